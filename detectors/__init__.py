@@ -1,0 +1,1 @@
+"""Detectors of logscan (installed as ``logscan.detectors``) and their registry."""

@@ -1,0 +1,5 @@
+"""`python -m logscan` runs the CLI."""
+
+from logscan.cli.main import main
+
+main()

@@ -1,0 +1,75 @@
+"""The `logscan` command group and the one place where errors become messages and exit codes."""
+
+from __future__ import annotations
+
+import sys
+import traceback
+
+import click
+
+from logscan import __version__
+from logscan.errors import LogscanError
+
+EXIT_OK, EXIT_ALARM, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+
+
+@click.group(
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    epilog="Example: logscan inspect sample_logs/quad_healthy.mcap",
+)
+@click.version_option(__version__, "--version", prog_name="logscan")
+@click.option("--debug", is_flag=True, default=False, help="Show tracebacks of errors.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """logscan: model-based fault and attack detection on drone and ground-vehicle logs."""
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def _register_commands() -> None:
+    from logscan.cli import inspect_cmd
+
+    cli.add_command(inspect_cmd.inspect)
+
+
+_register_commands()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console-script entry point: run the CLI and map every outcome to an exit code."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    debug = "--debug" in args
+    try:
+        code = cli.main(args=args, prog_name="logscan", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("logscan: aborted", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(EXIT_BAD_INPUT)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+    except LogscanError as exc:
+        if debug:
+            traceback.print_exc()
+        click.echo(f"logscan: error: {exc.one_line()}", err=True)
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        click.echo("logscan: interrupted", err=True)
+        sys.exit(130)
+    except BrokenPipeError:
+        sys.exit(0)
+    except Exception as exc:  # noqa: BLE001 - the one place internal errors are mapped
+        if debug:
+            traceback.print_exc()
+        click.echo(
+            f"logscan: internal error: {type(exc).__name__}: {exc} "
+            "(this is a bug in logscan; rerun with --debug for the traceback and report it)",
+            err=True,
+        )
+        sys.exit(EXIT_INTERNAL)
+    sys.exit(code if isinstance(code, int) else EXIT_OK)
+
+
+if __name__ == "__main__":
+    main()

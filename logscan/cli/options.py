@@ -1,0 +1,64 @@
+"""Options shared by logscan's commands, defined once and reused by every command."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+profile_option = click.option(
+    "--profile",
+    "-p",
+    "profile_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Profile (TOML) mapping log channels to a model and detectors. "
+    "Default: the profile embedded in the log.",
+)
+
+json_option = click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Write a machine-readable JSON summary to this file ('-' for stdout).",
+)
+
+output_option = click.option(
+    "--output",
+    "-o",
+    "output_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Output file.",
+)
+
+header_stamp_option = click.option(
+    "--header-stamp/--log-time",
+    "use_header_stamp",
+    default=False,
+    show_default=True,
+    help="Time MCAP messages by their header.stamp where present instead of log_time.",
+)
+
+quiet_option = click.option(
+    "--quiet", "-q", is_flag=True, default=False, help="No progress output on stderr."
+)
+
+seed_option = click.option(
+    "--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes)."
+)
+
+jobs_option = click.option(
+    "--jobs",
+    "-j",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Number of logs processed in parallel (local processes).",
+)
+
+
+def show_progress(quiet: bool) -> bool:
+    """Progress goes to stderr only when it is a terminal and --quiet is off."""
+    return not quiet and sys.stderr.isatty()

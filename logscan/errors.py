@@ -1,0 +1,62 @@
+"""Typed errors of logscan: each carries the exit code the CLI maps it to."""
+
+from __future__ import annotations
+
+
+class LogscanError(Exception):
+    """Base of every error logscan expects; the CLI turns it into one line and an exit code.
+
+    ``message`` should name the file (when there is one), what is wrong and what to do.
+    """
+
+    exit_code = 2
+
+    def __init__(self, message: str, *, path: str | None = None, hint: str | None = None):
+        super().__init__(message)
+        self.message = message
+        self.path = path
+        self.hint = hint
+
+    def one_line(self) -> str:
+        parts = []
+        if self.path:
+            parts.append(f"{self.path}:")
+        parts.append(self.message)
+        text = " ".join(parts)
+        if self.hint:
+            text = f"{text} ({self.hint})"
+        return " ".join(text.split())
+
+
+class UsageError(LogscanError):
+    """The command line asks for something impossible."""
+
+
+class InputError(LogscanError):
+    """An input file cannot be read: missing, unknown format, corrupt or empty."""
+
+
+class UnsupportedFormatError(InputError):
+    """The file's content matches none of the readers."""
+
+
+class CorruptLogError(InputError):
+    """The file's structure is broken beyond what a partial read can recover."""
+
+
+class ProfileError(LogscanError):
+    """A profile is invalid: unknown key, wrong type, unknown channel or model."""
+
+
+class ModelError(LogscanError):
+    """A vehicle model cannot be built from the given name or parameters."""
+
+
+class NotTrainedError(LogscanError):
+    """A detector needs trained state that is missing: run `logscan train`."""
+
+
+class InternalError(LogscanError):
+    """A bug in logscan; exit code 3 and a hint to rerun with --debug."""
+
+    exit_code = 3

@@ -1,0 +1,164 @@
+"""The in-memory log: named numeric channels with integer-nanosecond timestamps and source facts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Channel:
+    """One numeric signal: ``t`` int64 nanoseconds (sorted as read), ``values`` float64, same length."""
+
+    name: str
+    t: np.ndarray
+    values: np.ndarray
+    unit: str | None = None
+
+    def __post_init__(self) -> None:
+        self.t = np.asarray(self.t, dtype=np.int64)
+        self.values = np.asarray(self.values, dtype=np.float64)
+        if self.t.shape != self.values.shape or self.t.ndim != 1:
+            raise ValueError(
+                f"channel {self.name!r}: t and values must be 1-D of equal length, "
+                f"got {self.t.shape} and {self.values.shape}"
+            )
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass
+class TopicInfo:
+    """What a source topic (MCAP channel, CSV file, ULog message) held."""
+
+    name: str
+    message_count: int = 0
+    encoding: str = ""
+    schema: str = ""
+    first_ns: int | None = None
+    last_ns: int | None = None
+    fields: list[str] = field(default_factory=list)
+
+    @property
+    def rate_hz(self) -> float:
+        if self.first_ns is None or self.last_ns is None or self.message_count < 2:
+            return 0.0
+        span = (self.last_ns - self.first_ns) / 1e9
+        return (self.message_count - 1) / span if span > 0 else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "message_count": self.message_count,
+            "rate_hz": round(self.rate_hz, 6),
+            "encoding": self.encoding,
+            "schema": self.schema,
+            "first_ns": self.first_ns,
+            "last_ns": self.last_ns,
+            "fields": list(self.fields),
+        }
+
+
+@dataclass
+class Skipped:
+    """Something the reader did not turn into channels, and why (counted, never silent)."""
+
+    what: str
+    why: str
+    count: int = 1
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"what": self.what, "why": self.why, "count": self.count}
+
+
+@dataclass
+class SourceInfo:
+    """Facts about the file a log came from."""
+
+    path: str
+    format: str  # "mcap", "csv", "csv-dir", "ulog"
+    topics: dict[str, TopicInfo] = field(default_factory=dict)
+    skipped: list[Skipped] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    partial: bool = False  # the file was read only up to a corrupt or truncated point
+    partial_reason: str = ""
+    time_unit: str = "ns"  # unit the source's timestamps were in (inferred for CSV)
+    time_source: str = "log_time"
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    def skip(self, what: str, why: str, count: int = 1) -> None:
+        """Count a skipped item, merging repeats of the same (what, why)."""
+        for item in self.skipped:
+            if item.what == what and item.why == why:
+                item.count += count
+                return
+        self.skipped.append(Skipped(what, why, count))
+
+
+@dataclass
+class Log:
+    """Channels by name plus where they came from; optional ground truth and embedded profile."""
+
+    channels: dict[str, Channel]
+    source: SourceInfo
+    truth: dict[str, Any] | None = None  # {"events": [{"start", "end", "kind", "target", ...}], ...}
+    profile_text: str | None = None  # TOML of a profile embedded in the log
+
+    @property
+    def start_ns(self) -> int | None:
+        firsts = [int(c.t.min()) for c in self.channels.values() if len(c)]
+        if not firsts:
+            topic_firsts = [t.first_ns for t in self.source.topics.values() if t.first_ns is not None]
+            return min(topic_firsts) if topic_firsts else None
+        return min(firsts)
+
+    @property
+    def end_ns(self) -> int | None:
+        lasts = [int(c.t.max()) for c in self.channels.values() if len(c)]
+        if not lasts:
+            topic_lasts = [t.last_ns for t in self.source.topics.values() if t.last_ns is not None]
+            return max(topic_lasts) if topic_lasts else None
+        return max(lasts)
+
+    @property
+    def duration_s(self) -> float:
+        start, end = self.start_ns, self.end_ns
+        if start is None or end is None:
+            return 0.0
+        return (end - start) / 1e9
+
+    def channel(self, name: str) -> Channel:
+        """The channel called ``name``; a KeyError names close matches."""
+        try:
+            return self.channels[name]
+        except KeyError:
+            import difflib
+
+            close = difflib.get_close_matches(name, list(self.channels), n=3, cutoff=0.5)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise KeyError(f"no channel {name!r} in {self.source.path}{hint}") from None
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready facts used by `inspect --json` and report headers."""
+        return {
+            "file": self.source.path,
+            "format": self.source.format,
+            "start_ns": self.start_ns,
+            "end_ns": self.end_ns,
+            "duration_s": round(self.duration_s, 9),
+            "time_unit": self.source.time_unit,
+            "time_source": self.source.time_source,
+            "partial": self.source.partial,
+            "partial_reason": self.source.partial_reason,
+            "topics": {name: info.to_dict() for name, info in self.source.topics.items()},
+            "channels": {
+                name: {"samples": len(ch), "unit": ch.unit} for name, ch in self.channels.items()
+            },
+            "skipped": [s.to_dict() for s in self.source.skipped],
+            "warnings": list(self.source.warnings),
+            "has_truth": self.truth is not None,
+            "has_profile": self.profile_text is not None,
+        }

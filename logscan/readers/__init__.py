@@ -1,0 +1,99 @@
+"""Reader selection: pick the reader by the file's content (magic bytes), not only its suffix."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from logscan.errors import InputError, UnsupportedFormatError
+from logscan.log import Log
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+
+
+def detect_format(path: str | os.PathLike) -> str:
+    """Return "mcap", "ulog", "csv" or "csv-dir" for ``path``, judged by content.
+
+    Raises InputError when the path is missing or unreadable and UnsupportedFormatError when the
+    content matches no reader.
+    """
+    p = Path(path)
+    if p.is_dir():
+        if any(child.suffix.lower() == ".csv" for child in p.iterdir()):
+            return "csv-dir"
+        raise UnsupportedFormatError(
+            "directory holds no .csv files", path=str(p), hint="give an MCAP, ULog or CSV file"
+        )
+    if not p.exists():
+        raise InputError("no such file", path=str(p))
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(4096)
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=str(p)) from None
+    if head.startswith(MCAP_MAGIC):
+        return "mcap"
+    if head.startswith(ULOG_MAGIC):
+        return "ulog"
+    if not head:
+        raise InputError("file is empty", path=str(p))
+    if _looks_like_text(head):
+        return "csv"
+    raise UnsupportedFormatError(
+        "not an MCAP, ULog or CSV file (unknown magic bytes "
+        f"{head[:8].hex(' ')})",
+        path=str(p),
+        hint="logscan reads .mcap, .ulg and .csv logs",
+    )
+
+
+def _looks_like_text(head: bytes) -> bool:
+    if b"\x00" in head:
+        return False
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        # A multi-byte character cut at the 4096-byte boundary is still text.
+        if exc.start < len(head) - 4:
+            return False
+    return True
+
+
+def read_log(
+    path: str | os.PathLike,
+    topics: Iterable[str] | None = None,
+    *,
+    use_header_stamp: bool = False,
+) -> Log:
+    """Read ``path`` into a Log, decoding only ``topics`` (all when None).
+
+    ``topics`` are source topic names (MCAP topics, ULog ``topic_instance`` names, CSV file topics)
+    or channel names; a reader keeps a topic when it or any channel under it is asked for.
+    """
+    fmt = detect_format(path)
+    wanted = None if topics is None else set(topics)
+    if fmt == "mcap":
+        from logscan.readers.mcap_reader import read_mcap
+
+        return read_mcap(path, wanted, use_header_stamp=use_header_stamp)
+    if fmt == "ulog":
+        from logscan.readers.ulog_reader import read_ulog
+
+        return read_ulog(path, wanted)
+    from logscan.readers.csv_reader import read_csv, read_csv_dir
+
+    if fmt == "csv-dir":
+        return read_csv_dir(path, wanted)
+    return read_csv(path, wanted)
+
+
+def topic_wanted(topic: str, wanted: set[str] | None) -> bool:
+    """True when ``topic`` or a channel under it (``topic/...``) is in ``wanted`` (None: all)."""
+    if wanted is None:
+        return True
+    if topic in wanted:
+        return True
+    prefix = topic.rstrip("/") + "/"
+    return any(w.startswith(prefix) for w in wanted)

@@ -1,0 +1,1 @@
+"""Jinja2 templates of logscan's reports (installed as ``logscan.templates``)."""
