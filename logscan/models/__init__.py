@@ -1,0 +1,1 @@
+"""Vehicle model registry: name -> Model (see logscan.models.base for the interface)."""
