@@ -26,10 +26,18 @@ def cli(ctx: click.Context, debug: bool) -> None:
     ctx.obj["debug"] = debug
 
 
-def _register_commands() -> None:
-    from logscan.cli import inspect_cmd
+# Each command lives in its own module of logscan.cli as "module:function"; one line per command.
+_COMMANDS = [
+    "logscan.cli.inspect_cmd:inspect",
+]
 
-    cli.add_command(inspect_cmd.inspect)
+
+def _register_commands() -> None:
+    import importlib
+
+    for spec in _COMMANDS:
+        module_name, attr = spec.split(":")
+        cli.add_command(getattr(importlib.import_module(module_name), attr))
 
 
 _register_commands()
