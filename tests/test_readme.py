@@ -1,0 +1,114 @@
+"""The README's quick start and command docs agree with the CLI and with CI."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import click
+import pytest
+
+from logscan.cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def quick_start_commands() -> list[str]:
+    section = README.split("## Quick start", 1)[1].split("\n## ", 1)[0]
+    block = re.search(r"```sh\n(.*?)```", section, re.S).group(1)
+    return [line for line in block.splitlines() if line.strip()]
+
+
+def readme_invocations() -> list[list[str]]:
+    """Every `logscan ...` command line in the README's code blocks, split into words."""
+    lines = []
+    for block in re.findall(r"```(?:sh|console|bash)?\n(.*?)```", README, re.S):
+        for line in block.splitlines():
+            for part in re.split(r"&&|\|", line):
+                words = part.split()
+                for i, word in enumerate(words):
+                    if word.endswith("logscan") and not word.startswith("-"):
+                        lines.append(words[i + 1 :])
+                        break
+    return lines
+
+
+def test_quick_start_has_exactly_two_commands_install_run_and_test():
+    commands = quick_start_commands()
+    assert len(commands) == 2, commands
+    run_cmd, test_cmd = commands
+    assert "pip install ." in run_cmd and "sample_logs/" in run_cmd
+    assert "pytest" in test_cmd and "pip install '.[test]'" in test_cmd
+
+
+def test_ci_runs_the_readme_test_command():
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    pattern = re.search(r"grep -m1 -E '([^']+)' README.md", ci).group(1)
+    matches = [line for line in README.splitlines() if re.search(pattern, line)]
+    assert matches and matches[0] == quick_start_commands()[1]
+
+
+def test_every_command_in_help_is_documented_and_every_documented_command_exists():
+    ctx = click.Context(cli)
+    commands = set(cli.list_commands(ctx))
+    documented = set(re.findall(r"^### `logscan ([a-z-]+)", README, re.M))
+    assert commands == documented
+
+
+def test_readme_options_exist_in_the_commands_help():
+    ctx = click.Context(cli)
+    for words in readme_invocations():
+        if not words or words[0].startswith("-"):
+            continue
+        command = cli.get_command(ctx, words[0])
+        assert command is not None, f"README runs unknown command: logscan {' '.join(words)}"
+        known = {opt for param in command.params for opt in (*param.opts, *param.secondary_opts)}
+        for word in words[1:]:
+            if word.startswith("--"):
+                option = word.split("=", 1)[0]
+                assert option in known, f"README uses {option} unknown to `logscan {words[0]}`"
+
+
+def test_documented_options_of_each_command_match_its_help():
+    """Each command's README section names every option its --help lists (besides --help)."""
+    ctx = click.Context(cli)
+    for name in cli.list_commands(ctx):
+        section = README.split(f"### `logscan {name}", 1)[1].split("\n### ", 1)[0]
+        section = section.split("\n## ", 1)[0]
+        command = cli.get_command(ctx, name)
+        for param in command.params:
+            if isinstance(param, click.Option) and "--help" not in param.opts:
+                longest = max(param.opts, key=len)
+                assert longest in section, f"README section of `logscan {name}` omits {longest}"
+
+
+@pytest.mark.slow
+def test_quick_start_install_and_run_command_works_in_a_clean_copy(tmp_path):
+    """Runs the README's first command verbatim in a copy of the tracked files."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs a git checkout to copy the tracked files")
+    files = subprocess.run(
+        ["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True
+    ).stdout.split(b"\0")
+    for rel in filter(None, files):
+        src = ROOT / rel.decode()
+        if src.is_file():
+            dst = tmp_path / rel.decode()
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dst)
+    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH")}
+    env["PATH"] = os.pathsep.join(
+        p for p in env.get("PATH", "").split(os.pathsep) if ".venv" not in p and "/venv/" not in p
+    )
+    command = quick_start_commands()[0].replace("python3 ", f"{sys.executable} ", 1)
+    result = subprocess.run(
+        ["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900
+    )
+    assert result.returncode in (0, 1), result.stderr[-3000:]
+    assert "Traceback" not in result.stderr
+    assert result.stdout.strip(), "the main job printed nothing"
