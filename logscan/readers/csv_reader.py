@@ -1,0 +1,417 @@
+"""CSV input: one wide CSV file, or a directory of per-topic CSVs in PX4 `ulog2csv` layout.
+
+Rules (documented in the README):
+
+* Wide file: the time column is the leftmost column named ``time``, ``timestamp``, ``t`` or
+  ``stamp`` (case-insensitive, a leading ``%`` ignored), optionally with a unit suffix such as
+  ``time_s``, ``timestamp_us``, ``time [ms]``, ``stamp(ns)``, ``time_usec``. A suffix states the
+  unit; without one it is inferred from the median step and the magnitude (relative time since
+  boot or epoch time) and the inference is reported as a warning and in ``source.time_unit``.
+  Every other numeric column becomes a channel ``/<column>`` (a column already starting with
+  ``/`` keeps its name). Text columns are skipped and counted; a mostly-numeric column with a few
+  non-numbers keeps the numbers and reads the rest as NaN (counted). NaNs stay in the values
+  (alignment masks them). Rows without a valid time are dropped and counted. Timestamps are kept
+  in file order: unsorted or duplicate times are reported with counts; alignment sorts and
+  deduplicates them.
+* Directory: a file whose stem is ``<log>_<topic>_<instance>`` and whose first column is
+  ``timestamp`` (microseconds) is a ulog2csv topic ``<topic>_<instance>`` with channels
+  ``/<topic>_<instance>/<field>`` (the naming of the ULog reader; rows with timestamp 0 are
+  dropped as the ULog reader drops them). ``<log>`` is found as the
+  directory's name, the stem of a ``.ulg`` beside the CSVs, or the longest ``_``-separated prefix
+  all such files share. Any other ``.csv`` is read as a wide file with topic = its stem and
+  channels ``/<stem>/<column>``.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from logscan.errors import InputError
+from logscan.log import Channel, Log, SourceInfo, TopicInfo
+
+TIME_NAMES = ("time", "timestamp", "t", "stamp")
+
+_UNIT_WORDS = {
+    "s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
+    "ms": "ms", "msec": "ms", "msecs": "ms", "millis": "ms", "milliseconds": "ms",
+    "us": "us", "usec": "us", "usecs": "us", "µs": "us", "micros": "us", "microseconds": "us",
+    "ns": "ns", "nsec": "ns", "nsecs": "ns", "nanos": "ns", "nanoseconds": "ns",
+}  # fmt: skip
+_TIME_RE = re.compile(
+    r"^%?(?P<base>time|timestamp|t|stamp)"
+    r"(?:[\s_\-.]*[\[(]?\s*(?P<unit>" + "|".join(sorted(_UNIT_WORDS, key=len, reverse=True)) + r")\s*[\])]?)?$",
+    re.IGNORECASE,
+)
+NS_PER_UNIT = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+
+# Plausibility windows of the unit inference (seconds).
+_EPOCH_MIN_S, _EPOCH_MAX_S = 946_684_800.0, 4_102_444_800.0  # 2000-01-01 .. 2100-01-01
+_RELATIVE_MAX_S = 1.0e6  # time since boot / since the log's start: under ~11.6 days
+_PERIOD_MIN_S, _PERIOD_MAX_S = 1.0e-7, 1.0e4
+_TYPICAL_PERIOD_LOG10 = -1.5  # ~30 Hz, the middle of what vehicle logs sample at
+
+_ULOG2CSV_RE = re.compile(r"^(?P<rest>.+)_(?P<instance>\d+)$")
+_MIXED_MIN_NUMERIC_FRACTION = 0.5  # a column with at least this share of numbers is numeric
+ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
+
+
+@dataclass
+class TimeUnit:
+    """How a time column's numbers become nanoseconds, and why."""
+
+    unit: str  # s, ms, us, ns
+    origin: str  # "epoch", "relative" or "stated"
+    reason: str
+
+
+def time_column_unit(name: str) -> tuple[bool, str | None]:
+    """(is a time column, unit stated by its name or None) for a column header."""
+    match = _TIME_RE.match(name.strip())
+    if not match:
+        return False, None
+    unit = match.group("unit")
+    return True, (_UNIT_WORDS[unit.lower()] if unit else None)
+
+
+def infer_time_unit(values: np.ndarray) -> TimeUnit:
+    """Infer the unit of raw time numbers from their median step and magnitude.
+
+    A unit is plausible when the median step is a sampling period between 0.1 us and ~3 h, and the
+    values are either a relative time under ~11.6 days or epoch time between 2000 and 2100.
+    Fractional numbers prefer the coarsest plausible unit (seconds); integers take the plausible
+    unit whose period is closest to ~30 Hz in log scale (ties go to the coarser unit).
+    """
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return TimeUnit("s", "relative", "no finite time values; assumed seconds")
+    steps = np.diff(np.sort(finite))
+    steps = steps[steps > 0]
+    step = float(np.median(steps)) if steps.size else 0.0
+    low, high = float(finite.min()), float(finite.max())
+    integers = bool(np.all(finite == np.round(finite)))
+
+    plausible: list[tuple[str, str, float]] = []
+    for unit in ("s", "ms", "us", "ns"):
+        scale = NS_PER_UNIT[unit] / 1e9
+        period = step * scale
+        if step and not _PERIOD_MIN_S <= period <= _PERIOD_MAX_S:
+            continue
+        if abs(high) * scale <= _RELATIVE_MAX_S and abs(low) * scale <= _RELATIVE_MAX_S:
+            plausible.append((unit, "relative", period))
+        elif _EPOCH_MIN_S <= low * scale and high * scale <= _EPOCH_MAX_S:
+            plausible.append((unit, "epoch", period))
+    facts = f"median step {step:g}, values {low:g} .. {high:g}"
+    if not plausible:
+        return TimeUnit("s", "relative", f"{facts} fit no unit; assumed seconds")
+    if integers and step:
+        unit, origin, period = min(
+            plausible, key=lambda item: abs(np.log10(item[2]) - _TYPICAL_PERIOD_LOG10)
+        )
+    else:
+        unit, origin, period = plausible[0]
+    rate = f", ~{1 / period:.4g} Hz" if period else ""
+    return TimeUnit(unit, origin, f"{facts} ({origin} time{rate})")
+
+
+def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
+    """Read one wide CSV file into a Log (see the module docstring for the rules)."""
+    source = SourceInfo(path=str(path), format="csv", time_source="csv column")
+    frame = _load_frame(Path(path))
+    channels = _frame_channels(frame, Path(path), source, wanted, topic=None)
+    return Log(channels=channels, source=source, truth=_read_truth(Path(path)))
+
+
+def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
+    """Read a directory of per-topic CSVs (PX4 ulog2csv layout, or wide files) into one Log."""
+    from logscan.readers import topic_wanted
+
+    directory = Path(path)
+    files = sorted(p for p in directory.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
+    if not files:
+        raise InputError("directory holds no .csv files", path=str(directory),
+                         hint="give an MCAP, ULog or CSV file")
+    source = SourceInfo(path=str(directory), format="csv-dir", time_source="csv column")
+    topics = _topic_names(directory, files)
+    channels: dict[str, Channel] = {}
+    for file in files:
+        topic, px4 = topics[file]
+        if not (topic_wanted(topic, wanted) or topic_wanted("/" + topic, wanted)):
+            continue
+        frame = _load_frame(file)
+        if px4 and "timestamp" not in frame.columns:
+            px4 = False
+        channels.update(
+            _frame_channels(frame, file, source, wanted, topic=topic, stated_us=px4)
+        )
+    units = sorted({t.schema for t in source.topics.values()})
+    source.time_unit = "us" if units == ["ulog2csv"] else _dir_time_unit(source)
+    return Log(channels=channels, source=source, truth=_read_truth(directory))
+
+
+def _dir_time_unit(source: SourceInfo) -> str:
+    units = sorted(set(source.metadata.get("csv.time_units", {}).values()))
+    return units[0] if len(units) == 1 else "mixed: " + ",".join(units)
+
+
+def _topic_names(directory: Path, files: list[Path]) -> dict[Path, tuple[str, bool]]:
+    """Topic name of each file and whether it is in ulog2csv layout."""
+    layout = [f for f in files if _ULOG2CSV_RE.match(f.stem) and _first_column(f) == "timestamp"]
+    prefix = _log_prefix(directory, [f.stem for f in layout])
+    names: dict[Path, tuple[str, bool]] = {}
+    for file in files:
+        if file in layout and prefix and file.stem.startswith(prefix + "_"):
+            names[file] = (file.stem[len(prefix) + 1:], True)
+        else:
+            names[file] = (file.stem, file in layout)
+    return names
+
+
+def _log_prefix(directory: Path, stems: list[str]) -> str:
+    """The ``<log>`` part shared by ulog2csv file stems ``<log>_<topic>_<instance>``."""
+    if not stems:
+        return ""
+
+    def fits(prefix: str) -> bool:
+        return bool(prefix) and all(
+            s.startswith(prefix + "_") and _ULOG2CSV_RE.match(s[len(prefix) + 1:]) for s in stems
+        )
+
+    hints = [directory.resolve().name] + sorted(p.stem for p in directory.glob("*.ulg"))
+    for hint in hints:
+        if fits(hint):
+            return hint
+    if len(stems) < 2:
+        return ""
+    words = [s.split("_") for s in stems]
+    common: list[str] = []
+    for column in zip(*words):
+        if len(set(column)) != 1:
+            break
+        common.append(column[0])
+    while common and not fits("_".join(common)):
+        common.pop()
+    return "_".join(common)
+
+
+def _first_column(file: Path) -> str:
+    try:
+        with open(file, encoding="utf-8-sig", errors="replace") as fh:
+            header = fh.readline()
+    except OSError:
+        return ""
+    return header.split(_sniff_delimiter(header))[0].strip()
+
+
+def _sniff_delimiter(header: str) -> str:
+    counts = {sep: header.count(sep) for sep in (",", ";", "\t", "|")}
+    best = max(counts, key=lambda sep: counts[sep])
+    return best if counts[best] else ","
+
+
+def _load_frame(path: Path) -> pd.DataFrame:
+    """The file as a DataFrame of raw columns; one-line InputErrors for every unreadable case."""
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            header = fh.readline()
+    except FileNotFoundError:
+        raise InputError("no such file", path=str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text (bad byte at {exc.start} of the first line)",
+                         path=str(path), hint="save the CSV as UTF-8") from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    if not header.strip():
+        raise InputError("CSV file is empty (no header line)", path=str(path),
+                         hint="a CSV needs a header with a time column and data rows")
+    try:
+        frame = pd.read_csv(
+            path, sep=_sniff_delimiter(header), encoding="utf-8-sig", skipinitialspace=True,
+            low_memory=False, on_bad_lines="error",
+        )
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text (bad byte at offset {exc.start} of a block)",
+                         path=str(path), hint="save the CSV as UTF-8") from None
+    except pd.errors.EmptyDataError:
+        raise InputError("CSV file is empty", path=str(path)) from None
+    except (pd.errors.ParserError, csv.Error, ValueError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"malformed CSV: {first}", path=str(path),
+                         hint="every row needs as many fields as the header") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    if frame.empty:
+        raise InputError(
+            f"CSV has a header ({len(frame.columns)} column(s)) but no data rows",
+            path=str(path),
+        )
+    return frame
+
+
+def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
+    """(float64 values or None for a text column, count of non-numbers read as NaN)."""
+    if series.dtype == bool:
+        return series.to_numpy(dtype=np.float64), 0
+    if pd.api.types.is_numeric_dtype(series.dtype):
+        return series.to_numpy(dtype=np.float64, na_value=np.nan), 0
+    numbers = pd.to_numeric(series, errors="coerce")
+    present = series.notna().to_numpy()
+    if series.dtype == object:
+        present &= series.astype(str).str.strip().ne("").to_numpy()
+    parsed = numbers.notna().to_numpy()
+    n_present = int(present.sum())
+    if n_present == 0 or parsed.sum() < _MIXED_MIN_NUMERIC_FRACTION * n_present:
+        return None, 0
+    return numbers.to_numpy(dtype=np.float64, na_value=np.nan), int((present & ~parsed).sum())
+
+
+def _time_ns(series: pd.Series, unit: str) -> tuple[np.ndarray, np.ndarray]:
+    """(int64 ns of the valid rows, bool mask of valid rows) for a time column in ``unit``."""
+    factor = NS_PER_UNIT[unit]
+    if pd.api.types.is_integer_dtype(series.dtype):
+        raw = series.to_numpy(dtype=np.int64)
+        return raw * factor, np.ones(raw.size, dtype=bool)
+    values, _ = _numeric_column(series)
+    if values is None:
+        values = np.full(len(series), np.nan)
+    valid = np.isfinite(values)
+    return np.round(values[valid] * factor).astype(np.int64), valid
+
+
+def _pick_time_column(frame: pd.DataFrame, path: Path) -> tuple[str, str | None]:
+    for name in frame.columns:
+        is_time, unit = time_column_unit(name)
+        if is_time:
+            return name, unit
+    shown = ", ".join(repr(c) for c in list(frame.columns)[:12])
+    more = f" and {len(frame.columns) - 12} more" if len(frame.columns) > 12 else ""
+    raise InputError(
+        f"no time column among {shown}{more}",
+        path=str(path),
+        hint="name it time, timestamp, t or stamp, optionally with a unit: time_s, timestamp_us",
+    )
+
+
+def _frame_channels(
+    frame: pd.DataFrame,
+    path: Path,
+    source: SourceInfo,
+    wanted: set[str] | None,
+    *,
+    topic: str | None,
+    stated_us: bool = False,
+) -> dict[str, Channel]:
+    """Channels of one CSV table; fills the topic facts, skips and warnings into ``source``."""
+    from logscan.readers import topic_wanted
+
+    label = topic or path.name
+    if stated_us:
+        time_name = "timestamp"
+        unit = TimeUnit("us", "stated", "ulog2csv layout: timestamp in microseconds")
+    else:
+        time_name, stated = _pick_time_column(frame, path)
+        if stated:
+            unit = TimeUnit(stated, "stated", f"unit stated by the column name {time_name!r}")
+        else:
+            raw, _ = _numeric_column(frame[time_name])
+            if raw is None:
+                raise InputError(f"time column {time_name!r} holds no numbers", path=str(path))
+            unit = infer_time_unit(raw)
+            source.warnings.append(
+                f"{label}: time column {time_name!r} read as {unit.unit} inferred from {unit.reason}; "
+                f"name it e.g. '{time_name}_{unit.unit}' to state the unit"
+            )
+    source.time_unit = unit.unit
+    source.metadata.setdefault("csv.time_units", {})[label] = unit.unit
+    source.metadata.setdefault("csv.time_columns", {})[label] = (
+        f"{time_name} ({unit.unit}, {unit.origin}: {unit.reason})"
+    )
+    t_ns, valid = _time_ns(frame[time_name], unit.unit)
+    if not valid.all():
+        source.skip(f"rows of {label}", "time is empty or not a number", int((~valid).sum()))
+    if stated_us and (t_ns == 0).any():  # the ULog reader's rule, so both readers agree
+        nonzero = t_ns != 0
+        source.skip(f"messages of {label}", ZERO_TIMESTAMP_WHY, int((~nonzero).sum()))
+        valid[np.flatnonzero(valid)[~nonzero]] = False
+        t_ns = t_ns[nonzero]
+    report_time_order(t_ns, label, source)
+
+    channels: dict[str, Channel] = {}
+    fields: list[str] = []
+    nan_counts: dict[str, int] = {}
+    for column in frame.columns:
+        if column == time_name:
+            continue
+        if topic is None:
+            name = column if column.startswith("/") else "/" + column
+        else:
+            name = f"/{topic}/{column}"
+        values, garbage = _numeric_column(frame[column])
+        if values is None:
+            source.skip(f"text column {column!r} of {label}", "not numeric")
+            continue
+        fields.append(column)
+        if garbage:
+            source.skip(f"cells of column {column!r} of {label}", "not a number, read as NaN",
+                        garbage)
+        if not topic_wanted(name, wanted) and not (topic and topic_wanted(topic, wanted)):
+            continue
+        values = values[valid]
+        n_nan = int(np.isnan(values).sum())
+        if n_nan:
+            nan_counts[name] = n_nan
+        channels[name] = Channel(name, t_ns, values)
+    if nan_counts:
+        listed = ", ".join(f"{k}: {v}" for k, v in list(nan_counts.items())[:5])
+        more = f", ... ({len(nan_counts)} channels)" if len(nan_counts) > 5 else ""
+        source.warnings.append(
+            f"{label}: {sum(nan_counts.values())} NaN value(s) kept ({listed}{more}); "
+            "alignment masks them"
+        )
+    source.topics[topic or path.stem] = TopicInfo(
+        name=topic or path.stem,
+        message_count=int(t_ns.size),
+        encoding="csv",
+        schema="ulog2csv" if stated_us else "wide",
+        first_ns=int(t_ns.min()) if t_ns.size else None,
+        last_ns=int(t_ns.max()) if t_ns.size else None,
+        fields=fields,
+    )
+    return channels
+
+
+def report_time_order(t_ns: np.ndarray, label: str, source: SourceInfo) -> None:
+    """Warn about timestamps that go backwards or repeat; the values stay in file order.
+
+    Shared by the ULog reader. Alignment (logscan.align) sorts and deduplicates.
+    """
+    if t_ns.size < 2:
+        return
+    steps = np.diff(t_ns)
+    backwards = int((steps < 0).sum())
+    duplicates = int(t_ns.size - np.unique(t_ns).size)
+    if backwards or duplicates:
+        source.warnings.append(
+            f"{label}: timestamps not strictly increasing ({backwards} step(s) backwards, "
+            f"{duplicates} duplicate(s)); kept in file order, alignment sorts and deduplicates"
+        )
+
+
+def _read_truth(path: Path) -> dict | None:
+    """Ground truth from the ``<log>.truth.json`` sidecar, when present."""
+    import json
+
+    sidecar = path.with_name(path.name + ".truth.json") if path.is_dir() else path.with_suffix(
+        ".truth.json"
+    )
+    if not sidecar.is_file():
+        return None
+    try:
+        return json.loads(sidecar.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"ground-truth sidecar is not valid JSON: {exc}", path=str(sidecar)) from None
