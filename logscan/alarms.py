@@ -1,0 +1,281 @@
+"""Turning a statistic and its threshold series into alarm intervals (the one shared alarm logic).
+
+Every detector produces a statistic series and upper (and/or lower) threshold series on the grid;
+``alarm_intervals`` turns them into ``AlarmInterval`` objects with persistence, hold-off, minimum
+duration and warm-up. Rules, in order:
+
+1. A sample is *judged* where ``valid`` is True (default: everywhere) and it is not in warm-up.
+   Samples that are not judged are skipped: they neither raise nor break a run of exceedances
+   (e.g. a 10 Hz group on a 100 Hz grid is judged at its update steps only). Warm-up samples are
+   not judged and DO break a run: an alarm never contains a warm-up sample.
+2. A judged sample *exceeds* when ``statistic > upper`` or ``statistic < lower``, or when the
+   statistic is not finite (NaN, +-inf: a detector that cannot compute its statistic on a valid
+   sample has seen something wrong). A non-finite threshold never causes an exceedance by itself
+   (that bound is "not defined here"), but a non-finite statistic still does.
+3. Persistence: an alarm starts at the ``n_persist``-th consecutive exceeding judged sample;
+   ``start`` is that sample's time, ``first_exceed`` the time of the run's first exceedance.
+4. Hold-off: once on, the alarm stays on until there is no exceedance for more than
+   ``hold_off_s`` seconds: any later exceedance (even a single sample) at most ``hold_off_s``
+   after the previous one extends it. ``end`` is the time of the alarm's last exceeding sample,
+   so ``end - start`` is the raised duration (0 for a one-sample alarm).
+5. Minimum duration: alarms with ``end - start < min_duration_s`` are dropped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from logscan.errors import InternalError
+
+# Tolerance (seconds) for time comparisons, so a hold-off of exactly two grid periods is not
+# lost to floating-point rounding of the grid times.
+_TIME_EPS = 1e-9
+
+
+@dataclass
+class AlarmInterval:
+    """One alarm: [start, end] seconds on the analysis grid, and where it peaked.
+
+    peak_value / peak_threshold: the statistic and the threshold it crossed at the sample with the
+    largest excess over its threshold; peak_ratio = peak_value / peak_threshold (None when that
+    ratio is undefined: threshold 0 or non-finite, or a non-finite statistic).
+    bound: which bound the peak crossed, "upper", "lower" or "nonfinite".
+    """
+
+    start: float
+    end: float
+    first_exceed: float
+    peak_time: float
+    peak_value: float
+    peak_threshold: float | None
+    peak_ratio: float | None
+    bound: str
+    n_exceed: int  # exceeding samples inside the alarm
+    signal: str = ""
+    detector: str = ""
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["duration"] = self.duration
+        for key in ("peak_value", "peak_threshold", "peak_ratio"):
+            value = out[key]
+            if value is not None and not np.isfinite(value):
+                out[key] = str(value)  # JSON has no NaN / inf
+        return out
+
+
+def _as_series(name: str, value, n: int) -> np.ndarray | None:
+    if value is None:
+        return None
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise InternalError(f"alarm_intervals: {name} has shape {arr.shape}, expected ({n},) or a scalar")
+    return arr
+
+
+def _judged_mask(t: np.ndarray, valid, warmup, warmup_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(judged, in_warmup) boolean masks over the grid."""
+    n = t.size
+    judged = np.ones(n, dtype=bool)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != (n,):
+            raise InternalError(f"alarm_intervals: valid has shape {valid.shape}, expected ({n},)")
+        judged &= valid
+    in_warmup = np.zeros(n, dtype=bool)
+    if warmup is not None:
+        if isinstance(warmup, (int, np.integer)) and not isinstance(warmup, bool):
+            in_warmup[: max(int(warmup), 0)] = True
+        else:
+            mask = np.asarray(warmup, dtype=bool)
+            if mask.shape != (n,):
+                raise InternalError(f"alarm_intervals: warmup mask has shape {mask.shape}, expected ({n},)")
+            in_warmup |= mask
+    if warmup_s > 0 and n:
+        in_warmup |= t < t[0] + warmup_s - _TIME_EPS
+    return judged, in_warmup
+
+
+def alarm_intervals(
+    t: np.ndarray,
+    statistic: np.ndarray,
+    upper=None,
+    lower=None,
+    *,
+    n_persist: int = 1,
+    hold_off_s: float = 0.0,
+    min_duration_s: float = 0.0,
+    warmup=None,
+    warmup_s: float = 0.0,
+    valid=None,
+    signal: str = "",
+    detector: str = "",
+) -> list[AlarmInterval]:
+    """Alarm intervals of ``statistic`` against ``upper`` / ``lower`` (scalars or (N,) series).
+
+    warmup: an (N,) bool mask of samples where no alarm may be raised, or an int number of leading
+    samples; warmup_s: leading seconds (from t[0]) of warm-up, combined with ``warmup``.
+    valid: (N,) bool, samples to judge at all (others are skipped). See the module docstring for
+    the exact rules.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    if t.ndim != 1:
+        raise InternalError(f"alarm_intervals: t must be 1-D, got shape {t.shape}")
+    n = t.size
+    x = _as_series("statistic", statistic, n)
+    hi = _as_series("upper", upper, n)
+    lo = _as_series("lower", lower, n)
+    if hi is None and lo is None:
+        raise InternalError("alarm_intervals: give an upper or a lower threshold")
+    if n_persist < 1:
+        raise InternalError(f"alarm_intervals: n_persist must be >= 1, got {n_persist}")
+    judged, in_warmup = _judged_mask(t, valid, warmup, warmup_s)
+
+    # Work on the judged samples and the warm-up samples (which break runs but never exceed).
+    keep = np.flatnonzero(judged | in_warmup)
+    if keep.size == 0:
+        return []
+    xs, ts = x[keep], t[keep]
+    with np.errstate(invalid="ignore"):
+        over = (xs > hi[keep]) if hi is not None else np.zeros(keep.size, dtype=bool)
+        under = (xs < lo[keep]) if lo is not None else np.zeros(keep.size, dtype=bool)
+    nonfinite = ~np.isfinite(xs)
+    exceed = (over | under | nonfinite) & ~in_warmup[keep]
+    if not exceed.any():
+        return []
+
+    # Runs of consecutive exceedances: starts where the padded mask goes 0 -> 1, ends 1 -> 0.
+    edges = np.diff(np.concatenate(([0], exceed.view(np.int8), [0])))
+    run_start = np.flatnonzero(edges == 1)
+    run_last = np.flatnonzero(edges == -1) - 1
+    run_len = run_last - run_start + 1
+    # A run is bridged to the previous one when the gap between exceedances is <= hold_off_s and
+    # no warm-up sample lies between them; a chain is a maximal sequence of bridged runs.
+    warm_count = np.concatenate(([0], np.cumsum(in_warmup[keep])))
+    gap = ts[run_start[1:]] - ts[run_last[:-1]]
+    warm_between = warm_count[run_start[1:]] - warm_count[run_last[:-1] + 1] > 0
+    new_chain = np.concatenate(([True], (gap > hold_off_s + _TIME_EPS) | warm_between))
+    chain = np.cumsum(new_chain) - 1
+    chain_last_run = np.concatenate((np.flatnonzero(new_chain)[1:] - 1, [run_start.size - 1]))
+    # Within each chain the alarm starts at the first run long enough to persist and lasts to the
+    # chain's last exceedance.
+    qualifying = np.flatnonzero(run_len >= n_persist)
+    if qualifying.size == 0:
+        return []
+    chains, first = np.unique(chain[qualifying], return_index=True)
+    first_run = qualifying[first]
+    a_first = run_start[first_run]
+    a_start = a_first + n_persist - 1
+    a_last = run_last[chain_last_run[chains]]
+    durations = ts[a_last] - ts[a_start]
+    keep_alarm = durations >= min_duration_s - _TIME_EPS
+
+    # Excess over the crossed bound picks the peak sample; non-finite statistics rank highest.
+    with np.errstate(invalid="ignore"):
+        excess_hi = xs - hi[keep] if hi is not None else np.full(keep.size, -np.inf)
+        excess_lo = lo[keep] - xs if lo is not None else np.full(keep.size, -np.inf)
+    excess = np.where(exceed, np.fmax(excess_hi, excess_lo), -np.inf)
+    excess = np.where(exceed & nonfinite, np.inf, excess)
+    exceed_count = np.concatenate(([0], np.cumsum(exceed)))
+
+    out: list[AlarmInterval] = []
+    for i0, i1, f0 in zip(a_start[keep_alarm], a_last[keep_alarm], a_first[keep_alarm]):  # per alarm
+        peak = int(i0 + np.argmax(excess[i0 : i1 + 1]))
+        out.append(_make_interval(
+            ts, xs, hi, lo, keep, int(i0), int(i1), int(f0), peak, nonfinite[peak], over[peak],
+            int(exceed_count[i1 + 1] - exceed_count[f0]), signal, detector,
+        ))
+    return out
+
+
+def _make_interval(ts, xs, hi, lo, keep, i0, i1, f0, peak, is_nonfinite, is_over, n_exceed, signal, detector):
+    value = float(xs[peak])
+    if is_nonfinite:
+        bound = "nonfinite"
+        threshold = float(hi[keep[peak]]) if hi is not None else float(lo[keep[peak]])
+    elif is_over:
+        bound, threshold = "upper", float(hi[keep[peak]])
+    else:
+        bound, threshold = "lower", float(lo[keep[peak]])
+    ratio = None
+    if np.isfinite(value) and np.isfinite(threshold) and threshold != 0.0:
+        ratio = value / threshold
+    return AlarmInterval(
+        start=float(ts[i0]),
+        end=float(ts[i1]),
+        first_exceed=float(ts[f0]),
+        peak_time=float(ts[peak]),
+        peak_value=value,
+        peak_threshold=threshold if np.isfinite(threshold) else None,
+        peak_ratio=ratio,
+        bound=bound,
+        n_exceed=n_exceed,
+        signal=signal,
+        detector=detector,
+    )
+
+
+def merge_close(intervals: Iterable[AlarmInterval], gap_s: float, *, by_signal: bool = True) -> list[AlarmInterval]:
+    """Merge alarms whose gap (next start - previous end) is at most ``gap_s`` seconds.
+
+    by_signal=True merges only alarms of the same (detector, signal); False merges across signals
+    and names the merged alarm's signals "a,b" (in order of first appearance). The merged alarm
+    keeps the earliest start and first_exceed, the latest end, the summed exceedance count and the
+    peak of the part with the largest peak ratio (non-finite peaks first). Result sorted by start.
+    """
+    items = sorted(intervals, key=lambda a: (a.start, a.end))
+    groups: dict[tuple[str, str], list[AlarmInterval]] = {}
+    for alarm in items:
+        key = (alarm.detector, alarm.signal) if by_signal else ("", "")
+        groups.setdefault(key, []).append(alarm)
+    merged: list[AlarmInterval] = []
+    for parts in groups.values():
+        current = [parts[0]]
+        end = parts[0].end
+        for alarm in parts[1:]:
+            if alarm.start - end <= gap_s + _TIME_EPS:
+                current.append(alarm)
+                end = max(end, alarm.end)
+            else:
+                merged.append(_combine(current))
+                current, end = [alarm], alarm.end
+        merged.append(_combine(current))
+    return sorted(merged, key=lambda a: (a.start, a.end, a.detector, a.signal))
+
+
+def _peak_rank(alarm: AlarmInterval) -> float:
+    if alarm.bound == "nonfinite":
+        return np.inf
+    return alarm.peak_ratio if alarm.peak_ratio is not None else -np.inf
+
+
+def _joined(names: Sequence[str]) -> str:
+    return ",".join(dict.fromkeys(n for n in names if n))
+
+
+def _combine(parts: list[AlarmInterval]) -> AlarmInterval:
+    if len(parts) == 1:
+        return parts[0]
+    peak = max(parts, key=_peak_rank)
+    return AlarmInterval(
+        start=min(a.start for a in parts),
+        end=max(a.end for a in parts),
+        first_exceed=min(a.first_exceed for a in parts),
+        peak_time=peak.peak_time,
+        peak_value=peak.peak_value,
+        peak_threshold=peak.peak_threshold,
+        peak_ratio=peak.peak_ratio,
+        bound=peak.bound,
+        n_exceed=sum(a.n_exceed for a in parts),
+        signal=_joined([a.signal for a in parts]),
+        detector=_joined([a.detector for a in parts]),
+    )
