@@ -12,6 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from logscan.errors import ModelError
+from logscan.models import kernels
+
 
 @dataclass(frozen=True)
 class GroupSpec:
@@ -24,10 +27,23 @@ class GroupSpec:
     range_lo: tuple[float, ...]  # physical range per output: values outside are impossible
     range_hi: tuple[float, ...]
     units: tuple[str, ...] = ()
+    # Extensions used by the EKF core (all optional, one entry per output when given):
+    wrap: tuple[bool, ...] = ()  # angular output: the innovation is wrapped to (-pi, pi]
+    direct_states: tuple[int, ...] = ()  # state observed directly (z = gain * x[i]); -1: none
+    direct_gains: tuple[float, ...] = ()  # the gain of that direct observation
 
     @property
     def size(self) -> int:
         return len(self.outputs)
+
+    def wrap_mask(self) -> np.ndarray:
+        return np.array(self.wrap or (False,) * self.size, dtype=np.bool_)
+
+    def direct_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """(state index per output, -1 when not direct; gain per output)."""
+        idx = np.array(self.direct_states or (-1,) * self.size, dtype=np.int64)
+        gain = np.array(self.direct_gains or (1.0,) * self.size, dtype=np.float64)
+        return idx, gain
 
 
 class Model:
@@ -46,10 +62,62 @@ class Model:
     def __init__(self, params: dict | None = None):
         self.params: dict = dict(params or {})
 
+    def _merge_params(self, defaults: dict) -> dict:
+        """defaults updated by self.params; ModelError on an unknown or non-numeric parameter."""
+        unknown = sorted(set(self.params) - set(defaults))
+        if unknown:
+            raise ModelError(
+                f"model {self.name!r}: unknown parameter(s) {', '.join(unknown)}",
+                hint="known parameters: " + ", ".join(defaults),
+            )
+        merged = dict(defaults)
+        for key, value in self.params.items():
+            if isinstance(defaults[key], (int, float)) and not isinstance(defaults[key], bool):
+                try:
+                    value = float(value)
+                except (TypeError, ValueError):
+                    raise ModelError(
+                        f"model {self.name!r}: parameter {key} = {value!r} is not a number"
+                    ) from None
+                if not np.isfinite(value):
+                    raise ModelError(f"model {self.name!r}: parameter {key} = {value} is not finite")
+            merged[key] = value
+        return merged
+
     # --- packed data for kernels -------------------------------------------------------------
-    def param_vector(self) -> np.ndarray:
-        """float64 vector of the model's parameters as the numba functions read them."""
+    def param_vector(self, dt: float | None = None) -> np.ndarray:
+        """float64 vector of the model's parameters as the numba functions read them.
+
+        Models discretised exactly (linear, dc_motor) need the grid period ``dt``; the others
+        ignore it.
+        """
         raise NotImplementedError
+
+    @property
+    def n_states(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.input_names)
+
+    def group(self, name: str) -> GroupSpec:
+        """The group called ``name``; ModelError listing the model's groups when unknown."""
+        try:
+            return self.groups[name]
+        except KeyError:
+            raise ModelError(
+                f"model {self.name!r} has no measurement group {name!r}",
+                hint="known groups: " + ", ".join(self.groups),
+            ) from None
+
+    def default_x0(self) -> np.ndarray:
+        """Initial state when none is given (zeros unless the model knows better)."""
+        return np.zeros(self.n_states)
+
+    def default_P0(self) -> np.ndarray:
+        """Initial covariance when none is given: diag(state_scale^2)."""
+        return np.diag(np.square(self.state_scale()))
 
     # --- defaults -------------------------------------------------------------------------------
     def default_Q(self, dt: float) -> np.ndarray:
@@ -64,17 +132,20 @@ class Model:
         return np.ones(len(self.state_names))
 
     # --- numpy views of the model (tests, simulator, reference filter) -------------------------
+    # One call each; they run the same numba functions as the EKF kernel.
     def f(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        raise NotImplementedError
+        return kernels.f_disc(self.model_id, self.param_vector(dt), _vec(x), _vec(u), float(dt))
 
     def F(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        raise NotImplementedError
+        return kernels.predict(self.model_id, self.param_vector(dt), _vec(x), _vec(u), float(dt))[1]
 
     def h(self, group: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        gid = self.group(group).group_id
+        return kernels.h_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
 
     def H(self, group: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        gid = self.group(group).group_id
+        return kernels.H_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
 
     def describe(self) -> dict:
         """JSON-ready description: name, states, inputs, groups, the parameters it was built from."""
@@ -86,5 +157,9 @@ class Model:
                 g.name: {"outputs": list(g.outputs), "noise_std": list(g.noise_std)}
                 for g in self.groups.values()
             },
-            "params": dict(self.params),
+            "params": dict(getattr(self, "p", None) or self.params),
         }
+
+
+def _vec(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).reshape(-1)

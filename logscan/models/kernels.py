@@ -1,0 +1,435 @@
+"""Numba functions of every vehicle model and their dispatch on (model_id, group_id).
+
+All models' discrete `f`, Jacobian `F`, measurement `h` and Jacobian `H` live here as
+`@njit(cache=True)` functions that read a packed float64 parameter vector `p` (built by each
+model's `param_vector`). The EKF kernel calls only the four dispatchers at the bottom
+(`predict`, `f_disc`, `h_meas`, `H_meas`), so one cached kernel serves every model.
+
+Model ids: 0 quadcopter, 1 steer_by_wire, 2 dc_motor, 3 linear (2 and 3 share the linear code:
+the dc_motor model packs its exactly discretised A, B, C like a linear model).
+
+Continuous-time nonlinear models are discretised with one RK4 step per grid period; the discrete
+Jacobian F is the exact derivative of that RK4 step, obtained by propagating the continuous
+Jacobian A through the four stages (dk_i/dx = A(x_i) dx_i/dx).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+QUADCOPTER_ID = 0
+STEER_BY_WIRE_ID = 1
+DC_MOTOR_ID = 2
+LINEAR_ID = 3
+
+# ---- quadcopter parameter layout ------------------------------------------------------------
+QP_MASS, QP_G, QP_KD, QP_IX, QP_IY, QP_IZ, QP_ARM, QP_KT, QP_BTAU, QP_INPUT_MODE = range(10)
+QUAD_N_PARAMS = 10
+
+# ---- steer-by-wire parameter layout ---------------------------------------------------------
+(SP_JEQ, SP_BEQ, SP_FS, SP_CF, SP_CR, SP_LF, SP_LR, SP_LC, SP_LP, SP_M, SP_IZ, SP_V,
+ SP_VS) = range(13)
+SBW_N_PARAMS = 13
+
+
+# =============================================================================================
+# quadcopter
+# =============================================================================================
+@njit(cache=True)
+def quad_wrench(p, u):
+    """Collective thrust and body torques from the input (wrench, or motor speeds via the mixer).
+
+    Mixer (plus configuration, motor i on the body arm at angle (i-1)*90 deg from +x):
+    T_i = kT w_i^2; T = sum T_i; tau_x = L (T2 - T4); tau_y = L (T3 - T1);
+    tau_z = b (T1 - T2 + T3 - T4) (motors 1 and 3 give +z reaction torque).
+    """
+    if p[QP_INPUT_MODE] == 0.0:
+        return u[0], u[1], u[2], u[3]
+    kT = p[QP_KT]
+    L = p[QP_ARM]
+    b = p[QP_BTAU]
+    T1 = kT * u[0] * u[0]
+    T2 = kT * u[1] * u[1]
+    T3 = kT * u[2] * u[2]
+    T4 = kT * u[3] * u[3]
+    return T1 + T2 + T3 + T4, L * (T2 - T4), L * (T3 - T1), b * (T1 - T2 + T3 - T4)
+
+
+@njit(cache=True)
+def quad_rotation(phi, theta, psi):
+    """Body-to-world rotation R = Rz(psi) Ry(theta) Rx(phi) (ZYX Euler angles)."""
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    R = np.empty((3, 3))
+    R[0, 0] = cp * ct
+    R[0, 1] = cp * st * sf - sp * cf
+    R[0, 2] = cp * st * cf + sp * sf
+    R[1, 0] = sp * ct
+    R[1, 1] = sp * st * sf + cp * cf
+    R[1, 2] = sp * st * cf - cp * sf
+    R[2, 0] = -st
+    R[2, 1] = ct * sf
+    R[2, 2] = ct * cf
+    return R
+
+
+@njit(cache=True)
+def quad_rotation_derivatives(phi, theta, psi):
+    """dR/dphi, dR/dtheta, dR/dpsi of R = Rz Ry Rx, stacked as (3, 3, 3)."""
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    D = np.zeros((3, 3, 3))
+    # d/dphi
+    D[0, 0, 1] = cp * st * cf + sp * sf
+    D[0, 0, 2] = -cp * st * sf + sp * cf
+    D[0, 1, 1] = sp * st * cf - cp * sf
+    D[0, 1, 2] = -sp * st * sf - cp * cf
+    D[0, 2, 1] = ct * cf
+    D[0, 2, 2] = -ct * sf
+    # d/dtheta
+    D[1, 0, 0] = -cp * st
+    D[1, 0, 1] = cp * ct * sf
+    D[1, 0, 2] = cp * ct * cf
+    D[1, 1, 0] = -sp * st
+    D[1, 1, 1] = sp * ct * sf
+    D[1, 1, 2] = sp * ct * cf
+    D[1, 2, 0] = -ct
+    D[1, 2, 1] = -st * sf
+    D[1, 2, 2] = -st * cf
+    # d/dpsi
+    D[2, 0, 0] = -sp * ct
+    D[2, 0, 1] = -sp * st * sf - cp * cf
+    D[2, 0, 2] = -sp * st * cf + cp * sf
+    D[2, 1, 0] = cp * ct
+    D[2, 1, 1] = cp * st * sf - sp * cf
+    D[2, 1, 2] = cp * st * cf + sp * sf
+    return D
+
+
+@njit(cache=True)
+def quad_fc(p, x, u):
+    """Continuous dynamics (paper eq. 5 with Euler-angle kinematics):
+    p_dot = v;  v_dot = R e3 T/m - g e3 - kD v/m;  eta_dot = W(phi, theta) omega;
+    omega_dot = I^-1 (tau - omega x I omega)."""
+    T, tx, ty, tz = quad_wrench(p, u)
+    m, g, kD = p[QP_MASS], p[QP_G], p[QP_KD]
+    Ix, Iy, Iz = p[QP_IX], p[QP_IY], p[QP_IZ]
+    phi, theta, psi = x[6], x[7], x[8]
+    wp, wq, wr = x[9], x[10], x[11]
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    tt = st / ct
+    d = np.empty(12)
+    d[0] = x[3]
+    d[1] = x[4]
+    d[2] = x[5]
+    d[3] = T * (cp * st * cf + sp * sf) / m - kD * x[3] / m
+    d[4] = T * (sp * st * cf - cp * sf) / m - kD * x[4] / m
+    d[5] = T * (ct * cf) / m - g - kD * x[5] / m
+    d[6] = wp + (sf * wq + cf * wr) * tt
+    d[7] = cf * wq - sf * wr
+    d[8] = (sf * wq + cf * wr) / ct
+    d[9] = (tx - (Iz - Iy) * wq * wr) / Ix
+    d[10] = (ty - (Ix - Iz) * wp * wr) / Iy
+    d[11] = (tz - (Iy - Ix) * wp * wq) / Iz
+    return d
+
+
+@njit(cache=True)
+def quad_Ac(p, x, u):
+    """Continuous Jacobian d(quad_fc)/dx (the paper's F_k entries plus Euler kinematics)."""
+    T, tx, ty, tz = quad_wrench(p, u)
+    m, kD = p[QP_MASS], p[QP_KD]
+    Ix, Iy, Iz = p[QP_IX], p[QP_IY], p[QP_IZ]
+    phi, theta, psi = x[6], x[7], x[8]
+    wp, wq, wr = x[9], x[10], x[11]
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    tt = st / ct
+    A = np.zeros((12, 12))
+    A[0, 3] = 1.0
+    A[1, 4] = 1.0
+    A[2, 5] = 1.0
+    Tm = T / m
+    A[3, 6] = Tm * (-cp * st * sf + sp * cf)
+    A[3, 7] = Tm * (cp * ct * cf)
+    A[3, 8] = Tm * (-sp * st * cf + cp * sf)
+    A[4, 6] = Tm * (-sp * st * sf - cp * cf)
+    A[4, 7] = Tm * (sp * ct * cf)
+    A[4, 8] = Tm * (cp * st * cf + sp * sf)
+    A[5, 6] = Tm * (-ct * sf)
+    A[5, 7] = Tm * (-st * cf)
+    A[3, 3] = -kD / m
+    A[4, 4] = -kD / m
+    A[5, 5] = -kD / m
+    a = sf * wq + cf * wr
+    b = cf * wq - sf * wr
+    # phi_dot = p + a tan(theta)
+    A[6, 6] = b * tt
+    A[6, 7] = a / (ct * ct)
+    A[6, 9] = 1.0
+    A[6, 10] = sf * tt
+    A[6, 11] = cf * tt
+    # theta_dot = b
+    A[7, 6] = -a
+    A[7, 10] = cf
+    A[7, 11] = -sf
+    # psi_dot = a / cos(theta)
+    A[8, 6] = b / ct
+    A[8, 7] = a * st / (ct * ct)
+    A[8, 10] = sf / ct
+    A[8, 11] = cf / ct
+    # Euler's equations
+    A[9, 10] = -(Iz - Iy) * wr / Ix
+    A[9, 11] = -(Iz - Iy) * wq / Ix
+    A[10, 9] = -(Ix - Iz) * wr / Iy
+    A[10, 11] = -(Ix - Iz) * wp / Iy
+    A[11, 9] = -(Iy - Ix) * wq / Iz
+    A[11, 10] = -(Iy - Ix) * wp / Iz
+    return A
+
+
+@njit(cache=True)
+def quad_h(p, gid, x, u):
+    """Groups: 0 accel a_b = R^T (v_dot + g e3) = [0, 0, T/m] - (kD/m) R^T v; 1 gyro (p, q, r);
+    2 position (x, y, z); 3 attitude (roll, pitch, yaw)."""
+    out = np.empty(3)
+    if gid == 0:
+        T, tx, ty, tz = quad_wrench(p, u)
+        c = p[QP_KD] / p[QP_MASS]
+        R = quad_rotation(x[6], x[7], x[8])
+        for i in range(3):
+            out[i] = -c * (R[0, i] * x[3] + R[1, i] * x[4] + R[2, i] * x[5])
+        out[2] += T / p[QP_MASS]
+    else:
+        base = 9 if gid == 1 else (0 if gid == 2 else 6)
+        for i in range(3):
+            out[i] = x[base + i]
+    return out
+
+
+@njit(cache=True)
+def quad_H(p, gid, x, u):
+    H = np.zeros((3, 12))
+    if gid == 0:
+        c = p[QP_KD] / p[QP_MASS]
+        R = quad_rotation(x[6], x[7], x[8])
+        D = quad_rotation_derivatives(x[6], x[7], x[8])
+        for i in range(3):
+            for j in range(3):
+                H[i, 3 + j] = -c * R[j, i]  # d(R^T v)_i / dv_j = R[j, i]
+            for a in range(3):
+                s = 0.0
+                for j in range(3):
+                    s += D[a, j, i] * x[3 + j]
+                H[i, 6 + a] = -c * s
+    else:
+        base = 9 if gid == 1 else (0 if gid == 2 else 6)
+        for i in range(3):
+            H[i, base + i] = 1.0
+    return H
+
+
+# =============================================================================================
+# steer-by-wire (front-wheel subsystem + single-track vehicle)
+# =============================================================================================
+@njit(cache=True)
+def sbw_fc(p, x, u):
+    """Jeq d2_dd + Beq d_dot + Fs tanh(d_dot/vs) + tau_e = tau_eq, with the self-aligning torque
+    tau_e = Cf (lc + lp) (delta_f - beta - lf gamma / V); bicycle model for beta and gamma."""
+    Jeq, Beq, Fs = p[SP_JEQ], p[SP_BEQ], p[SP_FS]
+    Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
+    lt = p[SP_LC] + p[SP_LP]
+    M, Iz, V, vs = p[SP_M], p[SP_IZ], p[SP_V], p[SP_VS]
+    d, dd, beta, gamma = x[0], x[1], x[2], x[3]
+    out = np.empty(4)
+    out[0] = dd
+    tau_e = Cf * lt * (d - beta - lf * gamma / V)
+    out[1] = (u[0] - Beq * dd - Fs * np.tanh(dd / vs) - tau_e) / Jeq
+    out[2] = (-(Cf + Cr) / (M * V) * beta + (-1.0 + (Cr * lr - Cf * lf) / (M * V * V)) * gamma
+              + Cf / (M * V) * d)
+    out[3] = ((Cr * lr - Cf * lf) / Iz * beta - (Cr * lr * lr + Cf * lf * lf) / (Iz * V) * gamma
+              + Cf * lf / Iz * d)
+    return out
+
+
+@njit(cache=True)
+def sbw_Ac(p, x, u):
+    """Continuous Jacobian (paper section V.B, with d tanh(d_dot/vs)/d d_dot for Fs sign())."""
+    Jeq, Beq, Fs = p[SP_JEQ], p[SP_BEQ], p[SP_FS]
+    Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
+    lt = p[SP_LC] + p[SP_LP]
+    M, Iz, V, vs = p[SP_M], p[SP_IZ], p[SP_V], p[SP_VS]
+    th = np.tanh(x[1] / vs)
+    A = np.zeros((4, 4))
+    A[0, 1] = 1.0
+    A[1, 0] = -Cf * lt / Jeq
+    A[1, 1] = -(Beq + Fs * (1.0 - th * th) / vs) / Jeq
+    A[1, 2] = Cf * lt / Jeq
+    A[1, 3] = Cf * lt * lf / (Jeq * V)
+    A[2, 0] = Cf / (M * V)
+    A[2, 2] = -(Cf + Cr) / (M * V)
+    A[2, 3] = -1.0 + (Cr * lr - Cf * lf) / (M * V * V)
+    A[3, 0] = Cf * lf / Iz
+    A[3, 2] = (Cr * lr - Cf * lf) / Iz
+    A[3, 3] = -(Cr * lr * lr + Cf * lf * lf) / (Iz * V)
+    return A
+
+
+@njit(cache=True)
+def sbw_H(p, gid, x, u):
+    """Groups: 0 steering_angle (delta_f), 1 yaw_rate (gamma),
+    2 lateral_accel a_y = V (beta_dot + gamma) (linear in the state)."""
+    H = np.zeros((1, 4))
+    if gid == 0:
+        H[0, 0] = 1.0
+    elif gid == 1:
+        H[0, 3] = 1.0
+    else:
+        Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
+        M, V = p[SP_M], p[SP_V]
+        H[0, 0] = Cf / M
+        H[0, 2] = -(Cf + Cr) / M
+        H[0, 3] = (Cr * lr - Cf * lf) / (M * V)
+    return H
+
+
+@njit(cache=True)
+def sbw_h(p, gid, x, u):
+    H = sbw_H(p, gid, x, u)
+    return H @ x
+
+
+# =============================================================================================
+# linear (also dc_motor): p = [n, nu, G, group_start[G], Ad (n*n), Bd (n*nu), groups...],
+# each group block = [m, C (m*n), D (m*nu)]
+# =============================================================================================
+@njit(cache=True)
+def lin_dims(p):
+    return int(p[0]), int(p[1]), int(p[2])
+
+
+@njit(cache=True)
+def lin_AB(p):
+    n, nu, G = lin_dims(p)
+    a0 = 3 + G
+    Ad = p[a0:a0 + n * n].reshape((n, n))
+    Bd = p[a0 + n * n:a0 + n * n + n * nu].reshape((n, nu))
+    return Ad, Bd
+
+
+@njit(cache=True)
+def lin_CD(p, gid):
+    n, nu, G = lin_dims(p)
+    s = int(p[3 + gid])
+    m = int(p[s])
+    C = p[s + 1:s + 1 + m * n].reshape((m, n))
+    D = p[s + 1 + m * n:s + 1 + m * n + m * nu].reshape((m, nu))
+    return C, D
+
+
+@njit(cache=True)
+def lin_f(p, x, u):
+    Ad, Bd = lin_AB(p)
+    # x_k = Ad x_{k-1} + Bd u_k
+    return Ad @ x + Bd @ u
+
+
+@njit(cache=True)
+def lin_h(p, gid, x, u):
+    C, D = lin_CD(p, gid)
+    # z = C x + D u
+    return C @ x + D @ u
+
+
+@njit(cache=True)
+def lin_H(p, gid, x, u):
+    C, D = lin_CD(p, gid)
+    return C.copy()
+
+
+# =============================================================================================
+# RK4 with its exact Jacobian, and the dispatchers
+# =============================================================================================
+@njit(cache=True)
+def cont_f(model_id, p, x, u):
+    if model_id == QUADCOPTER_ID:
+        return quad_fc(p, x, u)
+    return sbw_fc(p, x, u)
+
+
+@njit(cache=True)
+def cont_A(model_id, p, x, u):
+    if model_id == QUADCOPTER_ID:
+        return quad_Ac(p, x, u)
+    return sbw_Ac(p, x, u)
+
+
+@njit(cache=True)
+def rk4_predict(model_id, p, x, u, dt):
+    """One RK4 step x_next and its exact Jacobian F = d x_next / d x."""
+    n = x.size
+    I = np.eye(n)
+    k1 = cont_f(model_id, p, x, u)
+    J1 = cont_A(model_id, p, x, u)
+    x2 = x + 0.5 * dt * k1
+    k2 = cont_f(model_id, p, x2, u)
+    J2 = cont_A(model_id, p, x2, u) @ (I + 0.5 * dt * J1)  # dk2/dx
+    x3 = x + 0.5 * dt * k2
+    k3 = cont_f(model_id, p, x3, u)
+    J3 = cont_A(model_id, p, x3, u) @ (I + 0.5 * dt * J2)
+    x4 = x + dt * k3
+    k4 = cont_f(model_id, p, x4, u)
+    J4 = cont_A(model_id, p, x4, u) @ (I + dt * J3)
+    # x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4)
+    x_next = x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    F = I + (dt / 6.0) * (J1 + 2.0 * J2 + 2.0 * J3 + J4)
+    return x_next, F
+
+
+@njit(cache=True)
+def rk4_f(model_id, p, x, u, dt):
+    k1 = cont_f(model_id, p, x, u)
+    k2 = cont_f(model_id, p, x + 0.5 * dt * k1, u)
+    k3 = cont_f(model_id, p, x + 0.5 * dt * k2, u)
+    k4 = cont_f(model_id, p, x + dt * k3, u)
+    return x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+@njit(cache=True)
+def predict(model_id, p, x, u, dt):
+    """(f(x, u), F(x, u)) of the discrete model `model_id`."""
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        Ad, Bd = lin_AB(p)
+        return lin_f(p, x, u), Ad.copy()
+    return rk4_predict(model_id, p, x, u, dt)
+
+
+@njit(cache=True)
+def f_disc(model_id, p, x, u, dt):
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        return lin_f(p, x, u)
+    return rk4_f(model_id, p, x, u, dt)
+
+
+@njit(cache=True)
+def h_meas(model_id, gid, p, x, u):
+    if model_id == QUADCOPTER_ID:
+        return quad_h(p, gid, x, u)
+    if model_id == STEER_BY_WIRE_ID:
+        return sbw_h(p, gid, x, u)
+    return lin_h(p, gid, x, u)
+
+
+@njit(cache=True)
+def H_meas(model_id, gid, p, x, u):
+    if model_id == QUADCOPTER_ID:
+        return quad_H(p, gid, x, u)
+    if model_id == STEER_BY_WIRE_ID:
+        return sbw_H(p, gid, x, u)
+    return lin_H(p, gid, x, u)
