@@ -329,7 +329,7 @@ def _frame_channels(
     source.time_unit = unit.unit
     source.metadata.setdefault("csv.time_units", {})[label] = unit.unit
     source.metadata.setdefault("csv.time_columns", {})[label] = (
-        f"{time_name} ({unit.unit}, {unit.origin}: {unit.reason})"
+        f"{time_name!r} in {unit.unit}: {unit.reason}"
     )
     t_ns, valid = _time_ns(frame[time_name], unit.unit)
     if not valid.all():
