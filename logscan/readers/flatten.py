@@ -1,0 +1,183 @@
+"""Numeric flattening of decoded messages (JSON, ROS 1, ROS 2, protobuf) into named columns.
+
+A decoded message is walked depth first. Numbers (and bools, as 0/1) become leaves named by their
+dotted path: ``linear_acceleration.x``, ``position[2]``, ``poses[1].position.z``. Strings, bytes
+(this includes ROS ``uint8[]`` fields, which the decoders return as ``bytes``) and other non-numeric
+values are not channels; they are reported as skipped with a reason. A JSON ``null`` is skipped
+the same way ("null value"), never turned into 0.
+
+Messages of one topic are grouped by their leaf layout, so a topic whose variable-length arrays
+change length yields, for each index seen, a column with only the messages that had that index.
+Each column comes back with the message indices it was present in, so the reader can attach
+per-column timestamps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+_NON_NUMERIC = "non-numeric"
+_NULL = "null value"
+_UNSUPPORTED = "unsupported value type"
+
+_slots_by_type: dict[type, tuple[str, ...]] = {}
+
+
+def _slots_of(kind: type) -> tuple[str, ...]:
+    """All ``__slots__`` names of ``kind`` and its bases, in definition order (cached per type)."""
+    slots = _slots_by_type.get(kind)
+    if slots is None:
+        names: list[str] = []
+        for klass in reversed(kind.__mro__):
+            declared = klass.__dict__.get("__slots__", ())
+            if isinstance(declared, str):
+                declared = (declared,)
+            names.extend(name for name in declared if name not in names and not name.startswith("__"))
+        slots = tuple(names)
+        _slots_by_type[kind] = slots
+    return slots
+
+
+def _walk(value: Any, path: str, keys: list, values: list, skipped: list) -> None:
+    """Append the numeric leaves under ``value`` (named ``path...``) to ``keys``/``values``."""
+    kind = type(value)
+    if kind is float or kind is int:
+        keys.append(path)
+        values.append(value)
+    elif kind is dict:
+        prefix = path + "." if path else ""
+        for name, item in value.items():
+            item_kind = type(item)
+            if item_kind is float or item_kind is int:
+                keys.append(prefix + name)
+                values.append(item)
+            else:
+                _walk(item, prefix + name, keys, values, skipped)
+    elif kind is list or kind is tuple:
+        for index, item in enumerate(value):
+            item_kind = type(item)
+            if item_kind is float or item_kind is int:
+                keys.append(f"{path}[{index}]")
+                values.append(item)
+            else:
+                _walk(item, f"{path}[{index}]", keys, values, skipped)
+    elif kind is bool:
+        keys.append(path)
+        values.append(1.0 if value else 0.0)
+    elif kind is str or kind is bytes or kind is bytearray or kind is memoryview:
+        skipped.append((path, _NON_NUMERIC))
+    elif value is None:
+        skipped.append((path, _NULL))
+    elif isinstance(value, (bool, np.bool_)):
+        keys.append(path)
+        values.append(1.0 if value else 0.0)
+    elif isinstance(value, (int, float, np.integer, np.floating)):
+        keys.append(path)
+        values.append(float(value))
+    elif isinstance(value, np.ndarray):
+        _walk(value.tolist(), path, keys, values, skipped)
+    elif hasattr(value, "DESCRIPTOR") and hasattr(value, "ListFields"):
+        _walk_protobuf(value, path, keys, values, skipped)
+    elif _slots_of(kind):
+        prefix = path + "." if path else ""
+        for name in _slots_of(kind):
+            item = getattr(value, name, None)
+            item_kind = type(item)
+            if item_kind is float or item_kind is int:
+                keys.append(prefix + name)
+                values.append(item)
+            else:
+                _walk(item, prefix + name, keys, values, skipped)
+    elif isinstance(value, Sequence) or (hasattr(value, "__len__") and hasattr(value, "__getitem__")):
+        # protobuf repeated containers and other sequence types
+        _walk(list(value), path, keys, values, skipped)
+    else:
+        skipped.append((path, _UNSUPPORTED))
+
+
+def _walk_protobuf(message: Any, path: str, keys: list, values: list, skipped: list) -> None:
+    """Protobuf message: every declared field; unset singular sub-messages are absent, not zeros."""
+    prefix = path + "." if path else ""
+    for field in message.DESCRIPTOR.fields:
+        name = prefix + field.name
+        is_repeated = getattr(field, "is_repeated", None)
+        if is_repeated is None:  # older protobuf
+            is_repeated = field.label == field.LABEL_REPEATED
+        if field.message_type is not None and not is_repeated:
+            if not message.HasField(field.name):
+                continue
+        if field.message_type is not None and field.message_type.GetOptions().map_entry:
+            skipped.append((name, "map field"))
+            continue
+        _walk(getattr(message, field.name), name, keys, values, skipped)
+
+
+def flatten_one(message: Any) -> tuple[dict[str, float], list[tuple[str, str]]]:
+    """The numeric leaves of one decoded message by dotted path, and the skipped (path, why)."""
+    keys: list[str] = []
+    values: list[Any] = []
+    skipped: list[tuple[str, str]] = []
+    _walk(message, "", keys, values, skipped)
+    return dict(zip(keys, (float(v) for v in values))), skipped
+
+
+class FlatColumns:
+    """Columns flattened from the messages of one topic.
+
+    ``columns[path] = (message_index int64 array, values float64 array)``; ``skipped[(path, why)]``
+    counts the messages in which ``path`` was not numeric; ``fields`` lists paths in first-seen order.
+    """
+
+    def __init__(self) -> None:
+        self.columns: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.skipped: dict[tuple[str, str], int] = {}
+        self.fields: list[str] = []
+
+
+def flatten_messages(messages: Sequence[Any]) -> FlatColumns:
+    """Flatten decoded ``messages`` of one topic into per-path columns (see ``FlatColumns``).
+
+    Messages are grouped by their leaf layout; each group becomes one (n, k) float64 array built
+    in a single numpy call, so the per-message Python work is the walk itself.
+    """
+    groups: dict[tuple, tuple[list[int], list[list[Any]]]] = {}
+    for index, message in enumerate(messages):
+        keys: list[str] = []
+        values: list[Any] = []
+        skipped: list[tuple[str, str]] = []
+        _walk(message, "", keys, values, skipped)
+        signature = (tuple(keys), tuple(skipped))
+        group = groups.get(signature)
+        if group is None:
+            group = groups[signature] = ([], [])
+        group[0].append(index)
+        group[1].append(values)
+
+    out = FlatColumns()
+    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    seen: set[str] = set()
+    for (keys, skipped), (indices, rows) in groups.items():
+        index_array = np.asarray(indices, dtype=np.int64)
+        for item in skipped:
+            out.skipped[item] = out.skipped.get(item, 0) + len(indices)
+        if not keys:
+            continue
+        matrix = np.array(rows, dtype=np.float64).reshape(len(indices), len(keys))
+        for column, key in enumerate(keys):
+            if key not in seen:
+                seen.add(key)
+                out.fields.append(key)
+            pieces.setdefault(key, []).append((index_array, matrix[:, column]))
+    for key in out.fields:
+        parts = pieces[key]
+        if len(parts) == 1:
+            out.columns[key] = (parts[0][0], np.ascontiguousarray(parts[0][1]))
+            continue
+        index_array = np.concatenate([p[0] for p in parts])
+        value_array = np.concatenate([p[1] for p in parts])
+        order = np.argsort(index_array, kind="stable")
+        out.columns[key] = (index_array[order], value_array[order])
+    return out

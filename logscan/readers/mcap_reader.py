@@ -1,0 +1,718 @@
+"""MCAP reader: raw records to per-topic message batches, decoded and flattened into channels.
+
+How a file is read
+------------------
+The whole file is walked linearly, record by record (a numba kernel finds the record boundaries,
+numpy gathers channel ids and log times; Python only touches the records of wanted topics). This
+is what the mcap library's streaming reader does too, but it is far faster, and it does not
+depend on the summary section, so it reads every conformance file, including the ones whose
+summary lacks channel or schema records (where ``mcap.reader.SeekingReader`` raises KeyError).
+Chunks are decompressed (lz4, zstd when ``zstandard`` is installed) and their CRC is checked when
+it is non-zero; the data-section CRC in the DataEnd record is checked when non-zero.
+
+Decoding: per channel, the first factory of [JSON (``logscan.readers.json_decoder``), ROS 2 CDR
+(``mcap_ros2``), ROS 1 (``mcap_ros1``), protobuf (``mcap_protobuf``)] whose ``decoder_for``
+returns a decoder is used for all of that channel's messages. Only messages of wanted topics are
+sliced out and decoded. A channel no factory decodes (unknown encoding, schemaless non-JSON) is
+skipped and listed in ``source.skipped`` with the reason and a warning naming the topics.
+
+Channel names: ``<topic>/<field path>``, where the topic's trailing "/" is dropped before joining,
+so ``/imu`` + ``linear_acceleration.x`` -> ``/imu/linear_acceleration.x`` and ``imu`` + ``accel.x``
+-> ``imu/accel.x``; arrays index as ``position[2]``. A message that is itself a number gives a
+channel named by the topic alone. Each channel has its own timestamps: a variable-length array
+index only gets samples from the messages that had it. Channels are sorted by time (stable); a
+topic logged out of log_time order gives a warning.
+
+Time: ``log_time`` (int ns). With ``use_header_stamp=True``, messages that have ``header.stamp``
+(``sec``/``nanosec`` in ROS 2 and JSON, ``secs``/``nsecs`` in ROS 1) use it instead.
+
+Metadata records logscan writes and reads back (``source.metadata[name]`` holds every record):
+ - ``logscan.truth``: key ``json`` -> a JSON document, the ground truth
+   (``{"events": [{"start": s, "end": s, "kind": str, "target": str, ...}], ...}``) -> ``Log.truth``.
+ - ``logscan.profile``: key ``toml`` -> the profile's TOML text -> ``Log.profile_text``.
+
+Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
+decompress or does not parse. If messages were read before that point the Log is returned with
+``source.partial = True`` and ``partial_reason`` saying where it stopped and how many messages
+(and what time span) were recovered; otherwise CorruptLogError names the file and the problem.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import numpy as np
+from numba import njit
+
+from logscan.errors import CorruptLogError, InputError
+from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.readers import MCAP_MAGIC, topic_wanted
+from logscan.readers.flatten import flatten_messages
+from logscan.readers.json_decoder import JsonDecoderFactory
+
+TRUTH_RECORD = "logscan.truth"
+PROFILE_RECORD = "logscan.profile"
+
+_OP_HEADER = 0x01
+_OP_FOOTER = 0x02
+_OP_SCHEMA = 0x03
+_OP_CHANNEL = 0x04
+_OP_MESSAGE = 0x05
+_OP_CHUNK = 0x06
+_OP_METADATA = 0x0C
+_OP_DATA_END = 0x0F
+_MESSAGE_HEADER = 22  # channel_id u16, sequence u32, log_time u64, publish_time u64
+
+# What a corrupt byte stream can make the parsing code raise; anything else is a bug and propagates.
+_PARSE_ERRORS = (struct.error, ValueError, UnicodeDecodeError, IndexError, OverflowError, MemoryError)
+
+
+class _Corrupt(Exception):
+    """Internal: the record at ``offset`` is broken; ``reason`` says how.
+
+    ``fatal``: nothing read can be trusted (a data-section CRC mismatch over records that have no
+    CRC of their own), so no partial result may be returned.
+    """
+
+    def __init__(self, reason: str, offset: int, fatal: bool = False):
+        super().__init__(reason)
+        self.reason = reason
+        self.offset = offset
+        self.fatal = fatal
+
+
+# ---------------------------------------------------------------------------------------------
+# record walking
+
+
+# how a record walk ended
+WALK_END = 0  # reached the end of the buffer exactly
+WALK_FOOTER = 1  # stopped after a Footer record
+WALK_TRUNCATED = 2  # a record header or body runs past the end of the buffer
+WALK_BAD_OPCODE = 3  # an opcode the MCAP specification reserves (0x00, 0x10-0x7f): misaligned or corrupt
+
+
+@njit(cache=True)
+def _count_records(buf, start, stop):  # pragma: no cover - compiled
+    """Number of whole records in buf[start:stop], the offset where the walk ended, and why."""
+    n = 0
+    pos = start
+    while pos < stop:
+        if pos + 9 > stop:
+            return n, pos, WALK_TRUNCATED
+        op = buf[pos]
+        if op == 0 or (op >= 0x10 and op < 0x80):
+            return n, pos, WALK_BAD_OPCODE
+        if buf[pos + 7] != 0 or buf[pos + 8] != 0:  # length >= 2**48: no real record is that long
+            return n, pos, WALK_TRUNCATED
+        length = np.int64(0)
+        for i in range(6):
+            length |= np.int64(buf[pos + 1 + i]) << (8 * i)
+        if length > stop - pos - 9:
+            return n, pos, WALK_TRUNCATED
+        n += 1
+        pos += 9 + length
+        if op == 2:
+            return n, pos, WALK_FOOTER
+    return n, pos, WALK_END
+
+
+@njit(cache=True)
+def _fill_records(buf, start, n, ops, offsets, lengths):  # pragma: no cover - compiled
+    """Opcode, body offset and body length of the first ``n`` records from ``start``."""
+    pos = start
+    for k in range(n):
+        length = np.int64(0)
+        for i in range(6):
+            length |= np.int64(buf[pos + 1 + i]) << (8 * i)
+        ops[k] = buf[pos]
+        offsets[k] = pos + 9
+        lengths[k] = length
+        pos += 9 + length
+
+
+_WALK_TEXT = {
+    WALK_END: "file ends without a footer (truncated?)",
+    WALK_TRUNCATED: "record runs past the end of the file (truncated, or a corrupt record length)",
+    WALK_BAD_OPCODE: "invalid record opcode (corrupt bytes)",
+}
+
+
+class _Records(NamedTuple):
+    ops: np.ndarray  # uint8
+    offsets: np.ndarray  # int64, offset of the record body
+    lengths: np.ndarray  # int64, body length
+    end: int  # where the walk stopped
+    status: int  # WALK_* code
+
+
+def _walk_records(u8: np.ndarray, start: int, stop: int) -> _Records:
+    n, end, status = _count_records(u8, start, stop)
+    ops = np.empty(n, dtype=np.uint8)
+    offsets = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)
+    _fill_records(u8, start, n, ops, offsets, lengths)
+    return _Records(ops, offsets, lengths, int(end), int(status))
+
+
+def _gather_u64(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Little-endian uint64 at each of ``offsets`` in ``u8`` (vectorised)."""
+    if offsets.size == 0:
+        return np.empty(0, dtype=np.uint64)
+    idx = offsets[:, None] + np.arange(8, dtype=np.int64)[None, :]
+    return np.ascontiguousarray(u8[idx]).view("<u8").reshape(-1)
+
+
+def _gather_u16(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    return u8[offsets].astype(np.int64) | (u8[offsets + 1].astype(np.int64) << 8)
+
+
+def _gather_u32(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    out = np.zeros(offsets.size, dtype=np.int64)
+    for i in range(4):
+        out |= u8[offsets + i].astype(np.int64) << (8 * i)
+    return out
+
+
+class _Cursor:
+    """Field reader over one record body (bounds-checked: a short body raises struct.error)."""
+
+    def __init__(self, data: bytes | memoryview, pos: int, end: int):
+        self.data = data
+        self.pos = pos
+        self.end = end
+
+    def take(self, fmt: str) -> tuple:
+        size = struct.calcsize(fmt)
+        if self.pos + size > self.end:
+            raise struct.error("record shorter than its fields")
+        values = struct.unpack_from(fmt, self.data, self.pos)
+        self.pos += size
+        return values
+
+    def raw(self, size: int) -> bytes:
+        if size < 0 or self.pos + size > self.end:
+            raise struct.error("record shorter than its fields")
+        out = bytes(self.data[self.pos : self.pos + size])
+        self.pos += size
+        return out
+
+    def string(self) -> str:
+        (size,) = self.take("<I")
+        return self.raw(size).decode("utf-8")
+
+    def string_map(self) -> dict[str, str]:
+        (size,) = self.take("<I")
+        stop = self.pos + size
+        if stop > self.end:
+            raise struct.error("map longer than its record")
+        out: dict[str, str] = {}
+        while self.pos < stop:
+            key = self.string()
+            out[key] = self.string()
+        if self.pos != stop:
+            raise ValueError("map entries overrun the map length")
+        return out
+
+
+@dataclass
+class _SchemaRec:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass
+class _ChannelRec:
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+    metadata: dict[str, str]
+
+
+class RawMessage(NamedTuple):
+    """One message as stored: topic, channel id, sequence, log and publish time (ns), data bytes."""
+
+    topic: str
+    channel_id: int
+    sequence: int
+    log_time: int
+    publish_time: int
+    data: bytes
+
+
+@dataclass
+class _Batch:
+    """Messages of one channel: log times (int64 arrays per container) and data slices."""
+
+    times: list[np.ndarray] = field(default_factory=list)
+    datas: list[Any] = field(default_factory=list)
+
+
+class _Scan:
+    """One linear pass over an MCAP file; fills channels, schemas, metadata and message batches."""
+
+    def __init__(self, path: str, wanted: set[str] | None, keep_raw: bool = False):
+        self.path = path
+        self.wanted = wanted
+        self.keep_raw = keep_raw
+        self.schemas: dict[int, _SchemaRec] = {}
+        self.channels: dict[int, _ChannelRec] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.batches: dict[int, _Batch] = {}
+        self.counts: dict[int, int] = {}
+        self.first: dict[int, int] = {}
+        self.last: dict[int, int] = {}
+        self.raw: list[RawMessage] = []
+        self.unknown_channel_messages = 0
+        self.messages_read = 0
+        self.unchecked_records = 0  # schema/channel/message records outside CRC-checked chunks
+        self.problem: _Corrupt | None = None
+        self.warnings: list[str] = []
+        self._wanted_ids: dict[int, bool] = {}
+
+    # -- the pass -------------------------------------------------------------------------------
+
+    def run(self) -> None:
+        try:
+            with open(self.path, "rb") as fh:
+                raw = fh.read()
+        except OSError as exc:
+            raise InputError(f"cannot read: {exc.strerror}", path=self.path) from None
+        if not raw.startswith(MCAP_MAGIC):
+            raise CorruptLogError(
+                "not an MCAP file (bad magic bytes at offset 0)", path=self.path,
+                hint="the file is damaged or not an MCAP log",
+            )
+        u8 = np.frombuffer(raw, dtype=np.uint8)
+        top = _walk_records(u8, len(MCAP_MAGIC), len(raw))
+        try:
+            self._top_level(raw, u8, top)
+        except _PARSE_ERRORS as exc:  # a field inside a record did not parse
+            self.problem = _Corrupt(f"malformed record ({type(exc).__name__}: {exc})", -1)
+        if self.problem is None and top.status != WALK_FOOTER:
+            self.problem = _Corrupt(_WALK_TEXT[top.status], top.end)
+        elif self.problem is None and raw[top.end : top.end + 8] != MCAP_MAGIC:
+            self.problem = _Corrupt("no closing magic bytes after the footer (truncated?)", top.end)
+
+    def _top_level(self, raw: bytes, u8: np.ndarray, top: _Records) -> None:
+        ops = top.ops
+        n = ops.size
+        i = 0
+        while i < n:
+            op = int(ops[i])
+            if op == _OP_CHUNK:
+                self._chunk(raw, int(top.offsets[i]), int(top.lengths[i]))
+                i += 1
+                continue
+            if op == _OP_DATA_END:
+                self._data_end(raw, int(top.offsets[i]), int(top.lengths[i]))
+                return
+            if op == _OP_FOOTER:
+                return
+            if op == _OP_METADATA:
+                start = int(top.offsets[i])
+                cur = _Cursor(raw, start, start + int(top.lengths[i]))
+                name = cur.string()
+                self.metadata[name] = cur.string_map()
+                self.unchecked_records += 1
+                i += 1
+                continue
+            # a run of top-level schema / channel / message / other records
+            j = i
+            while j < n and int(ops[j]) not in (_OP_CHUNK, _OP_DATA_END, _OP_FOOTER, _OP_METADATA):
+                j += 1
+            self._container(raw, u8, top.ops[i:j], top.offsets[i:j], top.lengths[i:j], checked=False)
+            i = j
+
+    def _chunk(self, raw: bytes, start: int, length: int) -> None:
+        cur = _Cursor(raw, start, start + length)
+        try:
+            _t0, _t1, uncompressed_size, uncompressed_crc = cur.take("<QQQI")
+            compression = cur.string()
+            (size,) = cur.take("<Q")
+            if size > cur.end - cur.pos:
+                raise struct.error("chunk records longer than the chunk")
+            payload = raw[cur.pos : cur.pos + size]
+        except _PARSE_ERRORS as exc:
+            raise_corrupt(f"chunk header does not parse ({exc})", start)
+        if compression == "":
+            data = payload
+        else:
+            data = _decompress(compression, payload, uncompressed_size, start)
+        if len(data) != uncompressed_size:
+            raise_corrupt(
+                f"chunk holds {len(data)} bytes, its header says {uncompressed_size}", start
+            )
+        if uncompressed_crc != 0 and zlib.crc32(data) != uncompressed_crc:
+            raise_corrupt("chunk CRC mismatch", start)
+        u8 = np.frombuffer(data, dtype=np.uint8)
+        inner = _walk_records(u8, 0, len(data))
+        if inner.status != WALK_END:
+            raise_corrupt("records inside a chunk do not fill it (corrupt chunk)", start)
+        self._container(data, u8, inner.ops, inner.offsets, inner.lengths, checked=uncompressed_crc != 0)
+
+    def _data_end(self, raw: bytes, start: int, length: int) -> None:
+        (expected,) = _Cursor(raw, start, start + length).take("<I")
+        if expected == 0:
+            return
+        actual = zlib.crc32(memoryview(raw)[: start - 9])
+        if actual == expected:
+            return
+        if self.unchecked_records == 0:
+            # every schema, channel and message came from a chunk whose own CRC matched: the
+            # damage is in chunk headers or message indexes, which the messages do not depend on.
+            self.warnings.append(
+                "data section CRC mismatch outside the message chunks; every message comes from "
+                "a chunk whose own CRC matches"
+            )
+            return
+        raise _Corrupt("data section CRC mismatch (the data section is corrupt)", start - 9, fatal=True)
+
+    def _container(self, data, u8, ops, offsets, lengths, *, checked: bool) -> None:
+        """Schema, channel and message records of one chunk (or one run of top-level records)."""
+        is_message = ops == _OP_MESSAGE
+        if not checked:
+            self.unchecked_records += int(np.count_nonzero(np.isin(ops, (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE))))
+        # schema and channel records are few: register them in order before the messages
+        for k in np.flatnonzero((ops == _OP_SCHEMA) | (ops == _OP_CHANNEL)).tolist():
+            start, length = int(offsets[k]), int(lengths[k])
+            cur = _Cursor(data, start, start + length)
+            try:
+                if ops[k] == _OP_SCHEMA:
+                    (sid,) = cur.take("<H")
+                    name = cur.string()
+                    encoding = cur.string()
+                    (size,) = cur.take("<I")
+                    self.schemas[sid] = _SchemaRec(sid, name, encoding, cur.raw(size))
+                else:
+                    cid, sid = cur.take("<HH")
+                    topic = cur.string()
+                    encoding = cur.string()
+                    meta = cur.string_map()
+                    self.channels[cid] = _ChannelRec(cid, sid, topic, encoding, meta)
+                    self._wanted_ids.pop(cid, None)
+            except _PARSE_ERRORS as exc:
+                raise_corrupt(f"schema/channel record does not parse ({exc})", start)
+        if not is_message.any():
+            return
+        m_off = offsets[is_message]
+        m_len = lengths[is_message]
+        if (m_len < _MESSAGE_HEADER).any():
+            raise_corrupt("message record shorter than its header", int(m_off[m_len < _MESSAGE_HEADER][0]))
+        channel_ids = _gather_u16(u8, m_off)
+        log_times = _gather_u64(u8, m_off + 6).astype(np.int64)
+        self.messages_read += int(m_off.size)
+        for cid in np.unique(channel_ids).tolist():
+            select = channel_ids == cid
+            channel = self.channels.get(cid)
+            if channel is None:
+                self.unknown_channel_messages += int(np.count_nonzero(select))
+                continue
+            times = log_times[select]
+            self.counts[cid] = self.counts.get(cid, 0) + int(times.size)
+            low, high = int(times.min()), int(times.max())
+            self.first[cid] = min(self.first.get(cid, low), low)
+            self.last[cid] = max(self.last.get(cid, high), high)
+            if not self._is_wanted(cid):
+                continue
+            starts = (m_off[select] + _MESSAGE_HEADER).tolist()
+            ends = (m_off[select] + m_len[select]).tolist()
+            batch = self.batches.setdefault(cid, _Batch())
+            batch.times.append(times)
+            batch.datas.extend([data[s:e] for s, e in zip(starts, ends)])
+        if self.keep_raw:
+            sequences = _gather_u32(u8, m_off + 2).tolist()
+            publish = _gather_u64(u8, m_off + 14).astype(np.int64).tolist()
+            for k, cid in enumerate(channel_ids.tolist()):
+                channel = self.channels.get(cid)
+                start, stop = int(m_off[k]) + _MESSAGE_HEADER, int(m_off[k] + m_len[k])
+                self.raw.append(RawMessage(
+                    channel.topic if channel else "", cid, sequences[k],
+                    int(log_times[k]), publish[k], bytes(data[start:stop]),
+                ))
+
+    def _is_wanted(self, cid: int) -> bool:
+        known = self._wanted_ids.get(cid)
+        if known is None:
+            known = self._wanted_ids[cid] = topic_wanted(self.channels[cid].topic, self.wanted)
+        return known
+
+
+def raise_corrupt(reason: str, offset: int) -> None:
+    raise _Corrupt(reason, offset)
+
+
+def _decompress(compression: str, payload: bytes, size: int, offset: int) -> bytes:
+    if compression == "lz4":
+        import lz4.frame
+
+        try:
+            return lz4.frame.decompress(payload)
+        except RuntimeError as exc:  # lz4 raises RuntimeError on bad frames
+            raise_corrupt(f"lz4 chunk does not decompress ({exc})", offset)
+    if compression == "zstd":
+        try:
+            import zstandard
+        except ImportError:
+            raise_corrupt("zstd-compressed chunk and the zstandard package is not installed", offset)
+        try:
+            return zstandard.ZstdDecompressor().decompress(payload, max_output_size=size)
+        except zstandard.ZstdError as exc:
+            raise_corrupt(f"zstd chunk does not decompress ({exc})", offset)
+    raise_corrupt(f"unsupported chunk compression {compression[:40]!r}", offset)
+    raise AssertionError("unreachable")
+
+
+def _scan(path: str, wanted: set[str] | None, keep_raw: bool) -> _Scan:
+    scan = _Scan(path, wanted, keep_raw)
+    try:
+        scan.run()
+    except _Corrupt as exc:
+        scan.problem = exc
+    return scan
+
+
+def _problem_text(scan: _Scan) -> str:
+    problem = scan.problem
+    assert problem is not None
+    where = f" at byte {problem.offset}" if problem.offset >= 0 else ""
+    return f"{problem.reason}{where}"
+
+
+def iter_raw_messages(path: str | os.PathLike) -> Iterator[RawMessage]:
+    """Every message of the file in file order, undecoded (the layer ``read_mcap`` is built on).
+
+    Raises CorruptLogError when the file is corrupt anywhere (this strict view is for checking
+    files; ``read_mcap`` instead keeps what precedes the damage).
+    """
+    scan = _scan(str(path), None, keep_raw=True)
+    if scan.problem is not None:
+        raise CorruptLogError(_problem_text(scan), path=str(path))
+    yield from scan.raw
+
+
+# ---------------------------------------------------------------------------------------------
+# decoding
+
+
+def decoder_factories() -> list:
+    """JSON, ROS 2, ROS 1 and protobuf decoder factories, in the order they are tried."""
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+    from mcap_ros1.decoder import DecoderFactory as Ros1DecoderFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+    return [JsonDecoderFactory(), Ros2DecoderFactory(), Ros1DecoderFactory(), ProtobufDecoderFactory()]
+
+
+def _mcap_schema(rec: _SchemaRec | None):
+    from mcap.records import Schema
+
+    if rec is None:
+        return None
+    return Schema(id=rec.id, name=rec.name, encoding=rec.encoding, data=rec.data)
+
+
+def _choose_decoder(factories: list, channel: _ChannelRec, schema: _SchemaRec | None):
+    """(decoder, None) or (None, why not)."""
+    mcap_schema = _mcap_schema(schema)
+    for factory in factories:
+        try:
+            decoder = factory.decoder_for(channel.message_encoding, mcap_schema)
+        except Exception as exc:  # a factory failing on a bad schema is data, not a logscan bug
+            return None, f"schema {schema.name if schema else ''!r} cannot be parsed ({type(exc).__name__}: {exc})"
+        if decoder is not None:
+            return decoder, None
+    schema_text = f"schema encoding {schema.encoding!r}" if schema else "no schema"
+    return None, f"no decoder for message encoding {channel.message_encoding!r} ({schema_text})"
+
+
+def _decode_all(decoder, datas: list) -> tuple[list[Any], list[int]]:
+    many = getattr(decoder, "decode_many", None)
+    if many is not None:
+        return many(datas)
+    try:
+        return [decoder(d) for d in datas], []
+    except Exception:  # noqa: BLE001 - retry one by one to find and count the bad messages
+        pass
+    out: list[Any] = []
+    failed: list[int] = []
+    for index, data in enumerate(datas):
+        try:
+            out.append(decoder(data))
+        except Exception:  # noqa: BLE001 - undecodable message bytes, counted below
+            out.append(None)
+            failed.append(index)
+    return out, failed
+
+
+_STAMP_FIELDS = (
+    ("header.stamp.sec", "header.stamp.nanosec"),
+    ("header.stamp.secs", "header.stamp.nsecs"),
+)
+
+
+def _header_stamps(columns: dict, log_times: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Per-message time: header.stamp where the message has it, else log_time."""
+    for sec_name, nsec_name in _STAMP_FIELDS:
+        if sec_name in columns and nsec_name in columns:
+            sec_idx, sec = columns[sec_name]
+            nsec_idx, nsec = columns[nsec_name]
+            both, in_sec, in_nsec = np.intersect1d(sec_idx, nsec_idx, return_indices=True)
+            times = log_times.copy()
+            # t = sec * 1e9 + nanosec, in integer ns
+            times[both] = sec[in_sec].astype(np.int64) * 1_000_000_000 + nsec[in_nsec].astype(np.int64)
+            return times, both.size > 0
+    return log_times, False
+
+
+def _channel_name(topic: str, path: str) -> str:
+    if not path:
+        return topic
+    return topic.rstrip("/") + "/" + path
+
+
+def _span_text(first: int | None, last: int | None) -> str:
+    if first is None or last is None:
+        return "no time span"
+    return f"log_time {first / 1e9:.6f} s .. {last / 1e9:.6f} s"
+
+
+# ---------------------------------------------------------------------------------------------
+# the reader
+
+
+def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
+    """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps."""
+    path = str(path)
+    scan = _scan(path, wanted, keep_raw=False)
+    source = SourceInfo(path=path, format="mcap")
+    source.metadata = dict(scan.metadata)
+    source.warnings.extend(scan.warnings)
+    if scan.problem is not None:
+        if scan.messages_read == 0 or scan.problem.fatal:
+            lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
+            raise CorruptLogError(
+                f"corrupt MCAP: {_problem_text(scan)}; {lost}",
+                path=path, hint="the file is damaged; re-export or re-record it",
+            )
+        firsts = [t for t in scan.first.values()]
+        lasts = [t for t in scan.last.values()]
+        source.partial = True
+        source.partial_reason = (
+            f"read stopped: {_problem_text(scan)}; recovered {scan.messages_read} messages "
+            f"({_span_text(min(firsts) if firsts else None, max(lasts) if lasts else None)})"
+        )
+    if scan.unknown_channel_messages:
+        source.skip("(messages of undefined channels)", "no channel record with their channel id",
+                    scan.unknown_channel_messages)
+
+    topics: dict[str, TopicInfo] = {}
+    for cid, channel in scan.channels.items():
+        schema = scan.schemas.get(channel.schema_id)
+        info = topics.get(channel.topic)
+        if info is None:
+            info = topics[channel.topic] = TopicInfo(
+                name=channel.topic, encoding=channel.message_encoding,
+                schema=schema.name if schema else "",
+            )
+        count = scan.counts.get(cid, 0)
+        if count:
+            info.message_count += count
+            first, last = scan.first[cid], scan.last[cid]
+            info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
+            info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
+    source.topics = topics
+
+    factories = decoder_factories()
+    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    undecodable: list[str] = []
+    stamp_topics: set[str] = set()
+    decoded_topics: set[str] = set()
+    for cid, batch in scan.batches.items():
+        channel = scan.channels[cid]
+        topic = channel.topic
+        decoder, why = _choose_decoder(factories, channel, scan.schemas.get(channel.schema_id))
+        if decoder is None:
+            source.skip(topic, why, len(batch.datas))
+            undecodable.append(topic)
+            continue
+        log_times = np.concatenate(batch.times)
+        messages, failed = _decode_all(decoder, batch.datas)
+        batch.datas = []
+        if failed:
+            source.skip(topic, "message bytes do not decode", len(failed))
+            keep = np.ones(len(messages), dtype=bool)
+            keep[failed] = False
+            messages = [m for m, k in zip(messages, keep.tolist()) if k]
+            log_times = log_times[keep]
+        decoded_topics.add(topic)
+        flat = flatten_messages(messages)
+        for (field_path, why_skipped), count in flat.skipped.items():
+            source.skip(_channel_name(topic, field_path), why_skipped, count)
+        times = log_times
+        if use_header_stamp:
+            times, used = _header_stamps(flat.columns, log_times)
+            if used:
+                stamp_topics.add(topic)
+        info = topics[topic]
+        for field_path in flat.fields:
+            if field_path not in info.fields:
+                info.fields.append(field_path)
+            index, values = flat.columns[field_path]
+            pieces.setdefault(_channel_name(topic, field_path), []).append((times[index], values))
+
+    channels: dict[str, Channel] = {}
+    unsorted_topics: set[str] = set()
+    for name, parts in pieces.items():
+        t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+        v = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
+        if t.size > 1 and (np.diff(t) < 0).any():
+            order = np.argsort(t, kind="stable")
+            t, v = t[order], v[order]
+            unsorted_topics.add(name)
+        channels[name] = Channel(name, t, v)
+    if unsorted_topics:
+        source.warnings.append(
+            f"{len(unsorted_topics)} channel(s) not in time order in the file, sorted by time: "
+            + ", ".join(sorted(unsorted_topics)[:5]) + (" ..." if len(unsorted_topics) > 5 else "")
+        )
+    if undecodable:
+        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(set(undecodable))))
+    if use_header_stamp:
+        missing = sorted(decoded_topics - stamp_topics)
+        if stamp_topics and not missing:
+            source.time_source = "header.stamp"
+        elif stamp_topics:
+            source.time_source = "header.stamp (log_time for " + ", ".join(missing) + ")"
+        else:
+            source.time_source = "log_time (no header.stamp found)"
+
+    log = Log(channels=channels, source=source)
+    _attach_logscan_records(log)
+    return log
+
+
+def _attach_logscan_records(log: Log) -> None:
+    """Ground truth and embedded profile from the ``logscan.truth`` / ``logscan.profile`` records."""
+    meta = log.source.metadata
+    truth = meta.get(TRUTH_RECORD)
+    if truth is not None:
+        try:
+            log.truth = json.loads(truth["json"])
+        except (KeyError, ValueError) as exc:
+            log.source.warnings.append(f"metadata record {TRUTH_RECORD!r} ignored: no valid 'json' key ({exc})")
+    profile = meta.get(PROFILE_RECORD)
+    if profile is not None:
+        if "toml" in profile:
+            log.profile_text = profile["toml"]
+        else:
+            log.source.warnings.append(f"metadata record {PROFILE_RECORD!r} ignored: no 'toml' key")
