@@ -46,7 +46,7 @@ _UNIT_WORDS = {
 }  # fmt: skip
 _TIME_RE = re.compile(
     r"^%?(?P<base>time|timestamp|t|stamp)"
-    r"(?:[\s_\-.]*[\[(]?\s*(?P<unit>" + "|".join(sorted(_UNIT_WORDS, key=len, reverse=True)) + r")\s*[\])]?)?$",
+    r"(?:(?:[\s_\-.]+[\[(]?|[\s_\-.]*[\[(])\s*(?P<unit>" + "|".join(sorted(_UNIT_WORDS, key=len, reverse=True)) + r")\s*[\])]?)?$",
     re.IGNORECASE,
 )
 NS_PER_UNIT = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
@@ -244,6 +244,9 @@ def _load_frame(path: Path) -> pd.DataFrame:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"malformed CSV: {first}", path=str(path),
                          hint="every row needs as many fields as the header") from None
+    if not isinstance(frame.index, pd.RangeIndex):  # pandas made the surplus fields an index
+        raise InputError("malformed CSV: data rows have more fields than the header",
+                         path=str(path), hint="every row needs as many fields as the header")
     frame.columns = [str(c).strip() for c in frame.columns]
     if frame.empty:
         raise InputError(
@@ -394,7 +397,9 @@ def report_time_order(t_ns: np.ndarray, label: str, source: SourceInfo) -> None:
         return
     steps = np.diff(t_ns)
     backwards = int((steps < 0).sum())
-    duplicates = int(t_ns.size - np.unique(t_ns).size)
+    if backwards == 0 and bool((steps > 0).all()):
+        return
+    duplicates = int((np.diff(np.sort(t_ns)) == 0).sum())
     if backwards or duplicates:
         source.warnings.append(
             f"{label}: timestamps not strictly increasing ({backwards} step(s) backwards, "

@@ -1,0 +1,253 @@
+"""CSV reader: wide files (time column, unit inference, NaNs, text, order) and ulog2csv directories."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from logscan.errors import InputError, LogscanError
+from logscan.readers import read_log
+from logscan.readers.csv_reader import infer_time_unit, read_csv, read_csv_dir, time_column_unit
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def rows(times, *columns) -> str:
+    return "\n".join(",".join(str(v) for v in row) for row in zip(times, *columns)) + "\n"
+
+
+def test_wide_file_channels_are_slash_column_and_values_are_exact(tmp_path):
+    f = write(tmp_path / "run.csv", "time,ax,/already/slashed\n0.0,1.5,7\n0.01,2.5,8\n0.02,3.5,9\n")
+    log = read_csv(f, None)
+    assert set(log.channels) == {"/ax", "/already/slashed"}
+    np.testing.assert_array_equal(log.channel("/ax").t, [0, 10_000_000, 20_000_000])
+    np.testing.assert_array_equal(log.channel("/ax").values, [1.5, 2.5, 3.5])
+    np.testing.assert_array_equal(log.channel("/already/slashed").values, [7, 8, 9])
+    assert log.source.format == "csv" and log.source.time_unit == "s"
+    assert log.source.topics["run"].message_count == 3
+    assert log.source.topics["run"].fields == ["ax", "/already/slashed"]
+
+
+def test_nans_are_kept_in_values_and_counted_in_a_warning(tmp_path):
+    f = write(tmp_path / "n.csv", "time,a,b\n0,1,\n0.1,nan,2\n0.2,3,NaN\n0.3,4,5\n")
+    log = read_csv(f, None)
+    np.testing.assert_array_equal(np.isnan(log.channel("/a").values), [False, True, False, False])
+    np.testing.assert_array_equal(np.isnan(log.channel("/b").values), [True, False, True, False])
+    nan_warnings = [w for w in log.source.warnings if "NaN" in w]
+    assert len(nan_warnings) == 1 and "3 NaN value(s)" in nan_warnings[0]
+    assert "/a: 1" in nan_warnings[0] and "/b: 2" in nan_warnings[0]
+
+
+def test_unsorted_and_duplicate_times_are_kept_in_file_order_with_a_warning(tmp_path):
+    f = write(tmp_path / "u.csv", "t,x\n0.2,1\n0.1,2\n0.1,3\n0.3,4\n")
+    log = read_csv(f, None)
+    np.testing.assert_array_equal(log.channel("/x").t, [200_000_000, 100_000_000, 100_000_000,
+                                                         300_000_000])
+    np.testing.assert_array_equal(log.channel("/x").values, [1, 2, 3, 4])
+    order = [w for w in log.source.warnings if "not strictly increasing" in w]
+    assert order and "1 step(s) backwards" in order[0] and "1 duplicate(s)" in order[0]
+
+
+def test_text_column_is_skipped_and_counted_and_mixed_column_reads_garbage_as_nan(tmp_path):
+    f = write(tmp_path / "m.csv",
+              "time,mode,speed\n0,idle,1.0\n1,go,2.0\n2,go,oops\n3,stop,4.0\n4,go,5.0\n")
+    log = read_csv(f, None)
+    assert set(log.channels) == {"/speed"}
+    np.testing.assert_array_equal(np.isnan(log.channel("/speed").values),
+                                  [False, False, True, False, False])
+    skipped = {s.what: (s.why, s.count) for s in log.source.skipped}
+    assert skipped["text column 'mode' of m.csv"] == ("not numeric", 1)
+    assert skipped["cells of column 'speed' of m.csv"] == ("not a number, read as NaN", 1)
+
+
+def test_rows_without_a_time_are_dropped_and_counted(tmp_path):
+    f = write(tmp_path / "r.csv", "time,x\n0,1\n,2\n0.2,3\n")
+    log = read_csv(f, None)
+    np.testing.assert_array_equal(log.channel("/x").values, [1, 3])
+    assert log.source.skipped[0].count == 1 and "time is empty" in log.source.skipped[0].why
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("", "empty"),
+        ("   \n", "empty"),
+        ("time,x\n", "header (2 column(s)) but no data rows"),
+        ("foo,bar\n1,2\n", "no time column among 'foo', 'bar'"),
+        ("time,x\n1,2,3,4\n5\n", "malformed CSV"),
+        ("time,x\nabc,1\ndef,2\n", "time column 'time' holds no numbers"),
+    ],
+)
+def test_bad_csv_raises_one_line_input_error(tmp_path, content, message):
+    f = tmp_path / "bad.csv"
+    f.write_text(content, encoding="utf-8")
+    with pytest.raises(InputError) as info:
+        read_csv(f, None)
+    line = info.value.one_line()
+    assert message in line and str(f) in line and "\n" not in line
+
+
+def test_no_time_column_message_lists_accepted_names(tmp_path):
+    f = write(tmp_path / "nt.csv", "a,b\n1,2\n")
+    with pytest.raises(InputError) as info:
+        read_csv(f, None)
+    assert "name it time, timestamp, t or stamp" in info.value.one_line()
+
+
+def test_non_utf8_bytes_after_the_first_block_give_input_error(tmp_path):
+    f = tmp_path / "latin.csv"
+    f.write_bytes(b"time,x\n" + b"0,1\n" * 3000 + b"1,\xe9\xff\n")
+    with pytest.raises(InputError, match="UTF-8"):
+        read_log(f)
+
+
+@pytest.mark.parametrize(
+    "header, unit",
+    [("time", None), ("Timestamp", None), ("t", None), ("stamp", None), ("time_s", "s"),
+     ("timestamp_us", "us"), ("time [ms]", "ms"), ("stamp(ns)", "ns"), ("time_usec", "us"),
+     ("%time", None), ("TIME_MS", "ms")],
+)
+def test_time_column_names_and_stated_units(header, unit):
+    assert time_column_unit(header) == (True, unit)
+
+
+@pytest.mark.parametrize("header", ["timestamp_sample", "times", "x_time", "tt", "time_total"])
+def test_other_columns_are_not_time(header):
+    assert time_column_unit(header)[0] is False
+
+
+@pytest.mark.parametrize(
+    "values, unit, origin",
+    [
+        (np.arange(1000) * 0.01, "s", "relative"),  # 100 Hz, fractional seconds
+        (np.arange(1000) * 10.0, "ms", "relative"),  # 100 Hz integer milliseconds
+        (20_000_000 + np.arange(1000) * 4000.0, "us", "relative"),  # PX4: us since boot, 250 Hz
+        (1_194_000_000 + np.arange(100) * 20_000.0, "us", "relative"),  # us since boot ~ 1.2e9
+        (np.arange(1000) * 1e7, "ns", "relative"),  # 100 Hz nanoseconds
+        (1.7e9 + np.arange(100) * 0.02, "s", "epoch"),  # epoch seconds with fractions
+        (1_700_000_000_000 + np.arange(100) * 20.0, "ms", "epoch"),
+        (1_700_000_000_000_000 + np.arange(100) * 5000.0, "us", "epoch"),
+        (1_700_000_000_000_000_000 + np.arange(100) * 1e7, "ns", "epoch"),
+    ],
+)
+def test_unit_inference_from_step_and_magnitude(values, unit, origin):
+    inferred = infer_time_unit(np.asarray(values, dtype=np.float64))
+    assert (inferred.unit, inferred.origin) == (unit, origin), inferred.reason
+
+
+@pytest.mark.parametrize(
+    "header, times, expected_ns",
+    [
+        ("time", ["0.0", "0.01", "0.02"], [0, 10_000_000, 20_000_000]),
+        ("time", ["0", "10", "20"], [0, 10_000_000, 20_000_000]),  # inferred ms
+        ("timestamp", ["20000000", "20004000", "20008000"],
+         [20_000_000_000, 20_004_000_000, 20_008_000_000]),  # inferred us
+        ("time_ms", ["0", "1", "2"], [0, 1_000_000, 2_000_000]),  # stated, not inferred
+        ("stamp", ["1700000000000000000", "1700000000010000000", "1700000000020000000"],
+         [1_700_000_000_000_000_000, 1_700_000_000_010_000_000, 1_700_000_000_020_000_000]),
+    ],
+)
+def test_time_is_converted_to_int64_ns_and_the_unit_is_reported(tmp_path, header, times, expected_ns):
+    f = write(tmp_path / "u.csv", f"{header},x\n" + "".join(f"{t},1\n" for t in times))
+    log = read_csv(f, None)
+    np.testing.assert_array_equal(log.channel("/x").t, expected_ns)
+    assert log.channel("/x").t.dtype == np.int64
+    inferred = [w for w in log.source.warnings if "inferred from" in w]
+    assert bool(inferred) == ("_" not in header)
+    assert log.source.metadata["csv.time_units"]["u.csv"] == log.source.time_unit
+
+
+def test_semicolon_and_tab_delimiters_are_detected(tmp_path):
+    for sep, name in ((";", "semi.csv"), ("\t", "tab.csv")):
+        f = write(tmp_path / name, f"time{sep}x\n0{sep}1\n0.5{sep}2\n")
+        assert read_csv(f, None).channel("/x").values.tolist() == [1, 2]
+
+
+def test_wanted_channels_limit_what_is_kept(tmp_path):
+    f = write(tmp_path / "w.csv", "time,a,b\n0,1,2\n1,3,4\n")
+    assert set(read_csv(f, {"/b"}).channels) == {"/b"}
+
+
+def test_truth_sidecar_is_read(tmp_path):
+    f = write(tmp_path / "flight.csv", "time,a\n0,1\n1,2\n")
+    write(tmp_path / "flight.truth.json", '{"events": [{"start": 1, "end": 2, "kind": "bias"}]}')
+    assert read_csv(f, None).truth["events"][0]["kind"] == "bias"
+
+
+def test_million_row_csv_reads_in_a_few_seconds(tmp_path):
+    n = 1_000_000
+    t = np.arange(n) * 0.001
+    data = np.column_stack([t, np.sin(t), np.cos(t), t * 2.0])
+    f = tmp_path / "big.csv"
+    np.savetxt(f, data, delimiter=",", header="time,a,b,c", comments="", fmt="%.6f")
+    start = time.perf_counter()
+    log = read_csv(f, None)
+    elapsed = time.perf_counter() - start
+    assert len(log.channel("/c")) == n
+    assert elapsed < 5.0, f"1e6-row CSV took {elapsed:.2f} s"
+
+
+# ---- directories in PX4 ulog2csv layout ---------------------------------------------------------
+
+
+def make_ulog2csv_dir(root: Path, log_name: str = "flight") -> Path:
+    d = root / "csvs"
+    d.mkdir()
+    write(d / f"{log_name}_vehicle_imu_0.csv",
+          "timestamp,accel[0],accel[1],temp_name\n0,9,9,x\n1000,0.1,0.2,a\n2000,0.3,0.4,b\n"
+          "3000,0.5,0.6,c\n")
+    write(d / f"{log_name}_vehicle_imu_1.csv", "timestamp,accel[0]\n1500,1.0\n2500,2.0\n")
+    write(d / f"{log_name}_battery_status_0.csv", "timestamp,voltage_v\n1000000,12.1\n2000000,12.0\n")
+    write(d / "notes.csv", "time_s,wind\n0,3\n1,4\n")
+    return d
+
+
+def test_directory_in_ulog2csv_layout_names_topics_like_the_ulog_reader(tmp_path):
+    d = make_ulog2csv_dir(tmp_path)
+    log = read_csv_dir(d, None)
+    assert log.source.format == "csv-dir"
+    assert set(log.source.topics) == {"vehicle_imu_0", "vehicle_imu_1", "battery_status_0", "notes"}
+    assert "/vehicle_imu_0/accel[0]" in log.channels and "/battery_status_0/voltage_v" in log.channels
+    imu = log.channel("/vehicle_imu_0/accel[1]")
+    # timestamp 0 is PX4's "never set": dropped like the ULog reader drops it, and counted
+    np.testing.assert_array_equal(imu.t, [1_000_000, 2_000_000, 3_000_000])
+    np.testing.assert_array_equal(imu.values, [0.2, 0.4, 0.6])
+    info = log.source.topics["vehicle_imu_0"]
+    assert info.message_count == 3 and info.schema == "ulog2csv"
+    assert info.rate_hz == pytest.approx(1000.0)
+    assert info.fields == ["accel[0]", "accel[1]"]
+    assert any(s.what == "text column 'temp_name' of vehicle_imu_0" for s in log.source.skipped)
+    assert any("timestamp 0" in s.why and s.count == 1 for s in log.source.skipped)
+    # a file outside the layout is a wide CSV with topic = its stem
+    np.testing.assert_array_equal(log.channel("/notes/wind").t, [0, 1_000_000_000])
+    assert log.source.time_unit == "mixed: s,us"
+
+
+def test_directory_topics_are_filtered_by_wanted(tmp_path):
+    d = make_ulog2csv_dir(tmp_path)
+    log = read_csv_dir(d, {"/vehicle_imu_1/accel[0]"})
+    assert list(log.channels) == ["/vehicle_imu_1/accel[0]"]
+    assert set(log.source.topics) == {"vehicle_imu_1"}
+
+
+def test_log_prefix_from_the_directory_name_when_topics_share_a_first_word(tmp_path):
+    d = tmp_path / "flight"
+    d.mkdir()
+    write(d / "flight_vehicle_imu_0.csv", "timestamp,x\n1,2\n")
+    write(d / "flight_vehicle_gps_position_0.csv", "timestamp,lat\n1,2\n")
+    assert set(read_csv_dir(d, None).source.topics) == {"vehicle_imu_0", "vehicle_gps_position_0"}
+
+
+def test_read_log_dispatches_directories_and_rejects_one_without_csvs(tmp_path):
+    d = make_ulog2csv_dir(tmp_path)
+    assert read_log(d).source.format == "csv-dir"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(LogscanError, match="no .csv files"):
+        read_log(empty)
