@@ -1,7 +1,12 @@
 """Alignment of a Log onto a profile's analysis grid: zero-order hold, staleness, fresh-sample masks.
 
-INTERFACE (fixed; the implementation of `align` is being written): downstream code (filters,
-detectors, simulator tests) relies only on the dataclasses below.
+INTERFACE (fixed): downstream code (filters, detectors, simulator tests) relies only on the
+dataclasses below; fields may be added with defaults, never renamed or removed.
+
+Time stays integer nanoseconds until the grid is built. Each channel is cleaned once (stable sort,
+duplicate timestamps dropped keeping the last, non-finite samples removed and counted), then held
+onto the grid with one compiled merge pass (numba): z[k] is the latest sample at or before t_k when it is no
+older than the staleness limit, else NaN.
 """
 
 from __future__ import annotations
@@ -9,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 
 @dataclass
@@ -27,6 +33,12 @@ class AlignedGroup:
     fresh: np.ndarray
     noise_std: np.ndarray | None = None  # (m,) from the profile, None: the model's default
     nonfinite_count: int = 0  # non-finite samples masked out before holding
+    # Optional additions (alignment fills them; defaults keep hand-built groups valid):
+    range_lo: np.ndarray | None = None  # (m,) profile override of the physical range, None: model's
+    range_hi: np.ndarray | None = None
+    rate_hz: float | None = None  # nominal rate from the profile
+    stale_s: float | None = None  # staleness limit used for holding
+    channel_fresh: np.ndarray | None = None  # (N, m) bool, per channel: a new sample in (t_{k-1}, t_k]
 
 
 @dataclass
@@ -53,7 +65,358 @@ class AlignedRun:
     onboard_variance: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
     gaps: list[tuple[float, float, str]] = field(default_factory=list)  # (start s, end s, channel)
+    # Optional additions (alignment fills them):
+    input_names: list[str] = field(default_factory=list)  # model input name of each column of u
+    mode_channel: str | None = None
+    onboard_names: list[str] = field(default_factory=list)  # column names (model states)
+    onboard_state_channels: list[str | None] = field(default_factory=list)
+    onboard_variance_channels: list[str | None] = field(default_factory=list)
+    redundant: dict[str, AlignedGroup] = field(default_factory=dict)  # sensors as channels
+    channel_stats: dict[str, dict[str, int]] = field(default_factory=dict)  # samples, nonfinite, ...
 
     @property
     def n_steps(self) -> int:
         return int(self.t.size)
+
+
+# ------------------------------------------------------------------------------------------------
+# Implementation
+# ------------------------------------------------------------------------------------------------
+
+_NS = 1_000_000_000
+_NEVER_STALE_NS = np.iinfo(np.int64).max // 4  # stale_s = inf
+_MAX_GAP_WARNINGS = 20
+
+
+@dataclass
+class _Clean:
+    """One channel after cleaning: sorted unique int64 ns times with finite float64 values."""
+
+    t: np.ndarray
+    values: np.ndarray
+    samples: int
+    nonfinite: int
+    unsorted: int
+    duplicates: int
+
+
+def stale_ns(stale_s: float) -> int:
+    """A staleness limit in integer nanoseconds (inf: never stale)."""
+    if not np.isfinite(stale_s):
+        return int(_NEVER_STALE_NS)
+    return int(round(stale_s * _NS))
+
+
+def clean_samples(t_ns: np.ndarray, values: np.ndarray) -> _Clean:
+    """Stable-sort by time, drop duplicate timestamps (keep the last), then drop non-finite values."""
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    values = np.asarray(values, dtype=np.float64)
+    samples = int(t_ns.size)
+    unsorted = int(np.count_nonzero(t_ns[1:] < t_ns[:-1]))
+    if unsorted:
+        order = np.argsort(t_ns, kind="stable")
+        t_ns, values = t_ns[order], values[order]
+    last_of_run = np.ones(t_ns.size, dtype=bool)
+    last_of_run[:-1] = t_ns[1:] != t_ns[:-1]
+    duplicates = int(t_ns.size - np.count_nonzero(last_of_run))
+    if duplicates:
+        t_ns, values = t_ns[last_of_run], values[last_of_run]
+    finite = np.isfinite(values)
+    nonfinite = int(finite.size - np.count_nonzero(finite))
+    if nonfinite:
+        t_ns, values = t_ns[finite], values[finite]
+    return _Clean(t_ns, values, samples, nonfinite, unsorted, duplicates)
+
+
+@njit(cache=True)
+def _hold_kernel(t_ns, values, grid_ns, limit_ns, z, fresh):  # pragma: no cover - compiled
+    # One merge pass over two sorted arrays: i = max{i : t_i <= g_k} (-1: none yet).
+    i = -1
+    n_t = t_ns.size
+    for k in range(grid_ns.size):
+        g = grid_ns[k]
+        while i + 1 < n_t and t_ns[i + 1] <= g:
+            i += 1
+        if i >= 0 and g - t_ns[i] <= limit_ns:
+            z[k] = values[i]
+            fresh[k] = k == 0 or t_ns[i] > grid_ns[k - 1]
+        else:
+            z[k] = np.nan
+            fresh[k] = False
+
+
+def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: int, z=None, fresh=None):
+    """Zero-order hold of sorted unique samples onto ``grid_ns`` within ``limit_ns``.
+
+    Returns (z, fresh): z[k] = the latest sample at or before grid_ns[k] if it is at most
+    ``limit_ns`` old, else NaN; fresh[k] = that sample is newer than grid_ns[k-1] (for k = 0:
+    any sample within the limit). A compiled merge of the two sorted arrays, O(N + M);
+    ``z`` / ``fresh`` may be given (e.g. a column of a 2-D array) to be written in place.
+    """
+    n = grid_ns.size
+    z = np.empty(n) if z is None else z
+    fresh = np.empty(n, dtype=np.bool_) if fresh is None else fresh
+    _hold_kernel(
+        np.ascontiguousarray(t_ns, dtype=np.int64),
+        np.ascontiguousarray(values, dtype=np.float64),
+        np.ascontiguousarray(grid_ns, dtype=np.int64),
+        np.int64(limit_ns),
+        z,
+        fresh,
+    )
+    return z, fresh
+
+
+@njit(cache=True)
+def _gap_kernel(edges, limit_ns):  # pragma: no cover - compiled
+    # stretches (edges[i], edges[i+1]) longer than the limit; two passes, no temporaries
+    count = 0
+    for i in range(edges.size - 1):
+        if edges[i + 1] - edges[i] > limit_ns:
+            count += 1
+    starts = np.empty(count, dtype=np.int64)
+    ends = np.empty(count, dtype=np.int64)
+    j = 0
+    for i in range(edges.size - 1):
+        if edges[i + 1] - edges[i] > limit_ns:
+            starts[j] = edges[i]
+            ends[j] = edges[i + 1]
+            j += 1
+    return starts, ends
+
+
+def _gaps(t_ns: np.ndarray, limit_ns: int, grid_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(start_ns, end_ns) of every stretch of the grid span without a sample for > limit_ns."""
+    g0, g1 = int(grid_ns[0]), int(grid_ns[-1])
+    i0 = int(np.searchsorted(t_ns, g0, side="left"))
+    i1 = int(np.searchsorted(t_ns, g1, side="right"))
+    inside = t_ns[i0:i1]
+    before = t_ns[:i0]
+    # a stretch starts at the last sample before the span when there is one, else at the span start
+    edges = np.empty(inside.size + 2, dtype=np.int64)
+    edges[0] = before[-1] if before.size else g0
+    edges[1:-1] = inside
+    edges[-1] = g1
+    # the edge stretches (start of span -> first sample, last sample -> end of span) count only
+    # when they exceed the limit, like any other
+    return _gap_kernel(edges, np.int64(limit_ns))
+
+
+class _Aligner:
+    """Holds every channel the profile names onto one grid, cleaning each channel once."""
+
+    def __init__(self, log, profile):
+        self.log = log
+        self.profile = profile
+        self.cache: dict[str, _Clean] = {}
+        self.warnings: list[str] = []
+        self.gaps: list[tuple[float, float, str]] = []
+        self.gap_reported: set[tuple[str, int]] = set()
+        self.gap_warnings = 0
+        self.start_ns = 0
+
+    def clean(self, name: str) -> _Clean:
+        if name not in self.cache:
+            ch = self.log.channels[name]
+            c = clean_samples(ch.t, ch.values)
+            if c.unsorted:
+                self.warnings.append(
+                    f"channel {name!r}: timestamps out of order ({c.unsorted} backward steps): "
+                    f"sorted (stable)"
+                )
+            if c.duplicates:
+                self.warnings.append(
+                    f"channel {name!r}: {c.duplicates} duplicate timestamps dropped (kept the last sample)"
+                )
+            if c.nonfinite:
+                self.warnings.append(
+                    f"channel {name!r}: {c.nonfinite} non-finite samples (NaN/inf) masked out, not held"
+                )
+            self.cache[name] = c
+        return self.cache[name]
+
+    def hold(self, name: str | None, grid_ns: np.ndarray, limit_s: float, transform=None, z=None, fresh=None):
+        n = grid_ns.size
+        if name is None:
+            return np.full(n, np.nan), np.zeros(n, dtype=bool)
+        c = self.clean(name)
+        values = c.values if transform is None else transform(c.values)
+        limit = stale_ns(limit_s)
+        z, fresh = hold(c.t, values, grid_ns, limit, z, fresh)
+        key = (name, limit)
+        if key not in self.gap_reported:
+            self.gap_reported.add(key)
+            g_start, g_end = _gaps(c.t, limit, grid_ns)
+            if g_start.size:
+                s = (g_start - self.start_ns) / _NS
+                e = (g_end - self.start_ns) / _NS
+                self.gaps.extend((float(a), float(b), name) for a, b in zip(s, e))
+                longest = int(np.argmax(e - s))
+                self.gap_warnings += 1
+                if self.gap_warnings <= _MAX_GAP_WARNINGS:
+                    self.warnings.append(
+                        f"channel {name!r}: {g_start.size} gap{'s' if g_start.size > 1 else ''} longer "
+                        f"than stale_s={limit_s:g} s (longest {e[longest] - s[longest]:.3f} s from "
+                        f"t={s[longest]:.3f} s); held values are NaN there"
+                    )
+        return z, fresh
+
+    def group(self, name: str, channels, grid_ns, limit_s: float, transforms=None) -> AlignedGroup:
+        m = len(channels)
+        n = grid_ns.size
+        z = np.empty((n, m))
+        ch_fresh = np.empty((n, m), dtype=bool)
+        for j, ch in enumerate(channels):
+            self.hold(ch, grid_ns, limit_s, transforms[j] if transforms else None, z[:, j], ch_fresh[:, j])
+        fresh = ch_fresh[:, 0].copy() if m else np.zeros(n, dtype=bool)
+        for j in range(1, m):
+            fresh &= ch_fresh[:, j]
+        if m > 1:
+            fewest = min(int(np.count_nonzero(ch_fresh[:, j])) for j in range(m))
+            n_fresh = int(np.count_nonzero(fresh))
+            if fewest and n_fresh < 0.5 * fewest:
+                self.warnings.append(
+                    f"group {name!r}: its channels arrive at different times; only {n_fresh} "
+                    f"grid steps have a new sample on every channel (a channel alone has {fewest}); "
+                    f"a group should map channels logged together (one topic)"
+                )
+        return AlignedGroup(
+            name=name,
+            channels=list(channels),
+            z=z,
+            fresh=fresh,
+            nonfinite_count=sum(self.clean(ch).nonfinite for ch in channels if ch is not None),
+            stale_s=float(limit_s),
+            channel_fresh=ch_fresh,
+        )
+
+
+def _grid(aligner: _Aligner, names: list[str], rate_hz: float) -> np.ndarray:
+    firsts, lasts = [], []
+    for name in names:
+        c = aligner.clean(name)
+        if c.t.size:
+            firsts.append(int(c.t[0]))
+            lasts.append(int(c.t[-1]))
+    if not firsts:
+        from logscan.errors import InputError
+
+        raise InputError(
+            "none of the profile's input and measurement channels has a finite sample",
+            path=aligner.log.source.path,
+            hint="check the profile's channels with `logscan inspect`",
+        )
+    first, last = min(firsts), max(lasts)
+    dt_ns = _NS / rate_hz
+    n = int(np.floor((last - first) / dt_ns + 1e-9)) + 1
+    # g_k = g_0 + round(k * dt) in integer ns (exact for any log length float64 can index)
+    return first + np.round(np.arange(n) * dt_ns).astype(np.int64)
+
+
+def align(log, profile) -> AlignedRun:
+    """Put ``log`` onto ``profile``'s analysis grid (see the module docstring for the rules).
+
+    Raises ProfileError when the profile names channels the log lacks (with close names) and
+    InputError when none of its input/measurement channels holds a finite sample.
+    """
+    from numpy.polynomial import polynomial as P
+
+    profile.check_channels(log)
+    aligner = _Aligner(log, profile)
+    rate = float(profile.vehicle.rate_hz)
+    input_channels = list(profile.inputs.channels)
+    span_channels = input_channels + [ch for g in profile.measurements.values() for ch in g.channels]
+    grid_ns = _grid(aligner, span_channels, rate)
+    start_ns = int(log.start_ns) if log.start_ns is not None else int(grid_ns[0])
+    aligner.start_ns = start_ns
+    n = grid_ns.size
+    dt = 1.0 / rate
+    t = (int(grid_ns[0]) - start_ns) / _NS + np.arange(n) * dt
+
+    u = np.empty((n, len(input_channels)))
+    scratch = np.empty(n, dtype=bool)
+    for j, ch in enumerate(input_channels):
+        aligner.hold(ch, grid_ns, profile.inputs.stale_s, z=u[:, j], fresh=scratch)
+    u_fresh = np.ones(n, dtype=bool)
+    for j in range(u.shape[1]):
+        u_fresh &= np.isfinite(u[:, j])
+
+    groups: dict[str, AlignedGroup] = {}
+    for spec in profile.measurements.values():
+        g = aligner.group(spec.name, spec.channels, grid_ns, spec.stale_s)
+        g.rate_hz = float(spec.rate_hz)
+        for attr in ("noise_std", "range_lo", "range_hi"):
+            value = getattr(spec, attr)
+            setattr(g, attr, None if value is None else np.asarray(value, dtype=np.float64))
+        groups[spec.name] = g
+
+    mode = None
+    mode_channel = None
+    if profile.mode is not None:
+        mode_channel = profile.mode.channel
+        mode, _ = aligner.hold(mode_channel, grid_ns, profile.mode.stale_s)
+
+    onboard_state = onboard_variance = None
+    state_chans: list = []
+    var_chans: list = []
+    onboard_names: list[str] = []
+    if profile.onboard is not None:
+        for which in ("state", "variance"):
+            chans, names = profile.onboard_channels(which, log.channels)
+            if not chans:
+                continue
+            onboard_names = onboard_names or names
+            missing = [nm for nm, ch in zip(names, chans) if ch is None]
+            if missing:
+                aligner.warnings.append(
+                    f"[onboard] {which}: no channel for {', '.join(missing)}; those columns are NaN"
+                )
+            arr = np.empty((n, len(chans)))
+            for j, ch in enumerate(chans):
+                arr[:, j], _ = aligner.hold(ch, grid_ns, profile.onboard.stale_s)
+            if which == "state":
+                onboard_state, state_chans = arr, chans
+            else:
+                onboard_variance, var_chans = arr, chans
+
+    redundant: dict[str, AlignedGroup] = {}
+    for red in profile.redundant.values():
+        sensors = list(red.sensors.values())
+        transforms = [
+            (lambda v, c=np.asarray(s.poly): P.polyval(v, c)) if s.poly is not None else None
+            for s in sensors
+        ]
+        g = aligner.group(red.name, [s.channel for s in sensors], grid_ns, red.stale_limit_s(), transforms)
+        g.rate_hz = red.rate_hz
+        redundant[red.name] = g
+
+    stats = {
+        name: {
+            "samples": c.samples,
+            "nonfinite": c.nonfinite,
+            "duplicates": c.duplicates,
+            "unsorted": c.unsorted,
+        }
+        for name, c in aligner.cache.items()
+    }
+    return AlignedRun(
+        t=t,
+        dt=dt,
+        start_ns=start_ns,
+        u=u,
+        u_fresh=u_fresh,
+        input_channels=input_channels,
+        groups=groups,
+        mode=mode,
+        onboard_state=onboard_state,
+        onboard_variance=onboard_variance,
+        warnings=aligner.warnings,
+        gaps=sorted(aligner.gaps),
+        input_names=list(profile.inputs.names),
+        mode_channel=mode_channel,
+        onboard_names=onboard_names,
+        onboard_state_channels=state_chans,
+        onboard_variance_channels=var_chans,
+        redundant=redundant,
+        channel_stats=stats,
+    )
