@@ -1,0 +1,187 @@
+"""Vehicle models: analytic Jacobians against central differences, registry errors, mixer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from logscan.errors import ModelError
+from logscan.models import MODEL_NAMES, get_model
+
+LINEAR_PARAMS = {
+    "A": [[0.0, 1.0], [-2.0, -0.5]],
+    "B": [[0.0], [1.0]],
+    "C": {"pos": [[1.0, 0.0]], "mix": [[1.0, 1.0], [0.0, 2.0]]},
+    "D": {"mix": [[0.5], [0.0]]},
+    "Q": [[1e-4, 0.0], [0.0, 1e-3]],
+}
+PARAMS = {"linear": LINEAR_PARAMS}
+MODELS = [
+    ("quadcopter", None),
+    ("quadcopter", {"inputs": "motors"}),
+    ("steer_by_wire", None),
+    ("dc_motor", None),
+    ("linear", LINEAR_PARAMS),
+]
+
+
+def _random_point(model, rng):
+    n = len(model.state_names)
+    x = rng.normal(size=n) * model.state_scale() * 2.0
+    if model.name == "quadcopter":
+        u = model.hover_input() * (1.0 + 0.2 * rng.normal(size=4))
+        if model.p["inputs"] == "wrench":
+            u[1:] = rng.normal(size=3) * 0.05
+    else:
+        u = rng.normal(size=len(model.input_names)) * 5.0
+    return x, u
+
+
+def _central_jacobian(fun, x, eps=1e-6):
+    cols = [(fun(x + eps * e) - fun(x - eps * e)) / (2 * eps) for e in np.eye(x.size)]
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize(("name", "params"), MODELS)
+@pytest.mark.parametrize("dt", [0.002, 0.01, 0.05])
+def test_discrete_jacobian_F_matches_finite_differences(name, params, dt):
+    model = get_model(name, params)
+    rng = np.random.default_rng(7)
+    for _ in range(10):
+        x, u = _random_point(model, rng)
+        F = model.F(x, u, dt)
+        F_num = _central_jacobian(lambda xx: model.f(xx, u, dt), x)
+        scale = max(1.0, np.abs(F).max())
+        np.testing.assert_allclose(F, F_num, atol=1e-6 * scale, rtol=1e-6)
+
+
+@pytest.mark.parametrize(("name", "params"), MODELS)
+def test_measurement_jacobian_H_matches_finite_differences_for_every_group(name, params):
+    model = get_model(name, params)
+    rng = np.random.default_rng(11)
+    for group in model.groups:
+        for _ in range(10):
+            x, u = _random_point(model, rng)
+            H = model.H(group, x, u)
+            assert H.shape == (model.groups[group].size, len(model.state_names))
+            H_num = _central_jacobian(lambda xx: model.h(group, xx, u), x)
+            np.testing.assert_allclose(H, H_num, atol=1e-6, rtol=1e-6)
+
+
+@pytest.mark.parametrize(("name", "params"), MODELS)
+def test_model_interface_is_complete_and_consistent(name, params):
+    model = get_model(name, params)
+    n = len(model.state_names)
+    ids = sorted(g.group_id for g in model.groups.values())
+    assert ids == list(range(len(model.groups)))
+    for spec in model.groups.values():
+        assert len(spec.noise_std) == len(spec.range_lo) == len(spec.range_hi) == spec.size
+        assert all(lo < hi for lo, hi in zip(spec.range_lo, spec.range_hi))
+        assert 1e20 > max(spec.range_hi)  # a bit-flipped 1e20 is outside every range
+        R = model.default_R(spec.name)
+        assert R.shape == (spec.size, spec.size)
+        np.linalg.cholesky(R)
+    Q = model.default_Q(0.01)
+    assert Q.shape == (n, n)
+    np.testing.assert_allclose(Q, Q.T)
+    np.linalg.cholesky(Q)
+    desc = model.describe()
+    assert desc["name"] == name and len(desc["states"]) == n
+    assert desc["params"]
+
+
+def test_direct_groups_really_observe_their_states():
+    rng = np.random.default_rng(3)
+    for name, params in MODELS:
+        model = get_model(name, params)
+        for spec in model.groups.values():
+            idx, gain = spec.direct_map()
+            x, u = _random_point(model, rng)
+            z = model.h(spec.name, x, u)
+            for j in np.flatnonzero(idx >= 0):
+                assert z[j] == pytest.approx(gain[j] * x[idx[j]], abs=1e-12)
+
+
+def test_quadcopter_hovers_and_accel_reads_gravity_reaction():
+    model = get_model("quadcopter")
+    x = np.zeros(12)
+    u = model.hover_input()
+    np.testing.assert_allclose(model.f(x, u, 0.01), x, atol=1e-12)
+    np.testing.assert_allclose(model.h("accel", x, u), [0.0, 0.0, 9.81], atol=1e-12)
+    # free fall: thrust 0 -> specific force 0 at rest
+    np.testing.assert_allclose(model.h("accel", x, np.zeros(4)), 0.0, atol=1e-12)
+    # free fall with linear drag: vz(t) = -(g m / kD) (1 - exp(-kD t / m))
+    tau = model.p["mass"] / model.p["drag"]
+    vz = -9.81 * tau * (1.0 - np.exp(-0.1 / tau))
+    assert model.f(x, np.zeros(4), 0.1)[5] == pytest.approx(vz, rel=1e-8)
+
+
+def test_quadcopter_mixer_round_trip_and_motor_inputs_match_wrench_inputs():
+    wrench_model = get_model("quadcopter")
+    motor_model = get_model("quadcopter", {"inputs": "motors"})
+    assert motor_model.input_names == ("w1", "w2", "w3", "w4")
+    wrench = np.array([12.0, 0.05, -0.03, 0.01])
+    omega = motor_model.wrench_to_motors(wrench)
+    np.testing.assert_allclose(motor_model.motors_to_wrench(omega), wrench, rtol=1e-12)
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=12) * 0.2
+    np.testing.assert_allclose(motor_model.f(x, omega, 0.01), wrench_model.f(x, wrench, 0.01))
+    np.testing.assert_allclose(motor_model.h("accel", x, omega), wrench_model.h("accel", x, wrench))
+    # a weaker motor 1 (on +x) pitches the nose: tau_y = L (T3 - T1) > 0
+    weak = omega.copy()
+    weak[0] *= 0.9
+    assert motor_model.motors_to_wrench(weak)[2] > wrench[2]
+
+
+def test_dc_motor_time_constant_and_top_speed_are_physical():
+    model = get_model("dc_motor")
+    slow = -max(np.linalg.eigvals(model._A).real)
+    assert 0.1 < 1.0 / slow < 0.5  # a few tenths of a second with the reflected inertia
+    i_a, w_v = model.steady_state(24.0)
+    assert 1.8 < w_v * model.p["wheel_radius"] < 2.3  # Jackal top speed ~2 m/s
+    # exact discretisation: stable at 10 Hz although La/Ra = 0.44 ms
+    F = model.F(np.zeros(2), np.zeros(1), 0.1)
+    assert max(abs(np.linalg.eigvals(F))) < 1.0
+
+
+def test_linear_discrete_matrices_are_used_as_given_and_dt_must_match():
+    params = {"A": [[1.0, 0.1], [0.0, 1.0]], "B": [[0.0], [0.1]], "C": [[1.0, 0.0]],
+              "continuous": False, "dt": 0.1}
+    model = get_model("linear", params)
+    np.testing.assert_allclose(model.f([1.0, 2.0], [3.0], 0.1), [1.2, 2.3])
+    with pytest.raises(ModelError, match="discrete at dt"):
+        model.f([1.0, 2.0], [3.0], 0.01)
+
+
+def test_registry_lists_models_and_rejects_unknown_names_and_params():
+    assert set(MODEL_NAMES) == {"quadcopter", "steer_by_wire", "dc_motor", "linear"}
+    with pytest.raises(ModelError, match="unknown vehicle model 'hexacopter'") as err:
+        get_model("hexacopter")
+    assert "known models: quadcopter, steer_by_wire, dc_motor, linear" in err.value.one_line()
+    with pytest.raises(ModelError, match="unknown parameter"):
+        get_model("quadcopter", {"mas": 1.0})
+    with pytest.raises(ModelError, match="not a number"):
+        get_model("steer_by_wire", {"V": "fast"})
+    with pytest.raises(ModelError, match="must be > 0"):
+        get_model("dc_motor", {"La": 0.0})
+    with pytest.raises(ModelError, match="inputs"):
+        get_model("quadcopter", {"inputs": "rotors"})
+    with pytest.raises(ModelError, match="has no measurement group"):
+        get_model("quadcopter").h("gps", np.zeros(12), np.zeros(4))
+    with pytest.raises(ModelError, match="B has"):
+        get_model("linear", {"A": [[0.0]], "B": [[1.0], [2.0]], "C": [[1.0]]})
+    with pytest.raises(ModelError, match="C is missing"):
+        get_model("linear", {"A": [[0.0]], "B": [[1.0]]})
+
+
+def test_exact_discretisation_of_Q_matches_quadrature_on_a_stiff_model():
+    from scipy.integrate import quad_vec
+    from scipy.linalg import expm
+
+    model = get_model("dc_motor")
+    dt = 0.01
+    p = model.p
+    Qc = np.diag([(p["q_voltage"] / p["La"]) ** 2, (p["q_torque"] / model.Jv) ** 2])
+    A = model._A
+    Q_ref = quad_vec(lambda s: expm(A * s) @ Qc @ expm(A * s).T, 0.0, dt, epsabs=1e-14)[0]
+    np.testing.assert_allclose(model.default_Q(dt), Q_ref, rtol=1e-6)
