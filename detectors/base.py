@@ -1,0 +1,350 @@
+"""The detector contract: the `Detector` base class and the `DetectorResult` every detector returns.
+
+A detector (built-in or plugin) subclasses `Detector`:
+
+    class MyDetector(Detector):
+        '''One line: what it detects.'''            # shown by `logscan detectors`
+        name = "my_detector"                          # unique registry name
+        defaults = {"threshold": 3.0, "n_persist": 3} # every parameter with its default
+        requires_fit = False                          # True: `run` needs trained state
+        requires_trace = False                        # True: `run` needs the shared filter trace
+        trained_attributes = ()                       # e.g. ("threshold_",): what `fit` learns
+
+        def _fit(self, runs, traces, **context):      # optional: set trailing-underscore attributes
+            ...
+        def _run(self, run, trace, **context) -> DetectorResult:
+            ...
+
+Rules (STYLE.md): ``__init__`` only stores parameters (they are the detector's JSON config, read
+back as attributes: ``self.threshold``); validation happens in `fit` / `run`. `fit` sets trained
+attributes ending in "_" and returns self. Trained state is JSON with a schema version, never
+pickle. A detector that needs trained state it lacks raises NotTrainedError.
+
+Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.models.base.Model),
+``profile`` (the detector's profile section as a dict), ``log_name``.
+The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
+module does not import the filter layer.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from logscan.alarms import AlarmInterval, alarm_intervals
+from logscan.align import AlignedRun
+from logscan.errors import InputError, InternalError, NotTrainedError, ProfileError, UsageError
+
+STATE_FORMAT = "logscan-detector-state"
+
+
+@dataclass
+class Band:
+    """Threshold series of one statistic on the grid: upper and/or lower, (N,) float64 each."""
+
+    upper: np.ndarray | None = None
+    lower: np.ndarray | None = None
+
+
+@dataclass
+class DetectorResult:
+    """What one detector found on one run.
+
+    series:     named statistic series, each (N,) on the run's grid (NaN where undefined).
+    thresholds: statistic name -> Band of threshold series (N,) for that statistic.
+    alarms:     alarm intervals (from `logscan.alarms.alarm_intervals`).
+    warnings:   things the user should know (coverage limits, skipped groups...).
+    extras:     further (N,) or (N, k) series for figures (coding vector, bands...).
+    info:       JSON-ready facts (coverage notes, parameters used, counts).
+    """
+
+    detector: str
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+    thresholds: dict[str, Band] = field(default_factory=dict)
+    alarms: list[AlarmInterval] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    extras: dict[str, np.ndarray] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def add_statistic(
+        self,
+        t: np.ndarray,
+        name: str,
+        statistic: np.ndarray,
+        upper=None,
+        lower=None,
+        **alarm_options,
+    ) -> list[AlarmInterval]:
+        """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
+        ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...)."""
+        n = np.asarray(t).size
+        statistic = np.asarray(statistic, dtype=np.float64)
+        band = Band(
+            upper=None if upper is None else np.broadcast_to(np.asarray(upper, np.float64), (n,)).copy(),
+            lower=None if lower is None else np.broadcast_to(np.asarray(lower, np.float64), (n,)).copy(),
+        )
+        self.series[name] = statistic
+        self.thresholds[name] = band
+        alarms = alarm_intervals(
+            t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
+        )
+        self.alarms.extend(alarms)
+        return alarms
+
+    def to_dict(self, summary_only: bool = True) -> dict:
+        """JSON-ready view; summary_only=False adds every series as a list (NaN -> null)."""
+        out: dict[str, Any] = {
+            "detector": self.detector,
+            "n_alarms": len(self.alarms),
+            "alarms": [a.to_dict() for a in self.alarms],
+            "warnings": list(self.warnings),
+            "info": _jsonable(self.info),
+            "series": {name: _series_summary(v) for name, v in self.series.items()},
+        }
+        if not summary_only:
+            out["series_values"] = {name: _jsonable(v) for name, v in self.series.items()}
+            out["thresholds"] = {
+                name: {"upper": _jsonable(b.upper), "lower": _jsonable(b.lower)}
+                for name, b in self.thresholds.items()
+            }
+            out["extras"] = {name: _jsonable(v) for name, v in self.extras.items()}
+        return out
+
+
+def _series_summary(values: np.ndarray) -> dict:
+    values = np.asarray(values, dtype=np.float64)
+    finite = values[np.isfinite(values)]
+    return {
+        "n": int(values.size),
+        "finite": int(finite.size),
+        "min": float(finite.min()) if finite.size else None,
+        "max": float(finite.max()) if finite.size else None,
+    }
+
+
+def _jsonable(value: Any) -> Any:
+    """numpy and non-finite floats -> strict-JSON values (NaN/inf -> None)."""
+    if value is None or isinstance(value, (str, bool)):
+        return value
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    return str(value)
+
+
+# --- trained-state encoding (lossless, strict JSON) -----------------------------------------------
+
+_NONFINITE = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def _encode_float(x: float) -> float | str:
+    if math.isfinite(x):
+        return x
+    return "NaN" if math.isnan(x) else ("Infinity" if x > 0 else "-Infinity")
+
+
+def encode_state_value(value: Any) -> Any:
+    """Trained attribute -> strict JSON, lossless for arrays (dtype and shape kept) and floats."""
+    if isinstance(value, np.ndarray):
+        flat = value.ravel().tolist()
+        if value.dtype.kind == "f":
+            flat = [_encode_float(x) for x in flat]
+        return {"__ndarray__": flat, "dtype": value.dtype.str, "shape": list(value.shape)}
+    if isinstance(value, (np.bool_, bool)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return {"__float__": _encode_float(float(value))} if not math.isfinite(value) else float(value)
+    if isinstance(value, Mapping):
+        return {str(k): encode_state_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [encode_state_value(v) for v in value]
+    if value is None or isinstance(value, str):
+        return value
+    raise InternalError(f"cannot store a {type(value).__name__} in trained detector state")
+
+
+def decode_state_value(value: Any) -> Any:
+    """Inverse of `encode_state_value`."""
+    if isinstance(value, dict):
+        if "__ndarray__" in value:
+            data = [_NONFINITE.get(x, x) if isinstance(x, str) else x for x in value["__ndarray__"]]
+            return np.asarray(data, dtype=np.dtype(value["dtype"])).reshape(value["shape"])
+        if set(value) == {"__float__"}:
+            return _NONFINITE[value["__float__"]]
+        return {k: decode_state_value(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [decode_state_value(v) for v in value]
+    return value
+
+
+class Detector:
+    """Base class of every detector (see the module docstring for the contract)."""
+
+    name: ClassVar[str] = ""
+    defaults: ClassVar[Mapping[str, Any]] = {}
+    requires_fit: ClassVar[bool] = False
+    requires_trace: ClassVar[bool] = False
+    trained_attributes: ClassVar[tuple[str, ...]] = ()
+    state_version: ClassVar[int] = 1
+
+    def __init__(self, **params: Any) -> None:
+        self.params = {**copy.deepcopy(dict(self.defaults)), **params}
+
+    def __getattr__(self, key: str) -> Any:
+        # parameters read as attributes (self.rho); only reached when normal lookup fails
+        params = self.__dict__.get("params")
+        if params is not None and key in params:
+            return params[key]
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {key!r}")
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
+        return f"{type(self).__name__}({args})"
+
+    # --- configuration ----------------------------------------------------------------------------
+    def get_params(self) -> dict[str, Any]:
+        """The detector's configuration (JSON-ready copy of its parameters)."""
+        return copy.deepcopy(self.params)
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any] | None) -> "Detector":
+        """A detector from its configuration dict (e.g. a profile's [detectors.NAME] table)."""
+        return cls(**dict(config or {}))
+
+    def check_params(self) -> None:
+        """Validate the parameters (called by fit and run). Subclasses extend it with value checks
+        and raise ProfileError naming the parameter."""
+        unknown = sorted(set(self.params) - set(self.defaults))
+        if unknown:
+            raise ProfileError(
+                f"detector {self.name!r}: unknown parameter(s) {', '.join(unknown)}",
+                hint=f"known: {', '.join(sorted(self.defaults)) or 'none'}",
+            )
+        try:
+            json.dumps(self.params, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise ProfileError(f"detector {self.name!r}: parameters are not plain JSON values ({exc})") from None
+
+    # --- training ---------------------------------------------------------------------------------
+    def fit(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None = None, **context: Any) -> "Detector":
+        """Learn trained state (trailing-underscore attributes) from healthy runs; returns self."""
+        self.check_params()
+        runs = list(runs)
+        traces = [None] * len(runs) if traces is None else list(traces)
+        if len(traces) != len(runs):
+            raise InternalError(f"detector {self.name!r}: {len(runs)} runs but {len(traces)} traces")
+        if self.requires_trace and any(tr is None for tr in traces):
+            raise UsageError(f"detector {self.name!r} needs the filter trace of every training run")
+        self._fit(runs, traces, **context)
+        return self
+
+    def _fit(self, runs: list[AlignedRun], traces: list[Any], **context: Any) -> None:
+        """Training step of subclasses that learn something; the default learns nothing."""
+
+    def is_trained(self) -> bool:
+        return all(hasattr(self, attr) for attr in self.trained_attributes)
+
+    def check_trained(self) -> None:
+        missing = [attr for attr in self.trained_attributes if not hasattr(self, attr)]
+        if missing:
+            raise NotTrainedError(
+                f"detector {self.name!r} is not trained (missing {', '.join(missing)})",
+                hint="run `logscan train` on healthy logs and pass the tables it writes",
+            )
+
+    # --- running ----------------------------------------------------------------------------------
+    def run(self, run: AlignedRun, trace: Any = None, **context: Any) -> DetectorResult:
+        """Run on one aligned run (and the shared filter trace); returns a DetectorResult."""
+        self.check_params()
+        if self.requires_fit:
+            self.check_trained()
+        if self.requires_trace and trace is None:
+            raise UsageError(f"detector {self.name!r} needs the filter trace, but none was given")
+        result = self._run(run, trace, **context)
+        self._check_result(result, run)
+        return result
+
+    def _run(self, run: AlignedRun, trace: Any, **context: Any) -> DetectorResult:
+        raise NotImplementedError(f"{type(self).__name__} must implement _run")
+
+    def new_result(self) -> DetectorResult:
+        return DetectorResult(detector=self.name)
+
+    def _check_result(self, result: DetectorResult, run: AlignedRun) -> None:
+        if not isinstance(result, DetectorResult):
+            raise InternalError(f"detector {self.name!r} returned {type(result).__name__}, not DetectorResult")
+        n = run.n_steps
+        for kind, named in (("series", result.series), ("extras", result.extras)):
+            for key, values in named.items():
+                if np.shape(values)[:1] != (n,):
+                    raise InternalError(
+                        f"detector {self.name!r}: {kind} {key!r} has shape {np.shape(values)}, grid has {n} steps"
+                    )
+        for key, band in result.thresholds.items():
+            for values in (band.upper, band.lower):
+                if values is not None and np.shape(values) != (n,):
+                    raise InternalError(f"detector {self.name!r}: threshold of {key!r} has shape {np.shape(values)}")
+
+    # --- trained state ----------------------------------------------------------------------------
+    def to_state(self) -> dict[str, Any]:
+        """Trained state as strict JSON: format, detector name, schema version, params, state."""
+        self.check_trained()
+        from logscan import __version__
+
+        return {
+            "format": STATE_FORMAT,
+            "detector": self.name,
+            "schema_version": self.state_version,
+            "logscan_version": __version__,
+            "params": self.get_params(),
+            "state": {attr: encode_state_value(getattr(self, attr)) for attr in self.trained_attributes},
+        }
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, Any], *, path: str | None = None) -> "Detector":
+        """A trained detector from `to_state` output (raises InputError on a mismatch)."""
+        if not isinstance(state, Mapping) or state.get("format") != STATE_FORMAT:
+            raise InputError("not a logscan detector state", path=path, hint="use a file written by `logscan train`")
+        if state.get("detector") != cls.name:
+            raise InputError(
+                f"trained state is for detector {state.get('detector')!r}, not {cls.name!r}", path=path
+            )
+        version = state.get("schema_version")
+        if version != cls.state_version:
+            raise InputError(
+                f"trained state of {cls.name!r} has schema version {version}, this logscan reads {cls.state_version}",
+                path=path,
+                hint="retrain with `logscan train`",
+            )
+        detector = cls.from_config(state.get("params") or {})
+        stored = state.get("state") or {}
+        missing = [attr for attr in cls.trained_attributes if attr not in stored]
+        if missing:
+            raise InputError(f"trained state of {cls.name!r} lacks {', '.join(missing)}", path=path,
+                             hint="retrain with `logscan train`")
+        for attr in cls.trained_attributes:
+            setattr(detector, attr, decode_state_value(stored[attr]))
+        return detector
+
+
+def describe(cls: type[Detector]) -> str:
+    """First line of a detector class's docstring ('' when it has none)."""
+    doc = (cls.__doc__ or "").strip()
+    return doc.splitlines()[0].strip() if doc else ""
