@@ -137,25 +137,129 @@ class FlatColumns:
         self.fields: list[str] = []
 
 
+class _Shape:
+    """Code generation state for ``_compile_extractor``."""
+
+    def __init__(self) -> None:
+        self.checks: list[str] = []
+        self.leaves: list[str] = []
+        self.names: dict[str, Any] = {}
+
+    def constant(self, value: Any) -> str:
+        name = f"_c{len(self.names)}"
+        self.names[name] = value
+        return name
+
+
+def _describe(value: Any, expr: str, shape: _Shape) -> bool:
+    """Add the checks and leaf expressions that pin ``value``'s layout; False when unsupported."""
+    kind = type(value)
+    if kind is float or kind is int or kind is bool:
+        shape.leaves.append(expr)
+        return True
+    if kind is str or kind is bytes or value is None:
+        shape.checks.append(f"type({expr}) is {shape.constant(kind)}")
+        return True
+    if kind is dict or kind is list or kind is tuple:
+        shape.checks.append(f"type({expr}) is {shape.constant(kind)} and len({expr}) == {len(value)}")
+        items = value.items() if kind is dict else enumerate(value)
+        for key, item in items:
+            if kind is dict and type(key) is not str:
+                return False
+            if not _describe(item, f"{expr}[{key!r}]", shape):
+                return False
+        return True
+    slots = _slots_of(kind) if not hasattr(value, "DESCRIPTOR") else ()
+    if slots and all(name.isidentifier() for name in slots):
+        shape.checks.append(f"type({expr}) is {shape.constant(kind)}")
+        for name in slots:
+            if not _describe(getattr(value, name, None), f"{expr}.{name}", shape):
+                return False
+        return True
+    return False
+
+
+def _compile_extractor(example: Any):
+    """A function returning the numeric leaves of a message laid out exactly like ``example``
+    (same keys, array lengths, types of non-numeric leaves), or None for any other message.
+
+    Generated once per topic; turns the per-message walk into one expression.
+    """
+    shape = _Shape()
+    if not _describe(example, "m", shape):
+        return None
+    condition = " and ".join(shape.checks) or "True"
+    source = (
+        "def extract(m):\n"
+        "    try:\n"
+        f"        if {condition}:\n"
+        f"            return [{', '.join(shape.leaves)}]\n"
+        "    except (KeyError, IndexError, TypeError, AttributeError):\n"
+        "        pass\n"
+        "    return None\n"
+    )
+    namespace = dict(shape.names)
+    try:
+        exec(compile(source, "<logscan flatten>", "exec"), namespace)  # noqa: S102 - generated code
+    except (SyntaxError, RecursionError, MemoryError):
+        return None
+    return namespace["extract"]
+
+
 def flatten_messages(messages: Sequence[Any]) -> FlatColumns:
     """Flatten decoded ``messages`` of one topic into per-path columns (see ``FlatColumns``).
 
-    Messages are grouped by their leaf layout; each group becomes one (n, k) float64 array built
-    in a single numpy call, so the per-message Python work is the walk itself.
+    Fast path: messages laid out like the first one go through a generated extractor and one
+    numpy conversion. The rest (and everything when the fast path does not apply) are walked one
+    by one and grouped by their leaf layout, each group becoming one (n, k) float64 array.
     """
     groups: dict[tuple, tuple[list[int], list[list[Any]]]] = {}
-    for index, message in enumerate(messages):
+    remaining: Sequence[int] | range = range(len(messages))
+    if len(messages) > 1:
+        fast = _fast_group(messages)
+        if fast is not None:
+            signature, indices, rows, remaining = fast
+            groups[signature] = (indices, rows)
+    for index in remaining:
         keys: list[str] = []
         values: list[Any] = []
         skipped: list[tuple[str, str]] = []
-        _walk(message, "", keys, values, skipped)
+        _walk(messages[index], "", keys, values, skipped)
         signature = (tuple(keys), tuple(skipped))
         group = groups.get(signature)
         if group is None:
             group = groups[signature] = ([], [])
         group[0].append(index)
         group[1].append(values)
+    return _columns(groups)
 
+
+def _fast_group(messages: Sequence[Any]):
+    """(signature, indices, value matrix, indices left for the slow path) or None."""
+    keys: list[str] = []
+    values: list[Any] = []
+    skipped: list[tuple[str, str]] = []
+    _walk(messages[0], "", keys, values, skipped)
+    extract = _compile_extractor(messages[0])
+    if extract is None or not keys:
+        return None
+    rows = [extract(m) for m in messages]
+    misfits = [k for k, row in enumerate(rows) if row is None]
+    if misfits:
+        misfit_set = set(misfits)
+        indices = [k for k in range(len(messages)) if k not in misfit_set]
+        rows = [row for row in rows if row is not None]
+    else:
+        indices = list(range(len(messages)))
+    if not rows:
+        return None
+    matrix = np.array(rows)  # dtype inferred: anything non-numeric (str, None, huge int) shows
+    if matrix.dtype.kind not in "biuf" or matrix.shape != (len(rows), len(keys)):
+        return None
+    return (tuple(keys), tuple(skipped)), indices, matrix.astype(np.float64, copy=False), misfits
+
+
+def _columns(groups: dict[tuple, tuple[list[int], Any]]) -> FlatColumns:
     out = FlatColumns()
     pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     seen: set[str] = set()
@@ -165,7 +269,7 @@ def flatten_messages(messages: Sequence[Any]) -> FlatColumns:
             out.skipped[item] = out.skipped.get(item, 0) + len(indices)
         if not keys:
             continue
-        matrix = np.array(rows, dtype=np.float64).reshape(len(indices), len(keys))
+        matrix = np.asarray(rows, dtype=np.float64).reshape(len(indices), len(keys))
         for column, key in enumerate(keys):
             if key not in seen:
                 seen.add(key)
