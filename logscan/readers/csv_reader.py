@@ -35,6 +35,7 @@ import pandas as pd
 
 from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.readers.ulog_reader import ZERO_TIMESTAMP_WHY, report_time_order
 
 TIME_NAMES = ("time", "timestamp", "t", "stamp")
 
@@ -59,7 +60,6 @@ _TYPICAL_PERIOD_LOG10 = -1.5  # ~30 Hz, the middle of what vehicle logs sample a
 
 _ULOG2CSV_RE = re.compile(r"^(?P<rest>.+)_(?P<instance>\d+)$")
 _MIXED_MIN_NUMERIC_FRACTION = 0.5  # a column with at least this share of numbers is numeric
-ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
 
 
 @dataclass
@@ -386,25 +386,6 @@ def _frame_channels(
         fields=fields,
     )
     return channels
-
-
-def report_time_order(t_ns: np.ndarray, label: str, source: SourceInfo) -> None:
-    """Warn about timestamps that go backwards or repeat; the values stay in file order.
-
-    Shared by the ULog reader. Alignment (logscan.align) sorts and deduplicates.
-    """
-    if t_ns.size < 2:
-        return
-    steps = np.diff(t_ns)
-    backwards = int((steps < 0).sum())
-    if backwards == 0 and bool((steps > 0).all()):
-        return
-    duplicates = int((np.diff(np.sort(t_ns)) == 0).sum())
-    if backwards or duplicates:
-        source.warnings.append(
-            f"{label}: timestamps not strictly increasing ({backwards} step(s) backwards, "
-            f"{duplicates} duplicate(s)); kept in file order, alignment sorts and deduplicates"
-        )
 
 
 def _read_truth(path: Path) -> dict | None:

@@ -10,6 +10,8 @@ changed parameters, corruption flags) and ``ulog.messages`` (the logged text mes
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import re
 import struct
@@ -18,10 +20,46 @@ import numpy as np
 
 from logscan.errors import CorruptLogError, InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
-from logscan.readers.csv_reader import ZERO_TIMESTAMP_WHY, report_time_order
 
 _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
+
+
+ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
+class _TruncationWatch(io.RawIOBase):
+    """A read-only file that remembers where a read first came back short (the file is cut).
+
+    pyulog stops silently at a cut message; a clean end of file is a 3-byte message-header read
+    that returns nothing, anything shorter than asked for is truncation.
+    """
+
+    def __init__(self, path: str):
+        super().__init__()
+        self._fh = open(path, "rb")  # noqa: SIM115 - closed by close()
+        self.cut_at: int | None = None
+
+    def read(self, size: int = -1) -> bytes:
+        pos = self._fh.tell()
+        data = self._fh.read(size)
+        if self.cut_at is None and 0 <= len(data) < size and not (size == 3 and not data):
+            self.cut_at = pos
+        return data
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._fh.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+    def close(self) -> None:
+        self._fh.close()
+        super().close()
 
 
 def message_filter(wanted: set[str] | None) -> list[str] | None:
@@ -47,8 +85,16 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     from logscan.readers import topic_wanted
 
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
+    chatter = io.StringIO()
     try:
-        ulog = ULog(str(path), message_filter(wanted), True)
+        watch = _TruncationWatch(str(path))
+    except FileNotFoundError:
+        raise InputError("no such file", path=str(path)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    try:
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter), watch:
+            ulog = ULog(watch, message_filter(wanted), True)
     except FileNotFoundError:
         raise InputError("no such file", path=str(path)) from None
     except OSError as exc:
@@ -101,16 +147,60 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
             last_ns=int(t_ns.max()) if t_ns.size else None,
             fields=fields,
         )
-        report_time_order(t_ns, topic, source)
+        report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
     _fill_metadata(ulog, source)
-    if ulog.file_corruption:
-        source.partial = True
-        source.partial_reason = (
-            "pyulog found corrupt data and skipped it; the topics hold the messages around it"
-        )
+    _report_damage(path, ulog, source, chatter.getvalue(), watch.cut_at, all_topics=wanted is None)
     if wanted is not None and not source.topics:
         source.warnings.append(f"none of the requested topics is in the log: {sorted(wanted)}")
     return Log(channels=channels, source=source)
+
+
+def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | None, *,
+                   all_topics: bool) -> None:
+    """Mark the log partial when the file is truncated or pyulog skipped corrupt data.
+
+    ULog has no checksums: flipped bytes inside message payloads cannot be detected, only
+    truncation, pyulog's corruption flag and (as warnings) topic timestamps going backwards.
+    """
+    size = os.path.getsize(path)
+    reasons = []
+    if cut_at is not None:
+        reasons.append(f"truncated: the message read at byte {cut_at} runs past the end of the "
+                       f"file ({size} bytes); the messages before it were read")
+    if ulog.file_corruption:
+        reasons.append("pyulog found corrupt data and skipped it")
+    if reasons:
+        source.partial = True
+        source.partial_reason = "; ".join(reasons)
+    lines = list(dict.fromkeys(line.strip() for line in chatter.splitlines() if line.strip()))
+    for line in lines[:5]:
+        source.warnings.append(f"pyulog: {line}")
+    if len(lines) > 5:
+        source.warnings.append(f"pyulog: ... {len(lines) - 5} more distinct message(s)")
+    if cut_at is not None and all_topics and not ulog.data_list:
+        raise CorruptLogError(
+            f"ULog truncated at byte {cut_at} of {size} before any data message",
+            path=str(path), hint="the file was cut during logging or copying; nothing to read",
+        )
+
+
+def report_time_order(t_ns: np.ndarray, label: str, source: SourceInfo, note: str = "") -> None:
+    """Warn about timestamps that go backwards or repeat; the values stay in file order.
+
+    Shared by the CSV reader. Alignment (logscan.align) sorts and deduplicates.
+    """
+    if t_ns.size < 2:
+        return
+    steps = np.diff(t_ns)
+    backwards = int((steps < 0).sum())
+    if backwards == 0 and bool((steps > 0).all()):
+        return
+    duplicates = int((np.diff(np.sort(t_ns)) == 0).sum())
+    source.warnings.append(
+        f"{label}: timestamps not strictly increasing ({backwards} step(s) backwards, "
+        f"{duplicates} duplicate(s)); kept in file order, alignment sorts and deduplicates"
+        + (f" ({note})" if note and backwards else "")
+    )
 
 
 def _array_base(name: str) -> str:
