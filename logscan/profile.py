@@ -398,6 +398,10 @@ def channels_under(prefix: str, names) -> list[str]:
     return [n for n in names if n.startswith(prefix) and len(n) > len(prefix) and n[len(prefix)] in "/._["]
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def _type_name(value: Any) -> str:
     if isinstance(value, bool):
         return f"boolean {str(value).lower()}"
@@ -732,26 +736,16 @@ class _Checker:
 
 
 def _registry():
-    """(get_model, MODEL_NAMES) from logscan.models, or None while the registry is absent."""
-    try:
-        from logscan import models
-    except ImportError:  # pragma: no cover - the package always exists
-        return None
-    get_model = getattr(models, "get_model", None)
-    names = getattr(models, "MODEL_NAMES", None)
-    if get_model is None or names is None:
-        return None
-    return get_model, tuple(names)
+    """(get_model, MODEL_NAMES) of logscan.models, imported lazily (profiles load without numba)."""
+    from logscan.models import MODEL_NAMES, get_model
+
+    return get_model, tuple(MODEL_NAMES)
 
 
 def _check_against_model(profile: Profile, model, problems: list[str]) -> None:
     """Bind inputs and check group names and sizes against the model; append problems."""
     if model is None:
-        registry = _registry()
-        if registry is None:
-            _bind_inputs_without_model(profile)
-            return
-        get_model, names = registry
+        get_model, names = _registry()
         name = profile.vehicle.model
         if name not in names:
             problems.append(
@@ -781,7 +775,7 @@ def _check_against_model(profile: Profile, model, problems: list[str]) -> None:
             continue
         if len(g.channels) != spec.size:
             problems.append(
-                f"{where} channels: {len(g.channels)} channels but {label} group {g.name!r} has "
+                f"{where} channels: {_count(len(g.channels), 'channel')} but {label} group {g.name!r} has "
                 f"{spec.size} outputs ({', '.join(spec.outputs)})"
             )
     if not problems:
@@ -801,7 +795,7 @@ def _check_onboard_sizes(profile: Profile, problems: list[str]) -> None:
         value = getattr(profile.onboard, key)
         if isinstance(value, list) and len(value) != len(states):
             problems.append(
-                f"[onboard] {key}: {len(value)} channels but model {profile.vehicle.model!r} has "
+                f"[onboard] {key}: {_count(len(value), 'channel')} but model {profile.vehicle.model!r} has "
                 f"{len(states)} states ({', '.join(states)})"
             )
         elif isinstance(value, dict):
@@ -823,6 +817,7 @@ def _members(key: str, input_names: tuple[str, ...]) -> list[str]:
 
 def _bind_inputs(profile: Profile, input_names: tuple[str, ...], label: str, problems: list[str]) -> None:
     bound: dict[str, str] = {}
+    reported: set[str] = set()
     for key, value in profile.inputs.mapping.items():
         where = f"[inputs] {key}"
         if isinstance(value, str) or (key in input_names and len(value) == 1):
@@ -843,15 +838,16 @@ def _bind_inputs(profile: Profile, input_names: tuple[str, ...], label: str, pro
                 continue
             if len(targets) != len(chans):
                 problems.append(
-                    f"{where}: {len(chans)} channels but {label} has {len(targets)} inputs "
+                    f"{where}: {_count(len(chans), 'channel')} but {label} has {len(targets)} inputs "
                     f"starting with {key!r} ({', '.join(targets)})"
                 )
+                reported.update(targets)  # not "missing" as well
                 continue
         for name, ch in zip(targets, chans):
             if name in bound:
                 problems.append(f"{where}: input {name!r} is bound twice")
             bound[name] = ch
-    missing = [n for n in input_names if n not in bound]
+    missing = [n for n in input_names if n not in bound and n not in reported]
     if missing:
         problems.append(
             f"[inputs]: {label} input{'s' if len(missing) > 1 else ''} "
