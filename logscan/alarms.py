@@ -187,41 +187,44 @@ def alarm_intervals(
     excess = np.where(exceed & nonfinite, np.inf, excess)
     exceed_count = np.concatenate(([0], np.cumsum(exceed)))
 
-    out: list[AlarmInterval] = []
-    for i0, i1, f0 in zip(a_start[keep_alarm], a_last[keep_alarm], a_first[keep_alarm]):  # per alarm
-        peak = int(i0 + np.argmax(excess[i0 : i1 + 1]))
-        out.append(_make_interval(
-            ts, xs, hi, lo, keep, int(i0), int(i1), int(f0), peak, nonfinite[peak], over[peak],
-            int(exceed_count[i1 + 1] - exceed_count[f0]), signal, detector,
-        ))
-    return out
-
-
-def _make_interval(ts, xs, hi, lo, keep, i0, i1, f0, peak, is_nonfinite, is_over, n_exceed, signal, detector):
-    value = float(xs[peak])
-    if is_nonfinite:
-        bound = "nonfinite"
-        threshold = float(hi[keep[peak]]) if hi is not None else float(lo[keep[peak]])
-    elif is_over:
-        bound, threshold = "upper", float(hi[keep[peak]])
-    else:
-        bound, threshold = "lower", float(lo[keep[peak]])
-    ratio = None
-    if np.isfinite(value) and np.isfinite(threshold) and threshold != 0.0:
+    i0, i1, f0 = a_start[keep_alarm], a_last[keep_alarm], a_first[keep_alarm]
+    if i0.size == 0:
+        return []
+    peak = _segment_argmax(excess, i0, i1)
+    value = xs[peak]
+    is_nonfinite = nonfinite[peak]
+    crossed_upper = over[peak] | (is_nonfinite & (hi is not None))
+    threshold = np.where(crossed_upper, _at(hi, keep[peak]), _at(lo, keep[peak]))
+    bound = np.where(is_nonfinite, "nonfinite", np.where(over[peak], "upper", "lower"))
+    with np.errstate(divide="ignore", invalid="ignore"):
         ratio = value / threshold
-    return AlarmInterval(
-        start=float(ts[i0]),
-        end=float(ts[i1]),
-        first_exceed=float(ts[f0]),
-        peak_time=float(ts[peak]),
-        peak_value=value,
-        peak_threshold=threshold if np.isfinite(threshold) else None,
-        peak_ratio=ratio,
-        bound=bound,
-        n_exceed=n_exceed,
-        signal=signal,
-        detector=detector,
+    ratio_ok = np.isfinite(value) & np.isfinite(threshold) & (threshold != 0.0)
+    n_exceed = exceed_count[i1 + 1] - exceed_count[f0]
+    columns = zip(
+        ts[i0].tolist(), ts[i1].tolist(), ts[f0].tolist(), ts[peak].tolist(), value.tolist(),
+        np.where(np.isfinite(threshold), threshold, np.nan).tolist(), np.isfinite(threshold).tolist(),
+        ratio.tolist(), ratio_ok.tolist(), bound.tolist(), n_exceed.tolist(),
     )
+    return [
+        AlarmInterval(start, end, first, t_peak, v, thr if thr_ok else None, r if r_ok else None, b, int(k),
+                      signal, detector)
+        for start, end, first, t_peak, v, thr, thr_ok, r, r_ok, b, k in columns
+    ]
+
+
+def _at(series: np.ndarray | None, index: np.ndarray) -> np.ndarray:
+    return np.full(index.size, np.nan) if series is None else series[index]
+
+
+def _segment_argmax(values: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """Index of the (first) maximum of values[first[k] : last[k] + 1] for each disjoint segment k."""
+    lengths = last - first + 1
+    segment = np.repeat(np.arange(first.size), lengths)
+    offsets = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+    index = np.arange(lengths.sum()) - np.repeat(offsets, lengths) + np.repeat(first, lengths)
+    # sort by segment, then by descending value, then by position: the first row of each segment
+    order = np.lexsort((index, -values[index], segment))
+    return index[order[offsets]]
 
 
 def merge_close(intervals: Iterable[AlarmInterval], gap_s: float, *, by_signal: bool = True) -> list[AlarmInterval]:

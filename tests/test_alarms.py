@@ -241,3 +241,23 @@ def test_n_persist_1_without_hold_off_reproduces_the_runs(hot):
     for a in alarms:
         covered[int(round(a.start / DT)) : int(round(a.end / DT)) + 1] = True
     assert np.array_equal(covered, np.array(hot))
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    values=st.lists(st.floats(-5, 5, allow_nan=False), min_size=1, max_size=60),
+    n=st.integers(1, 3),
+    hold=st.sampled_from([0.0, 0.2]),
+)
+def test_peak_is_the_largest_excess_inside_each_alarm(values, n, hold):
+    x = np.array(values)
+    t = np.arange(x.size) * DT
+    for a in alarm_intervals(t, x, upper=1.0, lower=-2.0, n_persist=n, hold_off_s=hold):
+        i0, i1 = int(round(a.start / DT)), int(round(a.end / DT))
+        span = x[i0 : i1 + 1]
+        excess = np.maximum(span - 1.0, -2.0 - span)
+        k = i0 + int(np.argmax(excess))
+        assert a.peak_time == pytest.approx(t[k])
+        assert a.peak_value == x[k]
+        assert a.bound == ("upper" if x[k] > 1.0 else "lower")
+        assert a.peak_threshold == (1.0 if x[k] > 1.0 else -2.0)
