@@ -209,12 +209,15 @@ def test_untrained_detector_raises_not_trained(name):
 # --- healthy / faulty fixtures (simulated sample logs) -------------------------------------------
 
 SAMPLE_LOGS = REPO / "sample_logs"
+# The healthy quadcopter log and its high-order bit-flip burst variant (a fault every detector
+# should see: ALGORITHMS.md section 1, prototype 19/20). Rename here if sample_logs/ differs.
 FIXTURES = {"healthy": "quad_healthy.mcap", "faulty": "quad_imu_bitflip.mcap"}
 _PIPELINE_CACHE: dict[str, tuple] = {}
 
 
 def pipeline_case(kind: str):
-    """(aligned run, filter trace, model) of a sample log, through the real pipeline.
+    """(aligned run, EKF trace, model, profile) of a sample log through the real pipeline
+    (read -> embedded profile -> model -> align -> run_ekf), computed once per session.
 
     Skips with the reason while the sample log or a pipeline stage does not exist yet.
     """
@@ -225,42 +228,43 @@ def pipeline_case(kind: str):
         pytest.skip(f"{path.relative_to(REPO)} does not exist yet (made by `logscan simulate`, issue 3)")
     try:
         from logscan.align import align
-        from logscan.filters import ekf
+        from logscan.filters.ekf import run_ekf
         from logscan.models import get_model
         from logscan.profile import resolve_profile
         from logscan.readers import read_log
     except ImportError as exc:
         pytest.skip(f"pipeline stage missing: {exc}")
-    run_filter = getattr(ekf, "run_ekf", None)
-    if run_filter is None:
-        pytest.skip("logscan.filters.ekf has no run_ekf(run, model, profile) yet: adapt pipeline_case")
     log = read_log(str(path))
     profile = resolve_profile(log)
     model = get_model(profile.vehicle.model, profile.vehicle.params)
     run = align(log, profile)
-    trace = run_filter(run, model, profile)
-    _PIPELINE_CACHE[kind] = (run, trace, model)
+    _PIPELINE_CACHE[kind] = (run, run_ekf(model, run), model, profile)
     return _PIPELINE_CACHE[kind]
 
 
 def pipeline_detector(name: str) -> Detector:
-    healthy_run, healthy_trace, model = pipeline_case("healthy")
-    detector = REGISTRY.get(name)()
+    """Detector ``name`` configured by the healthy log's profile and trained on that log."""
+    healthy_run, healthy_trace, model, profile = pipeline_case("healthy")
+    spec = profile.detectors.get(name)
+    detector = REGISTRY.get(name).from_config(spec.settings if spec else {})
     if detector.trained_attributes:
         detector.fit([healthy_run], [healthy_trace], model=model)
     return detector
 
 
-@pytest.mark.parametrize("name", [n for n in NAMES if n != "contract_probe"])
+PIPELINE_NAMES = [n for n in NAMES if n != "contract_probe"]
+
+
+@pytest.mark.parametrize("name", PIPELINE_NAMES)
 def test_no_alarms_on_the_healthy_fixture(name):
-    run, trace, model = pipeline_case("healthy")
+    run, trace, model, _ = pipeline_case("healthy")
     result = pipeline_detector(name).run(run, trace, model=model)
     assert result.alarms == []
 
 
-@pytest.mark.parametrize("name", [n for n in NAMES if n != "contract_probe"])
+@pytest.mark.parametrize("name", PIPELINE_NAMES)
 def test_alarms_on_the_faulty_fixture(name):
-    run, trace, model = pipeline_case("faulty")
+    run, trace, model, _ = pipeline_case("faulty")
     detector = pipeline_detector(name)
     assert detector.run(run, trace, model=model).alarms
 
