@@ -35,7 +35,7 @@ import pandas as pd
 
 from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
-from logscan.readers.ulog_reader import ZERO_TIMESTAMP_WHY, report_time_order
+from logscan.readers.ulog_reader import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order
 
 TIME_NAMES = ("time", "timestamp", "t", "stamp")
 
@@ -310,8 +310,6 @@ def _frame_channels(
     stated_us: bool = False,
 ) -> dict[str, Channel]:
     """Channels of one CSV table; fills the topic facts, skips and warnings into ``source``."""
-    from logscan.readers import topic_wanted
-
     label = topic or path.name
     if stated_us:
         time_name = "timestamp"
@@ -362,7 +360,7 @@ def _frame_channels(
         if garbage:
             source.skip(f"cells of column {column!r} of {label}", "not a number, read as NaN",
                         garbage)
-        if not topic_wanted(name, wanted) and not (topic and topic_wanted(topic, wanted)):
+        if not channel_wanted(name, topic or path.stem, wanted):
             continue
         values = values[valid]
         n_nan = int(np.isnan(values).sum())

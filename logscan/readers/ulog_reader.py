@@ -62,6 +62,16 @@ class _TruncationWatch(io.RawIOBase):
         super().close()
 
 
+def channel_wanted(channel: str, topic: str, wanted: set[str] | None) -> bool:
+    """Keep ``channel`` of ``topic`` when all are wanted, it is asked for, or its whole topic is
+    (as ``topic`` or ``/topic``)."""
+    from logscan.readers import topic_wanted
+
+    if wanted is None or topic in wanted or "/" + topic in wanted:
+        return True
+    return topic_wanted(channel, wanted)
+
+
 def message_filter(wanted: set[str] | None) -> list[str] | None:
     """ULog message names to decode for ``wanted`` topics/channels (None: all).
 
@@ -134,9 +144,7 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
                 continue
             fields.append(name)
             channel = f"/{topic}/{name}"
-            if topic_wanted(channel, wanted) or topic_wanted(topic, wanted) or topic_wanted(
-                "/" + topic, wanted
-            ):
+            if channel_wanted(channel, topic, wanted):
                 channels[channel] = Channel(channel, t_ns, data.data[name][keep])
         source.topics[topic] = TopicInfo(
             name=topic,
