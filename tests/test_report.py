@@ -1,0 +1,314 @@
+"""HTML report: size bounds on a 1-hour 100 Hz grid, plotly.js once, escaping, alarm table, truth."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from logscan.decimate import DEFAULT_MAX_POINTS
+from logscan.detectors.base import DetectorResult
+from logscan.errors import InputError
+from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
+
+HOSTILE = "<script>alert(1)</script>"
+GRID_N = 360_000  # 1 hour at 100 Hz
+BIAS_START = 2000.0  # ground-truth fault, seconds
+
+
+def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, seed: int = 0) -> ReportInput:
+    """A report from detector results shaped like the encoded and NIS detectors', with known alarms.
+
+    e_x: noise with a spike burst at 2000.5 s (matches the truth event) and at 100 s (false alarm)
+    and a NaN gap; e_v: a slow walk inside a constant band; a 12-column coding vector; NIS: three
+    groups (one named HOSTILE) and overall, the accel group exceeding at 2000.2 s.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    group = HOSTILE if hostile else "gyro"
+
+    encoded = DetectorResult("encoded_ekf")
+    e_x = rng.normal(0.0, 1.0, n)
+    e_x[200_050:200_060] = 40.0  # 2000.50 s .. 2000.59 s
+    e_x[10_000:10_005] = -35.0  # 100.00 s .. 100.04 s
+    e_x[50_000:50_020] = np.nan  # a gap the figure must keep
+    band = 5.0 + np.abs(np.sin(t / 50.0))
+    encoded.add_statistic(t, "e_x", e_x, upper=band, lower=-band, n_persist=3)
+    e_v = np.cumsum(rng.normal(0.0, 0.01, n))
+    encoded.add_statistic(t, "e_v", e_v, upper=50.0, lower=-50.0, n_persist=3)
+    encoded.extras["coding_vector"] = np.exp(np.cumsum(rng.normal(0, 1e-3, (n, 12)), axis=0))
+    encoded.info["coverage"] = "catches bit flips and actuator faults; not accelerometer biases"
+
+    nis = DetectorResult("nis")
+    for name in ("accel", group, "overall"):
+        stat = rng.chisquare(30, n)
+        if name == "accel":
+            stat[200_020:200_040] = 500.0  # 2000.20 s .. 2000.39 s
+        nis.add_statistic(t, f"nis.{name}", stat, upper=np.full(n, 90.0), n_persist=3)
+
+    facts = {
+        "file": f"/logs/{HOSTILE}.mcap",
+        "format": "mcap",
+        "start_ns": 1_700_000_000_000_000_000,
+        "end_ns": 1_700_000_000_000_000_000 + int((n - 1) * 1e7),
+        "duration_s": (n - 1) * 0.01,
+        "partial": False,
+        "partial_reason": "",
+        "topics": {f"/{group}/data": {}, "/imu": {}},
+        "channels": {f"/{group}/data.x": {"samples": n, "unit": None}},
+        "skipped": [],
+        "warnings": [],
+        "has_truth": truth,
+        "has_profile": False,
+    }
+    events = (
+        [{"kind": "imu-bias", "target": "accel.x", "start": BIAS_START, "end": BIAS_START + 10, "magnitude": 1.0}]
+        if truth
+        else []
+    )
+    results = [encoded, nis]
+    n_alarms = len(flat_alarms(results))
+    return ReportInput(
+        log_facts=facts,
+        profile_text=f'[vehicle]\nmodel = "quadcopter"\n# {HOSTILE}\n',
+        profile_source="profiles/quadcopter.toml",
+        model={"name": "quadcopter", "states": [f"x{i}" for i in range(12)], "inputs": ["thrust"],
+               "groups": {"accel": {}}, "params": {"mass": 1.2}},  # fmt: skip
+        logscan_version="0.1.0",
+        t=t,
+        results=results,
+        truth_events=events,
+        matches=None,
+        verdict=f"{n_alarms} alarms",
+        warnings=[f"topic {HOSTILE} has no schema"],
+    )
+
+
+class _Tables(HTMLParser):
+    """Cells of the table with a given id: list of rows, each a list of cell texts."""
+
+    def __init__(self, table_id: str):
+        super().__init__()
+        self.table_id, self.inside, self.rows, self.cell = table_id, False, [], None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table" and dict(attrs).get("id") == self.table_id:
+            self.inside = True
+        elif self.inside and tag == "tr":
+            self.rows.append([])
+        elif self.inside and tag in ("td", "th"):
+            self.cell = ""
+
+    def handle_endtag(self, tag):
+        if tag == "table":
+            self.inside = False
+        elif self.inside and tag in ("td", "th") and self.cell is not None:
+            self.rows[-1].append(self.cell.strip())
+            self.cell = None
+
+    def handle_data(self, data):
+        if self.cell is not None:
+            self.cell += data
+
+
+def table(html: str, table_id: str) -> list[list[str]]:
+    parser = _Tables(table_id)
+    parser.feed(html)
+    return parser.rows
+
+
+def figures(html: str) -> list[dict]:
+    match = re.search(r'<script type="application/json" id="logscan-figures">(.*?)</script>', html, re.S)
+    assert match, "figure JSON block missing"
+    return json.loads(match.group(1))
+
+
+def array(value) -> np.ndarray:
+    if isinstance(value, dict):  # plotly typed-array encoding
+        return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"]))
+    return np.asarray(value, dtype=float)
+
+
+@pytest.fixture(scope="module")
+def hour_report() -> ReportInput:
+    return make_report()
+
+
+@pytest.fixture(scope="module")
+def embedded(hour_report, tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("embed") / "report.html"
+    render_report(hour_report, path)
+    return path.read_text(encoding="utf-8")
+
+
+def test_embedded_report_of_an_hour_is_under_6_mb_with_plotlyjs_once(embedded):
+    size = len(embedded.encode("utf-8"))
+    assert size < 6_000_000, size
+    assert embedded.count("plotly.js v") == 1  # plotly.min.js's banner: embedded exactly once
+    assert "Plotly.newPlot" in embedded
+    assert not re.search(r"<script[^>]*\bsrc=", embedded)  # nothing to fetch: works offline
+
+
+def test_directory_mode_writes_plotlyjs_once_and_reports_stay_small(hour_report, tmp_path):
+    from plotly.offline import get_plotlyjs
+
+    js_dir, out_dir = tmp_path / "assets", tmp_path / "reports"
+    out_dir.mkdir()
+    render_report(hour_report, out_dir / "a.html", plotlyjs=js_dir)
+    written = js_dir / "plotly.min.js"
+    assert written.read_text(encoding="utf-8") == get_plotlyjs()
+    stamp = written.stat().st_mtime_ns
+    render_report(hour_report, out_dir / "b.html", plotlyjs=js_dir)
+    assert written.stat().st_mtime_ns == stamp  # identical: not rewritten
+    assert sorted(p.name for p in js_dir.iterdir()) == ["plotly.min.js"]
+    for name in ("a.html", "b.html"):
+        page = (out_dir / name).read_text(encoding="utf-8")
+        assert len(page.encode("utf-8")) < 300_000
+        assert page.count('src="../assets/plotly.min.js"') == 1
+        assert "plotly.js v" not in page
+
+
+def test_plotlyjs_directory_that_is_a_file_is_a_clear_error(hour_report, tmp_path):
+    not_a_dir = tmp_path / "file"
+    not_a_dir.write_text("x")
+    with pytest.raises(InputError, match="directory"):
+        render_report(hour_report, tmp_path / "r.html", plotlyjs=not_a_dir)
+    assert not (tmp_path / "r.html").exists()
+
+
+def test_hostile_names_are_text_never_markup(embedded):
+    assert HOSTILE not in embedded
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in embedded  # table, topics, profile, warnings
+    # the name inside the figure JSON is \u003c-escaped, and survives JSON decoding intact
+    names = [trace.get("name", "") for fig in figures(embedded) for trace in fig["figure"]["data"]]
+    assert f"nis.{HOSTILE}" in names
+    block = re.search(r'id="logscan-figures">(.*?)</script>', embedded, re.S).group(1)
+    assert "<" not in block and ">" not in block
+    # exactly the page's own scripts: error recorder, plotly.js, figure JSON, drawing script
+    assert len(re.findall(r"<script\b", embedded, re.I)) == 4
+
+
+def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report, embedded):
+    rows = table(embedded, "alarm-table")
+    header, body = rows[0], rows[1:]
+    assert header[:9] == ["#", "detector", "signal / sensor", "start (s)", "end (s)", "duration (s)",
+                          "peak", "threshold at peak", "peak / threshold"]  # fmt: skip
+    assert header[9:] == ["matched ground-truth event", "latency (s)"]
+    alarms = flat_alarms(hour_report.results)
+    assert len(body) == len(alarms) >= 3
+    for row, alarm in zip(body, alarms):
+        assert row[1] == alarm.detector and row[2] == alarm.signal
+        assert float(row[3]) == pytest.approx(alarm.start, abs=1e-3)
+        assert float(row[5]) == pytest.approx(alarm.end - alarm.start, abs=2e-3)
+    e_x_rows = [row for row in body if row[2] == "e_x"]
+    assert [row[3] for row in e_x_rows] == ["100.020", "500.020", "2000.520"]  # n_persist = 3
+    assert e_x_rows[1][6] == "NaN"  # the gap: a non-finite statistic is an exceedance
+    assert [row[9] for row in e_x_rows[:2]] == ["none (false alarm)"] * 2
+    burst = [row for row in body if row[2] == "e_x" and row[9] != "none (false alarm)"]
+    assert len(burst) == 1 and burst[0][9] == "#0 imu-bias accel.x"
+    assert float(burst[0][10]) == pytest.approx(0.52, abs=1e-6)  # 2000.52 - 2000.0
+    accel = next(row for row in body if row[2] == "nis.accel")
+    assert accel[9] == "#0 imu-bias accel.x" and float(accel[10]) == pytest.approx(0.22, abs=1e-6)
+    assert float(accel[6]) == 500.0 and float(accel[7]) == 90.0
+
+
+def test_truth_columns_and_table_appear_only_with_truth():
+    page = render_html(make_report(60_000, truth=False, hostile=False), plotlyjs_src="plotly.min.js")
+    header = table(page, "alarm-table")[0]
+    assert len(header) == 9 and "latency (s)" not in header
+    assert 'id="truth-table"' not in page and "ground truth" not in json.dumps(figures(page))
+
+
+def test_report_matches_follow_scoring(hour_report):
+    matches = report_matches(hour_report.results, hour_report.truth_events)
+    alarms = flat_alarms(hour_report.results)
+    assert len(matches) == len(alarms)
+    for alarm, match in zip(alarms, matches):
+        if alarm.start < BIAS_START:
+            assert match == {"event": None, "latency_s": None}
+        else:
+            assert match["event"] == 0 and match["latency_s"] == pytest.approx(alarm.start - BIAS_START)
+
+
+def test_every_trace_is_decimated_and_keeps_alarm_edges_and_gaps(hour_report, embedded):
+    figs = figures(embedded)
+    ids = [fig["id"] for fig in figs]
+    assert ids == [f"fig-{i}" for i in range(len(figs))]
+    for fig_id in ids:
+        assert f'id="{fig_id}"' in embedded
+    total = 0
+    for fig in figs:
+        for trace in fig["figure"]["data"]:
+            n = array(trace["x"]).size
+            assert n <= DEFAULT_MAX_POINTS
+            total += n
+    assert total < 40_000  # the whole page's point budget, not 360,000 per series
+    e_x = next(tr for fig in figs for tr in fig["figure"]["data"] if tr.get("name") == "e_x")
+    x, y = array(e_x["x"]), array(e_x["y"])
+    for alarm in (a for a in flat_alarms(hour_report.results) if a.signal == "e_x"):
+        for edge in (alarm.start, alarm.end):
+            assert np.isclose(x, edge, atol=1e-3).any(), f"alarm edge {edge} missing"
+    assert np.isnan(y[(x >= 499.0) & (x <= 501.0)]).any()  # the NaN gap at 500 s still breaks the line
+    assert np.nanmax(y) == 40.0 and np.nanmin(y) == -35.0  # spikes kept exactly
+
+
+def test_figures_per_detector_view(embedded):
+    titles = [fig["figure"]["layout"]["title"]["text"] for fig in figures(embedded)]
+    assert titles[:3] == ["encoded_ekf: e_x", "encoded_ekf: e_v", "encoded_ekf: coding_vector"]
+    assert titles[3] == "nis: statistic / threshold"
+    by_title = {fig["figure"]["layout"]["title"]["text"]: fig["figure"] for fig in figures(embedded)}
+    cv_names = [tr["name"] for tr in by_title["encoded_ekf: coding_vector"]["data"] if tr["name"].startswith("x")]
+    assert cv_names == [f"x{i}" for i in range(12)]  # labelled with the model's states
+    spans = {tr["name"] for tr in by_title["encoded_ekf: e_x"]["data"] if tr.get("fill") == "toself"}
+    assert spans == {"alarm", "ground truth"}
+    ratio = next(tr for tr in by_title["nis: statistic / threshold"]["data"] if tr["name"] == "nis.accel")
+    assert np.nanmax(array(ratio["y"])) == pytest.approx(500.0 / 90.0, rel=1e-6)
+
+
+def test_header_facts_profile_model_and_verdict(embedded):
+    facts = dict(row for row in table(embedded, "log-facts") if len(row) == 2)
+    assert facts["format"] == "mcap" and facts["duration"] == "3599.99 s"
+    assert facts["span"].startswith("2023-11-14T22:13:20.000 UTC")
+    assert facts["partial read"] == "no"
+    assert '<details id="profile">' in embedded and 'model = "quadcopter"' in embedded.replace("&#34;", '"')
+    assert 'class="verdict alarm"' in embedded and "Verdict: " in embedded
+    assert 'content="logscan 0.1.0"' in embedded
+
+
+def test_partial_read_and_clean_run_show_in_the_verdict():
+    report = make_report(5_000, truth=False, hostile=False)
+    report.log_facts.update(partial=True, partial_reason="truncated chunk at byte 1234")
+    report.verdict = "partial input"
+    page = render_html(report, plotlyjs_src="p.js")
+    assert 'class="verdict partial"' in page and "truncated chunk at byte 1234" in page
+    clean = make_report(5_000, truth=False, hostile=False)
+    clean.results = [DetectorResult("encoded_ekf")]
+    clean.verdict = "no alarms"
+    page = render_html(clean, plotlyjs_src="p.js")
+    assert 'class="verdict ok"' in page and 'id="no-alarms"' in page
+
+
+def test_a_series_off_the_grid_is_reported_not_fatal():
+    report = make_report(5_000, truth=False, hostile=False)
+    broken = DetectorResult("plugin")
+    broken.series["bad"] = np.zeros(10)
+    report.results.append(broken)
+    page = render_html(report, plotlyjs_src="p.js")
+    assert "statistic &#39;bad&#39; has shape (10,), the grid has 5000 steps: not drawn" in page
+
+
+def test_rendering_is_deterministic():
+    report = make_report(20_000)
+    assert render_html(report, plotlyjs_src="p.js") == render_html(report, plotlyjs_src="p.js")
+
+
+def test_module_is_importable_without_rendering():
+    # the template ships inside the package (logscan.templates)
+    import logscan.templates
+
+    assert (Path(logscan.templates.__file__).parent / "report.html.j2").is_file()
