@@ -1,0 +1,26 @@
+"""`logscan simulate`: closed-loop vehicle simulation with fault injection and ground truth.
+
+Modules: `faults` (kinds, defaults, parsing), `controllers` (numba controllers and references),
+`scenario` (per-model sensors, actuators and naming), `runner` (the numba closed-loop kernel),
+`simulation` (one seeded run and its logged series), `output` (MCAP / CSV writing).
+"""
+
+from __future__ import annotations
+
+from logscan.simulate.faults import ALL_NAMES as FAULT_NAMES
+from logscan.simulate.faults import FaultEvent, FaultSpec, parse_fault
+from logscan.simulate.output import FORMATS, write_simulation
+from logscan.simulate.scenario import SIMULATED_MODELS
+from logscan.simulate.simulation import Simulation, simulate
+
+__all__ = [
+    "FAULT_NAMES",
+    "FORMATS",
+    "SIMULATED_MODELS",
+    "FaultEvent",
+    "FaultSpec",
+    "Simulation",
+    "parse_fault",
+    "simulate",
+    "write_simulation",
+]

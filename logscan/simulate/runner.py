@@ -1,0 +1,165 @@
+"""The closed-loop simulation kernel (numba): truth, actuators, sensors, faults, on-board EKF.
+
+One step k (period dt, x_k = f(x_{k-1}, u_k) + w_k as the models define it):
+  1. controller: u_k from the on-board posterior estimate of step k-1 (never the true state);
+     actuators: a = M^-1 u clipped to the actuators' limits, u_cmd = M a (logged command);
+  2. actuator faults act on a; the truth is driven by u_act = M a_faulty:
+     x_k = f(x_{k-1}, u_act) + w_k, w_k ~ N(0, Q) (the model's own Q, so an analysis filter with
+     the model's defaults is consistent with the simulator);
+  3. each measurement group samples every `ratio` steps: z = h(x_k, u_act) + v, v ~ N(0, R);
+     sensor faults act on the sampled value (what the log records);
+  4. on-board EKF (what a real autopilot runs, its state and variance logged): predict with the
+     commanded u, update per fresh group, skipping non-finite or out-of-range samples (counted);
+     state-corruption faults then corrupt its posterior.
+The kernel uses the model's numba functions (`logscan.models.kernels`), so truth and filters share
+one model. All random draws (w, v, fault draws) are made before the loop from one seeded
+generator, which makes a run a pure function of its seed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from logscan.models.kernels import f_disc, h_meas, H_meas, predict
+from logscan.simulate.controllers import control
+from logscan.simulate.faults import (
+    ACT_OFFSET,
+    BIAS,
+    BITFLIP,
+    DRIFT,
+    LOST_ACT,
+    RANDOM,
+    STATE_CORRUPT,
+    STUCK,
+)
+
+
+@njit(cache=True)
+def _bitflip(value, bit):
+    """Flip bit ``bit`` of the float32 representation of ``value``."""
+    buf = np.empty(1, dtype=np.float32)
+    buf[0] = value
+    bits = buf.view(np.uint32)
+    bits[0] = bits[0] ^ np.uint32(1 << bit)
+    return np.float64(buf[0])
+
+
+@njit(cache=True)
+def _sensor_faults(k, c, z, dt, f_kind, f_target, f_start, f_end, f_mag, f_unif, f_bit, stuck):
+    """Value of channel ``c`` at step ``k`` after every sensor fault active on it."""
+    for i in range(f_kind.size):
+        if f_target[i] != c or k < f_start[i] or k >= f_end[i]:
+            continue
+        kind = f_kind[i]
+        if kind == BIAS:
+            z = z + f_mag[i]
+        elif kind == DRIFT:
+            z = z + f_mag[i] * (k - f_start[i]) * dt
+        elif kind == RANDOM:
+            z = z + f_mag[i] * (2.0 * f_unif[i, k] - 1.0)
+        elif kind == BITFLIP:
+            if f_unif[i, k] < f_mag[i]:
+                z = _bitflip(z, f_bit[i, k])
+        elif kind == STUCK:
+            z = stuck[i]
+    return z
+
+
+@njit(cache=True)
+def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_lo, ch_hi,
+                ch_wrap, R_diag, ctrl_id, cp, cs, ref, M, M_inv, a_lo, a_hi,
+                f_kind, f_target, f_start, f_end, f_mag, f_unif, f_bit):
+    """Run the whole log; returns (x_true, u_cmd, u_act, z, x_hat, P_diag, rejected).
+
+    z is (N, total measurements) with NaN where a group did not sample; rejected counts samples
+    the on-board EKF skipped (non-finite or outside the sensor's physical range)."""
+    N, n = W.shape
+    nu = M.shape[0]
+    n_meas = V.shape[1]
+    x_true = np.empty((N, n))
+    x_hat = np.empty((N, n))
+    P_diag = np.empty((N, n))
+    u_cmd = np.empty((N, nu))
+    u_act = np.empty((N, nu))
+    z_all = np.full((N, n_meas), np.nan)
+    last_z = np.zeros(n_meas)
+    stuck = np.zeros(f_kind.size)
+    rejected = 0
+    I = np.eye(n)
+    x = x0.copy()
+    xh = x0.copy()
+    P = P0.copy()
+    u = np.zeros(nu)
+    for k in range(N):
+        # 1. controller on the estimate, actuator limits
+        control(ctrl_id, cp, cs, ref[k], xh, dt, u)
+        a = M_inv @ u
+        for j in range(a.size):
+            a[j] = min(max(a[j], a_lo[j]), a_hi[j])
+        u_cmd[k] = M @ a
+        # 2. actuator faults, truth
+        for i in range(f_kind.size):
+            if k >= f_start[i] and k < f_end[i]:
+                if f_kind[i] == ACT_OFFSET:
+                    a[f_target[i]] *= 1.0 + f_mag[i]
+                elif f_kind[i] == LOST_ACT:
+                    a[f_target[i]] = 0.0
+        ua = M @ a
+        u_act[k] = ua
+        if k > 0:
+            # x_k = f(x_{k-1}, u_k) + w_k
+            x = f_disc(model_id, p, x, ua, dt) + W[k]
+            # on-board EKF predict: x_prior = f(x_post, u_cmd), P_prior = F P F^T + Q
+            xh, F = predict(model_id, p, xh, u_cmd[k], dt)
+            P = F @ P @ F.T + Q
+        x_true[k] = x
+        # 3. sensors, 4. on-board update per fresh group
+        for g in range(g_id.size):
+            if k % g_ratio[g] != 0:
+                continue
+            m = g_m[g]
+            o = g_off[g]
+            zg = h_meas(model_id, g_id[g], p, x, ua)
+            ok = True
+            for j in range(m):
+                c = o + j
+                for i in range(f_kind.size):
+                    if f_kind[i] == STUCK and f_target[i] == c and k == f_start[i]:
+                        stuck[i] = last_z[c]
+                v = zg[j] + V[k, c]
+                if ch_wrap[c]:
+                    v = (v + np.pi) % (2.0 * np.pi) - np.pi
+                v = _sensor_faults(k, c, v, dt, f_kind, f_target, f_start, f_end, f_mag,
+                                   f_unif, f_bit, stuck)
+                z_all[k, c] = v
+                last_z[c] = v
+                if not (v >= ch_lo[c] and v <= ch_hi[c]):
+                    ok = False
+            if not ok:
+                rejected += 1
+                continue
+            H = H_meas(model_id, g_id[g], p, xh, u_cmd[k])
+            # y = z - h(x_prior), S = H P H^T + R, K = P H^T S^-1 (solve)
+            y = z_all[k, o:o + m] - h_meas(model_id, g_id[g], p, xh, u_cmd[k])
+            for j in range(m):
+                if ch_wrap[o + j]:
+                    y[j] = (y[j] + np.pi) % (2.0 * np.pi) - np.pi
+            R = np.diag(R_diag[o:o + m])
+            S = H @ P @ H.T + R
+            K = np.linalg.solve(S, H @ P).T
+            xh = xh + K @ y
+            # Joseph form: P = (I - K H) P (I - K H)^T + K R K^T
+            IKH = I - K @ H
+            P = IKH @ P @ IKH.T + K @ R @ K.T
+            P = 0.5 * (P + P.T)
+        for i in range(f_kind.size):
+            if f_kind[i] == STATE_CORRUPT and k == f_start[i]:
+                if f_target[i] < 0:
+                    xh = xh + f_mag[i]
+                else:
+                    xh[f_target[i]] += f_mag[i]
+        x_hat[k] = xh
+        for j in range(n):
+            P_diag[k, j] = P[j, j]
+    return x_true, u_cmd, u_act, z_all, x_hat, P_diag, rejected

@@ -1,0 +1,218 @@
+"""Per-model scenarios: sensor rates and channel names, actuators, controller, reference, start state.
+
+A Scenario is everything the closed-loop kernel needs besides the random draws and the faults,
+plus the naming that the log, the truth and the profile use:
+
+ - quadcopter: accel + gyro at the grid rate (100 Hz), attitude 50 Hz, position 10 Hz; actuators
+   motor1..motor4 through the model's mixer; figure-eight with a hover (``aggressive``: faster).
+ - steer_by_wire: steering angle, yaw rate and lateral acceleration at the grid rate; one actuator
+   (the steering motor torque); lane changes through a PD hand wheel and sliding-mode control.
+ - dc_motor (Jackal-like UGV): left/right wheel encoders 20 Hz and GPS speed 10 Hz (a redundant
+   speed group for A-TFM); PI speed control through constant-speed modes 0.4 .. 1.9 m/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.errors import UsageError
+from logscan.models import get_model
+from logscan.models.base import Model
+from logscan.simulate import controllers as ctl
+
+DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0}
+SIMULATED_MODELS = tuple(DEFAULT_RATES)
+DCM_MODES = (0.4, 0.7, 1.0, 1.3, 1.6, 1.9)  # m/s, the A-TFM thesis's trained modes
+DCM_HOLD_S = 20.0
+
+# model -> group -> (topic, field per output); groups not listed: ("/<group>", output names)
+_SENSOR_TOPICS = {
+    "quadcopter": {
+        "accel": ("/imu/accel", ("x", "y", "z")),
+        "gyro": ("/imu/gyro", ("x", "y", "z")),
+        "position": ("/gps/position", ("x", "y", "z")),
+        "attitude": ("/attitude", ("roll", "pitch", "yaw")),
+    },
+    "steer_by_wire": {
+        "steering_angle": ("/steering/angle", ("delta_f",)),
+        "yaw_rate": ("/imu/yaw_rate", ("gamma",)),
+        "lateral_accel": ("/imu/lateral_accel", ("a_y",)),
+    },
+    "dc_motor": {
+        "encoder": ("/enc", ("left.v", "right.v")),
+        "gps_speed": ("/gps", ("speed",)),
+        "current": ("/motor", ("current",)),
+    },
+}
+# model -> group -> sensor rate in Hz (None: the grid rate)
+_SENSOR_RATES = {
+    "quadcopter": {"accel": None, "gyro": None, "position": 10.0, "attitude": 50.0},
+    "dc_motor": {"gps_speed": 10.0},
+}
+_IMU_DEFAULT = {"quadcopter": "accel.x", "steer_by_wire": "yaw_rate.gamma", "dc_motor": "encoder.v_left"}
+
+
+@dataclass
+class SensorGroup:
+    """One measurement group as the simulator samples and logs it."""
+
+    name: str
+    group_id: int
+    topic: str
+    fields: tuple[str, ...]
+    ratio: int  # samples every `ratio` grid steps
+    rate_hz: float
+    noise_std: np.ndarray
+    range_lo: np.ndarray
+    range_hi: np.ndarray
+    wrap: np.ndarray
+
+    @property
+    def channels(self) -> list[str]:
+        return [f"{self.topic}/{f}" for f in self.fields]
+
+    outputs: tuple[str, ...] = ()
+
+    def targets(self) -> list[str]:
+        """Fault target names of the group's channels: "<group>.<last part of the field>"
+        (accel.x), or "<group>.<model output>" (encoder.v_left) when those would repeat."""
+        short = [f"{self.name}.{f.split('.')[-1]}" for f in self.fields]
+        if len(set(short)) == len(short):
+            return short
+        return [f"{self.name}.{o}" for o in self.outputs]
+
+
+@dataclass
+class Scenario:
+    """A model's closed-loop setup on a grid of period dt."""
+
+    model_name: str
+    model: Model
+    dt: float
+    groups: list[SensorGroup]
+    actuators: list[str]
+    M: np.ndarray  # inputs = M @ actuators
+    a_lo: np.ndarray
+    a_hi: np.ndarray
+    ctrl_id: int
+    ctrl_params: np.ndarray
+    ctrl_state: np.ndarray
+    reference: np.ndarray  # (N, nr)
+    x0: np.ndarray
+    P0: np.ndarray
+    imu_default: str
+    input_channels: list[str]
+    mode_channel: str | None = None
+    mode_values: np.ndarray | None = None  # (N,) logged mode / set-point
+    setpoints: dict[str, np.ndarray] = field(default_factory=dict)  # extra logged channels
+    redundant: dict[str, dict[str, str]] = field(default_factory=dict)
+    onboard_rate_hz: float = 50.0
+
+
+def input_channel(name: str) -> str:
+    """Log channel of a model input: tau_x -> /cmd/tau.x, thrust -> /cmd/thrust."""
+    if len(name) > 2 and name[-2] == "_" and name[-1] in "xyz":
+        name = f"{name[:-2]}.{name[-1]}"
+    return f"/cmd/{name}"
+
+
+def build_scenario(model_name: str, duration: float, rate_hz: float | None, aggressive: bool,
+                   rng: np.random.Generator, params: dict | None = None) -> Scenario:
+    """The scenario of ``model_name`` for a log of ``duration`` seconds."""
+    if model_name not in SIMULATED_MODELS:
+        raise UsageError(
+            f"cannot simulate model {model_name!r}",
+            hint="simulated models: " + ", ".join(SIMULATED_MODELS),
+        )
+    rate = float(rate_hz or DEFAULT_RATES[model_name])
+    if not (1.0 <= rate <= 10000.0):
+        raise UsageError(f"--rate {rate:g} Hz is out of range", hint="use 1 .. 10000 Hz")
+    dt = 1.0 / rate
+    model = get_model(model_name, params)
+    n_steps = int(round(duration / dt)) + 1
+    t = np.arange(n_steps) * dt
+    groups = _sensor_groups(model_name, model, rate)
+    builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire, "dc_motor": _dc_motor}
+    return builder[model_name](model, dt, t, groups, aggressive, rng)
+
+
+def _sensor_groups(model_name: str, model: Model, rate: float) -> list[SensorGroup]:
+    out = []
+    for spec in sorted(model.groups.values(), key=lambda g: g.group_id):
+        topic, fields = _SENSOR_TOPICS.get(model_name, {}).get(spec.name, (f"/{spec.name}", spec.outputs))
+        sensor_rate = _SENSOR_RATES.get(model_name, {}).get(spec.name) or rate
+        ratio = max(1, int(round(rate / min(sensor_rate, rate))))
+        out.append(SensorGroup(
+            name=spec.name, group_id=spec.group_id, topic=topic, fields=tuple(fields), ratio=ratio,
+            rate_hz=rate / ratio, noise_std=np.asarray(spec.noise_std, dtype=np.float64),
+            range_lo=np.asarray(spec.range_lo, dtype=np.float64),
+            range_hi=np.asarray(spec.range_hi, dtype=np.float64), wrap=spec.wrap_mask(),
+            outputs=tuple(spec.outputs),
+        ))
+    return out
+
+
+def _quadcopter(model, dt, t, groups, aggressive, rng) -> Scenario:
+    ref = ctl.quad_reference(t, aggressive)
+    x0 = np.zeros(12)
+    x0[:3] = ref[0, :3]
+    M = model.mixer_matrix()
+    hover_motor = model.p["mass"] * model.p["g"] / 4.0
+    mode = np.where(np.abs(ref[:, 3:6]).sum(axis=1) > 1e-9, 1.0, 0.0)  # 0 hover, 1 figure-eight
+    return Scenario(
+        model_name="quadcopter", model=model, dt=dt, groups=groups,
+        actuators=["motor1", "motor2", "motor3", "motor4"], M=M,
+        a_lo=np.zeros(4), a_hi=np.full(4, 2.5 * hover_motor),
+        ctrl_id=ctl.QUAD_CTRL, ctrl_params=ctl.quad_params(model, aggressive),
+        ctrl_state=np.zeros(1), reference=ref, x0=x0,
+        P0=np.diag(np.square(0.1 * model.state_scale())),
+        imu_default=_IMU_DEFAULT["quadcopter"],
+        input_channels=[input_channel(n) for n in model.input_names],
+        mode_channel="/flight_mode/mode", mode_values=mode,
+        setpoints={
+            "/setpoint/position.x": ref[:, 0], "/setpoint/position.y": ref[:, 1],
+            "/setpoint/position.z": ref[:, 2], "/setpoint/yaw": ref[:, 9],
+        },
+        onboard_rate_hz=min(50.0, 1.0 / dt),
+    )
+
+
+def _steer_by_wire(model, dt, t, groups, aggressive, rng) -> Scenario:
+    cp = ctl.sbw_params(model)
+    ref = ctl.sbw_reference(t, cp[8], aggressive)
+    limit = float(model.p.get("tau_max", 200.0))
+    return Scenario(
+        model_name="steer_by_wire", model=model, dt=dt, groups=groups,
+        actuators=["steering_motor"], M=np.eye(1), a_lo=np.array([-limit]), a_hi=np.array([limit]),
+        ctrl_id=ctl.SBW_CTRL, ctrl_params=cp, ctrl_state=np.zeros(2), reference=ref,
+        x0=np.zeros(4), P0=np.diag(np.square(0.1 * model.state_scale())),
+        imu_default=groups[0].targets()[0],
+        input_channels=[input_channel(n) for n in model.input_names],
+        mode_channel="/handwheel/reference", mode_values=ref[:, 0],
+        onboard_rate_hz=min(50.0, 1.0 / dt),
+    )
+
+
+def _dc_motor(model, dt, t, groups, aggressive, rng) -> Scenario:
+    ref = ctl.dcm_reference(t, DCM_MODES, DCM_HOLD_S / (2.0 if aggressive else 1.0), rng)
+    supply = float(model.p["Va"])
+    radius = float(model.p["wheel_radius"])
+    # feed-forward: the steady-state voltage per m/s of the exactly discretised model
+    ff = supply / (radius * model.steady_state(supply)[1])
+    cp = np.array([20.0, 40.0, -supply, supply, 1.0, 1.0, radius, ff])
+    x0 = model.steady_state(ff * ref[0, 0])
+    names = {g.name: g for g in groups}
+    enc, gps = names["encoder"].channels, names["gps_speed"].channels
+    return Scenario(
+        model_name="dc_motor", model=model, dt=dt, groups=groups,
+        actuators=["motor"], M=np.eye(1), a_lo=np.array([-supply]), a_hi=np.array([supply]),
+        ctrl_id=ctl.DCM_CTRL, ctrl_params=cp, ctrl_state=np.zeros(1), reference=ref, x0=x0,
+        P0=np.diag(np.square(0.1 * model.state_scale())),
+        imu_default=_IMU_DEFAULT["dc_motor"],
+        input_channels=[input_channel(n) for n in model.input_names],
+        mode_channel="/cmd_vel/linear.x", mode_values=ref[:, 0],
+        redundant={"speed": {"left": enc[0], "right": enc[1], "gps": gps[0]}},
+        onboard_rate_hz=1.0 / dt,
+    )

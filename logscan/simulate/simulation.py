@@ -1,0 +1,235 @@
+"""One simulated log: run the closed loop for a model with faults, and expose its logged series.
+
+`simulate()` draws every random number from one seeded generator (process noise, sensor noise,
+fault draws, the mode schedule), runs the numba kernel of `logscan.simulate.runner` once, and
+returns a `Simulation` holding the true states, commands, sensor samples, the on-board estimate and
+the ground-truth fault events. `Simulation.series()` lists what a log holds, channel by channel,
+with sample indices on the grid; `logscan.simulate.output` writes it as MCAP or CSV.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from logscan.errors import UsageError
+from logscan.simulate.faults import (
+    FaultEvent,
+    FaultSpec,
+    FaultTable,
+    corrupt_logged_variance,
+    resolve_faults,
+)
+from logscan.simulate.runner import closed_loop
+from logscan.simulate.scenario import Scenario, build_scenario
+
+MAX_DURATION_S = 24 * 3600.0
+TRUTH_SCHEMA = "logscan.truth/1"
+SETPOINT_RATE_HZ = 10.0  # mode and set-point channels (they change slowly or in steps)
+
+
+@dataclass
+class Series:
+    """Samples of one logged topic: grid step indices and one value column per field."""
+
+    topic: str
+    schema: str
+    steps: np.ndarray  # (k,) int64 grid indices
+    fields: dict[str, np.ndarray]  # field name -> (k,) float64
+
+
+@dataclass
+class Simulation:
+    """Everything one closed-loop run produced (arrays on the grid of period ``scenario.dt``)."""
+
+    scenario: Scenario
+    seed: int
+    duration: float
+    aggressive: bool
+    events: list[FaultEvent]
+    faults: FaultTable
+    x_true: np.ndarray  # (N, n)
+    u_cmd: np.ndarray  # (N, nu) commanded (logged)
+    u_act: np.ndarray  # (N, nu) what the actuators delivered (truth)
+    z: np.ndarray  # (N, total measurements), NaN where a group did not sample
+    x_hat: np.ndarray  # (N, n) on-board estimate (logged)
+    P_diag: np.ndarray  # (N, n) on-board variance as LOGGED (after cov-corruption)
+    rejected: int  # sensor samples the on-board EKF skipped
+    elapsed_s: float
+
+    @property
+    def dt(self) -> float:
+        return self.scenario.dt
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.x_true.shape[0])
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.arange(self.n_steps) * self.dt
+
+    def group_slices(self) -> dict[str, slice]:
+        out, offset = {}, 0
+        for g in self.scenario.groups:
+            out[g.name] = slice(offset, offset + len(g.fields))
+            offset += len(g.fields)
+        return out
+
+    def series(self) -> list[Series]:
+        """Every logged topic: commands, sensors, on-board estimator, set-points/mode, truth."""
+        sc = self.scenario
+        n = self.n_steps
+        every = np.arange(n, dtype=np.int64)
+        out = [Series("/cmd", "logscan/Command", every, {
+            ch.removeprefix("/cmd/"): self.u_cmd[:, i] for i, ch in enumerate(sc.input_channels)
+        })]
+        for g, sl in zip(sc.groups, self.group_slices().values()):
+            steps = every[:: g.ratio]
+            out.append(Series(g.topic, f"logscan/{g.name.title()}", steps, {
+                f: self.z[steps, sl.start + j] for j, f in enumerate(g.fields)
+            }))
+        states = sc.model.state_names
+        ratio = max(1, int(round(1.0 / (sc.dt * sc.onboard_rate_hz))))
+        steps = every[::ratio]
+        out.append(Series("/ekf/state", "logscan/EstimatorState", steps,
+                          {s: self.x_hat[steps, i] for i, s in enumerate(states)}))
+        out.append(Series("/ekf/variance", "logscan/EstimatorVariance", steps,
+                          {s: self.P_diag[steps, i] for i, s in enumerate(states)}))
+        extra: dict[str, dict[str, np.ndarray]] = {}
+        if sc.mode_channel and sc.mode_values is not None:
+            extra.setdefault(*_split(sc.mode_channel, sc.mode_values))
+        for channel, values in sc.setpoints.items():
+            topic, fields = _split(channel, values)
+            extra.setdefault(topic, {}).update(fields)
+        slow = every[:: max(1, int(round(1.0 / (sc.dt * SETPOINT_RATE_HZ))))]
+        for topic, fields in extra.items():
+            out.append(Series(topic, "logscan/Setpoint", slow, {k: v[slow] for k, v in fields.items()}))
+        out.append(Series("/truth/state", "logscan/TruthState", every,
+                          {s: self.x_true[:, i] for i, s in enumerate(states)}))
+        return out
+
+    def truth(self) -> dict:
+        """The ground-truth document embedded in the log (`logscan.truth`)."""
+        sc = self.scenario
+        return {
+            "schema": TRUTH_SCHEMA,
+            "generator": "logscan simulate",
+            "model": sc.model_name,
+            "seed": self.seed,
+            "duration_s": self.duration,
+            "rate_hz": 1.0 / sc.dt,
+            "aggressive": self.aggressive,
+            "controller_input": "on-board EKF estimate",
+            "events": [e.to_json() for e in self.events],
+            "true_state_topic": "/truth/state",
+            "true_state_fields": list(sc.model.state_names),
+            "onboard_rejected_samples": int(self.rejected),
+        }
+
+    def profile_dict(self) -> dict:
+        """The matching profile (`[vehicle]`, `[inputs]`, `[measurements.*]`, `[onboard]`, ...)."""
+        sc = self.scenario
+        rate = 1.0 / sc.dt
+        profile: dict = {
+            "name": f"simulated {sc.model_name}",
+            "description": "written by `logscan simulate`; channels as logged",
+            "vehicle": {"model": sc.model_name, "rate_hz": rate},
+            "inputs": {name: ch for name, ch in zip(sc.model.input_names, sc.input_channels)},
+            "measurements": {},
+        }
+        if sc.model.params:
+            profile["vehicle"]["params"] = dict(sc.model.params)
+        for g in sc.groups:
+            profile["measurements"][g.name] = {
+                "channels": g.channels,
+                "rate_hz": g.rate_hz,
+                "stale_s": 2.5 / g.rate_hz,
+                "noise_std": [float(v) for v in g.noise_std],
+            }
+        if sc.mode_channel:
+            profile["mode"] = {"channel": sc.mode_channel}
+        if sc.redundant:
+            profile["redundant"] = {name: {"sensors": dict(s)} for name, s in sc.redundant.items()}
+        profile["onboard"] = {"state": "/ekf/state", "variance": "/ekf/variance"}
+        return profile
+
+    def profile_toml(self) -> str:
+        from logscan.profile import dumps_toml
+
+        return dumps_toml(self.profile_dict())
+
+
+def _split(channel: str, values: np.ndarray) -> tuple[str, dict[str, np.ndarray]]:
+    topic, _, field_name = channel.rpartition("/")
+    return topic, {field_name: values}
+
+
+def simulate(
+    model_name: str,
+    faults: list[FaultSpec] | None = None,
+    *,
+    duration: float = 60.0,
+    seed: int = 0,
+    rate_hz: float | None = None,
+    aggressive: bool = False,
+    params: dict | None = None,
+) -> Simulation:
+    """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``."""
+    if not (0.0 < duration <= MAX_DURATION_S):
+        raise UsageError(f"--duration {duration:g} s is out of range", hint="use 0 < duration <= 86400 s")
+    if seed < 0:
+        raise UsageError(f"--seed {seed} is negative", hint="use a seed >= 0")
+    rng = np.random.default_rng(seed)
+    sc = build_scenario(model_name, duration, rate_hz, aggressive, np.random.default_rng([seed, 1]), params)
+    n_steps = sc.reference.shape[0]
+    sensor_channels = [
+        (target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)
+    ]
+    events, table = resolve_faults(
+        list(faults or []), duration=duration, dt=sc.dt, sensor_channels=sensor_channels,
+        imu_default=sc.imu_default, actuators=sc.actuators, state_names=sc.model.state_names,
+        estimator_fields={s: f"/ekf/variance/{s}" for s in sc.model.state_names},
+        rng=np.random.default_rng([seed, 2]),
+    )
+    # cov-corruption's channels name the logged variance; state-corruption the logged state
+    events = [
+        e if e.kind != "state-corruption"
+        else FaultEvent(e.kind, e.target, e.start, e.end, e.magnitude,
+                        tuple(c.replace("/ekf/variance/", "/ekf/state/") for c in e.channels))
+        for e in events
+    ]
+    model = sc.model
+    n = model.n_states
+    Q = np.ascontiguousarray(model.default_Q(sc.dt))
+    L_Q = np.linalg.cholesky(Q)
+    # w_k ~ N(0, Q): w = L_Q e, e ~ N(0, I)
+    W = rng.standard_normal((n_steps, n)) @ L_Q.T
+    std = np.concatenate([g.noise_std for g in sc.groups])
+    V = rng.standard_normal((n_steps, std.size)) * std
+    g_m = np.array([len(g.fields) for g in sc.groups], dtype=np.int64)
+    started = time.perf_counter()
+    x_true, u_cmd, u_act, z, x_hat, P_diag, rejected = closed_loop(
+        model.model_id, model.param_vector(sc.dt), sc.dt, sc.x0.astype(np.float64),
+        np.ascontiguousarray(sc.P0, dtype=np.float64), Q, W, V,
+        np.array([g.group_id for g in sc.groups], dtype=np.int64), g_m,
+        np.concatenate([[0], np.cumsum(g_m)[:-1]]).astype(np.int64),
+        np.array([g.ratio for g in sc.groups], dtype=np.int64),
+        np.concatenate([g.range_lo for g in sc.groups]),
+        np.concatenate([g.range_hi for g in sc.groups]),
+        np.concatenate([g.wrap for g in sc.groups]).astype(np.bool_),
+        np.square(std), sc.ctrl_id, sc.ctrl_params.astype(np.float64),
+        sc.ctrl_state.astype(np.float64).copy(), np.ascontiguousarray(sc.reference),
+        np.ascontiguousarray(sc.M, dtype=np.float64),
+        np.ascontiguousarray(np.linalg.inv(sc.M)), sc.a_lo.astype(np.float64),
+        sc.a_hi.astype(np.float64), table.kind, table.target, table.start, table.end,
+        table.magnitude, table.uniform, table.bit,
+    )
+    elapsed = time.perf_counter() - started
+    return Simulation(
+        scenario=sc, seed=seed, duration=duration, aggressive=aggressive, events=events,
+        faults=table, x_true=x_true, u_cmd=u_cmd, u_act=u_act, z=z, x_hat=x_hat,
+        P_diag=corrupt_logged_variance(P_diag, table), rejected=int(rejected), elapsed_s=elapsed,
+    )
