@@ -167,8 +167,9 @@ def mcap_bytes(
     *,
     encoding: str = "json",
     metadata: dict[str, dict[str, str]] | None = None,
+    chunk_size: int = 1024 * 1024,
 ) -> bytes:
-    """The MCAP file ``write_mcap`` writes, as bytes."""
+    """The MCAP file ``write_mcap`` writes, as bytes (``chunk_size``: uncompressed bytes per chunk)."""
     from mcap.writer import CompressionType, Writer
 
     _check(topics, encoding)
@@ -179,7 +180,7 @@ def mcap_bytes(
     except ImportError:
         compression = CompressionType.NONE
     buffer = io.BytesIO()
-    writer = Writer(buffer, chunk_size=1024 * 1024, compression=compression, enable_data_crcs=True)
+    writer = Writer(buffer, chunk_size=chunk_size, compression=compression, enable_data_crcs=True)
     writer.start(profile="ros2" if encoding == "ros2" else "", library=LIBRARY)
     for name, record in (metadata or {}).items():
         writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
@@ -221,6 +222,7 @@ def write_mcap(
     *,
     encoding: str = "json",
     metadata: dict[str, dict[str, str]] | None = None,
+    chunk_size: int = 1024 * 1024,
 ) -> None:
     """Write ``topics`` to the MCAP file ``path`` atomically (see the module docstring)."""
-    write_atomic(path, mcap_bytes(topics, encoding=encoding, metadata=metadata))
+    write_atomic(path, mcap_bytes(topics, encoding=encoding, metadata=metadata, chunk_size=chunk_size))

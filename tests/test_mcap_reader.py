@@ -1,0 +1,450 @@
+"""MCAP reader: conformance files, corrupt variants, every message encoding, flattening rules."""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from mcap.writer import CompressionType, Writer
+
+from logscan.errors import CorruptLogError, InputError
+from logscan.log import Log
+from logscan.mcap_writer import TopicData, mcap_bytes
+from logscan.readers import read_log
+from logscan.readers.mcap_reader import iter_raw_messages, read_mcap
+
+CONFORMANCE = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "mcap-conformance"
+CONFORMANCE_FILES = sorted(CONFORMANCE.glob("*/*.mcap")) if CONFORMANCE.is_dir() else []
+
+
+# --------------------------------------------------------------------------------------------
+# conformance
+
+
+def _expected_messages(json_path: Path) -> list[tuple]:
+    records = json.loads(json_path.read_text())["records"]
+    topics: dict[str, str] = {}
+    out = []
+    for record in records:
+        fields = dict(record["fields"])
+        if record["type"] == "Channel":
+            topics[fields["id"]] = fields["topic"]
+        elif record["type"] == "Message":
+            out.append((
+                topics[fields["channel_id"]], int(fields["log_time"]), int(fields["publish_time"]),
+                int(fields["sequence"]), bytes(int(b) for b in fields["data"]),
+            ))
+    return out
+
+
+def test_conformance_suite_is_complete():
+    if not CONFORMANCE_FILES:
+        pytest.skip("shared conformance data absent")
+    assert len(CONFORMANCE_FILES) == 416
+
+
+@pytest.mark.parametrize("path", CONFORMANCE_FILES, ids=lambda p: p.stem)
+def test_conformance_file_yields_exactly_its_messages(path: Path):
+    expected = _expected_messages(path.with_suffix(".json"))
+    got = [(m.topic, m.log_time, m.publish_time, m.sequence, m.data) for m in iter_raw_messages(path)]
+    assert got == expected
+
+    log = read_mcap(path, None)
+    assert not log.source.partial
+    assert sum(info.message_count for info in log.source.topics.values()) == len(expected)
+    if expected:
+        # their message encodings ("a", "text") have no decoder: skipped, counted, named
+        skipped = {(s.what, s.count) for s in log.source.skipped}
+        assert skipped == {("example", len(expected))}
+        assert "no decoder for message encoding" in log.source.skipped[0].why
+        assert any("example" in w for w in log.source.warnings)
+    assert log.channels == {}
+
+
+def test_conformance_metadata_record_is_read():
+    path = CONFORMANCE / "OneMetadata" / "OneMetadata.mcap"
+    if not path.exists():
+        pytest.skip("shared conformance data absent")
+    log = read_mcap(path, None)
+    assert log.source.metadata == {"myMetadata": {"foo": "bar"}}
+
+
+# --------------------------------------------------------------------------------------------
+# corrupt variants of a file we write
+
+
+def _imu_topics(n: int = 3000) -> dict[str, TopicData]:
+    t = np.arange(n, dtype=np.int64) * 10_000_000 + 1_000_000_000
+    rng = np.random.default_rng(7)
+    return {
+        "/imu": TopicData("test/Imu", t, {f"accel.{a}": rng.normal(size=n) for a in "xyz"}),
+        "/gps": TopicData("test/Gps", t[::10] + 3, {"position.x": np.arange(n // 10, dtype=float)}),
+    }
+
+
+class _Valid(tuple):
+    """(path, bytes, Log) of the valid file, with a short repr for hypothesis reports."""
+
+    def __repr__(self) -> str:
+        return f"<valid file {self[0]}>"
+
+
+@pytest.fixture(scope="module")
+def valid_file(tmp_path_factory) -> tuple[Path, bytes, Log]:
+    data = mcap_bytes(_imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}},
+                      chunk_size=16 * 1024)
+    path = tmp_path_factory.mktemp("mcap") / "valid.mcap"
+    path.write_bytes(data)
+    log = read_mcap(path, None)
+    assert not log.source.partial and log.source.warnings == []
+    return _Valid((path, data, log))
+
+
+def _check_outcome(path: Path, original: Log) -> str:
+    """Read ``path``: an input error (exit 2), a Log equal to the original, or a partial prefix."""
+    try:
+        log = read_log(path)
+    except InputError as exc:  # CorruptLogError, or UnsupportedFormatError for a broken magic
+        line = exc.one_line()
+        assert str(path) in line and "\n" not in line
+        return "error"
+    if not log.source.partial:
+        assert set(log.channels) == set(original.channels)
+        for name, channel in log.channels.items():
+            np.testing.assert_array_equal(channel.t, original.channels[name].t)
+            np.testing.assert_array_equal(channel.values, original.channels[name].values)
+        return "intact"
+    assert "recovered" in log.source.partial_reason
+    assert set(log.channels) <= set(original.channels)
+    for name, channel in log.channels.items():
+        whole = original.channels[name]
+        n = len(channel)
+        assert n <= len(whole)
+        np.testing.assert_array_equal(channel.t, whole.t[:n])
+        np.testing.assert_array_equal(channel.values, whole.values[:n])
+    return "partial"
+
+
+def test_truncated_file_reads_a_partial_prefix_or_fails_cleanly(valid_file, tmp_path):
+    path, data, original = valid_file
+    outcomes = []
+    for cut in [8, 20, 200, len(data) // 3, len(data) // 2, len(data) - 200, len(data) - 9]:
+        cut_path = tmp_path / f"cut{cut}.mcap"
+        cut_path.write_bytes(data[:cut])
+        outcomes.append(_check_outcome(cut_path, original))
+    assert outcomes[0] == "error" and outcomes[1] == "error"
+    assert outcomes[3] == "partial" and outcomes[-1] == "partial"
+    half = read_mcap(tmp_path / f"cut{len(data) // 2}.mcap", None)
+    assert 0 < len(half.channels["/imu/accel.x"]) < len(original.channels["/imu/accel.x"])
+    assert "messages" in half.source.partial_reason and "log_time" in half.source.partial_reason
+
+
+def test_bad_magic_is_a_corrupt_log_error(valid_file, tmp_path):
+    _, data, _ = valid_file
+    bad = tmp_path / "bad_magic.mcap"
+    bad.write_bytes(b"\x89MCAX0\r\n" + data[8:])
+    with pytest.raises(CorruptLogError, match="magic"):
+        read_mcap(bad, None)
+
+
+def _first_chunk_crc_offset(data: bytes) -> int:
+    pos = 8
+    while True:
+        op, length = struct.unpack_from("<BQ", data, pos)
+        if op == 0x06:
+            return pos + 9 + 24  # after message start/end time and uncompressed size
+        pos += 9 + length
+
+
+def test_flipped_chunk_crc_stops_the_read(valid_file, tmp_path):
+    path, data, original = valid_file
+    offset = _first_chunk_crc_offset(data)
+    broken = bytearray(data)
+    broken[offset] ^= 0xFF
+    bad = tmp_path / "bad_crc.mcap"
+    bad.write_bytes(bytes(broken))
+    with pytest.raises(CorruptLogError, match="CRC"):
+        read_mcap(bad, None)  # the first chunk holds the channel records: nothing to recover
+    # a later chunk: the messages before it are recovered and the Log says so
+    second = data.index(b"\x06", offset + 100)
+    while True:
+        broken = bytearray(data)
+        try:
+            op, length = struct.unpack_from("<BQ", data, second)
+        except struct.error:
+            pytest.fail("no second chunk")
+        if op == 0x06 and 0 < length < len(data):
+            break
+        second = data.index(b"\x06", second + 1)
+    broken[second + 9 + 24] ^= 0x01
+    bad.write_bytes(bytes(broken))
+    assert _check_outcome(bad, original) in ("partial", "error")
+
+
+def test_data_section_crc_guards_the_metadata_records(valid_file, tmp_path):
+    path, data, _ = valid_file
+    at = data.index(b'{"events": []}')
+    broken = bytearray(data)
+    broken[at + 2] ^= 0x20  # "events" -> "Events": only the data-section CRC can tell
+    bad = tmp_path / "meta.mcap"
+    bad.write_bytes(bytes(broken))
+    with pytest.raises(CorruptLogError, match="data section CRC"):
+        read_mcap(bad, None)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(position=st.floats(0, 1, exclude_max=True), xor=st.integers(1, 255))
+def test_any_flipped_byte_gives_error_or_honest_result(valid_file, tmp_path, position, xor):
+    path, data, original = valid_file
+    broken = bytearray(data)
+    broken[int(position * len(data))] ^= xor
+    bad = tmp_path / "flip.mcap"
+    bad.write_bytes(bytes(broken))
+    _check_outcome(bad, original)
+
+
+# --------------------------------------------------------------------------------------------
+# message encodings
+
+
+def _json_file(path: Path, topics: dict[str, list[tuple[int, object]]]) -> None:
+    with open(path, "wb") as fh:
+        writer = Writer(fh, compression=CompressionType.NONE)
+        writer.start()
+        for topic, messages in topics.items():
+            schema = writer.register_schema("Thing", "jsonschema", b"{}")
+            channel = writer.register_channel(topic, "json", schema)
+            for log_time, message in messages:
+                data = message if isinstance(message, bytes) else json.dumps(message).encode()
+                writer.add_message(channel, log_time, data, log_time)
+        writer.finish()
+
+
+def test_json_nested_arrays_bools_and_non_numeric_fields(tmp_path):
+    path = tmp_path / "j.mcap"
+    _json_file(path, {"/robot": [
+        (10, {"pose": {"x": 1.0, "y": 2}, "ranges": [1, 2, 3], "ok": True, "frame": "map", "v": None}),
+        (20, {"pose": {"x": 1.5, "y": 3}, "ranges": [4], "ok": False, "frame": "map", "v": None}),
+        (30, {"pose": {"x": 2.5, "y": 4}, "ranges": [5, 6], "ok": True, "frame": "odom", "v": None}),
+    ]})
+    log = read_mcap(path, None)
+    ch = log.channels
+    np.testing.assert_array_equal(ch["/robot/pose.x"].values, [1.0, 1.5, 2.5])
+    np.testing.assert_array_equal(ch["/robot/pose.x"].t, [10, 20, 30])
+    np.testing.assert_array_equal(ch["/robot/ok"].values, [1, 0, 1])
+    # variable-length array: each index only where present, never zero-padded
+    np.testing.assert_array_equal(ch["/robot/ranges[0]"].t, [10, 20, 30])
+    np.testing.assert_array_equal(ch["/robot/ranges[1]"].t, [10, 30])
+    np.testing.assert_array_equal(ch["/robot/ranges[1]"].values, [2, 6])
+    np.testing.assert_array_equal(ch["/robot/ranges[2]"].values, [3])
+    assert "/robot/frame" not in ch
+    skipped = {(s.what, s.why): s.count for s in log.source.skipped}
+    assert skipped[("/robot/frame", "non-numeric")] == 3
+    assert skipped[("/robot/v", "null value")] == 3
+    info = log.source.topics["/robot"]
+    assert info.message_count == 3 and info.encoding == "json" and info.schema == "Thing"
+    assert (info.first_ns, info.last_ns) == (10, 30)
+    assert "pose.x" in info.fields and "ranges[2]" in info.fields
+
+
+def test_topic_without_leading_slash_and_scalar_message(tmp_path):
+    path = tmp_path / "s.mcap"
+    _json_file(path, {"imu": [(1, {"accel": {"x": 0.5}})], "/speed": [(1, 3.25), (2, 4.0)]})
+    log = read_mcap(path, None)
+    assert set(log.channels) == {"imu/accel.x", "/speed"}
+    np.testing.assert_array_equal(log.channels["/speed"].values, [3.25, 4.0])
+
+
+def test_only_wanted_topics_are_decoded(tmp_path):
+    path = tmp_path / "w.mcap"
+    _json_file(path, {"/a": [(1, {"x": 1.0})], "/b": [(1, b"not json {")]})
+    everything = read_mcap(path, None)
+    assert any(s.what == "/b" and "do not decode" in s.why for s in everything.source.skipped)
+    only_a = read_mcap(path, {"/a/x"})
+    assert set(only_a.channels) == {"/a/x"}
+    assert only_a.source.skipped == []  # /b was never decoded
+    assert only_a.source.topics["/b"].message_count == 1  # but it is still counted
+
+
+def test_script_topic_name_survives_as_data(tmp_path):
+    path = tmp_path / "x.mcap"
+    topic = "<script>alert('x')</script>"
+    _json_file(path, {topic: [(1, {"v": 1.0})]})
+    log = read_mcap(path, None)
+    assert list(log.channels) == [topic + "/v"]
+    assert topic in log.source.topics
+
+
+def test_out_of_order_messages_are_sorted_with_a_warning(tmp_path):
+    path = tmp_path / "o.mcap"
+    _json_file(path, {"/a": [(30, {"x": 3.0}), (10, {"x": 1.0}), (20, {"x": 2.0})]})
+    log = read_mcap(path, None)
+    np.testing.assert_array_equal(log.channels["/a/x"].t, [10, 20, 30])
+    np.testing.assert_array_equal(log.channels["/a/x"].values, [1.0, 2.0, 3.0])
+    assert any("sorted" in w for w in log.source.warnings)
+
+
+def test_json_header_stamp_option(tmp_path):
+    path = tmp_path / "h.mcap"
+    stamp = {"sec": 100, "nanosec": 5}
+    _json_file(path, {"/a": [(1, {"header": {"stamp": stamp}, "x": 1.0})], "/b": [(2, {"x": 2.0})]})
+    plain = read_mcap(path, None)
+    assert plain.channels["/a/x"].t.tolist() == [1] and plain.source.time_source == "log_time"
+    stamped = read_mcap(path, None, use_header_stamp=True)
+    assert stamped.channels["/a/x"].t.tolist() == [100_000_000_005]
+    assert stamped.channels["/b/x"].t.tolist() == [2]
+    assert stamped.source.time_source == "header.stamp (log_time for /b)"
+
+
+ROS2_POSE = """std_msgs/Header header
+geometry_msgs/Point position
+float64[] ranges
+int32[3] counts
+bool ok
+string label
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+"""
+
+
+def test_ros2_cdr_round_trip_with_header_stamp(tmp_path):
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    path = tmp_path / "r2.mcap"
+    with open(path, "wb") as fh:
+        writer = Ros2Writer(fh)
+        schema = writer.register_msgdef("test_msgs/msg/Pose", ROS2_POSE)
+        for k in range(3):
+            writer.write_message("/pose", schema, {
+                "header": {"stamp": {"sec": 50 + k, "nanosec": 7}, "frame_id": "map"},
+                "position": {"x": 1.0 * k, "y": 2.0, "z": -1.0},
+                "ranges": [0.5] * (k + 1), "counts": [1, 2, 3], "ok": k % 2 == 0, "label": "a",
+            }, log_time=1000 + k)
+        writer.finish()
+    log = read_mcap(path, None)
+    ch = log.channels
+    np.testing.assert_array_equal(ch["/pose/position.x"].values, [0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(ch["/pose/position.x"].t, [1000, 1001, 1002])
+    np.testing.assert_array_equal(ch["/pose/counts[2]"].values, [3, 3, 3])
+    np.testing.assert_array_equal(ch["/pose/ranges[2]"].t, [1002])
+    np.testing.assert_array_equal(ch["/pose/ok"].values, [1, 0, 1])
+    np.testing.assert_array_equal(ch["/pose/header.stamp.sec"].values, [50, 51, 52])
+    assert log.source.topics["/pose"].encoding == "cdr"
+    assert log.source.topics["/pose"].schema == "test_msgs/msg/Pose"
+    whys = {(s.what, s.why) for s in log.source.skipped}
+    assert ("/pose/header.frame_id", "non-numeric") in whys and ("/pose/label", "non-numeric") in whys
+    stamped = read_mcap(path, None, use_header_stamp=True)
+    assert stamped.channels["/pose/position.x"].t.tolist() == [k * 1_000_000_000 + 7 for k in (50, 51, 52)]
+    assert stamped.source.time_source == "header.stamp"
+
+
+ROS1_POSE = """Header header
+float64[] ranges
+float32 speed
+================================================================================
+MSG: std_msgs/Header
+uint32 seq
+time stamp
+string frame_id
+"""
+
+
+def test_ros1_round_trip_with_header_stamp(tmp_path):
+    from mcap_ros1._vendor.genpy import dynamic
+    from mcap_ros1.writer import Writer as Ros1Writer
+
+    msg_class = dynamic.generate_dynamic("test_msgs/Pose", ROS1_POSE)["test_msgs/Pose"]
+    path = tmp_path / "r1.mcap"
+    with open(path, "wb") as fh:
+        writer = Ros1Writer(fh)
+        for k in range(2):
+            message = msg_class()
+            message.header.stamp.secs = 20 + k
+            message.header.stamp.nsecs = 9
+            message.header.frame_id = "odom"
+            message.ranges = [1.5, 2.5][: k + 1]
+            message.speed = 0.25 * (k + 1)
+            writer.write_message("/ros1", message, log_time=500 + k)
+        writer.finish()
+    log = read_mcap(path, None)
+    np.testing.assert_array_equal(log.channels["/ros1/speed"].values, [0.25, 0.5])
+    np.testing.assert_array_equal(log.channels["/ros1/ranges[1]"].values, [2.5])
+    np.testing.assert_array_equal(log.channels["/ros1/header.stamp.secs"].values, [20, 21])
+    assert log.source.topics["/ros1"].encoding == "ros1"
+    stamped = read_mcap(path, None, use_header_stamp=True)
+    assert stamped.channels["/ros1/speed"].t.tolist() == [20_000_000_009, 21_000_000_009]
+
+
+def _protobuf_class():
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    file_proto = descriptor_pb2.FileDescriptorProto(name="logscan_test.proto", package="lstest", syntax="proto3")
+    vec = file_proto.message_type.add(name="Vec")
+    for number, name in enumerate("xyz", start=1):
+        vec.field.add(name=name, number=number, type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
+                      label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL)
+    pose = file_proto.message_type.add(name="Pose")
+    F = descriptor_pb2.FieldDescriptorProto
+    pose.field.add(name="position", number=1, type=F.TYPE_MESSAGE, type_name=".lstest.Vec", label=F.LABEL_OPTIONAL)
+    pose.field.add(name="velocity", number=2, type=F.TYPE_MESSAGE, type_name=".lstest.Vec", label=F.LABEL_OPTIONAL)
+    pose.field.add(name="cov", number=3, type=F.TYPE_DOUBLE, label=F.LABEL_REPEATED)
+    pose.field.add(name="frame", number=4, type=F.TYPE_STRING, label=F.LABEL_OPTIONAL)
+    pose.field.add(name="ok", number=5, type=F.TYPE_BOOL, label=F.LABEL_OPTIONAL)
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(file_proto)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName("lstest.Pose"))
+
+
+def test_protobuf_round_trip(tmp_path):
+    from mcap_protobuf.writer import Writer as ProtobufWriter
+
+    Pose = _protobuf_class()
+    path = tmp_path / "pb.mcap"
+    with open(path, "wb") as fh:
+        writer = ProtobufWriter(fh)
+        first = Pose(frame="map", ok=True)
+        first.position.x, first.position.y, first.position.z = 1.0, 2.0, 3.0
+        first.cov.extend([0.1, 0.2])
+        writer.write_message("/pb", first, log_time=10)
+        second = Pose(frame="map")
+        second.position.x = 4.0
+        second.velocity.z = 9.0
+        writer.write_message("/pb", second, log_time=20)
+        writer.finish()
+    log = read_mcap(path, None)
+    ch = log.channels
+    np.testing.assert_array_equal(ch["/pb/position.x"].values, [1.0, 4.0])
+    np.testing.assert_array_equal(ch["/pb/position.z"].values, [3.0, 0.0])  # proto3 default
+    np.testing.assert_array_equal(ch["/pb/velocity.z"].t, [20])  # unset sub-message: absent
+    np.testing.assert_array_equal(ch["/pb/cov[1]"].values, [0.2])
+    np.testing.assert_array_equal(ch["/pb/ok"].values, [1, 0])
+    assert log.source.topics["/pb"].encoding == "protobuf"
+    assert any(s.what == "/pb/frame" and s.count == 2 for s in log.source.skipped)
+
+
+def test_schema_that_does_not_parse_skips_the_topic_with_its_reason(tmp_path):
+    path = tmp_path / "bad_schema.mcap"
+    buffer = io.BytesIO()
+    writer = Writer(buffer)
+    writer.start()
+    schema = writer.register_schema("x/msg/Bad", "ros2msg", b"this is not a ros2 definition [[[")
+    channel = writer.register_channel("/bad", "cdr", schema)
+    writer.add_message(channel, 1, b"\x00\x01\x00\x00", 1)
+    writer.finish()
+    path.write_bytes(buffer.getvalue())
+    log = read_mcap(path, None)
+    assert log.channels == {}
+    assert log.source.skipped[0].what == "/bad" and "cannot be parsed" in log.source.skipped[0].why
