@@ -111,14 +111,14 @@ def compact_fields(fields: list[str]) -> list[str]:
 def _wrap_fields(fields: list[str], indent: str, width: int, full: bool) -> list[str]:
     """Fields as wrapped lines; beyond ``_FIELD_LINES`` lines a count of the rest (unless full)."""
     shown = compact_fields(fields)
-    lines = textwrap.wrap(", ".join(shown), width=max(40, width - len(indent)),
+    prefix = indent + "fields: "
+    lines = textwrap.wrap(", ".join(shown), width=max(40, width - len(prefix)),
                           break_long_words=False, break_on_hyphens=False)
     if not full and len(lines) > _FIELD_LINES:
         kept = lines[:_FIELD_LINES]
         listed = " ".join(kept).count(",")  # each line ends "name," while more follow
         kept[-1] = kept[-1].rstrip(",") + ","
         lines = kept + [f"... +{len(shown) - listed} more (--full lists all)"]
-    prefix = indent + "fields: "
     return [(prefix if i == 0 else " " * len(prefix)) + line for i, line in enumerate(lines)]
 
 
