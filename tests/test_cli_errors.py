@@ -1,0 +1,104 @@
+"""Bad input on the command line: exit 2 with one line on stderr, never a traceback."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from logscan import __version__
+
+ULOG = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog" / "sample_log_small.ulg"
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess, *fragments: str) -> None:
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("logscan: error: ")
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def test_version():
+    result = run_cli("--version")
+    assert result.returncode == 0 and __version__ in result.stdout and result.stderr == ""
+
+
+def test_missing_file(tmp_path):
+    missing = tmp_path / "nope.mcap"
+    assert_one_line_error(run_cli("inspect", str(missing)), str(missing), "no such file")
+
+
+def test_random_bytes_file(tmp_path):
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(np.random.default_rng(0).integers(0, 256, 10_000, dtype=np.uint8).tobytes())
+    assert_one_line_error(run_cli("inspect", str(junk)), str(junk), "not an MCAP, ULog or CSV")
+
+
+def test_directory_without_csvs(tmp_path):
+    (tmp_path / "readme.txt").write_text("hello")
+    assert_one_line_error(run_cli("inspect", str(tmp_path)), "directory holds no .csv files")
+
+
+@pytest.mark.parametrize(
+    "content, fragment",
+    [
+        ("", "empty"),
+        ("time,x\n", "no data rows"),
+        ("a,b\n1,2\n", "no time column"),
+        ("time,x\n1,2,3,4\n5,6,7,8\n", "more fields than the header"),
+    ],
+)
+def test_bad_csv_files(tmp_path, content, fragment):
+    path = tmp_path / "bad.csv"
+    path.write_text(content)
+    assert_one_line_error(run_cli("inspect", str(path)), str(path), fragment)
+
+
+def test_mcap_with_bad_magic(tmp_path):
+    path = tmp_path / "bad.mcap"
+    path.write_bytes(b"\x89MCAX0\r\n" + bytes(200))
+    assert_one_line_error(run_cli("inspect", str(path)), str(path))
+
+
+def test_ulog_cut_before_any_data(tmp_path):
+    if not ULOG.is_file():
+        pytest.skip("shared px4-ulog test data missing")
+    path = tmp_path / "cut.ulg"
+    path.write_bytes(ULOG.read_bytes()[:3000])
+    assert_one_line_error(run_cli("inspect", str(path)), str(path), "truncated")
+
+
+def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path):
+    if not ULOG.is_file():
+        pytest.skip("shared px4-ulog test data missing")
+    path = tmp_path / "half.ulg"
+    data = ULOG.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    result = run_cli("inspect", str(path))
+    assert result.returncode == 0 and "Traceback" not in result.stderr
+    assert "PARTIAL:   only part of the file was read: truncated" in result.stdout
+
+
+def test_unknown_option_is_a_usage_error():
+    result = run_cli("inspect", "--no-such-option", "x")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "no such option" in result.stderr.lower()
+
+
+def test_json_to_a_missing_directory_is_an_input_error(tmp_path):
+    if not ULOG.is_file():
+        pytest.skip("shared px4-ulog test data missing")
+    target = tmp_path / "missing" / "facts.json"
+    assert_one_line_error(run_cli("inspect", str(ULOG), "--json", str(target)),
+                          "output directory does not exist")
