@@ -145,8 +145,14 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False,
         f"format:    {facts['format']}  (time from {facts['time_source']}, "
         f"source unit {facts['time_unit']})",
     ]
+    by_rule: dict[str, list[str]] = {}
     for label, column in metadata.get("csv.time_columns", {}).items():
-        lines.append(f"time col:  {label}: {column}")
+        by_rule.setdefault(column, []).append(label)
+    for column, labels in by_rule.items():
+        who = labels[0] if len(labels) == 1 else (
+            f"{len(labels)} files ({', '.join(labels[:3])}{', ...' if len(labels) > 3 else ''})"
+        )
+        lines.append(f"time col:  {who}: {column}")
     if facts["start_ns"] is not None:
         lines.append(
             f"time span: {_fmt_time(facts['start_ns'])} .. {_fmt_time(facts['end_ns'])} "
