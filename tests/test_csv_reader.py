@@ -81,7 +81,7 @@ def test_rows_without_a_time_are_dropped_and_counted(tmp_path):
         ("time,x\n", "header (2 column(s)) but no data rows"),
         ("foo,bar\n1,2\n", "no time column among 'foo', 'bar'"),
         ("time,x\n1,2,3,4\n5\n", "malformed CSV"),
-        ("time,x\nabc,1\ndef,2\n", "time column 'time' holds no numbers"),
+        ("time,x\nabc,1\ndef,2\n", "time column 'time' holds no numbers or dates"),
     ],
 )
 def test_bad_csv_raises_one_line_input_error(tmp_path, content, message):
@@ -161,6 +161,14 @@ def test_time_is_converted_to_int64_ns_and_the_unit_is_reported(tmp_path, header
     inferred = [w for w in log.source.warnings if "inferred from" in w]
     assert bool(inferred) == ("_" not in header)
     assert log.source.metadata["csv.time_units"]["u.csv"] == log.source.time_unit
+
+
+def test_iso_datetime_time_column_is_epoch_ns(tmp_path):
+    f = write(tmp_path / "d.csv", "timestamp,x\n2024-03-18 14:49:10.000,1\n2024-03-18T14:49:10.250Z,2\n")
+    log = read_csv(f, None)
+    np.testing.assert_array_equal(log.channel("/x").t,
+                                  [1_710_773_350_000_000_000, 1_710_773_350_250_000_000])
+    assert log.source.time_unit == "ns" and any("ISO 8601" in w for w in log.source.warnings)
 
 
 def test_semicolon_and_tab_delimiters_are_detected(tmp_path):

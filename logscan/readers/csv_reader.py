@@ -7,6 +7,7 @@ Rules (documented in the README):
   ``time_s``, ``timestamp_us``, ``time [ms]``, ``stamp(ns)``, ``time_usec``. A suffix states the
   unit; without one it is inferred from the median step and the magnitude (relative time since
   boot or epoch time) and the inference is reported as a warning and in ``source.time_unit``.
+  ISO 8601 date-time text (``2024-03-18 14:49:10.126``) is read as UTC epoch time.
   Every other numeric column becomes a channel ``/<column>`` (a column already starting with
   ``/`` keeps its name). Text columns are skipped and counted; a mostly-numeric column with a few
   non-numbers keeps the numbers and reads the rest as NaN (counted). NaNs stay in the values
@@ -273,12 +274,26 @@ def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
     return numbers.to_numpy(dtype=np.float64, na_value=np.nan), int((present & ~parsed).sum())
 
 
+def _datetime_ns(series: pd.Series) -> pd.Series | None:
+    """Date-time text (``2024-03-18 14:49:10.126``, ISO 8601) as nullable int64 epoch ns."""
+    try:
+        stamps = pd.to_datetime(series, errors="coerce", utc=True, format="ISO8601")
+    except (ValueError, TypeError):
+        return None
+    valid = stamps.notna()
+    if valid.sum() < _MIXED_MIN_NUMERIC_FRACTION * max(1, int(series.notna().sum())):
+        return None
+    ns = stamps.dt.tz_convert(None).astype("datetime64[ns]").astype("int64", errors="ignore")
+    return pd.Series(np.where(valid, ns, 0), index=series.index).astype("Int64").where(valid)
+
+
 def _time_ns(series: pd.Series, unit: str) -> tuple[np.ndarray, np.ndarray]:
     """(int64 ns of the valid rows, bool mask of valid rows) for a time column in ``unit``."""
     factor = NS_PER_UNIT[unit]
     if pd.api.types.is_integer_dtype(series.dtype):
-        raw = series.to_numpy(dtype=np.int64)
-        return raw * factor, np.ones(raw.size, dtype=bool)
+        valid = series.notna().to_numpy().copy()
+        raw = series[valid].to_numpy(dtype=np.int64)
+        return raw * factor, valid
     values, _ = _numeric_column(series)
     if values is None:
         values = np.full(len(series), np.nan)
@@ -321,8 +336,14 @@ def _frame_channels(
         else:
             raw, _ = _numeric_column(frame[time_name])
             if raw is None:
-                raise InputError(f"time column {time_name!r} holds no numbers", path=str(path))
-            unit = infer_time_unit(raw)
+                dates = _datetime_ns(frame[time_name])
+                if dates is None:
+                    raise InputError(f"time column {time_name!r} holds no numbers or dates",
+                                     path=str(path), hint="use seconds, or ISO 8601 date-times")
+                frame = frame.assign(**{time_name: dates})
+                unit = TimeUnit("ns", "epoch", "ISO 8601 date-times (UTC unless an offset is given)")
+            else:
+                unit = infer_time_unit(raw)
             source.warnings.append(
                 f"{label}: time column {time_name!r} read as {unit.unit} inferred from {unit.reason}; "
                 f"name it e.g. '{time_name}_{unit.unit}' to state the unit"
