@@ -15,11 +15,12 @@ reader) are written before the messages, in the order given.
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
 import re
+import struct
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,7 @@ from logscan.artifacts import write_atomic
 from logscan.errors import UsageError
 
 LIBRARY = "logscan"
+MAGIC = b"\x89MCAP0\r\n"
 _ROS2_FIELD = re.compile(r"^[a-z][a-z0-9_]*$")
 _CDR_HEADER = b"\x00\x01\x00\x00"  # CDR, little endian, no options
 
@@ -162,6 +164,66 @@ def _check(topics: dict[str, TopicData], encoding: str) -> None:
                 )
 
 
+class _Out:
+    """Byte sink that tracks offsets and builds MCAP records (opcode, u64 length, body)."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.size = 0
+
+    def add(self, data: bytes) -> int:
+        offset = self.size
+        self.parts.append(data)
+        self.size += len(data)
+        return offset
+
+    def record(self, opcode: int, body: bytes) -> int:
+        return self.add(struct.pack("<BQ", opcode, len(body)) + body)
+
+    def crc(self, start: int = 0) -> int:
+        crc, offset = 0, 0
+        for part in self.parts:
+            if offset + len(part) > start:
+                crc = zlib.crc32(part[max(0, start - offset):], crc)
+            offset += len(part)
+        return crc
+
+
+def _string(text: str) -> bytes:
+    data = text.encode("utf-8")
+    return struct.pack("<I", len(data)) + data
+
+
+def _string_map(items: dict[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in items.items())
+    return struct.pack("<I", len(body)) + body
+
+
+_MESSAGE_HEADER = np.dtype([
+    ("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
+    ("log_time", "<u8"), ("publish_time", "<u8"),
+])
+
+
+def _message_records(channel: np.ndarray, sequence: np.ndarray, log_time: np.ndarray,
+                     datas: list[bytes]) -> tuple[bytes, np.ndarray]:
+    """Message records back to back, and the offset of each within the returned bytes."""
+    sizes = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
+    headers = np.zeros(len(datas), dtype=_MESSAGE_HEADER)
+    headers["opcode"] = 0x05
+    headers["length"] = sizes + (_MESSAGE_HEADER.itemsize - 9)
+    headers["channel"] = channel
+    headers["sequence"] = sequence
+    headers["log_time"] = log_time
+    headers["publish_time"] = log_time
+    raw = headers.tobytes()
+    width = _MESSAGE_HEADER.itemsize
+    pieces = [raw[k * width : (k + 1) * width] for k in range(len(datas))]
+    body = b"".join([piece for pair in zip(pieces, datas) for piece in pair])
+    offsets = np.concatenate([[0], np.cumsum(sizes + width)[:-1]]).astype(np.int64)
+    return body, offsets
+
+
 def mcap_bytes(
     topics: dict[str, TopicData],
     *,
@@ -169,51 +231,127 @@ def mcap_bytes(
     metadata: dict[str, dict[str, str]] | None = None,
     chunk_size: int = 1024 * 1024,
 ) -> bytes:
-    """The MCAP file ``write_mcap`` writes, as bytes (``chunk_size``: uncompressed bytes per chunk)."""
-    from mcap.writer import CompressionType, Writer
+    """The MCAP file ``write_mcap`` writes, as bytes (``chunk_size``: uncompressed bytes per chunk).
 
+    Layout: magic, Header, Metadata records, Chunks (the first one also holds the Schema and
+    Channel records) each followed by its MessageIndex records, DataEnd with the data-section
+    CRC; summary: Schemas, Channels, Statistics, ChunkIndexes, MetadataIndexes, SummaryOffsets;
+    Footer with the summary CRC; magic.
+    """
     _check(topics, encoding)
     try:
-        import lz4.frame  # noqa: F401 - only checks availability
+        import lz4.frame
 
-        compression = CompressionType.LZ4
+        compress, compression = lz4.frame.compress, "lz4"
     except ImportError:
-        compression = CompressionType.NONE
-    buffer = io.BytesIO()
-    writer = Writer(buffer, chunk_size=chunk_size, compression=compression, enable_data_crcs=True)
-    writer.start(profile="ros2" if encoding == "ros2" else "", library=LIBRARY)
-    for name, record in (metadata or {}).items():
-        writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
+        compress, compression = None, ""
 
-    channel_ids: list[int] = []
+    schema_records: list[bytes] = []
+    channel_records: list[bytes] = []
     payloads: list[list[bytes]] = []
     times: list[np.ndarray] = []
-    for topic, data in topics.items():
+    for number, (topic, data) in enumerate(topics.items(), start=1):
         tree = _field_tree(list(data.fields), topic)
         if encoding == "ros2":
-            text = _ros2_msgdef(data.schema_name, tree, topic)
-            schema_id = writer.register_schema(data.schema_name, "ros2msg", text.encode())
-            channel_id = writer.register_channel(topic, "cdr", schema_id)
+            schema_encoding, message_encoding = "ros2msg", "cdr"
+            schema_data = _ros2_msgdef(data.schema_name, tree, topic).encode()
         else:
-            schema = json.dumps(_json_schema(tree, data.schema_name), separators=(",", ":"))
-            schema_id = writer.register_schema(data.schema_name, "jsonschema", schema.encode())
-            channel_id = writer.register_channel(topic, "json", schema_id)
-        channel_ids.append(channel_id)
+            schema_encoding, message_encoding = "jsonschema", "json"
+            schema_data = json.dumps(_json_schema(tree, data.schema_name), separators=(",", ":")).encode()
+        schema_records.append(_record(0x03, struct.pack("<H", number)
+                              + _string(data.schema_name) + _string(schema_encoding)
+                              + struct.pack("<I", len(schema_data)) + schema_data))
+        channel_records.append(_record(0x04, struct.pack("<HH", number, number) + _string(topic)
+                               + _string(message_encoding) + _string_map({})))
         payloads.append(_payloads(data, topic, encoding, tree))
         times.append(np.asarray(data.t_ns, dtype=np.int64))
 
-    if times:
-        all_t = np.concatenate(times)
-        which = np.concatenate([np.full(t.size, k, dtype=np.int64) for k, t in enumerate(times)])
-        row = np.concatenate([np.arange(t.size, dtype=np.int64) for t in times])
-        order = np.argsort(all_t, kind="stable")
-        add = writer.add_message
-        sequence = [0] * len(times)
-        for log_time, k, r in zip(all_t[order].tolist(), which[order].tolist(), row[order].tolist()):
-            add(channel_ids[k], log_time, payloads[k][r], log_time, sequence[k])
-            sequence[k] += 1
-    writer.finish()
-    return buffer.getvalue()
+    out = _Out()
+    out.add(MAGIC)
+    out.record(0x01, _string("ros2" if encoding == "ros2" else "") + _string(LIBRARY))
+    metadata_indexes = []
+    for name, items in (metadata or {}).items():
+        body = _string(name) + _string_map({str(k): str(v) for k, v in items.items()})
+        offset = out.record(0x0C, body)
+        metadata_indexes.append(_record(0x0D, struct.pack("<QQ", offset, 9 + len(body)) + _string(name)))
+
+    # every message in global log_time order (stable: ties keep topic order)
+    n_topics = len(times)
+    all_t = np.concatenate(times) if times else np.empty(0, dtype=np.int64)
+    which = np.concatenate([np.full(t.size, k + 1, dtype=np.int64) for k, t in enumerate(times)]) if times else all_t
+    row = np.concatenate([np.arange(t.size, dtype=np.int64) for t in times]) if times else all_t
+    order = np.argsort(all_t, kind="stable")
+    all_t, which, row = all_t[order], which[order], row[order]
+    datas = [payloads[k - 1][r] for k, r in zip(which.tolist(), row.tolist())]
+    # sequence: the message's number within its channel (= its row, as rows are in time order)
+    sequences = row
+    sizes = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas)) + _MESSAGE_HEADER.itemsize
+    # chunk boundaries: start a new chunk when the running size passes a multiple of chunk_size
+    chunk_of = np.cumsum(sizes) // max(1, chunk_size) if len(datas) else np.empty(0, dtype=np.int64)
+    starts = np.flatnonzero(np.r_[True, np.diff(chunk_of) != 0]) if len(datas) else np.empty(0, dtype=np.int64)
+    bounds = list(zip(starts.tolist(), starts[1:].tolist() + [len(datas)]))
+    if not bounds:
+        bounds = [(0, 0)]
+
+    chunk_indexes: list[bytes] = []
+    for chunk_number, (lo, hi) in enumerate(bounds):
+        prefix = b"".join(schema_records + channel_records) if chunk_number == 0 else b""
+        channel = which[lo:hi]
+        t = all_t[lo:hi]
+        body, offsets = _message_records(channel, sequences[lo:hi], t, datas[lo:hi])
+        records = prefix + body
+        offsets = offsets + len(prefix)
+        payload = compress(records) if compress is not None else records
+        t_start = int(t.min()) if t.size else 0
+        t_end = int(t.max()) if t.size else 0
+        chunk_body = (struct.pack("<QQQI", t_start, t_end, len(records), zlib.crc32(records))
+                      + _string(compression) + struct.pack("<Q", len(payload)) + payload)
+        chunk_offset = out.record(0x06, chunk_body)
+        chunk_length = 9 + len(chunk_body)
+        index_offsets: dict[int, int] = {}
+        index_start = out.size
+        for k in np.unique(channel).tolist():
+            select = channel == k
+            pairs = np.empty((int(np.count_nonzero(select)), 2), dtype="<u8")
+            pairs[:, 0] = t[select]
+            pairs[:, 1] = offsets[select]
+            index_offsets[k] = out.record(0x07, struct.pack("<HI", k, pairs.nbytes) + pairs.tobytes())
+        offsets_map = b"".join(struct.pack("<HQ", k, v) for k, v in index_offsets.items())
+        chunk_indexes.append(_record(0x08, struct.pack("<QQQQ", t_start, t_end, chunk_offset, chunk_length)
+                             + struct.pack("<I", len(offsets_map)) + offsets_map
+                             + struct.pack("<Q", out.size - index_start) + _string(compression)
+                             + struct.pack("<QQ", len(payload), len(records))))
+
+    out.record(0x0F, struct.pack("<I", out.crc()))
+
+    summary_start = out.size
+    counts = np.bincount(which, minlength=n_topics + 1)[1:] if n_topics else []
+    counts_map = b"".join(struct.pack("<HQ", k + 1, int(c)) for k, c in enumerate(counts))
+    statistics = _record(0x0B, struct.pack(
+        "<QHIIIIQQ", len(datas), n_topics, n_topics, 0, len(metadata_indexes), len(chunk_indexes),
+        int(all_t.min()) if all_t.size else 0, int(all_t.max()) if all_t.size else 0,
+    ) + struct.pack("<I", len(counts_map)) + counts_map)
+    offsets_records = []
+    for opcode, group in ((0x03, schema_records), (0x04, channel_records), (0x0B, [statistics]),
+                          (0x08, chunk_indexes), (0x0D, metadata_indexes)):
+        if not group:
+            continue
+        group_start = out.size
+        for record in group:
+            out.add(record)
+        offsets_records.append(_record(0x0E, struct.pack("<BQQ", opcode, group_start, out.size - group_start)))
+    summary_offset_start = out.size
+    for record in offsets_records:
+        out.add(record)
+    footer_head = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
+    out.add(footer_head)
+    out.add(struct.pack("<I", out.crc(summary_start)))
+    out.add(MAGIC)
+    return b"".join(out.parts)
+
+
+def _record(opcode: int, body: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(body)) + body
 
 
 def write_mcap(

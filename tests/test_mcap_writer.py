@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import struct
+import zlib
+
 import numpy as np
 import pytest
-from mcap.reader import make_reader
+from mcap.reader import NonSeekingReader, make_reader
 
 from logscan.errors import UsageError
 from logscan.mcap_writer import TopicData, mcap_bytes, write_mcap
@@ -55,6 +58,13 @@ def test_file_is_in_log_time_order_with_summary_and_crcs(tmp_path, encoding):
     assert times == sorted(times) and len(times) == 550
     assert summary.statistics.message_count == 550 and summary.chunk_indexes
     assert all(ci.compression in ("lz4", "") for ci in summary.chunk_indexes)
+    with open(path, "rb") as fh:  # the streaming reader also checks the data-section CRC
+        streamed = list(NonSeekingReader(fh, validate_crcs=True).iter_messages(log_time_order=False))
+    assert [m.log_time for _, _, m in streamed] == times
+    assert [m.sequence for _, c, m in streamed if c.topic == "/gps"] == list(range(50))
+    data = path.read_bytes()
+    summary_start, _, summary_crc = struct.unpack_from("<QQI", data, len(data) - 8 - 20)
+    assert zlib.crc32(data[summary_start : len(data) - 8 - 4]) == summary_crc
 
 
 @pytest.mark.parametrize("encoding", ["json", "ros2"])

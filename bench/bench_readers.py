@@ -1,0 +1,115 @@
+"""Benchmark of the MCAP reader: logscan's read_mcap against plain mcap iter_decoded_messages.
+
+Generates (in a temporary directory, deleted afterwards) a JSON MCAP and a ROS 2 MCAP of IMU-like
+messages on several topics with ``logscan.mcap_writer``, then times, in one run:
+
+ - logscan: ``read_mcap(path, None)`` -> every numeric field as a numpy channel;
+ - plain mcap: ``make_reader(f, decoder_factories=[...]).iter_decoded_messages()``, touching
+   one field of every decoded message (it builds no arrays, so it does less work than logscan).
+
+Prints messages/s of both and the ratio. Usage:
+
+    python bench/bench_readers.py                      # 1,000,000 JSON + 200,000 ROS 2 messages
+    python bench/bench_readers.py --json 100000 --ros2 20000   # quick run
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from logscan.mcap_writer import TopicData, write_mcap
+from logscan.readers.mcap_reader import decoder_factories, read_mcap
+
+# topic -> (share of the messages, schema name, field names)
+_TOPICS = {
+    "/imu": (0.5, "sensor_msgs/msg/Imu", [
+        "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z",
+        "angular_velocity.x", "angular_velocity.y", "angular_velocity.z",
+        "orientation.x", "orientation.y", "orientation.z", "orientation.w",
+    ]),
+    "/imu2": (0.3, "sensor_msgs/msg/Imu", [
+        "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z",
+        "angular_velocity.x", "angular_velocity.y", "angular_velocity.z",
+    ]),
+    "/baro": (0.1, "logscan_msgs/msg/Baro", ["pressure", "temperature", "altitude"]),
+    "/gps": (0.1, "logscan_msgs/msg/Gps", ["position.x", "position.y", "position.z", "speed"]),
+}
+
+
+def make_topics(n_messages: int, seed: int = 0) -> dict[str, TopicData]:
+    """IMU-like topics totalling ``n_messages`` messages over the same time span."""
+    rng = np.random.default_rng(seed)
+    topics = {}
+    duration_ns = 1_000_000_000_000  # 1000 s
+    for topic, (share, schema, fields) in _TOPICS.items():
+        n = int(round(n_messages * share))
+        t = np.linspace(0, duration_ns, n, endpoint=False).astype(np.int64) + 1_700_000_000_000_000_000
+        topics[topic] = TopicData(schema, t, {name: rng.normal(size=n) for name in fields})
+    return topics
+
+
+def time_logscan(path: Path) -> tuple[float, int]:
+    start = time.perf_counter()
+    log = read_mcap(path, None)
+    elapsed = time.perf_counter() - start
+    messages = sum(info.message_count for info in log.source.topics.values())
+    assert not log.source.partial and not log.source.skipped
+    return elapsed, messages
+
+
+def _touch(decoded) -> object:
+    if isinstance(decoded, dict):
+        return next(iter(decoded.values()))
+    return getattr(decoded, decoded.__slots__[0])
+
+
+def time_plain_mcap(path: Path) -> tuple[float, int]:
+    from mcap.reader import make_reader
+
+    start = time.perf_counter()
+    count = 0
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=decoder_factories())
+        for _schema, _channel, _message, decoded in reader.iter_decoded_messages():
+            _touch(decoded)
+            count += 1
+    return time.perf_counter() - start, count
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", type=int, default=1_000_000, help="messages in the JSON file")
+    parser.add_argument("--ros2", type=int, default=200_000, help="messages in the ROS 2 file")
+    args = parser.parse_args()
+    print(f"python {platform.python_version()}, {os.cpu_count()} cpu(s), {platform.machine()}")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="logscan-bench-") as tmp:
+        for encoding, n in (("json", args.json), ("ros2", args.ros2)):
+            path = Path(tmp) / f"bench_{encoding}.mcap"
+            start = time.perf_counter()
+            write_mcap(path, make_topics(n), encoding=encoding)
+            written = time.perf_counter() - start
+            size_mb = path.stat().st_size / 1e6
+            print(f"{encoding}: wrote {n} messages ({size_mb:.1f} MB) in {written:.1f} s")
+            read_mcap(path, {"/baro"})  # warm-up: numba kernels and imports, off the clock
+            ours, ours_n = time_logscan(path)
+            plain, plain_n = time_plain_mcap(path)
+            assert ours_n == plain_n == n, (ours_n, plain_n, n)
+            rows.append((encoding, n, ours, plain))
+    print()
+    print("| file | messages | logscan read_mcap msg/s | mcap iter_decoded_messages msg/s | ratio |")
+    print("|---|---:|---:|---:|---:|")
+    for encoding, n, ours, plain in rows:
+        print(f"| {encoding} | {n:,} | {n / ours:,.0f} ({ours:.1f} s) | {n / plain:,.0f} ({plain:.1f} s) "
+              f"| {plain / ours:.2f}x |")
+
+
+if __name__ == "__main__":
+    main()
