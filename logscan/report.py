@@ -238,6 +238,28 @@ def _is_piecewise_flat(y: np.ndarray, limit: int = 64) -> bool:
     return changes <= limit
 
 
+def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
+    """The samples where ``y`` is defined, with one NaN where they are far apart in time.
+
+    Statistics are NaN on steps where they are not evaluated (a 10 Hz group's NIS on a 100 Hz
+    grid is NaN 9 steps in 10); drawn as is, such a line would be all gaps. So only defined
+    samples are drawn, joined, except across a gap longer than 3x their typical spacing, where a
+    NaN still breaks the line. ``keep`` (grid indices) is mapped onto the returned samples.
+    """
+    defined = ~np.isnan(y)
+    if defined.all():
+        return t, y, keep
+    idx = np.flatnonzero(defined)
+    tc, yc = t[idx], y[idx]
+    if idx.size >= 2:
+        spacing = np.diff(tc)
+        breaks = np.flatnonzero(spacing > 3.0 * np.median(spacing)) + 1
+        tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
+        yc = np.insert(yc, breaks, np.nan)
+    kept = np.clip(np.searchsorted(tc, t[keep]), 0, max(tc.size - 1, 0)) if tc.size else keep[:0]
+    return tc, yc, np.unique(kept)
+
+
 def _display_values(y: np.ndarray) -> np.ndarray:
     """float32 values for the browser: inf -> NaN (a gap), finite values clipped to float32."""
     out = np.asarray(y, dtype=np.float64).copy()
@@ -293,12 +315,13 @@ def _figure_json(fig: _Figure, t: np.ndarray, points: dict[int, int]) -> str:
         })  # fmt: skip
     for trace in fig.traces:
         max_points = points.get(id(trace), DEFAULT_MAX_POINTS)
-        idx = decimate_indices(trace.y, max_points, keep=trace.keep, simplify_flat=True)
+        x, y, keep = _defined_samples(t, trace.y, trace.keep)
+        idx = decimate_indices(y, max_points, keep=keep, simplify_flat=True)
         data.append({
             "type": "scatter",
             "name": trace.name,
-            "x": t[idx].astype(np.float32),
-            "y": _display_values(trace.y[idx]),
+            "x": x[idx].astype(np.float32),
+            "y": _display_values(y[idx]),
             "mode": "lines",
             "hovertemplate": "%{y:.6g} at %{x:.3f} s",
             **trace.style,
@@ -439,27 +462,34 @@ def _detector_figures(
                 title=f"{result.detector}: {name}", y_title=name, traces=traces,
                 spans={"alarm": _merge_spans(spans, min_width, min_gap), "ground truth": truth_spans},
             ))  # fmt: skip
+    # extras: an (N, k) array is one figure (e.g. the coding vector, one line per state); (N,)
+    # arrays named "<prefix>.<kind>" share one figure per kind (e.g. "nis.accel.per_dof")
+    extra_groups: dict[str, list[tuple[str, np.ndarray]]] = {}
     for key, values in (getattr(result, "extras", None) or {}).items():
         arr = np.asarray(values, dtype=np.float64)
-        if arr.ndim == 1:
-            arr = arr[:, None]
-        if arr.ndim != 2 or arr.shape[0] != n:
+        if arr.ndim not in (1, 2) or arr.shape[0] != n:
             problems.append(f"extra series {key!r} has shape {np.shape(values)}, the grid has {n} steps: not drawn")
             continue
-        labels = _labels_for(key, arr.shape[1], result, model)
+        if arr.ndim == 2:
+            labels = _labels_for(key, arr.shape[1], result, model)
+            extra_groups.setdefault(key, []).extend((labels[j], arr[:, j]) for j in range(arr.shape[1]))
+        else:
+            prefix, _, kind = key.rpartition(".")
+            extra_groups.setdefault(kind if prefix else key, []).append((prefix or key, arr))
+    for kind, columns in extra_groups.items():
         traces = [
             _Trace(
-                labels[j], arr[:, j], np.zeros(0, np.int64), 0.25,
+                label, column, np.zeros(0, np.int64), 0.25,
                 {"line": {"color": _LINE_COLOURS[j % len(_LINE_COLOURS)], "width": 1}},
-                varying=not _is_piecewise_flat(arr[:, j]),
+                varying=not _is_piecewise_flat(column),
             )
-            for j in range(arr.shape[1])
-        ]
+            for j, (label, column) in enumerate(columns)
+        ]  # fmt: skip
         figures.append(_Figure(
-            title=f"{result.detector}: {key}", y_title=key, traces=traces,
+            title=f"{result.detector}: {kind}", y_title=kind, traces=traces,
             spans={"alarm": _merge_spans(alarm_spans(list(series)), min_width, min_gap),
                    "ground truth": truth_spans},
-            log_y=_wants_log_axis(arr),
+            log_y=_wants_log_axis(np.concatenate([c for _, c in columns])),
         ))  # fmt: skip
     return figures
 
@@ -572,6 +602,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
             "detector": str(getattr(result, "detector", "detector")),
             "n_alarms": len(getattr(result, "alarms", [])),
             "warnings": [str(w) for w in getattr(result, "warnings", [])] + problems,
+            "coverage": str((getattr(result, "info", None) or {}).get("coverage", "")),
             "info": _info_rows(getattr(result, "info", None) or {}),
             "figures": [],
         })  # fmt: skip

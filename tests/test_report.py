@@ -26,7 +26,8 @@ def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, se
 
     e_x: noise with a spike burst at 2000.5 s (matches the truth event) and at 100 s (false alarm)
     and a NaN gap; e_v: a slow walk inside a constant band; a 12-column coding vector; NIS: three
-    groups (one named HOSTILE) and overall, the accel group exceeding at 2000.2 s.
+    groups (one named HOSTILE, one at 10 Hz: NaN between updates) and overall, with per-dof
+    extras; the accel group exceeds at 2000.2 s.
     """
     rng = np.random.default_rng(seed)
     t = np.arange(n) * 0.01
@@ -45,11 +46,14 @@ def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, se
     encoded.info["coverage"] = "catches bit flips and actuator faults; not accelerometer biases"
 
     nis = DetectorResult("nis")
-    for name in ("accel", group, "overall"):
-        stat = rng.chisquare(30, n)
+    for name in ("accel", group, "gps", "all"):
+        updated = np.ones(n, dtype=bool) if name != "gps" else (np.arange(n) % 10 == 0)  # gps: 10 Hz
+        stat = np.where(updated, rng.chisquare(30, n), np.nan)  # like the NIS detector: NaN between updates
         if name == "accel":
             stat[200_020:200_040] = 500.0  # 2000.20 s .. 2000.39 s
-        nis.add_statistic(t, f"nis.{name}", stat, upper=np.full(n, 90.0), n_persist=3)
+        upper = np.where(updated, 90.0, np.nan)
+        nis.add_statistic(t, f"nis.{name}", stat, upper=upper, valid=updated, n_persist=3)
+        nis.extras[f"nis.{name}.per_dof"] = stat / 30.0
 
     facts = {
         "file": f"/logs/{HOSTILE}.mcap",
@@ -250,9 +254,12 @@ def test_every_trace_is_decimated_and_keeps_alarm_edges_and_gaps(hour_report, em
     assert total < 40_000  # the whole page's point budget, not 360,000 per series
     e_x = next(tr for fig in figs for tr in fig["figure"]["data"] if tr.get("name") == "e_x")
     x, y = array(e_x["x"]), array(e_x["y"])
-    for alarm in (a for a in flat_alarms(hour_report.results) if a.signal == "e_x"):
-        for edge in (alarm.start, alarm.end):
-            assert np.isclose(x, edge, atol=1e-3).any(), f"alarm edge {edge} missing"
+    full = hour_report.results[0].series["e_x"]
+    edges = [edge for a in flat_alarms(hour_report.results) if a.signal == "e_x" for edge in (a.start, a.end)]
+    drawable = [edge for edge in edges if np.isfinite(full[round(edge * 100)])]  # not inside the gap
+    assert len(drawable) == 4
+    for edge in drawable:
+        assert np.isclose(x, edge, atol=1e-3).any(), f"alarm edge {edge} missing"
     assert np.isnan(y[(x >= 499.0) & (x <= 501.0)]).any()  # the NaN gap at 500 s still breaks the line
     assert np.nanmax(y) == 40.0 and np.nanmin(y) == -35.0  # spikes kept exactly
 
@@ -260,7 +267,7 @@ def test_every_trace_is_decimated_and_keeps_alarm_edges_and_gaps(hour_report, em
 def test_figures_per_detector_view(embedded):
     titles = [fig["figure"]["layout"]["title"]["text"] for fig in figures(embedded)]
     assert titles[:3] == ["encoded_ekf: e_x", "encoded_ekf: e_v", "encoded_ekf: coding_vector"]
-    assert titles[3] == "nis: statistic / threshold"
+    assert titles[3:] == ["nis: statistic / threshold", "nis: per_dof"]
     by_title = {fig["figure"]["layout"]["title"]["text"]: fig["figure"] for fig in figures(embedded)}
     cv_names = [tr["name"] for tr in by_title["encoded_ekf: coding_vector"]["data"] if tr["name"].startswith("x")]
     assert cv_names == [f"x{i}" for i in range(12)]  # labelled with the model's states
@@ -268,6 +275,18 @@ def test_figures_per_detector_view(embedded):
     assert spans == {"alarm", "ground truth"}
     ratio = next(tr for tr in by_title["nis: statistic / threshold"]["data"] if tr["name"] == "nis.accel")
     assert np.nanmax(array(ratio["y"])) == pytest.approx(500.0 / 90.0, rel=1e-6)
+    per_dof = [tr["name"] for tr in by_title["nis: per_dof"]["data"] if tr.get("fill") != "toself"]
+    assert per_dof == ["nis.accel", f"nis.{HOSTILE}", "nis.gps", "nis.all"]
+
+
+def test_a_sparse_statistic_is_drawn_as_a_line_not_as_gaps(embedded):
+    """A 10 Hz group's statistic is NaN 9 steps in 10 on the grid: draw its defined samples joined."""
+    ratio = next(
+        tr for fig in figures(embedded) for tr in fig["figure"]["data"]
+        if fig["figure"]["layout"]["title"]["text"] == "nis: statistic / threshold" and tr["name"] == "nis.gps"
+    )  # fmt: skip
+    y = array(ratio["y"])
+    assert y.size > 1000 and np.isfinite(y).all()
 
 
 def test_header_facts_profile_model_and_verdict(embedded):
@@ -278,6 +297,7 @@ def test_header_facts_profile_model_and_verdict(embedded):
     assert '<details id="profile">' in embedded and 'model = "quadcopter"' in embedded.replace("&#34;", '"')
     assert 'class="verdict alarm"' in embedded and "Verdict: " in embedded
     assert 'content="logscan 0.1.0"' in embedded
+    assert "<strong>What it can and cannot see:</strong> catches bit flips" in embedded
 
 
 def test_partial_read_and_clean_run_show_in_the_verdict():
