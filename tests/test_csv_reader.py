@@ -182,10 +182,16 @@ def test_wanted_channels_limit_what_is_kept(tmp_path):
     assert set(read_csv(f, {"/b"}).channels) == {"/b"}
 
 
-def test_truth_sidecar_is_read(tmp_path):
+def test_truth_and_profile_sidecars_are_read(tmp_path):
     f = write(tmp_path / "flight.csv", "time,a\n0,1\n1,2\n")
     write(tmp_path / "flight.truth.json", '{"events": [{"start": 1, "end": 2, "kind": "bias"}]}')
     assert read_csv(f, None).truth["events"][0]["kind"] == "bias"
+    assert read_csv(f, None).profile_text is None
+    write(tmp_path / "flight.profile.toml", '[vehicle]\nmodel = "quadcopter"\n')
+    assert 'model = "quadcopter"' in read_csv(f, None).profile_text
+    write(tmp_path / "flight.truth.json", "{broken")
+    with pytest.raises(InputError, match="not valid JSON"):
+        read_csv(f, None)
 
 
 def test_million_row_csv_reads_in_a_few_seconds(tmp_path):

@@ -21,6 +21,8 @@ Rules (documented in the README):
   directory's name, the stem of a ``.ulg`` beside the CSVs, or the longest ``_``-separated prefix
   all such files share. Any other ``.csv`` is read as a wide file with topic = its stem and
   channels ``/<stem>/<column>``.
+* Sidecars beside the log (``run.csv`` or directory ``run/``): ``run.truth.json`` (ground truth)
+  and ``run.profile.toml`` (the profile, as `logscan simulate` writes them).
 """
 
 from __future__ import annotations
@@ -126,7 +128,8 @@ def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     source = SourceInfo(path=str(path), format="csv", time_source="csv column")
     frame = _load_frame(Path(path))
     channels = _frame_channels(frame, Path(path), source, wanted, topic=None)
-    return Log(channels=channels, source=source, truth=_read_truth(Path(path)))
+    return Log(channels=channels, source=source, truth=_read_truth(Path(path)),
+               profile_text=_read_profile(Path(path)))
 
 
 def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
@@ -153,7 +156,8 @@ def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         )
     units = sorted({t.schema for t in source.topics.values()})
     source.time_unit = "us" if units == ["ulog2csv"] else _dir_time_unit(source)
-    return Log(channels=channels, source=source, truth=_read_truth(directory))
+    return Log(channels=channels, source=source, truth=_read_truth(directory),
+               profile_text=_read_profile(directory))
 
 
 def _dir_time_unit(source: SourceInfo) -> str:
@@ -407,16 +411,32 @@ def _frame_channels(
     return channels
 
 
+def _sidecar(path: Path, suffix: str) -> Path:
+    """``run.csv`` -> ``run<suffix>``; a directory ``logs/run/`` -> ``logs/run<suffix>``."""
+    return path.with_name(path.name + suffix) if path.is_dir() else path.with_suffix(suffix)
+
+
 def _read_truth(path: Path) -> dict | None:
     """Ground truth from the ``<log>.truth.json`` sidecar, when present."""
     import json
 
-    sidecar = path.with_name(path.name + ".truth.json") if path.is_dir() else path.with_suffix(
-        ".truth.json"
-    )
+    sidecar = _sidecar(path, ".truth.json")
     if not sidecar.is_file():
         return None
     try:
         return json.loads(sidecar.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise InputError(f"ground-truth sidecar is not valid JSON: {exc}", path=str(sidecar)) from None
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"ground-truth sidecar is not valid JSON: {first}",
+                         path=str(sidecar)) from None
+
+
+def _read_profile(path: Path) -> str | None:
+    """Profile text from the ``<log>.profile.toml`` sidecar (written by `logscan simulate`)."""
+    sidecar = _sidecar(path, ".profile.toml")
+    if not sidecar.is_file():
+        return None
+    try:
+        return sidecar.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"profile sidecar cannot be read: {exc}", path=str(sidecar)) from None
