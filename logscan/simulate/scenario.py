@@ -27,18 +27,19 @@ SIMULATED_MODELS = tuple(DEFAULT_RATES)
 DCM_MODES = (0.4, 0.7, 1.0, 1.3, 1.6, 1.9)  # m/s, the A-TFM thesis's trained modes
 DCM_HOLD_S = 20.0
 
-# model -> group -> (topic, field per output); groups not listed: ("/<group>", output names)
+# model -> group -> (topic, field per output); groups not listed: ("/<group>", output names).
+# Groups sharing a topic (same rate) are logged as one message, like an IMU's.
 _SENSOR_TOPICS = {
     "quadcopter": {
-        "accel": ("/imu/accel", ("x", "y", "z")),
-        "gyro": ("/imu/gyro", ("x", "y", "z")),
-        "position": ("/gps/position", ("x", "y", "z")),
+        "accel": ("/imu", ("accel.x", "accel.y", "accel.z")),
+        "gyro": ("/imu", ("gyro.x", "gyro.y", "gyro.z")),
+        "position": ("/gps", ("position.x", "position.y", "position.z")),
         "attitude": ("/attitude", ("roll", "pitch", "yaw")),
     },
     "steer_by_wire": {
-        "steering_angle": ("/steering/angle", ("delta_f",)),
-        "yaw_rate": ("/imu/yaw_rate", ("gamma",)),
-        "lateral_accel": ("/imu/lateral_accel", ("a_y",)),
+        "steering_angle": ("/steering", ("angle",)),
+        "yaw_rate": ("/imu", ("yaw_rate",)),
+        "lateral_accel": ("/imu", ("lateral_accel",)),
     },
     "dc_motor": {
         "encoder": ("/enc", ("left.v", "right.v")),
@@ -51,7 +52,7 @@ _SENSOR_RATES = {
     "quadcopter": {"accel": None, "gyro": None, "position": 10.0, "attitude": 50.0},
     "dc_motor": {"gps_speed": 10.0},
 }
-_IMU_DEFAULT = {"quadcopter": "accel.x", "steer_by_wire": "yaw_rate.gamma", "dc_motor": "encoder.v_left"}
+_IMU_DEFAULT = {"quadcopter": "accel.x", "steer_by_wire": "yaw_rate", "dc_motor": "encoder.v_left"}
 
 
 @dataclass
@@ -76,8 +77,11 @@ class SensorGroup:
     outputs: tuple[str, ...] = ()
 
     def targets(self) -> list[str]:
-        """Fault target names of the group's channels: "<group>.<last part of the field>"
-        (accel.x), or "<group>.<model output>" (encoder.v_left) when those would repeat."""
+        """Fault target names of the group's channels: the group (yaw_rate) when it has one,
+        "<group>.<last part of the field>" (accel.x), or "<group>.<model output>"
+        (encoder.v_left) when those would repeat."""
+        if len(self.fields) == 1:
+            return [self.name]
         short = [f"{self.name}.{f.split('.')[-1]}" for f in self.fields]
         if len(set(short)) == len(short):
             return short
@@ -188,7 +192,7 @@ def _steer_by_wire(model, dt, t, groups, aggressive, rng) -> Scenario:
         actuators=["steering_motor"], M=np.eye(1), a_lo=np.array([-limit]), a_hi=np.array([limit]),
         ctrl_id=ctl.SBW_CTRL, ctrl_params=cp, ctrl_state=np.zeros(2), reference=ref,
         x0=np.zeros(4), P0=np.diag(np.square(0.1 * model.state_scale())),
-        imu_default=groups[0].targets()[0],
+        imu_default=_IMU_DEFAULT["steer_by_wire"],
         input_channels=[input_channel(n) for n in model.input_names],
         mode_channel="/handwheel/reference", mode_values=ref[:, 0],
         onboard_rate_hz=min(50.0, 1.0 / dt),

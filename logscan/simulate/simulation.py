@@ -86,11 +86,16 @@ class Simulation:
         out = [Series("/cmd", "logscan/Command", every, {
             ch.removeprefix("/cmd/"): self.u_cmd[:, i] for i, ch in enumerate(sc.input_channels)
         })]
+        sensors: dict[str, Series] = {}
         for g, sl in zip(sc.groups, self.group_slices().values()):
             steps = every[:: g.ratio]
-            out.append(Series(g.topic, f"logscan/{g.name.title()}", steps, {
-                f: self.z[steps, sl.start + j] for j, f in enumerate(g.fields)
-            }))
+            fields = {f: self.z[steps, sl.start + j] for j, f in enumerate(g.fields)}
+            if g.topic in sensors:  # groups sharing a topic share its rate (see scenario)
+                sensors[g.topic].fields.update(fields)
+            else:
+                schema = "logscan/" + g.topic.strip("/").replace("/", "_").title()
+                sensors[g.topic] = Series(g.topic, schema, steps, fields)
+        out.extend(sensors.values())
         states = sc.model.state_names
         ratio = max(1, int(round(1.0 / (sc.dt * sc.onboard_rate_hz))))
         steps = every[::ratio]

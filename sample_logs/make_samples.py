@@ -1,0 +1,97 @@
+"""Regenerate the sample logs of this folder (and its README table), byte for byte.
+
+    python sample_logs/make_samples.py                 # all logs into sample_logs/
+    python sample_logs/make_samples.py --out /tmp/s quad_imu_bias.mcap   # some, elsewhere
+
+Every log is `logscan simulate` output: the same model, faults, seed and duration give the same
+bytes on any machine with the same numpy/numba versions (tests/test_sample_logs.py checks one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class Sample:
+    name: str  # file name in sample_logs/
+    model: str
+    faults: tuple[str, ...]  # `--fault` texts (KIND:TARGET:START:END:MAGNITUDE)
+    seed: int
+    duration: float
+    fmt: str = "mcap-json"
+    about: str = ""
+
+
+SAMPLES = (
+    Sample("quad_healthy.mcap", "quadcopter", (), 1, 60.0,
+           about="hover, then a figure-eight; no fault"),
+    Sample("quad_imu_bias.mcap", "quadcopter", ("imu-bias:accel.x:30:40:1.0",), 2, 60.0,
+           about="+1.0 m/s^2 step on accelerometer x (Kalman-gain-norm paper)"),
+    Sample("quad_imu_bitflip.mcap", "quadcopter", ("imu-bitflip:accel.x:30:31.2:1.0",), 3, 60.0,
+           about="1.2 s burst of float32 high-order bit flips on accelerometer x (encoded-EKF paper)"),
+    Sample("quad_motor_offset.mcap", "quadcopter", ("motor-offset:motor1:30:40:-0.10",), 4, 60.0,
+           about="-10 % thrust on motor 1"),
+    Sample("quad_cov_corruption.mcap", "quadcopter", ("cov-corruption:all:30:31:100",), 5, 60.0,
+           about="logged on-board variances x100 for 1 s"),
+    Sample("sbw_healthy.mcap", "steer_by_wire", (), 6, 60.0,
+           about="lane changes at 10 m/s; no fault"),
+    Sample("sbw_yaw_rate_bitflip.mcap", "steer_by_wire", ("bitflip:yaw_rate:30:31.2:1.0",), 7, 60.0,
+           about="1.2 s burst of bit flips on the yaw-rate sensor"),
+    Sample("jackal_healthy.mcap", "dc_motor", (), 8, 180.0,
+           about="PI speed control through the modes 0.4 .. 1.9 m/s (20 s each); no fault"),
+    Sample("quad_healthy.csv", "quadcopter", (), 9, 60.0, fmt="csv",
+           about="wide CSV + quad_healthy.truth.json + quad_healthy.profile.toml"),
+)
+
+
+def generate(sample: Sample, out_dir: Path) -> list[Path]:
+    """Write one sample log (and its sidecars) into ``out_dir``."""
+    from logscan.simulate import parse_fault, simulate, write_simulation
+
+    sim = simulate(sample.model, [parse_fault(f) for f in sample.faults],
+                   duration=sample.duration, seed=sample.seed)
+    return write_simulation(sim, out_dir / sample.name, sample.fmt)
+
+
+def readme_table() -> str:
+    """The README's table of the sample logs and their faults (markdown)."""
+    lines = [
+        "| log | model | duration | seed | faults (kind, target, start-end s, magnitude) | what |",
+        "|---|---|---|---|---|---|",
+    ]
+    from logscan.simulate import parse_fault
+    from logscan.simulate.faults import ALIASES
+
+    for s in SAMPLES:
+        faults = "; ".join(
+            f"{ALIASES.get(p.kind, (p.kind,))[0]} {p.target} {p.start:g}-{p.end:g} {p.magnitude:g}"
+            for p in (parse_fault(f) for f in s.faults)
+        ) or "none"
+        lines.append(f"| `{s.name}` | {s.model} | {s.duration:g} s | {s.seed} | {faults} | {s.about} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="sample file names (default: all)")
+    parser.add_argument("--out", type=Path, default=HERE, help="output folder (default: sample_logs/)")
+    args = parser.parse_args(argv)
+    known = {s.name: s for s in SAMPLES}
+    unknown = [n for n in args.names if n not in known]
+    if unknown:
+        print(f"unknown sample(s): {', '.join(unknown)}; known: {', '.join(known)}", file=sys.stderr)
+        return 2
+    for sample in [known[n] for n in args.names] or list(SAMPLES):
+        for path in generate(sample, args.out):
+            print(f"{path}  {path.stat().st_size / 1e6:.2f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
