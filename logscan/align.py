@@ -168,38 +168,37 @@ def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: in
 
 
 @njit(cache=True)
-def _gap_kernel(edges, limit_ns):  # pragma: no cover - compiled
-    # stretches (edges[i], edges[i+1]) longer than the limit; two passes, no temporaries
+def _gap_kernel(t_ns, g0, g1, limit_ns, starts, ends):  # pragma: no cover - compiled
+    # Stretches without a sample inside [g0, g1] longer than the limit; edges: the last sample
+    # before g0 (else g0), every sample in [g0, g1], then g1. Writes up to starts.size of them
+    # (pass empty arrays to only count) and returns how many there are.
+    i0 = np.searchsorted(t_ns, g0)  # first sample >= g0
+    i1 = np.searchsorted(t_ns, g1, side="right")  # one past the last sample <= g1
+    prev = t_ns[i0 - 1] if i0 > 0 else g0
     count = 0
-    for i in range(edges.size - 1):
-        if edges[i + 1] - edges[i] > limit_ns:
+    for i in range(i0, i1 + 1):
+        cur = t_ns[i] if i < i1 else g1
+        if cur - prev > limit_ns:
+            if count < starts.size:
+                starts[count] = prev
+                ends[count] = cur
             count += 1
-    starts = np.empty(count, dtype=np.int64)
-    ends = np.empty(count, dtype=np.int64)
-    j = 0
-    for i in range(edges.size - 1):
-        if edges[i + 1] - edges[i] > limit_ns:
-            starts[j] = edges[i]
-            ends[j] = edges[i + 1]
-            j += 1
-    return starts, ends
+        prev = cur
+    return count
 
 
 def _gaps(t_ns: np.ndarray, limit_ns: int, grid_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(start_ns, end_ns) of every stretch of the grid span without a sample for > limit_ns."""
-    g0, g1 = int(grid_ns[0]), int(grid_ns[-1])
-    i0 = int(np.searchsorted(t_ns, g0, side="left"))
-    i1 = int(np.searchsorted(t_ns, g1, side="right"))
-    inside = t_ns[i0:i1]
-    before = t_ns[:i0]
-    # a stretch starts at the last sample before the span when there is one, else at the span start
-    edges = np.empty(inside.size + 2, dtype=np.int64)
-    edges[0] = before[-1] if before.size else g0
-    edges[1:-1] = inside
-    edges[-1] = g1
-    # the edge stretches (start of span -> first sample, last sample -> end of span) count only
-    # when they exceed the limit, like any other
-    return _gap_kernel(edges, np.int64(limit_ns))
+    """(start_ns, end_ns) of every stretch of the grid span without a sample for > limit_ns.
+
+    A stretch starts at the last sample before the span when there is one, else at the span
+    start, and the one after the last sample ends at the span end; each counts only when it
+    exceeds the limit.
+    """
+    args = (t_ns, np.int64(grid_ns[0]), np.int64(grid_ns[-1]), np.int64(limit_ns))
+    count = _gap_kernel(*args, np.empty(0, np.int64), np.empty(0, np.int64))
+    starts, ends = np.empty(count, np.int64), np.empty(count, np.int64)
+    _gap_kernel(*args, starts, ends)
+    return starts, ends
 
 
 class _Aligner:
@@ -334,7 +333,7 @@ def align(log, profile) -> AlignedRun:
     t = (int(grid_ns[0]) - start_ns) / _NS + np.arange(n) * dt
 
     u = np.empty((n, len(input_channels)))
-    scratch = np.empty(n, dtype=bool)
+    scratch = np.empty(n, dtype=bool)  # fresh masks nobody reads
     for j, ch in enumerate(input_channels):
         aligner.hold(ch, grid_ns, profile.inputs.stale_s, z=u[:, j], fresh=scratch)
     u_fresh = np.ones(n, dtype=bool)
@@ -354,7 +353,7 @@ def align(log, profile) -> AlignedRun:
     mode_channel = None
     if profile.mode is not None:
         mode_channel = profile.mode.channel
-        mode, _ = aligner.hold(mode_channel, grid_ns, profile.mode.stale_s)
+        mode, _ = aligner.hold(mode_channel, grid_ns, profile.mode.stale_s, fresh=scratch)
 
     onboard_state = onboard_variance = None
     state_chans: list = []
@@ -373,7 +372,10 @@ def align(log, profile) -> AlignedRun:
                 )
             arr = np.empty((n, len(chans)))
             for j, ch in enumerate(chans):
-                arr[:, j], _ = aligner.hold(ch, grid_ns, profile.onboard.stale_s)
+                if ch is None:
+                    arr[:, j] = np.nan
+                else:
+                    aligner.hold(ch, grid_ns, profile.onboard.stale_s, z=arr[:, j], fresh=scratch)
             if which == "state":
                 onboard_state, state_chans = arr, chans
             else:

@@ -299,3 +299,28 @@ def test_align_gives_the_latest_finite_sample_within_stale_s(samples, stale_ms):
         before = [(tm, val) for tm, val in kept if tm <= g]
         expected = before[-1][1] if before and g - before[-1][0] <= stale_ms else np.nan
         np.testing.assert_equal(r.groups["speed"].z[k, 0], expected)
+
+
+def test_late_start_and_early_end_are_gaps_of_the_span():
+    t = np.arange(400, 601, 100)
+    r = run({"/force": force_100hz(), "/speed": (t, t)}, SPEED)
+    assert r.gaps == [(0.0, pytest.approx(0.4), "/speed"), (pytest.approx(0.6), 1.0, "/speed")]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    times=st.lists(st.integers(0, 2000), min_size=0, max_size=30, unique=True),
+    g0=st.integers(0, 1000),
+    span=st.integers(0, 1000),
+    limit=st.integers(0, 300),
+)
+def test_gaps_are_the_sample_free_stretches_longer_than_the_limit(times, g0, span, limit):
+    from logscan.align import _gaps
+
+    t_ns = np.array(sorted(times), dtype=np.int64)
+    grid = np.array([g0, g0 + span], dtype=np.int64)
+    starts, ends = _gaps(t_ns, limit, grid)
+    before = [x for x in t_ns if x < g0]
+    edges = [before[-1] if before else g0] + [x for x in t_ns if g0 <= x <= g0 + span] + [g0 + span]
+    expected = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b - a > limit]
+    assert list(zip(starts.tolist(), ends.tolist())) == expected
