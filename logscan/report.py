@@ -354,19 +354,23 @@ def _escape_json(text: str) -> str:
     )
 
 
-def _bands(result: Any) -> dict[str, tuple[np.ndarray | None, np.ndarray | None]]:
-    """statistic -> (upper, lower) from ``thresholds`` (Band objects, dicts or "<stat>.upper")."""
-    out: dict[str, list] = {}
-    for key, value in (getattr(result, "thresholds", None) or {}).items():
-        if hasattr(value, "upper") or isinstance(value, Mapping):
-            get = value.get if isinstance(value, Mapping) else lambda k, v=value: getattr(v, k, None)
-            out[key] = [get("upper"), get("lower")]
-        elif key.endswith(".upper") or key.endswith(".lower"):
-            stat, side = key.rsplit(".", 1)
-            out.setdefault(stat, [None, None])[0 if side == "upper" else 1] = value
-        else:
-            out.setdefault(key, [None, None])[0] = value
-    return {k: (v[0], v[1]) for k, v in out.items()}
+def _bands(result: Any, n: int, problems: list[str]) -> dict[str, tuple[np.ndarray | None, np.ndarray | None]]:
+    """statistic -> (upper, lower) (N,) arrays from ``result.thresholds`` (name -> Band); a side
+    that is absent, all non-finite or off the grid is None (the latter reported in ``problems``)."""
+    out = {}
+    for name, band in (getattr(result, "thresholds", None) or {}).items():
+        sides = []
+        for side in ("upper", "lower"):
+            value = getattr(band, side, None)
+            arr = None if value is None else np.asarray(value, dtype=np.float64)
+            if arr is not None and arr.ndim == 0:
+                arr = np.full(n, float(arr))
+            if arr is not None and arr.shape != (n,):
+                problems.append(f"{side} threshold of {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn")
+                arr = None
+            sides.append(arr if arr is not None and np.isfinite(arr).any() else None)
+        out[name] = (sides[0], sides[1])
+    return out
 
 
 def _labels_for(key: str, width: int, result: Any, model: Mapping) -> list[str]:
@@ -387,7 +391,14 @@ def _wants_log_axis(values: np.ndarray) -> bool:
 def _detector_figures(
     result: Any, t: np.ndarray, truth_spans: list, model: Mapping, problems: list[str]
 ) -> list[_Figure]:
-    """The figures of one detector section (see the module docstring of the template)."""
+    """The figures of one detector section.
+
+    Statistics with only positive upper thresholds (chi-square tests such as NIS, per group and
+    overall) share one "statistic / threshold" figure; otherwise each statistic gets its own
+    figure with its threshold band (e.g. e_x and e_v of the encoded checks). Extras follow
+    (:func:`_extra_figures`). Alarm spans of the statistics drawn and ground-truth spans are
+    shaded on every figure.
+    """
     n = t.size
     dt = float(np.median(np.diff(t))) if n > 1 else 0.0
     span_len = float(t[-1] - t[0]) if n > 1 else 0.0
@@ -400,71 +411,58 @@ def _detector_figures(
             problems.append(f"statistic {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn")
             continue
         series[name] = arr
-    bands = _bands(result)
+    bands = _bands(result, n, problems)
+    no_band = (None, None)
 
     def alarm_spans(names: Sequence[str]) -> list:
-        chosen = [a for a in alarms if getattr(a, "signal", "") in names] or (
-            alarms if not any(getattr(a, "signal", "") in series for a in alarms) else []
-        )
+        """Spans of the alarms on these statistics (all alarms if none names a drawn statistic)."""
+        named = [a for a in alarms if getattr(a, "signal", "") in series]
+        chosen = [a for a in named if a.signal in names] if named else alarms
         return [(float(a.start), float(a.end)) for a in chosen]
 
-    def band_arrays(name: str) -> tuple[np.ndarray | None, np.ndarray | None]:
-        upper, lower = bands.get(name, (None, None))
-        out = []
-        for side in (upper, lower):
-            arr = None if side is None else np.broadcast_to(np.asarray(side, np.float64), (n,))
-            out.append(arr if arr is None or np.isfinite(arr).any() else None)
-        return out[0], out[1]
+    def shading(names: Sequence[str]) -> dict:
+        return {"alarm": _merge_spans(alarm_spans(names), min_width, min_gap), "ground truth": truth_spans}
+
+    def positive_upper_only(name: str) -> bool:
+        upper, lower = bands.get(name, no_band)
+        return upper is not None and lower is None and bool(np.nanmin(upper) > 0)
 
     figures: list[_Figure] = []
-    upper_only = [
-        name for name in series
-        if band_arrays(name)[0] is not None and band_arrays(name)[1] is None
-        and np.nanmin(np.where(np.isfinite(band_arrays(name)[0]), band_arrays(name)[0], np.inf)) > 0
-    ]  # fmt: skip
-    if len(series) >= 2 and len(upper_only) == len(series):
-        # e.g. NIS per group and overall: every statistic / its threshold on one chart, alarm at 1
+    if len(series) >= 2 and all(positive_upper_only(name) for name in series):
         traces = []
-        for i, name in enumerate(series):
-            upper = band_arrays(name)[0]
+        for i, (name, values) in enumerate(series.items()):
             with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = series[name] / upper
-            spans = alarm_spans([name])
+                ratio = values / bands[name][0]
             traces.append(_Trace(
-                name, ratio, edge_indices(t, spans), 1.0,
+                name, ratio, edge_indices(t, alarm_spans([name])), 1.0,
                 {"line": {"color": _LINE_COLOURS[i % len(_LINE_COLOURS)], "width": 1.2}},
             ))  # fmt: skip
-        all_ratios = np.concatenate([tr.y for tr in traces])
         figures.append(_Figure(
             title=f"{result.detector}: statistic / threshold", y_title="statistic / threshold",
-            traces=traces,
-            spans={"alarm": _merge_spans(alarm_spans(list(series)), min_width, min_gap),
-                   "ground truth": truth_spans},
-            log_y=_wants_log_axis(all_ratios),
+            traces=traces, spans=shading(list(series)),
+            log_y=_wants_log_axis(np.concatenate([tr.y for tr in traces])),
             caption="Each statistic divided by its threshold; above 1 is an exceedance.",
             hlines=[(1.0, "threshold")],
         ))  # fmt: skip
     else:
         for name, values in series.items():
-            upper, lower = band_arrays(name)
-            spans = alarm_spans([name])
-            keep = edge_indices(t, spans)
+            keep = edge_indices(t, alarm_spans([name]))
             traces = [_Trace(name, values, keep, 1.0, {"line": {"color": "#1f77b4", "width": 1.2}})]
-            for label, band in (("upper threshold", upper), ("lower threshold", lower)):
+            for label, band in zip(("upper threshold", "lower threshold"), bands.get(name, no_band)):
                 if band is not None:
-                    band = np.asarray(band, dtype=np.float64)
                     traces.append(_Trace(
-                        label, band, keep, 0.5,
-                        {"line": {"color": "#d62728", "dash": "dash", "width": 1}},
+                        label, band, keep, 0.5, {"line": {"color": "#d62728", "dash": "dash", "width": 1}},
                         varying=not _is_piecewise_flat(band),
                     ))  # fmt: skip
-            figures.append(_Figure(
-                title=f"{result.detector}: {name}", y_title=name, traces=traces,
-                spans={"alarm": _merge_spans(spans, min_width, min_gap), "ground truth": truth_spans},
-            ))  # fmt: skip
-    # extras: an (N, k) array is one figure (e.g. the coding vector, one line per state); (N,)
-    # arrays named "<prefix>.<kind>" share one figure per kind (e.g. "nis.accel.per_dof")
-    extra_groups: dict[str, list[tuple[str, np.ndarray]]] = {}
+            figures.append(_Figure(f"{result.detector}: {name}", name, traces, shading([name])))
+    figures.extend(_extra_figures(result, n, model, shading(list(series)), problems))
+    return figures
+
+
+def _extra_figures(result: Any, n: int, model: Mapping, spans: dict, problems: list[str]) -> list[_Figure]:
+    """An (N, k) extra is one figure (e.g. the coding vector, a line per state); (N,) extras
+    named "<prefix>.<kind>" share one figure per kind (e.g. "nis.accel.per_dof")."""
+    groups: dict[str, list[tuple[str, np.ndarray]]] = {}
     for key, values in (getattr(result, "extras", None) or {}).items():
         arr = np.asarray(values, dtype=np.float64)
         if arr.ndim not in (1, 2) or arr.shape[0] != n:
@@ -472,11 +470,12 @@ def _detector_figures(
             continue
         if arr.ndim == 2:
             labels = _labels_for(key, arr.shape[1], result, model)
-            extra_groups.setdefault(key, []).extend((labels[j], arr[:, j]) for j in range(arr.shape[1]))
+            groups.setdefault(key, []).extend((labels[j], arr[:, j]) for j in range(arr.shape[1]))
         else:
             prefix, _, kind = key.rpartition(".")
-            extra_groups.setdefault(kind if prefix else key, []).append((prefix or key, arr))
-    for kind, columns in extra_groups.items():
+            groups.setdefault(kind if prefix else key, []).append((prefix or key, arr))
+    figures = []
+    for kind, columns in groups.items():
         traces = [
             _Trace(
                 label, column, np.zeros(0, np.int64), 0.25,
@@ -485,12 +484,8 @@ def _detector_figures(
             )
             for j, (label, column) in enumerate(columns)
         ]  # fmt: skip
-        figures.append(_Figure(
-            title=f"{result.detector}: {kind}", y_title=kind, traces=traces,
-            spans={"alarm": _merge_spans(alarm_spans(list(series)), min_width, min_gap),
-                   "ground truth": truth_spans},
-            log_y=_wants_log_axis(np.concatenate([c for _, c in columns])),
-        ))  # fmt: skip
+        log_y = _wants_log_axis(np.concatenate([column for _, column in columns]))
+        figures.append(_Figure(f"{result.detector}: {kind}", kind, traces, spans, log_y=log_y))
     return figures
 
 

@@ -19,7 +19,10 @@ import pytest
 from logscan.report import render_report
 from test_report import HOSTILE, figures, make_report
 
-CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium"), shutil.which("chromium-browser")) if p and Path(p).is_file()), None)  # fmt: skip
+CHROMIUM = next(
+    (p for p in ("/usr/bin/chromium", shutil.which("chromium"), shutil.which("chromium-browser")) if p and Path(p).is_file()),
+    None,
+)
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="chromium not installed (Debian: apt-get install -y chromium)"
