@@ -9,6 +9,7 @@ The schema is documented in docs/profiles.md; keep the two in step.
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import math
 import os
@@ -322,9 +323,9 @@ def load_profile(path: str | os.PathLike, *, model=None) -> Profile:
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ProfileError("no such profile file", path=str(p), hint=DOCS_HINT) from None
+        raise _single_error("no such profile file", str(p)) from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"cannot read profile: {exc}", path=str(p)) from None
+        raise _single_error(f"cannot read profile: {exc}", str(p)) from None
     return parse_profile(text, source=str(p), model=model)
 
 
@@ -336,11 +337,10 @@ def resolve_profile(log, profile_path: str | os.PathLike | None = None, *, model
     if text:
         return parse_profile(text, source=f"{log.source.path} (embedded logscan.profile)", model=model)
     where = log.source.path if log is not None else None
-    raise ProfileError(
+    raise _single_error(
         "no profile: pass --profile or analyse a log that embeds one "
         "(MCAP metadata record 'logscan.profile', as `logscan simulate` writes)",
-        path=where,
-        hint=DOCS_HINT,
+        where,
     )
 
 
@@ -353,7 +353,7 @@ def parse_profile(text: str, source: str = "<embedded>", *, model=None, check_mo
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"invalid TOML: {exc}", path=source, hint=DOCS_HINT) from None
+        raise _single_error(f"invalid TOML: {exc}", source) from None
     checker = _Checker()
     profile = checker.profile(data, source)
     if profile is not None and check_model and not checker.problems:
@@ -383,6 +383,12 @@ def _profile_error(problems: list[str], source: str, hint: str = DOCS_HINT) -> P
     more = f" ({len(problems) - 1} more)" if len(problems) > 1 else ""
     err = ProfileError(f"invalid profile: {problems[0]}{more}", path=source, hint=hint)
     err.problems = list(problems)
+    return err
+
+
+def _single_error(message: str, source: str | None) -> ProfileError:
+    err = ProfileError(message, path=source, hint=DOCS_HINT)
+    err.problems = [message]
     return err
 
 
@@ -508,12 +514,12 @@ class _Checker:
 
     # --- sections -----------------------------------------------------------------------------
     def profile(self, data: dict, source: str) -> Profile | None:
-        self.keys(data, "", TOP_KEYS, required=("vehicle", "inputs", "measurements"))
+        self.keys(data, "", TOP_KEYS, required=("vehicle", "measurements"))
         for key in ("name", "description"):
             if key in data and not isinstance(data[key], str):
                 self.add(key, f"expected a string, got {_type_name(data[key])}")
         vehicle = self.vehicle(data["vehicle"]) if "vehicle" in data else None
-        inputs = self.inputs(data["inputs"], vehicle) if "inputs" in data else None
+        inputs = self.inputs(data.get("inputs", {}), vehicle)
         measurements = self.measurements(data["measurements"]) if "measurements" in data else {}
         mode = self.mode(data["mode"]) if "mode" in data else None
         redundant = self.redundant(data["redundant"]) if "redundant" in data else {}
@@ -760,6 +766,14 @@ def _check_against_model(profile: Profile, model, problems: list[str]) -> None:
             problems.append(f"[vehicle] params: model {name!r} cannot be built: {msg}")
             return
     label = f"model {profile.vehicle.model!r}"
+    params = profile.vehicle.params
+    if params.get("continuous") is False and _is_number(params.get("dt")) and params["dt"] > 0:
+        # discrete matrices step once per grid period: the grid must run at 1 / dt
+        if abs(params["dt"] * profile.vehicle.rate_hz - 1.0) > 1e-9:
+            problems.append(
+                f"[vehicle] params.dt: discrete matrices of period {params['dt']:g} s need "
+                f"rate_hz = {1.0 / params['dt']:g}, got {profile.vehicle.rate_hz:g}"
+            )
     input_names = tuple(model.input_names)
     _bind_inputs(profile, input_names, label, problems)
 
@@ -913,6 +927,8 @@ def _value(value: Any) -> str:
         return repr(value)
     if isinstance(value, str):
         return _string(value)
+    if isinstance(value, (datetime.datetime, datetime.date, datetime.time)):
+        return value.isoformat()
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_value(v) for v in value) + "]"
     if isinstance(value, dict):

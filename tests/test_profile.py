@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import datetime
 import re
 from pathlib import Path
 
@@ -196,7 +197,12 @@ BROKEN = [
         "(did you mean 'accel'?) (groups: accel, gyro, position, attitude)",
     ),
     (mutated("measurements", {}), "[measurements]: no measurement group: add at least one [measurements.<group>]"),
-    (mutated("inputs", ...), "missing required key 'inputs'"),
+    (
+        mutated("inputs", ...),
+        "[inputs]: model 'quadcopter' inputs 'thrust', 'tau_x', 'tau_y', 'tau_z' have no channel "
+        "(inputs: thrust, tau_x, tau_y, tau_z)",
+    ),
+    (mutated("vehicle", ...), "missing required key 'vehicle'"),
     (
         mutated("inputs.thrust", ...),
         "[inputs]: model 'quadcopter' input 'thrust' has no channel (inputs: thrust, tau_x, tau_y, tau_z)",
@@ -271,6 +277,7 @@ def test_invalid_toml_names_the_file_and_line(tmp_path):
         load_profile(path)
     assert info.value.path == str(path)
     assert "invalid TOML" in info.value.message and "line 2" in info.value.message
+    assert info.value.problems == [info.value.message]
 
 
 def test_missing_profile_file_is_a_profile_error(tmp_path):
@@ -365,6 +372,7 @@ def rich_profile_dict() -> dict:
         "encoded_ekf": {"rho": 4.1, "window_s": 2.0, "variant": "adaptive"},
         "atfm": {"enabled": False, "group": {"left": "/l", "right": "/r"}, "windows": [25, 50]},
         "weird key.name": {"nested": {"deep": {"deeper": [1, {"a": True}]}}},
+        "dated": {"since": datetime.date(2026, 1, 2), "at": datetime.datetime(2026, 1, 2, 3, 4, 5)},
     }
     return data
 
@@ -438,3 +446,18 @@ def test_docs_example_validates_and_round_trips(index):
     text = doc_examples()[index]
     p = parse_profile(text, source=f"docs/profiles.md example {index + 1}")
     assert parse_profile(p.to_toml()) == p
+
+
+def test_discrete_linear_model_period_must_match_the_grid():
+    data = {
+        "vehicle": {
+            "model": "linear",
+            "rate_hz": 100,
+            "params": {"A": [[1.0]], "B": [[0.1]], "C": {"y": [[1.0]]}, "continuous": False, "dt": 0.02},
+        },
+        "inputs": {"u0": "/u"},
+        "measurements": {"y": {"channels": ["/y"], "rate_hz": 50}},
+    }
+    assert problems_of(data) == ["[vehicle] params.dt: discrete matrices of period 0.02 s need rate_hz = 50, got 100"]
+    data["vehicle"]["rate_hz"] = 50
+    assert parse_profile(dumps_toml(data)).vehicle.params["dt"] == 0.02
