@@ -122,6 +122,11 @@ def _wrap_fields(fields: list[str], indent: str, width: int, full: bool) -> list
     return [(prefix if i == 0 else " " * len(prefix)) + line for i, line in enumerate(lines)]
 
 
+def _rate(hz: float) -> str:
+    """A rate in a 9-character column (scientific notation beyond what fits)."""
+    return f"{hz:>9.3f}" if hz < 1e5 else f"{hz:>9.3g}"
+
+
 def _fmt_time(ns: int) -> str:
     if ns >= _EPOCH_MIN_NS:
         stamp = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
@@ -177,7 +182,7 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False,
         for name, info in topics.items():
             kind = " / ".join(x for x in (info["encoding"], info["schema"]) if x)
             lines.append(
-                f"  {name:<{name_width}}  {info['message_count']:>9}  {info['rate_hz']:>9.3f}  {kind}"
+                f"  {name:<{name_width}}  {info['message_count']:>9}  {_rate(info['rate_hz'])}  {kind}"
             )
             if info["fields"]:
                 lines.extend(_wrap_fields(info["fields"], "    ", width, full))
@@ -194,8 +199,8 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False,
         for name, info in channels.items():
             low, high = info.get("min"), info.get("max")
             span = "-" if low is None else f"{low:.6g} .. {high:.6g}"
-            rate = info.get("rate_hz", 0.0)
-            lines.append(f"  {name:<{name_width}}  {info['samples']:>9}  {rate:>9.3f}  "
+            rate = _rate(info.get("rate_hz", 0.0))
+            lines.append(f"  {name:<{name_width}}  {info['samples']:>9}  {rate}  "
                          f"{info.get('nonfinite', 0):>7}  {span}")
     if facts["skipped"]:
         total_skipped = sum(item["count"] for item in facts["skipped"])
