@@ -228,7 +228,9 @@ class Profile:
                 )
         if problems:
             raise _profile_error(
-                problems, self.source, hint=f"the log is {log.source.path}; `logscan inspect` lists its channels"
+                problems,
+                self.source,
+                hint=f"the log is {log.source.path}; `logscan inspect` lists its channels",
             )
 
     def onboard_channels(self, which: str, log_channels) -> tuple[list[str | None], list[str]]:
@@ -298,7 +300,11 @@ class Profile:
                     table["stale_s"] = r.stale_s
                 out["redundant"][r.name] = table
         if self.onboard is not None:
-            table = {k: getattr(self.onboard, k) for k in ("state", "variance") if getattr(self.onboard, k) is not None}
+            table = {
+                k: getattr(self.onboard, k)
+                for k in ("state", "variance")
+                if getattr(self.onboard, k) is not None
+            }
             table["stale_s"] = self.onboard.stale_s
             out["onboard"] = table
         if self.detectors:
@@ -574,7 +580,10 @@ class _Checker:
                 if chans is not None:
                     mapping[key] = chans
             else:
-                self.add(f"{where} {key}", f"expected a channel name or an array of them, got {_type_name(value)}")
+                self.add(
+                    f"{where} {key}",
+                    f"expected a channel name or an array of them, got {_type_name(value)}",
+                )
                 ok = False
         stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
         if "stale_s" in data and stale is None:
@@ -618,7 +627,10 @@ class _Checker:
             bad = [i for i in range(n) if not lo[i] < hi[i]]
             if bad:
                 i = bad[0]
-                self.add(where, f"range_lo must be < range_hi, got {lo[i]:g} >= {hi[i]:g} for {channels[i]!r}")
+                self.add(
+                    where,
+                    f"range_lo must be < range_hi, got {lo[i]:g} >= {hi[i]:g} for {channels[i]!r}",
+                )
         if stale is None and "stale_s" not in data:
             stale = GROUP_STALE_PERIODS / rate
         if stale is None:
@@ -677,7 +689,10 @@ class _Checker:
                 out[name] = SensorSpec(name, value)
                 continue
             if not isinstance(value, dict):
-                self.add(f"{where}.{name}", f"expected a channel name or a table {{ channel, poly }}, got {_type_name(value)}")
+                self.add(
+                    f"{where}.{name}",
+                    f"expected a channel name or a table {{ channel, poly }}, got {_type_name(value)}",
+                )
                 continue
             self.keys(value, f"{where}.{name}", SENSOR_KEYS, required=("channel",))
             channel = self.string(value, "channel", f"{where}.{name}")
@@ -711,7 +726,8 @@ class _Checker:
             else:
                 self.add(
                     f"{where} {key}",
-                    f"expected a channel prefix, an array of channels or a table state -> channel, got {_type_name(value)}",
+                    "expected a channel prefix, an array of channels or a table state -> channel, "
+                    f"got {_type_name(value)}",
                 )
         stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
         return OnboardSpec(
