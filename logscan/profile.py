@@ -79,7 +79,7 @@ class InputSpec:
 
 
 @dataclass
-class GroupSpec:
+class MeasurementSpec:
     """`[measurements.<group>]`: channels of one model measurement group and how to hold them."""
 
     name: str
@@ -160,7 +160,7 @@ class Profile:
 
     vehicle: VehicleSpec
     inputs: InputSpec
-    measurements: dict[str, GroupSpec]
+    measurements: dict[str, MeasurementSpec]
     mode: ModeSpec | None = None
     redundant: dict[str, RedundantSpec] = field(default_factory=dict)
     onboard: OnboardSpec | None = None
@@ -592,7 +592,7 @@ class _Checker:
             stale = INPUT_STALE_STEPS / vehicle.rate_hz if vehicle else 0.0
         return InputSpec(mapping=mapping, stale_s=stale) if ok else None
 
-    def measurements(self, raw: Any) -> dict[str, GroupSpec]:
+    def measurements(self, raw: Any) -> dict[str, MeasurementSpec]:
         data = self.table(raw, "[measurements]")
         if data is None:
             return {}
@@ -605,7 +605,7 @@ class _Checker:
                 out[name] = group
         return out
 
-    def group(self, name: str, raw: Any) -> GroupSpec | None:
+    def group(self, name: str, raw: Any) -> MeasurementSpec | None:
         where = f"[measurements.{name}]"
         data = self.table(raw, where)
         if data is None:
@@ -635,7 +635,7 @@ class _Checker:
             stale = GROUP_STALE_PERIODS / rate
         if stale is None:
             return None
-        return GroupSpec(name, channels, rate, stale, noise, lo, hi)
+        return MeasurementSpec(name, channels, rate, stale, noise, lo, hi)
 
     def _sized(self, values: list[float] | None, n: int, where: str) -> list[float] | None:
         if values is None:
