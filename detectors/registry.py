@@ -23,8 +23,8 @@ ENTRY_POINT_GROUP = "logscan.detectors"
 
 # Built-in detectors, one "module:Class" line each, imported only when the registry loads.
 BUILTIN_DETECTORS: list[str] = [
-    # "logscan.detectors.encoded_ekf:EncodedEkfDetector",
-    # "logscan.detectors.nis:NisDetector",
+    "logscan.detectors.encoded_ekf:EncodedEkfDetector",
+    "logscan.detectors.nis:NisDetector",
 ]
 
 BUILTIN = "built-in"

@@ -29,6 +29,7 @@ def cli(ctx: click.Context, debug: bool) -> None:
 # Each command lives in its own module of logscan.cli as "module:function"; one line per command.
 _COMMANDS = [
     "logscan.cli.inspect_cmd:inspect",
+    "logscan.cli.analyze_cmd:analyze",
     "logscan.cli.simulate_cmd:simulate",
     "logscan.cli.detectors_cmd:detectors",
 ]
