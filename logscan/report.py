@@ -14,6 +14,7 @@ whatever the log length.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import json
 import math
 import os
@@ -567,6 +568,7 @@ def _install_plotly_js(directory: Path, report_path: Path) -> str:
     return urllib.parse.quote(Path(relative).as_posix())
 
 
+@functools.lru_cache(maxsize=1)
 def _environment():
     import jinja2
 

@@ -332,3 +332,33 @@ def test_module_is_importable_without_rendering():
     import logscan.templates
 
     assert (Path(logscan.templates.__file__).parent / "report.html.j2").is_file()
+
+
+def test_a_real_log_with_script_topic_names_shows_them_as_text(tmp_path):
+    """End to end from an MCAP file: the reader's topic and channel names reach the page as text."""
+    try:
+        from logscan.mcap_writer import TopicData, write_mcap
+        from logscan.readers import read_log
+    except ImportError as exc:  # pragma: no cover - only while the MCAP stack is missing
+        pytest.skip(f"MCAP reader/writer missing: {exc}")
+    t_ns = np.arange(500, dtype=np.int64) * 10_000_000
+    topic = f"/{HOSTILE}"
+    path = tmp_path / "hostile.mcap"
+    write_mcap(path, {topic: TopicData("x/msg/Y", t_ns, {"value": np.sin(t_ns / 1e9)})})
+    log = read_log(str(path))
+    channel = next(iter(log.channels))
+    assert HOSTILE in channel
+    grid = (t_ns - t_ns[0]) / 1e9
+    result = DetectorResult("probe")
+    values = log.channels[channel].values.copy()
+    values[200:210] = 5.0
+    result.add_statistic(grid, channel, values, upper=2.0, n_persist=3)
+    page = render_html(
+        ReportInput(log.summary(), "", "embedded", {}, "0.1.0", grid, [result], verdict="1 alarms"),
+        plotlyjs_src="plotly.min.js",
+    )
+    assert HOSTILE not in page
+    escaped = "&lt;script&gt;alert(1)&lt;/script&gt;"
+    assert f"<li>/{escaped}</li>" in page  # topic list
+    assert f"<td>/{escaped}/value</td>" in page  # alarm table: signal names the channel
+    assert len(re.findall(r"<script\b", page, re.I)) == 4
