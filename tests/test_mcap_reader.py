@@ -448,3 +448,122 @@ def test_schema_that_does_not_parse_skips_the_topic_with_its_reason(tmp_path):
     log = read_mcap(path, None)
     assert log.channels == {}
     assert log.source.skipped[0].what == "/bad" and "cannot be parsed" in log.source.skipped[0].why
+
+
+# --------------------------------------------------------------------------------------------
+# the fast paths give exactly what decoding + the generic walk give
+
+
+def _generic_columns(messages):
+    from logscan.readers.flatten import flatten_messages
+
+    flat = flatten_messages(messages)
+    return flat.fields, {k: (i.tolist(), v.tolist()) for k, (i, v) in flat.columns.items()}, flat.skipped
+
+
+def _same_columns(fast, generic) -> None:
+    fields, columns, skipped = generic
+    assert fast.fields == fields
+    assert fast.skipped == skipped
+    for name, (index, values) in columns.items():
+        got_index, got_values = fast.columns[name]
+        assert got_index.tolist() == index
+        np.testing.assert_array_equal(got_values, values)
+
+
+def test_json_fast_path_matches_json_loads_on_mixed_messages():
+    from logscan.readers.json_decoder import json_columns
+
+    texts = [
+        b'{"a": {"x": 1.5, "y": -2}, "ok": true, "s": "map", "n": null, "v": [1, 2e-3]}',
+        b'{"a": {"x": -0.0, "y": 12345678901234567890}, "ok": false, "s": "map", "n": null, "v": [NaN, -Infinity]}',
+        b'{"a": {"x": 3.25, "y": 1}, "ok": true, "s": "odom", "n": null, "v": [1, 2]}',  # other string
+        b'{"a": {"x": 4.0, "y": 2}, "ok": true, "s": "map", "n": 7, "v": [1, 2]}',  # null became a number
+        b'{"a": {"x": 5.0, "y": 3},  "ok": true, "s": "map", "n": null, "v": [1, 2]}',  # other spacing
+        b'{"a": {"x": 6.0, "y": 4}, "ok": true, "s": "map", "n": null, "v": [1, 2, 3]}',  # longer array
+        b'{"a": {"x": 1e400, "y": 5}, "ok": true, "s": "map", "n": null, "v": [1, 2]}',
+        b'{"a": {"x": 7.0, "y": 6}, "ok": true, "s": "map", "n": null, "v": [1, 2]}',
+        b'not json at all',
+        b'{"a": {"x": "8", "y": 7}, "ok": true, "s": "map", "n": null, "v": [1, 2]}',  # string number
+    ]
+    flat, failed = json_columns(texts)
+    assert failed == [8]
+    messages = [json.loads(t) for k, t in enumerate(texts) if k != 8]
+    fields, columns, skipped = _generic_columns(messages)
+    renumber = [k for k in range(len(texts)) if k != 8]
+    columns = {name: ([renumber[i] for i in index], values) for name, (index, values) in columns.items()}
+    _same_columns(flat, (fields, columns, skipped))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(allow_nan=False, width=64), st.integers(-2**70, 2**70), st.booleans()),
+                min_size=2, max_size=30))
+def test_json_fast_path_parses_numbers_like_json_loads(rows):
+    from logscan.readers.json_decoder import json_columns
+
+    texts = [json.dumps({"f": f, "i": i, "b": b, "t": "x"}).encode() for f, i, b in rows]
+    flat, failed = json_columns(texts)
+    assert failed == []
+    _same_columns(flat, _generic_columns([json.loads(t) for t in texts]))
+
+
+ROS2_FIXED = """std_msgs/Header header
+int8 a
+uint16 b
+int32 c
+uint64 d
+float32 e
+bool f
+float64[3] g
+uint8[2] h
+string[2] names
+geometry_msgs/Point[2] pts
+int64 z
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+"""
+
+
+def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    from logscan.readers.mcap_reader import _cdr_fast, _cdr_layout, _SchemaRec
+
+    rng = np.random.default_rng(5)
+    path = tmp_path / "fixed.mcap"
+    with open(path, "wb") as fh:
+        writer = Ros2Writer(fh)
+        schema = writer.register_msgdef("test_msgs/msg/Fixed", ROS2_FIXED)
+        for k in range(20):
+            writer.write_message("/fixed", schema, {
+                "header": {"stamp": {"sec": k, "nanosec": 3 * k}, "frame_id": "f" * (k % 5)},
+                "a": int(rng.integers(-128, 128)), "b": int(rng.integers(0, 65536)),
+                "c": int(rng.integers(-2**31, 2**31)), "d": int(rng.integers(0, 2**63)),
+                "e": float(np.float32(rng.normal())), "f": bool(k % 2), "g": rng.normal(size=3).tolist(),
+                "h": bytes([k, 2 * k]), "names": ["n" * k, "m"], "z": -k * 10**12,
+                "pts": [{"x": float(k), "y": 1.0, "z": 2.0}, {"x": 3.0, "y": float(-k), "z": 4.0}],
+            }, log_time=k)
+        writer.finish()
+    raw = list(iter_raw_messages(path))
+    datas = [m.data for m in raw]
+    from mcap.records import Schema
+
+    layout = _cdr_layout(_SchemaRec(1, "test_msgs/msg/Fixed", "ros2msg", ROS2_FIXED.encode()))
+    assert layout is not None
+    fast = _cdr_fast(layout, datas)
+    assert fast is not None
+    schema = Schema(id=1, name="test_msgs/msg/Fixed", encoding="ros2msg", data=ROS2_FIXED.encode())
+    decode = Ros2DecoderFactory().decoder_for("cdr", schema)
+    _same_columns(fast, _generic_columns([decode(d) for d in datas]))
+    assert "pts[1].y" in fast.fields and ("header.frame_id", "non-numeric") in fast.skipped
+    # read_mcap takes the fast path and names channels as usual
+    log = read_mcap(path, None)
+    np.testing.assert_array_equal(log.channels["/fixed/pts[1].y"].values, [-float(k) for k in range(20)])

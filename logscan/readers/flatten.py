@@ -215,23 +215,42 @@ def flatten_messages(messages: Sequence[Any]) -> FlatColumns:
     """
     groups: dict[tuple, tuple[list[int], list[list[Any]]]] = {}
     remaining: Sequence[int] | range = range(len(messages))
+    entries = []
     if len(messages) > 1:
         fast = _fast_group(messages)
         if fast is not None:
             signature, indices, rows, remaining = fast
-            groups[signature] = (indices, rows)
-    for index in remaining:
+            entries.append((signature, indices, rows))
+    add_to_groups(groups, [messages[index] for index in remaining], list(remaining))
+    entries.extend((signature, indices, rows) for signature, (indices, rows) in groups.items())
+    return columns_from_groups(entries)
+
+
+def add_to_groups(groups: dict, messages: Sequence[Any], indices: Sequence[int]) -> None:
+    """Walk ``messages`` (whose message numbers are ``indices``) into ``groups`` by leaf layout.
+
+    ``groups[(keys, skipped)] = (message numbers, rows of leaf values)``.
+    """
+    for index, message in zip(indices, messages):
         keys: list[str] = []
         values: list[Any] = []
         skipped: list[tuple[str, str]] = []
-        _walk(messages[index], "", keys, values, skipped)
+        _walk(message, "", keys, values, skipped)
         signature = (tuple(keys), tuple(skipped))
         group = groups.get(signature)
         if group is None:
             group = groups[signature] = ([], [])
         group[0].append(index)
         group[1].append(values)
-    return _columns(groups)
+
+
+def layout_of(message: Any) -> tuple[tuple, list]:
+    """(signature, leaf values) of one decoded message; the signature is its group key."""
+    keys: list[str] = []
+    values: list[Any] = []
+    skipped: list[tuple[str, str]] = []
+    _walk(message, "", keys, values, skipped)
+    return (tuple(keys), tuple(skipped)), values
 
 
 def _fast_group(messages: Sequence[Any]):
@@ -259,11 +278,12 @@ def _fast_group(messages: Sequence[Any]):
     return (tuple(keys), tuple(skipped)), indices, matrix.astype(np.float64, copy=False), misfits
 
 
-def _columns(groups: dict[tuple, tuple[list[int], Any]]) -> FlatColumns:
+def columns_from_groups(entries: Sequence[tuple[tuple, Any, Any]]) -> FlatColumns:
+    """FlatColumns from (signature, message numbers, (n, k) values) entries; a signature may repeat."""
     out = FlatColumns()
     pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     seen: set[str] = set()
-    for (keys, skipped), (indices, rows) in groups.items():
+    for (keys, skipped), indices, rows in entries:
         index_array = np.asarray(indices, dtype=np.int64)
         for item in skipped:
             out.skipped[item] = out.skipped.get(item, 0) + len(indices)

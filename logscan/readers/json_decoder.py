@@ -1,13 +1,18 @@
-"""Decoder factory for MCAP channels with the ``json`` message encoding (the mcap library has none)."""
+"""JSON message decoding for MCAP: the decoder factory (the mcap library has none) and a bulk path."""
 
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
 from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.records import Schema
+from numba import njit
+
+from logscan.readers.flatten import FlatColumns, add_to_groups, columns_from_groups, layout_of
 
 
 class JsonDecoder:
@@ -54,3 +59,157 @@ class JsonDecoderFactory(McapDecoderFactory):
         if message_encoding != "json":
             return None
         return JsonDecoder()
+
+
+# ---------------------------------------------------------------------------------------------
+# Fast path: messages that are the first message with other numbers in it.
+#
+# The first message is split into literal segments and value tokens (numbers, true, false, NaN,
+# Infinity; never inside strings). A numba kernel checks every message against those literal
+# segments byte for byte and copies its tokens, space separated, into one buffer that numpy parses
+# in one call (correctly rounded, like json.loads). Messages that differ anywhere else (another
+# string value, a missing key, other whitespace) go through json.loads and the generic walk.
+
+_TOKEN_CHARS = frozenset(b"0123456789+-.eEabcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ")
+_IS_TOKEN = np.zeros(256, dtype=np.bool_)
+_IS_TOKEN[list(_TOKEN_CHARS)] = True
+
+
+def _value_tokens(data: bytes) -> list[tuple[int, int]]:
+    """(start, end) of each value token of one JSON text, outside strings; ``null`` is literal."""
+    spans = []
+    i, n = 0, len(data)
+    while i < n:
+        c = data[i]
+        if c == 0x22:  # a string: skip it, honouring backslash escapes
+            i += 1
+            while i < n and data[i] != 0x22:
+                i += 2 if data[i] == 0x5C else 1
+            i += 1
+        elif c in _TOKEN_CHARS:
+            j = i
+            while j < n and data[j] in _TOKEN_CHARS:
+                j += 1
+            if data[i:j] != b"null":
+                spans.append((i, j))
+            i = j
+        else:
+            i += 1
+    return spans
+
+
+@njit(cache=True)
+def _match_template(buf, starts, ends, literal, lit_start, lit_len, is_token, ok, out):  # pragma: no cover
+    """Check each message against the literal segments; copy its tokens to ``out``. Returns length."""
+    k = lit_start.size - 1  # tokens per message
+    w = 0
+    for m in range(starts.size):
+        p = starts[m]
+        end = ends[m]
+        w_message = w
+        good = True
+        for j in range(k + 1):
+            length = lit_len[j]
+            if p + length > end:
+                good = False
+                break
+            for i in range(length):
+                if buf[p + i] != literal[lit_start[j] + i]:
+                    good = False
+                    break
+            if not good:
+                break
+            p += length
+            if j == k:
+                break
+            q = p
+            while q < end and is_token[buf[q]]:
+                q += 1
+            if q == p:
+                good = False
+                break
+            if q - p == 4 and buf[p] == 116 and buf[p + 1] == 114 and buf[p + 2] == 117 and buf[p + 3] == 101:
+                out[w] = 49  # true -> 1
+                w += 1
+            elif q - p == 5 and buf[p] == 102 and buf[p + 1] == 97 and buf[p + 2] == 108:
+                out[w] = 48  # false -> 0
+                w += 1
+            else:
+                for i in range(p, q):
+                    out[w] = buf[i]
+                    w += 1
+            out[w] = 32
+            w += 1
+            p = q
+        if good and p != end:
+            good = False
+        ok[m] = good
+        if not good:
+            w = w_message
+    return w
+
+
+def json_columns(datas: Sequence[bytes]) -> tuple[FlatColumns, list[int]]:
+    """Numeric columns of JSON messages (see ``flatten``) and the indices that are not JSON."""
+    groups: dict = {}
+    entries = []
+    n = len(datas)
+    remaining: list[int] = list(range(n))
+    if n > 1:
+        fast = _fast_json(datas)
+        if fast is not None:
+            signature, indices, matrix = fast
+            entries.append((signature, indices, matrix))
+            remaining = np.flatnonzero(~np.isin(np.arange(n), indices)).tolist()
+    decoded, failed_local = JsonDecoder().decode_many([datas[i] for i in remaining])
+    failed = [remaining[i] for i in failed_local]
+    bad = set(failed_local)
+    add_to_groups(groups, [m for i, m in enumerate(decoded) if i not in bad],
+                  [remaining[i] for i in range(len(remaining)) if i not in bad])
+    entries.extend((signature, indices, rows) for signature, (indices, rows) in groups.items())
+    return columns_from_groups(entries), failed
+
+
+def _fast_json(datas: Sequence[bytes]):
+    """(signature, message numbers, (n, k) values) for the messages laid out like the first."""
+    first = bytes(datas[0])
+    try:
+        signature, first_values = layout_of(json.loads(first))
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        return None
+    spans = _value_tokens(first)
+    keys = signature[0]
+    if not keys or len(spans) != len(keys):
+        return None
+    literal_parts, cursor = [], 0
+    for start, end in spans:
+        literal_parts.append(first[cursor:start])
+        cursor = end
+    literal_parts.append(first[cursor:])
+    lit_len = np.array([len(part) for part in literal_parts], dtype=np.int64)
+    lit_start = np.concatenate([[0], np.cumsum(lit_len)[:-1]]).astype(np.int64)
+    literal = np.frombuffer(b"".join(literal_parts) + b"\0", dtype=np.uint8)
+    lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
+    ends = np.cumsum(lengths)
+    starts = ends - lengths
+    buf = np.frombuffer(b"".join(datas), dtype=np.uint8)
+    ok = np.zeros(len(datas), dtype=np.bool_)
+    out = np.empty(int(buf.size) + 2 * len(datas) * len(keys) + 1, dtype=np.uint8)
+    used = _match_template(buf, starts, ends, literal, lit_start, lit_len, _IS_TOKEN, ok, out)
+    indices = np.flatnonzero(ok)
+    if indices.size == 0:
+        return None
+    if indices[0] != 0:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a token that is no number: handled by the size check
+        try:
+            values = np.fromstring(out[:used].tobytes().decode("ascii"), sep=" ")
+        except ValueError:
+            return None
+    if values.size != indices.size * len(keys):
+        return None  # some token was not a number: let json.loads judge every message
+    matrix = values.reshape(indices.size, len(keys))
+    if not np.array_equal(matrix[0], np.asarray(first_values, dtype=np.float64), equal_nan=True):
+        return None
+    return signature, indices, matrix

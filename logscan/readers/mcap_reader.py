@@ -54,7 +54,7 @@ from logscan.errors import CorruptLogError, InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers import MCAP_MAGIC, topic_wanted
 from logscan.readers.flatten import FlatColumns, flatten_messages
-from logscan.readers.json_decoder import JsonDecoderFactory
+from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 
 TRUTH_RECORD = "logscan.truth"
 PROFILE_RECORD = "logscan.profile"
@@ -829,6 +829,10 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
                 layouts[schema.id] = _cdr_layout(schema)
             if layouts[schema.id] is not None:
                 flat = _cdr_fast(layouts[schema.id], batch.datas)
+        if flat is None and isinstance(decoder, JsonDecoder):
+            flat, failed = json_columns(batch.datas)
+            if failed:  # message numbers in flat index all messages, so log_times stay aligned
+                source.skip(topic, "message bytes do not decode", len(failed))
         if flat is None:
             messages, failed = _decode_all(decoder, batch.datas)
             if failed:
