@@ -302,12 +302,7 @@ def test_json_header_stamp_option(tmp_path):
     assert stamped.source.time_source == "header.stamp (log_time for /b)"
 
 
-ROS2_POSE = """std_msgs/Header header
-geometry_msgs/Point position
-float64[] ranges
-int32[3] counts
-bool ok
-string label
+ROS2_SUBTYPES = """
 ================================================================================
 MSG: std_msgs/Header
 builtin_interfaces/Time stamp
@@ -318,6 +313,15 @@ float64 x
 float64 y
 float64 z
 """
+
+
+ROS2_POSE = """std_msgs/Header header
+geometry_msgs/Point position
+float64[] ranges
+int32[3] counts
+bool ok
+string label
+""" + ROS2_SUBTYPES
 
 
 def test_ros2_cdr_round_trip_with_header_stamp(tmp_path):
@@ -519,16 +523,7 @@ uint8[2] h
 string[2] names
 geometry_msgs/Point[2] pts
 int64 z
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: geometry_msgs/Point
-float64 x
-float64 y
-float64 z
-"""
+""" + ROS2_SUBTYPES
 
 
 def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
