@@ -9,7 +9,8 @@ One step k (period dt, x_k = f(x_{k-1}, u_k) + w_k as the models define it):
   3. each measurement group samples every `ratio` steps: z = h(x_k, u_act) + v, v ~ N(0, R);
      sensor faults act on the sampled value (what the log records);
   4. on-board EKF (what a real autopilot runs, its state and variance logged): predict with the
-     commanded u, update per fresh group, skipping non-finite or out-of-range samples (counted);
+     commanded u, one stacked update with the fresh groups, skipping a group with a non-finite or
+     out-of-range sample (counted);
      state-corruption faults then corrupt its posterior.
 The kernel uses the model's numba functions (`logscan.models.kernels`), so truth and filters share
 one model. All random draws (w, v, fault draws) are made before the loop from one seeded
@@ -86,7 +87,9 @@ def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_
     last_z = np.zeros(n_meas)
     stuck = np.zeros(f_kind.size)
     rejected = 0
-    I = np.eye(n)
+    y_s = np.empty(n_meas)
+    R_s = np.empty(n_meas)
+    H_s = np.empty((n_meas, n))
     x = x0.copy()
     xh = x0.copy()
     P = P0.copy()
@@ -114,7 +117,8 @@ def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_
             xh, F = predict(model_id, p, xh, u_cmd[k], dt)
             P = F @ P @ F.T + Q
         x_true[k] = x
-        # 3. sensors, 4. on-board update per fresh group
+        # 3. sensors; the valid fresh groups are stacked into one on-board update
+        mk = 0
         for g in range(g_id.size):
             if k % g_ratio[g] != 0:
                 continue
@@ -139,19 +143,28 @@ def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_
             if not ok:
                 rejected += 1
                 continue
-            H = H_meas(model_id, g_id[g], p, xh, u_cmd[k])
-            # y = z - h(x_prior), S = H P H^T + R, K = P H^T S^-1 (solve)
-            y = z_all[k, o:o + m] - h_meas(model_id, g_id[g], p, xh, u_cmd[k])
+            Hg = H_meas(model_id, g_id[g], p, xh, u_cmd[k])
+            hg = h_meas(model_id, g_id[g], p, xh, u_cmd[k])
             for j in range(m):
+                # y = z - h(x_prior), angles wrapped
+                yj = z_all[k, o + j] - hg[j]
                 if ch_wrap[o + j]:
-                    y[j] = (y[j] + np.pi) % (2.0 * np.pi) - np.pi
-            R = np.diag(R_diag[o:o + m])
-            S = H @ P @ H.T + R
-            K = np.linalg.solve(S, H @ P).T
-            xh = xh + K @ y
-            # Joseph form: P = (I - K H) P (I - K H)^T + K R K^T
-            IKH = I - K @ H
-            P = IKH @ P @ IKH.T + K @ R @ K.T
+                    yj = (yj + np.pi) % (2.0 * np.pi) - np.pi
+                y_s[mk] = yj
+                R_s[mk] = R_diag[o + j]
+                H_s[mk] = Hg[j]
+                mk += 1
+        if mk > 0:
+            H = H_s[:mk]
+            HP = H @ P
+            # S = H P H^T + R;  K = P H^T S^-1 (solve, S symmetric)
+            S = HP @ H.T
+            for j in range(mk):
+                S[j, j] += R_s[j]
+            K = np.linalg.solve(S, HP).T
+            xh = xh + K @ y_s[:mk]
+            # P_post = P_prior - K H P_prior, symmetrised
+            P = P - K @ HP
             P = 0.5 * (P + P.T)
         for i in range(f_kind.size):
             if f_kind[i] == STATE_CORRUPT and k == f_start[i]:
