@@ -209,6 +209,8 @@ class _Figure:
     log_y: bool = False
     caption: str = ""
     hlines: list[tuple[float, str]] = field(default_factory=list)  # (y, name)
+    y_range: tuple[float, float] | None = None  # initial view; None: autorange
+
 
 
 def _merge_spans(spans: Sequence[tuple[float, float]], min_width: float, min_gap: float) -> list:
@@ -332,7 +334,8 @@ def _figure_json(fig: _Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "height": 360,
         "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
         "xaxis": {"title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False},
-        "yaxis": {"title": {"text": fig.y_title}, "gridcolor": "#eee", "type": "log" if fig.log_y else "linear"},
+        "yaxis": {"title": {"text": fig.y_title}, "gridcolor": "#eee", "type": "log" if fig.log_y else "linear",
+                  **({"range": list(fig.y_range)} if fig.y_range else {})},
         "yaxis2": {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True},
         "legend": {"orientation": "h", "y": -0.22, "yanchor": "top"},
         "hovermode": "closest",
@@ -387,6 +390,33 @@ def _wants_log_axis(values: np.ndarray) -> bool:
     if finite.size == 0 or finite.min() <= 0:
         return False
     return bool(finite.max() / finite.min() > 1e3)
+
+
+def _judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray | None, peaks: list[float]):
+    """Initial y range for a statistic and its band, when a settling transient (warm-up, the first
+    adaptive windows) would otherwise squash the rest of the plot; None: plotly's autorange.
+
+    Covers the 0.1-99.9 percentiles of the statistic and band where a threshold is defined, and
+    every alarm's peak value; double-clicking the plot restores the full range.
+    """
+    defined = [band for band in (upper, lower) if band is not None]
+    if not defined:
+        return None
+    judged = np.logical_or.reduce([np.isfinite(band) for band in defined])
+    parts = np.concatenate([values[judged], *[band[judged] for band in defined]])
+    parts, everything = parts[np.isfinite(parts)], values[np.isfinite(values)]
+    if parts.size == 0 or everything.size == 0:
+        return None
+    lo, hi = np.percentile(parts, [0.1, 99.9])
+    finite_peaks = [p for p in peaks if math.isfinite(p)]
+    lo, hi = float(min([lo, *finite_peaks])), float(max([hi, *finite_peaks]))
+    span = hi - lo
+    full_lo = min(float(everything.min()), *(float(np.nanmin(b)) for b in defined))
+    full_hi = max(float(everything.max()), *(float(np.nanmax(b)) for b in defined))
+    if full_lo >= lo - span and full_hi <= hi + span:
+        return None  # nothing far outside: autorange shows everything well
+    pad = 0.05 * span if span > 0 else max(abs(hi), 1.0) * 0.05
+    return (lo - pad, hi + pad)
 
 
 def _detector_figures(
@@ -452,10 +482,12 @@ def _detector_figures(
             for label, band in zip(("upper threshold", "lower threshold"), bands.get(name, no_band)):
                 if band is not None:
                     traces.append(_Trace(
-                        label, band, keep, 0.5, {"line": {"color": "#d62728", "dash": "dash", "width": 1}},
+                        label, band, keep, 0.5, {"line": {"color": "rgba(214, 39, 40, 0.75)", "width": 1}},
                         varying=not _is_piecewise_flat(band),
                     ))  # fmt: skip
-            figures.append(_Figure(f"{result.detector}: {name}", name, traces, shading([name])))
+            peaks = [float(a.peak_value) for a in alarms if getattr(a, "signal", "") == name]
+            y_range = _judged_range(values, *bands.get(name, no_band), peaks)
+            figures.append(_Figure(f"{result.detector}: {name}", name, traces, shading([name]), y_range=y_range))
     figures.extend(_extra_figures(result, n, model, shading(list(series)), problems))
     return figures
 

@@ -362,3 +362,25 @@ def test_a_real_log_with_script_topic_names_shows_them_as_text(tmp_path):
     assert f"<li>/{escaped}</li>" in page  # topic list
     assert f"<td>/{escaped}/value</td>" in page  # alarm table: signal names the channel
     assert len(re.findall(r"<script\b", page, re.I)) == 4
+
+
+def test_warm_up_transient_does_not_squash_the_judged_view():
+    n = 6_000
+    t = np.arange(n) * 0.01
+    e_v = np.random.default_rng(3).normal(0.0, 0.01, n)
+    e_v[:50] = -100.0  # filter settling, before the band exists
+    band = np.where(t >= 1.0, 0.05, np.nan)
+    band[100:103] = 30.0  # the first adaptive windows are wide
+    e_v[3000:3005] = 2.0  # a fault: its peak stays in view
+    result = DetectorResult("encoded_ekf")
+    result.add_statistic(t, "e_v", e_v, upper=band, lower=-band, valid=np.isfinite(band), n_persist=3)
+    report = make_report(n, truth=False, hostile=False)
+    report.results = [result]
+    layout = figures(render_html(report, plotlyjs_src="p.js"))[0]["figure"]["layout"]
+    low, high = layout["yaxis"]["range"]
+    assert len(result.alarms) == 1
+    assert -0.2 < low < -0.05 and 2.0 < high < 2.2  # band, judged values and the alarm peak, padded
+    result.series["e_v"][:50] = 0.0  # no transient: plotly's autorange
+    result.thresholds["e_v"].upper[100:103] = 0.05
+    result.thresholds["e_v"].lower[100:103] = -0.05
+    assert "range" not in figures(render_html(report, plotlyjs_src="p.js"))[0]["figure"]["layout"]["yaxis"]
