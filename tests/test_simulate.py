@@ -1,0 +1,193 @@
+"""`logscan simulate`: closed loop per model, determinism, formats, CLI errors, filter consistency."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from logscan.align import align
+from logscan.cli.main import cli, main
+from logscan.filters.ekf import run_ekf
+from logscan.models import get_model
+from logscan.profile import load_profile, parse_profile
+from logscan.readers import read_log
+from logscan.simulate import simulate
+
+REPO = Path(__file__).resolve().parents[1]
+QUAD_HEALTHY = REPO / "sample_logs" / "quad_healthy.mcap"
+
+
+def _cli(args, tmp_path):
+    return CliRunner().invoke(cli, args, catch_exceptions=False)
+
+
+def _exit_code(args, capsys) -> tuple[int, str]:
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    return info.value.code, capsys.readouterr().err
+
+
+def _mean_nis_per_measurement(log, profile) -> tuple[float, dict]:
+    run = align(log, profile)
+    model = get_model(profile.vehicle.model, profile.vehicle.params)
+    trace = run_ekf(model, run, store_gain=False, store_S=False)
+    updated = trace.m_k > 0
+    return float(np.nansum(trace.nis[updated]) / trace.m_k[updated].sum()), trace.summary()
+
+
+def test_healthy_quadcopter_log_nis_averages_the_number_of_measurements():
+    """Acceptance (issue 3): the analysis EKF on the healthy sample log is consistent."""
+    if not QUAD_HEALTHY.exists():
+        pytest.skip("sample_logs/quad_healthy.mcap is absent (python sample_logs/make_samples.py)")
+    log = read_log(QUAD_HEALTHY)
+    ratio, summary = _mean_nis_per_measurement(log, parse_profile(log.profile_text))
+    assert abs(ratio - 1.0) < 0.10, ratio
+    assert summary["divergence_episodes"] == 0
+    assert all(n == 0 for n in summary["rejected"].values())
+
+
+@pytest.mark.parametrize("model_name", ["quadcopter", "steer_by_wire", "dc_motor"])
+def test_every_model_is_consistent_with_its_analysis_filter(model_name, tmp_path):
+    out = tmp_path / "h.mcap"
+    result = _cli(["simulate", model_name, "--duration", "40", "--seed", "5", "-q", "-o", str(out)], tmp_path)
+    assert result.exit_code == 0, result.output
+    log = read_log(out)
+    profile = parse_profile(log.profile_text)
+    profile.check_channels(log)
+    ratio, _ = _mean_nis_per_measurement(log, profile)
+    assert abs(ratio - 1.0) < 0.10, ratio
+
+
+def test_quadcopter_flies_the_figure_eight_on_its_estimate():
+    sim = simulate("quadcopter", duration=60, seed=2)
+    ref = sim.scenario.reference
+    assert np.abs(sim.x_true[:, :3] - ref[:, :3]).max() < 1.0
+    assert np.ptp(sim.x_true[:, 0]) > 4.0 and np.ptp(sim.x_true[:, 1]) > 2.0  # it did fly the eight
+    hover = sim.t < 14.0
+    assert np.abs(sim.x_true[hover, :2]).max() < 0.5
+    estimate_error = np.sqrt(np.mean((sim.x_hat - sim.x_true) ** 2, axis=0))
+    assert estimate_error[:3].max() < 0.2  # position from 10 Hz GPS + IMU
+
+
+def test_aggressive_flight_tilts_more():
+    calm = simulate("quadcopter", duration=40, seed=3)
+    wild = simulate("quadcopter", duration=40, seed=3, aggressive=True)
+    assert np.abs(wild.x_true[:, 6:8]).max() > 2 * np.abs(calm.x_true[:, 6:8]).max()
+
+
+def test_steer_by_wire_front_wheel_follows_the_hand_wheel():
+    sim = simulate("steer_by_wire", duration=40, seed=4)
+    n_theta = sim.scenario.ctrl_params[8]
+    delta_ref = sim.scenario.reference[:, 0] / n_theta
+    assert np.abs(sim.x_true[:, 0]).max() > 0.03  # lane changes were driven
+    lag = int(round(0.3 / sim.dt))  # the hand wheel PD lags its reference
+    assert np.abs(sim.x_true[lag:, 0] - delta_ref[:-lag]).max() < 0.02
+
+
+def test_dc_motor_tracks_every_speed_mode():
+    sim = simulate("dc_motor", duration=180, seed=8)
+    radius = sim.scenario.model.p["wheel_radius"]
+    command = sim.scenario.mode_values
+    assert set(np.round(np.unique(command), 3)) == {0.4, 0.7, 1.0, 1.3, 1.6, 1.9}
+    settled = np.ones(sim.n_steps, dtype=bool)
+    for change in np.flatnonzero(np.diff(command)) + 1:
+        settled[change : change + int(3.0 / sim.dt)] = False
+    speed = radius * sim.x_true[:, 1]
+    assert np.abs(speed - command)[settled].mean() < 0.05
+
+
+def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
+    paths = [tmp_path / name for name in ("a.mcap", "b.mcap", "c.mcap")]
+    for path, seed in zip(paths, ("7", "7", "8")):
+        args = ["simulate", "quadcopter", "--duration", "5", "--seed", seed,
+                "--fault", "imu-bias", "--at", "2", "-q", "-o", str(path)]
+        assert _cli(args, tmp_path).exit_code == 0
+    a, b, c = (p.read_bytes() for p in paths)
+    assert a == b
+    assert a != c
+
+
+def test_imu_bias_at_30_embeds_truth_and_profile(tmp_path):
+    out = tmp_path / "q.mcap"
+    result = _cli(["simulate", "quadcopter", "--fault", "imu-bias", "--at", "30", "-q", "-o", str(out)], tmp_path)
+    assert result.exit_code == 0, result.output
+    log = read_log(out)
+    (event,) = log.truth["events"]
+    assert event == {"kind": "bias", "target": "accel.x", "start": 30.0, "end": 40.0,
+                     "magnitude": 1.0, "channels": ["/imu/accel.x"]}
+    assert log.truth["true_state_topic"] == "/truth/state"
+    assert {"/imu/accel.x", "/imu/gyro.z", "/gps/position.x", "/attitude/yaw", "/cmd/thrust",
+            "/cmd/tau.x", "/ekf/state/vx", "/ekf/variance/vx", "/truth/state/x"} <= set(log.channels)
+    inspect = _cli(["inspect", str(out)], tmp_path)
+    assert inspect.exit_code == 0 and "ground truth: yes" in inspect.output
+
+
+def test_fault_options_apply_to_short_faults_and_colon_faults_keep_theirs(tmp_path):
+    out = tmp_path / "q.mcap"
+    args = ["simulate", "quadcopter", "--duration", "20", "-q", "-o", str(out),
+            "--fault", "drift", "--at", "5", "--fault-duration", "3", "--magnitude", "0.1",
+            "--target", "gyro.y", "--fault", "stuck:position.z:12:14"]
+    assert _cli(args, tmp_path).exit_code == 0
+    drift, stuck = read_log(out).truth["events"]
+    assert (drift["kind"], drift["target"], drift["start"], drift["end"], drift["magnitude"]) == (
+        "drift", "gyro.y", 5.0, 8.0, 0.1)
+    assert (stuck["target"], stuck["start"], stuck["end"]) == ("position.z", 12.0, 14.0)
+
+
+def test_ros2_encoding_reads_back_the_same_channels(tmp_path):
+    json_path, ros_path = tmp_path / "j.mcap", tmp_path / "r.mcap"
+    for path, fmt in ((json_path, "mcap-json"), (ros_path, "mcap-ros2")):
+        args = ["simulate", "steer_by_wire", "--duration", "5", "--format", fmt, "-q", "-o", str(path)]
+        assert _cli(args, tmp_path).exit_code == 0
+    a, b = read_log(json_path), read_log(ros_path)
+    assert set(a.channels) == set(b.channels)
+    np.testing.assert_array_equal(a.channel("/imu/yaw_rate").values, b.channel("/imu/yaw_rate").values)
+    assert a.truth == b.truth
+
+
+def test_csv_format_writes_truth_and_profile_sidecars(tmp_path):
+    out = tmp_path / "sbw.csv"
+    args = ["simulate", "steer_by_wire", "--duration", "10", "--format", "csv",
+            "--fault", "bias:steering_angle:4:6:0.01", "-q", "-o", str(out)]
+    assert _cli(args, tmp_path).exit_code == 0
+    truth = json.loads((tmp_path / "sbw.truth.json").read_text())
+    assert truth["events"][0]["channels"] == ["/steering/angle"]
+    log = read_log(out)
+    profile = load_profile(tmp_path / "sbw.profile.toml")
+    ratio, _ = _mean_nis_per_measurement(log, profile)
+    assert ratio > 1.5  # the 0.01 rad step on a 0.002 rad sensor shows in the innovations
+    assert log.truth == truth
+
+
+@pytest.mark.parametrize("args, words", [
+    (["simulate", "submarine", "-o", "x.mcap"], "cannot simulate model 'submarine'"),
+    (["simulate", "quadcopter", "--fault", "wobble", "-o", "x.mcap"], "unknown fault kind 'wobble'"),
+    (["simulate", "quadcopter", "--fault", "imu-bias", "--at", "90", "-o", "x.mcap"], "outside the log"),
+    (["simulate", "quadcopter", "--duration", "-1", "-o", "x.mcap"], "out of range"),
+    (["simulate", "quadcopter"], "no output file"),
+])
+def test_bad_requests_exit_2_with_one_line(args, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, err = _exit_code(args, capsys)
+    assert code == 2
+    assert words in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_unknown_model_error_lists_the_simulated_models(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _, err = _exit_code(["simulate", "tank", "-o", "x.mcap"], capsys)
+    assert all(name in err for name in ("quadcopter", "steer_by_wire", "dc_motor"))
+
+
+def test_help_documents_every_option():
+    result = CliRunner().invoke(cli, ["simulate", "--help"])
+    for option in ("--fault", "--at", "--fault-duration", "--magnitude", "--target", "--duration",
+                   "--seed", "--rate", "--format", "--aggressive", "--output"):
+        assert option in result.output
+    assert "logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap" in result.output
