@@ -562,3 +562,23 @@ def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
     # read_mcap takes the fast path and names channels as usual
     log = read_mcap(path, None)
     np.testing.assert_array_equal(log.channels["/fixed/pts[1].y"].values, [-float(k) for k in range(20)])
+
+
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4, CompressionType.NONE])
+@pytest.mark.parametrize("chunked", [True, False])
+def test_library_written_files_read_back_in_every_layout(tmp_path, compression, chunked):
+    path = tmp_path / "lib.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh, compression=compression, use_chunking=chunked, chunk_size=2048)
+        writer.start()
+        writer.add_metadata("logscan.profile", {"toml": "x = 1\n"})
+        schema = writer.register_schema("S", "jsonschema", b"{}")
+        channel = writer.register_channel("/v", "json", schema)
+        for k in range(300):
+            writer.add_message(channel, 1000 + k, json.dumps({"k": k, "half": k / 2}).encode(), 1000 + k)
+        writer.finish()
+    log = read_mcap(path, None)
+    assert not log.source.partial
+    np.testing.assert_array_equal(log.channels["/v/k"].values, np.arange(300))
+    np.testing.assert_array_equal(log.channels["/v/half"].t, 1000 + np.arange(300))
+    assert log.profile_text == "x = 1\n"

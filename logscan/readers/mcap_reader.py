@@ -13,8 +13,14 @@ it is non-zero; the data-section CRC in the DataEnd record is checked when non-z
 Decoding: per channel, the first factory of [JSON (``logscan.readers.json_decoder``), ROS 2 CDR
 (``mcap_ros2``), ROS 1 (``mcap_ros1``), protobuf (``mcap_protobuf``)] whose ``decoder_for``
 returns a decoder is used for all of that channel's messages. Only messages of wanted topics are
-sliced out and decoded. A channel no factory decodes (unknown encoding, schemaless non-JSON) is
-skipped and listed in ``source.skipped`` with the reason and a warning naming the topics.
+sliced out and decoded. A channel no factory decodes (unknown encoding, schemaless non-JSON, a
+schema that does not parse) is skipped and listed in ``source.skipped`` with the reason and a
+warning naming the topics. Two bulk paths give the same columns without a Python object per
+message (tests check they match the decoders exactly): ROS 2 definitions made of primitives,
+strings and fixed-size arrays are run as a layout program by a numba kernel (``_cdr_layout``),
+and JSON messages laid out like their topic's first message are matched and their numbers parsed
+in bulk (``json_decoder.json_columns``). Everything else goes through the decoder and
+``flatten.flatten_messages``.
 
 Channel names: ``<topic>/<field path>``, where the topic's trailing "/" is dropped before joining,
 so ``/imu`` + ``linear_acceleration.x`` -> ``/imu/linear_acceleration.x`` and ``imu`` + ``accel.x``
@@ -305,33 +311,30 @@ class _Scan:
 
     def _top_level(self, raw: bytes, u8: np.ndarray, top: _Records) -> None:
         ops = top.ops
-        n = ops.size
-        i = 0
-        while i < n:
-            op = int(ops[i])
+        special = np.flatnonzero(np.isin(ops, (_OP_CHUNK, _OP_DATA_END, _OP_FOOTER, _OP_METADATA)))
+        # running count of schema / channel / message records, to skip runs without any
+        content = np.concatenate([[0], np.cumsum(np.isin(ops, (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE)))])
+        run_start = 0
+        for i in special.tolist() + [ops.size]:
+            if content[i] > content[run_start]:  # top-level schema / channel / message records
+                self._container(raw, u8, ops[run_start:i], top.offsets[run_start:i],
+                                top.lengths[run_start:i], checked=False)
+            run_start = i + 1
+            if i == ops.size:
+                return
+            op, start, length = int(ops[i]), int(top.offsets[i]), int(top.lengths[i])
             if op == _OP_CHUNK:
-                self._chunk(raw, int(top.offsets[i]), int(top.lengths[i]))
-                i += 1
-                continue
-            if op == _OP_DATA_END:
-                self._data_end(raw, int(top.offsets[i]), int(top.lengths[i]))
-                return
-            if op == _OP_FOOTER:
-                return
-            if op == _OP_METADATA:
-                start = int(top.offsets[i])
-                cur = _Cursor(raw, start, start + int(top.lengths[i]))
+                self._chunk(raw, start, length)
+            elif op == _OP_METADATA:
+                cur = _Cursor(raw, start, start + length)
                 name = cur.string()
                 self.metadata[name] = cur.string_map()
                 self.unchecked_records += 1
-                i += 1
-                continue
-            # a run of top-level schema / channel / message / other records
-            j = i
-            while j < n and int(ops[j]) not in (_OP_CHUNK, _OP_DATA_END, _OP_FOOTER, _OP_METADATA):
-                j += 1
-            self._container(raw, u8, top.ops[i:j], top.offsets[i:j], top.lengths[i:j], checked=False)
-            i = j
+            elif op == _OP_DATA_END:
+                self._data_end(raw, start, length)
+                return
+            else:  # footer
+                return
 
     def _chunk(self, raw: bytes, start: int, length: int) -> None:
         cur = _Cursor(raw, start, start + length)
