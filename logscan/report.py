@@ -385,11 +385,15 @@ def _labels_for(key: str, width: int, result: Any, model: Mapping) -> list[str]:
     return [f"{key}[{i}]" for i in range(width)]
 
 
-def _wants_log_axis(values: np.ndarray) -> bool:
-    finite = values[np.isfinite(values)]
-    if finite.size == 0 or finite.min() <= 0:
+def _wants_log_axis(columns: Sequence[np.ndarray]) -> bool:
+    """True when every defined value is positive and they span more than three decades."""
+    with np.errstate(invalid="ignore"):
+        lows = [float(np.fmin.reduce(c)) for c in columns if c.size]  # fmin/fmax skip NaN
+        highs = [float(np.fmax.reduce(c)) for c in columns if c.size]
+    lows, highs = [v for v in lows if not math.isnan(v)], [v for v in highs if not math.isnan(v)]
+    if not lows or min(lows) <= 0:
         return False
-    return bool(finite.max() / finite.min() > 1e3)
+    return max(highs) / min(lows) > 1e3
 
 
 def _judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray | None, peaks: list[float]):
@@ -407,7 +411,7 @@ def _judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarra
     parts, everything = parts[np.isfinite(parts)], values[np.isfinite(values)]
     if parts.size == 0 or everything.size == 0:
         return None
-    lo, hi = np.percentile(parts, [0.1, 99.9])
+    lo, hi = np.percentile(parts[:: max(parts.size // 1_000_000, 1)], [0.1, 99.9])  # a view, not a statistic
     finite_peaks = [p for p in peaks if math.isfinite(p)]
     lo, hi = float(min([lo, *finite_peaks])), float(max([hi, *finite_peaks]))
     span = hi - lo
@@ -471,7 +475,7 @@ def _detector_figures(
         figures.append(_Figure(
             title=f"{result.detector}: statistic / threshold", y_title="statistic / threshold",
             traces=traces, spans=shading(list(series)),
-            log_y=_wants_log_axis(np.concatenate([tr.y for tr in traces])),
+            log_y=_wants_log_axis([tr.y for tr in traces]),
             caption="Each statistic divided by its threshold; above 1 is an exceedance.",
             hlines=[(1.0, "threshold")],
         ))  # fmt: skip
@@ -492,6 +496,15 @@ def _detector_figures(
     return figures
 
 
+def _columns(arr: np.ndarray, block: int = 65_536) -> np.ndarray:
+    """(N, k) -> contiguous (k, N), transposed in blocks of rows (cache-friendly: a plain
+    transposing copy of a long array is several times slower)."""
+    out = np.empty((arr.shape[1], arr.shape[0]), dtype=np.float64)
+    for start in range(0, arr.shape[0], block):
+        out[:, start : start + block] = arr[start : start + block].T
+    return out
+
+
 def _extra_figures(result: Any, n: int, model: Mapping, spans: dict, problems: list[str]) -> list[_Figure]:
     """An (N, k) extra is one figure (e.g. the coding vector, a line per state); (N,) extras
     named "<prefix>.<kind>" share one figure per kind (e.g. "nis.accel.per_dof")."""
@@ -503,7 +516,8 @@ def _extra_figures(result: Any, n: int, model: Mapping, spans: dict, problems: l
             continue
         if arr.ndim == 2:
             labels = _labels_for(key, arr.shape[1], result, model)
-            groups.setdefault(key, []).extend((labels[j], arr[:, j]) for j in range(arr.shape[1]))
+            rows = _columns(arr)
+            groups.setdefault(key, []).extend(zip(labels, rows))
         else:
             prefix, _, kind = key.rpartition(".")
             groups.setdefault(kind if prefix else key, []).append((prefix or key, arr))
@@ -517,7 +531,7 @@ def _extra_figures(result: Any, n: int, model: Mapping, spans: dict, problems: l
             )
             for j, (label, column) in enumerate(columns)
         ]  # fmt: skip
-        log_y = _wants_log_axis(np.concatenate([column for _, column in columns]))
+        log_y = _wants_log_axis([column for _, column in columns])
         figures.append(_Figure(f"{result.detector}: {kind}", kind, traces, spans, log_y=log_y))
     return figures
 
