@@ -110,8 +110,9 @@ def quad_rotation_derivatives(phi, theta, psi):
 
 
 @njit(cache=True)
-def quad_fc(p, x, u):
-    """Continuous dynamics (paper eq. 5 with Euler-angle kinematics):
+def quad_fA(p, x, u, d, A, want_A):
+    """Continuous dynamics d = f_c(x, u) (paper eq. 5 with Euler-angle kinematics) and, when
+    want_A, its Jacobian A = df_c/dx (the paper's F_k entries plus the kinematics terms):
     p_dot = v;  v_dot = R e3 T/m - g e3 - kD v/m;  eta_dot = W(phi, theta) omega;
     omega_dot = I^-1 (tau - omega x I omega)."""
     T, tx, ty, tz = quad_wrench(p, u)
@@ -123,39 +124,27 @@ def quad_fc(p, x, u):
     ct, st = np.cos(theta), np.sin(theta)
     cp, sp = np.cos(psi), np.sin(psi)
     tt = st / ct
-    d = np.empty(12)
+    a = sf * wq + cf * wr
+    b = cf * wq - sf * wr
+    Tm = T / m
     d[0] = x[3]
     d[1] = x[4]
     d[2] = x[5]
-    d[3] = T * (cp * st * cf + sp * sf) / m - kD * x[3] / m
-    d[4] = T * (sp * st * cf - cp * sf) / m - kD * x[4] / m
-    d[5] = T * (ct * cf) / m - g - kD * x[5] / m
-    d[6] = wp + (sf * wq + cf * wr) * tt
-    d[7] = cf * wq - sf * wr
-    d[8] = (sf * wq + cf * wr) / ct
+    d[3] = Tm * (cp * st * cf + sp * sf) - kD * x[3] / m
+    d[4] = Tm * (sp * st * cf - cp * sf) - kD * x[4] / m
+    d[5] = Tm * (ct * cf) - g - kD * x[5] / m
+    d[6] = wp + a * tt
+    d[7] = b
+    d[8] = a / ct
     d[9] = (tx - (Iz - Iy) * wq * wr) / Ix
     d[10] = (ty - (Ix - Iz) * wp * wr) / Iy
     d[11] = (tz - (Iy - Ix) * wp * wq) / Iz
-    return d
-
-
-@njit(cache=True)
-def quad_Ac(p, x, u):
-    """Continuous Jacobian d(quad_fc)/dx (the paper's F_k entries plus Euler kinematics)."""
-    T, tx, ty, tz = quad_wrench(p, u)
-    m, kD = p[QP_MASS], p[QP_KD]
-    Ix, Iy, Iz = p[QP_IX], p[QP_IY], p[QP_IZ]
-    phi, theta, psi = x[6], x[7], x[8]
-    wp, wq, wr = x[9], x[10], x[11]
-    cf, sf = np.cos(phi), np.sin(phi)
-    ct, st = np.cos(theta), np.sin(theta)
-    cp, sp = np.cos(psi), np.sin(psi)
-    tt = st / ct
-    A = np.zeros((12, 12))
+    if not want_A:
+        return
+    A[:, :] = 0.0
     A[0, 3] = 1.0
     A[1, 4] = 1.0
     A[2, 5] = 1.0
-    Tm = T / m
     A[3, 6] = Tm * (-cp * st * sf + sp * cf)
     A[3, 7] = Tm * (cp * ct * cf)
     A[3, 8] = Tm * (-sp * st * cf + cp * sf)
@@ -167,8 +156,6 @@ def quad_Ac(p, x, u):
     A[3, 3] = -kD / m
     A[4, 4] = -kD / m
     A[5, 5] = -kD / m
-    a = sf * wq + cf * wr
-    b = cf * wq - sf * wr
     # phi_dot = p + a tan(theta)
     A[6, 6] = b * tt
     A[6, 7] = a / (ct * ct)
@@ -191,7 +178,6 @@ def quad_Ac(p, x, u):
     A[10, 11] = -(Ix - Iz) * wp / Iy
     A[11, 9] = -(Iy - Ix) * wq / Iz
     A[11, 10] = -(Iy - Ix) * wp / Iz
-    return A
 
 
 @njit(cache=True)
@@ -239,46 +225,39 @@ def quad_H(p, gid, x, u):
 # steer-by-wire (front-wheel subsystem + single-track vehicle)
 # =============================================================================================
 @njit(cache=True)
-def sbw_fc(p, x, u):
+def sbw_fA(p, x, u, d, A, want_A):
     """Jeq d2_dd + Beq d_dot + Fs tanh(d_dot/vs) + tau_e = tau_eq, with the self-aligning torque
-    tau_e = Cf (lc + lp) (delta_f - beta - lf gamma / V); bicycle model for beta and gamma."""
+    tau_e = Cf (lc + lp) (delta_f - beta - lf gamma / V); bicycle model for beta and gamma.
+    A: the paper's section V.B Jacobian, with d tanh(d_dot/vs)/d d_dot in place of the sign's."""
     Jeq, Beq, Fs = p[SP_JEQ], p[SP_BEQ], p[SP_FS]
     Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
     lt = p[SP_LC] + p[SP_LP]
     M, Iz, V, vs = p[SP_M], p[SP_IZ], p[SP_V], p[SP_VS]
-    d, dd, beta, gamma = x[0], x[1], x[2], x[3]
-    out = np.empty(4)
-    out[0] = dd
-    tau_e = Cf * lt * (d - beta - lf * gamma / V)
-    out[1] = (u[0] - Beq * dd - Fs * np.tanh(dd / vs) - tau_e) / Jeq
-    out[2] = (-(Cf + Cr) / (M * V) * beta + (-1.0 + (Cr * lr - Cf * lf) / (M * V * V)) * gamma
-              + Cf / (M * V) * d)
-    out[3] = ((Cr * lr - Cf * lf) / Iz * beta - (Cr * lr * lr + Cf * lf * lf) / (Iz * V) * gamma
-              + Cf * lf / Iz * d)
-    return out
-
-
-@njit(cache=True)
-def sbw_Ac(p, x, u):
-    """Continuous Jacobian (paper section V.B, with d tanh(d_dot/vs)/d d_dot for Fs sign())."""
-    Jeq, Beq, Fs = p[SP_JEQ], p[SP_BEQ], p[SP_FS]
-    Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
-    lt = p[SP_LC] + p[SP_LP]
-    M, Iz, V, vs = p[SP_M], p[SP_IZ], p[SP_V], p[SP_VS]
-    th = np.tanh(x[1] / vs)
-    A = np.zeros((4, 4))
+    delta, dd, beta, gamma = x[0], x[1], x[2], x[3]
+    th = np.tanh(dd / vs)
+    a22 = -(Cf + Cr) / (M * V)
+    a23 = -1.0 + (Cr * lr - Cf * lf) / (M * V * V)
+    a32 = (Cr * lr - Cf * lf) / Iz
+    a33 = -(Cr * lr * lr + Cf * lf * lf) / (Iz * V)
+    d[0] = dd
+    tau_e = Cf * lt * (delta - beta - lf * gamma / V)
+    d[1] = (u[0] - Beq * dd - Fs * th - tau_e) / Jeq
+    d[2] = a22 * beta + a23 * gamma + Cf / (M * V) * delta
+    d[3] = a32 * beta + a33 * gamma + Cf * lf / Iz * delta
+    if not want_A:
+        return
+    A[:, :] = 0.0
     A[0, 1] = 1.0
     A[1, 0] = -Cf * lt / Jeq
     A[1, 1] = -(Beq + Fs * (1.0 - th * th) / vs) / Jeq
     A[1, 2] = Cf * lt / Jeq
     A[1, 3] = Cf * lt * lf / (Jeq * V)
     A[2, 0] = Cf / (M * V)
-    A[2, 2] = -(Cf + Cr) / (M * V)
-    A[2, 3] = -1.0 + (Cr * lr - Cf * lf) / (M * V * V)
+    A[2, 2] = a22
+    A[2, 3] = a23
     A[3, 0] = Cf * lf / Iz
-    A[3, 2] = (Cr * lr - Cf * lf) / Iz
-    A[3, 3] = -(Cr * lr * lr + Cf * lf * lf) / (Iz * V)
-    return A
+    A[3, 2] = a32
+    A[3, 3] = a33
 
 
 @njit(cache=True)
@@ -357,48 +336,80 @@ def lin_H(p, gid, x, u):
 # RK4 with its exact Jacobian, and the dispatchers
 # =============================================================================================
 @njit(cache=True)
-def cont_f(model_id, p, x, u):
+def cont_fA(model_id, p, x, u, d, A, want_A):
     if model_id == QUADCOPTER_ID:
-        return quad_fc(p, x, u)
-    return sbw_fc(p, x, u)
+        quad_fA(p, x, u, d, A, want_A)
+    else:
+        sbw_fA(p, x, u, d, A, want_A)
 
 
 @njit(cache=True)
-def cont_A(model_id, p, x, u):
-    if model_id == QUADCOPTER_ID:
-        return quad_Ac(p, x, u)
-    return sbw_Ac(p, x, u)
+def _add_sparse_product(A, D, c, out):
+    """out += c * A @ D, skipping the zeros of A (continuous Jacobians are sparse)."""
+    n = A.shape[0]
+    for i in range(n):
+        for k in range(n):
+            a = A[i, k]
+            if a != 0.0:
+                a *= c
+                for j in range(n):
+                    out[i, j] += a * D[k, j]
 
 
 @njit(cache=True)
 def rk4_predict(model_id, p, x, u, dt):
-    """One RK4 step x_next and its exact Jacobian F = d x_next / d x."""
+    """One RK4 step x_next and its exact Jacobian F = d x_next / d x.
+
+    Stages x1 = x, x2 = x + dt/2 k1, x3 = x + dt/2 k2, x4 = x + dt k3 with k_i = f_c(x_i); with
+    dk_i/dx = J_i: J1 = A(x1), J2 = A(x2) (I + dt/2 J1), J3 = A(x3) (I + dt/2 J2),
+    J4 = A(x4) (I + dt J3); x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4),
+    F = I + dt/6 (J1 + 2 J2 + 2 J3 + J4).
+    """
     n = x.size
-    I = np.eye(n)
-    k1 = cont_f(model_id, p, x, u)
-    J1 = cont_A(model_id, p, x, u)
-    x2 = x + 0.5 * dt * k1
-    k2 = cont_f(model_id, p, x2, u)
-    J2 = cont_A(model_id, p, x2, u) @ (I + 0.5 * dt * J1)  # dk2/dx
-    x3 = x + 0.5 * dt * k2
-    k3 = cont_f(model_id, p, x3, u)
-    J3 = cont_A(model_id, p, x3, u) @ (I + 0.5 * dt * J2)
-    x4 = x + dt * k3
-    k4 = cont_f(model_id, p, x4, u)
-    J4 = cont_A(model_id, p, x4, u) @ (I + dt * J3)
-    # x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4)
-    x_next = x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    F = I + (dt / 6.0) * (J1 + 2.0 * J2 + 2.0 * J3 + J4)
+    k = np.empty(n)
+    xs = np.empty(n)
+    A = np.empty((n, n))
+    J = np.empty((n, n))
+    Jn = np.empty((n, n))
+    x_next = x.copy()
+    F = np.zeros((n, n))
+    c = dt / 6.0
+    xs[:] = x
+    for stage in range(4):
+        cont_fA(model_id, p, xs, u, k, A, True)
+        w = 1.0 if stage == 0 or stage == 3 else 2.0
+        Jn[:, :] = A
+        if stage > 0:
+            _add_sparse_product(A, J, 0.5 * dt if stage < 3 else dt, Jn)
+        step = 0.5 * dt if stage < 2 else dt
+        for i in range(n):
+            x_next[i] += c * w * k[i]
+            xs[i] = x[i] + step * k[i]
+            for j in range(n):
+                F[i, j] += c * w * Jn[i, j]
+        J, Jn = Jn, J
+    for i in range(n):
+        F[i, i] += 1.0
     return x_next, F
 
 
 @njit(cache=True)
 def rk4_f(model_id, p, x, u, dt):
-    k1 = cont_f(model_id, p, x, u)
-    k2 = cont_f(model_id, p, x + 0.5 * dt * k1, u)
-    k3 = cont_f(model_id, p, x + 0.5 * dt * k2, u)
-    k4 = cont_f(model_id, p, x + dt * k3, u)
-    return x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    """The RK4 step alone (no Jacobian): the simulator's truth propagation."""
+    n = x.size
+    k = np.empty(n)
+    xs = x.copy()
+    x_next = x.copy()
+    A = np.empty((0, 0))
+    c = dt / 6.0
+    for stage in range(4):
+        cont_fA(model_id, p, xs, u, k, A, False)
+        w = 1.0 if stage == 0 or stage == 3 else 2.0
+        step = 0.5 * dt if stage < 2 else dt
+        for i in range(n):
+            x_next[i] += c * w * k[i]
+            xs[i] = x[i] + step * k[i]
+    return x_next
 
 
 @njit(cache=True)

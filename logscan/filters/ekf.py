@@ -1,0 +1,612 @@
+"""The shared EKF core: one numba kernel that filters a whole aligned run, and its trace.
+
+Every model-based detector reads the `EkfTrace` this module returns (ALGORITHMS.md section 0);
+none carries its own filter. The kernel `ekf_run` is model-agnostic: it dispatches f/F/h/H on
+(model_id, group_id) through `logscan.models.kernels`, so one cached compilation serves every model.
+
+Conventions (step k on the grid, u_k the input held at step k):
+ - k = 0: x_prior = x0, P_prior = P0 (no prediction); k > 0: x_prior = f(x_post_{k-1}, u_k).
+ - Multi-rate: only groups with a fresh sample at k are stacked into z, H, R.
+ - A fresh group whose sample is non-finite or outside the group's physical range is skipped
+   for that step as a whole and flagged in `rejected[k, g]`.
+ - Inputs: a non-finite input row is replaced by the last finite one (`input_held[k]`).
+ - Divergence (a non-positive-definite S, or a non-finite state or covariance) is flagged in
+   `diverged[k]`; the filter restarts from x0/P0 at once, and then re-seeds every state that a
+   group observes directly (z = gain * x[i]: position, attitude, gyro, encoders ...) from that
+   group's next valid sample (x[i] = z / gain, P row/column i cleared, P[i, i] = R[j, j] / gain^2),
+   instead of updating with it (`seeded[k, g]`). States no group observes directly keep x0/P0.
+   When no x0 is given, the run starts in this seeding state too.
+ - An episode of divergence is the diverged steps up to the next successful update; the trace
+   lists episodes with their step counts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from logscan.align import AlignedRun
+from logscan.errors import ModelError
+from logscan.models import kernels
+from logscan.models.base import Model
+
+
+# =============================================================================================
+# small dense linear algebra (sizes <= a few tens)
+# =============================================================================================
+@njit(cache=True)
+def _cholesky(A, m, L):
+    """Lower Cholesky factor of A[:m, :m] into L; False when A is not positive definite."""
+    for j in range(m):
+        s = A[j, j]
+        for c in range(j):
+            s -= L[j, c] * L[j, c]
+        if not (s > 0.0) or not np.isfinite(s):
+            return False
+        d = np.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, m):
+            t = A[i, j]
+            for c in range(j):
+                t -= L[i, c] * L[j, c]
+            L[i, j] = t / d
+    return True
+
+
+@njit(cache=True)
+def _forward(L, m, b):
+    """Solve L v = b (b of length >= m), in place."""
+    for i in range(m):
+        t = b[i]
+        for c in range(i):
+            t -= L[i, c] * b[c]
+        b[i] = t / L[i, i]
+
+
+@njit(cache=True)
+def _cho_solve_columns(L, m, B, ncols):
+    """Solve (L L^T) X = B[:m, :ncols] in place."""
+    for col in range(ncols):
+        for i in range(m):  # L v = b
+            t = B[i, col]
+            for c in range(i):
+                t -= L[i, c] * B[c, col]
+            B[i, col] = t / L[i, i]
+        for i in range(m - 1, -1, -1):  # L^T x = v
+            t = B[i, col]
+            for c in range(i + 1, m):
+                t -= L[c, i] * B[c, col]
+            B[i, col] = t / L[i, i]
+
+
+@njit(cache=True)
+def _mm(A, B, out, n1, n2, n3):
+    """out[:n1, :n3] = A[:n1, :n2] @ B[:n2, :n3]."""
+    for i in range(n1):
+        for j in range(n3):
+            out[i, j] = 0.0
+        for c in range(n2):
+            a = A[i, c]
+            if a != 0.0:
+                for j in range(n3):
+                    out[i, j] += a * B[c, j]
+
+
+@njit(cache=True)
+def _transpose(A, out, n1, n2):
+    """out[:n2, :n1] = A[:n1, :n2]^T."""
+    for i in range(n1):
+        for j in range(n2):
+            out[j, i] = A[i, j]
+
+
+@njit(cache=True)
+def _all_finite(a):
+    for v in a.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _wrap_angle(a):
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@njit(cache=True)
+def _restart(x, P, x0, P0, seed_done):
+    """Divergence: back to x0/P0, every direct group to be re-seeded; returns True."""
+    x[:] = x0
+    P[:, :] = P0
+    seed_done[:] = False
+    return True
+
+
+@njit(cache=True)
+def _store(k, x, P, xs, P_diag, P_full, store_P):
+    xs[k] = x
+    for i in range(x.size):
+        P_diag[k, i] = P[i, i]
+    if store_P:
+        P_full[k] = P
+
+
+# =============================================================================================
+# the kernel
+# =============================================================================================
+@njit(cache=True)
+def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_offsets,
+            group_sizes, R_all, range_lo, range_hi, wrap, direct_idx, direct_gain, dt,
+            seed_at_start,
+            x_prior, x_post, P_prior_diag, P_post_diag, P_prior_full, P_post_full,
+            y_out, S_out, S_diag_out, K_out, nis, nis_group, m_k, gain_norm,
+            updated, rejected, seeded, diverged, input_held):
+    """Filter N steps; every output array is preallocated by the caller (NaN / False filled).
+
+    P_prior_full, P_post_full, S_out, K_out are stored when their first dimension is N
+    (pass zero-length arrays to skip them).
+    """
+    N = u.shape[0]
+    n = x0.size
+    G = group_ids.size
+    m_total = z.shape[1]
+    store_P = P_prior_full.shape[0] == N
+    store_S = S_out.shape[0] == N
+    store_K = K_out.shape[0] == N
+    I = np.eye(n)
+    x = x0.copy()
+    P = P0.copy()
+    u_last = u_default.copy()
+    # direct groups: every output observes one state
+    is_direct = np.zeros(G, dtype=np.bool_)
+    for g in range(G):
+        ok = True
+        for j in range(group_offsets[g], group_offsets[g] + group_sizes[g]):
+            if direct_idx[j] < 0:
+                ok = False
+        is_direct[g] = ok
+    seed_done = np.zeros(G, dtype=np.bool_)
+    pending = seed_at_start
+    # work arrays
+    rows = np.empty(m_total, dtype=np.int64)
+    sel_g = np.empty(G, dtype=np.int64)
+    Hs = np.zeros((m_total, n))
+    hx = np.zeros(m_total)
+    y = np.zeros(m_total)
+    S = np.zeros((m_total, m_total))
+    L = np.zeros((m_total, m_total))
+    Lg = np.zeros((m_total, m_total))
+    Sg = np.zeros((m_total, m_total))
+    Rs = np.zeros((m_total, m_total))
+    KT = np.zeros((m_total, n))
+    v = np.zeros(m_total)
+    W1 = np.zeros((n, n))
+    W2 = np.zeros((n, n))
+    W3 = np.zeros((n, n))
+    HP = np.zeros((m_total, n))
+    PHt = np.zeros((n, m_total))
+    K = np.zeros((n, m_total))
+    KR = np.zeros((n, m_total))
+    IKH = np.zeros((n, n))
+    x_upd = np.zeros(n)
+
+    for k in range(N):
+        # ---- input ----------------------------------------------------------------------
+        uk = u[k]
+        if _all_finite(uk):
+            u_last[:] = uk
+        else:
+            input_held[k] = True
+            uk = u_last
+        # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
+        if k > 0:
+            x_new, F = kernels.predict(model_id, p, x, uk, dt)
+            # F P F^T = F (F P)^T  (P symmetric; _mm skips the zeros of F)
+            _mm(F, P, W1, n, n, n)
+            _transpose(W1, W2, n, n)
+            _mm(F, W2, P, n, n, n)
+            for i in range(n):
+                for j in range(n):
+                    P[i, j] += Q[i, j]
+            x[:] = x_new
+            if not (_all_finite(x) and _all_finite(P)):
+                diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
+        # ---- select the fresh, valid groups -------------------------------------------------
+        m = 0
+        ng = 0
+        for g in range(G):
+            if not fresh[k, g]:
+                continue
+            o = group_offsets[g]
+            ok = True
+            for j in range(o, o + group_sizes[g]):
+                zj = z[k, j]
+                if not np.isfinite(zj) or zj < range_lo[j] or zj > range_hi[j]:
+                    ok = False
+            if not ok:
+                rejected[k, g] = True
+                continue
+            if pending and is_direct[g] and not seed_done[g]:
+                # re-seed the directly observed states from this sample
+                for j in range(o, o + group_sizes[g]):
+                    i = direct_idx[j]
+                    gain = direct_gain[j]
+                    x[i] = z[k, j] / gain
+                    for c in range(n):
+                        P[i, c] = 0.0
+                        P[c, i] = 0.0
+                    P[i, i] = R_all[j, j] / (gain * gain)
+                seed_done[g] = True
+                seeded[k, g] = True
+                continue
+            sel_g[ng] = g
+            ng += 1
+            for j in range(o, o + group_sizes[g]):
+                rows[m] = j
+                m += 1
+        if pending:
+            still = False
+            for g in range(G):
+                if is_direct[g] and not seed_done[g]:
+                    still = True
+            pending = still
+        # ---- update -----------------------------------------------------------------------
+        if m > 0:
+            r = 0
+            for a in range(ng):
+                g = sel_g[a]
+                gid = group_ids[g]
+                Hg = kernels.H_meas(model_id, gid, p, x, uk)
+                hg = kernels.h_meas(model_id, gid, p, x, uk)
+                for j in range(group_sizes[g]):
+                    Hs[r + j, :] = Hg[j, :]
+                    hx[r + j] = hg[j]
+                r += group_sizes[g]
+            for a in range(m):
+                j = rows[a]
+                # y~ = z - h(x_prior)
+                y[a] = z[k, j] - hx[a]
+                if wrap[j]:
+                    y[a] = _wrap_angle(y[a])
+                for b in range(m):
+                    Rs[a, b] = R_all[j, rows[b]]
+            _mm(Hs, P, HP, m, n, n)  # H P (skips the zeros of H)
+            _transpose(HP, PHt, m, n)  # P H^T
+            # S = H P H^T + R
+            _mm(Hs, PHt, S, m, n, m)
+            for a in range(m):
+                for b in range(m):
+                    S[a, b] += Rs[a, b]
+            ok = _cholesky(S, m, L)
+            if ok:
+                # K = P H^T S^-1  via  S K^T = H P
+                KT[:m] = HP[:m]
+                _cho_solve_columns(L, m, KT, n)
+                for i in range(n):
+                    t = x[i]
+                    for a in range(m):
+                        K[i, a] = KT[a, i]
+                        t += KT[a, i] * y[a]
+                    x_upd[i] = t  # x_post = x_prior + K y~
+                # P = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
+                _mm(K, Hs, IKH, n, m, n)
+                for i in range(n):
+                    for j in range(n):
+                        IKH[i, j] = -IKH[i, j]
+                    IKH[i, i] += 1.0
+                _mm(IKH, P, W1, n, n, n)
+                _transpose(W1, W2, n, n)
+                _mm(IKH, W2, W3, n, n, n)  # (I-KH) ((I-KH) P)^T
+                _mm(K, Rs, KR, n, m, m)
+                for i in range(n):
+                    for j in range(i + 1):
+                        t = 0.0
+                        for a in range(m):
+                            t += KR[i, a] * K[j, a]
+                        W3[i, j] = 0.5 * (W3[i, j] + W3[j, i]) + t
+                        W3[j, i] = W3[i, j]
+                P_upd = W3
+                if _all_finite(x_upd) and _all_finite(P_upd):
+                    x[:] = x_upd
+                    P[:, :] = P_upd
+                    m_k[k] = m
+                    # NIS = y^T S^-1 y = |L^-1 y|^2
+                    v[:m] = y[:m]
+                    _forward(L, m, v)
+                    nis[k] = np.sum(v[:m] ** 2)
+                    knorm = 0.0
+                    for i in range(n):
+                        for a in range(m):
+                            knorm += K[i, a] * K[i, a]
+                    gain_norm[k] = np.sqrt(knorm)
+                    for a in range(m):
+                        j = rows[a]
+                        y_out[k, j] = y[a]
+                        S_diag_out[k, j] = S[a, a]
+                        if store_S:
+                            for b in range(m):
+                                S_out[k, j, rows[b]] = S[a, b]
+                        if store_K:
+                            for i in range(n):
+                                K_out[k, i, j] = K[i, a]
+                    # per-group NIS on the group's own block of S
+                    r = 0
+                    for a in range(ng):
+                        g = sel_g[a]
+                        mg = group_sizes[g]
+                        updated[k, g] = True
+                        Sg[:mg, :mg] = S[r:r + mg, r:r + mg]
+                        _cholesky(Sg, mg, Lg)
+                        v[:mg] = y[r:r + mg]
+                        _forward(Lg, mg, v)
+                        nis_group[k, g] = np.sum(v[:mg] ** 2)
+                        r += mg
+                else:
+                    ok = False
+            if not ok:
+                diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        _store(k, x, P, x_post, P_post_diag, P_post_full, store_P)
+
+
+# =============================================================================================
+# trace and wrapper
+# =============================================================================================
+@dataclass
+class DivergenceEpisode:
+    """Diverged steps up to the next successful update (first step, last step, count)."""
+
+    start_step: int
+    end_step: int
+    n_steps: int
+    t_start: float
+    t_end: float
+
+
+@dataclass
+class EkfTrace:
+    """Per-step output of the shared EKF (N grid steps, n states, G groups, m_total = sum m_g).
+
+    Group g's measurement columns are `group_offsets[g] : group_offsets[g] + group_sizes[g]`
+    (`group_slice(name)`). Arrays with NaN mean "not updated at this step".
+    """
+
+    model_name: str
+    state_names: list[str]
+    group_names: list[str]
+    group_offsets: np.ndarray  # (G,) int
+    group_sizes: np.ndarray  # (G,) int
+    t: np.ndarray  # (N,)
+    dt: float
+    x_prior: np.ndarray  # (N, n)
+    x_post: np.ndarray  # (N, n)
+    P_prior_diag: np.ndarray  # (N, n)
+    P_post_diag: np.ndarray  # (N, n)
+    y: np.ndarray  # (N, m_total) innovation z - h(x_prior), NaN where not updated
+    S_diag: np.ndarray  # (N, m_total) diagonal of S, NaN where not updated
+    nis: np.ndarray  # (N,) y^T S^-1 y over the stacked update, NaN without update
+    nis_group: np.ndarray  # (N, G) y_g^T S_gg^-1 y_g per group, NaN where not updated
+    m_k: np.ndarray  # (N,) int, measurements in the update (0: none)
+    gain_norm: np.ndarray  # (N,) Frobenius norm of K, NaN without update
+    updated: np.ndarray  # (N, G) bool, group used in the update
+    rejected: np.ndarray  # (N, G) bool, fresh sample non-finite or outside the physical range
+    seeded: np.ndarray  # (N, G) bool, sample used to (re-)seed directly observed states
+    diverged: np.ndarray  # (N,) bool, divergence detected at this step (filter restarted)
+    input_held: np.ndarray  # (N,) bool, non-finite input replaced by the last finite one
+    Q: np.ndarray  # (n, n) process noise used
+    R: np.ndarray  # (m_total, m_total) block-diagonal measurement noise used
+    P_prior: np.ndarray | None = None  # (N, n, n) when full_P
+    P_post: np.ndarray | None = None  # (N, n, n) when full_P
+    S: np.ndarray | None = None  # (N, m_total, m_total) padded with NaN, when store_S
+    K: np.ndarray | None = None  # (N, n, m_total) padded with NaN, when store_gain
+    divergence_episodes: list[DivergenceEpisode] = field(default_factory=list)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.t.size)
+
+    def group_index(self, name: str) -> int:
+        try:
+            return self.group_names.index(name)
+        except ValueError:
+            raise ModelError(
+                f"the trace has no group {name!r}", hint="groups: " + ", ".join(self.group_names)
+            ) from None
+
+    def group_slice(self, name: str) -> slice:
+        g = self.group_index(name)
+        o = int(self.group_offsets[g])
+        return slice(o, o + int(self.group_sizes[g]))
+
+    def summary(self) -> dict:
+        """JSON-ready counts: updates, rejections and seeds per group, divergence, mean NIS."""
+        with np.errstate(invalid="ignore"):
+            mean_nis = {
+                g: (float(np.nanmean(self.nis_group[:, i])) if self.updated[:, i].any() else None)
+                for i, g in enumerate(self.group_names)
+            }
+        return {
+            "steps": self.n_steps,
+            "updates": dict(zip(self.group_names, self.updated.sum(axis=0).tolist())),
+            "rejected": dict(zip(self.group_names, self.rejected.sum(axis=0).tolist())),
+            "seeded": dict(zip(self.group_names, self.seeded.sum(axis=0).tolist())),
+            "inputs_held": int(self.input_held.sum()),
+            "divergence_episodes": len(self.divergence_episodes),
+            "diverged_steps": int(self.diverged.sum()),
+            "mean_nis": mean_nis,
+        }
+
+
+def divergence_episodes(t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray) -> list[DivergenceEpisode]:
+    """Group diverged steps into episodes: an episode ends at the next successful update."""
+    steps = np.flatnonzero(diverged)
+    if steps.size == 0:
+        return []
+    successes = np.cumsum((m_k > 0) & ~diverged)
+    new = np.ones(steps.size, dtype=bool)
+    new[1:] = successes[steps[1:]] > successes[steps[:-1]]
+    starts = np.flatnonzero(new)
+    ends = np.append(starts[1:], steps.size) - 1
+    return [
+        DivergenceEpisode(int(steps[a]), int(steps[b]), int(b - a + 1), float(t[steps[a]]),
+                          float(t[steps[b]]))
+        for a, b in zip(starts, ends)
+    ]
+
+
+@dataclass
+class KernelInputs:
+    """The packed arrays `ekf_run` reads (built by `pack_run`; the reference filter uses them too)."""
+
+    model_id: int
+    p: np.ndarray
+    x0: np.ndarray
+    P0: np.ndarray
+    Q: np.ndarray
+    u: np.ndarray
+    u_default: np.ndarray
+    z: np.ndarray
+    fresh: np.ndarray
+    group_names: list[str]
+    group_ids: np.ndarray
+    group_offsets: np.ndarray
+    group_sizes: np.ndarray
+    R_all: np.ndarray
+    range_lo: np.ndarray
+    range_hi: np.ndarray
+    wrap: np.ndarray
+    direct_idx: np.ndarray
+    direct_gain: np.ndarray
+    dt: float
+    seed_at_start: bool
+
+
+def _square(name: str, value, size: int) -> np.ndarray:
+    M = np.asarray(value, dtype=np.float64)
+    if M.ndim == 1 and M.size == size:
+        M = np.diag(M)
+    if M.shape != (size, size):
+        raise ModelError(f"{name} must be {size} x {size} (or a diagonal of {size}), got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        raise ModelError(f"{name} has non-finite entries")
+    return M
+
+
+def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) -> KernelInputs:
+    """Check the run against the model and pack it into the kernel's arrays.
+
+    R: None (each group's profile noise_std, else the model's default_R), or a dict
+    group -> (m, m) matrix or (m,) standard deviations.
+    """
+    n = model.n_states
+    N = run.n_steps
+    u = np.ascontiguousarray(run.u, dtype=np.float64)
+    if u.ndim != 2 or u.shape != (N, model.n_inputs):
+        raise ModelError(
+            f"model {model.name!r} takes {model.n_inputs} inputs ({', '.join(model.input_names)}) "
+            f"but the run has inputs of shape {u.shape} for {N} steps",
+            hint="map every model input to a log channel in the profile's [inputs]",
+        )
+    if not run.groups:
+        raise ModelError("the run has no measurement groups: the filter has nothing to update with")
+    names = list(run.groups)
+    specs = [model.group(g) for g in names]
+    sizes = np.array([s.size for s in specs], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    m_total = int(sizes.sum())
+    z = np.empty((N, m_total))
+    fresh = np.zeros((N, len(names)), dtype=np.bool_)
+    R_all = np.zeros((m_total, m_total))
+    R = dict(R or {})
+    for g, (name, spec) in enumerate(zip(names, specs)):
+        grp = run.groups[name]
+        zg = np.asarray(grp.z, dtype=np.float64)
+        if zg.ndim == 1:
+            zg = zg[:, None]
+        if zg.shape != (N, spec.size):
+            raise ModelError(
+                f"group {name!r}: {zg.shape[1] if zg.ndim == 2 else '?'} channels, the model's "
+                f"group has {spec.size} ({', '.join(spec.outputs)})",
+                hint="list one channel per model output in the profile",
+            )
+        o = offsets[g]
+        z[:, o:o + spec.size] = zg
+        fresh[:, g] = np.asarray(grp.fresh, dtype=bool)
+        if name in R:
+            Rg = _square(f"R[{name}]", np.square(R[name]) if np.ndim(R[name]) == 1 else R[name], spec.size)
+        elif grp.noise_std is not None:
+            Rg = np.diag(np.square(np.broadcast_to(np.asarray(grp.noise_std, float), (spec.size,))))
+        else:
+            Rg = model.default_R(name)
+        R_all[o:o + spec.size, o:o + spec.size] = Rg
+    unknown_R = sorted(set(R) - set(names))
+    if unknown_R:
+        raise ModelError(f"R given for group(s) not in the run: {', '.join(unknown_R)}")
+    seed = x0 is None
+    x0 = model.default_x0() if x0 is None else np.asarray(x0, dtype=np.float64).reshape(-1)
+    if x0.size != n or not np.all(np.isfinite(x0)):
+        raise ModelError(f"x0 must hold {n} finite values")
+    P0 = model.default_P0() if P0 is None else _square("P0", P0, n)
+    Q = model.default_Q(run.dt) if Q is None else _square("Q", Q, n)
+    finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))
+    u_default = u[finite_rows[0]].copy() if finite_rows.size else np.zeros(model.n_inputs)
+    direct = [s.direct_map() for s in specs]
+    return KernelInputs(
+        model_id=int(model.model_id),
+        p=np.ascontiguousarray(model.param_vector(run.dt), dtype=np.float64),
+        x0=np.ascontiguousarray(x0), P0=np.ascontiguousarray(P0), Q=np.ascontiguousarray(Q),
+        u=u, u_default=u_default, z=z, fresh=fresh, group_names=names,
+        group_ids=np.array([s.group_id for s in specs], dtype=np.int64),
+        group_offsets=offsets, group_sizes=sizes, R_all=R_all,
+        range_lo=np.concatenate([np.asarray(s.range_lo, float) for s in specs]),
+        range_hi=np.concatenate([np.asarray(s.range_hi, float) for s in specs]),
+        wrap=np.concatenate([s.wrap_mask() for s in specs]),
+        direct_idx=np.concatenate([d[0] for d in direct]),
+        direct_gain=np.concatenate([d[1] for d in direct]),
+        dt=float(run.dt), seed_at_start=seed,
+    )
+
+
+def run_ekf(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, full_P=False,
+            store_gain=True, store_S=True) -> EkfTrace:
+    """Filter the aligned run with the model; see the module docstring for the conventions.
+
+    Memory: the full P, S and K add N*n*n, N*m*m and N*n*m float64 (a 1 h 100 Hz quadcopter log:
+    415 MB each); `store_gain=False` / `store_S=False` drop K / S (the trace keeps y, S_diag, NIS
+    and the gain norm), `full_P` adds P_prior and P_post.
+    """
+    k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0)
+    N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
+    nan = np.nan
+    out = dict(
+        x_prior=np.full((N, n), nan), x_post=np.full((N, n), nan),
+        P_prior_diag=np.full((N, n), nan), P_post_diag=np.full((N, n), nan),
+        P_prior_full=np.full((N if full_P else 0, n, n), nan),
+        P_post_full=np.full((N if full_P else 0, n, n), nan),
+        y_out=np.full((N, m), nan), S_out=np.full((N if store_S else 0, m, m), nan),
+        S_diag_out=np.full((N, m), nan), K_out=np.full((N if store_gain else 0, n, m), nan),
+        nis=np.full(N, nan), nis_group=np.full((N, G), nan), m_k=np.zeros(N, dtype=np.int64),
+        gain_norm=np.full(N, nan), updated=np.zeros((N, G), dtype=np.bool_),
+        rejected=np.zeros((N, G), dtype=np.bool_), seeded=np.zeros((N, G), dtype=np.bool_),
+        diverged=np.zeros(N, dtype=np.bool_), input_held=np.zeros(N, dtype=np.bool_),
+    )
+    if N:
+        ekf_run(k.model_id, k.p, k.x0, k.P0, k.Q, k.u, k.u_default, k.z, k.fresh, k.group_ids,
+                k.group_offsets, k.group_sizes, k.R_all, k.range_lo, k.range_hi, k.wrap,
+                k.direct_idx, k.direct_gain, k.dt, k.seed_at_start, **out)
+    t = np.asarray(run.t, dtype=np.float64)
+    return EkfTrace(
+        model_name=model.name, state_names=list(model.state_names), group_names=k.group_names,
+        group_offsets=k.group_offsets, group_sizes=k.group_sizes, t=t, dt=k.dt,
+        x_prior=out["x_prior"], x_post=out["x_post"], P_prior_diag=out["P_prior_diag"],
+        P_post_diag=out["P_post_diag"], y=out["y_out"], S_diag=out["S_diag_out"],
+        nis=out["nis"], nis_group=out["nis_group"], m_k=out["m_k"], gain_norm=out["gain_norm"],
+        updated=out["updated"], rejected=out["rejected"], seeded=out["seeded"],
+        diverged=out["diverged"], input_held=out["input_held"], Q=k.Q, R=k.R_all,
+        P_prior=out["P_prior_full"] if full_P else None,
+        P_post=out["P_post_full"] if full_P else None,
+        S=out["S_out"] if store_S else None, K=out["K_out"] if store_gain else None,
+        divergence_episodes=divergence_episodes(t, out["diverged"], out["m_k"]),
+    )
