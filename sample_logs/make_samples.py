@@ -26,6 +26,7 @@ class Sample:
     duration: float
     fmt: str = "mcap-json"
     about: str = ""
+    glitches: float = 0.0  # healthy transients per minute (`--glitches`)
 
 
 SAMPLES = (
@@ -43,8 +44,10 @@ SAMPLES = (
            about="lane changes at 10 m/s; no fault"),
     Sample("sbw_yaw_rate_bitflip.mcap", "steer_by_wire", ("bitflip:yaw_rate:30:31.2:1.0",), 7, 60.0,
            about="1.2 s burst of bit flips on the yaw-rate sensor"),
-    Sample("jackal_healthy.mcap", "dc_motor", (), 8, 180.0,
-           about="PI speed control through the modes 0.4 .. 1.9 m/s (20 s each); no fault"),
+    Sample("jackal_healthy.mcap", "dc_motor", (), 8, 180.0, glitches=2.0,
+           about="PI speed control through the modes 0.4 .. 1.9 m/s (20 s each); no fault, "
+           "~2 healthy one- or two-sample glitches per minute on the speed sensors (truth "
+           "`transients`)"),
     Sample("quad_healthy.csv", "quadcopter", (), 9, 60.0, fmt="csv",
            about="wide CSV + quad_healthy.truth.json + quad_healthy.profile.toml"),
 )
@@ -55,7 +58,7 @@ def generate(sample: Sample, out_dir: Path) -> list[Path]:
     from logscan.simulate import parse_fault, simulate, write_simulation
 
     sim = simulate(sample.model, [parse_fault(f) for f in sample.faults],
-                   duration=sample.duration, seed=sample.seed)
+                   duration=sample.duration, seed=sample.seed, glitches_per_min=sample.glitches)
     return write_simulation(sim, out_dir / sample.name, sample.fmt)
 
 

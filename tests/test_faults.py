@@ -162,3 +162,23 @@ def test_state_corruption_shifts_the_estimate_once_and_the_vehicle_reacts(health
     assert sim.x_hat[k, 0] - healthy.x_hat[k, 0] == pytest.approx(2.0, abs=1e-9)
     # the controller flew on the corrupted estimate: the true position moved away
     assert np.abs(sim.x_true[k:, 0] - healthy.x_true[k:, 0]).max() > 0.5
+
+
+def test_glitches_are_healthy_transients_not_fault_events():
+    sim = simulate("dc_motor", duration=120, seed=3, glitches_per_min=3.0)
+    truth = sim.truth()
+    assert truth["events"] == []
+    assert len(truth["transients"]) >= 2
+    redundant = set(sim.scenario.redundant["speed"].values())
+    radius = sim.scenario.model.p["wheel_radius"]
+    slices = sim.group_slices()
+    for glitch in truth["transients"]:
+        assert glitch["kind"] == "glitch" and glitch["channels"][0] in redundant
+        assert 0 < glitch["end"] - glitch["start"] <= 0.2 + 1e-9
+        group = "gps_speed" if glitch["target"] == "gps_speed" else "encoder"
+        col = slices[group].start + (glitch["target"] == "encoder.v_right")
+        k = int(np.ceil(glitch["start"] / sim.dt - 1e-9))
+        k += -k % sim.scenario.groups[list(slices).index(group)].ratio  # first sample in the window
+        residual = sim.z[k, col] - radius * sim.x_true[k, 1]
+        std = sim.scenario.groups[list(slices).index(group)].noise_std[0]
+        assert residual == pytest.approx(glitch["magnitude"], abs=4 * std)

@@ -21,7 +21,7 @@ _FAULT_HELP = (
     "  logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap\n\n"
     "  logscan simulate quadcopter --fault imu-bitflip --at 20 --fault motor-offset:motor2:40:50 -o q.mcap\n\n"
     "  logscan simulate steer_by_wire --fault bias:yaw_rate.gamma:10:20:0.05 --format csv -o sbw.csv\n\n"
-    "  logscan simulate dc_motor --duration 600 --seed 3 -o jackal.mcap"
+    "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap"
 )
 @click.argument("model_name", metavar="MODEL")
 @click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
@@ -42,11 +42,15 @@ _FAULT_HELP = (
               help="MCAP (truth + profile embedded) or CSV (+ <log>.truth.json, <log>.profile.toml).")
 @click.option("--aggressive", is_flag=True, default=False,
               help="Faster, larger manoeuvres (for false-alarm testing).")
+@click.option("--glitches", "glitches_per_min", type=float, default=0.0, show_default=True,
+              metavar="PER_MIN",
+              help="Healthy transients per minute: 1-2 sample spikes on a sensor (the redundant "
+              "speed sensors for dc_motor), listed in the truth as 'transients', not as faults.")
 @seed_option
 @quiet_option
 @output_option
 def simulate(model_name, faults, at, fault_duration, magnitude, target, duration, rate_hz, fmt,
-             aggressive, seed, quiet, output_path) -> None:
+             aggressive, glitches_per_min, seed, quiet, output_path) -> None:
     """Simulate MODEL in closed loop with injected faults and write the log.
 
     MODEL is quadcopter, steer_by_wire or dc_motor. The log holds commands (/cmd), sensors, the
@@ -71,7 +75,7 @@ def simulate(model_name, faults, at, fault_duration, magnitude, target, duration
     if progress:
         click.echo(f"simulating {model_name} for {duration:g} s ...", err=True)
     sim = run_simulation(model_name, specs, duration=duration, seed=seed, rate_hz=rate_hz,
-                         aggressive=aggressive)
+                         aggressive=aggressive, glitches_per_min=glitches_per_min)
     if progress:
         click.echo(f"simulated {sim.n_steps} steps in {sim.elapsed_s:.2f} s; writing {output_path}",
                    err=True)

@@ -10,7 +10,7 @@ with sample indices on the grid; `logscan.simulate.output` writes it as MCAP or 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -58,6 +58,7 @@ class Simulation:
     P_diag: np.ndarray  # (N, n) on-board variance as LOGGED (after cov-corruption)
     rejected: int  # sensor samples the on-board EKF skipped
     elapsed_s: float
+    transients: list[FaultEvent] = field(default_factory=list)  # healthy glitches, not faults
 
     @property
     def dt(self) -> float:
@@ -129,6 +130,7 @@ class Simulation:
             "aggressive": self.aggressive,
             "controller_input": "on-board EKF estimate",
             "events": [e.to_json() for e in self.events],
+            "transients": [dict(e.to_json(), kind="glitch") for e in self.transients],
             "true_state_topic": "/truth/state",
             "true_state_fields": list(sc.model.state_names),
             "onboard_rejected_samples": int(self.rejected),
@@ -167,6 +169,29 @@ class Simulation:
         return dumps_toml(self.profile_dict())
 
 
+def _glitches(sc: Scenario, duration: float, per_min: float, rng: np.random.Generator) -> list[FaultSpec]:
+    """Healthy transients as one- or two-sample bias specs (see `simulate`)."""
+    count = rng.poisson(per_min * duration / 60.0) if per_min > 0 else 0
+    if count == 0:
+        return []
+    redundant = {ch for group in sc.redundant.values() for ch in group.values()}
+    channels = [
+        (ch, g.noise_std[j], g.ratio * sc.dt)
+        for g in sc.groups for j, ch in enumerate(g.channels)
+        if not redundant or ch in redundant
+    ]
+    picks = rng.integers(0, len(channels), size=count)
+    starts = np.sort(rng.uniform(1.0, max(duration - 1.0, 1.0), size=count))
+    sizes = rng.uniform(3.0, 8.0, size=count) * rng.choice([-1.0, 1.0], size=count)
+    lengths = rng.integers(1, 3, size=count)
+    out = []
+    for pick, start, size, length in zip(picks.tolist(), starts.tolist(), sizes.tolist(), lengths.tolist()):
+        channel, std, period = channels[pick]
+        out.append(FaultSpec("bias", channel, round(start, 3), round(start + length * period, 3),
+                             round(float(size * std), 6)))
+    return out
+
+
 def _split(channel: str, values: np.ndarray) -> tuple[str, dict[str, np.ndarray]]:
     topic, _, field_name = channel.rpartition("/")
     return topic, {field_name: values}
@@ -181,24 +206,36 @@ def simulate(
     rate_hz: float | None = None,
     aggressive: bool = False,
     params: dict | None = None,
+    glitches_per_min: float = 0.0,
 ) -> Simulation:
-    """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``."""
+    """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``.
+
+    ``glitches_per_min`` adds healthy transients (ALGORITHMS.md section 6): one- or two-sample
+    spikes of 3-8 noise standard deviations on a random sensor channel (the redundant group's
+    when the model has one), Poisson in time. They are listed in the truth as ``transients``, not
+    as fault ``events``: a detector should tolerate them.
+    """
     if not (0.0 < duration <= MAX_DURATION_S):
         raise UsageError(f"--duration {duration:g} s is out of range", hint="use 0 < duration <= 86400 s")
     if seed < 0:
         raise UsageError(f"--seed {seed} is negative", hint="use a seed >= 0")
+    if not (0.0 <= glitches_per_min <= 600.0):
+        raise UsageError(f"--glitches {glitches_per_min:g} per minute is out of range", hint="use 0 .. 600")
     rng = np.random.default_rng(seed)
     sc = build_scenario(model_name, duration, rate_hz, aggressive, np.random.default_rng([seed, 1]), params)
     n_steps = sc.reference.shape[0]
     sensor_channels = [
         (target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)
     ]
+    faults = list(faults or [])
+    glitches = _glitches(sc, duration, glitches_per_min, np.random.default_rng([seed, 3]))
     events, table = resolve_faults(
-        list(faults or []), duration=duration, dt=sc.dt, sensor_channels=sensor_channels,
+        faults + glitches, duration=duration, dt=sc.dt, sensor_channels=sensor_channels,
         imu_default=sc.imu_default, actuators=sc.actuators, state_names=sc.model.state_names,
         estimator_fields={s: f"/ekf/variance/{s}" for s in sc.model.state_names},
         rng=np.random.default_rng([seed, 2]),
     )
+    events, transients = events[: len(faults)], events[len(faults) :]
     # cov-corruption's channels name the logged variance; state-corruption the logged state
     events = [
         e if e.kind != "state-corruption"
@@ -235,6 +272,7 @@ def simulate(
     elapsed = time.perf_counter() - started
     return Simulation(
         scenario=sc, seed=seed, duration=duration, aggressive=aggressive, events=events,
+        transients=transients,
         faults=table, x_true=x_true, u_cmd=u_cmd, u_act=u_act, z=z, x_hat=x_hat,
         P_diag=corrupt_logged_variance(P_diag, table), rejected=int(rejected), elapsed_s=elapsed,
     )
