@@ -1,0 +1,80 @@
+"""`logscan evaluate`: detection rate, precision/recall/F1, latency and false alarms against ground truth."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from logscan.cli.options import header_stamp_option, json_option, profile_option, quiet_option, show_progress
+from logscan.errors import InputError
+from logscan.scoring import DEFAULT_GRACE_S
+
+
+@click.command(
+    epilog="Examples:\n\n"
+    "  logscan evaluate sample_logs/\n\n"
+    "  logscan evaluate runs/*.mcap --detector nis --json eval.json\n\n"
+    "  logscan evaluate sample_logs/ --grace 0.5"
+)
+@click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
+@json_option
+@click.option(
+    "--grace", "grace_s", type=click.FloatRange(min=0.0), default=DEFAULT_GRACE_S, show_default=True,
+    help="Seconds after a fault's end during which an alarm still counts as detecting it.",
+)
+@click.option(
+    "--detector", "-d", "detector_names", multiple=True,
+    help="Evaluate only this detector (repeatable). Default: those each log's profile enables.",
+)
+@profile_option
+@header_stamp_option
+@quiet_option
+def evaluate(
+    log_paths: tuple[str, ...],
+    json_path: str | None,
+    grace_s: float,
+    detector_names: tuple[str, ...],
+    profile_path: str | None,
+    use_header_stamp: bool,
+    quiet: bool,
+) -> None:
+    """Score the detectors against the ground truth of each LOG (ALGORITHMS.md section 7).
+
+    Runs the analysis on every log that carries ground truth (logs written by `logscan simulate`
+    do; others are skipped and listed), matches alarms to fault events, and prints per detector
+    and per check (encoded e_x with the rejected-sample checks, e_v, NIS per sensor group and
+    overall): TP/FN/FP, precision, recall, F1, mean/max latency and false alarms per hour on the
+    healthy logs (those without fault events), then the detection rate and latency per fault kind.
+    A log that cannot be analysed is reported as one line. Exit code: 0, or 2 when a log could not
+    be analysed or none has ground truth.
+    """
+    from logscan.cli.analyze_cmd import expand_logs
+    from logscan.evaluate import evaluate_logs, render_evaluation
+
+    logs = expand_logs(log_paths)
+    progress = show_progress(quiet)
+
+    def step(path: str) -> None:
+        if progress:
+            click.echo(f"logscan: evaluating {path}...", err=True)
+
+    evaluation = evaluate_logs(
+        logs, profile_path=profile_path, detector_names=list(detector_names) or None,
+        grace_s=grace_s, use_header_stamp=use_header_stamp, progress=step,
+    )
+    if json_path:
+        from logscan import __version__
+        from logscan.artifacts import write_json
+
+        write_json(json_path, {"logscan_version": __version__, **evaluation.to_dict()})
+    if json_path != "-":
+        click.echo(render_evaluation(evaluation))
+    for failure in evaluation.failures:
+        click.echo(f"logscan: error: {failure.message}", err=True)
+    if not evaluation.logs and not evaluation.failures:
+        raise InputError(
+            f"none of the {len(logs)} log(s) has ground truth",
+            hint="evaluate logs written by `logscan simulate` (fault events embedded) or a CSV with <log>.truth.json",
+        )
+    sys.exit(2 if evaluation.failures else 0)
