@@ -32,6 +32,7 @@ _COMMANDS = [
     "logscan.cli.analyze_cmd:analyze",
     "logscan.cli.simulate_cmd:simulate",
     "logscan.cli.detectors_cmd:detectors",
+    "logscan.cli.evaluate_cmd:evaluate",
 ]
 
 
