@@ -191,3 +191,16 @@ def test_help_documents_every_option():
                    "--seed", "--rate", "--format", "--aggressive", "--output"):
         assert option in result.output
     assert "logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap" in result.output
+
+
+def test_every_help_example_runs(tmp_path, monkeypatch):
+    from logscan.cli.simulate_cmd import simulate as command
+
+    monkeypatch.chdir(tmp_path)
+    examples = [line.strip() for line in command.epilog.splitlines() if line.strip().startswith("logscan ")]
+    assert len(examples) >= 3
+    for example in examples:
+        args = example.split()[1:] + ["-q"]
+        result = CliRunner().invoke(cli, args, catch_exceptions=False)
+        assert result.exit_code == 0, (example, result.output)
+        assert (tmp_path / args[args.index("-o") + 1]).stat().st_size > 0

@@ -20,7 +20,7 @@ _FAULT_HELP = (
     epilog="Examples:\n\n"
     "  logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap\n\n"
     "  logscan simulate quadcopter --fault imu-bitflip --at 20 --fault motor-offset:motor2:40:50 -o q.mcap\n\n"
-    "  logscan simulate steer_by_wire --fault bias:yaw_rate.gamma:10:20:0.05 --format csv -o sbw.csv\n\n"
+    "  logscan simulate steer_by_wire --fault bias:yaw_rate:10:20:0.05 --format csv -o sbw.csv\n\n"
     "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap"
 )
 @click.argument("model_name", metavar="MODEL")
