@@ -204,3 +204,15 @@ def test_every_help_example_runs(tmp_path, monkeypatch):
         result = CliRunner().invoke(cli, args, catch_exceptions=False)
         assert result.exit_code == 0, (example, result.output)
         assert (tmp_path / args[args.index("-o") + 1]).stat().st_size > 0
+
+
+def test_output_suffix_csv_selects_the_csv_format(tmp_path):
+    out = tmp_path / "d.csv"
+    assert _cli(["simulate", "dc_motor", "--duration", "5", "-q", "-o", str(out)], tmp_path).exit_code == 0
+    assert out.read_text().startswith("time_ns,")
+    assert (tmp_path / "d.truth.json").exists() and (tmp_path / "d.profile.toml").exists()
+
+
+def test_output_that_is_a_directory_is_a_usage_error(capsys, tmp_path):
+    code, err = _exit_code(["simulate", "dc_motor", "-o", str(tmp_path)], capsys)
+    assert code == 2 and "directory" in err

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from logscan.cli.options import output_option, quiet_option, seed_option, show_progress
@@ -38,8 +40,9 @@ _FAULT_HELP = (
 @click.option("--rate", "rate_hz", type=float, default=None,
               help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20.")
 @click.option("--format", "fmt", type=click.Choice(["mcap-json", "mcap-ros2", "csv"]),
-              default="mcap-json", show_default=True,
-              help="MCAP (truth + profile embedded) or CSV (+ <log>.truth.json, <log>.profile.toml).")
+              default=None,
+              help="MCAP (truth + profile embedded) or CSV (+ <log>.truth.json, <log>.profile.toml). "
+              "Default: csv for an output ending in .csv, else mcap-json.")
 @click.option("--aggressive", is_flag=True, default=False,
               help="Faster, larger manoeuvres (for false-alarm testing).")
 @click.option("--glitches", "glitches_per_min", type=float, default=0.0, show_default=True,
@@ -63,6 +66,10 @@ def simulate(model_name, faults, at, fault_duration, magnitude, target, duration
 
     if not output_path:
         raise UsageError("no output file", hint="give -o OUT (e.g. -o q.mcap)")
+    if Path(output_path).is_dir():
+        raise UsageError("the output is a directory", path=output_path, hint="give a file name, e.g. -o q.mcap")
+    if fmt is None:
+        fmt = "csv" if output_path.lower().endswith(".csv") else "mcap-json"
     specs = []
     for text in faults:
         spec = parse_fault(text)
