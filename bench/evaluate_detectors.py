@@ -1,0 +1,307 @@
+"""Detection rate, latency and false alarms of the encoded EKF checks vs. the baseline, e_v and NIS (issue 4).
+
+The evaluation behind docs/evaluation.md, in the layout of the encoded-EKF paper's Table III:
+fresh simulated runs per fault family and model, methods side by side:
+
+  A  time-varying encoded state check: e_x with the adaptive band mu +- rho s, together with the
+     rejected-sample checks (`rejected.<group>`) of the same detector (default settings);
+  B  the paper's reference [15]: constant coding vector CV_0 and a fixed threshold = max |e_x| over
+     10 separate healthy training runs x margin 1.0 (`variant = "baseline"`, trained with `fit`);
+     e_x only, as in [15];
+  C  the variance check e_v (on-board covariance mode: the simulated logs carry /ekf/variance);
+  D  the innovation chi-square test (NIS), any group or the overall test;
+plus supplementary rows (A's e_x alone, the rejected-sample check alone, B with the
+rejected-sample checks as the baseline-configured detector reports them, and "any alarm" of
+`logscan analyze`'s default detectors).
+
+Every run is 60 s, one fault starting at a uniform time in [20, 40) s (drawn from the run's seed)
+with the family's default target, magnitude and length (`logscan simulate --help`); false alarms
+per hour come from healthy runs (normal and `--aggressive`). Seeds (none used by
+sample_logs/make_samples.py or the tests; nothing was tuned on them):
+
+  quadcopter fault runs      1000 + 100 * family index + run      (1000 .. 1819)
+  steer_by_wire fault runs   2000 + 100 * family index + run      (2000 .. 2819)
+  healthy                    quadcopter 3000.., aggressive 3100..; steer_by_wire 3200.., aggressive 3300..
+  baseline training          quadcopter 4000 .. 4009, steer_by_wire 4100 .. 4109 (healthy, normal)
+
+Runs go through the Python API (simulate -> MCAP (ROS 2 CDR) in a temporary directory ->
+`analyze_log`, the same reader and pipeline as `logscan analyze`) in a process pool.
+
+    python bench/evaluate_detectors.py                     # 20 runs per family, 2 processes
+    python bench/evaluate_detectors.py --runs 3 --json /tmp/eval.json    # a quick look
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+import numpy as np
+
+DURATION_S = 60.0
+START_RANGE_S = (20.0, 40.0)
+GRACE_S = 1.0
+MARGIN = 1.0
+N_TRAIN = 10
+
+# (family label, `--fault` kind) per model; targets, magnitudes and lengths are the kinds' defaults
+FAMILIES = {
+    "quadcopter": [
+        ("imu-bias", "imu-bias"), ("imu-drift", "imu-drift"), ("imu-random", "imu-random"),
+        ("imu-bitflip", "imu-bitflip"), ("imu-stuck", "imu-stuck"), ("motor-offset", "motor-offset"),
+        ("lost-motor", "lost-motor"), ("cov-corruption", "cov-corruption"),
+        ("state-corruption", "state-corruption"),
+    ],
+    "steer_by_wire": [
+        ("bias", "bias"), ("drift", "drift"), ("random", "random"), ("bitflip", "bitflip"),
+        ("stuck", "stuck"), ("actuator-offset", "actuator-offset"), ("lost-actuator", "lost-actuator"),
+        ("cov-corruption", "cov-corruption"), ("state-corruption", "state-corruption"),
+    ],
+}
+FAULT_SEED_BASE = {"quadcopter": 1000, "steer_by_wire": 2000}
+HEALTHY_SEED_BASE = {("quadcopter", False): 3000, ("quadcopter", True): 3100,
+                     ("steer_by_wire", False): 3200, ("steer_by_wire", True): 3300}
+TRAIN_SEED_BASE = {"quadcopter": 4000, "steer_by_wire": 4100}
+
+METHODS = {  # key -> column title
+    "A": "A: encoded e_x + rejected (adaptive)",
+    "B": "B: constant CV_0, fixed threshold [15]",
+    "C": "C: variance check e_v",
+    "D": "D: NIS (any group / overall)",
+}
+SUPPLEMENTARY = {
+    "A.e_x": "A's e_x alone",
+    "R": "rejected-sample check alone",
+    "B+R": "B + rejected-sample check",
+    "any": "any alarm (encoded_ekf or nis)",
+}
+
+
+@dataclass(frozen=True)
+class Job:
+    model: str
+    family: str  # family label, or "healthy" / "aggressive" / "train"
+    fault: str | None  # `--fault` text
+    seed: int
+    aggressive: bool = False
+
+
+def fault_start(seed: int) -> float:
+    """The run's fault start time: uniform in START_RANGE_S from the run's own seed (10 ms steps)."""
+    low, high = START_RANGE_S
+    return round(float(np.random.default_rng([seed, 7]).uniform(low, high)), 2)
+
+
+def make_jobs(runs: int) -> tuple[list[Job], list[Job]]:
+    """(training jobs, evaluation jobs)."""
+    train = [Job(m, "train", None, TRAIN_SEED_BASE[m] + i) for m in FAMILIES for i in range(N_TRAIN)]
+    jobs = []
+    for model, families in FAMILIES.items():
+        for f, (label, kind) in enumerate(families):
+            for r in range(runs):
+                seed = FAULT_SEED_BASE[model] + 100 * f + r
+                jobs.append(Job(model, label, f"{kind}::{fault_start(seed):.2f}::", seed))
+        for aggressive in (False, True):
+            base = HEALTHY_SEED_BASE[(model, aggressive)]
+            jobs.extend(Job(model, "aggressive" if aggressive else "healthy", None, base + r, aggressive)
+                        for r in range(runs))
+    return train, jobs
+
+
+def _analyse(job: Job, directory: str):
+    """Simulate, write and analyse one run; returns the Analysis."""
+    from logscan.analysis import analyze_log
+    from logscan.simulate import parse_fault, simulate, write_simulation
+
+    faults = [parse_fault(job.fault)] if job.fault else []
+    sim = simulate(job.model, faults, duration=DURATION_S, seed=job.seed, aggressive=job.aggressive)
+    path = os.path.join(directory, f"{job.model}_{job.family}_{job.seed}.mcap")
+    write_simulation(sim, path, "mcap-ros2")
+    try:
+        return analyze_log(path, detector_names=["encoded_ekf", "nis"], grace_s=GRACE_S)
+    finally:
+        os.unlink(path)
+
+
+def _baseline(settings: dict):
+    from logscan.detectors.registry import default_registry
+
+    return default_registry().create("encoded_ekf", {"variant": "baseline", "margin": MARGIN, **settings})
+
+
+def train_one(job: Job) -> tuple[str, int, float]:
+    """`fit` of the baseline on one healthy run: (model, seed, margin * max |e_x|)."""
+    with tempfile.TemporaryDirectory() as directory:
+        analysis = _analyse(job, directory)
+    detector = _baseline({}).fit([analysis.run], [analysis.trace], model=analysis.model)
+    return job.model, job.seed, float(detector.threshold_)
+
+
+def evaluate_one(args: tuple[Job, dict[str, float]]):
+    """Score one run under every method; returns (job, LogEvaluation or error text, seconds)."""
+    from logscan.evaluate import LogEvaluation, score_groups
+
+    job, thresholds = args
+    started = time.perf_counter()
+    try:
+        with tempfile.TemporaryDirectory() as directory:
+            analysis = _analyse(job, directory)
+        baseline = _baseline({})
+        baseline.threshold_ = thresholds[job.model]
+        base_result = baseline.run(analysis.run, analysis.trace, model=analysis.model)
+        encoded = next(r for r in analysis.results if r.detector == "encoded_ekf")
+        nis = next(r for r in analysis.results if r.detector == "nis")
+        rejected = [a for a in encoded.alarms if a.signal.startswith("rejected.")]
+        e_x = [a for a in encoded.alarms if a.signal == "e_x"]
+        base_e_x = [a for a in base_result.alarms if a.signal == "e_x"]
+        groups = {
+            "A": e_x + rejected,
+            "B": base_e_x,
+            "C": [a for a in encoded.alarms if a.signal == "e_v"],
+            "D": list(nis.alarms),
+            "A.e_x": e_x,
+            "R": rejected,
+            "B+R": base_e_x + rejected,
+            "any": list(encoded.alarms) + list(nis.alarms),
+        }
+        duration = float(analysis.run.t[-1] - analysis.run.t[0])
+        scores = score_groups(analysis.events, groups, duration_s=duration, grace_s=GRACE_S,
+                              log=f"{job.model}/{job.family}/{job.seed}")
+        result = LogEvaluation(f"{job.model}/{job.family}/{job.seed}", job.model, duration,
+                               list(analysis.events), scores, aggressive=job.aggressive)
+    except Exception as exc:  # noqa: BLE001 - a failed run is reported in the tables, not fatal
+        result = f"{type(exc).__name__}: {exc}"
+    return job, result, time.perf_counter() - started
+
+
+# --- tables -----------------------------------------------------------------------------------
+
+def _latency(score) -> str:
+    if score.mean_latency_s is None:
+        return ""
+    return f" · {score.mean_latency_s:.2f} / {score.max_latency_s:.2f} s"
+
+
+def _fa_per_hour(scores) -> str:
+    from logscan.scoring import aggregate
+
+    total = aggregate(scores)
+    rate = total.false_alarms_per_hour_healthy
+    return "-" if rate is None else f"{rate:.1f} ({total.healthy_fp})"
+
+
+def family_tables(results: list, methods: dict[str, str], runs: int) -> str:
+    """Per model: one row per fault family, one column per method (Table III layout)."""
+    from logscan.scoring import aggregate
+
+    out = []
+    for model, families in FAMILIES.items():
+        mine = [(job, ev) for job, ev in results if job.model == model and not isinstance(ev, str)]
+        out.append(f"#### {model}\n")
+        out.append("| fault family (target, magnitude, length) | " + " | ".join(methods.values()) + " |")
+        out.append("|---|" + "---|" * len(methods))
+        for label, kind in families:
+            runs_here = [ev for job, ev in mine if job.family == label]
+            if not runs_here:
+                continue
+            event = runs_here[0].events[0]
+            length = (event.t_end - event.t_start) if event.t_end is not None else float("nan")
+            cells = []
+            for key in methods:
+                score = aggregate([ev.scores[key] for ev in runs_here])
+                cells.append(f"{score.tp}/{score.n_events}{_latency(score)}")
+            out.append(f"| {label} ({event.target}, {default_magnitude(kind)}, "
+                       f"{length:g} s) | " + " | ".join(cells) + " |")
+        for family, title in (("healthy", "false alarms / h, healthy"),
+                              ("aggressive", "false alarms / h, aggressive manoeuvres")):
+            runs_here = [ev for job, ev in mine if job.family == family]
+            cells = [_fa_per_hour([ev.scores[key] for ev in runs_here]) for key in methods]
+            out.append(f"| {title} ({len(runs_here)} x {DURATION_S:g} s) | " + " | ".join(cells) + " |")
+        faulty = [ev for job, ev in mine if job.family not in ("healthy", "aggressive")]
+        cells = [str(aggregate([ev.scores[key] for ev in faulty]).fp) for key in methods]
+        out.append(f"| alarms outside the fault windows of the {len(faulty)} fault runs | "
+                   + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)
+
+
+def default_magnitude(kind: str) -> str:
+    """The magnitude the simulator gives a fault kind or alias by default (unit per kind)."""
+    from logscan.simulate.faults import ALIASES, KIND_DEFAULTS
+
+    return f"{ALIASES[kind][2] if kind in ALIASES else KIND_DEFAULTS[kind][0]:g}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=20, help="runs per family and per healthy set")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--json", dest="json_path", default=None, help="write the raw scores here")
+    args = parser.parse_args(argv)
+
+    import logscan
+
+    started = time.perf_counter()
+    train_jobs, jobs = make_jobs(args.runs)
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        fits = list(pool.map(train_one, train_jobs))
+        thresholds = {m: max(th for model, _, th in fits if model == m) for m in FAMILIES}
+        results = []
+        for job, result, seconds in pool.map(evaluate_one, [(job, thresholds) for job in jobs]):
+            results.append((job, result))
+            if isinstance(result, str):
+                print(f"run {job.model}/{job.family}/{job.seed} failed: {result}", file=sys.stderr)
+    elapsed = time.perf_counter() - started
+    failed = [(job, r) for job, r in results if isinstance(r, str)]
+
+    lines = [
+        f"Measured {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__}, "
+        f"`python bench/evaluate_detectors.py --runs {args.runs} --jobs {args.jobs}`: "
+        f"{len(jobs)} evaluation runs + {len(train_jobs)} training runs in {elapsed:.0f} s "
+        f"({os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, Python {platform.python_version()}); "
+        f"{len(failed)} run(s) failed.",
+        "",
+        "Baseline thresholds (max |e_x| over the training runs x margin "
+        f"{MARGIN:g}): " + ", ".join(f"{m} {th:.4g}" for m, th in thresholds.items()) + ".",
+        "",
+        "Cells: detected / runs · mean / max latency (s). False-alarm rows: alarms per hour (count).",
+        "",
+        "### Main comparison",
+        "",
+        family_tables(results, METHODS, args.runs),
+        "### Supplementary",
+        "",
+        family_tables(results, SUPPLEMENTARY, args.runs),
+    ]
+    if failed:
+        lines += ["Failed runs:", ""] + [f"- {j.model}/{j.family}/{j.seed}: {r}" for j, r in failed] + [""]
+    print("\n".join(lines))
+
+    if args.json_path:
+        from logscan.artifacts import write_json
+
+        write_json(args.json_path, {
+            "elapsed_s": elapsed, "thresholds": thresholds,
+            "training": [{"model": m, "seed": s, "threshold": th} for m, s, th in fits],
+            "runs": [
+                {"model": job.model, "family": job.family, "seed": job.seed, "fault": job.fault,
+                 "aggressive": job.aggressive,
+                 "error": result if isinstance(result, str) else None,
+                 "events": [] if isinstance(result, str) else [e.to_dict() for e in result.events],
+                 "scores": {} if isinstance(result, str) else
+                 {k: {key: v for key, v in s.to_dict().items() if key != "log"} for k, s in result.scores.items()}}
+                for job, result in results
+            ],
+        })
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
