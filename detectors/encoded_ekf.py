@@ -71,6 +71,7 @@ class EncodedEkfDetector(Detector):
         "r_max": 1e6,
         "cv0": None,  # baseline coding vector; default: the paper's for the model, else ones
         "margin": 1.0,  # baseline threshold = margin * max |e_x| on healthy training runs
+        "threshold": None,  # baseline: a fixed threshold given directly instead of trained
         "rejected_hold_off_s": 1.0,  # rejected samples closer than this form one alarm
     }
 
@@ -86,6 +87,8 @@ class EncodedEkfDetector(Detector):
             value = self.params[key]
             if not isinstance(value, (int, float)) or not value > 0:
                 raise ProfileError(f"detector {self.name!r}: {key} must be a number > 0, got {value!r}")
+        if self.threshold is not None and not (isinstance(self.threshold, (int, float)) and self.threshold > 0):
+            raise ProfileError(f"detector {self.name!r}: threshold must be a number > 0, got {self.threshold!r}")
         for key in ("window", "window_v", "n_persist"):
             value = self.params[key]
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -134,12 +137,14 @@ class EncodedEkfDetector(Detector):
         result.info["rejected_samples"] = int(trace.rejected.sum())
         self._rejected_checks(result, run, trace)
         if self.variant == "baseline":
-            if not hasattr(self, "threshold_"):
+            limit = self.threshold if self.threshold is not None else getattr(self, "threshold_", None)
+            if limit is None:
                 raise NotTrainedError(
-                    f"detector {self.name!r} with variant = 'baseline' is not trained (no fixed threshold)",
-                    hint="run `logscan train` on healthy logs, or use variant = 'adaptive'",
+                    f"detector {self.name!r} with variant = 'baseline' has no fixed threshold",
+                    hint="set [detectors.encoded_ekf] threshold = ..., or train it with fit() on healthy "
+                    "runs (bench/evaluate_detectors.py does), or use variant = 'adaptive'",
                 )
-            limit = float(self.threshold_)
+            limit = float(limit)
             result.add_statistic(t, "e_x", e_x, upper=limit, lower=-limit, valid=defined,
                                  n_persist=self.n_persist)
             return result
