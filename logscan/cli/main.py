@@ -15,7 +15,7 @@ EXIT_OK, EXIT_ALARM, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
 
 @click.group(
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
-    epilog="Example: logscan inspect sample_logs/quad_healthy.mcap",
+    epilog="Example: logscan analyze sample_logs/quad_imu_bias.mcap",
 )
 @click.version_option(__version__, "--version", prog_name="logscan")
 @click.option("--debug", is_flag=True, default=False, help="Show tracebacks of errors.")
