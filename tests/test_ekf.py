@@ -227,3 +227,14 @@ def test_input_gaps_hold_the_last_input_and_bad_shapes_are_rejected():
     run.groups["nope"] = AlignedGroup("nope", ["c"], np.zeros((100, 1)), np.ones(100, bool))
     with pytest.raises(ModelError, match="no measurement group 'nope'"):
         run_ekf(model, run)
+
+
+def test_kernel_cache_is_keyed_on_the_model_kernels_source():
+    import hashlib
+
+    from logscan.filters.ekf import ekf_run
+    from logscan.models import kernels
+
+    with open(kernels.__file__, "rb") as fh:
+        digest = hashlib.sha256(fh.read()).hexdigest()
+    assert ekf_run._cache._cache_file._source_stamp[-1] == digest

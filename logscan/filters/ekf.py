@@ -351,6 +351,29 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
         _store(k, x, P, x_post, P_post_diag, P_post_full, store_P)
 
 
+def cache_depends_on(dispatcher, *modules) -> None:
+    """Make the on-disk numba cache of ``dispatcher`` stale when any of ``modules`` changes.
+
+    numba keys a cached function on its own source file only, but `ekf_run` compiles the model
+    functions of `logscan.models.kernels` into itself: without this, editing a model would leave
+    the EKF running the old equations from the cache. The index's source stamp becomes
+    (own stamp, sha256 of each dependency). Uses numba internals; a no-op if they change.
+    """
+    import hashlib
+
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
+        return
+    digests = []
+    for module in modules:
+        with open(module.__file__, "rb") as fh:
+            digests.append(hashlib.sha256(fh.read()).hexdigest())
+    cache_file._source_stamp = (cache_file._source_stamp, *digests)
+
+
+cache_depends_on(ekf_run, kernels)
+
+
 # =============================================================================================
 # trace and wrapper
 # =============================================================================================
