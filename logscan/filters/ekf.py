@@ -67,31 +67,42 @@ def _forward(L, m, b):
 
 @njit(cache=True)
 def _cho_solve_columns(L, m, B, ncols):
-    """Solve (L L^T) X = B[:m, :ncols] in place."""
-    for col in range(ncols):
-        for i in range(m):  # L v = b
-            t = B[i, col]
-            for c in range(i):
-                t -= L[i, c] * B[c, col]
-            B[i, col] = t / L[i, i]
-        for i in range(m - 1, -1, -1):  # L^T x = v
-            t = B[i, col]
-            for c in range(i + 1, m):
-                t -= L[c, i] * B[c, col]
-            B[i, col] = t / L[i, i]
+    """Solve (L L^T) X = B[:m, :ncols] in place, all columns at once (rows are contiguous)."""
+    for i in range(m):  # L V = B
+        for c in range(i):
+            l = L[i, c]
+            for col in range(ncols):
+                B[i, col] -= l * B[c, col]
+        d = 1.0 / L[i, i]
+        for col in range(ncols):
+            B[i, col] *= d
+    for i in range(m - 1, -1, -1):  # L^T X = V
+        for c in range(i + 1, m):
+            l = L[c, i]
+            for col in range(ncols):
+                B[i, col] -= l * B[c, col]
+        d = 1.0 / L[i, i]
+        for col in range(ncols):
+            B[i, col] *= d
+
+
+@njit(cache=True)
+def _mm_acc(A, B, out, n1, n2, n3, alpha):
+    """out[:n1, :n3] += alpha * A[:n1, :n2] @ B[:n2, :n3], skipping the zeros of A."""
+    for i in range(n1):
+        for c in range(n2):
+            a = A[i, c]
+            if a != 0.0:
+                a *= alpha
+                for j in range(n3):
+                    out[i, j] += a * B[c, j]
 
 
 @njit(cache=True)
 def _mm(A, B, out, n1, n2, n3):
     """out[:n1, :n3] = A[:n1, :n2] @ B[:n2, :n3]."""
-    for i in range(n1):
-        for j in range(n3):
-            out[i, j] = 0.0
-        for c in range(n2):
-            a = A[i, c]
-            if a != 0.0:
-                for j in range(n3):
-                    out[i, j] += a * B[c, j]
+    out[:n1, :n3] = 0.0
+    _mm_acc(A, B, out, n1, n2, n3, 1.0)
 
 
 @njit(cache=True)
@@ -186,10 +197,10 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
     W2 = np.zeros((n, n))
     W3 = np.zeros((n, n))
     HP = np.zeros((m_total, n))
+    HAt = np.zeros((m_total, n))
     PHt = np.zeros((n, m_total))
     K = np.zeros((n, m_total))
     KR = np.zeros((n, m_total))
-    IKH = np.zeros((n, n))
     x_upd = np.zeros(n)
 
     for k in range(N):
@@ -291,23 +302,21 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                         K[i, a] = KT[a, i]
                         t += KT[a, i] * y[a]
                     x_upd[i] = t  # x_post = x_prior + K y~
-                # P = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
-                _mm(K, Hs, IKH, n, m, n)
+                # P = (I - K H) P (I - K H)^T + K R K^T   (Joseph form), evaluated as
+                # A = (I - K H) P = P - K (H P);  A (I - K H)^T = A - (K (H A^T))^T
+                W1[:, :] = P
+                _mm_acc(K, HP, W1, n, m, n, -1.0)  # W1 = A
+                _transpose(W1, W2, n, n)  # W2 = A^T
+                _mm(Hs, W2, HAt, m, n, n)  # H A^T  (= (A H^T)^T)
+                _mm(K, HAt, W2, n, m, n)  # K (H A^T) = (A H^T K^T)^T
                 for i in range(n):
                     for j in range(n):
-                        IKH[i, j] = -IKH[i, j]
-                    IKH[i, i] += 1.0
-                _mm(IKH, P, W1, n, n, n)
-                _transpose(W1, W2, n, n)
-                _mm(IKH, W2, W3, n, n, n)  # (I-KH) ((I-KH) P)^T
+                        W3[i, j] = W1[i, j] - W2[j, i]  # A (I - K H)^T
                 _mm(K, Rs, KR, n, m, m)
+                _mm_acc(KR, KT, W3, n, m, n, 1.0)  # + K R K^T
                 for i in range(n):
-                    for j in range(i + 1):
-                        t = 0.0
-                        for a in range(m):
-                            t += KR[i, a] * K[j, a]
-                        W3[i, j] = 0.5 * (W3[i, j] + W3[j, i]) + t
-                        W3[j, i] = W3[i, j]
+                    for j in range(i):
+                        W3[i, j] = W3[j, i] = 0.5 * (W3[i, j] + W3[j, i])
                 P_upd = W3
                 if _all_finite(x_upd) and _all_finite(P_upd):
                     x[:] = x_upd
