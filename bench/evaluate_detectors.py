@@ -29,6 +29,7 @@ Runs go through the Python API (simulate -> MCAP (ROS 2 CDR) in a temporary dire
 
     python bench/evaluate_detectors.py                     # 20 runs per family, 2 processes
     python bench/evaluate_detectors.py --runs 3 --json /tmp/eval.json    # a quick look
+    python bench/evaluate_detectors.py --diagnose          # actuator offsets on development seeds
 """
 
 from __future__ import annotations
@@ -251,12 +252,73 @@ def default_magnitude(kind: str) -> str:
     return f"{ALIASES[kind][2] if kind in ALIASES else KIND_DEFAULTS[kind][0]:g}"
 
 
+# --- diagnosis on development seeds (< 1000; never the evaluation seeds) ------------------------
+
+DEV_FAULT_SEEDS = range(500, 508)
+DEV_HEALTHY_SEEDS = range(600, 608)
+DEV_AGGRESSIVE_SEEDS = range(700, 708)
+DEV_RHOS = (2.0, 2.5, 3.0, 3.5, 4.0)
+
+
+def diagnose_actuator_offsets() -> str:
+    """Why A misses actuator offsets: the step of e_x at the fault onset in units of its healthy
+    spread, and (for information, not tuning) detections vs. false alarms of A over rho."""
+    from logscan.evaluate import merge_intervals, score_groups
+
+    lines = ["| model, fault (start 30 s) | e_x step at onset / healthy std (8 dev runs) | "
+             + " | ".join(f"rho {rho:g}: detected, false alarms" for rho in DEV_RHOS) + " |",
+             "|---|---|" + "---|" * len(DEV_RHOS)]
+    for model, kind in (("quadcopter", "motor-offset"), ("steer_by_wire", "actuator-offset")):
+        with tempfile.TemporaryDirectory() as directory:
+            faulty = [_analyse(Job(model, kind, f"{kind}::30::", s), directory) for s in DEV_FAULT_SEEDS]
+            healthy = [_analyse(Job(model, "healthy", None, s), directory) for s in DEV_HEALTHY_SEEDS]
+            healthy += [_analyse(Job(model, "aggressive", None, s, True), directory) for s in DEV_AGGRESSIVE_SEEDS]
+        steps = []
+        for analysis in faulty:
+            e_x = next(r for r in analysis.results if r.detector == "encoded_ekf").series["e_x"]
+            k = int(np.searchsorted(analysis.run.t, 30.0))
+            before, after = e_x[k - 500:k], e_x[k:k + 50]  # 5 s before, 0.5 s after the onset
+            before, after = before[np.isfinite(before)], after[np.isfinite(after)]
+            steps.append((after.mean() - before.mean()) / before.std())
+        cells = []
+        for rho in DEV_RHOS:
+            detector = _adaptive(rho)
+            detected = false_alarms = 0
+            for analysis in faulty + healthy:
+                result = detector.run(analysis.run, analysis.trace, model=analysis.model)
+                alarms = [a for a in result.alarms if a.signal == "e_x" or a.signal.startswith("rejected.")]
+                if analysis.events:
+                    detected += score_groups(analysis.events, {"A": alarms}, duration_s=DURATION_S)["A"].tp
+                else:
+                    false_alarms += len(merge_intervals(alarms))
+            cells.append(f"{detected}/{len(faulty)}, {false_alarms}")
+        lines.append(f"| {model}, {kind} | {np.mean(steps):+.2f} (range {min(steps):+.2f} .. {max(steps):+.2f}) | "
+                     + " | ".join(cells) + " |")
+    return (f"Development seeds: faults {DEV_FAULT_SEEDS.start}..{DEV_FAULT_SEEDS.stop - 1}, healthy "
+            f"{DEV_HEALTHY_SEEDS.start}..{DEV_HEALTHY_SEEDS.stop - 1}, aggressive "
+            f"{DEV_AGGRESSIVE_SEEDS.start}..{DEV_AGGRESSIVE_SEEDS.stop - 1} ({len(DEV_HEALTHY_SEEDS) * 2} healthy "
+            "minutes); false alarms counted on the healthy and aggressive runs.\n\n" + "\n".join(lines))
+
+
+def _adaptive(rho: float):
+    from logscan.detectors.registry import default_registry
+
+    return default_registry().create("encoded_ekf", {"rho": rho})
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20, help="runs per family and per healthy set")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--json", dest="json_path", default=None, help="write the raw scores here")
+    parser.add_argument("--diagnose", action="store_true",
+                        help="only the actuator-offset diagnosis on development seeds (< 1000)")
     args = parser.parse_args(argv)
+    if args.diagnose:
+        started = time.perf_counter()
+        print(diagnose_actuator_offsets())
+        print(f"\n({time.perf_counter() - started:.0f} s)")
+        return 0
 
     import logscan
 
