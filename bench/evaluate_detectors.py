@@ -190,6 +190,37 @@ def _latency(score) -> str:
     return f" · {score.mean_latency_s:.2f} / {score.max_latency_s:.2f} s"
 
 
+CATEGORIES = (  # the paper's Table III rows, mapped onto the simulator's fault kinds
+    ("sensor faults", ("bias", "drift", "random", "bitflip", "stuck")),
+    ("actuator faults", ("actuator-offset", "lost-actuator")),
+    ("estimator faults", ("cov-corruption", "state-corruption")),
+)
+
+
+def category_table(results: list, methods: dict[str, str]) -> str:
+    """The paper's Table III rows: detection accuracy and mean latency per fault category, per
+    model, pooled over the families of the category (events detected / events)."""
+    from logscan.scoring import aggregate
+
+    out = ["| model: fault category | " + " | ".join(methods.values()) + " |",
+           "|---|" + "---|" * len(methods)]
+    for model in FAMILIES:
+        for category, kinds in CATEGORIES:
+            chosen = [ev for job, ev in results
+                      if job.model == model and not isinstance(ev, str) and ev.events
+                      and ev.events[0].kind in kinds]
+            if not chosen:
+                continue
+            cells = []
+            for key in methods:
+                score = aggregate([ev.scores[key] for ev in chosen])
+                rate = 100.0 * score.tp / score.n_events
+                latency = "" if score.mean_latency_s is None else f" · {score.mean_latency_s:.2f} s"
+                cells.append(f"{rate:.1f} % ({score.tp}/{score.n_events}){latency}")
+            out.append(f"| {model}: {category} | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
 def detected_while_active(scores) -> int:
     """Events whose first alarm came before the fault ended (latency < t_end - t_start); the
     others were detected in the grace period, i.e. by the fault's removal."""
@@ -306,6 +337,21 @@ def _adaptive(rho: float):
     return default_registry().create("encoded_ekf", {"rho": rho})
 
 
+def code_version() -> str:
+    """The commit the numbers were measured at, and whether the code under test had local edits."""
+    import subprocess
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "logscan", "detectors"], cwd=root,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "an unknown commit (no git checkout)"
+    return f"commit {head}" + (" with local edits under logscan/ or detectors/" if dirty else "")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20, help="runs per family and per healthy set")
@@ -336,7 +382,8 @@ def main(argv: list[str] | None = None) -> int:
     failed = [(job, r) for job, r in results if isinstance(r, str)]
 
     lines = [
-        f"Measured {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__}, "
+        f"Measured {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} "
+        f"({code_version()}), "
         f"`python bench/evaluate_detectors.py --runs {args.runs} --jobs {args.jobs}`: "
         f"{len(jobs)} evaluation runs + {len(train_jobs)} training runs in {elapsed:.0f} s "
         f"({os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, Python {platform.python_version()}); "
@@ -349,7 +396,10 @@ def main(argv: list[str] | None = None) -> int:
         f"by an alarm in the {GRACE_S:g} s grace period after the fault's end (the fault's removal was "
         "seen, not the fault). False-alarm rows: alarms per hour (count).",
         "",
-        "### Main comparison",
+        "### Per fault category (the paper's Table III rows: detection accuracy · mean latency)",
+        "",
+        category_table(results, METHODS),
+        "### Main comparison, per fault family",
         "",
         family_tables(results, METHODS, args.runs),
         "### Supplementary",
