@@ -57,7 +57,8 @@ def _simulate(p, N, dt, Lq, noise):
         u[2] = 0.0212 * (40.0 * (pitch_ref - x[7]) - 10.0 * x[10])
         u[3] = 0.0392 * (10.0 * (0.0 - x[8]) - 5.0 * x[11])
         if k > 0:
-            x = kernels.f_disc(kernels.QUADCOPTER_ID, p, x, u, dt) + noise * (Lq @ np.random.randn(12))
+            w = noise * (Lq @ np.random.randn(12))
+            x = kernels.f_disc(kernels.QUADCOPTER_ID, p, x, u, dt) + w
         X[k] = x
         U[k] = u
         Acc[k] = kernels.h_meas(kernels.QUADCOPTER_ID, 0, p, x, u)  # specific force
@@ -71,7 +72,8 @@ def make_run(steps: int, seed: int = 0):
     model = get_model("quadcopter")
     rng = np.random.default_rng(seed)
     _seed_numba(seed)
-    X, U, Acc = _simulate(model.param_vector(), steps, DT, np.linalg.cholesky(model.default_Q(DT)), 1.0)
+    L_Q = np.linalg.cholesky(model.default_Q(DT))
+    X, U, Acc = _simulate(model.param_vector(), steps, DT, L_Q, 1.0)
     groups = {}
     for name, period in (("accel", 1), ("gyro", 1), ("position", 10)):
         spec = model.groups[name]
@@ -145,7 +147,8 @@ m = get_model("quadcopter")
 N = 50
 run = AlignedRun(t=np.arange(N) * 0.01, dt=0.01, start_ns=0, u=np.tile(m.hover_input(), (N, 1)),
                  u_fresh=np.ones(N, bool), input_channels=list(m.input_names),
-                 groups={"gyro": AlignedGroup("gyro", ["a", "b", "c"], np.zeros((N, 3)), np.ones(N, bool))})
+                 groups={"gyro": AlignedGroup("gyro", ["a", "b", "c"], np.zeros((N, 3)),
+                                              np.ones(N, bool))})
 run_ekf(m, run)
 print(time.perf_counter() - t0)
 """

@@ -17,7 +17,9 @@ from logscan.models import get_model
 
 from test_models import LINEAR_PARAMS as _LINEAR_BASE
 
-LINEAR_PARAMS = dict(_LINEAR_BASE, Q=[[1e-3, 0.0], [0.0, 1e-2]], R={"pos": [0.05], "mix": [0.1, 0.1]})
+LINEAR_PARAMS = dict(
+    _LINEAR_BASE, Q=[[1e-3, 0.0], [0.0, 1e-2]], R={"pos": [0.05], "mix": [0.1, 0.1]}
+)
 # group -> period in steps (multi-rate)
 RATES = {
     "quadcopter": {"accel": 1, "gyro": 1, "position": 10, "attitude": 5},
@@ -63,7 +65,8 @@ def simulate(name, params=None, N=300, dt=0.01, seed=0, noise=1.0, rates=None):
         for g in rates:
             if fresh[g][k]:
                 Lr = np.linalg.cholesky(model.default_R(g))
-                zs[g][k] = model.h(g, x, u[k]) + noise * (Lr @ rng.normal(size=model.groups[g].size))
+                v = Lr @ rng.normal(size=model.groups[g].size)
+                zs[g][k] = model.h(g, x, u[k]) + noise * v
     groups = {g: AlignedGroup(g, list(model.groups[g].outputs), zs[g], fresh[g]) for g in rates}
     run = AlignedRun(t=np.arange(N) * dt, dt=dt, start_ns=0, u=u, u_fresh=np.ones(N, bool),
                      input_channels=list(model.input_names), groups=groups)

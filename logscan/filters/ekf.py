@@ -166,7 +166,6 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
     store_P = P_prior_full.shape[0] == N
     store_S = S_out.shape[0] == N
     store_K = K_out.shape[0] == N
-    I = np.eye(n)
     x = x0.copy()
     P = P0.copy()
     u_last = u_default.copy()
@@ -471,7 +470,9 @@ class EkfTrace:
         }
 
 
-def divergence_episodes(t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray) -> list[DivergenceEpisode]:
+def divergence_episodes(
+    t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray
+) -> list[DivergenceEpisode]:
     """Group diverged steps into episodes: an episode ends at the next successful update."""
     steps = np.flatnonzero(diverged)
     if steps.size == 0:
@@ -490,7 +491,8 @@ def divergence_episodes(t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray) ->
 
 @dataclass
 class KernelInputs:
-    """The packed arrays `ekf_run` reads (built by `pack_run`; the reference filter uses them too)."""
+    """The packed arrays `ekf_run` reads (built by `pack_run`; the reference filter reads them
+    too)."""
 
     model_id: int
     p: np.ndarray
@@ -520,7 +522,9 @@ def _square(name: str, value, size: int) -> np.ndarray:
     if M.ndim == 1 and M.size == size:
         M = np.diag(M)
     if M.shape != (size, size):
-        raise ModelError(f"{name} must be {size} x {size} (or a diagonal of {size}), got shape {M.shape}")
+        raise ModelError(
+            f"{name} must be {size} x {size} (or a diagonal of {size}), got shape {M.shape}"
+        )
     if not np.all(np.isfinite(M)):
         raise ModelError(f"{name} has non-finite entries")
     return M
@@ -567,7 +571,8 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
         z[:, o:o + spec.size] = zg
         fresh[:, g] = np.asarray(grp.fresh, dtype=bool)
         if name in R:
-            Rg = _square(f"R[{name}]", np.square(R[name]) if np.ndim(R[name]) == 1 else R[name], spec.size)
+            given = np.square(R[name]) if np.ndim(R[name]) == 1 else R[name]  # std or matrix
+            Rg = _square(f"R[{name}]", given, spec.size)
         elif grp.noise_std is not None:
             Rg = np.diag(np.square(np.broadcast_to(np.asarray(grp.noise_std, float), (spec.size,))))
         else:

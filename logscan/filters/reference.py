@@ -56,7 +56,8 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
             if not k.fresh[step, g]:
                 continue
             zg = k.z[step, s]
-            if not np.all(np.isfinite(zg)) or np.any(zg < k.range_lo[s]) or np.any(zg > k.range_hi[s]):
+            outside = np.any(zg < k.range_lo[s]) or np.any(zg > k.range_hi[s])
+            if not np.all(np.isfinite(zg)) or outside:
                 out["rejected"][step, g] = True
                 continue
             if pending and is_direct[g] and not seed_done[g]:

@@ -80,7 +80,9 @@ class Model:
                         f"model {self.name!r}: parameter {key} = {value!r} is not a number"
                     ) from None
                 if not np.isfinite(value):
-                    raise ModelError(f"model {self.name!r}: parameter {key} = {value} is not finite")
+                    raise ModelError(
+                        f"model {self.name!r}: parameter {key} = {value} is not finite"
+                    )
             merged[key] = value
         return merged
 
@@ -148,7 +150,8 @@ class Model:
         return kernels.H_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
 
     def describe(self) -> dict:
-        """JSON-ready description: name, states, inputs, groups, the parameters it was built from."""
+        """JSON-ready description: name, states, inputs, groups, the parameters it was built
+        from."""
         return {
             "name": self.name,
             "states": list(self.state_names),

@@ -55,7 +55,8 @@ class DcMotor(LinearBase):
         for key in ("Ra", "La", "Km", "K_EMF", "N", "vehicle_mass", "wheel_radius"):
             if p[key] <= 0:
                 raise ModelError(f"dc_motor: parameter {key} must be > 0 (got {p[key]})")
-        Jv = p["Jv"] if p["Jv"] > 0 else p["vehicle_mass"] * p["wheel_radius"] ** 2 + p["N"] ** 2 * p["Jm"]
+        reflected = p["vehicle_mass"] * p["wheel_radius"] ** 2 + p["N"] ** 2 * p["Jm"]
+        Jv = p["Jv"] if p["Jv"] > 0 else reflected
         self.Jv = Jv
         A = np.array(
             [

@@ -70,7 +70,8 @@ class LinearBase(Model):
     def _discrete(self, dt: float | None):
         if dt not in self._cache:
             if not self._continuous:
-                if dt is not None and self._discrete_dt is not None and abs(dt - self._discrete_dt) > 1e-12 * max(dt, 1.0):
+                own = self._discrete_dt
+                if dt is not None and own is not None and abs(dt - own) > 1e-12 * max(dt, 1.0):
                     raise ModelError(
                         f"model {self.name!r} is discrete at dt = {self._discrete_dt} s but the "
                         f"grid period is {dt} s",

@@ -10,7 +10,8 @@ Parameters (defaults and where they come from):
  - mass 1.2 kg, arm L 0.3 m: paper section VI.
  - drag k_D 0.25 N s/m (linear, world frame, F(3:5, 3:5) = -k_D I / m): the value of the paper's
    reference [32] (Gibiansky, "Quadcopter dynamics, simulation, and control").
- - inertia: the paper gives none. Ix = Iy = 2/5 M_c r^2 + 2 m_mot L^2, Iz = 2/5 M_c r^2 + 4 m_mot L^2
+ - inertia: the paper gives none. Ix = Iy = 2/5 M_c r^2 + 2 m_mot L^2,
+   Iz = 2/5 M_c r^2 + 4 m_mot L^2
    with the paper's body radius r = 0.1 m, a 0.8 kg central body and four 0.1 kg motors on the
    0.3 m arms: Ix = Iy = 0.0212, Iz = 0.0392 kg m^2.
  - thrust coefficient kT = C_T rho D^4 / (4 pi^2) = 1.29e-5 N/(rad/s)^2 for the paper's 10 x 4.5 in
