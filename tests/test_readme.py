@@ -43,7 +43,7 @@ def test_quick_start_has_exactly_two_commands_install_run_and_test():
     assert len(commands) == 2, commands
     run_cmd, test_cmd = commands
     assert "pip install ." in run_cmd and "sample_logs/" in run_cmd
-    assert "pytest" in test_cmd and "pip install '.[test]'" in test_cmd
+    assert "pytest" in test_cmd and "pip install -e '.[test]'" in test_cmd
 
 
 def test_ci_runs_the_readme_test_command():
