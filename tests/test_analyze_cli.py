@@ -17,7 +17,7 @@ FAULTY = ["quad_imu_bias.mcap", "quad_imu_bitflip.mcap", "quad_motor_offset.mcap
           "quad_cov_corruption.mcap", "sbw_yaw_rate_bitflip.mcap"]
 # jackal_healthy.mcap is left out on purpose: its speed sensors carry short healthy glitches
 # (the A-TFM's transients), which the NIS test rightly flags as sensor anomalies.
-HEALTHY = ["quad_healthy.mcap", "sbw_healthy.mcap"]
+HEALTHY = ["quad_healthy.mcap", "sbw_healthy.mcap", "quad_healthy.csv"]
 
 
 def logscan(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:

@@ -90,10 +90,15 @@ def read_log(
 
 
 def topic_wanted(topic: str, wanted: set[str] | None) -> bool:
-    """True when ``topic`` or a channel under it (``topic/...``) is in ``wanted`` (None: all)."""
+    """True when ``topic`` is wanted (``wanted`` None: all): it is in ``wanted``, a wanted channel
+    lies under it (``topic/...``), or it lies under a wanted prefix (a profile may name an on-board
+    estimator by the prefix ``/ekf/state`` of channels that a CSV holds as columns). Leading and
+    trailing "/" are ignored, so ULog and CSV topics without one match too."""
     if wanted is None:
         return True
-    if topic in wanted:
-        return True
-    prefix = topic.rstrip("/") + "/"
-    return any(w.startswith(prefix) for w in wanted)
+    name = topic.strip("/")
+    for item in wanted:
+        want = item.strip("/")
+        if name == want or want.startswith(name + "/") or name.startswith(want + "/"):
+            return True
+    return False
