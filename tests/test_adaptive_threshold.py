@@ -45,7 +45,7 @@ def reference_band(e, defined, window, rho):
 def test_band_matches_the_plain_statement_of_the_rule(values, window, rho, seed):
     e = np.array(values, dtype=np.float64)
     defined = np.random.default_rng(seed).random(e.size) < 0.8
-    mu, s, lower, upper, exceed, warm = adaptive_band(e, defined, window, rho)
+    mu, s, lower, upper, exceed, warm = adaptive_band(e, defined, window, rho, np.zeros(e.size))
     expected = reference_band(e, defined, window, rho)
     for k, item in enumerate(expected):
         if item is None:
@@ -67,7 +67,7 @@ def test_a_persistent_offset_does_not_widen_its_own_threshold():
     rng = np.random.default_rng(1)
     e = rng.normal(0.0, 1.0, 2000)
     e[1000:] += 20.0  # a fault that lasts
-    mu, s, lower, upper, exceed, warm = adaptive_band(e, np.ones(e.size, bool), 100, 4.0)
+    mu, s, lower, upper, exceed, warm = adaptive_band(e, np.ones(e.size, bool), 100, 4.0, np.zeros(e.size))
     assert exceed[1000:].all()  # masked window: the band stays where the healthy data put it
     assert exceed[200:1000].sum() <= 2
     assert np.nanmax(upper[1000:]) < 5.0
@@ -86,6 +86,15 @@ def test_warm_up_raises_nothing_and_nan_counts_as_an_exceedance_after_it():
     e = np.zeros(50)
     e[5] = np.nan
     e[40] = np.nan
-    mu, s, lower, upper, exceed, warm = adaptive_band(e, np.ones(50, bool), 10, 3.0)
+    mu, s, lower, upper, exceed, warm = adaptive_band(e, np.ones(50, bool), 10, 3.0, np.zeros(50))
     assert not exceed[:11].any() and not warm[:10].any()
     assert exceed[40] and exceed.sum() == 1
+
+
+def test_spread_floor_widens_a_band_that_noise_alone_would_make_too_tight():
+    e = np.random.default_rng(3).normal(0.0, 1e-9, 400)
+    e[300] = 1e-3
+    floor = np.full(e.size, 1e-2)
+    assert adaptive_band(e, np.ones(e.size, bool), 50, 4.0, np.zeros(e.size))[4][300]
+    mu, s, lower, upper, exceed, warm = adaptive_band(e, np.ones(e.size, bool), 50, 4.0, floor)
+    assert not exceed.any() and np.nanmin(s) == 1e-2

@@ -152,3 +152,18 @@ def test_nis_alpha_follows_the_false_alarm_budget():
     per_second = tests / (trace.t[-1] - trace.t[0])
     assert result.info["alpha"] == pytest.approx(0.1 / (3600 * per_second))
     assert result.alarms == []
+
+
+def test_onboard_state_corruption_is_caught_by_the_state_comparison(tmp_path):
+    import subprocess
+    import sys
+
+    from logscan.analysis import analyze_log
+
+    path = tmp_path / "sc.mcap"
+    subprocess.run([sys.executable, "-m", "logscan", "simulate", "quadcopter", "--fault", "state-corruption",
+                    "--at", "20", "--duration", "40", "--seed", "11", "-o", str(path), "-q"], check=True)
+    analysis = analyze_log(path, detector_names=["encoded_ekf"])
+    hits = [a for a in analysis.alarms if a.signal == "e_s"]
+    assert hits and 20.0 <= hits[0].start < 20.5
+    assert all(a.start >= 20.0 for a in analysis.alarms)  # nothing before the upset
