@@ -131,3 +131,11 @@ def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path):
     html = report.read_text(encoding="utf-8")
     assert "<script>alert(1)</script>" not in html
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html
+
+
+def test_json_to_stdout_is_pure_json():
+    result = logscan("analyze", str(sample("sbw_healthy.mcap")), "--json", "-", "--no-report")
+    assert result.returncode == 0
+    summary = json.loads(result.stdout)
+    assert summary["exit_code"] == 0 and summary["logs"][0]["verdict"] == "no alarms"
+    assert "sbw_healthy.mcap" in result.stderr  # the human summary moved to stderr

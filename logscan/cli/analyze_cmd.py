@@ -86,7 +86,8 @@ def analyze(
         summary = analysis.summary()
         summary["report"] = report_path
         summaries.append(summary)
-        click.echo(render_summary(analysis, report_path))
+        # with --json - the JSON owns stdout; the human summary goes to stderr
+        click.echo(render_summary(analysis, report_path), err=json_path == "-")
 
     code = 2 if failures else (1 if any(s["n_alarms"] for s in summaries) else 0)
     if exit_zero and code == 1:
