@@ -582,3 +582,70 @@ def test_library_written_files_read_back_in_every_layout(tmp_path, compression, 
     np.testing.assert_array_equal(log.channels["/v/k"].values, np.arange(300))
     np.testing.assert_array_equal(log.channels["/v/half"].t, 1000 + np.arange(300))
     assert log.profile_text == "x = 1\n"
+
+
+# --------------------------------------------------------------------------------------------
+# packed message bytes: the bulk paths read chunk buffers in place, the generic path gets bytes
+
+
+def _mixed_json_file(path: Path, chunked: bool) -> None:
+    """Two JSON topics over many small chunks; /mix changes layout and has undecodable messages."""
+    with open(path, "wb") as fh:
+        writer = Writer(fh, compression=CompressionType.LZ4, use_chunking=chunked, chunk_size=1024)
+        writer.start()
+        schema = writer.register_schema("S", "jsonschema", b"{}")
+        steady = writer.register_channel("/steady", "json", schema)
+        mixed = writer.register_channel("/mix", "json", schema)
+        writer.add_metadata("between", {"k": "v"})  # splits an unchunked file's top-level runs
+        for k in range(400):
+            writer.add_message(steady, 10 * k, json.dumps({"a": k / 3, "b": {"c": -k}}).encode(), 10 * k)
+            if k % 7 == 3:
+                data = b"{broken"
+            else:
+                data = json.dumps({"v": list(range(k % 4)), "s": "x" * (k % 2), "ok": k % 3 == 0}).encode()
+            writer.add_message(mixed, 10 * k + 5, data, 10 * k + 5)
+        writer.finish()
+
+
+def _read_both_paths(monkeypatch, path: Path, topics: set[str] | None) -> tuple[Log, Log]:
+    import logscan.readers.mcap_reader as reader
+
+    fast = read_mcap(path, topics)
+    with monkeypatch.context() as patch:
+        patch.setattr(reader, "_cdr_layout", lambda schema: None)  # no CDR layout kernel
+        patch.setattr(reader, "JsonDecoder", type("NoBulkJson", (), {}))  # no JSON template path
+        slow = read_mcap(path, topics)
+    return fast, slow
+
+
+@pytest.mark.parametrize("layout", ["json", "ros2", "mixed-chunked", "mixed-unchunked"])
+def test_bulk_paths_on_packed_chunks_match_the_generic_decoders(tmp_path, monkeypatch, layout):
+    path = tmp_path / f"{layout}.mcap"
+    if layout.startswith("mixed"):
+        _mixed_json_file(path, chunked=layout == "mixed-chunked")
+        topics = None
+    else:
+        path.write_bytes(mcap_bytes(_imu_topics(), encoding=layout, chunk_size=4096))
+        topics = {"/imu"}
+    if layout != "mixed-unchunked":
+        chunks = len(_chunk_indexes(path))
+        assert chunks > 10
+    fast, slow = _read_both_paths(monkeypatch, path, topics)
+    assert sorted(fast.channels) == sorted(slow.channels) and fast.channels
+    for name, channel in fast.channels.items():
+        np.testing.assert_array_equal(channel.t, slow.channels[name].t)
+        np.testing.assert_array_equal(channel.values, slow.channels[name].values)
+    assert [(s.what, s.why, s.count) for s in fast.source.skipped] == \
+        [(s.what, s.why, s.count) for s in slow.source.skipped]
+    if layout.startswith("mixed"):
+        assert ("/mix", "message bytes do not decode", 57) in [(s.what, s.why, s.count) for s in fast.source.skipped]
+        assert fast.channels["/mix/v[2]"].values.size == 400 // 4 - 15
+    else:
+        assert set(fast.channels) == {"/imu/accel.x", "/imu/accel.y", "/imu/accel.z"}
+
+
+def _chunk_indexes(path: Path) -> list:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        return make_reader(fh).get_summary().chunk_indexes

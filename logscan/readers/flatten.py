@@ -10,6 +10,11 @@ Messages of one topic are grouped by their leaf layout, so a topic whose variabl
 change length yields, for each index seen, a column with only the messages that had that index.
 Each column comes back with the message indices it was present in, so the reader can attach
 per-column timestamps.
+
+``MessageBytes`` is the undecoded side of the same hand-over: a topic's message bytes as one uint8
+buffer plus start/end offsets, which the bulk paths (ROS 2 CDR layout kernel, JSON template
+match) read without a Python object per message; ``to_list`` makes per-message ``bytes`` only for
+the generic decoders.
 """
 
 from __future__ import annotations
@@ -135,6 +140,65 @@ class FlatColumns:
         self.columns: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.skipped: dict[tuple[str, str], int] = {}
         self.fields: list[str] = []
+
+
+class MessageBytes:
+    """Undecoded messages of one topic, in order, as (buffer, starts, ends) parts, never copied.
+
+    Part ``p`` holds messages ``first[p] .. first[p + 1] - 1``: its message ``j`` is
+    ``buf[starts[j]:ends[j]]`` (uint8 buffer, int64 offsets anywhere in it: a decompressed chunk,
+    the whole file). Bulk kernels run once per part; ``to_list`` makes per-message ``bytes`` only
+    for the decoders that need them.
+    """
+
+    __slots__ = ("parts", "first")
+
+    def __init__(self, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]):
+        merged: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        for buf, starts, ends in parts:
+            if not starts.size:
+                continue
+            if merged and merged[-1][0] is buf:  # consecutive runs in one buffer: one part
+                last = merged[-1]
+                merged[-1] = (buf, np.concatenate([last[1], starts]), np.concatenate([last[2], ends]))
+            else:
+                merged.append((buf, np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)))
+        self.parts = merged
+        self.first = np.concatenate([[0], np.cumsum([p[1].size for p in merged])]).astype(np.int64)
+
+    def __len__(self) -> int:
+        return int(self.first[-1])
+
+    @classmethod
+    def from_list(cls, datas: Sequence[bytes]) -> MessageBytes:
+        """Pack a list of per-message bytes (one join)."""
+        lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
+        ends = np.cumsum(lengths)
+        return cls([(np.frombuffer(b"".join(datas), dtype=np.uint8), ends - lengths, ends)])
+
+    def message(self, index: int) -> bytes:
+        part = int(np.searchsorted(self.first, index, side="right")) - 1
+        buf, starts, ends = self.parts[part]
+        local = index - int(self.first[part])
+        return buf[int(starts[local]) : int(ends[local])].tobytes()
+
+    def total_bytes(self) -> int:
+        return sum(int((ends - starts).sum()) for _buf, starts, ends in self.parts)
+
+    def to_list(self, indices: Sequence[int] | np.ndarray | None = None) -> list[bytes]:
+        """Per-message ``bytes`` (of ``indices``, default all, in that order)."""
+        wanted = np.arange(len(self), dtype=np.int64) if indices is None else np.asarray(indices, dtype=np.int64)
+        out: list[bytes] = [b""] * wanted.size
+        part_of = np.searchsorted(self.first, wanted, side="right") - 1
+        for part, (buf, starts, ends) in enumerate(self.parts):
+            positions = np.flatnonzero(part_of == part)
+            if not positions.size:
+                continue
+            local = wanted[positions] - self.first[part]
+            view = memoryview(buf)  # no copy of the whole buffer (it may be the whole file)
+            for position, s, e in zip(positions.tolist(), starts[local].tolist(), ends[local].tolist()):
+                out[position] = view[s:e].tobytes()
+        return out
 
 
 class _Shape:

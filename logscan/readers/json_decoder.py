@@ -12,7 +12,7 @@ from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.records import Schema
 from numba import njit
 
-from logscan.readers.flatten import FlatColumns, add_to_groups, columns_from_groups, layout_of
+from logscan.readers.flatten import FlatColumns, MessageBytes, add_to_groups, columns_from_groups, layout_of
 
 
 class JsonDecoder:
@@ -149,19 +149,26 @@ def _match_template(buf, starts, ends, literal, lit_start, lit_len, is_token, ok
     return w
 
 
-def json_columns(datas: Sequence[bytes]) -> tuple[FlatColumns, list[int]]:
-    """Numeric columns of JSON messages (see ``flatten``) and the indices that are not JSON."""
+def json_columns(datas: MessageBytes | Sequence[bytes]) -> tuple[FlatColumns, list[int]]:
+    """Numeric columns of JSON messages (see ``flatten``) and the indices that are not JSON.
+
+    ``datas``: packed message bytes, or a list of per-message bytes. Only the messages the template
+    path does not take become ``bytes`` objects.
+    """
+    packed = datas if isinstance(datas, MessageBytes) else MessageBytes.from_list(datas)
     groups: dict = {}
     entries = []
-    n = len(datas)
+    n = len(packed)
     remaining: list[int] = list(range(n))
     if n > 1:
-        fast = _fast_json(datas)
+        fast = _fast_json(packed)
         if fast is not None:
             signature, indices, matrix = fast
             entries.append((signature, indices, matrix))
-            remaining = np.flatnonzero(~np.isin(np.arange(n), indices)).tolist()
-    decoded, failed_local = JsonDecoder().decode_many([datas[i] for i in remaining])
+            left = np.ones(n, dtype=bool)
+            left[indices] = False
+            remaining = np.flatnonzero(left).tolist()
+    decoded, failed_local = JsonDecoder().decode_many(packed.to_list(remaining))
     failed = [remaining[i] for i in failed_local]
     bad = set(failed_local)
     add_to_groups(groups, [m for i, m in enumerate(decoded) if i not in bad],
@@ -170,9 +177,9 @@ def json_columns(datas: Sequence[bytes]) -> tuple[FlatColumns, list[int]]:
     return columns_from_groups(entries), failed
 
 
-def _fast_json(datas: Sequence[bytes]):
+def _fast_json(packed: MessageBytes):
     """(signature, message numbers, (n, k) values) for the messages laid out like the first."""
-    first = bytes(datas[0])
+    first = packed.message(0)
     try:
         signature, first_values = layout_of(json.loads(first))
     except (ValueError, UnicodeDecodeError, RecursionError):
@@ -189,13 +196,13 @@ def _fast_json(datas: Sequence[bytes]):
     lit_len = np.array([len(part) for part in literal_parts], dtype=np.int64)
     lit_start = np.concatenate([[0], np.cumsum(lit_len)[:-1]]).astype(np.int64)
     literal = np.frombuffer(b"".join(literal_parts) + b"\0", dtype=np.uint8)
-    lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
-    ends = np.cumsum(lengths)
-    starts = ends - lengths
-    buf = np.frombuffer(b"".join(datas), dtype=np.uint8)
-    ok = np.zeros(len(datas), dtype=np.bool_)
-    out = np.empty(int(buf.size) + 2 * len(datas) * len(keys) + 1, dtype=np.uint8)
-    used = _match_template(buf, starts, ends, literal, lit_start, lit_len, _IS_TOKEN, ok, out)
+    n = len(packed)
+    ok = np.zeros(n, dtype=np.bool_)
+    out = np.empty(packed.total_bytes() + 2 * n * len(keys) + 1, dtype=np.uint8)
+    used = 0
+    for (buf, starts, ends), row in zip(packed.parts, packed.first.tolist()):
+        used += _match_template(buf, starts, ends, literal, lit_start, lit_len, _IS_TOKEN,
+                                ok[row : row + starts.size], out[used:])
     indices = np.flatnonzero(ok)
     if indices.size == 0:
         return None

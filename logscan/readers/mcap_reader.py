@@ -3,7 +3,7 @@
 How a file is read
 ------------------
 The whole file is walked linearly, record by record (a numba kernel finds the record boundaries,
-numpy gathers channel ids and log times; Python only touches the records of wanted topics). This
+numpy gathers channel ids and log times; Python works per chunk and channel, never per message). This
 is what the mcap library's streaming reader does too, but it is far faster, and it does not
 depend on the summary section, so it reads every conformance file, including the ones whose
 summary lacks channel or schema records (where ``mcap.reader.SeekingReader`` raises KeyError).
@@ -13,8 +13,10 @@ it is non-zero; the data-section CRC in the DataEnd record is checked when non-z
 Decoding: per channel, the first factory of [JSON (``logscan.readers.json_decoder``), ROS 2 CDR
 (``mcap_ros2``), ROS 1 (``mcap_ros1``), protobuf (``mcap_protobuf``)] whose ``decoder_for``
 returns a decoder is used for all of that channel's messages. Only messages of wanted topics are
-sliced out and decoded. A channel no factory decodes (unknown encoding, schemaless non-JSON, a
-schema that does not parse) is skipped and listed in ``source.skipped`` with the reason and a
+decoded. Their bytes are never sliced per message on the way: each channel keeps (decompressed
+chunk buffer, starts, ends) segments (``flatten.MessageBytes``) that the bulk paths below read in
+place; per-message ``bytes`` are made only for the generic decoders. A channel no factory decodes
+(unknown encoding, schemaless non-JSON, a schema that does not parse) is skipped and listed in ``source.skipped`` with the reason and a
 warning naming the topics. Two bulk paths give the same columns without a Python object per
 message (tests check they match the decoders exactly): ROS 2 definitions made of primitives,
 strings and fixed-size arrays are run as a layout program by a numba kernel (``_cdr_layout``),
@@ -49,7 +51,7 @@ import json
 import os
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -59,7 +61,7 @@ from numba import njit
 from logscan.errors import CorruptLogError, InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers import MCAP_MAGIC, topic_wanted
-from logscan.readers.flatten import FlatColumns, flatten_messages
+from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 
 TRUTH_RECORD = "logscan.truth"
@@ -257,10 +259,20 @@ class RawMessage(NamedTuple):
 
 @dataclass
 class _Batch:
-    """Messages of one channel: log times (int64 arrays per container) and data slices."""
+    """Messages of one channel, per container: log times (int64) and (buffer, starts, ends) segments.
+
+    No Python object per message: the segments point into the decompressed chunk (or the file) and
+    ``messages()`` packs them into one ``MessageBytes`` for decoding.
+    """
 
     times: list[np.ndarray] = field(default_factory=list)
-    datas: list[Any] = field(default_factory=list)
+    segments: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+
+    def count(self) -> int:
+        return sum(int(seg[1].size) for seg in self.segments)
+
+    def messages(self) -> MessageBytes:
+        return MessageBytes(self.segments)
 
 
 class _Scan:
@@ -427,11 +439,9 @@ class _Scan:
             self.last[cid] = max(self.last.get(cid, high), high)
             if not self._is_wanted(cid):
                 continue
-            starts = (m_off[select] + _MESSAGE_HEADER).tolist()
-            ends = (m_off[select] + m_len[select]).tolist()
             batch = self.batches.setdefault(cid, _Batch())
             batch.times.append(times)
-            batch.datas.extend([data[s:e] for s, e in zip(starts, ends)])
+            batch.segments.append((u8, m_off[select] + _MESSAGE_HEADER, m_off[select] + m_len[select]))
         if self.keep_raw:
             sequences = _gather_u32(u8, m_off + 2).tolist()
             publish = _gather_u64(u8, m_off + 14).astype(np.int64).tolist()
@@ -744,16 +754,15 @@ def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: n
     return True
 
 
-def _cdr_fast(layout: _CdrLayout, datas: list) -> FlatColumns | None:
+def _cdr_fast(layout: _CdrLayout, datas: MessageBytes | Sequence[bytes]) -> FlatColumns | None:
     """Columns of CDR messages decoded by the layout program, or None if one does not fit."""
-    n = len(datas)
-    lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=n)
-    ends = np.cumsum(lengths)
-    starts = ends - lengths
-    buf = np.frombuffer(b"".join(datas), dtype=np.uint8)
+    packed = datas if isinstance(datas, MessageBytes) else MessageBytes.from_list(datas)
+    n = len(packed)
     out = np.empty((n, len(layout.paths)), dtype=np.float64)
-    if not _cdr_run(buf, starts, ends, layout.kinds, layout.sizes, layout.codes, layout.columns, out):
-        return None
+    for (buf, starts, ends), row in zip(packed.parts, packed.first.tolist()):
+        if not _cdr_run(buf, starts, ends, layout.kinds, layout.sizes, layout.codes, layout.columns,
+                        out[row : row + starts.size]):
+            return None
     flat = FlatColumns()
     every = np.arange(n, dtype=np.int64)
     for column, path in enumerate(layout.paths):
@@ -821,23 +830,25 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
         topic = channel.topic
         decoder, why = _choose_decoder(factories, channel, scan.schemas.get(channel.schema_id))
         if decoder is None:
-            source.skip(topic, why, len(batch.datas))
+            source.skip(topic, why, batch.count())
             undecodable.append(topic)
             continue
         log_times = np.concatenate(batch.times)
+        datas = batch.messages()
+        batch.segments = []
         flat = None
         schema = scan.schemas.get(channel.schema_id)
         if channel.message_encoding == "cdr" and schema is not None and schema.encoding == "ros2msg":
             if schema.id not in layouts:
                 layouts[schema.id] = _cdr_layout(schema)
             if layouts[schema.id] is not None:
-                flat = _cdr_fast(layouts[schema.id], batch.datas)
+                flat = _cdr_fast(layouts[schema.id], datas)
         if flat is None and isinstance(decoder, JsonDecoder):
-            flat, failed = json_columns(batch.datas)
+            flat, failed = json_columns(datas)
             if failed:  # message numbers in flat index all messages, so log_times stay aligned
                 source.skip(topic, "message bytes do not decode", len(failed))
         if flat is None:
-            messages, failed = _decode_all(decoder, batch.datas)
+            messages, failed = _decode_all(decoder, datas.to_list())
             if failed:
                 source.skip(topic, "message bytes do not decode", len(failed))
                 keep = np.ones(len(messages), dtype=bool)
@@ -845,7 +856,6 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
                 messages = [m for m, k in zip(messages, keep.tolist()) if k]
                 log_times = log_times[keep]
             flat = flatten_messages(messages)
-        batch.datas = []
         decoded_topics.add(topic)
         for (field_path, why_skipped), count in flat.skipped.items():
             source.skip(_channel_name(topic, field_path), why_skipped, count)
