@@ -71,21 +71,21 @@ class Analysis:
 def load_log_and_profile(path: str, profile_path: str | None, *, use_header_stamp: bool = False):
     """Read only what the profile needs: the profile first (file, or the log's embedded one)."""
     from logscan.profile import load_profile, parse_profile
-    from logscan.readers import read_log
+    from logscan.readers import read_embedded_profile, read_log
 
     if profile_path is not None:
         profile = load_profile(profile_path)
         profile_text, source = profile.to_toml(), str(profile_path)
     else:
-        header = read_log(path, topics=set(), use_header_stamp=use_header_stamp)
-        if not header.profile_text:
+        embedded = read_embedded_profile(path)
+        if not embedded:
             raise ProfileError(
                 "no profile: the log embeds none",
                 path=str(path),
                 hint="pass --profile PROFILE.toml (see docs/profiles.md)",
             )
-        profile = parse_profile(header.profile_text, source=f"{path} (embedded profile)")
-        profile_text, source = header.profile_text, "embedded"
+        profile = parse_profile(embedded, source=f"{path} (embedded profile)")
+        profile_text, source = embedded, "embedded"
     log = read_log(path, topics=profile.topics(), use_header_stamp=use_header_stamp)
     profile.check_channels(log)
     return log, profile, profile_text, source

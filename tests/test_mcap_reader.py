@@ -649,3 +649,112 @@ def _chunk_indexes(path: Path) -> list:
 
     with open(path, "rb") as fh:
         return make_reader(fh).get_summary().chunk_indexes
+
+
+# --------------------------------------------------------------------------------------------
+# metadata without the messages: the summary's metadata index, else the walk
+
+SAMPLE_LOGS = sorted((Path(__file__).resolve().parents[1] / "sample_logs").glob("*.mcap"))
+
+
+def _no_walk(monkeypatch) -> None:
+    import logscan.readers.mcap_reader as reader
+
+    def walked(*args, **kwargs):
+        raise AssertionError("the whole file was walked")
+
+    monkeypatch.setattr(reader, "_scan", walked)
+
+
+@pytest.mark.parametrize("path", SAMPLE_LOGS, ids=lambda p: p.stem)
+def test_metadata_of_sample_logs_comes_from_the_summary_index(path, monkeypatch):
+    from logscan.readers import read_embedded_profile
+    from logscan.readers.mcap_reader import read_mcap_metadata
+
+    expected = read_mcap(path, set())
+    _no_walk(monkeypatch)
+    metadata = read_mcap_metadata(path)
+    assert metadata == expected.source.metadata
+    assert set(metadata) == {"logscan.truth", "logscan.profile"}
+    assert read_embedded_profile(path) == expected.profile_text
+    assert "[vehicle]" in expected.profile_text
+
+
+def test_metadata_matches_the_walk_on_every_conformance_file():
+    from logscan.readers.mcap_reader import read_mcap_metadata
+
+    if not CONFORMANCE_FILES:
+        pytest.skip("shared conformance data absent")
+    for path in CONFORMANCE_FILES:
+        assert read_mcap_metadata(path) == read_mcap(path, set()).source.metadata, path.name
+
+
+def test_metadata_of_a_truncated_file_comes_from_the_walk(valid_file, tmp_path):
+    from logscan.readers.mcap_reader import read_mcap_metadata
+
+    _, data, _ = valid_file
+    for cut in [len(data) // 2, len(data) - 9, len(data) - 40]:
+        cut_path = tmp_path / f"cut{cut}.mcap"
+        cut_path.write_bytes(data[:cut])
+        assert read_mcap_metadata(cut_path) == {"logscan.truth": {"json": '{"events": []}'}}
+    early = tmp_path / "early.mcap"
+    early.write_bytes(data[: data.index(b"\x06", data.index(b"logscan.truth"))])  # before any chunk
+    with pytest.raises(CorruptLogError, match="no messages could be recovered") as caught:
+        read_mcap_metadata(early)
+    assert str(early) in caught.value.one_line()
+    with pytest.raises(CorruptLogError, match="magic"):
+        read_mcap_metadata(_write(tmp_path / "magic.mcap", b"\x89MCAX0\r\n" + data[8:]))
+
+
+def _write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
+
+
+def test_a_summary_that_fails_its_checks_is_not_trusted(valid_file, tmp_path, monkeypatch):
+    from logscan.readers.mcap_reader import read_mcap_metadata
+
+    _, data, _ = valid_file
+    expected = {"logscan.truth": {"json": '{"events": []}'}}
+    assert read_mcap_metadata(_write(tmp_path / "ok.mcap", data)) == expected
+    index_at = data.rindex(b"logscan.truth")  # the name in the summary's MetadataIndex record
+    renamed = bytearray(data)
+    renamed[index_at] ^= 0x20
+    crc_off = bytearray(renamed)
+    crc_off[-12:-8] = b"\0\0\0\0"  # summary_crc 0: not checked, the name check must catch it
+    for variant in (renamed, crc_off):
+        assert read_mcap_metadata(_write(tmp_path / "v.mcap", bytes(variant))) == expected  # walked
+    with monkeypatch.context() as patch:
+        _no_walk(patch)
+        with pytest.raises(AssertionError, match="walked"):
+            read_mcap_metadata(tmp_path / "v.mcap")
+        assert read_mcap_metadata(tmp_path / "ok.mcap") == expected
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(position=st.floats(0.9, 1, exclude_max=True), xor=st.integers(1, 255))
+def test_flipped_summary_byte_gives_the_metadata_or_a_corrupt_log_error(valid_file, tmp_path, position, xor):
+    from logscan.readers.mcap_reader import read_mcap_metadata
+
+    data = valid_file[1]
+    at = int(position * len(data))
+    path = _write(tmp_path / "flip.mcap", data[:at] + bytes([data[at] ^ xor]) + data[at + 1 :])
+    try:
+        metadata = read_mcap_metadata(path)
+    except CorruptLogError:
+        return
+    assert metadata == {"logscan.truth": {"json": '{"events": []}'}}
+
+
+def test_embedded_profile_of_csv_and_ulog_logs(tmp_path):
+    from logscan.readers import read_embedded_profile
+
+    csv = Path(__file__).resolve().parents[1] / "sample_logs" / "quad_healthy.csv"
+    if not csv.exists():
+        pytest.skip("sample CSV absent")
+    assert read_embedded_profile(csv) == csv.with_suffix(".profile.toml").read_text(encoding="utf-8")
+    bare = _write(tmp_path / "bare.csv", b"time_s,x\n0,1\n0.1,2\n")
+    assert read_embedded_profile(bare) is None
+    ulogs = sorted((Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog").glob("*.ulg"))
+    if ulogs:
+        assert read_embedded_profile(ulogs[0]) is None

@@ -89,6 +89,25 @@ def read_log(
     return read_csv(path, wanted)
 
 
+def read_embedded_profile(path: str | os.PathLike) -> str | None:
+    """The profile TOML a log carries, read without its messages; None when it carries none.
+
+    MCAP: the metadata record ``logscan.profile`` (key ``toml``), through the summary's metadata
+    index when there is one. CSV file or directory: the ``<log>.profile.toml`` sidecar. ULog: None.
+    Raises like ``read_log`` for a missing, unknown or corrupt file.
+    """
+    fmt = detect_format(path)
+    if fmt == "mcap":
+        from logscan.readers.mcap_reader import PROFILE_RECORD, read_mcap_metadata
+
+        return read_mcap_metadata(path).get(PROFILE_RECORD, {}).get("toml")
+    if fmt in ("csv", "csv-dir"):
+        from logscan.readers.csv_reader import _read_profile
+
+        return _read_profile(Path(path))
+    return None
+
+
 def topic_wanted(topic: str, wanted: set[str] | None) -> bool:
     """True when ``topic`` is wanted (``wanted`` None: all): it is in ``wanted``, a wanted channel
     lies under it (``topic/...``), or it lies under a wanted prefix (a profile may name an on-board

@@ -39,6 +39,10 @@ Metadata records logscan writes and reads back (``source.metadata[name]`` holds 
    (``{"events": [{"start": s, "end": s, "kind": str, "target": str, ...}], ...}``) -> ``Log.truth``.
  - ``logscan.profile``: key ``toml`` -> the profile's TOML text -> ``Log.profile_text``.
 
+``read_mcap_metadata`` gets the metadata records alone: through the summary's MetadataIndex
+records when the file has a summary that indexes them all (a few reads at the end of the file),
+else by the same walk.
+
 Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
 decompress or does not parse. If messages were read before that point the Log is returned with
 ``source.partial = True`` and ``partial_reason`` saying where it stopped and how many messages
@@ -73,7 +77,9 @@ _OP_SCHEMA = 0x03
 _OP_CHANNEL = 0x04
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
+_OP_STATISTICS = 0x0B
 _OP_METADATA = 0x0C
+_OP_METADATA_INDEX = 0x0D
 _OP_DATA_END = 0x0F
 _MESSAGE_HEADER = 22  # channel_id u16, sequence u32, log_time u64, publish_time u64
 
@@ -781,16 +787,11 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
     """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps."""
     path = str(path)
     scan = _scan(path, wanted, keep_raw=False)
+    _raise_if_unrecoverable(scan)
     source = SourceInfo(path=path, format="mcap")
     source.metadata = dict(scan.metadata)
     source.warnings.extend(scan.warnings)
     if scan.problem is not None:
-        if scan.messages_read == 0 or scan.problem.fatal:
-            lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
-            raise CorruptLogError(
-                f"corrupt MCAP: {_problem_text(scan)}; {lost}",
-                path=path, hint="the file is damaged; re-export or re-record it",
-            )
         firsts = [t for t in scan.first.values()]
         lasts = [t for t in scan.last.values()]
         source.partial = True
@@ -900,6 +901,100 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
     log = Log(channels=channels, source=source)
     _attach_logscan_records(log)
     return log
+
+
+def _raise_if_unrecoverable(scan: _Scan) -> None:
+    """CorruptLogError when the walk stopped before any message, or nothing it read can be trusted."""
+    if scan.problem is not None and (scan.messages_read == 0 or scan.problem.fatal):
+        lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
+        raise CorruptLogError(
+            f"corrupt MCAP: {_problem_text(scan)}; {lost}",
+            path=scan.path, hint="the file is damaged; re-export or re-record it",
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# metadata without the messages
+
+
+def read_mcap_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
+    """Metadata records of the MCAP file ``path`` (name -> key/value map), without its messages.
+
+    When the file ends in a footer whose summary indexes every metadata record (MetadataIndex
+    records; a Statistics record, if any, counts as many), only the footer, the summary and the
+    indexed records are read, and checked: both magics, the footer's framing, the summary CRC
+    (when non-zero), the summary's record framing, and each indexed record's place (inside the
+    data section), opcode, length and name. Otherwise (no summary, no index, a check failing) the
+    whole file is walked as ``read_mcap`` walks it: same result as
+    ``read_mcap(path, set()).source.metadata``, and CorruptLogError where that raises it.
+    """
+    path = str(path)
+    try:
+        with open(path, "rb") as fh:
+            indexed = _indexed_metadata(fh)
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    if indexed is not None:
+        return indexed
+    scan = _scan(path, set(), keep_raw=False)
+    _raise_if_unrecoverable(scan)
+    return dict(scan.metadata)
+
+
+_FOOTER_RECORD = 9 + 20  # opcode, length, summary_start u64, summary_offset_start u64, summary_crc u32
+
+
+def _indexed_metadata(fh) -> dict[str, dict[str, str]] | None:
+    """Metadata through the summary's MetadataIndex records, or None when they cannot be trusted."""
+    size = fh.seek(0, os.SEEK_END)
+    footer_at = size - len(MCAP_MAGIC) - _FOOTER_RECORD
+    if footer_at < len(MCAP_MAGIC):
+        return None
+    fh.seek(0)
+    if fh.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+        return None
+    fh.seek(footer_at)
+    tail = fh.read(_FOOTER_RECORD + len(MCAP_MAGIC))
+    if tail[0] != _OP_FOOTER or tail[1:9] != struct.pack("<Q", 20) or tail[_FOOTER_RECORD:] != MCAP_MAGIC:
+        return None
+    summary_start, _offsets_start, summary_crc = struct.unpack_from("<QQI", tail, 9)
+    if not len(MCAP_MAGIC) < summary_start <= footer_at:
+        return None  # 0: no summary section
+    fh.seek(summary_start)
+    summary = fh.read(footer_at - summary_start)
+    # the CRC covers the summary section and the footer up to summary_crc
+    if summary_crc != 0 and zlib.crc32(tail[:25], zlib.crc32(summary)) != summary_crc:
+        return None
+    records = _walk_records(np.frombuffer(summary, dtype=np.uint8), 0, len(summary))
+    if records.status != WALK_END:
+        return None
+    indexes: list[tuple[int, int, str]] = []
+    counted: int | None = None
+    try:
+        for op, start, length in zip(records.ops.tolist(), records.offsets.tolist(), records.lengths.tolist()):
+            cur = _Cursor(summary, start, start + length)
+            if op == _OP_METADATA_INDEX:
+                offset, record_length = cur.take("<QQ")
+                indexes.append((offset, record_length, cur.string()))
+            elif op == _OP_STATISTICS:
+                counted = cur.take("<QHIIII")[4]  # message, schema, channel, attachment, metadata counts
+        if (not indexes and counted != 0) or (counted is not None and counted != len(indexes)):
+            return None  # the summary does not account for every metadata record
+        out: dict[str, dict[str, str]] = {}
+        for offset, record_length, name in indexes:
+            if offset < len(MCAP_MAGIC) or record_length < 9 or offset + record_length > summary_start:
+                return None
+            fh.seek(offset)
+            record = fh.read(record_length)
+            if record[0] != _OP_METADATA or struct.unpack_from("<Q", record, 1)[0] != record_length - 9:
+                return None
+            cur = _Cursor(record, 9, record_length)
+            if cur.string() != name:
+                return None
+            out[name] = cur.string_map()
+    except _PARSE_ERRORS:
+        return None
+    return out
 
 
 def _attach_logscan_records(log: Log) -> None:
