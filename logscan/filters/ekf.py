@@ -34,13 +34,14 @@ from logscan.models.base import Model
 
 
 # =============================================================================================
-# small dense linear algebra (sizes <= a few tens)
+# small dense linear algebra on preallocated arrays (sizes n <= a few tens, m <= n)
 # =============================================================================================
 @njit(cache=True)
-def _cholesky(A, m, L):
-    """Lower Cholesky factor of A[:m, :m] into L; False when A is not positive definite."""
+def _cholesky(A, r, m, L):
+    """Lower Cholesky factor of the block A[r:r+m, r:r+m] into L[:m, :m]; False when that block
+    is not positive definite."""
     for j in range(m):
-        s = A[j, j]
+        s = A[r + j, r + j]
         for c in range(j):
             s -= L[j, c] * L[j, c]
         if not (s > 0.0) or not np.isfinite(s):
@@ -48,7 +49,7 @@ def _cholesky(A, m, L):
         d = np.sqrt(s)
         L[j, j] = d
         for i in range(j + 1, m):
-            t = A[i, j]
+            t = A[r + i, r + j]
             for c in range(j):
                 t -= L[i, c] * L[j, c]
             L[i, j] = t / d
@@ -56,69 +57,125 @@ def _cholesky(A, m, L):
 
 
 @njit(cache=True)
-def _forward(L, m, b):
-    """Solve L v = b (b of length >= m), in place."""
+def _forward_sq(L, m, b, r, v):
+    """|L^-1 b[r:r+m]|^2: solve L v = b[r:r+m] (forward substitution) and return v^T v."""
+    acc = 0.0
     for i in range(m):
-        t = b[i]
+        t = b[r + i]
         for c in range(i):
-            t -= L[i, c] * b[c]
-        b[i] = t / L[i, i]
+            t -= L[i, c] * v[c]
+        t /= L[i, i]
+        v[i] = t
+        acc += t * t
+    return acc
 
 
 @njit(cache=True)
-def _cho_solve_columns(L, m, B, ncols):
-    """Solve (L L^T) X = B[:m, :ncols] in place, all columns at once (rows are contiguous)."""
+def _cho_solve_rows(L, m, B, n):
+    """Solve (L L^T) X = B[:m, :n] in place, all n columns at once (rows are contiguous)."""
     for i in range(m):  # L V = B
+        Bi = B[i]
         for c in range(i):
             l = L[i, c]
-            for col in range(ncols):
-                B[i, col] -= l * B[c, col]
+            Bc = B[c]
+            for j in range(n):
+                Bi[j] -= l * Bc[j]
         d = 1.0 / L[i, i]
-        for col in range(ncols):
-            B[i, col] *= d
+        for j in range(n):
+            Bi[j] *= d
     for i in range(m - 1, -1, -1):  # L^T X = V
+        Bi = B[i]
         for c in range(i + 1, m):
             l = L[c, i]
-            for col in range(ncols):
-                B[i, col] -= l * B[c, col]
+            Bc = B[c]
+            for j in range(n):
+                Bi[j] -= l * Bc[j]
         d = 1.0 / L[i, i]
-        for col in range(ncols):
-            B[i, col] *= d
+        for j in range(n):
+            Bi[j] *= d
 
 
 @njit(cache=True)
-def _mm_acc(A, B, out, n1, n2, n3, alpha):
-    """out[:n1, :n3] += alpha * A[:n1, :n2] @ B[:n2, :n3], skipping the zeros of A."""
-    for i in range(n1):
-        for c in range(n2):
-            a = A[i, c]
-            if a != 0.0:
-                a *= alpha
-                for j in range(n3):
-                    out[i, j] += a * B[c, j]
+def _sparse_rows(M, m, n, cols, nnz):
+    """Column indices of the non-zeros of each row of M[:m, :n] into cols[a, :nnz[a]]."""
+    for a in range(m):
+        c = 0
+        for j in range(n):
+            if M[a, j] != 0.0:
+                cols[a, c] = j
+                c += 1
+        nnz[a] = c
 
 
 @njit(cache=True)
-def _mm(A, B, out, n1, n2, n3):
-    """out[:n1, :n3] = A[:n1, :n2] @ B[:n2, :n3]."""
-    out[:n1, :n3] = 0.0
-    _mm_acc(A, B, out, n1, n2, n3, 1.0)
+def _sparse_mm(M, cols, nnz, m, B, n, out):
+    """out[:m, :n] = M[:m] B[:, :n] for row-sparse M (row a's non-zeros at cols[a, :nnz[a]])."""
+    for a in range(m):
+        Oa = out[a]
+        for j in range(n):
+            Oa[j] = 0.0
+        for s in range(nnz[a]):
+            c = cols[a, s]
+            f = M[a, c]
+            Bc = B[c]
+            for j in range(n):
+                Oa[j] += f * Bc[j]
 
 
 @njit(cache=True)
-def _transpose(A, out, n1, n2):
-    """out[:n2, :n1] = A[:n1, :n2]^T."""
-    for i in range(n1):
-        for j in range(n2):
-            out[j, i] = A[i, j]
+def _sym_plus_product(base, C, idx, cnt, B, n, out):
+    """out = base + C B when the result is symmetric: the upper triangle
+    out[i, j>=i] = base[i, j] + sum_s C[i, c] B[c, j] (c = idx[i, s], s < cnt[i]: the non-zeros
+    of C's row i), mirrored to the lower triangle."""
+    for i in range(n):
+        Oi = out[i]
+        for j in range(i, n):
+            Oi[j] = base[i, j]
+        for s in range(cnt[i]):
+            c = idx[i, s]
+            f = C[i, c]
+            Bc = B[c]
+            for j in range(i, n):
+                Oi[j] += f * Bc[j]
+        for j in range(i):
+            Oi[j] = out[j, i]
+
+
+@njit(cache=True)
+def _fpft_q(F, P, Q, n, fcols, fnnz, FP, W, out):
+    """out = F P F^T + Q for symmetric P, F row-sparse (fcols/fnnz); FP, W (n, n) are work.
+
+    FP = F P (row by row), W = (F P)^T = P F^T (P symmetric), out = Q + F W (upper triangle,
+    mirrored).
+    """
+    _sparse_mm(F, fcols, fnnz, n, P, n, FP)
+    for i in range(n):
+        for j in range(n):
+            W[j, i] = FP[i, j]
+    _sym_plus_product(Q, F, fcols, fnnz, W, n, out)
 
 
 @njit(cache=True)
 def _all_finite(a):
-    for v in a.ravel():
+    for v in a:
         if not np.isfinite(v):
             return False
     return True
+
+
+@njit(cache=True)
+def _all_finite2(A):
+    for i in range(A.shape[0]):
+        if not _all_finite(A[i]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _nan_fill(M):
+    for i in range(M.shape[0]):
+        for j in range(M.shape[1]):
+            M[i, j] = np.nan
 
 
 @njit(cache=True)
@@ -129,19 +186,56 @@ def _wrap_angle(a):
 @njit(cache=True)
 def _restart(x, P, x0, P0, seed_done):
     """Divergence: back to x0/P0, every direct group to be re-seeded; returns True."""
-    x[:] = x0
-    P[:, :] = P0
-    seed_done[:] = False
+    n = x.size
+    for i in range(n):
+        x[i] = x0[i]
+        for j in range(n):
+            P[i, j] = P0[i, j]
+    for g in range(seed_done.size):
+        seed_done[g] = False
     return True
 
 
 @njit(cache=True)
 def _store(k, x, P, xs, P_diag, P_full, store_P):
-    xs[k] = x
-    for i in range(x.size):
+    n = x.size
+    for i in range(n):
+        xs[k, i] = x[i]
         P_diag[k, i] = P[i, i]
     if store_P:
-        P_full[k] = P
+        for i in range(n):
+            for j in range(n):
+                P_full[k, i, j] = P[i, j]
+
+
+@njit(cache=True)
+def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, A, D, out):
+    """Joseph form out = (I - K H) P (I - K H)^T + K R K^T, K = KT^T, without forming I - K H:
+
+    A = (I - K H) P = P - K (H P);  A (I - K H)^T + K R K^T = A + (K R - A H^T) K^T = A + D K^T.
+    out is the upper triangle of A + D K^T, mirrored (the symmetric part, as the reference's
+    0.5 (P + P^T)). rcols/rnnz: the non-zero rows of each column of R. A (n, n) and D (n, m)
+    are work; all_cols[i, :m] = 0..m-1, m_cnt[:] = m.
+    """
+    for i in range(n):
+        Ai = A[i]
+        for j in range(n):  # A[i, :] = P[i, :] - sum_a K[i, a] HP[a, :]
+            Ai[j] = P[i, j]
+        for a in range(m):
+            kk = KT[a, i]
+            HPa = HP[a]
+            for j in range(n):
+                Ai[j] -= kk * HPa[j]
+        for a in range(m):  # D[i, a] = sum_b K[i, b] R[b, a] - (A H^T)[i, a]
+            t = 0.0
+            for s in range(hnnz[a]):
+                c = hcols[a, s]
+                t -= Ai[c] * Hs[a, c]
+            for s in range(rnnz[a]):  # the non-zeros of R's column a (R is block diagonal)
+                b = rcols[a, s]
+                t += KT[b, i] * Rs[b, a]
+            D[i, a] = t
+    _sym_plus_product(A, D, all_cols, m_cnt, KT, n, out)
 
 
 # =============================================================================================
@@ -154,13 +248,15 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
             x_prior, x_post, P_prior_diag, P_post_diag, P_prior_full, P_post_full,
             y_out, S_out, S_diag_out, K_out, nis, nis_group, m_k, gain_norm,
             updated, rejected, seeded, diverged, input_held):
-    """Filter N steps; every output array is preallocated by the caller (NaN / False filled).
+    """Filter N steps; every output array is preallocated by the caller (NaN / False filled,
+    except S_out and K_out, which the kernel fills step by step: NaN where not updated).
 
     P_prior_full, P_post_full, S_out, K_out are stored when their first dimension is N
-    (pass zero-length arrays to skip them).
+    (pass zero-length arrays to skip them). All work arrays are allocated once, before the loop.
     """
     N = u.shape[0]
     n = x0.size
+    nu = u.shape[1]
     G = group_ids.size
     m_total = z.shape[1]
     store_P = P_prior_full.shape[0] == N
@@ -179,49 +275,46 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
         is_direct[g] = ok
     seed_done = np.zeros(G, dtype=np.bool_)
     pending = seed_at_start
-    # work arrays
-    rows = np.empty(m_total, dtype=np.int64)
-    sel_g = np.empty(G, dtype=np.int64)
-    Hs = np.zeros((m_total, n))
-    hx = np.zeros(m_total)
-    y = np.zeros(m_total)
-    S = np.zeros((m_total, m_total))
-    L = np.zeros((m_total, m_total))
-    Lg = np.zeros((m_total, m_total))
-    Sg = np.zeros((m_total, m_total))
-    Rs = np.zeros((m_total, m_total))
-    KT = np.zeros((m_total, n))
-    v = np.zeros(m_total)
-    W1 = np.zeros((n, n))
-    W2 = np.zeros((n, n))
-    W3 = np.zeros((n, n))
-    HP = np.zeros((m_total, n))
-    HAt = np.zeros((m_total, n))
-    PHt = np.zeros((n, m_total))
-    K = np.zeros((n, m_total))
-    KR = np.zeros((n, m_total))
-    x_upd = np.zeros(n)
+    # work arrays (allocated once)
+    rows, sel_g = np.empty(m_total, dtype=np.int64), np.empty(G, dtype=np.int64)
+    x_new, kv, xs, x_upd = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    F, W, P_upd = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))  # RK4 Jacobian stages
+    R3, D3 = np.empty((3, 3)), np.empty((3, 3, 3))  # quadcopter rotation and its derivatives
+    # non-zero columns per row of F and of H
+    fcols, fnnz = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64)
+    hcols, hnnz = np.empty((m_total, n), dtype=np.int64), np.empty(m_total, dtype=np.int64)
+    hx, y, v = np.zeros(m_total), np.zeros(m_total), np.zeros(m_total)
+    Hs, HP, KT = np.zeros((m_total, n)), np.zeros((m_total, n)), np.zeros((m_total, n))
+    S, Rs = np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
+    RsT = np.zeros((m_total, m_total))
+    rcols, rnnz = np.empty((m_total, m_total), dtype=np.int64), np.empty(m_total, dtype=np.int64)
+    L, Lg = np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
+    D = np.zeros((n, m_total))
+    all_cols = np.empty((n, m_total), dtype=np.int64)  # all_cols[i, a] = a
+    for i in range(n):
+        for a in range(m_total):
+            all_cols[i, a] = a
+    m_cnt = np.empty(n, dtype=np.int64)
 
     for k in range(N):
         # ---- input ----------------------------------------------------------------------
         uk = u[k]
         if _all_finite(uk):
-            u_last[:] = uk
+            for i in range(nu):
+                u_last[i] = uk[i]
         else:
             input_held[k] = True
             uk = u_last
         # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
         if k > 0:
-            x_new, F = kernels.predict(model_id, p, x, uk, dt)
-            # F P F^T = F (F P)^T  (P symmetric; _mm skips the zeros of F)
-            _mm(F, P, W1, n, n, n)
-            _transpose(W1, W2, n, n)
-            _mm(F, W2, P, n, n, n)
+            kernels.predict_into(model_id, p, x, uk, dt, x_new, F, kv, xs, Aw, Jw, Jnw)
+            _sparse_rows(F, n, n, fcols, fnnz)
+            _fpft_q(F, P, Q, n, fcols, fnnz, Aw, W, P_upd)
+            P, P_upd = P_upd, P
             for i in range(n):
-                for j in range(n):
-                    P[i, j] += Q[i, j]
-            x[:] = x_new
-            if not (_all_finite(x) and _all_finite(P)):
+                x[i] = x_new[i]
+            if not (_all_finite(x) and _all_finite2(P)):
                 diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
         _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
         # ---- select the fresh, valid groups -------------------------------------------------
@@ -264,71 +357,67 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     still = True
             pending = still
         # ---- update -----------------------------------------------------------------------
+        if store_S:  # S_out and K_out come unfilled (np.empty): NaN where not updated
+            _nan_fill(S_out[k])
+        if store_K:
+            _nan_fill(K_out[k])
         if m > 0:
             r = 0
             for a in range(ng):
                 g = sel_g[a]
-                gid = group_ids[g]
-                Hg = kernels.H_meas(model_id, gid, p, x, uk)
-                hg = kernels.h_meas(model_id, gid, p, x, uk)
-                for j in range(group_sizes[g]):
-                    Hs[r + j, :] = Hg[j, :]
-                    hx[r + j] = hg[j]
+                kernels.meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
                 r += group_sizes[g]
+            _sparse_rows(Hs, m, n, hcols, hnnz)
             for a in range(m):
                 j = rows[a]
                 # y~ = z - h(x_prior)
-                y[a] = z[k, j] - hx[a]
+                ya = z[k, j] - hx[a]
                 if wrap[j]:
-                    y[a] = _wrap_angle(y[a])
+                    ya = _wrap_angle(ya)
+                y[a] = ya
                 for b in range(m):
                     Rs[a, b] = R_all[j, rows[b]]
-            _mm(Hs, P, HP, m, n, n)  # H P (skips the zeros of H)
-            _transpose(HP, PHt, m, n)  # P H^T
-            # S = H P H^T + R
-            _mm(Hs, PHt, S, m, n, m)
+                    RsT[b, a] = Rs[a, b]
+            _sparse_rows(RsT, m, m, rcols, rnnz)
+            # H P (H sparse: its rows' non-zeros only)
+            _sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
+            # S = H P H^T + R (upper triangle, mirrored)
             for a in range(m):
-                for b in range(m):
-                    S[a, b] += Rs[a, b]
-            ok = _cholesky(S, m, L)
+                for b in range(a, m):
+                    t = 0.0
+                    for s in range(hnnz[b]):
+                        c = hcols[b, s]
+                        t += HP[a, c] * Hs[b, c]
+                    S[a, b] = t + Rs[a, b]
+                for b in range(a):
+                    S[a, b] = S[b, a]
+            ok = _cholesky(S, 0, m, L)
             if ok:
-                # K = P H^T S^-1  via  S K^T = H P
-                KT[:m] = HP[:m]
-                _cho_solve_columns(L, m, KT, n)
+                # K = P H^T S^-1  via  S K^T = H P  (P symmetric)
+                for a in range(m):
+                    for j in range(n):
+                        KT[a, j] = HP[a, j]
+                _cho_solve_rows(L, m, KT, n)
                 for i in range(n):
                     t = x[i]
                     for a in range(m):
-                        K[i, a] = KT[a, i]
                         t += KT[a, i] * y[a]
                     x_upd[i] = t  # x_post = x_prior + K y~
-                # P = (I - K H) P (I - K H)^T + K R K^T   (Joseph form), evaluated as
-                # A = (I - K H) P = P - K (H P);  A (I - K H)^T = A - (K (H A^T))^T
-                W1[:, :] = P
-                _mm_acc(K, HP, W1, n, m, n, -1.0)  # W1 = A
-                _transpose(W1, W2, n, n)  # W2 = A^T
-                _mm(Hs, W2, HAt, m, n, n)  # H A^T  (= (A H^T)^T)
-                _mm(K, HAt, W2, n, m, n)  # K (H A^T) = (A H^T K^T)^T
-                for i in range(n):
-                    for j in range(n):
-                        W3[i, j] = W1[i, j] - W2[j, i]  # A (I - K H)^T
-                _mm(K, Rs, KR, n, m, m)
-                _mm_acc(KR, KT, W3, n, m, n, 1.0)  # + K R K^T
-                for i in range(n):
-                    for j in range(i):
-                        W3[i, j] = W3[j, i] = 0.5 * (W3[i, j] + W3[j, i])
-                P_upd = W3
-                if _all_finite(x_upd) and _all_finite(P_upd):
-                    x[:] = x_upd
-                    P[:, :] = P_upd
+                # P_post = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
+                m_cnt[:] = m
+                _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, D,
+                        P_upd)
+                if _all_finite(x_upd) and _all_finite2(P_upd):
+                    for i in range(n):
+                        x[i] = x_upd[i]
+                    P, P_upd = P_upd, P
                     m_k[k] = m
                     # NIS = y^T S^-1 y = |L^-1 y|^2
-                    v[:m] = y[:m]
-                    _forward(L, m, v)
-                    nis[k] = np.sum(v[:m] ** 2)
+                    nis[k] = _forward_sq(L, m, y, 0, v)
                     knorm = 0.0
-                    for i in range(n):
-                        for a in range(m):
-                            knorm += K[i, a] * K[i, a]
+                    for a in range(m):
+                        for i in range(n):
+                            knorm += KT[a, i] * KT[a, i]
                     gain_norm[k] = np.sqrt(knorm)
                     for a in range(m):
                         j = rows[a]
@@ -339,18 +428,18 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                                 S_out[k, j, rows[b]] = S[a, b]
                         if store_K:
                             for i in range(n):
-                                K_out[k, i, j] = K[i, a]
+                                K_out[k, i, j] = KT[a, i]
                     # per-group NIS on the group's own block of S
                     r = 0
                     for a in range(ng):
                         g = sel_g[a]
                         mg = group_sizes[g]
                         updated[k, g] = True
-                        Sg[:mg, :mg] = S[r:r + mg, r:r + mg]
-                        _cholesky(Sg, mg, Lg)
-                        v[:mg] = y[r:r + mg]
-                        _forward(Lg, mg, v)
-                        nis_group[k, g] = np.sum(v[:mg] ** 2)
+                        if r == 0:  # the leading block's factor is L's leading block
+                            nis_group[k, g] = _forward_sq(L, mg, y, 0, v)
+                        else:
+                            _cholesky(S, r, mg, Lg)
+                            nis_group[k, g] = _forward_sq(Lg, mg, y, r, v)
                         r += mg
                 else:
                     ok = False
@@ -622,8 +711,8 @@ def run_ekf(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, ful
         P_prior_diag=np.full((N, n), nan), P_post_diag=np.full((N, n), nan),
         P_prior_full=np.full((N if full_P else 0, n, n), nan),
         P_post_full=np.full((N if full_P else 0, n, n), nan),
-        y_out=np.full((N, m), nan), S_out=np.full((N if store_S else 0, m, m), nan),
-        S_diag_out=np.full((N, m), nan), K_out=np.full((N if store_gain else 0, n, m), nan),
+        y_out=np.full((N, m), nan), S_out=np.empty((N if store_S else 0, m, m)),  # filled by ekf_run
+        S_diag_out=np.full((N, m), nan), K_out=np.empty((N if store_gain else 0, n, m)),
         nis=np.full(N, nan), nis_group=np.full((N, G), nan), m_k=np.zeros(N, dtype=np.int64),
         gain_norm=np.full(N, nan), updated=np.zeros((N, G), dtype=np.bool_),
         rejected=np.zeros((N, G), dtype=np.bool_), seeded=np.zeros((N, G), dtype=np.bool_),

@@ -2,8 +2,9 @@
 
 All models' discrete `f`, Jacobian `F`, measurement `h` and Jacobian `H` live here as
 `@njit(cache=True)` functions that read a packed float64 parameter vector `p` (built by each
-model's `param_vector`). The EKF kernel calls only the four dispatchers at the bottom
-(`predict`, `f_disc`, `h_meas`, `H_meas`), so one cached kernel serves every model.
+model's `param_vector`). The EKF kernel calls only the two in-place dispatchers at the bottom
+(`predict_into`, `meas_into`: in-place, no allocation), so one cached kernel serves every model;
+`predict`, `f_disc`, `h_meas`, `H_meas` are the allocating versions (simulator, numpy views).
 
 Model ids: 0 quadcopter, 1 steer_by_wire, 2 dc_motor, 3 linear (2 and 3 share the linear code:
 the dc_motor model packs its exactly discretised A, B, C like a linear model).
@@ -57,12 +58,11 @@ def quad_wrench(p, u):
 
 
 @njit(cache=True)
-def quad_rotation(phi, theta, psi):
-    """Body-to-world rotation R = Rz(psi) Ry(theta) Rx(phi) (ZYX Euler angles)."""
+def quad_rotation_into(phi, theta, psi, R):
+    """Body-to-world rotation R = Rz(psi) Ry(theta) Rx(phi) (ZYX Euler angles), into R (3, 3)."""
     cf, sf = np.cos(phi), np.sin(phi)
     ct, st = np.cos(theta), np.sin(theta)
     cp, sp = np.cos(psi), np.sin(psi)
-    R = np.empty((3, 3))
     R[0, 0] = cp * ct
     R[0, 1] = cp * st * sf - sp * cf
     R[0, 2] = cp * st * cf + sp * sf
@@ -72,21 +72,30 @@ def quad_rotation(phi, theta, psi):
     R[2, 0] = -st
     R[2, 1] = ct * sf
     R[2, 2] = ct * cf
+
+
+@njit(cache=True)
+def quad_rotation(phi, theta, psi):
+    """Body-to-world rotation R = Rz(psi) Ry(theta) Rx(phi) (ZYX Euler angles)."""
+    R = np.empty((3, 3))
+    quad_rotation_into(phi, theta, psi, R)
     return R
 
 
 @njit(cache=True)
-def quad_rotation_derivatives(phi, theta, psi):
-    """dR/dphi, dR/dtheta, dR/dpsi of R = Rz Ry Rx, stacked as (3, 3, 3)."""
+def quad_rotation_derivatives_into(phi, theta, psi, D):
+    """dR/dphi, dR/dtheta, dR/dpsi of R = Rz Ry Rx, stacked into D (3, 3, 3)."""
     cf, sf = np.cos(phi), np.sin(phi)
     ct, st = np.cos(theta), np.sin(theta)
     cp, sp = np.cos(psi), np.sin(psi)
-    D = np.zeros((3, 3, 3))
     # d/dphi
+    D[0, 0, 0] = 0.0
     D[0, 0, 1] = cp * st * cf + sp * sf
     D[0, 0, 2] = -cp * st * sf + sp * cf
+    D[0, 1, 0] = 0.0
     D[0, 1, 1] = sp * st * cf - cp * sf
     D[0, 1, 2] = -sp * st * sf - cp * cf
+    D[0, 2, 0] = 0.0
     D[0, 2, 1] = ct * cf
     D[0, 2, 2] = -ct * sf
     # d/dtheta
@@ -106,6 +115,16 @@ def quad_rotation_derivatives(phi, theta, psi):
     D[2, 1, 0] = cp * ct
     D[2, 1, 1] = cp * st * sf - sp * cf
     D[2, 1, 2] = cp * st * cf + sp * sf
+    D[2, 2, 0] = 0.0
+    D[2, 2, 1] = 0.0
+    D[2, 2, 2] = 0.0
+
+
+@njit(cache=True)
+def quad_rotation_derivatives(phi, theta, psi):
+    """dR/dphi, dR/dtheta, dR/dpsi of R = Rz Ry Rx, stacked as (3, 3, 3)."""
+    D = np.empty((3, 3, 3))
+    quad_rotation_derivatives_into(phi, theta, psi, D)
     return D
 
 
@@ -181,43 +200,53 @@ def quad_fA(p, x, u, d, A, want_A):
 
 
 @njit(cache=True)
-def quad_h(p, gid, x, u):
+def quad_meas_into(p, gid, x, u, r, hx, Hs, R, D, want_H):
     """Groups: 0 accel a_b = R^T (v_dot + g e3) = [0, 0, T/m] - (kD/m) R^T v; 1 gyro (p, q, r);
-    2 position (x, y, z); 3 attitude (roll, pitch, yaw)."""
-    out = np.empty(3)
+    2 position (x, y, z); 3 attitude (roll, pitch, yaw). h into hx[r:r+3] and, when want_H,
+    H = dh/dx into Hs[r:r+3, :]; R (3, 3) and D (3, 3, 3) are work arrays."""
+    if want_H:
+        for i in range(3):
+            for j in range(12):
+                Hs[r + i, j] = 0.0
     if gid == 0:
         T, tx, ty, tz = quad_wrench(p, u)
         c = p[QP_KD] / p[QP_MASS]
-        R = quad_rotation(x[6], x[7], x[8])
+        quad_rotation_into(x[6], x[7], x[8], R)
         for i in range(3):
-            out[i] = -c * (R[0, i] * x[3] + R[1, i] * x[4] + R[2, i] * x[5])
-        out[2] += T / p[QP_MASS]
+            hx[r + i] = -c * (R[0, i] * x[3] + R[1, i] * x[4] + R[2, i] * x[5])
+        hx[r + 2] += T / p[QP_MASS]
+        if not want_H:
+            return
+        quad_rotation_derivatives_into(x[6], x[7], x[8], D)
+        for i in range(3):
+            for j in range(3):
+                Hs[r + i, 3 + j] = -c * R[j, i]  # d(R^T v)_i / dv_j = R[j, i]
+            for a in range(3):
+                s = 0.0
+                for j in range(3):
+                    s += D[a, j, i] * x[3 + j]
+                Hs[r + i, 6 + a] = -c * s
     else:
         base = 9 if gid == 1 else (0 if gid == 2 else 6)
         for i in range(3):
-            out[i] = x[base + i]
+            hx[r + i] = x[base + i]
+            if want_H:
+                Hs[r + i, base + i] = 1.0
+
+
+@njit(cache=True)
+def quad_h(p, gid, x, u):
+    out = np.empty(3)
+    quad_meas_into(p, gid, x, u, 0, out, np.empty((0, 0)), np.empty((3, 3)),
+                   np.empty((3, 3, 3)), False)
     return out
 
 
 @njit(cache=True)
 def quad_H(p, gid, x, u):
     H = np.zeros((3, 12))
-    if gid == 0:
-        c = p[QP_KD] / p[QP_MASS]
-        R = quad_rotation(x[6], x[7], x[8])
-        D = quad_rotation_derivatives(x[6], x[7], x[8])
-        for i in range(3):
-            for j in range(3):
-                H[i, 3 + j] = -c * R[j, i]  # d(R^T v)_i / dv_j = R[j, i]
-            for a in range(3):
-                s = 0.0
-                for j in range(3):
-                    s += D[a, j, i] * x[3 + j]
-                H[i, 6 + a] = -c * s
-    else:
-        base = 9 if gid == 1 else (0 if gid == 2 else 6)
-        for i in range(3):
-            H[i, base + i] = 1.0
+    quad_meas_into(p, gid, x, u, 0, np.empty(3), H, np.empty((3, 3)), np.empty((3, 3, 3)),
+                   True)
     return H
 
 
@@ -261,20 +290,27 @@ def sbw_fA(p, x, u, d, A, want_A):
 
 
 @njit(cache=True)
-def sbw_H(p, gid, x, u):
+def sbw_H_row_into(p, gid, Hs, r):
     """Groups: 0 steering_angle (delta_f), 1 yaw_rate (gamma),
-    2 lateral_accel a_y = V (beta_dot + gamma) (linear in the state)."""
-    H = np.zeros((1, 4))
+    2 lateral_accel a_y = V (beta_dot + gamma) (linear in the state): H into row r of Hs."""
+    for j in range(4):
+        Hs[r, j] = 0.0
     if gid == 0:
-        H[0, 0] = 1.0
+        Hs[r, 0] = 1.0
     elif gid == 1:
-        H[0, 3] = 1.0
+        Hs[r, 3] = 1.0
     else:
         Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
         M, V = p[SP_M], p[SP_V]
-        H[0, 0] = Cf / M
-        H[0, 2] = -(Cf + Cr) / M
-        H[0, 3] = (Cr * lr - Cf * lf) / (M * V)
+        Hs[r, 0] = Cf / M
+        Hs[r, 2] = -(Cf + Cr) / M
+        Hs[r, 3] = (Cr * lr - Cf * lf) / (M * V)
+
+
+@njit(cache=True)
+def sbw_H(p, gid, x, u):
+    H = np.zeros((1, 4))
+    sbw_H_row_into(p, gid, H, 0)
     return H
 
 
@@ -332,6 +368,42 @@ def lin_H(p, gid, x, u):
     return C.copy()
 
 
+@njit(cache=True)
+def lin_meas_into(p, gid, x, u, r, hx, Hs):
+    """z = C x + D u of group gid into hx[r:r+m], C into Hs[r:r+m, :] (no allocation)."""
+    n, nu, G = lin_dims(p)
+    s = int(p[3 + gid])
+    m = int(p[s])
+    c0 = s + 1
+    d0 = c0 + m * n
+    for i in range(m):
+        t = 0.0
+        for j in range(n):
+            C_ij = p[c0 + i * n + j]
+            Hs[r + i, j] = C_ij
+            t += C_ij * x[j]
+        for j in range(nu):
+            t += p[d0 + i * nu + j] * u[j]
+        hx[r + i] = t
+
+
+@njit(cache=True)
+def lin_predict_into(p, x, u, x_next, F):
+    """x_next = Ad x + Bd u and F = Ad (no allocation)."""
+    n, nu, G = lin_dims(p)
+    a0 = 3 + G
+    b0 = a0 + n * n
+    for i in range(n):
+        t = 0.0
+        for j in range(n):
+            A_ij = p[a0 + i * n + j]
+            F[i, j] = A_ij
+            t += A_ij * x[j]
+        for j in range(nu):
+            t += p[b0 + i * nu + j] * u[j]
+        x_next[i] = t
+
+
 # =============================================================================================
 # RK4 with its exact Jacobian, and the dispatchers
 # =============================================================================================
@@ -344,52 +416,56 @@ def cont_fA(model_id, p, x, u, d, A, want_A):
 
 
 @njit(cache=True)
-def _add_sparse_product(A, D, c, out):
-    """out += c * A @ D, skipping the zeros of A (continuous Jacobians are sparse)."""
-    n = A.shape[0]
-    for i in range(n):
-        for k in range(n):
-            a = A[i, k]
-            if a != 0.0:
-                a *= c
-                for j in range(n):
-                    out[i, j] += a * D[k, j]
-
-
-@njit(cache=True)
-def rk4_predict(model_id, p, x, u, dt):
-    """One RK4 step x_next and its exact Jacobian F = d x_next / d x.
+def rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """One RK4 step x_next and its exact Jacobian F = d x_next / d x, into x_next and F.
 
     Stages x1 = x, x2 = x + dt/2 k1, x3 = x + dt/2 k2, x4 = x + dt k3 with k_i = f_c(x_i); with
     dk_i/dx = J_i: J1 = A(x1), J2 = A(x2) (I + dt/2 J1), J3 = A(x3) (I + dt/2 J2),
     J4 = A(x4) (I + dt J3); x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4),
     F = I + dt/6 (J1 + 2 J2 + 2 J3 + J4).
+    kv, xs (n,) and A, J, Jn (n, n) are work arrays; the products skip the zeros of the sparse
+    continuous Jacobian A.
     """
     n = x.size
-    k = np.empty(n)
-    xs = np.empty(n)
-    A = np.empty((n, n))
-    J = np.empty((n, n))
-    Jn = np.empty((n, n))
-    x_next = x.copy()
-    F = np.zeros((n, n))
     c = dt / 6.0
-    xs[:] = x
+    for i in range(n):
+        x_next[i] = x[i]
+        xs[i] = x[i]
+        for j in range(n):
+            F[i, j] = 0.0
     for stage in range(4):
-        cont_fA(model_id, p, xs, u, k, A, True)
-        w = 1.0 if stage == 0 or stage == 3 else 2.0
-        Jn[:, :] = A
-        if stage > 0:
-            _add_sparse_product(A, J, 0.5 * dt if stage < 3 else dt, Jn)
+        cont_fA(model_id, p, xs, u, kv, A, True)
+        cw = c * (1.0 if stage == 0 or stage == 3 else 2.0)
+        h = 0.5 * dt if stage < 3 else dt
         step = 0.5 * dt if stage < 2 else dt
         for i in range(n):
-            x_next[i] += c * w * k[i]
-            xs[i] = x[i] + step * k[i]
+            # Jn = A + h A J  (= A (I + h J))
             for j in range(n):
-                F[i, j] += c * w * Jn[i, j]
+                Jn[i, j] = A[i, j]
+            if stage > 0:
+                for q in range(n):
+                    a = A[i, q]
+                    if a != 0.0:
+                        a *= h
+                        for j in range(n):
+                            Jn[i, j] += a * J[q, j]
+            for j in range(n):
+                F[i, j] += cw * Jn[i, j]
+            x_next[i] += cw * kv[i]
+            xs[i] = x[i] + step * kv[i]
         J, Jn = Jn, J
     for i in range(n):
         F[i, i] += 1.0
+
+
+@njit(cache=True)
+def rk4_predict(model_id, p, x, u, dt):
+    """One RK4 step x_next and its exact Jacobian F (allocating wrapper of rk4_predict_into)."""
+    n = x.size
+    x_next = np.empty(n)
+    F = np.empty((n, n))
+    rk4_predict_into(model_id, p, x, u, dt, x_next, F, np.empty(n), np.empty(n),
+                     np.empty((n, n)), np.empty((n, n)), np.empty((n, n)))
     return x_next, F
 
 
@@ -422,6 +498,16 @@ def predict(model_id, p, x, u, dt):
 
 
 @njit(cache=True)
+def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
+    A, J, Jn (n, n) are work arrays)."""
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        lin_predict_into(p, x, u, x_next, F)
+    else:
+        rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
+@njit(cache=True)
 def f_disc(model_id, p, x, u, dt):
     if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
         return lin_f(p, x, u)
@@ -444,3 +530,19 @@ def H_meas(model_id, gid, p, x, u):
     if model_id == STEER_BY_WIRE_ID:
         return sbw_H(p, gid, x, u)
     return lin_H(p, gid, x, u)
+
+
+@njit(cache=True)
+def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
+    """h_meas and H_meas without allocation: h of group gid into hx[r:r+m], H into
+    Hs[r:r+m, :] (R3 (3, 3) and D3 (3, 3, 3) are the quadcopter's work arrays)."""
+    if model_id == QUADCOPTER_ID:
+        quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+    elif model_id == STEER_BY_WIRE_ID:
+        sbw_H_row_into(p, gid, Hs, r)
+        t = 0.0
+        for j in range(4):
+            t += Hs[r, j] * x[j]
+        hx[r] = t
+    else:
+        lin_meas_into(p, gid, x, u, r, hx, Hs)
