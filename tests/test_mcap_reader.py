@@ -758,3 +758,34 @@ def test_embedded_profile_of_csv_and_ulog_logs(tmp_path):
     ulogs = sorted((Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog").glob("*.ulg"))
     if ulogs:
         assert read_embedded_profile(ulogs[0]) is None
+
+
+def test_exact_json_number_kernel_is_correctly_rounded_or_declines():
+    import re
+
+    from logscan.readers.json_decoder import _POW10, _json_number
+
+    grammar = re.compile(r"-?(0|[1-9][0-9]*)(\.[0-9]+)?([eE][+-]?[0-9]+)?\Z")
+    rng = np.random.default_rng(11)
+    doubles = rng.integers(0, 2**63, size=3000, dtype=np.uint64).view(np.float64)
+    tokens = [repr(float(x)) for x in doubles if np.isfinite(x)]
+    tokens += [f"{x:.{d}g}" for x, d in zip(rng.normal(0, 100, 3000), rng.integers(1, 17, 3000))]
+    tokens += ["0", "-0.0", "0e5", "1e22", "1e23", "1E+2", "1e-22", "9007199254740992", "9007199254740993",
+               "00", "1.", ".5", "+1", "1e", "-", "01.5", "NaN", "-Infinity", "5e-324", "0.1", "0.3"]
+    taken = 0
+    for token in tokens:
+        text = np.frombuffer(token.encode(), dtype=np.uint8)
+        value, exact = _json_number(text, 0, text.size, _POW10)
+        if exact:
+            taken += 1
+            assert grammar.match(token), token
+            assert np.float64(value).tobytes() == np.float64(float(token)).tobytes(), token
+        else:
+            assert np.isnan(value)
+    assert taken > 3000  # the short decimals loggers write take the exact path
+    text = np.frombuffer(b"1.5 -2 1e400 7 ", dtype=np.uint8)
+    from logscan.readers.json_decoder import _parse_numbers
+
+    values, rest = np.empty(4), np.empty(16, dtype=np.uint8)
+    assert _parse_numbers(text, text.size, _POW10, values, rest) == (4, 1, 6)
+    assert rest[:6].tobytes() == b"1e400 " and values[[0, 1, 3]].tolist() == [1.5, -2.0, 7.0]

@@ -66,9 +66,11 @@ class JsonDecoderFactory(McapDecoderFactory):
 #
 # The first message is split into literal segments and value tokens (numbers, true, false, NaN,
 # Infinity; never inside strings). A numba kernel checks every message against those literal
-# segments byte for byte and copies its tokens, space separated, into one buffer that numpy parses
-# in one call (correctly rounded, like json.loads). Messages that differ anywhere else (another
-# string value, a missing key, other whitespace) go through json.loads and the generic walk.
+# segments byte for byte and copies its tokens, space separated, into one buffer. A second kernel
+# parses the tokens that Clinger's exact fast path covers (at most 2**53 as digits, |exponent| <= 22:
+# what loggers write); numpy parses the rest in one call. Both are correctly rounded, like
+# json.loads. Messages that differ anywhere else (another string value, a missing key, other
+# whitespace) go through json.loads and the generic walk.
 
 _TOKEN_CHARS = frozenset(b"0123456789+-.eEabcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ")
 _IS_TOKEN = np.zeros(256, dtype=np.bool_)
@@ -149,6 +151,105 @@ def _match_template(buf, starts, ends, literal, lit_start, lit_len, is_token, ok
     return w
 
 
+# 10**0 .. 10**22: every one is exact in float64 (5**22 < 2**53)
+_POW10 = np.array([10.0**k for k in range(23)], dtype=np.float64)
+_MANTISSA_MAX = 2**53
+
+
+@njit(cache=True)
+def _json_number(text, start, stop, pow10):  # pragma: no cover - compiled
+    """(value, True) for a JSON number token text[start:stop] that Clinger's fast path gives exactly.
+
+    Decimal token = w * 10**e with integer w <= 2**53 and |e| <= 22: w and 10**|e| are exact
+    doubles, so the one IEEE product / quotient x = w * 10**e or x = w / 10**-e is the correctly
+    rounded value, as json.loads / strtod give it. Anything else (more digits, larger exponents,
+    NaN, Infinity, not JSON number syntax) -> (nan, False).
+    """
+    i = start
+    negative = False
+    if i < stop and text[i] == 45:  # '-'
+        negative = True
+        i += 1
+    if i >= stop or text[i] < 48 or text[i] > 57:
+        return np.nan, False
+    w = np.int64(0)
+    e = 0
+    if text[i] == 48:  # a leading 0 stands alone
+        i += 1
+        if i < stop and 48 <= text[i] <= 57:
+            return np.nan, False
+    else:
+        while i < stop and 48 <= text[i] <= 57:
+            w = w * 10 + (text[i] - 48)
+            if w > _MANTISSA_MAX:
+                return np.nan, False
+            i += 1
+    if i < stop and text[i] == 46:  # '.' then at least one digit
+        i += 1
+        if i >= stop or text[i] < 48 or text[i] > 57:
+            return np.nan, False
+        while i < stop and 48 <= text[i] <= 57:
+            w = w * 10 + (text[i] - 48)
+            if w > _MANTISSA_MAX:
+                return np.nan, False
+            e -= 1
+            i += 1
+    if i < stop and (text[i] == 101 or text[i] == 69):  # 'e' / 'E', optional sign, digits
+        i += 1
+        exp_negative = False
+        if i < stop and (text[i] == 43 or text[i] == 45):
+            exp_negative = text[i] == 45
+            i += 1
+        if i >= stop or text[i] < 48 or text[i] > 57:
+            return np.nan, False
+        exponent = 0
+        while i < stop and 48 <= text[i] <= 57:
+            if exponent < 10000:
+                exponent = exponent * 10 + (text[i] - 48)
+            i += 1
+        e += -exponent if exp_negative else exponent
+    if i != stop:
+        return np.nan, False
+    if w == 0:
+        value = 0.0
+    elif 0 <= e <= 22:
+        value = np.float64(w) * pow10[e]  # x = w * 10**e, one rounding
+    elif -22 <= e < 0:
+        value = np.float64(w) / pow10[-e]  # x = w / 10**-e, one rounding
+    else:
+        return np.nan, False
+    return (-value if negative else value), True
+
+
+@njit(cache=True)
+def _parse_numbers(text, used, pow10, values, rest):  # pragma: no cover - compiled
+    """Parse the space-terminated tokens of text[:used] into ``values``.
+
+    Tokens ``_json_number`` does not take are left NaN in ``values`` and copied, space-terminated,
+    to ``rest`` for numpy. Returns (tokens, tokens left, bytes used in rest).
+    """
+    count = 0
+    n_rest = 0
+    r = 0
+    p = 0
+    while p < used:
+        q = p
+        while text[q] != 32:
+            q += 1
+        if count >= values.size:
+            return count + 1, n_rest, r
+        value, exact = _json_number(text, p, q, pow10)
+        values[count] = value
+        if not exact:
+            for i in range(p, q + 1):
+                rest[r] = text[i]
+                r += 1
+            n_rest += 1
+        count += 1
+        p = q + 1
+    return count, n_rest, r
+
+
 def json_columns(datas: MessageBytes | Sequence[bytes]) -> tuple[FlatColumns, list[int]]:
     """Numeric columns of JSON messages (see ``flatten``) and the indices that are not JSON.
 
@@ -208,14 +309,21 @@ def _fast_json(packed: MessageBytes):
         return None
     if indices[0] != 0:
         return None
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a token that is no number: handled by the size check
-        try:
-            values = np.fromstring(out[:used].tobytes().decode("ascii"), sep=" ")
-        except ValueError:
-            return None
-    if values.size != indices.size * len(keys):
-        return None  # some token was not a number: let json.loads judge every message
+    values = np.empty(indices.size * len(keys), dtype=np.float64)
+    rest = np.empty(used + 1, dtype=np.uint8)
+    count, n_rest, rest_used = _parse_numbers(out, used, _POW10, values, rest)
+    if count != values.size:
+        return None
+    if n_rest:  # tokens the exact kernel leaves alone: numpy's correctly rounded parser
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a token that is no number: handled by the size check
+            try:
+                parsed = np.fromstring(rest[:rest_used].tobytes().decode("ascii"), sep=" ")
+            except ValueError:
+                return None
+        if parsed.size != n_rest:
+            return None  # some token was not a number: let json.loads judge every message
+        values[np.isnan(values)] = parsed  # the kernel marks exactly those tokens NaN, in order
     matrix = values.reshape(indices.size, len(keys))
     if not np.array_equal(matrix[0], np.asarray(first_values, dtype=np.float64), equal_nan=True):
         return None
