@@ -124,28 +124,30 @@ def _sparse_mm(M, cols, nnz, m, B, n, out):
 
 @njit(cache=True)
 def _sym_plus_product(base, C, idx, cnt, B, n, out):
-    """out = base + C B when the result is symmetric: the upper triangle
-    out[i, j>=i] = base[i, j] + sum_s C[i, c] B[c, j] (c = idx[i, s], s < cnt[i]: the non-zeros
-    of C's row i), mirrored to the lower triangle."""
+    """out = base + C B when the result is symmetric: the lower triangle
+    out[i, j<=i] = base[i, j] + sum_s C[i, c] B[c, j] (c = idx[i, s], s < cnt[i]: the non-zeros
+    of C's row i), mirrored to the upper triangle. (The lower triangle pairs the short rows with
+    the sparse bottom rows of a Jacobian: fewer products than the upper one.)"""
     for i in range(n):
         Oi = out[i]
-        for j in range(i, n):
+        for j in range(i + 1):
             Oi[j] = base[i, j]
         for s in range(cnt[i]):
             c = idx[i, s]
             f = C[i, c]
             Bc = B[c]
-            for j in range(i, n):
+            for j in range(i + 1):
                 Oi[j] += f * Bc[j]
-        for j in range(i):
-            Oi[j] = out[j, i]
+    for i in range(n):
+        for j in range(i + 1, n):
+            out[i, j] = out[j, i]
 
 
 @njit(cache=True)
 def _fpft_q(F, P, Q, n, fcols, fnnz, FP, W, out):
     """out = F P F^T + Q for symmetric P, F row-sparse (fcols/fnnz); FP, W (n, n) are work.
 
-    FP = F P (row by row), W = (F P)^T = P F^T (P symmetric), out = Q + F W (upper triangle,
+    FP = F P (row by row), W = (F P)^T = P F^T (P symmetric), out = Q + F W (lower triangle,
     mirrored).
     """
     _sparse_mm(F, fcols, fnnz, n, P, n, FP)
@@ -213,7 +215,7 @@ def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, 
     """Joseph form out = (I - K H) P (I - K H)^T + K R K^T, K = KT^T, without forming I - K H:
 
     A = (I - K H) P = P - K (H P);  A (I - K H)^T + K R K^T = A + (K R - A H^T) K^T = A + D K^T.
-    out is the upper triangle of A + D K^T, mirrored (the symmetric part, as the reference's
+    out is the lower triangle of A + D K^T, mirrored (the symmetric part, as the reference's
     0.5 (P + P^T)). rcols/rnnz: the non-zero rows of each column of R. A (n, n) and D (n, m)
     are work; all_cols[i, :m] = 0..m-1, m_cnt[:] = m.
     """
@@ -275,6 +277,9 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
         is_direct[g] = ok
     seed_done = np.zeros(G, dtype=np.bool_)
     pending = seed_at_start
+    # counters start from a typed zero: a literal 0 makes numba compile every helper they
+    # reach twice (once for Literal[int](0), once for int64), doubling the cold compile
+    zero = np.int64(0)
     # work arrays (allocated once)
     rows, sel_g = np.empty(m_total, dtype=np.int64), np.empty(G, dtype=np.int64)
     x_new, kv, xs, x_upd = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -318,8 +323,8 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                 diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
         _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
         # ---- select the fresh, valid groups -------------------------------------------------
-        m = 0
-        ng = 0
+        m = zero
+        ng = zero
         for g in range(G):
             if not fresh[k, g]:
                 continue
@@ -362,7 +367,7 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
         if store_K:
             _nan_fill(K_out[k])
         if m > 0:
-            r = 0
+            r = zero
             for a in range(ng):
                 g = sel_g[a]
                 kernels.meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
@@ -391,7 +396,7 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     S[a, b] = t + Rs[a, b]
                 for b in range(a):
                     S[a, b] = S[b, a]
-            ok = _cholesky(S, 0, m, L)
+            ok = _cholesky(S, zero, m, L)
             if ok:
                 # K = P H^T S^-1  via  S K^T = H P  (P symmetric)
                 for a in range(m):
@@ -413,7 +418,7 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     P, P_upd = P_upd, P
                     m_k[k] = m
                     # NIS = y^T S^-1 y = |L^-1 y|^2
-                    nis[k] = _forward_sq(L, m, y, 0, v)
+                    nis[k] = _forward_sq(L, m, y, zero, v)
                     knorm = 0.0
                     for a in range(m):
                         for i in range(n):
@@ -430,13 +435,13 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                             for i in range(n):
                                 K_out[k, i, j] = KT[a, i]
                     # per-group NIS on the group's own block of S
-                    r = 0
+                    r = zero
                     for a in range(ng):
                         g = sel_g[a]
                         mg = group_sizes[g]
                         updated[k, g] = True
                         if r == 0:  # the leading block's factor is L's leading block
-                            nis_group[k, g] = _forward_sq(L, mg, y, 0, v)
+                            nis_group[k, g] = _forward_sq(L, mg, y, zero, v)
                         else:
                             _cholesky(S, r, mg, Lg)
                             nis_group[k, g] = _forward_sq(Lg, mg, y, r, v)
