@@ -3,8 +3,8 @@
 How a file is read
 ------------------
 The whole file is walked linearly, record by record (a numba kernel finds the record boundaries,
-numpy gathers channel ids and log times; Python works per chunk and channel, never per message). This
-is what the mcap library's streaming reader does too, but it is far faster, and it does not
+numpy gathers channel ids and log times; Python works per chunk and channel, not per message).
+This is what the mcap library's streaming reader does too, but it is far faster, and it does not
 depend on the summary section, so it reads every conformance file, including the ones whose
 summary lacks channel or schema records (where ``mcap.reader.SeekingReader`` raises KeyError).
 Chunks are decompressed (lz4, zstd when ``zstandard`` is installed) and their CRC is checked when
@@ -16,12 +16,12 @@ returns a decoder is used for all of that channel's messages. Only messages of w
 decoded. Their bytes are never sliced per message on the way: each channel keeps (decompressed
 chunk buffer, starts, ends) segments (``flatten.MessageBytes``) that the bulk paths below read in
 place; per-message ``bytes`` are made only for the generic decoders. A channel no factory decodes
-(unknown encoding, schemaless non-JSON, a schema that does not parse) is skipped and listed in ``source.skipped`` with the reason and a
-warning naming the topics. Two bulk paths give the same columns without a Python object per
-message (tests check they match the decoders exactly): ROS 2 definitions made of primitives,
-strings and fixed-size arrays are run as a layout program by a numba kernel (``_cdr_layout``),
-and JSON messages laid out like their topic's first message are matched and their numbers parsed
-in bulk (``json_decoder.json_columns``). Everything else goes through the decoder and
+(unknown encoding, schemaless non-JSON, a schema that does not parse) is skipped and listed in
+``source.skipped`` with the reason and a warning naming the topics. Two bulk paths give the same
+columns without a Python object per message (tests check they match the decoders exactly): ROS 2
+definitions made of primitives, strings and fixed-size arrays are run as a layout program by a
+numba kernel (``_cdr_layout``), and JSON messages laid out like their topic's first message are
+matched and their numbers parsed in bulk (``json_decoder.json_columns``). Everything else goes through the decoder and
 ``flatten.flatten_messages``.
 
 Channel names: ``<topic>/<field path>``, where the topic's trailing "/" is dropped before joining,
