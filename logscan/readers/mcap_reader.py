@@ -924,9 +924,11 @@ def read_mcap_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
     records; a Statistics record, if any, counts as many), only the footer, the summary and the
     indexed records are read, and checked: both magics, the footer's framing, the summary CRC
     (when non-zero), the summary's record framing, and each indexed record's place (inside the
-    data section), opcode, length and name. Otherwise (no summary, no index, a check failing) the
-    whole file is walked as ``read_mcap`` walks it: same result as
-    ``read_mcap(path, set()).source.metadata``, and CorruptLogError where that raises it.
+    data section), opcode, length and name. Metadata records have no CRC of their own and the
+    data-section CRC would need the whole file, so this path does not check it (``read_mcap`` does).
+    Otherwise (no summary, no index, a check failing) the whole file is walked as ``read_mcap``
+    walks it: same result as ``read_mcap(path, set()).source.metadata``, and CorruptLogError where
+    that raises it.
     """
     path = str(path)
     try:
