@@ -28,6 +28,7 @@ from numba import njit
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters import run_ekf
+from logscan.filters import ekf
 from logscan.filters.ekf import cache_depends_on
 from logscan.models import get_model, kernels
 
@@ -135,6 +136,83 @@ def run_filterpy(model, run, x0, P0):
     return x_post
 
 
+@njit(cache=True)
+def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
+    """Time one sub-step of the EKF step `reps` times on fixed inputs (accel + gyro update,
+    m = 6), with the core's own helpers and work arrays."""
+    n, m = 12, 6
+    x_new, kv, xs = np.empty(n), np.empty(n), np.empty(n)
+    F, A, J, Jn, W, FP, P_upd = (np.empty((n, n)), np.empty((n, n)), np.empty((n, n)),
+                                 np.empty((n, n)), np.empty((n, n)), np.empty((n, n)),
+                                 np.empty((n, n)))
+    fcols, fnnz = np.empty((n, n), np.int64), np.empty(n, np.int64)
+    hcols, hnnz = np.empty((m, n), np.int64), np.empty(m, np.int64)
+    rcols, rnnz = np.empty((m, m), np.int64), np.empty(m, np.int64)
+    hx, Hs, R3, D3 = np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
+    HP, KT, S, L, D = (np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((m, m)),
+                       np.empty((n, m)))
+    all_cols = np.empty((n, m), np.int64)
+    for i in range(n):
+        for a in range(m):
+            all_cols[i, a] = a
+    m_cnt = np.full(n, m, np.int64)
+    qid = kernels.QUADCOPTER_ID
+    kernels.predict_into(qid, p, x, u, dt, x_new, F, kv, xs, A, J, Jn)
+    ekf._sparse_rows(F, n, n, fcols, fnnz)
+    ekf._sparse_rows(R, m, m, rcols, rnnz)
+    acc = 0.0
+    for it in range(reps + 1):
+        if which == 0 or it == 0:  # RK4 step and its exact Jacobian
+            kernels.predict_into(qid, p, x, u, dt, x_new, F, kv, xs, A, J, Jn)
+        if which == 1 or it == 0:  # P_prior = F P F^T + Q
+            ekf._sparse_rows(F, n, n, fcols, fnnz)
+            ekf._fpft_q(F, P, Q, n, fcols, fnnz, FP, W, P_upd)
+        if which == 2 or it == 0:  # h, H of accel and gyro
+            kernels.meas_into(qid, 0, p, x, u, 0, hx, Hs, R3, D3)
+            kernels.meas_into(qid, 1, p, x, u, 3, hx, Hs, R3, D3)
+            ekf._sparse_rows(Hs, m, n, hcols, hnnz)
+        if which == 3 or it == 0:  # H P and S = H P H^T + R
+            ekf._sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
+            for a in range(m):
+                for b in range(m):
+                    t = R[a, b]
+                    for s in range(hnnz[b]):
+                        t += HP[a, hcols[b, s]] * Hs[b, hcols[b, s]]
+                    S[a, b] = t
+        if which == 4 or it == 0:  # Cholesky of S and K^T = S^-1 H P
+            ekf._cholesky(S, 0, m, L)
+            KT[:, :] = HP
+            ekf._cho_solve_rows(L, m, KT, n)
+        if which == 5 or it == 0:  # Joseph form
+            ekf._joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W,
+                        D, P_upd)
+        acc += P_upd[1, 2] + KT[0, 0] + x_new[0]
+    return acc
+
+
+cache_depends_on(_phase_loop, kernels, ekf)
+
+PHASES = ("RK4 step + exact Jacobian F", "F P F^T + Q", "h, H (accel, gyro)",
+          "H P, S = H P H^T + R", "Cholesky of S, K = P H^T S^-1", "Joseph P update")
+
+
+def phase_times(model, trace, run, reps=100_000):
+    """CPU microseconds per call of each sub-step, on a state and covariance from the run."""
+    k = trace.n_steps // 2
+    R = np.zeros((6, 6))
+    R[:3, :3] = model.default_R("accel")
+    R[3:, 3:] = model.default_R("gyro")
+    args = (model.param_vector(run.dt), trace.x_post[k].copy(), run.u[k].copy(), run.dt,
+            np.ascontiguousarray(trace.P_post[k]), model.default_Q(run.dt), R)
+    out = {}
+    for which, name in enumerate(PHASES):
+        _phase_loop(which, 10, *args)
+        c0 = time.process_time()
+        _phase_loop(which, reps, *args)
+        out[name] = (time.process_time() - c0) / reps * 1e6
+    return out
+
+
 _COLD = """
 import time
 t0 = time.perf_counter()
@@ -181,6 +259,7 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=100_000)
     ap.add_argument("--reps", type=int, default=3, help="logscan repetitions (best is reported)")
     ap.add_argument("--no-compile", action="store_true", help="skip the cold-compile measurement")
+    ap.add_argument("--no-phases", action="store_true", help="skip the per-sub-step timings")
     args = ap.parse_args(argv)
 
     print(f"# {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
@@ -216,6 +295,13 @@ def main(argv=None) -> int:
     print(f"agreement: max |x_logscan - x_filterpy| = {diff:.2e} (relative {rel:.1e})")
     ok = diff < 1e-6 and np.array_equal(full.x_post, light.x_post)
     print("agreement check:", "PASS" if ok else "FAIL")
+    if not args.no_phases:
+        short = run_ekf(model, make_run(2000)[1], x0=x0, P0=P0, full_P=True)
+        print(f"per-step CPU time of the whole kernel (light trace): {cpu_l / N * 1e6:.2f} us; "
+              "its sub-steps (accel + gyro update, m = 6; CPU us per call):")
+        for name, us in phase_times(model, short, run).items():
+            print(f"  {name}: {us:.2f}")
+    print(f"load average after the run: {os.getloadavg()[0]:.1f}")
     return 0 if ok else 1
 
 

@@ -32,11 +32,14 @@ from logscan.errors import ModelError
 from logscan.models import kernels
 from logscan.models.base import Model
 
+# error_model="numpy": float division without the Python-style zero checks (no division here
+# can see a zero: Cholesky pivots are checked > 0 first); not fastmath, NaN checks still hold.
+
 
 # =============================================================================================
 # small dense linear algebra on preallocated arrays (sizes n <= a few tens, m <= n)
 # =============================================================================================
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cholesky(A, r, m, L):
     """Lower Cholesky factor of the block A[r:r+m, r:r+m] into L[:m, :m]; False when that block
     is not positive definite."""
@@ -56,7 +59,7 @@ def _cholesky(A, r, m, L):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _forward_sq(L, m, b, r, v):
     """|L^-1 b[r:r+m]|^2: solve L v = b[r:r+m] (forward substitution) and return v^T v."""
     acc = 0.0
@@ -70,7 +73,7 @@ def _forward_sq(L, m, b, r, v):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cho_solve_rows(L, m, B, n):
     """Solve (L L^T) X = B[:m, :n] in place, all n columns at once (rows are contiguous)."""
     for i in range(m):  # L V = B
@@ -95,7 +98,7 @@ def _cho_solve_rows(L, m, B, n):
             Bi[j] *= d
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sparse_rows(M, m, n, cols, nnz):
     """Column indices of the non-zeros of each row of M[:m, :n] into cols[a, :nnz[a]]."""
     for a in range(m):
@@ -107,7 +110,7 @@ def _sparse_rows(M, m, n, cols, nnz):
         nnz[a] = c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sparse_mm(M, cols, nnz, m, B, n, out):
     """out[:m, :n] = M[:m] B[:, :n] for row-sparse M (row a's non-zeros at cols[a, :nnz[a]])."""
     for a in range(m):
@@ -122,7 +125,7 @@ def _sparse_mm(M, cols, nnz, m, B, n, out):
                 Oa[j] += f * Bc[j]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sym_plus_product(base, C, idx, cnt, B, n, out):
     """out = base + C B when the result is symmetric: the lower triangle
     out[i, j<=i] = base[i, j] + sum_s C[i, c] B[c, j] (c = idx[i, s], s < cnt[i]: the non-zeros
@@ -143,7 +146,7 @@ def _sym_plus_product(base, C, idx, cnt, B, n, out):
             out[i, j] = out[j, i]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fpft_q(F, P, Q, n, fcols, fnnz, FP, W, out):
     """out = F P F^T + Q for symmetric P, F row-sparse (fcols/fnnz); FP, W (n, n) are work.
 
@@ -157,7 +160,7 @@ def _fpft_q(F, P, Q, n, fcols, fnnz, FP, W, out):
     _sym_plus_product(Q, F, fcols, fnnz, W, n, out)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _all_finite(a):
     for v in a:
         if not np.isfinite(v):
@@ -165,7 +168,7 @@ def _all_finite(a):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _all_finite2(A):
     for i in range(A.shape[0]):
         if not _all_finite(A[i]):
@@ -173,19 +176,19 @@ def _all_finite2(A):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _nan_fill(M):
     for i in range(M.shape[0]):
         for j in range(M.shape[1]):
             M[i, j] = np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _wrap_angle(a):
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _restart(x, P, x0, P0, seed_done):
     """Divergence: back to x0/P0, every direct group to be re-seeded; returns True."""
     n = x.size
@@ -198,7 +201,7 @@ def _restart(x, P, x0, P0, seed_done):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _store(k, x, P, xs, P_diag, P_full, store_P):
     n = x.size
     for i in range(n):
@@ -210,7 +213,7 @@ def _store(k, x, P, xs, P_diag, P_full, store_P):
                 P_full[k, i, j] = P[i, j]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, A, D, out):
     """Joseph form out = (I - K H) P (I - K H)^T + K R K^T, K = KT^T, without forming I - K H:
 
@@ -243,7 +246,7 @@ def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, 
 # =============================================================================================
 # the kernel
 # =============================================================================================
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_offsets,
             group_sizes, R_all, range_lo, range_hi, wrap, direct_idx, direct_gain, dt,
             seed_at_start,
