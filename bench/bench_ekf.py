@@ -149,8 +149,8 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
     hcols, hnnz = np.empty((m, n), np.int64), np.empty(m, np.int64)
     rcols, rnnz = np.empty((m, m), np.int64), np.empty(m, np.int64)
     hx, Hs, R3, D3 = np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
-    HP, KT, S, L, D = (np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((m, m)),
-                       np.empty((n, m)))
+    HP, KT, S, L, D, DT = (np.empty((m, n)), np.empty((m, n)), np.empty((m, m)),
+                           np.empty((m, m)), np.empty((n, m)), np.empty((m, n)))
     all_cols = np.empty((n, m), np.int64)
     for i in range(n):
         for a in range(m):
@@ -185,7 +185,7 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
             ekf._cho_solve_rows(L, m, KT, n)
         if which == 5 or it == 0:  # Joseph form
             ekf._joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W,
-                        D, P_upd)
+                        DT, D, P_upd)
         acc += P_upd[1, 2] + KT[0, 0] + x_new[0]
     return acc
 

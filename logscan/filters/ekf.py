@@ -214,33 +214,44 @@ def _store(k, x, P, xs, P_diag, P_full, store_P):
 
 
 @njit(cache=True, error_model="numpy")
-def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, A, D, out):
+def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, AT, DT, K, out):
     """Joseph form out = (I - K H) P (I - K H)^T + K R K^T, K = KT^T, without forming I - K H:
 
-    A = (I - K H) P = P - K (H P);  A (I - K H)^T + K R K^T = A + (K R - A H^T) K^T = A + D K^T.
-    out is the lower triangle of A + D K^T, mirrored (the symmetric part, as the reference's
-    0.5 (P + P^T)). rcols/rnnz: the non-zero rows of each column of R. A (n, n) and D (n, m)
-    are work; all_cols[i, :m] = 0..m-1, m_cnt[:] = m.
+    A = (I - K H) P;  A (I - K H)^T + K R K^T = A + (K R - A H^T) K^T = A + D K^T, and as the
+    result is symmetric it is evaluated transposed, row by row (contiguous rows only):
+    A^T = P - (H P)^T K^T (P symmetric),  D^T = R^T K^T - H A^T,  out = A^T + K D^T.
+    out is the lower triangle, mirrored (the symmetric part, as the reference's 0.5 (P + P^T)).
+    rcols/rnnz: the non-zero rows of each column of R. AT (n, n), DT (m, n) and K (n, m) are
+    work; all_cols[i, :m] = 0..m-1, m_cnt[:] = m.
     """
-    for i in range(n):
-        Ai = A[i]
-        for j in range(n):  # A[i, :] = P[i, :] - sum_a K[i, a] HP[a, :]
-            Ai[j] = P[i, j]
+    for c in range(n):  # A^T[c, :] = P[c, :] - sum_a (H P)[a, c] K^T[a, :]
+        ATc = AT[c]
+        for j in range(n):
+            ATc[j] = P[c, j]
         for a in range(m):
-            kk = KT[a, i]
-            HPa = HP[a]
+            h = HP[a, c]
+            KTa = KT[a]
             for j in range(n):
-                Ai[j] -= kk * HPa[j]
-        for a in range(m):  # D[i, a] = sum_b K[i, b] R[b, a] - (A H^T)[i, a]
-            t = 0.0
-            for s in range(hnnz[a]):
-                c = hcols[a, s]
-                t -= Ai[c] * Hs[a, c]
-            for s in range(rnnz[a]):  # the non-zeros of R's column a (R is block diagonal)
-                b = rcols[a, s]
-                t += KT[b, i] * Rs[b, a]
-            D[i, a] = t
-    _sym_plus_product(A, D, all_cols, m_cnt, KT, n, out)
+                ATc[j] -= h * KTa[j]
+    for a in range(m):  # D^T[a, :] = sum_b R[b, a] K^T[b, :] - sum_c H[a, c] A^T[c, :]
+        DTa = DT[a]
+        for j in range(n):
+            DTa[j] = 0.0
+        for s in range(rnnz[a]):  # the non-zeros of R's column a (R is block diagonal)
+            b = rcols[a, s]
+            r = Rs[b, a]
+            KTb = KT[b]
+            for j in range(n):
+                DTa[j] += r * KTb[j]
+        for s in range(hnnz[a]):  # the non-zeros of H's row a
+            c = hcols[a, s]
+            h = Hs[a, c]
+            ATc = AT[c]
+            for j in range(n):
+                DTa[j] -= h * ATc[j]
+        for i in range(n):
+            K[i, a] = KT[a, i]
+    _sym_plus_product(AT, K, all_cols, m_cnt, DT, n, out)
 
 
 # =============================================================================================
@@ -298,7 +309,7 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
     RsT = np.zeros((m_total, m_total))
     rcols, rnnz = np.empty((m_total, m_total), dtype=np.int64), np.empty(m_total, dtype=np.int64)
     L, Lg = np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
-    D = np.zeros((n, m_total))
+    D, DT = np.zeros((n, m_total)), np.zeros((m_total, n))
     all_cols = np.empty((n, m_total), dtype=np.int64)  # all_cols[i, a] = a
     for i in range(n):
         for a in range(m_total):
@@ -413,8 +424,8 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     x_upd[i] = t  # x_post = x_prior + K y~
                 # P_post = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
                 m_cnt[:] = m
-                _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, D,
-                        P_upd)
+                _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT,
+                        D, P_upd)
                 if _all_finite(x_upd) and _all_finite2(P_upd):
                     for i in range(n):
                         x[i] = x_upd[i]
