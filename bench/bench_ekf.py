@@ -244,20 +244,25 @@ def compile_times() -> tuple[float, float]:
     return out[0], out[1]
 
 
-def best_of(fun, reps):
-    wall, cpu = [], []
+def best_of(funs, reps):
+    """[(result, best wall s, best CPU s)] per function; repetitions interleaved (f1 f2 f1 f2 ...)
+    so that a change in the machine's load hits every variant alike."""
+    wall = [[] for _ in funs]
+    cpu = [[] for _ in funs]
+    results = [None] * len(funs)
     for _ in range(reps):
-        t0, c0 = time.perf_counter(), time.process_time()
-        result = fun()
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
-    return result, min(wall), min(cpu)
+        for i, fun in enumerate(funs):
+            t0, c0 = time.perf_counter(), time.process_time()
+            results[i] = fun()
+            wall[i].append(time.perf_counter() - t0)
+            cpu[i].append(time.process_time() - c0)
+    return [(r, min(w), min(c)) for r, w, c in zip(results, wall, cpu)]
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=100_000)
-    ap.add_argument("--reps", type=int, default=3, help="logscan repetitions (best is reported)")
+    ap.add_argument("--reps", type=int, default=5, help="logscan repetitions (best is reported)")
     ap.add_argument("--no-compile", action="store_true", help="skip the cold-compile measurement")
     ap.add_argument("--no-phases", action="store_true", help="skip the per-sub-step timings")
     args = ap.parse_args(argv)
@@ -272,10 +277,9 @@ def main(argv=None) -> int:
     x0 = truth[0].copy()
     P0 = np.diag(np.square(model.state_scale())) * 0.01
     run_ekf(model, run, x0=x0, P0=P0)  # compile / load from cache outside the timing
-    full, wall, cpu = best_of(lambda: run_ekf(model, run, x0=x0, P0=P0), args.reps)
-    light, wall_l, cpu_l = best_of(
-        lambda: run_ekf(model, run, x0=x0, P0=P0, store_gain=False, store_S=False), args.reps
-    )
+    (full, wall, cpu), (light, wall_l, cpu_l) = best_of(
+        [lambda: run_ekf(model, run, x0=x0, P0=P0),
+         lambda: run_ekf(model, run, x0=x0, P0=P0, store_gain=False, store_S=False)], args.reps)
     t0, c0 = time.perf_counter(), time.process_time()
     x_fp = run_filterpy(model, run, x0, P0)
     wall_fp, cpu_fp = time.perf_counter() - t0, time.process_time() - c0

@@ -730,7 +730,8 @@ def run_ekf(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, ful
         P_prior_diag=np.full((N, n), nan), P_post_diag=np.full((N, n), nan),
         P_prior_full=np.full((N if full_P else 0, n, n), nan),
         P_post_full=np.full((N if full_P else 0, n, n), nan),
-        y_out=np.full((N, m), nan), S_out=np.empty((N if store_S else 0, m, m)),  # filled by ekf_run
+        # S_out, K_out: NaN-filled step by step by ekf_run (one pass over the memory, not two)
+        y_out=np.full((N, m), nan), S_out=np.empty((N if store_S else 0, m, m)),
         S_diag_out=np.full((N, m), nan), K_out=np.empty((N if store_gain else 0, n, m)),
         nis=np.full(N, nan), nis_group=np.full((N, G), nan), m_k=np.zeros(N, dtype=np.int64),
         gain_norm=np.full(N, nan), updated=np.zeros((N, G), dtype=np.bool_),
