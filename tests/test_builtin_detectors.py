@@ -167,3 +167,23 @@ def test_onboard_state_corruption_is_caught_by_the_state_comparison(tmp_path):
     hits = [a for a in analysis.alarms if a.signal == "e_s"]
     assert hits and 20.0 <= hits[0].start < 20.5
     assert all(a.start >= 20.0 for a in analysis.alarms)  # nothing before the upset
+
+
+def test_detector_settings_in_the_profile_docs_are_accepted():
+    import re
+    import tomllib
+
+    from logscan.detectors.registry import default_registry
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "profiles.md").read_text(encoding="utf-8")
+    registry = default_registry()
+    seen = 0
+    for block in re.findall(r"```toml\n(.*?)```", text, re.S):
+        for name, settings in tomllib.loads(block).get("detectors", {}).items():
+            settings = {k: v for k, v in settings.items() if k != "enabled"}
+            registry.create(name, settings).check_params()  # raises ProfileError on a bad setting
+            seen += 1
+    assert seen >= 3
+    for name in ("encoded_ekf", "nis"):
+        for key in registry.get(name).defaults:
+            assert f"`{key}`" in text, f"docs/profiles.md does not describe {name}.{key}"
