@@ -1,4 +1,4 @@
-"""Detection rate, latency and false alarms of the encoded EKF checks vs. the baseline, e_v and NIS (issue 4).
+"""Detection rate, latency and false alarms of the encoded EKF checks vs. the baseline, e_v, NIS and e_s (issue 4).
 
 The evaluation behind docs/evaluation.md, in the layout of the encoded-EKF paper's Table III:
 fresh simulated runs per fault family and model, methods side by side:
@@ -10,6 +10,8 @@ fresh simulated runs per fault family and model, methods side by side:
      e_x only, as in [15];
   C  the variance check e_v (on-board covariance mode: the simulated logs carry /ekf/variance);
   D  the innovation chi-square test (NIS), any group or the overall test;
+  E  the on-board state check e_s = CV_k (x_onboard - x_post) of the same encoded_ekf run (the
+     simulated logs carry /ekf/state), band mu +- rho_s s; its alarms are kept out of A;
 plus supplementary rows (A's e_x alone, the rejected-sample check alone, B with the
 rejected-sample checks as the baseline-configured detector reports them, and "any alarm" of
 `logscan analyze`'s default detectors).
@@ -76,6 +78,7 @@ METHODS = {  # key -> column title
     "B": "B: constant CV_0, fixed threshold [15]",
     "C": "C: variance check e_v",
     "D": "D: NIS (any group / overall)",
+    "E": "E: on-board state check e_s",
 }
 SUPPLEMENTARY = {
     "A.e_x": "A's e_x alone",
@@ -167,6 +170,7 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             "B": base_e_x,
             "C": [a for a in encoded.alarms if a.signal == "e_v"],
             "D": list(nis.alarms),
+            "E": [a for a in encoded.alarms if a.signal == "e_s"],
             "A.e_x": e_x,
             "R": rejected,
             "B+R": base_e_x + rejected,
