@@ -185,3 +185,34 @@ def test_exact_discretisation_of_Q_matches_quadrature_on_a_stiff_model():
     A = model._A
     Q_ref = quad_vec(lambda s: expm(A * s) @ Qc @ expm(A * s).T, 0.0, dt, epsabs=1e-14)[0]
     np.testing.assert_allclose(model.default_Q(dt), Q_ref, rtol=1e-6)
+
+
+@pytest.mark.parametrize("params", [None, {"inputs": "motors"}])
+def test_quadcopter_block_rk4_jacobian_equals_generic_path_and_finite_differences(params):
+    """predict_into's quadcopter branch (3x3-block RK4 Jacobian) gives the generic RK4 path's
+    x_next and F to the last bit (work arrays filled with NaN: nothing stale is read), and F
+    matches central differences of the RK4 step."""
+    from logscan.models import kernels
+
+    model = get_model("quadcopter", params)
+    p = model.param_vector()
+    rng = np.random.default_rng(11)
+    n = 12
+
+    def work():
+        return (np.full(n, np.nan), np.full(n, np.nan), np.full((n, n), np.nan),
+                np.full((n, n), np.nan), np.full((n, n), np.nan))
+
+    for k in range(30):
+        x, u = _random_point(model, rng)
+        dt = (0.002, 0.01, 0.05)[k % 3]
+        x_gen, F_gen = np.full(n, np.nan), np.full((n, n), np.nan)
+        x_blk, F_blk = np.full(n, np.nan), np.full((n, n), np.nan)
+        kernels.rk4_predict_into(model.model_id, p, x, u, dt, x_gen, F_gen, *work())
+        kernels.predict_into(model.model_id, p, x, u, dt, x_blk, F_blk, *work())
+        np.testing.assert_array_equal(x_blk, x_gen)
+        np.testing.assert_array_equal(F_blk, F_gen)
+        assert np.abs(F_blk - np.eye(n)).max() > 0.0
+        F_num = _central_jacobian(lambda xx: kernels.f_disc(model.model_id, p, xx, u, dt), x)
+        scale = max(1.0, np.abs(F_blk).max())
+        np.testing.assert_allclose(F_blk, F_num, atol=1e-6 * scale, rtol=1e-6)

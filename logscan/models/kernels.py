@@ -130,8 +130,17 @@ def quad_rotation_derivatives(phi, theta, psi):
 
 @njit(cache=True)
 def quad_fA(p, x, u, d, A, want_A):
+    """quad_fA_nonzeros with A zeroed first (the whole continuous Jacobian A = df_c/dx)."""
+    if want_A:
+        A[:, :] = 0.0
+    quad_fA_nonzeros(p, x, u, d, A, want_A)
+
+
+@njit(cache=True)
+def quad_fA_nonzeros(p, x, u, d, A, want_A):
     """Continuous dynamics d = f_c(x, u) (paper eq. 5 with Euler-angle kinematics) and, when
-    want_A, its Jacobian A = df_c/dx (the paper's F_k entries plus the kinematics terms):
+    want_A, its Jacobian A = df_c/dx (the paper's F_k entries plus the kinematics terms),
+    written only at its non-zero entries (the same ones on every call; the caller zeroes A):
     p_dot = v;  v_dot = R e3 T/m - g e3 - kD v/m;  eta_dot = W(phi, theta) omega;
     omega_dot = I^-1 (tau - omega x I omega)."""
     T, tx, ty, tz = quad_wrench(p, u)
@@ -160,7 +169,6 @@ def quad_fA(p, x, u, d, A, want_A):
     d[11] = (tz - (Iy - Ix) * wp * wq) / Iz
     if not want_A:
         return
-    A[:, :] = 0.0
     A[0, 3] = 1.0
     A[1, 4] = 1.0
     A[2, 5] = 1.0
@@ -459,6 +467,100 @@ def rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
 
 
 @njit(cache=True)
+def _quad_blk(Jn, F, A, J, r0, c0, qd, qa, qb, h, cw, acc, first):
+    """One 3x3 block (rows r0.., cols c0..) of a stage Jacobian Jn = A + h A J (= A (I + h J))
+    and its RK4 weight into F: F_blk (= or +=) cw Jn_blk. With acc, the terms of h A J are those
+    of the non-zero blocks of A in the block row: a diagonal block at column qd and full blocks
+    at columns qa, qb (-1: none), summed in increasing column order as the generic loop does."""
+    for i in range(3):
+        r = r0 + i
+        if acc and qd >= 0:
+            ad = h * A[r, qd + i]
+        if acc and qa >= 0:
+            a0 = h * A[r, qa]
+            a1 = h * A[r, qa + 1]
+            a2 = h * A[r, qa + 2]
+        if acc and qb >= 0:
+            b0 = h * A[r, qb]
+            b1 = h * A[r, qb + 1]
+            b2 = h * A[r, qb + 2]
+        for j in range(3):
+            c = c0 + j
+            s = A[r, c]
+            if acc:
+                if qd >= 0:
+                    s += ad * J[qd + i, c]
+                if qa >= 0:
+                    s += a0 * J[qa, c]
+                    s += a1 * J[qa + 1, c]
+                    s += a2 * J[qa + 2, c]
+                if qb >= 0:
+                    s += b0 * J[qb, c]
+                    s += b1 * J[qb + 1, c]
+                    s += b2 * J[qb + 2, c]
+            Jn[r, c] = s
+            if first:
+                F[r, c] = cw * s
+            else:
+                F[r, c] += cw * s
+
+
+@njit(cache=True)
+def _quad_stage_jacobian(Jn, F, A, J, h, cw, acc, first):
+    """All nine non-zero 3x3 blocks of Jn = A (I + h J) and their weight into F (quadcopter)."""
+    # pos rows: A = [0, I, 0, 0];  vel rows: [0, Dv, Va, 0] (Dv diagonal)
+    _quad_blk(Jn, F, A, J, 0, 3, 3, -1, -1, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 0, 6, 3, -1, -1, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 0, 9, 3, -1, -1, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 3, 3, 3, -1, -1, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 3, 6, 3, 6, -1, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 3, 9, 3, 6, -1, h, cw, acc, first)
+    # att rows: [0, 0, Ea, Wr];  rate rows: [0, 0, 0, Or]
+    _quad_blk(Jn, F, A, J, 6, 6, -1, 6, -1, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 6, 9, -1, 6, 9, h, cw, acc, first)
+    _quad_blk(Jn, F, A, J, 9, 9, -1, 9, -1, h, cw, acc, first)
+
+
+@njit(cache=True)
+def quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """rk4_predict_into for the quadcopter, on the 3x3 blocks of its continuous Jacobian.
+
+    Blocks of the states (pos | vel | att | rates): A = [[0, I, 0, 0], [0, Dv, Va, 0],
+    [0, 0, Ea, Wr], [0, 0, 0, Or]] (quad_fA; Dv = -kD/m I diagonal): block upper triangular with
+    a zero first block column, so every stage Jacobian J_i = A_i (I + h J_{i-1}) has the same nine
+    non-zero blocks (0,1) (0,2) (0,3) (1,1) (1,2) (1,3) (2,2) (2,3) (3,3); only those are
+    computed, with the generic path's sums in its order (F and x_next equal to the last bit).
+    """
+    c = dt / 6.0
+    for i in range(12):
+        x_next[i] = x[i]
+        xs[i] = x[i]
+        for j in range(12):
+            A[i, j] = 0.0
+    for i in range(3, 12):  # the zero blocks of F: block column 0 and below the block diagonal
+        for j in range(3 if i < 6 else (6 if i < 9 else 9)):
+            F[i, j] = 0.0
+    for i in range(3):
+        F[i, 0] = F[i, 1] = F[i, 2] = 0.0
+    for stage in range(4):
+        quad_fA_nonzeros(p, xs, u, kv, A, True)
+        cw = c * (1.0 if stage == 0 or stage == 3 else 2.0)
+        h = 0.5 * dt if stage < 3 else dt
+        step = 0.5 * dt if stage < 2 else dt
+        # J_i = A_i + h A_i J_{i-1};  F += cw J_i (F = cw J_1 in stage 0)
+        if stage == 0:
+            _quad_stage_jacobian(Jn, F, A, J, h, cw, False, True)
+        else:
+            _quad_stage_jacobian(Jn, F, A, J, h, cw, True, False)
+        for i in range(12):
+            x_next[i] += cw * kv[i]
+            xs[i] = x[i] + step * kv[i]
+        J, Jn = Jn, J
+    for i in range(12):
+        F[i, i] += 1.0
+
+
+@njit(cache=True)
 def rk4_predict(model_id, p, x, u, dt):
     """One RK4 step x_next and its exact Jacobian F (allocating wrapper of rk4_predict_into)."""
     n = x.size
@@ -503,6 +605,8 @@ def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     A, J, Jn (n, n) are work arrays)."""
     if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
         lin_predict_into(p, x, u, x_next, F)
+    elif model_id == QUADCOPTER_ID:
+        quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     else:
         rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
 
