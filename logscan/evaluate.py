@@ -214,11 +214,11 @@ def evaluate_analysis(analysis, *, grace_s: float = DEFAULT_GRACE_S) -> LogEvalu
                          aggressive=bool(truth.get("aggressive", False)))
 
 
-def has_truth(path: str, *, use_header_stamp: bool = False) -> bool:
-    """Whether the log carries ground truth (reads only its header and metadata)."""
-    from logscan.readers import read_log
+def has_truth(path: str) -> bool:
+    """Whether the log carries ground truth (reads only its metadata, not its messages)."""
+    from logscan.readers import read_embedded
 
-    return read_log(path, topics=set(), use_header_stamp=use_header_stamp).truth is not None
+    return read_embedded(path)[1] is not None
 
 
 def evaluate_logs(
@@ -239,7 +239,7 @@ def evaluate_logs(
         if progress:
             progress(path)
         try:
-            if not has_truth(path, use_header_stamp=use_header_stamp):
+            if not has_truth(path):
                 evaluation.skipped.append(path)
                 continue
             analysis = analyze_log(path, profile_path, use_header_stamp=use_header_stamp,

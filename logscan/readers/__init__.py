@@ -89,23 +89,32 @@ def read_log(
     return read_csv(path, wanted)
 
 
-def read_embedded_profile(path: str | os.PathLike) -> str | None:
-    """The profile TOML a log carries, read without its messages; None when it carries none.
+def read_embedded(path: str | os.PathLike) -> tuple[str | None, dict | None]:
+    """(profile TOML, ground truth) a log carries, read without its messages; None where absent.
 
-    MCAP: the metadata record ``logscan.profile`` (key ``toml``), through the summary's metadata
-    index when there is one. CSV file or directory: the ``<log>.profile.toml`` sidecar. ULog: None.
+    MCAP: the metadata records ``logscan.profile`` (key ``toml``) and ``logscan.truth`` (key
+    ``json``), through the summary's metadata index when there is one. CSV file or directory: the
+    ``<log>.profile.toml`` and ``<log>.truth.json`` sidecars. ULog: neither.
     Raises like ``read_log`` for a missing, unknown or corrupt file.
     """
     fmt = detect_format(path)
     if fmt == "mcap":
-        from logscan.readers.mcap_reader import PROFILE_RECORD, read_mcap_metadata
+        from logscan.log import Log, SourceInfo
+        from logscan.readers.mcap_reader import attach_logscan_records, read_mcap_metadata
 
-        return read_mcap_metadata(path).get(PROFILE_RECORD, {}).get("toml")
+        header = Log(channels={}, source=SourceInfo(str(path), "mcap", metadata=read_mcap_metadata(path)))
+        attach_logscan_records(header)
+        return header.profile_text, header.truth
     if fmt in ("csv", "csv-dir"):
-        from logscan.readers.csv_reader import _read_profile
+        from logscan.readers.csv_reader import read_profile_sidecar, read_truth_sidecar
 
-        return _read_profile(Path(path))
-    return None
+        return read_profile_sidecar(Path(path)), read_truth_sidecar(Path(path))
+    return None, None
+
+
+def read_embedded_profile(path: str | os.PathLike) -> str | None:
+    """The profile TOML a log carries (see `read_embedded`); None when it carries none."""
+    return read_embedded(path)[0]
 
 
 def topic_wanted(topic: str, wanted: set[str] | None) -> bool:

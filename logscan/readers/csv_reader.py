@@ -128,8 +128,8 @@ def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     source = SourceInfo(path=str(path), format="csv", time_source="csv column")
     frame = _load_frame(Path(path))
     channels = _frame_channels(frame, Path(path), source, wanted, topic=None)
-    return Log(channels=channels, source=source, truth=_read_truth(Path(path)),
-               profile_text=_read_profile(Path(path)))
+    return Log(channels=channels, source=source, truth=read_truth_sidecar(Path(path)),
+               profile_text=read_profile_sidecar(Path(path)))
 
 
 def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
@@ -156,8 +156,8 @@ def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         )
     units = sorted({t.schema for t in source.topics.values()})
     source.time_unit = "us" if units == ["ulog2csv"] else _dir_time_unit(source)
-    return Log(channels=channels, source=source, truth=_read_truth(directory),
-               profile_text=_read_profile(directory))
+    return Log(channels=channels, source=source, truth=read_truth_sidecar(directory),
+               profile_text=read_profile_sidecar(directory))
 
 
 def _dir_time_unit(source: SourceInfo) -> str:
@@ -416,7 +416,7 @@ def _sidecar(path: Path, suffix: str) -> Path:
     return path.with_name(path.name + suffix) if path.is_dir() else path.with_suffix(suffix)
 
 
-def _read_truth(path: Path) -> dict | None:
+def read_truth_sidecar(path: Path) -> dict | None:
     """Ground truth from the ``<log>.truth.json`` sidecar, when present."""
     import json
 
@@ -431,7 +431,7 @@ def _read_truth(path: Path) -> dict | None:
                          path=str(sidecar)) from None
 
 
-def _read_profile(path: Path) -> str | None:
+def read_profile_sidecar(path: Path) -> str | None:
     """Profile text from the ``<log>.profile.toml`` sidecar (written by `logscan simulate`)."""
     sidecar = _sidecar(path, ".profile.toml")
     if not sidecar.is_file():

@@ -899,7 +899,7 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
             source.time_source = "log_time (no header.stamp found)"
 
     log = Log(channels=channels, source=source)
-    _attach_logscan_records(log)
+    attach_logscan_records(log)
     return log
 
 
@@ -999,7 +999,7 @@ def _indexed_metadata(fh) -> dict[str, dict[str, str]] | None:
     return out
 
 
-def _attach_logscan_records(log: Log) -> None:
+def attach_logscan_records(log: Log) -> None:
     """Ground truth and embedded profile from the ``logscan.truth`` / ``logscan.profile`` records."""
     meta = log.source.metadata
     truth = meta.get(TRUTH_RECORD)
