@@ -32,119 +32,15 @@ import copy
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
-from logscan.alarms import AlarmInterval, alarm_intervals
 from logscan.align import AlignedRun
 from logscan.errors import InputError, InternalError, NotTrainedError, ProfileError, UsageError
+from logscan.results import Band, DetectorResult
 
 STATE_FORMAT = "logscan-detector-state"
-
-
-@dataclass
-class Band:
-    """Threshold series of one statistic on the grid: upper and/or lower, (N,) float64 each."""
-
-    upper: np.ndarray | None = None
-    lower: np.ndarray | None = None
-
-
-@dataclass
-class DetectorResult:
-    """What one detector found on one run.
-
-    series:     named statistic series, each (N,) on the run's grid (NaN where undefined).
-    thresholds: statistic name -> Band of threshold series (N,) for that statistic.
-    alarms:     alarm intervals (from `logscan.alarms.alarm_intervals`).
-    warnings:   things the user should know (coverage limits, skipped groups...).
-    extras:     further (N,) or (N, k) series for figures (coding vector, bands...).
-    info:       JSON-ready facts (coverage notes, parameters used, counts).
-    """
-
-    detector: str
-    series: dict[str, np.ndarray] = field(default_factory=dict)
-    thresholds: dict[str, Band] = field(default_factory=dict)
-    alarms: list[AlarmInterval] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    extras: dict[str, np.ndarray] = field(default_factory=dict)
-    info: dict[str, Any] = field(default_factory=dict)
-
-    def add_statistic(
-        self,
-        t: np.ndarray,
-        name: str,
-        statistic: np.ndarray,
-        upper=None,
-        lower=None,
-        **alarm_options,
-    ) -> list[AlarmInterval]:
-        """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
-        ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...)."""
-        n = np.asarray(t).size
-        statistic = np.asarray(statistic, dtype=np.float64)
-        band = Band(
-            upper=None if upper is None else np.broadcast_to(np.asarray(upper, np.float64), (n,)).copy(),
-            lower=None if lower is None else np.broadcast_to(np.asarray(lower, np.float64), (n,)).copy(),
-        )
-        self.series[name] = statistic
-        self.thresholds[name] = band
-        alarms = alarm_intervals(
-            t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
-        )
-        self.alarms.extend(alarms)
-        return alarms
-
-    def to_dict(self, summary_only: bool = True) -> dict:
-        """JSON-ready view; summary_only=False adds every series as a list (NaN -> null)."""
-        out: dict[str, Any] = {
-            "detector": self.detector,
-            "n_alarms": len(self.alarms),
-            "alarms": [a.to_dict() for a in self.alarms],
-            "warnings": list(self.warnings),
-            "info": _jsonable(self.info),
-            "series": {name: _series_summary(v) for name, v in self.series.items()},
-        }
-        if not summary_only:
-            out["series_values"] = {name: _jsonable(v) for name, v in self.series.items()}
-            out["thresholds"] = {
-                name: {"upper": _jsonable(b.upper), "lower": _jsonable(b.lower)}
-                for name, b in self.thresholds.items()
-            }
-            out["extras"] = {name: _jsonable(v) for name, v in self.extras.items()}
-        return out
-
-
-def _series_summary(values: np.ndarray) -> dict:
-    values = np.asarray(values, dtype=np.float64)
-    finite = values[np.isfinite(values)]
-    return {
-        "n": int(values.size),
-        "finite": int(finite.size),
-        "min": float(finite.min()) if finite.size else None,
-        "max": float(finite.max()) if finite.size else None,
-    }
-
-
-def _jsonable(value: Any) -> Any:
-    """numpy and non-finite floats -> strict-JSON values (NaN/inf -> None)."""
-    if value is None or isinstance(value, (str, bool)):
-        return value
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    return str(value)
 
 
 # --- trained-state encoding (lossless, strict JSON) -----------------------------------------------

@@ -23,52 +23,16 @@ duration and warm-up. Rules, in order:
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from logscan.errors import InternalError
+from logscan.results import AlarmInterval
 
 # Tolerance (seconds) for time comparisons, so a hold-off of exactly two grid periods is not
 # lost to floating-point rounding of the grid times.
 _TIME_EPS = 1e-9
-
-
-@dataclass
-class AlarmInterval:
-    """One alarm: [start, end] seconds on the analysis grid, and where it peaked.
-
-    peak_value / peak_threshold: the statistic and the threshold it crossed at the sample with the
-    largest excess over its threshold; peak_ratio = peak_value / peak_threshold (None when that
-    ratio is undefined: threshold 0 or non-finite, or a non-finite statistic).
-    bound: which bound the peak crossed, "upper", "lower" or "nonfinite".
-    """
-
-    start: float
-    end: float
-    first_exceed: float
-    peak_time: float
-    peak_value: float
-    peak_threshold: float | None
-    peak_ratio: float | None
-    bound: str
-    n_exceed: int  # exceeding samples inside the alarm
-    signal: str = ""
-    detector: str = ""
-
-    @property
-    def duration(self) -> float:
-        return self.end - self.start
-
-    def to_dict(self) -> dict:
-        out = asdict(self)
-        out["duration"] = self.duration
-        for key in ("peak_value", "peak_threshold", "peak_ratio"):
-            value = out[key]
-            if value is not None and not np.isfinite(value):
-                out[key] = str(value)  # JSON has no NaN / inf
-        return out
 
 
 def _as_series(name: str, value, n: int) -> np.ndarray | None:

@@ -105,7 +105,8 @@ def analyze_log(
     from logscan.detectors.registry import default_registry
     from logscan.filters.ekf import run_ekf
     from logscan.models import get_model
-    from logscan.scoring import events_from_truth, score_by_detector
+    from logscan.results import events_from_truth
+    from logscan.scoring import score_by_detector
 
     step = progress or (lambda message: None)
     path = str(path)

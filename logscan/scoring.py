@@ -27,52 +27,9 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from logscan.errors import InputError
+from logscan.results import FaultEvent
 
 DEFAULT_GRACE_S = 1.0
-
-
-@dataclass(frozen=True)
-class FaultEvent:
-    """A ground-truth fault: [t_start, t_end] seconds (t_end None: until the end of the log)."""
-
-    t_start: float
-    t_end: float | None
-    kind: str = ""
-    target: str = ""
-
-    @property
-    def end_or_inf(self) -> float:
-        return math.inf if self.t_end is None else self.t_end
-
-    def to_dict(self) -> dict:
-        return {"t_start": self.t_start, "t_end": self.t_end, "kind": self.kind, "target": self.target}
-
-
-def events_from_truth(items: Iterable[Mapping], *, path: str | None = None) -> list[FaultEvent]:
-    """Fault events from ground-truth records: dicts with t_start (or start), t_end (or end,
-    may be null), kind and target. Raises InputError on a record without a usable start."""
-    events = []
-    for i, item in enumerate(items):
-        start = item.get("t_start", item.get("start"))
-        end = item.get("t_end", item.get("end"))
-        try:
-            start = float(start)
-            end = None if end is None else float(end)
-        except (TypeError, ValueError):
-            raise InputError(
-                f"ground-truth event {i} has no numeric t_start/t_end ({start!r}, {end!r})",
-                path=path,
-                hint="each fault event needs t_start and t_end in seconds (t_end may be null)",
-            ) from None
-        if not math.isfinite(start) or (end is not None and (math.isnan(end) or end < start)):
-            raise InputError(
-                f"ground-truth event {i} has an invalid interval [{start}, {end}]",
-                path=path,
-                hint="t_start must be finite and t_end >= t_start",
-            )
-        events.append(FaultEvent(start, end, str(item.get("kind", "")), str(item.get("target", ""))))
-    return events
 
 
 @dataclass

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from logscan.align import AlignedGroup, AlignedRun
-from logscan.detectors.base import Detector, DetectorResult, describe
+from logscan.detectors.base import Detector, describe
+from logscan.results import DetectorResult
 from logscan.detectors.registry import BUILTIN_DETECTORS, ENTRY_POINT_GROUP, Registry
 from logscan.errors import LogscanError, NotTrainedError
 

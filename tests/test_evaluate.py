@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from logscan.alarms import AlarmInterval
 from logscan.evaluate import (
     Evaluation,
     alarm_groups,
@@ -19,7 +18,7 @@ from logscan.evaluate import (
     merge_intervals,
     score_groups,
 )
-from logscan.scoring import FaultEvent
+from logscan.results import AlarmInterval, FaultEvent
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 HEALTHY = SAMPLES / "quad_healthy.mcap"

@@ -70,7 +70,7 @@ def test_defaults_imu_bias_is_one_on_accel_x_from_half_the_log():
     sim = simulate("quadcopter", [parse_fault("imu-bias")], duration=DURATION, seed=1)
     (event,) = sim.events
     assert (event.kind, event.target, event.magnitude) == ("bias", "accel.x", 1.0)
-    assert event.start == DURATION / 2
+    assert event.t_start == DURATION / 2
     assert event.channels == ("/imu/accel.x",)
 
 
@@ -78,7 +78,7 @@ def test_defaults_bitflip_burst_and_motor_offset():
     sim = simulate("quadcopter", [parse_fault("imu-bitflip"), parse_fault("motor-offset")],
                    duration=DURATION, seed=1)
     flips, motor = sim.events
-    assert flips.kind == "bitflip" and flips.end - flips.start == pytest.approx(1.2)
+    assert flips.kind == "bitflip" and flips.t_end - flips.t_start == pytest.approx(1.2)
     assert (motor.kind, motor.target, motor.magnitude) == ("actuator-offset", "motor1", -0.10)
 
 

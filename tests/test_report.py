@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from logscan.decimate import DEFAULT_MAX_POINTS
-from logscan.detectors.base import DetectorResult
+from logscan.results import DetectorResult
 from logscan.errors import InputError
 from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
 

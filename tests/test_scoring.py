@@ -7,12 +7,10 @@ import math
 
 import pytest
 
-from logscan.alarms import AlarmInterval
 from logscan.errors import InputError
+from logscan.results import AlarmInterval, FaultEvent, events_from_truth
 from logscan.scoring import (
-    FaultEvent,
     aggregate,
-    events_from_truth,
     match_alarms,
     score_by_detector,
     score_log,

@@ -8,7 +8,7 @@ Modules: `faults` (kinds, defaults, parsing), `controllers` (numba controllers a
 from __future__ import annotations
 
 from logscan.simulate.faults import ALL_NAMES as FAULT_NAMES
-from logscan.simulate.faults import FaultEvent, FaultSpec, parse_fault
+from logscan.simulate.faults import FaultSpec, parse_fault
 from logscan.simulate.output import FORMATS, write_simulation
 from logscan.simulate.scenario import SIMULATED_MODELS
 from logscan.simulate.simulation import Simulation, simulate
@@ -17,7 +17,6 @@ __all__ = [
     "FAULT_NAMES",
     "FORMATS",
     "SIMULATED_MODELS",
-    "FaultEvent",
     "FaultSpec",
     "Simulation",
     "parse_fault",

@@ -23,11 +23,12 @@ motor-offset = actuator-offset (-10 % thrust on motor 0), lost-motor = lost-actu
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from logscan.errors import UsageError
+from logscan.results import FaultEvent
 
 # Kernel codes (the closed-loop kernel switches on these).
 BIAS, DRIFT, RANDOM, BITFLIP, STUCK, ACT_OFFSET, LOST_ACT, COV_CORRUPT, STATE_CORRUPT = range(9)
@@ -82,23 +83,6 @@ class FaultSpec:
     start: float | None = None
     end: float | None = None
     magnitude: float | None = None
-
-
-@dataclass(frozen=True)
-class FaultEvent:
-    """A resolved fault: the ground-truth event written into the log."""
-
-    kind: str
-    target: str
-    start: float
-    end: float
-    magnitude: float
-    channels: tuple[str, ...] = ()  # log channels (sensor) or estimator fields affected
-
-    def to_json(self) -> dict:
-        out = asdict(self)
-        out["channels"] = list(self.channels)
-        return out
 
 
 def parse_fault(text: str) -> FaultSpec:
@@ -218,7 +202,7 @@ def resolve_faults(
         if kind == "state-corruption":
             last = first + 1  # one memory upset; the event window is where its effect is expected
         rows.append((KIND_CODES[kind], index, first, max(last, first + 1), float(magnitude)))
-        events.append(FaultEvent(kind, target, float(start), float(end), float(magnitude), channels))
+        events.append(FaultEvent(float(start), float(end), kind, target, float(magnitude), tuple(channels)))
     nf = len(rows)
     if nf == 0:
         return events, FaultTable.empty(n_steps)

@@ -10,13 +10,13 @@ with sample indices on the grid; `logscan.simulate.output` writes it as MCAP or 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from logscan.errors import UsageError
+from logscan.results import FaultEvent
 from logscan.simulate.faults import (
-    FaultEvent,
     FaultSpec,
     FaultTable,
     corrupt_logged_variance,
@@ -129,8 +129,8 @@ class Simulation:
             "rate_hz": 1.0 / sc.dt,
             "aggressive": self.aggressive,
             "controller_input": "on-board EKF estimate",
-            "events": [e.to_json() for e in self.events],
-            "transients": [dict(e.to_json(), kind="glitch") for e in self.transients],
+            "events": [e.to_truth() for e in self.events],
+            "transients": [dict(e.to_truth(), kind="glitch") for e in self.transients],
             "true_state_topic": "/truth/state",
             "true_state_fields": list(sc.model.state_names),
             "onboard_rejected_samples": int(self.rejected),
@@ -239,8 +239,7 @@ def simulate(
     # cov-corruption's channels name the logged variance; state-corruption the logged state
     events = [
         e if e.kind != "state-corruption"
-        else FaultEvent(e.kind, e.target, e.start, e.end, e.magnitude,
-                        tuple(c.replace("/ekf/variance/", "/ekf/state/") for c in e.channels))
+        else replace(e, channels=tuple(c.replace("/ekf/variance/", "/ekf/state/") for c in e.channels))
         for e in events
     ]
     model = sc.model

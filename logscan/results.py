@@ -1,0 +1,235 @@
+"""The data between layers: alarm intervals, detector results, ground-truth fault events, and the one
+JSON policy (numpy values to plain ones, NaN and infinities to null).
+
+Detectors produce `DetectorResult`s holding `AlarmInterval`s; scoring, the report and the artifacts
+read these typed objects directly. Ground truth, whether written by `logscan simulate` or read back
+from a log, is a list of `FaultEvent`s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from logscan.errors import InputError
+
+
+# --- the JSON policy ------------------------------------------------------------------------------
+
+def jsonable(value: Any) -> Any:
+    """numpy and non-finite floats -> strict-JSON values (NaN and +-inf -> None, arrays -> lists)."""
+    if value is None or isinstance(value, (str, bool)):
+        return value
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    return str(value)
+
+
+def series_summary(values: np.ndarray) -> dict:
+    """n, finite count, min and max of one series (the JSON summary's view of a statistic)."""
+    values = np.asarray(values, dtype=np.float64)
+    finite = values[np.isfinite(values)]
+    return {
+        "n": int(values.size),
+        "finite": int(finite.size),
+        "min": float(finite.min()) if finite.size else None,
+        "max": float(finite.max()) if finite.size else None,
+    }
+
+
+# --- alarms ---------------------------------------------------------------------------------------
+
+@dataclass
+class AlarmInterval:
+    """One alarm: [start, end] seconds on the analysis grid, and where it peaked.
+
+    peak_value / peak_threshold: the statistic and the threshold it crossed at the sample with the
+    largest excess over its threshold; peak_ratio = peak_value / peak_threshold (None when that
+    ratio is undefined: threshold 0 or non-finite, or a non-finite statistic).
+    bound: which bound the peak crossed, "upper", "lower" or "nonfinite".
+    """
+
+    start: float
+    end: float
+    first_exceed: float
+    peak_time: float
+    peak_value: float
+    peak_threshold: float | None
+    peak_ratio: float | None
+    bound: str
+    n_exceed: int  # exceeding samples inside the alarm
+    signal: str = ""
+    detector: str = ""
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["duration"] = self.duration
+        return jsonable(out)
+
+
+@dataclass
+class Band:
+    """Threshold series of one statistic on the grid: upper and/or lower, (N,) float64 each."""
+
+    upper: np.ndarray | None = None
+    lower: np.ndarray | None = None
+
+
+@dataclass
+class DetectorResult:
+    """What one detector found on one run.
+
+    series:     named statistic series, each (N,) on the run's grid (NaN where undefined).
+    thresholds: statistic name -> Band of threshold series (N,) for that statistic.
+    alarms:     alarm intervals (from `logscan.alarms.alarm_intervals`).
+    warnings:   things the user should know (coverage limits, skipped groups...).
+    extras:     further (N,) or (N, k) series for figures (coding vector, bands...).
+    info:       JSON-ready facts (coverage notes, parameters used, counts).
+    checks:     statistic name -> the check it belongs to for scoring (e.g. "rejected.accel" ->
+                "e_x"); filled by the detector's `check_of`, so no other layer names a detector.
+    """
+
+    detector: str
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+    thresholds: dict[str, Band] = field(default_factory=dict)
+    alarms: list[AlarmInterval] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    extras: dict[str, np.ndarray] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+    checks: dict[str, str] = field(default_factory=dict)
+
+    def add_statistic(self, t: np.ndarray, name: str, statistic: np.ndarray, upper=None, lower=None,
+                      **alarm_options) -> list[AlarmInterval]:
+        """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
+        ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...)."""
+        from logscan.alarms import alarm_intervals
+
+        n = np.asarray(t).size
+        statistic = np.asarray(statistic, dtype=np.float64)
+        band = Band(
+            upper=None if upper is None else np.broadcast_to(np.asarray(upper, np.float64), (n,)).copy(),
+            lower=None if lower is None else np.broadcast_to(np.asarray(lower, np.float64), (n,)).copy(),
+        )
+        self.series[name] = statistic
+        self.thresholds[name] = band
+        alarms = alarm_intervals(
+            t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
+        )
+        self.alarms.extend(alarms)
+        return alarms
+
+    def check_of(self, signal: str) -> str:
+        """The check (score family) a statistic belongs to: declared by the detector, else the
+        statistic's own name without a ``<detector>.`` prefix (``nis.accel`` -> ``accel``)."""
+        if signal in self.checks:
+            return self.checks[signal]
+        own = f"{self.detector}."
+        return signal[len(own):] if signal.startswith(own) else signal
+
+    def to_dict(self, summary_only: bool = True) -> dict:
+        """JSON-ready view; summary_only=False adds every series as a list (NaN -> null)."""
+        out: dict[str, Any] = {
+            "detector": self.detector,
+            "n_alarms": len(self.alarms),
+            "alarms": [a.to_dict() for a in self.alarms],
+            "warnings": list(self.warnings),
+            "info": jsonable(self.info),
+            "series": {name: series_summary(v) for name, v in self.series.items()},
+        }
+        if not summary_only:
+            out["series_values"] = {name: jsonable(v) for name, v in self.series.items()}
+            out["thresholds"] = {
+                name: {"upper": jsonable(b.upper), "lower": jsonable(b.lower)}
+                for name, b in self.thresholds.items()
+            }
+            out["extras"] = {name: jsonable(v) for name, v in self.extras.items()}
+        return out
+
+
+# --- ground truth ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class FaultEvent:
+    """A ground-truth fault: [t_start, t_end] seconds (t_end None: until the end of the log).
+
+    The one truth schema: `logscan simulate` writes these into a log (`to_truth`) and scoring, the
+    report and evaluation read them back (`events_from_truth`). magnitude's unit depends on the
+    kind; channels are the log channels (or estimator fields) the fault touched.
+    """
+
+    t_start: float
+    t_end: float | None
+    kind: str = ""
+    target: str = ""
+    magnitude: float | None = None
+    channels: tuple[str, ...] = ()
+
+    @property
+    def end_or_inf(self) -> float:
+        return math.inf if self.t_end is None else self.t_end
+
+    def to_dict(self) -> dict:
+        """The scoring view: interval, kind and target."""
+        return {"t_start": self.t_start, "t_end": self.t_end, "kind": self.kind, "target": self.target}
+
+    def to_truth(self) -> dict:
+        """The record stored in a log's ground truth."""
+        return {"kind": self.kind, "target": self.target, "start": self.t_start, "end": self.t_end,
+                "magnitude": self.magnitude, "channels": list(self.channels)}
+
+
+def _optional_float(value: Any) -> float | None:
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def events_from_truth(items: Iterable[Mapping], *, path: str | None = None) -> list[FaultEvent]:
+    """Fault events from ground-truth records: dicts with t_start (or start), t_end (or end,
+    may be null), kind, target and optionally magnitude and channels. Raises InputError on a
+    record without a usable interval."""
+    events = []
+    for i, item in enumerate(items):
+        start = item.get("t_start", item.get("start"))
+        end = item.get("t_end", item.get("end"))
+        try:
+            start = float(start)
+            end = None if end is None else float(end)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"ground-truth event {i} has no numeric t_start/t_end ({start!r}, {end!r})",
+                path=path,
+                hint="each fault event needs t_start and t_end in seconds (t_end may be null)",
+            ) from None
+        if not math.isfinite(start) or (end is not None and (math.isnan(end) or end < start)):
+            raise InputError(
+                f"ground-truth event {i} has an invalid interval [{start}, {end}]",
+                path=path,
+                hint="t_start must be finite and t_end >= t_start",
+            )
+        channels = item.get("channels") or ()
+        events.append(FaultEvent(
+            start, end, str(item.get("kind", "")), str(item.get("target", "")),
+            magnitude=_optional_float(item.get("magnitude")),
+            channels=tuple(str(c) for c in channels) if isinstance(channels, (list, tuple)) else (),
+        ))
+    return events
