@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from logscan.decimate import DEFAULT_MAX_POINTS
-from logscan.results import DetectorResult
 from logscan.errors import InputError
 from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
+from logscan.results import DetectorResult, FaultEvent
 
 HOSTILE = "<script>alert(1)</script>"
 GRID_N = 360_000  # 1 hour at 100 Hz
@@ -70,11 +70,7 @@ def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, se
         "has_truth": truth,
         "has_profile": False,
     }
-    events = (
-        [{"kind": "imu-bias", "target": "accel.x", "start": BIAS_START, "end": BIAS_START + 10, "magnitude": 1.0}]
-        if truth
-        else []
-    )
+    events = [FaultEvent(BIAS_START, BIAS_START + 10, "imu-bias", "accel.x", magnitude=1.0)] if truth else []
     results = [encoded, nis]
     n_alarms = len(flat_alarms(results))
     return ReportInput(

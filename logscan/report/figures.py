@@ -1,0 +1,271 @@
+"""Detector results as figure specs: statistic vs threshold band, alarm and truth spans, extras.
+
+A `Figure` holds full-resolution traces and span lists; `logscan.report.plotly_json` decimates
+and serialises it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.decimate import edge_indices
+from logscan.results import DetectorResult
+
+MAX_SPANS = 100  # shaded spans per figure (closer spans are merged for display)
+NO_BAND = (None, None)
+
+LINE_COLOURS = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2",
+    "#7f7f7f", "#bcbd22", "#17becf", "#d62728", "#393b79", "#637939",
+]  # fmt: skip
+
+
+@dataclass
+class Trace:
+    """One line to draw: full-resolution series, its weight in the point budget, its style."""
+
+    name: str
+    y: np.ndarray
+    keep: np.ndarray
+    weight: float
+    style: dict
+    varying: bool = True
+
+
+@dataclass
+class Figure:
+    title: str
+    y_title: str
+    traces: list[Trace]
+    spans: dict[str, list[tuple[float, float]]]  # "alarm" / "ground truth" -> [(start, end)]
+    log_y: bool = False
+    caption: str = ""
+    hlines: list[tuple[float, str]] = field(default_factory=list)  # (y, name)
+    y_range: tuple[float, float] | None = None  # initial view; None: autorange
+
+
+def merge_spans(spans: Sequence[tuple[float, float]], min_width: float, min_gap: float) -> list:
+    """Spans widened to ``min_width`` and merged where closer than ``min_gap``, at most MAX_SPANS."""
+    if not spans:
+        return []
+    arr = np.asarray(spans, dtype=np.float64).reshape(-1, 2)
+    arr = arr[np.isfinite(arr).all(axis=1)]
+    if arr.size == 0:
+        return []
+    arr = arr[np.argsort(arr[:, 0], kind="stable")]
+    starts = arr[:, 0]
+    ends = np.maximum(arr[:, 1], starts + min_width)
+    gap = min_gap
+    while True:
+        reach = np.maximum.accumulate(ends)
+        new = np.ones(starts.size, dtype=bool)
+        new[1:] = starts[1:] > reach[:-1] + gap
+        first = np.flatnonzero(new)
+        if first.size <= MAX_SPANS:
+            break
+        gap = max(gap * 2.0, min_width)
+    return list(zip(starts[first].tolist(), np.maximum.reduceat(ends, first).tolist()))
+
+
+def _is_piecewise_flat(y: np.ndarray, limit: int = 64) -> bool:
+    changes = np.count_nonzero(y[1:] != y[:-1]) if y.size > 1 else 0
+    return changes <= limit
+
+
+def _bands(result: DetectorResult, n: int, problems: list[str]) -> dict[str, tuple[np.ndarray | None, np.ndarray | None]]:
+    """statistic -> (upper, lower) (N,) arrays from ``result.thresholds`` (name -> Band); a side
+    that is absent, all non-finite or off the grid is None (the latter reported in ``problems``)."""
+    out = {}
+    for name, band in result.thresholds.items():
+        sides = []
+        for side, value in (("upper", band.upper), ("lower", band.lower)):
+            arr = None if value is None else np.asarray(value, dtype=np.float64)
+            if arr is not None and arr.ndim == 0:
+                arr = np.full(n, float(arr))
+            if arr is not None and arr.shape != (n,):
+                problems.append(f"{side} threshold of {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn")
+                arr = None
+            sides.append(arr if arr is not None and np.isfinite(arr).any() else None)
+        out[name] = (sides[0], sides[1])
+    return out
+
+
+def _labels_for(key: str, width: int, result: DetectorResult, model: Mapping) -> list[str]:
+    for candidate in (result.info.get(f"{key}_labels"), result.info.get("state_names"), model.get("states")):
+        if isinstance(candidate, (list, tuple)) and len(candidate) == width:
+            return [str(c) for c in candidate]
+    return [f"{key}[{i}]" for i in range(width)]
+
+
+def _wants_log_axis(columns: Sequence[np.ndarray]) -> bool:
+    """True when every defined value is positive and they span more than three decades."""
+    with np.errstate(invalid="ignore"):
+        lows = [float(np.fmin.reduce(c)) for c in columns if c.size]  # fmin/fmax skip NaN
+        highs = [float(np.fmax.reduce(c)) for c in columns if c.size]
+    lows, highs = [v for v in lows if not math.isnan(v)], [v for v in highs if not math.isnan(v)]
+    if not lows or min(lows) <= 0:
+        return False
+    return max(highs) / min(lows) > 1e3
+
+
+def _judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray | None, peaks: list[float]):
+    """Initial y range for a statistic and its band, when a settling transient (warm-up, the first
+    adaptive windows) would otherwise squash the rest of the plot; None: plotly's autorange.
+
+    Covers the 0.1-99.9 percentiles of the statistic and band where a threshold is defined, and
+    every alarm's peak value; double-clicking the plot restores the full range.
+    """
+    defined = [band for band in (upper, lower) if band is not None]
+    if not defined:
+        return None
+    judged = np.logical_or.reduce([np.isfinite(band) for band in defined])
+    parts = np.concatenate([values[judged], *[band[judged] for band in defined]])
+    parts, everything = parts[np.isfinite(parts)], values[np.isfinite(values)]
+    if parts.size == 0 or everything.size == 0:
+        return None
+    lo, hi = np.percentile(parts[:: max(parts.size // 1_000_000, 1)], [0.1, 99.9])  # a view, not a statistic
+    finite_peaks = [p for p in peaks if math.isfinite(p)]
+    lo, hi = float(min([lo, *finite_peaks])), float(max([hi, *finite_peaks]))
+    span = hi - lo
+    full_lo = min(float(everything.min()), *(float(np.nanmin(b)) for b in defined))
+    full_hi = max(float(everything.max()), *(float(np.nanmax(b)) for b in defined))
+    if full_lo >= lo - span and full_hi <= hi + span:
+        return None  # nothing far outside: autorange shows everything well
+    pad = 0.05 * span if span > 0 else max(abs(hi), 1.0) * 0.05
+    return (lo - pad, hi + pad)
+
+
+def _grid_series(result: DetectorResult, n: int, problems: list[str]) -> dict[str, np.ndarray]:
+    """The result's statistics that lie on the grid as float64; the others reported in ``problems``."""
+    series = {}
+    for name, values in result.series.items():
+        arr = np.asarray(values, dtype=np.float64)
+        if arr.shape != (n,):
+            problems.append(f"statistic {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn")
+            continue
+        series[name] = arr
+    return series
+
+
+def detector_figures(
+    result: DetectorResult, t: np.ndarray, truth_spans: list, model: Mapping, problems: list[str]
+) -> list[Figure]:
+    """The figures of one detector section.
+
+    Statistics with only positive upper thresholds (chi-square tests such as NIS, per group and
+    overall) share one "statistic / threshold" figure; otherwise each statistic gets its own
+    figure with its threshold band (e.g. e_x and e_v of the encoded checks). Extras follow
+    (:func:`_extra_figures`). Alarm spans of the statistics drawn and ground-truth spans are
+    shaded on every figure.
+    """
+    n = t.size
+    dt = float(np.median(np.diff(t))) if n > 1 else 0.0
+    span_len = float(t[-1] - t[0]) if n > 1 else 0.0
+    min_width, min_gap = max(dt, span_len / 2000.0), span_len / 5000.0
+    alarms = result.alarms
+    series = _grid_series(result, n, problems)
+    bands = _bands(result, n, problems)
+
+    def alarm_spans(names: Sequence[str]) -> list:
+        """Spans of the alarms on these statistics (all alarms if none names a drawn statistic)."""
+        named = [a for a in alarms if a.signal in series]
+        chosen = [a for a in named if a.signal in names] if named else alarms
+        return [(float(a.start), float(a.end)) for a in chosen]
+
+    def shading(names: Sequence[str]) -> dict:
+        return {"alarm": merge_spans(alarm_spans(names), min_width, min_gap), "ground truth": truth_spans}
+
+    if len(series) >= 2 and all(_positive_upper_only(bands.get(name, NO_BAND)) for name in series):
+        figures = [_ratio_figure(result.detector, t, series, bands, alarm_spans, shading(list(series)))]
+    else:
+        figures = [
+            _band_figure(result, t, name, values, bands.get(name, NO_BAND), alarm_spans, shading([name]))
+            for name, values in series.items()
+        ]
+    figures.extend(_extra_figures(result, n, model, shading(list(series)), problems))
+    return figures
+
+
+def _positive_upper_only(band: tuple) -> bool:
+    upper, lower = band
+    return upper is not None and lower is None and bool(np.nanmin(upper) > 0)
+
+
+def _ratio_figure(detector: str, t: np.ndarray, series: dict, bands: dict, alarm_spans, spans: dict) -> Figure:
+    """One figure of every statistic divided by its (positive, upper) threshold."""
+    traces = []
+    for i, (name, values) in enumerate(series.items()):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = values / bands[name][0]
+        traces.append(Trace(
+            name, ratio, edge_indices(t, alarm_spans([name])), 1.0,
+            {"line": {"color": LINE_COLOURS[i % len(LINE_COLOURS)], "width": 1.2}},
+        ))  # fmt: skip
+    return Figure(
+        title=f"{detector}: statistic / threshold", y_title="statistic / threshold",
+        traces=traces, spans=spans,
+        log_y=_wants_log_axis([tr.y for tr in traces]),
+        caption="Each statistic divided by its threshold; above 1 is an exceedance.",
+        hlines=[(1.0, "threshold")],
+    )  # fmt: skip
+
+
+def _band_figure(
+    result: DetectorResult, t: np.ndarray, name: str, values: np.ndarray, band: tuple, alarm_spans, spans: dict
+) -> Figure:
+    """One statistic against its threshold band, in the judged y range."""
+    keep = edge_indices(t, alarm_spans([name]))
+    traces = [Trace(name, values, keep, 1.0, {"line": {"color": "#1f77b4", "width": 1.2}})]
+    for label, side in zip(("upper threshold", "lower threshold"), band):
+        if side is not None:
+            traces.append(Trace(
+                label, side, keep, 0.5, {"line": {"color": "rgba(214, 39, 40, 0.75)", "width": 1}},
+                varying=not _is_piecewise_flat(side),
+            ))  # fmt: skip
+    peaks = [float(a.peak_value) for a in result.alarms if a.signal == name]
+    y_range = _judged_range(values, *band, peaks)
+    return Figure(f"{result.detector}: {name}", name, traces, spans, y_range=y_range)
+
+
+def _columns(arr: np.ndarray, block: int = 65_536) -> np.ndarray:
+    """(N, k) -> contiguous (k, N), transposed in blocks of rows (cache-friendly: a plain
+    transposing copy of a long array is several times slower)."""
+    out = np.empty((arr.shape[1], arr.shape[0]), dtype=np.float64)
+    for start in range(0, arr.shape[0], block):
+        out[:, start : start + block] = arr[start : start + block].T
+    return out
+
+
+def _extra_figures(result: DetectorResult, n: int, model: Mapping, spans: dict, problems: list[str]) -> list[Figure]:
+    """An (N, k) extra is one figure (e.g. the coding vector, a line per state); (N,) extras
+    named "<prefix>.<kind>" share one figure per kind (e.g. "nis.accel.per_dof")."""
+    groups: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for key, values in result.extras.items():
+        arr = np.asarray(values, dtype=np.float64)
+        if arr.ndim not in (1, 2) or arr.shape[0] != n:
+            problems.append(f"extra series {key!r} has shape {np.shape(values)}, the grid has {n} steps: not drawn")
+            continue
+        if arr.ndim == 2:
+            labels = _labels_for(key, arr.shape[1], result, model)
+            rows = _columns(arr)
+            groups.setdefault(key, []).extend(zip(labels, rows))
+        else:
+            prefix, _, kind = key.rpartition(".")
+            groups.setdefault(kind if prefix else key, []).append((prefix or key, arr))
+    figures = []
+    for kind, columns in groups.items():
+        traces = [
+            Trace(
+                label, column, np.zeros(0, np.int64), 0.25,
+                {"line": {"color": LINE_COLOURS[j % len(LINE_COLOURS)], "width": 1}},
+                varying=not _is_piecewise_flat(column),
+            )
+            for j, (label, column) in enumerate(columns)
+        ]  # fmt: skip
+        log_y = _wants_log_axis([column for _, column in columns])
+        figures.append(Figure(f"{result.detector}: {kind}", kind, traces, spans, log_y=log_y))
+    return figures

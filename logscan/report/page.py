@@ -1,0 +1,339 @@
+"""The analysis report page: ReportInput -> one offline HTML file (jinja2 template + plotly JSON).
+
+The page is rendered from ``templates/report.html.j2`` with autoescaping on (topic, channel and
+signal names come from untrusted logs). The figures' JSON sits in one ``application/json`` block
+and is drawn by a small inline script with ``Plotly.newPlot``; plotly.js itself is embedded once,
+or written once beside the reports (``plotlyjs=<directory>``) and referenced relatively.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import json
+import math
+import os
+import urllib.parse
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from logscan import scoring
+from logscan.artifacts import write_atomic
+from logscan.errors import InputError
+from logscan.report.figures import Figure, detector_figures, merge_spans
+from logscan.report.plotly_json import POINT_BUDGET, figures_json
+from logscan.results import AlarmInterval, DetectorResult, FaultEvent
+
+PLOTLY_JS_NAME = "plotly.min.js"
+MAX_TABLE_ROWS = 200  # alarm table rows shown; the JSON summary has them all
+
+
+@dataclass
+class ReportInput:
+    """Everything one report shows.
+
+    log_facts:        ``Log.summary()`` of the analysed log.
+    profile_text:     the profile as TOML text.
+    profile_source:   where the profile came from (a path, or "embedded").
+    model:            ``Model.describe()`` (empty dict when no model is used).
+    logscan_version:  version string of logscan.
+    t:                (N,) analysis grid, seconds since the log's start.
+    results:          one DetectorResult per detector that ran.
+    truth_events:     ground-truth fault events. Empty: the log has no truth.
+    matches:          per alarm, in the order of :func:`flat_alarms` (results in order, each
+                      result's alarms in order): ``{"event": index into truth_events or None,
+                      "latency_s": float or None}``. None: computed with
+                      :func:`report_matches` when the log has truth.
+    verdict:          "no alarms", "N alarms" or "partial input".
+    warnings:         run-level warnings shown under the verdict.
+    """
+
+    log_facts: dict
+    profile_text: str
+    profile_source: str
+    model: dict
+    logscan_version: str
+    t: np.ndarray
+    results: list[DetectorResult]
+    truth_events: list[FaultEvent] = field(default_factory=list)
+    matches: list[dict] | None = None
+    verdict: str = "no alarms"
+    warnings: list[str] = field(default_factory=list)
+
+
+# --- alarms and ground truth ------------------------------------------------------------------
+
+
+def flat_alarms(results: Sequence[DetectorResult]) -> list[AlarmInterval]:
+    """All alarms of all results, results in order, each result's alarms in order."""
+    return [alarm for result in results for alarm in result.alarms]
+
+
+def _event_view(event: FaultEvent, index: int, t_end: float) -> dict:
+    """A truth event as {index, kind, target, start, end, open_ended, magnitude, label}."""
+    open_ended = event.t_end is None
+    return {
+        "index": index,
+        "kind": event.kind,
+        "target": event.target,
+        "start": float(event.t_start),
+        "end": t_end if open_ended else float(event.t_end),
+        "open_ended": open_ended,
+        "magnitude": event.magnitude,
+        "label": f"#{index} {event.kind} {event.target}".strip(),
+    }
+
+
+def report_matches(
+    results: Sequence[DetectorResult], truth_events: list[FaultEvent], grace_s: float | None = None
+) -> list[dict]:
+    """Per alarm of :func:`flat_alarms`: the ground-truth event it detected and its latency.
+
+    Uses ``logscan.scoring.match_alarms`` (ALGORITHMS.md section 7); latency = alarm start -
+    event start, clipped at 0 as in scoring.
+    """
+    alarms = flat_alarms(results)
+    grace = scoring.DEFAULT_GRACE_S if grace_s is None else grace_s
+    _, alarm_event = scoring.match_alarms(truth_events, alarms, grace)
+    out = []
+    for alarm, hit in zip(alarms, alarm_event):
+        latency = None if hit is None else max(float(alarm.start) - truth_events[hit].t_start, 0.0)
+        out.append({"event": hit, "latency_s": latency})
+    return out
+
+
+def _number(value: Any, digits: int = 4) -> str:
+    if value is None:
+        return "—"
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    if math.isnan(x):
+        return "NaN"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return f"{x:.{digits}g}"
+
+
+def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> list[dict]:
+    alarms = flat_alarms(report.results)
+    matches = report.matches
+    if has_truth and matches is None and alarms:
+        matches = report_matches(report.results, report.truth_events)
+    rows = []
+    for i, alarm in enumerate(alarms[:MAX_TABLE_ROWS]):
+        start, end = float(alarm.start), float(alarm.end)
+        row = {
+            "index": i,
+            "detector": alarm.detector,
+            "signal": alarm.signal,
+            "start": f"{start:.3f}",
+            "end": f"{end:.3f}",
+            "duration": f"{end - start:.3f}",
+            "peak": _number(alarm.peak_value),
+            "threshold": _number(alarm.peak_threshold),
+            "ratio": _number(alarm.peak_ratio, 3),
+            "bound": alarm.bound,
+            "event": None,
+            "latency": None,
+        }
+        if has_truth and matches is not None and i < len(matches):
+            match = matches[i] or {}
+            hit = match.get("event")
+            if hit is not None and 0 <= int(hit) < len(events):
+                row["event"] = events[int(hit)]["label"]
+                row["latency"] = _number(match.get("latency_s"), 3)
+        rows.append(row)
+    return rows
+
+
+# --- facts --------------------------------------------------------------------------------------
+
+
+def _info_rows(info: Mapping) -> list[tuple[str, str]]:
+    rows = []
+    for key, value in info.items():
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        text = value if isinstance(value, str) else json.dumps(value, default=str)
+        if len(text) > 400:
+            text = text[:400] + " …"
+        rows.append((str(key), text))
+    return rows
+
+
+def _time_text(ns: Any) -> str:
+    if ns is None:
+        return "—"
+    ns = int(ns)
+    if ns > 10**15:  # absolute epoch time (later than 1970-01-12)
+        stamp = _dt.datetime.fromtimestamp(ns / 1e9, tz=_dt.timezone.utc)
+        return stamp.isoformat(timespec="milliseconds").replace("+00:00", " UTC")
+    return f"{ns / 1e9:.3f} s"
+
+
+def _log_view(facts: Mapping) -> dict:
+    return {
+        "file": str(facts.get("file", "")),
+        "name": os.path.basename(str(facts.get("file", ""))) or "log",
+        "format": str(facts.get("format", "")),
+        "start": _time_text(facts.get("start_ns")),
+        "end": _time_text(facts.get("end_ns")),
+        "duration": _number(facts.get("duration_s"), 6),
+        "n_topics": len(facts.get("topics") or {}),
+        "n_channels": len(facts.get("channels") or {}),
+        "partial": bool(facts.get("partial")),
+        "partial_reason": str(facts.get("partial_reason", "")),
+        "skipped": [
+            f"{s.get('what', '')}: {s.get('why', '')} (x{s.get('count', 1)})"
+            for s in facts.get("skipped") or []
+        ],
+        "warnings": [str(w) for w in facts.get("warnings") or []],
+        "topics": sorted(str(name) for name in (facts.get("topics") or {})),
+    }
+
+
+def _model_view(model: Mapping) -> dict:
+    return {
+        "name": str(model.get("name", "")),
+        "states": [str(s) for s in model.get("states", [])],
+        "inputs": [str(s) for s in model.get("inputs", [])],
+        "groups": [str(g) for g in (model.get("groups") or {})],
+        "params": _info_rows(model.get("params") or {}),
+    }
+
+
+def _verdict_class(verdict: str, n_alarms: int) -> str:
+    if "partial" in verdict:
+        return "partial"
+    return "alarm" if n_alarms else "ok"
+
+
+# --- plotly.js and the template -----------------------------------------------------------------
+
+
+def _plotly_js() -> str:
+    from plotly.offline import get_plotlyjs
+
+    js = get_plotlyjs()
+    # "</script" inside the inline script would end it early; "<\/" is the same string in JS
+    return js.replace("</script", "<\\/script").replace("</SCRIPT", "<\\/SCRIPT")
+
+
+def _install_plotly_js(directory: Path, report_path: Path) -> str:
+    """Write plotly.min.js into ``directory`` (if absent or different); URL relative to the report."""
+    if directory.exists() and not directory.is_dir():
+        raise InputError("--plotlyjs must be a directory", path=str(directory), hint="give a directory path or 'embed'")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the plotly.js directory: {exc.strerror}", path=str(directory)) from None
+    from plotly.offline import get_plotlyjs
+
+    payload = get_plotlyjs().encode("utf-8")
+    target = directory / PLOTLY_JS_NAME
+    if not target.is_file() or target.read_bytes() != payload:
+        write_atomic(target, payload)
+    relative = os.path.relpath(target.resolve(), report_path.resolve().parent)
+    return urllib.parse.quote(Path(relative).as_posix())
+
+
+@functools.lru_cache(maxsize=1)
+def _environment():
+    import jinja2
+
+    import logscan.templates
+
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(Path(logscan.templates.__file__).parent),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+
+
+# --- the page -----------------------------------------------------------------------------------
+
+
+def _sections(report: ReportInput, t: np.ndarray, truth_spans: list) -> tuple[list[dict], list[tuple[str, Figure]]]:
+    """One section per detector result, and every figure with its element id ("fig-<n>")."""
+    sections, figures = [], []
+    for result in report.results:
+        problems: list[str] = []
+        figs = detector_figures(result, t, truth_spans, report.model, problems)
+        sections.append({
+            "detector": result.detector,
+            "n_alarms": len(result.alarms),
+            "warnings": [str(w) for w in result.warnings] + problems,
+            "coverage": str(result.info.get("coverage", "")),
+            "info": _info_rows(result.info),
+            "figures": [],
+        })  # fmt: skip
+        for fig in figs:
+            fig_id = f"fig-{len(figures)}"
+            sections[-1]["figures"].append({"id": fig_id, "title": fig.title, "caption": fig.caption})
+            figures.append((fig_id, fig))
+    return sections, figures
+
+
+def _event_rows(events: list[dict]) -> list[dict]:
+    return [
+        {**e, "start": f"{e['start']:.3f}", "end": f"{e['end']:.3f}" + (" (open)" if e["open_ended"] else ""),
+         "magnitude": "—" if e["magnitude"] is None else str(e["magnitude"])}
+        for e in events
+    ]  # fmt: skip
+
+
+def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_budget: int = POINT_BUDGET) -> str:
+    """The report page as a string; plotly.js inline, or from ``plotlyjs_src`` (a URL) if given."""
+    t = np.asarray(report.t, dtype=np.float64)
+    t_end = float(t[-1]) if t.size else 0.0
+    events = [_event_view(e, i, t_end) for i, e in enumerate(report.truth_events)]
+    has_truth = bool(events) or bool(report.log_facts.get("has_truth"))
+    truth_spans = merge_spans([(e["start"], e["end"]) for e in events], 0.0, 0.0)
+    sections, figures = _sections(report, t, truth_spans)
+    figure_json = figures_json(figures, t, point_budget)
+
+    alarms = flat_alarms(report.results)
+    rows = _alarm_rows(report, events, has_truth)
+    log = _log_view(report.log_facts)
+    return _environment().get_template("report.html.j2").render(
+        title=f"logscan report: {log['name']}",
+        log=log,
+        profile_text=report.profile_text,
+        profile_source=report.profile_source,
+        model=_model_view(report.model),
+        version=report.logscan_version,
+        verdict=report.verdict,
+        verdict_class=_verdict_class(report.verdict, len(alarms)),
+        n_alarms=len(alarms),
+        warnings=[str(w) for w in report.warnings],
+        rows=rows,
+        rows_hidden=max(len(alarms) - len(rows), 0),
+        has_truth=has_truth,
+        events=_event_rows(events),
+        sections=sections,
+        n_figures=len(figures),
+        figure_json=figure_json,
+        plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
+        plotlyjs_src=plotlyjs_src,
+        grid={"n": int(t.size), "dt": _number(float(np.median(np.diff(t))) if t.size > 1 else None)},
+    )  # fmt: skip
+
+
+def render_report(report: ReportInput, path: str | os.PathLike, *, plotlyjs: str | os.PathLike = "embed") -> None:
+    """Write the report for ``report`` to ``path`` atomically.
+
+    plotlyjs: "embed" puts plotly.js inside the page (one self-contained file, ~5 MB); a
+    directory path writes plotly.min.js there once and references it relatively (each report
+    then stays a few hundred kilobytes).
+    """
+    target = Path(path)
+    src = None if str(plotlyjs) == "embed" else _install_plotly_js(Path(plotlyjs), target)
+    write_atomic(target, render_html(report, plotlyjs_src=src))

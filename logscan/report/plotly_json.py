@@ -1,0 +1,152 @@
+"""Figure specs as plotly JSON for an HTML page: one point budget, decimated traces, escaped text.
+
+Traces are decimated (``logscan.decimate``: min/max per bucket, alarm edges and NaN gaps kept)
+under one point budget per report, so a report stays a few hundred kilobytes plus plotly.js
+whatever the log length. The JSON has every ``<``, ``>`` and ``&`` escaped, so it can sit inside
+a ``<script>`` element.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from logscan.decimate import DEFAULT_MAX_POINTS, decimate_indices
+from logscan.report.figures import Figure
+
+POINT_BUDGET = 20_000  # plotted points per report, shared by all varying traces
+MIN_POINTS_PER_TRACE = 400
+_F4_MAX = float(np.finfo(np.float32).max)
+
+ALARM_FILL = "rgba(214, 39, 40, 0.18)"
+TRUTH_FILL = "rgba(31, 119, 180, 0.16)"
+
+
+def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
+    """The samples where ``y`` is defined, with one NaN where they are far apart in time.
+
+    Statistics are NaN on steps where they are not evaluated (a 10 Hz group's NIS on a 100 Hz
+    grid is NaN 9 steps in 10); drawn as is, such a line would be all gaps. So only defined
+    samples are drawn, joined, except across a gap longer than 3x their typical spacing, where a
+    NaN still breaks the line. ``keep`` (grid indices) is mapped onto the returned samples.
+    """
+    defined = ~np.isnan(y)
+    if defined.all():
+        return t, y, keep
+    idx = np.flatnonzero(defined)
+    tc, yc = t[idx], y[idx]
+    if idx.size >= 2:
+        spacing = np.diff(tc)
+        breaks = np.flatnonzero(spacing > 3.0 * np.median(spacing)) + 1
+        tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
+        yc = np.insert(yc, breaks, np.nan)
+    kept = np.clip(np.searchsorted(tc, t[keep]), 0, max(tc.size - 1, 0)) if tc.size else keep[:0]
+    return tc, yc, np.unique(kept)
+
+
+def _display_values(y: np.ndarray) -> np.ndarray:
+    """float32 values for the browser: inf -> NaN (a gap), finite values clipped to float32."""
+    out = np.asarray(y, dtype=np.float64).copy()
+    out[np.isinf(out)] = np.nan
+    np.clip(out, -_F4_MAX, _F4_MAX, out=out)
+    return out.astype(np.float32)
+
+
+def _span_trace(name: str, spans: list, fill: str) -> dict:
+    """A filled polygon per span on the hidden overlay axis y2 (0..1 covers the plot height)."""
+    arr = np.asarray(spans, dtype=np.float64).reshape(-1, 2)
+    x = np.column_stack([arr[:, 0], arr[:, 0], arr[:, 1], arr[:, 1], np.full(len(arr), np.nan)])
+    y = np.tile(np.array([0.0, 1.0, 1.0, 0.0, np.nan]), (len(arr), 1))
+    return {
+        "type": "scatter",
+        "name": name,
+        "legendgroup": name,
+        "x": x.ravel().astype(np.float32),
+        "y": y.ravel().astype(np.float32),
+        "yaxis": "y2",
+        "mode": "lines",
+        "line": {"width": 0},
+        "fill": "toself",
+        "fillcolor": fill,
+        "hoverinfo": "skip",
+        "showlegend": True,
+    }
+
+
+def allocate_points(figures: list[Figure], budget: int) -> dict[int, int]:
+    """Points per varying trace (by id), proportional to weight, within [MIN, DEFAULT_MAX]."""
+    varying = [tr for fig in figures for tr in fig.traces if tr.varying]
+    total_weight = sum(tr.weight for tr in varying) or 1.0
+    return {
+        id(tr): int(min(DEFAULT_MAX_POINTS, max(MIN_POINTS_PER_TRACE, budget * tr.weight / total_weight)))
+        for tr in varying
+    }
+
+
+def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict]:
+    """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines."""
+    data: list[dict] = []
+    span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL}
+    for name, spans in fig.spans.items():
+        if spans:
+            data.append(_span_trace(name, spans, span_fills.get(name, ALARM_FILL)))
+    t0, t1 = (float(t[0]), float(t[-1])) if t.size else (0.0, 0.0)
+    for y_value, name in fig.hlines:
+        data.append({
+            "type": "scatter", "name": name, "x": [t0, t1], "y": [y_value, y_value],
+            "mode": "lines", "line": {"color": "#d62728", "dash": "dash", "width": 1},
+        })  # fmt: skip
+    for trace in fig.traces:
+        max_points = points.get(id(trace), DEFAULT_MAX_POINTS)
+        x, y, keep = _defined_samples(t, trace.y, trace.keep)
+        idx = decimate_indices(y, max_points, keep=keep, simplify_flat=True)
+        data.append({
+            "type": "scatter",
+            "name": trace.name,
+            "x": x[idx].astype(np.float32),
+            "y": _display_values(y[idx]),
+            "mode": "lines",
+            "hovertemplate": "%{y:.6g} at %{x:.3f} s",
+            **trace.style,
+        })  # fmt: skip
+    return data
+
+
+def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
+    """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points)."""
+    import plotly.graph_objects as go
+
+    layout = {
+        "title": {"text": fig.title, "font": {"size": 14}},
+        "height": 360,
+        "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
+        "xaxis": {"title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False},
+        "yaxis": {"title": {"text": fig.y_title}, "gridcolor": "#eee", "type": "log" if fig.log_y else "linear",
+                  **({"range": list(fig.y_range)} if fig.y_range else {})},
+        "yaxis2": {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True},
+        "legend": {"orientation": "h", "y": -0.22, "yanchor": "top"},
+        "hovermode": "closest",
+        "plot_bgcolor": "white",
+        "paper_bgcolor": "white",
+        "template": {},
+    }
+    figure = go.Figure(data=_trace_data(fig, t, points), layout=layout, skip_invalid=False)
+    return escape_json(figure.to_json(validate=False, remove_uids=True))
+
+
+def figures_json(figures: list[tuple[str, Figure]], t: np.ndarray, point_budget: int = POINT_BUDGET) -> str:
+    """``[{"id": ..., "figure": ...}, ...]`` for (element id, figure) pairs, under one point budget."""
+    points = allocate_points([fig for _, fig in figures], point_budget)
+    return "[" + ",".join(
+        f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points)}}}' for fig_id, fig in figures
+    ) + "]"
+
+
+def escape_json(text: str) -> str:
+    """JSON safe inside an HTML <script> element: no ``<``, ``>``, ``&`` or line separators."""
+    return (
+        text.replace("<", "\\u003c")
+        .replace(">", "\\u003e")
+        .replace("&", "\\u0026")
+        .replace("\u2028", "\\u2028")
+        .replace("\u2029", "\\u2029")
+    )
