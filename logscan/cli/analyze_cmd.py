@@ -138,8 +138,7 @@ def write_report(analysis, path: str, plotlyjs_dir: str | None) -> None:
     from logscan import __version__
     from logscan.report import ReportInput, render_report, report_matches
 
-    events = [{**e.to_dict(), "magnitude": raw.get("magnitude")}
-              for e, raw in zip(analysis.events, (analysis.log.truth or {}).get("events", []))]
+    events = analysis.events
     report = ReportInput(
         log_facts=analysis.log.summary(),
         profile_text=analysis.profile_text,
