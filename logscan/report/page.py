@@ -93,8 +93,9 @@ def report_matches(
 ) -> list[dict]:
     """Per alarm of :func:`flat_alarms`: the ground-truth event it detected and its latency.
 
-    Uses ``logscan.scoring.match_alarms`` (ALGORITHMS.md section 7); latency = alarm start -
-    event start, clipped at 0 as in scoring.
+    Uses ``logscan.scoring.match_alarms`` (an alarm detects the earliest event it overlaps,
+    within the grace period after the event's end); latency = alarm start - event start, clipped
+    at 0 as in scoring.
     """
     alarms = flat_alarms(results)
     grace = scoring.DEFAULT_GRACE_S if grace_s is None else grace_s
