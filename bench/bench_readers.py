@@ -1,7 +1,7 @@
 """Benchmark of the MCAP reader: logscan's read_mcap against plain mcap iter_decoded_messages.
 
 Generates (in a temporary directory, deleted afterwards) a JSON MCAP and a ROS 2 MCAP of IMU-like
-messages on several topics with ``logscan.mcap_writer``, then times, in one run:
+messages on several topics with ``logscan.readers.mcap.writer``, then times, in one run:
 
  - logscan: ``read_mcap(path, None)`` -> every numeric field as a numpy channel;
  - plain mcap: ``make_reader(f, decoder_factories=[...]).iter_decoded_messages()``, touching
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from logscan.mcap_writer import TopicData, write_mcap
-from logscan.readers.mcap_reader import decoder_factories, read_mcap
+from logscan.readers.mcap.reader import decoder_factories, read_mcap
+from logscan.readers.mcap.writer import TopicData, write_mcap
 
 # topic -> (share of the messages, schema name, field names)
 _TOPICS = {

@@ -87,7 +87,7 @@ def test_unknown_channel_in_a_profile_names_the_closest_channels(tmp_path):
 
 
 def test_a_log_without_profile_asks_for_one(tmp_path):
-    from logscan.mcap_writer import TopicData, write_mcap
+    from logscan.readers.mcap import TopicData, write_mcap
 
     t = np.arange(10, dtype=np.int64) * 10_000_000
     path = tmp_path / "bare.mcap"
@@ -109,8 +109,8 @@ def test_several_logs_one_bad_reports_the_rest_and_exits_two(tmp_path):
 
 def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path):
     """A hostile topic name travels through reader, profile, detectors and report as data."""
-    from logscan.mcap_writer import TopicData, write_mcap
     from logscan.readers import read_log
+    from logscan.readers.mcap import TopicData, write_mcap
 
     source = read_log(sample("sbw_healthy.mcap"))
     hostile = "/imu<script>alert(1)</script>"

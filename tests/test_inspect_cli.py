@@ -16,7 +16,7 @@ from logscan.cli.main import main
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
 ULOGS = sorted((TESTDATA / "px4-ulog").glob("*.ulg"))
 MCAPS = sorted((TESTDATA / "mcap-conformance").rglob("*.mcap"))
-HAVE_MCAP_READER = importlib.util.find_spec("logscan.readers.mcap_reader") is not None
+HAVE_MCAP_READER = importlib.util.find_spec("logscan.readers.mcap") is not None
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
@@ -100,7 +100,7 @@ def conformance_message_count(mcap: Path) -> int:
 
 
 @pytest.mark.skipif(not MCAPS, reason="shared mcap-conformance test data missing")
-@pytest.mark.skipif(not HAVE_MCAP_READER, reason="logscan.readers.mcap_reader not written yet")
+@pytest.mark.skipif(not HAVE_MCAP_READER, reason="logscan.readers.mcap not written yet")
 def test_inspect_every_conformance_mcap(capsys):
     failures = []
     for path in MCAPS:

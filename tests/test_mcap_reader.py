@@ -15,9 +15,9 @@ from mcap.writer import CompressionType, Writer
 
 from logscan.errors import CorruptLogError, InputError
 from logscan.log import Log
-from logscan.mcap_writer import TopicData, mcap_bytes
+from logscan.readers.mcap.writer import TopicData, mcap_bytes
 from logscan.readers import read_log
-from logscan.readers.mcap_reader import iter_raw_messages, read_mcap
+from logscan.readers.mcap import iter_raw_messages, read_mcap
 
 CONFORMANCE = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "mcap-conformance"
 CONFORMANCE_FILES = sorted(CONFORMANCE.glob("*/*.mcap")) if CONFORMANCE.is_dir() else []
@@ -530,7 +530,8 @@ def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
     from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
     from mcap_ros2.writer import Writer as Ros2Writer
 
-    from logscan.readers.mcap_reader import _cdr_fast, _cdr_layout, _SchemaRec
+    from logscan.readers.mcap.cdr import cdr_fast, cdr_layout
+    from logscan.readers.mcap.scan import SchemaRec
 
     rng = np.random.default_rng(5)
     path = tmp_path / "fixed.mcap"
@@ -551,9 +552,9 @@ def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
     datas = [m.data for m in raw]
     from mcap.records import Schema
 
-    layout = _cdr_layout(_SchemaRec(1, "test_msgs/msg/Fixed", "ros2msg", ROS2_FIXED.encode()))
+    layout = cdr_layout(SchemaRec(1, "test_msgs/msg/Fixed", "ros2msg", ROS2_FIXED.encode()))
     assert layout is not None
-    fast = _cdr_fast(layout, datas)
+    fast = cdr_fast(layout, datas)
     assert fast is not None
     schema = Schema(id=1, name="test_msgs/msg/Fixed", encoding="ros2msg", data=ROS2_FIXED.encode())
     decode = Ros2DecoderFactory().decoder_for("cdr", schema)
@@ -608,11 +609,11 @@ def _mixed_json_file(path: Path, chunked: bool) -> None:
 
 
 def _read_both_paths(monkeypatch, path: Path, topics: set[str] | None) -> tuple[Log, Log]:
-    import logscan.readers.mcap_reader as reader
+    import logscan.readers.mcap.reader as reader
 
     fast = read_mcap(path, topics)
     with monkeypatch.context() as patch:
-        patch.setattr(reader, "_cdr_layout", lambda schema: None)  # no CDR layout kernel
+        patch.setattr(reader, "cdr_layout", lambda schema: None)  # no CDR layout kernel
         patch.setattr(reader, "JsonDecoder", type("NoBulkJson", (), {}))  # no JSON template path
         slow = read_mcap(path, topics)
     return fast, slow
@@ -658,18 +659,18 @@ SAMPLE_LOGS = sorted((Path(__file__).resolve().parents[1] / "sample_logs").glob(
 
 
 def _no_walk(monkeypatch) -> None:
-    import logscan.readers.mcap_reader as reader
+    import logscan.readers.mcap.metadata as metadata
 
     def walked(*args, **kwargs):
         raise AssertionError("the whole file was walked")
 
-    monkeypatch.setattr(reader, "_scan", walked)
+    monkeypatch.setattr(metadata, "scan_file", walked)
 
 
 @pytest.mark.parametrize("path", SAMPLE_LOGS, ids=lambda p: p.stem)
 def test_metadata_of_sample_logs_comes_from_the_summary_index(path, monkeypatch):
     from logscan.readers import read_embedded_profile
-    from logscan.readers.mcap_reader import read_mcap_metadata
+    from logscan.readers.mcap import read_mcap_metadata
 
     expected = read_mcap(path, set())
     _no_walk(monkeypatch)
@@ -681,7 +682,7 @@ def test_metadata_of_sample_logs_comes_from_the_summary_index(path, monkeypatch)
 
 
 def test_metadata_matches_the_walk_on_every_conformance_file():
-    from logscan.readers.mcap_reader import read_mcap_metadata
+    from logscan.readers.mcap import read_mcap_metadata
 
     if not CONFORMANCE_FILES:
         pytest.skip("shared conformance data absent")
@@ -690,7 +691,7 @@ def test_metadata_matches_the_walk_on_every_conformance_file():
 
 
 def test_metadata_of_a_truncated_file_comes_from_the_walk(valid_file, tmp_path):
-    from logscan.readers.mcap_reader import read_mcap_metadata
+    from logscan.readers.mcap import read_mcap_metadata
 
     _, data, _ = valid_file
     for cut in [len(data) // 2, len(data) - 9, len(data) - 40]:
@@ -712,7 +713,7 @@ def _write(path: Path, data: bytes) -> Path:
 
 
 def test_a_summary_that_fails_its_checks_is_not_trusted(valid_file, tmp_path, monkeypatch):
-    from logscan.readers.mcap_reader import read_mcap_metadata
+    from logscan.readers.mcap import read_mcap_metadata
 
     _, data, _ = valid_file
     expected = {"logscan.truth": {"json": '{"events": []}'}}
@@ -734,7 +735,7 @@ def test_a_summary_that_fails_its_checks_is_not_trusted(valid_file, tmp_path, mo
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(position=st.floats(0.9, 1, exclude_max=True), xor=st.integers(1, 255))
 def test_flipped_summary_byte_gives_the_metadata_or_a_corrupt_log_error(valid_file, tmp_path, position, xor):
-    from logscan.readers.mcap_reader import read_mcap_metadata
+    from logscan.readers.mcap import read_mcap_metadata
 
     data = valid_file[1]
     at = int(position * len(data))

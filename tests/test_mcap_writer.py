@@ -10,8 +10,8 @@ import pytest
 from mcap.reader import NonSeekingReader, make_reader
 
 from logscan.errors import UsageError
-from logscan.mcap_writer import TopicData, mcap_bytes, write_mcap
-from logscan.readers.mcap_reader import read_mcap
+from logscan.readers.mcap.writer import TopicData, mcap_bytes, write_mcap
+from logscan.readers.mcap import read_mcap
 
 
 def _topics() -> dict[str, TopicData]:

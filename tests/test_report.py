@@ -333,8 +333,8 @@ def test_module_is_importable_without_rendering():
 def test_a_real_log_with_script_topic_names_shows_them_as_text(tmp_path):
     """End to end from an MCAP file: the reader's topic and channel names reach the page as text."""
     try:
-        from logscan.mcap_writer import TopicData, write_mcap
         from logscan.readers import read_log
+        from logscan.readers.mcap import TopicData, write_mcap
     except ImportError as exc:  # pragma: no cover - only while the MCAP stack is missing
         pytest.skip(f"MCAP reader/writer missing: {exc}")
     t_ns = np.arange(500, dtype=np.int64) * 10_000_000

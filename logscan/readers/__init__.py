@@ -1,4 +1,4 @@
-"""Reader selection: pick the reader by the file's content (magic bytes), not only its suffix."""
+"""The format table: pick the reader by the file's content (magic bytes), not only its suffix."""
 
 from __future__ import annotations
 
@@ -8,9 +8,7 @@ from pathlib import Path
 
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.log import Log
-
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-ULOG_MAGIC = b"ULog\x01\x12\x35"
+from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC
 
 
 def detect_format(path: str | os.PathLike) -> str:
@@ -75,7 +73,7 @@ def read_log(
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
     if fmt == "mcap":
-        from logscan.readers.mcap_reader import read_mcap
+        from logscan.readers.mcap import read_mcap
 
         return read_mcap(path, wanted, use_header_stamp=use_header_stamp)
     if fmt == "ulog":
@@ -100,7 +98,7 @@ def read_embedded(path: str | os.PathLike) -> tuple[str | None, dict | None]:
     fmt = detect_format(path)
     if fmt == "mcap":
         from logscan.log import Log, SourceInfo
-        from logscan.readers.mcap_reader import attach_logscan_records, read_mcap_metadata
+        from logscan.readers.mcap import attach_logscan_records, read_mcap_metadata
 
         header = Log(channels={}, source=SourceInfo(str(path), "mcap", metadata=read_mcap_metadata(path)))
         attach_logscan_records(header)
@@ -115,18 +113,3 @@ def read_embedded(path: str | os.PathLike) -> tuple[str | None, dict | None]:
 def read_embedded_profile(path: str | os.PathLike) -> str | None:
     """The profile TOML a log carries (see `read_embedded`); None when it carries none."""
     return read_embedded(path)[0]
-
-
-def topic_wanted(topic: str, wanted: set[str] | None) -> bool:
-    """True when ``topic`` is wanted (``wanted`` None: all): it is in ``wanted``, a wanted channel
-    lies under it (``topic/...``), or it lies under a wanted prefix (a profile may name an on-board
-    estimator by the prefix ``/ekf/state`` of channels that a CSV holds as columns). Leading and
-    trailing "/" are ignored, so ULog and CSV topics without one match too."""
-    if wanted is None:
-        return True
-    name = topic.strip("/")
-    for item in wanted:
-        want = item.strip("/")
-        if name == want or want.startswith(name + "/") or name.startswith(want + "/"):
-            return True
-    return False

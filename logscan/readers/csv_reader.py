@@ -38,7 +38,7 @@ import pandas as pd
 
 from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
-from logscan.readers.ulog_reader import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order
+from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
 
 TIME_NAMES = ("time", "timestamp", "t", "stamp")
 
@@ -134,8 +134,6 @@ def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
 
 def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     """Read a directory of per-topic CSVs (PX4 ulog2csv layout, or wide files) into one Log."""
-    from logscan.readers import topic_wanted
-
     directory = Path(path)
     files = sorted(p for p in directory.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
     if not files:

@@ -20,12 +20,12 @@ import numpy as np
 
 from logscan.errors import CorruptLogError, InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
 
 _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
 
 
-ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
 class _TruncationWatch(io.RawIOBase):
     """A read-only file that remembers where a read first came back short (the file is cut).
 
@@ -62,16 +62,6 @@ class _TruncationWatch(io.RawIOBase):
         super().close()
 
 
-def channel_wanted(channel: str, topic: str, wanted: set[str] | None) -> bool:
-    """Keep ``channel`` of ``topic`` when all are wanted, it is asked for, or its whole topic is
-    (as ``topic`` or ``/topic``)."""
-    from logscan.readers import topic_wanted
-
-    if wanted is None or topic in wanted or "/" + topic in wanted:
-        return True
-    return topic_wanted(channel, wanted)
-
-
 def message_filter(wanted: set[str] | None) -> list[str] | None:
     """ULog message names to decode for ``wanted`` topics/channels (None: all).
 
@@ -91,8 +81,6 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     """Read a ULog file into a Log, decoding only the messages ``wanted`` asks for."""
     from pyulog import ULog
     from pyulog.exceptions import ULogException
-
-    from logscan.readers import topic_wanted
 
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
     chatter = io.StringIO()
@@ -190,25 +178,6 @@ def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | N
             f"ULog truncated at byte {cut_at} of {size} before any data message",
             path=str(path), hint="the file was cut during logging or copying; nothing to read",
         )
-
-
-def report_time_order(t_ns: np.ndarray, label: str, source: SourceInfo, note: str = "") -> None:
-    """Warn about timestamps that go backwards or repeat; the values stay in file order.
-
-    Shared by the CSV reader. Alignment (logscan.align) sorts and deduplicates.
-    """
-    if t_ns.size < 2:
-        return
-    steps = np.diff(t_ns)
-    backwards = int((steps < 0).sum())
-    if backwards == 0 and bool((steps > 0).all()):
-        return
-    duplicates = int((np.diff(np.sort(t_ns)) == 0).sum())
-    source.warnings.append(
-        f"{label}: timestamps not strictly increasing ({backwards} step(s) backwards, "
-        f"{duplicates} duplicate(s)); kept in file order, alignment sorts and deduplicates"
-        + (f" ({note})" if note and backwards else "")
-    )
 
 
 def _array_base(name: str) -> str:

@@ -58,7 +58,7 @@ def write_simulation(sim: Simulation, path: str | Path, fmt: str = "mcap-json") 
     profile_text = sim.profile_toml()
     if fmt == "csv":
         return _write_csv(sim, Path(path), truth_text, profile_text)
-    from logscan.mcap_writer import TopicData, write_mcap
+    from logscan.readers.mcap.writer import TopicData, write_mcap
 
     t_ns = grid_ns(sim)
     topics = {

@@ -3,7 +3,7 @@
 ``write_mcap(path, {"/imu": TopicData("sensor_msgs/msg/Imu", t_ns, {"linear_acceleration.x": x,
 ...})})`` writes one message per timestamp per topic. Dotted field names become nested JSON
 objects, or nested ROS 2 message types (sub-definitions ``MSG: <pkg>/<Type><Field>`` after a
-``====`` separator line), so ``logscan.readers.mcap_reader`` reads both back as channels
+``====`` separator line), so ``logscan.readers.mcap.reader`` reads both back as channels
 ``/imu/linear_acceleration.x``. All fields are float64 (ROS 2 ``float64``).
 
 Messages go out in global log_time order (stable: ties keep topic order), in lz4 chunks (none when
@@ -27,9 +27,9 @@ import numpy as np
 
 from logscan.artifacts import write_atomic
 from logscan.errors import UsageError
+from logscan.readers.common import MCAP_MAGIC
 
 LIBRARY = "logscan"
-MAGIC = b"\x89MCAP0\r\n"
 _ROS2_FIELD = re.compile(r"^[a-z][a-z0-9_]*$")
 _CDR_HEADER = b"\x00\x01\x00\x00"  # CDR, little endian, no options
 
@@ -267,7 +267,7 @@ def mcap_bytes(
         times.append(np.asarray(data.t_ns, dtype=np.int64))
 
     out = _Out()
-    out.add(MAGIC)
+    out.add(MCAP_MAGIC)
     out.record(0x01, _string("ros2" if encoding == "ros2" else "") + _string(LIBRARY))
     metadata_indexes = []
     for name, items in (metadata or {}).items():
@@ -346,7 +346,7 @@ def mcap_bytes(
     footer_head = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
     out.add(footer_head)
     out.add(struct.pack("<I", out.crc(summary_start)))
-    out.add(MAGIC)
+    out.add(MCAP_MAGIC)
     return b"".join(out.parts)
 
 

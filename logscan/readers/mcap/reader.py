@@ -1,0 +1,296 @@
+"""MCAP reader: the scan's message batches decoded per channel and flattened into time-sorted channels.
+
+How a file is read
+------------------
+The whole file is walked linearly, record by record (``records``: a numba kernel finds the record
+boundaries, numpy gathers channel ids and log times; ``scan``: Python works per chunk and channel,
+not per message). This is what the mcap library's streaming reader does too, but it is far faster,
+and it does not depend on the summary section, so it reads every conformance file, including the
+ones whose summary lacks channel or schema records (where ``mcap.reader.SeekingReader`` raises
+KeyError).
+
+Decoding: per channel, the first factory of [JSON (``logscan.readers.json_decoder``), ROS 2 CDR
+(``mcap_ros2``), ROS 1 (``mcap_ros1``), protobuf (``mcap_protobuf``)] whose ``decoder_for``
+returns a decoder is used for all of that channel's messages. Only messages of wanted topics are
+decoded. Their bytes are never sliced per message on the way: each channel keeps (decompressed
+chunk buffer, starts, ends) segments (``flatten.MessageBytes``) that the bulk paths below read in
+place; per-message ``bytes`` are made only for the generic decoders. A channel no factory decodes
+(unknown encoding, schemaless non-JSON, a schema that does not parse) is skipped and listed in
+``source.skipped`` with the reason and a warning naming the topics. Two bulk paths give the same
+columns without a Python object per message (tests check they match the decoders exactly): ROS 2
+definitions made of primitives, strings and fixed-size arrays are run as a layout program by a
+numba kernel (``cdr``), and JSON messages laid out like their topic's first message are matched
+and their numbers parsed in bulk (``json_decoder.json_columns``). Everything else goes through the
+decoder and ``flatten.flatten_messages``.
+
+Channel names: ``<topic>/<field path>``, where the topic's trailing "/" is dropped before joining,
+so ``/imu`` + ``linear_acceleration.x`` -> ``/imu/linear_acceleration.x`` and ``imu`` + ``accel.x``
+-> ``imu/accel.x``; arrays index as ``position[2]``. A message that is itself a number gives a
+channel named by the topic alone. Each channel has its own timestamps: a variable-length array
+index only gets samples from the messages that had it. Channels are sorted by time (stable); a
+topic logged out of log_time order gives a warning.
+
+Time: ``log_time`` (int ns). With ``use_header_stamp=True``, messages that have ``header.stamp``
+(``sec``/``nanosec`` in ROS 2 and JSON, ``secs``/``nsecs`` in ROS 1) use it instead.
+
+Metadata records become ``source.metadata``; logscan's truth and profile records become
+``Log.truth`` and ``Log.profile_text`` (``metadata``).
+
+Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
+decompress or does not parse. If messages were read before that point the Log is returned with
+``source.partial = True`` and ``partial_reason`` saying where it stopped and how many messages
+(and what time span) were recovered; otherwise CorruptLogError names the file and the problem.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
+from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
+from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
+from logscan.readers.mcap.metadata import attach_logscan_records
+from logscan.readers.mcap.scan import ChannelRec, Scan, SchemaRec, problem_text, raise_if_unrecoverable, scan_file
+
+
+def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
+    """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps."""
+    path = str(path)
+    scan = scan_file(path, wanted, keep_raw=False)
+    raise_if_unrecoverable(scan)
+    source = _source_of(scan)
+    pieces, undecodable, decoded_topics, stamp_topics = _decode_batches(scan, source, use_header_stamp)
+    channels = _channels_in_time_order(pieces, source)
+    if undecodable:
+        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(set(undecodable))))
+    if use_header_stamp:
+        source.time_source = _time_source(decoded_topics, stamp_topics)
+    log = Log(channels=channels, source=source)
+    attach_logscan_records(log)
+    return log
+
+
+def _source_of(scan: Scan) -> SourceInfo:
+    """What the scan found besides the messages: metadata, warnings, damage, topics and their counts."""
+    source = SourceInfo(path=scan.path, format="mcap")
+    source.metadata = dict(scan.metadata)
+    source.warnings.extend(scan.warnings)
+    if scan.problem is not None:
+        firsts = [t for t in scan.first.values()]
+        lasts = [t for t in scan.last.values()]
+        source.partial = True
+        source.partial_reason = (
+            f"read stopped: {problem_text(scan)}; recovered {scan.messages_read} messages "
+            f"({_span_text(min(firsts) if firsts else None, max(lasts) if lasts else None)})"
+        )
+    if scan.unknown_channel_messages:
+        source.skip("(messages of undefined channels)", "no channel record with their channel id",
+                    scan.unknown_channel_messages)
+
+    topics: dict[str, TopicInfo] = {}
+    for cid, channel in scan.channels.items():
+        schema = scan.schemas.get(channel.schema_id)
+        info = topics.get(channel.topic)
+        if info is None:
+            info = topics[channel.topic] = TopicInfo(
+                name=channel.topic, encoding=channel.message_encoding,
+                schema=schema.name if schema else "",
+            )
+        count = scan.counts.get(cid, 0)
+        if count:
+            info.message_count += count
+            first, last = scan.first[cid], scan.last[cid]
+            info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
+            info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
+    source.topics = topics
+    return source
+
+
+def _decode_batches(
+    scan: Scan, source: SourceInfo, use_header_stamp: bool
+) -> tuple[dict[str, list[tuple[np.ndarray, np.ndarray]]], list[str], set[str], set[str]]:
+    """Decode each wanted channel's batch into channel pieces (name -> [(t, values)]).
+
+    Also returns the topics no decoder takes, the topics decoded, and those timed by header.stamp.
+    """
+    factories = decoder_factories()
+    layouts: dict[int, CdrLayout | None] = {}
+    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    undecodable: list[str] = []
+    stamp_topics: set[str] = set()
+    decoded_topics: set[str] = set()
+    for cid, batch in scan.batches.items():
+        channel = scan.channels[cid]
+        topic = channel.topic
+        decoder, why = _choose_decoder(factories, channel, scan.schemas.get(channel.schema_id))
+        if decoder is None:
+            source.skip(topic, why, batch.count())
+            undecodable.append(topic)
+            continue
+        log_times = np.concatenate(batch.times)
+        datas = batch.messages()
+        batch.segments = []
+        schema = scan.schemas.get(channel.schema_id)
+        flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, layouts, source)
+        decoded_topics.add(topic)
+        for (field_path, why_skipped), count in flat.skipped.items():
+            source.skip(_channel_name(topic, field_path), why_skipped, count)
+        times = log_times
+        if use_header_stamp:
+            times, used = _header_stamps(flat.columns, log_times)
+            if used:
+                stamp_topics.add(topic)
+        info = source.topics[topic]
+        for field_path in flat.fields:
+            if field_path not in info.fields:
+                info.fields.append(field_path)
+            index, values = flat.columns[field_path]
+            pieces.setdefault(_channel_name(topic, field_path), []).append((times[index], values))
+    return pieces, undecodable, decoded_topics, stamp_topics
+
+
+def _columns_of(
+    decoder, channel: ChannelRec, schema: SchemaRec | None, datas: MessageBytes, log_times: np.ndarray,
+    layouts: dict[int, CdrLayout | None], source: SourceInfo,
+) -> tuple[FlatColumns, np.ndarray]:
+    """Columns of one channel's messages by the fastest path that fits them (CDR layout, bulk JSON,
+    the decoder), and the log times of the messages they index (undecodable messages dropped)."""
+    topic = channel.topic
+    flat = None
+    if channel.message_encoding == "cdr" and schema is not None and schema.encoding == "ros2msg":
+        if schema.id not in layouts:
+            layouts[schema.id] = cdr_layout(schema)
+        if layouts[schema.id] is not None:
+            flat = cdr_fast(layouts[schema.id], datas)
+    if flat is None and isinstance(decoder, JsonDecoder):
+        flat, failed = json_columns(datas)
+        if failed:  # message numbers in flat index all messages, so log_times stay aligned
+            source.skip(topic, "message bytes do not decode", len(failed))
+    if flat is None:
+        messages, failed = _decode_all(decoder, datas.to_list())
+        if failed:
+            source.skip(topic, "message bytes do not decode", len(failed))
+            keep = np.ones(len(messages), dtype=bool)
+            keep[failed] = False
+            messages = [m for m, k in zip(messages, keep.tolist()) if k]
+            log_times = log_times[keep]
+        flat = flatten_messages(messages)
+    return flat, log_times
+
+
+def _channels_in_time_order(
+    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]], source: SourceInfo
+) -> dict[str, Channel]:
+    """One Channel per name, its pieces joined and sorted by time (stable); a warning names the unsorted."""
+    channels: dict[str, Channel] = {}
+    unsorted_topics: set[str] = set()
+    for name, parts in pieces.items():
+        t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+        v = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
+        if t.size > 1 and (np.diff(t) < 0).any():
+            order = np.argsort(t, kind="stable")
+            t, v = t[order], v[order]
+            unsorted_topics.add(name)
+        channels[name] = Channel(name, t, v)
+    if unsorted_topics:
+        source.warnings.append(
+            f"{len(unsorted_topics)} channel(s) not in time order in the file, sorted by time: "
+            + ", ".join(sorted(unsorted_topics)[:5]) + (" ..." if len(unsorted_topics) > 5 else "")
+        )
+    return channels
+
+
+def _time_source(decoded_topics: set[str], stamp_topics: set[str]) -> str:
+    """What the channel times are, when header stamps were asked for."""
+    missing = sorted(decoded_topics - stamp_topics)
+    if stamp_topics and not missing:
+        return "header.stamp"
+    if stamp_topics:
+        return "header.stamp (log_time for " + ", ".join(missing) + ")"
+    return "log_time (no header.stamp found)"
+
+
+def decoder_factories() -> list:
+    """JSON, ROS 2, ROS 1 and protobuf decoder factories, in the order they are tried."""
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+    from mcap_ros1.decoder import DecoderFactory as Ros1DecoderFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+    return [JsonDecoderFactory(), Ros2DecoderFactory(), Ros1DecoderFactory(), ProtobufDecoderFactory()]
+
+
+def _mcap_schema(rec: SchemaRec | None):
+    from mcap.records import Schema
+
+    if rec is None:
+        return None
+    return Schema(id=rec.id, name=rec.name, encoding=rec.encoding, data=rec.data)
+
+
+def _choose_decoder(factories: list, channel: ChannelRec, schema: SchemaRec | None):
+    """(decoder, None) or (None, why not)."""
+    mcap_schema = _mcap_schema(schema)
+    for factory in factories:
+        try:
+            decoder = factory.decoder_for(channel.message_encoding, mcap_schema)
+        except Exception as exc:  # a factory failing on a bad schema is data, not a logscan bug
+            return None, f"schema {schema.name if schema else ''!r} cannot be parsed ({type(exc).__name__}: {exc})"
+        if decoder is not None:
+            return decoder, None
+    schema_text = f"schema encoding {schema.encoding!r}" if schema else "no schema"
+    return None, f"no decoder for message encoding {channel.message_encoding!r} ({schema_text})"
+
+
+def _decode_all(decoder, datas: list) -> tuple[list[Any], list[int]]:
+    many = getattr(decoder, "decode_many", None)
+    if many is not None:
+        return many(datas)
+    try:
+        return [decoder(d) for d in datas], []
+    except Exception:  # noqa: BLE001 - retry one by one to find and count the bad messages
+        pass
+    out: list[Any] = []
+    failed: list[int] = []
+    for index, data in enumerate(datas):
+        try:
+            out.append(decoder(data))
+        except Exception:  # noqa: BLE001 - undecodable message bytes, counted below
+            out.append(None)
+            failed.append(index)
+    return out, failed
+
+
+_STAMP_FIELDS = (
+    ("header.stamp.sec", "header.stamp.nanosec"),
+    ("header.stamp.secs", "header.stamp.nsecs"),
+)
+
+
+def _header_stamps(columns: dict, log_times: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Per-message time: header.stamp where the message has it, else log_time."""
+    for sec_name, nsec_name in _STAMP_FIELDS:
+        if sec_name in columns and nsec_name in columns:
+            sec_idx, sec = columns[sec_name]
+            nsec_idx, nsec = columns[nsec_name]
+            both, in_sec, in_nsec = np.intersect1d(sec_idx, nsec_idx, return_indices=True)
+            times = log_times.copy()
+            # t = sec * 1e9 + nanosec, in integer ns
+            times[both] = sec[in_sec].astype(np.int64) * 1_000_000_000 + nsec[in_nsec].astype(np.int64)
+            return times, both.size > 0
+    return log_times, False
+
+
+def _channel_name(topic: str, path: str) -> str:
+    if not path:
+        return topic
+    return topic.rstrip("/") + "/" + path
+
+
+def _span_text(first: int | None, last: int | None) -> str:
+    if first is None or last is None:
+        return "no time span"
+    return f"log_time {first / 1e9:.6f} s .. {last / 1e9:.6f} s"

@@ -1,0 +1,156 @@
+"""MCAP records: opcodes, the numba walk that finds record boundaries, vectorised field gathers, a field cursor."""
+
+from __future__ import annotations
+
+import struct
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+OP_FOOTER = 0x02
+OP_SCHEMA = 0x03
+OP_CHANNEL = 0x04
+OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
+OP_STATISTICS = 0x0B
+OP_METADATA = 0x0C
+OP_METADATA_INDEX = 0x0D
+OP_DATA_END = 0x0F
+MESSAGE_HEADER = 22  # channel_id u16, sequence u32, log_time u64, publish_time u64
+
+# What a corrupt byte stream can make the parsing code raise; anything else is a bug and propagates.
+PARSE_ERRORS = (struct.error, ValueError, UnicodeDecodeError, IndexError, OverflowError, MemoryError)
+
+
+# how a record walk ended
+WALK_END = 0  # reached the end of the buffer exactly
+WALK_FOOTER = 1  # stopped after a Footer record
+WALK_TRUNCATED = 2  # a record header or body runs past the end of the buffer
+WALK_BAD_OPCODE = 3  # an opcode the MCAP specification reserves (0x00, 0x10-0x7f): misaligned or corrupt
+
+
+@njit(cache=True)
+def _count_records(buf, start, stop):  # pragma: no cover - compiled
+    """Number of whole records in buf[start:stop], the offset where the walk ended, and why."""
+    n = 0
+    pos = start
+    while pos < stop:
+        if pos + 9 > stop:
+            return n, pos, WALK_TRUNCATED
+        op = buf[pos]
+        if op == 0 or (op >= 0x10 and op < 0x80):
+            return n, pos, WALK_BAD_OPCODE
+        if buf[pos + 7] != 0 or buf[pos + 8] != 0:  # length >= 2**48: no real record is that long
+            return n, pos, WALK_TRUNCATED
+        length = np.int64(0)
+        for i in range(6):
+            length |= np.int64(buf[pos + 1 + i]) << (8 * i)
+        if length > stop - pos - 9:
+            return n, pos, WALK_TRUNCATED
+        n += 1
+        pos += 9 + length
+        if op == 2:
+            return n, pos, WALK_FOOTER
+    return n, pos, WALK_END
+
+
+@njit(cache=True)
+def _fill_records(buf, start, n, ops, offsets, lengths):  # pragma: no cover - compiled
+    """Opcode, body offset and body length of the first ``n`` records from ``start``."""
+    pos = start
+    for k in range(n):
+        length = np.int64(0)
+        for i in range(6):
+            length |= np.int64(buf[pos + 1 + i]) << (8 * i)
+        ops[k] = buf[pos]
+        offsets[k] = pos + 9
+        lengths[k] = length
+        pos += 9 + length
+
+
+WALK_TEXT = {
+    WALK_END: "file ends without a footer (truncated?)",
+    WALK_TRUNCATED: "record runs past the end of the file (truncated, or a corrupt record length)",
+    WALK_BAD_OPCODE: "invalid record opcode (corrupt bytes)",
+}
+
+
+class Records(NamedTuple):
+    """Where the records of a buffer lie, one entry per whole record, and how the walk ended."""
+
+    ops: np.ndarray  # uint8
+    offsets: np.ndarray  # int64, offset of the record body
+    lengths: np.ndarray  # int64, body length
+    end: int  # where the walk stopped
+    status: int  # WALK_* code
+
+
+def walk_records(u8: np.ndarray, start: int, stop: int) -> Records:
+    """The records of ``u8[start:stop]``: one compiled pass counts them, a second fills their places."""
+    n, end, status = _count_records(u8, start, stop)
+    ops = np.empty(n, dtype=np.uint8)
+    offsets = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)
+    _fill_records(u8, start, n, ops, offsets, lengths)
+    return Records(ops, offsets, lengths, int(end), int(status))
+
+
+def gather_u64(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Little-endian uint64 at each of ``offsets`` in ``u8`` (vectorised)."""
+    if offsets.size == 0:
+        return np.empty(0, dtype=np.uint64)
+    idx = offsets[:, None] + np.arange(8, dtype=np.int64)[None, :]
+    return np.ascontiguousarray(u8[idx]).view("<u8").reshape(-1)
+
+
+def gather_u16(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    return u8[offsets].astype(np.int64) | (u8[offsets + 1].astype(np.int64) << 8)
+
+
+def gather_u32(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    out = np.zeros(offsets.size, dtype=np.int64)
+    for i in range(4):
+        out |= u8[offsets + i].astype(np.int64) << (8 * i)
+    return out
+
+
+class Cursor:
+    """Field reader over one record body (bounds-checked: a short body raises struct.error)."""
+
+    def __init__(self, data: bytes | memoryview, pos: int, end: int):
+        self.data = data
+        self.pos = pos
+        self.end = end
+
+    def take(self, fmt: str) -> tuple:
+        size = struct.calcsize(fmt)
+        if self.pos + size > self.end:
+            raise struct.error("record shorter than its fields")
+        values = struct.unpack_from(fmt, self.data, self.pos)
+        self.pos += size
+        return values
+
+    def raw(self, size: int) -> bytes:
+        if size < 0 or self.pos + size > self.end:
+            raise struct.error("record shorter than its fields")
+        out = bytes(self.data[self.pos : self.pos + size])
+        self.pos += size
+        return out
+
+    def string(self) -> str:
+        (size,) = self.take("<I")
+        return self.raw(size).decode("utf-8")
+
+    def string_map(self) -> dict[str, str]:
+        (size,) = self.take("<I")
+        stop = self.pos + size
+        if stop > self.end:
+            raise struct.error("map longer than its record")
+        out: dict[str, str] = {}
+        while self.pos < stop:
+            key = self.string()
+            out[key] = self.string()
+        if self.pos != stop:
+            raise ValueError("map entries overrun the map length")
+        return out

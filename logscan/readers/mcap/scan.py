@@ -1,0 +1,360 @@
+"""The scan: one linear pass over an MCAP file (chunks decompressed, CRCs checked) into raw message batches.
+
+Chunks are decompressed (lz4, zstd when ``zstandard`` is installed) and their CRC is checked when
+it is non-zero; the data-section CRC in the DataEnd record is checked when non-zero. Messages are
+never sliced one by one: each wanted channel keeps (buffer, starts, ends) segments into the
+decompressed chunk or the file.
+
+Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
+decompress or does not parse; ``Scan.problem`` says where and why, and the messages read before
+it are kept.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from logscan.errors import CorruptLogError, InputError
+from logscan.readers.common import MCAP_MAGIC, topic_wanted
+from logscan.readers.flatten import MessageBytes
+from logscan.readers.mcap.records import (
+    MESSAGE_HEADER,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_MESSAGE,
+    OP_METADATA,
+    OP_SCHEMA,
+    PARSE_ERRORS,
+    WALK_END,
+    WALK_FOOTER,
+    WALK_TEXT,
+    Cursor,
+    Records,
+    gather_u16,
+    gather_u32,
+    gather_u64,
+    walk_records,
+)
+
+
+class _Corrupt(Exception):
+    """Internal: the record at ``offset`` is broken; ``reason`` says how.
+
+    ``fatal``: nothing read can be trusted (a data-section CRC mismatch over records that have no
+    CRC of their own), so no partial result may be returned.
+    """
+
+    def __init__(self, reason: str, offset: int, fatal: bool = False):
+        super().__init__(reason)
+        self.reason = reason
+        self.offset = offset
+        self.fatal = fatal
+
+
+@dataclass
+class SchemaRec:
+    """A Schema record: id, name, encoding and definition bytes."""
+
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass
+class ChannelRec:
+    """A Channel record: id, schema id, topic, message encoding and metadata."""
+
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+    metadata: dict[str, str]
+
+
+class RawMessage(NamedTuple):
+    """One message as stored: topic, channel id, sequence, log and publish time (ns), data bytes."""
+
+    topic: str
+    channel_id: int
+    sequence: int
+    log_time: int
+    publish_time: int
+    data: bytes
+
+
+@dataclass
+class _Batch:
+    """Messages of one channel, per container: log times (int64) and (buffer, starts, ends) segments.
+
+    No Python object per message: the segments point into the decompressed chunk (or the file) and
+    ``messages()`` packs them into one ``MessageBytes`` for decoding.
+    """
+
+    times: list[np.ndarray] = field(default_factory=list)
+    segments: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+
+    def count(self) -> int:
+        return sum(int(seg[1].size) for seg in self.segments)
+
+    def messages(self) -> MessageBytes:
+        return MessageBytes(self.segments)
+
+
+class Scan:
+    """One linear pass over an MCAP file; fills channels, schemas, metadata and message batches."""
+
+    def __init__(self, path: str, wanted: set[str] | None, keep_raw: bool = False):
+        self.path = path
+        self.wanted = wanted
+        self.keep_raw = keep_raw
+        self.schemas: dict[int, SchemaRec] = {}
+        self.channels: dict[int, ChannelRec] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.batches: dict[int, _Batch] = {}
+        self.counts: dict[int, int] = {}
+        self.first: dict[int, int] = {}
+        self.last: dict[int, int] = {}
+        self.raw: list[RawMessage] = []
+        self.unknown_channel_messages = 0
+        self.messages_read = 0
+        self.unchecked_records = 0  # schema/channel/message records outside CRC-checked chunks
+        self.problem: _Corrupt | None = None
+        self.warnings: list[str] = []
+        self._wanted_ids: dict[int, bool] = {}
+
+    # -- the pass -------------------------------------------------------------------------------
+
+    def run(self) -> None:
+        try:
+            with open(self.path, "rb") as fh:
+                raw = fh.read()
+        except OSError as exc:
+            raise InputError(f"cannot read: {exc.strerror}", path=self.path) from None
+        if not raw.startswith(MCAP_MAGIC):
+            raise CorruptLogError(
+                "not an MCAP file (bad magic bytes at offset 0)", path=self.path,
+                hint="the file is damaged or not an MCAP log",
+            )
+        u8 = np.frombuffer(raw, dtype=np.uint8)
+        top = walk_records(u8, len(MCAP_MAGIC), len(raw))
+        try:
+            self._top_level(raw, u8, top)
+        except PARSE_ERRORS as exc:  # a field inside a record did not parse
+            self.problem = _Corrupt(f"malformed record ({type(exc).__name__}: {exc})", -1)
+        if self.problem is None and top.status != WALK_FOOTER:
+            self.problem = _Corrupt(WALK_TEXT[top.status], top.end)
+        elif self.problem is None and raw[top.end : top.end + 8] != MCAP_MAGIC:
+            self.problem = _Corrupt("no closing magic bytes after the footer (truncated?)", top.end)
+
+    def _top_level(self, raw: bytes, u8: np.ndarray, top: Records) -> None:
+        ops = top.ops
+        special = np.flatnonzero(np.isin(ops, (OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_METADATA)))
+        # running count of schema / channel / message records, to skip runs without any
+        content = np.concatenate([[0], np.cumsum(np.isin(ops, (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE)))])
+        run_start = 0
+        for i in special.tolist() + [ops.size]:
+            if content[i] > content[run_start]:  # top-level schema / channel / message records
+                self._container(raw, u8, ops[run_start:i], top.offsets[run_start:i],
+                                top.lengths[run_start:i], checked=False)
+            run_start = i + 1
+            if i == ops.size:
+                return
+            op, start, length = int(ops[i]), int(top.offsets[i]), int(top.lengths[i])
+            if op == OP_CHUNK:
+                self._chunk(raw, start, length)
+            elif op == OP_METADATA:
+                cur = Cursor(raw, start, start + length)
+                name = cur.string()
+                self.metadata[name] = cur.string_map()
+                self.unchecked_records += 1
+            elif op == OP_DATA_END:
+                self._data_end(raw, start, length)
+                return
+            else:  # footer
+                return
+
+    def _chunk(self, raw: bytes, start: int, length: int) -> None:
+        cur = Cursor(raw, start, start + length)
+        try:
+            _t0, _t1, uncompressed_size, uncompressed_crc = cur.take("<QQQI")
+            compression = cur.string()
+            (size,) = cur.take("<Q")
+            if size > cur.end - cur.pos:
+                raise struct.error("chunk records longer than the chunk")
+            payload = raw[cur.pos : cur.pos + size]
+        except PARSE_ERRORS as exc:
+            raise_corrupt(f"chunk header does not parse ({exc})", start)
+        if compression == "":
+            data = payload
+        else:
+            data = _decompress(compression, payload, uncompressed_size, start)
+        if len(data) != uncompressed_size:
+            raise_corrupt(
+                f"chunk holds {len(data)} bytes, its header says {uncompressed_size}", start
+            )
+        if uncompressed_crc != 0 and zlib.crc32(data) != uncompressed_crc:
+            raise_corrupt("chunk CRC mismatch", start)
+        u8 = np.frombuffer(data, dtype=np.uint8)
+        inner = walk_records(u8, 0, len(data))
+        if inner.status != WALK_END:
+            raise_corrupt("records inside a chunk do not fill it (corrupt chunk)", start)
+        self._container(data, u8, inner.ops, inner.offsets, inner.lengths, checked=uncompressed_crc != 0)
+
+    def _data_end(self, raw: bytes, start: int, length: int) -> None:
+        (expected,) = Cursor(raw, start, start + length).take("<I")
+        if expected == 0:
+            return
+        actual = zlib.crc32(memoryview(raw)[: start - 9])
+        if actual == expected:
+            return
+        if self.unchecked_records == 0:
+            # every schema, channel and message came from a chunk whose own CRC matched: the
+            # damage is in chunk headers or message indexes, which the messages do not depend on.
+            self.warnings.append(
+                "data section CRC mismatch outside the message chunks; every message comes from "
+                "a chunk whose own CRC matches"
+            )
+            return
+        raise _Corrupt("data section CRC mismatch (the data section is corrupt)", start - 9, fatal=True)
+
+    def _container(self, data, u8, ops, offsets, lengths, *, checked: bool) -> None:
+        """Schema, channel and message records of one chunk (or one run of top-level records)."""
+        is_message = ops == OP_MESSAGE
+        if not checked:
+            self.unchecked_records += int(np.count_nonzero(np.isin(ops, (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE))))
+        # schema and channel records are few: register them in order before the messages
+        for k in np.flatnonzero((ops == OP_SCHEMA) | (ops == OP_CHANNEL)).tolist():
+            start, length = int(offsets[k]), int(lengths[k])
+            cur = Cursor(data, start, start + length)
+            try:
+                if ops[k] == OP_SCHEMA:
+                    (sid,) = cur.take("<H")
+                    name = cur.string()
+                    encoding = cur.string()
+                    (size,) = cur.take("<I")
+                    self.schemas[sid] = SchemaRec(sid, name, encoding, cur.raw(size))
+                else:
+                    cid, sid = cur.take("<HH")
+                    topic = cur.string()
+                    encoding = cur.string()
+                    meta = cur.string_map()
+                    self.channels[cid] = ChannelRec(cid, sid, topic, encoding, meta)
+                    self._wanted_ids.pop(cid, None)
+            except PARSE_ERRORS as exc:
+                raise_corrupt(f"schema/channel record does not parse ({exc})", start)
+        if not is_message.any():
+            return
+        m_off = offsets[is_message]
+        m_len = lengths[is_message]
+        if (m_len < MESSAGE_HEADER).any():
+            raise_corrupt("message record shorter than its header", int(m_off[m_len < MESSAGE_HEADER][0]))
+        channel_ids = gather_u16(u8, m_off)
+        log_times = gather_u64(u8, m_off + 6).astype(np.int64)
+        self.messages_read += int(m_off.size)
+        for cid in np.unique(channel_ids).tolist():
+            select = channel_ids == cid
+            channel = self.channels.get(cid)
+            if channel is None:
+                self.unknown_channel_messages += int(np.count_nonzero(select))
+                continue
+            times = log_times[select]
+            self.counts[cid] = self.counts.get(cid, 0) + int(times.size)
+            low, high = int(times.min()), int(times.max())
+            self.first[cid] = min(self.first.get(cid, low), low)
+            self.last[cid] = max(self.last.get(cid, high), high)
+            if not self._is_wanted(cid):
+                continue
+            batch = self.batches.setdefault(cid, _Batch())
+            batch.times.append(times)
+            batch.segments.append((u8, m_off[select] + MESSAGE_HEADER, m_off[select] + m_len[select]))
+        if self.keep_raw:
+            sequences = gather_u32(u8, m_off + 2).tolist()
+            publish = gather_u64(u8, m_off + 14).astype(np.int64).tolist()
+            for k, cid in enumerate(channel_ids.tolist()):
+                channel = self.channels.get(cid)
+                start, stop = int(m_off[k]) + MESSAGE_HEADER, int(m_off[k] + m_len[k])
+                self.raw.append(RawMessage(
+                    channel.topic if channel else "", cid, sequences[k],
+                    int(log_times[k]), publish[k], bytes(data[start:stop]),
+                ))
+
+    def _is_wanted(self, cid: int) -> bool:
+        known = self._wanted_ids.get(cid)
+        if known is None:
+            known = self._wanted_ids[cid] = topic_wanted(self.channels[cid].topic, self.wanted)
+        return known
+
+
+def raise_corrupt(reason: str, offset: int) -> None:
+    raise _Corrupt(reason, offset)
+
+
+def _decompress(compression: str, payload: bytes, size: int, offset: int) -> bytes:
+    if compression == "lz4":
+        import lz4.frame
+
+        try:
+            return lz4.frame.decompress(payload)
+        except RuntimeError as exc:  # lz4 raises RuntimeError on bad frames
+            raise_corrupt(f"lz4 chunk does not decompress ({exc})", offset)
+    if compression == "zstd":
+        try:
+            import zstandard
+        except ImportError:
+            raise_corrupt("zstd-compressed chunk and the zstandard package is not installed", offset)
+        try:
+            return zstandard.ZstdDecompressor().decompress(payload, max_output_size=size)
+        except zstandard.ZstdError as exc:
+            raise_corrupt(f"zstd chunk does not decompress ({exc})", offset)
+    raise_corrupt(f"unsupported chunk compression {compression[:40]!r}", offset)
+    raise AssertionError("unreachable")
+
+
+def scan_file(path: str, wanted: set[str] | None, keep_raw: bool) -> Scan:
+    """Scan ``path``, keeping the batches of ``wanted`` topics (and every raw message when ``keep_raw``)."""
+    scan = Scan(path, wanted, keep_raw)
+    try:
+        scan.run()
+    except _Corrupt as exc:
+        scan.problem = exc
+    return scan
+
+
+def problem_text(scan: Scan) -> str:
+    """Why and where the scan stopped early."""
+    problem = scan.problem
+    assert problem is not None
+    where = f" at byte {problem.offset}" if problem.offset >= 0 else ""
+    return f"{problem.reason}{where}"
+
+
+def iter_raw_messages(path: str | os.PathLike) -> Iterator[RawMessage]:
+    """Every message of the file in file order, undecoded (the layer ``read_mcap`` is built on).
+
+    Raises CorruptLogError when the file is corrupt anywhere (this strict view is for checking
+    files; ``read_mcap`` instead keeps what precedes the damage).
+    """
+    scan = scan_file(str(path), None, keep_raw=True)
+    if scan.problem is not None:
+        raise CorruptLogError(problem_text(scan), path=str(path))
+    yield from scan.raw
+
+
+def raise_if_unrecoverable(scan: Scan) -> None:
+    """CorruptLogError when the walk stopped before any message, or nothing it read can be trusted."""
+    if scan.problem is not None and (scan.messages_read == 0 or scan.problem.fatal):
+        lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
+        raise CorruptLogError(
+            f"corrupt MCAP: {problem_text(scan)}; {lost}",
+            path=scan.path, hint="the file is damaged; re-export or re-record it",
+        )
