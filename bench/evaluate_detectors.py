@@ -1,4 +1,4 @@
-"""Detection rate, latency and false alarms of the encoded EKF checks vs. the baseline, e_v, NIS and e_s (issue 4).
+"""Detection rate, latency and false alarms of the encoded EKF checks vs. the baseline, e_v, NIS and e_s.
 
 The evaluation behind docs/evaluation.md, in the layout of the encoded-EKF paper's Table III:
 fresh simulated runs per fault family and model, methods side by side:
@@ -27,7 +27,8 @@ sample_logs/make_samples.py or the tests; nothing was tuned on them):
   baseline training          quadcopter 4000 .. 4009, steer_by_wire 4100 .. 4109 (healthy, normal)
 
 Runs go through the Python API (simulate -> MCAP (ROS 2 CDR) in a temporary directory ->
-`analyze_log`, the same reader and pipeline as `logscan analyze`) in a process pool.
+`logscan.pipeline`, the same reader and pipeline as `logscan analyze`) in local processes
+(`logscan.fleet.run_many`); the baseline is trained on prepared healthy runs (`logscan.training`).
 
     python bench/evaluate_detectors.py                     # 20 runs per family, 2 processes
     python bench/evaluate_detectors.py --runs 3 --json /tmp/eval.json    # a quick look
@@ -42,7 +43,6 @@ import platform
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
 
@@ -119,15 +119,22 @@ def make_jobs(runs: int) -> tuple[list[Job], list[Job]]:
     return train, jobs
 
 
-def _analyse(job: Job, directory: str):
-    """Simulate, write and analyse one run; returns the Analysis."""
-    from logscan.analysis import analyze_log
+def _simulate(job: Job, directory: str) -> str:
+    """Simulate and write one run; returns the log's path."""
     from logscan.simulate import parse_fault, simulate, write_simulation
 
     faults = [parse_fault(job.fault)] if job.fault else []
     sim = simulate(job.model, faults, duration=DURATION_S, seed=job.seed, aggressive=job.aggressive)
     path = os.path.join(directory, f"{job.model}_{job.family}_{job.seed}.mcap")
     write_simulation(sim, path, "mcap-ros2")
+    return path
+
+
+def _analyse(job: Job, directory: str):
+    """Simulate, write and analyse one run; returns the Analysis."""
+    from logscan.pipeline import analyze_log
+
+    path = _simulate(job, directory)
     try:
         return analyze_log(path, detector_names=["encoded_ekf", "nis"], grace_s=GRACE_S)
     finally:
@@ -141,10 +148,16 @@ def _baseline(settings: dict):
 
 
 def train_one(job: Job) -> tuple[str, int, float]:
-    """`fit` of the baseline on one healthy run: (model, seed, margin * max |e_x|)."""
+    """`fit` of the baseline on one prepared healthy run (no detector runs over it):
+    (model, seed, margin * max |e_x|)."""
+    from logscan.pipeline import load_profile_for, prepare
+    from logscan.training import fit_detectors
+
+    detector = _baseline({})
     with tempfile.TemporaryDirectory() as directory:
-        analysis = _analyse(job, directory)
-    detector = _baseline({}).fit([analysis.run], [analysis.trace], model=analysis.model)
+        path = _simulate(job, directory)
+        prepared = prepare(path, load_profile_for(path, None), detector.needs)
+    fit_detectors([detector], [prepared])
     return job.model, job.seed, float(detector.threshold_)
 
 
@@ -371,17 +384,18 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     import logscan
+    from logscan.fleet import run_many
 
     started = time.perf_counter()
     train_jobs, jobs = make_jobs(args.runs)
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        fits = list(pool.map(train_one, train_jobs))
-        thresholds = {m: max(th for model, _, th in fits if model == m) for m in FAMILIES}
-        results = []
-        for job, result, seconds in pool.map(evaluate_one, [(job, thresholds) for job in jobs]):
-            results.append((job, result))
-            if isinstance(result, str):
-                print(f"run {job.model}/{job.family}/{job.seed} failed: {result}", file=sys.stderr)
+    fits = run_many(train_jobs, train_one, jobs=args.jobs, isolate=False)
+    thresholds = {m: max(th for model, _, th in fits if model == m) for m in FAMILIES}
+    results = []
+    for job, result, seconds in run_many([(job, thresholds) for job in jobs], evaluate_one, jobs=args.jobs,
+                                         isolate=False):
+        results.append((job, result))
+        if isinstance(result, str):
+            print(f"run {job.model}/{job.family}/{job.seed} failed: {result}", file=sys.stderr)
     elapsed = time.perf_counter() - started
     failed = [(job, r) for job, r in results if isinstance(r, str)]
 

@@ -1,4 +1,4 @@
-"""The detector contract: the `Detector` base class and the `DetectorResult` every detector returns.
+"""The detector contract: the `Detector` base class (declared parameters, declared needs, fit/run).
 
 A detector (built-in or plugin) subclasses `Detector`:
 
@@ -6,22 +6,30 @@ A detector (built-in or plugin) subclasses `Detector`:
         '''One line: what it detects.'''            # shown by `logscan detectors`
         name = "my_detector"                          # unique registry name
         defaults = {"threshold": 3.0, "n_persist": 3} # every parameter with its default
+        parameter_constraints = {                     # types and ranges, checked at creation
+            "threshold": [Interval(float, 0, None, closed="neither")],
+            "n_persist": [Interval(int, 1, None)],
+        }
         requires_fit = False                          # True: `run` needs trained state
-        requires_trace = False                        # True: `run` needs the shared filter trace
+        requires_trace = False                        # True: needs the shared EKF trace
         trained_attributes = ()                       # e.g. ("threshold_",): what `fit` learns
 
+        def needs(self, run=None) -> Needs:           # optional: more than the EKF's default trace
+            ...
         def _fit(self, runs, traces, **context):      # optional: set trailing-underscore attributes
             ...
         def _run(self, run, trace, **context) -> DetectorResult:
             ...
 
 Rules (STYLE.md): ``__init__`` only stores parameters (they are the detector's JSON config, read
-back as attributes: ``self.threshold``); validation happens in `fit` / `run`. `fit` sets trained
+back as attributes: ``self.threshold``); the registry checks them against `parameter_constraints`
+when it creates the detector, before any log is read (`check_params`). `fit` sets trained
 attributes ending in "_" and returns self. Trained state is JSON with a schema version, never
-pickle. A detector that needs trained state it lacks raises NotTrainedError.
+pickle. A detector that needs trained state it lacks raises NotTrainedError. A statistic that
+belongs to another check for scoring says so with ``add_statistic(..., check="e_x")``.
 
 Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.models.base.Model),
-``profile`` (the detector's profile section as a dict), ``log_name``.
+``log_name``, ``traces`` (every filter trace the pipeline ran, by filter name).
 The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
 module does not import the filter layer.
 """
@@ -37,8 +45,12 @@ from typing import Any, ClassVar
 import numpy as np
 
 from logscan.align import AlignedRun
+from logscan.detectors.params import describe_constraints, satisfies
 from logscan.errors import InputError, InternalError, NotTrainedError, ProfileError, UsageError
+from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
+
+__all__ = ["Band", "Detector", "DetectorResult", "Needs", "describe"]
 
 STATE_FORMAT = "logscan-detector-state"
 
@@ -95,6 +107,8 @@ class Detector:
 
     name: ClassVar[str] = ""
     defaults: ClassVar[Mapping[str, Any]] = {}
+    parameter_constraints: ClassVar[Mapping[str, list]] = {}
+    default_enabled: ClassVar[bool] = False  # runs when a profile enables no detector
     requires_fit: ClassVar[bool] = False
     requires_trace: ClassVar[bool] = False
     trained_attributes: ClassVar[tuple[str, ...]] = ()
@@ -125,18 +139,30 @@ class Detector:
         return cls(**dict(config or {}))
 
     def check_params(self) -> None:
-        """Validate the parameters (called by fit and run). Subclasses extend it with value checks
-        and raise ProfileError naming the parameter."""
+        """Validate the parameters against `parameter_constraints` (the registry calls this when it
+        creates a detector; fit and run call it again). Subclasses may extend it with checks that
+        relate several parameters, raising ProfileError naming the parameter."""
         unknown = sorted(set(self.params) - set(self.defaults))
         if unknown:
             raise ProfileError(
                 f"detector {self.name!r}: unknown parameter(s) {', '.join(unknown)}",
                 hint=f"known: {', '.join(sorted(self.defaults)) or 'none'}",
             )
+        for key, constraints in self.parameter_constraints.items():
+            value = self.params.get(key)
+            if not satisfies(value, constraints):
+                raise ProfileError(
+                    f"detector {self.name!r}: {key} must be {describe_constraints(constraints)}, got {value!r}"
+                )
         try:
             json.dumps(self.params, allow_nan=False)
         except (TypeError, ValueError) as exc:
             raise ProfileError(f"detector {self.name!r}: parameters are not plain JSON values ({exc})") from None
+
+    def needs(self, run: AlignedRun | None = None) -> Needs:
+        """What this detector asks of the pipeline. ``run`` (the aligned run, when known) lets the
+        needs follow what the log holds; the default is the shared EKF trace when requires_trace."""
+        return Needs.of(ekf=()) if self.requires_trace else Needs()
 
     # --- training ---------------------------------------------------------------------------------
     def fit(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None = None, **context: Any) -> "Detector":

@@ -30,8 +30,11 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.adaptive_threshold import adaptive_band, trailing_mean_var
-from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.params import Boolean, Interval, Options, RealList
 from logscan.errors import NotTrainedError, ProfileError
+
+POSITIVE = Interval(float, 0, None, closed="neither")
 
 # The paper's initial coding vectors (section VI), used by the constant-CV baseline.
 PAPER_CV0 = {
@@ -63,6 +66,7 @@ class EncodedEkfDetector(Detector):
 
     name = "encoded_ekf"
     requires_trace = True
+    default_enabled = True
     trained_attributes = ("threshold_",)
     defaults = {
         "variant": "adaptive",  # "adaptive" (time-varying CV, mu +- rho s) or "baseline" (CV_0, fixed)
@@ -83,26 +87,32 @@ class EncodedEkfDetector(Detector):
         "rho_s": 8.0,
     }
 
-    def check_params(self) -> None:
-        super().check_params()
-        if self.variant not in ("adaptive", "baseline"):
-            raise ProfileError(f"detector {self.name!r}: variant must be 'adaptive' or 'baseline', not {self.variant!r}")
-        if self.variance_check not in ("auto", "onboard", "observed", "off"):
-            raise ProfileError(
-                f"detector {self.name!r}: variance_check must be auto, onboard, observed or off, not {self.variance_check!r}"
-            )
-        for key in ("rho", "rho_v", "rho_s", "sigma_floor", "r_max", "margin", "rejected_hold_off_s"):
-            value = self.params[key]
-            if not isinstance(value, (int, float)) or not value > 0:
-                raise ProfileError(f"detector {self.name!r}: {key} must be a number > 0, got {value!r}")
-        if not isinstance(self.rel_floor_v, (int, float)) or self.rel_floor_v < 0:
-            raise ProfileError(f"detector {self.name!r}: rel_floor_v must be a number >= 0, got {self.rel_floor_v!r}")
-        if self.threshold is not None and not (isinstance(self.threshold, (int, float)) and self.threshold > 0):
-            raise ProfileError(f"detector {self.name!r}: threshold must be a number > 0, got {self.threshold!r}")
-        for key in ("window", "window_v", "n_persist"):
-            value = self.params[key]
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ProfileError(f"detector {self.name!r}: {key} must be an integer >= 1, got {value!r}")
+    parameter_constraints = {
+        "variant": [Options("adaptive", "baseline")],
+        "rho": [POSITIVE],
+        "window": [Interval(int, 1, None)],
+        "n_persist": [Interval(int, 1, None)],
+        "variance_check": [Options("auto", "onboard", "observed", "off")],
+        "rho_v": [POSITIVE],
+        "window_v": [Interval(int, 1, None)],
+        "sigma_floor": [POSITIVE],
+        "r_max": [POSITIVE],
+        "cv0": [RealList(), None],
+        "margin": [POSITIVE],
+        "threshold": [POSITIVE, None],
+        "rejected_hold_off_s": [POSITIVE],
+        "rel_floor_v": [Interval(float, 0, None)],
+        "onboard_state_check": [Boolean()],
+        "rho_s": [POSITIVE],
+    }
+
+    def needs(self, run=None) -> Needs:
+        """The EKF trace; its K and S too when the variance check may run in observed mode (no
+        on-board variances in the log), since e_v then compares var(e_x) with CV K S K^T CV^T."""
+        no_onboard = run is None or run.onboard_variance is None
+        if self.variance_check == "observed" or (self.variance_check == "auto" and no_onboard):
+            return Needs.of(ekf=("K", "S"))
+        return Needs.of(ekf=())
 
     # --- the check quantities -----------------------------------------------------------------
     def _coding_vectors(self, trace, model) -> np.ndarray:
@@ -188,6 +198,7 @@ class EncodedEkfDetector(Detector):
             result.add_statistic(
                 run.t, f"rejected.{trace.group_names[g]}", trace.rejected[:, g].astype(np.float64),
                 upper=0.5, n_persist=1, hold_off_s=float(self.rejected_hold_off_s),
+                check="e_x",  # a refused sample is a corrupted update, like an e_x exceedance
             )
 
     def _variance_mode(self, run, trace) -> str:

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.special import chdtri  # inverse chi-square survival; lighter than scipy.stats
 
 from logscan.detectors.base import Detector, DetectorResult
-from logscan.errors import ProfileError
+from logscan.detectors.params import Boolean, Interval
 
 
 def window_sums(values: np.ndarray, counts: np.ndarray, window: int):
@@ -48,6 +48,7 @@ class NisDetector(Detector):
 
     name = "nis"
     requires_trace = True
+    default_enabled = True
     defaults = {
         "window": 10,  # W updates per window sum
         "budget_per_hour": 0.1,  # false alarms per hour the whole detector may spend
@@ -56,14 +57,13 @@ class NisDetector(Detector):
         "overall": True,  # also test the stacked update of all groups
     }
 
-    def check_params(self) -> None:
-        super().check_params()
-        if not isinstance(self.window, int) or isinstance(self.window, bool) or self.window < 1:
-            raise ProfileError(f"detector {self.name!r}: window must be an integer >= 1, got {self.window!r}")
-        if not isinstance(self.budget_per_hour, (int, float)) or not self.budget_per_hour > 0:
-            raise ProfileError(f"detector {self.name!r}: budget_per_hour must be > 0, got {self.budget_per_hour!r}")
-        if self.alpha is not None and not (isinstance(self.alpha, (int, float)) and 0 < self.alpha < 1):
-            raise ProfileError(f"detector {self.name!r}: alpha must be in (0, 1), got {self.alpha!r}")
+    parameter_constraints = {
+        "window": [Interval(int, 1, None)],
+        "budget_per_hour": [Interval(float, 0, None, closed="neither")],
+        "alpha": [Interval(float, 0, 1, closed="neither"), None],
+        "n_persist": [Interval(int, 1, None)],
+        "overall": [Boolean()],
+    }
 
     def _alpha(self, trace) -> float:
         if self.alpha is not None:

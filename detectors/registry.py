@@ -17,6 +17,7 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from logscan.detectors.base import Detector, describe
+from logscan.detectors.params import describe_constraints
 from logscan.errors import ProfileError
 
 ENTRY_POINT_GROUP = "logscan.detectors"
@@ -58,9 +59,21 @@ class DetectorEntry:
             out.update(
                 requires_fit=self.cls.requires_fit,
                 requires_trace=self.cls.requires_trace,
+                default_enabled=self.cls.default_enabled,
                 defaults=dict(self.cls.defaults),
+                parameters=parameter_rows(self.cls),
             )
         return out
+
+
+def parameter_rows(cls: type[Detector]) -> list[dict[str, Any]]:
+    """One row per parameter: name, default and its declared constraints as text."""
+    return [
+        {"name": key, "default": default,
+         "constraints": describe_constraints(cls.parameter_constraints[key])
+         if key in cls.parameter_constraints else "any JSON value"}
+        for key, default in cls.defaults.items()
+    ]
 
 
 def _import_spec(spec: str) -> Any:
@@ -171,9 +184,21 @@ class Registry:
             hint=f"available: {', '.join(self.names()) or 'none'} (see `logscan detectors`)",
         )
 
-    def create(self, name: str, config: dict | None = None) -> Detector:
-        """An instance of detector ``name`` from its configuration."""
-        return self.get(name).from_config(config)
+    def create(self, name: str, config: dict | None = None, *, source: str | None = None) -> Detector:
+        """An instance of detector ``name`` from its configuration, its parameters checked against
+        their declared types and ranges (ProfileError naming ``source``, the profile, otherwise)."""
+        detector = self.get(name).from_config(config)
+        try:
+            detector.check_params()
+        except ProfileError as exc:
+            if exc.path is None:
+                exc.path = source
+            raise
+        return detector
+
+    def default_names(self) -> list[str]:
+        """The detectors that run when a profile enables none (those with default_enabled)."""
+        return [e.name for e in self._load() if e.ok and e.cls.default_enabled]
 
     def __contains__(self, name: str) -> bool:
         return name in self.names()

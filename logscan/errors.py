@@ -1,6 +1,18 @@
-"""Typed errors of logscan: each carries the exit code the CLI maps it to."""
+"""Typed errors of logscan and the one exit-code enum: each error carries the code the CLI maps it to."""
 
 from __future__ import annotations
+
+from enum import IntEnum
+
+
+class ExitCode(IntEnum):
+    """The exit codes of every logscan command."""
+
+    OK = 0  # no alarm
+    ALARMS = 1  # at least one alarm (0 with --exit-zero)
+    BAD_INPUT = 2  # bad usage or input: one line on stderr says which file and what to do
+    INTERNAL = 3  # a bug in logscan: rerun with --debug for the traceback
+    INTERRUPTED = 130  # Ctrl-C
 
 
 class LogscanError(Exception):
@@ -9,7 +21,7 @@ class LogscanError(Exception):
     ``message`` should name the file (when there is one), what is wrong and what to do.
     """
 
-    exit_code = 2
+    exit_code = ExitCode.BAD_INPUT
 
     def __init__(self, message: str, *, path: str | None = None, hint: str | None = None):
         super().__init__(message)
@@ -59,4 +71,4 @@ class NotTrainedError(LogscanError):
 class InternalError(LogscanError):
     """A bug in logscan; exit code 3 and a hint to rerun with --debug."""
 
-    exit_code = 3
+    exit_code = ExitCode.INTERNAL

@@ -4,10 +4,10 @@ ALGORITHMS.md section 7 scores one detector on one log (`logscan.scoring`); this
 analysis on every log that has ground truth and pools the scores, at three levels:
 
  - per detector: every alarm the detector raised;
- - per check (signal family) of a detector: ``encoded_ekf:e_x`` (the state check e_x together with
-   the rejected-sample checks ``rejected.<group>``: both flag a corrupted estimate update),
-   ``encoded_ekf:e_v`` (variance check), ``nis:<group>`` and ``nis:all``; another detector's signal
-   ``<detector>.<name>`` becomes the check ``<detector>:<name>``;
+ - per check of a detector, ``<detector>:<check>``: each statistic is scored with the check its
+   detector declared for it (`DetectorResult.check_of`: e.g. the encoded detector scores its
+   rejected-sample statistics with its state check e_x, since both flag a corrupted update), else
+   with its own name without the ``<detector>.`` prefix (``nis.accel`` -> ``nis:accel``);
  - per fault kind (``<model>/<kind>``): detection rate and latency of each detector and check,
    the layout of the encoded-EKF paper's Table III.
 
@@ -21,31 +21,17 @@ analysed is recorded as one line and counted, never raised.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from logscan.scoring import DEFAULT_GRACE_S, Score, aggregate, score_log
 
 CHECK_SEPARATOR = ":"
-# encoded_ekf signals whose check family is not the signal's own name
-_FAMILY_PREFIXES = {"encoded_ekf": (("rejected.", "e_x"),)}
 
 
-def check_family(detector: str, signal: str) -> str:
-    """The check a signal belongs to: ``rejected.<group>`` of the encoded detector -> ``e_x``;
-    ``<detector>.<name>`` -> ``<name>`` (``nis.accel`` -> ``accel``); otherwise the signal."""
-    for prefix, family in _FAMILY_PREFIXES.get(detector, ()):
-        if signal.startswith(prefix):
-            return family
-    own = f"{detector}."
-    return signal[len(own):] if signal.startswith(own) else signal
-
-
-def check_key(detector: str, signal: str) -> str:
-    """Score key of a check: ``<detector>:<family>``."""
-    return f"{detector}{CHECK_SEPARATOR}{check_family(detector, signal)}"
+def check_key(result, signal: str) -> str:
+    """Score key of a check: ``<detector>:<check>``, the check as the detector declared it."""
+    return f"{result.detector}{CHECK_SEPARATOR}{result.check_of(signal)}"
 
 
 def merge_intervals(alarms: Iterable) -> list[tuple[float, float]]:
@@ -70,9 +56,9 @@ def alarm_groups(results: Sequence) -> dict[str, list]:
     for result in results:
         groups[result.detector] = list(result.alarms)
         for signal in result.series:
-            groups.setdefault(check_key(result.detector, signal), [])
+            groups.setdefault(check_key(result, signal), [])
         for alarm in result.alarms:
-            groups.setdefault(check_key(result.detector, alarm.signal), []).append(alarm)
+            groups.setdefault(check_key(result, alarm.signal), []).append(alarm)
     return groups
 
 
@@ -108,15 +94,6 @@ class LogEvaluation:
         return not self.events
 
 
-@dataclass
-class LogFailure:
-    """A log that could not be evaluated: one line, and the exit code its error maps to."""
-
-    path: str
-    message: str
-    exit_code: int = 2
-
-
 def kind_summary(score: Score) -> dict:
     """JSON view of one key's detection of one fault kind (a Score whose tp/fn count its events)."""
     return {"events": score.n_events, "detected": score.tp, "detection_rate": score.recall,
@@ -133,7 +110,7 @@ class Evaluation:
 
     logs: list[LogEvaluation] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)  # logs without ground truth
-    failures: list[LogFailure] = field(default_factory=list)
+    failures: list = field(default_factory=list)  # logscan.fleet.LogFailure
     grace_s: float = DEFAULT_GRACE_S
 
     def keys(self) -> list[str]:
@@ -206,7 +183,7 @@ def _score_summary(score: Score) -> dict:
 
 def evaluate_analysis(analysis, *, grace_s: float = DEFAULT_GRACE_S) -> LogEvaluation:
     """Score one analysed log (`logscan.analysis.Analysis` with ground truth) per detector and check."""
-    duration = float(analysis.run.t[-1] - analysis.run.t[0])
+    duration = analysis.duration_s
     scores = score_groups(analysis.events, alarm_groups(analysis.results), duration_s=duration,
                           grace_s=grace_s, log=analysis.path)
     truth = analysis.log.truth or {}
@@ -221,104 +198,48 @@ def has_truth(path: str) -> bool:
     return read_embedded(path)[1] is not None
 
 
+@dataclass(frozen=True)
+class EvaluationTask:
+    """Score one log (the per-log task of `evaluate_logs`; picklable for local processes).
+    Returns a LogEvaluation, or None for a log without ground truth."""
+
+    profile_path: str | None = None
+    detector_names: tuple[str, ...] | None = None
+    grace_s: float = DEFAULT_GRACE_S
+    use_header_stamp: bool = False
+
+    def __call__(self, path: str) -> LogEvaluation | None:
+        from logscan.pipeline import analyze_log
+
+        if not has_truth(path):
+            return None
+        analysis = analyze_log(path, self.profile_path, use_header_stamp=self.use_header_stamp,
+                               detector_names=self.detector_names, grace_s=self.grace_s)
+        return evaluate_analysis(analysis, grace_s=self.grace_s)
+
+
 def evaluate_logs(
     paths: Sequence[str],
     *,
     profile_path: str | None = None,
-    detector_names: list[str] | None = None,
+    detector_names: Sequence[str] | None = None,
     grace_s: float = DEFAULT_GRACE_S,
     use_header_stamp: bool = False,
-    progress=None,
+    jobs: int = 1,
+    progress: bool = False,
 ) -> Evaluation:
-    """Analyse and score every log with ground truth; skip the others; record failures as lines."""
-    from logscan.analysis import analyze_log
-    from logscan.errors import LogscanError
+    """Analyse and score every log with ground truth (``jobs`` local processes); skip the others;
+    record failures as lines."""
+    from logscan.fleet import LogFailure, run_many
 
+    task = EvaluationTask(profile_path, tuple(detector_names) if detector_names else None, grace_s,
+                          use_header_stamp)
     evaluation = Evaluation(grace_s=grace_s)
-    for path in paths:
-        if progress:
-            progress(path)
-        try:
-            if not has_truth(path):
-                evaluation.skipped.append(path)
-                continue
-            analysis = analyze_log(path, profile_path, use_header_stamp=use_header_stamp,
-                                   detector_names=detector_names, grace_s=grace_s)
-            evaluation.logs.append(evaluate_analysis(analysis, grace_s=grace_s))
-        except LogscanError as exc:
-            line = exc.one_line() if exc.path else f"{path}: {exc.one_line()}"
-            evaluation.failures.append(LogFailure(path, line, exc.exit_code))
-        except Exception as exc:  # noqa: BLE001 - one bad log must not stop a fleet evaluation
-            evaluation.failures.append(
-                LogFailure(path, f"{path}: internal error: {type(exc).__name__}: {exc} "
-                           "(a bug in logscan; `logscan --debug analyze` shows the traceback)", 3)
-            )
+    for path, outcome in zip(paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating")):
+        if isinstance(outcome, LogFailure):
+            evaluation.failures.append(outcome)
+        elif outcome is None:
+            evaluation.skipped.append(path)
+        else:
+            evaluation.logs.append(outcome)
     return evaluation
-
-
-# --- text rendering ---------------------------------------------------------------------------
-
-def _num(value: float | None, fmt: str = "{:.2f}") -> str:
-    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else fmt.format(value)
-
-
-def render_scores(evaluation: Evaluation) -> str:
-    """Per detector and per check: counts, precision/recall/F1, latency, false alarms per hour."""
-    header = (f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
-              f"{'prec':>5} {'recall':>6} {'F1':>5} {'lat mean':>8} {'lat max':>8} {'FA/h healthy':>12}")
-    lines = [header, "-" * len(header)]
-    for key in evaluation.keys():
-        s = evaluation.aggregate(key)
-        label = key if CHECK_SEPARATOR not in key else "  " + key
-        lines.append(
-            f"{label:<26} {s.n_logs:>4} {s.n_events:>6} {s.tp:>4} {s.fn:>4} {s.fp:>4} "
-            f"{_num(s.precision):>5} {_num(s.recall):>6} {_num(s.f1):>5} "
-            f"{_num(s.mean_latency_s, '{:.2f} s'):>8} {_num(s.max_latency_s, '{:.2f} s'):>8} "
-            f"{_num(s.false_alarms_per_hour_healthy, '{:.1f}'):>12}"
-        )
-    return "\n".join(lines)
-
-
-def render_kinds(evaluation: Evaluation) -> str:
-    """Per fault kind (Table III view): detected/events and latency of each detector and check."""
-    kinds = evaluation.kinds()
-    if not kinds:
-        return "per fault kind: no fault events in the evaluated logs"
-    header = f"{'fault kind':<30} {'detector / check':<26} {'detected':>8} {'lat mean':>8} {'lat max':>8}"
-    lines = [header, "-" * len(header)]
-    keys = evaluation.keys()
-    per_key = {key: evaluation.by_kind(key) for key in keys}
-    for kind in kinds:
-        first = True
-        for key in keys:
-            stats = per_key[key].get(kind)
-            if stats is None:
-                continue
-            label = key if CHECK_SEPARATOR not in key else "  " + key
-            lines.append(
-                f"{kind if first else '':<30} {label:<26} {f'{stats.tp}/{stats.n_events}':>8} "
-                f"{_num(stats.mean_latency_s, '{:.2f} s'):>8} {_num(stats.max_latency_s, '{:.2f} s'):>8}"
-            )
-            first = False
-    return "\n".join(lines)
-
-
-def render_evaluation(evaluation: Evaluation) -> str:
-    """The one-screen text report of `logscan evaluate`."""
-    n_healthy = sum(log.healthy for log in evaluation.logs)
-    n_events = sum(len(log.events) for log in evaluation.logs)
-    hours = sum(log.duration_s for log in evaluation.logs if log.healthy) / 3600.0
-    parts = [
-        f"evaluated {len(evaluation.logs)} log(s) with ground truth: {n_events} fault event(s), "
-        f"{n_healthy} healthy log(s) ({hours * 60:.1f} min); grace {evaluation.grace_s:g} s",
-    ]
-    if evaluation.logs:
-        parts += ["", render_scores(evaluation), "", render_kinds(evaluation)]
-    if evaluation.skipped:
-        parts.append("")
-        parts.append(f"skipped {len(evaluation.skipped)} log(s) without ground truth: "
-                     + ", ".join(Path(p).name for p in evaluation.skipped))
-    if evaluation.failures:
-        parts.append("")
-        parts.append(f"{len(evaluation.failures)} log(s) could not be evaluated (errors on stderr)")
-    return "\n".join(parts)

@@ -104,7 +104,8 @@ class DetectorResult:
     extras:     further (N,) or (N, k) series for figures (coding vector, bands...).
     info:       JSON-ready facts (coverage notes, parameters used, counts).
     checks:     statistic name -> the check it belongs to for scoring (e.g. "rejected.accel" ->
-                "e_x"); filled by the detector's `check_of`, so no other layer names a detector.
+                "e_x"), declared by the detector through `add_statistic(..., check=...)`, so no other
+                layer names a detector's signals.
     """
 
     detector: str
@@ -117,9 +118,10 @@ class DetectorResult:
     checks: dict[str, str] = field(default_factory=dict)
 
     def add_statistic(self, t: np.ndarray, name: str, statistic: np.ndarray, upper=None, lower=None,
-                      **alarm_options) -> list[AlarmInterval]:
+                      check: str | None = None, **alarm_options) -> list[AlarmInterval]:
         """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
-        ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...)."""
+        ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...).
+        ``check``: the check this statistic is scored with, when not its own name."""
         from logscan.alarms import alarm_intervals
 
         n = np.asarray(t).size
@@ -130,6 +132,8 @@ class DetectorResult:
         )
         self.series[name] = statistic
         self.thresholds[name] = band
+        if check is not None:
+            self.checks[name] = check
         alarms = alarm_intervals(
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )

@@ -8,17 +8,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from logscan.evaluate import (
     Evaluation,
     alarm_groups,
-    check_family,
+    check_key,
     evaluate_logs,
     merge_intervals,
     score_groups,
 )
-from logscan.results import AlarmInterval, FaultEvent
+from logscan.results import AlarmInterval, DetectorResult, FaultEvent
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 HEALTHY = SAMPLES / "quad_healthy.mcap"
@@ -43,13 +44,25 @@ def evaluation() -> Evaluation:
     return evaluate_logs([str(HEALTHY), str(BIAS), str(BITFLIP)])
 
 
-def test_signal_families_group_rejected_samples_with_the_state_check():
-    assert check_family("encoded_ekf", "rejected.accel") == "e_x"
-    assert check_family("encoded_ekf", "e_x") == "e_x"
-    assert check_family("encoded_ekf", "e_v") == "e_v"
-    assert check_family("nis", "nis.accel") == "accel"
-    assert check_family("nis", "nis.all") == "all"
-    assert check_family("plugin", "other.signal") == "other.signal"
+def test_checks_are_declared_by_the_detector_not_named_by_evaluation():
+    t = np.linspace(0.0, 1.0, 11)
+    encoded = DetectorResult("encoded_ekf")
+    encoded.add_statistic(t, "e_x", np.zeros(11), upper=1.0)
+    encoded.add_statistic(t, "rejected.accel", np.zeros(11), upper=0.5, check="e_x")
+    assert check_key(encoded, "rejected.accel") == "encoded_ekf:e_x"
+    assert check_key(encoded, "e_x") == "encoded_ekf:e_x"
+    nis = DetectorResult("nis")
+    assert check_key(nis, "nis.accel") == "nis:accel" and check_key(nis, "nis.all") == "nis:all"
+    assert check_key(DetectorResult("plugin"), "other.signal") == "plugin:other.signal"
+
+
+def test_the_encoded_detector_scores_rejected_samples_with_its_state_check():
+    from logscan.pipeline import analyze_log
+
+    analysis = analyze_log(str(BITFLIP), detector_names=["encoded_ekf"])
+    result = analysis.results[0]
+    rejected = [s for s in result.series if s.startswith("rejected.")]
+    assert rejected and all(result.check_of(s) == "e_x" for s in rejected)
 
 
 def test_overlapping_alarms_of_one_group_count_once():
@@ -57,13 +70,13 @@ def test_overlapping_alarms_of_one_group_count_once():
 
 
 def test_checks_that_ran_without_alarms_are_scored_as_misses():
-    class Result:
-        detector = "encoded_ekf"
-        series = {"e_x": None, "e_v": None, "rejected.accel": None}
-        alarms = [alarm(10.0, 10.5, "rejected.accel", "encoded_ekf"), alarm(10.1, 10.2, "e_x", "encoded_ekf"),
-                  alarm(50.0, 50.1, "e_x", "encoded_ekf")]
-
-    groups = alarm_groups([Result()])
+    result = DetectorResult(
+        "encoded_ekf", series={"e_x": None, "e_v": None, "rejected.accel": None},
+        alarms=[alarm(10.0, 10.5, "rejected.accel", "encoded_ekf"), alarm(10.1, 10.2, "e_x", "encoded_ekf"),
+                alarm(50.0, 50.1, "e_x", "encoded_ekf")],
+        checks={"rejected.accel": "e_x"},
+    )
+    groups = alarm_groups([result])
     assert set(groups) == {"encoded_ekf", "encoded_ekf:e_x", "encoded_ekf:e_v"}
     scores = score_groups([FaultEvent(10.0, 11.0, "bitflip")], groups, duration_s=60.0)
     e_x, e_v = scores["encoded_ekf:e_x"], scores["encoded_ekf:e_v"]

@@ -9,7 +9,7 @@ from importlib.metadata import EntryPoint
 import pytest
 from click.testing import CliRunner
 
-from logscan.cli.detectors_cmd import render_detectors
+from logscan.cli.render import render_detectors
 from logscan.cli.main import cli
 from logscan.detectors.base import Detector
 from logscan.detectors.registry import BUILTIN, ENTRY_POINT_GROUP, Registry, default_registry

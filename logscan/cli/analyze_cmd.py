@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
+from dataclasses import dataclass
 
 import click
 
-from logscan.cli.options import header_stamp_option, json_option, profile_option, quiet_option, show_progress
-from logscan.errors import LogscanError, UsageError
-
-LOG_SUFFIXES = {".mcap", ".ulg", ".csv"}
+from logscan.cli.options import (
+    header_stamp_option,
+    jobs_option,
+    json_option,
+    profile_option,
+    quiet_option,
+    show_progress,
+)
+from logscan.cli.render import render_summary
+from logscan.errors import ExitCode
 
 
 @click.command(
@@ -39,6 +45,7 @@ LOG_SUFFIXES = {".mcap", ".ulg", ".csv"}
 )
 @click.option("--exit-zero", is_flag=True, default=False, help="Exit 0 even when there are alarms.")
 @header_stamp_option
+@jobs_option
 @quiet_option
 def analyze(
     log_paths: tuple[str, ...],
@@ -50,6 +57,7 @@ def analyze(
     detector_names: tuple[str, ...],
     exit_zero: bool,
     use_header_stamp: bool,
+    jobs: int,
     quiet: bool,
 ) -> None:
     """Run the model-based detectors on each LOG and report the alarms.
@@ -58,122 +66,78 @@ def analyze(
     profile comes from --profile or from the log itself (logs written by `logscan simulate` embed
     theirs). Exit code: 0 no alarm, 1 alarms (0 with --exit-zero), 2 bad input, 3 internal error.
     """
-    from logscan.analysis import analyze_log
+    from logscan.fleet import LogFailure, expand_logs, output_paths, run_many
 
+    names = tuple(detector_names) or None
+    if profile_path is not None:
+        # one profile for every log: its detector settings are checked once, before any log is read
+        from logscan.pipeline import create_detectors, load_profile_for
+
+        create_detectors(load_profile_for(None, profile_path), names)
     logs = expand_logs(log_paths)
-    reports = report_paths(logs, output_path) if not no_report else [None] * len(logs)
+    reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
     progress = show_progress(quiet)
+    task = AnalyzeTask(profile_path, names, use_header_stamp, plotlyjs_dir,
+                       steps=progress and len(logs) == 1)
+    outcomes = run_many(list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing",
+                        isolate=len(logs) > 1)
     summaries, failures = [], []
-    for log_path, report_path in zip(logs, reports):
-        def step(message: str, _log=log_path) -> None:
-            if progress:
-                click.echo(f"logscan: {_log}: {message}...", err=True)
-
-        try:
-            analysis = analyze_log(
-                log_path, profile_path, use_header_stamp=use_header_stamp,
-                detector_names=list(detector_names) or None, progress=step,
-            )
-            if report_path is not None:
-                step("writing report")
-                write_report(analysis, report_path, plotlyjs_dir)
-        except LogscanError as exc:
-            if len(logs) == 1:
-                raise
-            click.echo(f"logscan: error: {exc.one_line()}", err=True)
-            failures.append({"file": log_path, "error": exc.one_line(), "exit_code": exc.exit_code})
+    for outcome in outcomes:
+        if isinstance(outcome, LogFailure):
+            click.echo(f"logscan: error: {outcome.message}", err=True)
+            failures.append({"file": outcome.path, "error": outcome.message, "exit_code": outcome.exit_code})
             continue
-        summary = analysis.summary()
-        summary["report"] = report_path
-        summaries.append(summary)
+        summaries.append(outcome.summary)
         # with --json - the JSON owns stdout; the human summary goes to stderr
-        click.echo(render_summary(analysis, report_path), err=json_path == "-")
+        click.echo(outcome.text, err=json_path == "-")
 
-    code = 2 if failures else (1 if any(s["n_alarms"] for s in summaries) else 0)
-    if exit_zero and code == 1:
-        code = 0
+    code = ExitCode.BAD_INPUT if failures else (
+        ExitCode.ALARMS if any(s["n_alarms"] for s in summaries) else ExitCode.OK)
+    if exit_zero and code == ExitCode.ALARMS:
+        code = ExitCode.OK
     if json_path:
         from logscan import __version__
         from logscan.artifacts import write_json
 
         write_json(json_path, {
-            "logscan_version": __version__, "exit_code": code, "logs": summaries, "errors": failures,
+            "logscan_version": __version__, "exit_code": int(code), "logs": summaries, "errors": failures,
         })
     sys.exit(code)
 
 
-def expand_logs(paths: tuple[str, ...]) -> list[str]:
-    """Files as given; a directory holding log files expands to them (sorted), a directory of
-    per-topic CSVs stays one log."""
-    logs: list[str] = []
-    for raw in paths:
-        path = Path(raw)
-        if path.is_dir():
-            inner = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in {".mcap", ".ulg"})
-            inner_dirs = sorted(p for p in path.iterdir() if p.is_dir() and any(p.glob("*.csv")))
-            if inner or inner_dirs:
-                logs.extend(str(p) for p in inner + inner_dirs)
-                continue
-        logs.append(raw)
-    return logs
+@dataclass
+class LogOutcome:
+    """What one analysed log sends back to the command: its JSON summary and its text."""
+
+    summary: dict
+    text: str
 
 
-def report_paths(logs: list[str], output: str | None) -> list[str]:
-    """Report file per log: -o FILE for one log, -o DIR/<name>.report.html for several."""
-    names = [f"{Path(log.rstrip('/')).stem}.report.html" for log in logs]
-    if len(set(names)) != len(names):
-        names = [f"{Path(log.rstrip('/')).parent.name}_{n}" for log, n in zip(logs, names)]
-    if output is None:
-        return names
-    if len(logs) == 1 and not Path(output).is_dir():
-        return [output]
-    directory = Path(output)
-    if directory.exists() and not directory.is_dir():
-        raise UsageError(f"--output {output} is a file, but {len(logs)} logs need a directory")
-    directory.mkdir(parents=True, exist_ok=True)
-    return [str(directory / name) for name in names]
+@dataclass(frozen=True)
+class AnalyzeTask:
+    """Analyse one (log, report path) pair and write its report (picklable for --jobs)."""
 
+    profile_path: str | None
+    detector_names: tuple[str, ...] | None
+    use_header_stamp: bool
+    plotlyjs_dir: str | None
+    steps: bool = False  # print each step on stderr (one log on a terminal)
 
-def write_report(analysis, path: str, plotlyjs_dir: str | None) -> None:
-    from logscan import __version__
-    from logscan.report import ReportInput, render_report, report_matches
+    def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
+        from logscan.pipeline import analyze_log
+        from logscan.report import render_report
 
-    events = analysis.events
-    report = ReportInput(
-        log_facts=analysis.log.summary(),
-        profile_text=analysis.profile_text,
-        profile_source=analysis.profile_source,
-        model=analysis.model.describe(),
-        logscan_version=__version__,
-        t=analysis.run.t,
-        results=analysis.results,
-        truth_events=events,
-        matches=report_matches(analysis.results, events) if events else None,
-        verdict=analysis.verdict(),
-        warnings=analysis.warnings,
-    )
-    render_report(report, path, plotlyjs=plotlyjs_dir or "embed")
+        log_path, report_path = item
 
+        def step(message: str) -> None:
+            if self.steps:
+                click.echo(f"logscan: {log_path}: {message}...", err=True)
 
-def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str:
-    """One screen per log: verdict, the first alarms, scores against ground truth."""
-    lines = [f"{analysis.path}: {analysis.verdict()}  "
-             f"({analysis.log.duration_s:.1f} s, model {analysis.model.name}, "
-             f"detectors {', '.join(r.detector for r in analysis.results)})"]
-    alarms = sorted(analysis.alarms, key=lambda a: a.start)
-    if alarms:
-        lines.append(f"  {'detector':<12} {'signal':<16} {'start s':>9} {'end s':>9} {'peak/thr':>9}")
-        for alarm in alarms[:max_rows]:
-            ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
-            lines.append(f"  {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} {ratio:>9}")
-        if len(alarms) > max_rows:
-            lines.append(f"  ... {len(alarms) - max_rows} more (see the report / --json)")
-    for name, score in analysis.scores.items():
-        latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
-        lines.append(f"  truth: {name}: detected {score.tp}/{score.tp + score.fn} events, "
-                     f"{score.fp} false alarm(s), mean latency {latency}")
-    for warning in analysis.warnings[:5]:
-        lines.append(f"  warning: {warning}")
-    if report_path:
-        lines.append(f"  report: {report_path}")
-    return "\n".join(lines)
+        analysis = analyze_log(log_path, self.profile_path, use_header_stamp=self.use_header_stamp,
+                               detector_names=self.detector_names, progress=step)
+        if report_path is not None:
+            step("writing report")
+            render_report(analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed")
+        summary = analysis.summary()
+        summary["report"] = report_path
+        return LogOutcome(summary, render_summary(analysis, report_path))

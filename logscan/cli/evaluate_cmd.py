@@ -6,8 +6,16 @@ import sys
 
 import click
 
-from logscan.cli.options import header_stamp_option, json_option, profile_option, quiet_option, show_progress
-from logscan.errors import InputError
+from logscan.cli.options import (
+    header_stamp_option,
+    jobs_option,
+    json_option,
+    profile_option,
+    quiet_option,
+    show_progress,
+)
+from logscan.cli.render import render_evaluation
+from logscan.errors import ExitCode, InputError
 from logscan.scoring import DEFAULT_GRACE_S
 
 
@@ -29,6 +37,7 @@ from logscan.scoring import DEFAULT_GRACE_S
 )
 @profile_option
 @header_stamp_option
+@jobs_option
 @quiet_option
 def evaluate(
     log_paths: tuple[str, ...],
@@ -37,9 +46,10 @@ def evaluate(
     detector_names: tuple[str, ...],
     profile_path: str | None,
     use_header_stamp: bool,
+    jobs: int,
     quiet: bool,
 ) -> None:
-    """Score the detectors against the ground truth of each LOG (ALGORITHMS.md section 7).
+    """Score the detectors against the ground truth of each LOG (docs/algorithms.md section 7).
 
     Runs the analysis on every log that carries ground truth (logs written by `logscan simulate`
     do; others are skipped and listed), matches alarms to fault events, and prints per detector
@@ -49,19 +59,13 @@ def evaluate(
     A log that cannot be analysed is reported as one line. Exit code: 0, or 2 when a log could not
     be analysed or none has ground truth.
     """
-    from logscan.cli.analyze_cmd import expand_logs
-    from logscan.evaluate import evaluate_logs, render_evaluation
+    from logscan.evaluate import evaluate_logs
+    from logscan.fleet import expand_logs
 
     logs = expand_logs(log_paths)
-    progress = show_progress(quiet)
-
-    def step(path: str) -> None:
-        if progress:
-            click.echo(f"logscan: evaluating {path}...", err=True)
-
     evaluation = evaluate_logs(
         logs, profile_path=profile_path, detector_names=list(detector_names) or None,
-        grace_s=grace_s, use_header_stamp=use_header_stamp, progress=step,
+        grace_s=grace_s, use_header_stamp=use_header_stamp, jobs=jobs, progress=show_progress(quiet),
     )
     if json_path:
         from logscan import __version__
@@ -77,4 +81,4 @@ def evaluate(
             f"none of the {len(logs)} log(s) has ground truth",
             hint="evaluate logs written by `logscan simulate` (fault events embedded) or a CSV with <log>.truth.json",
         )
-    sys.exit(2 if evaluation.failures else 0)
+    sys.exit(ExitCode.BAD_INPUT if evaluation.failures else ExitCode.OK)

@@ -8,9 +8,7 @@ import traceback
 import click
 
 from logscan import __version__
-from logscan.errors import LogscanError
-
-EXIT_OK, EXIT_ALARM, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+from logscan.errors import ExitCode, LogscanError
 
 
 @click.group(
@@ -55,10 +53,10 @@ def main(argv: list[str] | None = None) -> None:
         code = cli.main(args=args, prog_name="logscan", standalone_mode=False)
     except click.exceptions.Abort:
         click.echo("logscan: aborted", err=True)
-        sys.exit(EXIT_BAD_INPUT)
+        sys.exit(ExitCode.BAD_INPUT)
     except click.ClickException as exc:
         exc.show()
-        sys.exit(EXIT_BAD_INPUT)
+        sys.exit(ExitCode.BAD_INPUT)
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
     except LogscanError as exc:
@@ -68,9 +66,9 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
         click.echo("logscan: interrupted", err=True)
-        sys.exit(130)
+        sys.exit(ExitCode.INTERRUPTED)
     except BrokenPipeError:
-        sys.exit(0)
+        sys.exit(ExitCode.OK)
     except Exception as exc:  # noqa: BLE001 - the one place internal errors are mapped
         if debug:
             traceback.print_exc()
@@ -79,8 +77,8 @@ def main(argv: list[str] | None = None) -> None:
             "(this is a bug in logscan; rerun with --debug for the traceback and report it)",
             err=True,
         )
-        sys.exit(EXIT_INTERNAL)
-    sys.exit(code if isinstance(code, int) else EXIT_OK)
+        sys.exit(ExitCode.INTERNAL)
+    sys.exit(int(code) if isinstance(code, int) else ExitCode.OK)
 
 
 if __name__ == "__main__":

@@ -89,7 +89,7 @@ def simulate(model_name, faults, at, fault_duration, magnitude, target, duration
     written = write_simulation(sim, output_path, fmt)
     if not quiet:
         for event in sim.events:
-            click.echo(f"fault {event.kind} on {event.target}: {event.start:g} .. {event.end:g} s, "
+            click.echo(f"fault {event.kind} on {event.target}: {event.t_start:g} .. {event.t_end:g} s, "
                        f"magnitude {event.magnitude:g}", err=True)
         click.echo("wrote " + ", ".join(str(p) for p in written), err=True)
 

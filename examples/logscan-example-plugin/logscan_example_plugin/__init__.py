@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.params import Boolean, Interval
 from logscan.errors import NotTrainedError, ProfileError
 
 __all__ = ["RangeCheckDetector"]
@@ -26,15 +27,23 @@ class RangeCheckDetector(Detector):
         "n_persist": 1,
         "hold_off_s": 0.0,
     }
+    # types and ranges, checked when the detector is created (before any log is read)
+    parameter_constraints = {
+        "margin": [Interval(float, 0, None)],
+        "use_model_ranges": [Boolean()],
+        "n_persist": [Interval(int, 1, None)],
+        "hold_off_s": [Interval(float, 0, None)],
+    }
     trained_attributes = ("limits_",)
 
     def check_params(self) -> None:
+        # the declared constraints first, then what relates values to each other
         super().check_params()
+        if not isinstance(self.limits, dict):
+            raise ProfileError("range_check: limits must be a table of channel = [low, high]")
         for channel, pair in self.limits.items():
             if not (isinstance(pair, (list, tuple)) and len(pair) == 2 and pair[0] <= pair[1]):
                 raise ProfileError(f"range_check: limits[{channel!r}] must be [low, high] with low <= high")
-        if self.margin < 0:
-            raise ProfileError("range_check: margin must be >= 0")
 
     def _fit(self, runs, traces, **context) -> None:
         # healthy [min, max] per channel over every fresh sample of every run, widened by margin

@@ -1,0 +1,305 @@
+"""Every text view of the CLI: the analyze summary, the evaluation tables, inspect and detectors.
+
+Commands compute, this module renders; nothing here reads files or decides exit codes.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import textwrap
+from datetime import datetime, timezone
+from pathlib import Path
+
+from logscan.evaluate import CHECK_SEPARATOR
+
+_EPOCH_MIN_NS = 946_684_800 * 10**9  # 2000-01-01: later start times are wall-clock (epoch) time
+_FIELD_LINES = 3  # wrapped lines of fields per topic before truncating (--full shows all)
+_LIST_LIMIT = 40  # skipped items, warnings and metadata entries shown before truncating
+_INFO_KEYS = ("sys_name", "ver_hw", "ver_sw", "ver_sw_release", "ver_sw_branch", "sys_os_name",
+              "sys_uuid", "time_ref_utc")  # fmt: skip
+_ARRAY_RE = re.compile(r"^(?P<base>.*)\[(?P<index>\d+)\]$")
+
+
+# --- analyze --------------------------------------------------------------------------------------
+
+def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str:
+    """One screen per log: verdict, the first alarms, scores against ground truth."""
+    lines = [f"{analysis.path}: {analysis.verdict()}  "
+             f"({analysis.log.duration_s:.1f} s, model {analysis.model.name}, "
+             f"detectors {', '.join(r.detector for r in analysis.results)})"]
+    alarms = sorted(analysis.alarms, key=lambda a: a.start)
+    if alarms:
+        lines.append(f"  {'detector':<12} {'signal':<16} {'start s':>9} {'end s':>9} {'peak/thr':>9}")
+        for alarm in alarms[:max_rows]:
+            ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
+            lines.append(f"  {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} {ratio:>9}")
+        if len(alarms) > max_rows:
+            lines.append(f"  ... {len(alarms) - max_rows} more (see the report / --json)")
+    for name, score in analysis.scores.items():
+        latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
+        lines.append(f"  truth: {name}: detected {score.tp}/{score.tp + score.fn} events, "
+                     f"{score.fp} false alarm(s), mean latency {latency}")
+    for warning in analysis.warnings[:5]:
+        lines.append(f"  warning: {warning}")
+    if report_path:
+        lines.append(f"  report: {report_path}")
+    return "\n".join(lines)
+
+
+# --- evaluate -------------------------------------------------------------------------------------
+
+def _num(value: float | None, fmt: str = "{:.2f}") -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else fmt.format(value)
+
+
+def render_scores(evaluation: Evaluation) -> str:
+    """Per detector and per check: counts, precision/recall/F1, latency, false alarms per hour."""
+    header = (f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
+              f"{'prec':>5} {'recall':>6} {'F1':>5} {'lat mean':>8} {'lat max':>8} {'FA/h healthy':>12}")
+    lines = [header, "-" * len(header)]
+    for key in evaluation.keys():
+        s = evaluation.aggregate(key)
+        label = key if CHECK_SEPARATOR not in key else "  " + key
+        lines.append(
+            f"{label:<26} {s.n_logs:>4} {s.n_events:>6} {s.tp:>4} {s.fn:>4} {s.fp:>4} "
+            f"{_num(s.precision):>5} {_num(s.recall):>6} {_num(s.f1):>5} "
+            f"{_num(s.mean_latency_s, '{:.2f} s'):>8} {_num(s.max_latency_s, '{:.2f} s'):>8} "
+            f"{_num(s.false_alarms_per_hour_healthy, '{:.1f}'):>12}"
+        )
+    return "\n".join(lines)
+
+
+def render_kinds(evaluation: Evaluation) -> str:
+    """Per fault kind (Table III view): detected/events and latency of each detector and check."""
+    kinds = evaluation.kinds()
+    if not kinds:
+        return "per fault kind: no fault events in the evaluated logs"
+    header = f"{'fault kind':<30} {'detector / check':<26} {'detected':>8} {'lat mean':>8} {'lat max':>8}"
+    lines = [header, "-" * len(header)]
+    keys = evaluation.keys()
+    per_key = {key: evaluation.by_kind(key) for key in keys}
+    for kind in kinds:
+        first = True
+        for key in keys:
+            stats = per_key[key].get(kind)
+            if stats is None:
+                continue
+            label = key if CHECK_SEPARATOR not in key else "  " + key
+            lines.append(
+                f"{kind if first else '':<30} {label:<26} {f'{stats.tp}/{stats.n_events}':>8} "
+                f"{_num(stats.mean_latency_s, '{:.2f} s'):>8} {_num(stats.max_latency_s, '{:.2f} s'):>8}"
+            )
+            first = False
+    return "\n".join(lines)
+
+
+def render_evaluation(evaluation: Evaluation) -> str:
+    """The one-screen text report of `logscan evaluate`."""
+    n_healthy = sum(log.healthy for log in evaluation.logs)
+    n_events = sum(len(log.events) for log in evaluation.logs)
+    hours = sum(log.duration_s for log in evaluation.logs if log.healthy) / 3600.0
+    parts = [
+        f"evaluated {len(evaluation.logs)} log(s) with ground truth: {n_events} fault event(s), "
+        f"{n_healthy} healthy log(s) ({hours * 60:.1f} min); grace {evaluation.grace_s:g} s",
+    ]
+    if evaluation.logs:
+        parts += ["", render_scores(evaluation), "", render_kinds(evaluation)]
+    if evaluation.skipped:
+        parts.append("")
+        parts.append(f"skipped {len(evaluation.skipped)} log(s) without ground truth: "
+                     + ", ".join(Path(p).name for p in evaluation.skipped))
+    if evaluation.failures:
+        parts.append("")
+        parts.append(f"{len(evaluation.failures)} log(s) could not be evaluated (errors on stderr)")
+    return "\n".join(parts)
+
+
+# --- detectors ------------------------------------------------------------------------------------
+
+def render_detectors(entries: list[dict], parameters: bool = True) -> str:
+    """Plain-text table of registry entries (``DetectorEntry.to_dict()`` rows), then each
+    detector's declared parameters with their defaults and allowed values."""
+    if not entries:
+        return "no detectors registered"
+    rows = [(e["name"], e["origin"], e["description"] if e["ok"] else "BROKEN") for e in entries]
+    name_w = max(len("name"), *(len(r[0]) for r in rows))
+    origin_w = max(len("origin"), *(len(r[1]) for r in rows))
+    lines = [f"{'name':<{name_w}}  {'origin':<{origin_w}}  description"]
+    lines += [f"{n:<{name_w}}  {o:<{origin_w}}  {d}" for n, o, d in rows]
+    problems = [(e["name"], e["origin"], p) for e in entries for p in e["problems"]]
+    if problems:
+        lines.append("")
+        lines.append("problems:")
+        lines += [f"  {n} ({o}): {p}" for n, o, p in problems]
+    if parameters:
+        for entry in entries:
+            if entry.get("parameters"):
+                lines += ["", f"{entry['name']} parameters ([detectors.{entry['name']}] in a profile):"]
+                lines += _parameter_lines(entry["parameters"])
+    return "\n".join(lines)
+
+
+def _parameter_lines(rows: list[dict]) -> list[str]:
+    """One line per declared parameter: name, default, allowed values."""
+    import json
+
+    shown = [(r["name"], json.dumps(r["default"]), r["constraints"]) for r in rows]
+    name_w = max(len(n) for n, _, _ in shown)
+    default_w = max(len(d) for _, d, _ in shown)
+    return [f"  {n:<{name_w}}  default {d:<{default_w}}  {c}" for n, d, c in shown]
+
+
+# --- inspect --------------------------------------------------------------------------------------
+
+def compact_fields(fields: list[str]) -> list[str]:
+    """Runs of array elements ``q[0], q[1], q[2]`` shown as ``q[0..2]``; other names unchanged."""
+    out: list[str] = []
+    run_base, run_first, run_last = None, -1, -1
+
+    def flush() -> None:
+        if run_base is not None:
+            out.append(f"{run_base}[{run_first}]" if run_first == run_last
+                       else f"{run_base}[{run_first}..{run_last}]")
+
+    for name in fields:
+        match = _ARRAY_RE.match(name)
+        if match and match.group("base") == run_base and int(match.group("index")) == run_last + 1:
+            run_last += 1
+            continue
+        flush()
+        if match:
+            run_base, run_first = match.group("base"), int(match.group("index"))
+            run_last = run_first
+        else:
+            run_base = None
+            out.append(name)
+    flush()
+    return out
+
+
+def _wrap_fields(fields: list[str], indent: str, width: int, full: bool) -> list[str]:
+    """Fields as wrapped lines; beyond ``_FIELD_LINES`` lines a count of the rest (unless full)."""
+    shown = compact_fields(fields)
+    prefix = indent + "fields: "
+    lines = textwrap.wrap(", ".join(shown), width=max(40, width - len(prefix)),
+                          break_long_words=False, break_on_hyphens=False)
+    if not full and len(lines) > _FIELD_LINES:
+        kept = lines[:_FIELD_LINES]
+        listed = " ".join(kept).count(",")  # each line ends "name," while more follow
+        kept[-1] = kept[-1].rstrip(",") + ","
+        lines = kept + [f"... +{len(shown) - listed} more (--full lists all)"]
+    return [(prefix if i == 0 else " " * len(prefix)) + line for i, line in enumerate(lines)]
+
+
+def _rate(hz: float) -> str:
+    """A rate in a 9-character column (scientific notation beyond what fits)."""
+    return f"{hz:>9.3f}" if hz < 1e5 else f"{hz:>9.3g}"
+
+
+def _fmt_time(ns: int) -> str:
+    if ns >= _EPOCH_MIN_NS:
+        stamp = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
+        return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return f"{ns / 1e9:.6f} s"
+
+
+def _limited(items: list[str], full: bool, what: str) -> list[str]:
+    if full or len(items) <= _LIST_LIMIT:
+        return items
+    return items[:_LIST_LIMIT] + [f"... {len(items) - _LIST_LIMIT} more {what} (--full lists all)"]
+
+
+def render_inspect(facts: dict, show_channels: bool, *, full: bool = False,
+                   width: int | None = None) -> str:
+    """Plain-text view of ``inspect_facts`` / ``Log.summary()`` for the terminal."""
+    width = width or max(60, min(shutil.get_terminal_size((100, 24)).columns, 160))
+    metadata = facts.get("metadata", {})
+    lines = [
+        f"file:      {facts['file']}",
+        f"format:    {facts['format']}  (time from {facts['time_source']}, "
+        f"source unit {facts['time_unit']})",
+    ]
+    by_rule: dict[str, list[str]] = {}
+    for label, column in metadata.get("csv.time_columns", {}).items():
+        by_rule.setdefault(column, []).append(label)
+    for column, labels in by_rule.items():
+        who = labels[0] if len(labels) == 1 else (
+            f"{len(labels)} files ({', '.join(labels[:3])}{', ...' if len(labels) > 3 else ''})"
+        )
+        lines.append(f"time col:  {who}: {column}")
+    if facts["start_ns"] is not None:
+        lines.append(
+            f"time span: {_fmt_time(facts['start_ns'])} .. {_fmt_time(facts['end_ns'])} "
+            f"({facts['duration_s']:.3f} s)"
+        )
+    else:
+        lines.append("time span: (no messages)")
+    if facts["partial"]:
+        lines.append(f"PARTIAL:   only part of the file was read: {facts['partial_reason']}")
+    lines.append(
+        f"extras:    ground truth: {'yes' if facts['has_truth'] else 'no'}, "
+        f"embedded profile: {'yes' if facts['has_profile'] else 'no'}"
+    )
+    lines.extend(_render_metadata(metadata))
+
+    topics = facts["topics"]
+    total = sum(info["message_count"] for info in topics.values())
+    lines += ["", f"{len(topics)} topic(s), {total} message(s):"]
+    if topics:
+        name_width = min(max(len(name) for name in topics), 48)
+        lines.append(f"  {'topic':<{name_width}}  {'messages':>9}  {'rate Hz':>9}  encoding / schema")
+        for name, info in topics.items():
+            kind = " / ".join(x for x in (info["encoding"], info["schema"]) if x)
+            lines.append(
+                f"  {name:<{name_width}}  {info['message_count']:>9}  {_rate(info['rate_hz'])}  {kind}"
+            )
+            if info["fields"]:
+                lines.extend(_wrap_fields(info["fields"], "    ", width, full))
+
+    channels = facts["channels"]
+    with_nan = sum(1 for info in channels.values() if info.get("nonfinite"))
+    lines += ["", f"{len(channels)} numeric channel(s)"
+              + (f", {with_nan} with NaN/inf values" if with_nan else "")
+              + ("" if show_channels or not channels else " (--channels lists them)")]
+    if show_channels and channels:
+        name_width = min(max(len(name) for name in channels), 60)
+        lines.append(f"  {'channel':<{name_width}}  {'samples':>9}  {'rate Hz':>9}  "
+                     f"{'NaN/inf':>7}  range")
+        for name, info in channels.items():
+            low, high = info.get("min"), info.get("max")
+            span = "-" if low is None else f"{low:.6g} .. {high:.6g}"
+            rate = _rate(info.get("rate_hz", 0.0))
+            lines.append(f"  {name:<{name_width}}  {info['samples']:>9}  {rate}  "
+                         f"{info.get('nonfinite', 0):>7}  {span}")
+    if facts["skipped"]:
+        total_skipped = sum(item["count"] for item in facts["skipped"])
+        lines += ["", f"skipped ({len(facts['skipped'])} kind(s), {total_skipped} item(s)):"]
+        items = [f"  {item['what']}: {item['why']} (x{item['count']})" for item in facts["skipped"]]
+        lines.extend(_limited(items, full, "skipped kinds"))
+    if facts["warnings"]:
+        lines += ["", f"warnings ({len(facts['warnings'])}):"]
+        lines.extend(_limited([f"  {w}" for w in facts["warnings"]], full, "warnings"))
+    return "\n".join(lines)
+
+
+def _render_metadata(metadata: dict) -> list[str]:
+    """A few lines on the source's metadata: ULog system info and counts, other records by name."""
+    lines: list[str] = []
+    info = metadata.get("ulog.info", {})
+    if info:
+        shown = [f"{key}={info[key]}" for key in _INFO_KEYS if key in info]
+        lines.append(f"system:    {', '.join(shown) if shown else '(no system info)'}")
+    log_facts = metadata.get("ulog.log")
+    if log_facts:
+        lines.append(
+            f"ulog:      {len(metadata.get('ulog.parameters', {}))} parameter(s), "
+            f"{log_facts.get('changed_parameters', '0')} changed in flight, "
+            f"{log_facts.get('logged_messages', '0')} logged message(s), "
+            f"{log_facts.get('dropouts', '0')} dropout(s) ({log_facts.get('dropout_total_ms', '0')} ms)"
+        )
+    others = [k for k in metadata if not k.startswith(("ulog.", "csv."))]
+    if others:
+        lines.append("metadata:  " + ", ".join(f"{k} ({len(metadata[k])} key(s))" for k in others))
+    return lines

@@ -1,0 +1,45 @@
+"""What a detector asks of the pipeline: which filters to run and which parts of their traces to keep.
+
+A detector declares its needs (`Detector.needs`); the pipeline takes the union over the detectors it
+runs and runs each needed filter exactly once, keeping only the trace parts someone asked for
+(the EKF's gain K and innovation covariance S are large: (N, n, m) and (N, m, m)).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+# Parts of the EKF trace that are kept only on request (everything else is always there).
+EKF_PARTS = frozenset({"K", "S", "P"})  # gain, innovation covariance, full posterior covariance
+
+
+@dataclass(frozen=True)
+class Needs:
+    """filters: filter name -> the optional trace parts to keep (empty: the filter's default trace)."""
+
+    filters: Mapping[str, frozenset[str]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, **filters: Iterable[str]) -> "Needs":
+        """``Needs.of(ekf=("K", "S"))``: the EKF with its gain and innovation covariance."""
+        return cls({name: frozenset(parts) for name, parts in filters.items()})
+
+    def __or__(self, other: "Needs") -> "Needs":
+        merged = {name: frozenset(parts) for name, parts in self.filters.items()}
+        for name, parts in other.filters.items():
+            merged[name] = merged.get(name, frozenset()) | frozenset(parts)
+        return Needs(merged)
+
+    def parts(self, filter_name: str) -> frozenset[str]:
+        return frozenset(self.filters.get(filter_name, ()))
+
+    def wants(self, filter_name: str) -> bool:
+        return filter_name in self.filters
+
+
+def union(needs: Iterable[Needs]) -> Needs:
+    total = Needs()
+    for item in needs:
+        total = total | item
+    return total

@@ -1,0 +1,193 @@
+"""The pipeline of one log: `prepare` (profile, read, align, each needed filter run once) and `detect`.
+
+    profile = load_profile_for(path, profile_path)           # the file, or the log's embedded one
+    detectors = create_detectors(profile)                      # parameters checked: no log read yet
+    prepared = prepare(path, profile, needs_of(detectors))    # read only the needed topics, align, filter
+    analysis = detect(prepared, detectors)                    # DetectorResults, scores against truth
+
+With `logscan.fleet` this is the only module that sees every layer. Training and evaluation call
+`prepare` and then fit or score; no module outside `detectors/` names a detector: each declares
+what it needs (`Detector.needs`) and the pipeline runs the union of those needs.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from logscan.errors import LogscanError, ProfileError
+from logscan.needs import Needs, union
+
+Progress = Callable[[str], None]
+
+
+def _run_ekf(model, run, parts: frozenset[str]):
+    from logscan.filters.ekf import run_ekf
+
+    # R from each group's profile noise_std, else the model's default (pack_run)
+    return run_ekf(model, run, store_gain="K" in parts, store_S="S" in parts, full_P="P" in parts)
+
+
+# Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
+FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf}
+
+
+@dataclass
+class LoadedProfile:
+    """A parsed profile with its TOML text and where it came from ("embedded" or a file path)."""
+
+    profile: Any  # logscan.profiles.Profile
+    text: str
+    source: str
+
+
+@dataclass
+class Prepared:
+    """One log made ready for detectors: the log, its profile, model, aligned run and filter traces."""
+
+    path: str
+    log: Any  # logscan.log.Log
+    loaded: LoadedProfile
+    model: Any  # logscan.models.base.Model
+    run: Any  # logscan.align.AlignedRun
+    traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def profile(self):
+        return self.loaded.profile
+
+    @property
+    def trace(self):
+        """The shared EKF trace (None when no detector needed the EKF)."""
+        return self.traces.get("ekf")
+
+
+def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
+    """The profile of a log: the file given, else the one the log embeds (a metadata-only read)."""
+    from logscan.profiles import load_profile, parse_profile
+    from logscan.readers import read_embedded_profile
+
+    if profile_path is not None:
+        profile = load_profile(profile_path)
+        return LoadedProfile(profile, profile.to_toml(), str(profile_path))
+    embedded = read_embedded_profile(path)
+    if not embedded:
+        raise ProfileError(
+            "no profile: the log embeds none",
+            path=str(path),
+            hint="pass --profile PROFILE.toml (see docs/profiles.md)",
+        )
+    return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
+
+
+def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
+    """The detectors to run: ``names``, else those the profile enables, else the registry's defaults;
+    configured from the profile's [detectors.NAME] tables and checked before any log is read."""
+    from logscan.detectors.registry import default_registry
+
+    registry = default_registry()
+    profile = loaded.profile
+    chosen = list(names or profile.enabled_detectors() or registry.default_names())
+    detectors = []
+    for name in chosen:
+        spec = profile.detectors.get(name)
+        detectors.append(registry.create(name, dict(spec.settings) if spec else {}, source=loaded.source))
+    return detectors
+
+
+def needs_of(detectors: Sequence) -> Callable[[Any], Needs]:
+    """The union of the detectors' needs, as a function of the aligned run they depend on."""
+    return lambda run: union(detector.needs(run) for detector in detectors)
+
+
+def prepare(
+    path: str | os.PathLike,
+    loaded: LoadedProfile,
+    needs: Needs | Callable[[Any], Needs],
+    *,
+    use_header_stamp: bool = False,
+    progress: Progress | None = None,
+) -> Prepared:
+    """Read only the topics the profile needs, align them, and run each filter the needs ask for
+    exactly once. ``needs`` may be a function of the aligned run (needs can follow what the log
+    holds, e.g. K and S only when it carries no on-board variances). Raises LogscanError on bad input."""
+    from logscan.align import align
+    from logscan.models import get_model
+    from logscan.readers import read_log
+
+    step = progress or (lambda message: None)
+    path = str(path)
+    profile = loaded.profile
+    step("reading")
+    log = read_log(path, topics=profile.topics(), use_header_stamp=use_header_stamp)
+    profile.check_channels(log)
+    model = get_model(profile.vehicle.model, profile.vehicle.params)
+    step("aligning")
+    run = align(log, profile)
+    if run.n_steps < 2:
+        raise LogscanError(
+            "too few samples on the analysis grid to filter", path=path,
+            hint="check the profile's channels and rate_hz against `logscan inspect`",
+        )
+    wanted = needs(run) if callable(needs) else needs
+    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run)
+    prepared.warnings.extend(log.source.warnings)
+    prepared.warnings.extend(run.warnings)
+    if log.source.partial:
+        prepared.warnings.append(f"partial read: {log.source.partial_reason}")
+    for name, parts in wanted.filters.items():
+        if name not in FILTERS:
+            raise ProfileError(f"a detector needs the filter {name!r}, which this logscan does not have",
+                               hint=f"known filters: {', '.join(FILTERS)}")
+        step("filtering")
+        prepared.traces[name] = FILTERS[name](model, run, frozenset(parts))
+    ekf = prepared.trace
+    for episode in ekf.divergence_episodes if ekf is not None else ():
+        prepared.warnings.append(f"filter diverged: {episode}")
+    return prepared
+
+
+def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0,
+           progress: Progress | None = None):
+    """Run the detectors on a prepared log; score their alarms when the log carries ground truth."""
+    from logscan.analysis import Analysis
+    from logscan.results import events_from_truth
+    from logscan.scoring import score_by_detector
+
+    step = progress or (lambda message: None)
+    analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
+    for detector in detectors:
+        step(f"detector {detector.name}")
+        analysis.results.append(detector.run(
+            prepared.run, prepared.trace, model=prepared.model, log_name=prepared.path,
+            traces=prepared.traces,
+        ))
+    truth = prepared.log.truth
+    if truth is not None:
+        run = prepared.run
+        analysis.events = events_from_truth(truth.get("events", []), path=prepared.path)
+        analysis.scores = score_by_detector(
+            analysis.events, analysis.alarms, duration_s=float(run.t[-1] - run.t[0]),
+            grace_s=grace_s, detectors=[d.name for d in detectors], log=prepared.path,
+        )
+    return analysis
+
+
+def analyze_log(
+    path: str | os.PathLike,
+    profile_path: str | os.PathLike | None = None,
+    *,
+    use_header_stamp: bool = False,
+    detector_names: Sequence[str] | None = None,
+    grace_s: float = 1.0,
+    progress: Progress | None = None,
+):
+    """One log end to end: profile, detectors (checked before the log is read), prepare, detect."""
+    loaded = load_profile_for(path, profile_path)
+    detectors = create_detectors(loaded, detector_names)
+    prepared = prepare(path, loaded, needs_of(detectors), use_header_stamp=use_header_stamp,
+                       progress=progress)
+    return detect(prepared, detectors, grace_s=grace_s, progress=progress)
