@@ -27,10 +27,10 @@ import numpy as np
 from numba import njit
 
 from logscan.align import AlignedGroup, AlignedRun
-from logscan.filters import run_ekf
-from logscan.filters import ekf
-from logscan.filters.ekf import cache_depends_on
-from logscan.models import get_model, kernels
+from logscan.filters import linalg, run_ekf
+from logscan.models import dispatch, get_model
+from logscan.models.quadcopter_kernels import QP_G, QP_MASS, QUADCOPTER_ID
+from logscan.numba_cache import follow_dependencies
 
 DT = 0.01
 
@@ -38,7 +38,7 @@ DT = 0.01
 @njit(cache=True)
 def _simulate(p, N, dt, Lq, noise):
     """Closed-loop truth: PD position/attitude controller around a 5 m circle (bench only)."""
-    m, g = p[kernels.QP_MASS], p[kernels.QP_G]
+    m, g = p[QP_MASS], p[QP_G]
     x = np.zeros(12)
     X = np.empty((N, 12))
     U = np.empty((N, 4))
@@ -59,14 +59,11 @@ def _simulate(p, N, dt, Lq, noise):
         u[3] = 0.0392 * (10.0 * (0.0 - x[8]) - 5.0 * x[11])
         if k > 0:
             w = noise * (Lq @ np.random.randn(12))
-            x = kernels.f_disc(kernels.QUADCOPTER_ID, p, x, u, dt) + w
+            x = dispatch.f_disc(QUADCOPTER_ID, p, x, u, dt) + w
         X[k] = x
         U[k] = u
-        Acc[k] = kernels.h_meas(kernels.QUADCOPTER_ID, 0, p, x, u)  # specific force
+        Acc[k] = dispatch.h_meas(QUADCOPTER_ID, 0, p, x, u)  # specific force
     return X, U, Acc
-
-
-cache_depends_on(_simulate, kernels)
 
 
 def make_run(steps: int, seed: int = 0):
@@ -156,23 +153,23 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
         for a in range(m):
             all_cols[i, a] = a
     m_cnt = np.full(n, m, np.int64)
-    qid = kernels.QUADCOPTER_ID
-    kernels.predict_into(qid, p, x, u, dt, x_new, F, kv, xs, A, J, Jn)
-    ekf._sparse_rows(F, n, n, fcols, fnnz)
-    ekf._sparse_rows(R, m, m, rcols, rnnz)
+    qid = QUADCOPTER_ID
+    dispatch.predict_into(qid, p, x, u, dt, x_new, F, kv, xs, A, J, Jn)
+    linalg.sparse_rows(F, n, n, fcols, fnnz)
+    linalg.sparse_rows(R, m, m, rcols, rnnz)
     acc = 0.0
     for it in range(reps + 1):
         if which == 0 or it == 0:  # RK4 step and its exact Jacobian
-            kernels.predict_into(qid, p, x, u, dt, x_new, F, kv, xs, A, J, Jn)
+            dispatch.predict_into(qid, p, x, u, dt, x_new, F, kv, xs, A, J, Jn)
         if which == 1 or it == 0:  # P_prior = F P F^T + Q
-            ekf._sparse_rows(F, n, n, fcols, fnnz)
-            ekf._fpft_q(F, P, Q, n, fcols, fnnz, FP, W, P_upd)
+            linalg.sparse_rows(F, n, n, fcols, fnnz)
+            linalg.fpft_q(F, P, Q, n, fcols, fnnz, FP, W, P_upd)
         if which == 2 or it == 0:  # h, H of accel and gyro
-            kernels.meas_into(qid, 0, p, x, u, 0, hx, Hs, R3, D3)
-            kernels.meas_into(qid, 1, p, x, u, 3, hx, Hs, R3, D3)
-            ekf._sparse_rows(Hs, m, n, hcols, hnnz)
+            dispatch.meas_into(qid, 0, p, x, u, 0, hx, Hs, R3, D3)
+            dispatch.meas_into(qid, 1, p, x, u, 3, hx, Hs, R3, D3)
+            linalg.sparse_rows(Hs, m, n, hcols, hnnz)
         if which == 3 or it == 0:  # H P and S = H P H^T + R
-            ekf._sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
+            linalg.sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
             for a in range(m):
                 for b in range(m):
                     t = R[a, b]
@@ -180,17 +177,15 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
                         t += HP[a, hcols[b, s]] * Hs[b, hcols[b, s]]
                     S[a, b] = t
         if which == 4 or it == 0:  # Cholesky of S and K^T = S^-1 H P
-            ekf._cholesky(S, 0, m, L)
+            linalg.cholesky(S, 0, m, L)
             KT[:, :] = HP
-            ekf._cho_solve_rows(L, m, KT, n)
+            linalg.cho_solve_rows(L, m, KT, n)
         if which == 5 or it == 0:  # Joseph form
-            ekf._joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W,
+            linalg.joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W,
                         DT, D, P_upd)
         acc += P_upd[1, 2] + KT[0, 0] + x_new[0]
     return acc
 
-
-cache_depends_on(_phase_loop, kernels, ekf)
 
 PHASES = ("RK4 step + exact Jacobian F", "F P F^T + Q", "h, H (accel, gyro)",
           "H P, S = H P H^T + R", "Cholesky of S, K = P H^T S^-1", "Joseph P update")
@@ -219,7 +214,6 @@ t0 = time.perf_counter()
 import numpy as np
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters import run_ekf
-from logscan.filters.ekf import cache_depends_on
 from logscan.models import get_model
 m = get_model("quadcopter")
 N = 50
@@ -308,6 +302,8 @@ def main(argv=None) -> int:
     print(f"load average after the run: {os.getloadavg()[0]:.1f}")
     return 0 if ok else 1
 
+
+follow_dependencies(__name__)  # the bench kernels compile in the model kernels and linalg
 
 if __name__ == "__main__":
     sys.exit(main())

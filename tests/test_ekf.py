@@ -15,7 +15,7 @@ from logscan.filters.ekf import pack_run
 from logscan.filters.reference import reference_ekf
 from logscan.models import get_model
 
-from test_models import LINEAR_PARAMS as _LINEAR_BASE
+from test_model_contract import LINEAR_PARAMS as _LINEAR_BASE
 
 LINEAR_PARAMS = dict(
     _LINEAR_BASE, Q=[[1e-3, 0.0], [0.0, 1e-2]], R={"pos": [0.05], "mix": [0.1, 0.1]}
@@ -230,52 +230,6 @@ def test_input_gaps_hold_the_last_input_and_bad_shapes_are_rejected():
     run.groups["nope"] = AlignedGroup("nope", ["c"], np.zeros((100, 1)), np.ones(100, bool))
     with pytest.raises(ModelError, match="no measurement group 'nope'"):
         run_ekf(model, run)
-
-
-def test_kernel_cache_is_keyed_on_the_model_kernels_source():
-    import hashlib
-
-    from logscan.filters.ekf import ekf_run
-    from logscan.models import kernels
-
-    with open(kernels.__file__, "rb") as fh:
-        digest = hashlib.sha256(fh.read()).hexdigest()
-    assert ekf_run._cache._cache_file._source_stamp[-1] == digest
-
-
-@pytest.mark.parametrize(("name", "params"), CASES + [("quadcopter", {"inputs": "motors"})])
-def test_in_place_model_kernels_equal_the_allocating_ones(name, params):
-    """The EKF core calls predict_into/meas_into; the simulator and the reference call
-    predict/h_meas/H_meas: same f, F, H (bit for bit where the arithmetic is shared)."""
-    from logscan.models import kernels
-
-    model = get_model(name, params)
-    rng = np.random.default_rng(4)
-    n, dt = model.n_states, 0.01
-    p = model.param_vector(dt)
-    work = [np.empty(n), np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))]
-    for _ in range(20):
-        x = rng.normal(size=n) * model.state_scale()
-        u = rng.normal(size=model.n_inputs)
-        if name == "quadcopter":
-            u = model.hover_input() * (1.0 + 0.1 * rng.normal(size=4))
-        x_next, F = np.full(n, np.nan), np.full((n, n), np.nan)
-        kernels.predict_into(model.model_id, p, x, u, dt, x_next, F, *work)
-        f_ref, F_ref = kernels.predict(model.model_id, p, x, u, dt)
-        np.testing.assert_allclose(x_next, f_ref, rtol=1e-13, atol=1e-13)
-        np.testing.assert_array_equal(F, F_ref)
-        np.testing.assert_array_equal(f_ref, model.f(x, u, dt))
-        m_total = sum(g.size for g in model.groups.values())
-        hx, Hs = np.full(m_total + 1, np.nan), np.full((m_total + 1, n), np.nan)
-        r = 1
-        for g in model.groups.values():
-            kernels.meas_into(model.model_id, g.group_id, p, x, u, r, hx, Hs, np.empty((3, 3)),
-                              np.empty((3, 3, 3)))
-            np.testing.assert_array_equal(Hs[r:r + g.size], model.H(g.name, x, u))
-            np.testing.assert_allclose(hx[r:r + g.size], model.h(g.name, x, u), rtol=1e-13,
-                                       atol=1e-13)
-            r += g.size
-        assert np.isnan(hx[0]) and np.all(np.isnan(Hs[0]))  # rows outside the group untouched
 
 
 def test_kernel_matches_reference_with_correlated_measurement_noise():

@@ -1,4 +1,6 @@
-"""Vehicle models: analytic Jacobians against central differences, registry errors, mixer."""
+"""Vehicle models, their own physics: hover, mixer, DC-motor time constants, exact
+discretisation, the quadcopter's block RK4 Jacobian, registry errors. The checks every model
+passes (Jacobians, shapes, h/H consistency, parameter round trip) are in test_model_contract.py."""
 
 from __future__ import annotations
 
@@ -6,100 +8,9 @@ import numpy as np
 import pytest
 
 from logscan.errors import ModelError
-from logscan.models import MODEL_NAMES, get_model
+from logscan.models import MODEL_NAMES, dispatch, get_model, rk4
 
-LINEAR_PARAMS = {
-    "A": [[0.0, 1.0], [-2.0, -0.5]],
-    "B": [[0.0], [1.0]],
-    "C": {"pos": [[1.0, 0.0]], "mix": [[1.0, 1.0], [0.0, 2.0]]},
-    "D": {"mix": [[0.5], [0.0]]},
-    "Q": [[1e-4, 0.0], [0.0, 1e-3]],
-}
-PARAMS = {"linear": LINEAR_PARAMS}
-MODELS = [
-    ("quadcopter", None),
-    ("quadcopter", {"inputs": "motors"}),
-    ("steer_by_wire", None),
-    ("dc_motor", None),
-    ("linear", LINEAR_PARAMS),
-]
-
-
-def _random_point(model, rng):
-    n = len(model.state_names)
-    x = rng.normal(size=n) * model.state_scale() * 2.0
-    if model.name == "quadcopter":
-        u = model.hover_input() * (1.0 + 0.2 * rng.normal(size=4))
-        if model.p["inputs"] == "wrench":
-            u[1:] = rng.normal(size=3) * 0.05
-    else:
-        u = rng.normal(size=len(model.input_names)) * 5.0
-    return x, u
-
-
-def _central_jacobian(fun, x, eps=1e-6):
-    cols = [(fun(x + eps * e) - fun(x - eps * e)) / (2 * eps) for e in np.eye(x.size)]
-    return np.column_stack(cols)
-
-
-@pytest.mark.parametrize(("name", "params"), MODELS)
-@pytest.mark.parametrize("dt", [0.002, 0.01, 0.05])
-def test_discrete_jacobian_F_matches_finite_differences(name, params, dt):
-    model = get_model(name, params)
-    rng = np.random.default_rng(7)
-    for _ in range(10):
-        x, u = _random_point(model, rng)
-        F = model.F(x, u, dt)
-        F_num = _central_jacobian(lambda xx: model.f(xx, u, dt), x)
-        scale = max(1.0, np.abs(F).max())
-        np.testing.assert_allclose(F, F_num, atol=1e-6 * scale, rtol=1e-6)
-
-
-@pytest.mark.parametrize(("name", "params"), MODELS)
-def test_measurement_jacobian_H_matches_finite_differences_for_every_group(name, params):
-    model = get_model(name, params)
-    rng = np.random.default_rng(11)
-    for group in model.groups:
-        for _ in range(10):
-            x, u = _random_point(model, rng)
-            H = model.H(group, x, u)
-            assert H.shape == (model.groups[group].size, len(model.state_names))
-            H_num = _central_jacobian(lambda xx: model.h(group, xx, u), x)
-            np.testing.assert_allclose(H, H_num, atol=1e-6, rtol=1e-6)
-
-
-@pytest.mark.parametrize(("name", "params"), MODELS)
-def test_model_interface_is_complete_and_consistent(name, params):
-    model = get_model(name, params)
-    n = len(model.state_names)
-    ids = sorted(g.group_id for g in model.groups.values())
-    assert ids == list(range(len(model.groups)))
-    for spec in model.groups.values():
-        assert len(spec.noise_std) == len(spec.range_lo) == len(spec.range_hi) == spec.size
-        assert all(lo < hi for lo, hi in zip(spec.range_lo, spec.range_hi))
-        assert 1e20 > max(spec.range_hi)  # a bit-flipped 1e20 is outside every range
-        R = model.default_R(spec.name)
-        assert R.shape == (spec.size, spec.size)
-        np.linalg.cholesky(R)
-    Q = model.default_Q(0.01)
-    assert Q.shape == (n, n)
-    np.testing.assert_allclose(Q, Q.T)
-    np.linalg.cholesky(Q)
-    desc = model.describe()
-    assert desc["name"] == name and len(desc["states"]) == n
-    assert desc["params"]
-
-
-def test_direct_groups_really_observe_their_states():
-    rng = np.random.default_rng(3)
-    for name, params in MODELS:
-        model = get_model(name, params)
-        for spec in model.groups.values():
-            idx, gain = spec.direct_map()
-            x, u = _random_point(model, rng)
-            z = model.h(spec.name, x, u)
-            for j in np.flatnonzero(idx >= 0):
-                assert z[j] == pytest.approx(gain[j] * x[idx[j]], abs=1e-12)
+from test_model_contract import central_jacobian, random_point, work_arrays
 
 
 def test_quadcopter_hovers_and_accel_reads_gravity_reaction():
@@ -192,27 +103,20 @@ def test_quadcopter_block_rk4_jacobian_equals_generic_path_and_finite_difference
     """predict_into's quadcopter branch (3x3-block RK4 Jacobian) gives the generic RK4 path's
     x_next and F to the last bit (work arrays filled with NaN: nothing stale is read), and F
     matches central differences of the RK4 step."""
-    from logscan.models import kernels
-
     model = get_model("quadcopter", params)
     p = model.param_vector()
     rng = np.random.default_rng(11)
     n = 12
-
-    def work():
-        return (np.full(n, np.nan), np.full(n, np.nan), np.full((n, n), np.nan),
-                np.full((n, n), np.nan), np.full((n, n), np.nan))
-
     for k in range(30):
-        x, u = _random_point(model, rng)
+        x, u = random_point(model, rng)
         dt = (0.002, 0.01, 0.05)[k % 3]
         x_gen, F_gen = np.full(n, np.nan), np.full((n, n), np.nan)
         x_blk, F_blk = np.full(n, np.nan), np.full((n, n), np.nan)
-        kernels.rk4_predict_into(model.model_id, p, x, u, dt, x_gen, F_gen, *work())
-        kernels.predict_into(model.model_id, p, x, u, dt, x_blk, F_blk, *work())
+        rk4.rk4_predict_into(model.model_id, p, x, u, dt, x_gen, F_gen, *work_arrays(n))
+        dispatch.predict_into(model.model_id, p, x, u, dt, x_blk, F_blk, *work_arrays(n))
         np.testing.assert_array_equal(x_blk, x_gen)
         np.testing.assert_array_equal(F_blk, F_gen)
         assert np.abs(F_blk - np.eye(n)).max() > 0.0
-        F_num = _central_jacobian(lambda xx: kernels.f_disc(model.model_id, p, xx, u, dt), x)
+        F_num = central_jacobian(lambda xx: dispatch.f_disc(model.model_id, p, xx, u, dt), x)
         scale = max(1.0, np.abs(F_blk).max())
         np.testing.assert_allclose(F_blk, F_num, atol=1e-6 * scale, rtol=1e-6)

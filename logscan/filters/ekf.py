@@ -1,8 +1,9 @@
 """The shared EKF core: one numba kernel that filters a whole aligned run, and its trace.
 
-Every model-based detector reads the `EkfTrace` this module returns (ALGORITHMS.md section 0);
-none carries its own filter. The kernel `ekf_run` is model-agnostic: it dispatches f/F/h/H on
-(model_id, group_id) through `logscan.models.kernels`, so one cached compilation serves every model.
+Every model-based detector reads the `EkfTrace` (logscan.filters.trace) this module returns
+(ALGORITHMS.md section 0); none carries its own filter. The kernel `ekf_run` is model-agnostic: it
+dispatches f/F/h/H on (model_id, group_id) through `logscan.models.dispatch`, so one cached
+compilation serves every model; its linear algebra is `logscan.filters.linalg`.
 
 Conventions (step k on the grid, u_k the input held at step k):
  - k = 0: x_prior = x0, P_prior = P0 (no prediction); k > 0: x_prior = f(x_post_{k-1}, u_k).
@@ -22,170 +23,33 @@ Conventions (step k on the grid, u_k the input held at step k):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
-from logscan.models import kernels
+from logscan.filters.linalg import (
+    all_finite,
+    all_finite2,
+    cho_solve_rows,
+    cholesky,
+    forward_sq,
+    fpft_q,
+    joseph,
+    nan_fill,
+    sparse_mm,
+    sparse_rows,
+    wrap_angle,
+)
+from logscan.filters.trace import EkfTrace, divergence_episodes
+from logscan.models import dispatch
 from logscan.models.base import Model
+from logscan.numba_cache import follow_dependencies
 
 # error_model="numpy": float division without the Python-style zero checks (no division here
 # can see a zero: Cholesky pivots are checked > 0 first); not fastmath, NaN checks still hold.
-
-
-# =============================================================================================
-# small dense linear algebra on preallocated arrays (sizes n <= a few tens, m <= n)
-# =============================================================================================
-@njit(cache=True, error_model="numpy")
-def _cholesky(A, r, m, L):
-    """Lower Cholesky factor of the block A[r:r+m, r:r+m] into L[:m, :m]; False when that block
-    is not positive definite."""
-    for j in range(m):
-        s = A[r + j, r + j]
-        for c in range(j):
-            s -= L[j, c] * L[j, c]
-        if not (s > 0.0) or not np.isfinite(s):
-            return False
-        d = np.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, m):
-            t = A[r + i, r + j]
-            for c in range(j):
-                t -= L[i, c] * L[j, c]
-            L[i, j] = t / d
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def _forward_sq(L, m, b, r, v):
-    """|L^-1 b[r:r+m]|^2: solve L v = b[r:r+m] (forward substitution) and return v^T v."""
-    acc = 0.0
-    for i in range(m):
-        t = b[r + i]
-        for c in range(i):
-            t -= L[i, c] * v[c]
-        t /= L[i, i]
-        v[i] = t
-        acc += t * t
-    return acc
-
-
-@njit(cache=True, error_model="numpy")
-def _cho_solve_rows(L, m, B, n):
-    """Solve (L L^T) X = B[:m, :n] in place, all n columns at once (rows are contiguous)."""
-    for i in range(m):  # L V = B
-        Bi = B[i]
-        for c in range(i):
-            l = L[i, c]
-            Bc = B[c]
-            for j in range(n):
-                Bi[j] -= l * Bc[j]
-        d = 1.0 / L[i, i]
-        for j in range(n):
-            Bi[j] *= d
-    for i in range(m - 1, -1, -1):  # L^T X = V
-        Bi = B[i]
-        for c in range(i + 1, m):
-            l = L[c, i]
-            Bc = B[c]
-            for j in range(n):
-                Bi[j] -= l * Bc[j]
-        d = 1.0 / L[i, i]
-        for j in range(n):
-            Bi[j] *= d
-
-
-@njit(cache=True, error_model="numpy")
-def _sparse_rows(M, m, n, cols, nnz):
-    """Column indices of the non-zeros of each row of M[:m, :n] into cols[a, :nnz[a]]."""
-    for a in range(m):
-        c = 0
-        for j in range(n):
-            if M[a, j] != 0.0:
-                cols[a, c] = j
-                c += 1
-        nnz[a] = c
-
-
-@njit(cache=True, error_model="numpy")
-def _sparse_mm(M, cols, nnz, m, B, n, out):
-    """out[:m, :n] = M[:m] B[:, :n] for row-sparse M (row a's non-zeros at cols[a, :nnz[a]])."""
-    for a in range(m):
-        Oa = out[a]
-        for j in range(n):
-            Oa[j] = 0.0
-        for s in range(nnz[a]):
-            c = cols[a, s]
-            f = M[a, c]
-            Bc = B[c]
-            for j in range(n):
-                Oa[j] += f * Bc[j]
-
-
-@njit(cache=True, error_model="numpy")
-def _sym_plus_product(base, C, idx, cnt, B, n, out):
-    """out = base + C B when the result is symmetric: the lower triangle
-    out[i, j<=i] = base[i, j] + sum_s C[i, c] B[c, j] (c = idx[i, s], s < cnt[i]: the non-zeros
-    of C's row i), mirrored to the upper triangle. (The lower triangle pairs the short rows with
-    the sparse bottom rows of a Jacobian: fewer products than the upper one.)"""
-    for i in range(n):
-        Oi = out[i]
-        for j in range(i + 1):
-            Oi[j] = base[i, j]
-        for s in range(cnt[i]):
-            c = idx[i, s]
-            f = C[i, c]
-            Bc = B[c]
-            for j in range(i + 1):
-                Oi[j] += f * Bc[j]
-    for i in range(n):
-        for j in range(i + 1, n):
-            out[i, j] = out[j, i]
-
-
-@njit(cache=True, error_model="numpy")
-def _fpft_q(F, P, Q, n, fcols, fnnz, FP, W, out):
-    """out = F P F^T + Q for symmetric P, F row-sparse (fcols/fnnz); FP, W (n, n) are work.
-
-    FP = F P (row by row), W = (F P)^T = P F^T (P symmetric), out = Q + F W (lower triangle,
-    mirrored).
-    """
-    _sparse_mm(F, fcols, fnnz, n, P, n, FP)
-    for i in range(n):
-        for j in range(n):
-            W[j, i] = FP[i, j]
-    _sym_plus_product(Q, F, fcols, fnnz, W, n, out)
-
-
-@njit(cache=True, error_model="numpy")
-def _all_finite(a):
-    for v in a:
-        if not np.isfinite(v):
-            return False
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def _all_finite2(A):
-    for i in range(A.shape[0]):
-        if not _all_finite(A[i]):
-            return False
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def _nan_fill(M):
-    for i in range(M.shape[0]):
-        for j in range(M.shape[1]):
-            M[i, j] = np.nan
-
-
-@njit(cache=True, error_model="numpy")
-def _wrap_angle(a):
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 @njit(cache=True, error_model="numpy")
@@ -211,47 +75,6 @@ def _store(k, x, P, xs, P_diag, P_full, store_P):
         for i in range(n):
             for j in range(n):
                 P_full[k, i, j] = P[i, j]
-
-
-@njit(cache=True, error_model="numpy")
-def _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, AT, DT, K, out):
-    """Joseph form out = (I - K H) P (I - K H)^T + K R K^T, K = KT^T, without forming I - K H:
-
-    A = (I - K H) P;  A (I - K H)^T + K R K^T = A + (K R - A H^T) K^T = A + D K^T, and as the
-    result is symmetric it is evaluated transposed, row by row (contiguous rows only):
-    A^T = P - (H P)^T K^T (P symmetric),  D^T = R^T K^T - H A^T,  out = A^T + K D^T.
-    out is the lower triangle, mirrored (the symmetric part, as the reference's 0.5 (P + P^T)).
-    rcols/rnnz: the non-zero rows of each column of R. AT (n, n), DT (m, n) and K (n, m) are
-    work; all_cols[i, :m] = 0..m-1, m_cnt[:] = m.
-    """
-    for c in range(n):  # A^T[c, :] = P[c, :] - sum_a (H P)[a, c] K^T[a, :]
-        ATc = AT[c]
-        for j in range(n):
-            ATc[j] = P[c, j]
-        for a in range(m):
-            h = HP[a, c]
-            KTa = KT[a]
-            for j in range(n):
-                ATc[j] -= h * KTa[j]
-    for a in range(m):  # D^T[a, :] = sum_b R[b, a] K^T[b, :] - sum_c H[a, c] A^T[c, :]
-        DTa = DT[a]
-        for j in range(n):
-            DTa[j] = 0.0
-        for s in range(rnnz[a]):  # the non-zeros of R's column a (R is block diagonal)
-            b = rcols[a, s]
-            r = Rs[b, a]
-            KTb = KT[b]
-            for j in range(n):
-                DTa[j] += r * KTb[j]
-        for s in range(hnnz[a]):  # the non-zeros of H's row a
-            c = hcols[a, s]
-            h = Hs[a, c]
-            ATc = AT[c]
-            for j in range(n):
-                DTa[j] -= h * ATc[j]
-        for i in range(n):
-            K[i, a] = KT[a, i]
-    _sym_plus_product(AT, K, all_cols, m_cnt, DT, n, out)
 
 
 # =============================================================================================
@@ -319,7 +142,7 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
     for k in range(N):
         # ---- input ----------------------------------------------------------------------
         uk = u[k]
-        if _all_finite(uk):
+        if all_finite(uk):
             for i in range(nu):
                 u_last[i] = uk[i]
         else:
@@ -327,13 +150,13 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
             uk = u_last
         # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
         if k > 0:
-            kernels.predict_into(model_id, p, x, uk, dt, x_new, F, kv, xs, Aw, Jw, Jnw)
-            _sparse_rows(F, n, n, fcols, fnnz)
-            _fpft_q(F, P, Q, n, fcols, fnnz, Aw, W, P_upd)
+            dispatch.predict_into(model_id, p, x, uk, dt, x_new, F, kv, xs, Aw, Jw, Jnw)
+            sparse_rows(F, n, n, fcols, fnnz)
+            fpft_q(F, P, Q, n, fcols, fnnz, Aw, W, P_upd)
             P, P_upd = P_upd, P
             for i in range(n):
                 x[i] = x_new[i]
-            if not (_all_finite(x) and _all_finite2(P)):
+            if not (all_finite(x) and all_finite2(P)):
                 diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
         _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
         # ---- select the fresh, valid groups -------------------------------------------------
@@ -377,29 +200,29 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
             pending = still
         # ---- update -----------------------------------------------------------------------
         if store_S:  # S_out and K_out come unfilled (np.empty): NaN where not updated
-            _nan_fill(S_out[k])
+            nan_fill(S_out[k])
         if store_K:
-            _nan_fill(K_out[k])
+            nan_fill(K_out[k])
         if m > 0:
             r = zero
             for a in range(ng):
                 g = sel_g[a]
-                kernels.meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
+                dispatch.meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
                 r += group_sizes[g]
-            _sparse_rows(Hs, m, n, hcols, hnnz)
+            sparse_rows(Hs, m, n, hcols, hnnz)
             for a in range(m):
                 j = rows[a]
                 # y~ = z - h(x_prior)
                 ya = z[k, j] - hx[a]
                 if wrap[j]:
-                    ya = _wrap_angle(ya)
+                    ya = wrap_angle(ya)
                 y[a] = ya
                 for b in range(m):
                     Rs[a, b] = R_all[j, rows[b]]
                     RsT[b, a] = Rs[a, b]
-            _sparse_rows(RsT, m, m, rcols, rnnz)
+            sparse_rows(RsT, m, m, rcols, rnnz)
             # H P (H sparse: its rows' non-zeros only)
-            _sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
+            sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
             # S = H P H^T + R (upper triangle, mirrored)
             for a in range(m):
                 for b in range(a, m):
@@ -410,13 +233,13 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     S[a, b] = t + Rs[a, b]
                 for b in range(a):
                     S[a, b] = S[b, a]
-            ok = _cholesky(S, zero, m, L)
+            ok = cholesky(S, zero, m, L)
             if ok:
                 # K = P H^T S^-1  via  S K^T = H P  (P symmetric)
                 for a in range(m):
                     for j in range(n):
                         KT[a, j] = HP[a, j]
-                _cho_solve_rows(L, m, KT, n)
+                cho_solve_rows(L, m, KT, n)
                 for i in range(n):
                     t = x[i]
                     for a in range(m):
@@ -424,15 +247,15 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     x_upd[i] = t  # x_post = x_prior + K y~
                 # P_post = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
                 m_cnt[:] = m
-                _joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT,
+                joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT,
                         D, P_upd)
-                if _all_finite(x_upd) and _all_finite2(P_upd):
+                if all_finite(x_upd) and all_finite2(P_upd):
                     for i in range(n):
                         x[i] = x_upd[i]
                     P, P_upd = P_upd, P
                     m_k[k] = m
                     # NIS = y^T S^-1 y = |L^-1 y|^2
-                    nis[k] = _forward_sq(L, m, y, zero, v)
+                    nis[k] = forward_sq(L, m, y, zero, v)
                     knorm = 0.0
                     for a in range(m):
                         for i in range(n):
@@ -455,10 +278,10 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                         mg = group_sizes[g]
                         updated[k, g] = True
                         if r == 0:  # the leading block's factor is L's leading block
-                            nis_group[k, g] = _forward_sq(L, mg, y, zero, v)
+                            nis_group[k, g] = forward_sq(L, mg, y, zero, v)
                         else:
-                            _cholesky(S, r, mg, Lg)
-                            nis_group[k, g] = _forward_sq(Lg, mg, y, r, v)
+                            cholesky(S, r, mg, Lg)
+                            nis_group[k, g] = forward_sq(Lg, mg, y, r, v)
                         r += mg
                 else:
                     ok = False
@@ -467,136 +290,9 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
         _store(k, x, P, x_post, P_post_diag, P_post_full, store_P)
 
 
-def cache_depends_on(dispatcher, *modules) -> None:
-    """Make the on-disk numba cache of ``dispatcher`` stale when any of ``modules`` changes.
-
-    numba keys a cached function on its own source file only, but `ekf_run` compiles the model
-    functions of `logscan.models.kernels` into itself: without this, editing a model would leave
-    the EKF running the old equations from the cache. The index's source stamp becomes
-    (own stamp, sha256 of each dependency). Uses numba internals; a no-op if they change.
-    """
-    import hashlib
-
-    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
-    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
-        return
-    digests = []
-    for module in modules:
-        with open(module.__file__, "rb") as fh:
-            digests.append(hashlib.sha256(fh.read()).hexdigest())
-    cache_file._source_stamp = (cache_file._source_stamp, *digests)
-
-
-cache_depends_on(ekf_run, kernels)
-
-
 # =============================================================================================
-# trace and wrapper
+# packing a run for the kernel, and the Python entry point
 # =============================================================================================
-@dataclass
-class DivergenceEpisode:
-    """Diverged steps up to the next successful update (first step, last step, count)."""
-
-    start_step: int
-    end_step: int
-    n_steps: int
-    t_start: float
-    t_end: float
-
-
-@dataclass
-class EkfTrace:
-    """Per-step output of the shared EKF (N grid steps, n states, G groups, m_total = sum m_g).
-
-    Group g's measurement columns are `group_offsets[g] : group_offsets[g] + group_sizes[g]`
-    (`group_slice(name)`). Arrays with NaN mean "not updated at this step".
-    """
-
-    model_name: str
-    state_names: list[str]
-    group_names: list[str]
-    group_offsets: np.ndarray  # (G,) int
-    group_sizes: np.ndarray  # (G,) int
-    t: np.ndarray  # (N,)
-    dt: float
-    x_prior: np.ndarray  # (N, n)
-    x_post: np.ndarray  # (N, n)
-    P_prior_diag: np.ndarray  # (N, n)
-    P_post_diag: np.ndarray  # (N, n)
-    y: np.ndarray  # (N, m_total) innovation z - h(x_prior), NaN where not updated
-    S_diag: np.ndarray  # (N, m_total) diagonal of S, NaN where not updated
-    nis: np.ndarray  # (N,) y^T S^-1 y over the stacked update, NaN without update
-    nis_group: np.ndarray  # (N, G) y_g^T S_gg^-1 y_g per group, NaN where not updated
-    m_k: np.ndarray  # (N,) int, measurements in the update (0: none)
-    gain_norm: np.ndarray  # (N,) Frobenius norm of K, NaN without update
-    updated: np.ndarray  # (N, G) bool, group used in the update
-    rejected: np.ndarray  # (N, G) bool, fresh sample non-finite or outside the physical range
-    seeded: np.ndarray  # (N, G) bool, sample used to (re-)seed directly observed states
-    diverged: np.ndarray  # (N,) bool, divergence detected at this step (filter restarted)
-    input_held: np.ndarray  # (N,) bool, non-finite input replaced by the last finite one
-    Q: np.ndarray  # (n, n) process noise used
-    R: np.ndarray  # (m_total, m_total) block-diagonal measurement noise used
-    P_prior: np.ndarray | None = None  # (N, n, n) when full_P
-    P_post: np.ndarray | None = None  # (N, n, n) when full_P
-    S: np.ndarray | None = None  # (N, m_total, m_total) padded with NaN, when store_S
-    K: np.ndarray | None = None  # (N, n, m_total) padded with NaN, when store_gain
-    divergence_episodes: list[DivergenceEpisode] = field(default_factory=list)
-
-    @property
-    def n_steps(self) -> int:
-        return int(self.t.size)
-
-    def group_index(self, name: str) -> int:
-        try:
-            return self.group_names.index(name)
-        except ValueError:
-            raise ModelError(
-                f"the trace has no group {name!r}", hint="groups: " + ", ".join(self.group_names)
-            ) from None
-
-    def group_slice(self, name: str) -> slice:
-        g = self.group_index(name)
-        o = int(self.group_offsets[g])
-        return slice(o, o + int(self.group_sizes[g]))
-
-    def summary(self) -> dict:
-        """JSON-ready counts: updates, rejections and seeds per group, divergence, mean NIS."""
-        with np.errstate(invalid="ignore"):
-            mean_nis = {
-                g: (float(np.nanmean(self.nis_group[:, i])) if self.updated[:, i].any() else None)
-                for i, g in enumerate(self.group_names)
-            }
-        return {
-            "steps": self.n_steps,
-            "updates": dict(zip(self.group_names, self.updated.sum(axis=0).tolist())),
-            "rejected": dict(zip(self.group_names, self.rejected.sum(axis=0).tolist())),
-            "seeded": dict(zip(self.group_names, self.seeded.sum(axis=0).tolist())),
-            "inputs_held": int(self.input_held.sum()),
-            "divergence_episodes": len(self.divergence_episodes),
-            "diverged_steps": int(self.diverged.sum()),
-            "mean_nis": mean_nis,
-        }
-
-
-def divergence_episodes(
-    t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray
-) -> list[DivergenceEpisode]:
-    """Group diverged steps into episodes: an episode ends at the next successful update."""
-    steps = np.flatnonzero(diverged)
-    if steps.size == 0:
-        return []
-    successes = np.cumsum((m_k > 0) & ~diverged)
-    new = np.ones(steps.size, dtype=bool)
-    new[1:] = successes[steps[1:]] > successes[steps[:-1]]
-    starts = np.flatnonzero(new)
-    ends = np.append(starts[1:], steps.size) - 1
-    return [
-        DivergenceEpisode(int(steps[a]), int(steps[b]), int(b - a + 1), float(t[steps[a]]),
-                          float(t[steps[b]]))
-        for a, b in zip(starts, ends)
-    ]
-
-
 @dataclass
 class KernelInputs:
     """The packed arrays `ekf_run` reads (built by `pack_run`; the reference filter reads them
@@ -644,6 +340,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     R: None (each group's profile noise_std, else the model's default_R), or a dict
     group -> (m, m) matrix or (m,) standard deviations.
     """
+    dispatch.check_model_id(model.model_id, model.name)
     n = model.n_states
     N = run.n_steps
     u = np.ascontiguousarray(run.u, dtype=np.float64)
@@ -756,3 +453,6 @@ def run_ekf(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, ful
         S=out["S_out"] if store_S else None, K=out["K_out"] if store_gain else None,
         divergence_episodes=divergence_episodes(t, out["diverged"], out["m_k"]),
     )
+
+
+follow_dependencies(__name__)

@@ -2,7 +2,7 @@
 
 INTERFACE (fixed): models are registered by name in `logscan.models` (`get_model(name, params)`,
 `MODEL_NAMES`). The numeric parts run inside numba kernels: each model has an integer `model_id`
-and a packed float64 parameter vector, and `logscan.models.kernels` dispatches
+and a packed float64 parameter vector, and `logscan.models.dispatch` dispatches
 `f / F / h / H` on (model_id, group_id) so one cached EKF kernel serves every model.
 """
 
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from logscan.errors import ModelError
-from logscan.models import kernels
+from logscan.models import dispatch
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,8 @@ class Model:
     """Discrete-time model x_k = f(x_{k-1}, u_k) + w, z = h_g(x_k, u_k) + v per group g.
 
     Subclasses set the class attributes and implement the numpy methods as thin wrappers around
-    their numba functions in `logscan.models.kernels`.
+    their numba functions (`<model>_kernels.py` beside the class module, reached through
+    `logscan.models.dispatch`). `model_id` must be one of `dispatch.MODEL_IDS`.
     """
 
     name: str = ""
@@ -60,6 +61,7 @@ class Model:
     groups: dict[str, GroupSpec] = {}
 
     def __init__(self, params: dict | None = None):
+        dispatch.check_model_id(self.model_id, self.name)
         self.params: dict = dict(params or {})
 
     def _merge_params(self, defaults: dict) -> dict:
@@ -136,18 +138,19 @@ class Model:
     # --- numpy views of the model (tests, simulator, reference filter) -------------------------
     # One call each; they run the same numba functions as the EKF kernel.
     def f(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        return kernels.f_disc(self.model_id, self.param_vector(dt), _vec(x), _vec(u), float(dt))
+        return dispatch.f_disc(self.model_id, self.param_vector(dt), _vec(x), _vec(u), float(dt))
 
     def F(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        return kernels.predict(self.model_id, self.param_vector(dt), _vec(x), _vec(u), float(dt))[1]
+        p = self.param_vector(dt)
+        return dispatch.predict(self.model_id, p, _vec(x), _vec(u), float(dt))[1]
 
     def h(self, group: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         gid = self.group(group).group_id
-        return kernels.h_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
+        return dispatch.h_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
 
     def H(self, group: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         gid = self.group(group).group_id
-        return kernels.H_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
+        return dispatch.H_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
 
     def describe(self) -> dict:
         """JSON-ready description: name, states, inputs, groups, the parameters it was built

@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.errors import ModelError
-from logscan.models import kernels
 from logscan.models.base import GroupSpec
+from logscan.models.dispatch import DC_MOTOR_ID
 from logscan.models.linear import LinearBase
 
 DEFAULTS = {
@@ -45,7 +45,7 @@ DEFAULTS = {
 
 class DcMotor(LinearBase):
     name = "dc_motor"
-    model_id = kernels.DC_MOTOR_ID
+    model_id = DC_MOTOR_ID
     state_names = ("i_a", "w_v")
     input_names = ("Va",)
 

@@ -21,8 +21,8 @@ import numpy as np
 from scipy.linalg import expm
 
 from logscan.errors import ModelError
-from logscan.models import kernels
 from logscan.models.base import GroupSpec, Model
+from logscan.models.dispatch import LINEAR_ID
 
 
 def discretise(A: np.ndarray, B: np.ndarray, Qc: np.ndarray, dt: float):
@@ -127,7 +127,7 @@ _KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "
 
 class LinearModel(LinearBase):
     name = "linear"
-    model_id = kernels.LINEAR_ID
+    model_id = LINEAR_ID
 
     def __init__(self, params: dict | None = None):
         super().__init__(params)

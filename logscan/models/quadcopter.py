@@ -27,8 +27,8 @@ import math
 import numpy as np
 
 from logscan.errors import ModelError
-from logscan.models import kernels
 from logscan.models.base import GroupSpec, Model
+from logscan.models.dispatch import QUADCOPTER_ID
 
 _WRENCH_INPUTS = ("thrust", "tau_x", "tau_y", "tau_z")
 _MOTOR_INPUTS = ("w1", "w2", "w3", "w4")
@@ -52,7 +52,7 @@ DEFAULTS = {
 
 class Quadcopter(Model):
     name = "quadcopter"
-    model_id = kernels.QUADCOPTER_ID
+    model_id = QUADCOPTER_ID
     state_names = ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "p", "q", "r")
     input_names = _WRENCH_INPUTS
     groups = {

@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.errors import ModelError
-from logscan.models import kernels
 from logscan.models.base import GroupSpec, Model
+from logscan.models.dispatch import STEER_BY_WIRE_ID
 
 DEFAULTS = {
     "Jeq": 9.498,
@@ -45,7 +45,7 @@ _ORDER = ("Jeq", "Beq", "Fs", "Cf", "Cr", "lf", "lr", "lc", "lp", "M", "Iz", "V"
 
 class SteerByWire(Model):
     name = "steer_by_wire"
-    model_id = kernels.STEER_BY_WIRE_ID
+    model_id = STEER_BY_WIRE_ID
     state_names = ("delta_f", "delta_f_dot", "beta", "gamma")
     input_names = ("tau_eq",)
     groups = {

@@ -12,7 +12,7 @@ One step k (period dt, x_k = f(x_{k-1}, u_k) + w_k as the models define it):
      commanded u, one stacked update with the fresh groups, skipping a group with a non-finite or
      out-of-range sample (counted);
      state-corruption faults then corrupt its posterior.
-The kernel uses the model's numba functions (`logscan.models.kernels`), so truth and filters share
+The kernel uses the model's numba functions (`logscan.models.dispatch`), so truth and filters share
 one model. All random draws (w, v, fault draws) are made before the loop from one seeded
 generator, which makes a run a pure function of its seed.
 """
@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from logscan.models.kernels import f_disc, h_meas, H_meas, predict
+from logscan.models.dispatch import f_disc, H_meas, h_meas, predict
+from logscan.numba_cache import follow_dependencies
 from logscan.simulate.controllers import control
 from logscan.simulate.faults import (
     ACT_OFFSET,
@@ -176,3 +177,6 @@ def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_
         for j in range(n):
             P_diag[k, j] = P[j, j]
     return x_true, u_cmd, u_act, z_all, x_hat, P_diag, rejected
+
+
+follow_dependencies(__name__)

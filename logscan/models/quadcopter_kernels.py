@@ -1,17 +1,10 @@
-"""Numba functions of every vehicle model and their dispatch on (model_id, group_id).
+"""Numba functions of the quadcopter model: dynamics, Jacobian, measurements, block RK4 step.
 
-All models' discrete `f`, Jacobian `F`, measurement `h` and Jacobian `H` live here as
-`@njit(cache=True)` functions that read a packed float64 parameter vector `p` (built by each
-model's `param_vector`). The EKF kernel calls only the two in-place dispatchers at the bottom
-(`predict_into`, `meas_into`: in-place, no allocation), so one cached kernel serves every model;
-`predict`, `f_disc`, `h_meas`, `H_meas` are the allocating versions (simulator, numpy views).
-
-Model ids: 0 quadcopter, 1 steer_by_wire, 2 dc_motor, 3 linear (2 and 3 share the linear code:
-the dc_motor model packs its exactly discretised A, B, C like a linear model).
-
-Continuous-time nonlinear models are discretised with one RK4 step per grid period; the discrete
-Jacobian F is the exact derivative of that RK4 step, obtained by propagating the continuous
-Jacobian A through the four stages (dk_i/dx = A(x_i) dx_i/dx).
+Shapes: p (QUAD_N_PARAMS,) packed by `Quadcopter.param_vector` (layout QP_* below), x (12,),
+u (4,) (wrench or motor speeds, QP_INPUT_MODE), continuous d (12,) and A (12, 12); measurements
+write rows r:r+3 of hx (m,) and Hs (m, 12); R (3, 3) and D (3, 3, 3) are rotation work arrays.
+The block RK4 step is the generic one of `logscan.models.rk4` restricted to the non-zero 3x3
+blocks of the quadcopter's continuous Jacobian (equal to the last bit).
 """
 
 from __future__ import annotations
@@ -20,23 +13,12 @@ import numpy as np
 from numba import njit
 
 QUADCOPTER_ID = 0
-STEER_BY_WIRE_ID = 1
-DC_MOTOR_ID = 2
-LINEAR_ID = 3
 
-# ---- quadcopter parameter layout ------------------------------------------------------------
+# ---- parameter layout -------------------------------------------------------------------------
 QP_MASS, QP_G, QP_KD, QP_IX, QP_IY, QP_IZ, QP_ARM, QP_KT, QP_BTAU, QP_INPUT_MODE = range(10)
 QUAD_N_PARAMS = 10
 
-# ---- steer-by-wire parameter layout ---------------------------------------------------------
-(SP_JEQ, SP_BEQ, SP_FS, SP_CF, SP_CR, SP_LF, SP_LR, SP_LC, SP_LP, SP_M, SP_IZ, SP_V,
- SP_VS) = range(13)
-SBW_N_PARAMS = 13
 
-
-# =============================================================================================
-# quadcopter
-# =============================================================================================
 @njit(cache=True)
 def quad_wrench(p, u):
     """Collective thrust and body torques from the input (wrench, or motor speeds via the mixer).
@@ -258,214 +240,10 @@ def quad_H(p, gid, x, u):
     return H
 
 
-# =============================================================================================
-# steer-by-wire (front-wheel subsystem + single-track vehicle)
-# =============================================================================================
-@njit(cache=True)
-def sbw_fA(p, x, u, d, A, want_A):
-    """Jeq d2_dd + Beq d_dot + Fs tanh(d_dot/vs) + tau_e = tau_eq, with the self-aligning torque
-    tau_e = Cf (lc + lp) (delta_f - beta - lf gamma / V); bicycle model for beta and gamma.
-    A: the paper's section V.B Jacobian, with d tanh(d_dot/vs)/d d_dot in place of the sign's."""
-    Jeq, Beq, Fs = p[SP_JEQ], p[SP_BEQ], p[SP_FS]
-    Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
-    lt = p[SP_LC] + p[SP_LP]
-    M, Iz, V, vs = p[SP_M], p[SP_IZ], p[SP_V], p[SP_VS]
-    delta, dd, beta, gamma = x[0], x[1], x[2], x[3]
-    th = np.tanh(dd / vs)
-    a22 = -(Cf + Cr) / (M * V)
-    a23 = -1.0 + (Cr * lr - Cf * lf) / (M * V * V)
-    a32 = (Cr * lr - Cf * lf) / Iz
-    a33 = -(Cr * lr * lr + Cf * lf * lf) / (Iz * V)
-    d[0] = dd
-    tau_e = Cf * lt * (delta - beta - lf * gamma / V)
-    d[1] = (u[0] - Beq * dd - Fs * th - tau_e) / Jeq
-    d[2] = a22 * beta + a23 * gamma + Cf / (M * V) * delta
-    d[3] = a32 * beta + a33 * gamma + Cf * lf / Iz * delta
-    if not want_A:
-        return
-    A[:, :] = 0.0
-    A[0, 1] = 1.0
-    A[1, 0] = -Cf * lt / Jeq
-    A[1, 1] = -(Beq + Fs * (1.0 - th * th) / vs) / Jeq
-    A[1, 2] = Cf * lt / Jeq
-    A[1, 3] = Cf * lt * lf / (Jeq * V)
-    A[2, 0] = Cf / (M * V)
-    A[2, 2] = a22
-    A[2, 3] = a23
-    A[3, 0] = Cf * lf / Iz
-    A[3, 2] = a32
-    A[3, 3] = a33
-
-
-@njit(cache=True)
-def sbw_H_row_into(p, gid, Hs, r):
-    """Groups: 0 steering_angle (delta_f), 1 yaw_rate (gamma),
-    2 lateral_accel a_y = V (beta_dot + gamma) (linear in the state): H into row r of Hs."""
-    for j in range(4):
-        Hs[r, j] = 0.0
-    if gid == 0:
-        Hs[r, 0] = 1.0
-    elif gid == 1:
-        Hs[r, 3] = 1.0
-    else:
-        Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
-        M, V = p[SP_M], p[SP_V]
-        Hs[r, 0] = Cf / M
-        Hs[r, 2] = -(Cf + Cr) / M
-        Hs[r, 3] = (Cr * lr - Cf * lf) / (M * V)
-
-
-@njit(cache=True)
-def sbw_H(p, gid, x, u):
-    H = np.zeros((1, 4))
-    sbw_H_row_into(p, gid, H, 0)
-    return H
-
-
-@njit(cache=True)
-def sbw_h(p, gid, x, u):
-    H = sbw_H(p, gid, x, u)
-    return H @ x
-
 
 # =============================================================================================
-# linear (also dc_motor): p = [n, nu, G, group_start[G], Ad (n*n), Bd (n*nu), groups...],
-# each group block = [m, C (m*n), D (m*nu)]
+# RK4 step with its exact Jacobian on the 3x3 blocks
 # =============================================================================================
-@njit(cache=True)
-def lin_dims(p):
-    return int(p[0]), int(p[1]), int(p[2])
-
-
-@njit(cache=True)
-def lin_AB(p):
-    n, nu, G = lin_dims(p)
-    a0 = 3 + G
-    Ad = p[a0:a0 + n * n].reshape((n, n))
-    Bd = p[a0 + n * n:a0 + n * n + n * nu].reshape((n, nu))
-    return Ad, Bd
-
-
-@njit(cache=True)
-def lin_CD(p, gid):
-    n, nu, G = lin_dims(p)
-    s = int(p[3 + gid])
-    m = int(p[s])
-    C = p[s + 1:s + 1 + m * n].reshape((m, n))
-    D = p[s + 1 + m * n:s + 1 + m * n + m * nu].reshape((m, nu))
-    return C, D
-
-
-@njit(cache=True)
-def lin_f(p, x, u):
-    Ad, Bd = lin_AB(p)
-    # x_k = Ad x_{k-1} + Bd u_k
-    return Ad @ x + Bd @ u
-
-
-@njit(cache=True)
-def lin_h(p, gid, x, u):
-    C, D = lin_CD(p, gid)
-    # z = C x + D u
-    return C @ x + D @ u
-
-
-@njit(cache=True)
-def lin_H(p, gid, x, u):
-    C, D = lin_CD(p, gid)
-    return C.copy()
-
-
-@njit(cache=True)
-def lin_meas_into(p, gid, x, u, r, hx, Hs):
-    """z = C x + D u of group gid into hx[r:r+m], C into Hs[r:r+m, :] (no allocation)."""
-    n, nu, G = lin_dims(p)
-    s = int(p[3 + gid])
-    m = int(p[s])
-    c0 = s + 1
-    d0 = c0 + m * n
-    for i in range(m):
-        t = 0.0
-        for j in range(n):
-            C_ij = p[c0 + i * n + j]
-            Hs[r + i, j] = C_ij
-            t += C_ij * x[j]
-        for j in range(nu):
-            t += p[d0 + i * nu + j] * u[j]
-        hx[r + i] = t
-
-
-@njit(cache=True)
-def lin_predict_into(p, x, u, x_next, F):
-    """x_next = Ad x + Bd u and F = Ad (no allocation)."""
-    n, nu, G = lin_dims(p)
-    a0 = 3 + G
-    b0 = a0 + n * n
-    for i in range(n):
-        t = 0.0
-        for j in range(n):
-            A_ij = p[a0 + i * n + j]
-            F[i, j] = A_ij
-            t += A_ij * x[j]
-        for j in range(nu):
-            t += p[b0 + i * nu + j] * u[j]
-        x_next[i] = t
-
-
-# =============================================================================================
-# RK4 with its exact Jacobian, and the dispatchers
-# =============================================================================================
-@njit(cache=True)
-def cont_fA(model_id, p, x, u, d, A, want_A):
-    if model_id == QUADCOPTER_ID:
-        quad_fA(p, x, u, d, A, want_A)
-    else:
-        sbw_fA(p, x, u, d, A, want_A)
-
-
-@njit(cache=True)
-def rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
-    """One RK4 step x_next and its exact Jacobian F = d x_next / d x, into x_next and F.
-
-    Stages x1 = x, x2 = x + dt/2 k1, x3 = x + dt/2 k2, x4 = x + dt k3 with k_i = f_c(x_i); with
-    dk_i/dx = J_i: J1 = A(x1), J2 = A(x2) (I + dt/2 J1), J3 = A(x3) (I + dt/2 J2),
-    J4 = A(x4) (I + dt J3); x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4),
-    F = I + dt/6 (J1 + 2 J2 + 2 J3 + J4).
-    kv, xs (n,) and A, J, Jn (n, n) are work arrays; the products skip the zeros of the sparse
-    continuous Jacobian A.
-    """
-    n = x.size
-    c = dt / 6.0
-    for i in range(n):
-        x_next[i] = x[i]
-        xs[i] = x[i]
-        for j in range(n):
-            F[i, j] = 0.0
-    for stage in range(4):
-        cont_fA(model_id, p, xs, u, kv, A, True)
-        cw = c * (1.0 if stage == 0 or stage == 3 else 2.0)
-        h = 0.5 * dt if stage < 3 else dt
-        step = 0.5 * dt if stage < 2 else dt
-        for i in range(n):
-            # Jn = A + h A J  (= A (I + h J))
-            for j in range(n):
-                Jn[i, j] = A[i, j]
-            if stage > 0:
-                for q in range(n):
-                    a = A[i, q]
-                    if a != 0.0:
-                        a *= h
-                        for j in range(n):
-                            Jn[i, j] += a * J[q, j]
-            for j in range(n):
-                F[i, j] += cw * Jn[i, j]
-            x_next[i] += cw * kv[i]
-            xs[i] = x[i] + step * kv[i]
-        J, Jn = Jn, J
-    for i in range(n):
-        F[i, i] += 1.0
-
-
 @njit(cache=True)
 def _quad_blk(Jn, F, A, J, r0, c0, qd, qa, qb, h, cw, acc, first):
     """One 3x3 block (rows r0.., cols c0..) of a stage Jacobian Jn = A + h A J (= A (I + h J))
@@ -558,95 +336,3 @@ def quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         J, Jn = Jn, J
     for i in range(12):
         F[i, i] += 1.0
-
-
-@njit(cache=True)
-def rk4_predict(model_id, p, x, u, dt):
-    """One RK4 step x_next and its exact Jacobian F (allocating wrapper of rk4_predict_into)."""
-    n = x.size
-    x_next = np.empty(n)
-    F = np.empty((n, n))
-    rk4_predict_into(model_id, p, x, u, dt, x_next, F, np.empty(n), np.empty(n),
-                     np.empty((n, n)), np.empty((n, n)), np.empty((n, n)))
-    return x_next, F
-
-
-@njit(cache=True)
-def rk4_f(model_id, p, x, u, dt):
-    """The RK4 step alone (no Jacobian): the simulator's truth propagation."""
-    n = x.size
-    k = np.empty(n)
-    xs = x.copy()
-    x_next = x.copy()
-    A = np.empty((0, 0))
-    c = dt / 6.0
-    for stage in range(4):
-        cont_fA(model_id, p, xs, u, k, A, False)
-        w = 1.0 if stage == 0 or stage == 3 else 2.0
-        step = 0.5 * dt if stage < 2 else dt
-        for i in range(n):
-            x_next[i] += c * w * k[i]
-            xs[i] = x[i] + step * k[i]
-    return x_next
-
-
-@njit(cache=True)
-def predict(model_id, p, x, u, dt):
-    """(f(x, u), F(x, u)) of the discrete model `model_id`."""
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
-        Ad, Bd = lin_AB(p)
-        return lin_f(p, x, u), Ad.copy()
-    return rk4_predict(model_id, p, x, u, dt)
-
-
-@njit(cache=True)
-def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
-    """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
-    A, J, Jn (n, n) are work arrays)."""
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
-        lin_predict_into(p, x, u, x_next, F)
-    elif model_id == QUADCOPTER_ID:
-        quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
-    else:
-        rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
-
-
-@njit(cache=True)
-def f_disc(model_id, p, x, u, dt):
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
-        return lin_f(p, x, u)
-    return rk4_f(model_id, p, x, u, dt)
-
-
-@njit(cache=True)
-def h_meas(model_id, gid, p, x, u):
-    if model_id == QUADCOPTER_ID:
-        return quad_h(p, gid, x, u)
-    if model_id == STEER_BY_WIRE_ID:
-        return sbw_h(p, gid, x, u)
-    return lin_h(p, gid, x, u)
-
-
-@njit(cache=True)
-def H_meas(model_id, gid, p, x, u):
-    if model_id == QUADCOPTER_ID:
-        return quad_H(p, gid, x, u)
-    if model_id == STEER_BY_WIRE_ID:
-        return sbw_H(p, gid, x, u)
-    return lin_H(p, gid, x, u)
-
-
-@njit(cache=True)
-def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
-    """h_meas and H_meas without allocation: h of group gid into hx[r:r+m], H into
-    Hs[r:r+m, :] (R3 (3, 3) and D3 (3, 3, 3) are the quadcopter's work arrays)."""
-    if model_id == QUADCOPTER_ID:
-        quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
-    elif model_id == STEER_BY_WIRE_ID:
-        sbw_H_row_into(p, gid, Hs, r)
-        t = 0.0
-        for j in range(4):
-            t += Hs[r, j] * x[j]
-        hx[r] = t
-    else:
-        lin_meas_into(p, gid, x, u, r, hx, Hs)

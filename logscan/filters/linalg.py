@@ -1,0 +1,205 @@
+"""Small dense linear algebra of the EKF kernel, on preallocated arrays (numba).
+
+Sizes n <= a few tens, m <= n; every function writes into arrays its caller allocated once, so
+the kernel's step loop never allocates. Matrices are C-ordered: row-wise loops read contiguous
+memory; the sparse products skip the zeros of a Jacobian's rows (`sparse_rows` lists them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# error_model="numpy": float division without the Python-style zero checks (no division here
+# can see a zero: Cholesky pivots are checked > 0 first); not fastmath, NaN checks still hold.
+
+
+@njit(cache=True, error_model="numpy")
+def cholesky(A, r, m, L):
+    """Lower Cholesky factor of the block A[r:r+m, r:r+m] into L[:m, :m]; False when that block
+    is not positive definite."""
+    for j in range(m):
+        s = A[r + j, r + j]
+        for c in range(j):
+            s -= L[j, c] * L[j, c]
+        if not (s > 0.0) or not np.isfinite(s):
+            return False
+        d = np.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, m):
+            t = A[r + i, r + j]
+            for c in range(j):
+                t -= L[i, c] * L[j, c]
+            L[i, j] = t / d
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def forward_sq(L, m, b, r, v):
+    """|L^-1 b[r:r+m]|^2: solve L v = b[r:r+m] (forward substitution) and return v^T v."""
+    acc = 0.0
+    for i in range(m):
+        t = b[r + i]
+        for c in range(i):
+            t -= L[i, c] * v[c]
+        t /= L[i, i]
+        v[i] = t
+        acc += t * t
+    return acc
+
+
+@njit(cache=True, error_model="numpy")
+def cho_solve_rows(L, m, B, n):
+    """Solve (L L^T) X = B[:m, :n] in place, all n columns at once (rows are contiguous)."""
+    for i in range(m):  # L V = B
+        Bi = B[i]
+        for c in range(i):
+            l = L[i, c]
+            Bc = B[c]
+            for j in range(n):
+                Bi[j] -= l * Bc[j]
+        d = 1.0 / L[i, i]
+        for j in range(n):
+            Bi[j] *= d
+    for i in range(m - 1, -1, -1):  # L^T X = V
+        Bi = B[i]
+        for c in range(i + 1, m):
+            l = L[c, i]
+            Bc = B[c]
+            for j in range(n):
+                Bi[j] -= l * Bc[j]
+        d = 1.0 / L[i, i]
+        for j in range(n):
+            Bi[j] *= d
+
+
+@njit(cache=True, error_model="numpy")
+def sparse_rows(M, m, n, cols, nnz):
+    """Column indices of the non-zeros of each row of M[:m, :n] into cols[a, :nnz[a]]."""
+    for a in range(m):
+        c = 0
+        for j in range(n):
+            if M[a, j] != 0.0:
+                cols[a, c] = j
+                c += 1
+        nnz[a] = c
+
+
+@njit(cache=True, error_model="numpy")
+def sparse_mm(M, cols, nnz, m, B, n, out):
+    """out[:m, :n] = M[:m] B[:, :n] for row-sparse M (row a's non-zeros at cols[a, :nnz[a]])."""
+    for a in range(m):
+        Oa = out[a]
+        for j in range(n):
+            Oa[j] = 0.0
+        for s in range(nnz[a]):
+            c = cols[a, s]
+            f = M[a, c]
+            Bc = B[c]
+            for j in range(n):
+                Oa[j] += f * Bc[j]
+
+
+@njit(cache=True, error_model="numpy")
+def sym_plus_product(base, C, idx, cnt, B, n, out):
+    """out = base + C B when the result is symmetric: the lower triangle
+    out[i, j<=i] = base[i, j] + sum_s C[i, c] B[c, j] (c = idx[i, s], s < cnt[i]: the non-zeros
+    of C's row i), mirrored to the upper triangle. (The lower triangle pairs the short rows with
+    the sparse bottom rows of a Jacobian: fewer products than the upper one.)"""
+    for i in range(n):
+        Oi = out[i]
+        for j in range(i + 1):
+            Oi[j] = base[i, j]
+        for s in range(cnt[i]):
+            c = idx[i, s]
+            f = C[i, c]
+            Bc = B[c]
+            for j in range(i + 1):
+                Oi[j] += f * Bc[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            out[i, j] = out[j, i]
+
+
+@njit(cache=True, error_model="numpy")
+def fpft_q(F, P, Q, n, fcols, fnnz, FP, W, out):
+    """out = F P F^T + Q for symmetric P, F row-sparse (fcols/fnnz); FP, W (n, n) are work.
+
+    FP = F P (row by row), W = (F P)^T = P F^T (P symmetric), out = Q + F W (lower triangle,
+    mirrored).
+    """
+    sparse_mm(F, fcols, fnnz, n, P, n, FP)
+    for i in range(n):
+        for j in range(n):
+            W[j, i] = FP[i, j]
+    sym_plus_product(Q, F, fcols, fnnz, W, n, out)
+
+
+@njit(cache=True, error_model="numpy")
+def joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, AT, DT, K, out):
+    """Joseph form out = (I - K H) P (I - K H)^T + K R K^T, K = KT^T, without forming I - K H:
+
+    A = (I - K H) P;  A (I - K H)^T + K R K^T = A + (K R - A H^T) K^T = A + D K^T, and as the
+    result is symmetric it is evaluated transposed, row by row (contiguous rows only):
+    A^T = P - (H P)^T K^T (P symmetric),  D^T = R^T K^T - H A^T,  out = A^T + K D^T.
+    out is the lower triangle, mirrored (the symmetric part, as the reference's 0.5 (P + P^T)).
+    rcols/rnnz: the non-zero rows of each column of R. AT (n, n), DT (m, n) and K (n, m) are
+    work; all_cols[i, :m] = 0..m-1, m_cnt[:] = m.
+    """
+    for c in range(n):  # A^T[c, :] = P[c, :] - sum_a (H P)[a, c] K^T[a, :]
+        ATc = AT[c]
+        for j in range(n):
+            ATc[j] = P[c, j]
+        for a in range(m):
+            h = HP[a, c]
+            KTa = KT[a]
+            for j in range(n):
+                ATc[j] -= h * KTa[j]
+    for a in range(m):  # D^T[a, :] = sum_b R[b, a] K^T[b, :] - sum_c H[a, c] A^T[c, :]
+        DTa = DT[a]
+        for j in range(n):
+            DTa[j] = 0.0
+        for s in range(rnnz[a]):  # the non-zeros of R's column a (R is block diagonal)
+            b = rcols[a, s]
+            r = Rs[b, a]
+            KTb = KT[b]
+            for j in range(n):
+                DTa[j] += r * KTb[j]
+        for s in range(hnnz[a]):  # the non-zeros of H's row a
+            c = hcols[a, s]
+            h = Hs[a, c]
+            ATc = AT[c]
+            for j in range(n):
+                DTa[j] -= h * ATc[j]
+        for i in range(n):
+            K[i, a] = KT[a, i]
+    sym_plus_product(AT, K, all_cols, m_cnt, DT, n, out)
+
+
+@njit(cache=True, error_model="numpy")
+def all_finite(a):
+    for v in a:
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def all_finite2(A):
+    for i in range(A.shape[0]):
+        if not all_finite(A[i]):
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def nan_fill(M):
+    for i in range(M.shape[0]):
+        for j in range(M.shape[1]):
+            M[i, j] = np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def wrap_angle(a):
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+

@@ -1,0 +1,136 @@
+"""Dispatch of the numba model functions on the model id: one branch per known id, raise on others.
+
+The EKF kernel calls only the two in-place dispatchers (`predict_into`, `meas_into`: no
+allocation), so one cached kernel serves every model; `predict`, `f_disc`, `h_meas`, `H_meas` are
+the allocating versions (simulator, numpy views of a model). Each model's kernel module declares
+its id; `MODEL_IDS` lists them. An unknown id raises ValueError inside numba; `check_model_id`
+catches it at the Python level first (Model creation, `run_ekf`), with a clear ModelError.
+
+Shapes: p the model's packed parameter vector, x (n,), u (nu,), F (n, n); a group's h goes to
+rows r:r+m of hx (m_total,), its H to rows r:r+m of Hs (m_total, n); kv, xs (n,) and A, J, Jn
+(n, n) are the RK4 work arrays, R3 (3, 3) and D3 (3, 3, 3) the quadcopter's.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from logscan.errors import ModelError
+from logscan.models.linear_kernels import (
+    DC_MOTOR_ID,
+    LINEAR_ID,
+    lin_AB,
+    lin_f,
+    lin_H,
+    lin_h,
+    lin_meas_into,
+    lin_predict_into,
+)
+from logscan.models.quadcopter_kernels import (
+    QUADCOPTER_ID,
+    quad_H,
+    quad_h,
+    quad_meas_into,
+    quad_rk4_predict_into,
+)
+from logscan.models.rk4 import rk4_f, rk4_predict, rk4_predict_into
+from logscan.models.steer_by_wire_kernels import STEER_BY_WIRE_ID, sbw_H, sbw_h, sbw_H_row_into
+from logscan.numba_cache import follow_dependencies
+
+MODEL_IDS = {
+    QUADCOPTER_ID: "quadcopter",
+    STEER_BY_WIRE_ID: "steer_by_wire",
+    DC_MOTOR_ID: "dc_motor",
+    LINEAR_ID: "linear",
+}
+
+
+def check_model_id(model_id: int, model_name: str) -> None:
+    """ModelError unless every dispatcher has a branch for ``model_id``."""
+    if model_id not in MODEL_IDS:
+        known = ", ".join(f"{i} ({name})" for i, name in MODEL_IDS.items())
+        raise ModelError(
+            f"model {model_name!r} has model_id {model_id}, which no numba kernel dispatches",
+            hint=f"known model ids: {known}; a new model adds a branch to every dispatcher in "
+            "logscan/models/dispatch.py",
+        )
+
+
+@njit(cache=True)
+def predict(model_id, p, x, u, dt):
+    """(f(x, u), F(x, u)) of the discrete model `model_id`."""
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        Ad, Bd = lin_AB(p)
+        return lin_f(p, x, u), Ad.copy()
+    if model_id == QUADCOPTER_ID or model_id == STEER_BY_WIRE_ID:
+        return rk4_predict(model_id, p, x, u, dt)
+    raise ValueError("predict: unknown model id")
+
+
+@njit(cache=True)
+def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
+    A, J, Jn (n, n) are work arrays)."""
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        lin_predict_into(p, x, u, x_next, F)
+    elif model_id == QUADCOPTER_ID:
+        quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+    elif model_id == STEER_BY_WIRE_ID:
+        rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+    else:
+        raise ValueError("predict_into: unknown model id")
+
+
+@njit(cache=True)
+def f_disc(model_id, p, x, u, dt):
+    """f(x, u) of the discrete model `model_id` (no Jacobian: the simulator's truth)."""
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        return lin_f(p, x, u)
+    if model_id == QUADCOPTER_ID or model_id == STEER_BY_WIRE_ID:
+        return rk4_f(model_id, p, x, u, dt)
+    raise ValueError("f_disc: unknown model id")
+
+
+@njit(cache=True)
+def h_meas(model_id, gid, p, x, u):
+    """h(x, u) of group `gid`."""
+    if model_id == QUADCOPTER_ID:
+        return quad_h(p, gid, x, u)
+    if model_id == STEER_BY_WIRE_ID:
+        return sbw_h(p, gid, x, u)
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        return lin_h(p, gid, x, u)
+    raise ValueError("h_meas: unknown model id")
+
+
+@njit(cache=True)
+def H_meas(model_id, gid, p, x, u):
+    """H = dh/dx of group `gid`."""
+    if model_id == QUADCOPTER_ID:
+        return quad_H(p, gid, x, u)
+    if model_id == STEER_BY_WIRE_ID:
+        return sbw_H(p, gid, x, u)
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        return lin_H(p, gid, x, u)
+    raise ValueError("H_meas: unknown model id")
+
+
+@njit(cache=True)
+def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
+    """h_meas and H_meas without allocation: h of group gid into hx[r:r+m], H into
+    Hs[r:r+m, :] (R3 (3, 3) and D3 (3, 3, 3) are the quadcopter's work arrays)."""
+    if model_id == QUADCOPTER_ID:
+        quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+    elif model_id == STEER_BY_WIRE_ID:
+        sbw_H_row_into(p, gid, Hs, r)
+        t = 0.0
+        for j in range(4):
+            t += Hs[r, j] * x[j]
+        hx[r] = t
+    elif model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+        lin_meas_into(p, gid, x, u, r, hx, Hs)
+    else:
+        raise ValueError("meas_into: unknown model id")
+
+
+follow_dependencies(__name__)

@@ -1,0 +1,85 @@
+"""Numba functions of the steer-by-wire model: front-wheel subsystem + single-track vehicle.
+
+Shapes: p (SBW_N_PARAMS,) packed by `SteerByWire.param_vector` (layout SP_* below), x (4,)
+[delta_f, delta_f_dot, beta, gamma], u (1,) [tau_eq], continuous d (4,) and A (4, 4); every
+measurement group has one output: H into row r of Hs (m, 4). Discretised by `logscan.models.rk4`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+STEER_BY_WIRE_ID = 1
+
+# ---- parameter layout -------------------------------------------------------------------------
+(SP_JEQ, SP_BEQ, SP_FS, SP_CF, SP_CR, SP_LF, SP_LR, SP_LC, SP_LP, SP_M, SP_IZ, SP_V,
+ SP_VS) = range(13)
+SBW_N_PARAMS = 13
+
+
+@njit(cache=True)
+def sbw_fA(p, x, u, d, A, want_A):
+    """Jeq d2_dd + Beq d_dot + Fs tanh(d_dot/vs) + tau_e = tau_eq, with the self-aligning torque
+    tau_e = Cf (lc + lp) (delta_f - beta - lf gamma / V); bicycle model for beta and gamma.
+    A: the paper's section V.B Jacobian, with d tanh(d_dot/vs)/d d_dot in place of the sign's."""
+    Jeq, Beq, Fs = p[SP_JEQ], p[SP_BEQ], p[SP_FS]
+    Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
+    lt = p[SP_LC] + p[SP_LP]
+    M, Iz, V, vs = p[SP_M], p[SP_IZ], p[SP_V], p[SP_VS]
+    delta, dd, beta, gamma = x[0], x[1], x[2], x[3]
+    th = np.tanh(dd / vs)
+    a22 = -(Cf + Cr) / (M * V)
+    a23 = -1.0 + (Cr * lr - Cf * lf) / (M * V * V)
+    a32 = (Cr * lr - Cf * lf) / Iz
+    a33 = -(Cr * lr * lr + Cf * lf * lf) / (Iz * V)
+    d[0] = dd
+    tau_e = Cf * lt * (delta - beta - lf * gamma / V)
+    d[1] = (u[0] - Beq * dd - Fs * th - tau_e) / Jeq
+    d[2] = a22 * beta + a23 * gamma + Cf / (M * V) * delta
+    d[3] = a32 * beta + a33 * gamma + Cf * lf / Iz * delta
+    if not want_A:
+        return
+    A[:, :] = 0.0
+    A[0, 1] = 1.0
+    A[1, 0] = -Cf * lt / Jeq
+    A[1, 1] = -(Beq + Fs * (1.0 - th * th) / vs) / Jeq
+    A[1, 2] = Cf * lt / Jeq
+    A[1, 3] = Cf * lt * lf / (Jeq * V)
+    A[2, 0] = Cf / (M * V)
+    A[2, 2] = a22
+    A[2, 3] = a23
+    A[3, 0] = Cf * lf / Iz
+    A[3, 2] = a32
+    A[3, 3] = a33
+
+
+@njit(cache=True)
+def sbw_H_row_into(p, gid, Hs, r):
+    """Groups: 0 steering_angle (delta_f), 1 yaw_rate (gamma),
+    2 lateral_accel a_y = V (beta_dot + gamma) (linear in the state): H into row r of Hs."""
+    for j in range(4):
+        Hs[r, j] = 0.0
+    if gid == 0:
+        Hs[r, 0] = 1.0
+    elif gid == 1:
+        Hs[r, 3] = 1.0
+    else:
+        Cf, Cr, lf, lr = p[SP_CF], p[SP_CR], p[SP_LF], p[SP_LR]
+        M, V = p[SP_M], p[SP_V]
+        Hs[r, 0] = Cf / M
+        Hs[r, 2] = -(Cf + Cr) / M
+        Hs[r, 3] = (Cr * lr - Cf * lf) / (M * V)
+
+
+@njit(cache=True)
+def sbw_H(p, gid, x, u):
+    H = np.zeros((1, 4))
+    sbw_H_row_into(p, gid, H, 0)
+    return H
+
+
+@njit(cache=True)
+def sbw_h(p, gid, x, u):
+    H = sbw_H(p, gid, x, u)
+    return H @ x

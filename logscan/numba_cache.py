@@ -1,0 +1,120 @@
+"""numba's on-disk cache, made stale when any module a cached kernel compiles in changes.
+
+numba keys a cached function on its own source file only (the index's source stamp is a stamp of
+that file; a stale index is ignored: `IndexDataCacheFile._load_index`), but a kernel that calls
+numba functions of other modules carries their compiled code, and reads their numeric constants as
+frozen values: editing a model's kernels would leave the EKF running the old equations from the
+cache. `follow_dependencies(__name__)`, called at the end of every module that holds cached kernels
+and imports numba functions or constants from other logscan modules, makes the stamp of each of its
+cached functions (own stamp, sha256 of each dependency's source), over the dependencies found
+transitively (`kernel_dependencies`). tests/test_numba_cache.py fails for a module that forgets the
+call.
+
+Uses numba internals (`_cache._cache_file._source_stamp`, numba/core/caching.py); a no-op if
+they change.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import hashlib
+import importlib.util
+import re
+import sys
+from types import FunctionType, ModuleType
+
+from numba.core.dispatcher import Dispatcher
+
+PACKAGE = __name__.split(".")[0]
+
+
+def follow_dependencies(module_name: str) -> None:
+    """Key the disk cache of every cached numba function of the module on its own file and on
+    the source of every module in `kernel_dependencies` (nothing to do when there is none)."""
+    module = sys.modules[module_name]
+    dependencies = kernel_dependencies(module)
+    if not dependencies:
+        return
+    for dispatcher in cached_dispatchers(module):
+        cache_file = getattr(dispatcher._cache, "_cache_file", None)
+        if cache_file is not None and hasattr(cache_file, "_source_stamp"):
+            cache_file._source_stamp = source_stamp(dispatcher, dependencies)
+
+
+def source_stamp(dispatcher: Dispatcher, dependencies: list[ModuleType]):
+    """The index stamp the dispatcher's cache should carry: numba's own stamp of its file, with
+    the sha256 of each dependency's source when there are dependencies."""
+    own = dispatcher._cache._impl.locator.get_source_stamp()
+    if not dependencies:
+        return own
+    return (own, *(file_digest(module.__file__) for module in dependencies))
+
+
+def file_digest(path: str) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
+def cached_dispatchers(module: ModuleType) -> list[Dispatcher]:
+    """The numba functions defined in ``module`` with ``cache=True``."""
+    return [
+        value for value in vars(module).values()
+        if isinstance(value, Dispatcher) and value.py_func.__module__ == module.__name__
+        and hasattr(getattr(value, "_cache", None), "_cache_file")
+    ]
+
+
+def kernel_dependencies(module: ModuleType) -> list[ModuleType]:
+    """Every package module whose source the kernels of ``module`` may compile in, transitively,
+    sorted by name: the modules it imports numba functions or constants from (``from m import
+    name``), and those it imports whole (``import m``, ``from package import m``)."""
+    found: dict[str, ModuleType] = {}
+    todo = [module]
+    while todo:
+        for dependency in _direct_dependencies(todo.pop()):
+            if dependency is not module and dependency.__name__ not in found:
+                found[dependency.__name__] = dependency
+                todo.append(dependency)
+    return [found[name] for name in sorted(found)]
+
+
+def _direct_dependencies(module: ModuleType) -> list[ModuleType]:
+    return [sys.modules[name] for name in _imported_module_names(module)]
+
+
+# a top-level import statement (kernels see module globals only; imports inside functions or
+# under `if` are not theirs), parenthesised names included
+_IMPORT = re.compile(r"^(?:from[ \t]+[\w.]+[ \t]+)?import[ \t]+(?:\([^)]*\)|[^\n]*)", re.MULTILINE)
+
+
+@functools.lru_cache(maxsize=None)
+def _imported_module_names(module: ModuleType) -> tuple[str, ...]:
+    """Names of the package modules ``module`` imports something a kernel can read from; classes
+    and plain Python functions are skipped (a kernel cannot compile them in). Only the import
+    statements are parsed (a whole module's syntax tree costs milliseconds at every start-up)."""
+    with open(module.__file__, encoding="utf-8") as fh:
+        source = fh.read()
+    names = set()
+    for statement in _IMPORT.finditer(source):
+        try:
+            node = ast.parse(statement.group(0)).body[0]
+        except SyntaxError:  # an "import ..." line of a docstring
+            continue
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            source_name = importlib.util.resolve_name("." * node.level + (node.module or ""),
+                                                      module.__package__ or "")
+            for alias in node.names:
+                value = vars(module).get(alias.asname or alias.name)
+                if isinstance(value, ModuleType):
+                    names.add(value.__name__)
+                elif isinstance(value, Dispatcher):
+                    names.add(value.py_func.__module__)
+                elif value is not None and not isinstance(value, (type, FunctionType)):
+                    names.add(source_name)
+    return tuple(sorted(
+        name for name in names
+        if (name == PACKAGE or name.startswith(PACKAGE + ".")) and name in sys.modules
+    ))

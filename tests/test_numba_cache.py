@@ -1,0 +1,108 @@
+"""The numba disk cache of a kernel goes stale when any module it compiles in changes."""
+
+from __future__ import annotations
+
+import importlib
+import re
+from pathlib import Path
+
+import pytest
+from numba.core.caching import IndexDataCacheFile
+
+from logscan import numba_cache
+from logscan.filters import ekf
+from logscan.simulate import runner
+
+PACKAGE_DIR = Path(numba_cache.__file__).parent
+CACHED_KERNEL = re.compile(r"^@(numba\.)?n?jit\(.*cache=True", re.MULTILINE)
+MODEL_KERNEL_MODULES = sorted(
+    f"logscan.models.{path.stem}" for path in (PACKAGE_DIR / "models").glob("*.py")
+    if path.stem.endswith("_kernels") or path.stem in ("rk4", "dispatch")
+)
+
+
+def modules_with_cached_kernels() -> list[str]:
+    """Every package module whose source declares a cached numba function."""
+    names = []
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        if CACHED_KERNEL.search(path.read_text(encoding="utf-8")):
+            parts = path.relative_to(PACKAGE_DIR.parent).with_suffix("").parts
+            names.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    return names
+
+
+def names(modules) -> set[str]:
+    return {module.__name__ for module in modules}
+
+
+def test_the_ekf_kernel_depends_on_dispatch_linear_algebra_and_every_model_kernel_module():
+    assert len(MODEL_KERNEL_MODULES) >= 5
+    expected = {*MODEL_KERNEL_MODULES, "logscan.filters.linalg"}
+    assert names(numba_cache.kernel_dependencies(ekf)) == expected
+
+
+def test_the_simulator_kernel_depends_on_the_models_controllers_and_fault_codes():
+    expected = {*MODEL_KERNEL_MODULES, "logscan.simulate.controllers", "logscan.simulate.faults"}
+    assert names(numba_cache.kernel_dependencies(runner)) == expected
+
+
+def test_classes_and_python_functions_are_not_kernel_dependencies():
+    # ekf.py imports AlignedRun, ModelError, Model, EkfTrace and divergence_episodes too
+    found = names(numba_cache.kernel_dependencies(ekf))
+    for module in ("logscan.align", "logscan.errors", "logscan.models.base",
+                   "logscan.filters.trace", "logscan.numba_cache"):
+        assert module not in found
+
+
+@pytest.mark.parametrize("module_name", modules_with_cached_kernels())
+def test_every_cached_kernel_carries_the_stamp_of_its_dependencies(module_name):
+    module = importlib.import_module(module_name)
+    dependencies = numba_cache.kernel_dependencies(module)
+    dispatchers = numba_cache.cached_dispatchers(module)
+    assert dispatchers
+    for dispatcher in dispatchers:
+        stamp = dispatcher._cache._cache_file._source_stamp
+        assert stamp == numba_cache.source_stamp(dispatcher, dependencies), (
+            f"{module_name} imports kernels or constants of {names(dependencies)}: "
+            "end it with `follow_dependencies(__name__)` (logscan.numba_cache)"
+        )
+
+
+def changed_copy(module, tmp_path: Path) -> str:
+    """A copy of the module's source with one more comment line: an edited dependency."""
+    copy = tmp_path / Path(module.__file__).name
+    copy.write_text(Path(module.__file__).read_text(encoding="utf-8") + "# edited\n",
+                    encoding="utf-8")
+    return str(copy)
+
+
+@pytest.mark.parametrize(
+    ("kernel_module", "kernel", "dependency"),
+    [("logscan.filters.ekf", "ekf_run", name)
+     for name in (*MODEL_KERNEL_MODULES, "logscan.filters.linalg")]
+    + [("logscan.simulate.runner", "closed_loop", name)
+       for name in (*MODEL_KERNEL_MODULES, "logscan.simulate.controllers",
+                    "logscan.simulate.faults")],
+)
+def test_an_edited_dependency_makes_the_cached_index_stale(kernel_module, kernel, dependency,
+                                                          tmp_path, monkeypatch):
+    """numba reads a cached index only when its stamp equals the one the dispatcher carries
+    (IndexDataCacheFile._load_index): an index saved before a dependency changed is not used."""
+    module = importlib.import_module(kernel_module)
+    dispatcher = getattr(module, kernel)
+    before = dispatcher._cache._cache_file._source_stamp
+    saved = IndexDataCacheFile(str(tmp_path), "kernel", before)
+    saved.save(("signature",), "compiled code")
+    assert IndexDataCacheFile(str(tmp_path), "kernel", before).load(("signature",)) is not None
+
+    edited = importlib.import_module(dependency)
+    monkeypatch.setattr(edited, "__file__", changed_copy(edited, tmp_path))
+    try:
+        numba_cache.follow_dependencies(kernel_module)
+        after = dispatcher._cache._cache_file._source_stamp
+        assert after != before
+        assert IndexDataCacheFile(str(tmp_path), "kernel", after).load(("signature",)) is None
+    finally:
+        monkeypatch.undo()
+        numba_cache.follow_dependencies(kernel_module)
+    assert dispatcher._cache._cache_file._source_stamp == before
