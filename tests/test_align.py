@@ -11,7 +11,7 @@ from logscan.align import align, hold
 from logscan.errors import InputError, ProfileError
 from logscan.log import Channel, Log, SourceInfo
 from logscan.models.base import GroupSpec
-from logscan.profile import parse_profile
+from logscan.profiles import parse_profile
 
 MS = 1_000_000  # ns per millisecond
 

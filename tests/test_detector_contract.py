@@ -231,7 +231,7 @@ def pipeline_case(kind: str):
         from logscan.align import align
         from logscan.filters.ekf import run_ekf
         from logscan.models import get_model
-        from logscan.profile import resolve_profile
+        from logscan.profiles import resolve_profile
         from logscan.readers import read_log
     except ImportError as exc:
         pytest.skip(f"pipeline stage missing: {exc}")

@@ -13,8 +13,9 @@ import pytest
 from logscan.errors import ProfileError
 from logscan.log import Channel, Log, SourceInfo
 from logscan.models.base import GroupSpec
-from logscan.profile import (
+from logscan.profiles import (
     GROUP_STALE_PERIODS,
+    channels_under,
     dumps_toml,
     load_profile,
     parse_profile,
@@ -341,6 +342,11 @@ def test_topics_lists_every_channel_and_prefix_the_readers_need():
     assert topics == set(QUAD_CHANNELS) | {
         "/ekf/state", "/flight_mode/mode", "/baro/alt", "/gps/alt", *("/v/%d" % i for i in range(12))
     }
+
+
+def test_channels_under_a_prefix_need_a_separator_after_it():
+    names = ["/ekf/state", "/ekf/state.x", "/ekf/states", "/ekf/state[0]", "/ekf/state_y", "/ekf/state/z"]
+    assert channels_under("/ekf/state", names) == ["/ekf/state.x", "/ekf/state[0]", "/ekf/state_y", "/ekf/state/z"]
 
 
 def test_enabled_detectors():

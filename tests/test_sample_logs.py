@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from logscan.profile import load_profile, parse_profile
+from logscan.profiles import resolve_profile
 from logscan.readers import read_log
 from logscan.simulate import parse_fault
 from logscan.simulate.faults import ALIASES
@@ -51,10 +51,7 @@ def test_sample_is_small_and_carries_its_truth_and_profile(name):
     sample = next(s for s in MAKE.SAMPLES if s.name == name)
     assert path.stat().st_size < MAX_BYTES
     log = read_log(path)
-    if sample.fmt == "csv":
-        profile = load_profile(path.with_suffix(".profile.toml"))
-    else:
-        profile = parse_profile(log.profile_text)
+    profile = resolve_profile(log)  # MCAP metadata record, or the CSV's .profile.toml sidecar
     profile.check_channels(log)
     assert profile.vehicle.model == sample.model
     assert log.duration_s == pytest.approx(sample.duration)

@@ -13,7 +13,7 @@ from logscan.align import align
 from logscan.cli.main import cli, main
 from logscan.filters.ekf import run_ekf
 from logscan.models import get_model
-from logscan.profile import load_profile, parse_profile
+from logscan.profiles import load_profile, resolve_profile
 from logscan.readers import read_log
 from logscan.simulate import simulate
 
@@ -44,7 +44,7 @@ def test_healthy_quadcopter_log_nis_averages_the_number_of_measurements():
     if not QUAD_HEALTHY.exists():
         pytest.skip("sample_logs/quad_healthy.mcap is absent (python sample_logs/make_samples.py)")
     log = read_log(QUAD_HEALTHY)
-    ratio, summary = _mean_nis_per_measurement(log, parse_profile(log.profile_text))
+    ratio, summary = _mean_nis_per_measurement(log, resolve_profile(log))
     assert abs(ratio - 1.0) < 0.10, ratio
     assert summary["divergence_episodes"] == 0
     assert all(n == 0 for n in summary["rejected"].values())
@@ -56,7 +56,7 @@ def test_every_model_is_consistent_with_its_analysis_filter(model_name, tmp_path
     result = _cli(["simulate", model_name, "--duration", "40", "--seed", "5", "-q", "-o", str(out)], tmp_path)
     assert result.exit_code == 0, result.output
     log = read_log(out)
-    profile = parse_profile(log.profile_text)
+    profile = resolve_profile(log)
     profile.check_channels(log)
     ratio, _ = _mean_nis_per_measurement(log, profile)
     assert abs(ratio - 1.0) < 0.10, ratio

@@ -164,7 +164,7 @@ class Simulation:
         return profile
 
     def profile_toml(self) -> str:
-        from logscan.profile import dumps_toml
+        from logscan.profiles import dumps_toml
 
         return dumps_toml(self.profile_dict())
 

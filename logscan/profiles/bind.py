@@ -1,0 +1,149 @@
+"""Profile binding: channels to the vehicle model's inputs, measurement groups and states, checked."""
+
+from __future__ import annotations
+
+from logscan.profiles.problems import is_number, plural, suggest
+from logscan.profiles.schema import ModelFacts, Profile
+
+
+def _registry():
+    """(get_model, MODEL_NAMES) of logscan.models, imported lazily (profiles load without numba)."""
+    from logscan.models import MODEL_NAMES, get_model
+
+    return get_model, tuple(MODEL_NAMES)
+
+
+def check_against_model(profile: Profile, model, problems: list[str]) -> None:
+    """Bind inputs and check group names and sizes against the model; append problems."""
+    if model is None:
+        get_model, names = _registry()
+        name = profile.vehicle.model
+        if name not in names:
+            problems.append(
+                f"[vehicle] model: unknown model {name!r}{suggest(name, names)} "
+                f"(known models: {', '.join(sorted(names))})"
+            )
+            return
+        try:
+            model = get_model(name, profile.vehicle.params)
+        except Exception as exc:  # noqa: BLE001 - any failure to build is a profile problem
+            msg = getattr(exc, "message", None) or str(exc)
+            problems.append(f"[vehicle] params: model {name!r} cannot be built: {msg}")
+            return
+    label = f"model {profile.vehicle.model!r}"
+    params = profile.vehicle.params
+    if params.get("continuous") is False and is_number(params.get("dt")) and params["dt"] > 0:
+        # discrete matrices step once per grid period: the grid must run at 1 / dt
+        if abs(params["dt"] * profile.vehicle.rate_hz - 1.0) > 1e-9:
+            problems.append(
+                f"[vehicle] params.dt: discrete matrices of period {params['dt']:g} s need "
+                f"rate_hz = {1.0 / params['dt']:g}, got {profile.vehicle.rate_hz:g}"
+            )
+    input_names = tuple(model.input_names)
+    _bind_inputs(profile, input_names, label, problems)
+
+    groups = dict(model.groups)
+    for g in profile.measurements.values():
+        where = f"[measurements.{g.name}]"
+        spec = groups.get(g.name)
+        if spec is None:
+            problems.append(
+                f"{where}: {label} has no measurement group {g.name!r}"
+                f"{suggest(g.name, groups)} (groups: {', '.join(groups)})"
+            )
+            continue
+        if len(g.channels) != spec.size:
+            problems.append(
+                f"{where} channels: {plural(len(g.channels), 'channel')} but {label} group {g.name!r} has "
+                f"{spec.size} outputs ({', '.join(spec.outputs)})"
+            )
+    if not problems:
+        profile.model_facts = ModelFacts(
+            input_names=input_names,
+            state_names=tuple(model.state_names),
+            group_sizes={name: spec.size for name, spec in groups.items()},
+        )
+        _check_onboard_sizes(profile, problems)
+
+
+def _check_onboard_sizes(profile: Profile, problems: list[str]) -> None:
+    if profile.onboard is None or profile.model_facts is None:
+        return
+    states = profile.model_facts.state_names
+    for key in ("state", "variance"):
+        value = getattr(profile.onboard, key)
+        if isinstance(value, list) and len(value) != len(states):
+            problems.append(
+                f"[onboard] {key}: {plural(len(value), 'channel')} but model {profile.vehicle.model!r} has "
+                f"{len(states)} states ({', '.join(states)})"
+            )
+        elif isinstance(value, dict):
+            for s in value:
+                if s not in states:
+                    problems.append(
+                        f"[onboard] {key}: model {profile.vehicle.model!r} has no state {s!r}"
+                        f"{suggest(s, states)} (states: {', '.join(states)})"
+                    )
+
+
+def _members(key: str, input_names: tuple[str, ...]) -> list[str]:
+    """Model inputs a list-valued key binds: ``key`` + ``_ . [`` or a digit + anything."""
+    return [
+        n for n in input_names
+        if n.startswith(key) and len(n) > len(key) and (n[len(key)] in "_.[" or n[len(key)].isdigit())
+    ]
+
+
+def _bind_inputs(profile: Profile, input_names: tuple[str, ...], label: str, problems: list[str]) -> None:
+    bound: dict[str, str] = {}
+    reported: set[str] = set()
+    for key, value in profile.inputs.mapping.items():
+        where = f"[inputs] {key}"
+        if isinstance(value, str) or (key in input_names and len(value) == 1):
+            if key not in input_names:
+                problems.append(
+                    f"{where}: {label} has no input {key!r}{suggest(key, input_names)} "
+                    f"(inputs: {', '.join(input_names)})"
+                )
+                continue
+            targets, chans = [key], [value if isinstance(value, str) else value[0]]
+        else:
+            targets, chans = _members(key, input_names), value
+            if not targets:
+                problems.append(
+                    f"{where}: {label} has no inputs named {key!r} or {key}_*{suggest(key, input_names)} "
+                    f"(inputs: {', '.join(input_names)})"
+                )
+                continue
+            if len(targets) != len(chans):
+                problems.append(
+                    f"{where}: {plural(len(chans), 'channel')} but {label} has {len(targets)} inputs "
+                    f"starting with {key!r} ({', '.join(targets)})"
+                )
+                reported.update(targets)  # not "missing" as well
+                continue
+        for name, ch in zip(targets, chans):
+            if name in bound:
+                problems.append(f"{where}: input {name!r} is bound twice")
+            bound[name] = ch
+    missing = [n for n in input_names if n not in bound and n not in reported]
+    if missing:
+        problems.append(
+            f"[inputs]: {label} input{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(repr(m) for m in missing)} {'have' if len(missing) > 1 else 'has'} no channel "
+            f"(inputs: {', '.join(input_names)})"
+        )
+    profile.inputs.names = [n for n in input_names if n in bound]
+    profile.inputs.channels = [bound[n] for n in profile.inputs.names]
+
+
+def bind_inputs_without_model(profile: Profile) -> None:
+    names, chans = [], []
+    for key, value in profile.inputs.mapping.items():
+        if isinstance(value, str):
+            names.append(key)
+            chans.append(value)
+        else:
+            names.extend(f"{key}[{i}]" for i in range(len(value)))
+            chans.extend(value)
+    profile.inputs.names, profile.inputs.channels = names, chans

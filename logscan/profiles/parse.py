@@ -1,0 +1,412 @@
+"""Profile parsing: TOML text -> a validated Profile, every problem collected and reported at once."""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from logscan.profiles.bind import bind_inputs_without_model, check_against_model
+from logscan.profiles.problems import is_number, profile_error, single_error, type_name
+from logscan.profiles.schema import (
+    GROUP_KEYS,
+    GROUP_STALE_PERIODS,
+    INPUT_STALE_STEPS,
+    MODE_KEYS,
+    MODE_STALE_S,
+    ONBOARD_KEYS,
+    ONBOARD_STALE_S,
+    REDUNDANT_KEYS,
+    SENSOR_KEYS,
+    TOP_KEYS,
+    VEHICLE_KEYS,
+    DetectorSpec,
+    InputSpec,
+    MeasurementSpec,
+    ModeSpec,
+    OnboardSpec,
+    Profile,
+    RedundantSpec,
+    SensorSpec,
+    VehicleSpec,
+)
+
+
+def load_profile(path: str | os.PathLike, *, model=None) -> Profile:
+    """Read and validate the profile file at ``path``."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise single_error("no such profile file", str(p)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise single_error(f"cannot read profile: {exc}", str(p)) from None
+    return parse_profile(text, source=str(p), model=model)
+
+
+def resolve_profile(log, profile_path: str | os.PathLike | None = None, *, model=None) -> Profile:
+    """The ``--profile`` file when given, else the profile embedded in the log, else an error."""
+    if profile_path is not None:
+        return load_profile(profile_path, model=model)
+    text = getattr(log, "profile_text", None) if log is not None else None
+    if text:
+        return parse_profile(text, source=f"{log.source.path} (embedded logscan.profile)", model=model)
+    where = log.source.path if log is not None else None
+    raise single_error(
+        "no profile: pass --profile or analyse a log that embeds one "
+        "(MCAP metadata record 'logscan.profile', as `logscan simulate` writes)",
+        where,
+    )
+
+
+def parse_profile(text: str, source: str = "<embedded>", *, model=None, check_model: bool = True) -> Profile:
+    """Parse and validate profile TOML ``text``; ``source`` names it in messages.
+
+    ``model``: a built Model to validate against (tests pass fakes); default: the registry's model
+    named in ``[vehicle] model``. ``check_model=False`` checks only the structure.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise single_error(f"invalid TOML: {exc}", source) from None
+    checker = _Checker()
+    profile = checker.profile(data, source)
+    if profile is not None and check_model and not checker.problems:
+        check_against_model(profile, model, checker.problems)
+    elif profile is not None and not checker.problems:
+        bind_inputs_without_model(profile)
+    if checker.problems:
+        raise profile_error(checker.problems, source)
+    return profile
+
+
+def validate(profile: Profile, model=None) -> Profile:
+    """Re-check ``profile`` against ``model`` (default: the registry's); raise ProfileError."""
+    problems: list[str] = []
+    check_against_model(profile, model, problems)
+    if problems:
+        raise profile_error(problems, profile.source)
+    return profile
+
+
+class _Checker:
+    """Walks the parsed TOML, building dataclasses and collecting problems."""
+
+    def __init__(self) -> None:
+        self.problems: list[str] = []
+
+    def add(self, where: str, what: str) -> None:
+        self.problems.append(f"{where}: {what}" if where else what)
+
+    # --- generic checks -----------------------------------------------------------------------
+    def table(self, data: Any, where: str) -> dict | None:
+        if not isinstance(data, dict):
+            self.add(where, f"expected a table, got {type_name(data)}")
+            return None
+        return data
+
+    def keys(self, data: dict, where: str, allowed, required=()) -> None:
+        for key in data:
+            if key not in allowed:
+                close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
+                tip = f"did you mean {close[0]!r}?" if close else f"valid keys: {', '.join(allowed)}"
+                self.add(where, f"unknown key {key!r} ({tip})")
+        for key in required:
+            if key not in data:
+                self.add(where, f"missing required key {key!r}")
+
+    def number(self, data: dict, key: str, where: str, *, minimum: float, strict: bool, allow_inf=False):
+        if key not in data:
+            return None
+        value = data[key]
+        if not is_number(value):
+            self.add(f"{where} {key}", f"expected a number, got {type_name(value)}")
+            return None
+        value = float(value)
+        if math.isnan(value) or (math.isinf(value) and not (allow_inf and value > 0)):
+            self.add(f"{where} {key}", f"must be a finite number, got {value!r}")
+            return None
+        if (strict and value <= minimum) or (not strict and value < minimum):
+            op = ">" if strict else ">="
+            self.add(f"{where} {key}", f"must be {op} {minimum:g}, got {value:g}")
+            return None
+        return value
+
+    def string(self, data: dict, key: str, where: str) -> str | None:
+        if key not in data:
+            return None
+        value = data[key]
+        if not isinstance(value, str) or not value:
+            self.add(f"{where} {key}", f"expected a non-empty string, got {type_name(value)}")
+            return None
+        return value
+
+    def string_list(self, value: Any, where: str) -> list[str] | None:
+        if not isinstance(value, list) or not value:
+            self.add(where, f"expected a non-empty array of channel names, got {type_name(value)}")
+            return None
+        bad = [v for v in value if not isinstance(v, str) or not v]
+        if bad:
+            self.add(where, f"expected channel names (strings), got {type_name(bad[0])}")
+            return None
+        dup = sorted({v for v in value if value.count(v) > 1})
+        if dup:
+            self.add(where, f"channel {dup[0]!r} listed twice")
+            return None
+        return list(value)
+
+    def float_list(self, data: dict, key: str, where: str, *, positive: bool) -> list[float] | None:
+        """A number or an array of numbers (kept as given: scalar -> [x])."""
+        if key not in data:
+            return None
+        value = data[key]
+        items = value if isinstance(value, list) else [value]
+        if not items or not all(is_number(v) for v in items):
+            self.add(f"{where} {key}", f"expected a number or an array of numbers, got {type_name(value)}")
+            return None
+        out = [float(v) for v in items]
+        if positive:
+            bad = [v for v in out if not (v > 0 and math.isfinite(v))]
+            if bad:
+                self.add(f"{where} {key}", f"must be > 0 and finite, got {bad[0]:g}")
+                return None
+        elif any(math.isnan(v) for v in out):
+            self.add(f"{where} {key}", "must not be nan")
+            return None
+        return out
+
+    # --- sections -----------------------------------------------------------------------------
+    def profile(self, data: dict, source: str) -> Profile | None:
+        self.keys(data, "", TOP_KEYS, required=("vehicle", "measurements"))
+        for key in ("name", "description"):
+            if key in data and not isinstance(data[key], str):
+                self.add(key, f"expected a string, got {type_name(data[key])}")
+        vehicle = self.vehicle(data["vehicle"]) if "vehicle" in data else None
+        inputs = self.inputs(data.get("inputs", {}), vehicle)
+        measurements = self.measurements(data["measurements"]) if "measurements" in data else {}
+        mode = self.mode(data["mode"]) if "mode" in data else None
+        redundant = self.redundant(data["redundant"]) if "redundant" in data else {}
+        onboard = self.onboard(data["onboard"]) if "onboard" in data else None
+        detectors = self.detectors(data["detectors"]) if "detectors" in data else {}
+        if vehicle is None or inputs is None or self.problems:
+            return None
+        return Profile(
+            vehicle=vehicle,
+            inputs=inputs,
+            measurements=measurements,
+            mode=mode,
+            redundant=redundant,
+            onboard=onboard,
+            detectors=detectors,
+            name=data.get("name", ""),
+            description=data.get("description", ""),
+            source=source,
+        )
+
+    def vehicle(self, raw: Any) -> VehicleSpec | None:
+        where = "[vehicle]"
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        self.keys(data, where, VEHICLE_KEYS, required=("model", "rate_hz"))
+        model = self.string(data, "model", where)
+        rate = self.number(data, "rate_hz", where, minimum=0, strict=True)
+        params = data.get("params", {})
+        if not isinstance(params, dict):
+            self.add(f"{where} params", f"expected a table, got {type_name(params)}")
+            params = None
+        if model is None or rate is None or params is None:
+            return None
+        return VehicleSpec(model=model, rate_hz=rate, params=dict(params))
+
+    def inputs(self, raw: Any, vehicle: VehicleSpec | None) -> InputSpec | None:
+        where = "[inputs]"
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        mapping: dict[str, str | list[str]] = {}
+        ok = True
+        for key, value in data.items():
+            if key == "stale_s":
+                continue
+            if isinstance(value, str) and value:
+                mapping[key] = value
+            elif isinstance(value, list):
+                chans = self.string_list(value, f"{where} {key}")
+                ok &= chans is not None
+                if chans is not None:
+                    mapping[key] = chans
+            else:
+                self.add(
+                    f"{where} {key}",
+                    f"expected a channel name or an array of them, got {type_name(value)}",
+                )
+                ok = False
+        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        if "stale_s" in data and stale is None:
+            ok = False
+        if stale is None:
+            stale = INPUT_STALE_STEPS / vehicle.rate_hz if vehicle else 0.0
+        return InputSpec(mapping=mapping, stale_s=stale) if ok else None
+
+    def measurements(self, raw: Any) -> dict[str, MeasurementSpec]:
+        data = self.table(raw, "[measurements]")
+        if data is None:
+            return {}
+        if not data:
+            self.add("[measurements]", "no measurement group: add at least one [measurements.<group>]")
+        out = {}
+        for name, table in data.items():
+            group = self.group(name, table)
+            if group is not None:
+                out[name] = group
+        return out
+
+    def group(self, name: str, raw: Any) -> MeasurementSpec | None:
+        where = f"[measurements.{name}]"
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        self.keys(data, where, GROUP_KEYS, required=("channels", "rate_hz"))
+        channels = self.string_list(data["channels"], f"{where} channels") if "channels" in data else None
+        rate = self.number(data, "rate_hz", where, minimum=0, strict=True)
+        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        noise = self.float_list(data, "noise_std", where, positive=True)
+        lo = self.float_list(data, "range_lo", where, positive=False)
+        hi = self.float_list(data, "range_hi", where, positive=False)
+        if channels is None or rate is None:
+            return None
+        n = len(channels)
+        noise = self._sized(noise, n, f"{where} noise_std")
+        lo = self._sized(lo, n, f"{where} range_lo")
+        hi = self._sized(hi, n, f"{where} range_hi")
+        if lo is not None and hi is not None:
+            bad = [i for i in range(n) if not lo[i] < hi[i]]
+            if bad:
+                i = bad[0]
+                self.add(
+                    where,
+                    f"range_lo must be < range_hi, got {lo[i]:g} >= {hi[i]:g} for {channels[i]!r}",
+                )
+        if stale is None and "stale_s" not in data:
+            stale = GROUP_STALE_PERIODS / rate
+        if stale is None:
+            return None
+        return MeasurementSpec(name, channels, rate, stale, noise, lo, hi)
+
+    def _sized(self, values: list[float] | None, n: int, where: str) -> list[float] | None:
+        if values is None:
+            return None
+        if len(values) == 1:
+            return values * n
+        if len(values) != n:
+            self.add(where, f"{len(values)} values for {n} channels (give one number or {n})")
+            return None
+        return values
+
+    def mode(self, raw: Any) -> ModeSpec | None:
+        where = "[mode]"
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        self.keys(data, where, MODE_KEYS, required=("channel",))
+        channel = self.string(data, "channel", where)
+        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        if channel is None or ("stale_s" in data and stale is None):
+            return None
+        return ModeSpec(channel, MODE_STALE_S if stale is None else stale)
+
+    def redundant(self, raw: Any) -> dict[str, RedundantSpec]:
+        data = self.table(raw, "[redundant]")
+        out = {}
+        for name, table in (data or {}).items():
+            where = f"[redundant.{name}]"
+            t = self.table(table, where)
+            if t is None:
+                continue
+            self.keys(t, where, REDUNDANT_KEYS, required=("sensors",))
+            rate = self.number(t, "rate_hz", where, minimum=0, strict=True)
+            stale = self.number(t, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+            sensors = self.sensors(t.get("sensors"), f"{where} sensors") if "sensors" in t else None
+            if sensors is None or ("rate_hz" in t and rate is None) or ("stale_s" in t and stale is None):
+                continue
+            out[name] = RedundantSpec(name, sensors, rate, stale)
+        return out
+
+    def sensors(self, raw: Any, where: str) -> dict[str, SensorSpec] | None:
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        if len(data) < 2:
+            self.add(where, f"a redundant group needs at least 2 sensors, got {len(data)}")
+            return None
+        out = {}
+        for name, value in data.items():
+            if isinstance(value, str) and value:
+                out[name] = SensorSpec(name, value)
+                continue
+            if not isinstance(value, dict):
+                self.add(
+                    f"{where}.{name}",
+                    f"expected a channel name or a table {{ channel, poly }}, got {type_name(value)}",
+                )
+                continue
+            self.keys(value, f"{where}.{name}", SENSOR_KEYS, required=("channel",))
+            channel = self.string(value, "channel", f"{where}.{name}")
+            poly = self.float_list(value, "poly", f"{where}.{name}", positive=False)
+            if poly is not None and not all(math.isfinite(c) for c in poly):
+                self.add(f"{where}.{name} poly", "coefficients must be finite")
+                poly = None
+            if channel is not None:
+                out[name] = SensorSpec(name, channel, poly)
+        return out if len(out) == len(data) else None
+
+    def onboard(self, raw: Any) -> OnboardSpec | None:
+        where = "[onboard]"
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        self.keys(data, where, ONBOARD_KEYS)
+        if "state" not in data and "variance" not in data:
+            self.add(where, "give 'state' and/or 'variance' (a channel prefix, an array or a table)")
+        values = {}
+        for key in ("state", "variance"):
+            if key not in data:
+                continue
+            value = data[key]
+            if isinstance(value, str) and value:
+                values[key] = value
+            elif isinstance(value, list):
+                values[key] = self.string_list(value, f"{where} {key}")
+            elif isinstance(value, dict) and value and all(isinstance(v, str) and v for v in value.values()):
+                values[key] = dict(value)
+            else:
+                self.add(
+                    f"{where} {key}",
+                    "expected a channel prefix, an array of channels or a table state -> channel, "
+                    f"got {type_name(value)}",
+                )
+        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        return OnboardSpec(
+            state=values.get("state"),
+            variance=values.get("variance"),
+            stale_s=ONBOARD_STALE_S if stale is None else stale,
+        )
+
+    def detectors(self, raw: Any) -> dict[str, DetectorSpec]:
+        data = self.table(raw, "[detectors]")
+        out = {}
+        for name, table in (data or {}).items():
+            where = f"[detectors.{name}]"
+            t = self.table(table, where)
+            if t is None:
+                continue
+            enabled = t.get("enabled", True)
+            if not isinstance(enabled, bool):
+                self.add(f"{where} enabled", f"expected true or false, got {type_name(enabled)}")
+                continue
+            out[name] = DetectorSpec(name, enabled, {k: v for k, v in t.items() if k != "enabled"})
+        return out

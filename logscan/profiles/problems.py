@@ -1,0 +1,52 @@
+"""How profile problems are reported: collected messages -> one ProfileError, suggestions, value names."""
+
+from __future__ import annotations
+
+import difflib
+from typing import Any
+
+from logscan.errors import ProfileError
+
+DOCS_HINT = "see docs/profiles.md"
+
+
+def profile_error(problems: list[str], source: str, hint: str = DOCS_HINT) -> ProfileError:
+    more = f" ({len(problems) - 1} more)" if len(problems) > 1 else ""
+    err = ProfileError(f"invalid profile: {problems[0]}{more}", path=source, hint=hint)
+    err.problems = list(problems)
+    return err
+
+
+def single_error(message: str, source: str | None) -> ProfileError:
+    err = ProfileError(message, path=source, hint=DOCS_HINT)
+    err.problems = [message]
+    return err
+
+
+def suggest(word: str, choices, label: str = "did you mean") -> str:
+    close = difflib.get_close_matches(word, list(choices), n=3, cutoff=0.6)
+    if close:
+        return f" ({label} {', '.join(repr(c) for c in close)}?)"
+    return ""
+
+
+def plural(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def type_name(value: Any) -> str:
+    if isinstance(value, bool):
+        return f"boolean {str(value).lower()}"
+    if isinstance(value, str):
+        return f"string {value!r}"
+    if isinstance(value, (int, float)):
+        return f"number {value!r}"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return type(value).__name__
+
+
+def is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)

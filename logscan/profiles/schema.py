@@ -1,0 +1,307 @@
+"""Profile schema: the dataclasses a validated profile is made of, its keys and staleness defaults.
+
+The schema is documented in docs/profiles.md; keep the two in step.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from logscan.profiles.problems import profile_error, suggest
+from logscan.profiles.toml_writer import dumps_toml
+
+TOP_KEYS = (
+    "name",
+    "description",
+    "vehicle",
+    "inputs",
+    "measurements",
+    "mode",
+    "redundant",
+    "onboard",
+    "detectors",
+)
+VEHICLE_KEYS = ("model", "rate_hz", "params")
+GROUP_KEYS = ("channels", "rate_hz", "stale_s", "noise_std", "range_lo", "range_hi")
+MODE_KEYS = ("channel", "stale_s")
+REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
+SENSOR_KEYS = ("channel", "poly")
+ONBOARD_KEYS = ("state", "variance", "stale_s")
+
+#: Staleness defaults (seconds unless said otherwise), documented in docs/profiles.md.
+GROUP_STALE_PERIODS = 2.5  # a measurement group holds for 2.5 of its own sample periods
+INPUT_STALE_STEPS = 2  # inputs hold for 2 grid periods
+MODE_STALE_S = 1.0
+ONBOARD_STALE_S = 0.5
+
+_INDEX_SUFFIX = re.compile(r"^\[(\d+)\]$")
+
+
+def channels_under(prefix: str, names) -> list[str]:
+    """Channels named ``prefix`` followed by ``/ . _ [`` and more (in ``names``' order)."""
+    return [n for n in names if n.startswith(prefix) and len(n) > len(prefix) and n[len(prefix)] in "/._["]
+
+
+@dataclass
+class VehicleSpec:
+    """`[vehicle]`: which model, with which parameters, on which analysis grid."""
+
+    model: str
+    rate_hz: float
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class InputSpec:
+    """`[inputs]`: model input name (or a prefix of several) -> channel(s), as written.
+
+    ``names`` / ``channels`` are the binding in the model's input order, filled in by validation
+    (without a model: the file's order, a list ``k = [a, b]`` binding ``k[0]``, ``k[1]``).
+    """
+
+    mapping: dict[str, str | list[str]] = field(default_factory=dict)
+    stale_s: float = 0.0
+    names: list[str] = field(default_factory=list, compare=False)
+    channels: list[str] = field(default_factory=list, compare=False)
+
+
+@dataclass
+class MeasurementSpec:
+    """`[measurements.<group>]`: channels of one model measurement group and how to hold them."""
+
+    name: str
+    channels: list[str]
+    rate_hz: float
+    stale_s: float
+    noise_std: list[float] | None = None  # None: the model's default
+    range_lo: list[float] | None = None  # None: the model's physical range
+    range_hi: list[float] | None = None
+
+
+@dataclass
+class ModeSpec:
+    """`[mode]`: the operating-mode / set-point channel (e.g. commanded speed)."""
+
+    channel: str
+    stale_s: float = MODE_STALE_S
+
+
+@dataclass
+class SensorSpec:
+    """One sensor of a redundant group, with an optional polynomial into the group's unit."""
+
+    name: str
+    channel: str
+    poly: list[float] | None = None  # coefficients c0, c1, ... (numpy.polynomial order)
+
+
+@dataclass
+class RedundantSpec:
+    """`[redundant.<name>]`: sensors measuring one quantity (A-TFM and similar detectors)."""
+
+    name: str
+    sensors: dict[str, SensorSpec]
+    rate_hz: float | None = None  # detection grid; None: the slowest sensor's rate
+    stale_s: float | None = None  # None: 2.5 periods of rate_hz, or 1 s without a rate
+
+    def stale_limit_s(self) -> float:
+        if self.stale_s is not None:
+            return self.stale_s
+        return GROUP_STALE_PERIODS / self.rate_hz if self.rate_hz else 1.0
+
+
+@dataclass
+class OnboardSpec:
+    """`[onboard]`: the vehicle's own estimator, when logged.
+
+    ``state`` / ``variance`` are each a channel prefix (str), a list of channels in the model's
+    state order, or a table state name -> channel (missing states are NaN columns).
+    """
+
+    state: str | list[str] | dict[str, str] | None = None
+    variance: str | list[str] | dict[str, str] | None = None
+    stale_s: float = ONBOARD_STALE_S
+
+
+@dataclass
+class DetectorSpec:
+    """`[detectors.<name>]`: free-form settings of one detector plus `enabled`."""
+
+    name: str
+    enabled: bool = True
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class ModelFacts:
+    """What validation learned from the model (used by alignment, not written back to TOML)."""
+
+    input_names: tuple[str, ...]
+    state_names: tuple[str, ...]
+    group_sizes: dict[str, int]
+
+
+@dataclass
+class Profile:
+    """A validated profile. Compare two with ``==``; ``source`` is not part of equality."""
+
+    vehicle: VehicleSpec
+    inputs: InputSpec
+    measurements: dict[str, MeasurementSpec]
+    mode: ModeSpec | None = None
+    redundant: dict[str, RedundantSpec] = field(default_factory=dict)
+    onboard: OnboardSpec | None = None
+    detectors: dict[str, DetectorSpec] = field(default_factory=dict)
+    name: str = ""
+    description: str = ""
+    source: str = field(default="<embedded>", compare=False)
+    model_facts: ModelFacts | None = field(default=None, compare=False, repr=False)
+
+    # --- what the readers and alignment need ------------------------------------------------
+    def channel_refs(self) -> list[tuple[str, str]]:
+        """Every exact channel the profile references, as (where, channel), in file order."""
+        refs: list[tuple[str, str]] = []
+        for key, value in self.inputs.mapping.items():
+            for ch in [value] if isinstance(value, str) else value:
+                refs.append((f"[inputs] {key}", ch))
+        for group in self.measurements.values():
+            refs.extend((f"[measurements.{group.name}] channels", ch) for ch in group.channels)
+        if self.mode is not None:
+            refs.append(("[mode] channel", self.mode.channel))
+        for red in self.redundant.values():
+            refs.extend(
+                (f"[redundant.{red.name}] sensors.{s.name}", s.channel) for s in red.sensors.values()
+            )
+        if self.onboard is not None:
+            for key in ("state", "variance"):
+                value = getattr(self.onboard, key)
+                if isinstance(value, list):
+                    refs.extend((f"[onboard] {key}", ch) for ch in value)
+                elif isinstance(value, dict):
+                    refs.extend((f"[onboard] {key}.{s}", ch) for s, ch in value.items())
+        return refs
+
+    def channel_prefixes(self) -> list[tuple[str, str]]:
+        """Channel prefixes (on-board estimator given as a prefix), as (where, prefix)."""
+        out = []
+        if self.onboard is not None:
+            for key in ("state", "variance"):
+                value = getattr(self.onboard, key)
+                if isinstance(value, str):
+                    out.append((f"[onboard] {key}", value))
+        return out
+
+    def topics(self) -> set[str]:
+        """Channel names and prefixes the readers must decode (pass to `read_log(topics=...)`)."""
+        return {ch for _, ch in self.channel_refs()} | {p for _, p in self.channel_prefixes()}
+
+    def enabled_detectors(self) -> list[str]:
+        return [d.name for d in self.detectors.values() if d.enabled]
+
+    def check_channels(self, log) -> None:
+        """Raise ProfileError unless every channel the profile names exists in ``log``.
+
+        Unknown channels come with the closest existing names; all problems are reported.
+        """
+        names = list(log.channels)
+        problems = []
+        for where, ch in self.channel_refs():
+            if ch not in log.channels:
+                problems.append(f"{where}: no channel {ch!r} in the log{suggest(ch, names)}")
+        for where, prefix in self.channel_prefixes():
+            if not channels_under(prefix, names):
+                problems.append(
+                    f"{where}: no channel starts with {prefix!r} in the log{suggest(prefix, names)}"
+                )
+        if problems:
+            raise profile_error(
+                problems,
+                self.source,
+                hint=f"the log is {log.source.path}; `logscan inspect` lists its channels",
+            )
+
+    def onboard_channels(self, which: str, log_channels) -> tuple[list[str | None], list[str]]:
+        """Resolve ``[onboard] state`` or ``variance`` to one channel (or None) per column.
+
+        Returns (channels, column names). With a prefix: ``<prefix><sep><state>`` for each model
+        state name (sep one of ``/ . _``), else ``<prefix>[i]`` indexed channels.
+        """
+        value = getattr(self.onboard, which) if self.onboard else None
+        states = list(self.model_facts.state_names) if self.model_facts else []
+        if value is None:
+            return [], []
+        if isinstance(value, list):
+            cols = states if len(states) == len(value) else [f"{which}[{i}]" for i in range(len(value))]
+            return list(value), cols
+        if isinstance(value, dict):
+            if states:
+                return [value.get(s) for s in states], states
+            return list(value.values()), list(value)
+        names = set(log_channels)
+        if states:
+            for sep in ("/", ".", "_"):
+                found = [f"{value}{sep}{s}" if f"{value}{sep}{s}" in names else None for s in states]
+                if any(found):
+                    return found, states
+        indexed = {}
+        for ch in channels_under(value, names):
+            m = _INDEX_SUFFIX.match(ch[len(value) :])
+            if m:
+                indexed[int(m.group(1))] = ch
+        n = len(states) if states else (max(indexed) + 1 if indexed else 0)
+        cols = states if states else [f"{which}[{i}]" for i in range(n)]
+        return [indexed.get(i) for i in range(n)], cols
+
+    # --- writing ------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The profile as plain TOML-ready data (defaults written out explicitly)."""
+        out: dict[str, Any] = {}
+        if self.name:
+            out["name"] = self.name
+        if self.description:
+            out["description"] = self.description
+        out["vehicle"] = {"model": self.vehicle.model, "rate_hz": self.vehicle.rate_hz}
+        if self.vehicle.params:
+            out["vehicle"]["params"] = self.vehicle.params
+        out["inputs"] = {**self.inputs.mapping, "stale_s": self.inputs.stale_s}
+        out["measurements"] = {}
+        for g in self.measurements.values():
+            table: dict[str, Any] = {"channels": g.channels, "rate_hz": g.rate_hz, "stale_s": g.stale_s}
+            for key in ("noise_std", "range_lo", "range_hi"):
+                if getattr(g, key) is not None:
+                    table[key] = getattr(g, key)
+            out["measurements"][g.name] = table
+        if self.mode is not None:
+            out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
+        if self.redundant:
+            out["redundant"] = {}
+            for r in self.redundant.values():
+                sensors = {
+                    s.name: ({"channel": s.channel, "poly": s.poly} if s.poly is not None else s.channel)
+                    for s in r.sensors.values()
+                }
+                table = {"sensors": sensors}
+                if r.rate_hz is not None:
+                    table["rate_hz"] = r.rate_hz
+                if r.stale_s is not None:
+                    table["stale_s"] = r.stale_s
+                out["redundant"][r.name] = table
+        if self.onboard is not None:
+            table = {
+                k: getattr(self.onboard, k)
+                for k in ("state", "variance")
+                if getattr(self.onboard, k) is not None
+            }
+            table["stale_s"] = self.onboard.stale_s
+            out["onboard"] = table
+        if self.detectors:
+            out["detectors"] = {
+                d.name: {"enabled": d.enabled, **d.settings} for d in self.detectors.values()
+            }
+        return out
+
+    def to_toml(self) -> str:
+        """TOML text that `parse_profile` reads back to an equal Profile."""
+        return dumps_toml(self.to_dict())
