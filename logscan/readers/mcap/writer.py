@@ -22,6 +22,7 @@ import re
 import struct
 import zlib
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -246,6 +247,32 @@ def mcap_bytes(
     except ImportError:
         compress, compression = None, ""
 
+    schema_records, channel_records, payloads, times = _topic_records(topics, encoding)
+    out = _Out()
+    out.add(MCAP_MAGIC)
+    out.record(0x01, _string("ros2" if encoding == "ros2" else "") + _string(LIBRARY))
+    metadata_indexes = []
+    for name, items in (metadata or {}).items():
+        body = _string(name) + _string_map({str(k): str(v) for k, v in items.items()})
+        offset = out.record(0x0C, body)
+        metadata_indexes.append(_record(0x0D, struct.pack("<QQ", offset, 9 + len(body)) + _string(name)))
+
+    messages = _in_time_order(times, payloads)
+    chunk_indexes: list[bytes] = []
+    for chunk_number, (lo, hi) in enumerate(_chunk_bounds(messages.datas, chunk_size)):
+        prefix = b"".join(schema_records + channel_records) if chunk_number == 0 else b""
+        chunk_indexes.append(_write_chunk(out, prefix, messages, lo, hi, compress, compression))
+    out.record(0x0F, struct.pack("<I", out.crc()))
+    _write_summary(out, schema_records, channel_records, messages, len(times), metadata_indexes, chunk_indexes)
+    out.add(MCAP_MAGIC)
+    return b"".join(out.parts)
+
+
+def _topic_records(
+    topics: dict[str, TopicData], encoding: str
+) -> tuple[list[bytes], list[bytes], list[list[bytes]], list[np.ndarray]]:
+    """Schema and Channel records (channel and schema ids 1, 2, ... in topic order), and each
+    topic's message payloads and int64 log times."""
     schema_records: list[bytes] = []
     channel_records: list[bytes] = []
     payloads: list[list[bytes]] = []
@@ -265,18 +292,20 @@ def mcap_bytes(
                                + _string(message_encoding) + _string_map({})))
         payloads.append(_payloads(data, topic, encoding, tree))
         times.append(np.asarray(data.t_ns, dtype=np.int64))
+    return schema_records, channel_records, payloads, times
 
-    out = _Out()
-    out.add(MCAP_MAGIC)
-    out.record(0x01, _string("ros2" if encoding == "ros2" else "") + _string(LIBRARY))
-    metadata_indexes = []
-    for name, items in (metadata or {}).items():
-        body = _string(name) + _string_map({str(k): str(v) for k, v in items.items()})
-        offset = out.record(0x0C, body)
-        metadata_indexes.append(_record(0x0D, struct.pack("<QQ", offset, 9 + len(body)) + _string(name)))
 
-    # every message in global log_time order (stable: ties keep topic order)
-    n_topics = len(times)
+class _Messages(NamedTuple):
+    """Every message in global log_time order: log time, channel id, sequence, payload."""
+
+    t: np.ndarray  # int64 ns
+    channel: np.ndarray  # int64, 1-based topic number
+    sequence: np.ndarray  # int64
+    datas: list[bytes]
+
+
+def _in_time_order(times: list[np.ndarray], payloads: list[list[bytes]]) -> _Messages:
+    """Every message in global log_time order (stable: ties keep topic order)."""
     all_t = np.concatenate(times) if times else np.empty(0, dtype=np.int64)
     which = np.concatenate([np.full(t.size, k + 1, dtype=np.int64) for k, t in enumerate(times)]) if times else all_t
     row = np.concatenate([np.arange(t.size, dtype=np.int64) for t in times]) if times else all_t
@@ -284,7 +313,11 @@ def mcap_bytes(
     all_t, which, row = all_t[order], which[order], row[order]
     datas = [payloads[k - 1][r] for k, r in zip(which.tolist(), row.tolist())]
     # sequence: the message's number within its channel (= its row, as rows are in time order)
-    sequences = row
+    return _Messages(all_t, which, row, datas)
+
+
+def _chunk_bounds(datas: list[bytes], chunk_size: int) -> list[tuple[int, int]]:
+    """(first, stop) message numbers of each chunk; one empty chunk when there are no messages."""
     sizes = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas)) + _MESSAGE_HEADER.itemsize
     # chunk boundaries: start a new chunk when the running size passes a multiple of chunk_size
     chunk_of = np.cumsum(sizes) // max(1, chunk_size) if len(datas) else np.empty(0, dtype=np.int64)
@@ -292,43 +325,47 @@ def mcap_bytes(
     bounds = list(zip(starts.tolist(), starts[1:].tolist() + [len(datas)]))
     if not bounds:
         bounds = [(0, 0)]
+    return bounds
 
-    chunk_indexes: list[bytes] = []
-    for chunk_number, (lo, hi) in enumerate(bounds):
-        prefix = b"".join(schema_records + channel_records) if chunk_number == 0 else b""
-        channel = which[lo:hi]
-        t = all_t[lo:hi]
-        body, offsets = _message_records(channel, sequences[lo:hi], t, datas[lo:hi])
-        records = prefix + body
-        offsets = offsets + len(prefix)
-        payload = compress(records) if compress is not None else records
-        t_start = int(t.min()) if t.size else 0
-        t_end = int(t.max()) if t.size else 0
-        chunk_body = (struct.pack("<QQQI", t_start, t_end, len(records), zlib.crc32(records))
-                      + _string(compression) + struct.pack("<Q", len(payload)) + payload)
-        chunk_offset = out.record(0x06, chunk_body)
-        chunk_length = 9 + len(chunk_body)
-        index_offsets: dict[int, int] = {}
-        index_start = out.size
-        for k in np.unique(channel).tolist():
-            select = channel == k
-            pairs = np.empty((int(np.count_nonzero(select)), 2), dtype="<u8")
-            pairs[:, 0] = t[select]
-            pairs[:, 1] = offsets[select]
-            index_offsets[k] = out.record(0x07, struct.pack("<HI", k, pairs.nbytes) + pairs.tobytes())
-        offsets_map = b"".join(struct.pack("<HQ", k, v) for k, v in index_offsets.items())
-        chunk_indexes.append(_record(0x08, struct.pack("<QQQQ", t_start, t_end, chunk_offset, chunk_length)
-                             + struct.pack("<I", len(offsets_map)) + offsets_map
-                             + struct.pack("<Q", out.size - index_start) + _string(compression)
-                             + struct.pack("<QQ", len(payload), len(records))))
 
-    out.record(0x0F, struct.pack("<I", out.crc()))
+def _write_chunk(out: _Out, prefix: bytes, messages: _Messages, lo: int, hi: int, compress, compression: str) -> bytes:
+    """Write messages ``lo:hi`` (after ``prefix`` records) as a Chunk and its MessageIndexes; its ChunkIndex."""
+    channel = messages.channel[lo:hi]
+    t = messages.t[lo:hi]
+    body, offsets = _message_records(channel, messages.sequence[lo:hi], t, messages.datas[lo:hi])
+    records = prefix + body
+    offsets = offsets + len(prefix)
+    payload = compress(records) if compress is not None else records
+    t_start = int(t.min()) if t.size else 0
+    t_end = int(t.max()) if t.size else 0
+    chunk_body = (struct.pack("<QQQI", t_start, t_end, len(records), zlib.crc32(records))
+                  + _string(compression) + struct.pack("<Q", len(payload)) + payload)
+    chunk_offset = out.record(0x06, chunk_body)
+    chunk_length = 9 + len(chunk_body)
+    index_offsets: dict[int, int] = {}
+    index_start = out.size
+    for k in np.unique(channel).tolist():
+        select = channel == k
+        pairs = np.empty((int(np.count_nonzero(select)), 2), dtype="<u8")
+        pairs[:, 0] = t[select]
+        pairs[:, 1] = offsets[select]
+        index_offsets[k] = out.record(0x07, struct.pack("<HI", k, pairs.nbytes) + pairs.tobytes())
+    offsets_map = b"".join(struct.pack("<HQ", k, v) for k, v in index_offsets.items())
+    return _record(0x08, struct.pack("<QQQQ", t_start, t_end, chunk_offset, chunk_length)
+                   + struct.pack("<I", len(offsets_map)) + offsets_map
+                   + struct.pack("<Q", out.size - index_start) + _string(compression)
+                   + struct.pack("<QQ", len(payload), len(records)))
 
+
+def _write_summary(out: _Out, schema_records: list[bytes], channel_records: list[bytes], messages: _Messages,
+                   n_topics: int, metadata_indexes: list[bytes], chunk_indexes: list[bytes]) -> None:
+    """Write the summary (schemas, channels, statistics, chunk and metadata indexes, their offsets) and the footer."""
     summary_start = out.size
-    counts = np.bincount(which, minlength=n_topics + 1)[1:] if n_topics else []
+    all_t = messages.t
+    counts = np.bincount(messages.channel, minlength=n_topics + 1)[1:] if n_topics else []
     counts_map = b"".join(struct.pack("<HQ", k + 1, int(c)) for k, c in enumerate(counts))
     statistics = _record(0x0B, struct.pack(
-        "<QHIIIIQQ", len(datas), n_topics, n_topics, 0, len(metadata_indexes), len(chunk_indexes),
+        "<QHIIIIQQ", len(messages.datas), n_topics, n_topics, 0, len(metadata_indexes), len(chunk_indexes),
         int(all_t.min()) if all_t.size else 0, int(all_t.max()) if all_t.size else 0,
     ) + struct.pack("<I", len(counts_map)) + counts_map)
     offsets_records = []
@@ -346,8 +383,6 @@ def mcap_bytes(
     footer_head = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
     out.add(footer_head)
     out.add(struct.pack("<I", out.crc(summary_start)))
-    out.add(MCAP_MAGIC)
-    return b"".join(out.parts)
 
 
 def _record(opcode: int, body: bytes) -> bytes:
