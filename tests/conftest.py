@@ -1,0 +1,61 @@
+"""Shared test fixtures: one in-process CLI runner, and the paths of the repository's sample logs.
+
+`cli("analyze", LOG, "--json", "-")` runs `logscan` through its real entry point (`logscan.cli.main.main`,
+so errors become exit codes and one-line messages exactly as in a shell) inside the test process:
+no interpreter start-up and numba kernels compiled once per session. A few end-to-end tests still
+run `python -m logscan` in a subprocess (tests/test_cli_errors.py, tests/test_readme.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLES = REPO / "sample_logs"
+
+
+@dataclass
+class CliResult:
+    """Exit code and captured streams of one in-process `logscan` run."""
+
+    exit_code: int
+    stdout: str
+    stderr: str
+
+    @property
+    def output(self) -> str:
+        return self.stdout
+
+
+@pytest.fixture
+def cli(capsys):
+    """Run `logscan ARGS...` in-process; returns a CliResult."""
+    from logscan.cli.main import main
+
+    def invoke(*args) -> CliResult:
+        capsys.readouterr()  # drop anything printed before the command
+        try:
+            main([str(a) for a in args])
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        captured = capsys.readouterr()
+        return CliResult(int(code), captured.out, captured.err)
+
+    return invoke
+
+
+@pytest.fixture
+def sample():
+    """Path of a shipped sample log by name; skips when it is missing."""
+
+    def path(name: str) -> Path:
+        found = SAMPLES / name
+        if not found.exists():
+            pytest.skip(f"{found} missing (run sample_logs/make_samples.py)")
+        return found
+
+    return path
