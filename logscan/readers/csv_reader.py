@@ -328,28 +328,7 @@ def _frame_channels(
 ) -> dict[str, Channel]:
     """Channels of one CSV table; fills the topic facts, skips and warnings into ``source``."""
     label = topic or path.name
-    if stated_us:
-        time_name = "timestamp"
-        unit = TimeUnit("us", "stated", "ulog2csv layout: timestamp in microseconds")
-    else:
-        time_name, stated = _pick_time_column(frame, path)
-        if stated:
-            unit = TimeUnit(stated, "stated", f"unit stated by the column name {time_name!r}")
-        else:
-            raw, _ = _numeric_column(frame[time_name])
-            if raw is None:
-                dates = _datetime_ns(frame[time_name])
-                if dates is None:
-                    raise InputError(f"time column {time_name!r} holds no numbers or dates",
-                                     path=str(path), hint="use seconds, or ISO 8601 date-times")
-                frame = frame.assign(**{time_name: dates})
-                unit = TimeUnit("ns", "epoch", "ISO 8601 date-times (UTC unless an offset is given)")
-            else:
-                unit = infer_time_unit(raw)
-            source.warnings.append(
-                f"{label}: time column {time_name!r} read as {unit.unit} inferred from {unit.reason}; "
-                f"name it e.g. '{time_name}_{unit.unit}' to state the unit"
-            )
+    frame, time_name, unit = _time_column(frame, path, source, label, stated_us)
     source.time_unit = unit.unit
     source.metadata.setdefault("csv.time_units", {})[label] = unit.unit
     source.metadata.setdefault("csv.time_columns", {})[label] = (
@@ -407,6 +386,33 @@ def _frame_channels(
         fields=fields,
     )
     return channels
+
+
+def _time_column(
+    frame: pd.DataFrame, path: Path, source: SourceInfo, label: str, stated_us: bool
+) -> tuple[pd.DataFrame, str, TimeUnit]:
+    """The table's time column and its unit (stated, or inferred with a warning into ``source``);
+    the frame comes back with ISO 8601 date-times replaced by epoch nanoseconds."""
+    if stated_us:
+        return frame, "timestamp", TimeUnit("us", "stated", "ulog2csv layout: timestamp in microseconds")
+    time_name, stated = _pick_time_column(frame, path)
+    if stated:
+        return frame, time_name, TimeUnit(stated, "stated", f"unit stated by the column name {time_name!r}")
+    raw, _ = _numeric_column(frame[time_name])
+    if raw is None:
+        dates = _datetime_ns(frame[time_name])
+        if dates is None:
+            raise InputError(f"time column {time_name!r} holds no numbers or dates",
+                             path=str(path), hint="use seconds, or ISO 8601 date-times")
+        frame = frame.assign(**{time_name: dates})
+        unit = TimeUnit("ns", "epoch", "ISO 8601 date-times (UTC unless an offset is given)")
+    else:
+        unit = infer_time_unit(raw)
+    source.warnings.append(
+        f"{label}: time column {time_name!r} read as {unit.unit} inferred from {unit.reason}; "
+        f"name it e.g. '{time_name}_{unit.unit}' to state the unit"
+    )
+    return frame, time_name, unit
 
 
 def _sidecar(path: Path, suffix: str) -> Path:

@@ -79,32 +79,8 @@ def message_filter(wanted: set[str] | None) -> list[str] | None:
 
 def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     """Read a ULog file into a Log, decoding only the messages ``wanted`` asks for."""
-    from pyulog import ULog
-    from pyulog.exceptions import ULogException
-
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
-    chatter = io.StringIO()
-    try:
-        watch = _TruncationWatch(str(path))
-    except FileNotFoundError:
-        raise InputError("no such file", path=str(path)) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
-    try:
-        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter), watch:
-            ulog = ULog(watch, message_filter(wanted), True)
-    except FileNotFoundError:
-        raise InputError("no such file", path=str(path)) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
-    except (ULogException, struct.error, ValueError, IndexError, KeyError, OverflowError,
-            UnicodeDecodeError, TypeError, MemoryError) as exc:
-        raise CorruptLogError(
-            f"ULog cannot be parsed ({type(exc).__name__}: {exc})".rstrip(": )") + ")",
-            path=str(path),
-            hint="the file header or definitions section is damaged",
-        ) from None
-
+    ulog, watch, chatter = _parse(path, wanted)
     channels: dict[str, Channel] = {}
     for data in ulog.data_list:
         topic = f"{data.name}_{data.multi_id}"
@@ -149,6 +125,36 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     if wanted is not None and not source.topics:
         source.warnings.append(f"none of the requested topics is in the log: {sorted(wanted)}")
     return Log(channels=channels, source=source)
+
+
+def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
+    """(pyulog ULog of the ``wanted`` messages, the truncation watch, pyulog's printed chatter);
+    InputError when the file cannot be read, CorruptLogError when its header or definitions break."""
+    from pyulog import ULog
+    from pyulog.exceptions import ULogException
+
+    chatter = io.StringIO()
+    try:
+        watch = _TruncationWatch(str(path))
+    except FileNotFoundError:
+        raise InputError("no such file", path=str(path)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    try:
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter), watch:
+            ulog = ULog(watch, message_filter(wanted), True)
+    except FileNotFoundError:
+        raise InputError("no such file", path=str(path)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
+    except (ULogException, struct.error, ValueError, IndexError, KeyError, OverflowError,
+            UnicodeDecodeError, TypeError, MemoryError) as exc:
+        raise CorruptLogError(
+            f"ULog cannot be parsed ({type(exc).__name__}: {exc})".rstrip(": )") + ")",
+            path=str(path),
+            hint="the file header or definitions section is damaged",
+        ) from None
+    return ulog, watch, chatter
 
 
 def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | None, *,
