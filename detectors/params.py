@@ -54,8 +54,8 @@ class Interval:
         noun = "an integer" if self.kind is int else "a number"
         if self.low is None and self.high is None:
             return noun
-        left = "[" if self.closed in ("both", "left") else "("
-        right = "]" if self.closed in ("both", "right") else ")"
+        left = "[" if self.closed in ("both", "left") and self.low is not None else "("
+        right = "]" if self.closed in ("both", "right") and self.high is not None else ")"
         low = "-inf" if self.low is None else f"{self.low:g}"
         high = "inf" if self.high is None else f"{self.high:g}"
         return f"{noun} in {left}{low}, {high}{right}"
