@@ -1,9 +1,9 @@
-"""Encoded EKF checks (state check e_x and variance check e_v) of the encoded-EKF paper, ALGORITHMS.md s.1.
+"""Encoded EKF checks (state check e_x and variance check e_v) of the encoded-EKF paper (docs/algorithms.md section 1).
 
 Coding vector (Lemma 1): alpha_i,k = c_k / sigma_i,k with sigma_i,k = sqrt(P_prior[i,i]) floored at
 sigma_min_i = sigma_floor * state_scale_i (NaN-safe), c_k = min(1, R_max / sum_i 1/sigma_i,k).
 State check, only on steps with a measurement update: e_x(k) = CV_k x_prior_k - CV_k x_post_k
-(= -CV_k K_k y_k; CV_k on both terms, see ALGORITHMS.md). A step where the filter diverged gets
+(= -CV_k K_k y_k; CV_k on both terms, see docs/algorithms.md section 1.8). A step where the filter diverged gets
 e_x = NaN, which counts as an exceedance. A measurement the filter rejected (non-finite or outside
 the sensor's physical range: a flipped exponent bit gives 1e20) never reaches e_x, so it gets its
 own statistic per group, `rejected.<group>`, alarmed at the first such sample (no persistence: an

@@ -1,4 +1,4 @@
-"""Innovation chi-square (NIS) test on the shared EKF, per measurement group and overall (ALGORITHMS.md 1b).
+"""Innovation chi-square (NIS) test on the shared EKF, per measurement group and overall (docs/algorithms.md section 1b).
 
 Per update nis_k = y~^T S^-1 y~ with m_k measurements; the statistic is the sum over the last W
 updates (of that group, or of any group for the overall test) against

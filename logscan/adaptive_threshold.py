@@ -1,6 +1,6 @@
 """Adaptive mu +- rho*s thresholds over a trailing window of samples that did not exceed their own band.
 
-ALGORITHMS.md section 1, eq. 4 of the encoded-EKF paper: the band at step k is the exact mean and
+docs/algorithms.md section 1c, eq. 4 of the encoded-EKF paper: the band at step k is the exact mean and
 standard deviation of the last W accepted samples before k. A sample that exceeds its band (or is
 non-finite) never enters the window, so a fault cannot widen its own threshold. The window's
 moments are computed exactly from the ring buffer at every step (two passes, O(W)): running sums

@@ -1,6 +1,6 @@
 """Evaluation of detectors against ground truth over many logs: per detector, per check, per fault kind.
 
-ALGORITHMS.md section 7 scores one detector on one log (`logscan.scoring`); this module runs the
+`logscan.scoring` scores one detector on one log (docs/algorithms.md section 7); this module runs the
 analysis on every log that has ground truth and pools the scores, at three levels:
 
  - per detector: every alarm the detector raised;

@@ -1,4 +1,4 @@
-"""Scoring alarm intervals against ground-truth fault events (ALGORITHMS.md section 7).
+"""Scoring alarm intervals against ground-truth fault events (docs/algorithms.md section 7.1).
 
 Rules (closed intervals throughout, times in seconds on the analysis grid):
 
@@ -16,7 +16,7 @@ Rules (closed intervals throughout, times in seconds on the analysis grid):
   0/0 is undefined and reported as None (JSON null), never as 1.0: precision with no alarms at
   all, recall on a log without events, F1 when either is None; F1 = 0.0 when P + R = 0.
 - False alarms per hour = FP / hours of log (None without a duration). The "healthy" variant
-  counts only logs without fault events, which is the figure ALGORITHMS.md asks for.
+  counts only logs without fault events, the false-alarm rate the evaluation reports.
 - Aggregation over logs sums the counts and durations and pools the latencies (mean and max over
   every detected event of every log), so metrics of an aggregate are micro-averages.
 """

@@ -20,19 +20,15 @@ SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 
 @lru_cache(maxsize=None)
 def pipeline(name: str, store_gain: bool = False):
-    from logscan.align import align
-    from logscan.analysis import load_log_and_profile
-    from logscan.filters.ekf import run_ekf
-    from logscan.models import get_model
+    """(aligned run, EKF trace, model, log) of a sample log through `logscan.pipeline.prepare`."""
+    from logscan.needs import Needs
+    from logscan.pipeline import load_profile_for, prepare
 
     path = SAMPLES / name
     if not path.exists():
         pytest.skip(f"{path} missing")
-    log, profile, _, _ = load_log_and_profile(str(path), None)
-    model = get_model(profile.vehicle.model, profile.vehicle.params)
-    run = align(log, profile)
-    trace = run_ekf(model, run, store_gain=store_gain, store_S=store_gain)
-    return run, trace, model, log
+    prepared = prepare(path, load_profile_for(path, None), Needs.of(ekf=("K", "S") if store_gain else ()))
+    return prepared.run, prepared.trace, prepared.model, prepared.log
 
 
 # --- coding vector -------------------------------------------------------------------------------
@@ -158,7 +154,7 @@ def test_onboard_state_corruption_is_caught_by_the_state_comparison(tmp_path):
     import subprocess
     import sys
 
-    from logscan.analysis import analyze_log
+    from logscan.pipeline import analyze_log
 
     path = tmp_path / "sc.mcap"
     subprocess.run([sys.executable, "-m", "logscan", "simulate", "quadcopter", "--fault", "state-corruption",

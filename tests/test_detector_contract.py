@@ -211,35 +211,25 @@ def test_untrained_detector_raises_not_trained(name):
 
 SAMPLE_LOGS = REPO / "sample_logs"
 # The healthy quadcopter log and its high-order bit-flip burst variant (a fault every detector
-# should see: ALGORITHMS.md section 1, prototype 19/20). Rename here if sample_logs/ differs.
+# should see: docs/algorithms.md section 1.5). Rename here if sample_logs/ differs.
 FIXTURES = {"healthy": "quad_healthy.mcap", "faulty": "quad_imu_bitflip.mcap"}
 _PIPELINE_CACHE: dict[str, tuple] = {}
 
 
 def pipeline_case(kind: str):
-    """(aligned run, EKF trace, model, profile) of a sample log through the real pipeline
-    (read -> embedded profile -> model -> align -> run_ekf), computed once per session.
-
-    Skips with the reason while the sample log or a pipeline stage does not exist yet.
-    """
+    """(aligned run, EKF trace, model, profile) of a sample log through `logscan.pipeline.prepare`
+    with what every detector under test needs, computed once per session."""
     if kind in _PIPELINE_CACHE:
         return _PIPELINE_CACHE[kind]
     path = SAMPLE_LOGS / FIXTURES[kind]
     if not path.exists():
-        pytest.skip(f"{path.relative_to(REPO)} does not exist yet (made by `logscan simulate`, issue 3)")
-    try:
-        from logscan.align import align
-        from logscan.filters.ekf import run_ekf
-        from logscan.models import get_model
-        from logscan.profiles import resolve_profile
-        from logscan.readers import read_log
-    except ImportError as exc:
-        pytest.skip(f"pipeline stage missing: {exc}")
-    log = read_log(str(path))
-    profile = resolve_profile(log)
-    model = get_model(profile.vehicle.model, profile.vehicle.params)
-    run = align(log, profile)
-    _PIPELINE_CACHE[kind] = (run, run_ekf(model, run), model, profile)
+        pytest.skip(f"{path.relative_to(REPO)} does not exist (made by sample_logs/make_samples.py)")
+    from logscan.pipeline import load_profile_for, needs_of, prepare
+
+    loaded = load_profile_for(path, None)
+    detectors = [REGISTRY.get(name)() for name in PIPELINE_NAMES]
+    prepared = prepare(path, loaded, needs_of(detectors))
+    _PIPELINE_CACHE[kind] = (prepared.run, prepared.trace, prepared.model, prepared.profile)
     return _PIPELINE_CACHE[kind]
 
 

@@ -95,7 +95,7 @@ def test_nis_detects_the_accelerometer_bias_and_names_the_sensor(evaluation):
 def test_encoded_check_catches_the_bit_flips_and_not_the_bias(evaluation):
     e_x = evaluation.by_kind("encoded_ekf:e_x")
     assert e_x["quadcopter/bitflip"].tp == 1 and e_x["quadcopter/bitflip"].max_latency_s < 1.0
-    assert e_x["quadcopter/bias"].tp == 0  # coverage limit of ALGORITHMS.md section 1
+    assert e_x["quadcopter/bias"].tp == 0  # coverage limit of docs/algorithms.md section 1.9
 
 
 def test_healthy_log_raises_no_false_alarm(evaluation):

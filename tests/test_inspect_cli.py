@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from logscan.cli.inspect_cmd import compact_fields, render_inspect
+from logscan.cli.render import compact_fields, render_inspect
 from logscan.cli.main import main
 
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"

@@ -1,4 +1,4 @@
-"""Scoring of alarm intervals against ground-truth events (ALGORITHMS.md section 7)."""
+"""Scoring of alarm intervals against ground-truth events (docs/algorithms.md section 7.1)."""
 
 from __future__ import annotations
 

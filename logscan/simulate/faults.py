@@ -1,7 +1,7 @@
 """Fault injection for `logscan simulate`: fault kinds, their defaults, parsing, and the kernel table.
 
 A fault is (kind, target, start, end, magnitude), times in seconds since the log start. Kinds
-(ALGORITHMS.md section 6) and what their magnitude means:
+(docs/algorithms.md section 6.5) and what their magnitude means:
 
     bias             sensor channel    z += m                       (step; default 1.0 on accel x)
     drift            sensor channel    z += m * (t - start)         (slope per second; 0.05)

@@ -210,7 +210,7 @@ def simulate(
 ) -> Simulation:
     """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``.
 
-    ``glitches_per_min`` adds healthy transients (ALGORITHMS.md section 6): one- or two-sample
+    ``glitches_per_min`` adds healthy transients (docs/algorithms.md section 6.5): one- or two-sample
     spikes of 3-8 noise standard deviations on a random sensor channel (the redundant group's
     when the model has one), Poisson in time. They are listed in the truth as ``transients``, not
     as fault ``events``: a detector should tolerate them.
