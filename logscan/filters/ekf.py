@@ -1,7 +1,7 @@
 """The shared EKF core: one numba kernel that filters a whole aligned run, and its trace.
 
 Every model-based detector reads the `EkfTrace` (logscan.filters.trace) this module returns
-(ALGORITHMS.md section 0); none carries its own filter. The kernel `ekf_run` is model-agnostic: it
+(docs/algorithms.md section 8); none carries its own filter. The kernel `ekf_run` is model-agnostic: it
 dispatches f/F/h/H on (model_id, group_id) through `logscan.models.dispatch`, so one cached
 compilation serves every model; its linear algebra is `logscan.filters.linalg`.
 

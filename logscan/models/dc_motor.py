@@ -8,7 +8,7 @@ Continuous model (thesis eq. 9-10):
 discretised exactly (matrix exponential), because the electrical time constant La/Ra = 0.44 ms is
 far below any logging period. Table VI: Va 24, Ra 0.5, La 2.2e-4, K_EMF 4.49e-2, Km 4.45e-2,
 Jm 5.5e-4, Bv = Bf 0.05, N 25. The thesis gives no vehicle inertia Jv; with Jv = Jm the speed time
-constant is ~0.8 ms. Here (ALGORITHMS.md section 4) Jv is the inertia reflected to the wheel shaft:
+constant is ~0.8 ms. Here (docs/algorithms.md section 6.3) Jv is the inertia reflected to the wheel shaft:
 Jv = M r^2 + N^2 Jm with M = 17 kg and r = 0.1 m (0.17 + 0.344 = 0.514 kg m^2), which gives a
 speed time constant of ~0.2 s and a top speed of ~2.06 m/s at 24 V.
 
