@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from numba import njit
 
+# the two models' branches in every dispatcher of logscan.models.dispatch
 DC_MOTOR_ID = 2
 LINEAR_ID = 3
 

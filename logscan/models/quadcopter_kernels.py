@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-QUADCOPTER_ID = 0
+QUADCOPTER_ID = 0  # this model's branch in every dispatcher of logscan.models.dispatch
 
 # ---- parameter layout -------------------------------------------------------------------------
 QP_MASS, QP_G, QP_KD, QP_IX, QP_IY, QP_IZ, QP_ARM, QP_KT, QP_BTAU, QP_INPUT_MODE = range(10)
