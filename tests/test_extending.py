@@ -1,0 +1,137 @@
+"""docs/extending.md followed step by step: its example detector (one file plus one registry line) and
+its example linear model (one class module plus one registry line) work end to end."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from logscan.detectors.registry import BUILTIN_DETECTORS, Registry
+
+REPO = Path(__file__).resolve().parents[1]
+DOC = REPO / "docs" / "extending.md"
+SAMPLES = REPO / "sample_logs"
+
+
+def code_after(heading: str, language: str = "python", index: int = 0) -> str:
+    """The ``index``-th fenced code block of ``language`` after ``heading`` in docs/extending.md."""
+    text = DOC.read_text()
+    rest = text[text.index(heading):]
+    blocks = re.findall(rf"```{language}\n(.*?)```", rest, flags=re.S)
+    return blocks[index]
+
+
+def registry_line(block: str) -> str:
+    """The line the doc adds to a registry table (marked as the new one or the only entry)."""
+    lines = [ln for ln in block.splitlines() if "# the new line" in ln] or [
+        ln for ln in block.splitlines() if ln.strip().startswith('"')]
+    return lines[-1]
+
+
+@pytest.fixture
+def new_detector(tmp_path, monkeypatch):
+    """The doc's detector file written as a module, and the registry with the doc's new line."""
+    source = code_after("### 1. The file: `detectors/innovation_mean.py`")
+    (tmp_path / "innovation_mean.py").write_text(source)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    line = registry_line(code_after("### 2. The registry line"))
+    spec = re.search(r'"logscan\.detectors\.(\w+):(\w+)"', line)
+    assert spec, line
+    registry = Registry(builtins=BUILTIN_DETECTORS + [f"{spec.group(1)}:{spec.group(2)}"], plugins=[])
+    monkeypatch.setattr("logscan.detectors.registry._DEFAULT", registry)
+    return registry
+
+
+def test_the_new_detector_loads_with_its_declared_parameters(new_detector, cli):
+    assert new_detector.warnings() == []
+    assert "innovation_mean" in new_detector.names()
+    result = cli("detectors", "--json", "-")
+    entry = next(d for d in json.loads(result.output)["detectors"] if d["name"] == "innovation_mean")
+    assert [p["name"] for p in entry["parameters"]] == ["window", "alpha", "n_persist"]
+    with pytest.raises(Exception, match="window must be an integer"):
+        new_detector.create("innovation_mean", {"window": 1})
+
+
+def test_the_new_detector_runs_through_the_pipeline_and_is_scored(new_detector):
+    from logscan.evaluate import evaluate_analysis
+    from logscan.pipeline import analyze_log
+
+    analysis = analyze_log(SAMPLES / "quad_imu_bias.mcap", detector_names=["innovation_mean"])
+    (result,) = analysis.results
+    assert set(result.series) == {f"innovation_mean.{g}" for g in analysis.trace.group_names}
+    accel = [a for a in result.alarms if a.signal == "innovation_mean.accel"]
+    assert accel and 30.0 <= accel[0].start < 31.0  # the +1 m/s^2 bias on accel.x starts at 30 s
+    scores = evaluate_analysis(analysis).scores
+    assert scores["innovation_mean:accel"].tp == 1
+
+
+def test_the_new_detector_raises_nothing_on_the_healthy_sample(new_detector):
+    from logscan.pipeline import analyze_log
+
+    analysis = analyze_log(SAMPLES / "quad_healthy.mcap", detector_names=["innovation_mean"])
+    assert analysis.alarms == []
+
+
+@pytest.fixture
+def new_model(tmp_path, monkeypatch):
+    """The doc's linear model written as a module, and the model registry with the doc's line."""
+    from logscan import models
+
+    (tmp_path / "spring_cart.py").write_text(code_after("### A linear (or linearised) model"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    line = registry_line(code_after("### A linear (or linearised) model", index=1))
+    name, spec = re.match(r'\s*"(\w+)": "logscan\.models\.(\w+:\w+)"', line).groups()
+    monkeypatch.setitem(models._REGISTRY, name, spec)
+    return models.get_model(name)
+
+
+def _contract_module():
+    spec = importlib.util.spec_from_file_location("model_contract", REPO / "tests" / "test_model_contract.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("check", [
+    "test_states_inputs_groups_and_defaults_have_consistent_shapes",
+    "test_measurement_jacobian_H_matches_central_differences_of_h_per_group",
+    "test_in_place_kernels_equal_the_allocating_ones",
+    "test_direct_groups_really_observe_their_states",
+    "test_parameters_round_trip_through_describe_and_json",
+    "test_unknown_model_id_is_a_clear_model_error_before_any_kernel_runs",
+])
+def test_the_new_model_passes_the_model_contract(new_model, check):
+    getattr(_contract_module(), check)(new_model.name, None)
+
+
+def test_the_new_model_discrete_jacobian_matches_differences(new_model):
+    _contract_module().test_discrete_jacobian_F_matches_central_differences_of_f(new_model.name, None, 0.01)
+
+
+def test_the_new_model_is_filtered_by_the_shared_ekf(new_model):
+    from logscan.align import AlignedGroup, AlignedRun
+    from logscan.filters import run_ekf
+    from logscan.models import dispatch
+
+    n, dt = 500, 0.01
+    rng = np.random.default_rng(3)
+    t = np.arange(n) * dt
+    force = np.sin(t)[:, None]
+    x = np.zeros(2)
+    truth = np.empty((n, 2))
+    for k in range(n):
+        truth[k] = x
+        x = new_model.f(x, force[k], dt)
+    z = truth[:, :1] + rng.normal(0.0, 0.01, (n, 1))
+    group = AlignedGroup("position", ["/cart/x"], z, np.ones(n, bool))
+    run = AlignedRun(t=t, dt=dt, start_ns=0, u=force, u_fresh=np.ones(n, bool),
+                     input_channels=["/cart/force"], groups={"position": group})
+    trace = run_ekf(new_model, run)
+    assert dispatch.MODEL_IDS[new_model.model_id] == "linear"  # the shared linear kernels
+    assert np.abs(trace.x_post[-100:, 0] - truth[-100:, 0]).max() < 0.05
+    assert 0.5 < np.nanmean(trace.nis) < 2.0  # consistent: mean NIS per measurement about 1
