@@ -99,17 +99,6 @@ class RealList:
         return "a list of numbers"
 
 
-@dataclass(frozen=True)
-class Text:
-    """Any string."""
-
-    def accepts(self, value: Any) -> bool:
-        return isinstance(value, str)
-
-    def __str__(self) -> str:
-        return "a string"
-
-
 def satisfies(value: Any, constraints: list) -> bool:
     """Whether ``value`` meets at least one constraint (None in the list admits None)."""
     return any(value is None if c is None else c.accepts(value) for c in constraints)

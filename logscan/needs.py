@@ -10,13 +10,10 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-# Parts of the EKF trace that are kept only on request (everything else is always there).
-EKF_PARTS = frozenset({"K", "S", "P"})  # gain, innovation covariance, full posterior covariance
-
-
 @dataclass(frozen=True)
 class Needs:
-    """filters: filter name -> the optional trace parts to keep (empty: the filter's default trace)."""
+    """filters: filter name -> the optional trace parts to keep (empty: the filter's default trace).
+    The EKF's optional parts: "K" (gain), "S" (full innovation covariance), "P" (full covariance)."""
 
     filters: Mapping[str, frozenset[str]] = field(default_factory=dict)
 

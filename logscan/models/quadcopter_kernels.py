@@ -57,14 +57,6 @@ def quad_rotation_into(phi, theta, psi, R):
 
 
 @njit(cache=True)
-def quad_rotation(phi, theta, psi):
-    """Body-to-world rotation R = Rz(psi) Ry(theta) Rx(phi) (ZYX Euler angles)."""
-    R = np.empty((3, 3))
-    quad_rotation_into(phi, theta, psi, R)
-    return R
-
-
-@njit(cache=True)
 def quad_rotation_derivatives_into(phi, theta, psi, D):
     """dR/dphi, dR/dtheta, dR/dpsi of R = Rz Ry Rx, stacked into D (3, 3, 3)."""
     cf, sf = np.cos(phi), np.sin(phi)
@@ -100,14 +92,6 @@ def quad_rotation_derivatives_into(phi, theta, psi, D):
     D[2, 2, 0] = 0.0
     D[2, 2, 1] = 0.0
     D[2, 2, 2] = 0.0
-
-
-@njit(cache=True)
-def quad_rotation_derivatives(phi, theta, psi):
-    """dR/dphi, dR/dtheta, dR/dpsi of R = Rz Ry Rx, stacked as (3, 3, 3)."""
-    D = np.empty((3, 3, 3))
-    quad_rotation_derivatives_into(phi, theta, psi, D)
-    return D
 
 
 @njit(cache=True)

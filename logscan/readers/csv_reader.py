@@ -40,8 +40,6 @@ from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
 
-TIME_NAMES = ("time", "timestamp", "t", "stamp")
-
 _UNIT_WORDS = {
     "s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
     "ms": "ms", "msec": "ms", "msecs": "ms", "millis": "ms", "milliseconds": "ms",

@@ -120,15 +120,6 @@ def _walk_protobuf(message: Any, path: str, keys: list, values: list, skipped: l
         _walk(getattr(message, field.name), name, keys, values, skipped)
 
 
-def flatten_one(message: Any) -> tuple[dict[str, float], list[tuple[str, str]]]:
-    """The numeric leaves of one decoded message by dotted path, and the skipped (path, why)."""
-    keys: list[str] = []
-    values: list[Any] = []
-    skipped: list[tuple[str, str]] = []
-    _walk(message, "", keys, values, skipped)
-    return dict(zip(keys, (float(v) for v in values))), skipped
-
-
 class FlatColumns:
     """Columns flattened from the messages of one topic.
 
