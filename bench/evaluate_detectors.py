@@ -44,7 +44,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -391,7 +391,7 @@ def main(argv: list[str] | None = None) -> int:
     fits = run_many(train_jobs, train_one, jobs=args.jobs, isolate=False)
     thresholds = {m: max(th for model, _, th in fits if model == m) for m in FAMILIES}
     results = []
-    for job, result, seconds in run_many([(job, thresholds) for job in jobs], evaluate_one, jobs=args.jobs,
+    for job, result, _seconds in run_many([(job, thresholds) for job in jobs], evaluate_one, jobs=args.jobs,
                                          isolate=False):
         results.append((job, result))
         if isinstance(result, str):
@@ -400,7 +400,7 @@ def main(argv: list[str] | None = None) -> int:
     failed = [(job, r) for job, r in results if isinstance(r, str)]
 
     lines = [
-        f"Measured {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} "
+        f"Measured {datetime.now(UTC):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} "
         f"({code_version()}), "
         f"`python bench/evaluate_detectors.py --runs {args.runs} --jobs {args.jobs}`: "
         f"{len(jobs)} evaluation runs + {len(train_jobs)} training runs in {elapsed:.0f} s "

@@ -134,7 +134,7 @@ class Detector:
         return copy.deepcopy(self.params)
 
     @classmethod
-    def from_config(cls, config: Mapping[str, Any] | None) -> "Detector":
+    def from_config(cls, config: Mapping[str, Any] | None) -> Detector:
         """A detector from its configuration dict (e.g. a profile's [detectors.NAME] table)."""
         return cls(**dict(config or {}))
 
@@ -165,7 +165,7 @@ class Detector:
         return Needs.of(ekf=()) if self.requires_trace else Needs()
 
     # --- training ---------------------------------------------------------------------------------
-    def fit(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None = None, **context: Any) -> "Detector":
+    def fit(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None = None, **context: Any) -> Detector:
         """Learn trained state (trailing-underscore attributes) from healthy runs; returns self."""
         self.check_params()
         runs = list(runs)
@@ -240,7 +240,7 @@ class Detector:
         }
 
     @classmethod
-    def from_state(cls, state: Mapping[str, Any], *, path: str | None = None) -> "Detector":
+    def from_state(cls, state: Mapping[str, Any], *, path: str | None = None) -> Detector:
         """A trained detector from `to_state` output (raises InputError on a mismatch)."""
         if not isinstance(state, Mapping) or state.get("format") != STATE_FORMAT:
             raise InputError("not a logscan detector state", path=path, hint="use a file written by `logscan train`")

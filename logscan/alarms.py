@@ -23,7 +23,7 @@ duration and warm-up. Rules, in order:
 
 from __future__ import annotations
 
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 

@@ -385,7 +385,8 @@ def align(log, profile) -> AlignedRun:
     for red in profile.redundant.values():
         sensors = list(red.sensors.values())
         transforms = [
-            (lambda v, c=np.asarray(s.poly): P.polyval(v, c)) if s.poly is not None else None
+            # the default argument binds each sensor's own coefficients
+            (lambda v, c=np.asarray(s.poly): P.polyval(v, c)) if s.poly is not None else None  # noqa: B008
             for s in sensors
         ]
         g = aligner.group(red.name, [s.channel for s in sensors], grid_ns, red.stale_limit_s(), transforms)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
+
 @dataclass(frozen=True)
 class Needs:
     """filters: filter name -> the optional trace parts to keep (empty: the filter's default trace).
@@ -18,11 +19,11 @@ class Needs:
     filters: Mapping[str, frozenset[str]] = field(default_factory=dict)
 
     @classmethod
-    def of(cls, **filters: Iterable[str]) -> "Needs":
+    def of(cls, **filters: Iterable[str]) -> Needs:
         """``Needs.of(ekf=("K", "S"))``: the EKF with its gain and innovation covariance."""
         return cls({name: frozenset(parts) for name, parts in filters.items()})
 
-    def __or__(self, other: "Needs") -> "Needs":
+    def __or__(self, other: Needs) -> Needs:
         merged = {name: frozenset(parts) for name, parts in self.filters.items()}
         for name, parts in other.filters.items():
             merged[name] = merged.get(name, frozenset()) | frozenset(parts)

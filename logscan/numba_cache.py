@@ -88,7 +88,7 @@ def _direct_dependencies(module: ModuleType) -> list[ModuleType]:
 _IMPORT = re.compile(r"^(?:from[ \t]+[\w.]+[ \t]+)?import[ \t]+(?:\([^)]*\)|[^\n]*)", re.MULTILINE)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _imported_module_names(module: ModuleType) -> tuple[str, ...]:
     """Names of the package modules ``module`` imports something a kernel can read from; classes
     and plain Python functions are skipped (a kernel cannot compile them in). Only the import

@@ -17,7 +17,6 @@ import numpy as np
 
 from logscan.errors import InputError
 
-
 # --- the JSON policy ------------------------------------------------------------------------------
 
 def jsonable(value: Any) -> Any:

@@ -23,8 +23,7 @@ Rules (closed intervals throughout, times in seconds on the analysis grid):
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 from logscan.results import FaultEvent

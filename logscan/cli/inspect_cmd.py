@@ -11,7 +11,6 @@ from logscan.log import Log
 from logscan.readers import read_log
 
 
-
 @click.command(
     epilog="Examples:\n\n"
     "  logscan inspect sample_logs/quad_healthy.mcap\n\n"

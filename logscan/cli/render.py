@@ -9,10 +9,14 @@ import math
 import re
 import shutil
 import textwrap
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from logscan.evaluate import CHECK_SEPARATOR
+
+if TYPE_CHECKING:
+    from logscan.evaluate import Evaluation
 
 _EPOCH_MIN_NS = 946_684_800 * 10**9  # 2000-01-01: later start times are wall-clock (epoch) time
 _FIELD_LINES = 3  # wrapped lines of fields per topic before truncating (--full shows all)
@@ -200,7 +204,7 @@ def _rate(hz: float) -> str:
 
 def _fmt_time(ns: int) -> str:
     if ns >= _EPOCH_MIN_NS:
-        stamp = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
+        stamp = datetime.fromtimestamp(ns / 1e9, tz=UTC)
         return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
     return f"{ns / 1e9:.6f} s"
 

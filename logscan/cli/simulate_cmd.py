@@ -61,7 +61,8 @@ def simulate(model_name, faults, at, fault_duration, magnitude, target, duration
     (/truth/state); the fault events and the matching profile are embedded, so `logscan analyze`
     and `logscan evaluate` need no other file. Same seed, same bytes.
     """
-    from logscan.simulate import parse_fault, simulate as run_simulation, write_simulation
+    from logscan.simulate import parse_fault, write_simulation
+    from logscan.simulate import simulate as run_simulation
     from logscan.simulate.faults import FaultSpec
 
     if not output_path:

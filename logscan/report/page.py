@@ -173,7 +173,7 @@ def _time_text(ns: Any) -> str:
         return "—"
     ns = int(ns)
     if ns > 10**15:  # absolute epoch time (later than 1970-01-12)
-        stamp = _dt.datetime.fromtimestamp(ns / 1e9, tz=_dt.timezone.utc)
+        stamp = _dt.datetime.fromtimestamp(ns / 1e9, tz=_dt.UTC)
         return stamp.isoformat(timespec="milliseconds").replace("+00:00", " UTC")
     return f"{ns / 1e9:.3f} s"
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from logscan.models.dispatch import f_disc, H_meas, h_meas, predict
+from logscan.models.dispatch import H_meas, f_disc, h_meas, predict
 from logscan.numba_cache import follow_dependencies
 from logscan.simulate.controllers import control
 from logscan.simulate.faults import (

@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from logscan_example_plugin import RangeCheckDetector
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.errors import NotTrainedError, ProfileError
+from logscan_example_plugin import RangeCheckDetector
 
 
 def speed_run(values, rate_hz=10.0):
