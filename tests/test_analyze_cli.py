@@ -20,23 +20,11 @@ FAULTY = ["quad_imu_bias.mcap", "quad_imu_bitflip.mcap", "quad_motor_offset.mcap
 HEALTHY = ["quad_healthy.mcap", "sbw_healthy.mcap", "quad_healthy.csv"]
 
 
-def logscan(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True,
-                          cwd=cwd, timeout=300)
-
-
-def sample(name: str) -> Path:
-    path = SAMPLES / name
-    if not path.exists():
-        pytest.skip(f"{path} missing: run sample_logs/make_samples.py")
-    return path
-
-
 @pytest.mark.parametrize("name", FAULTY)
-def test_each_faulty_sample_log_raises_an_alarm_matching_its_fault_within_one_second(name, tmp_path):
+def test_each_faulty_sample_log_raises_an_alarm_matching_its_fault_within_one_second(name, tmp_path, cli, sample):
     out = tmp_path / "summary.json"
-    result = logscan("analyze", str(sample(name)), "--json", str(out), "--no-report")
-    assert result.returncode == 1, result.stderr
+    result = cli("analyze", sample(name), "--json", out, "--no-report")
+    assert result.exit_code == 1, result.stderr
     summary = json.loads(out.read_text())["logs"][0]
     assert summary["truth_events"], "sample logs carry their ground truth"
     latencies = [s["mean_latency_s"] for s in summary["scores"].values() if s["tp"]]
@@ -44,70 +32,70 @@ def test_each_faulty_sample_log_raises_an_alarm_matching_its_fault_within_one_se
 
 
 @pytest.mark.parametrize("name", HEALTHY)
-def test_each_healthy_sample_log_raises_no_alarm_and_exits_zero(name, tmp_path):
-    result = logscan("analyze", str(sample(name)), "-o", str(tmp_path / "r.html"))
-    assert result.returncode == 0, result.stdout + result.stderr
+def test_each_healthy_sample_log_raises_no_alarm_and_exits_zero(name, tmp_path, cli, sample):
+    result = cli("analyze", sample(name), "-o", tmp_path / "r.html")
+    assert result.exit_code == 0, result.stdout + result.stderr
     assert "no alarms" in result.stdout
     assert (tmp_path / "r.html").stat().st_size > 100_000
 
 
-def test_exit_zero_and_report_written_for_alarms(tmp_path):
+def test_exit_zero_and_report_written_for_alarms(tmp_path, cli, sample):
     report = tmp_path / "bias.html"
-    result = logscan("analyze", str(sample("quad_imu_bias.mcap")), "-o", str(report), "--exit-zero")
-    assert result.returncode == 0, result.stderr
+    result = cli("analyze", sample("quad_imu_bias.mcap"), "-o", report, "--exit-zero")
+    assert result.exit_code == 0, result.stderr
     assert "nis" in result.stdout and report.exists()
     html = report.read_text(encoding="utf-8")
     assert "nis.accel" in html
 
 
-def test_bad_input_exits_two_with_one_line_and_keeps_an_existing_report(tmp_path):
+def test_bad_input_exits_two_with_one_line_and_keeps_an_existing_report(tmp_path, cli, sample):
     report = tmp_path / "r.html"
     report.write_text("previous report")
     broken = tmp_path / "broken.mcap"
     broken.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 10)
     for args in (
-        [str(tmp_path / "missing.mcap")],
-        [str(broken)],
-        [str(sample("quad_healthy.mcap")), "--profile", str(tmp_path / "nope.toml")],
+        [tmp_path / "missing.mcap"],
+        [broken],
+        [sample("quad_healthy.mcap"), "--profile", tmp_path / "nope.toml"],
     ):
-        result = logscan("analyze", *args, "-o", str(report))
-        assert result.returncode == 2, (args, result.stderr)
+        result = cli("analyze", *args, "-o", report)
+        assert result.exit_code == 2, (args, result.stderr)
         assert "Traceback" not in result.stderr
         assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert report.read_text() == "previous report"
 
 
-def test_unknown_channel_in_a_profile_names_the_closest_channels(tmp_path):
+def test_unknown_channel_in_a_profile_names_the_closest_channels(tmp_path, cli, sample):
     text = (SAMPLES / "quad_healthy.profile.toml").read_text().replace("/imu/accel.x", "/imu/acel.x")
     profile = tmp_path / "p.toml"
     profile.write_text(text)
-    result = logscan("analyze", str(sample("quad_healthy.mcap")), "--profile", str(profile), "--no-report")
-    assert result.returncode == 2
+    result = cli("analyze", sample("quad_healthy.mcap"), "--profile", profile, "--no-report")
+    assert result.exit_code == 2
     assert "/imu/acel.x" in result.stderr and "/imu/accel.x" in result.stderr
 
 
-def test_a_log_without_profile_asks_for_one(tmp_path):
+def test_a_log_without_profile_asks_for_one(tmp_path, cli):
     from logscan.readers.mcap import TopicData, write_mcap
 
     t = np.arange(10, dtype=np.int64) * 10_000_000
     path = tmp_path / "bare.mcap"
     write_mcap(path, {"/x": TopicData("X", t, {"v": np.zeros(10)})}, encoding="json")
-    result = logscan("analyze", str(path), "--no-report")
-    assert result.returncode == 2 and "--profile" in result.stderr
+    result = cli("analyze", path, "--no-report")
+    assert result.exit_code == 2 and "--profile" in result.stderr
 
 
-def test_several_logs_one_bad_reports_the_rest_and_exits_two(tmp_path):
+def test_several_logs_one_bad_reports_the_rest_and_exits_two(tmp_path, cli, sample):
     out = tmp_path / "s.json"
-    result = logscan("analyze", str(sample("sbw_healthy.mcap")), str(tmp_path / "missing.mcap"),
-                     "-o", str(tmp_path / "reports"), "--json", str(out))
-    assert result.returncode == 2
+    result = cli("analyze", sample("sbw_healthy.mcap"), tmp_path / "missing.mcap",
+                 "-o", tmp_path / "reports", "--json", out)
+    assert result.exit_code == 2
     summary = json.loads(out.read_text())
     assert [Path(s["file"]).name for s in summary["logs"]] == ["sbw_healthy.mcap"]
     assert summary["errors"][0]["exit_code"] == 2
     assert (tmp_path / "reports" / "sbw_healthy.report.html").exists()
 
 
-def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path):
+def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path, cli, sample):
     """A hostile topic name travels through reader, profile, detectors and report as data."""
     from logscan.readers import read_log
     from logscan.readers.mcap import TopicData, write_mcap
@@ -126,15 +114,17 @@ def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path):
     path = tmp_path / "hostile.mcap"
     write_mcap(path, data, encoding="json", metadata={"logscan.profile": {"toml": profile}})
     report = tmp_path / "hostile.html"
-    result = logscan("analyze", str(path), "-o", str(report), "--exit-zero")
-    assert result.returncode == 0, result.stderr
+    result = cli("analyze", path, "-o", report, "--exit-zero")
+    assert result.exit_code == 0, result.stderr
     html = report.read_text(encoding="utf-8")
     assert "<script>alert(1)</script>" not in html
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html
 
 
-def test_json_to_stdout_is_pure_json():
-    result = logscan("analyze", str(sample("sbw_healthy.mcap")), "--json", "-", "--no-report")
+def test_json_to_stdout_is_pure_json(sample):
+    # a subprocess: only a real pipe shows that nothing else (imports, numba, warnings) writes to stdout
+    result = subprocess.run([sys.executable, "-m", "logscan", "analyze", str(sample("sbw_healthy.mcap")),
+                             "--json", "-", "--no-report"], capture_output=True, text=True, timeout=300)
     assert result.returncode == 0
     summary = json.loads(result.stdout)
     assert summary["exit_code"] == 0 and summary["logs"][0]["verdict"] == "no alarms"
