@@ -39,21 +39,12 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
-    """JSON to ``path`` atomically, or to stdout when ``path`` is "-"."""
-    text = json.dumps(obj, indent=2, sort_keys=False, default=_json_default) + "\n"
+    """JSON to ``path`` atomically, or to stdout when ``path`` is "-", under the one JSON policy
+    (`logscan.results.jsonable`: numpy values to plain ones, NaN and infinities to null)."""
+    from logscan.results import jsonable
+
+    text = json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
     if str(path) == "-":
         sys.stdout.write(text)
         return
     write_atomic(path, text)
-
-
-def _json_default(obj: Any) -> Any:
-    import numpy as np
-
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        return float(obj)
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

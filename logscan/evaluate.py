@@ -24,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
+from logscan.results import AlarmInterval
 from logscan.scoring import DEFAULT_GRACE_S, Score, aggregate, score_log
 
 CHECK_SEPARATOR = ":"
@@ -36,7 +37,7 @@ def check_key(result, signal: str) -> str:
 
 def merge_intervals(alarms: Iterable) -> list[tuple[float, float]]:
     """Union of alarm intervals (objects with start/end, or pairs) as sorted disjoint (start, end)."""
-    spans = sorted((float(a.start), float(a.end)) if hasattr(a, "start") else (float(a[0]), float(a[1]))
+    spans = sorted((float(a.start), float(a.end)) if isinstance(a, AlarmInterval) else (float(a[0]), float(a[1]))
                    for a in alarms)
     merged: list[tuple[float, float]] = []
     for start, end in spans:

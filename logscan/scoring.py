@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
-from logscan.results import FaultEvent
+from logscan.results import AlarmInterval, FaultEvent
 
 DEFAULT_GRACE_S = 1.0
 
@@ -54,8 +54,8 @@ class EventMatch:
         }
 
 
-def _interval(alarm) -> tuple[float, float]:
-    if hasattr(alarm, "start") and hasattr(alarm, "end"):
+def _interval(alarm: AlarmInterval | tuple[float, float]) -> tuple[float, float]:
+    if isinstance(alarm, AlarmInterval):
         return float(alarm.start), float(alarm.end)
     start, end = alarm
     return float(start), float(end)
@@ -206,7 +206,7 @@ def score_log(
 
 def score_by_detector(
     events: Sequence[FaultEvent],
-    alarms: Sequence,
+    alarms: Sequence[AlarmInterval],
     *,
     duration_s: float | None = None,
     grace_s: float = DEFAULT_GRACE_S,
@@ -217,7 +217,7 @@ def score_by_detector(
     ``detectors`` are scored even without any alarm (all their events missed)."""
     grouped: dict[str, list] = {name: [] for name in detectors}
     for alarm in alarms:
-        grouped.setdefault(getattr(alarm, "detector", ""), []).append(alarm)
+        grouped.setdefault(alarm.detector, []).append(alarm)
     return {
         name: score_log(events, items, duration_s=duration_s, grace_s=grace_s, detector=name, log=log)
         for name, items in grouped.items()
