@@ -43,9 +43,25 @@ def main() -> None:
         for fmt in args.formats.split(","):
             log = work / f"quad_{fmt}.mcap"
             t0 = time.perf_counter()
-            run_cli(["simulate", "quadcopter", "--duration", str(args.duration), "--seed", "7",
-                     "--fault", "imu-bias", "--at", str(args.duration / 2), "--format", fmt,
-                     "-o", str(log)], warm_cache)
+            run_cli(
+                [
+                    "simulate",
+                    "quadcopter",
+                    "--duration",
+                    str(args.duration),
+                    "--seed",
+                    "7",
+                    "--fault",
+                    "imu-bias",
+                    "--at",
+                    str(args.duration / 2),
+                    "--format",
+                    fmt,
+                    "-o",
+                    str(log),
+                ],
+                warm_cache,
+            )
             simulate_s = time.perf_counter() - t0
             command = ["analyze", str(log), "-o", str(work / f"{fmt}.html"), "--json", str(work / f"{fmt}.json"), "-q"]
             cold_cache = work / f"numba-cold-{fmt}"
@@ -56,7 +72,10 @@ def main() -> None:
             size_mb = log.stat().st_size / 1e6
             report_mb = (work / f"{fmt}.html").stat().st_size / 1e6
             rows.append((fmt, size_mb, simulate_s, cold, warm, report_mb))
-        print(f"{'format':<10} {'log MB':>8} {'simulate s':>11} {'analyze cold s':>15} {'analyze warm s':>15} {'report MB':>10}")
+        print(
+            f"{'format':<10} {'log MB':>8} {'simulate s':>11} {'analyze cold s':>15} "
+            f"{'analyze warm s':>15} {'report MB':>10}"
+        )
         for fmt, size_mb, sim, cold, warm, report_mb in rows:
             print(f"{fmt:<10} {size_mb:>8.1f} {sim:>11.1f} {cold:>15.2f} {warm:>15.2f} {report_mb:>10.2f}")
     finally:

@@ -81,8 +81,15 @@ def make_run(steps: int, seed: int = 0):
         clean = {"accel": Acc[idx], "gyro": X[idx, 9:12], "position": X[idx, 0:3]}[name]
         z[idx] = clean + rng.normal(size=clean.shape) * np.asarray(spec.noise_std)
         groups[name] = AlignedGroup(name, list(spec.outputs), z, fresh)
-    run = AlignedRun(t=np.arange(steps) * DT, dt=DT, start_ns=0, u=U, u_fresh=np.ones(steps, bool),
-                     input_channels=list(model.input_names), groups=groups)
+    run = AlignedRun(
+        t=np.arange(steps) * DT,
+        dt=DT,
+        start_ns=0,
+        u=U,
+        u_fresh=np.ones(steps, bool),
+        input_channels=list(model.input_names),
+        groups=groups,
+    )
     return model, run, X
 
 
@@ -121,7 +128,7 @@ def run_filterpy(model, run, x0, P0):
         o = 0
         for g in used:
             s = R[g].shape[0]
-            Rk[o:o + s, o:o + s] = R[g]
+            Rk[o : o + s, o : o + s] = R[g]
             o += s
         ekf.update(
             z,
@@ -139,15 +146,27 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
     m = 6), with the core's own helpers and work arrays."""
     n, m = 12, 6
     x_new, kv, xs = np.empty(n), np.empty(n), np.empty(n)
-    F, A, J, Jn, W, FP, P_upd = (np.empty((n, n)), np.empty((n, n)), np.empty((n, n)),
-                                 np.empty((n, n)), np.empty((n, n)), np.empty((n, n)),
-                                 np.empty((n, n)))
+    F, A, J, Jn, W, FP, P_upd = (
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+    )
     fcols, fnnz = np.empty((n, n), np.int64), np.empty(n, np.int64)
     hcols, hnnz = np.empty((m, n), np.int64), np.empty(m, np.int64)
     rcols, rnnz = np.empty((m, m), np.int64), np.empty(m, np.int64)
     hx, Hs, R3, D3 = np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
-    HP, KT, S, L, D, DT = (np.empty((m, n)), np.empty((m, n)), np.empty((m, m)),
-                           np.empty((m, m)), np.empty((n, m)), np.empty((m, n)))
+    HP, KT, S, L, D, DT = (
+        np.empty((m, n)),
+        np.empty((m, n)),
+        np.empty((m, m)),
+        np.empty((m, m)),
+        np.empty((n, m)),
+        np.empty((m, n)),
+    )
     all_cols = np.empty((n, m), np.int64)
     for i in range(n):
         for a in range(m):
@@ -181,14 +200,19 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
             KT[:, :] = HP
             linalg.cho_solve_rows(L, m, KT, n)
         if which == 5 or it == 0:  # Joseph form
-            linalg.joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W,
-                        DT, D, P_upd)
+            linalg.joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W, DT, D, P_upd)
         acc += P_upd[1, 2] + KT[0, 0] + x_new[0]
     return acc
 
 
-PHASES = ("RK4 step + exact Jacobian F", "F P F^T + Q", "h, H (accel, gyro)",
-          "H P, S = H P H^T + R", "Cholesky of S, K = P H^T S^-1", "Joseph P update")
+PHASES = (
+    "RK4 step + exact Jacobian F",
+    "F P F^T + Q",
+    "h, H (accel, gyro)",
+    "H P, S = H P H^T + R",
+    "Cholesky of S, K = P H^T S^-1",
+    "Joseph P update",
+)
 
 
 def phase_times(model, trace, run, reps=100_000):
@@ -197,8 +221,15 @@ def phase_times(model, trace, run, reps=100_000):
     R = np.zeros((6, 6))
     R[:3, :3] = model.default_R("accel")
     R[3:, 3:] = model.default_R("gyro")
-    args = (model.param_vector(run.dt), trace.x_post[k].copy(), run.u[k].copy(), run.dt,
-            np.ascontiguousarray(trace.P_post[k]), model.default_Q(run.dt), R)
+    args = (
+        model.param_vector(run.dt),
+        trace.x_post[k].copy(),
+        run.u[k].copy(),
+        run.dt,
+        np.ascontiguousarray(trace.P_post[k]),
+        model.default_Q(run.dt),
+        R,
+    )
     out = {}
     for which, name in enumerate(PHASES):
         _phase_loop(which, 10, *args)
@@ -232,8 +263,7 @@ def compile_times() -> tuple[float, float]:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         out = []
         for _ in range(2):
-            res = subprocess.run([sys.executable, "-c", _COLD], env=env, capture_output=True,
-                                 text=True, check=True)
+            res = subprocess.run([sys.executable, "-c", _COLD], env=env, capture_output=True, text=True, check=True)
             out.append(float(res.stdout.strip().splitlines()[-1]))
     return out[0], out[1]
 
@@ -261,19 +291,24 @@ def main(argv=None) -> int:
     ap.add_argument("--no-phases", action="store_true", help="skip the per-sub-step timings")
     args = ap.parse_args(argv)
 
-    print(f"# {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-          f"load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"# {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+        f"load average {os.getloadavg()[0]:.1f}"
+    )
     if not args.no_compile:
         cold, warm = compile_times()
-        print(f"numba cold compile (empty cache, import + first run): {cold:.1f} s; "
-              f"warm cache: {warm:.2f} s")
+        print(f"numba cold compile (empty cache, import + first run): {cold:.1f} s; warm cache: {warm:.2f} s")
     model, run, truth = make_run(args.steps)
     x0 = truth[0].copy()
     P0 = np.diag(np.square(model.state_scale())) * 0.01
     run_ekf(model, run, x0=x0, P0=P0)  # compile / load from cache outside the timing
     (full, wall, cpu), (light, wall_l, cpu_l) = best_of(
-        [lambda: run_ekf(model, run, x0=x0, P0=P0),
-         lambda: run_ekf(model, run, x0=x0, P0=P0, store_gain=False, store_S=False)], args.reps)
+        [
+            lambda: run_ekf(model, run, x0=x0, P0=P0),
+            lambda: run_ekf(model, run, x0=x0, P0=P0, store_gain=False, store_S=False),
+        ],
+        args.reps,
+    )
     t0, c0 = time.perf_counter(), time.process_time()
     x_fp = run_filterpy(model, run, x0, P0)
     wall_fp, cpu_fp = time.perf_counter() - t0, time.process_time() - c0
@@ -282,21 +317,27 @@ def main(argv=None) -> int:
     rel = diff / np.max(np.abs(full.x_post))
     rmse = np.sqrt(np.mean((full.x_post[:, :3] - truth[:, :3]) ** 2))
     N = args.steps
-    print(f"steps {N}: accel+gyro 100 Hz, position 10 Hz; position RMSE vs truth {rmse:.3f} m; "
-          f"mean NIS/m {np.nanmean(full.nis / full.m_k):.3f}")
+    print(
+        f"steps {N}: accel+gyro 100 Hz, position 10 Hz; position RMSE vs truth {rmse:.3f} m; "
+        f"mean NIS/m {np.nanmean(full.nis / full.m_k):.3f}"
+    )
     print("| filter | wall s | steps/s (wall) | CPU s | steps/s (CPU) | speed-up (CPU) |")
     print("|---|---:|---:|---:|---:|---:|")
-    for label, w, c in (("logscan, full trace (S, K stored)", wall, cpu),
-                        ("logscan, store_gain=False, store_S=False", wall_l, cpu_l),
-                        ("filterpy ExtendedKalmanFilter", wall_fp, cpu_fp)):
+    for label, w, c in (
+        ("logscan, full trace (S, K stored)", wall, cpu),
+        ("logscan, store_gain=False, store_S=False", wall_l, cpu_l),
+        ("filterpy ExtendedKalmanFilter", wall_fp, cpu_fp),
+    ):
         print(f"| {label} | {w:.2f} | {N / w:,.0f} | {c:.2f} | {N / c:,.0f} | {cpu_fp / c:.1f}x |")
     print(f"agreement: max |x_logscan - x_filterpy| = {diff:.2e} (relative {rel:.1e})")
     ok = diff < 1e-6 and np.array_equal(full.x_post, light.x_post)
     print("agreement check:", "PASS" if ok else "FAIL")
     if not args.no_phases:
         short = run_ekf(model, make_run(2000)[1], x0=x0, P0=P0, full_P=True)
-        print(f"per-step CPU time of the whole kernel (light trace): {cpu_l / N * 1e6:.2f} us; "
-              "its sub-steps (accel + gyro update, m = 6; CPU us per call):")
+        print(
+            f"per-step CPU time of the whole kernel (light trace): {cpu_l / N * 1e6:.2f} us; "
+            "its sub-steps (accel + gyro update, m = 6; CPU us per call):"
+        )
         for name, us in phase_times(model, short, run).items():
             print(f"  {name}: {us:.2f}")
     print(f"load average after the run: {os.getloadavg()[0]:.1f}")

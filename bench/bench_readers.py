@@ -29,15 +29,34 @@ from logscan.readers.mcap.writer import TopicData, write_mcap
 
 # topic -> (share of the messages, schema name, field names)
 _TOPICS = {
-    "/imu": (0.5, "sensor_msgs/msg/Imu", [
-        "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z",
-        "angular_velocity.x", "angular_velocity.y", "angular_velocity.z",
-        "orientation.x", "orientation.y", "orientation.z", "orientation.w",
-    ]),
-    "/imu2": (0.3, "sensor_msgs/msg/Imu", [
-        "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z",
-        "angular_velocity.x", "angular_velocity.y", "angular_velocity.z",
-    ]),
+    "/imu": (
+        0.5,
+        "sensor_msgs/msg/Imu",
+        [
+            "linear_acceleration.x",
+            "linear_acceleration.y",
+            "linear_acceleration.z",
+            "angular_velocity.x",
+            "angular_velocity.y",
+            "angular_velocity.z",
+            "orientation.x",
+            "orientation.y",
+            "orientation.z",
+            "orientation.w",
+        ],
+    ),
+    "/imu2": (
+        0.3,
+        "sensor_msgs/msg/Imu",
+        [
+            "linear_acceleration.x",
+            "linear_acceleration.y",
+            "linear_acceleration.z",
+            "angular_velocity.x",
+            "angular_velocity.y",
+            "angular_velocity.z",
+        ],
+    ),
     "/baro": (0.1, "logscan_msgs/msg/Baro", ["pressure", "temperature", "altitude"]),
     "/gps": (0.1, "logscan_msgs/msg/Gps", ["position.x", "position.y", "position.z", "speed"]),
 }
@@ -107,8 +126,10 @@ def main() -> None:
     print("| file | messages | logscan read_mcap msg/s | mcap iter_decoded_messages msg/s | ratio |")
     print("|---|---:|---:|---:|---:|")
     for encoding, n, ours, plain in rows:
-        print(f"| {encoding} | {n:,} | {n / ours:,.0f} ({ours:.1f} s) | {n / plain:,.0f} ({plain:.1f} s) "
-              f"| {plain / ours:.2f}x |")
+        print(
+            f"| {encoding} | {n:,} | {n / ours:,.0f} ({ours:.1f} s) | {n / plain:,.0f} ({plain:.1f} s) "
+            f"| {plain / ours:.2f}x |"
+        )
 
 
 if __name__ == "__main__":

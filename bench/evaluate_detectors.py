@@ -57,20 +57,35 @@ N_TRAIN = 10
 # (family label, `--fault` kind) per model; targets, magnitudes and lengths are the kinds' defaults
 FAMILIES = {
     "quadcopter": [
-        ("imu-bias", "imu-bias"), ("imu-drift", "imu-drift"), ("imu-random", "imu-random"),
-        ("imu-bitflip", "imu-bitflip"), ("imu-stuck", "imu-stuck"), ("motor-offset", "motor-offset"),
-        ("lost-motor", "lost-motor"), ("cov-corruption", "cov-corruption"),
+        ("imu-bias", "imu-bias"),
+        ("imu-drift", "imu-drift"),
+        ("imu-random", "imu-random"),
+        ("imu-bitflip", "imu-bitflip"),
+        ("imu-stuck", "imu-stuck"),
+        ("motor-offset", "motor-offset"),
+        ("lost-motor", "lost-motor"),
+        ("cov-corruption", "cov-corruption"),
         ("state-corruption", "state-corruption"),
     ],
     "steer_by_wire": [
-        ("bias", "bias"), ("drift", "drift"), ("random", "random"), ("bitflip", "bitflip"),
-        ("stuck", "stuck"), ("actuator-offset", "actuator-offset"), ("lost-actuator", "lost-actuator"),
-        ("cov-corruption", "cov-corruption"), ("state-corruption", "state-corruption"),
+        ("bias", "bias"),
+        ("drift", "drift"),
+        ("random", "random"),
+        ("bitflip", "bitflip"),
+        ("stuck", "stuck"),
+        ("actuator-offset", "actuator-offset"),
+        ("lost-actuator", "lost-actuator"),
+        ("cov-corruption", "cov-corruption"),
+        ("state-corruption", "state-corruption"),
     ],
 }
 FAULT_SEED_BASE = {"quadcopter": 1000, "steer_by_wire": 2000}
-HEALTHY_SEED_BASE = {("quadcopter", False): 3000, ("quadcopter", True): 3100,
-                     ("steer_by_wire", False): 3200, ("steer_by_wire", True): 3300}
+HEALTHY_SEED_BASE = {
+    ("quadcopter", False): 3000,
+    ("quadcopter", True): 3100,
+    ("steer_by_wire", False): 3200,
+    ("steer_by_wire", True): 3300,
+}
 TRAIN_SEED_BASE = {"quadcopter": 4000, "steer_by_wire": 4100}
 
 METHODS = {  # key -> column title
@@ -114,8 +129,9 @@ def make_jobs(runs: int) -> tuple[list[Job], list[Job]]:
                 jobs.append(Job(model, label, f"{kind}::{fault_start(seed):.2f}::", seed))
         for aggressive in (False, True):
             base = HEALTHY_SEED_BASE[(model, aggressive)]
-            jobs.extend(Job(model, "aggressive" if aggressive else "healthy", None, base + r, aggressive)
-                        for r in range(runs))
+            jobs.extend(
+                Job(model, "aggressive" if aggressive else "healthy", None, base + r, aggressive) for r in range(runs)
+            )
     return train, jobs
 
 
@@ -190,16 +206,24 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             "any": list(encoded.alarms) + list(nis.alarms),
         }
         duration = float(analysis.run.t[-1] - analysis.run.t[0])
-        scores = score_groups(analysis.events, groups, duration_s=duration, grace_s=GRACE_S,
-                              log=f"{job.model}/{job.family}/{job.seed}")
-        result = LogEvaluation(f"{job.model}/{job.family}/{job.seed}", job.model, duration,
-                               list(analysis.events), scores, aggressive=job.aggressive)
+        scores = score_groups(
+            analysis.events, groups, duration_s=duration, grace_s=GRACE_S, log=f"{job.model}/{job.family}/{job.seed}"
+        )
+        result = LogEvaluation(
+            f"{job.model}/{job.family}/{job.seed}",
+            job.model,
+            duration,
+            list(analysis.events),
+            scores,
+            aggressive=job.aggressive,
+        )
     except Exception as exc:  # noqa: BLE001 - a failed run is reported in the tables, not fatal
         result = f"{type(exc).__name__}: {exc}"
     return job, result, time.perf_counter() - started
 
 
 # --- tables -----------------------------------------------------------------------------------
+
 
 def _latency(score) -> str:
     if score.mean_latency_s is None:
@@ -219,13 +243,14 @@ def category_table(results: list, methods: dict[str, str]) -> str:
     model, pooled over the families of the category (events detected / events)."""
     from logscan.scoring import aggregate
 
-    out = ["| model: fault category | " + " | ".join(methods.values()) + " |",
-           "|---|" + "---|" * len(methods)]
+    out = ["| model: fault category | " + " | ".join(methods.values()) + " |", "|---|" + "---|" * len(methods)]
     for model in FAMILIES:
         for category, kinds in CATEGORIES:
-            chosen = [ev for job, ev in results
-                      if job.model == model and not isinstance(ev, str) and ev.events
-                      and ev.events[0].kind in kinds]
+            chosen = [
+                ev
+                for job, ev in results
+                if job.model == model and not isinstance(ev, str) and ev.events and ev.events[0].kind in kinds
+            ]
             if not chosen:
                 continue
             cells = []
@@ -242,9 +267,10 @@ def detected_while_active(scores) -> int:
     """Events whose first alarm came before the fault ended (latency < t_end - t_start); the
     others were detected in the grace period, i.e. by the fault's removal."""
     return sum(
-        1 for score in scores for match in score.matches
-        if match.detected and (match.event.t_end is None
-                               or match.latency_s < match.event.t_end - match.event.t_start)
+        1
+        for score in scores
+        for match in score.matches
+        if match.detected and (match.event.t_end is None or match.latency_s < match.event.t_end - match.event.t_start)
     )
 
 
@@ -278,17 +304,19 @@ def family_tables(results: list, methods: dict[str, str], runs: int) -> str:
                 late = score.tp - detected_while_active([ev.scores[key] for ev in runs_here])
                 note = f" ({late} only after the fault ended)" if late else ""
                 cells.append(f"{score.tp}/{score.n_events}{note}{_latency(score)}")
-            out.append(f"| {label} ({event.target}, {default_magnitude(kind)}, "
-                       f"{length:g} s) | " + " | ".join(cells) + " |")
-        for family, title in (("healthy", "false alarms / h, healthy"),
-                              ("aggressive", "false alarms / h, aggressive manoeuvres")):
+            out.append(
+                f"| {label} ({event.target}, {default_magnitude(kind)}, {length:g} s) | " + " | ".join(cells) + " |"
+            )
+        for family, title in (
+            ("healthy", "false alarms / h, healthy"),
+            ("aggressive", "false alarms / h, aggressive manoeuvres"),
+        ):
             runs_here = [ev for job, ev in mine if job.family == family]
             cells = [_fa_per_hour([ev.scores[key] for ev in runs_here]) for key in methods]
             out.append(f"| {title} ({len(runs_here)} x {DURATION_S:g} s) | " + " | ".join(cells) + " |")
         faulty = [ev for job, ev in mine if job.family not in ("healthy", "aggressive")]
         cells = [str(aggregate([ev.scores[key] for ev in faulty]).fp) for key in methods]
-        out.append(f"| alarms outside the fault windows of the {len(faulty)} fault runs | "
-                   + " | ".join(cells) + " |")
+        out.append(f"| alarms outside the fault windows of the {len(faulty)} fault runs | " + " | ".join(cells) + " |")
         out.append("")
     return "\n".join(out)
 
@@ -313,9 +341,12 @@ def diagnose_actuator_offsets() -> str:
     spread, and (for information, not tuning) detections vs. false alarms of A over rho."""
     from logscan.evaluate import merge_intervals, score_groups
 
-    lines = ["| model, fault (start 30 s) | e_x step at onset / healthy std (8 dev runs) | "
-             + " | ".join(f"rho {rho:g}: detected, false alarms" for rho in DEV_RHOS) + " |",
-             "|---|---|" + "---|" * len(DEV_RHOS)]
+    lines = [
+        "| model, fault (start 30 s) | e_x step at onset / healthy std (8 dev runs) | "
+        + " | ".join(f"rho {rho:g}: detected, false alarms" for rho in DEV_RHOS)
+        + " |",
+        "|---|---|" + "---|" * len(DEV_RHOS),
+    ]
     for model, kind in (("quadcopter", "motor-offset"), ("steer_by_wire", "actuator-offset")):
         with tempfile.TemporaryDirectory() as directory:
             faulty = [_analyse(Job(model, kind, f"{kind}::30::", s), directory) for s in DEV_FAULT_SEEDS]
@@ -325,7 +356,7 @@ def diagnose_actuator_offsets() -> str:
         for analysis in faulty:
             e_x = next(r for r in analysis.results if r.detector == "encoded_ekf").series["e_x"]
             k = int(np.searchsorted(analysis.run.t, 30.0))
-            before, after = e_x[k - 500:k], e_x[k:k + 50]  # 5 s before, 0.5 s after the onset
+            before, after = e_x[k - 500 : k], e_x[k : k + 50]  # 5 s before, 0.5 s after the onset
             before, after = before[np.isfinite(before)], after[np.isfinite(after)]
             steps.append((after.mean() - before.mean()) / before.std())
         cells = []
@@ -340,12 +371,17 @@ def diagnose_actuator_offsets() -> str:
                 else:
                     false_alarms += len(merge_intervals(alarms))
             cells.append(f"{detected}/{len(faulty)}, {false_alarms}")
-        lines.append(f"| {model}, {kind} | {np.mean(steps):+.2f} (range {min(steps):+.2f} .. {max(steps):+.2f}) | "
-                     + " | ".join(cells) + " |")
-    return (f"Development seeds: faults {DEV_FAULT_SEEDS.start}..{DEV_FAULT_SEEDS.stop - 1}, healthy "
-            f"{DEV_HEALTHY_SEEDS.start}..{DEV_HEALTHY_SEEDS.stop - 1}, aggressive "
-            f"{DEV_AGGRESSIVE_SEEDS.start}..{DEV_AGGRESSIVE_SEEDS.stop - 1} ({len(DEV_HEALTHY_SEEDS) * 2} healthy "
-            "minutes); false alarms counted on the healthy and aggressive runs.\n\n" + "\n".join(lines))
+        lines.append(
+            f"| {model}, {kind} | {np.mean(steps):+.2f} (range {min(steps):+.2f} .. {max(steps):+.2f}) | "
+            + " | ".join(cells)
+            + " |"
+        )
+    return (
+        f"Development seeds: faults {DEV_FAULT_SEEDS.start}..{DEV_FAULT_SEEDS.stop - 1}, healthy "
+        f"{DEV_HEALTHY_SEEDS.start}..{DEV_HEALTHY_SEEDS.stop - 1}, aggressive "
+        f"{DEV_AGGRESSIVE_SEEDS.start}..{DEV_AGGRESSIVE_SEEDS.stop - 1} ({len(DEV_HEALTHY_SEEDS) * 2} healthy "
+        "minutes); false alarms counted on the healthy and aggressive runs.\n\n" + "\n".join(lines)
+    )
 
 
 def _adaptive(rho: float):
@@ -360,10 +396,16 @@ def code_version() -> str:
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
-                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "logscan", "detectors"], cwd=root,
-                               capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "logscan", "detectors"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "an unknown commit (no git checkout)"
     return f"commit {head}" + (" with local edits under logscan/ or detectors/" if dirty else "")
@@ -374,8 +416,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=20, help="runs per family and per healthy set")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--json", dest="json_path", default=None, help="write the raw scores here")
-    parser.add_argument("--diagnose", action="store_true",
-                        help="only the actuator-offset diagnosis on development seeds (< 1000)")
+    parser.add_argument(
+        "--diagnose", action="store_true", help="only the actuator-offset diagnosis on development seeds (< 1000)"
+    )
     args = parser.parse_args(argv)
     if args.diagnose:
         started = time.perf_counter()
@@ -391,8 +434,9 @@ def main(argv: list[str] | None = None) -> int:
     fits = run_many(train_jobs, train_one, jobs=args.jobs, isolate=False)
     thresholds = {m: max(th for model, _, th in fits if model == m) for m in FAMILIES}
     results = []
-    for job, result, _seconds in run_many([(job, thresholds) for job in jobs], evaluate_one, jobs=args.jobs,
-                                         isolate=False):
+    for job, result, _seconds in run_many(
+        [(job, thresholds) for job in jobs], evaluate_one, jobs=args.jobs, isolate=False
+    ):
         results.append((job, result))
         if isinstance(result, str):
             print(f"run {job.model}/{job.family}/{job.seed} failed: {result}", file=sys.stderr)
@@ -410,7 +454,7 @@ def main(argv: list[str] | None = None) -> int:
         "Baseline thresholds (max |e_x| over the training runs x margin "
         f"{MARGIN:g}): " + ", ".join(f"{m} {th:.4g}" for m, th in thresholds.items()) + ".",
         "",
-        "Cells: detected / runs · mean / max latency (s); \"only after the fault ended\": detections "
+        'Cells: detected / runs · mean / max latency (s); "only after the fault ended": detections '
         f"by an alarm in the {GRACE_S:g} s grace period after the fault's end (the fault's removal was "
         "seen, not the fault). False-alarm rows: alarms per hour (count).",
         "",
@@ -431,19 +475,32 @@ def main(argv: list[str] | None = None) -> int:
     if args.json_path:
         from logscan.artifacts import write_json
 
-        write_json(args.json_path, {
-            "elapsed_s": elapsed, "thresholds": thresholds,
-            "training": [{"model": m, "seed": s, "threshold": th} for m, s, th in fits],
-            "runs": [
-                {"model": job.model, "family": job.family, "seed": job.seed, "fault": job.fault,
-                 "aggressive": job.aggressive,
-                 "error": result if isinstance(result, str) else None,
-                 "events": [] if isinstance(result, str) else [e.to_dict() for e in result.events],
-                 "scores": {} if isinstance(result, str) else
-                 {k: {key: v for key, v in s.to_dict().items() if key != "log"} for k, s in result.scores.items()}}
-                for job, result in results
-            ],
-        })
+        write_json(
+            args.json_path,
+            {
+                "elapsed_s": elapsed,
+                "thresholds": thresholds,
+                "training": [{"model": m, "seed": s, "threshold": th} for m, s, th in fits],
+                "runs": [
+                    {
+                        "model": job.model,
+                        "family": job.family,
+                        "seed": job.seed,
+                        "fault": job.fault,
+                        "aggressive": job.aggressive,
+                        "error": result if isinstance(result, str) else None,
+                        "events": [] if isinstance(result, str) else [e.to_dict() for e in result.events],
+                        "scores": {}
+                        if isinstance(result, str)
+                        else {
+                            k: {key: v for key, v in s.to_dict().items() if key != "log"}
+                            for k, s in result.scores.items()
+                        },
+                    }
+                    for job, result in results
+                ],
+            },
+        )
     return 0
 
 

@@ -245,9 +245,7 @@ class Detector:
         if not isinstance(state, Mapping) or state.get("format") != STATE_FORMAT:
             raise InputError("not a logscan detector state", path=path, hint="use a file written by `logscan train`")
         if state.get("detector") != cls.name:
-            raise InputError(
-                f"trained state is for detector {state.get('detector')!r}, not {cls.name!r}", path=path
-            )
+            raise InputError(f"trained state is for detector {state.get('detector')!r}, not {cls.name!r}", path=path)
         version = state.get("schema_version")
         if version != cls.state_version:
             raise InputError(
@@ -259,8 +257,11 @@ class Detector:
         stored = state.get("state") or {}
         missing = [attr for attr in cls.trained_attributes if attr not in stored]
         if missing:
-            raise InputError(f"trained state of {cls.name!r} lacks {', '.join(missing)}", path=path,
-                             hint="retrain with `logscan train`")
+            raise InputError(
+                f"trained state of {cls.name!r} lacks {', '.join(missing)}",
+                path=path,
+                hint="retrain with `logscan train`",
+            )
         for attr in cls.trained_attributes:
             setattr(detector, attr, decode_state_value(stored[attr]))
         return detector

@@ -165,8 +165,7 @@ class EncodedEkfDetector(Detector):
                     "runs (bench/evaluate_detectors.py does), or use variant = 'adaptive'",
                 )
             limit = float(limit)
-            result.add_statistic(t, "e_x", e_x, upper=limit, lower=-limit, valid=defined,
-                                 n_persist=self.n_persist)
+            result.add_statistic(t, "e_x", e_x, upper=limit, lower=-limit, valid=defined, n_persist=self.n_persist)
             return result
 
         self._adaptive_check(result, t, "e_x", e_x, defined, self.window, self.rho)
@@ -177,8 +176,9 @@ class EncodedEkfDetector(Detector):
             e_v, defined_v, scale_v = self.variance_check_series(mode, run, trace, cv, e_x, defined)
             # spread floored at a fraction of the check's own variance: two estimators of one model
             # that linearise at slightly different states differ by a few per cent in manoeuvres
-            self._adaptive_check(result, t, "e_v", e_v, defined_v, self.window_v, self.rho_v,
-                                 self.rel_floor_v * np.abs(scale_v))
+            self._adaptive_check(
+                result, t, "e_v", e_v, defined_v, self.window_v, self.rho_v, self.rel_floor_v * np.abs(scale_v)
+            )
         if self.onboard_state_check and run.onboard_state is not None and np.isfinite(run.onboard_state).any():
             e_s, defined_s = self.onboard_state_series(run, trace, cv, model, defined)
             self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s)
@@ -189,15 +189,20 @@ class EncodedEkfDetector(Detector):
         """mu +- rho s band over the masked trailing window, then the shared alarm logic."""
         floor = np.zeros(e.size) if s_floor is None else np.where(np.isfinite(s_floor), s_floor, 0.0)
         _, _, lower, upper, _, warm = adaptive_band(e, defined, window, float(rho), floor)
-        result.add_statistic(t, name, e, upper=upper, lower=lower, valid=defined,
-                             warmup=defined & ~warm, n_persist=self.n_persist)
+        result.add_statistic(
+            t, name, e, upper=upper, lower=lower, valid=defined, warmup=defined & ~warm, n_persist=self.n_persist
+        )
 
     def _rejected_checks(self, result, run, trace) -> None:
         """One statistic per group with rejected samples: 1 where the filter refused a sample."""
         for g in np.flatnonzero(trace.rejected.any(axis=0)):
             result.add_statistic(
-                run.t, f"rejected.{trace.group_names[g]}", trace.rejected[:, g].astype(np.float64),
-                upper=0.5, n_persist=1, hold_off_s=float(self.rejected_hold_off_s),
+                run.t,
+                f"rejected.{trace.group_names[g]}",
+                trace.rejected[:, g].astype(np.float64),
+                upper=0.5,
+                n_persist=1,
+                hold_off_s=float(self.rejected_hold_off_s),
                 check="e_x",  # a refused sample is a corrupted update, like an e_x exceedance
             )
 
@@ -227,9 +232,7 @@ class EncodedEkfDetector(Detector):
             scale = np.einsum("kn,kn->k", alpha_sq, np.where(logged, trace.P_post_diag, 0.0))
             return e_v, defined_v, scale
         if trace.K is None or trace.S is None:
-            raise ProfileError(
-                f"detector {self.name!r}: the observed variance check needs K and S on the trace"
-            )
+            raise ProfileError(f"detector {self.name!r}: the observed variance check needs K and S on the trace")
         # predicted variance of e_x: g S g^T with g = CV_k K_k (padded columns are NaN: zero them)
         K = np.nan_to_num(trace.K)
         S = np.nan_to_num(trace.S)

@@ -1,4 +1,6 @@
-"""Innovation chi-square (NIS) test on the shared EKF, per measurement group and overall (docs/algorithms.md section 1b).
+"""Innovation chi-square (NIS) test on the shared EKF, per measurement group and overall.
+
+Specified in docs/algorithms.md section 1b.
 
 Per update nis_k = y~^T S^-1 y~ with m_k measurements; the statistic is the sum over the last W
 updates (of that group, or of any group for the overall test) against
@@ -80,9 +82,10 @@ class NisDetector(Detector):
         alpha = self._alpha(trace)
         result.info["alpha"] = alpha
         result.info["window_updates"] = self.window
-        tests = [(f"nis.{name}", trace.nis_group[:, g], trace.updated[:, g],
-                  np.full(t.size, int(trace.group_sizes[g])))
-                 for g, name in enumerate(trace.group_names)]
+        tests = [
+            (f"nis.{name}", trace.nis_group[:, g], trace.updated[:, g], np.full(t.size, int(trace.group_sizes[g])))
+            for g, name in enumerate(trace.group_names)
+        ]
         if self.overall:
             tests.append(("nis.all", trace.nis, trace.m_k > 0, trace.m_k))
         for signal, nis, updated, m in tests:
@@ -97,7 +100,8 @@ class NisDetector(Detector):
                 threshold[steps] = chi2_threshold(dof, alpha)
                 per_dof[steps] = sums / np.maximum(dof, 1)
                 warm[steps[full]] = True
-            result.add_statistic(t, signal, statistic, upper=threshold, valid=updated,
-                                 warmup=updated & ~warm, n_persist=self.n_persist)
+            result.add_statistic(
+                t, signal, statistic, upper=threshold, valid=updated, warmup=updated & ~warm, n_persist=self.n_persist
+            )
             result.extras[f"{signal}.per_dof"] = per_dof
         return result

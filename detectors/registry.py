@@ -69,9 +69,13 @@ class DetectorEntry:
 def parameter_rows(cls: type[Detector]) -> list[dict[str, Any]]:
     """One row per parameter: name, default and its declared constraints as text."""
     return [
-        {"name": key, "default": default,
-         "constraints": describe_constraints(cls.parameter_constraints[key])
-         if key in cls.parameter_constraints else "any JSON value"}
+        {
+            "name": key,
+            "default": default,
+            "constraints": describe_constraints(cls.parameter_constraints[key])
+            if key in cls.parameter_constraints
+            else "any JSON value",
+        }
         for key, default in cls.defaults.items()
     ]
 

@@ -165,13 +165,22 @@ def alarm_intervals(
     ratio_ok = np.isfinite(value) & np.isfinite(threshold) & (threshold != 0.0)
     n_exceed = exceed_count[i1 + 1] - exceed_count[f0]
     columns = zip(
-        ts[i0].tolist(), ts[i1].tolist(), ts[f0].tolist(), ts[peak].tolist(), value.tolist(),
-        np.where(np.isfinite(threshold), threshold, np.nan).tolist(), np.isfinite(threshold).tolist(),
-        ratio.tolist(), ratio_ok.tolist(), bound.tolist(), n_exceed.tolist(),
+        ts[i0].tolist(),
+        ts[i1].tolist(),
+        ts[f0].tolist(),
+        ts[peak].tolist(),
+        value.tolist(),
+        np.where(np.isfinite(threshold), threshold, np.nan).tolist(),
+        np.isfinite(threshold).tolist(),
+        ratio.tolist(),
+        ratio_ok.tolist(),
+        bound.tolist(),
+        n_exceed.tolist(),
     )
     return [
-        AlarmInterval(start, end, first, t_peak, v, thr if thr_ok else None, r if r_ok else None, b, int(k),
-                      signal, detector)
+        AlarmInterval(
+            start, end, first, t_peak, v, thr if thr_ok else None, r if r_ok else None, b, int(k), signal, detector
+        )
         for start, end, first, t_peak, v, thr, thr_ok, r, r_ok, b, k in columns
     ]
 

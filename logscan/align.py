@@ -220,8 +220,7 @@ class _Aligner:
             c = clean_samples(ch.t, ch.values)
             if c.unsorted:
                 self.warnings.append(
-                    f"channel {name!r}: timestamps out of order ({c.unsorted} backward steps): "
-                    f"sorted (stable)"
+                    f"channel {name!r}: timestamps out of order ({c.unsorted} backward steps): sorted (stable)"
                 )
             if c.duplicates:
                 self.warnings.append(

@@ -37,8 +37,9 @@ def check_key(result, signal: str) -> str:
 
 def merge_intervals(alarms: Iterable) -> list[tuple[float, float]]:
     """Union of alarm intervals (objects with start/end, or pairs) as sorted disjoint (start, end)."""
-    spans = sorted((float(a.start), float(a.end)) if isinstance(a, AlarmInterval) else (float(a[0]), float(a[1]))
-                   for a in alarms)
+    spans = sorted(
+        (float(a.start), float(a.end)) if isinstance(a, AlarmInterval) else (float(a[0]), float(a[1])) for a in alarms
+    )
     merged: list[tuple[float, float]] = []
     for start, end in spans:
         if merged and start <= merged[-1][1]:
@@ -73,8 +74,7 @@ def score_groups(
 ) -> dict[str, Score]:
     """One Score per group of alarms (merged to disjoint spans first) on one log."""
     return {
-        key: score_log(events, merge_intervals(alarms), duration_s=duration_s, grace_s=grace_s,
-                       detector=key, log=log)
+        key: score_log(events, merge_intervals(alarms), duration_s=duration_s, grace_s=grace_s, detector=key, log=log)
         for key, alarms in groups.items()
     }
 
@@ -97,8 +97,13 @@ class LogEvaluation:
 
 def kind_summary(score: Score) -> dict:
     """JSON view of one key's detection of one fault kind (a Score whose tp/fn count its events)."""
-    return {"events": score.n_events, "detected": score.tp, "detection_rate": score.recall,
-            "mean_latency_s": score.mean_latency_s, "max_latency_s": score.max_latency_s}
+    return {
+        "events": score.n_events,
+        "detected": score.tp,
+        "detection_rate": score.recall,
+        "mean_latency_s": score.mean_latency_s,
+        "max_latency_s": score.max_latency_s,
+    }
 
 
 def kind_label(model: str, kind: str) -> str:
@@ -162,12 +167,15 @@ class Evaluation:
             "n_logs": len(self.logs),
             "n_healthy_logs": sum(log.healthy for log in self.logs),
             "scores": {key: _score_summary(self.aggregate(key)) for key in keys},
-            "by_kind": {key: {kind: kind_summary(s) for kind, s in sorted(self.by_kind(key).items())}
-                        for key in keys},
+            "by_kind": {key: {kind: kind_summary(s) for kind, s in sorted(self.by_kind(key).items())} for key in keys},
             "logs": [
-                {"file": log.path, "model": log.model, "duration_s": log.duration_s,
-                 "events": [e.to_dict() for e in log.events],
-                 "scores": {key: s.to_dict() for key, s in log.scores.items()}}
+                {
+                    "file": log.path,
+                    "model": log.model,
+                    "duration_s": log.duration_s,
+                    "events": [e.to_dict() for e in log.events],
+                    "scores": {key: s.to_dict() for key, s in log.scores.items()},
+                }
                 for log in self.logs
             ],
             "skipped_no_truth": list(self.skipped),
@@ -185,11 +193,18 @@ def _score_summary(score: Score) -> dict:
 def evaluate_analysis(analysis, *, grace_s: float = DEFAULT_GRACE_S) -> LogEvaluation:
     """Score one analysed log (`logscan.analysis.Analysis` with ground truth) per detector and check."""
     duration = analysis.duration_s
-    scores = score_groups(analysis.events, alarm_groups(analysis.results), duration_s=duration,
-                          grace_s=grace_s, log=analysis.path)
+    scores = score_groups(
+        analysis.events, alarm_groups(analysis.results), duration_s=duration, grace_s=grace_s, log=analysis.path
+    )
     truth = analysis.log.truth or {}
-    return LogEvaluation(analysis.path, analysis.model.name, duration, list(analysis.events), scores,
-                         aggressive=bool(truth.get("aggressive", False)))
+    return LogEvaluation(
+        analysis.path,
+        analysis.model.name,
+        duration,
+        list(analysis.events),
+        scores,
+        aggressive=bool(truth.get("aggressive", False)),
+    )
 
 
 def has_truth(path: str) -> bool:
@@ -214,8 +229,13 @@ class EvaluationTask:
 
         if not has_truth(path):
             return None
-        analysis = analyze_log(path, self.profile_path, use_header_stamp=self.use_header_stamp,
-                               detector_names=self.detector_names, grace_s=self.grace_s)
+        analysis = analyze_log(
+            path,
+            self.profile_path,
+            use_header_stamp=self.use_header_stamp,
+            detector_names=self.detector_names,
+            grace_s=self.grace_s,
+        )
         return evaluate_analysis(analysis, grace_s=self.grace_s)
 
 
@@ -233,8 +253,7 @@ def evaluate_logs(
     record failures as lines."""
     from logscan.fleet import LogFailure, run_many
 
-    task = EvaluationTask(profile_path, tuple(detector_names) if detector_names else None, grace_s,
-                          use_header_stamp)
+    task = EvaluationTask(profile_path, tuple(detector_names) if detector_names else None, grace_s, use_header_stamp)
     evaluation = Evaluation(grace_s=grace_s)
     for path, outcome in zip(paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating")):
         if isinstance(outcome, LogFailure):

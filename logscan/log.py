@@ -154,9 +154,7 @@ class Log:
             "partial": self.source.partial,
             "partial_reason": self.source.partial_reason,
             "topics": {name: info.to_dict() for name, info in self.source.topics.items()},
-            "channels": {
-                name: {"samples": len(ch), "unit": ch.unit} for name, ch in self.channels.items()
-            },
+            "channels": {name: {"samples": len(ch), "unit": ch.unit} for name, ch in self.channels.items()},
             "skipped": [s.to_dict() for s in self.source.skipped],
             "warnings": list(self.source.warnings),
             "has_truth": self.truth is not None,

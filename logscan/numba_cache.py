@@ -59,8 +59,10 @@ def file_digest(path: str) -> str:
 def cached_dispatchers(module: ModuleType) -> list[Dispatcher]:
     """The numba functions defined in ``module`` with ``cache=True``."""
     return [
-        value for value in vars(module).values()
-        if isinstance(value, Dispatcher) and value.py_func.__module__ == module.__name__
+        value
+        for value in vars(module).values()
+        if isinstance(value, Dispatcher)
+        and value.py_func.__module__ == module.__name__
         and hasattr(getattr(value, "_cache", None), "_cache_file")
     ]
 
@@ -104,8 +106,7 @@ def _imported_module_names(module: ModuleType) -> tuple[str, ...]:
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
-            source_name = importlib.util.resolve_name("." * node.level + (node.module or ""),
-                                                      module.__package__ or "")
+            source_name = importlib.util.resolve_name("." * node.level + (node.module or ""), module.__package__ or "")
             for alias in node.names:
                 value = vars(module).get(alias.asname or alias.name)
                 if isinstance(value, ModuleType):
@@ -114,7 +115,6 @@ def _imported_module_names(module: ModuleType) -> tuple[str, ...]:
                     names.add(value.py_func.__module__)
                 elif value is not None and not isinstance(value, (type, FunctionType)):
                     names.add(source_name)
-    return tuple(sorted(
-        name for name in names
-        if (name == PACKAGE or name.startswith(PACKAGE + ".")) and name in sys.modules
-    ))
+    return tuple(
+        sorted(name for name in names if (name == PACKAGE or name.startswith(PACKAGE + ".")) and name in sys.modules)
+    )

@@ -129,7 +129,8 @@ def prepare(
     run = align(log, profile)
     if run.n_steps < 2:
         raise LogscanError(
-            "too few samples on the analysis grid to filter", path=path,
+            "too few samples on the analysis grid to filter",
+            path=path,
             hint="check the profile's channels and rate_hz against `logscan inspect`",
         )
     wanted = needs(run) if callable(needs) else needs
@@ -140,8 +141,10 @@ def prepare(
         prepared.warnings.append(f"partial read: {log.source.partial_reason}")
     for name, parts in wanted.filters.items():
         if name not in FILTERS:
-            raise ProfileError(f"a detector needs the filter {name!r}, which this logscan does not have",
-                               hint=f"known filters: {', '.join(FILTERS)}")
+            raise ProfileError(
+                f"a detector needs the filter {name!r}, which this logscan does not have",
+                hint=f"known filters: {', '.join(FILTERS)}",
+            )
         step("filtering")
         prepared.traces[name] = FILTERS[name](model, run, frozenset(parts))
     ekf = prepared.trace
@@ -150,8 +153,7 @@ def prepare(
     return prepared
 
 
-def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0,
-           progress: Progress | None = None):
+def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, progress: Progress | None = None):
     """Run the detectors on a prepared log; score their alarms when the log carries ground truth."""
     from logscan.analysis import Analysis
     from logscan.results import events_from_truth
@@ -161,17 +163,26 @@ def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0,
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     for detector in detectors:
         step(f"detector {detector.name}")
-        analysis.results.append(detector.run(
-            prepared.run, prepared.trace, model=prepared.model, log_name=prepared.path,
-            traces=prepared.traces,
-        ))
+        analysis.results.append(
+            detector.run(
+                prepared.run,
+                prepared.trace,
+                model=prepared.model,
+                log_name=prepared.path,
+                traces=prepared.traces,
+            )
+        )
     truth = prepared.log.truth
     if truth is not None:
         run = prepared.run
         analysis.events = events_from_truth(truth.get("events", []), path=prepared.path)
         analysis.scores = score_by_detector(
-            analysis.events, analysis.alarms, duration_s=float(run.t[-1] - run.t[0]),
-            grace_s=grace_s, detectors=[d.name for d in detectors], log=prepared.path,
+            analysis.events,
+            analysis.alarms,
+            duration_s=float(run.t[-1] - run.t[0]),
+            grace_s=grace_s,
+            detectors=[d.name for d in detectors],
+            log=prepared.path,
         )
     return analysis
 
@@ -188,6 +199,5 @@ def analyze_log(
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect."""
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
-    prepared = prepare(path, loaded, needs_of(detectors), use_header_stamp=use_header_stamp,
-                       progress=progress)
+    prepared = prepare(path, loaded, needs_of(detectors), use_header_stamp=use_header_stamp, progress=progress)
     return detect(prepared, detectors, grace_s=grace_s, progress=progress)

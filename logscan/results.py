@@ -19,6 +19,7 @@ from logscan.errors import InputError
 
 # --- the JSON policy ------------------------------------------------------------------------------
 
+
 def jsonable(value: Any) -> Any:
     """numpy and non-finite floats -> strict-JSON values (NaN and +-inf -> None, arrays -> lists)."""
     if value is None or isinstance(value, (str, bool)):
@@ -51,6 +52,7 @@ def series_summary(values: np.ndarray) -> dict:
 
 
 # --- alarms ---------------------------------------------------------------------------------------
+
 
 @dataclass
 class AlarmInterval:
@@ -116,8 +118,16 @@ class DetectorResult:
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
 
-    def add_statistic(self, t: np.ndarray, name: str, statistic: np.ndarray, upper=None, lower=None,
-                      check: str | None = None, **alarm_options) -> list[AlarmInterval]:
+    def add_statistic(
+        self,
+        t: np.ndarray,
+        name: str,
+        statistic: np.ndarray,
+        upper=None,
+        lower=None,
+        check: str | None = None,
+        **alarm_options,
+    ) -> list[AlarmInterval]:
         """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
         ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...).
         ``check``: the check this statistic is scored with, when not its own name."""
@@ -145,7 +155,7 @@ class DetectorResult:
         if signal in self.checks:
             return self.checks[signal]
         own = f"{self.detector}."
-        return signal[len(own):] if signal.startswith(own) else signal
+        return signal[len(own) :] if signal.startswith(own) else signal
 
     def to_dict(self, summary_only: bool = True) -> dict:
         """JSON-ready view; summary_only=False adds every series as a list (NaN -> null)."""
@@ -160,14 +170,14 @@ class DetectorResult:
         if not summary_only:
             out["series_values"] = {name: jsonable(v) for name, v in self.series.items()}
             out["thresholds"] = {
-                name: {"upper": jsonable(b.upper), "lower": jsonable(b.lower)}
-                for name, b in self.thresholds.items()
+                name: {"upper": jsonable(b.upper), "lower": jsonable(b.lower)} for name, b in self.thresholds.items()
             }
             out["extras"] = {name: jsonable(v) for name, v in self.extras.items()}
         return out
 
 
 # --- ground truth ---------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class FaultEvent:
@@ -195,8 +205,14 @@ class FaultEvent:
 
     def to_truth(self) -> dict:
         """The record stored in a log's ground truth."""
-        return {"kind": self.kind, "target": self.target, "start": self.t_start, "end": self.t_end,
-                "magnitude": self.magnitude, "channels": list(self.channels)}
+        return {
+            "kind": self.kind,
+            "target": self.target,
+            "start": self.t_start,
+            "end": self.t_end,
+            "magnitude": self.magnitude,
+            "channels": list(self.channels),
+        }
 
 
 def _optional_float(value: Any) -> float | None:
@@ -230,9 +246,14 @@ def events_from_truth(items: Iterable[Mapping], *, path: str | None = None) -> l
                 hint="t_start must be finite and t_end >= t_start",
             )
         channels = item.get("channels") or ()
-        events.append(FaultEvent(
-            start, end, str(item.get("kind", "")), str(item.get("target", "")),
-            magnitude=_optional_float(item.get("magnitude")),
-            channels=tuple(str(c) for c in channels) if isinstance(channels, (list, tuple)) else (),
-        ))
+        events.append(
+            FaultEvent(
+                start,
+                end,
+                str(item.get("kind", "")),
+                str(item.get("target", "")),
+                magnitude=_optional_float(item.get("magnitude")),
+                channels=tuple(str(c) for c in channels) if isinstance(channels, (list, tuple)) else (),
+            )
+        )
     return events

@@ -67,7 +67,8 @@ def read_tables(path: str | os.PathLike) -> dict[str, Any]:
     if document.get("schema_version") != TABLES_VERSION:
         raise InputError(
             f"tables schema version {document.get('schema_version')!r}, this logscan reads {TABLES_VERSION}",
-            path=str(path), hint="retrain with `logscan train`",
+            path=str(path),
+            hint="retrain with `logscan train`",
         )
     registry = default_registry()
     trained = {}

@@ -30,26 +30,68 @@ class Sample:
 
 
 SAMPLES = (
-    Sample("quad_healthy.mcap", "quadcopter", (), 1, 60.0,
-           about="hover, then a figure-eight; no fault"),
-    Sample("quad_imu_bias.mcap", "quadcopter", ("imu-bias:accel.x:30:40:1.0",), 2, 60.0,
-           about="+1.0 m/s^2 step on accelerometer x (Kalman-gain-norm paper)"),
-    Sample("quad_imu_bitflip.mcap", "quadcopter", ("imu-bitflip:accel.x:30:31.2:1.0",), 3, 60.0,
-           about="1.2 s burst of float32 high-order bit flips on accelerometer x (encoded-EKF paper)"),
-    Sample("quad_motor_offset.mcap", "quadcopter", ("motor-offset:motor1:30:40:-0.10",), 4, 60.0,
-           about="-10 % thrust on motor 1"),
-    Sample("quad_cov_corruption.mcap", "quadcopter", ("cov-corruption:all:30:31:100",), 5, 60.0,
-           about="logged on-board variances x100 for 1 s"),
-    Sample("sbw_healthy.mcap", "steer_by_wire", (), 6, 60.0,
-           about="lane changes at 10 m/s; no fault"),
-    Sample("sbw_yaw_rate_bitflip.mcap", "steer_by_wire", ("bitflip:yaw_rate:30:31.2:1.0",), 7, 60.0,
-           about="1.2 s burst of bit flips on the yaw-rate sensor"),
-    Sample("jackal_healthy.mcap", "dc_motor", (), 8, 180.0, glitches=2.0,
-           about="PI speed control through the modes 0.4 .. 1.9 m/s (20 s each); no fault, "
-           "~2 healthy one- or two-sample glitches per minute on the speed sensors (truth "
-           "`transients`)"),
-    Sample("quad_healthy.csv", "quadcopter", (), 9, 60.0, fmt="csv",
-           about="wide CSV + quad_healthy.truth.json + quad_healthy.profile.toml"),
+    Sample("quad_healthy.mcap", "quadcopter", (), 1, 60.0, about="hover, then a figure-eight; no fault"),
+    Sample(
+        "quad_imu_bias.mcap",
+        "quadcopter",
+        ("imu-bias:accel.x:30:40:1.0",),
+        2,
+        60.0,
+        about="+1.0 m/s^2 step on accelerometer x (Kalman-gain-norm paper)",
+    ),
+    Sample(
+        "quad_imu_bitflip.mcap",
+        "quadcopter",
+        ("imu-bitflip:accel.x:30:31.2:1.0",),
+        3,
+        60.0,
+        about="1.2 s burst of float32 high-order bit flips on accelerometer x (encoded-EKF paper)",
+    ),
+    Sample(
+        "quad_motor_offset.mcap",
+        "quadcopter",
+        ("motor-offset:motor1:30:40:-0.10",),
+        4,
+        60.0,
+        about="-10 % thrust on motor 1",
+    ),
+    Sample(
+        "quad_cov_corruption.mcap",
+        "quadcopter",
+        ("cov-corruption:all:30:31:100",),
+        5,
+        60.0,
+        about="logged on-board variances x100 for 1 s",
+    ),
+    Sample("sbw_healthy.mcap", "steer_by_wire", (), 6, 60.0, about="lane changes at 10 m/s; no fault"),
+    Sample(
+        "sbw_yaw_rate_bitflip.mcap",
+        "steer_by_wire",
+        ("bitflip:yaw_rate:30:31.2:1.0",),
+        7,
+        60.0,
+        about="1.2 s burst of bit flips on the yaw-rate sensor",
+    ),
+    Sample(
+        "jackal_healthy.mcap",
+        "dc_motor",
+        (),
+        8,
+        180.0,
+        glitches=2.0,
+        about="PI speed control through the modes 0.4 .. 1.9 m/s (20 s each); no fault, "
+        "~2 healthy one- or two-sample glitches per minute on the speed sensors (truth "
+        "`transients`)",
+    ),
+    Sample(
+        "quad_healthy.csv",
+        "quadcopter",
+        (),
+        9,
+        60.0,
+        fmt="csv",
+        about="wide CSV + quad_healthy.truth.json + quad_healthy.profile.toml",
+    ),
 )
 
 
@@ -57,8 +99,13 @@ def generate(sample: Sample, out_dir: Path) -> list[Path]:
     """Write one sample log (and its sidecars) into ``out_dir``."""
     from logscan.simulate import parse_fault, simulate, write_simulation
 
-    sim = simulate(sample.model, [parse_fault(f) for f in sample.faults],
-                   duration=sample.duration, seed=sample.seed, glitches_per_min=sample.glitches)
+    sim = simulate(
+        sample.model,
+        [parse_fault(f) for f in sample.faults],
+        duration=sample.duration,
+        seed=sample.seed,
+        glitches_per_min=sample.glitches,
+    )
     return write_simulation(sim, out_dir / sample.name, sample.fmt)
 
 
@@ -72,10 +119,13 @@ def readme_table() -> str:
     from logscan.simulate.faults import ALIASES
 
     for s in SAMPLES:
-        faults = "; ".join(
-            f"{ALIASES.get(p.kind, (p.kind,))[0]} {p.target} {p.start:g}-{p.end:g} {p.magnitude:g}"
-            for p in (parse_fault(f) for f in s.faults)
-        ) or "none"
+        faults = (
+            "; ".join(
+                f"{ALIASES.get(p.kind, (p.kind,))[0]} {p.target} {p.start:g}-{p.end:g} {p.magnitude:g}"
+                for p in (parse_fault(f) for f in s.faults)
+            )
+            or "none"
+        )
         lines.append(f"| `{s.name}` | {s.model} | {s.duration:g} s | {s.seed} | {faults} | {s.about} |")
     return "\n".join(lines) + "\n"
 

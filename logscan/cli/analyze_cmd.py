@@ -28,19 +28,29 @@ from logscan.errors import ExitCode
 @click.argument("log_paths", metavar="LOG...", nargs=-1, required=True, type=click.Path(path_type=str))
 @profile_option
 @click.option(
-    "--output", "-o", "output_path", type=click.Path(path_type=str), default=None,
+    "--output",
+    "-o",
+    "output_path",
+    type=click.Path(path_type=str),
+    default=None,
     help="HTML report file (one log) or directory (several logs). "
     "Default: <log name>.report.html in the current directory.",
 )
 @json_option
 @click.option("--no-report", is_flag=True, default=False, help="Write no HTML report.")
 @click.option(
-    "--plotlyjs", "plotlyjs_dir", type=click.Path(file_okay=False, path_type=str), default=None,
+    "--plotlyjs",
+    "plotlyjs_dir",
+    type=click.Path(file_okay=False, path_type=str),
+    default=None,
     help="Write plotly.min.js once into this directory and reference it from the reports "
     "(small reports for fleets) instead of embedding it in each report.",
 )
 @click.option(
-    "--detector", "-d", "detector_names", multiple=True,
+    "--detector",
+    "-d",
+    "detector_names",
+    multiple=True,
     help="Run only this detector (repeatable). Default: those the profile enables.",
 )
 @click.option("--exit-zero", is_flag=True, default=False, help="Exit 0 even when there are alarms.")
@@ -77,10 +87,10 @@ def analyze(
     logs = expand_logs(log_paths)
     reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
     progress = show_progress(quiet)
-    task = AnalyzeTask(profile_path, names, use_header_stamp, plotlyjs_dir,
-                       steps=progress and len(logs) == 1)
-    outcomes = run_many(list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing",
-                        isolate=len(logs) > 1)
+    task = AnalyzeTask(profile_path, names, use_header_stamp, plotlyjs_dir, steps=progress and len(logs) == 1)
+    outcomes = run_many(
+        list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing", isolate=len(logs) > 1
+    )
     summaries, failures = [], []
     for outcome in outcomes:
         if isinstance(outcome, LogFailure):
@@ -91,17 +101,24 @@ def analyze(
         # with --json - the JSON owns stdout; the human summary goes to stderr
         click.echo(outcome.text, err=json_path == "-")
 
-    code = ExitCode.BAD_INPUT if failures else (
-        ExitCode.ALARMS if any(s["n_alarms"] for s in summaries) else ExitCode.OK)
+    code = (
+        ExitCode.BAD_INPUT if failures else (ExitCode.ALARMS if any(s["n_alarms"] for s in summaries) else ExitCode.OK)
+    )
     if exit_zero and code == ExitCode.ALARMS:
         code = ExitCode.OK
     if json_path:
         from logscan import __version__
         from logscan.artifacts import write_json
 
-        write_json(json_path, {
-            "logscan_version": __version__, "exit_code": int(code), "logs": summaries, "errors": failures,
-        })
+        write_json(
+            json_path,
+            {
+                "logscan_version": __version__,
+                "exit_code": int(code),
+                "logs": summaries,
+                "errors": failures,
+            },
+        )
     sys.exit(code)
 
 
@@ -133,8 +150,13 @@ class AnalyzeTask:
             if self.steps:
                 click.echo(f"logscan: {log_path}: {message}...", err=True)
 
-        analysis = analyze_log(log_path, self.profile_path, use_header_stamp=self.use_header_stamp,
-                               detector_names=self.detector_names, progress=step)
+        analysis = analyze_log(
+            log_path,
+            self.profile_path,
+            use_header_stamp=self.use_header_stamp,
+            detector_names=self.detector_names,
+            progress=step,
+        )
         if report_path is not None:
             step("writing report")
             render_report(analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed")

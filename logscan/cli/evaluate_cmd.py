@@ -28,11 +28,18 @@ from logscan.scoring import DEFAULT_GRACE_S
 @click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
 @json_option
 @click.option(
-    "--grace", "grace_s", type=click.FloatRange(min=0.0), default=DEFAULT_GRACE_S, show_default=True,
+    "--grace",
+    "grace_s",
+    type=click.FloatRange(min=0.0),
+    default=DEFAULT_GRACE_S,
+    show_default=True,
     help="Seconds after a fault's end during which an alarm still counts as detecting it.",
 )
 @click.option(
-    "--detector", "-d", "detector_names", multiple=True,
+    "--detector",
+    "-d",
+    "detector_names",
+    multiple=True,
     help="Evaluate only this detector (repeatable). Default: those each log's profile enables.",
 )
 @profile_option
@@ -64,8 +71,13 @@ def evaluate(
 
     logs = expand_logs(log_paths)
     evaluation = evaluate_logs(
-        logs, profile_path=profile_path, detector_names=list(detector_names) or None,
-        grace_s=grace_s, use_header_stamp=use_header_stamp, jobs=jobs, progress=show_progress(quiet),
+        logs,
+        profile_path=profile_path,
+        detector_names=list(detector_names) or None,
+        grace_s=grace_s,
+        use_header_stamp=use_header_stamp,
+        jobs=jobs,
+        progress=show_progress(quiet),
     )
     if json_path:
         from logscan import __version__

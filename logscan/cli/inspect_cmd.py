@@ -19,10 +19,17 @@ from logscan.readers import read_log
     "  logscan inspect csv_dir/ --json facts.json"
 )
 @click.argument("log_path", metavar="LOG", type=click.Path(path_type=str))
-@click.option("--channels", "show_channels", is_flag=True,
-              help="List every numeric channel with samples, rate, NaNs and range.")
-@click.option("--topic", "-t", "topics", multiple=True, metavar="NAME",
-              help="Read only this topic or channel (repeatable). Default: all.")
+@click.option(
+    "--channels", "show_channels", is_flag=True, help="List every numeric channel with samples, rate, NaNs and range."
+)
+@click.option(
+    "--topic",
+    "-t",
+    "topics",
+    multiple=True,
+    metavar="NAME",
+    help="Read only this topic or channel (repeatable). Default: all.",
+)
 @click.option("--full", is_flag=True, help="Do not truncate field lists, skips and warnings.")
 @json_option
 @header_stamp_option

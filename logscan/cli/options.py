@@ -12,8 +12,7 @@ profile_option = click.option(
     "profile_path",
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
-    help="Profile (TOML) mapping log channels to a model and detectors. "
-    "Default: the profile embedded in the log.",
+    help="Profile (TOML) mapping log channels to a model and detectors. Default: the profile embedded in the log.",
 )
 
 json_option = click.option(
@@ -41,9 +40,7 @@ header_stamp_option = click.option(
     help="Time MCAP messages by their header.stamp where present instead of log_time.",
 )
 
-quiet_option = click.option(
-    "--quiet", "-q", is_flag=True, default=False, help="No progress output on stderr."
-)
+quiet_option = click.option("--quiet", "-q", is_flag=True, default=False, help="No progress output on stderr.")
 
 seed_option = click.option(
     "--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes)."

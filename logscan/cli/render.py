@@ -28,11 +28,14 @@ _ARRAY_RE = re.compile(r"^(?P<base>.*)\[(?P<index>\d+)\]$")
 
 # --- analyze --------------------------------------------------------------------------------------
 
+
 def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str:
     """One screen per log: verdict, the first alarms, scores against ground truth."""
-    lines = [f"{analysis.path}: {analysis.verdict()}  "
-             f"({analysis.log.duration_s:.1f} s, model {analysis.model.name}, "
-             f"detectors {', '.join(r.detector for r in analysis.results)})"]
+    lines = [
+        f"{analysis.path}: {analysis.verdict()}  "
+        f"({analysis.log.duration_s:.1f} s, model {analysis.model.name}, "
+        f"detectors {', '.join(r.detector for r in analysis.results)})"
+    ]
     alarms = sorted(analysis.alarms, key=lambda a: a.start)
     if alarms:
         lines.append(f"  {'detector':<12} {'signal':<16} {'start s':>9} {'end s':>9} {'peak/thr':>9}")
@@ -43,8 +46,10 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             lines.append(f"  ... {len(alarms) - max_rows} more (see the report / --json)")
     for name, score in analysis.scores.items():
         latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
-        lines.append(f"  truth: {name}: detected {score.tp}/{score.tp + score.fn} events, "
-                     f"{score.fp} false alarm(s), mean latency {latency}")
+        lines.append(
+            f"  truth: {name}: detected {score.tp}/{score.tp + score.fn} events, "
+            f"{score.fp} false alarm(s), mean latency {latency}"
+        )
     for warning in analysis.warnings[:5]:
         lines.append(f"  warning: {warning}")
     if report_path:
@@ -54,14 +59,17 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
 
 # --- evaluate -------------------------------------------------------------------------------------
 
+
 def _num(value: float | None, fmt: str = "{:.2f}") -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else fmt.format(value)
 
 
 def render_scores(evaluation: Evaluation) -> str:
     """Per detector and per check: counts, precision/recall/F1, latency, false alarms per hour."""
-    header = (f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
-              f"{'prec':>5} {'recall':>6} {'F1':>5} {'lat mean':>8} {'lat max':>8} {'FA/h healthy':>12}")
+    header = (
+        f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
+        f"{'prec':>5} {'recall':>6} {'F1':>5} {'lat mean':>8} {'lat max':>8} {'FA/h healthy':>12}"
+    )
     lines = [header, "-" * len(header)]
     for key in evaluation.keys():
         s = evaluation.aggregate(key)
@@ -112,8 +120,10 @@ def render_evaluation(evaluation: Evaluation) -> str:
         parts += ["", render_scores(evaluation), "", render_kinds(evaluation)]
     if evaluation.skipped:
         parts.append("")
-        parts.append(f"skipped {len(evaluation.skipped)} log(s) without ground truth: "
-                     + ", ".join(Path(p).name for p in evaluation.skipped))
+        parts.append(
+            f"skipped {len(evaluation.skipped)} log(s) without ground truth: "
+            + ", ".join(Path(p).name for p in evaluation.skipped)
+        )
     if evaluation.failures:
         parts.append("")
         parts.append(f"{len(evaluation.failures)} log(s) could not be evaluated (errors on stderr)")
@@ -121,6 +131,7 @@ def render_evaluation(evaluation: Evaluation) -> str:
 
 
 # --- detectors ------------------------------------------------------------------------------------
+
 
 def render_detectors(entries: list[dict], parameters: bool = True) -> str:
     """Plain-text table of registry entries (``DetectorEntry.to_dict()`` rows), then each
@@ -157,6 +168,7 @@ def _parameter_lines(rows: list[dict]) -> list[str]:
 
 # --- inspect --------------------------------------------------------------------------------------
 
+
 def compact_fields(fields: list[str]) -> list[str]:
     """Runs of array elements ``q[0], q[1], q[2]`` shown as ``q[0..2]``; other names unchanged."""
     out: list[str] = []
@@ -164,8 +176,7 @@ def compact_fields(fields: list[str]) -> list[str]:
 
     def flush() -> None:
         if run_base is not None:
-            out.append(f"{run_base}[{run_first}]" if run_first == run_last
-                       else f"{run_base}[{run_first}..{run_last}]")
+            out.append(f"{run_base}[{run_first}]" if run_first == run_last else f"{run_base}[{run_first}..{run_last}]")
 
     for name in fields:
         match = _ARRAY_RE.match(name)
@@ -187,8 +198,9 @@ def _wrap_fields(fields: list[str], indent: str, width: int, full: bool) -> list
     """Fields as wrapped lines; beyond ``_FIELD_LINES`` lines a count of the rest (unless full)."""
     shown = compact_fields(fields)
     prefix = indent + "fields: "
-    lines = textwrap.wrap(", ".join(shown), width=max(40, width - len(prefix)),
-                          break_long_words=False, break_on_hyphens=False)
+    lines = textwrap.wrap(
+        ", ".join(shown), width=max(40, width - len(prefix)), break_long_words=False, break_on_hyphens=False
+    )
     if not full and len(lines) > _FIELD_LINES:
         kept = lines[:_FIELD_LINES]
         listed = " ".join(kept).count(",")  # each line ends "name," while more follow
@@ -215,28 +227,27 @@ def _limited(items: list[str], full: bool, what: str) -> list[str]:
     return items[:_LIST_LIMIT] + [f"... {len(items) - _LIST_LIMIT} more {what} (--full lists all)"]
 
 
-def render_inspect(facts: dict, show_channels: bool, *, full: bool = False,
-                   width: int | None = None) -> str:
+def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, width: int | None = None) -> str:
     """Plain-text view of ``inspect_facts`` / ``Log.summary()`` for the terminal."""
     width = width or max(60, min(shutil.get_terminal_size((100, 24)).columns, 160))
     metadata = facts.get("metadata", {})
     lines = [
         f"file:      {facts['file']}",
-        f"format:    {facts['format']}  (time from {facts['time_source']}, "
-        f"source unit {facts['time_unit']})",
+        f"format:    {facts['format']}  (time from {facts['time_source']}, source unit {facts['time_unit']})",
     ]
     by_rule: dict[str, list[str]] = {}
     for label, column in metadata.get("csv.time_columns", {}).items():
         by_rule.setdefault(column, []).append(label)
     for column, labels in by_rule.items():
-        who = labels[0] if len(labels) == 1 else (
-            f"{len(labels)} files ({', '.join(labels[:3])}{', ...' if len(labels) > 3 else ''})"
+        who = (
+            labels[0]
+            if len(labels) == 1
+            else (f"{len(labels)} files ({', '.join(labels[:3])}{', ...' if len(labels) > 3 else ''})")
         )
         lines.append(f"time col:  {who}: {column}")
     if facts["start_ns"] is not None:
         lines.append(
-            f"time span: {_fmt_time(facts['start_ns'])} .. {_fmt_time(facts['end_ns'])} "
-            f"({facts['duration_s']:.3f} s)"
+            f"time span: {_fmt_time(facts['start_ns'])} .. {_fmt_time(facts['end_ns'])} ({facts['duration_s']:.3f} s)"
         )
     else:
         lines.append("time span: (no messages)")
@@ -256,27 +267,26 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False,
         lines.append(f"  {'topic':<{name_width}}  {'messages':>9}  {'rate Hz':>9}  encoding / schema")
         for name, info in topics.items():
             kind = " / ".join(x for x in (info["encoding"], info["schema"]) if x)
-            lines.append(
-                f"  {name:<{name_width}}  {info['message_count']:>9}  {_rate(info['rate_hz'])}  {kind}"
-            )
+            lines.append(f"  {name:<{name_width}}  {info['message_count']:>9}  {_rate(info['rate_hz'])}  {kind}")
             if info["fields"]:
                 lines.extend(_wrap_fields(info["fields"], "    ", width, full))
 
     channels = facts["channels"]
     with_nan = sum(1 for info in channels.values() if info.get("nonfinite"))
-    lines += ["", f"{len(channels)} numeric channel(s)"
-              + (f", {with_nan} with NaN/inf values" if with_nan else "")
-              + ("" if show_channels or not channels else " (--channels lists them)")]
+    lines += [
+        "",
+        f"{len(channels)} numeric channel(s)"
+        + (f", {with_nan} with NaN/inf values" if with_nan else "")
+        + ("" if show_channels or not channels else " (--channels lists them)"),
+    ]
     if show_channels and channels:
         name_width = min(max(len(name) for name in channels), 60)
-        lines.append(f"  {'channel':<{name_width}}  {'samples':>9}  {'rate Hz':>9}  "
-                     f"{'NaN/inf':>7}  range")
+        lines.append(f"  {'channel':<{name_width}}  {'samples':>9}  {'rate Hz':>9}  {'NaN/inf':>7}  range")
         for name, info in channels.items():
             low, high = info.get("min"), info.get("max")
             span = "-" if low is None else f"{low:.6g} .. {high:.6g}"
             rate = _rate(info.get("rate_hz", 0.0))
-            lines.append(f"  {name:<{name_width}}  {info['samples']:>9}  {rate}  "
-                         f"{info.get('nonfinite', 0):>7}  {span}")
+            lines.append(f"  {name:<{name_width}}  {info['samples']:>9}  {rate}  {info.get('nonfinite', 0):>7}  {span}")
     if facts["skipped"]:
         total_skipped = sum(item["count"] for item in facts["skipped"])
         lines += ["", f"skipped ({len(facts['skipped'])} kind(s), {total_skipped} item(s)):"]

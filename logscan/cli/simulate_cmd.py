@@ -27,33 +27,78 @@ _FAULT_HELP = (
 )
 @click.argument("model_name", metavar="MODEL")
 @click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
-@click.option("--at", "at", type=float, default=None,
-              help="Start time (s) of the faults given by KIND alone. Default: half the log.")
-@click.option("--fault-duration", "fault_duration", type=float, default=None,
-              help="Length (s) of those faults. Default: per kind (bias 10 s, bit flips 1.2 s, ...).")
-@click.option("--magnitude", type=float, default=None,
-              help="Magnitude of those faults (unit per kind, e.g. m/s^2 for an IMU bias).")
-@click.option("--target", default=None,
-              help="Target of those faults: a sensor (accel.x, /imu/gyro.y), an actuator (motor1) "
-              "or an on-board state (vx, all).")
+@click.option(
+    "--at",
+    "at",
+    type=float,
+    default=None,
+    help="Start time (s) of the faults given by KIND alone. Default: half the log.",
+)
+@click.option(
+    "--fault-duration",
+    "fault_duration",
+    type=float,
+    default=None,
+    help="Length (s) of those faults. Default: per kind (bias 10 s, bit flips 1.2 s, ...).",
+)
+@click.option(
+    "--magnitude",
+    type=float,
+    default=None,
+    help="Magnitude of those faults (unit per kind, e.g. m/s^2 for an IMU bias).",
+)
+@click.option(
+    "--target",
+    default=None,
+    help="Target of those faults: a sensor (accel.x, /imu/gyro.y), an actuator (motor1) "
+    "or an on-board state (vx, all).",
+)
 @click.option("--duration", type=float, default=60.0, show_default=True, help="Log length (s).")
-@click.option("--rate", "rate_hz", type=float, default=None,
-              help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20.")
-@click.option("--format", "fmt", type=click.Choice(["mcap-json", "mcap-ros2", "csv"]),
-              default=None,
-              help="MCAP (truth + profile embedded) or CSV (+ <log>.truth.json, <log>.profile.toml). "
-              "Default: csv for an output ending in .csv, else mcap-json.")
-@click.option("--aggressive", is_flag=True, default=False,
-              help="Faster, larger manoeuvres (for false-alarm testing).")
-@click.option("--glitches", "glitches_per_min", type=float, default=0.0, show_default=True,
-              metavar="PER_MIN",
-              help="Healthy transients per minute: 1-2 sample spikes on a sensor (the redundant "
-              "speed sensors for dc_motor), listed in the truth as 'transients', not as faults.")
+@click.option(
+    "--rate",
+    "rate_hz",
+    type=float,
+    default=None,
+    help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20.",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["mcap-json", "mcap-ros2", "csv"]),
+    default=None,
+    help="MCAP (truth + profile embedded) or CSV (+ <log>.truth.json, <log>.profile.toml). "
+    "Default: csv for an output ending in .csv, else mcap-json.",
+)
+@click.option("--aggressive", is_flag=True, default=False, help="Faster, larger manoeuvres (for false-alarm testing).")
+@click.option(
+    "--glitches",
+    "glitches_per_min",
+    type=float,
+    default=0.0,
+    show_default=True,
+    metavar="PER_MIN",
+    help="Healthy transients per minute: 1-2 sample spikes on a sensor (the redundant "
+    "speed sensors for dc_motor), listed in the truth as 'transients', not as faults.",
+)
 @seed_option
 @quiet_option
 @output_option
-def simulate(model_name, faults, at, fault_duration, magnitude, target, duration, rate_hz, fmt,
-             aggressive, glitches_per_min, seed, quiet, output_path) -> None:
+def simulate(
+    model_name,
+    faults,
+    at,
+    fault_duration,
+    magnitude,
+    target,
+    duration,
+    rate_hz,
+    fmt,
+    aggressive,
+    glitches_per_min,
+    seed,
+    quiet,
+    output_path,
+) -> None:
     """Simulate MODEL in closed loop with injected faults and write the log.
 
     MODEL is quadcopter, steer_by_wire or dc_motor. The log holds commands (/cmd), sensors, the
@@ -82,15 +127,23 @@ def simulate(model_name, faults, at, fault_duration, magnitude, target, duration
     progress = show_progress(quiet)
     if progress:
         click.echo(f"simulating {model_name} for {duration:g} s ...", err=True)
-    sim = run_simulation(model_name, specs, duration=duration, seed=seed, rate_hz=rate_hz,
-                         aggressive=aggressive, glitches_per_min=glitches_per_min)
+    sim = run_simulation(
+        model_name,
+        specs,
+        duration=duration,
+        seed=seed,
+        rate_hz=rate_hz,
+        aggressive=aggressive,
+        glitches_per_min=glitches_per_min,
+    )
     if progress:
-        click.echo(f"simulated {sim.n_steps} steps in {sim.elapsed_s:.2f} s; writing {output_path}",
-                   err=True)
+        click.echo(f"simulated {sim.n_steps} steps in {sim.elapsed_s:.2f} s; writing {output_path}", err=True)
     written = write_simulation(sim, output_path, fmt)
     if not quiet:
         for event in sim.events:
-            click.echo(f"fault {event.kind} on {event.target}: {event.t_start:g} .. {event.t_end:g} s, "
-                       f"magnitude {event.magnitude:g}", err=True)
+            click.echo(
+                f"fault {event.kind} on {event.target}: {event.t_start:g} .. {event.t_end:g} s, "
+                f"magnitude {event.magnitude:g}",
+                err=True,
+            )
         click.echo("wrote " + ", ".join(str(p) for p in written), err=True)
-

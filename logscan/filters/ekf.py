@@ -81,12 +81,47 @@ def _store(k, x, P, xs, P_diag, P_full, store_P):
 # the kernel
 # =============================================================================================
 @njit(cache=True, error_model="numpy")
-def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_offsets,
-            group_sizes, R_all, range_lo, range_hi, wrap, direct_idx, direct_gain, dt,
-            seed_at_start,
-            x_prior, x_post, P_prior_diag, P_post_diag, P_prior_full, P_post_full,
-            y_out, S_out, S_diag_out, K_out, nis, nis_group, m_k, gain_norm,
-            updated, rejected, seeded, diverged, input_held):
+def ekf_run(
+    model_id,
+    p,
+    x0,
+    P0,
+    Q,
+    u,
+    u_default,
+    z,
+    fresh,
+    group_ids,
+    group_offsets,
+    group_sizes,
+    R_all,
+    range_lo,
+    range_hi,
+    wrap,
+    direct_idx,
+    direct_gain,
+    dt,
+    seed_at_start,
+    x_prior,
+    x_post,
+    P_prior_diag,
+    P_post_diag,
+    P_prior_full,
+    P_post_full,
+    y_out,
+    S_out,
+    S_diag_out,
+    K_out,
+    nis,
+    nis_group,
+    m_k,
+    gain_norm,
+    updated,
+    rejected,
+    seeded,
+    diverged,
+    input_held,
+):
     """Filter N steps; every output array is preallocated by the caller (NaN / False filled,
     except S_out and K_out, which the kernel fills step by step: NaN where not updated).
 
@@ -247,8 +282,7 @@ def ekf_run(model_id, p, x0, P0, Q, u, u_default, z, fresh, group_ids, group_off
                     x_upd[i] = t  # x_post = x_prior + K y~
                 # P_post = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
                 m_cnt[:] = m
-                joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT,
-                        D, P_upd)
+                joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT, D, P_upd)
                 if all_finite(x_upd) and all_finite2(P_upd):
                     for i in range(n):
                         x[i] = x_upd[i]
@@ -326,9 +360,7 @@ def _square(name: str, value, size: int) -> np.ndarray:
     if M.ndim == 1 and M.size == size:
         M = np.diag(M)
     if M.shape != (size, size):
-        raise ModelError(
-            f"{name} must be {size} x {size} (or a diagonal of {size}), got shape {M.shape}"
-        )
+        raise ModelError(f"{name} must be {size} x {size} (or a diagonal of {size}), got shape {M.shape}")
     if not np.all(np.isfinite(M)):
         raise ModelError(f"{name} has non-finite entries")
     return M
@@ -373,7 +405,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
                 hint="list one channel per model output in the profile",
             )
         o = offsets[g]
-        z[:, o:o + spec.size] = zg
+        z[:, o : o + spec.size] = zg
         fresh[:, g] = np.asarray(grp.fresh, dtype=bool)
         if name in R:
             given = np.square(R[name]) if np.ndim(R[name]) == 1 else R[name]  # std or matrix
@@ -382,7 +414,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
             Rg = np.diag(np.square(np.broadcast_to(np.asarray(grp.noise_std, float), (spec.size,))))
         else:
             Rg = model.default_R(name)
-        R_all[o:o + spec.size, o:o + spec.size] = Rg
+        R_all[o : o + spec.size, o : o + spec.size] = Rg
     unknown_R = sorted(set(R) - set(names))
     if unknown_R:
         raise ModelError(f"R given for group(s) not in the run: {', '.join(unknown_R)}")
@@ -398,21 +430,31 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     return KernelInputs(
         model_id=int(model.model_id),
         p=np.ascontiguousarray(model.param_vector(run.dt), dtype=np.float64),
-        x0=np.ascontiguousarray(x0), P0=np.ascontiguousarray(P0), Q=np.ascontiguousarray(Q),
-        u=u, u_default=u_default, z=z, fresh=fresh, group_names=names,
+        x0=np.ascontiguousarray(x0),
+        P0=np.ascontiguousarray(P0),
+        Q=np.ascontiguousarray(Q),
+        u=u,
+        u_default=u_default,
+        z=z,
+        fresh=fresh,
+        group_names=names,
         group_ids=np.array([s.group_id for s in specs], dtype=np.int64),
-        group_offsets=offsets, group_sizes=sizes, R_all=R_all,
+        group_offsets=offsets,
+        group_sizes=sizes,
+        R_all=R_all,
         range_lo=np.concatenate([np.asarray(s.range_lo, float) for s in specs]),
         range_hi=np.concatenate([np.asarray(s.range_hi, float) for s in specs]),
         wrap=np.concatenate([s.wrap_mask() for s in specs]),
         direct_idx=np.concatenate([d[0] for d in direct]),
         direct_gain=np.concatenate([d[1] for d in direct]),
-        dt=float(run.dt), seed_at_start=seed,
+        dt=float(run.dt),
+        seed_at_start=seed,
     )
 
 
-def run_ekf(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, full_P=False,
-            store_gain=True, store_S=True) -> EkfTrace:
+def run_ekf(
+    model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, full_P=False, store_gain=True, store_S=True
+) -> EkfTrace:
     """Filter the aligned run with the model; see the module docstring for the conventions.
 
     Memory: the full P, S and K add N*n*n, N*m*m and N*n*m float64 (a 1 h 100 Hz quadcopter log:
@@ -423,34 +465,81 @@ def run_ekf(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, ful
     N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
     nan = np.nan
     out = dict(
-        x_prior=np.full((N, n), nan), x_post=np.full((N, n), nan),
-        P_prior_diag=np.full((N, n), nan), P_post_diag=np.full((N, n), nan),
+        x_prior=np.full((N, n), nan),
+        x_post=np.full((N, n), nan),
+        P_prior_diag=np.full((N, n), nan),
+        P_post_diag=np.full((N, n), nan),
         P_prior_full=np.full((N if full_P else 0, n, n), nan),
         P_post_full=np.full((N if full_P else 0, n, n), nan),
         # S_out, K_out: NaN-filled step by step by ekf_run (one pass over the memory, not two)
-        y_out=np.full((N, m), nan), S_out=np.empty((N if store_S else 0, m, m)),
-        S_diag_out=np.full((N, m), nan), K_out=np.empty((N if store_gain else 0, n, m)),
-        nis=np.full(N, nan), nis_group=np.full((N, G), nan), m_k=np.zeros(N, dtype=np.int64),
-        gain_norm=np.full(N, nan), updated=np.zeros((N, G), dtype=np.bool_),
-        rejected=np.zeros((N, G), dtype=np.bool_), seeded=np.zeros((N, G), dtype=np.bool_),
-        diverged=np.zeros(N, dtype=np.bool_), input_held=np.zeros(N, dtype=np.bool_),
+        y_out=np.full((N, m), nan),
+        S_out=np.empty((N if store_S else 0, m, m)),
+        S_diag_out=np.full((N, m), nan),
+        K_out=np.empty((N if store_gain else 0, n, m)),
+        nis=np.full(N, nan),
+        nis_group=np.full((N, G), nan),
+        m_k=np.zeros(N, dtype=np.int64),
+        gain_norm=np.full(N, nan),
+        updated=np.zeros((N, G), dtype=np.bool_),
+        rejected=np.zeros((N, G), dtype=np.bool_),
+        seeded=np.zeros((N, G), dtype=np.bool_),
+        diverged=np.zeros(N, dtype=np.bool_),
+        input_held=np.zeros(N, dtype=np.bool_),
     )
     if N:
-        ekf_run(k.model_id, k.p, k.x0, k.P0, k.Q, k.u, k.u_default, k.z, k.fresh, k.group_ids,
-                k.group_offsets, k.group_sizes, k.R_all, k.range_lo, k.range_hi, k.wrap,
-                k.direct_idx, k.direct_gain, k.dt, k.seed_at_start, **out)
+        ekf_run(
+            k.model_id,
+            k.p,
+            k.x0,
+            k.P0,
+            k.Q,
+            k.u,
+            k.u_default,
+            k.z,
+            k.fresh,
+            k.group_ids,
+            k.group_offsets,
+            k.group_sizes,
+            k.R_all,
+            k.range_lo,
+            k.range_hi,
+            k.wrap,
+            k.direct_idx,
+            k.direct_gain,
+            k.dt,
+            k.seed_at_start,
+            **out,
+        )
     t = np.asarray(run.t, dtype=np.float64)
     return EkfTrace(
-        model_name=model.name, state_names=list(model.state_names), group_names=k.group_names,
-        group_offsets=k.group_offsets, group_sizes=k.group_sizes, t=t, dt=k.dt,
-        x_prior=out["x_prior"], x_post=out["x_post"], P_prior_diag=out["P_prior_diag"],
-        P_post_diag=out["P_post_diag"], y=out["y_out"], S_diag=out["S_diag_out"],
-        nis=out["nis"], nis_group=out["nis_group"], m_k=out["m_k"], gain_norm=out["gain_norm"],
-        updated=out["updated"], rejected=out["rejected"], seeded=out["seeded"],
-        diverged=out["diverged"], input_held=out["input_held"], Q=k.Q, R=k.R_all,
+        model_name=model.name,
+        state_names=list(model.state_names),
+        group_names=k.group_names,
+        group_offsets=k.group_offsets,
+        group_sizes=k.group_sizes,
+        t=t,
+        dt=k.dt,
+        x_prior=out["x_prior"],
+        x_post=out["x_post"],
+        P_prior_diag=out["P_prior_diag"],
+        P_post_diag=out["P_post_diag"],
+        y=out["y_out"],
+        S_diag=out["S_diag_out"],
+        nis=out["nis"],
+        nis_group=out["nis_group"],
+        m_k=out["m_k"],
+        gain_norm=out["gain_norm"],
+        updated=out["updated"],
+        rejected=out["rejected"],
+        seeded=out["seeded"],
+        diverged=out["diverged"],
+        input_held=out["input_held"],
+        Q=k.Q,
+        R=k.R_all,
         P_prior=out["P_prior_full"] if full_P else None,
         P_post=out["P_post_full"] if full_P else None,
-        S=out["S_out"] if store_S else None, K=out["K_out"] if store_gain else None,
+        S=out["S_out"] if store_S else None,
+        K=out["K_out"] if store_gain else None,
         divergence_episodes=divergence_episodes(t, out["diverged"], out["m_k"]),
     )
 

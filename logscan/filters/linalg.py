@@ -202,4 +202,3 @@ def nan_fill(M):
 @njit(cache=True, error_model="numpy")
 def wrap_angle(a):
     return (a + np.pi) % (2.0 * np.pi) - np.pi
-

@@ -25,11 +25,16 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
     N, n = k.u.shape[0], k.x0.size
     G, m_total = k.group_ids.size, k.z.shape[1]
     out = {
-        "x_prior": np.full((N, n), np.nan), "x_post": np.full((N, n), np.nan),
-        "P_prior": np.full((N, n, n), np.nan), "P_post": np.full((N, n, n), np.nan),
-        "y": np.full((N, m_total), np.nan), "nis": np.full(N, np.nan),
-        "updated": np.zeros((N, G), bool), "rejected": np.zeros((N, G), bool),
-        "seeded": np.zeros((N, G), bool), "diverged": np.zeros(N, bool),
+        "x_prior": np.full((N, n), np.nan),
+        "x_post": np.full((N, n), np.nan),
+        "P_prior": np.full((N, n, n), np.nan),
+        "P_post": np.full((N, n, n), np.nan),
+        "y": np.full((N, m_total), np.nan),
+        "nis": np.full(N, np.nan),
+        "updated": np.zeros((N, G), bool),
+        "rejected": np.zeros((N, G), bool),
+        "seeded": np.zeros((N, G), bool),
+        "diverged": np.zeros(N, bool),
     }
     slices = [slice(o, o + s) for o, s in zip(k.group_offsets, k.group_sizes)]
     is_direct = np.array([np.all(k.direct_idx[s] >= 0) for s in slices])

@@ -98,9 +98,7 @@ class EkfTrace:
         }
 
 
-def divergence_episodes(
-    t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray
-) -> list[DivergenceEpisode]:
+def divergence_episodes(t: np.ndarray, diverged: np.ndarray, m_k: np.ndarray) -> list[DivergenceEpisode]:
     """Group diverged steps into episodes: an episode ends at the next successful update."""
     steps = np.flatnonzero(diverged)
     if steps.size == 0:
@@ -111,8 +109,6 @@ def divergence_episodes(
     starts = np.flatnonzero(new)
     ends = np.append(starts[1:], steps.size) - 1
     return [
-        DivergenceEpisode(int(steps[a]), int(steps[b]), int(b - a + 1), float(t[steps[a]]),
-                          float(t[steps[b]]))
+        DivergenceEpisode(int(steps[a]), int(steps[b]), int(b - a + 1), float(t[steps[a]]), float(t[steps[b]]))
         for a, b in zip(starts, ends)
     ]
-

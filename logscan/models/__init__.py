@@ -20,9 +20,7 @@ MODEL_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 def model_class(name: str) -> type[Model]:
     """The Model subclass registered as ``name``; ModelError listing the known names otherwise."""
     if name not in _REGISTRY:
-        raise ModelError(
-            f"unknown vehicle model {name!r}", hint="known models: " + ", ".join(MODEL_NAMES)
-        )
+        raise ModelError(f"unknown vehicle model {name!r}", hint="known models: " + ", ".join(MODEL_NAMES))
     module, cls = _REGISTRY[name].split(":")
     return getattr(importlib.import_module(module), cls)
 

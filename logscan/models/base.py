@@ -78,13 +78,9 @@ class Model:
                 try:
                     value = float(value)
                 except (TypeError, ValueError):
-                    raise ModelError(
-                        f"model {self.name!r}: parameter {key} = {value!r} is not a number"
-                    ) from None
+                    raise ModelError(f"model {self.name!r}: parameter {key} = {value!r} is not a number") from None
                 if not np.isfinite(value):
-                    raise ModelError(
-                        f"model {self.name!r}: parameter {key} = {value} is not finite"
-                    )
+                    raise ModelError(f"model {self.name!r}: parameter {key} = {value} is not finite")
             merged[key] = value
         return merged
 
@@ -160,8 +156,7 @@ class Model:
             "states": list(self.state_names),
             "inputs": list(self.input_names),
             "groups": {
-                g.name: {"outputs": list(g.outputs), "noise_std": list(g.noise_std)}
-                for g in self.groups.values()
+                g.name: {"outputs": list(g.outputs), "noise_std": list(g.noise_std)} for g in self.groups.values()
             },
             "params": dict(getattr(self, "p", None) or self.params),
         }

@@ -70,16 +70,37 @@ class DcMotor(LinearBase):
         Qc = np.diag([(p["q_voltage"] / p["La"]) ** 2, (p["q_torque"] / Jv) ** 2])
         self.groups = {
             "encoder": GroupSpec(
-                "encoder", 0, ("v_left", "v_right"), (0.02, 0.02), (-10.0,) * 2, (10.0,) * 2,
-                ("m/s",) * 2, direct_states=(1, 1), direct_gains=(r, r),
+                "encoder",
+                0,
+                ("v_left", "v_right"),
+                (0.02, 0.02),
+                (-10.0,) * 2,
+                (10.0,) * 2,
+                ("m/s",) * 2,
+                direct_states=(1, 1),
+                direct_gains=(r, r),
             ),
             "gps_speed": GroupSpec(
-                "gps_speed", 1, ("v_gps",), (0.05,), (-50.0,), (50.0,), ("m/s",),
-                direct_states=(1,), direct_gains=(r,),
+                "gps_speed",
+                1,
+                ("v_gps",),
+                (0.05,),
+                (-50.0,),
+                (50.0,),
+                ("m/s",),
+                direct_states=(1,),
+                direct_gains=(r,),
             ),
             "current": GroupSpec(
-                "current", 2, ("i_a",), (0.1,), (-200.0,), (200.0,), ("A",),
-                direct_states=(0,), direct_gains=(1.0,),
+                "current",
+                2,
+                ("i_a",),
+                (0.1,),
+                (-200.0,),
+                (200.0,),
+                ("A",),
+                direct_states=(0,),
+                direct_gains=(1.0,),
             ),
         }
         self._setup(A, B, C, {}, Qc, True, None)

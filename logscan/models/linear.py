@@ -60,8 +60,10 @@ class LinearBase(Model):
         self._A = np.asarray(A, dtype=np.float64)
         self._B = np.asarray(B, dtype=np.float64)
         self._C = {g: np.asarray(c, dtype=np.float64) for g, c in C.items()}
-        self._D = {g: np.asarray(D[g], dtype=np.float64) if g in D else
-                   np.zeros((self._C[g].shape[0], self._B.shape[1])) for g in C}
+        self._D = {
+            g: np.asarray(D[g], dtype=np.float64) if g in D else np.zeros((self._C[g].shape[0], self._B.shape[1]))
+            for g in C
+        }
         self._Q = np.asarray(Q, dtype=np.float64)
         self._continuous = continuous
         self._discrete_dt = discrete_dt
@@ -73,8 +75,7 @@ class LinearBase(Model):
                 own = self._discrete_dt
                 if dt is not None and own is not None and abs(dt - own) > 1e-12 * max(dt, 1.0):
                     raise ModelError(
-                        f"model {self.name!r} is discrete at dt = {self._discrete_dt} s but the "
-                        f"grid period is {dt} s",
+                        f"model {self.name!r} is discrete at dt = {self._discrete_dt} s but the grid period is {dt} s",
                         hint="set the profile rate to match, or give continuous matrices",
                     )
                 out = (self._A, self._B, self._Q)
@@ -185,14 +186,17 @@ class LinearModel(LinearBase):
                 direct.append(int(nz[0]) if ok else -1)
                 gains.append(float(row[nz[0]]) if ok else 1.0)
             groups[g] = GroupSpec(
-                g, gid, names, tuple(float(s) for s in std),
+                g,
+                gid,
+                names,
+                tuple(float(s) for s in std),
                 tuple(np.broadcast_to(np.asarray(lo, dtype=float), (m,)).tolist()),
                 tuple(np.broadcast_to(np.asarray(hi, dtype=float), (m,)).tolist()),
-                direct_states=tuple(direct), direct_gains=tuple(gains),
+                direct_states=tuple(direct),
+                direct_gains=tuple(gains),
             )
         self.groups = groups
-        self._R_full = {g: np.asarray(R_tab[g], dtype=np.float64) for g in R_tab
-                        if np.ndim(R_tab[g]) == 2}
+        self._R_full = {g: np.asarray(R_tab[g], dtype=np.float64) for g in R_tab if np.ndim(R_tab[g]) == 2}
         self._setup(A, B, C, D, Q, continuous, None if dt is None else float(dt))
 
     def default_R(self, group: str) -> np.ndarray:

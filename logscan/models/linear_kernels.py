@@ -24,8 +24,8 @@ def lin_dims(p):
 def lin_AB(p):
     n, nu, G = lin_dims(p)
     a0 = 3 + G
-    Ad = p[a0:a0 + n * n].reshape((n, n))
-    Bd = p[a0 + n * n:a0 + n * n + n * nu].reshape((n, nu))
+    Ad = p[a0 : a0 + n * n].reshape((n, n))
+    Bd = p[a0 + n * n : a0 + n * n + n * nu].reshape((n, nu))
     return Ad, Bd
 
 
@@ -34,8 +34,8 @@ def lin_CD(p, gid):
     n, nu, G = lin_dims(p)
     s = int(p[3 + gid])
     m = int(p[s])
-    C = p[s + 1:s + 1 + m * n].reshape((m, n))
-    D = p[s + 1 + m * n:s + 1 + m * n + m * nu].reshape((m, nu))
+    C = p[s + 1 : s + 1 + m * n].reshape((m, n))
+    D = p[s + 1 + m * n : s + 1 + m * n + m * nu].reshape((m, nu))
     return C, D
 
 

@@ -57,23 +57,44 @@ class Quadcopter(Model):
     input_names = _WRENCH_INPUTS
     groups = {
         "accel": GroupSpec(
-            "accel", 0, ("ax", "ay", "az"), (0.1, 0.1, 0.1),
-            (-160.0,) * 3, (160.0,) * 3, ("m/s^2",) * 3,
+            "accel",
+            0,
+            ("ax", "ay", "az"),
+            (0.1, 0.1, 0.1),
+            (-160.0,) * 3,
+            (160.0,) * 3,
+            ("m/s^2",) * 3,
         ),
         "gyro": GroupSpec(
-            "gyro", 1, ("gx", "gy", "gz"), (0.01, 0.01, 0.01),
-            (-35.0,) * 3, (35.0,) * 3, ("rad/s",) * 3,
+            "gyro",
+            1,
+            ("gx", "gy", "gz"),
+            (0.01, 0.01, 0.01),
+            (-35.0,) * 3,
+            (35.0,) * 3,
+            ("rad/s",) * 3,
             direct_states=(9, 10, 11),
         ),
         "position": GroupSpec(
-            "position", 2, ("px", "py", "pz"), (0.5, 0.5, 0.5),
-            (-1e5,) * 3, (1e5,) * 3, ("m",) * 3,
+            "position",
+            2,
+            ("px", "py", "pz"),
+            (0.5, 0.5, 0.5),
+            (-1e5,) * 3,
+            (1e5,) * 3,
+            ("m",) * 3,
             direct_states=(0, 1, 2),
         ),
         "attitude": GroupSpec(
-            "attitude", 3, ("roll", "pitch", "yaw"), (0.02, 0.02, 0.02),
-            (-3.2, -1.6, -6.4), (3.2, 1.6, 6.4), ("rad",) * 3,
-            wrap=(True, True, True), direct_states=(6, 7, 8),
+            "attitude",
+            3,
+            ("roll", "pitch", "yaw"),
+            (0.02, 0.02, 0.02),
+            (-3.2, -1.6, -6.4),
+            (3.2, 1.6, 6.4),
+            ("rad",) * 3,
+            wrap=(True, True, True),
+            direct_states=(6, 7, 8),
         ),
     }
 
@@ -82,17 +103,22 @@ class Quadcopter(Model):
         self.p = self._merge_params(DEFAULTS)
         mode = self.p["inputs"]
         if mode not in ("wrench", "motors"):
-            raise ModelError(
-                f"quadcopter: inputs = {mode!r} is not known", hint='use "wrench" or "motors"'
-            )
+            raise ModelError(f"quadcopter: inputs = {mode!r} is not known", hint='use "wrench" or "motors"')
         for key in ("mass", "arm", "Ixx", "Iyy", "Izz", "kT"):
             if self.p[key] <= 0:
                 raise ModelError(f"quadcopter: parameter {key} must be > 0 (got {self.p[key]})")
         self.input_names = _MOTOR_INPUTS if mode == "motors" else _WRENCH_INPUTS
         self._pvec = np.array(
             [
-                self.p["mass"], self.p["g"], self.p["drag"], self.p["Ixx"], self.p["Iyy"],
-                self.p["Izz"], self.p["arm"], self.p["kT"], self.p["b_tau"],
+                self.p["mass"],
+                self.p["g"],
+                self.p["drag"],
+                self.p["Ixx"],
+                self.p["Iyy"],
+                self.p["Izz"],
+                self.p["arm"],
+                self.p["kT"],
+                self.p["b_tau"],
                 1.0 if mode == "motors" else 0.0,
             ],
             dtype=np.float64,
@@ -133,9 +159,7 @@ class Quadcopter(Model):
         Plus configuration: motor i sits on the arm at (i-1) * 90 deg from body +x;
         tau_x = L (T2 - T4), tau_y = L (T3 - T1), tau_z = b (T1 - T2 + T3 - T4)."""
         L, b = self.p["arm"], self.p["b_tau"]
-        return np.array(
-            [[1.0, 1.0, 1.0, 1.0], [0.0, L, 0.0, -L], [-L, 0.0, L, 0.0], [b, -b, b, -b]]
-        )
+        return np.array([[1.0, 1.0, 1.0, 1.0], [0.0, L, 0.0, -L], [-L, 0.0, L, 0.0], [b, -b, b, -b]])
 
     def motors_to_wrench(self, omega: np.ndarray) -> np.ndarray:
         """Motor speeds (..., 4) rad/s -> [thrust, tau_x, tau_y, tau_z] (..., 4), T_i = kT w_i^2."""

@@ -211,18 +211,15 @@ def quad_meas_into(p, gid, x, u, r, hx, Hs, R, D, want_H):
 @njit(cache=True)
 def quad_h(p, gid, x, u):
     out = np.empty(3)
-    quad_meas_into(p, gid, x, u, 0, out, np.empty((0, 0)), np.empty((3, 3)),
-                   np.empty((3, 3, 3)), False)
+    quad_meas_into(p, gid, x, u, 0, out, np.empty((0, 0)), np.empty((3, 3)), np.empty((3, 3, 3)), False)
     return out
 
 
 @njit(cache=True)
 def quad_H(p, gid, x, u):
     H = np.zeros((3, 12))
-    quad_meas_into(p, gid, x, u, 0, np.empty(3), H, np.empty((3, 3)), np.empty((3, 3, 3)),
-                   True)
+    quad_meas_into(p, gid, x, u, 0, np.empty(3), H, np.empty((3, 3)), np.empty((3, 3, 3)), True)
     return H
-
 
 
 # =============================================================================================

@@ -75,8 +75,9 @@ def rk4_predict(model_id, p, x, u, dt):
     n = x.size
     x_next = np.empty(n)
     F = np.empty((n, n))
-    rk4_predict_into(model_id, p, x, u, dt, x_next, F, np.empty(n), np.empty(n),
-                     np.empty((n, n)), np.empty((n, n)), np.empty((n, n)))
+    rk4_predict_into(
+        model_id, p, x, u, dt, x_next, F, np.empty(n), np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    )
     return x_next, F
 
 
@@ -97,7 +98,6 @@ def rk4_f(model_id, p, x, u, dt):
             x_next[i] += c * w * k[i]
             xs[i] = x[i] + step * k[i]
     return x_next
-
 
 
 follow_dependencies(__name__)

@@ -50,14 +50,33 @@ class SteerByWire(Model):
     input_names = ("tau_eq",)
     groups = {
         "steering_angle": GroupSpec(
-            "steering_angle", 0, ("delta_f",), (0.002,), (-1.0,), (1.0,), ("rad",),
+            "steering_angle",
+            0,
+            ("delta_f",),
+            (0.002,),
+            (-1.0,),
+            (1.0,),
+            ("rad",),
             direct_states=(0,),
         ),
         "yaw_rate": GroupSpec(
-            "yaw_rate", 1, ("gamma",), (0.005,), (-3.0,), (3.0,), ("rad/s",), direct_states=(3,),
+            "yaw_rate",
+            1,
+            ("gamma",),
+            (0.005,),
+            (-3.0,),
+            (3.0,),
+            ("rad/s",),
+            direct_states=(3,),
         ),
         "lateral_accel": GroupSpec(
-            "lateral_accel", 2, ("a_y",), (0.05,), (-30.0,), (30.0,), ("m/s^2",),
+            "lateral_accel",
+            2,
+            ("a_y",),
+            (0.05,),
+            (-30.0,),
+            (30.0,),
+            ("m/s^2",),
         ),
     }
 

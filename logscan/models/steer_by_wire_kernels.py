@@ -13,8 +13,7 @@ from numba import njit
 STEER_BY_WIRE_ID = 1  # this model's branch in every dispatcher of logscan.models.dispatch
 
 # ---- parameter layout -------------------------------------------------------------------------
-(SP_JEQ, SP_BEQ, SP_FS, SP_CF, SP_CR, SP_LF, SP_LR, SP_LC, SP_LP, SP_M, SP_IZ, SP_V,
- SP_VS) = range(13)
+(SP_JEQ, SP_BEQ, SP_FS, SP_CF, SP_CR, SP_LF, SP_LR, SP_LC, SP_LP, SP_M, SP_IZ, SP_V, SP_VS) = range(13)
 SBW_N_PARAMS = 13
 
 

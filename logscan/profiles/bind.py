@@ -89,7 +89,8 @@ def _check_onboard_sizes(profile: Profile, problems: list[str]) -> None:
 def _members(key: str, input_names: tuple[str, ...]) -> list[str]:
     """Model inputs a list-valued key binds: ``key`` + ``_ . [`` or a digit + anything."""
     return [
-        n for n in input_names
+        n
+        for n in input_names
         if n.startswith(key) and len(n) > len(key) and (n[len(key)] in "_.[" or n[len(key)].isdigit())
     ]
 

@@ -171,9 +171,7 @@ class Profile:
         if self.mode is not None:
             refs.append(("[mode] channel", self.mode.channel))
         for red in self.redundant.values():
-            refs.extend(
-                (f"[redundant.{red.name}] sensors.{s.name}", s.channel) for s in red.sensors.values()
-            )
+            refs.extend((f"[redundant.{red.name}] sensors.{s.name}", s.channel) for s in red.sensors.values())
         if self.onboard is not None:
             for key in ("state", "variance"):
                 value = getattr(self.onboard, key)
@@ -212,9 +210,7 @@ class Profile:
                 problems.append(f"{where}: no channel {ch!r} in the log{suggest(ch, names)}")
         for where, prefix in self.channel_prefixes():
             if not channels_under(prefix, names):
-                problems.append(
-                    f"{where}: no channel starts with {prefix!r} in the log{suggest(prefix, names)}"
-                )
+                problems.append(f"{where}: no channel starts with {prefix!r} in the log{suggest(prefix, names)}")
         if problems:
             raise profile_error(
                 problems,
@@ -289,17 +285,11 @@ class Profile:
                     table["stale_s"] = r.stale_s
                 out["redundant"][r.name] = table
         if self.onboard is not None:
-            table = {
-                k: getattr(self.onboard, k)
-                for k in ("state", "variance")
-                if getattr(self.onboard, k) is not None
-            }
+            table = {k: getattr(self.onboard, k) for k in ("state", "variance") if getattr(self.onboard, k) is not None}
             table["stale_s"] = self.onboard.stale_s
             out["onboard"] = table
         if self.detectors:
-            out["detectors"] = {
-                d.name: {"enabled": d.enabled, **d.settings} for d in self.detectors.values()
-            }
+            out["detectors"] = {d.name: {"enabled": d.enabled, **d.settings} for d in self.detectors.values()}
         return out
 
     def to_toml(self) -> str:

@@ -40,8 +40,7 @@ def detect_format(path: str | os.PathLike) -> str:
     if _looks_like_text(head):
         return "csv"
     raise UnsupportedFormatError(
-        "not an MCAP, ULog or CSV file (unknown magic bytes "
-        f"{head[:8].hex(' ')})",
+        f"not an MCAP, ULog or CSV file (unknown magic bytes {head[:8].hex(' ')})",
         path=str(p),
         hint="logscan reads .mcap, .ulg and .csv logs",
     )

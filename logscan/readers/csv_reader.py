@@ -48,7 +48,9 @@ _UNIT_WORDS = {
 }  # fmt: skip
 _TIME_RE = re.compile(
     r"^%?(?P<base>time|timestamp|t|stamp)"
-    r"(?:(?:[\s_\-.]+[\[(]?|[\s_\-.]*[\[(])\s*(?P<unit>" + "|".join(sorted(_UNIT_WORDS, key=len, reverse=True)) + r")\s*[\])]?)?$",
+    r"(?:(?:[\s_\-.]+[\[(]?|[\s_\-.]*[\[(])\s*(?P<unit>"
+    + "|".join(sorted(_UNIT_WORDS, key=len, reverse=True))
+    + r")\s*[\])]?)?$",
     re.IGNORECASE,
 )
 NS_PER_UNIT = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
@@ -112,9 +114,7 @@ def infer_time_unit(values: np.ndarray) -> TimeUnit:
     if not plausible:
         return TimeUnit("s", "relative", f"{facts} fit no unit; assumed seconds")
     if integers and step:
-        unit, origin, period = min(
-            plausible, key=lambda item: abs(np.log10(item[2]) - _TYPICAL_PERIOD_LOG10)
-        )
+        unit, origin, period = min(plausible, key=lambda item: abs(np.log10(item[2]) - _TYPICAL_PERIOD_LOG10))
     else:
         unit, origin, period = plausible[0]
     rate = f", ~{1 / period:.4g} Hz" if period else ""
@@ -126,8 +126,12 @@ def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     source = SourceInfo(path=str(path), format="csv", time_source="csv column")
     frame = _load_frame(Path(path))
     channels = _frame_channels(frame, Path(path), source, wanted, topic=None)
-    return Log(channels=channels, source=source, truth=read_truth_sidecar(Path(path)),
-               profile_text=read_profile_sidecar(Path(path)))
+    return Log(
+        channels=channels,
+        source=source,
+        truth=read_truth_sidecar(Path(path)),
+        profile_text=read_profile_sidecar(Path(path)),
+    )
 
 
 def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
@@ -135,8 +139,7 @@ def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     directory = Path(path)
     files = sorted(p for p in directory.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
     if not files:
-        raise InputError("directory holds no .csv files", path=str(directory),
-                         hint="give an MCAP, ULog or CSV file")
+        raise InputError("directory holds no .csv files", path=str(directory), hint="give an MCAP, ULog or CSV file")
     source = SourceInfo(path=str(directory), format="csv-dir", time_source="csv column")
     topics = _topic_names(directory, files)
     channels: dict[str, Channel] = {}
@@ -147,13 +150,15 @@ def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         frame = _load_frame(file)
         if px4 and "timestamp" not in frame.columns:
             px4 = False
-        channels.update(
-            _frame_channels(frame, file, source, wanted, topic=topic, stated_us=px4)
-        )
+        channels.update(_frame_channels(frame, file, source, wanted, topic=topic, stated_us=px4))
     units = sorted({t.schema for t in source.topics.values()})
     source.time_unit = "us" if units == ["ulog2csv"] else _dir_time_unit(source)
-    return Log(channels=channels, source=source, truth=read_truth_sidecar(directory),
-               profile_text=read_profile_sidecar(directory))
+    return Log(
+        channels=channels,
+        source=source,
+        truth=read_truth_sidecar(directory),
+        profile_text=read_profile_sidecar(directory),
+    )
 
 
 def _dir_time_unit(source: SourceInfo) -> str:
@@ -168,7 +173,7 @@ def _topic_names(directory: Path, files: list[Path]) -> dict[Path, tuple[str, bo
     names: dict[Path, tuple[str, bool]] = {}
     for file in files:
         if file in layout and prefix and file.stem.startswith(prefix + "_"):
-            names[file] = (file.stem[len(prefix) + 1:], True)
+            names[file] = (file.stem[len(prefix) + 1 :], True)
         else:
             names[file] = (file.stem, file in layout)
     return names
@@ -181,7 +186,7 @@ def _log_prefix(directory: Path, stems: list[str]) -> str:
 
     def fits(prefix: str) -> bool:
         return bool(prefix) and all(
-            s.startswith(prefix + "_") and _ULOG2CSV_RE.match(s[len(prefix) + 1:]) for s in stems
+            s.startswith(prefix + "_") and _ULOG2CSV_RE.match(s[len(prefix) + 1 :]) for s in stems
         )
 
     hints = [directory.resolve().name] + sorted(p.stem for p in directory.glob("*.ulg"))
@@ -224,30 +229,43 @@ def _load_frame(path: Path) -> pd.DataFrame:
     except FileNotFoundError:
         raise InputError("no such file", path=str(path)) from None
     except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text (bad byte at {exc.start} of the first line)",
-                         path=str(path), hint="save the CSV as UTF-8") from None
+        raise InputError(
+            f"not UTF-8 text (bad byte at {exc.start} of the first line)", path=str(path), hint="save the CSV as UTF-8"
+        ) from None
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
     if not header.strip():
-        raise InputError("CSV file is empty (no header line)", path=str(path),
-                         hint="a CSV needs a header with a time column and data rows")
+        raise InputError(
+            "CSV file is empty (no header line)",
+            path=str(path),
+            hint="a CSV needs a header with a time column and data rows",
+        )
     try:
         frame = pd.read_csv(
-            path, sep=_sniff_delimiter(header), encoding="utf-8-sig", skipinitialspace=True,
-            low_memory=False, on_bad_lines="error",
+            path,
+            sep=_sniff_delimiter(header),
+            encoding="utf-8-sig",
+            skipinitialspace=True,
+            low_memory=False,
+            on_bad_lines="error",
         )
     except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text (bad byte at offset {exc.start} of a block)",
-                         path=str(path), hint="save the CSV as UTF-8") from None
+        raise InputError(
+            f"not UTF-8 text (bad byte at offset {exc.start} of a block)", path=str(path), hint="save the CSV as UTF-8"
+        ) from None
     except pd.errors.EmptyDataError:
         raise InputError("CSV file is empty", path=str(path)) from None
     except (pd.errors.ParserError, csv.Error, ValueError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(f"malformed CSV: {first}", path=str(path),
-                         hint="every row needs as many fields as the header") from None
+        raise InputError(
+            f"malformed CSV: {first}", path=str(path), hint="every row needs as many fields as the header"
+        ) from None
     if not isinstance(frame.index, pd.RangeIndex):  # pandas made the surplus fields an index
-        raise InputError("malformed CSV: data rows have more fields than the header",
-                         path=str(path), hint="every row needs as many fields as the header")
+        raise InputError(
+            "malformed CSV: data rows have more fields than the header",
+            path=str(path),
+            hint="every row needs as many fields as the header",
+        )
     frame.columns = [str(c).strip() for c in frame.columns]
     if frame.empty:
         raise InputError(
@@ -329,9 +347,7 @@ def _frame_channels(
     frame, time_name, unit = _time_column(frame, path, source, label, stated_us)
     source.time_unit = unit.unit
     source.metadata.setdefault("csv.time_units", {})[label] = unit.unit
-    source.metadata.setdefault("csv.time_columns", {})[label] = (
-        f"{time_name!r} in {unit.unit}: {unit.reason}"
-    )
+    source.metadata.setdefault("csv.time_columns", {})[label] = f"{time_name!r} in {unit.unit}: {unit.reason}"
     t_ns, valid = _time_ns(frame[time_name], unit.unit)
     if not valid.all():
         source.skip(f"rows of {label}", "time is empty or not a number", int((~valid).sum()))
@@ -358,8 +374,7 @@ def _frame_channels(
             continue
         fields.append(column)
         if garbage:
-            source.skip(f"cells of column {column!r} of {label}", "not a number, read as NaN",
-                        garbage)
+            source.skip(f"cells of column {column!r} of {label}", "not a number, read as NaN", garbage)
         if not channel_wanted(name, topic or path.stem, wanted):
             continue
         values = values[valid]
@@ -371,8 +386,7 @@ def _frame_channels(
         listed = ", ".join(f"{k}: {v}" for k, v in list(nan_counts.items())[:5])
         more = f", ... ({len(nan_counts)} channels)" if len(nan_counts) > 5 else ""
         source.warnings.append(
-            f"{label}: {sum(nan_counts.values())} NaN value(s) kept ({listed}{more}); "
-            "alignment masks them"
+            f"{label}: {sum(nan_counts.values())} NaN value(s) kept ({listed}{more}); alignment masks them"
         )
     source.topics[topic or path.stem] = TopicInfo(
         name=topic or path.stem,
@@ -400,8 +414,11 @@ def _time_column(
     if raw is None:
         dates = _datetime_ns(frame[time_name])
         if dates is None:
-            raise InputError(f"time column {time_name!r} holds no numbers or dates",
-                             path=str(path), hint="use seconds, or ISO 8601 date-times")
+            raise InputError(
+                f"time column {time_name!r} holds no numbers or dates",
+                path=str(path),
+                hint="use seconds, or ISO 8601 date-times",
+            )
         frame = frame.assign(**{time_name: dates})
         unit = TimeUnit("ns", "epoch", "ISO 8601 date-times (UTC unless an offset is given)")
     else:
@@ -429,8 +446,7 @@ def read_truth_sidecar(path: Path) -> dict | None:
         return json.loads(sidecar.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"ground-truth sidecar is not valid JSON: {first}",
-                         path=str(sidecar)) from None
+        raise InputError(f"ground-truth sidecar is not valid JSON: {first}", path=str(sidecar)) from None
 
 
 def read_profile_sidecar(path: Path) -> str | None:

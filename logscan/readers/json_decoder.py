@@ -272,8 +272,11 @@ def json_columns(datas: MessageBytes | Sequence[bytes]) -> tuple[FlatColumns, li
     decoded, failed_local = JsonDecoder().decode_many(packed.to_list(remaining))
     failed = [remaining[i] for i in failed_local]
     bad = set(failed_local)
-    add_to_groups(groups, [m for i, m in enumerate(decoded) if i not in bad],
-                  [remaining[i] for i in range(len(remaining)) if i not in bad])
+    add_to_groups(
+        groups,
+        [m for i, m in enumerate(decoded) if i not in bad],
+        [remaining[i] for i in range(len(remaining)) if i not in bad],
+    )
     entries.extend((signature, indices, rows) for signature, (indices, rows) in groups.items())
     return columns_from_groups(entries), failed
 
@@ -302,8 +305,9 @@ def _fast_json(packed: MessageBytes):
     out = np.empty(packed.total_bytes() + 2 * n * len(keys) + 1, dtype=np.uint8)
     used = 0
     for (buf, starts, ends), row in zip(packed.parts, packed.first.tolist()):
-        used += _match_template(buf, starts, ends, literal, lit_start, lit_len, _IS_TOKEN,
-                                ok[row : row + starts.size], out[used:])
+        used += _match_template(
+            buf, starts, ends, literal, lit_start, lit_len, _IS_TOKEN, ok[row : row + starts.size], out[used:]
+        )
     indices = np.flatnonzero(ok)
     if indices.size == 0:
         return None

@@ -147,8 +147,17 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
         raise InputError("no such file", path=str(path)) from None
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
-    except (ULogException, struct.error, ValueError, IndexError, KeyError, OverflowError,
-            UnicodeDecodeError, TypeError, MemoryError) as exc:
+    except (
+        ULogException,
+        struct.error,
+        ValueError,
+        IndexError,
+        KeyError,
+        OverflowError,
+        UnicodeDecodeError,
+        TypeError,
+        MemoryError,
+    ) as exc:
         raise CorruptLogError(
             f"ULog cannot be parsed ({type(exc).__name__}: {exc})".rstrip(": )") + ")",
             path=str(path),
@@ -157,8 +166,7 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     return ulog, watch, chatter
 
 
-def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | None, *,
-                   all_topics: bool) -> None:
+def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | None, *, all_topics: bool) -> None:
     """Mark the log partial when the file is truncated or pyulog skipped corrupt data.
 
     ULog has no checksums: flipped bytes inside message payloads cannot be detected, only
@@ -167,8 +175,10 @@ def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | N
     size = os.path.getsize(path)
     reasons = []
     if cut_at is not None:
-        reasons.append(f"truncated: the message read at byte {cut_at} runs past the end of the "
-                       f"file ({size} bytes); the messages before it were read")
+        reasons.append(
+            f"truncated: the message read at byte {cut_at} runs past the end of the "
+            f"file ({size} bytes); the messages before it were read"
+        )
     if ulog.file_corruption:
         reasons.append("pyulog found corrupt data and skipped it")
     if reasons:
@@ -182,7 +192,8 @@ def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | N
     if cut_at is not None and all_topics and not ulog.data_list:
         raise CorruptLogError(
             f"ULog truncated at byte {cut_at} of {size} before any data message",
-            path=str(path), hint="the file was cut during logging or copying; nothing to read",
+            path=str(path),
+            hint="the file was cut during logging or copying; nothing to read",
         )
 
 
@@ -193,14 +204,11 @@ def _array_base(name: str) -> str:
 def _fill_metadata(ulog, source: SourceInfo) -> None:
     """Info, parameters, dropouts and logged messages of the file into ``source.metadata``."""
     source.metadata["ulog.info"] = {str(k): _text(v) for k, v in ulog.msg_info_dict.items()}
-    source.metadata["ulog.parameters"] = {
-        str(k): _text(v) for k, v in ulog.initial_parameters.items()
-    }
+    source.metadata["ulog.parameters"] = {str(k): _text(v) for k, v in ulog.initial_parameters.items()}
     changed = ulog.changed_parameters
     if changed:
         source.metadata["ulog.parameters_changed"] = {
-            f"{i:05d}": f"{t / 1e6:.6f} s {name} = {_text(value)}"
-            for i, (t, name, value) in enumerate(changed)
+            f"{i:05d}": f"{t / 1e6:.6f} s {name} = {_text(value)}" for i, (t, name, value) in enumerate(changed)
         }
     dropouts = ulog.dropouts
     dropout_ms = sum(int(d.duration) for d in dropouts)
@@ -220,14 +228,11 @@ def _fill_metadata(ulog, source: SourceInfo) -> None:
         "info_multiple_keys": ", ".join(sorted(ulog.msg_info_multiple_dict)),
     }
     source.metadata["ulog.messages"] = {
-        f"{i:05d}": f"{m.timestamp / 1e6:.6f} s [{m.log_level_str()}] "
-        f"{m.message}"
+        f"{i:05d}": f"{m.timestamp / 1e6:.6f} s [{m.log_level_str()}] {m.message}"
         for i, m in enumerate(messages[:_MAX_TEXT_MESSAGES])
     }
     if dropouts:
-        source.warnings.append(
-            f"{len(dropouts)} logging dropout(s), {dropout_ms} ms of data lost in total"
-        )
+        source.warnings.append(f"{len(dropouts)} logging dropout(s), {dropout_ms} ms of data lost in total")
 
 
 def _text(value) -> str:

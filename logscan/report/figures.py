@@ -76,7 +76,9 @@ def _is_piecewise_flat(y: np.ndarray, limit: int = 64) -> bool:
     return changes <= limit
 
 
-def _bands(result: DetectorResult, n: int, problems: list[str]) -> dict[str, tuple[np.ndarray | None, np.ndarray | None]]:
+def _bands(
+    result: DetectorResult, n: int, problems: list[str]
+) -> dict[str, tuple[np.ndarray | None, np.ndarray | None]]:
     """statistic -> (upper, lower) (N,) arrays from ``result.thresholds`` (name -> Band); a side
     that is absent, all non-finite or off the grid is None (the latter reported in ``problems``)."""
     out = {}
@@ -87,7 +89,9 @@ def _bands(result: DetectorResult, n: int, problems: list[str]) -> dict[str, tup
             if arr is not None and arr.ndim == 0:
                 arr = np.full(n, float(arr))
             if arr is not None and arr.shape != (n,):
-                problems.append(f"{side} threshold of {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn")
+                problems.append(
+                    f"{side} threshold of {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn"
+                )
                 arr = None
             sides.append(arr if arr is not None and np.isfinite(arr).any() else None)
         out[name] = (sides[0], sides[1])

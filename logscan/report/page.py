@@ -191,8 +191,7 @@ def _log_view(facts: Mapping) -> dict:
         "partial": bool(facts.get("partial")),
         "partial_reason": str(facts.get("partial_reason", "")),
         "skipped": [
-            f"{s.get('what', '')}: {s.get('why', '')} (x{s.get('count', 1)})"
-            for s in facts.get("skipped") or []
+            f"{s.get('what', '')}: {s.get('why', '')} (x{s.get('count', 1)})" for s in facts.get("skipped") or []
         ],
         "warnings": [str(w) for w in facts.get("warnings") or []],
         "topics": sorted(str(name) for name in (facts.get("topics") or {})),

@@ -120,8 +120,12 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "height": 360,
         "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
         "xaxis": {"title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False},
-        "yaxis": {"title": {"text": fig.y_title}, "gridcolor": "#eee", "type": "log" if fig.log_y else "linear",
-                  **({"range": list(fig.y_range)} if fig.y_range else {})},
+        "yaxis": {
+            "title": {"text": fig.y_title},
+            "gridcolor": "#eee",
+            "type": "log" if fig.log_y else "linear",
+            **({"range": list(fig.y_range)} if fig.y_range else {}),
+        },
         "yaxis2": {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True},
         "legend": {"orientation": "h", "y": -0.22, "yanchor": "top"},
         "hovermode": "closest",
@@ -136,9 +140,9 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
 def figures_json(figures: list[tuple[str, Figure]], t: np.ndarray, point_budget: int = POINT_BUDGET) -> str:
     """``[{"id": ..., "figure": ...}, ...]`` for (element id, figure) pairs, under one point budget."""
     points = allocate_points([fig for _, fig in figures], point_budget)
-    return "[" + ",".join(
-        f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points)}}}' for fig_id, fig in figures
-    ) + "]"
+    return (
+        "[" + ",".join(f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points)}}}' for fig_id, fig in figures) + "]"
+    )
 
 
 def escape_json(text: str) -> str:

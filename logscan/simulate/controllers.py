@@ -86,11 +86,25 @@ def quad_params(model, aggressive: bool) -> np.ndarray:
     p = model.p
     tilt = 0.6 if aggressive else 0.35
     wn_xy, wn_z, wn_att, wn_yaw = (1.2, 2.0, 10.0, 4.0) if aggressive else (0.8, 1.5, 8.0, 3.0)
-    return np.array([
-        p["mass"], p["g"], p["Ixx"], p["Iyy"], p["Izz"],
-        wn_xy**2, 1.8 * wn_xy, wn_z**2, 1.8 * wn_z, 0.3 * wn_z**2,
-        wn_att**2, 1.8 * wn_att, wn_yaw**2, 1.8 * wn_yaw, tilt,
-    ])
+    return np.array(
+        [
+            p["mass"],
+            p["g"],
+            p["Ixx"],
+            p["Iyy"],
+            p["Izz"],
+            wn_xy**2,
+            1.8 * wn_xy,
+            wn_z**2,
+            1.8 * wn_z,
+            0.3 * wn_z**2,
+            wn_att**2,
+            1.8 * wn_att,
+            wn_yaw**2,
+            1.8 * wn_yaw,
+            tilt,
+        ]
+    )
 
 
 # ---- steer-by-wire ---------------------------------------------------------------------------
@@ -113,8 +127,13 @@ def sbw_control(cp, cs, r, xh, dt, u):
     s = e_dot + lam * e  # sliding surface
     tau_e = Cf * lt * (xh[0] - xh[2] - lf * xh[3] / V)  # self-aligning torque estimate
     # tau_eq = Jeq (dd_r - lam e_dot) + Beq d_dot + Fs tanh(d_dot/vs) + tau_e - Jeq K sat(s/phi)
-    u[0] = (Jeq * (ddd_r - lam * e_dot) + Beq * xh[1] + Fs * np.tanh(xh[1] / vs) + tau_e
-            - Jeq * K * _clip(s / phi, -1.0, 1.0))
+    u[0] = (
+        Jeq * (ddd_r - lam * e_dot)
+        + Beq * xh[1]
+        + Fs * np.tanh(xh[1] / vs)
+        + tau_e
+        - Jeq * K * _clip(s / phi, -1.0, 1.0)
+    )
 
 
 def sbw_reference(t: np.ndarray, n_theta: float, aggressive: bool) -> np.ndarray:
@@ -135,10 +154,27 @@ def sbw_reference(t: np.ndarray, n_theta: float, aggressive: bool) -> np.ndarray
 
 def sbw_params(model) -> np.ndarray:
     p = model.p
-    return np.array([
-        p["Jeq"], p["Beq"], p["Fs"], p["Cf"], p["lc"] + p["lp"], p["lf"], p["V"], p["vs"],
-        p.get("N_theta", 12.0), 0.1, 0.5, 0.2, 10.0, 1.0, 10.0, 3.0, 0.1,
-    ])
+    return np.array(
+        [
+            p["Jeq"],
+            p["Beq"],
+            p["Fs"],
+            p["Cf"],
+            p["lc"] + p["lp"],
+            p["lf"],
+            p["V"],
+            p["vs"],
+            p.get("N_theta", 12.0),
+            0.1,
+            0.5,
+            0.2,
+            10.0,
+            1.0,
+            10.0,
+            3.0,
+            0.1,
+        ]
+    )
 
 
 # ---- dc_motor --------------------------------------------------------------------------------

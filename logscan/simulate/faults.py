@@ -126,8 +126,15 @@ class FaultTable:
     @classmethod
     def empty(cls, n_steps: int) -> FaultTable:
         zi = np.zeros(0, dtype=np.int64)
-        return cls(zi, zi.copy(), zi.copy(), zi.copy(), np.zeros(0), np.zeros((0, n_steps)),
-                   np.zeros((0, n_steps), dtype=np.int64))
+        return cls(
+            zi,
+            zi.copy(),
+            zi.copy(),
+            zi.copy(),
+            np.zeros(0),
+            np.zeros((0, n_steps)),
+            np.zeros((0, n_steps), dtype=np.int64),
+        )
 
 
 def resolve_faults(

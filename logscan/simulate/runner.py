@@ -69,9 +69,39 @@ def _sensor_faults(k, c, z, dt, f_kind, f_target, f_start, f_end, f_mag, f_unif,
 
 
 @njit(cache=True)
-def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_lo, ch_hi,
-                ch_wrap, R_diag, ctrl_id, cp, cs, ref, M, M_inv, a_lo, a_hi,
-                f_kind, f_target, f_start, f_end, f_mag, f_unif, f_bit):
+def closed_loop(
+    model_id,
+    p,
+    dt,
+    x0,
+    P0,
+    Q,
+    W,
+    V,
+    g_id,
+    g_m,
+    g_off,
+    g_ratio,
+    ch_lo,
+    ch_hi,
+    ch_wrap,
+    R_diag,
+    ctrl_id,
+    cp,
+    cs,
+    ref,
+    M,
+    M_inv,
+    a_lo,
+    a_hi,
+    f_kind,
+    f_target,
+    f_start,
+    f_end,
+    f_mag,
+    f_unif,
+    f_bit,
+):
     """Run the whole log; returns (x_true, u_cmd, u_act, z, x_hat, P_diag, rejected).
 
     z is (N, total measurements) with NaN where a group did not sample; rejected counts samples
@@ -135,8 +165,7 @@ def closed_loop(model_id, p, dt, x0, P0, Q, W, V, g_id, g_m, g_off, g_ratio, ch_
                 v = zg[j] + V[k, c]
                 if ch_wrap[c]:
                     v = (v + np.pi) % (2.0 * np.pi) - np.pi
-                v = _sensor_faults(k, c, v, dt, f_kind, f_target, f_start, f_end, f_mag,
-                                   f_unif, f_bit, stuck)
+                v = _sensor_faults(k, c, v, dt, f_kind, f_target, f_start, f_end, f_mag, f_unif, f_bit, stuck)
                 z_all[k, c] = v
                 last_z[c] = v
                 if not (v >= ch_lo[c] and v <= ch_hi[c]):

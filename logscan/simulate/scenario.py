@@ -122,8 +122,14 @@ def input_channel(name: str) -> str:
     return f"/cmd/{name}"
 
 
-def build_scenario(model_name: str, duration: float, rate_hz: float | None, aggressive: bool,
-                   rng: np.random.Generator, params: dict | None = None) -> Scenario:
+def build_scenario(
+    model_name: str,
+    duration: float,
+    rate_hz: float | None,
+    aggressive: bool,
+    rng: np.random.Generator,
+    params: dict | None = None,
+) -> Scenario:
     """The scenario of ``model_name`` for a log of ``duration`` seconds."""
     if model_name not in SIMULATED_MODELS:
         raise UsageError(
@@ -148,13 +154,21 @@ def _sensor_groups(model_name: str, model: Model, rate: float) -> list[SensorGro
         topic, fields = _SENSOR_TOPICS.get(model_name, {}).get(spec.name, (f"/{spec.name}", spec.outputs))
         sensor_rate = _SENSOR_RATES.get(model_name, {}).get(spec.name) or rate
         ratio = max(1, int(round(rate / min(sensor_rate, rate))))
-        out.append(SensorGroup(
-            name=spec.name, group_id=spec.group_id, topic=topic, fields=tuple(fields), ratio=ratio,
-            rate_hz=rate / ratio, noise_std=np.asarray(spec.noise_std, dtype=np.float64),
-            range_lo=np.asarray(spec.range_lo, dtype=np.float64),
-            range_hi=np.asarray(spec.range_hi, dtype=np.float64), wrap=spec.wrap_mask(),
-            outputs=tuple(spec.outputs),
-        ))
+        out.append(
+            SensorGroup(
+                name=spec.name,
+                group_id=spec.group_id,
+                topic=topic,
+                fields=tuple(fields),
+                ratio=ratio,
+                rate_hz=rate / ratio,
+                noise_std=np.asarray(spec.noise_std, dtype=np.float64),
+                range_lo=np.asarray(spec.range_lo, dtype=np.float64),
+                range_hi=np.asarray(spec.range_hi, dtype=np.float64),
+                wrap=spec.wrap_mask(),
+                outputs=tuple(spec.outputs),
+            )
+        )
     return out
 
 
@@ -166,18 +180,29 @@ def _quadcopter(model, dt, t, groups, aggressive, rng) -> Scenario:
     hover_motor = model.p["mass"] * model.p["g"] / 4.0
     mode = np.where(np.abs(ref[:, 3:6]).sum(axis=1) > 1e-9, 1.0, 0.0)  # 0 hover, 1 figure-eight
     return Scenario(
-        model_name="quadcopter", model=model, dt=dt, groups=groups,
-        actuators=["motor1", "motor2", "motor3", "motor4"], M=M,
-        a_lo=np.zeros(4), a_hi=np.full(4, 2.5 * hover_motor),
-        ctrl_id=ctl.QUAD_CTRL, ctrl_params=ctl.quad_params(model, aggressive),
-        ctrl_state=np.zeros(1), reference=ref, x0=x0,
+        model_name="quadcopter",
+        model=model,
+        dt=dt,
+        groups=groups,
+        actuators=["motor1", "motor2", "motor3", "motor4"],
+        M=M,
+        a_lo=np.zeros(4),
+        a_hi=np.full(4, 2.5 * hover_motor),
+        ctrl_id=ctl.QUAD_CTRL,
+        ctrl_params=ctl.quad_params(model, aggressive),
+        ctrl_state=np.zeros(1),
+        reference=ref,
+        x0=x0,
         P0=np.diag(np.square(0.1 * model.state_scale())),
         imu_default=_IMU_DEFAULT["quadcopter"],
         input_channels=[input_channel(n) for n in model.input_names],
-        mode_channel="/flight_mode/mode", mode_values=mode,
+        mode_channel="/flight_mode/mode",
+        mode_values=mode,
         setpoints={
-            "/setpoint/position.x": ref[:, 0], "/setpoint/position.y": ref[:, 1],
-            "/setpoint/position.z": ref[:, 2], "/setpoint/yaw": ref[:, 9],
+            "/setpoint/position.x": ref[:, 0],
+            "/setpoint/position.y": ref[:, 1],
+            "/setpoint/position.z": ref[:, 2],
+            "/setpoint/yaw": ref[:, 9],
         },
         onboard_rate_hz=min(50.0, 1.0 / dt),
     )
@@ -188,13 +213,24 @@ def _steer_by_wire(model, dt, t, groups, aggressive, rng) -> Scenario:
     ref = ctl.sbw_reference(t, cp[8], aggressive)
     limit = float(model.p.get("tau_max", 200.0))
     return Scenario(
-        model_name="steer_by_wire", model=model, dt=dt, groups=groups,
-        actuators=["steering_motor"], M=np.eye(1), a_lo=np.array([-limit]), a_hi=np.array([limit]),
-        ctrl_id=ctl.SBW_CTRL, ctrl_params=cp, ctrl_state=np.zeros(2), reference=ref,
-        x0=np.zeros(4), P0=np.diag(np.square(0.1 * model.state_scale())),
+        model_name="steer_by_wire",
+        model=model,
+        dt=dt,
+        groups=groups,
+        actuators=["steering_motor"],
+        M=np.eye(1),
+        a_lo=np.array([-limit]),
+        a_hi=np.array([limit]),
+        ctrl_id=ctl.SBW_CTRL,
+        ctrl_params=cp,
+        ctrl_state=np.zeros(2),
+        reference=ref,
+        x0=np.zeros(4),
+        P0=np.diag(np.square(0.1 * model.state_scale())),
         imu_default=_IMU_DEFAULT["steer_by_wire"],
         input_channels=[input_channel(n) for n in model.input_names],
-        mode_channel="/handwheel/reference", mode_values=ref[:, 0],
+        mode_channel="/handwheel/reference",
+        mode_values=ref[:, 0],
         onboard_rate_hz=min(50.0, 1.0 / dt),
     )
 
@@ -210,13 +246,24 @@ def _dc_motor(model, dt, t, groups, aggressive, rng) -> Scenario:
     names = {g.name: g for g in groups}
     enc, gps = names["encoder"].channels, names["gps_speed"].channels
     return Scenario(
-        model_name="dc_motor", model=model, dt=dt, groups=groups,
-        actuators=["motor"], M=np.eye(1), a_lo=np.array([-supply]), a_hi=np.array([supply]),
-        ctrl_id=ctl.DCM_CTRL, ctrl_params=cp, ctrl_state=np.zeros(1), reference=ref, x0=x0,
+        model_name="dc_motor",
+        model=model,
+        dt=dt,
+        groups=groups,
+        actuators=["motor"],
+        M=np.eye(1),
+        a_lo=np.array([-supply]),
+        a_hi=np.array([supply]),
+        ctrl_id=ctl.DCM_CTRL,
+        ctrl_params=cp,
+        ctrl_state=np.zeros(1),
+        reference=ref,
+        x0=x0,
         P0=np.diag(np.square(0.1 * model.state_scale())),
         imu_default=_IMU_DEFAULT["dc_motor"],
         input_channels=[input_channel(n) for n in model.input_names],
-        mode_channel="/cmd_vel/linear.x", mode_values=ref[:, 0],
+        mode_channel="/cmd_vel/linear.x",
+        mode_values=ref[:, 0],
         redundant={"speed": {"left": enc[0], "right": enc[1], "gps": gps[0]}},
         onboard_rate_hz=1.0 / dt,
     )

@@ -84,9 +84,14 @@ class Simulation:
         sc = self.scenario
         n = self.n_steps
         every = np.arange(n, dtype=np.int64)
-        out = [Series("/cmd", "logscan/Command", every, {
-            ch.removeprefix("/cmd/"): self.u_cmd[:, i] for i, ch in enumerate(sc.input_channels)
-        })]
+        out = [
+            Series(
+                "/cmd",
+                "logscan/Command",
+                every,
+                {ch.removeprefix("/cmd/"): self.u_cmd[:, i] for i, ch in enumerate(sc.input_channels)},
+            )
+        ]
         sensors: dict[str, Series] = {}
         for g, sl in zip(sc.groups, self.group_slices().values()):
             steps = every[:: g.ratio]
@@ -100,10 +105,19 @@ class Simulation:
         states = sc.model.state_names
         ratio = max(1, int(round(1.0 / (sc.dt * sc.onboard_rate_hz))))
         steps = every[::ratio]
-        out.append(Series("/ekf/state", "logscan/EstimatorState", steps,
-                          {s: self.x_hat[steps, i] for i, s in enumerate(states)}))
-        out.append(Series("/ekf/variance", "logscan/EstimatorVariance", steps,
-                          {s: self.P_diag[steps, i] for i, s in enumerate(states)}))
+        out.append(
+            Series(
+                "/ekf/state", "logscan/EstimatorState", steps, {s: self.x_hat[steps, i] for i, s in enumerate(states)}
+            )
+        )
+        out.append(
+            Series(
+                "/ekf/variance",
+                "logscan/EstimatorVariance",
+                steps,
+                {s: self.P_diag[steps, i] for i, s in enumerate(states)},
+            )
+        )
         extra: dict[str, dict[str, np.ndarray]] = {}
         if sc.mode_channel and sc.mode_values is not None:
             extra.setdefault(*_split(sc.mode_channel, sc.mode_values))
@@ -113,8 +127,9 @@ class Simulation:
         slow = every[:: max(1, int(round(1.0 / (sc.dt * SETPOINT_RATE_HZ))))]
         for topic, fields in extra.items():
             out.append(Series(topic, "logscan/Setpoint", slow, {k: v[slow] for k, v in fields.items()}))
-        out.append(Series("/truth/state", "logscan/TruthState", every,
-                          {s: self.x_true[:, i] for i, s in enumerate(states)}))
+        out.append(
+            Series("/truth/state", "logscan/TruthState", every, {s: self.x_true[:, i] for i, s in enumerate(states)})
+        )
         return out
 
     def truth(self) -> dict:
@@ -177,7 +192,8 @@ def _glitches(sc: Scenario, duration: float, per_min: float, rng: np.random.Gene
     redundant = {ch for group in sc.redundant.values() for ch in group.values()}
     channels = [
         (ch, g.noise_std[j], g.ratio * sc.dt)
-        for g in sc.groups for j, ch in enumerate(g.channels)
+        for g in sc.groups
+        for j, ch in enumerate(g.channels)
         if not redundant or ch in redundant
     ]
     picks = rng.integers(0, len(channels), size=count)
@@ -187,8 +203,9 @@ def _glitches(sc: Scenario, duration: float, per_min: float, rng: np.random.Gene
     out = []
     for pick, start, size, length in zip(picks.tolist(), starts.tolist(), sizes.tolist(), lengths.tolist()):
         channel, std, period = channels[pick]
-        out.append(FaultSpec("bias", channel, round(start, 3), round(start + length * period, 3),
-                             round(float(size * std), 6)))
+        out.append(
+            FaultSpec("bias", channel, round(start, 3), round(start + length * period, 3), round(float(size * std), 6))
+        )
     return out
 
 
@@ -224,21 +241,25 @@ def simulate(
     rng = np.random.default_rng(seed)
     sc = build_scenario(model_name, duration, rate_hz, aggressive, np.random.default_rng([seed, 1]), params)
     n_steps = sc.reference.shape[0]
-    sensor_channels = [
-        (target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)
-    ]
+    sensor_channels = [(target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)]
     faults = list(faults or [])
     glitches = _glitches(sc, duration, glitches_per_min, np.random.default_rng([seed, 3]))
     events, table = resolve_faults(
-        faults + glitches, duration=duration, dt=sc.dt, sensor_channels=sensor_channels,
-        imu_default=sc.imu_default, actuators=sc.actuators, state_names=sc.model.state_names,
+        faults + glitches,
+        duration=duration,
+        dt=sc.dt,
+        sensor_channels=sensor_channels,
+        imu_default=sc.imu_default,
+        actuators=sc.actuators,
+        state_names=sc.model.state_names,
         estimator_fields={s: f"/ekf/variance/{s}" for s in sc.model.state_names},
         rng=np.random.default_rng([seed, 2]),
     )
     events, transients = events[: len(faults)], events[len(faults) :]
     # cov-corruption's channels name the logged variance; state-corruption the logged state
     events = [
-        e if e.kind != "state-corruption"
+        e
+        if e.kind != "state-corruption"
         else replace(e, channels=tuple(c.replace("/ekf/variance/", "/ekf/state/") for c in e.channels))
         for e in events
     ]
@@ -253,25 +274,53 @@ def simulate(
     g_m = np.array([len(g.fields) for g in sc.groups], dtype=np.int64)
     started = time.perf_counter()
     x_true, u_cmd, u_act, z, x_hat, P_diag, rejected = closed_loop(
-        model.model_id, model.param_vector(sc.dt), sc.dt, sc.x0.astype(np.float64),
-        np.ascontiguousarray(sc.P0, dtype=np.float64), Q, W, V,
-        np.array([g.group_id for g in sc.groups], dtype=np.int64), g_m,
+        model.model_id,
+        model.param_vector(sc.dt),
+        sc.dt,
+        sc.x0.astype(np.float64),
+        np.ascontiguousarray(sc.P0, dtype=np.float64),
+        Q,
+        W,
+        V,
+        np.array([g.group_id for g in sc.groups], dtype=np.int64),
+        g_m,
         np.concatenate([[0], np.cumsum(g_m)[:-1]]).astype(np.int64),
         np.array([g.ratio for g in sc.groups], dtype=np.int64),
         np.concatenate([g.range_lo for g in sc.groups]),
         np.concatenate([g.range_hi for g in sc.groups]),
         np.concatenate([g.wrap for g in sc.groups]).astype(np.bool_),
-        np.square(std), sc.ctrl_id, sc.ctrl_params.astype(np.float64),
-        sc.ctrl_state.astype(np.float64).copy(), np.ascontiguousarray(sc.reference),
+        np.square(std),
+        sc.ctrl_id,
+        sc.ctrl_params.astype(np.float64),
+        sc.ctrl_state.astype(np.float64).copy(),
+        np.ascontiguousarray(sc.reference),
         np.ascontiguousarray(sc.M, dtype=np.float64),
-        np.ascontiguousarray(np.linalg.inv(sc.M)), sc.a_lo.astype(np.float64),
-        sc.a_hi.astype(np.float64), table.kind, table.target, table.start, table.end,
-        table.magnitude, table.uniform, table.bit,
+        np.ascontiguousarray(np.linalg.inv(sc.M)),
+        sc.a_lo.astype(np.float64),
+        sc.a_hi.astype(np.float64),
+        table.kind,
+        table.target,
+        table.start,
+        table.end,
+        table.magnitude,
+        table.uniform,
+        table.bit,
     )
     elapsed = time.perf_counter() - started
     return Simulation(
-        scenario=sc, seed=seed, duration=duration, aggressive=aggressive, events=events,
+        scenario=sc,
+        seed=seed,
+        duration=duration,
+        aggressive=aggressive,
+        events=events,
         transients=transients,
-        faults=table, x_true=x_true, u_cmd=u_cmd, u_act=u_act, z=z, x_hat=x_hat,
-        P_diag=corrupt_logged_variance(P_diag, table), rejected=int(rejected), elapsed_s=elapsed,
+        faults=table,
+        x_true=x_true,
+        u_cmd=u_cmd,
+        u_act=u_act,
+        z=z,
+        x_hat=x_hat,
+        P_diag=corrupt_logged_variance(P_diag, table),
+        rejected=int(rejected),
+        elapsed_s=elapsed,
     )

@@ -90,8 +90,14 @@ class RangeCheckDetector(Detector):
                     unchecked.append(channel)
                     continue
                 result.add_statistic(
-                    run.t, channel, group.z[:, j], upper=limits[1], lower=limits[0],
-                    valid=group.fresh, n_persist=self.n_persist, hold_off_s=self.hold_off_s,
+                    run.t,
+                    channel,
+                    group.z[:, j],
+                    upper=limits[1],
+                    lower=limits[0],
+                    valid=group.fresh,
+                    n_persist=self.n_persist,
+                    hold_off_s=self.hold_off_s,
                 )
                 checked += 1
         if checked == 0:

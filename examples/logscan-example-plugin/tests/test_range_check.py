@@ -18,8 +18,13 @@ def speed_run(values, rate_hz=10.0):
     n = values.size
     group = AlignedGroup("speed", ["/odom/speed"], values.reshape(n, 1), np.ones(n, bool))
     return AlignedRun(
-        t=np.arange(n) / rate_hz, dt=1 / rate_hz, start_ns=0, u=np.zeros((n, 0)),
-        u_fresh=np.ones(n, bool), input_channels=[], groups={"speed": group},
+        t=np.arange(n) / rate_hz,
+        dt=1 / rate_hz,
+        start_ns=0,
+        u=np.zeros((n, 0)),
+        u_fresh=np.ones(n, bool),
+        input_channels=[],
+        groups={"speed": group},
     )
 
 

@@ -24,9 +24,19 @@ class _Unsupported(Exception):
 
 # primitive -> (size in bytes, type code for the kernel); uint8/byte arrays decode as bytes
 _CDR_PRIMITIVES = {
-    "bool": (1, 1), "byte": (1, 1), "uint8": (1, 1), "char": (1, 2), "int8": (1, 2),
-    "uint16": (2, 3), "int16": (2, 4), "uint32": (4, 5), "int32": (4, 6),
-    "uint64": (8, 7), "int64": (8, 8), "float32": (4, 9), "float64": (8, 10),
+    "bool": (1, 1),
+    "byte": (1, 1),
+    "uint8": (1, 1),
+    "char": (1, 2),
+    "int8": (1, 2),
+    "uint16": (2, 3),
+    "int16": (2, 4),
+    "uint32": (4, 5),
+    "int32": (4, 6),
+    "uint64": (8, 7),
+    "int64": (8, 8),
+    "float32": (4, 9),
+    "float64": (8, 10),
 }
 _OP_VALUE, _OP_STRING, _OP_SKIP = 0, 1, 2
 
@@ -48,8 +58,7 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
         from mcap_ros2._dynamic import TimeDefinition, _for_each_msgdef
     except ImportError:  # the private helpers moved: the decoder path still works
         return None
-    msgdefs: dict[str, Any] = {"builtin_interfaces/Time": TimeDefinition,
-                               "builtin_interfaces/Duration": TimeDefinition}
+    msgdefs: dict[str, Any] = {"builtin_interfaces/Time": TimeDefinition, "builtin_interfaces/Duration": TimeDefinition}
 
     def keep(full_name: str, short_name: str, msgdef: Any) -> None:
         msgdefs[full_name] = msgdef
@@ -104,8 +113,7 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
     except _Unsupported:
         return None
     table = np.array(program, dtype=np.int64).reshape(-1, 4)
-    return CdrLayout(table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy(), table[:, 3].copy(),
-                     paths, skipped)
+    return CdrLayout(table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy(), table[:, 3].copy(), paths, skipped)
 
 
 @njit(cache=True)
@@ -160,7 +168,12 @@ def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: n
                     pos += 4 - (pos - base) % 4
                 if pos + 4 > end:
                     return False
-                length = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8) | (np.int64(buf[pos + 2]) << 16) | (np.int64(buf[pos + 3]) << 24)
+                length = (
+                    np.int64(buf[pos])
+                    | (np.int64(buf[pos + 1]) << 8)
+                    | (np.int64(buf[pos + 2]) << 16)
+                    | (np.int64(buf[pos + 3]) << 24)
+                )
                 pos += 4 + length
                 if pos > end:
                     return False
@@ -177,8 +190,9 @@ def cdr_fast(layout: CdrLayout, datas: MessageBytes | Sequence[bytes]) -> FlatCo
     n = len(packed)
     out = np.empty((n, len(layout.paths)), dtype=np.float64)
     for (buf, starts, ends), row in zip(packed.parts, packed.first.tolist()):
-        if not _cdr_run(buf, starts, ends, layout.kinds, layout.sizes, layout.codes, layout.columns,
-                        out[row : row + starts.size]):
+        if not _cdr_run(
+            buf, starts, ends, layout.kinds, layout.sizes, layout.codes, layout.columns, out[row : row + starts.size]
+        ):
             return None
     flat = FlatColumns()
     every = np.arange(n, dtype=np.int64)

@@ -88,8 +88,9 @@ def _source_of(scan: Scan) -> SourceInfo:
             f"({_span_text(min(firsts) if firsts else None, max(lasts) if lasts else None)})"
         )
     if scan.unknown_channel_messages:
-        source.skip("(messages of undefined channels)", "no channel record with their channel id",
-                    scan.unknown_channel_messages)
+        source.skip(
+            "(messages of undefined channels)", "no channel record with their channel id", scan.unknown_channel_messages
+        )
 
     topics: dict[str, TopicInfo] = {}
     for cid, channel in scan.channels.items():
@@ -97,7 +98,8 @@ def _source_of(scan: Scan) -> SourceInfo:
         info = topics.get(channel.topic)
         if info is None:
             info = topics[channel.topic] = TopicInfo(
-                name=channel.topic, encoding=channel.message_encoding,
+                name=channel.topic,
+                encoding=channel.message_encoding,
                 schema=schema.name if schema else "",
             )
         count = scan.counts.get(cid, 0)
@@ -154,8 +156,13 @@ def _decode_batches(
 
 
 def _columns_of(
-    decoder, channel: ChannelRec, schema: SchemaRec | None, datas: MessageBytes, log_times: np.ndarray,
-    layouts: dict[int, CdrLayout | None], source: SourceInfo,
+    decoder,
+    channel: ChannelRec,
+    schema: SchemaRec | None,
+    datas: MessageBytes,
+    log_times: np.ndarray,
+    layouts: dict[int, CdrLayout | None],
+    source: SourceInfo,
 ) -> tuple[FlatColumns, np.ndarray]:
     """Columns of one channel's messages by the fastest path that fits them (CDR layout, bulk JSON,
     the decoder), and the log times of the messages they index (undecodable messages dropped)."""
@@ -199,7 +206,8 @@ def _channels_in_time_order(
     if unsorted_topics:
         source.warnings.append(
             f"{len(unsorted_topics)} channel(s) not in time order in the file, sorted by time: "
-            + ", ".join(sorted(unsorted_topics)[:5]) + (" ..." if len(unsorted_topics) > 5 else "")
+            + ", ".join(sorted(unsorted_topics)[:5])
+            + (" ..." if len(unsorted_topics) > 5 else "")
         )
     return channels
 

@@ -142,7 +142,8 @@ class Scan:
             raise InputError(f"cannot read: {exc.strerror}", path=self.path) from None
         if not raw.startswith(MCAP_MAGIC):
             raise CorruptLogError(
-                "not an MCAP file (bad magic bytes at offset 0)", path=self.path,
+                "not an MCAP file (bad magic bytes at offset 0)",
+                path=self.path,
                 hint="the file is damaged or not an MCAP log",
             )
         u8 = np.frombuffer(raw, dtype=np.uint8)
@@ -164,8 +165,9 @@ class Scan:
         run_start = 0
         for i in special.tolist() + [ops.size]:
             if content[i] > content[run_start]:  # top-level schema / channel / message records
-                self._container(raw, u8, ops[run_start:i], top.offsets[run_start:i],
-                                top.lengths[run_start:i], checked=False)
+                self._container(
+                    raw, u8, ops[run_start:i], top.offsets[run_start:i], top.lengths[run_start:i], checked=False
+                )
             run_start = i + 1
             if i == ops.size:
                 return
@@ -199,9 +201,7 @@ class Scan:
         else:
             data = _decompress(compression, payload, uncompressed_size, start)
         if len(data) != uncompressed_size:
-            raise_corrupt(
-                f"chunk holds {len(data)} bytes, its header says {uncompressed_size}", start
-            )
+            raise_corrupt(f"chunk holds {len(data)} bytes, its header says {uncompressed_size}", start)
         if uncompressed_crc != 0 and zlib.crc32(data) != uncompressed_crc:
             raise_corrupt("chunk CRC mismatch", start)
         u8 = np.frombuffer(data, dtype=np.uint8)
@@ -283,10 +283,16 @@ class Scan:
             for k, cid in enumerate(channel_ids.tolist()):
                 channel = self.channels.get(cid)
                 start, stop = int(m_off[k]) + MESSAGE_HEADER, int(m_off[k] + m_len[k])
-                self.raw.append(RawMessage(
-                    channel.topic if channel else "", cid, sequences[k],
-                    int(log_times[k]), publish[k], bytes(data[start:stop]),
-                ))
+                self.raw.append(
+                    RawMessage(
+                        channel.topic if channel else "",
+                        cid,
+                        sequences[k],
+                        int(log_times[k]),
+                        publish[k],
+                        bytes(data[start:stop]),
+                    )
+                )
 
     def _is_wanted(self, cid: int) -> bool:
         known = self._wanted_ids.get(cid)
@@ -356,5 +362,6 @@ def raise_if_unrecoverable(scan: Scan) -> None:
         lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
         raise CorruptLogError(
             f"corrupt MCAP: {problem_text(scan)}; {lost}",
-            path=scan.path, hint="the file is damaged; re-export or re-record it",
+            path=scan.path,
+            hint="the file is damaged; re-export or re-record it",
         )

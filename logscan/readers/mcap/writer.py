@@ -160,9 +160,7 @@ def _check(topics: dict[str, TopicData], encoding: str) -> None:
             raise UsageError(f"topic {topic!r}: no fields to write")
         for name, values in data.fields.items():
             if np.shape(values) != t.shape:
-                raise UsageError(
-                    f"topic {topic!r}: field {name!r} has shape {np.shape(values)}, t_ns has {t.shape}"
-                )
+                raise UsageError(f"topic {topic!r}: field {name!r} has shape {np.shape(values)}, t_ns has {t.shape}")
 
 
 class _Out:
@@ -185,7 +183,7 @@ class _Out:
         crc, offset = 0, 0
         for part in self.parts:
             if offset + len(part) > start:
-                crc = zlib.crc32(part[max(0, start - offset):], crc)
+                crc = zlib.crc32(part[max(0, start - offset) :], crc)
             offset += len(part)
         return crc
 
@@ -200,14 +198,21 @@ def _string_map(items: dict[str, str]) -> bytes:
     return struct.pack("<I", len(body)) + body
 
 
-_MESSAGE_HEADER = np.dtype([
-    ("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
-    ("log_time", "<u8"), ("publish_time", "<u8"),
-])
+_MESSAGE_HEADER = np.dtype(
+    [
+        ("opcode", "u1"),
+        ("length", "<u8"),
+        ("channel", "<u2"),
+        ("sequence", "<u4"),
+        ("log_time", "<u8"),
+        ("publish_time", "<u8"),
+    ]
+)
 
 
-def _message_records(channel: np.ndarray, sequence: np.ndarray, log_time: np.ndarray,
-                     datas: list[bytes]) -> tuple[bytes, np.ndarray]:
+def _message_records(
+    channel: np.ndarray, sequence: np.ndarray, log_time: np.ndarray, datas: list[bytes]
+) -> tuple[bytes, np.ndarray]:
     """Message records back to back, and the offset of each within the returned bytes."""
     sizes = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
     headers = np.zeros(len(datas), dtype=_MESSAGE_HEADER)
@@ -285,11 +290,21 @@ def _topic_records(
         else:
             schema_encoding, message_encoding = "jsonschema", "json"
             schema_data = json.dumps(_json_schema(tree, data.schema_name), separators=(",", ":")).encode()
-        schema_records.append(_record(0x03, struct.pack("<H", number)
-                              + _string(data.schema_name) + _string(schema_encoding)
-                              + struct.pack("<I", len(schema_data)) + schema_data))
-        channel_records.append(_record(0x04, struct.pack("<HH", number, number) + _string(topic)
-                               + _string(message_encoding) + _string_map({})))
+        schema_records.append(
+            _record(
+                0x03,
+                struct.pack("<H", number)
+                + _string(data.schema_name)
+                + _string(schema_encoding)
+                + struct.pack("<I", len(schema_data))
+                + schema_data,
+            )
+        )
+        channel_records.append(
+            _record(
+                0x04, struct.pack("<HH", number, number) + _string(topic) + _string(message_encoding) + _string_map({})
+            )
+        )
         payloads.append(_payloads(data, topic, encoding, tree))
         times.append(np.asarray(data.t_ns, dtype=np.int64))
     return schema_records, channel_records, payloads, times
@@ -338,8 +353,12 @@ def _write_chunk(out: _Out, prefix: bytes, messages: _Messages, lo: int, hi: int
     payload = compress(records) if compress is not None else records
     t_start = int(t.min()) if t.size else 0
     t_end = int(t.max()) if t.size else 0
-    chunk_body = (struct.pack("<QQQI", t_start, t_end, len(records), zlib.crc32(records))
-                  + _string(compression) + struct.pack("<Q", len(payload)) + payload)
+    chunk_body = (
+        struct.pack("<QQQI", t_start, t_end, len(records), zlib.crc32(records))
+        + _string(compression)
+        + struct.pack("<Q", len(payload))
+        + payload
+    )
     chunk_offset = out.record(0x06, chunk_body)
     chunk_length = 9 + len(chunk_body)
     index_offsets: dict[int, int] = {}
@@ -351,26 +370,55 @@ def _write_chunk(out: _Out, prefix: bytes, messages: _Messages, lo: int, hi: int
         pairs[:, 1] = offsets[select]
         index_offsets[k] = out.record(0x07, struct.pack("<HI", k, pairs.nbytes) + pairs.tobytes())
     offsets_map = b"".join(struct.pack("<HQ", k, v) for k, v in index_offsets.items())
-    return _record(0x08, struct.pack("<QQQQ", t_start, t_end, chunk_offset, chunk_length)
-                   + struct.pack("<I", len(offsets_map)) + offsets_map
-                   + struct.pack("<Q", out.size - index_start) + _string(compression)
-                   + struct.pack("<QQ", len(payload), len(records)))
+    return _record(
+        0x08,
+        struct.pack("<QQQQ", t_start, t_end, chunk_offset, chunk_length)
+        + struct.pack("<I", len(offsets_map))
+        + offsets_map
+        + struct.pack("<Q", out.size - index_start)
+        + _string(compression)
+        + struct.pack("<QQ", len(payload), len(records)),
+    )
 
 
-def _write_summary(out: _Out, schema_records: list[bytes], channel_records: list[bytes], messages: _Messages,
-                   n_topics: int, metadata_indexes: list[bytes], chunk_indexes: list[bytes]) -> None:
+def _write_summary(
+    out: _Out,
+    schema_records: list[bytes],
+    channel_records: list[bytes],
+    messages: _Messages,
+    n_topics: int,
+    metadata_indexes: list[bytes],
+    chunk_indexes: list[bytes],
+) -> None:
     """Write the summary (schemas, channels, statistics, chunk and metadata indexes, their offsets) and the footer."""
     summary_start = out.size
     all_t = messages.t
     counts = np.bincount(messages.channel, minlength=n_topics + 1)[1:] if n_topics else []
     counts_map = b"".join(struct.pack("<HQ", k + 1, int(c)) for k, c in enumerate(counts))
-    statistics = _record(0x0B, struct.pack(
-        "<QHIIIIQQ", len(messages.datas), n_topics, n_topics, 0, len(metadata_indexes), len(chunk_indexes),
-        int(all_t.min()) if all_t.size else 0, int(all_t.max()) if all_t.size else 0,
-    ) + struct.pack("<I", len(counts_map)) + counts_map)
+    statistics = _record(
+        0x0B,
+        struct.pack(
+            "<QHIIIIQQ",
+            len(messages.datas),
+            n_topics,
+            n_topics,
+            0,
+            len(metadata_indexes),
+            len(chunk_indexes),
+            int(all_t.min()) if all_t.size else 0,
+            int(all_t.max()) if all_t.size else 0,
+        )
+        + struct.pack("<I", len(counts_map))
+        + counts_map,
+    )
     offsets_records = []
-    for opcode, group in ((0x03, schema_records), (0x04, channel_records), (0x0B, [statistics]),
-                          (0x08, chunk_indexes), (0x0D, metadata_indexes)):
+    for opcode, group in (
+        (0x03, schema_records),
+        (0x04, channel_records),
+        (0x0B, [statistics]),
+        (0x08, chunk_indexes),
+        (0x0D, metadata_indexes),
+    ):
         if not group:
             continue
         group_start = out.size
