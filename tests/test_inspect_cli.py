@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from logscan.cli.render import compact_fields, render_inspect
-from logscan.cli.main import main
 
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
 ULOGS = sorted((TESTDATA / "px4-ulog").glob("*.ulg"))
@@ -19,25 +16,11 @@ MCAPS = sorted((TESTDATA / "mcap-conformance").rglob("*.mcap"))
 HAVE_MCAP_READER = importlib.util.find_spec("logscan.readers.mcap") is not None
 
 
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    """The real console entry (``python -m logscan``), so exit codes are the process's own."""
-    return subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True,
-                          timeout=120)
-
-
-def run_in_process(capsys, *args: str) -> tuple[int, str, str]:
-    """`main` in this process (fast for hundreds of files); the same code path as the console."""
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out, err = capsys.readouterr()
-    return int(info.value.code or 0), out, err
-
-
 @pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
 @pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
-def test_inspect_every_real_ulog(path):
-    result = run_cli("inspect", str(path))
-    assert result.returncode == 0, result.stderr
+def test_inspect_every_real_ulog(path, cli):
+    result = cli("inspect", path)
+    assert result.exit_code == 0, result.stderr
     assert "Traceback" not in result.stderr and result.stderr == ""
     out = result.stdout
     assert "format:    ulog" in out and "system:    sys_name=PX4" in out
@@ -48,9 +31,9 @@ def test_inspect_every_real_ulog(path):
 
 
 @pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
-def test_inspect_json_to_stdout_parses_and_has_the_keys():
-    result = run_cli("inspect", str(TESTDATA / "px4-ulog" / "sample_log_small.ulg"), "--json", "-")
-    assert result.returncode == 0, result.stderr
+def test_inspect_json_to_stdout_parses_and_has_the_keys(cli):
+    result = cli("inspect", TESTDATA / "px4-ulog" / "sample_log_small.ulg", "--json", "-")
+    assert result.exit_code == 0, result.stderr
     facts = json.loads(result.stdout)
     for key in ("file", "format", "start_ns", "end_ns", "duration_s", "time_unit", "partial",
                 "topics", "channels", "skipped", "warnings", "metadata"):
@@ -63,32 +46,33 @@ def test_inspect_json_to_stdout_parses_and_has_the_keys():
 
 
 @pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
-def test_inspect_json_file_and_channels_and_topic_filter(tmp_path, capsys):
-    path = str(TESTDATA / "px4-ulog" / "sample_px4_events.ulg")
+def test_inspect_json_file_and_channels_and_topic_filter(tmp_path, cli):
     target = tmp_path / "facts.json"
-    code, out, err = run_in_process(capsys, "inspect", path, "--channels", "--topic",
-                                    "vehicle_status_0", "--json", str(target))
-    assert code == 0 and err == ""
+    result = cli("inspect", TESTDATA / "px4-ulog" / "sample_px4_events.ulg", "--channels",
+                 "--topic", "vehicle_status_0", "--json", target)
+    assert result.exit_code == 0 and result.stderr == ""
     facts = json.loads(target.read_text())
     assert list(facts["topics"]) == ["vehicle_status_0"]
-    assert "/vehicle_status_0/nav_state" in out and "rate Hz" in out
+    assert "/vehicle_status_0/nav_state" in result.output and "rate Hz" in result.output
     # epoch-based SITL log: the span is shown as UTC wall-clock time
-    assert "time span: 2024-03-18T" in out
+    assert "time span: 2024-03-18T" in result.output
 
 
-def test_inspect_csv_dir_and_wide_csv(tmp_path, capsys):
+def test_inspect_csv_dir_and_wide_csv(tmp_path, cli):
     d = tmp_path / "flight"
     d.mkdir()
     (d / "flight_vehicle_imu_0.csv").write_text("timestamp,accel[0],accel[1]\n1000,1,2\n2000,3,4\n")
     (d / "flight_battery_status_0.csv").write_text("timestamp,voltage_v\n1000,12\n")
-    code, out, _ = run_in_process(capsys, "inspect", str(d))
-    assert code == 0
+    result = cli("inspect", d)
+    assert result.exit_code == 0
+    out = result.output
     assert "vehicle_imu_0" in out and "csv / ulog2csv" in out and "fields: accel[0..1]" in out
     assert "time col:  2 files (battery_status_0, vehicle_imu_0): 'timestamp' in us" in out
     wide = tmp_path / "wide.csv"
     wide.write_text("time,speed,label\n0,1,a\n10,2,b\n20,,c\n")
-    code, out, _ = run_in_process(capsys, "inspect", str(wide))
-    assert code == 0
+    result = cli("inspect", wide)
+    assert result.exit_code == 0
+    out = result.output
     assert "time col:  wide.csv: 'time' in ms" in out
     assert "text column 'label' of wide.csv: not numeric" in out
     assert "1 with NaN/inf values" in out
@@ -101,14 +85,14 @@ def conformance_message_count(mcap: Path) -> int:
 
 @pytest.mark.skipif(not MCAPS, reason="shared mcap-conformance test data missing")
 @pytest.mark.skipif(not HAVE_MCAP_READER, reason="logscan.readers.mcap not written yet")
-def test_inspect_every_conformance_mcap(capsys):
+def test_inspect_every_conformance_mcap(cli):
     failures = []
     for path in MCAPS:
-        code, out, err = run_in_process(capsys, "inspect", str(path), "--json", "-")
-        if code != 0 or "Traceback" in err:
-            failures.append(f"{path.name}: exit {code}: {err.strip()[:200]}")
+        result = cli("inspect", path, "--json", "-")
+        if result.exit_code != 0 or "Traceback" in result.stderr:
+            failures.append(f"{path.name}: exit {result.exit_code}: {result.stderr.strip()[:200]}")
             continue
-        facts = json.loads(out)
+        facts = json.loads(result.output)
         counted = sum(info["message_count"] for info in facts["topics"].values())
         expected = conformance_message_count(path)
         if counted != expected or facts["partial"]:
