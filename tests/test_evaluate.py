@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +27,6 @@ BITFLIP = SAMPLES / "quad_imu_bitflip.mcap"
 
 def alarm(start, end, signal, detector):
     return AlarmInterval(start, end, start, start, 2.0, 1.0, 2.0, "upper", 1, signal, detector)
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True,
-                          timeout=120)
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +109,7 @@ def test_pooled_counts_add_up_over_logs(evaluation):
     assert nis.tp == per_log == 2
 
 
-def test_cli_prints_tables_writes_json_and_skips_logs_without_truth(tmp_path):
+def test_cli_prints_tables_writes_json_and_skips_logs_without_truth(tmp_path, cli):
     if not BIAS.exists():
         pytest.skip("sample logs missing")
     no_truth = tmp_path / "no_truth.csv"
@@ -124,8 +117,8 @@ def test_cli_prints_tables_writes_json_and_skips_logs_without_truth(tmp_path):
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
     out = tmp_path / "eval.json"
-    result = run_cli("evaluate", str(BIAS), str(no_truth), str(garbage), "--json", str(out), "--grace", "0.5")
-    assert result.returncode == 2, result.stderr  # the corrupt log is bad input
+    result = cli("evaluate", BIAS, no_truth, garbage, "--json", out, "--grace", "0.5")
+    assert result.exit_code == 2, result.stderr  # the corrupt log is bad input
     assert "Traceback" not in result.stderr
     errors = [line for line in result.stderr.splitlines() if line.startswith("logscan: error: ")]
     assert len(errors) == 1 and "garbage.mcap" in errors[0]
@@ -139,20 +132,20 @@ def test_cli_prints_tables_writes_json_and_skips_logs_without_truth(tmp_path):
     assert data["errors"][0]["file"] == str(garbage)
 
 
-def test_cli_exit_zero_and_detector_filter():
+def test_cli_exit_zero_and_detector_filter(cli):
     if not HEALTHY.exists():
         pytest.skip("sample logs missing")
-    result = run_cli("evaluate", str(HEALTHY), "--detector", "nis")
-    assert result.returncode == 0, result.stderr
+    result = cli("evaluate", HEALTHY, "--detector", "nis")
+    assert result.exit_code == 0, result.stderr
     assert "encoded_ekf" not in result.stdout
     assert "1 healthy log(s)" in result.stdout
 
 
-def test_cli_without_any_truth_is_bad_input(tmp_path):
+def test_cli_without_any_truth_is_bad_input(tmp_path, cli):
     if not (SAMPLES / "quad_healthy.csv").exists():
         pytest.skip("sample logs missing")
     no_truth = tmp_path / "plain.csv"
     shutil.copy(SAMPLES / "quad_healthy.csv", no_truth)
-    result = run_cli("evaluate", str(no_truth))
-    assert result.returncode == 2
+    result = cli("evaluate", no_truth)
+    assert result.exit_code == 2
     assert "has ground truth" in result.stderr and "Traceback" not in result.stderr
