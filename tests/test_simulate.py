@@ -7,10 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from logscan.align import align
-from logscan.cli.main import cli, main
 from logscan.filters.ekf import run_ekf
 from logscan.models import get_model
 from logscan.profiles import load_profile, resolve_profile
@@ -19,16 +17,6 @@ from logscan.simulate import simulate
 
 REPO = Path(__file__).resolve().parents[1]
 QUAD_HEALTHY = REPO / "sample_logs" / "quad_healthy.mcap"
-
-
-def _cli(args, tmp_path):
-    return CliRunner().invoke(cli, args, catch_exceptions=False)
-
-
-def _exit_code(args, capsys) -> tuple[int, str]:
-    with pytest.raises(SystemExit) as info:
-        main(args)
-    return info.value.code, capsys.readouterr().err
 
 
 def _mean_nis_per_measurement(log, profile) -> tuple[float, dict]:
@@ -51,9 +39,9 @@ def test_healthy_quadcopter_log_nis_averages_the_number_of_measurements():
 
 
 @pytest.mark.parametrize("model_name", ["quadcopter", "steer_by_wire", "dc_motor"])
-def test_every_model_is_consistent_with_its_analysis_filter(model_name, tmp_path):
+def test_every_model_is_consistent_with_its_analysis_filter(model_name, tmp_path, cli):
     out = tmp_path / "h.mcap"
-    result = _cli(["simulate", model_name, "--duration", "40", "--seed", "5", "-q", "-o", str(out)], tmp_path)
+    result = cli("simulate", model_name, "--duration", "40", "--seed", "5", "-q", "-o", out)
     assert result.exit_code == 0, result.output
     log = read_log(out)
     profile = resolve_profile(log)
@@ -100,20 +88,20 @@ def test_dc_motor_tracks_every_speed_mode():
     assert np.abs(speed - command)[settled].mean() < 0.05
 
 
-def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
+def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path, cli):
     paths = [tmp_path / name for name in ("a.mcap", "b.mcap", "c.mcap")]
     for path, seed in zip(paths, ("7", "7", "8")):
         args = ["simulate", "quadcopter", "--duration", "5", "--seed", seed,
                 "--fault", "imu-bias", "--at", "2", "-q", "-o", str(path)]
-        assert _cli(args, tmp_path).exit_code == 0
+        assert cli(*args).exit_code == 0
     a, b, c = (p.read_bytes() for p in paths)
     assert a == b
     assert a != c
 
 
-def test_imu_bias_at_30_embeds_truth_and_profile(tmp_path):
+def test_imu_bias_at_30_embeds_truth_and_profile(tmp_path, cli):
     out = tmp_path / "q.mcap"
-    result = _cli(["simulate", "quadcopter", "--fault", "imu-bias", "--at", "30", "-q", "-o", str(out)], tmp_path)
+    result = cli("simulate", "quadcopter", "--fault", "imu-bias", "--at", "30", "-q", "-o", out)
     assert result.exit_code == 0, result.output
     log = read_log(out)
     (event,) = log.truth["events"]
@@ -122,38 +110,38 @@ def test_imu_bias_at_30_embeds_truth_and_profile(tmp_path):
     assert log.truth["true_state_topic"] == "/truth/state"
     assert {"/imu/accel.x", "/imu/gyro.z", "/gps/position.x", "/attitude/yaw", "/cmd/thrust",
             "/cmd/tau.x", "/ekf/state/vx", "/ekf/variance/vx", "/truth/state/x"} <= set(log.channels)
-    inspect = _cli(["inspect", str(out)], tmp_path)
+    inspect = cli("inspect", out)
     assert inspect.exit_code == 0 and "ground truth: yes" in inspect.output
 
 
-def test_fault_options_apply_to_short_faults_and_colon_faults_keep_theirs(tmp_path):
+def test_fault_options_apply_to_short_faults_and_colon_faults_keep_theirs(tmp_path, cli):
     out = tmp_path / "q.mcap"
     args = ["simulate", "quadcopter", "--duration", "20", "-q", "-o", str(out),
             "--fault", "drift", "--at", "5", "--fault-duration", "3", "--magnitude", "0.1",
             "--target", "gyro.y", "--fault", "stuck:position.z:12:14"]
-    assert _cli(args, tmp_path).exit_code == 0
+    assert cli(*args).exit_code == 0
     drift, stuck = read_log(out).truth["events"]
     assert (drift["kind"], drift["target"], drift["start"], drift["end"], drift["magnitude"]) == (
         "drift", "gyro.y", 5.0, 8.0, 0.1)
     assert (stuck["target"], stuck["start"], stuck["end"]) == ("position.z", 12.0, 14.0)
 
 
-def test_ros2_encoding_reads_back_the_same_channels(tmp_path):
+def test_ros2_encoding_reads_back_the_same_channels(tmp_path, cli):
     json_path, ros_path = tmp_path / "j.mcap", tmp_path / "r.mcap"
     for path, fmt in ((json_path, "mcap-json"), (ros_path, "mcap-ros2")):
         args = ["simulate", "steer_by_wire", "--duration", "5", "--format", fmt, "-q", "-o", str(path)]
-        assert _cli(args, tmp_path).exit_code == 0
+        assert cli(*args).exit_code == 0
     a, b = read_log(json_path), read_log(ros_path)
     assert set(a.channels) == set(b.channels)
     np.testing.assert_array_equal(a.channel("/imu/yaw_rate").values, b.channel("/imu/yaw_rate").values)
     assert a.truth == b.truth
 
 
-def test_csv_format_writes_truth_and_profile_sidecars(tmp_path):
+def test_csv_format_writes_truth_and_profile_sidecars(tmp_path, cli):
     out = tmp_path / "sbw.csv"
     args = ["simulate", "steer_by_wire", "--duration", "10", "--format", "csv",
             "--fault", "bias:steering_angle:4:6:0.01", "-q", "-o", str(out)]
-    assert _cli(args, tmp_path).exit_code == 0
+    assert cli(*args).exit_code == 0
     truth = json.loads((tmp_path / "sbw.truth.json").read_text())
     assert truth["events"][0]["channels"] == ["/steering/angle"]
     log = read_log(out)
@@ -170,30 +158,30 @@ def test_csv_format_writes_truth_and_profile_sidecars(tmp_path):
     (["simulate", "quadcopter", "--duration", "-1", "-o", "x.mcap"], "out of range"),
     (["simulate", "quadcopter"], "no output file"),
 ])
-def test_bad_requests_exit_2_with_one_line(args, words, capsys, tmp_path, monkeypatch):
+def test_bad_requests_exit_2_with_one_line(args, words, cli, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    code, err = _exit_code(args, capsys)
-    assert code == 2
-    assert words in err
-    assert len(err.strip().splitlines()) == 1
+    result = cli(*args)
+    assert result.exit_code == 2
+    assert words in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x.mcap").exists()
 
 
-def test_unknown_model_error_lists_the_simulated_models(capsys, tmp_path, monkeypatch):
+def test_unknown_model_error_lists_the_simulated_models(cli, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    _, err = _exit_code(["simulate", "tank", "-o", "x.mcap"], capsys)
+    err = cli("simulate", "tank", "-o", "x.mcap").stderr
     assert all(name in err for name in ("quadcopter", "steer_by_wire", "dc_motor"))
 
 
-def test_help_documents_every_option():
-    result = CliRunner().invoke(cli, ["simulate", "--help"])
+def test_help_documents_every_option(cli):
+    result = cli("simulate", "--help")
     for option in ("--fault", "--at", "--fault-duration", "--magnitude", "--target", "--duration",
                    "--seed", "--rate", "--format", "--aggressive", "--output"):
         assert option in result.output
     assert "logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap" in result.output
 
 
-def test_every_help_example_runs(tmp_path, monkeypatch):
+def test_every_help_example_runs(tmp_path, monkeypatch, cli):
     from logscan.cli.simulate_cmd import simulate as command
 
     monkeypatch.chdir(tmp_path)
@@ -201,18 +189,18 @@ def test_every_help_example_runs(tmp_path, monkeypatch):
     assert len(examples) >= 3
     for example in examples:
         args = example.split()[1:] + ["-q"]
-        result = CliRunner().invoke(cli, args, catch_exceptions=False)
+        result = cli(*args)
         assert result.exit_code == 0, (example, result.output)
         assert (tmp_path / args[args.index("-o") + 1]).stat().st_size > 0
 
 
-def test_output_suffix_csv_selects_the_csv_format(tmp_path):
+def test_output_suffix_csv_selects_the_csv_format(tmp_path, cli):
     out = tmp_path / "d.csv"
-    assert _cli(["simulate", "dc_motor", "--duration", "5", "-q", "-o", str(out)], tmp_path).exit_code == 0
+    assert cli("simulate", "dc_motor", "--duration", "5", "-q", "-o", out).exit_code == 0
     assert out.read_text().startswith("time_ns,")
     assert (tmp_path / "d.truth.json").exists() and (tmp_path / "d.profile.toml").exists()
 
 
-def test_output_that_is_a_directory_is_a_usage_error(capsys, tmp_path):
-    code, err = _exit_code(["simulate", "dc_motor", "-o", str(tmp_path)], capsys)
-    assert code == 2 and "directory" in err
+def test_output_that_is_a_directory_is_a_usage_error(cli, tmp_path):
+    result = cli("simulate", "dc_motor", "-o", tmp_path)
+    assert result.exit_code == 2 and "directory" in result.stderr
