@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +18,7 @@ from logscan.errors import NotTrainedError
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 
 
-@lru_cache(maxsize=None)
+@cache
 def pipeline(name: str, store_gain: bool = False):
     """(aligned run, EKF trace, model, log) of a sample log through `logscan.pipeline.prepare`."""
     from logscan.needs import Needs
@@ -150,15 +150,13 @@ def test_nis_alpha_follows_the_false_alarm_budget():
     assert result.alarms == []
 
 
-def test_onboard_state_corruption_is_caught_by_the_state_comparison(tmp_path):
-    import subprocess
-    import sys
-
+def test_onboard_state_corruption_is_caught_by_the_state_comparison(tmp_path, cli):
     from logscan.pipeline import analyze_log
 
     path = tmp_path / "sc.mcap"
-    subprocess.run([sys.executable, "-m", "logscan", "simulate", "quadcopter", "--fault", "state-corruption",
-                    "--at", "20", "--duration", "40", "--seed", "11", "-o", str(path), "-q"], check=True)
+    result = cli("simulate", "quadcopter", "--fault", "state-corruption", "--at", "20", "--duration", "40",
+                 "--seed", "11", "-o", path, "-q")
+    assert result.exit_code == 0, result.stderr
     analysis = analyze_log(path, detector_names=["encoded_ekf"])
     hits = [a for a in analysis.alarms if a.signal == "e_s"]
     assert hits and 20.0 <= hits[0].start < 20.5
@@ -175,9 +173,9 @@ def test_detector_settings_in_the_profile_docs_are_accepted():
     registry = default_registry()
     seen = 0
     for block in re.findall(r"```toml\n(.*?)```", text, re.S):
-        for name, settings in tomllib.loads(block).get("detectors", {}).items():
-            settings = {k: v for k, v in settings.items() if k != "enabled"}
-            registry.create(name, settings).check_params()  # raises ProfileError on a bad setting
+        for name, options in tomllib.loads(block).get("detectors", {}).items():
+            options = {k: v for k, v in options.items() if k != "enabled"}
+            registry.create(name, options).check_params()  # raises ProfileError on a bad setting
             seen += 1
     assert seen >= 3
     for name in ("encoded_ekf", "nis"):

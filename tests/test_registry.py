@@ -7,10 +7,8 @@ import json
 from importlib.metadata import EntryPoint
 
 import pytest
-from click.testing import CliRunner
 
 from logscan.cli.render import render_detectors
-from logscan.cli.main import cli
 from logscan.detectors.base import Detector
 from logscan.detectors.registry import BUILTIN, ENTRY_POINT_GROUP, Registry, default_registry
 from logscan.errors import ProfileError
@@ -134,10 +132,10 @@ def test_render_lists_name_origin_description_and_problems():
     assert "problems:" in lines and any("not a subclass" in line for line in lines)
 
 
-def test_detectors_command_json(monkeypatch):
+def test_detectors_command_json(monkeypatch, cli):
     registry = Registry(builtins=[f"{HERE}:AlphaDetector"], plugins=[ep("gone", "Nope")])
     monkeypatch.setattr("logscan.detectors.registry._DEFAULT", registry)
-    result = CliRunner().invoke(cli, ["detectors", "--json", "-"])
+    result = cli("detectors", "--json", "-")
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert [d["name"] for d in data["detectors"]] == ["alpha", "gone"]
@@ -145,9 +143,9 @@ def test_detectors_command_json(monkeypatch):
     assert data["detectors"][1]["ok"] is False and len(data["warnings"]) == 1
 
 
-def test_detectors_command_text(monkeypatch):
+def test_detectors_command_text(monkeypatch, cli):
     registry = Registry(builtins=[f"{HERE}:BetaDetector"], plugins=[])
     monkeypatch.setattr("logscan.detectors.registry._DEFAULT", registry)
-    result = CliRunner().invoke(cli, ["detectors"])
+    result = cli("detectors")
     assert result.exit_code == 0
     assert "beta" in result.output and "Beta: another test detector." in result.output
