@@ -1,10 +1,16 @@
-"""Bad input on the command line: exit 2 with one line on stderr, never a traceback."""
+"""Bad input on the command line: exit 2 with one line on stderr, never a traceback.
+
+End to end: most tests run `python -m logscan` in a subprocess, so the exit code, stderr and stdout are a real
+process's (no traceback, warning or stray print can hide in the test process). Checks of one reader's message
+run in-process through the `cli` fixture.
+"""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,13 +20,14 @@ from logscan import __version__
 ULOG = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog" / "sample_log_small.ulg"
 
 
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True,
-                          timeout=120)
+def run_cli(*args: str) -> SimpleNamespace:
+    """`python -m logscan ARGS` in a subprocess; the result has the cli fixture's fields."""
+    proc = subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True, timeout=120)
+    return SimpleNamespace(exit_code=proc.returncode, stdout=proc.stdout, stderr=proc.stderr)
 
 
-def assert_one_line_error(result: subprocess.CompletedProcess, *fragments: str) -> None:
-    assert result.returncode == 2, (result.returncode, result.stderr)
+def assert_one_line_error(result, *fragments: str) -> None:
+    assert result.exit_code == 2, (result.exit_code, result.stderr)
     assert "Traceback" not in result.stderr and result.stdout == ""
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -31,7 +38,7 @@ def assert_one_line_error(result: subprocess.CompletedProcess, *fragments: str) 
 
 def test_version():
     result = run_cli("--version")
-    assert result.returncode == 0 and __version__ in result.stdout and result.stderr == ""
+    assert result.exit_code == 0 and __version__ in result.stdout and result.stderr == ""
 
 
 def test_missing_file(tmp_path):
@@ -59,10 +66,10 @@ def test_directory_without_csvs(tmp_path):
         ("time,x\n1,2,3,4\n5,6,7,8\n", "more fields than the header"),
     ],
 )
-def test_bad_csv_files(tmp_path, content, fragment):
+def test_bad_csv_files(tmp_path, content, fragment, cli):
     path = tmp_path / "bad.csv"
     path.write_text(content)
-    assert_one_line_error(run_cli("inspect", str(path)), str(path), fragment)
+    assert_one_line_error(cli("inspect", path), str(path), fragment)
 
 
 def test_mcap_with_bad_magic(tmp_path):
@@ -79,20 +86,20 @@ def test_ulog_cut_before_any_data(tmp_path):
     assert_one_line_error(run_cli("inspect", str(path)), str(path), "truncated")
 
 
-def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path):
+def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
     if not ULOG.is_file():
         pytest.skip("shared px4-ulog test data missing")
     path = tmp_path / "half.ulg"
     data = ULOG.read_bytes()
     path.write_bytes(data[: len(data) // 2])
-    result = run_cli("inspect", str(path))
-    assert result.returncode == 0 and "Traceback" not in result.stderr
+    result = cli("inspect", path)
+    assert result.exit_code == 0 and "Traceback" not in result.stderr
     assert "PARTIAL:   only part of the file was read: truncated" in result.stdout
 
 
 def test_unknown_option_is_a_usage_error():
     result = run_cli("inspect", "--no-such-option", "x")
-    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert "no such option" in result.stderr.lower()
 
 
