@@ -29,13 +29,6 @@ MAKE = _make_samples()
 NAMES = [s.name for s in MAKE.SAMPLES]
 
 
-def _sample(name):
-    path = SAMPLES_DIR / name
-    if not path.exists():
-        pytest.skip(f"{path} is absent (python sample_logs/make_samples.py)")
-    return path
-
-
 def test_the_issue_asks_for_these_logs():
     models = [s.model for s in MAKE.SAMPLES]
     assert "quad_healthy.mcap" in NAMES
@@ -46,33 +39,35 @@ def test_the_issue_asks_for_these_logs():
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_sample_is_small_and_carries_its_truth_and_profile(name):
-    path = _sample(name)
-    sample = next(s for s in MAKE.SAMPLES if s.name == name)
+def test_sample_is_small_and_carries_its_truth_and_profile(name, sample):
+    path = sample(name)
+    spec = next(s for s in MAKE.SAMPLES if s.name == name)
     assert path.stat().st_size < MAX_BYTES
     log = read_log(path)
     profile = resolve_profile(log)  # MCAP metadata record, or the CSV's .profile.toml sidecar
     profile.check_channels(log)
-    assert profile.vehicle.model == sample.model
-    assert log.duration_s == pytest.approx(sample.duration)
-    expected = [parse_fault(f) for f in sample.faults]
+    assert profile.vehicle.model == spec.model
+    assert log.duration_s == pytest.approx(spec.duration)
+    expected = [parse_fault(f) for f in spec.faults]
     events = log.truth["events"]
     assert [(e["kind"], e["target"], e["start"], e["end"], e["magnitude"]) for e in events] == [
         (ALIASES.get(f.kind, (f.kind,))[0], f.target, f.start, f.end, f.magnitude) for f in expected
     ]
-    assert log.truth["seed"] == sample.seed
+    assert log.truth["seed"] == spec.seed
 
 
-def test_regenerating_a_sample_gives_the_same_bytes(tmp_path):
+@pytest.mark.slow
+def test_regenerating_a_sample_gives_the_same_bytes(tmp_path, sample):
     name = "quad_imu_bias.mcap"
-    shipped = _sample(name)
+    shipped = sample(name)
     assert MAKE.main(["--out", str(tmp_path), name]) == 0
     assert (tmp_path / name).read_bytes() == shipped.read_bytes()
 
 
-def test_regenerating_the_csv_sample_gives_the_same_three_files(tmp_path):
+@pytest.mark.slow
+def test_regenerating_the_csv_sample_gives_the_same_three_files(tmp_path, sample):
     name = "quad_healthy.csv"
-    _sample(name)
+    sample(name)
     assert MAKE.main(["--out", str(tmp_path), name]) == 0
     for suffix in (".csv", ".truth.json", ".profile.toml"):
         fresh = (tmp_path / name).with_suffix(suffix)
