@@ -15,18 +15,20 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
-from logscan.report import render_report
 from test_report import HOSTILE, figures, make_report
 
+from logscan.report import render_report
+
 CHROMIUM = next(
-    (p for p in ("/usr/bin/chromium", shutil.which("chromium"), shutil.which("chromium-browser")) if p and Path(p).is_file()),
+    (p for p in ("/usr/bin/chromium", shutil.which("chromium"), shutil.which("chromium-browser"))
+     if p and Path(p).is_file()),
     None,
 )
 
-pytestmark = pytest.mark.skipif(
-    CHROMIUM is None, reason="chromium not installed (Debian: apt-get install -y chromium)"
-)
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (Debian: apt-get install -y chromium)"),
+]
 
 
 def start_chromium(page: Path, profile_dir: Path) -> subprocess.Popen:
