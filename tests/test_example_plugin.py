@@ -51,6 +51,7 @@ def test_plugin_uses_model_ranges_when_given_a_model():
 
 
 def test_plugin_own_tests_pass():
+    # a separate pytest process: the plugin's suite runs with its own rootdir and imports, as its author runs it
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(EXAMPLE_PLUGIN / "tests")],
         capture_output=True, text=True, timeout=120,
