@@ -35,9 +35,7 @@ def reference_band(e, defined, window, rho):
 
 @settings(max_examples=60, deadline=None)
 @given(
-    values=st.lists(
-        st.one_of(st.floats(-1e3, 1e3), st.just(float("nan")), st.just(1e20)), min_size=1, max_size=300
-    ),
+    values=st.lists(st.one_of(st.floats(-1e3, 1e3), st.just(float("nan")), st.just(1e20)), min_size=1, max_size=300),
     window=st.integers(2, 20),
     rho=st.floats(0.5, 6.0),
     seed=st.integers(0, 2**16),

@@ -205,7 +205,10 @@ def test_onboard_estimator_by_prefix_and_by_state_names():
 
 def test_redundant_group_applies_its_polynomial_before_holding():
     t = np.arange(0, 1001, 100)
-    toml = SPEED + '\n[redundant.v]\nsensors = { enc = "/enc", gps = { channel = "/gps", poly = [1.0, 2.0] } }\nrate_hz = 10\n'
+    toml = (
+        SPEED
+        + '\n[redundant.v]\nsensors = { enc = "/enc", gps = { channel = "/gps", poly = [1.0, 2.0] } }\nrate_hz = 10\n'
+    )
     r = run({"/force": force_100hz(), "/speed": (t, t), "/enc": (t, t / 100.0), "/gps": (t, t / 100.0)}, toml)
     g = r.redundant["v"]
     assert g.channels == ["/enc", "/gps"]

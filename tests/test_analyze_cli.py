@@ -13,8 +13,13 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "sample_logs"
 
-FAULTY = ["quad_imu_bias.mcap", "quad_imu_bitflip.mcap", "quad_motor_offset.mcap",
-          "quad_cov_corruption.mcap", "sbw_yaw_rate_bitflip.mcap"]
+FAULTY = [
+    "quad_imu_bias.mcap",
+    "quad_imu_bitflip.mcap",
+    "quad_motor_offset.mcap",
+    "quad_cov_corruption.mcap",
+    "sbw_yaw_rate_bitflip.mcap",
+]
 # jackal_healthy.mcap is left out on purpose: its speed sensors carry short healthy glitches
 # (the A-TFM's transients), which the NIS test rightly flags as sensor anomalies.
 HEALTHY = ["quad_healthy.mcap", "sbw_healthy.mcap", "quad_healthy.csv"]
@@ -86,8 +91,9 @@ def test_a_log_without_profile_asks_for_one(tmp_path, cli):
 
 def test_several_logs_one_bad_reports_the_rest_and_exits_two(tmp_path, cli, sample):
     out = tmp_path / "s.json"
-    result = cli("analyze", sample("sbw_healthy.mcap"), tmp_path / "missing.mcap",
-                 "-o", tmp_path / "reports", "--json", out)
+    result = cli(
+        "analyze", sample("sbw_healthy.mcap"), tmp_path / "missing.mcap", "-o", tmp_path / "reports", "--json", out
+    )
     assert result.exit_code == 2
     summary = json.loads(out.read_text())
     assert [Path(s["file"]).name for s in summary["logs"]] == ["sbw_healthy.mcap"]
@@ -123,8 +129,12 @@ def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path, cli, sam
 
 def test_json_to_stdout_is_pure_json(sample):
     # a subprocess: only a real pipe shows that nothing else (imports, numba, warnings) writes to stdout
-    result = subprocess.run([sys.executable, "-m", "logscan", "analyze", str(sample("sbw_healthy.mcap")),
-                             "--json", "-", "--no-report"], capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        [sys.executable, "-m", "logscan", "analyze", str(sample("sbw_healthy.mcap")), "--json", "-", "--no-report"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert result.returncode == 0
     summary = json.loads(result.stdout)
     assert summary["exit_code"] == 0 and summary["logs"][0]["verdict"] == "no alarms"

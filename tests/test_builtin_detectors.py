@@ -33,6 +33,7 @@ def pipeline(name: str, store_gain: bool = False):
 
 # --- coding vector -------------------------------------------------------------------------------
 
+
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.floats(0.0, 1e6) | st.just(float("nan")), min_size=12, max_size=12), st.floats(1.0, 1e6))
 def test_coding_vector_equalises_alpha_sigma_and_respects_the_sum_bound(variances, r_max):
@@ -61,6 +62,7 @@ def test_state_check_is_minus_cv_k_y():
 
 
 # --- encoded detector on sample logs -----------------------------------------------------------
+
 
 def test_bit_flips_rejected_by_the_filter_raise_an_alarm_naming_the_sensor():
     run, trace, model, log = pipeline("quad_imu_bitflip.mcap")
@@ -112,6 +114,7 @@ def test_healthy_logs_raise_no_encoded_alarm():
 
 # --- NIS ------------------------------------------------------------------------------------------
 
+
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.floats(0, 100), min_size=1, max_size=60), st.integers(1, 12))
 def test_window_sums_match_brute_force(values, window):
@@ -154,8 +157,21 @@ def test_onboard_state_corruption_is_caught_by_the_state_comparison(tmp_path, cl
     from logscan.pipeline import analyze_log
 
     path = tmp_path / "sc.mcap"
-    result = cli("simulate", "quadcopter", "--fault", "state-corruption", "--at", "20", "--duration", "40",
-                 "--seed", "11", "-o", path, "-q")
+    result = cli(
+        "simulate",
+        "quadcopter",
+        "--fault",
+        "state-corruption",
+        "--at",
+        "20",
+        "--duration",
+        "40",
+        "--seed",
+        "11",
+        "-o",
+        path,
+        "-q",
+    )
     assert result.exit_code == 0, result.stderr
     analysis = analyze_log(path, detector_names=["encoded_ekf"])
     hits = [a for a in analysis.alarms if a.signal == "e_s"]

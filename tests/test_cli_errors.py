@@ -107,5 +107,4 @@ def test_json_to_a_missing_directory_is_an_input_error(tmp_path):
     if not ULOG.is_file():
         pytest.skip("shared px4-ulog test data missing")
     target = tmp_path / "missing" / "facts.json"
-    assert_one_line_error(run_cli("inspect", str(ULOG), "--json", str(target)),
-                          "output directory does not exist")
+    assert_one_line_error(run_cli("inspect", str(ULOG), "--json", str(target)), "output directory does not exist")

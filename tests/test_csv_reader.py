@@ -47,20 +47,17 @@ def test_nans_are_kept_in_values_and_counted_in_a_warning(tmp_path):
 def test_unsorted_and_duplicate_times_are_kept_in_file_order_with_a_warning(tmp_path):
     f = write(tmp_path / "u.csv", "t,x\n0.2,1\n0.1,2\n0.1,3\n0.3,4\n")
     log = read_csv(f, None)
-    np.testing.assert_array_equal(log.channel("/x").t, [200_000_000, 100_000_000, 100_000_000,
-                                                         300_000_000])
+    np.testing.assert_array_equal(log.channel("/x").t, [200_000_000, 100_000_000, 100_000_000, 300_000_000])
     np.testing.assert_array_equal(log.channel("/x").values, [1, 2, 3, 4])
     order = [w for w in log.source.warnings if "not strictly increasing" in w]
     assert order and "1 step(s) backwards" in order[0] and "1 duplicate(s)" in order[0]
 
 
 def test_text_column_is_skipped_and_counted_and_mixed_column_reads_garbage_as_nan(tmp_path):
-    f = write(tmp_path / "m.csv",
-              "time,mode,speed\n0,idle,1.0\n1,go,2.0\n2,go,oops\n3,stop,4.0\n4,go,5.0\n")
+    f = write(tmp_path / "m.csv", "time,mode,speed\n0,idle,1.0\n1,go,2.0\n2,go,oops\n3,stop,4.0\n4,go,5.0\n")
     log = read_csv(f, None)
     assert set(log.channels) == {"/speed"}
-    np.testing.assert_array_equal(np.isnan(log.channel("/speed").values),
-                                  [False, False, True, False, False])
+    np.testing.assert_array_equal(np.isnan(log.channel("/speed").values), [False, False, True, False, False])
     skipped = {s.what: (s.why, s.count) for s in log.source.skipped}
     assert skipped["text column 'mode' of m.csv"] == ("not numeric", 1)
     assert skipped["cells of column 'speed' of m.csv"] == ("not a number, read as NaN", 1)
@@ -109,9 +106,19 @@ def test_non_utf8_bytes_after_the_first_block_give_input_error(tmp_path):
 
 @pytest.mark.parametrize(
     "header, unit",
-    [("time", None), ("Timestamp", None), ("t", None), ("stamp", None), ("time_s", "s"),
-     ("timestamp_us", "us"), ("time [ms]", "ms"), ("stamp(ns)", "ns"), ("time_usec", "us"),
-     ("%time", None), ("TIME_MS", "ms")],
+    [
+        ("time", None),
+        ("Timestamp", None),
+        ("t", None),
+        ("stamp", None),
+        ("time_s", "s"),
+        ("timestamp_us", "us"),
+        ("time [ms]", "ms"),
+        ("stamp(ns)", "ns"),
+        ("time_usec", "us"),
+        ("%time", None),
+        ("TIME_MS", "ms"),
+    ],
 )
 def test_time_column_names_and_stated_units(header, unit):
     assert time_column_unit(header) == (True, unit)
@@ -146,11 +153,17 @@ def test_unit_inference_from_step_and_magnitude(values, unit, origin):
     [
         ("time", ["0.0", "0.01", "0.02"], [0, 10_000_000, 20_000_000]),
         ("time", ["0", "10", "20"], [0, 10_000_000, 20_000_000]),  # inferred ms
-        ("timestamp", ["20000000", "20004000", "20008000"],
-         [20_000_000_000, 20_004_000_000, 20_008_000_000]),  # inferred us
+        (
+            "timestamp",
+            ["20000000", "20004000", "20008000"],
+            [20_000_000_000, 20_004_000_000, 20_008_000_000],
+        ),  # inferred us
         ("time_ms", ["0", "1", "2"], [0, 1_000_000, 2_000_000]),  # stated, not inferred
-        ("stamp", ["1700000000000000000", "1700000000010000000", "1700000000020000000"],
-         [1_700_000_000_000_000_000, 1_700_000_000_010_000_000, 1_700_000_000_020_000_000]),
+        (
+            "stamp",
+            ["1700000000000000000", "1700000000010000000", "1700000000020000000"],
+            [1_700_000_000_000_000_000, 1_700_000_000_010_000_000, 1_700_000_000_020_000_000],
+        ),
     ],
 )
 def test_time_is_converted_to_int64_ns_and_the_unit_is_reported(tmp_path, header, times, expected_ns):
@@ -166,8 +179,7 @@ def test_time_is_converted_to_int64_ns_and_the_unit_is_reported(tmp_path, header
 def test_iso_datetime_time_column_is_epoch_ns(tmp_path):
     f = write(tmp_path / "d.csv", "timestamp,x\n2024-03-18 14:49:10.000,1\n2024-03-18T14:49:10.250Z,2\n")
     log = read_csv(f, None)
-    np.testing.assert_array_equal(log.channel("/x").t,
-                                  [1_710_773_350_000_000_000, 1_710_773_350_250_000_000])
+    np.testing.assert_array_equal(log.channel("/x").t, [1_710_773_350_000_000_000, 1_710_773_350_250_000_000])
     assert log.source.time_unit == "ns" and any("ISO 8601" in w for w in log.source.warnings)
 
 
@@ -213,9 +225,10 @@ def test_million_row_csv_reads_in_a_few_seconds(tmp_path):
 def make_ulog2csv_dir(root: Path, log_name: str = "flight") -> Path:
     d = root / "csvs"
     d.mkdir()
-    write(d / f"{log_name}_vehicle_imu_0.csv",
-          "timestamp,accel[0],accel[1],temp_name\n0,9,9,x\n1000,0.1,0.2,a\n2000,0.3,0.4,b\n"
-          "3000,0.5,0.6,c\n")
+    write(
+        d / f"{log_name}_vehicle_imu_0.csv",
+        "timestamp,accel[0],accel[1],temp_name\n0,9,9,x\n1000,0.1,0.2,a\n2000,0.3,0.4,b\n3000,0.5,0.6,c\n",
+    )
     write(d / f"{log_name}_vehicle_imu_1.csv", "timestamp,accel[0]\n1500,1.0\n2500,2.0\n")
     write(d / f"{log_name}_battery_status_0.csv", "timestamp,voltage_v\n1000000,12.1\n2000000,12.0\n")
     write(d / "notes.csv", "time_s,wind\n0,3\n1,4\n")

@@ -20,9 +20,9 @@ import pytest
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.detectors.base import Detector, describe
-from logscan.results import DetectorResult
 from logscan.detectors.registry import BUILTIN_DETECTORS, ENTRY_POINT_GROUP, Registry
 from logscan.errors import LogscanError, NotTrainedError
+from logscan.results import DetectorResult
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_PLUGIN = REPO / "examples" / "logscan-example-plugin"
@@ -51,12 +51,14 @@ class ContractProbeDetector(Detector):
         for group in run.groups.values():
             for j, channel in enumerate(group.channels):
                 ratio = np.abs(group.z[:, j]) / self.scale_[channel]
-                result.add_statistic(run.t, channel, ratio, upper=self.factor, valid=group.fresh,
-                                     n_persist=self.n_persist)
+                result.add_statistic(
+                    run.t, channel, ratio, upper=self.factor, valid=group.fresh, n_persist=self.n_persist
+                )
         return result
 
 
 # --- the registry under test --------------------------------------------------------------------
+
 
 def example_plugin_entry_point() -> EntryPoint:
     """The example plugin's entry point, loadable from the checkout without installing it."""
@@ -79,6 +81,7 @@ NAMES = REGISTRY.names()
 
 # --- a synthetic run (no simulator needed) ------------------------------------------------------
 
+
 def synthetic_run(seed: int = 0, n: int = 400, burst: bool = False) -> AlignedRun:
     """A 100 Hz run with an accelerometer group (every step) and a 10 Hz position group.
 
@@ -99,8 +102,13 @@ def synthetic_run(seed: int = 0, n: int = 400, burst: bool = False) -> AlignedRu
         "position": AlignedGroup("position", ["/gps/x", "/gps/y", "/gps/z"], position, fresh_pos),
     }
     return AlignedRun(
-        t=t, dt=dt, start_ns=0, u=np.zeros((n, 4)), u_fresh=np.ones(n, bool),
-        input_channels=["/cmd/thrust", "/cmd/tau.x", "/cmd/tau.y", "/cmd/tau.z"], groups=groups,
+        t=t,
+        dt=dt,
+        start_ns=0,
+        u=np.zeros((n, 4)),
+        u_fresh=np.ones(n, bool),
+        input_channels=["/cmd/thrust", "/cmd/tau.x", "/cmd/tau.y", "/cmd/tau.z"],
+        groups=groups,
     )
 
 
@@ -124,8 +132,10 @@ def assert_same_result(a: DetectorResult, b: DetectorResult) -> None:
     for key in a.series:
         np.testing.assert_array_equal(a.series[key], b.series[key])
     for key in a.thresholds:
-        for x, y in ((a.thresholds[key].upper, b.thresholds[key].upper),
-                     (a.thresholds[key].lower, b.thresholds[key].lower)):
+        for x, y in (
+            (a.thresholds[key].upper, b.thresholds[key].upper),
+            (a.thresholds[key].lower, b.thresholds[key].lower),
+        ):
             assert (x is None) == (y is None)
             if x is not None:
                 np.testing.assert_array_equal(x, y)
@@ -133,6 +143,7 @@ def assert_same_result(a: DetectorResult, b: DetectorResult) -> None:
 
 
 # --- checks on every detector -------------------------------------------------------------------
+
 
 def test_registry_under_test_loads_without_problems():
     assert REGISTRY.warnings() == []
@@ -261,6 +272,7 @@ def test_alarms_on_the_faulty_fixture(name):
 
 
 # --- the base class itself ----------------------------------------------------------------------
+
 
 class ArrayStateDetector(Detector):
     """Test-only: stores arrays with non-finite values as trained state."""

@@ -85,7 +85,7 @@ def parameter_tables() -> dict[str, dict[str, str]]:
         if owner is None:
             continue  # a model's parameter table
         rows = tables.setdefault(owner.group(1), {})
-        for _, row in lines[i + 2:]:  # skip the header and its |---| separator
+        for _, row in lines[i + 2 :]:  # skip the header and its |---| separator
             if not row.lstrip().startswith("|"):
                 break
             cells = _cells(row)
@@ -122,15 +122,21 @@ def same_value(default, documented) -> bool:
     if default is None or isinstance(default, bool):
         return documented is default
     if isinstance(default, (int, float)):
-        return (isinstance(documented, float) and not isinstance(documented, bool)
-                and math.isclose(documented, float(default), rel_tol=1e-12, abs_tol=0.0))
+        return (
+            isinstance(documented, float)
+            and not isinstance(documented, bool)
+            and math.isclose(documented, float(default), rel_tol=1e-12, abs_tol=0.0)
+        )
     return documented == default
 
 
 def builtin_detectors() -> dict[str, dict]:
     registry = default_registry()
-    return {entry.name: dict(registry.get(entry.name).defaults)
-            for entry in registry.entries() if entry.origin == BUILTIN and entry.ok}
+    return {
+        entry.name: dict(registry.get(entry.name).defaults)
+        for entry in registry.entries()
+        if entry.origin == BUILTIN and entry.ok
+    }
 
 
 BUILTINS = builtin_detectors()
@@ -152,9 +158,11 @@ def test_every_parameter_of_a_builtin_detector_is_documented_with_its_default(na
     defaults = BUILTINS[name]
     missing = sorted(set(defaults) - set(documented))
     unknown = sorted(set(documented) - set(defaults))
-    wrong = [f"{key}: code {defaults[key]!r}, document {documented[key]!r}"
-             for key in sorted(set(defaults) & set(documented))
-             if not same_value(defaults[key], parse_default(documented[key]))]
+    wrong = [
+        f"{key}: code {defaults[key]!r}, document {documented[key]!r}"
+        for key in sorted(set(defaults) & set(documented))
+        if not same_value(defaults[key], parse_default(documented[key]))
+    ]
     assert not missing, f"{name}: parameters missing from docs/algorithms.md: {missing}"
     assert not unknown, f"{name}: docs/algorithms.md documents parameters the detector lacks: {unknown}"
     assert not wrong, f"{name}: defaults differ from docs/algorithms.md: " + "; ".join(wrong)
@@ -179,18 +187,21 @@ def test_required_sections_exist_once():
 
 def tracked_files() -> list[Path]:
     try:
-        out = subprocess.run(["git", "ls-files", "-z", "--", "*.py", "*.md"], cwd=ROOT,
-                             capture_output=True, check=True, timeout=60).stdout
+        out = subprocess.run(
+            ["git", "ls-files", "-z", "--", "*.py", "*.md"], cwd=ROOT, capture_output=True, check=True, timeout=60
+        ).stdout
     except (OSError, subprocess.SubprocessError):
         pytest.skip("git is not available (or this is not a git checkout)")
     return [ROOT / name for name in out.decode("utf-8", "replace").split("\0") if name]
 
 
 def test_reference_parser_reads_the_accepted_forms():
-    text = ("see docs/algorithms.md section 1b, docs/algorithms.md, section 7; "
-            "[docs/algorithms.md](../docs/algorithms.md) section 6.3. algorithms.md section 8\n"
-            "docs/algorithms.md\n# section 1c; " + "algorithms.md".upper() + " section 0; "
-            "docs/algorithms.md section N")
+    text = (
+        "see docs/algorithms.md section 1b, docs/algorithms.md, section 7; "
+        "[docs/algorithms.md](../docs/algorithms.md) section 6.3. algorithms.md section 8\n"
+        "docs/algorithms.md\n# section 1c; " + "algorithms.md".upper() + " section 0; "
+        "docs/algorithms.md section N"
+    )
     assert [m.group(1) for m in REFERENCE.finditer(text)] == ["1b", "7", "6.3", "8", "1c"]
 
 
@@ -207,5 +218,7 @@ def test_every_section_reference_in_the_repository_exists():
                 bad.append(f"{path.relative_to(ROOT)}:{line}: section {match.group(1)}")
     assert not bad, (
         "references to sections that docs/algorithms.md does not have (its sections: "
-        + ", ".join(sorted(ids)) + "):\n" + "\n".join(bad)
+        + ", ".join(sorted(ids))
+        + "):\n"
+        + "\n".join(bad)
     )

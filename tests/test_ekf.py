@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_model_contract import LINEAR_PARAMS as _LINEAR_BASE
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.errors import ModelError
@@ -15,11 +16,7 @@ from logscan.filters.ekf import pack_run
 from logscan.filters.reference import reference_ekf
 from logscan.models import get_model
 
-from test_model_contract import LINEAR_PARAMS as _LINEAR_BASE
-
-LINEAR_PARAMS = dict(
-    _LINEAR_BASE, Q=[[1e-3, 0.0], [0.0, 1e-2]], R={"pos": [0.05], "mix": [0.1, 0.1]}
-)
+LINEAR_PARAMS = dict(_LINEAR_BASE, Q=[[1e-3, 0.0], [0.0, 1e-2]], R={"pos": [0.05], "mix": [0.1, 0.1]})
 # group -> period in steps (multi-rate)
 RATES = {
     "quadcopter": {"accel": 1, "gyro": 1, "position": 10, "attitude": 5},
@@ -68,13 +65,19 @@ def simulate(name, params=None, N=300, dt=0.01, seed=0, noise=1.0, rates=None):
                 v = Lr @ rng.normal(size=model.groups[g].size)
                 zs[g][k] = model.h(g, x, u[k]) + noise * v
     groups = {g: AlignedGroup(g, list(model.groups[g].outputs), zs[g], fresh[g]) for g in rates}
-    run = AlignedRun(t=np.arange(N) * dt, dt=dt, start_ns=0, u=u, u_fresh=np.ones(N, bool),
-                     input_channels=list(model.input_names), groups=groups)
+    run = AlignedRun(
+        t=np.arange(N) * dt,
+        dt=dt,
+        start_ns=0,
+        u=u,
+        u_fresh=np.ones(N, bool),
+        input_channels=list(model.input_names),
+        groups=groups,
+    )
     return model, run, truth
 
 
-CASES = [("quadcopter", None), ("steer_by_wire", None), ("dc_motor", None),
-         ("linear", LINEAR_PARAMS)]
+CASES = [("quadcopter", None), ("steer_by_wire", None), ("dc_motor", None), ("linear", LINEAR_PARAMS)]
 
 
 @pytest.mark.parametrize(("name", "params"), CASES)
@@ -139,8 +142,12 @@ def test_trace_fields_have_documented_shapes():
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 2**31 - 1), noise=st.floats(0.0, 5.0),
-       torque=st.floats(-0.05, 0.05), thrust_scale=st.floats(0.5, 1.5))
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    noise=st.floats(0.0, 5.0),
+    torque=st.floats(-0.05, 0.05),
+    thrust_scale=st.floats(0.5, 1.5),
+)
 def test_covariance_stays_symmetric_positive_definite(seed, noise, torque, thrust_scale):
     model, run, _ = simulate("quadcopter", N=150, seed=seed, noise=noise)
     run.u[:, 0] *= thrust_scale
@@ -189,8 +196,9 @@ def test_forced_divergence_is_reported_once_and_the_filter_recovers():
 
 def test_non_positive_definite_S_is_divergence():
     model, run, _ = simulate("linear", LINEAR_PARAMS, N=50)
-    trace = run_ekf(model, run, R={"pos": [[-1.0]], "mix": np.diag([0.01, 0.01])},
-                    P0=np.diag([1e-6, 1e-6]), Q=np.diag([1e-9, 1e-9]))
+    trace = run_ekf(
+        model, run, R={"pos": [[-1.0]], "mix": np.diag([0.01, 0.01])}, P0=np.diag([1e-6, 1e-6]), Q=np.diag([1e-9, 1e-9])
+    )
     assert trace.diverged.any()
     assert trace.summary()["divergence_episodes"] >= 1
     assert np.all(np.isfinite(trace.x_post))
@@ -223,8 +231,15 @@ def test_input_gaps_hold_the_last_input_and_bad_shapes_are_rejected():
     trace = run_ekf(model, run)
     assert trace.input_held[10:20].all() and trace.input_held.sum() == 10
     assert np.all(np.isfinite(trace.x_post))
-    bad = AlignedRun(t=run.t, dt=run.dt, start_ns=0, u=np.zeros((100, 2)), u_fresh=run.u_fresh,
-                     input_channels=["a", "b"], groups=run.groups)
+    bad = AlignedRun(
+        t=run.t,
+        dt=run.dt,
+        start_ns=0,
+        u=np.zeros((100, 2)),
+        u_fresh=run.u_fresh,
+        input_channels=["a", "b"],
+        groups=run.groups,
+    )
     with pytest.raises(ModelError, match="takes 1 inputs"):
         run_ekf(model, bad)
     run.groups["nope"] = AlignedGroup("nope", ["c"], np.zeros((100, 1)), np.ones(100, bool))

@@ -64,9 +64,13 @@ def test_overlapping_alarms_of_one_group_count_once():
 
 def test_checks_that_ran_without_alarms_are_scored_as_misses():
     result = DetectorResult(
-        "encoded_ekf", series={"e_x": None, "e_v": None, "rejected.accel": None},
-        alarms=[alarm(10.0, 10.5, "rejected.accel", "encoded_ekf"), alarm(10.1, 10.2, "e_x", "encoded_ekf"),
-                alarm(50.0, 50.1, "e_x", "encoded_ekf")],
+        "encoded_ekf",
+        series={"e_x": None, "e_v": None, "rejected.accel": None},
+        alarms=[
+            alarm(10.0, 10.5, "rejected.accel", "encoded_ekf"),
+            alarm(10.1, 10.2, "e_x", "encoded_ekf"),
+            alarm(50.0, 50.1, "e_x", "encoded_ekf"),
+        ],
         checks={"rejected.accel": "e_x"},
     )
     groups = alarm_groups([result])

@@ -54,6 +54,8 @@ def test_plugin_own_tests_pass():
     # a separate pytest process: the plugin's suite runs with its own rootdir and imports, as its author runs it
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(EXAMPLE_PLUGIN / "tests")],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]

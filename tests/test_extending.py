@@ -21,7 +21,7 @@ SAMPLES = REPO / "sample_logs"
 def code_after(heading: str, language: str = "python", index: int = 0) -> str:
     """The ``index``-th fenced code block of ``language`` after ``heading`` in docs/extending.md."""
     text = DOC.read_text()
-    rest = text[text.index(heading):]
+    rest = text[text.index(heading) :]
     blocks = re.findall(rf"```{language}\n(.*?)```", rest, flags=re.S)
     return blocks[index]
 
@@ -29,7 +29,8 @@ def code_after(heading: str, language: str = "python", index: int = 0) -> str:
 def registry_line(block: str) -> str:
     """The line the doc adds to a registry table (marked as the new one or the only entry)."""
     lines = [ln for ln in block.splitlines() if "# the new line" in ln] or [
-        ln for ln in block.splitlines() if ln.strip().startswith('"')]
+        ln for ln in block.splitlines() if ln.strip().startswith('"')
+    ]
     return lines[-1]
 
 
@@ -97,14 +98,17 @@ def _contract_module():
     return module
 
 
-@pytest.mark.parametrize("check", [
-    "test_states_inputs_groups_and_defaults_have_consistent_shapes",
-    "test_measurement_jacobian_H_matches_central_differences_of_h_per_group",
-    "test_in_place_kernels_equal_the_allocating_ones",
-    "test_direct_groups_really_observe_their_states",
-    "test_parameters_round_trip_through_describe_and_json",
-    "test_unknown_model_id_is_a_clear_model_error_before_any_kernel_runs",
-])
+@pytest.mark.parametrize(
+    "check",
+    [
+        "test_states_inputs_groups_and_defaults_have_consistent_shapes",
+        "test_measurement_jacobian_H_matches_central_differences_of_h_per_group",
+        "test_in_place_kernels_equal_the_allocating_ones",
+        "test_direct_groups_really_observe_their_states",
+        "test_parameters_round_trip_through_describe_and_json",
+        "test_unknown_model_id_is_a_clear_model_error_before_any_kernel_runs",
+    ],
+)
 def test_the_new_model_passes_the_model_contract(new_model, check):
     getattr(_contract_module(), check)(new_model.name, None)
 
@@ -129,8 +133,15 @@ def test_the_new_model_is_filtered_by_the_shared_ekf(new_model):
         x = new_model.f(x, force[k], dt)
     z = truth[:, :1] + rng.normal(0.0, 0.01, (n, 1))
     group = AlignedGroup("position", ["/cart/x"], z, np.ones(n, bool))
-    run = AlignedRun(t=t, dt=dt, start_ns=0, u=force, u_fresh=np.ones(n, bool),
-                     input_channels=["/cart/force"], groups={"position": group})
+    run = AlignedRun(
+        t=t,
+        dt=dt,
+        start_ns=0,
+        u=force,
+        u_fresh=np.ones(n, bool),
+        input_channels=["/cart/force"],
+        groups={"position": group},
+    )
     trace = run_ekf(new_model, run)
     assert dispatch.MODEL_IDS[new_model.model_id] == "linear"  # the shared linear kernels
     assert np.abs(trace.x_post[-100:, 0] - truth[-100:, 0]).max() < 0.05

@@ -54,13 +54,16 @@ def test_unknown_kind_lists_the_kinds():
     assert all(name in info.value.one_line() for name in ALL_NAMES)
 
 
-@pytest.mark.parametrize("fault, words", [
-    ("bias:accel.x:25:30:1", "outside the log"),
-    ("bias:accel.x:5:4:1", "not after its start"),
-    ("bias:nosuch.x:5:6:1", "unknown sensor target"),
-    ("actuator-offset:motor9:5:6:0.1", "unknown actuator"),
-    ("state-corruption:speed:5:6:1", "unknown estimator state"),
-])
+@pytest.mark.parametrize(
+    "fault, words",
+    [
+        ("bias:accel.x:25:30:1", "outside the log"),
+        ("bias:accel.x:5:4:1", "not after its start"),
+        ("bias:nosuch.x:5:6:1", "unknown sensor target"),
+        ("actuator-offset:motor9:5:6:0.1", "unknown actuator"),
+        ("state-corruption:speed:5:6:1", "unknown estimator state"),
+    ],
+)
 def test_bad_fault_targets_and_times_are_usage_errors(fault, words):
     with pytest.raises(UsageError, match=words):
         _run(fault)
@@ -75,8 +78,7 @@ def test_defaults_imu_bias_is_one_on_accel_x_from_half_the_log():
 
 
 def test_defaults_bitflip_burst_and_motor_offset():
-    sim = simulate("quadcopter", [parse_fault("imu-bitflip"), parse_fault("motor-offset")],
-                   duration=DURATION, seed=1)
+    sim = simulate("quadcopter", [parse_fault("imu-bitflip"), parse_fault("motor-offset")], duration=DURATION, seed=1)
     flips, motor = sim.events
     assert flips.kind == "bitflip" and flips.t_end - flips.t_start == pytest.approx(1.2)
     assert (motor.kind, motor.target, motor.magnitude) == ("actuator-offset", "motor1", -0.10)
@@ -136,8 +138,10 @@ def test_bitflip_burst_gives_impossible_values_that_the_onboard_ekf_rejects(heal
 
 def test_actuator_offset_and_lost_actuator_change_delivered_not_commanded_thrust(healthy):
     M_inv = np.linalg.inv(healthy.scenario.M)
-    for fault, expected in ((f"actuator-offset:motor2:{START}:{END}:-0.1", 0.9),
-                            (f"lost-actuator:motor2:{START}:{START + 0.5}:0", 0.0)):
+    for fault, expected in (
+        (f"actuator-offset:motor2:{START}:{END}:-0.1", 0.9),
+        (f"lost-actuator:motor2:{START}:{START + 0.5}:0", 0.0),
+    ):
         sim = _run(fault)
         motors_cmd = sim.u_cmd @ M_inv.T
         motors_act = sim.u_act @ M_inv.T

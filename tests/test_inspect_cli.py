@@ -35,8 +35,20 @@ def test_inspect_json_to_stdout_parses_and_has_the_keys(cli):
     result = cli("inspect", TESTDATA / "px4-ulog" / "sample_log_small.ulg", "--json", "-")
     assert result.exit_code == 0, result.stderr
     facts = json.loads(result.stdout)
-    for key in ("file", "format", "start_ns", "end_ns", "duration_s", "time_unit", "partial",
-                "topics", "channels", "skipped", "warnings", "metadata"):
+    for key in (
+        "file",
+        "format",
+        "start_ns",
+        "end_ns",
+        "duration_s",
+        "time_unit",
+        "partial",
+        "topics",
+        "channels",
+        "skipped",
+        "warnings",
+        "metadata",
+    ):
         assert key in facts
     imu = facts["topics"]["vehicle_imu_0"]
     assert imu["message_count"] >= 10 and imu["rate_hz"] > 1 and "delta_velocity[0]" in imu["fields"]
@@ -48,8 +60,15 @@ def test_inspect_json_to_stdout_parses_and_has_the_keys(cli):
 @pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
 def test_inspect_json_file_and_channels_and_topic_filter(tmp_path, cli):
     target = tmp_path / "facts.json"
-    result = cli("inspect", TESTDATA / "px4-ulog" / "sample_px4_events.ulg", "--channels",
-                 "--topic", "vehicle_status_0", "--json", target)
+    result = cli(
+        "inspect",
+        TESTDATA / "px4-ulog" / "sample_px4_events.ulg",
+        "--channels",
+        "--topic",
+        "vehicle_status_0",
+        "--json",
+        target,
+    )
     assert result.exit_code == 0 and result.stderr == ""
     facts = json.loads(target.read_text())
     assert list(facts["topics"]) == ["vehicle_status_0"]
@@ -96,8 +115,7 @@ def test_inspect_every_conformance_mcap(cli):
         counted = sum(info["message_count"] for info in facts["topics"].values())
         expected = conformance_message_count(path)
         if counted != expected or facts["partial"]:
-            failures.append(f"{path.name}: {counted} messages (expected {expected}), "
-                            f"partial={facts['partial']}")
+            failures.append(f"{path.name}: {counted} messages (expected {expected}), partial={facts['partial']}")
     assert len(MCAPS) == 416
     assert not failures, f"{len(failures)} of {len(MCAPS)} failed:\n" + "\n".join(failures[:20])
 
@@ -107,18 +125,38 @@ def test_inspect_every_conformance_mcap(cli):
 
 def facts(**overrides) -> dict:
     base = {
-        "file": "f.ulg", "format": "ulog", "start_ns": 1_000_000_000, "end_ns": 3_500_000_000,
-        "duration_s": 2.5, "time_unit": "us", "time_source": "ulog timestamp", "partial": False,
-        "partial_reason": "", "topics": {}, "channels": {}, "skipped": [], "warnings": [],
-        "has_truth": False, "has_profile": False, "metadata": {},
+        "file": "f.ulg",
+        "format": "ulog",
+        "start_ns": 1_000_000_000,
+        "end_ns": 3_500_000_000,
+        "duration_s": 2.5,
+        "time_unit": "us",
+        "time_source": "ulog timestamp",
+        "partial": False,
+        "partial_reason": "",
+        "topics": {},
+        "channels": {},
+        "skipped": [],
+        "warnings": [],
+        "has_truth": False,
+        "has_profile": False,
+        "metadata": {},
     }
     base.update(overrides)
     return base
 
 
 def topic(name: str, fields: list[str], count: int = 10, rate: float = 4.0) -> dict:
-    return {"name": name, "message_count": count, "rate_hz": rate, "encoding": "ulog",
-            "schema": name.rsplit("_", 1)[0], "first_ns": 0, "last_ns": 1, "fields": fields}
+    return {
+        "name": name,
+        "message_count": count,
+        "rate_hz": rate,
+        "encoding": "ulog",
+        "schema": name.rsplit("_", 1)[0],
+        "first_ns": 0,
+        "last_ns": 1,
+        "fields": fields,
+    }
 
 
 def test_compact_fields_joins_runs_of_array_elements():
@@ -141,16 +179,17 @@ def test_long_field_lists_are_truncated_with_a_count_unless_full():
 
 def test_partial_skipped_warnings_and_channel_table_are_rendered():
     data = facts(
-        partial=True, partial_reason="truncated: the message read at byte 10 runs past the end",
+        partial=True,
+        partial_reason="truncated: the message read at byte 10 runs past the end",
         topics={"imu_0": topic("imu_0", ["x"])},
-        channels={"/imu_0/x": {"samples": 10, "unit": None, "rate_hz": 4.0, "nonfinite": 2,
-                               "min": -1.5, "max": 2.0}},
+        channels={"/imu_0/x": {"samples": 10, "unit": None, "rate_hz": 4.0, "nonfinite": 2, "min": -1.5, "max": 2.0}},
         skipped=[{"what": "text column 'mode' of a.csv", "why": "not numeric", "count": 1}],
         warnings=["a.csv: 2 NaN value(s) kept"],
-        metadata={"ulog.info": {"sys_name": "PX4", "ver_hw": "SITL"},
-                  "ulog.log": {"dropouts": "2", "dropout_total_ms": "40", "logged_messages": "5",
-                               "changed_parameters": "1"},
-                  "ulog.parameters": {"A": "1", "B": "2"}},
+        metadata={
+            "ulog.info": {"sys_name": "PX4", "ver_hw": "SITL"},
+            "ulog.log": {"dropouts": "2", "dropout_total_ms": "40", "logged_messages": "5", "changed_parameters": "1"},
+            "ulog.parameters": {"A": "1", "B": "2"},
+        },
     )
     text = render_inspect(data, True)
     assert "PARTIAL:   only part of the file was read: truncated" in text

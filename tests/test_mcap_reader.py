@@ -15,9 +15,9 @@ from mcap.writer import CompressionType, Writer
 
 from logscan.errors import CorruptLogError, InputError
 from logscan.log import Log
-from logscan.readers.mcap.writer import TopicData, mcap_bytes
 from logscan.readers import read_log
 from logscan.readers.mcap import iter_raw_messages, read_mcap
+from logscan.readers.mcap.writer import TopicData, mcap_bytes
 
 CONFORMANCE = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "mcap-conformance"
 CONFORMANCE_FILES = sorted(CONFORMANCE.glob("*/*.mcap")) if CONFORMANCE.is_dir() else []
@@ -36,10 +36,15 @@ def _expected_messages(json_path: Path) -> list[tuple]:
         if record["type"] == "Channel":
             topics[fields["id"]] = fields["topic"]
         elif record["type"] == "Message":
-            out.append((
-                topics[fields["channel_id"]], int(fields["log_time"]), int(fields["publish_time"]),
-                int(fields["sequence"]), bytes(int(b) for b in fields["data"]),
-            ))
+            out.append(
+                (
+                    topics[fields["channel_id"]],
+                    int(fields["log_time"]),
+                    int(fields["publish_time"]),
+                    int(fields["sequence"]),
+                    bytes(int(b) for b in fields["data"]),
+                )
+            )
     return out
 
 
@@ -97,8 +102,7 @@ class _Valid(tuple):
 
 @pytest.fixture(scope="module")
 def valid_file(tmp_path_factory) -> tuple[Path, bytes, Log]:
-    data = mcap_bytes(_imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}},
-                      chunk_size=16 * 1024)
+    data = mcap_bytes(_imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}}, chunk_size=16 * 1024)
     path = tmp_path_factory.mktemp("mcap") / "valid.mcap"
     path.write_bytes(data)
     log = read_mcap(path, None)
@@ -228,11 +232,16 @@ def _json_file(path: Path, topics: dict[str, list[tuple[int, object]]]) -> None:
 
 def test_json_nested_arrays_bools_and_non_numeric_fields(tmp_path):
     path = tmp_path / "j.mcap"
-    _json_file(path, {"/robot": [
-        (10, {"pose": {"x": 1.0, "y": 2}, "ranges": [1, 2, 3], "ok": True, "frame": "map", "v": None}),
-        (20, {"pose": {"x": 1.5, "y": 3}, "ranges": [4], "ok": False, "frame": "map", "v": None}),
-        (30, {"pose": {"x": 2.5, "y": 4}, "ranges": [5, 6], "ok": True, "frame": "odom", "v": None}),
-    ]})
+    _json_file(
+        path,
+        {
+            "/robot": [
+                (10, {"pose": {"x": 1.0, "y": 2}, "ranges": [1, 2, 3], "ok": True, "frame": "map", "v": None}),
+                (20, {"pose": {"x": 1.5, "y": 3}, "ranges": [4], "ok": False, "frame": "map", "v": None}),
+                (30, {"pose": {"x": 2.5, "y": 4}, "ranges": [5, 6], "ok": True, "frame": "odom", "v": None}),
+            ]
+        },
+    )
     log = read_mcap(path, None)
     ch = log.channels
     np.testing.assert_array_equal(ch["/robot/pose.x"].values, [1.0, 1.5, 2.5])
@@ -315,13 +324,16 @@ float64 z
 """
 
 
-ROS2_POSE = """std_msgs/Header header
+ROS2_POSE = (
+    """std_msgs/Header header
 geometry_msgs/Point position
 float64[] ranges
 int32[3] counts
 bool ok
 string label
-""" + ROS2_SUBTYPES
+"""
+    + ROS2_SUBTYPES
+)
 
 
 def test_ros2_cdr_round_trip_with_header_stamp(tmp_path):
@@ -332,11 +344,19 @@ def test_ros2_cdr_round_trip_with_header_stamp(tmp_path):
         writer = Ros2Writer(fh)
         schema = writer.register_msgdef("test_msgs/msg/Pose", ROS2_POSE)
         for k in range(3):
-            writer.write_message("/pose", schema, {
-                "header": {"stamp": {"sec": 50 + k, "nanosec": 7}, "frame_id": "map"},
-                "position": {"x": 1.0 * k, "y": 2.0, "z": -1.0},
-                "ranges": [0.5] * (k + 1), "counts": [1, 2, 3], "ok": k % 2 == 0, "label": "a",
-            }, log_time=1000 + k)
+            writer.write_message(
+                "/pose",
+                schema,
+                {
+                    "header": {"stamp": {"sec": 50 + k, "nanosec": 7}, "frame_id": "map"},
+                    "position": {"x": 1.0 * k, "y": 2.0, "z": -1.0},
+                    "ranges": [0.5] * (k + 1),
+                    "counts": [1, 2, 3],
+                    "ok": k % 2 == 0,
+                    "label": "a",
+                },
+                log_time=1000 + k,
+            )
         writer.finish()
     log = read_mcap(path, None)
     ch = log.channels
@@ -398,8 +418,12 @@ def _protobuf_class():
     file_proto = descriptor_pb2.FileDescriptorProto(name="logscan_test.proto", package="lstest", syntax="proto3")
     vec = file_proto.message_type.add(name="Vec")
     for number, name in enumerate("xyz", start=1):
-        vec.field.add(name=name, number=number, type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
-                      label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL)
+        vec.field.add(
+            name=name,
+            number=number,
+            type=descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE,
+            label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL,
+        )
     pose = file_proto.message_type.add(name="Pose")
     F = descriptor_pb2.FieldDescriptorProto
     pose.field.add(name="position", number=1, type=F.TYPE_MESSAGE, type_name=".lstest.Vec", label=F.LABEL_OPTIONAL)
@@ -487,7 +511,7 @@ def test_json_fast_path_matches_json_loads_on_mixed_messages():
         b'{"a": {"x": 6.0, "y": 4}, "ok": true, "s": "map", "n": null, "v": [1, 2, 3]}',  # longer array
         b'{"a": {"x": 1e400, "y": 5}, "ok": true, "s": "map", "n": null, "v": [1, 2]}',
         b'{"a": {"x": 7.0, "y": 6}, "ok": true, "s": "map", "n": null, "v": [1, 2]}',
-        b'not json at all',
+        b"not json at all",
         b'{"a": {"x": "8", "y": 7}, "ok": true, "s": "map", "n": null, "v": [1, 2]}',  # string number
     ]
     flat, failed = json_columns(texts)
@@ -500,8 +524,13 @@ def test_json_fast_path_matches_json_loads_on_mixed_messages():
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.lists(st.tuples(st.floats(allow_nan=False, width=64), st.integers(-2**70, 2**70), st.booleans()),
-                min_size=2, max_size=30))
+@given(
+    st.lists(
+        st.tuples(st.floats(allow_nan=False, width=64), st.integers(-(2**70), 2**70), st.booleans()),
+        min_size=2,
+        max_size=30,
+    )
+)
 def test_json_fast_path_parses_numbers_like_json_loads(rows):
     from logscan.readers.json_decoder import json_columns
 
@@ -511,7 +540,8 @@ def test_json_fast_path_parses_numbers_like_json_loads(rows):
     _same_columns(flat, _generic_columns([json.loads(t) for t in texts]))
 
 
-ROS2_FIXED = """std_msgs/Header header
+ROS2_FIXED = (
+    """std_msgs/Header header
 int8 a
 uint16 b
 int32 c
@@ -523,7 +553,9 @@ uint8[2] h
 string[2] names
 geometry_msgs/Point[2] pts
 int64 z
-""" + ROS2_SUBTYPES
+"""
+    + ROS2_SUBTYPES
+)
 
 
 def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
@@ -539,14 +571,25 @@ def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
         writer = Ros2Writer(fh)
         schema = writer.register_msgdef("test_msgs/msg/Fixed", ROS2_FIXED)
         for k in range(20):
-            writer.write_message("/fixed", schema, {
-                "header": {"stamp": {"sec": k, "nanosec": 3 * k}, "frame_id": "f" * (k % 5)},
-                "a": int(rng.integers(-128, 128)), "b": int(rng.integers(0, 65536)),
-                "c": int(rng.integers(-2**31, 2**31)), "d": int(rng.integers(0, 2**63)),
-                "e": float(np.float32(rng.normal())), "f": bool(k % 2), "g": rng.normal(size=3).tolist(),
-                "h": bytes([k, 2 * k]), "names": ["n" * k, "m"], "z": -k * 10**12,
-                "pts": [{"x": float(k), "y": 1.0, "z": 2.0}, {"x": 3.0, "y": float(-k), "z": 4.0}],
-            }, log_time=k)
+            writer.write_message(
+                "/fixed",
+                schema,
+                {
+                    "header": {"stamp": {"sec": k, "nanosec": 3 * k}, "frame_id": "f" * (k % 5)},
+                    "a": int(rng.integers(-128, 128)),
+                    "b": int(rng.integers(0, 65536)),
+                    "c": int(rng.integers(-(2**31), 2**31)),
+                    "d": int(rng.integers(0, 2**63)),
+                    "e": float(np.float32(rng.normal())),
+                    "f": bool(k % 2),
+                    "g": rng.normal(size=3).tolist(),
+                    "h": bytes([k, 2 * k]),
+                    "names": ["n" * k, "m"],
+                    "z": -k * 10**12,
+                    "pts": [{"x": float(k), "y": 1.0, "z": 2.0}, {"x": 3.0, "y": float(-k), "z": 4.0}],
+                },
+                log_time=k,
+            )
         writer.finish()
     raw = list(iter_raw_messages(path))
     datas = [m.data for m in raw]
@@ -636,8 +679,9 @@ def test_bulk_paths_on_packed_chunks_match_the_generic_decoders(tmp_path, monkey
     for name, channel in fast.channels.items():
         np.testing.assert_array_equal(channel.t, slow.channels[name].t)
         np.testing.assert_array_equal(channel.values, slow.channels[name].values)
-    assert [(s.what, s.why, s.count) for s in fast.source.skipped] == \
-        [(s.what, s.why, s.count) for s in slow.source.skipped]
+    assert [(s.what, s.why, s.count) for s in fast.source.skipped] == [
+        (s.what, s.why, s.count) for s in slow.source.skipped
+    ]
     if layout.startswith("mixed"):
         assert ("/mix", "message bytes do not decode", 57) in [(s.what, s.why, s.count) for s in fast.source.skipped]
         assert fast.channels["/mix/v[2]"].values.size == 400 // 4 - 15
@@ -771,8 +815,29 @@ def test_exact_json_number_kernel_is_correctly_rounded_or_declines():
     doubles = rng.integers(0, 2**63, size=3000, dtype=np.uint64).view(np.float64)
     tokens = [repr(float(x)) for x in doubles if np.isfinite(x)]
     tokens += [f"{x:.{d}g}" for x, d in zip(rng.normal(0, 100, 3000), rng.integers(1, 17, 3000))]
-    tokens += ["0", "-0.0", "0e5", "1e22", "1e23", "1E+2", "1e-22", "9007199254740992", "9007199254740993",
-               "00", "1.", ".5", "+1", "1e", "-", "01.5", "NaN", "-Infinity", "5e-324", "0.1", "0.3"]
+    tokens += [
+        "0",
+        "-0.0",
+        "0e5",
+        "1e22",
+        "1e23",
+        "1E+2",
+        "1e-22",
+        "9007199254740992",
+        "9007199254740993",
+        "00",
+        "1.",
+        ".5",
+        "+1",
+        "1e",
+        "-",
+        "01.5",
+        "NaN",
+        "-Infinity",
+        "5e-324",
+        "0.1",
+        "0.3",
+    ]
     taken = 0
     for token in tokens:
         text = np.frombuffer(token.encode(), dtype=np.uint8)

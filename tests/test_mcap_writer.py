@@ -10,8 +10,8 @@ import pytest
 from mcap.reader import NonSeekingReader, make_reader
 
 from logscan.errors import UsageError
-from logscan.readers.mcap.writer import TopicData, mcap_bytes, write_mcap
 from logscan.readers.mcap import read_mcap
+from logscan.readers.mcap.writer import TopicData, mcap_bytes, write_mcap
 
 
 def _topics() -> dict[str, TopicData]:
@@ -19,12 +19,16 @@ def _topics() -> dict[str, TopicData]:
     t_imu = np.arange(500, dtype=np.int64) * 5_000_000
     t_gps = np.arange(50, dtype=np.int64) * 50_000_000 + 1  # interleaves with the IMU
     return {
-        "/imu": TopicData("sensor_msgs/msg/Imu", t_imu, {
-            "linear_acceleration.x": rng.normal(size=500),
-            "linear_acceleration.y": rng.normal(size=500),
-            "angular_velocity.z": rng.normal(size=500),
-            "orientation.q.w": np.ones(500),
-        }),
+        "/imu": TopicData(
+            "sensor_msgs/msg/Imu",
+            t_imu,
+            {
+                "linear_acceleration.x": rng.normal(size=500),
+                "linear_acceleration.y": rng.normal(size=500),
+                "angular_velocity.z": rng.normal(size=500),
+                "orientation.q.w": np.ones(500),
+            },
+        ),
         "/gps": TopicData("logscan/Gps", t_gps, {"position.x": rng.normal(size=50), "speed": rng.normal(size=50)}),
     }
 
@@ -78,11 +82,17 @@ def test_same_inputs_give_the_same_bytes(encoding):
 
 def test_metadata_round_trips_into_truth_and_profile(tmp_path):
     truth = '{"events": [{"start": 3.0, "end": 5.0, "kind": "imu-bias", "target": "/imu"}]}'
-    profile = "[vehicle]\nmodel = \"quadcopter\"\nrate_hz = 100\n"
+    profile = '[vehicle]\nmodel = "quadcopter"\nrate_hz = 100\n'
     path = tmp_path / "m.mcap"
-    write_mcap(path, _topics(), metadata={
-        "logscan.truth": {"json": truth}, "logscan.profile": {"toml": profile}, "other": {"k": "v"},
-    })
+    write_mcap(
+        path,
+        _topics(),
+        metadata={
+            "logscan.truth": {"json": truth},
+            "logscan.profile": {"toml": profile},
+            "other": {"k": "v"},
+        },
+    )
     log = read_mcap(path, None)
     assert log.truth == {"events": [{"start": 3.0, "end": 5.0, "kind": "imu-bias", "target": "/imu"}]}
     assert log.profile_text == profile

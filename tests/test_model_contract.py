@@ -46,8 +46,7 @@ def random_point(model, rng):
     if hasattr(model, "hover_input"):
         nominal = model.hover_input()
         spread = np.where(nominal == 0.0, 0.05, 0.0)
-        return x, nominal * (1.0 + 0.2 * rng.normal(size=nominal.size)) + spread * rng.normal(
-            size=nominal.size)
+        return x, nominal * (1.0 + 0.2 * rng.normal(size=nominal.size)) + spread * rng.normal(size=nominal.size)
     return x, rng.normal(size=model.n_inputs) * 5.0
 
 
@@ -60,20 +59,30 @@ def healthy_run(model, N):
     """N steps at the default state with every group fresh and exact."""
     x, u = model.default_x0(), np.zeros(model.n_inputs)
     groups = {
-        name: AlignedGroup(name, list(spec.outputs), np.tile(model.h(name, x, u), (N, 1)),
-                           np.ones(N, bool))
+        name: AlignedGroup(name, list(spec.outputs), np.tile(model.h(name, x, u), (N, 1)), np.ones(N, bool))
         for name, spec in model.groups.items()
     }
-    return AlignedRun(t=np.arange(N) * 0.01, dt=0.01, start_ns=0, u=np.zeros((N, model.n_inputs)),
-                      u_fresh=np.ones(N, bool), input_channels=list(model.input_names),
-                      groups=groups)
+    return AlignedRun(
+        t=np.arange(N) * 0.01,
+        dt=0.01,
+        start_ns=0,
+        u=np.zeros((N, model.n_inputs)),
+        u_fresh=np.ones(N, bool),
+        input_channels=list(model.input_names),
+        groups=groups,
+    )
 
 
 def work_arrays(n):
     """predict_into's work arrays kv, xs (n,) and A, J, Jn (n, n), NaN-filled: nothing stale
     may be read."""
-    return (np.full(n, np.nan), np.full(n, np.nan), np.full((n, n), np.nan),
-            np.full((n, n), np.nan), np.full((n, n), np.nan))
+    return (
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        np.full((n, n), np.nan),
+        np.full((n, n), np.nan),
+        np.full((n, n), np.nan),
+    )
 
 
 @pytest.mark.parametrize(("name", "params"), CASES)
@@ -161,12 +170,11 @@ def test_in_place_kernels_equal_the_allocating_ones(name, params):
         hx, Hs = np.full(m_total + 1, np.nan), np.full((m_total + 1, n), np.nan)
         r = 1
         for g in model.groups.values():
-            dispatch.meas_into(model.model_id, g.group_id, p, x, u, r, hx, Hs, np.empty((3, 3)),
-                               np.empty((3, 3, 3)))
+            dispatch.meas_into(model.model_id, g.group_id, p, x, u, r, hx, Hs, np.empty((3, 3)), np.empty((3, 3, 3)))
             H_ref = dispatch.H_meas(model.model_id, g.group_id, p, x, u)
             h_ref = dispatch.h_meas(model.model_id, g.group_id, p, x, u)
-            np.testing.assert_array_equal(Hs[r:r + g.size], H_ref)
-            np.testing.assert_allclose(hx[r:r + g.size], h_ref, rtol=1e-13, atol=1e-13)
+            np.testing.assert_array_equal(Hs[r : r + g.size], H_ref)
+            np.testing.assert_allclose(hx[r : r + g.size], h_ref, rtol=1e-13, atol=1e-13)
             r += g.size
         assert np.isnan(hx[0]) and np.all(np.isnan(Hs[0]))  # rows outside the groups untouched
 
@@ -220,14 +228,15 @@ def test_every_dispatcher_raises_on_an_unknown_model_id(name, params):
     m = max(g.size for g in model.groups.values())
     calls = {
         "predict": lambda: dispatch.predict(UNKNOWN_ID, p, x, u, dt),
-        "predict_into": lambda: dispatch.predict_into(UNKNOWN_ID, p, x, u, dt, np.empty(n),
-                                                      np.empty((n, n)), *work_arrays(n)),
+        "predict_into": lambda: dispatch.predict_into(
+            UNKNOWN_ID, p, x, u, dt, np.empty(n), np.empty((n, n)), *work_arrays(n)
+        ),
         "f_disc": lambda: dispatch.f_disc(UNKNOWN_ID, p, x, u, dt),
         "h_meas": lambda: dispatch.h_meas(UNKNOWN_ID, 0, p, x, u),
         "H_meas": lambda: dispatch.H_meas(UNKNOWN_ID, 0, p, x, u),
-        "meas_into": lambda: dispatch.meas_into(UNKNOWN_ID, 0, p, x, u, 0, np.empty(m),
-                                                np.empty((m, n)), np.empty((3, 3)),
-                                                np.empty((3, 3, 3))),
+        "meas_into": lambda: dispatch.meas_into(
+            UNKNOWN_ID, 0, p, x, u, 0, np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
+        ),
         "cont_fA": lambda: rk4.cont_fA(UNKNOWN_ID, p, x, u, np.empty(n), np.empty((n, n)), True),
     }
     for label, call in calls.items():

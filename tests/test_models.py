@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_model_contract import central_jacobian, random_point, work_arrays
 
 from logscan.errors import ModelError
 from logscan.models import MODEL_NAMES, dispatch, get_model, rk4
-
-from test_model_contract import central_jacobian, random_point, work_arrays
 
 
 def test_quadcopter_hovers_and_accel_reads_gravity_reaction():
@@ -56,8 +55,7 @@ def test_dc_motor_time_constant_and_top_speed_are_physical():
 
 
 def test_linear_discrete_matrices_are_used_as_given_and_dt_must_match():
-    params = {"A": [[1.0, 0.1], [0.0, 1.0]], "B": [[0.0], [0.1]], "C": [[1.0, 0.0]],
-              "continuous": False, "dt": 0.1}
+    params = {"A": [[1.0, 0.1], [0.0, 1.0]], "B": [[0.0], [0.1]], "C": [[1.0, 0.0]], "continuous": False, "dt": 0.1}
     model = get_model("linear", params)
     np.testing.assert_allclose(model.f([1.0, 2.0], [3.0], 0.1), [1.2, 2.3])
     with pytest.raises(ModelError, match="discrete at dt"):

@@ -16,7 +16,8 @@ from logscan.simulate import runner
 PACKAGE_DIR = Path(numba_cache.__file__).parent
 CACHED_KERNEL = re.compile(r"^@(numba\.)?n?jit\(.*cache=True", re.MULTILINE)
 MODEL_KERNEL_MODULES = sorted(
-    f"logscan.models.{path.stem}" for path in (PACKAGE_DIR / "models").glob("*.py")
+    f"logscan.models.{path.stem}"
+    for path in (PACKAGE_DIR / "models").glob("*.py")
     if path.stem.endswith("_kernels") or path.stem in ("rk4", "dispatch")
 )
 
@@ -49,8 +50,13 @@ def test_the_simulator_kernel_depends_on_the_models_controllers_and_fault_codes(
 def test_classes_and_python_functions_are_not_kernel_dependencies():
     # ekf.py imports AlignedRun, ModelError, Model, EkfTrace and divergence_episodes too
     found = names(numba_cache.kernel_dependencies(ekf))
-    for module in ("logscan.align", "logscan.errors", "logscan.models.base",
-                   "logscan.filters.trace", "logscan.numba_cache"):
+    for module in (
+        "logscan.align",
+        "logscan.errors",
+        "logscan.models.base",
+        "logscan.filters.trace",
+        "logscan.numba_cache",
+    ):
         assert module not in found
 
 
@@ -71,21 +77,19 @@ def test_every_cached_kernel_carries_the_stamp_of_its_dependencies(module_name):
 def changed_copy(module, tmp_path: Path) -> str:
     """A copy of the module's source with one more comment line: an edited dependency."""
     copy = tmp_path / Path(module.__file__).name
-    copy.write_text(Path(module.__file__).read_text(encoding="utf-8") + "# edited\n",
-                    encoding="utf-8")
+    copy.write_text(Path(module.__file__).read_text(encoding="utf-8") + "# edited\n", encoding="utf-8")
     return str(copy)
 
 
 @pytest.mark.parametrize(
     ("kernel_module", "kernel", "dependency"),
-    [("logscan.filters.ekf", "ekf_run", name)
-     for name in (*MODEL_KERNEL_MODULES, "logscan.filters.linalg")]
-    + [("logscan.simulate.runner", "closed_loop", name)
-       for name in (*MODEL_KERNEL_MODULES, "logscan.simulate.controllers",
-                    "logscan.simulate.faults")],
+    [("logscan.filters.ekf", "ekf_run", name) for name in (*MODEL_KERNEL_MODULES, "logscan.filters.linalg")]
+    + [
+        ("logscan.simulate.runner", "closed_loop", name)
+        for name in (*MODEL_KERNEL_MODULES, "logscan.simulate.controllers", "logscan.simulate.faults")
+    ],
 )
-def test_an_edited_dependency_makes_the_cached_index_stale(kernel_module, kernel, dependency,
-                                                          tmp_path, monkeypatch):
+def test_an_edited_dependency_makes_the_cached_index_stale(kernel_module, kernel, dependency, tmp_path, monkeypatch):
     """numba reads a cached index only when its stamp equals the one the dispatcher carries
     (IndexDataCacheFile._load_index): an index saved before a dependency changed is not used."""
     module = importlib.import_module(kernel_module)

@@ -37,7 +37,9 @@ def test_the_encoded_checks_ask_for_the_gain_only_without_onboard_variances():
 def test_each_needed_filter_runs_exactly_once(monkeypatch):
     calls = []
     real = pipeline.FILTERS["ekf"]
-    monkeypatch.setitem(pipeline.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts))
+    monkeypatch.setitem(
+        pipeline.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts)
+    )
     analysis = analyze_log(HEALTHY, detector_names=["encoded_ekf", "nis"])
     assert len(calls) == 1 and [r.detector for r in analysis.results] == ["encoded_ekf", "nis"]
 
@@ -54,13 +56,16 @@ def _bad_profile(tmp_path, settings: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize("settings, message", [
-    ("windw = 3", "unknown parameter(s) windw"),
-    ("window = 0", "window must be an integer in [1, inf), got 0"),
-    ("budget_per_hour = -1.0", "budget_per_hour must be a number in (0, inf)"),
-    ("alpha = 1.5", "alpha must be a number in (0, 1) or None, got 1.5"),
-    ("overall = \"yes\"", "overall must be true or false"),
-])
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ("windw = 3", "unknown parameter(s) windw"),
+        ("window = 0", "window must be an integer in [1, inf), got 0"),
+        ("budget_per_hour = -1.0", "budget_per_hour must be a number in (0, inf)"),
+        ("alpha = 1.5", "alpha must be a number in (0, 1) or None, got 1.5"),
+        ('overall = "yes"', "overall must be true or false"),
+    ],
+)
 def test_a_bad_detector_setting_is_refused_before_any_log_is_read(tmp_path, monkeypatch, cli, settings, message):
     def no_reading(*args, **kwargs):
         raise AssertionError("the log was read before the profile's detector settings were checked")
@@ -94,17 +99,23 @@ def _string_constants(tree: ast.AST) -> set[str]:
     """String literals of a module, except docstrings and the keys of dicts and subscripts (a
     filter's own quantity, e.g. its "nis" array, is not a reference to a detector)."""
     skipped = {
-        id(node.body[0].value) for node in ast.walk(tree)
+        id(node.body[0].value)
+        for node in ast.walk(tree)
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
-        and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)
+        and node.body
+        and isinstance(node.body[0], ast.Expr)
+        and isinstance(node.body[0].value, ast.Constant)
     }
     for node in ast.walk(tree):
         if isinstance(node, ast.Dict):
             skipped.update(id(key) for key in node.keys if key is not None)
         elif isinstance(node, ast.Subscript):
             skipped.add(id(node.slice))
-    return {node.value for node in ast.walk(tree)
-            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped}
+    return {
+        node.value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped
+    }
 
 
 def test_no_module_outside_detectors_names_a_detector():

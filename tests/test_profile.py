@@ -119,9 +119,7 @@ def test_fake_model_through_the_validation_hook():
     assert p.model_facts.group_sizes == {"speed": 1, "pair": 2}
     with pytest.raises(ProfileError) as info:
         parse_profile(FAKE_TOML.replace('w = ["/u/w1", "/u/w2"]', 'w = ["/u/w1"]'), model=FakeModel())
-    assert info.value.problems == [
-        "[inputs] w: 1 channel but model 'fake' has 2 inputs starting with 'w' (w1, w2)"
-    ]
+    assert info.value.problems == ["[inputs] w: 1 channel but model 'fake' has 2 inputs starting with 'w' (w1, w2)"]
     # the structure alone, without any model
     p = parse_profile(FAKE_TOML, check_model=False)
     assert p.inputs.names == ["force", "w[0]", "w[1]"]
@@ -146,8 +144,7 @@ BROKEN = [
     (mutated("vehicle.params", [1, 2]), "[vehicle] params: expected a table, got an array"),
     (
         mutated("vehicle.params", {"mass": -1.0}),
-        "[vehicle] params: model 'quadcopter' cannot be built: "
-        "quadcopter: parameter mass must be > 0 (got -1.0)",
+        "[vehicle] params: model 'quadcopter' cannot be built: quadcopter: parameter mass must be > 0 (got -1.0)",
     ),
     (mutated("vehicle.ratehz", 5), "[vehicle]: unknown key 'ratehz' (did you mean 'rate_hz'?)"),
     (
@@ -239,7 +236,10 @@ BROKEN = [
         "[onboard] state: model 'quadcopter' has no state 'xx' (did you mean 'x'?) "
         "(states: x, y, z, vx, vy, vz, roll, pitch, yaw, p, q, r)",
     ),
-    (mutated("onboard", {"stale_s": 1.0}), "[onboard]: give 'state' and/or 'variance' (a channel prefix, an array or a table)"),
+    (
+        mutated("onboard", {"stale_s": 1.0}),
+        "[onboard]: give 'state' and/or 'variance' (a channel prefix, an array or a table)",
+    ),
     (
         mutated("detectors", {"nis": {"enabled": "yes"}}),
         "[detectors.nis] enabled: expected true or false, got string 'yes'",
@@ -298,9 +298,16 @@ def make_log(names, path="flight.mcap", profile_text=None) -> Log:
 
 
 QUAD_CHANNELS = [
-    "/cmd/thrust", "/cmd/tau.x", "/cmd/tau.y", "/cmd/tau.z",
-    "/imu/accel/x", "/imu/accel/y", "/imu/accel/z",
-    "/gps/position/x", "/gps/position/y", "/gps/position/z",
+    "/cmd/thrust",
+    "/cmd/tau.x",
+    "/cmd/tau.y",
+    "/cmd/tau.z",
+    "/imu/accel/x",
+    "/imu/accel/y",
+    "/imu/accel/z",
+    "/gps/position/x",
+    "/gps/position/y",
+    "/gps/position/z",
 ]
 
 
@@ -335,12 +342,16 @@ def test_onboard_prefix_must_match_some_channel():
 
 
 def test_topics_lists_every_channel_and_prefix_the_readers_need():
-    data = mutated("onboard", {"state": "/ekf/state", "variance": ["/v/%d" % i for i in range(12)]})
+    data = mutated("onboard", {"state": "/ekf/state", "variance": [f"/v/{i}" for i in range(12)]})
     data["mode"] = {"channel": "/flight_mode/mode"}
     data["redundant"] = {"alt": {"sensors": {"baro": "/baro/alt", "gps": {"channel": "/gps/alt", "poly": [0, 1]}}}}
     topics = parse_profile(dumps_toml(data)).topics()
     assert topics == set(QUAD_CHANNELS) | {
-        "/ekf/state", "/flight_mode/mode", "/baro/alt", "/gps/alt", *("/v/%d" % i for i in range(12))
+        "/ekf/state",
+        "/flight_mode/mode",
+        "/baro/alt",
+        "/gps/alt",
+        *(f"/v/{i}" for i in range(12)),
     }
 
 
@@ -371,7 +382,10 @@ def rich_profile_dict() -> dict:
     data["measurements"]["accel"]["range_hi"] = 50.0
     data["mode"] = {"channel": "/flight mode/mode", "stale_s": float("inf")}
     data["redundant"] = {
-        "alt": {"sensors": {"baro": "/baro/alt", "gps": {"channel": "/gps/alt", "poly": [0.5, 1.0, -1e-3]}}, "rate_hz": 5}
+        "alt": {
+            "sensors": {"baro": "/baro/alt", "gps": {"channel": "/gps/alt", "poly": [0.5, 1.0, -1e-3]}},
+            "rate_hz": 5,
+        }
     }
     data["onboard"] = {"state": {"x": "/ekf/x", "y": "/ekf/y"}, "variance": "/ekf/var", "stale_s": 0.2}
     data["detectors"] = {

@@ -92,9 +92,7 @@ def test_quick_start_install_and_run_command_works_in_a_clean_copy(tmp_path):
     """Runs the README's first command verbatim in a copy of the tracked files."""
     if shutil.which("git") is None or not (ROOT / ".git").exists():
         pytest.skip("needs a git checkout to copy the tracked files")
-    files = subprocess.run(
-        ["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True
-    ).stdout.split(b"\0")
+    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout.split(b"\0")
     for rel in filter(None, files):
         src = ROOT / rel.decode()
         if src.is_file():
@@ -106,9 +104,7 @@ def test_quick_start_install_and_run_command_works_in_a_clean_copy(tmp_path):
         p for p in env.get("PATH", "").split(os.pathsep) if ".venv" not in p and "/venv/" not in p
     )
     command = quick_start_commands()[0].replace("python3 ", f"{sys.executable} ", 1)
-    result = subprocess.run(
-        ["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900
-    )
+    result = subprocess.run(["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
     assert result.returncode in (0, 1), result.stderr[-3000:]
     assert "Traceback" not in result.stderr
     assert result.stdout.strip(), "the main job printed nothing"

@@ -77,8 +77,13 @@ def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, se
         log_facts=facts,
         profile_text=f'[vehicle]\nmodel = "quadcopter"\n# {HOSTILE}\n',
         profile_source="profiles/quadcopter.toml",
-        model={"name": "quadcopter", "states": [f"x{i}" for i in range(12)], "inputs": ["thrust"],
-               "groups": {"accel": {}}, "params": {"mass": 1.2}},  # fmt: skip
+        model={
+            "name": "quadcopter",
+            "states": [f"x{i}" for i in range(12)],
+            "inputs": ["thrust"],
+            "groups": {"accel": {}},
+            "params": {"mass": 1.2},
+        },  # fmt: skip
         logscan_version="0.1.0",
         t=t,
         results=results,

@@ -20,8 +20,11 @@ from test_report import HOSTILE, figures, make_report
 from logscan.report import render_report
 
 CHROMIUM = next(
-    (p for p in ("/usr/bin/chromium", shutil.which("chromium"), shutil.which("chromium-browser"))
-     if p and Path(p).is_file()),
+    (
+        p
+        for p in ("/usr/bin/chromium", shutil.which("chromium"), shutil.which("chromium-browser"))
+        if p and Path(p).is_file()
+    ),
     None,
 )
 

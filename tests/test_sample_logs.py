@@ -32,8 +32,14 @@ NAMES = [s.name for s in MAKE.SAMPLES]
 def test_the_issue_asks_for_these_logs():
     models = [s.model for s in MAKE.SAMPLES]
     assert "quad_healthy.mcap" in NAMES
-    assert {"quad_imu_bias.mcap", "quad_imu_bitflip.mcap", "quad_motor_offset.mcap",
-            "quad_cov_corruption.mcap", "sbw_healthy.mcap", "jackal_healthy.mcap"} <= set(NAMES)
+    assert {
+        "quad_imu_bias.mcap",
+        "quad_imu_bitflip.mcap",
+        "quad_motor_offset.mcap",
+        "quad_cov_corruption.mcap",
+        "sbw_healthy.mcap",
+        "jackal_healthy.mcap",
+    } <= set(NAMES)
     assert models.count("steer_by_wire") >= 2
     assert any(s.fmt == "csv" for s in MAKE.SAMPLES)
 

@@ -28,7 +28,7 @@ def _mean_nis_per_measurement(log, profile) -> tuple[float, dict]:
 
 
 def test_healthy_quadcopter_log_nis_averages_the_number_of_measurements():
-    """Acceptance (issue 3): the analysis EKF on the healthy sample log is consistent."""
+    """Acceptance: the analysis EKF on the healthy sample log is consistent."""
     if not QUAD_HEALTHY.exists():
         pytest.skip("sample_logs/quad_healthy.mcap is absent (python sample_logs/make_samples.py)")
     log = read_log(QUAD_HEALTHY)
@@ -91,8 +91,21 @@ def test_dc_motor_tracks_every_speed_mode():
 def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path, cli):
     paths = [tmp_path / name for name in ("a.mcap", "b.mcap", "c.mcap")]
     for path, seed in zip(paths, ("7", "7", "8")):
-        args = ["simulate", "quadcopter", "--duration", "5", "--seed", seed,
-                "--fault", "imu-bias", "--at", "2", "-q", "-o", str(path)]
+        args = [
+            "simulate",
+            "quadcopter",
+            "--duration",
+            "5",
+            "--seed",
+            seed,
+            "--fault",
+            "imu-bias",
+            "--at",
+            "2",
+            "-q",
+            "-o",
+            str(path),
+        ]
         assert cli(*args).exit_code == 0
     a, b, c = (p.read_bytes() for p in paths)
     assert a == b
@@ -105,24 +118,62 @@ def test_imu_bias_at_30_embeds_truth_and_profile(tmp_path, cli):
     assert result.exit_code == 0, result.output
     log = read_log(out)
     (event,) = log.truth["events"]
-    assert event == {"kind": "bias", "target": "accel.x", "start": 30.0, "end": 40.0,
-                     "magnitude": 1.0, "channels": ["/imu/accel.x"]}
+    assert event == {
+        "kind": "bias",
+        "target": "accel.x",
+        "start": 30.0,
+        "end": 40.0,
+        "magnitude": 1.0,
+        "channels": ["/imu/accel.x"],
+    }
     assert log.truth["true_state_topic"] == "/truth/state"
-    assert {"/imu/accel.x", "/imu/gyro.z", "/gps/position.x", "/attitude/yaw", "/cmd/thrust",
-            "/cmd/tau.x", "/ekf/state/vx", "/ekf/variance/vx", "/truth/state/x"} <= set(log.channels)
+    assert {
+        "/imu/accel.x",
+        "/imu/gyro.z",
+        "/gps/position.x",
+        "/attitude/yaw",
+        "/cmd/thrust",
+        "/cmd/tau.x",
+        "/ekf/state/vx",
+        "/ekf/variance/vx",
+        "/truth/state/x",
+    } <= set(log.channels)
     inspect = cli("inspect", out)
     assert inspect.exit_code == 0 and "ground truth: yes" in inspect.output
 
 
 def test_fault_options_apply_to_short_faults_and_colon_faults_keep_theirs(tmp_path, cli):
     out = tmp_path / "q.mcap"
-    args = ["simulate", "quadcopter", "--duration", "20", "-q", "-o", str(out),
-            "--fault", "drift", "--at", "5", "--fault-duration", "3", "--magnitude", "0.1",
-            "--target", "gyro.y", "--fault", "stuck:position.z:12:14"]
+    args = [
+        "simulate",
+        "quadcopter",
+        "--duration",
+        "20",
+        "-q",
+        "-o",
+        str(out),
+        "--fault",
+        "drift",
+        "--at",
+        "5",
+        "--fault-duration",
+        "3",
+        "--magnitude",
+        "0.1",
+        "--target",
+        "gyro.y",
+        "--fault",
+        "stuck:position.z:12:14",
+    ]
     assert cli(*args).exit_code == 0
     drift, stuck = read_log(out).truth["events"]
     assert (drift["kind"], drift["target"], drift["start"], drift["end"], drift["magnitude"]) == (
-        "drift", "gyro.y", 5.0, 8.0, 0.1)
+        "drift",
+        "gyro.y",
+        5.0,
+        8.0,
+        0.1,
+    )
     assert (stuck["target"], stuck["start"], stuck["end"]) == ("position.z", 12.0, 14.0)
 
 
@@ -139,8 +190,19 @@ def test_ros2_encoding_reads_back_the_same_channels(tmp_path, cli):
 
 def test_csv_format_writes_truth_and_profile_sidecars(tmp_path, cli):
     out = tmp_path / "sbw.csv"
-    args = ["simulate", "steer_by_wire", "--duration", "10", "--format", "csv",
-            "--fault", "bias:steering_angle:4:6:0.01", "-q", "-o", str(out)]
+    args = [
+        "simulate",
+        "steer_by_wire",
+        "--duration",
+        "10",
+        "--format",
+        "csv",
+        "--fault",
+        "bias:steering_angle:4:6:0.01",
+        "-q",
+        "-o",
+        str(out),
+    ]
     assert cli(*args).exit_code == 0
     truth = json.loads((tmp_path / "sbw.truth.json").read_text())
     assert truth["events"][0]["channels"] == ["/steering/angle"]
@@ -151,13 +213,16 @@ def test_csv_format_writes_truth_and_profile_sidecars(tmp_path, cli):
     assert log.truth == truth
 
 
-@pytest.mark.parametrize("args, words", [
-    (["simulate", "submarine", "-o", "x.mcap"], "cannot simulate model 'submarine'"),
-    (["simulate", "quadcopter", "--fault", "wobble", "-o", "x.mcap"], "unknown fault kind 'wobble'"),
-    (["simulate", "quadcopter", "--fault", "imu-bias", "--at", "90", "-o", "x.mcap"], "outside the log"),
-    (["simulate", "quadcopter", "--duration", "-1", "-o", "x.mcap"], "out of range"),
-    (["simulate", "quadcopter"], "no output file"),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["simulate", "submarine", "-o", "x.mcap"], "cannot simulate model 'submarine'"),
+        (["simulate", "quadcopter", "--fault", "wobble", "-o", "x.mcap"], "unknown fault kind 'wobble'"),
+        (["simulate", "quadcopter", "--fault", "imu-bias", "--at", "90", "-o", "x.mcap"], "outside the log"),
+        (["simulate", "quadcopter", "--duration", "-1", "-o", "x.mcap"], "out of range"),
+        (["simulate", "quadcopter"], "no output file"),
+    ],
+)
 def test_bad_requests_exit_2_with_one_line(args, words, cli, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = cli(*args)
@@ -175,8 +240,19 @@ def test_unknown_model_error_lists_the_simulated_models(cli, tmp_path, monkeypat
 
 def test_help_documents_every_option(cli):
     result = cli("simulate", "--help")
-    for option in ("--fault", "--at", "--fault-duration", "--magnitude", "--target", "--duration",
-                   "--seed", "--rate", "--format", "--aggressive", "--output"):
+    for option in (
+        "--fault",
+        "--at",
+        "--fault-duration",
+        "--magnitude",
+        "--target",
+        "--duration",
+        "--seed",
+        "--rate",
+        "--format",
+        "--aggressive",
+        "--output",
+    ):
         assert option in result.output
     assert "logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap" in result.output
 

@@ -185,6 +185,10 @@ def test_ulog2csv_directory_reads_to_the_same_channels_and_values(tmp_path, name
         np.testing.assert_array_equal(other.t, channel.t, err_msg=name_)
         # ulog2csv prints float32 values with str(): equal once both are float32
         np.testing.assert_allclose(
-            other.values.astype(np.float32), channel.values.astype(np.float32),
-            rtol=1e-6, atol=0, equal_nan=True, err_msg=name_,
+            other.values.astype(np.float32),
+            channel.values.astype(np.float32),
+            rtol=1e-6,
+            atol=0,
+            equal_nan=True,
+            err_msg=name_,
         )
