@@ -3,7 +3,8 @@
 `cli("analyze", LOG, "--json", "-")` runs `logscan` through its real entry point (`logscan.cli.main.main`,
 so errors become exit codes and one-line messages exactly as in a shell) inside the test process:
 no interpreter start-up and numba kernels compiled once per session. A few end-to-end tests still
-run `python -m logscan` in a subprocess (tests/test_cli_errors.py, tests/test_readme.py).
+run `python -m logscan` in a subprocess through `cli_process` (tests/test_cli_errors.py) or install
+the package (tests/test_readme.py).
 """
 
 from __future__ import annotations
@@ -44,6 +45,22 @@ def cli(capsys):
             code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
         captured = capsys.readouterr()
         return CliResult(int(code), captured.out, captured.err)
+
+    return invoke
+
+
+@pytest.fixture
+def cli_process():
+    """Run `python -m logscan ARGS...` in a subprocess (a real process's exit code and streams:
+    nothing can hide in the test process); returns a CliResult."""
+    import subprocess
+    import sys
+
+    def invoke(*args, timeout: float = 300) -> CliResult:
+        proc = subprocess.run(
+            [sys.executable, "-m", "logscan", *(str(a) for a in args)], capture_output=True, text=True, timeout=timeout
+        )
+        return CliResult(proc.returncode, proc.stdout, proc.stderr)
 
     return invoke
 

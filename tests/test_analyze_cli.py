@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -127,15 +125,10 @@ def test_script_in_topic_names_is_shown_as_text_in_the_report(tmp_path, cli, sam
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html
 
 
-def test_json_to_stdout_is_pure_json(sample):
+def test_json_to_stdout_is_pure_json(sample, cli_process):
     # a subprocess: only a real pipe shows that nothing else (imports, numba, warnings) writes to stdout
-    result = subprocess.run(
-        [sys.executable, "-m", "logscan", "analyze", str(sample("sbw_healthy.mcap")), "--json", "-", "--no-report"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert result.returncode == 0
+    result = cli_process("analyze", sample("sbw_healthy.mcap"), "--json", "-", "--no-report")
+    assert result.exit_code == 0
     summary = json.loads(result.stdout)
     assert summary["exit_code"] == 0 and summary["logs"][0]["verdict"] == "no alarms"
     assert "sbw_healthy.mcap" in result.stderr  # the human summary moved to stderr

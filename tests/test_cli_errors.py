@@ -7,10 +7,7 @@ run in-process through the `cli` fixture.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,12 +15,6 @@ import pytest
 from logscan import __version__
 
 ULOG = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog" / "sample_log_small.ulg"
-
-
-def run_cli(*args: str) -> SimpleNamespace:
-    """`python -m logscan ARGS` in a subprocess; the result has the cli fixture's fields."""
-    proc = subprocess.run([sys.executable, "-m", "logscan", *args], capture_output=True, text=True, timeout=120)
-    return SimpleNamespace(exit_code=proc.returncode, stdout=proc.stdout, stderr=proc.stderr)
 
 
 def assert_one_line_error(result, *fragments: str) -> None:
@@ -36,25 +27,25 @@ def assert_one_line_error(result, *fragments: str) -> None:
         assert fragment in lines[0], lines[0]
 
 
-def test_version():
-    result = run_cli("--version")
+def test_version(cli_process):
+    result = cli_process("--version")
     assert result.exit_code == 0 and __version__ in result.stdout and result.stderr == ""
 
 
-def test_missing_file(tmp_path):
+def test_missing_file(tmp_path, cli_process):
     missing = tmp_path / "nope.mcap"
-    assert_one_line_error(run_cli("inspect", str(missing)), str(missing), "no such file")
+    assert_one_line_error(cli_process("inspect", str(missing)), str(missing), "no such file")
 
 
-def test_random_bytes_file(tmp_path):
+def test_random_bytes_file(tmp_path, cli_process):
     junk = tmp_path / "junk.bin"
     junk.write_bytes(np.random.default_rng(0).integers(0, 256, 10_000, dtype=np.uint8).tobytes())
-    assert_one_line_error(run_cli("inspect", str(junk)), str(junk), "not an MCAP, ULog or CSV")
+    assert_one_line_error(cli_process("inspect", str(junk)), str(junk), "not an MCAP, ULog or CSV")
 
 
-def test_directory_without_csvs(tmp_path):
+def test_directory_without_csvs(tmp_path, cli_process):
     (tmp_path / "readme.txt").write_text("hello")
-    assert_one_line_error(run_cli("inspect", str(tmp_path)), "directory holds no .csv files")
+    assert_one_line_error(cli_process("inspect", str(tmp_path)), "directory holds no .csv files")
 
 
 @pytest.mark.parametrize(
@@ -72,18 +63,18 @@ def test_bad_csv_files(tmp_path, content, fragment, cli):
     assert_one_line_error(cli("inspect", path), str(path), fragment)
 
 
-def test_mcap_with_bad_magic(tmp_path):
+def test_mcap_with_bad_magic(tmp_path, cli_process):
     path = tmp_path / "bad.mcap"
     path.write_bytes(b"\x89MCAX0\r\n" + bytes(200))
-    assert_one_line_error(run_cli("inspect", str(path)), str(path))
+    assert_one_line_error(cli_process("inspect", str(path)), str(path))
 
 
-def test_ulog_cut_before_any_data(tmp_path):
+def test_ulog_cut_before_any_data(tmp_path, cli_process):
     if not ULOG.is_file():
         pytest.skip("shared px4-ulog test data missing")
     path = tmp_path / "cut.ulg"
     path.write_bytes(ULOG.read_bytes()[:3000])
-    assert_one_line_error(run_cli("inspect", str(path)), str(path), "truncated")
+    assert_one_line_error(cli_process("inspect", str(path)), str(path), "truncated")
 
 
 def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
@@ -97,14 +88,14 @@ def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
     assert "PARTIAL:   only part of the file was read: truncated" in result.stdout
 
 
-def test_unknown_option_is_a_usage_error():
-    result = run_cli("inspect", "--no-such-option", "x")
+def test_unknown_option_is_a_usage_error(cli_process):
+    result = cli_process("inspect", "--no-such-option", "x")
     assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert "no such option" in result.stderr.lower()
 
 
-def test_json_to_a_missing_directory_is_an_input_error(tmp_path):
+def test_json_to_a_missing_directory_is_an_input_error(tmp_path, cli_process):
     if not ULOG.is_file():
         pytest.skip("shared px4-ulog test data missing")
     target = tmp_path / "missing" / "facts.json"
-    assert_one_line_error(run_cli("inspect", str(ULOG), "--json", str(target)), "output directory does not exist")
+    assert_one_line_error(cli_process("inspect", str(ULOG), "--json", str(target)), "output directory does not exist")
