@@ -29,7 +29,8 @@ pickle. A detector that needs trained state it lacks raises NotTrainedError. A s
 belongs to another check for scoring says so with ``add_statistic(..., check="e_x")``.
 
 Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.models.base.Model),
-``log_name``, ``traces`` (every filter trace the pipeline ran, by filter name).
+``log_name``, ``traces`` (every filter trace the pipeline ran, by filter name), ``alarm_policy``
+(the profile's alarm floors, applied by `new_result` to every statistic).
 The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
 module does not import the filter layer.
 """
@@ -199,7 +200,12 @@ class Detector:
             self.check_trained()
         if self.requires_trace and trace is None:
             raise UsageError(f"detector {self.name!r} needs the filter trace, but none was given")
-        result = self._run(run, trace, **context)
+        # the profile's alarm floors reach every statistic through new_result()
+        self._alarm_policy = context.pop("alarm_policy", None)
+        try:
+            result = self._run(run, trace, **context)
+        finally:
+            self._alarm_policy = None
         self._check_result(result, run)
         return result
 
@@ -207,7 +213,8 @@ class Detector:
         raise NotImplementedError(f"{type(self).__name__} must implement _run")
 
     def new_result(self) -> DetectorResult:
-        return DetectorResult(detector=self.name)
+        """An empty result of this detector, carrying the profile's alarm floors during `run`."""
+        return DetectorResult(detector=self.name, alarm_policy=self.__dict__.get("_alarm_policy"))
 
     def _check_result(self, result: DetectorResult, run: AlignedRun) -> None:
         if not isinstance(result, DetectorResult):

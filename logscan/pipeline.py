@@ -170,6 +170,7 @@ def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, pro
                 model=prepared.model,
                 log_name=prepared.path,
                 traces=prepared.traces,
+                alarm_policy=prepared.profile.alarm_policy,
             )
         )
     truth = prepared.log.truth

@@ -86,6 +86,24 @@ class AlarmInterval:
         return jsonable(out)
 
 
+@dataclass(frozen=True)
+class AlarmPolicy:
+    """Floors a profile puts under every statistic's alarm options (the profile's [alarms] table):
+    an alarm needs at least ``n_persist`` consecutive exceeding samples and lasts at least
+    ``min_duration_s`` seconds, whatever a detector asks for (so that healthy one- or two-sample
+    transients cannot raise an alarm)."""
+
+    n_persist: int = 1
+    min_duration_s: float = 0.0
+
+    def apply(self, options: dict) -> dict:
+        """Alarm options with the floors applied (n_persist and min_duration_s raised to them)."""
+        out = dict(options)
+        out["n_persist"] = max(int(out.get("n_persist", 1)), self.n_persist)
+        out["min_duration_s"] = max(float(out.get("min_duration_s", 0.0)), self.min_duration_s)
+        return out
+
+
 @dataclass
 class Band:
     """Threshold series of one statistic on the grid: upper and/or lower, (N,) float64 each."""
@@ -117,6 +135,7 @@ class DetectorResult:
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
+    alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
 
     def add_statistic(
         self,
@@ -143,6 +162,8 @@ class DetectorResult:
         self.thresholds[name] = band
         if check is not None:
             self.checks[name] = check
+        if self.alarm_policy is not None:
+            alarm_options = self.alarm_policy.apply(alarm_options)
         alarms = alarm_intervals(
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )

@@ -11,6 +11,7 @@ from typing import Any
 
 from logscan.profiles.problems import profile_error, suggest
 from logscan.profiles.toml_writer import dumps_toml
+from logscan.results import AlarmPolicy
 
 TOP_KEYS = (
     "name",
@@ -154,6 +155,7 @@ class Profile:
     redundant: dict[str, RedundantSpec] = field(default_factory=dict)
     onboard: OnboardSpec | None = None
     detectors: dict[str, DetectorSpec] = field(default_factory=dict)
+    alarm_policy: AlarmPolicy | None = None  # the [alarms] table: floors under every detector's alarms
     name: str = ""
     description: str = ""
     source: str = field(default="<embedded>", compare=False)
