@@ -10,7 +10,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from logscan import __version__
-from logscan.results import DetectorResult, FaultEvent
+from logscan.errors import ExitCode
+from logscan.results import DetectorResult, FaultEvent, Incident
+
+
+@dataclass
+class DetectorFailure:
+    """A detector that raised while running: its name, one line, and the exit code it maps to."""
+
+    detector: str
+    message: str
+    exit_code: int = int(ExitCode.INTERNAL)
 
 
 @dataclass
@@ -19,6 +29,9 @@ class Analysis:
 
     prepared: Any  # logscan.pipeline.Prepared
     results: list[DetectorResult] = field(default_factory=list)
+    incidents: list[Incident] = field(default_factory=list)  # alarms grouped, in time order
+    unchecked: list[str] = field(default_factory=list)  # what could not be checked (logscan.coverage)
+    failures: list[DetectorFailure] = field(default_factory=list)  # detectors that raised
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
     scores: dict = field(default_factory=dict)  # detector -> logscan.scoring.Score (with truth)
     warnings: list[str] = field(default_factory=list)
@@ -70,10 +83,26 @@ class Analysis:
         return float(self.run.t[-1] - self.run.t[0])
 
     def verdict(self) -> str:
-        n = len(self.alarms)
+        """'no alarms' only when everything was checked and every detector ran."""
+        n, k = len(self.alarms), len(self.incidents)
         if n:
-            return f"{n} alarm{'s' if n != 1 else ''}"
-        return "partial input" if self.partial else "no alarms"
+            parts = [f"{n} alarm{'s' if n != 1 else ''} in {k} incident{'s' if k != 1 else ''}"]
+        else:
+            parts = ["no alarms" if not (self.unchecked or self.failures) else "no alarms in what was checked"]
+        if self.unchecked:
+            parts.append("not fully checked")
+        if self.failures:
+            parts.append(", ".join(f.message.split(":")[0] for f in self.failures))
+        return "; ".join(parts)
+
+    def exit_code(self, allow_partial: bool = False) -> ExitCode:
+        """3 (or the error's code) when a detector failed, 2 when part of the log could not be
+        checked (unless ``allow_partial``), 1 with alarms, 0 otherwise."""
+        if self.failures:
+            return ExitCode(max(f.exit_code for f in self.failures))
+        if self.unchecked and not allow_partial:
+            return ExitCode.BAD_INPUT
+        return ExitCode.ALARMS if self.alarms else ExitCode.OK
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of this log (the `--json` artifact's per-log entry)."""
@@ -81,6 +110,10 @@ class Analysis:
             "file": self.path,
             "verdict": self.verdict(),
             "n_alarms": len(self.alarms),
+            "n_incidents": len(self.incidents),
+            "incidents": [incident.to_dict() for incident in self.incidents],
+            "unchecked": list(self.unchecked),
+            "failed_detectors": [{"detector": f.detector, "error": f.message} for f in self.failures],
             "logscan_version": __version__,
             "profile_source": self.profile_source,
             "model": self.model.name,
@@ -110,4 +143,6 @@ class Analysis:
             matches=report_matches(self.results, self.events, grace_s) if self.events else None,
             verdict=self.verdict(),
             warnings=self.warnings,
+            incidents=self.incidents,
+            unchecked=self.unchecked + [f.message for f in self.failures],
         )

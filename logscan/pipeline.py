@@ -154,38 +154,73 @@ def prepare(
 
 
 def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, progress: Progress | None = None):
-    """Run the detectors on a prepared log; score their alarms when the log carries ground truth."""
+    """Run the detectors on a prepared log, merge their alarm fragments into incidents, say what
+    could not be checked, and score the alarms when the log carries ground truth. A detector that
+    raises is named in ``analysis.failures``; the others' results are kept."""
     from logscan.analysis import Analysis
-    from logscan.results import events_from_truth
-    from logscan.scoring import score_by_detector
+    from logscan.coverage import unchecked_reasons
+    from logscan.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
 
     step = progress or (lambda message: None)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
+    policy = prepared.profile.alarm_policy
     for detector in detectors:
         step(f"detector {detector.name}")
-        analysis.results.append(
-            detector.run(
+        try:
+            result = detector.run(
                 prepared.run,
                 prepared.trace,
                 model=prepared.model,
                 log_name=prepared.path,
                 traces=prepared.traces,
-                alarm_policy=prepared.profile.alarm_policy,
+                alarm_policy=policy,
             )
-        )
-    truth = prepared.log.truth
-    if truth is not None:
-        run = prepared.run
-        analysis.events = events_from_truth(truth.get("events", []), path=prepared.path)
-        analysis.scores = score_by_detector(
-            analysis.events,
-            analysis.alarms,
-            duration_s=float(run.t[-1] - run.t[0]),
-            grace_s=grace_s,
-            detectors=[d.name for d in detectors],
-            log=prepared.path,
-        )
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
+            analysis.failures.append(detector_failure(detector.name, exc))
+            continue
+        analysis.results.append(result)
+    gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
+    merge_fragments(analysis.results, gap_s)
+    groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
+    analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
+    analysis.unchecked = unchecked_reasons(prepared, analysis.results)
+    _score(analysis, [d.name for d in detectors], grace_s)
     return analysis
+
+
+def detector_failure(name: str, exc: BaseException):
+    """The line and exit code of a detector that raised: its own error, or a bug (exit 3)."""
+    from logscan.analysis import DetectorFailure
+    from logscan.errors import ExitCode
+
+    if isinstance(exc, LogscanError):
+        return DetectorFailure(name, f"detector {name!r} failed: {exc.one_line()}", int(exc.exit_code))
+    return DetectorFailure(
+        name,
+        f"detector {name!r} failed: {type(exc).__name__}: {exc} (a bug in that detector; its results are "
+        "missing, the other detectors ran)",
+        int(ExitCode.INTERNAL),
+    )
+
+
+def _score(analysis, detector_names: list[str], grace_s: float) -> None:
+    """Scores against the log's ground truth, when it has some."""
+    from logscan.results import events_from_truth
+    from logscan.scoring import score_by_detector
+
+    prepared = analysis.prepared
+    truth = prepared.log.truth
+    if truth is None:
+        return
+    analysis.events = events_from_truth(truth.get("events", []), path=prepared.path)
+    analysis.scores = score_by_detector(
+        analysis.events,
+        analysis.alarms,
+        duration_s=analysis.duration_s,
+        grace_s=grace_s,
+        detectors=detector_names,
+        log=prepared.path,
+    )
 
 
 def analyze_log(

@@ -95,6 +95,7 @@ class AlarmPolicy:
 
     n_persist: int = 1
     min_duration_s: float = 0.0
+    merge_gap_s: float = 1.0  # alarms of one statistic closer than this merge (logscan.incidents)
 
     def apply(self, options: dict) -> dict:
         """Alarm options with the floors applied (n_persist and min_duration_s raised to them)."""
@@ -195,6 +196,30 @@ class DetectorResult:
             }
             out["extras"] = {name: jsonable(v) for name, v in self.extras.items()}
         return out
+
+
+@dataclass
+class Incident:
+    """Alarms of different checks that overlap in time, headed by their most likely source
+    (`logscan.incidents`): one line for a user, the alarms behind it for the details."""
+
+    start: float
+    end: float
+    source: str  # a measurement group, or the signal of the alarm that heads the incident
+    headline: str
+    alarms: list[AlarmInterval] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return jsonable(
+            {
+                "start": self.start,
+                "end": self.end,
+                "source": self.source,
+                "headline": self.headline,
+                "checks": sorted({f"{a.detector}:{a.signal}" for a in self.alarms}),
+                "n_alarms": len(self.alarms),
+            }
+        )
 
 
 # --- ground truth ---------------------------------------------------------------------------------

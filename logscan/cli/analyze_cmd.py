@@ -54,6 +54,13 @@ from logscan.errors import ExitCode
     help="Run only this detector (repeatable). Default: those the profile enables.",
 )
 @click.option("--exit-zero", is_flag=True, default=False, help="Exit 0 even when there are alarms.")
+@click.option(
+    "--allow-partial",
+    is_flag=True,
+    default=False,
+    help="A log that could not be fully checked (read in part, a sensor without valid samples, a "
+    "diverged filter) exits 0 or 1 by its alarms instead of 2; the verdict still says what was not checked.",
+)
 @header_stamp_option
 @jobs_option
 @quiet_option
@@ -66,15 +73,19 @@ def analyze(
     plotlyjs_dir: str | None,
     detector_names: tuple[str, ...],
     exit_zero: bool,
+    allow_partial: bool,
     use_header_stamp: bool,
     jobs: int,
     quiet: bool,
 ) -> None:
-    """Run the model-based detectors on each LOG and report the alarms.
+    """Run the model-based detectors on each LOG and report the incidents and alarms.
 
     LOG is an MCAP, ULog or CSV file, a directory of per-topic CSVs, or a directory of logs. The
     profile comes from --profile or from the log itself (logs written by `logscan simulate` embed
-    theirs). Exit code: 0 no alarm, 1 alarms (0 with --exit-zero), 2 bad input, 3 internal error.
+    theirs). Exit code: 0 no alarm and everything checked; 1 alarms (0 with --exit-zero); 2 bad
+    input, or a log that could not be fully checked (read in part, a sensor without valid samples,
+    a diverged filter; 0 or 1 with --allow-partial); 3 a detector or logscan failed. The report is
+    written in every case and says what could not be checked.
     """
     from logscan.fleet import LogFailure, expand_logs, output_paths, run_many
 
@@ -87,23 +98,26 @@ def analyze(
     logs = expand_logs(log_paths)
     reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
     progress = show_progress(quiet)
-    task = AnalyzeTask(profile_path, names, use_header_stamp, plotlyjs_dir, steps=progress and len(logs) == 1)
+    task = AnalyzeTask(
+        profile_path, names, use_header_stamp, plotlyjs_dir, allow_partial, steps=progress and len(logs) == 1
+    )
     outcomes = run_many(
         list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing", isolate=len(logs) > 1
     )
-    summaries, failures = [], []
+    summaries, failures, codes = [], [], []
     for outcome in outcomes:
         if isinstance(outcome, LogFailure):
             click.echo(f"logscan: error: {outcome.message}", err=True)
             failures.append({"file": outcome.path, "error": outcome.message, "exit_code": outcome.exit_code})
+            codes.append(ExitCode(outcome.exit_code))
             continue
         summaries.append(outcome.summary)
+        codes.append(ExitCode(outcome.summary["exit_code"]))
         # with --json - the JSON owns stdout; the human summary goes to stderr
         click.echo(outcome.text, err=json_path == "-")
 
-    code = (
-        ExitCode.BAD_INPUT if failures else (ExitCode.ALARMS if any(s["n_alarms"] for s in summaries) else ExitCode.OK)
-    )
+    # the worst log decides: a failure (3) over bad or unchecked input (2) over alarms (1)
+    code = max(codes, default=ExitCode.OK)
     if exit_zero and code == ExitCode.ALARMS:
         code = ExitCode.OK
     if json_path:
@@ -138,6 +152,7 @@ class AnalyzeTask:
     detector_names: tuple[str, ...] | None
     use_header_stamp: bool
     plotlyjs_dir: str | None
+    allow_partial: bool = False  # a log not fully checked exits 0/1 instead of 2
     steps: bool = False  # print each step on stderr (one log on a terminal)
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
@@ -161,5 +176,6 @@ class AnalyzeTask:
             step("writing report")
             render_report(analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed")
         summary = analysis.summary()
+        summary["exit_code"] = int(analysis.exit_code(self.allow_partial))
         summary["report"] = report_path
         return LogOutcome(summary, render_summary(analysis, report_path))

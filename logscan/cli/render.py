@@ -30,20 +30,28 @@ _ARRAY_RE = re.compile(r"^(?P<base>.*)\[(?P<index>\d+)\]$")
 
 
 def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str:
-    """One screen per log: verdict, the first alarms, scores against ground truth."""
+    """One screen per log: verdict, what could not be checked, the incidents in time order with the
+    alarms behind each, scores against ground truth."""
     lines = [
         f"{analysis.path}: {analysis.verdict()}  "
         f"({analysis.log.duration_s:.1f} s, model {analysis.model.name}, "
         f"detectors {', '.join(r.detector for r in analysis.results)})"
     ]
-    alarms = sorted(analysis.alarms, key=lambda a: a.start)
-    if alarms:
-        lines.append(f"  {'detector':<12} {'signal':<16} {'start s':>9} {'end s':>9} {'peak/thr':>9}")
-        for alarm in alarms[:max_rows]:
+    lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
+    lines += [f"  error: {failure.message}" for failure in analysis.failures]
+    shown = 0
+    for k, incident in enumerate(analysis.incidents):
+        lines.append(f"  incident {k + 1}: {incident.headline}")
+        for alarm in sorted(incident.alarms, key=lambda a: (a.start, a.signal)):
+            if shown == max_rows:
+                break
             ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
-            lines.append(f"  {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} {ratio:>9}")
-        if len(alarms) > max_rows:
-            lines.append(f"  ... {len(alarms) - max_rows} more (see the report / --json)")
+            lines.append(
+                f"    {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} {ratio:>9}"
+            )
+            shown += 1
+    if len(analysis.alarms) > shown:
+        lines.append(f"  ... {len(analysis.alarms) - shown} more alarm(s) (see the report / --json)")
     for name, score in analysis.scores.items():
         latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
         lines.append(

@@ -26,7 +26,7 @@ from logscan.artifacts import write_atomic
 from logscan.errors import InputError
 from logscan.report.figures import Figure, detector_figures, merge_spans
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
-from logscan.results import AlarmInterval, DetectorResult, FaultEvent
+from logscan.results import AlarmInterval, DetectorResult, FaultEvent, Incident
 
 PLOTLY_JS_NAME = "plotly.min.js"
 MAX_TABLE_ROWS = 200  # alarm table rows shown; the JSON summary has them all
@@ -48,8 +48,10 @@ class ReportInput:
                       result's alarms in order): ``{"event": index into truth_events or None,
                       "latency_s": float or None}``. None: computed with
                       :func:`report_matches` when the log has truth.
-    verdict:          "no alarms", "N alarms" or "partial input".
+    verdict:          the analysis' verdict ("no alarms", "N alarms in K incidents; not fully checked"...).
     warnings:         run-level warnings shown under the verdict.
+    incidents:        alarms grouped in time (logscan.incidents), listed before the alarms.
+    unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
     """
 
     log_facts: dict
@@ -63,6 +65,8 @@ class ReportInput:
     matches: list[dict] | None = None
     verdict: str = "no alarms"
     warnings: list[str] = field(default_factory=list)
+    incidents: list[Incident] = field(default_factory=list)
+    unchecked: list[str] = field(default_factory=list)
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -123,6 +127,7 @@ def _number(value: Any, digits: int = 4) -> str:
 
 def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> list[dict]:
     alarms = flat_alarms(report.results)
+    incident_of = {id(alarm): i for i, incident in enumerate(report.incidents) for alarm in incident.alarms}
     matches = report.matches
     if has_truth and matches is None and alarms:
         matches = report_matches(report.results, report.truth_events)
@@ -149,8 +154,20 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
             if hit is not None and 0 <= int(hit) < len(events):
                 row["event"] = events[int(hit)]["label"]
                 row["latency"] = _number(match.get("latency_s"), 3)
+        row["incident"] = incident_of.get(id(alarm), "")
         rows.append(row)
-    return rows
+    if not incident_of:
+        return rows
+    # incidents first, in time order, then the alarms behind each (in time order)
+    return sorted(rows, key=lambda r: (r["incident"] == "", r["incident"], float(r["start"])))
+
+
+def _incident_rows(incidents: Sequence[Incident]) -> list[dict]:
+    return [
+        {"index": i, "headline": inc.headline, "start": f"{inc.start:.3f}", "end": f"{inc.end:.3f}",
+         "n_alarms": len(inc.alarms), "checks": ", ".join(sorted({a.signal for a in inc.alarms}))}
+        for i, inc in enumerate(incidents)
+    ]  # fmt: skip
 
 
 # --- facts --------------------------------------------------------------------------------------
@@ -208,10 +225,10 @@ def _model_view(model: Mapping) -> dict:
     }
 
 
-def _verdict_class(verdict: str, n_alarms: int) -> str:
-    if "partial" in verdict:
-        return "partial"
-    return "alarm" if n_alarms else "ok"
+def _verdict_class(verdict: str, n_alarms: int, unchecked: Sequence[str] = ()) -> str:
+    if n_alarms:
+        return "alarm"
+    return "partial" if unchecked or "partial" in verdict else "ok"
 
 
 # --- plotly.js and the template -----------------------------------------------------------------
@@ -311,9 +328,11 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         model=_model_view(report.model),
         version=report.logscan_version,
         verdict=report.verdict,
-        verdict_class=_verdict_class(report.verdict, len(alarms)),
+        verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),
         n_alarms=len(alarms),
         warnings=[str(w) for w in report.warnings],
+        unchecked=[str(u) for u in report.unchecked],
+        incidents=_incident_rows(report.incidents),
         rows=rows,
         rows_hidden=max(len(alarms) - len(rows), 0),
         has_truth=has_truth,

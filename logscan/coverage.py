@@ -1,0 +1,61 @@
+"""What could not be checked in one analysed log: the reasons a "no alarms" verdict would be a lie.
+
+A verdict is a promise: "no alarms" only when the whole log was read and every part the profile
+names was checked. Each rule below yields one line saying what was not checked:
+
+- the log was read only in part (truncated, failed CRC, broken framing: the reader says how much);
+- a measurement group the filter used fewer than ``MIN_UPDATE_FRACTION`` of the updates its rate
+  implies over the log (no valid sample at all, non-finite values, or silent after a while);
+- the filter was diverged for more than ``MAX_DIVERGED_FRACTION`` of the grid;
+- a detector statistic that is never finite over the log (the detector checked nothing).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+MIN_UPDATE_FRACTION = 0.5  # of the updates a group's nominal rate implies over the log
+MAX_DIVERGED_FRACTION = 0.5  # of the grid steps
+
+
+def unchecked_reasons(prepared, results: Sequence) -> list[str]:
+    """One line per part of the log that could not be checked (empty: everything was checked)."""
+    reasons = []
+    source = prepared.log.source
+    if source.partial:
+        reasons.append(f"the log was read only in part: {source.partial_reason}")
+    trace = prepared.trace
+    if trace is not None:
+        reasons += _starved_groups(prepared.run, trace)
+        reasons += _divergence(trace)
+    for result in results:
+        for name, series in result.series.items():
+            if series.size and not np.isfinite(series).any():
+                reasons.append(f"{result.detector}: {name} was never computed (no finite value over the log)")
+    return reasons
+
+
+def _starved_groups(run, trace) -> list[str]:
+    duration = float(run.t[-1] - run.t[0]) + float(run.dt)
+    reasons = []
+    for g, name in enumerate(trace.group_names):
+        group = run.groups.get(name)
+        rate = group.rate_hz if group is not None and group.rate_hz else 1.0 / float(run.dt)
+        expected = min(duration * rate, float(run.n_steps))
+        used = int(trace.updated[:, g].sum())
+        if used < MIN_UPDATE_FRACTION * expected:
+            reasons.append(
+                f"measurement group {name!r}: the filter used {used} of the ~{expected:.0f} updates its "
+                f"{rate:g} Hz rate implies (no valid samples, non-finite values or a silent sensor)"
+            )
+    return reasons
+
+
+def _divergence(trace) -> list[str]:
+    steps = sum(episode.n_steps for episode in trace.divergence_episodes)
+    fraction = steps / max(trace.n_steps, 1)
+    if fraction > MAX_DIVERGED_FRACTION:
+        return [f"the filter was diverged for {100 * fraction:.0f} % of the log"]
+    return []

@@ -1,0 +1,117 @@
+"""Incidents: alarm fragments of one check merged, and alarms of different checks that overlap in time
+grouped into one incident headed by its most likely source.
+
+One injected fault trips several checks (the faulty sensor's group test, the overall test, later the
+sensors that disagree with the drifting estimate), and a group test near its threshold flickers on
+and off. A user needs "accelerometer inconsistent 30.00-48.80 s (nis.accel, peak 11x)", then the
+alarms behind it. The rules:
+
+1. Alarms of one statistic closer than ``gap_s`` (default 1 s) merge into one alarm (its peak is the
+   largest peak of the parts; `logscan.alarms.merge_close`).
+2. Alarms of any checks whose spans overlap or lie within ``gap_s`` of each other form one incident.
+3. The incident's source is the measurement group the filter rejected the most samples of during
+   the incident (physically impossible values), if any; else the group whose alarm started first
+   (ties: the larger peak/threshold), because the sensors that disagree with an estimate pulled off
+   by the faulty one alarm later; an alarm that names no group (an overall or state check) heads
+   an incident only when no group alarm is in it. The headline quotes the source group's alarm with
+   the largest peak/threshold.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from logscan.alarms import merge_close
+from logscan.results import AlarmInterval, DetectorResult, Incident
+
+DEFAULT_GAP_S = 1.0
+
+# Plain words for common measurement-group names (others are shown as named by the model).
+GROUP_WORDS = {
+    "accel": "accelerometer",
+    "gyro": "gyroscope",
+    "baro": "barometer",
+    "mag": "magnetometer",
+    "gps": "GPS",
+    "gps_speed": "GPS speed",
+    "position": "position sensor",
+    "attitude": "attitude sensor",
+    "encoder": "wheel encoders",
+    "yaw_rate": "yaw-rate sensor",
+    "steer_angle": "steering-angle sensor",
+    "current": "motor current sensor",
+}
+
+
+def merge_fragments(results: Sequence[DetectorResult], gap_s: float = DEFAULT_GAP_S) -> None:
+    """Merge, in place, each result's alarms of one statistic that are at most ``gap_s`` apart."""
+    for result in results:
+        result.alarms = merge_close(result.alarms, gap_s, by_signal=True)
+
+
+def group_of(signal: str, groups: Sequence[str]) -> str | None:
+    """The measurement group a statistic is about: a dot-separated part of its name that is a group
+    of the model (``nis.accel`` -> ``accel``, ``rejected.gyro`` -> ``gyro``), else None."""
+    parts = signal.split(".")
+    return next((part for part in parts if part in groups), None)
+
+
+def _ratio(alarm: AlarmInterval) -> float:
+    if alarm.bound == "nonfinite":
+        return math.inf
+    return alarm.peak_ratio if alarm.peak_ratio is not None else -math.inf
+
+
+def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[str, int]):
+    """(group or None, the alarm the headline quotes) of one incident (rule 3)."""
+    named = [(a, group_of(a.signal, groups)) for a in alarms]
+    if rejected:
+        group = max(rejected, key=lambda g: (rejected[g], -groups.index(g)))
+    else:
+        grouped = [(a, g) for a, g in named if g is not None]
+        first = min(grouped or named, key=lambda item: (item[0].start, -_ratio(item[0])))
+        group = first[1]
+    quoted = [a for a, g in named if g == group] or alarms
+    return group, max(quoted, key=_ratio)
+
+
+def headline(source: AlarmInterval, group: str | None, start: float, end: float, n_rejected: int = 0) -> str:
+    """'accelerometer inconsistent 30.00-48.80 s (nis.accel, peak 11.3x)'."""
+    what = GROUP_WORDS.get(group, group.replace("_", " ")) if group else f"{source.detector} {source.signal}"
+    ratio = source.peak_ratio
+    peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
+    rejected = f"; {n_rejected} impossible sample{'s' if n_rejected != 1 else ''} rejected" if n_rejected else ""
+    return f"{what} inconsistent {start:.2f}-{end:.2f} s ({source.signal}, peak {peak}{rejected})"
+
+
+def _rejected_counts(trace, start: float, end: float) -> dict[str, int]:
+    """Samples the filter rejected per group within [start, end] (groups with none left out)."""
+    if trace is None:
+        return {}
+    inside = (trace.t >= start - 1e-9) & (trace.t <= end + 1e-9)
+    counts = trace.rejected[inside].sum(axis=0)
+    return {name: int(n) for name, n in zip(trace.group_names, counts) if n > 0}
+
+
+def find_incidents(
+    results: Sequence[DetectorResult], trace, groups: Sequence[str], gap_s: float = DEFAULT_GAP_S
+) -> list[Incident]:
+    """Incidents in time order from every result's alarms (merge fragments first). ``trace``: the
+    shared EKF trace (its rejected samples point at the source), or None."""
+    alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
+    starts = np.array([a.start for a in alarms])
+    ends = np.maximum.accumulate(np.array([a.end for a in alarms])) if alarms else np.zeros(0)
+    # a new incident starts where an alarm begins more than gap_s after every earlier one ended
+    breaks = np.flatnonzero(starts[1:] - ends[:-1] > gap_s + 1e-9) + 1 if alarms else np.zeros(0, int)
+    incidents = []
+    for members in np.split(np.array(alarms, dtype=object), breaks) if alarms else []:
+        members = list(members)
+        start, stop = members[0].start, max(a.end for a in members)
+        rejected = _rejected_counts(trace, start, stop)
+        group, quoted = _source(members, list(groups), rejected)
+        text = headline(quoted, group, start, stop, rejected.get(group, 0))
+        incidents.append(Incident(start=start, end=stop, source=group or quoted.signal, headline=text, alarms=members))
+    return incidents
