@@ -13,7 +13,8 @@ analysis on every log that has ground truth and pools the scores, at three level
 
 Alarms of one group (a detector, or the several signals of one check) that overlap in time are
 merged into one span before scoring, so a fault that trips e_x and a rejected-sample check at once
-counts once, and a false alarm is a span when the group is on with no fault. A check is scored only
+counts once, and a false alarm is a span when the group is on with no fault (nor a fault just
+ended, nor a healthy transient listed in the truth: see `logscan.scoring`). A check is scored only
 on the logs where it ran (its statistic exists there), so e.g. ``nis:position`` is not charged with
 misses on steer-by-wire logs. Logs without ground truth are skipped and listed; a log that cannot be
 analysed is recorded as one line and counted, never raised.
@@ -24,8 +25,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from logscan.results import AlarmInterval
-from logscan.scoring import DEFAULT_GRACE_S, Score, aggregate, score_log
+from logscan.results import AlarmInterval, events_from_truth
+from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregate, score_log
 
 CHECK_SEPARATOR = ":"
 
@@ -70,11 +71,14 @@ def score_groups(
     *,
     duration_s: float,
     grace_s: float = DEFAULT_GRACE_S,
+    recovery_s: float = DEFAULT_RECOVERY_S,
+    transients: Sequence = (),
     log: str = "",
 ) -> dict[str, Score]:
     """One Score per group of alarms (merged to disjoint spans first) on one log."""
+    options = {"duration_s": duration_s, "grace_s": grace_s, "recovery_s": recovery_s, "transients": transients}
     return {
-        key: score_log(events, merge_intervals(alarms), duration_s=duration_s, grace_s=grace_s, detector=key, log=log)
+        key: score_log(events, merge_intervals(alarms), detector=key, log=log, **options)
         for key, alarms in groups.items()
     }
 
@@ -89,6 +93,7 @@ class LogEvaluation:
     events: list  # logscan.scoring.FaultEvent
     scores: dict[str, Score]
     aggressive: bool = False
+    transients: list = field(default_factory=list)  # healthy transients of the truth (FaultEvent)
 
     @property
     def healthy(self) -> bool:
@@ -100,6 +105,7 @@ def kind_summary(score: Score) -> dict:
     return {
         "events": score.n_events,
         "detected": score.tp,
+        "at_onset": score.at_onset,
         "detection_rate": score.recall,
         "mean_latency_s": score.mean_latency_s,
         "max_latency_s": score.max_latency_s,
@@ -118,6 +124,7 @@ class Evaluation:
     skipped: list[str] = field(default_factory=list)  # logs without ground truth
     failures: list = field(default_factory=list)  # logscan.fleet.LogFailure
     grace_s: float = DEFAULT_GRACE_S
+    recovery_s: float = DEFAULT_RECOVERY_S
 
     def keys(self) -> list[str]:
         """Score keys in a stable order: detectors by name, each followed by its checks in the
@@ -139,8 +146,9 @@ class Evaluation:
         return aggregate([log.scores[key] for log in chosen if key in log.scores], detector=key)
 
     def by_kind(self, key: str, logs: Iterable[LogEvaluation] | None = None) -> dict[str, Score]:
-        """Per ``<model>/<kind>``: a Score of one key whose tp/fn count that kind's events
-        (detection rate = recall) with their latencies; its fp is not kind-specific and stays 0."""
+        """Per ``<model>/<kind>``: a Score of one key whose tp/fn/at_onset count that kind's events
+        (detection rate = recall) with their latencies; its alarm counts are not kind-specific and
+        stay 0."""
         stats: dict[str, Score] = {}
         for log in self.logs if logs is None else logs:
             score = log.scores.get(key)
@@ -150,6 +158,7 @@ class Evaluation:
                 label = kind_label(log.model, match.event.kind)
                 entry = stats.setdefault(label, Score(detector=key, log=label, n_logs=0))
                 entry.n_logs += 1
+                entry.at_onset += match.active_at_onset
                 if match.detected:
                     entry.tp += 1
                     entry.latencies_s.append(match.latency_s)
@@ -164,6 +173,7 @@ class Evaluation:
         keys = self.keys()
         return {
             "grace_s": self.grace_s,
+            "recovery_s": self.recovery_s,
             "n_logs": len(self.logs),
             "n_healthy_logs": sum(log.healthy for log in self.logs),
             "scores": {key: _score_summary(self.aggregate(key)) for key in keys},
@@ -174,6 +184,7 @@ class Evaluation:
                     "model": log.model,
                     "duration_s": log.duration_s,
                     "events": [e.to_dict() for e in log.events],
+                    "transients": [e.to_dict() for e in log.transients],
                     "scores": {key: s.to_dict() for key, s in log.scores.items()},
                 }
                 for log in self.logs
@@ -190,13 +201,23 @@ def _score_summary(score: Score) -> dict:
     return out
 
 
-def evaluate_analysis(analysis, *, grace_s: float = DEFAULT_GRACE_S) -> LogEvaluation:
-    """Score one analysed log (`logscan.analysis.Analysis` with ground truth) per detector and check."""
+def evaluate_analysis(
+    analysis, *, grace_s: float = DEFAULT_GRACE_S, recovery_s: float = DEFAULT_RECOVERY_S
+) -> LogEvaluation:
+    """Score one analysed log (`logscan.analysis.Analysis` with ground truth) per detector and
+    check, with the healthy transients its truth lists scored apart."""
     duration = analysis.duration_s
-    scores = score_groups(
-        analysis.events, alarm_groups(analysis.results), duration_s=duration, grace_s=grace_s, log=analysis.path
-    )
     truth = analysis.log.truth or {}
+    transients = events_from_truth(truth.get("transients") or [], path=analysis.path)
+    scores = score_groups(
+        analysis.events,
+        alarm_groups(analysis.results),
+        duration_s=duration,
+        grace_s=grace_s,
+        recovery_s=recovery_s,
+        transients=transients,
+        log=analysis.path,
+    )
     return LogEvaluation(
         analysis.path,
         analysis.model.name,
@@ -204,6 +225,7 @@ def evaluate_analysis(analysis, *, grace_s: float = DEFAULT_GRACE_S) -> LogEvalu
         list(analysis.events),
         scores,
         aggressive=bool(truth.get("aggressive", False)),
+        transients=transients,
     )
 
 
@@ -223,6 +245,7 @@ class EvaluationTask:
     detector_names: tuple[str, ...] | None = None
     grace_s: float = DEFAULT_GRACE_S
     use_header_stamp: bool = False
+    recovery_s: float = DEFAULT_RECOVERY_S
 
     def __call__(self, path: str) -> LogEvaluation | None:
         from logscan.pipeline import analyze_log
@@ -236,7 +259,7 @@ class EvaluationTask:
             detector_names=self.detector_names,
             grace_s=self.grace_s,
         )
-        return evaluate_analysis(analysis, grace_s=self.grace_s)
+        return evaluate_analysis(analysis, grace_s=self.grace_s, recovery_s=self.recovery_s)
 
 
 def evaluate_logs(
@@ -245,6 +268,7 @@ def evaluate_logs(
     profile_path: str | None = None,
     detector_names: Sequence[str] | None = None,
     grace_s: float = DEFAULT_GRACE_S,
+    recovery_s: float = DEFAULT_RECOVERY_S,
     use_header_stamp: bool = False,
     jobs: int = 1,
     progress: bool = False,
@@ -253,8 +277,9 @@ def evaluate_logs(
     record failures as lines."""
     from logscan.fleet import LogFailure, run_many
 
-    task = EvaluationTask(profile_path, tuple(detector_names) if detector_names else None, grace_s, use_header_stamp)
-    evaluation = Evaluation(grace_s=grace_s)
+    names = tuple(detector_names) if detector_names else None
+    task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s)
+    evaluation = Evaluation(grace_s=grace_s, recovery_s=recovery_s)
     for path, outcome in zip(paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating")):
         if isinstance(outcome, LogFailure):
             evaluation.failures.append(outcome)

@@ -1,20 +1,30 @@
-"""Scoring alarm intervals against ground-truth fault events (docs/algorithms.md section 7.1).
+"""Scoring alarm intervals against ground-truth fault events and healthy transients (docs/algorithms.md section 7.1).
 
 Rules (closed intervals throughout, times in seconds on the analysis grid):
 
 - A fault event is [t_start, t_end] from the ground truth (t_end None: the fault lasts to the end
   of the log). Events are considered in order of t_start (ties: ground-truth order).
-- An alarm [start, end] matches the FIRST event whose window [t_start, t_end + grace_s] it
-  overlaps: ``start <= t_end + grace_s and end >= t_start`` (touching counts). It then counts for
-  that event only, even if it also spans later events. An alarm that overlaps no window is a false
-  alarm (FP). Several alarms on one event count once.
-- Latency of a detected event = (start of its earliest matched alarm) - t_start, clipped at 0: an
-  alarm raised before the fault began but still on when it began detects it "at once" (latency
-  0); the unclipped value is kept as ``raw_latency_s`` on the match so such cases stay visible.
-- TP = detected events, FN = missed events, FP = false alarm intervals.
+- Each alarm [start, end] gets exactly one outcome, the first that applies:
+
+  1. detection: it starts within an event's window [t_start, t_end + grace_s] (both ends
+     included); it counts for the first such event only. Several alarms on one event count once;
+     latency = start of the earliest one - t_start (never negative).
+  2. at onset: it started before an event's onset and is still on at it (start < t_start <= end).
+     Not a detection and not a false alarm. Every event with such an alarm is flagged
+     ``active_at_onset`` (whatever that alarm's own outcome), and is detected only by a later
+     alarm that starts within its window.
+  3. recovery: it starts within the recovery window (t_end + grace_s, t_end + grace_s +
+     recovery_s] of a detected event (the filter settling after the fault was removed).
+  4. transient: it overlaps a healthy transient's [t_start, t_end + grace_s] (a glitch listed in
+     the truth's ``transients``, not a fault).
+  5. false alarm (FP): anything else.
+
+- TP = detected events, FN = missed events, FP = false alarms; ``at_onset`` counts events flagged
+  active at onset, ``recovery_alarms`` and ``transient_alarms`` count alarms.
   precision = TP / (TP + FP), recall = TP / (TP + FN), F1 = 2 P R / (P + R).
-  0/0 is undefined and reported as None (JSON null), never as 1.0: precision with no alarms at
-  all, recall on a log without events, F1 when either is None; F1 = 0.0 when P + R = 0.
+  0/0 is undefined and reported as None (JSON null), never as 1.0: precision with neither a
+  detection nor a false alarm, recall on a log without events, F1 when either is None; F1 = 0.0
+  when P + R = 0.
 - False alarms per hour = FP / hours of log (None without a duration). The "healthy" variant
   counts only logs without fault events, the false-alarm rate the evaluation reports.
 - Aggregation over logs sums the counts and durations and pools the latencies (mean and max over
@@ -25,32 +35,55 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from logscan.results import AlarmInterval, FaultEvent
 
 DEFAULT_GRACE_S = 1.0
+DEFAULT_RECOVERY_S = 5.0
+
+DETECTION = "detection"
+AT_ONSET = "at_onset"
+RECOVERY = "recovery"
+TRANSIENT = "transient"
+FALSE_ALARM = "false_alarm"
+
+
+class AlarmOutcome(NamedTuple):
+    """What one alarm was scored as, and the index of the fault event concerned (detection,
+    at onset, recovery) or of the transient it overlapped (transient); None for a false alarm."""
+
+    kind: str
+    index: int | None = None
 
 
 @dataclass
 class EventMatch:
-    """How one event was scored: detected or not, its latency, and which alarms matched it."""
+    """How one event was scored: detected or not, its latency, and the alarms around it."""
 
     event: FaultEvent
-    alarm_indices: list[int] = field(default_factory=list)  # indices into the scored alarm list
-    latency_s: float | None = None  # clipped at 0
-    raw_latency_s: float | None = None  # first matched alarm start - t_start, may be negative
+    alarm_indices: list[int] = field(default_factory=list)  # alarms that started in its window
+    latency_s: float | None = None  # earliest of those starts - t_start, >= 0
+    onset_alarm_indices: list[int] = field(default_factory=list)  # alarms already on at t_start
+    recovery_indices: list[int] = field(default_factory=list)  # alarms in its recovery window
 
     @property
     def detected(self) -> bool:
         return bool(self.alarm_indices)
+
+    @property
+    def active_at_onset(self) -> bool:
+        return bool(self.onset_alarm_indices)
 
     def to_dict(self) -> dict:
         return {
             **self.event.to_dict(),
             "detected": self.detected,
             "latency_s": self.latency_s,
-            "raw_latency_s": self.raw_latency_s,
+            "active_at_onset": self.active_at_onset,
             "alarms": list(self.alarm_indices),
+            "onset_alarms": list(self.onset_alarm_indices),
+            "recovery_alarms": list(self.recovery_indices),
         }
 
 
@@ -61,32 +94,59 @@ def _interval(alarm: AlarmInterval | tuple[float, float]) -> tuple[float, float]
     return float(start), float(end)
 
 
+def classify_alarms(
+    events: Sequence[FaultEvent],
+    alarms: Sequence,
+    *,
+    grace_s: float = DEFAULT_GRACE_S,
+    recovery_s: float = DEFAULT_RECOVERY_S,
+    transients: Sequence[FaultEvent] = (),
+) -> tuple[list[EventMatch], list[AlarmOutcome]]:
+    """Score alarms (AlarmInterval-like objects with start/end, or (start, end) pairs) against
+    events and transients by the rules of this module's docstring.
+
+    Returns one EventMatch per event (in the given order) and one AlarmOutcome per alarm.
+    Cost O(alarms x (events + transients)); all are short lists.
+    """
+    spans = [_interval(a) for a in alarms]
+    order = sorted(range(len(events)), key=lambda i: events[i].t_start)
+    starts = [event.t_start for event in events]
+    ends = [event.end_or_inf + grace_s for event in events]
+    matches = [EventMatch(event) for event in events]
+    outcomes: list[AlarmOutcome | None] = [None] * len(spans)
+    for a, (start, _end) in enumerate(spans):
+        hit = next((i for i in order if starts[i] <= start <= ends[i]), None)
+        if hit is not None:
+            outcomes[a] = AlarmOutcome(DETECTION, hit)
+            match = matches[hit]
+            match.alarm_indices.append(a)
+            if match.latency_s is None or start - starts[hit] < match.latency_s:
+                match.latency_s = start - starts[hit]
+    for i in order:
+        for a, (start, end) in enumerate(spans):
+            if start < starts[i] <= end:
+                matches[i].onset_alarm_indices.append(a)
+                outcomes[a] = outcomes[a] or AlarmOutcome(AT_ONSET, i)
+    for a, (start, end) in enumerate(spans):
+        if outcomes[a] is not None:
+            continue
+        hit = next((i for i in order if matches[i].detected and ends[i] < start <= ends[i] + recovery_s), None)
+        if hit is not None:
+            outcomes[a] = AlarmOutcome(RECOVERY, hit)
+            matches[hit].recovery_indices.append(a)
+            continue
+        near = next((j for j, t in enumerate(transients) if start <= t.end_or_inf + grace_s and end >= t.t_start), None)
+        outcomes[a] = AlarmOutcome(FALSE_ALARM) if near is None else AlarmOutcome(TRANSIENT, near)
+    return matches, outcomes
+
+
 def match_alarms(
     events: Sequence[FaultEvent], alarms: Sequence, grace_s: float = DEFAULT_GRACE_S
 ) -> tuple[list[EventMatch], list[int | None]]:
-    """Match alarms (AlarmInterval-like objects with start/end, or (start, end) pairs) to events.
-
-    Returns one EventMatch per event (in the given order) and, per alarm, the index of the event
-    it detected or None for a false alarm. Cost O(alarms x events); both are short lists.
-    """
-    order = sorted(range(len(events)), key=lambda i: events[i].t_start)
-    matches = [EventMatch(event) for event in events]
-    alarm_event: list[int | None] = []
-    for a, alarm in enumerate(alarms):
-        start, end = _interval(alarm)
-        hit = next(
-            (i for i in order if start <= events[i].end_or_inf + grace_s and end >= events[i].t_start),
-            None,
-        )
-        alarm_event.append(hit)
-        if hit is not None:
-            match = matches[hit]
-            match.alarm_indices.append(a)
-            raw = start - events[hit].t_start
-            if match.raw_latency_s is None or raw < match.raw_latency_s:
-                match.raw_latency_s = raw
-                match.latency_s = max(raw, 0.0)
-    return matches, alarm_event
+    """Detections only: one EventMatch per event and, per alarm, the index of the event it
+    detected or None (at onset, recovery, transient or false: see `classify_alarms`)."""
+    matches, outcomes = classify_alarms(events, alarms, grace_s=grace_s)
+    return matches, [o.index if o.kind == DETECTION else None for o in outcomes]
 
 
 def _ratio(num: float, den: float) -> float | None:
@@ -97,6 +157,8 @@ def _ratio(num: float, den: float) -> float | None:
 class Score:
     """Counts of one detector on one log (or summed over logs), with the derived metrics.
 
+    at_onset: events with an alarm already on at their onset; recovery_alarms / transient_alarms:
+    alarms after a detected fault / on a healthy transient (neither detections nor false alarms).
     duration_s / healthy_duration_s: seconds of log scored (healthy: logs without events);
     healthy_fp: false alarms on those healthy logs. latencies_s: one per detected event.
     """
@@ -106,6 +168,9 @@ class Score:
     tp: int = 0
     fn: int = 0
     fp: int = 0
+    at_onset: int = 0
+    recovery_alarms: int = 0
+    transient_alarms: int = 0
     n_alarms: int = 0
     duration_s: float | None = None
     healthy_fp: int = 0
@@ -162,6 +227,9 @@ class Score:
             "tp": self.tp,
             "fn": self.fn,
             "fp": self.fp,
+            "at_onset": self.at_onset,
+            "recovery_alarms": self.recovery_alarms,
+            "transient_alarms": self.transient_alarms,
             "n_alarms": self.n_alarms,
             "precision": self.precision,
             "recall": self.recall,
@@ -182,12 +250,15 @@ def score_log(
     *,
     duration_s: float | None = None,
     grace_s: float = DEFAULT_GRACE_S,
+    recovery_s: float = DEFAULT_RECOVERY_S,
+    transients: Sequence[FaultEvent] = (),
     detector: str = "",
     log: str = "",
 ) -> Score:
-    """Score one detector's alarms on one log against that log's events."""
-    matches, alarm_event = match_alarms(events, alarms, grace_s)
-    fp = sum(1 for e in alarm_event if e is None)
+    """Score one detector's alarms on one log against that log's events and transients."""
+    matches, outcomes = classify_alarms(events, alarms, grace_s=grace_s, recovery_s=recovery_s, transients=transients)
+    kinds = [o.kind for o in outcomes]
+    fp = kinds.count(FALSE_ALARM)
     healthy = len(events) == 0 and duration_s is not None
     return Score(
         detector=detector,
@@ -195,7 +266,10 @@ def score_log(
         tp=sum(m.detected for m in matches),
         fn=sum(not m.detected for m in matches),
         fp=fp,
-        n_alarms=len(alarm_event),
+        at_onset=sum(m.active_at_onset for m in matches),
+        recovery_alarms=kinds.count(RECOVERY),
+        transient_alarms=kinds.count(TRANSIENT),
+        n_alarms=len(outcomes),
         duration_s=duration_s,
         healthy_fp=fp if healthy else 0,
         healthy_duration_s=float(duration_s) if healthy else 0.0,
@@ -210,6 +284,8 @@ def score_by_detector(
     *,
     duration_s: float | None = None,
     grace_s: float = DEFAULT_GRACE_S,
+    recovery_s: float = DEFAULT_RECOVERY_S,
+    transients: Sequence[FaultEvent] = (),
     detectors: Iterable[str] = (),
     log: str = "",
 ) -> dict[str, Score]:
@@ -218,10 +294,8 @@ def score_by_detector(
     grouped: dict[str, list] = {name: [] for name in detectors}
     for alarm in alarms:
         grouped.setdefault(alarm.detector, []).append(alarm)
-    return {
-        name: score_log(events, items, duration_s=duration_s, grace_s=grace_s, detector=name, log=log)
-        for name, items in grouped.items()
-    }
+    options = {"duration_s": duration_s, "grace_s": grace_s, "recovery_s": recovery_s, "transients": transients}
+    return {name: score_log(events, items, detector=name, log=log, **options) for name, items in grouped.items()}
 
 
 def aggregate(scores: Iterable[Score], *, detector: str | None = None) -> Score:
@@ -237,6 +311,9 @@ def aggregate(scores: Iterable[Score], *, detector: str | None = None) -> Score:
         tp=sum(s.tp for s in scores),
         fn=sum(s.fn for s in scores),
         fp=sum(s.fp for s in scores),
+        at_onset=sum(s.at_onset for s in scores),
+        recovery_alarms=sum(s.recovery_alarms for s in scores),
+        transient_alarms=sum(s.transient_alarms for s in scores),
         n_alarms=sum(s.n_alarms for s in scores),
         duration_s=None if any(d is None for d in durations) else float(sum(durations)),
         healthy_fp=sum(s.healthy_fp for s in scores),

@@ -5,14 +5,17 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from logscan.evaluate import (
     Evaluation,
+    LogEvaluation,
     alarm_groups,
     check_key,
+    evaluate_analysis,
     evaluate_logs,
     merge_intervals,
     score_groups,
@@ -82,6 +85,40 @@ def test_checks_that_ran_without_alarms_are_scored_as_misses():
     assert (e_v.tp, e_v.fn, e_v.fp) == (0, 1, 0)
 
 
+def test_merged_spans_are_scored_with_recovery_window_and_onset_flag():
+    groups = {"d": [(8.0, 9.0), (8.5, 10.2), (10.5, 11.0), (14.0, 14.2), (14.1, 14.3)]}
+    score = score_groups([FaultEvent(10.0, 12.0)], groups, duration_s=60.0, recovery_s=5.0)["d"]
+    # (8, 10.2) is on at the onset, (10.5, 11) detects, (14, 14.3) is one recovery span
+    assert (score.tp, score.fp, score.at_onset, score.recovery_alarms, score.n_alarms) == (1, 0, 1, 1, 3)
+    assert score.latencies_s == [pytest.approx(0.5)]
+
+
+def test_evaluate_analysis_scores_the_truth_transients_apart():
+    result = DetectorResult("nis", series={"nis.accel": None}, alarms=[alarm(30.0, 30.2, "nis.accel", "nis")])
+    truth = {"events": [], "transients": [{"kind": "glitch", "target": "accel.x", "start": 30.0, "end": 30.01}]}
+    analysis = SimpleNamespace(
+        path="glitchy.mcap",
+        duration_s=60.0,
+        events=[],
+        results=[result],
+        log=SimpleNamespace(truth=truth),
+        model=SimpleNamespace(name="quadcopter"),
+    )
+    log = evaluate_analysis(analysis, recovery_s=2.0)
+    assert [t.kind for t in log.transients] == ["glitch"]
+    for key in ("nis", "nis:accel"):
+        assert (log.scores[key].transient_alarms, log.scores[key].fp, log.scores[key].healthy_fp) == (1, 0, 0)
+
+
+def test_by_kind_counts_events_active_at_onset():
+    event = FaultEvent(10.0, 12.0, "bias")
+    scores = score_groups([event], {"d": [(9.0, 10.5)]}, duration_s=60.0)
+    evaluation = Evaluation(logs=[LogEvaluation("a.mcap", "quadcopter", 60.0, [event], scores)])
+    entry = evaluation.by_kind("d")["quadcopter/bias"]
+    assert (entry.tp, entry.n_events, entry.at_onset) == (0, 1, 1)
+    assert evaluation.to_dict()["by_kind"]["d"]["quadcopter/bias"]["at_onset"] == 1
+
+
 def test_nis_detects_the_accelerometer_bias_and_names_the_sensor(evaluation):
     by_kind = evaluation.by_kind("nis:accel")["quadcopter/bias"]
     assert (by_kind.tp, by_kind.n_events) == (1, 1)
@@ -121,15 +158,20 @@ def test_cli_prints_tables_writes_json_and_skips_logs_without_truth(tmp_path, cl
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
     out = tmp_path / "eval.json"
-    result = cli("evaluate", BIAS, no_truth, garbage, "--json", out, "--grace", "0.5")
+    result = cli("evaluate", BIAS, no_truth, garbage, "--json", out, "--grace", "0.5", "--recovery", "3")
     assert result.exit_code == 2, result.stderr  # the corrupt log is bad input
     assert "Traceback" not in result.stderr
     errors = [line for line in result.stderr.splitlines() if line.startswith("logscan: error: ")]
     assert len(errors) == 1 and "garbage.mcap" in errors[0]
     assert "skipped 1 log(s) without ground truth: no_truth.csv" in result.stdout
     assert "nis:accel" in result.stdout and "quadcopter/bias" in result.stdout
+    assert "grace 0.5 s, recovery 3 s" in result.stdout
+    header = next(line for line in result.stdout.splitlines() if line.startswith("detector / check"))
+    assert "at onset" in header and "recovery" in header and "transient" in header
     data = json.loads(out.read_text())
-    assert data["grace_s"] == 0.5 and data["n_logs"] == 1
+    assert data["grace_s"] == 0.5 and data["recovery_s"] == 3.0 and data["n_logs"] == 1
+    assert {"at_onset", "recovery_alarms", "transient_alarms"} <= set(data["scores"]["nis"])
+    assert "active_at_onset" in data["logs"][0]["scores"]["nis"]["events"][0]
     assert data["scores"]["nis"]["tp"] == 1
     assert data["by_kind"]["nis:accel"]["quadcopter/bias"]["detected"] == 1
     assert data["skipped_no_truth"] == [str(no_truth)]

@@ -16,14 +16,14 @@ from logscan.cli.options import (
 )
 from logscan.cli.render import render_evaluation
 from logscan.errors import ExitCode, InputError
-from logscan.scoring import DEFAULT_GRACE_S
+from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 
 
 @click.command(
     epilog="Examples:\n\n"
     "  logscan evaluate sample_logs/\n\n"
     "  logscan evaluate runs/*.mcap --detector nis --json eval.json\n\n"
-    "  logscan evaluate sample_logs/ --grace 0.5"
+    "  logscan evaluate sample_logs/ --grace 0.5 --recovery 10"
 )
 @click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
 @json_option
@@ -33,7 +33,16 @@ from logscan.scoring import DEFAULT_GRACE_S
     type=click.FloatRange(min=0.0),
     default=DEFAULT_GRACE_S,
     show_default=True,
-    help="Seconds after a fault's end during which an alarm still counts as detecting it.",
+    help="Seconds after a fault's end during which an alarm that starts still counts as detecting it.",
+)
+@click.option(
+    "--recovery",
+    "recovery_s",
+    type=click.FloatRange(min=0.0),
+    default=DEFAULT_RECOVERY_S,
+    show_default=True,
+    help="Seconds after the grace period of a detected fault during which an alarm that starts is "
+    "counted as recovery (the filter settling), neither a detection nor a false alarm.",
 )
 @click.option(
     "--detector",
@@ -50,6 +59,7 @@ def evaluate(
     log_paths: tuple[str, ...],
     json_path: str | None,
     grace_s: float,
+    recovery_s: float,
     detector_names: tuple[str, ...],
     profile_path: str | None,
     use_header_stamp: bool,
@@ -61,8 +71,11 @@ def evaluate(
     Runs the analysis on every log that carries ground truth (logs written by `logscan simulate`
     do; others are skipped and listed), matches alarms to fault events, and prints per detector
     and per check (encoded e_x with the rejected-sample checks, e_v, NIS per sensor group and
-    overall): TP/FN/FP, precision, recall, F1, mean/max latency and false alarms per hour on the
-    healthy logs (those without fault events), then the detection rate and latency per fault kind.
+    overall): TP/FN/FP, events with an alarm already on at their onset (not detections), alarms
+    in the recovery window after a detected fault and alarms on the truth's healthy transients
+    (neither counted as false alarms), precision, recall, F1, mean/max latency and false alarms
+    per hour on the healthy logs (those without fault events), then the detection rate and
+    latency per fault kind.
     A log that cannot be analysed is reported as one line. Exit code: 0, or 2 when a log could not
     be analysed or none has ground truth.
     """
@@ -75,6 +88,7 @@ def evaluate(
         profile_path=profile_path,
         detector_names=list(detector_names) or None,
         grace_s=grace_s,
+        recovery_s=recovery_s,
         use_header_stamp=use_header_stamp,
         jobs=jobs,
         progress=show_progress(quiet),
