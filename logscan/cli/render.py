@@ -73,9 +73,11 @@ def _num(value: float | None, fmt: str = "{:.2f}") -> str:
 
 
 def render_scores(evaluation: Evaluation) -> str:
-    """Per detector and per check: counts, precision/recall/F1, latency, false alarms per hour."""
+    """Per detector and per check: counts (the alarms that are neither detections nor false alarms
+    apart), precision/recall/F1, latency, false alarms per hour; a legend of the apart columns."""
     header = (
         f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
+        f"{'at onset':>8} {'recovery':>8} {'transient':>9} "
         f"{'prec':>5} {'recall':>6} {'F1':>5} {'lat mean':>8} {'lat max':>8} {'FA/h healthy':>12}"
     )
     lines = [header, "-" * len(header)]
@@ -84,19 +86,28 @@ def render_scores(evaluation: Evaluation) -> str:
         label = key if CHECK_SEPARATOR not in key else "  " + key
         lines.append(
             f"{label:<26} {s.n_logs:>4} {s.n_events:>6} {s.tp:>4} {s.fn:>4} {s.fp:>4} "
+            f"{s.at_onset:>8} {s.recovery_alarms:>8} {s.transient_alarms:>9} "
             f"{_num(s.precision):>5} {_num(s.recall):>6} {_num(s.f1):>5} "
             f"{_num(s.mean_latency_s, '{:.2f} s'):>8} {_num(s.max_latency_s, '{:.2f} s'):>8} "
             f"{_num(s.false_alarms_per_hour_healthy, '{:.1f}'):>12}"
         )
+    lines += [
+        "at onset: events whose onset found an alarm already on (that alarm is no detection);",
+        f"recovery: alarms starting within {evaluation.recovery_s:g} s after a detected fault's grace period;",
+        "transient: alarms on a healthy transient listed in the truth. FP counts none of them.",
+    ]
     return "\n".join(lines)
 
 
 def render_kinds(evaluation: Evaluation) -> str:
-    """Per fault kind (Table III view): detected/events and latency of each detector and check."""
+    """Per fault kind (Table III view): detected/events, events with an alarm already on at their
+    onset, and latency of each detector and check."""
     kinds = evaluation.kinds()
     if not kinds:
         return "per fault kind: no fault events in the evaluated logs"
-    header = f"{'fault kind':<30} {'detector / check':<26} {'detected':>8} {'lat mean':>8} {'lat max':>8}"
+    header = (
+        f"{'fault kind':<30} {'detector / check':<26} {'detected':>8} {'at onset':>8} {'lat mean':>8} {'lat max':>8}"
+    )
     lines = [header, "-" * len(header)]
     keys = evaluation.keys()
     per_key = {key: evaluation.by_kind(key) for key in keys}
@@ -108,7 +119,7 @@ def render_kinds(evaluation: Evaluation) -> str:
                 continue
             label = key if CHECK_SEPARATOR not in key else "  " + key
             lines.append(
-                f"{kind if first else '':<30} {label:<26} {f'{stats.tp}/{stats.n_events}':>8} "
+                f"{kind if first else '':<30} {label:<26} {f'{stats.tp}/{stats.n_events}':>8} {stats.at_onset:>8} "
                 f"{_num(stats.mean_latency_s, '{:.2f} s'):>8} {_num(stats.max_latency_s, '{:.2f} s'):>8}"
             )
             first = False
@@ -119,10 +130,12 @@ def render_evaluation(evaluation: Evaluation) -> str:
     """The one-screen text report of `logscan evaluate`."""
     n_healthy = sum(log.healthy for log in evaluation.logs)
     n_events = sum(len(log.events) for log in evaluation.logs)
+    n_transients = sum(len(log.transients) for log in evaluation.logs)
     hours = sum(log.duration_s for log in evaluation.logs if log.healthy) / 3600.0
     parts = [
         f"evaluated {len(evaluation.logs)} log(s) with ground truth: {n_events} fault event(s), "
-        f"{n_healthy} healthy log(s) ({hours * 60:.1f} min); grace {evaluation.grace_s:g} s",
+        f"{n_transients} healthy transient(s), {n_healthy} healthy log(s) ({hours * 60:.1f} min); "
+        f"grace {evaluation.grace_s:g} s, recovery {evaluation.recovery_s:g} s",
     ]
     if evaluation.logs:
         parts += ["", render_scores(evaluation), "", render_kinds(evaluation)]
