@@ -46,8 +46,9 @@ def _as_series(name: str, value, n: int) -> np.ndarray | None:
     return arr
 
 
-def _judged_mask(t: np.ndarray, valid, warmup, warmup_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """(judged, in_warmup) boolean masks over the grid."""
+def judged_mask(t: np.ndarray, valid, warmup, warmup_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(judged, in_warmup) boolean masks over the grid: a sample is judged where it is valid and not
+    in warm-up (see rule 1 of the module docstring)."""
     n = t.size
     judged = np.ones(n, dtype=bool)
     if valid is not None:
@@ -102,7 +103,7 @@ def alarm_intervals(
         raise InternalError("alarm_intervals: give an upper or a lower threshold")
     if n_persist < 1:
         raise InternalError(f"alarm_intervals: n_persist must be >= 1, got {n_persist}")
-    judged, in_warmup = _judged_mask(t, valid, warmup, warmup_s)
+    judged, in_warmup = judged_mask(t, valid, warmup, warmup_s)
 
     # Work on the judged samples and the warm-up samples (which break runs but never exceed).
     keep = np.flatnonzero(judged | in_warmup)

@@ -7,7 +7,8 @@ names was checked. Each rule below yields one line saying what was not checked:
 - a measurement group the filter used fewer than ``MIN_UPDATE_FRACTION`` of the updates its rate
   implies over the log (no valid sample at all, non-finite values, or silent after a while);
 - the filter was diverged for more than ``MAX_DIVERGED_FRACTION`` of the grid;
-- a detector statistic that is never finite over the log (the detector checked nothing).
+- a detector statistic that is never finite over the log, or never judged (its warm-up or window is
+  longer than the log): the detector checked nothing.
 """
 
 from __future__ import annotations
@@ -34,6 +35,10 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
         for name, series in result.series.items():
             if series.size and not np.isfinite(series).any():
                 reasons.append(f"{result.detector}: {name} was never computed (no finite value over the log)")
+            elif name in result.never_judged:
+                reasons.append(
+                    f"{result.detector}: {name} was never judged (its warm-up or window covers the whole log)"
+                )
     return reasons
 
 

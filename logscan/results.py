@@ -137,6 +137,7 @@ class DetectorResult:
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
+    never_judged: list[str] = field(default_factory=list)  # statistics no sample of which was judged
 
     def add_statistic(
         self,
@@ -151,7 +152,7 @@ class DetectorResult:
         """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
         ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...).
         ``check``: the check this statistic is scored with, when not its own name."""
-        from logscan.alarms import alarm_intervals
+        from logscan.alarms import alarm_intervals, judged_mask
 
         n = np.asarray(t).size
         statistic = np.asarray(statistic, dtype=np.float64)
@@ -165,6 +166,12 @@ class DetectorResult:
             self.checks[name] = check
         if self.alarm_policy is not None:
             alarm_options = self.alarm_policy.apply(alarm_options)
+        judged, in_warmup = judged_mask(
+            t, alarm_options.get("valid"), alarm_options.get("warmup"), alarm_options.get("warmup_s", 0.0)
+        )
+        if n and not (judged & ~in_warmup).any():
+            # e.g. a window longer than the log: the statistic could never raise an alarm
+            self.never_judged.append(name)
         alarms = alarm_intervals(
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )

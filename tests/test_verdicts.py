@@ -167,3 +167,18 @@ def test_a_failing_detector_is_named_and_the_others_are_kept(cli, tmp_path, monk
     assert [d["detector"] for d in log["detectors"]] == ["nis"] and log["n_alarms"] > 0
     assert log["failed_detectors"][0]["detector"] == "exploding" and log["exit_code"] == 3
     assert report.exists() and "exploding" in report.read_text()
+
+
+def test_a_window_longer_than_the_log_cannot_hide_a_fault(cli, tmp_path):
+    import tomllib
+
+    from logscan.pipeline import load_profile_for
+    from logscan.profiles import dumps_toml
+
+    data = tomllib.loads(load_profile_for(BIAS, None).text)
+    data.setdefault("detectors", {})["nis"] = {"window": 1_000_000}
+    profile = tmp_path / "long_window.toml"
+    profile.write_text(dumps_toml(data))
+    result = cli("analyze", BIAS, "--profile", profile, "-d", "nis", "--no-report")
+    assert result.exit_code == 2
+    assert "nis: nis.accel was never judged (its warm-up or window covers the whole log)" in result.stdout
