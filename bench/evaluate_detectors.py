@@ -18,7 +18,10 @@ rejected-sample checks as the baseline-configured detector reports them, and "an
 
 Every run is 60 s, one fault starting at a uniform time in [20, 40) s (drawn from the run's seed)
 with the family's default target, magnitude and length (`logscan simulate --help`); false alarms
-per hour come from healthy runs (normal and `--aggressive`). Seeds (none used by
+per hour come from healthy runs (normal and `--aggressive`). Scoring is `logscan.scoring`'s
+(docs/algorithms.md section 7): an alarm already on at the fault's onset is no detection (cells
+count such runs apart), alarms in the recovery window after a detected fault are neither
+detections nor false alarms (a row of their own). Seeds (none used by
 sample_logs/make_samples.py or the tests; nothing was tuned on them):
 
   quadcopter fault runs      1000 + 100 * family index + run      (1000 .. 1819)
@@ -51,6 +54,7 @@ import numpy as np
 DURATION_S = 60.0
 START_RANGE_S = (20.0, 40.0)
 GRACE_S = 1.0
+RECOVERY_S = 5.0  # logscan.scoring.DEFAULT_RECOVERY_S
 MARGIN = 1.0
 N_TRAIN = 10
 
@@ -178,11 +182,14 @@ def train_one(job: Job) -> tuple[str, int, float]:
 
 
 def evaluate_one(args: tuple[Job, dict[str, float]]):
-    """Score one run under every method; returns (job, LogEvaluation or error text, seconds)."""
-    from logscan.evaluate import LogEvaluation, score_groups
+    """Score one run under every method; returns (job, LogEvaluation or error text, the merged
+    alarm spans per method (for rescoring the JSON), seconds)."""
+    from logscan.evaluate import LogEvaluation, merge_intervals, score_groups
+    from logscan.results import events_from_truth
 
     job, thresholds = args
     started = time.perf_counter()
+    spans: dict[str, list] = {}
     try:
         with tempfile.TemporaryDirectory() as directory:
             analysis = _analyse(job, directory)
@@ -206,8 +213,16 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             "any": list(encoded.alarms) + list(nis.alarms),
         }
         duration = float(analysis.run.t[-1] - analysis.run.t[0])
+        transients = events_from_truth((analysis.log.truth or {}).get("transients") or [])
+        spans = {key: merge_intervals(alarms) for key, alarms in groups.items()}
         scores = score_groups(
-            analysis.events, groups, duration_s=duration, grace_s=GRACE_S, log=f"{job.model}/{job.family}/{job.seed}"
+            analysis.events,
+            spans,
+            duration_s=duration,
+            grace_s=GRACE_S,
+            recovery_s=RECOVERY_S,
+            transients=transients,
+            log=f"{job.model}/{job.family}/{job.seed}",
         )
         result = LogEvaluation(
             f"{job.model}/{job.family}/{job.seed}",
@@ -216,10 +231,11 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             list(analysis.events),
             scores,
             aggressive=job.aggressive,
+            transients=transients,
         )
     except Exception as exc:  # noqa: BLE001 - a failed run is reported in the tables, not fatal
         result = f"{type(exc).__name__}: {exc}"
-    return job, result, time.perf_counter() - started
+    return job, result, spans, time.perf_counter() - started
 
 
 # --- tables -----------------------------------------------------------------------------------
@@ -257,8 +273,9 @@ def category_table(results: list, methods: dict[str, str]) -> str:
             for key in methods:
                 score = aggregate([ev.scores[key] for ev in chosen])
                 rate = 100.0 * score.tp / score.n_events
+                onset = f"; {score.at_onset} at onset" if score.at_onset else ""
                 latency = "" if score.mean_latency_s is None else f" · {score.mean_latency_s:.2f} s"
-                cells.append(f"{rate:.1f} % ({score.tp}/{score.n_events}){latency}")
+                cells.append(f"{rate:.1f} % ({score.tp}/{score.n_events}{onset}){latency}")
             out.append(f"| {model}: {category} | " + " | ".join(cells) + " |")
     return "\n".join(out) + "\n"
 
@@ -272,6 +289,22 @@ def detected_while_active(scores) -> int:
         for match in score.matches
         if match.detected and (match.event.t_end is None or match.latency_s < match.event.t_end - match.event.t_start)
     )
+
+
+def family_cell(scores) -> str:
+    """detected / runs (detections after the fault ended; runs with an alarm already on at the
+    onset) · mean / max latency."""
+    from logscan.scoring import aggregate
+
+    score = aggregate(scores)
+    late = score.tp - detected_while_active(scores)
+    notes = []
+    if late:
+        notes.append(f"{late} only after the fault ended")
+    if score.at_onset:
+        notes.append(f"{score.at_onset} at onset")
+    note = f" ({', '.join(notes)})" if notes else ""
+    return f"{score.tp}/{score.n_events}{note}{_latency(score)}"
 
 
 def _fa_per_hour(scores) -> str:
@@ -298,12 +331,7 @@ def family_tables(results: list, methods: dict[str, str], runs: int) -> str:
                 continue
             event = runs_here[0].events[0]
             length = (event.t_end - event.t_start) if event.t_end is not None else float("nan")
-            cells = []
-            for key in methods:
-                score = aggregate([ev.scores[key] for ev in runs_here])
-                late = score.tp - detected_while_active([ev.scores[key] for ev in runs_here])
-                note = f" ({late} only after the fault ended)" if late else ""
-                cells.append(f"{score.tp}/{score.n_events}{note}{_latency(score)}")
+            cells = [family_cell([ev.scores[key] for ev in runs_here]) for key in methods]
             out.append(
                 f"| {label} ({event.target}, {default_magnitude(kind)}, {length:g} s) | " + " | ".join(cells) + " |"
             )
@@ -315,8 +343,16 @@ def family_tables(results: list, methods: dict[str, str], runs: int) -> str:
             cells = [_fa_per_hour([ev.scores[key] for ev in runs_here]) for key in methods]
             out.append(f"| {title} ({len(runs_here)} x {DURATION_S:g} s) | " + " | ".join(cells) + " |")
         faulty = [ev for job, ev in mine if job.family not in ("healthy", "aggressive")]
-        cells = [str(aggregate([ev.scores[key] for ev in faulty]).fp) for key in methods]
-        out.append(f"| alarms outside the fault windows of the {len(faulty)} fault runs | " + " | ".join(cells) + " |")
+        totals = [aggregate([ev.scores[key] for ev in faulty]) for key in methods]
+        n = len(faulty)
+        out.append(f"| false alarms on the {n} fault runs | " + " | ".join(str(t.fp) for t in totals) + " |")
+        out.append(
+            f"| recovery alarms on the {n} fault runs (start within {RECOVERY_S:g} s after a detected fault's "
+            f"grace period) | " + " | ".join(str(t.recovery_alarms) for t in totals) + " |"
+        )
+        if any(ev.transients for _, ev in mine):
+            every = [aggregate([ev.scores[key] for _, ev in mine]) for key in methods]
+            out.append("| alarms on healthy transients | " + " | ".join(str(t.transient_alarms) for t in every) + " |")
         out.append("")
     return "\n".join(out)
 
@@ -434,10 +470,12 @@ def main(argv: list[str] | None = None) -> int:
     fits = run_many(train_jobs, train_one, jobs=args.jobs, isolate=False)
     thresholds = {m: max(th for model, _, th in fits if model == m) for m in FAMILIES}
     results = []
-    for job, result, _seconds in run_many(
+    spans = {}
+    for job, result, run_spans, _seconds in run_many(
         [(job, thresholds) for job in jobs], evaluate_one, jobs=args.jobs, isolate=False
     ):
         results.append((job, result))
+        spans[job] = run_spans
         if isinstance(result, str):
             print(f"run {job.model}/{job.family}/{job.seed} failed: {result}", file=sys.stderr)
     elapsed = time.perf_counter() - started
@@ -455,8 +493,12 @@ def main(argv: list[str] | None = None) -> int:
         f"{MARGIN:g}): " + ", ".join(f"{m} {th:.4g}" for m, th in thresholds.items()) + ".",
         "",
         'Cells: detected / runs · mean / max latency (s); "only after the fault ended": detections '
-        f"by an alarm in the {GRACE_S:g} s grace period after the fault's end (the fault's removal was "
-        "seen, not the fault). False-alarm rows: alarms per hour (count).",
+        f"by an alarm that started in the {GRACE_S:g} s grace period after the fault's end (the fault's "
+        'removal was seen, not the fault); "at onset": runs where an alarm of the method was already on '
+        "when the fault began (not a detection: such a run counts as detected only if a later alarm "
+        "started within [onset, end + grace]). False-alarm rows: alarms per hour (count); recovery "
+        f"alarms (starting within {RECOVERY_S:g} s after a detected fault's grace period) are counted "
+        "apart, not as false alarms.",
         "",
         "### Per fault category (the paper's Table III rows: detection accuracy · mean latency)",
         "",
@@ -479,6 +521,8 @@ def main(argv: list[str] | None = None) -> int:
             args.json_path,
             {
                 "elapsed_s": elapsed,
+                "grace_s": GRACE_S,
+                "recovery_s": RECOVERY_S,
                 "thresholds": thresholds,
                 "training": [{"model": m, "seed": s, "threshold": th} for m, s, th in fits],
                 "runs": [
@@ -489,6 +533,7 @@ def main(argv: list[str] | None = None) -> int:
                         "fault": job.fault,
                         "aggressive": job.aggressive,
                         "error": result if isinstance(result, str) else None,
+                        "spans": spans.get(job, {}),
                         "events": [] if isinstance(result, str) else [e.to_dict() for e in result.events],
                         "scores": {}
                         if isinstance(result, str)
