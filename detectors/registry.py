@@ -6,12 +6,20 @@ pyproject.toml:
 
     [project.entry-points."logscan.detectors"]
     range_check = "logscan_example_plugin:RangeCheckDetector"
+
+Plugins are isolated: their code is imported only when a name no built-in provides is asked for, or
+when everything is listed; whatever it raises while importing (SystemExit and KeyboardInterrupt
+included) becomes a problem on its registry row, and whatever it prints goes to stderr.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
-from collections.abc import Callable, Iterable
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
@@ -41,6 +49,7 @@ class DetectorEntry:
     cls: type[Detector] | None = None
     description: str = ""
     problems: list[str] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)  # read from the class while it loaded
 
     @property
     def ok(self) -> bool:
@@ -56,13 +65,7 @@ class DetectorEntry:
             "problems": list(self.problems),
         }
         if self.cls is not None:
-            out.update(
-                requires_fit=self.cls.requires_fit,
-                requires_trace=self.cls.requires_trace,
-                default_enabled=self.cls.default_enabled,
-                defaults=dict(self.cls.defaults),
-                parameters=parameter_rows(self.cls),
-            )
+            out.update(self.details)
         return out
 
 
@@ -93,9 +96,20 @@ def _import_spec(spec: str) -> Any:
 def _check_class(obj: Any) -> type[Detector]:
     if not (isinstance(obj, type) and issubclass(obj, Detector)):
         raise TypeError(f"{obj!r} is not a subclass of logscan.detectors.base.Detector")
-    if not obj.name:
+    if not isinstance(obj.name, str) or not obj.name:
         raise TypeError(f"{obj.__name__} has an empty `name` class attribute")
     return obj
+
+
+def _details(cls: type[Detector]) -> dict[str, Any]:
+    """What `logscan detectors` shows of a class, read once while its loading is isolated."""
+    return {
+        "requires_fit": bool(cls.requires_fit),
+        "requires_trace": bool(cls.requires_trace),
+        "default_enabled": bool(cls.default_enabled),
+        "defaults": dict(cls.defaults),
+        "parameters": parameter_rows(cls),
+    }
 
 
 def _origin(ep: EntryPoint) -> str:
@@ -105,59 +119,127 @@ def _origin(ep: EntryPoint) -> str:
     return f"plugin {dist.metadata['Name']} {dist.version}"
 
 
+def _exception_text(exc: BaseException) -> str:
+    """'<Type>: <message>' (or '<Type>' when the message is empty) of an exception raised by loaded code."""
+    try:
+        message = str(exc)
+    except BaseException:  # noqa: BLE001 - its __str__ is the failing code's too
+        message = "(message unavailable)"
+    return f"{type(exc).__name__}: {message}" if message else type(exc).__name__
+
+
+@contextlib.contextmanager
+def _user_interrupts() -> Iterator[list[bool]]:
+    """Yield a flag set when a real SIGINT (the user's Ctrl-C) arrives inside the block; the previous
+    handler still runs, so Ctrl-C still raises KeyboardInterrupt. Outside the main thread, or when
+    SIGINT has no Python handler, nothing is installed: no SIGINT can then raise there, so every
+    KeyboardInterrupt seen in the block was raised by code."""
+    seen = [False]
+    on_main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if on_main else None
+    if not callable(previous):
+        yield seen
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        seen[0] = True
+        previous(signum, frame)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _load_isolated(loader: Callable[[], Any]) -> tuple[type[Detector] | None, dict[str, Any], str]:
+    """Import a detector class with ``loader`` and check it, isolated from its code: (class, details, "")
+    or (None, {}, "failed to load: <Type>: <message>"); never raises for what the code does.
+
+    Everything the imported code throws is caught, SystemExit and KeyboardInterrupt included, and
+    everything it prints goes to stderr (stdout may hold `--json -`). The one exception told apart
+    is the user's Ctrl-C: a KeyboardInterrupt counts as the user's only when a real SIGINT arrived
+    while the code ran (see _user_interrupts); it is re-raised, even if the code swallowed it."""
+    with _user_interrupts() as interrupted:
+        try:
+            with contextlib.redirect_stdout(sys.stderr):
+                cls = _check_class(loader())
+                details = {"description": describe(cls), **_details(cls)}
+        except BaseException as exc:  # noqa: BLE001 - whatever loaded code throws is reported, never raised
+            if interrupted[0] and isinstance(exc, KeyboardInterrupt):
+                raise
+            if interrupted[0]:
+                raise KeyboardInterrupt from exc
+            return None, {}, f"failed to load: {_exception_text(exc)}"
+    if interrupted[0]:
+        raise KeyboardInterrupt
+    return cls, details, ""
+
+
 class Registry:
     """Detectors by name. Loading never raises: failures become entries with problems.
 
-    builtins: "module:Class" strings (default BUILTIN_DETECTORS).
-    plugins:  entry points to load, or None to read the installed `logscan.detectors` group.
+    builtins: "module:Class" strings (default BUILTIN_DETECTORS), all imported on the first query.
+    plugins:  entry points to load, or None to read the installed `logscan.detectors` group; loaded
+              only when a name no built-in provides is asked for or everything is listed.
     """
 
     def __init__(self, builtins: Iterable[str] | None = None, plugins: Iterable[EntryPoint] | None = None):
         self._builtins = list(BUILTIN_DETECTORS if builtins is None else builtins)
         self._plugins = None if plugins is None else list(plugins)
-        self._entries: list[DetectorEntry] | None = None
+        self._entries: list[DetectorEntry] = []
+        self._taken: dict[str, DetectorEntry] = {}
+        self._builtins_loaded = False
+        self._plugins_loaded = False
 
     # --- loading ----------------------------------------------------------------------------------
-    def _load(self) -> list[DetectorEntry]:
-        if self._entries is not None:
-            return self._entries
-        entries: list[DetectorEntry] = []
-        taken: dict[str, DetectorEntry] = {}
+    def _add(self, entry: DetectorEntry, loader: Callable[[], Any], fallback_name: str = "") -> None:
+        cls, details, problem = _load_isolated(loader)
+        self._entries.append(entry)
+        if cls is None:
+            entry.name = entry.name or fallback_name
+            entry.problems.append(problem)
+            return
+        if entry.name and entry.name != cls.name:
+            entry.problems.append(f"entry point is named {entry.name!r} but the class's name is {cls.name!r}")
+        entry.name = cls.name
+        entry.description = details.pop("description")
+        entry.details = details
+        if cls.name in self._taken:
+            taken = self._taken[cls.name]
+            entry.problems.append(
+                f"duplicate name {cls.name!r}: already provided by {taken.origin} ({taken.spec}); skipped"
+            )
+            return
+        if entry.origin != BUILTIN and details["default_enabled"]:
+            entry.problems.append("default_enabled is ignored for plugins: it runs only when a profile enables it")
+        entry.cls = cls
+        self._taken[cls.name] = entry
 
-        def add(entry: DetectorEntry, loader: Callable[[], Any], fallback_name: str = "") -> None:
-            try:
-                cls = _check_class(loader())
-            except Exception as exc:  # noqa: BLE001 - any plugin failure is reported, never raised
-                entry.name = entry.name or fallback_name
-                entry.problems.append(f"failed to load: {type(exc).__name__}: {exc}")
-                entries.append(entry)
-                return
-            if entry.name and entry.name != cls.name:
-                entry.problems.append(f"entry point is named {entry.name!r} but the class's name is {cls.name!r}")
-            entry.name = cls.name
-            entry.description = describe(cls)
-            if cls.name in taken:
-                entry.problems.append(
-                    f"duplicate name {cls.name!r}: already provided by {taken[cls.name].origin} "
-                    f"({taken[cls.name].spec}); skipped"
+    def _load(self, plugins: bool = True) -> list[DetectorEntry]:
+        """The entries loaded so far: every built-in, and the plugins too when ``plugins``."""
+        if not self._builtins_loaded:
+            self._builtins_loaded = True
+            for spec in self._builtins:
+                # a built-in that fails to load is listed under its module's name
+                module_name = spec.rpartition(":")[0].rpartition(".")[2]
+                self._add(
+                    DetectorEntry(name="", spec=spec, origin=BUILTIN), lambda spec=spec: _import_spec(spec), module_name
                 )
-                entries.append(entry)
-                return
-            entry.cls = cls
-            taken[cls.name] = entry
-            entries.append(entry)
+        if plugins and not self._plugins_loaded:
+            self._plugins_loaded = True
+            found = self._plugins if self._plugins is not None else list(entry_points(group=ENTRY_POINT_GROUP))
+            for ep in sorted(found, key=lambda e: (_origin(e), e.name)):
+                self._add(DetectorEntry(name=ep.name, spec=ep.value, origin=_origin(ep)), ep.load)
+        return self._entries
 
-        for spec in self._builtins:
-            # a built-in that fails to load is listed under its module's name
-            module_name = spec.rpartition(":")[0].rpartition(".")[2]
-            add(DetectorEntry(name="", spec=spec, origin=BUILTIN), lambda spec=spec: _import_spec(spec), module_name)
-        plugins = self._plugins
-        if plugins is None:
-            plugins = list(entry_points(group=ENTRY_POINT_GROUP))
-        for ep in sorted(plugins, key=lambda e: (_origin(e), e.name)):
-            add(DetectorEntry(name=ep.name, spec=ep.value, origin=_origin(ep)), ep.load)
-        self._entries = entries
-        return entries
+    def _find(self, name: str) -> list[DetectorEntry]:
+        """The entries named ``name``: the built-ins' when one of them provides it, else every loaded one
+        (loading the plugins)."""
+        found = [e for e in self._load(plugins=False) if e.name == name]
+        if not any(e.ok for e in found):
+            found = [e for e in self._load() if e.name == name]
+        return found
 
     # --- queries ----------------------------------------------------------------------------------
     def entries(self) -> list[DetectorEntry]:
@@ -173,20 +255,27 @@ class Registry:
         return [f"{e.name} ({e.origin}): {p}" for e in self._load() for p in e.problems]
 
     def get(self, name: str) -> type[Detector]:
-        """The detector class registered as ``name``; ProfileError when unknown or broken."""
-        for entry in self._load():
-            if entry.name == name and entry.ok:
+        """The detector class registered as ``name``; ProfileError when unknown or broken. Plugins are
+        imported only when no built-in provides ``name``."""
+        found = self._find(name)
+        for entry in found:
+            if entry.ok:
                 return entry.cls  # type: ignore[return-value]
-        broken = [e for e in self._load() if e.name == name]
-        if broken:
+        if found:
             raise ProfileError(
-                f"detector {name!r} is installed but could not be loaded: {'; '.join(broken[0].problems)}",
+                f"detector {name!r} ({found[0].origin}) is installed but could not be loaded: "
+                f"{'; '.join(found[0].problems)}",
                 hint="run `logscan detectors` to see every detector and its problems",
             )
         raise ProfileError(
             f"unknown detector {name!r}",
             hint=f"available: {', '.join(self.names()) or 'none'} (see `logscan detectors`)",
         )
+
+    def origin(self, name: str) -> str | None:
+        """Where detector ``name`` comes from: "built-in" or "plugin <distribution> <version>" (or
+        "plugin" for an entry point without a distribution); None when no loaded detector has that name."""
+        return next((e.origin for e in self._find(name) if e.ok), None)
 
     def create(self, name: str, config: dict | None = None, *, source: str | None = None) -> Detector:
         """An instance of detector ``name`` from its configuration, its parameters checked against
@@ -201,18 +290,20 @@ class Registry:
         return detector
 
     def default_names(self) -> list[str]:
-        """The detectors that run when a profile enables none (those with default_enabled)."""
-        return [e.name for e in self._load() if e.ok and e.cls.default_enabled]
+        """The detectors that run when a profile enables none: the built-ins with default_enabled.
+        Plugins are never default-enabled (their default_enabled is ignored and reported): a plugin
+        runs only when a profile or --detectors names it, so this never imports plugin code."""
+        return [e.name for e in self._load(plugins=False) if e.ok and e.origin == BUILTIN and e.cls.default_enabled]
 
     def __contains__(self, name: str) -> bool:
-        return name in self.names()
+        return any(e.ok for e in self._find(name))
 
 
 _DEFAULT: Registry | None = None
 
 
 def default_registry(refresh: bool = False) -> Registry:
-    """The process-wide registry of built-ins and installed plugins (loaded once)."""
+    """The process-wide registry of built-ins and installed plugins (loaded as needed, once)."""
     global _DEFAULT
     if _DEFAULT is None or refresh:
         _DEFAULT = Registry()

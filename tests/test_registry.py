@@ -1,9 +1,12 @@
 """The detector registry: lazy built-ins, entry-point plugins, broken plugins reported and skipped,
-and the `logscan detectors` command."""
+plugins isolated (their exits, interrupts and prints at import) and imported only when needed, and
+the `logscan detectors` command."""
 
 from __future__ import annotations
 
 import json
+import sys
+import textwrap
 from importlib.metadata import EntryPoint
 
 import pytest
@@ -149,3 +152,169 @@ def test_detectors_command_text(monkeypatch, cli):
     result = cli("detectors")
     assert result.exit_code == 0
     assert "beta" in result.output and "Beta: another test detector." in result.output
+
+
+# --- plugins isolated ---------------------------------------------------------------------------
+
+
+@pytest.fixture
+def plugin_module(tmp_path, monkeypatch):
+    """An entry point to a plugin module written from ``source`` into a folder on sys.path."""
+    monkeypatch.syspath_prepend(tmp_path)
+    written = []
+
+    def make(name: str, source: str, attr: str = "Plugin") -> EntryPoint:
+        module = f"logscan_test_plugin_{name}"
+        (tmp_path / f"{module}.py").write_text(textwrap.dedent(source))
+        written.append(module)
+        return ep(name, attr, module=module)
+
+    yield make
+    for module in written:
+        sys.modules.pop(module, None)
+
+
+class TripwireEntryPoint(EntryPoint):
+    """An entry point that records every attempt to import it (then fails to load)."""
+
+    loads: list[str] = []
+
+    def load(self):
+        TripwireEntryPoint.loads.append(self.name)
+        raise RuntimeError("this plugin should not have been imported")
+
+
+@pytest.fixture
+def tripwire():
+    TripwireEntryPoint.loads = []
+    yield TripwireEntryPoint(name="tripwire", value="never:Imported", group=ENTRY_POINT_GROUP)
+    TripwireEntryPoint.loads = []
+
+
+def test_plugin_exiting_at_import_is_a_problem_not_an_exit(plugin_module):
+    exiting = plugin_module("exiting", "import sys\nsys.exit(0)\n")
+    registry = Registry(builtins=[f"{HERE}:AlphaDetector"], plugins=[exiting, ep("beta", "BetaDetector")])
+    assert registry.names() == ["alpha", "beta"]
+    assert registry.warnings() == ["exiting (plugin): failed to load: SystemExit: 0"]
+    with pytest.raises(ProfileError, match=r"'exiting' \(plugin\) is installed but could not be loaded"):
+        registry.get("exiting")
+
+
+def test_plugin_raising_keyboard_interrupt_at_import_is_a_problem(plugin_module):
+    interrupting = plugin_module("interrupting", "raise KeyboardInterrupt\n")
+    registry = Registry(builtins=[], plugins=[interrupting, ep("beta", "BetaDetector")])
+    assert registry.names() == ["beta"]
+    assert registry.warnings() == ["interrupting (plugin): failed to load: KeyboardInterrupt"]
+
+
+@pytest.mark.parametrize("swallowed", [False, True], ids=["raised", "swallowed by the plugin"])
+def test_real_ctrl_c_while_a_plugin_imports_still_interrupts(plugin_module, swallowed):
+    # a SIGINT delivered while the plugin's code runs is the user's: it stops logscan
+    source = "import signal\nsignal.raise_signal(signal.SIGINT)\n"
+    if swallowed:
+        source = "import signal\ntry:\n    signal.raise_signal(signal.SIGINT)\nexcept KeyboardInterrupt:\n    pass\n"
+    registry = Registry(builtins=[], plugins=[plugin_module("slow", source)])
+    with pytest.raises(KeyboardInterrupt):
+        registry.entries()
+
+
+def test_plugin_printing_at_import_leaves_stdout_empty(plugin_module, capsys):
+    chatty = plugin_module(
+        "chatty",
+        """
+        from logscan.detectors.base import Detector
+        print("hello from a plugin")
+
+        class Plugin(Detector):
+            \"\"\"Chatty: prints when imported.\"\"\"
+
+            name = "chatty"
+        """,
+    )
+    registry = Registry(builtins=[], plugins=[chatty])
+    assert registry.names() == ["chatty"]
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "hello from a plugin" in captured.err
+
+
+def test_plugins_are_not_imported_when_only_builtins_are_asked_for(tripwire):
+    registry = Registry(builtins=[f"{HERE}:AlphaDetector"], plugins=[tripwire])
+    assert registry.get("alpha") is AlphaDetector
+    assert isinstance(registry.create("alpha"), AlphaDetector)
+    assert registry.origin("alpha") == BUILTIN and "alpha" in registry
+    assert registry.default_names() == []
+    assert TripwireEntryPoint.loads == []
+    assert registry.names() == ["alpha"]  # listing everything imports the plugins
+    assert TripwireEntryPoint.loads == ["tripwire"]
+
+
+def test_plugins_are_imported_for_a_name_no_builtin_provides(tripwire):
+    registry = Registry(builtins=[f"{HERE}:AlphaDetector"], plugins=[tripwire, ep("beta", "BetaDetector")])
+    assert registry.get("beta") is BetaDetector
+    assert TripwireEntryPoint.loads == ["tripwire"]
+
+
+def test_origin_names_builtin_or_plugin():
+    registry = Registry(builtins=[f"{HERE}:AlphaDetector"], plugins=[ep("beta", "BetaDetector")])
+    assert [registry.origin(n) for n in ("alpha", "beta", "gamma")] == [BUILTIN, "plugin", None]
+
+
+class EagerDetector(Detector):
+    """Eager: a plugin that asks to run by default."""
+
+    name = "eager"
+    default_enabled = True
+
+
+def test_default_names_never_include_plugins():
+    registry = Registry(builtins=[], plugins=[ep("eager", "EagerDetector")])
+    assert registry.names() == ["eager"]  # plugins loaded; still not a default
+    assert registry.default_names() == []
+    assert "default_enabled is ignored for plugins" in registry.warnings()[0]
+
+
+def test_detectors_command_lists_broken_plugins_and_exits_0(monkeypatch, cli, plugin_module):
+    plugins = [
+        plugin_module("exiting", "import sys\nsys.exit(0)\n"),
+        plugin_module("interrupting", "print('noise')\nraise KeyboardInterrupt\n"),
+    ]
+    monkeypatch.setattr(
+        "logscan.detectors.registry._DEFAULT", Registry(builtins=[f"{HERE}:BetaDetector"], plugins=plugins)
+    )
+    result = cli("detectors")
+    assert result.exit_code == 0
+    assert "  exiting (plugin): failed to load: SystemExit: 0" in result.stdout.splitlines()
+    assert "  interrupting (plugin): failed to load: KeyboardInterrupt" in result.stdout.splitlines()
+    assert "noise" not in result.stdout and "noise" in result.stderr
+
+
+def test_detectors_command_json_stays_pure_with_a_printing_plugin(monkeypatch, cli, plugin_module):
+    chatty = plugin_module("chatty", "print('hello from a plugin')\nraise ImportError('no numpy')\n")
+    monkeypatch.setattr("logscan.detectors.registry._DEFAULT", Registry(builtins=[], plugins=[chatty]))
+    result = cli("detectors", "--json", "-")
+    assert result.exit_code == 0
+    assert json.loads(result.stdout)["warnings"] == ["chatty (plugin): failed to load: ImportError: no numpy"]
+
+
+def test_analyze_is_unaffected_by_a_broken_plugin_it_does_not_use(monkeypatch, cli, sample, plugin_module, tripwire):
+    log = sample("quad_healthy.mcap")
+    exiting = plugin_module("exiting", "import sys\nprint('plugin noise')\nsys.exit(0)\n")
+    monkeypatch.setattr("logscan.detectors.registry._DEFAULT", Registry())
+    clean = cli("analyze", log, "--no-report", "--json", "-")
+    monkeypatch.setattr("logscan.detectors.registry._DEFAULT", Registry(plugins=[exiting, tripwire]))
+    result = cli("analyze", log, "--no-report", "--json", "-")
+    assert (clean.exit_code, result.exit_code) == (0, 0)
+    (with_plugin,), (without,) = json.loads(result.stdout)["logs"], json.loads(clean.stdout)["logs"]
+    for key in ("verdict", "n_alarms", "detectors", "exit_code"):
+        assert with_plugin[key] == without[key], key
+    assert [d["detector"] for d in with_plugin["detectors"]] == ["encoded_ekf", "nis"]
+    assert TripwireEntryPoint.loads == []
+
+
+def test_analyze_naming_a_broken_plugin_blames_the_plugin(monkeypatch, cli, sample, plugin_module):
+    exiting = plugin_module("exiting", "import sys\nsys.exit(0)\n")
+    monkeypatch.setattr("logscan.detectors.registry._DEFAULT", Registry(plugins=[exiting]))
+    result = cli("analyze", sample("quad_healthy.mcap"), "--no-report", "-d", "exiting")
+    assert result.exit_code == 2
+    assert "'exiting' (plugin) is installed but could not be loaded: failed to load: SystemExit: 0" in result.stderr

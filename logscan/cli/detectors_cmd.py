@@ -16,7 +16,9 @@ def detectors(json_path: str | None) -> None:
     a profile is read, before any log).
 
     Plugins come from the 'logscan.detectors' entry-point group of installed packages. A plugin
-    that fails to load is listed with its problem and skipped; it never stops the others.
+    that fails to load (an import error, an exit or interrupt raised while importing, not a
+    detector class, a name already taken) is listed with its problem and skipped; it never stops
+    the others. What a plugin prints while loading goes to stderr, never into --json -.
     """
     from logscan.detectors.registry import default_registry
 
