@@ -218,6 +218,7 @@ def _score(analysis, detector_names: list[str], grace_s: float) -> None:
         analysis.alarms,
         duration_s=analysis.duration_s,
         grace_s=grace_s,
+        transients=events_from_truth(truth.get("transients", []), path=prepared.path),
         detectors=detector_names,
         log=prepared.path,
     )

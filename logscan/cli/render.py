@@ -54,9 +54,17 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
         lines.append(f"  ... {len(analysis.alarms) - shown} more alarm(s) (see the report / --json)")
     for name, score in analysis.scores.items():
         latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
+        apart = [
+            f"{count} {label}"
+            for count, label in ((score.at_onset, "already on at a fault's onset"),
+                                 (score.recovery_alarms, "in recovery after a fault"),
+                                 (score.transient_alarms, "on healthy transients"))
+            if count
+        ]  # fmt: skip
         lines.append(
             f"  truth: {name}: detected {score.tp}/{score.tp + score.fn} events, "
             f"{score.fp} false alarm(s), mean latency {latency}"
+            + (f" (alarms apart: {', '.join(apart)})" if apart else "")
         )
     for warning in analysis.warnings[:5]:
         lines.append(f"  warning: {warning}")
