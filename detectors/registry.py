@@ -26,7 +26,7 @@ from typing import Any
 
 from logscan.detectors.base import Detector, describe
 from logscan.detectors.params import describe_constraints
-from logscan.errors import ProfileError
+from logscan.errors import LogscanError, ProfileError
 
 ENTRY_POINT_GROUP = "logscan.detectors"
 
@@ -152,28 +152,47 @@ def _user_interrupts() -> Iterator[list[bool]]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _load_isolated(loader: Callable[[], Any]) -> tuple[type[Detector] | None, dict[str, Any], str]:
-    """Import a detector class with ``loader`` and check it, isolated from its code: (class, details, "")
-    or (None, {}, "failed to load: <Type>: <message>"); never raises for what the code does.
+def _isolated(call: Callable[[], Any], passthrough: tuple[type[BaseException], ...] = ()) -> tuple[Any, str]:
+    """Run plugin code: (its value, "") or (None, "<Type>: <message>"); never raises for what the code
+    does, except the ``passthrough`` exceptions (logscan's typed errors it may raise on purpose).
 
-    Everything the imported code throws is caught, SystemExit and KeyboardInterrupt included, and
-    everything it prints goes to stderr (stdout may hold `--json -`). The one exception told apart
-    is the user's Ctrl-C: a KeyboardInterrupt counts as the user's only when a real SIGINT arrived
-    while the code ran (see _user_interrupts); it is re-raised, even if the code swallowed it."""
+    Everything the code throws is caught, SystemExit and KeyboardInterrupt included, and everything
+    it prints goes to stderr (stdout may hold `--json -`). The one exception told apart is the
+    user's Ctrl-C: a KeyboardInterrupt counts as the user's only when a real SIGINT arrived while
+    the code ran (see _user_interrupts); it is re-raised, even if the code swallowed it."""
     with _user_interrupts() as interrupted:
         try:
             with contextlib.redirect_stdout(sys.stderr):
-                cls = _check_class(loader())
-                details = {"description": describe(cls), **_details(cls)}
-        except BaseException as exc:  # noqa: BLE001 - whatever loaded code throws is reported, never raised
+                value = call()
+        except passthrough:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - whatever plugin code throws is reported, never raised
             if interrupted[0] and isinstance(exc, KeyboardInterrupt):
                 raise
             if interrupted[0]:
                 raise KeyboardInterrupt from exc
-            return None, {}, f"failed to load: {_exception_text(exc)}"
+            return None, _exception_text(exc)
     if interrupted[0]:
         raise KeyboardInterrupt
-    return cls, details, ""
+    return value, ""
+
+
+def _load_class(loader: Callable[[], Any]) -> tuple[type[Detector], dict[str, Any]]:
+    """Import a detector class with ``loader``, check it and read what the listing shows of it."""
+    cls = _check_class(loader())
+    return cls, {"description": describe(cls), **_details(cls)}
+
+
+def _configured(cls: type[Detector], config: dict | None, source: str | None) -> Detector:
+    """An instance of ``cls`` from ``config``, its parameters checked (ProfileError naming ``source``)."""
+    detector = cls.from_config(config)
+    try:
+        detector.check_params()
+    except ProfileError as exc:
+        if exc.path is None:
+            exc.path = source
+        raise
+    return detector
 
 
 class Registry:
@@ -194,12 +213,13 @@ class Registry:
 
     # --- loading ----------------------------------------------------------------------------------
     def _add(self, entry: DetectorEntry, loader: Callable[[], Any], fallback_name: str = "") -> None:
-        cls, details, problem = _load_isolated(loader)
+        loaded, problem = _isolated(lambda: _load_class(loader))
         self._entries.append(entry)
-        if cls is None:
+        if loaded is None:
             entry.name = entry.name or fallback_name
-            entry.problems.append(problem)
+            entry.problems.append(f"failed to load: {problem}")
             return
+        cls, details = loaded
         if entry.name and entry.name != cls.name:
             entry.problems.append(f"entry point is named {entry.name!r} but the class's name is {cls.name!r}")
         entry.name = cls.name
@@ -279,14 +299,20 @@ class Registry:
 
     def create(self, name: str, config: dict | None = None, *, source: str | None = None) -> Detector:
         """An instance of detector ``name`` from its configuration, its parameters checked against
-        their declared types and ranges (ProfileError naming ``source``, the profile, otherwise)."""
-        detector = self.get(name).from_config(config)
-        try:
-            detector.check_params()
-        except ProfileError as exc:
-            if exc.path is None:
-                exc.path = source
-            raise
+        their declared types and ranges (ProfileError naming ``source``, the profile, otherwise).
+        A plugin's constructor and checks run isolated: what else they raise becomes a ProfileError
+        naming the plugin."""
+        cls = self.get(name)
+        origin = self.origin(name)
+        if origin == BUILTIN:
+            return _configured(cls, config, source)
+        detector, problem = _isolated(lambda: _configured(cls, config, source), passthrough=(LogscanError,))
+        if problem:
+            raise ProfileError(
+                f"detector {name!r} ({origin}) failed to start: {problem}",
+                path=source,
+                hint="a bug in the plugin: report it to its authors, or remove the detector from the profile",
+            )
         return detector
 
     def default_names(self) -> list[str]:

@@ -260,6 +260,33 @@ def test_origin_names_builtin_or_plugin():
     assert [registry.origin(n) for n in ("alpha", "beta", "gamma")] == [BUILTIN, "plugin", None]
 
 
+class ExitingOnCreateDetector(Detector):
+    """Exits when created."""
+
+    name = "exiting_on_create"
+
+    def __init__(self, **params):
+        print("creating")
+        raise SystemExit(1)
+
+
+def test_plugin_failing_when_created_is_named_in_a_profile_error(capsys):
+    registry = Registry(builtins=[], plugins=[ep("exiting_on_create", "ExitingOnCreateDetector")])
+    with pytest.raises(ProfileError) as info:
+        registry.create("exiting_on_create", source="quad.toml")
+    assert info.value.one_line().startswith(
+        "quad.toml: detector 'exiting_on_create' (plugin) failed to start: SystemExit: 1"
+    )
+    assert capsys.readouterr().out == ""
+
+
+def test_plugin_profile_errors_pass_through_create():
+    registry = Registry(builtins=[], plugins=[ep("alpha", "AlphaDetector")])
+    with pytest.raises(ProfileError, match="unknown parameter") as info:
+        registry.create("alpha", {"levle": 2}, source="quad.toml")
+    assert info.value.path == "quad.toml"
+
+
 class EagerDetector(Detector):
     """Eager: a plugin that asks to run by default."""
 
