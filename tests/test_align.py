@@ -286,7 +286,7 @@ def test_hold_is_the_latest_sample_within_the_limit(times, start, step, n, limit
         min_size=1,
         max_size=60,
     ),
-    stale_ms=st.integers(0, 300),
+    stale_ms=st.integers(1, 300),  # a profile's stale_s is > 0
 )
 def test_align_gives_the_latest_finite_sample_within_stale_s(samples, stale_ms):
     t_ms = np.array([s[0] for s in samples])

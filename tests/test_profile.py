@@ -152,7 +152,7 @@ BROKEN = [
         "[vehicle]: unknown key 'colour' (valid keys: model, rate_hz, params)",
     ),
     (mutated("measurment", {}), "unknown key 'measurment' (did you mean 'measurements'?)"),
-    (mutated("measurements.accel.stale_s", -0.1), "[measurements.accel] stale_s: must be >= 0, got -0.1"),
+    (mutated("measurements.accel.stale_s", -0.1), "[measurements.accel] stale_s: must be > 0, got -0.1"),
     (mutated("measurements.accel.noise_std", 0), "[measurements.accel] noise_std: must be > 0 and finite, got 0"),
     (
         mutated("measurements.accel.noise_std", [0.1, -0.2, 0.1]),
@@ -215,9 +215,9 @@ BROKEN = [
         "[inputs] tau: 2 channels but model 'quadcopter' has 3 inputs starting with 'tau' (tau_x, tau_y, tau_z)",
     ),
     (mutated("inputs.thrust", 3), "[inputs] thrust: expected a channel name or an array of them, got number 3"),
-    (mutated("inputs.stale_s", -1), "[inputs] stale_s: must be >= 0, got -1"),
+    (mutated("inputs.stale_s", -1), "[inputs] stale_s: must be > 0, got -1"),
     (mutated("mode", {"chanel": "/m"}), "[mode]: unknown key 'chanel' (did you mean 'channel'?)"),
-    (mutated("mode", {"channel": "/m", "stale_s": -2}), "[mode] stale_s: must be >= 0, got -2"),
+    (mutated("mode", {"channel": "/m", "stale_s": -2}), "[mode] stale_s: must be > 0, got -2"),
     (
         mutated("redundant", {"speed": {"sensors": {"left": "/l"}}}),
         "[redundant.speed] sensors: a redundant group needs at least 2 sensors, got 1",
@@ -263,7 +263,7 @@ def test_all_problems_are_collected_in_one_error():
     err = info.value
     assert err.problems == [
         "[vehicle] rate_hz: must be > 0, got 0",
-        "[measurements.accel] stale_s: must be >= 0, got -1",
+        "[measurements.accel] stale_s: must be > 0, got -1",
         "[measurements.accel] noise_std: must be > 0 and finite, got 0",
     ]
     line = err.one_line()

@@ -366,11 +366,22 @@ def _square(name: str, value, size: int) -> np.ndarray:
     return M
 
 
+def _group_ranges(run: AlignedRun, names: list[str], specs, which: str) -> np.ndarray:
+    """``range_lo`` or ``range_hi`` of every output, group after group: the aligned group's
+    (from the profile) when it has one, else the model's GroupSpec's."""
+    parts = []
+    for name, spec in zip(names, specs):
+        own = getattr(run.groups[name], which, None)
+        parts.append(np.broadcast_to(np.asarray(getattr(spec, which) if own is None else own, float), (spec.size,)))
+    return np.concatenate(parts)
+
+
 def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) -> KernelInputs:
     """Check the run against the model and pack it into the kernel's arrays.
 
     R: None (each group's profile noise_std, else the model's default_R), or a dict
-    group -> (m, m) matrix or (m,) standard deviations.
+    group -> (m, m) matrix or (m,) standard deviations. The physical range (samples outside it are
+    rejected) is each group's profile range_lo / range_hi where given, else the model's.
     """
     dispatch.check_model_id(model.model_id, model.name)
     n = model.n_states
@@ -442,8 +453,9 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
         group_offsets=offsets,
         group_sizes=sizes,
         R_all=R_all,
-        range_lo=np.concatenate([np.asarray(s.range_lo, float) for s in specs]),
-        range_hi=np.concatenate([np.asarray(s.range_hi, float) for s in specs]),
+        # the profile's physical range of a group where it gives one, else the model's
+        range_lo=_group_ranges(run, names, specs, "range_lo"),
+        range_hi=_group_ranges(run, names, specs, "range_hi"),
         wrap=np.concatenate([s.wrap_mask() for s in specs]),
         direct_idx=np.concatenate([d[0] for d in direct]),
         direct_gain=np.concatenate([d[1] for d in direct]),

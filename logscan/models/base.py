@@ -46,6 +46,41 @@ class GroupSpec:
         return idx, gain
 
 
+def model_error(problems: list[str], hint: str | None = None) -> ModelError:
+    """One ModelError for every problem found: the first in its message, all in ``.problems``."""
+    more = f" ({len(problems) - 1} more)" if len(problems) > 1 else ""
+    err = ModelError(problems[0] + more, hint=hint)
+    err.problems = list(problems)
+    return err
+
+
+def raise_problems(problems: list[str], hint: str | None = None) -> None:
+    """Raise `model_error` when ``problems`` is not empty."""
+    if problems:
+        raise model_error(problems, hint)
+
+
+def covariance_problem(M, name: str, *, definite: bool) -> str | None:
+    """Why ``M`` cannot be a covariance, or None: it must be square, finite, symmetric and positive
+    semi-definite (positive definite when ``definite``). Tolerances are relative to its largest
+    entry: asymmetry up to 1e-9 of it, eigenvalues (eigvalsh) down to -1e-9 of it for
+    semi-definite, above 1e-12 of it for definite."""
+    M = np.asarray(M, dtype=np.float64)
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or M.size == 0:
+        return f"{name} must be a square matrix, got shape {M.shape}"
+    if not np.all(np.isfinite(M)):
+        return f"{name} has non-finite entries"
+    scale = float(np.abs(M).max())
+    if float(np.abs(M - M.T).max()) > 1e-9 * scale:
+        return f"{name} is not symmetric"
+    smallest = float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
+    if definite and not smallest > 1e-12 * scale:
+        return f"{name} is not positive definite (smallest eigenvalue {smallest:.3g})"
+    if not definite and smallest < -1e-9 * scale:
+        return f"{name} is not positive semi-definite (smallest eigenvalue {smallest:.3g})"
+    return None
+
+
 class Model:
     """Discrete-time model x_k = f(x_{k-1}, u_k) + w, z = h_g(x_k, u_k) + v per group g.
 
@@ -65,24 +100,32 @@ class Model:
         self.params: dict = dict(params or {})
 
     def _merge_params(self, defaults: dict) -> dict:
-        """defaults updated by self.params; ModelError on an unknown or non-numeric parameter."""
-        unknown = sorted(set(self.params) - set(defaults))
-        if unknown:
-            raise ModelError(
-                f"model {self.name!r}: unknown parameter(s) {', '.join(unknown)}",
-                hint="known parameters: " + ", ".join(defaults),
-            )
+        """defaults updated by self.params; one ModelError listing every unknown, non-numeric or
+        non-finite parameter."""
+        problems = [f"model {self.name!r}: unknown parameter {k}" for k in sorted(set(self.params) - set(defaults))]
         merged = dict(defaults)
         for key, value in self.params.items():
+            if key not in defaults:
+                continue
             if isinstance(defaults[key], (int, float)) and not isinstance(defaults[key], bool):
                 try:
                     value = float(value)
                 except (TypeError, ValueError):
-                    raise ModelError(f"model {self.name!r}: parameter {key} = {value!r} is not a number") from None
+                    problems.append(f"model {self.name!r}: parameter {key} = {value!r} is not a number")
+                    continue
                 if not np.isfinite(value):
-                    raise ModelError(f"model {self.name!r}: parameter {key} = {value} is not finite")
+                    problems.append(f"model {self.name!r}: parameter {key} = {value} is not finite")
             merged[key] = value
+        raise_problems(problems, hint="known parameters: " + ", ".join(defaults))
         return merged
+
+    def _check_signs(self, positive=(), non_negative=()) -> None:
+        """ModelError listing every parameter of ``positive`` not > 0 and of ``non_negative`` < 0."""
+        problems = [f"{self.name}: parameter {k} must be > 0 (got {self.p[k]})" for k in positive if not self.p[k] > 0]
+        problems += [
+            f"{self.name}: parameter {k} must be >= 0 (got {self.p[k]})" for k in non_negative if not self.p[k] >= 0
+        ]
+        raise_problems(problems)
 
     # --- packed data for kernels -------------------------------------------------------------
     def param_vector(self, dt: float | None = None) -> np.ndarray:
@@ -126,6 +169,13 @@ class Model:
     def default_R(self, group: str) -> np.ndarray:
         spec = self.groups[group]
         return np.diag(np.square(np.asarray(spec.noise_std, dtype=np.float64)))
+
+    def covariance_problems(self, dt: float) -> list[str]:
+        """Why the model's process noise Q at grid period ``dt`` or a group's default R cannot be
+        used (Q must be positive semi-definite, each R positive definite); empty when they can."""
+        found = [covariance_problem(self.default_Q(dt), f"process noise Q at dt = {dt:g} s", definite=False)]
+        found += [covariance_problem(self.default_R(g), f"noise R of group {g!r}", definite=True) for g in self.groups]
+        return [f"model {self.name!r}: {p}" for p in found if p]
 
     def state_scale(self) -> np.ndarray:
         """Typical magnitude of each state (sets the encoded check's sigma floor)."""

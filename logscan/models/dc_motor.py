@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.errors import ModelError
 from logscan.models.base import GroupSpec
 from logscan.models.dispatch import DC_MOTOR_ID
 from logscan.models.linear import LinearBase
@@ -52,9 +51,10 @@ class DcMotor(LinearBase):
     def __init__(self, params: dict | None = None):
         super().__init__(params)
         p = self.p = self._merge_params(DEFAULTS)
-        for key in ("Ra", "La", "Km", "K_EMF", "N", "vehicle_mass", "wheel_radius"):
-            if p[key] <= 0:
-                raise ModelError(f"dc_motor: parameter {key} must be > 0 (got {p[key]})")
+        self._check_signs(
+            positive=("Va", "Ra", "La", "Km", "K_EMF", "N", "vehicle_mass", "wheel_radius"),
+            non_negative=("Jm", "Bv", "Bf", "Jv", "q_voltage", "q_torque"),
+        )
         reflected = p["vehicle_mass"] * p["wheel_radius"] ** 2 + p["N"] ** 2 * p["Jm"]
         Jv = p["Jv"] if p["Jv"] > 0 else reflected
         self.Jv = Jv

@@ -10,7 +10,11 @@ Profile parameters (`[vehicle] model = "linear"`, `params = {...}`):
  - `range`: optional table group -> [lo, hi] (scalars or lists); default +-1e12, so a bit-flipped
    1e20 is rejected.
  - `dt`: period of discrete matrices (required when `continuous = false`; the grid must match).
- - `states`, `inputs`: optional names; `outputs`: optional table group -> names.
+ - `states`, `inputs`: optional names; `outputs`: optional table group -> names (unique, one per
+   row or column).
+Every matrix must be finite and of the right shape; Q symmetric positive semi-definite, a covariance
+R positive definite, standard deviations > 0; D, R, range and outputs only for groups of C. Every
+problem is reported at once (one ModelError whose `problems` lists them).
 Continuous models are discretised exactly: [Ad Bd; 0 I] = expm([A B; 0 0] dt), and Van Loan's
 method for Q: expm([[-A, Qc], [0, A^T]] dt) = [[., G12], [0, G22]], Qd = G22^T G12.
 """
@@ -21,7 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from logscan.errors import ModelError
-from logscan.models.base import GroupSpec, Model
+from logscan.models.base import GroupSpec, Model, covariance_problem, raise_problems
 from logscan.models.dispatch import LINEAR_ID
 
 
@@ -106,83 +110,196 @@ class LinearBase(Model):
         return self._discrete(dt)[2].copy()
 
 
-def _matrix(params: dict, key: str, shape: tuple[int | None, int | None], required=True):
-    if key not in params:
-        if required:
-            raise ModelError(f"linear model: parameter {key} is missing")
-        return None
+_KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs")
+_DEFAULT_RANGE = 1e12
+
+
+def _matrix(value, name: str, shape: tuple[int | None, int | None], problems: list[str]) -> np.ndarray | None:
+    """``value`` as a finite 2-D float64 matrix of ``shape`` (None: any size), else None and a
+    problem."""
     try:
-        M = np.atleast_2d(np.asarray(params[key], dtype=np.float64))
+        M = np.atleast_2d(np.asarray(value, dtype=np.float64))
     except (TypeError, ValueError):
-        raise ModelError(f"linear model: parameter {key} is not a numeric matrix") from None
+        problems.append(f"linear model: {name} is not a numeric matrix")
+        return None
+    if M.ndim != 2:
+        problems.append(f"linear model: {name} must be a matrix (an array of rows), got {M.ndim} dimensions")
+        return None
     for want, got, axis in zip(shape, M.shape, ("rows", "columns")):
         if want is not None and want != got:
-            raise ModelError(f"linear model: {key} has {got} {axis}, expected {want}")
+            problems.append(f"linear model: {name} has {got} {axis}, expected {want}")
+            return None
     if not np.all(np.isfinite(M)):
-        raise ModelError(f"linear model: {key} has non-finite entries")
+        problems.append(f"linear model: {name} has non-finite entries")
+        return None
     return M
 
 
-_KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs")
+def _table(params: dict, key: str, groups, problems: list[str]) -> dict:
+    """``params[key]`` as a table group -> value (a bare value belongs to the group ``y`` of a bare
+    C); entries for groups that C does not have are problems."""
+    raw = params.get(key)
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        if groups is not None and "y" not in groups:
+            problems.append(f"linear model: {key} must be a table group -> value (groups: {', '.join(groups)})")
+            return {}
+        raw = {"y": raw}
+    unknown = [g for g in raw if groups is not None and g not in groups]
+    for g in unknown:
+        problems.append(
+            f"linear model: {key} given for group {g!r} but C has no such group (groups: {', '.join(groups)})"
+        )
+    return {g: v for g, v in raw.items() if g not in unknown}
+
+
+def _names(raw, where: str, default: tuple[str, ...], problems: list[str]) -> tuple[str, ...]:
+    """Unique non-empty names, as many as ``default``; else ``default`` and a problem."""
+    if raw is None:
+        return default
+    if not isinstance(raw, (list, tuple)) or not all(isinstance(s, str) and s for s in raw):
+        problems.append(f"linear model: {where} must be an array of names")
+    elif len(raw) != len(default):
+        problems.append(f"linear model: {where} has {len(raw)} names for {len(default)} columns of the matrices")
+    elif len(set(raw)) != len(raw):
+        problems.append(f"linear model: {where} names {sorted(s for s in raw if raw.count(s) > 1)[0]!r} twice")
+    else:
+        return tuple(raw)
+    return default
+
+
+def _noise(value, g: str, m: int, problems: list[str]) -> tuple[np.ndarray, np.ndarray | None]:
+    """(standard deviation per output, covariance matrix or None) of ``R[g]``: standard deviations
+    (> 0, finite; one or m) or an m x m positive-definite covariance."""
+    try:
+        R = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        problems.append(f"linear model: R[{g}] is not numeric (give standard deviations or a covariance matrix)")
+        return np.ones(m), None
+    if R.ndim == 2:
+        issue = covariance_problem(R, f"R[{g}]", definite=True) if R.shape == (m, m) else f"R[{g}] is not {m} x {m}"
+        if issue:
+            problems.append(f"linear model: {issue}")
+            return np.ones(m), None
+        return np.sqrt(np.diag(R)), R
+    std = np.atleast_1d(R)
+    if std.ndim != 1 or std.size not in (1, m):
+        problems.append(f"linear model: R[{g}] gives {std.size} standard deviations for {m} outputs")
+        return np.ones(m), None
+    bad = std[~(np.isfinite(std) & (std > 0))]
+    if bad.size:
+        problems.append(f"linear model: R[{g}] standard deviations must be > 0 and finite, got {bad[0]:g}")
+        return np.ones(m), None
+    return np.broadcast_to(std, (m,)).copy(), None
+
+
+def _range(value, g: str, m: int, problems: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) per output of ``range[g] = [lo, hi]`` (each a number or m numbers, finite, lo < hi)."""
+    try:
+        lo, hi = (np.broadcast_to(np.asarray(v, dtype=np.float64), (m,)) for v in value)
+    except (TypeError, ValueError):
+        problems.append(f"linear model: range[{g}] must be [lo, hi], each a number or {m} numbers")
+        return np.full(m, -_DEFAULT_RANGE), np.full(m, _DEFAULT_RANGE)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
+        problems.append(f"linear model: range[{g}] needs finite lo < hi, got {value!r}")
+    return lo, hi
+
+
+def _timing(params: dict, problems: list[str]) -> tuple[bool, float | None]:
+    """(continuous, dt of discrete matrices or None)."""
+    continuous = params.get("continuous", True)
+    if not isinstance(continuous, (bool, np.bool_)):
+        problems.append(f"linear model: continuous must be true or false, got {continuous!r}")
+        continuous = True
+    dt = params.get("dt")
+    if dt is not None:
+        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not (np.isfinite(dt) and dt > 0):
+            problems.append(f"linear model: dt must be a finite number > 0 (seconds), got {dt!r}")
+            dt = None
+    elif not continuous:
+        problems.append("linear model: discrete matrices need `dt` (their period in s)")
+    return bool(continuous), None if dt is None else float(dt)
+
+
+def _system(params: dict, problems: list[str]):
+    """(A, B, C, D, Q) checked: A square, B with A's rows, C a table of matrices with A's columns
+    (a bare matrix: group ``y``), D per group (rows of C, columns of B), Q positive semi-definite
+    (default 1e-4 I). A part that cannot be read is None (C, D: left out)."""
+    for key in ("A", "B", "C"):
+        if key not in params:
+            problems.append(f"linear model: parameter {key} is missing")
+    A = _matrix(params["A"], "A", (None, None), problems) if "A" in params else None
+    if A is not None and A.shape[0] != A.shape[1]:
+        problems.append(f"linear model: A must be square, got {A.shape[0]} x {A.shape[1]}")
+        A = None
+    n = None if A is None else A.shape[0]
+    B = _matrix(params["B"], "B", (n, None), problems) if "B" in params else None
+    nu = None if B is None else B.shape[1]
+    C = {g: _matrix(v, f"C[{g}]", (None, n), problems) for g, v in _table(params, "C", None, problems).items()}
+    if "C" in params and not C:
+        problems.append("linear model: C has no group")
+    C = {g: c for g, c in C.items() if c is not None}
+    D = {
+        g: _matrix(v, f"D[{g}]", (C[g].shape[0] if g in C else None, nu), problems)
+        for g, v in _table(params, "D", list(C), problems).items()
+    }
+    Q = None
+    if "Q" in params:
+        Q = _matrix(params["Q"], "Q", (n, n), problems)
+        issue = None if Q is None else covariance_problem(Q, "Q", definite=False)
+        if issue:
+            problems.append(f"linear model: {issue}")
+    elif n is not None:
+        Q = 1e-4 * np.eye(n)
+    return A, B, C, {g: d for g, d in D.items() if d is not None}, Q
 
 
 class LinearModel(LinearBase):
+    """A linear model from a profile's matrices; every parameter problem is reported at once."""
+
     name = "linear"
     model_id = LINEAR_ID
 
     def __init__(self, params: dict | None = None):
         super().__init__(params)
         p = self.params
+        problems: list[str] = []
         unknown = sorted(set(p) - set(_KNOWN))
         if unknown:
-            raise ModelError(
-                f"linear model: unknown parameter(s) {', '.join(unknown)}",
-                hint="known parameters: " + ", ".join(_KNOWN),
-            )
-        A = _matrix(p, "A", (None, None))
-        n = A.shape[0]
-        if A.shape != (n, n):
-            raise ModelError(f"linear model: A must be square, got {A.shape}")
-        B = _matrix(p, "B", (n, None))
-        nu = B.shape[1]
-        C_raw = p.get("C")
-        if C_raw is None:
-            raise ModelError("linear model: parameter C is missing")
-        C_tab = C_raw if isinstance(C_raw, dict) else {"y": C_raw}
-        C = {g: _matrix(C_tab, g, (None, n)) for g in C_tab}
-        D_tab = p.get("D") or {}
-        if not isinstance(D_tab, dict):
-            D_tab = {"y": D_tab}
-        D = {g: _matrix(D_tab, g, (C[g].shape[0], nu)) for g in D_tab if g in C}
-        Q = _matrix(p, "Q", (n, n), required=False)
-        Q = 1e-4 * np.eye(n) if Q is None else Q
-        continuous = bool(p.get("continuous", True))
-        dt = p.get("dt")
-        if not continuous and dt is None:
-            raise ModelError("linear model: discrete matrices need `dt` (their period in s)")
-        self.state_names = tuple(p.get("states") or (f"x{i}" for i in range(n)))
-        self.input_names = tuple(p.get("inputs") or (f"u{i}" for i in range(nu)))
-        if len(self.state_names) != n or len(self.input_names) != nu:
-            raise ModelError("linear model: `states`/`inputs` names do not match A and B")
-        outputs = p.get("outputs") or {}
-        R_tab = p.get("R") or {}
-        ranges = p.get("range") or {}
-        groups = {}
+            problems.append(f"linear model: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(_KNOWN)})")
+        A, B, C, D, Q = _system(p, problems)
+        continuous, dt = _timing(p, problems)
+        if A is not None:
+            self.state_names = _names(p.get("states"), "states", tuple(f"x{i}" for i in range(A.shape[0])), problems)
+        if B is not None:
+            self.input_names = _names(p.get("inputs"), "inputs", tuple(f"u{i}" for i in range(B.shape[1])), problems)
+        self.groups, self._R_full = self._group_specs(C, D, problems)
+        raise_problems(problems)
+        self._setup(A, B, C, D, Q, continuous, dt)
+
+    def _group_specs(self, C: dict, D: dict, problems: list[str]) -> tuple[dict[str, GroupSpec], dict]:
+        """GroupSpecs of C's groups (names, noise from R, ranges) and the full R matrices given."""
+        p, groups, R_full = self.params, {}, {}
+        outputs = _table(p, "outputs", list(C), problems)
+        R_tab = _table(p, "R", list(C), problems)
+        ranges = _table(p, "range", list(C), problems)
         for gid, (g, Cg) in enumerate(C.items()):
             m = Cg.shape[0]
-            names = tuple(outputs.get(g) or (f"{g}{i}" for i in range(m)))
-            std = np.ones(m)
-            if g in R_tab:
-                Rg = np.atleast_1d(np.asarray(R_tab[g], dtype=np.float64))
-                std = np.sqrt(np.diag(Rg)) if Rg.ndim == 2 else np.broadcast_to(Rg, (m,))
-            lo, hi = ranges.get(g, (-1e12, 1e12))
+            names = _names(outputs.get(g), f"outputs[{g}]", tuple(f"{g}{i}" for i in range(m)), problems)
+            std, full = _noise(R_tab[g], g, m, problems) if g in R_tab else (np.ones(m), None)
+            if full is not None:
+                R_full[g] = full
+            lo, hi = (
+                _range(ranges[g], g, m, problems)
+                if g in ranges
+                else (np.full(m, -_DEFAULT_RANGE), np.full(m, _DEFAULT_RANGE))
+            )
             Dg = D.get(g)
-            direct = []
-            gains = []
+            direct, gains = [], []
             for row_i, row in enumerate(Cg):
                 nz = np.flatnonzero(row)
-                no_feedthrough = Dg is None or not np.any(Dg[row_i])
-                ok = nz.size == 1 and no_feedthrough
+                ok = nz.size == 1 and (Dg is None or not np.any(Dg[row_i]))
                 direct.append(int(nz[0]) if ok else -1)
                 gains.append(float(row[nz[0]]) if ok else 1.0)
             groups[g] = GroupSpec(
@@ -190,14 +307,12 @@ class LinearModel(LinearBase):
                 gid,
                 names,
                 tuple(float(s) for s in std),
-                tuple(np.broadcast_to(np.asarray(lo, dtype=float), (m,)).tolist()),
-                tuple(np.broadcast_to(np.asarray(hi, dtype=float), (m,)).tolist()),
+                tuple(lo.tolist()),
+                tuple(hi.tolist()),
                 direct_states=tuple(direct),
                 direct_gains=tuple(gains),
             )
-        self.groups = groups
-        self._R_full = {g: np.asarray(R_tab[g], dtype=np.float64) for g in R_tab if np.ndim(R_tab[g]) == 2}
-        self._setup(A, B, C, D, Q, continuous, None if dt is None else float(dt))
+        return groups, R_full
 
     def default_R(self, group: str) -> np.ndarray:
         if group in self._R_full:

@@ -104,9 +104,10 @@ class Quadcopter(Model):
         mode = self.p["inputs"]
         if mode not in ("wrench", "motors"):
             raise ModelError(f"quadcopter: inputs = {mode!r} is not known", hint='use "wrench" or "motors"')
-        for key in ("mass", "arm", "Ixx", "Iyy", "Izz", "kT"):
-            if self.p[key] <= 0:
-                raise ModelError(f"quadcopter: parameter {key} must be > 0 (got {self.p[key]})")
+        self._check_signs(
+            positive=("mass", "arm", "Ixx", "Iyy", "Izz", "kT", "b_tau"),
+            non_negative=("g", "drag", "q_accel", "q_angacc"),
+        )
         self.input_names = _MOTOR_INPUTS if mode == "motors" else _WRENCH_INPUTS
         self._pvec = np.array(
             [

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.errors import ModelError
 from logscan.models.base import GroupSpec, Model
 from logscan.models.dispatch import STEER_BY_WIRE_ID
 
@@ -83,9 +82,8 @@ class SteerByWire(Model):
     def __init__(self, params: dict | None = None):
         super().__init__(params)
         self.p = self._merge_params(DEFAULTS)
-        for key in _ORDER:
-            if key not in ("lc", "lp", "Fs") and self.p[key] <= 0:
-                raise ModelError(f"steer_by_wire: parameter {key} must be > 0 (got {self.p[key]})")
+        non_negative = ("lc", "lp", "Fs", "q_torque", "q_beta", "q_gamma")
+        self._check_signs(positive=[k for k in _ORDER if k not in non_negative], non_negative=non_negative)
         self._pvec = np.array([self.p[k] for k in _ORDER], dtype=np.float64)
 
     def param_vector(self, dt: float | None = None) -> np.ndarray:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from logscan.profiles.problems import is_number, plural, suggest
-from logscan.profiles.schema import ModelFacts, Profile
+from logscan.profiles.schema import MeasurementSpec, ModelFacts, Profile, VehicleSpec
 
 
 def _registry():
@@ -13,22 +13,29 @@ def _registry():
     return get_model, tuple(MODEL_NAMES)
 
 
+def build_model(vehicle: VehicleSpec, problems: list[str]):
+    """The registry's model named in ``[vehicle]`` built from its params, or None with problems
+    (every problem the model found in its parameters)."""
+    get_model, names = _registry()
+    name = vehicle.model
+    if name not in names:
+        problems.append(
+            f"[vehicle] model: unknown model {name!r}{suggest(name, names)} (known models: {', '.join(sorted(names))})"
+        )
+        return None
+    try:
+        return get_model(name, vehicle.params)
+    except Exception as exc:  # noqa: BLE001 - any failure to build is a profile problem
+        found = getattr(exc, "problems", None) or [getattr(exc, "message", None) or str(exc)]
+        problems.extend(f"[vehicle] params: model {name!r} cannot be built: {msg}" for msg in found)
+        return None
+
+
 def check_against_model(profile: Profile, model, problems: list[str]) -> None:
-    """Bind inputs and check group names and sizes against the model; append problems."""
+    """Bind inputs and check group names, sizes and noise against the model; append problems."""
     if model is None:
-        get_model, names = _registry()
-        name = profile.vehicle.model
-        if name not in names:
-            problems.append(
-                f"[vehicle] model: unknown model {name!r}{suggest(name, names)} "
-                f"(known models: {', '.join(sorted(names))})"
-            )
-            return
-        try:
-            model = get_model(name, profile.vehicle.params)
-        except Exception as exc:  # noqa: BLE001 - any failure to build is a profile problem
-            msg = getattr(exc, "message", None) or str(exc)
-            problems.append(f"[vehicle] params: model {name!r} cannot be built: {msg}")
+        model = build_model(profile.vehicle, problems)
+        if model is None:
             return
     label = f"model {profile.vehicle.model!r}"
     params = profile.vehicle.params
@@ -41,7 +48,6 @@ def check_against_model(profile: Profile, model, problems: list[str]) -> None:
             )
     input_names = tuple(model.input_names)
     _bind_inputs(profile, input_names, label, problems)
-
     groups = dict(model.groups)
     for g in profile.measurements.values():
         where = f"[measurements.{g.name}]"
@@ -51,12 +57,15 @@ def check_against_model(profile: Profile, model, problems: list[str]) -> None:
                 f"{where}: {label} has no measurement group {g.name!r}"
                 f"{suggest(g.name, groups)} (groups: {', '.join(groups)})"
             )
-            continue
-        if len(g.channels) != spec.size:
+        elif len(g.channels) != spec.size:
             problems.append(
                 f"{where} channels: {plural(len(g.channels), 'channel')} but {label} group {g.name!r} has "
                 f"{spec.size} outputs ({', '.join(spec.outputs)})"
             )
+        else:
+            _check_noise_in_range(g, spec, problems)
+    if not problems and hasattr(model, "covariance_problems"):
+        problems.extend(f"[vehicle] params: {p}" for p in model.covariance_problems(1.0 / profile.vehicle.rate_hz))
     if not problems:
         profile.model_facts = ModelFacts(
             input_names=input_names,
@@ -64,6 +73,25 @@ def check_against_model(profile: Profile, model, problems: list[str]) -> None:
             group_sizes={name: spec.size for name, spec in groups.items()},
         )
         _check_onboard_sizes(profile, problems)
+
+
+def _check_noise_in_range(group: MeasurementSpec, spec, problems: list[str]) -> None:
+    """A group's noise std (the profile's, else the model's) must not exceed its range span (the
+    profile's range, else the model's): noise wider than every possible value makes the filter
+    ignore the group, so no fault of it could be seen."""
+    noise = group.noise_std if group.noise_std is not None else spec.noise_std
+    lo = group.range_lo if group.range_lo is not None else spec.range_lo
+    hi = group.range_hi if group.range_hi is not None else spec.range_hi
+    for i, channel in enumerate(group.channels):
+        span = hi[i] - lo[i]
+        if noise[i] > span:
+            whose = "" if group.noise_std is not None else f"the model's default for {group.name!r}, "
+            problems.append(
+                f"[measurements.{group.name}] noise_std: {noise[i]:g} ({whose}{channel!r}) exceeds the group's "
+                f"range span {span:g} (range_lo {lo[i]:g} to range_hi {hi[i]:g}): the filter would ignore the group "
+                "and hide its faults; give the sensor's real noise"
+            )
+            return
 
 
 def _check_onboard_sizes(profile: Profile, problems: list[str]) -> None:

@@ -9,12 +9,15 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from logscan.profiles.bind import bind_inputs_without_model, check_against_model
+from logscan.profiles.bind import bind_inputs_without_model, build_model, check_against_model
 from logscan.profiles.problems import is_number, profile_error, single_error, type_name
 from logscan.profiles.schema import (
+    ALARM_KEYS,
     GROUP_KEYS,
     GROUP_STALE_PERIODS,
     INPUT_STALE_STEPS,
+    MAX_ALARM_DURATION_S,
+    MAX_ALARM_PERSIST,
     MODE_KEYS,
     MODE_STALE_S,
     ONBOARD_KEYS,
@@ -33,6 +36,9 @@ from logscan.profiles.schema import (
     SensorSpec,
     VehicleSpec,
 )
+from logscan.results import AlarmPolicy
+
+_STD_LIMITS = (1e-150, 1e150)  # a noise std whose square (the variance) is a normal float
 
 
 def load_profile(path: str | os.PathLike, *, model=None) -> Profile:
@@ -76,6 +82,8 @@ def parse_profile(text: str, source: str = "<embedded>", *, model=None, check_mo
     profile = checker.profile(data, source)
     if profile is not None and check_model and not checker.problems:
         check_against_model(profile, model, checker.problems)
+    elif checker.vehicle_spec is not None and check_model and model is None:
+        build_model(checker.vehicle_spec, checker.problems)  # its parameter problems too, all at once
     elif profile is not None and not checker.problems:
         bind_inputs_without_model(profile)
     if checker.problems:
@@ -97,6 +105,7 @@ class _Checker:
 
     def __init__(self) -> None:
         self.problems: list[str] = []
+        self.vehicle_spec: VehicleSpec | None = None  # [vehicle], when it is valid
 
     def add(self, where: str, what: str) -> None:
         self.problems.append(f"{where}: {what}" if where else what)
@@ -118,7 +127,11 @@ class _Checker:
             if key not in data:
                 self.add(where, f"missing required key {key!r}")
 
-    def number(self, data: dict, key: str, where: str, *, minimum: float, strict: bool, allow_inf=False):
+    def number(
+        self, data: dict, key: str, where: str, *, minimum: float, strict: bool, allow_inf=False, maximum=math.inf
+    ):
+        """``data[key]`` as a finite float (``inf`` too with ``allow_inf``) above ``minimum`` (or
+        equal, unless ``strict``) and at most ``maximum``; None when absent or with a problem."""
         if key not in data:
             return None
         value = data[key]
@@ -132,6 +145,9 @@ class _Checker:
         if (strict and value <= minimum) or (not strict and value < minimum):
             op = ">" if strict else ">="
             self.add(f"{where} {key}", f"must be {op} {minimum:g}, got {value:g}")
+            return None
+        if value > maximum:
+            self.add(f"{where} {key}", f"must be <= {maximum:g}, got {value:g}")
             return None
         return value
 
@@ -173,8 +189,8 @@ class _Checker:
             if bad:
                 self.add(f"{where} {key}", f"must be > 0 and finite, got {bad[0]:g}")
                 return None
-        elif any(math.isnan(v) for v in out):
-            self.add(f"{where} {key}", "must not be nan")
+        elif not all(math.isfinite(v) for v in out):
+            self.add(f"{where} {key}", f"must be finite, got {next(v for v in out if not math.isfinite(v))!r}")
             return None
         return out
 
@@ -184,13 +200,14 @@ class _Checker:
         for key in ("name", "description"):
             if key in data and not isinstance(data[key], str):
                 self.add(key, f"expected a string, got {type_name(data[key])}")
-        vehicle = self.vehicle(data["vehicle"]) if "vehicle" in data else None
+        vehicle = self.vehicle_spec = self.vehicle(data["vehicle"]) if "vehicle" in data else None
         inputs = self.inputs(data.get("inputs", {}), vehicle)
         measurements = self.measurements(data["measurements"]) if "measurements" in data else {}
         mode = self.mode(data["mode"]) if "mode" in data else None
         redundant = self.redundant(data["redundant"]) if "redundant" in data else {}
         onboard = self.onboard(data["onboard"]) if "onboard" in data else None
         detectors = self.detectors(data["detectors"]) if "detectors" in data else {}
+        alarm_policy = self.alarms(data["alarms"]) if "alarms" in data else None
         if vehicle is None or inputs is None or self.problems:
             return None
         return Profile(
@@ -201,6 +218,7 @@ class _Checker:
             redundant=redundant,
             onboard=onboard,
             detectors=detectors,
+            alarm_policy=alarm_policy,
             name=data.get("name", ""),
             description=data.get("description", ""),
             source=source,
@@ -245,7 +263,7 @@ class _Checker:
                     f"expected a channel name or an array of them, got {type_name(value)}",
                 )
                 ok = False
-        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
         if "stale_s" in data and stale is None:
             ok = False
         if stale is None:
@@ -273,8 +291,15 @@ class _Checker:
         self.keys(data, where, GROUP_KEYS, required=("channels", "rate_hz"))
         channels = self.string_list(data["channels"], f"{where} channels") if "channels" in data else None
         rate = self.number(data, "rate_hz", where, minimum=0, strict=True)
-        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
         noise = self.float_list(data, "noise_std", where, positive=True)
+        bad = [v for v in noise or () if not _STD_LIMITS[0] <= v <= _STD_LIMITS[1]]
+        if bad:
+            lo, hi = _STD_LIMITS
+            self.add(
+                f"{where} noise_std", f"must be between {lo:g} and {hi:g} (its square is the variance), got {bad[0]:g}"
+            )
+            noise = None
         lo = self.float_list(data, "range_lo", where, positive=False)
         hi = self.float_list(data, "range_hi", where, positive=False)
         if channels is None or rate is None:
@@ -314,7 +339,7 @@ class _Checker:
             return None
         self.keys(data, where, MODE_KEYS, required=("channel",))
         channel = self.string(data, "channel", where)
-        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
         if channel is None or ("stale_s" in data and stale is None):
             return None
         return ModeSpec(channel, MODE_STALE_S if stale is None else stale)
@@ -329,7 +354,7 @@ class _Checker:
                 continue
             self.keys(t, where, REDUNDANT_KEYS, required=("sensors",))
             rate = self.number(t, "rate_hz", where, minimum=0, strict=True)
-            stale = self.number(t, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+            stale = self.number(t, "stale_s", where, minimum=0, strict=True, allow_inf=True)
             sensors = self.sensors(t.get("sensors"), f"{where} sensors") if "sensors" in t else None
             if sensors is None or ("rate_hz" in t and rate is None) or ("stale_s" in t and stale is None):
                 continue
@@ -357,9 +382,6 @@ class _Checker:
             self.keys(value, f"{where}.{name}", SENSOR_KEYS, required=("channel",))
             channel = self.string(value, "channel", f"{where}.{name}")
             poly = self.float_list(value, "poly", f"{where}.{name}", positive=False)
-            if poly is not None and not all(math.isfinite(c) for c in poly):
-                self.add(f"{where}.{name} poly", "coefficients must be finite")
-                poly = None
             if channel is not None:
                 out[name] = SensorSpec(name, channel, poly)
         return out if len(out) == len(data) else None
@@ -389,12 +411,31 @@ class _Checker:
                     "expected a channel prefix, an array of channels or a table state -> channel, "
                     f"got {type_name(value)}",
                 )
-        stale = self.number(data, "stale_s", where, minimum=0, strict=False, allow_inf=True)
+        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
         return OnboardSpec(
             state=values.get("state"),
             variance=values.get("variance"),
             stale_s=ONBOARD_STALE_S if stale is None else stale,
         )
+
+    def alarms(self, raw: Any) -> AlarmPolicy | None:
+        """`[alarms]`: floors under every detector's alarm options (see `AlarmPolicy`)."""
+        where = "[alarms]"
+        data = self.table(raw, where)
+        if data is None:
+            return None
+        self.keys(data, where, ALARM_KEYS)
+        n_persist = data.get("n_persist", 1)
+        if isinstance(n_persist, bool) or not isinstance(n_persist, int):
+            self.add(f"{where} n_persist", f"expected an integer, got {type_name(n_persist)}")
+            n_persist = None
+        elif not 1 <= n_persist <= MAX_ALARM_PERSIST:
+            self.add(f"{where} n_persist", f"must be between 1 and {MAX_ALARM_PERSIST}, got {n_persist}")
+            n_persist = None
+        duration = self.number(data, "min_duration_s", where, minimum=0, strict=False, maximum=MAX_ALARM_DURATION_S)
+        if n_persist is None or ("min_duration_s" in data and duration is None):
+            return None
+        return AlarmPolicy(n_persist=n_persist, min_duration_s=0.0 if duration is None else duration)
 
     def detectors(self, raw: Any) -> dict[str, DetectorSpec]:
         data = self.table(raw, "[detectors]")

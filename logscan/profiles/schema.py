@@ -23,6 +23,7 @@ TOP_KEYS = (
     "redundant",
     "onboard",
     "detectors",
+    "alarms",
 )
 VEHICLE_KEYS = ("model", "rate_hz", "params")
 GROUP_KEYS = ("channels", "rate_hz", "stale_s", "noise_std", "range_lo", "range_hi")
@@ -30,6 +31,11 @@ MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
 SENSOR_KEYS = ("channel", "poly")
 ONBOARD_KEYS = ("state", "variance", "stale_s")
+ALARM_KEYS = ("n_persist", "min_duration_s")
+#: Upper bounds of the [alarms] floors: they are for one- or two-sample transients; longer floors
+#: would hide real faults (documented in docs/profiles.md).
+MAX_ALARM_PERSIST = 1000
+MAX_ALARM_DURATION_S = 10.0
 
 #: Staleness defaults (seconds unless said otherwise), documented in docs/profiles.md.
 GROUP_STALE_PERIODS = 2.5  # a measurement group holds for 2.5 of its own sample periods
@@ -292,6 +298,11 @@ class Profile:
             out["onboard"] = table
         if self.detectors:
             out["detectors"] = {d.name: {"enabled": d.enabled, **d.settings} for d in self.detectors.values()}
+        if self.alarm_policy is not None:
+            out["alarms"] = {
+                "n_persist": self.alarm_policy.n_persist,
+                "min_duration_s": self.alarm_policy.min_duration_s,
+            }
         return out
 
     def to_toml(self) -> str:
