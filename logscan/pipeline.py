@@ -189,16 +189,20 @@ def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, pro
 
 
 def detector_failure(name: str, exc: BaseException):
-    """The line and exit code of a detector that raised: its own error, or a bug (exit 3)."""
+    """The line and exit code of a detector that raised: its own error (its exit code), or a bug
+    in that detector (exit 3), blamed on the plugin package when it comes from one."""
     from logscan.analysis import DetectorFailure
+    from logscan.detectors.registry import default_registry
     from logscan.errors import ExitCode
 
+    origin = default_registry().origin(name) or "not registered"
     if isinstance(exc, LogscanError):
-        return DetectorFailure(name, f"detector {name!r} failed: {exc.one_line()}", int(exc.exit_code))
+        return DetectorFailure(name, f"detector {name!r} ({origin}) failed: {exc.one_line()}", int(exc.exit_code))
+    owner = "logscan" if origin == "built-in" else f"the {origin}"
     return DetectorFailure(
         name,
-        f"detector {name!r} failed: {type(exc).__name__}: {exc} (a bug in that detector; its results are "
-        "missing, the other detectors ran)",
+        f"detector {name!r} ({origin}) failed: {type(exc).__name__}: {exc} (a bug in {owner}; that "
+        "detector's results are missing, the other detectors ran)",
         int(ExitCode.INTERNAL),
     )
 

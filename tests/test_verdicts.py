@@ -162,7 +162,7 @@ def test_a_failing_detector_is_named_and_the_others_are_kept(cli, tmp_path, monk
     report, out = tmp_path / "r.html", tmp_path / "r.json"
     result = cli("analyze", BIAS, "-d", "exploding", "-d", "nis", "-o", report, "--json", out)
     assert result.exit_code == 3
-    assert "detector 'exploding' failed: ZeroDivisionError: boom" in result.stdout
+    assert "detector 'exploding' (built-in) failed: ZeroDivisionError: boom (a bug in logscan;" in result.stdout
     log = json.loads(out.read_text())["logs"][0]
     assert [d["detector"] for d in log["detectors"]] == ["nis"] and log["n_alarms"] > 0
     assert log["failed_detectors"][0]["detector"] == "exploding" and log["exit_code"] == 3
