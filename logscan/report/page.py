@@ -127,7 +127,7 @@ def _number(value: Any, digits: int = 4) -> str:
 
 def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> list[dict]:
     alarms = flat_alarms(report.results)
-    incident_of = {id(alarm): i for i, incident in enumerate(report.incidents) for alarm in incident.alarms}
+    incident_of = {id(alarm): i for i, incident in enumerate(report.incidents, 1) for alarm in incident.alarms}
     matches = report.matches
     if has_truth and matches is None and alarms:
         matches = report_matches(report.results, report.truth_events)
@@ -166,7 +166,7 @@ def _incident_rows(incidents: Sequence[Incident]) -> list[dict]:
     return [
         {"index": i, "headline": inc.headline, "start": f"{inc.start:.3f}", "end": f"{inc.end:.3f}",
          "n_alarms": len(inc.alarms), "checks": ", ".join(sorted({a.signal for a in inc.alarms}))}
-        for i, inc in enumerate(incidents)
+        for i, inc in enumerate(incidents, 1)
     ]  # fmt: skip
 
 
