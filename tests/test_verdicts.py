@@ -182,3 +182,11 @@ def test_a_window_longer_than_the_log_cannot_hide_a_fault(cli, tmp_path):
     result = cli("analyze", BIAS, "--profile", profile, "-d", "nis", "--no-report")
     assert result.exit_code == 2
     assert "nis: nis.accel was never judged (its warm-up or window covers the whole log)" in result.stdout
+
+
+def test_the_report_lists_the_incident_before_the_alarms_behind_it(cli, tmp_path):
+    report = tmp_path / "bias.html"
+    assert cli("analyze", BIAS, "-o", report).exit_code == 1
+    page = report.read_text()
+    assert page.index('id="incident-table"') < page.index('id="alarm-table"')
+    assert "accelerometer inconsistent 30.00-" in page and "Verdict: 5 alarms in 1 incident" in page
