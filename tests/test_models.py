@@ -1,5 +1,6 @@
 """Vehicle models, their own physics: hover, mixer, DC-motor time constants, exact
-discretisation, the quadcopter's block RK4 Jacobian, registry errors. The checks every model
+discretisation, the quadcopter's block RK4 Jacobian, registry errors, parameter checks (every
+problem at once; Q positive semi-definite, R positive definite). The checks every model
 passes (Jacobians, shapes, h/H consistency, parameter round trip) are in test_model_contract.py."""
 
 from __future__ import annotations
@@ -118,3 +119,109 @@ def test_quadcopter_block_rk4_jacobian_equals_generic_path_and_finite_difference
         F_num = central_jacobian(lambda xx: dispatch.f_disc(model.model_id, p, xx, u, dt), x)
         scale = max(1.0, np.abs(F_blk).max())
         np.testing.assert_allclose(F_blk, F_num, atol=1e-6 * scale, rtol=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------
+# Parameter checks: every problem at once, covariances positive (semi-)definite
+# ------------------------------------------------------------------------------------------------
+
+LINEAR_OK = {
+    "A": [[0.0, 1.0], [0.0, -0.5]],
+    "B": [[0.0], [1.0]],
+    "C": {"pos": [[1.0, 0.0]], "both": [[1.0, 0.0], [0.0, 1.0]]},
+}
+
+BAD_LINEAR = [
+    ({"R": {"pos": float("nan")}}, "R[pos] standard deviations must be > 0 and finite, got nan"),
+    ({"R": {"pos": [0.0]}}, "R[pos] standard deviations must be > 0 and finite, got 0"),
+    ({"R": {"pos": [[-1.0]]}}, "R[pos] is not positive definite (smallest eigenvalue -1)"),
+    ({"R": {"both": [[1.0, 2.0], [2.0, 1.0]]}}, "R[both] is not positive definite (smallest eigenvalue -1)"),
+    ({"R": {"both": [[1.0, 0.5], [0.0, 1.0]]}}, "R[both] is not symmetric"),
+    ({"R": {"both": [[1.0]]}}, "R[both] is not 2 x 2"),
+    ({"R": {"both": [0.1, 0.1, 0.1]}}, "R[both] gives 3 standard deviations for 2 outputs"),
+    ({"R": {"gps": [0.1]}}, "R given for group 'gps' but C has no such group (groups: pos, both)"),
+    ({"R": [[0.1]]}, "R must be a table group -> value (groups: pos, both)"),
+    ({"Q": [[1.0, 0.0], [0.0, -1e-3]]}, "Q is not positive semi-definite (smallest eigenvalue -0.001)"),
+    ({"Q": [[1.0, 1.0], [0.0, 1.0]]}, "Q is not symmetric"),
+    ({"Q": [[1.0, 0.0], [0.0, float("inf")]]}, "Q has non-finite entries"),
+    ({"Q": [[1.0]]}, "Q has 1 rows, expected 2"),
+    ({"D": {"vel": [[1.0]]}}, "D given for group 'vel' but C has no such group (groups: pos, both)"),
+    ({"range": {"pos": [1.0, -1.0]}}, "range[pos] needs finite lo < hi, got [1.0, -1.0]"),
+    ({"range": {"pos": [float("-inf"), 1.0]}}, "range[pos] needs finite lo < hi"),
+    ({"range": {"pos": 5.0}}, "range[pos] must be [lo, hi], each a number or 1 numbers"),
+    ({"states": ["p", "p"]}, "states names 'p' twice"),
+    ({"states": ["p"]}, "states has 1 names for 2 columns of the matrices"),
+    ({"inputs": ["f", 3]}, "inputs must be an array of names"),
+    ({"outputs": {"both": ["a", "a"]}}, "outputs[both] names 'a' twice"),
+    ({"dt": float("nan")}, "dt must be a finite number > 0 (seconds), got nan"),
+    ({"dt": 0}, "dt must be a finite number > 0 (seconds), got 0"),
+    ({"continuous": "yes"}, "continuous must be true or false, got 'yes'"),
+    ({"continuous": False}, "discrete matrices need `dt` (their period in s)"),
+    ({"A": [[0.0, 1.0]]}, "A must be square, got 1 x 2"),
+    ({"C": {}}, "C has no group"),
+    ({"C": {"pos": [[1.0, 0.0, 0.0]]}}, "C[pos] has 3 columns, expected 2"),
+]
+
+
+@pytest.mark.parametrize("change, message", BAD_LINEAR, ids=[m[:40] for _, m in BAD_LINEAR])
+def test_linear_model_refuses_a_bad_parameter(change, message):
+    with pytest.raises(ModelError) as err:
+        get_model("linear", {**LINEAR_OK, **change})
+    assert err.value.problems[0].startswith(f"linear model: {message}")
+
+
+def test_linear_model_lists_every_problem_at_once():
+    params = {**LINEAR_OK, "Q": [[1.0, 0.0], [0.0, -1.0]], "dt": -1, "R": {"pos": [[-1.0]]}, "inputs": ["a", "b"]}
+    with pytest.raises(ModelError) as err:
+        get_model("linear", params)
+    assert len(err.value.problems) == 4
+    assert err.value.message.endswith("(3 more)")
+
+
+def test_linear_model_accepts_a_positive_definite_covariance_and_std():
+    model = get_model("linear", {**LINEAR_OK, "R": {"both": [[0.04, 0.01], [0.01, 0.09]], "pos": 0.3}})
+    np.testing.assert_allclose(model.default_R("both"), [[0.04, 0.01], [0.01, 0.09]])
+    np.testing.assert_allclose(model.default_R("pos"), [[0.09]])
+    assert model.covariance_problems(0.01) == []
+
+
+def test_covariance_tolerances_are_relative_to_the_matrix_scale():
+    from logscan.models.base import covariance_problem
+
+    tiny = 1e-20 * np.array([[1.0, 1.0], [1.0, 1.0 + 1e-15]])  # PSD up to rounding, at any scale
+    assert covariance_problem(tiny, "Q", definite=False) is None
+    assert covariance_problem(1e20 * tiny, "Q", definite=False) is None
+    assert "not positive definite" in covariance_problem(tiny, "R", definite=True)
+    assert covariance_problem(np.diag([1e-20, 2e-20]), "R", definite=True) is None
+    assert "not positive semi-definite" in covariance_problem(np.diag([1e-20, -1e-25]), "Q", definite=False)
+    assert "not positive definite" in covariance_problem(np.zeros((2, 2)), "R", definite=True)
+    assert "square" in covariance_problem(np.zeros((2, 3)), "Q", definite=False)
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_default_noise_of_every_model_is_a_valid_covariance(name):
+    params = LINEAR_OK if name == "linear" else None
+    assert get_model(name, params).covariance_problems(0.01) == []
+
+
+def test_physical_parameters_are_checked_together():
+    with pytest.raises(ModelError) as err:
+        get_model("quadcopter", {"mass": 0.0, "drag": -0.1, "q_accel": float("nan"), "Izz": "heavy"})
+    assert err.value.problems == [
+        "model 'quadcopter': parameter q_accel = nan is not finite",
+        "model 'quadcopter': parameter Izz = 'heavy' is not a number",
+    ]
+    with pytest.raises(ModelError) as err:
+        get_model("quadcopter", {"mass": 0.0, "drag": -0.1})
+    assert err.value.problems == [
+        "quadcopter: parameter mass must be > 0 (got 0.0)",
+        "quadcopter: parameter drag must be >= 0 (got -0.1)",
+    ]
+    with pytest.raises(ModelError, match="q_gamma must be >= 0"):
+        get_model("steer_by_wire", {"q_gamma": -1.0})
+    with pytest.raises(ModelError, match="q_torque must be >= 0"):
+        get_model("dc_motor", {"q_torque": -1.0})
+    # finite but absurd: the process noise overflows, the covariance check names it
+    assert get_model("quadcopter", {"q_accel": 1e200}).covariance_problems(0.01) == [
+        "model 'quadcopter': process noise Q at dt = 0.01 s has non-finite entries"
+    ]

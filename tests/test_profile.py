@@ -245,6 +245,54 @@ BROKEN = [
         "[detectors.nis] enabled: expected true or false, got string 'yes'",
     ),
     (mutated("detectors", {"nis": 3}), "[detectors.nis]: expected a table, got number 3"),
+    # values that would hide faults
+    (mutated("measurements.accel.stale_s", 0), "[measurements.accel] stale_s: must be > 0, got 0"),
+    (
+        mutated("measurements.accel.noise_std", 1e300),
+        "[measurements.accel] noise_std: 1e+300 would hide every fault of the group (at most 1e+150)",
+    ),
+    (
+        mutated("measurements.accel.noise_std", [0.1, 1e-200, 0.1]),
+        "[measurements.accel] noise_std: 1e-200 is too small: its square underflows (at least 1e-150)",
+    ),
+    (
+        mutated("measurements.accel.noise_std", [0.1, 400.0, 0.1]),
+        "[measurements.accel] noise_std: 400 ('/imu/accel/y') exceeds the group's range span 320 "
+        "(range_lo -160 to range_hi 160): the filter would ignore the group and hide its faults; "
+        "give the sensor's real noise",
+    ),
+    (
+        mutated("measurements.accel", {**QUAD["measurements"]["accel"], "range_lo": -0.01, "range_hi": 0.01}),
+        "[measurements.accel] noise_std: 0.1 ('/imu/accel/x') exceeds the group's range span 0.02 "
+        "(range_lo -0.01 to range_hi 0.01): the filter would ignore the group and hide its faults; "
+        "give the sensor's real noise",
+    ),
+    (
+        mutated("measurements.position", {**QUAD["measurements"]["position"], "range_lo": -0.2, "range_hi": 0.2}),
+        "[measurements.position] noise_std: 0.5 (the model's default for 'position', '/gps/position/x') exceeds "
+        "the group's range span 0.4 (range_lo -0.2 to range_hi 0.2): the filter would ignore the group "
+        "and hide its faults; give the sensor's real noise",
+    ),
+    (mutated("measurements.accel.range_lo", float("-inf")), "[measurements.accel] range_lo: must be finite, got -inf"),
+    (mutated("measurements.accel.range_hi", float("nan")), "[measurements.accel] range_hi: must be finite, got nan"),
+    (
+        mutated("redundant", {"alt": {"sensors": {"a": "/a", "b": {"channel": "/b", "poly": [0.0, float("inf")]}}}}),
+        "[redundant.alt] sensors.b poly: must be finite, got inf",
+    ),
+    (
+        mutated("vehicle.params", {"q_accel": -0.2}),
+        "[vehicle] params: model 'quadcopter' cannot be built: quadcopter: parameter q_accel must be >= 0 (got -0.2)",
+    ),
+    (
+        mutated("vehicle.params", {"q_accel": 1e200}),
+        "[vehicle] params: model 'quadcopter': process noise Q at dt = 0.01 s has non-finite entries",
+    ),
+    (mutated("alarms", {"n_persist": 0}), "[alarms] n_persist: must be between 1 and 1000, got 0"),
+    (mutated("alarms", {"n_persist": 2.0}), "[alarms] n_persist: expected an integer, got number 2.0"),
+    (mutated("alarms", {"min_duration_s": -0.1}), "[alarms] min_duration_s: must be >= 0, got -0.1"),
+    (mutated("alarms", {"min_duration_s": 3600}), "[alarms] min_duration_s: must be <= 10, got 3600"),
+    (mutated("alarms", {"persist": 3}), "[alarms]: unknown key 'persist' (did you mean 'n_persist'?)"),
+    (mutated("alarms", 3), "[alarms]: expected a table, got number 3"),
 ]
 
 
@@ -269,6 +317,55 @@ def test_all_problems_are_collected_in_one_error():
     line = err.one_line()
     assert line.startswith("flight.toml: invalid profile: [vehicle] rate_hz: must be > 0, got 0 (2 more)")
     assert "\n" not in line
+
+
+def test_model_parameter_problems_come_with_the_structure_problems():
+    data = mutated("measurements.accel.stale_s", -1)
+    data["vehicle"]["params"] = {"mass": -1.0, "q_angacc": -1.0, "inputs": "wrench"}
+    assert problems_of(data) == [
+        "[measurements.accel] stale_s: must be > 0, got -1",
+        "[vehicle] params: model 'quadcopter' cannot be built: quadcopter: parameter mass must be > 0 (got -1.0)",
+        "[vehicle] params: model 'quadcopter' cannot be built: quadcopter: parameter q_angacc must be >= 0 (got -1.0)",
+    ]
+
+
+def test_every_problem_of_a_linear_model_is_listed():
+    data = {
+        "vehicle": {
+            "model": "linear",
+            "rate_hz": 100,
+            "params": {
+                "A": [[0.0, 1.0], [0.0, 0.0]],
+                "B": [[0.0], [1.0]],
+                "C": {"pos": [[1.0, 0.0]]},
+                "Q": [[1.0, 0.0], [0.0, -1.0]],
+                "R": {"pos": [[-1.0]], "vel": [0.1]},
+                "states": ["p", "p"],
+            },
+        },
+        "inputs": {"u0": "/u"},
+        "measurements": {"pos": {"channels": ["/pos"], "rate_hz": 50}},
+    }
+    prefix = "[vehicle] params: model 'linear' cannot be built: linear model: "
+    assert problems_of(data) == [
+        prefix + "Q is not positive semi-definite (smallest eigenvalue -1)",
+        prefix + "states names 'p' twice",
+        prefix + "R given for group 'vel' but C has no such group (groups: pos)",
+        prefix + "R[pos] is not positive definite (smallest eigenvalue -1)",
+    ]
+
+
+def test_alarms_table_becomes_the_alarm_policy_and_round_trips():
+    from logscan.results import AlarmPolicy
+
+    assert parse_profile(dumps_toml(QUAD)).alarm_policy is None
+    p = parse_profile(dumps_toml(mutated("alarms", {"n_persist": 3, "min_duration_s": 0.05})))
+    assert p.alarm_policy == AlarmPolicy(n_persist=3, min_duration_s=0.05)
+    assert "\n[alarms]\nn_persist = 3\nmin_duration_s = 0.05\n" in p.to_toml()
+    assert parse_profile(p.to_toml()) == p
+    only_duration = parse_profile(dumps_toml(mutated("alarms", {"min_duration_s": 1})))
+    assert only_duration.alarm_policy == AlarmPolicy(n_persist=1, min_duration_s=1.0)
+    assert parse_profile(dumps_toml(mutated("alarms", {}))).alarm_policy == AlarmPolicy()
 
 
 def test_invalid_toml_names_the_file_and_line(tmp_path):
@@ -388,6 +485,7 @@ def rich_profile_dict() -> dict:
         }
     }
     data["onboard"] = {"state": {"x": "/ekf/x", "y": "/ekf/y"}, "variance": "/ekf/var", "stale_s": 0.2}
+    data["alarms"] = {"n_persist": 2, "min_duration_s": 0.03}
     data["detectors"] = {
         "encoded_ekf": {"rho": 4.1, "window_s": 2.0, "variant": "adaptive"},
         "atfm": {"enabled": False, "group": {"left": "/l", "right": "/r"}, "windows": [25, 50]},

@@ -292,14 +292,7 @@ class _Checker:
         channels = self.string_list(data["channels"], f"{where} channels") if "channels" in data else None
         rate = self.number(data, "rate_hz", where, minimum=0, strict=True)
         stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
-        noise = self.float_list(data, "noise_std", where, positive=True)
-        bad = [v for v in noise or () if not _STD_LIMITS[0] <= v <= _STD_LIMITS[1]]
-        if bad:
-            lo, hi = _STD_LIMITS
-            self.add(
-                f"{where} noise_std", f"must be between {lo:g} and {hi:g} (its square is the variance), got {bad[0]:g}"
-            )
-            noise = None
+        noise = self.noise_std(data, where)
         lo = self.float_list(data, "range_lo", where, positive=False)
         hi = self.float_list(data, "range_hi", where, positive=False)
         if channels is None or rate is None:
@@ -321,6 +314,23 @@ class _Checker:
         if stale is None:
             return None
         return MeasurementSpec(name, channels, rate, stale, noise, lo, hi)
+
+    def noise_std(self, data: dict, where: str) -> list[float] | None:
+        """``noise_std``: > 0 and within `_STD_LIMITS` (its square, the variance, a normal float);
+        the bound by the group's range span needs the model (`bind`)."""
+        noise = self.float_list(data, "noise_std", where, positive=True)
+        if noise is None:
+            return None
+        smallest, largest = _STD_LIMITS
+        if max(noise) > largest:
+            self.add(f"{where} noise_std", f"{max(noise):g} would hide every fault of the group (at most {largest:g})")
+        elif min(noise) < smallest:
+            self.add(
+                f"{where} noise_std", f"{min(noise):g} is too small: its square underflows (at least {smallest:g})"
+            )
+        else:
+            return noise
+        return None
 
     def _sized(self, values: list[float] | None, n: int, where: str) -> list[float] | None:
         if values is None:
