@@ -18,6 +18,7 @@ from logscan.profiles.schema import (
     INPUT_STALE_STEPS,
     MAX_ALARM_DURATION_S,
     MAX_ALARM_PERSIST,
+    MAX_MERGE_GAP_S,
     MODE_KEYS,
     MODE_STALE_S,
     ONBOARD_KEYS,
@@ -443,9 +444,16 @@ class _Checker:
             self.add(f"{where} n_persist", f"must be between 1 and {MAX_ALARM_PERSIST}, got {n_persist}")
             n_persist = None
         duration = self.number(data, "min_duration_s", where, minimum=0, strict=False, maximum=MAX_ALARM_DURATION_S)
-        if n_persist is None or ("min_duration_s" in data and duration is None):
+        gap = self.number(data, "merge_gap_s", where, minimum=0, strict=False, maximum=MAX_MERGE_GAP_S)
+        if n_persist is None or any(
+            key in data and value is None for key, value in (("min_duration_s", duration), ("merge_gap_s", gap))
+        ):
             return None
-        return AlarmPolicy(n_persist=n_persist, min_duration_s=0.0 if duration is None else duration)
+        return AlarmPolicy(
+            n_persist=n_persist,
+            min_duration_s=0.0 if duration is None else duration,
+            merge_gap_s=AlarmPolicy.merge_gap_s if gap is None else gap,
+        )
 
     def detectors(self, raw: Any) -> dict[str, DetectorSpec]:
         data = self.table(raw, "[detectors]")

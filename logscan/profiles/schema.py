@@ -31,11 +31,12 @@ MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
 SENSOR_KEYS = ("channel", "poly")
 ONBOARD_KEYS = ("state", "variance", "stale_s")
-ALARM_KEYS = ("n_persist", "min_duration_s")
+ALARM_KEYS = ("n_persist", "min_duration_s", "merge_gap_s")
 #: Upper bounds of the [alarms] floors: they are for one- or two-sample transients; longer floors
 #: would hide real faults (documented in docs/profiles.md).
 MAX_ALARM_PERSIST = 1000
 MAX_ALARM_DURATION_S = 10.0
+MAX_MERGE_GAP_S = 60.0  # alarms of one check this close are one alarm (logscan.incidents)
 
 #: Staleness defaults (seconds unless said otherwise), documented in docs/profiles.md.
 GROUP_STALE_PERIODS = 2.5  # a measurement group holds for 2.5 of its own sample periods
@@ -302,6 +303,7 @@ class Profile:
             out["alarms"] = {
                 "n_persist": self.alarm_policy.n_persist,
                 "min_duration_s": self.alarm_policy.min_duration_s,
+                "merge_gap_s": self.alarm_policy.merge_gap_s,
             }
         return out
 
