@@ -7,8 +7,9 @@ names was checked. Each rule below yields one line saying what was not checked:
 - a measurement group the filter used fewer than ``MIN_UPDATE_FRACTION`` of the updates its rate
   implies over the log (no valid sample at all, non-finite values, or silent after a while);
 - the filter was diverged for more than ``MAX_DIVERGED_FRACTION`` of the grid;
-- a detector statistic that is never finite over the log, or never judged (its warm-up or window is
-  longer than the log): the detector checked nothing.
+- a detector statistic that is never finite over the log, or judged on fewer than
+  ``MIN_JUDGED_FRACTION`` of its valid samples (a warm-up or window covering most of the log): the
+  detector could not alarm there.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 MIN_UPDATE_FRACTION = 0.5  # of the updates a group's nominal rate implies over the log
 MAX_DIVERGED_FRACTION = 0.5  # of the grid steps
+MIN_JUDGED_FRACTION = 0.5  # of a statistic's valid samples that are out of warm-up
 
 
 def unchecked_reasons(prepared, results: Sequence) -> list[str]:
@@ -35,9 +37,11 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
         for name, series in result.series.items():
             if series.size and not np.isfinite(series).any():
                 reasons.append(f"{result.detector}: {name} was never computed (no finite value over the log)")
-            elif name in result.never_judged:
+            elif result.judged_fraction.get(name, 1.0) < MIN_JUDGED_FRACTION:
+                share = 100.0 * result.judged_fraction[name]
                 reasons.append(
-                    f"{result.detector}: {name} was never judged (its warm-up or window covers the whole log)"
+                    f"{result.detector}: {name} was judged on only {share:.0f} % of its samples (its warm-up "
+                    "or window covers most of the log)"
                 )
     return reasons
 

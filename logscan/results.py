@@ -137,7 +137,7 @@ class DetectorResult:
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
-    never_judged: list[str] = field(default_factory=list)  # statistics no sample of which was judged
+    judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
 
     def add_statistic(
         self,
@@ -169,9 +169,8 @@ class DetectorResult:
         judged, in_warmup = judged_mask(
             t, alarm_options.get("valid"), alarm_options.get("warmup"), alarm_options.get("warmup_s", 0.0)
         )
-        if n and not (judged & ~in_warmup).any():
-            # e.g. a window longer than the log: the statistic could never raise an alarm
-            self.never_judged.append(name)
+        # a warm-up or window longer than most of the log leaves the statistic unable to alarm there
+        self.judged_fraction[name] = float((judged & ~in_warmup).sum() / max(judged.sum(), 1)) if n else 1.0
         alarms = alarm_intervals(
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )

@@ -181,7 +181,22 @@ def test_a_window_longer_than_the_log_cannot_hide_a_fault(cli, tmp_path):
     profile.write_text(dumps_toml(data))
     result = cli("analyze", BIAS, "--profile", profile, "-d", "nis", "--no-report")
     assert result.exit_code == 2
-    assert "nis: nis.accel was never judged (its warm-up or window covers the whole log)" in result.stdout
+    assert "nis: nis.accel was judged on only 0 % of its samples" in result.stdout
+
+
+def test_a_window_over_most_of_the_log_is_not_fully_checked(cli, tmp_path):
+    import tomllib
+
+    from logscan.pipeline import load_profile_for
+    from logscan.profiles import dumps_toml
+
+    data = tomllib.loads(load_profile_for(BIAS, None).text)
+    data.setdefault("detectors", {})["nis"] = {"window": 5000}  # 50 s of the 60 s accelerometer updates
+    profile = tmp_path / "long_window.toml"
+    profile.write_text(dumps_toml(data))
+    result = cli("analyze", BIAS, "--profile", profile, "-d", "nis", "--no-report")
+    assert result.exit_code == 2
+    assert "nis: nis.accel was judged on only 17 % of its samples" in result.stdout
 
 
 def test_the_report_lists_the_incident_before_the_alarms_behind_it(cli, tmp_path):
