@@ -37,17 +37,27 @@ class LogFailure:
 
 
 def expand_logs(paths: Sequence[str]) -> list[str]:
-    """Files as given; a directory holding log files expands to them (sorted), a directory of
-    per-topic CSVs stays one log."""
+    """Files as given; a directory holding log files expands to them (sorted) and to its
+    sub-directories of CSVs; a directory of per-topic CSVs (the ulog2csv pieces of one log) stays
+    one log; CSVs that are not such pieces are one log per file."""
+    from logscan.readers.csv_reader import csv_files, csv_log_name
+
+    def csv_logs(directory: Path) -> list[Path]:
+        """The directory when its CSVs are the pieces of one log, else its CSV files (one log each)."""
+        files = csv_files(directory)
+        if files and not csv_log_name(directory, files):
+            return files
+        return [directory] if files else []
+
     logs: list[str] = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
             inner = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in LOG_FILE_SUFFIXES)
             inner_dirs = sorted(p for p in path.iterdir() if p.is_dir() and any(p.glob(CSV_DIRECTORY_PATTERN)))
-            if inner or inner_dirs:
-                logs.extend(str(p) for p in inner + inner_dirs)
-                continue
+            found = (inner or csv_logs(path)) + [log for d in inner_dirs for log in csv_logs(d)]
+            logs.extend(raw if p == path else str(p) for p in found or [path])
+            continue
         logs.append(raw)
     return logs
 

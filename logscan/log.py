@@ -98,14 +98,42 @@ class SourceInfo:
         self.skipped.append(Skipped(what, why, count))
 
 
+MAX_SPAN_S = 86_400.0  # a log spanning more than a day is most likely several logs, or a wrong time unit
+
+
 @dataclass
 class Log:
-    """Channels by name plus where they came from; optional ground truth and embedded profile."""
+    """Channels by name plus where they came from; optional ground truth and embedded profile.
+
+    Every reader builds its Log with the channels it read; a time span over MAX_SPAN_S adds a
+    warning to ``source.warnings`` then (naming the channels that start first and end last).
+    """
 
     channels: dict[str, Channel]
     source: SourceInfo
     truth: dict[str, Any] | None = None  # {"events": [{"start", "end", "kind", "target", ...}], ...}
     profile_text: str | None = None  # TOML of a profile embedded in the log
+
+    def __post_init__(self) -> None:
+        warning = self.span_warning()
+        if warning and warning not in self.source.warnings:
+            self.source.warnings.append(warning)
+
+    def span_warning(self) -> str | None:
+        """A warning when the log spans more than MAX_SPAN_S, else None."""
+        if self.duration_s <= MAX_SPAN_S:
+            return None
+        timed = {name: c for name, c in self.channels.items() if len(c)}
+        ends = ""
+        if timed:
+            first = min(timed, key=lambda name: int(timed[name].t.min()))
+            last = max(timed, key=lambda name: int(timed[name].t.max()))
+            ends = f" (from {first} to {last})"
+        return (
+            f"the log spans {self.duration_s / 86_400.0:.1f} days{ends}: more than a day, so it may join "
+            "several logs or read a time column in the wrong unit; analyse each log on its own, or state "
+            "the time unit (e.g. a column named time_s)"
+        )
 
     @property
     def start_ns(self) -> int | None:

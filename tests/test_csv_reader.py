@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from logscan.errors import InputError, LogscanError
+from logscan.log import Channel, Log, SourceInfo
 from logscan.readers import read_log
-from logscan.readers.csv_reader import infer_time_unit, read_csv, read_csv_dir, time_column_unit
+from logscan.readers.csv_reader import csv_log_name, infer_time_unit, read_csv, read_csv_dir, time_column_unit
 
 
 def write(path: Path, text: str) -> Path:
@@ -34,14 +35,27 @@ def test_wide_file_channels_are_slash_column_and_values_are_exact(tmp_path):
     assert log.source.topics["run"].fields == ["ax", "/already/slashed"]
 
 
-def test_nans_are_kept_in_values_and_counted_in_a_warning(tmp_path):
-    f = write(tmp_path / "n.csv", "time,a,b\n0,1,\n0.1,nan,2\n0.2,3,NaN\n0.3,4,5\n")
+def test_written_nans_are_kept_in_values_and_counted_in_a_warning(tmp_path):
+    f = write(tmp_path / "n.csv", "time,a,b\n0,1,nan\n0.1,nan,2\n0.2,3,NaN\n0.3,4,5\n")
     log = read_csv(f, None)
     np.testing.assert_array_equal(np.isnan(log.channel("/a").values), [False, True, False, False])
     np.testing.assert_array_equal(np.isnan(log.channel("/b").values), [True, False, True, False])
     nan_warnings = [w for w in log.source.warnings if "NaN" in w]
     assert len(nan_warnings) == 1 and "3 NaN value(s)" in nan_warnings[0]
     assert "/a: 1" in nan_warnings[0] and "/b: 2" in nan_warnings[0]
+    assert not log.source.skipped  # a written nan is a value, not a cell that failed to parse
+
+
+def test_empty_cells_of_a_multi_rate_wide_csv_are_no_samples_and_no_warning(tmp_path):
+    rows = "".join(f"{k * 0.01:.2f},{k},{'' if k % 10 else k / 10},{'NA' if k % 5 else 7}\n" for k in range(100))
+    f = write(tmp_path / "multi.csv", "time_s,fast,slow,mid\n" + rows)
+    log = read_csv(f, None)
+    assert len(log.channel("/fast")) == 100
+    slow, mid = log.channel("/slow"), log.channel("/mid")
+    np.testing.assert_array_equal(slow.t, np.arange(0, 100, 10) * 10_000_000)  # its own 10 Hz samples
+    np.testing.assert_array_equal(slow.values, np.arange(10.0))
+    assert len(mid) == 20 and np.isfinite(mid.values).all()
+    assert log.source.warnings == [] and log.source.skipped == []
 
 
 def test_unsorted_and_duplicate_times_are_kept_in_file_order_with_a_warning(tmp_path):
@@ -278,3 +292,45 @@ def test_read_log_dispatches_directories_and_rejects_one_without_csvs(tmp_path):
     empty.mkdir()
     with pytest.raises(LogscanError, match="no .csv files"):
         read_log(empty)
+
+
+def test_a_directory_of_separate_wide_csvs_is_not_read_as_one_log(tmp_path):
+    flights = tmp_path / "flights"
+    flights.mkdir()
+    write(flights / "monday.csv", "timestamp,speed\n1704067200,1\n1704067201,2\n")
+    write(flights / "april.csv", "timestamp,speed\n1712000000,1\n1712000001,2\n")
+    assert csv_log_name(flights) == ""
+    with pytest.raises(InputError) as info:
+        read_log(flights)
+    line = info.value.one_line()
+    assert "separate logs" in line and "april.csv, monday.csv" in line and "pass the files" in line
+    assert "\n" not in line
+
+
+def test_a_directory_of_ulog2csv_pieces_is_one_log_named_after_them(tmp_path):
+    d = make_ulog2csv_dir(tmp_path)
+    assert csv_log_name(d) == "flight"
+    single = tmp_path / "single"
+    single.mkdir()
+    write(single / "flight_vehicle_imu_0.csv", "timestamp,x\n1,2\n")
+    assert csv_log_name(single) == ""  # one piece: its log name cannot be told from its topic
+
+
+# ---- spans over a day ------------------------------------------------------------------------------
+
+
+def test_a_span_over_one_day_is_a_warning_naming_the_channels_at_both_ends(tmp_path):
+    f = write(tmp_path / "days.csv", "time_s,a,b\n0,1,\n1,2,\n200000,,3\n")
+    log = read_csv(f, None)
+    (warning,) = [w for w in log.source.warnings if "days" in w]
+    assert "spans 2.3 days (from /a to /b)" in warning and "more than a day" in warning
+    short = read_csv(write(tmp_path / "hours.csv", "time_s,a\n0,1\n86400,2\n"), None)
+    assert not any("days" in w for w in short.source.warnings)
+
+
+def test_the_span_warning_is_added_once_whoever_builds_the_log():
+    source = SourceInfo(path="x.mcap", format="mcap")
+    channels = {"/a": Channel("/a", np.array([0, 3 * 86_400 * 10**9]), np.zeros(2))}
+    log = Log(channels=channels, source=source)
+    Log(channels=channels, source=source)  # a second Log over the same source adds nothing
+    assert [w for w in source.warnings if "3.0 days" in w] == [log.span_warning()]

@@ -21,8 +21,37 @@ def test_a_directory_expands_to_its_logs_and_csv_directories_stay_one_log(tmp_pa
     csv_dir = tmp_path / "flight_csv"
     csv_dir.mkdir()
     (csv_dir / "flight_sensor_0.csv").write_text("timestamp,x\n1,2\n")
+    (csv_dir / "flight_gps_0.csv").write_text("timestamp,lat\n1,2\n")
     assert expand_logs([str(tmp_path)]) == [str(tmp_path / n) for n in ("a.ULG", "b.mcap", "flight_csv")]
     assert expand_logs([str(csv_dir), "missing.mcap"]) == [str(csv_dir), "missing.mcap"]
+
+
+def test_a_directory_of_wide_csvs_is_one_log_per_file(tmp_path):
+    flights = tmp_path / "flights"
+    flights.mkdir()
+    for name in ("b.csv", "a.csv"):
+        (flights / name).write_text("time,speed\n0,1\n1,2\n")
+    (flights / "a.truth.json").write_text("{}")
+    expected = [str(flights / "a.csv"), str(flights / "b.csv")]
+    assert expand_logs([str(flights)]) == expected
+    (tmp_path / "x.mcap").write_bytes(b"x")  # a folder of logs: its CSV sub-folders expand the same way
+    assert expand_logs([str(tmp_path)]) == [str(tmp_path / "x.mcap"), *expected]
+    assert expand_logs([str(tmp_path / "empty")]) == [str(tmp_path / "empty")]  # its reader says what is wrong
+
+
+def test_analyze_on_a_folder_of_wide_csvs_reports_each_file(cli, tmp_path, sample):
+    folder = tmp_path / "flights"
+    folder.mkdir()
+    for suffix in (".csv", ".truth.json", ".profile.toml"):
+        source = sample("quad_healthy.csv").with_suffix(suffix)
+        for name in ("one", "two"):
+            (folder / f"{name}{suffix}").write_bytes(source.read_bytes())
+    out = tmp_path / "summary.json"
+    result = cli("analyze", folder, "--no-report", "--json", out, "--exit-zero")
+    assert result.exit_code == 0, result.stderr
+    logs = json.loads(out.read_text())["logs"]
+    assert [Path(log["file"]).name for log in logs] == ["one.csv", "two.csv"]
+    assert all(log["log"]["duration_s"] == pytest.approx(60.0) and not log["warnings"] for log in logs)
 
 
 def test_outputs_are_named_after_their_logs_and_same_names_get_their_folder(tmp_path):

@@ -9,9 +9,12 @@ Rules (documented in the README):
   boot or epoch time) and the inference is reported as a warning and in ``source.time_unit``.
   ISO 8601 date-time text (``2024-03-18 14:49:10.126``) is read as UTC epoch time.
   Every other numeric column becomes a channel ``/<column>`` (a column already starting with
-  ``/`` keeps its name). Text columns are skipped and counted; a mostly-numeric column with a few
-  non-numbers keeps the numbers and reads the rest as NaN (counted). NaNs stay in the values
-  (alignment masks them). Rows without a valid time are dropped and counted. Timestamps are kept
+  ``/`` keeps its name). An empty cell (or a missing-value word: ``NA``, ``null``, ``None``,
+  ``N/A``...) means "no sample at this time": a channel holds the rows where its cell is filled,
+  so the columns of a multi-rate wide file keep their own rates. Text columns are skipped and
+  counted; a mostly-numeric column with a few non-numbers keeps the numbers and reads the rest as
+  NaN (counted). Written ``nan`` / ``inf`` values are samples: they stay in the values, counted in
+  a warning (alignment masks them). Rows without a valid time are dropped and counted. Timestamps are kept
   in file order: unsorted or duplicate times are reported with counts; alignment sorts and
   deduplicates them.
 * Directory: a file whose stem is ``<log>_<topic>_<instance>`` and whose first column is
@@ -20,7 +23,9 @@ Rules (documented in the README):
   dropped as the ULog reader drops them). ``<log>`` is found as the
   directory's name, the stem of a ``.ulg`` beside the CSVs, or the longest ``_``-separated prefix
   all such files share. Any other ``.csv`` is read as a wide file with topic = its stem and
-  channels ``/<stem>/<column>``.
+  channels ``/<stem>/<column>``. A directory without such per-topic pieces of one log (no
+  ``<log>`` found) is a folder of separate logs: reading it is an InputError saying to pass the
+  files (`logscan.fleet.expand_logs` expands it to one log per file).
 * Sidecars beside the log (``run.csv`` or directory ``run/``): ``run.truth.json`` (ground truth)
   and ``run.profile.toml`` (the profile, as `logscan simulate` writes them).
 """
@@ -63,6 +68,10 @@ _TYPICAL_PERIOD_LOG10 = -1.5  # ~30 Hz, the middle of what vehicle logs sample a
 
 _ULOG2CSV_RE = re.compile(r"^(?P<rest>.+)_(?P<instance>\d+)$")
 _MIXED_MIN_NUMERIC_FRACTION = 0.5  # a column with at least this share of numbers is numeric
+# Cells that mean "no sample here" (pandas' default missing-value words without its NaN spellings,
+# which are written values); and the NaN spellings, read as NaN samples.
+_MISSING_CELLS = ("", "NA", "N/A", "n/a", "NULL", "null", "None", "<NA>", "#N/A", "#N/A N/A", "#NA")
+_NAN_WORDS = frozenset({"nan", "-nan", "+nan", "1.#ind", "-1.#ind", "1.#qnan", "-1.#qnan"})
 
 
 @dataclass
@@ -134,14 +143,36 @@ def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     )
 
 
+def csv_files(directory: Path) -> list[Path]:
+    """The ``.csv`` files of ``directory``, sorted."""
+    return sorted(p for p in directory.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
+
+
+def csv_log_name(directory: Path, files: list[Path] | None = None) -> str:
+    """The ``<log>`` name the directory's ulog2csv pieces share ("" when its CSVs are not the
+    per-topic pieces of one log, e.g. a folder of separate wide-CSV flights)."""
+    files = csv_files(directory) if files is None else files
+    return _log_prefix(directory, [f.stem for f in _ulog2csv_files(files)])
+
+
 def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
-    """Read a directory of per-topic CSVs (PX4 ulog2csv layout, or wide files) into one Log."""
+    """Read a directory of per-topic CSVs (PX4 ulog2csv layout, plus wide files beside them) into
+    one Log; a directory of separate CSV logs is an InputError naming its files."""
     directory = Path(path)
-    files = sorted(p for p in directory.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
+    files = csv_files(directory)
     if not files:
         raise InputError("directory holds no .csv files", path=str(directory), hint="give an MCAP, ULog or CSV file")
+    log_name = csv_log_name(directory, files)
+    if not log_name:
+        shown = ", ".join(f.name for f in files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+        raise InputError(
+            f"the directory's {len(files)} CSV file(s) ({shown}) are separate logs, not the per-topic CSVs of "
+            "one log (PX4 ulog2csv: <log>_<topic>_<n>.csv with a timestamp column)",
+            path=str(directory),
+            hint="pass the files themselves (`logscan analyze DIR/` analyses each file as its own log)",
+        )
     source = SourceInfo(path=str(directory), format="csv-dir", time_source="csv column")
-    topics = _topic_names(directory, files)
+    topics = _topic_names(files, log_name)
     channels: dict[str, Channel] = {}
     for file in files:
         topic, px4 = topics[file]
@@ -166,17 +197,21 @@ def _dir_time_unit(source: SourceInfo) -> str:
     return units[0] if len(units) == 1 else "mixed: " + ",".join(units)
 
 
-def _topic_names(directory: Path, files: list[Path]) -> dict[Path, tuple[str, bool]]:
-    """Topic name of each file and whether it is in ulog2csv layout."""
-    layout = [f for f in files if _ULOG2CSV_RE.match(f.stem) and _first_column(f) == "timestamp"]
-    prefix = _log_prefix(directory, [f.stem for f in layout])
+def _topic_names(files: list[Path], prefix: str) -> dict[Path, tuple[str, bool]]:
+    """Topic name of each file and whether it is in ulog2csv layout (pieces of log ``prefix``)."""
+    layout = _ulog2csv_files(files)
     names: dict[Path, tuple[str, bool]] = {}
     for file in files:
-        if file in layout and prefix and file.stem.startswith(prefix + "_"):
+        if file in layout and file.stem.startswith(prefix + "_"):
             names[file] = (file.stem[len(prefix) + 1 :], True)
         else:
             names[file] = (file.stem, file in layout)
     return names
+
+
+def _ulog2csv_files(files: list[Path]) -> list[Path]:
+    """Files named ``<...>_<n>.csv`` whose first column is ``timestamp`` (ulog2csv layout)."""
+    return [f for f in files if _ULOG2CSV_RE.match(f.stem) and _first_column(f) == "timestamp"]
 
 
 def _log_prefix(directory: Path, stems: list[str]) -> str:
@@ -246,6 +281,8 @@ def _load_frame(path: Path) -> pd.DataFrame:
             sep=_sniff_delimiter(header),
             encoding="utf-8-sig",
             skipinitialspace=True,
+            keep_default_na=False,
+            na_values=list(_MISSING_CELLS),
             low_memory=False,
             on_bad_lines="error",
         )
@@ -282,10 +319,9 @@ def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
     if pd.api.types.is_numeric_dtype(series.dtype):
         return series.to_numpy(dtype=np.float64, na_value=np.nan), 0
     numbers = pd.to_numeric(series, errors="coerce")
-    present = series.notna().to_numpy()
-    if series.dtype == object:
-        present &= series.astype(str).str.strip().ne("").to_numpy()
-    parsed = numbers.notna().to_numpy()
+    text = series.astype(str).str.strip()
+    present = series.notna().to_numpy() & text.ne("").to_numpy()
+    parsed = numbers.notna().to_numpy() | text.str.lower().isin(_NAN_WORDS).to_numpy()
     n_present = int(present.sum())
     if n_present == 0 or parsed.sum() < _MIXED_MIN_NUMERIC_FRACTION * n_present:
         return None, 0
@@ -377,11 +413,12 @@ def _frame_channels(
             source.skip(f"cells of column {column!r} of {label}", "not a number, read as NaN", garbage)
         if not channel_wanted(name, topic or path.stem, wanted):
             continue
-        values = values[valid]
+        filled = frame[column].notna().to_numpy()[valid]  # an empty cell is no sample, not a NaN
+        values = values[valid][filled]
         n_nan = int(np.isnan(values).sum())
         if n_nan:
             nan_counts[name] = n_nan
-        channels[name] = Channel(name, t_ns, values)
+        channels[name] = Channel(name, t_ns[filled], values)
     if nan_counts:
         listed = ", ".join(f"{k}: {v}" for k, v in list(nan_counts.items())[:5])
         more = f", ... ({len(nan_counts)} channels)" if len(nan_counts) > 5 else ""
