@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -161,6 +162,54 @@ def test_garbage_after_the_magic_is_reported(tmp_path, source_bytes):
         assert "\n" not in exc.one_line()
     else:
         assert log.source.partial
+
+
+def _message_offsets(data: bytes) -> list[tuple[int, int, str]]:
+    """(offset, payload size, type) of every ULog message after the 16-byte file header."""
+    out, pos = [], 16
+    while pos + 3 <= len(data):
+        size, kind = struct.unpack_from("<HB", data, pos)
+        out.append((pos, size, chr(kind)))
+        pos += 3 + size
+    return out
+
+
+def _total_messages(log) -> int:
+    return sum(t.message_count for t in log.source.topics.values())
+
+
+@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.parametrize("size", [0, 0xFFFF])
+@pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
+def test_a_data_message_with_a_broken_size_field_makes_a_partial_read_that_says_how_much(tmp_path, path, size):
+    data = bytearray(path.read_bytes())
+    messages = [m for m in _message_offsets(data) if m[2] == "D"]
+    offset = messages[len(messages) // 2][0]
+    struct.pack_into("<H", data, offset, size)
+    broken = tmp_path / "broken.ulg"
+    broken.write_bytes(bytes(data))
+    log, full = read_log(broken), read_log(path)
+    assert log.source.partial, "half the flight dropped must not read as a complete log"
+    reason = log.source.partial_reason
+    assert ("framing" in reason or "corrupt" in reason) and "recovered" in reason and "busiest topic" in reason
+    assert _total_messages(log) < _total_messages(full)
+
+
+@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
+def test_a_log_cut_inside_a_message_at_any_of_several_offsets_is_partial(tmp_path, path):
+    data = path.read_bytes()
+    messages = [m for m in _message_offsets(data) if m[2] == "D"]
+    full = _total_messages(read_log(path))
+    for fraction in (0.1, 0.35, 0.6, 0.85, 0.999):
+        offset, size, _ = messages[int(fraction * (len(messages) - 1))]
+        for cut_at in {offset + 1, offset + 3 + size // 2}:  # in the header, in the payload
+            cut = tmp_path / "cut.ulg"
+            cut.write_bytes(data[:cut_at])
+            log = read_log(cut)
+            assert log.source.partial, (path.name, cut_at)
+            assert "truncated" in log.source.partial_reason and "recovered" in log.source.partial_reason
+            assert _total_messages(log) <= full
 
 
 # ---- round trip through pyulog's ulog2csv --------------------------------------------------------

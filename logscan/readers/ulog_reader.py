@@ -6,6 +6,14 @@ are skipped and counted. Timestamps are microseconds in the file and int64 nanos
 ``source.metadata`` holds ``ulog.info`` (``sys_name``, ``ver_hw``, ...), ``ulog.parameters``
 (initial values), ``ulog.parameters_changed``, ``ulog.log`` (counts of dropouts, logged messages,
 changed parameters, corruption flags) and ``ulog.messages`` (the logged text messages).
+
+Damage: pyulog stops without a word at a message it cannot frame (a data message of size 0 ends
+its read loop: the rest of the file is dropped) and at a cut message. The reader watches every
+byte range pyulog reads; a message cut by the end of the file, bytes never read (framing broken:
+the reader stopped early or jumped), appended-data offsets past the end of the file, or pyulog's
+corruption flag make the log partial, with ``partial_reason`` saying where and how much was
+recovered. A cut exactly between two messages leaves a valid, shorter ULog (the format has no
+index or end marker): that cannot be told from a log that ended there.
 """
 
 from __future__ import annotations
@@ -26,8 +34,8 @@ _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
 
 
-class _TruncationWatch(io.RawIOBase):
-    """A read-only file that remembers where a read first came back short (the file is cut).
+class _ReadWatch(io.RawIOBase):
+    """A read-only file that records the byte ranges read and where a read first came back short.
 
     pyulog stops silently at a cut message; a clean end of file is a 3-byte message-header read
     that returns nothing, anything shorter than asked for is truncation.
@@ -37,13 +45,31 @@ class _TruncationWatch(io.RawIOBase):
         super().__init__()
         self._fh = open(path, "rb")  # noqa: SIM115 - closed by close()
         self.cut_at: int | None = None
+        self.starts: list[int] = []  # one entry per read: pyulog reads message by message
+        self.ends: list[int] = []
 
     def read(self, size: int = -1) -> bytes:
         pos = self._fh.tell()
         data = self._fh.read(size)
         if self.cut_at is None and 0 <= len(data) < size and not (size == 3 and not data):
             self.cut_at = pos
+        if data:
+            self.starts.append(pos)
+            self.ends.append(pos + len(data))
         return data
+
+    def unread(self, size: int) -> tuple[int, int]:
+        """(bytes of the file never read, offset of the first of them; -1 when all were read)."""
+        if not self.starts:
+            return size, 0
+        order = np.argsort(self.starts, kind="stable")
+        starts = np.asarray(self.starts, dtype=np.int64)[order]
+        # reach[i]: the furthest byte read by reads 0..i (sorted by start)
+        reach = np.maximum.accumulate(np.asarray(self.ends, dtype=np.int64)[order])
+        gaps = np.concatenate(([starts[0]], starts[1:] - reach[:-1], [size - reach[-1]]))
+        where = np.concatenate(([0], reach))
+        holes = gaps > 0
+        return int(gaps[holes].sum()), int(where[holes][0]) if holes.any() else -1
 
     def readable(self) -> bool:
         return True
@@ -121,7 +147,7 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         )
         report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
     _fill_metadata(ulog, source)
-    _report_damage(path, ulog, source, chatter.getvalue(), watch.cut_at, all_topics=wanted is None)
+    _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None)
     if wanted is not None and not source.topics:
         source.warnings.append(f"none of the requested topics is in the log: {sorted(wanted)}")
     return Log(channels=channels, source=source)
@@ -135,7 +161,7 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
 
     chatter = io.StringIO()
     try:
-        watch = _TruncationWatch(str(path))
+        watch = _ReadWatch(str(path))
     except FileNotFoundError:
         raise InputError("no such file", path=str(path)) from None
     except OSError as exc:
@@ -166,24 +192,33 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     return ulog, watch, chatter
 
 
-def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | None, *, all_topics: bool) -> None:
-    """Mark the log partial when the file is truncated or pyulog skipped corrupt data.
+def _report_damage(path, ulog, source: SourceInfo, chatter: str, watch: _ReadWatch, *, all_topics: bool) -> None:
+    """Mark the log partial when the file is truncated, its framing broken, or pyulog skipped
+    corrupt data; the reason says where and how much was recovered.
 
     ULog has no checksums: flipped bytes inside message payloads cannot be detected, only
-    truncation, pyulog's corruption flag and (as warnings) topic timestamps going backwards.
+    framing, truncation, pyulog's corruption flag and (as warnings) topic timestamps going backwards.
     """
     size = os.path.getsize(path)
+    cut_at = watch.cut_at
     reasons = []
     if cut_at is not None:
+        reasons.append(f"truncated: the message read at byte {cut_at} runs past the end of the file ({size} bytes)")
+    unread, first_unread = watch.unread(size)
+    if unread and cut_at is None:
         reasons.append(
-            f"truncated: the message read at byte {cut_at} runs past the end of the "
-            f"file ({size} bytes); the messages before it were read"
+            f"message framing broken: reading stopped at byte {first_unread} (a message pyulog could not frame, "
+            "e.g. of size 0); "
+            f"{unread} bytes ({100.0 * unread / size:.1f} % of the file) were never read"
         )
+    beyond = [int(o) for o in getattr(ulog, "_appended_offsets", []) if int(o) > size]
+    if beyond:
+        reasons.append(f"truncated: data appended at byte {beyond[0]} lies past the end of the file ({size} bytes)")
     if ulog.file_corruption:
-        reasons.append("pyulog found corrupt data and skipped it")
+        reasons.append("pyulog found corrupt data (broken framing or unknown message ids) and skipped it")
     if reasons:
         source.partial = True
-        source.partial_reason = "; ".join(reasons)
+        source.partial_reason = "; ".join(reasons) + "; " + _recovered(source, ulog)
     lines = list(dict.fromkeys(line.strip() for line in chatter.splitlines() if line.strip()))
     for line in lines[:5]:
         source.warnings.append(f"pyulog: {line}")
@@ -195,6 +230,21 @@ def _report_damage(path, ulog, source: SourceInfo, chatter: str, cut_at: int | N
             path=str(path),
             hint="the file was cut during logging or copying; nothing to read",
         )
+
+
+def _recovered(source: SourceInfo, ulog) -> str:
+    """How much of the log a partial read recovered: data messages, and the time span of the busiest
+    topic (single messages can carry any timestamp, so the span of all topics says little)."""
+    count = sum(t.message_count for t in source.topics.values())
+    timed = [t for t in source.topics.values() if t.first_ns is not None and t.last_ns is not None]
+    if not timed:
+        return "no data message was recovered"
+    busiest = max(timed, key=lambda t: t.message_count)
+    start = int(ulog.start_timestamp) * 1000
+    return (
+        f"recovered {count} data messages of the topics read; {busiest.name} (the busiest topic) covers "
+        f"{(busiest.first_ns - start) / 1e9:.3f} .. {(busiest.last_ns - start) / 1e9:.3f} s after the log start"
+    )
 
 
 def _array_base(name: str) -> str:
