@@ -81,7 +81,7 @@ SAMPLES = (
         glitches=2.0,
         about="PI speed control through the modes 0.4 .. 1.9 m/s (20 s each); no fault, "
         "~2 healthy one- or two-sample glitches per minute on the speed sensors (truth "
-        "`transients`)",
+        "`transients`), which its profile's alarm floors tolerate (below)",
     ),
     Sample(
         "quad_healthy.csv",

@@ -88,6 +88,33 @@ def test_dc_motor_tracks_every_speed_mode():
     assert np.abs(speed - command)[settled].mean() < 0.05
 
 
+def test_glitch_tolerance_follows_the_sensor_rates():
+    from dataclasses import replace
+
+    from logscan.simulate.scenario import NIS_WINDOW, glitch_tolerance
+
+    groups = simulate("dc_motor", duration=1, seed=0).scenario.groups  # encoder 20 Hz, GPS 10 Hz
+    alarms, detectors = glitch_tolerance(groups)
+    assert alarms == {"min_duration_s": 0.15}  # > the 0.1 s between two GPS samples
+    assert detectors["nis"] == {"window": NIS_WINDOW, "n_persist": NIS_WINDOW + 3}
+    faster = [replace(g, rate_hz=50.0) if g.rate_hz == 20.0 else g for g in groups]
+    # two GPS samples 0.1 s apart span 6 updates of a 50 Hz group in the overall NIS test
+    assert glitch_tolerance(faster)[1]["nis"]["n_persist"] == NIS_WINDOW + 6
+    assert "[alarms]" not in simulate("quadcopter", duration=1, seed=0).profile_toml()
+
+
+def test_dc_motor_profile_tolerates_glitches_and_still_sees_a_gps_bias(tmp_path, cli):
+    glitchy, faulty = tmp_path / "glitchy.mcap", tmp_path / "faulty.mcap"
+    common = ("simulate", "dc_motor", "--duration", "120", "--glitches", "10", "--seed", "5", "-q", "-o")
+    assert cli(*common, glitchy).exit_code == 0
+    assert cli(*common, faulty, "--fault", "bias:gps_speed:40:50:0.15").exit_code == 0
+    assert len(read_log(glitchy).truth["transients"]) >= 10
+    result = cli("analyze", glitchy, "--no-report")
+    assert result.exit_code == 0, result.stdout
+    result = cli("analyze", faulty, "--no-report")
+    assert result.exit_code == 1 and "nis.gps_speed" in result.stdout
+
+
 def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path, cli):
     paths = [tmp_path / name for name in ("a.mcap", "b.mcap", "c.mcap")]
     for path, seed in zip(paths, ("7", "7", "8")):

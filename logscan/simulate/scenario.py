@@ -8,7 +8,8 @@ plus the naming that the log, the truth and the profile use:
  - steer_by_wire: steering angle, yaw rate and lateral acceleration at the grid rate; one actuator
    (the steering motor torque); lane changes through a PD hand wheel and sliding-mode control.
  - dc_motor (Jackal-like UGV): left/right wheel encoders 20 Hz and GPS speed 10 Hz (a redundant
-   speed group for A-TFM); PI speed control through constant-speed modes 0.4 .. 1.9 m/s.
+   speed group for A-TFM); PI speed control through constant-speed modes 0.4 .. 1.9 m/s. Its
+   profile tolerates healthy sensor glitches (see `glitch_tolerance`).
 """
 
 from __future__ import annotations
@@ -53,6 +54,12 @@ _SENSOR_RATES = {
     "dc_motor": {"gps_speed": 10.0},
 }
 _IMU_DEFAULT = {"quadcopter": "accel.x", "steer_by_wire": "yaw_rate", "dc_motor": "encoder.v_left"}
+GLITCH_MAX_SAMPLES = 2  # a healthy glitch lasts one or two samples of one sensor (simulation._glitches)
+NIS_WINDOW = 10  # updates per NIS window sum (the nis detector's default, written into the profile)
+# e_s band width on the DC motor: its logged on-board state has float32 resolution (7 significant
+# digits), and at a speed step the rounding alone moves e_s up to 24 s of its steady-state spread
+# (60 healthy 180 s runs; none with unrounded logs); wheel-speed state corruption moves it > 800 s.
+DCM_RHO_S = 32.0
 
 
 @dataclass
@@ -113,6 +120,8 @@ class Scenario:
     setpoints: dict[str, np.ndarray] = field(default_factory=dict)  # extra logged channels
     redundant: dict[str, dict[str, str]] = field(default_factory=dict)
     onboard_rate_hz: float = 50.0
+    alarms: dict[str, float] = field(default_factory=dict)  # the profile's [alarms] table
+    detectors: dict[str, dict] = field(default_factory=dict)  # the profile's [detectors.<name>] tables
 
 
 def input_channel(name: str) -> str:
@@ -120,6 +129,25 @@ def input_channel(name: str) -> str:
     if len(name) > 2 and name[-2] == "_" and name[-1] in "xyz":
         name = f"{name[:-2]}.{name[-1]}"
     return f"/cmd/{name}"
+
+
+def glitch_tolerance(groups: list[SensorGroup]) -> tuple[dict[str, float], dict[str, dict]]:
+    """([alarms], [detectors.*]) settings under which a healthy glitch (at most GLITCH_MAX_SAMPLES
+    samples of one sensor) cannot raise an alarm, while a fault that lasts can:
+
+     - ``[alarms] min_duration_s``: half a period longer than the time between a glitch's first
+       and last sample on the slowest sensor (10 Hz GPS: 0.1 s -> 0.15 s), a floor under every
+       statistic (e_x, e_v, e_s and the rejected-sample checks see a glitch for that long);
+     - ``[detectors.nis] n_persist``: a glitch stays in every NIS window sum that contains it,
+       NIS_WINDOW + L - 1 sums of its group and, in the overall test, NIS_WINDOW + span - 1 where
+       span counts the overall updates between its first and last sample (3 for two GPS samples
+       with a 20 Hz encoder between them): n_persist = NIS_WINDOW + span (13) exceeds both.
+    """
+    slowest = min(g.rate_hz for g in groups)
+    fastest = max(g.rate_hz for g in groups)
+    span = (GLITCH_MAX_SAMPLES - 1) * int(round(fastest / slowest)) + 1
+    alarms = {"min_duration_s": round((GLITCH_MAX_SAMPLES - 0.5) / slowest, 6)}
+    return alarms, {"nis": {"window": NIS_WINDOW, "n_persist": NIS_WINDOW + span}}
 
 
 def build_scenario(
@@ -245,6 +273,7 @@ def _dc_motor(model, dt, t, groups, aggressive, rng) -> Scenario:
     x0 = model.steady_state(ff * ref[0, 0])
     names = {g.name: g for g in groups}
     enc, gps = names["encoder"].channels, names["gps_speed"].channels
+    alarms, detectors = glitch_tolerance(groups)
     return Scenario(
         model_name="dc_motor",
         model=model,
@@ -266,4 +295,6 @@ def _dc_motor(model, dt, t, groups, aggressive, rng) -> Scenario:
         mode_values=ref[:, 0],
         redundant={"speed": {"left": enc[0], "right": enc[1], "gps": gps[0]}},
         onboard_rate_hz=1.0 / dt,
+        alarms=alarms,
+        detectors={**detectors, "encoded_ekf": {"rho_s": DCM_RHO_S}},
     )

@@ -176,6 +176,10 @@ class Simulation:
         if sc.redundant:
             profile["redundant"] = {name: {"sensors": dict(s)} for name, s in sc.redundant.items()}
         profile["onboard"] = {"state": "/ekf/state", "variance": "/ekf/variance"}
+        if sc.alarms:
+            profile["alarms"] = dict(sc.alarms)
+        if sc.detectors:
+            profile["detectors"] = {name: dict(settings) for name, settings in sorted(sc.detectors.items())}
         return profile
 
     def profile_toml(self) -> str:
