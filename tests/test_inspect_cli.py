@@ -88,7 +88,7 @@ def test_inspect_csv_dir_and_wide_csv(tmp_path, cli):
     assert "vehicle_imu_0" in out and "csv / ulog2csv" in out and "fields: accel[0..1]" in out
     assert "time col:  2 files (battery_status_0, vehicle_imu_0): 'timestamp' in us" in out
     wide = tmp_path / "wide.csv"
-    wide.write_text("time,speed,label\n0,1,a\n10,2,b\n20,,c\n")
+    wide.write_text("time,speed,label\n0,1,a\n10,2,b\n20,nan,c\n")  # a written nan is a sample
     result = cli("inspect", wide)
     assert result.exit_code == 0
     out = result.output
