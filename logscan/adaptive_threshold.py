@@ -57,8 +57,7 @@ def adaptive_band(e, defined, window, rho, s_floor):
     exceed = np.zeros(n, dtype=np.bool_)
     warm = np.zeros(n, dtype=np.bool_)
     ring = np.zeros(window)
-    count = 0
-    head = 0
+    count = head = np.int64(0)  # not literal zeros: they would compile the ring helpers twice
     for k in range(n):
         if not defined[k]:
             continue
@@ -89,8 +88,7 @@ def trailing_mean_var(values, defined, window):
     mean = np.full(n, np.nan)
     var = np.full(n, np.nan)
     ring = np.zeros(window)
-    count = 0
-    head = 0
+    count = head = np.int64(0)  # not literal zeros: they would compile the ring helpers twice
     for k in range(n):
         if not defined[k] or not np.isfinite(values[k]):
             continue

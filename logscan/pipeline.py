@@ -110,10 +110,13 @@ def prepare(
     *,
     use_header_stamp: bool = False,
     progress: Progress | None = None,
+    notice: Progress | None = None,
 ) -> Prepared:
     """Read only the topics the profile needs, align them, and run each filter the needs ask for
     exactly once. ``needs`` may be a function of the aligned run (needs can follow what the log
-    holds, e.g. K and S only when it carries no on-board variances). Raises LogscanError on bad input."""
+    holds, e.g. K and S only when it carries no on-board variances). ``notice`` hears the one
+    line a user should see even without progress (the first run's compile). Raises LogscanError
+    on bad input."""
     from logscan.align import align
     from logscan.models import get_model
     from logscan.readers import read_log
@@ -121,10 +124,11 @@ def prepare(
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
+    model = get_model(profile.vehicle.model, profile.vehicle.params)
+    compiling = _start_compile(model, needs, notice)
     step("reading")
     log = read_log(path, topics=profile.topics(), use_header_stamp=use_header_stamp)
     profile.check_channels(log)
-    model = get_model(profile.vehicle.model, profile.vehicle.params)
     step("aligning")
     run = align(log, profile)
     if run.n_steps < 2:
@@ -146,11 +150,25 @@ def prepare(
                 hint=f"known filters: {', '.join(FILTERS)}",
             )
         step("filtering")
+        compiling.wait()
         prepared.traces[name] = FILTERS[name](model, run, frozenset(parts))
     ekf = prepared.trace
     for episode in ekf.divergence_episodes if ekf is not None else ():
         prepared.warnings.append(f"filter diverged: {episode}")
     return prepared
+
+
+def _start_compile(model, needs, notice: Progress | None):
+    """The EKF kernel's first compile, beside the reading (logscan.filters.warmup), when a
+    detector may need the EKF and the cache lacks the model's kernel."""
+    from logscan.filters.warmup import COMPILING_NOTE, Compile, start_compile
+
+    if isinstance(needs, Needs) and "ekf" not in needs.filters:
+        return Compile(cold=False)
+    compiling = start_compile(model)
+    if compiling.cold and notice is not None:
+        notice(COMPILING_NOTE)
+    return compiling
 
 
 def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, progress: Progress | None = None):
@@ -236,9 +254,12 @@ def analyze_log(
     detector_names: Sequence[str] | None = None,
     grace_s: float = 1.0,
     progress: Progress | None = None,
+    notice: Progress | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect."""
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
-    prepared = prepare(path, loaded, needs_of(detectors), use_header_stamp=use_header_stamp, progress=progress)
+    prepared = prepare(
+        path, loaded, needs_of(detectors), use_header_stamp=use_header_stamp, progress=progress, notice=notice
+    )
     return detect(prepared, detectors, grace_s=grace_s, progress=progress)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import click
 
 from logscan.cli.options import (
+    echo_notice,
     header_stamp_option,
     jobs_option,
     json_option,
@@ -99,7 +100,13 @@ def analyze(
     reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
     progress = show_progress(quiet)
     task = AnalyzeTask(
-        profile_path, names, use_header_stamp, plotlyjs_dir, allow_partial, steps=progress and len(logs) == 1
+        profile_path,
+        names,
+        use_header_stamp,
+        plotlyjs_dir,
+        allow_partial,
+        steps=progress and len(logs) == 1,
+        notices=not quiet,
     )
     outcomes = run_many(
         list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing", isolate=len(logs) > 1
@@ -154,6 +161,7 @@ class AnalyzeTask:
     plotlyjs_dir: str | None
     allow_partial: bool = False  # a log not fully checked exits 0/1 instead of 2
     steps: bool = False  # print each step on stderr (one log on a terminal)
+    notices: bool = True  # print the one-off notes (the first run's compile) on stderr
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
@@ -171,6 +179,7 @@ class AnalyzeTask:
             use_header_stamp=self.use_header_stamp,
             detector_names=self.detector_names,
             progress=step,
+            notice=echo_notice if self.notices else None,
         )
         if report_path is not None:
             step("writing report")

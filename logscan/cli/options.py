@@ -59,3 +59,8 @@ jobs_option = click.option(
 def show_progress(quiet: bool) -> bool:
     """Progress goes to stderr only when it is a terminal and --quiet is off."""
     return not quiet and sys.stderr.isatty()
+
+
+def echo_notice(message: str) -> None:
+    """A one-off note for the user (e.g. the first run's compile), on stderr."""
+    click.echo(f"logscan: {message}", err=True)

@@ -1,9 +1,10 @@
 """The shared EKF core: one numba kernel that filters a whole aligned run, and its trace.
 
 Every model-based detector reads the `EkfTrace` (logscan.filters.trace) this module returns
-(docs/algorithms.md section 8); none carries its own filter. The kernel `ekf_run` is model-agnostic: it
-dispatches f/F/h/H on (model_id, group_id) through `logscan.models.dispatch`, so one cached
-compilation serves every model; its linear algebra is `logscan.filters.linalg`.
+(docs/algorithms.md section 8); none carries its own filter. The kernel `ekf_run` is
+model-agnostic: it calls the model's in-place f/F and h/H functions through
+`logscan.models.dispatch`, resolved for the literal model id, so numba compiles and caches one
+specialisation per model, only for the models a run uses; its linear algebra is `logscan.filters.linalg`.
 
 Conventions (step k on the grid, u_k the input held at step k):
  - k = 0: x_prior = x0, P_prior = P0 (no prediction); k > 0: x_prior = f(x_post_{k-1}, u_k).
@@ -23,10 +24,12 @@ Conventions (step k on the grid, u_k the input held at step k):
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import literally, njit, typeof, types
+from numba.core.typing.typeof import Purpose
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
@@ -52,7 +55,7 @@ from logscan.numba_cache import follow_dependencies
 # can see a zero: Cholesky pivots are checked > 0 first); not fastmath, NaN checks still hold.
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True)
 def _restart(x, P, x0, P0, seed_done):
     """Divergence: back to x0/P0, every direct group to be re-seeded; returns True."""
     n = x.size
@@ -65,7 +68,7 @@ def _restart(x, P, x0, P0, seed_done):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True)
 def _store(k, x, P, xs, P_diag, P_full, store_P):
     n = x.size
     for i in range(n):
@@ -128,6 +131,7 @@ def ekf_run(
     P_prior_full, P_post_full, S_out, K_out are stored when their first dimension is N
     (pass zero-length arrays to skip them). All work arrays are allocated once, before the loop.
     """
+    literally(model_id)  # one specialisation per model (logscan.models.dispatch)
     N = u.shape[0]
     n = x0.size
     nu = u.shape[1]
@@ -185,7 +189,7 @@ def ekf_run(
             uk = u_last
         # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
         if k > 0:
-            dispatch.predict_into(model_id, p, x, uk, dt, x_new, F, kv, xs, Aw, Jw, Jnw)
+            dispatch.model_predict_into(model_id, p, x, uk, dt, x_new, F, kv, xs, Aw, Jw, Jnw)
             sparse_rows(F, n, n, fcols, fnnz)
             fpft_q(F, P, Q, n, fcols, fnnz, Aw, W, P_upd)
             P, P_upd = P_upd, P
@@ -242,7 +246,7 @@ def ekf_run(
             r = zero
             for a in range(ng):
                 g = sel_g[a]
-                dispatch.meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
+                dispatch.model_meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
                 r += group_sizes[g]
             sparse_rows(Hs, m, n, hcols, hnnz)
             for a in range(m):
@@ -464,6 +468,21 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     )
 
 
+# ekf_run's parameters after the inputs, in order (the keys of run_ekf's `out`)
+_OUTPUT_NAMES = tuple(inspect.signature(ekf_run.py_func).parameters)[20:]
+
+
+def compiled_for(args: tuple):
+    """ekf_run's compiled entry point for these arguments, the model id as a literal.
+
+    `numba.literally(model_id)` makes ekf_run one specialisation per model, but calling the
+    dispatcher with a plain int re-types the whole kernel (~0.15 s) on every call before it
+    switches to the literal; compiling (or loading from the cache) the literal signature
+    directly skips that."""
+    signature = (types.literal(args[0]), *(typeof(a, Purpose.argument) for a in args[1:]))
+    return ekf_run.compile(signature)
+
+
 def run_ekf(
     model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, full_P=False, store_gain=True, store_S=True
 ) -> EkfTrace:
@@ -499,29 +518,11 @@ def run_ekf(
         input_held=np.zeros(N, dtype=np.bool_),
     )
     if N:
-        ekf_run(
-            k.model_id,
-            k.p,
-            k.x0,
-            k.P0,
-            k.Q,
-            k.u,
-            k.u_default,
-            k.z,
-            k.fresh,
-            k.group_ids,
-            k.group_offsets,
-            k.group_sizes,
-            k.R_all,
-            k.range_lo,
-            k.range_hi,
-            k.wrap,
-            k.direct_idx,
-            k.direct_gain,
-            k.dt,
-            k.seed_at_start,
-            **out,
-        )
+        inputs = (k.p, k.x0, k.P0, k.Q, k.u, k.u_default, k.z, k.fresh, k.group_ids, k.group_offsets)
+        inputs += (k.group_sizes, k.R_all, k.range_lo, k.range_hi, k.wrap, k.direct_idx, k.direct_gain)
+        inputs += (k.dt, k.seed_at_start)
+        args = (k.model_id, *inputs, *(out[name] for name in _OUTPUT_NAMES))
+        compiled_for(args)(*args)
     t = np.asarray(run.t, dtype=np.float64)
     return EkfTrace(
         model_name=model.name,

@@ -1,10 +1,12 @@
 """Dispatch of the numba model functions on the model id: one branch per known id, raise on others.
 
-The EKF kernel calls only the two in-place dispatchers (`predict_into`, `meas_into`: no
-allocation), so one cached kernel serves every model; `predict`, `f_disc`, `h_meas`, `H_meas` are
-the allocating versions (simulator, numpy views of a model). Each model's kernel module declares
-its id; `MODEL_IDS` lists them. An unknown id raises ValueError inside numba; `check_model_id`
-catches it at the Python level first (Model creation, `run_ekf`), with a clear ModelError.
+The EKF kernel calls one model's two in-place functions (`IN_PLACE[model_id]`: no allocation)
+through `model_predict_into` / `model_meas_into`, which numba resolves at compile time for a
+literal model id; `predict_into` and `meas_into` branch on the id at run time to the same
+functions; `predict`, `f_disc`, `h_meas`, `H_meas` are the allocating versions (simulator, numpy
+views of a model). Each model's kernel module declares its id; `MODEL_IDS` lists them. An unknown
+id raises ValueError inside numba; `check_model_id` catches it at the Python level first (Model
+creation, `run_ekf`), with a clear ModelError.
 
 Shapes: p the model's packed parameter vector, x (n,), u (nu,), F (n, n); a group's h goes to
 rows r:r+m of hx (m_total,), its H to rows r:r+m of Hs (m_total, n); kv, xs (n,) and A, J, Jn
@@ -13,7 +15,8 @@ rows r:r+m of hx (m_total,), its H to rows r:r+m of Hs (m_total, n); kv, xs (n,)
 
 from __future__ import annotations
 
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from logscan.errors import ModelError
 from logscan.models.linear_kernels import (
@@ -68,15 +71,33 @@ def predict(model_id, p, x, u, dt):
 
 
 @njit(cache=True)
+def lin_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the linear models (dc_motor, linear)."""
+    lin_predict_into(p, x, u, x_next, F)
+
+
+@njit(cache=True)
+def quad_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the quadcopter (RK4 on the 3x3 blocks of its Jacobian)."""
+    quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
+@njit(cache=True)
+def sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the steer-by-wire model (generic RK4)."""
+    rk4_predict_into(STEER_BY_WIRE_ID, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
+@njit(cache=True)
 def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
     A, J, Jn (n, n) are work arrays)."""
     if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
-        lin_predict_into(p, x, u, x_next, F)
+        lin_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     elif model_id == QUADCOPTER_ID:
-        quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+        quad_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     elif model_id == STEER_BY_WIRE_ID:
-        rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+        sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     else:
         raise ValueError("predict_into: unknown model id")
 
@@ -116,21 +137,90 @@ def H_meas(model_id, gid, p, x, u):
 
 
 @njit(cache=True)
+def lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the linear models."""
+    lin_meas_into(p, gid, x, u, r, hx, Hs)
+
+
+@njit(cache=True)
+def quad_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the quadcopter."""
+    quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+
+
+@njit(cache=True)
+def sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the steer-by-wire model (linear outputs: hx = H x)."""
+    sbw_H_row_into(p, gid, Hs, r)
+    t = 0.0
+    for j in range(4):
+        t += Hs[r, j] * x[j]
+    hx[r] = t
+
+
+@njit(cache=True)
 def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
     """h_meas and H_meas without allocation: h of group gid into hx[r:r+m], H into
     Hs[r:r+m, :] (R3 (3, 3) and D3 (3, 3, 3) are the quadcopter's work arrays)."""
     if model_id == QUADCOPTER_ID:
-        quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+        quad_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     elif model_id == STEER_BY_WIRE_ID:
-        sbw_H_row_into(p, gid, Hs, r)
-        t = 0.0
-        for j in range(4):
-            t += Hs[r, j] * x[j]
-        hx[r] = t
+        sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     elif model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
-        lin_meas_into(p, gid, x, u, r, hx, Hs)
+        lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     else:
         raise ValueError("meas_into: unknown model id")
+
+
+# model id -> (predict_into, meas_into) of that model alone, without the model_id argument
+IN_PLACE = {
+    QUADCOPTER_ID: (quad_step_into, quad_meas_rows_into),
+    STEER_BY_WIRE_ID: (sbw_step_into, sbw_meas_rows_into),
+    DC_MOTOR_ID: (lin_step_into, lin_meas_rows_into),
+    LINEAR_ID: (lin_step_into, lin_meas_rows_into),
+}
+
+
+# The EKF kernel's calls: resolved while numba compiles the kernel for a literal model id
+# (`numba.literally(model_id)` there), to that model's function alone. The kernel is then compiled
+# and cached once per model, only for the models a run uses, instead of every model's dynamics
+# in one kernel (a third of its cold compile).
+def model_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the model ``model_id`` (a compile-time constant; numba code only)."""
+    raise NotImplementedError("model_predict_into is resolved by numba at compile time")
+
+
+def model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the model ``model_id`` (a compile-time constant; numba code only)."""
+    raise NotImplementedError("model_meas_into is resolved by numba at compile time")
+
+
+def _literal_kernel(model_id, which: int):
+    if isinstance(model_id, types.IntegerLiteral) and model_id.literal_value in IN_PLACE:
+        return IN_PLACE[model_id.literal_value][which]
+    return None  # numba then tries the literal type, or reports no implementation
+
+
+@overload(model_predict_into)
+def _model_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    kernel = _literal_kernel(model_id, 0)
+    if kernel is not None:
+
+        def impl(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+            kernel(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+        return impl
+
+
+@overload(model_meas_into)
+def _model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
+    kernel = _literal_kernel(model_id, 1)
+    if kernel is not None:
+
+        def impl(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
+            kernel(gid, p, x, u, r, hx, Hs, R3, D3)
+
+        return impl
 
 
 follow_dependencies(__name__)

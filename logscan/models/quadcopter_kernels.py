@@ -225,7 +225,7 @@ def quad_H(p, gid, x, u):
 # =============================================================================================
 # RK4 step with its exact Jacobian on the 3x3 blocks
 # =============================================================================================
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _quad_blk(Jn, F, A, J, r0, c0, qd, qa, qb, h, cw, acc, first):
     """One 3x3 block (rows r0.., cols c0..) of a stage Jacobian Jn = A + h A J (= A (I + h J))
     and its RK4 weight into F: F_blk (= or +=) cw Jn_blk. With acc, the terms of h A J are those
@@ -264,20 +264,33 @@ def _quad_blk(Jn, F, A, J, r0, c0, qd, qa, qb, h, cw, acc, first):
                 F[r, c] += cw * s
 
 
-@njit(cache=True)
+# the nine non-zero 3x3 blocks of a stage Jacobian, as (r0, c0, qd, qa, qb) of `_quad_blk`:
+# pos rows: A = [0, I, 0, 0];  vel rows: [0, Dv, Va, 0] (Dv diagonal);
+# att rows: [0, 0, Ea, Wr];  rate rows: [0, 0, 0, Or]
+QUAD_BLOCKS = np.array(
+    [
+        [0, 3, 3, -1, -1],
+        [0, 6, 3, -1, -1],
+        [0, 9, 3, -1, -1],
+        [3, 3, 3, -1, -1],
+        [3, 6, 3, 6, -1],
+        [3, 9, 3, 6, -1],
+        [6, 6, -1, 6, -1],
+        [6, 9, -1, 6, 9],
+        [9, 9, -1, 9, -1],
+    ],
+    dtype=np.int64,
+)
+
+
+@njit(cache=True, no_cpython_wrapper=True)
 def _quad_stage_jacobian(Jn, F, A, J, h, cw, acc, first):
     """All nine non-zero 3x3 blocks of Jn = A (I + h J) and their weight into F (quadcopter)."""
-    # pos rows: A = [0, I, 0, 0];  vel rows: [0, Dv, Va, 0] (Dv diagonal)
-    _quad_blk(Jn, F, A, J, 0, 3, 3, -1, -1, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 0, 6, 3, -1, -1, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 0, 9, 3, -1, -1, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 3, 3, 3, -1, -1, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 3, 6, 3, 6, -1, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 3, 9, 3, 6, -1, h, cw, acc, first)
-    # att rows: [0, 0, Ea, Wr];  rate rows: [0, 0, 0, Or]
-    _quad_blk(Jn, F, A, J, 6, 6, -1, 6, -1, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 6, 9, -1, 6, 9, h, cw, acc, first)
-    _quad_blk(Jn, F, A, J, 9, 9, -1, 9, -1, h, cw, acc, first)
+    # block indices from an array, not literals: literal ints would compile _quad_blk once per
+    # block and stage kind (18 specialisations, a third of the quadcopter's cold compile)
+    for b in range(QUAD_BLOCKS.shape[0]):
+        blk = QUAD_BLOCKS[b]
+        _quad_blk(Jn, F, A, J, blk[0], blk[1], blk[2], blk[3], blk[4], h, cw, acc, first)
 
 
 @njit(cache=True)

@@ -37,13 +37,16 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 _UNIT_WORDS = {
     "s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
@@ -258,6 +261,8 @@ def _sniff_delimiter(header: str) -> str:
 
 def _load_frame(path: Path) -> pd.DataFrame:
     """The file as a DataFrame of raw columns; one-line InputErrors for every unreadable case."""
+    import pandas as pd  # here, not at module import: reading an MCAP never loads pandas
+
     try:
         with open(path, encoding="utf-8-sig") as fh:
             header = fh.readline()
@@ -314,6 +319,8 @@ def _load_frame(path: Path) -> pd.DataFrame:
 
 def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
     """(float64 values or None for a text column, count of non-numbers read as NaN)."""
+    import pandas as pd
+
     if series.dtype == bool:
         return series.to_numpy(dtype=np.float64), 0
     if pd.api.types.is_numeric_dtype(series.dtype):
@@ -330,6 +337,8 @@ def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
 
 def _datetime_ns(series: pd.Series) -> pd.Series | None:
     """Date-time text (``2024-03-18 14:49:10.126``, ISO 8601) as nullable int64 epoch ns."""
+    import pandas as pd
+
     try:
         stamps = pd.to_datetime(series, errors="coerce", utc=True, format="ISO8601")
     except (ValueError, TypeError):
@@ -343,6 +352,8 @@ def _datetime_ns(series: pd.Series) -> pd.Series | None:
 
 def _time_ns(series: pd.Series, unit: str) -> tuple[np.ndarray, np.ndarray]:
     """(int64 ns of the valid rows, bool mask of valid rows) for a time column in ``unit``."""
+    import pandas as pd
+
     factor = NS_PER_UNIT[unit]
     if pd.api.types.is_integer_dtype(series.dtype):
         valid = series.notna().to_numpy().copy()

@@ -231,7 +231,7 @@ def _parse_numbers(text, used, pow10, values, rest):  # pragma: no cover - compi
     count = 0
     n_rest = 0
     r = 0
-    p = 0
+    p = np.int64(0)  # not a literal 0: that would compile _json_number a second time
     while p < used:
         q = p
         while text[q] != 32:
