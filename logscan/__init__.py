@@ -1,3 +1,65 @@
 """logscan: offline model-based fault and attack detection for drone and ground-vehicle logs."""
 
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
 __version__ = "0.1.0"
+
+
+def cache_dir() -> Path:
+    """logscan's per-user cache directory: $LOGSCAN_CACHE_DIR, else the platform's user cache
+    (~/.cache/logscan or $XDG_CACHE_HOME/logscan, ~/Library/Caches/logscan, %LOCALAPPDATA%\\logscan)."""
+    given = os.environ.get("LOGSCAN_CACHE_DIR")
+    if given:
+        return Path(given).expanduser()
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "logscan"
+
+
+def _numba_cache_dir() -> str:
+    """Where numba keeps the compiled kernels: <cache_dir>/numba, never beside the sources.
+
+    Beside the sources (numba's default) the cache lands in site-packages, survives `pip
+    uninstall` and the leftover folder then shadows a later editable install as a namespace
+    package; in a checkout it dirties the tree. An explicit NUMBA_CACHE_DIR is kept unless
+    LOGSCAN_CACHE_DIR is set; an unwritable directory falls back to the system temp directory.
+    """
+    if os.environ.get("NUMBA_CACHE_DIR") and not os.environ.get("LOGSCAN_CACHE_DIR"):
+        return os.environ["NUMBA_CACHE_DIR"]
+    for candidate in (cache_dir() / "numba", Path(tempfile.gettempdir()) / f"logscan-{_user()}" / "numba"):
+        try:
+            candidate.mkdir(parents=True, exist_ok=True)
+            if os.access(candidate, os.W_OK):
+                return str(candidate)
+        except OSError:
+            continue
+    return str(cache_dir() / "numba")  # numba itself then says it cannot cache
+
+
+def _user() -> str:
+    try:
+        return str(os.getuid())
+    except AttributeError:  # Windows
+        return os.environ.get("USERNAME", "user")
+
+
+os.environ["NUMBA_CACHE_DIR"] = _numba_cache_dir()
+if "numba" in sys.modules:  # imported before logscan: numba read its config already
+    sys.modules["numba"].config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
+
+# Run from a source checkout without an installed copy (e.g. `python -m logscan` in the checkout
+# root, where the working directory shadows any install), the subpackages that live at the top
+# level of the checkout (pyproject.toml maps detectors/ and templates/ to logscan.detectors and
+# logscan.templates) are found through the package path.
+_checkout = Path(__file__).resolve().parent.parent
+if not (Path(__file__).resolve().parent / "detectors").is_dir() and (_checkout / "detectors" / "__init__.py").is_file():
+    __path__.append(str(_checkout))  # noqa: F821 - the package's own __path__

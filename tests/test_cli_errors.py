@@ -7,6 +7,7 @@ run in-process through the `cli` fixture.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +29,12 @@ def assert_one_line_error(result, *fragments: str) -> None:
 
 
 def test_version(cli_process):
+    """--version names logscan's version and those of the libraries results depend on."""
     result = cli_process("--version")
     assert result.exit_code == 0 and __version__ in result.stdout and result.stderr == ""
+    for package in ("numpy", "numba", "mcap", "plotly"):
+        assert re.search(rf"\b{package} \d+\.\d+", result.stdout), (package, result.stdout)
+    assert "compiled-kernel cache: " in result.stdout
 
 
 def test_missing_file(tmp_path, cli_process):

@@ -87,24 +87,61 @@ def test_documented_options_of_each_command_match_its_help():
                 assert longest in section, f"README section of `logscan {name}` omits {longest}"
 
 
-@pytest.mark.slow
-def test_quick_start_install_and_run_command_works_in_a_clean_copy(tmp_path):
-    """Runs the README's first command verbatim in a copy of the tracked files."""
-    if shutil.which("git") is None or not (ROOT / ".git").exists():
-        pytest.skip("needs a git checkout to copy the tracked files")
+def _copy_of_the_checkout(dest: Path) -> None:
     files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout.split(b"\0")
     for rel in filter(None, files):
         src = ROOT / rel.decode()
         if src.is_file():
-            dst = tmp_path / rel.decode()
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(src, dst)
-    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH")}
+            target = dest / rel.decode()
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, target)
+
+
+@pytest.mark.slow
+def test_quick_start_lines_one_after_the_other_in_one_copy(tmp_path):
+    """The README's two lines verbatim, one after the other in one copy of the tracked files (a
+    regular install, then an editable one over it), leave a working `logscan` and `python -m
+    logscan` in and outside the checkout, and no compiled-kernel cache in the copy or the venv.
+
+    Line 2's pytest run is narrowed with PYTEST_ADDOPTS (the line itself is unchanged) so that it
+    does not run the whole suite, this test included, a second time."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs a git checkout to copy the tracked files")
+    copy = tmp_path / "checkout"
+    _copy_of_the_checkout(copy)
+    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH", "NUMBA_CACHE_DIR")}
     env["PATH"] = os.pathsep.join(
         p for p in env.get("PATH", "").split(os.pathsep) if ".venv" not in p and "/venv/" not in p
     )
-    command = quick_start_commands()[0].replace("python3 ", f"{sys.executable} ", 1)
-    result = subprocess.run(["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
-    assert result.returncode in (0, 1), result.stderr[-3000:]
-    assert "Traceback" not in result.stderr
-    assert result.stdout.strip(), "the main job printed nothing"
+    env["LOGSCAN_CACHE_DIR"] = str(tmp_path / "user-cache")
+    env["PYTEST_ADDOPTS"] = "-p no:cacheprovider -k 'test_version or test_quick_start_has_exactly_two_commands'"
+
+    def shell(command: str, cwd: Path = copy) -> subprocess.CompletedProcess:
+        command = command.replace("python3 ", f"{sys.executable} ", 1)
+        return subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+
+    run_line, test_line = quick_start_commands()
+    first = shell(run_line)
+    assert first.returncode == 1, first.stderr[-3000:]  # the sample has an injected fault: alarms
+    assert "Traceback" not in first.stderr
+    assert "incident 1: accelerometer" in first.stdout
+    assert "compiling numerical kernels" in first.stderr
+    # a regular install, run from the checkout root (its logscan/ folder shadows the install)
+    from_root = shell(".venv/bin/python -m logscan detectors")
+    assert from_root.returncode == 0 and "nis" in from_root.stdout, from_root.stderr[-2000:]
+
+    second = shell(test_line)
+    assert second.returncode == 0, (second.stdout[-3000:], second.stderr[-3000:])
+    assert " passed" in second.stdout
+
+    for args, cwd in (("logscan --version", copy), ("python -m logscan --version", copy)):
+        result = shell(f".venv/bin/{args}", cwd)
+        assert result.returncode == 0 and result.stdout.startswith("logscan "), (args, result.stderr[-2000:])
+    elsewhere = shell(f"{copy}/.venv/bin/python -m logscan --version", tmp_path)
+    assert elsewhere.returncode == 0, elsewhere.stderr[-2000:]
+    again = shell(".venv/bin/logscan analyze sample_logs/quad_imu_bias.mcap --no-report")
+    assert again.returncode == 1 and "incident 1: accelerometer" in again.stdout, again.stderr[-3000:]
+
+    leftovers = [str(p) for p in copy.rglob("*.nb[ic]")]
+    assert leftovers == [], leftovers[:5]
+    assert list((tmp_path / "user-cache" / "numba").rglob("*.nbi")), "the kernels were cached elsewhere"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import traceback
 
@@ -15,13 +16,41 @@ from logscan.errors import ExitCode, LogscanError
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
     epilog="Example: logscan analyze sample_logs/quad_imu_bias.mcap",
 )
-@click.version_option(__version__, "--version", prog_name="logscan")
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=lambda ctx, param, value: _print_version(ctx) if value else None,
+    help="Show logscan's version, the versions of the libraries it computes with, and exit.",
+)
 @click.option("--debug", is_flag=True, default=False, help="Show tracebacks of errors.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:
     """logscan: model-based fault and attack detection on drone and ground-vehicle logs."""
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
+
+
+# the libraries whose versions change results or speed: what a bug report needs
+VERSION_PACKAGES = ("numpy", "scipy", "numba", "llvmlite", "pandas", "mcap", "plotly")
+
+
+def _print_version(ctx: click.Context) -> None:
+    import platform
+    from importlib import metadata
+
+    def version(name: str) -> str:
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            return "not installed"
+
+    click.echo(f"logscan {__version__} (Python {platform.python_version()}, {platform.system()} {platform.machine()})")
+    click.echo(", ".join(f"{name} {version(name)}" for name in VERSION_PACKAGES))
+    # set by `import logscan` (logscan/__init__.py): LOGSCAN_CACHE_DIR, NUMBA_CACHE_DIR or the user cache
+    click.echo(f"compiled-kernel cache: {os.environ.get('NUMBA_CACHE_DIR', '?')}")
+    ctx.exit(0)
 
 
 # Each command lives in its own module of logscan.cli as "module:function"; one line per command.

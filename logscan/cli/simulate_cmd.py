@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from logscan.cli.options import output_option, quiet_option, seed_option, show_progress
+from logscan.cli.options import echo_notice, output_option, quiet_option, seed_option, show_progress
 from logscan.errors import UsageError
 
 _FAULT_HELP = (
@@ -106,6 +106,7 @@ def simulate(
     (/truth/state); the fault events and the matching profile are embedded, so `logscan analyze`
     and `logscan evaluate` need no other file. Same seed, same bytes.
     """
+    from logscan.filters.warmup import COMPILING_NOTE
     from logscan.simulate import parse_fault, write_simulation
     from logscan.simulate import simulate as run_simulation
     from logscan.simulate.faults import FaultSpec
@@ -125,6 +126,9 @@ def simulate(
             spec = FaultSpec(spec.kind, target, start, end, magnitude)
         specs.append(spec)
     progress = show_progress(quiet)
+    cold = not quiet and _simulator_cold()
+    if cold:
+        echo_notice(COMPILING_NOTE)
     if progress:
         click.echo(f"simulating {model_name} for {duration:g} s ...", err=True)
     sim = run_simulation(
@@ -137,7 +141,8 @@ def simulate(
         glitches_per_min=glitches_per_min,
     )
     if progress:
-        click.echo(f"simulated {sim.n_steps} steps in {sim.elapsed_s:.2f} s; writing {output_path}", err=True)
+        compiled = " (compiling included)" if cold else ""
+        click.echo(f"simulated {sim.n_steps} steps in {sim.elapsed_s:.2f} s{compiled}; writing {output_path}", err=True)
     written = write_simulation(sim, output_path, fmt)
     if not quiet:
         for event in sim.events:
@@ -147,3 +152,11 @@ def simulate(
                 err=True,
             )
         click.echo("wrote " + ", ".join(str(p) for p in written), err=True)
+
+
+def _simulator_cold() -> bool:
+    """The simulator's kernel is not in numba's disk cache yet (its first run compiles it)."""
+    from logscan.filters.warmup import kernel_cached
+    from logscan.simulate.runner import closed_loop
+
+    return not kernel_cached(closed_loop)
