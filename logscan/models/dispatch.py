@@ -70,19 +70,19 @@ def predict(model_id, p, x, u, dt):
     raise ValueError("predict: unknown model id")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lin_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict_into of the linear models (dc_motor, linear)."""
     lin_predict_into(p, x, u, x_next, F)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def quad_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict_into of the quadcopter (RK4 on the 3x3 blocks of its Jacobian)."""
     quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict_into of the steer-by-wire model (generic RK4)."""
     rk4_predict_into(STEER_BY_WIRE_ID, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
@@ -136,19 +136,19 @@ def H_meas(model_id, gid, p, x, u):
     raise ValueError("H_meas: unknown model id")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
     """meas_into of the linear models."""
     lin_meas_into(p, gid, x, u, r, hx, Hs)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def quad_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
     """meas_into of the quadcopter."""
     quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
     """meas_into of the steer-by-wire model (linear outputs: hx = H x)."""
     sbw_H_row_into(p, gid, Hs, r)
@@ -201,7 +201,7 @@ def _literal_kernel(model_id, which: int):
     return None  # numba then tries the literal type, or reports no implementation
 
 
-@overload(model_predict_into)
+@overload(model_predict_into, inline="always")
 def _model_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     kernel = _literal_kernel(model_id, 0)
     if kernel is not None:
@@ -212,7 +212,7 @@ def _model_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         return impl
 
 
-@overload(model_meas_into)
+@overload(model_meas_into, inline="always")
 def _model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
     kernel = _literal_kernel(model_id, 1)
     if kernel is not None:

@@ -226,42 +226,39 @@ def quad_H(p, gid, x, u):
 # RK4 step with its exact Jacobian on the 3x3 blocks
 # =============================================================================================
 @njit(cache=True, no_cpython_wrapper=True)
-def _quad_blk(Jn, F, A, J, r0, c0, qd, qa, qb, h, cw, acc, first):
+def _quad_blk(Jn, F, A, J, r0, c0, qd, qa, qb, h, cw):
     """One 3x3 block (rows r0.., cols c0..) of a stage Jacobian Jn = A + h A J (= A (I + h J))
-    and its RK4 weight into F: F_blk (= or +=) cw Jn_blk. With acc, the terms of h A J are those
-    of the non-zero blocks of A in the block row: a diagonal block at column qd and full blocks
-    at columns qa, qb (-1: none), summed in increasing column order as the generic loop does."""
+    and its RK4 weight into F: F_blk += cw Jn_blk. The terms of h A J are those of the non-zero
+    blocks of A in the block row: a diagonal block at column qd and full blocks at columns qa, qb
+    (-1: none), summed in increasing column order as the generic loop does. (Stage 1 passes J = 0:
+    Jn = A exactly, up to the sign of a zero.)"""
     for i in range(3):
         r = r0 + i
-        if acc and qd >= 0:
-            ad = h * A[r, qd + i]
-        if acc and qa >= 0:
+        ad = h * A[r, qd + i] if qd >= 0 else 0.0
+        a0 = a1 = a2 = b0 = b1 = b2 = 0.0
+        if qa >= 0:
             a0 = h * A[r, qa]
             a1 = h * A[r, qa + 1]
             a2 = h * A[r, qa + 2]
-        if acc and qb >= 0:
+        if qb >= 0:
             b0 = h * A[r, qb]
             b1 = h * A[r, qb + 1]
             b2 = h * A[r, qb + 2]
         for j in range(3):
             c = c0 + j
             s = A[r, c]
-            if acc:
-                if qd >= 0:
-                    s += ad * J[qd + i, c]
-                if qa >= 0:
-                    s += a0 * J[qa, c]
-                    s += a1 * J[qa + 1, c]
-                    s += a2 * J[qa + 2, c]
-                if qb >= 0:
-                    s += b0 * J[qb, c]
-                    s += b1 * J[qb + 1, c]
-                    s += b2 * J[qb + 2, c]
+            if qd >= 0:
+                s += ad * J[qd + i, c]
+            if qa >= 0:
+                s += a0 * J[qa, c]
+                s += a1 * J[qa + 1, c]
+                s += a2 * J[qa + 2, c]
+            if qb >= 0:
+                s += b0 * J[qb, c]
+                s += b1 * J[qb + 1, c]
+                s += b2 * J[qb + 2, c]
             Jn[r, c] = s
-            if first:
-                F[r, c] = cw * s
-            else:
-                F[r, c] += cw * s
+            F[r, c] += cw * s
 
 
 # the nine non-zero 3x3 blocks of a stage Jacobian, as (r0, c0, qd, qa, qb) of `_quad_blk`:
@@ -284,13 +281,14 @@ QUAD_BLOCKS = np.array(
 
 
 @njit(cache=True, no_cpython_wrapper=True)
-def _quad_stage_jacobian(Jn, F, A, J, h, cw, acc, first):
+def _quad_stage_jacobian(Jn, F, A, J, h, cw):
     """All nine non-zero 3x3 blocks of Jn = A (I + h J) and their weight into F (quadcopter)."""
-    # block indices from an array, not literals: literal ints would compile _quad_blk once per
-    # block and stage kind (18 specialisations, a third of the quadcopter's cold compile)
+    # block indices from an array, not literals, and no stage flags: literal arguments would
+    # compile _quad_blk once per block and stage kind (18 specialisations, a third of the
+    # quadcopter's cold compile) for a few per cent per step
     for b in range(QUAD_BLOCKS.shape[0]):
         blk = QUAD_BLOCKS[b]
-        _quad_blk(Jn, F, A, J, blk[0], blk[1], blk[2], blk[3], blk[4], h, cw, acc, first)
+        _quad_blk(Jn, F, A, J, blk[0], blk[1], blk[2], blk[3], blk[4], h, cw)
 
 
 @njit(cache=True)
@@ -309,21 +307,17 @@ def quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         xs[i] = x[i]
         for j in range(12):
             A[i, j] = 0.0
-    for i in range(3, 12):  # the zero blocks of F: block column 0 and below the block diagonal
-        for j in range(3 if i < 6 else (6 if i < 9 else 9)):
+    for i in range(12):  # F accumulates the stages' weighted Jacobians; J_0 = 0 (Jn = A in stage 1)
+        for j in range(12):
             F[i, j] = 0.0
-    for i in range(3):
-        F[i, 0] = F[i, 1] = F[i, 2] = 0.0
+            J[i, j] = 0.0
     for stage in range(4):
         quad_fA_nonzeros(p, xs, u, kv, A, True)
         cw = c * (1.0 if stage == 0 or stage == 3 else 2.0)
         h = 0.5 * dt if stage < 3 else dt
         step = 0.5 * dt if stage < 2 else dt
-        # J_i = A_i + h A_i J_{i-1};  F += cw J_i (F = cw J_1 in stage 0)
-        if stage == 0:
-            _quad_stage_jacobian(Jn, F, A, J, h, cw, False, True)
-        else:
-            _quad_stage_jacobian(Jn, F, A, J, h, cw, True, False)
+        # J_i = A_i + h A_i J_{i-1};  F += cw J_i
+        _quad_stage_jacobian(Jn, F, A, J, h, cw)
         for i in range(12):
             x_next[i] += cw * kv[i]
             xs[i] = x[i] + step * kv[i]
