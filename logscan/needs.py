@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 @dataclass(frozen=True)
 class Needs:
     """filters: filter name -> the optional trace parts to keep (empty: the filter's default trace).
-    The EKF's optional parts: "K" (gain), "S" (full innovation covariance), "P" (full covariance)."""
+    The EKF's optional parts: "K" (gain), "S" (full innovation covariance), "P" (full covariance),
+    "y" (the innovations y and the diagonal of S per step)."""
 
     filters: Mapping[str, frozenset[str]] = field(default_factory=dict)
 

@@ -27,7 +27,14 @@ def _run_ekf(model, run, parts: frozenset[str]):
     from logscan.filters.ekf import run_ekf
 
     # R from each group's profile noise_std, else the model's default (pack_run)
-    return run_ekf(model, run, store_gain="K" in parts, store_S="S" in parts, full_P="P" in parts)
+    return run_ekf(
+        model,
+        run,
+        store_gain="K" in parts,
+        store_S="S" in parts,
+        full_P="P" in parts,
+        store_innovations="y" in parts,
+    )
 
 
 # Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
@@ -131,6 +138,7 @@ def prepare(
     profile.check_channels(log)
     step("aligning")
     run = align(log, profile)
+    log.release_samples()  # the run holds what the filters and detectors read from here on
     if run.n_steps < 2:
         raise LogscanError(
             "too few samples on the analysis grid to filter",

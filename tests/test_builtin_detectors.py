@@ -27,7 +27,7 @@ def pipeline(name: str, store_gain: bool = False):
     path = SAMPLES / name
     if not path.exists():
         pytest.skip(f"{path} missing")
-    prepared = prepare(path, load_profile_for(path, None), Needs.of(ekf=("K", "S") if store_gain else ()))
+    prepared = prepare(path, load_profile_for(path, None), Needs.of(ekf=("K", "S", "y") if store_gain else ()))
     return prepared.run, prepared.trace, prepared.model, prepared.log
 
 

@@ -128,8 +128,8 @@ def ekf_run(
     """Filter N steps; every output array is preallocated by the caller (NaN / False filled,
     except S_out and K_out, which the kernel fills step by step: NaN where not updated).
 
-    P_prior_full, P_post_full, S_out, K_out are stored when their first dimension is N
-    (pass zero-length arrays to skip them). All work arrays are allocated once, before the loop.
+    P_prior_full, P_post_full, y_out with S_diag_out, S_out, K_out are stored when their first
+    dimension is N (pass zero-length arrays to skip them). All work arrays are allocated once, before the loop.
     """
     literally(model_id)  # one specialisation per model (logscan.models.dispatch)
     N = u.shape[0]
@@ -138,6 +138,7 @@ def ekf_run(
     G = group_ids.size
     m_total = z.shape[1]
     store_P = P_prior_full.shape[0] == N
+    store_y = y_out.shape[0] == N  # y and the diagonal of S
     store_S = S_out.shape[0] == N
     store_K = K_out.shape[0] == N
     x = x0.copy()
@@ -301,8 +302,9 @@ def ekf_run(
                     gain_norm[k] = np.sqrt(knorm)
                     for a in range(m):
                         j = rows[a]
-                        y_out[k, j] = y[a]
-                        S_diag_out[k, j] = S[a, a]
+                        if store_y:
+                            y_out[k, j] = y[a]
+                            S_diag_out[k, j] = S[a, a]
                         if store_S:
                             for b in range(m):
                                 S_out[k, j, rows[b]] = S[a, b]
@@ -484,13 +486,23 @@ def compiled_for(args: tuple):
 
 
 def run_ekf(
-    model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, full_P=False, store_gain=True, store_S=True
+    model: Model,
+    run: AlignedRun,
+    Q=None,
+    R=None,
+    x0=None,
+    P0=None,
+    full_P=False,
+    store_gain=True,
+    store_S=True,
+    store_innovations=True,
 ) -> EkfTrace:
     """Filter the aligned run with the model; see the module docstring for the conventions.
 
     Memory: the full P, S and K add N*n*n, N*m*m and N*n*m float64 (a 1 h 100 Hz quadcopter log:
-    415 MB each); `store_gain=False` / `store_S=False` drop K / S (the trace keeps y, S_diag, NIS
-    and the gain norm), `full_P` adds P_prior and P_post.
+    415 MB each); `store_gain=False` / `store_S=False` drop K / S (the trace keeps NIS and the gain
+    norm), `store_innovations=False` drops y and S_diag (2 * N*m float64: 69 MB for that log),
+    `full_P` adds P_prior and P_post.
     """
     k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0)
     N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
@@ -503,9 +515,9 @@ def run_ekf(
         P_prior_full=np.full((N if full_P else 0, n, n), nan),
         P_post_full=np.full((N if full_P else 0, n, n), nan),
         # S_out, K_out: NaN-filled step by step by ekf_run (one pass over the memory, not two)
-        y_out=np.full((N, m), nan),
+        y_out=np.full((N if store_innovations else 0, m), nan),
         S_out=np.empty((N if store_S else 0, m, m)),
-        S_diag_out=np.full((N, m), nan),
+        S_diag_out=np.full((N if store_innovations else 0, m), nan),
         K_out=np.empty((N if store_gain else 0, n, m)),
         nis=np.full(N, nan),
         nis_group=np.full((N, G), nan),
@@ -536,8 +548,8 @@ def run_ekf(
         x_post=out["x_post"],
         P_prior_diag=out["P_prior_diag"],
         P_post_diag=out["P_post_diag"],
-        y=out["y_out"],
-        S_diag=out["S_diag_out"],
+        y=out["y_out"] if store_innovations else None,
+        S_diag=out["S_diag_out"] if store_innovations else None,
         nis=out["nis"],
         nis_group=out["nis_group"],
         m_k=out["m_k"],
