@@ -74,6 +74,7 @@ _MIXED_MIN_NUMERIC_FRACTION = 0.5  # a column with at least this share of number
 # Cells that mean "no sample here" (pandas' default missing-value words without its NaN spellings,
 # which are written values); and the NaN spellings, read as NaN samples.
 _MISSING_CELLS = ("", "NA", "N/A", "n/a", "NULL", "null", "None", "<NA>", "#N/A", "#N/A N/A", "#NA")
+_MAX_TIME_NS = 2**63 - 1  # times are int64 ns
 _NAN_WORDS = frozenset({"nan", "-nan", "+nan", "1.#ind", "-1.#ind", "1.#qnan", "-1.#qnan"})
 
 
@@ -325,7 +326,10 @@ def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
         return series.to_numpy(dtype=np.float64), 0
     if pd.api.types.is_numeric_dtype(series.dtype):
         return series.to_numpy(dtype=np.float64, na_value=np.nan), 0
-    numbers = pd.to_numeric(series, errors="coerce")
+    try:
+        numbers = pd.to_numeric(series, errors="coerce")
+    except OverflowError:  # integers beyond float range (pandas keeps them as Python ints): non-numbers
+        numbers = pd.to_numeric(series.map(_float_or_none), errors="coerce")
     text = series.astype(str).str.strip()
     present = series.notna().to_numpy() & text.ne("").to_numpy()
     parsed = numbers.notna().to_numpy() | text.str.lower().isin(_NAN_WORDS).to_numpy()
@@ -333,6 +337,16 @@ def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
     if n_present == 0 or parsed.sum() < _MIXED_MIN_NUMERIC_FRACTION * n_present:
         return None, 0
     return numbers.to_numpy(dtype=np.float64, na_value=np.nan), int((present & ~parsed).sum())
+
+
+def _float_or_none(value: object) -> object:
+    """``value``, or None for an integer too large for a float64 (more than 309 digits)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        try:
+            float(value)
+        except OverflowError:
+            return None
+    return value
 
 
 def _datetime_ns(series: pd.Series) -> pd.Series | None:
@@ -355,14 +369,15 @@ def _time_ns(series: pd.Series, unit: str) -> tuple[np.ndarray, np.ndarray]:
     import pandas as pd
 
     factor = NS_PER_UNIT[unit]
+    limit = _MAX_TIME_NS // factor  # a time whose ns do not fit int64 is not a valid time
     if pd.api.types.is_integer_dtype(series.dtype):
-        valid = series.notna().to_numpy().copy()
+        valid = (series.notna() & (series <= limit) & (series >= -limit)).to_numpy(dtype=bool, na_value=False).copy()
         raw = series[valid].to_numpy(dtype=np.int64)
         return raw * factor, valid
     values, _ = _numeric_column(series)
     if values is None:
         values = np.full(len(series), np.nan)
-    valid = np.isfinite(values)
+    valid = np.isfinite(values) & (np.abs(values) < limit)
     return np.round(values[valid] * factor).astype(np.int64), valid
 
 
@@ -397,7 +412,7 @@ def _frame_channels(
     source.metadata.setdefault("csv.time_columns", {})[label] = f"{time_name!r} in {unit.unit}: {unit.reason}"
     t_ns, valid = _time_ns(frame[time_name], unit.unit)
     if not valid.all():
-        source.skip(f"rows of {label}", "time is empty or not a number", int((~valid).sum()))
+        source.skip(f"rows of {label}", "time is empty, not a number or out of range", int((~valid).sum()))
     if stated_us and (t_ns == 0).any():  # the ULog reader's rule, so both readers agree
         nonzero = t_ns != 0
         source.skip(f"messages of {label}", ZERO_TIMESTAMP_WHY, int((~nonzero).sum()))
