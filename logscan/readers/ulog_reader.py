@@ -14,6 +14,14 @@ the reader stopped early or jumped), appended-data offsets past the end of the f
 corruption flag make the log partial, with ``partial_reason`` saying where and how much was
 recovered. A cut exactly between two messages leaves a valid, shorter ULog (the format has no
 index or end marker): that cannot be told from a log that ended there.
+
+Sizes: every ULog message states its size in a uint16, so no read exceeds 64 KiB. Message
+formats are data too: pyulog flattens a subscribed format into one field per array element,
+recursively, so a format that contains itself, or nested arrays that multiply (``B[60000]`` of
+``C[60000]`` of ``float[60000]``), would recurse or hang; a subscribed format whose flattened size
+exceeds what a 64 KiB message can hold, or that nests deeper than ``_MAX_FORMAT_NESTING``, is
+refused before pyulog flattens it: pyulog counts it as corrupt data and skips that subscription,
+so the log is partial (other topics are still read).
 """
 
 from __future__ import annotations
@@ -32,6 +40,52 @@ from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_ti
 
 _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
+_MAX_MESSAGE_BYTES = 0xFFFF  # a message's size field is a uint16
+_MAX_FORMAT_NESTING = 64  # nested message formats (PX4 nests 2 or 3 deep)
+
+
+def format_bytes(name: str, formats: dict) -> int:
+    """Bytes one ``name`` message takes once flattened (pyulog's ``MessageFormat`` fields);
+    ValueError when it contains itself, nests deeper than ``_MAX_FORMAT_NESTING`` or exceeds
+    ``_MAX_MESSAGE_BYTES``. O(formats): each format's size is computed once."""
+    from pyulog import ULog
+
+    sizes: dict[str, int] = {}
+
+    def size_of(type_name: str, chain: tuple[str, ...]) -> int:
+        if type_name in sizes:
+            return sizes[type_name]
+        if type_name in chain:
+            raise ValueError(f"message format {type_name!r} contains itself")
+        if len(chain) >= _MAX_FORMAT_NESTING:
+            raise ValueError(f"message formats nested more than {_MAX_FORMAT_NESTING} deep")
+        total = 0
+        for field_type, array_size, _ in formats[type_name].fields:  # KeyError: undefined type
+            primitive = ULog._UNPACK_TYPES.get(field_type)
+            one = primitive[1] if primitive else size_of(field_type, (*chain, type_name))
+            total += one * max(1, array_size)
+            if total > _MAX_MESSAGE_BYTES:
+                raise ValueError(
+                    f"message format {type_name!r} flattens to more than {_MAX_MESSAGE_BYTES} bytes, "
+                    "more than a ULog message can hold"
+                )
+        sizes[type_name] = total
+        return total
+
+    return size_of(name, ())
+
+
+def _bounded_ulog_class():
+    """pyulog's ULog whose subscriptions check their format (``format_bytes``) before flattening it."""
+    from pyulog import ULog
+
+    class BoundedULog(ULog):
+        class _MessageAddLogged(ULog._MessageAddLogged):
+            def _parse_format(self, message_formats):
+                format_bytes(self.message_name, message_formats)
+                super()._parse_format(message_formats)
+
+    return BoundedULog
 
 
 class _ReadWatch(io.RawIOBase):
@@ -156,8 +210,9 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
 def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     """(pyulog ULog of the ``wanted`` messages, the truncation watch, pyulog's printed chatter);
     InputError when the file cannot be read, CorruptLogError when its header or definitions break."""
-    from pyulog import ULog
     from pyulog.exceptions import ULogException
+
+    ULog = _bounded_ulog_class()
 
     chatter = io.StringIO()
     try:
@@ -183,6 +238,7 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
         UnicodeDecodeError,
         TypeError,
         MemoryError,
+        RecursionError,
     ) as exc:
         raise CorruptLogError(
             f"ULog cannot be parsed ({type(exc).__name__}: {exc})".rstrip(": )") + ")",

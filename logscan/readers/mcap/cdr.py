@@ -3,7 +3,9 @@
 Definitions made of primitives, strings and fixed-size arrays become a program of (kind, size,
 type code, column) steps; ``cdr_fast`` runs it over every message of a channel in place and gives
 the same columns as the ``mcap_ros2`` decoder (tests check they match exactly). Anything else
-(variable-length arrays, unknown nested types) has no layout and goes through the decoder.
+(variable-length arrays, unknown nested types) has no layout and goes through the decoder, and so
+does a definition whose fixed-size arrays unroll to more than ``MAX_LAYOUT_STEPS`` steps (a schema
+is data from the file: ``float64[100000000]`` must not allocate a column name per element).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ _CDR_PRIMITIVES = {
     "float64": (8, 10),
 }
 _OP_VALUE, _OP_STRING, _OP_SKIP = 0, 1, 2
+MAX_LAYOUT_STEPS = 65_536  # steps (columns, strings, skips) of one message's program
 
 
 class CdrLayout(NamedTuple):
@@ -83,6 +86,12 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
             if ftype.is_array and not ftype.is_fixed_size_array():
                 raise _Unsupported("variable-length array")
             count = ftype.array_size if ftype.is_array else None
+            if ftype.type in ("uint8", "byte") and count is not None:
+                program.append((_OP_SKIP, count, 0, -1))  # one step, whatever the count
+                skipped.append(name)
+                continue
+            if len(program) + (count or 1) > MAX_LAYOUT_STEPS:
+                raise _Unsupported("fixed-size arrays unroll to too many steps")
             names = [name] if count is None else [f"{name}[{i}]" for i in range(count)]
             if not ftype.is_primitive_type():
                 sub = msgdefs.get(f"{ftype.pkg_name}/{ftype.type}")
@@ -94,9 +103,6 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
                 for item in names:
                     program.append((_OP_STRING, 4, 0, -1))
                     skipped.append(item)
-            elif ftype.type in ("uint8", "byte") and count is not None:
-                program.append((_OP_SKIP, count, 0, -1))
-                skipped.append(name)
             elif ftype.type in _CDR_PRIMITIVES:
                 size, code = _CDR_PRIMITIVES[ftype.type]
                 for item in names:

@@ -8,6 +8,15 @@ decompressed chunk or the file.
 Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
 decompress or does not parse; ``Scan.problem`` says where and why, and the messages read before
 it are kept.
+
+Bounded decompression: a chunk's sizes are checked before anything is allocated for it. Its
+declared uncompressed size may be at most ``MAX_CHUNK_BYTES`` and at most ``MAX_RATIO`` times its
+compressed size (chunks up to ``SMALL_CHUNK_BYTES`` are exempt from the ratio), and the chunks of
+one file may decompress to at most ``MAX_RATIO`` times the file size in all (at least
+``MIN_FILE_BUDGET_BYTES``). Decompression itself never produces more than the declared size (a
+zstd frame whose own content size disagrees is refused before it is decompressed; lz4 output is
+cut at the declared size). A chunk over a limit is a corrupt chunk like any other: the scan stops
+there. Attachment records are never decompressed or copied (the walk steps over them).
 """
 
 from __future__ import annotations
@@ -44,6 +53,13 @@ from logscan.readers.mcap.records import (
     gather_u64,
     walk_records,
 )
+
+# Decompression bounds. Real MCAP chunks compress 2-20x (lz4 cannot exceed ~255x); a chunk that
+# claims more is a corrupt header or a decompression bomb (33 KB of zstd can claim 1 GB).
+MAX_CHUNK_BYTES = 1 << 30  # one chunk never decompresses to more than 1 GiB
+MAX_RATIO = 1000  # declared uncompressed size / compressed size, per chunk and per file
+SMALL_CHUNK_BYTES = 1 << 20  # a chunk declaring at most this is not held to MAX_RATIO
+MIN_FILE_BUDGET_BYTES = 64 << 20  # a file may decompress to max(this, MAX_RATIO x its size)
 
 
 class _Corrupt(Exception):
@@ -131,6 +147,7 @@ class Scan:
         self.problem: _Corrupt | None = None
         self.warnings: list[str] = []
         self._wanted_ids: dict[int, bool] = {}
+        self._inflate_budget = MIN_FILE_BUDGET_BYTES  # bytes the file's chunks may still decompress to
 
     # -- the pass -------------------------------------------------------------------------------
 
@@ -146,6 +163,7 @@ class Scan:
                 path=self.path,
                 hint="the file is damaged or not an MCAP log",
             )
+        self._inflate_budget = max(MIN_FILE_BUDGET_BYTES, MAX_RATIO * len(raw))
         u8 = np.frombuffer(raw, dtype=np.uint8)
         top = walk_records(u8, len(MCAP_MAGIC), len(raw))
         try:
@@ -199,6 +217,7 @@ class Scan:
         if compression == "":
             data = payload
         else:
+            self._check_inflation(uncompressed_size, size, start)
             data = _decompress(compression, payload, uncompressed_size, start)
         if len(data) != uncompressed_size:
             raise_corrupt(f"chunk holds {len(data)} bytes, its header says {uncompressed_size}", start)
@@ -209,6 +228,24 @@ class Scan:
         if inner.status != WALK_END:
             raise_corrupt("records inside a chunk do not fill it (corrupt chunk)", start)
         self._container(data, u8, inner.ops, inner.offsets, inner.lengths, checked=uncompressed_crc != 0)
+
+    def _check_inflation(self, declared: int, stored: int, offset: int) -> None:
+        """Refuse a compressed chunk whose declared size is over the limits (see the module doc)."""
+        limit = min(MAX_CHUNK_BYTES, max(SMALL_CHUNK_BYTES, MAX_RATIO * stored))
+        if declared > limit:
+            raise_corrupt(
+                f"chunk declares {declared} bytes uncompressed from {stored} compressed, over logscan's "
+                f"limit of {limit} (at most {MAX_RATIO}x and {MAX_CHUNK_BYTES >> 30} GiB per chunk): "
+                "a corrupt chunk header or a decompression bomb",
+                offset,
+            )
+        if declared > self._inflate_budget:
+            raise_corrupt(
+                f"chunks decompress to more than {MAX_RATIO}x the file size in all "
+                f"(at least {MIN_FILE_BUDGET_BYTES >> 20} MiB): a decompression bomb",
+                offset,
+            )
+        self._inflate_budget -= declared
 
     def _data_end(self, raw: bytes, start: int, length: int) -> None:
         (expected,) = Cursor(raw, start, start + length).take("<I")
@@ -306,11 +343,12 @@ def raise_corrupt(reason: str, offset: int) -> None:
 
 
 def _decompress(compression: str, payload: bytes, size: int, offset: int) -> bytes:
+    """The chunk's records, never more than ``size`` (+1) bytes: more or fewer is a size mismatch."""
     if compression == "lz4":
         import lz4.frame
 
-        try:
-            return lz4.frame.decompress(payload)
+        try:  # lz4.frame.decompress would allocate the frame's own (unchecked) content size
+            return lz4.frame.LZ4FrameDecompressor().decompress(payload, max_length=size + 1)
         except RuntimeError as exc:  # lz4 raises RuntimeError on bad frames
             raise_corrupt(f"lz4 chunk does not decompress ({exc})", offset)
     if compression == "zstd":
@@ -318,7 +356,14 @@ def _decompress(compression: str, payload: bytes, size: int, offset: int) -> byt
             import zstandard
         except ImportError:
             raise_corrupt("zstd-compressed chunk and the zstandard package is not installed", offset)
+        if size == 0:
+            return b""
         try:
+            # decompress() allocates the frame's content size when the frame states one, whatever
+            # max_output_size says: it must be the size the chunk header declares (checked above)
+            stated = zstandard.frame_content_size(payload)
+            if stated not in (-1, size):
+                raise_corrupt(f"zstd frame says {stated} bytes, the chunk header {size}", offset)
             return zstandard.ZstdDecompressor().decompress(payload, max_output_size=size)
         except zstandard.ZstdError as exc:
             raise_corrupt(f"zstd chunk does not decompress ({exc})", offset)
