@@ -12,6 +12,7 @@ is processed by the same task, and outcomes come back in the order of ``logs``.
 
 from __future__ import annotations
 
+import stat
 import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -19,12 +20,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from logscan.errors import LogscanError, UsageError
+from logscan.errors import InputError, LogscanError, UsageError
 
 # What a directory expands to: log files by suffix, and sub-directories holding per-topic CSVs
 # (each such directory is one log). Formats themselves are detected by content (logscan.readers).
 LOG_FILE_SUFFIXES = (".mcap", ".ulg")
-CSV_DIRECTORY_PATTERN = "*.csv"
 
 
 @dataclass
@@ -39,27 +39,61 @@ class LogFailure:
 def expand_logs(paths: Sequence[str]) -> list[str]:
     """Files as given; a directory holding log files expands to them (sorted) and to its
     sub-directories of CSVs; a directory of per-topic CSVs (the ulog2csv pieces of one log) stays
-    one log; CSVs that are not such pieces are one log per file."""
-    from logscan.readers.csv_reader import csv_files, csv_log_name
+    one log; CSVs that are not such pieces are one log per file.
 
-    def csv_logs(directory: Path) -> list[Path]:
-        """The directory when its CSVs are the pieces of one log, else its CSV files (one log each)."""
-        files = csv_files(directory)
-        if files and not csv_log_name(directory, files):
-            return files
-        return [directory] if files else []
+    Only regular files are logs, and nothing is opened here. An entry named like a log (``.mcap``,
+    ``.ulg``, ``.csv``) that is a FIFO, device or socket, and a directory or sub-directory that
+    cannot be listed or searched, are listed as logs of their own: each fails with one line
+    (exit 2) when it is read, and the other logs still run."""
+    from logscan.readers.common import list_directory
 
     logs: list[str] = []
     for raw in paths:
         path = Path(raw)
-        if path.is_dir():
-            inner = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in LOG_FILE_SUFFIXES)
-            inner_dirs = sorted(p for p in path.iterdir() if p.is_dir() and any(p.glob(CSV_DIRECTORY_PATTERN)))
-            found = (inner or csv_logs(path)) + [log for d in inner_dirs for log in csv_logs(d)]
-            logs.extend(raw if p == path else str(p) for p in found or [path])
+        if not path.is_dir():
+            logs.append(raw)
             continue
-        logs.append(raw)
+        try:
+            entries = sorted(list_directory(path))
+        except InputError:
+            logs.append(raw)
+            continue
+        inner = [path / n for n, mode in entries if stat.S_ISREG(mode) and _suffix(n) in LOG_FILE_SUFFIXES]
+        special = [path / n for n, mode in entries if _is_special(mode) and _suffix(n) in _SPECIAL_CHECKED]
+        inner_dirs = [path / n for n, mode in entries if stat.S_ISDIR(mode)]
+        found = (inner or _csv_logs(path, entries)) + [log for d in inner_dirs for log in _csv_logs(d)]
+        logs.extend(raw if p == path else str(p) for p in (found + special) or [path])
     return logs
+
+
+_SPECIAL_CHECKED = (*LOG_FILE_SUFFIXES, ".csv")  # special files named like a log are reported
+
+
+def _suffix(name: str) -> str:
+    return Path(name).suffix.lower()
+
+
+def _is_special(mode: int) -> bool:
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
+def _csv_logs(directory: Path, entries: list[tuple[str, int]] | None = None) -> list[Path]:
+    """The directory when its CSVs are the pieces of one log, else its CSV files (one log each);
+    none when it holds no regular ``.csv`` file."""
+    from logscan.readers.common import list_directory
+    from logscan.readers.csv_reader import csv_files, csv_log_name
+
+    if entries is None:
+        try:
+            entries = list_directory(directory)
+        except InputError:  # reading it will say why
+            return [directory]
+    if not any(stat.S_ISREG(mode) and _suffix(name) == ".csv" for name, mode in entries):
+        return []
+    files = csv_files(directory)
+    if files and not csv_log_name(directory, files):
+        return files
+    return [directory] if files else []
 
 
 def output_paths(logs: Sequence[str], output: str | None, suffix: str = ".report.html") -> list[str]:

@@ -3,34 +3,49 @@
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Iterable
 from pathlib import Path
 
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.log import Log
-from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC
+from logscan.readers.common import (
+    MCAP_MAGIC,
+    SPECIAL_FILE_HINT,
+    ULOG_MAGIC,
+    input_error,
+    list_directory,
+    special_kind,
+    stat_input,
+)
 
 
 def detect_format(path: str | os.PathLike) -> str:
     """Return "mcap", "ulog", "csv" or "csv-dir" for ``path``, judged by content.
 
-    Raises InputError when the path is missing or unreadable and UnsupportedFormatError when the
-    content matches no reader.
+    Only regular files and directories are read, and that is checked before anything is opened
+    (opening a FIFO blocks until a writer comes). Raises InputError when the path is missing,
+    unreadable, not a regular file or directory (FIFO, device, socket), a directory that cannot be
+    listed or searched, or a directory holding a special file named ``*.csv``; and
+    UnsupportedFormatError when the content matches no reader.
     """
     p = Path(path)
-    if p.is_dir():
-        if any(child.suffix.lower() == ".csv" for child in p.iterdir()):
+    if stat.S_ISDIR(stat_input(p).st_mode):
+        csvs = [(name, mode) for name, mode in list_directory(p) if name.lower().endswith(".csv")]
+        for name, mode in csvs:
+            kind = special_kind(mode)
+            if kind is not None:
+                raise InputError(f"is {kind}, not a regular file", path=str(p / name), hint=SPECIAL_FILE_HINT)
+        if any(stat.S_ISREG(mode) for _, mode in csvs):
             return "csv-dir"
         raise UnsupportedFormatError(
             "directory holds no .csv files", path=str(p), hint="give an MCAP, ULog or CSV file"
         )
-    if not p.exists():
-        raise InputError("no such file", path=str(p))
     try:
         with open(p, "rb") as fh:
             head = fh.read(4096)
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=str(p)) from None
+        raise input_error(exc, p) from None
     if head.startswith(MCAP_MAGIC):
         return "mcap"
     if head.startswith(ULOG_MAGIC):

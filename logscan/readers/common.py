@@ -1,15 +1,101 @@
-"""Helpers every reader shares: format magic bytes, which topics and channels are wanted, time-order warnings."""
+"""Helpers every reader shares: format magic bytes, which inputs may be opened and how OS errors read,
+which topics and channels are wanted, time-order warnings."""
 
 from __future__ import annotations
 
+import errno
+import os
+import stat
+
 import numpy as np
 
+from logscan.errors import InputError
 from logscan.log import SourceInfo
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 
 ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
+
+_SPECIAL_KINDS = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+SPECIAL_FILE_HINT = "logscan reads regular files only; save the data to a file first"
+
+
+def special_kind(mode: int) -> str | None:
+    """What a non-regular, non-directory ``st_mode`` is ("a FIFO (named pipe)", ...); None for a
+    regular file or a directory."""
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return next((text for test, text in _SPECIAL_KINDS if test(mode)), "a special file")
+
+
+def os_error_text(exc: OSError, *, directory: bool = False) -> tuple[str, str | None]:
+    """(what is wrong, what to do) for an OSError met while reading an input."""
+    if isinstance(exc, FileNotFoundError):
+        return "no such file", None
+    if isinstance(exc, PermissionError):
+        if directory:  # listing needs read, reaching the entries needs execute (search) permission
+            return (
+                "permission denied (cannot list or search the directory)",
+                "make it listable and searchable: chmod +rx",
+            )
+        return "permission denied", "make the file readable (chmod +r) and its directories searchable (chmod +x)"
+    if isinstance(exc, IsADirectoryError):
+        return "is a directory, not a file", "give a file"
+    if isinstance(exc, NotADirectoryError):
+        return "a part of the path is not a directory", "check the path"
+    if exc.errno == errno.ELOOP:
+        return "too many levels of symbolic links", "check the path"
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    return f"cannot read: {reason}", "check the disk, the network mount or the file system, then retry"
+
+
+def input_error(exc: OSError, path: str | os.PathLike, *, directory: bool = False) -> InputError:
+    """The one-line InputError for an OSError met while reading the input ``path``."""
+    message, hint = os_error_text(exc, directory=directory)
+    return InputError(message, path=str(path), hint=hint)
+
+
+def stat_input(path: str | os.PathLike) -> os.stat_result:
+    """``os.stat(path)``, checked before anything is opened: InputError when the path is missing or
+    unreachable, or is not a regular file or a directory (opening a FIFO for reading blocks until
+    a writer comes; a device can be endless)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise input_error(exc, path) from None
+    kind = special_kind(st.st_mode)
+    if kind is not None:
+        raise InputError(f"is {kind}, not a regular file", path=str(path), hint=SPECIAL_FILE_HINT)
+    return st
+
+
+def list_directory(path: str | os.PathLike) -> list[tuple[str, int]]:
+    """(name, st_mode) of every entry of the directory ``path``, following symbolic links; entries
+    that vanish or are dangling links are left out. InputError when the directory cannot be
+    listed or searched (no read or no execute permission) or a read fails."""
+    entries: list[tuple[str, int]] = []
+    try:
+        with os.scandir(path) as it:
+            for entry in it:
+                try:
+                    entries.append((entry.name, entry.stat().st_mode))
+                except (FileNotFoundError, NotADirectoryError):  # vanished, or a dangling link
+                    continue
+                except PermissionError:  # an entry cannot be stat'ed: the directory is not searchable
+                    raise
+                except OSError as exc:
+                    if exc.errno == errno.ELOOP:  # a symbolic-link loop is no log
+                        continue
+                    raise input_error(exc, os.path.join(path, entry.name)) from None
+    except OSError as exc:
+        raise input_error(exc, path, directory=True) from None
+    return entries
 
 
 def topic_wanted(topic: str, wanted: set[str] | None) -> bool:

@@ -34,9 +34,16 @@ import struct
 
 import numpy as np
 
-from logscan.errors import CorruptLogError, InputError
+from logscan.errors import CorruptLogError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
-from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
+from logscan.readers.common import (
+    ZERO_TIMESTAMP_WHY,
+    channel_wanted,
+    input_error,
+    report_time_order,
+    stat_input,
+    topic_wanted,
+)
 
 _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
@@ -215,19 +222,16 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     ULog = _bounded_ulog_class()
 
     chatter = io.StringIO()
+    stat_input(path)  # a FIFO or device is refused before it is opened
     try:
         watch = _ReadWatch(str(path))
-    except FileNotFoundError:
-        raise InputError("no such file", path=str(path)) from None
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
+        raise input_error(exc, path) from None
     try:
         with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter), watch:
             ulog = ULog(watch, message_filter(wanted), True)
-    except FileNotFoundError:
-        raise InputError("no such file", path=str(path)) from None
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
+        raise input_error(exc, path) from None
     except (
         ULogException,
         struct.error,

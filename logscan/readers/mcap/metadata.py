@@ -15,9 +15,8 @@ import zlib
 
 import numpy as np
 
-from logscan.errors import InputError
 from logscan.log import Log
-from logscan.readers.common import MCAP_MAGIC
+from logscan.readers.common import MCAP_MAGIC, input_error, stat_input
 from logscan.readers.mcap.records import (
     OP_FOOTER,
     OP_METADATA,
@@ -48,11 +47,12 @@ def read_mcap_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
     that raises it.
     """
     path = str(path)
+    stat_input(path)  # a FIFO or device is refused before it is opened
     try:
         with open(path, "rb") as fh:
             indexed = _indexed_metadata(fh)
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+        raise input_error(exc, path) from None
     if indexed is not None:
         return indexed
     scan = scan_file(path, set(), keep_raw=False)
@@ -123,7 +123,7 @@ def attach_logscan_records(log: Log) -> None:
     if truth is not None:
         try:
             log.truth = json.loads(truth["json"])
-        except (KeyError, ValueError) as exc:
+        except (KeyError, ValueError, RecursionError) as exc:  # RecursionError: JSON nested too deep
             log.source.warnings.append(f"metadata record {TRUTH_RECORD!r} ignored: no valid 'json' key ({exc})")
     profile = meta.get(PROFILE_RECORD)
     if profile is not None:

@@ -30,8 +30,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from logscan.errors import CorruptLogError, InputError
-from logscan.readers.common import MCAP_MAGIC, topic_wanted
+from logscan.errors import CorruptLogError
+from logscan.readers.common import MCAP_MAGIC, input_error, stat_input, topic_wanted
 from logscan.readers.flatten import MessageBytes
 from logscan.readers.mcap.records import (
     MESSAGE_HEADER,
@@ -152,11 +152,12 @@ class Scan:
     # -- the pass -------------------------------------------------------------------------------
 
     def run(self) -> None:
+        stat_input(self.path)  # a FIFO or device is refused before it is opened
         try:
             with open(self.path, "rb") as fh:
                 raw = fh.read()
         except OSError as exc:
-            raise InputError(f"cannot read: {exc.strerror}", path=self.path) from None
+            raise input_error(exc, self.path) from None
         if not raw.startswith(MCAP_MAGIC):
             raise CorruptLogError(
                 "not an MCAP file (bad magic bytes at offset 0)",
