@@ -5,12 +5,13 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import stat
 import tomllib
 from pathlib import Path
 from typing import Any
 
 from logscan.profiles.bind import bind_inputs_without_model, build_model, check_against_model
-from logscan.profiles.problems import is_number, profile_error, single_error, type_name
+from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, type_name
 from logscan.profiles.schema import (
     ALARM_KEYS,
     GROUP_KEYS,
@@ -37,21 +38,52 @@ from logscan.profiles.schema import (
     SensorSpec,
     VehicleSpec,
 )
+from logscan.readers.common import SPECIAL_FILE_HINT, os_error_text, special_kind
 from logscan.results import AlarmPolicy
 
 _STD_LIMITS = (1e-150, 1e150)  # a noise std whose square (the variance) is a normal float
+# A profile is a few KB of TOML; a larger one is the wrong file (or hostile), refused before parsing.
+MAX_PROFILE_BYTES = 1 << 20
+_SIZE_HINT = "a profile is a few KB of TOML: check that this is the right file"
 
 
 def load_profile(path: str | os.PathLike, *, model=None) -> Profile:
     """Read and validate the profile file at ``path``."""
     p = Path(path)
+    return parse_profile(_profile_text(p), source=str(p), model=model)
+
+
+def _profile_text(p: Path) -> str:
+    """The text of the profile file ``p``: a regular file of at most MAX_PROFILE_BYTES of UTF-8,
+    checked with ``os.stat`` before it is opened (opening a FIFO blocks); else a ProfileError."""
     try:
-        text = p.read_text(encoding="utf-8")
+        st = os.stat(p)
+        kind = "a directory" if stat.S_ISDIR(st.st_mode) else special_kind(st.st_mode)
+        if kind is not None:
+            raise single_error(f"profile is {kind}, not a regular file", str(p), hint=SPECIAL_FILE_HINT)
+        if st.st_size > MAX_PROFILE_BYTES:
+            raise _too_large(st.st_size, str(p))
+        with open(p, "rb") as fh:
+            data = fh.read(MAX_PROFILE_BYTES + 1)  # the file may have grown since the stat
     except FileNotFoundError:
         raise single_error("no such profile file", str(p)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise single_error(f"cannot read profile: {exc}", str(p)) from None
-    return parse_profile(text, source=str(p), model=model)
+    except OSError as exc:
+        message, hint = os_error_text(exc)
+        raise single_error(f"cannot read profile: {message}", str(p), hint=hint or DOCS_HINT) from None
+    if len(data) > MAX_PROFILE_BYTES:
+        raise _too_large(len(data), str(p))
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise single_error(
+            f"profile is not UTF-8 text (bad byte at offset {exc.start})", str(p), hint="save it as UTF-8"
+        ) from None
+
+
+def _too_large(size: int, source: str):
+    return single_error(
+        f"profile is {size} bytes, more than the {MAX_PROFILE_BYTES} a profile may have", source, hint=_SIZE_HINT
+    )
 
 
 def resolve_profile(log, profile_path: str | os.PathLike | None = None, *, model=None) -> Profile:
@@ -75,12 +107,16 @@ def parse_profile(text: str, source: str = "<embedded>", *, model=None, check_mo
     ``model``: a built Model to validate against (tests pass fakes); default: the registry's model
     named in ``[vehicle] model``. ``check_model=False`` checks only the structure.
     """
+    if len(text) > MAX_PROFILE_BYTES:  # characters: at least as many bytes
+        raise _too_large(len(text), source)
     try:
         data = tomllib.loads(text)
+        checker = _Checker()
+        profile = checker.profile(data, source)
     except tomllib.TOMLDecodeError as exc:
         raise single_error(f"invalid TOML: {exc}", source) from None
-    checker = _Checker()
-    profile = checker.profile(data, source)
+    except RecursionError:  # tomllib recurses once per level of nested arrays and inline tables
+        raise single_error("invalid TOML: arrays, tables or keys nested too deeply", source) from None
     if profile is not None and check_model and not checker.problems:
         check_against_model(profile, model, checker.problems)
     elif checker.vehicle_spec is not None and check_model and model is None:

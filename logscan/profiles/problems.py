@@ -17,8 +17,8 @@ def profile_error(problems: list[str], source: str, hint: str = DOCS_HINT) -> Pr
     return err
 
 
-def single_error(message: str, source: str | None) -> ProfileError:
-    err = ProfileError(message, path=source, hint=DOCS_HINT)
+def single_error(message: str, source: str | None, hint: str = DOCS_HINT) -> ProfileError:
+    err = ProfileError(message, path=source, hint=hint)
     err.problems = [message]
     return err
 
