@@ -1,50 +1,251 @@
-"""Writing outputs atomically (temp file + rename), so nothing already written is ever corrupted."""
+"""Writing outputs atomically (temp file + rename), so nothing already written is ever corrupted.
+
+One file: `write_atomic` (or `write_json`). Several files that belong together (the reports and the
+JSON of one `logscan analyze` run): `stage` each into a temporary file beside its target, then
+`commit` them all at the end, or `discard` them. What a failure leaves:
+
+- an error while writing (permissions, read-only file system, disk full, quota, file-size limit)
+  is an `OutputError` (exit 2, one line with the path and what to do); the temporary files are
+  removed and the previous files at the targets are untouched;
+- an error while renaming puts the files already replaced back (from hard-linked copies), so
+  either every target is new or every target is as before;
+- SIGINT, SIGTERM and SIGHUP are held back during the renames (delivered right after), so an
+  interrupted run leaves all previous files or all new ones. Only SIGKILL or a power cut in the
+  few microseconds of the renames themselves can leave some targets new and some old (POSIX has
+  no rename of several files at once); the JSON is renamed last, so a new JSON means new reports.
+  Such a kill also leaves its ``.<name>.<token>.*.tmp`` temporary files behind.
+"""
 
 from __future__ import annotations
 
+import errno
+import glob
 import json
 import os
+import secrets
+import signal
 import sys
 import tempfile
+import threading
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
-from logscan.errors import InputError
+from logscan.errors import LogscanError
+
+# errno -> (what is wrong, what to do) for the write-side errors a user can fix
+_WRITE_ERRORS = {
+    errno.EACCES: ("permission denied", "choose a writable location or fix the directory's permissions"),
+    errno.EPERM: ("operation not permitted", "choose a writable location or fix the directory's permissions"),
+    errno.EROFS: ("the file system is read-only", "write the outputs to a writable location"),
+    errno.ENOSPC: ("no space left on the device", "free some space or write the outputs elsewhere"),
+    errno.EDQUOT: ("disk quota exceeded", "free some space or write the outputs elsewhere"),
+    errno.EFBIG: ("file too large for the file-size limit (ulimit -f) or the file system",
+                  "raise the limit or write the outputs elsewhere"),
+    errno.EISDIR: ("is a directory", "give a file name"),
+    errno.ENOTDIR: ("a part of the path is not a directory", "give a path in an existing directory"),
+    errno.ENOENT: ("the directory does not exist", "create it or give another path"),
+    errno.ENAMETOOLONG: ("the file name is too long", "give a shorter path"),
+    errno.EIO: ("input/output error on the device", "check the disk, or write the outputs elsewhere"),
+}  # fmt: skip
 
 
-def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same directory and a rename."""
+class OutputError(LogscanError):
+    """An output cannot be written (permissions, read-only or full file system, size limit)."""
+
+
+class Staged(NamedTuple):
+    """A complete temporary file beside its target, waiting for `commit`."""
+
+    tmp: str
+    target: str
+
+
+def describe_os_error(exc: OSError) -> tuple[str, str | None]:
+    """(what is wrong, what to do) for an OSError: the errno's words and hint when known."""
+    if exc.errno in _WRITE_ERRORS:
+        return _WRITE_ERRORS[exc.errno]
+    return (exc.strerror or str(exc) or type(exc).__name__), None
+
+
+def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
+    """The one-line error for an OSError met while writing ``path``."""
+    what, hint = describe_os_error(exc)
+    return OutputError(f"cannot write the output: {what}", path=str(path), hint=hint)
+
+
+def new_token() -> str:
+    """A tag for the temporary files of one run: `cleanup` finds them by it, even those a worker
+    process had written when the run was interrupted."""
+    return f"{os.getpid()}-{secrets.token_hex(4)}"
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+def stage(path: str | os.PathLike, data: bytes | str, *, token: str = "") -> Staged:
+    """Write ``data`` completely (flushed to disk) to a temporary file in ``path``'s directory;
+    `commit` renames it onto ``path``. On an error the temporary file is removed."""
     target = Path(path)
     payload = data.encode("utf-8") if isinstance(data, str) else data
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
-        raise InputError("output directory does not exist", path=str(directory))
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+        raise OutputError("the output directory does not exist", path=str(directory), hint="create it first")
+    prefix = f".{target.name}.{token}." if token else f".{target.name}."
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".tmp", dir=directory)
+    except OSError as exc:
+        raise output_error(exc, target) from None
     try:
         # mkstemp creates 0600; give the file the permissions a plain open() would (umask)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        os.chmod(tmp, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+    except BaseException as exc:
+        _unlink(tmp)
+        if isinstance(exc, OSError):
+            raise output_error(exc, target) from None
         raise
+    return Staged(tmp, str(target))
+
+
+def commit(staged: Sequence[Staged]) -> None:
+    """Rename every staged file onto its target, in order, with SIGINT/SIGTERM/SIGHUP held back.
+
+    When a rename fails, the targets already replaced get their previous content back (or are
+    removed when they had none), the remaining temporary files are removed, and an OutputError
+    says which target failed."""
+    with _signals_held():
+        backups = [_backup(item.target) for item in staged]
+        done = 0
+        try:
+            for item in staged:
+                os.replace(item.tmp, item.target)
+                done += 1
+        except BaseException as exc:
+            _roll_back(staged[:done], backups[:done])
+            discard(staged[done:])
+            _discard_backups(backups)
+            if isinstance(exc, OSError):
+                raise output_error(exc, staged[done].target) from None
+            raise
+        _discard_backups(backups)
+    for directory in {os.path.dirname(os.path.abspath(item.target)) for item in staged}:
+        _fsync_directory(directory)
+
+
+def discard(staged: Iterable[Staged]) -> None:
+    """Remove the temporary files of ``staged`` (targets untouched)."""
+    for item in staged:
+        _unlink(item.tmp)
+
+
+def cleanup(targets: Iterable[str | os.PathLike], token: str) -> None:
+    """Remove every temporary file of the run tagged ``token`` beside ``targets`` (including those
+    a worker process wrote and could not report back before an interruption)."""
+    for target in targets:
+        target = Path(target)
+        pattern = os.path.join(glob.escape(str(target.parent)), glob.escape(f".{target.name}.{token}.") + "*.tmp")
+        for tmp in glob.glob(pattern):
+            _unlink(tmp)
+
+
+def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same directory and a rename."""
+    commit([stage(path, data)])
+
+
+def json_text(obj: Any) -> str:
+    """JSON under the one JSON policy (`logscan.results.jsonable`: numpy values to plain ones,
+    NaN and infinities to null)."""
+    from logscan.results import jsonable
+
+    return json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
-    """JSON to ``path`` atomically, or to stdout when ``path`` is "-", under the one JSON policy
-    (`logscan.results.jsonable`: numpy values to plain ones, NaN and infinities to null)."""
-    from logscan.results import jsonable
-
-    text = json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
+    """JSON to ``path`` atomically, or to stdout when ``path`` is "-" (see `json_text`)."""
+    text = json_text(obj)
     if str(path) == "-":
         sys.stdout.write(text)
         return
     write_atomic(path, text)
+
+
+# --- helpers ------------------------------------------------------------------------------------
+
+
+def _unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+def _backup(target: str) -> str | None:
+    """A hard link to the target's current file (None: no file, or no hard links here)."""
+    if not os.path.isfile(target):
+        return None
+    directory, name = os.path.split(os.path.abspath(target))
+    for _ in range(3):
+        backup = os.path.join(directory, f".{name}.{secrets.token_hex(4)}.bak")
+        try:
+            os.link(target, backup)
+            return backup
+        except FileExistsError:
+            continue
+        except OSError:
+            return None
+    return None
+
+
+def _roll_back(replaced: Sequence[Staged], backups: Sequence[str | None]) -> None:
+    for item, backup in zip(replaced, backups):
+        try:
+            if backup is None:
+                os.unlink(item.target)
+            else:
+                os.replace(backup, item.target)
+        except OSError:
+            pass
+
+
+def _discard_backups(backups: Iterable[str | None]) -> None:
+    for backup in backups:
+        if backup is not None:
+            _unlink(backup)
+
+
+def _fsync_directory(directory: str) -> None:
+    """Make the renames durable (best effort: not every platform can open a directory)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+class _signals_held:
+    """Hold back SIGINT, SIGTERM and SIGHUP (POSIX, main thread): delivered on exit."""
+
+    _SIGNALS = {getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)}
+
+    def __enter__(self):
+        self._old = None
+        if hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread():
+            self._old = signal.pthread_sigmask(signal.SIG_BLOCK, self._SIGNALS)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._old is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, self._old)

@@ -12,6 +12,7 @@ is processed by the same task, and outcomes come back in the order of ``logs``.
 
 from __future__ import annotations
 
+import os
 import stat
 import sys
 from collections.abc import Callable, Sequence
@@ -98,10 +99,10 @@ def _csv_logs(directory: Path, entries: list[tuple[str, int]] | None = None) -> 
 
 def output_paths(logs: Sequence[str], output: str | None, suffix: str = ".report.html") -> list[str]:
     """Output file per log: ``output`` itself for one log, else ``output/<name><suffix>`` (default:
-    the current directory); logs of the same name get their parent directory's name as a prefix."""
-    names = [f"{Path(log.rstrip('/')).stem}{suffix}" for log in logs]
-    if len(set(names)) != len(names):
-        names = [f"{Path(log.rstrip('/')).parent.name}_{n}" for log, n in zip(logs, names)]
+    the current directory). Names never clash: when two logs have the same name (ignoring case, as
+    some file systems do) every name gets its parent directory's name as a prefix, and a name that
+    still clashes gets a number (``run-2``)."""
+    names = unique_names(logs, suffix)
     if output is None:
         return names
     if len(logs) == 1 and not Path(output).is_dir():
@@ -109,8 +110,103 @@ def output_paths(logs: Sequence[str], output: str | None, suffix: str = ".report
     directory = Path(output)
     if directory.exists() and not directory.is_dir():
         raise UsageError(f"--output {output} is a file, but {len(logs)} logs need a directory")
-    directory.mkdir(parents=True, exist_ok=True)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        from logscan.artifacts import output_error
+
+        raise output_error(exc, directory) from None
     return [str(directory / name) for name in names]
+
+
+def unique_names(logs: Sequence[str], suffix: str) -> list[str]:
+    """``<log stem><suffix>`` per log, made unique as `output_paths` says."""
+    stems = [Path(log.rstrip("/") or log).stem for log in logs]
+    folded = [stem.casefold() for stem in stems]
+    if len(set(folded)) != len(folded):
+        stems = [f"{_parent_name(log)}_{stem}" for log, stem in zip(logs, stems)]
+    names, taken = [], set()
+    for stem in stems:
+        name, number = stem, 2
+        while name.casefold() in taken:
+            name, number = f"{stem}-{number}", number + 1
+        taken.add(name.casefold())
+        names.append(name + suffix)
+    return names
+
+
+def _parent_name(log: str) -> str:
+    parent = Path(log.rstrip("/") or log).parent
+    return parent.name or Path(os.path.abspath(parent)).name or "root"
+
+
+# Outputs named like these would be read as a log or a profile by the next run (or replace one)
+LOG_LIKE_SUFFIXES = (*LOG_FILE_SUFFIXES, ".csv", ".toml")
+
+
+def refuse_clobbering(
+    outputs: Sequence[tuple[str, str | None]], logs: Sequence[str], profile: str | None = None
+) -> None:
+    """Raise UsageError (before any work) when an output would replace an input or another output.
+
+    ``outputs``: (option, path) pairs; None and "-" (stdout) are skipped. Inputs are the logs, their
+    ``.truth.json`` / ``.profile.toml`` sidecars, the files of a log directory, and the profile.
+    The same file is found by device and inode (hard links, symbolic links, a case-insensitive
+    file system) when it exists, else by resolved path. An output named like a log or a profile
+    (``.mcap``, ``.ulg``, ``.csv``, ``.toml``) is refused as well."""
+    inputs = _input_files(logs, profile)
+    seen_ids = {key: ("the input", path) for path in inputs if (key := _file_id(path)) is not None}
+    seen_paths = {os.path.realpath(path): ("the input", path) for path in inputs}
+    for option, path in outputs:
+        if path is None or path == "-":
+            continue
+        key, resolved = _file_id(path), os.path.realpath(path)
+        clash = seen_ids.get(key) if key is not None else None
+        clash = clash or seen_paths.get(resolved)
+        if clash is not None:
+            what, other = clash
+            verb = "would replace" if what == "the input" else "is also"
+            raise UsageError(
+                f"{option} {path} {verb} {what} {other}",
+                hint="give another output path: inputs are never modified and each output needs its own file",
+            )
+        if _suffix(path) in LOG_LIKE_SUFFIXES:
+            raise UsageError(
+                f"{option} {path} is named like a log or a profile",
+                hint="give the output another name (e.g. .html for a report, .json for the summary)",
+            )
+        if key is not None:
+            seen_ids[key] = (f"the {option} output", path)
+        seen_paths[resolved] = (f"the {option} output", path)
+
+
+def _input_files(logs: Sequence[str], profile: str | None) -> list[str]:
+    files = [profile] if profile else []
+    for log in logs:
+        path = Path(log)
+        files.append(log)
+        for suffix in (".truth.json", ".profile.toml"):  # the CSV reader's sidecars
+            files.append(str(path.with_name(path.name + suffix) if path.is_dir() else path.with_suffix(suffix)))
+        if path.is_dir():
+            try:
+                files.extend(str(path / name) for name, mode in _listing(path) if stat.S_ISREG(mode))
+            except InputError:
+                pass
+    return files
+
+
+def _listing(path: Path) -> list[tuple[str, int]]:
+    from logscan.readers.common import list_directory
+
+    return list_directory(path)
+
+
+def _file_id(path: str) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino)
 
 
 def failure_of(path: str, exc: BaseException) -> LogFailure:
@@ -127,8 +223,12 @@ def failure_of(path: str, exc: BaseException) -> LogFailure:
 
 
 def _isolated(task: Callable[[str], Any], path: str) -> Any:
+    from logscan.artifacts import OutputError
+
     try:
         return task(path)
+    except OutputError:
+        raise  # the outputs cannot be written (disk full, read-only): no log can succeed, stop the run
     except Exception as exc:  # noqa: BLE001 - one bad log must not stop the others
         return failure_of(path, exc)
 
@@ -143,8 +243,10 @@ def run_many(
     isolate: bool = True,
 ) -> list[Any]:
     """``task(log)`` for every log, in input order; a failing log yields a LogFailure (with
-    ``isolate``; without it the first error propagates, e.g. for one log run in the foreground).
-    ``jobs`` > 1 runs the logs in that many local processes. ``progress`` shows one bar on stderr."""
+    ``isolate``; without it the first error propagates, e.g. for one log run in the foreground;
+    an `OutputError` always propagates). ``jobs`` > 1 runs the logs in that many local processes,
+    which ignore SIGINT: on Ctrl-C, or any error that stops the run, this process stops them
+    (terminated and joined) before the exception propagates. ``progress`` shows one bar on stderr."""
     logs = list(logs)
     call = (lambda path: _isolated(task, path)) if isolate else task
     bar = _progress_bar(len(logs), label) if progress and len(logs) > 1 else None
@@ -157,16 +259,39 @@ def run_many(
                     bar.update(1)
             return outcomes
         outcomes: list[Any] = [None] * len(logs)
-        with ProcessPoolExecutor(max_workers=min(jobs, len(logs))) as pool:
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_ignore_sigint)
+        try:
             futures = {pool.submit(_isolated if isolate else _call, task, path): i for i, path in enumerate(logs)}
             for future in as_completed(futures):
                 outcomes[futures[future]] = future.result()
                 if bar:
                     bar.update(1)
+        except BaseException:
+            _stop(pool)
+            raise
+        pool.shutdown()
         return outcomes
     finally:
         if bar:
             bar.render_finish()
+
+
+def _ignore_sigint() -> None:
+    """Worker processes leave Ctrl-C to the parent, which stops them and cleans up."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued logs and terminate the running workers (the executor's process table is
+    private, but it is the only way to stop a task that is running), then wait for them."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=10)
 
 
 def _call(task: Callable[[str], Any], path: str) -> Any:
