@@ -19,7 +19,6 @@ JSON of one `logscan analyze` run): `stage` each into a temporary file beside it
 from __future__ import annotations
 
 import errno
-import glob
 import json
 import os
 import secrets
@@ -147,12 +146,20 @@ def discard(staged: Iterable[Staged]) -> None:
 
 def cleanup(targets: Iterable[str | os.PathLike], token: str) -> None:
     """Remove every temporary file of the run tagged ``token`` beside ``targets`` (including those
-    a worker process wrote and could not report back before an interruption)."""
-    for target in targets:
-        target = Path(target)
-        pattern = os.path.join(glob.escape(str(target.parent)), glob.escape(f".{target.name}.{token}.") + "*.tmp")
-        for tmp in glob.glob(pattern):
-            _unlink(tmp)
+    a worker process wrote and could not report back before an interruption); each directory is
+    listed once."""
+    if not token:
+        return
+    directories = {os.path.dirname(os.path.abspath(target)) for target in targets}
+    marker = f".{token}."
+    for directory in directories:
+        try:
+            names = os.listdir(directory)
+        except OSError:
+            continue
+        for name in names:
+            if name.startswith(".") and name.endswith(".tmp") and marker in name:
+                _unlink(os.path.join(directory, name))
 
 
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import click
 
+from logscan.artifacts import Staged
 from logscan.cli.options import (
     echo_notice,
     header_stamp_option,
@@ -16,7 +17,7 @@ from logscan.cli.options import (
     quiet_option,
     show_progress,
 )
-from logscan.cli.render import render_summary
+from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode
 
 
@@ -88,7 +89,8 @@ def analyze(
     a diverged filter; 0 or 1 with --allow-partial); 3 a detector or logscan failed. The report is
     written in every case and says what could not be checked.
     """
-    from logscan.fleet import LogFailure, expand_logs, output_paths, run_many
+    from logscan.artifacts import cleanup, new_token
+    from logscan.fleet import expand_logs, output_paths, refuse_clobbering, run_many
 
     names = tuple(detector_names) or None
     if profile_path is not None:
@@ -98,7 +100,15 @@ def analyze(
         create_detectors(load_profile_for(None, profile_path), names)
     logs = expand_logs(log_paths)
     reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
+    plotlyjs_dir = None if no_report else plotlyjs_dir
+    plotly_js = _plotly_js_path(plotlyjs_dir)
+    report_option = "--output" if output_path else "report"
+    # before any log is read: no output may replace an input or another output
+    refuse_clobbering(
+        [*((report_option, r) for r in reports), ("--json", json_path), ("--plotlyjs", plotly_js)], logs, profile_path
+    )
     progress = show_progress(quiet)
+    token = new_token()  # tags this run's temporary files, wherever a worker wrote them
     task = AnalyzeTask(
         profile_path,
         names,
@@ -107,40 +117,76 @@ def analyze(
         allow_partial,
         steps=progress and len(logs) == 1,
         notices=not quiet,
+        token=token,
     )
-    outcomes = run_many(
-        list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing", isolate=len(logs) > 1
-    )
+    staged = []
+    try:
+        outcomes = run_many(
+            list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing", isolate=len(logs) > 1
+        )
+        staged = [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
+        code, document = _report_outcomes(outcomes, exit_zero, err=json_path == "-")
+        _write_outputs(staged, json_path, document, plotlyjs_dir, token)
+    except BaseException:
+        # an error or Ctrl-C: no output is replaced, and no temporary file stays
+        from logscan.artifacts import discard
+
+        discard(staged)
+        cleanup([p for p in (*reports, json_path, plotly_js) if p and p != "-"], token)
+        raise
+    sys.exit(code)
+
+
+def _plotly_js_path(plotlyjs_dir: str | None) -> str | None:
+    """Where --plotlyjs DIR puts plotly.js (DIR is created here, before any log is read)."""
+    from logscan.report.page import plotly_js_target
+
+    return None if plotlyjs_dir is None else str(plotly_js_target(plotlyjs_dir))
+
+
+def _report_outcomes(outcomes: list, exit_zero: bool, err: bool) -> tuple[ExitCode, dict]:
+    """Print each log's summary (stderr when ``err``) or error line; the run's exit code and JSON."""
+    from logscan import __version__
+    from logscan.fleet import LogFailure
+
     summaries, failures, codes = [], [], []
     for outcome in outcomes:
         if isinstance(outcome, LogFailure):
-            click.echo(f"logscan: error: {outcome.message}", err=True)
+            click.echo(f"logscan: error: {printable(outcome.message)}", err=True)
             failures.append({"file": outcome.path, "error": outcome.message, "exit_code": outcome.exit_code})
             codes.append(ExitCode(outcome.exit_code))
             continue
         summaries.append(outcome.summary)
         codes.append(ExitCode(outcome.summary["exit_code"]))
         # with --json - the JSON owns stdout; the human summary goes to stderr
-        click.echo(outcome.text, err=json_path == "-")
+        click.echo(outcome.text, err=err)
 
     # the worst log decides: a failure (3) over bad or unchecked input (2) over alarms (1)
     code = max(codes, default=ExitCode.OK)
     if exit_zero and code == ExitCode.ALARMS:
         code = ExitCode.OK
-    if json_path:
-        from logscan import __version__
-        from logscan.artifacts import write_json
+    document = {"logscan_version": __version__, "exit_code": int(code), "logs": summaries, "errors": failures}
+    return code, document
 
-        write_json(
-            json_path,
-            {
-                "logscan_version": __version__,
-                "exit_code": int(code),
-                "logs": summaries,
-                "errors": failures,
-            },
-        )
-    sys.exit(code)
+
+def _write_outputs(staged: list, json_path: str | None, document: dict, plotlyjs_dir: str | None, token: str) -> None:
+    """The run's outputs all at once: the reports (already staged by the tasks), plotly.js and the
+    JSON staged beside their targets, then renamed in a row (`logscan.artifacts.commit`: the JSON
+    last, signals held), so an interrupted run leaves all previous outputs or all new ones."""
+    from logscan.artifacts import commit, json_text, stage
+
+    if plotlyjs_dir is not None:
+        from logscan.report.page import stage_plotly_js
+
+        js = stage_plotly_js(plotlyjs_dir, token)
+        if js is not None:
+            staged.insert(0, js)
+    if json_path and json_path != "-":
+        staged.append(stage(json_path, json_text(document), token=token))
+    commit(staged)
+    staged.clear()
+    if json_path == "-":
+        sys.stdout.write(json_text(document))
 
 
 @dataclass
@@ -149,6 +195,7 @@ class LogOutcome:
 
     summary: dict
     text: str
+    staged: Staged | None = None  # the report in its temporary file, renamed by the command at the end
 
 
 @dataclass(frozen=True)
@@ -162,10 +209,11 @@ class AnalyzeTask:
     allow_partial: bool = False  # a log not fully checked exits 0/1 instead of 2
     steps: bool = False  # print each step on stderr (one log on a terminal)
     notices: bool = True  # print the one-off notes (the first run's compile) on stderr
+    token: str = ""  # tags the temporary files of the run (logscan.artifacts.cleanup)
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
-        from logscan.report import render_report
+        from logscan.report.page import stage_report
 
         log_path, report_path = item
 
@@ -181,10 +229,14 @@ class AnalyzeTask:
             progress=step,
             notice=echo_notice if self.notices else None,
         )
-        if report_path is not None:
-            step("writing report")
-            render_report(analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed")
         summary = analysis.summary()
         summary["exit_code"] = int(analysis.exit_code(self.allow_partial))
         summary["report"] = report_path
-        return LogOutcome(summary, render_summary(analysis, report_path))
+        text = render_summary(analysis, report_path)
+        staged = None
+        if report_path is not None:
+            step("writing report")
+            staged = stage_report(
+                analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed", token=self.token
+            )
+        return LogOutcome(summary, text, staged)

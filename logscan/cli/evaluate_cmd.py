@@ -14,7 +14,7 @@ from logscan.cli.options import (
     quiet_option,
     show_progress,
 )
-from logscan.cli.render import render_evaluation
+from logscan.cli.render import printable, render_evaluation
 from logscan.errors import ExitCode, InputError
 from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 
@@ -80,9 +80,10 @@ def evaluate(
     be analysed or none has ground truth.
     """
     from logscan.evaluate import evaluate_logs
-    from logscan.fleet import expand_logs
+    from logscan.fleet import expand_logs, refuse_clobbering
 
     logs = expand_logs(log_paths)
+    refuse_clobbering([("--json", json_path)], logs, profile_path)  # before any log is read
     evaluation = evaluate_logs(
         logs,
         profile_path=profile_path,
@@ -101,7 +102,7 @@ def evaluate(
     if json_path != "-":
         click.echo(render_evaluation(evaluation))
     for failure in evaluation.failures:
-        click.echo(f"logscan: error: {failure.message}", err=True)
+        click.echo(f"logscan: error: {printable(failure.message)}", err=True)
     if not evaluation.logs and not evaluation.failures:
         raise InputError(
             f"none of the {len(logs)} log(s) has ground truth",

@@ -43,8 +43,12 @@ def inspect(
 ) -> None:
     """Show the topics, message types, counts, rates, time span and fields of LOG.
 
-    LOG is an MCAP file, a PX4 ULog file, a CSV file or a directory of per-topic CSV files.
+    LOG is an MCAP file, a PX4 ULog file, a CSV file or a directory of per-topic CSV files. Names
+    from the log are shown with control characters escaped (e.g. ESC as \\x1b).
     """
+    from logscan.fleet import refuse_clobbering
+
+    refuse_clobbering([("--json", json_path)], [log_path])  # the facts never replace the log
     log = read_log(log_path, topics or None, use_header_stamp=use_header_stamp)
     facts = inspect_facts(log)
     if json_path:

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import errno
 import os
+import signal
 import sys
+import threading
 import traceback
 
 import click
 
 from logscan import __version__
+from logscan.cli.render import printable
 from logscan.errors import ExitCode, LogscanError
 
 
@@ -74,40 +78,136 @@ def _register_commands() -> None:
 _register_commands()
 
 
+class Interrupted(BaseException):
+    """Ctrl-C (SIGINT), raised by logscan's handler instead of KeyboardInterrupt, which click would
+    turn into its Abort; like KeyboardInterrupt no ``except Exception`` catches it, so every
+    ``finally`` and cleanup on the way runs (temporary files removed, worker processes stopped)."""
+
+
+# OSErrors that say the environment is wrong (exit 2), not logscan: permissions, a read-only or full
+# file system, quotas, size limits, missing or unusable paths, too many open files, no memory
+_ENVIRONMENT_ERRNOS = frozenset(
+    getattr(errno, name)
+    for name in ("EACCES", "EPERM", "EROFS", "ENOSPC", "EDQUOT", "EFBIG", "ENOENT", "ENOTDIR", "EISDIR",
+                 "ENAMETOOLONG", "ELOOP", "EIO", "EMFILE", "ENFILE", "ENOMEM", "EBUSY", "ETXTBSY", "EXDEV")
+    if hasattr(errno, name)
+)  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run the CLI and map every outcome to an exit code."""
     args = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in args
+    previous = _install_signal_handlers()
+    try:
+        code = _run(args, debug)
+    finally:
+        _restore_signal_handlers(previous)
+    sys.exit(code)
+
+
+def _run(args: list[str], debug: bool) -> int:
+    """Run the CLI; the exit code of every outcome, with its one line on stderr."""
     try:
         code = cli.main(args=args, prog_name="logscan", standalone_mode=False)
-    except click.exceptions.Abort:
+    except (Interrupted, KeyboardInterrupt):
+        return _interrupted()
+    except click.exceptions.Abort as exc:
+        if isinstance(exc.__context__, (Interrupted, KeyboardInterrupt)):
+            return _interrupted()
         click.echo("logscan: aborted", err=True)
-        sys.exit(ExitCode.BAD_INPUT)
+        return ExitCode.BAD_INPUT
     except click.ClickException as exc:
         exc.show()
-        sys.exit(ExitCode.BAD_INPUT)
+        return ExitCode.BAD_INPUT
     except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)
+        return exc.exit_code
     except LogscanError as exc:
         if debug:
             traceback.print_exc()
-        click.echo(f"logscan: error: {exc.one_line()}", err=True)
-        sys.exit(exc.exit_code)
-    except KeyboardInterrupt:
-        click.echo("logscan: interrupted", err=True)
-        sys.exit(ExitCode.INTERRUPTED)
+        click.echo(f"logscan: error: {printable(exc.one_line())}", err=True)
+        return exc.exit_code
     except BrokenPipeError:
-        sys.exit(ExitCode.OK)
+        return ExitCode.OK
+    except OSError as exc:
+        if debug:
+            traceback.print_exc()
+        if not _is_environment_error(exc):
+            return _internal_error(exc)
+        click.echo(f"logscan: error: {printable(_os_error_line(exc))}", err=True)
+        return ExitCode.BAD_INPUT
     except Exception as exc:  # noqa: BLE001 - the one place internal errors are mapped
         if debug:
             traceback.print_exc()
-        click.echo(
-            f"logscan: internal error: {type(exc).__name__}: {exc} "
-            "(this is a bug in logscan; rerun with --debug for the traceback and report it)",
-            err=True,
-        )
-        sys.exit(ExitCode.INTERNAL)
-    sys.exit(int(code) if isinstance(code, int) else ExitCode.OK)
+        return _internal_error(exc)
+    return int(code) if isinstance(code, int) else ExitCode.OK
+
+
+def _interrupted() -> int:
+    click.echo("logscan: interrupted", err=True)
+    return ExitCode.INTERRUPTED
+
+
+def _internal_error(exc: BaseException) -> int:
+    click.echo(
+        f"logscan: internal error: {type(exc).__name__}: {printable(exc)} "
+        "(this is a bug in logscan; rerun with --debug for the traceback and report it)",
+        err=True,
+    )
+    return ExitCode.INTERNAL
+
+
+def _is_environment_error(exc: OSError) -> bool:
+    """An OSError the user's environment causes: a known errno, on a file outside logscan's own
+    installation (a template or module of logscan that cannot be read is a broken install: a bug)."""
+    if exc.errno not in _ENVIRONMENT_ERRNOS:
+        return False
+    if exc.filename is None:
+        return exc.errno in (errno.ENOSPC, errno.EMFILE, errno.ENFILE, errno.ENOMEM, errno.EDQUOT)
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    try:
+        return os.path.commonpath([package, os.path.abspath(os.fsdecode(exc.filename))]) != package
+    except (TypeError, ValueError):
+        return True
+
+
+def _os_error_line(exc: OSError) -> str:
+    from logscan.artifacts import describe_os_error
+
+    what, hint = describe_os_error(exc)
+    where = f"{os.fsdecode(exc.filename)}: " if exc.filename is not None else ""
+    return f"{where}{what} ({hint or 'check the path and the system, then rerun'})"
+
+
+def _raise_interrupted(signum, frame) -> None:
+    if os.getpid() != _OWNER[0]:
+        # a forked child (the background compile) that kept this handler: end it quietly; the
+        # parent reports the interruption
+        os._exit(ExitCode.INTERRUPTED)
+    raise Interrupted()
+
+
+_OWNER = [0]  # the process whose Ctrl-C is reported
+
+
+def _install_signal_handlers() -> dict:
+    """Ctrl-C raises Interrupted (unless SIGINT is ignored, as for a background job), and
+    exceeding the file-size limit (ulimit -f) is an EFBIG error on the write instead of a kill
+    by SIGXFSZ that would leave a temporary file behind. Returns the handlers to restore."""
+    previous = {}
+    if threading.current_thread() is not threading.main_thread():
+        return previous
+    _OWNER[0] = os.getpid()
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
+    if hasattr(signal, "SIGXFSZ"):
+        previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    return previous
+
+
+def _restore_signal_handlers(previous: dict) -> None:
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,9 @@
 """Every text view of the CLI: the analyze summary, the evaluation tables, inspect and detectors.
 
-Commands compute, this module renders; nothing here reads files or decides exit codes.
+Commands compute, this module renders; nothing here reads files or decides exit codes. Every
+view goes through `printable`: names, messages and file names come from logs and profiles, and a
+control character in them (an ESC sequence clearing the screen, a bidirectional override) must
+reach the terminal as an escape, never as itself.
 """
 
 from __future__ import annotations
@@ -24,6 +27,25 @@ _LIST_LIMIT = 40  # skipped items, warnings and metadata entries shown before tr
 _INFO_KEYS = ("sys_name", "ver_hw", "ver_sw", "ver_sw_release", "ver_sw_branch", "sys_os_name",
               "sys_uuid", "time_ref_utc")  # fmt: skip
 _ARRAY_RE = re.compile(r"^(?P<base>.*)\[(?P<index>\d+)\]$")
+# C0 controls, DEL, C1 controls (CSI, OSC...), line/paragraph separators, bidirectional controls
+_CONTROL_RE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+
+
+def printable(text: object) -> str:
+    """``text`` safe for a terminal: each control character as a ``\\x1b`` / ``\\u202e`` escape
+    (newlines and tabs too: call it on one line or one name). Backslashes stay as they are, so an
+    escaped text passes through unchanged."""
+    return _CONTROL_RE.sub(_escape_char, str(text))
+
+
+def _escape_char(match: re.Match) -> str:
+    code = ord(match.group())
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def _lines(lines: list[str]) -> str:
+    """The view's lines, each made printable, as one text."""
+    return "\n".join(printable(line) for line in lines)
 
 
 # --- analyze --------------------------------------------------------------------------------------
@@ -70,7 +92,7 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
         lines.append(f"  warning: {warning}")
     if report_path:
         lines.append(f"  report: {report_path}")
-    return "\n".join(lines)
+    return _lines(lines)
 
 
 # --- evaluate -------------------------------------------------------------------------------------
@@ -104,7 +126,7 @@ def render_scores(evaluation: Evaluation) -> str:
         f"recovery: alarms starting within {evaluation.recovery_s:g} s after a detected fault's grace period;",
         "transient: alarms on a healthy transient listed in the truth. FP counts none of them.",
     ]
-    return "\n".join(lines)
+    return _lines(lines)
 
 
 def render_kinds(evaluation: Evaluation) -> str:
@@ -131,7 +153,7 @@ def render_kinds(evaluation: Evaluation) -> str:
                 f"{_num(stats.mean_latency_s, '{:.2f} s'):>8} {_num(stats.max_latency_s, '{:.2f} s'):>8}"
             )
             first = False
-    return "\n".join(lines)
+    return _lines(lines)
 
 
 def render_evaluation(evaluation: Evaluation) -> str:
@@ -150,8 +172,10 @@ def render_evaluation(evaluation: Evaluation) -> str:
     if evaluation.skipped:
         parts.append("")
         parts.append(
-            f"skipped {len(evaluation.skipped)} log(s) without ground truth: "
-            + ", ".join(Path(p).name for p in evaluation.skipped)
+            printable(
+                f"skipped {len(evaluation.skipped)} log(s) without ground truth: "
+                + ", ".join(Path(p).name for p in evaluation.skipped)
+            )
         )
     if evaluation.failures:
         parts.append("")
@@ -182,7 +206,7 @@ def render_detectors(entries: list[dict], parameters: bool = True) -> str:
             if entry.get("parameters"):
                 lines += ["", f"{entry['name']} parameters ([detectors.{entry['name']}] in a profile):"]
                 lines += _parameter_lines(entry["parameters"])
-    return "\n".join(lines)
+    return _lines(lines)
 
 
 def _parameter_lines(rows: list[dict]) -> list[str]:
@@ -288,20 +312,20 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
     )
     lines.extend(_render_metadata(metadata))
 
-    topics = facts["topics"]
-    total = sum(info["message_count"] for info in topics.values())
+    topics = [(printable(name), info) for name, info in facts["topics"].items()]  # escaped before measured
+    total = sum(info["message_count"] for _, info in topics)
     lines += ["", f"{len(topics)} topic(s), {total} message(s):"]
     if topics:
-        name_width = min(max(len(name) for name in topics), 48)
+        name_width = min(max(len(name) for name, _ in topics), 48)
         lines.append(f"  {'topic':<{name_width}}  {'messages':>9}  {'rate Hz':>9}  encoding / schema")
-        for name, info in topics.items():
+        for name, info in topics:
             kind = " / ".join(x for x in (info["encoding"], info["schema"]) if x)
             lines.append(f"  {name:<{name_width}}  {info['message_count']:>9}  {_rate(info['rate_hz'])}  {kind}")
             if info["fields"]:
-                lines.extend(_wrap_fields(info["fields"], "    ", width, full))
+                lines.extend(_wrap_fields([printable(f) for f in info["fields"]], "    ", width, full))
 
-    channels = facts["channels"]
-    with_nan = sum(1 for info in channels.values() if info.get("nonfinite"))
+    channels = [(printable(name), info) for name, info in facts["channels"].items()]
+    with_nan = sum(1 for _, info in channels if info.get("nonfinite"))
     lines += [
         "",
         f"{len(channels)} numeric channel(s)"
@@ -309,9 +333,9 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
         + ("" if show_channels or not channels else " (--channels lists them)"),
     ]
     if show_channels and channels:
-        name_width = min(max(len(name) for name in channels), 60)
+        name_width = min(max(len(name) for name, _ in channels), 60)
         lines.append(f"  {'channel':<{name_width}}  {'samples':>9}  {'rate Hz':>9}  {'NaN/inf':>7}  range")
-        for name, info in channels.items():
+        for name, info in channels:
             low, high = info.get("min"), info.get("max")
             span = "-" if low is None else f"{low:.6g} .. {high:.6g}"
             rate = _rate(info.get("rate_hz", 0.0))
@@ -324,7 +348,7 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
     if facts["warnings"]:
         lines += ["", f"warnings ({len(facts['warnings'])}):"]
         lines.extend(_limited([f"  {w}" for w in facts["warnings"]], full, "warnings"))
-    return "\n".join(lines)
+    return _lines(lines)
 
 
 def _render_metadata(metadata: dict) -> list[str]:

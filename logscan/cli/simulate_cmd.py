@@ -115,6 +115,13 @@ def simulate(
         raise UsageError("no output file", hint="give -o OUT (e.g. -o q.mcap)")
     if Path(output_path).is_dir():
         raise UsageError("the output is a directory", path=output_path, hint="give a file name, e.g. -o q.mcap")
+    if output_path.lower().endswith(_NOT_LOG_SUFFIXES):
+        # such a name is a profile, a CSV log's sidecar, a JSON summary or a report: never replace one with a log
+        raise UsageError(
+            "the output is named like a profile, a sidecar, a JSON summary or a report",
+            path=output_path,
+            hint="give the log a .mcap or .csv name, e.g. -o q.mcap",
+        )
     if fmt is None:
         fmt = "csv" if output_path.lower().endswith(".csv") else "mcap-json"
     specs = []
@@ -152,6 +159,9 @@ def simulate(
                 err=True,
             )
         click.echo("wrote " + ", ".join(str(p) for p in written), err=True)
+
+
+_NOT_LOG_SUFFIXES = (".toml", ".json", ".html", ".htm", ".xml", ".js")
 
 
 def _simulator_cold() -> bool:

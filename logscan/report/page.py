@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from logscan import scoring
-from logscan.artifacts import write_atomic
+from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.errors import InputError
 from logscan.report.figures import Figure, detector_figures, merge_spans
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
@@ -242,22 +242,42 @@ def _plotly_js() -> str:
     return js.replace("</script", "<\\/script").replace("</SCRIPT", "<\\/SCRIPT")
 
 
-def _install_plotly_js(directory: Path, report_path: Path) -> str:
-    """Write plotly.min.js into ``directory`` (if absent or different); URL relative to the report."""
+def plotly_js_target(directory: str | os.PathLike) -> Path:
+    """Where ``--plotlyjs DIR`` puts plotly.js (the directory is created; InputError when it cannot be)."""
+    directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise InputError("--plotlyjs must be a directory", path=str(directory), hint="give a directory path or 'embed'")
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"cannot create the plotly.js directory: {exc.strerror}", path=str(directory)) from None
+    return directory / PLOTLY_JS_NAME
+
+
+def stage_plotly_js(directory: str | os.PathLike, token: str = "") -> Staged | None:
+    """plotly.min.js staged into ``directory`` (`logscan.artifacts.stage`); None when the file
+    there already holds it."""
     from plotly.offline import get_plotlyjs
 
     payload = get_plotlyjs().encode("utf-8")
-    target = directory / PLOTLY_JS_NAME
-    if not target.is_file() or target.read_bytes() != payload:
-        write_atomic(target, payload)
-    relative = os.path.relpath(target.resolve(), report_path.resolve().parent)
+    target = plotly_js_target(directory)
+    if target.is_file() and target.read_bytes() == payload:
+        return None
+    return stage(target, payload, token=token)
+
+
+def _plotly_js_src(directory: Path, report_path: Path) -> str:
+    """The URL of plotly.min.js in ``directory``, relative to the report."""
+    relative = os.path.relpath((directory / PLOTLY_JS_NAME).resolve(), report_path.resolve().parent)
     return urllib.parse.quote(Path(relative).as_posix())
+
+
+def _install_plotly_js(directory: Path, report_path: Path) -> str:
+    """Write plotly.min.js into ``directory`` (if absent or different); URL relative to the report."""
+    staged = stage_plotly_js(directory)
+    if staged is not None:
+        commit([staged])
+    return _plotly_js_src(directory, report_path)
 
 
 @functools.lru_cache(maxsize=1)
@@ -356,3 +376,15 @@ def render_report(report: ReportInput, path: str | os.PathLike, *, plotlyjs: str
     target = Path(path)
     src = None if str(plotlyjs) == "embed" else _install_plotly_js(Path(plotlyjs), target)
     write_atomic(target, render_html(report, plotlyjs_src=src))
+
+
+def stage_report(
+    report: ReportInput, path: str | os.PathLike, *, plotlyjs: str | os.PathLike = "embed", token: str = ""
+) -> Staged:
+    """The report for ``report`` written to a temporary file beside ``path`` and not yet renamed
+    (`logscan.artifacts.commit` does that, together with the run's other outputs). With a
+    plotly.js directory the page links to ``DIR/plotly.min.js``, which the caller stages once
+    (`stage_plotly_js`)."""
+    target = Path(path)
+    src = None if str(plotlyjs) == "embed" else _plotly_js_src(Path(plotlyjs), target)
+    return stage(target, render_html(report, plotlyjs_src=src), token=token)

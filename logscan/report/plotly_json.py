@@ -2,8 +2,10 @@
 
 Traces are decimated (``logscan.decimate``: min/max per bucket, alarm edges and NaN gaps kept)
 under one point budget per report, so a report stays a few hundred kilobytes plus plotly.js
-whatever the log length. The JSON has every ``<``, ``>`` and ``&`` escaped, so it can sit inside
-a ``<script>`` element.
+whatever the log length. Every name shown in a figure (trace names, titles, axis titles) goes
+through `plot_text`: plotly draws ``<a href>``, ``<b>``, ``<br>`` in them as markup, and names come
+from logs and profiles. The JSON has every ``<``, ``>`` and ``&`` escaped, so it can sit inside a
+``<script>`` element.
 """
 
 from __future__ import annotations
@@ -51,6 +53,12 @@ def _display_values(y: np.ndarray) -> np.ndarray:
     return out.astype(np.float32)
 
 
+def plot_text(text: object) -> str:
+    """``text`` as plotly shows it literally: ``&``, ``<`` and ``>`` as the entities plotly turns
+    back into characters, never into links or formatting."""
+    return str(text).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
 def _span_trace(name: str, spans: list, fill: str) -> dict:
     """A filled polygon per span on the hidden overlay axis y2 (0..1 covers the plot height)."""
     arr = np.asarray(spans, dtype=np.float64).reshape(-1, 2)
@@ -58,8 +66,8 @@ def _span_trace(name: str, spans: list, fill: str) -> dict:
     y = np.tile(np.array([0.0, 1.0, 1.0, 0.0, np.nan]), (len(arr), 1))
     return {
         "type": "scatter",
-        "name": name,
-        "legendgroup": name,
+        "name": plot_text(name),
+        "legendgroup": plot_text(name),
         "x": x.ravel().astype(np.float32),
         "y": y.ravel().astype(np.float32),
         "yaxis": "y2",
@@ -92,7 +100,7 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict
     t0, t1 = (float(t[0]), float(t[-1])) if t.size else (0.0, 0.0)
     for y_value, name in fig.hlines:
         data.append({
-            "type": "scatter", "name": name, "x": [t0, t1], "y": [y_value, y_value],
+            "type": "scatter", "name": plot_text(name), "x": [t0, t1], "y": [y_value, y_value],
             "mode": "lines", "line": {"color": "#d62728", "dash": "dash", "width": 1},
         })  # fmt: skip
     for trace in fig.traces:
@@ -101,7 +109,7 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict
         idx = decimate_indices(y, max_points, keep=keep, simplify_flat=True)
         data.append({
             "type": "scatter",
-            "name": trace.name,
+            "name": plot_text(trace.name),
             "x": x[idx].astype(np.float32),
             "y": _display_values(y[idx]),
             "mode": "lines",
@@ -116,12 +124,12 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
     import plotly.graph_objects as go
 
     layout = {
-        "title": {"text": fig.title, "font": {"size": 14}},
+        "title": {"text": plot_text(fig.title), "font": {"size": 14}},
         "height": 360,
         "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
         "xaxis": {"title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False},
         "yaxis": {
-            "title": {"text": fig.y_title},
+            "title": {"text": plot_text(fig.y_title)},
             "gridcolor": "#eee",
             "type": "log" if fig.log_y else "linear",
             **({"range": list(fig.y_range)} if fig.y_range else {}),
