@@ -155,29 +155,30 @@ def refuse_clobbering(
     file system) when it exists, else by resolved path. An output named like a log or a profile
     (``.mcap``, ``.ulg``, ``.csv``, ``.toml``) is refused as well."""
     inputs = _input_files(logs, profile)
-    seen_ids = {key: ("the input", path) for path in inputs if (key := _file_id(path)) is not None}
-    seen_paths = {os.path.realpath(path): ("the input", path) for path in inputs}
+    seen_ids = {key: ("input", path) for path in inputs if (key := _file_id(path)) is not None}
+    seen_paths = {os.path.realpath(path): ("input", path) for path in inputs}
     for option, path in outputs:
         if path is None or path == "-":
             continue
         key, resolved = _file_id(path), os.path.realpath(path)
-        clash = seen_ids.get(key) if key is not None else None
-        clash = clash or seen_paths.get(resolved)
-        if clash is not None:
-            what, other = clash
-            verb = "would replace" if what == "the input" else "is also"
+        clash = (seen_ids.get(key) if key is not None else None) or seen_paths.get(resolved)
+        if clash is not None and clash[0] == "input":
             raise UsageError(
-                f"{option} {path} {verb} {what} {other}",
-                hint="give another output path: inputs are never modified and each output needs its own file",
+                f"{option} {path} would replace the input {clash[1]}",
+                hint="inputs are never modified: give another output path",
+            )
+        if clash is not None:
+            raise UsageError(
+                f"{option} {path} is the same file as {clash[0]} {clash[1]}", hint="give each output its own path"
             )
         if _suffix(path) in LOG_LIKE_SUFFIXES:
             raise UsageError(
                 f"{option} {path} is named like a log or a profile",
-                hint="give the output another name (e.g. .html for a report, .json for the summary)",
+                hint="give the output another name, e.g. .html for a report or .json for the summary",
             )
         if key is not None:
-            seen_ids[key] = (f"the {option} output", path)
-        seen_paths[resolved] = (f"the {option} output", path)
+            seen_ids[key] = (option, path)
+        seen_paths[resolved] = (option, path)
 
 
 def _input_files(logs: Sequence[str], profile: str | None) -> list[str]:
