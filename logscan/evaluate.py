@@ -246,6 +246,8 @@ class EvaluationTask:
     grace_s: float = DEFAULT_GRACE_S
     use_header_stamp: bool = False
     recovery_s: float = DEFAULT_RECOVERY_S
+    start_s: float | None = None  # the window analysed (s since each log's start), None: all of it
+    end_s: float | None = None
 
     def __call__(self, path: str) -> LogEvaluation | None:
         from logscan.pipeline import analyze_log
@@ -258,6 +260,8 @@ class EvaluationTask:
             use_header_stamp=self.use_header_stamp,
             detector_names=self.detector_names,
             grace_s=self.grace_s,
+            start_s=self.start_s,
+            end_s=self.end_s,
         )
         return evaluate_analysis(analysis, grace_s=self.grace_s, recovery_s=self.recovery_s)
 
@@ -272,13 +276,15 @@ def evaluate_logs(
     use_header_stamp: bool = False,
     jobs: int = 1,
     progress: bool = False,
+    start_s: float | None = None,
+    end_s: float | None = None,
 ) -> Evaluation:
     """Analyse and score every log with ground truth (``jobs`` local processes); skip the others;
-    record failures as lines."""
+    record failures as lines. ``start_s``/``end_s``: the window of each log analysed."""
     from logscan.fleet import LogFailure, run_many
 
     names = tuple(detector_names) if detector_names else None
-    task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s)
+    task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s, start_s, end_s)
     evaluation = Evaluation(grace_s=grace_s, recovery_s=recovery_s)
     for path, outcome in zip(paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating")):
         if isinstance(outcome, LogFailure):

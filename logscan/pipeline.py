@@ -118,12 +118,14 @@ def prepare(
     use_header_stamp: bool = False,
     progress: Progress | None = None,
     notice: Progress | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
 ) -> Prepared:
     """Read only the topics the profile needs, align them, and run each filter the needs ask for
     exactly once. ``needs`` may be a function of the aligned run (needs can follow what the log
     holds, e.g. K and S only when it carries no on-board variances). ``notice`` hears the one
-    line a user should see even without progress (the first run's compile). Raises LogscanError
-    on bad input."""
+    line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
+    (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
     from logscan.align import align
     from logscan.models import get_model
     from logscan.readers import read_log
@@ -137,7 +139,7 @@ def prepare(
     log = read_log(path, topics=profile.topics(), use_header_stamp=use_header_stamp)
     profile.check_channels(log)
     step("aligning")
-    run = align(log, profile)
+    run = align(log, profile, start_s=start_s, end_s=end_s)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     if run.n_steps < 2:
         raise LogscanError(
@@ -243,6 +245,9 @@ def _score(analysis, detector_names: list[str], grace_s: float) -> None:
     if truth is None:
         return
     analysis.events = events_from_truth(truth.get("events", []), path=prepared.path)
+    if prepared.run.window is not None:  # a window scores only the faults it overlaps
+        first, last = float(prepared.run.t[0]), float(prepared.run.t[-1])
+        analysis.events = [e for e in analysis.events if e.end_or_inf >= first and e.t_start <= last]
     analysis.scores = score_by_detector(
         analysis.events,
         analysis.alarms,
@@ -263,11 +268,13 @@ def analyze_log(
     grace_s: float = 1.0,
     progress: Progress | None = None,
     notice: Progress | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
 ):
-    """One log end to end: profile, detectors (checked before the log is read), prepare, detect."""
+    """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
+    ``start_s``/``end_s``: a window of the log (seconds since its start)."""
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
-    prepared = prepare(
-        path, loaded, needs_of(detectors), use_header_stamp=use_header_stamp, progress=progress, notice=notice
-    )
+    options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
+    prepared = prepare(path, loaded, needs_of(detectors), progress=progress, notice=notice, **options)
     return detect(prepared, detectors, grace_s=grace_s, progress=progress)

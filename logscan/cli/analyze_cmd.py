@@ -10,12 +10,14 @@ import click
 from logscan.artifacts import Staged
 from logscan.cli.options import (
     echo_notice,
+    end_option,
     header_stamp_option,
     jobs_option,
     json_option,
     profile_option,
     quiet_option,
     show_progress,
+    start_option,
 )
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode
@@ -63,6 +65,8 @@ from logscan.errors import ExitCode
     help="A log that could not be fully checked (read in part, a sensor without valid samples, a "
     "diverged filter) exits 0 or 1 by its alarms instead of 2; the verdict still says what was not checked.",
 )
+@start_option
+@end_option
 @header_stamp_option
 @jobs_option
 @quiet_option
@@ -76,6 +80,8 @@ def analyze(
     detector_names: tuple[str, ...],
     exit_zero: bool,
     allow_partial: bool,
+    start_s: float | None,
+    end_s: float | None,
     use_header_stamp: bool,
     jobs: int,
     quiet: bool,
@@ -89,9 +95,11 @@ def analyze(
     a diverged filter; 0 or 1 with --allow-partial); 3 a detector or logscan failed. The report is
     written in every case and says what could not be checked.
     """
+    from logscan.align import check_window
     from logscan.artifacts import cleanup, new_token
     from logscan.fleet import expand_logs, output_paths, refuse_clobbering, run_many
 
+    check_window(start_s, end_s)
     names = tuple(detector_names) or None
     if profile_path is not None:
         # one profile for every log: its detector settings are checked once, before any log is read
@@ -118,6 +126,8 @@ def analyze(
         steps=progress and len(logs) == 1,
         notices=not quiet,
         token=token,
+        start_s=start_s,
+        end_s=end_s,
     )
     staged = []
     try:
@@ -210,6 +220,8 @@ class AnalyzeTask:
     steps: bool = False  # print each step on stderr (one log on a terminal)
     notices: bool = True  # print the one-off notes (the first run's compile) on stderr
     token: str = ""  # tags the temporary files of the run (logscan.artifacts.cleanup)
+    start_s: float | None = None  # --start/--end: the window analysed (s since the log's start)
+    end_s: float | None = None
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
@@ -228,6 +240,8 @@ class AnalyzeTask:
             detector_names=self.detector_names,
             progress=step,
             notice=echo_notice if self.notices else None,
+            start_s=self.start_s,
+            end_s=self.end_s,
         )
         summary = analysis.summary()
         summary["exit_code"] = int(analysis.exit_code(self.allow_partial))

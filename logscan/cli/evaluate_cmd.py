@@ -7,12 +7,14 @@ import sys
 import click
 
 from logscan.cli.options import (
+    end_option,
     header_stamp_option,
     jobs_option,
     json_option,
     profile_option,
     quiet_option,
     show_progress,
+    start_option,
 )
 from logscan.cli.render import printable, render_evaluation
 from logscan.errors import ExitCode, InputError
@@ -52,6 +54,8 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
     help="Evaluate only this detector (repeatable). Default: those each log's profile enables.",
 )
 @profile_option
+@start_option
+@end_option
 @header_stamp_option
 @jobs_option
 @quiet_option
@@ -62,6 +66,8 @@ def evaluate(
     recovery_s: float,
     detector_names: tuple[str, ...],
     profile_path: str | None,
+    start_s: float | None,
+    end_s: float | None,
     use_header_stamp: bool,
     jobs: int,
     quiet: bool,
@@ -79,9 +85,11 @@ def evaluate(
     A log that cannot be analysed is reported as one line. Exit code: 0, or 2 when a log could not
     be analysed or none has ground truth.
     """
+    from logscan.align import check_window
     from logscan.evaluate import evaluate_logs
     from logscan.fleet import expand_logs, refuse_clobbering
 
+    check_window(start_s, end_s)
     logs = expand_logs(log_paths)
     refuse_clobbering([("--json", json_path)], logs, profile_path)  # before any log is read
     evaluation = evaluate_logs(
@@ -93,6 +101,8 @@ def evaluate(
         use_header_stamp=use_header_stamp,
         jobs=jobs,
         progress=show_progress(quiet),
+        start_s=start_s,
+        end_s=end_s,
     )
     if json_path:
         from logscan import __version__

@@ -55,6 +55,23 @@ jobs_option = click.option(
     help="Number of logs processed in parallel (local processes).",
 )
 
+start_option = click.option(
+    "--start",
+    "start_s",
+    type=float,
+    default=None,
+    help="Analyse from this time, in seconds since the log's start (e.g. to leave out a clock jump). "
+    "Default: the log's start.",
+)
+
+end_option = click.option(
+    "--end",
+    "end_s",
+    type=float,
+    default=None,
+    help="Analyse up to this time, in seconds since the log's start. Default: the log's end.",
+)
+
 
 def show_progress(quiet: bool) -> bool:
     """Progress goes to stderr only when it is a terminal and --quiet is off."""
