@@ -260,7 +260,7 @@ def run_many(
                     bar.update(1)
             return outcomes
         outcomes: list[Any] = [None] * len(logs)
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_ignore_sigint)
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_worker_init)
         try:
             futures = {pool.submit(_isolated if isolate else _call, task, path): i for i, path in enumerate(logs)}
             for future in as_completed(futures):
@@ -277,11 +277,22 @@ def run_many(
             bar.render_finish()
 
 
-def _ignore_sigint() -> None:
-    """Worker processes leave Ctrl-C to the parent, which stops them and cleans up."""
+def _worker_init() -> None:
+    """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM) and removes their
+    temporary files; on SIGTERM a worker ends its own children first (the background compile,
+    logscan.filters.warmup), which would otherwise outlive it."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _end_worker)
+
+
+def _end_worker(signum, frame) -> None:
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.terminate()
+    os._exit(128 + signum)
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:
