@@ -5,8 +5,10 @@ Rules (documented in the README):
 * Wide file: the time column is the leftmost column named ``time``, ``timestamp``, ``t`` or
   ``stamp`` (case-insensitive, a leading ``%`` ignored), optionally with a unit suffix such as
   ``time_s``, ``timestamp_us``, ``time [ms]``, ``stamp(ns)``, ``time_usec``. A suffix states the
-  unit; without one it is inferred from the median step and the magnitude (relative time since
-  boot or epoch time) and the inference is reported as a warning and in ``source.time_unit``.
+  unit (a column whose numbers contradict it, e.g. ``time_s`` holding epoch nanoseconds, is an
+  InputError naming the unit they fit: `check_stated_unit`); without one it is inferred from the
+  median step and the magnitude (relative time since boot or epoch time) and the inference is
+  reported as a warning and in ``source.time_unit``.
   ISO 8601 date-time text (``2024-03-18 14:49:10.126``) is read as UTC epoch time.
   Every other numeric column becomes a channel ``/<column>`` (a column already starting with
   ``/`` keeps its name). An empty cell (or a missing-value word: ``NA``, ``null``, ``None``,
@@ -68,6 +70,12 @@ _EPOCH_MIN_S, _EPOCH_MAX_S = 946_684_800.0, 4_102_444_800.0  # 2000-01-01 .. 210
 _RELATIVE_MAX_S = 1.0e6  # time since boot / since the log's start: under ~11.6 days
 _PERIOD_MIN_S, _PERIOD_MAX_S = 1.0e-7, 1.0e4
 _TYPICAL_PERIOD_LOG10 = -1.5  # ~30 Hz, the middle of what vehicle logs sample at
+# A stated unit is refused when the column read in it is past 2100 as epoch time, spans more than a
+# year (1st to 99th percentile) or samples faster than 1 MHz (median step): the name is wrong.
+_YEAR_S = 365.25 * 86_400.0
+_STATED_MAX_SPAN_S = _YEAR_S
+_STATED_MIN_PERIOD_S = 1.0e-6
+_UNIT_NAMES = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
 
 _ULOG2CSV_RE = re.compile(r"^(?P<rest>.+)_(?P<instance>\d+)$")
 _MIXED_MIN_NUMERIC_FRACTION = 0.5  # a column with at least this share of numbers is numeric
@@ -132,6 +140,36 @@ def infer_time_unit(values: np.ndarray) -> TimeUnit:
         unit, origin, period = plausible[0]
     rate = f", ~{1 / period:.4g} Hz" if period else ""
     return TimeUnit(unit, origin, f"{facts} ({origin} time{rate})")
+
+
+def check_stated_unit(values: np.ndarray, name: str, unit: str, path: Path) -> None:
+    """InputError when the numbers of the time column ``name`` contradict the unit its name states
+    (see _STATED_MAX_SPAN_S), saying what they look like and what to rename the column to."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return
+    scale = NS_PER_UNIT[unit] / 1e9
+    middle = float(np.median(finite))
+    low, high = np.percentile(finite, [1, 99])
+    steps = np.diff(np.sort(finite))
+    step = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    if abs(middle) * scale > _EPOCH_MAX_S:
+        problem = f"a median of {middle:.3g} {unit} is {abs(middle) * scale / _YEAR_S:.3g} years"
+    elif (high - low) * scale > _STATED_MAX_SPAN_S:
+        problem = f"they span {(high - low) * scale / _YEAR_S:.3g} years"
+    elif step and step * scale < _STATED_MIN_PERIOD_S:
+        problem = f"a median step of {step:.3g} {unit} is {1 / (step * scale):.3g} Hz"
+    else:
+        return
+    guess = infer_time_unit(finite)
+    plausible = guess.unit != unit and "fit no unit" not in guess.reason
+    base = _TIME_RE.match(name.strip()).group("base")
+    reading = guess.reason.rsplit("(", 1)[-1].rstrip(")")  # e.g. "epoch time, ~100 Hz"
+    looks = f"; read as {_UNIT_NAMES[guess.unit]} they are {reading}" if plausible else ""
+    rename = f"rename it to '{base}_{guess.unit}'" if plausible else "name it time_s, time_ms, time_us or time_ns"
+    raise InputError(
+        f"time column {name!r} states {_UNIT_NAMES[unit]} but {problem}{looks}", path=str(path), hint=rename
+    )
 
 
 def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
@@ -472,6 +510,9 @@ def _time_column(
         return frame, "timestamp", TimeUnit("us", "stated", "ulog2csv layout: timestamp in microseconds")
     time_name, stated = _pick_time_column(frame, path)
     if stated:
+        values, _ = _numeric_column(frame[time_name])
+        if values is not None:
+            check_stated_unit(values, time_name, stated, path)
         return frame, time_name, TimeUnit(stated, "stated", f"unit stated by the column name {time_name!r}")
     raw, _ = _numeric_column(frame[time_name])
     if raw is None:
