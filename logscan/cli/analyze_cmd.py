@@ -231,7 +231,7 @@ class AnalyzeTask:
 
         def step(message: str) -> None:
             if self.steps:
-                click.echo(f"logscan: {log_path}: {message}...", err=True)
+                click.echo(printable(f"logscan: {log_path}: {message}..."), err=True)
 
         analysis = analyze_log(
             log_path,
