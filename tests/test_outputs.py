@@ -309,15 +309,16 @@ def test_inspect_shows_escape_sequences_in_topic_names_escaped(cli, tmp_path):
     assert "v\\x9b1m" in result.stdout
 
 
-def test_names_from_logs_reach_plotly_as_text_never_as_links():
-    from logscan.report import ReportInput, render_html
+def markup_report():
+    """A report whose detector, statistic and extra are named with a link in HTML."""
+    from logscan.report import ReportInput
     from logscan.results import DetectorResult
 
     t = np.arange(200) * 0.1
     result = DetectorResult(f"det {MARKUP}")
     result.add_statistic(t, MARKUP, np.linspace(0, 2, 200), upper=1.5, n_persist=1)
     result.extras[f"{MARKUP}.per_dof"] = np.ones(200)
-    report = ReportInput(
+    return ReportInput(
         log_facts={"file": f"/logs/{MARKUP}.mcap", "topics": {MARKUP: {}}},
         profile_text="",
         profile_source="embedded",
@@ -326,7 +327,12 @@ def test_names_from_logs_reach_plotly_as_text_never_as_links():
         t=t,
         results=[result],
     )
-    page = render_html(report, plotlyjs_src="plotly.min.js")
+
+
+def test_names_from_logs_reach_plotly_as_text_never_as_links():
+    from logscan.report import render_html
+
+    page = render_html(markup_report(), plotlyjs_src="plotly.min.js")
     block = re.search(r'id="logscan-figures">(.*?)</script>', page, re.S).group(1)
     figures = [spec["figure"] for spec in json.loads(block)]
     texts = [trace["name"] for fig in figures for trace in fig["data"]]
@@ -338,3 +344,20 @@ def test_names_from_logs_reach_plotly_as_text_never_as_links():
     assert '&lt;a href="http://x"&gt;y&lt;/a&gt;' in texts
     # the page's own HTML is autoescaped by jinja2: the name is never a live link there either
     assert MARKUP not in page and "&lt;a href=&#34;http://x&#34;&gt;y&lt;/a&gt;" in page
+
+
+@pytest.mark.slow
+def test_a_name_with_a_link_is_no_link_in_the_browser(tmp_path):
+    """plotly draws <a href> in a legend or title as an SVG link: the name must stay text."""
+    test_report_browser = pytest.importorskip("test_report_browser")
+    if test_report_browser.CHROMIUM is None:
+        pytest.skip("chromium not installed (Debian: apt-get install -y chromium)")
+    from logscan.report import render_report
+
+    page = tmp_path / "report.html"
+    render_report(markup_report(), page, plotlyjs=tmp_path / "js")
+    dom, _ = test_report_browser.dump_dom(page, tmp_path / "profile")
+    assert 'data-plots-rendered="' in dom and test_report_browser.js_errors(dom) == ""
+    assert "http://x" in dom  # the name is drawn...
+    assert not re.search(r"<a\b[^>]*http://x", dom)  # ...never as a link
+    assert '&lt;a href="http://x"&gt;y&lt;/a&gt;' in dom  # as the text it is, in legends and titles
