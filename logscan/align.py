@@ -232,10 +232,7 @@ def outlying_runs(t_ns: np.ndarray) -> tuple[tuple[int, int], np.ndarray, np.nda
     # exact differences of sorted int64 times, even across the whole int64 range (mod 2**64)
     step = (t_ns[1:].view(np.uint64) - t_ns[:-1].view(np.uint64)).astype(np.float64)
     gap = max(_OUTLIER_GAP_SPACINGS * float(np.median(step)), _OUTLIER_MIN_GAP_S * _NS)
-    breaks = np.flatnonzero(step > gap) + 1
-    if not breaks.size:
-        return (0, n), none, none, int(gap)
-    bounds = np.concatenate(([0], breaks, [n]))
+    bounds = np.concatenate(([0], np.flatnonzero(step > gap) + 1, [n]))
     sizes = np.diff(bounds)
     main = int(np.argmax(sizes))
     tiny = sizes <= max(1.0, _OUTLIER_MAX_SHARE * n)
@@ -257,6 +254,12 @@ def _span_text(seconds: float) -> str:
         if seconds >= 2 * size:
             return f"{seconds / size:.3g} {unit}"
     return f"{seconds:.3g} s"
+
+
+def _sci(x: float) -> str:
+    """1.0e8, not 1.0e+08."""
+    mantissa, exponent = f"{x:.1e}".split("e") if np.isfinite(x) else (str(x), "0")
+    return f"{mantissa}e{int(exponent)}"
 
 
 def _when(seconds: np.ndarray) -> str:
@@ -431,11 +434,9 @@ def _grid(aligner: _Aligner, first: int, last: int, rate_hz: float, window) -> t
     k0 = int(np.ceil((lo - first) / dt_ns - 1e-9))  # the full grid's first point in the window
     steps = (hi - first) / dt_ns - k0  # float: no overflow whatever the span or rate
     if not steps < MAX_GRID_STEPS:
-        mantissa, exponent = f"{steps:.1e}".split("e") if np.isfinite(steps) else (str(steps), "0")
         raise InputError(
-            f"span {_span_text((hi - lo) / _NS)} at {rate_hz:g} Hz = {mantissa}e{int(exponent)} steps, over "
-            f"the analysis grid's limit of {MAX_GRID_STEPS:.0e} (channels from {aligner.ends[0]!r} to "
-            f"{aligner.ends[1]!r})",
+            f"span {_span_text((hi - lo) / _NS)} at {rate_hz:g} Hz = {_sci(steps)} steps, over the analysis "
+            f"grid's limit of {_sci(MAX_GRID_STEPS)} (channels from {aligner.ends[0]!r} to {aligner.ends[1]!r})",
             path=path,
             hint="check the time unit or pass --start/--end",
         )

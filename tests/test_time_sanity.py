@@ -303,7 +303,7 @@ def test_time_s_holding_epoch_nanoseconds_is_exit_2_saying_what_to_rename_it_to(
     "column, times, problem",
     [
         ("time_us", np.arange(600) * 1e-4, "a median step of 0.0001 us is 1e+10 Hz"),  # seconds as us
-        ("timestamp_ms", np.arange(600) * 1e8, "they span 1.86 years"),
+        ("timestamp_ms", np.arange(600) * 1e8, "600 samples 1e+08 ms apart span 1.9 years"),
         ("time [s]", np.arange(600) * 1e12, "a median of 3e+14 s is 9.49e+06 years"),
     ],
 )
