@@ -117,6 +117,7 @@ class Log:
     def __post_init__(self) -> None:
         self._span_ns: tuple[int | None, int | None] | None = None  # kept by release_samples
         self._sample_counts: dict[str, int] = {}  # likewise
+        self._span_text: str | None = None  # likewise
         warning = self.span_warning()
         if warning and warning not in self.source.warnings:
             self.source.warnings.append(warning)
@@ -124,6 +125,7 @@ class Log:
     def release_samples(self) -> None:
         """Drop every channel's samples, keeping names, units and the log's span: once a log is
         aligned, its raw samples (a 1-hour 100 Hz log: ~300 MB) are not read again."""
+        self._span_text = self.span_warning()
         self._span_ns = (self.start_ns, self.end_ns)
         self._sample_counts = {name: len(c) for name, c in self.channels.items()}
         empty_t, empty_v = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
@@ -133,6 +135,8 @@ class Log:
         """A warning when the log spans more than MAX_SPAN_S, else None."""
         if self.duration_s <= MAX_SPAN_S:
             return None
+        if self._span_text is not None:  # samples released: the text computed while they were here
+            return self._span_text
         timed = {name: c for name, c in self.channels.items() if len(c)}
         ends = ""
         if timed:

@@ -127,6 +127,7 @@ def prepare(
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
     from logscan.align import align
+    from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
 
@@ -149,7 +150,11 @@ def prepare(
         )
     wanted = needs(run) if callable(needs) else needs
     prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run)
-    prepared.warnings.extend(log.source.warnings)
+    span_warning = log.span_warning()
+    if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
+        prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)
+    else:
+        prepared.warnings.extend(log.source.warnings)
     prepared.warnings.extend(run.warnings)
     if log.source.partial:
         prepared.warnings.append(f"partial read: {log.source.partial_reason}")

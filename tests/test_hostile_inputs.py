@@ -453,3 +453,16 @@ def test_a_50_mb_profile_is_refused_before_parsing(cli, tmp_path, sample):
     assert f"{profile}: profile is {profile.stat().st_size} bytes, more than the 1048576" in result.stderr
     with pytest.raises(ProfileError, match="more than the 1048576"):  # an embedded profile too
         parse_profile("#" * 2_000_000, source="embedded")
+
+
+def test_a_truth_sidecar_nested_too_deep_exits_2(cli, sample, tmp_path):
+    """A `<log>.truth.json` nested 100,000 deep: one line, exit 2, never a RecursionError."""
+    import shutil
+
+    log = tmp_path / "run.csv"
+    shutil.copy(sample("quad_healthy.csv"), log)
+    shutil.copy(sample("quad_healthy.profile.toml"), tmp_path / "run.profile.toml")
+    (tmp_path / "run.truth.json").write_text("[" * 100_000 + "]" * 100_000)
+    result = cli("analyze", log, "--no-report")
+    assert result.exit_code == 2, result.stderr
+    assert "run.truth.json" in result.stderr and "nested too deeply" in result.stderr

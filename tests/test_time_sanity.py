@@ -78,6 +78,8 @@ def test_a_gps_message_stamped_days_late_is_dropped_with_a_warning_and_the_verdi
     assert all(repr(ch) in dropped[0] for ch in GPS), dropped
     assert "1 outlying sample dropped at t=1002270.100 s (+11.6 days)" in dropped[0]
     assert "outlying sample" in result.stdout  # the printed summary lists it too
+    # the dropped sample was the only reason the log spanned days: no "wrong time unit" warning
+    assert not any("the log spans" in w for w in log["warnings"]), log["warnings"]
 
 
 def test_a_log_time_of_2_63_minus_1_is_an_outlier_too(cli, sample, tmp_path):

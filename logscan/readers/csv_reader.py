@@ -548,8 +548,17 @@ def read_truth_sidecar(path: Path) -> dict | None:
     if not sidecar.is_file():
         return None
     try:
-        return json.loads(sidecar.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
+        text = sidecar.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise InputError(
+            f"ground-truth sidecar cannot be read: {why}", path=str(sidecar), hint="check its permissions"
+        ) from None
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise InputError("ground-truth sidecar is nested too deeply to be truth JSON", path=str(sidecar)) from None
+    except ValueError as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"ground-truth sidecar is not valid JSON: {first}", path=str(sidecar)) from None
 
@@ -562,4 +571,7 @@ def read_profile_sidecar(path: Path) -> str | None:
     try:
         return sidecar.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"profile sidecar cannot be read: {exc}", path=str(sidecar)) from None
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise InputError(
+            f"profile sidecar cannot be read: {why}", path=str(sidecar), hint="check its permissions and encoding"
+        ) from None
