@@ -17,6 +17,7 @@ from logscan.report import ReportInput, flat_alarms, render_html, render_report,
 from logscan.results import DetectorResult, FaultEvent
 
 HOSTILE = "<script>alert(1)</script>"
+HOSTILE_SHOWN = "&lt;script&gt;alert(1)&lt;/script&gt;"  # as plotly receives it: text, not markup
 GRID_N = 360_000  # 1 hour at 100 Hz
 BIAS_START = 2000.0  # ground-truth fault, seconds
 
@@ -189,9 +190,10 @@ def test_plotlyjs_directory_that_is_a_file_is_a_clear_error(hour_report, tmp_pat
 def test_hostile_names_are_text_never_markup(embedded):
     assert HOSTILE not in embedded
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in embedded  # table, topics, profile, warnings
-    # the name inside the figure JSON is \u003c-escaped, and survives JSON decoding intact
+    # the name inside the figure JSON is HTML-escaped for plotly (which draws names as markup), so
+    # after JSON decoding it is the escaped text plotly shows literally
     names = [trace.get("name", "") for fig in figures(embedded) for trace in fig["figure"]["data"]]
-    assert f"nis.{HOSTILE}" in names
+    assert f"nis.{HOSTILE_SHOWN}" in names and f"nis.{HOSTILE}" not in names
     block = re.search(r'id="logscan-figures">(.*?)</script>', embedded, re.S).group(1)
     assert "<" not in block and ">" not in block
     # exactly the page's own scripts: error recorder, plotly.js, figure JSON, drawing script
@@ -277,7 +279,7 @@ def test_figures_per_detector_view(embedded):
     ratio = next(tr for tr in by_title["nis: statistic / threshold"]["data"] if tr["name"] == "nis.accel")
     assert np.nanmax(array(ratio["y"])) == pytest.approx(500.0 / 90.0, rel=1e-6)
     per_dof = [tr["name"] for tr in by_title["nis: per_dof"]["data"] if tr.get("fill") != "toself"]
-    assert per_dof == ["nis.accel", f"nis.{HOSTILE}", "nis.gps", "nis.all"]
+    assert per_dof == ["nis.accel", f"nis.{HOSTILE_SHOWN}", "nis.gps", "nis.all"]
 
 
 def test_a_sparse_statistic_is_drawn_as_a_line_not_as_gaps(embedded):
