@@ -82,8 +82,9 @@ class NisDetector(Detector):
         alpha = self._alpha(trace)
         result.info["alpha"] = alpha
         result.info["window_updates"] = self.window
+        # (signal, NIS, updated, measurements per update: an int for a group, per step for all)
         tests = [
-            (f"nis.{name}", trace.nis_group[:, g], trace.updated[:, g], np.full(t.size, int(trace.group_sizes[g])))
+            (f"nis.{name}", trace.nis_group[:, g], trace.updated[:, g], int(trace.group_sizes[g]))
             for g, name in enumerate(trace.group_names)
         ]
         if self.overall:
@@ -92,10 +93,11 @@ class NisDetector(Detector):
             steps = np.flatnonzero(updated)
             statistic = np.full(t.size, np.nan)
             threshold = np.full(t.size, np.nan)
-            per_dof = np.full(t.size, np.nan)  # about 1 on a consistent filter (for figures)
+            per_dof = np.full(t.size, np.nan, dtype=np.float32)  # about 1 on a consistent filter (figures)
             warm = np.zeros(t.size, dtype=bool)
             if steps.size:
-                sums, dof, full = window_sums(nis[steps], m[steps], self.window)
+                m_steps = np.full(steps.size, m, dtype=np.int64) if isinstance(m, int) else m[steps]
+                sums, dof, full = window_sums(nis[steps], m_steps, self.window)
                 statistic[steps] = sums
                 threshold[steps] = chi2_threshold(dof, alpha)
                 per_dof[steps] = sums / np.maximum(dof, 1)

@@ -156,10 +156,7 @@ class DetectorResult:
 
         n = np.asarray(t).size
         statistic = np.asarray(statistic, dtype=np.float64)
-        band = Band(
-            upper=None if upper is None else np.broadcast_to(np.asarray(upper, np.float64), (n,)).copy(),
-            lower=None if lower is None else np.broadcast_to(np.asarray(lower, np.float64), (n,)).copy(),
-        )
+        band = Band(upper=_band_series(upper, n), lower=_band_series(lower, n))
         self.series[name] = statistic
         self.thresholds[name] = band
         if check is not None:
@@ -202,6 +199,16 @@ class DetectorResult:
             }
             out["extras"] = {name: jsonable(v) for name, v in self.extras.items()}
         return out
+
+
+def _band_series(value, n: int) -> np.ndarray | None:
+    """A threshold as an (N,) series; a constant one as a read-only broadcast view (no N floats)."""
+    if value is None:
+        return None
+    value = np.asarray(value, np.float64)
+    if value.ndim == 0:
+        return np.broadcast_to(value, (n,))
+    return np.broadcast_to(value, (n,)).copy() if value.shape != (n,) else value
 
 
 @dataclass
