@@ -31,6 +31,16 @@ _ARRAY_RE = re.compile(r"^(?P<base>.*)\[(?P<index>\d+)\]$")
 _CONTROL_RE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
 
 
+def _analysed_span(analysis) -> str:
+    """ "60.0 s" for a whole log; "25.0-45.0 s of 60.0 s" for a window (--start/--end) or a log
+    whose outlying timestamps were dropped."""
+    t = analysis.run.t
+    start, end, whole = float(t[0]), float(t[-1]), analysis.log.duration_s
+    if start <= 1e-9 and abs(whole - (end - start)) <= max(1e-6, 2.0 * analysis.run.dt):
+        return f"{end - start:.1f} s"
+    return f"{start:.1f}-{end:.1f} s of {whole:.1f} s"
+
+
 def printable(text: object) -> str:
     """``text`` safe for a terminal: each control character as a ``\\x1b`` / ``\\u202e`` escape
     (newlines and tabs too: call it on one line or one name). Backslashes stay as they are, so an
@@ -56,7 +66,7 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     alarms behind each, scores against ground truth."""
     lines = [
         f"{analysis.path}: {analysis.verdict()}  "
-        f"({analysis.log.duration_s:.1f} s, model {analysis.model.name}, "
+        f"({_analysed_span(analysis)}, model {analysis.model.name}, "
         f"detectors {', '.join(r.detector for r in analysis.results)})"
     ]
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
