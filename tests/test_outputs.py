@@ -361,3 +361,35 @@ def test_a_name_with_a_link_is_no_link_in_the_browser(tmp_path):
     assert "http://x" in dom  # the name is drawn...
     assert not re.search(r"<a\b[^>]*http://x", dom)  # ...never as a link
     assert '&lt;a href="http://x"&gt;y&lt;/a&gt;' in dom  # as the text it is, in legends and titles
+
+
+def test_a_simulated_csv_and_its_sidecars_are_replaced_together_or_not_at_all(tmp_path, monkeypatch):
+    """The CSV log, its truth and its profile: when the last cannot be written, none is replaced."""
+    import errno
+
+    from logscan import artifacts
+    from logscan.simulate import simulate, write_simulation
+
+    target = tmp_path / "run.csv"
+    for name in ("run.csv", "run.truth.json", "run.profile.toml"):
+        (tmp_path / name).write_text("previous")
+    real_stage = artifacts.stage
+
+    def failing_stage(path, data, **kwargs):
+        if str(path).endswith(".profile.toml"):
+            raise artifacts.output_error(OSError(errno.ENOSPC, "No space left on device"), path)
+        return real_stage(path, data, **kwargs)
+
+    monkeypatch.setattr(artifacts, "stage", failing_stage)
+    sim = simulate("dc_motor", [], duration=2.0, seed=1)
+    with pytest.raises(artifacts.OutputError):
+        write_simulation(sim, target, "csv")
+    assert all(
+        (tmp_path / name).read_text() == "previous" for name in ("run.csv", "run.truth.json", "run.profile.toml")
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv", "run.profile.toml", "run.truth.json"]
+    monkeypatch.setattr(artifacts, "stage", real_stage)
+    write_simulation(sim, target, "csv")
+    assert all(
+        (tmp_path / name).read_text() != "previous" for name in ("run.csv", "run.truth.json", "run.profile.toml")
+    )

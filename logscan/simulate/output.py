@@ -77,7 +77,7 @@ def write_simulation(sim: Simulation, path: str | Path, fmt: str = "mcap-json") 
 def _write_csv(sim: Simulation, path: Path, truth_text: str, profile_text: str) -> list[Path]:
     import pandas as pd
 
-    from logscan.artifacts import write_atomic
+    from logscan.artifacts import commit, discard, stage
 
     columns: dict[str, np.ndarray] = {"time_ns": grid_ns(sim)}
     for s in sim.series():
@@ -88,7 +88,13 @@ def _write_csv(sim: Simulation, path: Path, truth_text: str, profile_text: str) 
     frame = pd.DataFrame(columns)
     text = frame.to_csv(index=False, na_rep="", float_format=f"%.{SIGNIFICANT_DIGITS}g", lineterminator="\n")
     truth_path, profile_path = sidecar_paths(path)
-    write_atomic(path, text)
-    write_atomic(truth_path, truth_text)
-    write_atomic(profile_path, profile_text)
+    # the log and its two sidecars replace the previous ones together (or none of them does)
+    staged = []
+    try:
+        for target, content in ((path, text), (truth_path, truth_text), (profile_path, profile_text)):
+            staged.append(stage(target, content))
+    except BaseException:
+        discard(staged)
+        raise
+    commit(staged)
     return [path, truth_path, profile_path]
