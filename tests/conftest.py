@@ -9,6 +9,7 @@ the package (tests/test_readme.py).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +17,39 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
+TESTDATA = REPO.parent / "shared" / "testdata"
+# Set (to anything but "" or "0") by .ci/run: missing shared test data fails the tests that need
+# it instead of skipping them, so CI cannot pass without having run them.
+REQUIRE_TESTDATA = "LOGSCAN_REQUIRE_TESTDATA"
+
+
+def need_testdata(path: str | os.PathLike = "") -> Path:
+    """Path of shared test data: ``../shared/testdata/PATH`` (or ``PATH`` itself when absolute).
+
+    When it is missing (or an empty directory) the test is skipped, or fails with a clear message
+    when ``LOGSCAN_REQUIRE_TESTDATA`` is set. Module-level lists of files can use the marker
+    ``@pytest.mark.testdata("px4-ulog")`` instead (checked before the test runs).
+    """
+    found = Path(path) if Path(path).is_absolute() else TESTDATA / path
+    missing = not found.exists() or (found.is_dir() and not any(found.iterdir()))
+    if missing:
+        message = f"shared test data missing: {found}"
+        if os.environ.get(REQUIRE_TESTDATA, "") not in ("", "0"):
+            pytest.fail(f"{message} ({REQUIRE_TESTDATA} is set: provide ../shared/testdata)", pytrace=False)
+        pytest.skip(message)
+    return found
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "testdata(path): needs ../shared/testdata/PATH (skips, or fails in CI)")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    # before pytest's own skip marks: a test parametrised over an empty list of shared files
+    # must fail in CI, not skip as "got empty parameter set"
+    for marker in item.iter_markers("testdata"):
+        need_testdata(*marker.args)
 
 
 @dataclass
