@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import need_testdata
 
 from logscan import __version__
 
@@ -75,16 +76,14 @@ def test_mcap_with_bad_magic(tmp_path, cli_process):
 
 
 def test_ulog_cut_before_any_data(tmp_path, cli_process):
-    if not ULOG.is_file():
-        pytest.skip("shared px4-ulog test data missing")
+    need_testdata(ULOG)
     path = tmp_path / "cut.ulg"
     path.write_bytes(ULOG.read_bytes()[:3000])
     assert_one_line_error(cli_process("inspect", str(path)), str(path), "truncated")
 
 
 def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
-    if not ULOG.is_file():
-        pytest.skip("shared px4-ulog test data missing")
+    need_testdata(ULOG)
     path = tmp_path / "half.ulg"
     data = ULOG.read_bytes()
     path.write_bytes(data[: len(data) // 2])
@@ -100,7 +99,6 @@ def test_unknown_option_is_a_usage_error(cli_process):
 
 
 def test_json_to_a_missing_directory_is_an_input_error(tmp_path, cli_process):
-    if not ULOG.is_file():
-        pytest.skip("shared px4-ulog test data missing")
+    need_testdata(ULOG)
     target = tmp_path / "missing" / "facts.json"
     assert_one_line_error(cli_process("inspect", str(ULOG), "--json", str(target)), "output directory does not exist")

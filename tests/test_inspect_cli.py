@@ -16,7 +16,7 @@ MCAPS = sorted((TESTDATA / "mcap-conformance").rglob("*.mcap"))
 HAVE_MCAP_READER = importlib.util.find_spec("logscan.readers.mcap") is not None
 
 
-@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.testdata("px4-ulog")
 @pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
 def test_inspect_every_real_ulog(path, cli):
     result = cli("inspect", path)
@@ -30,7 +30,7 @@ def test_inspect_every_real_ulog(path, cli):
     assert len(rows) >= 20 and all(r[1].isdigit() and float(r[2]) >= 0 for r in rows)
 
 
-@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.testdata("px4-ulog")
 def test_inspect_json_to_stdout_parses_and_has_the_keys(cli):
     result = cli("inspect", TESTDATA / "px4-ulog" / "sample_log_small.ulg", "--json", "-")
     assert result.exit_code == 0, result.stderr
@@ -57,7 +57,7 @@ def test_inspect_json_to_stdout_parses_and_has_the_keys(cli):
     assert facts["metadata"]["ulog.info"]["ver_hw"] == "CUBEPILOT_CUBEORANGE"
 
 
-@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.testdata("px4-ulog")
 def test_inspect_json_file_and_channels_and_topic_filter(tmp_path, cli):
     target = tmp_path / "facts.json"
     result = cli(
@@ -102,7 +102,7 @@ def conformance_message_count(mcap: Path) -> int:
     return sum(1 for record in records if record["type"] == "Message")
 
 
-@pytest.mark.skipif(not MCAPS, reason="shared mcap-conformance test data missing")
+@pytest.mark.testdata("mcap-conformance")
 @pytest.mark.skipif(not HAVE_MCAP_READER, reason="logscan.readers.mcap not written yet")
 def test_inspect_every_conformance_mcap(cli):
     failures = []

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import need_testdata
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.writer import CompressionType, Writer
@@ -49,11 +50,11 @@ def _expected_messages(json_path: Path) -> list[tuple]:
 
 
 def test_conformance_suite_is_complete():
-    if not CONFORMANCE_FILES:
-        pytest.skip("shared conformance data absent")
+    need_testdata(CONFORMANCE)
     assert len(CONFORMANCE_FILES) == 416
 
 
+@pytest.mark.testdata("mcap-conformance")
 @pytest.mark.parametrize("path", CONFORMANCE_FILES, ids=lambda p: p.stem)
 def test_conformance_file_yields_exactly_its_messages(path: Path):
     expected = _expected_messages(path.with_suffix(".json"))
@@ -74,8 +75,7 @@ def test_conformance_file_yields_exactly_its_messages(path: Path):
 
 def test_conformance_metadata_record_is_read():
     path = CONFORMANCE / "OneMetadata" / "OneMetadata.mcap"
-    if not path.exists():
-        pytest.skip("shared conformance data absent")
+    need_testdata(path)
     log = read_mcap(path, None)
     assert log.source.metadata == {"myMetadata": {"foo": "bar"}}
 
@@ -728,8 +728,7 @@ def test_metadata_of_sample_logs_comes_from_the_summary_index(path, monkeypatch)
 def test_metadata_matches_the_walk_on_every_conformance_file():
     from logscan.readers.mcap import read_mcap_metadata
 
-    if not CONFORMANCE_FILES:
-        pytest.skip("shared conformance data absent")
+    need_testdata(CONFORMANCE)
     for path in CONFORMANCE_FILES:
         assert read_mcap_metadata(path) == read_mcap(path, set()).source.metadata, path.name
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import need_testdata
 
 from logscan.align import MAX_GRID_STEPS, align, outlying_runs
 from logscan.errors import InputError
@@ -177,8 +178,7 @@ rate_hz = 100
 
 def test_a_ulog_message_stamped_days_late_is_dropped_like_any_other(cli, tmp_path):
     source = ULOG_DIR / "sample_logging_tagged_and_default_params.ulg"
-    if not source.is_file():
-        pytest.skip(f"shared test data missing: {source}")
+    need_testdata(source)
     profile = tmp_path / "px4.toml"
     profile.write_text(ULOG_PROFILE)
     jumped = tmp_path / "jumped.ulg"

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import need_testdata
 
 from logscan.errors import CorruptLogError, LogscanError
 from logscan.readers import read_log
@@ -21,8 +22,7 @@ ULOGS = sorted(ULOG_DIR.glob("*.ulg")) if ULOG_DIR.is_dir() else []
 
 def ulog(name: str) -> Path:
     path = ULOG_DIR / name
-    if not path.is_file():
-        pytest.skip(f"shared test data missing: {path}")
+    need_testdata(path)
     return path
 
 
@@ -31,7 +31,7 @@ def small_log():
     return read_ulog(ulog("sample_log_small.ulg"), None)
 
 
-@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.testdata("px4-ulog")
 @pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
 def test_every_real_log_reads_fully_with_named_topics_and_channels(path):
     log = read_log(path)
@@ -178,7 +178,7 @@ def _total_messages(log) -> int:
     return sum(t.message_count for t in log.source.topics.values())
 
 
-@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.testdata("px4-ulog")
 @pytest.mark.parametrize("size", [0, 0xFFFF])
 @pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
 def test_a_data_message_with_a_broken_size_field_makes_a_partial_read_that_says_how_much(tmp_path, path, size):
@@ -195,7 +195,7 @@ def test_a_data_message_with_a_broken_size_field_makes_a_partial_read_that_says_
     assert _total_messages(log) < _total_messages(full)
 
 
-@pytest.mark.skipif(not ULOGS, reason="shared px4-ulog test data missing")
+@pytest.mark.testdata("px4-ulog")
 @pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
 def test_a_log_cut_inside_a_message_at_any_of_several_offsets_is_partial(tmp_path, path):
     data = path.read_bytes()
