@@ -18,6 +18,7 @@ or a flip under its CRCs, a ULog cut inside a message).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -624,25 +625,10 @@ def mcap_time(seed: Seed, rng: random.Random) -> Case:
     return Case(seed.name, "mcap", "time", detail, _rewrite(seed, messages=messages), seed.ext)
 
 
+# values put in place of a number: JSON texts, CSV cells, TOML values
 JSON_SPECIALS = (
-    "NaN",
-    "Infinity",
-    "-Infinity",
-    "1e999",
-    "-1e999",
-    "1e308",
-    "5e-324",
-    "-0.0",
-    '""',
-    '"1.5"',
-    "null",
-    "true",
-    "[]",
-    "{}",
-    "18446744073709551616",
-    "9" * 5000,
-    "1" + "0" * 400,
-    '"\\u0000"',
+    *'NaN Infinity -Infinity 1e999 -1e999 1e308 5e-324 -0.0 "" "1.5" null true [] {} "\\u0000"'.split(),
+    *("18446744073709551616", "9" * 5000, "1" + "0" * 400),
 )
 FLOAT_SPECIALS = (math.nan, math.inf, -math.inf, 1e308, -1e308, 5e-324, -0.0, 3.4e38)
 
@@ -722,30 +708,8 @@ def mcap_profile(seed: Seed, rng: random.Random) -> Case:
 # --- CSV ---
 
 CSV_SPECIALS = (
-    "nan",
-    "NaN",
-    "inf",
-    "-inf",
-    "+inf",
-    "Infinity",
-    "1e308",
-    "-1e308",
-    "1e400",
-    "-1e400",
-    "5e-324",
-    "1e-400",
-    "-0",
-    "",
-    "NA",
-    "abc",
-    "0x10",
-    '"1,5"',
-    "9" * 400,
-    "\u0661\u0662",
-    " 1 ",
-    "1e",
-    "--1",
-    "18446744073709551616",
+    *"nan NaN inf -inf +inf Infinity 1e308 -1e308 1e400 -1e400 5e-324 1e-400 -0 NA abc 0x10 1e --1".split(),
+    *("", '"1,5"', "9" * 400, "\u0661\u0662", " 1 ", "18446744073709551616"),
 )
 CSV_TIME_SPECIALS = ("", "nan", "inf", "-1", "1e400", "abc", "99999999999999999999999", "2024-03-18 14:49:10")
 
@@ -964,31 +928,8 @@ def ulog_profile(seed: Seed, rng: random.Random) -> Case:
 # --- profile TOML ---
 
 TOML_SPECIALS = (
-    math.nan,
-    math.inf,
-    -math.inf,
-    0,
-    0.0,
-    -1,
-    -1.0,
-    1e308,
-    -1e308,
-    5e-324,
-    1e-300,
-    2**63 - 1,
-    -(2**63),
-    2**64,
-    "",
-    "\x1b[31mred",
-    "a\rb",
-    "x" * 5000,
-    "/imu/accel.x",
-    [],
-    {},
-    [math.nan],
-    [1e308, -1e308],
-    True,
-    [[]],
+    *(math.nan, math.inf, -math.inf, 0, 0.0, -1, -1.0, 1e308, -1e308, 5e-324, 1e-300, 2**63 - 1, -(2**63), 2**64),
+    *("", "\x1b[31mred", "a\rb", "x" * 5000, "/imu/accel.x", [], {}, [math.nan], [1e308, -1e308], True, [[]]),
 )
 TOML_LINES = (
     "[vehicle]",
@@ -1450,7 +1391,8 @@ class Runner:
         if document is None:  # one log, no JSON: must be a one-line error naming it (exit 2)
             case, path = members[0]
             problems = list(whole)
-            line = _first_line(proc.stderr)
+            lines = [x for x in proc.stderr.splitlines() if x.startswith("logscan:")]  # warnings aside
+            line = lines[0][:200] if lines else _first_line(proc.stderr)
             if proc.returncode != 2 or not line.startswith("logscan: error:") or path.stem not in line:
                 problems.append(f"exit {proc.returncode} without a JSON summary: {line}")
             problems, known = waive_known(case, None, problems)
@@ -1569,18 +1511,20 @@ def run_campaign(seeds: dict[str, Seed], runner_for, n: int, jobs: int, rng: ran
     def run_chunk(chunk):
         runner = runner_for()
         cases = [mutate(seeds[s], k, random.Random(c)) for s, k, c in chunk]
+        inspected = [runner.inspect(dataclasses.replace(c)) for c in cases[::inspect_every]]  # a copy to forget
         single = [c for c in cases if c.profile_arg is not None]
         batched = [c for c in cases if c.profile_arg is None]
         outcomes = runner.analyze(batched) if batched else []
         outcomes += [runner.analyze([c])[0] for c in single]
-        inspected = [runner.inspect(c) for c in cases[::inspect_every]]
         return outcomes, inspected
 
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         yield from pool.map(run_chunk, chunks)
 
 
-def print_table(results: list[Outcome], inspected: list[Outcome], seconds: float) -> None:
+def print_table(results: list[Outcome], inspected: list[Outcome], seconds: float, seeds: dict[str, Seed]) -> None:
+    """Outcomes per format and mutation kind (Markdown); "verdict changed": exit 0 <-> 1 against
+    the intact seed's, exit 3 cases and failed cases with their first line."""
     rows: dict[tuple, dict] = defaultdict(lambda: Counter())
     rss: dict[tuple, float] = defaultdict(float)
     for outcome in results:
@@ -1590,20 +1534,23 @@ def print_table(results: list[Outcome], inspected: list[Outcome], seconds: float
         code = outcome.exit_code
         row[str(code) if code in (0, 1, 2, 3) else ("timeout" if code is None else "other")] += 1
         row["partial"] += outcome.partial
+        row["changed"] += code in (0, 1) and code != seeds[outcome.case.seed].exit_code
         row["problems"] += bool(outcome.problems)
         row["known"] += bool(outcome.known) and not outcome.problems
         rss[key] = max(rss[key], outcome.max_rss_mb)
     print(f"\n{len(results)} analyze cases + {len(inspected)} inspect runs in {seconds / 60:.1f} min\n")
-    columns = "cases,exit 0,exit 1,exit 2,exit 3,timeout,other,partial,failed,known bug,max RSS MB".split(",")
+    columns = "cases,exit 0,exit 1,exit 2,exit 3,timeout,other,partial,verdict changed,failed,known bug,max RSS MB"
+    columns = columns.split(",")
     print("| format | mutation | " + " | ".join(columns) + " |")
     print("|---|---|" + "---:|" * len(columns))
+    keys = ("cases", "0", "1", "2", "3", "timeout", "other", "partial", "changed", "problems", "known")
     total = Counter()
     for key in sorted(rows):
         row = rows[key]
         total.update(row)
-        cells = [row[c] for c in ("cases", "0", "1", "2", "3", "timeout", "other", "partial", "problems", "known")]
+        cells = [row[c] for c in keys]
         print(f"| {key[0]} | {key[1]} | " + " | ".join(map(str, cells)) + f" | {rss[key]:.0f} |")
-    cells = [total[c] for c in ("cases", "0", "1", "2", "3", "timeout", "other", "partial", "problems", "known")]
+    cells = [total[c] for c in keys]
     print("| all | | " + " | ".join(map(str, cells)) + f" | {max(rss.values(), default=0):.0f} |")
     codes = Counter(o.exit_code for o in inspected)
     failed_inspect = [o for o in inspected if o.problems]
@@ -1614,6 +1561,12 @@ def print_table(results: list[Outcome], inspected: list[Outcome], seconds: float
         print(f"\nexit 3 ({len(exit3)}):")
         for o in exit3[:40]:
             print(f"  {o.case.label[:140]}\n    {o.line[:200]}")
+    moved = [o for o in results if o.case.kind == "time" and o.exit_code in (0, 1)]
+    moved = [o for o in moved if o.exit_code != seeds[o.case.seed].exit_code]
+    if moved:
+        print(f"\nverdict changed by one outlying timestamp ({len(moved)}):")
+        for o in moved[:20]:
+            print(f"  {o.case.label[:160]}: exit {seeds[o.case.seed].exit_code} -> {o.exit_code} ({o.line[:80]})")
     if failed:
         print(f"\nfailed cases ({len(failed)}), by problem:")
         by_problem = Counter(re.sub(r"\d+", "N", p)[:120] for o in failed for p in o.problems)
@@ -1659,7 +1612,7 @@ def main(argv: list[str] | None = None) -> int:
             inspected.extend(inspects)
             if len(results) % 500 < BATCH_SIZE:
                 print(f"  {len(results)} cases, {time.monotonic() - started:.0f} s", file=sys.stderr, flush=True)
-        print_table(results, inspected, time.monotonic() - started)
+        print_table(results, inspected, time.monotonic() - started, seeds)
         failed = [o for o in results + inspected if o.problems]
         return 1 if failed or problems else 0
 
