@@ -20,8 +20,11 @@ directory (`.../fuzz*/failures/`) with a .txt saying what was done and what went
 from __future__ import annotations
 
 import importlib.util
+import os
 import random
+import stat
 import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -241,6 +244,31 @@ def test_fuzz_regression(fuzz, regression):
         if outcome.known:
             assert regression.bug in outcome.known.split(","), f"{outcome.known} instead of {regression.bug}"
             raise KnownBugShows(f"{outcome.known}: exit {outcome.exit_code}, {outcome.line}")
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known bug 'output-replaces-special-file': the JSON is renamed over a FIFO or device given as "
+    "--json (as root, --json /dev/null replaces /dev/null with a regular file): remove the mark when it is fixed",
+)
+def test_json_output_to_a_fifo_is_written_into_or_refused_never_replaced(fuzz, tmp_path):
+    """Found while building the fuzzer (`--json /dev/null`, as root, left /dev/null a regular file)."""
+    fifo = tmp_path / "summary.json"
+    os.mkfifo(fifo)
+    log = tmp_path / "quad.mcap"
+    log.write_bytes(fuzz.seeds["quad_zstd"].data)
+    received = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
+    reader.start()  # writing into the FIFO is as good as refusing it: a reader is there
+    proc = fc.run_logscan(
+        ["analyze", log.name, "--no-report", "--json", fifo.name, "-q"], cwd=tmp_path, env=fuzz.runner.env, timeout=60
+    )
+    if reader.is_alive():  # nothing opened the FIFO for writing: let the reader go
+        with open(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK), "wb"):
+            pass
+        reader.join(5)
+    assert proc.returncode in (1, 2), proc.stderr
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode), "the FIFO was replaced by a regular file"
 
 
 def test_every_reproducer_is_listed():
