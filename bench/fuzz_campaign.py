@@ -844,7 +844,7 @@ def ulog_truncate(seed: Seed, rng: random.Random) -> Case:
     layout = ulog_layout(seed.data)
     boundaries = [end for _s, end, _k in layout.messages]
     cut = _cut_point(len(seed.data), boundaries, rng)
-    damaged = cut <= layout.first_data or cut not in set(boundaries)
+    damaged = cut < 16 or cut not in set(boundaries)  # between two messages: a valid, shorter log
     detail = f"cut at {cut} of {len(seed.data)}" + ("" if damaged else " (between two messages)")
     return Case(seed.name, "ulog", "truncate", detail, seed.data[:cut], seed.ext, damaged=damaged, args=seed.args)
 
@@ -1277,10 +1277,11 @@ KNOWN_BUGS = {
     "mcap-chunk-skipped": _chunk_skipped,
     # a JSON integer beyond float range (10**400) in a message off the decoder's fast path
     "json-huge-integer": lambda case, entry, problem: "OverflowError: int too large to convert to float" in problem,
-    # profile numbers the checks let through: rate_hz = 1e-300 (dt**4 in the model's Q),
-    # stale_s = 1e308 or 2**63-1 (nanoseconds in align.py)
-    "profile-rate-overflow": lambda case, entry, problem: (
-        case.kind == "profile" and "Numerical result out of range" in problem
+    # profile numbers the checks let through: rate_hz = 1e-300 or 5e-324 (dt**4 in the model's Q,
+    # NaN steps), stale_s = 1e308 or 2**63-1 (nanoseconds in align.py)
+    "profile-rate-tiny": lambda case, entry, problem: (
+        case.kind == "profile"
+        and ("Numerical result out of range" in problem or "cannot convert float NaN to integer" in problem)
     ),
     "profile-stale-overflow": lambda case, entry, problem: (
         case.kind == "profile"
@@ -1289,9 +1290,11 @@ KNOWN_BUGS = {
             or "Python int too large to convert to C long" in problem
         )
     ),
-    # numpy's overflow warnings (float32 NIS per dof, window sums) printed on stderr for values near 1e308
+    # numpy's and scipy's floating-point RuntimeWarnings printed on stderr with their source line
+    # (float32 NIS per dof, window sums, expm of a huge A, a signalling NaN cast, NaN steps)
     "runtime-warning-leak": lambda case, entry, problem: (
-        problem.startswith("Python warning on stderr") and "RuntimeWarning: overflow encountered" in problem
+        problem.startswith("Python warning on stderr")
+        and re.search(r"RuntimeWarning: (overflow|invalid value|divide by zero) encountered", problem) is not None
     ),
     # a ULog message format without a timestamp field
     "ulog-missing-timestamp": lambda case, entry, problem: "KeyError: 'timestamp'" in problem,

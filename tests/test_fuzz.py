@@ -12,9 +12,11 @@ unchunked JSON without CRCs, ROS 2 CDR), the CSV with its sidecars, two PX4 ULog
 
 Each batch of cases is analysed by one `python -m logscan analyze F1 F2 ... --no-report --json -`
 process (each log's exit code is in the JSON; failures of one log do not stop the others), with a
-60 s timeout per case and a 2 GiB address-space cap; a batch that goes wrong as a whole is re-run
-one case per process to name the culprit. A failing case is kept under the session's temporary
-directory (`.../fuzz*/failures/`) with a .txt saying what was done and what went wrong.
+60 s timeout per case and a 2 GiB address-space cap; a batch that goes wrong as a whole (hang,
+signal, traceback, a log missing from the JSON) is split in halves until the culprits run alone.
+A failing case is kept under the session's temporary directory (`.../fuzz*/failures/`) with a .txt
+saying what was done and what went wrong; known bugs (`fuzz_campaign.KNOWN_BUGS`, each with an
+xfail(strict) reproducer below) are waived symptom by symptom, any other problem fails.
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ def fuzz_settings(examples: int):
         database=None,
         deadline=None,
         phases=(Phase.explicit, Phase.generate),
-        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+        suppress_health_check=[HealthCheck.too_slow],
     )
 
 
@@ -191,7 +193,7 @@ class Regression:
 REPRODUCERS = [
     Regression("mcap_chunk_opcode.mcap", "mcap-chunk-skipped", damaged=True, profile="mcap_chunk_opcode.toml"),
     Regression("json_huge_integer.mcap", "json-huge-integer"),
-    Regression("profile_rate_tiny.csv", "profile-rate-overflow", kind="profile"),
+    Regression("profile_rate_tiny.csv", "profile-rate-tiny", kind="profile"),
     Regression("profile_stale_huge.csv", "profile-stale-overflow", kind="profile"),
     Regression("runtime_warning.mcap", "runtime-warning-leak"),
     Regression("ulog_missing_timestamp.ulg", "ulog-missing-timestamp", command="inspect"),
