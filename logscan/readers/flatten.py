@@ -4,7 +4,8 @@ A decoded message is walked depth first. Numbers (and bools, as 0/1) become leav
 dotted path: ``linear_acceleration.x``, ``position[2]``, ``poses[1].position.z``. Strings, bytes
 (this includes ROS ``uint8[]`` fields, which the decoders return as ``bytes``) and other non-numeric
 values are not channels; they are reported as skipped with a reason. A JSON ``null`` is skipped
-the same way ("null value"), never turned into 0.
+the same way ("null value"), never turned into 0. An integer beyond float range (JSON numbers
+have no size limit) is a non-number: NaN in its column, counted as skipped, as in the CSV reader.
 
 Messages of one topic are grouped by their leaf layout, so a topic whose variable-length arrays
 change length yields, for each index seen, a column with only the messages that had that index.
@@ -27,6 +28,7 @@ import numpy as np
 _NON_NUMERIC = "non-numeric"
 _NULL = "null value"
 _UNSUPPORTED = "unsupported value type"
+_HUGE_INTEGER = "integer beyond float range (read as NaN)"
 
 _slots_by_type: dict[type, tuple[str, ...]] = {}
 
@@ -333,6 +335,22 @@ def _fast_group(messages: Sequence[Any]):
     return (tuple(keys), tuple(skipped)), indices, matrix.astype(np.float64, copy=False), misfits
 
 
+def _floats_of_huge(rows: Sequence[Sequence[Any]], keys: tuple[str, ...], skipped: dict) -> np.ndarray:
+    """float64 values of ``rows`` where integers beyond float range are NaN and counted in ``skipped``
+    under (path, _HUGE_INTEGER): a non-number, as the CSV reader reads such a cell. Only called
+    when the one-step conversion overflowed, so the common path pays nothing."""
+    out = np.empty((len(rows), len(keys)), dtype=np.float64)
+    for r, row in enumerate(rows):
+        for c, value in enumerate(row):
+            try:
+                out[r, c] = value
+            except OverflowError:
+                out[r, c] = np.nan
+                item = (keys[c], _HUGE_INTEGER)
+                skipped[item] = skipped.get(item, 0) + 1
+    return out
+
+
 def columns_from_groups(entries: Sequence[tuple[tuple, Any, Any]]) -> FlatColumns:
     """FlatColumns from (signature, message numbers, (n, k) values) entries; a signature may repeat."""
     out = FlatColumns()
@@ -344,7 +362,10 @@ def columns_from_groups(entries: Sequence[tuple[tuple, Any, Any]]) -> FlatColumn
             out.skipped[item] = out.skipped.get(item, 0) + len(indices)
         if not keys:
             continue
-        matrix = np.asarray(rows, dtype=np.float64).reshape(len(indices), len(keys))
+        try:
+            matrix = np.asarray(rows, dtype=np.float64).reshape(len(indices), len(keys))
+        except OverflowError:  # a Python int beyond float range (JSON numbers have no size limit)
+            matrix = _floats_of_huge(rows, keys, out.skipped).reshape(len(indices), len(keys))
         for column, key in enumerate(keys):
             if key not in seen:
                 seen.add(key)

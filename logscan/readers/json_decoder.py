@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -281,6 +282,15 @@ def json_columns(datas: MessageBytes | Sequence[bytes]) -> tuple[FlatColumns, li
     return columns_from_groups(entries), failed
 
 
+_INTEGER_TOKEN = re.compile(rb"-?[0-9]+")
+
+
+def _has_huge_integer(tokens: bytes, parsed: np.ndarray) -> bool:
+    """True when a space-separated token that parsed to +-inf is an integer (beyond float range)."""
+    words = tokens.split()
+    return any(_INTEGER_TOKEN.fullmatch(words[i]) for i in np.flatnonzero(np.isinf(parsed)).tolist())
+
+
 def _fast_json(packed: MessageBytes):
     """(signature, message numbers, (n, k) values) for the messages laid out like the first."""
     first = packed.message(0)
@@ -327,6 +337,8 @@ def _fast_json(packed: MessageBytes):
                 return None
         if parsed.size != n_rest:
             return None  # some token was not a number: let json.loads judge every message
+        if np.isinf(parsed).any() and _has_huge_integer(rest[:rest_used].tobytes(), parsed):
+            return None  # numpy gives it +-inf; the generic path makes it NaN and counts it (flatten)
         values[np.isnan(values)] = parsed  # the kernel marks exactly those tokens NaN, in order
     matrix = values.reshape(indices.size, len(keys))
     if not np.array_equal(matrix[0], np.asarray(first_values, dtype=np.float64), equal_nan=True):
