@@ -20,6 +20,8 @@ from logscan.profiles.schema import (
     MAX_ALARM_DURATION_S,
     MAX_ALARM_PERSIST,
     MAX_MERGE_GAP_S,
+    MAX_RATE_HZ,
+    MIN_RATE_HZ,
     MODE_KEYS,
     MODE_STALE_S,
     ONBOARD_KEYS,
@@ -188,6 +190,15 @@ class _Checker:
             return None
         return value
 
+    def rate(self, data: dict, key: str, where: str) -> float | None:
+        """A rate in Hz within [MIN_RATE_HZ, MAX_RATE_HZ]: a tiny one overflows the model's process
+        noise (dt**4) or the grid step in ns, a huge one is a grid step under a nanosecond."""
+        value = self.number(data, key, where, minimum=0, strict=True)
+        if value is not None and not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
+            self.add(f"{where} {key}", f"must be between {MIN_RATE_HZ:g} and {MAX_RATE_HZ:g} Hz, got {value:g}")
+            return None
+        return value
+
     def string(self, data: dict, key: str, where: str) -> str | None:
         if key not in data:
             return None
@@ -268,7 +279,7 @@ class _Checker:
             return None
         self.keys(data, where, VEHICLE_KEYS, required=("model", "rate_hz"))
         model = self.string(data, "model", where)
-        rate = self.number(data, "rate_hz", where, minimum=0, strict=True)
+        rate = self.rate(data, "rate_hz", where)
         params = data.get("params", {})
         if not isinstance(params, dict):
             self.add(f"{where} params", f"expected a table, got {type_name(params)}")
@@ -327,7 +338,7 @@ class _Checker:
             return None
         self.keys(data, where, GROUP_KEYS, required=("channels", "rate_hz"))
         channels = self.string_list(data["channels"], f"{where} channels") if "channels" in data else None
-        rate = self.number(data, "rate_hz", where, minimum=0, strict=True)
+        rate = self.rate(data, "rate_hz", where)
         stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
         noise = self.noise_std(data, where)
         lo = self.float_list(data, "range_lo", where, positive=False)
@@ -400,7 +411,7 @@ class _Checker:
             if t is None:
                 continue
             self.keys(t, where, REDUNDANT_KEYS, required=("sensors",))
-            rate = self.number(t, "rate_hz", where, minimum=0, strict=True)
+            rate = self.rate(t, "rate_hz", where)
             stale = self.number(t, "stale_s", where, minimum=0, strict=True, allow_inf=True)
             sensors = self.sensors(t.get("sensors"), f"{where} sensors") if "sensors" in t else None
             if sensors is None or ("rate_hz" in t and rate is None) or ("stale_s" in t and stale is None):
