@@ -1,6 +1,6 @@
-"""Profile bugs the fuzzing campaign found (tests/fuzz_regressions/README.md), fixed: rates and
-staleness limits that overflowed once past the profile checks are refused when the profile is
-parsed, naming the file, the key and the allowed range (exit 2, never 3)."""
+"""Profile bugs the fuzzing campaign found (tests/fuzz_regressions/README.md), fixed: rates,
+staleness limits and integers beyond float range that overflowed once past the profile checks are
+refused when the profile is parsed, naming the file, the key and the allowed range (exit 2, never 3)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 from logscan.errors import ProfileError
 from logscan.profiles import parse_profile
-from logscan.profiles.schema import MAX_RATE_HZ, MIN_RATE_HZ
+from logscan.profiles.schema import MAX_RATE_HZ, MAX_STALE_S, MIN_RATE_HZ
 
 REGRESSIONS = Path(__file__).resolve().parent / "fuzz_regressions"
 HEALTHY_PROFILE = (Path(__file__).resolve().parents[1] / "sample_logs" / "quad_healthy.profile.toml").read_text()
@@ -74,3 +74,59 @@ def test_the_rate_bounds_themselves_are_accepted(rate):
 
 def test_zero_and_negative_rates_keep_their_message():
     assert "[vehicle] rate_hz: must be > 0, got 0 " in _refused(_edited("rate_hz = 100.0", "rate_hz = 0"))
+
+
+# -- profile-stale-overflow -------------------------------------------------------------------------
+
+
+def test_a_huge_stale_s_is_refused_at_parse_time_naming_the_profile_key_and_range(tmp_path, cli):
+    log = _reproducer(tmp_path, "profile_stale_huge")
+    result = cli("analyze", log, "--no-report", "--json", "-")
+    assert result.exit_code == 2, result.stderr
+    assert result.stderr.strip() == (
+        f"logscan: error: {log} (embedded profile): invalid profile: [measurements.accel] stale_s: "
+        "must be at most 1000000 s (or inf: never stale), got 1e+308 (see docs/profiles.md)"
+    )
+
+
+BIG_INTEGER = "1" + "0" * 400  # TOML integers have no size limit in tomllib
+
+
+@pytest.mark.parametrize("value", ["1e308", str(2**63 - 1), str(2**64), "1e7"])
+@pytest.mark.parametrize(
+    "old, new, where",
+    [
+        ("stale_s = 0.025", "stale_s = {}", "[measurements.accel]"),
+        ("[inputs]", "[inputs]\nstale_s = {}", "[inputs]"),
+        ("[mode]\n", "[mode]\nstale_s = {}\n", "[mode]"),
+        ("[onboard]\n", "[onboard]\nstale_s = {}\n", "[onboard]"),
+        (
+            "[mode]",
+            '[redundant.x]\nsensors = {{ a = "/imu/accel.x", b = "/imu/accel.y" }}\nstale_s = {}\n\n[mode]',
+            "[redundant.x]",
+        ),
+    ],
+)
+def test_every_staleness_limit_beyond_the_maximum_is_refused(old, new, where, value):
+    line = _refused(_edited(old, new.format(value)))
+    expected = f"p.toml: invalid profile: {where} stale_s: must be at most 1000000 s (or inf: never stale), got "
+    assert line.startswith(expected), line
+
+
+@pytest.mark.parametrize("value", ["inf", repr(MAX_STALE_S)])
+def test_inf_and_the_maximum_staleness_are_accepted(value):
+    profile = parse_profile(_edited("stale_s = 0.025", f"stale_s = {value}"))
+    assert profile.measurements["accel"].stale_s == float(value)
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("stale_s = 0.025", f"stale_s = {BIG_INTEGER}", "[measurements.accel] stale_s: must be a finite number"),
+        ("rate_hz = 100.0", f"rate_hz = {BIG_INTEGER}", "[vehicle] rate_hz: must be a finite number, got an integer"),
+        ("[0.1, 0.1, 0.1]", f"[{BIG_INTEGER}, 0.1, 0.1]", "[measurements.accel] noise_std: must be finite, got an"),
+        ("stale_s = 0.025", "stale_s = 1" + "0" * 5000, "invalid TOML: an integer has more than 4300 digits"),
+    ],
+)
+def test_an_integer_beyond_float_range_is_a_profile_error_not_an_overflow(old, new, message):
+    assert message in _refused(_edited(old, new))

@@ -21,6 +21,7 @@ from logscan.profiles.schema import (
     MAX_ALARM_PERSIST,
     MAX_MERGE_GAP_S,
     MAX_RATE_HZ,
+    MAX_STALE_S,
     MIN_RATE_HZ,
     MODE_KEYS,
     MODE_STALE_S,
@@ -113,12 +114,14 @@ def parse_profile(text: str, source: str = "<embedded>", *, model=None, check_mo
         raise _too_large(len(text), source)
     try:
         data = tomllib.loads(text)
-        checker = _Checker()
-        profile = checker.profile(data, source)
     except tomllib.TOMLDecodeError as exc:
         raise single_error(f"invalid TOML: {exc}", source) from None
+    except ValueError:  # not a TOMLDecodeError: Python's int() refuses integers of over 4300 digits
+        raise single_error("invalid TOML: an integer has more than 4300 digits", source) from None
     except RecursionError:  # tomllib recurses once per level of nested arrays and inline tables
         raise single_error("invalid TOML: arrays, tables or keys nested too deeply", source) from None
+    checker = _Checker()
+    profile = checker.profile(data, source)
     if profile is not None and check_model and not checker.problems:
         check_against_model(profile, model, checker.problems)
     elif checker.vehicle_spec is not None and check_model and model is None:
@@ -177,7 +180,11 @@ class _Checker:
         if not is_number(value):
             self.add(f"{where} {key}", f"expected a number, got {type_name(value)}")
             return None
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # TOML integers have no size limit in tomllib: 10**400 is one
+            self.add(f"{where} {key}", "must be a finite number, got an integer beyond float range")
+            return None
         if math.isnan(value) or (math.isinf(value) and not (allow_inf and value > 0)):
             self.add(f"{where} {key}", f"must be a finite number, got {value!r}")
             return None
@@ -196,6 +203,15 @@ class _Checker:
         value = self.number(data, key, where, minimum=0, strict=True)
         if value is not None and not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
             self.add(f"{where} {key}", f"must be between {MIN_RATE_HZ:g} and {MAX_RATE_HZ:g} Hz, got {value:g}")
+            return None
+        return value
+
+    def stale(self, data: dict, key: str, where: str) -> float | None:
+        """A staleness limit: > 0 and at most MAX_STALE_S, or inf (never stale); a larger finite
+        limit overflows int64 nanoseconds in alignment."""
+        value = self.number(data, key, where, minimum=0, strict=True, allow_inf=True)
+        if value is not None and math.isfinite(value) and value > MAX_STALE_S:
+            self.add(f"{where} {key}", f"must be at most {MAX_STALE_S:.0f} s (or inf: never stale), got {value:g}")
             return None
         return value
 
@@ -231,7 +247,11 @@ class _Checker:
         if not items or not all(is_number(v) for v in items):
             self.add(f"{where} {key}", f"expected a number or an array of numbers, got {type_name(value)}")
             return None
-        out = [float(v) for v in items]
+        try:
+            out = [float(v) for v in items]
+        except OverflowError:  # an integer beyond float range (tomllib reads any size)
+            self.add(f"{where} {key}", "must be finite, got an integer beyond float range")
+            return None
         if positive:
             bad = [v for v in out if not (v > 0 and math.isfinite(v))]
             if bad:
@@ -311,7 +331,7 @@ class _Checker:
                     f"expected a channel name or an array of them, got {type_name(value)}",
                 )
                 ok = False
-        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
+        stale = self.stale(data, "stale_s", where)
         if "stale_s" in data and stale is None:
             ok = False
         if stale is None:
@@ -339,7 +359,7 @@ class _Checker:
         self.keys(data, where, GROUP_KEYS, required=("channels", "rate_hz"))
         channels = self.string_list(data["channels"], f"{where} channels") if "channels" in data else None
         rate = self.rate(data, "rate_hz", where)
-        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
+        stale = self.stale(data, "stale_s", where)
         noise = self.noise_std(data, where)
         lo = self.float_list(data, "range_lo", where, positive=False)
         hi = self.float_list(data, "range_hi", where, positive=False)
@@ -397,7 +417,7 @@ class _Checker:
             return None
         self.keys(data, where, MODE_KEYS, required=("channel",))
         channel = self.string(data, "channel", where)
-        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
+        stale = self.stale(data, "stale_s", where)
         if channel is None or ("stale_s" in data and stale is None):
             return None
         return ModeSpec(channel, MODE_STALE_S if stale is None else stale)
@@ -412,7 +432,7 @@ class _Checker:
                 continue
             self.keys(t, where, REDUNDANT_KEYS, required=("sensors",))
             rate = self.rate(t, "rate_hz", where)
-            stale = self.number(t, "stale_s", where, minimum=0, strict=True, allow_inf=True)
+            stale = self.stale(t, "stale_s", where)
             sensors = self.sensors(t.get("sensors"), f"{where} sensors") if "sensors" in t else None
             if sensors is None or ("rate_hz" in t and rate is None) or ("stale_s" in t and stale is None):
                 continue
@@ -469,7 +489,7 @@ class _Checker:
                     "expected a channel prefix, an array of channels or a table state -> channel, "
                     f"got {type_name(value)}",
                 )
-        stale = self.number(data, "stale_s", where, minimum=0, strict=True, allow_inf=True)
+        stale = self.stale(data, "stale_s", where)
         return OnboardSpec(
             state=values.get("state"),
             variance=values.get("variance"),
