@@ -4,8 +4,9 @@ bar, and local processes (`--jobs N`).
     logs = expand_logs(["runs/", "extra.mcap"])
     outcomes = run_many(logs, task, jobs=4, progress=True)   # results in input order
 
-``task`` is any picklable callable of one log path (a module-level function or a
-functools.partial of one); it returns what the caller wants back. A log whose task raises becomes a
+``task`` is any picklable callable of one log path, or of one tuple whose first item is the log
+path (`logscan analyze` passes (log, report path) pairs); a module-level function or a
+functools.partial of one; it returns what the caller wants back. A log whose task raises becomes a
 `LogFailure` in its place and never stops the others. Results do not depend on ``jobs``: each log
 is processed by the same task, and outcomes come back in the order of ``logs``.
 """
@@ -223,20 +224,25 @@ def failure_of(path: str, exc: BaseException) -> LogFailure:
     )
 
 
-def _isolated(task: Callable[[str], Any], path: str) -> Any:
+def log_of(item: Any) -> str:
+    """The log path of one of `run_many`'s items: the item, or the first item of a tuple."""
+    return str(item[0] if isinstance(item, tuple) else item)
+
+
+def _isolated(task: Callable[[Any], Any], item: Any) -> Any:
     from logscan.artifacts import OutputError
 
     try:
-        return task(path)
+        return task(item)
     except OutputError:
         raise  # the outputs cannot be written (disk full, read-only): no log can succeed, stop the run
     except Exception as exc:  # noqa: BLE001 - one bad log must not stop the others
-        return failure_of(path, exc)
+        return failure_of(log_of(item), exc)  # the log's path, never the tuple's repr
 
 
 def run_many(
-    logs: Sequence[str],
-    task: Callable[[str], Any],
+    logs: Sequence[Any],
+    task: Callable[[Any], Any],
     *,
     jobs: int = 1,
     progress: bool = False,

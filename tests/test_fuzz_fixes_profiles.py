@@ -1,15 +1,18 @@
 """Profile bugs the fuzzing campaign found (tests/fuzz_regressions/README.md), fixed: rates,
 staleness limits and integers beyond float range that overflowed once past the profile checks are
-refused when the profile is parsed, naming the file, the key and the allowed range (exit 2, never 3)."""
+refused when the profile is parsed, naming the file, the key and the allowed range (exit 2, never 3);
+with several logs, each log's error names it by its path (not a Python tuple)."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
 import pytest
 
-from logscan.errors import ProfileError
+from logscan.errors import InputError, ProfileError
+from logscan.fleet import LogFailure, run_many
 from logscan.profiles import parse_profile
 from logscan.profiles.schema import MAX_RATE_HZ, MAX_STALE_S, MIN_RATE_HZ
 
@@ -130,3 +133,33 @@ def test_inf_and_the_maximum_staleness_are_accepted(value):
 )
 def test_an_integer_beyond_float_range_is_a_profile_error_not_an_overflow(old, new, message):
     assert message in _refused(_edited(old, new))
+
+
+# -- error-tuple-name -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_with_several_logs_each_error_names_its_log_as_a_plain_path(tmp_path, cli, jobs):
+    logs = [_reproducer(tmp_path, "unknown_detector", name) for name in ("first", "second")]
+    result = cli("analyze", *logs, "--no-report", "--json", "-", "--jobs", jobs)
+    assert result.exit_code == 2, result.stderr
+    errors = json.loads(result.stdout)["errors"]
+    assert [e["file"] for e in errors] == [str(log) for log in logs]
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 2
+    for log, line, error in zip(logs, lines, errors):
+        assert line.startswith(f"logscan: error: {log}") and error["error"].startswith(str(log)), line
+        assert "unknown detector 'no_such_detector'" in line and "('" not in line
+
+
+def test_run_many_names_a_failed_log_by_the_first_item_of_its_tuple():
+    outcomes = run_many([("a", "a.html"), ("bad", "bad.html")], _pair_task)
+    assert outcomes[0] == "A"
+    assert outcomes[1] == LogFailure("bad", "bad: cannot read", 2)
+
+
+def _pair_task(item: tuple[str, str]) -> str:
+    log, _report = item
+    if log == "bad":
+        raise InputError("cannot read")
+    return log.upper()
