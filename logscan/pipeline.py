@@ -97,11 +97,18 @@ def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) 
 
     registry = default_registry()
     profile = loaded.profile
+    # the profile's file, or "<log> (embedded profile)": its errors name the log too ("embedded" does not)
+    source = profile.source
     chosen = list(names or profile.enabled_detectors() or registry.default_names())
     detectors = []
     for name in chosen:
         spec = profile.detectors.get(name)
-        detectors.append(registry.create(name, dict(spec.settings) if spec else {}, source=loaded.source))
+        try:
+            detectors.append(registry.create(name, dict(spec.settings) if spec else {}, source=source))
+        except ProfileError as exc:
+            if exc.path is None and not names:  # an unknown name the profile chose, not --detector
+                exc.path = source
+            raise
     return detectors
 
 

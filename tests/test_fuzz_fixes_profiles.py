@@ -163,3 +163,42 @@ def _pair_task(item: tuple[str, str]) -> str:
     if log == "bad":
         raise InputError("cannot read")
     return log.upper()
+
+
+# -- unknown-detector-unnamed -----------------------------------------------------------------------
+
+UNKNOWN = "unknown detector 'no_such_detector' (available: "
+
+
+def test_an_unknown_detector_in_a_sidecar_profile_names_the_profile_and_its_log(tmp_path, cli):
+    log = _reproducer(tmp_path, "unknown_detector")
+    result = cli("analyze", log, "--no-report", "--json", "-")
+    assert result.exit_code == 2 and result.stdout == "", result.stderr
+    assert result.stderr.startswith(f"logscan: error: {log} (embedded profile): {UNKNOWN}"), result.stderr
+
+
+def test_an_unknown_detector_in_a_profile_file_names_that_file(tmp_path, cli):
+    log = _reproducer(tmp_path, "unknown_detector")
+    profile = tmp_path / "unknown.toml"
+    shutil.copyfile(REGRESSIONS / "unknown_detector.profile.toml", profile)
+    result = cli("analyze", log, "--profile", profile, "--no-report")
+    assert result.exit_code == 2
+    assert result.stderr.startswith(f"logscan: error: {profile}: {UNKNOWN}"), result.stderr
+
+
+def test_a_bad_detector_setting_in_a_sidecar_profile_names_its_log_not_just_embedded(tmp_path, cli):
+    log = _reproducer(tmp_path, "unknown_detector")
+    sidecar = log.with_suffix(".profile.toml")
+    sidecar.write_text(sidecar.read_text().replace("[detectors.no_such_detector]", "[detectors.nis]\nwindow = 0"))
+    result = cli("analyze", log, "--no-report")
+    assert result.exit_code == 2
+    assert result.stderr.strip() == (
+        f"logscan: error: {log} (embedded profile): detector 'nis': window must be an integer in [1, inf), got 0"
+    )
+
+
+def test_an_unknown_detector_given_on_the_command_line_is_not_blamed_on_the_profile(tmp_path, cli):
+    log = _reproducer(tmp_path, "unknown_detector")  # --detector replaces the profile's choice
+    result = cli("analyze", log, "--detector", "nope", "--no-report")
+    assert result.exit_code == 2
+    assert result.stderr.startswith("logscan: error: unknown detector 'nope' (available: "), result.stderr
