@@ -13,7 +13,10 @@ byte range pyulog reads; a message cut by the end of the file, bytes never read 
 the reader stopped early or jumped), appended-data offsets past the end of the file, or pyulog's
 corruption flag make the log partial, with ``partial_reason`` saying where and how much was
 recovered. A cut exactly between two messages leaves a valid, shorter ULog (the format has no
-index or end marker): that cannot be told from a log that ended there.
+index or end marker): that cannot be told from a log that ended there. A subscribed format without
+a ``timestamp`` field (the spec requires one; a damaged definition renames it) has no times: its
+topic is skipped with a warning naming it and the log is partial (a CorruptLogError when no other
+topic is left); pyulog would stop reading the file at its first message, the reader reads on.
 
 Sizes: every ULog message states its size in a uint16, so no read exceeds 64 KiB. Message
 formats are data too: pyulog flattens a subscribed format into one field per array element,
@@ -49,6 +52,7 @@ _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
 _MAX_MESSAGE_BYTES = 0xFFFF  # a message's size field is a uint16
 _MAX_FORMAT_NESTING = 64  # nested message formats (PX4 nests 2 or 3 deep)
+_UNTIMED_WHY = "its message format has no timestamp field, which the ULog spec requires: the definition is damaged"
 
 
 def format_bytes(name: str, formats: dict) -> int:
@@ -83,7 +87,8 @@ def format_bytes(name: str, formats: dict) -> int:
 
 
 def _bounded_ulog_class():
-    """pyulog's ULog whose subscriptions check their format (``format_bytes``) before flattening it."""
+    """pyulog's ULog whose subscriptions check their format (``format_bytes``) before flattening it,
+    and which reads on past the data of a format without a uint64 ``timestamp`` field."""
     from pyulog import ULog
 
     class BoundedULog(ULog):
@@ -91,6 +96,19 @@ def _bounded_ulog_class():
             def _parse_format(self, message_formats):
                 format_bytes(self.message_name, message_formats)
                 super()._parse_format(message_formats)
+
+        class _MessageData(ULog._MessageData):
+            def initialize(self, data, header, subscriptions, ulog_object) -> bool:
+                try:
+                    return super().initialize(data, header, subscriptions, ulog_object)
+                except struct.error:
+                    if len(data) < 2:  # too short to name its topic: pyulog stops there (framing broken)
+                        raise
+                    # The message is kept, but the 8 timestamp bytes pyulog reads lie past its end: its
+                    # format has no uint64 `timestamp` field. pyulog would take this for the end of the
+                    # file and drop the rest of it; read_ulog skips the topic and says why.
+                    self.timestamp = 0
+                    return False
 
     return BoundedULog
 
@@ -169,12 +187,18 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
     ulog, watch, chatter = _parse(path, wanted)
     channels: dict[str, Channel] = {}
+    untimed: list[str] = []  # topics whose format has no timestamp field: skipped, the log is partial
     for data in ulog.data_list:
         topic = f"{data.name}_{data.multi_id}"
         if not (topic_wanted(topic, wanted) or topic_wanted("/" + topic, wanted)):
             continue
         if topic in source.topics:  # same message and instance subscribed twice: keep the first
             source.skip(f"topic {topic}", "subscribed twice in the file; second copy ignored")
+            continue
+        if "timestamp" not in data.data:  # the format breaks the spec: its definition is damaged
+            count = len(next(iter(data.data.values()), ()))
+            source.skip(f"topic {topic}", _UNTIMED_WHY, count)
+            untimed.append(topic)
             continue
         t_us = np.asarray(data.data["timestamp"], dtype=np.int64)
         keep = t_us != 0  # PX4 publishes timestamp 0 for a message never really set
@@ -208,7 +232,7 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         )
         report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
     _fill_metadata(ulog, source)
-    _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None)
+    _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None, untimed=untimed)
     if wanted is not None and not source.topics:
         source.warnings.append(f"none of the requested topics is in the log: {sorted(wanted)}")
     return Log(channels=channels, source=source)
@@ -252,9 +276,12 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     return ulog, watch, chatter
 
 
-def _report_damage(path, ulog, source: SourceInfo, chatter: str, watch: _ReadWatch, *, all_topics: bool) -> None:
-    """Mark the log partial when the file is truncated, its framing broken, or pyulog skipped
-    corrupt data; the reason says where and how much was recovered.
+def _report_damage(
+    path, ulog, source: SourceInfo, chatter: str, watch: _ReadWatch, *, all_topics: bool, untimed: list[str]
+) -> None:
+    """Mark the log partial when the file is truncated, its framing broken, pyulog skipped corrupt
+    data or topics were skipped for lack of a timestamp field (``untimed``); the reason says where
+    and how much was recovered. CorruptLogError when nothing at all could be read.
 
     ULog has no checksums: flipped bytes inside message payloads cannot be detected, only
     framing, truncation, pyulog's corruption flag and (as warnings) topic timestamps going backwards.
@@ -276,6 +303,10 @@ def _report_damage(path, ulog, source: SourceInfo, chatter: str, watch: _ReadWat
         reasons.append(f"truncated: data appended at byte {beyond[0]} lies past the end of the file ({size} bytes)")
     if ulog.file_corruption:
         reasons.append("pyulog found corrupt data (broken framing or unknown message ids) and skipped it")
+    skipped = f"topic{'s' if len(untimed) > 1 else ''} {', '.join(untimed)}"
+    if untimed:
+        source.warnings.append(f"{skipped} skipped: {_UNTIMED_WHY}")
+        reasons.append(f"{skipped} not read: {_UNTIMED_WHY}")
     if reasons:
         source.partial = True
         source.partial_reason = "; ".join(reasons) + "; " + _recovered(source, ulog)
@@ -289,6 +320,12 @@ def _report_damage(path, ulog, source: SourceInfo, chatter: str, watch: _ReadWat
             f"ULog truncated at byte {cut_at} of {size} before any data message",
             path=str(path),
             hint="the file was cut during logging or copying; nothing to read",
+        )
+    if untimed and not source.topics:  # every topic read lacks its timestamp: no data at all
+        raise CorruptLogError(
+            f"no data to read: {skipped} skipped, {_UNTIMED_WHY}",
+            path=str(path),
+            hint="re-export or re-record the log",
         )
 
 
