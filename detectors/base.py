@@ -13,6 +13,7 @@ A detector (built-in or plugin) subclasses `Detector`:
         requires_fit = False                          # True: `run` needs trained state
         requires_trace = False                        # True: needs the shared EKF trace
         trained_attributes = ()                       # e.g. ("threshold_",): what `fit` learns
+        reads = frozenset({"x_post"})                 # the large series it reads (see `reads`)
 
         def needs(self, run=None) -> Needs:           # optional: more than the EKF's default trace
             ...
@@ -114,6 +115,10 @@ class Detector:
     requires_trace: ClassVar[bool] = False
     trained_attributes: ClassVar[tuple[str, ...]] = ()
     state_version: ClassVar[int] = 1
+    # Which of the large per-step series (`logscan.pipeline.RELEASABLE`: the EKF's state, covariance,
+    # gain and innovation series, the run's on-board estimates) `run` reads. The pipeline frees each
+    # once no detector still to run reads it. None: not declared, nothing is freed before it runs.
+    reads: ClassVar[frozenset[str] | None] = None
 
     def __init__(self, **params: Any) -> None:
         self.params = {**copy.deepcopy(dict(self.defaults)), **params}

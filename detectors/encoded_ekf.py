@@ -67,6 +67,9 @@ class EncodedEkfDetector(Detector):
 
     name = "encoded_ekf"
     requires_trace = True
+    reads = frozenset(
+        {"x_prior", "x_post", "P_prior_diag", "P_post_diag", "K", "S", "onboard_state", "onboard_variance"}
+    )
     default_enabled = True
     trained_attributes = ("threshold_",)
     defaults = {
@@ -116,24 +119,30 @@ class EncodedEkfDetector(Detector):
         return Needs.of(ekf=())
 
     # --- the check quantities -----------------------------------------------------------------
-    def _coding_vectors(self, trace, model) -> np.ndarray:
+    def _coding_vectors(self, trace, model):
+        """rows -> CV_k over those steps, float64 (N, n) never held at once: recomputing a block from
+        P_prior_diag is cheaper than keeping 35 MB per log-hour."""
         n_steps, n = trace.x_prior.shape
         if self.variant == "baseline":
             cv0 = self.cv0 if self.cv0 is not None else PAPER_CV0.get(trace.model_name, [1.0] * n)
             cv0 = np.asarray(cv0, dtype=np.float64)
             if cv0.shape != (n,):
                 raise ProfileError(f"detector {self.name!r}: cv0 needs {n} entries, got {cv0.size}")
-            return np.broadcast_to(cv0, (n_steps, n))
+            return lambda rows: np.broadcast_to(cv0, (len(range(n_steps)[rows]), n))
         scale = model.state_scale() if model is not None else np.ones(n)
-        return coding_vectors(trace.P_prior_diag, scale, self.sigma_floor, self.r_max)
+        return lambda rows: coding_vectors(trace.P_prior_diag[rows], scale, self.sigma_floor, self.r_max)
 
-    def state_check(self, trace, model=None):
-        """(e_x (N,), defined (N,), CV (N, n)): e_x = CV_k (x_prior_k - x_post_k) on update steps."""
-        cv = self._coding_vectors(trace, model)
+    def state_check(self, trace, model=None, cv_dtype=np.float64):
+        """(e_x (N,), defined (N,), CV (N, n) as ``cv_dtype``): e_x = CV_k (x_prior_k - x_post_k) on
+        update steps."""
+        cv_of = self._coding_vectors(trace, model)
         defined = trace.updated.any(axis=1) | trace.diverged
-        e_x = np.empty(cv.shape[0])
-        for rows in _row_blocks(cv.shape[0]):  # no (N, n) temporary
-            e_x[rows] = np.einsum("kn,kn->k", cv[rows], trace.x_prior[rows] - trace.x_post[rows])
+        n_steps, n = trace.x_prior.shape
+        e_x, cv = np.empty(n_steps), np.empty((n_steps, n), dtype=cv_dtype)
+        for rows in _row_blocks(n_steps):  # no (N, n) float64 temporary
+            block = cv_of(rows)
+            cv[rows] = block
+            e_x[rows] = np.einsum("kn,kn->k", block, trace.x_prior[rows] - trace.x_post[rows])
         e_x[~defined] = np.nan
         e_x[trace.diverged] = np.nan  # a divergence is an exceedance, never silence
         return e_x, defined, cv
@@ -142,7 +151,7 @@ class EncodedEkfDetector(Detector):
         model = context.get("model")
         peak = 0.0
         for trace in traces:
-            e_x, defined, _ = self.state_check(trace, model)
+            e_x, defined, _ = self.state_check(trace, model, np.float32)
             finite = e_x[defined & np.isfinite(e_x)]
             if finite.size:
                 peak = max(peak, float(np.abs(finite).max()))
@@ -153,9 +162,10 @@ class EncodedEkfDetector(Detector):
         model = context.get("model")
         result = self.new_result()
         t = run.t
-        e_x, defined, cv = self.state_check(trace, model)
-        # for the figure only: float32 is ample and halves the (N, n) array it keeps
-        result.extras["coding_vector"] = cv.astype(np.float32)
+        # CV for the figure only: float32 is ample and halves the (N, n) array it keeps; the checks
+        # below recompute float64 blocks
+        e_x, defined, result.extras["coding_vector"] = self.state_check(trace, model, np.float32)
+        cv_of = self._coding_vectors(trace, model)
         result.info["coverage"] = COVERAGE_NOTE
         result.info["variant"] = self.variant
         result.info["rejected_samples"] = int(trace.rejected.sum())
@@ -177,14 +187,14 @@ class EncodedEkfDetector(Detector):
         mode = self._variance_mode(run, trace)
         result.info["variance_check"] = mode
         if mode != "off":
-            e_v, defined_v, scale_v = self.variance_check_series(mode, run, trace, cv, e_x, defined)
+            e_v, defined_v, scale_v = self.variance_check_series(mode, run, trace, cv_of, e_x, defined)
             # spread floored at a fraction of the check's own variance: two estimators of one model
             # that linearise at slightly different states differ by a few per cent in manoeuvres
             self._adaptive_check(
                 result, t, "e_v", e_v, defined_v, self.window_v, self.rho_v, self.rel_floor_v * np.abs(scale_v)
             )
-        if self.onboard_state_check and run.onboard_state is not None and np.isfinite(run.onboard_state).any():
-            e_s, defined_s = self.onboard_state_series(run, trace, cv, model, defined)
+        if self.onboard_state_check and _any_finite(run.onboard_state):
+            e_s, defined_s = self.onboard_state_series(run, trace, cv_of, model, defined)
             self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s)
             result.info["onboard_state_check"] = True
         return result
@@ -211,7 +221,7 @@ class EncodedEkfDetector(Detector):
             )
 
     def _variance_mode(self, run, trace) -> str:
-        has_onboard = run.onboard_variance is not None and np.isfinite(run.onboard_variance).any()
+        has_onboard = _any_finite(run.onboard_variance)
         if self.variance_check == "auto":
             if has_onboard:
                 return "onboard"
@@ -222,15 +232,17 @@ class EncodedEkfDetector(Detector):
             )
         return self.variance_check
 
-    def variance_check_series(self, mode, run, trace, cv, e_x, defined):
-        """(e_v (N,), defined (N,)) for the on-board or observed-vs-predicted variance check."""
+    def variance_check_series(self, mode, run, trace, cv_of, e_x, defined):
+        """(e_v (N,), defined (N,)) for the on-board or observed-vs-predicted variance check;
+        ``cv_of(rows)``: the coding vectors of those steps."""
         if mode == "onboard":
-            n_steps = cv.shape[0]
+            n_steps = trace.n_steps
             e_v, scale, any_logged = np.empty(n_steps), np.empty(n_steps), np.empty(n_steps, dtype=bool)
             for rows in _row_blocks(n_steps):  # (N, n) temporaries a block at a time
                 onboard, P_post = run.onboard_variance[rows], trace.P_post_diag[rows]
                 logged = np.isfinite(onboard)
-                alpha_sq = cv[rows] * cv[rows]
+                cv = cv_of(rows)
+                alpha_sq = cv * cv
                 # e_v = CV P_onboard CV^T - CV P_shadow CV^T over the logged diagonal entries
                 e_v[rows] = np.einsum("kn,kn->k", alpha_sq, np.where(logged, onboard - P_post, 0.0))
                 scale[rows] = np.einsum("kn,kn->k", alpha_sq, np.where(logged, P_post, 0.0))
@@ -243,7 +255,7 @@ class EncodedEkfDetector(Detector):
         # predicted variance of e_x: g S g^T with g = CV_k K_k (padded columns are NaN: zero them)
         K = np.nan_to_num(trace.K)
         S = np.nan_to_num(trace.S)
-        g = np.einsum("kn,knm->km", cv, K)
+        g = np.einsum("kn,knm->km", cv_of(slice(None)), K)
         predicted = np.einsum("km,kmj,kj->k", g, S, g)
         _, var_obs = trailing_mean_var(e_x, defined, self.window_v)
         mean_pred, _ = trailing_mean_var(predicted, defined, self.window_v)
@@ -251,14 +263,14 @@ class EncodedEkfDetector(Detector):
         defined_v = defined & np.isfinite(e_v)
         return e_v, defined_v, mean_pred
 
-    def onboard_state_series(self, run, trace, cv, model, defined):
+    def onboard_state_series(self, run, trace, cv_of, model, defined):
         """(e_s (N,), defined (N,)): e_s = CV_k (x_onboard_k - x_post_k) over the logged states.
 
         The offline analogue of the paper's check on the estimator's state computation: the vehicle's
         own estimate against logscan's shadow filter on the same data. Angle states (those a wrapped
         measurement observes directly) are compared modulo 2 pi.
         """
-        n_steps, n = cv.shape
+        n_steps, n = trace.x_post.shape
         angles = _angle_states(model, n)
         e_s, any_logged = np.empty(n_steps), np.empty(n_steps, dtype=bool)
         for rows in _row_blocks(n_steps):  # (N, n) temporaries a block at a time
@@ -266,7 +278,7 @@ class EncodedEkfDetector(Detector):
             logged = np.isfinite(onboard)
             diff = np.where(logged, onboard - trace.x_post[rows], 0.0)
             diff[:, angles] = (diff[:, angles] + np.pi) % (2.0 * np.pi) - np.pi
-            e_s[rows] = np.einsum("kn,kn->k", cv[rows], diff)
+            e_s[rows] = np.einsum("kn,kn->k", cv_of(rows), diff)
             any_logged[rows] = logged.any(axis=1)
         defined_s = defined & any_logged
         e_s[~defined_s] = np.nan
@@ -274,6 +286,13 @@ class EncodedEkfDetector(Detector):
 
 
 ROW_BLOCK = 65_536  # steps per block of the (N, n) arithmetic: bounded temporaries, numpy speed
+
+
+def _any_finite(series: np.ndarray | None) -> bool:
+    """Any finite entry, a block at a time (no (N, n) mask)."""
+    if series is None:
+        return False
+    return any(np.isfinite(series[rows]).any() for rows in _row_blocks(series.shape[0]))
 
 
 def _row_blocks(n_steps: int):

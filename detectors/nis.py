@@ -50,6 +50,7 @@ class NisDetector(Detector):
 
     name = "nis"
     requires_trace = True
+    reads = frozenset()  # only the NIS series, update masks and counts, which are never freed
     default_enabled = True
     defaults = {
         "window": 10,  # W updates per window sum

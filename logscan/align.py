@@ -381,10 +381,10 @@ class _Aligner:
                     )
         return z, fresh
 
-    def group(self, name: str, channels, grid_ns, limit_s: float, transforms=None) -> AlignedGroup:
+    def group(self, name: str, channels, grid_ns, limit_s: float, transforms=None, z=None) -> AlignedGroup:
         m = len(channels)
         n = grid_ns.size
-        z = np.empty((n, m))
+        z = np.empty((n, m)) if z is None else z
         ch_fresh = np.empty((n, m), dtype=bool)
         for j, ch in enumerate(channels):
             self.hold(ch, grid_ns, limit_s, transforms[j] if transforms else None, z[:, j], ch_fresh[:, j])
@@ -483,8 +483,14 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         u_fresh &= np.isfinite(u[:, j])
 
     groups: dict[str, AlignedGroup] = {}
+    # the groups' samples side by side in one (N, m_total) array, in the profile's order: the
+    # filter reads it in place (`filters.ekf.pack_run`) instead of a copy
+    z_all = np.empty((n, sum(len(spec.channels) for spec in profile.measurements.values())))
+    columns = 0
     for spec in profile.measurements.values():
-        g = aligner.group(spec.name, spec.channels, grid_ns, spec.stale_s)
+        z = z_all[:, columns : columns + len(spec.channels)]
+        columns += len(spec.channels)
+        g = aligner.group(spec.name, spec.channels, grid_ns, spec.stale_s, z=z)
         g.rate_hz = float(spec.rate_hz)
         for attr in ("noise_std", "range_lo", "range_hi"):
             value = getattr(spec, attr)

@@ -118,7 +118,7 @@ class Analysis:
             "profile_source": self.profile_source,
             "model": self.model.name,
             "log": self.log.summary() | {"channels": len(self.log.channels)},
-            "filter": self.trace.summary() if self.trace is not None else None,
+            "filter": self.prepared.filter_summary(),
             "detectors": [result.to_dict() for result in self.results],
             "truth_events": [
                 {"kind": e.kind, "target": e.target, "start": e.t_start, "end": e.t_end} for e in self.events

@@ -262,6 +262,7 @@ class EvaluationTask:
             grace_s=self.grace_s,
             start_s=self.start_s,
             end_s=self.end_s,
+            free_series=True,  # nothing reads the filter's series after the detectors
         )
         return evaluate_analysis(analysis, grace_s=self.grace_s, recovery_s=self.recovery_s)
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from logscan.errors import LogscanError, ProfileError
@@ -36,6 +36,13 @@ def _run_ekf(model, run, parts: frozenset[str]):
         store_innovations="y" in parts,
     )
 
+
+# The large per-step series a detector declares it reads (`Detector.reads`): each is freed once no
+# detector still to run reads it. What runs after the detectors (incidents, coverage, the summary)
+# reads none of them.
+RELEASABLE_TRACE = ("x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_diag", "K", "S", "P_prior", "P_post")
+RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode")  # "z": the groups' samples
+RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
 
 # Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
 FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf}
@@ -61,6 +68,33 @@ class Prepared:
     run: Any  # logscan.align.AlignedRun
     traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
     warnings: list[str] = field(default_factory=list)
+    _filter_summary: dict | None = None
+
+    def filter_summary(self) -> dict | None:
+        """The EKF trace's JSON counts (kept when the series are released)."""
+        if self._filter_summary is None and self.trace is not None:
+            self._filter_summary = self.trace.summary()
+        return self._filter_summary
+
+    def release_series(self) -> None:
+        """Free what only the filters and detectors read, once they have run: the filter traces and
+        the aligned signals (~290 MB for a 1-hour 100 Hz log). The report draws the grid's times and
+        the detectors' results; the filter's counts stay (``filter_summary``)."""
+        import numpy as np
+
+        self.filter_summary()
+        self.traces.clear()
+        empty = np.empty((self.run.n_steps, 0))
+        self.run = replace(
+            self.run,
+            u=empty,
+            u_fresh=np.empty(0, dtype=bool),
+            groups={},
+            redundant={},
+            mode=None,
+            onboard_state=None,
+            onboard_variance=None,
+        )
 
     @property
     def profile(self):
@@ -193,10 +227,19 @@ def _start_compile(model, needs, notice: Progress | None):
     return compiling
 
 
-def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, progress: Progress | None = None):
+def detect(
+    prepared: Prepared,
+    detectors: Sequence,
+    *,
+    grace_s: float = 1.0,
+    progress: Progress | None = None,
+    free_series: bool = False,
+):
     """Run the detectors on a prepared log, merge their alarm fragments into incidents, say what
     could not be checked, and score the alarms when the log carries ground truth. A detector that
-    raises is named in ``analysis.failures``; the others' results are kept."""
+    raises is named in ``analysis.failures``; the others' results are kept. ``free_series``: free
+    each large series once no detector still to run reads it (`release_unread`; the prepared log
+    then serves no further detector)."""
     from logscan.analysis import Analysis
     from logscan.coverage import unchecked_reasons
     from logscan.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
@@ -204,7 +247,9 @@ def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, pro
     step = progress or (lambda message: None)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     policy = prepared.profile.alarm_policy
-    for detector in detectors:
+    for position, detector in enumerate(detectors):
+        if free_series:
+            release_unread(prepared, detectors[position:])
         step(f"detector {detector.name}")
         try:
             result = detector.run(
@@ -226,6 +271,26 @@ def detect(prepared: Prepared, detectors: Sequence, *, grace_s: float = 1.0, pro
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     _score(analysis, [d.name for d in detectors], grace_s)
     return analysis
+
+
+def release_unread(prepared: Prepared, still_to_run: Sequence) -> None:
+    """Free the large series none of ``still_to_run`` declares it reads (all of them declare)."""
+    wanted: set[str] = set()
+    for detector in still_to_run:
+        if detector.reads is None:
+            return
+        wanted |= detector.reads
+    for trace in prepared.traces.values():
+        for name in RELEASABLE_TRACE:
+            if name not in wanted and getattr(trace, name, None) is not None:
+                setattr(trace, name, None)
+    run = prepared.run
+    for name in ("onboard_state", "onboard_variance", "u", "mode"):
+        if name not in wanted and getattr(run, name) is not None:
+            setattr(run, name, None)
+    if "z" not in wanted:
+        for group in (*run.groups.values(), *run.redundant.values()):
+            group.z = group.fresh = group.channel_fresh = None
 
 
 def detector_failure(name: str, exc: BaseException):
@@ -282,11 +347,13 @@ def analyze_log(
     notice: Progress | None = None,
     start_s: float | None = None,
     end_s: float | None = None,
+    free_series: bool = False,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
-    ``start_s``/``end_s``: a window of the log (seconds since its start)."""
+    ``start_s``/``end_s``: a window of the log (seconds since its start); ``free_series``: see
+    `detect`."""
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     prepared = prepare(path, loaded, needs_of(detectors), progress=progress, notice=notice, **options)
-    return detect(prepared, detectors, grace_s=grace_s, progress=progress)
+    return detect(prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series)

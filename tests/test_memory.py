@@ -41,3 +41,70 @@ def test_innovations_are_kept_only_when_a_detector_asks(sample):
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
 def test_the_mmap_threshold_is_fixed_on_glibc():
     assert return_freed_arrays_to_the_system() is True
+
+
+def test_the_filter_reads_the_aligned_samples_in_place(sample):
+    from logscan.filters.ekf import pack_run
+
+    path = sample("quad_imu_bias.mcap")
+    loaded = load_profile_for(path, None)
+    prepared = prepare(path, loaded, Needs())
+    packed = pack_run(prepared.model, prepared.run)
+    for name, group in prepared.run.groups.items():
+        assert np.shares_memory(packed.z, group.z), name
+    # a hand-built run (groups in their own arrays) is copied into the same layout
+    first = next(iter(prepared.run.groups.values()))
+    first.z = first.z.copy()
+    copied = pack_run(prepared.model, prepared.run)
+    assert not np.shares_memory(copied.z, first.z)
+    np.testing.assert_array_equal(copied.z, packed.z)
+
+
+class _Undeclared:
+    """A detector that does not say what it reads (a plugin): nothing may be freed before it runs."""
+
+    name = "undeclared"
+    reads = None
+
+    def run(self, run, trace, **context):
+        self.seen = (trace.x_post is not None, run.onboard_state is not None, run.u is not None)
+        from logscan.results import DetectorResult
+
+        return DetectorResult(detector=self.name)
+
+
+def test_each_large_series_is_freed_once_no_detector_left_reads_it(sample):
+    from logscan.pipeline import detect
+
+    path = sample("quad_imu_bias.mcap")
+    loaded = load_profile_for(path, None)
+    encoded, nis = create_detectors(loaded, ["encoded_ekf", "nis"])
+    kept = detect(prepare(path, loaded, needs_of([encoded, nis])), [encoded, nis])
+    assert kept.trace.x_prior is not None and kept.run.onboard_state is not None  # not asked to free
+
+    prepared = prepare(path, loaded, needs_of([encoded, nis]))
+    undeclared = _Undeclared()
+    freed = detect(prepared, [encoded, undeclared, nis], free_series=True)
+    assert undeclared.seen == (True, True, True)  # still there for the detector that did not declare
+    trace, run = freed.trace, freed.run
+    assert trace.x_prior is None and trace.P_post_diag is None and run.onboard_state is None and run.u is None
+    assert all(group.z is None for group in run.groups.values())
+    assert trace.nis is not None and trace.updated is not None  # read after the detectors
+    by_name = {r.detector: r for r in kept.results}
+    for result in freed.results:
+        if result.detector in by_name:
+            assert [a.to_dict() for a in result.alarms] == [a.to_dict() for a in by_name[result.detector].alarms]
+    assert freed.summary()["filter"] == kept.summary()["filter"]
+
+
+def test_the_report_needs_only_the_grid_and_the_results(sample, tmp_path):
+    from logscan.pipeline import analyze_log
+
+    path = sample("quad_imu_bias.mcap")
+    analysis = analyze_log(path, free_series=True)
+    summary = analysis.summary()
+    analysis.prepared.release_series()
+    assert analysis.summary() == summary
+    assert analysis.prepared.traces == {} and analysis.run.t.size == 6001
+    report = analysis.report_input()
+    assert report.t is analysis.run.t and report.results == analysis.results

@@ -242,11 +242,13 @@ class AnalyzeTask:
             notice=echo_notice if self.notices else None,
             start_s=self.start_s,
             end_s=self.end_s,
+            free_series=True,  # nothing reads the filter's series after the detectors
         )
         summary = analysis.summary()
         summary["exit_code"] = int(analysis.exit_code(self.allow_partial))
         summary["report"] = report_path
         text = render_summary(analysis, report_path)
+        analysis.prepared.release_series()  # the report reads the results and the grid's times
         staged = None
         if report_path is not None:
             step("writing report")

@@ -382,6 +382,25 @@ def _group_ranges(run: AlignedRun, names: list[str], specs, which: str) -> np.nd
     return np.concatenate(parts)
 
 
+def _side_by_side(run: AlignedRun, names: list[str], offsets: np.ndarray, sizes: np.ndarray) -> np.ndarray | None:
+    """The (N, m_total) float64 array whose column blocks are the groups' samples in this order
+    (what `logscan.align` builds), else None. The kernel only reads z, so it may share it."""
+    first = run.groups[names[0]].z
+    base = first.base if isinstance(first, np.ndarray) else None
+    if not isinstance(base, np.ndarray) or base.dtype != np.float64 or not base.flags.c_contiguous:
+        return None
+    if base.shape != (run.n_steps, int(sizes.sum())):
+        return None
+    origin = base.__array_interface__["data"][0]
+    for name, offset, size in zip(names, offsets.tolist(), sizes.tolist()):
+        z = run.groups[name].z
+        if not isinstance(z, np.ndarray) or z.base is not base or z.shape != (run.n_steps, size):
+            return None
+        if z.__array_interface__["data"][0] != origin + 8 * offset or z.strides != base.strides:
+            return None
+    return base
+
+
 def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) -> KernelInputs:
     """Check the run against the model and pack it into the kernel's arrays.
 
@@ -406,7 +425,9 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     sizes = np.array([s.size for s in specs], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     m_total = int(sizes.sum())
-    z = np.empty((N, m_total))
+    z = _side_by_side(run, names, offsets, sizes)  # alignment's own array, when it has that layout
+    packed = z is not None
+    z = np.empty((N, m_total)) if z is None else z
     fresh = np.zeros((N, len(names)), dtype=np.bool_)
     R_all = np.zeros((m_total, m_total))
     R = dict(R or {})
@@ -422,7 +443,8 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
                 hint="list one channel per model output in the profile",
             )
         o = offsets[g]
-        z[:, o : o + spec.size] = zg
+        if not packed:
+            z[:, o : o + spec.size] = zg
         fresh[:, g] = np.asarray(grp.fresh, dtype=bool)
         if name in R:
             given = np.square(R[name]) if np.ndim(R[name]) == 1 else R[name]  # std or matrix
