@@ -151,7 +151,9 @@ def _decode_batches(
             if field_path not in info.fields:
                 info.fields.append(field_path)
             index, values = flat.columns[field_path]
-            pieces.setdefault(_channel_name(topic, field_path), []).append((times[index], values))
+            # a field every message has shares the topic's times (one array, not one per field)
+            field_times = times if index.size == times.size else times[index]
+            pieces.setdefault(_channel_name(topic, field_path), []).append((field_times, values))
     return pieces, undecodable, decoded_topics, stamp_topics
 
 
