@@ -14,6 +14,13 @@ JSON of one `logscan analyze` run): `stage` each into a temporary file beside it
   few microseconds of the renames themselves can leave some targets new and some old (POSIX has
   no rename of several files at once); the JSON is renamed last, so a new JSON means new reports.
   Such a kill also leaves its ``.<name>.<token>.*.tmp`` temporary files behind.
+
+A target that exists and is not a regular file is never replaced: a FIFO or a character device
+(``/dev/null``, a terminal), or a path naming an open file descriptor (``/dev/stdout``,
+``/dev/fd/N``), is written into directly by `commit`, after the renames (the data waits in
+memory; opening a FIFO waits for its reader, with Ctrl-C working). What was written there cannot
+be taken back, but a failed or interrupted direct write still puts the renamed targets back. A
+directory, a socket or a block device as a target is an `OutputError` (see `check_target`).
 """
 
 from __future__ import annotations
@@ -21,8 +28,10 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import secrets
 import signal
+import stat
 import sys
 import tempfile
 import threading
@@ -46,6 +55,7 @@ _WRITE_ERRORS = {
     errno.ENOENT: ("the directory does not exist", "create it or give another path"),
     errno.ENAMETOOLONG: ("the file name is too long", "give a shorter path"),
     errno.EIO: ("input/output error on the device", "check the disk, or write the outputs elsewhere"),
+    errno.EPIPE: ("the reader of the pipe closed it", "keep the pipe's reader running until logscan ends"),
 }  # fmt: skip
 
 
@@ -54,10 +64,12 @@ class OutputError(LogscanError):
 
 
 class Staged(NamedTuple):
-    """A complete temporary file beside its target, waiting for `commit`."""
+    """A complete temporary file beside its target, waiting for `commit`; or, for a target that is
+    a FIFO or a device (``tmp`` None), the ``data`` `commit` writes into it."""
 
-    tmp: str
+    tmp: str | None
     target: str
+    data: bytes | None = None
 
 
 def describe_os_error(exc: OSError) -> tuple[str, str | None]:
@@ -85,11 +97,37 @@ def _umask() -> int:
     return umask
 
 
+def check_target(path: str | os.PathLike) -> bool:
+    """Whether the output ``path`` is written into directly (True: an existing FIFO or character
+    device, or a path naming an open file descriptor such as /dev/stdout) rather than staged and
+    renamed (False: a regular file, or nothing there yet). A directory, a socket or a block
+    device is an OutputError: none of them can take the output, and none may be replaced."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return False  # nothing there (or not reachable): staging creates it, or says why not
+    if stat.S_ISREG(mode):
+        # /dev/stdout redirected to a file: that file gets the output, never the link /dev/stdout
+        return _names_descriptor(path)
+    if stat.S_ISFIFO(mode) or stat.S_ISCHR(mode):
+        return True
+    what = "a directory" if stat.S_ISDIR(mode) else "a socket" if stat.S_ISSOCK(mode) else None
+    what = what or ("a block device" if stat.S_ISBLK(mode) else "not a regular file")
+    raise OutputError(
+        f"cannot write the output: it is {what}",
+        path=str(path),
+        hint="give the name of a file, a FIFO or a character device such as /dev/null",
+    )
+
+
 def stage(path: str | os.PathLike, data: bytes | str, *, token: str = "") -> Staged:
     """Write ``data`` completely (flushed to disk) to a temporary file in ``path``'s directory;
-    `commit` renames it onto ``path``. On an error the temporary file is removed."""
+    `commit` renames it onto ``path``. On an error the temporary file is removed. A FIFO or a
+    device at ``path`` (`check_target`) is not staged: the data waits for `commit` in memory."""
     target = Path(path)
     payload = data.encode("utf-8") if isinstance(data, str) else data
+    if check_target(target):
+        return Staged(None, str(target), payload)
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise OutputError("the output directory does not exist", path=str(directory), hint="create it first")
@@ -114,34 +152,55 @@ def stage(path: str | os.PathLike, data: bytes | str, *, token: str = "") -> Sta
 
 
 def commit(staged: Sequence[Staged]) -> None:
-    """Rename every staged file onto its target, in order, with SIGINT/SIGTERM/SIGHUP held back.
+    """Rename every staged file onto its target, in order, with SIGINT/SIGTERM/SIGHUP held back;
+    then write the data of the FIFO and device targets into them, in order.
 
     When a rename fails, the targets already replaced get their previous content back (or are
     removed when they had none), the remaining temporary files are removed, and an OutputError
-    says which target failed."""
+    says which target failed. A failed or interrupted direct write puts the renamed targets back
+    the same way (what already went into a FIFO or device stays written)."""
+    files = [item for item in staged if item.tmp is not None]
+    direct = [item for item in staged if item.tmp is None]
     with _signals_held():
-        backups = [_backup(item.target) for item in staged]
+        backups = [_backup(item.target) for item in files]
         done = 0
         try:
-            for item in staged:
+            for item in files:
                 os.replace(item.tmp, item.target)
                 done += 1
         except BaseException as exc:
-            _roll_back(staged[:done], backups[:done])
-            discard(staged[done:])
+            _roll_back(files[:done], backups[:done])
+            discard(files[done:])
             _discard_backups(backups)
             if isinstance(exc, OSError):
-                raise output_error(exc, staged[done].target) from None
+                raise output_error(exc, files[done].target) from None
+            raise
+        if not direct:
+            _discard_backups(backups)
+    if direct:
+        # outside the held signals: opening a FIFO waits for its reader, and Ctrl-C must work
+        written = 0
+        try:
+            for item in direct:
+                _write_into(item.target, item.data or b"")
+                written += 1
+        except BaseException as exc:
+            with _signals_held():
+                _roll_back(files, backups)
+            _discard_backups(backups)
+            if isinstance(exc, OSError):
+                raise output_error(exc, direct[written].target) from None
             raise
         _discard_backups(backups)
-    for directory in {os.path.dirname(os.path.abspath(item.target)) for item in staged}:
+    for directory in {os.path.dirname(os.path.abspath(item.target)) for item in files}:
         _fsync_directory(directory)
 
 
 def discard(staged: Iterable[Staged]) -> None:
     """Remove the temporary files of ``staged`` (targets untouched)."""
     for item in staged:
-        _unlink(item.tmp)
+        if item.tmp is not None:
+            _unlink(item.tmp)
 
 
 def cleanup(targets: Iterable[str | os.PathLike], token: str) -> None:
@@ -192,6 +251,44 @@ def _unlink(path: str) -> None:
         os.unlink(path)
     except OSError:
         pass
+
+
+# a directory of open file descriptors: /proc/<pid>/fd (Linux; /dev/fd links there), /dev/fd
+_DESCRIPTOR_DIRECTORY = re.compile(r"/proc/[^/]+(/task/[^/]+)?/fd|/dev/fd")
+
+
+def _names_descriptor(path: str | os.PathLike) -> bool:
+    """Whether ``path`` (or a symbolic link on its way) is an entry of a directory of open file
+    descriptors: /dev/stdout, /dev/fd/1 or /proc/self/fd/1 name whatever that descriptor is open
+    on (writing through them reaches it); such an entry is never renamed onto."""
+    current = os.path.abspath(path)
+    for _ in range(40):  # the kernel's limit on links followed
+        directory = os.path.realpath(os.path.dirname(current))
+        if _DESCRIPTOR_DIRECTORY.fullmatch(directory):
+            return True
+        try:
+            link = os.readlink(current)
+        except OSError:
+            return False  # not a link: the end of the chain
+        current = os.path.normpath(os.path.join(directory, link))
+    return False
+
+
+def _write_into(target: str, data: bytes) -> None:
+    """``data`` written into the existing FIFO or device ``target`` (never created or replaced;
+    appended, so a file reached through /dev/stdout keeps what is already there)."""
+    for stream in (sys.stdout, sys.stderr):  # text already printed comes first on a shared file
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    fd = os.open(target, os.O_WRONLY | os.O_APPEND | getattr(os, "O_NOCTTY", 0))
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view) :]
+    finally:
+        os.close(fd)
 
 
 def _backup(target: str) -> str | None:

@@ -15,12 +15,25 @@ profile_option = click.option(
     help="Profile (TOML) mapping log channels to a model and detectors. Default: the profile embedded in the log.",
 )
 
+
+def _output_target(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """Refuse, before any work, an output that is a socket or a block device (exit 2); a FIFO or
+    a character device such as /dev/null is written into (`logscan.artifacts.check_target`)."""
+    if value is not None and value != "-":
+        from logscan.artifacts import check_target
+
+        check_target(value)
+    return value
+
+
 json_option = click.option(
     "--json",
     "json_path",
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
-    help="Write a machine-readable JSON summary to this file ('-' for stdout).",
+    callback=_output_target,
+    help="Write a machine-readable JSON summary to this file ('-' for stdout; a FIFO or a device "
+    "such as /dev/null is written into, never replaced).",
 )
 
 output_option = click.option(
