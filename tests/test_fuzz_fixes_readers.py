@@ -7,10 +7,13 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from logscan.errors import CorruptLogError
 from logscan.readers import read_log
 from logscan.readers.flatten import flatten_messages
 from logscan.readers.json_decoder import json_columns
+from logscan.readers.mcap import iter_raw_messages
 
 REGRESSIONS = Path(__file__).resolve().parent / "fuzz_regressions"
 HUGE = "1" + "0" * 400  # beyond float range (~1.8e308)
@@ -132,3 +135,114 @@ def test_a_ulog_missing_the_profiles_topic_for_lack_of_timestamp_is_never_no_ala
         assert result.exit_code == 2, result.stderr
         assert "no alarms" not in result.stdout
         assert f"'/{topic}/" in result.stderr  # the profile's channel that the log lacks
+
+
+# -- mcap-chunk-skipped ------------------------------------------------------------------------------
+
+
+def _records(data: bytes) -> list[tuple[int, int, int]]:
+    """(opcode, record start, record end) of the top-level records, up to the footer."""
+    import struct
+
+    out, pos = [], 8
+    while pos + 9 <= len(data):
+        op, length = struct.unpack_from("<BQ", data, pos)
+        out.append((op, pos, pos + 9 + length))
+        pos += 9 + length
+        if op == 0x02:
+            break
+    return out
+
+
+def _imu_mcap() -> bytes:
+    """2 s of one 200 Hz topic in 4 KiB chunks, without metadata: data-section CRC and Statistics."""
+    from logscan.readers.mcap.writer import TopicData, mcap_bytes
+
+    t = np.arange(400, dtype=np.int64) * 5_000_000
+    topic = TopicData("Imu", t, {"accel.x": np.sin(t / 1e9), "accel.y": np.cos(t / 1e9)})
+    return mcap_bytes({"/imu": topic}, chunk_size=4 * 1024)
+
+
+def _set_data_crc(data: bytearray, crc: int | None = None) -> None:
+    """Set the DataEnd record's CRC to ``crc``, or to the CRC of the (edited) data section."""
+    import struct
+    import zlib
+
+    (data_end,) = [start for op, start, _end in _records(bytes(data)) if op == 0x0F]
+    struct.pack_into("<I", data, data_end + 9, zlib.crc32(bytes(data[:data_end])) if crc is None else crc)
+
+
+def test_mcap_chunk_opcode_reproducer_is_partial_never_no_alarms(cli):
+    """`mcap-chunk-skipped`: a chunk's opcode 0x06 -> 0x86 was skipped with a warning: exit 0, "no alarms"."""
+    path = REGRESSIONS / "mcap_chunk_opcode.mcap"
+    profile = REGRESSIONS / "mcap_chunk_opcode.toml"
+    result = cli("analyze", path, "--profile", profile, "--no-report", "--json", "-")
+    assert result.exit_code == 2, result.stderr
+    entry = json.loads(result.stdout)["logs"][0]
+    assert entry["log"]["partial"] and "not fully checked" in entry["verdict"]
+    reason = entry["log"]["partial_reason"]
+    assert reason.startswith("data section CRC mismatch (DataEnd record at byte 197596)")
+    assert "counts 1920 messages in 19 chunks, the data section holds 1816 in 18" in reason
+    assert "the record at byte 94042 has the private-use opcode 0x86" in reason
+    assert "recovered 1816 messages" in reason
+    assert not any("CRC" in warning for warning in entry["log"]["warnings"])
+
+
+def test_a_chunk_skipped_for_its_opcode_makes_the_mcap_read_partial(tmp_path):
+    data = _imu_mcap()
+    chunks = [start for op, start, _end in _records(data) if op == 0x06]
+    assert len(chunks) >= 3
+    intact = tmp_path / "intact.mcap"
+    intact.write_bytes(data)
+    whole = read_log(intact)
+    assert not whole.source.partial and len(whole.channels["/imu/accel.x"]) == 400
+    damaged = bytearray(data)
+    damaged[chunks[1]] = 0x86  # the middle chunk now reads as a private record
+    path = tmp_path / "opcode.mcap"
+    path.write_bytes(bytes(damaged))
+    log = read_log(path)
+    kept = len(log.channels["/imu/accel.x"])
+    assert log.source.partial and kept < 400
+    assert "data section CRC mismatch" in log.source.partial_reason
+    assert f"counts 400 messages in {len(chunks)} chunks, the data section holds {kept}" in log.source.partial_reason
+    assert f"the record at byte {chunks[1]} has the private-use opcode 0x86" in log.source.partial_reason
+    # without a data-section CRC the Statistics record still shows it
+    _set_data_crc(damaged, 0)
+    path.write_bytes(bytes(damaged))
+    log = read_log(path)
+    assert log.source.partial and "data section CRC" not in log.source.partial_reason
+    assert f"counts 400 messages in {len(chunks)} chunks" in log.source.partial_reason
+    with pytest.raises(CorruptLogError, match="counts 400 messages"):
+        list(iter_raw_messages(path))  # the strict view refuses it too
+
+
+def test_a_private_record_with_matching_crc_and_statistics_is_skipped_and_the_read_whole(tmp_path):
+    """Opcodes 0x80-0xff are the spec's private records: skipped, not damage, when nothing says otherwise."""
+    import struct
+    import zlib
+
+    data = _imu_mcap()
+    (data_end,) = [start for op, start, _end in _records(data) if op == 0x0F]
+    private = bytes([0x86]) + struct.pack("<Q", 5) + b"hello"  # before DataEnd: no chunk moves
+    edited = bytearray(data[:data_end] + private + data[data_end:])
+    _set_data_crc(edited)
+    shift = len(private)  # the summary moved: its offsets, in the SummaryOffset records and the footer
+    for op, start, _end in _records(bytes(edited)):
+        if op == 0x0E:
+            (group_start,) = struct.unpack_from("<Q", edited, start + 10)
+            struct.pack_into("<Q", edited, start + 10, group_start + shift)
+    footer = len(edited) - 8 - 29  # summary_start, summary_offset_start, summary_crc
+    summary_start, offsets_start, _crc = struct.unpack_from("<QQI", edited, footer + 9)
+    struct.pack_into("<QQ", edited, footer + 9, summary_start + shift, offsets_start + shift)
+    struct.pack_into("<I", edited, footer + 25, zlib.crc32(bytes(edited[summary_start + shift : footer + 25])))
+    path = tmp_path / "private.mcap"
+    path.write_bytes(bytes(edited))
+    log = read_log(path)
+    assert not log.source.partial and log.source.warnings == []
+    assert len(log.channels["/imu/accel.x"]) == 400
+    assert len(list(iter_raw_messages(path))) == 400
+    from mcap.reader import SeekingReader  # the file is valid for the mcap library too
+
+    with open(path, "rb") as fh:
+        reader = SeekingReader(fh, validate_crcs=True)
+        assert reader.get_summary().statistics.message_count == sum(1 for _ in reader.iter_messages()) == 400

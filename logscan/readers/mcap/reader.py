@@ -40,6 +40,8 @@ Corrupt files: the walk stops at the first record that is truncated, fails its C
 decompress or does not parse. If messages were read before that point the Log is returned with
 ``source.partial = True`` and ``partial_reason`` saying where it stopped and how many messages
 (and what time span) were recovered; otherwise CorruptLogError names the file and the problem.
+Damage the walk finds without stopping (a data-section CRC mismatch, summary statistics that
+count other numbers of messages or chunks: ``scan.Scan.damage``) makes the Log partial the same way.
 """
 
 from __future__ import annotations
@@ -79,12 +81,13 @@ def _source_of(scan: Scan) -> SourceInfo:
     source = SourceInfo(path=scan.path, format="mcap")
     source.metadata = dict(scan.metadata)
     source.warnings.extend(scan.warnings)
-    if scan.problem is not None:
+    reasons = ([f"read stopped: {problem_text(scan)}"] if scan.problem is not None else []) + scan.damage
+    if reasons:  # damage found after a complete walk is partial too: messages may be missing
         firsts = [t for t in scan.first.values()]
         lasts = [t for t in scan.last.values()]
         source.partial = True
         source.partial_reason = (
-            f"read stopped: {problem_text(scan)}; recovered {scan.messages_read} messages "
+            f"{'; '.join(reasons)}; recovered {scan.messages_read} messages "
             f"({_span_text(min(firsts) if firsts else None, max(lasts) if lasts else None)})"
         )
     if scan.unknown_channel_messages:

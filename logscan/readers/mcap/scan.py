@@ -7,7 +7,11 @@ decompressed chunk or the file.
 
 Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
 decompress or does not parse; ``Scan.problem`` says where and why, and the messages read before
-it are kept.
+it are kept. Damage found once the walk is through (``Scan.damage``) makes the read partial too:
+a data-section CRC mismatch, or a summary Statistics record counting other numbers of messages
+or chunks than the data section holds. Records with an opcode the spec leaves to private use
+(0x80-0xff) are skipped, as the spec says; a chunk whose opcode byte is damaged looks exactly
+like one, so only that evidence can tell.
 
 Bounded decompression: a chunk's sizes are checked before anything is allocated for it. Its
 declared uncompressed size may be at most ``MAX_CHUNK_BYTES`` and at most ``MAX_RATIO`` times its
@@ -42,6 +46,7 @@ from logscan.readers.mcap.records import (
     OP_MESSAGE,
     OP_METADATA,
     OP_SCHEMA,
+    OP_STATISTICS,
     PARSE_ERRORS,
     WALK_END,
     WALK_FOOTER,
@@ -143,8 +148,10 @@ class Scan:
         self.raw: list[RawMessage] = []
         self.unknown_channel_messages = 0
         self.messages_read = 0
+        self.chunks_read = 0
         self.unchecked_records = 0  # schema/channel/message records outside CRC-checked chunks
         self.problem: _Corrupt | None = None
+        self.damage: list[str] = []  # damage that did not stop the walk: the read is partial all the same
         self.warnings: list[str] = []
         self._wanted_ids: dict[int, bool] = {}
         self._inflate_budget = MIN_FILE_BUDGET_BYTES  # bytes the file's chunks may still decompress to
@@ -200,11 +207,15 @@ class Scan:
                 self.unchecked_records += 1
             elif op == OP_DATA_END:
                 self._data_end(raw, start, length)
+                self._check_statistics(raw, top, i + 1)
+                if self.damage:
+                    self.damage.extend(_private_records(top))
                 return
             else:  # footer
                 return
 
     def _chunk(self, raw: bytes, start: int, length: int) -> None:
+        self.chunks_read += 1
         cur = Cursor(raw, start, start + length)
         try:
             _t0, _t1, uncompressed_size, uncompressed_crc = cur.take("<QQQI")
@@ -256,14 +267,36 @@ class Scan:
         if actual == expected:
             return
         if self.unchecked_records == 0:
-            # every schema, channel and message came from a chunk whose own CRC matched: the
-            # damage is in chunk headers or message indexes, which the messages do not depend on.
-            self.warnings.append(
-                "data section CRC mismatch outside the message chunks; every message comes from "
-                "a chunk whose own CRC matches"
+            # Every message read came from a chunk whose own CRC matched, but the damage may be a
+            # chunk's opcode byte, and such a chunk was skipped like a private record: messages may
+            # be missing, so the read is partial (a damaged message index alone costs nothing, but
+            # the CRC cannot tell the two apart).
+            self.damage.append(
+                f"data section CRC mismatch (DataEnd record at byte {start - 9}): bytes outside the "
+                "CRC-checked chunks are damaged, and a chunk whose opcode byte is damaged is skipped "
+                "like an unknown record, so messages may be missing"
             )
             return
         raise _Corrupt("data section CRC mismatch (the data section is corrupt)", start - 9, fatal=True)
+
+    def _check_statistics(self, raw: bytes, top: Records, first: int) -> None:
+        """Damage when the summary's Statistics record counts other numbers of messages or chunks
+        than the walk read: a chunk was skipped (the data section may have no CRC to show it)."""
+        for k in np.flatnonzero(top.ops[first:] == OP_STATISTICS).tolist():
+            start = int(top.offsets[first + k])
+            try:
+                messages, _schemas, _channels, _attachments, _metadata, chunks = Cursor(
+                    raw, start, start + int(top.lengths[first + k])
+                ).take("<QHIIII")
+            except PARSE_ERRORS:
+                continue  # a statistics record that does not parse is no evidence either way
+            if (messages, chunks) != (self.messages_read, self.chunks_read):
+                self.damage.append(
+                    f"the summary's Statistics record (byte {start - 9}) counts {messages} messages in "
+                    f"{chunks} chunks, the data section holds {self.messages_read} in {self.chunks_read} "
+                    "(a chunk was skipped, or the summary is damaged)"
+                )
+            return
 
     def _container(self, data, u8, ops, offsets, lengths, *, checked: bool) -> None:
         """Schema, channel and message records of one chunk (or one run of top-level records)."""
@@ -343,6 +376,20 @@ def raise_corrupt(reason: str, offset: int) -> None:
     raise _Corrupt(reason, offset)
 
 
+def _private_records(top: Records) -> list[str]:
+    """Where the first top-level record with a private-use opcode (0x80-0xff) lies, once damage is
+    found: the likely skipped chunk."""
+    private = np.flatnonzero(top.ops >= 0x80)
+    if not private.size:
+        return []
+    first = int(private[0])
+    more = f" ({private.size - 1} more such records)" if private.size > 1 else ""
+    return [
+        f"the record at byte {int(top.offsets[first]) - 9} has the private-use opcode 0x{int(top.ops[first]):02x}"
+        f"{more}: a chunk whose opcode byte is damaged looks like that"
+    ]
+
+
 def _decompress(compression: str, payload: bytes, size: int, offset: int) -> bytes:
     """The chunk's records, never more than ``size`` (+1) bytes: more or fewer is a size mismatch."""
     if compression == "lz4":
@@ -397,17 +444,24 @@ def iter_raw_messages(path: str | os.PathLike) -> Iterator[RawMessage]:
     files; ``read_mcap`` instead keeps what precedes the damage).
     """
     scan = scan_file(str(path), None, keep_raw=True)
-    if scan.problem is not None:
-        raise CorruptLogError(problem_text(scan), path=str(path))
+    if scan.problem is not None or scan.damage:
+        raise CorruptLogError(problem_text(scan) if scan.problem else "; ".join(scan.damage), path=str(path))
     yield from scan.raw
 
 
 def raise_if_unrecoverable(scan: Scan) -> None:
-    """CorruptLogError when the walk stopped before any message, or nothing it read can be trusted."""
+    """CorruptLogError when the walk stopped before any message, or nothing it read can be trusted,
+    or it found damage (``Scan.damage``) and no message."""
     if scan.problem is not None and (scan.messages_read == 0 or scan.problem.fatal):
         lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
         raise CorruptLogError(
             f"corrupt MCAP: {problem_text(scan)}; {lost}",
+            path=scan.path,
+            hint="the file is damaged; re-export or re-record it",
+        )
+    if scan.damage and scan.messages_read == 0:
+        raise CorruptLogError(
+            f"corrupt MCAP: {'; '.join(scan.damage)}; no messages could be recovered",
             path=scan.path,
             hint="the file is damaged; re-export or re-record it",
         )
