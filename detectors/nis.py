@@ -19,21 +19,50 @@ from scipy.special import chdtri  # inverse chi-square survival; lighter than sc
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Boolean, Interval
 
+# A NIS beyond this (far beyond any chi-square threshold: a bit flip, a diverging filter) is summed
+# apart: in the running sum it would cost every later window its precision (1e20 leaves no digit of
+# the small NIS after it) or overflow the sum (1e308), making later windows NaN, false alarms.
+HUGE_NIS = 1e8
+_F4_MAX = float(np.finfo(np.float32).max)
+
 
 def window_sums(values: np.ndarray, counts: np.ndarray, window: int):
     """Trailing sums over the last ``window`` entries of ``values`` and ``counts`` (1-D, aligned).
 
     Returns (sum_values, sum_counts, full) where full marks entries with a complete window.
-    Non-finite values propagate into every window that contains them (they are exceedances).
+    Non-finite values propagate into every window that contains them (they are exceedances); a
+    window whose huge values add up beyond float range sums to inf.
     """
-    cv = np.concatenate(([0.0], np.cumsum(np.where(np.isfinite(values), values, 0.0))))
-    bad = np.concatenate(([0], np.cumsum(~np.isfinite(values))))
+    finite = np.isfinite(values)
+    huge = finite & (np.abs(values) > HUGE_NIS)
+    cv = np.concatenate(([0.0], np.cumsum(np.where(finite & ~huge, values, 0.0))))
+    bad = np.concatenate(([0], np.cumsum(~finite)))
     cc = np.concatenate(([0], np.cumsum(counts)))
     idx = np.arange(values.size)
     lo = np.maximum(idx + 1 - window, 0)
     sums = cv[idx + 1] - cv[lo]
+    at = np.flatnonzero(huge)
+    if at.size:
+        # each huge value is added to the windows that hold it, those ending at its index up to
+        # window - 1 later (a window's indices are distinct: plain fancy indexing adds once each)
+        big = values[at]
+        with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: inf, an exceedance
+            for offset in range(min(window, values.size)):
+                ends = at + offset
+                keep = ends < values.size
+                sums[ends[keep]] += big[keep]
     sums[(bad[idx + 1] - bad[lo]) > 0] = np.inf
     return sums, cc[idx + 1] - cc[lo], idx + 1 >= window
+
+
+def as_float32(values: np.ndarray) -> np.ndarray:
+    """``values`` as float32 for the figures; values beyond float32's range become +-inf, as a
+    cast would, deliberately (without numpy's overflow warning: such a NIS is off every scale)."""
+    values = np.asarray(values, dtype=np.float64)
+    beyond = np.abs(values) > _F4_MAX
+    if beyond.any():
+        values = np.where(beyond, np.copysign(np.inf, values), values)
+    return values.astype(np.float32)
 
 
 def chi2_threshold(dof: np.ndarray, alpha: float) -> np.ndarray:
@@ -101,7 +130,7 @@ class NisDetector(Detector):
                 sums, dof, full = window_sums(nis[steps], m_steps, self.window)
                 statistic[steps] = sums
                 threshold[steps] = chi2_threshold(dof, alpha)
-                per_dof[steps] = sums / np.maximum(dof, 1)
+                per_dof[steps] = as_float32(sums / np.maximum(dof, 1))
                 warm[steps[full]] = True
             result.add_statistic(
                 t, signal, statistic, upper=threshold, valid=updated, warmup=updated & ~warm, n_persist=self.n_persist

@@ -161,7 +161,8 @@ def alarm_intervals(
     crossed_upper = over[peak] | (is_nonfinite & (hi is not None))
     threshold = np.where(crossed_upper, _at(hi, keep[peak]), _at(lo, keep[peak]))
     bound = np.where(is_nonfinite, "nonfinite", np.where(over[peak], "upper", "lower"))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # a finite value far beyond a small threshold: the ratio overflows to inf (the JSON's null)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio = value / threshold
     ratio_ok = np.isfinite(value) & np.isfinite(threshold) & (threshold != 0.0)
     n_exceed = exceed_count[i1 + 1] - exceed_count[f0]

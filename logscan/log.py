@@ -19,7 +19,10 @@ class Channel:
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, dtype=np.int64)
-        self.values = np.asarray(self.values, dtype=np.float64)
+        # a float32 signalling NaN (a flipped bit) becomes a quiet NaN, an invalid sample like any
+        # other NaN: numpy's "invalid value encountered in cast" would say nothing more
+        with np.errstate(invalid="ignore"):
+            self.values = np.asarray(self.values, dtype=np.float64)
         if self.t.shape != self.values.shape or self.t.ndim != 1:
             raise ValueError(
                 f"channel {self.name!r}: t and values must be 1-D of equal length, "

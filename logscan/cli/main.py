@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import signal
 import sys
 import threading
 import traceback
+import warnings
+from contextlib import contextmanager
 
 import click
 
@@ -100,7 +103,8 @@ def main(argv: list[str] | None = None) -> None:
     debug = "--debug" in args
     previous = _install_signal_handlers()
     try:
-        code = _run(args, debug)
+        with _warnings_as_lines(debug):
+            code = _run(args, debug)
     finally:
         _restore_signal_handlers(previous)
     sys.exit(code)
@@ -141,6 +145,58 @@ def _run(args: list[str], debug: bool) -> int:
             traceback.print_exc()
         return _internal_error(exc)
     return int(code) if isinstance(code, int) else ExitCode.OK
+
+
+@contextmanager
+def _warnings_as_lines(debug: bool):
+    """Python warnings printed as one line of logscan's own, instead of Python's file:line and
+    source line (with --debug: as Python prints them). Worker processes (--jobs, forked) inherit
+    it. Not a filter: every warning still shows, once per place as Python's default filter has it.
+    logscan handles the numeric edge cases it knows where they arise (numpy's and scipy's
+    "overflow encountered in ..."); one that still shows here means a result there may be inf or
+    NaN, and is worth reporting."""
+    if debug:
+        yield
+        return
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        yield
+
+
+_NUMERIC = re.compile(r"(overflow|underflow|invalid value|divide by zero) encountered")
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` as one line: "logscan: warning: numeric problem in
+    detectors/nis.py line 104: overflow encountered in cast (a result there may be inf or NaN)"."""
+    text = printable(str(message))
+    where = f"{_source_name(filename)} line {lineno}"
+    if issubclass(category, RuntimeWarning) and _NUMERIC.match(text):
+        out = f"logscan: warning: numeric problem in {where}: {text} (a result there may be inf or NaN)"
+    else:
+        out = f"logscan: warning: {category.__name__} in {where}: {text}"
+    stream = file if file is not None else sys.stderr
+    try:
+        stream.write(out + "\n")
+        stream.flush()
+    except (OSError, ValueError, AttributeError):
+        pass  # stderr closed or gone: a warning is not worth an error
+
+
+def _source_name(filename: str) -> str:
+    """A warning's file, short: from the package directory on for a library
+    (scipy/linalg/_matfuncs.py), from logscan's source tree for its own modules (detectors/nis.py)."""
+    path = os.path.abspath(filename or "?")
+    marker = f"{os.sep}site-packages{os.sep}"
+    if marker in path:
+        return path.rsplit(marker, 1)[1]
+    tree = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    try:
+        if os.path.commonpath([tree, path]) == tree:
+            return os.path.relpath(path, tree)
+    except ValueError:
+        pass
+    return os.path.basename(path)
 
 
 def _interrupted() -> int:

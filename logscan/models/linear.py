@@ -40,21 +40,24 @@ def discretise(A: np.ndarray, B: np.ndarray, Qc: np.ndarray, dt: float):
     M = np.zeros((n + nu, n + nu))
     M[:n, :n] = A
     M[:n, n:] = B
-    E = expm(M * dt)
-    Ad, Bd = E[:n, :n], E[:n, n:]
-    k = max(0, int(np.ceil(np.log2(max(np.abs(A).sum(axis=0).max() * dt, 1e-300) / 0.5))))
-    h = dt / 2**k
-    V = np.zeros((2 * n, 2 * n))
-    V[:n, :n] = -A
-    V[:n, n:] = Qc
-    V[n:, n:] = A.T
-    G = expm(V * h)
-    Phi = G[n:, n:].T
-    Qd = Phi @ G[:n, n:]
-    for _ in range(k):
-        Qd = Qd + Phi @ Qd @ Phi.T
-        Phi = Phi @ Phi
-    return Ad, Bd, 0.5 * (Qd + Qd.T)
+    # A whose exp(A dt) is beyond float range (A = 1e308) gives inf or NaN matrices, quietly:
+    # `LinearBase.covariance_problems` turns them into a profile error
+    with np.errstate(over="ignore", invalid="ignore"):
+        E = expm(M * dt)
+        Ad, Bd = E[:n, :n], E[:n, n:]
+        k = max(0, int(np.ceil(np.log2(max(np.abs(A).sum(axis=0).max() * dt, 1e-300) / 0.5))))
+        h = dt / 2**k
+        V = np.zeros((2 * n, 2 * n))
+        V[:n, :n] = -A
+        V[:n, n:] = Qc
+        V[n:, n:] = A.T
+        G = expm(V * h)
+        Phi = G[n:, n:].T
+        Qd = Phi @ G[:n, n:]
+        for _ in range(k):
+            Qd = Qd + Phi @ Qd @ Phi.T
+            Phi = Phi @ Phi
+        return Ad, Bd, 0.5 * (Qd + Qd.T)
 
 
 class LinearBase(Model):
@@ -108,6 +111,18 @@ class LinearBase(Model):
 
     def default_Q(self, dt: float) -> np.ndarray:
         return self._discrete(dt)[2].copy()
+
+    def covariance_problems(self, dt: float) -> list[str]:
+        """A continuous model whose discretisation at ``dt`` is not finite (exp(A dt) beyond float
+        range) is one problem, named as such, before its process noise Q (non-finite with it)."""
+        if self._continuous:
+            Ad, Bd, _ = self._discrete(dt)
+            if not (np.all(np.isfinite(Ad)) and np.all(np.isfinite(Bd))):
+                return [
+                    f"model {self.name!r}: the dynamics (A, B) discretised at dt = {dt:g} s are not finite: "
+                    "exp(A dt) overflows, A's rates are far too large for the profile's rate_hz"
+                ]
+        return super().covariance_problems(dt)
 
 
 _KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs")
