@@ -1,6 +1,6 @@
-"""Profile bugs the fuzzing campaign found (tests/fuzz_regressions/README.md), fixed: rates,
-staleness limits and integers beyond float range that overflowed once past the profile checks are
-refused when the profile is parsed, naming the file, the key and the allowed range (exit 2, never 3);
+"""Profile bugs the fuzzing campaign found (tests/fuzz_regressions/README.md), fixed: tiny rates,
+huge staleness limits and integers beyond float range that overflowed once past the profile checks
+are refused when the profile is parsed, naming the file, the key and the allowed range (exit 2, never 3);
 with several logs, each log's error names it by its path (not a Python tuple)."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 from logscan.errors import InputError, ProfileError
 from logscan.fleet import LogFailure, run_many
 from logscan.profiles import parse_profile
-from logscan.profiles.schema import MAX_RATE_HZ, MAX_STALE_S, MIN_RATE_HZ
+from logscan.profiles.schema import MAX_STALE_S, MIN_RATE_HZ
 
 REGRESSIONS = Path(__file__).resolve().parent / "fuzz_regressions"
 HEALTHY_PROFILE = (Path(__file__).resolve().parents[1] / "sample_logs" / "quad_healthy.profile.toml").read_text()
@@ -49,7 +49,7 @@ def test_a_tiny_vehicle_rate_is_refused_at_parse_time_naming_the_profile_key_and
     assert result.exit_code == 2, result.stderr
     assert result.stderr.strip() == (
         f"logscan: error: {log} (embedded profile): invalid profile: [vehicle] rate_hz: "
-        "must be between 0.01 and 100000 Hz, got 1e-300 (see docs/profiles.md)"
+        "must be >= 0.01 Hz (a 100 s period), got 1e-300 (see docs/profiles.md)"
     )
 
 
@@ -57,20 +57,21 @@ def test_a_tiny_vehicle_rate_is_refused_at_parse_time_naming_the_profile_key_and
     "old, new, where",
     [
         ("rate_hz = 100.0", "rate_hz = 5e-324", "[vehicle] rate_hz"),  # NaN grid steps
-        ("rate_hz = 100.0", "rate_hz = 1e9", "[vehicle] rate_hz"),  # a grid step of 1 ns
         ("rate_hz = 100.0", "rate_hz = 0.001", "[vehicle] rate_hz"),
         ("rate_hz = 10.0", "rate_hz = 1e-300", "[measurements.position] rate_hz"),
-        ("[mode]", '[redundant.x]\nsensors = { a = "/imu/accel.x", b = "/imu/accel.y" }\nrate_hz = 1e6\n\n[mode]', ""),
+        ("[mode]", '[redundant.x]\nsensors = { a = "/imu/accel.x", b = "/imu/accel.y" }\nrate_hz = 1e-9\n\n[mode]', ""),
     ],
 )
-def test_every_rate_out_of_range_is_refused(old, new, where):
+def test_every_rate_below_the_minimum_is_refused(old, new, where):
     line = _refused(_edited(old, new))
     where = where or "[redundant.x] rate_hz"
-    assert line.startswith(f"p.toml: invalid profile: {where}: must be between 0.01 and 100000 Hz, got "), line
+    assert line.startswith(f"p.toml: invalid profile: {where}: must be >= 0.01 Hz (a 100 s period), got "), line
 
 
-@pytest.mark.parametrize("rate", [MIN_RATE_HZ, MAX_RATE_HZ])
-def test_the_rate_bounds_themselves_are_accepted(rate):
+@pytest.mark.parametrize("rate", [MIN_RATE_HZ, 1e9, 1e300])
+def test_the_minimum_rate_and_high_rates_are_accepted(rate):
+    """A rate too high for the log is refused by alignment, with the span and the grid's steps
+    (tests/test_time_sanity.py)."""
     profile = parse_profile(_edited("rate_hz = 100.0", f"rate_hz = {rate!r}"))
     assert profile.vehicle.rate_hz == rate
 

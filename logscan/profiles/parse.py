@@ -20,7 +20,6 @@ from logscan.profiles.schema import (
     MAX_ALARM_DURATION_S,
     MAX_ALARM_PERSIST,
     MAX_MERGE_GAP_S,
-    MAX_RATE_HZ,
     MAX_STALE_S,
     MIN_RATE_HZ,
     MODE_KEYS,
@@ -198,11 +197,12 @@ class _Checker:
         return value
 
     def rate(self, data: dict, key: str, where: str) -> float | None:
-        """A rate in Hz within [MIN_RATE_HZ, MAX_RATE_HZ]: a tiny one overflows the model's process
-        noise (dt**4) or the grid step in ns, a huge one is a grid step under a nanosecond."""
+        """A finite rate in Hz of at least MIN_RATE_HZ: a tiny one overflows the model's process noise
+        (dt**4) or gives NaN grid steps. Too high a rate for the log's span is alignment's to refuse
+        (its grid limit), naming the span and the steps."""
         value = self.number(data, key, where, minimum=0, strict=True)
-        if value is not None and not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
-            self.add(f"{where} {key}", f"must be between {MIN_RATE_HZ:g} and {MAX_RATE_HZ:g} Hz, got {value:g}")
+        if value is not None and value < MIN_RATE_HZ:
+            self.add(f"{where} {key}", f"must be >= {MIN_RATE_HZ:g} Hz (a {1 / MIN_RATE_HZ:g} s period), got {value:g}")
             return None
         return value
 

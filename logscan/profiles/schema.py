@@ -38,10 +38,10 @@ MAX_ALARM_PERSIST = 1000
 MAX_ALARM_DURATION_S = 10.0
 MAX_MERGE_GAP_S = 60.0  # alarms of one check this close are one alarm (logscan.incidents)
 #: Bounds of every rate and finite staleness limit (documented in docs/profiles.md). Beyond them a
-#: value is a slip, and it would overflow downstream: the grid step in integer nanoseconds and dt**4
-#: in a model's process noise (rates), a limit in int64 nanoseconds (logscan.align.stale_ns).
+#: value is a slip, and it would overflow downstream: dt**4 in a model's process noise and NaN grid
+#: steps (a tiny rate), a limit in int64 nanoseconds (logscan.align.stale_ns). A rate too high for
+#: the log is refused by alignment's grid limit (`align.MAX_GRID_STEPS`), with the span and steps.
 MIN_RATE_HZ = 0.01  # a 100 s period: slower than any vehicle sensor or filter step
-MAX_RATE_HZ = 100_000.0  # a 10 us grid step (10,000 ns); the fastest IMUs log at a few kHz
 MAX_STALE_S = 1_000_000.0  # 11.6 days, longer than any log (logscan.log.MAX_SPAN_S); inf: never stale
 
 #: Staleness defaults (seconds unless said otherwise), documented in docs/profiles.md.
