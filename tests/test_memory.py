@@ -108,3 +108,47 @@ def test_the_report_needs_only_the_grid_and_the_results(sample, tmp_path):
     assert analysis.prepared.traces == {} and analysis.run.t.size == 6001
     report = analysis.report_input()
     assert report.t is analysis.run.t and report.results == analysis.results
+
+
+@pytest.mark.parametrize("name", ["quad_imu_bias.mcap", "sbw_yaw_rate_bitflip.mcap", "jackal_healthy.mcap"])
+def test_decoding_chunk_by_chunk_gives_the_same_log(sample, monkeypatch, name):
+    """The reader decodes the scan's batches whenever FLUSH_BYTES are held: flushing after every
+    chunk (and every 7 top-level records) reads the same channels as one flush at the end."""
+    from logscan.readers.mcap import scan
+
+    path = sample(name)
+    whole = read_log(path)
+    monkeypatch.setattr(scan, "FLUSH_BYTES", 1)
+    monkeypatch.setattr(scan, "TOP_LEVEL_SLICE", 7)
+    pieces = read_log(path)
+    assert list(pieces.channels) == list(whole.channels) and whole.channels
+    for channel, again in zip(whole.channels.values(), pieces.channels.values()):
+        np.testing.assert_array_equal(channel.t, again.t)
+        np.testing.assert_array_equal(channel.values, again.values)
+    assert pieces.summary() == whole.summary()
+
+
+def test_unchunked_mcap_decoded_in_slices_of_top_level_records(tmp_path, monkeypatch):
+    import json
+
+    from mcap.writer import Writer
+
+    from logscan.readers.mcap import scan
+
+    path = tmp_path / "flat.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh, use_chunking=False)
+        writer.start()
+        schema = writer.register_schema("S", "jsonschema", b"{}")
+        channel = writer.register_channel("/v", "json", schema)
+        for k in range(1000):
+            writer.add_message(channel, 1000 + k, json.dumps({"k": k, "half": k / 2}).encode(), 1000 + k)
+        writer.finish()
+    whole = read_log(path)
+    monkeypatch.setattr(scan, "FLUSH_BYTES", 1)
+    monkeypatch.setattr(scan, "TOP_LEVEL_SLICE", 64)
+    sliced = read_log(path)
+    np.testing.assert_array_equal(sliced.channels["/v/k"].values, np.arange(1000))
+    for name, channel in whole.channels.items():
+        np.testing.assert_array_equal(channel.values, sliced.channels[name].values)
+        np.testing.assert_array_equal(channel.t, sliced.channels[name].t)

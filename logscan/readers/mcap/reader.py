@@ -62,15 +62,19 @@ from logscan.readers.mcap.scan import ChannelRec, Scan, SchemaRec, problem_text,
 def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
     """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps."""
     path = str(path)
-    scan = scan_file(path, wanted, keep_raw=False)
+    decoding = _Decoding(path, use_header_stamp)
+    scan = Scan(path, wanted)
+    scan.on_flush = decoding  # batches decoded as the scan goes: memory follows the columns
+    scan_file(scan)
     raise_if_unrecoverable(scan)
+    scan.flush()
     source = _source_of(scan)
-    pieces, undecodable, decoded_topics, stamp_topics = _decode_batches(scan, source, use_header_stamp)
-    channels = _channels_in_time_order(pieces, source)
-    if undecodable:
-        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(set(undecodable))))
+    decoding.report_to(source)
+    channels = _channels_in_time_order(decoding.pieces, source)
+    if decoding.undecodable:
+        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(decoding.undecodable)))
     if use_header_stamp:
-        source.time_source = _time_source(decoded_topics, stamp_topics)
+        source.time_source = _time_source(decoding.decoded_topics, decoding.stamp_topics)
     log = Log(channels=channels, source=source)
     attach_logscan_records(log)
     return log
@@ -115,49 +119,64 @@ def _source_of(scan: Scan) -> SourceInfo:
     return source
 
 
-def _decode_batches(
-    scan: Scan, source: SourceInfo, use_header_stamp: bool
-) -> tuple[dict[str, list[tuple[np.ndarray, np.ndarray]]], list[str], set[str], set[str]]:
-    """Decode each wanted channel's batch into channel pieces (name -> [(t, values)]).
+class _Decoding:
+    """Decodes the scan's batches each time it is called (`Scan.on_flush`) into channel pieces
+    (name -> [(t, values)]); what it skips and the fields it finds go to the log's source at the end
+    (`report_to`), since the source is made once the scan is through."""
 
-    Also returns the topics no decoder takes, the topics decoded, and those timed by header.stamp.
-    """
-    factories = decoder_factories()
-    layouts: dict[int, CdrLayout | None] = {}
-    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    undecodable: list[str] = []
-    stamp_topics: set[str] = set()
-    decoded_topics: set[str] = set()
-    for cid, batch in scan.batches.items():
-        channel = scan.channels[cid]
-        topic = channel.topic
-        decoder, why = _choose_decoder(factories, channel, scan.schemas.get(channel.schema_id))
-        if decoder is None:
-            source.skip(topic, why, batch.count())
-            undecodable.append(topic)
-            continue
-        log_times = np.concatenate(batch.times)
-        datas = batch.messages()
-        batch.segments = []
-        schema = scan.schemas.get(channel.schema_id)
-        flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, layouts, source)
-        decoded_topics.add(topic)
-        for (field_path, why_skipped), count in flat.skipped.items():
-            source.skip(_channel_name(topic, field_path), why_skipped, count)
-        times = log_times
-        if use_header_stamp:
-            times, used = _header_stamps(flat.columns, log_times)
-            if used:
-                stamp_topics.add(topic)
-        info = source.topics[topic]
-        for field_path in flat.fields:
-            if field_path not in info.fields:
-                info.fields.append(field_path)
-            index, values = flat.columns[field_path]
-            # a field every message has shares the topic's times (one array, not one per field)
-            field_times = times if index.size == times.size else times[index]
-            pieces.setdefault(_channel_name(topic, field_path), []).append((field_times, values))
-    return pieces, undecodable, decoded_topics, stamp_topics
+    def __init__(self, path: str, use_header_stamp: bool):
+        self.use_header_stamp = use_header_stamp
+        self.factories = decoder_factories()
+        self.decoders: dict[int, tuple[Any, str | None]] = {}  # channel id -> (decoder, why none)
+        self.layouts: dict[int, CdrLayout | None] = {}
+        self.pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        self.undecodable: set[str] = set()  # topics no decoder takes
+        self.decoded_topics: set[str] = set()
+        self.stamp_topics: set[str] = set()  # topics timed by header.stamp
+        self.fields: dict[str, list[str]] = {}  # topic -> field paths in first-seen order
+        self.skips = SourceInfo(path=path, format="mcap")  # collects skip counts until report_to
+
+    def __call__(self, scan: Scan) -> None:
+        batches, scan.batches = scan.batches, {}
+        for cid, batch in batches.items():
+            channel = scan.channels[cid]
+            topic = channel.topic
+            schema = scan.schemas.get(channel.schema_id)
+            if cid not in self.decoders:
+                self.decoders[cid] = _choose_decoder(self.factories, channel, schema)
+            decoder, why = self.decoders[cid]
+            if decoder is None:
+                self.skips.skip(topic, why, batch.count())
+                self.undecodable.add(topic)
+                continue
+            log_times = np.concatenate(batch.times)
+            datas = batch.messages()
+            batch.segments = []
+            flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self.layouts, self.skips)
+            self.decoded_topics.add(topic)
+            for (field_path, why_skipped), count in flat.skipped.items():
+                self.skips.skip(_channel_name(topic, field_path), why_skipped, count)
+            times = log_times
+            if self.use_header_stamp:
+                times, used = _header_stamps(flat.columns, log_times)
+                if used:
+                    self.stamp_topics.add(topic)
+            fields = self.fields.setdefault(topic, [])
+            for field_path in flat.fields:
+                if field_path not in fields:
+                    fields.append(field_path)
+                index, values = flat.columns[field_path]
+                # a field every message has shares the topic's times (one array, not one per field)
+                field_times = times if index.size == times.size else times[index]
+                self.pieces.setdefault(_channel_name(topic, field_path), []).append((field_times, values))
+
+    def report_to(self, source: SourceInfo) -> None:
+        """The skips and fields found, into the log's source."""
+        for item in self.skips.skipped:
+            source.skip(item.what, item.why, item.count)
+        for topic, fields in self.fields.items():
+            info = source.topics[topic]
+            info.fields.extend(f for f in fields if f not in info.fields)
 
 
 def _columns_of(
@@ -200,9 +219,15 @@ def _channels_in_time_order(
     """One Channel per name, its pieces joined and sorted by time (stable); a warning names the unsorted."""
     channels: dict[str, Channel] = {}
     unsorted_topics: set[str] = set()
-    for name, parts in pieces.items():
-        t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+    joined: dict[tuple[int, ...], np.ndarray] = {}  # pieces' times shared by a topic's fields, joined once
+    for name in list(pieces):
+        parts = pieces.pop(name)  # each channel's pieces go as it is joined
+        key = tuple(id(p[0]) for p in parts)
+        if key not in joined:
+            joined[key] = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+        t = joined[key]
         v = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
+        del parts
         if t.size > 1 and (np.diff(t) < 0).any():
             order = np.argsort(t, kind="stable")
             t, v = t[order], v[order]

@@ -21,14 +21,20 @@ one file may decompress to at most ``MAX_RATIO`` times the file size in all (at 
 zstd frame whose own content size disagrees is refused before it is decompressed; lz4 output is
 cut at the declared size). A chunk over a limit is a corrupt chunk like any other: the scan stops
 there. Attachment records are never decompressed or copied (the walk steps over them).
+
+Bounded memory: the file is mapped, not read, and the pages already handed on are given back
+(``madvise``); with ``Scan.on_flush`` set, the batches are handed to it (the reader decodes them)
+whenever the chunks held for them pass ``FLUSH_BYTES``. Memory then follows the decoded columns
+and a few chunks, not the file (a 1-hour log's 146 MB file was held whole before).
 """
 
 from __future__ import annotations
 
+import mmap
 import os
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -65,6 +71,9 @@ MAX_CHUNK_BYTES = 1 << 30  # one chunk never decompresses to more than 1 GiB
 MAX_RATIO = 1000  # declared uncompressed size / compressed size, per chunk and per file
 SMALL_CHUNK_BYTES = 1 << 20  # a chunk declaring at most this is not held to MAX_RATIO
 MIN_FILE_BUDGET_BYTES = 64 << 20  # a file may decompress to max(this, MAX_RATIO x its size)
+FLUSH_BYTES = 32 << 20  # message bytes held in batches before they are handed to ``on_flush``
+TOP_LEVEL_SLICE = 1 << 16  # top-level records handled at a time (unchunked files)
+CRC_BLOCK = 16 << 20  # bytes of the data-section CRC computed before their pages are given back
 
 
 class _Corrupt(Exception):
@@ -155,6 +164,9 @@ class Scan:
         self.warnings: list[str] = []
         self._wanted_ids: dict[int, bool] = {}
         self._inflate_budget = MIN_FILE_BUDGET_BYTES  # bytes the file's chunks may still decompress to
+        self.on_flush: Callable[[Scan], None] | None = None  # takes (and empties) the batches
+        self._held = 0  # message bytes in the batches since the last flush
+        self._map: mmap.mmap | None = None
 
     # -- the pass -------------------------------------------------------------------------------
 
@@ -162,10 +174,11 @@ class Scan:
         stat_input(self.path)  # a FIFO or device is refused before it is opened
         try:
             with open(self.path, "rb") as fh:
-                raw = fh.read()
+                raw = _map_file(fh)
         except OSError as exc:
             raise input_error(exc, self.path) from None
-        if not raw.startswith(MCAP_MAGIC):
+        self._map = raw if isinstance(raw, mmap.mmap) else None
+        if raw[: len(MCAP_MAGIC)] != MCAP_MAGIC:
             raise CorruptLogError(
                 "not an MCAP file (bad magic bytes at offset 0)",
                 path=self.path,
@@ -174,6 +187,7 @@ class Scan:
         self._inflate_budget = max(MIN_FILE_BUDGET_BYTES, MAX_RATIO * len(raw))
         u8 = np.frombuffer(raw, dtype=np.uint8)
         top = walk_records(u8, len(MCAP_MAGIC), len(raw))
+        self._give_back(len(raw))  # the pages of record headers the walk touched
         try:
             self._top_level(raw, u8, top)
         except PARSE_ERRORS as exc:  # a field inside a record did not parse
@@ -183,6 +197,27 @@ class Scan:
         elif self.problem is None and raw[top.end : top.end + 8] != MCAP_MAGIC:
             self.problem = _Corrupt("no closing magic bytes after the footer (truncated?)", top.end)
 
+    def _give_back(self, stop: int) -> None:
+        """Drop the mapped file's pages before ``stop`` from this process (they are read again
+        from the page cache if touched): RSS follows what is in hand, not the file."""
+        if self._map is not None and hasattr(mmap, "MADV_DONTNEED"):
+            length = stop - stop % mmap.PAGESIZE
+            if length > 0:
+                self._map.madvise(mmap.MADV_DONTNEED, 0, length)
+
+    def _held_more(self, size: int, position: int) -> None:
+        """``size`` more message bytes in the batches; past FLUSH_BYTES they go to ``on_flush``."""
+        self._held += size
+        if self.on_flush is not None and self._held >= FLUSH_BYTES:
+            self.flush()
+            self._give_back(position)
+
+    def flush(self) -> None:
+        """Hand the batches to ``on_flush`` (which empties them)."""
+        if self.on_flush is not None and self.batches:
+            self.on_flush(self)
+        self._held = 0
+
     def _top_level(self, raw: bytes, u8: np.ndarray, top: Records) -> None:
         ops = top.ops
         special = np.flatnonzero(np.isin(ops, (OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_METADATA)))
@@ -191,15 +226,17 @@ class Scan:
         run_start = 0
         for i in special.tolist() + [ops.size]:
             if content[i] > content[run_start]:  # top-level schema / channel / message records
-                self._container(
-                    raw, u8, ops[run_start:i], top.offsets[run_start:i], top.lengths[run_start:i], checked=False
-                )
+                for lo in range(run_start, i, TOP_LEVEL_SLICE):
+                    hi = min(lo + TOP_LEVEL_SLICE, i)
+                    lengths = top.lengths[lo:hi]
+                    self._container(raw, u8, ops[lo:hi], top.offsets[lo:hi], lengths, checked=False)
+                    self._held_more(int(lengths.sum()), int(top.offsets[hi - 1] + lengths[-1]))
             run_start = i + 1
             if i == ops.size:
                 return
             op, start, length = int(ops[i]), int(top.offsets[i]), int(top.lengths[i])
             if op == OP_CHUNK:
-                self._chunk(raw, start, length)
+                self._held_more(self._chunk(raw, start, length), start + length)
             elif op == OP_METADATA:
                 cur = Cursor(raw, start, start + length)
                 name = cur.string()
@@ -214,7 +251,8 @@ class Scan:
             else:  # footer
                 return
 
-    def _chunk(self, raw: bytes, start: int, length: int) -> None:
+    def _chunk(self, raw: bytes, start: int, length: int) -> int:
+        """Read one chunk's records; returns its uncompressed size."""
         self.chunks_read += 1
         cur = Cursor(raw, start, start + length)
         try:
@@ -240,6 +278,7 @@ class Scan:
         if inner.status != WALK_END:
             raise_corrupt("records inside a chunk do not fill it (corrupt chunk)", start)
         self._container(data, u8, inner.ops, inner.offsets, inner.lengths, checked=uncompressed_crc != 0)
+        return len(data)
 
     def _check_inflation(self, declared: int, stored: int, offset: int) -> None:
         """Refuse a compressed chunk whose declared size is over the limits (see the module doc)."""
@@ -263,7 +302,12 @@ class Scan:
         (expected,) = Cursor(raw, start, start + length).take("<I")
         if expected == 0:
             return
-        actual = zlib.crc32(memoryview(raw)[: start - 9])
+        actual = 0
+        with memoryview(raw) as view:
+            for lo in range(0, start - 9, CRC_BLOCK):
+                hi = min(lo + CRC_BLOCK, start - 9)
+                actual = zlib.crc32(view[lo:hi], actual)
+                self._give_back(hi)
         if actual == expected:
             return
         if self.unchecked_records == 0:
@@ -372,6 +416,13 @@ class Scan:
         return known
 
 
+def _map_file(fh) -> mmap.mmap | bytes:
+    """The open file mapped read-only (b"" when empty: an empty file cannot be mapped)."""
+    if os.fstat(fh.fileno()).st_size == 0:
+        return b""
+    return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+
+
 def raise_corrupt(reason: str, offset: int) -> None:
     raise _Corrupt(reason, offset)
 
@@ -419,9 +470,11 @@ def _decompress(compression: str, payload: bytes, size: int, offset: int) -> byt
     raise AssertionError("unreachable")
 
 
-def scan_file(path: str, wanted: set[str] | None, keep_raw: bool) -> Scan:
-    """Scan ``path``, keeping the batches of ``wanted`` topics (and every raw message when ``keep_raw``)."""
-    scan = Scan(path, wanted, keep_raw)
+def scan_file(scan: Scan | str, wanted: set[str] | None = None, keep_raw: bool = False) -> Scan:
+    """Run ``scan`` (or a new Scan of the path ``scan``, keeping the batches of ``wanted`` topics and
+    every raw message when ``keep_raw``); damage is left in ``scan.problem``."""
+    if not isinstance(scan, Scan):
+        scan = Scan(scan, wanted, keep_raw)
     try:
         scan.run()
     except _Corrupt as exc:
