@@ -161,37 +161,39 @@ def commit(staged: Sequence[Staged]) -> None:
     the same way (what already went into a FIFO or device stays written)."""
     files = [item for item in staged if item.tmp is not None]
     direct = [item for item in staged if item.tmp is None]
-    with _signals_held():
-        backups = [_backup(item.target) for item in files]
-        done = 0
-        try:
-            for item in files:
-                os.replace(item.tmp, item.target)
-                done += 1
-        except BaseException as exc:
-            _roll_back(files[:done], backups[:done])
-            discard(files[done:])
-            _discard_backups(backups)
-            if isinstance(exc, OSError):
-                raise output_error(exc, files[done].target) from None
-            raise
-        if not direct:
-            _discard_backups(backups)
-    if direct:
+    kept: list[str | None] = []  # the backups of the renamed targets, while a direct write may fail
+    try:
+        with _signals_held():
+            backups = [_backup(item.target) for item in files]
+            done = 0
+            try:
+                for item in files:
+                    os.replace(item.tmp, item.target)
+                    done += 1
+            except BaseException as exc:
+                _roll_back(files[:done], backups[:done])
+                discard(files[done:])
+                _discard_backups(backups)
+                if isinstance(exc, OSError):
+                    raise output_error(exc, files[done].target) from None
+                raise
+            if direct:
+                kept = backups
+            else:
+                _discard_backups(backups)
         # outside the held signals: opening a FIFO waits for its reader, and Ctrl-C must work
-        written = 0
-        try:
-            for item in direct:
+        for item in direct:
+            try:
                 _write_into(item.target, item.data or b"")
-                written += 1
-        except BaseException as exc:
+            except OSError as exc:
+                raise output_error(exc, item.target) from None
+    except BaseException:
+        if kept:  # every file was renamed, then a direct write failed or was interrupted
             with _signals_held():
-                _roll_back(files, backups)
-            _discard_backups(backups)
-            if isinstance(exc, OSError):
-                raise output_error(exc, direct[written].target) from None
-            raise
-        _discard_backups(backups)
+                _roll_back(files, kept)
+            _discard_backups(kept)
+        raise
+    _discard_backups(kept)
     for directory in {os.path.dirname(os.path.abspath(item.target)) for item in files}:
         _fsync_directory(directory)
 

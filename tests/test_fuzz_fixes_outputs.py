@@ -99,7 +99,8 @@ def test_a_fifo_target_is_written_into_after_the_renames(tmp_path):
     assert temporary_files(tmp_path) == []
 
 
-def test_a_failed_write_into_a_fifo_puts_the_renamed_outputs_back(tmp_path, monkeypatch):
+@pytest.mark.parametrize("failure", [BrokenPipeError(errno.EPIPE, os.strerror(errno.EPIPE)), KeyboardInterrupt()])
+def test_a_failed_or_interrupted_write_into_a_fifo_puts_the_renamed_outputs_back(tmp_path, monkeypatch, failure):
     report = tmp_path / "r.html"
     report.write_bytes(OLD)
     fresh = tmp_path / "fresh.html"  # did not exist: removed again
@@ -107,13 +108,14 @@ def test_a_failed_write_into_a_fifo_puts_the_renamed_outputs_back(tmp_path, monk
     os.mkfifo(fifo)
     staged = [artifacts.stage(report, "new"), artifacts.stage(fresh, "new"), artifacts.stage(fifo, "{}")]
 
-    def broken(target, data):
-        raise BrokenPipeError(errno.EPIPE, os.strerror(errno.EPIPE))
+    def broken(target, data):  # e.g. the reader went away, or Ctrl-C while waiting for one
+        raise failure
 
     monkeypatch.setattr(artifacts, "_write_into", broken)
-    with pytest.raises(artifacts.OutputError) as error:
+    with pytest.raises(artifacts.OutputError if isinstance(failure, OSError) else KeyboardInterrupt) as error:
         artifacts.commit(staged)
-    assert error.value.one_line().startswith(f"{fifo}: cannot write the output: the reader of the pipe closed it")
+    if isinstance(failure, OSError):
+        assert error.value.one_line().startswith(f"{fifo}: cannot write the output: the reader of the pipe closed it")
     assert report.read_bytes() == OLD and not fresh.exists()
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
     assert temporary_files(tmp_path) == []
