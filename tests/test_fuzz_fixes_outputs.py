@@ -364,11 +364,27 @@ def test_a_warning_left_is_one_logscan_line(cli, sample, monkeypatch):
     assert result.exit_code in (0, 1)
     line = one_line(result.stderr)
     assert re.fullmatch(
-        r"logscan: warning: numeric problem in tests/test_fuzz_fixes_outputs\.py line \d+: overflow encountered in "
-        r"cast \(a result there may be inf or NaN\)",
+        r"logscan: warning: numeric problem in logscan/cli/analyze_cmd\.py line \d+ "
+        r"\(tests/test_fuzz_fixes_outputs\.py\): overflow encountered in cast \(a result there may be inf or NaN\)",
         line,
     ), line
     assert not PY_WARNING.search(result.stderr)
+
+
+def test_a_warning_from_a_library_names_the_line_of_logscan_that_called_it(capsys):
+    import logscan
+
+    namespace = {"warnings": warnings}
+    caller = Path(logscan.__file__).parent / "filters" / "caller.py"  # a frame of logscan's (no such file)
+    source = "def f():\n    warnings.warn_explicit(MESSAGE, RuntimeWarning, LIBRARY, 83)\n"
+    exec(compile(source, str(caller), "exec"), namespace)
+    namespace.update(MESSAGE="overflow encountered in reduce", LIBRARY="/v/site-packages/numpy/_core/fromnumeric.py")
+    with cli_main._warnings_as_lines(debug=False):
+        namespace["f"]()
+    assert capsys.readouterr().err == (
+        "logscan: warning: numeric problem in logscan/filters/caller.py line 2 (numpy/_core/fromnumeric.py): "
+        "overflow encountered in reduce (a result there may be inf or NaN)\n"
+    )
 
 
 def test_other_warnings_are_one_line_too_and_debug_keeps_pythons_format(capsys):

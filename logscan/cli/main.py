@@ -168,9 +168,13 @@ _NUMERIC = re.compile(r"(overflow|underflow|invalid value|divide by zero) encoun
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` as one line: "logscan: warning: numeric problem in
-    detectors/nis.py line 104: overflow encountered in cast (a result there may be inf or NaN)"."""
+    detectors/nis.py line 104: overflow encountered in cast (a result there may be inf or NaN)".
+    A warning from a library names logscan's line that called it, then the library's file."""
     text = printable(str(message))
     where = f"{_source_name(filename)} line {lineno}"
+    caller = _logscan_caller()
+    if caller is not None and os.path.abspath(filename or "?") != caller[0]:
+        where = f"{_source_name(caller[0])} line {caller[1]} ({_source_name(filename)})"
     if issubclass(category, RuntimeWarning) and _NUMERIC.match(text):
         out = f"logscan: warning: numeric problem in {where}: {text} (a result there may be inf or NaN)"
     else:
@@ -181,6 +185,23 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
         stream.flush()
     except (OSError, ValueError, AttributeError):
         pass  # stderr closed or gone: a warning is not worth an error
+
+
+def _logscan_caller() -> tuple[str, int] | None:
+    """(file, line) of the innermost frame of logscan's own code (its package or its built-in
+    detectors) on the stack of a warning, this module's frames aside; None when there is none."""
+    roots = [os.path.dirname(os.path.dirname(os.path.abspath(__file__)))]
+    detectors = sys.modules.get("logscan.detectors")
+    if detectors is not None and getattr(detectors, "__file__", None):
+        roots.append(os.path.dirname(os.path.abspath(detectors.__file__)))
+    this = os.path.abspath(__file__)
+    frame = sys._getframe(1)
+    while frame is not None:
+        name = os.path.abspath(frame.f_code.co_filename)
+        if name != this and any(name.startswith(root + os.sep) for root in roots):
+            return name, frame.f_lineno
+        frame = frame.f_back
+    return None
 
 
 def _source_name(filename: str) -> str:

@@ -81,7 +81,8 @@ class EkfTrace:
 
     def summary(self) -> dict:
         """JSON-ready counts: updates, rejections and seeds per group, divergence, mean NIS."""
-        with np.errstate(invalid="ignore"):
+        # NIS near float's maximum (a value of 1e308 let through) add up beyond it: the mean is inf
+        with np.errstate(invalid="ignore", over="ignore"):
             mean_nis = {
                 g: (float(np.nanmean(self.nis_group[:, i])) if self.updated[:, i].any() else None)
                 for i, g in enumerate(self.group_names)
