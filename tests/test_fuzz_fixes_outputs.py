@@ -58,10 +58,13 @@ class FifoReader:
         self.thread.start()
 
     def received(self) -> bytes:
+        self.thread.join(5)  # at once when something wrote and closed the FIFO
         if self.thread.is_alive():  # nothing opened the FIFO for writing: let the reader go
-            with open(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK), "wb"):
+            try:
+                os.close(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK))
+            except OSError:  # ENXIO: the reader is not in open() yet
                 pass
-        self.thread.join(10)
+            self.thread.join(5)
         assert stat.S_ISFIFO(os.lstat(self.path).st_mode), f"{self.path} was replaced"
         return self.data[0] if self.data else b""
 
