@@ -141,16 +141,33 @@ class Log:
         if self._span_text is not None:  # samples released: the text computed while they were here
             return self._span_text
         timed = {name: c for name, c in self.channels.items() if len(c)}
-        ends = ""
+        if not timed:
+            return _span_text(self.duration_s, None, None)
+        first = min(timed, key=lambda name: int(timed[name].t.min()))
+        last = max(timed, key=lambda name: int(timed[name].t.max()))
+        return _span_text(self.duration_s, first, last)
+
+    @classmethod
+    def without_samples(cls, spans: dict[str, tuple[int, int | None, int | None]], source: SourceInfo) -> Log:
+        """A log whose channels were read and counted but not kept (``spans``: name -> (samples,
+        first ns, last ns)), as `release_samples` leaves one: what a streaming reader returns."""
+        empty_t, empty_v = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
+        log = cls.__new__(cls)
+        log.channels = {name: Channel(name, empty_t, empty_v) for name in spans}
+        log.source, log.truth, log.profile_text = source, None, None
+        timed = {name: span for name, span in spans.items() if span[0]}
+        log._sample_counts = {name: span[0] for name, span in spans.items()}
+        log._span_ns = None
+        log._span_text = None
         if timed:
-            first = min(timed, key=lambda name: int(timed[name].t.min()))
-            last = max(timed, key=lambda name: int(timed[name].t.max()))
-            ends = f" (from {first} to {last})"
-        return (
-            f"the log spans {self.duration_s / 86_400.0:.1f} days{ends}: more than a day, so it may join "
-            "several logs or read a time column in the wrong unit; analyse each log on its own, or state "
-            "the time unit (e.g. a column named time_s)"
-        )
+            first = min(timed, key=lambda name: timed[name][1])
+            last = max(timed, key=lambda name: timed[name][2])
+            log._span_ns = (timed[first][1], timed[last][2])
+            log._span_text = _span_text(log.duration_s, first, last)
+        warning = log.span_warning()
+        if warning and warning not in source.warnings:
+            source.warnings.append(warning)
+        return log
 
     @property
     def start_ns(self) -> int | None:
@@ -212,3 +229,12 @@ class Log:
             "has_truth": self.truth is not None,
             "has_profile": self.profile_text is not None,
         }
+
+
+def _span_text(duration_s: float, first: str | None, last: str | None) -> str:
+    ends = f" (from {first} to {last})" if first is not None else ""
+    return (
+        f"the log spans {duration_s / 86_400.0:.1f} days{ends}: more than a day, so it may join "
+        "several logs or read a time column in the wrong unit; analyse each log on its own, or state "
+        "the time unit (e.g. a column named time_s)"
+    )

@@ -120,6 +120,7 @@ def test_decoding_chunk_by_chunk_gives_the_same_log(sample, monkeypatch, name):
     whole = read_log(path)
     monkeypatch.setattr(scan, "FLUSH_BYTES", 1)
     monkeypatch.setattr(scan, "TOP_LEVEL_SLICE", 7)
+    monkeypatch.setattr(scan, "WALK_WINDOW", 100)  # record boundaries found 100 bytes at a time
     pieces = read_log(path)
     assert list(pieces.channels) == list(whole.channels) and whole.channels
     for channel, again in zip(whole.channels.values(), pieces.channels.values()):
@@ -152,3 +153,18 @@ def test_unchunked_mcap_decoded_in_slices_of_top_level_records(tmp_path, monkeyp
     for name, channel in whole.channels.items():
         np.testing.assert_array_equal(channel.values, sliced.channels[name].values)
         np.testing.assert_array_equal(channel.t, sliced.channels[name].t)
+
+
+@pytest.mark.parametrize("name", ["quad_imu_bias.mcap", "sbw_yaw_rate_bitflip.mcap", "jackal_healthy.mcap"])
+def test_inspect_folds_each_batch_into_the_same_facts(sample, monkeypatch, name):
+    """`inspect` on an MCAP keeps per-channel statistics, not samples: the same facts as reading
+    the whole log, with a flush after every chunk."""
+    from logscan.cli.inspect_cmd import inspect_facts, read_facts
+    from logscan.readers.mcap import scan
+
+    path = sample(name)
+    whole = inspect_facts(read_log(path))
+    monkeypatch.setattr(scan, "FLUSH_BYTES", 1)
+    streamed = read_facts(path, None, False)
+    assert streamed == whole
+    assert streamed["channels"] and all(info["samples"] > 0 for info in streamed["channels"].values())

@@ -49,8 +49,7 @@ def inspect(
     from logscan.fleet import refuse_clobbering
 
     refuse_clobbering([("--json", json_path)], [log_path])  # the facts never replace the log
-    log = read_log(log_path, topics or None, use_header_stamp=use_header_stamp)
-    facts = inspect_facts(log)
+    facts = read_facts(log_path, topics or None, use_header_stamp)
     if json_path:
         from logscan.artifacts import write_json
 
@@ -58,6 +57,24 @@ def inspect(
         if json_path == "-":
             return
     click.echo(render_inspect(facts, show_channels, full=full))
+
+
+def read_facts(path: str, topics: tuple[str, ...] | None, use_header_stamp: bool) -> dict:
+    """The facts of one log. An MCAP file is read in memory bounded by a few chunks (its channels'
+    statistics folded as it is decoded); ULog and CSV logs are read whole."""
+    from logscan.readers import detect_format
+
+    if detect_format(path) == "mcap":
+        from logscan.readers.mcap import inspect_mcap
+
+        wanted = None if topics is None else set(topics)
+        log, stats = inspect_mcap(path, wanted, use_header_stamp=use_header_stamp)
+        facts = log.summary()
+        facts.setdefault("metadata", {k: dict(v) for k, v in log.source.metadata.items()})
+        for name, info in facts["channels"].items():
+            info.update(stats[name])
+        return facts
+    return inspect_facts(read_log(path, topics, use_header_stamp=use_header_stamp))
 
 
 def inspect_facts(log: Log) -> dict:

@@ -80,6 +80,80 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
     return log
 
 
+def inspect_mcap(
+    path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False
+) -> tuple[Log, dict[str, dict]]:
+    """What `read_mcap` finds, in memory bounded by a few chunks instead of the log: each batch's
+    columns are folded into per-channel statistics and dropped. Returns the log (its channels
+    counted, their samples not kept, as `Log.release_samples` leaves them) and channel name ->
+    {rate_hz, nonfinite, min, max}."""
+    path = str(path)
+    decoding = _Decoding(path, use_header_stamp)
+    stats: dict[str, ChannelStats] = {}
+
+    def flush(scan: Scan) -> None:
+        decoding(scan)
+        decoding.fold_into(stats)
+
+    scan = Scan(path, wanted)
+    scan.on_flush = flush
+    scan_file(scan)
+    raise_if_unrecoverable(scan)
+    scan.flush()
+    source = _source_of(scan)
+    decoding.report_to(source)
+    unsorted = sorted(name for name, entry in stats.items() if entry.unsorted)
+    if unsorted:
+        source.warnings.append(_unsorted_text(unsorted))
+    if decoding.undecodable:
+        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(decoding.undecodable)))
+    if use_header_stamp:
+        source.time_source = _time_source(decoding.decoded_topics, decoding.stamp_topics)
+    log = Log.without_samples({name: entry.span() for name, entry in stats.items()}, source)
+    attach_logscan_records(log)
+    return log, {name: entry.to_dict() for name, entry in stats.items()}
+
+
+class ChannelStats:
+    """Running facts of one channel over the pieces it is read in."""
+
+    def __init__(self) -> None:
+        self.samples = self.nonfinite = 0
+        self.first = self.last = None  # ns
+        self.previous = None  # the last time of the previous piece (order check)
+        self.unsorted = False
+        self.low = self.high = None
+
+    def add(self, t: np.ndarray, values: np.ndarray) -> None:
+        if t.size == 0:
+            return
+        self.samples += int(t.size)
+        low_t, high_t = int(t.min()), int(t.max())
+        self.first = low_t if self.first is None else min(self.first, low_t)
+        self.last = high_t if self.last is None else max(self.last, high_t)
+        if (self.previous is not None and int(t[0]) < self.previous) or (t.size > 1 and (np.diff(t) < 0).any()):
+            self.unsorted = True
+        self.previous = int(t[-1])
+        finite = values[np.isfinite(values)]
+        self.nonfinite += int(values.size - finite.size)
+        if finite.size:
+            low, high = float(finite.min()), float(finite.max())
+            self.low = low if self.low is None else min(self.low, low)
+            self.high = high if self.high is None else max(self.high, high)
+
+    def span(self) -> tuple[int, int | None, int | None]:
+        return self.samples, self.first, self.last
+
+    def to_dict(self) -> dict:
+        span = (self.last - self.first) / 1e9 if self.samples else 0.0
+        return {
+            "rate_hz": round((self.samples - 1) / span, 6) if self.samples > 1 and span > 0 else 0.0,
+            "nonfinite": self.nonfinite,
+            "min": self.low,
+            "max": self.high,
+        }
+
+
 def _source_of(scan: Scan) -> SourceInfo:
     """What the scan found besides the messages: metadata, warnings, damage, topics and their counts."""
     source = SourceInfo(path=scan.path, format="mcap")
@@ -170,6 +244,14 @@ class _Decoding:
                 field_times = times if index.size == times.size else times[index]
                 self.pieces.setdefault(_channel_name(topic, field_path), []).append((field_times, values))
 
+    def fold_into(self, stats: dict[str, ChannelStats]) -> None:
+        """Fold the pieces decoded so far into per-channel statistics, and drop them."""
+        for name, parts in self.pieces.items():
+            entry = stats.setdefault(name, ChannelStats())
+            for t, values in parts:
+                entry.add(t, values)
+        self.pieces = {}
+
     def report_to(self, source: SourceInfo) -> None:
         """The skips and fields found, into the log's source."""
         for item in self.skips.skipped:
@@ -234,12 +316,16 @@ def _channels_in_time_order(
             unsorted_topics.add(name)
         channels[name] = Channel(name, t, v)
     if unsorted_topics:
-        source.warnings.append(
-            f"{len(unsorted_topics)} channel(s) not in time order in the file, sorted by time: "
-            + ", ".join(sorted(unsorted_topics)[:5])
-            + (" ..." if len(unsorted_topics) > 5 else "")
-        )
+        source.warnings.append(_unsorted_text(sorted(unsorted_topics)))
     return channels
+
+
+def _unsorted_text(names: list[str]) -> str:
+    return (
+        f"{len(names)} channel(s) not in time order in the file, sorted by time: "
+        + ", ".join(names[:5])
+        + (" ..." if len(names) > 5 else "")
+    )
 
 
 def _time_source(decoded_topics: set[str], stamp_topics: set[str]) -> str:

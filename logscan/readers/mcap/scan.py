@@ -54,6 +54,7 @@ from logscan.readers.mcap.records import (
     OP_SCHEMA,
     OP_STATISTICS,
     PARSE_ERRORS,
+    WALK_BAD_OPCODE,
     WALK_END,
     WALK_FOOTER,
     WALK_TEXT,
@@ -73,6 +74,7 @@ SMALL_CHUNK_BYTES = 1 << 20  # a chunk declaring at most this is not held to MAX
 MIN_FILE_BUDGET_BYTES = 64 << 20  # a file may decompress to max(this, MAX_RATIO x its size)
 FLUSH_BYTES = 32 << 20  # message bytes held in batches before they are handed to ``on_flush``
 TOP_LEVEL_SLICE = 1 << 16  # top-level records handled at a time (unchunked files)
+WALK_WINDOW = 32 << 20  # bytes of the file walked for record boundaries before their pages go back
 CRC_BLOCK = 16 << 20  # bytes of the data-section CRC computed before their pages are given back
 
 
@@ -186,8 +188,7 @@ class Scan:
             )
         self._inflate_budget = max(MIN_FILE_BUDGET_BYTES, MAX_RATIO * len(raw))
         u8 = np.frombuffer(raw, dtype=np.uint8)
-        top = walk_records(u8, len(MCAP_MAGIC), len(raw))
-        self._give_back(len(raw))  # the pages of record headers the walk touched
+        top = self._walk(u8, len(MCAP_MAGIC), len(raw))
         try:
             self._top_level(raw, u8, top)
         except PARSE_ERRORS as exc:  # a field inside a record did not parse
@@ -205,10 +206,34 @@ class Scan:
             if length > 0:
                 self._map.madvise(mmap.MADV_DONTNEED, 0, length)
 
+    def _walk(self, u8: np.ndarray, start: int, stop: int) -> Records:
+        """`walk_records` over the file a window at a time, giving back the pages walked: reading a
+        record's header maps the whole folio around it (up to megabytes), so one walk over the file
+        would hold all of it. Same records, end and status as a single walk."""
+        parts = []
+        pos = start
+        while True:
+            window = min(stop, max(pos + WALK_WINDOW, _claimed_end(u8, pos, stop)))
+            part = walk_records(u8, pos, window)
+            parts.append(part)
+            self._give_back(window)
+            if window >= stop or part.status in (WALK_FOOTER, WALK_BAD_OPCODE) or part.end == pos:
+                break
+            pos = part.end  # a record crossing the window is walked again in the next one
+        if len(parts) == 1:
+            return parts[0]
+        return Records(
+            np.concatenate([p.ops for p in parts]),
+            np.concatenate([p.offsets for p in parts]),
+            np.concatenate([p.lengths for p in parts]),
+            parts[-1].end,
+            parts[-1].status,
+        )
+
     def _held_more(self, size: int, position: int) -> None:
         """``size`` more message bytes in the batches; past FLUSH_BYTES they go to ``on_flush``."""
         self._held += size
-        if self.on_flush is not None and self._held >= FLUSH_BYTES:
+        if self._held >= FLUSH_BYTES:
             self.flush()
             self._give_back(position)
 
@@ -414,6 +439,14 @@ class Scan:
         if known is None:
             known = self._wanted_ids[cid] = topic_wanted(self.channels[cid].topic, self.wanted)
         return known
+
+
+def _claimed_end(u8: np.ndarray, pos: int, stop: int) -> int:
+    """Where the record at ``pos`` ends by its header's length; ``stop`` when that cannot be read."""
+    if pos + 9 > stop:
+        return stop
+    length = int.from_bytes(u8[pos + 1 : pos + 9].tobytes(), "little")
+    return min(stop, pos + 9 + length)
 
 
 def _map_file(fh) -> mmap.mmap | bytes:
