@@ -1258,52 +1258,19 @@ def judge_entry(case: Case, entry: dict, is_error: bool) -> tuple[int | None, li
     return code, problems, line, partial
 
 
-# Bugs the fuzzer found that are not fixed yet, each with an xfail(strict=True) reproducer in
-# tests/fuzz_regressions/ (see its README). A problem that shows exactly one of these symptoms is
-# waived (counted as "known") instead of failing the case; every other problem of the case still
-# counts. Remove an entry when its bug is fixed (its reproducer's test then passes: XPASS, strict).
-
-
-def _chunk_skipped(case: Case, entry: dict, problem: str) -> bool:
-    """A chunk whose opcode byte is damaged is skipped as an unknown record; the data-section CRC
-    mismatch that shows it is only a warning when the file has no metadata."""
-    warnings = entry.get("log", {}).get("warnings", [])
-    return "although the mutation damaged the file" in problem and any(
-        "data section CRC mismatch outside the message chunks" in w for w in warnings
-    )
-
-
+# Bugs the campaign found that are not fixed yet: id -> does this problem show it. Each has a
+# reproducer in tests/fuzz_regressions (xfail(strict) while open); a problem that shows one is
+# counted as "known" instead of failing its case. Fixed, with their reproducers
+# kept as regression tests: mcap-chunk-skipped, json-huge-integer, profile-rate-tiny,
+# profile-stale-overflow, ulog-missing-timestamp, unknown-detector-unnamed, error-tuple-name,
+# output-replaces-special-file.
 KNOWN_BUGS = {
-    "mcap-chunk-skipped": _chunk_skipped,
-    # a JSON integer beyond float range (10**400) in a message off the decoder's fast path
-    "json-huge-integer": lambda case, entry, problem: "OverflowError: int too large to convert to float" in problem,
-    # profile numbers the checks let through: rate_hz = 1e-300 or 5e-324 (dt**4 in the model's Q,
-    # NaN steps), stale_s = 1e308 or 2**63-1 (nanoseconds in align.py)
-    "profile-rate-tiny": lambda case, entry, problem: (
-        case.kind == "profile"
-        and ("Numerical result out of range" in problem or "cannot convert float NaN to integer" in problem)
-    ),
-    "profile-stale-overflow": lambda case, entry, problem: (
-        case.kind == "profile"
-        and (
-            "cannot convert float infinity to integer" in problem
-            or "Python int too large to convert to C long" in problem
-        )
-    ),
     # numpy's and scipy's floating-point RuntimeWarnings printed on stderr with their source line
     # (float32 NIS per dof, window sums, expm of a huge A, a signalling NaN cast, NaN steps)
     "runtime-warning-leak": lambda case, entry, problem: (
         problem.startswith("Python warning on stderr")
         and re.search(r"RuntimeWarning: (overflow|invalid value|divide by zero) encountered", problem) is not None
     ),
-    # a ULog message format without a timestamp field
-    "ulog-missing-timestamp": lambda case, entry, problem: "KeyError: 'timestamp'" in problem,
-    # a profile naming an unknown detector: the error line names neither the profile nor the log
-    "unknown-detector-unnamed": lambda case, entry, problem: (
-        "without a JSON summary" in problem and "unknown detector" in problem
-    ),
-    # with several logs, an error line names its log as a Python tuple: "('x.csv', None): ..."
-    "error-tuple-name": lambda case, entry, problem: problem.startswith("error names the log as"),
 }
 
 

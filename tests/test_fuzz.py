@@ -182,7 +182,8 @@ def test_one_mutated_log_per_process_and_its_inspect(fuzz, fmt, case_seed):
 @dataclass
 class Regression:
     file: str
-    bug: str = ""  # its fuzz_campaign.KNOWN_BUGS id while it is not fixed: the test is xfail(strict)
+    bug: str  # the bug's id (fuzz_regressions/README.md)
+    open: bool = False  # not fixed yet: listed in fuzz_campaign.KNOWN_BUGS, the test is xfail(strict)
     damaged: bool = False  # the reader must notice (exit 2)
     profile: str | None = None  # passed as --profile (a file in fuzz_regressions/)
     command: str = "analyze"  # or "inspect"
@@ -195,7 +196,7 @@ REPRODUCERS = [
     Regression("json_huge_integer.mcap", "json-huge-integer"),
     Regression("profile_rate_tiny.csv", "profile-rate-tiny", kind="profile"),
     Regression("profile_stale_huge.csv", "profile-stale-overflow", kind="profile"),
-    Regression("runtime_warning.mcap", "runtime-warning-leak"),
+    Regression("runtime_warning.mcap", "runtime-warning-leak", open=True),
     Regression("ulog_missing_timestamp.ulg", "ulog-missing-timestamp", command="inspect"),
     Regression("unknown_detector.csv", "unknown-detector-unnamed"),
     Regression("unknown_detector.csv", "error-tuple-name", copies=2),
@@ -208,10 +209,10 @@ class KnownBugShows(Exception):
 
 def _reproducer_param(regression: Regression):
     marks = ()
-    if regression.bug:
+    if regression.open:
         reason = f"known bug {regression.bug!r} (fuzz_campaign.KNOWN_BUGS): remove the mark when it is fixed"
         marks = (pytest.mark.xfail(strict=True, raises=KnownBugShows, reason=reason),)
-    return pytest.param(regression, marks=marks, id=f"{regression.file}-{regression.bug or 'fixed'}")
+    return pytest.param(regression, marks=marks, id=f"{regression.file}-{regression.bug}")
 
 
 @pytest.mark.parametrize("regression", [_reproducer_param(r) for r in REPRODUCERS])
@@ -248,11 +249,6 @@ def test_fuzz_regression(fuzz, regression):
             raise KnownBugShows(f"{outcome.known}: exit {outcome.exit_code}, {outcome.line}")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known bug 'output-replaces-special-file': the JSON is renamed over a FIFO or device given as "
-    "--json (as root, --json /dev/null replaces /dev/null with a regular file): remove the mark when it is fixed",
-)
 def test_json_output_to_a_fifo_is_written_into_or_refused_never_replaced(fuzz, tmp_path):
     """Found while building the fuzzer (`--json /dev/null`, as root, left /dev/null a regular file)."""
     fifo = tmp_path / "summary.json"
@@ -281,7 +277,8 @@ def test_every_reproducer_is_listed():
             assert path.name in listed, f"{path.name} has no Regression entry"
         if path.name != "README.md":
             assert f"`{path.name}`" in readme, f"{path.name} is not described in README.md"
-    assert {r.bug for r in REPRODUCERS if r.bug} <= set(fc.KNOWN_BUGS)
+    assert {r.bug for r in REPRODUCERS if r.open} <= set(fc.KNOWN_BUGS)
+    assert not {r.bug for r in REPRODUCERS if not r.open} & set(fc.KNOWN_BUGS), "a fixed bug is still waived"
 
 
 # --- the oracle and the runner themselves ------------------------------------------------------
