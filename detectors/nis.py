@@ -14,7 +14,6 @@ the test that catches sensor biases, which the encoded checks cannot see.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import chdtri  # inverse chi-square survival; lighter than scipy.stats
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Boolean, Interval
@@ -67,6 +66,8 @@ def as_float32(values: np.ndarray) -> np.ndarray:
 
 def chi2_threshold(dof: np.ndarray, alpha: float) -> np.ndarray:
     """chi2.ppf(1 - alpha, dof) per entry, evaluated once per distinct dof."""
+    from scipy.special import chdtri  # here: scipy.special costs ~20 MB, paid only when NIS runs
+
     dof = np.asarray(dof, dtype=np.int64)
     out = np.full(dof.shape, np.nan)
     for d in np.unique(dof[dof > 0]):  # a handful of distinct values, not a per-sample loop

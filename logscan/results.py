@@ -107,7 +107,8 @@ class AlarmPolicy:
 
 @dataclass
 class Band:
-    """Threshold series of one statistic on the grid: upper and/or lower, (N,) float64 each."""
+    """Threshold series of one statistic on the grid: upper and/or lower, (N,) each (float64 while
+    alarms are drawn from them, float32 once kept for figures; a constant is a broadcast view)."""
 
     upper: np.ndarray | None = None
     lower: np.ndarray | None = None
@@ -172,6 +173,8 @@ class DetectorResult:
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )
         self.alarms.extend(alarms)
+        # once the alarms are drawn from it, the band is only drawn: float32 halves it
+        self.thresholds[name] = Band(upper=_drawn(band.upper), lower=_drawn(band.lower))
         return alarms
 
     def check_of(self, signal: str) -> str:
@@ -199,6 +202,14 @@ class DetectorResult:
             }
             out["extras"] = {name: jsonable(v) for name, v in self.extras.items()}
         return out
+
+
+def _drawn(series: np.ndarray | None) -> np.ndarray | None:
+    """A band series as kept for figures: float32, a broadcast constant as it is."""
+    if series is None or series.strides == (0,):
+        return series
+    with np.errstate(over="ignore"):  # beyond float32's range a drawn threshold is off the chart
+        return series.astype(np.float32)
 
 
 def _band_series(value, n: int) -> np.ndarray | None:

@@ -41,8 +41,8 @@ class EkfTrace:
     dt: float
     x_prior: np.ndarray  # (N, n)
     x_post: np.ndarray  # (N, n)
-    P_prior_diag: np.ndarray  # (N, n)
-    P_post_diag: np.ndarray  # (N, n)
+    P_prior_diag: np.ndarray  # (N, n) float32
+    P_post_diag: np.ndarray  # (N, n) float32
     y: np.ndarray | None  # (N, m_total) innovation z - h(x_prior), NaN where not updated (None: not kept)
     S_diag: np.ndarray | None  # (N, m_total) diagonal of S, NaN where not updated (None: not kept)
     nis: np.ndarray  # (N,) y^T S^-1 y over the stacked update, NaN without update
