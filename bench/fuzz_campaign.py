@@ -1260,18 +1260,11 @@ def judge_entry(case: Case, entry: dict, is_error: bool) -> tuple[int | None, li
 
 # Bugs the campaign found that are not fixed yet: id -> does this problem show it. Each has a
 # reproducer in tests/fuzz_regressions (xfail(strict) while open); a problem that shows one is
-# counted as "known" instead of failing its case. Fixed, with their reproducers
-# kept as regression tests: mcap-chunk-skipped, json-huge-integer, profile-rate-tiny,
-# profile-stale-overflow, ulog-missing-timestamp, unknown-detector-unnamed, error-tuple-name,
-# output-replaces-special-file.
-KNOWN_BUGS = {
-    # numpy's and scipy's floating-point RuntimeWarnings printed on stderr with their source line
-    # (float32 NIS per dof, window sums, expm of a huge A, a signalling NaN cast, NaN steps)
-    "runtime-warning-leak": lambda case, entry, problem: (
-        problem.startswith("Python warning on stderr")
-        and re.search(r"RuntimeWarning: (overflow|invalid value|divide by zero) encountered", problem) is not None
-    ),
-}
+# counted as "known" instead of failing its case. None is open: mcap-chunk-skipped,
+# json-huge-integer, profile-rate-tiny, profile-stale-overflow, runtime-warning-leak,
+# ulog-missing-timestamp, unknown-detector-unnamed, error-tuple-name and
+# output-replaces-special-file are fixed, their reproducers kept as regression tests.
+KNOWN_BUGS: dict = {}
 
 
 def waive_known(case: Case, entry: dict | None, problems: list[str]) -> tuple[list[str], str]:

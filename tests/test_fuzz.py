@@ -196,7 +196,7 @@ REPRODUCERS = [
     Regression("json_huge_integer.mcap", "json-huge-integer"),
     Regression("profile_rate_tiny.csv", "profile-rate-tiny", kind="profile"),
     Regression("profile_stale_huge.csv", "profile-stale-overflow", kind="profile"),
-    Regression("runtime_warning.mcap", "runtime-warning-leak", open=True),
+    Regression("runtime_warning.mcap", "runtime-warning-leak"),
     Regression("ulog_missing_timestamp.ulg", "ulog-missing-timestamp", command="inspect"),
     Regression("unknown_detector.csv", "unknown-detector-unnamed"),
     Regression("unknown_detector.csv", "error-tuple-name", copies=2),

@@ -143,7 +143,7 @@ def test_an_os_error_with_a_file_name_is_an_environment_error(cli, monkeypatch, 
     def no_memory(*args, **kwargs):
         raise OSError(errno.EMFILE, "Too many open files", str(tmp_path / "x"))
 
-    monkeypatch.setattr(inspect_cmd, "read_log", no_memory)
+    monkeypatch.setattr(inspect_cmd, "read_facts", no_memory)
     result = cli("inspect", tmp_path / "x")
     assert result.exit_code == 2
     assert one_line(result.stderr).startswith(f"logscan: error: {tmp_path / 'x'}: Too many open files")
@@ -151,7 +151,7 @@ def test_an_os_error_with_a_file_name_is_an_environment_error(cli, monkeypatch, 
     def bug(*args, **kwargs):
         raise OSError(errno.EBADF, "Bad file descriptor")
 
-    monkeypatch.setattr(inspect_cmd, "read_log", bug)
+    monkeypatch.setattr(inspect_cmd, "read_facts", bug)
     result = cli("inspect", tmp_path / "x")
     assert result.exit_code == 3 and "internal error" in result.stderr
 
