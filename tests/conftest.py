@@ -23,6 +23,30 @@ TESTDATA = REPO.parent / "shared" / "testdata"
 REQUIRE_TESTDATA = "LOGSCAN_REQUIRE_TESTDATA"
 
 
+def one_state_profile(thrust: str, accel: str, name: str = "one state") -> str:
+    """A linear one-state profile TOML: one input channel and one accelerometer channel (the
+    smallest profile a ULog or hand-made log can be analysed with)."""
+    return f"""\
+name = "{name}"
+[vehicle]
+model = "linear"
+rate_hz = 100
+[vehicle.params]
+A = [[0.0]]
+B = [[0.0]]
+C = {{ accel = [[1.0]] }}
+R = {{ accel = [1.0] }}
+inputs = ["thrust"]
+states = ["az"]
+[inputs]
+thrust = "{thrust}"
+stale_s = 0.5
+[measurements.accel]
+channels = ["{accel}"]
+rate_hz = 100
+"""
+
+
 def need_testdata(path: str | os.PathLike = "") -> Path:
     """Path of shared test data: ``../shared/testdata/PATH`` (or ``PATH`` itself when absolute).
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import one_state_profile
 
 from logscan.errors import CorruptLogError
 from logscan.readers import read_log
@@ -57,25 +58,7 @@ def test_json_huge_integer_reproducer_analyses_without_error(cli_process):
 # -- ulog-missing-timestamp --------------------------------------------------------------------------
 
 UNTIMED_WHY = "its message format has no timestamp field, which the ULog spec requires: the definition is damaged"
-LINEAR_PROFILE = """\
-name = "untimed topic"
-[vehicle]
-model = "linear"
-rate_hz = 100
-[vehicle.params]
-A = [[0.0]]
-B = [[0.0]]
-C = { accel = [[1.0]] }
-R = { accel = [1.0] }
-inputs = ["thrust"]
-states = ["az"]
-[inputs]
-thrust = "/act_0/thrust"
-stale_s = 0.5
-[measurements.accel]
-channels = ["/acc_0/z"]
-rate_hz = 100
-"""
+LINEAR_PROFILE = one_state_profile("/act_0/thrust", "/acc_0/z", "untimed topic")
 
 
 def _ulog(topics: list[tuple[str, str]], n: int = 400) -> bytes:

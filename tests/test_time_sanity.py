@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import need_testdata
+from conftest import need_testdata, one_state_profile
 
 from logscan.align import MAX_GRID_STEPS, align, outlying_runs
 from logscan.errors import InputError
@@ -153,27 +153,7 @@ def jump_ulog(source: Path, target: Path, topic: str, shift_us: int) -> None:
     target.write_bytes(bytes(data))
 
 
-ULOG_PROFILE = """
-[vehicle]
-model = "linear"
-rate_hz = 100
-
-[vehicle.params]
-A = [[0.0]]
-B = [[0.0]]
-C = { accel = [[1.0]] }
-R = { accel = [1.0] }
-inputs = ["thrust"]
-states = ["az"]
-
-[inputs]
-thrust = "/actuator_controls_0_0/control[3]"
-stale_s = 0.5
-
-[measurements.accel]
-channels = ["/sensor_combined_0/accelerometer_m_s2[2]"]
-rate_hz = 100
-"""
+ULOG_PROFILE = one_state_profile("/actuator_controls_0_0/control[3]", "/sensor_combined_0/accelerometer_m_s2[2]")
 
 
 def test_a_ulog_message_stamped_days_late_is_dropped_like_any_other(cli, tmp_path):
