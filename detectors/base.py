@@ -104,6 +104,12 @@ def decode_state_value(value: Any) -> Any:
     return value
 
 
+def _short(value: Any) -> str:
+    """A setting as the error line quotes it (a 400-digit integer is not worth 400 characters)."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:20]}...{text[-8:]} ({len(text)} characters)"
+
+
 class Detector:
     """Base class of every detector (see the module docstring for the contract)."""
 
@@ -158,7 +164,7 @@ class Detector:
             value = self.params.get(key)
             if not satisfies(value, constraints):
                 raise ProfileError(
-                    f"detector {self.name!r}: {key} must be {describe_constraints(constraints)}, got {value!r}"
+                    f"detector {self.name!r}: {key} must be {describe_constraints(constraints)}, got {_short(value)}"
                 )
         try:
             json.dumps(self.params, allow_nan=False)

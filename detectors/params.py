@@ -19,13 +19,18 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+_INT64 = 2**63
+
 
 def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
+    """An integer numpy can hold (int64): 10**400 in a profile is no window length."""
+    return isinstance(value, int) and not isinstance(value, bool) and -_INT64 <= value < _INT64
 
 
 def _is_real(value: Any) -> bool:
-    return (_is_int(value) or isinstance(value, float)) and math.isfinite(value)
+    if isinstance(value, int) and not isinstance(value, bool):
+        return abs(value) < 2**1024  # within float range (math.isfinite would raise beyond it)
+    return isinstance(value, float) and math.isfinite(value)
 
 
 @dataclass(frozen=True)

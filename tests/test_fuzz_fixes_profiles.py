@@ -203,3 +203,44 @@ def test_an_unknown_detector_given_on_the_command_line_is_not_blamed_on_the_prof
     result = cli("analyze", log, "--detector", "nope", "--no-report")
     assert result.exit_code == 2
     assert result.stderr.startswith("logscan: error: unknown detector 'nope' (available: "), result.stderr
+
+
+@pytest.mark.parametrize(
+    ("setting", "expected"),
+    [
+        ("window = 1" + "0" * 400, "window must be an integer in [1, inf), got 10000000000000000000...00000000"),
+        ("budget_per_hour = 1" + "0" * 400, "budget_per_hour must be a number in (0, inf)"),
+        ("window = 9223372036854775808", "window must be an integer in [1, inf), got 9223372036854775808"),
+    ],
+)
+def test_detector_settings_beyond_int64_or_float_range_are_profile_errors(cli, sample, tmp_path, setting, expected):
+    """10**400 as a window used to pass the checks and fail in numpy (exit 3)."""
+    log = tmp_path / "quad.csv"
+    shutil.copy(sample("quad_healthy.csv"), log)
+    base = Path(sample("quad_healthy.profile.toml")).read_text(encoding="utf-8")
+    (tmp_path / "quad.profile.toml").write_text(base + f"\n[detectors.nis]\n{setting}\n", encoding="utf-8")
+    result = cli("analyze", log, "--no-report", "-q")
+    assert result.exit_code == 2, result.stderr
+    assert expected in result.stderr and len(result.stderr) < 400
+
+
+@pytest.mark.parametrize(
+    ("param", "expected"),
+    [
+        ("La = 1e-300", "parameters give numbers beyond float range"),
+        ("N = 1e200", "parameters give numbers beyond float range"),
+        ("Km = 1e308", "discretised at dt = 0.05 s are not finite"),
+    ],
+)
+def test_model_parameters_beyond_float_range_are_profile_errors(cli, sample, tmp_path, param, expected):
+    """dc_motor with La = 1e-300 or Km = 1e308 raised OverflowError in Python float arithmetic or
+    in the discretisation (exit 3)."""
+    from logscan.readers import read_embedded_profile
+
+    log = sample("jackal_healthy.mcap")
+    text = read_embedded_profile(log)
+    profile = tmp_path / "jackal.toml"
+    profile.write_text(text.replace("[inputs]", f"[vehicle.params]\n{param}\n\n[inputs]", 1), encoding="utf-8")
+    result = cli("analyze", log, "--profile", profile, "--no-report", "-q")
+    assert result.exit_code == 2, result.stderr
+    assert "invalid profile" in result.stderr and expected in result.stderr

@@ -29,7 +29,14 @@ def get_model(name: str, params: dict | None = None) -> Model:
     """Build the model ``name`` from ``params`` (a profile's [vehicle].params table)."""
     if params is not None and not isinstance(params, dict):
         raise ModelError(f"model {name!r}: params must be a table, got {type(params).__name__}")
-    return model_class(name)(params)
+    cls = model_class(name)
+    try:
+        return cls(params)
+    except (OverflowError, ZeroDivisionError):  # Python float arithmetic on extreme values
+        raise ModelError(
+            "its parameters give numbers beyond float range (a value far too large or too small)",
+            hint="check the magnitudes in [vehicle.params] (see docs/profiles.md)",
+        ) from None
 
 
 __all__ = ["MODEL_NAMES", "GroupSpec", "Model", "get_model", "model_class"]

@@ -45,7 +45,11 @@ def discretise(A: np.ndarray, B: np.ndarray, Qc: np.ndarray, dt: float):
     with np.errstate(over="ignore", invalid="ignore"):
         E = expm(M * dt)
         Ad, Bd = E[:n, :n], E[:n, n:]
-        k = max(0, int(np.ceil(np.log2(max(np.abs(A).sum(axis=0).max() * dt, 1e-300) / 0.5))))
+        norm = np.abs(A).sum(axis=0).max() * dt
+        if not (np.isfinite(norm) and np.isfinite(Qc).all()):  # A or Qc beyond float range
+            nan = np.full((n, n), np.nan)
+            return nan, np.full((n, nu), np.nan), nan
+        k = max(0, int(np.ceil(np.log2(max(norm, 1e-300) / 0.5))))
         h = dt / 2**k
         V = np.zeros((2 * n, 2 * n))
         V[:n, :n] = -A
