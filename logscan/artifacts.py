@@ -13,7 +13,8 @@ JSON of one `logscan analyze` run): `stage` each into a temporary file beside it
   interrupted run leaves all previous files or all new ones. Only SIGKILL or a power cut in the
   few microseconds of the renames themselves can leave some targets new and some old (POSIX has
   no rename of several files at once); the JSON is renamed last, so a new JSON means new reports.
-  Such a kill also leaves its ``.<name>.<token>.*.tmp`` temporary files behind.
+  Such a kill also leaves its ``.<name>.<token>.*.tmp`` temporary files behind; the next run
+  writing the same target removes them (`remove_orphans`: the token names a process that is gone).
 
 A target that exists and is not a regular file is never replaced: a FIFO or a character device
 (``/dev/null``, a terminal), or a path naming an open file descriptor (``/dev/stdout``,
@@ -35,6 +36,7 @@ import stat
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -221,6 +223,44 @@ def cleanup(targets: Iterable[str | os.PathLike], token: str) -> None:
         for name in names:
             if name.startswith(".") and name.endswith(".tmp") and marker in name:
                 _unlink(os.path.join(directory, name))
+
+
+ORPHAN_AGE_S = 60.0  # a temporary file of a dead process younger than this is left alone
+
+
+def remove_orphans(targets: Iterable[str | os.PathLike]) -> None:
+    """Remove the temporary files a killed run left beside ``targets``: ``.<name>.<pid>-<hex>.*.tmp``
+    whose process no longer exists and that are over ORPHAN_AGE_S old (a live process, or one
+    this machine cannot see, keeps its files)."""
+    for target in targets:
+        directory, name = os.path.split(os.path.abspath(target))
+        try:
+            names = os.listdir(directory)
+        except OSError:
+            continue
+        prefix = f".{name}."
+        for entry in names:
+            if not (entry.startswith(prefix) and entry.endswith(".tmp")):
+                continue
+            pid_text = entry[len(prefix) :].split("-", 1)[0]
+            if not pid_text.isdigit() or _process_exists(int(pid_text)):
+                continue
+            path = os.path.join(directory, entry)
+            try:
+                if time.time() - os.lstat(path).st_mtime > ORPHAN_AGE_S:
+                    _unlink(path)
+            except OSError:
+                continue
+
+
+def _process_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True  # someone else's process, or no such pid to ask about: keep its files
+    return True
 
 
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:

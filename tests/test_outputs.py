@@ -393,3 +393,24 @@ def test_a_simulated_csv_and_its_sidecars_are_replaced_together_or_not_at_all(tm
     assert all(
         (tmp_path / name).read_text() != "previous" for name in ("run.csv", "run.truth.json", "run.profile.toml")
     )
+
+
+def test_a_killed_runs_temporary_files_are_removed_by_the_next_run(cli, sample, tmp_path):
+    """SIGKILL leaves `.<name>.<pid>-<hex>.*.tmp` beside the outputs; the next run writing there
+    removes those of processes that are gone (and keeps a live process's, and fresh ones)."""
+    log = tmp_path / "quad.mcap"
+    log.write_bytes(Path(sample("quad_healthy.mcap")).read_bytes())
+    dead = 2**22 + 12345  # above Linux's default pid_max: no such process
+    orphan = tmp_path / f".r.html.{dead}-0badc0de.k3j2.tmp"
+    young = tmp_path / f".r.json.{dead}-0badc0de.a1b2.tmp"
+    alive = tmp_path / f".r.html.{os.getpid()}-12345678.zz.tmp"
+    other = tmp_path / f".notes.txt.{dead}-0badc0de.q.tmp"
+    for path in (orphan, young, alive, other):
+        path.write_text("half a report")
+    old = time.time() - 3600
+    for path in (orphan, alive, other):
+        os.utime(path, (old, old))
+    result = cli("analyze", log, "-o", tmp_path / "r.html", "--json", tmp_path / "r.json", "-q")
+    assert result.exit_code == 0, result.stderr
+    assert not orphan.exists()
+    assert young.exists() and alive.exists() and other.exists()

@@ -96,7 +96,7 @@ def analyze(
     written in every case and says what could not be checked.
     """
     from logscan.align import check_window
-    from logscan.artifacts import cleanup, new_token
+    from logscan.artifacts import cleanup, new_token, remove_orphans
     from logscan.fleet import expand_logs, output_paths, refuse_clobbering, run_many
 
     check_window(start_s, end_s)
@@ -116,6 +116,8 @@ def analyze(
         [*((report_option, r) for r in reports), ("--json", json_path), ("--plotlyjs", plotly_js)], logs, profile_path
     )
     progress = show_progress(quiet)
+    # temporary files a killed run left beside these outputs
+    remove_orphans([p for p in (*reports, json_path, plotly_js) if p and p != "-"])
     token = new_token()  # tags this run's temporary files, wherever a worker wrote them
     task = AnalyzeTask(
         profile_path,
