@@ -14,12 +14,14 @@ import pytest
 from logscan.decimate import DEFAULT_MAX_POINTS
 from logscan.errors import InputError
 from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
+from logscan.report.page import _report_js
 from logscan.results import DetectorResult, FaultEvent
 
 HOSTILE = "<script>alert(1)</script>"
 HOSTILE_SHOWN = "&lt;script&gt;alert(1)&lt;/script&gt;"  # as plotly receives it: text, not markup
 GRID_N = 360_000  # 1 hour at 100 Hz
 BIAS_START = 2000.0  # ground-truth fault, seconds
+OWN_SCRIPTS = 4 + bool(_report_js())  # error recorder, plotly.js, figure JSON, drawing, report.js
 
 
 def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, seed: int = 0) -> ReportInput:
@@ -196,8 +198,9 @@ def test_hostile_names_are_text_never_markup(embedded):
     assert f"nis.{HOSTILE_SHOWN}" in names and f"nis.{HOSTILE}" not in names
     block = re.search(r'id="logscan-figures">(.*?)</script>', embedded, re.S).group(1)
     assert "<" not in block and ">" not in block
-    # exactly the page's own scripts: error recorder, plotly.js, figure JSON, drawing script
-    assert len(re.findall(r"<script\b", embedded, re.I)) == 4
+    # exactly the page's own scripts: error recorder, plotly.js, figure JSON, drawing script,
+    # and templates/report.js when there is one
+    assert len(re.findall(r"<script\b", embedded, re.I)) == OWN_SCRIPTS
 
 
 def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report, embedded):
@@ -364,7 +367,7 @@ def test_a_real_log_with_script_topic_names_shows_them_as_text(tmp_path):
     escaped = "&lt;script&gt;alert(1)&lt;/script&gt;"
     assert f"<li>/{escaped}</li>" in page  # topic list
     assert f"<td>/{escaped}/value</td>" in page  # alarm table: signal names the channel
-    assert len(re.findall(r"<script\b", page, re.I)) == 4
+    assert len(re.findall(r"<script\b", page, re.I)) == OWN_SCRIPTS
 
 
 def test_warm_up_transient_does_not_squash_the_judged_view():

@@ -140,6 +140,8 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
             "signal": alarm.signal,
             "start": f"{start:.3f}",
             "end": f"{end:.3f}",
+            "t0": repr(start),
+            "t1": repr(end),
             "duration": f"{end - start:.3f}",
             "peak": _number(alarm.peak_value),
             "threshold": _number(alarm.peak_threshold),
@@ -165,6 +167,7 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
 def _incident_rows(incidents: Sequence[Incident]) -> list[dict]:
     return [
         {"index": i, "headline": inc.headline, "start": f"{inc.start:.3f}", "end": f"{inc.end:.3f}",
+         "t0": repr(float(inc.start)), "t1": repr(float(inc.end)),
          "n_alarms": len(inc.alarms), "checks": ", ".join(sorted({a.signal for a in inc.alarms}))}
         for i, inc in enumerate(incidents, 1)
     ]  # fmt: skip
@@ -295,6 +298,15 @@ def _environment():
     )
 
 
+def _report_js() -> str:
+    """templates/report.js (the page's interactions), "" when absent; safe inside a <script>."""
+    import logscan.templates
+
+    path = Path(logscan.templates.__file__).parent / "report.js"
+    js = path.read_text(encoding="utf-8") if path.is_file() else ""
+    return js.replace("</script", "<\\/script").replace("</SCRIPT", "<\\/SCRIPT")
+
+
 # --- the page -----------------------------------------------------------------------------------
 
 
@@ -362,6 +374,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         figure_json=figure_json,
         plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
         plotlyjs_src=plotlyjs_src,
+        report_js=_report_js(),
         grid={"n": int(t.size), "dt": _number(float(np.median(np.diff(t))) if t.size > 1 else None)},
     )  # fmt: skip
 
