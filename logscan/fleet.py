@@ -159,7 +159,7 @@ def refuse_clobbering(
     seen_ids = {key: ("input", path) for path in inputs if (key := _file_id(path)) is not None}
     seen_paths = {os.path.realpath(path): ("input", path) for path in inputs}
     for option, path in outputs:
-        if path is None or path == "-":
+        if path is None or path == "-" or _is_char_device(path):  # /dev/null may take every output
             continue
         key, resolved = _file_id(path), os.path.realpath(path)
         clash = (seen_ids.get(key) if key is not None else None) or seen_paths.get(resolved)
@@ -180,6 +180,13 @@ def refuse_clobbering(
         if key is not None:
             seen_ids[key] = (option, path)
         seen_paths[resolved] = (option, path)
+
+
+def _is_char_device(path: str) -> bool:
+    try:
+        return stat.S_ISCHR(os.stat(path).st_mode)
+    except OSError:
+        return False
 
 
 def _input_files(logs: Sequence[str], profile: str | None) -> list[str]:

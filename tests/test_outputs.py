@@ -414,3 +414,11 @@ def test_a_killed_runs_temporary_files_are_removed_by_the_next_run(cli, sample, 
     assert result.exit_code == 0, result.stderr
     assert not orphan.exists()
     assert young.exists() and alive.exists() and other.exists()
+
+
+def test_dev_null_may_take_the_report_and_the_json(cli, sample, tmp_path):
+    log = tmp_path / "quad.mcap"
+    log.write_bytes(Path(sample("quad_healthy.mcap")).read_bytes())
+    result = cli("analyze", log, "-o", "/dev/null", "--json", "/dev/null", "-q")
+    assert result.exit_code == 0, result.stderr
+    assert Path("/dev/null").is_char_device()
