@@ -229,3 +229,30 @@ def test_a_private_record_with_matching_crc_and_statistics_is_skipped_and_the_re
     with open(path, "rb") as fh:
         reader = SeekingReader(fh, validate_crcs=True)
         assert reader.get_summary().statistics.message_count == sum(1 for _ in reader.iter_messages()) == 400
+
+
+def test_a_header_stamp_beyond_int64_nanoseconds_keeps_the_log_time(tmp_path):
+    """--header-stamp: a stamp of 1e300 s, inf or NaN used to become a junk time and a numeric
+    warning; now that message keeps its log_time and the skip is counted."""
+    from mcap.writer import Writer
+
+    from logscan.readers.mcap import read_mcap
+
+    path = tmp_path / "stamped.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh)
+        writer.start()
+        schema = writer.register_schema("S", "jsonschema", b"{}")
+        channel = writer.register_channel("/v", "json", schema)
+        for k in range(50):
+            sec = {10: "1e300", 11: "Infinity", 12: "NaN"}.get(k, str(100 + k))
+            text = f'{{"header": {{"stamp": {{"sec": {sec}, "nanosec": 5}}}}, "x": {k}}}'
+            writer.add_message(channel, 1_000 + k, text.encode(), 1_000 + k)
+        writer.finish()
+    log = read_mcap(path, None, use_header_stamp=True)
+    t = log.channels["/v/x"].t
+    assert 100 * 1_000_000_000 + 5 in t.tolist()  # the first message's stamp
+    assert {1_010, 1_011, 1_012} <= set(t.tolist())  # the three bad stamps kept their log_time
+    assert t.size == 50
+    skipped = {s.what: s for s in log.source.skipped}
+    assert skipped["/v header.stamp"].count == 3

@@ -232,9 +232,11 @@ class _Decoding:
                 self.skips.skip(_channel_name(topic, field_path), why_skipped, count)
             times = log_times
             if self.use_header_stamp:
-                times, used = _header_stamps(flat.columns, log_times)
+                times, used, unfit = _header_stamps(flat.columns, log_times)
                 if used:
                     self.stamp_topics.add(topic)
+                if unfit:
+                    self.skips.skip(f"{topic} header.stamp", "not a time in range (log_time used)", unfit)
             fields = self.fields.setdefault(topic, [])
             for field_path in flat.fields:
                 if field_path not in fields:
@@ -388,24 +390,29 @@ def _decode_all(decoder, datas: list) -> tuple[list[Any], list[int]]:
     return out, failed
 
 
+MAX_STAMP_S = 9.2e9  # header.stamp seconds int64 nanoseconds can hold (2**63 ns ~ 9.22e9 s)
 _STAMP_FIELDS = (
     ("header.stamp.sec", "header.stamp.nanosec"),
     ("header.stamp.secs", "header.stamp.nsecs"),
 )
 
 
-def _header_stamps(columns: dict, log_times: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Per-message time: header.stamp where the message has it, else log_time."""
+def _header_stamps(columns: dict, log_times: np.ndarray) -> tuple[np.ndarray, bool, int]:
+    """Per-message time: header.stamp where the message has it (and it is a time in range),
+    else log_time; also whether any message had one, and how many were out of range."""
     for sec_name, nsec_name in _STAMP_FIELDS:
         if sec_name in columns and nsec_name in columns:
             sec_idx, sec = columns[sec_name]
             nsec_idx, nsec = columns[nsec_name]
             both, in_sec, in_nsec = np.intersect1d(sec_idx, nsec_idx, return_indices=True)
+            sec, nsec = sec[in_sec], nsec[in_nsec]
+            # a stamp int64 ns cannot hold (NaN, inf, 1e300 s) keeps the message's log_time
+            fits = np.isfinite(sec) & np.isfinite(nsec) & (np.abs(sec) < MAX_STAMP_S) & (np.abs(nsec) < 1e12)
             times = log_times.copy()
             # t = sec * 1e9 + nanosec, in integer ns
-            times[both] = sec[in_sec].astype(np.int64) * 1_000_000_000 + nsec[in_nsec].astype(np.int64)
-            return times, both.size > 0
-    return log_times, False
+            times[both[fits]] = sec[fits].astype(np.int64) * 1_000_000_000 + nsec[fits].astype(np.int64)
+            return times, both.size > 0, int(both.size - np.count_nonzero(fits))
+    return log_times, False, 0
 
 
 def _channel_name(topic: str, path: str) -> str:
