@@ -131,6 +131,7 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "yaxis": {
             "title": {"text": plot_text(fig.y_title)},
             "gridcolor": "#eee",
+            "exponentformat": "e",  # 1e-04, never SI prefixes ("100µ") on ratios and statistics
             "type": "log" if fig.log_y else "linear",
             **({"range": list(fig.y_range)} if fig.y_range else {}),
         },
