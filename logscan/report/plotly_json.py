@@ -127,7 +127,10 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "title": {"text": plot_text(fig.title), "font": {"size": 14}},
         "height": 360,
         "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
-        "xaxis": {"title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False},
+        "xaxis": {
+            "title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False,
+            "exponentformat": "none",  # 20000 s, not "20k"
+        },  # fmt: skip
         "yaxis": {
             "title": {"text": plot_text(fig.y_title)},
             "gridcolor": "#eee",
