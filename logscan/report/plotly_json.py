@@ -128,9 +128,11 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "height": 360,
         "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
         "xaxis": {
-            "title": {"text": "time since log start (s)"}, "gridcolor": "#eee", "zeroline": False,
+            "title": {"text": "time since log start (s)"},
+            "gridcolor": "#eee",
+            "zeroline": False,
             "exponentformat": "none",  # 20000 s, not "20k"
-        },  # fmt: skip
+        },
         "yaxis": {
             "title": {"text": plot_text(fig.y_title)},
             "gridcolor": "#eee",
