@@ -130,6 +130,7 @@ class Analysis:
     def report_input(self, grace_s: float | None = None):
         """What the HTML report shows of this log."""
         from logscan.report import ReportInput, report_matches
+        from logscan.report.context import measurement_groups
 
         return ReportInput(
             log_facts=self.log.summary(),
@@ -145,4 +146,5 @@ class Analysis:
             warnings=self.warnings,
             incidents=self.incidents,
             unchecked=self.unchecked + [f.message for f in self.failures],
+            groups=measurement_groups(self.profile, self.prepared.filter_summary()),
         )

@@ -16,6 +16,16 @@ from logscan.decimate import edge_indices
 from logscan.results import DetectorResult
 
 MAX_SPANS = 100  # shaded spans per figure (closer spans are merged for display)
+ALARM_TAIL = "long enough is an alarm (shaded red)"
+
+# Captions of the extra series' figures, by kind (the part of "<prefix>.<kind>" after the last dot,
+# or the extra's own name); others get a generic "for context" caption.
+EXTRA_CAPTIONS = {
+    "per_dof": "Windowed NIS per measurement, per group. Normal: about 1 (the sensor agrees with the "
+    "model's prediction within its noise); well above 1: that sensor disagrees with the prediction.",
+    "coding_vector": "The coding vector: each state's weight in e_x (1/sigma, scaled). For context: no "
+    "threshold applies; a weight that jumps shows the filter's uncertainty in that state changing.",
+}
 NO_BAND = (None, None)
 
 LINE_COLOURS = [
@@ -209,11 +219,13 @@ def _ratio_figure(detector: str, t: np.ndarray, series: dict, bands: dict, alarm
             name, ratio, edge_indices(t, alarm_spans([name])), 1.0,
             {"line": {"color": LINE_COLOURS[i % len(LINE_COLOURS)], "width": 1.2}},
         ))  # fmt: skip
+    log_y = _wants_log_axis([tr.y for tr in traces])
     return Figure(
         title=f"{detector}: statistic / threshold", y_title="statistic / threshold",
         traces=traces, spans=spans,
-        log_y=_wants_log_axis([tr.y for tr in traces]),
-        caption="Each statistic divided by its threshold; above 1 is an exceedance.",
+        log_y=log_y,
+        caption="Each statistic divided by its threshold (1 = on the threshold, dashed line). Normal: below 1 "
+        f"throughout; above 1 long enough is an alarm (shaded red). {'Logarithmic' if log_y else 'Linear'} y axis.",
         hlines=[(1.0, "threshold")],
     )  # fmt: skip
 
@@ -232,7 +244,25 @@ def _band_figure(
             ))  # fmt: skip
     peaks = [float(a.peak_value) for a in result.alarms if a.signal == name]
     y_range = _judged_range(values, *band, peaks)
-    return Figure(f"{result.detector}: {name}", name, traces, spans, y_range=y_range)
+    return Figure(f"{result.detector}: {name}", name, traces, spans, y_range=y_range, caption=band_caption(name, band))
+
+
+def band_caption(name: str, band: tuple) -> str:
+    """One line: what a statistic-with-band figure shows and what normal looks like."""
+    if name.startswith("rejected."):
+        group = name.removeprefix("rejected.")
+        return (
+            f"1 where the filter refused a {group} sample as outside the physical range (and skipped it), "
+            "else 0. Normal: 0 throughout."
+        )
+    upper, lower = band
+    if upper is not None and lower is not None:
+        return f"{name} (blue) inside its threshold band (red). Normal: between the red lines; outside {ALARM_TAIL}."
+    if upper is not None:
+        return f"{name} (blue) against its upper threshold (red). Normal: below the red line; above it {ALARM_TAIL}."
+    if lower is not None:
+        return f"{name} (blue) against its lower threshold (red). Normal: above the red line; below it {ALARM_TAIL}."
+    return f"{name}: no threshold is defined for it, shown for context."
 
 
 def _columns(arr: np.ndarray, block: int = 65_536) -> np.ndarray:
@@ -271,5 +301,8 @@ def _extra_figures(result: DetectorResult, n: int, model: Mapping, spans: dict, 
             for j, (label, column) in enumerate(columns)
         ]  # fmt: skip
         log_y = _wants_log_axis([column for _, column in columns])
-        figures.append(Figure(f"{result.detector}: {kind}", kind, traces, spans, log_y=log_y))
+        caption = EXTRA_CAPTIONS.get(
+            kind, f"{kind}: a supporting series of {result.detector}, for context (no threshold)."
+        )
+        figures.append(Figure(f"{result.detector}: {kind}", kind, traces, spans, log_y=log_y, caption=caption))
     return figures

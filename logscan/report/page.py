@@ -8,23 +8,22 @@ or written once beside the reports (``plotlyjs=<directory>``) and referenced rel
 
 from __future__ import annotations
 
-import datetime as _dt
 import functools
-import json
-import math
 import os
 import urllib.parse
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from logscan import scoring
 from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.errors import InputError
+from logscan.report import overview
+from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
 from logscan.report.figures import Figure, detector_figures, merge_spans
+from logscan.report.margins import Margin, result_margins
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
 from logscan.results import AlarmInterval, DetectorResult, FaultEvent, Incident
 
@@ -52,6 +51,8 @@ class ReportInput:
     warnings:         run-level warnings shown under the verdict.
     incidents:        alarms grouped in time (logscan.incidents), listed before the alarms.
     unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
+    groups:           the profile's measurement groups as used, with the filter's counts
+                      (`logscan.report.context.measurement_groups`). Empty: not shown.
     """
 
     log_facts: dict
@@ -67,6 +68,7 @@ class ReportInput:
     warnings: list[str] = field(default_factory=list)
     incidents: list[Incident] = field(default_factory=list)
     unchecked: list[str] = field(default_factory=list)
+    groups: list[dict] = field(default_factory=list)
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -111,20 +113,6 @@ def report_matches(
     return out
 
 
-def _number(value: Any, digits: int = 4) -> str:
-    if value is None:
-        return "—"
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        return str(value)
-    if math.isnan(x):
-        return "NaN"
-    if math.isinf(x):
-        return "inf" if x > 0 else "-inf"
-    return f"{x:.{digits}g}"
-
-
 def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> list[dict]:
     alarms = flat_alarms(report.results)
     incident_of = {id(alarm): i for i, incident in enumerate(report.incidents, 1) for alarm in incident.alarms}
@@ -143,10 +131,11 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
             "t0": repr(start),
             "t1": repr(end),
             "duration": f"{end - start:.3f}",
-            "peak": _number(alarm.peak_value),
-            "threshold": _number(alarm.peak_threshold),
-            "ratio": _number(alarm.peak_ratio, 3),
+            "peak": number_text(alarm.peak_value),
+            "threshold": number_text(alarm.peak_threshold),
+            "ratio": number_text(alarm.peak_ratio, 3),
             "bound": alarm.bound,
+            "note": overview.alarm_note(alarm),
             "event": None,
             "latency": None,
         }
@@ -155,7 +144,7 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
             hit = match.get("event")
             if hit is not None and 0 <= int(hit) < len(events):
                 row["event"] = events[int(hit)]["label"]
-                row["latency"] = _number(match.get("latency_s"), 3)
+                row["latency"] = number_text(match.get("latency_s"), 3)
         row["incident"] = incident_of.get(id(alarm), "")
         rows.append(row)
     if not incident_of:
@@ -171,61 +160,6 @@ def _incident_rows(incidents: Sequence[Incident]) -> list[dict]:
          "n_alarms": len(inc.alarms), "checks": ", ".join(sorted({a.signal for a in inc.alarms}))}
         for i, inc in enumerate(incidents, 1)
     ]  # fmt: skip
-
-
-# --- facts --------------------------------------------------------------------------------------
-
-
-def _info_rows(info: Mapping) -> list[tuple[str, str]]:
-    rows = []
-    for key, value in info.items():
-        if isinstance(value, np.ndarray):
-            value = value.tolist()
-        text = value if isinstance(value, str) else json.dumps(value, default=str)
-        if len(text) > 400:
-            text = text[:400] + " …"
-        rows.append((str(key), text))
-    return rows
-
-
-def _time_text(ns: Any) -> str:
-    if ns is None:
-        return "—"
-    ns = int(ns)
-    if ns > 10**15:  # absolute epoch time (later than 1970-01-12)
-        stamp = _dt.datetime.fromtimestamp(ns / 1e9, tz=_dt.UTC)
-        return stamp.isoformat(timespec="milliseconds").replace("+00:00", " UTC")
-    return f"{ns / 1e9:.3f} s"
-
-
-def _log_view(facts: Mapping) -> dict:
-    return {
-        "file": str(facts.get("file", "")),
-        "name": os.path.basename(str(facts.get("file", ""))) or "log",
-        "format": str(facts.get("format", "")),
-        "start": _time_text(facts.get("start_ns")),
-        "end": _time_text(facts.get("end_ns")),
-        "duration": _number(facts.get("duration_s"), 6),
-        "n_topics": len(facts.get("topics") or {}),
-        "n_channels": len(facts.get("channels") or {}),
-        "partial": bool(facts.get("partial")),
-        "partial_reason": str(facts.get("partial_reason", "")),
-        "skipped": [
-            f"{s.get('what', '')}: {s.get('why', '')} (x{s.get('count', 1)})" for s in facts.get("skipped") or []
-        ],
-        "warnings": [str(w) for w in facts.get("warnings") or []],
-        "topics": sorted(str(name) for name in (facts.get("topics") or {})),
-    }
-
-
-def _model_view(model: Mapping) -> dict:
-    return {
-        "name": str(model.get("name", "")),
-        "states": [str(s) for s in model.get("states", [])],
-        "inputs": [str(s) for s in model.get("inputs", [])],
-        "groups": [str(g) for g in (model.get("groups") or {})],
-        "params": _info_rows(model.get("params") or {}),
-    }
 
 
 def _verdict_class(verdict: str, n_alarms: int, unchecked: Sequence[str] = ()) -> str:
@@ -310,25 +244,44 @@ def _report_js() -> str:
 # --- the page -----------------------------------------------------------------------------------
 
 
-def _sections(report: ReportInput, t: np.ndarray, truth_spans: list) -> tuple[list[dict], list[tuple[str, Figure]]]:
-    """One section per detector result, and every figure with its element id ("fig-<n>")."""
-    sections, figures = [], []
+def _sections(
+    report: ReportInput, t: np.ndarray, truth_spans: list, margins: Sequence[Margin]
+) -> tuple[list[dict], list[tuple[str, Figure]]]:
+    """One section per detector result, alarmed ones first, and every figure with its element id
+    ("fig-<n>", numbered in page order)."""
+    sections = []
     for result in report.results:
         problems: list[str] = []
         figs = detector_figures(result, t, truth_spans, report.model, problems)
+        own = [m for m in margins if m.detector == result.detector]
         sections.append({
             "detector": result.detector,
             "n_alarms": len(result.alarms),
+            "line": overview.section_line(len(result.alarms), own),
             "warnings": [str(w) for w in result.warnings] + problems,
             "coverage": str(result.info.get("coverage", "")),
-            "info": _info_rows(result.info),
-            "figures": [],
+            "info": info_rows(result.info),
+            "figures": figs,
         })  # fmt: skip
-        for fig in figs:
+    sections, figures = overview.order_sections(sections), []
+    for section in sections:
+        views = []
+        for fig in section["figures"]:
             fig_id = f"fig-{len(figures)}"
-            sections[-1]["figures"].append({"id": fig_id, "title": fig.title, "caption": fig.caption})
+            views.append({"id": fig_id, "title": fig.title, "caption": fig.caption})
             figures.append((fig_id, fig))
+        section["figures"] = views
     return sections, figures
+
+
+def _rejected_counts(results: Sequence[DetectorResult]) -> dict[tuple[str, str], float]:
+    """(detector, statistic) -> samples flagged, for the ``rejected.*`` indicator statistics."""
+    return {
+        (r.detector, name): float(np.nansum(values))
+        for r in results
+        for name, values in r.series.items()
+        if overview.is_rejected(name)
+    }
 
 
 def _event_rows(events: list[dict]) -> list[dict]:
@@ -346,20 +299,24 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     events = [_event_view(e, i, t_end) for i, e in enumerate(report.truth_events)]
     has_truth = bool(events) or bool(report.log_facts.get("has_truth"))
     truth_spans = merge_spans([(e["start"], e["end"]) for e in events], 0.0, 0.0)
-    sections, figures = _sections(report, t, truth_spans)
+    margins = result_margins(report.results, t)
+    sections, figures = _sections(report, t, truth_spans, margins)
     figure_json = figures_json(figures, t, point_budget)
 
     alarms = flat_alarms(report.results)
     rows = _alarm_rows(report, events, has_truth)
-    log = _log_view(report.log_facts)
+    log = log_view(report.log_facts)
     return _environment().get_template("report.html.j2").render(
         title=f"logscan report: {log['name']}",
         log=log,
         profile_text=report.profile_text,
         profile_source=report.profile_source,
-        model=_model_view(report.model),
+        model=model_view(report.model),
         version=report.logscan_version,
         verdict=report.verdict,
+        verdict_lines=overview.verdict_lines(report.incidents, margins),
+        margins=overview.margin_rows(margins, _rejected_counts(report.results)),
+        groups=group_rows(report.groups),
         verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),
         n_alarms=len(alarms),
         warnings=[str(w) for w in report.warnings],
@@ -375,7 +332,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
         plotlyjs_src=plotlyjs_src,
         report_js=_report_js(),
-        grid={"n": int(t.size), "dt": _number(float(np.median(np.diff(t))) if t.size > 1 else None)},
+        grid={"n": int(t.size), "dt": number_text(float(np.median(np.diff(t))) if t.size > 1 else None)},
     )  # fmt: skip
 
 

@@ -1,0 +1,98 @@
+"""The report's overview: what the verdict box says, the margin table, and the detector sections'
+order and one-line summaries.
+
+A reader should see in ten seconds whether something alarmed, when and on which sensor (the
+incidents' headlines in the verdict box), and on a clean log how close each check came (the
+margins). Detectors that alarmed come first and open; the others collapse to one line with their
+closest margin.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from logscan.report.margins import Margin, peak_margin, ratio_text
+from logscan.results import AlarmInterval, Incident
+
+REJECTED_PREFIX = "rejected."  # indicator statistics: 1 where the filter refused a sample
+
+
+def rejected_words(n: int) -> str:
+    """What a ``rejected.<group>`` alarm means, in plain words."""
+    return f"{n} sample{'' if n == 1 else 's'} outside the physical range, the filter skipped them"
+
+
+def is_rejected(signal: str) -> bool:
+    return signal.startswith(REJECTED_PREFIX)
+
+
+def alarm_note(alarm: AlarmInterval) -> str:
+    """Plain words replacing peak / threshold for alarms whose ratio means nothing ("" otherwise)."""
+    return rejected_words(int(alarm.n_exceed)) if is_rejected(alarm.signal) else ""
+
+
+def _where(margin: Margin) -> str:
+    return "" if margin.time is None else f" at {margin.time:.2f} s"
+
+
+def closest_line(margins: Sequence[Margin]) -> str:
+    """'closest to its threshold: nis.all at 0.82x (28.95 s)' over the margins given ("" if none)."""
+    peak = peak_margin([m for m in margins if not is_rejected(m.statistic)])
+    if peak is None:
+        return ""
+    return f"closest to a threshold: {peak.statistic} at {ratio_text(peak.ratio)}x its threshold{_where(peak)}"
+
+
+def verdict_lines(incidents: Sequence[Incident], margins: Sequence[Margin]) -> list[str]:
+    """Lines under the verdict: each incident's headline, or, with none, the closest margin."""
+    if incidents:
+        return [inc.headline for inc in incidents]
+    line = closest_line(margins)
+    return [line[0].upper() + line[1:]] if line else []
+
+
+def margin_rows(margins: Sequence[Margin], series: dict[tuple[str, str], float] | None = None) -> list[dict]:
+    """Rows of the margin table, in the order given; ``series``: (detector, statistic) -> count of
+    rejected samples for ``rejected.*`` statistics."""
+    rows = []
+    for m in margins:
+        note = m.note
+        if is_rejected(m.statistic):
+            note = rejected_words(int((series or {}).get((m.detector, m.statistic), 0)))
+        elif m.ratio is not None and m.ratio > 1 and not m.n_alarms:
+            note = "above 1 too briefly to raise an alarm (persistence or warm-up)"
+        rows.append({
+            "detector": m.detector,
+            "statistic": m.statistic,
+            "kind": m.kind or "—",
+            "ratio": "—" if is_rejected(m.statistic) else ratio_text(m.ratio),
+            "time": "—" if m.time is None or is_rejected(m.statistic) else f"{m.time:.3f}",
+            "value": "—" if m.value is None else f"{m.value:.4g}",
+            "n_alarms": m.n_alarms,
+            "level": _level(m),
+            "note": note,
+        })  # fmt: skip
+    return rows
+
+
+def _level(margin: Margin) -> str:
+    """CSS class of a margin row: "over" (alarmed or above 1), "near" (above 0.8), "" otherwise."""
+    if margin.n_alarms or (margin.ratio is not None and margin.ratio > 1):
+        return "over"
+    if margin.ratio is not None and not math.isnan(margin.ratio) and margin.ratio > 0.8:
+        return "near"
+    return ""
+
+
+def section_line(n_alarms: int, margins: Sequence[Margin]) -> str:
+    """One line for a detector section's heading: its alarms, or its closest margin."""
+    if n_alarms:
+        return f"{n_alarms} alarm{'' if n_alarms == 1 else 's'}"
+    closest = closest_line(margins)
+    return "no alarms" + (f"; {closest}" if closest else "")
+
+
+def order_sections(sections: list[dict]) -> list[dict]:
+    """Sections of detectors that alarmed first (each group in its original order)."""
+    return sorted(sections, key=lambda s: s["n_alarms"] == 0)
