@@ -1,22 +1,28 @@
-"""The report in headless Chromium: every figure rendered, no JavaScript error, hostile names inert.
+"""The report in headless Chromium: every figure rendered, no JavaScript error, hostile names inert,
+one time axis (zoom one figure, all follow; an incident or alarm row zooms them all; reset returns).
 
 Runs Debian's ``chromium`` with ``--dump-dom`` after a virtual-time budget. The page's own inline
 script records window errors, unhandled rejections and console.error into ``<pre id="js-errors">``
 and sets ``<body data-plots-rendered="N">`` once every ``Plotly.newPlot`` promise resolved.
+Interactions are driven by a probe script appended to the page (`PROBE`): it acts as a user would
+(a mouse drag on a plot, a click on a row, Enter on a focused row) and writes every time-series
+figure's x range after each step into the DOM, which the tests read from the dump.
 Skipped (with the reason) when no Chromium is installed; CI installs it in ``.ci/run``.
 """
 
 from __future__ import annotations
 
 import html
+import json
 import re
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
-from test_report import HOSTILE, figures, make_report
+from test_report import HOSTILE, OWN_SCRIPTS, figures, make_report
 
+from logscan.incidents import find_incidents
 from logscan.report import render_report
 
 CHROMIUM = next(
@@ -71,11 +77,17 @@ def console_errors(stderr: str) -> list[str]:
     return [line for line in stderr.splitlines() if "Uncaught" in line or ":CONSOLE" in line and "rror" in line]
 
 
+def report_with_incidents(n: int, **kwargs):
+    report = make_report(n, **kwargs)
+    report.incidents = find_incidents(report.results, None, ["accel", "gps"])
+    return report
+
+
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> dict[str, tuple[str, str, str]]:
     """One-hour report in both plotly.js modes: {mode: (source html, dumped DOM, stderr)}."""
     root = tmp_path_factory.mktemp("browser")
-    report = make_report(60_000)  # 10 minutes: the same figures and point budget as an hour
+    report = report_with_incidents(60_000)  # 10 minutes: the same figures and point budget as an hour
     pages, running = {}, {}
     for mode, option in (("embed", "embed"), ("directory", root / "assets")):
         (root / mode).mkdir()
@@ -106,7 +118,7 @@ def test_hostile_names_stay_text_in_the_browser(rendered):
     _, dom, _ = rendered["embed"]
     assert HOSTILE not in dom  # never became an element
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in dom  # shown as text (tables, legend)
-    assert len(re.findall(r"<script\b", dom, re.I)) == 4  # only the page's own scripts
+    assert len(re.findall(r"<script\b", dom, re.I)) == OWN_SCRIPTS  # only the page's own scripts
 
 
 def test_the_error_recorder_catches_failures(tmp_path):
@@ -122,3 +134,148 @@ def test_the_error_recorder_catches_failures(tmp_path):
     assert "Uncaught ReferenceError: undefinedFunction42 is not defined" in errors
     assert any("undefinedFunction42" in line for line in console_errors(stderr))
     assert not re.search(r'data-plots-rendered="\d+"', dom)
+
+
+# --- one time axis --------------------------------------------------------------------------------
+
+PROBE = """<script>
+/* test probe: acts as a user, writes every time-series figure's x range after each step */
+(function () {
+  function figs() { return Array.prototype.slice.call(document.querySelectorAll(".ls-timeseries")); }
+  function record(step) {
+    var out = document.createElement("pre");
+    out.id = "probe-" + step;
+    out.textContent = JSON.stringify({
+      ranges: figs().map(function (el) { return el.layout.xaxis.autorange ? "auto" : el.layout.xaxis.range; }),
+      events: figs().map(function (el) { return el.probeEvents; }),
+      label: document.querySelector("#ls-zoom span").textContent,
+      reset_disabled: document.getElementById("ls-reset-zoom").disabled,
+      focused: document.activeElement === document.querySelector("#alarm-table tbody tr:last-child"),
+      cursor: getComputedStyle(document.querySelector("#incident-table tbody tr")).cursor
+    });
+    document.body.appendChild(out);
+  }
+  function mouse(type, target, x, y) {
+    target.dispatchEvent(new MouseEvent(type, {bubbles: true, cancelable: true, view: window,
+      clientX: x, clientY: y, button: 0, buttons: type === "mouseup" ? 0 : 1}));
+  }
+  function drag() {  /* a box zoom over the middle fifth of the first figure's time axis */
+    var box = document.querySelector(".ls-timeseries .nsewdrag"), r = box.getBoundingClientRect();
+    var y = r.top + r.height / 2, x0 = r.left + 0.4 * r.width, x1 = r.left + 0.6 * r.width;
+    mouse("mousedown", box, x0, y);
+    mouse("mousemove", document, x0 + 20, y);
+    mouse("mousemove", document, x1, y);
+    mouse("mouseup", document, x1, y);
+  }
+  function enter() {
+    var row = document.querySelector("#alarm-table tbody tr:last-child");
+    row.focus();
+    row.dispatchEvent(new KeyboardEvent("keydown", {key: "Enter", bubbles: true, cancelable: true}));
+  }
+  function count() {  /* plotly_relayout events per figure: a feedback loop would run them up */
+    figs().forEach(function (el) {
+      el.probeEvents = 0;
+      el.on("plotly_relayout", function () { el.probeEvents += 1; });
+    });
+  }
+  var steps = [
+    [null, count],
+    ["start", drag],
+    ["drag", function () { document.querySelector("#incident-table tbody tr").click(); }],
+    ["incident", function () { document.getElementById("ls-reset-zoom").click(); }],
+    ["reset", enter],
+    ["enter", function () {}]
+  ];
+  function run(i) {
+    if (i >= steps.length) { document.body.setAttribute("data-probe-done", "1"); return; }
+    if (steps[i][0]) { record(steps[i][0]); }
+    try { steps[i][1](); } catch (err) { window.logscanError("probe: " + err.message); }
+    setTimeout(function () { run(i + 1); }, 500);
+  }
+  var wait = setInterval(function () {
+    if (document.body.hasAttribute("data-time-axis")) { clearInterval(wait); run(0); }
+  }, 50);
+})();
+</script>"""
+
+
+def probe_steps(dom: str) -> dict[str, dict]:
+    found = re.findall(r'<pre id="probe-(\w+)">(.*?)</pre>', dom, re.S)
+    return {step: json.loads(html.unescape(text)) for step, text in found}
+
+
+@pytest.fixture(scope="module")
+def interacted(tmp_path_factory) -> tuple[dict, str, dict, str]:
+    """The 10-minute report with the probe run: (report incidents/alarms, dumped DOM, steps, stderr)."""
+    root = tmp_path_factory.mktemp("zoom")
+    report = report_with_incidents(60_000, hostile=False)
+    page = root / "report.html"
+    render_report(report, page, plotlyjs=root / "assets")
+    text = page.read_text(encoding="utf-8")
+    head, tail = text.rsplit("</body>", 1)
+    page.write_text(head + PROBE + "</body>" + tail, encoding="utf-8")
+    dom, stderr = dump_dom(page, root / "profile")
+    return report, dom, probe_steps(dom), stderr
+
+
+def expected_zoom(start: float, end: float) -> list[float]:
+    margin = max(2.0, 0.5 * (end - start))
+    return [start - margin, end + margin]
+
+
+def row_interval(dom: str, table_id: str, which: int) -> tuple[float, float]:
+    body = re.search(rf'<table id="{table_id}">.*?<tbody>(.*?)</tbody>', dom, re.S).group(1)
+    rows = re.findall(r'<tr data-start="([^"]+)" data-end="([^"]+)"', body)
+    start, end = rows[which]
+    return float(start), float(end)
+
+
+def test_the_time_axis_works_without_javascript_errors(interacted):
+    _, dom, steps, stderr = interacted
+    assert js_errors(dom) == ""
+    assert console_errors(stderr) == []
+    assert 'data-probe-done="1"' in dom
+    assert list(steps) == ["start", "drag", "incident", "reset", "enter"]
+    n_figures = int(re.search(r'data-time-axis="(\d+)"', dom).group(1))
+    assert n_figures >= 4 and all(len(step["ranges"]) == n_figures for step in steps.values())
+
+
+def test_zooming_one_figure_zooms_every_figure_once(interacted):
+    _, _, steps, _ = interacted
+    assert steps["start"]["ranges"] == ["auto"] * len(steps["start"]["ranges"])
+    assert steps["start"]["reset_disabled"] and steps["start"]["label"] == "full time range"
+    ranges = steps["drag"]["ranges"]
+    first = ranges[0]
+    assert first != "auto" and 0 < first[0] < first[1]
+    assert all(r == pytest.approx(first) for r in ranges)
+    # each figure moved exactly once: the followers' own relayout events are not echoed back
+    assert steps["drag"]["events"] == [1] * len(ranges)
+    assert not steps["drag"]["reset_disabled"]
+    assert steps["drag"]["label"] == f"time {first[0]:.2f} to {first[1]:.2f} s"
+
+
+def test_clicking_the_first_incident_row_zooms_every_figure_around_it(interacted):
+    report, dom, steps, _ = interacted
+    incident = report.incidents[0]
+    assert row_interval(dom, "incident-table", 0) == pytest.approx((incident.start, incident.end))
+    expected = expected_zoom(incident.start, incident.end)
+    for r in steps["incident"]["ranges"]:
+        assert r == pytest.approx(expected)
+        assert r[0] < incident.start and incident.end < r[1]
+    assert steps["incident"]["cursor"] == "pointer"
+
+
+def test_reset_returns_every_figure_to_the_full_time_range(interacted):
+    _, _, steps, _ = interacted
+    assert steps["reset"]["ranges"] == ["auto"] * len(steps["reset"]["ranges"])
+    assert steps["reset"]["reset_disabled"] and steps["reset"]["label"] == "full time range"
+
+
+def test_enter_on_a_focused_alarm_row_zooms_every_figure_to_that_alarm(interacted):
+    _, dom, steps, _ = interacted
+    start, end = row_interval(dom, "alarm-table", -1)
+    assert steps["enter"]["focused"]
+    assert all(r == pytest.approx(expected_zoom(start, end)) for r in steps["enter"]["ranges"])
+    body = re.search(r'<table id="alarm-table">.*?<tbody>(.*?)</tbody>', dom, re.S).group(1)
+    rows = re.findall(r"<tr [^>]*>", body)
+    assert rows and all('tabindex="0"' in row for row in rows)  # every row reachable by Tab

@@ -1,0 +1,128 @@
+/* One time axis for the report's figures (inlined by logscan/report/page.py).
+   Every div.ls-timeseries follows the x range of the one zoomed or panned; a row with
+   data-start/data-end (incidents, alarms) zooms them all to its interval with a margin of
+   max(2 s, 50 % of its span), by click or Enter; "reset zoom" restores each figure's first view.
+   Feedback guard: a follower's own plotly_relayout echoes the range already shared, and is
+   ignored while the followers are being moved. */
+(function () {
+  "use strict";
+  var MIN_MARGIN_S = 2, MARGIN_FRACTION = 0.5;
+  var shared = "auto", syncing = 0, initial = [], full = "auto", label, button;
+
+  function plots() {
+    return Array.prototype.filter.call(document.querySelectorAll(".ls-timeseries"), function (el) {
+      return el._fullLayout && el._fullLayout.xaxis;
+    });
+  }
+  function fail(err) { window.logscanError("zoom failed: " + (err && err.message ? err.message : err)); }
+  function rangeOf(el) {
+    var x = el.layout.xaxis;
+    return x.autorange || !x.range ? "auto" : [Number(x.range[0]), Number(x.range[1])];
+  }
+  function same(a, b) {
+    if (a === "auto" || b === "auto") { return a === b; }
+    var tol = 1e-9 * (Math.abs(a[1] - a[0]) + 1);
+    return Math.abs(a[0] - b[0]) <= tol && Math.abs(a[1] - b[1]) <= tol;
+  }
+  function show(range) {
+    var zoomed = range !== "auto" && !same(range, full);
+    label.textContent = zoomed ? "time " + range[0].toFixed(2) + " to " + range[1].toFixed(2) + " s" : "full time range";
+    button.disabled = !zoomed;
+  }
+  /* Moves every figure but `source` to `range` ("auto": autorange). */
+  function share(range, source) {
+    shared = range;
+    show(range);
+    var update = range === "auto" ? { "xaxis.autorange": true } : { "xaxis.range": range.slice() };
+    syncing += 1;
+    var jobs = plots().filter(function (el) { return el !== source; }).map(function (el) {
+      return Plotly.relayout(el, update);
+    });
+    return Promise.all(jobs).then(function () { syncing -= 1; }, function (err) { syncing -= 1; fail(err); });
+  }
+  function follow(el) {
+    el.on("plotly_relayout", function (event) {
+      var keys = Object.keys(event || {}).join(" ");
+      if (syncing || !/xaxis\.(range|autorange)/.test(keys)) { return; }
+      var range = rangeOf(el);
+      if (!same(range, shared)) { share(range, el); }
+    });
+  }
+  function zoomTo(start, end) {
+    var margin = Math.max(MIN_MARGIN_S, MARGIN_FRACTION * (end - start));
+    var range = [start - margin, end + margin];
+    if (full !== "auto") { range = [Math.max(range[0], full[0]), Math.min(range[1], full[1])]; }
+    return share(range, null);
+  }
+  function reset() {
+    shared = "auto";
+    show("auto");
+    syncing += 1;
+    var jobs = initial.map(function (view) {
+      var update = { "xaxis.range": view.x === "auto" ? null : view.x.slice(), "xaxis.autorange": view.x === "auto" };
+      update[view.yAuto ? "yaxis.autorange" : "yaxis.range"] = view.yAuto ? true : view.y.slice();
+      return Plotly.relayout(view.el, update);
+    });
+    return Promise.all(jobs).then(function () { syncing -= 1; }, function (err) { syncing -= 1; fail(err); });
+  }
+  function rowZoom(row) {
+    var start = parseFloat(row.getAttribute("data-start")), end = parseFloat(row.getAttribute("data-end"));
+    if (!isFinite(start) || !isFinite(end)) { return; }
+    zoomTo(Math.min(start, end), Math.max(start, end));
+    var els = plots(), height = window.innerHeight;
+    var seen = els.some(function (el) { var r = el.getBoundingClientRect(); return r.bottom > 0 && r.top < height; });
+    if (!seen && els.length) { els[0].scrollIntoView({ block: "start" }); }  // show the first figure
+  }
+  function controls() {
+    var style = document.createElement("style");
+    style.textContent = "tr[data-start]{cursor:pointer}tr[data-start]:hover,tr[data-start]:focus{background:#e8f0fb}" +
+      "#ls-zoom{position:fixed;right:1rem;bottom:1rem;z-index:10;background:#fff;border:1px solid #bbb;" +
+      "border-radius:6px;padding:.3rem .6rem;font-size:.85rem;box-shadow:0 1px 4px rgba(0,0,0,.15)}" +
+      "#ls-zoom button{margin-left:.5rem}";
+    document.head.appendChild(style);
+    var bar = document.createElement("div");
+    bar.id = "ls-zoom";
+    bar.setAttribute("role", "group");
+    bar.setAttribute("aria-label", "shared time axis");
+    label = document.createElement("span");
+    label.setAttribute("aria-live", "polite");
+    button = document.createElement("button");
+    button.type = "button";
+    button.id = "ls-reset-zoom";
+    button.textContent = "reset zoom";
+    button.addEventListener("click", reset);
+    bar.appendChild(label);
+    bar.appendChild(button);
+    document.body.appendChild(bar);
+    Array.prototype.forEach.call(document.querySelectorAll("tr[data-start]"), function (row) {
+      row.tabIndex = 0;
+      row.title = "zoom every figure to this interval";
+      row.addEventListener("click", function () { rowZoom(row); });
+      row.addEventListener("keydown", function (event) {
+        if (event.key === "Enter" || event.key === " ") { event.preventDefault(); rowZoom(row); }
+      });
+    });
+  }
+  function start() {
+    var els = plots();
+    if (!els.length) { return; }
+    initial = els.map(function (el) {
+      var y = el.layout.yaxis || {};
+      return { el: el, x: rangeOf(el), yAuto: !!y.autorange || !y.range, y: y.range ? y.range.slice() : null };
+    });
+    var x = els[0]._fullLayout.xaxis.range;
+    full = [Number(x[0]), Number(x[1])];
+    controls();
+    els.forEach(follow);
+    show("auto");
+    document.body.setAttribute("data-time-axis", String(els.length));
+  }
+  function whenDrawn() {
+    if (document.body.hasAttribute("data-plots-rendered")) { return start(); }
+    var observer = new MutationObserver(function () {
+      if (document.body.hasAttribute("data-plots-rendered")) { observer.disconnect(); start(); }
+    });
+    observer.observe(document.body, { attributes: true, attributeFilter: ["data-plots-rendered"] });
+  }
+  if (typeof Plotly !== "undefined") { whenDrawn(); }
+})();
