@@ -1,6 +1,7 @@
 """Detection rate, latency and false alarms of the encoded EKF checks vs. the baseline, e_v, NIS and e_s.
 
-The evaluation behind docs/evaluation.md, in the layout of the encoded-EKF paper's Table III:
+The evaluation behind bench/evaluation_notes.md (summarised in docs/evaluation.md), in the layout
+of the encoded-EKF paper's Table III:
 fresh simulated runs per fault family and model, methods side by side:
 
   A  time-varying encoded state check: e_x with the adaptive band mu +- rho s, together with the
