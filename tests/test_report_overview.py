@@ -4,6 +4,7 @@ captions on every figure, no SI prefixes, rejected samples in plain words, group
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,7 +120,7 @@ def test_the_verdict_names_the_incidents_and_alarmed_detectors_come_first():
     assert page.index("Detector: loud") < page.index("Detector: encoded") < page.index("Detector: quiet")
     # the quiet detector collapses to one line with its margin; figures are numbered in page order
     assert re.search(r'<details class="detector"[^>]*>\s*<summary><h2>Detector: quiet</h2>', page)
-    assert "no alarms; closest to a threshold: e_x at 0x its threshold" in page
+    assert "no alarms; closest to a threshold: e_x peaked at 0 of its threshold (0.00 s)" in page
     ids = re.findall(r'class="figure ls-timeseries" id="(fig-\d+)"', page)
     assert ids == [f"fig-{i}" for i in range(len(ids))] and len(ids) == len(figures(page))
     assert [spec["id"] for spec in figures(page)] == ids
@@ -181,3 +182,13 @@ def test_measurement_groups_as_used_and_topics_read_vs_in_the_log():
     assert "1 read of 2 in the log" in page
     topics = page[page.index('id="log-topics"') :]
     assert topics.index("/imu") < topics.index("in the log, not read") < topics.index("/camera")
+
+
+def test_readme_shows_the_screenshots_the_script_regenerates():
+    root = Path(__file__).resolve().parent.parent
+    readme = (root / "README.md").read_text(encoding="utf-8")
+    script = (root / "docs" / "make_screenshots.py").read_text(encoding="utf-8")
+    for log in ("quad_imu_bias", "quad_healthy"):
+        image = root / "docs" / "images" / f"report_{log}.png"
+        assert f"](docs/images/report_{log}.png)" in readme and f'"{log}"' in script
+        assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and image.stat().st_size < 400_000

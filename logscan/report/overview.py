@@ -32,16 +32,13 @@ def alarm_note(alarm: AlarmInterval) -> str:
     return rejected_words(int(alarm.n_exceed)) if is_rejected(alarm.signal) else ""
 
 
-def _where(margin: Margin) -> str:
-    return "" if margin.time is None else f" at {margin.time:.2f} s"
-
-
 def closest_line(margins: Sequence[Margin]) -> str:
-    """'closest to its threshold: nis.all at 0.82x (28.95 s)' over the margins given ("" if none)."""
+    """'closest to a threshold: nis.all peaked at 0.815 of its threshold (28.95 s)' ("" if none)."""
     peak = peak_margin([m for m in margins if not is_rejected(m.statistic)])
     if peak is None:
         return ""
-    return f"closest to a threshold: {peak.statistic} at {ratio_text(peak.ratio)}x its threshold{_where(peak)}"
+    when = "" if peak.time is None else f" ({peak.time:.2f} s)"
+    return f"closest to a threshold: {peak.statistic} peaked at {ratio_text(peak.ratio)} of its threshold{when}"
 
 
 def verdict_lines(incidents: Sequence[Incident], margins: Sequence[Margin]) -> list[str]:
