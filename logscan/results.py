@@ -139,6 +139,9 @@ class DetectorResult:
     checks: dict[str, str] = field(default_factory=dict)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
     judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
+    # statistic -> (N,) bool, the samples that could raise an alarm (valid, not in warm-up); the
+    # report's margins are taken over these. All True: a read-only broadcast view.
+    judged: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def add_statistic(
         self,
@@ -168,7 +171,9 @@ class DetectorResult:
             t, alarm_options.get("valid"), alarm_options.get("warmup"), alarm_options.get("warmup_s", 0.0)
         )
         # a warm-up or window longer than most of the log leaves the statistic unable to alarm there
-        self.judged_fraction[name] = float((judged & ~in_warmup).sum() / max(judged.sum(), 1)) if n else 1.0
+        alarmable = judged & ~in_warmup
+        self.judged_fraction[name] = float(alarmable.sum() / max(judged.sum(), 1)) if n else 1.0
+        self.judged[name] = np.broadcast_to(True, (n,)) if alarmable.all() else alarmable
         alarms = alarm_intervals(
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )

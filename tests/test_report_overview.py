@@ -68,10 +68,21 @@ def test_one_sided_margins_constant_bands_and_bounds_of_either_sign():
     np.testing.assert_allclose(ratios, expected)
 
 
+def test_samples_that_cannot_alarm_do_not_count_toward_the_margin():
+    e = np.zeros(N)
+    e[:50] = 30.0  # a settling transient in the warm-up
+    e[600] = 0.5
+    e[700] = 40.0  # not a valid sample (e.g. no update of that sensor there)
+    valid = np.ones(N, dtype=bool)
+    valid[700] = False
+    margin = statistic_margin(result_with("e_v", e, upper=1.0, lower=-1.0, warmup_s=1.0, valid=valid), "e_v", T)
+    assert (margin.ratio, margin.time, margin.n_alarms) == (0.5, 6.0, 0)
+
+
 def test_a_statistic_never_evaluated_has_no_margin_and_says_why():
     result = result_with("nis.mag", np.full(N, np.nan), upper=90.0, valid=np.zeros(N, dtype=bool))
     margins = result_margins([result], T)
-    assert margins[0].ratio is None and margins[0].note == "never evaluated against its threshold"
+    assert margins[0].ratio is None and margins[0].note.startswith("never evaluated against its threshold")
 
 
 # --- the page -------------------------------------------------------------------------------------

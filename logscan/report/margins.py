@@ -11,8 +11,9 @@ where the statistic and its threshold are both defined, the largest of:
 - lower bound only: ``e / lower`` for a negative bound, ``lower / e`` for a positive one.
 
 A statistic on the wrong side of zero from a one-sided bound of the other sign, or on a zero-width
-band, is infinitely far (ratio inf); a zero bound has no ratio (the sample is skipped). Samples
-where the statistic is NaN (steps where it is not evaluated) are skipped. Computed on the
+band, is infinitely far (ratio inf); a zero bound has no ratio (the sample is skipped). Only the
+samples that could raise an alarm count (``DetectorResult.judged``: valid, past the warm-up); of
+those, samples where the statistic is NaN (steps where it is not evaluated) are skipped. Computed on the
 statistics as kept for figures: bands are float32, constant ones read-only broadcast views.
 """
 
@@ -94,10 +95,13 @@ def statistic_margin(result: DetectorResult, name: str, t: np.ndarray) -> Margin
         margin.note = "no threshold"
         return margin
     ratio = margin_ratios(values, upper, lower)
+    judged = result.judged.get(name)
+    if judged is not None and np.shape(judged) == (n,):
+        ratio[~np.asarray(judged, dtype=bool)] = np.nan
     ranked = np.where(np.isnan(ratio), -np.inf, ratio)
     peak = int(np.argmax(ranked)) if n else 0
     if n == 0 or ranked[peak] == -np.inf:
-        margin.note = "never evaluated against its threshold"
+        margin.note = "never evaluated against its threshold (no valid sample past the warm-up)"
         return margin
     margin.ratio, margin.time, margin.value = float(ratio[peak]), float(t[peak]), float(values[peak])
     return margin

@@ -58,7 +58,7 @@ def margin_rows(margins: Sequence[Margin], series: dict[tuple[str, str], float] 
         if is_rejected(m.statistic):
             note = rejected_words(int((series or {}).get((m.detector, m.statistic), 0)))
         elif m.ratio is not None and m.ratio > 1 and not m.n_alarms:
-            note = "above 1 too briefly to raise an alarm (persistence or warm-up)"
+            note = "above 1 too briefly to raise an alarm"
         rows.append({
             "detector": m.detector,
             "statistic": m.statistic,
