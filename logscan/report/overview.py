@@ -12,8 +12,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
 from logscan.report.margins import Margin, peak_margin, ratio_text
-from logscan.results import AlarmInterval, Incident
+from logscan.results import AlarmInterval, DetectorResult, Incident
 
 REJECTED_PREFIX = "rejected."  # indicator statistics: 1 where the filter refused a sample
 
@@ -49,14 +51,20 @@ def verdict_lines(incidents: Sequence[Incident], margins: Sequence[Margin]) -> l
     return [line[0].upper() + line[1:]] if line else []
 
 
-def margin_rows(margins: Sequence[Margin], series: dict[tuple[str, str], float] | None = None) -> list[dict]:
-    """Rows of the margin table, in the order given; ``series``: (detector, statistic) -> count of
-    rejected samples for ``rejected.*`` statistics."""
+def margin_rows(margins: Sequence[Margin], results: Sequence[DetectorResult] = ()) -> list[dict]:
+    """Rows of the margin table, in the order given; ``rejected.*`` statistics of ``results`` are
+    given as the count of samples the filter skipped."""
+    rejected = {
+        (r.detector, name): int(np.nansum(values))
+        for r in results
+        for name, values in r.series.items()
+        if is_rejected(name)
+    }
     rows = []
     for m in margins:
         note = m.note
         if is_rejected(m.statistic):
-            note = rejected_words(int((series or {}).get((m.detector, m.statistic), 0)))
+            note = rejected_words(rejected.get((m.detector, m.statistic), 0))
         elif m.ratio is not None and m.ratio > 1 and not m.n_alarms:
             note = "above 1 too briefly to raise an alarm"
         rows.append({

@@ -274,16 +274,6 @@ def _sections(
     return sections, figures
 
 
-def _rejected_counts(results: Sequence[DetectorResult]) -> dict[tuple[str, str], float]:
-    """(detector, statistic) -> samples flagged, for the ``rejected.*`` indicator statistics."""
-    return {
-        (r.detector, name): float(np.nansum(values))
-        for r in results
-        for name, values in r.series.items()
-        if overview.is_rejected(name)
-    }
-
-
 def _event_rows(events: list[dict]) -> list[dict]:
     return [
         {**e, "start": f"{e['start']:.3f}", "end": f"{e['end']:.3f}" + (" (open)" if e["open_ended"] else ""),
@@ -315,7 +305,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         version=report.logscan_version,
         verdict=report.verdict,
         verdict_lines=overview.verdict_lines(report.incidents, margins),
-        margins=overview.margin_rows(margins, _rejected_counts(report.results)),
+        margins=overview.margin_rows(margins, report.results),
         groups=group_rows(report.groups),
         verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),
         n_alarms=len(alarms),
