@@ -10,7 +10,7 @@ closest margin.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -51,9 +51,11 @@ def verdict_lines(incidents: Sequence[Incident], margins: Sequence[Margin]) -> l
     return [line[0].upper() + line[1:]] if line else []
 
 
-def margin_rows(margins: Sequence[Margin], results: Sequence[DetectorResult] = ()) -> list[dict]:
+def margin_rows(
+    margins: Sequence[Margin], results: Sequence[DetectorResult] = (), sections: Mapping[str, str] | None = None
+) -> list[dict]:
     """Rows of the margin table, in the order given; ``rejected.*`` statistics of ``results`` are
-    given as the count of samples the filter skipped."""
+    given as the count of samples the filter skipped; ``sections``: detector -> its section's id."""
     rejected = {
         (r.detector, name): int(np.nansum(values))
         for r in results
@@ -73,6 +75,8 @@ def margin_rows(margins: Sequence[Margin], results: Sequence[DetectorResult] = (
             "kind": m.kind or "—",
             "ratio": "—" if is_rejected(m.statistic) else ratio_text(m.ratio),
             "time": "—" if m.time is None or is_rejected(m.statistic) else f"{m.time:.3f}",
+            "t": "" if m.time is None or is_rejected(m.statistic) else repr(m.time),
+            "section": (sections or {}).get(m.detector, ""),
             "value": "—" if m.value is None else f"{m.value:.4g}",
             "n_alarms": m.n_alarms,
             "level": _level(m),
@@ -99,5 +103,9 @@ def section_line(n_alarms: int, margins: Sequence[Margin]) -> str:
 
 
 def order_sections(sections: list[dict]) -> list[dict]:
-    """Sections of detectors that alarmed first (each group in its original order)."""
-    return sorted(sections, key=lambda s: s["n_alarms"] == 0)
+    """Sections of detectors that alarmed first (each group in its original order), each given its
+    element id "detector-<n>" in that order."""
+    ordered = sorted(sections, key=lambda s: s["n_alarms"] == 0)
+    for i, section in enumerate(ordered, 1):
+        section["id"] = f"detector-{i}"
+    return ordered
