@@ -318,3 +318,12 @@ def test_the_nis_threshold_figures_of_bring_your_own_vehicle():
     assert round(threshold / 10) * 10 == 90
     per_hour = {k: chi2.sf(threshold / k, 30) * 100 * 3600 for k in (1.2, 1.5)}
     assert round(per_hour[1.2]) == 4 and round(per_hour[1.5], -1) == 360, per_hour
+
+
+def test_every_relative_link_of_the_docs_resolves():
+    broken = []
+    for page in sorted(DOCS.glob("*.md")):
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text(encoding="utf-8")):
+            if "://" not in target and not (page.parent / target).exists():
+                broken.append(f"{page.name}: {target}")
+    assert not broken, broken
