@@ -77,7 +77,7 @@ def margin_rows(
             "time": "—" if m.time is None or is_rejected(m.statistic) else f"{m.time:.3f}",
             "t": "" if m.time is None or is_rejected(m.statistic) else repr(m.time),
             "section": (sections or {}).get(m.detector, ""),
-            "value": "—" if m.value is None else f"{m.value:.4g}",
+            "value": "—" if m.value is None or is_rejected(m.statistic) else f"{m.value:.4g}",
             "n_alarms": m.n_alarms,
             "level": _level(m),
             "note": note,
