@@ -203,3 +203,14 @@ def test_readme_shows_the_screenshots_the_script_regenerates():
         image = root / "docs" / "images" / f"report_{log}.png"
         assert f"](docs/images/report_{log}.png)" in readme and f'"{log}"' in script
         assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and image.stat().st_size < 400_000
+
+
+def test_an_installed_logscan_ships_every_template_file():
+    import tomllib
+
+    root = Path(__file__).resolve().parent.parent
+    shipped = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    patterns = shipped["package-data"]["logscan.templates"]
+    files = [p for p in (root / "templates").iterdir() if p.is_file() and p.suffix != ".py"]
+    assert any(p.name == "report.js" for p in files)
+    assert all(any(p.match(pattern) for pattern in patterns) for p in files), (files, patterns)
