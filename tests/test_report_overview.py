@@ -79,6 +79,21 @@ def test_samples_that_cannot_alarm_do_not_count_toward_the_margin():
     assert (margin.ratio, margin.time, margin.n_alarms) == (0.5, 6.0, 0)
 
 
+def test_margins_taken_block_by_block_find_the_peak_in_any_block(monkeypatch):
+    import logscan.report.margins as margins
+
+    rng = np.random.default_rng(3)
+    e = rng.normal(0.0, 1.0, N)
+    e[::7] = np.nan
+    e[901] = 3.9  # the peak, in the last block
+    band = 4.0 + 0.01 * np.sin(T)
+    result = result_with("e_x", e, upper=band, lower=-band, valid=~np.isnan(e))
+    whole = statistic_margin(result, "e_x", T)
+    monkeypatch.setattr(margins, "BLOCK", 64)
+    blocks = statistic_margin(result, "e_x", T)
+    assert (blocks.ratio, blocks.time) == (whole.ratio, whole.time) and whole.time == pytest.approx(9.01)
+
+
 def test_a_statistic_never_evaluated_has_no_margin_and_says_why():
     result = result_with("nis.mag", np.full(N, np.nan), upper=90.0, valid=np.zeros(N, dtype=bool))
     margins = result_margins([result], T)
