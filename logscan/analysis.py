@@ -147,4 +147,5 @@ class Analysis:
             incidents=self.incidents,
             unchecked=self.unchecked + [f.message for f in self.failures],
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
+            context=getattr(self.prepared, "context", None),
         )

@@ -69,6 +69,7 @@ class Prepared:
     traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
     warnings: list[str] = field(default_factory=list)
     _filter_summary: dict | None = None
+    context: Any = None  # logscan.run_context.RunContext: the path and mode the report draws (small)
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
@@ -171,6 +172,7 @@ def prepare(
     from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
+    from logscan.run_context import run_context
 
     step = progress or (lambda message: None)
     path = str(path)
@@ -190,7 +192,7 @@ def prepare(
             hint="check the profile's channels and rate_hz against `logscan inspect`",
         )
     wanted = needs(run) if callable(needs) else needs
-    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run)
+    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=run_context(run, model))
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pytest
 from test_report import HOSTILE, OWN_SCRIPTS, figures, make_report
+from test_run_context import sample_context
 
 from logscan.incidents import find_incidents
 from logscan.report import render_report
@@ -78,8 +79,10 @@ def console_errors(stderr: str) -> list[str]:
 
 
 def report_with_incidents(n: int, **kwargs):
+    """`make_report` with its incidents, a mode channel and a path (the "Context" figures)."""
     report = make_report(n, **kwargs)
     report.incidents = find_incidents(report.results, None, ["accel", "gps"])
+    report.context = sample_context(n, hostile=kwargs.get("hostile", True))
     return report
 
 
@@ -147,6 +150,8 @@ PROBE = """<script>
     out.id = "probe-" + step;
     out.textContent = JSON.stringify({
       ranges: figs().map(function (el) { return el.layout.xaxis.autorange ? "auto" : el.layout.xaxis.range; }),
+      ids: figs().map(function (el) { return el.id; }),
+      path: document.getElementById("ctx-path").layout.xaxis.autorange,
       events: figs().map(function (el) { return el.probeEvents; }),
       label: document.querySelector("#ls-zoom span").textContent,
       reset_disabled: document.getElementById("ls-reset-zoom").disabled,
@@ -279,3 +284,11 @@ def test_enter_on_a_focused_alarm_row_zooms_every_figure_to_that_alarm(interacte
     body = re.search(r'<table id="alarm-table">.*?<tbody>(.*?)</tbody>', dom, re.S).group(1)
     rows = re.findall(r"<tr [^>]*>", body)
     assert rows and all('tabindex="0"' in row for row in rows)  # every row reachable by Tab
+
+
+def test_the_mode_figure_follows_the_time_axis_and_the_path_does_not(interacted):
+    _, _, steps, _ = interacted
+    assert "ctx-mode" in steps["drag"]["ids"] and "ctx-path" not in steps["drag"]["ids"]
+    mode = steps["drag"]["ids"].index("ctx-mode")
+    assert steps["incident"]["ranges"][mode] == steps["incident"]["ranges"][0] != "auto"
+    assert all(step["path"] is True for step in steps.values())  # x/y axes: never moved by time zoom

@@ -22,10 +22,12 @@ from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.errors import InputError
 from logscan.report import overview
 from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
+from logscan.report.context_figures import context_figures
 from logscan.report.figures import Figure, detector_figures, merge_spans
 from logscan.report.margins import Margin, result_margins
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
 from logscan.results import AlarmInterval, DetectorResult, FaultEvent, Incident
+from logscan.run_context import RunContext
 
 PLOTLY_JS_NAME = "plotly.min.js"
 MAX_TABLE_ROWS = 200  # alarm table rows shown; the JSON summary has them all
@@ -53,6 +55,8 @@ class ReportInput:
     unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
     groups:           the profile's measurement groups as used, with the filter's counts
                       (`logscan.report.context.measurement_groups`). Empty: not shown.
+    context:          the run's path and mode (`logscan.run_context.RunContext`), drawn in the
+                      "Context" section (`logscan.report.context_figures`). None: not shown.
     """
 
     log_facts: dict
@@ -69,6 +73,7 @@ class ReportInput:
     incidents: list[Incident] = field(default_factory=list)
     unchecked: list[str] = field(default_factory=list)
     groups: list[dict] = field(default_factory=list)
+    context: RunContext | None = None
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -291,7 +296,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     truth_spans = merge_spans([(e["start"], e["end"]) for e in events], 0.0, 0.0)
     margins = result_margins(report.results, t)
     sections, figures = _sections(report, t, truth_spans, margins)
-    figure_json = figures_json(figures, t, point_budget)
+    context = context_figures(report.context, report.incidents)
+    figure_json = figures_json(figures, t, point_budget, extra=context)
 
     alarms = flat_alarms(report.results)
     rows = _alarm_rows(report, events, has_truth)
@@ -317,7 +323,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         has_truth=has_truth,
         events=_event_rows(events),
         sections=sections,
-        n_figures=len(figures),
+        n_figures=len(figures) + len(context),
+        context=context,
         figure_json=figure_json,
         plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
         plotlyjs_src=plotlyjs_src,

@@ -19,6 +19,12 @@ POINT_BUDGET = 20_000  # plotted points per report, shared by all varying traces
 MIN_POINTS_PER_TRACE = 400
 _F4_MAX = float(np.finfo(np.float32).max)
 
+TIME_AXIS = {
+    "title": {"text": "time since log start (s)"},
+    "gridcolor": "#eee",
+    "zeroline": False,
+    "exponentformat": "none",  # 20000 s, not "20k"
+}
 ALARM_FILL = "rgba(214, 39, 40, 0.18)"
 TRUTH_FILL = "rgba(31, 119, 180, 0.16)"
 
@@ -59,7 +65,7 @@ def plot_text(text: object) -> str:
     return str(text).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
-def _span_trace(name: str, spans: list, fill: str) -> dict:
+def span_trace(name: str, spans: list, fill: str) -> dict:
     """A filled polygon per span on the hidden overlay axis y2 (0..1 covers the plot height)."""
     arr = np.asarray(spans, dtype=np.float64).reshape(-1, 2)
     x = np.column_stack([arr[:, 0], arr[:, 0], arr[:, 1], arr[:, 1], np.full(len(arr), np.nan)])
@@ -96,7 +102,7 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict
     span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL}
     for name, spans in fig.spans.items():
         if spans:
-            data.append(_span_trace(name, spans, span_fills.get(name, ALARM_FILL)))
+            data.append(span_trace(name, spans, span_fills.get(name, ALARM_FILL)))
     t0, t1 = (float(t[0]), float(t[-1])) if t.size else (0.0, 0.0)
     for y_value, name in fig.hlines:
         data.append({
@@ -121,18 +127,11 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict
 
 def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
     """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points)."""
-    import plotly.graph_objects as go
-
     layout = {
         "title": {"text": plot_text(fig.title), "font": {"size": 14}},
         "height": 360,
         "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
-        "xaxis": {
-            "title": {"text": "time since log start (s)"},
-            "gridcolor": "#eee",
-            "zeroline": False,
-            "exponentformat": "none",  # 20000 s, not "20k"
-        },
+        "xaxis": TIME_AXIS,
         "yaxis": {
             "title": {"text": plot_text(fig.y_title)},
             "gridcolor": "#eee",
@@ -147,16 +146,28 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "paper_bgcolor": "white",
         "template": {},
     }
-    figure = go.Figure(data=_trace_data(fig, t, points), layout=layout, skip_invalid=False)
+    return spec_json(_trace_data(fig, t, points), layout)
+
+
+def spec_json(data: list[dict], layout: dict) -> str:
+    """Plotly traces and layout as escaped figure JSON (numpy arrays as typed arrays)."""
+    import plotly.graph_objects as go
+
+    figure = go.Figure(data=data, layout=layout, skip_invalid=False)
     return escape_json(figure.to_json(validate=False, remove_uids=True))
 
 
-def figures_json(figures: list[tuple[str, Figure]], t: np.ndarray, point_budget: int = POINT_BUDGET) -> str:
-    """``[{"id": ..., "figure": ...}, ...]`` for (element id, figure) pairs, under one point budget."""
-    points = allocate_points([fig for _, fig in figures], point_budget)
-    return (
-        "[" + ",".join(f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points)}}}' for fig_id, fig in figures) + "]"
-    )
+def figures_json(
+    figures: list[tuple[str, Figure]], t: np.ndarray, point_budget: int = POINT_BUDGET, extra: list[dict] = ()
+) -> str:
+    """``[{"id": ..., "figure": ...}, ...]`` for (element id, figure) pairs, under one point budget,
+    then the ``extra`` figures already serialised (``{"id", "json", "points"}``, e.g.
+    `logscan.report.context_figures`), whose points come out of the same budget."""
+    budget = max(point_budget - sum(int(spec.get("points", 0)) for spec in extra), 0)
+    points = allocate_points([fig for _, fig in figures], budget)
+    parts = [f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points)}}}' for fig_id, fig in figures]
+    parts += [f'{{"id":"{spec["id"]}","figure":{spec["json"]}}}' for spec in extra]
+    return "[" + ",".join(parts) + "]"
 
 
 def escape_json(text: str) -> str:

@@ -1,0 +1,153 @@
+"""The report's context figures: mode / set-point bands on the shared time axis, and the 2-D path
+with the incidents marked on it (from `logscan.run_context.RunContext`, already decimated)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from logscan.report.plotly_json import TIME_AXIS, plot_text, spec_json
+from logscan.results import Incident
+
+MAX_BAND_VALUES = 12  # a mode with more distinct values is a set-point: drawn as a line only
+MAX_MARKED_INCIDENTS = 50
+MODE_HEIGHT, PATH_HEIGHT = 270, 460
+BAND_FILLS = [
+    "rgba(31,119,180,0.14)", "rgba(255,127,14,0.16)", "rgba(44,160,44,0.14)", "rgba(148,103,189,0.14)",
+    "rgba(140,86,75,0.14)", "rgba(227,119,194,0.14)", "rgba(127,127,127,0.14)", "rgba(188,189,34,0.16)",
+    "rgba(23,190,207,0.14)", "rgba(57,59,121,0.14)", "rgba(99,121,57,0.14)", "rgba(214,39,40,0.12)",
+]  # fmt: skip
+INCIDENT_COLOUR = "#d62728"
+
+_BASE_LAYOUT = {
+    "hovermode": "closest",
+    "plot_bgcolor": "white",
+    "paper_bgcolor": "white",
+    "template": {},
+    "legend": {"orientation": "h", "y": -0.3, "yanchor": "top"},
+}
+
+
+def _spec(spec: dict, data: list[dict], layout: dict) -> dict:
+    """``spec`` with its figure JSON and what it costs in the report's point budget: its size in
+    (x, y) float32 pairs as base64 (32 bytes per 3 points), so the page stays the same size."""
+    text = spec_json(data, layout)
+    return {**spec, "json": text, "points": len(text) * 3 // 32}
+
+
+def _band_trace(name: str, spans: list[tuple[float, float]], fill: str) -> dict:
+    """Spans as a step area on the hidden overlay axis y2 (0..1 spans the plot): 2 points each."""
+    x = np.asarray(spans, dtype=np.float64).reshape(-1)
+    y = np.tile(np.array([1.0, 0.0]), len(spans))
+    return {
+        "type": "scatter", "name": plot_text(name), "x": x.astype(np.float32), "y": y.astype(np.float32),
+        "yaxis": "y2", "mode": "lines", "line": {"width": 0, "shape": "hv"}, "fill": "tozeroy",
+        "fillcolor": fill, "hoverinfo": "skip",
+    }  # fmt: skip
+
+
+def _value_text(value: float) -> str:
+    return f"{value:g}"
+
+
+def mode_figure(mode) -> dict:
+    """The mode channel as a step line, shaded by value when it takes few values."""
+    name = plot_text(mode.channel)
+    values = sorted({v for _, _, v in mode.intervals})
+    banded = bool(mode.intervals) and len(values) <= MAX_BAND_VALUES
+    data = []
+    if banded:
+        for i, value in enumerate(values):
+            spans = [(a, b) for a, b, v in mode.intervals if v == value]
+            data.append(_band_trace(f"{mode.channel} = {_value_text(value)}", spans, BAND_FILLS[i % len(BAND_FILLS)]))
+    data.append({
+        "type": "scatter", "name": name, "x": mode.t.astype(np.float32), "y": mode.value.astype(np.float32),
+        "mode": "lines", "line": {"shape": "hv", "color": "#333", "width": 1.5},
+        "hovertemplate": "%{y:.6g} from %{x:.3f} s",
+    })  # fmt: skip
+    layout = {
+        **_BASE_LAYOUT,
+        "title": {"text": f"mode: {name}", "font": {"size": 14}},
+        "height": MODE_HEIGHT,
+        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},  # left and right as the detector figures: time axes align
+        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
+        "xaxis": {**TIME_AXIS},
+        "yaxis": {"title": {"text": name}, "gridcolor": "#eee", "exponentformat": "e"},
+        "yaxis2": {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True},
+    }
+    caption = (
+        f"The profile's mode channel {mode.channel} on the shared time axis"
+        + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
+        + ". Read an alarm against the mode it happened in."
+    )
+    spec = {"id": "ctx-mode", "title": f"mode: {mode.channel}", "caption": caption, "timeseries": True,
+            "height": MODE_HEIGHT}  # fmt: skip
+    return _spec(spec, data, layout)
+
+
+def _incident_traces(path, incidents: Sequence[Incident]) -> list[dict]:
+    """The path during each incident (red) and a marker where each began, numbered as in the table."""
+    segments_x, segments_y, marks = [], [], []
+    for number, incident in enumerate(incidents[:MAX_MARKED_INCIDENTS], 1):
+        start, end = float(incident.start), float(incident.end)
+        inside = (path.t > start) & (path.t < end)
+        t_seg = np.concatenate([[start], path.t[inside], [end]])
+        segments_x += [*np.interp(t_seg, path.t, path.x), np.nan]
+        segments_y += [*np.interp(t_seg, path.t, path.y), np.nan]
+        x0, y0 = np.interp(start, path.t, path.x), np.interp(start, path.t, path.y)
+        marks.append((float(x0), float(y0), str(number), f"incident {number}: {plot_text(incident.headline)}"))
+    if not marks:
+        return []
+    x, y, label, hover = (list(column) for column in zip(*marks))
+    return [
+        {"type": "scatter", "name": "during an incident", "x": segments_x, "y": segments_y, "mode": "lines",
+         "line": {"color": INCIDENT_COLOUR, "width": 2.5}, "opacity": 0.75, "hoverinfo": "skip"},
+        {"type": "scatter", "name": "incident start", "x": x, "y": y, "mode": "markers+text", "text": label,
+         "textposition": "top right", "hovertext": hover, "hoverinfo": "text",
+         "textfont": {"color": INCIDENT_COLOUR, "size": 14}, "cliponaxis": False,
+         "marker": {"symbol": "x", "size": 14, "color": INCIDENT_COLOUR, "line": {"color": "white", "width": 1}}},
+    ]  # fmt: skip
+
+
+def path_figure(path, incidents: Sequence[Incident]) -> dict:
+    """The 2-D path (equal axes), its start and end, and the incidents on it."""
+    x_name, y_name = plot_text(path.channels[0]), plot_text(path.channels[1])
+    data = [
+        {"type": "scatter", "name": "path", "x": path.x.astype(np.float32), "y": path.y.astype(np.float32),
+         "customdata": path.t.astype(np.float32), "mode": "lines", "line": {"color": "#7f7f7f", "width": 1},
+         "hovertemplate": "(%{x:.2f}, %{y:.2f}) at %{customdata:.1f} s<extra></extra>"},
+        {"type": "scatter", "name": "start / end", "x": [float(path.x[0]), float(path.x[-1])],
+         "y": [float(path.y[0]), float(path.y[-1])], "mode": "markers", "hoverinfo": "text",
+         "hovertext": ["start", "end"],
+         "marker": {"symbol": ["circle", "square"], "size": 10, "color": ["#2ca02c", "#222"]}},
+        *_incident_traces(path, incidents),
+    ]  # fmt: skip
+    layout = {
+        **_BASE_LAYOUT,
+        "title": {"text": f"path: {plot_text(path.group)}", "font": {"size": 14}},
+        "height": PATH_HEIGHT,
+        "margin": {"l": 70, "r": 20, "t": 40, "b": 80},
+        "xaxis": {"title": {"text": x_name}, "gridcolor": "#eee", "zeroline": False},
+        "yaxis": {"title": {"text": y_name}, "gridcolor": "#eee", "zeroline": False, "scaleanchor": "x"},
+    }
+    caption = (
+        f"Where the vehicle was: {path.channels[0]} against {path.channels[1]} (equal scales). "
+        "Red: the path during an incident, x where it began (numbered as in the incident table)."
+    )
+    spec = {"id": "ctx-path", "title": f"path: {path.group}", "caption": caption, "timeseries": False,
+            "height": PATH_HEIGHT}  # fmt: skip
+    return _spec(spec, data, layout)
+
+
+def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
+    """``{"id", "title", "caption", "timeseries", "height", "json", "points"}`` per context figure: the mode
+    when the profile has a mode channel, the path when a group measures position. [] for None."""
+    if context is None:
+        return []
+    figures = []
+    if context.mode is not None:
+        figures.append(mode_figure(context.mode))
+    if context.path is not None:
+        figures.append(path_figure(context.path, incidents))
+    return figures

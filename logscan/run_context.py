@@ -1,0 +1,124 @@
+"""The run's context kept for the report: the vehicle's 2-D path and its mode intervals, small.
+
+The aligned run's arrays are freed once the detectors have run (`logscan.pipeline.Prepared`), so
+what the report shows beside the statistics is extracted right after alignment, decimated:
+
+- the path: the measurement group the model maps directly onto its states named ``x`` and ``y``
+  (a position sensor), its samples where the group had a new one, at most ``MAX_PATH_POINTS``
+  (half evenly in time, half the min/max per bucket of x and of y, so an excursion of one sample
+  stays visible);
+- the mode: the profile's ``[mode]`` channel as intervals of one value (``MAX_MODE_INTERVALS`` at
+  most), or, when it changes more often (a continuous set-point), as a decimated series.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.decimate import decimate_indices
+
+MAX_PATH_POINTS = 1_000
+MAX_MODE_INTERVALS = 200
+MAX_MODE_POINTS = 1_000
+POSITION_STATES = ("x", "y")
+
+
+@dataclass
+class Path2D:
+    """Positions of the vehicle: times (s since the log's start), x and y, and their channels."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    channels: tuple[str, str]
+    group: str
+
+
+@dataclass
+class ModeTrack:
+    """The mode / set-point channel: intervals of one value (start s, end s, value) when there are
+    few, and always a decimated series (t, value) to draw it as a step line."""
+
+    channel: str
+    t: np.ndarray
+    value: np.ndarray
+    intervals: list[tuple[float, float, float]] = field(default_factory=list)  # empty: too many
+    n_changes: int = 0
+
+
+@dataclass
+class RunContext:
+    path: Path2D | None = None
+    mode: ModeTrack | None = None
+
+
+def position_columns(run, model) -> tuple[str, int, int] | None:
+    """(group, column of x, column of y): the first aligned group the model maps directly onto
+    its states ``x`` and ``y``; None when none does."""
+    states = list(getattr(model, "state_names", ()))
+    if not all(name in states for name in POSITION_STATES):
+        return None
+    wanted = [states.index(name) for name in POSITION_STATES]
+    for name, group in run.groups.items():
+        spec = getattr(model, "groups", {}).get(name)
+        direct = list(getattr(spec, "direct_states", ()) or ())
+        if all(i in direct for i in wanted) and group.z.ndim == 2 and group.z.shape[1] == len(direct):
+            return name, direct.index(wanted[0]), direct.index(wanted[1])
+    return None
+
+
+def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
+    """The decimated 2-D path of the position group, or None (no such group, < 2 samples)."""
+    found = position_columns(run, model)
+    if found is None:
+        return None
+    name, cx, cy = found
+    group = run.groups[name]
+    x, y = group.z[:, cx], group.z[:, cy]
+    idx = np.flatnonzero(np.asarray(group.fresh, dtype=bool) & np.isfinite(x) & np.isfinite(y))
+    if idx.size < 2:
+        return None
+    if idx.size > max_points:
+        # half the points evenly in time (the shape), a quarter each on x's and y's extremes
+        even = np.linspace(0, idx.size - 1, max_points // 2).round().astype(np.int64)
+        quarter = max(max_points // 4, 16)
+        extremes = np.union1d(decimate_indices(x[idx], quarter), decimate_indices(y[idx], quarter))
+        idx = idx[np.union1d(even, extremes)]
+    return Path2D(run.t[idx].copy(), x[idx].copy(), y[idx].copy(), (group.channels[cx], group.channels[cy]), name)
+
+
+def _runs(value: np.ndarray) -> np.ndarray:
+    """Start indices of the runs of one value (NaN runs included; NaN equals NaN here)."""
+    nan = np.isnan(value)
+    change = (value[1:] != value[:-1]) & ~(nan[1:] & nan[:-1])
+    return np.concatenate([[0], np.flatnonzero(change) + 1])
+
+
+def mode_of(run, max_intervals: int = MAX_MODE_INTERVALS, max_points: int = MAX_MODE_POINTS) -> ModeTrack | None:
+    """The mode channel as intervals and a decimated series, or None (no mode channel, never defined)."""
+    mode = getattr(run, "mode", None)
+    if mode is None or run.n_steps == 0 or not np.isfinite(mode).any():
+        return None
+    value = np.asarray(mode, dtype=np.float64)
+    t = run.t
+    starts = _runs(value)
+    if starts.size < max_points // 2:  # a step line needs each run's start (and the end before a gap)
+        before_gap = starts[np.isnan(value[starts]) & (starts > 0)] - 1
+        idx = np.unique(np.concatenate([starts, before_gap, [value.size - 1]]))
+    else:
+        idx = decimate_indices(value, max_points, keep=starts, simplify_flat=True)
+    track = ModeTrack(str(run.mode_channel or "mode"), t[idx].copy(), value[idx].copy(), n_changes=starts.size - 1)
+    defined = np.flatnonzero(np.isfinite(value[starts]))
+    if defined.size <= max_intervals:
+        ends = np.append(starts[1:], value.size)[defined]  # a run ends where the next begins
+        begins = starts[defined]
+        t_edge = np.append(t, t[-1] + run.dt)
+        track.intervals = list(zip(t_edge[begins].tolist(), t_edge[ends].tolist(), value[begins].tolist()))
+    return track
+
+
+def run_context(run, model) -> RunContext:
+    """The path and the mode of an aligned run (each None when the run has none)."""
+    return RunContext(path=path_of(run, model), mode=mode_of(run))
