@@ -16,6 +16,11 @@ wrote):
   --profile NAME.toml` must accept it (exit 0 or 1, never a profile error). A ```toml block
   without that line fails the test, so no profile example goes unchecked.
 - ```yaml blocks: GitHub Actions workflows; see tests/test_docs_ci.py.
+- ```python blocks: docs/extending.md's are run by tests/test_extending.py, docs/algorithms.md's
+  appendix script here (on two of the logs of its table).
+
+Also checked here: the figures of bring-your-own-vehicle.md's mean-NIS table and NIS threshold,
+the first-run note quoted by troubleshooting.md, and that every relative link of docs/ resolves.
 """
 
 from __future__ import annotations
@@ -327,3 +332,37 @@ def test_every_relative_link_of_the_docs_resolves():
             if "://" not in target and not (page.parent / target).exists():
                 broken.append(f"{page.name}: {target}")
     assert not broken, broken
+
+
+def test_the_appendix_script_of_algorithms_reproduces_its_table(tmp_path):
+    """docs/algorithms.md's appendix script, run on two of the logs of its table, prints the
+    table's figures for them."""
+    text = (DOCS / "algorithms.md").read_text(encoding="utf-8")
+    appendix = text.split("## Appendix: figures measured for this page", 1)[1]
+    script = next(body for language, body, _ in fenced_blocks_of(appendix) if language == "python")
+    (tmp_path / "figs.py").write_text(script, encoding="utf-8")
+    logs = ("quad_healthy.mcap", "sbw_yaw_rate_bitflip.mcap")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(
+        [sys.executable, "figs.py", *(str(SAMPLES / name) for name in logs)],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    printed = done.stdout.split(str(SAMPLES))[1:]
+    for name, output in zip(logs, printed, strict=True):
+        row = next(line for line in appendix.splitlines() if line.startswith(f"| `{name}`"))
+        std, persist, nis, masked = (cell.strip() for cell in row.strip("|").split("|")[1:])
+        persist, nis, masked = (re.findall(r"\d+", cell) for cell in (persist, nis, masked))
+        assert f"std ratio paper/ours {std}" in output, (name, output)
+        for n, count in zip((1, 2, 3), persist, strict=True):
+            assert f"e_x alarms, n_persist {n}: {count}\n" in output, (name, output)
+        assert f"nis {{}} {nis[0]} alarms" in output and f"0.01}} {nis[1]} alarms" in output, (name, output)
+        assert f"e_x alarms masked {masked[0]}, unmasked {masked[1]}" in output, (name, output)
+
+
+def fenced_blocks_of(text: str) -> list[tuple[str, str, int]]:
+    return [(m.group(1), m.group(2), text.count("\n", 0, m.start()) + 1) for m in FENCE.finditer(text)]
