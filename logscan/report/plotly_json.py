@@ -6,6 +6,11 @@ whatever the log length. Every name shown in a figure (trace names, titles, axis
 through `plot_text`: plotly draws ``<a href>``, ``<b>``, ``<br>`` in them as markup, and names come
 from logs and profiles. The JSON has every ``<``, ``>`` and ``&`` escaped, so it can sit inside a
 ``<script>`` element.
+
+Zooming to an incident or alarm (templates/report.js: its span with a margin of max(2 s, 50 %))
+would show a long log's overview decimation, a few points per window; so a quarter of each
+decimated trace's points is spent inside those windows (`focus_windows`), when they cover at most
+a fifth of the log.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.decimate import DEFAULT_MAX_POINTS, decimate_indices
-from logscan.report.figures import Figure
+from logscan.report.figures import Figure, merge_spans
 
 POINT_BUDGET = 20_000  # plotted points per report, shared by all varying traces
 MIN_POINTS_PER_TRACE = 400
@@ -25,6 +30,10 @@ TIME_AXIS = {
     "zeroline": False,
     "exponentformat": "none",  # 20000 s, not "20k"
 }
+ZOOM_MARGIN_S, ZOOM_MARGIN_FRACTION = 2.0, 0.5  # as templates/report.js zooms to a row's span
+INCIDENT_GAP_S = 1.0  # alarms this close form one incident (logscan.incidents.DEFAULT_GAP_S)
+FOCUS_SHARE = 0.25  # of a decimated trace's points, spent inside the zoom windows
+MAX_FOCUS_FRACTION = 0.2  # no focus when the windows cover more of the log than this
 ALARM_FILL = "rgba(214, 39, 40, 0.18)"
 TRUTH_FILL = "rgba(31, 119, 180, 0.16)"
 
@@ -96,8 +105,46 @@ def allocate_points(figures: list[Figure], budget: int) -> dict[int, int]:
     }
 
 
-def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict]:
+def focus_windows(figures: list[Figure], t: np.ndarray) -> np.ndarray:
+    """(k, 2) sorted disjoint windows a click on an alarm or incident row zooms to: every figure's
+    alarm spans and their groups, widened by the zoom margin; empty when they would cover more
+    than MAX_FOCUS_FRACTION of the log (alarms everywhere: the overview is the view)."""
+    spans = [span for fig in figures for span in fig.spans.get("alarm", [])]
+    if not spans or t.size < 2:
+        return np.zeros((0, 2))
+    spans += merge_spans(spans, 0.0, INCIDENT_GAP_S)
+    arr = np.asarray(spans, dtype=np.float64).reshape(-1, 2)
+    margin = np.maximum(ZOOM_MARGIN_S, ZOOM_MARGIN_FRACTION * (arr[:, 1] - arr[:, 0]))
+    windows = np.asarray(merge_spans(np.column_stack([arr[:, 0] - margin, arr[:, 1] + margin]).tolist(), 0.0, 0.0))
+    covered = float(np.sum(windows[:, 1] - windows[:, 0])) if windows.size else 0.0
+    if covered > MAX_FOCUS_FRACTION * float(t[-1] - t[0]):
+        return np.zeros((0, 2))
+    return windows.reshape(-1, 2)
+
+
+def _in_windows(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
+    """Mask of ``x`` inside any of the sorted disjoint ``windows``."""
+    if windows.size == 0:
+        return np.zeros(x.size, dtype=bool)
+    i = np.searchsorted(windows[:, 0], x, side="right") - 1
+    return (i >= 0) & (x <= windows[np.maximum(i, 0), 1])
+
+
+def _decimated(x: np.ndarray, y: np.ndarray, keep: np.ndarray, max_points: int, windows: np.ndarray) -> np.ndarray:
+    """Indices drawing ``y``: the whole under ``max_points``, FOCUS_SHARE of them inside ``windows``."""
+    n_focus = int(max_points * FOCUS_SHARE)
+    focus = y.size > max_points and n_focus >= 16
+    inside = np.flatnonzero(_in_windows(x, windows)) if focus else np.zeros(0, dtype=np.int64)
+    if inside.size <= n_focus:  # not decimated, or the windows hold few samples: drawn in full below
+        overview = decimate_indices(y, max_points - inside.size, keep=keep, simplify_flat=True)
+        return np.union1d(overview, inside)
+    overview = decimate_indices(y, max_points - n_focus, keep=keep, simplify_flat=True)
+    return np.union1d(overview, inside[decimate_indices(y[inside], n_focus, simplify_flat=True)])
+
+
+def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> list[dict]:
     """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines."""
+    windows = np.zeros((0, 2)) if windows is None else windows
     data: list[dict] = []
     span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL}
     for name, spans in fig.spans.items():
@@ -112,7 +159,7 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict
     for trace in fig.traces:
         max_points = points.get(id(trace), DEFAULT_MAX_POINTS)
         x, y, keep = _defined_samples(t, trace.y, trace.keep)
-        idx = decimate_indices(y, max_points, keep=keep, simplify_flat=True)
+        idx = _decimated(x, y, keep, max_points, windows)
         data.append({
             "type": "scatter",
             "name": plot_text(trace.name),
@@ -125,8 +172,9 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int]) -> list[dict
     return data
 
 
-def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
-    """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points)."""
+def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> str:
+    """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points),
+    part of them inside the zoom ``windows`` (`focus_windows`)."""
     layout = {
         "title": {"text": plot_text(fig.title), "font": {"size": 14}},
         "height": 360,
@@ -146,7 +194,7 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int]) -> str:
         "paper_bgcolor": "white",
         "template": {},
     }
-    return spec_json(_trace_data(fig, t, points), layout)
+    return spec_json(_trace_data(fig, t, points, windows), layout)
 
 
 def spec_json(data: list[dict], layout: dict) -> str:
@@ -165,7 +213,8 @@ def figures_json(
     `logscan.report.context_figures`), whose points come out of the same budget."""
     budget = max(point_budget - sum(int(spec.get("points", 0)) for spec in extra), 0)
     points = allocate_points([fig for _, fig in figures], budget)
-    parts = [f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points)}}}' for fig_id, fig in figures]
+    windows = focus_windows([fig for _, fig in figures], t)
+    parts = [f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points, windows)}}}' for fig_id, fig in figures]
     parts += [f'{{"id":"{spec["id"]}","figure":{spec["json"]}}}' for spec in extra]
     return "[" + ",".join(parts) + "]"
 
