@@ -8,13 +8,9 @@ duplicate timestamps dropped keeping the last, non-finite samples removed and co
 onto the grid with one compiled merge pass (numba): z[k] is the latest sample at or before t_k when it is no
 older than the staleness limit, else NaN.
 
-Time sanity (docs/algorithms.md section 8.1): the grid spans where the input and measurement
-channels are dense. A run of samples split from the rest of its channel by a gap over
-``_OUTLIER_GAP_SPACINGS`` median spacings (and over ``_OUTLIER_MIN_GAP_S``), holding at most
-``_OUTLIER_MAX_SHARE`` of the channel's samples and lying outside the span of every channel's
-largest run by more than that gap, is an outlying run (a clock jump, a bad timestamp): it is
-dropped with a warning. A grid over ``MAX_GRID_STEPS`` steps is an InputError, computed before
-anything is allocated; ``start_s``/``end_s`` cut the grid to a window of the log.
+Time sanity (`logscan.time_sanity`, docs/algorithms.md section 8.1): the grid spans where the
+input and measurement channels are dense (outlying runs dropped with a warning), its size is
+checked before anything is allocated, and ``start_s``/``end_s`` cut it to a window of the log.
 """
 
 from __future__ import annotations
@@ -24,7 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 
-from logscan.errors import InputError, UsageError
+from logscan.time_sanity import MAX_GRID_STEPS, check_window, dense_span, grid, outlier_warnings, outlying_runs
 
 
 @dataclass
@@ -97,13 +93,6 @@ class AlignedRun:
 _NS = 1_000_000_000
 _NEVER_STALE_NS = np.iinfo(np.int64).max // 4  # stale_s = inf
 _MAX_GAP_WARNINGS = 20
-# A 24-hour log at 100 Hz is 8.64e6 steps; 1e8 steps of a 12-state trace would take tens of GB.
-MAX_GRID_STEPS = 50_000_000
-_OUTLIER_GAP_SPACINGS = 1000  # a break in a channel: a gap over 1000 median spacings ...
-_OUTLIER_MIN_GAP_S = 10.0  # ... and over 10 s
-_OUTLIER_MAX_SHARE = 0.01  # an outlying run holds at most 1% of its channel's samples (at least one)
-_OUTLIER_MIN_SAMPLES = 50  # shorter channels are not searched for outliers
-_INT64 = np.iinfo(np.int64)
 
 
 @dataclass
@@ -220,55 +209,6 @@ def _gaps(t_ns: np.ndarray, limit_ns: int, grid_ns: np.ndarray) -> tuple[np.ndar
     return starts, ends
 
 
-def outlying_runs(t_ns: np.ndarray) -> tuple[tuple[int, int], np.ndarray, np.ndarray, int]:
-    """Split sorted unique times at breaks: gaps over max(_OUTLIER_GAP_SPACINGS x the median
-    spacing, _OUTLIER_MIN_GAP_S). Returns (index range [lo, hi) of the largest run, lo and hi
-    of the runs holding at most _OUTLIER_MAX_SHARE of the samples (at least one sample), and the
-    break gap in ns). Channels under _OUTLIER_MIN_SAMPLES samples are one run."""
-    n = int(t_ns.size)
-    none = np.empty(0, np.int64)
-    if n < _OUTLIER_MIN_SAMPLES:
-        return (0, n), none, none, 0
-    # exact differences of sorted int64 times, even across the whole int64 range (mod 2**64)
-    step = (t_ns[1:].view(np.uint64) - t_ns[:-1].view(np.uint64)).astype(np.float64)
-    gap = max(_OUTLIER_GAP_SPACINGS * float(np.median(step)), _OUTLIER_MIN_GAP_S * _NS)
-    bounds = np.concatenate(([0], np.flatnonzero(step > gap) + 1, [n]))
-    sizes = np.diff(bounds)
-    main = int(np.argmax(sizes))
-    tiny = sizes <= max(1.0, _OUTLIER_MAX_SHARE * n)
-    tiny[main] = False
-    return (int(bounds[main]), int(bounds[main + 1])), bounds[:-1][tiny], bounds[1:][tiny], int(gap)
-
-
-def check_window(start_s: float | None, end_s: float | None) -> None:
-    """UsageError unless --start/--end are finite and end > start (checked before any log is read)."""
-    for flag, value in (("--start", start_s), ("--end", end_s)):
-        if value is not None and not np.isfinite(value):
-            raise UsageError(f"{flag} {value} is not a finite number of seconds since the log's start")
-    if start_s is not None and end_s is not None and end_s <= start_s:
-        raise UsageError(f"--end {end_s:g} must be after --start {start_s:g} (seconds since the log's start)")
-
-
-def _span_text(seconds: float) -> str:
-    for unit, size in (("days", 86_400.0), ("h", 3_600.0), ("min", 60.0)):
-        if seconds >= 2 * size:
-            return f"{seconds / size:.3g} {unit}"
-    return f"{seconds:.3g} s"
-
-
-def _sci(x: float) -> str:
-    """1.0e8, not 1.0e+08."""
-    mantissa, exponent = f"{x:.1e}".split("e") if np.isfinite(x) else (str(x), "0")
-    return f"{mantissa}e{int(exponent)}"
-
-
-def _when(seconds: np.ndarray) -> str:
-    """Up to three times (s since the log's start), with days when they are far."""
-    shown = [seconds[0], seconds[1], seconds[-1]] if seconds.size > 3 else list(seconds)
-    text = [f"{s:.3f} s" + (f" ({s / 86_400.0:+.1f} days)" if abs(s) >= 86_400.0 else "") for s in shown]
-    return ", ".join(text[:2]) + ", ..., " + text[2] if seconds.size > 3 else ", ".join(text)
-
-
 class _Aligner:
     """Holds every channel the profile names onto one grid, cleaning each channel once."""
 
@@ -304,56 +244,16 @@ class _Aligner:
         return self.cache[name]
 
     def span(self, names: list[str]) -> tuple[int, int]:
-        """(first, last) ns of the ``names`` after dropping their outlying runs: those that
-        `outlying_runs` finds and that lie outside the span of every channel's largest run by
-        more than their channel's break gap."""
-        found = {}
-        for name in dict.fromkeys(names):
-            c = self.clean(name)
-            if c.t.size:
-                found[name] = (c, outlying_runs(c.t))
-        if not found:
-            raise InputError(
-                "none of the profile's input and measurement channels has a finite sample",
-                path=self.log.source.path,
-                hint="check the profile's channels with `logscan inspect`",
-            )
-        bulk_lo = min(int(c.t[main[0]]) for c, (main, *_) in found.values())
-        bulk_hi = max(int(c.t[main[1] - 1]) for c, (main, *_) in found.values())
-        for name, (c, (_, lo, hi, gap)) in found.items():
-            # int64 bounds (Python ints: no overflow) outside which a tiny run is dropped
-            below, above = max(bulk_lo - gap, int(_INT64.min)), min(bulk_hi + gap, int(_INT64.max))
-            far = (c.t[hi - 1] < below) | (c.t[lo] > above)
-            if not far.any():
-                continue
-            marks = np.zeros(c.t.size + 1, np.int64)
-            marks[lo[far]] += 1
-            marks[hi[far]] -= 1
-            drop = np.cumsum(marks[:-1]) > 0
+        """(first, last) ns of the ``names`` where they are dense (`time_sanity.dense_span`); the
+        outlying samples are dropped from the cleaned channels and kept in ``dropped``."""
+        times = {name: self.clean(name).t for name in dict.fromkeys(names) if self.clean(name).t.size}
+        first, last, drops, self.ends = dense_span(times, self.log.source.path)
+        for name, drop in drops.items():
+            c = self.cache[name]
             self.dropped[name] = c.t[drop]
             keep = ~drop
             self.cache[name] = replace(c, t=c.t[keep], values=c.values[keep], outliers=int(drop.sum()))
-        self.ends = (
-            min(found, key=lambda name: int(self.cache[name].t[0])),
-            max(found, key=lambda name: int(self.cache[name].t[-1])),
-        )
-        return int(self.cache[self.ends[0]].t[0]), int(self.cache[self.ends[1]].t[-1])
-
-    def outlier_warnings(self) -> None:
-        """One warning per set of channels that lost the same outlying times (e.g. one CSV row)."""
-        same: dict[tuple, list[str]] = {}
-        for name, times in self.dropped.items():
-            same.setdefault((times.size, int(times[0]), int(times[-1])), []).append(name)
-        for names in same.values():
-            times = self.dropped[names[0]]
-            shown = ", ".join(repr(n) for n in names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
-            kept = self.cache[names[0]].t.size
-            self.warnings.append(
-                f"channel{'s' if len(names) > 1 else ''} {shown}: {times.size} outlying "
-                f"sample{'s' if times.size > 1 else ''} dropped at t={_when((times - self.start_ns) / _NS)}, "
-                f"far from the other {kept} samples (a clock jump or a bad timestamp); the grid spans "
-                "where the channels are dense"
-            )
+        return first, last
 
     def hold(self, name: str | None, grid_ns: np.ndarray, limit_s: float, transform=None, z=None, fresh=None):
         n = grid_ns.size
@@ -411,40 +311,6 @@ class _Aligner:
         )
 
 
-def _grid(aligner: _Aligner, first: int, last: int, rate_hz: float, window) -> tuple[np.ndarray, int]:
-    """The grid first + round(k * dt) ns for k = k0 .. k0 + N - 1, cut to ``window`` (start_s,
-    end_s since aligner.start_ns, either None); its size is checked before anything is allocated."""
-    path = aligner.log.source.path
-    dt_ns = _NS / rate_hz
-    lo, hi = first, last
-    if window is not None:
-        start_s, end_s = window
-        # Python ints: exact at epoch magnitudes (float64 ns there are 256 ns apart)
-        if start_s is not None:
-            lo = max(lo, aligner.start_ns + round(start_s * _NS))
-        if end_s is not None:
-            hi = min(hi, aligner.start_ns + round(end_s * _NS))
-        if hi - lo < dt_ns:
-            span = f"{(first - aligner.start_ns) / _NS:.3f} .. {(last - aligner.start_ns) / _NS:.3f} s"
-            raise InputError(
-                f"the window --start {start_s} --end {end_s} holds no two grid steps of the log's channels ({span})",
-                path=path,
-                hint="give --start/--end in seconds since the log's start, within its span",
-            )
-    k0 = int(np.ceil((lo - first) / dt_ns - 1e-9))  # the full grid's first point in the window
-    steps = (hi - first) / dt_ns - k0  # float: no overflow whatever the span or rate
-    if not steps < MAX_GRID_STEPS:
-        raise InputError(
-            f"span {_span_text((hi - lo) / _NS)} at {rate_hz:g} Hz = {_sci(steps)} steps, over the analysis "
-            f"grid's limit of {_sci(MAX_GRID_STEPS)} (channels from {aligner.ends[0]!r} to {aligner.ends[1]!r})",
-            path=path,
-            hint="check the time unit or pass --start/--end",
-        )
-    n = max(int(np.floor(steps + 1e-9)) + 1, 0)
-    # g_k = g_0 + round(k * dt) in integer ns (exact for any log length float64 can index)
-    return first + np.round((k0 + np.arange(n)) * dt_ns).astype(np.int64), k0
-
-
 def align(log, profile, *, start_s: float | None = None, end_s: float | None = None) -> AlignedRun:
     """Put ``log`` onto ``profile``'s analysis grid (see the module docstring for the rules),
     from ``start_s`` to ``end_s`` seconds since the log's start when given.
@@ -467,9 +333,10 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
     if early and start_ns <= max(early):  # the log's start is an outlier: count from the grid's
         start_ns = first
     aligner.start_ns = start_ns
-    aligner.outlier_warnings()
+    kept = {name: aligner.cache[name].t.size for name in aligner.dropped}
+    aligner.warnings.extend(outlier_warnings(aligner.dropped, kept, start_ns))
     window = None if start_s is None and end_s is None else (start_s, end_s)
-    grid_ns, k0 = _grid(aligner, first, last, rate, window)
+    grid_ns, k0 = grid(first, last, rate, window, start_ns, aligner.ends, log.source.path)
     n = grid_ns.size
     dt = 1.0 / rate
     t = (first - start_ns) / _NS + (k0 + np.arange(n)) * dt
@@ -573,3 +440,6 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         channel_stats=stats,
         window=window,
     )
+
+
+__all__ = ["MAX_GRID_STEPS", "AlignedGroup", "AlignedRun", "align", "check_window", "hold", "outlying_runs"]
