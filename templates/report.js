@@ -1,7 +1,8 @@
 /* One time axis for the report's figures (inlined by logscan/report/page.py).
    Every div.ls-timeseries follows the x range of the one zoomed or panned; a row with
    data-start/data-end (incidents, alarms) zooms them all to its interval with a margin of
-   max(2 s, 50 % of its span), by click or Enter; "reset zoom" restores each figure's first view.
+   max(2 s, 50 % of its span), by click or Enter, and so does a click on an incident marker of the
+   path figure (#ctx-path, customdata [start, end]); "reset zoom" restores each figure's first view.
    Feedback guard: a follower's own plotly_relayout echoes the range already shared, and is
    ignored while the followers are being moved. */
 (function () {
@@ -114,6 +115,13 @@
     full = [Number(x[0]), Number(x[1])];
     controls();
     els.forEach(follow);
+    var path = document.getElementById("ctx-path");
+    if (path && path.on) {
+      path.on("plotly_click", function (event) {
+        var span = event && event.points && event.points[0] && event.points[0].customdata;
+        if (span && span.length === 2) { zoomTo(Number(span[0]), Number(span[1])); }
+      });
+    }
     show("auto");
     document.body.setAttribute("data-time-axis", String(els.length));
   }

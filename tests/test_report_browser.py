@@ -177,6 +177,11 @@ PROBE = """<script>
     row.focus();
     row.dispatchEvent(new KeyboardEvent("keydown", {key: "Enter", bubbles: true, cancelable: true}));
   }
+  function clickPathMarker() {  /* plotly's click event on the path's first incident marker */
+    var el = document.getElementById("ctx-path");
+    var marks = el.data.filter(function (trace) { return trace.name === "incident start"; })[0];
+    el.emit("plotly_click", {points: [{customdata: marks.customdata[0], pointIndex: 0}]});
+  }
   function count() {  /* plotly_relayout events per figure: a feedback loop would run them up */
     figs().forEach(function (el) {
       el.probeEvents = 0;
@@ -189,7 +194,8 @@ PROBE = """<script>
     ["drag", function () { document.querySelector("#incident-table tbody tr").click(); }],
     ["incident", function () { document.getElementById("ls-reset-zoom").click(); }],
     ["reset", enter],
-    ["enter", function () {}]
+    ["enter", clickPathMarker],
+    ["path", function () {}]
   ];
   function run(i) {
     if (i >= steps.length) { document.body.setAttribute("data-probe-done", "1"); return; }
@@ -240,7 +246,7 @@ def test_the_time_axis_works_without_javascript_errors(interacted):
     assert js_errors(dom) == ""
     assert console_errors(stderr) == []
     assert 'data-probe-done="1"' in dom
-    assert list(steps) == ["start", "drag", "incident", "reset", "enter"]
+    assert list(steps) == ["start", "drag", "incident", "reset", "enter", "path"]
     n_figures = int(re.search(r'data-time-axis="(\d+)"', dom).group(1))
     assert n_figures >= 4 and all(len(step["ranges"]) == n_figures for step in steps.values())
 
@@ -292,3 +298,10 @@ def test_the_mode_figure_follows_the_time_axis_and_the_path_does_not(interacted)
     mode = steps["drag"]["ids"].index("ctx-mode")
     assert steps["incident"]["ranges"][mode] == steps["incident"]["ranges"][0] != "auto"
     assert all(step["path"] is True for step in steps.values())  # x/y axes: never moved by time zoom
+
+
+def test_clicking_an_incident_on_the_path_zooms_the_time_axis_to_it(interacted):
+    report, _, steps, _ = interacted
+    first = report.incidents[0]
+    assert steps["enter"]["ranges"][0] != pytest.approx(expected_zoom(first.start, first.end))  # moved from
+    assert all(r == pytest.approx(expected_zoom(first.start, first.end)) for r in steps["path"]["ranges"])

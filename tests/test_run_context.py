@@ -118,7 +118,8 @@ def test_the_report_draws_the_mode_on_the_time_axis_and_the_path_with_incidents(
     path = specs["ctx-path"]
     assert path["layout"]["yaxis"]["scaleanchor"] == "x"
     marks = next(tr for tr in path["data"] if tr["name"] == "incident start")
-    assert marks["text"] == ["1"] and marks["hovertext"] == ["incident 1: accel &lt;b&gt;x&lt;/b&gt;"]
+    assert marks["text"] == ["1"] and marks["hovertext"][0].startswith("incident 1: accel &lt;b&gt;x&lt;/b&gt;<br>")
+    assert marks["customdata"] == [[100.0, 101.0]]  # a click zooms the time axis to the incident
     x0 = float(array(marks["x"])[0])
     assert x0 == pytest.approx(50 * np.cos(1.0), abs=0.1)  # where the vehicle was at 100 s
     assert HOSTILE not in page

@@ -96,15 +96,16 @@ def _incident_traces(path, incidents: Sequence[Incident]) -> list[dict]:
         segments_x += [*np.interp(t_seg, path.t, path.x), np.nan]
         segments_y += [*np.interp(t_seg, path.t, path.y), np.nan]
         x0, y0 = np.interp(start, path.t, path.x), np.interp(start, path.t, path.y)
-        marks.append((float(x0), float(y0), str(number), f"incident {number}: {plot_text(incident.headline)}"))
+        hover = f"incident {number}: {plot_text(incident.headline)}<br>click: zoom the time axis to it"
+        marks.append((float(x0), float(y0), str(number), hover, [start, end]))
     if not marks:
         return []
-    x, y, label, hover = (list(column) for column in zip(*marks))
+    x, y, label, hover, spans = (list(column) for column in zip(*marks))
     return [
         {"type": "scatter", "name": "during an incident", "x": segments_x, "y": segments_y, "mode": "lines",
          "line": {"color": INCIDENT_COLOUR, "width": 2.5}, "opacity": 0.75, "hoverinfo": "skip"},
         {"type": "scatter", "name": "incident start", "x": x, "y": y, "mode": "markers+text", "text": label,
-         "textposition": "top right", "hovertext": hover, "hoverinfo": "text",
+         "textposition": "top right", "hovertext": hover, "hoverinfo": "text", "customdata": spans,
          "textfont": {"color": INCIDENT_COLOUR, "size": 14}, "cliponaxis": False,
          "marker": {"symbol": "x", "size": 14, "color": INCIDENT_COLOUR, "line": {"color": "white", "width": 1}}},
     ]  # fmt: skip
@@ -133,7 +134,8 @@ def path_figure(path, incidents: Sequence[Incident]) -> dict:
     }
     caption = (
         f"Where the vehicle was: {path.channels[0]} against {path.channels[1]} (equal scales). "
-        "Red: the path during an incident, x where it began (numbered as in the incident table)."
+        "Red: the path during an incident, x where it began (numbered as in the incident table; "
+        "click one to zoom the time axis to it)."
     )
     spec = {"id": "ctx-path", "title": f"path: {path.group}", "caption": caption, "timeseries": False,
             "height": PATH_HEIGHT}  # fmt: skip
