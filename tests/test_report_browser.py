@@ -172,6 +172,11 @@ PROBE = """<script>
     mouse("mousemove", document, x1, y);
     mouse("mouseup", document, x1, y);
   }
+  function doubleClick() {  /* plotly's own reset: a double click on the last figure's plot area */
+    var all = document.querySelectorAll(".ls-timeseries .nsewdrag"), box = all[all.length - 1];
+    var r = box.getBoundingClientRect(), x = r.left + r.width / 2, y = r.top + r.height / 2;
+    [0, 1].forEach(function () { mouse("mousedown", box, x, y); mouse("mouseup", document, x, y); });
+  }
   function enter() {
     var row = document.querySelector("#alarm-table tbody tr:last-child");
     row.focus();
@@ -195,7 +200,8 @@ PROBE = """<script>
     ["incident", function () { document.getElementById("ls-reset-zoom").click(); }],
     ["reset", enter],
     ["enter", clickPathMarker],
-    ["path", function () {}]
+    ["path", doubleClick],
+    ["dblclick", function () {}]
   ];
   function run(i) {
     if (i >= steps.length) { document.body.setAttribute("data-probe-done", "1"); return; }
@@ -246,7 +252,7 @@ def test_the_time_axis_works_without_javascript_errors(interacted):
     assert js_errors(dom) == ""
     assert console_errors(stderr) == []
     assert 'data-probe-done="1"' in dom
-    assert list(steps) == ["start", "drag", "incident", "reset", "enter", "path"]
+    assert list(steps) == ["start", "drag", "incident", "reset", "enter", "path", "dblclick"]
     n_figures = int(re.search(r'data-time-axis="(\d+)"', dom).group(1))
     assert n_figures >= 4 and all(len(step["ranges"]) == n_figures for step in steps.values())
 
@@ -305,3 +311,10 @@ def test_clicking_an_incident_on_the_path_zooms_the_time_axis_to_it(interacted):
     first = report.incidents[0]
     assert steps["enter"]["ranges"][0] != pytest.approx(expected_zoom(first.start, first.end))  # moved from
     assert all(r == pytest.approx(expected_zoom(first.start, first.end)) for r in steps["path"]["ranges"])
+
+
+def test_a_double_click_on_any_figure_returns_every_figure_to_the_full_range(interacted):
+    _, _, steps, _ = interacted
+    assert steps["path"]["ranges"][-1] != "auto"
+    assert steps["dblclick"]["ranges"] == ["auto"] * len(steps["dblclick"]["ranges"])
+    assert steps["dblclick"]["reset_disabled"]
