@@ -327,3 +327,33 @@ def test_gaps_are_the_sample_free_stretches_longer_than_the_limit(times, g0, spa
     edges = [before[-1] if before else g0] + [x for x in t_ns if g0 <= x <= g0 + span] + [g0 + span]
     expected = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b - a > limit]
     assert list(zip(starts.tolist(), ends.tolist())) == expected
+
+
+def test_onboard_columns_of_one_topic_are_held_at_their_own_rate():
+    """Columns sharing their sample times are a HeldTable (samples at their own rate plus a row
+    per grid step) that reads exactly like the dense held array; others stay dense."""
+    from logscan.align import HeldTable
+
+    t = np.arange(0, 1001, 20)
+    late = np.arange(5, 1001, 20)
+    toml = SPEED + '\n[onboard]\nstate = "/ekf/state"\nvariance = "/ekf/var"\nstale_s = 0.025\n'
+    channels = {
+        "/force": force_100hz(),
+        "/speed": (np.arange(0, 1001, 100), np.zeros(11)),
+        "/ekf/state[0]": (t[t < 500], t[t < 500] * 1.0),  # stops at 480 ms: stale after 505 ms
+        "/ekf/state[1]": (t[t < 500], t[t < 500] * 2.0),
+        "/ekf/var/pos": (t, t * 3.0),
+        "/ekf/var/vel": (late, late * 4.0),  # other times: dense
+    }
+    r = run(channels, toml)
+    table = r.onboard_state
+    assert isinstance(table, HeldTable) and table.samples.shape == (25, 2) and table.shape == (101, 2)
+    assert isinstance(r.onboard_variance, np.ndarray)
+    dense = np.asarray(table)
+    for j, name in enumerate(["/ekf/state[0]", "/ekf/state[1]"]):
+        times, values = channels[name]
+        expected, _ = hold(times * 1_000_000, values, np.arange(101) * 10_000_000, 25_000_000)
+        np.testing.assert_array_equal(dense[:, j], expected)
+    np.testing.assert_array_equal(table[10:20], dense[10:20])
+    np.testing.assert_array_equal(table[7], dense[7])
+    assert np.isnan(dense[60:]).all() and np.isfinite(dense[:49]).all()
