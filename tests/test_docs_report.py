@@ -26,6 +26,9 @@ PARTS = {
     "Shaded red: alarm intervals; shaded blue: ground-truth faults": "Shaded red: alarm intervals",
     "**measurement groups used**": "Measurement groups used",
     "**mean NIS per update**": "mean NIS per update",
+    "## Context": 'id="context"',
+    "`[mode]` channel": 'aria-label="mode: /flight_mode/mode"',
+    "the path is\ndrawn from above": 'aria-label="path: position"',
     "## Log, profile and model": 'id="log-facts"',
 }
 
