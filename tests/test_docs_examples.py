@@ -366,3 +366,13 @@ def test_the_appendix_script_of_algorithms_reproduces_its_table(tmp_path):
 
 def fenced_blocks_of(text: str) -> list[tuple[str, str, int]]:
     return [(m.group(1), m.group(2), text.count("\n", 0, m.start()) + 1) for m in FENCE.finditer(text)]
+
+
+USER_PAGES = ("bring-your-own-vehicle", "reading-the-report", "ci", "models", "troubleshooting", "evaluation")
+
+
+@pytest.mark.parametrize("name", USER_PAGES)
+def test_user_pages_name_no_commits(name):
+    """User pages describe the installed logscan: no commit hashes (lab notes go to bench/)."""
+    text = (DOCS / f"{name}.md").read_text(encoding="utf-8")
+    assert not re.findall(r"\bcommit\b|\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*\d)[0-9a-f]{7,40}\b", text), name
