@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
 from logscan.time_sanity import MAX_GRID_STEPS, check_window, dense_span, grid, outlier_warnings, outlying_runs
 
 
@@ -491,3 +492,5 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
 
 
 __all__ = ["MAX_GRID_STEPS", "AlignedGroup", "AlignedRun", "align", "check_window", "hold", "outlying_runs"]
+
+follow_dependencies(__name__)  # the cached hold kernels are stamped with time_sanity's source too
