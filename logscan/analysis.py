@@ -148,4 +148,5 @@ class Analysis:
             unchecked=self.unchecked + [f.message for f in self.failures],
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
             context=getattr(self.prepared, "context", None),
+            innovations=getattr(self.prepared, "innovations", None),
         )

@@ -70,6 +70,7 @@ class Prepared:
     warnings: list[str] = field(default_factory=list)
     _filter_summary: dict | None = None
     context: Any = None  # logscan.run_context.RunContext: the path and mode the report draws (small)
+    innovations: Any = None  # logscan.sensor_views.Innovations: the report's measured-vs-predicted figures
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
@@ -236,17 +237,21 @@ def detect(
     grace_s: float = 1.0,
     progress: Progress | None = None,
     free_series: bool = False,
+    sensor_views: bool = False,
 ):
     """Run the detectors on a prepared log, merge their alarm fragments into incidents, say what
     could not be checked, and score the alarms when the log carries ground truth. A detector that
     raises is named in ``analysis.failures``; the others' results are kept. ``free_series``: free
     each large series once no detector still to run reads it (`release_unread`; the prepared log
-    then serves no further detector)."""
+    then serves no further detector). ``sensor_views``: pack the EKF's innovations, when it kept
+    them, for the report (`Prepared.innovations`, `logscan.sensor_views`)."""
     from logscan.analysis import Analysis
     from logscan.coverage import unchecked_reasons
     from logscan.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
 
     step = progress or (lambda message: None)
+    if sensor_views:
+        _pack_innovations(prepared, detectors, reuse_samples=free_series)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     policy = prepared.profile.alarm_policy
     for position, detector in enumerate(detectors):
@@ -273,6 +278,27 @@ def detect(
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     _score(analysis, [d.name for d in detectors], grace_s)
     return analysis
+
+
+def _pack_innovations(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:
+    """`Prepared.innovations` from the EKF trace's innovations and the groups' samples; with
+    ``reuse_samples``, into the samples' own buffer when no detector reads them (they are dropped)."""
+    import numpy as np
+
+    from logscan.filters.ekf import samples_side_by_side
+    from logscan.sensor_views import pack_innovations
+
+    trace, run = prepared.trace, prepared.run
+    if trace is None or trace.y is None or trace.S_diag is None:
+        return
+    samples = None
+    if reuse_samples and all(d.reads is not None and "z" not in d.reads for d in detectors):
+        samples = samples_side_by_side(run, trace.group_names, trace.group_offsets, trace.group_sizes)
+    prepared.innovations = pack_innovations(run, trace, samples)
+    if samples is not None:  # the buffer now holds the pack: no group may read it as samples
+        for group in (*run.groups.values(), *run.redundant.values()):
+            if isinstance(group.z, np.ndarray) and group.z.base is samples:
+                group.z = None
 
 
 def release_unread(prepared: Prepared, still_to_run: Sequence) -> None:
@@ -350,12 +376,27 @@ def analyze_log(
     start_s: float | None = None,
     end_s: float | None = None,
     free_series: bool = False,
+    sensor_views: bool = False,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
     ``start_s``/``end_s``: a window of the log (seconds since its start); ``free_series``: see
-    `detect`."""
+    `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
+    figures (`logscan.sensor_views`), when a detector runs the EKF."""
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
-    prepared = prepare(path, loaded, needs_of(detectors), progress=progress, notice=notice, **options)
-    return detect(prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series)
+    needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
+    prepared = prepare(path, loaded, needs, progress=progress, notice=notice, **options)
+    return detect(
+        prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series, sensor_views=sensor_views
+    )
+
+
+def _with_innovations(needs: Callable[[Any], Needs]) -> Callable[[Any], Needs]:
+    """``needs`` plus the EKF's innovations, when the EKF runs at all."""
+
+    def wanted(run) -> Needs:
+        base = needs(run)
+        return base | Needs.of(ekf=("y",)) if base.wants("ekf") else base
+
+    return wanted

@@ -26,6 +26,8 @@ PARTS = {
     "Shaded red: alarm intervals; shaded blue: ground-truth faults": "Shaded red: alarm intervals",
     "**measurement groups used**": "Measurement groups used",
     "**mean NIS per update**": "mean NIS per update",
+    "`accel: /imu/accel.x measured vs predicted`": 'aria-label="accel: /imu/accel.x measured vs predicted"',
+    "normalised innovation": 'aria-label="accel: normalised innovation per channel"',
     "## Context": 'id="context"',
     "`[mode]` channel": 'aria-label="mode: /flight_mode/mode"',
     "the path is\ndrawn from above": 'aria-label="path: position"',

@@ -245,6 +245,7 @@ class AnalyzeTask:
             start_s=self.start_s,
             end_s=self.end_s,
             free_series=True,  # nothing reads the filter's series after the detectors
+            sensor_views=report_path is not None,
         )
         summary = analysis.summary()
         summary["exit_code"] = int(analysis.exit_code(self.allow_partial))

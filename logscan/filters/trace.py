@@ -43,8 +43,8 @@ class EkfTrace:
     x_post: np.ndarray  # (N, n)
     P_prior_diag: np.ndarray  # (N, n) float32
     P_post_diag: np.ndarray  # (N, n) float32
-    y: np.ndarray | None  # (N, m_total) innovation z - h(x_prior), NaN where not updated (None: not kept)
-    S_diag: np.ndarray | None  # (N, m_total) diagonal of S, NaN where not updated (None: not kept)
+    y: np.ndarray | None  # (N, m_total) float32 innovation z - h(x_prior), NaN where not updated (None: not kept)
+    S_diag: np.ndarray | None  # (N, m_total) float32 diagonal of S, NaN where not updated (None: not kept)
     nis: np.ndarray  # (N,) y^T S^-1 y over the stacked update, NaN without update
     nis_group: np.ndarray  # (N, G) y_g^T S_gg^-1 y_g per group, NaN where not updated
     m_k: np.ndarray  # (N,) int, measurements in the update (0: none)

@@ -44,6 +44,7 @@ class Trace:
     weight: float
     style: dict
     varying: bool = True
+    t: np.ndarray | None = None  # the samples' own times, when they are not the whole grid
 
 
 @dataclass
@@ -126,7 +127,7 @@ def _wants_log_axis(columns: Sequence[np.ndarray]) -> bool:
     return max(highs) / min(lows) > 1e3
 
 
-def _judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray | None, peaks: list[float]):
+def judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray | None, peaks: list[float]):
     """Initial y range for a statistic and its band, when a settling transient (warm-up, the first
     adaptive windows) would otherwise squash the rest of the plot; None: plotly's autorange.
 
@@ -177,9 +178,7 @@ def detector_figures(
     shaded on every figure.
     """
     n = t.size
-    dt = float(np.median(np.diff(t))) if n > 1 else 0.0
-    span_len = float(t[-1] - t[0]) if n > 1 else 0.0
-    min_width, min_gap = max(dt, span_len / 2000.0), span_len / 5000.0
+    min_width, min_gap = span_limits(t)
     alarms = result.alarms
     series = _grid_series(result, n, problems)
     bands = _bands(result, n, problems)
@@ -202,6 +201,15 @@ def detector_figures(
         ]
     figures.extend(_extra_figures(result, n, model, shading(list(series)), problems))
     return figures
+
+
+def span_limits(t: np.ndarray) -> tuple[float, float]:
+    """(min_width, min_gap) of shaded spans on the grid ``t``: a step or 1/2000 of the log wide at
+    least, merged when closer than 1/5000 of it (`merge_spans`)."""
+    n = t.size
+    dt = float(np.median(np.diff(t))) if n > 1 else 0.0
+    span_len = float(t[-1] - t[0]) if n > 1 else 0.0
+    return max(dt, span_len / 2000.0), span_len / 5000.0
 
 
 def _positive_upper_only(band: tuple) -> bool:
@@ -243,7 +251,7 @@ def _band_figure(
                 varying=not _is_piecewise_flat(side),
             ))  # fmt: skip
     peaks = [float(a.peak_value) for a in result.alarms if a.signal == name]
-    y_range = _judged_range(values, *band, peaks)
+    y_range = judged_range(values, *band, peaks)
     return Figure(f"{result.detector}: {name}", name, traces, spans, y_range=y_range, caption=band_caption(name, band))
 
 

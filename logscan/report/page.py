@@ -26,8 +26,10 @@ from logscan.report.context_figures import context_figures
 from logscan.report.figures import Figure, detector_figures, merge_spans
 from logscan.report.margins import Margin, result_margins
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
+from logscan.report.sensor_figures import named_group_figures
 from logscan.results import AlarmInterval, DetectorResult, FaultEvent, Incident
 from logscan.run_context import RunContext
+from logscan.sensor_views import Innovations
 
 PLOTLY_JS_NAME = "plotly.min.js"
 MAX_TABLE_ROWS = 200  # alarm table rows shown; the JSON summary has them all
@@ -57,6 +59,9 @@ class ReportInput:
                       (`logscan.report.context.measurement_groups`). Empty: not shown.
     context:          the run's path and mode (`logscan.run_context.RunContext`), drawn in the
                       "Context" section (`logscan.report.context_figures`). None: not shown.
+    innovations:      the EKF's packed innovations (`logscan.sensor_views.Innovations`): a group
+                      an alarm names is drawn (measured vs predicted, per channel) in the first
+                      section whose alarms name it. None: not drawn.
     """
 
     log_facts: dict
@@ -74,6 +79,7 @@ class ReportInput:
     unchecked: list[str] = field(default_factory=list)
     groups: list[dict] = field(default_factory=list)
     context: RunContext | None = None
+    innovations: Innovations | None = None
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -255,9 +261,12 @@ def _sections(
     """One section per detector result, alarmed ones first, and every figure with its element id
     ("fig-<n>", numbered in page order)."""
     sections = []
+    drawn: set[str] = set()  # groups whose sensor figures are placed
     for result in report.results:
         problems: list[str] = []
         figs = detector_figures(result, t, truth_spans, report.model, problems)
+        # the sensor beside the statistic: right after the statistic's figure
+        figs[1:1] = named_group_figures(result, report.innovations, t, truth_spans, drawn)
         own = [m for m in margins if m.detector == result.detector]
         sections.append({
             "detector": result.detector,

@@ -22,6 +22,7 @@ from logscan.report.figures import Figure, merge_spans
 
 POINT_BUDGET = 20_000  # plotted points per report, shared by all varying traces
 MIN_POINTS_PER_TRACE = 400
+MIN_POINTS_FLOOR = 100
 _F4_MAX = float(np.finfo(np.float32).max)
 
 TIME_AXIS = {
@@ -96,20 +97,24 @@ def span_trace(name: str, spans: list, fill: str) -> dict:
 
 
 def allocate_points(figures: list[Figure], budget: int) -> dict[int, int]:
-    """Points per varying trace (by id), proportional to weight, within [MIN, DEFAULT_MAX]."""
+    """Points per varying trace (by id), proportional to weight, within [floor, DEFAULT_MAX]; the
+    floor is MIN_POINTS_PER_TRACE, lowered (to MIN_POINTS_FLOOR at least) when that many traces at
+    the floor would spend more than half the budget (the sensor figures of several groups)."""
     varying = [tr for fig in figures for tr in fig.traces if tr.varying]
     total_weight = sum(tr.weight for tr in varying) or 1.0
-    return {
-        id(tr): int(min(DEFAULT_MAX_POINTS, max(MIN_POINTS_PER_TRACE, budget * tr.weight / total_weight)))
-        for tr in varying
-    }
+    floor = max(MIN_POINTS_FLOOR, min(MIN_POINTS_PER_TRACE, budget // max(2 * len(varying), 1)))
+    return {id(tr): int(min(DEFAULT_MAX_POINTS, max(floor, budget * tr.weight / total_weight))) for tr in varying}
 
 
 def focus_windows(figures: list[Figure], t: np.ndarray) -> np.ndarray:
     """(k, 2) sorted disjoint windows a click on an alarm or incident row zooms to: every figure's
     alarm spans and their groups, widened by the zoom margin; empty when they would cover more
     than MAX_FOCUS_FRACTION of the log (alarms everywhere: the overview is the view)."""
-    spans = [span for fig in figures for span in fig.spans.get("alarm", [])]
+    return zoom_windows([span for fig in figures for span in fig.spans.get("alarm", [])], t)
+
+
+def zoom_windows(spans: list, t: np.ndarray) -> np.ndarray:
+    """`focus_windows` of these alarm spans."""
     if not spans or t.size < 2:
         return np.zeros((0, 2))
     spans += merge_spans(spans, 0.0, INCIDENT_GAP_S)
@@ -122,7 +127,7 @@ def focus_windows(figures: list[Figure], t: np.ndarray) -> np.ndarray:
     return windows.reshape(-1, 2)
 
 
-def _in_windows(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
+def in_windows(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
     """Mask of ``x`` inside any of the sorted disjoint ``windows``."""
     if windows.size == 0:
         return np.zeros(x.size, dtype=bool)
@@ -134,7 +139,7 @@ def _decimated(x: np.ndarray, y: np.ndarray, keep: np.ndarray, max_points: int, 
     """Indices drawing ``y``: the whole under ``max_points``, FOCUS_SHARE of them inside ``windows``."""
     n_focus = int(max_points * FOCUS_SHARE)
     focus = y.size > max_points and n_focus >= 16
-    inside = np.flatnonzero(_in_windows(x, windows)) if focus else np.zeros(0, dtype=np.int64)
+    inside = np.flatnonzero(in_windows(x, windows)) if focus else np.zeros(0, dtype=np.int64)
     if inside.size <= n_focus:  # not decimated, or the windows hold few samples: drawn in full below
         overview = decimate_indices(y, max_points - inside.size, keep=keep, simplify_flat=True)
         return np.union1d(overview, inside)
@@ -158,7 +163,7 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.
         })  # fmt: skip
     for trace in fig.traces:
         max_points = points.get(id(trace), DEFAULT_MAX_POINTS)
-        x, y, keep = _defined_samples(t, trace.y, trace.keep)
+        x, y, keep = _defined_samples(t if trace.t is None else trace.t, trace.y, trace.keep)
         idx = _decimated(x, y, keep, max_points, windows)
         data.append({
             "type": "scatter",

@@ -1,0 +1,110 @@
+"""The sensor beside the statistic: figures of a measurement group an alarm names.
+
+Per channel of the group, the measured value against the filter's prediction h(x_prior) with its
++-k sigma band of S; then one figure of every channel's normalised innovation y_i / sigma_i
+(`logscan.sensor_views`). The legend carries the channel names from the log.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from logscan.decimate import decimate_indices, edge_indices
+from logscan.incidents import group_of
+from logscan.report.figures import LINE_COLOURS, Figure, Trace, judged_range, merge_spans, span_limits
+from logscan.report.plotly_json import in_windows, zoom_windows
+from logscan.results import DetectorResult
+from logscan.sensor_views import K_SIGMA, Innovations, SensorView
+
+BAND_FILL = "rgba(255, 127, 14, 0.18)"
+PREDICTED_COLOUR = "#ff7f0e"
+MEASURED_COLOUR = "#1f77b4"
+REDUCED_POINTS = 4_000  # per series, before the page's own decimation
+
+
+def named_group_figures(
+    result: DetectorResult, innovations: Innovations | None, t: np.ndarray, truth_spans: list, drawn: set[str]
+) -> list[Figure]:
+    """The sensor figures of the groups ``result``'s alarms name (in the order they first alarm)
+    that are not in ``drawn`` (added to it: a group is drawn once per report)."""
+    if innovations is None:
+        return []
+    by_group: dict[str, list] = {}
+    for alarm in sorted(result.alarms, key=lambda a: a.start):
+        group = group_of(alarm.signal, innovations.group_names)
+        if group is not None and group not in drawn:
+            by_group.setdefault(group, []).append((float(alarm.start), float(alarm.end)))
+    figures = []
+    min_width, min_gap = span_limits(t)
+    for group, alarm_spans in by_group.items():
+        drawn.add(group)
+        spans = {"alarm": merge_spans(alarm_spans, min_width, min_gap), "ground truth": truth_spans}
+        figures.extend(sensor_figures(innovations.view(group), t, spans, alarm_spans))
+    return figures
+
+
+def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(times, indices): the steps drawing ``series`` (same length as ``t``), without keeping them
+    all until the page is written: the steps where the first series is defined, at most
+    REDUCED_POINTS per series (min/max per bucket) plus every one inside the zoom ``windows``
+    (the page decimates again under its point budget)."""
+    steps = np.flatnonzero(np.isfinite(series[0]))
+    if steps.size > REDUCED_POINTS:
+        chosen = [decimate_indices(s[steps], REDUCED_POINTS, simplify_flat=True) for s in series]
+        inside = np.flatnonzero(in_windows(t[steps], windows))
+        steps = steps[np.unique(np.concatenate([*chosen, inside]))]
+    return t[steps], steps
+
+
+def sensor_figures(view: SensorView, t: np.ndarray, spans: dict, alarm_spans: Sequence) -> list[Figure]:
+    """The figures of one group: one per channel (measured vs predicted), then the normalised
+    innovations; ``spans`` shaded as on the statistic's figure, ``alarm_spans`` (the alarms
+    naming the group) kept in full around them."""
+    windows = zoom_windows(list(alarm_spans), t)
+    k = K_SIGMA
+    figures, normalised = [], []
+    for j, channel in enumerate(view.channels):
+        predicted, measured = view.predicted[:, j], view.measured[:, j]
+        half = np.float32(k) * view.sigma[:, j]
+        upper, lower = predicted + half, predicted - half
+        x, steps = _reduced(t, [predicted, measured, upper, lower, view.normalised[:, j]], windows)
+        keep = edge_indices(x, list(alarm_spans))
+        band_style = {"line": {"width": 0, "color": BAND_FILL}, "hoverinfo": "skip"}
+        traces = [
+            Trace(f"predicted ± {k:g}σ", upper[steps], keep, 0.25, {**band_style, "legendgroup": "band"}, t=x),
+            Trace(
+                f"predicted ± {k:g}σ (lower)", lower[steps], keep, 0.25,
+                {**band_style, "legendgroup": "band", "showlegend": False, "fill": "tonexty", "fillcolor": BAND_FILL},
+                t=x,
+            ),
+            Trace("predicted h(x̂⁻)", predicted[steps], keep, 0.5,
+                  {"line": {"color": PREDICTED_COLOUR, "width": 1.2, "dash": "dot"}}, t=x),
+            Trace(channel, measured[steps], keep, 1.0, {"line": {"color": MEASURED_COLOUR, "width": 1.2}}, t=x),
+        ]  # fmt: skip
+        figures.append(Figure(
+            title=f"{view.group}: {channel} measured vs predicted",
+            y_title=channel,
+            traces=traces,
+            spans=spans,
+            caption=f"{channel} as the filter used it (blue) against the filter's prediction of it from the state "
+            f"before the update (orange, dotted) with ±{k:g}σ of the innovation covariance S (shaded). Normal: "
+            "blue inside the shaded band; blue leaving the band on one sensor while the others stay is that "
+            "sensor's fault.",
+            y_range=judged_range(measured[steps], upper[steps], lower[steps], []),
+        ))  # fmt: skip
+        normalised.append(Trace(
+            channel, view.normalised[steps, j], keep, 0.5,
+            {"line": {"color": LINE_COLOURS[j % len(LINE_COLOURS)], "width": 1}}, t=x,
+        ))  # fmt: skip
+    figures.append(Figure(
+        title=f"{view.group}: normalised innovation per channel",
+        y_title="innovation / σ",
+        traces=normalised,
+        spans=spans,
+        caption=f"Each channel's innovation (measured − predicted) divided by its σ from S. Normal: noise "
+        f"around 0, mostly within ±{k:g} (dashed); a sustained offset on one channel is a bias on that axis.",
+        hlines=[(k, f"+{k:g}σ"), (-k, f"−{k:g}σ")],
+    ))  # fmt: skip
+    return figures

@@ -1,0 +1,132 @@
+"""The sensor beside the statistic (logscan.sensor_views, logscan.report.sensor_figures): every
+group's prediction, innovation and sigma packed right after the filter, unpacked for the groups an
+alarm names, drawn per channel with the log's channel names."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from logscan.needs import Needs
+from logscan.pipeline import analyze_log, create_detectors, detect, load_profile_for, needs_of, prepare
+from logscan.report import render_html
+from logscan.sensor_views import PACKED, pack_innovations
+
+
+def analysed(path, **kwargs):
+    return analyze_log(path, free_series=True, sensor_views=True, **kwargs)
+
+
+def test_the_pack_takes_as_much_as_a_float64_sample():
+    assert PACKED.itemsize == np.dtype(np.float64).itemsize
+
+
+def synthetic(sigmas: list[float], n: int = 500, seed: int = 0):
+    """A one-group run and trace with the given per-channel sigma (any unit)."""
+    rng = np.random.default_rng(seed)
+    m = len(sigmas)
+    sigma = np.asarray(sigmas)
+    z = 1e3 + rng.normal(size=(n, m)) * sigma  # values far from zero: the prediction keeps its digits
+    y = rng.normal(size=(n, m)) * sigma
+    y[::7] = np.nan  # steps without an update
+    S = np.where(np.isnan(y), np.nan, sigma**2)
+    group = SimpleNamespace(z=z, channels=[f"/c{j}" for j in range(m)])
+    run = SimpleNamespace(groups={"g": group})
+    trace = SimpleNamespace(
+        y=y.astype(np.float32), S_diag=S.astype(np.float32), group_names=["g"],
+        group_offsets=np.array([0]), group_sizes=np.array([m]),
+    )  # fmt: skip
+    return run, trace, z, y, sigma
+
+
+@pytest.mark.parametrize("sigmas", [[1e-6, 1.0, 3e4], [2e-9, 5e-3]])
+def test_unpacked_values_match_the_filter_in_any_unit(sigmas):
+    run, trace, z, y, sigma = synthetic(sigmas)
+    view = pack_innovations(run, trace).view("g")
+    updated = ~np.isnan(y)
+    assert view.channels == [f"/c{j}" for j in range(len(sigmas))]
+    for arr in (view.measured, view.predicted, view.sigma, view.normalised):
+        np.testing.assert_array_equal(np.isnan(arr), ~updated)
+    y32 = trace.y.astype(np.float64)  # what the filter kept
+    np.testing.assert_allclose(view.predicted[updated], (z - y32)[updated], rtol=1e-6)
+    # measured = prediction + float16 innovation: within a thousandth of sigma of the sample, or
+    # float32's rounding of it (what the page draws)
+    error = np.abs(view.measured - z) - 2.0**-23 * np.abs(z)
+    assert np.nanmax(error / sigma) < 2e-3
+    np.testing.assert_allclose(view.sigma[updated], np.broadcast_to(sigma, y.shape)[updated], rtol=1e-3)
+    np.testing.assert_allclose(view.normalised[updated], (y / sigma)[updated], rtol=2e-3, atol=2e-3)
+
+
+def test_the_pack_can_reuse_the_samples_buffer():
+    run, trace, z, y, _ = synthetic([0.1, 2.0])
+    samples = np.ascontiguousarray(z.copy())
+    in_place = pack_innovations(run, trace, samples)
+    assert np.shares_memory(in_place.packed, samples)
+    apart = pack_innovations(run, trace)
+    for field in PACKED.names:
+        np.testing.assert_array_equal(in_place.packed[field], apart.packed[field])
+
+
+def test_the_accelerometer_bias_shows_on_its_axis(sample):
+    analysis = analysed(sample("quad_imu_bias.mcap"))
+    view = analysis.prepared.innovations.view("accel")
+    assert view.channels == ["/imu/accel.x", "/imu/accel.y", "/imu/accel.z"]
+    t = analysis.run.t
+    before, during = (t > 5) & (t < 29), (t > 31) & (t < 40)  # the truth: +1 m/s^2 on x, 30-40 s
+    x = view.normalised[:, 0]
+    assert np.nanmedian(x[during]) > 3 and abs(np.nanmedian(x[before])) < 0.5
+    # the measured value sits above the prediction while the +1 m/s^2 bias lasts (the filter's
+    # state absorbs part of it), and on it before
+    offset = (view.measured - view.predicted)[:, 0]
+    assert 0.3 < np.nanmedian(offset[during]) < 1.2 and abs(np.nanmedian(offset[before])) < 0.05
+    assert abs(np.nanmedian(view.normalised[during, 1])) < 1  # y is untouched
+
+
+def test_the_pack_reuses_the_samples_and_leaves_them_alone_otherwise(sample):
+    path = sample("quad_imu_bias.mcap")
+    loaded = load_profile_for(path, None)
+    detectors = create_detectors(loaded)
+    wanted = lambda run: needs_of(detectors)(run) | Needs.of(ekf=("y",))  # noqa: E731
+    kept = prepare(path, loaded, wanted)
+    z_before = kept.run.groups["accel"].z.copy()
+    detect(kept, detectors, sensor_views=True)  # the samples stay readable
+    np.testing.assert_array_equal(kept.run.groups["accel"].z, z_before)
+    assert not np.shares_memory(kept.innovations.packed, kept.run.groups["accel"].z)
+    freed = prepare(path, loaded, wanted)
+    samples = freed.run.groups["accel"].z
+    detect(freed, detectors, free_series=True, sensor_views=True)
+    assert np.shares_memory(freed.innovations.packed, samples)  # no new buffer through the detectors
+    assert all(group.z is None for group in freed.run.groups.values())
+    assert freed.trace.y is None and freed.trace.S_diag is None
+    for field in PACKED.names:
+        np.testing.assert_array_equal(freed.innovations.packed[field], kept.innovations.packed[field])
+
+
+def test_without_the_report_nothing_is_kept(sample):
+    analysis = analyze_log(sample("quad_imu_bias.mcap"), free_series=True)
+    assert analysis.prepared.innovations is None
+
+
+def test_the_report_draws_the_groups_alarms_name_beside_their_statistic(sample):
+    analysis = analysed(sample("quad_imu_bias.mcap"))
+    analysis.prepared.release_series()
+    page = render_html(analysis.report_input())
+    named = {a.signal.split(".")[1] for r in analysis.results for a in r.alarms if a.signal.startswith("nis.")}
+    assert "accel" in named and "gyro" not in named
+    for group in named - {"all"}:
+        assert f"{group}: normalised innovation per channel" in page
+    assert page.count("measured vs predicted") >= 3
+    assert "accel: /imu/accel.x measured vs predicted" in page
+    assert "gyro: /imu/gyro.x measured vs predicted" not in page
+    # beside the statistic: the NIS section's first figure, then the accelerometer's
+    nis = page.index("nis: statistic / threshold")
+    assert nis < page.index("accel: /imu/accel.x measured vs predicted") < page.index("nis: per_dof")
+
+
+def test_a_healthy_report_draws_no_sensor_figure(sample):
+    analysis = analysed(sample("quad_healthy.mcap"))
+    assert analysis.alarms == []
+    page = render_html(analysis.report_input())
+    assert "measured vs predicted" not in page
