@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,12 @@ def test_each_healthy_sample_log_raises_no_alarm_and_exits_zero(name, tmp_path, 
     assert result.exit_code == 0, result.stdout + result.stderr
     assert "no alarms" in result.stdout
     assert (tmp_path / "r.html").stat().st_size > 100_000
+
+
+def test_rejected_samples_are_counted_in_words_not_as_a_ratio(cli, sample):
+    result = cli("analyze", sample("quad_imu_bitflip.mcap"), "--no-report")
+    line = next(line for line in result.stdout.splitlines() if "rejected.accel" in line)
+    assert re.search(r"\d+\.\d\d +\d+ samples outside the physical range, the filter skipped them$", line), line
 
 
 def test_exit_zero_and_report_written_for_alarms(tmp_path, cli, sample):

@@ -71,6 +71,8 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     ]
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
+    from logscan.report import overview
+
     shown = 0
     for k, incident in enumerate(analysis.incidents):
         lines.append(f"  incident {k + 1}: {incident.headline}")
@@ -78,8 +80,10 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             if shown == max_rows:
                 break
             ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
+            note = overview.alarm_note(alarm)  # an indicator's ratio means nothing: its count, in words
             lines.append(
-                f"    {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} {ratio:>9}"
+                f"    {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} "
+                + (f"  {note}" if note else f"{ratio:>9}")
             )
             shown += 1
     if len(analysis.alarms) > shown:
