@@ -130,3 +130,46 @@ def test_a_healthy_report_draws_no_sensor_figure(sample):
     assert analysis.alarms == []
     page = render_html(analysis.report_input())
     assert "measured vs predicted" not in page
+
+
+def hour_innovations(n: int) -> Innovations:  # noqa: F821 - the type is logscan.sensor_views.Innovations
+    """Packed innovations of three 3-channel groups over ``n`` steps (gps at 10 Hz)."""
+    rng = np.random.default_rng(1)
+    names, groups, ys, Ss = ["accel", "gyro", "gps"], {}, [], []
+    for name, sigma in zip(names, (0.1, 0.01, 0.5)):
+        updated = np.ones(n, dtype=bool) if name != "gps" else (np.arange(n) % 10 == 0)
+        y = np.where(updated[:, None], rng.normal(size=(n, 3)) * sigma, np.nan)
+        ys.append(y)
+        Ss.append(np.where(np.isnan(y), np.nan, sigma**2))
+        z = np.cumsum(rng.normal(size=(n, 3)), axis=0) * sigma
+        groups[name] = SimpleNamespace(z=z, channels=[f"/{name}/{axis}" for axis in "xyz"])
+    trace = SimpleNamespace(
+        y=np.hstack(ys).astype(np.float32), S_diag=np.hstack(Ss).astype(np.float32), group_names=names,
+        group_offsets=np.array([0, 3, 6]), group_sizes=np.array([3, 3, 3]),
+    )  # fmt: skip
+    return pack_innovations(SimpleNamespace(groups=groups), trace)
+
+
+def test_an_hour_with_three_alarming_groups_stays_under_the_size_limits(tmp_path):
+    from test_report import make_report
+
+    from logscan.report import render_report
+    from logscan.results import DetectorResult
+
+    report = make_report(hostile=False)
+    n = report.t.size
+    more = DetectorResult("more")  # alarms naming the other two groups, as a fault seen by several
+    for name in ("gyro", "gps"):
+        statistic = np.zeros(n)
+        statistic[250_000:250_300] = 10.0
+        more.add_statistic(report.t, f"more.{name}", statistic, upper=1.0, n_persist=3)
+    report.results.append(more)
+    report.innovations = hour_innovations(n)
+    sizes = {}
+    for mode, option in (("embed", "embed"), ("directory", tmp_path / "js")):
+        page = tmp_path / f"{mode}.html"
+        render_report(report, page, plotlyjs=option)
+        text = page.read_text(encoding="utf-8")
+        assert text.count("measured vs predicted") >= 9 and text.count("normalised innovation per channel") >= 3
+        sizes[mode] = len(text.encode("utf-8"))
+    assert sizes["embed"] <= 6_000_000 and sizes["directory"] <= 300_000, sizes
