@@ -149,7 +149,8 @@ def max_window_counts(
     for lo in range(0, eps.size, chunk):
         block = eps[lo : lo + chunk]
         rows = cs[: block.size]
-        # cs[:, k] = count(err[:k] > eps), cs[:, 0] = 0 (NaN > eps is False)
+        # cs[:, k] = count(err[:k] > eps); the leading cs[:, 0] = 0 lets the window at sample 0 count
+        # (NaN > eps is False: a missing error never exceeds)
         np.cumsum(err[None, :] > block[:, None], axis=1, dtype=np.int32, out=rows[:, 1:])
         for k, (w, (valid, short_lo, short_hi)) in enumerate(zip(windows, layouts)):
             best = np.zeros(block.size, dtype=np.int64)
