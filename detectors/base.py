@@ -120,6 +120,9 @@ class Detector:
     requires_fit: ClassVar[bool] = False
     requires_trace: ClassVar[bool] = False
     trained_attributes: ClassVar[tuple[str, ...]] = ()
+    # Parameters that shape what `fit` learns: a trained detector keeps them from its tables; the
+    # others come from the profile it runs with (`logscan.training.apply_tables`).
+    fit_params: ClassVar[tuple[str, ...]] = ()
     state_version: ClassVar[int] = 1
     # Which of the large per-step series (`logscan.pipeline.RELEASABLE`: the EKF's state, covariance,
     # gain and innovation series, the run's on-board estimates) `run` reads. The pipeline frees each
@@ -191,6 +194,21 @@ class Detector:
 
     def _fit(self, runs: list[AlignedRun], traces: list[Any], **context: Any) -> None:
         """Training step of subclasses that learn something; the default learns nothing."""
+
+    def learns(self) -> bool:
+        """Whether `fit` learns anything in this configuration (`logscan train` fits those that do)."""
+        return bool(self.trained_attributes)
+
+    @classmethod
+    def asked_for_by(cls, profile) -> bool:
+        """Whether a profile asks for this detector's tables even without enabling it (A-TFM: a
+        [redundant] group); `logscan train` then trains it too."""
+        return False
+
+    @classmethod
+    def state_lines(cls, state: Mapping[str, Any]) -> list[str]:
+        """What `logscan train` prints of a trained state (`to_state` output): one line by default."""
+        return [f"  {cls.name}: trained ({', '.join(cls.trained_attributes)})"]
 
     def is_trained(self) -> bool:
         return all(hasattr(self, attr) for attr in self.trained_attributes)

@@ -72,6 +72,7 @@ class EncodedEkfDetector(Detector):
     )
     default_enabled = True
     trained_attributes = ("threshold_",)
+    fit_params = ("margin",)
     defaults = {
         "variant": "adaptive",  # "adaptive" (time-varying CV, mu +- rho s) or "baseline" (CV_0, fixed)
         "rho": 4.0,
@@ -109,6 +110,10 @@ class EncodedEkfDetector(Detector):
         "onboard_state_check": [Boolean()],
         "rho_s": [POSITIVE],
     }
+
+    def learns(self) -> bool:
+        """Only the baseline variant learns (its fixed threshold); the adaptive one needs nothing."""
+        return self.variant == "baseline"
 
     def needs(self, run=None) -> Needs:
         """The EKF trace; its K and S too when the variance check may run in observed mode (no

@@ -34,6 +34,7 @@ ENTRY_POINT_GROUP = "logscan.detectors"
 BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.encoded_ekf:EncodedEkfDetector",
     "logscan.detectors.nis:NisDetector",
+    "logscan.detectors.atfm:AtfmDetector",
 ]
 
 BUILTIN = "built-in"

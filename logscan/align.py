@@ -46,6 +46,7 @@ class AlignedGroup:
     rate_hz: float | None = None  # nominal rate from the profile
     stale_s: float | None = None  # staleness limit used for holding
     channel_fresh: np.ndarray | None = None  # (N, m) bool, per channel: a new sample in (t_{k-1}, t_k]
+    labels: list[str] | None = None  # the profile's name of each channel ([redundant] sensors), if named
 
 
 class HeldTable:
@@ -455,6 +456,7 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         ]
         g = aligner.group(red.name, [s.channel for s in sensors], grid_ns, red.stale_limit_s(), transforms)
         g.rate_hz = red.rate_hz
+        g.labels = [s.name for s in sensors]
         redundant[red.name] = g
 
     stats = {

@@ -248,6 +248,7 @@ class EvaluationTask:
     recovery_s: float = DEFAULT_RECOVERY_S
     start_s: float | None = None  # the window analysed (s since each log's start), None: all of it
     end_s: float | None = None
+    tables_path: str | None = None  # trained tables (logscan train); None: each profile's own key
 
     def __call__(self, path: str) -> LogEvaluation | None:
         from logscan.pipeline import analyze_log
@@ -263,6 +264,7 @@ class EvaluationTask:
             start_s=self.start_s,
             end_s=self.end_s,
             free_series=True,  # nothing reads the filter's series after the detectors
+            tables=self.tables_path,
         )
         return evaluate_analysis(analysis, grace_s=self.grace_s, recovery_s=self.recovery_s)
 
@@ -279,13 +281,14 @@ def evaluate_logs(
     progress: bool = False,
     start_s: float | None = None,
     end_s: float | None = None,
+    tables_path: str | None = None,
 ) -> Evaluation:
     """Analyse and score every log with ground truth (``jobs`` local processes); skip the others;
     record failures as lines. ``start_s``/``end_s``: the window of each log analysed."""
     from logscan.fleet import LogFailure, run_many
 
     names = tuple(detector_names) if detector_names else None
-    task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s, start_s, end_s)
+    task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s, start_s, end_s, tables_path)
     evaluation = Evaluation(grace_s=grace_s, recovery_s=recovery_s)
     for path, outcome in zip(paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating")):
         if isinstance(outcome, LogFailure):

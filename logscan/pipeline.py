@@ -41,7 +41,8 @@ def _run_ekf(model, run, parts: frozenset[str]):
 # detector still to run reads it. What runs after the detectors (incidents, coverage, the summary)
 # reads none of them.
 RELEASABLE_TRACE = ("x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_diag", "K", "S", "P_prior", "P_post")
-RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode")  # "z": the groups' samples
+# "z": the measurement groups' samples; "redundant": the [redundant] groups' readings
+RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode", "redundant")
 RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
 
 # Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
@@ -317,7 +318,10 @@ def release_unread(prepared: Prepared, still_to_run: Sequence) -> None:
         if name not in wanted and getattr(run, name) is not None:
             setattr(run, name, None)
     if "z" not in wanted:
-        for group in (*run.groups.values(), *run.redundant.values()):
+        for group in run.groups.values():
+            group.z = group.fresh = group.channel_fresh = None
+    if "redundant" not in wanted:
+        for group in run.redundant.values():
             group.z = group.fresh = group.channel_fresh = None
 
 
@@ -377,13 +381,20 @@ def analyze_log(
     end_s: float | None = None,
     free_series: bool = False,
     sensor_views: bool = False,
+    tables: str | os.PathLike | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
+    ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
     ``start_s``/``end_s``: a window of the log (seconds since its start); ``free_series``: see
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
     figures (`logscan.sensor_views`), when a detector runs the EKF."""
+    from logscan.training import apply_tables, tables_path
+
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
+    trained = tables_path(None if tables is None else str(tables), loaded.profile)
+    if trained is not None:
+        detectors = apply_tables(detectors, trained, loaded.profile)
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
     prepared = prepare(path, loaded, needs, progress=progress, notice=notice, **options)

@@ -1,26 +1,67 @@
 """Training: fit detectors on prepared healthy runs, and their trained state as versioned tables JSON.
 
-    detectors = create_detectors(loaded)                            # logscan.pipeline
+    detectors = trainable_detectors(loaded)                     # those with something to learn
     prepared = [prepare(p, loaded, needs_of(detectors)) for p in healthy_logs]
     fit_detectors(detectors, prepared)
-    write_tables("vehicle.tables.json", detectors)
+    write_tables("vehicle.tables.json", tables_document(detectors, logs, loaded.profile))
 
 Training never runs a detector over a log: it prepares each healthy log (read, align, filters) and
 hands the runs and traces to each detector's `fit`. The tables file holds one trained state per
-detector (`Detector.to_state`: detector name, its schema version, parameters, trained attributes).
+detector (`Detector.to_state`: detector name, its schema version, parameters, trained attributes),
+the training logs (name, size, SHA-256) and the fingerprint of the profile's vehicle, inputs,
+measurements, mode and redundant sections: `logscan analyze --tables` refuses tables trained for
+another profile (`apply_tables`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
-from logscan.errors import InputError, UsageError
+from logscan.errors import InputError, ProfileError, UsageError
 
 TABLES_FORMAT = "logscan-tables"
-TABLES_VERSION = 1
+TABLES_VERSION = 2
+# the profile sections a trained table depends on (detector settings and alarm floors do not)
+TRAINED_SECTIONS = ("vehicle", "inputs", "measurements", "mode", "redundant")
+
+
+def profile_fingerprint(profile) -> str:
+    """SHA-256 of the profile's sections a trained table depends on (canonical JSON)."""
+    data = profile.to_dict()
+    trained = {key: data.get(key) for key in TRAINED_SECTIONS}
+    return hashlib.sha256(json.dumps(trained, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
+    """The detectors training fits: those the profile runs (or ``names``) that learn something in
+    their configuration, and those whose tables the profile asks for (`Detector.asked_for_by`)."""
+    from logscan.detectors.registry import default_registry
+    from logscan.pipeline import create_detectors
+
+    chosen = list(names or loaded.profile.enabled_detectors() or default_registry().default_names())
+    if not names:
+        registry = default_registry()
+        chosen += [n for n in registry.names() if n not in chosen and registry.get(n).asked_for_by(loaded.profile)]
+    trainable = [d for d in create_detectors(loaded, chosen) if d.learns()]
+    if not trainable:
+        raise UsageError(
+            "nothing to train: no detector of this profile learns from healthy logs",
+            hint="add a [redundant.<name>] group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
+        )
+    return trainable
 
 
 def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
@@ -34,29 +75,33 @@ def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
     return list(detectors)
 
 
-def tables_document(detectors: Sequence) -> dict[str, Any]:
-    """The tables JSON: format, version and the trained state of each detector that learns something."""
+def tables_document(detectors: Sequence, logs: Sequence[str] = (), profile=None) -> dict[str, Any]:
+    """The tables JSON: format, version, what it was trained on, and each detector's trained state."""
     from logscan import __version__
 
     return {
         "format": TABLES_FORMAT,
         "schema_version": TABLES_VERSION,
         "logscan_version": __version__,
+        "profile_fingerprint": profile_fingerprint(profile) if profile is not None else None,
+        "profile_name": getattr(profile, "name", "") if profile is not None else "",
+        "training_logs": [
+            {"name": os.path.basename(p), "path": str(p), "bytes": os.path.getsize(p), "sha256": file_sha256(p)}
+            for p in logs
+        ],
         "detectors": [d.to_state() for d in detectors if d.trained_attributes],
     }
 
 
-def write_tables(path: str | os.PathLike, detectors: Sequence) -> None:
+def write_tables(path: str | os.PathLike, document: dict) -> None:
     """Write the tables JSON atomically."""
     from logscan.artifacts import write_json
 
-    write_json(path, tables_document(detectors))
+    write_json(path, document)
 
 
-def read_tables(path: str | os.PathLike) -> dict[str, Any]:
-    """Trained detectors by name from a tables file (InputError on anything but a tables file)."""
-    from logscan.detectors.registry import default_registry
-
+def read_tables_document(path: str | os.PathLike) -> dict[str, Any]:
+    """The tables JSON (InputError on anything but a tables file of this schema)."""
     try:
         with open(path, encoding="utf-8") as fh:
             document = json.load(fh)
@@ -70,9 +115,96 @@ def read_tables(path: str | os.PathLike) -> dict[str, Any]:
             path=str(path),
             hint="retrain with `logscan train`",
         )
+    return document
+
+
+def read_tables(path: str | os.PathLike) -> dict[str, Any]:
+    """Trained detectors by name from a tables file (InputError on anything but a tables file)."""
+    from logscan.detectors.registry import default_registry
+
+    document = read_tables_document(path)
     registry = default_registry()
     trained = {}
     for state in document.get("detectors") or []:
         name = state.get("detector") if isinstance(state, dict) else None
         trained[name] = registry.get(str(name)).from_state(state, path=str(path))
     return trained
+
+
+def tables_path(option: str | None, profile) -> str | None:
+    """The tables to use: ``--tables``, else the profile's ``tables`` key (relative to its file)."""
+    if option is not None:
+        return option
+    if not profile.tables:
+        return None
+    source = Path(profile.source)
+    base = source.parent if source.is_file() else Path.cwd()
+    return str(base / profile.tables)
+
+
+def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
+    """``detectors`` with the trained state of ``path`` (trained for this profile, else exit 2):
+    each detector the tables hold is replaced by its trained self, its run-time parameters taken
+    from the profile; the others are kept."""
+    document = read_tables_document(path)
+    fingerprint = document.get("profile_fingerprint")
+    if fingerprint != profile_fingerprint(profile):
+        raise ProfileError(
+            "the tables were trained for another profile (its vehicle, inputs, measurements, mode or "
+            "redundant sections differ)",
+            path=str(path),
+            hint=f"retrain with `logscan train LOGS --profile {profile.source} -o {path}`",
+        )
+    trained = read_tables(path)
+    out = []
+    for detector in detectors:
+        fitted = trained.get(detector.name)
+        if fitted is None:
+            out.append(detector)
+            continue
+        fitted.params.update({k: v for k, v in detector.params.items() if k not in fitted.fit_params})
+        fitted.check_params()
+        out.append(fitted)
+    return out
+
+
+def train_logs(
+    logs: Sequence[str], profile_path: str | None, *, allow_faulty: bool = False, progress=None, notice=None
+) -> dict[str, Any]:
+    """`logscan train`: prepare each healthy log, fit the trainable detectors, return the tables
+    document. Without ``profile_path`` every log's embedded profile must match the first's."""
+    from logscan.pipeline import load_profile_for, needs_of, prepare
+    from logscan.readers import read_embedded
+
+    step = progress or (lambda message: None)
+    if not logs:
+        raise UsageError("training needs at least one healthy log")
+    loaded = load_profile_for(logs[0], profile_path)
+    detectors = trainable_detectors(loaded)
+    fingerprint = profile_fingerprint(loaded.profile)
+    prepared = []
+    for number, path in enumerate(logs, 1):
+        step(f"reading {path} ({number}/{len(logs)})")
+        faults = ((read_embedded(path)[1] or {}).get("events")) or []
+        if faults and not allow_faulty:
+            raise InputError(
+                f"its ground truth lists {len(faults)} fault(s): a table trained on it would tolerate them",
+                path=path,
+                hint="train on healthy logs only, or pass --allow-faulty",
+            )
+        own = loaded if profile_path is not None or number == 1 else load_profile_for(path, None)
+        if profile_fingerprint(own.profile) != fingerprint:
+            raise ProfileError(
+                f"its embedded profile differs from {logs[0]}'s (vehicle, inputs, measurements, mode or redundant)",
+                path=path,
+                hint="train logs of one profile together, or pass --profile",
+            )
+        one = prepare(path, loaded, needs_of(detectors), notice=notice)
+        if one.log.source.partial:
+            raise InputError(
+                f"read in part ({one.log.source.partial_reason})", path=path, hint="train on complete logs"
+            )
+        prepared.append(one)
+    step("fitting " + ", ".join(d.name for d in detectors))
+    fit_detectors(detectors, prepared)
+    return tables_document(detectors, logs, loaded.profile)

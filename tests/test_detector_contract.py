@@ -224,15 +224,20 @@ SAMPLE_LOGS = REPO / "sample_logs"
 # The healthy quadcopter log and its high-order bit-flip burst variant (a fault every detector
 # should see: docs/algorithms.md section 1.5). Rename here if sample_logs/ differs.
 FIXTURES = {"healthy": "quad_healthy.mcap", "faulty": "quad_imu_bitflip.mcap"}
+# Detectors of sensors a quadcopter log lacks get fixtures that have them: A-TFM needs redundant
+# speed sensors and a mode channel (the Jackal logs; its faulty one attacks the GPS speed).
+OWN_FIXTURES = {"atfm": {"healthy": "jackal_healthy.mcap", "faulty": "jackal_gps_bias.mcap"}}
 _PIPELINE_CACHE: dict[str, tuple] = {}
 
 
-def pipeline_case(kind: str):
+def pipeline_case(kind: str, name: str | None = None):
     """(aligned run, EKF trace, model, profile) of a sample log through `logscan.pipeline.prepare`
-    with what every detector under test needs, computed once per session."""
-    if kind in _PIPELINE_CACHE:
-        return _PIPELINE_CACHE[kind]
-    path = SAMPLE_LOGS / FIXTURES[kind]
+    with what every detector under test needs, computed once per session; ``name``: the detector
+    whose fixtures (`OWN_FIXTURES`) to use."""
+    fixture = OWN_FIXTURES.get(name, FIXTURES)[kind]
+    if fixture in _PIPELINE_CACHE:
+        return _PIPELINE_CACHE[fixture]
+    path = SAMPLE_LOGS / fixture
     if not path.exists():
         pytest.skip(f"{path.relative_to(REPO)} does not exist (made by sample_logs/make_samples.py)")
     from logscan.pipeline import load_profile_for, needs_of, prepare
@@ -240,13 +245,13 @@ def pipeline_case(kind: str):
     loaded = load_profile_for(path, None)
     detectors = [REGISTRY.get(name)() for name in PIPELINE_NAMES]
     prepared = prepare(path, loaded, needs_of(detectors))
-    _PIPELINE_CACHE[kind] = (prepared.run, prepared.trace, prepared.model, prepared.profile)
-    return _PIPELINE_CACHE[kind]
+    _PIPELINE_CACHE[fixture] = (prepared.run, prepared.trace, prepared.model, prepared.profile)
+    return _PIPELINE_CACHE[fixture]
 
 
 def pipeline_detector(name: str) -> Detector:
     """Detector ``name`` configured by the healthy log's profile and trained on that log."""
-    healthy_run, healthy_trace, model, profile = pipeline_case("healthy")
+    healthy_run, healthy_trace, model, profile = pipeline_case("healthy", name)
     spec = profile.detectors.get(name)
     detector = REGISTRY.get(name).from_config(spec.settings if spec else {})
     if detector.trained_attributes:
@@ -259,14 +264,14 @@ PIPELINE_NAMES = [n for n in NAMES if n != "contract_probe"]
 
 @pytest.mark.parametrize("name", PIPELINE_NAMES)
 def test_no_alarms_on_the_healthy_fixture(name):
-    run, trace, model, _ = pipeline_case("healthy")
+    run, trace, model, _ = pipeline_case("healthy", name)
     result = pipeline_detector(name).run(run, trace, model=model)
     assert result.alarms == []
 
 
 @pytest.mark.parametrize("name", PIPELINE_NAMES)
 def test_alarms_on_the_faulty_fixture(name):
-    run, trace, model, _ = pipeline_case("faulty")
+    run, trace, model, _ = pipeline_case("faulty", name)
     detector = pipeline_detector(name)
     assert detector.run(run, trace, model=model).alarms
 

@@ -18,6 +18,7 @@ from logscan.cli.options import (
     quiet_option,
     show_progress,
     start_option,
+    tables_option,
 )
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode
@@ -31,6 +32,7 @@ from logscan.errors import ExitCode
 )
 @click.argument("log_paths", metavar="LOG...", nargs=-1, required=True, type=click.Path(path_type=str))
 @profile_option
+@tables_option
 @click.option(
     "--output",
     "-o",
@@ -73,6 +75,7 @@ from logscan.errors import ExitCode
 def analyze(
     log_paths: tuple[str, ...],
     profile_path: str | None,
+    tables_path: str | None,
     output_path: str | None,
     json_path: str | None,
     no_report: bool,
@@ -106,6 +109,10 @@ def analyze(
         from logscan.pipeline import create_detectors, load_profile_for
 
         create_detectors(load_profile_for(None, profile_path), names)
+    if tables_path is not None:  # a bad tables file stops the run before any log is read
+        from logscan.training import read_tables
+
+        read_tables(tables_path)
     logs = expand_logs(log_paths)
     reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
     plotlyjs_dir = None if no_report else plotlyjs_dir
@@ -130,6 +137,7 @@ def analyze(
         token=token,
         start_s=start_s,
         end_s=end_s,
+        tables_path=tables_path,
     )
     staged = []
     try:
@@ -224,6 +232,7 @@ class AnalyzeTask:
     token: str = ""  # tags the temporary files of the run (logscan.artifacts.cleanup)
     start_s: float | None = None  # --start/--end: the window analysed (s since the log's start)
     end_s: float | None = None
+    tables_path: str | None = None  # --tables: trained tables (logscan train)
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
@@ -246,6 +255,7 @@ class AnalyzeTask:
             end_s=self.end_s,
             free_series=True,  # nothing reads the filter's series after the detectors
             sensor_views=report_path is not None,
+            tables=self.tables_path,
         )
         summary = analysis.summary()
         summary["exit_code"] = int(analysis.exit_code(self.allow_partial))

@@ -15,6 +15,7 @@ from logscan.cli.options import (
     quiet_option,
     show_progress,
     start_option,
+    tables_option,
 )
 from logscan.cli.render import printable, render_evaluation
 from logscan.errors import ExitCode, InputError
@@ -54,6 +55,7 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
     help="Evaluate only this detector (repeatable). Default: those each log's profile enables.",
 )
 @profile_option
+@tables_option
 @start_option
 @end_option
 @header_stamp_option
@@ -66,6 +68,7 @@ def evaluate(
     recovery_s: float,
     detector_names: tuple[str, ...],
     profile_path: str | None,
+    tables_path: str | None,
     start_s: float | None,
     end_s: float | None,
     use_header_stamp: bool,
@@ -103,6 +106,7 @@ def evaluate(
         progress=show_progress(quiet),
         start_s=start_s,
         end_s=end_s,
+        tables_path=tables_path,
     )
     if json_path:
         from logscan import __version__

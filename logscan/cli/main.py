@@ -67,6 +67,7 @@ _COMMANDS = [
     "logscan.cli.simulate_cmd:simulate",
     "logscan.cli.detectors_cmd:detectors",
     "logscan.cli.evaluate_cmd:evaluate",
+    "logscan.cli.train_cmd:train",
 ]
 
 

@@ -6,6 +6,14 @@ import sys
 
 import click
 
+tables_option = click.option(
+    "--tables",
+    "tables_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Trained tables written by `logscan train` for this profile. Default: the profile's `tables` key.",
+)
+
 profile_option = click.option(
     "--profile",
     "-p",

@@ -265,7 +265,7 @@ class _Checker:
     # --- sections -----------------------------------------------------------------------------
     def profile(self, data: dict, source: str) -> Profile | None:
         self.keys(data, "", TOP_KEYS, required=("vehicle", "measurements"))
-        for key in ("name", "description"):
+        for key in ("name", "description", "tables"):
             if key in data and not isinstance(data[key], str):
                 self.add(key, f"expected a string, got {type_name(data[key])}")
         vehicle = self.vehicle_spec = self.vehicle(data["vehicle"]) if "vehicle" in data else None
@@ -289,6 +289,7 @@ class _Checker:
             alarm_policy=alarm_policy,
             name=data.get("name", ""),
             description=data.get("description", ""),
+            tables=data.get("tables", ""),
             source=source,
         )
 

@@ -24,6 +24,7 @@ TOP_KEYS = (
     "onboard",
     "detectors",
     "alarms",
+    "tables",
 )
 VEHICLE_KEYS = ("model", "rate_hz", "params")
 GROUP_KEYS = ("channels", "rate_hz", "stale_s", "noise_std", "range_lo", "range_hi")
@@ -171,6 +172,7 @@ class Profile:
     alarm_policy: AlarmPolicy | None = None  # the [alarms] table: floors under every detector's alarms
     name: str = ""
     description: str = ""
+    tables: str = ""  # trained tables file (`logscan train`), relative to the profile's directory
     source: str = field(default="<embedded>", compare=False)
     model_facts: ModelFacts | None = field(default=None, compare=False, repr=False)
 
@@ -273,6 +275,8 @@ class Profile:
             out["name"] = self.name
         if self.description:
             out["description"] = self.description
+        if self.tables:
+            out["tables"] = self.tables
         out["vehicle"] = {"model": self.vehicle.model, "rate_hz": self.vehicle.rate_hz}
         if self.vehicle.params:
             out["vehicle"]["params"] = self.vehicle.params

@@ -1,0 +1,328 @@
+"""A-TFM on redundant sensors: weak and strong inconsistency with a speed lookup table.
+
+Specified in docs/algorithms.md section 4 (../shared/ALGORITHMS.md section 4, the adaptive
+transient fault model paper). Per `[redundant.<group>]` of the profile:
+
+- Detection grid: the rate of the group's slowest sensor; faster sensors are sampled onto it by
+  taking their latest reading (the aligned run's hold), never by averaging.
+- Training (`fit`, from healthy runs; `logscan train`): per sensor and mode value (the profile's
+  `[mode]` channel, e.g. the commanded speed), the error against the median of the others on
+  segments of one mode value (a settle time after each change dropped), e(eps, w) for every eps and
+  window, the knee per window, the knees at the detection window w as the table row, and the
+  monotone envelope of eps over the mode values (`logscan.tfm`).
+- Detection: the row is the smallest trained mode >= max(commanded, measured - margin), measured
+  being the median of the sensors; above the top row the top row is used with a warning.
+  Intervals [y_i - eps_i, y_i + eps_i]; WI_ij when two do not overlap; SI_ij when the WI count over
+  the last w samples exceeds e_i + e_j: one statistic per pair (the count against e_i + e_j),
+  alarms closer than w samples merged. Attribution: a sensor in SI with every other sensor (a
+  majority for groups of 4+) is named; otherwise the pair.
+- Fusion (thesis chapter III): the group's fused signals as extras (`logscan.fusion`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.params import Interval, Options, RealList
+from logscan.errors import NotTrainedError, ProfileError
+
+TRAIN_COMMAND = "logscan train HEALTHY_LOGS... --profile PROFILE -o tables.json"
+
+
+@dataclass
+class GroupSamples:
+    """One redundant group on its detection grid: steps of the analysis grid, readings, mode."""
+
+    name: str
+    sensors: list[str]
+    steps: np.ndarray  # (M,) indices into the analysis grid
+    values: np.ndarray  # (M, s) readings in the group's unit (NaN: none within the staleness limit)
+    mode: np.ndarray  # (M,) mode value (NaN: none)
+    dt: float  # detection period, s
+
+
+def detection_grid(run, name: str) -> GroupSamples:
+    """The redundant group ``name`` of an aligned run sampled at its slowest sensor's rate."""
+    group = run.redundant[name]
+    n = run.n_steps
+    if group.rate_hz:
+        rate = float(group.rate_hz)
+    else:  # each sensor's rate from the steps where it had a new reading
+        fresh = group.channel_fresh if group.channel_fresh is not None else group.fresh[:, None]
+        counts = np.asarray(fresh, dtype=bool).sum(axis=0)
+        rate = float(counts.min()) / max(n * run.dt, run.dt) if counts.size else 1.0 / run.dt
+    period = max(int(round(1.0 / (max(rate, 1e-9) * run.dt))), 1)
+    steps = np.arange(period - 1, n, period)
+    mode = run.mode[steps] if run.mode is not None else np.full(steps.size, np.nan)
+    values = np.asarray(group.z, dtype=np.float64).reshape(n, -1)[steps]
+    sensors = list(group.labels or group.channels)
+    return GroupSamples(name, sensors, steps, values, np.asarray(mode, dtype=np.float64), period * run.dt)
+
+
+def mode_segments(mode: np.ndarray, settle: int) -> list[tuple[float, int, int]]:
+    """(mode value, first, stop) of each run of one mode value, its first ``settle`` samples dropped
+    (the vehicle is still reaching the new speed); runs of NaN mode are skipped."""
+    if mode.size == 0:
+        return []
+    key = np.round(mode, 6)
+    change = np.flatnonzero(~((key[1:] == key[:-1]) | (np.isnan(key[1:]) & np.isnan(key[:-1])))) + 1
+    starts = np.concatenate(([0], change))
+    stops = np.concatenate((change, [mode.size]))
+    return [
+        (float(key[a]), int(a + settle), int(b))
+        for a, b in zip(starts, stops)
+        if np.isfinite(key[a]) and b - a > settle
+    ]
+
+
+class AtfmDetector(Detector):
+    """A-TFM: weak/strong inconsistency of redundant sensors with a trained speed lookup table."""
+
+    name = "atfm"
+    requires_fit = True
+    requires_trace = False
+    reads = frozenset({"mode", "redundant"})
+    trained_attributes = ("tables_",)
+    fit_params = ("window", "windows", "settle_s", "eps_points")
+    defaults = {
+        "window": 100,  # w, detection window in samples of the detection grid
+        "windows": [25, 50, 100, 200],  # windows whose e(eps, w) curves are trained (w among them)
+        "settle_s": 5.0,  # dropped after every mode change when training
+        "margin": 0.05,  # selection value = max(commanded, measured - margin)
+        "row": "adaptive",  # "adaptive", or a trained mode value to use throughout (a fixed table)
+        "eps_points": 201,
+        "fusion_window": 5,  # moving-average fusion window, samples
+    }
+    parameter_constraints = {
+        "window": [Interval(int, 1, None)],
+        "windows": [RealList()],  # positive integers, checked in check_params
+        "settle_s": [Interval(float, 0, None)],
+        "margin": [Interval(float, 0, None)],
+        "row": [Options("adaptive"), Interval(float, 0, None), Interval(int, 0, None)],
+        "eps_points": [Interval(int, 200, None)],
+        "fusion_window": [Interval(int, 1, None)],
+    }
+
+    def check_params(self) -> None:
+        super().check_params()
+        windows = self.params["windows"]
+        if not all(isinstance(w, int) and not isinstance(w, bool) and w >= 1 for w in windows):
+            raise ProfileError(f"detector 'atfm': windows must be a list of positive integers, got {windows!r}")
+        if self.window not in windows:
+            raise ProfileError(f"detector 'atfm': window {self.window} must be one of windows {windows}")
+
+    def needs(self, run=None) -> Needs:
+        return Needs()
+
+    @classmethod
+    def asked_for_by(cls, profile) -> bool:
+        return bool(profile.redundant)
+
+    @classmethod
+    def state_lines(cls, state) -> list[str]:
+        """The lookup table of each group: eps (e) per sensor and mode value."""
+        from logscan.detectors.base import decode_state_value
+
+        lines = []
+        for group, table in decode_state_value(state["state"]["tables_"]).items():
+            sensors, modes, eps, e = table["sensors"], table["modes"], table["eps"], table["e"]
+            lines.append(f"  {cls.name} {group}: w = {table['w']}, eps (e) per mode value")
+            lines.append("    mode  " + "".join(f"{s:>16}" for s in sensors))
+            for r, mode in enumerate(modes):
+                cells = "".join(f"{eps[r, i]:>10.4g} ({int(e[r, i]):>3})" for i in range(len(sensors)))
+                lines.append(f"    {mode:<5g} {cells}")
+        return lines
+
+    def check_trained(self) -> None:
+        if not hasattr(self, "tables_"):
+            raise NotTrainedError(
+                "detector 'atfm' has no lookup table",
+                hint=f"train one with `{TRAIN_COMMAND}`, then pass --tables tables.json (or set the "
+                "profile's `tables` key)",
+            )
+
+    # --- training -----------------------------------------------------------------------------------
+    def _fit(self, runs, traces, **context) -> None:
+        from logscan.tfm import monotone_envelope, reference_errors, train_sensor
+
+        names = _redundant_names(runs)
+        tables = {}
+        for name in names:
+            # errors per (mode value, sensor): one segment per run of that mode in each log
+            segments: dict[float, list[np.ndarray]] = {}
+            sensors: list[str] = []
+            for run in runs:
+                if name not in run.redundant:
+                    continue
+                samples = detection_grid(run, name)
+                sensors = samples.sensors
+                errors = reference_errors(samples.values)
+                settle = int(round(self.settle_s / samples.dt))
+                for value, first, stop in mode_segments(samples.mode, settle):
+                    segments.setdefault(value, []).append(errors[first:stop])
+            if not segments:
+                raise NotTrainedError(
+                    f"detector 'atfm': no samples of redundant group {name!r} with a mode value to train on",
+                    hint="the training logs need the profile's [mode] channel and the group's sensors",
+                )
+            modes = sorted(segments)
+            windows = tuple(int(w) for w in self.windows)
+            at = windows.index(int(self.window))
+            eps = np.zeros((len(modes), len(sensors)))
+            e = np.zeros((len(modes), len(sensors)), dtype=np.int64)
+            curves = []
+            for r, value in enumerate(modes):
+                row = []
+                for i in range(len(sensors)):
+                    trained = train_sensor([seg[:, i] for seg in segments[value]], windows, int(self.eps_points))
+                    knee = trained.knees[at]
+                    eps[r, i], e[r, i] = knee.eps, knee.e
+                    row.append({
+                        "eps": trained.eps, "counts": trained.counts, "n_samples": int(trained.n_samples),
+                        "knees": [[k.w, float(k.eps), int(k.e)] for k in trained.knees],
+                    })  # fmt: skip
+                curves.append(row)
+            raw = eps.copy()
+            for i in range(len(sensors)):
+                eps[:, i] = monotone_envelope(eps[:, i])
+            tables[name] = {
+                "sensors": sensors, "modes": np.asarray(modes), "w": int(self.window), "windows": list(windows),
+                "eps": eps, "eps_knee": raw, "e": e, "curves": curves,
+            }  # fmt: skip
+        self.tables_ = tables
+
+    # --- detection ----------------------------------------------------------------------------------
+    def _table(self, name: str) -> dict:
+        table = self.tables_.get(name)
+        if table is None:
+            raise NotTrainedError(
+                f"detector 'atfm': the tables have no redundant group {name!r}",
+                hint=f"retrain with `{TRAIN_COMMAND}` on logs of this profile",
+            )
+        return table
+
+    def _run(self, run, trace, **context) -> DetectorResult:
+        from logscan.tfm import attribute, strong_inconsistency
+
+        result = self.new_result()
+        t = run.t
+        for name in run.redundant:
+            table = self._table(name)
+            samples = detection_grid(run, name)
+            modes, w = np.asarray(table["modes"], dtype=np.float64), int(table["w"])
+            eps_rows, e_rows = np.asarray(table["eps"], dtype=np.float64), np.asarray(table["e"])
+            if len(table["sensors"]) != samples.values.shape[1]:
+                raise NotTrainedError(
+                    f"detector 'atfm': group {name!r} has {samples.values.shape[1]} sensors, its table "
+                    f"{len(table['sensors'])}",
+                    hint=f"retrain with `{TRAIN_COMMAND}`",
+                )
+            measured = _median(samples.values)
+            rows, _ = self._rows(modes, samples.mode, measured)
+            # beyond the top row: commanded above it, or measured clearly above it (noise at the top
+            # speed puts measured - margin over it now and then; the top row is then right)
+            above = (samples.mode > modes[-1] + 1e-9) | (measured - 2.0 * float(self.margin) > modes[-1])
+            if above.any():
+                result.warnings.append(
+                    f"{name}: {above.sum() * samples.dt:.1f} s above the table's top row ({modes[-1]:g}): "
+                    "the top row was used (train at higher mode values to cover them)"
+                )
+            eps, e = eps_rows[rows], e_rows[rows]
+            pairs = strong_inconsistency(samples.values, eps, e, w)
+            si = {}
+            for (i, j), (count, threshold) in pairs.items():
+                signal = f"atfm.{name}.{table['sensors'][i]}~{table['sensors'][j]}"
+                statistic, upper, valid = _on_grid(t.size, samples.steps, count, threshold)
+                warm = np.zeros(t.size, dtype=bool)
+                warm[samples.steps[: max(w - 1, 0)]] = True  # a full window first
+                result.add_statistic(
+                    t, signal, statistic, upper=upper, valid=valid, warmup=warm,
+                    hold_off_s=w * samples.dt,  # intervals closer than w merged
+                )  # fmt: skip
+                si[(i, j)] = count > threshold
+            self._attribute(result, name, table["sensors"], samples, si, attribute)
+            self._extras(result, t.size, name, samples, modes, rows, eps)
+        result.info["window"] = int(self.window)
+        result.info["row"] = self.row
+        return result
+
+    def _rows(self, modes: np.ndarray, commanded: np.ndarray, measured: np.ndarray):
+        from logscan.tfm import select_rows
+
+        if self.row == "adaptive":
+            return select_rows(modes, commanded, measured, float(self.margin))
+        fixed = np.flatnonzero(np.isclose(modes, float(self.row)))
+        if fixed.size == 0:
+            raise ProfileError(
+                f"detector 'atfm': row {self.row!r} is not a trained mode value",
+                hint="trained: " + ", ".join(f"{m:g}" for m in modes),
+            )
+        return np.full(commanded.size, int(fixed[0])), np.zeros(commanded.size, dtype=bool)
+
+    @staticmethod
+    def _attribute(result, name, sensors, samples, si, attribute) -> None:
+        """Name the sensor (or the pair) behind each SI stretch, in the result's info."""
+        if not si:
+            return
+        named = attribute(si, len(sensors))
+        any_si = np.logical_or.reduce(list(si.values()))
+        lines = []
+        for i, flags in enumerate(named):
+            if flags.any():
+                lines.append(f"{sensors[i]}: in SI with every other sensor for {flags.sum() * samples.dt:.1f} s")
+        for (i, j), flags in si.items():
+            alone = flags & ~np.logical_or.reduce(named)
+            if alone.any():
+                seconds = alone.sum() * samples.dt
+                lines.append(f"{sensors[i]}~{sensors[j]}: pair in SI, no single sensor named, {seconds:.1f} s")
+        if any_si.any():
+            result.info[f"attribution.{name}"] = "; ".join(lines)
+
+    def _extras(self, result, grid: int, name, samples, modes, rows, eps) -> None:
+        """The mode value, the table row in use and the fused signals, on the analysis grid."""
+        from logscan.fusion import fuse_all
+
+        selection = np.full(grid, np.nan, dtype=np.float32)
+        selection[samples.steps] = modes[rows]
+        result.extras[f"{name}.table_row_mode"] = selection
+        mode = np.full(grid, np.nan, dtype=np.float32)
+        mode[samples.steps] = samples.mode
+        result.extras[f"{name}.commanded_mode"] = mode
+        for method, fused in fuse_all(samples.values, eps, int(self.fusion_window)).items():
+            out = np.full(grid, np.nan, dtype=np.float32)
+            out[samples.steps] = fused
+            result.extras[f"{name}.fused_{method}"] = out
+
+
+def _redundant_names(runs) -> list[str]:
+    names: list[str] = []
+    for run in runs:
+        names.extend(n for n in run.redundant if n not in names)
+    if not names:
+        raise ProfileError(
+            "detector 'atfm' needs a [redundant.<name>] group of sensors in the profile",
+            hint="see docs/profiles.md, section [redundant]",
+        )
+    return names
+
+
+def _median(values: np.ndarray) -> np.ndarray:
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # steps without any reading
+        return np.nanmedian(values, axis=1)
+
+
+def _on_grid(n: int, steps: np.ndarray, count: np.ndarray, threshold: np.ndarray):
+    """(statistic, upper, valid) on the analysis grid: the detection grid's values at its steps."""
+    statistic = np.full(n, np.nan)
+    upper = np.full(n, np.nan)
+    valid = np.zeros(n, dtype=bool)
+    statistic[steps] = count
+    upper[steps] = threshold
+    valid[steps] = True
+    return statistic, upper, valid

@@ -1,0 +1,99 @@
+"""`logscan train`: fit the profile's trainable detectors on healthy logs into a tables JSON (+ report)."""
+
+from __future__ import annotations
+
+import os
+
+import click
+
+from logscan.cli.options import echo_notice, profile_option, quiet_option, show_progress
+
+
+@click.command(
+    epilog="Examples:\n\n"
+    "  logscan train sample_logs/jackal_train_1.mcap sample_logs/jackal_train_2.mcap -o jackal.tables.json\n\n"
+    "  logscan analyze sample_logs/jackal_gps_bias.mcap --tables jackal.tables.json -d atfm"
+)
+@click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
+@profile_option
+@click.option(
+    "--output", "-o", "output_path", required=True, type=click.Path(dir_okay=False, path_type=str),
+    help="The tables JSON to write (its training report goes beside it as <name>.html).",
+)  # fmt: skip
+@click.option(
+    "--report", "report_path", type=click.Path(dir_okay=False, path_type=str), default=None,
+    help="Write the training report here instead of beside the tables.",
+)  # fmt: skip
+@click.option("--no-report", is_flag=True, default=False, help="Write no training report.")
+@click.option(
+    "--allow-faulty", is_flag=True, default=False,
+    help="Train on logs whose ground truth lists faults (refused by default: a table trained on a fault "
+    "tolerates it).",
+)  # fmt: skip
+@quiet_option
+def train(
+    log_paths: tuple[str, ...],
+    profile_path: str | None,
+    output_path: str,
+    report_path: str | None,
+    no_report: bool,
+    allow_faulty: bool,
+    quiet: bool,
+) -> None:
+    """Train the lookup tables and thresholds of the profile's detectors on healthy logs.
+
+    LOG_OR_DIR are healthy logs (or directories of them) of one vehicle and profile. Every
+    detector that learns from healthy logs is fitted: the A-TFM table of each [redundant] group
+    (eps and e per sensor and mode value), and the thresholds of the detectors the profile runs in a
+    trained variant. Writes one versioned JSON (the training logs' names and SHA-256, the profile's
+    fingerprint) for `logscan analyze --tables`, and a training report. Exit 0, or 2 on bad input.
+    """
+    from logscan.fleet import expand_logs, refuse_clobbering
+    from logscan.training import train_logs
+
+    logs = expand_logs(log_paths)
+    report = None if no_report else (report_path or _beside(output_path))
+    refuse_clobbering([("--output", output_path), ("--report", report)], logs, profile_path)
+    progress = show_progress(quiet)
+
+    def step(message: str) -> None:
+        if progress:
+            click.echo(f"logscan: {message}", err=True)
+
+    document = train_logs(
+        logs, profile_path, allow_faulty=allow_faulty, progress=step, notice=None if quiet else echo_notice
+    )
+    _write(output_path, report, document)
+    if not quiet:
+        for line in _summary_lines(document, output_path, report):
+            click.echo(line)
+
+
+def _beside(output_path: str) -> str:
+    root, ext = os.path.splitext(output_path)
+    return (root if ext.lower() == ".json" else output_path) + ".html"
+
+
+def _write(output_path: str, report: str | None, document: dict) -> None:
+    """The tables and the report, both or neither (staged, then renamed in a row)."""
+    from logscan.artifacts import commit, json_text, new_token, stage
+
+    token = new_token()
+    staged = [stage(output_path, json_text(document), token=token)]
+    if report is not None:
+        from logscan.report.training_page import render_training_html
+
+        staged.insert(0, stage(report, render_training_html(document), token=token))
+    commit(staged)
+
+
+def _summary_lines(document: dict, output_path: str, report: str | None) -> list[str]:
+    from logscan.detectors.registry import default_registry
+
+    registry = default_registry()
+    lines = [f"trained on {len(document['training_logs'])} log(s): {output_path}"]
+    for state in document["detectors"]:
+        lines.extend(registry.get(state["detector"]).state_lines(state))
+    if report is not None:
+        lines.append(f"  report: {report}")
+    return lines
