@@ -1,0 +1,157 @@
+"""A-TFM end to end (detectors/atfm.py, logscan/training.py, `logscan train`): training on healthy
+Jackal-like logs gives a lookup table the detector uses; an attack on one speed sensor alarms on
+its pairs and names it; tables trained for another profile or on faulty logs are refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from logscan.detectors.atfm import AtfmDetector, mode_segments
+from logscan.errors import NotTrainedError, ProfileError
+from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
+from logscan.training import apply_tables, profile_fingerprint, read_tables, train_logs
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    """Two healthy multi-speed logs with glitches and one with a GPS speed bias of 0.3 m/s (60-90 s)."""
+    from logscan.cli.main import main
+
+    root = tmp_path_factory.mktemp("atfm")
+
+    def simulate(name: str, *args: str) -> str:
+        path = str(root / name)
+        try:
+            main(["simulate", "dc_motor", "--duration", "120", "-q", "-o", path, *args])
+        except SystemExit as exc:
+            assert exc.code in (0, None)
+        return path
+
+    return {
+        "healthy": [simulate("h1.mcap", "--seed", "21", "--glitches", "2"), simulate("h2.mcap", "--seed", "22")],
+        "bias": simulate("bias.mcap", "--seed", "23", "--fault", "bias:/gps/speed:60:90:0.3"),
+        "root": root,
+    }
+
+
+@pytest.fixture(scope="module")
+def tables(logs):
+    document = train_logs(logs["healthy"], None)
+    path = logs["root"] / "tables.json"
+    path.write_text(json.dumps(document), encoding="utf-8")
+    return path, document
+
+
+def test_segments_drop_the_settle_time_and_never_span_a_mode_change():
+    mode = np.array([0.4] * 10 + [1.0] * 4 + [np.nan] * 3 + [1.0] * 8)
+    assert mode_segments(mode, 3) == [(0.4, 3, 10), (1.0, 3 + 10, 14), (1.0, 20, 25)]
+
+
+def test_the_table_covers_every_mode_and_sensor_with_sound_rows(tables):
+    _, document = tables
+    (state,) = [s for s in document["detectors"] if s["detector"] == "atfm"]
+    detector = AtfmDetector.from_state(state)
+    table = detector.tables_["speed"]
+    assert table["sensors"] == ["left", "right", "gps"]
+    np.testing.assert_allclose(table["modes"], [0.4, 0.7, 1.0, 1.3, 1.6, 1.9])
+    eps, e = table["eps"], table["e"]
+    assert np.all(np.diff(eps, axis=0) >= 0)  # the monotone envelope
+    assert np.all(eps >= table["eps_knee"]) and np.all(eps > 0)
+    assert np.all(e < 0.5 * table["w"])  # Lemma 4: e/w < 0.5
+    # each knee lies on its own curve at the detection window
+    for r, row in enumerate(table["curves"]):
+        for i, curve in enumerate(row):
+            w_index = table["windows"].index(table["w"])
+            k = int(np.argmin(np.abs(curve["eps"] - table["eps_knee"][r, i])))
+            assert curve["counts"][k, w_index] == e[r, i]
+    assert [log["name"] for log in document["training_logs"]] == ["h1.mcap", "h2.mcap"]
+    assert all(len(log["sha256"]) == 64 for log in document["training_logs"])
+
+
+def test_a_gps_bias_alarms_on_the_gps_pairs_and_names_the_gps(logs, tables):
+    path, _ = tables
+    loaded = load_profile_for(logs["bias"], None)
+    (detector,) = apply_tables(create_detectors(loaded, ["atfm"]), path, loaded.profile)
+    prepared = prepare(logs["bias"], loaded, needs_of([detector]))
+    result = detector.run(prepared.run, None)
+    signals = {a.signal for a in result.alarms}
+    assert {"atfm.speed.left~gps", "atfm.speed.right~gps"} <= signals
+    assert "atfm.speed.left~right" not in signals
+    first = min(a.start for a in result.alarms)
+    assert 60.0 <= first <= 63.0  # within 3 s of the attack's start
+    assert "gps: in SI with every other sensor" in result.info["attribution.speed"]
+    assert {"speed.fused_median", "speed.fused_hybrid", "speed.table_row_mode"} <= set(result.extras)
+
+
+def test_no_alarm_on_a_healthy_log_with_glitches(logs, tables):
+    path, _ = tables
+    healthy = logs["healthy"][0]
+    loaded = load_profile_for(healthy, None)
+    (detector,) = apply_tables(create_detectors(loaded, ["atfm"]), path, loaded.profile)
+    prepared = prepare(healthy, loaded, needs_of([detector]))
+    assert detector.run(prepared.run, None).alarms == []
+
+
+def test_a_fixed_row_uses_that_row_throughout(logs, tables):
+    path, _ = tables
+    loaded = load_profile_for(logs["bias"], None)
+    (detector,) = apply_tables(create_detectors(loaded, ["atfm"]), path, loaded.profile)
+    detector.params["row"] = 1.9
+    prepared = prepare(logs["bias"], loaded, needs_of([detector]))
+    result = detector.run(prepared.run, None)
+    rows = result.extras["speed.table_row_mode"]
+    assert np.nanmin(rows) == np.nanmax(rows) == pytest.approx(1.9)
+    detector.params["row"] = 0.5
+    with pytest.raises(ProfileError, match="not a trained mode value"):
+        detector.run(prepared.run, None)
+
+
+def test_untrained_atfm_says_which_command_to_run(logs):
+    loaded = load_profile_for(logs["bias"], None)
+    (detector,) = create_detectors(loaded, ["atfm"])
+    prepared = prepare(logs["bias"], loaded, needs_of([detector]))
+    with pytest.raises(NotTrainedError, match="no lookup table") as info:
+        detector.run(prepared.run, None)
+    assert "logscan train" in info.value.one_line()
+
+
+def test_tables_of_another_profile_are_refused(logs, tables, tmp_path):
+    path, _ = tables
+    loaded = load_profile_for(logs["bias"], None)
+    other = loaded.profile.to_toml().replace("rate_hz = 10.0", "rate_hz = 5.0", 1)
+    profile = tmp_path / "other.toml"
+    profile.write_text(other, encoding="utf-8")
+    other_loaded = load_profile_for(logs["bias"], profile)
+    assert profile_fingerprint(other_loaded.profile) != profile_fingerprint(loaded.profile)
+    with pytest.raises(ProfileError, match="trained for another profile"):
+        apply_tables(create_detectors(other_loaded, ["atfm"]), path, other_loaded.profile)
+
+
+def test_train_cli_writes_tables_and_analyze_uses_them(logs, cli, tmp_path):
+    out = tmp_path / "t.json"
+    result = cli("train", *logs["healthy"], "-o", out, "--no-report")
+    assert result.exit_code == 0, result.stderr
+    assert "atfm speed: w = 100" in result.stdout and "left" in result.stdout
+    assert set(read_tables(out)) == {"atfm"}
+    analysed = cli("analyze", logs["bias"], "--tables", out, "-d", "atfm", "--no-report")
+    assert analysed.exit_code == 1 and "atfm.speed.left~gps" in analysed.stdout
+    untrained = cli("analyze", logs["bias"], "-d", "atfm", "--no-report")
+    assert untrained.exit_code == 2 and "logscan train" in untrained.stdout + untrained.stderr
+
+
+def test_train_refuses_a_faulty_log_unless_allowed(logs, cli, tmp_path):
+    out = tmp_path / "t.json"
+    refused = cli("train", logs["bias"], "-o", out, "--no-report")
+    assert refused.exit_code == 2 and "fault" in refused.stderr and not out.exists()
+    allowed = cli("train", logs["bias"], "-o", out, "--no-report", "--allow-faulty", "-q")
+    assert allowed.exit_code == 0 and out.exists()
+
+
+def test_a_bad_tables_file_stops_analyze_before_any_log_is_read(logs, cli, tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "something else"}', encoding="utf-8")
+    result = cli("analyze", logs["bias"], "--tables", bad, "--no-report")
+    assert result.exit_code == 2 and "not a logscan tables file" in result.stderr
