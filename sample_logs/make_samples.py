@@ -27,6 +27,8 @@ class Sample:
     fmt: str = "mcap-json"
     about: str = ""
     glitches: float = 0.0  # healthy transients per minute (`--glitches`)
+    speed: str | None = None  # dc_motor's commanded speed (`--speed`; None: the modes, 20 s each)
+    noise: str | None = None  # `--noise` (None: speed with --speed, else constant)
 
 
 SAMPLES = (
@@ -84,6 +86,37 @@ SAMPLES = (
         "`transients`), which its profile's alarm floors tolerate (below)",
     ),
     Sample(
+        "jackal_train_1.mcap",
+        "dc_motor",
+        (),
+        10,
+        120.0,
+        glitches=2.0,
+        noise="speed",
+        about="A-TFM training: every mode 0.4 .. 1.9 m/s for 20 s (seeded order), speed-dependent "
+        "sensor noise, ~2 encoder slips / GPS glitches per minute (truth `transients`); no fault",
+    ),
+    Sample(
+        "jackal_train_2.mcap",
+        "dc_motor",
+        (),
+        11,
+        120.0,
+        glitches=2.0,
+        noise="speed",
+        about="A-TFM training, as jackal_train_1.mcap with another seed (another mode order and noise)",
+    ),
+    Sample(
+        "jackal_gps_bias.mcap",
+        "dc_motor",
+        ("bias:gps_speed:45:75:0.22",),
+        12,
+        100.0,
+        speed="1.0,0.4@30",
+        about="1.0 m/s, then 0.4 from 30 s; +0.22 m/s on the GPS speed in the slow part (A-TFM "
+        "thesis's attack); speed-dependent sensor noise",
+    ),
+    Sample(
         "quad_healthy.csv",
         "quadcopter",
         (),
@@ -105,6 +138,8 @@ def generate(sample: Sample, out_dir: Path) -> list[Path]:
         duration=sample.duration,
         seed=sample.seed,
         glitches_per_min=sample.glitches,
+        speed=sample.speed,
+        noise=sample.noise,
     )
     return write_simulation(sim, out_dir / sample.name, sample.fmt)
 
@@ -112,8 +147,8 @@ def generate(sample: Sample, out_dir: Path) -> list[Path]:
 def readme_table() -> str:
     """The README's table of the sample logs and their faults (markdown)."""
     lines = [
-        "| log | model | duration | seed | faults (kind, target, start-end s, magnitude) | what |",
-        "|---|---|---|---|---|---|",
+        "| log | model | duration | seed | speed (m/s) | faults (kind, target, start-end s, magnitude) | what |",
+        "|---|---|---|---|---|---|---|",
     ]
     from logscan.simulate import parse_fault
     from logscan.simulate.faults import ALIASES
@@ -126,7 +161,8 @@ def readme_table() -> str:
             )
             or "none"
         )
-        lines.append(f"| `{s.name}` | {s.model} | {s.duration:g} s | {s.seed} | {faults} | {s.about} |")
+        speed = s.speed or ("modes" if s.model == "dc_motor" else "-")
+        lines.append(f"| `{s.name}` | {s.model} | {s.duration:g} s | {s.seed} | {speed} | {faults} | {s.about} |")
     return "\n".join(lines) + "\n"
 
 

@@ -23,7 +23,8 @@ _FAULT_HELP = (
     "  logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap\n\n"
     "  logscan simulate quadcopter --fault imu-bitflip --at 20 --fault motor-offset:motor2:40:50 -o q.mcap\n\n"
     "  logscan simulate steer_by_wire --fault bias:yaw_rate:10:20:0.05 --format csv -o sbw.csv\n\n"
-    "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap"
+    "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap\n\n"
+    "  logscan simulate dc_motor --speed 1.0,0.4@30 --fault bias:gps_speed:45:75:0.22 --duration 100 -o j.mcap"
 )
 @click.argument("model_name", metavar="MODEL")
 @click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
@@ -77,8 +78,27 @@ _FAULT_HELP = (
     default=0.0,
     show_default=True,
     metavar="PER_MIN",
-    help="Healthy transients per minute: 1-2 sample spikes on a sensor (the redundant "
-    "speed sensors for dc_motor), listed in the truth as 'transients', not as faults.",
+    help="Healthy transients per minute: 1-2 sample spikes on a sensor (dc_motor: an encoder "
+    "slip or a GPS glitch on the redundant speed sensors), listed in the truth as 'transients', "
+    "not as faults.",
+)
+@click.option(
+    "--speed",
+    "speed",
+    default=None,
+    metavar="SPEC",
+    help="dc_motor's commanded speed (/cmd_vel/linear.x, m/s): 0.7 (constant), 1.0,0.4@30 "
+    "(1.0, then 0.4 from t = 30 s; any number of v@t), or random (speeds from the modes "
+    "0.4 .. 1.9, each held 5-20 s; seeded). Default: the modes in turn, 20 s each.",
+)
+@click.option(
+    "--noise",
+    "noise",
+    type=click.Choice(["speed", "constant"]),
+    default=None,
+    help="Sensor noise: speed (dc_motor: encoder std 0.01 + 0.02 |v|, GPS 0.03 + 0.03 |v|; the "
+    "profile keeps the nominal noise_std) or constant (the model's noise_std). Default: speed "
+    "with --speed, else constant.",
 )
 @seed_option
 @quiet_option
@@ -95,6 +115,8 @@ def simulate(
     fmt,
     aggressive,
     glitches_per_min,
+    speed,
+    noise,
     seed,
     quiet,
     output_path,
@@ -110,6 +132,7 @@ def simulate(
     from logscan.simulate import parse_fault, write_simulation
     from logscan.simulate import simulate as run_simulation
     from logscan.simulate.faults import FaultSpec
+    from logscan.simulate.scenario import check_speed, resolve_noise
 
     if not output_path:
         raise UsageError("no output file", hint="give -o OUT (e.g. -o q.mcap)")
@@ -132,6 +155,8 @@ def simulate(
             end = None if fault_duration is None else (at if at is not None else 0.5 * duration) + fault_duration
             spec = FaultSpec(spec.kind, target, start, end, magnitude)
         specs.append(spec)
+    check_speed(model_name, speed, duration)  # a bad --speed fails before any progress line
+    resolve_noise(model_name, noise, speed)
     progress = show_progress(quiet)
     cold = not quiet and _simulator_cold()
     if cold:
@@ -146,6 +171,8 @@ def simulate(
         rate_hz=rate_hz,
         aggressive=aggressive,
         glitches_per_min=glitches_per_min,
+        speed=speed,
+        noise=noise,
     )
     if progress:
         compiled = " (compiling included)" if cold else ""

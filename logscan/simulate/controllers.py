@@ -12,7 +12,7 @@ writes the input into ``u``. The references are computed vectorised before the l
  - steer_by_wire (id 1): PD hand wheel (a driver following a steering-wheel profile of lane
    changes) and a sliding-mode front-wheel controller tracking theta_h / N_theta (paper V.B).
  - dc_motor (id 2): PI speed control of each wheel on the estimated speed through a schedule of
-   constant-speed modes.
+   constant-speed modes, given speed changes or a random piecewise-constant profile.
 """
 
 from __future__ import annotations
@@ -202,6 +202,28 @@ def dcm_reference(t: np.ndarray, modes: tuple[float, ...], hold: float, rng) -> 
     order = np.concatenate([rng.permutation(len(modes)) for _ in range(n_slots // len(modes) + 1)])
     speeds = np.asarray(modes, dtype=np.float64)[order[:n_slots]]
     return speeds[np.minimum((t / hold).astype(np.int64), n_slots - 1)][:, None]
+
+
+def dcm_steps_reference(t: np.ndarray, changes: list[tuple[float, float]]) -> np.ndarray:
+    """(N, 1) commanded speed: piecewise constant, ``changes`` = [(from t, speed), ...] with the
+    first at t = 0 and increasing times (``--speed 1.0,0.4@30``)."""
+    starts = np.array([c[0] for c in changes], dtype=np.float64)
+    speeds = np.array([c[1] for c in changes], dtype=np.float64)
+    index = np.searchsorted(starts, t + 1e-9, side="right") - 1
+    return speeds[np.maximum(index, 0)][:, None]
+
+
+def dcm_random_reference(t: np.ndarray, modes: tuple[float, ...], hold: tuple[float, float], rng) -> np.ndarray:
+    """(N, 1) commanded speed of ``--speed random``: piecewise constant, each speed one of
+    ``modes`` (never the previous one) held uniform ``hold`` = (lo, hi) seconds; seeded by ``rng``."""
+    end = float(t[-1]) if t.size else 0.0
+    changes = [(0.0, float(rng.choice(modes)))]
+    at = float(rng.uniform(*hold))
+    while at <= end:
+        others = [m for m in modes if m != changes[-1][1]]
+        changes.append((at, float(others[rng.integers(len(others))])))
+        at += float(rng.uniform(*hold))
+    return dcm_steps_reference(t, changes)
 
 
 @njit(cache=True)

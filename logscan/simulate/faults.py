@@ -148,12 +148,14 @@ def resolve_faults(
     state_names: tuple[str, ...],
     estimator_fields: dict[str, str],
     rng: np.random.Generator,
+    sensor_aliases: dict[str, str] | None = None,
 ) -> tuple[list[FaultEvent], FaultTable]:
     """Turn user specs into ground-truth events and the kernel's fault table.
 
     ``sensor_channels``: (target name like "accel.x", log channel) per measured value, in kernel
     order; ``imu_default``: the target of imu-* aliases; ``actuators``: actuator target names in
-    kernel order; ``estimator_fields``: state name -> logged field prefix (for the truth's channels).
+    kernel order; ``estimator_fields``: state name -> logged field prefix (for the truth's channels);
+    ``sensor_aliases``: other names of sensor targets -> target name (gps -> gps_speed).
     """
     n_steps = int(round(duration / dt)) + 1
     events: list[FaultEvent] = []
@@ -178,7 +180,8 @@ def resolve_faults(
         if not math.isfinite(magnitude):
             raise UsageError(f"fault {spec.kind}: magnitude must be finite, got {magnitude}")
         if kind in SENSOR_KINDS:
-            index = _sensor_target(target or "imu", imu_default, sensor_channels, spec.kind)
+            target = target or "imu"
+            index = _sensor_target((sensor_aliases or {}).get(target, target), imu_default, sensor_channels, spec.kind)
             target = sensor_channels[index][0]
             channels: tuple[str, ...] = (sensor_channels[index][1],)
         elif kind in ACTUATOR_KINDS:

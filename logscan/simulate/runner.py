@@ -6,7 +6,9 @@ One step k (period dt, x_k = f(x_{k-1}, u_k) + w_k as the models define it):
   2. actuator faults act on a; the truth is driven by u_act = M a_faulty:
      x_k = f(x_{k-1}, u_act) + w_k, w_k ~ N(0, Q) (the model's own Q, so an analysis filter with
      the model's defaults is consistent with the simulator);
-  3. each measurement group samples every `ratio` steps: z = h(x_k, u_act) + v, v ~ N(0, R);
+  3. each measurement group samples every `ratio` steps: z = h(x_k, u_act) + v, v ~ N(0, s^2) with
+     s = base + slope |h| per channel (slope 0: the model's noise_std; the dc_motor's speed sensors
+     grow noisier with the speed);
      sensor faults act on the sampled value (what the log records);
   4. on-board EKF (what a real autopilot runs, its state and variance logged): predict with the
      commanded u, one stacked update with the fresh groups, skipping a group with a non-finite or
@@ -77,7 +79,9 @@ def closed_loop(
     P0,
     Q,
     W,
-    V,
+    E,
+    noise_base,
+    noise_slope,
     g_id,
     g_m,
     g_off,
@@ -105,10 +109,11 @@ def closed_loop(
     """Run the whole log; returns (x_true, u_cmd, u_act, z, x_hat, P_diag, rejected).
 
     z is (N, total measurements) with NaN where a group did not sample; rejected counts samples
-    the on-board EKF skipped (non-finite or outside the sensor's physical range)."""
+    the on-board EKF skipped (non-finite or outside the sensor's physical range). E holds unit
+    normal draws (N, total measurements); R_diag is the on-board EKF's (nominal) noise variance."""
     N, n = W.shape
     nu = M.shape[0]
-    n_meas = V.shape[1]
+    n_meas = E.shape[1]
     x_true = np.empty((N, n))
     x_hat = np.empty((N, n))
     P_diag = np.empty((N, n))
@@ -162,7 +167,10 @@ def closed_loop(
                 for i in range(f_kind.size):
                     if f_kind[i] == STUCK and f_target[i] == c and k == f_start[i]:
                         stuck[i] = last_z[c]
-                v = zg[j] + V[k, c]
+                sd = noise_base[c]
+                if noise_slope[c] != 0.0:
+                    sd = sd + noise_slope[c] * abs(zg[j])
+                v = zg[j] + E[k, c] * sd
                 if ch_wrap[c]:
                     v = (v + np.pi) % (2.0 * np.pi) - np.pi
                 v = _sensor_faults(k, c, v, dt, f_kind, f_target, f_start, f_end, f_mag, f_unif, f_bit, stuck)

@@ -8,8 +8,10 @@ plus the naming that the log, the truth and the profile use:
  - steer_by_wire: steering angle, yaw rate and lateral acceleration at the grid rate; one actuator
    (the steering motor torque); lane changes through a PD hand wheel and sliding-mode control.
  - dc_motor (Jackal-like UGV): left/right wheel encoders 20 Hz and GPS speed 10 Hz (a redundant
-   speed group for A-TFM); PI speed control through constant-speed modes 0.4 .. 1.9 m/s. Its
-   profile tolerates healthy sensor glitches (see `glitch_tolerance`).
+   speed group for A-TFM); PI speed control through constant-speed modes 0.4 .. 1.9 m/s, or the
+   commanded-speed profile ``speed`` (`parse_speed`: constant, changes at given times, random).
+   The speed sensors' noise grows with the speed (`SPEED_NOISE`). Its profile tolerates healthy
+   sensor glitches (see `glitch_tolerance`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,19 @@ DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0}
 SIMULATED_MODELS = tuple(DEFAULT_RATES)
 DCM_MODES = (0.4, 0.7, 1.0, 1.3, 1.6, 1.9)  # m/s, the A-TFM thesis's trained modes
 DCM_HOLD_S = 20.0
+DCM_RANDOM_HOLD_S = (5.0, 20.0)  # `--speed random`: each speed held uniform 5 .. 20 s
+DCM_MAX_SPEED = 2.0  # m/s: --speed values 0 .. 2.0 (the motor tops out near 2.06 m/s at 24 V)
+# Speed-dependent sensor noise of the dc_motor speed sensors, group -> (base, k): a sample's noise
+# std is base + k |v| at the true speed v (wheel slip and quantisation grow with the speed; the GPS
+# speed's error with the distance covered between fixes). At 1.9 m/s: encoder 0.048, GPS 0.087, so
+# an encoder's error against the mean of the other two has std ~0.07 and its trained A-TFM bound
+# is ~0.15-0.17 (the thesis's 0.17 at 1.9 m/s); at 0.4 m/s: 0.018 and 0.042. The profile keeps
+# the model's nominal noise_std (encoder 0.02, GPS 0.05), what the on-board EKF assumes too.
+SPEED_NOISE = {"encoder": (0.01, 0.02), "gps_speed": (0.03, 0.03)}
+# --noise: "speed" (SPEED_NOISE, dc_motor only) or "constant" (the model's noise_std). Default: speed
+# for the UGV scenarios (--speed given), constant for the mode cycle, whose logs stay consistent
+# with the analysis filter's fixed noise (a fixed-R NIS alarms on speed-dependent noise at speed).
+NOISE_KINDS = ("speed", "constant")
 
 # model -> group -> (topic, field per output); groups not listed: ("/<group>", output names).
 # Groups sharing a topic (same rate) are logged as one message, like an IMU's.
@@ -82,6 +97,16 @@ class SensorGroup:
         return [f"{self.topic}/{f}" for f in self.fields]
 
     outputs: tuple[str, ...] = ()
+    # simulated noise std per channel: noise_base + noise_slope * |noise-free reading|
+    # (None: noise_std, constant)
+    noise_base: np.ndarray | None = None
+    noise_slope: np.ndarray | None = None
+
+    def sample_std(self, reading: float) -> np.ndarray:
+        """Simulated noise std per channel at a noise-free reading (speed) ``reading``."""
+        if self.noise_base is None or self.noise_slope is None:
+            return self.noise_std
+        return self.noise_base + self.noise_slope * abs(reading)
 
     def targets(self) -> list[str]:
         """Fault target names of the group's channels: the group (yaw_rate) when it has one,
@@ -122,6 +147,8 @@ class Scenario:
     onboard_rate_hz: float = 50.0
     alarms: dict[str, float] = field(default_factory=dict)  # the profile's [alarms] table
     detectors: dict[str, dict] = field(default_factory=dict)  # the profile's [detectors.<name>] tables
+    speed: str | None = None  # dc_motor's --speed as given (None: the mode cycle)
+    noise: str = "constant"  # sensor noise: "speed" (SPEED_NOISE) or "constant"
 
 
 def input_channel(name: str) -> str:
@@ -157,13 +184,18 @@ def build_scenario(
     aggressive: bool,
     rng: np.random.Generator,
     params: dict | None = None,
+    speed: str | None = None,
+    noise: str | None = None,
 ) -> Scenario:
-    """The scenario of ``model_name`` for a log of ``duration`` seconds."""
+    """The scenario of ``model_name`` for a log of ``duration`` seconds (``speed``: the dc_motor's
+    commanded-speed profile, see `parse_speed`, None: its mode cycle; ``noise``: see NOISE_KINDS)."""
     if model_name not in SIMULATED_MODELS:
         raise UsageError(
             f"cannot simulate model {model_name!r}",
             hint="simulated models: " + ", ".join(SIMULATED_MODELS),
         )
+    changes = check_speed(model_name, speed, duration)
+    noise = resolve_noise(model_name, noise, speed)
     rate = float(rate_hz or DEFAULT_RATES[model_name])
     if not (1.0 <= rate <= 10000.0):
         raise UsageError(f"--rate {rate:g} Hz is out of range", hint="use 1 .. 10000 Hz")
@@ -171,12 +203,69 @@ def build_scenario(
     model = get_model(model_name, params)
     n_steps = int(round(duration / dt)) + 1
     t = np.arange(n_steps) * dt
-    groups = _sensor_groups(model_name, model, rate)
-    builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire, "dc_motor": _dc_motor}
+    groups = _sensor_groups(model_name, model, rate, noise)
+    if model_name == "dc_motor":
+        sc = _dc_motor(model, dt, t, groups, aggressive, rng, changes)
+        sc.speed, sc.noise = speed, noise
+        return sc
+    builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire}
     return builder[model_name](model, dt, t, groups, aggressive, rng)
 
 
-def _sensor_groups(model_name: str, model: Model, rate: float) -> list[SensorGroup]:
+def check_speed(model_name: str, speed: str | None, duration: float) -> list[tuple[float, float]] | str | None:
+    """`parse_speed` of ``speed`` for ``model_name`` (None: no --speed); UsageError unless dc_motor."""
+    if speed is None or model_name not in SIMULATED_MODELS:
+        return None
+    if model_name != "dc_motor":
+        raise UsageError(f"--speed is for dc_motor, not {model_name}", hint="drop --speed or simulate dc_motor")
+    return parse_speed(speed, duration)
+
+
+def resolve_noise(model_name: str, noise: str | None, speed: str | None) -> str:
+    """``--noise`` (None: its default, see NOISE_KINDS); UsageError on an unknown kind or speed
+    noise on a model other than dc_motor."""
+    if noise is None:
+        return "speed" if model_name == "dc_motor" and speed is not None else "constant"
+    if noise not in NOISE_KINDS:
+        raise UsageError(f"--noise {noise!r} is unknown", hint="choose " + " or ".join(NOISE_KINDS))
+    if noise == "speed" and model_name != "dc_motor":
+        raise UsageError(f"--noise speed is for dc_motor, not {model_name}", hint="drop --noise")
+    return noise
+
+
+def parse_speed(text: str, duration: float) -> list[tuple[float, float]] | str:
+    """``--speed`` of dc_motor: ``0.7`` (constant), ``1.0,0.4@30`` (1.0 m/s, then 0.4 from t = 30 s;
+    any number of ``v@t`` with increasing times inside the log) -> [(t, v), ...] starting at t = 0;
+    ``random`` -> "random" (`controllers.dcm_random_reference`). Raises UsageError on anything else."""
+    spec = text.strip().lower()
+    if spec == "random":
+        return "random"
+    hint = "use a speed (0.7), speed changes (1.0,0.4@30) or random; speeds 0 .. 2 m/s"
+    changes: list[tuple[float, float]] = []
+    for i, part in enumerate(spec.split(",")):
+        value, at, when = part.partition("@")
+        try:
+            v = float(value)
+            t = float(when) if at else 0.0
+        except ValueError:
+            raise UsageError(f"--speed {text!r} is not a speed profile", hint=hint) from None
+        if i == 0 and at:
+            raise UsageError(f"--speed {text!r}: the first speed holds from 0 s, give it without @", hint=hint)
+        if i > 0 and not at:
+            raise UsageError(f"--speed {text!r}: every speed after the first needs its start time (v@t)", hint=hint)
+        if not (0.0 <= v <= DCM_MAX_SPEED):
+            raise UsageError(f"--speed {text!r}: speed {v:g} m/s is out of range", hint=hint)
+        if i > 0 and not (changes[-1][0] < t < duration):
+            raise UsageError(
+                f"--speed {text!r}: change at {t:g} s is not after the previous one and inside the log "
+                f"(0 .. {duration:g} s)",
+                hint="give increasing times within --duration",
+            )
+        changes.append((t, v))
+    return changes
+
+
+def _sensor_groups(model_name: str, model: Model, rate: float, noise: str = "constant") -> list[SensorGroup]:
     out = []
     for spec in sorted(model.groups.values(), key=lambda g: g.group_id):
         topic, fields = _SENSOR_TOPICS.get(model_name, {}).get(spec.name, (f"/{spec.name}", spec.outputs))
@@ -195,9 +284,18 @@ def _sensor_groups(model_name: str, model: Model, rate: float) -> list[SensorGro
                 range_hi=np.asarray(spec.range_hi, dtype=np.float64),
                 wrap=spec.wrap_mask(),
                 outputs=tuple(spec.outputs),
+                **(_speed_noise(spec.name, len(fields)) if noise == "speed" else {}),
             )
         )
     return out
+
+
+def _speed_noise(group: str, m: int) -> dict[str, np.ndarray]:
+    """SensorGroup noise_base / noise_slope of a speed sensor (empty: constant noise_std)."""
+    if group not in SPEED_NOISE:
+        return {}
+    base, slope = SPEED_NOISE[group]
+    return {"noise_base": np.full(m, base), "noise_slope": np.full(m, slope)}
 
 
 def _quadcopter(model, dt, t, groups, aggressive, rng) -> Scenario:
@@ -263,8 +361,13 @@ def _steer_by_wire(model, dt, t, groups, aggressive, rng) -> Scenario:
     )
 
 
-def _dc_motor(model, dt, t, groups, aggressive, rng) -> Scenario:
-    ref = ctl.dcm_reference(t, DCM_MODES, DCM_HOLD_S / (2.0 if aggressive else 1.0), rng)
+def _dc_motor(model, dt, t, groups, aggressive, rng, changes=None) -> Scenario:
+    if changes is None:
+        ref = ctl.dcm_reference(t, DCM_MODES, DCM_HOLD_S / (2.0 if aggressive else 1.0), rng)
+    elif changes == "random":
+        ref = ctl.dcm_random_reference(t, DCM_MODES, DCM_RANDOM_HOLD_S, rng)
+    else:
+        ref = ctl.dcm_steps_reference(t, changes)
     supply = float(model.p["Va"])
     radius = float(model.p["wheel_radius"])
     # feed-forward: the steady-state voltage per m/s of the exactly discretised model

@@ -135,7 +135,7 @@ class Simulation:
     def truth(self) -> dict:
         """The ground-truth document embedded in the log (`logscan.truth`)."""
         sc = self.scenario
-        return {
+        doc = {
             "schema": TRUTH_SCHEMA,
             "generator": "logscan simulate",
             "model": sc.model_name,
@@ -145,11 +145,21 @@ class Simulation:
             "aggressive": self.aggressive,
             "controller_input": "on-board EKF estimate",
             "events": [e.to_truth() for e in self.events],
-            "transients": [dict(e.to_truth(), kind="glitch") for e in self.transients],
+            "transients": [dict(e.to_truth(), kind="glitch", cause=_glitch_cause(e.target)) for e in self.transients],
             "true_state_topic": "/truth/state",
             "true_state_fields": list(sc.model.state_names),
             "onboard_rejected_samples": int(self.rejected),
         }
+        if sc.speed is not None:
+            doc["speed_profile"] = sc.speed
+        noisy = [g for g in sc.groups if g.noise_slope is not None]
+        if noisy:  # the simulated noise std per channel, where it is not the profile's noise_std
+            doc["sensor_noise_std"] = {
+                ch: f"{b:g} + {k:g} |v|"
+                for g in noisy
+                for ch, b, k in zip(g.channels, g.noise_base.tolist(), g.noise_slope.tolist())
+            }
+        return doc
 
     def profile_dict(self) -> dict:
         """The matching profile (`[vehicle]`, `[inputs]`, `[measurements.*]`, `[onboard]`, ...)."""
@@ -189,28 +199,55 @@ class Simulation:
 
 
 def _glitches(sc: Scenario, duration: float, per_min: float, rng: np.random.Generator) -> list[FaultSpec]:
-    """Healthy transients as one- or two-sample bias specs (see `simulate`)."""
+    """Healthy transients as one- or two-sample bias specs (see `simulate`): 3-8 noise standard
+    deviations (at the commanded speed for a speed sensor whose noise grows with it); an encoder
+    slips (reads low), any other sensor is off either way (a GPS glitch)."""
     count = rng.poisson(per_min * duration / 60.0) if per_min > 0 else 0
     if count == 0:
         return []
     redundant = {ch for group in sc.redundant.values() for ch in group.values()}
-    channels = [
-        (ch, g.noise_std[j], g.ratio * sc.dt)
-        for g in sc.groups
-        for j, ch in enumerate(g.channels)
-        if not redundant or ch in redundant
-    ]
+    channels = [(ch, g, j) for g in sc.groups for j, ch in enumerate(g.channels) if not redundant or ch in redundant]
     picks = rng.integers(0, len(channels), size=count)
     starts = np.sort(rng.uniform(1.0, max(duration - 1.0, 1.0), size=count))
     sizes = rng.uniform(3.0, 8.0, size=count) * rng.choice([-1.0, 1.0], size=count)
     lengths = rng.integers(1, 3, size=count)
     out = []
     for pick, start, size, length in zip(picks.tolist(), starts.tolist(), sizes.tolist(), lengths.tolist()):
-        channel, std, period = channels[pick]
-        out.append(
-            FaultSpec("bias", channel, round(start, 3), round(start + length * period, 3), round(float(size * std), 6))
-        )
+        channel, g, j = channels[pick]
+        step = min(int(round(start / sc.dt)), sc.reference.shape[0] - 1)
+        std = float(g.sample_std(sc.reference[step, 0])[j]) if g.noise_slope is not None else float(g.noise_std[j])
+        if _glitch_cause(g.name) == "encoder-slip":
+            size = -abs(size)
+        period = g.ratio * sc.dt
+        out.append(FaultSpec("bias", channel, round(start, 3), round(start + length * period, 3), round(size * std, 6)))
     return out
+
+
+def _glitch_cause(target: str) -> str:
+    """What a healthy transient on ``target`` (a fault target or group name) stands for."""
+    if target.startswith("encoder"):
+        return "encoder-slip"
+    if target.startswith("gps"):
+        return "gps-glitch"
+    return "spike"
+
+
+def sensor_aliases(sc: Scenario) -> dict[str, str]:
+    """Other names a user may give a sensor fault's target -> the target name: the field
+    (left.v), the model output (v_left), "<group>.<field>" and the redundant group's sensor name
+    (left, encoder.left, gps); a name that would stand for two channels is left out."""
+    redundant = {ch: name for group in sc.redundant.values() for name, ch in group.items()}
+    seen: dict[str, set[str]] = {}
+    for g in sc.groups:
+        outputs = g.outputs or g.fields
+        for target, channel, field_name, output in zip(g.targets(), g.channels, g.fields, outputs):
+            names = {field_name, output, f"{g.name}.{field_name}", f"{g.name}.{output}"}
+            if channel in redundant:  # left, encoder.left, gps
+                names |= {redundant[channel], f"{g.name}.{redundant[channel]}"}
+            for name in names - {target}:
+                seen.setdefault(name, set()).add(target)
+    real = {target for g in sc.groups for target in g.targets()}
+    return {name: next(iter(targets)) for name, targets in seen.items() if len(targets) == 1 and name not in real}
 
 
 def _split(channel: str, values: np.ndarray) -> tuple[str, dict[str, np.ndarray]]:
@@ -228,13 +265,21 @@ def simulate(
     aggressive: bool = False,
     params: dict | None = None,
     glitches_per_min: float = 0.0,
+    speed: str | None = None,
+    noise: str | None = None,
 ) -> Simulation:
     """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``.
 
     ``glitches_per_min`` adds healthy transients (docs/algorithms.md section 6.5): one- or two-sample
     spikes of 3-8 noise standard deviations on a random sensor channel (the redundant group's
     when the model has one), Poisson in time. They are listed in the truth as ``transients``, not
-    as fault ``events``: a detector should tolerate them.
+    as fault ``events``: a detector should tolerate them. On dc_motor they are encoder slips (one
+    encoder reads low) and GPS glitches, sized by the noise at the commanded speed.
+
+    ``speed`` (dc_motor only): the commanded-speed profile, ``0.7``, ``1.0,0.4@30`` or ``random``
+    (`logscan.simulate.scenario.parse_speed`); None: the mode cycle. ``noise``: "speed" (the speed
+    sensors' noise std grows with the speed, `scenario.SPEED_NOISE`; dc_motor only) or "constant"
+    (the model's noise_std); None: speed when ``speed`` is given, else constant.
     """
     if not (0.0 < duration <= MAX_DURATION_S):
         raise UsageError(f"--duration {duration:g} s is out of range", hint="use 0 < duration <= 86400 s")
@@ -243,7 +288,8 @@ def simulate(
     if not (0.0 <= glitches_per_min <= 600.0):
         raise UsageError(f"--glitches {glitches_per_min:g} per minute is out of range", hint="use 0 .. 600")
     rng = np.random.default_rng(seed)
-    sc = build_scenario(model_name, duration, rate_hz, aggressive, np.random.default_rng([seed, 1]), params)
+    scenario_rng = np.random.default_rng([seed, 1])
+    sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
     n_steps = sc.reference.shape[0]
     sensor_channels = [(target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)]
     faults = list(faults or [])
@@ -254,6 +300,7 @@ def simulate(
         dt=sc.dt,
         sensor_channels=sensor_channels,
         imu_default=sc.imu_default,
+        sensor_aliases=sensor_aliases(sc),
         actuators=sc.actuators,
         state_names=sc.model.state_names,
         estimator_fields={s: f"/ekf/variance/{s}" for s in sc.model.state_names},
@@ -273,8 +320,10 @@ def simulate(
     L_Q = np.linalg.cholesky(Q)
     # w_k ~ N(0, Q): w = L_Q e, e ~ N(0, I)
     W = rng.standard_normal((n_steps, n)) @ L_Q.T
-    std = np.concatenate([g.noise_std for g in sc.groups])
-    V = rng.standard_normal((n_steps, std.size)) * std
+    std = np.concatenate([g.noise_std for g in sc.groups])  # nominal: the on-board EKF's R
+    base = np.concatenate([g.noise_std if g.noise_base is None else g.noise_base for g in sc.groups])
+    slope = np.concatenate([np.zeros(len(g.fields)) if g.noise_slope is None else g.noise_slope for g in sc.groups])
+    E = rng.standard_normal((n_steps, std.size))
     g_m = np.array([len(g.fields) for g in sc.groups], dtype=np.int64)
     started = time.perf_counter()
     x_true, u_cmd, u_act, z, x_hat, P_diag, rejected = closed_loop(
@@ -285,7 +334,9 @@ def simulate(
         np.ascontiguousarray(sc.P0, dtype=np.float64),
         Q,
         W,
-        V,
+        E,
+        base,
+        slope,
         np.array([g.group_id for g in sc.groups], dtype=np.int64),
         g_m,
         np.concatenate([[0], np.cumsum(g_m)[:-1]]).astype(np.int64),
