@@ -31,12 +31,13 @@ DCM_MODES = (0.4, 0.7, 1.0, 1.3, 1.6, 1.9)  # m/s, the A-TFM thesis's trained mo
 DCM_HOLD_S = 20.0
 DCM_RANDOM_HOLD_S = (5.0, 20.0)  # `--speed random`: each speed held uniform 5 .. 20 s
 DCM_MAX_SPEED = 2.0  # m/s: --speed values 0 .. 2.0 (the motor tops out near 2.06 m/s at 24 V)
-# Speed-dependent sensor noise of the dc_motor speed sensors, group -> (base, k): a sample's noise
-# std is base + k |v| at the true speed v (wheel slip and quantisation grow with the speed; the GPS
-# speed's error with the distance covered between fixes). At 1.9 m/s: encoder 0.048, GPS 0.087, so
-# an encoder's error against the mean of the other two has std ~0.07 and its trained A-TFM bound
-# is ~0.15-0.17 (the thesis's 0.17 at 1.9 m/s); at 0.4 m/s: 0.018 and 0.042. The profile keeps
-# the model's nominal noise_std (encoder 0.02, GPS 0.05), what the on-board EKF assumes too.
+# Speed-dependent sensor noise of the dc_motor speed sensors (--noise speed), group -> (base, k): a
+# sample's noise std is base + k |v| at the true speed v (wheel slip and tick quantisation grow with
+# the speed; a GPS speed with the distance covered between fixes). At 1.9 m/s: encoder 0.048, GPS
+# 0.087; an encoder's error against the mean of the other two then trains to an A-TFM bound of
+# ~0.15 at w = 100 (the thesis's 0.17 at 1.9 m/s), ~0.06 at 0.4 m/s (encoder 0.018, GPS 0.042;
+# the thesis's 0.06); measured on 300 s constant-speed runs. The profile keeps the model's nominal
+# noise_std (encoder 0.02, GPS 0.05), which the on-board EKF assumes too.
 SPEED_NOISE = {"encoder": (0.01, 0.02), "gps_speed": (0.03, 0.03)}
 # --noise: "speed" (SPEED_NOISE, dc_motor only) or "constant" (the model's noise_std). Default: speed
 # for the UGV scenarios (--speed given), constant for the mode cycle, whose logs stay consistent
