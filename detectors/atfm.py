@@ -78,6 +78,55 @@ def mode_segments(mode: np.ndarray, settle: int) -> list[tuple[float, int, int]]
     ]
 
 
+def train_table(
+    sensors: list[str], segments: dict[float, list[np.ndarray]], windows: list[int], w: int, eps_points: int
+) -> dict:
+    """The lookup table of one group from its error segments by mode value ((M, s) arrays): per
+    sensor and mode, e(eps, w) for every window and its knee (`logscan.tfm.train_sensor`); the
+    row is the knee at the detection window ``w``; eps then takes its monotone envelope over the
+    mode values. Keeps the curves for the training report."""
+    from logscan.tfm import monotone_envelope, train_sensor
+
+    modes = sorted(segments)
+    at = windows.index(w)
+    eps = np.zeros((len(modes), len(sensors)))
+    e = np.zeros((len(modes), len(sensors)), dtype=np.int64)
+    curves = []
+    for r, value in enumerate(modes):
+        row = []
+        for i in range(len(sensors)):
+            trained = train_sensor([seg[:, i] for seg in segments[value]], tuple(windows), eps_points)
+            eps[r, i], e[r, i] = trained.knees[at].eps, trained.knees[at].e
+            row.append({
+                "eps": trained.eps, "counts": trained.counts, "n_samples": int(trained.n_samples),
+                "knees": [[k.w, float(k.eps), int(k.e)] for k in trained.knees],
+            })  # fmt: skip
+        curves.append(row)
+    knees = eps.copy()
+    for i in range(len(sensors)):
+        eps[:, i] = monotone_envelope(eps[:, i])
+    return {
+        "sensors": list(sensors), "modes": np.asarray(modes), "w": int(w), "windows": list(windows),
+        "eps": eps, "eps_knee": knees, "e": e, "curves": curves,
+    }  # fmt: skip
+
+
+def table_rows(detector: str, modes: np.ndarray, row, margin: float, commanded: np.ndarray, measured: np.ndarray):
+    """(row per step, above the top row per step): "next higher" by max(commanded, measured -
+    margin) when ``row`` is "adaptive", else the trained mode value ``row`` throughout."""
+    from logscan.tfm import select_rows
+
+    if row == "adaptive":
+        return select_rows(modes, commanded, measured, margin)
+    fixed = np.flatnonzero(np.isclose(modes, float(row)))
+    if fixed.size == 0:
+        raise ProfileError(
+            f"detector {detector!r}: row {row!r} is not a trained mode value",
+            hint="trained: " + ", ".join(f"{m:g}" for m in modes),
+        )
+    return np.full(commanded.size, int(fixed[0])), np.zeros(commanded.size, dtype=bool)
+
+
 class AtfmDetector(Detector):
     """A-TFM: weak/strong inconsistency of redundant sensors with a trained speed lookup table."""
 
@@ -146,7 +195,7 @@ class AtfmDetector(Detector):
 
     # --- training -----------------------------------------------------------------------------------
     def _fit(self, runs, traces, **context) -> None:
-        from logscan.tfm import monotone_envelope, reference_errors, train_sensor
+        from logscan.tfm import reference_errors
 
         names = _redundant_names(runs)
         tables = {}
@@ -168,30 +217,9 @@ class AtfmDetector(Detector):
                     f"detector 'atfm': no samples of redundant group {name!r} with a mode value to train on",
                     hint="the training logs need the profile's [mode] channel and the group's sensors",
                 )
-            modes = sorted(segments)
-            windows = tuple(int(w) for w in self.windows)
-            at = windows.index(int(self.window))
-            eps = np.zeros((len(modes), len(sensors)))
-            e = np.zeros((len(modes), len(sensors)), dtype=np.int64)
-            curves = []
-            for r, value in enumerate(modes):
-                row = []
-                for i in range(len(sensors)):
-                    trained = train_sensor([seg[:, i] for seg in segments[value]], windows, int(self.eps_points))
-                    knee = trained.knees[at]
-                    eps[r, i], e[r, i] = knee.eps, knee.e
-                    row.append({
-                        "eps": trained.eps, "counts": trained.counts, "n_samples": int(trained.n_samples),
-                        "knees": [[k.w, float(k.eps), int(k.e)] for k in trained.knees],
-                    })  # fmt: skip
-                curves.append(row)
-            raw = eps.copy()
-            for i in range(len(sensors)):
-                eps[:, i] = monotone_envelope(eps[:, i])
-            tables[name] = {
-                "sensors": sensors, "modes": np.asarray(modes), "w": int(self.window), "windows": list(windows),
-                "eps": eps, "eps_knee": raw, "e": e, "curves": curves,
-            }  # fmt: skip
+            tables[name] = train_table(
+                sensors, segments, [int(w) for w in self.windows], int(self.window), int(self.eps_points)
+            )
         self.tables_ = tables
 
     # --- detection ----------------------------------------------------------------------------------
@@ -250,17 +278,7 @@ class AtfmDetector(Detector):
         return result
 
     def _rows(self, modes: np.ndarray, commanded: np.ndarray, measured: np.ndarray):
-        from logscan.tfm import select_rows
-
-        if self.row == "adaptive":
-            return select_rows(modes, commanded, measured, float(self.margin))
-        fixed = np.flatnonzero(np.isclose(modes, float(self.row)))
-        if fixed.size == 0:
-            raise ProfileError(
-                f"detector 'atfm': row {self.row!r} is not a trained mode value",
-                hint="trained: " + ", ".join(f"{m:g}" for m in modes),
-            )
-        return np.full(commanded.size, int(fixed[0])), np.zeros(commanded.size, dtype=bool)
+        return table_rows(self.name, modes, self.row, float(self.margin), commanded, measured)
 
     @staticmethod
     def _attribute(result, name, sensors, samples, si, attribute) -> None:

@@ -35,6 +35,7 @@ BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.encoded_ekf:EncodedEkfDetector",
     "logscan.detectors.nis:NisDetector",
     "logscan.detectors.atfm:AtfmDetector",
+    "logscan.detectors.atfm_residual:AtfmResidualDetector",
 ]
 
 BUILTIN = "built-in"

@@ -155,3 +155,67 @@ def test_a_bad_tables_file_stops_analyze_before_any_log_is_read(logs, cli, tmp_p
     bad.write_text('{"format": "something else"}', encoding="utf-8")
     result = cli("analyze", logs["bias"], "--tables", bad, "--no-report")
     assert result.exit_code == 2 and "not a logscan tables file" in result.stderr
+
+
+# --- the residual flavour (hybrid KF + A-TFM) ---------------------------------------------------
+
+
+def test_segment_counts_never_reach_back_across_a_mode_change():
+    from logscan.detectors.atfm_residual import segment_counts
+
+    rng = np.random.default_rng(4)
+    exceed = rng.random(300) < 0.3
+    mode = np.repeat([0.4, 1.0, np.nan, 1.0], [100, 80, 20, 100])
+    counts = segment_counts(exceed, mode, 25)
+    expected = []
+    for k in range(exceed.size):  # brute force: back to w steps or the run's first step
+        first = k
+        while (
+            first > 0
+            and k - first + 1 < 25
+            and (mode[first - 1] == mode[k] or (np.isnan(mode[first - 1]) and np.isnan(mode[k])))
+        ):
+            first -= 1
+        expected.append(int(exceed[first : k + 1].sum()))
+    np.testing.assert_array_equal(counts, expected)
+
+
+@pytest.fixture(scope="module")
+def residual_setup(logs, tmp_path_factory):
+    """A profile enabling atfm_residual, and tables trained on the healthy logs with it."""
+    root = tmp_path_factory.mktemp("residual")
+    loaded = load_profile_for(logs["healthy"][0], None)
+    profile = root / "p.toml"
+    profile.write_text(loaded.profile.to_toml() + "\n[detectors.atfm_residual]\n", encoding="utf-8")
+    document = train_logs(logs["healthy"], str(profile))
+    tables_file = root / "t.json"
+    tables_file.write_text(json.dumps(document), encoding="utf-8")
+    return profile, tables_file, document
+
+
+def residual_result(path, profile, tables_file):
+    loaded = load_profile_for(path, profile)
+    (detector,) = apply_tables(create_detectors(loaded, ["atfm_residual"]), tables_file, loaded.profile)
+    prepared = prepare(path, loaded, needs_of([detector]))
+    return detector.run(prepared.run, prepared.trace)
+
+
+def test_the_residual_tables_cover_each_speed_channel(residual_setup):
+    _, _, document = residual_setup
+    assert {s["detector"] for s in document["detectors"]} == {"atfm", "atfm_residual"}
+    (state,) = [s for s in document["detectors"] if s["detector"] == "atfm_residual"]
+    from logscan.detectors.atfm_residual import AtfmResidualDetector
+
+    tables = AtfmResidualDetector.from_state(state).tables_
+    assert set(tables) == {"encoder[0]", "encoder[1]", "gps_speed"}  # the speed sensors, not the current
+    for table in tables.values():
+        assert np.all(np.diff(table["eps"][:, 0]) >= 0) and np.all(table["e"] < 0.5 * table["w"])
+
+
+def test_the_residual_flavour_is_quiet_on_its_training_logs_and_sees_the_gps_bias(logs, residual_setup):
+    profile, tables_file, _ = residual_setup
+    for healthy in logs["healthy"]:
+        assert residual_result(healthy, profile, tables_file).alarms == []
+    alarms = residual_result(logs["bias"], profile, tables_file).alarms
+    gps = [a for a in alarms if a.signal == "atfm_residual.gps_speed"]
+    assert gps and any(a.start <= 62.0 <= a.end for a in gps)

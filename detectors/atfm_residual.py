@@ -1,0 +1,193 @@
+"""Hybrid KF + A-TFM (thesis chapter IV): the transient fault model on one sensor's filter residual.
+
+Specified in docs/algorithms.md section 4, last part (../shared/ALGORITHMS.md). The residual of a
+channel is the shared EKF's innovation r = z - h(x_prior) at the steps where the filter updated with
+its group (the group's detection grid). Training, per channel and mode value, is A-TFM's on |r|
+instead of the error against the other sensors: segments of one mode value (settle time dropped),
+e(eps, w) for every eps and window, the knee at the detection window w, the monotone envelope of eps
+over the mode values (`detectors.atfm.train_table`). Detection: count(|r| > eps) over the last w
+updates against e, the row being the next higher trained mode value than the commanded one.
+
+Two choices the specification leaves open: as in training, the settle time after the start and
+after each mode change is not judged (the residual is not stationary there: a fault that starts in
+it is seen once it ends); and the row follows the commanded value alone, not A-TFM's max(commanded,
+measured - margin): with the transitions not judged, the measured term only made a noisy reading at
+a row's value flip between two rows whose e differ (false alarms on its own training log).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from logscan.detectors.atfm import TRAIN_COMMAND, mode_segments, table_rows, train_table
+from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.params import Interval, Options, RealList
+from logscan.errors import NotTrainedError, ProfileError
+
+
+def residual_channels(run, trace) -> list[tuple[str, int, str, bool]]:
+    """(group, column in the trace, channel, measures the mode quantity) of every channel checked:
+    the measurement channels that are also [redundant] sensors, else every measurement channel."""
+    redundant = {ch for group in run.redundant.values() for ch in group.channels}
+    channels = []
+    for g, name in enumerate(trace.group_names):
+        offset = int(trace.group_offsets[g])
+        for j, channel in enumerate(run.groups[name].channels):
+            channels.append((name, offset + j, channel, channel in redundant))
+    if any(speed for *_, speed in channels):
+        return [c for c in channels if c[3]]
+    return channels
+
+
+def _label(group: str, channel: str, run) -> str:
+    """The statistic's name part: the group, and the channel's index when the group has several."""
+    channels = run.groups[group].channels
+    return group if len(channels) == 1 else f"{group}[{channels.index(channel)}]"
+
+
+def _settled(mode: np.ndarray, settle: int) -> np.ndarray:
+    """False for the first ``settle`` samples and for ``settle`` samples after each change of mode."""
+    settled = np.ones(mode.size, dtype=bool)
+    for _, first, stop in mode_segments(mode, 0):
+        settled[first : min(first + settle, stop)] = False
+    if mode.size and not np.isfinite(mode).any():
+        settled[:settle] = False
+    return settled
+
+
+def segment_counts(exceed: np.ndarray, mode: np.ndarray, w: int) -> np.ndarray:
+    """Per step, count(exceed) over the last w steps of its own run of one mode value: like the
+    training's windows, a window never reaches back across a mode change (the previous mode's
+    exceedances were bounded by that mode's e, not this one's)."""
+    index = np.arange(exceed.size)
+    key = np.round(mode, 6)
+    change = np.ones(exceed.size, dtype=bool)
+    change[1:] = ~((key[1:] == key[:-1]) | (np.isnan(key[1:]) & np.isnan(key[:-1])))
+    segment_start = np.maximum.accumulate(np.where(change, index, 0))
+    cs = np.concatenate(([0], np.cumsum(exceed)))  # cs[k] = exceedances before step k
+    return cs[index + 1] - cs[np.maximum(index + 1 - w, segment_start)]
+
+
+class AtfmResidualDetector(Detector):
+    """Hybrid KF + A-TFM: count of large filter residuals per sensor against a trained speed table."""
+
+    name = "atfm_residual"
+    requires_fit = True
+    requires_trace = True
+    reads = frozenset({"y", "mode"})
+    trained_attributes = ("tables_",)
+    fit_params = ("window", "windows", "settle_s", "eps_points")
+    defaults = {
+        "window": 100,  # w, in updates of the channel's group
+        "windows": [25, 50, 100, 200],
+        "settle_s": 5.0,
+        "row": "adaptive",
+        "eps_points": 201,
+    }
+    parameter_constraints = {
+        "window": [Interval(int, 1, None)],
+        "windows": [RealList()],
+        "settle_s": [Interval(float, 0, None)],
+        "row": [Options("adaptive"), Interval(float, 0, None), Interval(int, 0, None)],
+        "eps_points": [Interval(int, 200, None)],
+    }
+
+    def check_params(self) -> None:
+        super().check_params()
+        windows = self.params["windows"]
+        if not all(isinstance(w, int) and not isinstance(w, bool) and w >= 1 for w in windows):
+            raise ProfileError(f"detector {self.name!r}: windows must be a list of positive integers, got {windows!r}")
+        if self.window not in windows:
+            raise ProfileError(f"detector {self.name!r}: window {self.window} must be one of windows {windows}")
+
+    def needs(self, run=None) -> Needs:
+        return Needs.of(ekf=("y",))
+
+    def check_trained(self) -> None:
+        if not hasattr(self, "tables_"):
+            raise NotTrainedError(
+                f"detector {self.name!r} has no lookup table",
+                hint=f"train one with `{TRAIN_COMMAND}` (its profile enabling [detectors.{self.name}]), "
+                "then pass --tables tables.json",
+            )
+
+    @classmethod
+    def state_lines(cls, state) -> list[str]:
+        from logscan.detectors.base import decode_state_value
+
+        lines = []
+        for label, table in decode_state_value(state["state"]["tables_"]).items():
+            cells = ", ".join(
+                f"{m:g}: {eps:.4g} ({int(e)})"
+                for m, eps, e in zip(table["modes"], table["eps"][:, 0], table["e"][:, 0])
+            )
+            lines.append(f"  {cls.name} {label}: w = {table['w']}, eps (e) by mode value {cells}")
+        return lines
+
+    @staticmethod
+    def _residuals(run, trace, column: int) -> tuple[np.ndarray, np.ndarray]:
+        """(steps where the filter updated with the channel, |r| there)."""
+        r = trace.y[:, column]
+        steps = np.flatnonzero(np.isfinite(r))
+        return steps, np.abs(r[steps].astype(np.float64))
+
+    # --- training -----------------------------------------------------------------------------------
+    def _fit(self, runs, traces, **context) -> None:
+        segments: dict[str, dict[float, list[np.ndarray]]] = {}
+        for run, trace in zip(runs, traces):
+            if trace.y is None:
+                raise NotTrainedError(f"detector {self.name!r} needs the filter's innovations to train")
+            for group, column, channel, _ in residual_channels(run, trace):
+                steps, residual = self._residuals(run, trace, column)
+                if steps.size < 2 or run.mode is None:
+                    continue
+                dt = float(np.median(np.diff(run.t[steps])))
+                settle = int(round(self.settle_s / max(dt, 1e-9)))
+                by_mode = segments.setdefault(_label(group, channel, run), {})
+                for value, first, stop in mode_segments(run.mode[steps], settle):
+                    by_mode.setdefault(value, []).append(residual[first:stop, None])
+        if not any(segments.values()):
+            raise NotTrainedError(
+                f"detector {self.name!r}: no residuals with a mode value to train on",
+                hint="the training logs need the profile's [mode] channel",
+            )
+        windows = [int(w) for w in self.windows]
+        self.tables_ = {
+            label: train_table([label], by_mode, windows, int(self.window), int(self.eps_points))
+            for label, by_mode in segments.items()
+            if by_mode
+        }
+
+    # --- detection ----------------------------------------------------------------------------------
+    def _run(self, run, trace, **context) -> DetectorResult:
+        result = self.new_result()
+        t = run.t
+        for group, column, channel, _ in residual_channels(run, trace):
+            label = _label(group, channel, run)
+            table = self.tables_.get(label)
+            if table is None:
+                raise NotTrainedError(
+                    f"detector {self.name!r}: the tables have no {label!r}", hint=f"retrain with `{TRAIN_COMMAND}`"
+                )
+            steps, residual = self._residuals(run, trace, column)
+            commanded = run.mode[steps] if run.mode is not None else np.full(steps.size, np.nan)
+            dt = float(np.median(np.diff(t[steps]))) if steps.size > 1 else run.dt
+            # as in training, the settle time after the start and after each mode change is not
+            # judged: the residual is not stationary there (the filter converging, the speed changing)
+            settled = _settled(commanded, int(round(self.settle_s / max(dt, 1e-9))))
+            residual = np.where(settled, residual, np.nan)
+            modes = np.asarray(table["modes"], dtype=np.float64)
+            # the commanded value selects the row: the settle time after each change is not judged,
+            # and a noisy reading near a row's value would flip between rows whose e differ
+            rows, _ = table_rows(self.name, modes, self.row, 0.0, commanded, commanded)
+            eps = np.asarray(table["eps"], dtype=np.float64)[rows, 0]
+            e = np.asarray(table["e"], dtype=np.float64)[rows, 0]
+            w = int(table["w"])
+            count = segment_counts(residual > eps, commanded, w)
+            statistic, upper = np.full(t.size, np.nan), np.full(t.size, np.nan)
+            valid = np.zeros(t.size, dtype=bool)
+            statistic[steps], upper[steps], valid[steps] = count, e, settled
+            result.add_statistic(t, f"{self.name}.{label}", statistic, upper=upper, valid=valid, hold_off_s=w * dt)
+        result.info["window"] = int(self.window)
+        result.info["row"] = self.row
+        return result
