@@ -226,3 +226,17 @@ def test_every_figure_renders_in_chromium_without_javascript_errors(document, tm
     assert len(re.findall(r'<path class="js-line"', dom)) >= len(specs)
     assert HOSTILE not in dom
     assert len(re.findall(r"<script\b", dom, re.I)) == PAGE_SCRIPTS
+
+
+def test_a_table_without_curves_shows_its_lookup_table(document):
+    doc = copy.deepcopy(document)
+    state = next(s for s in doc["detectors"] if s["detector"] == "atfm")
+    tables = decode_state_value(state["state"]["tables_"])
+    for group in tables.values():
+        del group["curves"], group["eps_knee"]
+    state["state"]["tables_"] = encode_state_value(tables)
+    page = render_training_html(doc)
+    _, group = one_group(document)
+    rows = table(page, "lookup-0")
+    assert len(rows) == 1 + len(group["modes"]) and "knee" not in " ".join(map(" ".join, rows))
+    assert len(figures(page)) == len(tables) and curve_specs(page) == []

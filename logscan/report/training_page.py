@@ -116,7 +116,8 @@ def _param_rows(params: Mapping) -> list[tuple[str, str]]:
 
 def _table_rows(table: Mapping) -> list[dict]:
     """One row per mode value: per sensor {eps, e, knee (None unless the envelope raised eps)}."""
-    eps, raw, e = np.asarray(table["eps"], float), np.asarray(table["eps_knee"], float), np.asarray(table["e"])
+    eps, e = np.asarray(table["eps"], float), np.asarray(table["e"])
+    raw = np.asarray(table.get("eps_knee", eps), float)
     rows = []
     for r, mode in enumerate(np.asarray(table["modes"], float)):
         cells = []
@@ -130,7 +131,7 @@ def _table_rows(table: Mapping) -> list[dict]:
 def _eps_mode_figure(group: str, table: Mapping) -> str:
     """eps (after the envelope) against the mode value, a line per sensor; the knees as hollow markers."""
     modes = [float(m) for m in np.asarray(table["modes"], float)]
-    eps, raw = np.asarray(table["eps"], float), np.asarray(table["eps_knee"], float)
+    eps, raw = np.asarray(table["eps"], float), np.asarray(table.get("eps_knee", table["eps"]), float)
     data = []
     for i, sensor in enumerate(table["sensors"]):
         color = COLORS[i % len(COLORS)]
@@ -209,7 +210,8 @@ def _curve_figure(sensor: str, mode_text: str, curve: Mapping, windows: Sequence
         "height": CURVE_HEIGHT,
         "margin": {"l": 45, "r": 10, "t": 30, "b": 38},
         "xaxis": {**AXIS, "title": {"text": "eps", "standoff": 2, "font": {"size": 11}}, "range": [0, eps_max]},
-        "yaxis": {**AXIS, "title": {"text": "e/w", "standoff": 2, "font": {"size": 11}}, "range": [0, 1.05]},
+        "yaxis": {**AXIS, "title": {"text": "e/w", "standoff": 2, "font": {"size": 11}}, "range": [0, 1.05],
+                  "tickvals": [0.2, 0.4, 0.6, 0.8, 1.0]},  # no "0" on top of the eps axis's "0"
         "shapes": [
             {"type": "line", "xref": "x", "yref": "y", "x0": 0, "y0": 1, "x1": eps_max, "y1": 0,
              "line": {"color": "#999", "width": 1, "dash": "dash"}},
@@ -246,6 +248,11 @@ def _curve_caption(sensor: str, mode_text: str, curve: Mapping, w: int) -> tuple
     return caption, warning
 
 
+def _curve(table: Mapping, r: int, i: int) -> Mapping | None:
+    curves = table.get("curves") or []
+    return curves[r][i] if r < len(curves) and i < len(curves[r]) and curves[r][i] else None
+
+
 def _atfm_groups(state: Mapping, figures: list[tuple[str, str]]) -> list[dict]:
     """The page's view of each A-TFM group; its figures appended to ``figures`` as (id, json)."""
     tables = decode_state_value((state.get("state") or {}).get("tables_")) or {}
@@ -259,17 +266,20 @@ def _atfm_groups(state: Mapping, figures: list[tuple[str, str]]) -> list[dict]:
         for r, mode in enumerate(np.asarray(table["modes"], float)):
             mode_text, views = _num(mode), []
             for i, sensor in enumerate(table["sensors"]):
-                curve = table["curves"][r][i]
+                curve = _curve(table, r, i)
+                if curve is None:  # a table without its curves: the lookup table only
+                    continue
                 fig_id = f"tf-{len(figures)}"
                 figures.append((fig_id, _curve_figure(sensor, mode_text, curve, windows, w)))
                 caption, warning = _curve_caption(sensor, mode_text, curve, w)
                 views.append(
                     {"id": fig_id, "title": f"{sensor} at mode {mode_text}", "caption": caption, "warning": warning}
                 )
-            rows.append({"mode": mode_text, "figures": views})
+            if views:
+                rows.append({"mode": mode_text, "figures": views})
         groups.append({
             "name": group, "w": w, "windows": ", ".join(map(str, windows)), "sensors": list(table["sensors"]),
-            "n_modes": len(rows), "rows": _table_rows(table), "table_figure": table_id, "curve_rows": rows,
+            "n_modes": len(table["modes"]), "rows": _table_rows(table), "table_figure": table_id, "curve_rows": rows,
         })  # fmt: skip
     return groups
 
