@@ -297,13 +297,30 @@ def _other_detector(state: Mapping) -> dict:
 # --- the page -------------------------------------------------------------------------------------
 
 
+LOOKUP_KEYS = {"sensors", "modes", "eps", "e"}  # a transient-fault-model lookup table (logscan.tfm)
+
+
+def _holds_lookup_tables(state: Mapping) -> bool:
+    """Whether a trained state is lookup tables by group (A-TFM and its residual flavour), drawn
+    with their curves; the page names no detector: it reads what the state holds."""
+    tables = (state.get("state") or {}).get("tables_")
+    return (
+        isinstance(tables, dict)
+        and bool(tables)
+        and all(isinstance(table, dict) and LOOKUP_KEYS <= set(table) for table in tables.values())
+    )
+
+
 def render_training_html(document: dict) -> str:
     """The training report of a tables document (`logscan.training.tables_document`) as a string."""
     figures: list[tuple[str, str]] = []
     atfm, others = [], []
     for state in document.get("detectors") or []:
-        if state.get("detector") == "atfm" and isinstance((state.get("state") or {}).get("tables_"), dict):
-            atfm.append({"params": _param_rows(state.get("params") or {}), "groups": _atfm_groups(state, figures)})
+        if _holds_lookup_tables(state):
+            atfm.append({
+                "name": str(state.get("detector", "")), "params": _param_rows(state.get("params") or {}),
+                "groups": _atfm_groups(state, figures),
+            })  # fmt: skip
         else:
             others.append(_other_detector(state))
     logs = [
