@@ -29,6 +29,14 @@ from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.params import Interval, Options, RealList
 from logscan.errors import NotTrainedError, ProfileError
 
+EXTRA_CAPTIONS = {
+    "mode": "The commanded mode value and the lookup-table row in use (the next higher trained mode value than "
+    "max(commanded, measured - margin)). Normal: the row follows the command, one step up now and then at a "
+    "row's own speed.",
+    "fused": "The group's sensors fused by each method of the thesis's chapter III (average, moving average, "
+    "median, iterative filter, Marzullo's interval midpoint, hybrid = median). Normal: the methods agree; an "
+    "attacked sensor pulls the average away from the median and Marzullo.",
+}
 TRAIN_COMMAND = "logscan train HEALTHY_LOGS... --profile PROFILE -o tables.json"
 
 
@@ -275,6 +283,7 @@ class AtfmDetector(Detector):
             self._extras(result, t.size, name, samples, modes, rows, eps)
         result.info["window"] = int(self.window)
         result.info["row"] = self.row
+        result.info["extra_captions"] = EXTRA_CAPTIONS
         return result
 
     def _rows(self, modes: np.ndarray, commanded: np.ndarray, measured: np.ndarray):
@@ -305,14 +314,14 @@ class AtfmDetector(Detector):
 
         selection = np.full(grid, np.nan, dtype=np.float32)
         selection[samples.steps] = modes[rows]
-        result.extras[f"{name}.table_row_mode"] = selection
+        result.extras[f"{name} row in use.mode"] = selection
         mode = np.full(grid, np.nan, dtype=np.float32)
         mode[samples.steps] = samples.mode
-        result.extras[f"{name}.commanded_mode"] = mode
+        result.extras[f"{name} commanded.mode"] = mode
         for method, fused in fuse_all(samples.values, eps, int(self.fusion_window)).items():
             out = np.full(grid, np.nan, dtype=np.float32)
             out[samples.steps] = fused
-            result.extras[f"{name}.fused_{method}"] = out
+            result.extras[f"{name} {method}.fused"] = out
 
 
 def _redundant_names(runs) -> list[str]:

@@ -83,7 +83,7 @@ def test_a_gps_bias_alarms_on_the_gps_pairs_and_names_the_gps(logs, tables):
     first = min(a.start for a in result.alarms)
     assert 60.0 <= first <= 63.0  # within 3 s of the attack's start
     assert "gps: in SI with every other sensor" in result.info["attribution.speed"]
-    assert {"speed.fused_median", "speed.fused_hybrid", "speed.table_row_mode"} <= set(result.extras)
+    assert {"speed median.fused", "speed hybrid.fused", "speed row in use.mode"} <= set(result.extras)
 
 
 def test_no_alarm_on_a_healthy_log_with_glitches(logs, tables):
@@ -102,7 +102,7 @@ def test_a_fixed_row_uses_that_row_throughout(logs, tables):
     detector.params["row"] = 1.9
     prepared = prepare(logs["bias"], loaded, needs_of([detector]))
     result = detector.run(prepared.run, None)
-    rows = result.extras["speed.table_row_mode"]
+    rows = result.extras["speed row in use.mode"]
     assert np.nanmin(rows) == np.nanmax(rows) == pytest.approx(1.9)
     detector.params["row"] = 0.5
     with pytest.raises(ProfileError, match="not a trained mode value"):

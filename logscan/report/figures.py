@@ -309,7 +309,8 @@ def _extra_figures(result: DetectorResult, n: int, model: Mapping, spans: dict, 
             for j, (label, column) in enumerate(columns)
         ]  # fmt: skip
         log_y = _wants_log_axis([column for _, column in columns])
-        caption = EXTRA_CAPTIONS.get(
+        own = result.info.get("extra_captions")  # a detector may say what its extras show
+        caption = (own.get(kind) if isinstance(own, dict) else None) or EXTRA_CAPTIONS.get(
             kind, f"{kind}: a supporting series of {result.detector}, for context (no threshold)."
         )
         figures.append(Figure(f"{result.detector}: {kind}", kind, traces, spans, log_y=log_y, caption=caption))
