@@ -226,7 +226,8 @@ SAMPLE_LOGS = REPO / "sample_logs"
 FIXTURES = {"healthy": "quad_healthy.mcap", "faulty": "quad_imu_bitflip.mcap"}
 # Detectors of sensors a quadcopter log lacks get fixtures that have them: A-TFM needs redundant
 # speed sensors and a mode channel (the Jackal logs; its faulty one attacks the GPS speed).
-OWN_FIXTURES = {"atfm": {"healthy": "jackal_healthy.mcap", "faulty": "jackal_gps_bias.mcap"}}
+JACKAL = {"healthy": "jackal_train_1.mcap", "faulty": "jackal_gps_bias.mcap"}
+OWN_FIXTURES = {"atfm": JACKAL, "atfm_residual": JACKAL}
 _PIPELINE_CACHE: dict[str, tuple] = {}
 
 

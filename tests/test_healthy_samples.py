@@ -10,13 +10,21 @@ import pytest
 
 from logscan.readers import read_log
 
-HEALTHY = ["quad_healthy.mcap", "quad_healthy.csv", "sbw_healthy.mcap", "jackal_healthy.mcap"]
+HEALTHY = [
+    "quad_healthy.mcap",
+    "quad_healthy.csv",
+    "sbw_healthy.mcap",
+    "jackal_healthy.mcap",
+    "jackal_train_1.mcap",
+    "jackal_train_2.mcap",
+]
 FAULTY = [
     "quad_imu_bias.mcap",
     "quad_imu_bitflip.mcap",
     "quad_motor_offset.mcap",
     "quad_cov_corruption.mcap",
     "sbw_yaw_rate_bitflip.mcap",
+    "jackal_gps_bias.mcap",
 ]
 
 
