@@ -96,8 +96,8 @@ _FAULT_HELP = (
     "noise",
     type=click.Choice(["speed", "constant"]),
     default=None,
-    help="Sensor noise: speed (dc_motor: encoder std 0.01 + 0.02 |v|, GPS 0.03 + 0.03 |v|; the "
-    "profile keeps the nominal noise_std) or constant (the model's noise_std). Default: speed "
+    help="Sensor noise: speed (dc_motor: encoder std 0.004 + 0.03 |v|, GPS 0.015 + 0.02 |v|; the "
+    "profile assumes the noise at 1.9 m/s) or constant (the model's noise_std). Default: speed "
     "with --speed, else constant.",
 )
 @seed_option
