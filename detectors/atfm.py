@@ -46,6 +46,7 @@ class GroupSamples:
 
     name: str
     sensors: list[str]
+    channels: list[str]
     steps: np.ndarray  # (M,) indices into the analysis grid
     values: np.ndarray  # (M, s) readings in the group's unit (NaN: none within the staleness limit)
     mode: np.ndarray  # (M,) mode value (NaN: none)
@@ -67,7 +68,8 @@ def detection_grid(run, name: str) -> GroupSamples:
     mode = run.mode[steps] if run.mode is not None else np.full(steps.size, np.nan)
     values = np.asarray(group.z, dtype=np.float64).reshape(n, -1)[steps]
     sensors = list(group.labels or group.channels)
-    return GroupSamples(name, sensors, steps, values, np.asarray(mode, dtype=np.float64), period * run.dt)
+    mode = np.asarray(mode, dtype=np.float64)
+    return GroupSamples(name, sensors, list(group.channels), steps, values, mode, period * run.dt)
 
 
 def mode_segments(mode: np.ndarray, settle: int) -> list[tuple[float, int, int]]:
@@ -268,17 +270,21 @@ class AtfmDetector(Detector):
                 )
             eps, e = eps_rows[rows], e_rows[rows]
             pairs = strong_inconsistency(samples.values, eps, e, w)
+            warm = np.zeros(t.size, dtype=bool)
+            warm[samples.steps[: max(w - 1, 0)]] = True  # a full window first
+            options = {"warmup": warm, "hold_off_s": w * samples.dt, "check": name}  # closer than w: merged
             si = {}
             for (i, j), (count, threshold) in pairs.items():
                 signal = f"atfm.{name}.{table['sensors'][i]}~{table['sensors'][j]}"
                 statistic, upper, valid = _on_grid(t.size, samples.steps, count, threshold)
-                warm = np.zeros(t.size, dtype=bool)
-                warm[samples.steps[: max(w - 1, 0)]] = True  # a full window first
-                result.add_statistic(
-                    t, signal, statistic, upper=upper, valid=valid, warmup=warm,
-                    hold_off_s=w * samples.dt,  # intervals closer than w merged
-                )  # fmt: skip
+                result.add_statistic(t, signal, statistic, upper=upper, valid=valid, **options)
                 si[(i, j)] = count > threshold
+            for i, ratio in enumerate(_named_ratio(pairs, len(table["sensors"]))):
+                # the sensor named: in SI with every other (a majority in groups of 4+), as the
+                # measurement group its channel belongs to, so the incident names that sensor
+                signal = f"atfm.{_sensor_label(run, samples.channels[i], name)}.{table['sensors'][i]}"
+                statistic, upper, valid = _on_grid(t.size, samples.steps, ratio, np.ones(ratio.size))
+                result.add_statistic(t, signal, statistic, upper=upper, valid=valid, **options)
             self._attribute(result, name, table["sensors"], samples, si, attribute)
             self._extras(result, t.size, name, samples, modes, rows, eps)
         result.info["window"] = int(self.window)
@@ -322,6 +328,33 @@ class AtfmDetector(Detector):
             out = np.full(grid, np.nan, dtype=np.float32)
             out[samples.steps] = fused
             result.extras[f"{name} {method}.fused"] = out
+
+
+def _named_ratio(pairs: dict, n_sensors: int) -> list[np.ndarray]:
+    """Per sensor (groups of 3+), how far it is into SI with the others it must disagree with to be
+    named: the k-th largest over its pairs of WI count / (e_i + e_j + 1/2), k = every other sensor
+    (3 sensors) or a majority of them (4+). Counts are integers, so the ratio exceeds 1 exactly
+    when count > e_i + e_j: > 1 is "named" (`logscan.tfm.attribute`'s rule), with a peak ratio."""
+    if n_sensors < 3:
+        return []
+    others = n_sensors - 1
+    k = others if n_sensors == 3 else others // 2 + 1
+    out = []
+    for i in range(n_sensors):
+        ratio = np.stack([
+            count / (threshold + 0.5) for (a, b), (count, threshold) in pairs.items() if i in (a, b)
+        ]).astype(np.float64)  # fmt: skip
+        out.append(-np.sort(-ratio, axis=0)[k - 1])
+    return out
+
+
+def _sensor_label(run, channel: str, group: str) -> str:
+    """The measurement group a redundant sensor's channel belongs to (its name in incidents), else
+    the redundant group's name."""
+    for name, measured in run.groups.items():
+        if channel in measured.channels:
+            return name
+    return group
 
 
 def _redundant_names(runs) -> list[str]:

@@ -79,10 +79,14 @@ def test_a_gps_bias_alarms_on_the_gps_pairs_and_names_the_gps(logs, tables):
     result = detector.run(prepared.run, None)
     signals = {a.signal for a in result.alarms}
     assert {"atfm.speed.left~gps", "atfm.speed.right~gps"} <= signals
-    assert "atfm.speed.left~right" not in signals
+    assert "atfm.speed.left~right" not in signals and "atfm.gps_speed.gps" in signals
     first = min(a.start for a in result.alarms)
     assert 60.0 <= first <= 63.0  # within 3 s of the attack's start
     assert "gps: in SI with every other sensor" in result.info["attribution.speed"]
+    # the named sensor is an alarm of its own, under its measurement group: the incident names it
+    named = [a for a in result.alarms if a.signal == "atfm.gps_speed.gps"]
+    assert named and named[0].peak_ratio > 1
+    assert not any(a.signal in ("atfm.encoder.left", "atfm.encoder.right") for a in result.alarms)
     assert {"speed median.fused", "speed hybrid.fused", "speed row in use.mode"} <= set(result.extras)
 
 
