@@ -48,6 +48,7 @@ class GroupSamples:
     sensors: list[str]
     channels: list[str]
     steps: np.ndarray  # (M,) indices into the analysis grid
+    t: np.ndarray  # (M,) their times, s since the log's start
     values: np.ndarray  # (M, s) readings in the group's unit (NaN: none within the staleness limit)
     mode: np.ndarray  # (M,) mode value (NaN: none)
     dt: float  # detection period, s
@@ -69,7 +70,7 @@ def detection_grid(run, name: str) -> GroupSamples:
     values = np.asarray(group.z, dtype=np.float64).reshape(n, -1)[steps]
     sensors = list(group.labels or group.channels)
     mode = np.asarray(mode, dtype=np.float64)
-    return GroupSamples(name, sensors, list(group.channels), steps, values, mode, period * run.dt)
+    return GroupSamples(name, sensors, list(group.channels), steps, run.t[steps], values, mode, period * run.dt)
 
 
 def mode_segments(mode: np.ndarray, settle: int) -> list[tuple[float, int, int]]:
@@ -286,7 +287,10 @@ class AtfmDetector(Detector):
                 statistic, upper, valid = _on_grid(t.size, samples.steps, ratio, np.ones(ratio.size))
                 result.add_statistic(t, signal, statistic, upper=upper, valid=valid, **options)
             self._attribute(result, name, table["sensors"], samples, si, attribute)
-            self._extras(result, t.size, name, samples, modes, rows, eps)
+            fused = self._extras(result, t.size, name, samples, modes, rows, eps)
+            truth = context.get("truth")
+            if truth and truth.get("events"):
+                result.info[f"fusion RMSE vs fault-free.{name}"] = self._fusion_rmse(samples, eps, fused, truth)
         result.info["window"] = int(self.window)
         result.info["row"] = self.row
         result.info["extra_captions"] = EXTRA_CAPTIONS
@@ -324,10 +328,33 @@ class AtfmDetector(Detector):
         mode = np.full(grid, np.nan, dtype=np.float32)
         mode[samples.steps] = samples.mode
         result.extras[f"{name} commanded.mode"] = mode
-        for method, fused in fuse_all(samples.values, eps, int(self.fusion_window)).items():
+        fused = fuse_all(samples.values, eps, int(self.fusion_window))
+        for method, values in fused.items():
             out = np.full(grid, np.nan, dtype=np.float32)
-            out[samples.steps] = fused
+            out[samples.steps] = values
             result.extras[f"{name} {method}.fused"] = out
+        return fused
+
+    def _fusion_rmse(self, samples: GroupSamples, eps: np.ndarray, fused: dict, truth: dict) -> str:
+        """Each fusion method's RMSE against the same method on the fault-free readings: the
+        readings of the sensors the truth's fault events name are dropped while those last (the
+        thesis's chapter III comparison of the methods under attack)."""
+        from logscan.fusion import fuse_all, rmse
+
+        clean = samples.values.copy()
+        t = samples.t
+        touched = False
+        for event in truth.get("events") or []:
+            columns = [i for i, ch in enumerate(samples.channels) if ch in (event.get("channels") or [])]
+            end = event.get("end")
+            during = (t >= float(event.get("start", 0.0))) & (t <= (np.inf if end is None else float(end)))
+            for i in columns:
+                clean[during, i] = np.nan
+                touched = True
+        if not touched:
+            return "no fault event on these sensors"
+        reference = fuse_all(clean, eps, int(self.fusion_window))
+        return ", ".join(f"{method} {rmse(fused[method], reference[method]):.3g}" for method in fused)
 
 
 def _named_ratio(pairs: dict, n_sensors: int) -> list[np.ndarray]:

@@ -31,7 +31,9 @@ belongs to another check for scoring says so with ``add_statistic(..., check="e_
 
 Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.models.base.Model),
 ``log_name``, ``traces`` (every filter trace the pipeline ran, by filter name), ``alarm_policy``
-(the profile's alarm floors, applied by `new_result` to every statistic).
+(the profile's alarm floors, applied by `new_result` to every statistic), ``truth`` (a simulated
+log's ground truth: fault events and transients; None for real logs; never used to detect, only to
+report against, e.g. fusion error against the fault-free fusion).
 The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
 module does not import the filter layer.
 """

@@ -267,6 +267,7 @@ def detect(
                 log_name=prepared.path,
                 traces=prepared.traces,
                 alarm_policy=policy,
+                truth=prepared.log.truth,  # simulated logs' ground truth, None for real logs
             )
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
             analysis.failures.append(detector_failure(detector.name, exc))

@@ -88,6 +88,22 @@ def test_a_gps_bias_alarms_on_the_gps_pairs_and_names_the_gps(logs, tables):
     assert named and named[0].peak_ratio > 1
     assert not any(a.signal in ("atfm.encoder.left", "atfm.encoder.right") for a in result.alarms)
     assert {"speed median.fused", "speed hybrid.fused", "speed row in use.mode"} <= set(result.extras)
+    assert "fusion RMSE vs fault-free.speed" not in result.info  # no truth given: nothing to compare
+
+
+def test_fusion_rmse_against_the_fault_free_fusion_when_truth_exists(logs, tables):
+    from logscan.readers import read_log
+
+    path, _ = tables
+    loaded = load_profile_for(logs["bias"], None)
+    (detector,) = apply_tables(create_detectors(loaded, ["atfm"]), path, loaded.profile)
+    prepared = prepare(logs["bias"], loaded, needs_of([detector]))
+    result = detector.run(prepared.run, None, truth=read_log(logs["bias"]).truth)
+    text = result.info["fusion RMSE vs fault-free.speed"]
+    rmse = {method: float(value) for method, value in (part.split() for part in text.split(", "))}
+    assert set(rmse) == {"average", "moving_average", "median", "iterative", "marzullo", "hybrid"}
+    # a 0.3 m/s GPS bias for 30 s of 120: the average moves by 0.1 while it lasts, the median barely
+    assert 0.03 < rmse["average"] < 0.07 and rmse["median"] < 0.5 * rmse["average"]
 
 
 def test_no_alarm_on_a_healthy_log_with_glitches(logs, tables):
