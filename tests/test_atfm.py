@@ -239,3 +239,24 @@ def test_the_residual_flavour_is_quiet_on_its_training_logs_and_sees_the_gps_bia
     alarms = residual_result(logs["bias"], profile, tables_file).alarms
     gps = [a for a in alarms if a.signal == "atfm_residual.gps_speed"]
     assert gps and any(a.start <= 62.0 <= a.end for a in gps)
+
+
+def test_every_knee_of_the_sample_tables_equals_the_brute_force_rule(sample):
+    """logscan train on the healthy multi-speed sample logs: eps grows with the speed (the thesis's
+    Table I), and each stored knee is the brute-force knee (plain loops) of its own curve."""
+    from test_tfm import brute_knee
+
+    document = train_logs([str(sample("jackal_train_1.mcap")), str(sample("jackal_train_2.mcap"))], None)
+    (state,) = [s for s in document["detectors"] if s["detector"] == "atfm"]
+    table = AtfmDetector.from_state(state).tables_["speed"]
+    eps = table["eps"]
+    assert np.all(eps[-1] > 1.5 * eps[0])  # 1.9 m/s against 0.4 m/s, every sensor
+    checked = 0
+    for r, row in enumerate(table["curves"]):
+        for i, curve in enumerate(row):
+            for c, (w, eps_k, e_k) in enumerate(curve["knees"]):
+                assert brute_knee(curve["eps"], curve["counts"][:, c], w) == (eps_k, e_k)
+                checked += 1
+            at = table["windows"].index(table["w"])
+            assert (table["eps_knee"][r, i], table["e"][r, i]) == tuple(curve["knees"][at][1:])
+    assert checked == len(table["modes"]) * len(table["sensors"]) * len(table["windows"])
