@@ -75,6 +75,11 @@ class Analysis:
         return [alarm for result in self.results for alarm in result.alarms]
 
     @property
+    def possible(self) -> list:
+        """ "Possible fault" warnings of every detector (a level below alarms)."""
+        return [p for result in self.results for p in result.possible]
+
+    @property
     def partial(self) -> bool:
         return bool(self.log.source.partial)
 
@@ -89,20 +94,25 @@ class Analysis:
             parts = [f"{n} alarm{'s' if n != 1 else ''} in {k} incident{'s' if k != 1 else ''}"]
         else:
             parts = ["no alarms" if not (self.unchecked or self.failures) else "no alarms in what was checked"]
+        if self.possible:
+            parts.append(f"{len(self.possible)} possible fault{'s' if len(self.possible) != 1 else ''}")
         if self.unchecked:
             parts.append("not fully checked")
         if self.failures:
             parts.append(", ".join(f.message.split(":")[0] for f in self.failures))
         return "; ".join(parts)
 
-    def exit_code(self, allow_partial: bool = False) -> ExitCode:
+    def exit_code(self, allow_partial: bool = False, fail_on_warning: bool = False) -> ExitCode:
         """3 (or the error's code) when a detector failed, 2 when part of the log could not be
-        checked (unless ``allow_partial``), 1 with alarms, 0 otherwise."""
+        checked (unless ``allow_partial``), 1 with alarms (or, ``fail_on_warning``, with possible
+        faults), 0 otherwise."""
         if self.failures:
             return ExitCode(max(f.exit_code for f in self.failures))
         if self.unchecked and not allow_partial:
             return ExitCode.BAD_INPUT
-        return ExitCode.ALARMS if self.alarms else ExitCode.OK
+        if self.alarms or (fail_on_warning and self.possible):
+            return ExitCode.ALARMS
+        return ExitCode.OK
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of this log (the `--json` artifact's per-log entry)."""
@@ -111,6 +121,8 @@ class Analysis:
             "verdict": self.verdict(),
             "n_alarms": len(self.alarms),
             "n_incidents": len(self.incidents),
+            "n_possible": len(self.possible),
+            "possible_faults": [p.to_dict() for p in self.possible],
             "incidents": [incident.to_dict() for incident in self.incidents],
             "unchecked": list(self.unchecked),
             "failed_detectors": [{"detector": f.detector, "error": f.message} for f in self.failures],

@@ -127,6 +127,9 @@ class DetectorResult:
     checks:     statistic name -> the check it belongs to for scoring (e.g. "rejected.accel" ->
                 "e_x"), declared by the detector through `add_statistic(..., check=...)`, so no other
                 layer names a detector's signals.
+    possible:   "possible fault" intervals: a warning level below an alarm (e.g. the UBIKF test's
+                upper chi-square sum over its threshold while the lower one is not), drawn and
+                listed apart; they fail a run only with `--fail-on warning` (`add_possible`).
     """
 
     detector: str
@@ -137,6 +140,7 @@ class DetectorResult:
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
+    possible: list[AlarmInterval] = field(default_factory=list)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
     judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
     # statistic -> (N,) bool, the samples that could raise an alarm (valid, not in warm-up); the
@@ -182,6 +186,19 @@ class DetectorResult:
         self.thresholds[name] = Band(upper=_drawn(band.upper), lower=_drawn(band.lower))
         return alarms
 
+    def add_possible(self, t: np.ndarray, name: str, statistic: np.ndarray, upper, **alarm_options) -> list:
+        """ "Possible fault" intervals of ``statistic`` over ``upper`` (the shared alarm logic), less
+        those that overlap an alarm already raised (the alarm says more); stored, not scored."""
+        from logscan.alarms import alarm_intervals
+
+        if self.alarm_policy is not None:
+            alarm_options = self.alarm_policy.apply(alarm_options)
+        alarm_options.pop("check", None)
+        found = alarm_intervals(t, statistic, upper, None, signal=name, detector=self.detector, **alarm_options)
+        kept = [p for p in found if not any(a.start <= p.end and p.start <= a.end for a in self.alarms)]
+        self.possible.extend(kept)
+        return kept
+
     def check_of(self, signal: str) -> str:
         """The check (score family) a statistic belongs to: declared by the detector, else the
         statistic's own name without a ``<detector>.`` prefix (``nis.accel`` -> ``accel``)."""
@@ -196,6 +213,8 @@ class DetectorResult:
             "detector": self.detector,
             "n_alarms": len(self.alarms),
             "alarms": [a.to_dict() for a in self.alarms],
+            "n_possible": len(self.possible),
+            "possible_faults": [a.to_dict() for a in self.possible],
             "warnings": list(self.warnings),
             "info": jsonable(self.info),
             "series": {name: series_summary(v) for name, v in self.series.items()},

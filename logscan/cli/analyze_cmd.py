@@ -67,6 +67,15 @@ from logscan.errors import ExitCode
     help="A log that could not be fully checked (read in part, a sensor without valid samples, a "
     "diverged filter) exits 0 or 1 by its alarms instead of 2; the verdict still says what was not checked.",
 )
+@click.option(
+    "--fail-on",
+    "fail_on",
+    type=click.Choice(["alarm", "warning"]),
+    default="alarm",
+    show_default=True,
+    help="Exit 1 on alarms only, or also on 'possible fault' warnings (a level below alarms: e.g. the "
+    "UBIKF test's upper chi-square sum over its threshold while the lower one is not).",
+)
 @start_option
 @end_option
 @header_stamp_option
@@ -83,6 +92,7 @@ def analyze(
     detector_names: tuple[str, ...],
     exit_zero: bool,
     allow_partial: bool,
+    fail_on: str,
     start_s: float | None,
     end_s: float | None,
     use_header_stamp: bool,
@@ -138,6 +148,7 @@ def analyze(
         start_s=start_s,
         end_s=end_s,
         tables_path=tables_path,
+        fail_on_warning=fail_on == "warning",
     )
     staged = []
     try:
@@ -233,6 +244,7 @@ class AnalyzeTask:
     start_s: float | None = None  # --start/--end: the window analysed (s since the log's start)
     end_s: float | None = None
     tables_path: str | None = None  # --tables: trained tables (logscan train)
+    fail_on_warning: bool = False  # --fail-on warning: possible faults exit 1 too
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
@@ -258,7 +270,7 @@ class AnalyzeTask:
             tables=self.tables_path,
         )
         summary = analysis.summary()
-        summary["exit_code"] = int(analysis.exit_code(self.allow_partial))
+        summary["exit_code"] = int(analysis.exit_code(self.allow_partial, self.fail_on_warning))
         summary["report"] = report_path
         text = render_summary(analysis, report_path)
         analysis.prepared.release_series()  # the report reads the results and the grid's times

@@ -189,8 +189,11 @@ def detector_figures(
         chosen = [a for a in named if a.signal in names] if named else alarms
         return [(float(a.start), float(a.end)) for a in chosen]
 
+    possible = merge_spans([(float(p.start), float(p.end)) for p in result.possible], min_width, min_gap)
+
     def shading(names: Sequence[str]) -> dict:
-        return {"alarm": merge_spans(alarm_spans(names), min_width, min_gap), "ground truth": truth_spans}
+        spans = {"alarm": merge_spans(alarm_spans(names), min_width, min_gap), "ground truth": truth_spans}
+        return {**spans, "possible fault": possible} if possible else spans
 
     if len(series) >= 2 and all(_positive_upper_only(bands.get(name, NO_BAND)) for name in series):
         figures = [_ratio_figure(result.detector, t, series, bands, alarm_spans, shading(list(series)))]

@@ -288,6 +288,15 @@ def _sections(
     return sections, figures
 
 
+def _possible_lines(results: Sequence[DetectorResult]) -> list[str]:
+    """One verdict line per "possible fault" warning (shaded orange in the figures)."""
+    return [
+        f"possible fault (a warning, not an alarm): {p.detector} {p.signal} {p.start:.2f}-{p.end:.2f} s"
+        for result in results
+        for p in result.possible
+    ][:MAX_TABLE_ROWS]
+
+
 def _event_rows(events: list[dict]) -> list[dict]:
     return [
         {**e, "start": f"{e['start']:.3f}", "end": f"{e['end']:.3f}" + (" (open)" if e["open_ended"] else ""),
@@ -319,7 +328,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         model=model_view(report.model),
         version=report.logscan_version,
         verdict=report.verdict,
-        verdict_lines=overview.verdict_lines(report.incidents, margins),
+        verdict_lines=overview.verdict_lines(report.incidents, margins) + _possible_lines(report.results),
         margins=overview.margin_rows(margins, report.results, {s["detector"]: s["id"] for s in sections}),
         groups=group_rows(report.groups),
         verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),

@@ -37,6 +37,7 @@ FOCUS_SHARE = 0.25  # of a decimated trace's points, spent inside the zoom windo
 MAX_FOCUS_FRACTION = 0.2  # no focus when the windows cover more of the log than this
 ALARM_FILL = "rgba(214, 39, 40, 0.18)"
 TRUTH_FILL = "rgba(31, 119, 180, 0.16)"
+POSSIBLE_FILL = "rgba(255, 165, 0, 0.22)"  # "possible fault" warnings: orange, apart from alarms
 
 
 def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
@@ -151,7 +152,7 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.
     """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines."""
     windows = np.zeros((0, 2)) if windows is None else windows
     data: list[dict] = []
-    span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL}
+    span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL, "possible fault": POSSIBLE_FILL}
     for name, spans in fig.spans.items():
         if spans:
             data.append(span_trace(name, spans, span_fills.get(name, ALARM_FILL)))
