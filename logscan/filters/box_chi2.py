@@ -59,7 +59,7 @@ def _quad(H, x, m):
 
 
 @njit(cache=True, error_model="numpy")
-def _qp_min(c, rad, H, m, x, g, state, free, Hf, L, p):
+def _qp_min(c, rad, H, m, x, state, free, Hf, L, p):
     """min of x^T H x over c[:m] +- rad[:m] (H[:m, :m] SPD); the minimiser into x[:m].
 
     Primal active-set method on ``0.5 x^T H x`` (gradient g = H x). Start at the point of the box
@@ -71,7 +71,8 @@ def _qp_min(c, rad, H, m, x, g, state, free, Hf, L, p):
     bound, g_i <= 0 at an upper one, up to rounding); otherwise the most violating coordinate is
     freed. Each full step strictly lowers the objective, so no active set repeats and the method
     ends in finitely many steps (about m in practice; capped at 50 (m + 1)). Returns NaN when
-    H_FF is not numerically positive definite. Work arrays: g, p, free, state (m), Hf, L (m x m).
+    H_FF is not numerically positive definite. Work arrays: free, state (int, m), p (m x 1), Hf, L
+    (m x m).
     """
     inside = True
     for i in range(m):
@@ -213,7 +214,7 @@ def box_qp_argmin(r_mid, r_rad, H):
     m = r_mid.shape[0]
     x = np.zeros(m)
     value = _qp_min(
-        r_mid, r_rad, H, m, x, np.empty(m), np.empty(m, np.int64), np.empty(m, np.int64),
+        r_mid, r_rad, H, m, x, np.empty(m, np.int64), np.empty(m, np.int64),
         np.empty((m, m)), np.empty((m, m)), np.empty((m, 1)),
     )  # fmt: skip
     return value, x
@@ -250,7 +251,6 @@ def _bounds_loop(r_mid, r_rad, S, mask, beta_lo, beta_hi):
     H = np.empty((M, M))
     Hf = np.empty((M, M))
     x = np.empty(M)
-    g = np.empty(M)
     w = np.empty(M)
     iw1 = np.empty(M, np.int64)
     iw2 = np.empty(M, np.int64)
@@ -283,8 +283,8 @@ def _bounds_loop(r_mid, r_rad, S, mask, beta_lo, beta_hi):
                 s = 0.5 * (H[a, b] + H[b, a])
                 H[a, b] = s
                 H[b, a] = s
-        beta_lo[k] = _qp_min(c, rad, H, m, x, g, iw1, iw2, Hf, L, p)
-        beta_hi[k] = _max_vertex(c, rad, H, m, iw1, w, g)
+        beta_lo[k] = _qp_min(c, rad, H, m, x, iw1, iw2, Hf, L, p)
+        beta_hi[k] = _max_vertex(c, rad, H, m, iw1, w, x)
 
 
 def box_chi2_bounds(
