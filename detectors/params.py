@@ -104,6 +104,17 @@ class RealList:
         return "a list of numbers"
 
 
+@dataclass(frozen=True)
+class StringList:
+    """A list of strings (names checked against the model at run time)."""
+
+    def accepts(self, value: Any) -> bool:
+        return isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
+
+    def __str__(self) -> str:
+        return "a list of names"
+
+
 def satisfies(value: Any, constraints: list) -> bool:
     """Whether ``value`` meets at least one constraint (None in the list admits None)."""
     return any(value is None if c is None else c.accepts(value) for c in constraints)

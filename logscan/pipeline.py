@@ -45,8 +45,21 @@ RELEASABLE_TRACE = ("x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_
 RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode", "redundant")
 RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
 
+
+def _run_ubikf(model, run, parts: frozenset[str]):
+    from logscan.filters.ubikf import run_ubikf
+
+    interval_model = getattr(model, "interval_model", None)
+    if interval_model is None:
+        raise ProfileError(
+            f"the UBIKF needs a model with interval parameters; {model.name!r} has none",
+            hint='use [vehicle] model = "hover_uav" (docs/models.md), or drop the chi2 detector',
+        )
+    return run_ubikf(interval_model(run.dt), run)
+
+
 # Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
-FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf}
+FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf, "ubikf": _run_ubikf}
 
 
 @dataclass

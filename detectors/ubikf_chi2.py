@@ -1,0 +1,121 @@
+"""UBIKF chi-square test: robust alarms and possible faults over the interval filter's innovation box.
+
+Specified in docs/algorithms.md section 2 (../shared/ALGORITHMS.md section 2, the UBIKF paper's
+section III.B). The UBIKF (`logscan.filters.ubikf`, a second filter of the pipeline, run because
+this detector's needs name it) gives per update the innovation box [r_k] = y_k - C [x_prior_k] and
+the covariance bound S+. Per update:
+
+    beta_lo = min over r in [r_k] of r^T (S+)^-1 r      (box QP, `logscan.filters.box_chi2`)
+    beta_hi = max over r in [r_k] of r^T (S+)^-1 r      (vertex enumeration up to m = 12)
+
+Window sums over the last W updates, degrees of freedom = the measurements of those updates,
+delta = chi2.ppf(1 - alpha, dof), alpha from a false-alarm budget (as the NIS test). A "robust
+alarm" when the lower sum exceeds delta (the statistic exceeds it for every admissible model); a
+"possible fault" warning when only the upper sum does. Neither is "guaranteed": the false-alarm
+probability is still about alpha per test. The paper's W = 4, alpha = 0.01 remain selectable.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.nis import chi2_threshold, window_sums
+from logscan.detectors.params import Interval, StringList
+from logscan.errors import UsageError
+
+EXTRA_CAPTIONS = {
+    "trace(P+)": "Trace of the UBIKF's covariance upper bound P+ after each update. Normal: it settles to a "
+    "constant after a few steps (the paper's Fig. 4); growing without bound means the bound diverges.",
+}
+ENVELOPE_CAPTION = (
+    "The UBIKF's state envelope (the hull of its zonotope: every admissible model's estimate lies "
+    "between the lower and upper lines) around its point estimate. Normal: a narrow band hugging the "
+    "estimate; it widens while the model cannot explain the data."
+)
+
+
+class Chi2Detector(Detector):
+    """UBIKF chi-square test: robust alarms (lower bound) and possible faults (upper bound only)."""
+
+    name = "chi2"
+    requires_trace = False  # it reads the UBIKF's trace, not the EKF's
+    reads = frozenset()
+    defaults = {
+        "window": 10,  # W updates per window sum (the paper: 4)
+        "budget_per_hour": 0.1,  # false alarms per hour the test may spend
+        "alpha": None,  # set to override the budget (the paper: 0.01)
+        "n_persist": 1,
+        "states": [],  # states whose envelopes the report draws; empty: the attitude, else the first 3
+    }
+    parameter_constraints = {
+        "window": [Interval(int, 1, None)],
+        "budget_per_hour": [Interval(float, 0, None, closed="neither")],
+        "alpha": [Interval(float, 0, 1, closed="neither"), None],
+        "n_persist": [Interval(int, 1, None)],
+        "states": [StringList()],
+    }
+
+    def needs(self, run=None) -> Needs:
+        return Needs.of(ubikf=())
+
+    def _alpha(self, trace, n_tests: int) -> float:
+        if self.alpha is not None:
+            return float(self.alpha)
+        duration = max(float(trace.t[-1] - trace.t[0]), 1e-9) if trace.t.size > 1 else 1.0
+        tests_per_second = max(n_tests / duration, 1e-9)
+        return float(self.budget_per_hour) / (3600.0 * tests_per_second)  # alpha = budget / (3600 tests/s)
+
+    def _run(self, run, trace, **context) -> DetectorResult:
+        from logscan.filters.box_chi2 import box_chi2_bounds
+
+        ubikf = (context.get("traces") or {}).get("ubikf")
+        if ubikf is None:
+            raise UsageError("detector 'chi2' needs the UBIKF trace, but the pipeline did not run it")
+        result = self.new_result()
+        t = run.t
+        beta_lo, beta_hi = box_chi2_bounds(ubikf.r_mid, ubikf.r_rad, ubikf.S)
+        updated = (ubikf.m_k > 0) & ~ubikf.diverged & np.isfinite(beta_lo)
+        steps = np.flatnonzero(updated)
+        alpha = self._alpha(ubikf, int(steps.size))
+        result.info["alpha"] = alpha
+        result.info["window_updates"] = int(self.window)
+        lower, upper_sum = np.full(t.size, np.nan), np.full(t.size, np.nan)
+        delta = np.full(t.size, np.nan)
+        warm = np.zeros(t.size, dtype=bool)
+        if steps.size:
+            m_steps = ubikf.m_k[steps].astype(np.int64)
+            sums_lo, dof, full = window_sums(beta_lo[steps], m_steps, int(self.window))
+            sums_hi, _, _ = window_sums(beta_hi[steps], m_steps, int(self.window))
+            lower[steps], upper_sum[steps] = sums_lo, sums_hi
+            delta[steps] = chi2_threshold(dof, alpha)  # delta = chi2.ppf(1 - alpha, dof)
+            warm[steps[~full]] = True
+        options = {"valid": updated, "warmup": warm, "n_persist": int(self.n_persist)}
+        result.add_statistic(t, "chi2.lower", lower, upper=delta, **options)
+        result.add_possible(t, "chi2.upper", upper_sum, delta, **options)
+        result.series["chi2.upper"] = upper_sum  # drawn beside the lower sum, alarms from the lower only
+        if ubikf.diverged.any():
+            result.warnings.append(
+                f"the UBIKF bound diverged on {int(ubikf.diverged.sum())} steps and restarted; those are not judged"
+            )
+        self._envelopes(result, ubikf)
+        result.info["extra_captions"] = {**EXTRA_CAPTIONS, **{s: ENVELOPE_CAPTION for s in self._states(ubikf)}}
+        return result
+
+    def _states(self, ubikf) -> list[str]:
+        names = list(ubikf.state_names)
+        chosen = [s for s in (self.states or []) if s in names]
+        if chosen:
+            return chosen
+        attitude = [s for s in ("roll", "pitch", "yaw") if s in names]
+        return attitude or names[:3]
+
+    def _envelopes(self, result: DetectorResult, ubikf) -> None:
+        """The selected states' envelopes around the point estimate, and trace(P+), as extras."""
+        names = list(ubikf.state_names)
+        for state in self._states(ubikf):
+            i = names.index(state)
+            result.extras[f"lower.{state}"] = ubikf.x_lo[:, i].astype(np.float32)
+            result.extras[f"estimate.{state}"] = ubikf.x_mid[:, i].astype(np.float32)
+            result.extras[f"upper.{state}"] = ubikf.x_hi[:, i].astype(np.float32)
+        result.extras["trace(P+)"] = ubikf.P_trace.astype(np.float32)
