@@ -156,15 +156,19 @@ def _qp_min(c, rad, H, m, x, state, free, Hf, L, p):
 
 
 @njit(cache=True, error_model="numpy")
-def _max_vertex(c, rad, H, m, act, w, v):
+def _max_vertex(c, rad, H, m, act, u, v, G):
     """max of x^T H x over c[:m] +- rad[:m] (H[:m, :m] symmetric positive semi-definite).
 
     Gray-code walk over the vertices of the coordinates with rad > 0 (the k active ones): vertex t
-    differs from vertex t - 1 in bit b = the number of trailing zeros of t, and the form and
-    w = H v follow by the rank-one update of the module docstring. The best vertex is evaluated
-    again from scratch at the end (no rounding drift from the 2^k updates). More than
-    MAX_VERTEX_DIM active coordinates: the bound (|c| + rad)^T |H| (|c| + rad) instead. Work
-    arrays: act (int, m), w, v (m).
+    differs from vertex t - 1 in bit b = the number of trailing zeros of t. The rank-one update of
+    the module docstring, in coordinates scaled by the radii (G = D H D and u = D H v over the
+    active coordinates, D = diag(rad)): setting the sign of coordinate b to s changes
+
+        q <- q + 4 (s u_b + G_bb),    u <- u + 2 s G[b, :]
+
+    (a contiguous row: O(k) per vertex). The best vertex is evaluated again from scratch at the end
+    (no rounding drift from the 2^k updates). More than MAX_VERTEX_DIM active coordinates: the
+    bound (|c| + rad)^T |H| (|c| + rad) instead. Work arrays: act (int, m), u, v (m), G (m x m).
     """
     k = 0
     for i in range(m):
@@ -184,7 +188,9 @@ def _max_vertex(c, rad, H, m, act, w, v):
         t = 0.0
         for j in range(m):
             t += H[i, j] * v[j]
-        w[i] = t
+        u[a] = rad[i] * t
+        for b in range(k):
+            G[a, b] = rad[i] * H[i, act[b]] * rad[act[b]]
     q = _quad(H, v, m)
     best = q
     best_code = 0
@@ -194,11 +200,11 @@ def _max_vertex(c, rad, H, m, act, w, v):
         while not (t >> b) & 1:
             b += 1
         code ^= 1 << b
-        i = act[b]
-        d = 2.0 * rad[i] if (code >> b) & 1 else -2.0 * rad[i]
-        q += d * (2.0 * w[i] + d * H[i, i])
+        s = 1.0 if (code >> b) & 1 else -1.0
+        q += 4.0 * (s * u[b] + G[b, b])
+        Gb = G[b]
         for a in range(k):
-            w[act[a]] += d * H[act[a], i]
+            u[a] += 2.0 * s * Gb[a]
         if q > best:
             best = q
             best_code = code
@@ -234,7 +240,7 @@ def box_max_vertex(r_mid, r_rad, H):
     radius; above that the upper bound (|r_mid| + r_rad)^T |H| (|r_mid| + r_rad), which can
     over-estimate the maximum (by up to 3.4x in the UBIKF runs). `_max_vertex`."""
     m = r_mid.shape[0]
-    return _max_vertex(r_mid, r_rad, H, m, np.empty(m, np.int64), np.empty(m), np.empty(m))
+    return _max_vertex(r_mid, r_rad, H, m, np.empty(m, np.int64), np.empty(m), np.empty(m), np.empty((m, m)))
 
 
 @njit(cache=True, error_model="numpy")
@@ -284,7 +290,7 @@ def _bounds_loop(r_mid, r_rad, S, mask, beta_lo, beta_hi):
                 H[a, b] = s
                 H[b, a] = s
         beta_lo[k] = _qp_min(c, rad, H, m, x, iw1, iw2, Hf, L, p)
-        beta_hi[k] = _max_vertex(c, rad, H, m, iw1, w, x)
+        beta_hi[k] = _max_vertex(c, rad, H, m, iw1, w, x, Hf)
 
 
 def box_chi2_bounds(
