@@ -13,6 +13,7 @@ _REGISTRY = {
     "steer_by_wire": "logscan.models.steer_by_wire:SteerByWire",
     "dc_motor": "logscan.models.dc_motor:DcMotor",
     "linear": "logscan.models.linear:LinearModel",
+    "hover_uav": "logscan.models.hover_uav:HoverUav",
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 

@@ -40,11 +40,16 @@ from logscan.models.rk4 import rk4_f, rk4_predict, rk4_predict_into
 from logscan.models.steer_by_wire_kernels import STEER_BY_WIRE_ID, sbw_H, sbw_h, sbw_H_row_into
 from logscan.numba_cache import follow_dependencies
 
+# the hover UAV (logscan.models.hover_uav) packs its exactly discretised A, B, C like a linear
+# model and runs the linear kernels under an id of its own
+HOVER_UAV_ID = 4
+
 MODEL_IDS = {
     QUADCOPTER_ID: "quadcopter",
     STEER_BY_WIRE_ID: "steer_by_wire",
     DC_MOTOR_ID: "dc_motor",
     LINEAR_ID: "linear",
+    HOVER_UAV_ID: "hover_uav",
 }
 
 
@@ -62,7 +67,7 @@ def check_model_id(model_id: int, model_name: str) -> None:
 @njit(cache=True)
 def predict(model_id, p, x, u, dt):
     """(f(x, u), F(x, u)) of the discrete model `model_id`."""
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         Ad, Bd = lin_AB(p)
         return lin_f(p, x, u), Ad.copy()
     if model_id == QUADCOPTER_ID or model_id == STEER_BY_WIRE_ID:
@@ -72,7 +77,7 @@ def predict(model_id, p, x, u, dt):
 
 @njit(cache=True, inline="always")
 def lin_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
-    """predict_into of the linear models (dc_motor, linear)."""
+    """predict_into of the linear models (dc_motor, linear, hover_uav)."""
     lin_predict_into(p, x, u, x_next, F)
 
 
@@ -92,7 +97,7 @@ def sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
 def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
     A, J, Jn (n, n) are work arrays)."""
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         lin_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     elif model_id == QUADCOPTER_ID:
         quad_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
@@ -105,7 +110,7 @@ def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
 @njit(cache=True)
 def f_disc(model_id, p, x, u, dt):
     """f(x, u) of the discrete model `model_id` (no Jacobian: the simulator's truth)."""
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         return lin_f(p, x, u)
     if model_id == QUADCOPTER_ID or model_id == STEER_BY_WIRE_ID:
         return rk4_f(model_id, p, x, u, dt)
@@ -119,7 +124,7 @@ def h_meas(model_id, gid, p, x, u):
         return quad_h(p, gid, x, u)
     if model_id == STEER_BY_WIRE_ID:
         return sbw_h(p, gid, x, u)
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         return lin_h(p, gid, x, u)
     raise ValueError("h_meas: unknown model id")
 
@@ -131,7 +136,7 @@ def H_meas(model_id, gid, p, x, u):
         return quad_H(p, gid, x, u)
     if model_id == STEER_BY_WIRE_ID:
         return sbw_H(p, gid, x, u)
-    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+    if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         return lin_H(p, gid, x, u)
     raise ValueError("H_meas: unknown model id")
 
@@ -166,7 +171,7 @@ def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
         quad_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     elif model_id == STEER_BY_WIRE_ID:
         sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
-    elif model_id == DC_MOTOR_ID or model_id == LINEAR_ID:
+    elif model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     else:
         raise ValueError("meas_into: unknown model id")
@@ -178,6 +183,7 @@ IN_PLACE = {
     STEER_BY_WIRE_ID: (sbw_step_into, sbw_meas_rows_into),
     DC_MOTOR_ID: (lin_step_into, lin_meas_rows_into),
     LINEAR_ID: (lin_step_into, lin_meas_rows_into),
+    HOVER_UAV_ID: (lin_step_into, lin_meas_rows_into),
 }
 
 
