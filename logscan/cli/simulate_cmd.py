@@ -14,7 +14,9 @@ _FAULT_HELP = (
     "defaults). Kinds: bias, drift, random, bitflip, stuck, actuator-offset, lost-actuator, "
     "cov-corruption, state-corruption; aliases imu-bias (1.0 m/s^2 on accel.x), imu-drift, "
     "imu-random, imu-bitflip (1.2 s burst), imu-stuck, motor-offset (-10 % thrust on motor1), "
-    "lost-motor."
+    "lost-motor; the UBIKF paper's scenarios (hover_uav; samples k counted from 5 s, the start of "
+    "its attitude excitation): roll-bias (0.1 rad on attitude.roll for k in [30, 70]), rotor-loss "
+    "(rotor1 stops from k = 31)."
 )
 
 
@@ -24,7 +26,8 @@ _FAULT_HELP = (
     "  logscan simulate quadcopter --fault imu-bitflip --at 20 --fault motor-offset:motor2:40:50 -o q.mcap\n\n"
     "  logscan simulate steer_by_wire --fault bias:yaw_rate:10:20:0.05 --format csv -o sbw.csv\n\n"
     "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap\n\n"
-    "  logscan simulate dc_motor --speed 1.0,0.4@30 --fault bias:gps_speed:45:75:0.22 --duration 100 -o j.mcap"
+    "  logscan simulate dc_motor --speed 1.0,0.4@30 --fault bias:gps_speed:45:75:0.22 --duration 100 -o j.mcap\n\n"
+    "  logscan simulate hover_uav --fault roll-bias -o hover.mcap"
 )
 @click.argument("model_name", metavar="MODEL")
 @click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
@@ -60,7 +63,7 @@ _FAULT_HELP = (
     "rate_hz",
     type=float,
     default=None,
-    help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20.",
+    help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20, hover_uav 100.",
 )
 @click.option(
     "--format",
@@ -123,7 +126,7 @@ def simulate(
 ) -> None:
     """Simulate MODEL in closed loop with injected faults and write the log.
 
-    MODEL is quadcopter, steer_by_wire or dc_motor. The log holds commands (/cmd), sensors, the
+    MODEL is quadcopter, steer_by_wire, dc_motor or hover_uav. The log holds commands (/cmd), sensors, the
     on-board EKF's state and variance (/ekf/state, /ekf/variance), set-points and the true state
     (/truth/state); the fault events and the matching profile are embedded, so `logscan analyze`
     and `logscan evaluate` need no other file. Same seed, same bytes.

@@ -13,6 +13,10 @@ writes the input into ``u``. The references are computed vectorised before the l
    changes) and a sliding-mode front-wheel controller tracking theta_h / N_theta (paper V.B).
  - dc_motor (id 2): PI speed control of each wheel on the estimated speed through a schedule of
    constant-speed modes, given speed changes or a random piecewise-constant profile.
+ - hover_uav (id 3): the linearised hover: PD position hold -> roll/pitch set-points (plus the
+   attitude excitation of the reference) -> attitude PD -> wrench deviation -> rotor thrust
+   deviations through the inverse mixer. Reference: hover for a settle time, then roll, pitch and
+   yaw set-point excitation (multi-sines).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-QUAD_CTRL, SBW_CTRL, DCM_CTRL = 0, 1, 2
+QUAD_CTRL, SBW_CTRL, DCM_CTRL, HOVER_CTRL = 0, 1, 2, 3
 
 
 @njit(cache=True)
@@ -226,11 +230,66 @@ def dcm_random_reference(t: np.ndarray, modes: tuple[float, ...], hold: tuple[fl
     return dcm_steps_reference(t, changes)
 
 
+# ---- hover_uav -------------------------------------------------------------------------------
+# cp: the quadcopter's (m, g, Ix, Iy, Iz, kp_xy, kd_xy, kp_z, kd_z, ki_z, kp_att, kd_att, kp_yaw,
+#     kd_yaw, tilt_max), ki_att, tau_z_max, then the inverse mixer (4 x 4, row-major): rotor
+#     thrust deviations = M^-1 @ wrench deviation
+# cs: integrators of the altitude, roll and pitch errors
+# r:  x, y, z, roll excitation, pitch excitation, yaw
+@njit(cache=True)
+def hover_control(cp, cs, r, xh, dt, u):
+    m, g = cp[0], cp[1]
+    ax = cp[5] * (r[0] - xh[0]) - cp[6] * xh[3]
+    ay = cp[5] * (r[1] - xh[1]) - cp[6] * xh[4]
+    # linearised: vx' = g pitch, vy' = -g roll
+    theta_d = _clip(ax / g + r[4], -cp[14], cp[14])
+    phi_d = _clip(-ay / g + r[3], -cp[14], cp[14])
+    ez, er, ep = r[2] - xh[2], phi_d - xh[6], theta_d - xh[7]
+    # integral action (clamped): a rotor that delivers less than commanded is compensated
+    cs[0] = _clip(cs[0] + ez * dt, -2.0, 2.0)
+    cs[1] = _clip(cs[1] + er * dt, -0.5, 0.5)
+    cs[2] = _clip(cs[2] + ep * dt, -0.5, 0.5)
+    w0 = m * (cp[7] * ez - cp[8] * xh[5] + cp[9] * cs[0])
+    w1 = cp[2] * (cp[10] * er - cp[11] * xh[9] + cp[15] * cs[1])
+    w2 = cp[3] * (cp[10] * ep - cp[11] * xh[10] + cp[15] * cs[2])
+    # yaw has the least authority (three rotors cannot hold it): clipped so it never takes the
+    # rotors' thrust from roll, pitch and altitude
+    w3 = _clip(cp[4] * (cp[12] * _wrap(r[5] - xh[8]) - cp[13] * xh[11]), -cp[16], cp[16])
+    for i in range(4):
+        b = 17 + 4 * i
+        u[i] = cp[b] * w0 + cp[b + 1] * w1 + cp[b + 2] * w2 + cp[b + 3] * w3
+
+
+def hover_reference(t: np.ndarray, aggressive: bool, settle: float) -> np.ndarray:
+    """(N, 6) reference [x, y, z, roll excitation, pitch excitation, yaw] of the hover_uav: hold
+    the hover point; from ``settle`` on, roll and pitch set-point excitation (two sines each,
+    0.08 + 0.04 rad; aggressive: doubled) and a slow yaw swing (0.2 rad at 0.05 Hz), faded in
+    over 1 s."""
+    scale = 2.0 if aggressive else 1.0
+    te = np.clip(t - settle, 0.0, None)
+    env = np.where(t >= settle, np.sin(0.5 * np.pi * np.clip(te, 0.0, 1.0)) ** 2, 0.0)
+    ref = np.zeros((t.size, 6))
+    ref[:, 3] = env * scale * (0.08 * np.sin(2.0 * np.pi * 0.4 * te) + 0.04 * np.sin(2.0 * np.pi * 1.3 * te))
+    ref[:, 4] = env * scale * (0.08 * np.sin(2.0 * np.pi * 0.3 * te + 1.0) + 0.04 * np.sin(2.0 * np.pi * 1.1 * te))
+    ref[:, 5] = env * 0.2 * np.sin(2.0 * np.pi * 0.05 * te)
+    return ref
+
+
+def hover_params(model, aggressive: bool) -> np.ndarray:
+    """The quadcopter's gains (`quad_params`, nominal parameters), the roll and pitch integral
+    gain 0.2 wn_att^2, the yaw torque limit 0.05 N m, and the inverse mixer."""
+    quad = quad_params(model, aggressive)
+    extra = [0.2 * quad[10], 0.05]
+    return np.concatenate([quad, extra, np.linalg.inv(model.mixer_matrix()).ravel()])
+
+
 @njit(cache=True)
 def control(ctrl_id, cp, cs, r, xh, dt, u):
     if ctrl_id == QUAD_CTRL:
         quad_control(cp, cs, r, xh, dt, u)
     elif ctrl_id == SBW_CTRL:
         sbw_control(cp, cs, r, xh, dt, u)
+    elif ctrl_id == HOVER_CTRL:
+        hover_control(cp, cs, r, xh, dt, u)
     else:
         dcm_control(cp, cs, r, xh, dt, u)

@@ -18,6 +18,10 @@ A fault is (kind, target, start, end, magnitude), times in seconds since the log
 Aliases: imu-bias = bias on the accelerometer x channel (Kalman-gain-norm paper: +1 m/s^2),
 imu-bitflip = a 1.2 s burst of bit flips in one IMU channel (encoded-EKF paper), imu-drift,
 motor-offset = actuator-offset (-10 % thrust on motor 0), lost-motor = lost-actuator.
+The UBIKF paper's two scenarios (section IV.B), timed in grid samples k counted from
+PAPER_SETTLE_S after the log start (the hover_uav's excitation starts there, the filters have
+converged): roll-bias = bias 0.1 rad on attitude.roll for k in [30, 70] (both included),
+rotor-loss = total loss of the first actuator (rotor1) from k = 31 to the end of the log.
 """
 
 from __future__ import annotations
@@ -57,7 +61,14 @@ ALIASES = {
     "imu-stuck": ("stuck", "imu", 0.0, 5.0),
     "motor-offset": ("actuator-offset", None, -0.10, 10.0),
     "lost-motor": ("lost-actuator", None, 0.0, 5.0),
+    # the UBIKF paper's scenarios; durations here are at 100 Hz, ALIAS_SAMPLES times them
+    "roll-bias": ("bias", "attitude.roll", 0.1, 0.41),
+    "rotor-loss": ("lost-actuator", None, 0.0, math.inf),
 }
+# alias -> (first sample k, last sample k included or None: to the log end), k counted in grid
+# periods from PAPER_SETTLE_S; used when the fault's start (and end) are not given
+ALIAS_SAMPLES = {"roll-bias": (30, 70), "rotor-loss": (31, None)}
+PAPER_SETTLE_S = 5.0  # the hover_uav's hover before its attitude excitation: the paper's k = 0
 # kind -> (default magnitude, default duration s)
 KIND_DEFAULTS = {
     "bias": (1.0, 10.0),
@@ -165,6 +176,8 @@ def resolve_faults(
         target = spec.target or alias_target
         start = 0.5 * duration if spec.start is None else spec.start
         end = start + length if spec.end is None else spec.end
+        if spec.kind in ALIAS_SAMPLES:
+            start, end = _sample_window(spec, dt)
         magnitude = magnitude if spec.magnitude is None else spec.magnitude
         if not (0.0 <= start < duration):
             raise UsageError(
@@ -226,6 +239,16 @@ def resolve_faults(
         bit=rng.integers(BITFLIP_LOWEST_BIT, 32, size=(nf, n_steps)).astype(np.int64),
     )
     return events, table
+
+
+def _sample_window(spec: FaultSpec, dt: float) -> tuple[float, float]:
+    """(start, end) s of a fault of ALIAS_SAMPLES: samples k in [first, last] counted from
+    PAPER_SETTLE_S (a given start replaces k = first; a given end stays)."""
+    first, last = ALIAS_SAMPLES[spec.kind]
+    start = round(PAPER_SETTLE_S + first * dt, 9) if spec.start is None else spec.start
+    if spec.end is not None:
+        return start, spec.end
+    return start, math.inf if last is None else round(start + (last + 1 - first) * dt, 9)
 
 
 def _defaults(name: str) -> tuple[str, str | None, float, float]:

@@ -3,7 +3,9 @@
 One step k (period dt, x_k = f(x_{k-1}, u_k) + w_k as the models define it):
   1. controller: u_k from the on-board posterior estimate of step k-1 (never the true state);
      actuators: a = M^-1 u clipped to the actuators' limits, u_cmd = M a (logged command);
-  2. actuator faults act on a; the truth is driven by u_act = M a_faulty:
+  2. actuator faults act on a (on the actuator's total a_trim + a when the inputs are deviations
+     from an operating point a_trim, the hover_uav's rotor thrusts; zero otherwise); the truth is
+     driven by u_act = M a_faulty:
      x_k = f(x_{k-1}, u_act) + w_k, w_k ~ N(0, Q) (the model's own Q, so an analysis filter with
      the model's defaults is consistent with the simulator);
   3. each measurement group samples every `ratio` steps: z = h(x_k, u_act) + v, v ~ N(0, s^2) with
@@ -98,6 +100,7 @@ def closed_loop(
     M_inv,
     a_lo,
     a_hi,
+    a_trim,
     f_kind,
     f_target,
     f_start,
@@ -110,7 +113,9 @@ def closed_loop(
 
     z is (N, total measurements) with NaN where a group did not sample; rejected counts samples
     the on-board EKF skipped (non-finite or outside the sensor's physical range). E holds unit
-    normal draws (N, total measurements); R_diag is the on-board EKF's (nominal) noise variance."""
+    normal draws (N, total measurements); R_diag is the on-board EKF's (nominal) noise variance;
+    a_trim (nu_actuators,) the actuators' operating point (zeros unless the model's inputs are
+    deviations from one)."""
     N, n = W.shape
     nu = M.shape[0]
     n_meas = E.shape[1]
@@ -140,10 +145,11 @@ def closed_loop(
         # 2. actuator faults, truth
         for i in range(f_kind.size):
             if k >= f_start[i] and k < f_end[i]:
-                if f_kind[i] == ACT_OFFSET:
-                    a[f_target[i]] *= 1.0 + f_mag[i]
-                elif f_kind[i] == LOST_ACT:
-                    a[f_target[i]] = 0.0
+                j = f_target[i]
+                if f_kind[i] == ACT_OFFSET:  # the total a_trim + a scaled by 1 + m
+                    a[j] = (a_trim[j] + a[j]) * (1.0 + f_mag[i]) - a_trim[j]
+                elif f_kind[i] == LOST_ACT:  # total 0
+                    a[j] = -a_trim[j]
         ua = M @ a
         u_act[k] = ua
         if k > 0:

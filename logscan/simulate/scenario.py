@@ -12,6 +12,11 @@ plus the naming that the log, the truth and the profile use:
    commanded-speed profile ``speed`` (`parse_speed`: constant, changes at given times, random).
    The speed sensors' noise grows with the speed (`SPEED_NOISE`). Its profile tolerates healthy
    sensor glitches (see `glitch_tolerance`).
+ - hover_uav (the UBIKF paper's linearised hover quadcopter): position, velocity and attitude at the
+   grid rate (100 Hz, a motion-capture system); actuators rotor1..rotor4 = the inputs F1..F4,
+   thrust deviations from hover (faults act on the total thrust, `Scenario.a_trim`); hover for
+   PAPER_SETTLE_S (5 s), then roll, pitch and yaw set-point excitation; the embedded profile
+   carries every parameter, the intervals included.
 """
 
 from __future__ import annotations
@@ -24,8 +29,9 @@ from logscan.errors import UsageError
 from logscan.models import get_model
 from logscan.models.base import Model
 from logscan.simulate import controllers as ctl
+from logscan.simulate.faults import PAPER_SETTLE_S
 
-DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0}
+DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0, "hover_uav": 100.0}
 SIMULATED_MODELS = tuple(DEFAULT_RATES)
 DCM_MODES = (0.4, 0.7, 1.0, 1.3, 1.6, 1.9)  # m/s, the A-TFM thesis's trained modes
 DCM_HOLD_S = 20.0
@@ -63,13 +69,23 @@ _SENSOR_TOPICS = {
         "gps_speed": ("/gps", ("speed",)),
         "current": ("/motor", ("current",)),
     },
+    "hover_uav": {
+        "position": ("/mocap", ("position.x", "position.y", "position.z")),
+        "velocity": ("/mocap", ("velocity.x", "velocity.y", "velocity.z")),
+        "attitude": ("/mocap", ("roll", "pitch", "yaw")),
+    },
 }
 # model -> group -> sensor rate in Hz (None: the grid rate)
 _SENSOR_RATES = {
     "quadcopter": {"accel": None, "gyro": None, "position": 10.0, "attitude": 50.0},
     "dc_motor": {"gps_speed": 10.0},
 }
-_IMU_DEFAULT = {"quadcopter": "accel.x", "steer_by_wire": "yaw_rate", "dc_motor": "encoder.v_left"}
+_IMU_DEFAULT = {
+    "quadcopter": "accel.x",
+    "steer_by_wire": "yaw_rate",
+    "dc_motor": "encoder.v_left",
+    "hover_uav": "attitude.roll",  # no IMU: the imu-* aliases fall on the roll output
+}
 GLITCH_MAX_SAMPLES = 2  # a healthy glitch lasts one or two samples of one sensor (simulation._glitches)
 NIS_WINDOW = 10  # updates per NIS window sum (the nis detector's default, written into the profile)
 # e_s band width on the DC motor: its logged on-board state has float32 resolution (7 significant
@@ -150,6 +166,10 @@ class Scenario:
     detectors: dict[str, dict] = field(default_factory=dict)  # the profile's [detectors.<name>] tables
     speed: str | None = None  # dc_motor's --speed as given (None: the mode cycle)
     noise: str = "constant"  # sensor noise: "speed" (SPEED_NOISE) or "constant"
+    # actuators' operating point when the inputs are deviations from it (hover_uav: m g / 4 per
+    # rotor); actuator faults act on a_trim + a. None: zeros
+    a_trim: np.ndarray | None = None
+    profile_params: dict | None = None  # the profile's [vehicle] params (None: those given)
 
 
 def input_channel(name: str) -> str:
@@ -209,7 +229,7 @@ def build_scenario(
         sc = _dc_motor(model, dt, t, groups, aggressive, rng, changes)
         sc.speed, sc.noise = speed, noise
         return sc
-    builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire}
+    builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire, "hover_uav": _hover_uav}
     return builder[model_name](model, dt, t, groups, aggressive, rng)
 
 
@@ -403,4 +423,37 @@ def _dc_motor(model, dt, t, groups, aggressive, rng, changes=None) -> Scenario:
         onboard_rate_hz=1.0 / dt,
         alarms=alarms,
         detectors={**detectors, "encoded_ekf": {"rho_s": DCM_RHO_S}},
+    )
+
+
+def _hover_uav(model, dt, t, groups, aggressive, rng) -> Scenario:
+    ref = ctl.hover_reference(t, aggressive, PAPER_SETTLE_S)
+    hover = model.hover_thrust()
+    return Scenario(
+        model_name="hover_uav",
+        model=model,
+        dt=dt,
+        groups=groups,
+        actuators=["rotor1", "rotor2", "rotor3", "rotor4"],
+        M=np.eye(4),  # the inputs are the rotor thrust deviations; the mixer is inside the model
+        a_lo=np.full(4, -hover),  # a rotor cannot pull down: total thrust >= 0
+        a_hi=np.full(4, 1.5 * hover),  # total <= 2.5 x hover, as the quadcopter's motors
+        ctrl_id=ctl.HOVER_CTRL,
+        ctrl_params=ctl.hover_params(model, aggressive),
+        ctrl_state=np.zeros(3),
+        reference=ref,
+        x0=np.zeros(12),
+        P0=np.diag(np.square(0.1 * model.state_scale())),
+        imu_default=_IMU_DEFAULT["hover_uav"],
+        input_channels=[input_channel(n) for n in model.input_names],
+        mode_channel="/flight_mode/mode",
+        mode_values=np.where(t >= PAPER_SETTLE_S, 1.0, 0.0),  # 0 hover, 1 attitude excitation
+        setpoints={
+            "/setpoint/roll": ref[:, 3],
+            "/setpoint/pitch": ref[:, 4],
+            "/setpoint/yaw": ref[:, 5],
+        },
+        onboard_rate_hz=min(50.0, 1.0 / dt),
+        a_trim=np.full(4, hover),
+        profile_params=dict(model.p),
     )

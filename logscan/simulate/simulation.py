@@ -172,8 +172,9 @@ class Simulation:
             "inputs": {name: ch for name, ch in zip(sc.model.input_names, sc.input_channels)},
             "measurements": {},
         }
-        if sc.model.params:
-            profile["vehicle"]["params"] = dict(sc.model.params)
+        params = sc.model.params if sc.profile_params is None else sc.profile_params
+        if params:
+            profile["vehicle"]["params"] = dict(params)
         for g in sc.groups:
             profile["measurements"][g.name] = {
                 "channels": g.channels,
@@ -353,6 +354,7 @@ def simulate(
         np.ascontiguousarray(np.linalg.inv(sc.M)),
         sc.a_lo.astype(np.float64),
         sc.a_hi.astype(np.float64),
+        np.zeros(len(sc.actuators)) if sc.a_trim is None else sc.a_trim.astype(np.float64),
         table.kind,
         table.target,
         table.start,
