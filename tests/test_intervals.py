@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from logscan.filters.interval_model import loewner_upper
-from logscan.filters.intervals import interval_product, reduce_zonotope, zonotope_hull
+from logscan.filters.intervals import congruence_bound, interval_product, reduce_zonotope, zonotope_hull
 
 SAMPLES = 200
 
@@ -145,3 +145,19 @@ def test_loewner_upper_bound_lies_above_every_symmetric_matrix_inside(problem):
         E = np.triu(signs * M_r)
         M = M_m + E + np.triu(E, 1).T  # symmetric, inside [M_m +- M_r]
         assert np.linalg.eigvalsh(U - M).min() >= -1e-9 * scale
+
+
+@settings(max_examples=60, deadline=None)
+@given(interval_covariances(), st.sampled_from([0.0, 0.01, 0.1, 0.5]))
+def test_weighted_congruence_bound_lies_above_M_P_MT_for_every_M_inside(problem, relative):
+    rng, P, _ = problem
+    n = P.shape[0]
+    M_m = rng.normal(size=(n, n))
+    M_m[rng.uniform(size=(n, n)) < 0.3] = 0.0  # row-sparse, as a discretised model
+    M_r = relative * np.abs(rng.normal(size=(n, n)))
+    bound = congruence_bound(M_m, M_r, P)
+    scale = np.max(np.abs(bound))
+    for M in draws(rng, M_m, M_r, SAMPLES):
+        assert np.linalg.eigvalsh(bound - M @ P @ M.T).min() >= -1e-9 * scale
+    if relative == 0.0:  # a point matrix: the bound is M P M^T itself
+        np.testing.assert_allclose(bound, M_m @ P @ M_m.T, rtol=1e-12, atol=1e-12 * scale)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from logscan.filters.linalg import sparse_mm
+from logscan.filters.linalg import fpft_q, joseph, sparse_mm, sparse_rows
 from logscan.numba_cache import follow_dependencies
 
 EPS = float(np.finfo(np.float64).eps)
@@ -155,6 +155,139 @@ def reduce_order(G, p, q):
     return n + keep
 
 
+# ================================================================================================
+# covariance bounds: Loewner upper bounds of [M] P [M]^T (the UBIKF's weighted bound)
+# ================================================================================================
+@njit(cache=True, error_model="numpy")
+def weighted_ratio(trace, size_sum):
+    """(sigma / sigma0, sigma) of the weighted bound: sigma0 = sqrt(trace) (the point term's
+    size), sigma = sigma0 + the interval terms' sizes. A zero point term is dropped (ratio 0)."""
+    s0 = np.sqrt(max(trace, 0.0))
+    s = s0 + size_sum
+    if s0 > 0.0:
+        return widen(s / s0), widen(s)
+    return 0.0, widen(s)
+
+
+@njit(cache=True, error_model="numpy")
+def sqrt_diag(P, out):
+    for i in range(P.shape[0]):
+        out[i] = np.sqrt(max(P[i, i], 0.0))
+
+
+@njit(cache=True, error_model="numpy")
+def radius_times(M_r, rows, rc, v, out):
+    """out[a] = sum_j M_r[rows[a], j] v[j] for a < rc (widened): an interval matrix's radius
+    applied to a non-negative vector. Returns the sum of out."""
+    total = 0.0
+    for a in range(rc):
+        s = 0.0
+        Ma = M_r[rows[a]]
+        for j in range(v.size):
+            s += Ma[j] * v[j]
+        out[a] = widen(s)
+        total += out[a]
+    return total
+
+
+@njit(cache=True, error_model="numpy")
+def predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Z, FP, W, APA, out):
+    """P+_prior = (s/s0) A_m P A_m^T + s diag(A_r sqrt(diag P)) + Q+ into out."""
+    n = P.shape[0]
+    sqrt_diag(P, sigma)
+    size = radius_times(A_r, all_rows, n, sigma, rho)
+    # A_m P A_m^T (Z: zeros)
+    fpft_q(A_m, P, Z, n, acols, annz, FP, W, APA)
+    tr = 0.0
+    for i in range(n):
+        tr += APA[i, i]
+    ratio, s = weighted_ratio(tr, size)
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = ratio * APA[i, j] + Q[i, j]
+        out[i, i] += s * rho[i]
+
+
+@njit(cache=True, error_model="numpy")
+def innovation_bound(Cs, hcols, hnnz, m, P, HP, rho, Rs, S):
+    """S+ = (c/c0) C P C^T + c diag(rho) + R+ for the m stacked rows; returns c/c0. HP = C P on
+    entry (C row-sparse), rho = C_r sqrt(diag P) for those rows."""
+    size = 0.0
+    tr = 0.0
+    for a in range(m):
+        size += rho[a]
+        for b in range(a, m):
+            t = 0.0
+            for s in range(hnnz[b]):
+                c = hcols[b, s]
+                t += HP[a, c] * Cs[b, c]
+            S[a, b] = t
+        tr += S[a, a]
+    ratio, c = weighted_ratio(tr, size)
+    for a in range(m):
+        for b in range(a, m):
+            S[a, b] = ratio * S[a, b] + Rs[a, b]
+            S[b, a] = S[a, b]
+        S[a, a] += c * rho[a]
+    return ratio
+
+
+@njit(cache=True, error_model="numpy")
+def add_gain_noise(K, Rs, m, KR, out):
+    """out += K R+ K^T (K (n, m))."""
+    n = K.shape[0]
+    for i in range(n):
+        for b in range(m):
+            t = 0.0
+            for a in range(m):
+                t += K[i, a] * Rs[a, b]
+            KR[i, b] = t
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for b in range(m):
+                t += KR[i, b] * K[j, b]
+            out[i, j] += t
+
+
+@njit(cache=True, error_model="numpy")
+def column_norm(KT, a):
+    """|k_a|, the norm of column a of K (row a of K^T)."""
+    t = 0.0
+    for v in KT[a]:
+        t += v * v
+    return np.sqrt(t)
+
+
+@njit(cache=True, error_model="numpy")
+def posterior_bound(P, Cs, hcols, hnnz, HP, KT, Rs, m, rho, w, out):
+    """P+_post = (d/d0) M P M^T + d sum_a (rho_a / |k_a|) k_a k_a^T + K R+ K^T, M = I - K C.
+    w: work arrays (all_cols, m_cnt, no_cols, no_cnt, AT, DT, K, KR); K is left in w's K."""
+    all_cols, m_cnt, no_cols, no_cnt, AT, DT, K, KR = w
+    n = P.shape[0]
+    m_cnt[:] = m
+    # M P M^T: the Joseph form with no R term (no_cnt = 0)
+    joseph(P, Cs, hcols, hnnz, HP, KT, Rs, no_cols, no_cnt, m, n, all_cols, m_cnt, AT, DT, K, out)
+    tr = 0.0
+    for i in range(n):
+        tr += out[i, i]
+    size = 0.0
+    for a in range(m):
+        size += widen(rho[a] * column_norm(KT, a))
+    ratio, d = weighted_ratio(tr, size)
+    for i in range(n):
+        for j in range(n):
+            out[i, j] *= ratio
+    for a in range(m):
+        knorm = column_norm(KT, a)
+        if knorm > 0.0 and rho[a] > 0.0:
+            f = widen(d * rho[a] / knorm)
+            for i in range(n):
+                for j in range(n):
+                    out[i, j] += f * KT[a, i] * KT[a, j]
+    add_gain_noise(K, Rs, m, KR, out)
+
+
 # ------------------------------------------------------------------------------------------------
 # plain numpy entry points (tests, reports)
 # ------------------------------------------------------------------------------------------------
@@ -179,6 +312,20 @@ def zonotope_hull(G) -> np.ndarray:
     G = np.ascontiguousarray(G, dtype=np.float64)
     out = np.empty(G.shape[0])
     zonotope_hull_into(G, G.shape[0], G.shape[1], out)
+    return out
+
+
+def congruence_bound(M_m, M_r, P) -> np.ndarray:
+    """The weighted Loewner upper bound of M P M^T over every square M in [M_m +- M_r] (`predict_bound`
+    with no noise term)."""
+    M_m, M_r = np.ascontiguousarray(M_m, dtype=np.float64), np.ascontiguousarray(M_r, dtype=np.float64)
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    n = P.shape[0]
+    cols, nnz = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64)
+    sparse_rows(M_m, n, n, cols, nnz)
+    zero, out = np.zeros((n, n)), np.empty((n, n))
+    work = [np.empty((n, n)) for _ in range(3)]
+    predict_bound(M_m, cols, nnz, M_r, np.arange(n), zero, P, np.empty(n), np.empty(n), zero, *work, out)
     return out
 
 

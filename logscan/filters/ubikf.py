@@ -48,7 +48,12 @@ from logscan.filters.interval_model import IntervalModel, loewner_upper
 from logscan.filters.intervals import (
     append_box,
     append_scaled_columns,
+    innovation_bound,
+    posterior_bound,
+    predict_bound,
+    radius_times,
     reduce_order,
+    sqrt_diag,
     subtract_product,
     widen,
     zonotope_hull_into,
@@ -59,8 +64,6 @@ from logscan.filters.linalg import (
     cho_solve_rows,
     cholesky,
     forward_sq,
-    fpft_q,
-    joseph,
     sparse_mm,
     sparse_rows,
 )
@@ -95,139 +98,6 @@ class UbikfTrace:
     state_names: tuple[str, ...]
     K: np.ndarray | None = None  # (N, n, m) gain, NaN-padded (store_gain)
     P: np.ndarray | None = None  # (N, n, n) P+_post (store_P)
-
-
-# ================================================================================================
-# covariance bound
-# ================================================================================================
-@njit(cache=True, error_model="numpy")
-def weighted_ratio(trace, size_sum):
-    """(sigma / sigma0, sigma) of the weighted bound: sigma0 = sqrt(trace) (the point term's
-    size), sigma = sigma0 + the interval terms' sizes. A zero point term is dropped (ratio 0)."""
-    s0 = np.sqrt(max(trace, 0.0))
-    s = s0 + size_sum
-    if s0 > 0.0:
-        return widen(s / s0), widen(s)
-    return 0.0, widen(s)
-
-
-@njit(cache=True, error_model="numpy")
-def sqrt_diag(P, out):
-    for i in range(P.shape[0]):
-        out[i] = np.sqrt(max(P[i, i], 0.0))
-
-
-@njit(cache=True, error_model="numpy")
-def radius_times(M_r, rows, rc, v, out):
-    """out[a] = sum_j M_r[rows[a], j] v[j] for a < rc (widened): an interval matrix's radius
-    applied to a non-negative vector. Returns the sum of out."""
-    total = 0.0
-    for a in range(rc):
-        s = 0.0
-        Ma = M_r[rows[a]]
-        for j in range(v.size):
-            s += Ma[j] * v[j]
-        out[a] = widen(s)
-        total += out[a]
-    return total
-
-
-@njit(cache=True, error_model="numpy")
-def predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Z, FP, W, APA, out):
-    """P+_prior = (s/s0) A_m P A_m^T + s diag(A_r sqrt(diag P)) + Q+ into out."""
-    n = P.shape[0]
-    sqrt_diag(P, sigma)
-    size = radius_times(A_r, all_rows, n, sigma, rho)
-    # A_m P A_m^T (Z: zeros)
-    fpft_q(A_m, P, Z, n, acols, annz, FP, W, APA)
-    tr = 0.0
-    for i in range(n):
-        tr += APA[i, i]
-    ratio, s = weighted_ratio(tr, size)
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = ratio * APA[i, j] + Q[i, j]
-        out[i, i] += s * rho[i]
-
-
-@njit(cache=True, error_model="numpy")
-def innovation_bound(Cs, hcols, hnnz, m, P, HP, rho, Rs, S):
-    """S+ = (c/c0) C P C^T + c diag(rho) + R+ for the m stacked rows; returns c/c0. HP = C P on
-    entry (C row-sparse), rho = C_r sqrt(diag P) for those rows."""
-    size = 0.0
-    tr = 0.0
-    for a in range(m):
-        size += rho[a]
-        for b in range(a, m):
-            t = 0.0
-            for s in range(hnnz[b]):
-                c = hcols[b, s]
-                t += HP[a, c] * Cs[b, c]
-            S[a, b] = t
-        tr += S[a, a]
-    ratio, c = weighted_ratio(tr, size)
-    for a in range(m):
-        for b in range(a, m):
-            S[a, b] = ratio * S[a, b] + Rs[a, b]
-            S[b, a] = S[a, b]
-        S[a, a] += c * rho[a]
-    return ratio
-
-
-@njit(cache=True, error_model="numpy")
-def add_gain_noise(K, Rs, m, KR, out):
-    """out += K R+ K^T (K (n, m))."""
-    n = K.shape[0]
-    for i in range(n):
-        for b in range(m):
-            t = 0.0
-            for a in range(m):
-                t += K[i, a] * Rs[a, b]
-            KR[i, b] = t
-    for i in range(n):
-        for j in range(n):
-            t = 0.0
-            for b in range(m):
-                t += KR[i, b] * K[j, b]
-            out[i, j] += t
-
-
-@njit(cache=True, error_model="numpy")
-def column_norm(KT, a):
-    """|k_a|, the norm of column a of K (row a of K^T)."""
-    t = 0.0
-    for v in KT[a]:
-        t += v * v
-    return np.sqrt(t)
-
-
-@njit(cache=True, error_model="numpy")
-def posterior_bound(P, Cs, hcols, hnnz, HP, KT, Rs, m, rho, w, out):
-    """P+_post = (d/d0) M P M^T + d sum_a (rho_a / |k_a|) k_a k_a^T + K R+ K^T, M = I - K C.
-    w: work arrays (all_cols, m_cnt, no_cols, no_cnt, AT, DT, K, KR); K is left in w's K."""
-    all_cols, m_cnt, no_cols, no_cnt, AT, DT, K, KR = w
-    n = P.shape[0]
-    m_cnt[:] = m
-    # M P M^T: the Joseph form with no R term (no_cnt = 0)
-    joseph(P, Cs, hcols, hnnz, HP, KT, Rs, no_cols, no_cnt, m, n, all_cols, m_cnt, AT, DT, K, out)
-    tr = 0.0
-    for i in range(n):
-        tr += out[i, i]
-    size = 0.0
-    for a in range(m):
-        size += widen(rho[a] * column_norm(KT, a))
-    ratio, d = weighted_ratio(tr, size)
-    for i in range(n):
-        for j in range(n):
-            out[i, j] *= ratio
-    for a in range(m):
-        knorm = column_norm(KT, a)
-        if knorm > 0.0 and rho[a] > 0.0:
-            f = widen(d * rho[a] / knorm)
-            for i in range(n):
-                for j in range(n):
-                    out[i, j] += f * KT[a, i] * KT[a, j]
-    add_gain_noise(K, Rs, m, KR, out)
 
 
 # ================================================================================================
@@ -274,116 +144,138 @@ def select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd):
 
 
 @njit(cache=True, error_model="numpy")
-def ubikf_run(
-    A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh, group_offsets, group_sizes, L, cap,
-    x_mid, x_lo, x_hi, P_trace, P_diag, r_mid, r_rad, S_out, nis, K_out, P_out, updated, m_k, diverged, n_gen,
-):  # fmt: skip
-    """Filter N steps; outputs preallocated by the caller (r_mid, r_rad, S_out, nis, K_out NaN,
-    the flags False). K_out and P_out are stored when their first dimension is N."""
-    N, nu = u.shape
-    n = x0.size
-    m_total = C_m.shape[0]
-    store_K = K_out.shape[0] == N
-    store_P = P_out.shape[0] == N
+def predict_step(A_m, acols, annz, A_r, B_m, B_r, u, x, h, G, p, G_out, alpha, x_prior):
+    """x_c,prior = A_m x_c + B_m u and G_out = [A_m G, diag(A_r (|x_c| + h) + B_r |u|)]; returns
+    the new generator count."""
+    interval_input_radius(A_r, x, h, B_r, u, alpha)
+    zonotope_map_into(A_m, acols, annz, G, p, G_out)
+    for i in range(x.size):
+        x_prior[i] = np.dot(A_m[i], x) + np.dot(B_m[i], u)
+    return append_box(G_out, p, alpha)
+
+
+@njit(cache=True, error_model="numpy")
+def update_step(C, C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_out):
+    """The correction with the m stacked rows (Cs = C_m[rows], y = r on entry): S+, K, P+_post
+    into P_out, x_c += K r, G <- [(I - K C_m) G, K diag(gamma)]. Returns (ok, p); ok False when
+    S+ is not positive definite. Leaves S+ and its Cholesky factor, the box radius of C_m G and
+    gamma in `work`."""
+    hcols, hnnz, HP, KT, S, Lc, CG, r_box, gamma, rho_c, sigma, w = work
+    n = x.size
+    sparse_rows(Cs, m, n, hcols, hnnz)
+    sparse_mm(Cs, hcols, hnnz, m, P, n, HP)
+    sqrt_diag(P, sigma)
+    radius_times(C_r, rows, m, sigma, rho_c)
+    ratio_c = innovation_bound(Cs, hcols, hnnz, m, P, HP, rho_c, Rs, S)
+    if not cholesky(S, 0, m, Lc):
+        return False, p
+    # K^T = (c/c0) (S+)^-1 C P
+    for a in range(m):
+        for j in range(n):
+            KT[a, j] = ratio_c * HP[a, j]
+    cho_solve_rows(Lc, m, KT, n)
+    posterior_bound(P, Cs, hcols, hnnz, HP, KT, Rs, m, rho_c, w, P_out)
+    K = w[6]
+    # innovation box radius rowsum |C_m G| + gamma, gamma = C_r (|x_c,prior| + h_prior)
+    for i in range(n):
+        sigma[i] = abs(x[i]) + h[i]
+    radius_times(C_r, rows, m, sigma, gamma)
+    sparse_mm(Cs, hcols, hnnz, m, G, p, CG)
+    zonotope_hull_into(CG, m, p, r_box)
+    # G <- [(I - K C_m) G, K diag(gamma)];  x_c,post = x_c,prior + K r
+    subtract_product(K, m, CG, p, G)
+    for i in range(n):
+        x[i] += np.dot(K[i, :m], y[:m])
+    return True, append_scaled_columns(G, p, K, m, gamma)
+
+
+@njit(cache=True, error_model="numpy")
+def store_step(k, x, h, P, p, outputs):
+    """The posterior of step k: x_c, its hull x_c -+ h, diag and trace of P+, generator count."""
+    x_mid, x_lo, x_hi, P_trace, P_diag, n_gen, P_out = outputs
+    tr = 0.0
+    for i in range(x.size):
+        x_mid[k, i] = x[i]
+        x_lo[k, i] = x[i] - h[i]
+        x_hi[k, i] = x[i] + h[i]
+        P_diag[k, i] = P[i, i]
+        tr += P[i, i]
+    P_trace[k] = tr
+    n_gen[k] = p
+    if P_out.shape[0] == x_mid.shape[0]:
+        P_out[k] = P
+
+
+@njit(cache=True, error_model="numpy")
+def store_update(k, rows, m, y, work, K_out, r_mid, r_rad, S_out, nis, v):
+    """The innovation box, S+, the point NIS and (K_out of length N) the gain of step k."""
+    r_box, gamma, S, Lc, K = work[7], work[8], work[4], work[5], work[11][6]
+    nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
+    for a in range(m):
+        j = rows[a]
+        r_mid[k, j] = y[a]
+        r_rad[k, j] = widen(r_box[a] + gamma[a])
+        for b in range(m):
+            S_out[k, j, rows[b]] = S[a, b]
+        if K_out.shape[0] == r_mid.shape[0]:
+            for i in range(K.shape[0]):
+                K_out[k, i, j] = K[i, a]
+
+
+@njit(cache=True, error_model="numpy")
+def work_arrays(n, m, cap_p):
+    """The update's work arrays (see `update_step`), allocated once."""
+    all_cols = np.empty((n, m), dtype=np.int64)
+    for i in range(n):
+        all_cols[i, :] = np.arange(m)
+    int_n, int_m, int_mm = np.empty(n, dtype=np.int64), np.zeros(m, dtype=np.int64), np.empty((m, m), dtype=np.int64)
+    w = (all_cols, int_n, int_mm, int_m, np.empty((n, n)), np.empty((m, n)), np.zeros((n, m)), np.empty((n, m)))
+    hcols, hnnz = np.empty((m, n), dtype=np.int64), np.empty(m, dtype=np.int64)
+    HP, KT, S, Lc = np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, m)), np.zeros((m, m))
+    return (hcols, hnnz, HP, KT, S, Lc, np.zeros((m, cap_p)), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(n), w)
+
+
+@njit(cache=True, error_model="numpy")
+def ubikf_run(A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh, group_offsets, group_sizes, L, cap,
+              outputs, r_mid, r_rad, S_out, nis, K_out, updated, m_k, diverged):  # fmt: skip
+    """Filter N steps. outputs = (x_mid, x_lo, x_hi, P_trace, P_diag, n_gen, P_out), all
+    preallocated by the caller (r_mid, r_rad, S_out, nis, K_out NaN, the flags False); K_out and
+    P_out are stored when their first dimension is N."""
+    n, m_total = x0.size, C_m.shape[0]
     cap_p = n + 2 * L * (n + m_total)  # generators: a box, then at most 2 L steps of new ones
     # work arrays (allocated once)
-    x, x_prior, u_last, h, h_prior = x0.copy(), np.empty(n), u_default.copy(), np.zeros(n), np.zeros(n)
+    x, x_prior, u_last, h = x0.copy(), np.empty(n), u_default.copy(), np.zeros(n)
     sigma, rho, alpha = np.empty(n), np.empty(n), np.empty(n)
-    P, P_prior, APA, FP, W, Z = (
-        P0.copy(),
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.zeros((n, n)),
-    )
-    G, G2 = np.zeros((n, cap_p)), np.zeros((n, cap_p))
-    CG = np.zeros((m_total, cap_p))
-    all_rows = np.arange(n)
-    acols, annz = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64)
+    P, P_next, Wn = P0.copy(), np.empty((n, n)), np.zeros((4, n, n))  # Wn[3] stays zero
+    G, G_next = np.zeros((n, cap_p)), np.zeros((n, cap_p))
+    acols, annz, all_rows = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64), np.arange(n)
     sparse_rows(A_m, n, n, acols, annz)
     rows, upd = np.empty(m_total, dtype=np.int64), np.zeros(group_offsets.size, dtype=np.bool_)
-    Cs, HP, KT = np.zeros((m_total, n)), np.zeros((m_total, n)), np.zeros((m_total, n))
-    hcols, hnnz = np.empty((m_total, n), dtype=np.int64), np.empty(m_total, dtype=np.int64)
-    S, Rs, Lc = np.zeros((m_total, m_total)), np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
-    y, r_box, gamma, rho_c, v = (
-        np.zeros(m_total),
-        np.zeros(m_total),
-        np.zeros(m_total),
-        np.zeros(m_total),
-        np.zeros(m_total),
-    )
-    all_cols = np.empty((n, m_total), dtype=np.int64)
-    for i in range(n):
-        all_cols[i, :] = np.arange(m_total)
-    w = (all_cols, np.empty(n, dtype=np.int64), np.empty((m_total, m_total), dtype=np.int64),
-         np.zeros(m_total, dtype=np.int64), np.empty((n, n)), np.empty((m_total, n)), np.zeros((n, m_total)),
-         np.empty((n, m_total)))  # fmt: skip
-    K = w[6]
+    Cs, Rs, y, v = np.zeros((m_total, n)), np.zeros((m_total, m_total)), np.zeros(m_total), np.zeros(m_total)
+    work = work_arrays(n, m_total, cap_p)
     p, p_mark, age = 0, 0, 0
-    for k in range(N):
-        uk = u[k]
-        if all_finite(uk):
-            u_last[:] = uk
-        # ---- predict --------------------------------------------------------------------------
-        if age > 0:
-            # G <- [A_m G, diag(A_r (|x| + h) + B_r |u|)]
-            interval_input_radius(A_r, x, h, B_r, u_last, alpha)
-            zonotope_map_into(A_m, acols, annz, G, p, G2)
-            G, G2 = G2, G
-            p = append_box(G, p, alpha)
-            # x_c,prior = A_m x_c + B_m u
-            for i in range(n):
-                t = 0.0
-                for j in range(n):
-                    t += A_m[i, j] * x[j]
-                for j in range(nu):
-                    t += B_m[i, j] * u_last[j]
-                x_prior[i] = t
-            predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Z, FP, W, APA, P_prior)
-        else:
-            x_prior[:] = x
-            P_prior[:] = P
-        zonotope_hull_into(G, n, p, h_prior)
-        x[:] = x_prior
-        h[:] = h_prior
-        P, P_prior = P_prior, P
+    for k in range(u.shape[0]):
+        if all_finite(u[k]):
+            u_last[:] = u[k]
+        if age > 0:  # k = 0 and after a restart: the prior is x0, P0
+            p = predict_step(A_m, acols, annz, A_r, B_m, B_r, u_last, x, h, G, p, G_next, alpha, x_prior)
+            G, G_next = G_next, G
+            x[:] = x_prior
+            predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
+            P, P_next = P_next, P
+            zonotope_hull_into(G, n, p, h)
         ok = True
-        # ---- update with the fresh groups ----------------------------------------------------
         m = select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd)
         if m > 0:
             for a in range(m):
                 Cs[a] = C_m[rows[a]]
-                y[a] = z[k, rows[a]] - np.dot(C_m[rows[a]], x_prior)  # r = y - C_m x_c,prior
+                y[a] = z[k, rows[a]] - np.dot(C_m[rows[a]], x)  # r = y - C_m x_c,prior
                 for b in range(m):
                     Rs[a, b] = R[rows[a], rows[b]]
-            sparse_rows(Cs, m, n, hcols, hnnz)
-            sparse_mm(Cs, hcols, hnnz, m, P, n, HP)
-            sqrt_diag(P, sigma)
-            radius_times(C_r, rows, m, sigma, rho_c)
-            ratio_c = innovation_bound(Cs, hcols, hnnz, m, P, HP, rho_c, Rs, S)
-            ok = cholesky(S, 0, m, Lc)
-            if ok:
-                # K^T = (c/c0) (S+)^-1 C P
-                for a in range(m):
-                    for j in range(n):
-                        KT[a, j] = ratio_c * HP[a, j]
-                cho_solve_rows(Lc, m, KT, n)
-                posterior_bound(P, Cs, hcols, hnnz, HP, KT, Rs, m, rho_c, w, P_prior)
-                P, P_prior = P_prior, P
-                # innovation box and the corrected zonotope: G <- [(I - K C_m) G, K diag(gamma)]
-                for i in range(n):
-                    sigma[i] = abs(x_prior[i]) + h_prior[i]
-                radius_times(C_r, rows, m, sigma, gamma)
-                sparse_mm(Cs, hcols, hnnz, m, G, p, CG)
-                zonotope_hull_into(CG, m, p, r_box)
-                subtract_product(K, m, CG, p, G)
-                p = append_scaled_columns(G, p, K, m, gamma)
-                # x_c,post = x_c,prior + K r
-                for i in range(n):
-                    x[i] = x_prior[i] + np.dot(K[i, :m], y[:m])
+            ok, p = update_step(C_m, C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_next)
+            P, P_next = P_next, P
         age += 1
-        if age % L == 0:
+        if age % L == 0:  # box the generators older than L steps
             p = reduce_order(G, p, p_mark)
             p_mark = p
         zonotope_hull_into(G, n, p, h)
@@ -393,31 +285,11 @@ def ubikf_run(
             P[:] = P0
             h[:] = 0.0
             p, p_mark, age, m = 0, 0, 0, 0
-        # ---- store ---------------------------------------------------------------------------
-        tr = 0.0
-        for i in range(n):
-            x_mid[k, i] = x[i]
-            x_lo[k, i] = x[i] - h[i]
-            x_hi[k, i] = x[i] + h[i]
-            P_diag[k, i] = P[i, i]
-            tr += P[i, i]
-        P_trace[k] = tr
-        n_gen[k] = p
-        if store_P:
-            P_out[k] = P
+        store_step(k, x, h, P, p, outputs)
         if m > 0:
             m_k[k] = m
             updated[k] = upd
-            nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
-            for a in range(m):
-                j = rows[a]
-                r_mid[k, j] = y[a]
-                r_rad[k, j] = widen(r_box[a] + gamma[a])
-                for b in range(m):
-                    S_out[k, j, rows[b]] = S[a, b]
-                if store_K:
-                    for i in range(n):
-                        K_out[k, i, j] = K[i, a]
+            store_update(k, rows, m, y, work, K_out, r_mid, r_rad, S_out, nis, v)
 
 
 # ================================================================================================
@@ -448,7 +320,7 @@ def unobservable_unstable_states(model: IntervalModel, rtol: float = 1e-9, margi
         V = V @ N  # orthonormal columns still
     if not V.shape[1]:
         return []
-    T, Zs, sdim = scipy.linalg.schur(V.T @ A @ V, output="complex", sort=lambda lam: abs(lam) >= 1.0 - margin)
+    _, Zs, sdim = scipy.linalg.schur(V.T @ A @ V, output="complex", sort=lambda lam: abs(lam) >= 1.0 - margin)
     if sdim == 0:
         return []
     U = np.abs(V @ Zs[:, :sdim])
@@ -510,45 +382,43 @@ def run_ubikf(
     P0 = np.eye(n) if model.P0.size == 0 else np.asarray(model.P0, dtype=np.float64)
     finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite[0]].copy() if finite.size else np.zeros(u.shape[1])
-    c = np.ascontiguousarray
-    nan = np.nan
-    out = dict(
+    c, nan = np.ascontiguousarray, np.nan
+    # the posterior per step (ubikf_run's `outputs`, in order), then the update's outputs
+    posterior = dict(
         x_mid=np.full((N, n), nan),
         x_lo=np.full((N, n), nan),
         x_hi=np.full((N, n), nan),
         P_trace=np.full(N, nan),
         P_diag=np.full((N, n), nan, dtype=np.float32),
+        n_generators=np.zeros(N, dtype=np.int64),
+        P=np.full((N if store_P else 0, n, n), nan),
+    )
+    update = dict(
         r_mid=np.full((N, m), nan),
         r_rad=np.full((N, m), nan),
         S=np.full((N, m, m), nan),
         nis=np.full(N, nan),
         K=np.full((N if store_gain else 0, n, m), nan),
-        P=np.full((N if store_P else 0, n, n), nan),
         updated=np.zeros((N, G), dtype=np.bool_),
         m_k=np.zeros(N, dtype=np.int64),
         diverged=np.zeros(N, dtype=np.bool_),
-        n_generators=np.zeros(N, dtype=np.int64),
     )
     if N:
         matrices = [c(getattr(model, name), dtype=np.float64) for name in ("A_m", "A_r", "B_m", "B_r", "C_m", "C_r")]
         Q, R = c(loewner_upper(model.Q_m, model.Q_r)), c(loewner_upper(model.R_m, model.R_r))
         offsets, sizes = c(model.group_offsets, dtype=np.int64), c(model.group_sizes, dtype=np.int64)
-        ubikf_run(
-            *matrices, Q, R, c(x0), c(P0), u, u_default, z, fresh, offsets, sizes, int(L), float(cap), *out.values()
-        )
+        inputs = (*matrices, Q, R, c(x0), c(P0), u, u_default, z, fresh, offsets, sizes, int(L), float(cap))
+        ubikf_run(*inputs, tuple(posterior.values()), *update.values())
+    posterior["P"] = posterior["P"] if store_P else None
+    update["K"] = update["K"] if store_gain else None
     return UbikfTrace(
         t=np.asarray(run.t, dtype=np.float64),
-        **{name: out[name] for name in ("x_mid", "x_lo", "x_hi", "P_trace", "P_diag", "r_mid", "r_rad", "S", "nis")},
-        updated=out["updated"],
-        m_k=out["m_k"],
-        diverged=out["diverged"],
-        n_generators=out["n_generators"],
+        **posterior,
+        **update,
         group_names=tuple(model.group_names),
         group_offsets=np.asarray(model.group_offsets),
         group_sizes=np.asarray(model.group_sizes),
         state_names=tuple(model.state_names),
-        K=out["K"] if store_gain else None,
-        P=out["P"] if store_P else None,
     )
 
 
