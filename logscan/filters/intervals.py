@@ -299,12 +299,14 @@ def interval_product(A_m, A_r, B_m, B_r=None) -> tuple[np.ndarray, np.ndarray]:
     A_m, A_r = np.ascontiguousarray(A_m, dtype=np.float64), np.ascontiguousarray(A_r, dtype=np.float64)
     B_m = np.asarray(B_m, dtype=np.float64)
     B_r = np.zeros_like(B_m) if B_r is None else np.asarray(B_r, dtype=np.float64)
-    vector = B_m.ndim == 1
-    B_m2, B_r2 = (B_m[:, None], B_r[:, None]) if vector else (B_m, B_r)
-    out_m = np.empty((A_m.shape[0], B_m2.shape[1]))
+    B_m, B_r = np.ascontiguousarray(B_m), np.ascontiguousarray(B_r)
+    out_m = np.empty((A_m.shape[0], *B_m.shape[1:]))
     out_r = np.empty_like(out_m)
-    interval_matmul_into(A_m, A_r, np.ascontiguousarray(B_m2), np.ascontiguousarray(B_r2), out_m, out_r)
-    return (out_m[:, 0], out_r[:, 0]) if vector else (out_m, out_r)
+    if B_m.ndim == 1:
+        interval_matvec_into(A_m, A_r, B_m, B_r, out_m, out_r)
+    else:
+        interval_matmul_into(A_m, A_r, B_m, B_r, out_m, out_r)
+    return out_m, out_r
 
 
 def zonotope_hull(G) -> np.ndarray:

@@ -371,6 +371,8 @@ def run_ubikf(
     P0 to the identity when the model gives none. Raises ModelError for an ill-formed or
     undetectable model, or a run that does not match it.
     """
+    if int(L) < 1:
+        raise ValueError(f"the order-reduction period L must be at least 1 step, got {L}")
     model.check()
     check_detectable(model)
     n, m, N, G = model.n, model.m, run.n_steps, len(model.group_names)
