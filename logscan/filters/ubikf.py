@@ -155,7 +155,7 @@ def predict_step(A_m, acols, annz, A_r, B_m, B_r, u, x, h, G, p, G_out, alpha, x
 
 
 @njit(cache=True, error_model="numpy")
-def update_step(C, C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_out):
+def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_out):
     """The correction with the m stacked rows (Cs = C_m[rows], y = r on entry): S+, K, P+_post
     into P_out, x_c += K r, G <- [(I - K C_m) G, K diag(gamma)]. Returns (ok, p); ok False when
     S+ is not positive definite. Leaves S+ and its Cholesky factor, the box radius of C_m G and
@@ -272,7 +272,7 @@ def ubikf_run(A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh
                 y[a] = z[k, rows[a]] - np.dot(C_m[rows[a]], x)  # r = y - C_m x_c,prior
                 for b in range(m):
                     Rs[a, b] = R[rows[a], rows[b]]
-            ok, p = update_step(C_m, C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_next)
+            ok, p = update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_next)
             P, P_next = P_next, P
         age += 1
         if age % L == 0:  # box the generators older than L steps
