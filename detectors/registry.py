@@ -36,6 +36,7 @@ BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.nis:NisDetector",
     "logscan.detectors.atfm:AtfmDetector",
     "logscan.detectors.atfm_residual:AtfmResidualDetector",
+    "logscan.detectors.ubikf_chi2:Chi2Detector",
 ]
 
 BUILTIN = "built-in"

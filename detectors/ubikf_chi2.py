@@ -40,7 +40,7 @@ class Chi2Detector(Detector):
 
     name = "chi2"
     requires_trace = False  # it reads the UBIKF's trace, not the EKF's
-    reads = frozenset()
+    reads = frozenset({"S"})  # the UBIKF trace's S+ (the pipeline frees S of every trace nobody reads)
     defaults = {
         "window": 10,  # W updates per window sum (the paper: 4)
         "budget_per_hour": 0.1,  # false alarms per hour the test may spend

@@ -117,6 +117,23 @@ SAMPLES = (
         "thesis's attack); speed-dependent sensor noise",
     ),
     Sample(
+        "hover_healthy.mcap",
+        "hover_uav",
+        (),
+        13,
+        20.0,
+        about="the UBIKF paper's hover quadcopter (interval mass, inertias, arm): hover with attitude "
+        "excitation; no fault",
+    ),
+    Sample(
+        "hover_rotor_offset.mcap",
+        "hover_uav",
+        ("actuator-offset:rotor1:10:11:-0.2",),
+        14,
+        20.0,
+        about="rotor 1 gives 20 % less thrust for 1 s",
+    ),
+    Sample(
         "quad_healthy.csv",
         "quadcopter",
         (),

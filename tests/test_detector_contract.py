@@ -227,12 +227,14 @@ FIXTURES = {"healthy": "quad_healthy.mcap", "faulty": "quad_imu_bitflip.mcap"}
 # Detectors of sensors a quadcopter log lacks get fixtures that have them: A-TFM needs redundant
 # speed sensors and a mode channel (the Jackal logs; its faulty one attacks the GPS speed).
 JACKAL = {"healthy": "jackal_train_1.mcap", "faulty": "jackal_gps_bias.mcap"}
-OWN_FIXTURES = {"atfm": JACKAL, "atfm_residual": JACKAL}
+HOVER = {"healthy": "hover_healthy.mcap", "faulty": "hover_rotor_offset.mcap"}
+# the UBIKF's chi-square test needs a model with interval parameters (hover_uav)
+OWN_FIXTURES = {"atfm": JACKAL, "atfm_residual": JACKAL, "chi2": HOVER}
 _PIPELINE_CACHE: dict[str, tuple] = {}
 
 
 def pipeline_case(kind: str, name: str | None = None):
-    """(aligned run, EKF trace, model, profile) of a sample log through `logscan.pipeline.prepare`
+    """(aligned run, EKF trace, model, profile, every filter trace) of a sample log through `logscan.pipeline.prepare`
     with what every detector under test needs, computed once per session; ``name``: the detector
     whose fixtures (`OWN_FIXTURES`) to use."""
     fixture = OWN_FIXTURES.get(name, FIXTURES)[kind]
@@ -244,15 +246,17 @@ def pipeline_case(kind: str, name: str | None = None):
     from logscan.pipeline import load_profile_for, needs_of, prepare
 
     loaded = load_profile_for(path, None)
-    detectors = [REGISTRY.get(name)() for name in PIPELINE_NAMES]
+    # the detectors of this fixture set (a quadcopter log cannot run the UBIKF, for one)
+    mine = [n for n in PIPELINE_NAMES if OWN_FIXTURES.get(n, FIXTURES)[kind] == fixture]
+    detectors = [REGISTRY.get(n)() for n in mine]
     prepared = prepare(path, loaded, needs_of(detectors))
-    _PIPELINE_CACHE[fixture] = (prepared.run, prepared.trace, prepared.model, prepared.profile)
+    _PIPELINE_CACHE[fixture] = (prepared.run, prepared.trace, prepared.model, prepared.profile, prepared.traces)
     return _PIPELINE_CACHE[fixture]
 
 
 def pipeline_detector(name: str) -> Detector:
     """Detector ``name`` configured by the healthy log's profile and trained on that log."""
-    healthy_run, healthy_trace, model, profile = pipeline_case("healthy", name)
+    healthy_run, healthy_trace, model, profile, _ = pipeline_case("healthy", name)
     spec = profile.detectors.get(name)
     detector = REGISTRY.get(name).from_config(spec.settings if spec else {})
     if detector.trained_attributes:
@@ -265,16 +269,16 @@ PIPELINE_NAMES = [n for n in NAMES if n != "contract_probe"]
 
 @pytest.mark.parametrize("name", PIPELINE_NAMES)
 def test_no_alarms_on_the_healthy_fixture(name):
-    run, trace, model, _ = pipeline_case("healthy", name)
-    result = pipeline_detector(name).run(run, trace, model=model)
+    run, trace, model, _, traces = pipeline_case("healthy", name)
+    result = pipeline_detector(name).run(run, trace, model=model, traces=traces)
     assert result.alarms == []
 
 
 @pytest.mark.parametrize("name", PIPELINE_NAMES)
 def test_alarms_on_the_faulty_fixture(name):
-    run, trace, model, _ = pipeline_case("faulty", name)
+    run, trace, model, _, traces = pipeline_case("faulty", name)
     detector = pipeline_detector(name)
-    assert detector.run(run, trace, model=model).alarms
+    assert detector.run(run, trace, model=model, traces=traces).alarms
 
 
 # --- the base class itself ----------------------------------------------------------------------

@@ -17,6 +17,7 @@ HEALTHY = [
     "jackal_healthy.mcap",
     "jackal_train_1.mcap",
     "jackal_train_2.mcap",
+    "hover_healthy.mcap",
 ]
 FAULTY = [
     "quad_imu_bias.mcap",
@@ -25,6 +26,7 @@ FAULTY = [
     "quad_cov_corruption.mcap",
     "sbw_yaw_rate_bitflip.mcap",
     "jackal_gps_bias.mcap",
+    "hover_rotor_offset.mcap",
 ]
 
 
