@@ -58,7 +58,7 @@ DEFAULTS = {
     "k_yaw_rel": 0.05,
     # process noise: continuous white accelerations
     "q_accel": 0.05,  # m/s^2 / sqrt(Hz) on vx, vy, vz
-    "q_angacc": 0.1,  # rad/s^2 / sqrt(Hz) on p, q, r
+    "q_angacc": 0.02,  # rad/s^2 / sqrt(Hz) on p, q, r
 }
 # the parameters with intervals and the relative half-width that applies to each
 INTERVAL_PARAMS = {

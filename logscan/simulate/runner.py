@@ -108,6 +108,7 @@ def closed_loop(
     f_mag,
     f_unif,
     f_bit,
+    control_on_truth,
 ):
     """Run the whole log; returns (x_true, u_cmd, u_act, z, x_hat, P_diag, rejected).
 
@@ -136,8 +137,8 @@ def closed_loop(
     P = P0.copy()
     u = np.zeros(nu)
     for k in range(N):
-        # 1. controller on the estimate, actuator limits
-        control(ctrl_id, cp, cs, ref[k], xh, dt, u)
+        # 1. controller on the estimate (or on the true state: Scenario.control_on_truth), actuator limits
+        control(ctrl_id, cp, cs, ref[k], x if control_on_truth else xh, dt, u)
         a = M_inv @ u
         for j in range(a.size):
             a[j] = min(max(a[j], a_lo[j]), a_hi[j])

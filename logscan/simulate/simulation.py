@@ -362,6 +362,7 @@ def simulate(
         table.magnitude,
         table.uniform,
         table.bit,
+        bool(sc.control_on_truth),
     )
     elapsed = time.perf_counter() - started
     return Simulation(
