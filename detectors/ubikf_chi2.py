@@ -21,7 +21,7 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.nis import chi2_threshold, window_sums
-from logscan.detectors.params import Interval, StringList
+from logscan.detectors.params import Boolean, Interval, StringList
 from logscan.errors import UsageError
 
 EXTRA_CAPTIONS = {
@@ -33,6 +33,15 @@ ENVELOPE_CAPTION = (
     "between the lower and upper lines) around its point estimate. Normal: a narrow band hugging the "
     "estimate; it widens while the model cannot explain the data."
 )
+
+
+def _only_group(ubikf, group: str) -> np.ndarray:
+    """The innovation box midpoints of one group's rows (the others NaN: not in that test)."""
+    g = list(ubikf.group_names).index(group)
+    rows = slice(int(ubikf.group_offsets[g]), int(ubikf.group_offsets[g] + ubikf.group_sizes[g]))
+    out = np.full_like(ubikf.r_mid, np.nan)
+    out[:, rows] = ubikf.r_mid[:, rows]
+    return out
 
 
 class Chi2Detector(Detector):
@@ -47,6 +56,7 @@ class Chi2Detector(Detector):
         "alpha": None,  # set to override the budget (the paper: 0.01)
         "n_persist": 1,
         "states": [],  # states whose envelopes the report draws; empty: the attitude, else the first 3
+        "per_group": True,  # also a test per measurement group (False: the paper's overall test only)
     }
     parameter_constraints = {
         "window": [Interval(int, 1, None)],
@@ -54,6 +64,7 @@ class Chi2Detector(Detector):
         "alpha": [Interval(float, 0, 1, closed="neither"), None],
         "n_persist": [Interval(int, 1, None)],
         "states": [StringList()],
+        "per_group": [Boolean()],
     }
 
     def needs(self, run=None) -> Needs:
@@ -74,26 +85,41 @@ class Chi2Detector(Detector):
             raise UsageError("detector 'chi2' needs the UBIKF trace, but the pipeline did not run it")
         result = self.new_result()
         t = run.t
-        beta_lo, beta_hi = box_chi2_bounds(ubikf.r_mid, ubikf.r_rad, ubikf.S)
-        updated = (ubikf.m_k > 0) & ~ubikf.diverged & np.isfinite(beta_lo)
-        steps = np.flatnonzero(updated)
-        alpha = self._alpha(ubikf, int(steps.size))
+        # the overall test (the paper's), then one per measurement group (as the NIS test: a fault of
+        # one sensor is not diluted by the others' degrees of freedom, and the alarm names it)
+        tests = [("chi2.lower", "chi2.upper", None)]
+        if self.per_group and len(ubikf.group_names) > 1:
+            tests += [(f"chi2.lower.{g}", None, g) for g in ubikf.group_names]
+        bounds = {}
+        n_tests = 0
+        for lower_name, _, group in tests:
+            r_mid = ubikf.r_mid if group is None else _only_group(ubikf, group)
+            beta_lo, beta_hi = box_chi2_bounds(r_mid, ubikf.r_rad, ubikf.S)
+            updated = (np.isfinite(r_mid).any(axis=1)) & ~ubikf.diverged & np.isfinite(beta_lo)
+            m_k = np.isfinite(r_mid).sum(axis=1)
+            bounds[lower_name] = (beta_lo, beta_hi, updated, m_k)
+            n_tests += int(updated.sum())
+        alpha = self._alpha(ubikf, n_tests)  # the budget is spent over every test
         result.info["alpha"] = alpha
         result.info["window_updates"] = int(self.window)
-        lower, upper_sum = np.full(t.size, np.nan), np.full(t.size, np.nan)
-        delta = np.full(t.size, np.nan)
-        warm = np.zeros(t.size, dtype=bool)
-        if steps.size:
-            m_steps = ubikf.m_k[steps].astype(np.int64)
-            sums_lo, dof, full = window_sums(beta_lo[steps], m_steps, int(self.window))
-            sums_hi, _, _ = window_sums(beta_hi[steps], m_steps, int(self.window))
-            lower[steps], upper_sum[steps] = sums_lo, sums_hi
-            delta[steps] = chi2_threshold(dof, alpha)  # delta = chi2.ppf(1 - alpha, dof)
-            warm[steps[~full]] = True
-        options = {"valid": updated, "warmup": warm, "n_persist": int(self.n_persist)}
-        result.add_statistic(t, "chi2.lower", lower, upper=delta, **options)
-        result.add_possible(t, "chi2.upper", upper_sum, delta, **options)
-        result.series["chi2.upper"] = upper_sum  # drawn beside the lower sum, alarms from the lower only
+        for lower_name, upper_name, _ in tests:
+            beta_lo, beta_hi, updated, m_k = bounds[lower_name]
+            steps = np.flatnonzero(updated)
+            lower, upper_sum = np.full(t.size, np.nan), np.full(t.size, np.nan)
+            delta = np.full(t.size, np.nan)
+            warm = np.zeros(t.size, dtype=bool)
+            if steps.size:
+                m_steps = m_k[steps].astype(np.int64)
+                sums_lo, dof, full = window_sums(beta_lo[steps], m_steps, int(self.window))
+                sums_hi, _, _ = window_sums(beta_hi[steps], m_steps, int(self.window))
+                lower[steps], upper_sum[steps] = sums_lo, sums_hi
+                delta[steps] = chi2_threshold(dof, alpha)  # delta = chi2.ppf(1 - alpha, dof)
+                warm[steps[~full]] = True
+            options = {"valid": updated, "warmup": warm, "n_persist": int(self.n_persist)}
+            result.add_statistic(t, lower_name, lower, upper=delta, **options)
+            if upper_name is not None:  # possible faults from the overall test's upper sum
+                result.add_possible(t, upper_name, upper_sum, delta, **options)
+                result.series[upper_name] = upper_sum  # drawn beside the lower sums; alarms from those only
         if ubikf.diverged.any():
             result.warnings.append(
                 f"the UBIKF bound diverged on {int(ubikf.diverged.sum())} steps and restarted; those are not judged"

@@ -1,0 +1,66 @@
+"""UBIKF steps per second next to the point EKF, on the same 12-state hover-UAV log.
+
+Simulates a 300 s healthy `hover_uav` log (100 Hz, position, velocity and attitude at 100 Hz: 9
+measurements per step; seed 8300), aligns it once, then times in one run, best of 3 each: the
+point EKF (`logscan.filters.ekf.run_ekf`, default trace) and the UBIKF (`logscan.filters.ubikf.
+run_ubikf`: the weighted covariance bound, the zonotope state set reduced every 60 steps, the
+innovation box and S+ stored per step), and the chi-square bounds over the box
+(`logscan.filters.box_chi2.box_chi2_bounds`). Kernels are compiled before timing.
+
+    python bench/bench_ubikf.py
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+
+def best_of(n: int, run) -> float:
+    times = []
+    for _ in range(n):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def main() -> None:
+    from logscan.align import align
+    from logscan.filters.box_chi2 import box_chi2_bounds
+    from logscan.filters.ekf import run_ekf
+    from logscan.filters.ubikf import run_ubikf
+    from logscan.models import get_model
+    from logscan.pipeline import load_profile_for
+    from logscan.readers import read_log
+
+    with tempfile.TemporaryDirectory(prefix="bench-ubikf-") as root:
+        log_path = os.path.join(root, "hover.mcap")
+        subprocess.run(
+            [sys.executable, "-m", "logscan", "simulate", "hover_uav", "--duration", "300", "--seed", "8300",
+             "-q", "-o", log_path], check=True,
+        )  # fmt: skip
+        loaded = load_profile_for(log_path, None)
+        profile = loaded.profile
+        model = get_model(profile.vehicle.model, profile.vehicle.params)
+        log = read_log(log_path, topics=profile.topics())
+        run = align(log, profile)
+    interval = model.interval_model(run.dt)
+    run_ekf(model, run, store_gain=False, store_S=False, store_innovations=False)  # compile
+    trace = run_ubikf(interval, run)
+    box_chi2_bounds(trace.r_mid, trace.r_rad, trace.S)
+    n = run.n_steps
+    ekf = best_of(3, lambda: run_ekf(model, run, store_gain=False, store_S=False, store_innovations=False))
+    ubikf = best_of(3, lambda: run_ubikf(interval, run))
+    box = best_of(3, lambda: box_chi2_bounds(trace.r_mid, trace.r_rad, trace.S))
+    print(f"{n} steps, 12 states, 9 measurements per step")
+    print(f"point EKF:  {n / ekf:,.0f} steps/s")
+    print(f"UBIKF:      {n / ubikf:,.0f} steps/s ({ubikf / ekf:.1f}x the EKF's time)")
+    print(f"chi2 bounds over the box: {n / box:,.0f} steps/s")
+
+
+if __name__ == "__main__":
+    main()
