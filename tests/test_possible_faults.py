@@ -52,5 +52,5 @@ def test_verdict_exit_code_and_summary_distinguish_possible_faults(sample):
     from logscan.report import render_html
 
     page = render_html(analysis.report_input())
-    assert "possible fault (a warning, not an alarm): probe probe.hi 6.00-6.39 s" in page
+    assert "2 possible faults (warnings, not alarms): probe probe.hi, 1.00-6.39 s" in page
     assert '"possible fault"' in page or "possible fault" in page

@@ -88,11 +88,14 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             shown += 1
     if len(analysis.alarms) > shown:
         lines.append(f"  ... {len(analysis.alarms) - shown} more alarm(s) (see the report / --json)")
-    for possible in analysis.possible[:max_rows]:
+    possible = analysis.possible
+    for p in possible[:3]:
         lines.append(
-            f"  possible fault: {possible.detector} {possible.signal} {possible.start:.2f}-{possible.end:.2f} s "
+            f"  possible fault: {p.detector} {p.signal} {p.start:.2f}-{p.end:.2f} s "
             "(a warning: only the upper bound of the statistic crossed its threshold)"
         )
+    if len(possible) > 3:
+        lines.append(f"  ... {len(possible) - 3} more possible fault(s) (see the report / --json)")
     for name, score in analysis.scores.items():
         latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
         apart = [

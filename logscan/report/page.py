@@ -289,12 +289,18 @@ def _sections(
 
 
 def _possible_lines(results: Sequence[DetectorResult]) -> list[str]:
-    """One verdict line per "possible fault" warning (shaded orange in the figures)."""
-    return [
-        f"possible fault (a warning, not an alarm): {p.detector} {p.signal} {p.start:.2f}-{p.end:.2f} s"
-        for result in results
-        for p in result.possible
-    ][:MAX_TABLE_ROWS]
+    """The "possible fault" warnings (shaded orange in the figures): one verdict line per statistic,
+    its count and span (they can be many: each is in the JSON)."""
+    by_signal: dict[tuple[str, str], list] = {}
+    for result in results:
+        for p in result.possible:
+            by_signal.setdefault((p.detector, p.signal), []).append(p)
+    lines = []
+    for (detector, signal), found in by_signal.items():
+        first, last = min(p.start for p in found), max(p.end for p in found)
+        what = f"{len(found)} possible faults" if len(found) > 1 else "possible fault"
+        lines.append(f"{what} (warnings, not alarms): {detector} {signal}, {first:.2f}-{last:.2f} s")
+    return lines
 
 
 def _event_rows(events: list[dict]) -> list[dict]:
