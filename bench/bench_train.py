@@ -15,19 +15,11 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
-
-
-def best_of(n: int, run) -> float:
-    times = []
-    for _ in range(n):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:
+    from benchlib import best_of
+
     from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
     from logscan.training import fit_detectors
 

@@ -16,19 +16,11 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
-
-
-def best_of(n: int, run) -> float:
-    times = []
-    for _ in range(n):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:
+    from benchlib import best_of
+
     from logscan.align import align
     from logscan.filters.box_chi2 import box_chi2_bounds
     from logscan.filters.ekf import run_ekf

@@ -120,14 +120,9 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if args.write_docs:
-        with open(DOC, encoding="utf-8") as fh:
-            doc = fh.read()
-        if BEGIN not in doc or END not in doc:
-            raise SystemExit(f"{DOC} has no {BEGIN} ... {END} block")
-        head, rest = doc.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        with open(DOC, "w", encoding="utf-8") as fh:
-            fh.write(head + BEGIN + "\n" + text + "\n" + END + tail)
+        from benchlib import write_doc_block
+
+        write_doc_block(DOC, BEGIN, END, text)
 
 
 if __name__ == "__main__":

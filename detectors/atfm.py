@@ -122,6 +122,15 @@ def train_table(
     }  # fmt: skip
 
 
+def check_windows(detector: Detector) -> None:
+    """``windows`` are positive integers and the detection ``window`` is one of them."""
+    windows = detector.params["windows"]
+    if not all(isinstance(w, int) and not isinstance(w, bool) and w >= 1 for w in windows):
+        raise ProfileError(f"detector {detector.name!r}: windows must be a list of positive integers, got {windows!r}")
+    if detector.params["window"] not in windows:
+        raise ProfileError(f"detector {detector.name!r}: window {detector.params['window']} must be one of {windows}")
+
+
 def table_rows(detector: str, modes: np.ndarray, row, margin: float, commanded: np.ndarray, measured: np.ndarray):
     """(row per step, above the top row per step): "next higher" by max(commanded, measured -
     margin) when ``row`` is "adaptive", else the trained mode value ``row`` throughout."""
@@ -168,11 +177,7 @@ class AtfmDetector(Detector):
 
     def check_params(self) -> None:
         super().check_params()
-        windows = self.params["windows"]
-        if not all(isinstance(w, int) and not isinstance(w, bool) and w >= 1 for w in windows):
-            raise ProfileError(f"detector 'atfm': windows must be a list of positive integers, got {windows!r}")
-        if self.window not in windows:
-            raise ProfileError(f"detector 'atfm': window {self.window} must be one of windows {windows}")
+        check_windows(self)
 
     def needs(self, run=None) -> Needs:
         return Needs()

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.detectors.atfm import TRAIN_COMMAND, mode_segments, table_rows, train_table
+from logscan.detectors.atfm import TRAIN_COMMAND, check_windows, mode_segments, table_rows, train_table
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.params import Interval, Options, RealList
-from logscan.errors import NotTrainedError, ProfileError
+from logscan.errors import NotTrainedError
 
 
 def residual_channels(run, trace) -> list[tuple[str, int, str, bool]]:
@@ -94,11 +94,7 @@ class AtfmResidualDetector(Detector):
 
     def check_params(self) -> None:
         super().check_params()
-        windows = self.params["windows"]
-        if not all(isinstance(w, int) and not isinstance(w, bool) and w >= 1 for w in windows):
-            raise ProfileError(f"detector {self.name!r}: windows must be a list of positive integers, got {windows!r}")
-        if self.window not in windows:
-            raise ProfileError(f"detector {self.name!r}: window {self.window} must be one of windows {windows}")
+        check_windows(self)
 
     def needs(self, run=None) -> Needs:
         return Needs.of(ekf=("y",))
