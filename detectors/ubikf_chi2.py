@@ -118,7 +118,10 @@ class Chi2Detector(Detector):
             options = {"valid": updated, "warmup": warm, "n_persist": int(self.n_persist)}
             result.add_statistic(t, lower_name, lower, upper=delta, **options)
             if upper_name is not None:  # possible faults from the overall test's upper sum
-                result.add_possible(t, upper_name, upper_sum, delta, **options)
+                # a warning must last a window (W updates): the upper sum of a wide innovation box
+                # flickers over delta on healthy flights, and a one-update warning says nothing
+                lasting = {**options, "n_persist": max(int(self.n_persist), int(self.window))}
+                result.add_possible(t, upper_name, upper_sum, delta, **lasting)
                 result.series[upper_name] = upper_sum  # drawn beside the lower sums; alarms from those only
         if ubikf.diverged.any():
             result.warnings.append(

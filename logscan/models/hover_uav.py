@@ -53,7 +53,7 @@ DEFAULTS = {
     "g": 9.81,
     # relative half-widths of the parameter intervals: p in nominal * [1 - rel, 1 + rel]
     "mass_rel": 0.05,
-    "inertia_rel": 0.10,  # Ixx, Iyy and Izz, each independently
+    "inertia_rel": 0.05,  # Ixx, Iyy and Izz, each independently
     "arm_rel": 0.05,
     "k_yaw_rel": 0.05,
     # process noise: continuous white accelerations
