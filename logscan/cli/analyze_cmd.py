@@ -70,11 +70,35 @@ from logscan.errors import ExitCode
 @click.option(
     "--fail-on",
     "fail_on",
-    type=click.Choice(["alarm", "warning"]),
+    type=click.Choice(["alarm", "warning", "never"]),
     default="alarm",
     show_default=True,
-    help="Exit 1 on alarms only, or also on 'possible fault' warnings (a level below alarms: e.g. the "
-    "UBIKF test's upper chi-square sum over its threshold while the lower one is not).",
+    help="Exit 1 on alarms; 'warning': also on 'possible fault' warnings (a level below alarms: e.g. the "
+    "UBIKF test's upper chi-square sum over its threshold while the lower one is not); 'never': exit 0 "
+    "whatever the alarms (as --exit-zero).",
+)
+@click.option(
+    "--junit",
+    "junit_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Write a JUnit XML report: a testsuite per log, a testcase per detector and statistic (failed "
+    "when it alarmed), for CI servers' test views.",
+)
+@click.option(
+    "--markdown",
+    "markdown_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Write a Markdown summary (verdict and alarm tables, links to the reports) for a CI job summary "
+    "page (e.g. >> $GITHUB_STEP_SUMMARY).",
+)
+@click.option(
+    "--github-annotations",
+    is_flag=True,
+    default=False,
+    help="Print one GitHub Actions '::error' line per alarm and '::warning' per possible fault or "
+    "unchecked part, so they show on the workflow run.",
 )
 @start_option
 @end_option
@@ -93,6 +117,9 @@ def analyze(
     exit_zero: bool,
     allow_partial: bool,
     fail_on: str,
+    junit_path: str | None,
+    markdown_path: str | None,
+    github_annotations: bool,
     start_s: float | None,
     end_s: float | None,
     use_header_stamp: bool,
@@ -129,12 +156,16 @@ def analyze(
     plotly_js = _plotly_js_path(plotlyjs_dir)
     report_option = "--output" if output_path else "report"
     # before any log is read: no output may replace an input or another output
+    exit_zero = exit_zero or fail_on == "never"
+    artifacts = {"--junit": junit_path, "--markdown": markdown_path}
     refuse_clobbering(
-        [*((report_option, r) for r in reports), ("--json", json_path), ("--plotlyjs", plotly_js)], logs, profile_path
+        [*((report_option, r) for r in reports), ("--json", json_path), ("--plotlyjs", plotly_js), *artifacts.items()],
+        logs,
+        profile_path,
     )
     progress = show_progress(quiet)
     # temporary files a killed run left beside these outputs
-    remove_orphans([p for p in (*reports, json_path, plotly_js) if p and p != "-"])
+    remove_orphans([p for p in (*reports, json_path, plotly_js, junit_path, markdown_path) if p and p != "-"])
     token = new_token()  # tags this run's temporary files, wherever a worker wrote them
     task = AnalyzeTask(
         profile_path,
@@ -157,13 +188,18 @@ def analyze(
         )
         staged = [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
         code, document = _report_outcomes(outcomes, exit_zero, err=json_path == "-")
-        _write_outputs(staged, json_path, document, plotlyjs_dir, token)
+        if github_annotations:
+            from logscan.ci_artifacts import github_annotations as annotations
+
+            for line in annotations(document):
+                click.echo(line, err=json_path == "-")
+        _write_outputs(staged, json_path, document, plotlyjs_dir, token, junit_path, markdown_path)
     except BaseException:
         # an error or Ctrl-C: no output is replaced, and no temporary file stays
         from logscan.artifacts import discard
 
         discard(staged)
-        cleanup([p for p in (*reports, json_path, plotly_js) if p and p != "-"], token)
+        cleanup([p for p in (*reports, json_path, plotly_js, junit_path, markdown_path) if p and p != "-"], token)
         raise
     sys.exit(code)
 
@@ -200,7 +236,15 @@ def _report_outcomes(outcomes: list, exit_zero: bool, err: bool) -> tuple[ExitCo
     return code, document
 
 
-def _write_outputs(staged: list, json_path: str | None, document: dict, plotlyjs_dir: str | None, token: str) -> None:
+def _write_outputs(
+    staged: list,
+    json_path: str | None,
+    document: dict,
+    plotlyjs_dir: str | None,
+    token: str,
+    junit_path: str | None = None,
+    markdown_path: str | None = None,
+) -> None:
     """The run's outputs all at once: the reports (already staged by the tasks), plotly.js and the
     JSON staged beside their targets, then renamed in a row (`logscan.artifacts.commit`: the JSON
     last, signals held), so an interrupted run leaves all previous outputs or all new ones."""
@@ -212,6 +256,12 @@ def _write_outputs(staged: list, json_path: str | None, document: dict, plotlyjs
         js = stage_plotly_js(plotlyjs_dir, token)
         if js is not None:
             staged.insert(0, js)
+    if junit_path or markdown_path:
+        from logscan.ci_artifacts import junit_xml, markdown_summary
+
+        for path, render in ((junit_path, junit_xml), (markdown_path, markdown_summary)):
+            if path:
+                staged.append(stage(path, render(document), token=token))
     if json_path and json_path != "-":
         staged.append(stage(json_path, json_text(document), token=token))
     commit(staged)
