@@ -23,6 +23,8 @@ from logscan.cli.options import (
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode
 
+SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field changes it
+
 
 @click.command(
     epilog="Examples:\n\n"
@@ -232,7 +234,14 @@ def _report_outcomes(outcomes: list, exit_zero: bool, err: bool) -> tuple[ExitCo
     code = max(codes, default=ExitCode.OK)
     if exit_zero and code == ExitCode.ALARMS:
         code = ExitCode.OK
-    document = {"logscan_version": __version__, "exit_code": int(code), "logs": summaries, "errors": failures}
+    # docs/schema/analyze-summary.schema.json describes it (a test validates every sample's)
+    document = {
+        "schema_version": SUMMARY_SCHEMA_VERSION,
+        "logscan_version": __version__,
+        "exit_code": int(code),
+        "logs": summaries,
+        "errors": failures,
+    }
     return code, document
 
 
