@@ -37,6 +37,7 @@ BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.atfm:AtfmDetector",
     "logscan.detectors.atfm_residual:AtfmResidualDetector",
     "logscan.detectors.ubikf_chi2:Chi2Detector",
+    "logscan.detectors.kgn:KgnDetector",
 ]
 
 BUILTIN = "built-in"

@@ -1,0 +1,165 @@
+"""KGN end to end (detectors/kgn.py, docs/algorithms.md section 3): the window means, the steady
+gate, training on healthy simulated quadcopter logs (hover 0-15 s and 60-75 s of each 60 s cycle,
+figure-eight between; judged after the 35 s warm-up where /flight_mode/mode is 10 s unchanged: 35-60,
+70-75 and 85-120 s), no alarm on unseen healthy logs, a +1 m/s^2 accel.x step at 70 s seen in the
+hover, a 0.02 m/s^2/s drift over the hover not seen, and the blindness probe agreeing with both."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from logscan.detectors.kgn import KgnDetector, column_norms, steady_steps, window_means
+from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
+from logscan.training import apply_tables, train_logs
+
+FAULT_AT = 70.0  # hover from 60 s; steady (mode unchanged for 10 s) from 70 s to 75 s
+
+
+# --- the statistic on synthetic gains -----------------------------------------------------------
+
+
+def test_window_means_equal_a_brute_force_windowed_mean():
+    rng = np.random.default_rng(3)
+    N, n, m, period = 57, 4, 3, 5
+    K = rng.normal(size=(N, n, m))
+    K[rng.random(N) < 0.4, :, 2] = np.nan  # a slower group: column 2 updated at some steps only
+    K[10:20, :, 1] = np.nan  # column 1 missing for two whole windows
+    norms = column_norms(K)
+    starts = np.arange(2, N - period + 1, period)
+    got = window_means(norms, starts, period)
+    for w, s in enumerate(starts):
+        for j in range(m):
+            vals = [np.sqrt(sum(K[k, i, j] ** 2 for i in range(n))) for k in range(s, s + period)]
+            vals = [v for v in vals if np.isfinite(v)]
+            expected = sum(vals) / len(vals) if vals else np.nan
+            np.testing.assert_allclose(got[w, j], expected, rtol=1e-12, equal_nan=True)
+    assert np.isnan(got[(starts >= 10) & (starts + period <= 20), 1]).all()
+
+
+def test_the_steady_gate_excludes_set_point_changes():
+    dt = 0.1
+    t = np.arange(0, 60, dt)
+    mode = np.where(t < 20.35, 0.0, np.where(t < 40.35, 1.0, 0.0))  # set-point changes at 20.35 s and 40.35 s
+    steady = steady_steps(t, mode, hold_s=5.0)
+    # the first step of a new mode is at 20.4 s and 40.4 s
+    assert not steady[(t < 4.95) | ((t > 20.35) & (t < 25.35)) | ((t > 40.35) & (t < 45.35))].any()
+    assert steady[((t > 5.05) & (t < 20.35)) | ((t > 25.45) & (t < 40.35)) | (t > 45.45)].all()
+    # the detector's windows: none that starts within hold_s of a change or straddles one
+    N, n, m = t.size, 2, 1
+    run = SimpleNamespace(t=t, dt=dt, n_steps=N, mode=mode)
+    trace = SimpleNamespace(
+        K=np.ones((N, n, m)) + (t >= 20)[:, None, None],  # the gain moves with the set-point
+        updated=np.ones((N, 1), dtype=bool),
+        P_post_diag=np.ones((N, n), dtype=np.float32),
+    )
+    w = KgnDetector(window_s=1.0, hold_s=5.0, warmup_s=0.0).windows(run, trace)
+    t0, t1 = t[w.starts], t[w.ends]
+    brute = [bool(steady[s : e + 1].all()) for s, e in zip(w.starts, w.ends)]
+    np.testing.assert_array_equal(w.judged, brute)
+    assert w.judged.sum() == 15 + 14 + 14  # starts 5-19 s, 26-39 s, 46-59 s
+    for change in (20.0, 40.0):
+        assert not (w.judged & (t0 < change + 5.0) & (t1 >= change)).any()
+    no_mode = KgnDetector(window_s=1.0, warmup_s=0.0).windows(SimpleNamespace(**{**vars(run), "mode": None}), trace)
+    assert no_mode.judged.all() and not no_mode.has_mode
+
+
+# --- simulated quadcopter logs ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def quad(tmp_path_factory):
+    """Healthy training logs, unseen healthy logs, a step and a drift, a profile enabling kgn and
+    tables trained on the healthy logs with it (through `logscan.training.train_logs`)."""
+    from logscan.cli.main import main
+
+    root = tmp_path_factory.mktemp("kgn")
+
+    def simulate(name: str, seed: int, *args: str) -> str:
+        path = str(root / name)
+        try:
+            main(["simulate", "quadcopter", "--duration", "120", "-q", "--seed", str(seed), "-o", path, *args])
+        except SystemExit as exc:
+            assert exc.code in (0, None)
+        return path
+
+    healthy = [simulate(f"h{s}.mcap", s) for s in (101, 102, 103, 104)]
+    logs = {
+        "healthy": healthy,
+        "unseen": [simulate(f"u{s}.mcap", s) for s in (201, 202)],
+        "step": simulate("step.mcap", 301, "--fault", f"bias:accel.x:{FAULT_AT:g}:80:1.0"),
+        # a slow drift over the whole hover segment (60-75 s), 0.3 m/s^2 at its end
+        "drift": simulate("drift.mcap", 302, "--fault", "drift:accel.x:60:75:0.02"),
+    }
+    loaded = load_profile_for(healthy[0], None)
+    profile = root / "p.toml"
+    profile.write_text(loaded.profile.to_toml() + "\n[detectors.kgn]\n", encoding="utf-8")
+    document = train_logs(healthy, str(profile))
+    tables = root / "t.json"
+    tables.write_text(json.dumps(document), encoding="utf-8")
+    logs.update(profile=profile, tables=tables, document=document, root=root)
+    return logs
+
+
+def kgn_result(path, quad):
+    loaded = load_profile_for(path, quad["profile"])
+    (detector,) = apply_tables(create_detectors(loaded, ["kgn"]), quad["tables"], loaded.profile)
+    prepared = prepare(path, loaded, needs_of([detector]))
+    return detector, detector.run(prepared.run, prepared.trace, model=prepared.model)
+
+
+def test_train_logs_trains_kgn_when_the_profile_enables_it(quad):
+    (state,) = quad["document"]["detectors"]
+    assert state["detector"] == "kgn"
+    detector = KgnDetector.from_state(state)
+    assert set(detector.reference_["bins"]) == {"0", "1"}  # hover and figure-eight
+    assert detector.reference_["groups"] == ["accel", "gyro", "position", "attitude"]
+    assert 1.0 < detector.rho_ < 50.0
+    lines = KgnDetector.state_lines(state)
+    assert "rho" in lines[0] and any("probe accel step" in line for line in lines)
+
+
+def test_no_alarm_on_unseen_healthy_logs(quad):
+    for path in quad["unseen"]:
+        _, result = kgn_result(path, quad)
+        assert result.alarms == [], path
+        assert result.info["judged_windows"] > 40  # 35-60, 70-75 and 85-120 s
+
+
+def test_the_accelerometer_step_is_detected_in_the_hover(quad):
+    _, result = kgn_result(quad["step"], quad)
+    starts = [a.start for a in result.alarms]
+    assert starts and FAULT_AT < min(starts) < FAULT_AT + 5.0  # within the steady hover
+    assert "kgn.accel" in {a.signal for a in result.alarms if a.start < FAULT_AT + 5.0}
+
+
+def test_a_slow_drift_is_not_detected_and_the_probe_agrees(quad):
+    detector, result = kgn_result(quad["drift"], quad)
+    assert result.alarms == []
+    verdicts = result.info["blindness"]
+    # the probe (open loop): KGN cannot see a 0.02 /s drift on accel.x, it sees the 1 m/s^2 step
+    assert verdicts["accel"]["drift"]["blind"] is True
+    assert verdicts["accel"]["step"]["blind"] is False
+    assert verdicts["accel"]["step"]["channel"].endswith("accel.x")
+    assert any("cannot see a drift" in w and "accel" in w for w in result.warnings)
+    assert detector.blindness_ == KgnDetector.from_state(quad["document"]["detectors"][0]).blindness_
+
+
+def test_train_and_analyze_with_tables_through_the_cli(quad, cli, tmp_path):
+    out = tmp_path / "t.json"
+    trained = cli("train", *quad["healthy"][:2], "--profile", quad["profile"], "-o", out, "--no-report")
+    assert trained.exit_code == 0, trained.stderr
+    assert "kgn: rho" in trained.stdout and "probe accel" in trained.stdout
+    summary = tmp_path / "s.json"
+    analysed = cli(
+        "analyze", quad["step"], "--profile", quad["profile"], "--tables", out, "--no-report", "--json", summary
+    )
+    assert analysed.exit_code == 1, analysed.stderr
+    document = json.loads(summary.read_text(encoding="utf-8"))
+    text = json.dumps(document)
+    assert "kgn.accel" in text and "blindness" in text
+    untrained = cli("analyze", quad["step"], "--profile", quad["profile"], "--no-report")
+    assert untrained.exit_code == 2 and "logscan train" in untrained.stdout + untrained.stderr
