@@ -21,7 +21,7 @@ from logscan.cli.options import (
     tables_option,
 )
 from logscan.cli.render import printable, render_summary
-from logscan.errors import ExitCode
+from logscan.errors import ExitCode, UsageError
 
 SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field changes it
 
@@ -72,12 +72,20 @@ SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field
 @click.option(
     "--fail-on",
     "fail_on",
-    type=click.Choice(["alarm", "warning", "never"]),
+    type=click.Choice(["alarm", "warning", "new", "never"]),
     default="alarm",
     show_default=True,
     help="Exit 1 on alarms; 'warning': also on 'possible fault' warnings (a level below alarms: e.g. the "
-    "UBIKF test's upper chi-square sum over its threshold while the lower one is not); 'never': exit 0 "
-    "whatever the alarms (as --exit-zero).",
+    "UBIKF test's upper chi-square sum over its threshold while the lower one is not); 'new': only on "
+    "alarms the --baseline does not have; 'never': exit 0 whatever the alarms (as --exit-zero).",
+)
+@click.option(
+    "--baseline",
+    "baseline_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="A previous run's --json summary: every alarm is marked new or unchanged (same log name, "
+    "detector and statistic, overlapping in time) and the previous ones no longer raised are listed as gone.",
 )
 @click.option(
     "--junit",
@@ -119,6 +127,7 @@ def analyze(
     exit_zero: bool,
     allow_partial: bool,
     fail_on: str,
+    baseline_path: str | None,
     junit_path: str | None,
     markdown_path: str | None,
     github_annotations: bool,
@@ -159,6 +168,13 @@ def analyze(
     report_option = "--output" if output_path else "report"
     # before any log is read: no output may replace an input or another output
     exit_zero = exit_zero or fail_on == "never"
+    if fail_on == "new" and baseline_path is None:
+        raise UsageError("--fail-on new needs --baseline PREVIOUS.json (the run whose alarms are known)")
+    previous = None
+    if baseline_path is not None:  # read before any log is analysed: a bad baseline stops the run at once
+        from logscan.baseline import read_baseline
+
+        previous = read_baseline(baseline_path)
     artifacts = {"--junit": junit_path, "--markdown": markdown_path}
     refuse_clobbering(
         [*((report_option, r) for r in reports), ("--json", json_path), ("--plotlyjs", plotly_js), *artifacts.items()],
@@ -190,6 +206,8 @@ def analyze(
         )
         staged = [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
         code, document = _report_outcomes(outcomes, exit_zero, err=json_path == "-")
+        if previous is not None:
+            code = _compare_with_baseline(document, previous, code, fail_on, exit_zero, err=json_path == "-")
         if github_annotations:
             from logscan.ci_artifacts import github_annotations as annotations
 
@@ -204,6 +222,21 @@ def analyze(
         cleanup([p for p in (*reports, json_path, plotly_js, junit_path, markdown_path) if p and p != "-"], token)
         raise
     sys.exit(code)
+
+
+def _compare_with_baseline(document: dict, previous: dict, code, fail_on: str, exit_zero: bool, err: bool):
+    """Mark the alarms new / unchanged / gone (in the document), print the counts, and with
+    ``--fail-on new`` let only new alarms fail the run; returns the exit code."""
+    from logscan.baseline import compare, exit_code_on_new
+
+    totals = compare(document, previous)
+    click.echo(
+        f"baseline: {totals['new']} new, {totals['unchanged']} unchanged, {totals['gone']} gone alarm(s)", err=err
+    )
+    if fail_on == "new" and not exit_zero:
+        code = ExitCode(exit_code_on_new(document))
+        document["exit_code"] = int(code)
+    return code
 
 
 def _plotly_js_path(plotlyjs_dir: str | None) -> str | None:
