@@ -96,6 +96,9 @@ class Analysis:
             parts = ["no alarms" if not (self.unchecked or self.failures) else "no alarms in what was checked"]
         if self.possible:
             parts.append(f"{len(self.possible)} possible fault{'s' if len(self.possible) != 1 else ''}")
+        suppressed = sum(len(r.suppressed) for r in self.results)
+        if suppressed:
+            parts.append(f"{suppressed} suppressed")
         if self.unchecked:
             parts.append("not fully checked")
         if self.failures:
@@ -123,6 +126,7 @@ class Analysis:
             "n_incidents": len(self.incidents),
             "n_possible": len(self.possible),
             "possible_faults": [p.to_dict() for p in self.possible],
+            "suppressed": [{**a.to_dict(), "reason": reason} for r in self.results for a, reason in r.suppressed],
             "incidents": [incident.to_dict() for incident in self.incidents],
             "unchecked": list(self.unchecked),
             "failed_detectors": [{"detector": f.detector, "error": f.message} for f in self.failures],

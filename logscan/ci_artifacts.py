@@ -61,6 +61,12 @@ def junit_xml(document: dict) -> str:
                         "\n".join(_alarm_line(a) for a in alarms),
                     )
                 cases.append(case)
+        for suppressed in log.get("suppressed", []):
+            cases.append({
+                "name": f"{suppressed.get('detector', '')}: {suppressed.get('signal', '')} (suppressed)",
+                "failure": None, "error": None,
+                "skipped": f"{_alarm_line(suppressed)}: {suppressed.get('reason', '')}",
+            })  # fmt: skip
         for failed in log.get("failed_detectors", []):
             cases.append({"name": f"{failed['detector']}: ran", "failure": None, "error": ("failed", failed["error"])})
         if log.get("unchecked"):
@@ -87,7 +93,7 @@ def junit_xml(document: dict) -> str:
 
 
 def _cases(suite: ET.Element, cases: list[dict], classname: str) -> None:
-    failures = errors = 0
+    failures = errors = skipped = 0
     for case in cases:
         element = ET.SubElement(suite, "testcase", name=case["name"], classname=classname, time="0")
         if case["failure"] is not None:
@@ -98,10 +104,13 @@ def _cases(suite: ET.Element, cases: list[dict], classname: str) -> None:
             message, text = case["error"]
             ET.SubElement(element, "error", message=message, type="logscan").text = text
             errors += 1
+        if case.get("skipped"):
+            ET.SubElement(element, "skipped", message=case["skipped"])
+            skipped += 1
     suite.set("tests", str(len(cases)))
     suite.set("failures", str(failures))
     suite.set("errors", str(errors))
-    suite.set("skipped", "0")
+    suite.set("skipped", str(skipped))
     suite.set("time", "0")
 
 
@@ -147,6 +156,11 @@ def markdown_summary(document: dict) -> str:
             )
         if len(alarms) > MAX_MARKDOWN_ROWS:
             lines.append(f"\n... {len(alarms) - MAX_MARKDOWN_ROWS} more alarm(s) in the JSON summary")
+    suppressed = [(log, a) for log in logs for a in log.get("suppressed", [])]
+    if suppressed:
+        lines += ["", f"{len(suppressed)} alarm(s) suppressed:", ""]
+        lines += [f"- {_cell(_name(log['file']))}: {_cell(_alarm_line(a))} ({_cell(a.get('reason', ''))})"
+                  for log, a in suppressed[:MAX_MARKDOWN_ROWS]]  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

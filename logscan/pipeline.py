@@ -358,6 +358,12 @@ def detector_failure(name: str, exc: BaseException):
     )
 
 
+def rescore(analysis, grace_s: float = 1.0) -> None:
+    """Score the analysis again (its alarms changed: `logscan.suppressions`)."""
+    names = [r.detector for r in analysis.results] + [f.detector for f in analysis.failures]
+    _score(analysis, names, grace_s)
+
+
 def _score(analysis, detector_names: list[str], grace_s: float) -> None:
     """Scores against the log's ground truth, when it has some."""
     from logscan.results import events_from_truth

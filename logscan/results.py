@@ -141,6 +141,7 @@ class DetectorResult:
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
     possible: list[AlarmInterval] = field(default_factory=list)
+    suppressed: list[tuple[AlarmInterval, str]] = field(default_factory=list)  # (alarm, reason): logscan.suppressions
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
     judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
     # statistic -> (N,) bool, the samples that could raise an alarm (valid, not in warm-up); the
@@ -215,6 +216,7 @@ class DetectorResult:
             "alarms": [a.to_dict() for a in self.alarms],
             "n_possible": len(self.possible),
             "possible_faults": [a.to_dict() for a in self.possible],
+            "suppressed": [{**a.to_dict(), "reason": reason} for a, reason in self.suppressed],
             "warnings": list(self.warnings),
             "info": jsonable(self.info),
             "series": {name: series_summary(v) for name, v in self.series.items()},

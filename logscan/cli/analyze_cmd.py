@@ -80,6 +80,14 @@ SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field
     "alarms the --baseline does not have; 'never': exit 0 whatever the alarms (as --exit-zero).",
 )
 @click.option(
+    "--suppressions",
+    "suppressions_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="A TOML file of accepted alarms ([[suppress]]: detector, check, log glob, start/end, reason, "
+    "expires): they leave the verdict and exit code and are listed with their reason everywhere.",
+)
+@click.option(
     "--baseline",
     "baseline_path",
     type=click.Path(dir_okay=False, path_type=str),
@@ -127,6 +135,7 @@ def analyze(
     exit_zero: bool,
     allow_partial: bool,
     fail_on: str,
+    suppressions_path: str | None,
     baseline_path: str | None,
     junit_path: str | None,
     markdown_path: str | None,
@@ -170,6 +179,11 @@ def analyze(
     exit_zero = exit_zero or fail_on == "never"
     if fail_on == "new" and baseline_path is None:
         raise UsageError("--fail-on new needs --baseline PREVIOUS.json (the run whose alarms are known)")
+    rules = ()
+    if suppressions_path is not None:  # checked before any log is read: no reason or expired is exit 2
+        from logscan.suppressions import read_suppressions
+
+        rules = tuple(read_suppressions(suppressions_path))
     previous = None
     if baseline_path is not None:  # read before any log is analysed: a bad baseline stops the run at once
         from logscan.baseline import read_baseline
@@ -198,6 +212,7 @@ def analyze(
         end_s=end_s,
         tables_path=tables_path,
         fail_on_warning=fail_on == "warning",
+        suppressions=rules,
     )
     staged = []
     try:
@@ -337,6 +352,7 @@ class AnalyzeTask:
     end_s: float | None = None
     tables_path: str | None = None  # --tables: trained tables (logscan train)
     fail_on_warning: bool = False  # --fail-on warning: possible faults exit 1 too
+    suppressions: tuple = ()  # --suppressions: logscan.suppressions.Suppression entries
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
@@ -361,6 +377,10 @@ class AnalyzeTask:
             sensor_views=report_path is not None,
             tables=self.tables_path,
         )
+        if self.suppressions:
+            from logscan.suppressions import apply_suppressions
+
+            apply_suppressions(analysis, list(self.suppressions))
         summary = analysis.summary()
         summary["exit_code"] = int(analysis.exit_code(self.allow_partial, self.fail_on_warning))
         summary["report"] = report_path

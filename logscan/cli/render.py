@@ -88,6 +88,11 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             shown += 1
     if len(analysis.alarms) > shown:
         lines.append(f"  ... {len(analysis.alarms) - shown} more alarm(s) (see the report / --json)")
+    for result in analysis.results:
+        for alarm, reason in result.suppressed[:3]:
+            lines.append(
+                f"  suppressed: {alarm.detector} {alarm.signal} {alarm.start:.2f}-{alarm.end:.2f} s ({reason})"
+            )
     possible = analysis.possible
     for p in possible[:3]:
         lines.append(

@@ -303,6 +303,15 @@ def _possible_lines(results: Sequence[DetectorResult]) -> list[str]:
     return lines
 
 
+def _suppressed_lines(results: Sequence[DetectorResult]) -> list[str]:
+    """One verdict line per suppressed alarm, with the reason the suppressions file gives."""
+    return [
+        f"suppressed: {a.detector} {a.signal} {a.start:.2f}-{a.end:.2f} s ({reason})"
+        for result in results
+        for a, reason in result.suppressed
+    ][:MAX_TABLE_ROWS]
+
+
 def _event_rows(events: list[dict]) -> list[dict]:
     return [
         {**e, "start": f"{e['start']:.3f}", "end": f"{e['end']:.3f}" + (" (open)" if e["open_ended"] else ""),
@@ -334,7 +343,9 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         model=model_view(report.model),
         version=report.logscan_version,
         verdict=report.verdict,
-        verdict_lines=overview.verdict_lines(report.incidents, margins) + _possible_lines(report.results),
+        verdict_lines=overview.verdict_lines(report.incidents, margins)
+        + _possible_lines(report.results)
+        + _suppressed_lines(report.results),
         margins=overview.margin_rows(margins, report.results, {s["detector"]: s["id"] for s in sections}),
         groups=group_rows(report.groups),
         verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),
