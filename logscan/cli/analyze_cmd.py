@@ -158,6 +158,7 @@ def analyze(
     from logscan.align import check_window
     from logscan.artifacts import cleanup, new_token, remove_orphans
     from logscan.fleet import expand_logs, output_paths, refuse_clobbering, run_many
+    from logscan.report.index_page import index_path
 
     check_window(start_s, end_s)
     names = tuple(detector_names) or None
@@ -228,6 +229,12 @@ def analyze(
 
             for line in annotations(document):
                 click.echo(line, err=json_path == "-")
+        index = index_path(reports) if output_path is not None else None
+        if index is not None:  # several reports in one folder: their index page beside them
+            from logscan.artifacts import stage
+            from logscan.report.index_page import render_index_html
+
+            staged.append(stage(index, render_index_html(document, index), token=token))
         _write_outputs(staged, json_path, document, plotlyjs_dir, token, junit_path, markdown_path)
     except BaseException:
         # an error or Ctrl-C: no output is replaced, and no temporary file stays
