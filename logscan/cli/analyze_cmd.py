@@ -198,7 +198,9 @@ def analyze(
     )
     progress = show_progress(quiet)
     # temporary files a killed run left beside these outputs
-    remove_orphans([p for p in (*reports, json_path, plotly_js, junit_path, markdown_path) if p and p != "-"])
+    index = index_path(reports) if output_path is not None else None  # several reports: their index page
+    written = (*reports, json_path, plotly_js, junit_path, markdown_path, index)
+    remove_orphans([p for p in written if p and p != "-"])
     token = new_token()  # tags this run's temporary files, wherever a worker wrote them
     task = AnalyzeTask(
         profile_path,
@@ -229,8 +231,7 @@ def analyze(
 
             for line in annotations(document):
                 click.echo(line, err=json_path == "-")
-        index = index_path(reports) if output_path is not None else None
-        if index is not None:  # several reports in one folder: their index page beside them
+        if index is not None:
             from logscan.artifacts import stage
             from logscan.report.index_page import render_index_html
 
@@ -241,7 +242,7 @@ def analyze(
         from logscan.artifacts import discard
 
         discard(staged)
-        cleanup([p for p in (*reports, json_path, plotly_js, junit_path, markdown_path) if p and p != "-"], token)
+        cleanup([p for p in written if p and p != "-"], token)
         raise
     sys.exit(code)
 
