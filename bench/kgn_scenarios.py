@@ -31,6 +31,8 @@ import tempfile
 import time
 from dataclasses import dataclass
 
+from benchlib import write_doc_block  # bench/ is on the path when this script runs
+
 SCENARIOS = {
     "x-accel step +1 m/s^2, 70-80 s (steady hover)": ("bias:accel.x:70:80:1.0", 9000),
     "x-accel slope 0.02 m/s^2/s, 70-75 s (the judged hover)": ("drift:accel.x:70:75:0.02", 9400),
@@ -52,16 +54,11 @@ class Run:
 
 
 def simulate(path: str, seed: int, fault: str | None = None) -> str:
-    from logscan.cli.main import main
+    """Write a DURATION_S quadcopter log (with ``fault``, `logscan simulate`'s syntax) to ``path``."""
+    from logscan.simulate import parse_fault, simulate, write_simulation
 
-    args = ["simulate", "quadcopter", "--duration", str(DURATION_S), "--seed", str(seed), "-q", "-o", path]
-    if fault:
-        args += ["--fault", fault]
-    try:
-        main(args)
-    except SystemExit as exc:
-        if exc.code not in (0, None):
-            raise RuntimeError(f"simulate {args} exited {exc.code}") from None
+    faults = [parse_fault(fault)] if fault else []
+    write_simulation(simulate("quadcopter", faults, duration=DURATION_S, seed=seed), path)
     return path
 
 
@@ -87,12 +84,12 @@ class RunTask:
         return out
 
 
-def train(root: str) -> tuple[str, str, dict]:
-    """A profile enabling kgn and nis, and kgn's tables trained on TRAIN healthy logs."""
+def train(root: str, count: int = TRAIN) -> tuple[str, str, dict]:
+    """A profile enabling kgn and nis, and kgn's tables trained on ``count`` healthy logs."""
     from logscan.pipeline import load_profile_for
     from logscan.training import train_logs
 
-    logs = [simulate(os.path.join(root, f"train-{s}.mcap"), s) for s in range(TRAIN_SEED, TRAIN_SEED + TRAIN)]
+    logs = [simulate(os.path.join(root, f"train-{s}.mcap"), s) for s in range(TRAIN_SEED, TRAIN_SEED + count)]
     profile = os.path.join(root, "kgn.toml")
     with open(profile, "w", encoding="utf-8") as fh:
         fh.write(load_profile_for(logs[0], None).profile.to_toml() + "\n[detectors.kgn]\n\n[detectors.nis]\n")
@@ -137,40 +134,38 @@ def blindness_lines(document: dict) -> list[str]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--runs", type=int, default=20)
+    parser.add_argument("--write-docs", action="store_true", help="rewrite the table in docs/evaluation.md")
+    parser.add_argument("--runs", type=int, default=20, help="unseen seeds per scenario and healthy runs")
+    parser.add_argument("--train", type=int, default=TRAIN, help="healthy training logs")
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--write-docs", action="store_true")
     parser.add_argument("-q", "--quiet", action="store_true")
     args = parser.parse_args()
     from logscan.fleet import LogFailure, run_many
 
     started = time.time()
-    runs = [Run(fault, seed + r) for fault, seed in SCENARIOS.values() for r in range(args.runs)]
-    runs += [Run(None, HEALTHY_SEED + r) for r in range(args.runs)]
+    seeds = {label: range(seed, seed + args.runs) for label, (_, seed) in SCENARIOS.items()}
+    seeds["healthy"] = range(HEALTHY_SEED, HEALTHY_SEED + args.runs)
+    faults = {label: fault for label, (fault, _) in SCENARIOS.items()} | {"healthy": None}
+    runs = [Run(faults[label], seed) for label, chosen in seeds.items() for seed in chosen]
     with tempfile.TemporaryDirectory(prefix="kgn-") as root:
-        profile, tables, document = train(root)
-        task = RunTask(root, profile, tables)
-        results = run_many(runs, task, jobs=args.jobs, progress=not args.quiet, label="runs", isolate=True)
-    failed = [r for r in results if isinstance(r, LogFailure)]
-    if failed:
-        raise SystemExit(f"{len(failed)} run(s) failed, first: {failed[0].message}")
-    outcomes: dict = {"faults": {}, "healthy": []}
-    labels = {fault: label for label, (fault, _) in SCENARIOS.items()}
-    for run, result in zip(runs, results):
-        if run.fault is None:
-            outcomes["healthy"].append(result)
-        else:
-            outcomes["faults"].setdefault(labels[run.fault], []).append(result)
-    lines = table(outcomes, args.runs)
-    lines += ["", f"`kgn` trained on {TRAIN} healthy logs (seeds {TRAIN_SEED}..); its state and blindness probe:", ""]
-    lines += ["```", *(line.strip() for line in blindness_lines(document)), "```"]
-    lines.append(f"\n(`python bench/kgn_scenarios.py --runs {args.runs}`, {(time.time() - started) / 60:.1f} min.)")
-    text = "\n".join(lines)
-    print(text)
+        profile, tables, document = train(root, args.train)
+        results = run_many(
+            runs, RunTask(root, profile, tables), jobs=args.jobs, progress=not args.quiet, label="runs", isolate=True
+        )
+    broken = [r for r in results if isinstance(r, LogFailure)]
+    if broken:
+        raise SystemExit(f"{len(broken)} run(s) failed, first: {broken[0].message}")
+    by_label = {label: results[i * args.runs : (i + 1) * args.runs] for i, label in enumerate(seeds)}
+    healthy = by_label.pop("healthy")
+    lines = table({"faults": by_label, "healthy": healthy}, args.runs)
+    lines += ["", f"`kgn` trained on {args.train} healthy logs (seeds {TRAIN_SEED}..); its state and blindness probe:"]
+    lines += ["", "```", *(line.strip() for line in blindness_lines(document)), "```", ""]
+    minutes = (time.time() - started) / 60
+    lines.append(f"(`python bench/kgn_scenarios.py --runs {args.runs} --train {args.train}`, {minutes:.1f} min.)")
+    report = "\n".join(lines)
+    print(report)
     if args.write_docs:
-        from benchlib import write_doc_block
-
-        write_doc_block(DOC, BEGIN, END, text)
+        write_doc_block(DOC, BEGIN, END, report)
 
 
 if __name__ == "__main__":
