@@ -378,6 +378,8 @@ class KgnDetector(Detector):
         result.info["warmup_end_s"] = float(w.warmup_end_s)
         result.info["judged_windows"] = int(judged.sum())
         result.info["blindness"] = {k: v for k, v in self.blindness_.items() if not k.startswith("_")}
+        if "_note" in self.blindness_:
+            result.info["blindness_note"] = self.blindness_["_note"]
         if not w.has_mode:
             note = "kgn: the run has no mode channel: every window after warm-up counts as steady"
             result.info["steady_gate"] = "none (no mode channel)"

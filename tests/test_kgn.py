@@ -165,3 +165,39 @@ def test_train_and_analyze_with_tables_through_the_cli(quad, cli, tmp_path):
     assert "kgn.accel" in text and "blindness" in text
     untrained = cli("analyze", quad["step"], "--profile", quad["profile"], "--no-report")
     assert untrained.exit_code == 2 and "logscan train" in untrained.stdout + untrained.stderr
+
+
+def synthetic(seed: int, jump_at: float | None = None, n_steps: int = 1200, dt: float = 0.1):
+    """A run without a mode channel and a trace whose K (2 states, groups a: 1 column, b: 2
+    columns) is noisy around constants; ``jump_at``: group b's gain moves by 5 % from then on."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_steps) * dt
+    K = 1.0 + 1e-3 * rng.normal(size=(n_steps, 2, 3))
+    if jump_at is not None:
+        K[t >= jump_at, :, 1:] *= 1.05
+    run = SimpleNamespace(t=t, dt=dt, n_steps=n_steps, mode=None, groups={})
+    trace = SimpleNamespace(
+        K=K,
+        updated=np.ones((n_steps, 2), dtype=bool),
+        P_post_diag=np.ones((n_steps, 2), dtype=np.float32),
+        group_names=["a", "b"],
+        group_offsets=np.array([0, 1]),
+        group_sizes=np.array([1, 2]),
+    )
+    return run, trace
+
+
+def test_without_a_mode_channel_the_whole_run_after_warm_up_is_judged_and_said_so():
+    detector = KgnDetector(warmup_s=20.0).fit(*zip(synthetic(1), synthetic(2)))
+    assert detector.reference_["mode"] == "no mode channel" and set(detector.reference_["bins"]) == {"all"}
+    assert "_note" in detector.blindness_  # no model: no probe, and the result says why
+    healthy = detector.run(*synthetic(3))
+    assert any("no mode channel" in w for w in healthy.warnings) and "blindness_note" in healthy.info
+    assert healthy.info["judged_windows"] == 120 - 20
+    faulty = detector.run(*synthetic(3, jump_at=80.0))
+    (alarm,) = faulty.alarms
+    # the second window over rho (n_persist = 2) ends 1.9 s after the jump
+    assert alarm.signal == "kgn.b" and alarm.start == pytest.approx(81.9)
+    early = detector.run(*synthetic(3, jump_at=5.0))
+    # nothing before the warm-up ends (20 s): the first two judged windows end at 20.9 s and 21.9 s
+    assert [a.start for a in early.alarms] == [pytest.approx(21.9)]
