@@ -32,7 +32,9 @@ def _peak(alarm: dict) -> str:
 
 def _alarm_line(alarm: dict) -> str:
     peak = _peak(alarm)
-    return f"{alarm.get('signal', '')} {alarm['start']:.2f}-{alarm['end']:.2f} s" + (f", {peak}" if peak else "")
+    status = f" [{alarm['baseline']}]" if alarm.get("baseline") else ""  # --baseline: new / unchanged
+    where = f"{alarm.get('signal', '')} {alarm['start']:.2f}-{alarm['end']:.2f} s"
+    return where + (f", {peak}" if peak else "") + status
 
 
 def _name(path: str) -> str:
@@ -145,15 +147,19 @@ def markdown_summary(document: dict) -> str:
     if alarms:
         lines += [
             "",
-            "| log | detector | signal | start (s) | end (s) | peak |",
-            "|---|---|---|---:|---:|---|",
+            "| log | detector | signal | start (s) | end (s) | peak | baseline |",
+            "|---|---|---|---:|---:|---|---|",
         ]
         for log, alarm in alarms[:MAX_MARKDOWN_ROWS]:
             cells = [_name(log["file"]), alarm.get("detector", ""), alarm.get("signal", "")]
             lines.append(
                 "| " + " | ".join(_cell(c) for c in cells) + f" | {alarm['start']:.2f} | {alarm['end']:.2f} | "
-                f"{_cell(_peak(alarm) or '-')} |"
+                f"{_cell(_peak(alarm) or '-')} | {_cell(alarm.get('baseline', '-'))} |"
             )
+    gone = [(log, a) for log in logs for a in (log.get("baseline") or {}).get("gone", [])]
+    if gone:
+        lines += ["", f"{len(gone)} alarm(s) of the baseline gone:", ""]
+        lines += [f"- {_cell(_name(log['file']))}: {_cell(_alarm_line(a))}" for log, a in gone[:MAX_MARKDOWN_ROWS]]
         if len(alarms) > MAX_MARKDOWN_ROWS:
             lines.append(f"\n... {len(alarms) - MAX_MARKDOWN_ROWS} more alarm(s) in the JSON summary")
     suppressed = [(log, a) for log in logs for a in log.get("suppressed", [])]

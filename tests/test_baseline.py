@@ -61,6 +61,11 @@ def test_fail_on_new_through_the_cli(cli, sample, tmp_path):
     assert document["exit_code"] == 1 and document["baseline"]["new"] == 3
     flipped = next(log for log in document["logs"] if log["file"].endswith("quad_imu_bitflip.mcap"))
     assert all(a["baseline"] == "new" for r in flipped["detectors"] for a in r["alarms"])
+    from logscan.ci_artifacts import junit_xml, markdown_summary
+
+    table = markdown_summary(document)
+    assert table.count("| new |") == 3 and table.count("| unchanged |") == 5
+    assert "nis.accel 30.13-31.27 s, peak/threshold 7.87 [new]" in junit_xml(document)
 
 
 def test_baseline_mistakes_exit_two(cli, sample, tmp_path):
