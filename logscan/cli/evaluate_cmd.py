@@ -31,6 +31,15 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 @click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
 @json_option
 @click.option(
+    "--output",
+    "-o",
+    "page_path",
+    type=click.Path(dir_okay=False, path_type=str),
+    default=None,
+    help="Write the evaluation as an HTML page: the scores per detector and check with the latency "
+    "distribution, and the detection matrix per fault kind.",
+)
+@click.option(
     "--grace",
     "grace_s",
     type=click.FloatRange(min=0.0),
@@ -64,6 +73,7 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 def evaluate(
     log_paths: tuple[str, ...],
     json_path: str | None,
+    page_path: str | None,
     grace_s: float,
     recovery_s: float,
     detector_names: tuple[str, ...],
@@ -94,7 +104,7 @@ def evaluate(
 
     check_window(start_s, end_s)
     logs = expand_logs(log_paths)
-    refuse_clobbering([("--json", json_path)], logs, profile_path)  # before any log is read
+    refuse_clobbering([("--json", json_path), ("--output", page_path)], logs, profile_path)  # before any log
     evaluation = evaluate_logs(
         logs,
         profile_path=profile_path,
@@ -113,6 +123,11 @@ def evaluate(
         from logscan.artifacts import write_json
 
         write_json(json_path, {"logscan_version": __version__, **evaluation.to_dict()})
+    if page_path and evaluation.logs:
+        from logscan.artifacts import write_atomic
+        from logscan.report.evaluation_page import render_evaluation_html
+
+        write_atomic(page_path, render_evaluation_html(evaluation))
     if json_path != "-":
         click.echo(render_evaluation(evaluation))
     for failure in evaluation.failures:
