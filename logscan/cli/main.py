@@ -142,6 +142,10 @@ def _run(args: list[str], debug: bool) -> int:
         click.echo(f"logscan: error: {printable(_os_error_line(exc))}", err=True)
         return ExitCode.BAD_INPUT
     except Exception as exc:  # noqa: BLE001 - the one place internal errors are mapped
+        if _INTERRUPT_SEEN[0]:
+            # Ctrl-C landed inside a C callback (numba's compiler calling back into Python): the
+            # interruption was swallowed there and surfaced as this error; it is still Ctrl-C
+            return _interrupted()
         if debug:
             traceback.print_exc()
         return _internal_error(exc)
@@ -262,10 +266,12 @@ def _raise_interrupted(signum, frame) -> None:
         # a forked child (the background compile) that kept this handler: end it quietly; the
         # parent reports the interruption
         os._exit(ExitCode.INTERRUPTED)
+    _INTERRUPT_SEEN[0] = True
     raise Interrupted()
 
 
 _OWNER = [0]  # the process whose Ctrl-C is reported
+_INTERRUPT_SEEN = [False]  # set by the handler: an error that follows it is the interruption
 
 
 def _install_signal_handlers() -> dict:
@@ -276,6 +282,7 @@ def _install_signal_handlers() -> dict:
     if threading.current_thread() is not threading.main_thread():
         return previous
     _OWNER[0] = os.getpid()
+    _INTERRUPT_SEEN[0] = False
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
     if hasattr(signal, "SIGXFSZ"):
