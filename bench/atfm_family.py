@@ -1,6 +1,6 @@
 """A-TFM on the thesis's motivating family: adaptive lookup table vs a fixed row, and healthy hours.
 
-The family (docs/algorithms.md section 4, ../shared/ALGORITHMS.md section 4): the Jackal-like UGV
+The family (docs/algorithms.md section 4; the thesis's motivating example): the Jackal-like UGV
 commanded 1.0 m/s, then 0.4 m/s from 30 s; an attack on one speed sensor in the slow part (50-80 s):
 bias +m, or uniform random in [-m, m], m = 0.11, 0.22, 0.33 m/s, on the left encoder, the right
 encoder and the GPS speed; RUNS unseen seeds each. Each run is analysed by `atfm` with the adaptive

@@ -1,7 +1,7 @@
 """The Kalman gain norm (KGN) test on the paper's scenarios on the simulated quadcopter, next to the
 NIS test on the same filter.
 
-The paper's test (../shared/papers/kalman-gain-norm.txt; ../shared/ALGORITHMS.md section 3): a
+The paper's test (the Kalman gain norm paper; docs/algorithms.md section 3): a
 +1 m/s^2 step on the x accelerometer and a 0.02 m/s^2/s slope, in a steady hover. The simulated
 quadcopter (`logscan simulate quadcopter`, 120 s) hovers 0-15 s and 60-75 s of each 60 s cycle and
 flies a figure-eight between; after KGN's 35 s warm-up its steady gate (/flight_mode/mode unchanged

@@ -1,6 +1,6 @@
 """The UBIKF chi-square test on the paper's two hover-UAV scenarios, next to the NIS test on the same logs.
 
-The scenarios (`logscan simulate hover_uav`, ../shared/papers/ubikf-chi2-uav.txt section IV.B): a
+The scenarios (`logscan simulate hover_uav`; the UBIKF paper's section IV.B): a
 0.1 rad bias on the roll output for samples k in [30, 70], and the total loss of rotor 1 from
 k = 31 (k counted from the excitation's start, docs/models.md); RUNS unseen seeds each, and RUNS
 healthy runs for false alarms. Each log is analysed by `chi2` (robust alarms, and "possible fault"

@@ -1,7 +1,7 @@
 """A-TFM on redundant sensors: weak and strong inconsistency with a speed lookup table.
 
-Specified in docs/algorithms.md section 4 (../shared/ALGORITHMS.md section 4, the adaptive
-transient fault model paper). Per `[redundant.<group>]` of the profile:
+Specified in docs/algorithms.md section 4 (from the adaptive transient fault model thesis,
+chapter II). Per `[redundant.<group>]` of the profile:
 
 - Detection grid: the rate of the group's slowest sensor; faster sensors are sampled onto it by
   taking their latest reading (the aligned run's hold), never by averaging.

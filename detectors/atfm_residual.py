@@ -1,6 +1,6 @@
 """Hybrid KF + A-TFM (thesis chapter IV): the transient fault model on one sensor's filter residual.
 
-Specified in docs/algorithms.md section 4, last part (../shared/ALGORITHMS.md). The residual of a
+Specified in docs/algorithms.md section 4.4. The residual of a
 channel is the shared EKF's innovation r = z - h(x_prior) at the steps where the filter updated with
 its group (the group's detection grid). Training, per channel and mode value, is A-TFM's on |r|
 instead of the error against the other sensors: segments of one mode value (settle time dropped),

@@ -1,7 +1,7 @@
 """Kalman gain norm (KGN) test on the shared EKF, per measurement group, gated to steady operation.
 
-Specified in docs/algorithms.md section 3 (../shared/ALGORITHMS.md section 3, the Kalman gain norm
-paper with a prototype's corrections).
+Specified in docs/algorithms.md section 3 (the Kalman gain norm paper, with the corrections that
+section states).
 
 - Column norms: at every update k, for each measurement column j of the gain K_k (n x m),
   N_j(k) = ||K_k[:, j]||_2 (NaN where column j was not updated at step k).

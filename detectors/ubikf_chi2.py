@@ -1,7 +1,7 @@
 """UBIKF chi-square test: robust alarms and possible faults over the interval filter's innovation box.
 
-Specified in docs/algorithms.md section 2 (../shared/ALGORITHMS.md section 2, the UBIKF paper's
-section III.B). The UBIKF (`logscan.filters.ubikf`, a second filter of the pipeline, run because
+Specified in docs/algorithms.md section 2.2 (the UBIKF paper's section III.B, with the changes
+that section states). The UBIKF (`logscan.filters.ubikf`, a second filter of the pipeline, run because
 this detector's needs name it) gives per update the innovation box [r_k] = y_k - C [x_prior_k] and
 the covariance bound S+. Per update:
 

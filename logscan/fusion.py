@@ -1,4 +1,4 @@
-"""Sensor fusion of one redundant sensor group into one signal (thesis chapter III, docs ALGORITHMS.md section 4).
+"""Sensor fusion of one redundant sensor group into one signal (thesis chapter III; docs/algorithms.md section 4.5).
 
 Every method takes the group's readings as an (N, s) array, one column per sensor on the detection grid, NaN (or any
 non-finite value) where a sensor has no reading, and returns one fused value per step (NaN when no sensor reads):
