@@ -30,6 +30,8 @@ import tempfile
 import time
 from dataclasses import dataclass
 
+from benchlib import publish, simulate_log  # bench/ is on the path when this script runs
+
 KINDS = ("bias", "random")
 MAGNITUDES = (0.11, 0.22, 0.33)
 SENSORS = {"left encoder": "/enc/left.v", "right encoder": "/enc/right.v", "GPS speed": "/gps/speed"}
@@ -41,14 +43,7 @@ BEGIN, END = "<!-- atfm-family:begin -->", "<!-- atfm-family:end -->"
 
 
 def simulate(path: str, seed: int, *args: str) -> str:
-    from logscan.cli.main import main
-
-    try:
-        main(["simulate", "dc_motor", "--seed", str(seed), "-q", "-o", path, *args])
-    except SystemExit as exc:
-        if exc.code not in (0, None):
-            raise RuntimeError(f"simulate {args} exited {exc.code}") from None
-    return path
+    return simulate_log("dc_motor", path, "--seed", str(seed), *args)
 
 
 @dataclass(frozen=True)
@@ -181,11 +176,7 @@ def main() -> None:
     minutes = (time.time() - started) / 60.0
     lines.append(f"\n(`python bench/atfm_family.py --runs {args.runs} --healthy {args.healthy}`, {minutes:.0f} min.)")
     text = "\n".join(lines)
-    print(text)
-    if args.write_docs:
-        from benchlib import write_doc_block
-
-        write_doc_block(DOC, BEGIN, END, text)
+    publish(text, args.write_docs, DOC, BEGIN, END)
 
 
 if __name__ == "__main__":

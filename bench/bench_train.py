@@ -18,17 +18,14 @@ import tempfile
 
 
 def main() -> None:
-    from benchlib import best_of
+    from benchlib import best_of, simulate_log
 
     from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
     from logscan.training import fit_detectors
 
     with tempfile.TemporaryDirectory(prefix="bench-train-") as root:
         log = os.path.join(root, "hour.mcap")
-        subprocess.run(
-            [sys.executable, "-m", "logscan", "simulate", "dc_motor", "--duration", "3600", "--glitches", "2",
-             "--seed", "6100", "-q", "-o", log], check=True,
-        )  # fmt: skip
+        simulate_log("dc_motor", log, "--duration", "3600", "--glitches", "2", "--seed", "6100")
         loaded = load_profile_for(log, None)
         prepared = prepare(log, loaded, needs_of(create_detectors(loaded, ["atfm"])))
         hours = float(prepared.run.t[-1] - prepared.run.t[0]) / 3600.0

@@ -13,13 +13,11 @@ innovation box and S+ stored per step), and the chi-square bounds over the box
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import tempfile
 
 
 def main() -> None:
-    from benchlib import best_of
+    from benchlib import best_of, simulate_log
 
     from logscan.align import align
     from logscan.filters.box_chi2 import box_chi2_bounds
@@ -31,10 +29,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="bench-ubikf-") as root:
         log_path = os.path.join(root, "hover.mcap")
-        subprocess.run(
-            [sys.executable, "-m", "logscan", "simulate", "hover_uav", "--duration", "300", "--seed", "8300",
-             "-q", "-o", log_path], check=True,
-        )  # fmt: skip
+        simulate_log("hover_uav", log_path, "--duration", "300", "--seed", "8300")
         loaded = load_profile_for(log_path, None)
         profile = loaded.profile
         model = get_model(profile.vehicle.model, profile.vehicle.params)

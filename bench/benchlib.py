@@ -1,5 +1,5 @@
-"""What several benchmark scripts share: timing the best of n runs, and rewriting a marked block of
-a documentation page with a regenerated table."""
+"""What several benchmark scripts share: simulating a log, timing the best of n runs, and printing a
+regenerated table (and rewriting its marked block of a documentation page)."""
 
 from __future__ import annotations
 
@@ -26,3 +26,22 @@ def write_doc_block(path: str, begin: str, end: str, text: str) -> None:
     _, tail = rest.split(end, 1)
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(head + begin + "\n" + text + "\n" + end + tail)
+
+
+def simulate_log(model: str, path: str, *args: str) -> str:
+    """``logscan simulate MODEL ARGS -q -o PATH`` in this process; RuntimeError when it fails."""
+    from logscan.cli.main import main
+
+    try:
+        main(["simulate", model, *args, "-q", "-o", path])
+    except SystemExit as exc:
+        if exc.code not in (0, None):
+            raise RuntimeError(f"logscan simulate {model} {' '.join(args)} exited {exc.code}") from None
+    return path
+
+
+def publish(text: str, write_docs: bool, path: str, begin: str, end: str) -> None:
+    """Print a benchmark's table; with ``write_docs``, also put it between its page's markers."""
+    print(text)
+    if write_docs:
+        write_doc_block(path, begin, end, text)

@@ -31,7 +31,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 
-from benchlib import write_doc_block  # bench/ is on the path when this script runs
+from benchlib import publish  # bench/ is on the path when this script runs
 
 SCENARIOS = {
     "x-accel step +1 m/s^2, 70-80 s (steady hover)": ("bias:accel.x:70:80:1.0", 9000),
@@ -163,9 +163,7 @@ def main() -> None:
     minutes = (time.time() - started) / 60
     lines.append(f"(`python bench/kgn_scenarios.py --runs {args.runs} --train {args.train}`, {minutes:.1f} min.)")
     report = "\n".join(lines)
-    print(report)
-    if args.write_docs:
-        write_doc_block(DOC, BEGIN, END, report)
+    publish(report, args.write_docs, DOC, BEGIN, END)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ import tempfile
 import time
 from dataclasses import dataclass
 
+from benchlib import publish, simulate_log  # bench/ is on the path when this script runs
+
 SCENARIOS = {"roll bias (0.1 rad, k 30-70)": ("roll-bias", 8000), "rotor 1 lost (k 31)": ("rotor-loss", 8100)}
 HEALTHY_SEED = 8200
 DURATION_S = 30.0
@@ -41,18 +43,11 @@ class RunTask:
     root: str
 
     def __call__(self, run: Run) -> dict:
-        from logscan.cli.main import main
         from logscan.pipeline import analyze_log
 
         path = os.path.join(self.root, f"run-{run.seed}.mcap")
-        args = ["simulate", "hover_uav", "--duration", str(DURATION_S), "--seed", str(run.seed), "-q", "-o", path]
-        if run.fault:
-            args += ["--fault", run.fault]
-        try:
-            main(args)
-        except SystemExit as exc:
-            if exc.code not in (0, None):
-                raise RuntimeError(f"simulate {args} exited {exc.code}") from None
+        fault = ("--fault", run.fault) if run.fault else ()
+        simulate_log("hover_uav", path, "--duration", str(DURATION_S), "--seed", str(run.seed), *fault)
         analysis = analyze_log(path, detector_names=list(DETECTORS), free_series=True)
         out = {}
         for name in DETECTORS:
@@ -118,11 +113,7 @@ def main() -> None:
     lines = table(outcomes, args.runs)
     lines.append(f"\n(`python bench/ubikf_scenarios.py --runs {args.runs}`, {(time.time() - started) / 60:.0f} min.)")
     text = "\n".join(lines)
-    print(text)
-    if args.write_docs:
-        from benchlib import write_doc_block
-
-        write_doc_block(DOC, BEGIN, END, text)
+    publish(text, args.write_docs, DOC, BEGIN, END)
 
 
 if __name__ == "__main__":
