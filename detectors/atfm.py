@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.modes import mode_segments
 from logscan.detectors.params import Interval, Options, RealList
 from logscan.errors import NotTrainedError, ProfileError
 
@@ -71,22 +72,6 @@ def detection_grid(run, name: str) -> GroupSamples:
     sensors = list(group.labels or group.channels)
     mode = np.asarray(mode, dtype=np.float64)
     return GroupSamples(name, sensors, list(group.channels), steps, run.t[steps], values, mode, period * run.dt)
-
-
-def mode_segments(mode: np.ndarray, settle: int) -> list[tuple[float, int, int]]:
-    """(mode value, first, stop) of each run of one mode value, its first ``settle`` samples dropped
-    (the vehicle is still reaching the new speed); runs of NaN mode are skipped."""
-    if mode.size == 0:
-        return []
-    key = np.round(mode, 6)
-    change = np.flatnonzero(~((key[1:] == key[:-1]) | (np.isnan(key[1:]) & np.isnan(key[:-1])))) + 1
-    starts = np.concatenate(([0], change))
-    stops = np.concatenate((change, [mode.size]))
-    return [
-        (float(key[a]), int(a + settle), int(b))
-        for a, b in zip(starts, stops)
-        if np.isfinite(key[a]) and b - a > settle
-    ]
 
 
 def train_table(
@@ -147,6 +132,24 @@ def table_rows(detector: str, modes: np.ndarray, row, margin: float, commanded: 
     return np.full(commanded.size, int(fixed[0])), np.zeros(commanded.size, dtype=bool)
 
 
+# The lookup-table parameters of every transient-fault-model detector (atfm, atfm_residual)
+TABLE_DEFAULTS = {
+    "window": 100,  # w, the detection window
+    "windows": [25, 50, 100, 200],  # windows whose e(eps, w) curves are trained (w among them)
+    "settle_s": 5.0,  # dropped after every mode change when training
+    "row": "adaptive",  # "adaptive", or a trained mode value to use throughout (a fixed table)
+    "eps_points": 201,
+}
+TABLE_CONSTRAINTS = {
+    "window": [Interval(int, 1, None)],
+    "windows": [RealList()],  # positive integers, checked by check_windows
+    "settle_s": [Interval(float, 0, None)],
+    "row": [Options("adaptive"), Interval(float, 0, None), Interval(int, 0, None)],
+    "eps_points": [Interval(int, 200, None)],
+}
+TABLE_FIT_PARAMS = ("window", "windows", "settle_s", "eps_points")
+
+
 class AtfmDetector(Detector):
     """A-TFM: weak/strong inconsistency of redundant sensors with a trained speed lookup table."""
 
@@ -155,23 +158,15 @@ class AtfmDetector(Detector):
     requires_trace = False
     reads = frozenset({"mode", "redundant"})
     trained_attributes = ("tables_",)
-    fit_params = ("window", "windows", "settle_s", "eps_points")
+    fit_params = TABLE_FIT_PARAMS
     defaults = {
-        "window": 100,  # w, detection window in samples of the detection grid
-        "windows": [25, 50, 100, 200],  # windows whose e(eps, w) curves are trained (w among them)
-        "settle_s": 5.0,  # dropped after every mode change when training
+        **TABLE_DEFAULTS,  # window: w in samples of the detection grid
         "margin": 0.05,  # selection value = max(commanded, measured - margin)
-        "row": "adaptive",  # "adaptive", or a trained mode value to use throughout (a fixed table)
-        "eps_points": 201,
         "fusion_window": 5,  # moving-average fusion window, samples
     }
     parameter_constraints = {
-        "window": [Interval(int, 1, None)],
-        "windows": [RealList()],  # positive integers, checked in check_params
-        "settle_s": [Interval(float, 0, None)],
+        **TABLE_CONSTRAINTS,
         "margin": [Interval(float, 0, None)],
-        "row": [Options("adaptive"), Interval(float, 0, None), Interval(int, 0, None)],
-        "eps_points": [Interval(int, 200, None)],
         "fusion_window": [Interval(int, 1, None)],
     }
 

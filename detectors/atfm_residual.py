@@ -19,9 +19,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.detectors.atfm import TRAIN_COMMAND, check_windows, mode_segments, table_rows, train_table
+from logscan.detectors.atfm import (
+    TABLE_CONSTRAINTS,
+    TABLE_DEFAULTS,
+    TABLE_FIT_PARAMS,
+    TRAIN_COMMAND,
+    check_windows,
+    table_rows,
+    train_table,
+)
 from logscan.detectors.base import Detector, DetectorResult, Needs
-from logscan.detectors.params import Interval, Options, RealList
+from logscan.detectors.modes import mode_changes, mode_segments
 from logscan.errors import NotTrainedError
 
 
@@ -60,10 +68,7 @@ def segment_counts(exceed: np.ndarray, mode: np.ndarray, w: int) -> np.ndarray:
     training's windows, a window never reaches back across a mode change (the previous mode's
     exceedances were bounded by that mode's e, not this one's)."""
     index = np.arange(exceed.size)
-    key = np.round(mode, 6)
-    change = np.ones(exceed.size, dtype=bool)
-    change[1:] = ~((key[1:] == key[:-1]) | (np.isnan(key[1:]) & np.isnan(key[:-1])))
-    segment_start = np.maximum.accumulate(np.where(change, index, 0))
+    segment_start = np.maximum.accumulate(np.where(mode_changes(mode), index, 0))
     cs = np.concatenate(([0], np.cumsum(exceed)))  # cs[k] = exceedances before step k
     return cs[index + 1] - cs[np.maximum(index + 1 - w, segment_start)]
 
@@ -76,21 +81,9 @@ class AtfmResidualDetector(Detector):
     requires_trace = True
     reads = frozenset({"y", "mode"})
     trained_attributes = ("tables_",)
-    fit_params = ("window", "windows", "settle_s", "eps_points")
-    defaults = {
-        "window": 100,  # w, in updates of the channel's group
-        "windows": [25, 50, 100, 200],
-        "settle_s": 5.0,
-        "row": "adaptive",
-        "eps_points": 201,
-    }
-    parameter_constraints = {
-        "window": [Interval(int, 1, None)],
-        "windows": [RealList()],
-        "settle_s": [Interval(float, 0, None)],
-        "row": [Options("adaptive"), Interval(float, 0, None), Interval(int, 0, None)],
-        "eps_points": [Interval(int, 200, None)],
-    }
+    fit_params = TABLE_FIT_PARAMS
+    defaults = dict(TABLE_DEFAULTS)  # window: w in updates of the channel's group; row by the command
+    parameter_constraints = dict(TABLE_CONSTRAINTS)
 
     def check_params(self) -> None:
         super().check_params()

@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.modes import mode_changes
 from logscan.detectors.params import Interval
 from logscan.errors import InternalError, NotTrainedError
 
@@ -82,8 +83,7 @@ def steady_steps(t: np.ndarray, mode: np.ndarray | None, hold_s: float) -> np.nd
     mode = np.asarray(mode, dtype=np.float64)
     if mode.size == 0:
         return np.zeros(0, dtype=bool)
-    changed = np.ones(mode.size, dtype=bool)
-    changed[1:] = ~((mode[1:] == mode[:-1]) | (np.isnan(mode[1:]) & np.isnan(mode[:-1])))
+    changed = mode_changes(mode)
     last = np.maximum.accumulate(np.where(changed, np.arange(mode.size), 0))
     return (t - t[last] >= hold_s) & np.isfinite(mode)
 
