@@ -35,13 +35,14 @@ ENVELOPE_CAPTION = (
 )
 
 
-def _only_group(ubikf, group: str) -> np.ndarray:
-    """The innovation box midpoints of one group's rows (the others NaN: not in that test)."""
-    g = list(ubikf.group_names).index(group)
-    rows = slice(int(ubikf.group_offsets[g]), int(ubikf.group_offsets[g] + ubikf.group_sizes[g]))
-    out = np.full_like(ubikf.r_mid, np.nan)
-    out[:, rows] = ubikf.r_mid[:, rows]
-    return out
+def _group_rows(ubikf, group: str | None) -> np.ndarray:
+    """(N, m) bool view: the measurement rows of one group's test (every row for the overall test)."""
+    rows = np.ones(ubikf.r_mid.shape[1], dtype=bool)
+    if group is not None:
+        g = list(ubikf.group_names).index(group)
+        rows[:] = False
+        rows[int(ubikf.group_offsets[g]) : int(ubikf.group_offsets[g] + ubikf.group_sizes[g])] = True
+    return np.broadcast_to(rows, ubikf.r_mid.shape)
 
 
 class Chi2Detector(Detector):
@@ -93,10 +94,11 @@ class Chi2Detector(Detector):
         bounds = {}
         n_tests = 0
         for lower_name, _, group in tests:
-            r_mid = ubikf.r_mid if group is None else _only_group(ubikf, group)
-            beta_lo, beta_hi = box_chi2_bounds(r_mid, ubikf.r_rad, ubikf.S)
-            updated = (np.isfinite(r_mid).any(axis=1)) & ~ubikf.diverged & np.isfinite(beta_lo)
-            m_k = np.isfinite(r_mid).sum(axis=1)
+            rows = _group_rows(ubikf, group)
+            beta_lo, beta_hi = box_chi2_bounds(ubikf.r_mid, ubikf.r_rad, ubikf.S, rows)
+            used = np.isfinite(ubikf.r_mid) & rows
+            updated = used.any(axis=1) & ~ubikf.diverged & np.isfinite(beta_lo)
+            m_k = used.sum(axis=1)
             bounds[lower_name] = (beta_lo, beta_hi, updated, m_k)
             n_tests += int(updated.sum())
         alpha = self._alpha(ubikf, n_tests)  # the budget is spent over every test
