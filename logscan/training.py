@@ -174,6 +174,7 @@ def train_logs(
     """`logscan train`: prepare each healthy log, fit the trainable detectors, return the tables
     document. Without ``profile_path`` every log's embedded profile must match the first's."""
     from logscan.pipeline import load_profile_for, needs_of, prepare
+    from logscan.profiles import parse_profile
     from logscan.readers import read_embedded
 
     step = progress or (lambda message: None)
@@ -185,15 +186,20 @@ def train_logs(
     prepared = []
     for number, path in enumerate(logs, 1):
         step(f"reading {path} ({number}/{len(logs)})")
-        faults = ((read_embedded(path)[1] or {}).get("events")) or []
+        embedded_profile, truth = read_embedded(path)  # one metadata read: the truth and the profile
+        faults = ((truth or {}).get("events")) or []
         if faults and not allow_faulty:
             raise InputError(
                 f"its ground truth lists {len(faults)} fault(s): a table trained on it would tolerate them",
                 path=path,
                 hint="train on healthy logs only, or pass --allow-faulty",
             )
-        own = loaded if profile_path is not None or number == 1 else load_profile_for(path, None)
-        if profile_fingerprint(own.profile) != fingerprint:
+        if profile_path is None and number > 1 and not embedded_profile:
+            raise ProfileError("no profile: the log embeds none", path=path, hint="pass --profile PROFILE.toml")
+        own = loaded.profile
+        if profile_path is None and number > 1:
+            own = parse_profile(embedded_profile, source=f"{path} (embedded profile)")
+        if profile_fingerprint(own) != fingerprint:
             raise ProfileError(
                 f"its embedded profile differs from {logs[0]}'s (vehicle, inputs, measurements, mode or redundant)",
                 path=path,
