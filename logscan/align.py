@@ -15,11 +15,14 @@ checked before anything is allocated, and ``start_s``/``end_s`` cut it to a wind
 
 from __future__ import annotations
 
+import os
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
 
+from logscan import conversions
 from logscan.numba_cache import follow_dependencies
 from logscan.time_sanity import MAX_GRID_STEPS, check_window, dense_span, grid, outlier_warnings, outlying_runs
 
@@ -29,7 +32,10 @@ class AlignedGroup:
     """One measurement group on the grid.
 
     z:      (N, m) float64, zero-order held value of each channel within the staleness limit,
-            NaN where no sample is recent enough (never zero-filled).
+            NaN where no sample is recent enough (never zero-filled). A profile group with
+            ``scale`` holds the scaled channels; with ``from`` (`logscan.conversions`), m is the
+            converted width (3) and ``channels`` names each converted output (e.g.
+            ``/vehicle_attitude_0/q[0..3] roll``); ``nonfinite_count`` counts the raw channels.
     fresh:  (N,) bool, True at grid steps where every channel of the group has a sample newer than
             the previous grid step and not older than the staleness limit (the filter updates then).
     """
@@ -47,6 +53,8 @@ class AlignedGroup:
     stale_s: float | None = None  # staleness limit used for holding
     channel_fresh: np.ndarray | None = None  # (N, m) bool, per channel: a new sample in (t_{k-1}, t_k]
     labels: list[str] | None = None  # the profile's name of each channel ([redundant] sensors), if named
+    # a `from = "geodetic"` group: the (lat deg, lon deg, alt m) its north/east/down are relative to
+    origin: tuple[float, float, float] | None = None
 
 
 class HeldTable:
@@ -336,6 +344,68 @@ class _Aligner:
         row = np.where(np.isnan(held), -1, held).astype(np.int32 if t.size < 2**31 else np.int64)
         return HeldTable(samples, row)
 
+    def measurement_group(self, spec, grid_ns: np.ndarray, z: np.ndarray) -> AlignedGroup:
+        """A profile's measurement group held into ``z`` (N, spec.width): each channel times its
+        ``scale``, then, with ``from``, the held channels converted (`logscan.conversions`)."""
+        transforms = [_scaled(f) for f in spec.scale] if spec.scale is not None else None
+        if spec.source is None:
+            return self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms, z=z)
+        raw = self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms)
+        origin = None
+        if spec.source == "quaternion":
+            invalid = int(np.count_nonzero(conversions.invalid_quaternions(raw.z)))
+            z[:] = conversions.quaternion_to_euler(raw.z)
+            if invalid:
+                lo, hi = conversions.QUATERNION_NORM_LIMITS
+                self.warnings.append(
+                    f"group {spec.name!r}: {invalid} grid step{'s' if invalid > 1 else ''} hold a quaternion whose "
+                    f"norm is outside [{lo:g}, {hi:g}]; roll, pitch and yaw are NaN there (not used)"
+                )
+        else:
+            origin = tuple(spec.origin) if spec.origin is not None else self.first_fix(spec, grid_ns, raw)
+            if origin is None:
+                z[:] = np.nan
+                self.warnings.append(
+                    f"group {spec.name!r}: no sample with a valid latitude, longitude and altitude in the "
+                    "window to take as the origin; its values are NaN (give [measurements."
+                    f"{spec.name}] origin = [lat_deg, lon_deg, alt_m])"
+                )
+            else:
+                z[:] = conversions.geodetic_to_local(raw.z, origin, spec.frame)
+        label = _group_label(spec.channels)
+        width = spec.width
+        return AlignedGroup(
+            name=spec.name,
+            channels=[f"{label} {out}" for out in spec.output_names()],
+            z=z,
+            fresh=raw.fresh,
+            nonfinite_count=raw.nonfinite_count,
+            stale_s=raw.stale_s,
+            channel_fresh=np.repeat(raw.fresh[:, None], width, axis=1),
+            origin=None if origin is None else tuple(float(v) for v in origin),
+        )
+
+    def first_fix(self, spec, grid_ns: np.ndarray, raw: AlignedGroup) -> tuple[float, float, float] | None:
+        """The default origin of a geodetic group: its first sample inside the grid's span with a
+        finite altitude and a latitude / longitude in range (the cleaned samples, scaled, at times
+        all three channels share), else the first fresh grid step with such values."""
+        cleaned = [self.clean(ch) for ch in spec.channels]
+        scale = spec.scale or [1.0] * len(cleaned)
+        times = cleaned[0].t
+        for c in cleaned[1:]:
+            times = np.intersect1d(times, c.t, assume_unique=True)
+        times = times[(times >= grid_ns[0]) & (times <= grid_ns[-1])]
+        if times.size:
+            lla = np.stack(
+                [c.values[np.searchsorted(c.t, times)] * f for c, f in zip(cleaned, scale)],
+                axis=1,
+            )
+            ok = np.flatnonzero(conversions.valid_geodetic(lla))
+            if ok.size:
+                return tuple(float(v) for v in lla[ok[0]])
+        ok = np.flatnonzero(raw.fresh & conversions.valid_geodetic(raw.z))
+        return tuple(float(v) for v in raw.z[ok[0]]) if ok.size else None
+
     def group(self, name: str, channels, grid_ns, limit_s: float, transforms=None, z=None) -> AlignedGroup:
         m = len(channels)
         n = grid_ns.size
@@ -364,6 +434,25 @@ class _Aligner:
             stale_s=float(limit_s),
             channel_fresh=ch_fresh,
         )
+
+
+def _scaled(factor: float):
+    return lambda values: values * factor
+
+
+def _group_label(channels: list[str]) -> str:
+    """One short name for the channels of a converted group: ``/a/q[0..3]`` for indexed channels
+    of one field, ``/gps/{lat,lon,alt}`` for fields under one topic, else the names joined by commas."""
+    prefix = os.path.commonprefix(channels)
+    rests = [ch[len(prefix) :] for ch in channels]
+    if prefix.endswith("[") and all(re.fullmatch(r"\d+\]", r) for r in rests):
+        idx = [int(r[:-1]) for r in rests]
+        consecutive = idx == list(range(idx[0], idx[0] + len(idx)))
+        return f"{prefix}{idx[0]}..{idx[-1]}]" if consecutive else f"{prefix}{','.join(map(str, idx))}]"
+    cut = max(prefix.rfind(sep) for sep in "/._")
+    if cut >= 0 and all(ch[cut + 1 :] for ch in channels):
+        return f"{prefix[: cut + 1]}{{{','.join(ch[cut + 1 :] for ch in channels)}}}"
+    return ",".join(channels)
 
 
 def align(log, profile, *, start_s: float | None = None, end_s: float | None = None) -> AlignedRun:
@@ -406,13 +495,14 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
 
     groups: dict[str, AlignedGroup] = {}
     # the groups' samples side by side in one (N, m_total) array, in the profile's order: the
-    # filter reads it in place (`filters.ekf.pack_run`) instead of a copy
-    z_all = np.empty((n, sum(len(spec.channels) for spec in profile.measurements.values())))
+    # filter reads it in place (`filters.ekf.pack_run`) instead of a copy; a group with `from`
+    # takes its converted width
+    z_all = np.empty((n, sum(spec.width for spec in profile.measurements.values())))
     columns = 0
     for spec in profile.measurements.values():
-        z = z_all[:, columns : columns + len(spec.channels)]
-        columns += len(spec.channels)
-        g = aligner.group(spec.name, spec.channels, grid_ns, spec.stale_s, z=z)
+        z = z_all[:, columns : columns + spec.width]
+        columns += spec.width
+        g = aligner.measurement_group(spec, grid_ns, z)
         g.rate_hz = float(spec.rate_hz)
         for attr in ("noise_std", "range_lo", "range_hi"):
             value = getattr(spec, attr)

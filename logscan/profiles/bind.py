@@ -57,9 +57,14 @@ def check_against_model(profile: Profile, model, problems: list[str]) -> None:
                 f"{where}: {label} has no measurement group {g.name!r}"
                 f"{suggest(g.name, groups)} (groups: {', '.join(groups)})"
             )
-        elif len(g.channels) != spec.size:
+        elif g.width != spec.size:
+            converted = (
+                f' (from = "{g.source}" gives {plural(g.width, "value")}: {", ".join(g.output_names())})'
+                if g.source is not None
+                else ""
+            )
             problems.append(
-                f"{where} channels: {plural(len(g.channels), 'channel')} but {label} group {g.name!r} has "
+                f"{where} channels: {plural(len(g.channels), 'channel')}{converted} but {label} group {g.name!r} has "
                 f"{spec.size} outputs ({', '.join(spec.outputs)})"
             )
         else:
@@ -82,7 +87,7 @@ def _check_noise_in_range(group: MeasurementSpec, spec, problems: list[str]) -> 
     noise = group.noise_std if group.noise_std is not None else spec.noise_std
     lo = group.range_lo if group.range_lo is not None else spec.range_lo
     hi = group.range_hi if group.range_hi is not None else spec.range_hi
-    for i, channel in enumerate(group.channels):
+    for i, channel in enumerate(group.output_names() or group.channels):
         span = hi[i] - lo[i]
         if noise[i] > span:
             whose = "" if group.noise_std is not None else f"the model's default for {group.name!r}, "

@@ -10,8 +10,9 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from logscan.conversions import CONVERSIONS, FRAMES, Conversion
 from logscan.profiles.bind import bind_inputs_without_model, build_model, check_against_model
-from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, type_name
+from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, suggest, type_name
 from logscan.profiles.schema import (
     ALARM_KEYS,
     GROUP_KEYS,
@@ -364,25 +365,105 @@ class _Checker:
         noise = self.noise_std(data, where)
         lo = self.float_list(data, "range_lo", where, positive=False)
         hi = self.float_list(data, "range_hi", where, positive=False)
-        if channels is None or rate is None:
+        scale = self.scale(data, where)
+        conversion = self.conversion(data, where)
+        source = conversion.name if conversion is not None else None
+        frame = self.frame(data, where, source)
+        origin = self.origin(data, where, source)
+        bad_keys = any(key in data and value is None for key, value in (("scale", scale), ("frame", frame)))
+        if channels is None or rate is None or bad_keys or ("from" in data and conversion is None):
             return None
-        n = len(channels)
-        noise = self._sized(noise, n, f"{where} noise_std")
-        lo = self._sized(lo, n, f"{where} range_lo")
-        hi = self._sized(hi, n, f"{where} range_hi")
+        if "origin" in data and origin is None:
+            return None
+        if scale is not None:
+            scale = self._sized(scale, len(channels), f"{where} scale")
+        if conversion is not None and len(channels) != len(conversion.inputs):
+            self.add(
+                f"{where} channels",
+                f'from = "{source}" needs exactly {len(conversion.inputs)} channels, in the order '
+                f"{', '.join(conversion.inputs)}; got {len(channels)}",
+            )
+            return None
+        outputs = list(conversion.output_names(frame or "ned")) if conversion is not None else channels
+        n = len(outputs)
+        noun = "outputs" if conversion is not None else "channels"
+        noise = self._sized(noise, n, f"{where} noise_std", noun)
+        lo = self._sized(lo, n, f"{where} range_lo", noun)
+        hi = self._sized(hi, n, f"{where} range_hi", noun)
         if lo is not None and hi is not None:
             bad = [i for i in range(n) if not lo[i] < hi[i]]
             if bad:
                 i = bad[0]
                 self.add(
                     where,
-                    f"range_lo must be < range_hi, got {lo[i]:g} >= {hi[i]:g} for {channels[i]!r}",
+                    f"range_lo must be < range_hi, got {lo[i]:g} >= {hi[i]:g} for {outputs[i]!r}",
                 )
         if stale is None and "stale_s" not in data:
             stale = GROUP_STALE_PERIODS / rate
-        if stale is None:
+        if stale is None or ("scale" in data and scale is None):
             return None
-        return MeasurementSpec(name, channels, rate, stale, noise, lo, hi)
+        return MeasurementSpec(
+            name, channels, rate, stale, noise, lo, hi, scale=scale, source=source, origin=origin, frame=frame or "ned"
+        )
+
+    def scale(self, data: dict, where: str) -> list[float] | None:
+        """``scale``: finite, non-zero factors (a number or one per channel)."""
+        scale = self.float_list(data, "scale", where, positive=False)
+        if scale is not None and any(v == 0.0 for v in scale):
+            self.add(f"{where} scale", "must be non-zero, got 0")
+            return None
+        return scale
+
+    def conversion(self, data: dict, where: str) -> Conversion | None:
+        """``from``: one of `CONVERSIONS`, None when absent or with a problem."""
+        if "from" not in data:
+            return None
+        value = data["from"]
+        choices = ", ".join(f'"{c}"' for c in CONVERSIONS)
+        if not isinstance(value, str):
+            self.add(f"{where} from", f"expected a string ({choices}), got {type_name(value)}")
+            return None
+        if value not in CONVERSIONS:
+            self.add(f"{where} from", f"unknown conversion {value!r}{suggest(value, CONVERSIONS)} (choices: {choices})")
+            return None
+        return CONVERSIONS[value]
+
+    def frame(self, data: dict, where: str, source: str | None) -> str | None:
+        """``frame`` of a geodetic group: "ned" (the default) or "enu"."""
+        if "frame" not in data:
+            return None
+        value = data["frame"]
+        if source != "geodetic":
+            if "from" not in data or source is not None:  # an unknown `from` is reported already
+                self.add(f"{where} frame", 'only allowed with from = "geodetic"')
+            return None
+        if value not in FRAMES:
+            self.add(f"{where} frame", f"expected {' or '.join(repr(f) for f in FRAMES)}, got {type_name(value)}")
+            return None
+        return value
+
+    def origin(self, data: dict, where: str, source: str | None) -> list[float] | None:
+        """``origin`` of a geodetic group: [latitude deg in [-90, 90], longitude deg in [-180, 180],
+        altitude m], all finite."""
+        if "origin" not in data:
+            return None
+        if source != "geodetic":
+            if "from" not in data or source is not None:
+                self.add(f"{where} origin", 'only allowed with from = "geodetic"')
+            return None
+        value = self.float_list(data, "origin", where, positive=False)
+        if value is None:
+            return None
+        if not isinstance(data["origin"], list) or len(value) != 3:
+            self.add(f"{where} origin", "expected [latitude_deg, longitude_deg, altitude_m] (3 numbers)")
+            return None
+        if not -90.0 <= value[0] <= 90.0:
+            self.add(f"{where} origin", f"latitude must be within [-90, 90] degrees, got {value[0]:g}")
+            return None
+        if not -180.0 <= value[1] <= 180.0:
+            self.add(f"{where} origin", f"longitude must be within [-180, 180] degrees, got {value[1]:g}")
+            return None
+        return value
 
     def noise_std(self, data: dict, where: str) -> list[float] | None:
         """``noise_std``: > 0 and within `_STD_LIMITS` (its square, the variance, a normal float);
@@ -401,13 +482,13 @@ class _Checker:
             return noise
         return None
 
-    def _sized(self, values: list[float] | None, n: int, where: str) -> list[float] | None:
+    def _sized(self, values: list[float] | None, n: int, where: str, noun: str = "channels") -> list[float] | None:
         if values is None:
             return None
         if len(values) == 1:
             return values * n
         if len(values) != n:
-            self.add(where, f"{len(values)} values for {n} channels (give one number or {n})")
+            self.add(where, f"{len(values)} values for {n} {noun} (give one number or {n})")
             return None
         return values
 

@@ -9,6 +9,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from logscan.conversions import CONVERSIONS
 from logscan.profiles.problems import profile_error, suggest
 from logscan.profiles.toml_writer import dumps_toml
 from logscan.results import AlarmPolicy
@@ -27,7 +28,18 @@ TOP_KEYS = (
     "tables",
 )
 VEHICLE_KEYS = ("model", "rate_hz", "params")
-GROUP_KEYS = ("channels", "rate_hz", "stale_s", "noise_std", "range_lo", "range_hi")
+GROUP_KEYS = (
+    "channels",
+    "rate_hz",
+    "stale_s",
+    "noise_std",
+    "range_lo",
+    "range_hi",
+    "scale",
+    "from",
+    "frame",
+    "origin",
+)
 MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
 SENSOR_KEYS = ("channel", "poly")
@@ -84,7 +96,13 @@ class InputSpec:
 
 @dataclass
 class MeasurementSpec:
-    """`[measurements.<group>]`: channels of one model measurement group and how to hold them."""
+    """`[measurements.<group>]`: channels of one model measurement group and how to hold them.
+
+    ``scale`` multiplies each channel (one factor per channel); ``source`` (the TOML key ``from``)
+    converts the held channels (`logscan.conversions`): "quaternion" (w, x, y, z) -> roll, pitch,
+    yaw; "geodetic" (lat, lon, alt) -> north, east, down about ``origin`` (``frame`` "enu": east,
+    north, up). ``noise_std`` / ``range_*`` have one value per converted output (`width`).
+    """
 
     name: str
     channels: list[str]
@@ -93,6 +111,19 @@ class MeasurementSpec:
     noise_std: list[float] | None = None  # None: the model's default
     range_lo: list[float] | None = None  # None: the model's physical range
     range_hi: list[float] | None = None
+    scale: list[float] | None = None  # one factor per channel, None: 1
+    source: str | None = None  # `from`: None, "quaternion" or "geodetic"
+    origin: list[float] | None = None  # geodetic: [lat deg, lon deg, alt m]; None: the first fix
+    frame: str = "ned"  # geodetic: "ned" or "enu"
+
+    @property
+    def width(self) -> int:
+        """Values per grid step: the converted outputs with ``from``, else one per channel."""
+        return len(CONVERSIONS[self.source].outputs) if self.source is not None else len(self.channels)
+
+    def output_names(self) -> tuple[str, ...] | None:
+        """Names of the converted outputs (None without ``from``)."""
+        return CONVERSIONS[self.source].output_names(self.frame) if self.source is not None else None
 
 
 @dataclass
@@ -284,9 +315,15 @@ class Profile:
         out["measurements"] = {}
         for g in self.measurements.values():
             table: dict[str, Any] = {"channels": g.channels, "rate_hz": g.rate_hz, "stale_s": g.stale_s}
-            for key in ("noise_std", "range_lo", "range_hi"):
+            for key in ("noise_std", "range_lo", "range_hi", "scale"):
                 if getattr(g, key) is not None:
                     table[key] = getattr(g, key)
+            if g.source is not None:
+                table["from"] = g.source
+            if g.source == "geodetic":
+                table["frame"] = g.frame
+            if g.origin is not None:
+                table["origin"] = g.origin
             out["measurements"][g.name] = table
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
