@@ -11,7 +11,7 @@ import pytest
 from logscan.models import MODEL_NAMES, get_model
 
 DOC = (Path(__file__).resolve().parents[1] / "docs" / "models.md").read_text(encoding="utf-8")
-TABLED = ("quadcopter", "steer_by_wire", "dc_motor")
+TABLED = ("quadcopter", "steer_by_wire", "dc_motor", "ins")
 
 
 def section(model: str) -> str:

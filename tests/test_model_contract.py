@@ -1,10 +1,12 @@
 """The model contract, checked on every registered model (like the detector contract test).
 
 Parametrised over `logscan.models.MODEL_NAMES` (a model without example parameters here is built
-with none): shapes of states, inputs, groups and defaults; F against central differences of f;
-H against central differences of h, per group; the in-place kernels the EKF runs against the
-allocating ones; directly observed states; parameters round-tripping through `describe()`; the
-model id known to the dispatch, and an unknown id raising a clear error at both levels.
+with none): shapes of states, inputs, groups and defaults; F against central differences of f and
+H against central differences of h per group, both through the model's box-plus / box-minus (plain
+differences unless the state holds a rotation); the in-place kernels the EKF runs against the
+allocating ones; box-plus and box-minus inverse to each other; directly observed states;
+parameters round-tripping through `describe()`; the model id known to the dispatch, and an unknown
+id raising a clear error at both levels.
 """
 
 from __future__ import annotations
@@ -132,7 +134,10 @@ def test_discrete_jacobian_F_matches_central_differences_of_f(name, params, dt):
     for _ in range(10):
         x, u = random_point(model, rng)
         F = model.F(x, u, dt)
-        F_num = central_jacobian(lambda xx: model.f(xx, u, dt), x)
+        fx = model.f(x, u, dt)
+        # F is the Jacobian in the model's own chart: d (f(x (+) d) (-) f(x)) / d d at d = 0
+        # (plain differences for an additive state; ins rotates its attitude)
+        F_num = central_jacobian(lambda d: model.boxminus(model.f(model.boxplus(x, d), u, dt), fx), np.zeros(x.size))
         scale = max(1.0, np.abs(F).max())
         np.testing.assert_allclose(F, F_num, atol=1e-6 * scale, rtol=1e-6)
 
@@ -145,7 +150,14 @@ def test_measurement_jacobian_H_matches_central_differences_of_h_per_group(name,
         for _ in range(10):
             x, u = random_point(model, rng)
             H = model.H(group, x, u)
-            H_num = central_jacobian(lambda xx: model.h(group, xx, u), x)
+            hx = model.h(group, x, u)
+            wrap = model.groups[group].wrap_mask()
+
+            def change(d, group=group, hx=hx, wrap=wrap):  # h(x (+) d) - h(x), angles wrapped
+                diff = model.h(group, model.boxplus(x, d), u) - hx
+                return np.where(wrap, (diff + np.pi) % (2 * np.pi) - np.pi, diff)
+
+            H_num = central_jacobian(change, np.zeros(x.size))
             np.testing.assert_allclose(H, H_num, atol=1e-6, rtol=1e-6)
 
 
@@ -177,6 +189,23 @@ def test_in_place_kernels_equal_the_allocating_ones(name, params):
             np.testing.assert_allclose(hx[r : r + g.size], h_ref, rtol=1e-13, atol=1e-13)
             r += g.size
         assert np.isnan(hx[0]) and np.all(np.isnan(Hs[0]))  # rows outside the groups untouched
+
+
+@pytest.mark.parametrize(("name", "params"), CASES)
+def test_boxplus_and_boxminus_are_inverse_and_the_kernel_applies_the_same(name, params):
+    model = get_model(name, params)
+    rng = np.random.default_rng(9)
+    p = model.param_vector(0.01)
+    boxplus = dispatch.IN_PLACE[model.model_id][2]
+    for _ in range(20):
+        x, _u = random_point(model, rng)
+        dx = rng.normal(size=x.size) * model.state_scale() * 0.5
+        moved = model.boxplus(x, dx)
+        np.testing.assert_allclose(model.boxminus(moved, x), dx, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(model.boxplus(x, np.zeros(x.size)), x, atol=1e-12)
+        out = np.full(x.size, np.nan)
+        boxplus.py_func(p, x, dx, out)
+        np.testing.assert_allclose(out, moved, rtol=1e-13, atol=1e-13)
 
 
 @pytest.mark.parametrize(("name", "params"), CASES)

@@ -159,7 +159,7 @@ def ekf_run(
     zero = np.int64(0)
     # work arrays (allocated once)
     rows, sel_g = np.empty(m_total, dtype=np.int64), np.empty(G, dtype=np.int64)
-    x_new, kv, xs, x_upd = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    x_new, kv, xs, x_upd, dx = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     F, W, P_upd = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))  # RK4 Jacobian stages
     R3, D3 = np.empty((3, 3)), np.empty((3, 3, 3))  # quadcopter rotation and its derivatives
@@ -281,10 +281,12 @@ def ekf_run(
                         KT[a, j] = HP[a, j]
                 cho_solve_rows(L, m, KT, n)
                 for i in range(n):
-                    t = x[i]
+                    t = 0.0
                     for a in range(m):
                         t += KT[a, i] * y[a]
-                    x_upd[i] = t  # x_post = x_prior + K y~
+                    dx[i] = t
+                # x_post = x_prior (+) K y~ (additive but for a model with a rotation in its state)
+                dispatch.model_boxplus_into(model_id, p, x, dx, x_upd)
                 # P_post = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
                 m_cnt[:] = m
                 joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT, D, P_upd)

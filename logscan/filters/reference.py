@@ -88,7 +88,7 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
             try:
                 factor = cho_factor(S, lower=True)
                 K = cho_solve(factor, H @ P).T
-                x_new = x + K @ y
+                x_new = model.boxplus(x, K @ y)
                 IKH = np.eye(n) - K @ H
                 P_new = IKH @ P @ IKH.T + K @ R @ K.T
                 P_new = 0.5 * (P_new + P_new.T)

@@ -14,6 +14,7 @@ _REGISTRY = {
     "dc_motor": "logscan.models.dc_motor:DcMotor",
     "linear": "logscan.models.linear:LinearModel",
     "hover_uav": "logscan.models.hover_uav:HoverUav",
+    "ins": "logscan.models.ins:Ins",
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 

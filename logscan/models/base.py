@@ -198,6 +198,15 @@ class Model:
         gid = self.group(group).group_id
         return dispatch.H_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
 
+    # --- the state's chart: additive unless the model says otherwise (ins: rotated attitude) ----
+    def boxplus(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        """x (+) dx: the state moved by an error-state step dx (the EKF's update applies this)."""
+        return _vec(x) + _vec(dx)
+
+    def boxminus(self, x1: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        """dx with x0 (+) dx = x1 (F and H are Jacobians with respect to dx)."""
+        return _vec(x1) - _vec(x0)
+
     def describe(self) -> dict:
         """JSON-ready description: name, states, inputs, groups, the parameters it was built
         from."""

@@ -19,6 +19,15 @@ from numba import njit, types
 from numba.extending import overload
 
 from logscan.errors import ModelError
+from logscan.models.ins_kernels import (
+    INS_ID,
+    ins_boxplus_into,
+    ins_H,
+    ins_h,
+    ins_meas_into,
+    ins_predict,
+    ins_predict_into,
+)
 from logscan.models.linear_kernels import (
     DC_MOTOR_ID,
     LINEAR_ID,
@@ -50,6 +59,7 @@ MODEL_IDS = {
     DC_MOTOR_ID: "dc_motor",
     LINEAR_ID: "linear",
     HOVER_UAV_ID: "hover_uav",
+    INS_ID: "ins",
 }
 
 
@@ -72,6 +82,8 @@ def predict(model_id, p, x, u, dt):
         return lin_f(p, x, u), Ad.copy()
     if model_id == QUADCOPTER_ID or model_id == STEER_BY_WIRE_ID:
         return rk4_predict(model_id, p, x, u, dt)
+    if model_id == INS_ID:
+        return ins_predict(p, x, u, dt)
     raise ValueError("predict: unknown model id")
 
 
@@ -93,6 +105,12 @@ def sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     rk4_predict_into(STEER_BY_WIRE_ID, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
 
 
+@njit(cache=True, inline="always")
+def ins_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the ins model (strapdown step, error-state Jacobian)."""
+    ins_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
 @njit(cache=True)
 def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
@@ -103,6 +121,8 @@ def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         quad_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     elif model_id == STEER_BY_WIRE_ID:
         sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+    elif model_id == INS_ID:
+        ins_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     else:
         raise ValueError("predict_into: unknown model id")
 
@@ -114,6 +134,8 @@ def f_disc(model_id, p, x, u, dt):
         return lin_f(p, x, u)
     if model_id == QUADCOPTER_ID or model_id == STEER_BY_WIRE_ID:
         return rk4_f(model_id, p, x, u, dt)
+    if model_id == INS_ID:
+        return ins_predict(p, x, u, dt)[0]
     raise ValueError("f_disc: unknown model id")
 
 
@@ -126,6 +148,8 @@ def h_meas(model_id, gid, p, x, u):
         return sbw_h(p, gid, x, u)
     if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         return lin_h(p, gid, x, u)
+    if model_id == INS_ID:
+        return ins_h(p, gid, x, u)
     raise ValueError("h_meas: unknown model id")
 
 
@@ -138,6 +162,8 @@ def H_meas(model_id, gid, p, x, u):
         return sbw_H(p, gid, x, u)
     if model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         return lin_H(p, gid, x, u)
+    if model_id == INS_ID:
+        return ins_H(p, gid, x, u)
     raise ValueError("H_meas: unknown model id")
 
 
@@ -163,6 +189,25 @@ def sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
     hx[r] = t
 
 
+@njit(cache=True, inline="always")
+def ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the ins model."""
+    ins_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+
+
+@njit(cache=True, inline="always")
+def additive_boxplus_into(p, x, dx, out):
+    """x (+) dx of the models whose state adds: out = x + dx."""
+    for i in range(x.size):
+        out[i] = x[i] + dx[i]
+
+
+@njit(cache=True, inline="always")
+def ins_boxplus(p, x, dx, out):
+    """x (+) dx of the ins model (the attitude rotates)."""
+    ins_boxplus_into(p, x, dx, out)
+
+
 @njit(cache=True)
 def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
     """h_meas and H_meas without allocation: h of group gid into hx[r:r+m], H into
@@ -173,17 +218,21 @@ def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
         sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     elif model_id == DC_MOTOR_ID or model_id == LINEAR_ID or model_id == HOVER_UAV_ID:
         lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
+    elif model_id == INS_ID:
+        ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     else:
         raise ValueError("meas_into: unknown model id")
 
 
-# model id -> (predict_into, meas_into) of that model alone, without the model_id argument
+# model id -> (predict_into, meas_into, boxplus_into) of that model alone, without the model_id
+# argument
 IN_PLACE = {
-    QUADCOPTER_ID: (quad_step_into, quad_meas_rows_into),
-    STEER_BY_WIRE_ID: (sbw_step_into, sbw_meas_rows_into),
-    DC_MOTOR_ID: (lin_step_into, lin_meas_rows_into),
-    LINEAR_ID: (lin_step_into, lin_meas_rows_into),
-    HOVER_UAV_ID: (lin_step_into, lin_meas_rows_into),
+    QUADCOPTER_ID: (quad_step_into, quad_meas_rows_into, additive_boxplus_into),
+    STEER_BY_WIRE_ID: (sbw_step_into, sbw_meas_rows_into, additive_boxplus_into),
+    DC_MOTOR_ID: (lin_step_into, lin_meas_rows_into, additive_boxplus_into),
+    LINEAR_ID: (lin_step_into, lin_meas_rows_into, additive_boxplus_into),
+    HOVER_UAV_ID: (lin_step_into, lin_meas_rows_into, additive_boxplus_into),
+    INS_ID: (ins_step_into, ins_meas_rows_into, ins_boxplus),
 }
 
 
@@ -199,6 +248,11 @@ def model_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
 def model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
     """meas_into of the model ``model_id`` (a compile-time constant; numba code only)."""
     raise NotImplementedError("model_meas_into is resolved by numba at compile time")
+
+
+def model_boxplus_into(model_id, p, x, dx, out):
+    """out = x (+) dx of the model ``model_id`` (a compile-time constant; numba code only)."""
+    raise NotImplementedError("model_boxplus_into is resolved by numba at compile time")
 
 
 def _literal_kernel(model_id, which: int):
@@ -225,6 +279,17 @@ def _model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
 
         def impl(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
             kernel(gid, p, x, u, r, hx, Hs, R3, D3)
+
+        return impl
+
+
+@overload(model_boxplus_into, inline="always")
+def _model_boxplus_into(model_id, p, x, dx, out):
+    kernel = _literal_kernel(model_id, 2)
+    if kernel is not None:
+
+        def impl(model_id, p, x, dx, out):
+            kernel(p, x, dx, out)
 
         return impl
 
