@@ -358,8 +358,8 @@ class _Aligner:
             if invalid:
                 lo, hi = conversions.QUATERNION_NORM_LIMITS
                 self.warnings.append(
-                    f"group {spec.name!r}: {invalid} grid step{'s' if invalid > 1 else ''} hold a quaternion whose "
-                    f"norm is outside [{lo:g}, {hi:g}]; roll, pitch and yaw are NaN there (not used)"
+                    f"group {spec.name!r}: {invalid} grid step{'s hold' if invalid > 1 else ' holds'} a quaternion "
+                    f"whose norm is outside [{lo:g}, {hi:g}]; roll, pitch and yaw are NaN there (not used)"
                 )
         else:
             origin = tuple(spec.origin) if spec.origin is not None else self.first_fix(spec, grid_ns, raw)

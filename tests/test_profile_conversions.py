@@ -366,7 +366,7 @@ def test_alignment_converts_quaternions_and_integer_geodetic_fixes():
     np.testing.assert_allclose(att.z[good], euler[good], atol=1e-12)
     assert np.isnan(att.z[4]).all() and att.fresh.all() and att.origin is None
     assert any(
-        "group 'attitude': 1 grid step hold a quaternion whose norm is outside [0.5, 1.5]" in w for w in run.warnings
+        "group 'attitude': 1 grid step holds a quaternion whose norm is outside [0.5, 1.5]" in w for w in run.warnings
     )
 
     gnss = run.groups["gnss_position"]
