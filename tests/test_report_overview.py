@@ -195,16 +195,21 @@ def test_statistics_have_no_si_prefixes():
 
 def test_measurement_groups_as_used_and_topics_read_vs_in_the_log():
     class Spec:
-        channels, rate_hz, noise_std = ["/imu/accel.x"], 100.0, [0.1]
+        channels, rate_hz, noise_std, width, source = ["/imu/accel.x"], 100.0, [0.1], 1, None
+
+    class Quaternion:  # four channels converted to three angles: the NIS expects 3
+        channels, rate_hz, noise_std, width, source = [f"/att/q[{i}]" for i in range(4)], 50.0, None, 3, "quaternion"
 
     class Profile:
-        measurements = {"accel": Spec()}
+        measurements = {"accel": Spec(), "attitude": Quaternion()}
 
-    groups = measurement_groups(Profile(), {"updates": {"accel": 999}, "rejected": {"accel": 2}, "mean_nis": {}})
+    counts = {"updates": {"accel": 999}, "rejected": {"accel": 2}, "mean_nis": {"attitude": 2.5}}
+    groups = measurement_groups(Profile(), counts)
     page = render_html(report_of(quiet_and_alarming()[:1], groups=groups), plotlyjs_src="p.js")
     rows = table(page, "groups-table")
     assert rows[1] == ["accel", "/imu/accel.x", "100", "0.1", "999", "2", "— (1)"]
-    assert len(rows) == 2  # only the group the profile used, not the model's gyro and mag
+    assert rows[2][1].endswith("/att/q[3] (from quaternion)") and rows[2][-1] == "2.5 (3)"
+    assert len(rows) == 3  # only the groups the profile used, not the model's gyro and mag
     assert "1 read of 2 in the log" in page
     topics = page[page.index('id="log-topics"') :]
     assert topics.index("/imu") < topics.index("in the log, not read") < topics.index("/camera")

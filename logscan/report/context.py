@@ -107,14 +107,16 @@ def model_view(model: Mapping) -> dict:
 
 def measurement_groups(profile, filter_summary: Mapping | None) -> list[dict]:
     """The profile's measurement groups as the analysis used them, with the filter's counts:
-    ``{name, channels, rate_hz, noise_std, updates, rejected, mean_nis}`` (counts None without a
-    filter). ``profile``: a `logscan.profiles.schema.Profile`."""
+    ``{name, channels, size, conversion, rate_hz, noise_std, updates, rejected, mean_nis}`` (counts
+    None without a filter). ``profile``: a `logscan.profiles.schema.Profile`."""
     counts = filter_summary or {}
     out = []
     for name, spec in profile.measurements.items():
         out.append({
             "name": name,
             "channels": list(spec.channels),
+            "size": spec.width,  # the model outputs the channels give (after a `from` conversion)
+            "conversion": spec.source,
             "rate_hz": spec.rate_hz,
             "noise_std": list(spec.noise_std) if spec.noise_std is not None else None,
             "updates": (counts.get("updates") or {}).get(name),
@@ -129,13 +131,14 @@ def group_rows(groups: list[dict]) -> list[dict]:
     return [
         {
             "name": str(g.get("name", "")),
-            "channels": ", ".join(str(c) for c in g.get("channels") or []),
+            "channels": ", ".join(str(c) for c in g.get("channels") or [])
+            + (f" (from {g['conversion']})" if g.get("conversion") else ""),
             "rate": number_text(g.get("rate_hz"), 4),
             "noise": ", ".join(number_text(v, 3) for v in g.get("noise_std") or []) or "—",
             "updates": number_text(g.get("updates"), 12),
             "rejected": number_text(g.get("rejected"), 12),
             "mean_nis": number_text(g.get("mean_nis"), 3),
-            "dof": len(g.get("channels") or []),
+            "dof": g.get("size") or len(g.get("channels") or []),
         }
         for g in groups
     ]
