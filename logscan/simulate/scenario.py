@@ -17,6 +17,11 @@ plus the naming that the log, the truth and the profile use:
    thrust deviations from hover (faults act on the total thrust, `Scenario.a_trim`); hover for
    PAPER_SETTLE_S (5 s), then roll, pitch and yaw set-point excitation; the embedded profile
    carries every parameter, the intervals included.
+ - ins (the IMU-driven inertial navigation model): no closed loop, the IMU is the model's input.
+   A multirotor flies an open-loop reference (hover at 10 m, then minimum-jerk moves between random
+   waypoints and holds, occasional yaw turns); the IMU at the grid rate (250 Hz) is derived from the
+   truth, GNSS position and velocity 10 Hz, barometer 25 Hz, heading 10 Hz, attitude 50 Hz
+   (`logscan.simulate.ins_sim`).
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ from logscan.models.base import Model
 from logscan.simulate import controllers as ctl
 from logscan.simulate.faults import PAPER_SETTLE_S
 
-DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0, "hover_uav": 100.0}
+DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0, "hover_uav": 100.0, "ins": 250.0}
 SIMULATED_MODELS = tuple(DEFAULT_RATES)
 DCM_MODES = (0.4, 0.7, 1.0, 1.3, 1.6, 1.9)  # m/s, the A-TFM thesis's trained modes
 DCM_HOLD_S = 20.0
@@ -74,17 +79,28 @@ _SENSOR_TOPICS = {
         "velocity": ("/mocap", ("velocity.x", "velocity.y", "velocity.z")),
         "attitude": ("/mocap", ("roll", "pitch", "yaw")),
     },
+    "ins": {
+        "gnss_position": ("/gnss", ("position.north", "position.east", "position.down")),
+        "gnss_velocity": ("/gnss", ("velocity.north", "velocity.east", "velocity.down")),
+        "baro": ("/baro", ("altitude",)),
+        "heading": ("/mag", ("heading",)),
+        "attitude": ("/mocap", ("roll", "pitch", "yaw")),
+    },
 }
 # model -> group -> sensor rate in Hz (None: the grid rate)
 _SENSOR_RATES = {
     "quadcopter": {"accel": None, "gyro": None, "position": 10.0, "attitude": 50.0},
     "dc_motor": {"gps_speed": 10.0},
+    "ins": {"gnss_position": 10.0, "gnss_velocity": 10.0, "baro": 25.0, "heading": 10.0, "attitude": 50.0},
 }
+# model -> groups of the model that the simulated vehicle has no sensor for
+_UNSENSED = {"ins": frozenset({"odometry"})}  # a multirotor: no wheel or visual odometry
 _IMU_DEFAULT = {
     "quadcopter": "accel.x",
     "steer_by_wire": "yaw_rate",
     "dc_motor": "encoder.v_left",
     "hover_uav": "attitude.roll",  # no IMU: the imu-* aliases fall on the roll output
+    "ins": "accel.x",  # the IMU is the model's input; its channels are fault targets too
 }
 GLITCH_MAX_SAMPLES = 2  # a healthy glitch lasts one or two samples of one sensor (simulation._glitches)
 NIS_WINDOW = 10  # updates per NIS window sum (the nis detector's default, written into the profile)
@@ -174,6 +190,8 @@ class Scenario:
     # paper's scenarios excite the vehicle open loop, so a sensor fault does not feed back into the
     # flight and shows in the log as itself)
     control_on_truth: bool = False
+    controller_input: str = "on-board EKF estimate"  # what the truth says the vehicle flew on
+    truth_extra: dict = field(default_factory=dict)  # extra entries of the truth document
 
 
 def input_channel(name: str) -> str:
@@ -233,6 +251,10 @@ def build_scenario(
         sc = _dc_motor(model, dt, t, groups, aggressive, rng, changes)
         sc.speed, sc.noise = speed, noise
         return sc
+    if model_name == "ins":
+        from logscan.simulate.ins_sim import ins_scenario
+
+        return ins_scenario(model, dt, t, groups, aggressive, rng)
     builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire, "hover_uav": _hover_uav}
     return builder[model_name](model, dt, t, groups, aggressive, rng)
 
@@ -293,6 +315,8 @@ def parse_speed(text: str, duration: float) -> list[tuple[float, float]] | str:
 def _sensor_groups(model_name: str, model: Model, rate: float, noise: str = "constant") -> list[SensorGroup]:
     out = []
     for spec in sorted(model.groups.values(), key=lambda g: g.group_id):
+        if spec.name in _UNSENSED.get(model_name, ()):
+            continue
         topic, fields = _SENSOR_TOPICS.get(model_name, {}).get(spec.name, (f"/{spec.name}", spec.outputs))
         sensor_rate = _SENSOR_RATES.get(model_name, {}).get(spec.name) or rate
         ratio = max(1, int(round(rate / min(sensor_rate, rate))))

@@ -84,14 +84,11 @@ class Simulation:
         sc = self.scenario
         n = self.n_steps
         every = np.arange(n, dtype=np.int64)
-        out = [
-            Series(
-                "/cmd",
-                "logscan/Command",
-                every,
-                {ch.removeprefix("/cmd/"): self.u_cmd[:, i] for i, ch in enumerate(sc.input_channels)},
-            )
-        ]
+        inputs: dict[str, dict[str, np.ndarray]] = {}  # topic -> fields (/cmd; ins: /imu)
+        for i, ch in enumerate(sc.input_channels):
+            topic, _, name = ("/cmd", "", ch.removeprefix("/cmd/")) if ch.startswith("/cmd/") else ch.rpartition("/")
+            inputs.setdefault(topic, {})[name] = self.u_cmd[:, i]
+        out = [Series(topic, _schema(topic), every, fields) for topic, fields in inputs.items()]
         sensors: dict[str, Series] = {}
         for g, sl in zip(sc.groups, self.group_slices().values()):
             steps = every[:: g.ratio]
@@ -99,8 +96,7 @@ class Simulation:
             if g.topic in sensors:  # groups sharing a topic share its rate (see scenario)
                 sensors[g.topic].fields.update(fields)
             else:
-                schema = "logscan/" + g.topic.strip("/").replace("/", "_").title()
-                sensors[g.topic] = Series(g.topic, schema, steps, fields)
+                sensors[g.topic] = Series(g.topic, _schema(g.topic), steps, fields)
         out.extend(sensors.values())
         states = sc.model.state_names
         ratio = max(1, int(round(1.0 / (sc.dt * sc.onboard_rate_hz))))
@@ -143,7 +139,7 @@ class Simulation:
             "duration_s": self.duration,
             "rate_hz": 1.0 / sc.dt,
             "aggressive": self.aggressive,
-            "controller_input": "on-board EKF estimate",
+            "controller_input": sc.controller_input,
             "events": [e.to_truth() for e in self.events],
             "transients": [dict(e.to_truth(), kind="glitch", cause=_glitch_cause(e.target)) for e in self.transients],
             "true_state_topic": "/truth/state",
@@ -152,6 +148,7 @@ class Simulation:
         }
         if sc.speed is not None:
             doc["speed_profile"] = sc.speed
+        doc.update(sc.truth_extra)
         noisy = [g for g in sc.groups if g.noise_slope is not None]
         if noisy:  # the simulated noise std per channel, where it is not the profile's noise_std
             doc["sensor_noise_std"] = {
@@ -251,6 +248,13 @@ def sensor_aliases(sc: Scenario) -> dict[str, str]:
     return {name: next(iter(targets)) for name, targets in seen.items() if len(targets) == 1 and name not in real}
 
 
+def _schema(topic: str) -> str:
+    """Schema name of a logged topic: /cmd -> logscan/Command, /imu -> logscan/Imu."""
+    if topic == "/cmd":
+        return "logscan/Command"
+    return "logscan/" + topic.strip("/").replace("/", "_").title()
+
+
 def _split(channel: str, values: np.ndarray) -> tuple[str, dict[str, np.ndarray]]:
     topic, _, field_name = channel.rpartition("/")
     return topic, {field_name: values}
@@ -290,6 +294,19 @@ def simulate(
         raise UsageError(f"--glitches {glitches_per_min:g} per minute is out of range", hint="use 0 .. 600")
     rng = np.random.default_rng(seed)
     scenario_rng = np.random.default_rng([seed, 1])
+    if model_name == "ins":  # the IMU is the model's input: no closed loop (logscan.simulate.ins_sim)
+        from logscan.simulate.ins_sim import check_ins_faults, simulate_ins
+
+        check_ins_faults(faults or [])
+        sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
+        return simulate_ins(
+            sc,
+            list(faults or []),
+            duration=duration,
+            seed=seed,
+            aggressive=aggressive,
+            glitches_per_min=glitches_per_min,
+        )
     sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
     n_steps = sc.reference.shape[0]
     sensor_channels = [(target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)]
