@@ -27,7 +27,8 @@ _FAULT_HELP = (
     "  logscan simulate steer_by_wire --fault bias:yaw_rate:10:20:0.05 --format csv -o sbw.csv\n\n"
     "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap\n\n"
     "  logscan simulate dc_motor --speed 1.0,0.4@30 --fault bias:gps_speed:45:75:0.22 --duration 100 -o j.mcap\n\n"
-    "  logscan simulate hover_uav --fault roll-bias -o hover.mcap"
+    "  logscan simulate hover_uav --fault roll-bias -o hover.mcap\n\n"
+    "  logscan simulate ins --duration 120 --seed 3 --fault imu-bias:accel.x:60:70:1.0 -o ins.mcap"
 )
 @click.argument("model_name", metavar="MODEL")
 @click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
@@ -63,7 +64,8 @@ _FAULT_HELP = (
     "rate_hz",
     type=float,
     default=None,
-    help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20, hover_uav 100.",
+    help="Grid rate (Hz). Default: quadcopter 100, steer_by_wire 100, dc_motor 20, hover_uav 100, ins 250 "
+    "(the IMU's rate).",
 )
 @click.option(
     "--format",
@@ -126,10 +128,16 @@ def simulate(
 ) -> None:
     """Simulate MODEL in closed loop with injected faults and write the log.
 
-    MODEL is quadcopter, steer_by_wire, dc_motor or hover_uav. The log holds commands (/cmd), sensors, the
+    MODEL is quadcopter, steer_by_wire, dc_motor, hover_uav or ins. The log holds commands (/cmd), sensors, the
     on-board EKF's state and variance (/ekf/state, /ekf/variance), set-points and the true state
     (/truth/state); the fault events and the matching profile are embedded, so `logscan analyze`
     and `logscan evaluate` need no other file. Same seed, same bytes.
+
+    ins (the IMU-driven inertial navigation model) is open loop: a multirotor flies a reference
+    (hover at 10 m, then minimum-jerk moves between random waypoints); its IMU (/imu/gyro.*,
+    /imu/accel.*, 250 Hz) is the model's input and takes sensor faults (accel.x .. gyro.z, imu-*
+    aliases) like GNSS (/gnss), barometer (/baro), heading (/mag) and attitude (/mocap); actuator
+    and estimator faults do not apply.
     """
     from logscan.filters.warmup import COMPILING_NOTE
     from logscan.simulate import parse_fault, write_simulation
@@ -158,10 +166,14 @@ def simulate(
             end = None if fault_duration is None else (at if at is not None else 0.5 * duration) + fault_duration
             spec = FaultSpec(spec.kind, target, start, end, magnitude)
         specs.append(spec)
+    if model_name == "ins":  # an actuator or estimator fault fails before any progress line
+        from logscan.simulate.ins_sim import check_ins_faults
+
+        check_ins_faults(specs)
     check_speed(model_name, speed, duration)  # a bad --speed fails before any progress line
     resolve_noise(model_name, noise, speed)
     progress = show_progress(quiet)
-    cold = not quiet and _simulator_cold()
+    cold = not quiet and _simulator_cold(model_name)
     if cold:
         echo_notice(COMPILING_NOTE)
     if progress:
@@ -194,9 +206,14 @@ def simulate(
 _NOT_LOG_SUFFIXES = (".toml", ".json", ".html", ".htm", ".xml", ".js")
 
 
-def _simulator_cold() -> bool:
+def _simulator_cold(model_name: str = "") -> bool:
     """The simulator's kernel is not in numba's disk cache yet (its first run compiles it)."""
     from logscan.filters.warmup import kernel_cached
+
+    if model_name == "ins":
+        from logscan.simulate.ins_sim import apply_sensor_faults
+
+        return not kernel_cached(apply_sensor_faults)
     from logscan.simulate.runner import closed_loop
 
     return not kernel_cached(closed_loop)
