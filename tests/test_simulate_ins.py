@@ -114,9 +114,9 @@ def test_log_layout_profile_and_truth(tmp_path, cli):
     assert log.truth["controller_input"] == "none (open-loop reference trajectory)"
     assert log.truth["model"] == "ins" and log.truth["events"] == []
     assert log.channel("/flight_mode/mode").values.size == 301  # 10 Hz
-    # mode 1 only while moving: the first move starts at 20 s
-    assert np.all(sim.scenario.mode_values[sim.t < 20.0] == 0.0)
-    assert sim.scenario.mode_values[(sim.t > 20.0) & (sim.t < 23.0)].min() == 1.0
+    # mode 1 only while moving: the first move starts after the 25 s hover
+    assert np.all(sim.scenario.mode_values[sim.t < 25.0] == 0.0)
+    assert sim.scenario.mode_values[(sim.t > 25.0) & (sim.t < 28.0)].min() == 1.0
     heading = sim.z[:, sim.group_slices()["heading"]]
     assert np.nanmax(np.abs(heading)) <= np.pi
 

@@ -48,7 +48,7 @@ def _skew_into(w0, w1, w2, S):
     S[2, 2] = 0.0
 
 
-@njit(cache=True, no_cpython_wrapper=True)
+@njit(cache=True)
 def so3_exp_jr_into(w0, w1, w2, E, Jr):
     """E = Exp(w) (Rodrigues) and Jr = the right Jacobian of SO(3) at w:
     Exp(w) = I + a [w]x + b [w]x^2,  Jr(w) = I - b [w]x + c [w]x^2,

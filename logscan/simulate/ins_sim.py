@@ -3,12 +3,14 @@
 The closed-loop kernel (`logscan.simulate.runner`) drives a model's inputs from a controller; the
 `ins` model's input is a sensor, the IMU, so its simulation runs the other way round:
 
- 1. a reference trajectory (NED): hover at 10 m altitude over the origin, yaw 0, until HOVER_S,
-    then minimum-jerk moves (quintic in time, zero velocity and acceleration at both ends) to
-    random waypoints (a few metres from the previous one, within +-10 m horizontally and 5-15 m
-    altitude), each 3-6 s long and followed by a 10-20 s hold; one move in three also turns the
-    yaw (quintic, up to +-90 deg). ``aggressive``: twice the distance in the same time (twice as
-    fast). Mode 1 while moving, 0 while holding;
+ 1. a reference trajectory (NED) in cycles of CYCLE_S (60 s, as the quadcopter's): a hover of
+    HOVER_S (25 s; the first over the origin at 10 m altitude, yaw 0), then minimum-jerk moves
+    (quintic in time, zero velocity and acceleration at both ends) to random waypoints (a few
+    metres from the previous one, within +-10 m horizontally and 5-15 m altitude), each 3-6 s
+    long and followed by a 2-6 s hold, until the cycle ends; one move in three also turns the yaw
+    (quintic, up to +-90 deg). ``aggressive``: twice the distance in the same time (twice as
+    fast). Mode 1 while moving, 0 while holding. The long hovers (0-25 s, 60-85 s, ...) are the
+    steady segments the Kalman-gain-norm paper's test needs;
  2. the attitude a multirotor needs to follow it: its thrust axis along the specific force,
     b3 = -f_n / |f_n| with f_n = a_n - g e3, yaw psi: b2 = b3 x (cos psi, sin psi, 0) normalised,
     b1 = b2 x b3, R = [b1 b2 b3];
@@ -51,10 +53,11 @@ from logscan.simulate.runner import _sensor_faults
 from logscan.simulate.scenario import Scenario, SensorGroup
 from logscan.simulate.simulation import Simulation, _glitches, sensor_aliases
 
-HOVER_S = 20.0  # hover before the first move
-HOVER_DOWN = -10.0  # m, NED down of the hover (10 m altitude)
+CYCLE_S = 60.0  # a hover, then manoeuvres
+HOVER_S = 25.0  # the hover at the start of each cycle
+HOVER_DOWN = -10.0  # m, NED down of the first hover (10 m altitude)
 MOVE_S = (3.0, 6.0)  # duration of a move, uniform
-HOLD_S = (10.0, 20.0)  # hold after a move, uniform
+HOLD_S = (2.0, 6.0)  # hold after a move, uniform
 STEP_M = (3.0, 3.0, 1.5)  # largest waypoint change per axis (north, east, down), uniform +-
 BOX_NE = 10.0  # waypoints within +-10 m north and east
 ALTITUDE_M = (5.0, 15.0)  # waypoint altitude range
@@ -86,7 +89,7 @@ def _quintic(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def move_schedule(duration: float, aggressive: bool, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """The moves of a flight of ``duration`` s: start (s), length (s), waypoint before and after
     (NED m) and yaw before and after (rad, unwrapped), one row per move (the last may run past the
-    log's end). A Python loop over the moves, not the samples (one per 13-26 s)."""
+    log's end). A Python loop over the moves, not the samples (one per 5-12 s)."""
     scale = 2.0 if aggressive else 1.0
     starts, lengths, p_from, p_to, yaw_from, yaw_to = [], [], [], [], [], []
     p = np.array([0.0, 0.0, HOVER_DOWN])
@@ -95,6 +98,11 @@ def move_schedule(duration: float, aggressive: bool, rng: np.random.Generator) -
     while t < duration:
         length = rng.uniform(*MOVE_S)
         hold = rng.uniform(*HOLD_S)
+        cycle_start = np.floor(t / CYCLE_S) * CYCLE_S
+        t = max(t, cycle_start + HOVER_S)  # a hold that ran into a cycle's hover: wait it out
+        if t + length > cycle_start + CYCLE_S:  # no move across a cycle's end: the next hover starts there
+            t = cycle_start + CYCLE_S + HOVER_S
+            continue
         step = rng.uniform(-1.0, 1.0, size=3) * np.array(STEP_M) * scale
         target = p + step
         target[:2] = np.clip(target[:2], -BOX_NE, BOX_NE)
