@@ -21,9 +21,10 @@ section states).
 - Alarm: statistic kgn.<group>(w) = max over the group's columns of d_j(w), against rho, for
   ``n_persist`` consecutive judged windows (the shared alarm logic).
 - Blindness probe (`fit`, needs the model): a step of ``probe_size`` (the group's unit) on the
-  first channel of each group, for ``probe_s`` seconds in a judged segment of the first training
-  run, re-filtered; z_g = max over the probe windows and the group's columns of
-  |Nbar_fault - Nbar_clean| / s_j. z_g < rho: KGN cannot see that fault on this model and filter
+  first channel of each group, and on the first input of each sensor that drives a sensor-driven
+  model (ins: gyro_x, accel_x), for ``probe_s`` seconds in a judged segment of the training runs,
+  re-filtered; z_g = max over the probe windows and the group's columns (every column for an
+  input) of |Nbar_fault - Nbar_clean| / s_j. z_g < rho: KGN cannot see that fault on this model and filter
   (`blindness_`, result.info["blindness"] and a warning naming the groups).
 """
 
@@ -155,7 +156,9 @@ class KgnDetector(Detector):
         "rho": None,  # set to override the trained rho
         "probe_size": 1.0,  # blindness probe: step on each group's first channel, in its unit
         "probe_slope": 0.02,  # blindness probe: drift on each group's first channel, unit per s
-        "probe_s": 10.0,  # length of the probe faults, s (at most; the steady stretch may be shorter)
+        # length of the probe faults, s (at most: the steady stretch may be shorter); a drift's verdict
+        # holds for this long (0.02 unit/s reaches 0.3 units)
+        "probe_s": 15.0,
     }
     parameter_constraints = {
         "window_s": [Interval(float, 0, None, closed="neither")],
@@ -195,9 +198,10 @@ class KgnDetector(Detector):
                 continue
             for kind, v in verdict.items():
                 word = "cannot see it" if v["blind"] else "sees it"
+                lasted = f" for {v['probe_s']:.3g} s" if "probe_s" in v else ""
                 lines.append(
-                    f"    probe {group} {kind} {v['size']:g} ({v['unit']}) on {v['channel']}: z = {v['z']:.3g} "
-                    f"vs rho {v['rho']:.3g} ({word})"
+                    f"    probe {group} {kind} {v['size']:g} ({v['unit']}){lasted} on {v['channel']}: "
+                    f"z = {v['z']:.3g} vs rho {v['rho']:.3g} ({word})"
                 )
         return lines
 
@@ -320,32 +324,26 @@ class KgnDetector(Detector):
         rho = float(self.rho_)
         kinds = {"step": float(self.probe_size), "drift": float(self.probe_slope)}
         verdicts: dict = {}
-        for name in self.reference_["groups"]:
-            g = self.reference_["groups"].index(name)
-            o, s = self.reference_["offsets"][g], self.reference_["sizes"][g]
+        for name, channel, inject, cols in self._probe_targets(runs[0], model):
             for kind, size in kinds.items():
                 scores = {}
+                lasted = 0.0  # the longest probe, s
                 for key, (r, w0, count) in stretches.items():
                     run, w = runs[r], wins[r]
-                    group = run.groups.get(name)
-                    if group is None:
-                        continue
                     period = self._period(run.dt)
                     lo, hi = int(w.starts[w0]), int(w.starts[w0 + count - 1] + period)
-                    z = np.array(group.z, dtype=np.float64, copy=True)
-                    z2 = z if z.ndim == 2 else z[:, None]
-                    if kind == "step":
-                        z2[lo:hi, 0] += size
-                    else:
-                        z2[lo:hi, 0] += size * (run.t[lo:hi] - run.t[lo])
-                    faulty = dataclasses.replace(run, groups={**run.groups, name: dataclasses.replace(group, z=z)})
+                    fault = size * np.ones(hi - lo) if kind == "step" else size * (run.t[lo:hi] - run.t[lo])
+                    faulty = inject(run, lo, hi, fault)
+                    if faulty is None:
+                        continue
                     ftrace = run_ekf(model, faulty, store_gain=True, store_S=False, store_innovations=False)
                     fw = self.windows(faulty, ftrace)
-                    spread = np.asarray(self.reference_["bins"][key]["spread"], dtype=np.float64)[o : o + s]
+                    spread = np.asarray(self.reference_["bins"][key]["spread"], dtype=np.float64)[cols]
                     sl = slice(w0, w0 + count)
                     with np.errstate(invalid="ignore", divide="ignore"):
-                        dz = np.abs(fw.nbar[sl, o : o + s] - w.nbar[sl, o : o + s]) / spread
+                        dz = np.abs(fw.nbar[sl, cols] - w.nbar[sl, cols]) / spread
                     scores[key] = float(np.nanmax(dz)) if np.isfinite(dz).any() else 0.0
+                    lasted = max(lasted, float(run.t[hi - 1] - run.t[lo]) if hi > lo else 0.0)
                 if not scores:
                     continue
                 z_max = max(scores.values())
@@ -353,15 +351,59 @@ class KgnDetector(Detector):
                 verdicts.setdefault(name, {})[kind] = {
                     "size": size,
                     "unit": unit,
-                    "channel": run.groups[name].channels[0] if name in run.groups else "",
+                    "channel": channel,
                     "z": z_max,
                     "z_per_bin": scores,
+                    "probe_s": round(lasted, 3),
                     "rho": rho,
                     "blind": bool(z_max < rho),
                 }
         if not verdicts:
             return {"_note": "no steady stretch in the training logs: the probe did not run"}
         return verdicts
+
+    def _probe_targets(self, run, model) -> list:
+        """(name, channel, inject(run, lo, hi, fault) -> faulty run or None, K columns scored) of every
+        probe: each measurement group's first channel (scored on the group's columns) and, for a model
+        driven by sensors (ins: the IMU), the first input of each sensor (gyro_x, accel_x), scored on
+        every column (an input has none of its own)."""
+        ref = self.reference_
+
+        def on_group(name):
+            def inject(r, lo, hi, fault):
+                group = r.groups.get(name)
+                if group is None:
+                    return None
+                z = np.array(group.z, dtype=np.float64, copy=True)
+                (z if z.ndim == 1 else z[:, 0])[lo:hi] += fault
+                return dataclasses.replace(r, groups={**r.groups, name: dataclasses.replace(group, z=z)})
+
+            return inject
+
+        def on_input(col):
+            def inject(r, lo, hi, fault):
+                u = np.array(r.u, dtype=np.float64, copy=True)
+                u[lo:hi, col] += fault
+                return dataclasses.replace(r, u=u)
+
+            return inject
+
+        out = []
+        for g, name in enumerate(ref["groups"]):
+            o, s = ref["offsets"][g], ref["sizes"][g]
+            channel = run.groups[name].channels[0] if name in run.groups else ""
+            out.append((name, channel, on_group(name), slice(o, o + s)))
+        if getattr(model, "inputs_are_sensors", False):
+            every = slice(0, int(sum(ref["sizes"])))
+            seen = set()
+            for col, input_name in enumerate(model.input_names):
+                sensor = input_name.rsplit("_", 1)[0]
+                if sensor in seen:
+                    continue
+                seen.add(sensor)
+                channel = run.input_channels[col] if col < len(run.input_channels) else input_name
+                out.append((f"{sensor} (input)", channel, on_input(col), every))
+        return out
 
     # --- detection ----------------------------------------------------------------------------------
     def _run(self, run, trace, **context) -> DetectorResult:

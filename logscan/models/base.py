@@ -93,6 +93,7 @@ class Model:
     model_id: int = -1
     state_names: tuple[str, ...] = ()
     input_names: tuple[str, ...] = ()
+    inputs_are_sensors: bool = False  # True when the inputs are sensor readings (ins: the IMU), not commands
     groups: dict[str, GroupSpec] = {}
 
     def __init__(self, params: dict | None = None):

@@ -60,6 +60,7 @@ class Ins(Model):
         "baro_offset",
     )
     input_names = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
+    inputs_are_sensors = True  # the IMU: its faults are sensor faults (the KGN blindness probe tries them)
     groups = {
         "gnss_position": GroupSpec(
             "gnss_position",
