@@ -117,6 +117,15 @@ SAMPLES = (
         "thesis's attack); speed-dependent sensor noise",
     ),
     Sample(
+        "ins_imu_bias.mcap",
+        "ins",
+        ("imu-bias:accel.x:15:25:1.0",),
+        15,
+        30.0,
+        about="the IMU-driven INS (250 Hz IMU as the model's input; GNSS, baro, heading, attitude): "
+        "+1.0 m/s^2 on accelerometer x in the first hover",
+    ),
+    Sample(
         "hover_healthy.mcap",
         "hover_uav",
         (),

@@ -27,6 +27,7 @@ FAULTY = [
     "sbw_yaw_rate_bitflip.mcap",
     "jackal_gps_bias.mcap",
     "hover_rotor_offset.mcap",
+    "ins_imu_bias.mcap",
 ]
 
 
