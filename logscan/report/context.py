@@ -67,7 +67,8 @@ def _topic_rows(facts: Mapping) -> list[dict]:
             "name": str(name),
             "messages": str(info.get("message_count", "—")),
             "rate": number_text(info.get("rate_hz"), 3),
-            "read": any(f"{name}/{f}" in channels for f in fields),
+            # MCAP topics start with "/" as their channels do; a ULog topic (sensor_combined_0) does not
+            "read": any(f"{name}/{f}" in channels or f"/{name}/{f}" in channels for f in fields),
         })  # fmt: skip
     return sorted(rows, key=lambda r: (not r["read"], r["name"]))
 
