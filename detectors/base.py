@@ -33,7 +33,9 @@ Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.mo
 ``log_name``, ``traces`` (every filter trace the pipeline ran, by filter name), ``alarm_policy``
 (the profile's alarm floors, applied by `new_result` to every statistic), ``truth`` (a simulated
 log's ground truth: fault events and transients; None for real logs; never used to detect, only to
-report against, e.g. fusion error against the fault-free fusion).
+report against, e.g. fusion error against the fault-free fusion), ``raw`` (the channels of the
+detector's `raw_topics` present in the log, as read: channel name -> logscan.log.Channel) and
+``metadata`` (the log's metadata: ULog info and parameters, MCAP metadata records).
 The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
 module does not import the filter layer.
 """
@@ -130,6 +132,11 @@ class Detector:
     # gain and innovation series, the run's on-board estimates) `run` reads. The pipeline frees each
     # once no detector still to run reads it. None: not declared, nothing is freed before it runs.
     reads: ClassVar[frozenset[str] | None] = None
+    # Source topics (ULog ``topic_instance`` names, MCAP topics) the detector reads from the log
+    # itself, beyond the profile's channels (e.g. the autopilot's own estimator status). The pipeline
+    # decodes those present and passes their channels, unaligned, as the context keyword ``raw``
+    # (channel name -> logscan.log.Channel), with the log's metadata as ``metadata``.
+    raw_topics: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, **params: Any) -> None:
         self.params = {**copy.deepcopy(dict(self.defaults)), **params}

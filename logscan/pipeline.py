@@ -85,6 +85,7 @@ class Prepared:
     _filter_summary: dict | None = None
     context: Any = None  # logscan.run_context.RunContext: the path and mode the report draws (small)
     innovations: Any = None  # logscan.sensor_views.Innovations: the report's measured-vs-predicted figures
+    raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
@@ -162,6 +163,22 @@ def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) 
     return detectors
 
 
+def raw_topics_of(detectors: Sequence) -> frozenset[str]:
+    """The source topics the detectors read from the log itself (`Detector.raw_topics`)."""
+    return frozenset(topic for detector in detectors for topic in getattr(detector, "raw_topics", ()))
+
+
+def raw_channels(log, topics: frozenset[str]) -> dict:
+    """The log's channels under ``topics`` (``/topic/field`` or ``topic/field``), as read."""
+    if not topics:
+        return {}
+    return {
+        name: channel
+        for name, channel in log.channels.items()
+        if name.lstrip("/").split("/", 1)[0] in topics or name in topics
+    }
+
+
 def needs_of(detectors: Sequence) -> Callable[[Any], Needs]:
     """The union of the detectors' needs, as a function of the aligned run they depend on."""
     return lambda run: union(detector.needs(run) for detector in detectors)
@@ -177,10 +194,12 @@ def prepare(
     notice: Progress | None = None,
     start_s: float | None = None,
     end_s: float | None = None,
+    raw_topics: frozenset[str] = frozenset(),
 ) -> Prepared:
-    """Read only the topics the profile needs, align them, and run each filter the needs ask for
-    exactly once. ``needs`` may be a function of the aligned run (needs can follow what the log
-    holds, e.g. K and S only when it carries no on-board variances). ``notice`` hears the one
+    """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
+    ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
+    may be a function of the aligned run (needs can follow what the log holds, e.g. K and S only
+    when it carries no on-board variances). ``notice`` hears the one
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
     from logscan.align import align
@@ -195,10 +214,11 @@ def prepare(
     model = get_model(profile.vehicle.model, profile.vehicle.params)
     compiling = _start_compile(model, needs, notice)
     step("reading")
-    log = read_log(path, topics=profile.topics(), use_header_stamp=use_header_stamp)
+    log = read_log(path, topics=profile.topics() | set(raw_topics), use_header_stamp=use_header_stamp)
     profile.check_channels(log)
     step("aligning")
     run = align(log, profile, start_s=start_s, end_s=end_s)
+    raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
     log.release_samples()  # the run holds what the filters and detectors read from here on
     if run.n_steps < 2:
         raise LogscanError(
@@ -207,7 +227,9 @@ def prepare(
             hint="check the profile's channels and rate_hz against `logscan inspect`",
         )
     wanted = needs(run) if callable(needs) else needs
-    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=run_context(run, model))
+    prepared = Prepared(
+        path=path, log=log, loaded=loaded, model=model, run=run, context=run_context(run, model), raw=raw
+    )
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)
@@ -281,6 +303,8 @@ def detect(
                 traces=prepared.traces,
                 alarm_policy=policy,
                 truth=prepared.log.truth,  # simulated logs' ground truth, None for real logs
+                raw=prepared.raw,
+                metadata=prepared.log.source.metadata,
             )
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
             analysis.failures.append(detector_failure(detector.name, exc))
@@ -417,7 +441,8 @@ def analyze_log(
         detectors = apply_tables(detectors, trained, loaded.profile)
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
-    prepared = prepare(path, loaded, needs, progress=progress, notice=notice, **options)
+    raw = raw_topics_of(detectors)
+    prepared = prepare(path, loaded, needs, progress=progress, notice=notice, raw_topics=raw, **options)
     return detect(
         prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series, sensor_views=sensor_views
     )
