@@ -38,6 +38,7 @@ BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.atfm_residual:AtfmResidualDetector",
     "logscan.detectors.ubikf_chi2:Chi2Detector",
     "logscan.detectors.kgn:KgnDetector",
+    "logscan.detectors.px4_estimator:Px4EstimatorDetector",
 ]
 
 BUILTIN = "built-in"
