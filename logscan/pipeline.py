@@ -68,7 +68,8 @@ class LoadedProfile:
 
     profile: Any  # logscan.profiles.Profile
     text: str
-    source: str
+    source: str  # a file path, "embedded", or "built-in <name>"
+    notes: list[str] = field(default_factory=list)  # what a built-in profile left out, one line each
 
 
 @dataclass
@@ -124,7 +125,8 @@ class Prepared:
 
 
 def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
-    """The profile of a log: the file given, else the one the log embeds (a metadata-only read)."""
+    """The profile of a log: the file given, else the one the log embeds (a metadata-only read), else
+    the built-in profile of a log that names itself (a PX4 ULog: `logscan.profiles.builtin`)."""
     from logscan.profiles import load_profile, parse_profile
     from logscan.readers import read_embedded_profile
 
@@ -133,12 +135,31 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
         return LoadedProfile(profile, profile.to_toml(), str(profile_path))
     embedded = read_embedded_profile(path)
     if not embedded:
+        built = builtin_profile_for(path)
+        if built is not None:
+            profile = parse_profile(built.text, source=f"{path} (built-in profile {built.name})")
+            notes = [f"built-in profile {built.name}: {note}" for note in built.notes]
+            return LoadedProfile(profile, built.text, f"built-in {built.name}", notes)
         raise ProfileError(
             "no profile: the log embeds none",
             path=str(path),
             hint="pass --profile PROFILE.toml (see docs/profiles.md)",
         )
     return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
+
+
+def builtin_profile_for(path: str | os.PathLike):
+    """The built-in profile (`logscan.profiles.builtin.BuiltProfile`) of a log that names itself,
+    else None; reads only the topics the built-in profile may use."""
+    from logscan.profiles import builtin
+    from logscan.readers import detect_format, read_log
+
+    if path is None or detect_format(path) != "ulog":
+        return None
+    log = read_log(path, topics=builtin.PX4_TOPICS)
+    if builtin.identify(log) != "px4":
+        return None
+    return builtin.px4_profile(log)
 
 
 def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
@@ -236,6 +257,7 @@ def prepare(
     else:
         prepared.warnings.extend(log.source.warnings)
     prepared.warnings.extend(run.warnings)
+    prepared.warnings.extend(loaded.notes)
     if log.source.partial:
         prepared.warnings.append(f"partial read: {log.source.partial_reason}")
     for name, parts in wanted.filters.items():
@@ -310,6 +332,7 @@ def detect(
             analysis.failures.append(detector_failure(detector.name, exc))
             continue
         analysis.results.append(result)
+    analysis.warnings[:0] = consistency_warnings(prepared)  # first: they question every verdict below
     gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
     merge_fragments(analysis.results, gap_s)
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
@@ -317,6 +340,39 @@ def detect(
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     _score(analysis, [d.name for d in detectors], grace_s)
     return analysis
+
+
+# A group's mean NIS per output far from 1 on a whole log: the filter's model of it is wrong. Above
+# NIS_MISMATCH the samples disagree with the prediction far beyond their noise (units, signs,
+# frames, a wrong channel); below 1 / NIS_MISMATCH**2 its noise_std dwarfs the data's scatter, so a
+# fault of that size hides. Checked only with enough updates to mean something.
+NIS_MISMATCH = 10.0
+NIS_MIN_UPDATES = 20
+
+
+def consistency_warnings(prepared: Prepared) -> list[str]:
+    """One warning per measurement group whose mean NIS per output is far from 1 (see NIS_MISMATCH)."""
+    summary = prepared.filter_summary()
+    trace = prepared.trace
+    if summary is None or trace is None:
+        return []
+    out = []
+    for name, size in zip(trace.group_names, trace.group_sizes.tolist()):
+        mean = summary["mean_nis"].get(name)
+        if mean is None or summary["updates"].get(name, 0) < NIS_MIN_UPDATES or not size:
+            continue
+        ratio = mean / size
+        if ratio > NIS_MISMATCH:
+            out.append(
+                f"group {name!r}: mean NIS per output {ratio:.3g} (about 1 expected): model or profile mismatch, "
+                "check units, signs and frames of its channels, or its noise_std (docs/troubleshooting.md)"
+            )
+        elif ratio < 1.0 / NIS_MISMATCH**2:
+            out.append(
+                f"group {name!r}: mean NIS per output {ratio:.3g} (about 1 expected): its noise_std is far larger "
+                "than the data's scatter, so faults of that size hide; lower noise_std"
+            )
+    return out
 
 
 def _pack_innovations(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:

@@ -1,0 +1,78 @@
+"""Built-in profiles (logscan.profiles.builtin) and the filter-consistency warnings.
+
+A PX4 ULog with no profile gets the `px4` profile of the ins model, built from its topics: each of
+the real PX4 logs of ../shared/testdata/px4-ulog is analysed with no flags (exit 0 or 1, never 2).
+A deliberately mis-scaled profile draws the "model or profile mismatch" warning, a sound one none.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from conftest import need_testdata
+
+from logscan.pipeline import builtin_profile_for, consistency_warnings
+from logscan.profiles import parse_profile
+from logscan.readers import read_embedded_profile
+
+PX4_LOGS = [
+    "sample_log_small.ulg",
+    "sample_logging_tagged_and_default_params.ulg",
+    "sample_px4_events.ulg",
+    "sample_appended_multiple.ulg",
+]
+
+
+@pytest.mark.parametrize("name", PX4_LOGS)
+def test_px4_log_gets_the_builtin_profile_and_is_analysed_with_no_flags(name, cli, tmp_path):
+    path = need_testdata(f"px4-ulog/{name}")
+    built = builtin_profile_for(path)
+    assert built is not None and built.name == "px4"
+    profile = parse_profile(built.text)
+    assert profile.vehicle.model == "ins" and profile.vehicle.rate_hz >= 50
+    assert {"gnss_position", "baro", "attitude"} <= set(profile.measurements)
+    summary = tmp_path / "summary.json"
+    result = cli("analyze", str(path), "-o", str(tmp_path / "report.html"), "--json", str(summary))
+    assert result.exit_code in (0, 1), result.stdout + result.stderr
+    entry = json.loads(summary.read_text())["logs"][0]
+    assert entry["model"] == "ins" and entry["profile_source"].startswith("built-in")
+    assert entry["filter"]["divergence_episodes"] == 0
+    assert min(entry["filter"]["updates"].values()) >= 20
+
+
+def test_the_builtin_profile_uses_the_logs_own_ekf2_noise_and_notes_what_it_left_out():
+    path = need_testdata("px4-ulog/sample_appended_multiple.ulg")
+    built = builtin_profile_for(path)
+    profile = parse_profile(built.text)
+    # this early log has no GNSS topic: PX4's local position stands in, said in a note
+    assert "/vehicle_local_position_0/x" in profile.measurements["gnss_position"].channels
+    assert "gnss_velocity" not in profile.measurements
+    assert any("local position" in note for note in built.notes)
+    assert profile.measurements["baro"].noise_std == [2.0]  # its EKF2_BARO_NOISE (PX4's default: 3.5)
+
+
+def test_a_log_that_does_not_name_itself_gets_no_builtin_profile(sample):
+    assert builtin_profile_for(sample("quad_healthy.csv")) is None
+    assert builtin_profile_for(sample("quad_healthy.mcap")) is None
+
+
+def test_mis_scaled_profile_draws_the_mismatch_warning_and_the_sound_one_none(sample, tmp_path):
+    from logscan.pipeline import LoadedProfile, create_detectors, needs_of, prepare
+
+    path = sample("quad_healthy.mcap")
+    text = read_embedded_profile(path)
+    sound = parse_profile(text)
+    prepared = prepare(
+        path, LoadedProfile(sound, text, "embedded"), needs_of(create_detectors(LoadedProfile(sound, text, "x")))
+    )
+    assert consistency_warnings(prepared) == []
+    # an accelerometer logged in another unit (twice the value): the filter's fit of it falls apart
+    wrong = text.replace("[measurements.accel]\n", "[measurements.accel]\nscale = 2.0\n")
+    assert wrong != text
+    bad = parse_profile(wrong)
+    loaded = LoadedProfile(bad, wrong, "embedded")
+    prepared = prepare(path, loaded, needs_of(create_detectors(loaded)))
+    warnings = consistency_warnings(prepared)
+    (warning,) = [w for w in warnings if "group 'accel'" in w]
+    assert "mismatch" in warning and "units" in warning
