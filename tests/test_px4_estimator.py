@@ -93,8 +93,10 @@ def profile(tmp_path) -> Path:
     return path
 
 
-def analyze(cli, log: Path, profile: Path, *detectors: str) -> tuple[int, dict]:
-    args = ["analyze", str(log), "--profile", str(profile), "--json", "-"]
+def analyze(cli, log: Path, profile: Path, *detectors: str, report: Path) -> tuple[int, dict]:
+    """`logscan analyze` with ``detectors`` (px4_estimator by default): exit code and the log's JSON
+    entry; the HTML report goes to ``report`` (its figures draw every statistic)."""
+    args = ["analyze", str(log), "--profile", str(profile), "--json", "-", "-o", str(report)]
     for name in detectors or ("px4_estimator",):
         args += ["--detector", name]
     result = cli(*args)
@@ -124,7 +126,7 @@ def test_the_crafted_ulog_is_read_by_pyulog_and_logscan(tmp_path, cli):
 
 
 def test_gps_hpos_over_its_gate_for_10_s_is_one_alarm_and_a_short_baro_spike_none(tmp_path, cli, profile):
-    code, entry = analyze(cli, new_style_log(tmp_path / "new.ulg"), profile)
+    code, entry = analyze(cli, new_style_log(tmp_path / "new.ulg"), profile, report=tmp_path / "report.html")
     assert code == 1
     result = detector_entry(entry)
     assert {"px4.gps_hpos", "px4.baro_vpos", "px4.heading", "px4.pos_test_ratio", "px4.hgt_test_ratio"} <= set(
@@ -141,18 +143,19 @@ def test_gps_hpos_over_its_gate_for_10_s_is_one_alarm_and_a_short_baro_spike_non
     assert result["series"]["px4.baro_vpos"]["max"] == pytest.approx(5.0)  # the spike was read
     assert {a["signal"] for a in result["alarms"]} == {"px4.gps_hpos", "px4.pos_test_ratio"}
     assert result["warnings"] == [] and entry["unchecked"] == []
+    assert "px4.gps_hpos" in (tmp_path / "report.html").read_text(encoding="utf-8")  # drawn in the report
 
 
 def test_a_shorter_duration_lets_the_spike_through(tmp_path, cli, profile):
     text = profile.read_text(encoding="utf-8") + "\n[detectors.px4_estimator]\nmin_duration_s = 0.3\n"
     profile.write_text(text, encoding="utf-8")
-    _, entry = analyze(cli, new_style_log(tmp_path / "new.ulg"), profile)
+    _, entry = analyze(cli, new_style_log(tmp_path / "new.ulg"), profile, report=tmp_path / "report.html")
     baro = [a for a in detector_entry(entry)["alarms"] if a["signal"] == "px4.baro_vpos"]
     assert len(baro) == 1 and 40.0 <= baro[0]["start"] <= 40.5
 
 
 def test_ekf2_innovations_ratios_use_the_logs_gates(tmp_path, cli, profile):
-    code, entry = analyze(cli, legacy_log(tmp_path / "legacy.ulg"), profile)
+    code, entry = analyze(cli, legacy_log(tmp_path / "legacy.ulg"), profile, report=tmp_path / "report.html")
     assert code == 1
     result = detector_entry(entry)
     assert result["info"]["sources"]["px4.gps_hpos"] == "ekf2_innovations_0"
@@ -170,7 +173,7 @@ def test_ekf2_innovations_ratios_use_the_logs_gates(tmp_path, cli, profile):
 
 
 def test_no_estimator_topics_is_a_warning_and_not_checked(tmp_path, cli, profile):
-    code, entry = analyze(cli, no_ratio_log(tmp_path / "plain.ulg"), profile)
+    code, entry = analyze(cli, no_ratio_log(tmp_path / "plain.ulg"), profile, report=tmp_path / "report.html")
     result = detector_entry(entry)
     assert result["n_alarms"] == 0
     assert result["warnings"] == [NO_RATIOS]
@@ -212,10 +215,10 @@ REAL_LOGS = {
 
 
 @pytest.mark.parametrize(("log", "case"), sorted(REAL_LOGS.items()))
-def test_real_px4_logs(log, case, cli, capsys):
+def test_real_px4_logs(log, case, cli, capsys, tmp_path):
     profile, topic = case
     path = need_testdata(Path("px4-ulog") / log)
-    code, entry = analyze(cli, path, EXAMPLES / profile, "px4_estimator", "nis")
+    code, entry = analyze(cli, path, EXAMPLES / profile, "px4_estimator", "nis", report=tmp_path / "report.html")
     assert code in (0, 1)
     assert detector_entry(entry, "nis")["series"]
     result = detector_entry(entry)
