@@ -76,3 +76,25 @@ def test_mis_scaled_profile_draws_the_mismatch_warning_and_the_sound_one_none(sa
     warnings = consistency_warnings(prepared)
     (warning,) = [w for w in warnings if "group 'accel'" in w]
     assert "mismatch" in warning and "units" in warning
+
+
+def test_init_profile_writes_the_builtin_profile_and_never_replaces_a_file(cli, tmp_path):
+    path = need_testdata("px4-ulog/sample_px4_events.ulg")
+    out = tmp_path / "px4.toml"
+    assert cli("init-profile", str(path), "-o", str(out)).exit_code == 0
+    text = out.read_text()
+    assert 'model = "ins"' in text and "# logscan built-in profile `px4`" in text
+    assert parse_profile(text).measurements["gnss_position"].source == "geodetic"
+    again = cli("init-profile", str(path), "-o", str(out))
+    assert again.exit_code == 2 and "never replaces" in again.stderr
+    assert out.read_text() == text
+    # the written profile, passed back, analyses the log as the built-in one does
+    result = cli("analyze", str(path), "--profile", str(out), "--no-report")
+    assert result.exit_code in (0, 1), result.stderr
+
+
+def test_analyze_print_profile_shows_the_profile_used(cli, sample):
+    result = cli("analyze", sample("quad_healthy.mcap"), "--no-report", "--print-profile")
+    assert result.exit_code == 0
+    assert "# profile for" in result.stdout and "(embedded)" in result.stdout
+    assert 'model = "quadcopter"' in result.stdout

@@ -26,6 +26,18 @@ from logscan.errors import ExitCode, UsageError
 SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field changes it
 
 
+def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
+    """--print-profile: each log's profile as TOML, headed by where it comes from."""
+    from logscan.pipeline import load_profile_for
+
+    for log in logs:
+        loaded = load_profile_for(log, profile_path)
+        click.echo(f"# profile for {log} ({loaded.source})", err=err)
+        for note in loaded.notes:
+            click.echo(f"# {note}", err=err)
+        click.echo(loaded.text.rstrip("\n") + "\n", err=err)
+
+
 @click.command(
     epilog="Examples:\n\n"
     "  logscan analyze sample_logs/quad_imu_bias.mcap\n\n"
@@ -118,6 +130,13 @@ SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field
     help="Print one GitHub Actions '::error' line per alarm and '::warning' per possible fault or "
     "unchecked part, so they show on the workflow run.",
 )
+@click.option(
+    "--print-profile",
+    is_flag=True,
+    default=False,
+    help="Print the profile each log is analysed with (the file given, the log's embedded one, or the "
+    "built-in one a PX4 log gets), as TOML, before analysing it.",
+)
 @start_option
 @end_option
 @header_stamp_option
@@ -140,6 +159,7 @@ def analyze(
     junit_path: str | None,
     markdown_path: str | None,
     github_annotations: bool,
+    print_profile: bool,
     start_s: float | None,
     end_s: float | None,
     use_header_stamp: bool,
@@ -172,6 +192,8 @@ def analyze(
 
         read_tables(tables_path)
     logs = expand_logs(log_paths)
+    if print_profile:
+        _print_profiles(logs, profile_path, err=json_path == "-")
     reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
     plotlyjs_dir = None if no_report else plotlyjs_dir
     plotly_js = _plotly_js_path(plotlyjs_dir)

@@ -68,6 +68,7 @@ _COMMANDS = [
     "logscan.cli.detectors_cmd:detectors",
     "logscan.cli.evaluate_cmd:evaluate",
     "logscan.cli.train_cmd:train",
+    "logscan.cli.profile_cmd:init_profile",
 ]
 
 
