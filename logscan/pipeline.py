@@ -493,7 +493,7 @@ def analyze_log(
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
     trained = tables_path(None if tables is None else str(tables), loaded.profile)
-    if trained is not None:
+    if trained is not None:  # the trained detectors, and the filter's calibrated noise in the profile
         detectors = apply_tables(detectors, trained, loaded.profile)
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)

@@ -55,13 +55,8 @@ def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
     if not names:
         registry = default_registry()
         chosen += [n for n in registry.names() if n not in chosen and registry.get(n).asked_for_by(loaded.profile)]
-    trainable = [d for d in create_detectors(loaded, chosen) if d.learns()]
-    if not trainable:
-        raise UsageError(
-            "nothing to train: no detector of this profile learns from healthy logs",
-            hint="add a [redundant.<name>] group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
-        )
-    return trainable
+    # none may learn: `logscan train --calibrate` still calibrates the filter (logscan.calibration)
+    return [d for d in create_detectors(loaded, chosen) if d.learns()]
 
 
 def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
@@ -75,8 +70,11 @@ def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
     return list(detectors)
 
 
-def tables_document(detectors: Sequence, logs: Sequence[str] = (), profile=None) -> dict[str, Any]:
-    """The tables JSON: format, version, what it was trained on, and each detector's trained state."""
+def tables_document(
+    detectors: Sequence, logs: Sequence[str] = (), profile=None, calibration: dict | None = None
+) -> dict[str, Any]:
+    """The tables JSON: format, version, what it was trained on, the filter's calibrated
+    measurement noise (`logscan.calibration`) and each detector's trained state."""
     from logscan import __version__
 
     return {
@@ -89,6 +87,7 @@ def tables_document(detectors: Sequence, logs: Sequence[str] = (), profile=None)
             {"name": os.path.basename(p), "path": str(p), "bytes": os.path.getsize(p), "sha256": file_sha256(p)}
             for p in logs
         ],
+        "calibration": calibration,
         "detectors": [d.to_state() for d in detectors if d.trained_attributes],
     }
 
@@ -145,7 +144,10 @@ def tables_path(option: str | None, profile) -> str | None:
 def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     """``detectors`` with the trained state of ``path`` (trained for this profile, else exit 2):
     each detector the tables hold is replaced by its trained self, its run-time parameters taken
-    from the profile; the others are kept."""
+    from the profile; the others are kept. The tables' calibrated measurement noise is set in
+    ``profile`` (`logscan.calibration.apply_calibration`): the filter then runs as in training."""
+    from logscan.calibration import apply_calibration
+
     document = read_tables_document(path)
     fingerprint = document.get("profile_fingerprint")
     if fingerprint != profile_fingerprint(profile):
@@ -156,6 +158,8 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
             hint=f"retrain with `logscan train LOGS --profile {profile.source} -o {path}`",
         )
     trained = read_tables(path)
+    # after the profile check: the calibrated noise changes the profile it fingerprints
+    apply_calibration(profile, document.get("calibration"))
     out = []
     for detector in detectors:
         fitted = trained.get(detector.name)
@@ -169,12 +173,19 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
 
 
 def train_logs(
-    logs: Sequence[str], profile_path: str | None, *, allow_faulty: bool = False, progress=None, notice=None
+    logs: Sequence[str],
+    profile_path: str | None,
+    *,
+    allow_faulty: bool = False,
+    calibrate: bool = False,
+    progress=None,
+    notice=None,
 ) -> dict[str, Any]:
-    """`logscan train`: prepare each healthy log, fit the trainable detectors, return the tables
-    document. Without ``profile_path`` every log's embedded profile must match the first's."""
+    """`logscan train`: prepare each healthy log, with ``calibrate`` calibrate the filter's
+    measurement noise on them (the detectors are then fitted on the calibrated filter), fit the
+    trainable detectors, return the tables document. Without ``profile_path`` every log's own
+    profile (embedded or built-in) must match the first's."""
     from logscan.pipeline import load_profile_for, needs_of, prepare
-    from logscan.profiles import parse_profile
     from logscan.readers import read_embedded
 
     step = progress or (lambda message: None)
@@ -183,10 +194,17 @@ def train_logs(
     loaded = load_profile_for(logs[0], profile_path)
     detectors = trainable_detectors(loaded)
     fingerprint = profile_fingerprint(loaded.profile)
+    if not detectors and not calibrate:
+        raise UsageError(
+            "nothing to train: no detector of this profile learns from healthy logs",
+            hint="pass --calibrate to calibrate the filter's measurement noise, add a [redundant.<name>] "
+            "group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
+        )
+    needs = _with_ekf(needs_of(detectors)) if calibrate else needs_of(detectors)
     prepared = []
     for number, path in enumerate(logs, 1):
         step(f"reading {path} ({number}/{len(logs)})")
-        embedded_profile, truth = read_embedded(path)  # one metadata read: the truth and the profile
+        _, truth = read_embedded(path)  # one metadata read: the truth
         faults = ((truth or {}).get("events")) or []
         if faults and not allow_faulty:
             raise InputError(
@@ -194,23 +212,50 @@ def train_logs(
                 path=path,
                 hint="train on healthy logs only, or pass --allow-faulty",
             )
-        if profile_path is None and number > 1 and not embedded_profile:
-            raise ProfileError("no profile: the log embeds none", path=path, hint="pass --profile PROFILE.toml")
         own = loaded.profile
         if profile_path is None and number > 1:
-            own = parse_profile(embedded_profile, source=f"{path} (embedded profile)")
+            own = load_profile_for(path, None).profile  # embedded, or built-in (a PX4 log)
         if profile_fingerprint(own) != fingerprint:
             raise ProfileError(
                 f"its embedded profile differs from {logs[0]}'s (vehicle, inputs, measurements, mode or redundant)",
                 path=path,
                 hint="train logs of one profile together, or pass --profile",
             )
-        one = prepare(path, loaded, needs_of(detectors), notice=notice)
+        one = prepare(path, loaded, needs, notice=notice)
         if one.log.source.partial:
             raise InputError(
                 f"read in part ({one.log.source.partial_reason})", path=path, hint="train on complete logs"
             )
         prepared.append(one)
-    step("fitting " + ", ".join(d.name for d in detectors))
-    fit_detectors(detectors, prepared)
-    return tables_document(detectors, logs, loaded.profile)
+    calibration = None
+    if calibrate:
+        step("calibrating the measurement noise")
+        calibration = calibrate_prepared(prepared, needs)
+    if detectors:
+        step("fitting " + ", ".join(d.name for d in detectors))
+        fit_detectors(detectors, prepared)
+    return tables_document(detectors, logs, loaded.profile, calibration)
+
+
+def _with_ekf(needs):
+    """``needs`` plus the EKF's default trace (calibration filters every training log)."""
+    from logscan.needs import Needs
+
+    return lambda run: needs(run) | Needs.of(ekf=())
+
+
+def calibrate_prepared(prepared: Sequence, needs) -> dict:
+    """Calibrate the measurement noise on the prepared healthy logs (`logscan.calibration`), then
+    put the calibrated noise in their runs and re-run their filters, so the detectors are fitted on
+    the filter `logscan analyze --tables` runs."""
+    from logscan.calibration import calibrate, calibrated_runs
+    from logscan.pipeline import FILTERS
+
+    calibration = calibrate(prepared[0].model, [p.run for p in prepared])
+    for one, run in zip(prepared, calibrated_runs([p.run for p in prepared], calibration)):
+        one.run = run
+        one.traces = {
+            name: FILTERS[name](one.model, run, frozenset(parts)) for name, parts in needs(run).filters.items()
+        }
+        one._filter_summary = None
+    return calibration

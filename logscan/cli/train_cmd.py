@@ -30,6 +30,14 @@ from logscan.cli.options import echo_notice, profile_option, quiet_option, show_
     help="Train on logs whose ground truth lists faults (refused by default: a table trained on a fault "
     "tolerates it).",
 )  # fmt: skip
+@click.option(
+    "--calibrate",
+    is_flag=True,
+    default=False,
+    help="Also calibrate the filter's measurement noise: scale each group's noise_std until its mean NIS "
+    "per output on these logs is 1 (for real logs whose sensors' noise the profile only guesses); "
+    "the detectors are then fitted on the calibrated filter.",
+)
 @quiet_option
 def train(
     log_paths: tuple[str, ...],
@@ -38,12 +46,17 @@ def train(
     report_path: str | None,
     no_report: bool,
     allow_faulty: bool,
+    calibrate: bool,
     quiet: bool,
 ) -> None:
-    """Train the lookup tables and thresholds of the profile's detectors on healthy logs.
+    """Train the lookup tables and thresholds of the profile's detectors on healthy logs (and, with
+    --calibrate, the filter's measurement noise).
 
-    LOG_OR_DIR are healthy logs (or directories of them) of one vehicle and profile. Every
-    detector that learns from healthy logs is fitted: the A-TFM table of each [redundant] group
+    LOG_OR_DIR are healthy logs (or directories of them) of one vehicle and profile. With
+    --calibrate the filter's measurement noise is calibrated first: each group's noise_std is
+    scaled until its mean NIS per output on these logs is 1 (`logscan analyze --tables` then
+    filters with it). Every detector that learns from healthy logs is fitted (on the calibrated
+    filter with --calibrate): the A-TFM table of each [redundant] group
     (eps and e per sensor and mode value), and the thresholds of the detectors the profile runs in a
     trained variant. Writes one versioned JSON (the training logs' names and SHA-256, the profile's
     fingerprint) for `logscan analyze --tables`, and a training report. Exit 0, or 2 on bad input.
@@ -61,7 +74,12 @@ def train(
             click.echo(f"logscan: {message}", err=True)
 
     document = train_logs(
-        logs, profile_path, allow_faulty=allow_faulty, progress=step, notice=None if quiet else echo_notice
+        logs,
+        profile_path,
+        allow_faulty=allow_faulty,
+        calibrate=calibrate,
+        progress=step,
+        notice=None if quiet else echo_notice,
     )
     _write(output_path, report, document)
     if not quiet:
@@ -91,7 +109,12 @@ def _summary_lines(document: dict, output_path: str, report: str | None) -> list
     from logscan.detectors.registry import default_registry
 
     registry = default_registry()
+    from logscan.calibration import calibration_lines
+
     lines = [f"trained on {len(document['training_logs'])} log(s): {output_path}"]
+    if document.get("calibration"):
+        lines.append("  measurement noise calibrated (mean NIS per output -> 1):")
+        lines.extend("  " + line for line in calibration_lines(document["calibration"]))
     for state in document["detectors"]:
         lines.extend(registry.get(state["detector"]).state_lines(state))
     if report is not None:
