@@ -14,11 +14,14 @@ above ``ratio`` (1.0) for ``min_duration_s`` (2 s). Where the ratios are, by PX4
 - v1.6-1.8: ``ekf2_innovations`` (innovations and their variances: the ratio is computed here
   with the log's EKF2_*_GATE parameters, PX4's defaults when absent) and ``estimator_status``.
 
-Each statistic lives on the analysis grid: a sample counts at the first grid step at or after its
-time (the max of the samples that fall on one step); steps without a sample are not judged. A ratio
-of exactly 0 (a source not fused) or a non-finite one is no evidence: not judged. A source with no
-such sample over the log is not reported (listed in ``info["unused"]``). Several EKF2 instances
-(multi-EKF): statistics per instance, ``px4.ekf<i>.<source>``.
+A ratio is judged only while PX4 fuses its source (``estimator_status_flags`` cs_* of the same
+instance, v1.12+; an ``estimator_aid_src_*`` sample's own ``fused`` field): before GNSS is
+accepted or for a sensor PX4 ignores, the ratio is no evidence. Each statistic lives on the
+analysis grid: a sample counts at the first grid step at or after its time (the max of the samples
+that fall on one step); steps without a sample are not judged. A ratio of exactly 0 (a source not
+fused) or a non-finite one is no evidence: not judged. A source with no such sample over the log
+is not reported (listed in ``info["unused"]``). Several EKF2 instances (multi-EKF): statistics per
+instance, ``px4.ekf<i>.<source>``.
 """
 
 from __future__ import annotations
@@ -79,7 +82,29 @@ STATUS_FIELDS = (
     "hagl_test_ratio",
     "beta_test_ratio",
 )
-TOPIC_NAMES = (TEST_RATIOS, STATUS, LEGACY, *(AID_PREFIX + source for source in AID_SOURCES))
+FLAGS = "estimator_status_flags"  # PX4 v1.12+: which sources the EKF fuses (cs_* booleans)
+TOPIC_NAMES = (TEST_RATIOS, STATUS, LEGACY, FLAGS, *(AID_PREFIX + source for source in AID_SOURCES))
+# estimator_innovation_test_ratios source -> the cs_* flags of which one must be set for the EKF to
+# fuse it: a ratio while the source is not fused (before GNSS is accepted, on the ground) is PX4
+# computing a test for data it does not use, no evidence (it ran to 5.6e9 before the first fix of a
+# real log)
+FUSED_BY = {
+    "gps_hvel": ("cs_gps",),
+    "gps_vvel": ("cs_gps",),
+    "gps_hpos": ("cs_gps",),
+    "gps_vpos": ("cs_gps_hgt", "cs_gps"),
+    "baro_vpos": ("cs_baro_hgt",),
+    "rng_vpos": ("cs_rng_hgt",),
+    "heading": ("cs_mag_hdg", "cs_gps_yaw", "cs_ev_yaw"),
+    "mag_field": ("cs_mag_3d",),
+    "flow": ("cs_opt_flow",),
+    "ev_hpos": ("cs_ev_pos",),
+    "ev_vpos": ("cs_ev_hgt",),
+    "ev_hvel": ("cs_ev_vel",),
+    "ev_vvel": ("cs_ev_vel",),
+    "airspeed": ("cs_fuse_aspd",),
+    "beta": ("cs_fuse_beta",),
+}
 
 # ekf2_innovations (PX4 v1.6-1.8): source -> (innovation fields, gate parameter, PX4's default gate)
 _HEIGHT_BY_MODE = {  # EKF2_HGT_MODE -> (source, gate parameter, default)
@@ -221,9 +246,39 @@ class Px4EstimatorDetector(Detector):
                         found.append((instance, source, topic, series))
         return found, gates
 
+    @staticmethod
+    def _fused_only(found: list, raw: Mapping) -> list:
+        """``found`` with each test-ratio sample NaN where its instance's estimator_status_flags say
+        the source was not fused (the flags held from their latest sample; all kept without them),
+        and each estimator_aid_src_* sample NaN where its own ``fused`` field is 0."""
+        topics = _split(raw)
+        out = []
+        for instance, source, topic, series in found:
+            if series is not None:
+                t, values = series
+                mask = None
+                if topic == TEST_RATIOS and source in FUSED_BY:
+                    flags = topics.get((FLAGS, instance), {})
+                    present = [flags[f] for f in FUSED_BY[source] if f in flags]
+                    if present:
+                        mask = np.zeros(t.shape, dtype=bool)
+                        for flag in present:
+                            i = np.searchsorted(flag.t, t, side="right") - 1
+                            mask |= (i >= 0) & (flag.values[np.maximum(i, 0)] != 0)
+                elif topic.startswith(AID_PREFIX):
+                    fused = topics.get((topic, instance), {}).get("fused")
+                    if fused is not None and np.array_equal(fused.t, t):
+                        mask = fused.values != 0
+                if mask is not None:
+                    series = (t, np.where(mask, values, np.nan))
+            out.append((instance, source, topic, series))
+        return out
+
     def _run(self, run, trace, **context) -> DetectorResult:
         result = self.new_result()
-        found, gates = self._sources(context.get("raw") or {}, context.get("metadata") or {})
+        raw = context.get("raw") or {}
+        found, gates = self._sources(raw, context.get("metadata") or {})
+        found = self._fused_only(found, raw)
         instances = {instance for instance, *_ in found}
         t_grid = run.t
         n = run.n_steps

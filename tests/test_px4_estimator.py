@@ -146,6 +146,22 @@ def test_gps_hpos_over_its_gate_for_10_s_is_one_alarm_and_a_short_baro_spike_non
     assert "px4.gps_hpos" in (tmp_path / "report.html").read_text(encoding="utf-8")  # drawn in the report
 
 
+def test_a_ratio_while_the_source_is_not_fused_is_no_evidence(tmp_path, cli, profile):
+    """estimator_status_flags: GNSS fused only from 25 s; gps_hpos over its gate at 20-30 s then
+    alarms from its 25 s on (2 s later at the earliest), never before."""
+    t_us = ratios_10hz()
+    t = t_us / 1e6
+    gps = np.where((t >= 20.0) & (t < 30.0), 3.0, 0.3)
+    topics = base_topics()
+    topics["estimator_innovation_test_ratios"] = (t_us, {"gps_hpos": np.column_stack([gps, gps])})
+    fused = (t >= 25.0).astype(np.float64)
+    topics["estimator_status_flags"] = (t_us, {"cs_gps": fused, "cs_baro_hgt": np.ones(t.size)})
+    log = write_ulog(tmp_path / "flags.ulg", topics, parameters={"EKF2_GPS_P_GATE": 5.0})
+    code, entry = analyze(cli, log, profile, report=tmp_path / "report.html")
+    (alarm,) = [a for a in detector_entry(entry)["alarms"] if a["signal"] == "px4.gps_hpos"]
+    assert alarm["first_exceed"] == pytest.approx(25.0, abs=0.05) and alarm["start"] >= 26.9
+
+
 def test_a_shorter_duration_lets_the_spike_through(tmp_path, cli, profile):
     text = profile.read_text(encoding="utf-8") + "\n[detectors.px4_estimator]\nmin_duration_s = 0.3\n"
     profile.write_text(text, encoding="utf-8")

@@ -203,7 +203,13 @@ def px4_profile(log) -> BuiltProfile:
             'channel = "/vehicle_status_0/nav_state"',
             "stale_s = inf  # logged on change",
         ]
-    lines += ["", "[detectors.nis]", ""]
+    lines += [
+        "",
+        "[detectors.nis]  # logscan's filter: NIS per group",
+        "",
+        "[detectors.px4_estimator]  # PX4's own EKF2 innovation test ratios: the baseline",
+        "",
+    ]
     return BuiltProfile("px4", "\n".join(lines), notes)
 
 
