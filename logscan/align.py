@@ -33,9 +33,10 @@ class AlignedGroup:
 
     z:      (N, m) float64, zero-order held value of each channel within the staleness limit,
             NaN where no sample is recent enough (never zero-filled). A profile group with
-            ``scale`` holds the scaled channels; with ``from`` (`logscan.conversions`), m is the
-            converted width (3) and ``channels`` names each converted output (e.g.
-            ``/vehicle_attitude_0/q[0..3] roll``); ``nonfinite_count`` counts the raw channels.
+            ``scale`` / ``offset`` holds raw * scale + offset; with ``from`` (`logscan.conversions`),
+            m is the converted width (3) and ``channels`` names each converted output (e.g.
+            ``/vehicle_attitude_0/q[0..3] roll``), as with a converting ``frame`` ("flu": forward,
+            right, down; "enu": north, east, down); ``nonfinite_count`` counts the raw channels.
     fresh:  (N,) bool, True at grid steps where every channel of the group has a sample newer than
             the previous grid step and not older than the staleness limit (the filter updates then).
     """
@@ -346,15 +347,20 @@ class _Aligner:
 
     def measurement_group(self, spec, grid_ns: np.ndarray, z: np.ndarray) -> AlignedGroup:
         """A profile's measurement group held into ``z`` (N, spec.width): each channel times its
-        ``scale``, then, with ``from``, the held channels converted (`logscan.conversions`)."""
-        transforms = [_scaled(f) for f in spec.scale] if spec.scale is not None else None
-        if spec.source is None:
+        ``scale`` plus its ``offset``, then, with ``from`` or a converting ``frame``, the held
+        channels converted (`logscan.conversions`)."""
+        transforms = _linear_transforms(spec.scale, spec.offset, len(spec.channels))
+        if not spec.converted:
             return self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms, z=z)
         raw = self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms)
         origin = None
-        if spec.source == "quaternion":
+        channel_fresh = np.repeat(raw.fresh[:, None], spec.width, axis=1)
+        if spec.source is None:  # a 3-vector's frame: FLU -> FRD or ENU -> NED
+            z[:] = conversions.vector_to_frd_ned(raw.z, spec.frame)
+            channel_fresh = raw.channel_fresh[:, [1, 0, 2]] if spec.frame == "enu" else raw.channel_fresh
+        elif spec.source == "quaternion":
             invalid = int(np.count_nonzero(conversions.invalid_quaternions(raw.z)))
-            z[:] = conversions.quaternion_to_euler(raw.z)
+            z[:] = conversions.convert("quaternion", raw.z, frame=spec.frame)
             if invalid:
                 lo, hi = conversions.QUATERNION_NORM_LIMITS
                 self.warnings.append(
@@ -373,7 +379,6 @@ class _Aligner:
             else:
                 z[:] = conversions.geodetic_to_local(raw.z, origin, spec.frame)
         label = _group_label(spec.channels)
-        width = spec.width
         return AlignedGroup(
             name=spec.name,
             channels=[f"{label} {out}" for out in spec.output_names()],
@@ -381,7 +386,7 @@ class _Aligner:
             fresh=raw.fresh,
             nonfinite_count=raw.nonfinite_count,
             stale_s=raw.stale_s,
-            channel_fresh=np.repeat(raw.fresh[:, None], width, axis=1),
+            channel_fresh=channel_fresh,
             origin=None if origin is None else tuple(float(v) for v in origin),
         )
 
@@ -391,13 +396,14 @@ class _Aligner:
         all three channels share), else the first fresh grid step with such values."""
         cleaned = [self.clean(ch) for ch in spec.channels]
         scale = spec.scale or [1.0] * len(cleaned)
+        offset = spec.offset or [0.0] * len(cleaned)
         times = cleaned[0].t
         for c in cleaned[1:]:
             times = np.intersect1d(times, c.t, assume_unique=True)
         times = times[(times >= grid_ns[0]) & (times <= grid_ns[-1])]
         if times.size:
             lla = np.stack(
-                [c.values[np.searchsorted(c.t, times)] * f for c, f in zip(cleaned, scale)],
+                [c.values[np.searchsorted(c.t, times)] * f + o for c, f, o in zip(cleaned, scale, offset)],
                 axis=1,
             )
             ok = np.flatnonzero(conversions.valid_geodetic(lla))
@@ -436,8 +442,21 @@ class _Aligner:
         )
 
 
-def _scaled(factor: float):
-    return lambda values: values * factor
+def _linear(factor: float, offset: float):
+    """values * factor + offset (the identity skipped, a plain multiply without an offset)."""
+    if offset == 0.0:
+        return None if factor == 1.0 else (lambda values: values * factor)
+    return lambda values: values * factor + offset
+
+
+def _linear_transforms(scale, offset, n: int) -> list | None:
+    """Per channel ``raw * scale + offset`` (None lists: 1 and 0), None when every one is the identity."""
+    if scale is None and offset is None:
+        return None
+    scale = scale if scale is not None else [1.0] * n
+    offset = offset if offset is not None else [0.0] * n
+    transforms = [_linear(f, o) for f, o in zip(scale, offset)]
+    return transforms if any(t is not None for t in transforms) else None
 
 
 def _group_label(channels: list[str]) -> str:
@@ -487,8 +506,13 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
 
     u = np.empty((n, len(input_channels)))
     scratch = np.empty(n, dtype=bool)  # fresh masks nobody reads
+    # an input table's scale, offset and frame ("flu": the 2nd and 3rd negated), per bound channel
+    input_transforms = _linear_transforms(
+        profile.inputs.factors or None, profile.inputs.offsets or None, len(input_channels)
+    )
     for j, ch in enumerate(input_channels):
-        aligner.hold(ch, grid_ns, profile.inputs.stale_s, z=u[:, j], fresh=scratch)
+        transform = input_transforms[j] if input_transforms else None
+        aligner.hold(ch, grid_ns, profile.inputs.stale_s, transform, z=u[:, j], fresh=scratch)
     u_fresh = np.ones(n, dtype=bool)
     for j in range(u.shape[1]):
         u_fresh &= np.isfinite(u[:, j])

@@ -6,6 +6,11 @@
 - ``from = "geodetic"``: channels (latitude deg, longitude deg, altitude m positive up) on the
   WGS-84 ellipsoid -> metres in the local tangent frame at an origin: (north, east, down) or
   (east, north, up).
+- ``frame`` of a 3-vector group without ``from`` (`vector_to_frd_ned`): "flu" (a body vector
+  forward, left, up -> forward, right, down) or "enu" (a world vector east, north, up -> north,
+  east, down); "frd" / "ned" leave it as it is. ``frame = "enu_flu"`` of a quaternion group
+  (`quaternion_enu_flu_to_ned_frd`): a ROS orientation (body FLU to world ENU, REP 103) turned
+  into the body FRD to world NED attitude before the Euler angles.
 
 Pure numpy, no per-sample Python loops; invalid samples become NaN rows (never an exception), and
 the filter skips a NaN measurement as invalid. Documented for profiles in docs/profiles.md.
@@ -25,7 +30,15 @@ WGS84_A = 6378137.0  # semi-major axis, m
 WGS84_F = 1.0 / 298.257223563  # flattening
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
 
-FRAMES = ("ned", "enu")
+FRAMES = ("ned", "enu")  # of a geodetic group's output
+#: ``frame`` of a quaternion group: "ned" (body FRD to world NED, as PX4) or "enu_flu" (ROS).
+QUATERNION_FRAMES = ("ned", "enu_flu")
+#: ``frame`` of a 3-vector group without ``from``: the identity frames, then the converted ones.
+VECTOR_FRAMES = ("frd", "ned", "flu", "enu")
+#: the outputs of a converted 3-vector frame
+VECTOR_FRAME_OUTPUTS = {"flu": ("forward", "right", "down"), "enu": ("north", "east", "down")}
+#: ``frame`` values a group may have, by its ``from`` (None: without ``from``)
+GROUP_FRAMES = {None: VECTOR_FRAMES, "quaternion": QUATERNION_FRAMES, "geodetic": FRAMES}
 
 
 @dataclass(frozen=True)
@@ -187,9 +200,69 @@ def geodetic_to_local(lla: np.ndarray, origin, frame: str = "ned") -> np.ndarray
     return out
 
 
+def flu_to_frd(v: np.ndarray) -> np.ndarray:
+    """Body vectors (N, 3) given forward, left, up (ROS, REP 103) -> forward, right, down: (x, -y, -z)."""
+    v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+    return v * np.array([1.0, -1.0, -1.0])
+
+
+def enu_to_ned(v: np.ndarray) -> np.ndarray:
+    """World vectors (N, 3) given east, north, up -> north, east, down: (y, x, -z)."""
+    v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+    return np.stack([v[:, 1], v[:, 0], -v[:, 2]], axis=1)
+
+
+def vector_to_frd_ned(v: np.ndarray, frame: str) -> np.ndarray:
+    """The ``frame`` conversion of a 3-vector group without ``from``: "flu" -> FRD
+    (`flu_to_frd`), "enu" -> NED (`enu_to_ned`), "frd" / "ned": unchanged (a copy)."""
+    if frame == "flu":
+        return flu_to_frd(v)
+    if frame == "enu":
+        return enu_to_ned(v)
+    if frame in ("frd", "ned"):
+        return np.array(v, dtype=np.float64).reshape(-1, 3)
+    raise ValueError(f"frame must be one of {VECTOR_FRAMES}, got {frame!r}")
+
+
+def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products a * b of quaternions (w, x, y, z), broadcast over rows ((N, 4) or (4,))."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+_S = np.sqrt(0.5)
+#: the rotation T taking ENU vectors to NED, (y, x, -z): 180 deg about (1, 1, 0) / sqrt 2
+Q_ENU_TO_NED = np.array([0.0, _S, _S, 0.0])
+#: the rotation B taking FRD body vectors to FLU (and back), diag(1, -1, -1): 180 deg about x
+Q_FLU_TO_FRD = np.array([0.0, 1.0, 0.0, 0.0])
+
+
+def quaternion_enu_flu_to_ned_frd(q: np.ndarray) -> np.ndarray:
+    """Quaternions (N, 4) = (w, x, y, z) rotating body FLU into world ENU (a ROS orientation) ->
+    the same attitude rotating body FRD into world NED: q_T * q * q_B, i.e. R_ned_frd = T R B with
+    T = [[0, 1, 0], [1, 0, 0], [0, 0, -1]] and B = diag(1, -1, -1). The norm is kept (a NaN row
+    stays NaN), so the validity check of `quaternion_to_euler` applies unchanged."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    return quaternion_multiply(quaternion_multiply(Q_ENU_TO_NED, q), Q_FLU_TO_FRD)
+
+
 def convert(source: str, values: np.ndarray, *, origin=None, frame: str = "ned") -> np.ndarray:
-    """The ``from = source`` conversion of held channel values (N, channels) -> (N, 3)."""
+    """The ``from = source`` conversion of held channel values (N, channels) -> (N, 3); ``frame``
+    "enu_flu" of a quaternion turns a ROS orientation into the FRD-to-NED attitude first."""
     if source == "quaternion":
+        if frame == "enu_flu":
+            values = quaternion_enu_flu_to_ned_frd(values)
         return quaternion_to_euler(values)
     if source == "geodetic":
         return geodetic_to_local(values, origin, frame)

@@ -214,7 +214,10 @@ BROKEN = [
         mutated("inputs.tau", ["/a", "/b"]),
         "[inputs] tau: 2 channels but model 'quadcopter' has 3 inputs starting with 'tau' (tau_x, tau_y, tau_z)",
     ),
-    (mutated("inputs.thrust", 3), "[inputs] thrust: expected a channel name or an array of them, got number 3"),
+    (
+        mutated("inputs.thrust", 3),
+        ("[inputs] thrust: expected a channel name, an array of them or a table { channels = [...] }, got number 3"),
+    ),
     (mutated("inputs.stale_s", -1), "[inputs] stale_s: must be > 0, got -1"),
     (mutated("mode", {"chanel": "/m"}), "[mode]: unknown key 'chanel' (did you mean 'channel'?)"),
     (mutated("mode", {"channel": "/m", "stale_s": -2}), "[mode] stale_s: must be > 0, got -2"),

@@ -241,11 +241,14 @@ def test_a_scalar_scale_applies_to_every_channel_and_a_plain_group_may_be_scaled
             ATTITUDE.replace('"quaternion"', "4"),
             '[measurements.attitude] from: expected a string ("quaternion", "geodetic"), got number 4',
         ),
-        (ATTITUDE + 'frame = "enu"\n', '[measurements.attitude] frame: only allowed with from = "geodetic"'),
+        (
+            ATTITUDE + 'frame = "enu"\n',
+            "[measurements.attitude] frame: expected 'ned' or 'enu_flu' (from = \"quaternion\"), got string 'enu'",
+        ),
         (ATTITUDE + "origin = [1, 2, 3]\n", '[measurements.attitude] origin: only allowed with from = "geodetic"'),
         (
             '[measurements.baro]\nchannels = ["/b"]\nrate_hz = 10\nframe = "ned"\n',
-            '[measurements.baro] frame: only allowed with from = "geodetic"',
+            '[measurements.baro] frame: frame = "ned" needs exactly 3 channels (x, y, z), got 1',
         ),
         (GNSS + 'frame = "nwu"\n', "[measurements.gnss_position] frame: expected 'ned' or 'enu', got string 'nwu'"),
         (

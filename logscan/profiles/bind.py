@@ -3,7 +3,14 @@
 from __future__ import annotations
 
 from logscan.profiles.problems import is_number, plural, suggest
-from logscan.profiles.schema import MeasurementSpec, ModelFacts, Profile, VehicleSpec
+from logscan.profiles.schema import (
+    MeasurementSpec,
+    ModelFacts,
+    Profile,
+    VehicleSpec,
+    input_channels,
+    input_transform,
+)
 
 
 def _registry():
@@ -130,19 +137,22 @@ def _members(key: str, input_names: tuple[str, ...]) -> list[str]:
 
 def _bind_inputs(profile: Profile, input_names: tuple[str, ...], label: str, problems: list[str]) -> None:
     bound: dict[str, str] = {}
+    transform: dict[str, tuple[float, float]] = {}
     reported: set[str] = set()
     for key, value in profile.inputs.mapping.items():
         where = f"[inputs] {key}"
-        if isinstance(value, str) or (key in input_names and len(value) == 1):
+        channels = input_channels(value)
+        factors, offsets = input_transform(value)
+        if isinstance(value, str) or (key in input_names and len(channels) == 1):
             if key not in input_names:
                 problems.append(
                     f"{where}: {label} has no input {key!r}{suggest(key, input_names)} "
                     f"(inputs: {', '.join(input_names)})"
                 )
                 continue
-            targets, chans = [key], [value if isinstance(value, str) else value[0]]
+            targets, chans = [key], channels[:1]
         else:
-            targets, chans = _members(key, input_names), value
+            targets, chans = _members(key, input_names), channels
             if not targets:
                 problems.append(
                     f"{where}: {label} has no inputs named {key!r} or {key}_*{suggest(key, input_names)} "
@@ -156,10 +166,11 @@ def _bind_inputs(profile: Profile, input_names: tuple[str, ...], label: str, pro
                 )
                 reported.update(targets)  # not "missing" as well
                 continue
-        for name, ch in zip(targets, chans):
+        for name, ch, factor, offset in zip(targets, chans, factors, offsets):
             if name in bound:
                 problems.append(f"{where}: input {name!r} is bound twice")
             bound[name] = ch
+            transform[name] = (factor, offset)
     missing = [n for n in input_names if n not in bound and n not in reported]
     if missing:
         problems.append(
@@ -169,15 +180,21 @@ def _bind_inputs(profile: Profile, input_names: tuple[str, ...], label: str, pro
         )
     profile.inputs.names = [n for n in input_names if n in bound]
     profile.inputs.channels = [bound[n] for n in profile.inputs.names]
+    profile.inputs.factors = [transform[n][0] for n in profile.inputs.names]
+    profile.inputs.offsets = [transform[n][1] for n in profile.inputs.names]
 
 
 def bind_inputs_without_model(profile: Profile) -> None:
-    names, chans = [], []
+    names, chans, factors, offsets = [], [], [], []
     for key, value in profile.inputs.mapping.items():
+        channels = input_channels(value)
         if isinstance(value, str):
             names.append(key)
-            chans.append(value)
         else:
-            names.extend(f"{key}[{i}]" for i in range(len(value)))
-            chans.extend(value)
+            names.extend(f"{key}[{i}]" for i in range(len(channels)))
+        chans.extend(channels)
+        f, o = input_transform(value)
+        factors.extend(f)
+        offsets.extend(o)
     profile.inputs.names, profile.inputs.channels = names, chans
+    profile.inputs.factors, profile.inputs.offsets = factors, offsets

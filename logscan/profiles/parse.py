@@ -10,14 +10,16 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from logscan.conversions import CONVERSIONS, FRAMES, Conversion
+from logscan.conversions import CONVERSIONS, GROUP_FRAMES, Conversion
 from logscan.profiles.bind import bind_inputs_without_model, build_model, check_against_model
 from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, suggest, type_name
 from logscan.profiles.schema import (
     ALARM_KEYS,
     GROUP_KEYS,
     GROUP_STALE_PERIODS,
+    INPUT_FRAMES,
     INPUT_STALE_STEPS,
+    INPUT_TABLE_KEYS,
     MAX_ALARM_DURATION_S,
     MAX_ALARM_PERSIST,
     MAX_MERGE_GAP_S,
@@ -140,6 +142,12 @@ def validate(profile: Profile, model=None) -> Profile:
     if problems:
         raise profile_error(problems, profile.source)
     return profile
+
+
+def _choices(values) -> str:
+    """``'a', 'b' or 'c'``."""
+    quoted = [repr(v) for v in values]
+    return quoted[0] if len(quoted) == 1 else f"{', '.join(quoted[:-1])} or {quoted[-1]}"
 
 
 class _Checker:
@@ -327,10 +335,16 @@ class _Checker:
                 ok &= chans is not None
                 if chans is not None:
                     mapping[key] = chans
+            elif isinstance(value, dict):
+                table = self.input_table(value, f"{where} {key}")
+                ok &= table is not None
+                if table is not None:
+                    mapping[key] = table
             else:
                 self.add(
                     f"{where} {key}",
-                    f"expected a channel name or an array of them, got {type_name(value)}",
+                    "expected a channel name, an array of them or a table { channels = [...] }, "
+                    f"got {type_name(value)}",
                 )
                 ok = False
         stale = self.stale(data, "stale_s", where)
@@ -339,6 +353,34 @@ class _Checker:
         if stale is None:
             stale = INPUT_STALE_STEPS / vehicle.rate_hz if vehicle else 0.0
         return InputSpec(mapping=mapping, stale_s=stale) if ok else None
+
+    def input_table(self, data: dict, where: str) -> dict | None:
+        """An input's inline table ``{ channels = [...], frame = "flu", scale = 1, offset = 0 }``,
+        normalised: ``scale`` / ``offset`` one number per channel, ``frame`` only when given."""
+        problems = len(self.problems)
+        self.keys(data, where, INPUT_TABLE_KEYS, required=("channels",))
+        chans = self.string_list(data["channels"], f"{where} channels") if "channels" in data else None
+        scale = self.scale(data, where)
+        offset = self.float_list(data, "offset", where, positive=False)
+        frame = data.get("frame")
+        if "frame" in data:
+            if frame not in INPUT_FRAMES:
+                self.add(f"{where} frame", f"expected {_choices(INPUT_FRAMES)}, got {type_name(frame)}")
+            elif chans is not None and len(chans) != 3:
+                self.add(f"{where} frame", f'frame = "{frame}" needs exactly 3 channels (x, y, z), got {len(chans)}')
+        if chans is not None:
+            scale = self._sized(scale, len(chans), f"{where} scale")
+            offset = self._sized(offset, len(chans), f"{where} offset")
+        if chans is None or len(self.problems) > problems:
+            return None
+        out: dict[str, Any] = {"channels": chans}
+        if "frame" in data:
+            out["frame"] = frame
+        if scale is not None:
+            out["scale"] = scale
+        if offset is not None:
+            out["offset"] = offset
+        return out
 
     def measurements(self, raw: Any) -> dict[str, MeasurementSpec]:
         data = self.table(raw, "[measurements]")
@@ -366,17 +408,22 @@ class _Checker:
         lo = self.float_list(data, "range_lo", where, positive=False)
         hi = self.float_list(data, "range_hi", where, positive=False)
         scale = self.scale(data, where)
+        offset = self.float_list(data, "offset", where, positive=False)
         conversion = self.conversion(data, where)
         source = conversion.name if conversion is not None else None
-        frame = self.frame(data, where, source)
+        frame = self.frame(data, where, source, channels)
         origin = self.origin(data, where, source)
-        bad_keys = any(key in data and value is None for key, value in (("scale", scale), ("frame", frame)))
+        bad_keys = any(
+            key in data and value is None for key, value in (("scale", scale), ("offset", offset), ("frame", frame))
+        )
         if channels is None or rate is None or bad_keys or ("from" in data and conversion is None):
             return None
         if "origin" in data and origin is None:
             return None
         if scale is not None:
             scale = self._sized(scale, len(channels), f"{where} scale")
+        if offset is not None:
+            offset = self._sized(offset, len(channels), f"{where} offset")
         if conversion is not None and len(channels) != len(conversion.inputs):
             self.add(
                 f"{where} channels",
@@ -400,10 +447,21 @@ class _Checker:
                 )
         if stale is None and "stale_s" not in data:
             stale = GROUP_STALE_PERIODS / rate
-        if stale is None or ("scale" in data and scale is None):
+        if stale is None or ("scale" in data and scale is None) or ("offset" in data and offset is None):
             return None
         return MeasurementSpec(
-            name, channels, rate, stale, noise, lo, hi, scale=scale, source=source, origin=origin, frame=frame or "ned"
+            name,
+            channels,
+            rate,
+            stale,
+            noise,
+            lo,
+            hi,
+            scale=scale,
+            source=source,
+            origin=origin,
+            frame=frame or "ned",
+            offset=offset,
         )
 
     def scale(self, data: dict, where: str) -> list[float] | None:
@@ -428,17 +486,22 @@ class _Checker:
             return None
         return CONVERSIONS[value]
 
-    def frame(self, data: dict, where: str, source: str | None) -> str | None:
-        """``frame`` of a geodetic group: "ned" (the default) or "enu"."""
+    def frame(self, data: dict, where: str, source: str | None, channels: list[str] | None) -> str | None:
+        """``frame``: of a geodetic group "ned" (the default) or "enu"; of a quaternion group "ned"
+        (the default: FRD to NED) or "enu_flu" (a ROS orientation); of a group without ``from``,
+        a 3-vector's frame: "frd" / "ned" (as it is), "flu" or "enu" (converted)."""
         if "frame" not in data:
             return None
         value = data["frame"]
-        if source != "geodetic":
-            if "from" not in data or source is not None:  # an unknown `from` is reported already
-                self.add(f"{where} frame", 'only allowed with from = "geodetic"')
+        if "from" in data and source is None:  # an unknown `from` is reported already
             return None
-        if value not in FRAMES:
-            self.add(f"{where} frame", f"expected {' or '.join(repr(f) for f in FRAMES)}, got {type_name(value)}")
+        choices = GROUP_FRAMES[source]
+        if not isinstance(value, str) or value not in choices:
+            what = {None: " (a 3-vector without from)", "quaternion": ' (from = "quaternion")'}.get(source, "")
+            self.add(f"{where} frame", f"expected {_choices(choices)}{what}, got {type_name(value)}")
+            return None
+        if source is None and channels is not None and len(channels) != 3:
+            self.add(f"{where} frame", f'frame = "{value}" needs exactly 3 channels (x, y, z), got {len(channels)}')
             return None
         return value
 

@@ -9,7 +9,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
-from logscan.conversions import CONVERSIONS
+from logscan.conversions import CONVERSIONS, VECTOR_FRAME_OUTPUTS
 from logscan.profiles.problems import profile_error, suggest
 from logscan.profiles.toml_writer import dumps_toml
 from logscan.results import AlarmPolicy
@@ -36,6 +36,7 @@ GROUP_KEYS = (
     "range_lo",
     "range_hi",
     "scale",
+    "offset",
     "from",
     "frame",
     "origin",
@@ -44,6 +45,10 @@ MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
 SENSOR_KEYS = ("channel", "poly")
 ONBOARD_KEYS = ("state", "variance", "stale_s")
+#: keys of an input's inline table, ``gyro = { channels = [...], frame = "flu", scale = 1, offset = 0 }``
+INPUT_TABLE_KEYS = ("channels", "frame", "scale", "offset")
+#: ``frame`` of an input table: "flu" (forward, left, up: negate the 2nd and 3rd channels) or "frd"
+INPUT_FRAMES = ("frd", "flu")
 ALARM_KEYS = ("n_persist", "min_duration_s", "merge_gap_s")
 #: Upper bounds of the [alarms] floors: they are for one- or two-sample transients; longer floors
 #: would hide real faults (documented in docs/profiles.md).
@@ -80,28 +85,57 @@ class VehicleSpec:
     params: dict[str, Any] = field(default_factory=dict)
 
 
+def input_channels(value: str | list[str] | dict) -> list[str]:
+    """The channels of one ``[inputs]`` value: a channel, an array, or an inline table's ``channels``."""
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, dict):
+        return list(value["channels"])
+    return list(value)
+
+
+def input_transform(value: str | list[str] | dict) -> tuple[list[float], list[float]]:
+    """(factor, offset) per channel of one ``[inputs]`` value: held = raw * factor + offset, the
+    factor being ``scale`` times -1 for the 2nd and 3rd channels of ``frame = "flu"``."""
+    n = len(input_channels(value))
+    if not isinstance(value, dict):
+        return [1.0] * n, [0.0] * n
+    factor = list(value.get("scale", [1.0] * n))
+    if value.get("frame") == "flu":
+        factor = [factor[0], -factor[1], -factor[2]]
+    return factor, list(value.get("offset", [0.0] * n))
+
+
 @dataclass
 class InputSpec:
     """`[inputs]`: model input name (or a prefix of several) -> channel(s), as written.
 
+    A value is a channel, an array of channels, or an inline table ``{ channels = [...], frame,
+    scale, offset }`` (stored with ``scale`` / ``offset`` as one number per channel, as validated).
     ``names`` / ``channels`` are the binding in the model's input order, filled in by validation
-    (without a model: the file's order, a list ``k = [a, b]`` binding ``k[0]``, ``k[1]``).
+    (without a model: the file's order, a list ``k = [a, b]`` binding ``k[0]``, ``k[1]``), and
+    ``factors`` / ``offsets`` each bound channel's transform (held = raw * factor + offset).
     """
 
-    mapping: dict[str, str | list[str]] = field(default_factory=dict)
+    mapping: dict[str, str | list[str] | dict[str, Any]] = field(default_factory=dict)
     stale_s: float = 0.0
     names: list[str] = field(default_factory=list, compare=False)
     channels: list[str] = field(default_factory=list, compare=False)
+    factors: list[float] = field(default_factory=list, compare=False)  # empty: all 1
+    offsets: list[float] = field(default_factory=list, compare=False)  # empty: all 0
 
 
 @dataclass
 class MeasurementSpec:
     """`[measurements.<group>]`: channels of one model measurement group and how to hold them.
 
-    ``scale`` multiplies each channel (one factor per channel); ``source`` (the TOML key ``from``)
-    converts the held channels (`logscan.conversions`): "quaternion" (w, x, y, z) -> roll, pitch,
-    yaw; "geodetic" (lat, lon, alt) -> north, east, down about ``origin`` (``frame`` "enu": east,
-    north, up). ``noise_std`` / ``range_*`` have one value per converted output (`width`).
+    ``scale`` multiplies each channel (one factor per channel), then ``offset`` is added; ``source``
+    (the TOML key ``from``) converts the held channels (`logscan.conversions`): "quaternion" (w, x,
+    y, z) -> roll, pitch, yaw (``frame`` "enu_flu": a ROS orientation, turned into FRD-to-NED
+    first); "geodetic" (lat, lon, alt) -> north, east, down about ``origin`` (``frame`` "enu": east,
+    north, up). Without ``from``, ``frame`` of a 3-vector: "flu" -> forward, right, down; "enu" ->
+    north, east, down ("ned"/"frd": as it is). ``noise_std`` / ``range_*`` have one value per
+    converted output (`width`).
     """
 
     name: str
@@ -114,7 +148,8 @@ class MeasurementSpec:
     scale: list[float] | None = None  # one factor per channel, None: 1
     source: str | None = None  # `from`: None, "quaternion" or "geodetic"
     origin: list[float] | None = None  # geodetic: [lat deg, lon deg, alt m]; None: the first fix
-    frame: str = "ned"  # geodetic: "ned" or "enu"
+    frame: str = "ned"  # geodetic: "ned"/"enu"; quaternion: "ned"/"enu_flu"; a 3-vector: frd/ned/flu/enu
+    offset: list[float] | None = None  # one per channel, added after scale; None: 0
 
     @property
     def width(self) -> int:
@@ -122,8 +157,15 @@ class MeasurementSpec:
         return len(CONVERSIONS[self.source].outputs) if self.source is not None else len(self.channels)
 
     def output_names(self) -> tuple[str, ...] | None:
-        """Names of the converted outputs (None without ``from``)."""
-        return CONVERSIONS[self.source].output_names(self.frame) if self.source is not None else None
+        """Names of the converted outputs (None without ``from`` or a converting ``frame``)."""
+        if self.source is not None:
+            return CONVERSIONS[self.source].output_names(self.frame)
+        return VECTOR_FRAME_OUTPUTS.get(self.frame)
+
+    @property
+    def converted(self) -> bool:
+        """True when the held channels are converted (``from``, or a ``frame`` that changes them)."""
+        return self.source is not None or self.frame in VECTOR_FRAME_OUTPUTS
 
 
 @dataclass
@@ -212,7 +254,7 @@ class Profile:
         """Every exact channel the profile references, as (where, channel), in file order."""
         refs: list[tuple[str, str]] = []
         for key, value in self.inputs.mapping.items():
-            for ch in [value] if isinstance(value, str) else value:
+            for ch in input_channels(value):
                 refs.append((f"[inputs] {key}", ch))
         for group in self.measurements.values():
             refs.extend((f"[measurements.{group.name}] channels", ch) for ch in group.channels)
@@ -315,12 +357,12 @@ class Profile:
         out["measurements"] = {}
         for g in self.measurements.values():
             table: dict[str, Any] = {"channels": g.channels, "rate_hz": g.rate_hz, "stale_s": g.stale_s}
-            for key in ("noise_std", "range_lo", "range_hi", "scale"):
+            for key in ("noise_std", "range_lo", "range_hi", "scale", "offset"):
                 if getattr(g, key) is not None:
                     table[key] = getattr(g, key)
             if g.source is not None:
                 table["from"] = g.source
-            if g.source == "geodetic":
+            if g.source == "geodetic" or g.frame != "ned":
                 table["frame"] = g.frame
             if g.origin is not None:
                 table["origin"] = g.origin
