@@ -216,6 +216,7 @@ def prepare(
     start_s: float | None = None,
     end_s: float | None = None,
     raw_topics: frozenset[str] = frozenset(),
+    truth_path: str | os.PathLike | None = None,
 ) -> Prepared:
     """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
     ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
@@ -236,6 +237,7 @@ def prepare(
     compiling = _start_compile(model, needs, notice)
     step("reading")
     log = read_log(path, topics=profile.topics() | set(raw_topics), use_header_stamp=use_header_stamp)
+    _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")
     run = align(log, profile, start_s=start_s, end_s=end_s)
@@ -273,6 +275,18 @@ def prepare(
     for episode in ekf.divergence_episodes if ekf is not None else ():
         prepared.warnings.append(f"filter diverged: {episode}")
     return prepared
+
+
+def _attach_truth(log, path: str, truth_path) -> None:
+    """Ground truth from ``truth_path`` (--truth), else the log's own, else `<log>.truth.json`
+    beside it; UTC event times turned into the log's seconds (`logscan.truth`)."""
+    from logscan.truth import in_log_time, read_truth_file, truth_beside
+
+    source = truth_path if truth_path is not None else (truth_beside(path) if log.truth is None else None)
+    if source is not None:
+        log.truth = read_truth_file(source)
+    if log.truth is not None:
+        log.truth = in_log_time(log.truth, log.start_ns, str(source or path))
 
 
 def _start_compile(model, needs, notice: Progress | None):
@@ -482,12 +496,14 @@ def analyze_log(
     free_series: bool = False,
     sensor_views: bool = False,
     tables: str | os.PathLike | None = None,
+    truth: str | os.PathLike | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
     ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
     ``start_s``/``end_s``: a window of the log (seconds since its start); ``free_series``: see
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
-    figures (`logscan.sensor_views`), when a detector runs the EKF."""
+    figures (`logscan.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
+    to score against (default: the log's own, or `<log>.truth.json` beside it)."""
     from logscan.training import apply_tables, tables_path
 
     loaded = load_profile_for(path, profile_path)
@@ -498,7 +514,9 @@ def analyze_log(
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
     raw = raw_topics_of(detectors)
-    prepared = prepare(path, loaded, needs, progress=progress, notice=notice, raw_topics=raw, **options)
+    prepared = prepare(
+        path, loaded, needs, progress=progress, notice=notice, raw_topics=raw, truth_path=truth, **options
+    )
     return detect(
         prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series, sensor_views=sensor_views
     )

@@ -131,6 +131,14 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
     "unchecked part, so they show on the workflow run.",
 )
 @click.option(
+    "--truth",
+    "truth_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=str),
+    default=None,
+    help="Ground truth (JSON: events with kind, target and start/end in seconds since the log's start, or "
+    "start_utc/end_utc) to score the alarms against. Default: the log's own, or <log>.truth.json beside it.",
+)
+@click.option(
     "--print-profile",
     is_flag=True,
     default=False,
@@ -159,6 +167,7 @@ def analyze(
     junit_path: str | None,
     markdown_path: str | None,
     github_annotations: bool,
+    truth_path: str | None,
     print_profile: bool,
     start_s: float | None,
     end_s: float | None,
@@ -236,6 +245,7 @@ def analyze(
         start_s=start_s,
         end_s=end_s,
         tables_path=tables_path,
+        truth_path=truth_path,
         fail_on_warning=fail_on == "warning",
         suppressions=rules,
     )
@@ -381,6 +391,7 @@ class AnalyzeTask:
     start_s: float | None = None  # --start/--end: the window analysed (s since the log's start)
     end_s: float | None = None
     tables_path: str | None = None  # --tables: trained tables (logscan train)
+    truth_path: str | None = None  # --truth: ground truth to score against
     fail_on_warning: bool = False  # --fail-on warning: possible faults exit 1 too
     suppressions: tuple = ()  # --suppressions: logscan.suppressions.Suppression entries
 
@@ -406,6 +417,7 @@ class AnalyzeTask:
             free_series=True,  # nothing reads the filter's series after the detectors
             sensor_views=report_path is not None,
             tables=self.tables_path,
+            truth=self.truth_path,
         )
         if self.suppressions:
             from logscan.suppressions import apply_suppressions
