@@ -228,7 +228,7 @@ def prepare(
     from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
-    from logscan.run_context import run_context
+    from logscan.run_context import logged_messages, run_context
 
     step = progress or (lambda message: None)
     path = str(path)
@@ -253,6 +253,8 @@ def prepare(
     prepared = Prepared(
         path=path, log=log, loaded=loaded, model=model, run=run, context=run_context(run, model), raw=raw
     )
+    prepared.context.messages = logged_messages(log.source.metadata, run.start_ns)
+    prepared.context.t_span = (float(run.t[0]), float(run.t[-1]))
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)

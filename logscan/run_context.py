@@ -8,7 +8,9 @@ what the report shows beside the statistics is extracted right after alignment, 
   (half evenly in time, half the min/max per bucket of x and of y, so an excursion of one sample
   stays visible);
 - the mode: the profile's ``[mode]`` channel as intervals of one value (``MAX_MODE_INTERVALS`` at
-  most), or, when it changes more often (a continuous set-point), as a decimated series.
+  most), or, when it changes more often (a continuous set-point), as a decimated series;
+- the autopilot's own logged messages of level WARNING and above (a ULog's ``logged_messages``,
+  ``MAX_MESSAGES`` at most), on the same time axis.
 """
 
 from __future__ import annotations
@@ -23,6 +25,10 @@ MAX_PATH_POINTS = 1_000
 MAX_MODE_INTERVALS = 200
 MAX_MODE_POINTS = 1_000
 POSITION_STATES = ("x", "y")
+MAX_MESSAGES = 200
+# a ULog message's level, as logscan.readers.ulog_reader writes it ("<s> s [<LEVEL>] <text>"), most severe first
+MESSAGE_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING")
+_MESSAGE = None  # compiled lazily: most runs have no messages
 
 
 @dataclass
@@ -49,9 +55,44 @@ class ModeTrack:
 
 
 @dataclass
+class LoggedMessage:
+    """One message the autopilot logged: time (s since the log's start), level, text."""
+
+    t: float
+    level: str
+    text: str
+
+
+@dataclass
 class RunContext:
     path: Path2D | None = None
     mode: ModeTrack | None = None
+    messages: list[LoggedMessage] = field(default_factory=list)
+    t_span: tuple[float, float] | None = None  # the grid's first and last time: the shared time axis
+
+
+def logged_messages(metadata: dict, start_ns: int) -> list[LoggedMessage]:
+    """The log's own messages of level WARNING and above (`MESSAGE_LEVELS`), in time order, at most
+    MAX_MESSAGES: a ULog's ``ulog.messages`` metadata ("<seconds> s [<LEVEL>] <text>", on the
+    clock of its channels)."""
+    import re
+
+    global _MESSAGE
+    if _MESSAGE is None:
+        _MESSAGE = re.compile(r"^\s*(?P<t>[-+0-9.eE]+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
+    out = []
+    for line in (metadata or {}).get("ulog.messages", {}).values():
+        match = _MESSAGE.match(str(line))
+        if match is None or match.group("level") not in MESSAGE_LEVELS:
+            continue
+        try:
+            t = (float(match.group("t")) * 1e9 - start_ns) / 1e9
+        except ValueError:
+            continue
+        out.append(LoggedMessage(t, match.group("level"), match.group("text").strip()))
+        if len(out) >= MAX_MESSAGES:
+            break
+    return out
 
 
 def position_columns(run, model) -> tuple[str, int, int] | None:

@@ -98,3 +98,17 @@ def test_analyze_print_profile_shows_the_profile_used(cli, sample):
     assert result.exit_code == 0
     assert "# profile for" in result.stdout and "(embedded)" in result.stdout
     assert 'model = "quadcopter"' in result.stdout
+
+
+def test_the_autopilots_warnings_are_drawn_on_the_time_axis(cli, tmp_path):
+    from logscan.readers import read_log
+    from logscan.run_context import logged_messages
+
+    path = need_testdata("px4-ulog/sample_px4_events.ulg")
+    log = read_log(path, topics={"vehicle_status_0"})
+    messages = logged_messages(log.source.metadata, log.start_ns)
+    assert [m.level for m in messages] == ["WARNING", "WARNING"] and "GPS fix" in messages[0].text
+    assert 0.0 < messages[0].t < messages[1].t < log.duration_s
+    report = tmp_path / "r.html"
+    assert cli("analyze", str(path), "-o", str(report)).exit_code in (0, 1)
+    assert "ctx-messages" in report.read_text(encoding="utf-8")

@@ -142,6 +142,45 @@ def path_figure(path, incidents: Sequence[Incident]) -> dict:
     return _spec(spec, data, layout)
 
 
+_LEVEL_ROWS = {"WARNING": 0, "ERROR": 1, "CRITICAL": 2, "ALERT": 3, "EMERGENCY": 4}
+_LEVEL_COLOURS = {"WARNING": "#e6a100", "ERROR": "#d62728", "CRITICAL": "#8c1c13", "ALERT": "#8c1c13",
+                  "EMERGENCY": "#000000"}  # fmt: skip
+
+
+def messages_figure(messages, t_span: tuple[float, float] | None = None) -> dict:
+    """The autopilot's own warnings and errors as markers on the shared time axis, one row per
+    level, the text on hover."""
+    data = []
+    for level, row in _LEVEL_ROWS.items():
+        chosen = [m for m in messages if m.level == level]
+        if not chosen:
+            continue
+        data.append({
+            "type": "scatter", "name": level.lower(), "x": np.array([m.t for m in chosen], dtype=np.float32),
+            "y": np.full(len(chosen), row, dtype=np.float32), "mode": "markers",
+            "marker": {"symbol": "diamond", "size": 9, "color": _LEVEL_COLOURS[level]},
+            "text": [plot_text(m.text[:200]) for m in chosen], "hovertemplate": "%{x:.3f} s: %{text}",
+        })  # fmt: skip
+    rows = sorted({_LEVEL_ROWS[m.level] for m in messages})
+    layout = {
+        **_BASE_LAYOUT,
+        "title": {"text": "the autopilot's logged warnings and errors", "font": {"size": 14}},
+        "height": MODE_HEIGHT,
+        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},  # as the detector figures: time axes align
+        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
+        "xaxis": {**TIME_AXIS, **({"range": list(t_span)} if t_span else {})},
+        "yaxis": {"tickvals": rows, "ticktext": [k.lower() for k, v in _LEVEL_ROWS.items() if v in rows],
+                  "range": [-0.5, max(rows) + 0.5], "fixedrange": True},
+    }  # fmt: skip
+    caption = (
+        f"{len(messages)} message(s) of level warning and above the autopilot logged, at their time "
+        "on the shared axis (hover for the text). Read an alarm against what the autopilot itself said."
+    )
+    spec = {"id": "ctx-messages", "title": "autopilot messages", "caption": caption, "timeseries": True,
+            "height": MODE_HEIGHT}  # fmt: skip
+    return _spec(spec, data, layout)
+
+
 def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
     """``{"id", "title", "caption", "timeseries", "height", "json", "points"}`` per context figure: the mode
     when the profile has a mode channel, the path when a group measures position. [] for None."""
@@ -150,6 +189,8 @@ def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
     figures = []
     if context.mode is not None:
         figures.append(mode_figure(context.mode))
+    if getattr(context, "messages", None):
+        figures.append(messages_figure(context.messages, getattr(context, "t_span", None)))
     if context.path is not None:
         figures.append(path_figure(context.path, incidents))
     return figures
