@@ -39,6 +39,7 @@ BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.ubikf_chi2:Chi2Detector",
     "logscan.detectors.kgn:KgnDetector",
     "logscan.detectors.px4_estimator:Px4EstimatorDetector",
+    "logscan.detectors.health:HealthDetector",
 ]
 
 BUILTIN = "built-in"

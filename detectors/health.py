@@ -1,0 +1,566 @@
+"""The `health` detector: plausibility checks on the PX4 topics of a log (no filter of its own).
+
+Specified in docs/algorithms.md section 3c.
+
+Each check reads the log's own PX4 topics (``raw_topics``, instances 0 to 3) and gives one
+statistic ``health.<check>`` normalised so that its threshold is 1.0: a measured value over its
+limit (``eph / EKF2_REQ_EPH``), or a flag. The alarm logic's test is strict (statistic > threshold),
+so a count c that alarms when it reaches a limit L is stored as ``c / (L - 1/2)``: a flag (L = 1) is
+0 or 2, "all n motor outputs saturated" is ``count / (n - 1/2)``. Every statistic alarms through the
+shared logic with ``n_persist`` spanning ``min_duration_s`` at the source's sample rate on the grid.
+
+Checks (a check whose topic or field is absent is skipped, listed in ``info["skipped"]``):
+
+- battery (``battery_status``): ``cells * V_EMPTY / voltage_v``; a reading under 0.5 V while the
+  battery says it is connected: ``health.battery_zero``;
+- GNSS (``vehicle_gps_position``, else ``sensor_gps``), while armed when the arming state is
+  known: fix lost after the first 3D fix, ``eph`` / ``epv`` over EKF2_REQ_EPH / EKF2_REQ_EPV while
+  3D-fixed, ``jamming_indicator`` over ``jamming_limit``;
+- motors (``actuator_outputs`` and ``actuator_armed`` / ``vehicle_status``): saturated share, one
+  output at its max, an output at or below its disarmed value while flying;
+- IMU clipping (``sensor_combined``, ``vehicle_imu``), estimator faults (``estimator_status``),
+  errors in the logged messages, and sensor timeouts (a gap of more than ``timeout_periods``
+  median periods in any topic read).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+
+import numpy as np
+
+from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.params import Interval
+
+PREFIX = "health"
+INSTANCES = (0, 1, 2, 3)
+BATTERY = "battery_status"
+GPS = "vehicle_gps_position"
+SENSOR_GPS = "sensor_gps"
+OUTPUTS = "actuator_outputs"
+ARMED = "actuator_armed"
+STATUS = "vehicle_status"
+LAND = "vehicle_land_detected"
+COMBINED = "sensor_combined"
+IMU = "vehicle_imu"
+ESTIMATOR = "estimator_status"
+TOPIC_NAMES = (BATTERY, GPS, SENSOR_GPS, OUTPUTS, ARMED, STATUS, LAND, COMBINED, IMU, ESTIMATOR)
+# published on change, not at a rate: a long interval is no timeout
+EVENT_TOPICS = (ARMED, STATUS, LAND)
+
+FLAG = 2.0  # a set flag: count 1 / (limit 1 - 1/2)
+ZERO_VOLTAGE_V = 0.5  # a battery reading below this is "about 0 V"
+CELL_EMPTY_V = 3.3  # per-cell empty voltage when the log has no BAT*_V_EMPTY
+REQ_EPH_M = 3.0  # PX4's EKF2_REQ_EPH default
+REQ_EPV_M = 5.0  # PX4's EKF2_REQ_EPV default
+PWM_MAX = 2000.0  # PX4's PWM_MAIN_MAX default
+ARMED_STATE = 2  # vehicle_status.arming_state ARMED
+MOTOR_FUNCTIONS = range(101, 113)  # PWM_MAIN_FUNCn Motor1..Motor12 (PX4 v1.13+)
+# MAV_TYPE of multicopters (MAVLink: quad, coaxial, hexa, octo, tri, dodeca, deca): without
+# PWM_MAIN_FUNCn their first noutputs outputs are taken for motors; other vehicles' are not
+MULTICOPTERS = (2, 3, 13, 14, 15, 29, 35)
+LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR")  # pyulog's log_level_str, severe ones
+MAX_LOGGED_ERRORS = 50
+
+NO_TOPICS = (
+    "health: the log has none of the PX4 topics the plausibility checks read "
+    "(battery_status, vehicle_gps_position / sensor_gps, actuator_outputs, sensor_combined, "
+    "vehicle_imu, estimator_status) and no logged messages"
+)
+NOTHING = f"{PREFIX}.checks"  # the statistic that stands for "nothing was checked" (never finite)
+
+_CHANNEL = re.compile(r"^/?(?P<topic>[^/]+)_(?P<instance>\d+)/(?P<field>.+)$")
+_MESSAGE = re.compile(r"^(?P<t>\S+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
+
+
+def _split(raw: Mapping) -> dict[tuple[str, int], dict]:
+    """(topic, instance) -> {field: Channel} of the raw channels of known topics."""
+    topics: dict[tuple[str, int], dict] = {}
+    for name, channel in raw.items():
+        match = _CHANNEL.match(name)
+        if match is None or match.group("topic") not in TOPIC_NAMES:
+            continue
+        key = (match.group("topic"), int(match.group("instance")))
+        topics.setdefault(key, {})[match.group("field")] = channel
+    return topics
+
+
+def _parameter(parameters: Mapping, *names: str, positive: bool = True) -> tuple[float, str] | None:
+    """(value, name) of the first of ``names`` the log sets to a usable value (finite, and > 0
+    when ``positive``: PX4 writes -1 for "not set"), else None."""
+    for name in names:
+        try:
+            value = float(parameters[name])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if math.isfinite(value) and (value > 0 or not positive):
+            return value, name
+    return None
+
+
+def _held(channel, t_ns: np.ndarray) -> np.ndarray:
+    """The channel's value held from its latest sample at or before each time (NaN before)."""
+    i = np.searchsorted(channel.t, t_ns, side="right") - 1
+    out = channel.values[np.maximum(i, 0)].astype(np.float64)
+    out[i < 0] = np.nan
+    return out
+
+
+def _same_times(fields: Mapping, names) -> bool:
+    t = fields[names[0]].t
+    return all(np.array_equal(fields[n].t, t) for n in names[1:])
+
+
+def _suffix(instance: int) -> str:
+    return "" if instance == 0 else f".{instance}"
+
+
+class HealthDetector(Detector):
+    """Plausibility checks on PX4's own topics: battery, GNSS, motors, clipping, faults, errors, timeouts."""
+
+    name = "health"
+    requires_trace = False
+    reads = frozenset()  # none of the filter's series: only the log's own PX4 topics
+    raw_topics = tuple(f"{topic}_{i}" for topic in TOPIC_NAMES for i in INSTANCES)
+    defaults = {
+        "min_duration_s": 1.0,  # a check must fail for this long (logged errors and timeouts: once)
+        "jamming_limit": 80.0,  # GNSS jamming_indicator (0-255) above this is jamming
+        "timeout_periods": 5.0,  # a gap of more than this many median periods is a timeout
+    }
+    parameter_constraints = {
+        "min_duration_s": [Interval(float, 0, None, closed="left")],
+        "jamming_limit": [Interval(float, 0, None, closed="neither")],
+        "timeout_periods": [Interval(float, 1, None, closed="left")],
+    }
+
+    # --- the shared plumbing -------------------------------------------------------------------
+    def _run(self, run, trace, **context) -> DetectorResult:
+        result = self.new_result()
+        raw = context.get("raw") or {}
+        metadata = context.get("metadata") or {}
+        parameters = metadata.get("ulog.parameters", {}) or {}
+        topics = _split(raw)
+        self._result, self._grid = result, run
+        self._checks: dict[str, dict] = {}
+        self._skipped: dict[str, str] = {}
+        try:
+            armed = self._arming(topics)
+            self._battery(topics, parameters)
+            self._gnss(topics, parameters, armed)
+            self._motors(topics, parameters, armed)
+            self._clipping(topics)
+            self._estimator(topics)
+            self._logged_errors(metadata)
+            self._timeouts(topics, metadata)
+        finally:
+            self._result = self._grid = None
+        n = run.n_steps
+        if not topics:
+            result.warnings.append(NO_TOPICS)
+        if not self._checks:
+            if topics and NO_TOPICS not in result.warnings:
+                result.warnings.append("health: none of the log's PX4 topics had a sample to check on the grid")
+            # never finite: the verdict lists it as not checked (logscan.coverage)
+            result.add_statistic(run.t, NOTHING, np.full(n, np.nan), upper=1.0, valid=np.zeros(n, bool))
+        result.info["checks"] = self._checks
+        result.info["skipped"] = self._skipped
+        result.info["armed_from"] = armed[0] if armed else None
+        return result
+
+    def _add(self, name: str, where: str, t_ns, values, *, limit, n_persist: int | None = None, why: str = "") -> bool:
+        """Put ``values`` (at times ``t_ns``, NaN: not judged) on the grid and alarm over 1.0.
+        False (and ``name`` listed as skipped, ``why`` saying when it is judged) when no sample
+        lands on a grid step."""
+        run = self._grid
+        statistic = self._on_grid(run, np.asarray(t_ns), np.asarray(values, dtype=np.float64))
+        valid = np.isfinite(statistic)
+        if not valid.any():
+            self._skipped[name] = f"{where}: no sample to judge on the analysis grid{why}"
+            return False
+        if n_persist is None:
+            n_persist = self._n_persist(run.t[valid])
+        self._result.add_statistic(run.t, name, statistic, upper=1.0, valid=valid, n_persist=n_persist)
+        self._checks[name] = {"source": where, "limit": limit, "n_persist": n_persist}
+        return True
+
+    @staticmethod
+    def _on_grid(run, t_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """The samples on the grid: each at the first step at or after its time (max per step)."""
+        statistic = np.full(run.n_steps, np.nan)
+        if t_ns.size == 0 or run.n_steps == 0:
+            return statistic
+        t = (t_ns - run.start_ns) / 1e9
+        step = np.searchsorted(run.t, t - 1e-9, side="left")
+        keep = (step < run.n_steps) & (t >= run.t[0] - float(run.dt)) & np.isfinite(values)
+        np.fmax.at(statistic, step[keep], values[keep])
+        return statistic
+
+    def _n_persist(self, t_valid: np.ndarray) -> int:
+        """Consecutive judged samples that span min_duration_s at the source's rate on the grid."""
+        if self.min_duration_s <= 0 or t_valid.size < 2:
+            return 1
+        period = float(np.median(np.diff(t_valid)))
+        if not period > 0:
+            return 1
+        return int(math.ceil(float(self.min_duration_s) / period - 1e-6)) + 1
+
+    def _arming(self, topics) -> tuple[str, object, object] | None:
+        """(source, armed(t_ns) -> bool array, flying(t_ns) -> bool array), None when unknown."""
+        armed_channel = topics.get((ARMED, 0), {}).get("armed")
+        if armed_channel is not None:
+            source = f"{ARMED}_0.armed"
+
+            def armed(t_ns):
+                return np.nan_to_num(_held(armed_channel, t_ns)) != 0
+
+        else:
+            state = topics.get((STATUS, 0), {}).get("arming_state")
+            if state is None:
+                return None
+            source = f"{STATUS}_0.arming_state == {ARMED_STATE}"
+
+            def armed(t_ns):
+                return _held(state, t_ns) == ARMED_STATE
+
+        landed = topics.get((LAND, 0), {}).get("landed")
+
+        def flying(t_ns):
+            out = armed(t_ns)
+            if landed is not None:
+                held = _held(landed, t_ns)
+                out &= np.isfinite(held) & (held == 0)
+            return out
+
+        return source, armed, flying
+
+    # --- 1. battery ------------------------------------------------------------------------------
+    def _battery(self, topics, parameters) -> None:
+        found = sorted(i for topic, i in topics if topic == BATTERY)
+        if not found:
+            self._skipped["battery"] = f"no {BATTERY} topic"
+            return
+        for instance in found:
+            fields = topics[(BATTERY, instance)]
+            where = f"{BATTERY}_{instance}"
+            name = f"{PREFIX}.battery{_suffix(instance)}"
+            voltage = fields.get("voltage_v")
+            if voltage is None:
+                self._skipped[name] = f"{where} has no voltage_v"
+                continue
+            t, v = voltage.t, voltage.values
+            connected = fields.get("connected")
+            on = np.ones(t.size, bool) if connected is None else np.nan_to_num(_held(connected, t)) != 0
+            k = instance + 1
+            empty = _parameter(parameters, f"BAT{k}_V_EMPTY", "BAT_V_EMPTY")
+            v_empty, empty_from = empty if empty else (CELL_EMPTY_V, "default")
+            cells = np.full(t.size, np.nan)
+            cells_from = None
+            if "cell_count" in fields:
+                cells = np.where(_held(fields["cell_count"], t) > 0, _held(fields["cell_count"], t), np.nan)
+                cells_from = f"{where}.cell_count" if np.isfinite(cells).any() else None
+            param = _parameter(parameters, f"BAT{k}_N_CELLS", "BAT_N_CELLS")
+            if param is not None:
+                if cells_from is None:
+                    cells_from = param[1]
+                cells = np.where(np.isfinite(cells), cells, param[0])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                if cells_from is None:
+                    self._skipped[name] = (
+                        f"{where}: cell count unknown (no cell_count, no BAT{k}_N_CELLS / BAT_N_CELLS)"
+                    )
+                else:
+                    limit = cells * v_empty
+                    ok = on & np.isfinite(v) & (v >= ZERO_VOLTAGE_V)
+                    cells_seen = cells[np.isfinite(cells)]
+                    self._add(
+                        name,
+                        where,
+                        t,
+                        np.where(ok, limit / v, np.nan),
+                        limit={
+                            "empty_v": float(np.median(cells_seen)) * v_empty,
+                            "cells": float(np.median(cells_seen)),
+                            "cells_from": cells_from,
+                            "cell_empty_v": v_empty,
+                            "cell_empty_from": empty_from,
+                        },
+                    )
+                zero = np.where(on & np.isfinite(v), np.where(v < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
+            self._add(
+                f"{PREFIX}.battery_zero{_suffix(instance)}",
+                where,
+                t,
+                zero,
+                limit={"below_v": ZERO_VOLTAGE_V, "while": "connected" if connected is not None else "always"},
+            )
+
+    # --- 2. GNSS ---------------------------------------------------------------------------------
+    def _gnss(self, topics, parameters, armed) -> None:
+        topic = GPS if any(t == GPS for t, _ in topics) else SENSOR_GPS
+        found = sorted(i for t, i in topics if t == topic)
+        if not found:
+            self._skipped["gnss"] = f"no {GPS} or {SENSOR_GPS} topic"
+            return
+        eph_limit, eph_from = _parameter(parameters, "EKF2_REQ_EPH") or (REQ_EPH_M, "default")
+        epv_limit, epv_from = _parameter(parameters, "EKF2_REQ_EPV") or (REQ_EPV_M, "default")
+        for instance in found:
+            fields = topics[(topic, instance)]
+            where = f"{topic}_{instance}"
+            sfx = _suffix(instance)
+            any_channel = next(iter(fields.values()))
+            t = any_channel.t
+            gate = np.ones(t.size, bool) if armed is None else armed[1](t)
+            while_ = "armed" if armed is not None else "always (arming state unknown)"
+            fixed = np.ones(t.size, bool)  # 3D-fixed now (all when fix_type is absent)
+            fix = fields.get("fix_type")
+            if fix is not None and np.array_equal(fix.t, t):
+                three_d = fix.values >= 3
+                first = np.flatnonzero(three_d)
+                if first.size == 0:
+                    self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where}: no 3D fix in the log"
+                    fixed = three_d
+                else:
+                    after = np.arange(t.size) >= first[0]
+                    flag = np.where(three_d, 0.0, FLAG)
+                    self._add(
+                        f"{PREFIX}.gnss_fix{sfx}",
+                        where,
+                        t,
+                        np.where(after & gate, flag, np.nan),
+                        limit={
+                            "fix_type_below": 3,
+                            "after_s": (t[first[0]] - self._grid.start_ns) / 1e9,
+                            "while": while_,
+                        },
+                        why=f" ({while_}, after the first 3D fix)",
+                    )
+                    fixed = three_d
+            else:
+                self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where} has no fix_type"
+            for field, limit, source in (("eph", eph_limit, eph_from), ("epv", epv_limit, epv_from)):
+                name = f"{PREFIX}.gnss_{field}{sfx}"
+                channel = fields.get(field)
+                if channel is None or not np.array_equal(channel.t, t):
+                    self._skipped[name] = f"{where} has no {field}"
+                    continue
+                values = np.where(gate & fixed, channel.values / limit, np.nan)
+                self._add(
+                    name,
+                    where,
+                    t,
+                    values,
+                    limit={"m": limit, "from": source, "while": f"{while_}, 3D fix"},
+                    why=f" ({while_}, 3D fix)",
+                )
+            jam = fields.get("jamming_indicator")
+            name = f"{PREFIX}.gnss_jamming{sfx}"
+            if jam is None or not np.array_equal(jam.t, t):
+                self._skipped[name] = f"{where} has no jamming_indicator"
+            else:
+                values = np.where(gate, jam.values / float(self.jamming_limit), np.nan)
+                limit = {"indicator": float(self.jamming_limit), "while": while_}
+                self._add(name, where, t, values, limit=limit, why=f" ({while_})")
+
+    # --- 3. motors -------------------------------------------------------------------------------
+    def _motors(self, topics, parameters, armed) -> None:
+        found = sorted(i for t, i in topics if t == OUTPUTS)
+        if not found:
+            self._skipped["motors"] = f"no {OUTPUTS} topic"
+            return
+        if armed is None:
+            self._skipped["motors"] = f"arming state unknown (no {ARMED}.armed, no {STATUS}.arming_state)"
+            return
+        for instance in found:
+            fields = topics[(OUTPUTS, instance)]
+            where = f"{OUTPUTS}_{instance}"
+            group = "MAIN" if instance == 0 else "AUX"
+            label = "" if instance == 0 else "aux"
+            sfx = "" if instance == 0 else ".aux"
+            outputs = sorted(int(m.group(1)) for f in fields if (m := re.fullmatch(r"output\[(\d+)\]", f)) is not None)
+            if not outputs:
+                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = f"{where} has no output[k] fields"
+                continue
+            t = fields[f"output[{outputs[0]}]"].t
+            if not _same_times(fields, [f"output[{k}]" for k in outputs]):
+                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = f"{where}: outputs with different sample times"
+                continue
+            functions = {k: _parameter(parameters, f"PWM_{group}_FUNC{k + 1}", positive=False) for k in outputs}
+            if any(functions.values()):
+                motors = [k for k, f in functions.items() if f is not None and int(f[0]) in MOTOR_FUNCTIONS]
+                mapping = f"PWM_{group}_FUNCn in 101..112"
+                used = np.ones((t.size, len(motors)), bool)
+            elif instance == 0:
+                vehicle = _parameter(parameters, "MAV_TYPE", positive=False)
+                if vehicle is not None and int(vehicle[0]) not in MULTICOPTERS:
+                    self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = (
+                        f"{where}: no PWM_MAIN_FUNCn and MAV_TYPE {int(vehicle[0])} is not a multicopter: "
+                        "its outputs drive servos too, which of them are motors is unknown"
+                    )
+                    continue
+                if "noutputs" in fields:
+                    n_out = np.nan_to_num(_held(fields["noutputs"], t))
+                else:
+                    n_out = np.full(t.size, len(outputs))
+                motors = [k for k in outputs if k < n_out.max()]
+                mapping = "the first noutputs outputs (no PWM_MAIN_FUNCn)"
+                used = np.asarray(motors, dtype=np.int64)[None, :] < n_out[:, None]
+            else:
+                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = (
+                    f"{where}: no PWM_AUX_FUNCn, so which outputs drive motors is unknown (AUX outputs drive servos)"
+                )
+                continue
+            if not motors:
+                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = f"{where}: no output is a motor ({mapping})"
+                continue
+            values = np.column_stack([fields[f"output[{k}]"].values for k in motors])
+            top = np.array([self._pwm(parameters, group, "MAX", k, PWM_MAX) for k in motors])
+            bottom = np.array([self._pwm(parameters, group, "DIS", k, 0.0) for k in motors])
+            on = armed[1](t)
+            fly = armed[2](t)
+            saturated = (values >= top[None, :] - 0.5) & used
+            n_used = used.sum(axis=1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share = np.where(on & (n_used > 0), saturated.sum(axis=1) / (n_used - 0.5), np.nan)
+            limits = {
+                "mapping": mapping,
+                "outputs": [f"{label}{k + 1}" for k in motors],
+                "max": top.tolist(),
+                "disarmed": bottom.tolist(),
+            }
+            why = " (armed)"
+            self._add(f"{PREFIX}.motor_saturated{sfx}", where, t, share, limit={**limits, "all_outputs": True}, why=why)
+            for j, k in enumerate(motors):
+                flag = np.where(on & used[:, j], np.where(saturated[:, j], FLAG, 0.0), np.nan)
+                self._add(
+                    f"{PREFIX}.motor_max.{label}{k + 1}",
+                    where,
+                    t,
+                    flag,
+                    limit={"output": f"{label}{k + 1}", "field": f"output[{k}]", "max": float(top[j])},
+                    why=why,
+                )
+            low = (values <= bottom[None, :] + 0.5) & used
+            zero = np.where(fly & (n_used > 0), np.where(low.any(axis=1), FLAG, 0.0), np.nan)
+            limit = {**limits, "while": "armed and flying"}
+            if self._add(f"{PREFIX}.motor_zero{sfx}", where, t, zero, limit=limit, why=" (armed and flying)"):
+                hit = low & fly[:, None]
+                self._checks[f"{PREFIX}.motor_zero{sfx}"]["outputs_at_disarmed"] = [
+                    f"{label}{k + 1}" for j, k in enumerate(motors) if hit[:, j].any()
+                ]
+
+    @staticmethod
+    def _pwm(parameters, group: str, kind: str, k: int, default: float) -> float:
+        """An output's PWM max ("MAX") or disarmed value ("DIS") from the log's parameters: the
+        output's own (PWM_MAIN_MAXn, v1.13+), the group's, the legacy PWM_MAX / PWM_DISARMED."""
+        names = {
+            "MAX": (f"PWM_{group}_MAX{k + 1}", f"PWM_{group}_MAX", "PWM_MAX"),
+            "DIS": (f"PWM_{group}_DIS{k + 1}", f"PWM_{group}_DISARM", "PWM_DISARMED"),
+        }[kind]
+        found = _parameter(parameters, *names)
+        return found[0] if found else default
+
+    # --- 4. IMU clipping, 5. estimator faults ----------------------------------------------------
+    def _flag_check(self, topics, topic: str, field: str, name_of) -> bool:
+        ran = False
+        for (t_name, instance), fields in sorted(topics.items()):
+            if t_name != topic:
+                continue
+            channel = fields.get(field)
+            name = name_of(instance)
+            if channel is None:
+                self._skipped[name] = f"{topic}_{instance} has no {field}"
+                continue
+            values = np.where(np.isfinite(channel.values), np.where(channel.values != 0, FLAG, 0.0), np.nan)
+            ran |= self._add(name, f"{topic}_{instance}", channel.t, values, limit={field: "!= 0"})
+        return ran
+
+    def _clipping(self, topics) -> None:
+        if not any(t in (COMBINED, IMU) for t, _ in topics):
+            self._skipped["imu_clipping"] = f"no {COMBINED} or {IMU} topic"
+            return
+        self._flag_check(topics, COMBINED, "accelerometer_clipping", lambda i: f"{PREFIX}.imu_clipping{_suffix(i)}")
+        self._flag_check(topics, IMU, "delta_velocity_clipping", lambda i: f"{PREFIX}.imu_clipping.imu{i}")
+
+    def _estimator(self, topics) -> None:
+        if not any(t == ESTIMATOR for t, _ in topics):
+            self._skipped["estimator_fault"] = f"no {ESTIMATOR} topic"
+            return
+        self._flag_check(topics, ESTIMATOR, "filter_fault_flags", lambda i: f"{PREFIX}.estimator_fault{_suffix(i)}")
+        failed = {}
+        for (topic, instance), fields in sorted(topics.items()):
+            channel = fields.get("gps_check_fail_flags") if topic == ESTIMATOR else None
+            if channel is not None and channel.values.size:
+                bits = np.bitwise_or.reduce(np.nan_to_num(channel.values).astype(np.int64))
+                failed[f"{topic}_{instance}"] = {
+                    "bits_ever_set": int(bits),
+                    "share_of_samples": float(np.mean(channel.values != 0)),
+                }
+        if failed:
+            self._result.info["gps_check_fail_flags"] = failed
+
+    # --- 6. logged errors ------------------------------------------------------------------------
+    def _logged_errors(self, metadata) -> None:
+        messages = metadata.get("ulog.messages")
+        name = f"{PREFIX}.logged_error"
+        if messages is None:
+            self._skipped[name] = "the log carries no logged messages (not a ULog)"
+            return
+        run = self._grid
+        errors = []
+        statistic = np.zeros(run.n_steps)
+        for _, text in sorted(messages.items()):
+            match = _MESSAGE.match(str(text))
+            if match is None or match.group("level") not in LEVELS:
+                continue
+            try:
+                t_ns = round(float(match.group("t")) * 1e6) * 1000
+            except ValueError:
+                continue
+            t_s = (t_ns - run.start_ns) / 1e9
+            on_grid = self._on_grid(run, np.array([t_ns]), np.array([FLAG]))
+            statistic = np.fmax(statistic, np.nan_to_num(on_grid))
+            if len(errors) < MAX_LOGGED_ERRORS:
+                errors.append(
+                    {
+                        "time": t_s,
+                        "level": match.group("level"),
+                        "text": match.group("text").strip(),
+                        "on_grid": bool(np.isfinite(on_grid).any()),
+                    }
+                )
+        if run.n_steps:
+            run_result = self._result
+            run_result.add_statistic(run.t, name, statistic, upper=1.0, valid=np.ones(run.n_steps, bool), n_persist=1)
+            self._checks[name] = {"source": "ulog.messages", "limit": {"levels": list(LEVELS)}, "n_persist": 1}
+        self._result.info["logged_errors"] = errors
+
+    # --- 7. sensor timeouts ----------------------------------------------------------------------
+    def _timeouts(self, topics, metadata) -> None:
+        periods = float(self.timeout_periods)
+        for (topic, instance), fields in sorted(topics.items()):
+            if topic in EVENT_TOPICS:
+                continue
+            where = f"{topic}_{instance}"
+            name = f"{PREFIX}.timeout.{where}"
+            t = next(iter(fields.values())).t
+            if t.size < 4:
+                self._skipped[name] = f"{where}: fewer than 4 samples"
+                continue
+            gaps = np.diff(t).astype(np.float64)
+            period = float(np.median(gaps))
+            if not period > 0:
+                self._skipped[name] = f"{where}: no sample period"
+                continue
+            ratio = np.full(t.size, np.nan)
+            # the first interval is not judged: PX4's logger writes a topic's latest sample when it
+            # subscribes, which can be older than the topic's rate says
+            ratio[2:] = gaps[1:] / (periods * period)
+            limit = {"gap_s": periods * period / 1e9, "median_period_s": period / 1e9}
+            self._add(name, where, t, ratio, limit=limit, n_persist=1)
+        dropouts = (metadata.get("ulog.log") or {}).get("dropouts")
+        if dropouts not in (None, "0"):
+            self._result.info["logging_dropouts"] = (
+                f"{dropouts} logging dropout(s) in the log: a timeout may be data the logger lost, not a sensor"
+            )
