@@ -149,12 +149,19 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
 
 
 def builtin_profile_for(path: str | os.PathLike):
-    """The built-in profile (`logscan.profiles.builtin.BuiltProfile`) of a log that names itself,
-    else None; reads only the topics the built-in profile may use."""
+    """The built-in profile (`logscan.profiles.builtin.BuiltProfile`) of a log that names itself (a
+    PX4 ULog, a ROS 2 MCAP), else None; reads only the topics the built-in profile may use."""
     from logscan.profiles import builtin
     from logscan.readers import detect_format, read_log
 
-    if path is None or detect_format(path) != "ulog":
+    fmt = None if path is None else detect_format(path)
+    if fmt == "mcap":  # a ROS 2 log: its topic list first (the summary), then only the topics the profile may use
+        schemas = builtin.mcap_topic_schemas(path)
+        if not any(builtin.is_ros2_topic(*value) for value in schemas.values()):
+            return None
+        log = read_log(path, topics=builtin.ros2_candidate_topics(schemas))
+        return builtin.ros2_profile(log) if builtin.identify(log) == "ros2" else None
+    if fmt != "ulog":
         return None
     log = read_log(path, topics=builtin.PX4_TOPICS)
     if builtin.identify(log) != "px4":

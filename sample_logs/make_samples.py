@@ -5,6 +5,8 @@
 
 Every log is `logscan simulate` output: the same model, faults, seed and duration give the same
 bytes on any machine with the same numpy/numba versions (tests/test_sample_logs.py checks one).
+`ros2_ins.mcap` (format "ros2-mcap") is an `ins` simulation written as a ROS 2 recording by
+`logscan.simulate.ros2_export.write_ros2_mcap`: standard message types, no embedded profile or truth.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ class Sample:
     faults: tuple[str, ...]  # `--fault` texts (KIND:TARGET:START:END:MAGNITUDE)
     seed: int
     duration: float
-    fmt: str = "mcap-json"
+    fmt: str = "mcap-json"  # or "csv", "ros2-mcap" (`logscan.simulate.ros2_export`)
     about: str = ""
     glitches: float = 0.0  # healthy transients per minute (`--glitches`)
     speed: str | None = None  # dc_motor's commanded speed (`--speed`; None: the modes, 20 s each)
@@ -143,6 +145,16 @@ SAMPLES = (
         about="rotor 1 gives 20 % less thrust for 1 s",
     ),
     Sample(
+        "ros2_ins.mcap",
+        "ins",
+        (),
+        21,
+        35.0,
+        fmt="ros2-mcap",
+        about="the ins flight as a ROS 2 recording (CDR; /imu/data Imu 250 Hz, /gps/fix NavSatFix 10 Hz, "
+        "/odom Odometry 50 Hz; ENU / FLU frames): no profile embedded, it gets the built-in ros2 profile; no fault",
+    ),
+    Sample(
         "quad_healthy.csv",
         "quadcopter",
         (),
@@ -167,6 +179,10 @@ def generate(sample: Sample, out_dir: Path) -> list[Path]:
         speed=sample.speed,
         noise=sample.noise,
     )
+    if sample.fmt == "ros2-mcap":
+        from logscan.simulate.ros2_export import write_ros2_mcap
+
+        return [write_ros2_mcap(sim, out_dir / sample.name, truth=False)]  # a recording: no truth, no profile
     return write_simulation(sim, out_dir / sample.name, sample.fmt)
 
 

@@ -18,6 +18,7 @@ HEALTHY = [
     "jackal_train_1.mcap",
     "jackal_train_2.mcap",
     "hover_healthy.mcap",
+    "ros2_ins.mcap",  # no embedded profile: the built-in ros2 one (tests/test_ros2_builtin.py)
 ]
 FAULTY = [
     "quad_imu_bias.mcap",

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from logscan.pipeline import load_profile_for
 from logscan.profiles import resolve_profile
 from logscan.readers import read_log
 from logscan.simulate import parse_fault
@@ -50,10 +51,17 @@ def test_sample_is_small_and_carries_its_truth_and_profile(name, sample):
     spec = next(s for s in MAKE.SAMPLES if s.name == name)
     assert path.stat().st_size < MAX_BYTES
     log = read_log(path)
-    profile = resolve_profile(log)  # MCAP metadata record, or the CSV's .profile.toml sidecar
+    if spec.fmt == "ros2-mcap":  # a ROS 2 recording embeds no profile: it gets the built-in ros2 one
+        assert log.profile_text is None
+        profile = load_profile_for(path, None).profile
+    else:
+        profile = resolve_profile(log)  # MCAP metadata record, or the CSV's .profile.toml sidecar
     profile.check_channels(log)
     assert profile.vehicle.model == spec.model
     assert log.duration_s == pytest.approx(spec.duration)
+    if spec.fmt == "ros2-mcap":  # nor its truth: a recording has none
+        assert log.truth is None and not spec.faults
+        return
     expected = [parse_fault(f) for f in spec.faults]
     events = log.truth["events"]
     assert [(e["kind"], e["target"], e["start"], e["end"], e["magnitude"]) for e in events] == [
