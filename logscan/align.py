@@ -491,7 +491,8 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
     input_channels = list(profile.inputs.channels)
     span_channels = input_channels + [ch for g in profile.measurements.values() for ch in g.channels]
     first, last = aligner.span(span_channels)
-    start_ns = int(log.start_ns) if log.start_ns is not None else first
+    origin = getattr(log, "origin_ns", log.start_ns)  # the log's own time zero, whatever was read
+    start_ns = int(origin) if origin is not None else first
     early = [int(times[0]) for times in aligner.dropped.values() if times[0] < first]
     if early and start_ns <= max(early):  # the log's start is an outlier: count from the grid's
         start_ns = first

@@ -180,6 +180,21 @@ class Log:
         return min(firsts)
 
     @property
+    def origin_ns(self) -> int | None:
+        """Time zero of the log's own clock, the same whichever topics were read: a ULog's start
+        timestamp (the logger's start), else the first sample read (`start_ns`)."""
+        start_us = self.source.metadata.get("ulog.log", {}).get("start_timestamp_us")
+        try:
+            origin = int(start_us) * 1000 if start_us is not None else None
+        except ValueError:
+            origin = None
+        if origin is None or origin <= 0:
+            return self.start_ns  # no logger start: the first sample read
+        # kept even when a topic has samples before it (an appended log's early messages): time
+        # zero must not move with the topics a profile or detector reads
+        return origin
+
+    @property
     def end_ns(self) -> int | None:
         if self._span_ns is not None:
             return self._span_ns[1]

@@ -112,3 +112,20 @@ def test_the_autopilots_warnings_are_drawn_on_the_time_axis(cli, tmp_path):
     report = tmp_path / "r.html"
     assert cli("analyze", str(path), "-o", str(report)).exit_code in (0, 1)
     assert "ctx-messages" in report.read_text(encoding="utf-8")
+
+
+def test_time_zero_is_the_logs_own_whatever_the_topics_read(cli, tmp_path):
+    """A ULog's times count from its logger's start: reading more topics (the health detector's)
+    must not move the grid, so an alarm time means the same under any profile."""
+    path = need_testdata("px4-ulog/sample_appended_multiple.ulg")  # some topics start before the logger
+
+    def grid_start(*detectors):
+        out = tmp_path / f"{len(detectors)}.json"
+        args = [a for d in detectors for a in ("-d", d)]
+        assert cli("analyze", str(path), "--no-report", "--json", str(out), *args).exit_code in (0, 1)
+        return json.loads(out.read_text())["logs"][0]["log"]
+
+    alone, with_health = grid_start("nis"), grid_start("nis", "health")
+    assert alone["start_ns"] != with_health["start_ns"]  # the data read start at different times...
+    first = [json.loads((tmp_path / f"{n}.json").read_text())["logs"][0]["detectors"][0]["series"] for n in (1, 2)]
+    assert first[0] == first[1]  # ...but the grid, and every statistic on it, is the same
