@@ -106,6 +106,7 @@ class AlignedRun:
     input_channels: list[str]
     groups: dict[str, AlignedGroup]
     mode: np.ndarray | None = None
+    ground: np.ndarray | None = None  # (N,) the [alarms] ground_channel held (non-zero: on the ground)
     onboard_state: np.ndarray | HeldTable | None = None
     onboard_variance: np.ndarray | HeldTable | None = None
     warnings: list[str] = field(default_factory=list)
@@ -540,6 +541,11 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         mode_channel = profile.mode.channel
         mode, _ = aligner.hold(mode_channel, grid_ns, profile.mode.stale_s, fresh=scratch)
 
+    ground = None
+    policy = getattr(profile, "alarm_policy", None)
+    if policy is not None and policy.ground_channel:  # logged on change: held as long as it says
+        ground, _ = aligner.hold(policy.ground_channel, grid_ns, float("inf"), fresh=scratch)
+
     onboard_state = onboard_variance = None
     state_chans: list = []
     var_chans: list = []
@@ -593,6 +599,7 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         input_channels=input_channels,
         groups=groups,
         mode=mode,
+        ground=ground,
         onboard_state=onboard_state,
         onboard_variance=onboard_variance,
         warnings=aligner.warnings,

@@ -335,6 +335,24 @@ def detect(
         _pack_innovations(prepared, detectors, reuse_samples=free_series)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     policy = prepared.profile.alarm_policy
+    if policy is not None and (policy.ground_channel or policy.ignore_start_s):
+        policy = policy.suspend(prepared.run.t, prepared.run.ground)
+        if policy.suspended is not None:
+            seconds = float(policy.suspended.sum()) * prepared.run.dt
+            analysis.warnings.append(
+                f"not judged for {seconds:.1f} s of {prepared.run.n_steps * prepared.run.dt:.1f} s: "
+                + ", ".join(
+                    part
+                    for part, on in (
+                        (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.ignore_start_s > 0),
+                        (
+                            f"on the ground ({policy.ground_channel}) and {policy.after_ground_s:g} s after take-off",
+                            bool(policy.ground_channel),
+                        ),
+                    )
+                    if on
+                )
+            )
     for position, detector in enumerate(detectors):
         if free_series:
             release_unread(prepared, detectors[position:])

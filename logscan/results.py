@@ -96,6 +96,30 @@ class AlarmPolicy:
     n_persist: int = 1
     min_duration_s: float = 0.0
     merge_gap_s: float = 1.0  # alarms of one statistic closer than this merge (logscan.incidents)
+    # ground time: a channel non-zero while the vehicle is on the ground (a landed flag); no
+    # statistic is judged there, nor for after_ground_s after each take-off (the transient)
+    ground_channel: str | None = None
+    after_ground_s: float = 5.0
+    ignore_start_s: float = 0.0  # not judged for this long from the grid's start (the filter converging)
+    # (N,) bool, the grid steps not judged (from the three above, set per run by the pipeline)
+    suspended: Any = field(default=None, repr=False, compare=False)
+
+    def suspend(self, t, ground) -> AlarmPolicy:
+        """A copy with ``suspended`` set for a run of grid times ``t`` and held ground channel values
+        ``ground`` (None: none; NaN: unknown, judged)."""
+        import dataclasses
+
+        t = np.asarray(t, dtype=np.float64)
+        out = np.zeros(t.size, dtype=bool)
+        if t.size and self.ignore_start_s > 0:
+            out |= t < t[0] + self.ignore_start_s
+        if ground is not None and t.size:
+            on = np.nan_to_num(np.asarray(ground, dtype=np.float64), nan=0.0) != 0.0
+            out |= on
+            takeoffs = t[1:][on[:-1] & ~on[1:]]  # ground -> air
+            for t0 in takeoffs.tolist():
+                out |= (t >= t0) & (t < t0 + self.after_ground_s)
+        return dataclasses.replace(self, suspended=out if out.any() else None)
 
     def apply(self, options: dict) -> dict:
         """Alarm options with the floors applied (n_persist and min_duration_s raised to them)."""
@@ -170,14 +194,24 @@ class DetectorResult:
         self.thresholds[name] = band
         if check is not None:
             self.checks[name] = check
+        suspended = None
         if self.alarm_policy is not None:
             alarm_options = self.alarm_policy.apply(alarm_options)
+            suspended = self.alarm_policy.suspended
+            if suspended is not None and np.shape(suspended) != (n,):  # the grid's statistics only
+                suspended = None
         judged, in_warmup = judged_mask(
             t, alarm_options.get("valid"), alarm_options.get("warmup"), alarm_options.get("warmup_s", 0.0)
         )
         # a warm-up or window longer than most of the log leaves the statistic unable to alarm there
+        # (the profile's suspension, ground time, is a choice of scope, not a gap in the check)
         alarmable = judged & ~in_warmup
         self.judged_fraction[name] = float(alarmable.sum() / max(judged.sum(), 1)) if n else 1.0
+        if suspended is not None:
+            alarmable = alarmable & ~suspended
+            valid = alarm_options.get("valid")
+            base = np.ones(n, dtype=bool) if valid is None else np.broadcast_to(np.asarray(valid, bool), (n,))
+            alarm_options["valid"] = base & ~suspended
         self.judged[name] = np.broadcast_to(True, (n,)) if alarmable.all() else alarmable
         alarms = alarm_intervals(
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options

@@ -125,7 +125,36 @@ def test_time_zero_is_the_logs_own_whatever_the_topics_read(cli, tmp_path):
         assert cli("analyze", str(path), "--no-report", "--json", str(out), *args).exit_code in (0, 1)
         return json.loads(out.read_text())["logs"][0]["log"]
 
-    alone, with_health = grid_start("nis"), grid_start("nis", "health")
-    assert alone["start_ns"] != with_health["start_ns"]  # the data read start at different times...
+    grid_start("nis"), grid_start("nis", "health")  # health reads topics that start before the logger
     first = [json.loads((tmp_path / f"{n}.json").read_text())["logs"][0]["detectors"][0]["series"] for n in (1, 2)]
-    assert first[0] == first[1]  # ...but the grid, and every statistic on it, is the same
+    assert first[0] == first[1]  # the grid, and every statistic on it, is the same
+
+
+def test_ground_time_and_the_start_are_not_judged_and_say_so(cli, tmp_path):
+    """The built-in px4 profile suspends detection on the ground (vehicle_land_detected.landed), for
+    5 s after take-off and for the filter's first 5 s: a choice of scope, said in one warning line,
+    that leaves the log fully checked (exit 0 or 1, not 2)."""
+    path = need_testdata("px4-ulog/sample_px4_events.ulg")
+    built = parse_profile(builtin_profile_for(path).text)
+    policy = built.alarm_policy
+    assert policy.ground_channel == "/vehicle_land_detected_0/landed" and policy.ignore_start_s == 5.0
+    out = tmp_path / "s.json"
+    result = cli("analyze", str(path), "--no-report", "--json", str(out))
+    assert result.exit_code in (0, 1)
+    entry = json.loads(out.read_text())["logs"][0]
+    (line,) = [w for w in entry["warnings"] if w.startswith("not judged for")]
+    assert "on the ground" in line and "the first 5 s" in line
+    assert entry["unchecked"] == []
+
+
+def test_suspension_of_a_policy():
+    import numpy as np
+
+    from logscan.results import AlarmPolicy
+
+    t = np.arange(0.0, 30.0, 0.5)
+    ground = np.where((t < 10.0) | (t >= 25.0), 1.0, 0.0)  # landed, flies 10-25 s, landed
+    suspended = AlarmPolicy(ground_channel="g", after_ground_s=3.0, ignore_start_s=2.0).suspend(t, ground).suspended
+    flying_judged = t[~suspended]
+    assert flying_judged.min() == 13.0 and flying_judged.max() == 24.5  # take-off + 3 s .. landing
+    assert AlarmPolicy().suspend(t, None).suspended is None  # nothing asked: nothing suspended

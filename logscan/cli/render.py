@@ -38,6 +38,7 @@ def _analysed_span(analysis) -> str:
     start, end, whole = float(t[0]), float(t[-1]), analysis.log.duration_s
     if start <= 1e-9 and abs(whole - (end - start)) <= max(1e-6, 2.0 * analysis.run.dt):
         return f"{end - start:.1f} s"
+    start = max(start, 0.0) if start > -0.05 else start  # a grid step before time zero reads "0.0", not "-0.0"
     return f"{start:.1f}-{end:.1f} s of {whole:.1f} s"
 
 

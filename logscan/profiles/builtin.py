@@ -11,6 +11,8 @@ built from the topics present (`px4_profile`):
  - ``baro`` from ``vehicle_air_data`` (older logs: ``sensor_combined.baro_alt_meter``);
  - ``attitude`` from PX4's own estimate, ``vehicle_attitude.q``;
  - ``[mode]`` from ``vehicle_status.nav_state`` (the flight mode: KGN's steady gate);
+ - ``[alarms]``: nothing judged in the first IGNORE_START_S (the filter converging), on the ground
+   (``vehicle_land_detected.landed``) or in the 5 s after each take-off;
  - noise from the log's own EKF2 parameters where it has them (EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE,
    EKF2_BARO_NOISE, EKF2_ACC_NOISE, EKF2_GYR_NOISE, EKF2_ACC_B_NOISE, EKF2_GYR_B_NOISE): the
    values PX4 flew with.
@@ -53,7 +55,9 @@ PX4_TOPICS = (
     "vehicle_attitude_0",
     "vehicle_local_position_0",
     "vehicle_status_0",
+    "vehicle_land_detected_0",
 )
+IGNORE_START_S = 5.0  # the ins filter's convergence from its first samples: not judged
 _IMU = "sensor_combined_0"
 # ROS 2 message types the ros2 profile reads
 ROS2_IMU = "sensor_msgs/msg/Imu"
@@ -260,6 +264,16 @@ def px4_profile(log) -> BuiltProfile:
             "[mode]  # PX4's flight mode",
             'channel = "/vehicle_status_0/nav_state"',
             "stale_s = inf  # logged on change",
+        ]
+    lines += [
+        "",
+        "[alarms]",
+        f"ignore_start_s = {IGNORE_START_S:g}  # the filter converging from the first samples: not judged",
+    ]
+    if has("/vehicle_land_detected_0/landed"):
+        lines += [
+            'ground_channel = "/vehicle_land_detected_0/landed"  # not judged on the ground ...',
+            "after_ground_s = 5  # ... nor during the take-off transient",
         ]
     lines += [
         "",

@@ -24,6 +24,7 @@ from logscan.profiles.schema import (
     MAX_ALARM_PERSIST,
     MAX_MERGE_GAP_S,
     MAX_STALE_S,
+    MAX_SUSPEND_S,
     MIN_RATE_HZ,
     MODE_KEYS,
     MODE_STALE_S,
@@ -657,14 +658,22 @@ class _Checker:
             n_persist = None
         duration = self.number(data, "min_duration_s", where, minimum=0, strict=False, maximum=MAX_ALARM_DURATION_S)
         gap = self.number(data, "merge_gap_s", where, minimum=0, strict=False, maximum=MAX_MERGE_GAP_S)
-        if n_persist is None or any(
-            key in data and value is None for key, value in (("min_duration_s", duration), ("merge_gap_s", gap))
-        ):
+        after = self.number(data, "after_ground_s", where, minimum=0, strict=False, maximum=MAX_SUSPEND_S)
+        start = self.number(data, "ignore_start_s", where, minimum=0, strict=False, maximum=MAX_SUSPEND_S)
+        ground = self.string(data, "ground_channel", where) if "ground_channel" in data else None
+        numbers = (("min_duration_s", duration), ("merge_gap_s", gap), ("after_ground_s", after))
+        numbers += (("ignore_start_s", start),)
+        if n_persist is None or any(key in data and value is None for key, value in numbers):
+            return None
+        if "ground_channel" in data and ground is None:
             return None
         return AlarmPolicy(
             n_persist=n_persist,
             min_duration_s=0.0 if duration is None else duration,
             merge_gap_s=AlarmPolicy.merge_gap_s if gap is None else gap,
+            ground_channel=ground,
+            after_ground_s=AlarmPolicy.after_ground_s if after is None else after,
+            ignore_start_s=0.0 if start is None else start,
         )
 
     def detectors(self, raw: Any) -> dict[str, DetectorSpec]:

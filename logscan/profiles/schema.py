@@ -49,7 +49,8 @@ ONBOARD_KEYS = ("state", "variance", "stale_s")
 INPUT_TABLE_KEYS = ("channels", "frame", "scale", "offset")
 #: ``frame`` of an input table: "flu" (forward, left, up: negate the 2nd and 3rd channels) or "frd"
 INPUT_FRAMES = ("frd", "flu")
-ALARM_KEYS = ("n_persist", "min_duration_s", "merge_gap_s")
+ALARM_KEYS = ("n_persist", "min_duration_s", "merge_gap_s", "ground_channel", "after_ground_s", "ignore_start_s")
+MAX_SUSPEND_S = 600.0  # after_ground_s, ignore_start_s: a transient, not a flight
 #: Upper bounds of the [alarms] floors: they are for one- or two-sample transients; longer floors
 #: would hide real faults (documented in docs/profiles.md).
 MAX_ALARM_PERSIST = 1000
@@ -260,6 +261,8 @@ class Profile:
             refs.extend((f"[measurements.{group.name}] channels", ch) for ch in group.channels)
         if self.mode is not None:
             refs.append(("[mode] channel", self.mode.channel))
+        if self.alarm_policy is not None and self.alarm_policy.ground_channel:
+            refs.append(("[alarms] ground_channel", self.alarm_policy.ground_channel))
         for red in self.redundant.values():
             refs.extend((f"[redundant.{red.name}] sensors.{s.name}", s.channel) for s in red.sensors.values())
         if self.onboard is not None:
@@ -394,6 +397,11 @@ class Profile:
                 "min_duration_s": self.alarm_policy.min_duration_s,
                 "merge_gap_s": self.alarm_policy.merge_gap_s,
             }
+            if self.alarm_policy.ground_channel:
+                out["alarms"]["ground_channel"] = self.alarm_policy.ground_channel
+                out["alarms"]["after_ground_s"] = self.alarm_policy.after_ground_s
+            if self.alarm_policy.ignore_start_s:
+                out["alarms"]["ignore_start_s"] = self.alarm_policy.ignore_start_s
         return out
 
     def to_toml(self) -> str:
