@@ -25,7 +25,6 @@ Checks (a check whose topic or field is absent is skipped, listed in ``info["ski
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 
@@ -33,6 +32,9 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Interval
+from logscan.detectors.raw_topics import held as _held
+from logscan.detectors.raw_topics import log_parameter as _parameter
+from logscan.detectors.raw_topics import on_grid, persist_count, split_topics
 
 PREFIX = "health"
 INSTANCES = (0, 1, 2, 3)
@@ -71,41 +73,7 @@ NO_TOPICS = (
 )
 NOTHING = f"{PREFIX}.checks"  # the statistic that stands for "nothing was checked" (never finite)
 
-_CHANNEL = re.compile(r"^/?(?P<topic>[^/]+)_(?P<instance>\d+)/(?P<field>.+)$")
 _MESSAGE = re.compile(r"^(?P<t>\S+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
-
-
-def _split(raw: Mapping) -> dict[tuple[str, int], dict]:
-    """(topic, instance) -> {field: Channel} of the raw channels of known topics."""
-    topics: dict[tuple[str, int], dict] = {}
-    for name, channel in raw.items():
-        match = _CHANNEL.match(name)
-        if match is None or match.group("topic") not in TOPIC_NAMES:
-            continue
-        key = (match.group("topic"), int(match.group("instance")))
-        topics.setdefault(key, {})[match.group("field")] = channel
-    return topics
-
-
-def _parameter(parameters: Mapping, *names: str, positive: bool = True) -> tuple[float, str] | None:
-    """(value, name) of the first of ``names`` the log sets to a usable value (finite, and > 0
-    when ``positive``: PX4 writes -1 for "not set"), else None."""
-    for name in names:
-        try:
-            value = float(parameters[name])
-        except (KeyError, TypeError, ValueError):
-            continue
-        if math.isfinite(value) and (value > 0 or not positive):
-            return value, name
-    return None
-
-
-def _held(channel, t_ns: np.ndarray) -> np.ndarray:
-    """The channel's value held from its latest sample at or before each time (NaN before)."""
-    i = np.searchsorted(channel.t, t_ns, side="right") - 1
-    out = channel.values[np.maximum(i, 0)].astype(np.float64)
-    out[i < 0] = np.nan
-    return out
 
 
 def _same_times(fields: Mapping, names) -> bool:
@@ -141,7 +109,7 @@ class HealthDetector(Detector):
         raw = context.get("raw") or {}
         metadata = context.get("metadata") or {}
         parameters = metadata.get("ulog.parameters", {}) or {}
-        topics = _split(raw)
+        topics = split_topics(raw, TOPIC_NAMES)
         self._result, self._grid = result, run
         self._checks: dict[str, dict] = {}
         self._skipped: dict[str, str] = {}
@@ -174,37 +142,16 @@ class HealthDetector(Detector):
         False (and ``name`` listed as skipped, ``why`` saying when it is judged) when no sample
         lands on a grid step."""
         run = self._grid
-        statistic = self._on_grid(run, np.asarray(t_ns), np.asarray(values, dtype=np.float64))
+        statistic = on_grid(run, np.asarray(t_ns), np.asarray(values, dtype=np.float64))
         valid = np.isfinite(statistic)
         if not valid.any():
             self._skipped[name] = f"{where}: no sample to judge on the analysis grid{why}"
             return False
         if n_persist is None:
-            n_persist = self._n_persist(run.t[valid])
+            n_persist = persist_count(run.t[valid], float(self.min_duration_s))
         self._result.add_statistic(run.t, name, statistic, upper=1.0, valid=valid, n_persist=n_persist)
         self._checks[name] = {"source": where, "limit": limit, "n_persist": n_persist}
         return True
-
-    @staticmethod
-    def _on_grid(run, t_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """The samples on the grid: each at the first step at or after its time (max per step)."""
-        statistic = np.full(run.n_steps, np.nan)
-        if t_ns.size == 0 or run.n_steps == 0:
-            return statistic
-        t = (t_ns - run.start_ns) / 1e9
-        step = np.searchsorted(run.t, t - 1e-9, side="left")
-        keep = (step < run.n_steps) & (t >= run.t[0] - float(run.dt)) & np.isfinite(values)
-        np.fmax.at(statistic, step[keep], values[keep])
-        return statistic
-
-    def _n_persist(self, t_valid: np.ndarray) -> int:
-        """Consecutive judged samples that span min_duration_s at the source's rate on the grid."""
-        if self.min_duration_s <= 0 or t_valid.size < 2:
-            return 1
-        period = float(np.median(np.diff(t_valid)))
-        if not period > 0:
-            return 1
-        return int(math.ceil(float(self.min_duration_s) / period - 1e-6)) + 1
 
     def _arming(self, topics) -> tuple[str, object, object] | None:
         """(source, armed(t_ns) -> bool array, flying(t_ns) -> bool array), None when unknown."""
@@ -519,15 +466,15 @@ class HealthDetector(Detector):
             except ValueError:
                 continue
             t_s = (t_ns - run.start_ns) / 1e9
-            on_grid = self._on_grid(run, np.array([t_ns]), np.array([FLAG]))
-            statistic = np.fmax(statistic, np.nan_to_num(on_grid))
+            placed = on_grid(run, np.array([t_ns]), np.array([FLAG]))
+            statistic = np.fmax(statistic, np.nan_to_num(placed))
             if len(errors) < MAX_LOGGED_ERRORS:
                 errors.append(
                     {
                         "time": t_s,
                         "level": match.group("level"),
                         "text": match.group("text").strip(),
-                        "on_grid": bool(np.isfinite(on_grid).any()),
+                        "on_grid": bool(np.isfinite(placed).any()),
                     }
                 )
         if run.n_steps:

@@ -26,7 +26,6 @@ instance, ``px4.ekf<i>.<source>``.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 
@@ -34,6 +33,7 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Interval
+from logscan.detectors.raw_topics import held, log_parameter, on_grid, persist_count, split_topics
 
 PREFIX = "px4"
 # EKF2 instances read (PX4 runs up to several with EKF2_MULTI_IMU / EKF2_MULTI_MAG)
@@ -133,20 +133,7 @@ NO_RATIOS = (
 # the statistic that stands for "nothing was checked" (never finite: logscan.coverage says so)
 NOTHING = f"{PREFIX}.test_ratios"
 
-_CHANNEL = re.compile(r"^/?(?P<topic>[^/]+)_(?P<instance>\d+)/(?P<field>.+)$")
 _ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")
-
-
-def _split(raw: Mapping) -> dict[tuple[str, int], dict]:
-    """(topic, instance) -> {field: Channel} of the raw channels of known topics."""
-    topics: dict[tuple[str, int], dict] = {}
-    for name, channel in raw.items():
-        match = _CHANNEL.match(name)
-        if match is None or match.group("topic") not in TOPIC_NAMES:
-            continue
-        key = (match.group("topic"), int(match.group("instance")))
-        topics.setdefault(key, {})[match.group("field")] = channel
-    return topics
 
 
 def _base(field: str) -> str:
@@ -190,11 +177,8 @@ def _legacy_ratio(fields: dict, innov: tuple[str, ...], gate: float) -> tuple[np
 
 
 def _parameter(parameters: Mapping, name: str, default: float) -> float:
-    try:
-        value = float(parameters[name])
-    except (KeyError, TypeError, ValueError):
-        return default
-    return value if math.isfinite(value) and value > 0 else default
+    found = log_parameter(parameters, name)
+    return default if found is None else found[0]
 
 
 class Px4EstimatorDetector(Detector):
@@ -218,7 +202,7 @@ class Px4EstimatorDetector(Detector):
         parameters = (metadata or {}).get("ulog.parameters", {}) or {}
         found = []
         gates: dict[str, float] = {}
-        for (topic, instance), fields in sorted(_split(raw).items()):
+        for (topic, instance), fields in sorted(split_topics(raw, TOPIC_NAMES).items()):
             if topic == TEST_RATIOS:
                 by_base: dict[str, list] = {}
                 for field, channel in fields.items():
@@ -251,7 +235,7 @@ class Px4EstimatorDetector(Detector):
         """``found`` with each test-ratio sample NaN where its instance's estimator_status_flags say
         the source was not fused (the flags held from their latest sample; all kept without them),
         and each estimator_aid_src_* sample NaN where its own ``fused`` field is 0."""
-        topics = _split(raw)
+        topics = split_topics(raw, TOPIC_NAMES)
         out = []
         for instance, source, topic, series in found:
             if series is not None:
@@ -263,8 +247,7 @@ class Px4EstimatorDetector(Detector):
                     if present:
                         mask = np.zeros(t.shape, dtype=bool)
                         for flag in present:
-                            i = np.searchsorted(flag.t, t, side="right") - 1
-                            mask |= (i >= 0) & (flag.values[np.maximum(i, 0)] != 0)
+                            mask |= np.nan_to_num(held(flag, t)) != 0
                 elif topic.startswith(AID_PREFIX):
                     fused = topics.get((topic, instance), {}).get("fused")
                     if fused is not None and np.array_equal(fused.t, t):
@@ -291,12 +274,12 @@ class Px4EstimatorDetector(Detector):
             if series is None:
                 result.warnings.append(f"px4_estimator: {where} {source}: fields with different sample times, skipped")
                 continue
-            statistic = self._on_grid(run, *series)
+            statistic = on_grid(run, *series)
             valid = np.isfinite(statistic)
             if not valid.any():
                 unused.append(name)
                 continue
-            n_persist = self._n_persist(t_grid[valid])
+            n_persist = persist_count(t_grid[valid], float(self.min_duration_s))
             result.add_statistic(t_grid, name, statistic, upper=float(self.ratio), valid=valid, n_persist=n_persist)
             sources[name] = where
             persist[name] = n_persist
@@ -314,24 +297,3 @@ class Px4EstimatorDetector(Detector):
         if gates:
             result.info["gates"] = gates
         return result
-
-    @staticmethod
-    def _on_grid(run, t_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """The samples on the grid: each at the first step at or after its time (max per step)."""
-        statistic = np.full(run.n_steps, np.nan)
-        if t_ns.size == 0 or run.n_steps == 0:
-            return statistic
-        t = (t_ns - run.start_ns) / 1e9
-        step = np.searchsorted(run.t, t - 1e-9, side="left")
-        keep = (step < run.n_steps) & (t >= run.t[0] - float(run.dt)) & np.isfinite(values)
-        np.fmax.at(statistic, step[keep], values[keep])
-        return statistic
-
-    def _n_persist(self, t_valid: np.ndarray) -> int:
-        """Consecutive samples over the ratio that span min_duration_s at the source's sample rate."""
-        if self.min_duration_s <= 0 or t_valid.size < 2:
-            return 1
-        period = float(np.median(np.diff(t_valid)))
-        if not period > 0:
-            return 1
-        return int(math.ceil(float(self.min_duration_s) / period - 1e-6)) + 1
