@@ -103,16 +103,22 @@ def euler_rate_matrix_into(phi, theta, Em, r0):
 
 
 @njit(cache=True, no_cpython_wrapper=True)
-def _rotate_euler(x, d0, d1, d2, out, R, E, Jr, M):
-    """out[6:9] = the Euler angles of R(x[6:9]) Exp(d) (R, E, Jr, M: 3x3 work arrays)."""
-    quad_rotation_into(x[6], x[7], x[8], R)
-    so3_exp_jr_into(d0, d1, d2, E, Jr)
+def _mat3_mul_into(A, B, C):
+    """C = A B (3 x 3)."""
     for i in range(3):
         for j in range(3):
             t = 0.0
             for k in range(3):
-                t += R[i, k] * E[k, j]
-            M[i, j] = t
+                t += A[i, k] * B[k, j]
+            C[i, j] = t
+
+
+@njit(cache=True, no_cpython_wrapper=True)
+def _rotate_euler(x, d0, d1, d2, out, R, E, Jr, M):
+    """out[6:9] = the Euler angles of R(x[6:9]) Exp(d) (R, E, Jr, M: 3x3 work arrays)."""
+    quad_rotation_into(x[6], x[7], x[8], R)
+    so3_exp_jr_into(d0, d1, d2, E, Jr)
+    _mat3_mul_into(R, E, M)
     out[6], out[7], out[8] = euler_from_rotation(M)
 
 
@@ -152,12 +158,7 @@ def ins_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         x_next[i] = x[i]
     # R' = R Exp(w dt)
     so3_exp_jr_into(w0 * dt, w1 * dt, w2 * dt, E, Jr)
-    for i in range(3):
-        for j in range(3):
-            t = 0.0
-            for k in range(3):
-                t += R[i, k] * E[k, j]
-            M[i, j] = t
+    _mat3_mul_into(R, E, M)
     x_next[6], x_next[7], x_next[8] = euler_from_rotation(M)
     # F
     for i in range(INS_N):
