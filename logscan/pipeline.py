@@ -235,7 +235,7 @@ def prepare(
     from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
-    from logscan.run_context import logged_messages, run_context
+    from logscan.run_context import STATE_TOPICS, autopilot_states, logged_messages, run_context
 
     step = progress or (lambda message: None)
     path = str(path)
@@ -243,12 +243,14 @@ def prepare(
     model = get_model(profile.vehicle.model, profile.vehicle.params)
     compiling = _start_compile(model, needs, notice)
     step("reading")
-    log = read_log(path, topics=profile.topics() | set(raw_topics), use_header_stamp=use_header_stamp)
+    context_topics = set(STATE_TOPICS)  # the autopilot's states for the report, when the log has them
+    log = read_log(path, topics=profile.topics() | set(raw_topics) | context_topics, use_header_stamp=use_header_stamp)
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")
     run = align(log, profile, start_s=start_s, end_s=end_s)
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
+    states = autopilot_states(raw_channels(log, frozenset(context_topics)), run.start_ns, float(run.t[-1]))
     log.release_samples()  # the run holds what the filters and detectors read from here on
     if run.n_steps < 2:
         raise LogscanError(
@@ -262,6 +264,7 @@ def prepare(
     )
     prepared.context.messages = logged_messages(log.source.metadata, run.start_ns)
     prepared.context.t_span = (float(run.t[0]), float(run.t[-1]))
+    prepared.context.states = states
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)

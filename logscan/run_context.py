@@ -10,7 +10,9 @@ what the report shows beside the statistics is extracted right after alignment, 
 - the mode: the profile's ``[mode]`` channel as intervals of one value (``MAX_MODE_INTERVALS`` at
   most), or, when it changes more often (a continuous set-point), as a decimated series;
 - the autopilot's own logged messages of level WARNING and above (a ULog's ``logged_messages``,
-  ``MAX_MESSAGES`` at most), on the same time axis.
+  ``MAX_MESSAGES`` at most), on the same time axis;
+- the autopilot's states as intervals: armed (PX4 ``vehicle_status.arming_state`` 2) and in
+  failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,10 @@ MAX_MODE_INTERVALS = 200
 MAX_MODE_POINTS = 1_000
 POSITION_STATES = ("x", "y")
 MAX_MESSAGES = 200
+MAX_STATE_INTERVALS = 200
+# topics read beside a profile's for the states drawn in the report (absent topics cost nothing)
+STATE_TOPICS = ("vehicle_status_0",)
+ARMED_STATE = 2.0  # PX4 vehicle_status.arming_state: ARMING_STATE_ARMED
 # a ULog message's level, as logscan.readers.ulog_reader writes it ("<s> s [<LEVEL>] <text>"), most severe first
 MESSAGE_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING")
 _MESSAGE = None  # compiled lazily: most runs have no messages
@@ -69,6 +75,39 @@ class RunContext:
     mode: ModeTrack | None = None
     messages: list[LoggedMessage] = field(default_factory=list)
     t_span: tuple[float, float] | None = None  # the grid's first and last time: the shared time axis
+    states: dict[str, list[tuple[float, float]]] = field(default_factory=dict)  # "armed" -> intervals (s)
+
+
+def _intervals(t: np.ndarray, on: np.ndarray, end: float) -> list[tuple[float, float]]:
+    """The (start, end) times where ``on`` holds, each sample holding until the next (the last
+    until ``end``)."""
+    if t.size == 0:
+        return []
+    change = np.flatnonzero(np.diff(on.astype(np.int8)) != 0) + 1
+    starts = np.concatenate([[0], change])
+    stops = np.concatenate([change, [t.size]])
+    out = []
+    for a, b in zip(starts.tolist(), stops.tolist()):
+        if on[a]:
+            out.append((float(t[a]), float(t[b]) if b < t.size else end))
+    return out[:MAX_STATE_INTERVALS]
+
+
+def autopilot_states(raw: dict, start_ns: int, end_s: float) -> dict[str, list[tuple[float, float]]]:
+    """{"armed": intervals, "failsafe": intervals} from PX4's vehicle_status channels in ``raw``
+    (times in s since ``start_ns``); states the log lacks are left out."""
+    out = {}
+    for state, field_name, test in (
+        ("armed", "arming_state", lambda v: v == ARMED_STATE),
+        ("failsafe", "failsafe", lambda v: v != 0),
+    ):
+        channel = raw.get(f"/vehicle_status_0/{field_name}")
+        if channel is None or len(channel) == 0:
+            continue
+        t = (np.asarray(channel.t, dtype=np.int64) - start_ns) / 1e9
+        values = np.asarray(channel.values, dtype=np.float64)
+        out[state] = _intervals(t, test(np.nan_to_num(values)), end_s)
+    return out
 
 
 def logged_messages(metadata: dict, start_ns: int) -> list[LoggedMessage]:

@@ -158,3 +158,22 @@ def test_suspension_of_a_policy():
     flying_judged = t[~suspended]
     assert flying_judged.min() == 13.0 and flying_judged.max() == 24.5  # take-off + 3 s .. landing
     assert AlarmPolicy().suspend(t, None).suspended is None  # nothing asked: nothing suspended
+
+
+def test_the_autopilots_armed_and_failsafe_states_are_drawn(cli, tmp_path):
+    import numpy as np
+
+    from logscan.log import Channel
+    from logscan.run_context import autopilot_states
+
+    t = np.arange(0, 10) * 1_000_000_000
+    raw = {
+        "/vehicle_status_0/arming_state": Channel("a", t, np.array([1, 1, 2, 2, 2, 1, 1, 2, 2, 1.0])),
+        "/vehicle_status_0/failsafe": Channel("f", t, np.zeros(10)),
+    }
+    states = autopilot_states(raw, 0, 10.0)
+    assert states == {"armed": [(2.0, 5.0), (7.0, 9.0)], "failsafe": []}
+    path = need_testdata("px4-ulog/sample_px4_events.ulg")
+    report = tmp_path / "r.html"
+    assert cli("analyze", str(path), "-o", str(report)).exit_code in (0, 1)
+    assert "ctx-states" in report.read_text(encoding="utf-8")

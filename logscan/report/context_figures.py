@@ -181,6 +181,41 @@ def messages_figure(messages, t_span: tuple[float, float] | None = None) -> dict
     return _spec(spec, data, layout)
 
 
+_STATE_FILLS = {"armed": "rgba(44, 160, 44, 0.25)", "failsafe": "rgba(214, 39, 40, 0.35)"}
+
+
+def states_figure(states: dict, t_span: tuple[float, float] | None = None) -> dict:
+    """The autopilot's armed and failsafe intervals as bands on the shared time axis, one row each."""
+    data = []
+    names = list(states)
+    for row, name in enumerate(names):
+        spans = states[name]
+        x, y = [], []
+        for a, b in spans:  # a filled rectangle per interval on the state's row
+            x += [a, a, b, b, None]
+            y += [row - 0.4, row + 0.4, row + 0.4, row - 0.4, None]
+        data.append({
+            "type": "scatter", "name": name, "x": x, "y": y, "mode": "lines", "fill": "toself",
+            "fillcolor": _STATE_FILLS.get(name, "rgba(127, 127, 127, 0.3)"), "line": {"width": 0},
+            "hoverinfo": "name",
+        })  # fmt: skip
+    layout = {
+        **_BASE_LAYOUT,
+        "title": {"text": "the autopilot's state", "font": {"size": 14}},
+        "height": MODE_HEIGHT,
+        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},  # as the detector figures: time axes align
+        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
+        "xaxis": {**TIME_AXIS, **({"range": list(t_span)} if t_span else {})},
+        "yaxis": {"tickvals": list(range(len(names))), "ticktext": names, "range": [-0.6, len(names) - 0.4],
+                  "fixedrange": True},
+    }  # fmt: skip
+    summary = "; ".join(f"{name}: {len(spans)} interval(s)" for name, spans in states.items())
+    caption = f"When the vehicle was armed and in failsafe, as its autopilot logged ({summary})."
+    spec = {"id": "ctx-states", "title": "autopilot state", "caption": caption, "timeseries": True,
+            "height": MODE_HEIGHT}  # fmt: skip
+    return _spec(spec, data, layout)
+
+
 def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
     """``{"id", "title", "caption", "timeseries", "height", "json", "points"}`` per context figure: the mode
     when the profile has a mode channel, the path when a group measures position. [] for None."""
@@ -189,6 +224,8 @@ def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
     figures = []
     if context.mode is not None:
         figures.append(mode_figure(context.mode))
+    if getattr(context, "states", None):
+        figures.append(states_figure(context.states, getattr(context, "t_span", None)))
     if getattr(context, "messages", None):
         figures.append(messages_figure(context.messages, getattr(context, "t_span", None)))
     if context.path is not None:
