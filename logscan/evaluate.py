@@ -282,15 +282,19 @@ def evaluate_logs(
     start_s: float | None = None,
     end_s: float | None = None,
     tables_path: str | None = None,
+    scheduler: str | None = None,
 ) -> Evaluation:
-    """Analyse and score every log with ground truth (``jobs`` local processes); skip the others;
-    record failures as lines. ``start_s``/``end_s``: the window of each log analysed."""
+    """Analyse and score every log with ground truth (``jobs`` local processes, or the Dask
+    ``scheduler``: `logscan.fleet.run_many`); skip the others; record failures as lines.
+    ``start_s``/``end_s``: the window of each log analysed."""
     from logscan.fleet import LogFailure, run_many
 
     names = tuple(detector_names) if detector_names else None
     task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s, start_s, end_s, tables_path)
     evaluation = Evaluation(grace_s=grace_s, recovery_s=recovery_s)
-    for path, outcome in zip(paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating")):
+    for path, outcome in zip(
+        paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating", scheduler=scheduler)
+    ):
         if isinstance(outcome, LogFailure):
             evaluation.failures.append(outcome)
         elif outcome is None:

@@ -1,5 +1,5 @@
 """One runner over many logs: log expansion, output naming, per-log failure isolation, one progress
-bar, and local processes (`--jobs N`).
+bar, local processes (`--jobs N`) and a Dask cluster (`--scheduler ADDRESS`).
 
     logs = expand_logs(["runs/", "extra.mcap"])
     outcomes = run_many(logs, task, jobs=4, progress=True)   # results in input order
@@ -9,6 +9,10 @@ path (`logscan analyze` passes (log, report path) pairs); a module-level functio
 functools.partial of one; it returns what the caller wants back. A log whose task raises becomes a
 `LogFailure` in its place and never stops the others. Results do not depend on ``jobs``: each log
 is processed by the same task, and outcomes come back in the order of ``logs``.
+
+With ``scheduler`` (``tcp://host:8786``, or ``local:N`` for a LocalCluster of N worker processes
+started for the run) the same task runs on Dask workers (`run_on_dask`): same outcomes, same order.
+Workers must see the logs and the output directories at the same paths (a shared file system).
 """
 
 from __future__ import annotations
@@ -255,13 +259,17 @@ def run_many(
     progress: bool = False,
     label: str = "logs",
     isolate: bool = True,
+    scheduler: str | None = None,
 ) -> list[Any]:
     """``task(log)`` for every log, in input order; a failing log yields a LogFailure (with
     ``isolate``; without it the first error propagates, e.g. for one log run in the foreground;
     an `OutputError` always propagates). ``jobs`` > 1 runs the logs in that many local processes,
     which ignore SIGINT: on Ctrl-C, or any error that stops the run, this process stops them
-    (terminated and joined) before the exception propagates. ``progress`` shows one bar on stderr."""
+    (terminated and joined) before the exception propagates. ``scheduler``: the logs run on that
+    Dask cluster instead (`run_on_dask`). ``progress`` shows one bar on stderr."""
     logs = list(logs)
+    if scheduler is not None:
+        return run_on_dask(logs, task, scheduler=scheduler, progress=progress, label=label, isolate=isolate)
     call = (lambda path: _isolated(task, path)) if isolate else task
     bar = _progress_bar(len(logs), label) if progress and len(logs) > 1 else None
     try:
@@ -329,3 +337,187 @@ def _progress_bar(total: int, label: str):
     bar = click.progressbar(length=total, label=label, file=sys.stderr, show_pos=True)
     bar.render_progress()
     return bar
+
+
+# --scheduler: a Dask cluster. A task that raises is retried this many times by distributed (with
+# ``isolate`` a log's error is its LogFailure, so only errors that stop the run, such as OutputError,
+# raise); a log whose worker died (KilledWorker, after distributed.scheduler.allowed-failures) is
+# resubmitted this many more times before it becomes a LogFailure.
+TASK_RETRIES = 1
+KILLED_WORKER_RESUBMITS = 2
+DASK_EXTRA_MESSAGE = "--scheduler needs the dask extra: pip install 'logscan[dask]'"
+
+
+def check_scheduler(address: str) -> str:
+    """``address`` when it is ``local:N`` (N >= 1) or a scheduler URL (``tcp://host:port``, any
+    ``scheme://``); UsageError otherwise, or when distributed is not installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("distributed") is None:
+        raise UsageError(DASK_EXTRA_MESSAGE)
+    if address.startswith("local:"):
+        count = address.removeprefix("local:")
+        if not count.isdigit() or int(count) < 1:
+            raise UsageError(f"--scheduler {address}: local:N needs a number of workers N >= 1")
+        return address
+    if "://" not in address or not address.split("://", 1)[1]:
+        raise UsageError(
+            f"--scheduler {address} is not a scheduler address",
+            hint="give tcp://HOST:PORT (a running dask scheduler) or local:N (N local worker processes)",
+        )
+    return address
+
+
+CONNECT_TIMEOUT_S = 10.0  # at most, to reach a --scheduler (less if distributed.comm.timeouts.connect says so)
+
+
+def _connect_timeout_s() -> float:
+    import dask
+    from dask.utils import parse_timedelta
+
+    configured = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), default="seconds")
+    return min(CONNECT_TIMEOUT_S, configured or CONNECT_TIMEOUT_S)
+
+
+class _DaskClient:
+    """A distributed.Client for ``address`` (a LocalCluster started for ``local:N``), closed on exit
+    with the cluster it started. A scheduler that cannot be reached within distributed's connect
+    timeout (distributed.comm.timeouts.connect) is a UsageError."""
+
+    def __init__(self, address: str):
+        self.address = check_scheduler(address)
+        self.cluster = None
+        self.client = None
+
+    def __enter__(self):
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        logging.getLogger("distributed").setLevel(logging.ERROR)  # the run's own output stays readable
+        if self.address.startswith("local:"):
+            workers = int(self.address.removeprefix("local:"))
+            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            self.client = Client(self.cluster)
+            return self.client
+        try:
+            self.client = Client(self.address, timeout=_connect_timeout_s())
+        except (OSError, TimeoutError, ValueError) as exc:
+            reason = (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise UsageError(
+                f"--scheduler {self.address}: cannot connect to the scheduler ({reason})",
+                hint="start one with `dask scheduler` and its workers with `dask worker ADDRESS`, or use local:N",
+            ) from None
+        return self.client
+
+    def __exit__(self, *exc_info) -> None:
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def run_on_dask(
+    logs: Sequence[Any],
+    task: Callable[[Any], Any],
+    *,
+    scheduler: str,
+    progress: bool = False,
+    label: str = "logs",
+    isolate: bool = True,
+) -> list[Any]:
+    """`run_many` on a Dask cluster: ``client.submit`` of the same per-log call, outcomes in the
+    order of ``logs`` (the same objects as local runs), progress as they complete. A log whose worker
+    died is resubmitted (`KILLED_WORKER_RESUBMITS` times), then is a LogFailure saying so (exit 3);
+    without ``isolate`` the error of the first log in input order propagates, once every log before
+    it has completed. On Ctrl-C or an error that stops the run the logs still queued are cancelled."""
+    from distributed import as_completed
+    from distributed.scheduler import KilledWorker
+
+    logs = list(logs)
+    function = _isolated if isolate else _captured
+    bar = _progress_bar(len(logs), label) if progress and len(logs) > 1 else None
+    try:
+        with _DaskClient(scheduler) as client:
+            futures = {}
+            attempts = [1] * len(logs)
+
+            def submit(index: int):
+                future = client.submit(function, task, logs[index], pure=False, retries=TASK_RETRIES)
+                futures[future] = index
+                return future
+
+            pending = as_completed([submit(i) for i in range(len(logs))])
+            outcomes: list[Any] = [None] * len(logs)
+            done = [False] * len(logs)
+            errors: dict[int, BaseException] = {}
+            try:
+                for future in pending:
+                    index = futures.pop(future)
+                    try:
+                        outcome = future.result()
+                        if isinstance(outcome, _Raised):
+                            raise outcome.error
+                        outcomes[index] = outcome
+                    except KilledWorker as exc:
+                        if attempts[index] <= KILLED_WORKER_RESUBMITS:
+                            attempts[index] += 1
+                            pending.add(submit(index))
+                            continue
+                        failure = _worker_died(log_of(logs[index]), attempts[index], exc)
+                        if not isolate:
+                            errors[index] = _worker_died_error(failure)
+                        outcomes[index] = failure
+                    except Exception as exc:  # raised by the task (isolate: only what stops the run)
+                        from logscan.artifacts import OutputError
+
+                        if not isolate:
+                            errors[index] = exc
+                        elif isinstance(exc, OutputError):
+                            raise
+                        else:  # e.g. an outcome that could not be sent back
+                            outcomes[index] = failure_of(log_of(logs[index]), exc)
+                    done[index] = True
+                    if bar:
+                        bar.update(1)
+                    if errors:
+                        first = min(errors)
+                        if all(done[:first]):
+                            raise errors[first]
+            except BaseException:
+                client.cancel(list(futures))
+                raise
+            return outcomes
+    finally:
+        if bar:
+            bar.render_finish()
+
+
+@dataclass
+class _Raised:
+    """The error a task raised, sent back as its outcome (not retried, nor logged by the worker:
+    a log's error is deterministic, and the command prints it)."""
+
+    error: Exception
+
+
+def _captured(task: Callable[[Any], Any], item: Any) -> Any:
+    try:
+        return task(item)
+    except Exception as exc:  # noqa: BLE001 - raised in the client (run_on_dask)
+        return _Raised(exc)
+
+
+def _worker_died(path: str, attempts: int, exc: BaseException) -> LogFailure:
+    return LogFailure(
+        path,
+        f"{path}: the Dask worker processing it died ({attempts} attempt(s); {type(exc).__name__}) "
+        "(out of memory, or killed; rerun this log alone with `logscan --debug`)",
+        3,
+    )
+
+
+def _worker_died_error(failure: LogFailure) -> LogscanError:
+    from logscan.errors import InternalError
+
+    return InternalError(failure.message)

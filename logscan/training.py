@@ -19,6 +19,7 @@ import hashlib
 import json
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -180,13 +181,16 @@ def train_logs(
     calibrate: bool = False,
     progress=None,
     notice=None,
+    jobs: int = 1,
+    scheduler: str | None = None,
 ) -> dict[str, Any]:
     """`logscan train`: prepare each healthy log, with ``calibrate`` calibrate the filter's
     measurement noise on them (the detectors are then fitted on the calibrated filter), fit the
     trainable detectors, return the tables document. Without ``profile_path`` every log's own
-    profile (embedded or built-in) must match the first's."""
-    from logscan.pipeline import load_profile_for, needs_of, prepare
-    from logscan.readers import read_embedded
+    profile (embedded or built-in) must match the first's. The logs are prepared (`PrepareTask`)
+    in ``jobs`` local processes or on the Dask ``scheduler`` (`logscan.fleet.run_many`), and fitted
+    here: the same tables whichever runs them."""
+    from logscan.pipeline import load_profile_for
 
     step = progress or (lambda message: None)
     if not logs:
@@ -200,33 +204,19 @@ def train_logs(
             hint="pass --calibrate to calibrate the filter's measurement noise, add a [redundant.<name>] "
             "group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
         )
-    needs = _with_ekf(needs_of(detectors)) if calibrate else needs_of(detectors)
-    prepared = []
-    for number, path in enumerate(logs, 1):
-        step(f"reading {path} ({number}/{len(logs)})")
-        _, truth = read_embedded(path)  # one metadata read: the truth
-        faults = ((truth or {}).get("events")) or []
-        if faults and not allow_faulty:
-            raise InputError(
-                f"its ground truth lists {len(faults)} fault(s): a table trained on it would tolerate them",
-                path=path,
-                hint="train on healthy logs only, or pass --allow-faulty",
-            )
-        own = loaded.profile
-        if profile_path is None and number > 1:
-            own = load_profile_for(path, None).profile  # embedded, or built-in (a PX4 log)
-        if profile_fingerprint(own) != fingerprint:
-            raise ProfileError(
-                f"its embedded profile differs from {logs[0]}'s (vehicle, inputs, measurements, mode or redundant)",
-                path=path,
-                hint="train logs of one profile together, or pass --profile",
-            )
-        one = prepare(path, loaded, needs, notice=notice)
-        if one.log.source.partial:
-            raise InputError(
-                f"read in part ({one.log.source.partial_reason})", path=path, hint="train on complete logs"
-            )
-        prepared.append(one)
+    task = PrepareTask(loaded, logs[0], profile_path, fingerprint, allow_faulty, calibrate, notice)
+    items = [(path, number) for number, path in enumerate(logs, 1)]
+    if jobs <= 1 and scheduler is None:
+        prepared = []
+        for path, number in items:
+            step(f"reading {path} ({number}/{len(logs)})")
+            prepared.append(task((path, number)))
+    else:
+        from logscan.fleet import run_many
+
+        step(f"reading {len(logs)} log(s) on " + (f"the scheduler {scheduler}" if scheduler else f"{jobs} processes"))
+        prepared = run_many(items, task, jobs=jobs, scheduler=scheduler, isolate=False)
+    needs = task.needs()
     calibration = None
     if calibrate:
         step("calibrating the measurement noise")
@@ -235,6 +225,57 @@ def train_logs(
         step("fitting " + ", ".join(d.name for d in detectors))
         fit_detectors(detectors, prepared)
     return tables_document(detectors, logs, loaded.profile, calibration)
+
+
+@dataclass(frozen=True)
+class PrepareTask:
+    """Check and prepare one healthy training log, an item (path, its number from 1): the per-log
+    work of `train_logs`, picklable for local processes and Dask workers. Returns its
+    `logscan.pipeline.Prepared` (read, aligned, filtered), which the fit and calibration read."""
+
+    loaded: Any  # logscan.pipeline.LoadedProfile: the first log's (or --profile's)
+    first_log: str
+    profile_path: str | None
+    fingerprint: str
+    allow_faulty: bool = False
+    calibrate: bool = False
+    notice: Any = None  # a module-level function (picklable), or None
+
+    def needs(self):
+        from logscan.pipeline import needs_of
+
+        needs = needs_of(trainable_detectors(self.loaded))
+        return _with_ekf(needs) if self.calibrate else needs
+
+    def __call__(self, item: tuple[str, int]):
+        from logscan.pipeline import load_profile_for, prepare
+        from logscan.readers import read_embedded
+
+        path, number = item
+        _, truth = read_embedded(path)  # one metadata read: the truth
+        faults = ((truth or {}).get("events")) or []
+        if faults and not self.allow_faulty:
+            raise InputError(
+                f"its ground truth lists {len(faults)} fault(s): a table trained on it would tolerate them",
+                path=path,
+                hint="train on healthy logs only, or pass --allow-faulty",
+            )
+        own = self.loaded.profile
+        if self.profile_path is None and number > 1:
+            own = load_profile_for(path, None).profile  # embedded, or built-in (a PX4 log)
+        if profile_fingerprint(own) != self.fingerprint:
+            raise ProfileError(
+                f"its embedded profile differs from {self.first_log}'s "
+                "(vehicle, inputs, measurements, mode or redundant)",
+                path=path,
+                hint="train logs of one profile together, or pass --profile",
+            )
+        one = prepare(path, self.loaded, self.needs(), notice=self.notice)
+        if one.log.source.partial:
+            raise InputError(
+                f"read in part ({one.log.source.partial_reason})", path=path, hint="train on complete logs"
+            )
+        return one
 
 
 def _with_ekf(needs):

@@ -9,6 +9,7 @@ import click
 
 from logscan.artifacts import Staged
 from logscan.cli.options import (
+    check_parallelism,
     echo_notice,
     end_option,
     header_stamp_option,
@@ -16,6 +17,7 @@ from logscan.cli.options import (
     json_option,
     profile_option,
     quiet_option,
+    scheduler_option,
     show_progress,
     start_option,
     tables_option,
@@ -149,6 +151,7 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
 @end_option
 @header_stamp_option
 @jobs_option
+@scheduler_option
 @quiet_option
 def analyze(
     log_paths: tuple[str, ...],
@@ -173,6 +176,7 @@ def analyze(
     end_s: float | None,
     use_header_stamp: bool,
     jobs: int,
+    scheduler: str | None,
     quiet: bool,
 ) -> None:
     """Run the model-based detectors on each LOG and report the incidents and alarms.
@@ -190,6 +194,7 @@ def analyze(
     from logscan.report.index_page import index_path
 
     check_window(start_s, end_s)
+    check_parallelism(jobs, scheduler)
     names = tuple(detector_names) or None
     if profile_path is not None:
         # one profile for every log: its detector settings are checked once, before any log is read
@@ -252,7 +257,13 @@ def analyze(
     staged = []
     try:
         outcomes = run_many(
-            list(zip(logs, reports)), task, jobs=jobs, progress=progress, label="analysing", isolate=len(logs) > 1
+            list(zip(logs, reports)),
+            task,
+            jobs=jobs,
+            progress=progress,
+            label="analysing",
+            isolate=len(logs) > 1,
+            scheduler=scheduler,
         )
         staged = [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
         code, document = _report_outcomes(outcomes, exit_zero, err=json_path == "-")

@@ -7,12 +7,14 @@ import sys
 import click
 
 from logscan.cli.options import (
+    check_parallelism,
     end_option,
     header_stamp_option,
     jobs_option,
     json_option,
     profile_option,
     quiet_option,
+    scheduler_option,
     show_progress,
     start_option,
     tables_option,
@@ -69,6 +71,7 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 @end_option
 @header_stamp_option
 @jobs_option
+@scheduler_option
 @quiet_option
 def evaluate(
     log_paths: tuple[str, ...],
@@ -83,6 +86,7 @@ def evaluate(
     end_s: float | None,
     use_header_stamp: bool,
     jobs: int,
+    scheduler: str | None,
     quiet: bool,
 ) -> None:
     """Score the detectors against the ground truth of each LOG (docs/algorithms.md section 7).
@@ -103,6 +107,7 @@ def evaluate(
     from logscan.fleet import expand_logs, refuse_clobbering
 
     check_window(start_s, end_s)
+    check_parallelism(jobs, scheduler)
     logs = expand_logs(log_paths)
     refuse_clobbering([("--json", json_path), ("--output", page_path)], logs, profile_path)  # before any log
     evaluation = evaluate_logs(
@@ -113,6 +118,7 @@ def evaluate(
         recovery_s=recovery_s,
         use_header_stamp=use_header_stamp,
         jobs=jobs,
+        scheduler=scheduler,
         progress=show_progress(quiet),
         start_s=start_s,
         end_s=end_s,

@@ -76,6 +76,36 @@ jobs_option = click.option(
     help="Number of logs processed in parallel (local processes).",
 )
 
+
+def _scheduler_address(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """Refuse, before any work, a malformed address or a missing dask extra (exit 2)."""
+    if value is not None:
+        from logscan.fleet import check_scheduler
+
+        check_scheduler(value)
+    return value
+
+
+scheduler_option = click.option(
+    "--scheduler",
+    "scheduler",
+    metavar="ADDRESS",
+    default=None,
+    callback=_scheduler_address,
+    help="Process the logs on a Dask cluster: tcp://HOST:8786 (a running scheduler; its workers must see "
+    "the logs and outputs at the same paths) or local:N (N local worker processes for this run). "
+    "Same results as --jobs 1; needs the dask extra (pip install 'logscan[dask]').",
+)
+
+
+def check_parallelism(jobs: int, scheduler: str | None) -> None:
+    """--scheduler and --jobs N > 1 are two ways to run logs in parallel: one at a time."""
+    if scheduler is not None and jobs > 1:
+        from logscan.errors import UsageError
+
+        raise UsageError(f"--scheduler and --jobs {jobs} exclude each other: give one of them")
+
+
 start_option = click.option(
     "--start",
     "start_s",

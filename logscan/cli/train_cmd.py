@@ -6,7 +6,15 @@ import os
 
 import click
 
-from logscan.cli.options import echo_notice, profile_option, quiet_option, show_progress
+from logscan.cli.options import (
+    check_parallelism,
+    echo_notice,
+    jobs_option,
+    profile_option,
+    quiet_option,
+    scheduler_option,
+    show_progress,
+)
 
 
 @click.command(
@@ -38,6 +46,8 @@ from logscan.cli.options import echo_notice, profile_option, quiet_option, show_
     "per output on these logs is 1 (for real logs whose sensors' noise the profile only guesses); "
     "the detectors are then fitted on the calibrated filter.",
 )
+@jobs_option
+@scheduler_option
 @quiet_option
 def train(
     log_paths: tuple[str, ...],
@@ -47,6 +57,8 @@ def train(
     no_report: bool,
     allow_faulty: bool,
     calibrate: bool,
+    jobs: int,
+    scheduler: str | None,
     quiet: bool,
 ) -> None:
     """Train the lookup tables and thresholds of the profile's detectors on healthy logs (and, with
@@ -64,6 +76,7 @@ def train(
     from logscan.fleet import expand_logs, refuse_clobbering
     from logscan.training import train_logs
 
+    check_parallelism(jobs, scheduler)
     logs = expand_logs(log_paths)
     report = None if no_report else (report_path or _beside(output_path))
     refuse_clobbering([("--output", output_path), ("--report", report)], logs, profile_path)
@@ -80,6 +93,8 @@ def train(
         calibrate=calibrate,
         progress=step,
         notice=None if quiet else echo_notice,
+        jobs=jobs,
+        scheduler=scheduler,
     )
     _write(output_path, report, document)
     if not quiet:
