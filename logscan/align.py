@@ -54,6 +54,8 @@ class AlignedGroup:
     stale_s: float | None = None  # staleness limit used for holding
     channel_fresh: np.ndarray | None = None  # (N, m) bool, per channel: a new sample in (t_{k-1}, t_k]
     labels: list[str] | None = None  # the profile's name of each channel ([redundant] sensors), if named
+    # (N, m) per-sample noise std held from the profile's noise_channels (NaN: the group's noise_std)
+    noise_std_series: np.ndarray | None = None
     # a `from = "geodetic"` group: the (lat deg, lon deg, alt m) its north/east/down are relative to
     origin: tuple[float, float, float] | None = None
 
@@ -530,6 +532,12 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         columns += spec.width
         g = aligner.measurement_group(spec, grid_ns, z)
         g.rate_hz = float(spec.rate_hz)
+        if spec.noise_channels:  # held like the samples, so each sample gets the std logged with it
+            g.noise_std = None if spec.noise_std is None else np.asarray(spec.noise_std, dtype=np.float64)
+            series = np.empty((n, len(spec.noise_channels)))
+            for j, ch in enumerate(spec.noise_channels):
+                aligner.hold(ch, grid_ns, spec.stale_s, z=series[:, j], fresh=scratch)
+            g.noise_std_series = series
         for attr in ("noise_std", "range_lo", "range_hi"):
             value = getattr(spec, attr)
             setattr(g, attr, None if value is None else np.asarray(value, dtype=np.float64))

@@ -98,6 +98,7 @@ def ekf_run(
     group_offsets,
     group_sizes,
     R_all,
+    R_std,
     range_lo,
     range_hi,
     wrap,
@@ -129,7 +130,10 @@ def ekf_run(
     except S_out and K_out, which the kernel fills step by step: NaN where not updated).
 
     P_prior_full, P_post_full, y_out with S_diag_out, S_out, K_out are stored when their first
-    dimension is N (pass zero-length arrays to skip them). All work arrays are allocated once, before the loop.
+    dimension is N (pass zero-length arrays to skip them). R_std (N, m_total) holds a per-sample
+    noise standard deviation (its square replaces that output's row and column of R at that step;
+    NaN: R_all's) when its first dimension is N; zero-length: R_all throughout. All work arrays
+    are allocated once, before the loop.
     """
     literally(model_id)  # one specialisation per model (logscan.models.dispatch)
     N = u.shape[0]
@@ -141,6 +145,7 @@ def ekf_run(
     store_y = y_out.shape[0] == N  # y and the diagonal of S
     store_S = S_out.shape[0] == N
     store_K = K_out.shape[0] == N
+    dyn_R = R_std.shape[0] == N
     x = x0.copy()
     P = P0.copy()
     u_last = u_default.copy()
@@ -223,7 +228,10 @@ def ekf_run(
                     for c in range(n):
                         P[i, c] = 0.0
                         P[c, i] = 0.0
-                    P[i, i] = R_all[j, j] / (gain * gain)
+                    rj = R_all[j, j]
+                    if dyn_R and np.isfinite(R_std[k, j]) and R_std[k, j] > 0.0:
+                        rj = R_std[k, j] * R_std[k, j]
+                    P[i, i] = rj / (gain * gain)
                 seed_done[g] = True
                 seeded[k, g] = True
                 continue
@@ -259,6 +267,16 @@ def ekf_run(
                 y[a] = ya
                 for b in range(m):
                     Rs[a, b] = R_all[j, rows[b]]
+            if dyn_R:  # per-sample noise (a receiver's own accuracy estimate): replaces row and column
+                for a in range(m):
+                    sd = R_std[k, rows[a]]
+                    if np.isfinite(sd) and sd > 0.0:
+                        for b in range(m):
+                            Rs[a, b] = 0.0
+                            Rs[b, a] = 0.0
+                        Rs[a, a] = sd * sd
+            for a in range(m):
+                for b in range(m):
                     RsT[b, a] = Rs[a, b]
             sparse_rows(RsT, m, m, rcols, rnnz)
             # H P (H sparse: its rows' non-zeros only)
@@ -354,6 +372,7 @@ class KernelInputs:
     group_offsets: np.ndarray
     group_sizes: np.ndarray
     R_all: np.ndarray
+    R_std: np.ndarray  # (N, m_total) per-sample noise std, NaN where none; (0, m_total): none
     range_lo: np.ndarray
     range_hi: np.ndarray
     wrap: np.ndarray
@@ -434,6 +453,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     z = np.empty((N, m_total)) if z is None else z
     fresh = np.zeros((N, len(names)), dtype=np.bool_)
     R_all = np.zeros((m_total, m_total))
+    R_std = None  # per-sample noise of the groups that have it (AlignedGroup.noise_std_series)
     R = dict(R or {})
     for g, (name, spec) in enumerate(zip(names, specs)):
         grp = run.groups[name]
@@ -458,6 +478,11 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
         else:
             Rg = model.default_R(name)
         R_all[o : o + spec.size, o : o + spec.size] = Rg
+        noise = getattr(grp, "noise_std_series", None)
+        if noise is not None:
+            if R_std is None:
+                R_std = np.full((N, m_total), np.nan)
+            R_std[:, o : o + spec.size] = np.asarray(noise, dtype=np.float64).reshape(N, spec.size)
     unknown_R = sorted(set(R) - set(names))
     if unknown_R:
         raise ModelError(f"R given for group(s) not in the run: {', '.join(unknown_R)}")
@@ -485,6 +510,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
         group_offsets=offsets,
         group_sizes=sizes,
         R_all=R_all,
+        R_std=np.empty((0, m_total)) if R_std is None else np.ascontiguousarray(R_std),
         # the profile's physical range of a group where it gives one, else the model's
         range_lo=_group_ranges(run, names, specs, "range_lo"),
         range_hi=_group_ranges(run, names, specs, "range_hi"),
@@ -497,7 +523,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
 
 
 # ekf_run's parameters after the inputs, in order (the keys of run_ekf's `out`)
-_OUTPUT_NAMES = tuple(inspect.signature(ekf_run.py_func).parameters)[20:]
+_OUTPUT_NAMES = tuple(inspect.signature(ekf_run.py_func).parameters)[21:]
 
 
 def compiled_for(args: tuple):
@@ -561,7 +587,7 @@ def run_ekf(
     )
     if N:
         inputs = (k.p, k.x0, k.P0, k.Q, k.u, k.u_default, k.z, k.fresh, k.group_ids, k.group_offsets)
-        inputs += (k.group_sizes, k.R_all, k.range_lo, k.range_hi, k.wrap, k.direct_idx, k.direct_gain)
+        inputs += (k.group_sizes, k.R_all, k.R_std, k.range_lo, k.range_hi, k.wrap, k.direct_idx, k.direct_gain)
         inputs += (k.dt, k.seed_at_start)
         args = (k.model_id, *inputs, *(out[name] for name in _OUTPUT_NAMES))
         compiled_for(args)(*args)

@@ -71,7 +71,10 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
                     x[i] = zg[j] / gain[j]
                     P[i, :] = 0.0
                     P[:, i] = 0.0
-                    P[i, i] = k.R_all[s, s][j, j] / gain[j] ** 2
+                    rj = k.R_all[s, s][j, j]
+                    if k.R_std.shape[0] == N and np.isfinite(k.R_std[step, s][j]) and k.R_std[step, s][j] > 0:
+                        rj = k.R_std[step, s][j] ** 2
+                    P[i, i] = rj / gain[j] ** 2
                 seed_done[g] = out["seeded"][step, g] = True
                 continue
             used.append(g)
@@ -83,7 +86,14 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
             hx = np.concatenate([model.h(k.group_names[g], x, uk) for g in used])
             y = k.z[step, rows] - hx
             y = np.where(k.wrap[rows], (y + np.pi) % (2 * np.pi) - np.pi, y)
-            R = k.R_all[np.ix_(rows, rows)]
+            R = k.R_all[np.ix_(rows, rows)].copy()
+            if k.R_std.shape[0] == N:  # per-sample noise replaces its row and column
+                for a, j in enumerate(rows):
+                    sd = k.R_std[step, j]
+                    if np.isfinite(sd) and sd > 0:
+                        R[a, :] = 0.0
+                        R[:, a] = 0.0
+                        R[a, a] = sd * sd
             S = H @ P @ H.T + R
             try:
                 factor = cho_factor(S, lower=True)

@@ -15,11 +15,11 @@ built from the topics present (`px4_profile`):
    (``vehicle_land_detected.landed``) or in the 5 s after each take-off;
  - noise from the log's own EKF2 parameters where it has them (EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE,
    EKF2_BARO_NOISE, EKF2_ACC_NOISE, EKF2_GYR_NOISE, EKF2_ACC_B_NOISE, EKF2_GYR_B_NOISE): the
-   values PX4 flew with.
+   values PX4 flew with; the GNSS noise per fix from the receiver's eph / epv and speed accuracy
+   (``noise_channels``) where the log has them.
 
 A group whose topic the log lacks is left out, with one info line (`BuiltProfile.notes`).
-Simplified: the GNSS noise is fixed (PX4's eph / epv per fix are not used as R) and fixes are not
-gated on fix_type (a profile cannot mask one channel by another yet).
+Simplified: fixes are not gated on fix_type (a profile cannot mask one channel by another yet).
 
 A ROS 2 MCAP (a topic in CDR whose schema is a ROS 2 message type, ``pkg/msg/Type``) gets the
 `ros2` profile of the same model (`ros2_profile`), its topics chosen by message type, never by name
@@ -206,6 +206,9 @@ def px4_profile(log) -> BuiltProfile:
             f"rate_hz = {hz:.3g}",
             f"noise_std = [{gps_p:.3g}, {gps_p:.3g}, {1.5 * gps_p:.3g}]  # EKF2_GPS_P_NOISE (x 1.5 vertical)",
         ]
+        accuracy = _channels(topic, ("eph", "eph", "epv"))
+        if all(has(ch) for ch in accuracy):  # the receiver's own accuracy per fix, where it logs one
+            lines.append(f"noise_channels = {_toml_list(accuracy)}  # per fix: eph, eph, epv (m)")
         if all(has(ch) for ch in vel):
             lines += [
                 "",
@@ -214,6 +217,9 @@ def px4_profile(log) -> BuiltProfile:
                 f"rate_hz = {hz:.3g}",
                 f"noise_std = [{gps_v:.3g}, {gps_v:.3g}, {1.5 * gps_v:.3g}]  # EKF2_GPS_V_NOISE (x 1.5 vertical)",
             ]
+            speed = f"/{topic}/s_variance_m_s"  # despite its name, PX4's speed accuracy (a std, m/s)
+            if has(speed):
+                lines.append(f"noise_channels = {_toml_list([speed] * 3)}  # per fix: the speed accuracy")
         else:
             notes.append(f"optional gnss_velocity: {topic} has no vel_n_m_s/vel_e_m_s/vel_d_m_s: left out")
     else:

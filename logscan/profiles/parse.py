@@ -436,6 +436,21 @@ class _Checker:
         n = len(outputs)
         noun = "outputs" if conversion is not None else "channels"
         noise = self._sized(noise, n, f"{where} noise_std", noun)
+        noise_channels = None
+        if "noise_channels" in data:
+            listed = data["noise_channels"]  # one channel may serve several outputs (eph, eph, epv)
+            if isinstance(listed, list) and listed and all(isinstance(v, str) and v for v in listed):
+                noise_channels = list(listed)
+            else:
+                self.add(f"{where} noise_channels", f"expected an array of channel names, got {type_name(listed)}")
+            if noise_channels is not None and len(noise_channels) != n:
+                self.add(
+                    f"{where} noise_channels",
+                    f"{len(noise_channels)} channels for {n} {noun} (one noise std channel per output)",
+                )
+                return None
+            if noise_channels is None:
+                return None
         lo = self._sized(lo, n, f"{where} range_lo", noun)
         hi = self._sized(hi, n, f"{where} range_hi", noun)
         if lo is not None and hi is not None:
@@ -463,6 +478,7 @@ class _Checker:
             origin=origin,
             frame=frame or "ned",
             offset=offset,
+            noise_channels=noise_channels,
         )
 
     def scale(self, data: dict, where: str) -> list[float] | None:

@@ -40,6 +40,7 @@ GROUP_KEYS = (
     "from",
     "frame",
     "origin",
+    "noise_channels",
 )
 MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
@@ -151,6 +152,8 @@ class MeasurementSpec:
     origin: list[float] | None = None  # geodetic: [lat deg, lon deg, alt m]; None: the first fix
     frame: str = "ned"  # geodetic: "ned"/"enu"; quaternion: "ned"/"enu_flu"; a 3-vector: frd/ned/flu/enu
     offset: list[float] | None = None  # one per channel, added after scale; None: 0
+    # per-sample noise std channels, one per output (a receiver's eph, eph, epv); None: noise_std
+    noise_channels: list[str] | None = None
 
     @property
     def width(self) -> int:
@@ -259,6 +262,7 @@ class Profile:
                 refs.append((f"[inputs] {key}", ch))
         for group in self.measurements.values():
             refs.extend((f"[measurements.{group.name}] channels", ch) for ch in group.channels)
+            refs.extend((f"[measurements.{group.name}] noise_channels", ch) for ch in group.noise_channels or ())
         if self.mode is not None:
             refs.append(("[mode] channel", self.mode.channel))
         if self.alarm_policy is not None and self.alarm_policy.ground_channel:
@@ -369,6 +373,8 @@ class Profile:
                 table["frame"] = g.frame
             if g.origin is not None:
                 table["origin"] = g.origin
+            if g.noise_channels is not None:
+                table["noise_channels"] = g.noise_channels
             out["measurements"][g.name] = table
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
