@@ -177,3 +177,14 @@ def test_the_autopilots_armed_and_failsafe_states_are_drawn(cli, tmp_path):
     report = tmp_path / "r.html"
     assert cli("analyze", str(path), "-o", str(report)).exit_code in (0, 1)
     assert "ctx-states" in report.read_text(encoding="utf-8")
+
+
+def test_plain_words_for_the_autopilot_checks():
+    from logscan.incidents import headline, plain_words
+    from logscan.results import AlarmInterval
+
+    assert plain_words("health.gnss_fix") == "GNSS 3D fix lost"
+    assert plain_words("px4.ekf1.pos_test_ratio") == "PX4's own test of the position failed"
+    assert plain_words("nis.gnss_position") is None  # a model group: "<group> inconsistent"
+    alarm = AlarmInterval(20.0, 24.0, 19.0, 21.0, 2.0, 1.0, 2.0, "upper", 5, "health.gnss_fix", "health")
+    assert headline(alarm, None, 20.0, 24.0).startswith("GNSS 3D fix lost 20.00-24.00 s (health.gnss_fix")
