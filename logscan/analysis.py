@@ -117,6 +117,23 @@ class Analysis:
             return ExitCode.ALARMS
         return ExitCode.OK
 
+    def against_px4(self) -> dict[str, int] | None:
+        """logscan's model-based alarms against PX4's own estimator tests (`px4_estimator`), when
+        it ran and read a ratio: how many of them PX4 also flagged (overlapping in time, 1 s of
+        slack), how many it did not, and PX4's alarms no model-based detector matched."""
+        px4 = [r for r in self.results if r.detector == "px4_estimator"]
+        if not px4 or not px4[0].info.get("sources"):
+            return None
+        theirs = px4[0].alarms
+        ours = [a for r in self.results if r.detector not in ("px4_estimator", "health") for a in r.alarms]
+
+        def overlaps(a, b) -> bool:
+            return a.start <= b.end + 1.0 and b.start <= a.end + 1.0
+
+        both = sum(1 for a in ours if any(overlaps(a, b) for b in theirs))
+        alone = sum(1 for b in theirs if not any(overlaps(a, b) for a in ours))
+        return {"logscan_alarms": len(ours), "also_flagged_by_px4": both, "px4_alarms": len(theirs), "px4_alone": alone}
+
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of this log (the `--json` artifact's per-log entry)."""
         return {
@@ -140,6 +157,7 @@ class Analysis:
                 {"kind": e.kind, "target": e.target, "start": e.t_start, "end": e.t_end} for e in self.events
             ],
             "scores": {name: score.to_dict() for name, score in self.scores.items()},
+            "against_px4": self.against_px4(),
             "warnings": list(self.warnings),
         }
 

@@ -188,3 +188,23 @@ def test_plain_words_for_the_autopilot_checks():
     assert plain_words("nis.gnss_position") is None  # a model group: "<group> inconsistent"
     alarm = AlarmInterval(20.0, 24.0, 19.0, 21.0, 2.0, 1.0, 2.0, "upper", 5, "health.gnss_fix", "health")
     assert headline(alarm, None, 20.0, 24.0).startswith("GNSS 3D fix lost 20.00-24.00 s (health.gnss_fix")
+
+
+def test_model_based_alarms_are_reported_against_px4s_own_tests():
+    """PX4's gps_hpos test fails at 20-30 s: a model-based alarm overlapping it counts as also
+    flagged by PX4; PX4's heading alarm at 45 s is PX4's alone."""
+    from logscan.analysis import Analysis
+    from logscan.results import AlarmInterval, DetectorResult
+
+    def alarm(start, end, signal, detector):
+        return AlarmInterval(start, end, start, start, 2.0, 1.0, 2.0, "upper", 3, signal, detector)
+
+    px4 = DetectorResult("px4_estimator", info={"sources": {"px4.gps_hpos": "estimator_innovation_test_ratios_0"}})
+    px4.alarms = [alarm(20.0, 30.0, "px4.gps_hpos", "px4_estimator"), alarm(45.0, 46.0, "px4.heading", "px4_estimator")]
+    nis = DetectorResult("nis")
+    nis.alarms = [alarm(29.5, 33.0, "nis.gnss_position", "nis"), alarm(50.0, 51.0, "nis.baro", "nis")]
+    analysis = Analysis.__new__(Analysis)
+    analysis.results = [px4, nis]
+    assert analysis.against_px4() == {"logscan_alarms": 2, "also_flagged_by_px4": 1, "px4_alarms": 2, "px4_alone": 1}
+    analysis.results = [nis]
+    assert analysis.against_px4() is None

@@ -116,6 +116,13 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             f"{score.fp} false alarm(s), mean latency {latency}"
             + (f" (alarms apart: {', '.join(apart)})" if apart else "")
         )
+    versus = analysis.against_px4()
+    if versus is not None:
+        lines.append(
+            f"  against PX4's own estimator: {versus['also_flagged_by_px4']} of logscan's "
+            f"{versus['logscan_alarms']} model-based alarm(s) also flagged by PX4; "
+            f"{versus['px4_alone']} of PX4's {versus['px4_alarms']} seen by PX4 alone"
+        )
     for warning in analysis.warnings[:5]:
         lines.append(f"  warning: {warning}")
     if report_path:
