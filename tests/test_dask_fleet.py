@@ -68,12 +68,20 @@ def test_evaluate_on_a_cluster_writes_the_same_json_as_one_job(cli, tmp_path, sc
 def test_train_prepares_the_logs_on_the_cluster_and_fits_the_same_tables(cli, tmp_path, scheduler):
     logs = [SAMPLES / "jackal_train_1.mcap", SAMPLES / "jackal_train_2.mcap"]
     tables = {}
-    for name, how in (("jobs", ["--jobs", "1"]), ("dask", ["--scheduler", scheduler])):
+    modes = (("jobs", ["--jobs", "1"]), ("processes", ["--jobs", "2"]), ("dask", ["--scheduler", scheduler]))
+    for name, how in modes:
         path = tmp_path / f"{name}.tables.json"
         result = cli("train", *logs, "-o", path, "--no-report", "-q", *how)
         assert result.exit_code == 0, result.output
         tables[name] = path.read_bytes()
-    assert tables["jobs"] == tables["dask"]
+    assert tables["jobs"] == tables["processes"] == tables["dask"]
+
+
+def test_train_stops_at_a_faulty_log_on_the_cluster_as_in_one_process(cli, tmp_path, scheduler):
+    logs = [SAMPLES / "jackal_train_1.mcap", SAMPLES / "jackal_gps_bias.mcap"]
+    result = cli("train", *logs, "-o", tmp_path / "t.json", "--no-report", "-q", "--scheduler", scheduler)
+    assert result.exit_code == 2 and not (tmp_path / "t.json").exists()
+    assert result.stderr.strip().count("\n") == 0 and "jackal_gps_bias.mcap: its ground truth lists" in result.stderr
 
 
 @dataclass(frozen=True)
