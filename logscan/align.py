@@ -56,6 +56,7 @@ class AlignedGroup:
     labels: list[str] | None = None  # the profile's name of each channel ([redundant] sensors), if named
     # (N, m) per-sample noise std held from the profile's noise_channels (NaN: the group's noise_std)
     noise_std_series: np.ndarray | None = None
+    gated_s: float = 0.0  # time its gate was closed (no 3D fix): no sample there, and none expected
     # a `from = "geodetic"` group: the (lat deg, lon deg, alt m) its north/east/down are relative to
     origin: tuple[float, float, float] | None = None
 
@@ -351,7 +352,26 @@ class _Aligner:
     def measurement_group(self, spec, grid_ns: np.ndarray, z: np.ndarray) -> AlignedGroup:
         """A profile's measurement group held into ``z`` (N, spec.width): each channel times its
         ``scale`` plus its ``offset``, then, with ``from`` or a converting ``frame``, the held
-        channels converted (`logscan.conversions`)."""
+        channels converted (`logscan.conversions`); with a ``gate``, the steps where the gate
+        channel is below its minimum (a GNSS fix type under 3) hold no sample (NaN, not fresh)."""
+        group = self._measurement_group(spec, grid_ns, z)
+        if getattr(spec, "gate_channel", None):
+            gate, _ = self.hold(spec.gate_channel, grid_ns, spec.stale_s, fresh=np.empty(grid_ns.size, dtype=bool))
+            closed = ~(np.nan_to_num(gate, nan=-np.inf) >= spec.gate_min)
+            if closed.any():
+                group.z[closed] = np.nan
+                group.fresh = group.fresh & ~closed
+                if group.channel_fresh is not None:
+                    group.channel_fresh = group.channel_fresh & ~closed[:, None]
+                dt = float(np.median(np.diff(grid_ns))) / _NS if grid_ns.size > 1 else 0.0
+                group.gated_s = float(closed.sum()) * dt
+                self.warnings.append(
+                    f"group {spec.name!r}: {spec.gate_channel} below {spec.gate_min:g} for {group.gated_s:.1f} s "
+                    f"of {grid_ns.size * dt:.1f} s; no sample used there"
+                )
+        return group
+
+    def _measurement_group(self, spec, grid_ns: np.ndarray, z: np.ndarray) -> AlignedGroup:
         transforms = _linear_transforms(spec.scale, spec.offset, len(spec.channels))
         if not spec.converted:
             return self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms, z=z)
@@ -409,7 +429,12 @@ class _Aligner:
                 [c.values[np.searchsorted(c.t, times)] * f + o for c, f, o in zip(cleaned, scale, offset)],
                 axis=1,
             )
-            ok = np.flatnonzero(conversions.valid_geodetic(lla))
+            usable = conversions.valid_geodetic(lla)
+            if getattr(spec, "gate_channel", None):  # the origin is a fix the gate lets through
+                gate = self.clean(spec.gate_channel)
+                i = np.searchsorted(gate.t, times, side="right") - 1
+                usable &= (i >= 0) & (gate.values[np.maximum(i, 0)] >= spec.gate_min)
+            ok = np.flatnonzero(usable)
             if ok.size:
                 return tuple(float(v) for v in lla[ok[0]])
         ok = np.flatnonzero(raw.fresh & conversions.valid_geodetic(raw.z))

@@ -52,7 +52,9 @@ def _starved_groups(run, trace) -> list[str]:
     for g, name in enumerate(trace.group_names):
         group = run.groups.get(name)
         rate = group.rate_hz if group is not None and group.rate_hz else 1.0 / float(run.dt)
-        expected = min(duration * rate, float(run.n_steps))
+        # none expected while its gate was closed (a GNSS without a 3D fix): said at alignment
+        open_s = max(duration - float(getattr(group, "gated_s", 0.0) or 0.0), 0.0)
+        expected = min(open_s * rate, float(run.n_steps))
         used = int(trace.updated[:, g].sum())
         if used < MIN_UPDATE_FRACTION * expected:
             reasons.append(

@@ -208,3 +208,20 @@ def test_model_based_alarms_are_reported_against_px4s_own_tests():
     assert analysis.against_px4() == {"logscan_alarms": 2, "also_flagged_by_px4": 1, "px4_alarms": 2, "px4_alone": 1}
     analysis.results = [nis]
     assert analysis.against_px4() is None
+
+
+def test_gnss_samples_count_only_with_a_3d_fix(cli, tmp_path):
+    """The built-in px4 profile gates GNSS on fix_type >= 3: a SITL log with a 3D fix only in its
+    last 1.5 s uses only those fixes (the origin too), says how long the gate was closed, and still
+    counts as fully checked (none expected without a fix)."""
+    path = need_testdata("px4-ulog/sample_logging_tagged_and_default_params.ulg")
+    profile = parse_profile(builtin_profile_for(path).text)
+    gnss = profile.measurements["gnss_position"]
+    assert (gnss.gate_channel, gnss.gate_min) == ("/vehicle_gps_position_0/fix_type", 3.0)
+    assert parse_profile(profile.to_toml()) == profile
+    out = tmp_path / "s.json"
+    assert cli("analyze", str(path), "--no-report", "--json", str(out)).exit_code in (0, 1)
+    entry = json.loads(out.read_text())["logs"][0]
+    assert entry["filter"]["updates"]["gnss_position"] < 40  # ~30 fixes with fix_type 3 of ~190
+    assert any("fix_type below 3" in w for w in entry["warnings"])
+    assert entry["unchecked"] == []

@@ -19,7 +19,7 @@ built from the topics present (`px4_profile`):
    (``noise_channels``) where the log has them.
 
 A group whose topic the log lacks is left out, with one info line (`BuiltProfile.notes`).
-Simplified: fixes are not gated on fix_type (a profile cannot mask one channel by another yet).
+GNSS samples count only with a 3D fix (``gate`` on fix_type >= 3), the origin too.
 
 A ROS 2 MCAP (a topic in CDR whose schema is a ROS 2 message type, ``pkg/msg/Type``) gets the
 `ros2` profile of the same model (`ros2_profile`), its topics chosen by message type, never by name
@@ -206,6 +206,10 @@ def px4_profile(log) -> BuiltProfile:
             f"rate_hz = {hz:.3g}",
             f"noise_std = [{gps_p:.3g}, {gps_p:.3g}, {1.5 * gps_p:.3g}]  # EKF2_GPS_P_NOISE (x 1.5 vertical)",
         ]
+        fix = f"/{topic}/fix_type"
+        gate = f'gate = {{ channel = "{fix}", min = 3 }}  # only 3D fixes' if has(fix) else None
+        if gate:
+            lines.append(gate)
         accuracy = _channels(topic, ("eph", "eph", "epv"))
         if all(has(ch) for ch in accuracy):  # the receiver's own accuracy per fix, where it logs one
             lines.append(f"noise_channels = {_toml_list(accuracy)}  # per fix: eph, eph, epv (m)")
@@ -217,6 +221,8 @@ def px4_profile(log) -> BuiltProfile:
                 f"rate_hz = {hz:.3g}",
                 f"noise_std = [{gps_v:.3g}, {gps_v:.3g}, {1.5 * gps_v:.3g}]  # EKF2_GPS_V_NOISE (x 1.5 vertical)",
             ]
+            if gate:
+                lines.append(gate)
             speed = f"/{topic}/s_variance_m_s"  # despite its name, PX4's speed accuracy (a std, m/s)
             if has(speed):
                 lines.append(f"noise_channels = {_toml_list([speed] * 3)}  # per fix: the speed accuracy")

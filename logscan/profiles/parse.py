@@ -15,6 +15,7 @@ from logscan.profiles.bind import bind_inputs_without_model, build_model, check_
 from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, suggest, type_name
 from logscan.profiles.schema import (
     ALARM_KEYS,
+    GATE_KEYS,
     GROUP_KEYS,
     GROUP_STALE_PERIODS,
     INPUT_FRAMES,
@@ -479,7 +480,22 @@ class _Checker:
             frame=frame or "ned",
             offset=offset,
             noise_channels=noise_channels,
+            **self.gate(data, where),
         )
+
+    def gate(self, data: dict, where: str) -> dict:
+        """``gate = { channel = "...", min = 3 }``: the keyword arguments of MeasurementSpec."""
+        if "gate" not in data:
+            return {}
+        table = self.table(data["gate"], f"{where} gate")
+        if table is None:
+            return {}
+        self.keys(table, f"{where} gate", GATE_KEYS, required=("channel", "min"))
+        channel = self.string(table, "channel", f"{where} gate")
+        minimum = self.number(table, "min", f"{where} gate", minimum=-1e12, strict=False, maximum=1e12)
+        if channel is None or minimum is None:
+            return {}
+        return {"gate_channel": channel, "gate_min": float(minimum)}
 
     def scale(self, data: dict, where: str) -> list[float] | None:
         """``scale``: finite, non-zero factors (a number or one per channel)."""

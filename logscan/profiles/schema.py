@@ -41,7 +41,9 @@ GROUP_KEYS = (
     "frame",
     "origin",
     "noise_channels",
+    "gate",
 )
+GATE_KEYS = ("channel", "min")
 MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
 SENSOR_KEYS = ("channel", "poly")
@@ -154,6 +156,9 @@ class MeasurementSpec:
     offset: list[float] | None = None  # one per channel, added after scale; None: 0
     # per-sample noise std channels, one per output (a receiver's eph, eph, epv); None: noise_std
     noise_channels: list[str] | None = None
+    # a sample counts only where this channel (held) is at least gate_min: a GNSS fix type >= 3
+    gate_channel: str | None = None
+    gate_min: float = 0.0
 
     @property
     def width(self) -> int:
@@ -263,6 +268,8 @@ class Profile:
         for group in self.measurements.values():
             refs.extend((f"[measurements.{group.name}] channels", ch) for ch in group.channels)
             refs.extend((f"[measurements.{group.name}] noise_channels", ch) for ch in group.noise_channels or ())
+            if group.gate_channel is not None:
+                refs.append((f"[measurements.{group.name}] gate", group.gate_channel))
         if self.mode is not None:
             refs.append(("[mode] channel", self.mode.channel))
         if self.alarm_policy is not None and self.alarm_policy.ground_channel:
@@ -375,6 +382,8 @@ class Profile:
                 table["origin"] = g.origin
             if g.noise_channels is not None:
                 table["noise_channels"] = g.noise_channels
+            if g.gate_channel is not None:
+                table["gate"] = {"channel": g.gate_channel, "min": g.gate_min}
             out["measurements"][g.name] = table
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
