@@ -137,6 +137,9 @@ class Detector:
     # decodes those present and passes their channels, unaligned, as the context keyword ``raw``
     # (channel name -> logscan.log.Channel), with the log's metadata as ``metadata``.
     raw_topics: ClassVar[tuple[str, ...]] = ()
+    # Threshold multipliers `logscan train --tune` may choose (logscan.tuning): parameter -> the
+    # statistics whose alarms it alone decides, e.g. {"rho": ("e_x",)}.
+    tunable: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     def __init__(self, **params: Any) -> None:
         self.params = {**copy.deepcopy(dict(self.defaults)), **params}
@@ -203,6 +206,13 @@ class Detector:
 
     def _fit(self, runs: list[AlignedRun], traces: list[Any], **context: Any) -> None:
         """Training step of subclasses that learn something; the default learns nothing."""
+
+    def with_params(self, **params: Any) -> Detector:
+        """A copy with ``params`` changed (checked), trained state kept (`logscan.tuning`)."""
+        other = copy.deepcopy(self)
+        other.params.update(params)
+        other.check_params()
+        return other
 
     def learns(self) -> bool:
         """Whether `fit` learns anything in this configuration (`logscan train` fits those that do)."""

@@ -92,6 +92,9 @@ class EncodedEkfDetector(Detector):
         "rho_s": 8.0,
     }
 
+    # `logscan train --tune`: each band factor decides the alarms of its own check alone
+    tunable = {"rho": ("e_x",), "rho_v": ("e_v",), "rho_s": ("e_s",)}
+
     parameter_constraints = {
         "variant": [Options("adaptive", "baseline")],
         "rho": [POSITIVE],

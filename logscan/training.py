@@ -161,8 +161,13 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     trained = read_tables(path)
     # after the profile check: the calibrated noise changes the profile it fingerprints
     apply_calibration(profile, document.get("calibration"))
+    from logscan.tuning import tuned_params
+
     out = []
     for detector in detectors:
+        tuned = tuned_params(document.get("tuning"), detector.name)
+        if tuned:  # `logscan train --tune`: the multipliers chosen on the training logs
+            detector = detector.with_params(**tuned)
         fitted = trained.get(detector.name)
         if fitted is None:
             out.append(detector)
@@ -179,6 +184,7 @@ def train_logs(
     *,
     allow_faulty: bool = False,
     calibrate: bool = False,
+    tune: bool = False,
     progress=None,
     notice=None,
     jobs: int = 1,
@@ -198,13 +204,19 @@ def train_logs(
     loaded = load_profile_for(logs[0], profile_path)
     detectors = trainable_detectors(loaded)
     fingerprint = profile_fingerprint(loaded.profile)
-    if not detectors and not calibrate:
+    tuned = tunable_detectors(loaded) if tune else []
+    if tune and not tuned:
+        raise UsageError(
+            "--tune: no detector of this profile has threshold multipliers to tune",
+            hint="enable [detectors.encoded_ekf] (its rho, rho_v and rho_s are tuned)",
+        )
+    if not detectors and not calibrate and not tune:
         raise UsageError(
             "nothing to train: no detector of this profile learns from healthy logs",
             hint="pass --calibrate to calibrate the filter's measurement noise, add a [redundant.<name>] "
             "group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
         )
-    task = PrepareTask(loaded, logs[0], profile_path, fingerprint, allow_faulty, calibrate, notice)
+    task = PrepareTask(loaded, logs[0], profile_path, fingerprint, allow_faulty or tune, calibrate, notice, tune)
     items = [(path, number) for number, path in enumerate(logs, 1)]
     if jobs <= 1 and scheduler is None:
         prepared = []
@@ -217,14 +229,36 @@ def train_logs(
         step(f"reading {len(logs)} log(s) on " + (f"the scheduler {scheduler}" if scheduler else f"{jobs} processes"))
         prepared = run_many(items, task, jobs=jobs, scheduler=scheduler, isolate=False)
     needs = task.needs()
+    # --tune takes labelled logs too (ground truth with faults): they only score the multipliers
+    labelled = [p for p in prepared if ((p.log.truth or {}).get("events") or [])] if tune else []
+    healthy = [p for p in prepared if all(p is not q for q in labelled)]
+    if not healthy:
+        raise UsageError("training needs at least one healthy log (one whose ground truth lists no fault)")
     calibration = None
     if calibrate:
         step("calibrating the measurement noise")
-        calibration = calibrate_prepared(prepared, needs)
+        calibration = calibrate_prepared(healthy, needs)
     if detectors:
         step("fitting " + ", ".join(d.name for d in detectors))
-        fit_detectors(detectors, prepared)
-    return tables_document(detectors, logs, loaded.profile, calibration)
+        fit_detectors(detectors, healthy)
+    tuning = None
+    if tune:
+        from logscan.tuning import tune as tune_multipliers
+
+        step(f"tuning {', '.join(d.name for d in tuned)} on {len(healthy)} healthy and {len(labelled)} labelled log(s)")
+        tuning = tune_multipliers(tuned, healthy, labelled)
+    document = tables_document(detectors, logs, loaded.profile, calibration)
+    document["tuning"] = tuning
+    return document
+
+
+def tunable_detectors(loaded) -> list:
+    """The profile's detectors (those it runs, else the defaults) that declare multipliers to tune."""
+    from logscan.detectors.registry import default_registry
+    from logscan.pipeline import create_detectors
+
+    chosen = list(loaded.profile.enabled_detectors() or default_registry().default_names())
+    return [d for d in create_detectors(loaded, chosen) if getattr(d, "tunable", None)]
 
 
 @dataclass(frozen=True)
@@ -240,11 +274,13 @@ class PrepareTask:
     allow_faulty: bool = False
     calibrate: bool = False
     notice: Any = None  # a module-level function (picklable), or None
+    tune: bool = False  # the tuned detectors' needs too (logscan.tuning)
 
     def needs(self):
         from logscan.pipeline import needs_of
 
-        needs = needs_of(trainable_detectors(self.loaded))
+        detectors = trainable_detectors(self.loaded) + (tunable_detectors(self.loaded) if self.tune else [])
+        needs = needs_of(detectors)
         return _with_ekf(needs) if self.calibrate else needs
 
     def __call__(self, item: tuple[str, int]):

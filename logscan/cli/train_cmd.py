@@ -48,6 +48,14 @@ from logscan.cli.options import (
 )
 @jobs_option
 @scheduler_option
+@click.option(
+    "--tune",
+    is_flag=True,
+    default=False,
+    help="Also choose the threshold multipliers (encoded_ekf's rho, rho_v, rho_s): the smallest with no "
+    "false alarm on the healthy logs plus a margin of 1, F1 on labelled logs (ground truth with faults, "
+    "accepted with --tune) breaking ties; `logscan analyze --tables` then runs with them.",
+)
 @quiet_option
 def train(
     log_paths: tuple[str, ...],
@@ -59,6 +67,7 @@ def train(
     calibrate: bool,
     jobs: int,
     scheduler: str | None,
+    tune: bool,
     quiet: bool,
 ) -> None:
     """Train the lookup tables and thresholds of the profile's detectors on healthy logs (and, with
@@ -91,6 +100,7 @@ def train(
         profile_path,
         allow_faulty=allow_faulty,
         calibrate=calibrate,
+        tune=tune,
         progress=step,
         notice=None if quiet else echo_notice,
         jobs=jobs,
@@ -130,6 +140,11 @@ def _summary_lines(document: dict, output_path: str, report: str | None) -> list
     if document.get("calibration"):
         lines.append("  measurement noise calibrated (mean NIS per output -> 1):")
         lines.extend("  " + line for line in calibration_lines(document["calibration"]))
+    if document.get("tuning"):
+        from logscan.tuning import tuning_lines
+
+        lines.append("  threshold multipliers tuned:")
+        lines.extend("  " + line for line in tuning_lines(document["tuning"]))
     for state in document["detectors"]:
         lines.extend(registry.get(state["detector"]).state_lines(state))
     if report is not None:
