@@ -60,3 +60,13 @@ def test_analyze_with_the_tables_runs_with_the_tuned_multipliers(tuned, sample):
     (detector,) = apply_tables(create_detectors(loaded, ["encoded_ekf"]), str(path), loaded.profile)
     for param in ("rho", "rho_v", "rho_s"):
         assert detector.params[param] == document["tuning"]["encoded_ekf"][param]["value"]
+
+
+def test_the_training_report_shows_the_tuned_multipliers(tuned):
+    from logscan.report.training_page import render_training_html
+
+    _, document, _ = tuned
+    page = render_training_html(document)
+    assert 'id="tuning"' in page and "encoded_ekf.rho_v" in page
+    rho = document["tuning"]["encoded_ekf"]["rho"]
+    assert f"<td>{rho['value']:g}</td>" in page

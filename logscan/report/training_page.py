@@ -311,6 +311,43 @@ def _holds_lookup_tables(state: Mapping) -> bool:
     )
 
 
+def _calibration_rows(calibration: Mapping | None) -> list[dict]:
+    """The calibrated noise per group (`logscan.calibration`), as table cells."""
+    rows = []
+    for name, entry in ((calibration or {}).get("groups") or {}).items():
+        after = ", ".join(f"{v:.3g}" for v in entry.get("noise_std") or [])
+        rows.append({
+            "name": str(name),
+            "before": ", ".join(f"{v:.3g}" for v in entry.get("profile_noise_std") or []),
+            "after": after if entry.get("calibrated") else "(not calibrated)",
+            "updates": str(entry.get("updates", "")),
+            "nis_before": f"{entry.get('mean_nis_per_output_before', float('nan')):.3g}",
+            "nis_after": f"{entry.get('mean_nis_per_output_after', float('nan')):.3g}",
+            "note": " (at the floor: the process noise may be too large)" if entry.get("at_floor") else "",
+        })  # fmt: skip
+    return rows
+
+
+def _tuning_rows(tuning: Mapping | None) -> list[dict]:
+    """The tuned multipliers (`logscan.tuning`), with their false-alarm counts by value."""
+    rows = []
+    for detector, params in (tuning or {}).items():
+        for param, entry in (params or {}).items():
+            value = entry.get("value")
+            grid, counts, f1 = entry.get("grid") or [], entry.get("false_alarms") or [], entry.get("f1") or []
+            curve = ", ".join(f"{g:g}: {c}" for g, c in zip(grid, counts) if c) or "none at any value"
+            at = grid.index(value) if value in grid else None
+            free = entry.get("smallest_without_false_alarms")
+            rows.append({
+                "name": f"{detector}.{param}",
+                "value": "—" if value is None else f"{value:g}",
+                "free": "—" if free is None else f"{free:g}",
+                "curve": curve,
+                "f1": "—" if at is None or at >= len(f1) or f1[at] is None else f"{f1[at]:.2f}",
+            })  # fmt: skip
+    return rows
+
+
 def render_training_html(document: dict) -> str:
     """The training report of a tables document (`logscan.training.tables_document`) as a string."""
     figures: list[tuple[str, str]] = []
@@ -344,6 +381,8 @@ def render_training_html(document: dict) -> str:
             atfm=atfm,
             others=others,
             n_detectors=len(document.get("detectors") or []),
+            calibration=_calibration_rows(document.get("calibration")),
+            tuning=_tuning_rows(document.get("tuning")),
             n_figures=len(figures),
             figure_json=figure_json,
             plotlyjs_inline=_plotly_js(),
