@@ -386,35 +386,42 @@ def detect(
     return analysis
 
 
-# A group's mean NIS per output far from 1 on a whole log: the filter's model of it is wrong. Above
-# NIS_MISMATCH the samples disagree with the prediction far beyond their noise (units, signs,
-# frames, a wrong channel); below 1 / NIS_MISMATCH**2 its noise_std dwarfs the data's scatter, so a
-# fault of that size hides. Checked only with enough updates to mean something.
+# A group's NIS far from its chi-square law on a whole log: the filter's model of it is wrong. The
+# median NIS over its updates against the chi-square median of its size (robust: a fault over less
+# than half of the log does not move it). Above NIS_MISMATCH times, the samples disagree with the
+# prediction far beyond their noise (units, signs, frames, a wrong channel); below 1 / NIS_MISMATCH**2
+# its noise_std dwarfs the data's scatter, so a fault of that size hides. Checked only with enough
+# updates to mean something.
 NIS_MISMATCH = 10.0
 NIS_MIN_UPDATES = 20
 
 
 def consistency_warnings(prepared: Prepared) -> list[str]:
-    """One warning per measurement group whose mean NIS per output is far from 1 (see NIS_MISMATCH)."""
-    summary = prepared.filter_summary()
+    """One warning per measurement group whose median NIS is far from the chi-square median of its
+    size (see NIS_MISMATCH); the ratio is given per output."""
+    import numpy as np
+    from scipy.stats import chi2
+
     trace = prepared.trace
-    if summary is None or trace is None:
+    if trace is None or trace.nis_group is None:
         return []
     out = []
-    for name, size in zip(trace.group_names, trace.group_sizes.tolist()):
-        mean = summary["mean_nis"].get(name)
-        if mean is None or summary["updates"].get(name, 0) < NIS_MIN_UPDATES or not size:
+    for g, (name, size) in enumerate(zip(trace.group_names, trace.group_sizes.tolist())):
+        used = trace.updated[:, g] & np.isfinite(trace.nis_group[:, g])
+        if int(used.sum()) < NIS_MIN_UPDATES or not size:
             continue
-        ratio = mean / size
+        ratio = float(np.median(trace.nis_group[used, g])) / float(chi2.ppf(0.5, size))
         if ratio > NIS_MISMATCH:
             out.append(
-                f"group {name!r}: mean NIS per output {ratio:.3g} (about 1 expected): model or profile mismatch, "
-                "check units, signs and frames of its channels, or its noise_std (docs/troubleshooting.md)"
+                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "
+                "profile mismatch, check units, signs and frames of its channels, or its noise_std "
+                "(docs/troubleshooting.md; logscan train --calibrate)"
             )
         elif ratio < 1.0 / NIS_MISMATCH**2:
             out.append(
-                f"group {name!r}: mean NIS per output {ratio:.3g} (about 1 expected): its noise_std is far larger "
-                "than the data's scatter, so faults of that size hide; lower noise_std"
+                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): its "
+                "noise_std is far larger than the data's scatter, so faults of that size hide; lower noise_std "
+                "(logscan train --calibrate)"
             )
     return out
 
