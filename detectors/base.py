@@ -140,6 +140,9 @@ class Detector:
     # Threshold multipliers `logscan train --tune` may choose (logscan.tuning): parameter -> the
     # statistics whose alarms it alone decides, e.g. {"rho": ("e_x",)}.
     tunable: ClassVar[Mapping[str, tuple[str, ...]]] = {}
+    # The autopilot's own verdict (PX4's estimator tests): the baseline logscan's model-based alarms
+    # are reported against (`logscan.analysis.Analysis.against_baseline`).
+    is_baseline: ClassVar[bool] = False
 
     def __init__(self, **params: Any) -> None:
         self.params = {**copy.deepcopy(dict(self.defaults)), **params}
@@ -206,6 +209,12 @@ class Detector:
 
     def _fit(self, runs: list[AlignedRun], traces: list[Any], **context: Any) -> None:
         """Training step of subclasses that learn something; the default learns nothing."""
+
+    @classmethod
+    def signal_words(cls, signal: str) -> str | None:
+        """Plain words for one of its statistics, said instead of "<group> inconsistent" in an
+        incident's headline (`logscan.incidents`); None: the default wording."""
+        return None
 
     def with_params(self, **params: Any) -> Detector:
         """A copy with ``params`` changed (checked), trained state kept (`logscan.tuning`)."""

@@ -85,6 +85,24 @@ def _suffix(instance: int) -> str:
     return "" if instance == 0 else f".{instance}"
 
 
+# Plain words for each check, said in an incident's headline instead of "<group> inconsistent"
+CHECK_WORDS = {
+    "battery": "battery voltage below empty",
+    "battery_zero": "battery sensor reading about 0 V",
+    "gnss_fix": "GNSS 3D fix lost",
+    "gnss_eph": "GNSS horizontal accuracy worse than required",
+    "gnss_epv": "GNSS vertical accuracy worse than required",
+    "gnss_jamming": "GNSS jamming indicated",
+    "motor_saturated": "motors saturated",
+    "motor_max": "a motor output at its maximum",
+    "motor_zero": "a motor output at zero while flying",
+    "imu_clipping": "IMU clipping",
+    "estimator_fault": "PX4 estimator fault flags set",
+    "logged_error": "the autopilot logged an error",
+    "timeout": "a sensor topic stopped",
+}
+
+
 class HealthDetector(Detector):
     """Plausibility checks on PX4's own topics: battery, GNSS, motors, clipping, faults, errors, timeouts."""
 
@@ -104,6 +122,12 @@ class HealthDetector(Detector):
     }
 
     # --- the shared plumbing -------------------------------------------------------------------
+
+    @classmethod
+    def signal_words(cls, signal: str) -> str | None:
+        parts = signal.split(".")
+        return CHECK_WORDS.get(parts[1]) if len(parts) > 1 and parts[0] == PREFIX else None
+
     def _run(self, run, trace, **context) -> DetectorResult:
         result = self.new_result()
         raw = context.get("raw") or {}

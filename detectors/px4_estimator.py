@@ -181,6 +181,34 @@ def _parameter(parameters: Mapping, name: str, default: float) -> float:
     return default if found is None else found[0]
 
 
+# Plain words for each source, in an incident's headline: "PX4's own test of the <words> failed"
+SOURCE_WORDS = {
+    "gps_hpos": "GNSS horizontal position",
+    "gps_vpos": "GNSS height",
+    "gps_hvel": "GNSS horizontal velocity",
+    "gps_vvel": "GNSS vertical velocity",
+    "baro_vpos": "barometer height",
+    "rng_vpos": "range-finder height",
+    "heading": "heading",
+    "mag_field": "magnetometer field",
+    "flow": "optical flow",
+    "airspeed": "airspeed",
+    "beta": "sideslip",
+    "pos_test_ratio": "position",
+    "vel_test_ratio": "velocity",
+    "hgt_test_ratio": "height",
+    "mag_test_ratio": "magnetometer",
+    "tas_test_ratio": "airspeed",
+    "hagl_test_ratio": "height above ground",
+    "beta_test_ratio": "sideslip",
+    "aid_gnss_pos": "GNSS position",
+    "aid_gnss_vel": "GNSS velocity",
+    "aid_gnss_hgt": "GNSS height",
+    "aid_baro_hgt": "barometer height",
+    "aid_mag": "magnetometer",
+}
+
+
 class Px4EstimatorDetector(Detector):
     """PX4's own EKF2 innovation test ratios per aiding source, over 1 for a set time."""
 
@@ -196,6 +224,17 @@ class Px4EstimatorDetector(Detector):
         "ratio": [Interval(float, 0, None, closed="neither")],
         "min_duration_s": [Interval(float, 0, None, closed="left")],
     }
+
+    is_baseline = True  # PX4's own verdict: logscan's model-based alarms are reported against it
+
+    @classmethod
+    def signal_words(cls, signal: str) -> str | None:
+        parts = signal.split(".")
+        if len(parts) < 2 or parts[0] != PREFIX:
+            return None
+        source = parts[-1]
+        words = SOURCE_WORDS.get(source, source.replace("aid_", "").replace("_test_ratio", "").replace("_", " "))
+        return f"PX4's own test of the {words} failed"
 
     def _sources(self, raw: Mapping, metadata: Mapping) -> tuple[list, dict]:
         """[(instance, source, topic, (t ns, ratio))] and the gates used for ekf2_innovations."""

@@ -117,15 +117,30 @@ class Analysis:
             return ExitCode.ALARMS
         return ExitCode.OK
 
-    def against_px4(self) -> dict[str, int] | None:
-        """logscan's model-based alarms against PX4's own estimator tests (`px4_estimator`), when
-        it ran and read a ratio: how many of them PX4 also flagged (overlapping in time, 1 s of
-        slack), how many it did not, and PX4's alarms no model-based detector matched."""
-        px4 = [r for r in self.results if r.detector == "px4_estimator"]
-        if not px4 or not px4[0].info.get("sources"):
+    def against_baseline(self) -> dict[str, int] | None:
+        """logscan's model-based alarms against the autopilot's own verdict (a detector with
+        `is_baseline`: PX4's estimator tests), when it ran and read something: how many of them it
+        also flagged (overlapping in time, 1 s of slack), how many it did not, and its alarms no
+        model-based detector matched. Detectors that read the autopilot's topics (`raw_topics`)
+        are neither side."""
+        from logscan.detectors.registry import default_registry
+
+        registry = default_registry()
+
+        def kind(result) -> str:
+            try:
+                cls = registry.get(result.detector)
+            except Exception:  # noqa: BLE001 - a detector the registry lost counts as model-based
+                return "model"
+            if getattr(cls, "is_baseline", False):
+                return "baseline"
+            return "autopilot" if getattr(cls, "raw_topics", ()) else "model"
+
+        baseline = [r for r in self.results if kind(r) == "baseline" and r.info.get("sources")]
+        if not baseline:
             return None
-        theirs = px4[0].alarms
-        ours = [a for r in self.results if r.detector not in ("px4_estimator", "health") for a in r.alarms]
+        theirs = [a for r in baseline for a in r.alarms]
+        ours = [a for r in self.results if kind(r) == "model" for a in r.alarms]
 
         def overlaps(a, b) -> bool:
             return a.start <= b.end + 1.0 and b.start <= a.end + 1.0
@@ -157,7 +172,7 @@ class Analysis:
                 {"kind": e.kind, "target": e.target, "start": e.t_start, "end": e.t_end} for e in self.events
             ],
             "scores": {name: score.to_dict() for name, score in self.scores.items()},
-            "against_px4": self.against_px4(),
+            "against_px4": self.against_baseline(),
             "warnings": list(self.warnings),
         }
 

@@ -48,62 +48,17 @@ GROUP_WORDS = {
     "heading": "compass heading",
     "odometry": "odometry",
 }
-# Plain words for the statistics of the detectors that check the autopilot's own topics (no model
-# group): the whole phrase, said instead of "<group> inconsistent"
-HEALTH_WORDS = {
-    "battery": "battery voltage below empty",
-    "battery_zero": "battery sensor reading about 0 V",
-    "gnss_fix": "GNSS 3D fix lost",
-    "gnss_eph": "GNSS horizontal accuracy worse than required",
-    "gnss_epv": "GNSS vertical accuracy worse than required",
-    "gnss_jamming": "GNSS jamming indicated",
-    "motor_saturated": "motors saturated",
-    "motor_max": "a motor output at its maximum",
-    "motor_zero": "a motor output at zero while flying",
-    "imu_clipping": "IMU clipping",
-    "estimator_fault": "PX4 estimator fault flags set",
-    "logged_error": "the autopilot logged an error",
-    "timeout": "a sensor topic stopped",
-}
-PX4_SOURCE_WORDS = {
-    "gps_hpos": "GNSS horizontal position",
-    "gps_vpos": "GNSS height",
-    "gps_hvel": "GNSS horizontal velocity",
-    "gps_vvel": "GNSS vertical velocity",
-    "baro_vpos": "barometer height",
-    "rng_vpos": "range-finder height",
-    "heading": "heading",
-    "mag_field": "magnetometer field",
-    "flow": "optical flow",
-    "airspeed": "airspeed",
-    "beta": "sideslip",
-    "pos_test_ratio": "position",
-    "vel_test_ratio": "velocity",
-    "hgt_test_ratio": "height",
-    "mag_test_ratio": "magnetometer",
-    "tas_test_ratio": "airspeed",
-    "hagl_test_ratio": "height above ground",
-    "beta_test_ratio": "sideslip",
-    "aid_gnss_pos": "GNSS position",
-    "aid_gnss_vel": "GNSS velocity",
-    "aid_gnss_hgt": "GNSS height",
-    "aid_baro_hgt": "barometer height",
-    "aid_mag": "magnetometer",
-}
 
 
-def plain_words(signal: str) -> str | None:
-    """The phrase for a statistic of `health` or `px4_estimator` (None for others):
-    ``health.gnss_fix`` -> "GNSS 3D fix lost", ``px4.gps_hpos`` -> "PX4's own test of the GNSS
-    horizontal position failed"."""
-    parts = signal.split(".")
-    if parts[0] == "health" and len(parts) > 1:
-        return HEALTH_WORDS.get(parts[1])
-    if parts[0] == "px4" and len(parts) > 1:
-        source = parts[-1]
-        words = PX4_SOURCE_WORDS.get(source, source.replace("aid_", "").replace("_test_ratio", "").replace("_", " "))
-        return f"PX4's own test of the {words} failed"
-    return None
+def plain_words(signal: str, detector: str) -> str | None:
+    """The phrase a detector gives one of its statistics (`Detector.signal_words`), else None."""
+    from logscan.detectors.registry import default_registry
+
+    try:
+        cls = default_registry().get(detector)
+    except Exception:  # noqa: BLE001 - an unknown or broken detector keeps the default wording
+        return None
+    return cls.signal_words(signal)
 
 
 def merge_fragments(results: Sequence[DetectorResult], gap_s: float = DEFAULT_GAP_S) -> None:
@@ -143,7 +98,7 @@ def headline(source: AlarmInterval, group: str | None, start: float, end: float,
     ratio = source.peak_ratio
     peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
     rejected = f"; {n_rejected} impossible sample{'s' if n_rejected != 1 else ''} rejected" if n_rejected else ""
-    phrase = plain_words(source.signal) if not group else None
+    phrase = plain_words(source.signal, source.detector) if not group else None
     if phrase is None:
         what = GROUP_WORDS.get(group, group.replace("_", " ")) if group else f"{source.detector} {source.signal}"
         phrase = f"{what} inconsistent"

@@ -183,9 +183,9 @@ def test_plain_words_for_the_autopilot_checks():
     from logscan.incidents import headline, plain_words
     from logscan.results import AlarmInterval
 
-    assert plain_words("health.gnss_fix") == "GNSS 3D fix lost"
-    assert plain_words("px4.ekf1.pos_test_ratio") == "PX4's own test of the position failed"
-    assert plain_words("nis.gnss_position") is None  # a model group: "<group> inconsistent"
+    assert plain_words("health.gnss_fix", "health") == "GNSS 3D fix lost"
+    assert plain_words("px4.ekf1.pos_test_ratio", "px4_estimator") == "PX4's own test of the position failed"
+    assert plain_words("nis.gnss_position", "nis") is None  # a model group: "<group> inconsistent"
     alarm = AlarmInterval(20.0, 24.0, 19.0, 21.0, 2.0, 1.0, 2.0, "upper", 5, "health.gnss_fix", "health")
     assert headline(alarm, None, 20.0, 24.0).startswith("GNSS 3D fix lost 20.00-24.00 s (health.gnss_fix")
 
@@ -205,9 +205,14 @@ def test_model_based_alarms_are_reported_against_px4s_own_tests():
     nis.alarms = [alarm(29.5, 33.0, "nis.gnss_position", "nis"), alarm(50.0, 51.0, "nis.baro", "nis")]
     analysis = Analysis.__new__(Analysis)
     analysis.results = [px4, nis]
-    assert analysis.against_px4() == {"logscan_alarms": 2, "also_flagged_by_px4": 1, "px4_alarms": 2, "px4_alone": 1}
+    assert analysis.against_baseline() == {
+        "logscan_alarms": 2,
+        "also_flagged_by_px4": 1,
+        "px4_alarms": 2,
+        "px4_alone": 1,
+    }
     analysis.results = [nis]
-    assert analysis.against_px4() is None
+    assert analysis.against_baseline() is None
 
 
 def test_gnss_samples_count_only_with_a_3d_fix(cli, tmp_path):

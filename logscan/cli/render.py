@@ -116,7 +116,7 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             f"{score.fp} false alarm(s), mean latency {latency}"
             + (f" (alarms apart: {', '.join(apart)})" if apart else "")
         )
-    versus = analysis.against_px4()
+    versus = analysis.against_baseline()
     if versus is not None:
         lines.append(
             f"  against PX4's own estimator: {versus['also_flagged_by_px4']} of logscan's "
