@@ -70,6 +70,10 @@ class LoadedProfile:
     text: str
     source: str  # a file path, "embedded", or "built-in <name>"
     notes: list[str] = field(default_factory=list)  # what a built-in profile left out, one line each
+    # a built-in profile's log, read once to build it with every topic an analysis of it may read
+    # (`builtin_profile_for`): `prepare` takes it instead of reading the file again, then drops it
+    log: Any = field(default=None, repr=False, compare=False)
+    log_extra_topics: frozenset = field(default=frozenset(), repr=False, compare=False)
 
 
 @dataclass
@@ -135,11 +139,12 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
         return LoadedProfile(profile, profile.to_toml(), str(profile_path))
     embedded = read_embedded_profile(path)
     if not embedded:
-        built = builtin_profile_for(path)
-        if built is not None:
+        found = builtin_profile_for(path, with_log=True)
+        if found is not None:
+            built, log, extra = found
             profile = parse_profile(built.text, source=f"{path} (built-in profile {built.name})")
             notes = [f"built-in profile {built.name}: {note}" for note in built.notes]
-            return LoadedProfile(profile, built.text, f"built-in {built.name}", notes)
+            return LoadedProfile(profile, built.text, f"built-in {built.name}", notes, log, extra)
         raise ProfileError(
             "no profile: the log embeds none",
             path=str(path),
@@ -148,25 +153,41 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
     return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
 
 
-def builtin_profile_for(path: str | os.PathLike):
+def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
     """The built-in profile (`logscan.profiles.builtin.BuiltProfile`) of a log that names itself (a
-    PX4 ULog, a ROS 2 MCAP), else None; reads only the topics the built-in profile may use."""
+    PX4 ULog, a ROS 2 MCAP), else None; reads only the topics the built-in profile may use, plus
+    those any detector reads from the log itself (`Detector.raw_topics`) and the report's states.
+    ``with_log``: (profile, the log read, those extra topics), so the analysis need not read it
+    again."""
     from logscan.profiles import builtin
     from logscan.readers import detect_format, read_log
 
     fmt = None if path is None else detect_format(path)
+    extra = _extra_topics()
     if fmt == "mcap":  # a ROS 2 log: its topic list first (the summary), then only the topics the profile may use
         schemas = builtin.mcap_topic_schemas(path)
         if not any(builtin.is_ros2_topic(*value) for value in schemas.values()):
             return None
-        log = read_log(path, topics=builtin.ros2_candidate_topics(schemas))
-        return builtin.ros2_profile(log) if builtin.identify(log) == "ros2" else None
-    if fmt != "ulog":
+        # the extra topics the file has (its summary lists them all: the others are covered too)
+        log = read_log(path, topics=set(builtin.ros2_candidate_topics(schemas)) | (extra & set(schemas)))
+        built = builtin.ros2_profile(log) if builtin.identify(log) == "ros2" else None
+    elif fmt == "ulog":
+        log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra)
+        built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None
+    else:
         return None
-    log = read_log(path, topics=builtin.PX4_TOPICS)
-    if builtin.identify(log) != "px4":
-        return None
-    return builtin.px4_profile(log)
+    if built is None or not with_log:
+        return built
+    return built, log, extra
+
+
+def _extra_topics() -> frozenset[str]:
+    """Every topic a registered detector reads from the log itself, and the report's states."""
+    from logscan.detectors.registry import default_registry
+    from logscan.run_context import STATE_TOPICS
+
+    registry = default_registry()
+    return raw_topics_of([registry.get(name) for name in registry.names()]) | frozenset(STATE_TOPICS)
 
 
 def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
@@ -244,7 +265,10 @@ def prepare(
     compiling = _start_compile(model, needs, notice)
     step("reading")
     context_topics = set(STATE_TOPICS)  # the autopilot's states for the report, when the log has them
-    log = read_log(path, topics=profile.topics() | set(raw_topics) | context_topics, use_header_stamp=use_header_stamp)
+    log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
+    if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
+        wanted = profile.topics() | set(raw_topics) | context_topics
+        log = read_log(path, topics=wanted, use_header_stamp=use_header_stamp)
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")

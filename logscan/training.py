@@ -15,6 +15,7 @@ another profile (`apply_tables`).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -216,6 +217,9 @@ def train_logs(
             hint="pass --calibrate to calibrate the filter's measurement noise, add a [redundant.<name>] "
             "group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
         )
+    # the first log, when its profile is built in, was read to build it: its task reads it again
+    # (a task travels to worker processes without a log in it)
+    loaded = dataclasses.replace(loaded, log=None)
     task = PrepareTask(loaded, logs[0], profile_path, fingerprint, allow_faulty or tune, calibrate, notice, tune)
     items = [(path, number) for number, path in enumerate(logs, 1)]
     if jobs <= 1 and scheduler is None:
@@ -296,9 +300,11 @@ class PrepareTask:
                 path=path,
                 hint="train on healthy logs only, or pass --allow-faulty",
             )
-        own = self.loaded.profile
+        loaded, own = self.loaded, self.loaded.profile
         if self.profile_path is None and number > 1:
-            own = load_profile_for(path, None).profile  # embedded, or built-in (a PX4 log)
+            theirs = load_profile_for(path, None)  # embedded, or built-in (a PX4 log: read once here)
+            own = theirs.profile
+            loaded = dataclasses.replace(loaded, log=theirs.log, log_extra_topics=theirs.log_extra_topics)
         if profile_fingerprint(own) != self.fingerprint:
             raise ProfileError(
                 f"its embedded profile differs from {self.first_log}'s "
@@ -306,7 +312,7 @@ class PrepareTask:
                 path=path,
                 hint="train logs of one profile together, or pass --profile",
             )
-        one = prepare(path, self.loaded, self.needs(), notice=self.notice)
+        one = prepare(path, loaded, self.needs(), notice=self.notice)
         if one.log.source.partial:
             raise InputError(
                 f"read in part ({one.log.source.partial_reason})", path=path, hint="train on complete logs"
