@@ -256,7 +256,7 @@ def prepare(
     from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
-    from logscan.run_context import STATE_TOPICS, autopilot_states, logged_messages, run_context
+    from logscan.run_context import STATE_TOPICS, run_context
 
     step = progress or (lambda message: None)
     path = str(path)
@@ -273,22 +273,17 @@ def prepare(
     profile.check_channels(log)
     step("aligning")
     run = align(log, profile, start_s=start_s, end_s=end_s)
-    raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
-    states = autopilot_states(raw_channels(log, frozenset(context_topics)), run.start_ns, float(run.t[-1]))
-    log.release_samples()  # the run holds what the filters and detectors read from here on
     if run.n_steps < 2:
         raise LogscanError(
             "too few samples on the analysis grid to filter",
             path=path,
             hint="check the profile's channels and rate_hz against `logscan inspect`",
         )
+    raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
+    context = run_context(run, model, log)  # the report's context, from the samples about to go
+    log.release_samples()  # the run holds what the filters and detectors read from here on
     wanted = needs(run) if callable(needs) else needs
-    prepared = Prepared(
-        path=path, log=log, loaded=loaded, model=model, run=run, context=run_context(run, model), raw=raw
-    )
-    prepared.context.messages = logged_messages(log.source.metadata, run.start_ns)
-    prepared.context.t_span = (float(run.t[0]), float(run.t[-1]))
-    prepared.context.states = states
+    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)

@@ -93,15 +93,15 @@ def _intervals(t: np.ndarray, on: np.ndarray, end: float) -> list[tuple[float, f
     return out[:MAX_STATE_INTERVALS]
 
 
-def autopilot_states(raw: dict, start_ns: int, end_s: float) -> dict[str, list[tuple[float, float]]]:
-    """{"armed": intervals, "failsafe": intervals} from PX4's vehicle_status channels in ``raw``
-    (times in s since ``start_ns``); states the log lacks are left out."""
+def autopilot_states(channels: dict, start_ns: int, end_s: float) -> dict[str, list[tuple[float, float]]]:
+    """{"armed": intervals, "failsafe": intervals} from PX4's vehicle_status channels among a log's
+    ``channels`` (times in s since ``start_ns``); states the log lacks are left out."""
     out = {}
     for state, field_name, test in (
         ("armed", "arming_state", lambda v: v == ARMED_STATE),
         ("failsafe", "failsafe", lambda v: v != 0),
     ):
-        channel = raw.get(f"/vehicle_status_0/{field_name}")
+        channel = channels.get(f"/vehicle_status_0/{field_name}")
         if channel is None or len(channel) == 0:
             continue
         t = (np.asarray(channel.t, dtype=np.int64) - start_ns) / 1e9
@@ -199,6 +199,11 @@ def mode_of(run, max_intervals: int = MAX_MODE_INTERVALS, max_points: int = MAX_
     return track
 
 
-def run_context(run, model) -> RunContext:
-    """The path and the mode of an aligned run (each None when the run has none)."""
-    return RunContext(path=path_of(run, model), mode=mode_of(run))
+def run_context(run, model, log=None) -> RunContext:
+    """The path and the mode of an aligned run (each None when the run has none), and, from its
+    ``log`` (before its samples are released), the autopilot's messages and states."""
+    context = RunContext(path=path_of(run, model), mode=mode_of(run), t_span=(float(run.t[0]), float(run.t[-1])))
+    if log is not None:
+        context.messages = logged_messages(log.source.metadata, run.start_ns)
+        context.states = autopilot_states(log.channels, run.start_ns, context.t_span[1])
+    return context

@@ -47,6 +47,24 @@ def _band_trace(name: str, spans: list[tuple[float, float]], fill: str) -> dict:
     }  # fmt: skip
 
 
+def _time_row_layout(title: str, yaxis: dict, t_span: tuple[float, float] | None = None) -> dict:
+    """The layout of a context figure on the shared time axis (the mode, the autopilot's messages
+    and states): margins as the detector figures', so the time axes align."""
+    return {
+        **_BASE_LAYOUT,
+        "title": {"text": title, "font": {"size": 14}},
+        "height": MODE_HEIGHT,
+        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},
+        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
+        "xaxis": {**TIME_AXIS, **({"range": list(t_span)} if t_span else {})},
+        "yaxis": yaxis,
+    }
+
+
+def _time_row_spec(fig_id: str, title: str, caption: str) -> dict:
+    return {"id": fig_id, "title": title, "caption": caption, "timeseries": True, "height": MODE_HEIGHT}
+
+
 def _value_text(value: float) -> str:
     return f"{value:g}"
 
@@ -66,24 +84,14 @@ def mode_figure(mode) -> dict:
         "mode": "lines", "line": {"shape": "hv", "color": "#333", "width": 1.5},
         "hovertemplate": "%{y:.6g} from %{x:.3f} s",
     })  # fmt: skip
-    layout = {
-        **_BASE_LAYOUT,
-        "title": {"text": f"mode: {name}", "font": {"size": 14}},
-        "height": MODE_HEIGHT,
-        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},  # left and right as the detector figures: time axes align
-        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
-        "xaxis": {**TIME_AXIS},
-        "yaxis": {"title": {"text": name}, "gridcolor": "#eee", "exponentformat": "e"},
-        "yaxis2": {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True},
-    }
+    layout = _time_row_layout(f"mode: {name}", {"title": {"text": name}, "gridcolor": "#eee", "exponentformat": "e"})
+    layout["yaxis2"] = {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True}
     caption = (
         f"The profile's mode channel {mode.channel} on the shared time axis"
         + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
         + ". Read an alarm against the mode it happened in."
     )
-    spec = {"id": "ctx-mode", "title": f"mode: {mode.channel}", "caption": caption, "timeseries": True,
-            "height": MODE_HEIGHT}  # fmt: skip
-    return _spec(spec, data, layout)
+    return _spec(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout)
 
 
 def _incident_traces(path, incidents: Sequence[Incident]) -> list[dict]:
@@ -162,23 +170,14 @@ def messages_figure(messages, t_span: tuple[float, float] | None = None) -> dict
             "text": [plot_text(m.text[:200]) for m in chosen], "hovertemplate": "%{x:.3f} s: %{text}",
         })  # fmt: skip
     rows = sorted({_LEVEL_ROWS[m.level] for m in messages})
-    layout = {
-        **_BASE_LAYOUT,
-        "title": {"text": "the autopilot's logged warnings and errors", "font": {"size": 14}},
-        "height": MODE_HEIGHT,
-        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},  # as the detector figures: time axes align
-        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
-        "xaxis": {**TIME_AXIS, **({"range": list(t_span)} if t_span else {})},
-        "yaxis": {"tickvals": rows, "ticktext": [k.lower() for k, v in _LEVEL_ROWS.items() if v in rows],
-                  "range": [-0.5, max(rows) + 0.5], "fixedrange": True},
-    }  # fmt: skip
+    yaxis = {"tickvals": rows, "ticktext": [k.lower() for k, v in _LEVEL_ROWS.items() if v in rows],
+             "range": [-0.5, max(rows) + 0.5], "fixedrange": True}  # fmt: skip
+    layout = _time_row_layout("the autopilot's logged warnings and errors", yaxis, t_span)
     caption = (
         f"{len(messages)} message(s) of level warning and above the autopilot logged, at their time "
         "on the shared axis (hover for the text). Read an alarm against what the autopilot itself said."
     )
-    spec = {"id": "ctx-messages", "title": "autopilot messages", "caption": caption, "timeseries": True,
-            "height": MODE_HEIGHT}  # fmt: skip
-    return _spec(spec, data, layout)
+    return _spec(_time_row_spec("ctx-messages", "autopilot messages", caption), data, layout)
 
 
 _STATE_FILLS = {"armed": "rgba(44, 160, 44, 0.25)", "failsafe": "rgba(214, 39, 40, 0.35)"}
@@ -199,21 +198,12 @@ def states_figure(states: dict, t_span: tuple[float, float] | None = None) -> di
             "fillcolor": _STATE_FILLS.get(name, "rgba(127, 127, 127, 0.3)"), "line": {"width": 0},
             "hoverinfo": "name",
         })  # fmt: skip
-    layout = {
-        **_BASE_LAYOUT,
-        "title": {"text": "the autopilot's state", "font": {"size": 14}},
-        "height": MODE_HEIGHT,
-        "margin": {"l": 70, "r": 20, "t": 40, "b": 100},  # as the detector figures: time axes align
-        "legend": {"orientation": "h", "y": -0.6, "yanchor": "top"},
-        "xaxis": {**TIME_AXIS, **({"range": list(t_span)} if t_span else {})},
-        "yaxis": {"tickvals": list(range(len(names))), "ticktext": names, "range": [-0.6, len(names) - 0.4],
-                  "fixedrange": True},
-    }  # fmt: skip
+    yaxis = {"tickvals": list(range(len(names))), "ticktext": names, "range": [-0.6, len(names) - 0.4],
+             "fixedrange": True}  # fmt: skip
+    layout = _time_row_layout("the autopilot's state", yaxis, t_span)
     summary = "; ".join(f"{name}: {len(spans)} interval(s)" for name, spans in states.items())
     caption = f"When the vehicle was armed and in failsafe, as its autopilot logged ({summary})."
-    spec = {"id": "ctx-states", "title": "autopilot state", "caption": caption, "timeseries": True,
-            "height": MODE_HEIGHT}  # fmt: skip
-    return _spec(spec, data, layout)
+    return _spec(_time_row_spec("ctx-states", "autopilot state", caption), data, layout)
 
 
 def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
