@@ -22,11 +22,14 @@ Noise defaults follow PX4's EKF2 defaults where it has one (accelerometer 0.35 m
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from logscan.models.base import GroupSpec, Model
 from logscan.models.dispatch import INS_ID
 from logscan.models.ins_kernels import INS_N, ins_boxplus_into, so3_exp_jr_into
+from logscan.models.quadcopter import Quadcopter
 
 DEFAULTS = {
     "g": 9.80665,  # m/s^2, standard gravity
@@ -94,17 +97,8 @@ class Ins(Model):
             wrap=(True,),
             direct_states=(8,),
         ),
-        "attitude": GroupSpec(
-            "attitude",
-            4,
-            _ATT,
-            (0.02, 0.02, 0.02),
-            (-3.2, -1.6, -6.4),
-            (3.2, 1.6, 6.4),
-            ("rad",) * 3,
-            wrap=(True, True, True),
-            direct_states=(6, 7, 8),
-        ),
+        # the quadcopter's (ZYX Euler angles, wrapped, observing roll, pitch, yaw directly)
+        "attitude": replace(Quadcopter.groups["attitude"], group_id=4),
         "odometry": GroupSpec(
             "odometry",
             5,
