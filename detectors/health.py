@@ -32,9 +32,10 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Interval
+from logscan.detectors.raw_topics import grid_steps, on_grid, persist_count, split_topics
 from logscan.detectors.raw_topics import held as _held
 from logscan.detectors.raw_topics import log_parameter as _parameter
-from logscan.detectors.raw_topics import on_grid, persist_count, split_topics
+from logscan.run_context import logged_messages
 
 PREFIX = "health"
 INSTANCES = (0, 1, 2, 3)
@@ -72,8 +73,6 @@ NO_TOPICS = (
     "vehicle_imu, estimator_status) and no logged messages"
 )
 NOTHING = f"{PREFIX}.checks"  # the statistic that stands for "nothing was checked" (never finite)
-
-_MESSAGE = re.compile(r"^(?P<t>\S+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
 
 
 def _same_times(fields: Mapping, names) -> bool:
@@ -479,28 +478,14 @@ class HealthDetector(Detector):
             self._skipped[name] = "the log carries no logged messages (not a ULog)"
             return
         run = self._grid
-        errors = []
-        statistic = np.zeros(run.n_steps)
-        for _, text in sorted(messages.items()):
-            match = _MESSAGE.match(str(text))
-            if match is None or match.group("level") not in LEVELS:
-                continue
-            try:
-                t_ns = round(float(match.group("t")) * 1e6) * 1000
-            except ValueError:
-                continue
-            t_s = (t_ns - run.start_ns) / 1e9
-            placed = on_grid(run, np.array([t_ns]), np.array([FLAG]))
-            statistic = np.fmax(statistic, np.nan_to_num(placed))
-            if len(errors) < MAX_LOGGED_ERRORS:
-                errors.append(
-                    {
-                        "time": t_s,
-                        "level": match.group("level"),
-                        "text": match.group("text").strip(),
-                        "on_grid": bool(np.isfinite(placed).any()),
-                    }
-                )
+        found = logged_messages(metadata, run.start_ns, LEVELS, limit=None)
+        t_ns = np.array([m.t_ns for m in found], dtype=np.int64)
+        statistic = np.nan_to_num(on_grid(run, t_ns, np.full(t_ns.size, FLAG)))
+        landed = grid_steps(run, t_ns)[1] if found else np.zeros(0, bool)
+        errors = [
+            {"time": m.t, "level": m.level, "text": m.text, "on_grid": bool(on)}
+            for m, on in zip(found[:MAX_LOGGED_ERRORS], landed.tolist())
+        ]
         if run.n_steps:
             run_result = self._result
             run_result.add_statistic(run.t, name, statistic, upper=1.0, valid=np.ones(run.n_steps, bool), n_persist=1)

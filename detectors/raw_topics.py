@@ -33,11 +33,18 @@ def on_grid(run, t_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
     statistic = np.full(run.n_steps, np.nan)
     if t_ns.size == 0 or run.n_steps == 0:
         return statistic
-    t = (t_ns - run.start_ns) / 1e9
-    step = np.searchsorted(run.t, t - 1e-9, side="left")
-    keep = (step < run.n_steps) & (t >= run.t[0] - float(run.dt)) & np.isfinite(values)
+    step, landed = grid_steps(run, t_ns)
+    keep = landed & np.isfinite(values)
     np.fmax.at(statistic, step[keep], values[keep])
     return statistic
+
+
+def grid_steps(run, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the grid step each time falls on: the first at or after it, whether it lands on the grid:
+    not after its last step nor more than a step before its first)."""
+    t = (np.asarray(t_ns) - run.start_ns) / 1e9
+    step = np.searchsorted(run.t, t - 1e-9, side="left")
+    return step, (step < run.n_steps) & (t >= run.t[0] - float(run.dt))
 
 
 def persist_count(t_valid: np.ndarray, min_duration_s: float) -> int:

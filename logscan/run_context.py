@@ -17,6 +17,7 @@ what the report shows beside the statistics is extracted right after alignment, 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +35,8 @@ STATE_TOPICS = ("vehicle_status_0",)
 ARMED_STATE = 2.0  # PX4 vehicle_status.arming_state: ARMING_STATE_ARMED
 # a ULog message's level, as logscan.readers.ulog_reader writes it ("<s> s [<LEVEL>] <text>"), most severe first
 MESSAGE_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING")
-_MESSAGE = None  # compiled lazily: most runs have no messages
+# a ULog message as logscan.readers.ulog_reader writes it: "<seconds> s [<LEVEL>] <text>"
+_MESSAGE = re.compile(r"^\s*(?P<t>[-+0-9.eE]+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
 
 
 @dataclass
@@ -62,11 +64,13 @@ class ModeTrack:
 
 @dataclass
 class LoggedMessage:
-    """One message the autopilot logged: time (s since the log's start), level, text."""
+    """One message the autopilot logged: time (s since the log's start, and as the log's ns), level,
+    text."""
 
     t: float
     level: str
     text: str
+    t_ns: int = 0
 
 
 @dataclass
@@ -110,26 +114,22 @@ def autopilot_states(channels: dict, start_ns: int, end_s: float) -> dict[str, l
     return out
 
 
-def logged_messages(metadata: dict, start_ns: int) -> list[LoggedMessage]:
-    """The log's own messages of level WARNING and above (`MESSAGE_LEVELS`), in time order, at most
-    MAX_MESSAGES: a ULog's ``ulog.messages`` metadata ("<seconds> s [<LEVEL>] <text>", on the
-    clock of its channels)."""
-    import re
-
-    global _MESSAGE
-    if _MESSAGE is None:
-        _MESSAGE = re.compile(r"^\s*(?P<t>[-+0-9.eE]+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
+def logged_messages(
+    metadata: dict, start_ns: int, levels: tuple[str, ...] = MESSAGE_LEVELS, limit: int | None = MAX_MESSAGES
+) -> list[LoggedMessage]:
+    """The log's own messages of ``levels`` (default: WARNING and above), in time order, at most
+    ``limit``: a ULog's ``ulog.messages`` metadata (on the clock of its channels)."""
     out = []
     for line in (metadata or {}).get("ulog.messages", {}).values():
         match = _MESSAGE.match(str(line))
-        if match is None or match.group("level") not in MESSAGE_LEVELS:
+        if match is None or match.group("level") not in levels:
             continue
         try:
-            t = (float(match.group("t")) * 1e9 - start_ns) / 1e9
+            t_ns = round(float(match.group("t")) * 1e6) * 1000  # written in microseconds
         except ValueError:
             continue
-        out.append(LoggedMessage(t, match.group("level"), match.group("text").strip()))
-        if len(out) >= MAX_MESSAGES:
+        out.append(LoggedMessage((t_ns - start_ns) / 1e9, match.group("level"), match.group("text").strip(), t_ns))
+        if limit is not None and len(out) >= limit:
             break
     return out
 
