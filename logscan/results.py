@@ -116,9 +116,10 @@ class AlarmPolicy:
         if ground is not None and t.size:
             on = np.nan_to_num(np.asarray(ground, dtype=np.float64), nan=0.0) != 0.0
             out |= on
-            takeoffs = t[1:][on[:-1] & ~on[1:]]  # ground -> air
-            for t0 in takeoffs.tolist():
-                out |= (t >= t0) & (t < t0 + self.after_ground_s)
+            # the latest take-off (ground -> air) at or before each step
+            takeoff = np.concatenate([[False], on[:-1] & ~on[1:]])
+            last = np.maximum.accumulate(np.where(takeoff, t, -np.inf))
+            out |= t < last + self.after_ground_s
         return dataclasses.replace(self, suspended=out if out.any() else None)
 
     def apply(self, options: dict) -> dict:
