@@ -31,13 +31,16 @@ CAL_MIN_UPDATES = 20  # updates of a group over the training logs to calibrate i
 
 
 def base_noise_std(model, run) -> dict[str, np.ndarray]:
-    """Each group's noise std as the filter takes it: the profile's, else the model's default."""
-    out = {}
-    for name, group in run.groups.items():
-        spec = model.group(name)
-        std = group.noise_std if group.noise_std is not None else spec.noise_std
-        out[name] = np.broadcast_to(np.asarray(std, dtype=np.float64), (spec.size,)).copy()
-    return out
+    """Each group's noise std as the filter takes it (`logscan.filters.ekf.pack_run`: the
+    profile's, else the model's default R), from the diagonal of its block of R."""
+    from logscan.filters.ekf import pack_run
+
+    packed = pack_run(model, run)
+    diagonal = np.sqrt(np.diag(packed.R_all))
+    return {
+        name: diagonal[o : o + m].copy()
+        for name, o, m in zip(packed.group_names, packed.group_offsets.tolist(), packed.group_sizes.tolist())
+    }
 
 
 def mean_nis_per_output(model, runs: Sequence, noise_std: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
