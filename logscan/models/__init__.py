@@ -15,6 +15,7 @@ _REGISTRY = {
     "linear": "logscan.models.linear:LinearModel",
     "hover_uav": "logscan.models.hover_uav:HoverUav",
     "ins": "logscan.models.ins:Ins",
+    "unicycle": "logscan.models.unicycle:Unicycle",
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 

@@ -47,6 +47,7 @@ from logscan.models.quadcopter_kernels import (
 )
 from logscan.models.rk4 import rk4_f, rk4_predict, rk4_predict_into
 from logscan.models.steer_by_wire_kernels import STEER_BY_WIRE_ID, sbw_H, sbw_h, sbw_H_row_into
+from logscan.models.unicycle_kernels import UNICYCLE_ID, uni_H, uni_h, uni_meas_into, uni_predict, uni_predict_into
 from logscan.numba_cache import follow_dependencies
 
 # the hover UAV (logscan.models.hover_uav) packs its exactly discretised A, B, C like a linear
@@ -60,6 +61,7 @@ MODEL_IDS = {
     LINEAR_ID: "linear",
     HOVER_UAV_ID: "hover_uav",
     INS_ID: "ins",
+    UNICYCLE_ID: "unicycle",
 }
 
 
@@ -84,6 +86,8 @@ def predict(model_id, p, x, u, dt):
         return rk4_predict(model_id, p, x, u, dt)
     if model_id == INS_ID:
         return ins_predict(p, x, u, dt)
+    if model_id == UNICYCLE_ID:
+        return uni_predict(p, x, u, dt)
     raise ValueError("predict: unknown model id")
 
 
@@ -111,6 +115,12 @@ def ins_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     ins_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
 
 
+@njit(cache=True, inline="always")
+def uni_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the unicycle (Euler step)."""
+    uni_predict_into(p, x, u, dt, x_next, F)
+
+
 @njit(cache=True)
 def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
@@ -123,6 +133,8 @@ def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     elif model_id == INS_ID:
         ins_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+    elif model_id == UNICYCLE_ID:
+        uni_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     else:
         raise ValueError("predict_into: unknown model id")
 
@@ -136,6 +148,8 @@ def f_disc(model_id, p, x, u, dt):
         return rk4_f(model_id, p, x, u, dt)
     if model_id == INS_ID:
         return ins_predict(p, x, u, dt)[0]
+    if model_id == UNICYCLE_ID:
+        return uni_predict(p, x, u, dt)[0]
     raise ValueError("f_disc: unknown model id")
 
 
@@ -150,6 +164,8 @@ def h_meas(model_id, gid, p, x, u):
         return lin_h(p, gid, x, u)
     if model_id == INS_ID:
         return ins_h(p, gid, x, u)
+    if model_id == UNICYCLE_ID:
+        return uni_h(p, gid, x, u)
     raise ValueError("h_meas: unknown model id")
 
 
@@ -164,6 +180,8 @@ def H_meas(model_id, gid, p, x, u):
         return lin_H(p, gid, x, u)
     if model_id == INS_ID:
         return ins_H(p, gid, x, u)
+    if model_id == UNICYCLE_ID:
+        return uni_H(p, gid, x, u)
     raise ValueError("H_meas: unknown model id")
 
 
@@ -196,6 +214,12 @@ def ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
 
 
 @njit(cache=True, inline="always")
+def uni_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the unicycle."""
+    uni_meas_into(p, gid, x, u, r, hx, Hs)
+
+
+@njit(cache=True, inline="always")
 def additive_boxplus_into(p, x, dx, out):
     """x (+) dx of the models whose state adds: out = x + dx."""
     for i in range(x.size):
@@ -220,6 +244,8 @@ def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
         lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     elif model_id == INS_ID:
         ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
+    elif model_id == UNICYCLE_ID:
+        uni_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     else:
         raise ValueError("meas_into: unknown model id")
 
@@ -233,6 +259,7 @@ IN_PLACE = {
     LINEAR_ID: (lin_step_into, lin_meas_rows_into, additive_boxplus_into),
     HOVER_UAV_ID: (lin_step_into, lin_meas_rows_into, additive_boxplus_into),
     INS_ID: (ins_step_into, ins_meas_rows_into, ins_boxplus),
+    UNICYCLE_ID: (uni_step_into, uni_meas_rows_into, additive_boxplus_into),
 }
 
 

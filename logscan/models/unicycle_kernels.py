@@ -1,0 +1,69 @@
+"""Numba functions of the unicycle (the checkpointing / roll-forward-recovery paper's ground robot,
+outer loop).
+
+Shapes: p (UNI_N_PARAMS,) packed by `Unicycle.param_vector` (no entry is read: the step needs only
+dt), x (3,) [x, y, theta], u (2,) [v, w], F (3, 3); the one group `mocap` (gid 0) measures the
+state directly: h into hx[r:r+3], H into Hs[r:r+3, :].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+UNICYCLE_ID = 6  # this model's branch in every dispatcher of logscan.models.dispatch
+UNI_N_PARAMS = 1
+
+
+@njit(cache=True)
+def uni_predict_into(p, x, u, dt, x_next, F):
+    """Euler step of the paper's eq. 23 (with the "x_k +" its print omits) and its Jacobian
+    (eq. 36: F = I + A dt); no allocation."""
+    c = np.cos(x[2])
+    s = np.sin(x[2])
+    v = u[0]
+    # x_{k+1} = x_k + [v cos th, v sin th, w] dt
+    x_next[0] = x[0] + v * c * dt
+    x_next[1] = x[1] + v * s * dt
+    x_next[2] = x[2] + u[1] * dt
+    for i in range(3):
+        for j in range(3):
+            F[i, j] = 1.0 if i == j else 0.0
+    # dx/dth = -v sin th dt, dy/dth = v cos th dt
+    F[0, 2] = -v * s * dt
+    F[1, 2] = v * c * dt
+
+
+@njit(cache=True)
+def uni_predict(p, x, u, dt):
+    """(f(x, u), F(x, u)), allocating."""
+    x_next = np.empty(3)
+    F = np.empty((3, 3))
+    uni_predict_into(p, x, u, dt, x_next, F)
+    return x_next, F
+
+
+@njit(cache=True)
+def uni_meas_into(p, gid, x, u, r, hx, Hs):
+    """mocap: z = [x, y, theta] (eq. 24; the EKF wraps theta's innovation) into hx[r:r+3], H = I
+    into Hs[r:r+3, :]."""
+    for i in range(3):
+        hx[r + i] = x[i]
+        for j in range(3):
+            Hs[r + i, j] = 1.0 if i == j else 0.0
+
+
+@njit(cache=True)
+def uni_h(p, gid, x, u):
+    hx = np.empty(3)
+    Hs = np.empty((3, 3))
+    uni_meas_into(p, gid, x, u, 0, hx, Hs)
+    return hx
+
+
+@njit(cache=True)
+def uni_H(p, gid, x, u):
+    hx = np.empty(3)
+    Hs = np.empty((3, 3))
+    uni_meas_into(p, gid, x, u, 0, hx, Hs)
+    return Hs
