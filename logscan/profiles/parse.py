@@ -12,6 +12,7 @@ from typing import Any
 
 from logscan.conversions import CONVERSIONS, GROUP_FRAMES, Conversion
 from logscan.profiles.bind import bind_inputs_without_model, build_model, check_against_model
+from logscan.profiles.loops import PRIMARY_LOOP, RecoverySpec, parse_loops, parse_recovery
 from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, suggest, type_name
 from logscan.profiles.schema import (
     ALARM_KEYS,
@@ -124,7 +125,7 @@ def parse_profile(text: str, source: str = "<embedded>", *, model=None, check_mo
         raise single_error("invalid TOML: an integer has more than 4300 digits", source) from None
     except RecursionError:  # tomllib recurses once per level of nested arrays and inline tables
         raise single_error("invalid TOML: arrays, tables or keys nested too deeply", source) from None
-    checker = _Checker()
+    checker = _Checker(check_model and model is None)
     profile = checker.profile(data, source)
     if profile is not None and check_model and not checker.problems:
         check_against_model(profile, model, checker.problems)
@@ -155,7 +156,8 @@ def _choices(values) -> str:
 class _Checker:
     """Walks the parsed TOML, building dataclasses and collecting problems."""
 
-    def __init__(self) -> None:
+    def __init__(self, check_model: bool = True) -> None:
+        self.check_model = check_model  # further loops are checked against their models here
         self.problems: list[str] = []
         self.vehicle_spec: VehicleSpec | None = None  # [vehicle], when it is valid
 
@@ -287,9 +289,16 @@ class _Checker:
         onboard = self.onboard(data["onboard"]) if "onboard" in data else None
         detectors = self.detectors(data["detectors"]) if "detectors" in data else {}
         alarm_policy = self.alarms(data["alarms"]) if "alarms" in data else None
+        loops = parse_loops(self, data["loops"], source, self.check_model) if "loops" in data else {}
+        primary = vehicle.loop if vehicle is not None and vehicle.loop else PRIMARY_LOOP
+        if primary in loops:
+            self.add(f"[loops.{primary}]", f"the top level is already the loop {primary!r}: rename one")
+        recovery = self.recovery_table(data, {primary, *loops})
         if vehicle is None or inputs is None or self.problems:
             return None
         return Profile(
+            loops=loops,
+            recovery=recovery,
             vehicle=vehicle,
             inputs=inputs,
             measurements=measurements,
@@ -316,9 +325,12 @@ class _Checker:
         if not isinstance(params, dict):
             self.add(f"{where} params", f"expected a table, got {type_name(params)}")
             params = None
-        if model is None or rate is None or params is None:
+        loop = self.string(data, "loop", where) if "loop" in data else ""
+        if loop is not None and loop and not loop.isidentifier():
+            self.add(f"{where} loop", "a loop name must be a plain identifier (letters, digits, _)")
+        if model is None or rate is None or params is None or loop is None:
             return None
-        return VehicleSpec(model=model, rate_hz=rate, params=dict(params))
+        return VehicleSpec(model=model, rate_hz=rate, params=dict(params), loop=loop)
 
     def inputs(self, raw: Any, vehicle: VehicleSpec | None) -> InputSpec | None:
         where = "[inputs]"
@@ -707,6 +719,11 @@ class _Checker:
             after_ground_s=AlarmPolicy.after_ground_s if after is None else after,
             ignore_start_s=0.0 if start is None else start,
         )
+
+    def recovery_table(self, data: dict, loop_names: set[str]) -> RecoverySpec | None:
+        if "recovery" not in data:
+            return None
+        return parse_recovery(self, data["recovery"], loop_names)
 
     def detectors(self, raw: Any) -> dict[str, DetectorSpec]:
         data = self.table(raw, "[detectors]")

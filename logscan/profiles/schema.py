@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from logscan.conversions import CONVERSIONS, VECTOR_FRAME_OUTPUTS
+from logscan.profiles.loops import PRIMARY_LOOP, RecoverySpec
 from logscan.profiles.problems import profile_error, suggest
 from logscan.profiles.toml_writer import dumps_toml
 from logscan.results import AlarmPolicy
@@ -26,8 +27,10 @@ TOP_KEYS = (
     "detectors",
     "alarms",
     "tables",
+    "loops",
+    "recovery",
 )
-VEHICLE_KEYS = ("model", "rate_hz", "params")
+VEHICLE_KEYS = ("model", "rate_hz", "params", "loop")
 GROUP_KEYS = (
     "channels",
     "rate_hz",
@@ -87,6 +90,7 @@ class VehicleSpec:
     model: str
     rate_hz: float
     params: dict[str, Any] = field(default_factory=dict)
+    loop: str = ""  # the loop's name in a hierarchical profile ("": the primary's default name)
 
 
 def input_channels(value: str | list[str] | dict) -> list[str]:
@@ -257,6 +261,12 @@ class Profile:
     tables: str = ""  # trained tables file (`logscan train`), relative to the profile's directory
     source: str = field(default="<embedded>", compare=False)
     model_facts: ModelFacts | None = field(default=None, compare=False, repr=False)
+    loops: dict[str, Profile] = field(default_factory=dict)  # further loops ([loops.<name>], `loops`)
+    recovery: RecoverySpec | None = None  # [recovery]
+
+    @property
+    def loop_name(self) -> str:
+        return self.vehicle.loop or PRIMARY_LOOP
 
     # --- what the readers and alignment need ------------------------------------------------
     def channel_refs(self) -> list[tuple[str, str]]:
@@ -283,6 +293,8 @@ class Profile:
                     refs.extend((f"[onboard] {key}", ch) for ch in value)
                 elif isinstance(value, dict):
                     refs.extend((f"[onboard] {key}.{s}", ch) for s, ch in value.items())
+        for name, loop in self.loops.items():
+            refs.extend((f"[loops.{name}] {where.strip('[')}", ch) for where, ch in loop.channel_refs())
         return refs
 
     def channel_prefixes(self) -> list[tuple[str, str]]:
@@ -365,6 +377,8 @@ class Profile:
         if self.tables:
             out["tables"] = self.tables
         out["vehicle"] = {"model": self.vehicle.model, "rate_hz": self.vehicle.rate_hz}
+        if self.vehicle.loop:
+            out["vehicle"]["loop"] = self.vehicle.loop
         if self.vehicle.params:
             out["vehicle"]["params"] = self.vehicle.params
         out["inputs"] = {**self.inputs.mapping, "stale_s": self.inputs.stale_s}
@@ -417,8 +431,19 @@ class Profile:
                 out["alarms"]["after_ground_s"] = self.alarm_policy.after_ground_s
             if self.alarm_policy.ignore_start_s:
                 out["alarms"]["ignore_start_s"] = self.alarm_policy.ignore_start_s
+        if self.loops:
+            out["loops"] = {name: _loop_table(loop) for name, loop in self.loops.items()}
+        if self.recovery is not None:
+            out["recovery"] = self.recovery.to_dict()
         return out
 
     def to_toml(self) -> str:
         """TOML text that `parse_profile` reads back to an equal Profile."""
         return dumps_toml(self.to_dict())
+
+
+def _loop_table(loop: Profile) -> dict[str, Any]:
+    """A further loop as its ``[loops.<name>]`` table (its name is the table's)."""
+    table = loop.to_dict()
+    table["vehicle"].pop("loop", None)
+    return table
