@@ -3,7 +3,8 @@
 A PX4 ULog (its info ``sys_name`` is "PX4") gets the `px4` profile of the IMU-driven `ins` model,
 built from the topics present (`px4_profile`):
 
- - inputs: the IMU of ``sensor_combined`` (gyro_rad, accelerometer_m_s2), the grid at its rate;
+ - inputs: the IMU of ``sensor_combined`` (gyro_rad, accelerometer_m_s2), or ``vehicle_imu``'s
+   increments per second when it is the only IMU or logged faster (`_imu`), the grid at its rate;
    an IMU logged below MIN_IMU_HZ is refused (the strapdown prediction would not hold);
  - ``gnss_position`` from ``vehicle_gps_position`` or ``sensor_gps`` (integer 1e-7 deg / mm, or
    degrees and metres), converted to local NED about the first fix; ``gnss_velocity`` from their
@@ -49,6 +50,7 @@ MIN_IMU_HZ = 50.0  # the ins model holds one IMU sample over a grid period: slow
 # candidate topics (ULog `topic_instance` names) the px4 profile may use
 PX4_TOPICS = (
     "sensor_combined_0",
+    "vehicle_imu_0",
     "vehicle_gps_position_0",
     "sensor_gps_0",
     "vehicle_air_data_0",
@@ -59,6 +61,7 @@ PX4_TOPICS = (
 )
 IGNORE_START_S = 5.0  # the ins filter's convergence from its first samples: not judged
 _IMU = "sensor_combined_0"
+_FULL_IMU = "vehicle_imu_0"  # the IMU's integrated increments at the full sensor rate
 # ROS 2 message types the ros2 profile reads
 ROS2_IMU = "sensor_msgs/msg/Imu"
 ROS2_NAVSATFIX = "sensor_msgs/msg/NavSatFix"
@@ -146,6 +149,46 @@ def _channels(topic: str, fields) -> list[str]:
     return [f"/{topic}/{f}" for f in fields]
 
 
+def _imu(channels, has):
+    """(topic, gyro channels, accel channels, per-second scale or None, rate) of the IMU to use:
+    ``sensor_combined`` (rates in rad/s and m/s^2), or ``vehicle_imu`` when it is the only IMU or
+    logged faster (PX4 logs it at the full sensor rate on high-rate profiles). ``vehicle_imu`` holds
+    integrated increments: delta_angle (rad) and delta_velocity (m/s) over delta_*_dt microseconds.
+    Simplified: they are divided by the median integration period of the log (a scale), not each
+    sample's own; PX4 integrates over a fixed number of sensor samples, so the period varies by
+    well under 1 % on a healthy log."""
+    combined = (
+        _channels(_IMU, ("gyro_rad[0]", "gyro_rad[1]", "gyro_rad[2]")),
+        _channels(_IMU, ("accelerometer_m_s2[0]", "accelerometer_m_s2[1]", "accelerometer_m_s2[2]")),
+    )
+    full = (
+        _channels(_FULL_IMU, ("delta_angle[0]", "delta_angle[1]", "delta_angle[2]")),
+        _channels(_FULL_IMU, ("delta_velocity[0]", "delta_velocity[1]", "delta_velocity[2]")),
+    )
+    period = f"/{_FULL_IMU}/delta_angle_dt"
+    found = []
+    if all(has(ch) for ch in combined[0] + combined[1]):
+        found.append(("sensor_combined", *combined, None, rate_hz(channels[combined[0][0]].t)))
+    if all(has(ch) for ch in full[0] + full[1]) and has(period):
+        dt_us = np.asarray(channels[period].values, dtype=float)
+        dt_us = dt_us[np.isfinite(dt_us) & (dt_us > 0)]
+        if dt_us.size:
+            found.append(("vehicle_imu", *full, 1e6 / float(np.median(dt_us)), rate_hz(channels[full[0][0]].t)))
+    if len(found) == 2 and found[1][4] > 1.2 * found[0][4]:  # within 20 %: the same samples, logged twice
+        return found[1]
+    return found[0] if found else None
+
+
+def _imu_lines(topic: str, gyro: list[str], accel: list[str], per_second: float | None) -> list[str]:
+    if per_second is None:
+        return [f"gyro = {_toml_list(gyro)}", f"accel = {_toml_list(accel)}"]
+    note = f"  # {topic}'s increments per second: 1 / its median delta_angle_dt"
+    return [
+        f"gyro = {{ channels = {_toml_list(gyro)}, scale = {per_second:.8g} }}{note}",
+        f"accel = {{ channels = {_toml_list(accel)}, scale = {per_second:.8g} }}",
+    ]
+
+
 def px4_profile(log) -> BuiltProfile:
     """The `px4` profile of a PX4 ULog read with (at least) PX4_TOPICS; see the module docstring."""
     channels = log.channels
@@ -153,18 +196,17 @@ def px4_profile(log) -> BuiltProfile:
     path = log.source.path
     has = lambda name: name in channels and len(channels[name]) > 0  # noqa: E731
 
-    gyro = _channels(_IMU, ("gyro_rad[0]", "gyro_rad[1]", "gyro_rad[2]"))
-    accel = _channels(_IMU, ("accelerometer_m_s2[0]", "accelerometer_m_s2[1]", "accelerometer_m_s2[2]"))
-    if not all(has(ch) for ch in gyro + accel):
+    imu = _imu(channels, has)
+    if imu is None:
         raise InputError(
-            "a PX4 log without the IMU topic sensor_combined: the built-in px4 profile needs it",
+            "a PX4 log without an IMU topic (sensor_combined or vehicle_imu): the built-in px4 profile needs one",
             path=path,
             hint="pass --profile (docs/profiles.md; examples in docs/examples/)",
         )
-    imu_hz = rate_hz(channels[gyro[0]].t)
+    topic, gyro, accel, per_second, imu_hz = imu
     if imu_hz < MIN_IMU_HZ:
         raise InputError(
-            f"sensor_combined is logged at {imu_hz:.3g} Hz: the ins model needs the IMU at {MIN_IMU_HZ:g} Hz "
+            f"{topic} is logged at {imu_hz:.3g} Hz: the ins model needs the IMU at {MIN_IMU_HZ:g} Hz "
             "or more (it holds one IMU sample per step)",
             path=path,
             hint="log at a higher rate (PX4: SDLOG_PROFILE with 'high rate'), or pass --profile with another model",
@@ -175,7 +217,7 @@ def px4_profile(log) -> BuiltProfile:
         "# logscan built-in profile `px4`: the IMU-driven ins model on a PX4 flight log, built from the",
         f"# topics of {path}. Edit and pass it with --profile (docs/profiles.md).",
         'name = "px4"',
-        'description = "built-in: ins model on sensor_combined, GNSS, barometer and PX4\'s attitude"',
+        f'description = "built-in: ins model on {topic}, GNSS, barometer and PX4\'s attitude"',
         "",
         "[vehicle]",
         'model = "ins"',
@@ -188,8 +230,7 @@ def px4_profile(log) -> BuiltProfile:
         f"gyro_bias_rw = {_param(params, 'EKF2_GYR_B_NOISE', 1e-3):.6g}",
         "",
         "[inputs]",
-        f"gyro = {_toml_list(gyro)}",
-        f"accel = {_toml_list(accel)}",
+        *_imu_lines(topic, gyro, accel, per_second),
         f"stale_s = {max(2.5 / imu_hz, 0.05):.3g}  # an IMU gap longer than this is a dropout",
     ]
     gps_p = _param(params, "EKF2_GPS_P_NOISE", 0.5)
