@@ -1,0 +1,213 @@
+"""`recover`: checkpointing and roll-forward recovery of every loop's estimate during each anomaly.
+
+Per anomaly, in time order (docs/algorithms.md section 5):
+ 1. k1 = the latest consistent checkpoint with t_detect - t_k1 > detection time + the slowest loop's
+    period, outside every earlier anomaly;
+ 2. every affected loop (a specific anomaly's flagged loops; every loop for a generic one) re-runs
+    the shared filter from k1 (`logscan.recovery.rerun`) up to the max_duration_s horizon: without
+    the flagged groups (refilter, specific), without any measurement (rollforward, generic, replace);
+ 3. the anomaly ends when the flagged groups agree with the recovered prediction for hold_s
+    (`logscan.recovery.agreement`), a generic one hold_s after the detector's alarm; cut at
+    max_duration_s;
+ 4. the recovered estimate, its k-sigma bound, T_max and the worst-case bound
+    (`logscan.recovery.bounds`) fill the span [k1, end] of each affected loop.
+An anomaly detected inside the previous one's recovered span merges with it (recovered again as
+one, its groups joined).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from logscan.recovery.agreement import agreed_at, agreement_status, held_inputs
+from logscan.recovery.anomalies import _join
+from logscan.recovery.bounds import k_sigma_bound, t_max, worst_case
+from logscan.recovery.checkpoints import (
+    Checkpoints,
+    consistent_checkpoints,
+    loop_times,
+    select_checkpoint,
+    slowest_period,
+)
+from logscan.recovery.records import (
+    Anomaly,
+    AnomalyRecord,
+    LoopRecovery,
+    LoopRun,
+    Recovery,
+    RecoverySettings,
+)
+from logscan.recovery.rerun import replace_mask, rerun
+from logscan.recovery.validate import allowed_states, check_anomalies, check_loops
+
+
+@dataclass
+class _Context:
+    loops: list[LoopRun]
+    times: list[np.ndarray]
+    checkpoints: Checkpoints
+    margin_s: float
+    settings: RecoverySettings
+    allowed: dict[str, dict[int, float]]  # loop -> state index -> E
+
+
+@dataclass
+class _LoopPart:
+    """One loop's re-run for one anomaly: slice [k1, k_stop], its trace and flagged groups."""
+
+    loop: LoopRun
+    t: np.ndarray  # the slice's times (common frame)
+    k1: int
+    part: object  # EkfTrace of the slice
+    flagged: tuple[str, ...]
+
+
+def recover(
+    loops: Sequence[LoopRun], anomalies: Sequence[Anomaly], settings: RecoverySettings | None = None
+) -> Recovery:
+    """Recover every loop's estimate during ``anomalies``; see the module docstring."""
+    loops = list(loops)
+    settings = settings or RecoverySettings()
+    check_loops(loops)
+    check_anomalies(anomalies, loops)
+    times = loop_times(loops)
+    ctx = _Context(
+        loops,
+        times,
+        consistent_checkpoints(loops, settings.checkpoint_period_s, settings.consistency_tol_s),
+        settings.detection_time_s + slowest_period(loops),
+        settings,
+        allowed_states(settings.allowed_error, loops),
+    )
+    out = {lp.name: _empty(lp, t) for lp, t in zip(loops, times)}
+    records: list[AnomalyRecord] = []
+    blocked: list[tuple[float, float]] = []
+    queue = sorted(anomalies, key=lambda a: (a.t_detect, a.t_end))
+    i = 0
+    while i < len(queue):
+        anomaly, j = queue[i], i + 1
+        record, fills = _recover_one(anomaly, ctx, blocked)
+        while j < len(queue) and queue[j].t_detect <= _span_end(record, anomaly):
+            anomaly = Anomaly(
+                anomaly.t_detect, max(anomaly.t_end, queue[j].t_end), _join(anomaly.targets, queue[j].targets)
+            )
+            j += 1
+            record, fills = _recover_one(anomaly, ctx, blocked)
+        record.merged = j - i
+        for name, k1, x, bound, worst in fills:
+            span = slice(k1, k1 + x.shape[0])
+            out[name].x_recovered[span], out[name].bound[span], out[name].worst_case[span] = x, bound, worst
+        records.append(record)
+        blocked.append((anomaly.t_detect - ctx.margin_s, _span_end(record, anomaly)))
+        i = j
+    return Recovery(out, records, settings)
+
+
+def _span_end(record: AnomalyRecord, anomaly: Anomaly) -> float:
+    return record.t_recovered_end if record.t_recovered_end is not None else anomaly.t_end
+
+
+def _empty(loop: LoopRun, t: np.ndarray) -> LoopRecovery:
+    shape = (loop.run.n_steps, loop.model.n_states)
+    nan = np.full(shape, np.nan)
+    return LoopRecovery(loop.name, list(loop.model.state_names), t, nan, nan.copy(), nan.copy())
+
+
+def _recover_one(anomaly: Anomaly, ctx: _Context, blocked) -> tuple[AnomalyRecord, list]:
+    """The record of one anomaly and its fills (loop, k1, x, bound, worst case)."""
+    s = ctx.settings
+    affected = [lp for lp in ctx.loops if anomaly.targets is None or anomaly.targets.get(lp.name)]
+    record = AnomalyRecord(
+        anomaly.t_detect,
+        anomaly.t_end,
+        None if anomaly.targets is None else {k: tuple(v) for k, v in anomaly.targets.items() if v},
+        s.method,
+        tuple(lp.name for lp in affected),
+    )
+    index = select_checkpoint(ctx.checkpoints, anomaly.t_detect, ctx.margin_s, blocked)
+    if index is None:
+        record.note = (
+            f"not recovered: no consistent checkpoint more than {ctx.margin_s:g} s before "
+            f"{anomaly.t_detect:g} s and outside earlier anomalies"
+        )
+        return record, []
+    record.t_checkpoint = float(ctx.checkpoints.t[index])
+    record.checkpoint_steps = ctx.checkpoints.step_of(index)
+    t_cap = anomaly.t_detect + s.max_duration_s
+    parts = [_rerun_loop(lp, record.checkpoint_steps[lp.name], t_cap, anomaly, ctx) for lp in affected]
+    end, record.t_agreed, t_log_end = _anomaly_end(anomaly, parts, s)
+    record.capped = end >= t_cap
+    end = min(end, t_cap, t_log_end)
+    if end >= t_log_end and not record.capped:
+        record.note = "the anomaly lasts until the end of the log"
+    record.t_recovered_end = end
+    record.rollforward_s = end - record.t_checkpoint
+    record.alarm_kept = end > anomaly.t_end
+    fills = []
+    for lp_part in parts:
+        fills.append(_fill(lp_part, end, ctx))
+        _t_max(lp_part, anomaly, record, ctx)
+    duration = end - anomaly.t_detect
+    record.outlasted = tuple(k for k, v in record.t_max.items() if v is not None and duration > v)
+    return record, fills
+
+
+def _rerun_loop(loop: LoopRun, k1: int, t_cap: float, anomaly: Anomaly, ctx: _Context) -> _LoopPart:
+    t_loop = ctx.times[ctx.loops.index(loop)]
+    k_stop = max(k1, int(np.searchsorted(t_loop, t_cap + 1e-9, side="right")) - 1)
+    groups = tuple(loop.run.groups)
+    flagged = groups if anomaly.targets is None else tuple(anomaly.targets[loop.name])
+    excluded = flagged if (anomaly.targets is not None and ctx.settings.method == "refilter") else groups
+    part = rerun(loop, k1, k_stop, excluded)
+    return _LoopPart(loop, t_loop[k1 : k_stop + 1], k1, part, flagged)
+
+
+def _anomaly_end(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings) -> tuple[float, float | None, float]:
+    """(end of the anomaly, when the flagged groups agreed again, end of the re-run slices).
+
+    Specific: every flagged loop's groups agree again (held for hold_s); generic: hold_s after the
+    detector's alarm."""
+    t_log_end = min(float(p.t[-1]) for p in parts)
+    if anomaly.targets is None:
+        return anomaly.t_end + s.hold_s, None, t_log_end
+    agreed = []
+    for p in parts:
+        status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile)
+        agreed.append(agreed_at(p.t, status, anomaly.t_detect, s.hold_s))
+    if any(a is None for a in agreed):
+        return np.inf, None, t_log_end
+    return max(agreed) + s.hold_s, max(agreed), t_log_end
+
+
+def _fill(p: _LoopPart, end: float, ctx: _Context):
+    """(loop, k1, x, bound, worst case) over the loop's steps k1..end."""
+    s = ctx.settings
+    J = max(1, int(np.searchsorted(p.t, end + 1e-9, side="right")))
+    x = p.part.x_post[:J]
+    bound = k_sigma_bound(p.part.P_post[:J], s.k_sigma)
+    tr = p.loop.trace
+    if s.method == "replace" and set(p.flagged) != set(p.loop.run.groups):
+        # the paper's element replacement: roll-forward values where K g != 0, the EKF's elsewhere
+        gains = rerun(p.loop, p.k1, p.k1 + J - 1, (), store_gain=True)
+        mask = replace_mask(gains, p.flagged)
+        span = slice(p.k1, p.k1 + J)
+        ekf_bound = s.k_sigma * np.sqrt(np.maximum(np.asarray(tr.P_post_diag[span], dtype=np.float64), 0.0))
+        x = np.where(mask, x, tr.x_post[span])
+        bound = np.where(mask, bound, ekf_bound)
+    u = held_inputs(np.asarray(p.loop.run.u[p.k1 : p.k1 + J], dtype=np.float64))
+    worst = worst_case(p.loop.model, p.loop.run.dt, p.part.x_post[:J], u, tr.P_post[p.k1], tr.Q, s.k_sigma)
+    return p.loop.name, p.k1, x, bound, worst
+
+
+def _t_max(p: _LoopPart, anomaly: Anomaly, record: AnomalyRecord, ctx: _Context) -> None:
+    """T_max of the loop's states with an allowed error, from the bound over the whole re-run."""
+    allowed = ctx.allowed.get(p.loop.name, {})
+    if not allowed:
+        return
+    found = t_max(p.t, k_sigma_bound(p.part.P_post, ctx.settings.k_sigma), allowed, anomaly.t_detect)
+    names = p.loop.model.state_names
+    for i, value in found.items():
+        record.t_max[f"{p.loop.name}.{names[i]}"] = value
