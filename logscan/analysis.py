@@ -69,6 +69,15 @@ class Analysis:
     def trace(self):
         return self.prepared.trace
 
+    @property
+    def clock(self):
+        """The log's own clock (`logscan.clock`): the one the pipeline kept, when it dated the log
+        before releasing its samples (a ULog's GNSS time), else derived from the log and run now."""
+        from logscan.clock import clock_of
+
+        kept = getattr(self.prepared, "clock", None)
+        return kept if kept is not None else clock_of(self.log, self.run.start_ns)
+
     # --- verdict and summary -----------------------------------------------------------------------
     @property
     def alarms(self) -> list:
@@ -150,16 +159,22 @@ class Analysis:
         return {"logscan_alarms": len(ours), "also_flagged_by_px4": both, "px4_alarms": len(theirs), "px4_alone": alone}
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready summary of this log (the `--json` artifact's per-log entry)."""
+        """JSON-ready summary of this log (the `--json` artifact's per-log entry). Times stay seconds
+        since the log's time zero (``start``, ``end``); alarms and incidents add them in the log's
+        own clock (``start_clock``, ``start_utc``...: `logscan.clock.Clock.stamp`)."""
+        clock = self.clock
         return {
             "file": self.path,
+            "clock": clock.to_dict(),
             "verdict": self.verdict(),
             "n_alarms": len(self.alarms),
             "n_incidents": len(self.incidents),
             "n_possible": len(self.possible),
-            "possible_faults": [p.to_dict() for p in self.possible],
-            "suppressed": [{**a.to_dict(), "reason": reason} for r in self.results for a, reason in r.suppressed],
-            "incidents": [incident.to_dict() for incident in self.incidents],
+            "possible_faults": [clock.stamp(p.to_dict()) for p in self.possible],
+            "suppressed": [
+                clock.stamp({**a.to_dict(), "reason": reason}) for r in self.results for a, reason in r.suppressed
+            ],
+            "incidents": [incident.to_dict(clock) for incident in self.incidents],
             "unchecked": list(self.unchecked),
             "failed_detectors": [{"detector": f.detector, "error": f.message} for f in self.failures],
             "logscan_version": __version__,
@@ -167,9 +182,10 @@ class Analysis:
             "model": self.model.name,
             "log": self.log.summary() | {"channels": len(self.log.channels)},
             "filter": self.prepared.filter_summary(),
-            "detectors": [result.to_dict() for result in self.results],
+            "detectors": [_stamped(result.to_dict(), clock) for result in self.results],
             "truth_events": [
-                {"kind": e.kind, "target": e.target, "start": e.t_start, "end": e.t_end} for e in self.events
+                clock.stamp({"kind": e.kind, "target": e.target, "start": e.t_start, "end": e.t_end})
+                for e in self.events
             ],
             "scores": {name: score.to_dict() for name, score in self.scores.items()},
             "against_px4": self.against_baseline(),
@@ -198,4 +214,12 @@ class Analysis:
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
             context=getattr(self.prepared, "context", None),
             innovations=getattr(self.prepared, "innovations", None),
+            clock=self.clock,
         )
+
+
+def _stamped(result: dict, clock) -> dict:
+    """A detector result's JSON with its alarms' times also in the log's clock."""
+    for key in ("alarms", "possible_faults", "suppressed"):
+        result[key] = [clock.stamp(item) for item in result.get(key, [])]
+    return result

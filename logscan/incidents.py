@@ -93,8 +93,9 @@ def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[s
     return group, max(quoted, key=_ratio)
 
 
-def headline(source: AlarmInterval, group: str | None, start: float, end: float, n_rejected: int = 0) -> str:
-    """'accelerometer inconsistent 30.00-48.80 s (nis.accel, peak 11.3x)'."""
+def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0) -> tuple[str, str]:
+    """('accelerometer inconsistent', 'nis.accel, peak 11.3x'): an incident's source in words and
+    the check its headline quotes."""
     ratio = source.peak_ratio
     peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
     rejected = f"; {n_rejected} impossible sample{'s' if n_rejected != 1 else ''} rejected" if n_rejected else ""
@@ -102,7 +103,13 @@ def headline(source: AlarmInterval, group: str | None, start: float, end: float,
     if phrase is None:
         what = GROUP_WORDS.get(group, group.replace("_", " ")) if group else f"{source.detector} {source.signal}"
         phrase = f"{what} inconsistent"
-    return f"{phrase} {start:.2f}-{end:.2f} s ({source.signal}, peak {peak}{rejected})"
+    return phrase, f"{source.signal}, peak {peak}{rejected}"
+
+
+def headline(source: AlarmInterval, group: str | None, start: float, end: float, n_rejected: int = 0) -> str:
+    """'accelerometer inconsistent 30.00-48.80 s (nis.accel, peak 11.3x)'."""
+    phrase, detail = headline_parts(source, group, n_rejected)
+    return f"{phrase} {start:.2f}-{end:.2f} s ({detail})"
 
 
 def _rejected_counts(trace, start: float, end: float) -> dict[str, int]:
@@ -130,6 +137,7 @@ def find_incidents(
         start, stop = members[0].start, max(a.end for a in members)
         rejected = _rejected_counts(trace, start, stop)
         group, quoted = _source(members, list(groups), rejected)
-        text = headline(quoted, group, start, stop, rejected.get(group, 0))
-        incidents.append(Incident(start=start, end=stop, source=group or quoted.signal, headline=text, alarms=members))
+        what, detail = headline_parts(quoted, group, rejected.get(group, 0))
+        text = f"{what} {start:.2f}-{stop:.2f} s ({detail})"
+        incidents.append(Incident(start, stop, group or quoted.signal, text, members, what=what, detail=detail))
     return incidents

@@ -286,25 +286,37 @@ def _band_series(value, n: int) -> np.ndarray | None:
 @dataclass
 class Incident:
     """Alarms of different checks that overlap in time, headed by their most likely source
-    (`logscan.incidents`): one line for a user, the alarms behind it for the details."""
+    (`logscan.incidents`): one line for a user, the alarms behind it for the details.
+
+    ``headline`` gives the times in seconds since the log's time zero; ``what`` (the source in
+    words) and ``detail`` (the quoted check and its peak), when set, let `headline_in` give the same
+    line in the log's own clock."""
 
     start: float
     end: float
     source: str  # a measurement group, or the signal of the alarm that heads the incident
     headline: str
     alarms: list[AlarmInterval] = field(default_factory=list)
+    what: str = ""  # "accelerometer inconsistent"
+    detail: str = ""  # "nis.accel, peak 11.3x"
 
-    def to_dict(self) -> dict:
-        return jsonable(
-            {
-                "start": self.start,
-                "end": self.end,
-                "source": self.source,
-                "headline": self.headline,
-                "checks": sorted({f"{a.detector}:{a.signal}" for a in self.alarms}),
-                "n_alarms": len(self.alarms),
-            }
-        )
+    def headline_in(self, clock=None) -> str:
+        """The headline with its times in ``clock`` (a `logscan.clock.Clock`; None: as built)."""
+        if clock is None or not self.what:
+            return self.headline
+        return f"{self.what} {clock.span_text(self.start, self.end)} ({self.detail})"
+
+    def to_dict(self, clock=None) -> dict:
+        """JSON view; with a ``clock`` the headline is in it and start/end are also given in it."""
+        out = {
+            "start": self.start,
+            "end": self.end,
+            "source": self.source,
+            "headline": self.headline_in(clock),
+            "checks": sorted({f"{a.detector}:{a.signal}" for a in self.alarms}),
+            "n_alarms": len(self.alarms),
+        }
+        return jsonable(clock.stamp(out) if clock is not None else out)
 
 
 # --- ground truth ---------------------------------------------------------------------------------

@@ -3,12 +3,25 @@
    data-start/data-end (incidents, alarms) zooms them all to its interval with a margin of
    max(2 s, 50 % of its span), by click or Enter, and so does a click on an incident marker of the
    path figure (#ctx-path, customdata [start, end]); "reset zoom" restores each figure's first view.
+   Times on the axis are in the log's clock; a UTC clock is a date axis counting milliseconds
+   (<body data-time-scale="1000">: axis units per second), whose ranges plotly gives as date strings.
    Feedback guard: a follower's own plotly_relayout echoes the range already shared, and is
    ignored while the followers are being moved. */
 (function () {
   "use strict";
   var MIN_MARGIN_S = 2, MARGIN_FRACTION = 0.5;
   var shared = "auto", syncing = 0, initial = [], full = "auto", label, button;
+  var scale = Number(document.body.getAttribute("data-time-scale")) || 1;  // axis units per second
+
+  /* An axis value as a number: a date axis' "2024-03-18 14:49:30.5" as epoch milliseconds (UTC). */
+  function axisNumber(value) {
+    if (typeof value !== "string") { return Number(value); }
+    var iso = value.replace(" ", "T");
+    return Date.parse(/(Z|[+-]\d\d:?\d\d)$/.test(iso) ? iso : iso + "Z");
+  }
+  function timeText(value) {
+    return scale === 1000 ? new Date(value).toISOString().slice(11, 23) : value.toFixed(2);
+  }
 
   function plots() {
     return Array.prototype.filter.call(document.querySelectorAll(".ls-timeseries"), function (el) {
@@ -18,7 +31,7 @@
   function fail(err) { window.logscanError("zoom failed: " + (err && err.message ? err.message : err)); }
   function rangeOf(el) {
     var x = el.layout.xaxis;
-    return x.autorange || !x.range ? "auto" : [Number(x.range[0]), Number(x.range[1])];
+    return x.autorange || !x.range ? "auto" : [axisNumber(x.range[0]), axisNumber(x.range[1])];
   }
   function same(a, b) {
     if (a === "auto" || b === "auto") { return a === b; }
@@ -27,7 +40,8 @@
   }
   function show(range) {
     var zoomed = range !== "auto" && !same(range, full);
-    label.textContent = zoomed ? "time " + range[0].toFixed(2) + " to " + range[1].toFixed(2) + " s" : "full time range";
+    var unit = scale === 1000 ? " UTC" : " s";
+    label.textContent = zoomed ? "time " + timeText(range[0]) + " to " + timeText(range[1]) + unit : "full time range";
     button.disabled = !zoomed;
   }
   /* Moves every figure but `source` to `range` ("auto": autorange). */
@@ -50,7 +64,7 @@
     });
   }
   function zoomTo(start, end) {
-    var margin = Math.max(MIN_MARGIN_S, MARGIN_FRACTION * (end - start));
+    var margin = Math.max(MIN_MARGIN_S * scale, MARGIN_FRACTION * (end - start));
     var range = [start - margin, end + margin];
     if (full !== "auto") { range = [Math.max(range[0], full[0]), Math.min(range[1], full[1])]; }
     return share(range, null);
@@ -112,7 +126,7 @@
       return { el: el, x: rangeOf(el), yAuto: !!y.autorange || !y.range, y: y.range ? y.range.slice() : null };
     });
     var x = els[0]._fullLayout.xaxis.range;
-    full = [Number(x[0]), Number(x[1])];
+    full = [axisNumber(x[0]), axisNumber(x[1])];
     controls();
     els.forEach(follow);
     var path = document.getElementById("ctx-path");

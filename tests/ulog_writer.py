@@ -8,7 +8,7 @@ start timestamp in microseconds), a flag-bits message 'B', then per topic a form
 (``name:uint64_t timestamp;float field[k];...``), info 'I' and parameter 'P' messages, and the
 data section: a subscription 'A' per topic and its data 'D' messages in time order. Every message
 is uint16 size + uint8 type + body. Fields are float32 (a 1-D value per sample, or an (n, k)
-array for an array field).
+array for an array field), or uint64 for a 1-D uint64 array (a GNSS ``time_utc_usec``).
 """
 
 from __future__ import annotations
@@ -31,8 +31,18 @@ def _format(name: str, fields: Mapping[str, np.ndarray]) -> tuple[str, list[str]
     parts = ["uint64_t timestamp"]
     for field, values in fields.items():
         values = np.asarray(values)
-        parts.append(f"float {field}" if values.ndim == 1 else f"float[{values.shape[1]}] {field}")
+        if values.dtype == np.uint64:
+            parts.append(f"uint64_t {field}")
+        else:
+            parts.append(f"float {field}" if values.ndim == 1 else f"float[{values.shape[1]}] {field}")
     return f"{name}:{';'.join(parts)};", list(fields)
+
+
+def _column_bytes(values, n: int) -> np.ndarray:
+    """(n, bytes) little-endian rows of one field: uint64 as is, anything else as float32."""
+    values = np.asarray(values)
+    typed = values.astype("<u8") if values.dtype == np.uint64 else values.astype("<f4")
+    return np.ascontiguousarray(typed.reshape(n, -1)).view(np.uint8).reshape(n, -1)
 
 
 def write_ulog(
@@ -61,10 +71,10 @@ def write_ulog(
     samples = []
     for msg_id, (name, (t_us, fields)) in enumerate(topics.items()):
         out += _message(b"A", struct.pack("<BH", 0, msg_id) + name.encode())
-        columns = [np.asarray(fields[f], dtype=np.float32).reshape(len(t_us), -1) for f in orders[name]]
-        table = np.hstack(columns) if columns else np.zeros((len(t_us), 0), np.float32)
+        columns = [_column_bytes(fields[f], len(t_us)) for f in orders[name]]
+        table = np.hstack(columns) if columns else np.zeros((len(t_us), 0), np.uint8)
         for i, t in enumerate(np.asarray(t_us, dtype=np.int64)):
-            payload = struct.pack("<HQ", msg_id, int(t)) + table[i].astype("<f4").tobytes()
+            payload = struct.pack("<HQ", msg_id, int(t)) + table[i].tobytes()
             samples.append((int(t), msg_id, payload))
     for _, _, payload in sorted(samples, key=lambda s: (s[0], s[1])):
         out += _message(b"D", payload)

@@ -70,21 +70,24 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
         f"({_analysed_span(analysis)}, model {analysis.model.name}, "
         f"detectors {', '.join(r.detector for r in analysis.results)})"
     ]
+    clock = analysis.clock
+    if not clock.relative:  # seconds since the log's start, as the span above, need no line
+        lines.append(f"  times: {_clock_line(clock)}")
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
     from logscan.report import overview
 
     shown = 0
     for k, incident in enumerate(analysis.incidents):
-        lines.append(f"  incident {k + 1}: {incident.headline}")
+        lines.append(f"  incident {k + 1}: {incident.headline_in(clock)}")
         for alarm in sorted(incident.alarms, key=lambda a: (a.start, a.signal)):
             if shown == max_rows:
                 break
             ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
             note = overview.alarm_note(alarm)  # an indicator's ratio means nothing: its count, in words
             lines.append(
-                f"    {alarm.detector:<12} {alarm.signal:<16} {alarm.start:>9.2f} {alarm.end:>9.2f} "
-                + (f"  {note}" if note else f"{ratio:>9}")
+                f"    {alarm.detector:<12} {alarm.signal:<16} {_clock_time(clock, alarm.start)} "
+                f"{_clock_time(clock, alarm.end)} " + (f"  {note}" if note else f"{ratio:>9}")
             )
             shown += 1
     if len(analysis.alarms) > shown:
@@ -92,12 +95,12 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     for result in analysis.results:
         for alarm, reason in result.suppressed[:3]:
             lines.append(
-                f"  suppressed: {alarm.detector} {alarm.signal} {alarm.start:.2f}-{alarm.end:.2f} s ({reason})"
+                f"  suppressed: {alarm.detector} {alarm.signal} {clock.span_text(alarm.start, alarm.end)} ({reason})"
             )
     possible = analysis.possible
     for p in possible[:3]:
         lines.append(
-            f"  possible fault: {p.detector} {p.signal} {p.start:.2f}-{p.end:.2f} s "
+            f"  possible fault: {p.detector} {p.signal} {clock.span_text(p.start, p.end)} "
             "(a warning: only the upper bound of the statistic crossed its threshold)"
         )
     if len(possible) > 3:
@@ -128,6 +131,22 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     if report_path:
         lines.append(f"  report: {report_path}")
     return _lines(lines)
+
+
+def _clock_line(clock) -> str:
+    """What the times below count: "PX4 boot time (s); time zero at 20.309 s", "UTC (...)"."""
+    utc = clock.utc_text(0.0)
+    if clock.utc:
+        return f"UTC (the log's clock; time zero {utc})"
+    if clock.relative:
+        return clock.axis_title()
+    dated = f" = {utc} (GNSS)" if utc else ""
+    return f"{clock.axis_title()}; time zero at {clock.at(0.0):.3f} s{dated}"
+
+
+def _clock_time(clock, t: float) -> str:
+    """An alarm table time in ``clock``: seconds right-aligned in 9, or a UTC time of day."""
+    return f"{clock.short(t):>12}" if clock.utc else f"{clock.short(t, 2):>9}"
 
 
 # --- evaluate -------------------------------------------------------------------------------------

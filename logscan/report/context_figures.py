@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from logscan.clock import Clock
 from logscan.report.plotly_json import TIME_AXIS, plot_text, spec_json
 from logscan.results import Incident
 
@@ -29,10 +30,11 @@ _BASE_LAYOUT = {
 }
 
 
-def _spec(spec: dict, data: list[dict], layout: dict) -> dict:
-    """``spec`` with its figure JSON and what it costs in the report's point budget: its size in
-    (x, y) float32 pairs as base64 (32 bytes per 3 points), so the page stays the same size."""
-    text = spec_json(data, layout)
+def _spec(spec: dict, data: list[dict], layout: dict, clock: Clock | None = None) -> dict:
+    """``spec`` with its figure JSON (its time axis in ``clock``) and what it costs in the report's
+    point budget: its size in (x, y) float32 pairs as base64 (32 bytes per 3 points), so the page
+    stays the same size."""
+    text = spec_json(data, layout, clock)
     return {**spec, "json": text, "points": len(text) * 3 // 32}
 
 
@@ -69,7 +71,7 @@ def _value_text(value: float) -> str:
     return f"{value:g}"
 
 
-def mode_figure(mode) -> dict:
+def mode_figure(mode, clock: Clock | None = None) -> dict:
     """The mode channel as a step line, shaded by value when it takes few values."""
     name = plot_text(mode.channel)
     values = sorted({v for _, _, v in mode.intervals})
@@ -91,11 +93,12 @@ def mode_figure(mode) -> dict:
         + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
         + ". Read an alarm against the mode it happened in."
     )
-    return _spec(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout)
+    return _spec(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout, clock)
 
 
-def _incident_traces(path, incidents: Sequence[Incident]) -> list[dict]:
-    """The path during each incident (red) and a marker where each began, numbered as in the table."""
+def _incident_traces(path, incidents: Sequence[Incident], clock: Clock) -> list[dict]:
+    """The path during each incident (red) and a marker where each began, numbered as in the table;
+    each marker's customdata: the incident's span on the time axis (in ``clock``), to zoom to."""
     segments_x, segments_y, marks = [], [], []
     for number, incident in enumerate(incidents[:MAX_MARKED_INCIDENTS], 1):
         start, end = float(incident.start), float(incident.end)
@@ -104,8 +107,8 @@ def _incident_traces(path, incidents: Sequence[Incident]) -> list[dict]:
         segments_x += [*np.interp(t_seg, path.t, path.x), np.nan]
         segments_y += [*np.interp(t_seg, path.t, path.y), np.nan]
         x0, y0 = np.interp(start, path.t, path.x), np.interp(start, path.t, path.y)
-        hover = f"incident {number}: {plot_text(incident.headline)}<br>click: zoom the time axis to it"
-        marks.append((float(x0), float(y0), str(number), hover, [start, end]))
+        hover = f"incident {number}: {plot_text(incident.headline_in(clock))}<br>click: zoom the time axis to it"
+        marks.append((float(x0), float(y0), str(number), hover, [clock.axis_value(start), clock.axis_value(end)]))
     if not marks:
         return []
     x, y, label, hover, spans = (list(column) for column in zip(*marks))
@@ -119,18 +122,21 @@ def _incident_traces(path, incidents: Sequence[Incident]) -> list[dict]:
     ]  # fmt: skip
 
 
-def path_figure(path, incidents: Sequence[Incident]) -> dict:
-    """The 2-D path (equal axes), its start and end, and the incidents on it."""
+def path_figure(path, incidents: Sequence[Incident], clock: Clock | None = None) -> dict:
+    """The 2-D path (equal axes), its start and end, and the incidents on it; times in ``clock``."""
+    clock = clock or Clock()
     x_name, y_name = plot_text(path.channels[0]), plot_text(path.channels[1])
+    # the hover's time: clock seconds, or the UTC time of day (customdata in epoch ms on a UTC clock)
+    when = "%{customdata|%H:%M:%S.%L} UTC" if clock.utc else "%{customdata:.1f} s"
     data = [
         {"type": "scatter", "name": "path", "x": path.x.astype(np.float32), "y": path.y.astype(np.float32),
-         "customdata": path.t.astype(np.float32), "mode": "lines", "line": {"color": "#7f7f7f", "width": 1},
-         "hovertemplate": "(%{x:.2f}, %{y:.2f}) at %{customdata:.1f} s<extra></extra>"},
+         "customdata": clock.axis_values(path.t), "mode": "lines", "line": {"color": "#7f7f7f", "width": 1},
+         "hovertemplate": f"(%{{x:.2f}}, %{{y:.2f}}) at {when}<extra></extra>"},
         {"type": "scatter", "name": "start / end", "x": [float(path.x[0]), float(path.x[-1])],
          "y": [float(path.y[0]), float(path.y[-1])], "mode": "markers", "hoverinfo": "text",
          "hovertext": ["start", "end"],
          "marker": {"symbol": ["circle", "square"], "size": 10, "color": ["#2ca02c", "#222"]}},
-        *_incident_traces(path, incidents),
+        *_incident_traces(path, incidents, clock),
     ]  # fmt: skip
     layout = {
         **_BASE_LAYOUT,
@@ -155,7 +161,7 @@ _LEVEL_COLOURS = {"WARNING": "#e6a100", "ERROR": "#d62728", "CRITICAL": "#8c1c13
                   "EMERGENCY": "#000000"}  # fmt: skip
 
 
-def messages_figure(messages, t_span: tuple[float, float] | None = None) -> dict:
+def messages_figure(messages, t_span: tuple[float, float] | None = None, clock: Clock | None = None) -> dict:
     """The autopilot's own warnings and errors as markers on the shared time axis, one row per
     level, the text on hover."""
     data = []
@@ -177,13 +183,13 @@ def messages_figure(messages, t_span: tuple[float, float] | None = None) -> dict
         f"{len(messages)} message(s) of level warning and above the autopilot logged, at their time "
         "on the shared axis (hover for the text). Read an alarm against what the autopilot itself said."
     )
-    return _spec(_time_row_spec("ctx-messages", "autopilot messages", caption), data, layout)
+    return _spec(_time_row_spec("ctx-messages", "autopilot messages", caption), data, layout, clock)
 
 
 _STATE_FILLS = {"armed": "rgba(44, 160, 44, 0.25)", "failsafe": "rgba(214, 39, 40, 0.35)"}
 
 
-def states_figure(states: dict, t_span: tuple[float, float] | None = None) -> dict:
+def states_figure(states: dict, t_span: tuple[float, float] | None = None, clock: Clock | None = None) -> dict:
     """The autopilot's armed and failsafe intervals as bands on the shared time axis, one row each."""
     data = []
     names = list(states)
@@ -203,21 +209,22 @@ def states_figure(states: dict, t_span: tuple[float, float] | None = None) -> di
     layout = _time_row_layout("the autopilot's state", yaxis, t_span)
     summary = "; ".join(f"{name}: {len(spans)} interval(s)" for name, spans in states.items())
     caption = f"When the vehicle was armed and in failsafe, as its autopilot logged ({summary})."
-    return _spec(_time_row_spec("ctx-states", "autopilot state", caption), data, layout)
+    return _spec(_time_row_spec("ctx-states", "autopilot state", caption), data, layout, clock)
 
 
-def context_figures(context, incidents: Sequence[Incident]) -> list[dict]:
+def context_figures(context, incidents: Sequence[Incident], clock: Clock | None = None) -> list[dict]:
     """``{"id", "title", "caption", "timeseries", "height", "json", "points"}`` per context figure: the mode
-    when the profile has a mode channel, the path when a group measures position. [] for None."""
+    when the profile has a mode channel, the path when a group measures position. [] for None.
+    Times in ``clock`` (None: seconds since the log's start)."""
     if context is None:
         return []
     figures = []
     if context.mode is not None:
-        figures.append(mode_figure(context.mode))
+        figures.append(mode_figure(context.mode, clock))
     if getattr(context, "states", None):
-        figures.append(states_figure(context.states, getattr(context, "t_span", None)))
+        figures.append(states_figure(context.states, getattr(context, "t_span", None), clock))
     if getattr(context, "messages", None):
-        figures.append(messages_figure(context.messages, getattr(context, "t_span", None)))
+        figures.append(messages_figure(context.messages, getattr(context, "t_span", None), clock))
     if context.path is not None:
-        figures.append(path_figure(context.path, incidents))
+        figures.append(path_figure(context.path, incidents, clock))
     return figures

@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from logscan.clock import Clock
 from logscan.report.margins import Margin, peak_margin, ratio_text
 from logscan.results import AlarmInterval, DetectorResult, Incident
 
@@ -34,28 +35,34 @@ def alarm_note(alarm: AlarmInterval) -> str:
     return rejected_words(int(alarm.n_exceed)) if is_rejected(alarm.signal) else ""
 
 
-def closest_line(margins: Sequence[Margin]) -> str:
-    """'closest to a threshold: nis.all peaked at 0.815 of its threshold (28.95 s)' ("" if none)."""
+def closest_line(margins: Sequence[Margin], clock: Clock | None = None) -> str:
+    """'closest to a threshold: nis.all peaked at 0.815 of its threshold (28.95 s)' ("" if none);
+    the time in ``clock`` (default: seconds since the log's start)."""
     peak = peak_margin([m for m in margins if not is_rejected(m.statistic)])
     if peak is None:
         return ""
-    when = "" if peak.time is None else f" ({peak.time:.2f} s)"
+    when = "" if peak.time is None else f" ({(clock or Clock()).text(peak.time)})"
     return f"closest to a threshold: {peak.statistic} peaked at {ratio_text(peak.ratio)} of its threshold{when}"
 
 
-def verdict_lines(incidents: Sequence[Incident], margins: Sequence[Margin]) -> list[str]:
+def verdict_lines(incidents: Sequence[Incident], margins: Sequence[Margin], clock: Clock | None = None) -> list[str]:
     """Lines under the verdict: each incident's headline, or, with none, the closest margin."""
     if incidents:
-        return [inc.headline for inc in incidents]
-    line = closest_line(margins)
+        return [inc.headline_in(clock) for inc in incidents]
+    line = closest_line(margins, clock)
     return [line[0].upper() + line[1:]] if line else []
 
 
 def margin_rows(
-    margins: Sequence[Margin], results: Sequence[DetectorResult] = (), sections: Mapping[str, str] | None = None
+    margins: Sequence[Margin],
+    results: Sequence[DetectorResult] = (),
+    sections: Mapping[str, str] | None = None,
+    clock: Clock | None = None,
 ) -> list[dict]:
     """Rows of the margin table, in the order given; ``rejected.*`` statistics of ``results`` are
-    given as the count of samples the filter skipped; ``sections``: detector -> its section's id."""
+    given as the count of samples the filter skipped; ``sections``: detector -> its section's id;
+    times in ``clock`` (default: seconds since the log's start)."""
+    clock = clock or Clock()
     rejected = {
         (r.detector, name): int(np.nansum(values))
         for r in results
@@ -74,8 +81,8 @@ def margin_rows(
             "statistic": m.statistic,
             "kind": m.kind or "—",
             "ratio": "—" if is_rejected(m.statistic) else ratio_text(m.ratio),
-            "time": "—" if m.time is None or is_rejected(m.statistic) else f"{m.time:.3f}",
-            "t": "" if m.time is None or is_rejected(m.statistic) else repr(m.time),
+            "time": "—" if m.time is None or is_rejected(m.statistic) else clock.short(m.time),
+            "t": "" if m.time is None or is_rejected(m.statistic) else repr(clock.axis_value(m.time)),
             "section": (sections or {}).get(m.detector, ""),
             "value": "—" if m.value is None or is_rejected(m.statistic) else f"{m.value:.4g}",
             "n_alarms": m.n_alarms,
@@ -94,11 +101,11 @@ def _level(margin: Margin) -> str:
     return ""
 
 
-def section_line(n_alarms: int, margins: Sequence[Margin]) -> str:
+def section_line(n_alarms: int, margins: Sequence[Margin], clock: Clock | None = None) -> str:
     """One line for a detector section's heading: its alarms, or its closest margin."""
     if n_alarms:
         return f"{n_alarms} alarm{'' if n_alarms == 1 else 's'}"
-    closest = closest_line(margins)
+    closest = closest_line(margins, clock)
     return "no alarms" + (f"; {closest}" if closest else "")
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from logscan import scoring
 from logscan.artifacts import Staged, commit, stage, write_atomic
+from logscan.clock import Clock
 from logscan.errors import InputError
 from logscan.report import overview
 from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
@@ -62,6 +63,8 @@ class ReportInput:
     innovations:      the EKF's packed innovations (`logscan.sensor_views.Innovations`): a group
                       an alarm names is drawn (measured vs predicted, per channel) in the first
                       section whose alarms name it. None: not drawn.
+    clock:            the log's own clock (`logscan.clock`): the time axis, the tables and the
+                      headlines show times in it. Default: seconds since the log's start.
     """
 
     log_facts: dict
@@ -80,6 +83,7 @@ class ReportInput:
     groups: list[dict] = field(default_factory=list)
     context: RunContext | None = None
     innovations: Innovations | None = None
+    clock: Clock = field(default_factory=Clock)
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -88,6 +92,13 @@ class ReportInput:
 def flat_alarms(results: Sequence[DetectorResult]) -> list[AlarmInterval]:
     """All alarms of all results, results in order, each result's alarms in order."""
     return [alarm for result in results for alarm in result.alarms]
+
+
+def _time_head(clock: Clock) -> str:
+    """The unit of the tables' time columns: "s", "UTC" or "PX4 boot time, s"."""
+    if clock.utc:
+        return "UTC"
+    return "s" if clock.relative else f"{clock.name}, s"
 
 
 def _event_view(event: FaultEvent, index: int, t_end: float) -> dict:
@@ -131,16 +142,18 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
     if has_truth and matches is None and alarms:
         matches = report_matches(report.results, report.truth_events)
     rows = []
+    clock = report.clock
     for i, alarm in enumerate(alarms[:MAX_TABLE_ROWS]):
         start, end = float(alarm.start), float(alarm.end)
         row = {
             "index": i,
             "detector": alarm.detector,
             "signal": alarm.signal,
-            "start": f"{start:.3f}",
-            "end": f"{end:.3f}",
-            "t0": repr(start),
-            "t1": repr(end),
+            "start": clock.short(start),
+            "end": clock.short(end),
+            "t0": repr(clock.axis_value(start)),  # where the time axis zooms to: its own units
+            "t1": repr(clock.axis_value(end)),
+            "order": start,
             "duration": f"{end - start:.3f}",
             "peak": number_text(alarm.peak_value),
             "threshold": number_text(alarm.peak_threshold),
@@ -161,13 +174,13 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
     if not incident_of:
         return rows
     # incidents first, in time order, then the alarms behind each (in time order)
-    return sorted(rows, key=lambda r: (r["incident"] == "", r["incident"], float(r["start"])))
+    return sorted(rows, key=lambda r: (r["incident"] == "", r["incident"], r["order"]))
 
 
-def _incident_rows(incidents: Sequence[Incident]) -> list[dict]:
+def _incident_rows(incidents: Sequence[Incident], clock: Clock) -> list[dict]:
     return [
-        {"index": i, "headline": inc.headline, "start": f"{inc.start:.3f}", "end": f"{inc.end:.3f}",
-         "t0": repr(float(inc.start)), "t1": repr(float(inc.end)),
+        {"index": i, "headline": inc.headline_in(clock), "start": clock.short(inc.start),
+         "end": clock.short(inc.end), "t0": repr(clock.axis_value(inc.start)), "t1": repr(clock.axis_value(inc.end)),
          "n_alarms": len(inc.alarms), "checks": ", ".join(sorted({a.signal for a in inc.alarms}))}
         for i, inc in enumerate(incidents, 1)
     ]  # fmt: skip
@@ -271,7 +284,7 @@ def _sections(
         sections.append({
             "detector": result.detector,
             "n_alarms": len(result.alarms),
-            "line": overview.section_line(len(result.alarms), own),
+            "line": overview.section_line(len(result.alarms), own, report.clock),
             "warnings": [str(w) for w in result.warnings] + problems,
             "coverage": str(result.info.get("coverage", "")),
             "info": info_rows(result.info),
@@ -288,7 +301,7 @@ def _sections(
     return sections, figures
 
 
-def _possible_lines(results: Sequence[DetectorResult]) -> list[str]:
+def _possible_lines(results: Sequence[DetectorResult], clock: Clock) -> list[str]:
     """The "possible fault" warnings (shaded orange in the figures): one verdict line per statistic,
     its count and span (they can be many: each is in the JSON)."""
     by_signal: dict[tuple[str, str], list] = {}
@@ -299,25 +312,36 @@ def _possible_lines(results: Sequence[DetectorResult]) -> list[str]:
     for (detector, signal), found in by_signal.items():
         first, last = min(p.start for p in found), max(p.end for p in found)
         what = f"{len(found)} possible faults" if len(found) > 1 else "possible fault"
-        lines.append(f"{what} (warnings, not alarms): {detector} {signal}, {first:.2f}-{last:.2f} s")
+        lines.append(f"{what} (warnings, not alarms): {detector} {signal}, {clock.span_text(first, last)}")
     return lines
 
 
-def _suppressed_lines(results: Sequence[DetectorResult]) -> list[str]:
+def _suppressed_lines(results: Sequence[DetectorResult], clock: Clock) -> list[str]:
     """One verdict line per suppressed alarm, with the reason the suppressions file gives."""
     return [
-        f"suppressed: {a.detector} {a.signal} {a.start:.2f}-{a.end:.2f} s ({reason})"
+        f"suppressed: {a.detector} {a.signal} {clock.span_text(a.start, a.end)} ({reason})"
         for result in results
         for a, reason in result.suppressed
     ][:MAX_TABLE_ROWS]
 
 
-def _event_rows(events: list[dict]) -> list[dict]:
+def _event_rows(events: list[dict], clock: Clock) -> list[dict]:
     return [
-        {**e, "start": f"{e['start']:.3f}", "end": f"{e['end']:.3f}" + (" (open)" if e["open_ended"] else ""),
+        {**e, "start": clock.short(e["start"]), "end": clock.short(e["end"]) + (" (open)" if e["open_ended"] else ""),
          "magnitude": "—" if e["magnitude"] is None else str(e["magnitude"])}
         for e in events
     ]  # fmt: skip
+
+
+def clock_text(clock: Clock) -> str:
+    """The log facts' line on the clock: its name, time zero in it, and its UTC when known."""
+    if clock.utc:
+        return f"UTC (the log's timestamps are wall-clock time); time zero {clock.utc_text(0.0)}"
+    if clock.relative:
+        return "time since log start (the log's timestamps are not a known clock)"
+    utc = clock.utc_text(0.0)
+    dated = f"; UTC of time zero {utc} (from the GNSS receiver's time)" if utc else ""
+    return f"{clock.name}; the analysis' time zero at {clock.at(0.0):.3f} s{dated}"
 
 
 def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_budget: int = POINT_BUDGET) -> str:
@@ -329,12 +353,13 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     truth_spans = merge_spans([(e["start"], e["end"]) for e in events], 0.0, 0.0)
     margins = result_margins(report.results, t)
     sections, figures = _sections(report, t, truth_spans, margins)
-    context = context_figures(report.context, report.incidents)
-    figure_json = figures_json(figures, t, point_budget, extra=context)
+    clock = report.clock
+    context = context_figures(report.context, report.incidents, clock)
+    figure_json = figures_json(figures, t, point_budget, extra=context, clock=clock)
 
     alarms = flat_alarms(report.results)
     rows = _alarm_rows(report, events, has_truth)
-    log = log_view(report.log_facts)
+    log = log_view(report.log_facts) | {"clock": clock_text(clock)}
     return _environment().get_template("report.html.j2").render(
         title=f"logscan report: {log['name']}",
         log=log,
@@ -343,20 +368,23 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         model=model_view(report.model),
         version=report.logscan_version,
         verdict=report.verdict,
-        verdict_lines=overview.verdict_lines(report.incidents, margins)
-        + _possible_lines(report.results)
-        + _suppressed_lines(report.results),
-        margins=overview.margin_rows(margins, report.results, {s["detector"]: s["id"] for s in sections}),
+        verdict_lines=overview.verdict_lines(report.incidents, margins, clock)
+        + _possible_lines(report.results, clock)
+        + _suppressed_lines(report.results, clock),
+        margins=overview.margin_rows(margins, report.results, {s["detector"]: s["id"] for s in sections}, clock),
+        time_head=_time_head(clock),
+        time_axis=clock.axis_title(),
+        time_scale=1000 if clock.utc else 1,  # axis units per second (a date axis counts milliseconds)
         groups=group_rows(report.groups),
         verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),
         n_alarms=len(alarms),
         warnings=[str(w) for w in report.warnings],
         unchecked=[str(u) for u in report.unchecked],
-        incidents=_incident_rows(report.incidents),
+        incidents=_incident_rows(report.incidents, clock),
         rows=rows,
         rows_hidden=max(len(alarms) - len(rows), 0),
         has_truth=has_truth,
-        events=_event_rows(events),
+        events=_event_rows(events, clock),
         sections=sections,
         n_figures=len(figures) + len(context),
         context=context,

@@ -7,6 +7,10 @@ through `plot_text`: plotly draws ``<a href>``, ``<b>``, ``<br>`` in them as mar
 from logs and profiles. The JSON has every ``<``, ``>`` and ``&`` escaped, so it can sit inside a
 ``<script>`` element.
 
+Time axes show the log's own clock (`logscan.clock`: PX4 boot time, UTC as a date axis, or time
+since the log's start): figures are built in seconds since the log's time zero and `on_clock`, in
+`spec_json`, moves every figure on TIME_AXIS to the clock, in one place.
+
 Zooming to an incident or alarm (templates/report.js: its span with a margin of max(2 s, 50 %))
 would show a long log's overview decimation, a few points per window; so a quarter of each
 decimated trace's points is spent inside those windows (`focus_windows`), when they cover at most
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from logscan.clock import Clock
 from logscan.decimate import DEFAULT_MAX_POINTS, decimate_indices
 from logscan.report.figures import Figure, merge_spans
 
@@ -25,8 +30,9 @@ MIN_POINTS_PER_TRACE = 400
 MIN_POINTS_FLOOR = 100
 _F4_MAX = float(np.finfo(np.float32).max)
 
+TIME_TITLE = "time since log start (s)"  # the axis' title until `on_clock` names the log's clock
 TIME_AXIS = {
-    "title": {"text": "time since log start (s)"},
+    "title": {"text": TIME_TITLE},
     "gridcolor": "#eee",
     "zeroline": False,
     "exponentformat": "none",  # 20000 s, not "20k"
@@ -178,9 +184,11 @@ def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.
     return data
 
 
-def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> str:
+def figure_json(
+    fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None, clock: Clock | None = None
+) -> str:
     """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points),
-    part of them inside the zoom ``windows`` (`focus_windows`)."""
+    part of them inside the zoom ``windows`` (`focus_windows`), its time axis in ``clock``."""
     layout = {
         "title": {"text": plot_text(fig.title), "font": {"size": 14}},
         "height": 360,
@@ -200,27 +208,66 @@ def figure_json(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.
         "paper_bgcolor": "white",
         "template": {},
     }
-    return spec_json(_trace_data(fig, t, points, windows), layout)
+    return spec_json(_trace_data(fig, t, points, windows), layout, clock)
 
 
-def spec_json(data: list[dict], layout: dict) -> str:
-    """Plotly traces and layout as escaped figure JSON (numpy arrays as typed arrays)."""
+# hover texts of times in seconds, as the figure builders write them, and as a UTC date axis shows them
+_HOVER_SECONDS, _HOVER_UTC = "%{x:.3f} s", "%{x|%H:%M:%S.%L} UTC"
+
+
+def is_time_axis(layout: dict) -> bool:
+    """True for a figure on the report's shared time axis (its x axis built from TIME_AXIS)."""
+    return (layout.get("xaxis") or {}).get("title") == TIME_AXIS["title"]
+
+
+def on_clock(data: list[dict], layout: dict, clock: Clock) -> tuple[list[dict], dict]:
+    """A time-axis figure (`is_time_axis`) moved to ``clock``: every trace's x and the axis range
+    as the clock plots them (`Clock.axis_values`), the axis titled with the clock's name, a date
+    axis for UTC; other figures unchanged."""
+    if not is_time_axis(layout) or clock.relative:
+        return data, layout
+    moved = []
+    for trace in data:
+        trace = dict(trace)
+        if trace.get("x") is not None:
+            trace["x"] = clock.axis_values(np.asarray(trace["x"], dtype=np.float64))
+        if clock.utc and isinstance(trace.get("hovertemplate"), str):
+            trace["hovertemplate"] = trace["hovertemplate"].replace(_HOVER_SECONDS, _HOVER_UTC)
+        moved.append(trace)
+    axis = {**layout["xaxis"], "title": {"text": plot_text(clock.axis_title())}}
+    if clock.utc:
+        axis |= {"type": "date", "hoverformat": "%H:%M:%S.%L"}
+    if axis.get("range") is not None:
+        axis["range"] = [clock.axis_value(value) for value in axis["range"]]
+    return moved, {**layout, "xaxis": axis}
+
+
+def spec_json(data: list[dict], layout: dict, clock: Clock | None = None) -> str:
+    """Plotly traces and layout as escaped figure JSON (numpy arrays as typed arrays); a figure on
+    the time axis in ``clock`` (`on_clock`)."""
     import plotly.graph_objects as go
 
+    if clock is not None:
+        data, layout = on_clock(data, layout, clock)
     figure = go.Figure(data=data, layout=layout, skip_invalid=False)
     return escape_json(figure.to_json(validate=False, remove_uids=True))
 
 
 def figures_json(
-    figures: list[tuple[str, Figure]], t: np.ndarray, point_budget: int = POINT_BUDGET, extra: list[dict] = ()
+    figures: list[tuple[str, Figure]],
+    t: np.ndarray,
+    point_budget: int = POINT_BUDGET,
+    extra: list[dict] = (),
+    clock: Clock | None = None,
 ) -> str:
     """``[{"id": ..., "figure": ...}, ...]`` for (element id, figure) pairs, under one point budget,
     then the ``extra`` figures already serialised (``{"id", "json", "points"}``, e.g.
-    `logscan.report.context_figures`), whose points come out of the same budget."""
+    `logscan.report.context_figures`), whose points come out of the same budget. Time axes in
+    ``clock`` (None: seconds since the log's start)."""
     budget = max(point_budget - sum(int(spec.get("points", 0)) for spec in extra), 0)
     points = allocate_points([fig for _, fig in figures], budget)
     windows = focus_windows([fig for _, fig in figures], t)
-    parts = [f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points, windows)}}}' for fig_id, fig in figures]
+    parts = [f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points, windows, clock)}}}' for fig_id, fig in figures]
     parts += [f'{{"id":"{spec["id"]}","figure":{spec["json"]}}}' for spec in extra]
     return "[" + ",".join(parts) + "]"
 
