@@ -1,18 +1,30 @@
-"""Calibration of the measurement noise from healthy logs' innovations (`logscan train`).
+"""Calibration of the filter's noise from healthy logs' innovations (`logscan train --calibrate`).
 
-On a healthy log a consistent filter's NIS per measurement group averages the group's size:
-E[y^T S^-1 y] = m with S = H P H^T + R. A profile's guessed noise_std is rarely that: on real PX4
-logs the mean NIS per output ran from 0.001 to 2 with PX4's own EKF2 noise values. Training scales
-each group's noise variance by the ratio of its mean NIS per output to 1, re-filters every training
-log with the new R, and repeats (CAL_ITERATIONS): the update is exact for a group whose innovation
+Measurement noise R. On a healthy log a consistent filter's NIS per measurement group averages the
+group's size: E[y^T S^-1 y] = m with S = H P H^T + R. A profile's guessed noise_std is rarely that:
+on real PX4 logs the mean NIS per output ran from 0.001 to 2 with PX4's own EKF2 noise values.
+Training scales each group's noise variance by the ratio of its mean NIS per output to 1, re-filters
+every training log with the new R, and repeats: the update is exact for a group whose innovation
 covariance is all R, and converges in a few steps when H P H^T is a part of S. The result is one
-noise_std per output of each group (the profile's per-output proportions kept), written in the
-tables as ``calibration`` and applied by `logscan analyze --tables` before the filter runs, so the
-detectors trained in the same run are fitted on the calibrated filter.
+noise_std per output of each group (the profile's per-output proportions kept).
 
-Simplified: only R is calibrated. The process noise Q stays the model's (its IMU noise parameters
-for `ins`); a group whose NIS stays low with R at its floor (CAL_FLOOR of the profile's variance)
-says that Q is too large for it, and the tables report the NIS reached.
+Process noise Q. The NIS cannot tell a Q too large from an R too large (both widen S), so Q is fitted
+on what can: the innovations' likelihood (`logscan.process_noise`, whose docstring says why not
+covariance matching). The model's states are grouped in blocks of like meaning (for `ins`: position,
+velocity, attitude, gyro bias, accelerometer bias, barometer offset) and each block's Q is scaled
+(Q' = D^1/2 Q D^1/2, symmetric positive semi-definite, the model's proportions inside a block kept)
+to the least -2 log-likelihood of the training logs' innovations, one parabolic step per block and
+iteration. Each iteration scales R first, then Q, and the loop stops when every group's mean NIS per
+output is within CAL_NIS_BAND and no block's scale moved more than CAL_Q_TOLERANCE, or after
+CAL_ITERATIONS. Scales are clipped to [1e-4, 1e4]; a block whose Q does not change the likelihood
+(nothing observes it, or what does is all measurement noise: the position of a model whose velocity
+is measured) keeps scale 1 and is reported as not identified.
+
+Both are written in the tables as ``calibration`` (``groups``: each group's noise_std;
+``process_noise_scale``: each state's Q scale, ``process_noise_blocks``, the iterations used) and
+applied by `logscan analyze --tables` before the filter runs (R in the profile's noise_std, Q through
+the filter's Q override: `logscan.process_noise.calibrated_Q`), so the detectors trained in the same
+run are fitted on the calibrated filter. ``calibrate(..., process_noise=False)`` calibrates R alone.
 """
 
 from __future__ import annotations
@@ -23,11 +35,14 @@ from dataclasses import replace
 import numpy as np
 
 from logscan.errors import InputError
+from logscan.process_noise import BlockFit, evaluate, fit_blocks, state_blocks
 
 CAL_ITERATIONS = 6
 CAL_FLOOR = 1e-6  # the smallest calibrated variance, relative to the profile's (std / 1000)
 CAL_CEILING = 1e6  # the largest (std x 1000)
 CAL_MIN_UPDATES = 20  # updates of a group over the training logs to calibrate it
+CAL_NIS_BAND = (0.8, 1.25)  # calibrated: every group's mean NIS per output within this band ...
+CAL_Q_TOLERANCE = float(np.log(1.25))  # ... and no block's Q scale moved by more than 25 % in an iteration
 
 
 def base_noise_std(model, run) -> dict[str, np.ndarray]:
@@ -45,41 +60,63 @@ def base_noise_std(model, run) -> dict[str, np.ndarray]:
 
 def mean_nis_per_output(model, runs: Sequence, noise_std: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
     """(mean NIS per output, updates) of each group over ``runs`` filtered with ``noise_std``."""
-    from logscan.filters.ekf import run_ekf
-
-    sums: dict[str, float] = {}
-    counts: dict[str, int] = {}
-    for run in runs:
-        trace = run_ekf(model, run, R=noise_std, store_gain=False, store_S=False, store_innovations=False)
-        for g, name in enumerate(trace.group_names):
-            used = trace.updated[:, g] & np.isfinite(trace.nis_group[:, g])
-            sums[name] = sums.get(name, 0.0) + float(trace.nis_group[used, g].sum())
-            counts[name] = counts.get(name, 0) + int(used.sum())
-    sizes = {name: model.group(name).size for name in sums}
-    return {
-        name: (sums[name] / (sizes[name] * counts[name]) if counts[name] else np.nan, counts[name]) for name in sums
-    }
+    return evaluate(model, runs, noise_std, np.ones(model.n_states)).nis
 
 
-def calibrate(model, runs: Sequence) -> dict:
+def _within_band(nis: dict[str, tuple[float, int]]) -> bool:
+    """Every calibrated group's mean NIS per output within `CAL_NIS_BAND`."""
+    low, high = CAL_NIS_BAND
+    return all(low <= ratio <= high for ratio, count in nis.values() if count >= CAL_MIN_UPDATES)
+
+
+def calibrate(model, runs: Sequence, process_noise: bool = True) -> dict:
     """The calibration document: per group the calibrated noise std, the profile's, and the mean NIS
-    per output before and after (see the module docstring)."""
+    per output before and after; with ``process_noise`` each block's Q scale too (see the module
+    docstring)."""
     if not runs:
         raise InputError("calibration needs at least one healthy log")
     base = base_noise_std(model, runs[0])
     scale = {name: 1.0 for name in base}
-    before = mean_nis_per_output(model, runs, base)
-    current = before
-    for _ in range(CAL_ITERATIONS):
-        for name, (ratio, count) in current.items():
+    blocks = {name: BlockFit(states) for name, states in state_blocks(model).items()} if process_noise else {}
+
+    def q_scale() -> np.ndarray:
+        out = np.ones(model.n_states)
+        for fit in blocks.values():
+            out[fit.states] = np.exp(fit.log_scale)
+        return out
+
+    def noise() -> dict[str, np.ndarray]:
+        return {name: base[name] * np.sqrt(scale[name]) for name in base}
+
+    before = current = evaluate(model, runs, base, q_scale())
+    iterations, converged = 0, False
+    while iterations < CAL_ITERATIONS and not converged:
+        iterations += 1
+        # R first: each group's variance times its mean NIS per output (exact when S is all R)
+        for name, (ratio, count) in current.nis.items():
             if count >= CAL_MIN_UPDATES and np.isfinite(ratio) and ratio > 0:
                 scale[name] = float(np.clip(scale[name] * ratio, CAL_FLOOR, CAL_CEILING))
-        std = {name: base[name] * np.sqrt(scale[name]) for name in base}
-        current = mean_nis_per_output(model, runs, std)
+        current = evaluate(model, runs, noise(), q_scale())
+        moved = 0.0
+        if blocks:  # then Q: one step of each block's scale on the innovations' likelihood
+            current, moved = fit_blocks(model, runs, noise(), blocks, current)
+        converged = process_noise and _within_band(current.nis) and moved < CAL_Q_TOLERANCE
+    document = {
+        "method": "noise variance scaled to mean NIS per output 1",
+        "iterations": iterations,
+        "groups": _group_entries(base, scale, before.nis, current.nis),
+    }
+    if process_noise:
+        document.update(_process_noise_entries(model, blocks, before, current, converged))
+    return document
+
+
+def _group_entries(base, scale, before, after) -> dict:
+    """Each group's entry of the calibration document."""
     groups = {}
     for name in base:
         ratio0, count = before.get(name, (np.nan, 0))
-        ratio1 = current.get(name, (np.nan, 0))[0]
+        ratio1 = after.get(name, (np.nan, 0))[0]
         calibrated = count >= CAL_MIN_UPDATES
         groups[name] = {
             "noise_std": [float(v) for v in (base[name] * np.sqrt(scale[name]) if calibrated else base[name])],
@@ -90,7 +127,27 @@ def calibrate(model, runs: Sequence) -> dict:
             "calibrated": bool(calibrated),
             "at_floor": bool(calibrated and scale[name] <= CAL_FLOOR * 1.0001),
         }
-    return {"method": "noise variance scaled to mean NIS per output 1", "iterations": CAL_ITERATIONS, "groups": groups}
+    return groups
+
+
+def _process_noise_entries(model, blocks: dict[str, BlockFit], before, after, converged: bool) -> dict:
+    """The process-noise part of the calibration document: the scale of each state's Q (what
+    `logscan analyze --tables` applies), each block's, and the innovations' cost before and after."""
+    names = model.state_names
+    scales = {name: float(np.exp(fit.log_scale)) if fit.identified else 1.0 for name, fit in blocks.items()}
+    return {
+        "method": "noise variance scaled to mean NIS per output 1; process noise Q scaled per block of "
+        "states to the least -2 log-likelihood of the innovations",
+        "converged": bool(converged),
+        "nis_band": list(CAL_NIS_BAND),
+        "process_noise_scale": {names[i]: scales[name] for name, fit in blocks.items() for i in fit.states},
+        "process_noise_blocks": {
+            name: {"states": [names[i] for i in fit.states], "scale": scales[name], "identified": fit.identified}
+            for name, fit in blocks.items()
+        },
+        "innovation_cost_per_output_before": before.cost / max(before.samples, 1),
+        "innovation_cost_per_output_after": after.cost / max(after.samples, 1),
+    }
 
 
 def calibrated_runs(runs: Sequence, calibration: dict) -> list:
@@ -120,6 +177,12 @@ def apply_calibration(profile, calibration: dict | None) -> list[str]:
     return lines
 
 
+def process_noise_scale(calibration: dict | None) -> dict[str, float] | None:
+    """The calibration's Q scale per state ({state name: scale}), None when it calibrated R alone."""
+    scales = (calibration or {}).get("process_noise_scale")
+    return {str(name): float(value) for name, value in scales.items()} if scales else None
+
+
 def calibration_lines(calibration: dict | None) -> list[str]:
     """Human-readable lines of a calibration (the train command's summary)."""
     lines = []
@@ -134,4 +197,17 @@ def calibration_lines(calibration: dict | None) -> list[str]:
             f"  {name}: noise_std {before} -> {after}; mean NIS per output "
             f"{entry['mean_nis_per_output_before']:.3g} -> {entry['mean_nis_per_output_after']:.3g}{note}"
         )
+    return lines + process_noise_lines(calibration)
+
+
+def process_noise_lines(calibration: dict | None) -> list[str]:
+    """The Q scale of each block of states, and the iterations used (empty when R alone)."""
+    blocks = (calibration or {}).get("process_noise_blocks") or {}
+    if not blocks:
+        return []
+    state = "converged" if calibration.get("converged") else "not converged"
+    lines = [f"  process noise Q x scale per block of states ({calibration.get('iterations')} iteration(s), {state}):"]
+    for name, entry in blocks.items():
+        shown = f"{entry['scale']:.3g}" if entry.get("identified") else "1 (not identifiable from these logs)"
+        lines.append(f"    {name} ({', '.join(entry['states'])}): {shown}")
     return lines

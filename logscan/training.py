@@ -328,15 +328,16 @@ def _with_ekf(needs):
 
 
 def calibrate_prepared(prepared: Sequence, needs) -> dict:
-    """Calibrate the measurement noise on the prepared healthy logs (`logscan.calibration`), then
-    put the calibrated noise in their runs and re-run their filters, so the detectors are fitted on
-    the filter `logscan analyze --tables` runs."""
-    from logscan.calibration import calibrate, calibrated_runs
+    """Calibrate the measurement and process noise on the prepared healthy logs
+    (`logscan.calibration`), then put the calibrated noise in their runs and models and re-run their
+    filters, so the detectors are fitted on the filter `logscan analyze --tables` runs."""
+    from logscan.calibration import calibrate, calibrated_runs, process_noise_scale
     from logscan.pipeline import FILTERS
 
     calibration = calibrate(prepared[0].model, [p.run for p in prepared])
     for one, run in zip(prepared, calibrated_runs([p.run for p in prepared], calibration)):
         one.run = run
+        one.model.process_noise_scale = process_noise_scale(calibration)  # as `prepare` sets it from tables
         one.traces = {
             name: FILTERS[name](one.model, run, frozenset(parts)) for name, parts in needs(run).filters.items()
         }
