@@ -40,7 +40,7 @@ def test_loops_parse_and_round_trip():
     assert motor.vehicle.rate_hz == 100.0 and motor.loop_name == "left_motor"
     assert motor.measurements["encoder"].channels == ["/enc"]
     assert profile.topics() == {"/u", "/y", "/volt", "/enc"}
-    assert profile.recovery.detector == "oracle" and profile.recovery.allowed_error == {"outer.x0": 1.5}
+    assert profile.recovery.detector == "oracle" and profile.recovery.settings == {"allowed_error": {"outer.x0": 1.5}}
     assert parse_profile(profile.to_toml()) == profile
 
 

@@ -23,6 +23,8 @@ RECOVERY_KEYS = (
     "allowed_error",
     "hold_s",
     "max_duration_s",
+    "agreement_quantile",
+    "consistency_tol_s",
 )
 RECOVERY_METHODS = ("refilter", "rollforward", "replace")
 #: ``[recovery] detector = "oracle"``: anomalies from the log's ground truth, for evaluation only
@@ -32,29 +34,19 @@ PRIMARY_LOOP = "main"  # the top level's loop name when ``[vehicle] loop`` is no
 
 @dataclass
 class RecoverySpec:
-    """``[recovery]``: which alarms drive recovery and how (see `logscan.recovery`).
+    """``[recovery]``: which alarms drive recovery, and the settings given (`logscan.recovery`'s
+    RecoverySettings holds their defaults and checks their values; here only their types).
 
     ``detector``: a registered detector's name, ``"oracle"`` (ground truth), or None (the alarms of
-    every detector that ran). ``allowed_error``: "loop.state" -> the largest tolerable error E of
-    that state (its T_max is the first recovery duration whose bound exceeds E).
+    every detector that ran). ``settings["allowed_error"]``: "loop.state" -> the largest tolerable
+    error E of that state (its T_max is the first recovery duration whose bound exceeds E).
     """
 
     detector: str | None = None
-    method: str = "refilter"
-    checkpoint_period_s: float = 0.0  # 0: every sample of the slowest loop
-    detection_time_s: float = 0.25  # checkpoint margin: the detector's latency
-    k_sigma: float = 3.0
-    allowed_error: dict[str, float] = field(default_factory=dict)
-    hold_s: float = 0.5  # the flagged sensors must agree again this long to end an anomaly
-    max_duration_s: float = 60.0
+    settings: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        out = {key: getattr(self, key) for key in RECOVERY_KEYS if key not in ("detector", "allowed_error")}
-        if self.detector is not None:
-            out["detector"] = self.detector
-        if self.allowed_error:
-            out["allowed_error"] = dict(self.allowed_error)
-        return out
+        return ({"detector": self.detector} if self.detector is not None else {}) | self.settings
 
 
 def parse_loops(checker, raw: Any, source: str, check_model: bool) -> dict:
@@ -91,28 +83,32 @@ def parse_recovery(checker, raw: Any, loop_names: set[str]) -> RecoverySpec | No
         return None
     checker.keys(data, where, RECOVERY_KEYS)
     before = len(checker.problems)
-    values: dict[str, Any] = {}
-    if "detector" in data:
-        values["detector"] = checker.string(data, "detector", where)
+    detector = checker.string(data, "detector", where)
+    settings: dict[str, Any] = {}
     if "method" in data:
         method = checker.string(data, "method", where)
         if method is not None and method not in RECOVERY_METHODS:
             checker.add(f"{where} method", f"must be one of {', '.join(RECOVERY_METHODS)}, got {method!r}")
-        values["method"] = method
-    for key, strict in (("checkpoint_period_s", False), ("detection_time_s", False), ("hold_s", False)):
-        values[key] = checker.number(data, key, where, minimum=0, strict=strict)
-    for key in ("k_sigma", "max_duration_s"):
-        values[key] = checker.number(data, key, where, minimum=0, strict=True)
-    errors = checker.table(data.get("allowed_error", {}), f"{where} allowed_error") or {}
-    values["allowed_error"] = {}
-    for state, _ in errors.items():
-        loop = state.split(".", 1)[0]
-        if "." not in state or loop not in loop_names:
-            checker.add(
-                f"{where} allowed_error", f"{state!r}: expected 'loop.state' with a loop among {sorted(loop_names)}"
+        settings["method"] = method
+    for key in ("checkpoint_period_s", "detection_time_s", "hold_s"):
+        settings[key] = checker.number(data, key, where, minimum=0, strict=False)
+    for key in ("k_sigma", "max_duration_s", "consistency_tol_s"):
+        settings[key] = checker.number(data, key, where, minimum=0, strict=True)
+    settings["agreement_quantile"] = checker.number(
+        data, "agreement_quantile", where, minimum=0, strict=True, maximum=1
+    )
+    if "allowed_error" in data:
+        errors = checker.table(data["allowed_error"], f"{where} allowed_error") or {}
+        settings["allowed_error"] = {}
+        for state in errors:
+            if "." not in state or state.split(".", 1)[0] not in loop_names:
+                checker.add(
+                    f"{where} allowed_error", f"{state!r}: expected 'loop.state' with a loop among {sorted(loop_names)}"
+                )
+                continue
+            settings["allowed_error"][state] = checker.number(
+                errors, state, f"{where} allowed_error", minimum=0, strict=True
             )
-            continue
-        values["allowed_error"][state] = checker.number(errors, state, f"{where} allowed_error", minimum=0, strict=True)
     if len(checker.problems) > before:
         return None
-    return RecoverySpec(**{k: v for k, v in values.items() if v is not None or k == "detector"})
+    return RecoverySpec(detector, {key: value for key, value in settings.items() if key in data})
