@@ -35,6 +35,8 @@ class Analysis:
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
     scores: dict = field(default_factory=dict)  # detector -> logscan.scoring.Score (with truth)
     warnings: list[str] = field(default_factory=list)
+    loops: dict[str, Analysis] = field(default_factory=dict)  # a hierarchical profile's further loops
+    recovery: Any = None  # logscan.recovery.Recovery, when the profile asks for [recovery]
 
     # --- the prepared log, read through ------------------------------------------------------------
     @property
@@ -81,12 +83,21 @@ class Analysis:
     # --- verdict and summary -----------------------------------------------------------------------
     @property
     def alarms(self) -> list:
-        return [alarm for result in self.results for alarm in result.alarms]
+        """Every detector's alarms, the further loops' too."""
+        return [alarm for result in self.results for alarm in result.alarms] + [
+            alarm for loop in self.loops.values() for alarm in loop.alarms
+        ]
 
     @property
     def possible(self) -> list:
-        """ "Possible fault" warnings of every detector (a level below alarms)."""
-        return [p for result in self.results for p in result.possible]
+        """ "Possible fault" warnings of every detector (a level below alarms), the loops' too."""
+        return [p for result in self.results for p in result.possible] + [
+            p for loop in self.loops.values() for p in loop.possible
+        ]
+
+    @property
+    def all_incidents(self) -> list:
+        return self.incidents + [i for loop in self.loops.values() for i in loop.all_incidents]
 
     @property
     def partial(self) -> bool:
@@ -98,7 +109,7 @@ class Analysis:
 
     def verdict(self) -> str:
         """'no alarms' only when everything was checked and every detector ran."""
-        n, k = len(self.alarms), len(self.incidents)
+        n, k = len(self.alarms), len(self.all_incidents)
         if n:
             parts = [f"{n} alarm{'s' if n != 1 else ''} in {k} incident{'s' if k != 1 else ''}"]
         else:

@@ -25,11 +25,14 @@ Progress = Callable[[str], None]
 
 def _run_ekf(model, run, parts: frozenset[str]):
     from logscan.filters.ekf import run_ekf
+    from logscan.process_noise import calibrated_Q
 
-    # R from each group's profile noise_std, else the model's default (pack_run)
+    # R from each group's profile noise_std, else the model's default (pack_run); Q the model's,
+    # scaled when trained tables calibrated it (`LoadedProfile.process_noise_scale`)
     return run_ekf(
         model,
         run,
+        Q=calibrated_Q(model, run.dt),
         store_gain="K" in parts,
         store_S="S" in parts,
         full_P="P" in parts,
@@ -74,6 +77,9 @@ class LoadedProfile:
     # (`builtin_profile_for`): `prepare` takes it instead of reading the file again, then drops it
     log: Any = field(default=None, repr=False, compare=False)
     log_extra_topics: frozenset = field(default=frozenset(), repr=False, compare=False)
+    # the tables' calibrated process noise, {state: scale of its Q} (`logscan.calibration`; set by
+    # `analyze_log` from --tables): `prepare` gives it to the model, the EKF scales Q by it
+    process_noise_scale: dict | None = field(default=None, compare=False)
 
 
 @dataclass
@@ -91,6 +97,7 @@ class Prepared:
     context: Any = None  # logscan.run_context.RunContext: the path and mode the report draws (small)
     innovations: Any = None  # logscan.sensor_views.Innovations: the report's measured-vs-predicted figures
     raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
+    loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
@@ -262,6 +269,7 @@ def prepare(
     path = str(path)
     profile = loaded.profile
     model = get_model(profile.vehicle.model, profile.vehicle.params)
+    model.process_noise_scale = loaded.process_noise_scale  # read by the EKF (process_noise.calibrated_Q)
     compiling = _start_compile(model, needs, notice)
     step("reading")
     context_topics = set(STATE_TOPICS)  # the autopilot's states for the report, when the log has them
@@ -281,9 +289,17 @@ def prepare(
         )
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
     context = run_context(run, model, log)  # the report's context, from the samples about to go
+    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
+    if profile.loops:
+        from logscan.loops import prepare_loops
+
+        prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     wanted = needs(run) if callable(needs) else needs
-    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
+    if profile.recovery is not None:
+        from logscan.loops import RECOVERY_NEEDS
+
+        wanted = wanted | RECOVERY_NEEDS
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)
@@ -375,6 +391,7 @@ def detect(
                     if on
                 )
             )
+    free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     for position, detector in enumerate(detectors):
         if free_series:
             release_unread(prepared, detectors[position:])
@@ -401,7 +418,20 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
+    if prepared.loops:  # a hierarchical profile: every further loop checked by its own detectors
+        from logscan.loops import detect_loops
+
+        analysis.loops = detect_loops(prepared, grace_s=grace_s, progress=progress)
+        for name, loop in analysis.loops.items():  # what a loop could not check is the log's
+            analysis.unchecked += [f"loop {name}: {reason}" for reason in loop.unchecked]
+            analysis.failures += [replace(f, message=f"loop {name}: {f.message}") for f in loop.failures]
+            analysis.warnings += [w if w.startswith(f"loop {name}") else f"loop {name}: {w}" for w in loop.warnings]
     _score(analysis, [d.name for d in detectors], grace_s)
+    if prepared.profile.recovery is not None:
+        from logscan.loops import recover_analysis
+
+        step("recovery")
+        analysis.recovery = recover_analysis(analysis)
     return analysis
 
 
@@ -560,13 +590,15 @@ def analyze_log(
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
     figures (`logscan.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it)."""
-    from logscan.training import apply_tables, tables_path
+    from logscan.calibration import process_noise_scale
+    from logscan.training import apply_tables, read_tables_document, tables_path
 
     loaded = load_profile_for(path, profile_path)
     detectors = create_detectors(loaded, detector_names)
     trained = tables_path(None if tables is None else str(tables), loaded.profile)
     if trained is not None:  # the trained detectors, and the filter's calibrated noise in the profile
         detectors = apply_tables(detectors, trained, loaded.profile)
+        loaded.process_noise_scale = process_noise_scale(read_tables_document(trained).get("calibration"))
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
     raw = raw_topics_of(detectors)

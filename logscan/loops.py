@@ -1,0 +1,103 @@
+"""The further control loops of a hierarchical profile (``[loops.<name>]``), each prepared and
+checked like a log of its own: its model, its rate, its inputs and sensors, the shared filters run
+on it once, and its own detectors (from its ``[detectors]`` table, else the registry's defaults).
+
+`logscan.pipeline.prepare` calls `prepare_loops` on the log it read once (the profile's topics
+include every loop's channels) before the samples are released; `detect` runs `detect_loops` and
+the recovery stage reads the loops' traces (`logscan.recovery`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from logscan.errors import LogscanError
+from logscan.needs import Needs
+
+#: what recovery needs of every loop's EKF: the full covariance at the checkpoints
+RECOVERY_NEEDS = Needs.of(ekf=("P",))
+
+
+def loop_detectors(loaded) -> list:
+    """The detectors a loop runs (its own [detectors] table, else the defaults)."""
+    from logscan.pipeline import create_detectors
+
+    return create_detectors(loaded)
+
+
+def prepare_loops(primary, log, *, start_s=None, end_s=None, step: Callable[[str], None]) -> dict:
+    """Loop name -> Prepared for every further loop of ``primary.profile`` (aligned and filtered)."""
+    from logscan.align import align
+    from logscan.models import get_model
+    from logscan.pipeline import FILTERS, LoadedProfile, Prepared, needs_of
+
+    profile = primary.profile
+    extra = RECOVERY_NEEDS if profile.recovery is not None else Needs()
+    loops = {}
+    for name, loop in profile.loops.items():
+        loaded = LoadedProfile(loop, text="", source=f"{primary.loaded.source} [loops.{name}]")
+        model = get_model(loop.vehicle.model, loop.vehicle.params)
+        step(f"aligning loop {name}")
+        run = align(log, loop, start_s=start_s, end_s=end_s)
+        if run.n_steps < 2:
+            raise LogscanError(
+                f"loop {name!r}: too few samples on its analysis grid to filter",
+                path=primary.path,
+                hint=f"check [loops.{name}]'s channels and rate_hz against `logscan inspect`",
+            )
+        prepared = Prepared(path=primary.path, log=log, loaded=loaded, model=model, run=run)
+        prepared.warnings.extend(f"loop {name}: {w}" for w in run.warnings)
+        wanted = needs_of(loop_detectors(loaded))(run) | extra
+        for filter_name, parts in wanted.filters.items():
+            step(f"filtering loop {name}")
+            prepared.traces[filter_name] = FILTERS[filter_name](model, run, frozenset(parts))
+        for episode in prepared.trace.divergence_episodes if prepared.trace is not None else ():
+            prepared.warnings.append(f"loop {name}: filter diverged: {episode}")
+        loops[name] = prepared
+    return loops
+
+
+def detect_loops(prepared, *, grace_s: float, progress=None) -> dict:
+    """Loop name -> the Analysis of that loop (its detectors on its own run)."""
+    from logscan.pipeline import detect
+
+    return {
+        name: detect(loop, loop_detectors(loop.loaded), grace_s=grace_s, progress=progress)
+        for name, loop in prepared.loops.items()
+    }
+
+
+def loop_runs(prepared) -> list:
+    """Every loop of a prepared log, the primary first, as the recovery engine takes them."""
+    from logscan.recovery import LoopRun
+
+    pairs = [(prepared.profile.loop_name, prepared), *prepared.loops.items()]
+    return [LoopRun(name, one.model, one.run, one.trace) for name, one in pairs]
+
+
+def recover_analysis(analysis):
+    """The profile's [recovery] over every loop: the anomalies of its detector's alarms (or of the
+    ground truth, `detector = "oracle"`), each recovered from a consistent checkpoint
+    (`logscan.recovery.recover`). None, with a warning, when the oracle has no truth to read."""
+    from logscan.profiles.loops import ORACLE
+    from logscan.recovery import RecoverySettings, anomalies_from_alarms, anomalies_from_truth, recover
+
+    spec = analysis.profile.recovery
+    settings = RecoverySettings(**spec.settings)
+    loops = loop_runs(analysis.prepared)
+    if any(loop.trace is None or loop.trace.P_post is None for loop in loops):
+        analysis.warnings.append("recovery skipped: a loop's filter kept no covariance (no EKF ran)")
+        return None
+    if spec.detector == ORACLE:
+        if analysis.prepared.log.truth is None:
+            analysis.warnings.append('recovery skipped: detector = "oracle" needs the log\'s ground truth')
+            return None
+        anomalies = anomalies_from_truth(analysis.events, settings.detection_time_s, loops)
+    else:
+        analyses = {loops[0].name: analysis, **analysis.loops}
+        alarms = {
+            name: [a for r in one.results if spec.detector in (None, r.detector) for a in r.alarms]
+            for name, one in analyses.items()
+        }
+        anomalies = anomalies_from_alarms(alarms, loops)
+    return recover(loops, anomalies, settings)
