@@ -26,13 +26,13 @@ def merge_pieces(pieces: Sequence[_Piece], gap_s: float) -> list[Anomaly]:
     for start, end, targets in sorted(pieces, key=lambda p: (p[0], p[1])):
         if out and start <= out[-1].t_end + gap_s:
             last = out[-1]
-            out[-1] = Anomaly(last.t_detect, max(last.t_end, end), _join(last.targets, targets))
+            out[-1] = Anomaly(last.t_detect, max(last.t_end, end), join_targets(last.targets, targets))
         else:
             out.append(Anomaly(start, max(start, end), targets))
     return out
 
 
-def _join(a, b):
+def join_targets(a, b):
     if a is None or b is None:
         return None
     joined = {loop: tuple(groups) for loop, groups in a.items()}

@@ -22,8 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from logscan.filters.trace import EkfTrace
 from logscan.recovery.agreement import agreed_at, agreement_status, held_inputs
-from logscan.recovery.anomalies import _join
+from logscan.recovery.anomalies import join_targets
 from logscan.recovery.bounds import k_sigma_bound, t_max, worst_case
 from logscan.recovery.checkpoints import (
     Checkpoints,
@@ -61,7 +62,7 @@ class _LoopPart:
     loop: LoopRun
     t: np.ndarray  # the slice's times (common frame)
     k1: int
-    part: object  # EkfTrace of the slice
+    part: EkfTrace  # the re-run of the slice
     flagged: tuple[str, ...]
 
 
@@ -92,7 +93,7 @@ def recover(
         record, fills = _recover_one(anomaly, ctx, blocked)
         while j < len(queue) and queue[j].t_detect <= _span_end(record, anomaly):
             anomaly = Anomaly(
-                anomaly.t_detect, max(anomaly.t_end, queue[j].t_end), _join(anomaly.targets, queue[j].targets)
+                anomaly.t_detect, max(anomaly.t_end, queue[j].t_end), join_targets(anomaly.targets, queue[j].targets)
             )
             j += 1
             record, fills = _recover_one(anomaly, ctx, blocked)
