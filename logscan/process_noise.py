@@ -130,7 +130,7 @@ def evaluate(model, runs: Sequence, noise_std: dict[str, np.ndarray], scale: np.
 
     sums: dict[str, float] = {}
     counts: dict[str, int] = {}
-    cost, samples = 0.0, 0
+    terms: dict[str, np.ndarray] = {}  # per group: sum of log S_jj, of y_j^2 / S_jj, outputs
     for run in runs:
         Q = scaled_Q(model.default_Q(run.dt), scale)
         trace = run_ekf(model, run, Q=Q, R=noise_std, store_gain=False, store_S=False, store_innovations=True)
@@ -138,15 +138,28 @@ def evaluate(model, runs: Sequence, noise_std: dict[str, np.ndarray], scale: np.
             used = trace.updated[:, g] & np.isfinite(trace.nis_group[:, g])
             sums[name] = sums.get(name, 0.0) + float(trace.nis_group[used, g].sum())
             counts[name] = counts.get(name, 0) + int(used.sum())
-        y = trace.y.astype(np.float64)
-        S = trace.S_diag.astype(np.float64)
-        ok = np.isfinite(y) & np.isfinite(S) & (S > 0)
-        # -2 log L of each output on its own: log S_jj + y_j^2 / S_jj (constants dropped)
-        cost += float(np.sum(np.log(S[ok]) + y[ok] ** 2 / S[ok]))
-        samples += int(ok.sum())
+        for name, offset, size in zip(trace.group_names, trace.group_offsets.tolist(), trace.group_sizes.tolist()):
+            y = trace.y[:, offset : offset + size].astype(np.float64)
+            S = trace.S_diag[:, offset : offset + size].astype(np.float64)
+            ok = np.isfinite(y) & np.isfinite(S) & (S > 0)
+            parts = terms.setdefault(name, np.zeros(3))
+            parts += (float(np.log(S[ok]).sum()), float((y[ok] ** 2 / S[ok]).sum()), float(ok.sum()))
     sizes = {name: model.group(name).size for name in sums}
     nis = {name: (sums[name] / (sizes[name] * counts[name]) if counts[name] else np.nan, counts[name]) for name in sums}
-    return Evaluation(nis=nis, cost=cost, samples=samples)
+    return Evaluation(nis=nis, cost=_concentrated_cost(terms), samples=int(sum(t[2] for t in terms.values())))
+
+
+def _concentrated_cost(terms: dict[str, np.ndarray]) -> float:
+    """-2 log L of each output on its own, log S_jj + y_j^2 / S_jj summed (constants dropped), with
+    each group's S scaled by c_g = mean(y_j^2 / S_jj), the c_g that makes it least:
+    sum log S_jj + n_g log c_g + n_g per group. The level of S is the R scaling's to set (mean NIS
+    per output 1); with it taken out, the cost of a Q scale is what the innovations' time structure
+    says, not how wide S is, and R and Q do not trade along the line where NIS is 1."""
+    cost = 0.0
+    for log_S, nis, n in terms.values():
+        if n > 0:
+            cost += log_S + n * np.log(nis / n) + n
+    return float(cost)
 
 
 @dataclass
