@@ -21,6 +21,7 @@ from logscan.calibration import base_noise_std, calibrate, calibrated_runs, proc
 from logscan.models import get_model
 from logscan.pipeline import load_profile_for
 from logscan.process_noise import evaluate, scale_vector, scaled_Q, state_blocks
+from logscan.report.training_page import render_training_html
 
 Q_ACCEL, Q_ANGACC = 0.2, 1.0  # the quadcopter's defaults: the simulated process noise
 SIZES = {"accel": 3, "gyro": 3, "position": 3, "attitude": 3}
@@ -101,6 +102,12 @@ def test_q_calibration_brings_an_unseen_log_within_nis_half_to_two_better_than_r
     for name, entry in calibration["groups"].items():  # R was right: it stays near the profile's
         np.testing.assert_allclose(entry["noise_std"], entry["profile_noise_std"], rtol=0.15, err_msg=name)
     assert 1 <= calibration["iterations"] <= 6
+    page = render_training_html(json.loads(tables.read_text()))  # the training report's table
+    assert (
+        f"process noise Q: body_rate (p, q, r)</td><td>model&#39;s Q x 1</td><td>Q x {blocks['body_rate']['scale']:.3g}"
+        in page
+    )
+    assert "Q x 1 (not identifiable from these logs)" in page
 
     before = _unseen_nis(cli, unseen, profiles[factor], tmp_path)
     after = _unseen_nis(cli, unseen, profiles[factor], tmp_path, "--tables", tables)

@@ -325,6 +325,23 @@ def _calibration_rows(calibration: Mapping | None) -> list[dict]:
             "nis_after": f"{entry.get('mean_nis_per_output_after', float('nan')):.3g}",
             "note": " (at the floor: the process noise may be too large)" if entry.get("at_floor") else "",
         })  # fmt: skip
+    return rows + _process_noise_rows(calibration)
+
+
+def _process_noise_rows(calibration: Mapping | None) -> list[dict]:
+    """The Q scale of each block of states (`logscan.process_noise`), as rows of the same table."""
+    rows = []
+    for name, entry in ((calibration or {}).get("process_noise_blocks") or {}).items():
+        identified = bool(entry.get("identified"))
+        rows.append({
+            "name": f"process noise Q: {name} ({', '.join(map(str, entry.get('states') or []))})",
+            "before": "model's Q x 1",
+            "after": f"Q x {entry.get('scale', 1.0):.3g}" if identified else "Q x 1 (not identifiable from these logs)",
+            "updates": "",
+            "nis_before": "",
+            "nis_after": "",
+            "note": "",
+        })  # fmt: skip
     return rows
 
 
