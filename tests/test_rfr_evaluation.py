@@ -1,0 +1,75 @@
+"""The recovery evaluation (bench/rfr_scenarios.py) on one unseen seed of the paper's ground robot:
+recovery beats the shared EKF during the anomalies, and the k-sigma bound covers the truth."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "bench"))
+import rfr_scenarios as rfr  # noqa: E402
+
+SEED = 101  # the bench's first unseen seed
+
+
+@pytest.fixture(scope="module")
+def robot_log(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rfr")
+    return str(rfr.simulate(str(root / f"robot-{SEED}.mcap"), SEED)), root
+
+
+def measure(robot_log, variant: rfr.Variant) -> dict:
+    path, root = robot_log
+    profile = root / f"{variant.detector}-{variant.method}-{variant.shifted}.toml"
+    profile.write_text(rfr.profile_text(path, variant, 1.0), encoding="utf-8")
+    return rfr.pooled(
+        [{variant.label: rfr.measure_variant(path, str(profile), shifted=variant.shifted)}], variant.label
+    )
+
+
+def test_truth_is_read_on_the_loops_grids_and_the_anomaly_windows_are_the_papers(robot_log):
+    from logscan.pipeline import analyze_log
+
+    path, root = robot_log
+    profile = root / "oracle.toml"
+    profile.write_text(rfr.profile_text(path, rfr.Variant("oracle", "rollforward"), 1.0), encoding="utf-8")
+    analysis = analyze_log(path, str(profile))
+    outer = analysis.recovery.loops["outer"]
+    truth = rfr.true_states(path, analysis.prepared.log.truth, "outer", analysis.prepared.run.start_ns, outer.t)
+    # outside the attacks the shared EKF tracks the truth within a few of its sigmas
+    mask = rfr.anomaly_mask(analysis.events, outer.t)
+    healthy = ~mask & (outer.t < 3.0)
+    assert np.max(np.abs(analysis.prepared.trace.x_post[healthy, 0] - truth[healthy, 0])) < 0.5
+    # 3.25-5 s and 8.25-10 s on the 10 Hz grid: 3.3 .. 4.9 and 8.3 .. 9.9
+    assert mask.sum() == 2 * 17 and outer.t[mask][0] == pytest.approx(3.3)
+
+
+def test_oracle_recovery_beats_the_ekf_during_the_anomalies(robot_log):
+    for method in rfr.METHODS:
+        figures = measure(robot_log, rfr.Variant("oracle", method))
+        assert figures["covered"] == 1.0
+        assert figures["rec"] < 0.8 * figures["ekf"], (method, figures["rec"], figures["ekf"])
+        # the worst case (Proposition 5.1) is far looser than the k-sigma bound
+        assert figures["worst_x"] > 10 * figures["bound_x"]
+
+
+def test_with_the_simulators_input_timing_the_bound_covers_the_truth(robot_log):
+    """The diagnostic (inputs held one step later, as the simulator applies them): the recovered
+    error is under the prototype's roll-forward 1.01 m and the 3-sigma bound covers >= 90 %."""
+    figures = measure(robot_log, rfr.Variant("oracle", "rollforward", shifted=True))
+    assert figures["coverage"] >= 0.9
+    assert figures["rec"] < 1.01
+    assert figures["rec"] < 0.3 * figures["ekf"]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the simulator applies the input it logs at t_k over [t_k, t_k+1), the EKF kernel reads the input held "
+    "at step k as the one over (t_k-1, t_k]: one step off, so the roll-forward drifts outside its bound "
+    "(docs/evaluation.md, checkpointing and roll-forward recovery)",
+)
+def test_the_pipelines_bound_covers_the_truth(robot_log):
+    assert measure(robot_log, rfr.Variant("oracle", "rollforward"))["coverage"] >= 0.9
