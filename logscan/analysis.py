@@ -37,6 +37,7 @@ class Analysis:
     warnings: list[str] = field(default_factory=list)
     loops: dict[str, Analysis] = field(default_factory=dict)  # a hierarchical profile's further loops
     recovery: Any = None  # logscan.recovery.Recovery, when the profile asks for [recovery]
+    recovery_view: Any = None  # logscan.recovery_view.RecoveryView: what the report draws of it
 
     # --- the prepared log, read through ------------------------------------------------------------
     @property
@@ -201,6 +202,30 @@ class Analysis:
             "scores": {name: score.to_dict() for name, score in self.scores.items()},
             "against_px4": self.against_baseline(),
             "warnings": list(self.warnings),
+            **({"loops": {name: loop.loop_summary(clock) for name, loop in self.loops.items()}} if self.loops else {}),
+            **({"recovery": self.recovery_summary(clock)} if self.recovery is not None else {}),
+        }
+
+    def loop_summary(self, clock) -> dict[str, Any]:
+        """A further loop's own part of the summary: its model, rate, verdict and detectors."""
+        return {
+            "model": self.model.name,
+            "rate_hz": self.profile.vehicle.rate_hz,
+            "verdict": self.verdict(),
+            "n_alarms": len(self.alarms),
+            "incidents": [incident.to_dict(clock) for incident in self.incidents],
+            "filter": self.prepared.filter_summary(),
+            "detectors": [_stamped(result.to_dict(), clock) for result in self.results],
+        }
+
+    def recovery_summary(self, clock) -> dict[str, Any]:
+        """One record per recovered anomaly (`logscan.recovery.AnomalyRecord`), times also in the
+        log's clock."""
+        keys = ("t_detect", "t_end", "t_checkpoint", "t_recovered_end", "t_agreed")
+        return {
+            "method": self.recovery.settings.method,
+            "k_sigma": self.recovery.settings.k_sigma,
+            "anomalies": [clock.stamp(record.to_dict(), keys) for record in self.recovery.anomalies],
         }
 
     def report_input(self, grace_s: float | None = None):
@@ -226,6 +251,7 @@ class Analysis:
             context=getattr(self.prepared, "context", None),
             innovations=getattr(self.prepared, "innovations", None),
             clock=self.clock,
+            recovery=self.recovery_view,
         )
 
 

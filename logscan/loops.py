@@ -75,12 +75,27 @@ def loop_runs(prepared) -> list:
     return [LoopRun(name, one.model, one.run, one.trace) for name, one in pairs]
 
 
+def _sensor_alarms(alarms: list, groups: list[str]) -> list:
+    """The alarms without those of a statistic over every sensor (``nis.all``) that an alarm naming
+    a sensor overlaps: that one says which sensors to leave out, the sum only that something is off
+    (kept alone, it would make the anomaly generic: every sensor left out)."""
+    from logscan.incidents import group_of
+
+    named = [a for a in alarms if group_of(a.signal, groups) is not None]
+    return named + [
+        a
+        for a in alarms
+        if group_of(a.signal, groups) is None and not any(n.start <= a.end and a.start <= n.end for n in named)
+    ]
+
+
 def recover_analysis(analysis):
     """The profile's [recovery] over every loop: the anomalies of its detector's alarms (or of the
     ground truth, `detector = "oracle"`), each recovered from a consistent checkpoint
     (`logscan.recovery.recover`). None, with a warning, when the oracle has no truth to read."""
     from logscan.profiles.loops import ORACLE
     from logscan.recovery import RecoverySettings, anomalies_from_alarms, anomalies_from_truth, recover
+    from logscan.recovery_view import recovery_view
 
     spec = analysis.profile.recovery
     settings = RecoverySettings(**spec.settings)
@@ -96,8 +111,13 @@ def recover_analysis(analysis):
     else:
         analyses = {loops[0].name: analysis, **analysis.loops}
         alarms = {
-            name: [a for r in one.results if spec.detector in (None, r.detector) for a in r.alarms]
-            for name, one in analyses.items()
+            loop.name: _sensor_alarms(
+                [a for r in analyses[loop.name].results if spec.detector in (None, r.detector) for a in r.alarms],
+                list(loop.run.groups),
+            )
+            for loop in loops
         }
         anomalies = anomalies_from_alarms(alarms, loops)
-    return recover(loops, anomalies, settings)
+    recovery = recover(loops, anomalies, settings)
+    analysis.recovery_view = recovery_view(loops, recovery, settings.k_sigma)  # before the series go
+    return recovery

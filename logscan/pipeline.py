@@ -369,6 +369,7 @@ def detect(
     from logscan.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
 
     step = progress or (lambda message: None)
+    free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     if sensor_views:
         _pack_innovations(prepared, detectors, reuse_samples=free_series)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
@@ -391,7 +392,6 @@ def detect(
                     if on
                 )
             )
-    free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     for position, detector in enumerate(detectors):
         if free_series:
             release_unread(prepared, detectors[position:])

@@ -14,6 +14,7 @@ import urllib.parse
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from logscan.report.context_figures import context_figures
 from logscan.report.figures import Figure, detector_figures, merge_spans
 from logscan.report.margins import Margin, result_margins
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
+from logscan.report.recovery_figures import recovery_figures, recovery_rows
 from logscan.report.sensor_figures import named_group_figures
 from logscan.results import AlarmInterval, DetectorResult, FaultEvent, Incident
 from logscan.run_context import RunContext
@@ -65,6 +67,8 @@ class ReportInput:
                       section whose alarms name it. None: not drawn.
     clock:            the log's own clock (`logscan.clock`): the time axis, the tables and the
                       headlines show times in it. Default: seconds since the log's start.
+    recovery:         the recovered estimates per loop and state and one record per anomaly
+                      (`logscan.recovery_view`). None: no recovery section.
     """
 
     log_facts: dict
@@ -84,6 +88,7 @@ class ReportInput:
     context: RunContext | None = None
     innovations: Innovations | None = None
     clock: Clock = field(default_factory=Clock)
+    recovery: Any = None  # logscan.recovery_view.RecoveryView: the recovery section, when [recovery] ran
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -355,7 +360,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     sections, figures = _sections(report, t, truth_spans, margins)
     clock = report.clock
     context = context_figures(report.context, report.incidents, clock)
-    figure_json = figures_json(figures, t, point_budget, extra=context, clock=clock)
+    recovered = recovery_figures(report.recovery, clock)
+    figure_json = figures_json(figures, t, point_budget, extra=context + recovered, clock=clock)
 
     alarms = flat_alarms(report.results)
     rows = _alarm_rows(report, events, has_truth)
@@ -386,8 +392,10 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         has_truth=has_truth,
         events=_event_rows(events, clock),
         sections=sections,
-        n_figures=len(figures) + len(context),
+        n_figures=len(figures) + len(context) + len(recovered),
         context=context,
+        recovery=recovered,
+        recovery_rows=recovery_rows(report.recovery, clock),
         figure_json=figure_json,
         plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
         plotlyjs_src=plotlyjs_src,
