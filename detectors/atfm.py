@@ -28,6 +28,7 @@ import numpy as np
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.modes import mode_segments
 from logscan.detectors.params import Interval, Options, RealList
+from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError, ProfileError
 
 EXTRA_CAPTIONS = {
@@ -169,6 +170,17 @@ class AtfmDetector(Detector):
         "margin": [Interval(float, 0, None)],
         "fusion_window": [Interval(int, 1, None)],
     }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        parts = signal.split(".", 2)
+        if len(parts) != 3 or parts[0] != "atfm":
+            return None
+        _, group, sensor = parts
+        if "~" in sensor:  # a pair's strong inconsistency
+            a, b = (group_words(s) for s in sensor.split("~", 1))
+            return f"{a} and {b} disagree longer than a healthy transient does (A-TFM, {group_words(group)})"
+        return f"{group_words(sensor)} disagrees with the other redundant sensors (A-TFM, named sensor)"
 
     def check_params(self) -> None:
         super().check_params()

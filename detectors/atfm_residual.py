@@ -30,6 +30,7 @@ from logscan.detectors.atfm import (
 )
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.modes import mode_changes, mode_segments
+from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError
 
 
@@ -84,6 +85,16 @@ class AtfmResidualDetector(Detector):
     fit_params = TABLE_FIT_PARAMS
     defaults = dict(TABLE_DEFAULTS)  # window: w in updates of the channel's group; row by the command
     parameter_constraints = dict(TABLE_CONSTRAINTS)
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        prefix, _, channel = signal.partition(".")
+        if prefix != cls.name or not channel:
+            return None
+        return (
+            f"{group_words(channel)} strays from the filter's prediction longer than a healthy transient "
+            "does at this speed (A-TFM on the filter residual)"
+        )
 
     def check_params(self) -> None:
         super().check_params()

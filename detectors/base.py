@@ -216,6 +216,14 @@ class Detector:
         incident's headline (`logscan.incidents`); None: the default wording."""
         return None
 
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        """What one of its statistics means to a flight-test engineer, in plain words ("the state
+        prediction disagrees with the measurements"), shown next to the statistic's name in the
+        report, the alarm table, incidents and the summary. Every statistic a detector produces
+        should have one (tests/test_words.py checks the built-ins); default: `signal_words`."""
+        return cls.signal_words(signal)
+
     def with_params(self, **params: Any) -> Detector:
         """A copy with ``params`` changed (checked), trained state kept (`logscan.tuning`)."""
         other = copy.deepcopy(self)

@@ -32,6 +32,7 @@ import numpy as np
 from logscan.adaptive_threshold import adaptive_band, trailing_mean_var
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.params import Boolean, Interval, Options, RealList
+from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError, ProfileError
 
 POSITIVE = Interval(float, 0, None, closed="neither")
@@ -60,6 +61,13 @@ def coding_vectors(P_prior_diag: np.ndarray, state_scale: np.ndarray, sigma_floo
     c = np.minimum(1.0, r_max / cv.sum(axis=1))
     cv *= c[:, None]
     return cv
+
+
+SIGNAL_LABELS = {
+    "e_x": "the state prediction disagrees with the measurements (encoded check of the state)",
+    "e_v": "the filter's uncertainty disagrees with what the measurements show (encoded check of the variance)",
+    "e_s": "the vehicle's own estimate disagrees with the filter's (encoded check of the on-board state)",
+}
 
 
 class EncodedEkfDetector(Detector):
@@ -113,6 +121,13 @@ class EncodedEkfDetector(Detector):
         "onboard_state_check": [Boolean()],
         "rho_s": [POSITIVE],
     }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        if signal.startswith("rejected."):
+            group = group_words(signal.removeprefix("rejected."))
+            return f"{group} sample outside its physical range: the filter refused it"
+        return SIGNAL_LABELS.get(signal)
 
     def learns(self) -> bool:
         """Only the baseline variant learns (its fixed threshold); the adaptive one needs nothing."""

@@ -123,6 +123,18 @@ class HealthDetector(Detector):
     # --- the shared plumbing -------------------------------------------------------------------
 
     @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        if signal == NOTHING:
+            return "the autopilot's health topics (none in the log: nothing checked)"
+        parts = signal.split(".", 2)
+        words = CHECK_WORDS.get(parts[1]) if len(parts) > 1 and parts[0] == PREFIX else None
+        if words is None or len(parts) == 2:
+            return words
+        if parts[1] == "timeout":
+            return f"the topic {parts[2]} stopped arriving"
+        return f"{words} ({parts[2]})"  # one instance: battery 1, imu0
+
+    @classmethod
     def signal_words(cls, signal: str) -> str | None:
         parts = signal.split(".")
         return CHECK_WORDS.get(parts[1]) if len(parts) > 1 and parts[0] == PREFIX else None

@@ -38,6 +38,7 @@ import numpy as np
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.modes import mode_changes
 from logscan.detectors.params import Interval
+from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
 
 SPREAD_FLOOR = 1e-9  # relative floor of a column's spread: a zero spread alarms on rounding
@@ -171,6 +172,13 @@ class KgnDetector(Detector):
         "probe_slope": [Interval(float, None, None)],
         "probe_s": [Interval(float, 0, None, closed="neither")],
     }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        prefix, _, group = signal.partition(".")
+        if prefix != "kgn" or not group:
+            return None
+        return f"the filter weighs the {group_words(group)} unlike on healthy runs (Kalman gain norm)"
 
     def needs(self, run=None) -> Needs:
         return Needs.of(ekf=("K",))

@@ -17,6 +17,7 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Boolean, Interval
+from logscan.detectors.words import group_words
 
 # A NIS beyond this (far beyond any chi-square threshold: a bit flip, a diverging filter) is summed
 # apart: in the running sum it would cost every later window its precision (1e20 leaves no digit of
@@ -97,6 +98,17 @@ class NisDetector(Detector):
         "n_persist": [Interval(int, 1, None)],
         "overall": [Boolean()],
     }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        prefix, _, group = signal.partition(".")
+        if prefix != "nis" or not group:
+            return None
+        if group == "all":
+            return (
+                "all sensors together disagree with the model's prediction beyond their noise (overall innovation test)"
+            )
+        return f"{group_words(group)} disagrees with the model's prediction beyond its noise (innovation test)"
 
     def _alpha(self, trace) -> float:
         if self.alpha is not None:

@@ -228,6 +228,18 @@ class Px4EstimatorDetector(Detector):
     is_baseline = True  # PX4's own verdict: logscan's model-based alarms are reported against it
 
     @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        if signal == NOTHING:
+            return "PX4's estimator test ratios (none in the log: nothing checked)"
+        parts = signal.split(".")
+        if len(parts) < 2 or parts[0] != PREFIX:
+            return None
+        source = parts[-1]
+        words = SOURCE_WORDS.get(source, source.replace("aid_", "").replace("_test_ratio", "").replace("_", " "))
+        instance = f", estimator {parts[1].removeprefix('ekf')}" if len(parts) > 2 else ""
+        return f"PX4's own innovation test of the {words} (above 1: PX4 rejects it{instance})"
+
+    @classmethod
     def signal_words(cls, signal: str) -> str | None:
         parts = signal.split(".")
         if len(parts) < 2 or parts[0] != PREFIX:

@@ -22,6 +22,7 @@ import numpy as np
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.nis import chi2_threshold, window_sums
 from logscan.detectors.params import Boolean, Interval, StringList
+from logscan.detectors.words import group_words
 from logscan.errors import UsageError
 
 EXTRA_CAPTIONS = {
@@ -67,6 +68,17 @@ class Chi2Detector(Detector):
         "states": [StringList()],
         "per_group": [Boolean()],
     }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        if signal == "chi2.lower":
+            return "the measurements disagree with the model whatever its uncertain parameters (robust interval test)"
+        if signal == "chi2.upper":
+            return "the measurements may disagree with the model for some of its parameters (possible fault)"
+        if signal.startswith("chi2.lower."):
+            group = group_words(signal.removeprefix("chi2.lower."))
+            return f"{group} disagrees with the model whatever its uncertain parameters (robust interval test)"
+        return None
 
     def needs(self, run=None) -> Needs:
         return Needs.of(ubikf=())

@@ -256,7 +256,15 @@ class Analysis:
 
 
 def _stamped(result: dict, clock) -> dict:
-    """A detector result's JSON with its alarms' times also in the log's clock."""
+    """A detector result's JSON with its alarms' times also in the log's clock, and its statistics'
+    plain words (``labels``; each alarm's ``label``)."""
+    from logscan.incidents import signal_label
+
+    detector = result["detector"]
+    result["labels"] = {name: signal_label(name, detector) for name in result.get("series", {})}
     for key in ("alarms", "possible_faults", "suppressed"):
-        result[key] = [clock.stamp(item) for item in result.get(key, [])]
+        result[key] = [
+            clock.stamp(item) | {"label": signal_label(item.get("signal", ""), detector)}
+            for item in result.get(key, [])
+        ]
     return result

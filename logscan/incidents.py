@@ -25,40 +25,38 @@ from collections.abc import Sequence
 import numpy as np
 
 from logscan.alarms import merge_close
+from logscan.detectors import words
 from logscan.results import AlarmInterval, DetectorResult, Incident
 
 DEFAULT_GAP_S = 1.0
 
-# Plain words for common measurement-group names (others are shown as named by the model).
-GROUP_WORDS = {
-    "accel": "accelerometer",
-    "gyro": "gyroscope",
-    "baro": "barometer",
-    "mag": "magnetometer",
-    "gps": "GPS",
-    "gps_speed": "GPS speed",
-    "position": "position sensor",
-    "attitude": "attitude sensor",
-    "encoder": "wheel encoders",
-    "yaw_rate": "yaw-rate sensor",
-    "steer_angle": "steering-angle sensor",
-    "current": "motor current sensor",
-    "gnss_position": "GNSS position",
-    "gnss_velocity": "GNSS velocity",
-    "heading": "compass heading",
-    "odometry": "odometry",
-}
+# Plain words for measurement-group names (others are shown as named by the model): the detectors'
+# shared vocabulary (`logscan.detectors.words`), here for the headlines of group incidents
+GROUP_WORDS = words.GROUP_WORDS
+
+
+def _detector_class(detector: str):
+    """The registered class of ``detector``, None when the registry has none (or it is broken)."""
+    from logscan.detectors.registry import default_registry
+
+    try:
+        return default_registry().get(detector)
+    except Exception:  # noqa: BLE001 - an unknown or broken detector keeps the default wording
+        return None
 
 
 def plain_words(signal: str, detector: str) -> str | None:
     """The phrase a detector gives one of its statistics (`Detector.signal_words`), else None."""
-    from logscan.detectors.registry import default_registry
+    cls = _detector_class(detector)
+    return None if cls is None else cls.signal_words(signal)
 
-    try:
-        cls = default_registry().get(detector)
-    except Exception:  # noqa: BLE001 - an unknown or broken detector keeps the default wording
-        return None
-    return cls.signal_words(signal)
+
+def signal_label(signal: str, detector: str) -> str:
+    """What a statistic means in plain words (`Detector.signal_label`), "" when its detector gives
+    none: shown next to the statistic's name, never instead of it."""
+    cls = _detector_class(detector)
+    label = cls.signal_label(signal) if cls is not None else None
+    return str(label) if label else ""
 
 
 def merge_fragments(results: Sequence[DetectorResult], gap_s: float = DEFAULT_GAP_S) -> None:
@@ -99,9 +97,11 @@ def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0
     ratio = source.peak_ratio
     peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
     rejected = f"; {n_rejected} impossible sample{'s' if n_rejected != 1 else ''} rejected" if n_rejected else ""
-    phrase = plain_words(source.signal, source.detector) if not group else None
-    if phrase is None:
-        what = GROUP_WORDS.get(group, group.replace("_", " ")) if group else f"{source.detector} {source.signal}"
+    phrase = (
+        None if group else (plain_words(source.signal, source.detector) or signal_label(source.signal, source.detector))
+    )
+    if not phrase:
+        what = words.group_words(group) if group else f"{source.detector} {source.signal}"
         phrase = f"{what} inconsistent"
     return phrase, f"{source.signal}, peak {peak}{rejected}"
 

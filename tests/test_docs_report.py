@@ -32,6 +32,9 @@ PARTS = {
     "`[mode]` channel": 'aria-label="mode: /flight_mode/mode"',
     "the path is\ndrawn from above": 'aria-label="path: position"',
     "## Log, profile and model": 'id="log-facts"',
+    "## Times: the log's own clock": "times: time since log start (s)",
+    "(`clock`)": 'id="log-clock"',
+    "what its statistics mean in plain words": 'class="statistics"',
 }
 
 

@@ -75,6 +75,7 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
         lines.append(f"  times: {_clock_line(clock)}")
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
+    from logscan.incidents import signal_label
     from logscan.report import overview
 
     shown = 0
@@ -85,9 +86,12 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
                 break
             ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
             note = overview.alarm_note(alarm)  # an indicator's ratio means nothing: its count, in words
+            label = signal_label(alarm.signal, alarm.detector)  # plain words beside the name
             lines.append(
                 f"    {alarm.detector:<12} {alarm.signal:<16} {_clock_time(clock, alarm.start)} "
-                f"{_clock_time(clock, alarm.end)} " + (f"  {note}" if note else f"{ratio:>9}")
+                f"{_clock_time(clock, alarm.end)} "
+                + (f"  {note}" if note else f"{ratio:>9}")
+                + (f"  {label}" if label else "")
             )
             shown += 1
     if len(analysis.alarms) > shown:

@@ -57,6 +57,7 @@ class Figure:
     caption: str = ""
     hlines: list[tuple[float, str]] = field(default_factory=list)  # (y, name)
     y_range: tuple[float, float] | None = None  # initial view; None: autorange
+    subtitle: str = ""  # the statistic in plain words, under the title (`Detector.signal_label`)
 
 
 def merge_spans(spans: Sequence[tuple[float, float]], min_width: float, min_gap: float) -> list:
@@ -167,9 +168,15 @@ def _grid_series(result: DetectorResult, n: int, problems: list[str]) -> dict[st
 
 
 def detector_figures(
-    result: DetectorResult, t: np.ndarray, truth_spans: list, model: Mapping, problems: list[str]
+    result: DetectorResult,
+    t: np.ndarray,
+    truth_spans: list,
+    model: Mapping,
+    problems: list[str],
+    labels: Mapping[str, str] | None = None,
 ) -> list[Figure]:
-    """The figures of one detector section.
+    """The figures of one detector section; ``labels``: statistic -> its plain words, shown beside
+    its name (a statistic's own figure: under the title; the shared ratio figure: in the caption).
 
     Statistics with only positive upper thresholds (chi-square tests such as NIS, per group and
     overall) share one "statistic / threshold" figure; otherwise each statistic gets its own
@@ -197,11 +204,16 @@ def detector_figures(
 
     if len(series) >= 2 and all(_positive_upper_only(bands.get(name, NO_BAND)) for name in series):
         figures = [_ratio_figure(result.detector, t, series, bands, alarm_spans, shading(list(series)))]
+        named = [f"{name}: {labels[name]}" for name in series if (labels or {}).get(name)]
+        if named:
+            figures[0].caption += " The statistics: " + "; ".join(named) + "."
     else:
         figures = [
             _band_figure(result, t, name, values, bands.get(name, NO_BAND), alarm_spans, shading([name]))
             for name, values in series.items()
         ]
+        for fig, name in zip(figures, series):
+            fig.subtitle = (labels or {}).get(name, "")
     figures.extend(_extra_figures(result, n, model, shading(list(series)), problems))
     return figures
 

@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from logscan.clock import Clock
+from logscan.incidents import signal_label
 from logscan.report.margins import Margin, peak_margin, ratio_text
 from logscan.results import AlarmInterval, DetectorResult, Incident
 
@@ -79,6 +80,7 @@ def margin_rows(
         rows.append({
             "detector": m.detector,
             "statistic": m.statistic,
+            "label": signal_label(m.statistic, m.detector),
             "kind": m.kind or "—",
             "ratio": "—" if is_rejected(m.statistic) else ratio_text(m.ratio),
             "time": "—" if m.time is None or is_rejected(m.statistic) else clock.short(m.time),

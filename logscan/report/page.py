@@ -22,6 +22,7 @@ from logscan import scoring
 from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.clock import Clock
 from logscan.errors import InputError
+from logscan.incidents import signal_label
 from logscan.report import overview
 from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
 from logscan.report.context_figures import context_figures
@@ -154,6 +155,7 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
             "index": i,
             "detector": alarm.detector,
             "signal": alarm.signal,
+            "label": signal_label(alarm.signal, alarm.detector),
             "start": clock.short(start),
             "end": clock.short(end),
             "t0": repr(clock.axis_value(start)),  # where the time axis zooms to: its own units
@@ -186,7 +188,9 @@ def _incident_rows(incidents: Sequence[Incident], clock: Clock) -> list[dict]:
     return [
         {"index": i, "headline": inc.headline_in(clock), "start": clock.short(inc.start),
          "end": clock.short(inc.end), "t0": repr(clock.axis_value(inc.start)), "t1": repr(clock.axis_value(inc.end)),
-         "n_alarms": len(inc.alarms), "checks": ", ".join(sorted({a.signal for a in inc.alarms}))}
+         "n_alarms": len(inc.alarms),
+         "checks": [{"name": name, "label": signal_label(name, detector)}
+                    for detector, name in sorted({(a.detector, a.signal) for a in inc.alarms}, key=lambda c: c[1])]}
         for i, inc in enumerate(incidents, 1)
     ]  # fmt: skip
 
@@ -282,7 +286,8 @@ def _sections(
     drawn: set[str] = set()  # groups whose sensor figures are placed
     for result in report.results:
         problems: list[str] = []
-        figs = detector_figures(result, t, truth_spans, report.model, problems)
+        labels = {name: signal_label(name, result.detector) for name in result.series}
+        figs = detector_figures(result, t, truth_spans, report.model, problems, labels)
         # the sensor beside the statistic: right after the statistic's figure
         figs[1:1] = named_group_figures(result, report.innovations, t, truth_spans, drawn)
         own = [m for m in margins if m.detector == result.detector]
@@ -293,6 +298,7 @@ def _sections(
             "warnings": [str(w) for w in result.warnings] + problems,
             "coverage": str(result.info.get("coverage", "")),
             "info": info_rows(result.info),
+            "statistics": [{"name": name, "label": label} for name, label in labels.items()],
             "figures": figs,
         })  # fmt: skip
     sections, figures = overview.order_sections(sections), []
