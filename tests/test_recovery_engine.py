@@ -194,3 +194,15 @@ def test_inputs_are_checked():
 
 def test_params_are_the_two_group_loop():
     assert set(PARAMS["C"]) == {"gps", "odo"}
+
+
+def test_the_agreement_test_uses_a_groups_per_sample_noise():
+    from logscan.recovery.agreement import AGREE, DISAGREE, agreement_status
+
+    loop, _ = make_loop(N=250, seed=3, attacks=[("gps", 10.0, 25.0, 3.0)])
+    part = rerun(loop, 90, 200, ("gps",))
+    status = agreement_status(loop, 90, part, ("gps",), 0.99)
+    assert np.mean(status[20:] == DISAGREE) > 0.9  # the 10-sigma bias, against R = 0.3^2
+    loop.run.groups["gps"].noise_std_series = np.full((250, 1), 100.0)  # the receiver says 100 m
+    status = agreement_status(loop, 90, part, ("gps",), 0.99)
+    assert np.all(status[1:] == AGREE)

@@ -28,34 +28,49 @@ AGREE, DISAGREE, NO_SAMPLE = 1, -1, 0
 
 
 @njit(cache=True)
-def group_nis(model_id, gid, p, x_prior, P_prior, u, z, fresh, R, lo, hi, wrap, nis):
-    """NIS of one group's fresh samples against a prior; inf for an impossible sample.
+def group_predictions(model_id, gid, p, x_prior, u, steps, hx, H):
+    """h(x_R) and H at the given steps: x_prior (N, n), u (N, nu) finite, steps (s,) int;
+    hx (s, m) and H (s, m, n) filled."""
+    for a in range(steps.size):
+        k = steps[a]
+        hx[a] = h_meas(model_id, gid, p, x_prior[k], u[k])
+        H[a] = H_meas(model_id, gid, p, x_prior[k], u[k])
 
-    x_prior (N, n), P_prior (N, n, n), u (N, nu) finite, z (N, m), fresh (N,), R (m, m),
-    lo/hi (m,) physical range, wrap (m,) angular outputs; nis (N,) NaN-filled by the caller."""
-    N = x_prior.shape[0]
-    m = z.shape[1]
-    for k in range(N):
-        if not fresh[k]:
-            continue
-        ok = True
-        for j in range(m):
-            if not (np.isfinite(z[k, j]) and z[k, j] >= lo[j] and z[k, j] <= hi[j]):
-                ok = False
-        if not ok:
-            nis[k] = np.inf
-            continue
-        x = x_prior[k]
-        hx = h_meas(model_id, gid, p, x, u[k])
-        H = H_meas(model_id, gid, p, x, u[k])
-        # y = z - h(x_R), angles wrapped to [-pi, pi)
-        y = z[k] - hx
-        for j in range(m):
-            if wrap[j]:
-                y[j] = (y[j] + np.pi) % (2.0 * np.pi) - np.pi
-        # S = H P_R H^T + R;  NIS = y^T S^-1 y (solve, no inverse)
-        S = H @ P_prior[k] @ H.T + R
-        nis[k] = np.dot(y, np.linalg.solve(S, y))
+
+def group_nis(packed, g: int, part: EkfTrace, u: np.ndarray, fresh: np.ndarray) -> np.ndarray:
+    """(N,) NIS of group g's fresh samples against the recovery's prior, NaN elsewhere, inf for an
+    impossible sample (non-finite or outside the physical range)."""
+    o, m = int(packed.group_offsets[g]), int(packed.group_sizes[g])
+    cols = slice(o, o + m)
+    z = packed.z[:, cols]
+    nis = np.full(z.shape[0], np.nan)
+    possible = np.all(np.isfinite(z) & (z >= packed.range_lo[cols]) & (z <= packed.range_hi[cols]), axis=1)
+    nis[fresh & ~possible] = np.inf
+    steps = np.flatnonzero(fresh & possible)
+    hx, H = np.empty((steps.size, m)), np.empty((steps.size, m, part.x_prior.shape[1]))
+    group_predictions(packed.model_id, packed.group_ids[g], packed.p, part.x_prior, u, steps, hx, H)
+    # y = z - h(x_R) (angles wrapped to [-pi, pi));  S = H P_R H^T + R;  NIS = y^T S^-1 y
+    y = z[steps] - hx
+    wrap = packed.wrap[cols]
+    y[:, wrap] = (y[:, wrap] + np.pi) % (2.0 * np.pi) - np.pi
+    S = H @ part.P_prior[steps] @ np.swapaxes(H, 1, 2) + sample_R(packed, cols, steps)
+    nis[steps] = np.einsum("ki,ki->k", y, np.linalg.solve(S, y[:, :, None])[:, :, 0])
+    return nis
+
+
+def sample_R(packed, cols: slice, steps: np.ndarray) -> np.ndarray:
+    """(s, m, m) the group's R at each step: a per-sample noise std (a receiver's own accuracy)
+    replaces its output's row and column, as in the EKF kernel."""
+    R = np.repeat(packed.R_all[cols, cols][None], steps.size, axis=0)
+    if packed.R_std.shape[0] != packed.z.shape[0]:
+        return R
+    sd = packed.R_std[steps][:, cols]
+    for j in range(sd.shape[1]):  # loop over the group's outputs
+        rows = np.isfinite(sd[:, j]) & (sd[:, j] > 0)
+        R[rows, j, :] = 0.0
+        R[rows, :, j] = 0.0
+        R[rows, j, j] = sd[rows, j] ** 2
+    return R
 
 
 def held_inputs(u: np.ndarray) -> np.ndarray:
@@ -78,18 +93,11 @@ def agreement_status(loop: LoopRun, k1: int, part: EkfTrace, flagged: Collection
     status = np.full(N, NO_SAMPLE, dtype=np.int8)
     for name in flagged:
         g = packed.group_names.index(name)
-        cols = slice(int(packed.group_offsets[g]), int(packed.group_offsets[g] + packed.group_sizes[g]))
-        nis = np.full(N, np.nan)
         fresh = packed.fresh[:, g].copy()
         fresh[0] = False  # the checkpoint's own sample was already used by the shared filter
-        z = np.ascontiguousarray(packed.z[:, cols])
-        R = np.ascontiguousarray(packed.R_all[cols, cols])
-        group_nis(
-            packed.model_id, packed.group_ids[g], packed.p, part.x_prior, part.P_prior, u, z, fresh, R,
-            packed.range_lo[cols], packed.range_hi[cols], packed.wrap[cols], nis,
-        )  # fmt: skip
+        nis = group_nis(packed, g, part, u, fresh)
         limit = chi2.ppf(quantile, int(packed.group_sizes[g]))
-        sampled = np.isfinite(nis) | np.isinf(nis)
+        sampled = ~np.isnan(nis)
         status[sampled & (nis <= limit) & (status != DISAGREE)] = AGREE
         status[sampled & ~(nis <= limit)] = DISAGREE
     return status

@@ -62,26 +62,31 @@ def jacobian_bound(model_id, p, x, u, dt):
     return Abar
 
 
-@njit(cache=True)
-def proposition_51(Abar, eps_delta, eps_w, J):
+def matrix_powers(A: np.ndarray, J: int) -> np.ndarray:
+    """(J, n, n) A^0 .. A^(J-1), by doubling: log2(J) batched products, no loop over steps."""
+    n = A.shape[0]
+    powers = np.eye(n)[None].repeat(max(J, 1), axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        have = 1
+        while have < J:
+            take = min(have, J - have)
+            # A^(have + i) = A^have A^i,  A^have = A^(have - 1) A
+            powers[have : have + take] = (powers[have - 1] @ A) @ powers[:take]
+            have += take
+    return powers[:J]
+
+
+def proposition_51(Abar: np.ndarray, eps_delta: np.ndarray, eps_w: np.ndarray, J: int) -> np.ndarray:
     """(J, n) B_j = Abar^j eps_delta + sum_{i=0..j} Abar^i eps_w (B_0 = eps_delta); inf once the
     powers overflow."""
-    n = eps_delta.size
-    B = np.empty((J, n))
     if J == 0:
-        return B
+        return np.empty((0, eps_delta.size))
+    powers = matrix_powers(np.asarray(Abar, dtype=np.float64), J)
+    with np.errstate(over="ignore", invalid="ignore"):
+        noise = np.cumsum(powers @ eps_w, axis=0)  # sum_{i=0..j} Abar^i eps_w
+        B = powers @ eps_delta + noise
     B[0] = eps_delta
-    Apow = np.eye(n)
-    noise = eps_w.copy()  # i = 0 term
-    for j in range(1, J):
-        Apow = Abar @ Apow
-        noise = noise + Apow @ eps_w
-        B[j] = Apow @ eps_delta + noise
-    for j in range(J):
-        for i in range(n):
-            if np.isnan(B[j, i]):  # inf * 0 in an overflowed power: unbounded
-                B[j, i] = np.inf
-    return B
+    return np.where(np.isnan(B), np.inf, B)  # inf * 0 in an overflowed power: unbounded
 
 
 def worst_case(model, dt: float, x: np.ndarray, u: np.ndarray, P_k1: np.ndarray, Q: np.ndarray, k_sigma: float):
