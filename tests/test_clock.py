@@ -169,3 +169,52 @@ def test_real_ulogs_name_their_clock_on_stdout(cli, tmp_path, name):
     # a real PX4 flight counts boot time; PX4 SITL stamps wall-clock time (2024): UTC
     expected = UTC if clock["offset_s"] > 9.46e8 else BOOT_TIME
     assert clock["name"] == expected and f"times: {expected}" in result.stdout
+
+
+# once every figure is drawn: clicks the alarm row, then records the x range and type of the first figure
+ZOOM_PROBE = """<script>
+(function () {
+  function probe() {
+    if (!document.body.getAttribute("data-time-axis")) { setTimeout(probe, 50); return; }
+    var row = document.querySelector("#alarm-table tr[data-start]");
+    row.click();
+    setTimeout(function () {
+      var plot = document.querySelector(".ls-timeseries.js-plotly-plot");
+      document.body.setAttribute("data-probe", JSON.stringify({range: plot.layout.xaxis.range,
+        type: plot._fullLayout.xaxis.type, label: document.getElementById("ls-zoom").textContent}));
+    }, 1000);
+  }
+  probe();
+})();
+</script>
+"""
+
+
+def test_a_row_click_zooms_a_utc_date_axis_to_its_alarm(tmp_path):
+    from test_report_browser import CHROMIUM, dump_dom, js_errors
+    from test_report_overview import quiet_and_alarming, report_of
+
+    from logscan.report import render_report
+
+    if CHROMIUM is None:
+        pytest.skip("chromium not installed")
+    report = report_of(quiet_and_alarming(), verdict="2 alarms")
+    report.clock = Clock(UTC, GNSS_UTC_S, utc=True, utc_zero_s=GNSS_UTC_S)
+    path = tmp_path / "report.html"
+    render_report(report, path, plotlyjs=tmp_path / "js")
+    page = path.read_text(encoding="utf-8")
+    assert "<th>start (UTC)</th>" in page and ">14:49:13.000<" in page  # the alarm at 3.00 s
+    path.write_text(page.replace("</body>", ZOOM_PROBE + "</body>"), encoding="utf-8")
+    dom, _ = dump_dom(path, tmp_path / "profile")
+    assert js_errors(dom) == ""
+    probe = json.loads(re.search(r"data-probe=\"([^\"]*)\"", dom).group(1).replace("&quot;", '"'))
+    assert probe["type"] == "date"
+    # plotly keeps the range as given: epoch ms from report.js, a date string from its own zoom
+    low, high = (
+        np.datetime64(int(v), "ms") if isinstance(v, (int, float)) else np.datetime64(v.replace(" ", "T"))
+        for v in probe["range"]
+    )
+    alarm = np.datetime64("2024-03-18T14:49:13")
+    # zoomed around the alarm (3.00-3.19 s) with a margin of at least 2 s, not the whole 10 s
+    assert low < alarm < high and (high - low) < np.timedelta64(9, "s"), probe
+    assert "14:49:1" in probe["label"] and "UTC" in probe["label"]
