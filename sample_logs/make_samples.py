@@ -7,6 +7,8 @@ Every log is `logscan simulate` output: the same model, faults, seed and duratio
 bytes on any machine with the same numpy/numba versions (tests/test_sample_logs.py checks one).
 `ros2_ins.mcap` (format "ros2-mcap") is an `ins` simulation written as a ROS 2 recording by
 `logscan.simulate.ros2_export.write_ros2_mcap`: standard message types, no embedded profile or truth.
+The ground robot's logs (`ROBOT_SAMPLES`, `logscan simulate ground_robot --scenario ...`) are made
+alone with `python sample_logs/make_samples.py ground_robot_attack.mcap ground_robot_healthy.mcap`.
 """
 
 from __future__ import annotations
@@ -166,9 +168,47 @@ SAMPLES = (
 )
 
 
-def generate(sample: Sample, out_dir: Path) -> list[Path]:
+@dataclass(frozen=True)
+class RobotSample:
+    """A `logscan simulate ground_robot` log: its anomalies come from a scenario, not faults."""
+
+    name: str
+    scenario: str  # paper, random or healthy
+    seed: int
+    duration: float
+    fmt: str = "mcap-ros2"  # binary fields: under 300 kB at 100 Hz
+    about: str = ""
+    model: str = "ground_robot"
+
+
+ROBOT_SAMPLES = (
+    RobotSample(
+        "ground_robot_attack.mcap",
+        "paper",
+        16,
+        12.0,
+        about="the checkpointing / roll-forward-recovery paper's hierarchical robot (unicycle loop 10 Hz, two "
+        "DC-motor loops 100 Hz) on its circle: +[5, 5, 0] on the mocap and +20000 rad/s on both encoders over "
+        "3.25-5 s, the negatives over 8.25-10 s (6 truth events, one per group and anomaly); 12 s, not the "
+        "paper's 15, to stay small",
+    ),
+    RobotSample(
+        "ground_robot_healthy.mcap",
+        "healthy",
+        17,
+        12.0,
+        about="the hierarchical robot on its circle; no anomaly",
+    ),
+)
+
+
+def generate(sample: Sample | RobotSample, out_dir: Path) -> list[Path]:
     """Write one sample log (and its sidecars) into ``out_dir``."""
     from logscan.simulate import parse_fault, simulate, write_simulation
+
+    if isinstance(sample, RobotSample):
+        sim = simulate(sample.model, duration=sample.duration, seed=sample.seed, scenario=sample.scenario)
+        return write_simulation(sim, out_dir / sample.name, sample.fmt)
 
     sim = simulate(
         sample.model,
@@ -205,6 +245,9 @@ def readme_table() -> str:
         )
         speed = s.speed or ("modes" if s.model == "dc_motor" else "-")
         lines.append(f"| `{s.name}` | {s.model} | {s.duration:g} s | {s.seed} | {speed} | {faults} | {s.about} |")
+    for r in ROBOT_SAMPLES:
+        scenario = f"scenario {r.scenario}"
+        lines.append(f"| `{r.name}` | {r.model} | {r.duration:g} s | {r.seed} | - | {scenario} | {r.about} |")
     return "\n".join(lines) + "\n"
 
 
@@ -213,12 +256,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("names", nargs="*", help="sample file names (default: all)")
     parser.add_argument("--out", type=Path, default=HERE, help="output folder (default: sample_logs/)")
     args = parser.parse_args(argv)
-    known = {s.name: s for s in SAMPLES}
+    known = {s.name: s for s in (*SAMPLES, *ROBOT_SAMPLES)}
     unknown = [n for n in args.names if n not in known]
     if unknown:
         print(f"unknown sample(s): {', '.join(unknown)}; known: {', '.join(known)}", file=sys.stderr)
         return 2
-    for sample in [known[n] for n in args.names] or list(SAMPLES):
+    for sample in [known[n] for n in args.names] or list(known.values()):
         for path in generate(sample, args.out):
             print(f"{path}  {path.stat().st_size / 1e6:.2f} MB")
     return 0

@@ -28,7 +28,9 @@ _FAULT_HELP = (
     "  logscan simulate dc_motor --duration 600 --glitches 2 --seed 3 -o jackal.mcap\n\n"
     "  logscan simulate dc_motor --speed 1.0,0.4@30 --fault bias:gps_speed:45:75:0.22 --duration 100 -o j.mcap\n\n"
     "  logscan simulate hover_uav --fault roll-bias -o hover.mcap\n\n"
-    "  logscan simulate ins --duration 120 --seed 3 --fault imu-bias:accel.x:60:70:1.0 -o ins.mcap"
+    "  logscan simulate ins --duration 120 --seed 3 --fault imu-bias:accel.x:60:70:1.0 -o ins.mcap\n\n"
+    "  logscan simulate ground_robot -o robot.mcap\n\n"
+    "  logscan simulate ground_robot --scenario random --seed 3 -o robot_3.mcap"
 )
 @click.argument("model_name", metavar="MODEL")
 @click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
@@ -58,7 +60,17 @@ _FAULT_HELP = (
     help="Target of those faults: a sensor (accel.x, /imu/gyro.y), an actuator (motor1) "
     "or an on-board state (vx, all).",
 )
-@click.option("--duration", type=float, default=60.0, show_default=True, help="Log length (s).")
+@click.option(
+    "--duration", type=float, default=None, help="Log length (s). Default: 60 (ground_robot: 15, the paper's run)."
+)
+@click.option(
+    "--scenario",
+    type=click.Choice(["paper", "random", "healthy"]),
+    default=None,
+    help="ground_robot's anomalies: paper (+[5, 5, 0] on the mocap and +20000 rad/s on both encoders "
+    "over 3.25-5 s, the negatives over 8.25-10 s; the default), random (1-3 anomalies from --seed) "
+    "or healthy.",
+)
 @click.option(
     "--rate",
     "rate_hz",
@@ -116,6 +128,7 @@ def simulate(
     magnitude,
     target,
     duration,
+    scenario,
     rate_hz,
     fmt,
     aggressive,
@@ -128,16 +141,22 @@ def simulate(
 ) -> None:
     """Simulate MODEL in closed loop with injected faults and write the log.
 
-    MODEL is quadcopter, steer_by_wire, dc_motor, hover_uav or ins. The log holds commands (/cmd), sensors, the
-    on-board EKF's state and variance (/ekf/state, /ekf/variance), set-points and the true state
-    (/truth/state); the fault events and the matching profile are embedded, so `logscan analyze`
-    and `logscan evaluate` need no other file. Same seed, same bytes.
+    MODEL is quadcopter, steer_by_wire, dc_motor, hover_uav, ins or ground_robot. The log holds
+    commands (/cmd), sensors, the on-board EKF's state and variance (/ekf/state, /ekf/variance),
+    set-points and the true state (/truth/state); the fault events and the matching profile are
+    embedded, so `logscan analyze` and `logscan evaluate` need no other file. Same seed, same
+    bytes.
 
     ins (the IMU-driven inertial navigation model) is open loop: a multirotor flies a reference
     (hover at 10 m, then minimum-jerk moves between random waypoints); its IMU (/imu/gyro.*,
     /imu/accel.*, 250 Hz) is the model's input and takes sensor faults (accel.x .. gyro.z, imu-*
     aliases) like GNSS (/gnss), barometer (/baro), heading (/mag) and attitude (/mocap); actuator
     and estimator faults do not apply.
+
+    ground_robot is the checkpointing / roll-forward-recovery paper's hierarchical robot: an outer
+    unicycle loop at 10 Hz (mocap, /cmd/outer.v and .w) over two DC-motor loops at 100 Hz (/enc,
+    /motor_cmd), each with its own on-board filter (/ekf/..., per loop) and true state (/truth/...);
+    its anomalies come from --scenario, its profile has one [loops.<name>] table per motor loop.
     """
     from logscan.filters.warmup import COMPILING_NOTE
     from logscan.simulate import parse_fault, write_simulation
@@ -156,6 +175,8 @@ def simulate(
             path=output_path,
             hint="give the log a .mcap or .csv name, e.g. -o q.mcap",
         )
+    if duration is None:
+        duration = 15.0 if model_name == "ground_robot" else 60.0
     if fmt is None:
         fmt = "csv" if output_path.lower().endswith(".csv") else "mcap-json"
     specs = []
@@ -188,6 +209,7 @@ def simulate(
         glitches_per_min=glitches_per_min,
         speed=speed,
         noise=noise,
+        scenario=scenario,
     )
     if progress:
         compiled = " (compiling included)" if cold else ""
@@ -214,6 +236,10 @@ def _simulator_cold(model_name: str = "") -> bool:
         from logscan.simulate.ins_sim import apply_sensor_faults
 
         return not kernel_cached(apply_sensor_faults)
+    if model_name == "ground_robot":
+        from logscan.simulate.ground_robot_kernels import robot_loop
+
+        return not kernel_cached(robot_loop)
     from logscan.simulate.runner import closed_loop
 
     return not kernel_cached(closed_loop)

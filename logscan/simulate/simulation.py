@@ -272,6 +272,7 @@ def simulate(
     glitches_per_min: float = 0.0,
     speed: str | None = None,
     noise: str | None = None,
+    scenario: str | None = None,
 ) -> Simulation:
     """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``.
 
@@ -285,6 +286,11 @@ def simulate(
     (`logscan.simulate.scenario.parse_speed`); None: the mode cycle. ``noise``: "speed" (the speed
     sensors' noise std grows with the speed, `scenario.SPEED_NOISE`; dc_motor only) or "constant"
     (the model's noise_std); None: speed when ``speed`` is given, else constant.
+
+    ``model_name`` "ground_robot" is the hierarchical robot of `logscan.simulate.ground_robot_sim`
+    (not a model: an outer unicycle loop over two DC-motor loops); it takes ``scenario`` ("paper",
+    the default, "random" or "healthy"), ``duration`` and ``seed`` only, and returns a
+    `GroundRobotSimulation`. ``scenario`` is for ground_robot alone.
     """
     if not (0.0 < duration <= MAX_DURATION_S):
         raise UsageError(f"--duration {duration:g} s is out of range", hint="use 0 < duration <= 86400 s")
@@ -292,6 +298,13 @@ def simulate(
         raise UsageError(f"--seed {seed} is negative", hint="use a seed >= 0")
     if not (0.0 <= glitches_per_min <= 600.0):
         raise UsageError(f"--glitches {glitches_per_min:g} per minute is out of range", hint="use 0 .. 600")
+    if model_name == "ground_robot":  # several loops, several rates (logscan.simulate.ground_robot_sim)
+        from logscan.simulate.ground_robot_sim import check_ground_robot_options, simulate_ground_robot
+
+        check_ground_robot_options(faults, rate_hz, aggressive, glitches_per_min, speed, noise)
+        return simulate_ground_robot(scenario or "paper", duration=duration, seed=seed)
+    if scenario is not None:
+        raise UsageError("--scenario is for ground_robot", hint="drop --scenario")
     rng = np.random.default_rng(seed)
     scenario_rng = np.random.default_rng([seed, 1])
     if model_name == "ins":  # the IMU is the model's input: no closed loop (logscan.simulate.ins_sim)
