@@ -132,7 +132,8 @@ def _group_entries(base, scale, before, after) -> dict:
 
 def _process_noise_entries(model, blocks: dict[str, BlockFit], before, after, converged: bool) -> dict:
     """The process-noise part of the calibration document: the scale of each state's Q (what
-    `logscan analyze --tables` applies), each block's, and the innovations' cost before and after."""
+    `logscan analyze --tables` applies), each block's, and the innovations' cost per output before
+    and after (`logscan.process_noise.Evaluation.cost` over its outputs: lower is likelier)."""
     names = model.state_names
     scales = {name: float(np.exp(fit.log_scale)) if fit.identified else 1.0 for name, fit in blocks.items()}
     return {

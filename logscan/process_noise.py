@@ -125,7 +125,8 @@ def calibrated_Q(model, dt: float) -> np.ndarray | None:
 @dataclass
 class Evaluation:
     """One filter pass over the training logs: each group's (mean NIS per output, updates) and the
-    innovations' cost (-2 log L, composite: the module docstring) over ``samples`` outputs."""
+    innovations' cost (-2 log L, composite, each group's level of S taken out: `_concentrated_cost`)
+    over ``samples`` outputs."""
 
     nis: dict[str, tuple[float, int]]
     cost: float
@@ -165,7 +166,7 @@ def _concentrated_cost(terms: dict[str, np.ndarray]) -> float:
     says, not how wide S is, and R and Q do not trade along the line where NIS is 1."""
     cost = 0.0
     for log_S, nis, n in terms.values():
-        if n > 0:
+        if n > 0 and nis > 0:  # nis = 0: innovations all zero, a group that says nothing
             cost += log_S + n * np.log(nis / n) + n
     return float(cost)
 
