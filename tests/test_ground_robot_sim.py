@@ -235,3 +235,17 @@ def test_sample_logs_are_small_and_inspect_reads_them(name, cli, sample):
     log = read_log(path)
     assert log.truth["model"] == "ground_robot"
     assert len(log.truth["events"]) == (6 if "attack" in name else 0)
+
+
+def test_wheels_coupling_moves_the_robot_with_the_motors_wheel_speeds():
+    """The coupled plant kept for study: each 10 ms Euler step of the unicycle uses the motors'
+    true wheel speeds (v = Rw (w_r + w_l) / 2, w = Rw (w_r - w_l) / Lw), not the commands."""
+    sim = simulate_ground_robot("healthy", seed=1, duration=2.0, coupling="wheels", process_noise=False)
+    p = RobotParams(0.01, 10.0, 2.0, 0.5, 3.3, 4.4, 0.05, 0.5, 13.2, 1.525, 0.275, np.inf, 0.1, 1.0, 1.0)
+    x = sim.x_true[0].copy()
+    for k in range(sim.ratio):
+        v, w = body_speeds(sim.m_true[k, 0, 1], sim.m_true[k, 1, 1], p)
+        x += np.array([v * np.cos(x[2]), v * np.sin(x[2]), w]) * 0.01
+    np.testing.assert_allclose(x, sim.x_true[1], rtol=1e-12, atol=1e-12)
+    commanded = get_model("unicycle").f(sim.x_true[0], sim.u_outer[0], 0.1)
+    assert np.abs(commanded - sim.x_true[1]).max() > 1e-3
