@@ -539,9 +539,14 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
     input_transforms = _linear_transforms(
         profile.inputs.factors or None, profile.inputs.offsets or None, len(input_channels)
     )
+    # an input stamped when it starts to act holds from the next step: step k (x_{k-1} -> x_k)
+    # takes the input logged at or before t_{k-1}
+    input_grid_ns = grid_ns
+    if profile.inputs.stamp == "start" and n:  # the previous grid time itself (not t_k - dt, rounded)
+        input_grid_ns = np.concatenate(([grid_ns[0] - int(round(dt * _NS))], grid_ns[:-1]))
     for j, ch in enumerate(input_channels):
         transform = input_transforms[j] if input_transforms else None
-        aligner.hold(ch, grid_ns, profile.inputs.stale_s, transform, z=u[:, j], fresh=scratch)
+        aligner.hold(ch, input_grid_ns, profile.inputs.stale_s, transform, z=u[:, j], fresh=scratch)
     u_fresh = np.ones(n, dtype=bool)
     for j in range(u.shape[1]):
         u_fresh &= np.isfinite(u[:, j])

@@ -75,3 +75,31 @@ def test_a_loop_may_not_take_the_primary_loops_name():
     with pytest.raises(ProfileError) as info:
         parse_profile(BASE.replace("[loops.left_motor", "[loops.outer"))
     assert "the top level is already the loop 'outer'" in " ".join(info.value.problems)
+
+
+def test_input_stamp_start_holds_a_command_from_the_next_step(tmp_path):
+    """u_k applied over [t_k, t_k+1) (a command stamped when issued) must drive x_k -> x_k+1: the
+    EKF's step k+1, so alignment holds it from the next grid step; the default ("end") holds it at
+    its own step (an IMU's increments over the step ending at their stamp)."""
+    import numpy as np
+
+    from logscan.align import align
+    from logscan.log import Channel, Log, SourceInfo
+
+    t_ns = (np.arange(20) * 1e8).astype(np.int64)  # 10 Hz, on the grid
+    log = Log(
+        channels={
+            "/u": Channel("/u", t_ns, np.arange(20.0)),
+            "/y": Channel("/y", t_ns, np.zeros(20)),
+        },
+        source=SourceInfo(path="mem", format="test"),
+    )
+    profile = parse_profile(BASE.split("[loops.left_motor]")[0])
+    at_end = align(log, profile).u[:, 0]
+    assert profile.inputs.stamp == "end" and at_end[5] == 5.0
+    started = parse_profile(BASE.split("[loops.left_motor]")[0].replace('u0 = "/u"', 'u0 = "/u"\nstamp = "start"'))
+    assert started.inputs.stamp == "start" and parse_profile(started.to_toml()) == started
+    at_start = align(log, started).u[:, 0]
+    np.testing.assert_array_equal(at_start[1:], at_end[:-1])  # one step later, exactly
+    with pytest.raises(ProfileError, match="stamp"):
+        parse_profile(BASE.replace('u0 = "/u"', 'u0 = "/u"\nstamp = "middle"'))

@@ -21,6 +21,7 @@ from logscan.profiles.schema import (
     GROUP_STALE_PERIODS,
     INPUT_FRAMES,
     INPUT_STALE_STEPS,
+    INPUT_STAMPS,
     INPUT_TABLE_KEYS,
     MAX_ALARM_DURATION_S,
     MAX_ALARM_PERSIST,
@@ -340,7 +341,7 @@ class _Checker:
         mapping: dict[str, str | list[str]] = {}
         ok = True
         for key, value in data.items():
-            if key == "stale_s":
+            if key in ("stale_s", "stamp"):
                 continue
             if isinstance(value, str) and value:
                 mapping[key] = value
@@ -366,7 +367,11 @@ class _Checker:
             ok = False
         if stale is None:
             stale = INPUT_STALE_STEPS / vehicle.rate_hz if vehicle else 0.0
-        return InputSpec(mapping=mapping, stale_s=stale) if ok else None
+        stamp = data.get("stamp", "end")
+        if stamp not in INPUT_STAMPS:
+            self.add(f"{where} stamp", f"must be {_choices(INPUT_STAMPS)}, got {stamp!r}")
+            ok = False
+        return InputSpec(mapping=mapping, stale_s=stale, stamp=stamp) if ok else None
 
     def input_table(self, data: dict, where: str) -> dict | None:
         """An input's inline table ``{ channels = [...], frame = "flu", scale = 1, offset = 0 }``,

@@ -72,6 +72,7 @@ MAX_STALE_S = 1_000_000.0  # 11.6 days, longer than any log (logscan.log.MAX_SPA
 #: Staleness defaults (seconds unless said otherwise), documented in docs/profiles.md.
 GROUP_STALE_PERIODS = 2.5  # a measurement group holds for 2.5 of its own sample periods
 INPUT_STALE_STEPS = 2  # inputs hold for 2 grid periods
+INPUT_STAMPS = ("end", "start")  # [inputs] stamp: see InputSpec.stamp
 MODE_STALE_S = 1.0
 ONBOARD_STALE_S = 0.5
 
@@ -127,6 +128,10 @@ class InputSpec:
 
     mapping: dict[str, str | list[str] | dict[str, Any]] = field(default_factory=dict)
     stale_s: float = 0.0
+    # "end": a logged input acts over the grid step that ends at its stamp (an IMU's increments, the
+    # EKF's x_k = f(x_{k-1}, u_k)); "start": it acts from its stamp on (a command stamped when issued,
+    # applied over [t_k, t_k+1)), so alignment holds it from the next step
+    stamp: str = "end"
     names: list[str] = field(default_factory=list, compare=False)
     channels: list[str] = field(default_factory=list, compare=False)
     factors: list[float] = field(default_factory=list, compare=False)  # empty: all 1
@@ -382,6 +387,8 @@ class Profile:
         if self.vehicle.params:
             out["vehicle"]["params"] = self.vehicle.params
         out["inputs"] = {**self.inputs.mapping, "stale_s": self.inputs.stale_s}
+        if self.inputs.stamp != "end":
+            out["inputs"]["stamp"] = self.inputs.stamp
         out["measurements"] = {}
         for g in self.measurements.values():
             table: dict[str, Any] = {"channels": g.channels, "rate_hz": g.rate_hz, "stale_s": g.stale_s}
