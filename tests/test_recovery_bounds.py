@@ -8,7 +8,8 @@ from recovery_linear import make_loop
 
 from logscan.models.linear import discretise
 from logscan.recovery import Anomaly, RecoverySettings, recover
-from logscan.recovery.bounds import jacobian_bound, proposition_51
+from logscan.recovery.bounds import proposition_51
+from logscan.recovery.kernels import call_literal, jacobian_bound
 
 RUNS = 500
 
@@ -57,6 +58,6 @@ def test_the_jacobian_bound_of_a_linear_model_is_abs_ad():
     loop, _ = make_loop(N=20)
     m = loop.model
     p = m.param_vector(0.1)
-    Abar = jacobian_bound(m.model_id, p, loop.trace.x_post, loop.run.u, 0.1)
+    Abar = call_literal(jacobian_bound, m.model_id, p, loop.trace.x_post, loop.run.u, 0.1)
     Ad = discretise(np.array(m._A), np.array(m._B), np.array(m._Q), 0.1)[0]
     np.testing.assert_allclose(Abar, np.abs(Ad), rtol=1e-12)

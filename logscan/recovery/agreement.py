@@ -14,27 +14,15 @@ from __future__ import annotations
 from collections.abc import Collection
 
 import numpy as np
-from numba import njit
 from scipy.stats import chi2
 
 from logscan.filters.ekf import pack_run
 from logscan.filters.trace import EkfTrace
-from logscan.models.dispatch import H_meas, h_meas
-from logscan.numba_cache import follow_dependencies
+from logscan.recovery.kernels import call_literal, group_predictions
 from logscan.recovery.records import LoopRun
 from logscan.recovery.rerun import shared_R, slice_run
 
 AGREE, DISAGREE, NO_SAMPLE = 1, -1, 0
-
-
-@njit(cache=True)
-def group_predictions(model_id, gid, p, x_prior, u, steps, hx, H):
-    """h(x_R) and H at the given steps: x_prior (N, n), u (N, nu) finite, steps (s,) int;
-    hx (s, m) and H (s, m, n) filled."""
-    for a in range(steps.size):
-        k = steps[a]
-        hx[a] = h_meas(model_id, gid, p, x_prior[k], u[k])
-        H[a] = H_meas(model_id, gid, p, x_prior[k], u[k])
 
 
 def group_nis(packed, g: int, part: EkfTrace, u: np.ndarray, fresh: np.ndarray) -> np.ndarray:
@@ -48,7 +36,8 @@ def group_nis(packed, g: int, part: EkfTrace, u: np.ndarray, fresh: np.ndarray) 
     nis[fresh & ~possible] = np.inf
     steps = np.flatnonzero(fresh & possible)
     hx, H = np.empty((steps.size, m)), np.empty((steps.size, m, part.x_prior.shape[1]))
-    group_predictions(packed.model_id, packed.group_ids[g], packed.p, part.x_prior, u, steps, hx, H)
+    gid = np.int64(packed.group_ids[g])
+    call_literal(group_predictions, packed.model_id, gid, packed.p, part.x_prior, u, steps, hx, H)
     # y = z - h(x_R) (angles wrapped to [-pi, pi));  S = H P_R H^T + R;  NIS = y^T S^-1 y
     y = z[steps] - hx
     wrap = packed.wrap[cols]
@@ -115,6 +104,3 @@ def agreed_at(t: np.ndarray, status: np.ndarray, t_from: float, hold_s: float) -
     ok = (t_next > t[cand] + hold_s) & (t[cand] + hold_s <= t[-1] + 1e-9)
     found = np.flatnonzero(ok)
     return float(t[cand[found[0]]]) if found.size else None
-
-
-follow_dependencies(__name__)

@@ -25,10 +25,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from numba import njit
 
-from logscan.models.dispatch import predict
-from logscan.numba_cache import follow_dependencies
+from logscan.recovery.kernels import call_literal, jacobian_bound
 
 
 def k_sigma_bound(P: np.ndarray, k_sigma: float) -> np.ndarray:
@@ -43,23 +41,6 @@ def t_max(t: np.ndarray, bound: np.ndarray, allowed: Mapping[int, float], t_dete
         over = np.flatnonzero(bound[:, i] > E)
         out[i] = float(t[over[0]] - t_detect) if over.size else None
     return out
-
-
-@njit(cache=True)
-def jacobian_bound(model_id, p, x, u, dt):
-    """Abar = max_k |F_k| elementwise, F_k = df/dx at (x[k-1], u[k]) for k = 1..J-1.
-
-    x (J, n) recovered trajectory, u (J, nu) finite inputs; returns (n, n)."""
-    n = x.shape[1]
-    Abar = np.zeros((n, n))
-    for k in range(1, x.shape[0]):
-        F = predict(model_id, p, x[k - 1], u[k], dt)[1]
-        for i in range(n):
-            for j in range(n):
-                a = abs(F[i, j])
-                if a > Abar[i, j]:
-                    Abar[i, j] = a
-    return Abar
 
 
 def matrix_powers(A: np.ndarray, J: int) -> np.ndarray:
@@ -94,10 +75,7 @@ def worst_case(model, dt: float, x: np.ndarray, u: np.ndarray, P_k1: np.ndarray,
     (J, nu, non-finite rows already held), from the checkpoint covariance ``P_k1``."""
     p = np.ascontiguousarray(model.param_vector(dt), dtype=np.float64)
     x = np.ascontiguousarray(x, dtype=np.float64)
-    Abar = jacobian_bound(int(model.model_id), p, x, np.ascontiguousarray(u, dtype=np.float64), float(dt))
+    Abar = call_literal(jacobian_bound, int(model.model_id), p, x, np.ascontiguousarray(u, dtype=np.float64), float(dt))
     eps_delta = k_sigma * np.sqrt(np.maximum(np.diag(P_k1), 0.0))
     eps_w = k_sigma * np.sqrt(np.maximum(np.diag(Q), 0.0))
     return proposition_51(Abar, eps_delta, eps_w, x.shape[0])
-
-
-follow_dependencies(__name__)
