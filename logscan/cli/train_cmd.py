@@ -42,9 +42,10 @@ from logscan.cli.options import (
     "--calibrate",
     is_flag=True,
     default=False,
-    help="Also calibrate the filter's measurement noise: scale each group's noise_std until its mean NIS "
-    "per output on these logs is 1 (for real logs whose sensors' noise the profile only guesses); "
-    "the detectors are then fitted on the calibrated filter.",
+    help="Also calibrate the filter's noise: each group's noise_std (its mean NIS per output on these logs "
+    "-> 1) and the process noise Q, one scale per block of like states fitted to the innovations' "
+    "likelihood (for real logs whose noise the profile only guesses); the detectors are then fitted on "
+    "the calibrated filter.",
 )
 @jobs_option
 @scheduler_option
@@ -71,12 +72,13 @@ def train(
     quiet: bool,
 ) -> None:
     """Train the lookup tables and thresholds of the profile's detectors on healthy logs (and, with
-    --calibrate, the filter's measurement noise).
+    --calibrate, the filter's measurement and process noise).
 
     LOG_OR_DIR are healthy logs (or directories of them) of one vehicle and profile. With
-    --calibrate the filter's measurement noise is calibrated first: each group's noise_std is
-    scaled until its mean NIS per output on these logs is 1 (`logscan analyze --tables` then
-    filters with it). Every detector that learns from healthy logs is fitted (on the calibrated
+    --calibrate the filter's noise is calibrated first: each group's noise_std is scaled until its
+    mean NIS per output on these logs is 1, alternating with one scale of the process noise Q per
+    block of like states, fitted to the innovations' likelihood (`logscan analyze --tables` then
+    filters with both). Every detector that learns from healthy logs is fitted (on the calibrated
     filter with --calibrate): the A-TFM table of each [redundant] group
     (eps and e per sensor and mode value), and the thresholds of the detectors the profile runs in a
     trained variant. Writes one versioned JSON (the training logs' names and SHA-256, the profile's
@@ -138,7 +140,7 @@ def _summary_lines(document: dict, output_path: str, report: str | None) -> list
 
     lines = [f"trained on {len(document['training_logs'])} log(s): {output_path}"]
     if document.get("calibration"):
-        lines.append("  measurement noise calibrated (mean NIS per output -> 1):")
+        lines.append("  filter noise calibrated (mean NIS per output -> 1; process noise Q per block):")
         lines.extend("  " + line for line in calibration_lines(document["calibration"]))
     if document.get("tuning"):
         from logscan.tuning import tuning_lines
