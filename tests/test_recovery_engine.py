@@ -131,6 +131,13 @@ def test_an_anomaly_that_never_agrees_is_cut_at_max_duration():
     assert r.t_recovered_end == pytest.approx(18.3)
 
 
+def test_an_anomaly_that_lasts_to_the_end_of_the_log_is_not_capped():
+    loop, _ = make_loop(N=200, seed=3, attacks=[("gps", 10.0, 40.0, 3.0)])
+    r = recover([loop], [Anomaly(10.3, 11.0, GPS)], RecoverySettings(max_duration_s=60.0)).anomalies[0]
+    assert not r.capped and r.t_agreed is None and "end of the log" in r.note
+    assert r.t_recovered_end == pytest.approx(19.9)
+
+
 def test_a_generic_anomaly_ends_hold_s_after_the_detectors_alarm():
     loop, _ = make_loop(N=300, seed=0)
     r = recover([loop], [Anomaly(10.0, 14.0, None)], RecoverySettings(hold_s=0.5)).anomalies[0]

@@ -139,11 +139,12 @@ def _recover_one(anomaly: Anomaly, ctx: _Context, blocked) -> tuple[AnomalyRecor
     record.checkpoint_steps = ctx.checkpoints.step_of(index)
     t_cap = anomaly.t_detect + s.max_duration_s
     parts = [_rerun_loop(lp, record.checkpoint_steps[lp.name], t_cap, anomaly, ctx) for lp in affected]
-    end, record.t_agreed, t_log_end = _anomaly_end(anomaly, parts, s)
-    record.capped = end >= t_cap
-    end = min(end, t_cap, t_log_end)
-    if end >= t_log_end and not record.capped:
+    end, record.t_agreed = _anomaly_end(anomaly, parts, s)
+    t_log_end = min(float(ctx.times[ctx.loops.index(p.loop)][-1]) for p in parts)
+    record.capped = end >= t_cap and t_log_end >= t_cap
+    if end > t_log_end and not record.capped:
         record.note = "the anomaly lasts until the end of the log"
+    end = min(end, t_cap, t_log_end)
     record.t_recovered_end = end
     record.rollforward_s = end - record.t_checkpoint
     record.alarm_kept = end > anomaly.t_end
@@ -166,21 +167,20 @@ def _rerun_loop(loop: LoopRun, k1: int, t_cap: float, anomaly: Anomaly, ctx: _Co
     return _LoopPart(loop, t_loop[k1 : k_stop + 1], k1, part, flagged)
 
 
-def _anomaly_end(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings) -> tuple[float, float | None, float]:
-    """(end of the anomaly, when the flagged groups agreed again, end of the re-run slices).
+def _anomaly_end(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings) -> tuple[float, float | None]:
+    """(end of the anomaly, uncut; when the flagged groups agreed again).
 
     Specific: every flagged loop's groups agree again (held for hold_s); generic: hold_s after the
     detector's alarm."""
-    t_log_end = min(float(p.t[-1]) for p in parts)
     if anomaly.targets is None:
-        return anomaly.t_end + s.hold_s, None, t_log_end
+        return anomaly.t_end + s.hold_s, None
     agreed = []
     for p in parts:
         status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile)
         agreed.append(agreed_at(p.t, status, anomaly.t_detect, s.hold_s))
     if any(a is None for a in agreed):
-        return np.inf, None, t_log_end
-    return max(agreed) + s.hold_s, max(agreed), t_log_end
+        return np.inf, None
+    return max(agreed) + s.hold_s, max(agreed)
 
 
 def _fill(p: _LoopPart, end: float, ctx: _Context):
