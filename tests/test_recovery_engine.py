@@ -213,3 +213,13 @@ def test_the_agreement_test_uses_a_groups_per_sample_noise():
     loop.run.groups["gps"].noise_std_series = np.full((250, 1), 100.0)  # the receiver says 100 m
     status = agreement_status(loop, 90, part, ("gps",), 0.99)
     assert np.all(status[1:] == AGREE)
+
+
+def test_each_flagged_loop_ends_when_its_own_sensors_agree_again():
+    a, _ = make_loop("a", N=400, seed=5, attacks=[("gps", 10.0, 15.0, 3.0)])
+    b, _ = make_loop("b", N=400, seed=6, attacks=[("gps", 10.0, 25.0, 3.0)])
+    r = recover([a, b], [Anomaly(10.3, 11.0, {"a": ("gps",), "b": ("gps",)})], RecoverySettings(hold_s=1.0)).anomalies[
+        0
+    ]
+    assert 16.0 - 1e-9 <= r.loop_ends["a"] <= 17.0 and 26.0 - 1e-9 <= r.loop_ends["b"] <= 27.0, r.loop_ends
+    assert r.t_recovered_end == r.loop_ends["b"] and r.t_agreed == pytest.approx(r.loop_ends["b"] - 1.0)

@@ -139,21 +139,25 @@ def _recover_one(anomaly: Anomaly, ctx: _Context, blocked) -> tuple[AnomalyRecor
     record.checkpoint_steps = ctx.checkpoints.step_of(index)
     t_cap = anomaly.t_detect + s.max_duration_s
     parts = [_rerun_loop(lp, record.checkpoint_steps[lp.name], t_cap, anomaly, ctx) for lp in affected]
-    end, record.t_agreed = _anomaly_end(anomaly, parts, s)
-    t_log_end = min(float(ctx.times[ctx.loops.index(p.loop)][-1]) for p in parts)
-    record.capped = end >= t_cap and t_log_end >= t_cap
-    if end > t_log_end and not record.capped:
-        record.note = "the anomaly lasts until the end of the log"
-    end = min(end, t_cap, t_log_end)
+    ends, agreed = _loop_ends(anomaly, parts, s)
+    record.t_agreed = None if any(a is None for a in agreed) else max(agreed)
+    for p, end in zip(parts, ends):
+        t_log_end = float(ctx.times[ctx.loops.index(p.loop)][-1])
+        record.capped |= end >= t_cap and t_log_end >= t_cap
+        if end > t_log_end and t_log_end < t_cap:
+            record.note = "the anomaly lasts until the end of the log"
+        record.loop_ends[p.loop.name] = min(end, t_cap, t_log_end)
+    end = max(record.loop_ends.values())
     record.t_recovered_end = end
     record.rollforward_s = end - record.t_checkpoint
     record.alarm_kept = end > anomaly.t_end
-    fills = []
-    for lp_part in parts:
-        fills.append(_fill(lp_part, end, ctx))
-        _t_max(lp_part, anomaly, record, ctx)
-    duration = end - anomaly.t_detect
-    record.outlasted = tuple(k for k, v in record.t_max.items() if v is not None and duration > v)
+    fills = [_fill(p, record.loop_ends[p.loop.name], ctx) for p in parts]
+    for p in parts:
+        duration = record.loop_ends[p.loop.name] - anomaly.t_detect
+        for state, T in _t_max(p, anomaly, ctx).items():
+            record.t_max[state] = T
+            if T is not None and duration > T:
+                record.outlasted += (state,)
     return record, fills
 
 
@@ -167,20 +171,18 @@ def _rerun_loop(loop: LoopRun, k1: int, t_cap: float, anomaly: Anomaly, ctx: _Co
     return _LoopPart(loop, t_loop[k1 : k_stop + 1], k1, part, flagged)
 
 
-def _anomaly_end(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings) -> tuple[float, float | None]:
-    """(end of the anomaly, uncut; when the flagged groups agreed again).
+def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings) -> tuple[list[float], list]:
+    """Per loop: (end of its span, uncut; when its flagged groups agreed again, None if never).
 
-    Specific: every flagged loop's groups agree again (held for hold_s); generic: hold_s after the
-    detector's alarm."""
+    Specific: the loop's flagged groups agree again, held for hold_s (inf if they never do); generic:
+    hold_s after the detector's alarm, every loop."""
     if anomaly.targets is None:
-        return anomaly.t_end + s.hold_s, None
+        return [anomaly.t_end + s.hold_s] * len(parts), [None] * len(parts)
     agreed = []
     for p in parts:
         status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile)
         agreed.append(agreed_at(p.t, status, anomaly.t_detect, s.hold_s))
-    if any(a is None for a in agreed):
-        return np.inf, None
-    return max(agreed) + s.hold_s, max(agreed)
+    return [np.inf if a is None else a + s.hold_s for a in agreed], agreed
 
 
 def _fill(p: _LoopPart, end: float, ctx: _Context):
@@ -203,12 +205,12 @@ def _fill(p: _LoopPart, end: float, ctx: _Context):
     return p.loop.name, p.k1, x, bound, worst
 
 
-def _t_max(p: _LoopPart, anomaly: Anomaly, record: AnomalyRecord, ctx: _Context) -> None:
-    """T_max of the loop's states with an allowed error, from the bound over the whole re-run."""
+def _t_max(p: _LoopPart, anomaly: Anomaly, ctx: _Context) -> dict[str, float | None]:
+    """ "loop.state" -> T_max of the loop's states with an allowed error, from the bound over the
+    whole re-run."""
     allowed = ctx.allowed.get(p.loop.name, {})
     if not allowed:
-        return
+        return {}
     found = t_max(p.t, k_sigma_bound(p.part.P_post, ctx.settings.k_sigma), allowed, anomaly.t_detect)
     names = p.loop.model.state_names
-    for i, value in found.items():
-        record.t_max[f"{p.loop.name}.{names[i]}"] = value
+    return {f"{p.loop.name}.{names[i]}": value for i, value in found.items()}

@@ -141,8 +141,10 @@ class AnomalyRecord:
 
     t_checkpoint: the consistent checkpoint used (k1), None when no checkpoint qualifies (then
     nothing is recovered and ``note`` says why); checkpoint_steps: loop -> k1 on its grid.
-    rollforward_s: t_recovered_end - t_checkpoint. t_agreed: when the flagged sensors agreed again
-    with the recovered prediction (held for hold_s), None if they did not (or generic).
+    rollforward_s: t_recovered_end - t_checkpoint. t_agreed: when the flagged sensors of every loop
+    agreed again with the recovered prediction (held for hold_s), None if some did not (or generic).
+    loop_ends: each affected loop's own recovered span end (a specific anomaly ends per loop, when
+    that loop's flagged sensors agree again); t_recovered_end is the latest.
     alarm_kept: the recovery went on past the detector's alarm end. capped: cut at max_duration_s
     (or at the end of the log). t_max: "loop.state" -> the first duration after t_detect where the
     bound exceeds the allowed error (negative: already at detection; None: not within the
@@ -159,6 +161,7 @@ class AnomalyRecord:
     rollforward_s: float | None = None
     t_recovered_end: float | None = None
     t_agreed: float | None = None
+    loop_ends: dict[str, float] = field(default_factory=dict)
     alarm_kept: bool = False
     capped: bool = False
     t_max: dict[str, float | None] = field(default_factory=dict)
@@ -187,6 +190,7 @@ class AnomalyRecord:
             "rollforward_s": self.rollforward_s,
             "t_recovered_end": self.t_recovered_end,
             "t_agreed": self.t_agreed,
+            "loop_ends": dict(self.loop_ends),
             "alarm_kept": self.alarm_kept,
             "capped": self.capped,
             "t_max": dict(self.t_max),
