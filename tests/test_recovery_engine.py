@@ -223,3 +223,15 @@ def test_each_flagged_loop_ends_when_its_own_sensors_agree_again():
     ]
     assert 16.0 - 1e-9 <= r.loop_ends["a"] <= 17.0 and 26.0 - 1e-9 <= r.loop_ends["b"] <= 27.0, r.loop_ends
     assert r.t_recovered_end == r.loop_ends["b"] and r.t_agreed == pytest.approx(r.loop_ends["b"] - 1.0)
+
+
+def test_a_merged_anomaly_keeps_a_loop_recovering_until_after_its_latest_detection():
+    # b's sensor never agrees again, so the second attack on a falls inside the first anomaly's span
+    # (no consistent checkpoint in between): a must be recovered through its second attack too
+    a, _ = make_loop("a", N=300, seed=5, attacks=[("gps", 10.0, 15.0, 3.0), ("gps", 20.0, 25.0, 3.0)])
+    b, _ = make_loop("b", N=300, seed=6, attacks=[("gps", 10.0, 40.0, 3.0)])
+    anomalies = [Anomaly(10.3, 11.0, {"a": ("gps",), "b": ("gps",)}), Anomaly(20.3, 21.0, {"a": ("gps",)})]
+    rec = recover([a, b], anomalies, RecoverySettings(hold_s=1.0))
+    (r,) = rec.anomalies
+    assert r.merged == 2 and 26.0 - 1e-9 <= r.loop_ends["a"] <= 27.0, r.loop_ends
+    assert rec.loops["a"].recovered[int(round(22.0 / 0.1))]

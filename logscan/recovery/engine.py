@@ -89,15 +89,7 @@ def recover(
     queue = sorted(anomalies, key=lambda a: (a.t_detect, a.t_end))
     i = 0
     while i < len(queue):
-        anomaly, j = queue[i], i + 1
-        record, fills = _recover_one(anomaly, ctx, blocked)
-        while j < len(queue) and queue[j].t_detect <= _span_end(record, anomaly):
-            anomaly = Anomaly(
-                anomaly.t_detect, max(anomaly.t_end, queue[j].t_end), join_targets(anomaly.targets, queue[j].targets)
-            )
-            j += 1
-            record, fills = _recover_one(anomaly, ctx, blocked)
-        record.merged = j - i
+        anomaly, record, fills, j = _recover_merging(queue, i, ctx, blocked)
         for name, k1, x, bound, worst in fills:
             span = slice(k1, k1 + x.shape[0])
             out[name].x_recovered[span], out[name].bound[span], out[name].worst_case[span] = x, bound, worst
@@ -105,6 +97,25 @@ def recover(
         blocked.append((anomaly.t_detect - ctx.margin_s, _span_end(record, anomaly)))
         i = j
     return Recovery(out, records, settings)
+
+
+def _recover_merging(queue: list[Anomaly], i: int, ctx: _Context, blocked):
+    """(anomaly, record, fills, next index): queue[i] recovered, merged with every later anomaly
+    detected inside its recovered span. A loop's span then ends only when its sensors agree after
+    the latest detection that flags it (the consistent checkpoint lies before the first)."""
+    anomaly, j = queue[i], i + 1
+    latest = {lp.name: anomaly.t_detect for lp in ctx.loops if anomaly.targets is None or anomaly.targets.get(lp.name)}
+    record, fills = _recover_one(anomaly, ctx, blocked, latest)
+    while j < len(queue) and queue[j].t_detect <= _span_end(record, anomaly):
+        nxt = queue[j]
+        for lp in ctx.loops:
+            if nxt.targets is None or nxt.targets.get(lp.name):
+                latest[lp.name] = nxt.t_detect
+        anomaly = Anomaly(anomaly.t_detect, max(anomaly.t_end, nxt.t_end), join_targets(anomaly.targets, nxt.targets))
+        j += 1
+        record, fills = _recover_one(anomaly, ctx, blocked, latest)
+    record.merged = j - i
+    return anomaly, record, fills, j
 
 
 def _span_end(record: AnomalyRecord, anomaly: Anomaly) -> float:
@@ -117,8 +128,9 @@ def _empty(loop: LoopRun, t: np.ndarray) -> LoopRecovery:
     return LoopRecovery(loop.name, list(loop.model.state_names), t, nan, nan.copy(), nan.copy())
 
 
-def _recover_one(anomaly: Anomaly, ctx: _Context, blocked) -> tuple[AnomalyRecord, list]:
-    """The record of one anomaly and its fills (loop, k1, x, bound, worst case)."""
+def _recover_one(anomaly: Anomaly, ctx: _Context, blocked, latest: dict[str, float]) -> tuple[AnomalyRecord, list]:
+    """The record of one anomaly and its fills (loop, k1, x, bound, worst case); ``latest``: loop ->
+    the latest detection flagging it (merged anomalies)."""
     s = ctx.settings
     affected = [lp for lp in ctx.loops if anomaly.targets is None or anomaly.targets.get(lp.name)]
     record = AnomalyRecord(
@@ -139,7 +151,7 @@ def _recover_one(anomaly: Anomaly, ctx: _Context, blocked) -> tuple[AnomalyRecor
     record.checkpoint_steps = ctx.checkpoints.step_of(index)
     t_cap = anomaly.t_detect + s.max_duration_s
     parts = [_rerun_loop(lp, record.checkpoint_steps[lp.name], t_cap, anomaly, ctx) for lp in affected]
-    ends, agreed = _loop_ends(anomaly, parts, s)
+    ends, agreed = _loop_ends(anomaly, parts, s, latest)
     record.t_agreed = None if any(a is None for a in agreed) else max(agreed)
     for p, end in zip(parts, ends):
         t_log_end = float(ctx.times[ctx.loops.index(p.loop)][-1])
@@ -171,17 +183,17 @@ def _rerun_loop(loop: LoopRun, k1: int, t_cap: float, anomaly: Anomaly, ctx: _Co
     return _LoopPart(loop, t_loop[k1 : k_stop + 1], k1, part, flagged)
 
 
-def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings) -> tuple[list[float], list]:
+def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, latest) -> tuple[list[float], list]:
     """Per loop: (end of its span, uncut; when its flagged groups agreed again, None if never).
 
-    Specific: the loop's flagged groups agree again, held for hold_s (inf if they never do); generic:
-    hold_s after the detector's alarm, every loop."""
+    Specific: the loop's flagged groups agree again after its latest detection, held for hold_s (inf
+    if they never do); generic: hold_s after the detector's alarm, every loop."""
     if anomaly.targets is None:
         return [anomaly.t_end + s.hold_s] * len(parts), [None] * len(parts)
     agreed = []
     for p in parts:
         status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile)
-        agreed.append(agreed_at(p.t, status, anomaly.t_detect, s.hold_s))
+        agreed.append(agreed_at(p.t, status, latest.get(p.loop.name, anomaly.t_detect), s.hold_s))
     return [np.inf if a is None else a + s.hold_s for a in agreed], agreed
 
 
