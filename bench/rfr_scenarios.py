@@ -64,11 +64,12 @@ PROTOTYPE = {"ekf": 4.98, (ORACLE, "rollforward"): 1.01, (ORACLE, "refilter"): 0
 class Variant:
     detector: str
     method: str
-    shifted: bool = False  # the input-timing diagnostic (`shifted_recovery`)
+    shifted: bool = False  # the input-timing contrast (`shifted_recovery`)
 
     @property
     def label(self) -> str:
-        return f"{self.detector} / {self.method}" + (", inputs held one step later (diagnostic)" if self.shifted else "")
+        early = ', inputs one step early (contrast: without [inputs] stamp = "start")'
+        return f"{self.detector} / {self.method}" + (early if self.shifted else "")
 
 
 def variants(detectors=DETECTORS, methods=METHODS, diagnose: bool = True) -> list[Variant]:
@@ -84,9 +85,12 @@ def simulate(path: str, seed: int) -> str:
 
 def profile_text(log_path: str, variant: Variant, allowed_error_m: float) -> str:
     """The log's embedded profile with a [recovery] table for ``variant``."""
+    from dataclasses import replace
+
     from logscan.pipeline import load_profile_for
 
-    base = load_profile_for(log_path, None).profile.to_toml()
+    profile = load_profile_for(log_path, None).profile
+    base = replace(profile, recovery=None).to_toml()  # the log's own [recovery] replaced
     lines = ["", "[recovery]", f'detector = "{variant.detector}"', f'method = "{variant.method}"']
     if variant.detector == ORACLE:
         lines.append(f"detection_time_s = {DETECTION_TIME_S}")
@@ -151,10 +155,10 @@ def measure_variant(path: str, profile: str, truths: dict | None = None, shifted
 
 
 def shifted_recovery(analysis):
-    """DIAGNOSTIC, not the pipeline: the same recovery with every loop's inputs held one step later
-    (u[k] := u[k-1]) and the shared EKF re-run on them. The simulator applies the input it logs at
-    t_k over [t_k, t_k+1); the zero-order hold puts it at step k, which the EKF kernel reads as
-    the input of the step that ENDS at t_k: one step off. Returns (Recovery, outer x_post)."""
+    """CONTRAST, not the pipeline: the same recovery with every loop's inputs one step early
+    (u[k] := u[k+1]) and the shared EKF re-run on them: what a profile without `[inputs] stamp =
+    "start"` gives. The simulator applies the input it logs at t_k over [t_k, t_k+1); held at step k,
+    the EKF would read it as the input of the step that ENDS at t_k. Returns (Recovery, outer x_post)."""
     from dataclasses import replace
 
     from logscan.filters.ekf import run_ekf
@@ -164,7 +168,7 @@ def shifted_recovery(analysis):
     loops = []
     for loop in loop_runs(analysis.prepared):
         u = np.asarray(loop.run.u)
-        run = replace(loop.run, u=np.vstack([u[:1], u[:-1]]))
+        run = replace(loop.run, u=np.vstack([u[1:], u[-1:]]))
         loops.append(LoopRun(loop.name, loop.model, run, run_ekf(loop.model, run, full_P=True)))
     settings = RecoverySettings(**analysis.profile.recovery.settings)
     anomalies = anomalies_from_truth(analysis.events, settings.detection_time_s, loops)
@@ -280,7 +284,7 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=FIRST_SEED)
     parser.add_argument("--detectors", default=",".join(DETECTORS), help="comma-separated, 'oracle' for the truth")
     parser.add_argument("--allowed-error", type=float, default=1.0, help="allowed error E (m) of the outer x and y")
-    parser.add_argument("--no-diagnostic", action="store_true", help="skip the input-timing diagnostic rows")
+    parser.add_argument("--no-diagnostic", action="store_true", help="skip the input-timing contrast rows")
     parser.add_argument("--write-docs", action="store_true", help="rewrite the table in docs/evaluation.md")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("-q", "--quiet", action="store_true")

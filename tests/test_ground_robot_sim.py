@@ -84,12 +84,13 @@ def test_healthy_robot_tracks_the_circle():
 def test_attack_is_in_the_logged_measurements_exactly_in_the_truth_intervals(logged):
     sim, log = logged
     events = sim.events
-    assert {e.target for e in events} == {"mocap", "left_motor.encoder", "right_motor.encoder"}
-    assert [(e.t_start, e.t_end) for e in events if e.target == "mocap"] == [(3.25, 5.0), (8.25, 10.0)]
+    # the mocap's attack names the profile group it moves: position (x, y); theta is not attacked
+    assert {e.target for e in events} == {"position", "left_motor.encoder", "right_motor.encoder"}
+    assert [(e.t_start, e.t_end) for e in events if e.target == "position"] == [(3.25, 5.0), (8.25, 10.0)]
     t_o = log.channels["/mocap/x"].t / 1e9
     truth_x = log.channels["/truth/state/x"].values
     offset = log.channels["/mocap/x"].values - truth_x  # noise 0.1 m, attack +-5 m
-    on = attacked(t_o, events, "mocap")
+    on = attacked(t_o, events, "position")
     np.testing.assert_array_equal(np.abs(offset) > 2.5, on)
     assert np.all(np.sign(offset[on][t_o[on] < 6.0]) > 0) and np.all(np.sign(offset[on][t_o[on] > 6.0]) < 0)
     theta_error = np.angle(
@@ -109,7 +110,7 @@ def test_onboard_ekf_error_grows_during_the_attack(paper):
     the attacks, against ~0.05 m before)."""
     t = paper.t_outer
     error = paper.x_hat[:, 0] - paper.x_true[:, 0]
-    during = attacked(t, paper.events, "mocap")
+    during = attacked(t, paper.events, "position")
     before = t < 3.25
     rms_during = np.sqrt(np.mean(error[during] ** 2))
     rms_before = np.sqrt(np.mean(error[before] ** 2))
@@ -192,9 +193,9 @@ def test_profile_has_the_hierarchical_shape_and_each_loop_parses_alone(logged):
     sim, log = logged
     profile = tomllib.loads(sim.profile_toml())
     assert profile["vehicle"] == {"model": "unicycle", "rate_hz": 10.0, "loop": "outer"}
-    assert profile["inputs"] == {"v": "/cmd/outer.v", "w": "/cmd/outer.w"}
+    assert profile["inputs"] == {"v": "/cmd/outer.v", "w": "/cmd/outer.w", "stamp": "start"}
     assert set(profile["loops"]) == set(MOTORS)
-    outer = {k: v for k, v in profile.items() if k != "loops"}
+    outer = {k: v for k, v in profile.items() if k not in ("loops", "recovery")}
     outer["vehicle"] = {k: v for k, v in outer["vehicle"].items() if k != "loop"}
     parts = [outer] + [{"name": name, **loop} for name, loop in profile["loops"].items()]
     for part in parts:

@@ -5,6 +5,7 @@ its schema) and the report carry the loops and one record per anomaly."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import jsonschema
@@ -29,7 +30,7 @@ def robot(tmp_path_factory):
 
 
 def _profile(robot: Path, tmp_path: Path, recovery: str) -> Path:
-    profile = load_profile_for(robot, None).profile
+    profile = replace(load_profile_for(robot, None).profile, recovery=None)  # the log's own replaced
     text = profile.to_toml() + ("" if profile.detectors else "\n[detectors.nis]\n")  # nis alone: short log
     out = tmp_path / "robot.profile.toml"
     out.write_text(text + "\n[recovery]\n" + recovery + "\n")

@@ -46,6 +46,14 @@ class Unicycle(Model):
             wrap=(False, False, True),
             direct_states=(0, 1, 2),
         ),
+        # the same sensor as two groups, so a detector can flag its position alone (the paper's
+        # attack moves x and y, G = [1, 1, 0]) and recovery keeps using its heading
+        "position": GroupSpec(
+            "position", 1, ("x", "y"), (0.1, 0.1), (-1e5, -1e5), (1e5, 1e5), ("m", "m"), direct_states=(0, 1)
+        ),
+        "heading": GroupSpec(
+            "heading", 2, ("theta",), (0.1,), (-6.4,), (6.4,), ("rad",), wrap=(True,), direct_states=(2,)
+        ),
     }
 
     def __init__(self, params: dict | None = None):

@@ -2,8 +2,9 @@
 outer loop).
 
 Shapes: p (UNI_N_PARAMS,) packed by `Unicycle.param_vector` (no entry is read: the step needs only
-dt), x (3,) [x, y, theta], u (2,) [v, w], F (3, 3); the one group `mocap` (gid 0) measures the
-state directly: h into hx[r:r+3], H into Hs[r:r+3, :].
+dt), x (3,) [x, y, theta], u (2,) [v, w], F (3, 3); the groups measure states directly: `mocap`
+(gid 0) all three, `position` (gid 1) x and y, `heading` (gid 2) theta: h into hx[r:r+m], H into
+Hs[r:r+m, :].
 """
 
 from __future__ import annotations
@@ -44,26 +45,39 @@ def uni_predict(p, x, u, dt):
 
 
 @njit(cache=True)
+def _group_states(gid):
+    """The states a group reads directly: mocap (0) all three, position (1) x and y, heading (2) theta."""
+    if gid == 1:
+        return 0, 2
+    if gid == 2:
+        return 2, 3
+    return 0, 3
+
+
+@njit(cache=True)
 def uni_meas_into(p, gid, x, u, r, hx, Hs):
-    """mocap: z = [x, y, theta] (eq. 24; the EKF wraps theta's innovation) into hx[r:r+3], H = I
-    into Hs[r:r+3, :]."""
-    for i in range(3):
-        hx[r + i] = x[i]
+    """mocap: z = [x, y, theta] (eq. 24; the EKF wraps theta's innovation); position: [x, y];
+    heading: [theta]. Into hx[r:r+m], H (rows of I) into Hs[r:r+m, :]."""
+    first, stop = _group_states(gid)
+    for i in range(stop - first):
+        hx[r + i] = x[first + i]
         for j in range(3):
-            Hs[r + i, j] = 1.0 if i == j else 0.0
+            Hs[r + i, j] = 1.0 if j == first + i else 0.0
 
 
 @njit(cache=True)
 def uni_h(p, gid, x, u):
-    hx = np.empty(3)
-    Hs = np.empty((3, 3))
+    first, stop = _group_states(gid)
+    hx = np.empty(stop - first)
+    Hs = np.empty((stop - first, 3))
     uni_meas_into(p, gid, x, u, 0, hx, Hs)
     return hx
 
 
 @njit(cache=True)
 def uni_H(p, gid, x, u):
-    hx = np.empty(3)
-    Hs = np.empty((3, 3))
+    first, stop = _group_states(gid)
+    hx = np.empty(stop - first)
+    Hs = np.empty((stop - first, 3))
     uni_meas_into(p, gid, x, u, 0, hx, Hs)
     return Hs

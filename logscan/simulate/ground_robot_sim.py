@@ -80,6 +80,7 @@ RANDOM_ENCODER = (5000.0, 30000.0)
 MOTORS = ("left_motor", "right_motor")
 SIDES = ("left", "right")
 MOCAP_FIELDS = ("x", "y", "theta")
+MOCAP_GROUPS = {"position": (0, 1), "heading": (2,)}  # the profile's groups of the mocap's fields
 # the motors' on-board estimates are logged at 50 Hz (as the other simulators log their on-board
 # estimator), so that a 15 s sample log stays under 300 kB
 ONBOARD_RATIO = 2
@@ -196,15 +197,19 @@ def attack_offsets(attacks: list[Attack], t_outer: np.ndarray, t_inner: np.ndarr
 
 
 def truth_events(attacks: list[Attack]) -> list[FaultEvent]:
-    """One "bias" event per attacked group; magnitude: its largest offset (signed), channels: the
-    channels with a non-zero offset."""
+    """One "bias" event per attacked measurement group of the profile (the mocap's offsets split
+    into its `position` (x, y) and `heading` (theta) groups); magnitude: its largest offset
+    (signed), channels: the channels with a non-zero offset."""
     channels = group_targets()
     events = []
     for a in attacks:
         for target, offsets in a.offsets.items():
-            hit = tuple(ch for ch, v in zip(channels[target], offsets) if v != 0.0)
-            peak = max(offsets, key=abs)
-            events.append(FaultEvent(a.start, a.end, "bias", target, float(peak), hit))
+            parts = MOCAP_GROUPS.items() if target == "mocap" else [(target, range(len(offsets)))]
+            for group, columns in parts:
+                values = [offsets[i] for i in columns]
+                hit = tuple(channels[target][i] for i in columns if offsets[i] != 0.0)
+                if hit:
+                    events.append(FaultEvent(a.start, a.end, "bias", group, float(max(values, key=abs)), hit))
     return events
 
 
@@ -331,20 +336,26 @@ class GroundRobotSimulation:
             "name": "simulated ground_robot",
             "description": "written by `logscan simulate ground_robot`; channels as logged",
             "vehicle": {"model": "unicycle", "rate_hz": 1.0 / (DT * RATIO), "loop": "outer"},
-            "inputs": dict(OUTER_CHANNELS),
+            # u_k is logged at t_k and applied over [t_k, t_k+1): held from the filter's next step
+            "inputs": {**OUTER_CHANNELS, "stamp": "start"},
             "measurements": {
-                "mocap": {
-                    "channels": [f"/mocap/{f}" for f in MOCAP_FIELDS],
+                group: {
+                    "channels": [f"/mocap/{MOCAP_FIELDS[i]}" for i in columns],
                     "rate_hz": 1.0 / (DT * RATIO),
                     "stale_s": 2.5 * DT * RATIO,
-                    "noise_std": [MOCAP_STD] * 3,
+                    "noise_std": [MOCAP_STD] * len(columns),
                 }
+                for group, columns in MOCAP_GROUPS.items()
             },
             "onboard": {"state": "/ekf/state", "variance": "/ekf/variance"},
+            # a 15 s log at 10 Hz is too short for the encoded checks' windows: NIS alone outside
+            "detectors": {"nis": {"enabled": True}},
+            # what the estimator should have believed during each anomaly (logscan.recovery)
+            "recovery": {"detector": "nis", "allowed_error": {"outer.x": 1.0, "outer.y": 1.0}},
             "loops": {
                 m: {
                     "vehicle": {"model": "linear", "rate_hz": 1.0 / DT, "params": motor_params()},
-                    "inputs": {"V": f"/motor_cmd/{s}.voltage"},
+                    "inputs": {"V": f"/motor_cmd/{s}.voltage", "stamp": "start"},
                     "measurements": {
                         "encoder": {
                             "channels": [f"/enc/{s}.w"],
