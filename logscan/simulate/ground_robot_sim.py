@@ -80,7 +80,10 @@ RANDOM_ENCODER = (5000.0, 30000.0)
 MOTORS = ("left_motor", "right_motor")
 SIDES = ("left", "right")
 MOCAP_FIELDS = ("x", "y", "theta")
-MOCAP_GROUPS = {"position": (0, 1), "heading": (2,)}  # the profile's groups of the mocap's fields
+MOCAP_GROUPS = {"position": (0, 1), "heading": (2,)}
+OUTER_DETECTORS = {
+    "nis": {"enabled": True}
+}  # the outer loop's [detectors]  # the profile's groups of the mocap's fields
 # the motors' on-board estimates are logged at 50 Hz (as the other simulators log their on-board
 # estimator), so that a 15 s sample log stays under 300 kB
 ONBOARD_RATIO = 2
@@ -349,9 +352,10 @@ class GroundRobotSimulation:
             },
             "onboard": {"state": "/ekf/state", "variance": "/ekf/variance"},
             # a 15 s log at 10 Hz is too short for the encoded checks' windows: NIS alone outside
-            "detectors": {"nis": {"enabled": True}},
-            # what the estimator should have believed during each anomaly (logscan.recovery)
-            "recovery": {"detector": "nis", "allowed_error": {"outer.x": 1.0, "outer.y": 1.0}},
+            "detectors": OUTER_DETECTORS,
+            # what the estimator should have believed during each anomaly (logscan.recovery), driven
+            # by the outer loop's detector (per sensor group: a specific detector)
+            "recovery": {"detector": next(iter(OUTER_DETECTORS)), "allowed_error": {"outer.x": 1.0, "outer.y": 1.0}},
             "loops": {
                 m: {
                     "vehicle": {"model": "linear", "rate_hz": 1.0 / DT, "params": motor_params()},
