@@ -6,7 +6,7 @@ no output files and no printing here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from logscan import __version__
@@ -84,9 +84,13 @@ class Analysis:
     # --- verdict and summary -----------------------------------------------------------------------
     @property
     def alarms(self) -> list:
-        """Every detector's alarms, the further loops' too."""
-        return [alarm for result in self.results for alarm in result.alarms] + [
-            alarm for loop in self.loops.values() for alarm in loop.alarms
+        """Every detector's alarms, the further loops' too (their signals naming their loop:
+        ``left_motor/nis.encoder``)."""
+        own = [alarm for result in self.results for alarm in result.alarms]
+        return own + [
+            replace(alarm, signal=f"{name}/{alarm.signal}")
+            for name, loop in self.loops.items()
+            for alarm in loop.alarms
         ]
 
     @property

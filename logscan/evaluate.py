@@ -23,7 +23,8 @@ analysed is recorded as one line and counted, never raised.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 from logscan.results import AlarmInterval, events_from_truth
 from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregate, score_log
@@ -31,37 +32,56 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregat
 CHECK_SEPARATOR = ":"
 
 
-def check_key(result, signal: str) -> str:
-    """Score key of a check: ``<detector>:<check>``, the check as the detector declared it."""
-    return f"{result.detector}{CHECK_SEPARATOR}{result.check_of(signal)}"
+def check_key(result, signal: str, prefix: str = "") -> str:
+    """Score key of a check: ``<detector>:<check>``, the check as the detector declared it
+    (``<detector>:<loop>/<check>`` with a further loop's ``prefix``)."""
+    return f"{result.detector}{CHECK_SEPARATOR}{prefix}{result.check_of(signal)}"
 
 
-def merge_intervals(alarms: Iterable) -> list[tuple[float, float]]:
-    """Union of alarm intervals (objects with start/end, or pairs) as sorted disjoint (start, end)."""
+class Span(NamedTuple):
+    """Merged alarms: [start, end] and the statistics they came from (which faults they name)."""
+
+    start: float
+    end: float
+    signals: frozenset[str] = frozenset()
+
+
+def merge_intervals(alarms: Iterable) -> list[Span]:
+    """Union of alarm intervals (objects with start/end, or pairs) as sorted disjoint spans, each
+    with the signals of the alarms merged into it."""
     spans = sorted(
-        (float(a.start), float(a.end)) if isinstance(a, AlarmInterval) else (float(a[0]), float(a[1])) for a in alarms
+        (float(a.start), float(a.end), a.signal) if isinstance(a, AlarmInterval) else (float(a[0]), float(a[1]), "")
+        for a in alarms
     )
-    merged: list[tuple[float, float]] = []
-    for start, end in spans:
-        if merged and start <= merged[-1][1]:
-            merged[-1] = (merged[-1][0], max(merged[-1][1], end))
+    merged: list[Span] = []
+    for start, end, signal in spans:
+        mine = frozenset((signal,) if signal else ())
+        if merged and start <= merged[-1].end:
+            last = merged[-1]
+            merged[-1] = Span(last.start, max(last.end, end), last.signals | mine)
         else:
-            merged.append((start, end))
+            merged.append(Span(start, end, mine))
     return merged
 
 
-def alarm_groups(results: Sequence) -> dict[str, list]:
-    """Alarms per score key (detector, then each of its checks) from DetectorResults.
+def alarm_groups(results: Sequence, loops: Mapping[str, Sequence] | None = None) -> dict[str, list]:
+    """Alarms per score key (detector, then each of its checks) from DetectorResults; ``loops``:
+    a hierarchical log's further loops, loop name -> their DetectorResults, whose alarms join their
+    detector's key and name their loop (``left_motor/nis.encoder``, check ``nis:left_motor/encoder``).
 
     Every check whose statistic exists on the run gets a key, with an empty list when it raised
     nothing (so its misses are counted)."""
     groups: dict[str, list] = {}
-    for result in results:
-        groups[result.detector] = list(result.alarms)
-        for signal in result.series:
-            groups.setdefault(check_key(result, signal), [])
-        for alarm in result.alarms:
-            groups.setdefault(check_key(result, alarm.signal), []).append(alarm)
+    for loop, loop_results in [("", results), *(loops or {}).items()]:
+        prefix = f"{loop}/" if loop else ""
+        for result in loop_results:
+            groups.setdefault(result.detector, [])
+            for signal in result.series:
+                groups.setdefault(check_key(result, signal, prefix), [])
+            for alarm in result.alarms:
+                named = replace(alarm, signal=prefix + alarm.signal) if prefix else alarm
+                groups[result.detector].append(named)
+                groups.setdefault(check_key(result, alarm.signal, prefix), []).append(named)
     return groups
 
 
@@ -211,7 +231,7 @@ def evaluate_analysis(
     transients = events_from_truth(truth.get("transients") or [], path=analysis.path)
     scores = score_groups(
         analysis.events,
-        alarm_groups(analysis.results),
+        alarm_groups(analysis.results, {name: loop.results for name, loop in getattr(analysis, "loops", {}).items()}),
         duration_s=duration,
         grace_s=grace_s,
         recovery_s=recovery_s,

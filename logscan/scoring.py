@@ -7,8 +7,11 @@ Rules (closed intervals throughout, times in seconds on the analysis grid):
 - Each alarm [start, end] gets exactly one outcome, the first that applies:
 
   1. detection: it starts within an event's window [t_start, t_end + grace_s] (both ends
-     included); it counts for the first such event only. Several alarms on one event count once;
-     latency = start of the earliest one - t_start (never negative).
+     included); it counts for every such event whose target its statistics name (`names_target`:
+     simultaneous faults on several sensors, e.g. a hierarchical robot's mocap and both encoders,
+     each detected by the alarm that names it), else for the first such event only.
+     Several alarms on one event count once; latency = start of the earliest one - t_start
+     (never negative).
   2. at onset: it started before an event's onset and is still on at it (start < t_start <= end).
      Not a detection and not a false alarm. Every event with such an alarm is flagged
      ``active_at_onset`` (whatever that alarm's own outcome), and is detected only by a later
@@ -87,8 +90,9 @@ class EventMatch:
         }
 
 
-def _interval(alarm: AlarmInterval | tuple[float, float]) -> tuple[float, float]:
-    if isinstance(alarm, AlarmInterval):
+def _interval(alarm) -> tuple[float, float]:
+    """(start, end) of an AlarmInterval, a merged span (`logscan.evaluate.Span`) or a pair."""
+    if hasattr(alarm, "start"):
         return float(alarm.start), float(alarm.end)
     start, end = alarm
     return float(start), float(end)
@@ -115,9 +119,13 @@ def classify_alarms(
     matches = [EventMatch(event) for event in events]
     outcomes: list[AlarmOutcome | None] = [None] * len(spans)
     for a, (start, _end) in enumerate(spans):
-        hit = next((i for i in order if starts[i] <= start <= ends[i]), None)
-        if hit is not None:
-            outcomes[a] = AlarmOutcome(DETECTION, hit)
+        within = [i for i in order if starts[i] <= start <= ends[i]]
+        if not within:
+            continue
+        names = signal_names(alarms[a])
+        named = [i for i in within if names_target(names, events[i].target)]
+        outcomes[a] = AlarmOutcome(DETECTION, (named or within)[0])
+        for hit in named or within[:1]:
             match = matches[hit]
             match.alarm_indices.append(a)
             if match.latency_s is None or start - starts[hit] < match.latency_s:
@@ -138,6 +146,22 @@ def classify_alarms(
         near = next((j for j, t in enumerate(transients) if start <= t.end_or_inf + grace_s and end >= t.t_start), None)
         outcomes[a] = AlarmOutcome(FALSE_ALARM) if near is None else AlarmOutcome(TRANSIENT, near)
     return matches, outcomes
+
+
+def signal_names(alarm) -> frozenset[str]:
+    """The names an alarm's statistics are made of (``left_motor/nis.encoder`` -> left_motor, nis,
+    encoder): an AlarmInterval's signal, a merged span's ``signals``; none for a bare pair."""
+    signals = getattr(alarm, "signals", None)
+    if signals is None:
+        signals = (getattr(alarm, "signal", ""),)
+    return frozenset(part for signal in signals for part in signal.replace("/", ".").split(".") if part)
+
+
+def names_target(names: frozenset[str], target: str) -> bool:
+    """Whether statistics made of ``names`` are about a fault's ``target`` (``loop.group``,
+    ``group`` or ``group.output``): every part of it, or every part but a trailing output."""
+    parts = [part for part in target.split(".") if part]
+    return bool(parts) and (set(parts) <= names or (len(parts) > 1 and set(parts[:-1]) <= names))
 
 
 def match_alarms(

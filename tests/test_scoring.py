@@ -271,3 +271,23 @@ def test_events_from_truth_accepts_both_key_spellings():
 def test_events_from_truth_rejects_bad_records(record):
     with pytest.raises(InputError, match="ground-truth event 0"):
         events_from_truth([record], path="truth.json")
+
+
+def test_simultaneous_faults_are_each_detected_by_the_alarm_that_names_them():
+    """A hierarchical robot's attack hits the mocap position and both encoders at once: an alarm
+    counts for every fault whose target its statistic names, else for the first fault only."""
+    from logscan.evaluate import Span
+
+    events = [
+        FaultEvent(3.25, 5.0, "bias", "position"),
+        FaultEvent(3.25, 5.0, "bias", "left_motor.encoder"),
+        FaultEvent(3.25, 5.0, "bias", "right_motor.encoder"),
+    ]
+    outer = AlarmInterval(3.3, 6.0, 3.3, 3.5, 9.0, 1.0, 9.0, "upper", 5, signal="nis.position")
+    left = AlarmInterval(3.25, 7.0, 3.25, 3.4, 9.0, 1.0, 9.0, "upper", 5, signal="left_motor/nis.encoder")
+    matches, _ = classify_alarms(events, [outer, left])
+    assert [m.detected for m in matches] == [True, True, False]  # the right encoder: nothing names it
+    merged = Span(3.25, 7.0, frozenset({"nis.position", "left_motor/nis.encoder", "right_motor/nis.encoder"}))
+    assert all(m.detected for m in classify_alarms(events, [merged])[0])
+    anonymous = AlarmInterval(3.3, 6.0, 3.3, 3.5, 9.0, 1.0, 9.0, "upper", 5, signal="nis.all")
+    assert [m.detected for m in classify_alarms(events, [anonymous])[0]] == [True, False, False]
