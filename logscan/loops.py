@@ -95,7 +95,7 @@ def recover_analysis(analysis):
     (`logscan.recovery.recover`). None, with a warning, when the oracle has no truth to read."""
     from logscan.profiles.loops import ORACLE
     from logscan.recovery import RecoverySettings, anomalies_from_alarms, anomalies_from_truth, recover
-    from logscan.recovery_view import recovery_view
+    from logscan.recovery_view import recovery_view, true_states
 
     spec = analysis.profile.recovery
     settings = RecoverySettings(**spec.settings)
@@ -119,5 +119,6 @@ def recover_analysis(analysis):
         }
         anomalies = anomalies_from_alarms(alarms, loops)
     recovery = recover(loops, anomalies, settings)
-    analysis.recovery_view = recovery_view(loops, recovery, settings.k_sigma)  # before the series go
+    truths = true_states(analysis.path, analysis.prepared.log.truth, loops)  # a simulated log's
+    analysis.recovery_view = recovery_view(loops, recovery, settings.k_sigma, truths)  # before the series go
     return recovery

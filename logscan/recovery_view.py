@@ -23,6 +23,7 @@ class StateView:
     worst_case: np.ndarray  # (N,) Proposition 5.1
     measured: np.ndarray | None = None  # (N,) a group output that reads this state, as held
     measured_name: str = ""
+    truth: np.ndarray | None = None  # (N,) the true state (a simulated log's truth names its channel)
 
 
 @dataclass
@@ -42,9 +43,38 @@ def _measurement_of(loop, state: int) -> tuple[np.ndarray | None, str]:
     return None, ""
 
 
-def recovery_view(loops, recovery, k_sigma: float) -> RecoveryView:
-    """The report's view of ``recovery`` (`logscan.recovery.Recovery`) over ``loops`` (LoopRun)."""
+def true_states(path: str, truth: dict | None, loops) -> dict[str, np.ndarray]:
+    """Loop name -> (N, n) true states on that loop's grid, for the loops whose channels the log's
+    ground truth names (``loops.<name>.true_state_channels``, as `logscan simulate` writes them),
+    read again from the log (only those channels), held at each grid time."""
+    from logscan.readers import read_log
+
+    named = {
+        loop.name: ((truth or {}).get("loops") or {}).get(loop.name, {}).get("true_state_channels") for loop in loops
+    }
+    named = {name: list(channels) for name, channels in named.items() if channels}
+    if not named:
+        return {}
+    log = read_log(path, [ch for channels in named.values() for ch in channels])
+    out = {}
+    for loop in loops:
+        if loop.name not in named or not all(ch in log.channels for ch in named[loop.name]):
+            continue
+        grid_ns = loop.run.start_ns + np.round(np.asarray(loop.run.t) * 1e9).astype(np.int64)
+        columns = []
+        for name in named[loop.name]:
+            channel = log.channels[name]
+            i = np.searchsorted(channel.t, grid_ns, side="right") - 1  # the latest sample at each step
+            columns.append(np.where(i >= 0, np.asarray(channel.values)[np.clip(i, 0, None)], np.nan))
+        out[loop.name] = np.column_stack(columns)
+    return out
+
+
+def recovery_view(loops, recovery, k_sigma: float, truths: dict | None = None) -> RecoveryView:
+    """The report's view of ``recovery`` (`logscan.recovery.Recovery`) over ``loops`` (LoopRun),
+    with the loops' true states where ``truths`` has them (`true_states`)."""
     view = RecoveryView(anomalies=list(recovery.anomalies), k_sigma=k_sigma)
+    truths = truths or {}
     for loop in loops:
         rec = recovery.loops[loop.name]
         stride = max(1, -(-rec.t.size // MAX_POINTS))
@@ -63,6 +93,7 @@ def recovery_view(loops, recovery, k_sigma: float) -> RecoveryView:
                     worst_case=rec.worst_case[::stride, i],
                     measured=None if measured is None else measured[::stride],
                     measured_name=channel,
+                    truth=truths[loop.name][::stride, i] if loop.name in truths else None,
                 )
             )
     return view

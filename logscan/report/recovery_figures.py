@@ -12,13 +12,32 @@ from logscan.report.context_figures import _band_trace, _spec, _time_row_layout
 from logscan.report.plotly_json import plot_text
 
 HEIGHT = 320
-COLOURS = {"measured": "#9a9a9a", "ekf": "#1f77b4", "recovered": "#2ca02c", "band": "rgba(44,160,44,0.18)"}
+COLOURS = {
+    "measured": "#9a9a9a", "ekf": "#1f77b4", "recovered": "#2ca02c", "band": "rgba(44,160,44,0.18)", "truth": "#111",
+}  # fmt: skip
 
 
 def _line(name: str, t: np.ndarray, y: np.ndarray, colour: str, **extra) -> dict:
     return {
         "type": "scatter", "name": name, "x": t.astype(np.float64), "y": y.astype(np.float64), "mode": "lines",
         "line": {"color": colour, "width": 1.5}, "hovertemplate": "%{y:.4g} at %{x:.2f} s", **extra,
+    }  # fmt: skip
+
+
+def _band(name: str, t: np.ndarray, centre: np.ndarray, bound: np.ndarray) -> dict:
+    """centre +- bound as one filled polygon per recovered span (NaN elsewhere): a fill between two
+    lines would bridge the gaps between spans."""
+    finite = np.isfinite(centre) & np.isfinite(bound)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], finite.astype(np.int8), [0]))))
+    x: list[float] = []
+    y: list[float] = []
+    for first, stop in zip(edges[::2], edges[1::2]):
+        span = slice(first, stop)
+        x += [*t[span], *t[span][::-1], np.nan]
+        y += [*(centre[span] + bound[span]), *(centre[span] - bound[span])[::-1], np.nan]
+    return {
+        "type": "scatter", "name": name, "x": np.asarray(x, dtype=np.float64), "y": np.asarray(y, dtype=np.float64),
+        "mode": "lines", "line": {"width": 0}, "fill": "toself", "fillcolor": COLOURS["band"], "hoverinfo": "skip",
     }  # fmt: skip
 
 
@@ -41,11 +60,10 @@ def state_figure(view, sv, index: int, clock: Clock) -> dict:
         data.append(_checkpoint_trace([a.t_checkpoint for a in mine]))
     if sv.measured is not None:
         data.append(_line(f"measured ({plot_text(sv.measured_name)})", sv.t, sv.measured, COLOURS["measured"]))
-    upper, lower = sv.recovered + sv.bound, sv.recovered - sv.bound
     data += [
-        _line(f"bound (+{view.k_sigma:g} sigma)", sv.t, upper, COLOURS["band"], showlegend=False, hoverinfo="skip"),
-        _line(f"recovered +- {view.k_sigma:g} sigma", sv.t, lower, COLOURS["band"], fill="tonexty",
-              fillcolor=COLOURS["band"], hoverinfo="skip"),
+        _band(f"recovered +- {view.k_sigma:g} sigma", sv.t, sv.recovered, sv.bound),
+        *([_line("truth", sv.t, sv.truth, COLOURS["truth"], line={"color": COLOURS["truth"], "dash": "dot"})]
+          if sv.truth is not None else []),
         _line("shared EKF", sv.t, sv.ekf, COLOURS["ekf"]),
         _line("recovered", sv.t, sv.recovered, COLOURS["recovered"], line={"color": COLOURS["recovered"], "width": 3}),
     ]  # fmt: skip
@@ -58,6 +76,7 @@ def state_figure(view, sv, index: int, clock: Clock) -> dict:
         f"have believed during each anomaly (recovered from the checkpoint, green, with its {view.k_sigma:g}-sigma "
         "bound from the covariance carried through the recovery)"
         + (f"; grey: {sv.measured_name} as logged" if sv.measured is not None else "")
+        + ("; dotted: the true state (the log's ground truth)" if sv.truth is not None else "")
         + ". Dashed lines: the checkpoints used."
     )
     spec = {"id": f"rec-{index}", "title": title, "caption": caption, "timeseries": True, "height": HEIGHT}
