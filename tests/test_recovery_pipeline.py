@@ -72,6 +72,7 @@ def test_recovery_in_the_json_summary_and_the_report(cli, robot, tmp_path):
     assert set(entry["loops"]) == {"left_motor", "right_motor"}
     html = (tmp_path / "report.html").read_text()
     assert 'id="recovery"' in html and "outer: x" in html and "left_motor: w" in html
+    assert "dotted: the true state" in html  # the simulator's truth names each loop's true-state channels
 
 
 def test_a_detector_drives_recovery_and_a_missing_truth_is_said(robot, tmp_path):
