@@ -25,14 +25,12 @@ Progress = Callable[[str], None]
 
 def _run_ekf(model, run, parts: frozenset[str]):
     from logscan.filters.ekf import run_ekf
-    from logscan.process_noise import calibrated_Q
 
-    # R from each group's profile noise_std, else the model's default (pack_run); Q the model's,
-    # scaled when trained tables calibrated it (`LoadedProfile.process_noise_scale`)
+    # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
+    # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run
     return run_ekf(
         model,
         run,
-        Q=calibrated_Q(model, run.dt),
         store_gain="K" in parts,
         store_S="S" in parts,
         full_P="P" in parts,
@@ -269,7 +267,7 @@ def prepare(
     path = str(path)
     profile = loaded.profile
     model = get_model(profile.vehicle.model, profile.vehicle.params)
-    model.process_noise_scale = loaded.process_noise_scale  # read by the EKF (process_noise.calibrated_Q)
+    model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice)
     step("reading")
     context_topics = set(STATE_TOPICS)  # the autopilot's states for the report, when the log has them

@@ -427,7 +427,8 @@ def samples_side_by_side(
 def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) -> KernelInputs:
     """Check the run against the model and pack it into the kernel's arrays.
 
-    R: None (each group's profile noise_std, else the model's default_R), or a dict
+    Q: None (the model's default_Q, scaled by its calibrated ``process_noise_scale`` when set),
+    or an (n, n) matrix. R: None (each group's profile noise_std, else the model's default_R), or a dict
     group -> (m, m) matrix or (m,) standard deviations. The physical range (samples outside it are
     rejected) is each group's profile range_lo / range_hi where given, else the model's.
     """
@@ -491,6 +492,10 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     if x0.size != n or not np.all(np.isfinite(x0)):
         raise ModelError(f"x0 must hold {n} finite values")
     P0 = model.default_P0() if P0 is None else _square("P0", P0, n)
+    if Q is None:  # the model's, scaled when trained tables calibrated it (`logscan.process_noise`)
+        from logscan.process_noise import calibrated_Q
+
+        Q = calibrated_Q(model, run.dt)
     Q = model.default_Q(run.dt) if Q is None else _square("Q", Q, n)
     finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite_rows[0]].copy() if finite_rows.size else np.zeros(model.n_inputs)
