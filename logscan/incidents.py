@@ -14,7 +14,8 @@ alarms behind it. The rules:
    (ties: the larger peak/threshold), because the sensors that disagree with an estimate pulled off
    by the faulty one alarm later; an alarm that names no group (an overall or state check) heads
    an incident only when no group alarm is in it. The headline quotes the source group's alarm with
-   the largest peak/threshold.
+   the largest peak/threshold; without a group it says what that statistic means (the detector's
+   `signal_words`, else its `signal_label`).
 """
 
 from __future__ import annotations

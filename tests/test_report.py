@@ -13,6 +13,7 @@ import pytest
 
 from logscan.decimate import DEFAULT_MAX_POINTS
 from logscan.errors import InputError
+from logscan.incidents import signal_label
 from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
 from logscan.report.page import _report_js
 from logscan.results import DetectorResult, FaultEvent
@@ -111,6 +112,8 @@ class _Tables(HTMLParser):
             self.rows.append([])
         elif self.inside and tag in ("td", "th"):
             self.cell = ""
+        elif tag == "br" and self.cell is not None:  # a cell's second line (a statistic's words)
+            self.cell += "\n"
 
     def handle_endtag(self, tag):
         if tag == "table":
@@ -211,6 +214,10 @@ def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report,
     assert header[9:] == ["matched ground-truth event", "latency (s)"]
     alarms = flat_alarms(hour_report.results)
     assert len(body) == len(alarms) >= 3
+    words = {row[2].splitlines()[0]: row[2].splitlines()[1:] for row in body}
+    assert words["e_x"] == [signal_label("e_x", "encoded_ekf")]  # its plain words under the name
+    for row in body:
+        row[2] = row[2].splitlines()[0]
     for row, alarm in zip(body, alarms):
         assert row[1] == alarm.detector and row[2] == alarm.signal
         assert float(row[3]) == pytest.approx(alarm.start, abs=1e-3)

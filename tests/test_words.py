@@ -95,6 +95,8 @@ def test_the_report_json_and_summary_show_the_words_beside_the_name(tmp_path, cl
     assert f'{alarm["signal"]}<br><span class="label">{words}' in html.replace("&#39;", "'")  # alarm table
     # a statistic's own figure carries its words under the title (the technical name stays in it)
     e_x = signal_label("e_x", "encoded_ekf")
-    titles = [f["figure"]["layout"]["title"]["text"] for f in figures(html)]
-    assert any("e_x" in t and e_x in t for t in titles), titles
+    titles = [f["figure"]["layout"]["title"] for f in figures(html)]
+    assert {"text": "encoded_ekf: e_x", "subtitle": e_x} in [
+        {"text": t["text"], "subtitle": t.get("subtitle", {}).get("text")} for t in titles
+    ], titles
     assert "what its" in html  # the section's list of its statistics in words

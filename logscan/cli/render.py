@@ -86,7 +86,8 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
                 break
             ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
             note = overview.alarm_note(alarm)  # an indicator's ratio means nothing: its count, in words
-            label = signal_label(alarm.signal, alarm.detector)  # plain words beside the name
+            # plain words beside the name (a note already says it in words)
+            label = "" if note else signal_label(alarm.signal, alarm.detector)
             lines.append(
                 f"    {alarm.detector:<12} {alarm.signal:<16} {_clock_time(clock, alarm.start)} "
                 f"{_clock_time(clock, alarm.end)} "

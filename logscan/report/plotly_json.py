@@ -189,11 +189,11 @@ def figure_json(
 ) -> str:
     """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points),
     part of them inside the zoom ``windows`` (`focus_windows`), its time axis in ``clock``."""
-    title = plot_text(fig.title)
-    if fig.subtitle:  # the statistic in plain words: a smaller second line (markup of ours, text escaped)
-        title += f"<br><span style='font-size:12px;color:#555'>{plot_text(fig.subtitle)}</span>"
+    title = {"text": plot_text(fig.title), "font": {"size": 14}}
+    if fig.subtitle:  # the statistic in plain words, a smaller line under its name
+        title["subtitle"] = {"text": plot_text(fig.subtitle), "font": {"size": 12, "color": "#555"}}
     layout = {
-        "title": {"text": title, "font": {"size": 14}},
+        "title": title,
         "height": 380 if fig.subtitle else 360,
         "margin": {"l": 70, "r": 20, "t": 60 if fig.subtitle else 40, "b": 80},
         "xaxis": TIME_AXIS,
