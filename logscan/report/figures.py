@@ -16,6 +16,7 @@ from logscan.decimate import edge_indices
 from logscan.results import DetectorResult
 
 MAX_SPANS = 100  # shaded spans per figure (closer spans are merged for display)
+MAX_NAMED_IN_CAPTION = 6  # a shared figure's caption says the words of this many statistics at most
 ALARM_TAIL = "long enough is an alarm (shaded red)"
 
 # Captions of the extra series' figures, by kind (the part of "<prefix>.<kind>" after the last dot,
@@ -205,8 +206,10 @@ def detector_figures(
     if len(series) >= 2 and all(_positive_upper_only(bands.get(name, NO_BAND)) for name in series):
         figures = [_ratio_figure(result.detector, t, series, bands, alarm_spans, shading(list(series)))]
         named = [f"{name}: {labels[name]}" for name in series if (labels or {}).get(name)]
-        if named:
+        if 0 < len(named) <= MAX_NAMED_IN_CAPTION:
             figures[0].caption += " The statistics: " + "; ".join(named) + "."
+        elif named:  # many: the section's list says them, one per line
+            figures[0].caption += " What each statistic means: the list above."
     else:
         figures = [
             _band_figure(result, t, name, values, bands.get(name, NO_BAND), alarm_spans, shading([name]))
