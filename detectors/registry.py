@@ -34,6 +34,7 @@ ENTRY_POINT_GROUP = "logscan.detectors"
 BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.encoded_ekf:EncodedEkfDetector",
     "logscan.detectors.nis:NisDetector",
+    "logscan.detectors.cusum:CusumDetector",
     "logscan.detectors.atfm:AtfmDetector",
     "logscan.detectors.atfm_residual:AtfmResidualDetector",
     "logscan.detectors.ubikf_chi2:Chi2Detector",

@@ -256,4 +256,5 @@ def _combine(parts: list[AlarmInterval]) -> AlarmInterval:
         n_exceed=sum(a.n_exceed for a in parts),
         signal=_joined([a.signal for a in parts]),
         detector=_joined([a.detector for a in parts]),
+        change_time=min((a.change_time for a in parts if a.change_time is not None), default=None),
     )

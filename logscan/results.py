@@ -75,6 +75,9 @@ class AlarmInterval:
     n_exceed: int  # exceeding samples inside the alarm
     signal: str = ""
     detector: str = ""
+    # a sequential test's estimate of when the change began (e.g. the CUSUM's last zero before the
+    # crossing), so latency can be read back to the onset; None: the detector gives none
+    change_time: float | None = None
 
     @property
     def duration(self) -> float:

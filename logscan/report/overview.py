@@ -32,8 +32,13 @@ def is_rejected(signal: str) -> bool:
 
 
 def alarm_note(alarm: AlarmInterval) -> str:
-    """Plain words replacing peak / threshold for alarms whose ratio means nothing ("" otherwise)."""
-    return rejected_words(int(alarm.n_exceed)) if is_rejected(alarm.signal) else ""
+    """Plain words replacing peak / threshold for alarms whose ratio means nothing, or when the
+    change began by a sequential test's estimate ("" otherwise)."""
+    if is_rejected(alarm.signal):
+        return rejected_words(int(alarm.n_exceed))
+    if alarm.change_time is not None:
+        return f"change estimated to begin {max(alarm.start - alarm.change_time, 0.0):.2f} s before the alarm"
+    return ""
 
 
 def closest_line(margins: Sequence[Margin], clock: Clock | None = None) -> str:

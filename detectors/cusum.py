@@ -1,0 +1,219 @@
+"""Two-sided CUSUM on each whitened innovation of the shared EKF, per measurement group and axis.
+
+Specified in docs/algorithms.md section 1e. The sequential test for slow faults (drifts, small
+biases, a stuck sensor whose innovation walks away) that the windowed NIS sees only once they are
+large. Per output j of group g, at each update of the group:
+
+    u_k   = y~_k,j / sqrt(S_k,jj)                              whitened innovation, N(0, 1) when healthy
+    S+_k  = min(c h_j, max(0, S+_k-1 + u_k - kappa))           upward drift of the mean
+    S-_k  = min(c h_j, max(0, S-_k-1 - u_k - kappa))           downward drift
+    g_k   = S+_k if S+_k >= S-_k else -S-_k                    the signed statistic, alarm when |g_k| > h_j
+
+kappa is the reference value (half the shift, in innovation standard deviations, the test is
+tuned to). h_j comes from the false-alarm budget through Siegmund's approximation of the average
+run length of a one-sided CUSUM on N(0, 1) samples,
+
+    ARL0(h) = (exp(2 kappa b) - 2 kappa b - 1) / (2 kappa^2),   b = h + 1.166,
+
+solved for ARL0_j = J r_j 3600 / budget_per_hour updates, where J = 2 x (outputs over every group)
+one-sided tests and r_j the group's updates per second, so that the J tests together raise at most
+``budget_per_hour`` false alarms per hour (a union bound: it holds whatever the tests' correlation).
+
+Resets to zero: when an alarm ends (|g| falls back to h or below: the alarm's evidence is spent, the
+next alarm needs a full h of new evidence, which is what the ARL counts); at a filter divergence
+(the filter restarts); across a gap in a group's updates longer than max(gap_s, 5 update periods).
+The statistic is held at most c h (``cap``) so that an alarm ends soon after the fault does.
+The change time reported with each alarm (``AlarmInterval.change_time``) is Page's estimate: the
+first update after the last time the alarming side was zero.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.params import Interval
+from logscan.detectors.words import group_words
+
+POSITIVE = Interval(float, 0, None, closed="neither")
+SIEGMUND_SHIFT = 1.166  # b = h + 1.166: the overshoot correction of Siegmund's approximation
+GAP_PERIODS = 5.0  # a gap longer than this many update periods resets a test
+
+
+def siegmund_arl(h, kappa: float):
+    """ARL0(h) = (exp(2 kappa b) - 2 kappa b - 1) / (2 kappa^2), b = h + 1.166: the mean number of
+    N(0, 1) samples before a one-sided CUSUM with reference kappa crosses h (kappa -> 0: b^2)."""
+    b = np.asarray(h, dtype=np.float64) + SIEGMUND_SHIFT
+    if kappa == 0:
+        return b * b
+    x = 2.0 * kappa * b
+    return (np.expm1(x) - x) / (2.0 * kappa * kappa)
+
+
+def threshold_for_arl(arl, kappa: float) -> np.ndarray:
+    """The h whose Siegmund ARL0 is ``arl`` (vectorised bisection on the monotone ARL0(h))."""
+    arl = np.atleast_1d(np.asarray(arl, dtype=np.float64))
+    lo = np.zeros(arl.shape)
+    hi = np.full(arl.shape, 1.0)
+    while np.any(siegmund_arl(hi, kappa) < arl):  # doubles until bracketed: a few dozen at most
+        hi = np.where(siegmund_arl(hi, kappa) < arl, 2.0 * hi, hi)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        low = siegmund_arl(mid, kappa) < arl
+        lo, hi = np.where(low, mid, lo), np.where(low, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+@numba.njit(cache=True)
+def cusum_kernel(t, u, reset, gap, h, kappa, cap):  # pragma: no cover - compiled
+    """Signed two-sided CUSUM per column with its resets (docs/algorithms.md section 1e).
+
+    t (N,) grid times; u (N, J) whitened innovations, NaN where a column has no update;
+    reset (N,) bool, steps where every test restarts (filter divergence); gap (J,) s, a longer gap
+    between a column's updates restarts it; h (J,) thresholds; kappa reference; cap: statistics held
+    at most cap * h. Returns g (N, J), the signed statistic (NaN without update), and onset (N, J),
+    the first step of the run of the side g shows (-1 when that side is zero).
+    """
+    n, m = u.shape
+    g = np.full((n, m), np.nan)
+    onset = np.full((n, m), -1, dtype=np.int64)
+    for j in range(m):
+        sp = 0.0
+        sm = 0.0
+        p0 = -1
+        m0 = -1
+        last = -np.inf
+        on = False
+        top = cap * h[j]
+        for i in range(n):
+            if reset[i]:
+                sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
+            x = u[i, j]
+            if not np.isfinite(x):
+                continue
+            if t[i] - last > gap[j]:
+                sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
+            last = t[i]
+            # S+_k = max(0, S+_k-1 + u_k - kappa), held at cap h; its run starts where it leaves 0
+            sp_new = sp + x - kappa
+            if sp_new <= 0.0:
+                sp, p0 = 0.0, -1
+            else:
+                if sp == 0.0:
+                    p0 = i
+                sp = min(sp_new, top)
+            # S-_k = max(0, S-_k-1 - u_k - kappa)
+            sm_new = sm - x - kappa
+            if sm_new <= 0.0:
+                sm, m0 = 0.0, -1
+            else:
+                if sm == 0.0:
+                    m0 = i
+                sm = min(sm_new, top)
+            now = max(sp, sm) > h[j]
+            if on and not now:  # the alarm ended: its evidence is spent, both sides restart
+                sp, sm, p0, m0 = 0.0, 0.0, -1, -1
+            on = now
+            if sp >= sm:
+                g[i, j] = sp
+                onset[i, j] = p0
+            else:
+                g[i, j] = -sm
+                onset[i, j] = m0
+    return g, onset
+
+
+def output_names(model, group: str, size: int) -> list[str]:
+    """The group's output names from the model ("ax", "ay", "az"), else "0", "1", ...; a group of
+    one output is named by the group alone."""
+    spec = getattr(model, "groups", {}).get(group) if model is not None else None
+    names = list(spec.outputs) if spec is not None and len(spec.outputs) == size else [str(i) for i in range(size)]
+    return [""] if size == 1 else names
+
+
+class CusumDetector(Detector):
+    """Two-sided CUSUM on each whitened innovation (per group and axis): slow drifts and small biases."""
+
+    name = "cusum"
+    requires_trace = True
+    reads = frozenset({"y", "S_diag"})
+    default_enabled = False
+    defaults = {
+        "kappa": 0.25,  # reference value: half the mean shift (in innovation std) the test is tuned to
+        "budget_per_hour": 0.1,  # false alarms per hour the whole detector may spend (sets h)
+        "h": None,  # set to override the budget: one threshold for every test
+        "cap": 1.5,  # the statistic is held at most cap x h
+        "gap_s": 1.0,  # a longer gap in a group's updates (and at least 5 update periods) restarts it
+        "hold_off_s": 1.0,  # crossings closer than this form one alarm
+    }
+    parameter_constraints = {
+        "kappa": [Interval(float, 0, None)],
+        "budget_per_hour": [POSITIVE],
+        "h": [POSITIVE, None],
+        "cap": [Interval(float, 1, None, closed="neither")],
+        "gap_s": [POSITIVE],
+        "hold_off_s": [Interval(float, 0, None)],
+    }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        prefix, _, rest = signal.partition(".")
+        if prefix != "cusum" or not rest:
+            return None
+        group, _, output = rest.partition(".")
+        what = group_words(group) + (f" {output}" if output else "")
+        return f"{what} drifts away from the model's prediction (cumulative innovation test, CUSUM)"
+
+    def needs(self, run=None) -> Needs:
+        return Needs.of(ekf=("y",))
+
+    def thresholds(self, trace) -> tuple[np.ndarray, np.ndarray]:
+        """(h per measurement column, the ARL0 in updates it was solved for)."""
+        sizes = trace.group_sizes.astype(np.int64)
+        duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
+        rate = np.repeat(trace.updated.sum(axis=0) / duration, sizes)  # updates per second per column
+        tests = 2 * int(sizes.sum())  # two one-sided tests per column
+        # ARL0_j = J r_j 3600 / budget: J equal shares of the budget
+        arl = np.maximum(tests * rate * 3600.0 / float(self.budget_per_hour), 1.0)
+        if self.h is not None:
+            return np.full(arl.size, float(self.h)), siegmund_arl(np.full(arl.size, float(self.h)), self.kappa)
+        return threshold_for_arl(arl, float(self.kappa)), arl
+
+    def _run(self, run, trace, **context) -> DetectorResult:
+        result = self.new_result()
+        t = run.t
+        h, arl = self.thresholds(trace)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = trace.y.astype(np.float64) / np.sqrt(trace.S_diag.astype(np.float64))
+        stat, onset = cusum_kernel(t, u, trace.diverged, self._gaps(trace), h, float(self.kappa), float(self.cap))
+        model = context.get("model")
+        result.info.update(kappa=float(self.kappa), budget_per_hour=float(self.budget_per_hour), tests=2 * h.size)
+        result.info["h"], result.info["arl0_updates"] = {}, {}
+        for g, group in enumerate(trace.group_names):
+            for j, output in zip(self._columns(trace, g), output_names(model, group, int(trace.group_sizes[g]))):
+                signal = f"cusum.{group}" + (f".{output}" if output else "")
+                valid = np.isfinite(stat[:, j])
+                alarms = result.add_statistic(
+                    t, signal, stat[:, j], upper=h[j], lower=-h[j], valid=valid, hold_off_s=self.hold_off_s
+                )
+                for alarm in alarms:  # Page's change-time estimate at the crossing
+                    first = int(onset[np.searchsorted(t, alarm.start), j])
+                    alarm.change_time = float(t[first]) if first >= 0 else None
+                result.info["h"][signal] = float(h[j])
+                result.info["arl0_updates"][signal] = float(arl[j])
+        return result
+
+    def _gaps(self, trace) -> np.ndarray:
+        """Per measurement column, the gap between updates that restarts its tests (s)."""
+        gap = np.zeros(int(trace.group_sizes.sum()))
+        for g in range(len(trace.group_names)):  # a handful of groups
+            steps = np.flatnonzero(trace.updated[:, g])
+            period = float(np.median(np.diff(trace.t[steps]))) if steps.size > 1 else trace.dt
+            gap[self._columns(trace, g)] = max(float(self.gap_s), GAP_PERIODS * period)
+        return gap
+
+    @staticmethod
+    def _columns(trace, g: int) -> np.ndarray:
+        offset = int(trace.group_offsets[g])
+        return np.arange(offset, offset + int(trace.group_sizes[g]))
