@@ -96,6 +96,7 @@ class Prepared:
     innovations: Any = None  # logscan.sensor_views.Innovations: the report's measured-vs-predicted figures
     raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
     loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
+    clock: Any = None  # logscan.clock.Clock: the log's own clock, dated before the samples go
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
@@ -188,11 +189,13 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
 
 def _extra_topics() -> frozenset[str]:
     """Every topic a registered detector reads from the log itself, and the report's states."""
+    from logscan.clock import GNSS_UTC_CHANNELS
     from logscan.detectors.registry import default_registry
     from logscan.run_context import STATE_TOPICS
 
     registry = default_registry()
-    return raw_topics_of([registry.get(name) for name in registry.names()]) | frozenset(STATE_TOPICS)
+    extra = frozenset(STATE_TOPICS) | frozenset(GNSS_UTC_CHANNELS)
+    return raw_topics_of([registry.get(name) for name in registry.names()]) | extra
 
 
 def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
@@ -258,6 +261,7 @@ def prepare(
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
     from logscan.align import align
+    from logscan.clock import GNSS_UTC_CHANNELS, clock_of
     from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
@@ -270,7 +274,8 @@ def prepare(
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice)
     step("reading")
-    context_topics = set(STATE_TOPICS)  # the autopilot's states for the report, when the log has them
+    # the autopilot's states for the report, and a ULog's GNSS time (its UTC), when the log has them
+    context_topics = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
     log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
     if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
         wanted = profile.topics() | set(raw_topics) | context_topics
@@ -288,6 +293,7 @@ def prepare(
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
     context = run_context(run, model, log)  # the report's context, from the samples about to go
     prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
+    prepared.clock = clock_of(log, run.start_ns)  # dated while the GNSS time is still there
     if profile.loops:
         from logscan.loops import prepare_loops
 

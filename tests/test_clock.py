@@ -104,6 +104,18 @@ def test_a_ulogs_gnss_time_dates_its_boot_clock(tmp_path):
     assert gnss_utc_zero(read_log(boot_time_log(tmp_path / "plain.ulg")), int(BOOT_S * 1e9)) is None
 
 
+def test_analyze_dates_a_ulogs_boot_clock_from_its_gnss_time(tmp_path, cli, profile):
+    """The pipeline reads the GNSS time beside the profile's topics and dates the clock before the
+    samples are released: the JSON and stdout give the UTC of time zero."""
+    log = boot_time_log(tmp_path / "gnss.ulg", gnss=True)
+    summary = tmp_path / "gnss.json"
+    result = cli("analyze", log, "--profile", profile, "--detector", "px4_estimator", "--no-report", "--json", summary)
+    assert result.exit_code == 1, result.stderr
+    clock = json.loads(summary.read_text())["logs"][0]["clock"]
+    assert clock["name"] == BOOT_TIME and clock["utc_start"] == "2024-03-18T14:49:10.000Z"
+    assert "= 2024-03-18T14:49:10.000Z (GNSS)" in result.stdout
+
+
 def test_an_mcap_with_epoch_stamps_gets_a_utc_date_axis(tmp_path, cli):
     log = SAMPLES / "ros2_ins.mcap"
     if not log.is_file():
