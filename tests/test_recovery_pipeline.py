@@ -65,6 +65,8 @@ def test_recovery_in_the_json_summary_and_the_report(cli, robot, tmp_path):
     out = tmp_path / "s.json"
     result = cli("analyze", robot, "--profile", profile, "--json", out, "-o", tmp_path / "report.html")
     assert result.exit_code == 1, result.stderr
+    assert "  loop left_motor: " in result.stdout and "  recovery (refilter): " in result.stdout
+    assert "from the checkpoint at 3.10 s" in result.stdout  # the latest one > 0.1 s (slowest period) before 3.25 s
     summary = json.loads(out.read_text())
     jsonschema.validate(summary, json.loads(SCHEMA.read_text()))
     entry = summary["logs"][0]

@@ -62,6 +62,26 @@ def _lines(lines: list[str]) -> str:
 # --- analyze --------------------------------------------------------------------------------------
 
 
+def _recovery_lines(recovery, clock) -> list[str]:
+    """One line per recovered anomaly: checkpoint, roll-forward, hand-back, T_max and verdict."""
+    lines = [f"  recovery ({recovery.settings.method}): {len(recovery.anomalies)} anomaly(ies)"]
+    for k, a in enumerate(recovery.anomalies, 1):
+        sensors = "every sensor (generic)" if a.targets is None else "; ".join(
+            f"{loop} {', '.join(groups)}" for loop, groups in a.targets.items()
+        )  # fmt: skip
+        if a.t_checkpoint is None:
+            lines.append(f"    {k}: detected {clock.text(a.t_detect)} ({sensors}): not recovered: {a.note}")
+            continue
+        t_max = ", ".join(f"{state} {v:.2f} s" for state, v in a.t_max.items() if v is not None)
+        lines.append(
+            f"    {k}: detected {clock.text(a.t_detect)} ({sensors}): from the checkpoint at "
+            f"{clock.text(a.t_checkpoint)}, rolled forward {a.rollforward_s:.2f} s to {clock.text(a.t_recovered_end)}"
+            + (f"; T_max {t_max}" if t_max else "")
+            + (f": {a.verdict}" if a.verdict else "")
+        )
+    return lines
+
+
 def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str:
     """One screen per log: verdict, what could not be checked, the incidents in time order with the
     alarms behind each, scores against ground truth."""
@@ -95,8 +115,17 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
                 + (f"  {label}" if label else "")
             )
             shown += 1
+    for name, loop in analysis.loops.items():  # a hierarchical profile's further loops
+        lines.append(
+            f"  loop {name}: {loop.verdict()}  (model {loop.model.name}, {loop.profile.vehicle.rate_hz:g} Hz, "
+            f"detectors {', '.join(r.detector for r in loop.results)})"
+        )
+        lines += [f"    incident {k + 1}: {i.headline_in(clock)}" for k, i in enumerate(loop.incidents[:max_rows])]
+        shown += sum(len(i.alarms) for i in loop.incidents[:max_rows])
     if len(analysis.alarms) > shown:
         lines.append(f"  ... {len(analysis.alarms) - shown} more alarm(s) (see the report / --json)")
+    if analysis.recovery is not None:
+        lines += _recovery_lines(analysis.recovery, clock)
     for result in analysis.results:
         for alarm, reason in result.suppressed[:3]:
             lines.append(
