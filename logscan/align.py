@@ -262,7 +262,8 @@ class _Aligner:
         self.warnings: list[str] = []
         self.gaps: list[tuple[float, float, str]] = []
         self.gap_reported: set[tuple[str, int]] = set()
-        self.gap_warnings = 0
+        # (topic, count, stale_s, longest, its start) -> the channels with those gaps (`gap_lines`)
+        self.gap_channels: dict[tuple, list[str]] = {}
         self.start_ns = 0
         self.dropped: dict[str, np.ndarray] = {}  # channel -> outlying times dropped (ns)
         self.ends = ("", "")  # the channels that start first and end last (after `span`)
@@ -315,14 +316,24 @@ class _Aligner:
                 e = (g_end - self.start_ns) / _NS
                 self.gaps.extend((float(a), float(b), name) for a, b in zip(s, e))
                 longest = int(np.argmax(e - s))
-                self.gap_warnings += 1
-                if self.gap_warnings <= _MAX_GAP_WARNINGS:
-                    self.warnings.append(
-                        f"channel {name!r}: {g_start.size} gap{'s' if g_start.size > 1 else ''} longer "
-                        f"than stale_s={limit_s:g} s (longest {e[longest] - s[longest]:.3f} s from "
-                        f"t={s[longest]:.3f} s); held values are NaN there"
-                    )
+                gap = (g_start.size, f"{limit_s:g}", f"{e[longest] - s[longest]:.3f}", f"{s[longest]:.3f}")
+                self.gap_channels.setdefault((name.rsplit("/", 1)[0], *gap), []).append(name)
         return z, fresh
+
+    def gap_lines(self) -> list[str]:
+        """One warning per topic's channels with the same gaps (a GNSS receiver's ten fields lost
+        together are one line), at most _MAX_GAP_WARNINGS."""
+        lines = []
+        for (topic, count, limit, longest, at), names in self.gap_channels.items():
+            if len(names) == 1:
+                what = f"channel {names[0]!r}: {count} gap{'s' if count > 1 else ''}"
+            else:
+                fields = ", ".join(name[len(topic) + 1 :] for name in names)
+                what = f"channels {topic}/{{{fields}}}: {count} gap{'s' if count > 1 else ''} each"
+            lines.append(
+                f"{what} longer than stale_s={limit} s (longest {longest} s from t={at} s); held values are NaN there"
+            )
+        return lines[:_MAX_GAP_WARNINGS]
 
     def table(self, channels: list[str | None], grid_ns: np.ndarray, limit_s: float) -> np.ndarray | HeldTable:
         """The ``channels`` held onto the grid (None: a NaN column): a `HeldTable` when they share
@@ -640,7 +651,7 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         ground=ground,
         onboard_state=onboard_state,
         onboard_variance=onboard_variance,
-        warnings=aligner.warnings,
+        warnings=aligner.warnings + aligner.gap_lines(),
         gaps=sorted(aligner.gaps),
         input_names=list(profile.inputs.names),
         mode_channel=mode_channel,

@@ -92,6 +92,16 @@ def test_gap_beyond_stale_s_gives_nan_and_a_gap_report():
     assert any("'/speed': 1 gap longer than stale_s=0.25 s" in w for w in r.warnings)
 
 
+def test_a_topics_channels_with_the_same_gap_are_one_warning():
+    """A receiver's fields lost together (one topic, the same gap) make one line, not one each."""
+    t = np.array([0, 100, 200, 300, 800, 900, 1000])
+    pair = '[measurements.pair]\nchannels = ["/gnss/a", "/gnss/b"]\nrate_hz = 10\n'
+    r = run({"/force": force_100hz(), "/gnss/a": (t, t * 0.0), "/gnss/b": (t, t * 0.0)}, pair)
+    (line,) = [w for w in r.warnings if "gap" in w]
+    assert line.startswith("channels /gnss/{a, b}: 1 gap each longer than stale_s=0.25 s")
+    assert len(r.gaps) == 2  # the gaps themselves stay per channel
+
+
 def test_nonfinite_samples_are_masked_and_counted_not_held():
     t = np.arange(0, 1001, 100)
     v = np.arange(11.0)
