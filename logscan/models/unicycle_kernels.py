@@ -66,18 +66,20 @@ def uni_meas_into(p, gid, x, u, r, hx, Hs):
 
 
 @njit(cache=True)
-def uni_h(p, gid, x, u):
+def _measure(p, gid, x, u):
+    """(h, H) of one group, freshly allocated."""
     first, stop = _group_states(gid)
     hx = np.empty(stop - first)
     Hs = np.empty((stop - first, 3))
     uni_meas_into(p, gid, x, u, 0, hx, Hs)
-    return hx
+    return hx, Hs
+
+
+@njit(cache=True)
+def uni_h(p, gid, x, u):
+    return _measure(p, gid, x, u)[0]
 
 
 @njit(cache=True)
 def uni_H(p, gid, x, u):
-    first, stop = _group_states(gid)
-    hx = np.empty(stop - first)
-    Hs = np.empty((stop - first, 3))
-    uni_meas_into(p, gid, x, u, 0, hx, Hs)
-    return Hs
+    return _measure(p, gid, x, u)[1]
