@@ -38,6 +38,7 @@ class Analysis:
     loops: dict[str, Analysis] = field(default_factory=dict)  # a hierarchical profile's further loops
     recovery: Any = None  # logscan.recovery.Recovery, when the profile asks for [recovery]
     recovery_view: Any = None  # logscan.recovery_view.RecoveryView: what the report draws of it
+    observability: Any = None  # logscan.observability.Observability: when a fault could be seen at all
 
     # --- the prepared log, read through ------------------------------------------------------------
     @property
@@ -208,6 +209,7 @@ class Analysis:
             "warnings": list(self.warnings),
             **({"loops": {name: loop.loop_summary(clock) for name, loop in self.loops.items()}} if self.loops else {}),
             **({"recovery": self.recovery_summary(clock)} if self.recovery is not None else {}),
+            **({"observability": self.observability.to_dict()} if self.observability is not None else {}),
         }
 
     def loop_summary(self, clock) -> dict[str, Any]:
@@ -256,6 +258,7 @@ class Analysis:
             innovations=getattr(self.prepared, "innovations", None),
             clock=self.clock,
             recovery=self.recovery_view,
+            observability=self.observability,
         )
 
 

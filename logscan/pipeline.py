@@ -377,6 +377,11 @@ def detect(
     if sensor_views:
         _pack_innovations(prepared, detectors, reuse_samples=free_series)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
+    # when a fault of a kind could be seen at all: from the filter's states, before any is freed
+    from logscan.observability import observability_for
+
+    analysis.observability, why = observability_for(prepared)
+    analysis.warnings += [why] if why else []
     policy = prepared.profile.alarm_policy
     if policy is not None and (policy.ground_channel or policy.ignore_start_s):
         policy = policy.suspend(prepared.run.t, prepared.run.ground)

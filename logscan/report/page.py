@@ -28,6 +28,7 @@ from logscan.report.context import group_rows, info_rows, log_view, model_view, 
 from logscan.report.context_figures import context_figures
 from logscan.report.figures import Figure, detector_figures, merge_spans
 from logscan.report.margins import Margin, result_margins
+from logscan.report.observability_figures import observability_figures
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
 from logscan.report.recovery_figures import recovery_figures, recovery_rows
 from logscan.report.sensor_figures import named_group_figures
@@ -70,6 +71,8 @@ class ReportInput:
                       headlines show times in it. Default: seconds since the log's start.
     recovery:         the recovered estimates per loop and state and one record per anomaly
                       (`logscan.recovery_view`). None: no recovery section.
+    observability:    when a fault of a kind could not be seen (`logscan.observability`), drawn as
+                      bands in the "Context" section. None: not drawn.
     """
 
     log_facts: dict
@@ -90,6 +93,7 @@ class ReportInput:
     innovations: Innovations | None = None
     clock: Clock = field(default_factory=Clock)
     recovery: Any = None  # logscan.recovery_view.RecoveryView: the recovery section, when [recovery] ran
+    observability: Any = None  # logscan.observability.Observability: shaded where a fault could not be seen
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -366,6 +370,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     sections, figures = _sections(report, t, truth_spans, margins)
     clock = report.clock
     context = context_figures(report.context, report.incidents, clock)
+    context += observability_figures(report.observability, clock)
     recovered = recovery_figures(report.recovery, clock)
     figure_json = figures_json(figures, t, point_budget, extra=context + recovered, clock=clock)
 

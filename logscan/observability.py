@@ -1,0 +1,284 @@
+"""Observability verdict: when could a fault of a kind on a sensor or actuator be seen at all?
+
+Specified in docs/algorithms.md section 10. For each fault direction of the model (each actuator,
+each measured output) the kernel (`logscan.observability_kernel`) propagates a unit fault through the
+filter linearised along its own trajectory and sums the evidence it leaves in the innovations over
+``window_s`` from every window start on a ``stride_s`` grid: lambda = sum r^T S^-1 r, the
+non-centrality of the innovations. A fault of size m scales it by m^2 (an actuator offset of
+m = -10 %: du = m u; a lost actuator: du = -u, m^2 = 1; a sensor bias of m units). The fault is
+observable from a window start when
+
+    sqrt(m^2 lambda) >= snr_min                    (default 5: 5 standard deviations of evidence)
+
+i.e. the matched test of that fault direction at a false-alarm probability of 1e-4 per window
+(z = 3.7) still has about 90 % power (z = 1.3). Below it, no detector that reads these sensors can
+promise to see that fault there: a steer-by-wire actuator offset during straight driving (the
+commanded torque is nearly zero, so is the offset) is the case in point.
+
+Kinds with a verdict: actuator-offset and lost-actuator on every actuator, bias on every measured
+output. Other kinds (drift, stuck, noise, bit flips, estimator corruption) get none: their
+signature does not depend on the excitation this way (a stuck sensor is seen by its vanished noise).
+Actuators: the simulator's scenario of the model (names, mixer and operating point, so the names
+match the ground truth of simulated logs), else one actuator per model input.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# kind -> reference size for the report's shading and the summary (the simulator's default sizes:
+# `logscan simulate --help`); evaluate scales by each fault's own magnitude instead
+REFERENCE_SIZE = {"actuator-offset": -0.10, "lost-actuator": 1.0, "bias": 1.0}
+ACTUATOR_KINDS = ("actuator-offset", "lost-actuator")
+SENSOR_KINDS = ("bias",)
+WINDOW_S = 1.0  # a fault must show within 1 s of its onset (the detection target of issue 17)
+STRIDE_S = 0.25  # window starts every 0.25 s: the resolution of the shading
+SNR_MIN = 5.0  # sqrt(lambda) needed: z(1 - 1e-4) + z(0.9) = 3.72 + 1.28
+
+WORDS = {
+    "actuator-offset": "an offset on {target} could not be seen here: {why}",
+    "lost-actuator": "a loss of {target} could not be seen here: {why}",
+    "bias": "a bias on {target} could not be seen here: {why}",
+}
+WHY = {
+    "actuator": "it is barely commanded (straight driving, steady hover), so the fault gives the sensors no signature",
+    "sensor": "the filter absorbs it into its state, so the innovations carry no signature",
+}
+
+
+@dataclass(frozen=True)
+class Direction:
+    """One fault direction: an actuator, or one measured output (group column)."""
+
+    target: str  # as the ground truth names it: steering_motor, motor1, yaw_rate, accel.x
+    what: str  # "actuator" or "sensor"
+    channel: str = ""  # a sensor's log channel (matches a truth event's channels)
+
+
+@dataclass
+class Observability:
+    """Evidence of a unit fault per window start (rows, every ``stride_s``) and direction (columns)."""
+
+    t_start: np.ndarray  # (W,) window start times (s)
+    evidence: np.ndarray  # (W, D) lambda of a unit fault over [t, t + window_s)
+    directions: list[Direction]
+    window_s: float = WINDOW_S
+    stride_s: float = STRIDE_S
+    snr_min: float = SNR_MIN
+    t_end: float = 0.0  # the log's last grid time
+    notes: list[str] = field(default_factory=list)
+
+    # --- verdicts -------------------------------------------------------------------------------
+    def kinds_of(self, direction: Direction) -> tuple[str, ...]:
+        return ACTUATOR_KINDS if direction.what == "actuator" else SENSOR_KINDS
+
+    def observable(self, d: int, kind: str, magnitude: float | None = None) -> np.ndarray:
+        """(W,) bool: a fault of ``kind`` and ``magnitude`` (None: the reference size) on direction
+        ``d`` starting at each window start would leave sqrt(m^2 lambda) >= snr_min (NaN: False)."""
+        size = fault_scale(kind, REFERENCE_SIZE[kind] if magnitude is None else magnitude)
+        with np.errstate(invalid="ignore"):
+            return size * size * self.evidence[:, d] >= self.snr_min**2
+
+    def unobservable_intervals(self, d: int, kind: str, magnitude: float | None = None) -> list[tuple[float, float]]:
+        """Merged [start, end) spans of window starts from which the fault would not be seen (windows
+        without a verdict, NaN evidence, are neither seen nor unseen)."""
+        blind = np.isfinite(self.evidence[:, d]) & ~self.observable(d, kind, magnitude)
+        return spans_of(blind, self.t_start, self.stride_s, self.t_end)
+
+    def find(self, target: str, channels=()) -> int | None:
+        """Index of the direction a fault event names (its log channel first, then its target)."""
+        for i, direction in enumerate(self.directions):
+            if direction.channel and direction.channel in channels:
+                return i
+        for i, direction in enumerate(self.directions):
+            if direction.target == target:
+                return i
+        return None
+
+    def event_verdict(self, event) -> bool | None:
+        """Whether a truth event (`logscan.results.FaultEvent`) overlaps a period where it could be
+        seen: True (observable), False (its whole span is unobservable), None (no verdict: a kind
+        or target this module does not judge)."""
+        d = self.find(event.target, event.channels or ())
+        if d is None or event.kind not in self.kinds_of(self.directions[d]):
+            return None
+        magnitude = event.magnitude if event.kind != "lost-actuator" else 1.0
+        seen = self.observable(d, event.kind, magnitude)
+        end = min(event.end_or_inf, self.t_end)
+        # window starts within the fault's span; the one in progress at its onset counts from there
+        inside = (self.t_start + self.stride_s > event.t_start) & (self.t_start <= end)
+        inside &= np.isfinite(self.evidence[:, d])
+        return bool(seen[inside].any()) if inside.any() else None
+
+    # --- views ----------------------------------------------------------------------------------
+    def blind_periods(self) -> list[dict]:
+        """Every (direction, kind) at its reference size with an unobservable period: target, kind,
+        plain words and the intervals (seconds since the log's time zero)."""
+        out = []
+        for d, direction in enumerate(self.directions):
+            for kind in self.kinds_of(direction):
+                spans = self.unobservable_intervals(d, kind)
+                if not spans:
+                    continue
+                out.append(
+                    {
+                        "target": direction.target,
+                        "kind": kind,
+                        "size": REFERENCE_SIZE[kind],
+                        "words": WORDS[kind].format(target=direction.target, why=WHY[direction.what]),
+                        "intervals": [[a, b] for a, b in spans],
+                        "unobservable_s": float(sum(b - a for a, b in spans)),
+                    }
+                )
+        return out
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (the analyze summary's ``observability``)."""
+        return {
+            "window_s": self.window_s,
+            "stride_s": self.stride_s,
+            "snr_min": self.snr_min,
+            "judged": [{"target": d.target, "kinds": list(self.kinds_of(d))} for d in self.directions],
+            "unobservable": self.blind_periods(),
+            "notes": list(self.notes),
+        }
+
+
+def fault_scale(kind: str, magnitude: float) -> float:
+    """The factor a fault of ``kind`` and ``magnitude`` puts on the unit signature: the offset
+    itself (du = m u), 1 for a lost actuator (du = -u), the bias itself."""
+    return 1.0 if kind == "lost-actuator" else float(magnitude)
+
+
+def spans_of(mask: np.ndarray, t_start: np.ndarray, stride_s: float, t_end: float) -> list[tuple[float, float]]:
+    """[t_start[i], t_start[i] + stride) of the True entries of ``mask``, merged, clipped to t_end."""
+    if not mask.any():
+        return []
+    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return [
+        (float(t_start[a]), float(min(t_start[b] + stride_s, t_end))) for a, b in zip(first, last) if t_start[a] < t_end
+    ]
+
+
+# --- building the verdict from a filtered run ------------------------------------------------------
+
+
+def actuators_of(model, dt: float) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """(names, M, trim): inputs u = M a for actuator values a, a fault acting on trim + a. The
+    simulator's scenario of the model when it has one (its names are the ground truth's), else
+    one actuator per model input. A model whose inputs are sensors (ins) has none."""
+    if getattr(model, "inputs_are_sensors", False):
+        return [], np.zeros((model.n_inputs, 0)), np.zeros(0)
+    try:
+        from logscan.simulate.scenario import SIMULATED_MODELS, build_scenario
+
+        if model.name in SIMULATED_MODELS:
+            rate = 1.0 / dt
+            sc = build_scenario(model.name, 4 * dt, rate, False, np.random.default_rng(0), params=model.params)
+            M = np.asarray(sc.M, dtype=np.float64)
+            if M.shape == (model.n_inputs, len(sc.actuators)):
+                trim = np.zeros(M.shape[1]) if sc.a_trim is None else np.asarray(sc.a_trim, dtype=np.float64)
+                return list(sc.actuators), M, trim
+    except Exception:  # noqa: BLE001 - a scenario that cannot be built: fall back to the inputs
+        pass
+    return list(model.input_names), np.eye(model.n_inputs), np.zeros(model.n_inputs)
+
+
+def held_inputs(u: np.ndarray) -> np.ndarray:
+    """u with every non-finite row replaced by the last finite one (zeros before the first), as
+    the filter holds them."""
+    u = np.asarray(u, dtype=np.float64)
+    ok = np.all(np.isfinite(u), axis=1)
+    last = np.maximum.accumulate(np.where(ok, np.arange(u.shape[0]), -1))
+    held = np.where((last >= 0)[:, None], u[np.maximum(last, 0)], 0.0)
+    return np.ascontiguousarray(held)
+
+
+def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S, snr_min=SNR_MIN) -> Observability:
+    """The verdict of one filtered run (the EKF trace with its x_prior and x_post)."""
+    from logscan.observability_kernel import signature_evidence
+    from logscan.recovery.kernels import call_literal
+
+    dt = float(trace.dt)
+    stride = max(int(round(stride_s / dt)), 1)
+    window = max(int(round(window_s / dt / stride)), 1) * stride
+    names, M, trim = actuators_of(model, dt)
+    u = held_inputs(run.u)
+    # actuator values a = M^+ u (+ trim): the fault du = M[:, a] * m * value
+    values = np.ascontiguousarray(u @ np.linalg.pinv(M).T + trim) if names else np.zeros((u.shape[0], 0))
+    directions = [Direction(name, "actuator") for name in names]
+    cols = []
+    for g, group in enumerate(trace.group_names):
+        channels = list(run.groups[group].channels) if group in run.groups else []
+        size = int(trace.group_sizes[g])
+        for c in range(size):
+            channel = channels[c] if c < len(channels) else ""
+            # the simulator's target names: the group alone, or <group>.<field's last part> (accel.x)
+            field_name = (channel or model.group(group).outputs[c]).rsplit("/", 1)[-1].rsplit(".", 1)[-1]
+            target = group if size == 1 else f"{group}.{field_name}"
+            directions.append(Direction(target, "sensor", channel))
+            cols.append(int(trace.group_offsets[g]) + c)
+    evidence = call_literal(
+        signature_evidence,
+        model.model_id,
+        model.param_vector(dt),
+        np.ascontiguousarray(trace.x_prior, dtype=np.float64),
+        np.ascontiguousarray(trace.x_post, dtype=np.float64),
+        u,
+        dt,
+        np.ascontiguousarray(trace.Q, dtype=np.float64),
+        np.ascontiguousarray(trace.R, dtype=np.float64),
+        np.diag(np.nan_to_num(trace.P_post_diag[0].astype(np.float64), nan=1.0)),
+        np.ascontiguousarray(trace.updated),
+        np.array([model.group(g).group_id for g in trace.group_names], dtype=np.int64),
+        np.asarray(trace.group_offsets, dtype=np.int64),
+        np.asarray(trace.group_sizes, dtype=np.int64),
+        np.ascontiguousarray(M.T, dtype=np.float64),
+        values,
+        np.array(cols, dtype=np.int64),
+        np.int64(window),
+        np.int64(stride),
+    )
+    t = np.asarray(trace.t, dtype=np.float64)
+    starts = t[0] + dt * stride * np.arange(evidence.shape[0])
+    keep = starts <= t[-1]
+    # a window the log's end cuts short is not judged (nothing could be seen in what is left of it)
+    evidence[stride * np.arange(evidence.shape[0]) + window > t.size - 1] = np.nan
+    return Observability(
+        t_start=starts[keep],
+        evidence=evidence[keep],
+        directions=directions,
+        window_s=window * dt,
+        stride_s=stride * dt,
+        snr_min=float(snr_min),
+        t_end=float(t[-1]),
+    )
+
+
+def observability_for(prepared) -> tuple[Observability | None, str | None]:
+    """(the verdict of a prepared log's EKF run, None) or (None, why there is none): no EKF trace
+    or its states freed, or the verdict failed (a warning, never a failed analysis)."""
+    trace = getattr(prepared, "trace", None)
+    run = prepared.run
+    if trace is None or getattr(trace, "x_prior", None) is None or trace.x_post is None or run.u is None:
+        return None, None
+    try:
+        return observability_of(prepared.model, run, trace), None
+    except Exception as exc:  # noqa: BLE001 - the verdict is an aid; it must not cost the analysis
+        return None, f"observability verdict not computed: {type(exc).__name__}: {exc}"
+
+
+def describe(obs: Observability | None) -> str:
+    """One line for a summary: how much of the log each judged fault could not be seen."""
+    if obs is None:
+        return ""
+    parts = [
+        f"{p['kind']} on {p['target']} unobservable {p['unobservable_s']:.1f} s"
+        for p in obs.blind_periods()
+        if not math.isclose(p["unobservable_s"], 0.0)
+    ]
+    return "; ".join(parts)
