@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 from logscan.results import AlarmInterval, events_from_truth
-from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregate, score_log
+from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregate, label_observability, score_log
 
 CHECK_SEPARATOR = ":"
 
@@ -121,12 +121,17 @@ class LogEvaluation:
 
 
 def kind_summary(score: Score) -> dict:
-    """JSON view of one key's detection of one fault kind (a Score whose tp/fn count its events)."""
+    """JSON view of one key's detection of one fault kind (a Score whose tp/fn count its events):
+    with the events that could not be seen at all (``unobservable``), the misses among them, and
+    the detection rate over the others (``detection_rate_observable``)."""
     return {
         "events": score.n_events,
         "detected": score.tp,
         "at_onset": score.at_onset,
         "detection_rate": score.recall,
+        "unobservable": score.unobservable,
+        "missed_unobservable": score.fn_unobservable,
+        "detection_rate_observable": score.recall_observable,
         "mean_latency_s": score.mean_latency_s,
         "max_latency_s": score.max_latency_s,
     }
@@ -179,6 +184,8 @@ class Evaluation:
                 entry = stats.setdefault(label, Score(detector=key, log=label, n_logs=0))
                 entry.n_logs += 1
                 entry.at_onset += match.active_at_onset
+                entry.unobservable += match.observable is False
+                entry.fn_unobservable += match.observable is False and not match.detected
                 if match.detected:
                     entry.tp += 1
                     entry.latencies_s.append(match.latency_s)
@@ -238,6 +245,11 @@ def evaluate_analysis(
         transients=transients,
         log=analysis.path,
     )
+    # the events that could not be seen at all (logscan.observability), labelled in every key's score
+    observability = getattr(analysis, "observability", None)
+    verdicts = [observability.event_verdict(e) if observability is not None else None for e in analysis.events]
+    for score in scores.values():
+        label_observability(score, verdicts)
     return LogEvaluation(
         analysis.path,
         analysis.model.name,

@@ -32,6 +32,10 @@ Rules (closed intervals throughout, times in seconds on the analysis grid):
   counts only logs without fault events, the false-alarm rate the evaluation reports.
 - Aggregation over logs sums the counts and durations and pools the latencies (mean and max over
   every detected event of every log), so metrics of an aggregate are micro-averages.
+- Observability (`label_observability`, docs/algorithms.md section 10): an event whose whole span
+  lies where a fault of its kind and size could not be seen is labelled unobservable; it stays a TP
+  or an FN (recall is unchanged), and ``fn_unobservable`` counts the misses among them, so
+  ``recall_observable`` = detected / events that could be seen at some time of their span.
 """
 
 from __future__ import annotations
@@ -69,6 +73,9 @@ class EventMatch:
     latency_s: float | None = None  # earliest of those starts - t_start, >= 0
     onset_alarm_indices: list[int] = field(default_factory=list)  # alarms already on at t_start
     recovery_indices: list[int] = field(default_factory=list)  # alarms in its recovery window
+    # whether the fault could be seen at all (`logscan.observability`): True, False (its whole span
+    # lies where it could not be seen: a miss there is labelled so), None (no verdict)
+    observable: bool | None = None
 
     @property
     def detected(self) -> bool:
@@ -87,6 +94,7 @@ class EventMatch:
             "alarms": list(self.alarm_indices),
             "onset_alarms": list(self.onset_alarm_indices),
             "recovery_alarms": list(self.recovery_indices),
+            "observable": self.observable,
         }
 
 
@@ -200,12 +208,23 @@ class Score:
     healthy_fp: int = 0
     healthy_duration_s: float = 0.0
     n_logs: int = 1
+    unobservable: int = 0  # events whose whole span lies where they could not be seen
+    fn_unobservable: int = 0  # of them, missed (the rest of FN were missed where they could be seen)
     latencies_s: list[float] = field(default_factory=list)
     matches: list[EventMatch] = field(default_factory=list)
 
     @property
     def n_events(self) -> int:
         return self.tp + self.fn
+
+    @property
+    def fn_observable(self) -> int:
+        return self.fn - self.fn_unobservable
+
+    @property
+    def recall_observable(self) -> float | None:
+        """Recall over the events that could be seen at some time of their span (or have no verdict)."""
+        return _ratio(self.tp - (self.unobservable - self.fn_unobservable), self.n_events - self.unobservable)
 
     @property
     def precision(self) -> float | None:
@@ -257,6 +276,9 @@ class Score:
             "n_alarms": self.n_alarms,
             "precision": self.precision,
             "recall": self.recall,
+            "unobservable": self.unobservable,
+            "fn_unobservable": self.fn_unobservable,
+            "recall_observable": self.recall_observable,
             "f1": self.f1,
             "mean_latency_s": self.mean_latency_s,
             "max_latency_s": self.max_latency_s,
@@ -343,6 +365,20 @@ def aggregate(scores: Iterable[Score], *, detector: str | None = None) -> Score:
         healthy_fp=sum(s.healthy_fp for s in scores),
         healthy_duration_s=float(sum(s.healthy_duration_s for s in scores)),
         n_logs=sum(s.n_logs for s in scores),
+        unobservable=sum(s.unobservable for s in scores),
+        fn_unobservable=sum(s.fn_unobservable for s in scores),
         latencies_s=[x for s in scores for x in s.latencies_s],
         matches=[],
     )
+
+
+def label_observability(score: Score, verdicts: Sequence[bool | None]) -> Score:
+    """Label each event of ``score`` with its verdict (one per event, in the events' order: True
+    observable, False unobservable, None no verdict) and count the unobservable ones and the misses
+    among them; returns the score."""
+    for match, verdict in zip(score.matches, verdicts, strict=True):
+        match.observable = verdict
+    blind = [m for m in score.matches if m.observable is False]
+    score.unobservable = len(blind)
+    score.fn_unobservable = sum(not m.detected for m in blind)
+    return score

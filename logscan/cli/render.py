@@ -244,6 +244,32 @@ def render_kinds(evaluation: Evaluation) -> str:
     return _lines(lines)
 
 
+def render_observability(evaluation: Evaluation) -> str:
+    """Per fault kind with unobservable events (`logscan.observability`): per detector, the misses,
+    those of them that lay wholly where the fault could not be seen, and the detection rate over the
+    events that could be seen. Empty when no event was judged unobservable."""
+    keys = [key for key in evaluation.keys() if CHECK_SEPARATOR not in key]
+    per_key = {key: evaluation.by_kind(key) for key in keys}
+    kinds = [kind for kind in evaluation.kinds() if any(s.unobservable for k in keys if (s := per_key[k].get(kind)))]
+    if not kinds:
+        return ""
+    header = (
+        f"{'fault kind':<30} {'detector':<26} {'events':>6} {'unobs.':>6} {'missed':>6} {'of them unobs.':>14} "
+        f"{'detected / observable':>21}"
+    )
+    lines = ["faults that could not be seen (docs/algorithms.md section 10):", header, "-" * len(header)]
+    for kind in kinds:
+        for i, key in enumerate(k for k in keys if k in per_key and kind in per_key[k]):
+            st = per_key[key][kind]
+            seen = f"{st.tp - (st.unobservable - st.fn_unobservable)}/{st.n_events - st.unobservable}"
+            lines.append(
+                f"{kind if i == 0 else '':<30} {key:<26} {st.n_events:>6} {st.unobservable:>6} {st.fn:>6} "
+                f"{st.fn_unobservable:>14} {seen:>21}"
+            )
+    lines.append("unobs.: events whose whole span lay where a fault of their kind and size left no signature.")
+    return _lines(lines)
+
+
 def render_evaluation(evaluation: Evaluation) -> str:
     """The one-screen text report of `logscan evaluate`."""
     n_healthy = sum(log.healthy for log in evaluation.logs)
@@ -257,6 +283,8 @@ def render_evaluation(evaluation: Evaluation) -> str:
     ]
     if evaluation.logs:
         parts += ["", render_scores(evaluation), "", render_kinds(evaluation)]
+        blind = render_observability(evaluation)
+        parts += ["", blind] if blind else []
     if evaluation.skipped:
         parts.append("")
         parts.append(
