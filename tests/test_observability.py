@@ -1,0 +1,154 @@
+"""The observability verdict (logscan.observability, docs/algorithms.md section 10): a steer-by-wire
+actuator offset cannot be seen in straight driving and can in a lane change, a quadcopter sensor bias
+is always seen, evaluate counts the misses where a fault could not be seen apart, and the summary's
+observability validates against the published schema."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from logscan.observability import Direction, Observability, spans_of
+from logscan.results import FaultEvent
+from logscan.scoring import label_observability, score_log
+
+SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "schema" / "analyze-summary.schema.json"
+
+
+def _simulated(tmp_path_factory, model: str, seconds: float, seed: int, faults=()):
+    from logscan.pipeline import analyze_log
+    from logscan.simulate import parse_fault, simulate, write_simulation
+
+    path = tmp_path_factory.mktemp(model) / f"{model}.mcap"
+    sim = simulate(model, [parse_fault(f) for f in faults], duration=seconds, seed=seed)
+    write_simulation(sim, str(path), "mcap-ros2")
+    return path, analyze_log(path, detector_names=["nis"])
+
+
+@pytest.fixture(scope="module")
+def steer(tmp_path_factory):
+    """25 s of steer-by-wire: a double lane change over 0-4 s and 20-24 s, straight driving between;
+    a 10 % steering-motor offset over 6-16 s (straight)."""
+    return _simulated(tmp_path_factory, "steer_by_wire", 25.0, 9101, ["actuator-offset::6:16:"])
+
+
+def _index(obs: Observability, target: str) -> int:
+    return next(i for i, d in enumerate(obs.directions) if d.target == target)
+
+
+def test_steer_by_wire_actuator_offset_is_unobservable_straight_and_observable_in_a_lane_change(steer):
+    _, analysis = steer
+    obs = analysis.observability
+    d = _index(obs, "steering_motor")
+    seen = obs.observable(d, "actuator-offset")
+    t = obs.t_start
+    assert seen[(t >= 0.25) & (t <= 2.5)].all()  # the lane change: the offset moves the steering
+    assert not seen[(t >= 5.0) & (t <= 18.5)].any()  # straight: nearly no torque, nearly no offset
+    assert obs.observable(d, "lost-actuator")[(t >= 0.25) & (t <= 2.5)].all()
+    spans = obs.unobservable_intervals(d, "actuator-offset")
+    assert any(a <= 5.0 and b >= 18.5 for a, b in spans)
+    # the truth's offset (6-16 s, all straight) is labelled unobservable; one reaching into the
+    # next lane change is not
+    event = analysis.events[0]
+    assert (event.kind, event.target) == ("actuator-offset", "steering_motor")
+    assert obs.event_verdict(event) is False
+    later = FaultEvent(15.0, 22.0, "actuator-offset", "steering_motor", -0.1)
+    assert obs.event_verdict(later) is True
+
+
+def test_steer_by_wire_shading_words_and_report_figure(steer):
+    from logscan.report.observability_figures import observability_figures
+
+    _, analysis = steer
+    blind = {(p["target"], p["kind"]): p for p in analysis.observability.blind_periods()}
+    offset = blind[("steering_motor", "actuator-offset")]
+    assert "could not be seen here" in offset["words"] and "barely commanded" in offset["words"]
+    assert offset["unobservable_s"] > 10.0
+    figures = observability_figures(analysis.observability)
+    assert len(figures) == 1 and figures[0]["id"] == "ctx-observability"
+    assert "could not be seen here" in figures[0]["json"]
+
+
+def test_quadcopter_sensor_bias_is_always_observable(tmp_path_factory):
+    _, analysis = _simulated(tmp_path_factory, "quadcopter", 15.0, 9102)
+    obs = analysis.observability
+    for target in ("accel.x", "accel.z", "gyro.y"):
+        d = _index(obs, target)
+        judged = np.isfinite(obs.evidence[:, d])
+        assert judged.sum() > 40
+        assert obs.observable(d, "bias")[judged].all(), target
+        assert obs.unobservable_intervals(d, "bias") == []
+    assert obs.event_verdict(FaultEvent(5.0, 8.0, "bias", "accel.x", 1.0)) is True
+    assert obs.event_verdict(FaultEvent(5.0, 8.0, "stuck", "accel.x", 0.0)) is None  # no verdict
+
+
+def _crafted() -> Observability:
+    """Two directions over 0-10 s: an actuator seen only from 2 to 4 s, a sensor always seen."""
+    t = np.arange(0.0, 10.0, 0.5)
+    evidence = np.ones((t.size, 2)) * 1e4
+    evidence[:, 0] = np.where((t >= 2.0) & (t < 4.0), 1e4, 1.0)
+    evidence[-1] = np.nan  # a window the log's end cut short: not judged
+    return Observability(t, evidence, [Direction("motor", "actuator"), Direction("speed", "sensor", "/speed")],
+                         window_s=1.0, stride_s=0.5, t_end=10.0)  # fmt: skip
+
+
+def test_verdict_of_a_fault_follows_its_span_and_size():
+    obs = _crafted()
+    assert obs.unobservable_intervals(0, "actuator-offset") == [(0.0, 2.0), (4.0, 9.5)]
+    assert obs.event_verdict(FaultEvent(5.0, 8.0, "actuator-offset", "motor", -0.1)) is False
+    assert obs.event_verdict(FaultEvent(3.8, 8.0, "actuator-offset", "motor", -0.1)) is True
+    # 1e4 * 0.01 = 100 >= 25: seen; 1e4 * 1e-4 = 1: too small to be seen even at 2-4 s
+    assert obs.event_verdict(FaultEvent(2.0, 3.0, "actuator-offset", "motor", -0.01)) is False
+    assert obs.event_verdict(FaultEvent(5.0, 8.0, "bias", "x", 1.0, ("/speed",))) is True  # by channel
+    assert obs.event_verdict(FaultEvent(5.0, 8.0, "bias", "elsewhere", 1.0)) is None
+    assert spans_of(np.array([False, True, True, False]), np.arange(4.0), 1.0, 2.5) == [(1.0, 2.5)]
+
+
+def test_evaluate_counts_misses_where_a_fault_could_not_be_seen_apart():
+    from logscan.cli.render import render_observability
+    from logscan.evaluate import Evaluation, LogEvaluation, kind_summary
+
+    obs = _crafted()
+    events = [
+        FaultEvent(5.0, 7.0, "actuator-offset", "motor", -0.1),  # unobservable, missed
+        FaultEvent(1.0, 3.0, "actuator-offset", "motor", -0.1),  # observable, detected
+        FaultEvent(8.5, 9.0, "lost-actuator", "motor", 0.0),  # unobservable (lost: 1.0 < 25), detected
+    ]
+    score = score_log(events, [(1.5, 1.6), (8.6, 8.7)], duration_s=10.0, detector="d")
+    label_observability(score, [obs.event_verdict(e) for e in events])
+    assert [m.observable for m in score.matches] == [False, True, False]
+    assert (score.tp, score.fn, score.unobservable, score.fn_unobservable) == (2, 1, 2, 1)
+    assert score.fn_observable == 0 and score.recall_observable == 1.0
+    assert score.to_dict()["events"][0]["observable"] is False
+    evaluation = Evaluation(logs=[LogEvaluation("a.mcap", "toy", 10.0, events, {"d": score})])
+    offset = evaluation.by_kind("d")["toy/actuator-offset"]
+    summary = kind_summary(offset)
+    split = (summary["unobservable"], summary["missed_unobservable"], summary["detection_rate_observable"])
+    assert split == (1, 1, 1.0)
+    assert evaluation.aggregate("d").fn_unobservable == 1
+    text = render_observability(evaluation)
+    assert "toy/actuator-offset" in text and "1/1" in text
+    assert json.dumps(evaluation.to_dict())  # the JSON carries it
+
+
+def test_summary_observability_validates_against_the_schema(steer, tmp_path):
+    import jsonschema
+
+    from logscan.cli.main import main
+
+    path, _ = steer
+    out = tmp_path / "summary.json"
+    with pytest.raises(SystemExit):
+        main(["analyze", str(path), "--no-report", "-q", "--json", str(out)])
+    document = json.loads(out.read_text())
+    schema = json.loads(SCHEMA.read_text(encoding="utf-8"))
+    validator = jsonschema.Draft202012Validator(schema)
+    assert list(validator.iter_errors(document)) == []
+    observability = document["logs"][0]["observability"]
+    assert any(p["kind"] == "actuator-offset" for p in observability["unobservable"])
+    broken = json.loads(json.dumps(document))
+    broken["logs"][0]["observability"]["unobservable"][0]["kind"] = "sideways"
+    assert list(validator.iter_errors(broken))  # the schema checks it
