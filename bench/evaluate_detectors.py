@@ -190,6 +190,7 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
     alarm spans per method (for rescoring the JSON), seconds)."""
     from logscan.evaluate import LogEvaluation, merge_intervals, score_groups
     from logscan.results import events_from_truth
+    from logscan.scoring import label_observability
 
     job, thresholds = args
     started = time.perf_counter()
@@ -231,6 +232,11 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             transients=transients,
             log=f"{job.model}/{job.family}/{job.seed}",
         )
+        # faults wholly where they could not be seen are labelled (logscan.observability), not excused
+        seen = analysis.observability
+        verdicts = [seen.event_verdict(e) if seen is not None else None for e in analysis.events]
+        for score in scores.values():
+            label_observability(score, verdicts)
         result = LogEvaluation(
             f"{job.model}/{job.family}/{job.seed}",
             job.model,
@@ -300,7 +306,8 @@ def detected_while_active(scores) -> int:
 
 def family_cell(scores) -> str:
     """detected / runs (detections after the fault ended; runs with an alarm already on at the
-    onset) · mean / max latency."""
+    onset; faults wholly where they could not be seen, the misses among them, and the detection
+    rate of the others) · mean / max latency."""
     from logscan.scoring import aggregate
 
     score = aggregate(scores)
@@ -310,6 +317,12 @@ def family_cell(scores) -> str:
         notes.append(f"{late} only after the fault ended")
     if score.at_onset:
         notes.append(f"{score.at_onset} at onset")
+    if score.unobservable:  # docs/algorithms.md section 10
+        seen = score.n_events - score.unobservable
+        notes.append(
+            f"{score.unobservable} unobservable, {score.fn_unobservable} of them missed; "
+            f"{score.tp - (score.unobservable - score.fn_unobservable)}/{seen} observable detected"
+        )
     note = f" ({', '.join(notes)})" if notes else ""
     return f"{score.tp}/{score.n_events}{note}{_latency(score)}"
 
