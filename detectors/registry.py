@@ -35,6 +35,7 @@ BUILTIN_DETECTORS: list[str] = [
     "logscan.detectors.encoded_ekf:EncodedEkfDetector",
     "logscan.detectors.nis:NisDetector",
     "logscan.detectors.cusum:CusumDetector",
+    "logscan.detectors.frozen:FrozenSensorDetector",
     "logscan.detectors.atfm:AtfmDetector",
     "logscan.detectors.atfm_residual:AtfmResidualDetector",
     "logscan.detectors.ubikf_chi2:Chi2Detector",

@@ -230,6 +230,8 @@ JACKAL = {"healthy": "jackal_train_1.mcap", "faulty": "jackal_gps_bias.mcap"}
 HOVER = {"healthy": "hover_healthy.mcap", "faulty": "hover_rotor_offset.mcap"}
 # the UBIKF's chi-square test needs a model with interval parameters (hover_uav)
 OWN_FIXTURES = {"atfm": JACKAL, "atfm_residual": JACKAL, "chi2": HOVER}
+# detectors of a fault the faulty fixture (a bit flip) does not have, checked on their own faults
+OWN_FAULT_TESTS = {"frozen": "the fixture's bit flips never freeze a channel (tests/test_frozen.py: stuck sensors)"}
 _PIPELINE_CACHE: dict[str, tuple] = {}
 
 
@@ -280,6 +282,8 @@ def test_alarms_on_the_faulty_fixture(name):
         pytest.skip(
             f"{name} reads the autopilot's own topics, which the simulated fixtures lack (tests/test_{name}.py)"
         )
+    if name in OWN_FAULT_TESTS:
+        pytest.skip(f"{name}: {OWN_FAULT_TESTS[name]}")
     run, trace, model, _, traces = pipeline_case("faulty", name)
     detector = pipeline_detector(name)
     assert detector.run(run, trace, model=model, traces=traces).alarms

@@ -1,0 +1,214 @@
+"""The frozen-sensor ("stuck") check: a measurement channel whose fresh samples stop changing.
+
+Specified in docs/algorithms.md section 1f. Per channel of every measurement group, over its fresh
+samples v_1 .. v_M (the steps where the channel has a new sample, `AlignedGroup.channel_fresh`):
+
+    still_i  = |v_i - v_a(i)| <= tol,  tol = still_ratio * sigma       a(i): the run's anchor sample
+    r_i      = i - a(i) + 1                                           samples held within tol (run)
+    L        = median run length over the log (>= 1)                 fill factor: 1, or a CSV's repeats
+    g_i      = r_i / L                                                the statistic: held samples, in
+                                                                      units of the channel's own rate
+
+The anchor a(i) is the first sample of the current run: a run ends when a sample leaves the band
++-tol around it, so a slow healthy ramp (each step small, the sum not) is not a run. sigma is the
+channel's noise: the profile's noise_std, else the model's default, never larger than the channel's
+own noise read from the log (the median absolute successive difference / (0.6745 sqrt 2)), so a
+profile that overstates the noise cannot make healthy samples look still. An exact freeze has
+|v_i - v_a| = 0; a frozen value with quantisation noise far below the sensor's stays within tol.
+
+Forward-filled channels: a wide CSV that repeats a slow channel's last value on every row of a
+faster one gives every run the length of the ratio of the rates; L, the median run length, is that
+ratio (1 for a channel whose samples are all new), so g counts the channel's own samples and the
+fill is never called stuck. L is taken from the runs only when there are at least MIN_RUNS of them.
+
+Threshold: an alarm when g > h, h = max(n_samples, h_budget). Healthy runs are taken as geometric
+in g (a repeat has probability p, P(g >= r) = p^(r - 1)), p estimated from the log's runs (the share
+of runs of at least 1.5 L samples, with half a run added: one long stuck run counts once), and
+h_budget = 1 + ln(q) / ln(p) with q = budget_per_hour / (channels x runs per hour): the channel's
+healthy repeats (a quantised sensor) raise its threshold so that all channels together stay within
+``budget_per_hour`` false alarms. The change time of each alarm is the run's second sample, the
+first that repeated the frozen value.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.params import Interval
+from logscan.detectors.words import group_words
+
+PREFIX = "frozen"
+MIN_RUNS = 20  # fewer runs than this: too few to read a fill factor from (L = 1)
+# A channel that repeats its sample on at least HELD_SHARE of its steps, spread over at least
+# NOISELESS_P of its runs (not one long freeze), shows no noise between samples: a quantised or
+# noiseless sensor (a simulator's GNSS velocity reads exactly 0 at rest) that holds its value
+# whenever the quantity is still; stillness cannot be told from a freeze there: not checked.
+HELD_SHARE = 0.5
+NOISELESS_P = 0.1
+MAD_TO_STD = 0.6745 * np.sqrt(2.0)  # median |v_i - v_i-1| of N(0, sigma^2) noise = 0.6745 sqrt(2) sigma
+
+
+@numba.njit(cache=True)
+def held_runs(v, tol):  # pragma: no cover - compiled
+    """Per sample, the first index of its run: a run lasts while samples stay within ``tol`` of its
+    first sample (the anchor); a NaN never joins a run."""
+    anchor = np.empty(v.size, dtype=np.int64)
+    a = 0
+    for i in range(v.size):
+        if i == 0 or not (abs(v[i] - v[a]) <= tol):
+            a = i
+        anchor[i] = a
+    return anchor
+
+
+def channel_noise(values: np.ndarray) -> float:
+    """A channel's noise std from its own samples: median |v_i - v_i-1| / (0.6745 sqrt 2) (motion
+    adds to it, a stuck stretch shorter than half the log does not move the median)."""
+    steps = np.abs(np.diff(values))
+    steps = steps[np.isfinite(steps)]
+    return float(np.median(steps)) / MAD_TO_STD if steps.size else np.nan
+
+
+def fill_factor(lengths: np.ndarray) -> float:
+    """L: the median length of a channel's runs of exactly repeated samples, 1 with fewer than
+    MIN_RUNS runs (a forward fill repeats a slow channel about L times; a channel whose samples are
+    all new has L = 1)."""
+    if lengths.size < MIN_RUNS:
+        return 1.0
+    return max(float(np.median(lengths)), 1.0)
+
+
+def repeat_probability(lengths: np.ndarray, fill: float) -> float:
+    """p: the share of runs of at least 1.5 L samples (a repeat of the channel's own sample), with
+    half a run added; one long stuck run counts once."""
+    return (np.count_nonzero(lengths >= 1.5 * fill) + 0.5) / (lengths.size + 1.0)
+
+
+def run_threshold(lengths: np.ndarray, fill: float, tests: int, duration_s: float, budget: float) -> float:
+    """h_budget = 1 + ln(q) / ln(p) (module docstring): the held length (in units of the channel's
+    rate) that healthy runs of this channel exceed with the channel's share of the budget."""
+    runs = lengths.size
+    p = repeat_probability(lengths, fill)
+    runs_per_hour = runs / max(duration_s, 1e-9) * 3600.0
+    q = budget / (max(tests, 1) * max(runs_per_hour, 1e-9))
+    if p >= 1.0 or q >= 1.0:
+        return 1.0
+    return 1.0 + np.log(q) / np.log(p)
+
+
+class FrozenSensorDetector(Detector):
+    """Frozen-sensor check: a channel whose fresh samples stop changing ("stuck"), per channel."""
+
+    name = "frozen"
+    requires_trace = False
+    reads = frozenset({"z"})  # the measurement groups' samples and fresh masks
+    default_enabled = False
+    defaults = {
+        "n_samples": 5,  # at least this many held samples (of the channel's own rate) to be stuck
+        "still_ratio": 0.01,  # a sample within this share of the noise std of the run's first is "held"
+        "budget_per_hour": 0.1,  # false alarms per hour all channels together may spend
+    }
+    parameter_constraints = {
+        "n_samples": [Interval(int, 2, None)],
+        "still_ratio": [Interval(float, 0, 1, closed="left")],
+        "budget_per_hour": [Interval(float, 0, None, closed="neither")],
+    }
+
+    @classmethod
+    def signal_label(cls, signal: str) -> str | None:
+        prefix, _, rest = signal.partition(".")
+        if prefix != PREFIX or not rest:
+            return None
+        group, _, output = rest.partition(".")
+        what = group_words(group) + (f" {output}" if output else "")
+        return f"{what} stopped changing: its samples repeat one value (stuck sensor)"
+
+    @classmethod
+    def signal_words(cls, signal: str) -> str | None:
+        prefix, _, rest = signal.partition(".")
+        return "a stuck sensor (its samples stopped changing)" if prefix == PREFIX and rest else None
+
+    def _run(self, run, trace, **context) -> DetectorResult:
+        result = self.new_result()
+        model = context.get("model")
+        columns = [
+            (group, j, self._signal(model, group, j))
+            for group in run.groups.values()
+            if group.z is not None
+            for j in range(group.z.shape[1])
+        ]
+        duration = max(float(run.t[-1] - run.t[0]), run.dt) if run.t.size else 1.0
+        info = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
+        for group, j, signal in columns:  # one pass per channel: a few dozen at most
+            info["channels"][signal] = group.channels[j] if j < len(group.channels) else group.name
+            stat, h, sigma, fill, change = self._channel(run, group, j, model, len(columns), duration)
+            if stat is None:
+                info["not_checked"][signal] = (
+                    "repeats its sample on most steps: a quantised or noiseless sensor that reads "
+                    "constant whenever the quantity is still (a freeze cannot be told from stillness)"
+                )
+                continue
+            fresh = np.isfinite(stat)
+            alarms = result.add_statistic(run.t, signal, stat, upper=h, valid=fresh)
+            for alarm in alarms:  # the first sample that repeated the frozen value
+                k = int(np.searchsorted(run.t, alarm.start))
+                alarm.change_time = float(run.t[change[k]]) if change[k] >= 0 else None
+            info["fill"][signal], info["h"][signal], info["sigma"][signal] = fill, h, sigma
+        result.info.update(info)
+        return result
+
+    def _channel(self, run, group, j: int, model, tests: int, duration: float):
+        """(statistic (N,) NaN off the channel's fresh steps, or None when the channel is not
+        checked; threshold h; sigma; fill factor L; per step the grid index of its run's second
+        sample, -1 where none)."""
+        n = run.n_steps
+        fresh = group.channel_fresh[:, j] if group.channel_fresh is not None else group.fresh
+        z = np.asarray(group.z[:, j], dtype=np.float64)
+        steps = np.flatnonzero(np.asarray(fresh, dtype=bool) & np.isfinite(z))
+        stat = np.full(n, np.nan)
+        change = np.full(n, -1, dtype=np.int64)
+        if steps.size < 2:
+            return stat, float(self.n_samples), np.nan, 1.0, change
+        v = z[steps]
+        # exact repeats first: their typical run is a forward fill's L; repeats on most steps and
+        # in many runs: a sensor that holds its value whenever the quantity is still (not checked)
+        new = np.concatenate(([True], v[1:] != v[:-1]))
+        exact = np.diff(np.append(np.flatnonzero(new), v.size))
+        fill = fill_factor(exact)
+        if 1.0 - new.mean() >= HELD_SHARE and repeat_probability(exact, fill) >= NOISELESS_P:
+            return None, np.nan, np.nan, fill, change
+        sigma = float(np.fmin(self._stated_sigma(group, j, model), channel_noise(v[new])))
+        anchor = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0)
+        index = np.arange(v.size)
+        lengths = np.diff(np.append(np.flatnonzero(anchor == index), v.size))
+        # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
+        stat[steps] = (index - anchor + 1) / fill
+        h = max(float(self.n_samples), run_threshold(lengths, fill, tests, duration, float(self.budget_per_hour)))
+        second = np.minimum(anchor + 1, v.size - 1)
+        change[steps] = np.where(index > anchor, steps[second], -1)
+        return stat, h, sigma, fill, change
+
+    @staticmethod
+    def _stated_sigma(group, j: int, model) -> float:
+        """The channel's noise std as the profile states it, else the model's default (NaN: none)."""
+        stated = np.nan
+        if group.noise_std is not None:
+            stated = float(np.broadcast_to(np.asarray(group.noise_std, float), (group.z.shape[1],))[j])
+        else:
+            spec = getattr(model, "groups", {}).get(group.name) if model is not None else None
+            if spec is not None and len(spec.noise_std) == group.z.shape[1]:
+                stated = float(spec.noise_std[j])
+        return stated
+
+    @staticmethod
+    def _signal(model, group, j: int) -> str:
+        """frozen.<group>.<output> (the model's output name, else the channel's index); a group of
+        one channel: frozen.<group>."""
+        width = group.z.shape[1]
+        if width == 1:
+            return f"{PREFIX}.{group.name}"
+        spec = getattr(model, "groups", {}).get(group.name) if model is not None else None
+        outputs = list(spec.outputs) if spec is not None and len(spec.outputs) == width else None
+        return f"{PREFIX}.{group.name}.{outputs[j] if outputs else j}"
