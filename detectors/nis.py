@@ -5,10 +5,19 @@ Specified in docs/algorithms.md section 1b.
 Per update nis_k = y~^T S^-1 y~ with m_k measurements; the statistic is the sum over the last W
 updates (of that group, or of any group for the overall test) against
 delta_k = chi2.ppf(1 - alpha, sum of m over those updates) (multi-rate: the degrees of freedom follow
-the updates actually in the window). alpha comes from a false-alarm budget:
-alpha = budget_per_hour / (3600 * tests per second), tests counted over every group and the overall
-test, so the whole detector spends the budget. An alarm on a group's test names that sensor; this is
-the test that catches sensor biases, which the encoded checks cannot see.
+the updates actually in the window). alpha comes from a false-alarm budget (docs/algorithms.md
+section 1b, "The false-alarm budget"):
+
+    alpha = rate_design / (3600 * tests per second)            (union bound over every test)
+
+tests counted over every group's updates and the overall test's, so the whole detector spends the
+budget whatever the tests' correlation (consecutive windows share W - 1 terms and the overall test
+repeats the groups': measured, an exceedance comes in clumps of about 2, so the union bound is
+conservative by about that factor; the credit is not taken). rate_design is the rate at which a
+healthy demonstration of ``proof_hours`` hours shows the budget met (the upper bound of the exact
+95 % Poisson interval at or below ``budget_per_hour``) with probability 0.9 (`design_rate`); without
+``proof_hours`` it is the budget itself. An alarm on a group's test names that sensor; this is the
+test that catches sensor biases, which the encoded checks cannot see.
 """
 
 from __future__ import annotations
@@ -18,6 +27,7 @@ import numpy as np
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Boolean, Interval
 from logscan.detectors.words import group_words
+from logscan.errors import ProfileError
 
 # A NIS beyond this (far beyond any chi-square threshold: a bit flip, a diverging filter) is summed
 # apart: in the running sum it would cost every later window its precision (1e20 leaves no digit of
@@ -65,6 +75,44 @@ def as_float32(values: np.ndarray) -> np.ndarray:
     return values.astype(np.float32)
 
 
+# A demonstration of the budget: the exact (two-sided) Poisson interval's confidence, whose upper end
+# must be within the budget, and the probability that a detector running at its design rate passes
+# (the consumer's and the producer's risk of a fixed-length demonstration test, as in MIL-HDBK-781's
+# plans: 2.5 % and 10 %).
+PROOF_CONFIDENCE = 0.95
+PROOF_PASS_PROBABILITY = 0.9
+
+
+def design_rate(budget_per_hour: float, proof_hours: float | None) -> float:
+    """False alarms per hour to design for, so that ``proof_hours`` healthy hours show the upper end
+    of the rate's exact 95 % Poisson interval at or below ``budget_per_hour`` with probability 0.9.
+
+    c = the most alarms whose upper end chi2.ppf(0.975, 2c + 2) / (2 T) stays within the budget;
+    rate = chi2.ppf(0.1, 2c + 2) / (2 T), the rate at which P(at most c alarms in T hours) = 0.9.
+    T = 100 h, budget 0.1/h: c = 3, rate 0.0174/h. None: the budget itself. A demonstration too
+    short to ever show the budget (budget x T < 3.69, the upper end with no alarm) is refused when
+    the detector is created (`NisDetector.check_params`)."""
+    from scipy.special import chdtri  # chdtri(d, q) = chi2.ppf(1 - q, d)
+
+    if proof_hours is None:
+        return float(budget_per_hour)
+    hours = float(proof_hours)
+    upper = lambda c: chdtri(2 * c + 2, (1.0 - PROOF_CONFIDENCE) / 2.0) / (2.0 * hours)  # noqa: E731
+    if upper(0) > budget_per_hour:
+        raise ValueError(f"{hours:g} h cannot show a budget of {budget_per_hour:g} per hour")
+    c = 0
+    while upper(c + 1) <= budget_per_hour:  # a few steps: c grows like budget x T
+        c += 1
+    return float(chdtri(2 * c + 2, PROOF_PASS_PROBABILITY)) / (2.0 * hours)
+
+
+def proof_shortest_hours(budget_per_hour: float) -> float:
+    """The shortest demonstration that can show ``budget_per_hour``: no alarm, upper end = budget."""
+    from scipy.special import chdtri
+
+    return float(chdtri(2, (1.0 - PROOF_CONFIDENCE) / 2.0)) / (2.0 * budget_per_hour)
+
+
 def chi2_threshold(dof: np.ndarray, alpha: float) -> np.ndarray:
     """chi2.ppf(1 - alpha, dof) per entry, evaluated once per distinct dof."""
     from scipy.special import chdtri  # here: scipy.special costs ~20 MB, paid only when NIS runs
@@ -86,6 +134,7 @@ class NisDetector(Detector):
     defaults = {
         "window": 10,  # W updates per window sum
         "budget_per_hour": 0.1,  # false alarms per hour the whole detector may spend
+        "proof_hours": 100.0,  # design so that this many healthy hours show the budget met (None: spend it all)
         "alpha": None,  # set to override the budget (e.g. the paper's 0.01)
         "n_persist": 1,
         "overall": True,  # also test the stacked update of all groups
@@ -94,10 +143,22 @@ class NisDetector(Detector):
     parameter_constraints = {
         "window": [Interval(int, 1, None)],
         "budget_per_hour": [Interval(float, 0, None, closed="neither")],
+        "proof_hours": [Interval(float, 0, None, closed="neither"), None],
         "alpha": [Interval(float, 0, 1, closed="neither"), None],
         "n_persist": [Interval(int, 1, None)],
         "overall": [Boolean()],
     }
+
+    def check_params(self) -> None:
+        super().check_params()
+        if self.proof_hours is not None:
+            try:
+                design_rate(float(self.budget_per_hour), self.proof_hours)
+            except ValueError as exc:
+                shortest = proof_shortest_hours(float(self.budget_per_hour))
+                raise ProfileError(
+                    f"detector {self.name!r}: proof_hours: {exc}", hint=f"use at least {shortest:.4g} h, or null"
+                ) from None
 
     @classmethod
     def signal_label(cls, signal: str) -> str | None:
@@ -116,14 +177,15 @@ class NisDetector(Detector):
         duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
         tests = trace.updated.sum() + (trace.updated.any(axis=1).sum() if self.overall else 0)
         tests_per_second = max(float(tests) / duration, 1e-9)
-        # alpha = budget / (3600 * tests per second)
-        return float(self.budget_per_hour) / (3600.0 * tests_per_second)
+        # alpha = rate_design / (3600 * tests per second): a union bound over every test
+        return design_rate(float(self.budget_per_hour), self.proof_hours) / (3600.0 * tests_per_second)
 
     def _run(self, run, trace, **context) -> DetectorResult:
         result = self.new_result()
         t = run.t
         alpha = self._alpha(trace)
         result.info["alpha"] = alpha
+        result.info["design_rate_per_hour"] = design_rate(float(self.budget_per_hour), self.proof_hours)
         result.info["window_updates"] = self.window
         # (signal, NIS, updated, measurements per update: an int for a group, per step for all)
         tests = [

@@ -150,7 +150,7 @@ def test_nis_names_the_biased_sensor_within_a_second():
 
 def test_nis_alpha_follows_the_false_alarm_budget():
     run, trace, model, _ = pipeline("quad_healthy.mcap")
-    result = NisDetector(budget_per_hour=0.1).run(run, trace, model=model)
+    result = NisDetector(budget_per_hour=0.1, proof_hours=None).run(run, trace, model=model)
     tests = trace.updated.sum() + trace.updated.any(axis=1).sum()
     per_second = tests / (trace.t[-1] - trace.t[0])
     assert result.info["alpha"] == pytest.approx(0.1 / (3600 * per_second))

@@ -1,0 +1,255 @@
+"""False alarms per hour of every detector and check over >= 100 healthy simulated hours.
+
+The campaign behind docs/evaluation.md ("The false-alarm budget over 100 hours"): healthy runs of
+the quadcopter and the steer-by-wire, normal and `--aggressive`, equal hours each (default 25 h
+per configuration as 50 logs of 30 min), no faults and no glitches, so every alarm is a false
+alarm. Each log is simulated, written as MCAP (ROS 2 CDR) in a temporary directory and analysed
+by `logscan.pipeline.analyze_log` (the reader, pipeline and alarm rules of `logscan analyze`), in
+local processes (`logscan.fleet.run_many`).
+
+Detectors: those `logscan analyze` runs by default on these logs (the embedded profile's, else the
+registry's defaults), plus every other registered detector that applies to both models: one that
+runs without failing on a 60 s healthy probe log of each model (a detector that needs trained
+tables, another filter or topics these logs lack is listed as not applicable, with its reason).
+
+Counting is `logscan evaluate`'s: alarms grouped per detector and per check
+(`logscan.evaluate.alarm_groups`), merged into disjoint spans (`merge_intervals`); each span on
+a healthy log is one false alarm. Rate = alarms / hours; the 95 % interval is the exact
+(Garwood) Poisson interval
+
+    lower = chi2.ppf(0.025, 2 n) / (2 T),     upper = chi2.ppf(0.975, 2 n + 2) / (2 T)
+
+(lower = 0 when n = 0), n alarms over T hours. Seeds (used nowhere else: evaluate_detectors.py
+uses 500 .. 4109):
+
+    quadcopter 10000.., aggressive 11000..; steer_by_wire 12000.., aggressive 13000..
+
+    python bench/false_alarm_budget.py                       # 100 h, 2 processes
+    python bench/false_alarm_budget.py --hours 4 --log-s 600 # a quick look
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime
+
+MODELS = ("quadcopter", "steer_by_wire")
+SEED_BASE = {
+    ("quadcopter", False): 10000,
+    ("quadcopter", True): 11000,
+    ("steer_by_wire", False): 12000,
+    ("steer_by_wire", True): 13000,
+}
+BUDGET_PER_HOUR = 0.1
+PROBE_S = 60.0
+PROBE_SEED = 9999
+
+
+@dataclass(frozen=True)
+class Job:
+    model: str
+    aggressive: bool
+    seed: int
+    duration_s: float
+    detectors: tuple[str, ...]
+
+
+def poisson_interval(n: int, hours: float, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Garwood) two-sided interval of a Poisson rate: n events over ``hours``."""
+    from scipy.stats import chi2
+
+    tail = (1.0 - level) / 2.0
+    lower = 0.0 if n == 0 else float(chi2.ppf(tail, 2 * n)) / (2.0 * hours)
+    upper = float(chi2.ppf(1.0 - tail, 2 * n + 2)) / (2.0 * hours)
+    return lower, upper
+
+
+def _simulate(model: str, aggressive: bool, seed: int, duration_s: float, directory: str) -> str:
+    from logscan.simulate import simulate, write_simulation
+
+    sim = simulate(model, [], duration=duration_s, seed=seed, aggressive=aggressive)
+    path = os.path.join(directory, f"{model}_{'aggressive' if aggressive else 'normal'}_{seed}.mcap")
+    write_simulation(sim, path, "mcap-ros2")
+    return path
+
+
+def probe(model: str) -> tuple[list[str], dict[str, str]]:
+    """(the default detectors on this model's logs, {detector: why it does not apply}) from one
+    short healthy log run through every registered detector."""
+    from logscan.detectors.registry import default_registry
+    from logscan.pipeline import analyze_log, create_detectors, load_profile_for
+
+    registry = default_registry()
+    reasons: dict[str, str] = {}
+    with tempfile.TemporaryDirectory() as directory:
+        path = _simulate(model, False, PROBE_SEED, PROBE_S, directory)
+        defaults = [d.name for d in create_detectors(load_profile_for(path, None))]
+        for name in registry.names():
+            try:  # one detector at a time: one that cannot run must not take the others down
+                analysis = analyze_log(path, detector_names=[name])
+            except Exception as exc:  # noqa: BLE001 - a detector that cannot run here does not apply
+                reasons[name] = f"{type(exc).__name__}: {exc}"
+                continue
+            if analysis.failures:
+                reasons[name] = analysis.failures[0].message
+    return defaults, reasons
+
+
+def count_one(job: Job) -> dict:
+    """Simulate and analyse one healthy log; its false alarms per detector and check, with each
+    alarm's statistic and peak / threshold (a "hair above" crossing reads 1.00)."""
+    from logscan.evaluate import alarm_groups, merge_intervals
+    from logscan.pipeline import analyze_log
+
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory() as directory:
+        path = _simulate(job.model, job.aggressive, job.seed, job.duration_s, directory)
+        analysis = analyze_log(path, detector_names=list(job.detectors))
+    groups = alarm_groups(analysis.results)
+    alarms = [
+        {
+            "detector": result.detector,
+            "signal": alarm.signal,
+            "start": float(alarm.start),
+            "end": float(alarm.end),
+            "ratio": None if alarm.peak_ratio is None else float(alarm.peak_ratio),
+        }
+        for result in analysis.results
+        for alarm in result.alarms
+    ]
+    return {
+        "model": job.model,
+        "aggressive": job.aggressive,
+        "seed": job.seed,
+        "hours": float(analysis.run.t[-1] - analysis.run.t[0]) / 3600.0,
+        "counts": {key: len(merge_intervals(items)) for key, items in groups.items()},
+        "failures": [f"{f.detector}: {f.message}" for f in analysis.failures],
+        "alarms": alarms,
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def make_jobs(hours: float, log_s: float, detectors: dict[str, tuple[str, ...]]) -> list[Job]:
+    """Equal hours per (model, aggressive) configuration, in logs of ``log_s`` seconds."""
+    per_config = max(1, round(hours * 3600.0 / len(SEED_BASE) / log_s))
+    return [
+        Job(model, aggressive, base + i, log_s, detectors[model])
+        for (model, aggressive), base in SEED_BASE.items()
+        for i in range(per_config)
+    ]
+
+
+def rate_table(runs: list[dict]) -> str:
+    """One row per detector and check: alarms, hours, rate and its 95 % interval, per configuration."""
+    configs = [(m, a) for m, a in SEED_BASE]
+    hours = {c: sum(r["hours"] for r in runs if (r["model"], r["aggressive"]) == c) for c in configs}
+    total_hours = sum(hours.values())
+    keys = sorted({k for r in runs for k in r["counts"]}, key=lambda k: (k.split(":")[0], ":" in k, k))
+    head = " | ".join(f"{m}{' aggressive' if a else ''} ({hours[(m, a)]:.1f} h)" for m, a in configs)
+    lines = [
+        f"| detector / check | false alarms | rate / h | 95 % interval / h | within {BUDGET_PER_HOUR:g} / h "
+        f"(rate; upper bound) | {head} |",
+        "|---|---:|---:|---|---|" + "---:|" * len(configs),
+    ]
+    for key in keys:
+        n = sum(r["counts"].get(key, 0) for r in runs)
+        lower, upper = poisson_interval(n, total_hours)
+        rate = n / total_hours
+        verdict = f"{'yes' if rate <= BUDGET_PER_HOUR else 'NO'}; {'yes' if upper <= BUDGET_PER_HOUR else 'no'}"
+        per = " | ".join(
+            str(sum(r["counts"].get(key, 0) for r in runs if (r["model"], r["aggressive"]) == c)) for c in configs
+        )
+        name = key if ":" not in key else f"&nbsp;&nbsp;{key}"
+        lines.append(f"| {name} | {n} | {rate:.3f} | {lower:.3f} - {upper:.3f} | {verdict} | {per} |")
+    return "\n".join(lines) + "\n"
+
+
+def _ratio(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def alarm_list(runs: list[dict]) -> str:
+    """Every false alarm: log, statistic, start, length and peak / threshold."""
+    rows = [
+        f"| {r['model']}{' aggressive' if r['aggressive'] else ''} seed {r['seed']} | {a['detector']} "
+        f"{a['signal']} | {a['start']:.2f} s | {a['end'] - a['start']:.2f} s | "
+        f"{_ratio(a['ratio'])} |"
+        for r in runs
+        for a in r["alarms"]
+    ]
+    if not rows:
+        return "No alarm.\n"
+    head = "| log | statistic | start | length | peak / threshold |\n|---|---|---:|---:|---:|\n"
+    return head + "\n".join(rows) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hours", type=float, default=100.0, help="healthy hours in all (equal per configuration)")
+    parser.add_argument("--log-s", type=float, default=1800.0, help="length of each simulated log (s)")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--detector", action="append", default=None, help="only these detectors (repeatable)")
+    parser.add_argument("--json", dest="json_path", default=None, help="write every log's counts and alarms here")
+    args = parser.parse_args(argv)
+
+    import logscan
+    from logscan.fleet import run_many
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from evaluate_detectors import code_version
+
+    started = time.perf_counter()
+    detectors: dict[str, tuple[str, ...]] = {}
+    reasons: dict[str, dict[str, str]] = {}
+    for model in MODELS:
+        if args.detector:
+            detectors[model], reasons[model] = tuple(args.detector), {}
+            continue
+        defaults, reasons[model] = probe(model)
+        from logscan.detectors.registry import default_registry
+
+        applicable = [n for n in default_registry().names() if n not in reasons[model]]
+        detectors[model] = tuple(dict.fromkeys(defaults + applicable))
+    jobs = make_jobs(args.hours, args.log_s, detectors)
+    runs = run_many(jobs, count_one, jobs=args.jobs, isolate=False)
+    elapsed = time.perf_counter() - started
+    total_hours = sum(r["hours"] for r in runs)
+    failures = sorted({f for r in runs for f in r["failures"]})
+    per_log = sum(r["seconds"] for r in runs) / max(len(runs), 1)
+
+    lines = [
+        f"Measured {datetime.now(UTC):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} ({code_version()}), "
+        f"`python bench/false_alarm_budget.py --hours {args.hours:g} --log-s {args.log_s:g} --jobs {args.jobs}`: "
+        f"{len(runs)} healthy logs, {total_hours:.1f} h, in {elapsed:.0f} s ({per_log:.1f} s per log: simulate, "
+        f"write, analyse; {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()}).",
+        "",
+        "Detectors run: "
+        + "; ".join(f"{model}: {', '.join(detectors[model])}" for model in MODELS)
+        + ". Not applicable: "
+        + ("; ".join(f"{m}: {n} ({why})" for m in MODELS for n, why in sorted(reasons[m].items())) or "none")
+        + ".",
+        "",
+        rate_table(runs),
+        "False alarms:",
+        "",
+        alarm_list(runs),
+    ]
+    if failures:
+        lines += ["Detector failures:", ""] + [f"- {f}" for f in failures] + [""]
+    print("\n".join(lines))
+    if args.json_path:
+        from logscan.artifacts import write_json
+
+        write_json(args.json_path, {"elapsed_s": elapsed, "detectors": detectors, "reasons": reasons, "runs": runs})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
