@@ -14,6 +14,7 @@ fresh simulated runs per fault family and model, methods side by side:
   E  the on-board state check e_s = CV_k (x_onboard - x_post) of the same encoded_ekf run (the
      simulated logs carry /ekf/state), band mu +- rho_s s; its alarms are kept out of A;
   F  the two-sided CUSUM on each whitened innovation (`cusum`), any group and axis;
+  G  the frozen-sensor check (`frozen`), any measurement channel;
 plus supplementary rows (A's e_x alone, the rejected-sample check alone, B with the
 rejected-sample checks as the baseline-configured detector reports them, and "any alarm" of
 `logscan analyze`'s default detectors).
@@ -101,13 +102,14 @@ METHODS = {  # key -> column title
     "D": "D: NIS (any group / overall)",
     "E": "E: on-board state check e_s",
     "F": "F: CUSUM (any group and axis)",
+    "G": "G: frozen-sensor check (any channel)",
 }
 SUPPLEMENTARY = {
     "A.e_x": "A's e_x alone",
     "R": "rejected-sample check alone",
     "B+R": "B + rejected-sample check",
     "D+F": "NIS or CUSUM",
-    "any": "any alarm (encoded_ekf, nis or cusum)",
+    "any": "any alarm (encoded_ekf, nis, cusum or frozen)",
 }
 
 
@@ -160,7 +162,7 @@ def _analyse(job: Job, directory: str):
 
     path = _simulate(job, directory)
     try:
-        return analyze_log(path, detector_names=["encoded_ekf", "nis", "cusum"], grace_s=GRACE_S)
+        return analyze_log(path, detector_names=["encoded_ekf", "nis", "cusum", "frozen"], grace_s=GRACE_S)
     finally:
         os.unlink(path)
 
@@ -204,6 +206,7 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
         encoded = next(r for r in analysis.results if r.detector == "encoded_ekf")
         nis = next(r for r in analysis.results if r.detector == "nis")
         cusum = next(r for r in analysis.results if r.detector == "cusum")
+        frozen = next(r for r in analysis.results if r.detector == "frozen")
         rejected = [a for a in encoded.alarms if a.signal.startswith("rejected.")]
         e_x = [a for a in encoded.alarms if a.signal == "e_x"]
         base_e_x = [a for a in base_result.alarms if a.signal == "e_x"]
@@ -214,11 +217,12 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             "D": list(nis.alarms),
             "E": [a for a in encoded.alarms if a.signal == "e_s"],
             "F": list(cusum.alarms),
+            "G": list(frozen.alarms),
             "A.e_x": e_x,
             "R": rejected,
             "B+R": base_e_x + rejected,
             "D+F": list(nis.alarms) + list(cusum.alarms),
-            "any": list(encoded.alarms) + list(nis.alarms) + list(cusum.alarms),
+            "any": list(encoded.alarms) + list(nis.alarms) + list(cusum.alarms) + list(frozen.alarms),
         }
         duration = float(analysis.run.t[-1] - analysis.run.t[0])
         transients = events_from_truth((analysis.log.truth or {}).get("transients") or [])
