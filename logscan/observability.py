@@ -8,11 +8,12 @@ non-centrality of the innovations. A fault of size m scales it by m^2 (an actuat
 m = -10 %: du = m u; a lost actuator: du = -u, m^2 = 1; a sensor bias of m units). The fault is
 observable from a window start when
 
-    sqrt(m^2 lambda) >= snr_min                    (default 5: 5 standard deviations of evidence)
+    sqrt(m^2 lambda) >= snr_min = z(1 - alpha) + z(0.9)     (5.63 standard deviations of evidence)
 
-i.e. the matched test of that fault direction at a false-alarm probability of 1e-4 per window
-(z = 3.7) still has about 90 % power (z = 1.3). Below it, no detector that reads these sensors can
-promise to see that fault there: a steer-by-wire actuator offset during straight driving (the
+i.e. the matched test of that fault direction (the best any detector can do: it knows the fault's
+signature), spending logscan's budget of 0.1 false alarms per hour over one test per window start
+(alpha = 0.1 x 0.25 / 3600), would still see it with 90 % probability. Below it, no detector that
+reads these sensors can promise to see that fault there: a steer-by-wire actuator offset during straight driving (the
 commanded torque is nearly zero, so is the offset) is the case in point.
 
 Kinds with a verdict: actuator-offset and lost-actuator on every actuator, bias on every measured
@@ -36,7 +37,21 @@ ACTUATOR_KINDS = ("actuator-offset", "lost-actuator")
 SENSOR_KINDS = ("bias",)
 WINDOW_S = 1.0  # a fault must show within 1 s of its onset (the detection target of issue 17)
 STRIDE_S = 0.25  # window starts every 0.25 s: the resolution of the shading
-SNR_MIN = 5.0  # sqrt(lambda) needed: z(1 - 1e-4) + z(0.9) = 3.72 + 1.28
+BUDGET_PER_HOUR = 0.1  # the false alarms per hour every logscan detector may spend
+POWER = 0.9  # the detection probability a fault "that can be seen" must reach
+
+
+def snr_needed(budget_per_hour: float = BUDGET_PER_HOUR, stride_s: float = STRIDE_S, power: float = POWER) -> float:
+    """sqrt(lambda) a fault needs: the matched test of its direction, one test per window start,
+    at the false-alarm budget (alpha = budget * stride / 3600 per test), with probability ``power``:
+    z(1 - alpha) + z(power) (0.1 / h every 0.25 s: 4.35 + 1.28 = 5.63)."""
+    from scipy.special import ndtri
+
+    alpha = budget_per_hour * stride_s / 3600.0
+    return float(ndtri(1.0 - alpha) + ndtri(power))
+
+
+SNR_MIN = 5.63  # snr_needed() at the defaults (a test checks it); computed per run from its stride
 
 WORDS = {
     "actuator-offset": "an offset on {target} could not be seen here: {why}",
@@ -108,8 +123,11 @@ class Observability:
         magnitude = event.magnitude if event.kind != "lost-actuator" else 1.0
         seen = self.observable(d, event.kind, magnitude)
         end = min(event.end_or_inf, self.t_end)
-        # window starts within the fault's span; the one in progress at its onset counts from there
-        inside = (self.t_start + self.stride_s > event.t_start) & (self.t_start <= end)
+        # windows the fault fills: from the one in progress at its onset to the last that ends
+        # before the fault does (a fault ending a moment after the excitation began left no more
+        # than that moment's evidence); the onset's window always counts
+        last = max(end - self.window_s, event.t_start)
+        inside = (self.t_start + self.stride_s > event.t_start) & (self.t_start <= last + 1e-9)
         inside &= np.isfinite(self.evidence[:, d])
         return bool(seen[inside].any()) if inside.any() else None
 
@@ -198,8 +216,9 @@ def held_inputs(u: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(held)
 
 
-def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S, snr_min=SNR_MIN) -> Observability:
-    """The verdict of one filtered run (the EKF trace with its x_prior and x_post)."""
+def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S, snr_min=None) -> Observability:
+    """The verdict of one filtered run (the EKF trace with its x_prior and x_post); ``snr_min`` None:
+    `snr_needed` at the grid's stride."""
     from logscan.observability_kernel import signature_evidence
     from logscan.recovery.kernels import call_literal
 
@@ -254,7 +273,7 @@ def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S,
         directions=directions,
         window_s=window * dt,
         stride_s=stride * dt,
-        snr_min=float(snr_min),
+        snr_min=snr_needed(stride_s=stride * dt) if snr_min is None else float(snr_min),
         t_end=float(t[-1]),
     )
 

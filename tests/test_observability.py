@@ -96,6 +96,10 @@ def _crafted() -> Observability:
 
 
 def test_verdict_of_a_fault_follows_its_span_and_size():
+    from logscan.observability import SNR_MIN, snr_needed
+
+    # the matched test at 0.1 false alarms per hour (one test per 0.25 s) with 90 % power
+    assert snr_needed() == pytest.approx(4.3453 + 1.2816, abs=1e-3) == pytest.approx(SNR_MIN, abs=5e-3)
     obs = _crafted()
     assert obs.unobservable_intervals(0, "actuator-offset") == [(0.0, 2.0), (4.0, 9.5)]
     assert obs.event_verdict(FaultEvent(5.0, 8.0, "actuator-offset", "motor", -0.1)) is False
