@@ -60,7 +60,7 @@ WORDS = {
 }
 WHY = {
     "actuator": "it is barely commanded (straight driving, steady hover), so the fault gives the sensors no signature",
-    "sensor": "the filter absorbs it into its state, so the innovations carry no signature",
+    "sensor": "within a second it stays small against the sensor's noise, and the filter absorbs part of it",
 }
 
 
