@@ -9,15 +9,19 @@ large. Per output j of group g, at each update of the group:
     S-_k  = min(c h_j, max(0, S-_k-1 - u_k - kappa))           downward drift
     g_k   = S+_k if S+_k >= S-_k else -S-_k                    the signed statistic, alarm when |g_k| > h_j
 
+(u_k clipped to +-``clip`` first: a one-sample glitch is the NIS test's to flag, not a drift.)
+
 kappa is the reference value (half the shift, in innovation standard deviations, the test is
 tuned to). h_j comes from the false-alarm budget through Siegmund's approximation of the average
 run length of a one-sided CUSUM on N(0, 1) samples,
 
     ARL0(h) = (exp(2 kappa b) - 2 kappa b - 1) / (2 kappa^2),   b = h + 1.166,
 
-solved for ARL0_j = J r_j 3600 / budget_per_hour updates, where J = 2 x (outputs over every group)
-one-sided tests and r_j the group's updates per second, so that the J tests together raise at most
-``budget_per_hour`` false alarms per hour (a union bound: it holds whatever the tests' correlation).
+solved for ARL0_j = margin J r_j 3600 / budget_per_hour updates, where J = 2 x (outputs over every
+group) one-sided tests and r_j the group's updates per second, so that the J tests together raise at
+most ``budget_per_hour`` false alarms per hour (a union bound: it holds whatever the tests'
+correlation). ``arl_margin`` (default 10) covers the healthy innovations' slow wander, which
+shortens the run length of a test tuned to small shifts (measured, docs/algorithms.md section 1e).
 
 Resets to zero: when an alarm ends (|g| falls back to h or below: the alarm's evidence is spent, the
 next alarm needs a full h of new evidence, which is what the ARL counts); at a filter divergence
@@ -66,14 +70,15 @@ def threshold_for_arl(arl, kappa: float) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def cusum_kernel(t, u, reset, gap, h, kappa, cap):  # pragma: no cover - compiled
+def cusum_kernel(t, u, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
     """Signed two-sided CUSUM per column with its resets (docs/algorithms.md section 1e).
 
     t (N,) grid times; u (N, J) whitened innovations, NaN where a column has no update;
     reset (N,) bool, steps where every test restarts (filter divergence); gap (J,) s, a longer gap
     between a column's updates restarts it; h (J,) thresholds; kappa reference; cap: statistics held
-    at most cap * h. Returns g (N, J), the signed statistic (NaN without update), and onset (N, J),
-    the first step of the run of the side g shows (-1 when that side is zero).
+    at most cap * h; clip: each u enters at most +-clip (one glitch cannot raise an alarm alone).
+    Returns g (N, J), the signed statistic (NaN without update), and onset (N, J), the first step of
+    the run of the side g shows (-1 when that side is zero).
     """
     n, m = u.shape
     g = np.full((n, m), np.nan)
@@ -95,6 +100,7 @@ def cusum_kernel(t, u, reset, gap, h, kappa, cap):  # pragma: no cover - compile
             if t[i] - last > gap[j]:
                 sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
             last = t[i]
+            x = min(max(x, -clip), clip)
             # S+_k = max(0, S+_k-1 + u_k - kappa), held at cap h; its run starts where it leaves 0
             sp_new = sp + x - kappa
             if sp_new <= 0.0:
@@ -138,20 +144,24 @@ class CusumDetector(Detector):
     name = "cusum"
     requires_trace = True
     reads = frozenset({"y", "S_diag"})
-    default_enabled = False
+    default_enabled = True
     defaults = {
         "kappa": 0.25,  # reference value: half the mean shift (in innovation std) the test is tuned to
         "budget_per_hour": 0.1,  # false alarms per hour the whole detector may spend (sets h)
+        "arl_margin": 10.0,  # design ARL x this: healthy innovations wander slowly (docs/algorithms.md 1e)
         "h": None,  # set to override the budget: one threshold for every test
         "cap": 1.5,  # the statistic is held at most cap x h
+        "clip": 4.0,  # each whitened innovation enters at most +-clip (a glitch is NIS's, not a drift)
         "gap_s": 1.0,  # a longer gap in a group's updates (and at least 5 update periods) restarts it
         "hold_off_s": 1.0,  # crossings closer than this form one alarm
     }
     parameter_constraints = {
         "kappa": [Interval(float, 0, None)],
         "budget_per_hour": [POSITIVE],
+        "arl_margin": [Interval(float, 1, None)],
         "h": [POSITIVE, None],
         "cap": [Interval(float, 1, None, closed="neither")],
+        "clip": [POSITIVE],
         "gap_s": [POSITIVE],
         "hold_off_s": [Interval(float, 0, None)],
     }
@@ -174,8 +184,8 @@ class CusumDetector(Detector):
         duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
         rate = np.repeat(trace.updated.sum(axis=0) / duration, sizes)  # updates per second per column
         tests = 2 * int(sizes.sum())  # two one-sided tests per column
-        # ARL0_j = J r_j 3600 / budget: J equal shares of the budget
-        arl = np.maximum(tests * rate * 3600.0 / float(self.budget_per_hour), 1.0)
+        # ARL0_j = margin J r_j 3600 / budget: J equal shares of the budget, with the design margin
+        arl = np.maximum(float(self.arl_margin) * tests * rate * 3600.0 / float(self.budget_per_hour), 1.0)
         if self.h is not None:
             return np.full(arl.size, float(self.h)), siegmund_arl(np.full(arl.size, float(self.h)), self.kappa)
         return threshold_for_arl(arl, float(self.kappa)), arl
@@ -186,7 +196,9 @@ class CusumDetector(Detector):
         h, arl = self.thresholds(trace)
         with np.errstate(invalid="ignore", divide="ignore"):
             u = trace.y.astype(np.float64) / np.sqrt(trace.S_diag.astype(np.float64))
-        stat, onset = cusum_kernel(t, u, trace.diverged, self._gaps(trace), h, float(self.kappa), float(self.cap))
+        stat, onset = cusum_kernel(
+            t, u, trace.diverged, self._gaps(trace), h, float(self.kappa), float(self.cap), float(self.clip)
+        )
         model = context.get("model")
         result.info.update(kappa=float(self.kappa), budget_per_hour=float(self.budget_per_hour), tests=2 * h.size)
         result.info["h"], result.info["arl0_updates"] = {}, {}

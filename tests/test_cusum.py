@@ -12,13 +12,13 @@ from logscan.detectors.cusum import CusumDetector, cusum_kernel, siegmund_arl, t
 DT = 0.01
 
 
-def run_kernel(u, h, *, kappa=0.25, cap=1.5, gap=1.0, reset=None):
+def run_kernel(u, h, *, kappa=0.25, cap=1.5, gap=1.0, reset=None, clip=4.0):
     u = np.asarray(u, dtype=np.float64)
     u = u[:, None] if u.ndim == 1 else u
     t = np.arange(u.shape[0]) * DT
     reset = np.zeros(u.shape[0], dtype=bool) if reset is None else reset
     m = u.shape[1]
-    return cusum_kernel(t, u, reset, np.full(m, gap), np.full(m, float(h)), kappa, cap)
+    return cusum_kernel(t, u, reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)
 
 
 def alarm_starts(g: np.ndarray, h: float) -> np.ndarray:
@@ -103,12 +103,21 @@ def test_thresholds_spend_the_budget_over_every_test():
         updated = np.ones((t.size, 2), dtype=bool)
 
     Trace.updated[:, 1] = np.arange(Trace.t.size) % 10 == 0  # a 10 Hz group
-    h, arl = CusumDetector().thresholds(Trace)
+    h, arl = CusumDetector(arl_margin=1.0).thresholds(Trace)
     tests = 8  # 2 sides x 4 outputs
     rate = 1.0 / Trace.t[-1] * Trace.updated.sum(axis=0)
     np.testing.assert_allclose(arl, tests * np.repeat(rate, [3, 1]) * 3600 / 0.1)
     # false alarms per hour: sum over the one-sided tests of rate / ARL0 = the budget
     assert 2 * np.sum(np.repeat(rate, [3, 1]) / siegmund_arl(h, 0.25)) * 3600 == pytest.approx(0.1, rel=1e-6)
+
+
+def test_a_single_glitch_cannot_raise_an_alarm():
+    u = np.zeros(300)
+    u[100] = 1e6  # a one-sample spike far beyond the noise
+    g, _ = run_kernel(u, 10.0, clip=4.0)
+    assert np.nanmax(g) == pytest.approx(3.75)
+    g_unclipped, _ = run_kernel(u, 10.0, clip=np.inf)
+    assert np.nanmax(g_unclipped) == pytest.approx(15.0)  # held at the cap
 
 
 def test_signal_words():
