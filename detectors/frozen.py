@@ -146,7 +146,9 @@ class FrozenSensorDetector(Detector):
             stat, h, sigma, fill, change = self._channel(run, group, j, model, len(columns), duration)
             if stat is None:
                 info["not_checked"][signal] = (
-                    "repeats its sample on most steps: a quantised or noiseless sensor that reads "
+                    "fewer than 2 samples"
+                    if np.isnan(fill)
+                    else "repeats its sample on most steps: a quantised or noiseless sensor that reads "
                     "constant whenever the quantity is still (a freeze cannot be told from stillness)"
                 )
                 continue
@@ -155,7 +157,7 @@ class FrozenSensorDetector(Detector):
             for alarm in alarms:  # the first sample that repeated the frozen value
                 k = int(np.searchsorted(run.t, alarm.start))
                 alarm.change_time = float(run.t[change[k]]) if change[k] >= 0 else None
-            info["fill"][signal], info["h"][signal], info["sigma"][signal] = fill, h, sigma
+            info["fill"][signal], info["h"][signal], info["sigma"][signal] = float(fill), float(h), float(sigma)
         result.info.update(info)
         return result
 
@@ -169,8 +171,8 @@ class FrozenSensorDetector(Detector):
         steps = np.flatnonzero(np.asarray(fresh, dtype=bool) & np.isfinite(z))
         stat = np.full(n, np.nan)
         change = np.full(n, -1, dtype=np.int64)
-        if steps.size < 2:
-            return stat, float(self.n_samples), np.nan, 1.0, change
+        if steps.size < 2:  # nothing to compare (the group's own gaps are the other checks' to report)
+            return None, np.nan, np.nan, np.nan, change
         v = z[steps]
         # exact repeats first: their typical run is a forward fill's L; repeats on most steps and
         # in many runs: a sensor that holds its value whenever the quantity is still (not checked)

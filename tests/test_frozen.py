@@ -178,3 +178,14 @@ def test_a_simulated_stuck_sensor_is_caught_within_a_second(cli, tmp_path, model
     assert [a.signal for a in alarms] == [signal]
     assert 30.0 < alarms[0].start < 31.0
     assert alarms[0].change_time == pytest.approx(30.0, abs=0.05)
+
+
+def test_a_channel_without_samples_gets_no_statistic_and_says_why():
+    """A statistic with no finite value would make the log "not fully checked": a group without
+    samples is the other checks' to report; this one lists it as not checked."""
+    fresh = np.zeros(N, dtype=bool)
+    result = FrozenSensorDetector().run(
+        make_run({"gps": (np.full(N, np.nan), fresh, 0.5), "gyro": (noisy(9), EVERY_STEP, 0.1)})
+    )
+    assert list(result.series) == ["frozen.gyro"]
+    assert result.info["not_checked"] == {"frozen.gps": "fewer than 2 samples"}
