@@ -26,6 +26,7 @@ uses 500 .. 4109):
 
     python bench/false_alarm_budget.py                       # 100 h, 2 processes
     python bench/false_alarm_budget.py --hours 4 --log-s 600 # a quick look
+    python bench/false_alarm_budget.py --table runs.json      # the tables of a (partial) --json
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ SEED_BASE = {
 BUDGET_PER_HOUR = 0.1
 PROBE_S = 60.0
 PROBE_SEED = 9999
+CHUNK = 16  # logs per run_many call (the --json file is rewritten after each)
 
 
 @dataclass(frozen=True)
@@ -196,7 +198,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--detector", action="append", default=None, help="only these detectors (repeatable)")
     parser.add_argument("--json", dest="json_path", default=None, help="write every log's counts and alarms here")
+    parser.add_argument("--table", default=None, help="only print the tables of a --json file (also a partial one)")
     args = parser.parse_args(argv)
+    if args.table:
+        import json
+
+        with open(args.table, encoding="utf-8") as handle:
+            document = json.load(handle)
+        runs = document["runs"]
+        hours = sum(r["hours"] for r in runs)
+        state = "partial: " if document.get("partial") else ""
+        print(f"{state}{len(runs)} logs, {hours:.1f} h, {document['elapsed_s']:.0f} s\n")
+        print(rate_table(runs) + "\n" + alarm_list(runs))
+        return 0
 
     import logscan
     from logscan.fleet import run_many
@@ -217,7 +231,14 @@ def main(argv: list[str] | None = None) -> int:
         applicable = [n for n in default_registry().names() if n not in reasons[model]]
         detectors[model] = tuple(dict.fromkeys(defaults + applicable))
     jobs = make_jobs(args.hours, args.log_s, detectors)
-    runs = run_many(jobs, count_one, jobs=args.jobs, isolate=False)
+    runs: list[dict] = []
+    # in chunks, the configurations interleaved, so that an interrupted campaign still has a
+    # balanced partial result in --json (written after every chunk)
+    order = sorted(jobs, key=lambda job: (job.seed % 1000, job.seed))
+    for first in range(0, len(order), CHUNK):
+        runs += run_many(order[first : first + CHUNK], count_one, jobs=args.jobs, isolate=False)
+        if args.json_path:
+            _write(args.json_path, time.perf_counter() - started, detectors, reasons, runs, partial=True)
     elapsed = time.perf_counter() - started
     total_hours = sum(r["hours"] for r in runs)
     failures = sorted({f for r in runs for f in r["failures"]})
@@ -245,10 +266,15 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["Detector failures:", ""] + [f"- {f}" for f in failures] + [""]
     print("\n".join(lines))
     if args.json_path:
-        from logscan.artifacts import write_json
-
-        write_json(args.json_path, {"elapsed_s": elapsed, "detectors": detectors, "reasons": reasons, "runs": runs})
+        _write(args.json_path, elapsed, detectors, reasons, runs, partial=False)
     return 0
+
+
+def _write(path: str, elapsed: float, detectors: dict, reasons: dict, runs: list[dict], *, partial: bool) -> None:
+    from logscan.artifacts import write_json
+
+    document = {"elapsed_s": elapsed, "partial": partial, "detectors": detectors, "reasons": reasons, "runs": runs}
+    write_json(path, document)
 
 
 if __name__ == "__main__":
