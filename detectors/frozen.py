@@ -104,7 +104,7 @@ class FrozenSensorDetector(Detector):
     name = "frozen"
     requires_trace = False
     reads = frozenset({"z"})  # the measurement groups' samples and fresh masks
-    default_enabled = False
+    default_enabled = True
     defaults = {
         "n_samples": 5,  # at least this many held samples (of the channel's own rate) to be stuck
         "still_ratio": 0.01,  # a sample within this share of the noise std of the run's first is "held"

@@ -335,7 +335,7 @@ def test_analyze_is_unaffected_by_a_broken_plugin_it_does_not_use(monkeypatch, c
     (with_plugin,), (without,) = json.loads(result.stdout)["logs"], json.loads(clean.stdout)["logs"]
     for key in ("verdict", "n_alarms", "detectors", "exit_code"):
         assert with_plugin[key] == without[key], key
-    assert [d["detector"] for d in with_plugin["detectors"]] == ["encoded_ekf", "nis", "cusum"]
+    assert [d["detector"] for d in with_plugin["detectors"]] == ["encoded_ekf", "nis", "cusum", "frozen"]
     assert TripwireEntryPoint.loads == []
 
 
