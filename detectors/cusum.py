@@ -70,17 +70,18 @@ def threshold_for_arl(arl, kappa: float) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def cusum_kernel(t, u, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
+def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
     """Signed two-sided CUSUM per column with its resets (docs/algorithms.md section 1e).
 
-    t (N,) grid times; u (N, J) whitened innovations, NaN where a column has no update;
+    t (N,) grid times; y, S_diag (N, J) innovations and their variances, NaN where a column has no
+    update (whitened here, u = y / sqrt(S), so no (N, J) temporaries);
     reset (N,) bool, steps where every test restarts (filter divergence); gap (J,) s, a longer gap
     between a column's updates restarts it; h (J,) thresholds; kappa reference; cap: statistics held
     at most cap * h; clip: each u enters at most +-clip (one glitch cannot raise an alarm alone).
     Returns g (N, J), the signed statistic (NaN without update), and onset (N, J), the first step of
     the run of the side g shows (-1 when that side is zero).
     """
-    n, m = u.shape
+    n, m = y.shape
     g = np.full((n, m), np.nan)
     onset = np.full((n, m), -1, dtype=np.int64)
     for j in range(m):
@@ -94,7 +95,7 @@ def cusum_kernel(t, u, reset, gap, h, kappa, cap, clip):  # pragma: no cover - c
         for i in range(n):
             if reset[i]:
                 sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
-            x = u[i, j]
+            x = y[i, j] / np.sqrt(S_diag[i, j])  # u = y~ / sqrt(S_jj)
             if not np.isfinite(x):
                 continue
             if t[i] - last > gap[j]:
@@ -194,11 +195,8 @@ class CusumDetector(Detector):
         result = self.new_result()
         t = run.t
         h, arl = self.thresholds(trace)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u = trace.y.astype(np.float64) / np.sqrt(trace.S_diag.astype(np.float64))
-        stat, onset = cusum_kernel(
-            t, u, trace.diverged, self._gaps(trace), h, float(self.kappa), float(self.cap), float(self.clip)
-        )
+        settings = (float(self.kappa), float(self.cap), float(self.clip))
+        stat, onset = cusum_kernel(t, trace.y, trace.S_diag, trace.diverged, self._gaps(trace), h, *settings)
         model = context.get("model")
         result.info.update(kappa=float(self.kappa), budget_per_hour=float(self.budget_per_hour), tests=2 * h.size)
         result.info["h"], result.info["arl0_updates"] = {}, {}

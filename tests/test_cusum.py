@@ -18,7 +18,7 @@ def run_kernel(u, h, *, kappa=0.25, cap=1.5, gap=1.0, reset=None, clip=4.0):
     t = np.arange(u.shape[0]) * DT
     reset = np.zeros(u.shape[0], dtype=bool) if reset is None else reset
     m = u.shape[1]
-    return cusum_kernel(t, u, reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)
+    return cusum_kernel(t, u, np.ones_like(u), reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)
 
 
 def alarm_starts(g: np.ndarray, h: float) -> np.ndarray:
