@@ -36,7 +36,7 @@ def test_one_injected_bias_is_one_incident_naming_the_accelerometer(cli, tmp_pat
     assert result.exit_code == 1
     first = result.stdout.splitlines()[1]
     assert first.startswith("  incident 1: accelerometer inconsistent 30.00-")
-    assert "(nis.accel, peak 11.3x)" in first
+    assert "(nis.accel, peak 10.7x)" in first
     log = json.loads(out.read_text())["logs"][0]
     assert log["n_incidents"] == 1 and log["incidents"][0]["source"] == "accel"
     # fragments of one check within a second are one alarm: nis.accel flickered 3 times before
