@@ -97,7 +97,9 @@ def design_rate(budget_per_hour: float, proof_hours: float | None) -> float:
     if proof_hours is None:
         return float(budget_per_hour)
     hours = float(proof_hours)
-    upper = lambda c: chdtri(2 * c + 2, (1.0 - PROOF_CONFIDENCE) / 2.0) / (2.0 * hours)  # noqa: E731
+    # the upper end of c alarms in T hours, against the budget (a relative 1e-12: at exactly
+    # proof_shortest_hours the two sides differ by rounding)
+    upper = lambda c: chdtri(2 * c + 2, (1.0 - PROOF_CONFIDENCE) / 2.0) / (2.0 * hours) / (1.0 + 1e-12)  # noqa: E731
     if upper(0) > budget_per_hour:
         raise ValueError(f"{hours:g} h cannot show a budget of {budget_per_hour:g} per hour")
     c = 0
