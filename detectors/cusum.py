@@ -37,6 +37,7 @@ import numba
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import Interval
 from logscan.detectors.words import group_words
 
@@ -150,6 +151,7 @@ class CusumDetector(Detector):
         "kappa": 0.25,  # reference value: half the mean shift (in innovation std) the test is tuned to
         "budget_per_hour": 0.1,  # false alarms per hour the whole detector may spend (sets h)
         "arl_margin": 10.0,  # design ARL x this: healthy innovations wander slowly (docs/algorithms.md 1e)
+        "proof_hours": 100.0,  # design so that this many healthy hours show the budget met (as nis)
         "h": None,  # set to override the budget: one threshold for every test
         "cap": 1.5,  # the statistic is held at most cap x h
         "clip": 4.0,  # each whitened innovation enters at most +-clip (a glitch is NIS's, not a drift)
@@ -160,6 +162,7 @@ class CusumDetector(Detector):
         "kappa": [Interval(float, 0, None)],
         "budget_per_hour": [POSITIVE],
         "arl_margin": [Interval(float, 1, None)],
+        "proof_hours": [POSITIVE, None],
         "h": [POSITIVE, None],
         "cap": [Interval(float, 1, None, closed="neither")],
         "clip": [POSITIVE],
@@ -176,6 +179,10 @@ class CusumDetector(Detector):
         what = group_words(group) + (f" {output}" if output else "")
         return f"{what} drifts away from the model's prediction (cumulative innovation test, CUSUM)"
 
+    def check_params(self) -> None:
+        super().check_params()
+        check_proof(self)
+
     def needs(self, run=None) -> Needs:
         return Needs.of(ekf=("y",))
 
@@ -185,8 +192,10 @@ class CusumDetector(Detector):
         duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
         rate = np.repeat(trace.updated.sum(axis=0) / duration, sizes)  # updates per second per column
         tests = 2 * int(sizes.sum())  # two one-sided tests per column
-        # ARL0_j = margin J r_j 3600 / budget: J equal shares of the budget, with the design margin
-        arl = np.maximum(float(self.arl_margin) * tests * rate * 3600.0 / float(self.budget_per_hour), 1.0)
+        # ARL0_j = margin J r_j 3600 / rate_design: J equal shares of the rate a proof_hours demonstration
+        # shows within the budget (`detectors.budget`), with the design margin
+        designed = design_rate(float(self.budget_per_hour), self.proof_hours)
+        arl = np.maximum(float(self.arl_margin) * tests * rate * 3600.0 / designed, 1.0)
         if self.h is not None:
             return np.full(arl.size, float(self.h)), siegmund_arl(np.full(arl.size, float(self.h)), self.kappa)
         return threshold_for_arl(arl, float(self.kappa)), arl

@@ -25,9 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import Boolean, Interval
 from logscan.detectors.words import group_words
-from logscan.errors import ProfileError
 
 # A NIS beyond this (far beyond any chi-square threshold: a bit flip, a diverging filter) is summed
 # apart: in the running sum it would cost every later window its precision (1e20 leaves no digit of
@@ -75,46 +75,6 @@ def as_float32(values: np.ndarray) -> np.ndarray:
     return values.astype(np.float32)
 
 
-# A demonstration of the budget: the exact (two-sided) Poisson interval's confidence, whose upper end
-# must be within the budget, and the probability that a detector running at its design rate passes
-# (the consumer's and the producer's risk of a fixed-length demonstration test, as in MIL-HDBK-781's
-# plans: 2.5 % and 10 %).
-PROOF_CONFIDENCE = 0.95
-PROOF_PASS_PROBABILITY = 0.9
-
-
-def design_rate(budget_per_hour: float, proof_hours: float | None) -> float:
-    """False alarms per hour to design for, so that ``proof_hours`` healthy hours show the upper end
-    of the rate's exact 95 % Poisson interval at or below ``budget_per_hour`` with probability 0.9.
-
-    c = the most alarms whose upper end chi2.ppf(0.975, 2c + 2) / (2 T) stays within the budget;
-    rate = chi2.ppf(0.1, 2c + 2) / (2 T), the rate at which P(at most c alarms in T hours) = 0.9.
-    T = 100 h, budget 0.1/h: c = 3, rate 0.0174/h. None: the budget itself. A demonstration too
-    short to ever show the budget (budget x T < 3.69, the upper end with no alarm) is refused when
-    the detector is created (`NisDetector.check_params`)."""
-    from scipy.special import chdtri  # chdtri(d, q) = chi2.ppf(1 - q, d)
-
-    if proof_hours is None:
-        return float(budget_per_hour)
-    hours = float(proof_hours)
-    # the upper end of c alarms in T hours, against the budget (a relative 1e-12: at exactly
-    # proof_shortest_hours the two sides differ by rounding)
-    upper = lambda c: chdtri(2 * c + 2, (1.0 - PROOF_CONFIDENCE) / 2.0) / (2.0 * hours) / (1.0 + 1e-12)  # noqa: E731
-    if upper(0) > budget_per_hour:
-        raise ValueError(f"{hours:g} h cannot show a budget of {budget_per_hour:g} per hour")
-    c = 0
-    while upper(c + 1) <= budget_per_hour:  # a few steps: c grows like budget x T
-        c += 1
-    return float(chdtri(2 * c + 2, PROOF_PASS_PROBABILITY)) / (2.0 * hours)
-
-
-def proof_shortest_hours(budget_per_hour: float) -> float:
-    """The shortest demonstration that can show ``budget_per_hour``: no alarm, upper end = budget."""
-    from scipy.special import chdtri
-
-    return float(chdtri(2, (1.0 - PROOF_CONFIDENCE) / 2.0)) / (2.0 * budget_per_hour)
-
-
 def chi2_threshold(dof: np.ndarray, alpha: float) -> np.ndarray:
     """chi2.ppf(1 - alpha, dof) per entry, evaluated once per distinct dof."""
     from scipy.special import chdtri  # here: scipy.special costs ~20 MB, paid only when NIS runs
@@ -153,14 +113,7 @@ class NisDetector(Detector):
 
     def check_params(self) -> None:
         super().check_params()
-        if self.proof_hours is not None:
-            try:
-                design_rate(float(self.budget_per_hour), self.proof_hours)
-            except ValueError as exc:
-                shortest = proof_shortest_hours(float(self.budget_per_hour))
-                raise ProfileError(
-                    f"detector {self.name!r}: proof_hours: {exc}", hint=f"use at least {shortest:.4g} h, or null"
-                ) from None
+        check_proof(self)
 
     @classmethod
     def signal_label(cls, signal: str) -> str | None:

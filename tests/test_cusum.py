@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from logscan.detectors.budget import design_rate
 from logscan.detectors.cusum import CusumDetector, cusum_kernel, siegmund_arl, threshold_for_arl
 
 DT = 0.01
@@ -103,12 +104,15 @@ def test_thresholds_spend_the_budget_over_every_test():
         updated = np.ones((t.size, 2), dtype=bool)
 
     Trace.updated[:, 1] = np.arange(Trace.t.size) % 10 == 0  # a 10 Hz group
-    h, arl = CusumDetector(arl_margin=1.0).thresholds(Trace)
     tests = 8  # 2 sides x 4 outputs
     rate = 1.0 / Trace.t[-1] * Trace.updated.sum(axis=0)
-    np.testing.assert_allclose(arl, tests * np.repeat(rate, [3, 1]) * 3600 / 0.1)
-    # false alarms per hour: sum over the one-sided tests of rate / ARL0 = the budget
-    assert 2 * np.sum(np.repeat(rate, [3, 1]) / siegmund_arl(h, 0.25)) * 3600 == pytest.approx(0.1, rel=1e-6)
+    for proof_hours, designed in ((None, 0.1), (100.0, design_rate(0.1, 100.0))):
+        h, arl = CusumDetector(arl_margin=1.0, proof_hours=proof_hours).thresholds(Trace)
+        np.testing.assert_allclose(arl, tests * np.repeat(rate, [3, 1]) * 3600 / designed)
+        # false alarms per hour: sum over the one-sided tests of rate / ARL0 = the design rate
+        spent = 2 * np.sum(np.repeat(rate, [3, 1]) / siegmund_arl(h, 0.25)) * 3600
+        assert spent == pytest.approx(designed, rel=1e-6)
+    assert design_rate(0.1, 100.0) == pytest.approx(0.0174, abs=1e-4)  # what a 100-hour proof allows
 
 
 def test_a_single_glitch_cannot_raise_an_alarm():

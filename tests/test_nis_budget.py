@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2, poisson
 
-from logscan.detectors.nis import NisDetector, design_rate, proof_shortest_hours
+from logscan.detectors.budget import design_rate, proof_shortest_hours
+from logscan.detectors.nis import NisDetector
 from logscan.errors import ProfileError
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "bench"))
