@@ -73,7 +73,7 @@ def test_the_markdown_summary_has_the_verdict_and_alarm_tables(run):
     text = out["r.md"].read_text()
     for log in document["logs"]:
         assert f"| {log['file']} | {log['verdict']} | {log['n_alarms']} |" in text
-    assert "| quad_imu_bitflip.mcap | nis | nis.accel | 30.13 | 31.27 | peak/threshold 7.87 | - |" in text
+    assert "| quad_imu_bitflip.mcap | nis | nis.accel | 30.13 | 31.27 | peak/threshold 7.46 | - |" in text
     assert "22 samples outside the physical range" in text  # refused samples in words, not a ratio
     assert "missing.mcap | error:" in text
 

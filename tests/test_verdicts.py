@@ -204,4 +204,4 @@ def test_the_report_lists_the_incident_before_the_alarms_behind_it(cli, tmp_path
     assert cli("analyze", BIAS, "-o", report).exit_code == 1
     page = report.read_text()
     assert page.index('id="incident-table"') < page.index('id="alarm-table"')
-    assert "accelerometer inconsistent 30.00-" in page and "Verdict: 5 alarms in 1 incident" in page
+    assert "accelerometer inconsistent 30.00-" in page and "Verdict: 12 alarms in 1 incident" in page
