@@ -374,8 +374,6 @@ def detect(
 
     step = progress or (lambda message: None)
     free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
-    if sensor_views:
-        _pack_innovations(prepared, detectors, reuse_samples=free_series)
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
     from logscan.observability import observability_for
@@ -401,9 +399,18 @@ def detect(
                     if on
                 )
             )
-    for position, detector in enumerate(detectors):
-        if free_series:
-            release_unread(prepared, detectors[position:])
+    # the detectors that read the samples first (the frozen-sensor check), so the report's pack of
+    # innovations can then take the samples' buffer (`_pack_innovations`); results in the given order
+    order = sorted(range(len(detectors)), key=lambda i: not _reads_samples(detectors[i]))
+    results: dict[int, Any] = {}
+    packed = not sensor_views
+    for position, index in enumerate(order):
+        detector, still_to_run = detectors[index], [detectors[i] for i in order[position:]]
+        if not packed and not any(_reads_samples(d) for d in still_to_run):
+            _pack_innovations(prepared, still_to_run, reuse_samples=free_series)
+            packed = True
+        if free_series:  # the report's pack, still to come, reads the innovations
+            release_unread(prepared, still_to_run, keep=frozenset() if packed else frozenset({"y", "S_diag"}))
         step(f"detector {detector.name}")
         try:
             result = detector.run(
@@ -420,7 +427,10 @@ def detect(
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
             analysis.failures.append(detector_failure(detector.name, exc))
             continue
-        analysis.results.append(result)
+        results[index] = result
+    if not packed:  # every detector reads the samples
+        _pack_innovations(prepared, [], reuse_samples=False)
+    analysis.results = [results[i] for i in sorted(results)]
     analysis.warnings[:0] = consistency_warnings(prepared)  # first: they question every verdict below
     gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
     merge_fragments(analysis.results, gap_s)
@@ -484,6 +494,11 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
     return out
 
 
+def _reads_samples(detector) -> bool:
+    """Whether a detector reads the groups' samples (undeclared reads: it may)."""
+    return detector.reads is None or "z" in detector.reads
+
+
 def _pack_innovations(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:
     """`Prepared.innovations` from the EKF trace's innovations and the groups' samples; with
     ``reuse_samples``, into the samples' own buffer when no detector reads them (they are dropped)."""
@@ -505,9 +520,10 @@ def _pack_innovations(prepared: Prepared, detectors: Sequence, reuse_samples: bo
                 group.z = None
 
 
-def release_unread(prepared: Prepared, still_to_run: Sequence) -> None:
-    """Free the large series none of ``still_to_run`` declares it reads (all of them declare)."""
-    wanted: set[str] = set()
+def release_unread(prepared: Prepared, still_to_run: Sequence, keep: frozenset[str] = frozenset()) -> None:
+    """Free the large series none of ``still_to_run`` declares it reads (all of them declare), but
+    those in ``keep``."""
+    wanted: set[str] = set(keep)
     for detector in still_to_run:
         if detector.reads is None:
             return

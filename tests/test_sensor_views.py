@@ -87,7 +87,8 @@ def test_the_accelerometer_bias_shows_on_its_axis(sample):
 def test_the_pack_reuses_the_samples_and_leaves_them_alone_otherwise(sample):
     path = sample("quad_imu_bias.mcap")
     loaded = load_profile_for(path, None)
-    detectors = create_detectors(loaded)
+    # the frozen-sensor check reads the samples: it runs first, then the pack takes their buffer
+    detectors = create_detectors(loaded, ["encoded_ekf", "nis", "frozen"])
     wanted = lambda run: needs_of(detectors)(run) | Needs.of(ekf=("y",))  # noqa: E731
     kept = prepare(path, loaded, wanted)
     z_before = kept.run.groups["accel"].z.copy()
@@ -99,7 +100,12 @@ def test_the_pack_reuses_the_samples_and_leaves_them_alone_otherwise(sample):
     detect(freed, detectors, free_series=True, sensor_views=True)
     assert np.shares_memory(freed.innovations.packed, samples)  # no new buffer through the detectors
     assert all(group.z is None for group in freed.run.groups.values())
-    assert freed.trace.y is None and freed.trace.S_diag is None
+    assert freed.trace.y is None and freed.trace.S_diag is None  # no detector here reads them
+    assert [r.detector for r in detect(prepare(path, loaded, wanted), detectors).results] == [
+        "encoded_ekf",
+        "nis",
+        "frozen",
+    ]  # results in the given order, whatever order they ran in
     for field in PACKED.names:
         np.testing.assert_array_equal(freed.innovations.packed[field], kept.innovations.packed[field])
 
