@@ -72,5 +72,11 @@ def test_the_sensor_figures_follow_the_time_axis(bias_page):
     first = steps["drag"]["ranges"][0]
     assert first != "auto" and all(r == pytest.approx(first) for r in steps["drag"]["ranges"])
     start, end = row_interval(dom, "incident-table", 0)
-    assert all(r == pytest.approx(expected_zoom(start, end)) for r in steps["incident"]["ranges"])
-    assert steps["reset"]["ranges"] == ["auto"] * len(ids)
+    low, high = expected_zoom(start, end)
+    zoom = [max(low, 0.0), min(high, 60.0)]  # the margins stop at the log's ends (0-60 s; report.js zoomTo)
+    assert all(r == pytest.approx(zoom) for r in steps["incident"]["ranges"])
+    # reset restores each figure's first view: autorange, or the 0-60 s range a figure is drawn with
+    # (the observability context figure, ctx-observability)
+    first_views = steps["start"]["ranges"]
+    assert steps["reset"]["ranges"] == first_views and all(r in ("auto", [0, 60]) for r in first_views)
+    assert all(r == "auto" for i, r in zip(ids, first_views, strict=True) if i in sensor_ids)
