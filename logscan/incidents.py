@@ -93,7 +93,7 @@ def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[s
 
 
 def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0) -> tuple[str, str]:
-    """('accelerometer inconsistent', 'nis.accel, peak 11.3x'): an incident's source in words and
+    """('accelerometer inconsistent', 'nis.accel, peak 10.7x'): an incident's source in words and
     the check its headline quotes."""
     ratio = source.peak_ratio
     peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
@@ -108,7 +108,7 @@ def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0
 
 
 def headline(source: AlarmInterval, group: str | None, start: float, end: float, n_rejected: int = 0) -> str:
-    """'accelerometer inconsistent 30.00-48.80 s (nis.accel, peak 11.3x)'."""
+    """'accelerometer inconsistent 30.00-60.00 s (nis.accel, peak 10.7x)'."""
     phrase, detail = headline_parts(source, group, n_rejected)
     return f"{phrase} {start:.2f}-{end:.2f} s ({detail})"
 
