@@ -301,7 +301,7 @@ class Incident:
     headline: str
     alarms: list[AlarmInterval] = field(default_factory=list)
     what: str = ""  # "accelerometer inconsistent"
-    detail: str = ""  # "nis.accel, peak 11.3x"
+    detail: str = ""  # "nis.accel, peak 10.7x"
 
     def headline_in(self, clock=None) -> str:
         """The headline with its times in ``clock`` (a `logscan.clock.Clock`; None: as built)."""
