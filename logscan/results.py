@@ -221,7 +221,9 @@ class DetectorResult:
             t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
         )
         self.alarms.extend(alarms)
-        # once the alarms are drawn from it, the band is only drawn: float32 halves it
+        # once the alarms are drawn from them, the statistic and its band are only drawn and read for
+        # margins (7 digits): float32 halves them (a 1-hour 100 Hz log: 1.4 MB per statistic)
+        self.series[name] = _drawn(statistic)
         self.thresholds[name] = Band(upper=_drawn(band.upper), lower=_drawn(band.lower))
         return alarms
 
@@ -269,7 +271,7 @@ class DetectorResult:
 
 
 def _drawn(series: np.ndarray | None) -> np.ndarray | None:
-    """A band series as kept for figures: float32, a broadcast constant as it is."""
+    """A statistic or band series as kept for figures: float32, a broadcast constant as it is."""
     if series is None or series.strides == (0,):
         return series
     with np.errstate(over="ignore"):  # beyond float32's range a drawn threshold is off the chart

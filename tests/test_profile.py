@@ -134,7 +134,7 @@ BROKEN = [
     (
         mutated("vehicle.model", "quadrotor"),
         "[vehicle] model: unknown model 'quadrotor' (did you mean 'quadcopter'?) "
-        "(known models: dc_motor, hover_uav, ins, linear, quadcopter, steer_by_wire)",
+        "(known models: dc_motor, hover_uav, ins, linear, quadcopter, steer_by_wire, unicycle)",
     ),
     (mutated("vehicle.model", ...), "[vehicle]: missing required key 'model'"),
     (mutated("vehicle.rate_hz", 0), "[vehicle] rate_hz: must be > 0, got 0"),
@@ -149,7 +149,7 @@ BROKEN = [
     (mutated("vehicle.ratehz", 5), "[vehicle]: unknown key 'ratehz' (did you mean 'rate_hz'?)"),
     (
         mutated("vehicle.colour", "red"),
-        "[vehicle]: unknown key 'colour' (valid keys: model, rate_hz, params)",
+        "[vehicle]: unknown key 'colour' (valid keys: model, rate_hz, params, loop)",
     ),
     (mutated("measurment", {}), "unknown key 'measurment' (did you mean 'measurements'?)"),
     (mutated("measurements.accel.stale_s", -0.1), "[measurements.accel] stale_s: must be > 0, got -0.1"),

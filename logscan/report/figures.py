@@ -98,9 +98,9 @@ def _bands(
     for name, band in result.thresholds.items():
         sides = []
         for side, value in (("upper", band.upper), ("lower", band.lower)):
-            arr = None if value is None else np.asarray(value, dtype=np.float64)
+            arr = None if value is None else _as_float(value)
             if arr is not None and arr.ndim == 0:
-                arr = np.full(n, float(arr))
+                arr = np.full(n, float(arr), dtype=arr.dtype)
             if arr is not None and arr.shape != (n,):
                 problems.append(
                     f"{side} threshold of {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn"
@@ -156,11 +156,18 @@ def judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray
     return (lo - pad, hi + pad)
 
 
+def _as_float(values) -> np.ndarray:
+    """``values`` as a float array without widening float32 (kept for drawing: every figure of a
+    report is built before any is written, so a 1-hour log's float64 copies cost 100 MB and more)."""
+    arr = np.asarray(values)
+    return arr if arr.dtype in (np.float32, np.float64) else arr.astype(np.float64)
+
+
 def _grid_series(result: DetectorResult, n: int, problems: list[str]) -> dict[str, np.ndarray]:
-    """The result's statistics that lie on the grid as float64; the others reported in ``problems``."""
+    """The result's statistics that lie on the grid; the others reported in ``problems``."""
     series = {}
     for name, values in result.series.items():
-        arr = np.asarray(values, dtype=np.float64)
+        arr = _as_float(values)
         if arr.shape != (n,):
             problems.append(f"statistic {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn")
             continue
@@ -305,7 +312,7 @@ def _extra_figures(result: DetectorResult, n: int, model: Mapping, spans: dict, 
     named "<prefix>.<kind>" share one figure per kind (e.g. "nis.accel.per_dof")."""
     groups: dict[str, list[tuple[str, np.ndarray]]] = {}
     for key, values in result.extras.items():
-        arr = np.asarray(values, dtype=np.float64)
+        arr = _as_float(values)
         if arr.ndim not in (1, 2) or arr.shape[0] != n:
             problems.append(f"extra series {key!r} has shape {np.shape(values)}, the grid has {n} steps: not drawn")
             continue
