@@ -134,3 +134,16 @@ def sample():
         return found
 
     return path
+
+
+@pytest.fixture(autouse=True)
+def _ctrl_c_is_the_users():
+    """Each test starts with Python's own Ctrl-C handler. A test that leaves SIGINT ignored (seen
+    once in the full suite, not reproduced alone) would make every later subprocess inherit the
+    ignore, and the Ctrl-C tests (tests/test_outputs.py, tests/test_registry.py) fail for a reason
+    that is not theirs."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
