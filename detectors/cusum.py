@@ -71,6 +71,16 @@ def threshold_for_arl(arl, kappa: float) -> np.ndarray:
 
 
 @numba.njit(cache=True)
+def _side(s, start, u, kappa, top, i):
+    """One side's step: S_k = max(0, S_k-1 + u_k - kappa), held at ``top``; its run starts at the
+    step where it leaves 0 (``start``, -1 while at 0)."""
+    new = s + u - kappa
+    if new <= 0.0:
+        return 0.0, -1
+    return min(new, top), (i if s == 0.0 else start)
+
+
+@numba.njit(cache=True)
 def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
     """Signed two-sided CUSUM per column with its resets (docs/algorithms.md section 1e).
 
@@ -103,22 +113,8 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
                 sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
             last = t[i]
             x = min(max(x, -clip), clip)
-            # S+_k = max(0, S+_k-1 + u_k - kappa), held at cap h; its run starts where it leaves 0
-            sp_new = sp + x - kappa
-            if sp_new <= 0.0:
-                sp, p0 = 0.0, -1
-            else:
-                if sp == 0.0:
-                    p0 = i
-                sp = min(sp_new, top)
-            # S-_k = max(0, S-_k-1 - u_k - kappa)
-            sm_new = sm - x - kappa
-            if sm_new <= 0.0:
-                sm, m0 = 0.0, -1
-            else:
-                if sm == 0.0:
-                    m0 = i
-                sm = min(sm_new, top)
+            sp, p0 = _side(sp, p0, x, kappa, top, i)  # S+ on u_k
+            sm, m0 = _side(sm, m0, -x, kappa, top, i)  # S- on -u_k
             now = max(sp, sm) > h[j]
             if on and not now:  # the alarm ended: its evidence is spent, both sides restart
                 sp, sm, p0, m0 = 0.0, 0.0, -1, -1

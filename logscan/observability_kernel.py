@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import literally, njit
 
-from logscan.filters.linalg import cho_solve_rows, cholesky, forward_sq
+from logscan.filters.linalg import all_finite, all_finite2, cho_solve_rows, cholesky, forward_sq
 from logscan.models import dispatch
 from logscan.numba_cache import follow_dependencies
 
@@ -46,14 +46,6 @@ def _mm_t(A, B, ra, ca, rb, out):
             for c in range(ca):
                 s += A[i, c] * B[j, c]
             out[i, j] = s
-
-
-@njit(cache=True, error_model="numpy")
-def _finite(a):
-    for v in a.ravel():
-        if not np.isfinite(v):
-            return False
-    return True
 
 
 @njit(cache=True)
@@ -106,7 +98,7 @@ def signature_evidence(
                 mu[j] = 0.0
                 lam[j] = 0.0
         xk = x_post[k - 1]
-        if not (_finite(xk) and _finite(x_prior[k]) and _finite(P)):
+        if not (all_finite(xk) and all_finite(x_prior[k]) and all_finite2(P)):
             start[:] = -1  # a diverged filter: no verdict until the next window start
             P[:] = P0
             continue
