@@ -308,7 +308,7 @@ class EncodedEkfDetector(Detector):
         return e_s, defined_s
 
 
-ROW_BLOCK = 65_536  # steps per block of the (N, n) arithmetic: bounded temporaries, numpy speed
+ROW_BLOCK = 16_384  # steps per block of the (N, n) arithmetic: temporaries of ~1.5 MB, numpy speed
 
 
 def _any_finite(series: np.ndarray | None) -> bool:

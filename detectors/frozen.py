@@ -143,7 +143,7 @@ class FrozenSensorDetector(Detector):
         info = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
         for group, j, signal in columns:  # one pass per channel: a few dozen at most
             info["channels"][signal] = group.channels[j] if j < len(group.channels) else group.name
-            stat, h, sigma, fill, change = self._channel(run, group, j, model, len(columns), duration)
+            stat, h, sigma, fill, steps, anchor = self._channel(run, group, j, model, len(columns), duration)
             if stat is None:
                 info["not_checked"][signal] = (
                     "fewer than 2 samples"
@@ -154,43 +154,42 @@ class FrozenSensorDetector(Detector):
                 continue
             fresh = np.isfinite(stat)
             alarms = result.add_statistic(run.t, signal, stat, upper=h, valid=fresh)
-            for alarm in alarms:  # the first sample that repeated the frozen value
-                k = int(np.searchsorted(run.t, alarm.start))
-                alarm.change_time = float(run.t[change[k]]) if change[k] >= 0 else None
+            for alarm in alarms:  # the first sample that repeated the frozen value: its run's second
+                i = int(np.searchsorted(steps, np.searchsorted(run.t, alarm.start)))
+                alarm.change_time = float(run.t[steps[anchor[i] + 1]]) if i > anchor[i] else None
             info["fill"][signal], info["h"][signal], info["sigma"][signal] = float(fill), float(h), float(sigma)
         result.info.update(info)
         return result
 
     def _channel(self, run, group, j: int, model, tests: int, duration: float):
         """(statistic (N,) NaN off the channel's fresh steps, or None when the channel is not
-        checked; threshold h; sigma; fill factor L; per step the grid index of its run's second
-        sample, -1 where none)."""
-        n = run.n_steps
+        checked; threshold h; sigma; fill factor L; the grid steps of its fresh samples; per fresh
+        sample the index of its run's first sample, the anchor). Temporaries are the channel's
+        samples, not (N,) copies of the grid."""
         fresh = group.channel_fresh[:, j] if group.channel_fresh is not None else group.fresh
-        z = np.asarray(group.z[:, j], dtype=np.float64)
-        steps = np.flatnonzero(np.asarray(fresh, dtype=bool) & np.isfinite(z))
-        stat = np.full(n, np.nan)
-        change = np.full(n, -1, dtype=np.int64)
+        column = group.z[:, j]
+        steps = np.flatnonzero(np.asarray(fresh, dtype=bool) & np.isfinite(column))
+        none = np.zeros(0, dtype=np.int64)
         if steps.size < 2:  # nothing to compare (the group's own gaps are the other checks' to report)
-            return None, np.nan, np.nan, np.nan, change
-        v = z[steps]
+            return None, np.nan, np.nan, np.nan, none, none
+        v = np.asarray(column[steps], dtype=np.float64)
         # exact repeats first: their typical run is a forward fill's L; repeats on most steps and
         # in many runs: a sensor that holds its value whenever the quantity is still (not checked)
         new = np.concatenate(([True], v[1:] != v[:-1]))
         exact = np.diff(np.append(np.flatnonzero(new), v.size))
         fill = fill_factor(exact)
         if 1.0 - new.mean() >= HELD_SHARE and repeat_probability(exact, fill) >= NOISELESS_P:
-            return None, np.nan, np.nan, fill, change
+            return None, np.nan, np.nan, fill, none, none
         sigma = float(np.fmin(self._stated_sigma(group, j, model), channel_noise(v[new])))
         anchor = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0)
-        index = np.arange(v.size)
-        lengths = np.diff(np.append(np.flatnonzero(anchor == index), v.size))
+        del v, new
+        held = np.arange(1, anchor.size + 1) - anchor  # r_i: samples held since the anchor (1 at it)
+        lengths = np.diff(np.append(np.flatnonzero(held == 1), anchor.size))
         # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
-        stat[steps] = (index - anchor + 1) / fill
+        stat = np.full(run.n_steps, np.nan)
+        stat[steps] = held / fill
         h = max(float(self.n_samples), run_threshold(lengths, fill, tests, duration, float(self.budget_per_hour)))
-        second = np.minimum(anchor + 1, v.size - 1)
-        change[steps] = np.where(index > anchor, steps[second], -1)
-        return stat, h, sigma, fill, change
+        return stat, h, sigma, fill, steps, anchor
 
     @staticmethod
     def _stated_sigma(group, j: int, model) -> float:

@@ -40,7 +40,7 @@ def _as_series(name: str, value, n: int) -> np.ndarray | None:
         return None
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim == 0:
-        return np.full(n, float(arr))
+        return np.broadcast_to(arr, (n,))  # read only: a view, not n copies
     if arr.shape != (n,):
         raise InternalError(f"alarm_intervals: {name} has shape {arr.shape}, expected ({n},) or a scalar")
     return arr
@@ -105,16 +105,20 @@ def alarm_intervals(
         raise InternalError(f"alarm_intervals: n_persist must be >= 1, got {n_persist}")
     judged, in_warmup = judged_mask(t, valid, warmup, warmup_s)
 
-    # Work on the judged samples and the warm-up samples (which break runs but never exceed).
-    keep = np.flatnonzero(judged | in_warmup)
-    if keep.size == 0:
+    # Work on the judged samples and the warm-up samples (which break runs but never exceed); when
+    # that is every sample (the usual case) on the series themselves: no (N,) copies.
+    considered = judged | in_warmup
+    keep = None if considered.all() else np.flatnonzero(considered)
+    if keep is not None and keep.size == 0:
         return []
-    xs, ts = x[keep], t[keep]
+    xs, ts, warm = (x, t, in_warmup) if keep is None else (x[keep], t[keep], in_warmup[keep])
+    his = hi if hi is None or keep is None else hi[keep]
+    los = lo if lo is None or keep is None else lo[keep]
     with np.errstate(invalid="ignore"):
-        over = (xs > hi[keep]) if hi is not None else np.zeros(keep.size, dtype=bool)
-        under = (xs < lo[keep]) if lo is not None else np.zeros(keep.size, dtype=bool)
+        over = (xs > his) if his is not None else np.zeros(xs.size, dtype=bool)
+        under = (xs < los) if los is not None else np.zeros(xs.size, dtype=bool)
     nonfinite = ~np.isfinite(xs)
-    exceed = (over | under | nonfinite) & ~in_warmup[keep]
+    exceed = (over | under | nonfinite) & ~warm
     if not exceed.any():
         return []
 
@@ -125,9 +129,8 @@ def alarm_intervals(
     run_len = run_last - run_start + 1
     # A run is bridged to the previous one when the gap between exceedances is <= hold_off_s and
     # no warm-up sample lies between them; a chain is a maximal sequence of bridged runs.
-    warm_count = np.concatenate(([0], np.cumsum(in_warmup[keep])))
     gap = ts[run_start[1:]] - ts[run_last[:-1]]
-    warm_between = warm_count[run_start[1:]] - warm_count[run_last[:-1] + 1] > 0
+    warm_between = _count_in(np.flatnonzero(warm), run_last[:-1] + 1, run_start[1:]) > 0
     new_chain = np.concatenate(([True], (gap > hold_off_s + _TIME_EPS) | warm_between))
     chain = np.cumsum(new_chain) - 1
     chain_last_run = np.concatenate((np.flatnonzero(new_chain)[1:] - 1, [run_start.size - 1]))
@@ -144,28 +147,31 @@ def alarm_intervals(
     durations = ts[a_last] - ts[a_start]
     keep_alarm = durations >= min_duration_s - _TIME_EPS
 
-    # Excess over the crossed bound picks the peak sample; non-finite statistics rank highest.
-    with np.errstate(invalid="ignore"):
-        excess_hi = xs - hi[keep] if hi is not None else np.full(keep.size, -np.inf)
-        excess_lo = lo[keep] - xs if lo is not None else np.full(keep.size, -np.inf)
-    excess = np.where(exceed, np.fmax(excess_hi, excess_lo), -np.inf)
-    excess = np.where(exceed & nonfinite, np.inf, excess)
-    exceed_count = np.concatenate(([0], np.cumsum(exceed)))
-
     i0, i1, f0 = a_start[keep_alarm], a_last[keep_alarm], a_first[keep_alarm]
     if i0.size == 0:
         return []
+
+    def excess(index: np.ndarray) -> np.ndarray:
+        """Excess over the crossed bound at ``index``, which picks the peak sample; non-finite
+        statistics rank highest, samples that do not exceed lowest."""
+        v = xs[index]
+        with np.errstate(invalid="ignore"):
+            above = v - his[index] if his is not None else np.full(index.size, -np.inf)
+            below = los[index] - v if los is not None else np.full(index.size, -np.inf)
+        out = np.where(exceed[index], np.fmax(above, below), -np.inf)
+        return np.where(exceed[index] & nonfinite[index], np.inf, out)
+
     peak = _segment_argmax(excess, i0, i1)
     value = xs[peak]
     is_nonfinite = nonfinite[peak]
     crossed_upper = over[peak] | (is_nonfinite & (hi is not None))
-    threshold = np.where(crossed_upper, _at(hi, keep[peak]), _at(lo, keep[peak]))
+    threshold = np.where(crossed_upper, _at(his, peak), _at(los, peak))
     bound = np.where(is_nonfinite, "nonfinite", np.where(over[peak], "upper", "lower"))
     # a finite value far beyond a small threshold: the ratio overflows to inf (the JSON's null)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio = value / threshold
     ratio_ok = np.isfinite(value) & np.isfinite(threshold) & (threshold != 0.0)
-    n_exceed = exceed_count[i1 + 1] - exceed_count[f0]
+    n_exceed = _count_in(np.flatnonzero(exceed), f0, i1 + 1)
     columns = zip(
         ts[i0].tolist(),
         ts[i1].tolist(),
@@ -191,14 +197,20 @@ def _at(series: np.ndarray | None, index: np.ndarray) -> np.ndarray:
     return np.full(index.size, np.nan) if series is None else series[index]
 
 
-def _segment_argmax(values: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarray:
-    """Index of the (first) maximum of values[first[k] : last[k] + 1] for each disjoint segment k."""
+def _count_in(sorted_index: np.ndarray, first: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """How many of ``sorted_index`` lie in [first[k], stop[k]) for each k."""
+    return np.searchsorted(sorted_index, stop) - np.searchsorted(sorted_index, first)
+
+
+def _segment_argmax(values_at, first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """Index of the (first) maximum of values over [first[k], last[k]] for each disjoint segment k;
+    ``values_at(index)`` gives the values at those indices (only the segments' are computed)."""
     lengths = last - first + 1
     segment = np.repeat(np.arange(first.size), lengths)
     offsets = np.concatenate(([0], np.cumsum(lengths)[:-1]))
     index = np.arange(lengths.sum()) - np.repeat(offsets, lengths) + np.repeat(first, lengths)
     # sort by segment, then by descending value, then by position: the first row of each segment
-    order = np.lexsort((index, -values[index], segment))
+    order = np.lexsort((index, -values_at(index), segment))
     return index[order[offsets]]
 
 

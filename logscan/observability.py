@@ -221,8 +221,8 @@ def held_inputs(u: np.ndarray) -> np.ndarray:
 def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S, snr_min=None) -> Observability:
     """The verdict of one filtered run (the EKF trace with its x_prior and x_post); ``snr_min`` None:
     `snr_needed` at the grid's stride."""
+    from logscan.models.dispatch import call_literal
     from logscan.observability_kernel import signature_evidence
-    from logscan.recovery.kernels import call_literal
 
     dt = float(trace.dt)
     stride = max(int(round(stride_s / dt)), 1)

@@ -468,7 +468,7 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
     """One warning per measurement group whose median NIS is far from the chi-square median of its
     size (see NIS_MISMATCH); the ratio is given per output."""
     import numpy as np
-    from scipy.stats import chi2
+    from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
 
     trace = prepared.trace
     if trace is None or trace.nis_group is None:
@@ -478,7 +478,7 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
         used = trace.updated[:, g] & np.isfinite(trace.nis_group[:, g])
         if int(used.sum()) < NIS_MIN_UPDATES or not size:
             continue
-        ratio = float(np.median(trace.nis_group[used, g])) / float(chi2.ppf(0.5, size))
+        ratio = float(np.median(trace.nis_group[used, g])) / float(chdtri(size, 0.5))
         if ratio > NIS_MISMATCH:
             out.append(
                 f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "

@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 from recovery_linear import make_loop
 
+from logscan.models.dispatch import call_literal
 from logscan.models.linear import discretise
 from logscan.recovery import Anomaly, RecoverySettings, recover
 from logscan.recovery.bounds import proposition_51
-from logscan.recovery.kernels import call_literal, jacobian_bound
+from logscan.recovery.kernels import jacobian_bound
 
 RUNS = 500
 

@@ -408,7 +408,6 @@ class AnalyzeTask:
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
-        from logscan.report.page import stage_report
 
         log_path, report_path = item
 
@@ -441,6 +440,9 @@ class AnalyzeTask:
         analysis.prepared.release_series()  # the report reads the results and the grid's times
         staged = None
         if report_path is not None:
+            # imported only now: plotly and the report's modules are ~58 MB, not needed while detecting
+            from logscan.report.page import stage_report
+
             step("writing report")
             staged = stage_report(
                 analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed", token=self.token

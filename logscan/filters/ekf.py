@@ -28,8 +28,7 @@ import inspect
 from dataclasses import dataclass
 
 import numpy as np
-from numba import literally, njit, typeof, types
-from numba.core.typing.typeof import Purpose
+from numba import literally, njit
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
@@ -532,14 +531,8 @@ _OUTPUT_NAMES = tuple(inspect.signature(ekf_run.py_func).parameters)[21:]
 
 
 def compiled_for(args: tuple):
-    """ekf_run's compiled entry point for these arguments, the model id as a literal.
-
-    `numba.literally(model_id)` makes ekf_run one specialisation per model, but calling the
-    dispatcher with a plain int re-types the whole kernel (~0.15 s) on every call before it
-    switches to the literal; compiling (or loading from the cache) the literal signature
-    directly skips that."""
-    signature = (types.literal(args[0]), *(typeof(a, Purpose.argument) for a in args[1:]))
-    return ekf_run.compile(signature)
+    """ekf_run's compiled entry point for these arguments, the model id as a literal."""
+    return dispatch.compiled_for_model(ekf_run, args)
 
 
 def run_ekf(

@@ -15,7 +15,8 @@ rows r:r+m of hx (m_total,), its H to rows r:r+m of Hs (m_total, n); kv, xs (n,)
 
 from __future__ import annotations
 
-from numba import njit, types
+from numba import njit, typeof, types
+from numba.core.typing.typeof import Purpose
 from numba.extending import overload
 
 from logscan.errors import ModelError
@@ -319,6 +320,21 @@ def _model_boxplus_into(model_id, p, x, dx, out):
             kernel(p, x, dx, out)
 
         return impl
+
+
+def compiled_for_model(kernel, args: tuple):
+    """``kernel``'s compiled entry point for ``args``, its first argument (the model id) as a literal.
+
+    A kernel that calls `numba.literally(model_id)` is one specialisation per model, but calling its
+    dispatcher with a plain int re-types the whole kernel (~0.15 s) on every call before it switches
+    to the literal; compiling (or loading from the cache) the literal signature skips that."""
+    signature = (types.literal(int(args[0])), *(typeof(a, Purpose.argument) for a in args[1:]))
+    return kernel.compile(signature)
+
+
+def call_literal(kernel, *args):
+    """kernel(*args) compiled for the literal model id args[0] (`compiled_for_model`)."""
+    return compiled_for_model(kernel, args)(*args)
 
 
 follow_dependencies(__name__)

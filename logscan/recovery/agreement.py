@@ -14,11 +14,12 @@ from __future__ import annotations
 from collections.abc import Collection
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from logscan.filters.ekf import pack_run
 from logscan.filters.trace import EkfTrace
-from logscan.recovery.kernels import call_literal, group_predictions
+from logscan.models.dispatch import call_literal
+from logscan.recovery.kernels import group_predictions
 from logscan.recovery.records import LoopRun
 from logscan.recovery.rerun import shared_R, slice_run
 
@@ -85,7 +86,7 @@ def agreement_status(loop: LoopRun, k1: int, part: EkfTrace, flagged: Collection
         fresh = packed.fresh[:, g].copy()
         fresh[0] = False  # the checkpoint's own sample was already used by the shared filter
         nis = group_nis(packed, g, part, u, fresh)
-        limit = chi2.ppf(quantile, int(packed.group_sizes[g]))
+        limit = chdtri(int(packed.group_sizes[g]), 1.0 - quantile)  # chi2.ppf(quantile, m)
         sampled = ~np.isnan(nis)
         status[sampled & (nis <= limit) & (status != DISAGREE)] = AGREE
         status[sampled & ~(nis <= limit)] = DISAGREE

@@ -26,7 +26,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from logscan.recovery.kernels import call_literal, jacobian_bound
+from logscan.models.dispatch import call_literal
+from logscan.recovery.kernels import jacobian_bound
 
 
 def k_sigma_bound(P: np.ndarray, k_sigma: float) -> np.ndarray:

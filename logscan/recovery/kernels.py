@@ -6,18 +6,10 @@ the models a run uses."""
 from __future__ import annotations
 
 import numpy as np
-from numba import literally, njit, typeof, types
-from numba.core.typing.typeof import Purpose
+from numba import literally, njit
 
 from logscan.models import dispatch
 from logscan.numba_cache import follow_dependencies
-
-
-def call_literal(kernel, *args):
-    """kernel(*args) compiled for the literal model id args[0] (no re-typing per call: calling the
-    dispatcher with a plain int types it once as an int before switching to the literal)."""
-    signature = (types.literal(int(args[0])), *(typeof(a, Purpose.argument) for a in args[1:]))
-    return kernel.compile(signature)(*args)
 
 
 @njit(cache=True)
