@@ -26,13 +26,22 @@ the events' [start, end) intervals on the outer, 10 Hz grid):
  - mean roll-forward length (recovered end - checkpoint), anomalies kept past the detector's alarm,
    and anomalies that outlasted T_max (allowed error --allowed-error m on the outer x and y).
 
-The figures pool every seed's samples (one RMS over all anomaly samples of all seeds).
+The figures pool every seed's samples (one RMS over all anomaly samples of all seeds). Beside
+each RMS, a 95 % bootstrap interval over the seeds: 2000 resamples of the seeds with replacement
+(a fixed RNG seed, the same resamples for every row), each pooling its seeds' squared errors as
+the RMS does; the 2.5 and 97.5 percentiles of the resampled RMS.
+
+--plant-without-noise: the same seeds simulated with the plant's process noise off
+(`simulate_ground_robot(..., process_noise=False)`: the same attacks, the same sensor noise, the
+sensors keep theirs), to separate the recovery's own error from the plant's random walk, which no
+roll-forward can know (Q_o = 0.1^2 per 0.1 s outer step on x, y and theta).
 
 Seeds 101.. (the sample logs use 16 and 17, the tests 0-9).
 
     python bench/rfr_scenarios.py                    # 20 seeds
     python bench/rfr_scenarios.py --seeds 3          # a quick look
     python bench/rfr_scenarios.py --write-docs       # also rewrite the table in docs/evaluation.md
+    python bench/rfr_scenarios.py --plant-without-noise --detectors oracle --no-diagnostic
 """
 
 from __future__ import annotations
@@ -58,6 +67,8 @@ DOC = os.path.join(os.path.dirname(__file__), "..", "docs", "evaluation.md")
 MARKERS = ("<!-- rfr-scenarios:begin -->", "<!-- rfr-scenarios:end -->")
 # the prototype of docs/algorithms.md section 5: x RMS error during the attacks (m)
 PROTOTYPE = {"ekf": 4.98, (ORACLE, "rollforward"): 1.01, (ORACLE, "refilter"): 0.36, ("nis", "rollforward"): 1.01}
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 20240  # fixed: the interval is reproducible (and the resamples are the same for every row)
 
 
 @dataclass(frozen=True)
@@ -78,9 +89,18 @@ def variants(detectors=DETECTORS, methods=METHODS, diagnose: bool = True) -> lis
     return chosen + ([Variant(ORACLE, m, True) for m in methods] if diagnose else [])
 
 
-def simulate(path: str, seed: int) -> str:
-    """The paper's scenario with ``seed`` (`logscan simulate ground_robot --scenario paper`)."""
-    return simulate_log("ground_robot", path, "--scenario", "paper", "--seed", str(seed))
+def simulate(path: str, seed: int, process_noise: bool = True) -> str:
+    """The paper's scenario with ``seed`` (`logscan simulate ground_robot --scenario paper`).
+    ``process_noise`` False: the plant without its process noise, through the CLI's own functions
+    (`simulate_ground_robot` and `write_simulation`, the CLI's default duration and MCAP format)."""
+    if process_noise:
+        return simulate_log("ground_robot", path, "--scenario", "paper", "--seed", str(seed))
+    from logscan.simulate import write_simulation
+    from logscan.simulate.ground_robot_sim import PAPER_DURATION_S, simulate_ground_robot
+
+    sim = simulate_ground_robot("paper", duration=PAPER_DURATION_S, seed=seed, process_noise=False)
+    write_simulation(sim, path)
+    return path
 
 
 def profile_text(log_path: str, variant: Variant, allowed_error_m: float) -> str:
@@ -217,9 +237,10 @@ class SeedTask:
     root: str
     variants: tuple[Variant, ...]
     allowed_error_m: float = 1.0
+    process_noise: bool = True
 
     def __call__(self, seed: int) -> dict:
-        path = simulate(os.path.join(self.root, f"robot-{seed}.mcap"), seed)
+        path = simulate(os.path.join(self.root, f"robot-{seed}.mcap"), seed, self.process_noise)
         truths: dict = {}
         out = {}
         for variant in self.variants:
@@ -232,10 +253,21 @@ class SeedTask:
         return out
 
 
+def bootstrap_rms(sq, n, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:
+    """95 % percentile interval of the pooled RMS sqrt(sum sq / sum n) with the seeds resampled
+    with replacement (``sq``, ``n``: each seed's sum of squared errors and its sample count)."""
+    sq, n = np.asarray(sq, dtype=float), np.asarray(n, dtype=float)
+    pick = np.random.default_rng(seed).integers(0, sq.size, size=(resamples, sq.size))
+    rms = np.sqrt(sq[pick].sum(axis=1) / n[pick].sum(axis=1))
+    low, high = np.percentile(rms, [2.5, 97.5])
+    return float(low), float(high)
+
+
 def pooled(results: list[dict], label: str) -> dict:
     """The figures of one variant pooled over every seed's samples."""
     rows = [r[label] for r in results]
     n = sum(r["n"] for r in rows)
+    counts = [r["n"] for r in rows]
     bound_x = np.concatenate([r["bound_x"] for r in rows])
     worst_x = np.concatenate([r["worst_x"] for r in rows])
     lengths = [s for r in rows for s in r["rollforward_s"]]
@@ -243,6 +275,8 @@ def pooled(results: list[dict], label: str) -> dict:
     return {
         "ekf": np.sqrt(sum(r["ekf_sq"] for r in rows) / n),
         "rec": np.sqrt(sum(r["rec_sq"] for r in rows) / n),
+        "ekf_interval": bootstrap_rms([r["ekf_sq"] for r in rows], counts),
+        "rec_interval": bootstrap_rms([r["rec_sq"] for r in rows], counts),
         "per_seed": [np.sqrt(r["rec_sq"] / r["n"]) for r in rows],
         "covered": sum(r["covered"] for r in rows) / n,
         "coverage": sum(r["bound_within"] for r in rows) / judged if judged else float("nan"),
@@ -255,22 +289,27 @@ def pooled(results: list[dict], label: str) -> dict:
     }
 
 
-def table(results: list[dict], chosen: list[Variant]) -> list[str]:
+def table(results: list[dict], chosen: list[Variant], process_noise: bool = True) -> list[str]:
     seeds = len(results)
     figures = {v.label: pooled(results, v.label) for v in chosen}
-    ekf = next(iter(figures.values()))["ekf"]
+    first = next(iter(figures.values()))
+    ekf, ekf_low, ekf_high = first["ekf"], *first["ekf_interval"]
+    plant = "" if process_noise else ", plant without process noise"
     lines = [
-        f"| x error during the anomalies ({seeds} seeds) | RMS (m) | per seed (m) | prototype (m) | covered "
+        f"| x error during the anomalies ({seeds} seeds{plant}) | RMS (m) | 95 % interval (seeds resampled) "
+        "| per seed (m) | prototype (m) | covered "
         "| bound coverage | median bound x (m) | median worst case x (m) | mean roll-forward (s) "
         "| anomalies: kept / outlasted T_max |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-        f"| shared EKF (no recovery) | {ekf:.2f} | | {PROTOTYPE['ekf']:.2f} | | | | | | |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| shared EKF (no recovery) | {ekf:.2f} | {ekf_low:.2f}-{ekf_high:.2f} | | {PROTOTYPE['ekf']:.2f} "
+        "| | | | | | |",
     ]
     for v in chosen:
         f = figures[v.label]
         proto = PROTOTYPE.get((v.detector, v.method))
+        low, high = f["rec_interval"]
         lines.append(
-            f"| {v.label} | {f['rec']:.2f} | {min(f['per_seed']):.2f}-{max(f['per_seed']):.2f} "
+            f"| {v.label} | {f['rec']:.2f} | {low:.2f}-{high:.2f} | {min(f['per_seed']):.2f}-{max(f['per_seed']):.2f} "
             f"| {'-' if proto is None else f'{proto:.2f}'} | {f['covered']:.1%} | {f['coverage']:.1%} "
             f"| {f['bound_x']:.2f} | {f['worst_x']:.3g} | {f['rollforward_s']:.2f} "
             f"| {f['anomalies']}: {f['kept']} / {f['outlasted']} |"
@@ -285,24 +324,37 @@ def main() -> None:
     parser.add_argument("--detectors", default=",".join(DETECTORS), help="comma-separated, 'oracle' for the truth")
     parser.add_argument("--allowed-error", type=float, default=1.0, help="allowed error E (m) of the outer x and y")
     parser.add_argument("--no-diagnostic", action="store_true", help="skip the input-timing contrast rows")
+    parser.add_argument(
+        "--plant-without-noise",
+        action="store_true",
+        help="simulate the seeds without the plant's process noise (the sensors keep theirs): the recovery's "
+        "own error apart from the plant's random walk; not with --write-docs",
+    )
     parser.add_argument("--write-docs", action="store_true", help="rewrite the table in docs/evaluation.md")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("-q", "--quiet", action="store_true")
     args = parser.parse_args()
+    if args.plant_without_noise and args.write_docs:
+        parser.error("--plant-without-noise is a contrast: the documented table is the noisy plant's")
     from logscan.fleet import LogFailure, run_many
 
     started = time.time()
     chosen = variants(tuple(d.strip() for d in args.detectors.split(",") if d.strip()), diagnose=not args.no_diagnostic)
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     with tempfile.TemporaryDirectory(prefix="rfr-") as root:
-        task = SeedTask(root, tuple(chosen), args.allowed_error)
+        task = SeedTask(root, tuple(chosen), args.allowed_error, not args.plant_without_noise)
         results = run_many(seeds, task, jobs=args.jobs, progress=not args.quiet, label="seeds", isolate=True)
     broken = [r for r in results if isinstance(r, LogFailure)]
     if broken:
         raise SystemExit(f"{len(broken)} seed(s) failed, first: {broken[0].message}")
-    lines = table(results, chosen)
+    lines = table(results, chosen, not args.plant_without_noise)
     minutes = (time.time() - started) / 60
     command = f"python bench/rfr_scenarios.py --seeds {args.seeds} --first-seed {args.first_seed}"
+    if args.detectors != ",".join(DETECTORS):
+        command += f" --detectors {args.detectors}"
+    for flag in ("no_diagnostic", "plant_without_noise"):
+        if getattr(args, flag):
+            command += " --" + flag.replace("_", "-")
     lines += ["", f"(`{command}`, seeds {seeds[0]}-{seeds[-1]}, {minutes:.1f} min.)"]
     publish("\n".join(lines), args.write_docs, DOC, *MARKERS)
 
