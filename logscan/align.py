@@ -578,6 +578,8 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
             series = np.empty((n, len(spec.noise_channels)))
             for j, ch in enumerate(spec.noise_channels):
                 aligner.hold(ch, grid_ns, spec.stale_s, z=series[:, j], fresh=scratch)
+            if spec.noise_channels_scale != 1.0:
+                series *= spec.noise_channels_scale
             g.noise_std_series = series
         for attr in ("noise_std", "range_lo", "range_hi"):
             value = getattr(spec, attr)

@@ -69,10 +69,11 @@ def _within_band(nis: dict[str, tuple[float, int]]) -> bool:
     return all(low <= ratio <= high for ratio, count in nis.values() if count >= CAL_MIN_UPDATES)
 
 
-def calibrate(model, runs: Sequence, process_noise: bool = True) -> dict:
+def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequence | None = None) -> dict:
     """The calibration document: per group the calibrated noise std, the profile's, and the mean NIS
     per output before and after; with ``process_noise`` each block's Q scale too (see the module
-    docstring)."""
+    docstring). ``judged``: per run, the steps the detectors judge ((N,) bool, or None for all),
+    the only ones calibrated on (`judged_steps`)."""
     if not runs:
         raise InputError("calibration needs at least one healthy log")
     base = base_noise_std(model, runs[0])
@@ -88,7 +89,10 @@ def calibrate(model, runs: Sequence, process_noise: bool = True) -> dict:
     def noise() -> dict[str, np.ndarray]:
         return {name: base[name] * np.sqrt(scale[name]) for name in base}
 
-    before = current = evaluate(model, runs, base, q_scale())
+    def scaled() -> list:  # a group's logged per-sample std scales with it
+        return with_noise_factors(runs, {name: float(np.sqrt(value)) for name, value in scale.items()})
+
+    before = current = evaluate(model, runs, base, q_scale(), judged)
     iterations, converged = 0, False
     while iterations < CAL_ITERATIONS and not converged:
         iterations += 1
@@ -96,11 +100,13 @@ def calibrate(model, runs: Sequence, process_noise: bool = True) -> dict:
         for name, (ratio, count) in current.nis.items():
             if count >= CAL_MIN_UPDATES and np.isfinite(ratio) and ratio > 0:
                 scale[name] = float(np.clip(scale[name] * ratio, CAL_FLOOR, CAL_CEILING))
-        current = evaluate(model, runs, noise(), q_scale())
+        floored = frozenset(name for name in base if scale[name] <= CAL_FLOOR * 1.0001)
+        now = scaled()
+        current = evaluate(model, now, noise(), q_scale(), judged, floored)
         moved = 0.0
         if blocks:  # then Q: one step of each block's scale on the innovations' likelihood
-            current, moved = fit_blocks(model, runs, noise(), blocks, current)
-        converged = process_noise and _within_band(current.nis) and moved < CAL_Q_TOLERANCE
+            current, moved = fit_blocks(model, now, noise(), blocks, current, judged, floored)
+        converged = _within_band(current.nis) and moved < CAL_Q_TOLERANCE
     document = {
         "method": "noise variance scaled to mean NIS per output 1",
         "iterations": iterations,
@@ -109,6 +115,18 @@ def calibrate(model, runs: Sequence, process_noise: bool = True) -> dict:
     if process_noise:
         document.update(_process_noise_entries(model, blocks, before, current, converged))
     return document
+
+
+def judged_steps(profile, run) -> np.ndarray | None:
+    """The steps of ``run`` the detectors judge under ``profile``'s [alarms] policy: not on the
+    ground, not in the take-off transient, not in the filter's first seconds (None: every step).
+    Calibration uses the same steps: a vehicle standing still (a real flight's ground time, a SITL
+    log's exact GNSS at rest) tells little of the noise the detectors will judge in flight."""
+    policy = getattr(profile, "alarm_policy", None)
+    if policy is None or not (policy.ground_channel or policy.ignore_start_s):
+        return None
+    suspended = policy.suspend(run.t, run.ground).suspended
+    return None if suspended is None else ~suspended
 
 
 def _group_entries(base, scale, before, after) -> dict:
@@ -120,6 +138,8 @@ def _group_entries(base, scale, before, after) -> dict:
         calibrated = count >= CAL_MIN_UPDATES
         groups[name] = {
             "noise_std": [float(v) for v in (base[name] * np.sqrt(scale[name]) if calibrated else base[name])],
+            # the std's factor, for the logged per-sample std (noise_channels) too
+            "noise_factor": float(np.sqrt(scale[name])) if calibrated else 1.0,
             "profile_noise_std": [float(v) for v in base[name]],
             "updates": int(count),
             "mean_nis_per_output_before": float(ratio0),
@@ -151,16 +171,42 @@ def _process_noise_entries(model, blocks: dict[str, BlockFit], before, after, co
     }
 
 
-def calibrated_runs(runs: Sequence, calibration: dict) -> list:
-    """``runs`` with each calibrated group's noise std replaced (the filter then uses it)."""
+def with_noise_factors(runs: Sequence, factors: dict[str, float]) -> list:
+    """``runs`` with each group's logged per-sample noise std (``noise_channels``) times its factor;
+    a run with none to scale is returned as it is."""
     out = []
     for run in runs:
         groups = dict(run.groups)
-        for name, entry in calibration.get("groups", {}).items():
-            if name in groups and entry.get("calibrated"):
+        scaled = [
+            name
+            for name, f in factors.items()
+            if f != 1.0 and getattr(groups.get(name), "noise_std_series", None) is not None
+        ]
+        for name in scaled:
+            groups[name] = replace(groups[name], noise_std_series=groups[name].noise_std_series * factors[name])
+        out.append(replace(run, groups=groups) if scaled else run)
+    return out
+
+
+def calibrated_runs(runs: Sequence, calibration: dict) -> list:
+    """``runs`` with each calibrated group's noise std replaced, and its logged per-sample std
+    scaled (the filter then uses them)."""
+    entries = {name: e for name, e in calibration.get("groups", {}).items() if e.get("calibrated")}
+    out = []
+    for run in with_noise_factors(runs, {name: _factor(e) for name, e in entries.items()}):
+        groups = dict(run.groups)
+        for name, entry in entries.items():
+            if name in groups:
                 groups[name] = replace(groups[name], noise_std=np.asarray(entry["noise_std"], dtype=np.float64))
         out.append(replace(run, groups=groups))
     return out
+
+
+def _factor(entry: dict) -> float:
+    """A calibrated group's std factor (tables written before it was stored: from its noise_std)."""
+    if "noise_factor" in entry:
+        return float(entry["noise_factor"])
+    return float(np.asarray(entry["noise_std"])[0] / np.asarray(entry["profile_noise_std"])[0])
 
 
 def apply_calibration(profile, calibration: dict | None) -> list[str]:
@@ -171,6 +217,8 @@ def apply_calibration(profile, calibration: dict | None) -> list[str]:
         if spec is None or not entry.get("calibrated"):
             continue
         spec.noise_std = [float(v) for v in entry["noise_std"]]
+        if spec.noise_channels:  # the logged per-sample std is what the filter takes: scale it alike
+            spec.noise_channels_scale = _factor(entry)
         lines.append(
             f"calibrated noise_std of {name}: {', '.join(f'{v:.3g}' for v in spec.noise_std)} "
             f"(mean NIS per output on the training logs {entry['mean_nis_per_output_after']:.2f})"

@@ -25,7 +25,10 @@ with each group's S scaled by its mean y^2 / S (the likelihood concentrated over
 `_concentrated_cost`), so what decides Q is the innovations' time structure. With the plain cost
 the alternation crept along the NIS-is-1 line (the quadcopter's gyro R still 0.7x the truth after
 five iterations); concentrated, Q 10x and 0.1x too large came back to 0.09-0.13x and 8-13x with
-every R within 1 % of the truth.
+every R within 1 % of the truth. A group whose R the calibration has scaled down to its floor
+cannot set its level any more (its S is mostly H P H^T): its cost is the plain one, so Q sets it
+(on a SITL log, whose GNSS is far quieter than any R a profile guesses, the concentrated cost
+drove the velocity Q up 7,700x while the position NIS sat at 0.001).
 
 Simplified: the cost is the composite likelihood of each output on its own (log S_jj +
 y_j^2 / S_jj from the trace's diagonal of S, summed over outputs and updates), not the joint one
@@ -133,40 +136,53 @@ class Evaluation:
     samples: int
 
 
-def evaluate(model, runs: Sequence, noise_std: dict[str, np.ndarray], scale: np.ndarray) -> Evaluation:
-    """Filter ``runs`` with R from ``noise_std`` and Q scaled by ``scale`` (one per state)."""
+def evaluate(
+    model,
+    runs: Sequence,
+    noise_std: dict[str, np.ndarray],
+    scale: np.ndarray,
+    judged: Sequence | None = None,
+    floored: frozenset[str] = frozenset(),
+) -> Evaluation:
+    """Filter ``runs`` with R from ``noise_std`` and Q scaled by ``scale`` (one per state); the
+    NIS and the likelihood over each run's ``judged`` steps ((N,) bool, None: all of them), the
+    ``floored`` groups' at their own level (`_concentrated_cost`)."""
     from logscan.filters.ekf import run_ekf
 
     sums: dict[str, float] = {}
     counts: dict[str, int] = {}
     terms: dict[str, np.ndarray] = {}  # per group: sum of log S_jj, of y_j^2 / S_jj, outputs
-    for run in runs:
+    for r, run in enumerate(runs):
         Q = scaled_Q(model.default_Q(run.dt), scale)
         trace = run_ekf(model, run, Q=Q, R=noise_std, store_gain=False, store_S=False, store_innovations=True)
+        steps = judged[r] if judged is not None and judged[r] is not None else slice(None)
         for g, name in enumerate(trace.group_names):
-            used = trace.updated[:, g] & np.isfinite(trace.nis_group[:, g])
-            sums[name] = sums.get(name, 0.0) + float(trace.nis_group[used, g].sum())
+            used = trace.updated[steps, g] & np.isfinite(trace.nis_group[steps, g])
+            sums[name] = sums.get(name, 0.0) + float(trace.nis_group[steps, g][used].sum())
             counts[name] = counts.get(name, 0) + int(used.sum())
         for name, offset, size in zip(trace.group_names, trace.group_offsets.tolist(), trace.group_sizes.tolist()):
-            y = trace.y[:, offset : offset + size].astype(np.float64)
-            S = trace.S_diag[:, offset : offset + size].astype(np.float64)
+            y = trace.y[steps, offset : offset + size].astype(np.float64)
+            S = trace.S_diag[steps, offset : offset + size].astype(np.float64)
             ok = np.isfinite(y) & np.isfinite(S) & (S > 0)
             parts = terms.setdefault(name, np.zeros(3))
             parts += (float(np.log(S[ok]).sum()), float((y[ok] ** 2 / S[ok]).sum()), float(ok.sum()))
     sizes = {name: model.group(name).size for name in sums}
     nis = {name: (sums[name] / (sizes[name] * counts[name]) if counts[name] else np.nan, counts[name]) for name in sums}
-    return Evaluation(nis=nis, cost=_concentrated_cost(terms), samples=int(sum(t[2] for t in terms.values())))
+    cost = _concentrated_cost(terms, floored)
+    return Evaluation(nis=nis, cost=cost, samples=int(sum(t[2] for t in terms.values())))
 
 
-def _concentrated_cost(terms: dict[str, np.ndarray]) -> float:
+def _concentrated_cost(terms: dict[str, np.ndarray], floored: frozenset[str] = frozenset()) -> float:
     """-2 log L of each output on its own, log S_jj + y_j^2 / S_jj summed (constants dropped), with
     each group's S scaled by c_g = mean(y_j^2 / S_jj), the c_g that makes it least:
     sum log S_jj + n_g log c_g + n_g per group. The level of S is the R scaling's to set (mean NIS
     per output 1); with it taken out, the cost of a Q scale is what the innovations' time structure
     says, not how wide S is, and R and Q do not trade along the line where NIS is 1."""
     cost = 0.0
-    for log_S, nis, n in terms.values():
-        if n > 0 and nis > 0:  # nis = 0: innovations all zero, a group that says nothing
+    for name, (log_S, nis, n) in terms.items():
+        if name in floored:  # its R can go no lower: the level is Q's to set, plain -2 log L
+            cost += log_S + nis
+        elif n > 0 and nis > 0:  # nis = 0: innovations all zero, a group that says nothing
             cost += log_S + n * np.log(nis / n) + n
     return float(cost)
 
@@ -180,7 +196,15 @@ class BlockFit:
     identified: bool = False
 
 
-def fit_blocks(model, runs, noise_std, blocks: dict[str, BlockFit], current: Evaluation) -> tuple[Evaluation, float]:
+def fit_blocks(
+    model,
+    runs,
+    noise_std,
+    blocks: dict[str, BlockFit],
+    current: Evaluation,
+    judged: Sequence | None = None,
+    floored: frozenset[str] = frozenset(),
+) -> tuple[Evaluation, float]:
     """One step of every block's log scale (in order, each from the others' latest): the cost at
     the current scale, x2 and /2, the least of a parabola through them (at most `Q_MAX_MOVE`
     away), and the best of the points tried. A block whose cost barely changes (`Q_FLAT`) keeps
@@ -198,7 +222,7 @@ def fit_blocks(model, runs, noise_std, blocks: dict[str, BlockFit], current: Eva
         at = fit.log_scale
         tried = {at: current}
         for point in (max(lo, at - Q_STEP), min(hi, at + Q_STEP)):
-            tried[point] = evaluate(model, runs, noise_std, scale_with(name, point))
+            tried[point] = evaluate(model, runs, noise_std, scale_with(name, point), judged, floored)
         down, up = tried[max(lo, at - Q_STEP)].cost, tried[min(hi, at + Q_STEP)].cost
         if max(abs(down - current.cost), abs(up - current.cost)) < Q_FLAT:
             continue
@@ -208,7 +232,7 @@ def fit_blocks(model, runs, noise_std, blocks: dict[str, BlockFit], current: Eva
         move = Q_MAX_MOVE * np.sign(down - up) if curvature <= 0 else -Q_STEP * (up - down) / (2.0 * curvature)
         point = float(np.clip(at + np.clip(move, -Q_MAX_MOVE, Q_MAX_MOVE), lo, hi))
         if point not in tried:
-            tried[point] = evaluate(model, runs, noise_std, scale_with(name, point))
+            tried[point] = evaluate(model, runs, noise_std, scale_with(name, point), judged, floored)
         best = min(tried, key=lambda p: tried[p].cost)
         largest = max(largest, abs(best - at))
         fit.log_scale, current = best, tried[best]

@@ -73,10 +73,15 @@ def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
 
 
 def tables_document(
-    detectors: Sequence, logs: Sequence[str] = (), profile=None, calibration: dict | None = None
+    detectors: Sequence,
+    logs: Sequence[str] = (),
+    profile=None,
+    calibration: dict | None = None,
+    window: tuple[float | None, float | None] = (None, None),
 ) -> dict[str, Any]:
-    """The tables JSON: format, version, what it was trained on, the filter's calibrated
-    measurement noise (`logscan.calibration`) and each detector's trained state."""
+    """The tables JSON: format, version, what it was trained on (the logs, and the ``window`` of
+    each, seconds since its start), the filter's calibrated measurement noise
+    (`logscan.calibration`) and each detector's trained state."""
     from logscan import __version__
 
     return {
@@ -89,6 +94,7 @@ def tables_document(
             {"name": os.path.basename(p), "path": str(p), "bytes": os.path.getsize(p), "sha256": file_sha256(p)}
             for p in logs
         ],
+        "training_window": {"start_s": window[0], "end_s": window[1]} if window != (None, None) else None,
         "calibration": calibration,
         "detectors": [d.to_state() for d in detectors if d.trained_attributes],
     }
@@ -190,8 +196,11 @@ def train_logs(
     notice=None,
     jobs: int = 1,
     scheduler: str | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
 ) -> dict[str, Any]:
-    """`logscan train`: prepare each healthy log, with ``calibrate`` calibrate the filter's
+    """`logscan train`: prepare each healthy log (its ``start_s``..``end_s`` window, seconds since
+    its start, when given), with ``calibrate`` calibrate the filter's
     measurement noise on them (the detectors are then fitted on the calibrated filter), fit the
     trainable detectors, return the tables document. Without ``profile_path`` every log's own
     profile (embedded or built-in) must match the first's. The logs are prepared (`PrepareTask`)
@@ -220,7 +229,9 @@ def train_logs(
     # the first log, when its profile is built in, was read to build it: its task reads it again
     # (a task travels to worker processes without a log in it)
     loaded = dataclasses.replace(loaded, log=None)
-    task = PrepareTask(loaded, logs[0], profile_path, fingerprint, allow_faulty or tune, calibrate, notice, tune)
+    task = PrepareTask(
+        loaded, logs[0], profile_path, fingerprint, allow_faulty or tune, calibrate, notice, tune, start_s, end_s
+    )
     items = [(path, number) for number, path in enumerate(logs, 1)]
     if jobs <= 1 and scheduler is None:
         prepared = []
@@ -251,7 +262,7 @@ def train_logs(
 
         step(f"tuning {', '.join(d.name for d in tuned)} on {len(healthy)} healthy and {len(labelled)} labelled log(s)")
         tuning = tune_multipliers(tuned, healthy, labelled)
-    document = tables_document(detectors, logs, loaded.profile, calibration)
+    document = tables_document(detectors, logs, loaded.profile, calibration, (start_s, end_s))
     document["tuning"] = tuning
     return document
 
@@ -279,6 +290,8 @@ class PrepareTask:
     calibrate: bool = False
     notice: Any = None  # a module-level function (picklable), or None
     tune: bool = False  # the tuned detectors' needs too (logscan.tuning)
+    start_s: float | None = None  # --start/--end: the window of each log trained on
+    end_s: float | None = None
 
     def needs(self):
         from logscan.pipeline import needs_of
@@ -312,7 +325,7 @@ class PrepareTask:
                 path=path,
                 hint="train logs of one profile together, or pass --profile",
             )
-        one = prepare(path, loaded, self.needs(), notice=self.notice)
+        one = prepare(path, loaded, self.needs(), notice=self.notice, start_s=self.start_s, end_s=self.end_s)
         if one.log.source.partial:
             raise InputError(
                 f"read in part ({one.log.source.partial_reason})", path=path, hint="train on complete logs"
@@ -331,10 +344,11 @@ def calibrate_prepared(prepared: Sequence, needs) -> dict:
     """Calibrate the measurement and process noise on the prepared healthy logs
     (`logscan.calibration`), then put the calibrated noise in their runs and models and re-run their
     filters, so the detectors are fitted on the filter `logscan analyze --tables` runs."""
-    from logscan.calibration import calibrate, calibrated_runs, process_noise_scale
+    from logscan.calibration import calibrate, calibrated_runs, judged_steps, process_noise_scale
     from logscan.pipeline import FILTERS
 
-    calibration = calibrate(prepared[0].model, [p.run for p in prepared])
+    judged = [judged_steps(p.profile, p.run) for p in prepared]
+    calibration = calibrate(prepared[0].model, [p.run for p in prepared], judged=judged)
     for one, run in zip(prepared, calibrated_runs([p.run for p in prepared], calibration)):
         one.run = run
         one.model.process_noise_scale = process_noise_scale(calibration)  # as `prepare` sets it from tables

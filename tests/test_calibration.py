@@ -83,3 +83,118 @@ def test_a_group_with_too_few_updates_is_left_as_the_profile_has_it(ins_logs):
     lines = apply_calibration(profile, calibration)
     assert profile.measurements["gnss_position"].noise_std == entry["profile_noise_std"]
     assert profile.measurements["attitude"].noise_std != before and any("attitude" in line for line in lines)
+
+
+def test_train_on_a_window_of_each_log_records_it_and_reads_only_it(ins_logs, cli, tmp_path):
+    (train_a, _, _), wrong = ins_logs
+    counts = {}
+    for name, window in (("full", ()), ("window", ("--start", "20", "--end", "50"))):
+        tables = tmp_path / f"{name}.json"
+        result = cli("train", train_a, "--profile", wrong, "-o", str(tables), "--no-report", "--calibrate", *window)
+        assert result.exit_code == 0, result.stderr
+        document = json.loads(tables.read_text())
+        counts[name] = document["calibration"]["groups"]["gnss_position"]["updates"]
+        if window:
+            assert document["training_window"] == {"start_s": 20.0, "end_s": 50.0}
+            assert "trained on 1 log(s) (20 s to 50 s of each)" in result.stdout
+        else:
+            assert document["training_window"] is None
+    # 10 Hz GNSS: 30 s of a 60 s log hold half its fixes
+    assert counts["window"] == pytest.approx(counts["full"] / 2, rel=0.05)
+    bad = cli(
+        "train",
+        train_a,
+        "--profile",
+        wrong,
+        "-o",
+        str(tmp_path / "bad.json"),
+        "--calibrate",
+        "--start",
+        "9",
+        "--end",
+        "3",
+    )
+    assert bad.exit_code == 2 and "--end 3 must be after --start 9" in bad.stderr
+
+
+def test_calibration_reads_only_the_judged_steps(ins_logs):
+    """Steps the [alarms] policy does not judge (here the filter's first 30 s) are not calibrated
+    on: the NIS counts are those of the judged steps alone, and judged_steps follows the policy."""
+    from logscan.align import align
+    from logscan.calibration import judged_steps
+    from logscan.models import get_model
+    from logscan.process_noise import evaluate
+    from logscan.readers import read_log
+
+    (path, _, _), wrong = ins_logs
+    text = open(wrong).read() + "\n[alarms]\nignore_start_s = 30.0\n"
+    profile = parse_profile(text)
+    run = align(read_log(path), profile)
+    judged = judged_steps(profile, run)
+    assert judged is not None and judged.dtype == bool
+    np.testing.assert_array_equal(judged, run.t >= run.t[0] + 30.0)
+    assert judged_steps(parse_profile(open(wrong).read()), run) is None  # no policy: every step
+    model = get_model("ins")
+    noise = {name: np.asarray(m.noise_std, dtype=float) for name, m in profile.measurements.items()}
+    everything = evaluate(model, [run], noise, np.ones(model.n_states))
+    second_half = evaluate(model, [run], noise, np.ones(model.n_states), [judged])
+    for name, (_, count) in everything.nis.items():
+        assert 0.4 * count <= second_half.nis[name][1] <= 0.6 * count, name
+    assert second_half.samples < everything.samples
+
+
+def test_a_group_whose_noise_is_at_the_floor_is_costed_at_its_own_level():
+    """The concentrated cost takes each group's level of S out; at the R floor the level is Q's to
+    set, so that group's cost is the plain -2 log L (log S + y^2 / S summed)."""
+    from logscan.process_noise import _concentrated_cost
+
+    terms = {"a": np.array([10.0, 0.5, 100.0]), "b": np.array([-3.0, 400.0, 50.0])}
+    concentrated = _concentrated_cost(terms)
+    plain_b = _concentrated_cost(terms, frozenset({"b"}))
+    assert plain_b - concentrated == pytest.approx((-3.0 + 400.0) - (-3.0 + 50 * np.log(400.0 / 50) + 50))
+    # a group whose innovations are as wide as S predicts (y^2 / S averaging 1) costs the same either way
+    fitted = {"c": np.array([7.0, 80.0, 80.0])}
+    assert _concentrated_cost(fitted) == pytest.approx(_concentrated_cost(fitted, frozenset({"c"})))
+
+
+def test_a_group_with_logged_noise_is_calibrated_through_a_factor_on_it(ins_logs):
+    """A group whose std is logged per sample (noise_channels: the filter takes those in place of
+    noise_std) is calibrated by a factor on the logged std: 5x too large comes back to about 1/5."""
+    from dataclasses import replace
+
+    from logscan.align import align
+    from logscan.calibration import calibrated_runs, mean_nis_per_output
+    from logscan.models import get_model
+    from logscan.readers import read_log
+
+    (path, _, _), wrong = ins_logs
+    profile = parse_profile(open(wrong).read())
+    run = align(read_log(path), profile)
+    group = run.groups["gnss_position"]
+    logged = np.broadcast_to(np.asarray(group.noise_std), (run.n_steps, 3)).copy()  # 5x the truth
+    run = replace(run, groups={**run.groups, "gnss_position": replace(group, noise_std_series=logged)})
+    model = get_model("ins")
+    calibration = calibrate(model, [run], process_noise=False)
+    entry = calibration["groups"]["gnss_position"]
+    assert entry["noise_factor"] == pytest.approx(0.2, rel=0.1)
+    assert entry["mean_nis_per_output_after"] == pytest.approx(1.0, abs=0.2)
+    (again,) = calibrated_runs([run], calibration)
+    np.testing.assert_allclose(again.groups["gnss_position"].noise_std_series, logged * entry["noise_factor"])
+    np.testing.assert_array_equal(run.groups["gnss_position"].noise_std_series, logged)  # the input kept
+    noise = {name: np.asarray(e["noise_std"]) for name, e in calibration["groups"].items()}
+    assert mean_nis_per_output(model, [again], noise)["gnss_position"][0] == pytest.approx(1.0, abs=0.2)
+
+
+def test_noise_channels_scale_is_read_written_and_refused_without_noise_channels(ins_logs):
+    _, wrong = ins_logs
+    text = open(wrong).read()
+    head, rest = text.split("[measurements.gnss_position]", 1)
+    logged = 'noise_channels = ["/gnss/position.north", "/gnss/position.north", "/gnss/position.down"]\n'
+    with_scale = head + "[measurements.gnss_position]\n" + logged + "noise_channels_scale = 0.25\n" + rest
+    profile = parse_profile(with_scale)
+    assert profile.measurements["gnss_position"].noise_channels_scale == 0.25
+    assert "noise_channels_scale = 0.25" in profile.to_toml()
+    with pytest.raises(Exception, match="noise_channels_scale"):
+        parse_profile(head + "[measurements.gnss_position]\nnoise_channels_scale = 0.25\n" + rest)
+    with pytest.raises(Exception, match="noise_channels_scale"):
+        parse_profile(head + "[measurements.gnss_position]\n" + logged + "noise_channels_scale = -1\n" + rest)

@@ -47,6 +47,15 @@ from logscan.cli.options import (
     "likelihood (for real logs whose noise the profile only guesses); the detectors are then fitted on "
     "the calibrated filter.",
 )
+@click.option(
+    "--start", "start_s", type=float, default=None,
+    help="Train on each log from this time, in seconds since its start (e.g. to leave out the ground "
+    "time and take-off of a real flight). Default: the log's start.",
+)  # fmt: skip
+@click.option(
+    "--end", "end_s", type=float, default=None,
+    help="Train on each log up to this time, in seconds since its start. Default: the log's end.",
+)  # fmt: skip
 @jobs_option
 @scheduler_option
 @click.option(
@@ -66,6 +75,8 @@ def train(
     no_report: bool,
     allow_faulty: bool,
     calibrate: bool,
+    start_s: float | None,
+    end_s: float | None,
     jobs: int,
     scheduler: str | None,
     tune: bool,
@@ -85,9 +96,11 @@ def train(
     fingerprint) for `logscan analyze --tables`, and a training report. Exit 0, or 2 on bad input.
     """
     from logscan.fleet import expand_logs, refuse_clobbering
+    from logscan.time_sanity import check_window
     from logscan.training import train_logs
 
     check_parallelism(jobs, scheduler)
+    check_window(start_s, end_s)
     logs = expand_logs(log_paths)
     report = None if no_report else (report_path or _beside(output_path))
     refuse_clobbering([("--output", output_path), ("--report", report)], logs, profile_path)
@@ -107,6 +120,8 @@ def train(
         notice=None if quiet else echo_notice,
         jobs=jobs,
         scheduler=scheduler,
+        start_s=start_s,
+        end_s=end_s,
     )
     _write(output_path, report, document)
     if not quiet:
@@ -137,8 +152,11 @@ def _summary_lines(document: dict, output_path: str, report: str | None) -> list
 
     registry = default_registry()
     from logscan.calibration import calibration_lines
+    from logscan.report.training_page import window_text
 
-    lines = [f"trained on {len(document['training_logs'])} log(s): {output_path}"]
+    window = window_text(document.get("training_window"))
+    each = f" ({window} of each)" if window else ""
+    lines = [f"trained on {len(document['training_logs'])} log(s){each}: {output_path}"]
     if document.get("calibration"):
         lines.append("  filter noise calibrated (mean NIS per output -> 1; process noise Q per block):")
         lines.extend("  " + line for line in calibration_lines(document["calibration"]))

@@ -469,6 +469,11 @@ class _Checker:
                 return None
             if noise_channels is None:
                 return None
+        # a factor on every logged std (set by `logscan train --calibrate`, or by hand)
+        noise_channels_scale = self.number(data, "noise_channels_scale", where, minimum=0, strict=True)
+        if "noise_channels_scale" in data and noise_channels is None:
+            self.add(f"{where} noise_channels_scale", "scales the noise_channels' std: list noise_channels too")
+            return None
         lo = self._sized(lo, n, f"{where} range_lo", noun)
         hi = self._sized(hi, n, f"{where} range_hi", noun)
         if lo is not None and hi is not None:
@@ -497,6 +502,7 @@ class _Checker:
             frame=frame or "ned",
             offset=offset,
             noise_channels=noise_channels,
+            noise_channels_scale=1.0 if noise_channels_scale is None else noise_channels_scale,
             **self.gate(data, where),
         )
 

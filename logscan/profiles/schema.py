@@ -44,6 +44,7 @@ GROUP_KEYS = (
     "frame",
     "origin",
     "noise_channels",
+    "noise_channels_scale",
     "gate",
 )
 GATE_KEYS = ("channel", "min")
@@ -165,6 +166,7 @@ class MeasurementSpec:
     offset: list[float] | None = None  # one per channel, added after scale; None: 0
     # per-sample noise std channels, one per output (a receiver's eph, eph, epv); None: noise_std
     noise_channels: list[str] | None = None
+    noise_channels_scale: float = 1.0  # times each logged std (calibration's factor)
     # a sample counts only where this channel (held) is at least gate_min: a GNSS fix type >= 3
     gate_channel: str | None = None
     gate_min: float = 0.0
@@ -403,6 +405,8 @@ class Profile:
                 table["origin"] = g.origin
             if g.noise_channels is not None:
                 table["noise_channels"] = g.noise_channels
+                if g.noise_channels_scale != 1.0:
+                    table["noise_channels_scale"] = g.noise_channels_scale
             if g.gate_channel is not None:
                 table["gate"] = {"channel": g.gate_channel, "min": g.gate_min}
             out["measurements"][g.name] = table

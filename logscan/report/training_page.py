@@ -365,6 +365,14 @@ def _tuning_rows(tuning: Mapping | None) -> list[dict]:
     return rows
 
 
+def window_text(window: dict | None) -> str:
+    """'10 s to 25 s' (or 'from 10 s', 'up to 25 s') of a --start/--end window, else ''."""
+    start, end = (window or {}).get("start_s"), (window or {}).get("end_s")
+    if start is not None and end is not None:
+        return f"{start:g} s to {end:g} s"
+    return f"from {start:g} s" if start is not None else (f"up to {end:g} s" if end is not None else "")
+
+
 def render_training_html(document: dict) -> str:
     """The training report of a tables document (`logscan.training.tables_document`) as a string."""
     figures: list[tuple[str, str]] = []
@@ -395,6 +403,7 @@ def render_training_html(document: dict) -> str:
             fingerprint=_short(fingerprint) or "—",
             fingerprint_full=str(fingerprint),
             logs=logs,
+            window=window_text(document.get("training_window")),
             atfm=atfm,
             others=others,
             n_detectors=len(document.get("detectors") or []),
