@@ -201,19 +201,24 @@ class CusumDetector(Detector):
         t = run.t
         h, arl = self.thresholds(trace)
         settings = (float(self.kappa), float(self.cap), float(self.clip))
-        stat, onset = cusum_kernel(t, trace.y, trace.S_diag, trace.diverged, self._gaps(trace), h, *settings)
+        gaps = self._gaps(trace)
         model = context.get("model")
         result.info.update(kappa=float(self.kappa), budget_per_hour=float(self.budget_per_hour), tests=2 * h.size)
         result.info["h"], result.info["arl0_updates"] = {}, {}
         for g, group in enumerate(trace.group_names):
             for j, output in zip(self._columns(trace, g), output_names(model, group, int(trace.group_sizes[g]))):
                 signal = f"cusum.{group}" + (f".{output}" if output else "")
-                valid = np.isfinite(stat[:, j])
+                # one column at a time: (N,) temporaries, not the (N, J) statistic and onsets at once
+                column = slice(j, j + 1)
+                y, S_diag = (np.ascontiguousarray(a[:, column]) for a in (trace.y, trace.S_diag))
+                stat, onset = cusum_kernel(t, y, S_diag, trace.diverged, gaps[column], h[column], *settings)
+                stat, onset = stat[:, 0], onset[:, 0]
+                valid = np.isfinite(stat)
                 alarms = result.add_statistic(
-                    t, signal, stat[:, j], upper=h[j], lower=-h[j], valid=valid, hold_off_s=self.hold_off_s
+                    t, signal, stat, upper=h[j], lower=-h[j], valid=valid, hold_off_s=self.hold_off_s
                 )
                 for alarm in alarms:  # Page's change-time estimate at the crossing
-                    first = int(onset[np.searchsorted(t, alarm.start), j])
+                    first = int(onset[np.searchsorted(t, alarm.start)])
                     alarm.change_time = float(t[first]) if first >= 0 else None
                 result.info["h"][signal] = float(h[j])
                 result.info["arl0_updates"][signal] = float(arl[j])

@@ -156,15 +156,17 @@ class EncodedEkfDetector(Detector):
         return lambda rows: coding_vectors(trace.P_prior_diag[rows], scale, self.sigma_floor, self.r_max)
 
     def state_check(self, trace, model=None, cv_dtype=np.float64):
-        """(e_x (N,), defined (N,), CV (N, n) as ``cv_dtype``): e_x = CV_k (x_prior_k - x_post_k) on
-        update steps."""
+        """(e_x (N,), defined (N,), CV (N, n) as ``cv_dtype``, None when ``cv_dtype`` is None):
+        e_x = CV_k (x_prior_k - x_post_k) on update steps."""
         cv_of = self._coding_vectors(trace, model)
         defined = trace.updated.any(axis=1) | trace.diverged
         n_steps, n = trace.x_prior.shape
-        e_x, cv = np.empty(n_steps), np.empty((n_steps, n), dtype=cv_dtype)
+        e_x = np.empty(n_steps)
+        cv = None if cv_dtype is None else np.empty((n_steps, n), dtype=cv_dtype)
         for rows in _row_blocks(n_steps):  # no (N, n) float64 temporary
             block = cv_of(rows)
-            cv[rows] = block
+            if cv is not None:
+                cv[rows] = block
             e_x[rows] = np.einsum("kn,kn->k", block, trace.x_prior[rows] - trace.x_post[rows])
         e_x[~defined] = np.nan
         e_x[trace.diverged] = np.nan  # a divergence is an exceedance, never silence
@@ -174,7 +176,7 @@ class EncodedEkfDetector(Detector):
         model = context.get("model")
         peak = 0.0
         for trace in traces:
-            e_x, defined, _ = self.state_check(trace, model, np.float32)
+            e_x, defined, _ = self.state_check(trace, model, None)
             finite = e_x[defined & np.isfinite(e_x)]
             if finite.size:
                 peak = max(peak, float(np.abs(finite).max()))
@@ -184,10 +186,19 @@ class EncodedEkfDetector(Detector):
     def _run(self, run, trace, **context) -> DetectorResult:
         model = context.get("model")
         result = self.new_result()
+        self._checks(result, run, trace, model)
+        # CV for the figure only, made once the checks' temporaries are gone (the peak memory of a
+        # long log is here): float32 is ample and halves the (N, n) array it keeps
+        cv_of = self._coding_vectors(trace, model)
+        cv = result.extras["coding_vector"] = np.empty(trace.x_prior.shape, dtype=np.float32)
+        for rows in _row_blocks(cv.shape[0]):
+            cv[rows] = cv_of(rows)
+        return result
+
+    def _checks(self, result, run, trace, model) -> None:
+        """The state check, and in the adaptive variant the variance and on-board state checks."""
         t = run.t
-        # CV for the figure only: float32 is ample and halves the (N, n) array it keeps; the checks
-        # below recompute float64 blocks
-        e_x, defined, result.extras["coding_vector"] = self.state_check(trace, model, np.float32)
+        e_x, defined, _ = self.state_check(trace, model, None)
         cv_of = self._coding_vectors(trace, model)
         result.info["coverage"] = COVERAGE_NOTE
         result.info["variant"] = self.variant
@@ -203,7 +214,7 @@ class EncodedEkfDetector(Detector):
                 )
             limit = float(limit)
             result.add_statistic(t, "e_x", e_x, upper=limit, lower=-limit, valid=defined, n_persist=self.n_persist)
-            return result
+            return
 
         self._adaptive_check(result, t, "e_x", e_x, defined, self.window, self.rho)
 
@@ -220,7 +231,6 @@ class EncodedEkfDetector(Detector):
             e_s, defined_s = self.onboard_state_series(run, trace, cv_of, model, defined)
             self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s)
             result.info["onboard_state_check"] = True
-        return result
 
     def _adaptive_check(self, result, t, name, e, defined, window, rho, s_floor=None) -> None:
         """mu +- rho s band over the masked trailing window, then the shared alarm logic."""

@@ -335,9 +335,11 @@ class _Aligner:
             )
         return lines[:_MAX_GAP_WARNINGS]
 
-    def table(self, channels: list[str | None], grid_ns: np.ndarray, limit_s: float) -> np.ndarray | HeldTable:
-        """The ``channels`` held onto the grid (None: a NaN column): a `HeldTable` when they share
-        their sample times (one topic), else a dense (N, c) array."""
+    def table(
+        self, channels: list[str | None], grid_ns: np.ndarray, limit_s: float, dtype=np.float64
+    ) -> np.ndarray | HeldTable:
+        """The ``channels`` held onto the grid (None: a NaN column): a `HeldTable` of ``dtype``
+        samples when they share their sample times (one topic), else a dense (N, c) float64 array."""
         n = grid_ns.size
         named = [ch for ch in channels if ch is not None]
         column = np.empty(n)
@@ -352,7 +354,7 @@ class _Aligner:
         for ch in named:  # the gaps and warnings of each channel, as a dense hold reports them
             self.hold(ch, grid_ns, limit_s, z=column, fresh=scratch)
         t = self.clean(named[0]).t
-        samples = np.full((t.size, len(channels)), np.nan)
+        samples = np.full((t.size, len(channels)), np.nan, dtype=dtype)
         for j, ch in enumerate(channels):
             if ch is not None:
                 samples[:, j] = self.clean(ch).values
@@ -612,7 +614,9 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
                 aligner.warnings.append(
                     f"[onboard] {which}: no channel for {', '.join(missing)}; those columns are NaN"
                 )
-            arr = aligner.table(chans, grid_ns, profile.onboard.stale_s)
+            # variances in float32, as the filter's own P diagonals they are compared with
+            dtype = np.float64 if which == "state" else np.float32
+            arr = aligner.table(chans, grid_ns, profile.onboard.stale_s, dtype)
             if which == "state":
                 onboard_state, state_chans = arr, chans
             else:
