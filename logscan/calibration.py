@@ -107,10 +107,18 @@ def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequenc
         if blocks:  # then Q: one step of each block's scale on the innovations' likelihood
             current, moved = fit_blocks(model, now, noise(), blocks, current, judged, floored)
         converged = _within_band(current.nis) and moved < CAL_Q_TOLERANCE
+    # a group still below the band at the R floor: no noise_std brings it to 1 (most of its S is
+    # H P H^T; PX4's own attitude estimate as a measurement, smoother than any sensor). Its R at
+    # the floor would alarm on every small deviation: it keeps the profile's, and says so.
+    at_floor = {name: current.nis[name][0] for name in _below_band_at_floor(current.nis, scale)}
+    if at_floor:
+        for name in at_floor:
+            scale[name] = 1.0
+        current = evaluate(model, scaled(), noise(), q_scale(), judged)
     document = {
         "method": "noise variance scaled to mean NIS per output 1",
         "iterations": iterations,
-        "groups": _group_entries(base, scale, before.nis, current.nis),
+        "groups": _group_entries(base, scale, before.nis, current.nis, at_floor),
     }
     if process_noise:
         document.update(_process_noise_entries(model, blocks, before, current, converged))
@@ -129,13 +137,26 @@ def judged_steps(profile, run) -> np.ndarray | None:
     return None if suspended is None else ~suspended
 
 
-def _group_entries(base, scale, before, after) -> dict:
-    """Each group's entry of the calibration document."""
+def _below_band_at_floor(nis: dict[str, tuple[float, int]], scale: dict[str, float]) -> list[str]:
+    """The calibrated groups whose noise is at the floor with their mean NIS per output still under
+    the band."""
+    low = CAL_NIS_BAND[0]
+    return [
+        name
+        for name, (ratio, count) in nis.items()
+        if count >= CAL_MIN_UPDATES and scale.get(name, 1.0) <= CAL_FLOOR * 1.0001 and ratio < low
+    ]
+
+
+def _group_entries(base, scale, before, after, at_floor: dict[str, float] | None = None) -> dict:
+    """Each group's entry of the calibration document (``at_floor``: the groups no noise_std could
+    calibrate, with their mean NIS per output at the floor; they keep the profile's)."""
+    at_floor = at_floor or {}
     groups = {}
     for name in base:
         ratio0, count = before.get(name, (np.nan, 0))
         ratio1 = after.get(name, (np.nan, 0))[0]
-        calibrated = count >= CAL_MIN_UPDATES
+        calibrated = count >= CAL_MIN_UPDATES and name not in at_floor
         groups[name] = {
             "noise_std": [float(v) for v in (base[name] * np.sqrt(scale[name]) if calibrated else base[name])],
             # the std's factor, for the logged per-sample std (noise_channels) too
@@ -143,8 +164,9 @@ def _group_entries(base, scale, before, after) -> dict:
             "profile_noise_std": [float(v) for v in base[name]],
             "updates": int(count),
             "mean_nis_per_output_before": float(ratio0),
-            "mean_nis_per_output_after": float(ratio1) if calibrated else float(ratio0),
+            "mean_nis_per_output_after": float(ratio1) if calibrated or name in at_floor else float(ratio0),
             "calibrated": bool(calibrated),
+            "nis_at_floor": float(at_floor[name]) if name in at_floor else None,
             "at_floor": bool(calibrated and scale[name] <= CAL_FLOOR * 1.0001),
         }
     return groups
@@ -236,6 +258,13 @@ def calibration_lines(calibration: dict | None) -> list[str]:
     """Human-readable lines of a calibration (the train command's summary)."""
     lines = []
     for name, entry in (calibration or {}).get("groups", {}).items():
+        if entry.get("nis_at_floor") is not None:
+            lines.append(
+                f"  {name}: not calibrated: at the floor (noise_std / 1000) its mean NIS per output was still "
+                f"{entry['nis_at_floor']:.3g} (most of its S is the filter's own uncertainty); the profile's "
+                f"noise_std kept (mean NIS per output {entry['mean_nis_per_output_after']:.3g})"
+            )
+            continue
         if not entry.get("calibrated"):
             lines.append(f"  {name}: not calibrated ({entry['updates']} updates, {CAL_MIN_UPDATES} needed)")
             continue

@@ -392,7 +392,8 @@ def detect(
                     for part, on in (
                         (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.ignore_start_s > 0),
                         (
-                            f"on the ground ({policy.ground_channel}) and {policy.after_ground_s:g} s after take-off",
+                            f"on the ground ({policy.ground_channel}), {policy.after_ground_s:g} s after take-off"
+                            + (f" and {policy.before_ground_s:g} s before landing" if policy.before_ground_s else ""),
                             bool(policy.ground_channel),
                         ),
                     )

@@ -100,9 +100,11 @@ class AlarmPolicy:
     min_duration_s: float = 0.0
     merge_gap_s: float = 1.0  # alarms of one statistic closer than this merge (logscan.incidents)
     # ground time: a channel non-zero while the vehicle is on the ground (a landed flag); no
-    # statistic is judged there, nor for after_ground_s after each take-off (the transient)
+    # statistic is judged there, nor for after_ground_s after each take-off (the transient), nor
+    # for before_ground_s before each landing (a land detector confirms a touchdown late)
     ground_channel: str | None = None
     after_ground_s: float = 5.0
+    before_ground_s: float = 0.0
     ignore_start_s: float = 0.0  # not judged for this long from the grid's start (the filter converging)
     # (N,) bool, the grid steps not judged (from the three above, set per run by the pipeline)
     suspended: Any = field(default=None, repr=False, compare=False)
@@ -123,6 +125,10 @@ class AlarmPolicy:
             takeoff = np.concatenate([[False], on[:-1] & ~on[1:]])
             last = np.maximum.accumulate(np.where(takeoff, t, -np.inf))
             out |= t < last + self.after_ground_s
+            if self.before_ground_s > 0:  # the next landing (air -> ground) at or after each step
+                landing = np.concatenate([[False], ~on[:-1] & on[1:]])
+                following = np.minimum.accumulate(np.where(landing, t, np.inf)[::-1])[::-1]
+                out |= t >= following - self.before_ground_s
         return dataclasses.replace(self, suspended=out if out.any() else None)
 
     def apply(self, options: dict) -> dict:

@@ -8,6 +8,7 @@ A deliberately mis-scaled profile draws the "model or profile mismatch" warning,
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from conftest import need_testdata
@@ -138,12 +139,15 @@ def test_ground_time_and_the_start_are_not_judged_and_say_so(cli, tmp_path):
     built = parse_profile(builtin_profile_for(path).text)
     policy = built.alarm_policy
     assert policy.ground_channel == "/vehicle_land_detected_0/landed" and policy.ignore_start_s == 5.0
+    assert policy.before_ground_s == 3.0  # PX4 confirms a touchdown about 2 s after it
     out = tmp_path / "s.json"
     result = cli("analyze", str(path), "--no-report", "--json", str(out))
     assert result.exit_code in (0, 1)
     entry = json.loads(out.read_text())["logs"][0]
     (line,) = [w for w in entry["warnings"] if w.startswith("not judged for")]
-    assert "on the ground" in line and "the first 5 s" in line
+    assert "on the ground" in line and "the first 5 s" in line and "3 s before landing" in line
+    # the flight: take-off 16.74 s, landed 28.13 s; judged 21.74-25.13 s of its 31.1 s
+    assert "not judged for 27.7 s of 31.1 s" in line, line
     assert entry["unchecked"] == []
 
 
@@ -158,6 +162,20 @@ def test_suspension_of_a_policy():
     flying_judged = t[~suspended]
     assert flying_judged.min() == 13.0 and flying_judged.max() == 24.5  # take-off + 3 s .. landing
     assert AlarmPolicy().suspend(t, None).suspended is None  # nothing asked: nothing suspended
+    # and 2 s before each landing (the touchdown a land detector confirms late)
+    policy = AlarmPolicy(ground_channel="g", after_ground_s=3.0, before_ground_s=2.0)
+    judged = t[~policy.suspend(t, ground).suspended]
+    assert judged.min() == 13.0 and judged.max() == 22.5
+    # a log that ends in the air has no landing to come: nothing suspended before its end
+    airborne = np.where(t < 10.0, 1.0, 0.0)
+    assert t[~policy.suspend(t, airborne).suspended].max() == t[-1]
+    from logscan.pipeline import load_profile_for
+
+    quad = str(Path(__file__).resolve().parent.parent / "sample_logs" / "quad_healthy.mcap")
+    with_landing = (
+        load_profile_for(quad, None).text + '\n[alarms]\nground_channel = "/flight_mode/mode"\nbefore_ground_s = 2\n'
+    )
+    assert "before_ground_s = 2.0" in parse_profile(with_landing).to_toml()
 
 
 def test_the_autopilots_armed_and_failsafe_states_are_drawn(cli, tmp_path):

@@ -198,3 +198,26 @@ def test_noise_channels_scale_is_read_written_and_refused_without_noise_channels
         parse_profile(head + "[measurements.gnss_position]\nnoise_channels_scale = 0.25\n" + rest)
     with pytest.raises(Exception, match="noise_channels_scale"):
         parse_profile(head + "[measurements.gnss_position]\n" + logged + "noise_channels_scale = -1\n" + rest)
+
+
+def test_a_group_no_noise_std_can_calibrate_keeps_the_profiles(ins_logs, monkeypatch):
+    """A group whose mean NIS per output is still under the band with its noise at the floor (here
+    a floor of half the profile's variance, for a profile 5x too wide) keeps the profile's noise
+    and says why: its R at the floor would alarm on every small deviation of a real log."""
+    import logscan.calibration as calibration_module
+    from logscan.align import align
+    from logscan.calibration import calibration_lines
+    from logscan.models import get_model
+    from logscan.readers import read_log
+
+    (path, _, _), wrong = ins_logs
+    monkeypatch.setattr(calibration_module, "CAL_FLOOR", 0.5)
+    run = align(read_log(path), parse_profile(open(wrong).read()))
+    calibration = calibrate(get_model("ins"), [run], process_noise=False)
+    for name, entry in calibration["groups"].items():
+        assert not entry["calibrated"] and entry["noise_std"] == entry["profile_noise_std"], name
+        assert entry["nis_at_floor"] < 0.8 and entry["mean_nis_per_output_after"] < entry["nis_at_floor"], name
+    text = "\n".join(calibration_lines(calibration))
+    assert "gnss_position: not calibrated: at the floor" in text and "the profile's noise_std kept" in text
+    profile = parse_profile(open(wrong).read())
+    assert apply_calibration(profile, calibration) == []  # nothing applied

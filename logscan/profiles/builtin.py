@@ -13,7 +13,8 @@ built from the topics present (`px4_profile`):
  - ``attitude`` from PX4's own estimate, ``vehicle_attitude.q``;
  - ``[mode]`` from ``vehicle_status.nav_state`` (the flight mode: KGN's steady gate);
  - ``[alarms]``: nothing judged in the first IGNORE_START_S (the filter converging), on the ground
-   (``vehicle_land_detected.landed``) or in the 5 s after each take-off;
+   (``vehicle_land_detected.landed``), in the 5 s after each take-off or in the BEFORE_LANDING_S
+   before each landing;
  - noise from the log's own EKF2 parameters where it has them (EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE,
    EKF2_BARO_NOISE, EKF2_ACC_NOISE, EKF2_GYR_NOISE, EKF2_ACC_B_NOISE, EKF2_GYR_B_NOISE): the
    values PX4 flew with; the GNSS noise per fix from the receiver's eph / epv and speed accuracy
@@ -60,6 +61,7 @@ PX4_TOPICS = (
     "vehicle_land_detected_0",
 )
 IGNORE_START_S = 5.0  # the ins filter's convergence from its first samples: not judged
+BEFORE_LANDING_S = 3.0  # PX4's land detector confirms a touchdown about 2 s late: its transient lies before
 _IMU = "sensor_combined_0"
 _FULL_IMU = "vehicle_imu_0"  # the IMU's integrated increments at the full sensor rate
 # ROS 2 message types the ros2 profile reads
@@ -326,7 +328,8 @@ def px4_profile(log) -> BuiltProfile:
     if has("/vehicle_land_detected_0/landed"):
         lines += [
             'ground_channel = "/vehicle_land_detected_0/landed"  # not judged on the ground ...',
-            "after_ground_s = 5  # ... nor during the take-off transient",
+            "after_ground_s = 5  # ... nor during the take-off transient ...",
+            f"before_ground_s = {BEFORE_LANDING_S:g}  # ... nor before a landing (PX4 confirms touchdown late)",
         ]
     lines += [
         "",

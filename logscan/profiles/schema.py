@@ -56,7 +56,15 @@ ONBOARD_KEYS = ("state", "variance", "stale_s")
 INPUT_TABLE_KEYS = ("channels", "frame", "scale", "offset")
 #: ``frame`` of an input table: "flu" (forward, left, up: negate the 2nd and 3rd channels) or "frd"
 INPUT_FRAMES = ("frd", "flu")
-ALARM_KEYS = ("n_persist", "min_duration_s", "merge_gap_s", "ground_channel", "after_ground_s", "ignore_start_s")
+ALARM_KEYS = (
+    "n_persist",
+    "min_duration_s",
+    "merge_gap_s",
+    "ground_channel",
+    "after_ground_s",
+    "before_ground_s",
+    "ignore_start_s",
+)
 MAX_SUSPEND_S = 600.0  # after_ground_s, ignore_start_s: a transient, not a flight
 #: Upper bounds of the [alarms] floors: they are for one- or two-sample transients; longer floors
 #: would hide real faults (documented in docs/profiles.md).
@@ -440,6 +448,8 @@ class Profile:
             if self.alarm_policy.ground_channel:
                 out["alarms"]["ground_channel"] = self.alarm_policy.ground_channel
                 out["alarms"]["after_ground_s"] = self.alarm_policy.after_ground_s
+                if self.alarm_policy.before_ground_s:
+                    out["alarms"]["before_ground_s"] = self.alarm_policy.before_ground_s
             if self.alarm_policy.ignore_start_s:
                 out["alarms"]["ignore_start_s"] = self.alarm_policy.ignore_start_s
         if self.loops:

@@ -323,9 +323,19 @@ def _calibration_rows(calibration: Mapping | None) -> list[dict]:
             "updates": str(entry.get("updates", "")),
             "nis_before": f"{entry.get('mean_nis_per_output_before', float('nan')):.3g}",
             "nis_after": f"{entry.get('mean_nis_per_output_after', float('nan')):.3g}",
-            "note": " (at the floor: the process noise may be too large)" if entry.get("at_floor") else "",
+            "note": _calibration_note(entry),
         })  # fmt: skip
     return rows + _process_noise_rows(calibration)
+
+
+def _calibration_note(entry: Mapping) -> str:
+    """Why a group's noise sits where it does, when it is not simply calibrated."""
+    if entry.get("nis_at_floor") is not None:
+        return (
+            f" (no noise_std brings it to 1: at the floor its NIS per output was {entry['nis_at_floor']:.3g}; "
+            "the profile's kept)"
+        )
+    return " (at the floor: the process noise may be too large)" if entry.get("at_floor") else ""
 
 
 def _process_noise_rows(calibration: Mapping | None) -> list[dict]:
