@@ -118,7 +118,7 @@ def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequenc
     document = {
         "method": "noise variance scaled to mean NIS per output 1",
         "iterations": iterations,
-        "groups": _group_entries(base, scale, before.nis, current.nis, at_floor),
+        "groups": _group_entries(base, scale, before.nis, current.nis, at_floor, _logged_noise(runs)),
     }
     if process_noise:
         document.update(_process_noise_entries(model, blocks, before, current, converged))
@@ -148,7 +148,14 @@ def _below_band_at_floor(nis: dict[str, tuple[float, int]], scale: dict[str, flo
     ]
 
 
-def _group_entries(base, scale, before, after, at_floor: dict[str, float] | None = None) -> dict:
+def _logged_noise(runs: Sequence) -> set[str]:
+    """The groups whose noise std is logged per sample (noise_channels) in any of ``runs``."""
+    return {name for run in runs for name, g in run.groups.items() if g.noise_std_series is not None}
+
+
+def _group_entries(
+    base, scale, before, after, at_floor: dict[str, float] | None = None, logged: set[str] = frozenset()
+) -> dict:
     """Each group's entry of the calibration document (``at_floor``: the groups no noise_std could
     calibrate, with their mean NIS per output at the floor; they keep the profile's)."""
     at_floor = at_floor or {}
@@ -167,6 +174,7 @@ def _group_entries(base, scale, before, after, at_floor: dict[str, float] | None
             "mean_nis_per_output_after": float(ratio1) if calibrated or name in at_floor else float(ratio0),
             "calibrated": bool(calibrated),
             "nis_at_floor": float(at_floor[name]) if name in at_floor else None,
+            "logged_noise": name in logged,  # the filter takes the logged std: noise_factor scales it
             "at_floor": bool(calibrated and scale[name] <= CAL_FLOOR * 1.0001),
         }
     return groups
@@ -271,6 +279,8 @@ def calibration_lines(calibration: dict | None) -> list[str]:
         before = ", ".join(f"{v:.3g}" for v in entry["profile_noise_std"])
         after = ", ".join(f"{v:.3g}" for v in entry["noise_std"])
         note = " (at the floor: the process noise may be too large for it)" if entry["at_floor"] else ""
+        if entry.get("logged_noise"):
+            note += f" (its logged per-sample std x {entry['noise_factor']:.3g}: noise_channels_scale)"
         lines.append(
             f"  {name}: noise_std {before} -> {after}; mean NIS per output "
             f"{entry['mean_nis_per_output_before']:.3g} -> {entry['mean_nis_per_output_after']:.3g}{note}"

@@ -163,7 +163,7 @@ def test_a_group_with_logged_noise_is_calibrated_through_a_factor_on_it(ins_logs
     from dataclasses import replace
 
     from logscan.align import align
-    from logscan.calibration import calibrated_runs, mean_nis_per_output
+    from logscan.calibration import calibrated_runs, calibration_lines, mean_nis_per_output
     from logscan.models import get_model
     from logscan.readers import read_log
 
@@ -177,6 +177,8 @@ def test_a_group_with_logged_noise_is_calibrated_through_a_factor_on_it(ins_logs
     calibration = calibrate(model, [run], process_noise=False)
     entry = calibration["groups"]["gnss_position"]
     assert entry["noise_factor"] == pytest.approx(0.2, rel=0.1)
+    assert entry["logged_noise"] and not calibration["groups"]["attitude"]["logged_noise"]
+    assert "logged per-sample std x 0.2" in "\n".join(calibration_lines(calibration))
     assert entry["mean_nis_per_output_after"] == pytest.approx(1.0, abs=0.2)
     (again,) = calibrated_runs([run], calibration)
     np.testing.assert_allclose(again.groups["gnss_position"].noise_std_series, logged * entry["noise_factor"])

@@ -319,7 +319,9 @@ def _calibration_rows(calibration: Mapping | None) -> list[dict]:
         rows.append({
             "name": str(name),
             "before": ", ".join(f"{v:.3g}" for v in entry.get("profile_noise_std") or []),
-            "after": after if entry.get("calibrated") else "(not calibrated)",
+            "after": (after + (f"; logged std x {entry['noise_factor']:.3g}" if entry.get("logged_noise") else ""))
+            if entry.get("calibrated")
+            else "(not calibrated)",
             "updates": str(entry.get("updates", "")),
             "nis_before": f"{entry.get('mean_nis_per_output_before', float('nan')):.3g}",
             "nis_after": f"{entry.get('mean_nis_per_output_after', float('nan')):.3g}",
