@@ -573,13 +573,15 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
     for spec in profile.measurements.values():
         z = z_all[:, columns : columns + spec.width]
         columns += spec.width
-        g = aligner.measurement_group(spec, grid_ns, z)
+        # a delayed sensor: the sample stamped t + delay_s is the vehicle at grid time t
+        at = grid_ns + int(round(spec.delay_s * _NS)) if spec.delay_s else grid_ns
+        g = aligner.measurement_group(spec, at, z)
         g.rate_hz = float(spec.rate_hz)
         if spec.noise_channels:  # held like the samples, so each sample gets the std logged with it
             g.noise_std = None if spec.noise_std is None else np.asarray(spec.noise_std, dtype=np.float64)
             series = np.empty((n, len(spec.noise_channels)))
             for j, ch in enumerate(spec.noise_channels):
-                aligner.hold(ch, grid_ns, spec.stale_s, z=series[:, j], fresh=scratch)
+                aligner.hold(ch, at, spec.stale_s, z=series[:, j], fresh=scratch)
             if spec.noise_channels_scale != 1.0:
                 series *= spec.noise_channels_scale
             g.noise_std_series = series

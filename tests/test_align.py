@@ -80,6 +80,20 @@ def test_10hz_group_on_100hz_grid_is_fresh_on_exactly_every_10th_step():
     assert r.gaps == [] and r.warnings == []
 
 
+def test_a_delayed_sensor_is_held_delay_s_earlier():
+    """delay_s: the sample stamped t + delay_s is the vehicle at t (a GNSS receiver's latency)."""
+    t = np.arange(0, 1001, 100)
+    plain = run({"/force": force_100hz(), "/speed": (t, np.arange(11.0))}, SPEED)
+    late = run({"/force": force_100hz(), "/speed": (t, np.arange(11.0))}, SPEED + "delay_s = 0.03\n")
+    assert late.n_steps == plain.n_steps  # the grid is the log's; only the group moves
+    g = late.groups["speed"]
+    assert steps(g.fresh) == [0] + list(range(7, 101, 10))  # the 100 ms sample is fresh at 70 ms
+    np.testing.assert_array_equal(g.z[:, 0], plain.groups["speed"].z[np.minimum(np.arange(101) + 3, 100), 0])
+    assert "delay_s = 0.03" in parse_profile(BASE + SPEED + "delay_s = 0.03\n", model=FakeModel()).to_toml()
+    with pytest.raises(ProfileError, match="delay_s"):
+        parse_profile(BASE + SPEED + "delay_s = -0.1\n", model=FakeModel())
+
+
 def test_gap_beyond_stale_s_gives_nan_and_a_gap_report():
     t = np.array([0, 100, 200, 300, 800, 900, 1000])
     r = run({"/force": force_100hz(), "/speed": (t, t / 100.0)}, SPEED)

@@ -18,7 +18,8 @@ built from the topics present (`px4_profile`):
  - noise from the log's own EKF2 parameters where it has them (EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE,
    EKF2_BARO_NOISE, EKF2_ACC_NOISE, EKF2_GYR_NOISE, EKF2_ACC_B_NOISE, EKF2_GYR_B_NOISE): the
    values PX4 flew with; the GNSS noise per fix from the receiver's eph / epv and speed accuracy
-   (``noise_channels``) where the log has them.
+   (``noise_channels``) where the log has them; the GNSS and baro latency (``delay_s``) from
+   EKF2_GPS_DELAY and EKF2_BARO_DELAY.
 
 A group whose topic the log lacks is left out, with one info line (`BuiltProfile.notes`).
 GNSS samples count only with a 3D fix (``gate`` on fix_type >= 3), the origin too.
@@ -134,6 +135,14 @@ def rate_hz(t_ns: np.ndarray) -> float:
     return float(1e9 / np.median(np.diff(t)))
 
 
+def _delay_line(params: dict, name: str, default_ms: float) -> str:
+    """``delay_s = ...`` from PX4's sensor delay parameter (ms), clipped to what a profile takes."""
+    from logscan.profiles.schema import MAX_DELAY_S
+
+    delay = min(max(_param(params, name, default_ms), 0.0) / 1000.0, MAX_DELAY_S)
+    return f"delay_s = {delay:.3g}  # {name}: the sensor's latency PX4 flew with"
+
+
 def _param(params: dict, name: str, default: float) -> float:
     try:
         value = float(params[name])
@@ -237,6 +246,8 @@ def px4_profile(log) -> BuiltProfile:
     ]
     gps_p = _param(params, "EKF2_GPS_P_NOISE", 0.5)
     gps_v = _param(params, "EKF2_GPS_V_NOISE", 0.3)
+    # the receiver's latency PX4 flew with (ms; its default 110): a fix describes the vehicle then
+    gps_delay = _delay_line(params, "EKF2_GPS_DELAY", 110.0)
     gnss = _gnss(channels, has)
     if gnss is not None:
         topic, pos, scale, vel = gnss
@@ -253,6 +264,7 @@ def px4_profile(log) -> BuiltProfile:
         gate = f'gate = {{ channel = "{fix}", min = 3 }}  # only 3D fixes' if has(fix) else None
         if gate:
             lines.append(gate)
+        lines.append(gps_delay)
         accuracy = _channels(topic, ("eph", "eph", "epv"))
         if all(has(ch) for ch in accuracy):  # the receiver's own accuracy per fix, where it logs one
             lines.append(f"noise_channels = {_toml_list(accuracy)}  # per fix: eph, eph, epv (m)")
@@ -266,6 +278,7 @@ def px4_profile(log) -> BuiltProfile:
             ]
             if gate:
                 lines.append(gate)
+            lines.append(gps_delay)
             speed = f"/{topic}/s_variance_m_s"  # despite its name, PX4's speed accuracy (a std, m/s)
             if has(speed):
                 lines.append(f"noise_channels = {_toml_list([speed] * 3)}  # per fix: the speed accuracy")
@@ -297,6 +310,7 @@ def px4_profile(log) -> BuiltProfile:
             f'channels = ["{baro}"]',
             f"rate_hz = {hz:.3g}",
             f"noise_std = {_param(params, 'EKF2_BARO_NOISE', 3.5):.3g}  # EKF2_BARO_NOISE",
+            _delay_line(params, "EKF2_BARO_DELAY", 0.0),
         ]
     else:
         notes.append("optional baro: no vehicle_air_data: left out")

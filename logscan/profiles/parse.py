@@ -25,6 +25,7 @@ from logscan.profiles.schema import (
     INPUT_TABLE_KEYS,
     MAX_ALARM_DURATION_S,
     MAX_ALARM_PERSIST,
+    MAX_DELAY_S,
     MAX_MERGE_GAP_S,
     MAX_STALE_S,
     MAX_SUSPEND_S,
@@ -469,6 +470,9 @@ class _Checker:
                 return None
             if noise_channels is None:
                 return None
+        delay = self.number(data, "delay_s", where, minimum=0, strict=False, maximum=MAX_DELAY_S)
+        if "delay_s" in data and delay is None:
+            return None
         # a factor on every logged std (set by `logscan train --calibrate`, or by hand)
         noise_channels_scale = self.number(data, "noise_channels_scale", where, minimum=0, strict=True)
         if "noise_channels_scale" in data and noise_channels is None:
@@ -503,6 +507,7 @@ class _Checker:
             offset=offset,
             noise_channels=noise_channels,
             noise_channels_scale=1.0 if noise_channels_scale is None else noise_channels_scale,
+            delay_s=0.0 if delay is None else delay,
             **self.gate(data, where),
         )
 

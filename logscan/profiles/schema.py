@@ -46,6 +46,7 @@ GROUP_KEYS = (
     "noise_channels",
     "noise_channels_scale",
     "gate",
+    "delay_s",
 )
 GATE_KEYS = ("channel", "min")
 MODE_KEYS = ("channel", "stale_s")
@@ -76,6 +77,7 @@ MAX_MERGE_GAP_S = 60.0  # alarms of one check this close are one alarm (logscan.
 #: steps (a tiny rate), a limit in int64 nanoseconds (logscan.align.stale_ns). A rate too high for
 #: the log is refused by alignment's grid limit (`align.MAX_GRID_STEPS`), with the span and steps.
 MIN_RATE_HZ = 0.01  # a 100 s period: slower than any vehicle sensor or filter step
+MAX_DELAY_S = 5.0  # a measurement's own latency (a GNSS receiver's: 0.1-0.2 s), not a clock offset
 MAX_STALE_S = 1_000_000.0  # 11.6 days, longer than any log (logscan.log.MAX_SPAN_S); inf: never stale
 
 #: Staleness defaults (seconds unless said otherwise), documented in docs/profiles.md.
@@ -175,6 +177,9 @@ class MeasurementSpec:
     # per-sample noise std channels, one per output (a receiver's eph, eph, epv); None: noise_std
     noise_channels: list[str] | None = None
     noise_channels_scale: float = 1.0  # times each logged std (calibration's factor)
+    # the samples describe the vehicle this long before their stamps (a GNSS receiver's latency,
+    # PX4's EKF2_GPS_DELAY): alignment holds them delay_s earlier
+    delay_s: float = 0.0
     # a sample counts only where this channel (held) is at least gate_min: a GNSS fix type >= 3
     gate_channel: str | None = None
     gate_min: float = 0.0
@@ -417,6 +422,8 @@ class Profile:
                     table["noise_channels_scale"] = g.noise_channels_scale
             if g.gate_channel is not None:
                 table["gate"] = {"channel": g.gate_channel, "min": g.gate_min}
+            if g.delay_s:
+                table["delay_s"] = g.delay_s
             out["measurements"][g.name] = table
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
