@@ -256,6 +256,12 @@ def apply_calibration(profile, calibration: dict | None) -> list[str]:
     return lines
 
 
+def uncalibrable_groups(calibration: dict | None) -> frozenset[str]:
+    """The groups a calibration found no noise_std for (still under the band at the floor)."""
+    groups = (calibration or {}).get("groups", {})
+    return frozenset(name for name, entry in groups.items() if entry.get("nis_at_floor") is not None)
+
+
 def process_noise_scale(calibration: dict | None) -> dict[str, float] | None:
     """The calibration's Q scale per state ({state name: scale}), None when it calibrated R alone."""
     scales = (calibration or {}).get("process_noise_scale")

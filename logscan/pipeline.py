@@ -78,6 +78,8 @@ class LoadedProfile:
     # the tables' calibrated process noise, {state: scale of its Q} (`logscan.calibration`; set by
     # `analyze_log` from --tables): `prepare` gives it to the model, the EKF scales Q by it
     process_noise_scale: dict | None = field(default=None, compare=False)
+    # the groups those tables' calibration could not bring to NIS 1 (kept the profile's noise)
+    uncalibrated: frozenset = field(default=frozenset(), compare=False)
 
 
 @dataclass
@@ -487,10 +489,15 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
                 "(docs/troubleshooting.md; logscan train --calibrate)"
             )
         elif ratio < 1.0 / NIS_MISMATCH**2:
+            kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())
             out.append(
                 f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): its "
-                "noise_std is far larger than the data's scatter, so faults of that size hide; lower noise_std "
-                "(logscan train --calibrate)"
+                "noise_std is far larger than the data's scatter, so faults of that size hide; "
+                + (
+                    "the tables' calibration found no noise_std that brings it to 1 (see their training report)"
+                    if kept
+                    else "lower noise_std (logscan train --calibrate)"
+                )
             )
     return out
 
@@ -616,7 +623,7 @@ def analyze_log(
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
     figures (`logscan.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it)."""
-    from logscan.calibration import process_noise_scale
+    from logscan.calibration import process_noise_scale, uncalibrable_groups
     from logscan.training import apply_tables, read_tables_document, tables_path
 
     loaded = load_profile_for(path, profile_path)
@@ -624,7 +631,9 @@ def analyze_log(
     trained = tables_path(None if tables is None else str(tables), loaded.profile)
     if trained is not None:  # the trained detectors, and the filter's calibrated noise in the profile
         detectors = apply_tables(detectors, trained, loaded.profile)
-        loaded.process_noise_scale = process_noise_scale(read_tables_document(trained).get("calibration"))
+        calibration = read_tables_document(trained).get("calibration")
+        loaded.process_noise_scale = process_noise_scale(calibration)
+        loaded.uncalibrated = uncalibrable_groups(calibration)
     options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
     raw = raw_topics_of(detectors)
