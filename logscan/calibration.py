@@ -127,7 +127,8 @@ def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequenc
 
 def judged_steps(profile, run) -> np.ndarray | None:
     """The steps of ``run`` the detectors judge under ``profile``'s [alarms] policy: not on the
-    ground, not in the take-off transient, not in the filter's first seconds (None: every step).
+    ground, not in the take-off or touchdown transients, not in the filter's first seconds (None:
+    every step).
     Calibration uses the same steps: a vehicle standing still (a real flight's ground time, a SITL
     log's exact GNSS at rest) tells little of the noise the detectors will judge in flight."""
     policy = getattr(profile, "alarm_policy", None)
