@@ -41,7 +41,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from logscan.errors import LogscanError
+from logscan.errors import INTERRUPT_SEEN, LogscanError
 
 # errno -> (what is wrong, what to do) for the write-side errors a user can fix
 _WRITE_ERRORS = {
@@ -161,6 +161,9 @@ def commit(staged: Sequence[Staged]) -> None:
     removed when they had none), the remaining temporary files are removed, and an OutputError
     says which target failed. A failed or interrupted direct write puts the renamed targets back
     the same way (what already went into a FIFO or device stays written)."""
+    if INTERRUPT_SEEN[0]:  # Ctrl-C came, but a finalizer swallowed its exception: commit nothing
+        discard(staged)
+        raise KeyboardInterrupt
     files = [item for item in staged if item.tmp is not None]
     direct = [item for item in staged if item.tmp is None]
     kept: list[str | None] = []  # the backups of the renamed targets, while a direct write may fail

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 from enum import IntEnum
 
+# set by the CLI's Ctrl-C handler (logscan.cli.main): a Ctrl-C whose exception Python swallowed
+# (raised while a finalizer ran, e.g. llvmlite's ObjectRef.__del__: "Exception ignored in ...")
+# still stops the run before its outputs are committed (`logscan.artifacts.commit`)
+INTERRUPT_SEEN = [False]
+
 
 class ExitCode(IntEnum):
     """The exit codes of every logscan command."""

@@ -422,3 +422,49 @@ def test_dev_null_may_take_the_report_and_the_json(cli, sample, tmp_path):
     result = cli("analyze", log, "-o", "/dev/null", "--json", "/dev/null", "-q")
     assert result.exit_code == 0, result.stderr
     assert Path("/dev/null").is_char_device()
+
+
+def test_a_ctrl_c_a_finalizer_swallowed_still_exits_130_and_commits_nothing(sample, tmp_path, monkeypatch):
+    """Ctrl-C raised while a finalizer runs (llvmlite's ObjectRef.__del__ during the compile) is
+    swallowed by Python ("Exception ignored in ..."): the handler's flag still stops the run before
+    its outputs are committed, no traceback is printed, and the exit code is 130."""
+    import gc
+
+    from logscan.cli import main as cli_main
+
+    out = tmp_path / "r.html"
+    (previous,) = previous_outputs(tmp_path, "r.html")
+
+    class Finalized:
+        def __del__(self):  # the handler raising where Python cannot propagate it
+            cli_main._raise_interrupted(signal.SIGINT, None)
+
+    real = cli_main.cli.main
+
+    def interrupted_in_a_finalizer(*args, **kwargs):
+        Finalized()
+        gc.collect()
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cli_main.cli, "main", interrupted_in_a_finalizer)
+    with pytest.raises(SystemExit) as exit_info:
+        cli_main.main(["analyze", sample("quad_healthy.mcap"), "-o", str(out), "-q"])
+    assert exit_info.value.code == 130
+    assert previous.read_bytes() == OLD and temporary_files(tmp_path) == []
+    assert not cli_main._INTERRUPT_SEEN[0]  # reset once the run is reported
+    assert sys.unraisablehook is not cli_main._unraisable  # Python's hook back
+
+
+def test_commit_refuses_after_a_ctrl_c_and_removes_its_temporary_files(tmp_path):
+    from logscan.errors import INTERRUPT_SEEN
+
+    target = tmp_path / "s.json"
+    target.write_text("old")
+    staged = [artifacts.stage(target, "new")]
+    INTERRUPT_SEEN[0] = True
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            artifacts.commit(staged)
+    finally:
+        INTERRUPT_SEEN[0] = False
+    assert target.read_text() == "old" and temporary_files(tmp_path) == []

@@ -16,7 +16,7 @@ import click
 
 from logscan import __version__
 from logscan.cli.render import printable
-from logscan.errors import ExitCode, LogscanError
+from logscan.errors import INTERRUPT_SEEN, ExitCode, LogscanError
 
 
 @click.group(
@@ -116,6 +116,8 @@ def _run(args: list[str], debug: bool) -> int:
     """Run the CLI; the exit code of every outcome, with its one line on stderr."""
     try:
         code = cli.main(args=args, prog_name="logscan", standalone_mode=False)
+        if _INTERRUPT_SEEN[0]:  # a Ctrl-C whose exception a finalizer swallowed: still Ctrl-C
+            return _interrupted()
     except (Interrupted, KeyboardInterrupt):
         return _interrupted()
     except click.exceptions.Abort as exc:
@@ -272,7 +274,7 @@ def _raise_interrupted(signum, frame) -> None:
 
 
 _OWNER = [0]  # the process whose Ctrl-C is reported
-_INTERRUPT_SEEN = [False]  # set by the handler: an error that follows it is the interruption
+_INTERRUPT_SEEN = INTERRUPT_SEEN  # set by the handler: an error that follows it is the interruption
 
 
 def _install_signal_handlers() -> dict:
@@ -288,12 +290,30 @@ def _install_signal_handlers() -> dict:
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
     if hasattr(signal, "SIGXFSZ"):
         previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    previous["unraisablehook"] = _HOOK[0] = sys.unraisablehook
+    sys.unraisablehook = _unraisable
     return previous
 
 
+_HOOK = [sys.unraisablehook]  # the unraisable hook `_unraisable` passes everything else to
+
+
+def _unraisable(unraisable) -> None:
+    """Python's hook for an exception it cannot raise (one raised while a finalizer runs): a
+    Ctrl-C there is not printed as a traceback; the handler's flag carries it (`_run`)."""
+    if isinstance(unraisable.exc_value, (Interrupted, KeyboardInterrupt)):
+        return
+    _HOOK[0](unraisable)
+
+
 def _restore_signal_handlers(previous: dict) -> None:
+    hook = previous.pop("unraisablehook", None)
+    if hook is not None:
+        sys.unraisablehook = hook
     for signum, handler in previous.items():
         signal.signal(signum, handler)
+    if hook is not None:  # the main thread's run is over: its Ctrl-C is reported
+        _INTERRUPT_SEEN[0] = False
 
 
 if __name__ == "__main__":
