@@ -100,7 +100,7 @@ def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequenc
         for name, (ratio, count) in current.nis.items():
             if count >= CAL_MIN_UPDATES and np.isfinite(ratio) and ratio > 0:
                 scale[name] = float(np.clip(scale[name] * ratio, CAL_FLOOR, CAL_CEILING))
-        floored = frozenset(name for name in base if scale[name] <= CAL_FLOOR * 1.0001)
+        floored = frozenset(name for name in base if _at_floor(scale[name]))
         now = scaled()
         current = evaluate(model, now, noise(), q_scale(), judged, floored)
         moved = 0.0
@@ -132,10 +132,15 @@ def judged_steps(profile, run) -> np.ndarray | None:
     Calibration uses the same steps: a vehicle standing still (a real flight's ground time, a SITL
     log's exact GNSS at rest) tells little of the noise the detectors will judge in flight."""
     policy = getattr(profile, "alarm_policy", None)
-    if policy is None or not (policy.ground_channel or policy.ignore_start_s):
+    if policy is None or not policy.suspends:
         return None
     suspended = policy.suspend(run.t, run.ground).suspended
     return None if suspended is None else ~suspended
+
+
+def _at_floor(scale: float) -> bool:
+    """Whether a group's variance scale has reached the floor (within rounding)."""
+    return scale <= CAL_FLOOR * 1.0001
 
 
 def _below_band_at_floor(nis: dict[str, tuple[float, int]], scale: dict[str, float]) -> list[str]:
@@ -145,7 +150,7 @@ def _below_band_at_floor(nis: dict[str, tuple[float, int]], scale: dict[str, flo
     return [
         name
         for name, (ratio, count) in nis.items()
-        if count >= CAL_MIN_UPDATES and scale.get(name, 1.0) <= CAL_FLOOR * 1.0001 and ratio < low
+        if count >= CAL_MIN_UPDATES and _at_floor(scale.get(name, 1.0)) and ratio < low
     ]
 
 
@@ -176,7 +181,7 @@ def _group_entries(
             "calibrated": bool(calibrated),
             "nis_at_floor": float(at_floor[name]) if name in at_floor else None,
             "logged_noise": name in logged,  # the filter takes the logged std: noise_factor scales it
-            "at_floor": bool(calibrated and scale[name] <= CAL_FLOOR * 1.0001),
+            "at_floor": bool(calibrated and _at_floor(scale[name])),
         }
     return groups
 

@@ -383,7 +383,7 @@ def detect(
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
     policy = prepared.profile.alarm_policy
-    if policy is not None and (policy.ground_channel or policy.ignore_start_s):
+    if policy is not None and policy.suspends:
         policy = policy.suspend(prepared.run.t, prepared.run.ground)
         if policy.suspended is not None:
             seconds = float(policy.suspended.sum()) * prepared.run.dt

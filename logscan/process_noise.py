@@ -157,8 +157,9 @@ def evaluate(
         trace = run_ekf(model, run, Q=Q, R=noise_std, store_gain=False, store_S=False, store_innovations=True)
         steps = judged[r] if judged is not None and judged[r] is not None else slice(None)
         for g, name in enumerate(trace.group_names):
-            used = trace.updated[steps, g] & np.isfinite(trace.nis_group[steps, g])
-            sums[name] = sums.get(name, 0.0) + float(trace.nis_group[steps, g][used].sum())
+            nis = trace.nis_group[steps, g]
+            used = trace.updated[steps, g] & np.isfinite(nis)
+            sums[name] = sums.get(name, 0.0) + float(nis[used].sum())
             counts[name] = counts.get(name, 0) + int(used.sum())
         for name, offset, size in zip(trace.group_names, trace.group_offsets.tolist(), trace.group_sizes.tolist()):
             y = trace.y[steps, offset : offset + size].astype(np.float64)

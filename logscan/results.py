@@ -109,6 +109,11 @@ class AlarmPolicy:
     # (N,) bool, the grid steps not judged (from the three above, set per run by the pipeline)
     suspended: Any = field(default=None, repr=False, compare=False)
 
+    @property
+    def suspends(self) -> bool:
+        """Whether the policy leaves any step unjudged (ground time, take-off, the start)."""
+        return bool(self.ground_channel or self.ignore_start_s)
+
     def suspend(self, t, ground) -> AlarmPolicy:
         """A copy with ``suspended`` set for a run of grid times ``t`` and held ground channel values
         ``ground`` (None: none; NaN: unknown, judged)."""

@@ -11,7 +11,6 @@ from logscan.artifacts import Staged
 from logscan.cli.options import (
     check_parallelism,
     echo_notice,
-    end_option,
     header_stamp_option,
     jobs_option,
     json_option,
@@ -19,8 +18,8 @@ from logscan.cli.options import (
     quiet_option,
     scheduler_option,
     show_progress,
-    start_option,
     tables_option,
+    window_option,
 )
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode, UsageError
@@ -147,8 +146,7 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
     help="Print the profile each log is analysed with (the file given, the log's embedded one, or the "
     "built-in one a PX4 log gets), as TOML, before analysing it.",
 )
-@start_option
-@end_option
+@window_option
 @header_stamp_option
 @jobs_option
 @scheduler_option

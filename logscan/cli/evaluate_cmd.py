@@ -8,7 +8,6 @@ import click
 
 from logscan.cli.options import (
     check_parallelism,
-    end_option,
     header_stamp_option,
     jobs_option,
     json_option,
@@ -16,8 +15,8 @@ from logscan.cli.options import (
     quiet_option,
     scheduler_option,
     show_progress,
-    start_option,
     tables_option,
+    window_option,
 )
 from logscan.cli.render import printable, render_evaluation
 from logscan.errors import ExitCode, InputError
@@ -67,8 +66,7 @@ from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 )
 @profile_option
 @tables_option
-@start_option
-@end_option
+@window_option
 @header_stamp_option
 @jobs_option
 @scheduler_option

@@ -106,22 +106,20 @@ def check_parallelism(jobs: int, scheduler: str | None) -> None:
         raise UsageError(f"--scheduler and --jobs {jobs} exclude each other: give one of them")
 
 
-start_option = click.option(
-    "--start",
-    "start_s",
-    type=float,
-    default=None,
-    help="Analyse from this time, in seconds since the log's start (e.g. to leave out a clock jump). "
-    "Default: the log's start.",
-)
+def window_options(verb: str, each: str, example: str):
+    """--start/--end (seconds since a log's start) as ``verb`` uses them; a decorator for both."""
+    start = click.option(
+        "--start", "start_s", type=float, default=None,
+        help=f"{verb} {each} from this time, in seconds since its start ({example}). Default: the log's start.",
+    )  # fmt: skip
+    end = click.option(
+        "--end", "end_s", type=float, default=None,
+        help=f"{verb} {each} up to this time, in seconds since its start. Default: the log's end.",
+    )  # fmt: skip
+    return lambda command: start(end(command))
 
-end_option = click.option(
-    "--end",
-    "end_s",
-    type=float,
-    default=None,
-    help="Analyse up to this time, in seconds since the log's start. Default: the log's end.",
-)
+
+window_option = window_options("Analyse", "the log", "e.g. to leave out a clock jump")
 
 
 def show_progress(quiet: bool) -> bool:

@@ -14,6 +14,7 @@ from logscan.cli.options import (
     quiet_option,
     scheduler_option,
     show_progress,
+    window_options,
 )
 
 
@@ -47,15 +48,7 @@ from logscan.cli.options import (
     "likelihood (for real logs whose noise the profile only guesses); the detectors are then fitted on "
     "the calibrated filter.",
 )
-@click.option(
-    "--start", "start_s", type=float, default=None,
-    help="Train on each log from this time, in seconds since its start (e.g. to leave out the ground "
-    "time and take-off of a real flight). Default: the log's start.",
-)  # fmt: skip
-@click.option(
-    "--end", "end_s", type=float, default=None,
-    help="Train on each log up to this time, in seconds since its start. Default: the log's end.",
-)  # fmt: skip
+@window_options("Train on", "each log", "e.g. to leave out the ground time and take-off of a real flight")
 @jobs_option
 @scheduler_option
 @click.option(
