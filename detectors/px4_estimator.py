@@ -21,7 +21,9 @@ analysis grid: a sample counts at the first grid step at or after its time (the 
 that fall on one step); steps without a sample are not judged. A ratio of exactly 0 (a source not
 fused) or a non-finite one is no evidence: not judged. A source with no such sample over the log
 is not reported (listed in ``info["unused"]``). Several EKF2 instances (multi-EKF): statistics per
-instance, ``px4.ekf<i>.<source>``.
+instance, ``px4.ekf<i>.<source>``. PX4's tests of synthetic observations that it runs only as a
+gate (gravity, fake position/height, drag, sideslip: `GATE_ONLY`) are read and set aside
+(``info["gate_only"]``): a ratio over 1 there is PX4 declining an assumption, never a fault.
 """
 
 from __future__ import annotations
@@ -125,6 +127,23 @@ LEGACY_SOURCES = {
     "flow": (("flow_innov[0]", "flow_innov[1]"), "EKF2_OF_GATE", 3.0),
     "hagl": (("hagl_innov",), "EKF2_RNG_GATE", 5.0),
 }
+
+# Tests PX4 runs only as a gate on a synthetic observation, not on a sensor: a ratio over 1 there is
+# PX4 choosing not to fuse the assumption at that moment, by design, never a fault. gravity: the
+# accelerometer taken as the gravity direction, with a 0.25 gate, so every manoeuvre fails it
+# (gravity_fusion.cpp; 82 % of the samples of a normal real flight); fake_pos / fake_hgt: "no
+# motion" fused while PX4 has no aiding source; drag: the multirotor drag model's specific force
+# (wind estimation); beta / sideslip: the zero-sideslip assumption of a fixed wing
+# (cs_fuse_beta: "synthetic sideslip measurements"). Keys: the source with "aid_" and
+# "_test_ratio" removed.
+GATE_ONLY = frozenset({"gravity", "fake_pos", "fake_hgt", "drag", "beta", "sideslip"})
+
+
+def gate_only(source: str) -> bool:
+    """Whether PX4's test of ``source`` (a statistic's last part) is a gate on a synthetic
+    observation (GATE_ONLY): read, never an alarm."""
+    return source.removeprefix("aid_").removesuffix("_test_ratio") in GATE_ONLY
+
 
 NO_RATIOS = (
     "px4_estimator: the log has no PX4 estimator test ratios (estimator_innovation_test_ratios, "
@@ -319,9 +338,13 @@ class Px4EstimatorDetector(Detector):
         sources: dict[str, str] = {}
         persist: dict[str, int] = {}
         unused: list[str] = []
+        gates_only: list[str] = []
         for instance, source, topic, series in found:
             name = f"{PREFIX}.ekf{instance}.{source}" if len(instances) > 1 else f"{PREFIX}.{source}"
             where = f"{topic}_{instance}"
+            if gate_only(source):  # PX4's gate on a synthetic observation: no evidence of a fault
+                gates_only.append(name)
+                continue
             if series is None:
                 result.warnings.append(f"px4_estimator: {where} {source}: fields with different sample times, skipped")
                 continue
@@ -345,6 +368,7 @@ class Px4EstimatorDetector(Detector):
         result.info["sources"] = sources
         result.info["n_persist"] = persist
         result.info["unused"] = unused
+        result.info["gate_only"] = gates_only
         if gates:
             result.info["gates"] = gates
         return result

@@ -244,3 +244,57 @@ def test_real_px4_logs(log, case, cli, capsys, tmp_path):
     with capsys.disabled():
         counts = {d["detector"]: d["n_alarms"] for d in entry["detectors"]}
         print(f"\n{log}: alarms {counts}, px4 sources read: {', '.join(sorted(sources))}")
+
+
+# --- PX4's gate-only tests -----------------------------------------------------------------------
+
+
+def gravity_log(path: Path) -> Path:
+    """gravity (v1.13+ test ratios, and v1.14+ estimator_aid_src_gravity) at 3 over [10, 40) s, as
+    while the vehicle accelerates; gps_hpos over its gate at [45, 55) s: a real fault."""
+    t_us = ratios_10hz()
+    over = {"gravity": (10.0, 40.0, 0.2), "gps_hpos": (45.0, 55.0, 0.3)}
+    ratio = {k: np.where((t_us >= a * 1e6) & (t_us < b * 1e6), 3.0, low) for k, (a, b, low) in over.items()}
+    gravity3 = np.column_stack([ratio["gravity"]] * 3)
+    topics = base_topics()
+    topics["estimator_innovation_test_ratios"] = (
+        t_us,
+        {"gravity": gravity3, "gps_hpos": np.column_stack([ratio["gps_hpos"]] * 2)},
+    )
+    fused = np.ones(t_us.size)
+    topics["estimator_aid_src_gravity"] = (t_us, {"test_ratio": gravity3, "fused": fused})
+    topics["estimator_aid_src_fake_pos"] = (t_us, {"test_ratio": gravity3[:, :2], "fused": fused})
+    return write_ulog(path, topics, parameters={"EKF2_GPS_P_GATE": 5.0})
+
+
+def test_gate_only_tests_are_read_but_never_an_alarm(tmp_path, cli, profile):
+    """PX4 rejects the gravity observation by design while accelerating: 30 s over its gate is no
+    alarm, and the summary against PX4 counts only the GNSS test's alarm."""
+    code, entry = analyze(cli, gravity_log(tmp_path / "gravity.ulg"), profile, report=tmp_path / "report.html")
+    result = detector_entry(entry)
+    assert set(result["info"]["gate_only"]) == {"px4.gravity", "px4.aid_gravity", "px4.aid_fake_pos"}
+    assert not [s for s in result["series"] if "gravity" in s or "fake" in s]
+    assert {a["signal"] for a in result["alarms"]} == {"px4.gps_hpos"}
+    (alarm,) = result["alarms"]
+    assert 45.0 <= alarm["start"] <= 47.1
+    assert entry["against_px4"]["px4_alarms"] == 1 and code == 1
+
+
+def test_gate_only_matches_px4_sources_by_name():
+    from logscan.detectors.px4_estimator import gate_only
+
+    assert gate_only("gravity") and gate_only("aid_gravity") and gate_only("beta_test_ratio")
+    assert gate_only("aid_fake_hgt") and gate_only("drag") and gate_only("aid_sideslip")
+    assert not any(gate_only(s) for s in ("gps_hpos", "aid_gnss_vel", "baro_vpos", "heading", "mag_test_ratio"))
+
+
+@pytest.mark.testdata("px4-ulog-extra/mcap_ulog2mcap_test_ulog.ulg")
+def test_a_real_v1_14_log_reads_gravity_as_a_gate(cli, tmp_path):
+    """A real PX4_FMU_V6C log logs gravity[0..2] among its test ratios: set aside, never a statistic."""
+    path = need_testdata("px4-ulog-extra/mcap_ulog2mcap_test_ulog.ulg")
+    result = cli("analyze", str(path), "--detector", "px4_estimator", "--json", "-", "-o", str(tmp_path / "r.html"))
+    entry = json.loads(result.stdout)["logs"][0]
+    px4 = detector_entry(entry)
+    gravity = {f"px4.ekf{i}.gravity" for i in (0, 1)}  # two EKF2 instances
+    assert gravity <= set(px4["info"]["gate_only"]) and not gravity & set(px4["series"])
+    assert {"px4.ekf0.gps_hpos", "px4.ekf1.gps_hpos"} <= set(px4["series"])
