@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from logscan.errors import LogscanError, ProfileError
+from logscan.errors import InputError, LogscanError, ProfileError
 from logscan.needs import Needs, union
 
 Progress = Callable[[str], None]
@@ -80,6 +80,9 @@ class LoadedProfile:
     process_noise_scale: dict | None = field(default=None, compare=False)
     # the groups those tables' calibration could not bring to NIS 1 (kept the profile's noise)
     uncalibrated: frozenset = field(default=frozenset(), compare=False)
+    # why the model's filter cannot run on this log ("": it can; a built-in profile says,
+    # `BuiltProfile.model_not_run`): only detectors that need no filter run (`filter_free`)
+    model_not_run: str = ""
 
 
 @dataclass
@@ -152,7 +155,9 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
             built, log, extra = found
             profile = parse_profile(built.text, source=f"{path} (built-in profile {built.name})")
             notes = [f"built-in profile {built.name}: {note}" for note in built.notes]
-            return LoadedProfile(profile, built.text, f"built-in {built.name}", notes, log, extra)
+            loaded = LoadedProfile(profile, built.text, f"built-in {built.name}", notes, log, extra)
+            loaded.model_not_run = built.model_not_run
+            return loaded
         raise ProfileError(
             "no profile: the log embeds none",
             path=str(path),
@@ -220,6 +225,23 @@ def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) 
                 exc.path = source
             raise
     return detectors
+
+
+def filter_free(detectors: Sequence, loaded: LoadedProfile, path) -> list:
+    """``detectors``, less those that need a filter when the profile's model cannot run on the log
+    (`LoadedProfile.model_not_run`: the verdict lists the model as not checked); an InputError
+    when none is left."""
+    if not loaded.model_not_run:
+        return list(detectors)
+    kept = [d for d in detectors if not d.needs(None).filters]
+    if not kept:
+        names = ", ".join(d.name for d in detectors)
+        raise InputError(
+            f"{loaded.model_not_run}; {names} need{'s' if len(detectors) == 1 else ''} its filter",
+            path=str(path),
+            hint="run the checks without a filter (-d health -d px4_estimator), or pass --profile with another model",
+        )
+    return kept
 
 
 def raw_topics_of(detectors: Sequence) -> frozenset[str]:
@@ -302,6 +324,8 @@ def prepare(
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     wanted = needs(run) if callable(needs) else needs
+    if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
+        raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
     if profile.recovery is not None:
         from logscan.loops import RECOVERY_NEEDS
 
@@ -440,6 +464,9 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
+    if prepared.loaded.model_not_run:  # its filter's detectors were not run (`filter_free`)
+        model = prepared.profile.vehicle.model
+        analysis.unchecked.insert(0, f"the {model} model (logscan's filter): {prepared.loaded.model_not_run}")
     if prepared.loops:  # a hierarchical profile: every further loop checked by its own detectors
         from logscan.loops import detect_loops
 
@@ -627,7 +654,7 @@ def analyze_log(
     from logscan.training import apply_tables, read_tables_document, tables_path
 
     loaded = load_profile_for(path, profile_path)
-    detectors = create_detectors(loaded, detector_names)
+    detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
     trained = tables_path(None if tables is None else str(tables), loaded.profile)
     if trained is not None:  # the trained detectors, and the filter's calibrated noise in the profile
         detectors = apply_tables(detectors, trained, loaded.profile)

@@ -72,11 +72,16 @@ def test_the_faster_imu_is_chosen_sensor_combined_on_a_tie(tmp_path, combined_hz
     assert profile.vehicle.rate_hz == max(combined_hz, imu_hz)
 
 
-def test_a_slow_vehicle_imu_is_refused_with_one_line(cli, tmp_path):
+def test_a_slow_vehicle_imu_is_a_not_checked_model(cli, tmp_path):
+    """Too slow for the ins model: the filter-free checks run (nothing to read in this crafted log)
+    and the model is a `not checked` line; the filter's detector alone is one clear error."""
     path = _write(tmp_path / "slow.ulg", {"vehicle_imu": _vehicle_imu(20.0)})
     result = cli("analyze", str(path), "--no-report")
     assert result.exit_code == 2
-    assert "vehicle_imu is logged at 20 Hz" in result.stderr and "Traceback" not in result.stderr
+    assert "not checked: the ins model (logscan's filter): vehicle_imu is logged at 20 Hz" in result.stdout
+    alone = cli("analyze", str(path), "--no-report", "-d", "nis")
+    assert alone.exit_code == 2 and "Traceback" not in alone.stderr
+    assert "vehicle_imu is logged at 20 Hz" in alone.stderr and len(alone.stderr.strip().splitlines()) == 1
 
 
 def test_vehicle_imu_drives_the_filter_like_sensor_combined(cli, tmp_path):

@@ -80,6 +80,9 @@ class BuiltProfile:
     name: str
     text: str
     notes: list[str] = field(default_factory=list)
+    # why the profile's model cannot run on this log ("": it can): only the detectors that need no
+    # filter run (health, PX4's own estimator tests), and the model is a `not checked` line
+    model_not_run: str = ""
 
 
 def identify(log) -> str | None:
@@ -215,24 +218,20 @@ def px4_profile(log) -> BuiltProfile:
             hint="pass --profile (docs/profiles.md; examples in docs/examples/)",
         )
     topic, gyro, accel, per_second, imu_hz = imu
-    if imu_hz < MIN_IMU_HZ:
-        raise InputError(
-            f"{topic} is logged at {imu_hz:.3g} Hz: the ins model needs the IMU at {MIN_IMU_HZ:g} Hz "
-            "or more (it holds one IMU sample per step)",
-            path=path,
-            hint="log at a higher rate (PX4: SDLOG_PROFILE with 'high rate'), or pass --profile with another model",
-        )
-    rate = _nice_rate(imu_hz)
+    # an IMU too slow for the ins model: the filter-free checks still run, on a grid of MIN_IMU_HZ
+    model_not_run = slow_imu_reason(topic, imu_hz) if imu_hz < MIN_IMU_HZ else ""
+    rate = _nice_rate(max(imu_hz, MIN_IMU_HZ))
     notes: list[str] = []
     lines = [
         "# logscan built-in profile `px4`: the IMU-driven ins model on a PX4 flight log, built from the",
         f"# topics of {path}. Edit and pass it with --profile (docs/profiles.md).",
+        *([f"# The ins model is not run: {model_not_run}. Only the filter-free checks."] * bool(model_not_run)),
         'name = "px4"',
         f'description = "built-in: ins model on {topic}, GNSS, barometer and PX4\'s attitude"',
         "",
         "[vehicle]",
         'model = "ins"',
-        f"rate_hz = {rate:g}  # the IMU's rate in this log",
+        f"rate_hz = {rate:g}  # the IMU's rate in this log" + (f" (at least {MIN_IMU_HZ:g})" if model_not_run else ""),
         "",
         "[vehicle.params]  # PX4's EKF2 noise parameters of this log where it has them",
         f"accel_noise = {_param(params, 'EKF2_ACC_NOISE', 0.35):.6g}",
@@ -345,16 +344,23 @@ def px4_profile(log) -> BuiltProfile:
             "after_ground_s = 5  # ... nor during the take-off transient ...",
             f"before_ground_s = {BEFORE_LANDING_S:g}  # ... nor before a landing (PX4 confirms touchdown late)",
         ]
+    lines += ["", "[detectors.nis]  # logscan's filter: NIS per group"] if not model_not_run else []
     lines += [
-        "",
-        "[detectors.nis]  # logscan's filter: NIS per group",
         "",
         "[detectors.px4_estimator]  # PX4's own EKF2 innovation test ratios: the baseline",
         "",
         "[detectors.health]  # plausibility: battery, GNSS fix, motors, IMU clipping, logged errors, timeouts",
         "",
     ]
-    return BuiltProfile("px4", "\n".join(lines), notes)
+    return BuiltProfile("px4", "\n".join(lines), notes, model_not_run)
+
+
+def slow_imu_reason(topic: str, imu_hz: float) -> str:
+    """Why the ins model cannot run on an IMU logged at ``imu_hz`` (below MIN_IMU_HZ)."""
+    return (
+        f"{topic} is logged at {imu_hz:.3g} Hz: the ins model needs the IMU at {MIN_IMU_HZ:g} Hz or more (it "
+        "holds one IMU sample per step; PX4: log at a higher rate, SDLOG_PROFILE with 'high rate')"
+    )
 
 
 def _topics_of_type(log, schema: str) -> list[str]:
