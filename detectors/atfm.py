@@ -29,6 +29,7 @@ from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.modes import mode_segments
 from logscan.detectors.params import Interval, Options, RealList
 from logscan.detectors.words import group_words
+from logscan.docs import doc_url
 from logscan.errors import NotTrainedError, ProfileError
 
 EXTRA_CAPTIONS = {
@@ -403,7 +404,7 @@ def _redundant_names(runs) -> list[str]:
     if not names:
         raise ProfileError(
             "detector 'atfm' needs a [redundant.<name>] group of sensors in the profile",
-            hint="see docs/profiles.md, section [redundant]",
+            hint=f"see {doc_url('profiles.md')}, section [redundant]",
         )
     return names
 

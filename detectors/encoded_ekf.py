@@ -209,8 +209,8 @@ class EncodedEkfDetector(Detector):
             if limit is None:
                 raise NotTrainedError(
                     f"detector {self.name!r} with variant = 'baseline' has no fixed threshold",
-                    hint="set [detectors.encoded_ekf] threshold = ..., or train it with fit() on healthy "
-                    "runs (bench/evaluate_detectors.py does), or use variant = 'adaptive'",
+                    hint="set [detectors.encoded_ekf] threshold = ..., or train it on healthy logs "
+                    "(`logscan train ... -o tables.json`, then --tables tables.json), or use variant = 'adaptive'",
                 )
             limit = float(limit)
             result.add_statistic(t, "e_x", e_x, upper=limit, lower=-limit, valid=defined, n_persist=self.n_persist)

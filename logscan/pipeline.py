@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from logscan.errors import InputError, LogscanError, ProfileError
@@ -174,6 +175,7 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
     again."""
     from logscan.profiles import builtin
     from logscan.readers import detect_format, read_log
+    from logscan.readers.csv_reader import csv_log_name
 
     fmt = None if path is None else detect_format(path)
     extra = _extra_topics()
@@ -184,7 +186,7 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
         # the extra topics the file has (its summary lists them all: the others are covered too)
         log = read_log(path, topics=set(builtin.ros2_candidate_topics(schemas)) | (extra & set(schemas)))
         built = builtin.ros2_profile(log) if builtin.identify(log) == "ros2" else None
-    elif fmt == "ulog":
+    elif fmt == "ulog" or (fmt == "csv-dir" and csv_log_name(Path(path))):  # a ULog, or ulog2csv's pieces of one
         log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra)
         built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None
     else:
@@ -330,13 +332,13 @@ def prepare(
         from logscan.loops import RECOVERY_NEEDS
 
         wanted = wanted | RECOVERY_NEEDS
+    prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
         prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)
     else:
         prepared.warnings.extend(log.source.warnings)
     prepared.warnings.extend(run.warnings)
-    prepared.warnings.extend(loaded.notes)
     if log.source.partial:
         prepared.warnings.append(f"partial read: {log.source.partial_reason}")
     for name, parts in wanted.filters.items():

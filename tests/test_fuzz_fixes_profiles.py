@@ -49,7 +49,7 @@ def test_a_tiny_vehicle_rate_is_refused_at_parse_time_naming_the_profile_key_and
     assert result.exit_code == 2, result.stderr
     assert result.stderr.strip() == (
         f"logscan: error: {log} (embedded profile): invalid profile: [vehicle] rate_hz: "
-        "must be >= 0.01 Hz (a 100 s period), got 1e-300 (see docs/profiles.md)"
+        "must be >= 0.01 Hz (a 100 s period), got 1e-300 (see https://github.com/logscan/logscan/blob/main/docs/profiles.md)"
     )
 
 
@@ -89,7 +89,7 @@ def test_a_huge_stale_s_is_refused_at_parse_time_naming_the_profile_key_and_rang
     assert result.exit_code == 2, result.stderr
     assert result.stderr.strip() == (
         f"logscan: error: {log} (embedded profile): invalid profile: [measurements.accel] stale_s: "
-        "must be at most 1000000 s (or inf: never stale), got 1e+308 (see docs/profiles.md)"
+        "must be at most 1000000 s (or inf: never stale), got 1e+308 (see https://github.com/logscan/logscan/blob/main/docs/profiles.md)"
     )
 
 

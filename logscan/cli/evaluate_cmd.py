@@ -87,7 +87,7 @@ def evaluate(
     scheduler: str | None,
     quiet: bool,
 ) -> None:
-    """Score the detectors against the ground truth of each LOG (docs/algorithms.md section 7).
+    """Score the detectors against the ground truth of each LOG (how: algorithms.md, section 7).
 
     Runs the analysis on every log that carries ground truth (logs written by `logscan simulate`
     do; others are skipped and listed), matches alarms to fault events, and prints per detector

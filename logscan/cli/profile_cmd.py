@@ -27,7 +27,7 @@ def init_profile(log_path: str, output_path: str | None) -> None:
     """Write the profile `logscan analyze LOG` would use without --profile: the one the log embeds
     (logs of `logscan simulate`), else the built-in profile it gets (a PX4 ULog: `px4`, built from
     the topics it holds, with comments saying where each value comes from). Edit it and pass it
-    with --profile; docs/profiles.md describes every key."""
+    with --profile; the documentation's profiles.md describes every key."""
     from logscan.pipeline import load_profile_for
 
     loaded = load_profile_for(log_path, None)

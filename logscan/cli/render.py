@@ -16,6 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from logscan.docs import doc_url
 from logscan.evaluate import CHECK_SEPARATOR
 
 if TYPE_CHECKING:
@@ -257,7 +258,7 @@ def render_observability(evaluation: Evaluation) -> str:
         f"{'fault kind':<30} {'detector':<26} {'events':>6} {'unobs.':>6} {'missed':>6} {'of them unobs.':>14} "
         f"{'detected / observable':>21}"
     )
-    lines = ["faults that could not be seen (docs/algorithms.md section 10):", header, "-" * len(header)]
+    lines = [f"faults that could not be seen ({doc_url('algorithms.md')} section 10):", header, "-" * len(header)]
     for kind in kinds:
         for i, key in enumerate(k for k in keys if k in per_key and kind in per_key[k]):
             st = per_key[key][kind]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 
+from logscan.docs import doc_url
 from logscan.errors import ModelError
 from logscan.models.base import GroupSpec, Model
 
@@ -38,7 +39,7 @@ def get_model(name: str, params: dict | None = None) -> Model:
     except (OverflowError, ZeroDivisionError):  # Python float arithmetic on extreme values
         raise ModelError(
             "its parameters give numbers beyond float range (a value far too large or too small)",
-            hint="check the magnitudes in [vehicle.params] (see docs/profiles.md)",
+            hint=f"check the magnitudes in [vehicle.params] (see {doc_url('profiles.md')})",
         ) from None
 
 

@@ -90,11 +90,20 @@ def identify(log) -> str | None:
     info = log.source.metadata.get("ulog.info", {})
     if log.source.format == "ulog" and info.get("sys_name", "").strip().upper() == "PX4":
         return "px4"
+    if log.source.format == "csv-dir" and is_ulog2csv_px4(log.source.topics):
+        return "px4"
     if log.source.format == "mcap" and any(
         is_ros2_topic(t.encoding, t.schema) for t in getattr(log.source, "topics", {}).values()
     ):
         return "ros2"
     return None
+
+
+def is_ulog2csv_px4(topics) -> bool:
+    """A directory of CSVs (its topics: name -> `logscan.log.TopicInfo`) that pyulog's ``ulog2csv``
+    wrote from a PX4 log: PX4's IMU topic among its ``<log>_<topic>_<n>.csv`` pieces. The export
+    holds no info, parameters or logged messages: the topics' names are what says PX4."""
+    return any(name in (_IMU, _FULL_IMU) and info.schema == "ulog2csv" for name, info in topics.items())
 
 
 def is_ros2_topic(encoding: str, schema: str) -> bool:
@@ -209,7 +218,12 @@ def px4_profile(log) -> BuiltProfile:
     params = log.source.metadata.get("ulog.parameters", {})
     path = log.source.path
     has = lambda name: name in channels and len(channels[name]) > 0  # noqa: E731
-
+    notes: list[str] = []
+    if log.source.format == "csv-dir":  # PX4's ulog2csv export: the topics alone
+        notes.append(
+            "a ulog2csv export holds no parameters: the noise, delays and limits are PX4's defaults (EKF2_*, "
+            "BAT*...), not the values this vehicle flew with (analyse the .ulg for those)"
+        )
     imu = _imu(channels, has)
     if imu is None:
         raise InputError(
@@ -221,7 +235,6 @@ def px4_profile(log) -> BuiltProfile:
     # an IMU too slow for the ins model: the filter-free checks still run, on a grid of MIN_IMU_HZ
     model_not_run = slow_imu_reason(topic, imu_hz) if imu_hz < MIN_IMU_HZ else ""
     rate = _nice_rate(max(imu_hz, MIN_IMU_HZ))
-    notes: list[str] = []
     lines = [
         "# logscan built-in profile `px4`: the IMU-driven ins model on a PX4 flight log, built from the",
         f"# topics of {path}. Edit and pass it with --profile (docs/profiles.md).",

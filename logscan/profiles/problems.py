@@ -5,9 +5,10 @@ from __future__ import annotations
 import difflib
 from typing import Any
 
+from logscan.docs import doc_url
 from logscan.errors import ProfileError
 
-DOCS_HINT = "see docs/profiles.md"
+DOCS_HINT = f"see {doc_url('profiles.md')}"
 
 
 def profile_error(problems: list[str], source: str, hint: str = DOCS_HINT) -> ProfileError:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from logscan.align import AlignedRun
+from logscan.docs import doc_url
 from logscan.errors import ProfileError
 from logscan.filters.trace import EkfTrace
 from logscan.models.base import Model
@@ -101,7 +102,7 @@ class RecoverySettings:
                 problems.append(f"recovery allowed_error[{key}] must be a finite number > 0, got {value!r}")
         if problems:
             more = f" ({len(problems) - 1} more)" if len(problems) > 1 else ""
-            err = ProfileError(problems[0] + more, hint="see docs/algorithms.md section 5")
+            err = ProfileError(problems[0] + more, hint=f"see {doc_url('algorithms.md')} section 5")
             err.problems = problems
             raise err
 

@@ -4,6 +4,7 @@ fault of that kind could not have been seen (`logscan.observability`), on the sh
 from __future__ import annotations
 
 from logscan.clock import Clock
+from logscan.docs import doc_url
 from logscan.report.context_figures import _spec, _time_row_layout, _time_row_spec
 from logscan.report.plotly_json import plot_text
 
@@ -36,12 +37,13 @@ def observability_figures(observability, clock: Clock | None = None) -> list[dic
     layout = _time_row_layout("where a fault could not be seen", yaxis, (observability.t_start[0], observability.t_end))
     layout["height"] = _time_row_spec("", "", "")["height"] + ROW_HEIGHT * max(len(names) - 3, 0)
     words = "; ".join(dict.fromkeys(p["words"].split(": ", 1)[1] for p in blind))
+    size = f"of the size named in {doc_url('algorithms.md')} section 10"
     caption = (
-        "Grey: a fault of that kind, of the size named in docs/algorithms.md section 10 (actuator offset 10 %, "
-        f"a lost actuator, a sensor bias of 1 unit), starting there would leave less than {observability.snr_min:g} "
-        f"standard deviations of evidence in the filter's innovations within {observability.window_s:g} s, so no "
-        f"detector reading these sensors could promise to see it ({words}). A missed fault there is no "
-        "detector's failure; `logscan evaluate` counts it apart."
+        f"Grey: a fault of that kind, {size} (actuator offset 10 %, a lost actuator, a sensor bias of 1 unit), "
+        f"starting there would leave less than {observability.snr_min:g} standard deviations of evidence in the "
+        f"filter's innovations within {observability.window_s:g} s, so no detector reading these sensors could "
+        f"promise to see it ({words}). A missed fault there is no detector's failure; `logscan evaluate` counts it "
+        "apart."
     )
     spec = _time_row_spec("ctx-observability", "where a fault could not be seen", caption)
     spec["height"] = layout["height"]

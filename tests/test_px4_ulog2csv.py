@@ -1,0 +1,64 @@
+"""A PX4 log exported with pyulog's ``ulog2csv`` (a folder of ``<log>_<topic>_<n>.csv``) gets the
+built-in px4 profile, as the .ulg does: the same measurement groups and grid, PX4's default
+parameters (the export holds none) said in a warning, and the same detectors run.
+
+The folder is made by pyulog's own converter from a real log (PX4 SITL, sample_px4_events.ulg).
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from conftest import need_testdata
+from pyulog.ulog2csv import convert_ulog2csv
+
+from logscan.pipeline import builtin_profile_for, load_profile_for
+
+pytestmark = pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
+SOURCE = "px4-ulog/sample_px4_events.ulg"
+
+
+def _export(folder, messages=None):
+    """pyulog's ulog2csv of the real log into ``folder`` (only ``messages``, comma-separated, if given)."""
+    folder.mkdir()
+    convert_ulog2csv(str(need_testdata(SOURCE)), messages, str(folder), ",", None, None)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    return _export(tmp_path_factory.mktemp("ulog2csv") / "sample_px4_events")
+
+
+def test_the_export_gets_the_px4_profile_of_the_ulog(exported):
+    from_csv = load_profile_for(exported, None)
+    from_ulog = load_profile_for(need_testdata(SOURCE), None)
+    assert from_csv.source == from_ulog.source == "built-in px4"
+    assert set(from_csv.profile.measurements) == set(from_ulog.profile.measurements)
+    assert from_csv.profile.vehicle.rate_hz == from_ulog.profile.vehicle.rate_hz
+    assert from_csv.profile.enabled_detectors() == from_ulog.profile.enabled_detectors()
+    # the same channels: ulog2csv's topics are named as the ULog reader names them
+    assert from_csv.profile.topics() == from_ulog.profile.topics()
+    (note,) = [n for n in from_csv.notes if "ulog2csv" in n]
+    assert "no parameters" in note and "PX4's defaults" in note
+    assert not any("ulog2csv" in n for n in from_ulog.notes)
+
+
+def test_analyzing_the_export_runs_every_check_with_a_warning_on_parameters(cli, exported, tmp_path):
+    out = tmp_path / "summary.json"
+    result = cli("analyze", exported, "--no-report", "--json", out, "--allow-partial")
+    assert result.exit_code in (0, 1), result.stderr
+    summary = json.loads(out.read_text())["logs"][0]
+    assert summary["profile_source"] == "built-in px4"
+    assert {d["detector"] for d in summary["detectors"]} >= {"nis", "px4_estimator", "health"}
+    assert summary["filter"]["updates"]["gnss_position"] > 0 and summary["filter"]["updates"]["baro"] > 0
+    assert any("ulog2csv export holds no parameters" in w for w in summary["warnings"])
+    assert "ulog2csv export holds no parameters" in result.stdout  # among the warnings the summary shows
+
+
+def test_an_export_without_px4_imu_topics_still_asks_for_a_profile(cli, tmp_path):
+    folder = _export(tmp_path / "sample_px4_events", "vehicle_status,battery_status")
+    assert builtin_profile_for(folder) is None
+    result = cli("analyze", folder, "--no-report")
+    assert result.exit_code == 2 and "no profile" in result.stderr and "Traceback" not in result.stderr
