@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
 from logscan.needs import Needs, union
 
@@ -55,7 +56,7 @@ def _run_ubikf(model, run, parts: frozenset[str]):
     if interval_model is None:
         raise ProfileError(
             f"the UBIKF needs a model with interval parameters; {model.name!r} has none",
-            hint='use [vehicle] model = "hover_uav" (docs/models.md), or drop the chi2 detector',
+            hint=f'use [vehicle] model = "hover_uav" ({doc_url("models.md")}), or drop the chi2 detector',
         )
     return run_ubikf(interval_model(run.dt), run)
 
@@ -162,7 +163,7 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
         raise ProfileError(
             "no profile: the log embeds none",
             path=str(path),
-            hint="pass --profile PROFILE.toml (see docs/profiles.md)",
+            hint=f"pass --profile PROFILE.toml (see {doc_url('profiles.md')})",
         )
     return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
 
@@ -515,7 +516,7 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
             out.append(
                 f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "
                 "profile mismatch, check units, signs and frames of its channels, or its noise_std "
-                "(docs/troubleshooting.md; logscan train --calibrate)"
+                f"({doc_url('troubleshooting.md')}; logscan train --calibrate)"
             )
         elif ratio < 1.0 / NIS_MISMATCH**2:
             kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from logscan.docs import doc_url
 from logscan.errors import InputError
 
 MIN_IMU_HZ = 50.0  # the ins model holds one IMU sample over a grid period: slower is not an INS
@@ -229,7 +230,7 @@ def px4_profile(log) -> BuiltProfile:
         raise InputError(
             "a PX4 log without an IMU topic (sensor_combined or vehicle_imu): the built-in px4 profile needs one",
             path=path,
-            hint="pass --profile (docs/profiles.md; examples in docs/examples/)",
+            hint=f"pass --profile ({doc_url('profiles.md')}; examples in {doc_url('examples')})",
         )
     topic, gyro, accel, per_second, imu_hz = imu
     # an IMU too slow for the ins model: the filter-free checks still run, on a grid of MIN_IMU_HZ
@@ -237,7 +238,7 @@ def px4_profile(log) -> BuiltProfile:
     rate = _nice_rate(max(imu_hz, MIN_IMU_HZ))
     lines = [
         "# logscan built-in profile `px4`: the IMU-driven ins model on a PX4 flight log, built from the",
-        f"# topics of {path}. Edit and pass it with --profile (docs/profiles.md).",
+        f"# topics of {path}. Edit and pass it with --profile ({doc_url('profiles.md')}).",
         *([f"# The ins model is not run: {model_not_run}. Only the filter-free checks."] * bool(model_not_run)),
         'name = "px4"',
         f'description = "built-in: ins model on {topic}, GNSS, barometer and PX4\'s attitude"',
@@ -439,7 +440,7 @@ def ros2_profile(log) -> BuiltProfile:
             f"a ROS 2 log without an IMU: the built-in ros2 profile needs a {ROS2_IMU} topic "
             "(angular_velocity, linear_acceleration)",
             path=path,
-            hint="pass --profile (docs/profiles.md)",
+            hint=f"pass --profile ({doc_url('profiles.md')})",
         )
     imu = imu_topics[0]
     if len(imu_topics) > 1:
@@ -468,7 +469,7 @@ def ros2_profile(log) -> BuiltProfile:
     lines = [
         "# logscan built-in profile `ros2`: the IMU-driven ins model on a ROS 2 log (ENU world, FLU body,",
         f"# REP 103), its topics chosen by message type from {path}.",
-        "# Edit and pass it with --profile (docs/profiles.md).",
+        f"# Edit and pass it with --profile ({doc_url('profiles.md')}).",
         'name = "ros2"',
         'description = "built-in: ins model on a ROS 2 IMU, NavSatFix and odometry"',
         "",
@@ -545,7 +546,7 @@ def ros2_profile(log) -> BuiltProfile:
             f"a ROS 2 log with an IMU but nothing to check it against: the built-in ros2 profile needs a "
             f"{ROS2_NAVSATFIX} or {ROS2_ODOMETRY} topic",
             path=path,
-            hint="pass --profile (docs/profiles.md)",
+            hint=f"pass --profile ({doc_url('profiles.md')})",
         )
     lines += ["", "[detectors.nis]  # logscan's filter: NIS per group", ""]
     return BuiltProfile("ros2", "\n".join(lines), notes)
