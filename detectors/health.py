@@ -9,7 +9,10 @@ so a count c that alarms when it reaches a limit L is stored as ``c / (L - 1/2)`
 0 or 2, "all n motor outputs saturated" is ``count / (n - 1/2)``. Every statistic alarms through the
 shared logic with ``n_persist`` spanning ``min_duration_s`` at the source's sample rate on the grid.
 
-Checks (a check whose topic or field is absent is skipped, listed in ``info["skipped"]``):
+Checks (a check whose topic or field is absent is skipped, listed in ``info["skipped"]`` and as a
+`logscan.results.NotChecked` line; a sensor in the log that gave no valid sample over the whole
+log, a battery whose ``connected`` is 0 all flight or a GNSS without a 3D fix all flight, is a
+``partial`` one: the log is not fully checked, as with a measurement group without valid samples):
 
 - battery (``battery_status``): ``cells * V_EMPTY / voltage_v``; a reading under 0.5 V while the
   battery says it is connected: ``health.battery_zero``;
@@ -32,9 +35,10 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Interval
-from logscan.detectors.raw_topics import grid_steps, on_grid, persist_count, split_topics
+from logscan.detectors.raw_topics import grid_steps, in_span, on_grid, persist_count, skipped_lines, split_topics
 from logscan.detectors.raw_topics import held as _held
 from logscan.detectors.raw_topics import log_parameter as _parameter
+from logscan.results import NotChecked
 from logscan.run_context import logged_messages
 
 PREFIX = "health"
@@ -148,6 +152,7 @@ class HealthDetector(Detector):
         self._result, self._grid = result, run
         self._checks: dict[str, dict] = {}
         self._skipped: dict[str, str] = {}
+        self._unmonitored: list[str] = []  # sensors in the log without one valid sample: not checked
         try:
             armed = self._arming(topics)
             self._battery(topics, parameters)
@@ -169,6 +174,8 @@ class HealthDetector(Detector):
             result.add_statistic(run.t, NOTHING, np.full(n, np.nan), upper=1.0, valid=np.zeros(n, bool))
         result.info["checks"] = self._checks
         result.info["skipped"] = self._skipped
+        result.not_checked = [NotChecked(reason, partial=True) for reason in self._unmonitored]
+        result.not_checked += [NotChecked(line) for line in skipped_lines(self._skipped, PREFIX)]
         result.info["armed_from"] = armed[0] if armed else None
         return result
 
@@ -234,6 +241,12 @@ class HealthDetector(Detector):
             t, v = voltage.t, voltage.values
             connected = fields.get("connected")
             on = np.ones(t.size, bool) if connected is None else np.nan_to_num(_held(connected, t)) != 0
+            inside = in_span(self._grid, t)
+            if connected is not None and inside.any() and not on[inside].any():
+                seen = v[inside][np.isfinite(v[inside])]
+                volts = f", voltage {seen.min():.2f}-{seen.max():.2f} V" if seen.size else ""
+                self._unmonitored.append(f"battery not monitored: connected=0 all flight ({where}{volts})")
+                continue
             k = instance + 1
             empty = _parameter(parameters, f"BAT{k}_V_EMPTY", "BAT_V_EMPTY")
             v_empty, empty_from = empty if empty else (CELL_EMPTY_V, "default")
@@ -300,7 +313,15 @@ class HealthDetector(Detector):
             if fix is not None and np.array_equal(fix.t, t):
                 three_d = fix.values >= 3
                 first = np.flatnonzero(three_d)
-                if first.size == 0:
+                inside = in_span(self._grid, t)
+                if inside.any() and not three_d[inside].any():
+                    best = int(np.nanmax(fix.values)) if np.isfinite(fix.values).any() else None
+                    self._unmonitored.append(
+                        f"GNSS: no 3D fix all flight ({where}.fix_type"
+                        + (f" at most {best})" if best is not None else " never set)")
+                    )
+                    fixed = np.zeros(t.size, bool)
+                elif first.size == 0:
                     self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where}: no 3D fix in the log"
                     fixed = three_d
                 else:
@@ -323,6 +344,8 @@ class HealthDetector(Detector):
                 self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where} has no fix_type"
             for field, limit, source in (("eph", eph_limit, eph_from), ("epv", epv_limit, epv_from)):
                 name = f"{PREFIX}.gnss_{field}{sfx}"
+                if not fixed.any():  # judged while 3D-fixed only: the line above says it
+                    continue
                 channel = fields.get(field)
                 if channel is None or not np.array_equal(channel.t, t):
                     self._skipped[name] = f"{where} has no {field}"

@@ -1,7 +1,7 @@
 """What the detectors that read a log's own topics (`Detector.raw_topics`: px4_estimator, health)
 share: the raw channels by topic and instance, a sample series placed on the analysis grid, the
-persistence a duration takes at a source's rate, a channel held at given times, and the log's
-parameters."""
+persistence a duration takes at a source's rate, a channel held at given times, the log's
+parameters, and the checks they could not run in words."""
 
 from __future__ import annotations
 
@@ -77,3 +77,29 @@ def log_parameter(parameters: Mapping, *names: str, positive: bool = True) -> tu
         if math.isfinite(value) and (value > 0 or not positive):
             return value, name
     return None
+
+
+def in_span(run, t_ns: np.ndarray) -> np.ndarray:
+    """The samples (times ``t_ns``) inside the analysed span: from the grid's first step to one step
+    after its last."""
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    if not run.n_steps:
+        return np.zeros(t_ns.size, bool)
+    first = run.start_ns + round(float(run.t[0]) * 1e9)
+    last = run.start_ns + round((float(run.t[-1]) + float(run.dt)) * 1e9)
+    return (t_ns >= first) & (t_ns <= last)
+
+
+def skipped_lines(skipped: Mapping[str, str], prefix: str, shown: int = 3) -> list[str]:
+    """The ``skipped`` checks (name -> reason) as one line per reason, naming its checks without
+    ``prefix.`` ("motor_max.1, motor_max.2 and 6 more: actuator_outputs_0: ..."), in first-seen order."""
+    by_reason: dict[str, list[str]] = {}
+    for name, reason in skipped.items():
+        by_reason.setdefault(reason, []).append(name.removeprefix(f"{prefix}."))
+    lines = []
+    for reason, names in by_reason.items():
+        named = ", ".join(names[:shown]) if len(names) <= shown else (
+            f"{', '.join(names[: shown - 1])} and {len(names) - shown + 1} more"
+        )  # fmt: skip
+        lines.append(f"{named}: {reason}")
+    return lines

@@ -110,6 +110,24 @@ class Analysis:
         return bool(self.log.source.partial)
 
     @property
+    def skipped_checks(self) -> list[str]:
+        """The checks the detectors could not run because the log holds nothing for them to judge
+        (`logscan.coverage.skipped_checks`): listed; unlike ``unchecked``, the verdict stands."""
+        from logscan.coverage import skipped_checks
+
+        return skipped_checks(self.results)
+
+    def autopilot_messages(self) -> tuple[list, int]:
+        """(the autopilot's distinct messages of WARNING and above during flight, each with its
+        incident (`logscan.autopilot_messages`); the number logged while disarmed)."""
+        from logscan.autopilot_messages import flight_messages
+
+        context = getattr(self.prepared, "context", None)
+        states = getattr(context, "states", None) or {}
+        metadata = self.log.source.metadata or {}
+        return flight_messages(metadata, self.run.start_ns, self.incidents, states.get("armed"))
+
+    @property
     def duration_s(self) -> float:
         return float(self.run.t[-1] - self.run.t[0])
 
@@ -193,6 +211,8 @@ class Analysis:
             ],
             "incidents": [incident.to_dict(clock) for incident in self.incidents],
             "unchecked": list(self.unchecked),
+            "skipped_checks": self.skipped_checks,
+            **_messages_summary(*self.autopilot_messages(), clock),
             "failed_detectors": [{"detector": f.detector, "error": f.message} for f in self.failures],
             "logscan_version": __version__,
             "profile_source": self.profile_source,
@@ -253,6 +273,8 @@ class Analysis:
             warnings=self.warnings,
             incidents=self.incidents,
             unchecked=self.unchecked + [f.message for f in self.failures],
+            skipped=self.skipped_checks,
+            messages=self.autopilot_messages()[0],
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
             context=getattr(self.prepared, "context", None),
             innovations=getattr(self.prepared, "innovations", None),
@@ -260,6 +282,14 @@ class Analysis:
             recovery=self.recovery_view,
             observability=self.observability,
         )
+
+
+def _messages_summary(messages: list, disarmed: int, clock) -> dict[str, Any]:
+    """The JSON of the autopilot's messages during flight and the count of those while disarmed."""
+    return {
+        "autopilot_messages": [m.to_dict(clock) for m in messages],
+        "autopilot_messages_disarmed": disarmed,
+    }
 
 
 def _stamped(result: dict, clock) -> dict:

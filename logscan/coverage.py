@@ -5,11 +5,25 @@ names was checked. Each rule below yields one line saying what was not checked:
 
 - the log was read only in part (truncated, failed CRC, broken framing: the reader says how much);
 - a measurement group the filter used fewer than ``MIN_UPDATE_FRACTION`` of the updates its rate
-  implies over the log (no valid sample at all, non-finite values, or silent after a while);
+  implies over the log (no valid sample at all, non-finite values, or silent after a while); a
+  group whose ``gate`` was closed all the log (a GNSS without a 3D fix all flight) had no valid
+  sample at all: not checked either (while the gate is closed for part of the log, no sample is
+  expected there);
 - the filter was diverged for more than ``MAX_DIVERGED_FRACTION`` of the grid;
 - a detector statistic that is never finite over the log, or judged on fewer than
   ``MIN_JUDGED_FRACTION`` of its valid samples (a warm-up or window covering most of the log): the
-  detector could not alarm there.
+  detector could not alarm there;
+- a check a detector could not run because its sensor, present in the log, gave no valid sample
+  over the whole log (`logscan.results.NotChecked` with ``partial``: a battery whose ``connected``
+  is 0 all flight, a GNSS without a 3D fix all flight). This is the rule of a measurement group
+  without valid samples, applied to the checks that read the autopilot's topics: the sensor is in
+  the log and nothing of it was judged.
+
+The other checks a detector could not run, because the log holds nothing for them (no such topic
+or field, a vehicle never armed), are `skipped_checks`: listed with their reason in the summary,
+the JSON and the report, so that "every check ran" is said only when it is true, but the verdict
+and the exit code stand (a profile is built from what the log holds; what it does not hold is not
+a part of the log left unjudged).
 """
 
 from __future__ import annotations
@@ -31,9 +45,11 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
         reasons.append(f"the log was read only in part: {source.partial_reason}")
     trace = prepared.trace
     if trace is not None:
-        reasons += _starved_groups(prepared.run, trace)
+        profile = getattr(prepared, "profile", None)
+        reasons += _starved_groups(prepared.run, trace, getattr(profile, "measurements", None))
         reasons += _divergence(trace)
     for result in results:
+        reasons += [f"{result.detector}: {c.reason}" for c in result.not_checked if c.partial]
         for name, series in result.series.items():
             if series.size and not np.isfinite(series).any():
                 reasons.append(f"{result.detector}: {name} was never computed (no finite value over the log)")
@@ -46,7 +62,13 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
     return reasons
 
 
-def _starved_groups(run, trace) -> list[str]:
+def skipped_checks(results: Sequence) -> list[str]:
+    """One line per check a detector could not run because the log holds nothing for it to judge
+    (no such topic or field, never armed): listed, not a reason of "not fully checked"."""
+    return [f"{result.detector}: {c.reason}" for result in results for c in result.not_checked if not c.partial]
+
+
+def _starved_groups(run, trace, specs=None) -> list[str]:
     duration = float(run.t[-1] - run.t[0]) + float(run.dt)
     reasons = []
     for g, name in enumerate(trace.group_names):
@@ -56,7 +78,14 @@ def _starved_groups(run, trace) -> list[str]:
         open_s = max(duration - float(getattr(group, "gated_s", 0.0) or 0.0), 0.0)
         expected = min(open_s * rate, float(run.n_steps))
         used = int(trace.updated[:, g].sum())
-        if used < MIN_UPDATE_FRACTION * expected:
+        spec = (specs or {}).get(name)
+        if used == 0 and expected < 1.0 and getattr(spec, "gate_channel", None):
+            # closed all the log: not one valid sample, the group's sensor was never checked
+            reasons.append(
+                f"measurement group {name!r}: its gate was closed all flight ({spec.gate_channel} below "
+                f"{spec.gate_min:g}{', no 3D fix' if 'fix_type' in spec.gate_channel else ''}): no sample used"
+            )
+        elif used < MIN_UPDATE_FRACTION * expected:
             reasons.append(
                 f"measurement group {name!r}: the filter used {used} of the ~{expected:.0f} updates its "
                 f"{rate:g} Hz rate implies (no valid samples, non-finite values or a silent sensor)"

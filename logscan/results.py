@@ -153,6 +153,20 @@ class Band:
     lower: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class NotChecked:
+    """A check a detector could not run on a log, with its real reason.
+
+    ``partial`` (the log is "not fully checked", exit 2): the sensor is in the log but gave no valid
+    sample to judge over the whole log (a battery reporting ``connected`` 0, a GNSS without a 3D
+    fix), as a measurement group without valid samples is (`logscan.coverage`). Otherwise the log
+    holds nothing for the check to judge (no such topic or field, never armed): listed, the verdict
+    stands."""
+
+    reason: str
+    partial: bool = False
+
+
 @dataclass
 class DetectorResult:
     """What one detector found on one run.
@@ -169,6 +183,7 @@ class DetectorResult:
     possible:   "possible fault" intervals: a warning level below an alarm (e.g. the UBIKF test's
                 upper chi-square sum over its threshold while the lower one is not), drawn and
                 listed apart; they fail a run only with `--fail-on warning` (`add_possible`).
+    not_checked: the checks it could not run, each with its reason (`NotChecked`).
     """
 
     detector: str
@@ -181,6 +196,7 @@ class DetectorResult:
     checks: dict[str, str] = field(default_factory=dict)
     possible: list[AlarmInterval] = field(default_factory=list)
     suppressed: list[tuple[AlarmInterval, str]] = field(default_factory=list)  # (alarm, reason): logscan.suppressions
+    not_checked: list[NotChecked] = field(default_factory=list)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
     judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
     # statistic -> (N,) bool, the samples that could raise an alarm (valid, not in warm-up); the
@@ -269,6 +285,7 @@ class DetectorResult:
             "possible_faults": [a.to_dict() for a in self.possible],
             "suppressed": [{**a.to_dict(), "reason": reason} for a, reason in self.suppressed],
             "warnings": list(self.warnings),
+            "not_checked": [{"reason": c.reason, "partial": c.partial} for c in self.not_checked],
             "info": jsonable(self.info),
             "series": {name: series_summary(v) for name, v in self.series.items()},
         }

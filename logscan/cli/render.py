@@ -95,6 +95,7 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     if not clock.relative:  # seconds since the log's start, as the span above, need no line
         lines.append(f"  times: {_clock_line(clock)}")
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
+    lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
     from logscan.incidents import signal_label
     from logscan.report import overview
@@ -116,6 +117,10 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
                 + (f"  {label}" if label else "")
             )
             shown += 1
+    messages, disarmed = analysis.autopilot_messages()
+    lines += [f"  autopilot: {message.line(clock)}" for message in messages]
+    if disarmed:
+        lines.append(f"  autopilot: {disarmed} more message(s) of WARNING and above while disarmed (in the report)")
     for name, loop in analysis.loops.items():  # a hierarchical profile's further loops
         lines.append(
             f"  loop {name}: {loop.verdict()}  (model {loop.model.name}, {loop.profile.vehicle.rate_hz:g} Hz, "

@@ -60,6 +60,10 @@ class ReportInput:
     warnings:         run-level warnings shown under the verdict.
     incidents:        alarms grouped in time (logscan.incidents), listed before the alarms.
     unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
+    skipped:          the checks with nothing to judge in this log (`logscan.coverage.skipped_checks`),
+                      listed beside ``unchecked`` in the margins section.
+    messages:         the autopilot's messages during flight with their incidents
+                      (`logscan.autopilot_messages.AutopilotMessage`), a table under the incidents.
     groups:           the profile's measurement groups as used, with the filter's counts
                       (`logscan.report.context.measurement_groups`). Empty: not shown.
     context:          the run's path and mode (`logscan.run_context.RunContext`), drawn in the
@@ -88,6 +92,8 @@ class ReportInput:
     warnings: list[str] = field(default_factory=list)
     incidents: list[Incident] = field(default_factory=list)
     unchecked: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    messages: list = field(default_factory=list)
     groups: list[dict] = field(default_factory=list)
     context: RunContext | None = None
     innovations: Innovations | None = None
@@ -397,6 +403,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         n_alarms=len(alarms),
         warnings=[str(w) for w in report.warnings],
         unchecked=[str(u) for u in report.unchecked],
+        skipped=[str(u) for u in report.skipped],
+        messages=[_message_row(m, clock) for m in report.messages],
         incidents=_incident_rows(report.incidents, clock),
         rows=rows,
         rows_hidden=max(len(alarms) - len(rows), 0),
@@ -413,6 +421,20 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         report_js=_report_js(),
         grid={"n": int(t.size), "dt": number_text(float(np.median(np.diff(t))) if t.size > 1 else None)},
     )  # fmt: skip
+
+
+def _message_row(message, clock) -> dict:
+    """One autopilot message as the report's table shows it."""
+    return {
+        "level": message.level,
+        "text": message.text,
+        "time": clock.short(message.first),
+        "last": clock.short(message.last) if message.count > 1 else "",
+        "count": message.count,
+        "incident": "" if message.incident is None else str(message.incident),
+        "start": message.first,
+        "end": message.last,
+    }
 
 
 def render_report(report: ReportInput, path: str | os.PathLike, *, plotlyjs: str | os.PathLike = "embed") -> None:

@@ -1,0 +1,73 @@
+"""The autopilot's own warnings and errors during flight are listed beside the verdict, each with
+the incident it falls in, identical ones folded with a count: on crafted messages, and on the real
+robologs flight whose autopilot told its pilot "Dangerous battery level!, please land!"."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import pytest
+from conftest import need_testdata
+
+from logscan.autopilot_messages import flight_messages
+
+START_NS = 10_000_000_000  # the run's time zero: 10 s of the log's clock
+
+
+def _metadata(*messages: tuple[float, str, str]) -> dict:
+    """``ulog.messages`` as the ULog reader writes them: "<seconds> s [<LEVEL>] <text>"."""
+    return {"ulog.messages": {f"{k:05d}": f"{t:.6f} s [{level}] {text}" for k, (t, level, text) in enumerate(messages)}}
+
+
+def test_repeated_messages_are_folded_per_incident_and_disarmed_ones_counted():
+    metadata = _metadata(
+        (11.0, "WARNING", "[health_and_arming_checks] Preflight: GPS fix too low"),  # before arming
+        (13.0, "ERROR", "[commander] Dangerous battery level!, please land!"),
+        (14.0, "ERROR", "[commander] Dangerous battery level!, please land!"),
+        (15.2, "ERROR", "[commander] Dangerous battery level!, please land!"),
+        (20.5, "CRITICAL", "[commander] Failsafe activated"),
+        (21.0, "INFO", "[commander] Landing detected"),  # below WARNING: never listed
+        (26.0, "ERROR", "[commander] Dangerous battery level!, please land!"),
+    )
+    incidents = [SimpleNamespace(start=4.0, end=4.1), SimpleNamespace(start=11.0, end=12.0)]
+    messages, disarmed = flight_messages(metadata, START_NS, incidents, armed=[(2.0, 15.5)])
+    assert disarmed == 2  # the preflight warning at 1 s and the error at 16 s, after disarming
+    assert [(m.level, m.first, m.last, m.count, m.incident) for m in messages] == [
+        ("ERROR", 3.0, 4.0, 2, 1),  # 3.0 s is within 1 s of incident 1, 4.0 s inside it
+        ("ERROR", 5.2, 5.2, 1, None),
+        ("CRITICAL", 10.5, 10.5, 1, 2),
+    ]
+    assert messages[0].line() == (
+        "ERROR at 3.0 s: [commander] Dangerous battery level!, please land! (x2, until 4.0 s; in incident 1)"
+    )
+    # unknown arming state: every message of the log is the flight's
+    every, none_disarmed = flight_messages(metadata, START_NS, [], armed=None)
+    assert none_disarmed == 0 and sum(m.count for m in every) == 6
+    assert flight_messages({}, START_NS, [], armed=None) == ([], 0)
+
+
+@pytest.mark.testdata("px4-ulog-extra")
+def test_the_robologs_flight_lists_its_dangerous_battery_error(cli, tmp_path):
+    path = need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+    summary, report = tmp_path / "s.json", tmp_path / "r.html"
+    result = cli("analyze", path, "-o", report, "--json", summary)
+    assert "Traceback" not in result.stderr
+    (log,) = json.loads(summary.read_text())["logs"]
+    battery = [m for m in log["autopilot_messages"] if "Dangerous battery level" in m["text"]]
+    assert len(battery) == 1 and battery[0]["level"] == "ERROR" and battery[0]["count"] == 1, log["autopilot_messages"]
+    # the ERROR came 0.109 s after the log started (boot time 3.238 s), armed
+    assert battery[0]["start_clock"] == pytest.approx(3.238, abs=0.01)
+    printed = [line for line in result.stdout.splitlines() if "Dangerous battery level" in line]
+    assert len(printed) == 1 and printed[0].startswith("  autopilot: ERROR at 3.24 s: [commander]"), result.stdout
+    if battery[0]["incident"] is not None:
+        number = battery[0]["incident"]
+        incident = log["incidents"][number - 1]
+        assert incident["start"] - 1.0 <= battery[0]["start"] <= incident["end"] + 1.0
+        assert printed[0].endswith(f"(in incident {number})")
+    # PX4 switched its primary EKF twice from instance 1 to 0: one line with its count
+    switched = [m for m in log["autopilot_messages"] if m["text"] == "[ekf2] primary EKF changed 1 (filter fault) -> 0"]
+    assert sum(m["count"] for m in switched) == 2
+    page = report.read_text(encoding="utf-8")
+    table = page[page.index('id="autopilot-messages"') :]
+    assert "Dangerous battery level!, please land!" in table[: table.index("</table>")]
