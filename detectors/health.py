@@ -19,8 +19,9 @@ log, a battery whose ``connected`` is 0 all flight or a GNSS without a 3D fix al
 - GNSS (``vehicle_gps_position``, else ``sensor_gps``), while armed when the arming state is
   known: fix lost after the first 3D fix, ``eph`` / ``epv`` over EKF2_REQ_EPH / EKF2_REQ_EPV while
   3D-fixed, ``jamming_indicator`` over ``jamming_limit``;
-- motors (``actuator_outputs`` and ``actuator_armed`` / ``vehicle_status``): saturated share, one
-  output at its max, an output at or below its disarmed value while flying;
+- motors (``actuator_outputs``, ``actuator_motors``, ``actuator_armed`` / ``vehicle_status``):
+  saturated share, one output at its max, an output at its stopped value while flying; judged
+  only on outputs that drive motors PX4 commands to run (detectors/motor_outputs.py);
 - IMU clipping (``sensor_combined``, ``vehicle_imu``), estimator faults (``estimator_status``),
   errors in the logged messages, and sensor timeouts (a gap of more than ``timeout_periods``
   median periods in any topic read).
@@ -28,12 +29,10 @@ log, a battery whose ``connected`` is 0 all flight or a GNSS without a 3D fix al
 
 from __future__ import annotations
 
-import re
-from collections.abc import Mapping
-
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.motor_outputs import MotorGroup, motor_groups
 from logscan.detectors.params import Interval
 from logscan.detectors.raw_topics import grid_steps, in_span, on_grid, persist_count, skipped_lines, split_topics
 from logscan.detectors.raw_topics import held as _held
@@ -47,13 +46,14 @@ BATTERY = "battery_status"
 GPS = "vehicle_gps_position"
 SENSOR_GPS = "sensor_gps"
 OUTPUTS = "actuator_outputs"
+MOTORS = "actuator_motors"
 ARMED = "actuator_armed"
 STATUS = "vehicle_status"
 LAND = "vehicle_land_detected"
 COMBINED = "sensor_combined"
 IMU = "vehicle_imu"
 ESTIMATOR = "estimator_status"
-TOPIC_NAMES = (BATTERY, GPS, SENSOR_GPS, OUTPUTS, ARMED, STATUS, LAND, COMBINED, IMU, ESTIMATOR)
+TOPIC_NAMES = (BATTERY, GPS, SENSOR_GPS, OUTPUTS, MOTORS, ARMED, STATUS, LAND, COMBINED, IMU, ESTIMATOR)
 # published on change, not at a rate: a long interval is no timeout
 EVENT_TOPICS = (ARMED, STATUS, LAND)
 
@@ -62,12 +62,7 @@ ZERO_VOLTAGE_V = 0.5  # a battery reading below this is "about 0 V"
 CELL_EMPTY_V = 3.3  # per-cell empty voltage when the log has no BAT*_V_EMPTY
 REQ_EPH_M = 3.0  # PX4's EKF2_REQ_EPH default
 REQ_EPV_M = 5.0  # PX4's EKF2_REQ_EPV default
-PWM_MAX = 2000.0  # PX4's PWM_MAIN_MAX default
 ARMED_STATE = 2  # vehicle_status.arming_state ARMED
-MOTOR_FUNCTIONS = range(101, 113)  # PWM_MAIN_FUNCn Motor1..Motor12 (PX4 v1.13+)
-# MAV_TYPE of multicopters (MAVLink: quad, coaxial, hexa, octo, tri, dodeca, deca): without
-# PWM_MAIN_FUNCn their first noutputs outputs are taken for motors; other vehicles' are not
-MULTICOPTERS = (2, 3, 13, 14, 15, 29, 35)
 LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR")  # pyulog's log_level_str, severe ones
 MAX_LOGGED_ERRORS = 50
 
@@ -77,11 +72,6 @@ NO_TOPICS = (
     "vehicle_imu, estimator_status) and no logged messages"
 )
 NOTHING = f"{PREFIX}.checks"  # the statistic that stands for "nothing was checked" (never finite)
-
-
-def _same_times(fields: Mapping, names) -> bool:
-    t = fields[names[0]].t
-    return all(np.array_equal(fields[n].t, t) for n in names[1:])
 
 
 def _suffix(instance: int) -> str:
@@ -368,103 +358,52 @@ class HealthDetector(Detector):
                 limit = {"indicator": float(self.jamming_limit), "while": while_}
                 self._add(name, where, t, values, limit=limit, why=f" ({while_})")
 
-    # --- 3. motors -------------------------------------------------------------------------------
+    # --- 3. motors (which outputs are motors and their levels: motor_outputs.py) ----------------
     def _motors(self, topics, parameters, armed) -> None:
-        found = sorted(i for t, i in topics if t == OUTPUTS)
-        if not found:
+        if not any(t == OUTPUTS for t, _ in topics):
             self._skipped["motors"] = f"no {OUTPUTS} topic"
             return
         if armed is None:
             self._skipped["motors"] = f"arming state unknown (no {ARMED}.armed, no {STATUS}.arming_state)"
             return
-        for instance in found:
-            fields = topics[(OUTPUTS, instance)]
-            where = f"{OUTPUTS}_{instance}"
-            group = "MAIN" if instance == 0 else "AUX"
-            label = "" if instance == 0 else "aux"
-            sfx = "" if instance == 0 else ".aux"
-            outputs = sorted(int(m.group(1)) for f in fields if (m := re.fullmatch(r"output\[(\d+)\]", f)) is not None)
-            if not outputs:
-                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = f"{where} has no output[k] fields"
-                continue
-            t = fields[f"output[{outputs[0]}]"].t
-            if not _same_times(fields, [f"output[{k}]" for k in outputs]):
-                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = f"{where}: outputs with different sample times"
-                continue
-            functions = {k: _parameter(parameters, f"PWM_{group}_FUNC{k + 1}", positive=False) for k in outputs}
-            if any(functions.values()):
-                motors = [k for k, f in functions.items() if f is not None and int(f[0]) in MOTOR_FUNCTIONS]
-                mapping = f"PWM_{group}_FUNCn in 101..112"
-                used = np.ones((t.size, len(motors)), bool)
-            elif instance == 0:
-                vehicle = _parameter(parameters, "MAV_TYPE", positive=False)
-                if vehicle is not None and int(vehicle[0]) not in MULTICOPTERS:
-                    self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = (
-                        f"{where}: no PWM_MAIN_FUNCn and MAV_TYPE {int(vehicle[0])} is not a multicopter: "
-                        "its outputs drive servos too, which of them are motors is unknown"
-                    )
-                    continue
-                if "noutputs" in fields:
-                    n_out = np.nan_to_num(_held(fields["noutputs"], t))
-                else:
-                    n_out = np.full(t.size, len(outputs))
-                motors = [k for k in outputs if k < n_out.max()]
-                mapping = "the first noutputs outputs (no PWM_MAIN_FUNCn)"
-                used = np.asarray(motors, dtype=np.int64)[None, :] < n_out[:, None]
-            else:
-                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = (
-                    f"{where}: no PWM_AUX_FUNCn, so which outputs drive motors is unknown (AUX outputs drive servos)"
-                )
-                continue
-            if not motors:
-                self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = f"{where}: no output is a motor ({mapping})"
-                continue
-            values = np.column_stack([fields[f"output[{k}]"].values for k in motors])
-            top = np.array([self._pwm(parameters, group, "MAX", k, PWM_MAX) for k in motors])
-            bottom = np.array([self._pwm(parameters, group, "DIS", k, 0.0) for k in motors])
-            on = armed[1](t)
-            fly = armed[2](t)
-            saturated = (values >= top[None, :] - 0.5) & used
-            n_used = used.sum(axis=1)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                share = np.where(on & (n_used > 0), saturated.sum(axis=1) / (n_used - 0.5), np.nan)
-            limits = {
-                "mapping": mapping,
-                "outputs": [f"{label}{k + 1}" for k in motors],
-                "max": top.tolist(),
-                "disarmed": bottom.tolist(),
-            }
-            why = " (armed)"
-            self._add(f"{PREFIX}.motor_saturated{sfx}", where, t, share, limit={**limits, "all_outputs": True}, why=why)
-            for j, k in enumerate(motors):
-                flag = np.where(on & used[:, j], np.where(saturated[:, j], FLAG, 0.0), np.nan)
-                self._add(
-                    f"{PREFIX}.motor_max.{label}{k + 1}",
-                    where,
-                    t,
-                    flag,
-                    limit={"output": f"{label}{k + 1}", "field": f"output[{k}]", "max": float(top[j])},
-                    why=why,
-                )
-            low = (values <= bottom[None, :] + 0.5) & used
-            zero = np.where(fly & (n_used > 0), np.where(low.any(axis=1), FLAG, 0.0), np.nan)
-            limit = {**limits, "while": "armed and flying"}
-            if self._add(f"{PREFIX}.motor_zero{sfx}", where, t, zero, limit=limit, why=" (armed and flying)"):
-                hit = low & fly[:, None]
-                self._checks[f"{PREFIX}.motor_zero{sfx}"]["outputs_at_disarmed"] = [
-                    f"{label}{k + 1}" for j, k in enumerate(motors) if hit[:, j].any()
-                ]
+        groups, skipped = motor_groups(topics, parameters, armed)
+        for sfx, why in skipped.items():
+            self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = why
+        for group in groups:
+            self._motor_checks(group, armed)
 
-    @staticmethod
-    def _pwm(parameters, group: str, kind: str, k: int, default: float) -> float:
-        """An output's PWM max ("MAX") or disarmed value ("DIS") from the log's parameters: the
-        output's own (PWM_MAIN_MAXn, v1.13+), the group's, the legacy PWM_MAX / PWM_DISARMED."""
-        names = {
-            "MAX": (f"PWM_{group}_MAX{k + 1}", f"PWM_{group}_MAX", "PWM_MAX"),
-            "DIS": (f"PWM_{group}_DIS{k + 1}", f"PWM_{group}_DISARM", "PWM_DISARMED"),
-        }[kind]
-        found = _parameter(parameters, *names)
-        return found[0] if found else default
+    def _motor_checks(self, group: MotorGroup, armed) -> None:
+        """Saturated share, each motor at its max (while armed), any motor stopped (while flying),
+        each judged only where PX4 commands that motor to run (``group.runs``)."""
+        t, values, runs, label, where = group.t, group.values, group.runs, group.label, group.where
+        sfx = f".{label}" if label else ""
+        on = armed[1](t)
+        fly = armed[2](t)
+        saturated = (values >= group.top[None, :] - 0.5) & runs
+        n_runs = runs.sum(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(on & (n_runs > 0), saturated.sum(axis=1) / (n_runs - 0.5), np.nan)
+        why = " (armed)"
+        limits = group.limits
+        self._add(f"{PREFIX}.motor_saturated{sfx}", where, t, share, limit={**limits, "all_outputs": True}, why=why)
+        for j, k in enumerate(group.outputs):
+            flag = np.where(on & runs[:, j], np.where(saturated[:, j], FLAG, 0.0), np.nan)
+            self._add(
+                f"{PREFIX}.motor_max.{label}{k + 1}",
+                where,
+                t,
+                flag,
+                limit={"output": f"{label}{k + 1}", "field": f"output[{k}]", "max": float(group.top[j])},
+                why=why,
+            )
+        stopped = (values <= group.stop[None, :] + 0.5) & runs & fly[:, None]
+        judged = fly & (n_runs > 0)
+        zero = np.where(judged, np.where(stopped.any(axis=1), FLAG, 0.0), np.nan)
+        name = f"{PREFIX}.motor_zero{sfx}"
+        if self._add(name, where, t, zero, limit={**limits, "while": "armed and flying"}, why=" (armed and flying)"):
+            self._checks[name]["outputs_stopped"] = [
+                f"{label}{k + 1}" for j, k in enumerate(group.outputs) if stopped[:, j].any()
+            ]
 
     # --- 4. IMU clipping, 5. estimator faults ----------------------------------------------------
     def _flag_check(self, topics, topic: str, field: str, name_of) -> bool:

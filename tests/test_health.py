@@ -65,7 +65,9 @@ def crafted_log(path: Path, *, faults: bool = True) -> Path:
     gps_us = times(5)
     fix = np.full(gps_us.size, 3.0)
     out_us = times(10)
-    outputs = np.full((out_us.size, 4), 1500.0)
+    # motors as PX4 drives them: at the disarmed value (900) until armed, then near hover, varying
+    outputs = np.round(1500.0 + rng.normal(0.0, 20.0, (out_us.size, 4)))
+    outputs[out_us / 1e6 < 5.0] = 900.0
     if faults:
         voltage[between(bat_us, 30.0, 35.0)] = 12.4
         voltage[between(bat_us, 45.0, 48.0)] = 0.0

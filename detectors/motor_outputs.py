@@ -1,0 +1,214 @@
+"""Which of a PX4 log's actuator outputs drive motors, and which output values mean "stopped" and
+"full", as PX4 drives them: the protocol from the timer parameters, the motors from the output
+functions and the motor topic, reduced to the outputs that were active while armed.
+
+Read by the `health` detector's motor checks (docs/algorithms.md section 3c). PX4 facts used:
+
+- ``PWM_MAIN_TIMn`` / ``PWM_AUX_TIMn`` (v1.13+, pwm_out's module.yaml): a timer's protocol, > 0 PWM
+  at that rate, -1 OneShot, -2 to -5 DShot1200 to DShot150, -6 to -8 bidirectional DShot. Legacy
+  logs: ``DSHOT_CONFIG`` > 0 puts the FMU outputs (AUX with an IO board, ``SYS_USE_IO`` 1) on DShot.
+- a DShot output's value in ``actuator_outputs`` is 0 disarmed or stopped, 1 to 1999 running
+  (the driver's DSHOT_DISARM_VALUE, DSHOT_MIN_THROTTLE, DSHOT_MAX_THROTTLE); PWM and OneShot
+  outputs are microseconds, stopped at their disarmed value (``PWM_MAIN_DISn``...).
+- ``PWM_MAIN_FUNCn`` / ``PWM_AUX_FUNCn`` 101 to 112: the output drives Motor 1 to 12.
+- ``actuator_motors`` (v1.14+): the allocator's command per motor, NaN where a motor is disarmed,
+  unused or stopped on purpose (a VTOL's hover motors in forward flight, a plane's motor at zero
+  thrust): a motor is judged only where PX4 commands it to run.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.detectors.raw_topics import held, log_parameter
+
+OUTPUTS = "actuator_outputs"
+MOTORS = "actuator_motors"
+MOTOR_FUNCTIONS = range(101, 113)  # PWM_MAIN_FUNCn Motor1..Motor12 (PX4 v1.13+)
+# MAV_TYPE of multicopters (MAVLink: quad, coaxial, hexa, octo, tri, dodeca, deca): without
+# PWM_MAIN_FUNCn their first noutputs outputs are taken for motors; other vehicles' are not
+MULTICOPTERS = (2, 3, 13, 14, 15, 29, 35)
+PWM_MAX = 2000.0  # PX4's PWM_MAIN_MAX default
+DSHOT_STOP = 0.0  # DSHOT_DISARM_VALUE
+DSHOT_MAX = 1999.0  # DSHOT_MAX_THROTTLE
+ONE_COUNT = 0.5  # outputs are integers: half a count is "equal"
+TIMER_NAMES = {-1: "OneShot", -2: "DShot1200", -3: "DShot600", -4: "DShot300", -5: "DShot150"}
+TIMER_NAMES |= {-6: "BDShot600", -7: "BDShot300", -8: "BDShot150"}
+
+
+@dataclass
+class MotorGroup:
+    """The motor outputs of one ``actuator_outputs`` instance: (n samples, m motors) arrays."""
+
+    where: str  # actuator_outputs_<i>
+    label: str  # "" (MAIN) or "aux": the prefix of an output's number in statistic names
+    t: np.ndarray  # int64 ns
+    outputs: list[int]  # output index k (0-based) of each column
+    values: np.ndarray  # (n, m) the logged output values
+    stop: np.ndarray  # (m,) the value that means stopped (the disarmed value of its protocol)
+    top: np.ndarray  # (m,) the value that means full
+    runs: np.ndarray  # (n, m) armed, and PX4 commands this motor to run (actuator_motors finite)
+    limits: dict = field(default_factory=dict)  # what was taken and from where, for info["checks"]
+
+
+def motor_groups(topics, parameters, armed) -> tuple[list[MotorGroup], dict[str, str]]:
+    """The motor groups of the log, and {instance suffix ("" / ".aux"): why not checked}."""
+    groups: list[MotorGroup] = []
+    skipped: dict[str, str] = {}
+    commands = _commands(topics)
+    for instance in sorted(i for topic, i in topics if topic == OUTPUTS):
+        sfx = "" if instance == 0 else ".aux" if instance == 1 else f".aux{instance}"
+        found = _group(topics[(OUTPUTS, instance)], instance, parameters, armed, commands)
+        if isinstance(found, str):
+            skipped[sfx] = found
+        else:
+            groups.append(found)
+    return groups, skipped
+
+
+def _commands(topics) -> dict[int, object]:
+    """Motor index -> its ``actuator_motors_0.control[m]`` channel (empty when not logged)."""
+    fields = topics.get((MOTORS, 0), {})
+    return {int(m.group(1)): ch for f, ch in fields.items() if (m := re.fullmatch(r"control\[(\d+)\]", f))}
+
+
+def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | str:
+    where = f"{OUTPUTS}_{instance}"
+    outputs = sorted(int(m.group(1)) for f in fields if (m := re.fullmatch(r"output\[(\d+)\]", f)) is not None)
+    if not outputs:
+        return f"{where} has no output[k] fields"
+    t = fields[f"output[{outputs[0]}]"].t
+    if not all(np.array_equal(fields[f"output[{k}]"].t, t) for k in outputs):
+        return f"{where}: outputs with different sample times"
+    if instance > 1:
+        return f"{where}: which output parameters (MAIN or AUX) describe instance {instance} is unknown"
+    group = "MAIN" if instance == 0 else "AUX"
+    mapped = _motor_map(fields, outputs, t, instance, group, parameters)
+    if isinstance(mapped, str):
+        return f"{where}: {mapped}"
+    motor_of, mapping = mapped
+    if not motor_of:
+        return f"{where}: no output is a motor ({mapping})"
+    motors = sorted(motor_of)
+    values = np.column_stack([fields[f"output[{k}]"].values for k in motors]).astype(np.float64)
+    on = armed[1](t)
+    kind, protocol = _protocol(parameters, group)
+    stop, stop_from = _stops(parameters, group, motors, kind, values, on)
+    top = np.array([_top(parameters, group, k, kind) for k in motors])
+    # a motor PX4 commands: finite in actuator_motors (when logged) while armed
+    if commands:
+        command = np.column_stack(
+            [
+                np.isfinite(held(commands[motor_of[k]], t)) if motor_of[k] in commands else np.zeros(t.size, bool)
+                for k in motors
+            ]
+        )
+    else:
+        command = np.ones(values.shape, bool)
+    runs = on[:, None] & command
+    # an output never active while armed (constant: unused channel, unused group, no ESC) is no motor
+    seen = runs & np.isfinite(values)
+    high = np.max(np.where(seen, values, -np.inf), axis=0)
+    low = np.min(np.where(seen, values, np.inf), axis=0)
+    active = high - low > ONE_COUNT  # False for a motor never seen running
+    label = "" if instance == 0 else "aux"
+    names = [f"{label}{k + 1}" for k in motors]
+    limits = {
+        "mapping": mapping,
+        "protocol": protocol,
+        "motor_topic": f"{MOTORS}_0 (judged where its command is finite)" if commands else None,
+        "outputs": [n for n, a in zip(names, active) if a],
+        "not_motors": [n for n, a in zip(names, active) if not a],
+        "max": top[active].tolist(),
+        "stopped_at": stop[active].tolist(),
+        "stopped_from": [s for s, a in zip(stop_from, active) if a],
+    }
+    if not active.any():
+        return f"{where}: no motor output was active while armed ({', '.join(names)} constant or never commanded)"
+    keep = np.flatnonzero(active)
+    return MotorGroup(
+        where, label, t, [motors[j] for j in keep], values[:, keep], stop[keep], top[keep], runs[:, keep], limits
+    )
+
+
+def _motor_map(fields, outputs, t, instance: int, group: str, parameters) -> tuple[dict[int, int], str] | str:
+    """({output k: motor index}, how it was found), or why it cannot be known."""
+    functions = {k: log_parameter(parameters, f"PWM_{group}_FUNC{k + 1}", positive=False) for k in outputs}
+    if any(functions.values()):
+        motor_of = {k: int(f[0]) - 101 for k, f in functions.items() if f is not None and int(f[0]) in MOTOR_FUNCTIONS}
+        return motor_of, f"PWM_{group}_FUNCn in 101..112"
+    if instance != 0:
+        return f"no PWM_{group}_FUNCn, so which outputs drive motors is unknown (AUX outputs drive servos)"
+    vehicle = log_parameter(parameters, "MAV_TYPE", positive=False)
+    if vehicle is not None and int(vehicle[0]) not in MULTICOPTERS:
+        return (
+            f"no PWM_MAIN_FUNCn and MAV_TYPE {int(vehicle[0])} is not a multicopter: "
+            "its outputs drive servos too, which of them are motors is unknown"
+        )
+    n_out = np.nan_to_num(held(fields["noutputs"], t)).max() if "noutputs" in fields else len(outputs)
+    return {k: k for k in outputs if k < n_out}, "the first noutputs outputs (no PWM_MAIN_FUNCn)"
+
+
+def _protocol(parameters, group: str) -> tuple[str, str]:
+    """("pwm" | "dshot" | "mixed", the parameters that say so) for a group's outputs."""
+    pattern = re.compile(rf"PWM_{group}_TIM(\d+)")
+    timers = {}
+    for name in parameters:
+        if pattern.fullmatch(str(name)) and (found := log_parameter(parameters, name, positive=False)):
+            timers[str(name)] = int(found[0])
+    if timers:
+        dshot = [v for v in timers.values() if v <= -2]
+        said = ", ".join(
+            f"{n} = {v} ({TIMER_NAMES.get(v, f'PWM {v} Hz' if v > 0 else 'unknown')})"
+            for n, v in sorted(timers.items())
+        )
+        if not dshot:
+            return "pwm", said
+        return ("dshot" if len(dshot) == len(timers) else "mixed"), said
+    config = log_parameter(parameters, "DSHOT_CONFIG", positive=True)
+    if config is not None:  # legacy: DShot on the FMU outputs, AUX on a board with an IO
+        io = log_parameter(parameters, "SYS_USE_IO", positive=True)
+        fmu = "AUX" if io is not None else "MAIN"
+        if fmu == group:
+            return "dshot", f"DSHOT_CONFIG = {int(config[0])} (DShot on the FMU outputs: {fmu})"
+    return "pwm", "no DShot timer (PWM)"
+
+
+def _stops(parameters, group: str, motors, kind: str, values, on) -> tuple[np.ndarray, list[str]]:
+    """Each motor output's stopped value and where it came from. DShot: 0. PWM: its disarmed
+    value parameter, else the value it held while disarmed in this log. A group with both
+    DShot and PWM timers: 0 (which timer drives which output is board wiring the log lacks, and
+    0 is "stopped" in both protocols)."""
+    stops, whence = [], []
+    for j, k in enumerate(motors):
+        if kind in ("dshot", "mixed"):
+            stops.append(DSHOT_STOP)
+            whence.append("DShot disarmed value" if kind == "dshot" else "0: DShot and PWM timers in the group")
+            continue
+        names = (f"PWM_{group}_DIS{k + 1}", f"PWM_{group}_DISARM", f"PWM_{group}_DISARMED", "PWM_DISARMED")
+        found = next((n for n in names if (log_parameter(parameters, n, positive=False) or (-1.0,))[0] >= 0), None)
+        if found is not None:  # PX4 writes -1 for "not set"; 0 (no pulse) is a disarmed value
+            stops.append(log_parameter(parameters, found, positive=False)[0])
+            whence.append(found)
+            continue
+        off = values[~on, j]
+        off = off[np.isfinite(off)]
+        if off.size:
+            levels, counts = np.unique(off, return_counts=True)
+            stops.append(float(levels[np.argmax(counts)]))
+            whence.append("its value while disarmed")
+        else:
+            stops.append(0.0)
+            whence.append("unknown: 0")
+    return np.asarray(stops, dtype=np.float64), whence
+
+
+def _top(parameters, group: str, k: int, kind: str) -> float:
+    """An output's full value: DShot 1999; PWM its max parameter (PWM_MAIN_MAXn, v1.13+, the
+    group's, the legacy PWM_MAX) else 2000; a mixed group the larger of the two."""
+    found = log_parameter(parameters, f"PWM_{group}_MAX{k + 1}", f"PWM_{group}_MAX", "PWM_MAX")
+    pwm = found[0] if found else PWM_MAX
+    return {"dshot": DSHOT_MAX, "pwm": pwm}.get(kind, max(pwm, DSHOT_MAX))
