@@ -31,7 +31,8 @@ belongs to another check for scoring says so with ``add_statistic(..., check="e_
 
 Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.models.base.Model),
 ``log_name``, ``traces`` (every filter trace the pipeline ran, by filter name), ``alarm_policy``
-(the profile's alarm floors, applied by `new_result` to every statistic), ``truth`` (a simulated
+(the profile's alarm floors, applied by `new_result` to every statistic; its suspended steps to
+every statistic but those of a detector with ``raw_topics``, which are never suspended), ``truth`` (a simulated
 log's ground truth: fault events and transients; None for real logs; never used to detect, only to
 report against, e.g. fusion error against the fault-free fusion), ``raw`` (the channels of the
 detector's `raw_topics` present in the log, as read: channel name -> logscan.log.Channel) and
@@ -265,8 +266,11 @@ class Detector:
             self.check_trained()
         if self.requires_trace and trace is None:
             raise UsageError(f"detector {self.name!r} needs the filter trace, but none was given")
-        # the profile's alarm floors reach every statistic through new_result()
-        self._alarm_policy = context.pop("alarm_policy", None)
+        # the profile's alarm floors reach every statistic through new_result(); its suspension (the
+        # ground, take-off and landing, the filter converging) only the model's: a detector that reads
+        # the autopilot's own topics (raw_topics) judges what the vehicle reported, on the whole log
+        policy = context.pop("alarm_policy", None)
+        self._alarm_policy = policy.unsuspended() if policy is not None and self.raw_topics else policy
         try:
             result = self._run(run, trace, **context)
         finally:

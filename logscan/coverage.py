@@ -35,6 +35,10 @@ import numpy as np
 MIN_UPDATE_FRACTION = 0.5  # of the updates a group's nominal rate implies over the log
 MAX_DIVERGED_FRACTION = 0.5  # of the grid steps
 MIN_JUDGED_FRACTION = 0.5  # of a statistic's valid samples that are out of warm-up
+# of the flight (the whole log without a ground channel, or when it never flew) that the [alarms]
+# policy may leave unjudged (ground, take-off, landing, the filter converging) before the log is "not
+# fully checked": beyond it the model-based statistics judged less of the flight than they skipped
+MAX_UNJUDGED_FLIGHT = 0.5
 
 
 def unchecked_reasons(prepared, results: Sequence) -> list[str]:
@@ -99,3 +103,42 @@ def _divergence(trace) -> list[str]:
     if fraction > MAX_DIVERGED_FRACTION:
         return [f"the filter was diverged for {100 * fraction:.0f} % of the log"]
     return []
+
+
+def unjudged_flight(policy, run) -> tuple[str, bool] | None:
+    """What a suspending [alarms] policy (`AlarmPolicy.suspend` already applied) left unjudged of the
+    model-based statistics, in one line, and whether it is more than MAX_UNJUDGED_FLIGHT of the
+    flight (the log is then not fully checked: the line is its reason, else a warning). None: the
+    policy suspended nothing."""
+    if policy is None or policy.suspended is None:
+        return None
+    suspended = np.asarray(policy.suspended, dtype=bool)
+    airborne = policy.airborne
+    flew = airborne is not None and bool(np.any(airborne))
+    scope = np.asarray(airborne, dtype=bool) if flew else np.ones(suspended.size, dtype=bool)
+    dt = float(run.dt)
+    unjudged_s, scope_s = float(np.sum(suspended & scope)) * dt, float(np.sum(scope)) * dt
+    over = unjudged_s > MAX_UNJUDGED_FLIGHT * scope_s
+    why = ", ".join(
+        part
+        for part, on in (
+            (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.ignore_start_s > 0),
+            (
+                f"on the ground ({policy.ground_channel}), {policy.after_ground_s:g} s after take-off"
+                + (f" and {policy.before_ground_s:g} s before landing" if policy.before_ground_s else ""),
+                bool(policy.ground_channel),
+            ),
+        )
+        if on
+    )
+    total = f"{float(suspended.sum()) * dt:.1f} s of {suspended.size * dt:.1f} s"
+    if flew:
+        share = f"{total} ({unjudged_s:.1f} s of the {scope_s:.1f} s in flight)"
+    elif airborne is not None:
+        share = f"{total} (never in flight by {policy.ground_channel})"
+    else:
+        share = total
+    line = f"not judged for {share}: {why}"
+    if over:
+        line = f"the model-based statistics (not the autopilot's own checks) were {line}"
+    return line, over

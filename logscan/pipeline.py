@@ -398,7 +398,7 @@ def detect(
     then serves no further detector). ``sensor_views``: pack the EKF's innovations, when it kept
     them, for the report (`Prepared.innovations`, `logscan.sensor_views`)."""
     from logscan.analysis import Analysis
-    from logscan.coverage import unchecked_reasons
+    from logscan.coverage import unchecked_reasons, unjudged_flight
     from logscan.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
 
     step = progress or (lambda message: None)
@@ -412,23 +412,11 @@ def detect(
     policy = prepared.profile.alarm_policy
     if policy is not None and policy.suspends:
         policy = policy.suspend(prepared.run.t, prepared.run.ground)
-        if policy.suspended is not None:
-            seconds = float(policy.suspended.sum()) * prepared.run.dt
-            analysis.warnings.append(
-                f"not judged for {seconds:.1f} s of {prepared.run.n_steps * prepared.run.dt:.1f} s: "
-                + ", ".join(
-                    part
-                    for part, on in (
-                        (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.ignore_start_s > 0),
-                        (
-                            f"on the ground ({policy.ground_channel}), {policy.after_ground_s:g} s after take-off"
-                            + (f" and {policy.before_ground_s:g} s before landing" if policy.before_ground_s else ""),
-                            bool(policy.ground_channel),
-                        ),
-                    )
-                    if on
-                )
-            )
+    # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
+    # a warning, or the log is not fully checked when it kept them from most of the flight
+    unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
+    if unjudged is not None and not unjudged[1]:
+        analysis.warnings.append(unjudged[0])
     # the detectors that read the samples first (the frozen-sensor check), so the report's pack of
     # innovations can then take the samples' buffer (`_pack_innovations`); results in the given order
     order = sorted(range(len(detectors)), key=lambda i: not _reads_samples(detectors[i]))
@@ -467,6 +455,8 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
+    if unjudged is not None and unjudged[1]:
+        analysis.unchecked.append(unjudged[0])
     if prepared.loaded.model_not_run:  # its filter's detectors were not run (`filter_free`)
         model = prepared.profile.vehicle.model
         analysis.unchecked.insert(0, f"the {model} model (logscan's filter): {prepared.loaded.model_not_run}")

@@ -94,7 +94,9 @@ class AlarmPolicy:
     """Floors a profile puts under every statistic's alarm options (the profile's [alarms] table):
     an alarm needs at least ``n_persist`` consecutive exceeding samples and lasts at least
     ``min_duration_s`` seconds, whatever a detector asks for (so that healthy one- or two-sample
-    transients cannot raise an alarm)."""
+    transients cannot raise an alarm). Its suspension (ground time, take-off and landing, the start)
+    is for the model-based statistics; the checks of the vehicle's own reports are never suspended
+    (`unsuspended`)."""
 
     n_persist: int = 1
     min_duration_s: float = 0.0
@@ -105,9 +107,15 @@ class AlarmPolicy:
     ground_channel: str | None = None
     after_ground_s: float = 5.0
     before_ground_s: float = 0.0
+    # a ground span shorter than this between two airborne ones is a land detector's blip, not a
+    # landing (a bounce, an impact, a fall): flight, judged as flight (the built-in px4 profile:
+    # PX4's own time to confirm a landing, LNDMC_TRIG_TIME)
+    min_ground_s: float = 0.0
     ignore_start_s: float = 0.0  # not judged for this long from the grid's start (the filter converging)
-    # (N,) bool, the grid steps not judged (from the three above, set per run by the pipeline)
+    # (N,) bool, the grid steps not judged (from the keys above, set per run by the pipeline)
     suspended: Any = field(default=None, repr=False, compare=False)
+    # (N,) bool, the steps in flight (said not on the ground, blips ignored); None: no ground channel
+    airborne: Any = field(default=None, repr=False, compare=False)
 
     @property
     def suspends(self) -> bool:
@@ -115,16 +123,18 @@ class AlarmPolicy:
         return bool(self.ground_channel or self.ignore_start_s)
 
     def suspend(self, t, ground) -> AlarmPolicy:
-        """A copy with ``suspended`` set for a run of grid times ``t`` and held ground channel values
-        ``ground`` (None: none; NaN: unknown, judged)."""
+        """A copy with ``suspended`` and ``airborne`` set for a run of grid times ``t`` and held ground
+        channel values ``ground`` (None: none; NaN: unknown, judged; blips under min_ground_s: flight)."""
         import dataclasses
 
         t = np.asarray(t, dtype=np.float64)
         out = np.zeros(t.size, dtype=bool)
         if t.size and self.ignore_start_s > 0:
             out |= t < t[0] + self.ignore_start_s
+        on = None
         if ground is not None and t.size:
-            on = np.nan_to_num(np.asarray(ground, dtype=np.float64), nan=0.0) != 0.0
+            ground = np.asarray(ground, dtype=np.float64)
+            on = _without_blips(t, np.nan_to_num(ground, nan=0.0) != 0.0, self.min_ground_s)
             out |= on
             # the latest take-off (ground -> air) at or before each step
             takeoff = np.concatenate([[False], on[:-1] & ~on[1:]])
@@ -134,7 +144,15 @@ class AlarmPolicy:
                 landing = np.concatenate([[False], ~on[:-1] & on[1:]])
                 following = np.minimum.accumulate(np.where(landing, t, np.inf)[::-1])[::-1]
                 out |= t >= following - self.before_ground_s
-        return dataclasses.replace(self, suspended=out if out.any() else None)
+        airborne = None if on is None else ~on & np.isfinite(ground)  # unknown is judged, but not flight
+        return dataclasses.replace(self, suspended=out if out.any() else None, airborne=airborne)
+
+    def unsuspended(self) -> AlarmPolicy:
+        """This policy's floors without its suspension: for the checks of what the vehicle itself
+        reported (its health topics, messages and estimator flags), judged on the whole log."""
+        import dataclasses
+
+        return self if self.suspended is None else dataclasses.replace(self, suspended=None)
 
     def apply(self, options: dict) -> dict:
         """Alarm options with the floors applied (n_persist and min_duration_s raised to them)."""
@@ -142,6 +160,26 @@ class AlarmPolicy:
         out["n_persist"] = max(int(out.get("n_persist", 1)), self.n_persist)
         out["min_duration_s"] = max(float(out.get("min_duration_s", 0.0)), self.min_duration_s)
         return out
+
+
+def _without_blips(t: np.ndarray, on: np.ndarray, min_ground_s: float) -> np.ndarray:
+    """``on`` (held ground flags on the grid times ``t``) less its ground spans shorter than
+    ``min_ground_s`` that have flight on both sides (a land detector's blip in flight)."""
+    if min_ground_s <= 0 or not on.any():
+        return on
+    edges = np.diff(np.concatenate(([0], on.view(np.int8), [0])))
+    first, stop = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # each span is [first, stop)
+    inside = (first > 0) & (stop < t.size)  # flight before and after it
+    # a span lasts from its first step to the step flight resumes
+    short = inside & (t[np.minimum(stop, t.size - 1)] - t[first] < min_ground_s)
+    if not short.any():
+        return on
+    out = on.copy()
+    cover = np.zeros(t.size + 1, dtype=np.int32)
+    np.add.at(cover, first[short], 1)
+    np.add.at(cover, stop[short], -1)
+    out[np.cumsum(cover[:-1]) > 0] = False
+    return out
 
 
 @dataclass

@@ -14,7 +14,8 @@ built from the topics present (`px4_profile`):
  - ``[mode]`` from ``vehicle_status.nav_state`` (the flight mode: KGN's steady gate);
  - ``[alarms]``: nothing judged in the first IGNORE_START_S (the filter converging), on the ground
    (``vehicle_land_detected.landed``), in the 5 s after each take-off or in the BEFORE_LANDING_S
-   before each landing;
+   before each landing; a landing shorter than PX4's own confirmation time (LAND_TRIGGER_S) is a
+   blip, flight; the health and PX4 estimator checks are judged on the whole log;
  - noise from the log's own EKF2 parameters where it has them (EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE,
    EKF2_BARO_NOISE, EKF2_ACC_NOISE, EKF2_GYR_NOISE, EKF2_ACC_B_NOISE, EKF2_GYR_B_NOISE): the
    values PX4 flew with; the GNSS noise per fix from the receiver's eph / epv and speed accuracy
@@ -64,6 +65,11 @@ PX4_TOPICS = (
 )
 IGNORE_START_S = 5.0  # the ins filter's convergence from its first samples: not judged
 BEFORE_LANDING_S = 3.0  # PX4's land detector confirms a touchdown about 2 s late: its transient lies before
+# PX4's land detector says "landed" only once the landing conditions held for its trigger time
+# (LNDMC_TRIG_TIME, multicopters and VTOL; LNDFW_TRIG_TIME, fixed-wing = MAV_TYPE 1; the defaults
+# are PX4's): a shorter stay on the ground in flight is a blip (a bounce, an impact), judged as flight
+LAND_TRIGGER_S = {"LNDMC_TRIG_TIME": 1.0, "LNDFW_TRIG_TIME": 2.0}
+MAV_TYPE_FIXED_WING = 1
 _IMU = "sensor_combined_0"
 _FULL_IMU = "vehicle_imu_0"  # the IMU's integrated increments at the full sensor rate
 # ROS 2 message types the ros2 profile reads
@@ -162,6 +168,15 @@ def _param(params: dict, name: str, default: float) -> float:
     except (KeyError, TypeError, ValueError):
         return default
     return value if np.isfinite(value) and value > 0 else default
+
+
+def _land_trigger_line(params: dict) -> str:
+    """``min_ground_s = ...``: the log's land detector trigger time (LAND_TRIGGER_S)."""
+    fixed_wing = _param(params, "MAV_TYPE", 0.0) == MAV_TYPE_FIXED_WING
+    name = "LNDFW_TRIG_TIME" if fixed_wing else "LNDMC_TRIG_TIME"
+    seconds = _param(params, name, LAND_TRIGGER_S[name])
+    logged = "" if name in params else ", not logged: PX4's default"
+    return f"min_ground_s = {seconds:.3g}  # {name}{logged}: a shorter landing in flight is a blip, judged as flight"
 
 
 def _nice_rate(hz: float) -> float:
@@ -357,6 +372,7 @@ def px4_profile(log) -> BuiltProfile:
             'ground_channel = "/vehicle_land_detected_0/landed"  # not judged on the ground ...',
             "after_ground_s = 5  # ... nor during the take-off transient ...",
             f"before_ground_s = {BEFORE_LANDING_S:g}  # ... nor before a landing (PX4 confirms touchdown late)",
+            _land_trigger_line(params),
         ]
     lines += ["", "[detectors.nis]  # logscan's filter: NIS per group"] if not model_not_run else []
     lines += [

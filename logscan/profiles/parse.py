@@ -720,10 +720,11 @@ class _Checker:
         gap = self.number(data, "merge_gap_s", where, minimum=0, strict=False, maximum=MAX_MERGE_GAP_S)
         after = self.number(data, "after_ground_s", where, minimum=0, strict=False, maximum=MAX_SUSPEND_S)
         before = self.number(data, "before_ground_s", where, minimum=0, strict=False, maximum=MAX_SUSPEND_S)
+        blip = self.number(data, "min_ground_s", where, minimum=0, strict=False, maximum=MAX_SUSPEND_S)
         start = self.number(data, "ignore_start_s", where, minimum=0, strict=False, maximum=MAX_SUSPEND_S)
         ground = self.string(data, "ground_channel", where) if "ground_channel" in data else None
         numbers = (("min_duration_s", duration), ("merge_gap_s", gap), ("after_ground_s", after))
-        numbers += (("before_ground_s", before), ("ignore_start_s", start))
+        numbers += (("before_ground_s", before), ("min_ground_s", blip), ("ignore_start_s", start))
         if n_persist is None or any(key in data and value is None for key, value in numbers):
             return None
         if "ground_channel" in data and ground is None:
@@ -735,6 +736,7 @@ class _Checker:
             ground_channel=ground,
             after_ground_s=AlarmPolicy.after_ground_s if after is None else after,
             before_ground_s=0.0 if before is None else before,
+            min_ground_s=0.0 if blip is None else blip,
             ignore_start_s=0.0 if start is None else start,
         )
 

@@ -64,6 +64,7 @@ ALARM_KEYS = (
     "ground_channel",
     "after_ground_s",
     "before_ground_s",
+    "min_ground_s",
     "ignore_start_s",
 )
 MAX_SUSPEND_S = 600.0  # after_ground_s, ignore_start_s: a transient, not a flight
@@ -457,6 +458,8 @@ class Profile:
                 out["alarms"]["after_ground_s"] = self.alarm_policy.after_ground_s
                 if self.alarm_policy.before_ground_s:
                     out["alarms"]["before_ground_s"] = self.alarm_policy.before_ground_s
+                if self.alarm_policy.min_ground_s:
+                    out["alarms"]["min_ground_s"] = self.alarm_policy.min_ground_s
             if self.alarm_policy.ignore_start_s:
                 out["alarms"]["ignore_start_s"] = self.alarm_policy.ignore_start_s
         if self.loops:

@@ -1,0 +1,190 @@
+"""The [alarms] masks cannot hide a fault: a land detector's blip in flight is flight, the checks of
+the vehicle's own reports (health, logged messages, PX4's estimator flags) are never suspended, and a
+log whose flight was mostly not judged is "not fully checked", never "no alarms"."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from conftest import need_testdata
+
+from logscan.coverage import MAX_UNJUDGED_FLIGHT, unjudged_flight
+from logscan.detectors.base import Detector
+from logscan.results import AlarmPolicy
+
+DT = 0.02
+T = np.arange(0.0, 30.0, DT)
+
+
+def _ground(*spans) -> np.ndarray:
+    """1.0 on the ground over each (start, end) span of T, 0.0 in the air."""
+    out = np.zeros(T.size)
+    for start, end in spans:
+        out[(T >= start - 1e-9) & (T < end - 1e-9)] = 1.0
+    return out
+
+
+def test_a_land_detector_blip_in_flight_is_flight():
+    """A 'landed' of 0.14 s in flight (PX4's flag true for a message or two during a fall) neither
+    suspends the steps around it nor starts a take-off transient: min_ground_s ignores it, a real
+    landing longer than that is kept, and so is ground time at the log's start or end."""
+    policy = AlarmPolicy(ground_channel="g", after_ground_s=5.0, before_ground_s=3.0, min_ground_s=1.0)
+    clean = policy.suspend(T, _ground((0, 10), (25, 30))).suspended
+    blip = _ground((0, 10), (17.0, 17.14), (25, 30))
+    assert np.array_equal(policy.suspend(T, blip).suspended, clean)
+    assert not clean[(T >= 15.0) & (T < 22.0)].any()  # judged through the blip
+    # the same blip without min_ground_s: 3 s before it to 5 s after it unjudged (the fault hidden)
+    old = AlarmPolicy(ground_channel="g", after_ground_s=5.0, before_ground_s=3.0).suspend(T, blip).suspended
+    assert old[(T >= 14.0) & (T < 22.1)].all()
+    # the flight mask counts the blip as flight
+    assert np.array_equal(policy.suspend(T, blip).airborne, _ground((0, 10), (25, 30)) == 0.0)
+    # a landing of 2 s in flight is a landing: suspended, with its take-off transient after it
+    hop = policy.suspend(T, _ground((0, 10), (17, 19), (25, 30))).suspended
+    assert hop[(T >= 14.0) & (T < 24.0)].all()
+    # ground time shorter than min_ground_s at the log's start or end is still ground
+    edges = policy.suspend(T, _ground((0, 0.5), (29.6, 30))).suspended
+    assert edges[T < 5.5].all() and edges[T >= 26.6].all()
+
+
+class _Flags(Detector):
+    """A check of what the vehicle reported: it reads the autopilot's own topics."""
+
+    name = "flags_under_test"
+    raw_topics = ("vehicle_status_0",)
+
+    def _run(self, run, trace, **context):
+        result = self.new_result()
+        result.add_statistic(run.t, "flags_under_test.flag", np.where(run.t >= 2.0, 2.0, 0.0), upper=1.0)
+        return result
+
+
+class _Model(_Flags):
+    """The same statistic from a model: suspended like every model-based statistic."""
+
+    name = "model_under_test"
+    raw_topics = ()
+
+
+@pytest.mark.parametrize(("detector", "alarms"), [(_Flags, 1), (_Model, 0)])
+def test_only_model_based_statistics_are_suspended(detector, alarms):
+    t = np.arange(0.0, 4.0, 0.1)
+    run = SimpleNamespace(t=t, n_steps=t.size)
+    policy = AlarmPolicy(ignore_start_s=5.0).suspend(t, None)  # the whole run suspended
+    result = detector().run(run, None, alarm_policy=policy)
+    assert len(result.alarms) == alarms
+    assert policy.suspended is not None  # the policy itself is left as it was
+
+
+def _unjudged(policy, ground):
+    return unjudged_flight(policy.suspend(T, ground), SimpleNamespace(dt=DT))
+
+
+def test_more_than_half_of_the_flight_unjudged_is_not_fully_checked():
+    on_ground = AlarmPolicy(ground_channel="g", after_ground_s=5.0, before_ground_s=3.0, min_ground_s=1.0)
+    # 20 s of flight, 8 s of it unjudged (take-off, landing): a warning, and the flight is said
+    line, over = _unjudged(on_ground, _ground((0, 5), (25, 30)))
+    assert not over and line.startswith("not judged for") and "8.0 s of the 20.0 s in flight" in line
+    # 10 s of flight, 8 s of it unjudged: more than MAX_UNJUDGED_FLIGHT, the log is not fully checked
+    line, over = _unjudged(on_ground, _ground((0, 10), (20, 30)))
+    assert MAX_UNJUDGED_FLIGHT == 0.5 and over and "8.0 s of the 10.0 s in flight" in line
+    assert "model-based statistics" in line and "5 s after take-off and 3 s before landing" in line
+    # never in flight: the model-based statistics judged nothing
+    line, over = _unjudged(on_ground, np.ones(T.size))
+    assert over and "never in flight by g" in line
+    # no ground channel: the scope is the whole log
+    assert _unjudged(AlarmPolicy(ignore_start_s=5.0), None)[1] is False
+    assert _unjudged(AlarmPolicy(ignore_start_s=20.0), None)[1] is True
+    assert unjudged_flight(AlarmPolicy(), SimpleNamespace(dt=DT)) is None  # nothing suspended
+
+
+def _quaternion_product(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """q r for (n, 4) q and one (4,) r, w first (Hamilton)."""
+    w1, x1, y1, z1 = q.T
+    w2, x2, y2, z2 = r
+    return np.stack(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ],
+        axis=1,
+    )
+
+
+def blip_and_attitude_failure(source, target, at_s: float, roll_deg: float, blip_s: float = 0.14):
+    """A copy of a real ULog with PX4's land detector saying 'landed' for ``blip_s`` from ``at_s``
+    (seconds from the log's start: two messages, as during a fall) and its attitude estimate rolled by
+    ``roll_deg`` from then on (an attitude failure): both at the same moment."""
+    from pyulog import ULog
+
+    ulog = ULog(str(source))
+    at_us = ulog.start_timestamp + int(at_s * 1e6)
+    for data in ulog.data_list:
+        if data.name == "vehicle_land_detected" and data.multi_id == 0:
+            i = int(np.searchsorted(data.data["timestamp"], at_us))
+            for key, values in data.data.items():  # two messages like the one before, then edited
+                data.data[key] = np.insert(values, [i, i], values[i - 1])
+            data.data["timestamp"][i : i + 2] = (at_us, at_us + int(blip_s * 1e6))
+            data.data["landed"][i : i + 2] = (1, 0)
+        if data.name == "vehicle_attitude" and data.multi_id == 0:
+            after = data.data["timestamp"] >= at_us
+            q = np.stack([data.data[f"q[{j}]"] for j in range(4)], axis=1).astype(np.float64)
+            half = np.radians(roll_deg) / 2.0
+            rolled = _quaternion_product(q, np.array([np.cos(half), np.sin(half), 0.0, 0.0]))
+            for j in range(4):
+                data.data[f"q[{j}]"][after] = rolled[after, j]
+    ulog.write_ulog(str(target))
+    return target
+
+
+def _first_alarm(cli, path, tmp_path, *args) -> tuple[int, dict, float]:
+    out = tmp_path / f"summary{len(args)}.json"
+    result = cli("analyze", str(path), "--no-report", "--json", str(out), *args)
+    assert "Traceback" not in result.stderr, result.stderr
+    (log,) = json.loads(out.read_text())["logs"]
+    starts = [a["start"] for d in log["detectors"] if d["detector"] == "nis" for a in d["alarms"]]
+    return result.exit_code, log, min(starts, default=float("inf"))
+
+
+@pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
+def test_a_fault_inside_a_land_detector_blip_is_alarmed_within_1_s(cli, tmp_path):
+    """The real SITL flight (take-off 16.74 s, landing 28.13 s) edited: a 0.14 s 'landed' blip and a
+    60 degree attitude failure both at 23.0 s. The built-in profile alarms within 1 s of the onset;
+    the same profile without min_ground_s (the blip taken for a landing) hides it."""
+    from logscan.pipeline import builtin_profile_for
+
+    source = need_testdata("px4-ulog/sample_px4_events.ulg")
+    edited = blip_and_attitude_failure(source, tmp_path / "blip.ulg", at_s=23.0, roll_deg=60.0)
+    code, log, first = _first_alarm(cli, edited, tmp_path)
+    assert 23.0 <= first <= 24.0, (first, log["verdict"])
+    assert code in (1, 2) and log["n_alarms"] > 0
+    text = builtin_profile_for(edited).text
+    assert "min_ground_s = 1  # LNDMC_TRIG_TIME" in text  # the log's own land detector trigger time
+    old = tmp_path / "old.toml"
+    old.write_text("\n".join(line for line in text.splitlines() if not line.startswith("min_ground_s")))
+    _, log_old, first_old = _first_alarm(cli, edited, tmp_path, "--profile", str(old))
+    assert first_old > 24.0, log_old["verdict"]  # the mask hid it: the test can fail
+
+
+@pytest.mark.testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+def test_the_autopilots_battery_error_is_never_no_alarms(cli, tmp_path):
+    """A 9 s real flight whose first 5 s are the filter converging and the rest take-off transients:
+    the model-based statistics judged none of its 2.7 s in flight (not fully checked), while the
+    autopilot's own ERROR ("Dangerous battery level", 3.24 s boot time) and the battery check alarm."""
+    path = need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+    out = tmp_path / "s.json"
+    result = cli("analyze", str(path), "--no-report", "--json", str(out))
+    (log,) = json.loads(out.read_text())["logs"]
+    assert result.exit_code == 2 and "not fully checked" in log["verdict"]
+    assert not log["verdict"].startswith("no alarms")
+    (line,) = [u for u in log["unchecked"] if "model-based statistics" in u]
+    assert "2.7 s of the 2.7 s in flight" in line
+    alarms = {a["signal"]: a for d in log["detectors"] if d["detector"] == "health" for a in d["alarms"]}
+    error = alarms["health.logged_error"]  # at 3.24 s of PX4's boot time, 0.11 s into the log
+    assert abs(error["start_clock"] - 3.24) < 0.05 and error["start"] < 5.0  # inside the first 5 s
+    assert "health.battery" in alarms
+    assert cli("analyze", str(path), "--no-report", "--allow-partial").exit_code == 1
