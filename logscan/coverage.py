@@ -135,7 +135,7 @@ def unjudged_flight(policy, run) -> tuple[str, bool] | None:
     if flew:
         share = f"{total} ({unjudged_s:.1f} s of the {scope_s:.1f} s in flight)"
     elif airborne is not None:
-        share = f"{total} (never in flight by {policy.ground_channel})"
+        share = f"{total} ({policy.ground_channel} never says airborne: no flight to judge)"
     else:
         share = total
     line = f"not judged for {share}: {why}"
