@@ -21,11 +21,15 @@ xfail(strict) reproducer below) are waived symptom by symptom, any other problem
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import os
+import pickle
 import random
+import shutil
 import stat
 import sys
+import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +38,8 @@ import pytest
 from conftest import REPO
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
+
+import logscan
 
 
 def _campaign():
@@ -71,14 +77,48 @@ class Fuzz:
     seed_problems: list[str]
 
 
+def seed_inputs_digest() -> str:
+    """sha256 of what the seeds are made from: the campaign's source, the sample logs and the
+    shared ULogs (names and bytes), and this Python (the seeds are pickled)."""
+    digest = hashlib.sha256(f"{sys.version_info[:2]} {pickle.HIGHEST_PROTOCOL}".encode())
+    inputs = [Path(fc.__file__), *sorted(fc.SAMPLES.iterdir())]
+    inputs += sorted(fc.ULOG_DIR.glob("*.ulg")) if fc.ULOG_DIR.is_dir() else []
+    for path in inputs:
+        if path.is_file():
+            digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:24]
+
+
+def cached_seeds(cache: Path) -> dict:
+    """The seeds, built once per content of their inputs (seed_inputs_digest) and kept under
+    ``cache``: the profile files the seeds' --profile arguments name live beside the pickle. A
+    directory is built aside and renamed into place, so concurrent sessions (pytest-xdist workers)
+    never see half of one."""
+    built = cache / seed_inputs_digest()
+    if not (built / "seeds.pickle").is_file():
+        cache.mkdir(parents=True, exist_ok=True)
+        aside = Path(tempfile.mkdtemp(prefix=f"{built.name}.", dir=cache))
+        seeds = fc.build_seeds(aside)
+        for seed in seeds.values():  # --profile paths point into the final directory
+            seed.args = tuple(a.replace(str(aside), str(built)) for a in seed.args)
+        (aside / "seeds.pickle").write_bytes(pickle.dumps(seeds))
+        try:
+            aside.rename(built)
+        except OSError:  # another session renamed its copy first: use that one
+            shutil.rmtree(aside, ignore_errors=True)
+    return pickle.loads((built / "seeds.pickle").read_bytes())
+
+
 @pytest.fixture(scope="session")
 def fuzz(tmp_path_factory):
     root = tmp_path_factory.mktemp("fuzz")
     work = root / "work"
     work.mkdir()
-    seeds = fc.build_seeds(root / "seeds")
-    runner = fc.Runner(work, fc.child_env(root / "cache"), keep=root / "failures")
-    problems = fc.warm_up(runner, seeds)  # compiles the numba kernels into the session's cache
+    seeds = cached_seeds(logscan.cache_dir() / "fuzz-seeds")
+    # the children share the compiled kernels of this process and of every other logscan run (the
+    # numba cache is keyed on the kernels' sources: logscan/numba_cache.py)
+    runner = fc.Runner(work, fc.child_env(logscan.cache_dir()), keep=root / "failures")
+    problems = fc.warm_up(runner, seeds)  # a clean run of every seed (compiles what is not cached yet)
     return Fuzz(seeds, runner, problems)
 
 
