@@ -10,7 +10,11 @@ hands the runs and traces to each detector's `fit`. The tables file holds one tr
 detector (`Detector.to_state`: detector name, its schema version, parameters, trained attributes),
 the training logs (name, size, SHA-256) and the fingerprint of the profile's vehicle, inputs,
 measurements, mode and redundant sections: `logscan analyze --tables` refuses tables trained for
-another profile (`apply_tables`).
+another profile (`apply_tables`). The fingerprint is what identifies the vehicle and its profile
+(model, channels, transforms, parameters), not the numbers a built-in profile measures from each
+log (`MEASURED_KEYS`: two flights of one vehicle log its IMU at 198 and 200 Hz): the rates are
+held to within RATE_TOLERANCE of the tables' instead (``profile_rates``), and the noise is the
+calibration's or each flight's own.
 """
 
 from __future__ import annotations
@@ -27,16 +31,98 @@ from typing import Any
 from logscan.errors import InputError, ProfileError, UsageError
 
 TABLES_FORMAT = "logscan-tables"
-TABLES_VERSION = 2
+TABLES_VERSION = 3  # 3: the fingerprint leaves out measured values, the rates are held apart
 # the profile sections a trained table depends on (detector settings and alarm floors do not)
 TRAINED_SECTIONS = ("vehicle", "inputs", "measurements", "mode", "redundant")
+# the keys whose values a built-in profile measures from each log (a rate, the staleness that
+# follows from it, a noise; an input's "scale" is the per-second scale of an IMU's increments, one
+# over their measured period): not the vehicle's identity, left out of its fingerprint
+MEASURED_KEYS = frozenset({"rate_hz", "stale_s", "noise_std", "noise_channels_scale"})
+RATE_TOLERANCE = 0.1  # a rate (or an input's scale) may differ this much (relative) from the tables'
 
 
 def profile_fingerprint(profile) -> str:
-    """SHA-256 of the profile's sections a trained table depends on (canonical JSON)."""
+    """SHA-256 of what identifies the profile in the sections a trained table depends on
+    (canonical JSON, without the measured values: `MEASURED_KEYS`, the inputs' scales)."""
     data = profile.to_dict()
-    trained = {key: data.get(key) for key in TRAINED_SECTIONS}
+    trained = {key: _identity(data.get(key), key) for key in TRAINED_SECTIONS}
     return hashlib.sha256(json.dumps(trained, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _identity(value, section: str):
+    """``value`` without the measured values of `MEASURED_KEYS` (and the inputs' scales)."""
+    if isinstance(value, dict):
+        return {
+            key: _identity(item, section)
+            for key, item in value.items()
+            if key not in MEASURED_KEYS and not (section == "inputs" and key == "scale")
+        }
+    if isinstance(value, list):
+        return [_identity(item, section) for item in value]
+    return value
+
+
+def profile_rates(profile) -> dict[str, float]:
+    """The rates a trained table assumes: the grid's and each group's rate_hz, and each input's
+    scale (an IMU's increments per second), by their place in the profile ("vehicle.rate_hz")."""
+    data = profile.to_dict()
+    rates: dict[str, float] = {}
+    for section in TRAINED_SECTIONS:
+        _collect_rates(data.get(section), section, rates)
+    return rates
+
+
+def _collect_rates(value, where: str, out: dict[str, float]) -> None:
+    if not isinstance(value, dict):
+        return
+    for key, item in value.items():
+        place = f"{where}.{key}"
+        scale = where.startswith("inputs") and key == "scale"
+        if (key == "rate_hz" or scale) and item is not None:
+            numbers = [float(v) for v in (item if isinstance(item, list) else [item])]
+            if numbers and all(n > 0 and n != float("inf") for n in numbers):
+                out[place] = numbers[0]
+        else:
+            _collect_rates(item, place, out)
+
+
+def _rate_mismatches(trained: dict, profile) -> list[str]:
+    """The rates of ``profile`` more than RATE_TOLERANCE from the tables' (``trained``)."""
+    own = profile_rates(profile)
+    return [
+        f"{place} {own[place]:.4g} (the tables': {value:.4g})"
+        for place, value in sorted(trained.items())
+        if place in own and abs(own[place] - value) > RATE_TOLERANCE * abs(value)
+    ]
+
+
+def profile_file(profile) -> str | None:
+    """The profile file ``profile`` came from; None when it is embedded in a log or built in."""
+    source = str(getattr(profile, "source", "") or "")
+    return source if source and Path(source).is_file() else None
+
+
+def retrain_command(document: dict, tables: str | os.PathLike, profile, *, same_logs: bool = True) -> str:
+    """The `logscan train` command that writes ``tables`` again for ``profile`` (None: the profile
+    file the tables were trained with, if any): the tables' own training logs that are still there
+    (``same_logs``; else, or when none is, HEALTHY_LOG...: logs of the vehicle to analyse), with
+    their options (--calibrate, --tune, --start/--end), and --profile only for a profile file (a
+    built-in or embedded profile comes from each log)."""
+    import shlex
+
+    source = profile_file(profile) if profile is not None else document.get("profile_path")
+    logs = [str(entry.get("path", "")) for entry in document.get("training_logs") or [] if isinstance(entry, dict)]
+    logs = [path for path in logs if path and os.path.exists(path)] if same_logs else []
+    words = ["logscan", "train", *(shlex.quote(path) for path in logs or ["HEALTHY_LOG..."])]
+    if source and Path(source).is_file():
+        words += ["--profile", shlex.quote(str(source))]
+    if document.get("calibration"):
+        words.append("--calibrate")
+    if document.get("tuning"):
+        words.append("--tune")
+    window = document.get("training_window") or {}
+    words += [f"--{edge} {window[f'{edge}_s']:g}" for edge in ("start", "end") if window.get(f"{edge}_s") is not None]
+    return " ".join([*words, "-o", shlex.quote(str(tables))])
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -89,6 +175,8 @@ def tables_document(
         "schema_version": TABLES_VERSION,
         "logscan_version": __version__,
         "profile_fingerprint": profile_fingerprint(profile) if profile is not None else None,
+        "profile_rates": profile_rates(profile) if profile is not None else None,
+        "profile_path": profile_file(profile) if profile is not None else None,
         "profile_name": getattr(profile, "name", "") if profile is not None else "",
         "training_logs": [
             {"name": os.path.basename(p), "path": str(p), "bytes": os.path.getsize(p), "sha256": file_sha256(p)}
@@ -120,7 +208,7 @@ def read_tables_document(path: str | os.PathLike) -> dict[str, Any]:
         raise InputError(
             f"tables schema version {document.get('schema_version')!r}, this logscan reads {TABLES_VERSION}",
             path=str(path),
-            hint="retrain with `logscan train`",
+            hint=f"retrain with `{retrain_command(document, path, None)}`",
         )
     return document
 
@@ -159,11 +247,20 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     document = read_tables_document(path)
     fingerprint = document.get("profile_fingerprint")
     if fingerprint != profile_fingerprint(profile):
+        # a profile file: its tables from the same logs; a built-in or embedded one: other logs
+        command = retrain_command(document, path, profile, same_logs=bool(profile_file(profile)))
         raise ProfileError(
             "the tables were trained for another profile (its vehicle, inputs, measurements, mode or "
             "redundant sections differ)",
             path=str(path),
-            hint=f"retrain with `logscan train LOGS --profile {profile.source} -o {path}`",
+            hint=f"train tables for it: `{command}`",
+        )
+    rates = _rate_mismatches(document.get("profile_rates") or {}, profile)
+    if rates:
+        raise ProfileError(
+            f"the tables were trained at other rates: {', '.join(rates)}; more than {RATE_TOLERANCE:.0%} apart",
+            path=str(path),
+            hint=f"train tables at these rates: `{retrain_command(document, path, profile, same_logs=False)}`",
         )
     trained = read_tables(path)
     # after the profile check: the calibrated noise changes the profile it fingerprints

@@ -139,15 +139,22 @@ def test_untrained_atfm_says_which_command_to_run(logs):
 
 
 def test_tables_of_another_profile_are_refused(logs, tables, tmp_path):
+    """Another vehicle (its id) is another profile; a rate is not the profile's identity, but the
+    tables' windows count its samples: one more than 10 % off is refused too."""
     path, _ = tables
     loaded = load_profile_for(logs["bias"], None)
-    other = loaded.profile.to_toml().replace("rate_hz = 10.0", "rate_hz = 5.0", 1)
-    profile = tmp_path / "other.toml"
-    profile.write_text(other, encoding="utf-8")
-    other_loaded = load_profile_for(logs["bias"], profile)
-    assert profile_fingerprint(other_loaded.profile) != profile_fingerprint(loaded.profile)
-    with pytest.raises(ProfileError, match="trained for another profile"):
-        apply_tables(create_detectors(other_loaded, ["atfm"]), path, other_loaded.profile)
+    for change, refusal in (
+        (lambda text: text.replace("[vehicle]", '[vehicle]\nid = "another jackal"', 1), "trained for another profile"),
+        (lambda text: text.replace("rate_hz = 10.0", "rate_hz = 5.0", 1), "trained at other rates"),
+    ):
+        profile = tmp_path / "other.toml"
+        profile.write_text(change(loaded.profile.to_toml()), encoding="utf-8")
+        other_loaded = load_profile_for(logs["bias"], profile)
+        same = profile_fingerprint(other_loaded.profile) == profile_fingerprint(loaded.profile)
+        assert same == (refusal == "trained at other rates")
+        with pytest.raises(ProfileError, match=refusal) as info:
+            apply_tables(create_detectors(other_loaded, ["atfm"]), path, other_loaded.profile)
+        assert f"--profile {profile}" in info.value.one_line()  # a profile file: the command passes it
 
 
 def test_train_cli_writes_tables_and_analyze_uses_them(logs, cli, tmp_path):

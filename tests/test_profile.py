@@ -149,7 +149,7 @@ BROKEN = [
     (mutated("vehicle.ratehz", 5), "[vehicle]: unknown key 'ratehz' (did you mean 'rate_hz'?)"),
     (
         mutated("vehicle.colour", "red"),
-        "[vehicle]: unknown key 'colour' (valid keys: model, rate_hz, params, loop)",
+        "[vehicle]: unknown key 'colour' (valid keys: model, rate_hz, params, loop, id)",
     ),
     (mutated("measurment", {}), "unknown key 'measurment' (did you mean 'measurements'?)"),
     (mutated("measurements.accel.stale_s", -0.1), "[measurements.accel] stale_s: must be > 0, got -0.1"),

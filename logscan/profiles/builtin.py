@@ -42,6 +42,7 @@ A ROS 2 MCAP (a topic in CDR whose schema is a ROS 2 message type, ``pkg/msg/Typ
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass, field
 
@@ -260,6 +261,7 @@ def px4_profile(log) -> BuiltProfile:
         "",
         "[vehicle]",
         'model = "ins"',
+        *_vehicle_id_line(log),
         f"rate_hz = {rate:g}  # the IMU's rate in this log" + (f" (at least {MIN_IMU_HZ:g})" if model_not_run else ""),
         "",
         "[vehicle.params]  # PX4's EKF2 noise parameters of this log where it has them",
@@ -383,6 +385,19 @@ def px4_profile(log) -> BuiltProfile:
         "",
     ]
     return BuiltProfile("px4", "\n".join(lines), notes, model_not_run)
+
+
+def _vehicle_id_line(log) -> list[str]:
+    """``id = "..."``: which vehicle flew, from the ULog's info and parameters (the board ver_hw,
+    its unique sys_uuid where logged, the airframe SYS_AUTOSTART); none when the log says none (a
+    ulog2csv export). Trained tables are refused on another vehicle's flights (`logscan.training`)."""
+    info = log.source.metadata.get("ulog.info", {}) or {}
+    airframe = (log.source.metadata.get("ulog.parameters", {}) or {}).get("SYS_AUTOSTART")
+    parts = [str(info.get(key, "")).strip() for key in ("ver_hw", "sys_uuid")]
+    if airframe is not None:
+        parts.append(f"airframe {int(airframe)}")
+    text = " ".join(part for part in parts if part)
+    return [f"id = {json.dumps(text)}  # board, unique id, airframe: trained tables are for this vehicle"] * bool(text)
 
 
 def slow_imu_reason(topic: str, imu_hz: float) -> str:

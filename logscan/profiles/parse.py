@@ -330,9 +330,10 @@ class _Checker:
         loop = self.string(data, "loop", where) if "loop" in data else ""
         if loop is not None and loop and not loop.isidentifier():
             self.add(f"{where} loop", "a loop name must be a plain identifier (letters, digits, _)")
-        if model is None or rate is None or params is None or loop is None:
+        vehicle_id = self.string(data, "id", where) if "id" in data else ""
+        if model is None or rate is None or params is None or loop is None or vehicle_id is None:
             return None
-        return VehicleSpec(model=model, rate_hz=rate, params=dict(params), loop=loop)
+        return VehicleSpec(model=model, rate_hz=rate, params=dict(params), loop=loop, id=vehicle_id)
 
     def inputs(self, raw: Any, vehicle: VehicleSpec | None) -> InputSpec | None:
         where = "[inputs]"

@@ -30,7 +30,7 @@ TOP_KEYS = (
     "loops",
     "recovery",
 )
-VEHICLE_KEYS = ("model", "rate_hz", "params", "loop")
+VEHICLE_KEYS = ("model", "rate_hz", "params", "loop", "id")
 GROUP_KEYS = (
     "channels",
     "rate_hz",
@@ -104,6 +104,9 @@ class VehicleSpec:
     rate_hz: float
     params: dict[str, Any] = field(default_factory=dict)
     loop: str = ""  # the loop's name in a hierarchical profile ("": the primary's default name)
+    # which vehicle the profile describes (a built-in px4 profile: the board, its unique id, the
+    # airframe): part of the trained tables' fingerprint (`logscan.training`), nothing else reads it
+    id: str = ""
 
 
 def input_channels(value: str | list[str] | dict) -> list[str]:
@@ -400,6 +403,8 @@ class Profile:
         out["vehicle"] = {"model": self.vehicle.model, "rate_hz": self.vehicle.rate_hz}
         if self.vehicle.loop:
             out["vehicle"]["loop"] = self.vehicle.loop
+        if self.vehicle.id:
+            out["vehicle"]["id"] = self.vehicle.id
         if self.vehicle.params:
             out["vehicle"]["params"] = self.vehicle.params
         out["inputs"] = {**self.inputs.mapping, "stale_s": self.inputs.stale_s}
