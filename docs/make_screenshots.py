@@ -1,4 +1,4 @@
-"""Regenerate the report screenshots in docs/images/ (referenced from README.md).
+"""Regenerate the report screenshots in docs/images/ (shown by README.md and docs/reading-the-report.md).
 
 Analyses two shipped sample logs with the installed logscan, renders each report in headless
 Chromium at 1400 x 1800 px and writes ``docs/images/report_<log>.png``: the top of the report, as

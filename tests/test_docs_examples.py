@@ -369,6 +369,7 @@ def fenced_blocks_of(text: str) -> list[tuple[str, str, int]]:
 
 
 USER_PAGES = ("bring-your-own-vehicle", "reading-the-report", "ci", "models", "troubleshooting", "evaluation")
+USER_PAGES += ("inputs", "detectors")
 
 
 @pytest.mark.parametrize("name", USER_PAGES)

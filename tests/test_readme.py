@@ -1,4 +1,5 @@
-"""The README's quick start and command docs agree with the CLI and with CI."""
+"""The README's quick start and its pointers agree with the CLI, the docs and CI (the options it
+shows: tests/test_docs_cli.py)."""
 
 from __future__ import annotations
 
@@ -53,38 +54,25 @@ def test_ci_runs_the_readme_test_command():
     assert matches and matches[0] == quick_start_commands()[1]
 
 
-def test_every_command_in_help_is_documented_and_every_documented_command_exists():
+def test_the_readme_is_short_and_opens_with_the_quick_start():
+    """A newcomer's page (under 250 lines) whose first commands are the quick start's two lines."""
+    assert len(README.splitlines()) < 250, len(README.splitlines())
+    first_block = re.search(r"```(?:sh|console|bash)?\n(.*?)```", README, re.S).group(1)
+    assert [line for line in first_block.splitlines() if line.strip()] == quick_start_commands()
+
+
+def test_every_command_is_in_the_readme_table_and_every_listed_command_exists():
     ctx = click.Context(cli)
     commands = set(cli.list_commands(ctx))
-    documented = set(re.findall(r"^### `logscan ([a-z-]+)", README, re.M))
-    assert commands == documented
+    listed = set(re.findall(r"^\| \[`logscan ([a-z-]+)[^`]*`\]\(docs/cli\.md#logscan-\1\)", README, re.M))
+    assert commands == listed
 
 
-def test_readme_options_exist_in_the_commands_help():
-    ctx = click.Context(cli)
-    for words in readme_invocations():
-        if not words or words[0].startswith("-"):
-            continue
-        command = cli.get_command(ctx, words[0])
-        assert command is not None, f"README runs unknown command: logscan {' '.join(words)}"
-        known = {opt for param in command.params for opt in (*param.opts, *param.secondary_opts)}
-        for word in words[1:]:
-            if word.startswith("--"):
-                option = word.split("=", 1)[0]
-                assert option in known, f"README uses {option} unknown to `logscan {words[0]}`"
-
-
-def test_documented_options_of_each_command_match_its_help():
-    """Each command's README section names every option its --help lists (besides --help)."""
-    ctx = click.Context(cli)
-    for name in cli.list_commands(ctx):
-        section = README.split(f"### `logscan {name}", 1)[1].split("\n### ", 1)[0]
-        section = section.split("\n## ", 1)[0]
-        command = cli.get_command(ctx, name)
-        for param in command.params:
-            if isinstance(param, click.Option) and "--help" not in param.opts:
-                longest = max(param.opts, key=len)
-                assert longest in section, f"README section of `logscan {name}` omits {longest}"
+def test_the_readme_links_every_docs_page_and_each_link_resolves():
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", README)
+    assert [target for target in links if "://" not in target and not (ROOT / target).exists()] == []
+    pages = {p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md")}
+    assert pages <= set(links), f"docs pages the README does not link: {sorted(pages - set(links))}"
 
 
 def _copy_of_the_checkout(dest: Path) -> None:

@@ -215,13 +215,17 @@ def test_measurement_groups_as_used_and_topics_read_vs_in_the_log():
     assert topics.index("/imu") < topics.index("in the log, not read") < topics.index("/camera")
 
 
-def test_readme_shows_the_screenshots_the_script_regenerates():
+def test_the_readme_and_the_report_page_show_the_screenshots_the_script_regenerates():
+    """The README shows the faulty sample's report; docs/reading-the-report.md shows it and links
+    the healthy one; docs/make_screenshots.py makes both."""
     root = Path(__file__).resolve().parent.parent
     readme = (root / "README.md").read_text(encoding="utf-8")
+    page = (root / "docs" / "reading-the-report.md").read_text(encoding="utf-8")
     script = (root / "docs" / "make_screenshots.py").read_text(encoding="utf-8")
+    assert re.search(r"!\[[^\]]*\]\(docs/images/report_quad_imu_bias\.png\)", readme)
     for log in ("quad_imu_bias", "quad_healthy"):
         image = root / "docs" / "images" / f"report_{log}.png"
-        assert f"](docs/images/report_{log}.png)" in readme and f'"{log}"' in script
+        assert f"](images/report_{log}.png)" in page and f'"{log}"' in script
         assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and image.stat().st_size < 400_000
 
 

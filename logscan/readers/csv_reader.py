@@ -1,6 +1,6 @@
 """CSV input: one wide CSV file, or a directory of per-topic CSVs in PX4 `ulog2csv` layout.
 
-Rules (documented in the README):
+Rules (documented in docs/inputs.md):
 
 * Wide file: the time column is the leftmost column named ``time``, ``timestamp``, ``t`` or
   ``stamp`` (case-insensitive, a leading ``%`` ignored), optionally with a unit suffix such as
