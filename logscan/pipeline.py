@@ -485,6 +485,10 @@ def detect(
 # updates to mean something.
 NIS_MISMATCH = 10.0
 NIS_MIN_UPDATES = 20
+# A group whose mean NIS per output over the judged updates is below NIS_BLIND is blind: its test
+# is looser than the data by more than 1 / sqrt(NIS_BLIND) (1.8x) in std, so a fault of that size
+# hides and the verdict says so (healthy: [NIS_BLIND, 1 / NIS_BLIND], about 1 expected).
+NIS_BLIND = 0.3
 
 
 def consistency_warnings(prepared: Prepared) -> list[str]:
@@ -508,18 +512,35 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
                 "profile mismatch, check units, signs and frames of its channels, or its noise_std "
                 f"({doc_url('troubleshooting.md')}; logscan train --calibrate)"
             )
-        elif ratio < 1.0 / NIS_MISMATCH**2:
-            kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())
-            out.append(
-                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): its "
-                "noise_std is far larger than the data's scatter, so faults of that size hide; "
-                + (
-                    "the tables' calibration found no noise_std that brings it to 1 (see their training report)"
-                    if kept
-                    else "lower noise_std (logscan train --calibrate)"
-                )
-            )
+        else:
+            out.extend(_blind_warning(prepared, g, name, size, used))
     return out
+
+
+def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> list[str]:
+    """The "blind" warning of group ``g`` when its mean NIS per output is below NIS_BLIND over the
+    judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
+    import numpy as np
+
+    from logscan.calibration import judged_steps
+
+    judged = judged_steps(prepared.profile, prepared.run)
+    if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
+        used = used & judged
+    level = float(np.mean(prepared.trace.nis_group[used, g])) / size
+    if not level < NIS_BLIND:
+        return []
+    kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())
+    return [
+        f"group {name!r} is blind: mean NIS per output {level:.3g} over {int(used.sum())} updates (about 1 "
+        f"expected, {NIS_BLIND:g} at the least): its noise_std is {1.0 / np.sqrt(level):.3g} times the scatter "
+        "the filter sees, so a fault of that size hides; "
+        + (
+            "the tables' calibration found no noise_std that brings it to 1 (see their training report)"
+            if kept
+            else "lower noise_std (logscan train --calibrate)"
+        )
+    ]
 
 
 def _reads_samples(detector) -> bool:

@@ -18,8 +18,9 @@ built from the topics present (`px4_profile`):
    blip, flight; the health and PX4 estimator checks are judged on the whole log;
  - noise from the log's own EKF2 parameters where it has them (EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE,
    EKF2_BARO_NOISE, EKF2_ACC_NOISE, EKF2_GYR_NOISE, EKF2_ACC_B_NOISE, EKF2_GYR_B_NOISE): the
-   values PX4 flew with; the GNSS noise per fix from the receiver's eph / epv and speed accuracy
-   (``noise_channels``) where the log has them; the GNSS and baro latency (``delay_s``) from
+   values PX4 flew with; the GNSS and baro noise from the scatter of PX4's own innovations
+   (`logscan.profiles.px4_noise`), never from the receiver's reported accuracy (eph, epv,
+   s_variance_m_s: a sensor does not vouch for itself); the GNSS and baro latency (``delay_s``) from
    EKF2_GPS_DELAY and EKF2_BARO_DELAY.
 
 A group whose topic the log lacks is left out, with one info line (`BuiltProfile.notes`).
@@ -50,6 +51,7 @@ import numpy as np
 
 from logscan.docs import doc_url
 from logscan.errors import InputError
+from logscan.profiles.px4_noise import NOISE_TOPICS, px4_noise
 
 MIN_IMU_HZ = 50.0  # the ins model holds one IMU sample over a grid period: slower is not an INS
 # candidate topics (ULog `topic_instance` names) the px4 profile may use
@@ -63,6 +65,7 @@ PX4_TOPICS = (
     "vehicle_local_position_0",
     "vehicle_status_0",
     "vehicle_land_detected_0",
+    *NOISE_TOPICS,  # PX4's own innovations: the measurement noise (logscan.profiles.px4_noise)
 )
 IGNORE_START_S = 5.0  # the ins filter's convergence from its first samples: not judged
 BEFORE_LANDING_S = 3.0  # PX4's land detector confirms a touchdown about 2 s late: its transient lies before
@@ -180,6 +183,11 @@ def _land_trigger_line(params: dict) -> str:
     return f"min_ground_s = {seconds:.3g}  # {name}{logged}: a shorter landing in flight is a blip, judged as flight"
 
 
+def _noise_std_line(noise) -> str:
+    """``noise_std = [...]`` of a group's `logscan.profiles.px4_noise.Noise`, commented."""
+    return f"noise_std = [{', '.join(f'{v:.3g}' for v in noise.std)}]  # {noise.comment()}"
+
+
 def _nice_rate(hz: float) -> float:
     """A grid rate near ``hz``: whole hertz (PX4 logs its IMU at 200, 250, ... Hz)."""
     return float(max(1, round(hz)))
@@ -277,6 +285,17 @@ def px4_profile(log) -> BuiltProfile:
     gps_p = _param(params, "EKF2_GPS_P_NOISE", 0.5)
     gps_v = _param(params, "EKF2_GPS_V_NOISE", 0.3)
     # the receiver's latency PX4 flew with (ms; its default 110): a fix describes the vehicle then
+    # each group's noise from the scatter of PX4's own innovations, PX4's configured noise the
+    # ceiling; never the receiver's reported accuracy (a sensor does not vouch for itself)
+    noise = px4_noise(
+        channels,
+        lambda name, default: _param(params, name, default),
+        {
+            "gnss_position": ((gps_p, gps_p, 1.5 * gps_p), "EKF2_GPS_P_NOISE (x 1.5 vertical)"),
+            "gnss_velocity": ((gps_v, gps_v, 1.5 * gps_v), "EKF2_GPS_V_NOISE (x 1.5 vertical)"),
+            "baro": ((_param(params, "EKF2_BARO_NOISE", 3.5),), "EKF2_BARO_NOISE"),
+        },
+    )
     gps_delay = _delay_line(params, "EKF2_GPS_DELAY", 110.0)
     gnss = _gnss(channels, has)
     if gnss is not None:
@@ -288,30 +307,24 @@ def px4_profile(log) -> BuiltProfile:
         lines += [
             'from = "geodetic"  # local NED about the first fix',
             f"rate_hz = {hz:.3g}",
-            f"noise_std = [{gps_p:.3g}, {gps_p:.3g}, {1.5 * gps_p:.3g}]  # EKF2_GPS_P_NOISE (x 1.5 vertical)",
+            _noise_std_line(noise["gnss_position"]),
         ]
         fix = f"/{topic}/fix_type"
         gate = f'gate = {{ channel = "{fix}", min = 3 }}  # only 3D fixes' if has(fix) else None
         if gate:
             lines.append(gate)
         lines.append(gps_delay)
-        accuracy = _channels(topic, ("eph", "eph", "epv"))
-        if all(has(ch) for ch in accuracy):  # the receiver's own accuracy per fix, where it logs one
-            lines.append(f"noise_channels = {_toml_list(accuracy)}  # per fix: eph, eph, epv (m)")
         if all(has(ch) for ch in vel):
             lines += [
                 "",
                 "[measurements.gnss_velocity]",
                 f"channels = {_toml_list(vel)}",
                 f"rate_hz = {hz:.3g}",
-                f"noise_std = [{gps_v:.3g}, {gps_v:.3g}, {1.5 * gps_v:.3g}]  # EKF2_GPS_V_NOISE (x 1.5 vertical)",
+                _noise_std_line(noise["gnss_velocity"]),
             ]
             if gate:
                 lines.append(gate)
             lines.append(gps_delay)
-            speed = f"/{topic}/s_variance_m_s"  # despite its name, PX4's speed accuracy (a std, m/s)
-            if has(speed):
-                lines.append(f"noise_channels = {_toml_list([speed] * 3)}  # per fix: the speed accuracy")
         else:
             notes.append(f"optional gnss_velocity: {topic} has no vel_n_m_s/vel_e_m_s/vel_d_m_s: left out")
     else:
@@ -339,7 +352,7 @@ def px4_profile(log) -> BuiltProfile:
             "[measurements.baro]",
             f'channels = ["{baro}"]',
             f"rate_hz = {hz:.3g}",
-            f"noise_std = {_param(params, 'EKF2_BARO_NOISE', 3.5):.3g}  # EKF2_BARO_NOISE",
+            _noise_std_line(noise["baro"]),
             _delay_line(params, "EKF2_BARO_DELAY", 0.0),
         ]
     else:
