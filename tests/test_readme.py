@@ -68,6 +68,14 @@ def test_every_command_is_in_the_readme_table_and_every_listed_command_exists():
     assert commands == listed
 
 
+def test_the_output_the_readme_shows_is_the_one_reading_the_report_runs():
+    """The README's example summary lines are those docs/reading-the-report.md shows under the same
+    command, which tests/test_docs_examples.py runs and compares with the real output."""
+    shown = re.search(r"```text\n(.*?)```", README, re.S).group(1).splitlines()
+    page = (ROOT / "docs" / "reading-the-report.md").read_text(encoding="utf-8")
+    assert shown and all(line in page for line in shown), shown
+
+
 def test_the_readme_links_every_docs_page_and_each_link_resolves():
     links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", README)
     assert [target for target in links if "://" not in target and not (ROOT / target).exists()] == []
