@@ -31,6 +31,9 @@ class Analysis:
     results: list[DetectorResult] = field(default_factory=list)
     incidents: list[Incident] = field(default_factory=list)  # alarms grouped, in time order
     unchecked: list[str] = field(default_factory=list)  # what could not be checked (logscan.coverage)
+    # what the [alarms] suspension left unjudged of the model-based statistics, when at most half of
+    # the flight (`logscan.coverage.unjudged_flight`; more is an ``unchecked`` line); "": nothing
+    unjudged: str = ""
     failures: list[DetectorFailure] = field(default_factory=list)  # detectors that raised
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
     scores: dict = field(default_factory=dict)  # detector -> logscan.scoring.Score (with truth)
@@ -274,6 +277,7 @@ class Analysis:
             incidents=self.incidents,
             unchecked=self.unchecked + [f.message for f in self.failures],
             skipped=self.skipped_checks,
+            unjudged=self.unjudged,
             messages=self.autopilot_messages()[0],
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
             context=getattr(self.prepared, "context", None),

@@ -417,6 +417,7 @@ def detect(
     unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
     if unjudged is not None and not unjudged[1]:
         analysis.warnings.append(unjudged[0])
+        analysis.unjudged = unjudged[0]  # the report says it where "every check ran" would be
     # the detectors that read the samples first (the frozen-sensor check), so the report's pack of
     # innovations can then take the samples' buffer (`_pack_innovations`); results in the given order
     order = sorted(range(len(detectors)), key=lambda i: not _reads_samples(detectors[i]))

@@ -188,3 +188,21 @@ def test_the_autopilots_battery_error_is_never_no_alarms(cli, tmp_path):
     assert abs(error["start_clock"] - 3.24) < 0.05 and error["start"] < 5.0  # inside the first 5 s
     assert "health.battery" in alarms
     assert cli("analyze", str(path), "--no-report", "--allow-partial").exit_code == 1
+
+
+def test_a_partly_suspended_log_is_never_said_to_be_checked_on_the_whole_log(cli, sample, tmp_path):
+    """At most half of the log unjudged: a warning, the verdict stands, and the report says what the
+    model-based statistics skipped where it would say "Every check ran on the whole log"."""
+    from logscan.readers import read_embedded_profile
+
+    path = sample("quad_healthy.mcap")
+    profile = tmp_path / "p.toml"
+    profile.write_text(read_embedded_profile(path) + "\n[alarms]\nignore_start_s = 2\n")
+    report, out = tmp_path / "r.html", tmp_path / "s.json"
+    result = cli("analyze", str(path), "--profile", str(profile), "-o", str(report), "--json", str(out))
+    (log,) = json.loads(out.read_text())["logs"]
+    assert result.exit_code == 0 and log["unchecked"] == [], log["unchecked"]
+    (line,) = [w for w in log["warnings"] if w.startswith("not judged for 2.0 s of")]
+    page = report.read_text(encoding="utf-8")
+    assert "Every check ran on the whole log" not in page
+    assert f"Every check ran; the model-based statistics were {line}" in page

@@ -62,6 +62,9 @@ class ReportInput:
     unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
     skipped:          the checks with nothing to judge in this log (`logscan.coverage.skipped_checks`),
                       listed beside ``unchecked`` in the margins section.
+    unjudged:         what the profile's [alarms] suspension left unjudged of the model-based
+                      statistics, when at most half of the flight ("": nothing; more is an
+                      ``unchecked`` line): said where "every check ran" would be.
     messages:         the autopilot's messages during flight with their incidents
                       (`logscan.autopilot_messages.AutopilotMessage`), a table under the incidents.
     groups:           the profile's measurement groups as used, with the filter's counts
@@ -93,6 +96,7 @@ class ReportInput:
     incidents: list[Incident] = field(default_factory=list)
     unchecked: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    unjudged: str = ""
     messages: list = field(default_factory=list)
     groups: list[dict] = field(default_factory=list)
     context: RunContext | None = None
@@ -404,6 +408,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         warnings=[str(w) for w in report.warnings],
         unchecked=[str(u) for u in report.unchecked],
         skipped=[str(u) for u in report.skipped],
+        unjudged=str(report.unjudged),
         messages=[_message_row(m, clock) for m in report.messages],
         incidents=_incident_rows(report.incidents, clock),
         rows=rows,
