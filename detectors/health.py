@@ -396,7 +396,7 @@ class HealthDetector(Detector):
                 limit={"output": f"{label}{k + 1}", "field": f"output[{k}]", "max": float(group.top[j])},
                 why=why,
             )
-        stopped = (values <= group.stop[None, :] + 0.5) & runs & fly[:, None]
+        stopped = group.stopped & runs & fly[:, None]
         judged = fly & (n_runs > 0)
         zero = np.where(judged, np.where(stopped.any(axis=1), FLAG, 0.0), np.nan)
         name = f"{PREFIX}.motor_zero{sfx}"

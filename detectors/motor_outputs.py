@@ -48,9 +48,9 @@ class MotorGroup:
     t: np.ndarray  # int64 ns
     outputs: list[int]  # output index k (0-based) of each column
     values: np.ndarray  # (n, m) the logged output values
-    stop: np.ndarray  # (m,) the value that means stopped (the disarmed value of its protocol)
     top: np.ndarray  # (m,) the value that means full
     runs: np.ndarray  # (n, m) armed, and PX4 commands this motor to run (actuator_motors finite)
+    stopped: np.ndarray  # (n, m) the output at its stopped value (the disarmed value of its protocol)
     limits: dict = field(default_factory=dict)  # what was taken and from where, for info["checks"]
 
 
@@ -81,8 +81,8 @@ def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | s
     if not outputs:
         return f"{where} has no output[k] fields"
     t = fields[f"output[{outputs[0]}]"].t
-    if not all(np.array_equal(fields[f"output[{k}]"].t, t) for k in outputs):
-        return f"{where}: outputs with different sample times"
+    if t.size == 0 or not all(np.array_equal(fields[f"output[{k}]"].t, t) for k in outputs):
+        return f"{where}: no samples, or outputs with different sample times"
     if instance > 1:
         return f"{where}: which output parameters (MAIN or AUX) describe instance {instance} is unknown"
     group = "MAIN" if instance == 0 else "AUX"
@@ -98,17 +98,10 @@ def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | s
     kind, protocol = _protocol(parameters, group)
     stop, stop_from = _stops(parameters, group, motors, kind, values, on)
     top = np.array([_top(parameters, group, k, kind) for k in motors])
-    # a motor PX4 commands: finite in actuator_motors (when logged) while armed
-    if commands:
-        command = np.column_stack(
-            [
-                np.isfinite(held(commands[motor_of[k]], t)) if motor_of[k] in commands else np.zeros(t.size, bool)
-                for k in motors
-            ]
-        )
-    else:
-        command = np.ones(values.shape, bool)
-    runs = on[:, None] & command
+    idle = np.array([_idle(parameters, group, k, kind) for k in motors])
+    command = _commanded(commands, [motor_of[k] for k in motors], t)
+    # a motor PX4 commands to run: armed, and finite in actuator_motors when that is logged
+    runs = on[:, None] & (np.isfinite(command) if commands else np.ones(values.shape, bool))
     # an output never active while armed (constant: unused channel, unused group, no ESC) is no motor
     seen = runs & np.isfinite(values)
     high = np.max(np.where(seen, values, -np.inf), axis=0)
@@ -116,22 +109,47 @@ def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | s
     active = high - low > ONE_COUNT  # False for a motor never seen running
     label = "" if instance == 0 else "aux"
     names = [f"{label}{k + 1}" for k in motors]
+    if not active.any():
+        return f"{where}: no motor output was active while armed ({', '.join(names)} constant or never commanded)"
+    stopped, stop_from = _stopped(values, stop, idle, top, command if commands else None, stop_from)
+    keep = np.flatnonzero(active)
     limits = {
         "mapping": mapping,
         "protocol": protocol,
         "motor_topic": f"{MOTORS}_0 (judged where its command is finite)" if commands else None,
-        "outputs": [n for n, a in zip(names, active) if a],
+        "outputs": [names[j] for j in keep],
         "not_motors": [n for n, a in zip(names, active) if not a],
-        "max": top[active].tolist(),
-        "stopped_at": stop[active].tolist(),
-        "stopped_from": [s for s, a in zip(stop_from, active) if a],
+        "max": top[keep].tolist(),
+        "stopped_at": stop[keep].tolist(),
+        "stopped_from": [stop_from[j] for j in keep],
     }
-    if not active.any():
-        return f"{where}: no motor output was active while armed ({', '.join(names)} constant or never commanded)"
-    keep = np.flatnonzero(active)
-    return MotorGroup(
-        where, label, t, [motors[j] for j in keep], values[:, keep], stop[keep], top[keep], runs[:, keep], limits
-    )
+    cols = (values[:, keep], top[keep], runs[:, keep], stopped[:, keep])
+    return MotorGroup(where, label, t, [motors[j] for j in keep], *cols, limits)
+
+
+def _commanded(commands, motor_index: list[int], t) -> np.ndarray:
+    """(n, m) PX4's command of each motor held at the output times (NaN: not commanded, or no
+    ``actuator_motors`` in the log)."""
+    out = np.full((t.size, len(motor_index)), np.nan)
+    for j, m in enumerate(motor_index):
+        channel = commands.get(m)
+        if channel is not None and channel.t.size:
+            out[:, j] = held(channel, t)
+    return out
+
+
+def _stopped(values, stop, idle, top, command, whence: list[str]) -> tuple[np.ndarray, list[str]]:
+    """(n, m) each output at its stopped value. Where the stopped value is also the output's idle
+    minimum (PX4 v1.13+'s PWM defaults: PWM_MAIN_DISn = PWM_MAIN_MINn = 1000) the value alone
+    cannot tell a stop from idle: stopped there only while PX4 commands the motor at least one
+    count above idle (``command * (top - stop) > 1/2``), never without ``actuator_motors``."""
+    at_stop = values <= stop[None, :] + ONE_COUNT
+    same = np.isfinite(idle) & (idle <= stop + ONE_COUNT)
+    if not same.any():
+        return at_stop, whence
+    whence = [w + (", = its idle minimum" if s else "") for w, s in zip(whence, same)]
+    above_idle = np.zeros(values.shape, bool) if command is None else np.nan_to_num(command) * (top - stop) > ONE_COUNT
+    return np.where(same[None, :], at_stop & above_idle, at_stop), whence
 
 
 def _motor_map(fields, outputs, t, instance: int, group: str, parameters) -> tuple[dict[int, int], str] | str:
@@ -212,3 +230,12 @@ def _top(parameters, group: str, k: int, kind: str) -> float:
     found = log_parameter(parameters, f"PWM_{group}_MAX{k + 1}", f"PWM_{group}_MAX", "PWM_MAX")
     pwm = found[0] if found else PWM_MAX
     return {"dshot": DSHOT_MAX, "pwm": pwm}.get(kind, max(pwm, DSHOT_MAX))
+
+
+def _idle(parameters, group: str, k: int, kind: str) -> float:
+    """An output's lowest running value: DShot 1 (DSHOT_MIN_THROTTLE, above the stop 0); PWM its
+    min parameter (PWM_MAIN_MINn, the group's, the legacy PWM_MIN), NaN when unknown."""
+    if kind != "pwm":
+        return 1.0
+    found = log_parameter(parameters, f"PWM_{group}_MIN{k + 1}", f"PWM_{group}_MIN", "PWM_MIN")
+    return found[0] if found else np.nan

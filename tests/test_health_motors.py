@@ -181,3 +181,32 @@ def test_a_motor_stopping_in_flight_is_one_alarm_at_its_time(tmp_path, cli, prot
     assert alarm["first_exceed"] == pytest.approx(onset, abs=0.15)
     assert onset <= alarm["start"] <= onset + LATE_S
     assert alarm["end"] == pytest.approx(end, abs=0.15)
+
+
+@pytest.mark.testdata(EVENTS)
+@pytest.mark.parametrize("commanded", [0.0, None])
+def test_where_stopped_and_idle_are_one_value_the_command_tells_them_apart(tmp_path, cli, commanded):
+    """PX4 v1.13+'s PWM defaults: PWM_MAIN_DISn = PWM_MAIN_MINn = 1000, so an output at 1000 is
+    stopped or idling. Output 2 at 1000 for 4 s mid-flight: PX4 commanding it 0 (idle) is no
+    alarm; PX4 commanding it as logged (about half thrust) is a stopped motor."""
+
+    def edit(ulog):
+        for k in range(1, 17):
+            ulog.initial_parameters[f"PWM_MAIN_DIS{k}"] = 1000
+            ulog.initial_parameters[f"PWM_MAIN_MIN{k}"] = 1000
+        first, last = stop(ulog, 1, 1000.0)
+        if commanded is not None:
+            motors = ulog.get_dataset("actuator_motors").data
+            motors["control[1]"][(motors["timestamp"] >= first) & (motors["timestamp"] <= last)] = commanded
+
+    health = analyze(cli, EVENTS, edit_log(EVENTS, tmp_path / "idle.ulg", edit), tmp_path)
+    zero = health["info"]["checks"]["health.motor_zero"]
+    assert zero["limit"]["stopped_at"] == [1000.0] * 4
+    assert zero["limit"]["stopped_from"] == ["PWM_MAIN_DIS1, = its idle minimum"] + [
+        f"PWM_MAIN_DIS{k}, = its idle minimum" for k in (2, 3, 4)
+    ]
+    if commanded is None:
+        (alarm,) = motor_alarms(health)
+        assert alarm["signal"] == "health.motor_zero" and zero["outputs_stopped"] == ["2"]
+    else:
+        assert motor_alarms(health) == [] and zero["outputs_stopped"] == []
