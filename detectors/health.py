@@ -18,7 +18,9 @@ log, a battery whose ``connected`` is 0 all flight or a GNSS without a 3D fix al
   battery says it is connected: ``health.battery_zero``;
 - GNSS (``vehicle_gps_position``, else ``sensor_gps``), while armed when the arming state is
   known: fix lost after the first 3D fix, ``eph`` / ``epv`` over EKF2_REQ_EPH / EKF2_REQ_EPV while
-  3D-fixed, ``jamming_indicator`` over ``jamming_limit``;
+  3D-fixed, ``jamming_indicator`` over ``jamming_limit``, and a sudden rise of the reported
+  accuracy (eph, epv, s_variance_m_s over ``accuracy_jump`` times their median of the
+  ``accuracy_window_s`` before: detectors/accuracy_jump.py);
 - motors (``actuator_outputs``, ``actuator_motors``, ``actuator_armed`` / ``vehicle_status``):
   saturated share, one output at its max, an output at its stopped value while flying; judged
   only on outputs that drive motors PX4 commands to run (detectors/motor_outputs.py);
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from logscan.detectors.accuracy_jump import accuracy_jump
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.motor_outputs import MotorGroup, motor_groups
 from logscan.detectors.params import Interval
@@ -86,6 +89,7 @@ CHECK_WORDS = {
     "gnss_eph": "GNSS horizontal accuracy worse than required",
     "gnss_epv": "GNSS vertical accuracy worse than required",
     "gnss_jamming": "GNSS jamming indicated",
+    "gnss_accuracy_jump": "GNSS reported accuracy suddenly worse",
     "motor_saturated": "motors saturated",
     "motor_max": "a motor output at its maximum",
     "motor_zero": "a motor output at zero while flying",
@@ -107,11 +111,15 @@ class HealthDetector(Detector):
         "min_duration_s": 1.0,  # a check must fail for this long (logged errors and timeouts: once)
         "jamming_limit": 80.0,  # GNSS jamming_indicator (0-255) above this is jamming
         "timeout_periods": 5.0,  # a gap of more than this many median periods is a timeout
+        "accuracy_jump": 2.0,  # GNSS eph / epv / speed accuracy over this times its recent median
+        "accuracy_window_s": 10.0,  # ... the median of the reports this long before it
     }
     parameter_constraints = {
         "min_duration_s": [Interval(float, 0, None, closed="left")],
         "jamming_limit": [Interval(float, 0, None, closed="neither")],
         "timeout_periods": [Interval(float, 1, None, closed="left")],
+        "accuracy_jump": [Interval(float, 1, None, closed="neither")],
+        "accuracy_window_s": [Interval(float, 0, None, closed="neither")],
     }
 
     # --- the shared plumbing -------------------------------------------------------------------
@@ -190,6 +198,20 @@ class HealthDetector(Detector):
         armed_channel = topics.get((ARMED, 0), {}).get("armed")
         if armed_channel is not None:
             source = f"{ARMED}_0.armed"
+
+    def _accuracy_jumps(self, fields, where: str, sfx: str, judged, while_: str) -> None:
+        """``health.gnss_accuracy_jump.<field>``: each reported accuracy over ``accuracy_jump``
+        times its recent median (detectors/accuracy_jump.py), judged where ``judged``."""
+        for field in ("eph", "epv", "s_variance_m_s"):
+            channel = fields.get(field)
+            name = f"{PREFIX}.gnss_accuracy_jump.{field}{sfx}"
+            if channel is None or channel.t.shape != judged.shape:
+                self._skipped[name] = f"{where} has no {field}"
+                continue
+            ratio = accuracy_jump(channel.t, np.where(judged, channel.values, np.nan), float(self.accuracy_window_s))
+            limit = {"times_recent_median": float(self.accuracy_jump), "window_s": float(self.accuracy_window_s)}
+            limit["while"] = while_
+            self._add(name, where, channel.t, ratio / float(self.accuracy_jump), limit=limit, why=f" ({while_})")
 
             def armed(t_ns):
                 return np.nan_to_num(_held(armed_channel, t_ns)) != 0
@@ -355,6 +377,8 @@ class HealthDetector(Detector):
                 self._skipped[name] = f"{where} has no jamming_indicator"
             else:
                 values = np.where(gate, jam.values / float(self.jamming_limit), np.nan)
+            if fixed.any():  # judged while 3D-fixed only, as eph / epv
+                self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")
                 limit = {"indicator": float(self.jamming_limit), "while": while_}
                 self._add(name, where, t, values, limit=limit, why=f" ({while_})")
 

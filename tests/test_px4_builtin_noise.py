@@ -1,8 +1,9 @@
 """The built-in px4 profile's measurement noise (logscan.profiles.px4_noise, docs/algorithms.md
 section 6.7a): from the scatter of PX4's own innovations, never from the receiver's reported
-accuracy; the "blind" warning where the filter's test stays far looser than the data; and a
+accuracy; the "blind" warning where the filter's test stays far looser than the data; a sudden
+rise of the reported accuracy as a finding (health, detectors/accuracy_jump.py); and a
 spoofing-like GNSS ramp, its receiver reporting worse accuracy as it starts, injected into a real
-log and caught within 2 s."""
+log and caught within 2 s by both."""
 
 from __future__ import annotations
 
@@ -135,4 +136,23 @@ def test_a_gnss_ramp_whose_receiver_reports_worse_accuracy_is_caught_within_2_s(
     (alarm,) = [a for a in nis["alarms"] if a["signal"] == "nis.gnss_position"]
     # EKF2_GPS_DELAY (110 ms) puts a fix that much earlier on the grid: the onset too
     assert onset - 0.2 <= alarm["first_exceed"] and alarm["start"] <= onset + 2.0, (alarm, onset)
+    # the receiver's sudden loss of accuracy is a finding of its own (health), 1 s after it
+    health = next(d for d in log["detectors"] if d["detector"] == "health")
+    jumps = [a for a in health["alarms"] if a["signal"].startswith("health.gnss_accuracy_jump.")]
+    assert {a["signal"].rsplit(".", 1)[1] for a in jumps} == {"eph", "epv", "s_variance_m_s"}
+    assert all(onset - 0.2 <= a["first_exceed"] and a["start"] <= onset + 2.0 for a in jumps), jumps
     assert log["n_alarms"] >= 1 and log["exit_code"] in (1, 2)
+
+
+def test_an_accuracy_jump_is_a_rise_over_the_recent_median_and_a_slow_drift_is_none():
+    from logscan.detectors.accuracy_jump import accuracy_jump
+
+    t = (np.arange(600) * 0.2e9).astype(np.int64)  # 5 Hz for 120 s
+    slow = np.linspace(1.0, 2.5, t.size)  # geometry: 2.5 times worse over 2 minutes
+    assert np.nanmax(accuracy_jump(t, slow, 10.0)) < 1.2
+    step = np.where(t >= 60e9, 3.0, 1.0)
+    step[100] = np.nan  # a sample not judged (no 3D fix) stays NaN and out of the median
+    ratio = accuracy_jump(t, step, 10.0)
+    assert np.isnan(ratio[0]) and np.isnan(ratio[100]) and ratio[99] == 1.0
+    assert ratio[300] == pytest.approx(3.0) and ratio[324] == pytest.approx(3.0)  # the 25 before: 1
+    assert ratio[326] == pytest.approx(1.0)  # after half the window the median has moved up

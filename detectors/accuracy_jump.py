@@ -1,0 +1,42 @@
+"""A sudden rise of a sensor's self-reported accuracy: the reported value over its own recent level.
+
+Specified in docs/algorithms.md section 3c (the `health` detector's GNSS checks). A GNSS receiver's
+reported accuracy (eph, epv, speed accuracy) follows the satellite geometry, which changes over
+minutes (a satellite moves about 0.5 deg a minute; one rising or setting moves the accuracy by
+tens of percent); a rise by a factor of 2 within seconds is the signal changing instead:
+interference, an obstruction, or a spoofer capturing the receiver, which then reports worse
+accuracy as the attack starts. That rise is a finding of its own, whatever the level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def accuracy_jump(t_ns: np.ndarray, values: np.ndarray, window_s: float) -> np.ndarray:
+    """Per sample, ``values`` over the median of the finite positive values of the ``window_s``
+    before it (the samples judged: NaN where ``values`` is NaN or the window holds none).
+
+    Vectorised over a window of samples (the count ``window_s`` spans at the median sample
+    period), each window clipped to ``window_s`` in time."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    v = np.asarray(values, dtype=np.float64)
+    out = np.full(v.shape, np.nan)
+    if v.size < 2:
+        return out
+    period = float(np.median(np.diff(t))) if np.any(np.diff(t) > 0) else 0.0
+    k = int(np.clip(np.ceil(window_s * 1e9 / period), 1, v.size)) if period > 0 else 1
+    good = np.where(np.isfinite(v) & (v > 0), v, np.nan)
+    # row i: the k samples before sample i (NaN before the log's start), and their times
+    padded = np.concatenate([np.full(k, np.nan), good])
+    t_padded = np.concatenate([np.full(k, np.iinfo(np.int64).min // 2), t])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, k)[: v.size]
+    times = np.lib.stride_tricks.sliding_window_view(t_padded, k)[: v.size]
+    windows = np.where(times >= (t - int(window_s * 1e9))[:, None], windows, np.nan)
+    has = np.isfinite(windows).any(axis=1)
+    reference = np.full(v.size, np.nan)
+    if has.any():
+        reference[has] = np.nanmedian(windows[has], axis=1)
+    judged = has & np.isfinite(good)
+    out[judged] = good[judged] / reference[judged]
+    return out
