@@ -95,6 +95,8 @@ def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | s
     motors = sorted(motor_of)
     values = np.column_stack([fields[f"output[{k}]"].values for k in motors]).astype(np.float64)
     on = armed[1](t)
+    if not on.any():
+        return f"{where}: never armed while it was logged"
     kind, protocol = _protocol(parameters, group)
     stop, stop_from = _stops(parameters, group, motors, kind, values, on)
     top = np.array([_top(parameters, group, k, kind) for k in motors])

@@ -16,8 +16,9 @@ from conftest import REPO, need_testdata
 
 EVENTS = "px4-ulog/sample_px4_events.ulg"  # SITL quad, PX4 v1.14: PWM_MAIN_FUNC1..4 = Motor1..4, actuator_motors
 ROBOLOGS = "px4-ulog-extra/robologs_fmu_v5_test.ulg"  # real FMU v5 quad, legacy mixer (no FUNC params)
+NEVER_ARMED = "px4-ulog/sample_logging_tagged_and_default_params.ulg"  # SITL quad, armed never set
 # the example profile of the log's PX4 generation; None: the built-in px4 profile
-PROFILES = {EVENTS: "px4-ins-v1.14.profile.toml", ROBOLOGS: None}
+PROFILES = {EVENTS: "px4-ins-v1.14.profile.toml", ROBOLOGS: None, NEVER_ARMED: "px4-ins.profile.toml"}
 DSHOT_MIN = 0.055  # PX4's default DSHOT_MIN
 STOP_FOR_S = 4.0
 # how late an alarm may start after its event: min_duration_s (1 s) at the outputs' 10 Hz, plus a
@@ -210,3 +211,9 @@ def test_where_stopped_and_idle_are_one_value_the_command_tells_them_apart(tmp_p
         assert alarm["signal"] == "health.motor_zero" and zero["outputs_stopped"] == ["2"]
     else:
         assert motor_alarms(health) == [] and zero["outputs_stopped"] == []
+
+
+@pytest.mark.testdata(NEVER_ARMED)
+def test_a_log_never_armed_says_so(tmp_path, cli):
+    health = analyze(cli, NEVER_ARMED, need_testdata(NEVER_ARMED), tmp_path)
+    assert health["info"]["skipped"]["health.motor_saturated"] == "actuator_outputs_0: never armed while it was logged"
