@@ -153,6 +153,9 @@ class HealthDetector(Detector):
         self._unmonitored: list[str] = []  # sensors in the log without one valid sample: not checked
         try:
             armed = self._arming(topics)
+            # never armed on the grid: every while-armed check has nothing to judge, said as such
+            grid_ns = run.start_ns + np.round(np.asarray(run.t) * 1e9).astype(np.int64)
+            self._never_armed = armed is not None and run.n_steps > 0 and not armed[1](grid_ns).any()
             self._battery(topics, parameters)
             self._gnss(topics, parameters, armed)
             self._motors(topics, parameters, armed)
@@ -185,7 +188,10 @@ class HealthDetector(Detector):
         statistic = on_grid(run, np.asarray(t_ns), np.asarray(values, dtype=np.float64))
         valid = np.isfinite(statistic)
         if not valid.any():
-            self._skipped[name] = f"{where}: no sample to judge on the analysis grid{why}"
+            never = self._never_armed and "armed" in why
+            self._skipped[name] = f"{where}: never armed in the log" if never else (
+                f"{where}: no sample to judge on the analysis grid{why}"
+            )  # fmt: skip
             return False
         if n_persist is None:
             n_persist = persist_count(run.t[valid], float(self.min_duration_s))

@@ -99,3 +99,12 @@ def test_checks_sharing_a_reason_are_one_line_naming_them():
         "imu_clipping: no sensor_combined",
     ]
     assert skipped_lines({"health.a": "r", "health.b": "r"}, "health") == ["a, b: r"]
+
+
+def test_a_log_never_armed_says_so_for_the_while_armed_checks(cli, tmp_path):
+    path = need_testdata("px4-ulog/sample_logging_tagged_and_default_params.ulg")  # SITL on the ground, never armed
+    result, log, page = _analyze(cli, path, tmp_path)
+    gnss = [s for s in log["skipped_checks"] if s.startswith("health: gnss_fix")]
+    assert len(gnss) == 1, log["skipped_checks"]  # the while-armed GNSS checks in one line
+    assert gnss[0].endswith("vehicle_gps_position_0: never armed in the log")
+    assert "no sample to judge" not in " ".join(log["skipped_checks"])
