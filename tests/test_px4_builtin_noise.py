@@ -59,6 +59,33 @@ def test_an_innovation_takes_the_variance_published_nearest_to_it():
     assert y.tolist() == [1.0, 2.0, 4.0] and s.tolist() == [10.0, 20.0, 40.0]  # 200 ms: none within 20 ms
 
 
+def test_a_v1_14_log_gives_its_noise_through_estimator_aid_src_and_only_fused_samples_count():
+    from logscan.log import Channel
+    from logscan.profiles.px4_noise import px4_noise
+
+    rng = np.random.default_rng(5)
+    n = 200
+    t = np.arange(n, dtype=np.int64) * 200_000_000
+    fused = (np.arange(n) % 4 != 0).astype(float)  # a quarter not fused: their innovations are wild
+    y = np.where(fused != 0, rng.normal(0.0, 0.05, n), 30.0)
+
+    def topic(name, values):
+        return {f"/estimator_aid_src_{name}_0/{f}": Channel(f, t, v) for f, v in values.items()}
+
+    channels = {
+        **topic("gnss_vel", {"innovation[0]": y, "innovation_variance[0]": np.full(n, 1e4), "fused": fused}),
+        **topic("baro_hgt", {"innovation": 10 * y, "innovation_variance": np.full(n, 1e4), "fused": fused}),
+    }
+    configured = {"gnss_velocity": ((0.3, 0.3, 0.45), "EKF2_GPS_V_NOISE"), "baro": ((3.5,), "EKF2_BARO_NOISE")}
+    noise = px4_noise(channels, lambda name, default: default, configured)
+    rms = np.sqrt(np.mean(y[fused != 0] ** 2))
+    bound = np.sqrt(150 / chi2.ppf(0.05, 150))
+    assert noise["gnss_velocity"].std[0] == pytest.approx(rms * bound)
+    assert noise["gnss_velocity"].std[1:] == (0.3, 0.45)  # not logged: PX4's configured noise
+    assert noise["gnss_velocity"].samples == (150, None, None)
+    assert noise["baro"].std[0] == pytest.approx(10 * rms * bound)
+
+
 # --- the built-in profile on the real logs -------------------------------------------------------
 
 

@@ -284,7 +284,6 @@ def px4_profile(log) -> BuiltProfile:
     ]
     gps_p = _param(params, "EKF2_GPS_P_NOISE", 0.5)
     gps_v = _param(params, "EKF2_GPS_V_NOISE", 0.3)
-    # the receiver's latency PX4 flew with (ms; its default 110): a fix describes the vehicle then
     # each group's noise from the scatter of PX4's own innovations, PX4's configured noise the
     # ceiling; never the receiver's reported accuracy (a sensor does not vouch for itself)
     noise = px4_noise(
@@ -297,6 +296,7 @@ def px4_profile(log) -> BuiltProfile:
         },
     )
     gps_delay = _delay_line(params, "EKF2_GPS_DELAY", 110.0)
+    # the receiver's latency PX4 flew with (ms; its default 110): a fix describes the vehicle then
     gnss = _gnss(channels, has)
     if gnss is not None:
         topic, pos, scale, vel = gnss

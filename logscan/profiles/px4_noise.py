@@ -5,7 +5,8 @@ EKF2_GPS_V_NOISE, EKF2_BARO_NOISE) are conservative floors, and a receiver's rep
 (eph, epv, s_variance_m_s) is the sensor vouching for itself: on real flights either left the
 filter 10^2-10^5 times looser than the data. What PX4 logged of each fused sensor says how far
 the sensor actually strayed from PX4's one-step prediction: its innovations (``estimator_innovations``,
-PX4 v1.12+; ``ekf2_innovations`` v1.6-1.8). Per output:
+PX4 v1.12+; ``ekf2_innovations`` v1.6-1.8; ``estimator_aid_src_*`` v1.14+, its samples PX4
+fused). Per output:
 
     std = clip(sigma_hat, FLOOR, PX4's configured std)
 
@@ -34,26 +35,31 @@ import numpy as np
 INNOVATIONS = "estimator_innovations_0"
 VARIANCES = "estimator_innovation_variances_0"
 LEGACY = "ekf2_innovations_0"
-NOISE_TOPICS = (INNOVATIONS, VARIANCES, LEGACY)
+# PX4 v1.14+ per aiding source: innovation, innovation_variance and fused in one message (gps_* in
+# early v1.14, gnss_* since)
+AID = "estimator_aid_src_{}_0"
+AID_SOURCES = ("gnss_pos", "gps_pos", "gnss_hgt", "gps_hgt", "gnss_vel", "gps_vel", "baro_hgt")
+NOISE_TOPICS = (INNOVATIONS, VARIANCES, LEGACY, *(AID.format(source) for source in AID_SOURCES))
 CONFIDENCE = 0.95  # sigma_hat at its upper confidence bound of this level
 MIN_SAMPLES = 10  # fewer accepted innovations: PX4's configured std
 FLOOR = 0.011  # m (and m/s): the 1e-7 deg resolution of a logged GNSS latitude / longitude
 PAIR_NS = 20_000_000  # an innovation and its variance from one EKF2 cycle: within 20 ms (PX4 runs at 100+ Hz)
 DEFAULT_GATE = 5.0  # PX4's default innovation gates (EKF2_GPS_P_GATE, _V_GATE, EKF2_BARO_GATE)
 
-# group -> per output: (estimator_innovations field, ekf2_innovations index or None, gate parameter)
+# group -> per output: (estimator_innovations field, ekf2_innovations index or None, gate parameter,
+# estimator_aid_src_* sources (the new name first) and the output's element of theirs, None: scalar)
 SOURCES = {
     "gnss_position": (
-        ("gps_hpos[0]", 3, "EKF2_GPS_P_GATE"),
-        ("gps_hpos[1]", 4, "EKF2_GPS_P_GATE"),
-        ("gps_vpos", None, "EKF2_GPS_P_GATE"),
+        ("gps_hpos[0]", 3, "EKF2_GPS_P_GATE", ("gnss_pos", "gps_pos"), 0),
+        ("gps_hpos[1]", 4, "EKF2_GPS_P_GATE", ("gnss_pos", "gps_pos"), 1),
+        ("gps_vpos", None, "EKF2_GPS_P_GATE", ("gnss_hgt", "gps_hgt"), None),
     ),
     "gnss_velocity": (
-        ("gps_hvel[0]", 0, "EKF2_GPS_V_GATE"),
-        ("gps_hvel[1]", 1, "EKF2_GPS_V_GATE"),
-        ("gps_vvel", 2, "EKF2_GPS_V_GATE"),
+        ("gps_hvel[0]", 0, "EKF2_GPS_V_GATE", ("gnss_vel", "gps_vel"), 0),
+        ("gps_hvel[1]", 1, "EKF2_GPS_V_GATE", ("gnss_vel", "gps_vel"), 1),
+        ("gps_vvel", 2, "EKF2_GPS_V_GATE", ("gnss_vel", "gps_vel"), 2),
     ),
-    "baro": (("baro_vpos", 5, "EKF2_BARO_GATE"),),
+    "baro": (("baro_vpos", 5, "EKF2_BARO_GATE", ("baro_hgt",), None),),
 }
 
 
@@ -116,14 +122,26 @@ def _pairs(channels, has, legacy_height: bool):
         y, s = channels[y_name], channels[s_name]
         return paired(np.asarray(y.t), np.asarray(y.values), np.asarray(s.t), np.asarray(s.values))
 
+    def aid(sources: tuple[str, ...], element: int | None):
+        """(y, S) of the first estimator_aid_src_* source logged, its samples PX4 fused only."""
+        suffix = "" if element is None else f"[{element}]"
+        for source in sources:
+            topic = AID.format(source)
+            fused = f"/{topic}/fused"
+            found = series(topic, f"innovation{suffix}", topic, f"innovation_variance{suffix}")
+            if found is not None and has(fused) and channels[fused].values.shape == found[0].shape:
+                keep = np.asarray(channels[fused].values) != 0
+                return found[0][keep], found[1][keep]
+        return None
+
     out = {}
     for group, outputs in SOURCES.items():
         row = []
-        for field, index, _ in outputs:
+        for field, index, _, sources, element in outputs:
             found = series(INNOVATIONS, field, VARIANCES, field)
             if found is None and index is not None and (index != 5 or legacy_height):
                 found = series(LEGACY, f"vel_pos_innov[{index}]", LEGACY, f"vel_pos_innov_var[{index}]")
-            row.append(found)
+            row.append(found if found is not None else aid(sources, element))
         out[group] = row
     return out
 
