@@ -295,8 +295,8 @@ def px4_profile(log) -> BuiltProfile:
             "baro": ((_param(params, "EKF2_BARO_NOISE", 3.5),), "EKF2_BARO_NOISE"),
         },
     )
-    gps_delay = _delay_line(params, "EKF2_GPS_DELAY", 110.0)
     # the receiver's latency PX4 flew with (ms; its default 110): a fix describes the vehicle then
+    gps_delay = _delay_line(params, "EKF2_GPS_DELAY", 110.0)
     gnss = _gnss(channels, has)
     if gnss is not None:
         topic, pos, scale, vel = gnss
