@@ -199,12 +199,6 @@ class HealthDetector(Detector):
         self._checks[name] = {"source": where, "limit": limit, "n_persist": n_persist}
         return True
 
-    def _arming(self, topics) -> tuple[str, object, object] | None:
-        """(source, armed(t_ns) -> bool array, flying(t_ns) -> bool array), None when unknown."""
-        armed_channel = topics.get((ARMED, 0), {}).get("armed")
-        if armed_channel is not None:
-            source = f"{ARMED}_0.armed"
-
     def _accuracy_jumps(self, fields, where: str, sfx: str, judged, while_: str) -> None:
         """``health.gnss_accuracy_jump.<field>``: each reported accuracy over ``accuracy_jump``
         times its recent median (detectors/accuracy_jump.py), judged where ``judged``."""
@@ -218,6 +212,12 @@ class HealthDetector(Detector):
             limit = {"times_recent_median": float(self.accuracy_jump), "window_s": float(self.accuracy_window_s)}
             limit["while"] = while_
             self._add(name, where, channel.t, ratio / float(self.accuracy_jump), limit=limit, why=f" ({while_})")
+
+    def _arming(self, topics) -> tuple[str, object, object] | None:
+        """(source, armed(t_ns) -> bool array, flying(t_ns) -> bool array), None when unknown."""
+        armed_channel = topics.get((ARMED, 0), {}).get("armed")
+        if armed_channel is not None:
+            source = f"{ARMED}_0.armed"
 
             def armed(t_ns):
                 return np.nan_to_num(_held(armed_channel, t_ns)) != 0
@@ -377,14 +377,14 @@ class HealthDetector(Detector):
                     limit={"m": limit, "from": source, "while": f"{while_}, 3D fix"},
                     why=f" ({while_}, 3D fix)",
                 )
+            if fixed.any():  # judged while 3D-fixed only, as eph / epv
+                self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")
             jam = fields.get("jamming_indicator")
             name = f"{PREFIX}.gnss_jamming{sfx}"
             if jam is None or not np.array_equal(jam.t, t):
                 self._skipped[name] = f"{where} has no jamming_indicator"
             else:
                 values = np.where(gate, jam.values / float(self.jamming_limit), np.nan)
-            if fixed.any():  # judged while 3D-fixed only, as eph / epv
-                self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")
                 limit = {"indicator": float(self.jamming_limit), "while": while_}
                 self._add(name, where, t, values, limit=limit, why=f" ({while_})")
 
