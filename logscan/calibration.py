@@ -20,6 +20,11 @@ CAL_ITERATIONS. Scales are clipped to [1e-4, 1e4]; a block whose Q does not chan
 (nothing observes it, or what does is all measurement noise: the position of a model whose velocity
 is measured) keeps scale 1 and is reported as not identified.
 
+A calibration that did not converge in CAL_ITERATIONS, or whose Q scale of a block ran to its bound
+(`logscan.process_noise.Q_SCALE_MIN`, Q_SCALE_MAX: the likelihood still falling there, so the logs
+do not fix it) or whose noise_std ran to its ceiling, has failed: ``failures`` says why, the train
+summary and training report say it failed, and `logscan analyze --tables` refuses it.
+
 Both are written in the tables as ``calibration`` (``groups``: each group's noise_std;
 ``process_noise_scale``: each state's Q scale, ``process_noise_blocks``, the iterations used) and
 applied by `logscan analyze --tables` before the filter runs (R in the profile's noise_std, Q through
@@ -35,9 +40,9 @@ from dataclasses import replace
 import numpy as np
 
 from logscan.errors import InputError
-from logscan.process_noise import BlockFit, evaluate, fit_blocks, state_blocks
+from logscan.process_noise import Q_SCALE_MAX, Q_SCALE_MIN, BlockFit, evaluate, fit_blocks, state_blocks
 
-CAL_ITERATIONS = 6
+CAL_ITERATIONS = 10
 CAL_FLOOR = 1e-6  # the smallest calibrated variance, relative to the profile's (std / 1000)
 CAL_CEILING = 1e6  # the largest (std x 1000)
 CAL_MIN_UPDATES = 20  # updates of a group over the training logs to calibrate it
@@ -63,10 +68,13 @@ def mean_nis_per_output(model, runs: Sequence, noise_std: dict[str, np.ndarray])
     return evaluate(model, runs, noise_std, np.ones(model.n_states)).nis
 
 
-def _within_band(nis: dict[str, tuple[float, int]]) -> bool:
-    """Every calibrated group's mean NIS per output within `CAL_NIS_BAND`."""
+def _within_band(nis: dict[str, tuple[float, int]], kept: Sequence[str] = ()) -> bool:
+    """Every calibrated group's mean NIS per output within `CAL_NIS_BAND` (but those ``kept`` at
+    the profile's noise: no noise_std brings them to 1, `_below_band_at_floor`)."""
     low, high = CAL_NIS_BAND
-    return all(low <= ratio <= high for ratio, count in nis.values() if count >= CAL_MIN_UPDATES)
+    return all(
+        low <= ratio <= high for name, (ratio, count) in nis.items() if count >= CAL_MIN_UPDATES and name not in kept
+    )
 
 
 def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequence | None = None) -> dict:
@@ -106,7 +114,7 @@ def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequenc
         moved = 0.0
         if blocks:  # then Q: one step of each block's scale on the innovations' likelihood
             current, moved = fit_blocks(model, now, noise(), blocks, current, judged, floored)
-        converged = _within_band(current.nis) and moved < CAL_Q_TOLERANCE
+        converged = _within_band(current.nis, _below_band_at_floor(current.nis, scale)) and moved < CAL_Q_TOLERANCE
     # a group still below the band at the R floor: no noise_std brings it to 1 (most of its S is
     # H P H^T; PX4's own attitude estimate as a measurement, smoother than any sensor). Its R at
     # the floor would alarm on every small deviation: it keeps the profile's, and says so.
@@ -122,7 +130,26 @@ def calibrate(model, runs: Sequence, process_noise: bool = True, judged: Sequenc
     }
     if process_noise:
         document.update(_process_noise_entries(model, blocks, before, current, converged))
+    document["failures"] = _failures(document, converged, iterations)
     return document
+
+
+def _failures(document: dict, converged: bool, iterations: int) -> list[str]:
+    """Why a calibration failed (empty: it worked): not converged, a block's Q scale or a group's
+    noise_std at its bound (the likelihood or the NIS still pulling past it)."""
+    out = [] if converged else [f"not converged in {iterations} iteration(s)"]
+    for name, entry in (document.get("process_noise_blocks") or {}).items():
+        if entry["identified"] and not Q_SCALE_MIN * 1.0001 < entry["scale"] < Q_SCALE_MAX / 1.0001:
+            out.append(f"the process noise of {name} ran to its bound (Q x {entry['scale']:.3g})")
+    for name, entry in document["groups"].items():
+        if entry["calibrated"] and entry["noise_factor"] ** 2 >= CAL_CEILING / 1.0001:
+            out.append(f"the noise of {name} ran to its ceiling (noise_std x {entry['noise_factor']:.3g})")
+    return out
+
+
+def calibration_failures(calibration: dict | None) -> list[str]:
+    """Why the tables' calibration failed (`calibrate`'s ``failures``; empty: it worked or there is none)."""
+    return [str(reason) for reason in (calibration or {}).get("failures") or []]
 
 
 def judged_steps(profile, run) -> np.ndarray | None:
@@ -276,7 +303,8 @@ def process_noise_scale(calibration: dict | None) -> dict[str, float] | None:
 
 def calibration_lines(calibration: dict | None) -> list[str]:
     """Human-readable lines of a calibration (the train command's summary)."""
-    lines = []
+    failures = calibration_failures(calibration)
+    lines = [f"  FAILED: {'; '.join(failures)}: `logscan analyze --tables` refuses it"] if failures else []
     for name, entry in (calibration or {}).get("groups", {}).items():
         if entry.get("nis_at_floor") is not None:
             lines.append(

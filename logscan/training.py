@@ -242,7 +242,7 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     each detector the tables hold is replaced by its trained self, its run-time parameters taken
     from the profile; the others are kept. The tables' calibrated measurement noise is set in
     ``profile`` (`logscan.calibration.apply_calibration`): the filter then runs as in training."""
-    from logscan.calibration import apply_calibration
+    from logscan.calibration import apply_calibration, calibration_failures
 
     document = read_tables_document(path)
     fingerprint = document.get("profile_fingerprint")
@@ -261,6 +261,14 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
             f"the tables were trained at other rates: {', '.join(rates)}; more than {RATE_TOLERANCE:.0%} apart",
             path=str(path),
             hint=f"train tables at these rates: `{retrain_command(document, path, profile, same_logs=False)}`",
+        )
+    failures = calibration_failures(document.get("calibration"))
+    if failures:
+        raise InputError(
+            f"the tables' calibration failed ({'; '.join(failures)}): its noise would misjudge every log",
+            path=str(path),
+            hint="calibrate on more or longer healthy flights "
+            f"(`{retrain_command(document, path, profile, same_logs=False)}`), or train without --calibrate",
         )
     trained = read_tables(path)
     # after the profile check: the calibrated noise changes the profile it fingerprints

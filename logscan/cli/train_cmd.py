@@ -86,8 +86,11 @@ def train(
     filter with --calibrate): the A-TFM table of each [redundant] group
     (eps and e per sensor and mode value), and the thresholds of the detectors the profile runs in a
     trained variant. Writes one versioned JSON (the training logs' names and SHA-256, the profile's
-    fingerprint) for `logscan analyze --tables`, and a training report. Exit 0, or 2 on bad input.
+    fingerprint) for `logscan analyze --tables`, and a training report. Exit 0, or 2 on bad input
+    or a calibration that failed (not converged, or a noise at its bound: written, marked failed).
     """
+    from logscan.calibration import calibration_failures
+    from logscan.errors import InputError
     from logscan.fleet import expand_logs, refuse_clobbering
     from logscan.time_sanity import check_window
     from logscan.training import train_logs
@@ -120,6 +123,13 @@ def train(
     if not quiet:
         for line in _summary_lines(document, output_path, report):
             click.echo(line)
+    failures = calibration_failures(document.get("calibration"))
+    if failures:  # written, marked failed (the report shows why); analyze refuses them
+        raise InputError(
+            f"the calibration failed: {'; '.join(failures)} (marked so in the tables; `logscan analyze` refuses them)",
+            path=output_path,
+            hint="calibrate on more or longer healthy flights, or train without --calibrate",
+        )
 
 
 def _beside(output_path: str) -> str:

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from logscan.calibration import calibration_failures
 from logscan.detectors.base import decode_state_value
 from logscan.report.context import number_text
 from logscan.report.page import _environment, _plotly_js
@@ -420,6 +421,7 @@ def render_training_html(document: dict) -> str:
             others=others,
             n_detectors=len(document.get("detectors") or []),
             calibration=_calibration_rows(document.get("calibration")),
+            calibration_failures=calibration_failures(document.get("calibration")),
             tuning=_tuning_rows(document.get("tuning")),
             n_figures=len(figures),
             figure_json=figure_json,
