@@ -37,7 +37,9 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.params import Interval
+from logscan.detectors.raw_topics import skipped_lines
 from logscan.detectors.words import group_words
+from logscan.results import NotChecked
 
 PREFIX = "frozen"
 MIN_RUNS = 20  # fewer runs than this: too few to read a fill factor from (L = 1)
@@ -159,6 +161,8 @@ class FrozenSensorDetector(Detector):
                 alarm.change_time = float(run.t[steps[anchor[i] + 1]]) if i > anchor[i] else None
             info["fill"][signal], info["h"][signal], info["sigma"][signal] = float(fill), float(h), float(sigma)
         result.info.update(info)
+        # listed beside the verdict (logscan.coverage.skipped_checks), not only in the JSON's info
+        result.not_checked = [NotChecked(line) for line in skipped_lines(info["not_checked"], self.name)]
         return result
 
     def _channel(self, run, group, j: int, model, tests: int, duration: float):

@@ -1,7 +1,7 @@
 """What the detectors that read a log's own topics (`Detector.raw_topics`: px4_estimator, health)
 share: the raw channels by topic and instance, a sample series placed on the analysis grid, the
 persistence a duration takes at a source's rate, a channel held at given times, the log's
-parameters, and the checks they could not run in words."""
+parameters, and the checks they could not run in words (the frozen-sensor check's too)."""
 
 from __future__ import annotations
 

@@ -86,6 +86,9 @@ def test_a_sensor_that_holds_its_value_whenever_still_is_not_checked():
     result = FrozenSensorDetector().run(make_run({"velocity": (z, EVERY_STEP, 0.1)}))
     assert result.alarms == []
     assert "frozen.velocity" in result.info["not_checked"]
+    # said beside the verdict too, as a check with nothing to judge (the verdict stands)
+    (line,) = [c for c in result.not_checked if c.reason.startswith("velocity: repeats its sample")]
+    assert not line.partial
 
 
 def test_a_forward_filled_channel_counts_its_own_samples():
@@ -189,3 +192,4 @@ def test_a_channel_without_samples_gets_no_statistic_and_says_why():
     )
     assert list(result.series) == ["frozen.gyro"]
     assert result.info["not_checked"] == {"frozen.gps": "fewer than 2 samples"}
+    assert [(c.reason, c.partial) for c in result.not_checked] == [("gps: fewer than 2 samples", False)]
