@@ -301,6 +301,16 @@ def process_noise_scale(calibration: dict | None) -> dict[str, float] | None:
     return {str(name): float(value) for name, value in scales.items()} if scales else None
 
 
+def calibrate_command(profile) -> str:
+    """The command that calibrates ``profile``'s noise on healthy flights of its vehicle (its file
+    passed with --profile; a built-in or embedded profile comes from each log)."""
+    import shlex
+
+    source = profile.source_file()
+    chosen = f" --profile {shlex.quote(source)}" if source else ""
+    return f"logscan train HEALTHY_LOG...{chosen} --calibrate -o tables.json"
+
+
 def calibration_lines(calibration: dict | None) -> list[str]:
     """Human-readable lines of a calibration (the train command's summary)."""
     failures = calibration_failures(calibration)

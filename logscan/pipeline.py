@@ -498,6 +498,8 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
     import numpy as np
     from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
 
+    from logscan.calibration import calibrate_command
+
     trace = prepared.trace
     if trace is None or trace.nis_group is None:
         return []
@@ -511,7 +513,7 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
             out.append(
                 f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "
                 "profile mismatch, check units, signs and frames of its channels, or its noise_std "
-                f"({doc_url('troubleshooting.md')}; logscan train --calibrate)"
+                f"({doc_url('troubleshooting.md')}; `{calibrate_command(prepared.profile)}`, then --tables tables.json)"
             )
         else:
             out.extend(_blind_warning(prepared, g, name, size, used))
@@ -523,7 +525,7 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
     judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
     import numpy as np
 
-    from logscan.calibration import judged_steps
+    from logscan.calibration import calibrate_command, judged_steps
 
     judged = judged_steps(prepared.profile, prepared.run)
     if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
@@ -539,7 +541,7 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
         + (
             "the tables' calibration found no noise_std that brings it to 1 (see their training report)"
             if kept
-            else "lower noise_std (logscan train --calibrate)"
+            else f"lower noise_std: `{calibrate_command(prepared.profile)}`, then analyze with --tables tables.json"
         )
     ]
 

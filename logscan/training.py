@@ -96,12 +96,6 @@ def _rate_mismatches(trained: dict, profile) -> list[str]:
     ]
 
 
-def profile_file(profile) -> str | None:
-    """The profile file ``profile`` came from; None when it is embedded in a log or built in."""
-    source = str(getattr(profile, "source", "") or "")
-    return source if source and Path(source).is_file() else None
-
-
 def retrain_command(document: dict, tables: str | os.PathLike, profile, *, same_logs: bool = True) -> str:
     """The `logscan train` command that writes ``tables`` again for ``profile`` (None: the profile
     file the tables were trained with, if any): the tables' own training logs that are still there
@@ -110,7 +104,7 @@ def retrain_command(document: dict, tables: str | os.PathLike, profile, *, same_
     built-in or embedded profile comes from each log)."""
     import shlex
 
-    source = profile_file(profile) if profile is not None else document.get("profile_path")
+    source = profile.source_file() if profile is not None else document.get("profile_path")
     logs = [str(entry.get("path", "")) for entry in document.get("training_logs") or [] if isinstance(entry, dict)]
     logs = [path for path in logs if path and os.path.exists(path)] if same_logs else []
     words = ["logscan", "train", *(shlex.quote(path) for path in logs or ["HEALTHY_LOG..."])]
@@ -176,7 +170,7 @@ def tables_document(
         "logscan_version": __version__,
         "profile_fingerprint": profile_fingerprint(profile) if profile is not None else None,
         "profile_rates": profile_rates(profile) if profile is not None else None,
-        "profile_path": profile_file(profile) if profile is not None else None,
+        "profile_path": profile.source_file() if profile is not None else None,
         "profile_name": getattr(profile, "name", "") if profile is not None else "",
         "training_logs": [
             {"name": os.path.basename(p), "path": str(p), "bytes": os.path.getsize(p), "sha256": file_sha256(p)}
@@ -248,7 +242,7 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     fingerprint = document.get("profile_fingerprint")
     if fingerprint != profile_fingerprint(profile):
         # a profile file: its tables from the same logs; a built-in or embedded one: other logs
-        command = retrain_command(document, path, profile, same_logs=bool(profile_file(profile)))
+        command = retrain_command(document, path, profile, same_logs=bool(profile.source_file()))
         raise ProfileError(
             "the tables were trained for another profile (its vehicle, inputs, measurements, mode or "
             "redundant sections differ)",

@@ -126,3 +126,22 @@ def test_tables_of_an_older_schema_name_the_command_that_rewrites_them(cli, trai
     assert args == ["train", str(need_testdata(FLIGHT)), "--calibrate", "-o", str(stale)]  # its own logs
     assert cli(*args, "--no-report", "-q").exit_code == 0
     assert json.loads(stale.read_text())["schema_version"] != 2
+
+
+def test_the_warning_that_asks_for_calibration_names_a_command_that_runs(cli, tmp_path):
+    flight = need_testdata(FLIGHT)
+    profile = tmp_path / "px4.toml"
+    profile.write_text(load_profile_for(flight, None).text)
+    for chosen in ((), ("--profile", str(profile))):
+        out = tmp_path / "summary.json"
+        cli("analyze", flight, *chosen, "--no-report", "--json", out, "--allow-partial")
+        warnings = json.loads(out.read_text())["logs"][0]["warnings"]
+        asking = [w for w in warnings if "--calibrate -o tables.json`" in w]
+        assert asking, warnings
+        args = _suggested(asking[0])
+        assert args[:2] == ["train", "HEALTHY_LOG..."] and ("--profile" in args) == bool(chosen)
+        tables = tmp_path / "tables.json"
+        args = [str(flight) if a == "HEALTHY_LOG..." else (str(tables) if a == "tables.json" else a) for a in args]
+        assert cli(*args, "--no-report", "-q").exit_code == 0
+        analysed = cli("analyze", flight, *chosen, "--tables", tables, "--no-report", "--allow-partial")
+        assert analysed.exit_code in (0, 1), analysed.stderr

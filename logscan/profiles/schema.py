@@ -5,6 +5,7 @@ The schema is documented in docs/profiles.md; keep the two in step.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from typing import Any
@@ -291,6 +292,11 @@ class Profile:
     @property
     def loop_name(self) -> str:
         return self.vehicle.loop or PRIMARY_LOOP
+
+    def source_file(self) -> str | None:
+        """The profile file this profile came from; None when a log embeds it or it is built in
+        (a command then passes no --profile: each log brings its own)."""
+        return self.source if self.source and os.path.isfile(self.source) else None
 
     # --- what the readers and alignment need ------------------------------------------------
     def channel_refs(self) -> list[tuple[str, str]]:
