@@ -226,9 +226,11 @@ def test_a_group_no_noise_std_can_calibrate_keeps_the_profiles(ins_logs, monkeyp
 
 
 def test_a_real_px4_flight_calibrates_what_it_can_and_says_what_it_cannot(cli, tmp_path):
-    """The one flight of ../shared/testdata that flies (PX4 SITL, 3.4 s judged): GNSS position and
-    baro come to NIS about 1; GNSS velocity and PX4's own attitude estimate cannot be calibrated
-    (still under the band at the floor) and keep the profile's noise, and analyze says so."""
+    """The one flight of ../shared/testdata that flies (PX4 SITL, 3.4 s judged): GNSS position,
+    GNSS velocity and baro come to NIS about 1 from the built-in profile's noise (PX4's own
+    innovations; none logged per fix: the receiver's accuracy is not the noise); PX4's own attitude
+    estimate cannot be calibrated (still under the band at the floor) and keeps the profile's
+    noise, and analyze says it is blind."""
     from conftest import need_testdata
 
     path = str(need_testdata("px4-ulog/sample_px4_events.ulg"))
@@ -236,15 +238,14 @@ def test_a_real_px4_flight_calibrates_what_it_can_and_says_what_it_cannot(cli, t
     result = cli("train", path, "--calibrate", "-o", str(tables), "--no-report")
     assert result.exit_code == 0, result.stderr
     groups = json.loads(tables.read_text())["calibration"]["groups"]
-    for name in ("gnss_position", "baro"):
+    for name in ("gnss_position", "gnss_velocity", "baro"):
         assert groups[name]["calibrated"] and 0.5 <= groups[name]["mean_nis_per_output_after"] <= 2.0, name
-    assert groups["gnss_position"]["logged_noise"]  # eph / epv per fix, scaled by its noise_factor
-    for name in ("gnss_velocity", "attitude"):
-        assert not groups[name]["calibrated"] and groups[name]["nis_at_floor"] < 0.8, name
-        assert groups[name]["noise_std"] == groups[name]["profile_noise_std"]
+        assert not groups[name]["logged_noise"], name
+    assert not groups["attitude"]["calibrated"] and groups["attitude"]["nis_at_floor"] < 0.8
+    assert groups["attitude"]["noise_std"] == groups["attitude"]["profile_noise_std"]
     summary = tmp_path / "s.json"
     analysed = cli("analyze", path, "--tables", str(tables), "--no-report", "--json", str(summary))
-    assert analysed.exit_code == 0, analysed.stdout  # healthy: no alarms with the calibrated filter
-    warnings = json.loads(summary.read_text())["logs"][0]["warnings"]
-    (attitude,) = [w for w in warnings if w.startswith("group 'attitude': median NIS")]
+    log = json.loads(summary.read_text())["logs"][0]
+    assert analysed.exit_code in (0, 2) and log["n_alarms"] == 0, analysed.stdout  # healthy: no alarms
+    (attitude,) = [w for w in log["warnings"] if w.startswith("group 'attitude' is blind")]
     assert "the tables' calibration found no noise_std that brings it to 1" in attitude
