@@ -83,6 +83,34 @@ def pytest_runtest_setup(item):
         need_testdata(*marker.args)
 
 
+# --- the whole suite on every core -----------------------------------------------------------------
+# The README's test command (pytest without arguments: the testpaths) runs on every core with
+# pytest-xdist, one test module per worker at a time, so that a module's fixtures are built once; a
+# run of chosen files or tests stays in one process unless -n is given. The modules that take
+# minutes start first (the others then fill both cores). A session fixture is built once per worker:
+# one too costly to build twice (installed_wheel, fuzz) is used by the tests of one module only.
+SLOWEST_MODULES_FIRST = ("test_readme.py", "test_wheel_install.py", "test_fuzz.py", "test_docs_ci.py")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    if hasattr(config, "workerinput") or not config.pluginmanager.hasplugin("xdist"):
+        return
+    if config.option.numprocesses is not None or config.args_source is not pytest.Config.ArgsSource.TESTPATHS:
+        return
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if cores > 1 and not config.getoption("usepdb", False):
+        config.option.numprocesses = cores
+        config.option.dist = "loadfile"
+        config.option.loadscopereorder = False  # in the order of pytest_collection_modifyitems
+
+
+def pytest_collection_modifyitems(config, items):
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller hands modules out in this order
+        rank = {name: i for i, name in enumerate(SLOWEST_MODULES_FIRST)}
+        items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest keep their order
+
+
 @dataclass
 class CliResult:
     """Exit code and captured streams of one in-process `logscan` run."""
