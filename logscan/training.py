@@ -120,11 +120,27 @@ def retrain_command(document: dict, tables: str | os.PathLike, profile, *, same_
 
 
 def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a log file; of a log that is a directory (per-topic CSVs), of its files' names
+    and contents in name order."""
     digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
+    for file in _log_files(path):
+        if Path(path).is_dir():
+            digest.update(os.path.basename(file).encode() + b"\0")
+        with open(file, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
     return digest.hexdigest()
+
+
+def _log_bytes(path: str | os.PathLike) -> int:
+    return sum(os.path.getsize(file) for file in _log_files(path))
+
+
+def _log_files(path: str | os.PathLike) -> list[str]:
+    """The files of a log: itself, or a directory's regular files in name order."""
+    if not Path(path).is_dir():
+        return [str(path)]
+    return sorted(str(p) for p in Path(path).iterdir() if p.is_file())
 
 
 def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
@@ -173,7 +189,7 @@ def tables_document(
         "profile_path": profile.source_file() if profile is not None else None,
         "profile_name": getattr(profile, "name", "") if profile is not None else "",
         "training_logs": [
-            {"name": os.path.basename(p), "path": str(p), "bytes": os.path.getsize(p), "sha256": file_sha256(p)}
+            {"name": os.path.basename(p), "path": str(p), "bytes": _log_bytes(p), "sha256": file_sha256(p)}
             for p in logs
         ],
         "training_window": {"start_s": window[0], "end_s": window[1]} if window != (None, None) else None,

@@ -62,3 +62,14 @@ def test_an_export_without_px4_imu_topics_still_asks_for_a_profile(cli, tmp_path
     assert builtin_profile_for(folder) is None
     result = cli("analyze", folder, "--no-report")
     assert result.exit_code == 2 and "no profile" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_export_trains_tables_it_then_accepts(cli, exported, tmp_path):
+    tables = tmp_path / "export.tables.json"
+    trained = cli("train", exported, "--calibrate", "-o", tables, "--no-report", "-q")
+    assert trained.exit_code == 0, trained.stderr
+    (log,) = json.loads(tables.read_text())["training_logs"]  # the folder, hashed over its files
+    assert log["name"] == exported.name and len(log["sha256"]) == 64
+    assert log["bytes"] == sum(p.stat().st_size for p in exported.iterdir())
+    analysed = cli("analyze", exported, "--tables", tables, "--no-report", "--allow-partial")
+    assert analysed.exit_code in (0, 1), analysed.stderr
