@@ -7,10 +7,12 @@ from __future__ import annotations
 import json
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from conftest import need_testdata
 
 from logscan.autopilot_messages import flight_messages
+from logscan.clock import Clock
 
 START_NS = 10_000_000_000  # the run's time zero: 10 s of the log's clock
 
@@ -71,3 +73,35 @@ def test_the_robologs_flight_lists_its_dangerous_battery_error(cli, tmp_path):
     page = report.read_text(encoding="utf-8")
     table = page[page.index('id="autopilot-messages"') :]
     assert "Dangerous battery level!, please land!" in table[: table.index("</table>")]
+
+
+def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():
+    from logscan.autopilot_messages import AutopilotMessage
+    from logscan.cli.render import render_summary
+
+    messages = [AutopilotMessage("WARNING", f"[ekf2] warning {k}", float(k), float(k)) for k in range(15)]
+    run = SimpleNamespace(t=np.arange(0.0, 20.0, 0.01), dt=0.01)
+    analysis = SimpleNamespace(
+        path="flight.ulg",
+        verdict=lambda: "no alarms",
+        run=run,
+        log=SimpleNamespace(duration_s=20.0),
+        model=SimpleNamespace(name="ins"),
+        results=[],
+        clock=Clock(),
+        unchecked=[],
+        skipped_checks=[],
+        failures=[],
+        incidents=[],
+        autopilot_messages=lambda: (messages, 0),
+        loops={},
+        alarms=[],
+        recovery=None,
+        possible=[],
+        scores={},
+        against_baseline=lambda: None,
+        warnings=[],
+    )
+    text = render_summary(analysis, None, max_rows=12)
+    assert text.count("  autopilot: WARNING at ") == 12
+    assert "... 3 more autopilot message(s)" in text

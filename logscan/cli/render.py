@@ -118,7 +118,9 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             )
             shown += 1
     messages, disarmed = analysis.autopilot_messages()
-    lines += [f"  autopilot: {message.line(clock)}" for message in messages]
+    lines += [f"  autopilot: {message.line(clock)}" for message in messages[:max_rows]]
+    if len(messages) > max_rows:
+        lines.append(f"  ... {len(messages) - max_rows} more autopilot message(s) (see the report / --json)")
     if disarmed:
         lines.append(f"  autopilot: {disarmed} more message(s) of WARNING and above while disarmed (in the report)")
     for name, loop in analysis.loops.items():  # a hierarchical profile's further loops
