@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from logscan.run_context import MESSAGE_LEVELS, logged_messages
 
 SLACK_S = 1.0  # a message this close to an incident's span falls in it
-MAX_SHOWN = 50  # distinct messages kept (the summary, the JSON, the report)
+MAX_SHOWN = 50  # distinct messages the report's table shows (the JSON has them all)
 
 
 @dataclass
@@ -89,6 +89,6 @@ def flight_messages(
             entry = kept[key]
             entry.count += 1
             entry.last = max(entry.last, message.t)
-        elif len(kept) < MAX_SHOWN:
+        else:
             kept[key] = AutopilotMessage(message.level, message.text, message.t, message.t, 1, incident)
     return sorted(kept.values(), key=lambda m: m.first), disarmed

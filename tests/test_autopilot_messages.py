@@ -105,3 +105,9 @@ def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():
     text = render_summary(analysis, None, max_rows=12)
     assert text.count("  autopilot: WARNING at ") == 12
     assert "... 3 more autopilot message(s)" in text
+
+
+def test_every_distinct_message_is_kept_however_many():
+    metadata = _metadata(*[(11.0 + 0.1 * k, "WARNING", f"[navigator] waypoint {k} unreachable") for k in range(80)])
+    messages, _ = flight_messages(metadata, START_NS, [], armed=None)
+    assert len(messages) == 80 and all(m.count == 1 for m in messages)

@@ -20,6 +20,7 @@ import numpy as np
 
 from logscan import scoring
 from logscan.artifacts import Staged, commit, stage, write_atomic
+from logscan.autopilot_messages import MAX_SHOWN
 from logscan.clock import Clock
 from logscan.errors import InputError
 from logscan.incidents import signal_label
@@ -409,7 +410,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         unchecked=[str(u) for u in report.unchecked],
         skipped=[str(u) for u in report.skipped],
         unjudged=str(report.unjudged),
-        messages=[_message_row(m, clock) for m in report.messages],
+        messages=[_message_row(m, clock) for m in report.messages[:MAX_SHOWN]],
+        messages_hidden=max(len(report.messages) - MAX_SHOWN, 0),
         incidents=_incident_rows(report.incidents, clock),
         rows=rows,
         rows_hidden=max(len(alarms) - len(rows), 0),
