@@ -46,6 +46,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import shlex
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -255,7 +256,8 @@ class Detector:
         if missing:
             raise NotTrainedError(
                 f"detector {self.name!r} is not trained (missing {', '.join(missing)})",
-                hint="run `logscan train` on healthy logs and pass the tables it writes",
+                hint="train it on healthy logs (`logscan train HEALTHY_LOG... -o tables.json`), then pass "
+                "--tables tables.json",
             )
 
     # --- running ----------------------------------------------------------------------------------
@@ -327,7 +329,7 @@ class Detector:
             raise InputError(
                 f"trained state of {cls.name!r} has schema version {version}, this logscan reads {cls.state_version}",
                 path=path,
-                hint="retrain with `logscan train`",
+                hint=f"retrain with `logscan train HEALTHY_LOG... -o {shlex.quote(str(path or 'tables.json'))}`",
             )
         detector = cls.from_config(state.get("params") or {})
         stored = state.get("state") or {}
@@ -336,7 +338,7 @@ class Detector:
             raise InputError(
                 f"trained state of {cls.name!r} lacks {', '.join(missing)}",
                 path=path,
-                hint="retrain with `logscan train`",
+                hint=f"retrain with `logscan train HEALTHY_LOG... -o {shlex.quote(str(path or 'tables.json'))}`",
             )
         for attr in cls.trained_attributes:
             setattr(detector, attr, decode_state_value(stored[attr]))

@@ -9,6 +9,7 @@ the recovery stage reads the loops' traces (`logscan.recovery`).
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Callable
 
 from logscan.errors import LogscanError
@@ -43,7 +44,7 @@ def prepare_loops(primary, log, *, start_s=None, end_s=None, step: Callable[[str
             raise LogscanError(
                 f"loop {name!r}: too few samples on its analysis grid to filter",
                 path=primary.path,
-                hint=f"check [loops.{name}]'s channels and rate_hz against `logscan inspect`",
+                hint=f"check [loops.{name}]'s channels and rate_hz: `logscan inspect {shlex.quote(primary.path)}`",
             )
         prepared = Prepared(path=primary.path, log=log, loaded=loaded, model=model, run=run)
         prepared.warnings.extend(f"loop {name}: {w}" for w in run.warnings)

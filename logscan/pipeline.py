@@ -13,6 +13,7 @@ what it needs (`Detector.needs`) and the pipeline runs the union of those needs.
 from __future__ import annotations
 
 import os
+import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -315,7 +316,7 @@ def prepare(
         raise LogscanError(
             "too few samples on the analysis grid to filter",
             path=path,
-            hint="check the profile's channels and rate_hz against `logscan inspect`",
+            hint=f"check the profile's channels and rate_hz against `logscan inspect {shlex.quote(path)}`",
         )
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
     context = run_context(run, model, log)  # the report's context, from the samples about to go

@@ -11,6 +11,7 @@ A grid over ``MAX_GRID_STEPS`` steps is an InputError, computed before anything 
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Mapping
 
 import numpy as np
@@ -55,7 +56,7 @@ def dense_span(times: Mapping[str, np.ndarray], path: str) -> tuple[int, int, di
         raise InputError(
             "none of the profile's input and measurement channels has a finite sample",
             path=path,
-            hint="check the profile's channels with `logscan inspect`",
+            hint=f"check the profile's channels with `logscan inspect {shlex.quote(str(path))} --channels`",
         )
     found = {name: (t, outlying_runs(t)) for name, t in times.items()}
     bulk_lo = min(int(t[main[0]]) for t, (main, *_) in found.values())
