@@ -88,8 +88,10 @@ def pytest_runtest_setup(item):
 # pytest-xdist, one test module per worker at a time, so that a module's fixtures are built once; a
 # run of chosen files or tests stays in one process unless -n is given. The modules that take
 # minutes start first (the others then fill both cores). A session fixture is built once per worker:
-# one too costly to build twice (installed_wheel, fuzz) is used by the tests of one module only.
-SLOWEST_MODULES_FIRST = ("test_readme.py", "test_wheel_install.py", "test_fuzz.py", "test_docs_ci.py")
+# one too costly to build twice (installed_wheel, fuzz) is used by the tests of one module only. The
+# tests of a module whose fixtures cost little but whose tests take minutes each go to any worker.
+SLOWEST_MODULES_FIRST = ("test_readme.py", "test_wheel_install.py", "test_fuzz.py", "test_docs_examples.py")
+TESTS_TO_ANY_WORKER = ("test_docs_examples.py",)
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -103,6 +105,21 @@ def pytest_cmdline_main(config):
         config.option.numprocesses = cores
         config.option.dist = "loadfile"
         config.option.loadscopereorder = False  # in the order of pytest_collection_modifyitems
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """xdist's loadfile, but each test of TESTS_TO_ANY_WORKER a unit of its own."""
+    if config.option.dist != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class ModulesOrTests(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return nodeid if Path(module).name in TESTS_TO_ANY_WORKER else module
+
+    return ModulesOrTests(config, log)
 
 
 def pytest_collection_modifyitems(config, items):
