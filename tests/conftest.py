@@ -123,9 +123,41 @@ def pytest_xdist_make_scheduler(config, log):
 
 
 def pytest_collection_modifyitems(config, items):
+    if config.getoption("campaign") == "full":
+        full_campaign(items, FULL_CAMPAIGN_FACTOR)
     if hasattr(config, "workerinput"):  # an xdist worker: the controller hands modules out in this order
         rank = {name: i for i, name in enumerate(SLOWEST_MODULES_FIRST)}
         items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest keep their order
+
+
+# --- campaign size -----------------------------------------------------------------------------------
+# The property tests (hypothesis) and the fuzz tests (tests/test_fuzz.py) draw their own max_examples:
+# the CI size. `pytest --campaign=full` (or LOGSCAN_CAMPAIGN=full) draws FULL_CAMPAIGN_FACTOR times as
+# many, to search longer before a release; bench/fuzz_campaign.py is the fuzzer's long campaign.
+FULL_CAMPAIGN_FACTOR = 10
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--campaign",
+        choices=("ci", "full"),
+        default=os.environ.get("LOGSCAN_CAMPAIGN") or "ci",
+        help=f"property and fuzz tests: ci (their own max_examples) or full ({FULL_CAMPAIGN_FACTOR} times as many)",
+    )
+
+
+def full_campaign(items, factor: int) -> None:
+    """Multiply the max_examples of every hypothesis test among ``items`` by ``factor`` (once per
+    test function: the items of a parametrised test share it)."""
+    scaled = set()
+    for item in items:
+        test = getattr(getattr(item, "obj", None), "__func__", getattr(item, "obj", None))
+        if getattr(test, "is_hypothesis_test", False) and test not in scaled:
+            own = getattr(test, "_hypothesis_internal_use_settings", None)  # hypothesis's own attribute
+            if own is None:
+                raise pytest.UsageError(f"--campaign=full cannot find the settings of {item.nodeid}")
+            test._hypothesis_internal_use_settings = settings(own, max_examples=own.max_examples * factor)
+            scaled.add(test)
 
 
 @dataclass
