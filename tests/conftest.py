@@ -86,7 +86,7 @@ def pytest_runtest_setup(item):
 # --- the whole suite on every core -----------------------------------------------------------------
 # The README's test command (pytest without arguments: the testpaths) runs on every core with
 # pytest-xdist, one test module per worker at a time, so that a module's fixtures are built once; a
-# run of chosen files or tests stays in one process unless -n is given. The modules that take
+# run of chosen files or tests (-k) stays in one process unless -n is given. The modules that take
 # minutes start first (the others then fill both cores). A session fixture is built once per worker:
 # one too costly to build twice (installed_wheel, fuzz) is used by the tests of one module only. The
 # tests of a module whose fixtures cost little but whose tests take minutes each go to any worker.
@@ -98,7 +98,8 @@ TESTS_TO_ANY_WORKER = ("test_docs_examples.py",)
 def pytest_cmdline_main(config):
     if hasattr(config, "workerinput") or not config.pluginmanager.hasplugin("xdist"):
         return
-    if config.option.numprocesses is not None or config.args_source is not pytest.Config.ArgsSource.TESTPATHS:
+    chosen = config.args_source is not pytest.Config.ArgsSource.TESTPATHS or config.option.keyword
+    if config.option.numprocesses is not None or chosen:  # -n given, or chosen files or tests (-k)
         return
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if cores > 1 and not config.getoption("usepdb", False):
