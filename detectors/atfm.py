@@ -40,7 +40,8 @@ EXTRA_CAPTIONS = {
     "median, iterative filter, Marzullo's interval midpoint, hybrid = median). Normal: the methods agree; an "
     "attacked sensor pulls the average away from the median and Marzullo.",
 }
-TRAIN_COMMAND = "logscan train HEALTHY_LOGS... --profile PROFILE -o tables.json"
+# logs that embed their profile need no --profile; with a profile file, add --profile FILE
+TRAIN_COMMAND = "logscan train HEALTHY_LOG... -o tables.json"
 
 
 @dataclass
@@ -213,8 +214,8 @@ class AtfmDetector(Detector):
         if not hasattr(self, "tables_"):
             raise NotTrainedError(
                 "detector 'atfm' has no lookup table",
-                hint=f"train one with `{TRAIN_COMMAND}`, then pass --tables tables.json (or set the "
-                "profile's `tables` key)",
+                hint=f"train one with `{TRAIN_COMMAND}` (and --profile FILE when the logs embed none), then "
+                "pass --tables tables.json (or set the profile's `tables` key)",
             )
 
     # --- training -----------------------------------------------------------------------------------

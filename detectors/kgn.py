@@ -217,8 +217,8 @@ class KgnDetector(Detector):
         if not hasattr(self, "reference_") or not hasattr(self, "rho_") or not hasattr(self, "blindness_"):
             raise NotTrainedError(
                 "detector 'kgn' has no reference gain norms",
-                hint="train it with `logscan train HEALTHY_LOGS... --profile PROFILE -o tables.json` "
-                "(the profile enabling [detectors.kgn]), then pass --tables tables.json",
+                hint="train it with `logscan train HEALTHY_LOG... -o tables.json` (and --profile FILE, the "
+                "profile enabling [detectors.kgn], when the logs embed none), then pass --tables tables.json",
             )
 
     # --- windows ----------------------------------------------------------------------------------

@@ -25,3 +25,18 @@ def test_a_log_without_a_finite_sample_names_the_inspect_command_for_it(cli, tmp
     assert args == ["inspect", str(log), "--channels"]
     inspected = cli(*args)
     assert inspected.exit_code == 0 and "/thrust" in inspected.stdout
+
+
+def test_an_untrained_atfm_names_a_train_command_that_runs_on_logs_embedding_their_profile(cli, sample, tmp_path):
+    faulty = sample("jackal_gps_bias.mcap")
+    untrained = cli("analyze", faulty, "-d", "atfm", "--no-report")
+    assert untrained.exit_code == 2
+    message = untrained.stdout + untrained.stderr
+    args = _suggested(message[message.index("train one with") :])
+    assert args[:2] == ["train", "HEALTHY_LOG..."] and "--profile" not in args  # the samples embed theirs
+    tables = tmp_path / "tables.json"
+    healthy = [str(sample(f"jackal_train_{i}.mcap")) for i in (1, 2)]
+    args = ["train", *healthy, *args[2:]]
+    args[args.index("-o") + 1] = str(tables)
+    assert cli(*args, "--no-report", "-q").exit_code == 0
+    assert cli("analyze", faulty, "-d", "atfm", "--tables", tables, "--no-report").exit_code == 1  # the GPS bias
