@@ -64,6 +64,10 @@ FLAG = 2.0  # a set flag: count 1 / (limit 1 - 1/2)
 ZERO_VOLTAGE_V = 0.5  # a battery reading below this is "about 0 V"
 CELL_EMPTY_V = 3.3  # per-cell empty voltage when the log has no BAT*_V_EMPTY
 REQ_EPH_M = 3.0  # PX4's EKF2_REQ_EPH default
+# PX4's EKF2 calls its GNSS checks (EKF2_REQ_EPH, EKF2_REQ_EPV, ...) failing only once they have
+# failed for 5 s without a pass (gps_control.cpp: gps_checks_failing = isTimedOut(_last_gps_pass_us,
+# 5 s)); a receiver over the limit for less is one PX4 keeps using, not a fault
+GNSS_CHECKS_FAILING_S = 5.0
 REQ_EPV_M = 5.0  # PX4's EKF2_REQ_EPV default
 ARMED_STATE = 2  # vehicle_status.arming_state ARMED
 LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR")  # pyulog's log_level_str, severe ones
@@ -98,6 +102,23 @@ CHECK_WORDS = {
     "logged_error": "the autopilot logged an error",
     "timeout": "a sensor topic stopped",
 }
+
+
+def _px4_gnss_passing(topics, t_ns: np.ndarray) -> np.ndarray | None:
+    """At each time: whether PX4's own GNSS checks (``estimator_status_0.gps_check_fail_flags``
+    all clear) passed within the last GNSS_CHECKS_FAILING_S, so PX4 did not call them failing;
+    None when the log lacks the flags. PX4 judges its own receiver values, with its own filtering:
+    where it saw a pass, a reading over the limit in ``vehicle_gps_position`` is not a fault."""
+    channel = topics.get((ESTIMATOR, 0), {}).get("gps_check_fail_flags")
+    if channel is None or not channel.values.size:
+        return None
+    t = np.asarray(channel.t)
+    # failing is 5 s of failures seen: the log's first flags count as the latest pass (PX4's timer
+    # before the log started is unknown), and before them nothing is known to fail
+    pass_t = np.union1d(t[:1], t[np.nan_to_num(channel.values) == 0])
+    latest = np.searchsorted(pass_t, t_ns, side="right") - 1
+    last_pass = pass_t[np.maximum(latest, 0)]
+    return (latest < 0) | ((np.asarray(t_ns) - last_pass) < GNSS_CHECKS_FAILING_S * 1e9)
 
 
 class HealthDetector(Detector):
@@ -180,7 +201,18 @@ class HealthDetector(Detector):
         result.info["armed_from"] = armed[0] if armed else None
         return result
 
-    def _add(self, name: str, where: str, t_ns, values, *, limit, n_persist: int | None = None, why: str = "") -> bool:
+    def _add(
+        self,
+        name: str,
+        where: str,
+        t_ns,
+        values,
+        *,
+        limit,
+        n_persist: int | None = None,
+        why: str = "",
+        min_duration_s: float | None = None,
+    ) -> bool:
         """Put ``values`` (at times ``t_ns``, NaN: not judged) on the grid and alarm over 1.0.
         False (and ``name`` listed as skipped, ``why`` saying when it is judged) when no sample
         lands on a grid step."""
@@ -194,7 +226,8 @@ class HealthDetector(Detector):
             )  # fmt: skip
             return False
         if n_persist is None:
-            n_persist = persist_count(run.t[valid], float(self.min_duration_s))
+            seconds = float(self.min_duration_s) if min_duration_s is None else min_duration_s
+            n_persist = persist_count(run.t[valid], seconds)
         self._result.add_statistic(run.t, name, statistic, upper=1.0, valid=valid, n_persist=n_persist)
         self._checks[name] = {"source": where, "limit": limit, "n_persist": n_persist}
         return True
@@ -324,6 +357,7 @@ class HealthDetector(Detector):
             sfx = _suffix(instance)
             any_channel = next(iter(fields.values()))
             t = any_channel.t
+            px4_passing = _px4_gnss_passing(topics, t)
             gate = np.ones(t.size, bool) if armed is None else armed[1](t)
             while_ = "armed" if armed is not None else "always (arming state unknown)"
             fixed = np.ones(t.size, bool)  # 3D-fixed now (all when fix_type is absent)
@@ -369,13 +403,17 @@ class HealthDetector(Detector):
                     self._skipped[name] = f"{where} has no {field}"
                     continue
                 values = np.where(gate & fixed, channel.values / limit, np.nan)
+                if px4_passing is not None:  # PX4's own checks passed within 5 s: not failing
+                    values = np.where(px4_passing, np.minimum(values, 1.0), values)
                 self._add(
                     name,
                     where,
                     t,
                     values,
-                    limit={"m": limit, "from": source, "while": f"{while_}, 3D fix"},
+                    limit={"m": limit, "from": source, "while": f"{while_}, 3D fix", "for_s": GNSS_CHECKS_FAILING_S},
                     why=f" ({while_}, 3D fix)",
+                    # PX4's own pass/fail timer, when logged, already waited the 5 s
+                    min_duration_s=None if px4_passing is not None else GNSS_CHECKS_FAILING_S,
                 )
             if fixed.any():  # judged while 3D-fixed only, as eph / epv
                 self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")

@@ -47,11 +47,14 @@ def append_logged_messages(path: Path, messages: list[tuple[float, str, str]]) -
     return path
 
 
-def crafted_log(path: Path, *, faults: bool = True) -> Path:
+def crafted_log(
+    path: Path, *, faults: bool = True, eph_over: tuple[float, float] | None = None, px4_flags: bool = True
+) -> Path:
     """60 s of a 4-cell quad armed from 5 s. With ``faults``: the battery at 12.4 V over [30, 35) s
     (under 4 x 3.5 V) and at 0 V over [45, 48) s, the GNSS fix lost (fix 1) over [20, 24) s,
     output 2 at its max (2000) over [40, 43) s, sensor_combined silent over (50, 52) s and an
-    ERROR message at 12 s."""
+    ERROR message at 12 s. ``eph_over``: eph at 4 m (over PX4's 3 m EKF2_REQ_EPH) over that span, with PX4's
+    gps_check_fail_flags saying so (``px4_flags``) or clear."""
     imu_us = times(100)
     keep = ~between(imu_us, 50.005, 52.0) if faults else np.ones(imu_us.size, bool)
     imu_us = imu_us[keep]
@@ -73,6 +76,9 @@ def crafted_log(path: Path, *, faults: bool = True) -> Path:
         voltage[between(bat_us, 45.0, 48.0)] = 0.0
         fix[between(gps_us, 20.0, 24.0)] = 1.0
         outputs[between(out_us, 40.0, 43.0), 1] = 2000.0
+    eph = np.full(gps_us.size, 1.0)
+    if eph_over is not None:
+        eph[between(gps_us, *eph_over)] = 4.0
     armed_us = times(2)
     topics = {
         "sensor_combined": (imu_us, {"accelerometer_m_s2": accel, "accelerometer_clipping": np.zeros(n)}),
@@ -82,20 +88,34 @@ def crafted_log(path: Path, *, faults: bool = True) -> Path:
             gps_us,
             {
                 "fix_type": fix,
-                "eph": np.full(gps_us.size, 1.0),
+                "eph": eph,
                 "epv": np.full(gps_us.size, 1.5),
                 "jamming_indicator": np.full(gps_us.size, 10.0),
             },
         ),
         "actuator_armed": (armed_us, {"armed": (armed_us / 1e6 >= 5.0).astype(float)}),
         "actuator_outputs": (out_us, {"noutputs": np.full(out_us.size, 4.0), "output": outputs}),
-        "estimator_status": (times(10), {"filter_fault_flags": np.zeros(600), "gps_check_fail_flags": np.zeros(600)}),
+        "estimator_status": (
+            times(10),
+            {
+                "filter_fault_flags": np.zeros(600),
+                "gps_check_fail_flags": _eph_flags(times(10), eph_over if px4_flags else None),
+            },
+        ),
     }
     write_ulog(path, topics, parameters=PARAMETERS)
     messages = [(3.0, "6", "[commander] Ready for takeoff!")]
     if faults:
         messages.append((ERROR_AT_S, "3", "[sensors] accel 0 failed"))
     return append_logged_messages(path, messages)
+
+
+def _eph_flags(t_us: np.ndarray, eph_over: tuple[float, float] | None) -> np.ndarray:
+    """PX4's gps_check_fail_flags: its eph bit (8) set where eph is over EKF2_REQ_EPH."""
+    flags = np.zeros(t_us.size)
+    if eph_over is not None:
+        flags[between(t_us, *eph_over)] = 8.0
+    return flags
 
 
 @pytest.fixture
@@ -190,6 +210,28 @@ def test_a_shorter_dip_than_min_duration_is_no_alarm(tmp_path, cli, profile):
     # 5 s battery dip, 4 s fix loss, 3 s saturation: all shorter than 6 s; timeouts and logged
     # errors are one-sample checks
     assert signals == {"health.timeout.sensor_combined_0", "health.logged_error"}
+
+
+@pytest.mark.parametrize(("over_s", "alarmed"), [(4.0, False), (8.0, True)])
+def test_gnss_accuracy_alarms_only_once_px4_would_call_its_checks_failing(over_s, alarmed, tmp_path, cli, profile):
+    """eph over EKF2_REQ_EPH is a fault once it has lasted PX4's own 5 s (gps_checks_failing), not before."""
+    log = crafted_log(tmp_path / "eph.ulg", faults=False, eph_over=(20.0, 20.0 + over_s))
+    _, entry = analyze(cli, log, profile, tmp_path / "report.html")
+    result = health_entry(entry)
+    eph = [a for a in result["alarms"] if a["signal"] == "health.gnss_eph"]
+    assert bool(eph) == alarmed, eph
+    if alarmed:
+        assert eph[0]["first_exceed"] == pytest.approx(25.0, abs=0.2)  # the 5 s PX4 waits, then the alarm
+        assert 25.0 <= eph[0]["start"] <= 25.0 + LATE_S
+    assert result["info"]["checks"]["health.gnss_eph"]["limit"]["for_s"] == 5.0
+
+
+def test_gnss_accuracy_over_the_limit_is_no_fault_while_px4_own_checks_pass(tmp_path, cli, profile):
+    """eph over EKF2_REQ_EPH for 8 s, but PX4's own gps_check_fail_flags clear (PX4 passed its checks
+    on its own values): PX4 never called its GNSS failing, so neither does logscan."""
+    log = crafted_log(tmp_path / "eph.ulg", faults=False, eph_over=(20.0, 28.0), px4_flags=False)
+    _, entry = analyze(cli, log, profile, tmp_path / "report.html")
+    assert not [a for a in health_entry(entry)["alarms"] if a["signal"] == "health.gnss_eph"]
 
 
 def test_without_raw_channels_the_detector_says_so_on_any_run():
