@@ -2,16 +2,23 @@
 log itself calls for, written down from what the autopilot logged (its messages, failsafes, land
 detector and parameters), not from what logscan happened to print.
 
-| log | what the log says | expected verdict |
-|---|---|---|
-| px4-ulog/sample_appended_multiple | never armed, on the ground all log; "Not ready to fly: Sensors not set up correctly" | no alarm |
-| px4-ulog/sample_log_small | CubeOrange VTOL: a 1.2 s hop (take-off 2.4 s, landing 3.5 s), disarmed by landing; no warning | no alarm |
-| px4-ulog/sample_logging_tagged_and_default_params | SITL quadcopter on the ground, never armed | no alarm |
-| px4-ulog/sample_px4_events | SITL quadcopter: take-off, RTL, landing, disarmed; only "GPS fix too low" before arming | no alarm |
-| px4-ulog-extra/mcap_ulog2mcap_test_ulog | FMU-v6C: armed by RC, a 2 s hop, disarmed by landing; no warning | no alarm |
-| px4-ulog-extra/robologs_fmu_v5_test | ERROR "Dangerous battery level!, please land!" (4S at 12.9-14.1 V, BAT1_V_EMPTY 3.5 V a cell); "primary EKF changed (filter fault)" in flight | alarm on the battery, the ERROR listed (exit 1, or 2 with its flight unjudged by the model) |
-| ros-robots/robot_localization_test1_husky.bag | a healthy Husky drive (robot_localization's reference run), ROS 1 bag | exit 2 with one line: not read yet (issue 26) |
-| ros-robots/robot_localization_test1_husky_ros2 | the same drive as a ROS 2 bag | no alarm, never a traceback (exit 0 or 2) |
+- px4-ulog/sample_appended_multiple: never armed, on the ground all log ("Not ready to fly: Sensors
+  not set up correctly"): no alarm.
+- px4-ulog/sample_log_small: CubeOrange VTOL, a 1.2 s hop (take-off 2.4 s, landing 3.5 s), disarmed
+  by landing, no warning; its GNSS over EKF2_REQ_EPV but PX4's own checks pass every 2 s: no alarm.
+- px4-ulog/sample_logging_tagged_and_default_params: SITL quadcopter on the ground, never armed:
+  no alarm.
+- px4-ulog/sample_px4_events: SITL quadcopter, take-off, RTL, landing, disarmed; only "GPS fix too
+  low" before arming: no alarm.
+- px4-ulog-extra/mcap_ulog2mcap_test_ulog: FMU-v6C armed by RC, a 2 s hop, disarmed by landing, no
+  warning: no alarm.
+- px4-ulog-extra/robologs_fmu_v5_test: ERROR "Dangerous battery level!, please land!" (4S at
+  12.9-14.1 V, BAT1_V_EMPTY 3.5 V a cell), "primary EKF changed (filter fault)" in flight: an alarm
+  on the battery with the ERROR listed (exit 1, or 2 with its flight unjudged by the model).
+- ros-robots/robot_localization_test1_husky.bag: a healthy Husky drive (robot_localization's
+  reference run) as a ROS 1 bag: one clear line and exit 2 until ROS 1 bags are read (issue 26).
+- ros-robots/robot_localization_test1_husky_ros2: the same drive as a ROS 2 bag: no alarm, never a
+  traceback (exit 0 or 2).
 
 "No alarm" on a log that was not judged enough is not a pass: a log that exits 0 must have no
 `not checked` line; one that exits 2 must say why. The false-alarm budget (at most 1 per flight-hour
@@ -25,7 +32,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
-
 from conftest import need_testdata
 
 
