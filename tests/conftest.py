@@ -4,12 +4,16 @@
 so errors become exit codes and one-line messages exactly as in a shell) inside the test process:
 no interpreter start-up and numba kernels compiled once per session. A few end-to-end tests still
 run `python -m logscan` in a subprocess through `cli_process` (tests/test_cli_errors.py) or install
-the package (tests/test_readme.py).
+the package (tests/test_readme.py; `installed_wheel`, the built wheel in a fresh venv outside the
+checkout, tests/test_wheel_install.py).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -232,3 +236,70 @@ def _ctrl_c_is_the_users():
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
+
+
+@dataclass(frozen=True)
+class InstalledWheel:
+    """logscan as a user gets it: the wheel `pip wheel` builds from the tracked files, installed
+    with its dependencies into a fresh venv outside the checkout (tests/test_wheel_install.py)."""
+
+    wheel: Path
+    venv: Path
+    workdir: Path  # outside the checkout: run from here, nothing of the checkout is importable
+    env: dict[str, str]  # no checkout or dev venv on any path; its own kernel cache
+
+    def run(self, *args: str | os.PathLike, timeout: float = 900) -> subprocess.CompletedProcess:
+        """`logscan ARGS...` from the venv's bin/, in workdir."""
+        command = [str(self.venv / "bin" / "logscan"), *(str(a) for a in args)]
+        return subprocess.run(command, cwd=self.workdir, env=self.env, capture_output=True, text=True, timeout=timeout)
+
+    def python(self, code: str) -> subprocess.CompletedProcess:
+        command = [str(self.venv / "bin" / "python"), "-c", code]
+        return subprocess.run(command, cwd=self.workdir, env=self.env, capture_output=True, text=True, timeout=300)
+
+
+def clean_env(cache_dir: Path) -> dict[str, str]:
+    """This process's environment without the dev venv, PYTHONPATH or an explicit numba cache, and
+    with logscan's cache (compiled kernels) in cache_dir."""
+    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH", "NUMBA_CACHE_DIR")}
+    env["PATH"] = os.pathsep.join(
+        p for p in env.get("PATH", "").split(os.pathsep) if ".venv" not in p and "/venv/" not in p
+    )
+    env["LOGSCAN_CACHE_DIR"] = str(cache_dir)
+    return env
+
+
+def copy_tracked_files(dest: Path) -> None:
+    """The files git tracks (as they are in the working tree) copied to dest: what a clean clone has."""
+    listed = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, check=True).stdout
+    for rel in filter(None, listed.decode().split("\0")):
+        src = REPO / rel
+        if src.is_file():
+            (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / rel)
+
+
+@pytest.fixture(scope="session")
+def installed_wheel(tmp_path_factory) -> InstalledWheel:
+    """Build the wheel once from a copy of the tracked files, install it with its dependencies into
+    a fresh venv in a temporary directory outside the checkout (session-scoped: tests share it)."""
+    if shutil.which("git") is None or not (REPO / ".git").exists():
+        pytest.skip("needs a git checkout to build the wheel from the tracked files")
+    root = tmp_path_factory.mktemp("wheel")
+    assert REPO not in root.resolve().parents, f"{root} is inside the checkout"
+    source, wheels, venv, workdir = root / "source", root / "dist", root / "venv", root / "work"
+    workdir.mkdir()
+    copy_tracked_files(source)
+    env = clean_env(root / "cache")
+
+    def step(*command: str | os.PathLike) -> None:
+        done = subprocess.run([str(c) for c in command], cwd=workdir, env=env, capture_output=True, text=True)
+        assert done.returncode == 0, (command, done.stdout[-2000:], done.stderr[-3000:])
+
+    step(sys.executable, "-m", "pip", "wheel", source, "-w", wheels, "--no-deps", "-q")
+    (wheel,) = wheels.glob("logscan-*.whl")
+    step(sys.executable, "-m", "venv", venv)
+    # --no-compile: byte-compiling numpy, scipy and pandas at install time is most of an install's
+    # CPU; the modules logscan imports are compiled on first import instead
+    step(venv / "bin" / "python", "-m", "pip", "install", "-q", "--no-compile", wheel)
+    return InstalledWheel(wheel=wheel, venv=venv, workdir=workdir, env=env)
