@@ -7,7 +7,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def cache_dir() -> Path:
