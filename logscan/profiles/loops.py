@@ -10,6 +10,7 @@ for checkpointing and roll-forward recovery of the loops' estimates during anoma
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -49,11 +50,11 @@ class RecoverySpec:
         return ({"detector": self.detector} if self.detector is not None else {}) | self.settings
 
 
-def parse_loops(checker, raw: Any, source: str, check_model: bool) -> dict:
+def parse_loops(checker, raw: Any, source: str, check_model: Callable[..., None] | None) -> dict:
     """``[loops]``: loop name -> Profile of that loop; problems go to ``checker`` prefixed with
-    the loop's table. ``check_model``: also check each loop against its model."""
-    from logscan.profiles.bind import check_against_model
-
+    the loop's table. ``check_model``: None, or the check of each loop against its model, called as
+    ``check_model(profile, None, problems)`` (the caller passes `logscan.profiles.bind`'s
+    check_against_model, so this module imports neither bind nor schema)."""
     data = checker.table(raw, "[loops]") or {}
     loops = {}
     for name, table in data.items():
@@ -67,8 +68,8 @@ def parse_loops(checker, raw: Any, source: str, check_model: bool) -> dict:
         checker.keys(sub, where, LOOP_KEYS, required=("vehicle", "measurements"))
         inner = type(checker)()
         profile = inner.profile({k: v for k, v in sub.items() if k in LOOP_KEYS}, source)
-        if profile is not None and check_model and not inner.problems:
-            check_against_model(profile, None, inner.problems)
+        if profile is not None and check_model is not None and not inner.problems:
+            check_model(profile, None, inner.problems)
         checker.problems.extend(f"{where} {problem}" for problem in inner.problems)
         if profile is not None and not inner.problems:
             loops[name] = replace(profile, vehicle=replace(profile.vehicle, loop=name))

@@ -291,7 +291,8 @@ class _Checker:
         onboard = self.onboard(data["onboard"]) if "onboard" in data else None
         detectors = self.detectors(data["detectors"]) if "detectors" in data else {}
         alarm_policy = self.alarms(data["alarms"]) if "alarms" in data else None
-        loops = parse_loops(self, data["loops"], source, self.check_model) if "loops" in data else {}
+        check = check_against_model if self.check_model else None
+        loops = parse_loops(self, data["loops"], source, check) if "loops" in data else {}
         primary = vehicle.loop if vehicle is not None and vehicle.loop else PRIMARY_LOOP
         if primary in loops:
             self.add(f"[loops.{primary}]", f"the top level is already the loop {primary!r}: rename one")
