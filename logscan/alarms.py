@@ -24,11 +24,48 @@ duration and warm-up. Rules, in order:
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from logscan.errors import InternalError
-from logscan.results import AlarmInterval
+from logscan.json_policy import jsonable
+
+
+@dataclass
+class AlarmInterval:
+    """One alarm: [start, end] seconds on the analysis grid, and where it peaked.
+
+    peak_value / peak_threshold: the statistic and the threshold it crossed at the sample with the
+    largest excess over its threshold; peak_ratio = peak_value / peak_threshold (None when that
+    ratio is undefined: threshold 0 or non-finite, or a non-finite statistic).
+    bound: which bound the peak crossed, "upper", "lower" or "nonfinite".
+    """
+
+    start: float
+    end: float
+    first_exceed: float
+    peak_time: float
+    peak_value: float
+    peak_threshold: float | None
+    peak_ratio: float | None
+    bound: str
+    n_exceed: int  # exceeding samples inside the alarm
+    signal: str = ""
+    detector: str = ""
+    # a sequential test's estimate of when the change began (e.g. the CUSUM's last zero before the
+    # crossing), so latency can be read back to the onset; None: the detector gives none
+    change_time: float | None = None
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["duration"] = self.duration
+        return jsonable(out)
+
 
 # Tolerance (seconds) for time comparisons, so a hold-off of exactly two grid periods is not
 # lost to floating-point rounding of the grid times.

@@ -26,7 +26,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
-from logscan.results import AlarmInterval, events_from_truth
+from logscan.alarms import AlarmInterval
+from logscan.results import events_from_truth
 from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregate, label_observability, score_log
 
 CHECK_SEPARATOR = ":"

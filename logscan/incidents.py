@@ -25,9 +25,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from logscan.alarms import merge_close
+from logscan.alarms import AlarmInterval, merge_close
 from logscan.detectors import words
-from logscan.results import AlarmInterval, DetectorResult, Incident
+from logscan.results import DetectorResult, Incident
 
 DEFAULT_GAP_S = 1.0
 

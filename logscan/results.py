@@ -1,42 +1,27 @@
-"""The data between layers: alarm intervals, detector results, ground-truth fault events, and the one
-JSON policy (numpy values to plain ones, NaN and infinities to null).
+"""The data between layers: detector results, ground-truth fault events and the JSON summary of a
+series.
 
-Detectors produce `DetectorResult`s holding `AlarmInterval`s; scoring, the report and the artifacts
+Detectors produce `DetectorResult`s holding `AlarmInterval`s (defined below this module, in
+`logscan.alarms`, with the shared alarm logic that makes them); scoring, the report and the artifacts
 read these typed objects directly. Ground truth, whether written by `logscan simulate` or read back
-from a log, is a list of `FaultEvent`s.
+from a log, is a list of `FaultEvent`s. The one JSON policy, `jsonable`, lives in
+`logscan.json_policy`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from logscan.alarms import AlarmInterval, alarm_intervals, judged_mask
 from logscan.errors import InputError
+from logscan.json_policy import jsonable
 
-# --- the JSON policy ------------------------------------------------------------------------------
-
-
-def jsonable(value: Any) -> Any:
-    """numpy and non-finite floats -> strict-JSON values (NaN and +-inf -> None, arrays -> lists)."""
-    if value is None or isinstance(value, (str, bool)):
-        return value
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, Mapping):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    return str(value)
+# --- JSON summaries -------------------------------------------------------------------------------
 
 
 def series_summary(values: np.ndarray) -> dict:
@@ -52,41 +37,6 @@ def series_summary(values: np.ndarray) -> dict:
 
 
 # --- alarms ---------------------------------------------------------------------------------------
-
-
-@dataclass
-class AlarmInterval:
-    """One alarm: [start, end] seconds on the analysis grid, and where it peaked.
-
-    peak_value / peak_threshold: the statistic and the threshold it crossed at the sample with the
-    largest excess over its threshold; peak_ratio = peak_value / peak_threshold (None when that
-    ratio is undefined: threshold 0 or non-finite, or a non-finite statistic).
-    bound: which bound the peak crossed, "upper", "lower" or "nonfinite".
-    """
-
-    start: float
-    end: float
-    first_exceed: float
-    peak_time: float
-    peak_value: float
-    peak_threshold: float | None
-    peak_ratio: float | None
-    bound: str
-    n_exceed: int  # exceeding samples inside the alarm
-    signal: str = ""
-    detector: str = ""
-    # a sequential test's estimate of when the change began (e.g. the CUSUM's last zero before the
-    # crossing), so latency can be read back to the onset; None: the detector gives none
-    change_time: float | None = None
-
-    @property
-    def duration(self) -> float:
-        return self.end - self.start
-
-    def to_dict(self) -> dict:
-        out = asdict(self)
-        out["duration"] = self.duration
-        return jsonable(out)
 
 
 @dataclass(frozen=True)
@@ -254,8 +204,6 @@ class DetectorResult:
         """Store a statistic with its thresholds and append its alarms (the shared alarm logic;
         ``alarm_options`` go to `alarm_intervals`: n_persist, hold_off_s, warmup, valid...).
         ``check``: the check this statistic is scored with, when not its own name."""
-        from logscan.alarms import alarm_intervals, judged_mask
-
         n = np.asarray(t).size
         statistic = np.asarray(statistic, dtype=np.float64)
         band = Band(upper=_band_series(upper, n), lower=_band_series(lower, n))
@@ -295,8 +243,6 @@ class DetectorResult:
     def add_possible(self, t: np.ndarray, name: str, statistic: np.ndarray, upper, **alarm_options) -> list:
         """ "Possible fault" intervals of ``statistic`` over ``upper`` (the shared alarm logic), less
         those that overlap an alarm already raised (the alarm says more); stored, not scored."""
-        from logscan.alarms import alarm_intervals
-
         if self.alarm_policy is not None:
             alarm_options = self.alarm_policy.apply(alarm_options)
         alarm_options.pop("check", None)

@@ -44,7 +44,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from logscan.results import AlarmInterval, FaultEvent
+from logscan.alarms import AlarmInterval
+from logscan.results import FaultEvent
 
 DEFAULT_GRACE_S = 1.0
 DEFAULT_RECOVERY_S = 5.0

@@ -9,9 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan.alarms import alarm_intervals, merge_close
+from logscan.alarms import AlarmInterval, alarm_intervals, merge_close
 from logscan.errors import InternalError
-from logscan.results import AlarmInterval
 
 DT = 0.1
 T = np.arange(20) * DT

@@ -207,8 +207,8 @@ def test_the_autopilots_armed_and_failsafe_states_are_drawn(cli, tmp_path):
 
 
 def test_plain_words_for_the_autopilot_checks():
+    from logscan.alarms import AlarmInterval
     from logscan.incidents import headline, plain_words
-    from logscan.results import AlarmInterval
 
     assert plain_words("health.gnss_fix", "health") == "GNSS 3D fix lost"
     assert plain_words("px4.ekf1.pos_test_ratio", "px4_estimator") == "PX4's own test of the position failed"
@@ -220,8 +220,9 @@ def test_plain_words_for_the_autopilot_checks():
 def test_model_based_alarms_are_reported_against_px4s_own_tests():
     """PX4's gps_hpos test fails at 20-30 s: a model-based alarm overlapping it counts as also
     flagged by PX4; PX4's heading alarm at 45 s is PX4's alone."""
+    from logscan.alarms import AlarmInterval
     from logscan.analysis import Analysis
-    from logscan.results import AlarmInterval, DetectorResult
+    from logscan.results import DetectorResult
 
     def alarm(start, end, signal, detector):
         return AlarmInterval(start, end, start, start, 2.0, 1.0, 2.0, "upper", 3, signal, detector)

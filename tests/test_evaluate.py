@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from logscan.alarms import AlarmInterval
 from logscan.evaluate import (
     Evaluation,
     LogEvaluation,
@@ -20,7 +21,7 @@ from logscan.evaluate import (
     merge_intervals,
     score_groups,
 )
-from logscan.results import AlarmInterval, DetectorResult, FaultEvent
+from logscan.results import DetectorResult, FaultEvent
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 HEALTHY = SAMPLES / "quad_healthy.mcap"

@@ -8,8 +8,9 @@ import math
 import pytest
 from recovery_linear import make_loop
 
+from logscan.alarms import AlarmInterval
 from logscan.recovery import Anomaly, anomalies_from_alarms, anomalies_from_truth
-from logscan.results import AlarmInterval, FaultEvent
+from logscan.results import FaultEvent
 
 
 def alarm(start, end, signal):

@@ -7,8 +7,9 @@ import math
 
 import pytest
 
+from logscan.alarms import AlarmInterval
 from logscan.errors import InputError
-from logscan.results import AlarmInterval, FaultEvent, events_from_truth
+from logscan.results import FaultEvent, events_from_truth
 from logscan.scoring import (
     AT_ONSET,
     DETECTION,

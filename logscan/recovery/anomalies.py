@@ -12,9 +12,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+from logscan.alarms import AlarmInterval
 from logscan.incidents import group_of
 from logscan.recovery.records import Anomaly, LoopRun
-from logscan.results import AlarmInterval, FaultEvent
+from logscan.results import FaultEvent
 
 # one alarm or fault, before merging: (start, end, {loop: groups} or None)
 _Piece = tuple[float, float, dict[str, tuple[str, ...]] | None]

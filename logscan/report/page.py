@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from logscan import scoring
+from logscan.alarms import AlarmInterval
 from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.autopilot_messages import MAX_SHOWN
 from logscan.clock import Clock
@@ -33,7 +34,7 @@ from logscan.report.observability_figures import observability_figures
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
 from logscan.report.recovery_figures import recovery_figures, recovery_rows
 from logscan.report.sensor_figures import named_group_figures
-from logscan.results import AlarmInterval, DetectorResult, FaultEvent, Incident
+from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.run_context import RunContext
 from logscan.sensor_views import Innovations
 
