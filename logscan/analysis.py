@@ -10,6 +10,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from logscan import __version__
+from logscan.autopilot_messages import flight_messages
+from logscan.coverage import skipped_checks
 from logscan.errors import ExitCode
 from logscan.results import DetectorResult, FaultEvent, Incident
 
@@ -116,15 +118,11 @@ class Analysis:
     def skipped_checks(self) -> list[str]:
         """The checks the detectors could not run because the log holds nothing for them to judge
         (`logscan.coverage.skipped_checks`): listed; unlike ``unchecked``, the verdict stands."""
-        from logscan.coverage import skipped_checks
-
         return skipped_checks(self.results)
 
     def autopilot_messages(self) -> tuple[list, int]:
         """(the autopilot's distinct messages of WARNING and above during flight, each with its
         incident (`logscan.autopilot_messages`); the number logged while disarmed)."""
-        from logscan.autopilot_messages import flight_messages
-
         context = getattr(self.prepared, "context", None)
         states = getattr(context, "states", None) or {}
         metadata = self.log.source.metadata or {}
