@@ -192,7 +192,8 @@ def actuators_of(model, dt: float) -> tuple[list[str], np.ndarray, np.ndarray]:
     if getattr(model, "inputs_are_sensors", False):
         return [], np.zeros((model.n_inputs, 0)), np.zeros(0)
     try:
-        from logscan.simulate.scenario import SIMULATED_MODELS, build_scenario
+        from logscan.simulate.dispatch import build_scenario
+        from logscan.simulate.scenario import SIMULATED_MODELS
 
         if model.name in SIMULATED_MODELS:
             rate = 1.0 / dt

@@ -211,7 +211,7 @@ def imu_channels() -> list[str]:
 
 
 def ins_scenario(model, dt: float, t: np.ndarray, groups: list[SensorGroup], aggressive: bool, rng) -> Scenario:
-    """The `ins` scenario (called by `scenario.build_scenario`): the reference flight, the aiding
+    """The `ins` scenario (called by `dispatch.build_scenario`): the reference flight, the aiding
     sensor groups, the IMU as the input channels, mode and set-points."""
     moves = move_schedule(t[-1] + dt, aggressive, rng)
     ref = reference_trajectory(t, moves)
@@ -402,7 +402,7 @@ def simulate_ins(
     glitches_per_min: float = 0.0,
 ) -> Simulation:
     """One `ins` run (see the module docstring), deterministic in ``seed``; called by
-    `simulation.simulate`, which has checked its arguments."""
+    `dispatch.simulate`, which has checked its arguments."""
     check_ins_faults(faults)
     rng = np.random.default_rng(seed)
     model = sc.model

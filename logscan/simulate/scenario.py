@@ -30,10 +30,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import logscan.simulate.controllers as ctl
 from logscan.errors import UsageError
 from logscan.models import get_model
 from logscan.models.base import Model
-from logscan.simulate import controllers as ctl
 from logscan.simulate.faults import PAPER_SETTLE_S
 
 DEFAULT_RATES = {"quadcopter": 100.0, "steer_by_wire": 100.0, "dc_motor": 20.0, "hover_uav": 100.0, "ins": 250.0}
@@ -220,18 +220,16 @@ def glitch_tolerance(groups: list[SensorGroup]) -> tuple[dict[str, float], dict[
     return alarms, {"nis": {"window": NIS_WINDOW, "n_persist": NIS_WINDOW + span}}
 
 
-def build_scenario(
+def prepare_scenario(
     model_name: str,
     duration: float,
     rate_hz: float | None,
-    aggressive: bool,
-    rng: np.random.Generator,
     params: dict | None = None,
     speed: str | None = None,
     noise: str | None = None,
-) -> Scenario:
-    """The scenario of ``model_name`` for a log of ``duration`` seconds (``speed``: the dc_motor's
-    commanded-speed profile, see `parse_speed`, None: its mode cycle; ``noise``: see NOISE_KINDS)."""
+) -> tuple[Model, float, np.ndarray, list[SensorGroup], list[tuple[float, float]] | str | None, str]:
+    """What every model's scenario starts from: (model, dt, t, sensor groups, the parsed ``speed``,
+    the resolved ``noise``), the arguments checked (UsageError); see `dispatch.build_scenario`."""
     if model_name not in SIMULATED_MODELS:
         raise UsageError(
             f"cannot simulate model {model_name!r}",
@@ -247,15 +245,29 @@ def build_scenario(
     n_steps = int(round(duration / dt)) + 1
     t = np.arange(n_steps) * dt
     groups = _sensor_groups(model_name, model, rate, noise)
+    return model, dt, t, groups, changes, noise
+
+
+def closed_loop_scenario(
+    model_name: str,
+    duration: float,
+    rate_hz: float | None,
+    aggressive: bool,
+    rng: np.random.Generator,
+    params: dict | None = None,
+    speed: str | None = None,
+    noise: str | None = None,
+) -> Scenario:
+    """The scenario of a closed-loop model (all but ins, whose scenario is `ins_sim.ins_scenario`;
+    `logscan.simulate.dispatch.build_scenario` picks the builder of any model)."""
+    model, dt, t, groups, changes, noise = prepare_scenario(model_name, duration, rate_hz, params, speed, noise)
     if model_name == "dc_motor":
         sc = _dc_motor(model, dt, t, groups, aggressive, rng, changes)
         sc.speed, sc.noise = speed, noise
         return sc
-    if model_name == "ins":
-        from logscan.simulate.ins_sim import ins_scenario
-
-        return ins_scenario(model, dt, t, groups, aggressive, rng)
     builder = {"quadcopter": _quadcopter, "steer_by_wire": _steer_by_wire, "hover_uav": _hover_uav}
+    if model_name not in builder:
+        raise ValueError(f"{model_name} has no closed-loop scenario: use logscan.simulate.dispatch.build_scenario")
     return builder[model_name](model, dt, t, groups, aggressive, rng)
 
 

@@ -1,7 +1,8 @@
 """One simulated log: run the closed loop for a model with faults, and expose its logged series.
 
-`simulate()` draws every random number from one seeded generator (process noise, sensor noise,
-fault draws, the mode schedule), runs the numba kernel of `logscan.simulate.runner` once, and
+`simulate_closed_loop()` (entered through `logscan.simulate.dispatch.simulate`, which picks the
+simulator of a model) draws every random number from one seeded generator (process noise, sensor
+noise, fault draws, the mode schedule), runs the numba kernel of `logscan.simulate.runner` once, and
 returns a `Simulation` holding the true states, commands, sensor samples, the on-board estimate and
 the ground-truth fault events. `Simulation.series()` lists what a log holds, channel by channel,
 with sample indices on the grid; `logscan.simulate.output` writes it as MCAP or CSV.
@@ -23,7 +24,7 @@ from logscan.simulate.faults import (
     resolve_faults,
 )
 from logscan.simulate.runner import closed_loop
-from logscan.simulate.scenario import Scenario, build_scenario
+from logscan.simulate.scenario import Scenario
 
 MAX_DURATION_S = 24 * 3600.0
 TRUTH_SCHEMA = "logscan.truth/1"
@@ -260,67 +261,28 @@ def _split(channel: str, values: np.ndarray) -> tuple[str, dict[str, np.ndarray]
     return topic, {field_name: values}
 
 
-def simulate(
-    model_name: str,
-    faults: list[FaultSpec] | None = None,
-    *,
-    duration: float = 60.0,
-    seed: int = 0,
-    rate_hz: float | None = None,
-    aggressive: bool = False,
-    params: dict | None = None,
-    glitches_per_min: float = 0.0,
-    speed: str | None = None,
-    noise: str | None = None,
-    scenario: str | None = None,
-) -> Simulation:
-    """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``.
-
-    ``glitches_per_min`` adds healthy transients (docs/algorithms.md section 6.5): one- or two-sample
-    spikes of 3-8 noise standard deviations on a random sensor channel (the redundant group's
-    when the model has one), Poisson in time. They are listed in the truth as ``transients``, not
-    as fault ``events``: a detector should tolerate them. On dc_motor they are encoder slips (one
-    encoder reads low) and GPS glitches, sized by the noise at the commanded speed.
-
-    ``speed`` (dc_motor only): the commanded-speed profile, ``0.7``, ``1.0,0.4@30`` or ``random``
-    (`logscan.simulate.scenario.parse_speed`); None: the mode cycle. ``noise``: "speed" (the speed
-    sensors' noise std grows with the speed, `scenario.SPEED_NOISE`; dc_motor only) or "constant"
-    (the model's noise_std); None: speed when ``speed`` is given, else constant.
-
-    ``model_name`` "ground_robot" is the hierarchical robot of `logscan.simulate.ground_robot_sim`
-    (not a model: an outer unicycle loop over two DC-motor loops); it takes ``scenario`` ("paper",
-    the default, "random" or "healthy"), ``duration`` and ``seed`` only, and returns a
-    `GroundRobotSimulation`. ``scenario`` is for ground_robot alone.
-    """
+def check_run_options(duration: float, seed: int, glitches_per_min: float) -> None:
+    """UsageError unless ``duration``, ``seed`` and ``glitches_per_min`` are in range (any model)."""
     if not (0.0 < duration <= MAX_DURATION_S):
         raise UsageError(f"--duration {duration:g} s is out of range", hint="use 0 < duration <= 86400 s")
     if seed < 0:
         raise UsageError(f"--seed {seed} is negative", hint="use a seed >= 0")
     if not (0.0 <= glitches_per_min <= 600.0):
         raise UsageError(f"--glitches {glitches_per_min:g} per minute is out of range", hint="use 0 .. 600")
-    if model_name == "ground_robot":  # several loops, several rates (logscan.simulate.ground_robot_sim)
-        from logscan.simulate.ground_robot_sim import check_ground_robot_options, simulate_ground_robot
 
-        check_ground_robot_options(faults, rate_hz, aggressive, glitches_per_min, speed, noise)
-        return simulate_ground_robot(scenario or "paper", duration=duration, seed=seed)
-    if scenario is not None:
-        raise UsageError("--scenario is for ground_robot", hint="drop --scenario")
+
+def simulate_closed_loop(
+    sc: Scenario,
+    faults: list[FaultSpec],
+    *,
+    duration: float,
+    seed: int,
+    aggressive: bool,
+    glitches_per_min: float,
+) -> Simulation:
+    """Run the closed loop of scenario ``sc`` (`scenario.closed_loop_scenario`) with ``faults``;
+    called by `logscan.simulate.dispatch.simulate`, which has checked its arguments."""
     rng = np.random.default_rng(seed)
-    scenario_rng = np.random.default_rng([seed, 1])
-    if model_name == "ins":  # the IMU is the model's input: no closed loop (logscan.simulate.ins_sim)
-        from logscan.simulate.ins_sim import check_ins_faults, simulate_ins
-
-        check_ins_faults(faults or [])
-        sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
-        return simulate_ins(
-            sc,
-            list(faults or []),
-            duration=duration,
-            seed=seed,
-            aggressive=aggressive,
-            glitches_per_min=glitches_per_min,
-        )
-    sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
     n_steps = sc.reference.shape[0]
     sensor_channels = [(target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)]
     faults = list(faults or [])
