@@ -127,7 +127,7 @@ class Detector:
     requires_trace: ClassVar[bool] = False
     trained_attributes: ClassVar[tuple[str, ...]] = ()
     # Parameters that shape what `fit` learns: a trained detector keeps them from its tables; the
-    # others come from the profile it runs with (`logscan.training.apply_tables`).
+    # others come from the profile it runs with (`logscan.tables.apply_tables`).
     fit_params: ClassVar[tuple[str, ...]] = ()
     state_version: ClassVar[int] = 1
     # Which of the large per-step series (`logscan.pipeline.RELEASABLE`: the EKF's state, covariance,

@@ -3,17 +3,20 @@ checked like a log of its own: its model, its rate, its inputs and sensors, the 
 on it once, and its own detectors (from its ``[detectors]`` table, else the registry's defaults).
 
 `logscan.pipeline.prepare` calls `prepare_loops` on the log it read once (the profile's topics
-include every loop's channels) before the samples are released; `detect` runs `detect_loops` and
-the recovery stage reads the loops' traces (`logscan.recovery`).
+include every loop's channels) before the samples are released; `detect` runs `detect_loops`
+(handing it itself: this module sits below the pipeline and never imports it) and the recovery
+stage reads the loops' traces (`logscan.recovery`).
 """
 
 from __future__ import annotations
 
 import shlex
 from collections.abc import Callable
+from typing import Any
 
 from logscan.errors import LogscanError
 from logscan.needs import Needs
+from logscan.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
 
 #: what recovery needs of every loop's EKF: the full covariance at the checkpoints
 RECOVERY_NEEDS = Needs.of(ekf=("P",))
@@ -21,8 +24,6 @@ RECOVERY_NEEDS = Needs.of(ekf=("P",))
 
 def loop_detectors(loaded) -> list:
     """The detectors a loop runs (its own [detectors] table, else the defaults)."""
-    from logscan.pipeline import create_detectors
-
     return create_detectors(loaded)
 
 
@@ -30,7 +31,6 @@ def prepare_loops(primary, log, *, start_s=None, end_s=None, step: Callable[[str
     """Loop name -> Prepared for every further loop of ``primary.profile`` (aligned and filtered)."""
     from logscan.align import align
     from logscan.models import get_model
-    from logscan.pipeline import FILTERS, LoadedProfile, Prepared, needs_of
 
     profile = primary.profile
     extra = RECOVERY_NEEDS if profile.recovery is not None else Needs()
@@ -58,10 +58,9 @@ def prepare_loops(primary, log, *, start_s=None, end_s=None, step: Callable[[str
     return loops
 
 
-def detect_loops(prepared, *, grace_s: float, progress=None) -> dict:
-    """Loop name -> the Analysis of that loop (its detectors on its own run)."""
-    from logscan.pipeline import detect
-
+def detect_loops(prepared, *, detect: Callable[..., Any], grace_s: float, progress=None) -> dict:
+    """Loop name -> the Analysis of that loop (its detectors on its own run, by ``detect``: the
+    pipeline's per-log detection step, `logscan.pipeline.detect`, which calls this)."""
     return {
         name: detect(loop, loop_detectors(loop.loaded), grace_s=grace_s, progress=progress)
         for name, loop in prepared.loops.items()

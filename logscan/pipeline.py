@@ -15,30 +15,18 @@ from __future__ import annotations
 import os
 import shlex
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
-from logscan.needs import Needs, union
+from logscan.loops import RECOVERY_NEEDS, detect_loops, prepare_loops, recover_analysis
+from logscan.needs import Needs
+from logscan.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
+from logscan.tables import apply_tables, read_tables_document, tables_path
 
 Progress = Callable[[str], None]
-
-
-def _run_ekf(model, run, parts: frozenset[str]):
-    from logscan.filters.ekf import run_ekf
-
-    # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
-    # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run
-    return run_ekf(
-        model,
-        run,
-        store_gain="K" in parts,
-        store_S="S" in parts,
-        full_P="P" in parts,
-        store_innovations="y" in parts,
-    )
 
 
 # The large per-step series a detector declares it reads (`Detector.reads`): each is freed once no
@@ -48,98 +36,6 @@ RELEASABLE_TRACE = ("x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_
 # "z": the measurement groups' samples; "redundant": the [redundant] groups' readings
 RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode", "redundant")
 RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
-
-
-def _run_ubikf(model, run, parts: frozenset[str]):
-    from logscan.filters.ubikf import run_ubikf
-
-    interval_model = getattr(model, "interval_model", None)
-    if interval_model is None:
-        raise ProfileError(
-            f"the UBIKF needs a model with interval parameters; {model.name!r} has none",
-            hint=f'use [vehicle] model = "hover_uav" ({doc_url("models.md")}), or drop the chi2 detector',
-        )
-    return run_ubikf(interval_model(run.dt), run)
-
-
-# Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
-FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf, "ubikf": _run_ubikf}
-
-
-@dataclass
-class LoadedProfile:
-    """A parsed profile with its TOML text and where it came from ("embedded" or a file path)."""
-
-    profile: Any  # logscan.profiles.Profile
-    text: str
-    source: str  # a file path, "embedded", or "built-in <name>"
-    notes: list[str] = field(default_factory=list)  # what a built-in profile left out, one line each
-    # a built-in profile's log, read once to build it with every topic an analysis of it may read
-    # (`builtin_profile_for`): `prepare` takes it instead of reading the file again, then drops it
-    log: Any = field(default=None, repr=False, compare=False)
-    log_extra_topics: frozenset = field(default=frozenset(), repr=False, compare=False)
-    # the tables' calibrated process noise, {state: scale of its Q} (`logscan.calibration`; set by
-    # `analyze_log` from --tables): `prepare` gives it to the model, the EKF scales Q by it
-    process_noise_scale: dict | None = field(default=None, compare=False)
-    # the groups those tables' calibration could not bring to NIS 1 (kept the profile's noise)
-    uncalibrated: frozenset = field(default=frozenset(), compare=False)
-    # why the model's filter cannot run on this log ("": it can; a built-in profile says,
-    # `BuiltProfile.model_not_run`): only detectors that need no filter run (`filter_free`)
-    model_not_run: str = ""
-
-
-@dataclass
-class Prepared:
-    """One log made ready for detectors: the log, its profile, model, aligned run and filter traces."""
-
-    path: str
-    log: Any  # logscan.log.Log
-    loaded: LoadedProfile
-    model: Any  # logscan.models.base.Model
-    run: Any  # logscan.align.AlignedRun
-    traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
-    warnings: list[str] = field(default_factory=list)
-    _filter_summary: dict | None = None
-    context: Any = None  # logscan.run_context.RunContext: the path and mode the report draws (small)
-    innovations: Any = None  # logscan.sensor_views.Innovations: the report's measured-vs-predicted figures
-    raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
-    loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
-    clock: Any = None  # logscan.clock.Clock: the log's own clock, dated before the samples go
-
-    def filter_summary(self) -> dict | None:
-        """The EKF trace's JSON counts (kept when the series are released)."""
-        if self._filter_summary is None and self.trace is not None:
-            self._filter_summary = self.trace.summary()
-        return self._filter_summary
-
-    def release_series(self) -> None:
-        """Free what only the filters and detectors read, once they have run: the filter traces and
-        the aligned signals (~290 MB for a 1-hour 100 Hz log). The report draws the grid's times and
-        the detectors' results; the filter's counts stay (``filter_summary``)."""
-        import numpy as np
-
-        self.filter_summary()
-        self.traces.clear()
-        empty = np.empty((self.run.n_steps, 0))
-        self.run = replace(
-            self.run,
-            u=empty,
-            u_fresh=np.empty(0, dtype=bool),
-            groups={},
-            redundant={},
-            mode=None,
-            onboard_state=None,
-            onboard_variance=None,
-        )
-
-    @property
-    def profile(self):
-        return self.loaded.profile
-
-    @property
-    def trace(self):
-        """The shared EKF trace (None when no detector needed the EKF)."""
-        return self.traces.get("ekf")
 
 
 def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
@@ -209,28 +105,6 @@ def _extra_topics() -> frozenset[str]:
     return raw_topics_of([registry.get(name) for name in registry.names()]) | extra
 
 
-def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
-    """The detectors to run: ``names``, else those the profile enables, else the registry's defaults;
-    configured from the profile's [detectors.NAME] tables and checked before any log is read."""
-    from logscan.detectors.registry import default_registry
-
-    registry = default_registry()
-    profile = loaded.profile
-    # the profile's file, or "<log> (embedded profile)": its errors name the log too ("embedded" does not)
-    source = profile.source
-    chosen = list(names or profile.enabled_detectors() or registry.default_names())
-    detectors = []
-    for name in chosen:
-        spec = profile.detectors.get(name)
-        try:
-            detectors.append(registry.create(name, dict(spec.settings) if spec else {}, source=source))
-        except ProfileError as exc:
-            if exc.path is None and not names:  # an unknown name the profile chose, not --detector
-                exc.path = source
-            raise
-    return detectors
-
-
 def filter_free(detectors: Sequence, loaded: LoadedProfile, path) -> list:
     """``detectors``, less those that need a filter when the profile's model cannot run on the log
     (`LoadedProfile.model_not_run`: the verdict lists the model as not checked); an InputError
@@ -262,11 +136,6 @@ def raw_channels(log, topics: frozenset[str]) -> dict:
         for name, channel in log.channels.items()
         if name.lstrip("/").split("/", 1)[0] in topics or name in topics
     }
-
-
-def needs_of(detectors: Sequence) -> Callable[[Any], Needs]:
-    """The union of the detectors' needs, as a function of the aligned run they depend on."""
-    return lambda run: union(detector.needs(run) for detector in detectors)
 
 
 def prepare(
@@ -323,16 +192,12 @@ def prepare(
     prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
     prepared.clock = clock_of(log, run.start_ns)  # dated while the GNSS time is still there
     if profile.loops:
-        from logscan.loops import prepare_loops
-
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     wanted = needs(run) if callable(needs) else needs
     if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
         raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
     if profile.recovery is not None:
-        from logscan.loops import RECOVERY_NEEDS
-
         wanted = wanted | RECOVERY_NEEDS
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     span_warning = log.span_warning()
@@ -463,17 +328,13 @@ def detect(
         model = prepared.profile.vehicle.model
         analysis.unchecked.insert(0, f"the {model} model (logscan's filter): {prepared.loaded.model_not_run}")
     if prepared.loops:  # a hierarchical profile: every further loop checked by its own detectors
-        from logscan.loops import detect_loops
-
-        analysis.loops = detect_loops(prepared, grace_s=grace_s, progress=progress)
+        analysis.loops = detect_loops(prepared, detect=detect, grace_s=grace_s, progress=progress)
         for name, loop in analysis.loops.items():  # what a loop could not check is the log's
             analysis.unchecked += [f"loop {name}: {reason}" for reason in loop.unchecked]
             analysis.failures += [replace(f, message=f"loop {name}: {f.message}") for f in loop.failures]
             analysis.warnings += [w if w.startswith(f"loop {name}") else f"loop {name}: {w}" for w in loop.warnings]
     _score(analysis, [d.name for d in detectors], grace_s)
     if prepared.profile.recovery is not None:
-        from logscan.loops import recover_analysis
-
         step("recovery")
         analysis.recovery = recover_analysis(analysis)
     return analysis
@@ -669,7 +530,6 @@ def analyze_log(
     figures (`logscan.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it)."""
     from logscan.calibration import process_noise_scale, uncalibrable_groups
-    from logscan.training import apply_tables, read_tables_document, tables_path
 
     loaded = load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)

@@ -12,7 +12,8 @@ import pytest
 from logscan.detectors.atfm import AtfmDetector, mode_segments
 from logscan.errors import NotTrainedError, ProfileError
 from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
-from logscan.training import apply_tables, profile_fingerprint, read_tables, train_logs
+from logscan.tables import apply_tables, profile_fingerprint, read_tables
+from logscan.training import train_logs
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,8 @@ import pytest
 
 from logscan.detectors.kgn import KgnDetector, column_norms, steady_steps, window_means
 from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
-from logscan.training import apply_tables, train_logs
+from logscan.tables import apply_tables
+from logscan.training import train_logs
 
 FAULT_AT = 70.0  # hover from 60 s; steady (mode unchanged for 10 s) from 70 s to 75 s
 

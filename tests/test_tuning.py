@@ -9,7 +9,7 @@ import json
 import pytest
 
 from logscan.pipeline import create_detectors, load_profile_for
-from logscan.training import apply_tables
+from logscan.tables import apply_tables
 from logscan.tuning import TUNE_GRID, TUNE_MARGIN
 
 

@@ -200,7 +200,7 @@ def analyze(
 
         create_detectors(load_profile_for(None, profile_path), names)
     if tables_path is not None:  # a bad tables file stops the run before any log is read
-        from logscan.training import read_tables
+        from logscan.tables import read_tables
 
         read_tables(tables_path)
     logs = expand_logs(log_paths)
