@@ -28,7 +28,7 @@ summary and training report say it failed, and `logscan analyze --tables` refuse
 Both are written in the tables as ``calibration`` (``groups``: each group's noise_std;
 ``process_noise_scale``: each state's Q scale, ``process_noise_blocks``, the iterations used) and
 applied by `logscan analyze --tables` before the filter runs (R in the profile's noise_std, Q through
-the filter's Q override: `logscan.process_noise.calibrated_Q`), so the detectors trained in the same
+the filter's Q override: `logscan.filters.q_scale.calibrated_Q`), so the detectors trained in the same
 run are fitted on the calibrated filter. ``calibrate(..., process_noise=False)`` calibrates R alone.
 """
 

@@ -47,6 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from logscan.filters.q_scale import scaled_Q
+
 Q_SCALE_MIN = 1e-4  # the smallest scale of a block's Q
 Q_SCALE_MAX = 1e4
 Q_STEP = math.log(2.0)  # the step of a block's log scale where the cost is sampled (x2, /2)
@@ -102,27 +104,6 @@ def state_blocks(model) -> dict[str, list[int]]:
         if i not in grouped:
             blocks[name if name not in blocks else f"{name}_{i}"] = [i]
     return dict(sorted(blocks.items(), key=lambda item: item[1][0]))
-
-
-def scaled_Q(Q: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Q' = D^1/2 Q D^1/2, D = diag(scale) (see the module docstring)."""
-    root = np.sqrt(np.asarray(scale, dtype=np.float64))
-    return root[:, None] * np.asarray(Q, dtype=np.float64) * root[None, :]
-
-
-def scale_vector(model, scales: dict[str, float] | None) -> np.ndarray:
-    """One scale per state from {state name: scale} (a state not named: 1)."""
-    scales = scales or {}
-    return np.array([float(scales.get(name, 1.0)) for name in model.state_names])
-
-
-def calibrated_Q(model, dt: float) -> np.ndarray | None:
-    """The model's Q at ``dt`` scaled by its ``process_noise_scale`` ({state: scale}, set from the
-    tables' calibration by `logscan.pipeline.prepare`), or None (the filter's default Q)."""
-    scales = getattr(model, "process_noise_scale", None)
-    if not scales:
-        return None
-    return scaled_Q(model.default_Q(dt), scale_vector(model, scales))
 
 
 @dataclass

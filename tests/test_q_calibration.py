@@ -18,9 +18,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from logscan.calibration import base_noise_std, calibrate, calibrated_runs, process_noise_scale
+from logscan.filters.q_scale import scale_vector, scaled_Q
 from logscan.models import get_model
 from logscan.pipeline import load_profile_for
-from logscan.process_noise import evaluate, scale_vector, scaled_Q, state_blocks
+from logscan.process_noise import evaluate, state_blocks
 from logscan.report.training_page import render_training_html
 
 Q_ACCEL, Q_ANGACC = 0.2, 1.0  # the quadcopter's defaults: the simulated process noise

@@ -45,6 +45,7 @@ from logscan.filters.linalg import (
     sparse_rows,
     wrap_angle,
 )
+from logscan.filters.q_scale import calibrated_Q
 from logscan.filters.trace import EkfTrace, divergence_episodes
 from logscan.models import dispatch
 from logscan.models.base import Model
@@ -492,8 +493,6 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
         raise ModelError(f"x0 must hold {n} finite values")
     P0 = model.default_P0() if P0 is None else _square("P0", P0, n)
     if Q is None:  # the model's, scaled when trained tables calibrated it (`logscan.process_noise`)
-        from logscan.process_noise import calibrated_Q
-
         Q = calibrated_Q(model, run.dt)
     Q = model.default_Q(run.dt) if Q is None else _square("Q", Q, n)
     finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))
