@@ -74,19 +74,12 @@ def simulate(
     if scenario is not None:
         raise UsageError("--scenario is for ground_robot", hint="drop --scenario")
     scenario_rng = np.random.default_rng([seed, 1])
-    if model_name == "ins":  # the IMU is the model's input: no closed loop (logscan.simulate.ins_sim)
+    # ins: the IMU is the model's input, no closed loop (logscan.simulate.ins_sim)
+    if model_name == "ins":
         check_ins_faults(faults or [])
-        sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
-        return simulate_ins(
-            sc,
-            list(faults or []),
-            duration=duration,
-            seed=seed,
-            aggressive=aggressive,
-            glitches_per_min=glitches_per_min,
-        )
+    run = simulate_ins if model_name == "ins" else simulate_closed_loop
     sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
-    return simulate_closed_loop(
+    return run(
         sc,
         list(faults or []),
         duration=duration,
