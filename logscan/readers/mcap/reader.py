@@ -28,7 +28,8 @@ so ``/imu`` + ``linear_acceleration.x`` -> ``/imu/linear_acceleration.x`` and ``
 -> ``imu/accel.x``; arrays index as ``position[2]``. A message that is itself a number gives a
 channel named by the topic alone. Each channel has its own timestamps: a variable-length array
 index only gets samples from the messages that had it. Channels are sorted by time (stable); a
-topic logged out of log_time order gives a warning.
+topic logged out of log_time order gives a warning. (Naming, timing and ordering are
+``logscan.readers.topic_channels``, shared with the ROS bag reader.)
 
 Time: ``log_time`` (int ns). With ``use_header_stamp=True``, messages that have ``header.stamp``
 (``sec``/``nanosec`` in ROS 2 and JSON, ``secs``/``nsecs`` in ROS 1) use it instead.
@@ -51,12 +52,13 @@ from typing import Any
 
 import numpy as np
 
-from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.log import Log, SourceInfo, TopicInfo
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
 from logscan.readers.mcap.metadata import attach_logscan_records
 from logscan.readers.mcap.scan import ChannelRec, Scan, SchemaRec, problem_text, raise_if_unrecoverable, scan_file
+from logscan.readers.topic_channels import TopicPieces, channels_in_time_order, unsorted_text
 
 
 def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
@@ -70,11 +72,11 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
     scan.flush()
     source = _source_of(scan)
     decoding.report_to(source)
-    channels = _channels_in_time_order(decoding.pieces, source)
+    channels = channels_in_time_order(decoding.pieces, source)
     if decoding.undecodable:
         source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(decoding.undecodable)))
     if use_header_stamp:
-        source.time_source = _time_source(decoding.decoded_topics, decoding.stamp_topics)
+        source.time_source = decoding.time_source()
     log = Log(channels=channels, source=source)
     attach_logscan_records(log)
     return log
@@ -104,11 +106,11 @@ def inspect_mcap(
     decoding.report_to(source)
     unsorted = sorted(name for name, entry in stats.items() if entry.unsorted)
     if unsorted:
-        source.warnings.append(_unsorted_text(unsorted))
+        source.warnings.append(unsorted_text(unsorted))
     if decoding.undecodable:
         source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(decoding.undecodable)))
     if use_header_stamp:
-        source.time_source = _time_source(decoding.decoded_topics, decoding.stamp_topics)
+        source.time_source = decoding.time_source()
     log = Log.without_samples({name: entry.span() for name, entry in stats.items()}, source)
     attach_logscan_records(log)
     return log, {name: entry.to_dict() for name, entry in stats.items()}
@@ -193,22 +195,17 @@ def _source_of(scan: Scan) -> SourceInfo:
     return source
 
 
-class _Decoding:
+class _Decoding(TopicPieces):
     """Decodes the scan's batches each time it is called (`Scan.on_flush`) into channel pieces
     (name -> [(t, values)]); what it skips and the fields it finds go to the log's source at the end
     (`report_to`), since the source is made once the scan is through."""
 
     def __init__(self, path: str, use_header_stamp: bool):
-        self.use_header_stamp = use_header_stamp
+        super().__init__(path, "mcap", use_header_stamp)
         self.factories = decoder_factories()
         self.decoders: dict[int, tuple[Any, str | None]] = {}  # channel id -> (decoder, why none)
         self.layouts: dict[int, CdrLayout | None] = {}
-        self.pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self.undecodable: set[str] = set()  # topics no decoder takes
-        self.decoded_topics: set[str] = set()
-        self.stamp_topics: set[str] = set()  # topics timed by header.stamp
-        self.fields: dict[str, list[str]] = {}  # topic -> field paths in first-seen order
-        self.skips = SourceInfo(path=path, format="mcap")  # collects skip counts until report_to
 
     def __call__(self, scan: Scan) -> None:
         batches, scan.batches = scan.batches, {}
@@ -227,24 +224,7 @@ class _Decoding:
             datas = batch.messages()
             batch.segments = []
             flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self.layouts, self.skips)
-            self.decoded_topics.add(topic)
-            for (field_path, why_skipped), count in flat.skipped.items():
-                self.skips.skip(_channel_name(topic, field_path), why_skipped, count)
-            times = log_times
-            if self.use_header_stamp:
-                times, used, unfit = _header_stamps(flat.columns, log_times)
-                if used:
-                    self.stamp_topics.add(topic)
-                if unfit:
-                    self.skips.skip(f"{topic} header.stamp", "not a time in range (log_time used)", unfit)
-            fields = self.fields.setdefault(topic, [])
-            for field_path in flat.fields:
-                if field_path not in fields:
-                    fields.append(field_path)
-                index, values = flat.columns[field_path]
-                # a field every message has shares the topic's times (one array, not one per field)
-                field_times = times if index.size == times.size else times[index]
-                self.pieces.setdefault(_channel_name(topic, field_path), []).append((field_times, values))
+            self.add(topic, flat, log_times)
 
     def fold_into(self, stats: dict[str, ChannelStats]) -> None:
         """Fold the pieces decoded so far into per-channel statistics, and drop them."""
@@ -253,14 +233,6 @@ class _Decoding:
             for t, values in parts:
                 entry.add(t, values)
         self.pieces = {}
-
-    def report_to(self, source: SourceInfo) -> None:
-        """The skips and fields found, into the log's source."""
-        for item in self.skips.skipped:
-            source.skip(item.what, item.why, item.count)
-        for topic, fields in self.fields.items():
-            info = source.topics[topic]
-            info.fields.extend(f for f in fields if f not in info.fields)
 
 
 def _columns_of(
@@ -295,49 +267,6 @@ def _columns_of(
             log_times = log_times[keep]
         flat = flatten_messages(messages)
     return flat, log_times
-
-
-def _channels_in_time_order(
-    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]], source: SourceInfo
-) -> dict[str, Channel]:
-    """One Channel per name, its pieces joined and sorted by time (stable); a warning names the unsorted."""
-    channels: dict[str, Channel] = {}
-    unsorted_topics: set[str] = set()
-    joined: dict[tuple[int, ...], np.ndarray] = {}  # pieces' times shared by a topic's fields, joined once
-    for name in list(pieces):
-        parts = pieces.pop(name)  # each channel's pieces go as it is joined
-        key = tuple(id(p[0]) for p in parts)
-        if key not in joined:
-            joined[key] = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
-        t = joined[key]
-        v = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
-        del parts
-        if t.size > 1 and (np.diff(t) < 0).any():
-            order = np.argsort(t, kind="stable")
-            t, v = t[order], v[order]
-            unsorted_topics.add(name)
-        channels[name] = Channel(name, t, v)
-    if unsorted_topics:
-        source.warnings.append(_unsorted_text(sorted(unsorted_topics)))
-    return channels
-
-
-def _unsorted_text(names: list[str]) -> str:
-    return (
-        f"{len(names)} channel(s) not in time order in the file, sorted by time: "
-        + ", ".join(names[:5])
-        + (" ..." if len(names) > 5 else "")
-    )
-
-
-def _time_source(decoded_topics: set[str], stamp_topics: set[str]) -> str:
-    """What the channel times are, when header stamps were asked for."""
-    missing = sorted(decoded_topics - stamp_topics)
-    if stamp_topics and not missing:
-        return "header.stamp"
-    if stamp_topics:
-        return "header.stamp (log_time for " + ", ".join(missing) + ")"
-    return "log_time (no header.stamp found)"
 
 
 def decoder_factories() -> list:
@@ -388,37 +317,6 @@ def _decode_all(decoder, datas: list) -> tuple[list[Any], list[int]]:
             out.append(None)
             failed.append(index)
     return out, failed
-
-
-MAX_STAMP_S = 9.2e9  # header.stamp seconds int64 nanoseconds can hold (2**63 ns ~ 9.22e9 s)
-_STAMP_FIELDS = (
-    ("header.stamp.sec", "header.stamp.nanosec"),
-    ("header.stamp.secs", "header.stamp.nsecs"),
-)
-
-
-def _header_stamps(columns: dict, log_times: np.ndarray) -> tuple[np.ndarray, bool, int]:
-    """Per-message time: header.stamp where the message has it (and it is a time in range),
-    else log_time; also whether any message had one, and how many were out of range."""
-    for sec_name, nsec_name in _STAMP_FIELDS:
-        if sec_name in columns and nsec_name in columns:
-            sec_idx, sec = columns[sec_name]
-            nsec_idx, nsec = columns[nsec_name]
-            both, in_sec, in_nsec = np.intersect1d(sec_idx, nsec_idx, return_indices=True)
-            sec, nsec = sec[in_sec], nsec[in_nsec]
-            # a stamp int64 ns cannot hold (NaN, inf, 1e300 s) keeps the message's log_time
-            fits = np.isfinite(sec) & np.isfinite(nsec) & (np.abs(sec) < MAX_STAMP_S) & (np.abs(nsec) < 1e12)
-            times = log_times.copy()
-            # t = sec * 1e9 + nanosec, in integer ns
-            times[both[fits]] = sec[fits].astype(np.int64) * 1_000_000_000 + nsec[fits].astype(np.int64)
-            return times, both.size > 0, int(both.size - np.count_nonzero(fits))
-    return log_times, False, 0
-
-
-def _channel_name(topic: str, path: str) -> str:
-    if not path:
-        return topic
-    return topic.rstrip("/") + "/" + path
 
 
 def _span_text(first: int | None, last: int | None) -> str:
