@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -220,17 +219,16 @@ def test_truth_and_profile_sidecars_are_read(tmp_path):
         read_csv(f, None)
 
 
-def test_million_row_csv_reads_in_a_few_seconds(tmp_path):
+def test_million_row_csv_reads_every_row(tmp_path):
+    """Every row read, the values as written; its speed is measured by bench/bench_timed_checks.py."""
     n = 1_000_000
     t = np.arange(n) * 0.001
     data = np.column_stack([t, np.sin(t), np.cos(t), t * 2.0])
     f = tmp_path / "big.csv"
     np.savetxt(f, data, delimiter=",", header="time,a,b,c", comments="", fmt="%.6f")
-    start = time.perf_counter()
     log = read_csv(f, None)
-    elapsed = time.perf_counter() - start
     assert len(log.channel("/c")) == n
-    assert elapsed < 5.0, f"1e6-row CSV took {elapsed:.2f} s"
+    assert np.allclose(log.channel("/c").values[[0, n // 2, -1]], data[[0, n // 2, -1], 3], atol=1e-6)
 
 
 # ---- directories in PX4 ulog2csv layout ---------------------------------------------------------

@@ -102,10 +102,9 @@ def test_a_zstd_bomb_is_refused_before_it_is_decompressed(tmp_path, sample):
     )
     assert proc.returncode == 0, proc.stderr
     message, figures = proc.stdout.strip().splitlines()
-    grew_kb, seconds = figures.split()
+    grew_kb = figures.split()[0]  # and the seconds taken: timed limits belong in bench/
     assert "decompression bomb" in message and str(bomb) in message
     assert int(grew_kb) < 200 * 1024, f"RSS grew {int(grew_kb) // 1024} MB"
-    assert float(seconds) < 2.0
 
 
 def test_a_zstd_bomb_exits_2_with_one_line(cli_process, tmp_path):

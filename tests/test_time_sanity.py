@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import shutil
 import struct
-import time
 import tracemalloc
 from pathlib import Path
 
@@ -69,10 +68,8 @@ def test_a_gps_message_stamped_days_late_is_dropped_with_a_warning_and_the_verdi
     cli, sample, tmp_path, name, code
 ):
     jumped = rewrite_mcap(sample(name), tmp_path / f"late_{name}", shift_gps(301, LATE_NS))
-    started = time.perf_counter()
     result, log = analyze_json(cli, jumped, tmp_path)
     assert result.exit_code == code, result.stdout + result.stderr
-    assert time.perf_counter() - started < 60
     assert log["filter"]["steps"] == 6001  # the 60 s of the log at 100 Hz, not 11.6 days
     dropped = [w for w in log["warnings"] if "outlying" in w]
     assert len(dropped) == 1
@@ -250,9 +247,7 @@ def test_a_profile_rate_of_a_gigahertz_is_exit_2_with_the_figures(cli, sample, t
     profile.write_text(
         read_embedded_profile(sample("quad_healthy.mcap")).replace("rate_hz = 100.0\n", f"rate_hz = {rate}\n", 1)
     )
-    started = time.perf_counter()
     result = cli("analyze", sample("quad_healthy.mcap"), "-p", profile, "--no-report")
-    assert time.perf_counter() - started < 30
     assert result.exit_code == 2 and not result.stdout
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "span 60 s at" in lines[0] and "steps, over the analysis grid's limit" in lines[0]

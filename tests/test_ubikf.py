@@ -5,7 +5,6 @@ by name; divergence is flagged and followed by a finite restart."""
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -348,7 +347,8 @@ def test_non_finite_samples_skip_their_group():
     assert not trace.diverged.any()
 
 
-def test_speed_of_a_12_state_6_measurement_run():
+def test_a_100000_step_12_state_6_measurement_run_stays_bounded():
+    """The long run completes without diverging; its speed is measured by bench/bench_timed_checks.py."""
     rng = np.random.default_rng(9)
     model, _, F = hover_interval_model(rng)
     N = 100_000
@@ -357,9 +357,5 @@ def test_speed_of_a_12_state_6_measurement_run():
     groups = {name: replace(g, z=np.tile(g.z, (N // 1000, 1)), fresh=every) for name, g in run.groups.items()}
     run = replace(run, t=np.arange(N) * model.dt, u=np.tile(run.u, (N // 1000, 1)), u_fresh=every, groups=groups)
     run_ubikf(model, simulated_run(rng, model, 20))  # compiled (or loaded from the cache) first
-    started = time.perf_counter()
     trace = run_ubikf(model, run)
-    rate = N / (time.perf_counter() - started)
-    print(f"UBIKF 12 states, 6 measurements: {rate:,.0f} steps/s")
-    assert not trace.diverged.any()
-    assert rate >= 5000
+    assert len(trace.diverged) == N and not trace.diverged.any()
