@@ -1,0 +1,273 @@
+"""ROS bag reader: ROS 1 ``.bag`` files, rosbag2 ``.db3`` files and rosbag2 directories, as Logs.
+
+Read through the pure-Python ``rosbags`` library (``rosbags.rosbag1.Reader``,
+``rosbags.rosbag2.Reader``: sqlite3 and mcap storage). The channels are those the MCAP reader
+gives for the same messages in a ROS 2 MCAP (``/imu/data/linear_acceleration.x``,
+``/fix/position_covariance[0]``), so one profile serves all three containers:
+
+ - ROS 1 types are read as their ROS 2 counterparts (``logscan.readers.rosbag_types``): the
+   ``std_msgs/Header`` ``seq`` is dropped and ``stamp.secs``/``nsecs`` read as ``stamp.sec`` /
+   ``nanosec``; a topic's schema is ``pkg/msg/Type`` and its encoding ``ros1`` (``cdr`` for rosbag2).
+ - A rosbag2 directory whose storage is one MCAP file is read by logscan's MCAP reader (the
+   same channels, faster); its source format is still ``rosbag2``.
+
+Time is the bag's receive time (what MCAP calls log_time); with ``use_header_stamp`` the header
+stamp where a message has one, as in the MCAP reader. Only wanted topics are read
+(``common.topic_wanted``). rosbags walks the messages in Python; the bytes of each topic are
+then decoded in bulk (the CDR layout kernel) where the type allows.
+
+Bad input: a bag rosbags cannot open (truncated, unindexed, not a bag, a database that is not
+rosbag2) is one InputError line; a bag that fails part way is returned with what was read,
+``source.partial`` set and ``partial_reason`` saying where and how much.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from logscan.errors import InputError
+from logscan.log import Log, SourceInfo, TopicInfo
+from logscan.readers.common import topic_wanted
+from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
+from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
+
+ROS1_HINT = "check the copy; an unindexed bag (a recording cut short) can be repaired with `rosbag reindex`"
+ROS2_HINT = "check the copy; a rosbag2 database is read-only here, so repair it with `ros2 bag reindex` or sqlite3"
+
+
+def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
+    """Read the ROS 1 bag, rosbag2 ``.db3`` or rosbag2 directory ``path`` into a Log."""
+    p = Path(path)
+    mcap_file = _single_mcap(p)
+    if mcap_file is not None:
+        from logscan.readers.mcap import read_mcap
+
+        log = read_mcap(mcap_file, wanted, use_header_stamp=use_header_stamp)
+        log.source.path, log.source.format = str(p), "rosbag2"
+        return log
+    ros1 = not p.is_dir() and _is_ros1(p)
+    fmt = "ros1bag" if ros1 else "rosbag2"
+    with _opened(p, ros1) as reader:
+        source = SourceInfo(path=str(p), format=fmt)
+        source.topics = _topic_infos(reader, ros1)
+        store, bad = bag_typestore(list(reader.connections), ros1)
+        pieces = TopicPieces(str(p), fmt, use_header_stamp)
+        chosen = []
+        for connection in reader.connections:
+            if not topic_wanted(connection.topic, wanted):
+                continue
+            if connection.msgtype in bad:
+                pieces.skips.skip(connection.topic, bad[connection.msgtype], connection.msgcount)
+                continue
+            chosen.append(connection)
+        batches = _read_messages(reader, chosen, source)
+    columns = TopicColumns(store)
+    for (topic, msgtype), (times, datas) in batches.items():
+        _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
+        _note_span(source.topics[topic], times)
+    pieces.report_to(source)
+    channels = channels_in_time_order(pieces.pieces, source)
+    if bad:
+        skipped = sorted({c.topic for c in reader.connections if c.msgtype in bad and topic_wanted(c.topic, wanted)})
+        if skipped:
+            source.warnings.append("topics skipped (no decoder): " + ", ".join(skipped))
+    if use_header_stamp:
+        source.time_source = pieces.time_source()
+    return Log(channels=channels, source=source)
+
+
+def _decode_topic(
+    topic: str,
+    msgtype: str,
+    times: np.ndarray,
+    datas: list,
+    ros1: bool,
+    columns: TopicColumns,
+    pieces: TopicPieces,
+) -> None:
+    if ros1:
+        datas, failed = ros1_to_cdr(columns.store, msgtype, datas)
+        if failed:
+            pieces.skips.skip(topic, "message bytes do not decode", len(failed))
+            times = np.delete(times, failed)
+    flat, times = columns.columns(topic, msgtype, datas, times, pieces.skips)
+    pieces.add(topic, flat, times)
+
+
+def _read_messages(reader, connections: list, source: SourceInfo) -> dict[tuple[str, str], tuple[list, list]]:
+    """(topic, msgtype) -> (receive times, raw message bytes) of ``connections``, in bag order. A
+    bag that fails part way keeps what was read before, and the source says so."""
+    batches: dict[tuple[str, str], tuple[list, list]] = {}
+    if not connections:
+        return batches
+    count = 0
+    last = None
+    try:
+        for connection, timestamp, data in reader.messages(connections=connections):
+            key = (connection.topic, connection.msgtype)
+            batch = batches.get(key)
+            if batch is None:
+                batch = batches[key] = ([], [])
+            batch[0].append(timestamp)
+            batch[1].append(data)
+            count += 1
+            last = timestamp
+    except Exception as exc:  # noqa: BLE001 - rosbags' errors on damaged data are many kinds
+        if not count:
+            raise InputError(
+                f"cannot read the messages: {_why(exc)}",
+                path=source.path,
+                hint=ROS1_HINT if source.format == "ros1bag" else ROS2_HINT,
+            ) from None
+        source.partial = True
+        source.partial_reason = (
+            f"read stopped: {_why(exc)}; recovered {count} messages (up to receive time {last / 1e9:.6f} s)"
+        )
+    return batches
+
+
+def _topic_infos(reader, ros1: bool) -> dict[str, TopicInfo]:
+    """Topic -> TopicInfo (count, ROS 2 schema name, encoding), and its time span where the bag
+    indexes it without reading messages (ROS 1 indexes; rosbag2 sqlite per-topic times)."""
+    topics: dict[str, TopicInfo] = {}
+    spans = _ros1_spans(reader) if ros1 else _sqlite_spans(reader)
+    for connection in reader.connections:
+        info = topics.get(connection.topic)
+        if info is None:
+            encoding = "ros1" if ros1 else getattr(connection.ext, "serialization_format", "cdr")
+            info = topics[connection.topic] = TopicInfo(
+                name=connection.topic, encoding=encoding, schema=ros2_type_name(connection.msgtype)
+            )
+        info.message_count += int(connection.msgcount)
+        first, last = spans.get((connection.topic, connection.id), (None, None))
+        if first is not None:
+            info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
+            info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
+    return topics
+
+
+def _ros1_spans(reader) -> dict[tuple[str, int], tuple[int, int]]:
+    out = {}
+    for connection in reader.connections:
+        index = reader.indexes.get(connection.id) or []
+        if index:
+            out[(connection.topic, connection.id)] = (int(index[0].time), int(index[-1].time))
+    return out
+
+
+def _sqlite_spans(reader) -> dict[tuple[str, int], tuple[int, int]]:
+    """First and last receive time per topic of a rosbag2 sqlite3 file, by one query; {} when the
+    storage is another (the times of the topics read come from their messages)."""
+    out: dict[tuple[str, int], tuple[int, int]] = {}
+    storages = getattr(reader.storage, "storages", None) or [reader.storage]
+    for storage in storages:
+        dbconn = getattr(storage, "dbconn", None)
+        if dbconn is None:
+            continue
+        try:
+            rows = dbconn.cursor().execute(
+                "SELECT topics.name, min(timestamp), max(timestamp) FROM messages "
+                "JOIN topics ON topics.id == messages.topic_id GROUP BY topics.name"
+            )
+            by_name = {name: (int(first), int(last)) for name, first, last in rows if first is not None}
+        except Exception:  # noqa: BLE001 - the spans are a nicety; the topics read are timed anyway
+            continue
+        for connection in reader.connections:
+            if connection.topic in by_name:
+                first, last = by_name[connection.topic]
+                old = out.get((connection.topic, connection.id))
+                if old is not None:
+                    first, last = min(first, old[0]), max(last, old[1])
+                out[(connection.topic, connection.id)] = (first, last)
+    return out
+
+
+def _note_span(info: TopicInfo, times: list) -> None:
+    if times and info.first_ns is None:
+        info.first_ns, info.last_ns = int(min(times)), int(max(times))
+
+
+class _opened:
+    """The rosbags reader of ``path``, open; rosbags' errors become one InputError line."""
+
+    def __init__(self, path: Path, ros1: bool):
+        self.path, self.ros1 = path, ros1
+        self.reader = None
+
+    def __enter__(self):
+        target = _for_rosbags(self.path)
+        try:
+            if self.ros1:
+                from rosbags.rosbag1 import Reader
+            else:
+                from rosbags.rosbag2 import Reader
+            self.reader = Reader(target)
+            self.reader.open()
+        except ImportError as exc:
+            raise InputError(
+                f"reading ROS bags needs the rosbags library ({exc})", path=str(self.path), hint="pip install rosbags"
+            ) from None
+        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on damaged files
+            kind = "ROS 1 bag" if self.ros1 else "rosbag2"
+            raise InputError(
+                f"{kind} cannot be opened: {_why(exc)}", path=str(self.path), hint=ROS1_HINT if self.ros1 else ROS2_HINT
+            ) from None
+        return self.reader
+
+    def __exit__(self, *exc_info) -> bool:
+        try:
+            self.reader.close()
+        except Exception:  # noqa: BLE001, S110 - closing a damaged bag must not hide what was read
+            pass
+        return False
+
+
+def _for_rosbags(path: Path) -> Path:
+    """The path rosbags chooses its storage by: rosbag2.Reader goes by suffix (``.db3``, ``.mcap``)
+    and logscan by content, so a SQLite bag with another name is given through a ``.db3`` link."""
+    if path.is_dir() or path.suffix == ".db3" or _is_ros1(path):
+        return path
+    raise InputError(
+        "an SQLite file not named .db3: rosbags reads rosbag2 databases by their suffix",
+        path=str(path),
+        hint="name it <bag>.db3, or give its rosbag2 directory",
+    )
+
+
+def _is_ros1(path: Path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(13) == b"#ROSBAG V2.0\n"
+    except OSError:
+        return False
+
+
+def _single_mcap(path: Path) -> Path | None:
+    """The one MCAP file of a rosbag2 directory whose storage is mcap (uncompressed), else None."""
+    if not path.is_dir():
+        return None
+    try:
+        text = (path / "metadata.yaml").read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    try:
+        from ruamel.yaml import YAML  # what rosbags reads metadata.yaml with
+
+        info = YAML(typ="safe").load(text)["rosbag2_bagfile_information"]
+        files = info["relative_file_paths"]
+        storage = info["storage_identifier"]
+        compressed = str(info.get("compression_mode") or "").lower() not in ("", "none")
+    except Exception:  # noqa: BLE001 - rosbags says what is wrong with the metadata
+        return None
+    if storage != "mcap" or compressed or len(files) != 1:
+        return None
+    candidate = path / Path(str(files[0])).name
+    return candidate if candidate.is_file() else None
+
+
+def _why(exc: BaseException) -> str:
+    text = " ".join(str(part) for part in exc.args) if exc.args else ""
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

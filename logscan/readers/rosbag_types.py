@@ -1,0 +1,149 @@
+"""The message types of a ROS bag as ROS 2 types: one rosbags typestore, CDR bytes, flat columns.
+
+Types come from the definitions the bag carries (ROS 1 connection headers, rosbag2 message
+definitions), else from rosbags' built-in ROS 2 store (a rosbag2 without definitions). ROS 1
+messages become ROS 2 CDR by byte conversion (``Typestore.ros1_to_cdr``, as ``rosbags convert``
+does): ``std_msgs/Header`` is the ROS 2 one, so its ``seq`` is dropped, and ROS 1 ``time`` /
+``duration`` are ``builtin_interfaces`` ``sec``/``nanosec`` already. The CDR then takes the MCAP
+reader's path: the layout kernel (``logscan.readers.mcap.cdr``) from the ROS 2 ``.msg`` text the
+typestore generates, else rosbags' deserializer and ``flatten_messages``. The same messages so give
+the same columns as in a ROS 2 MCAP.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from logscan.log import SourceInfo
+from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
+from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
+from logscan.readers.mcap.scan import SchemaRec
+
+
+def ros2_type_name(msgtype: str) -> str:
+    """``pkg/msg/Type`` of a type name (rosbags names ROS 1 types that way already)."""
+    parts = msgtype.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
+
+
+def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str]]:
+    """(typestore of every type the bag's connections use, msgtype -> why it cannot be decoded).
+
+    A definition that does not parse, or a rosbag2 type without a definition that the built-in
+    ROS 2 store does not know, makes that type undecodable (its topics are skipped), not the bag.
+    """
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+    typs: dict = {}
+    bad: dict[str, str] = {}
+    missing: set[str] = set()
+    for connection in connections:
+        msgdef = connection.msgdef
+        try:
+            if msgdef.format == MessageDefinitionFormat.MSG:
+                typs.update(get_types_from_msg(msgdef.data, connection.msgtype))
+            elif msgdef.format == MessageDefinitionFormat.IDL:
+                typs.update(_types_from_idl(msgdef.data, get_types_from_idl))
+            else:
+                missing.add(connection.msgtype)
+        except Exception as exc:  # noqa: BLE001 - a definition from the file that does not parse
+            bad[connection.msgtype] = f"message definition does not parse ({type(exc).__name__}: {exc})"
+    ros2 = get_typestore(getattr(Stores, "LATEST", Stores.ROS2_HUMBLE))
+    if ros1:  # the ROS 2 Header: ros1_to_cdr drops the ROS 1 seq
+        typs["std_msgs/msg/Header"] = ros2.fielddefs["std_msgs/msg/Header"]
+    for msgtype in missing - set(typs):
+        if msgtype not in ros2.fielddefs:
+            bad[msgtype] = "no message definition in the bag, and not a standard ROS 2 type"
+    store = get_typestore(Stores.EMPTY)
+    if missing:
+        store.register({k: v for k, v in ros2.fielddefs.items() if k not in typs})
+    try:
+        store.register(typs)
+    except Exception as exc:  # noqa: BLE001 - definitions of one type that disagree
+        for msgtype in {c.msgtype for c in connections}:
+            bad.setdefault(msgtype, f"message definitions do not agree ({type(exc).__name__}: {exc})")
+    return store, bad
+
+
+def _types_from_idl(text: str, get_types_from_idl) -> dict:
+    sep = "=" * 80 + "\n"
+    if not text.startswith(f"{sep}IDL: "):
+        return get_types_from_idl(text)
+    typs: dict = {}
+    for block in text.split(sep)[1:]:
+        typs.update(get_types_from_idl(block.split("\n", 1)[1]))
+    return typs
+
+
+def ros1_to_cdr(store: Any, msgtype: str, datas: list[bytes]) -> tuple[list, list[int]]:
+    """CDR bytes of ROS 1 messages (byte conversion, no deserialization); indices that fail."""
+    convert = store.ros1_to_cdr
+    try:
+        return [convert(data, msgtype) for data in datas], []
+    except Exception:  # noqa: BLE001 - retry one by one to find and count the bad messages
+        pass
+    out, failed = [], []
+    for index, data in enumerate(datas):
+        try:
+            out.append(convert(data, msgtype))
+        except Exception:  # noqa: BLE001 - message bytes that do not fit the definition
+            failed.append(index)
+    return out, failed
+
+
+class TopicColumns:
+    """Columns of CDR messages per type: the layout kernel when the type has a layout, else
+    rosbags' deserializer and ``flatten_messages``; the layout of a type is made once."""
+
+    def __init__(self, store: Any):
+        self.store = store
+        self.layouts: dict[str, CdrLayout | None] = {}
+
+    def layout(self, msgtype: str) -> CdrLayout | None:
+        if msgtype not in self.layouts:
+            try:
+                text = self.store.generate_msgdef(msgtype, ros_version=2)[0]
+            except Exception:  # noqa: BLE001 - a type rosbags cannot write out: the deserializer path
+                self.layouts[msgtype] = None
+            else:
+                schema = SchemaRec(id=0, name=ros2_type_name(msgtype), encoding="ros2msg", data=text.encode())
+                self.layouts[msgtype] = cdr_layout(schema)
+        return self.layouts[msgtype]
+
+    def columns(
+        self, topic: str, msgtype: str, cdrs: list, times: np.ndarray, skips: SourceInfo
+    ) -> tuple[FlatColumns, np.ndarray]:
+        """Flat columns of one topic's CDR messages and the times of the messages they index."""
+        layout = self.layout(msgtype)
+        flat = cdr_fast(layout, MessageBytes.from_list(cdrs)) if layout is not None else None
+        if flat is not None:
+            return flat, times
+        messages, failed = [], []
+        for index, data in enumerate(cdrs):
+            try:
+                messages.append(_plain(self.store.deserialize_cdr(data, msgtype)))
+            except Exception:  # noqa: BLE001 - message bytes that do not fit the definition
+                failed.append(index)
+        if failed:
+            skips.skip(topic, "message bytes do not decode", len(failed))
+            keep = np.ones(len(cdrs), dtype=bool)
+            keep[failed] = False
+            times = times[keep]
+        return flatten_messages(messages), times
+
+
+def _plain(value: Any) -> Any:
+    """A rosbags message as the MCAP decoders give it: fields by name, ``uint8[]`` as bytes."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {
+            f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value) if not f.name.startswith("__")
+        }
+    if isinstance(value, np.ndarray):
+        return value.tobytes() if value.dtype == np.uint8 else value
+    if isinstance(value, list):
+        return [_plain(item) for item in value]
+    return value
