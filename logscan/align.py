@@ -39,6 +39,9 @@ class AlignedGroup:
             right, down; "enu": north, east, down); ``nonfinite_count`` counts the raw channels.
     fresh:  (N,) bool, True at grid steps where every channel of the group has a sample newer than
             the previous grid step and not older than the staleness limit (the filter updates then).
+            A profile group with ``fresh = "on_change"``: True where at least one channel's held
+            value differs from the previous grid step's (a forward-filled CSV column's repeats are
+            not new measurements); ``channel_fresh`` still marks the samples' arrivals.
     """
 
     name: str
@@ -368,6 +371,8 @@ class _Aligner:
         channels converted (`logscan.conversions`); with a ``gate``, the steps where the gate
         channel is below its minimum (a GNSS fix type under 3) hold no sample (NaN, not fresh)."""
         group = self._measurement_group(spec, grid_ns, z)
+        if getattr(spec, "fresh", "on_sample") == "on_change":
+            group.fresh = changed_steps(group.z)
         if getattr(spec, "gate_channel", None):
             gate, _ = self.hold(spec.gate_channel, grid_ns, spec.stale_s, fresh=np.empty(grid_ns.size, dtype=bool))
             closed = ~(np.nan_to_num(gate, nan=-np.inf) >= spec.gate_min)
@@ -481,6 +486,19 @@ class _Aligner:
             stale_s=float(limit_s),
             channel_fresh=ch_fresh,
         )
+
+
+def changed_steps(z: np.ndarray) -> np.ndarray:
+    """(N,) bool: the grid steps where at least one column of ``z`` (N, m) holds a finite value
+    that differs from the step before (step 0: any finite value). A held value changes only when
+    a new sample arrives, so these are the new samples that are not repeats (``fresh =
+    "on_change"``); a value back after a stale gap (NaN before it) counts as changed."""
+    finite = np.isfinite(z)
+    out = np.zeros(z.shape[0], dtype=bool)
+    if z.shape[0]:
+        out[0] = finite[0].any()
+        out[1:] = ((z[1:] != z[:-1]) & finite[1:]).any(axis=1)
+    return out
 
 
 def _linear(factor: float, offset: float):

@@ -38,6 +38,7 @@ from logscan.profiles.schema import (
     SENSOR_KEYS,
     TOP_KEYS,
     VEHICLE_KEYS,
+    FRESH_MODES,
     DetectorSpec,
     InputSpec,
     MeasurementSpec,
@@ -475,6 +476,10 @@ class _Checker:
         delay = self.number(data, "delay_s", where, minimum=0, strict=False, maximum=MAX_DELAY_S)
         if "delay_s" in data and delay is None:
             return None
+        fresh = data.get("fresh", FRESH_MODES[0])
+        if fresh not in FRESH_MODES:
+            self.add(f"{where} fresh", f"expected {_choices(FRESH_MODES)}, got {type_name(fresh)}")
+            return None
         # a factor on every logged std (set by `logscan train --calibrate`, or by hand)
         noise_channels_scale = self.number(data, "noise_channels_scale", where, minimum=0, strict=True)
         if "noise_channels_scale" in data and noise_channels is None:
@@ -510,6 +515,7 @@ class _Checker:
             noise_channels=noise_channels,
             noise_channels_scale=1.0 if noise_channels_scale is None else noise_channels_scale,
             delay_s=0.0 if delay is None else delay,
+            fresh=fresh,
             **self.gate(data, where),
         )
 
@@ -550,7 +556,7 @@ class _Checker:
         return CONVERSIONS[value]
 
     def frame(self, data: dict, where: str, source: str | None, channels: list[str] | None) -> str | None:
-        """``frame``: of a geodetic group "ned" (the default) or "enu"; of a quaternion group "ned"
+        """``frame``: of a geodetic group "ned" (the default), "enu", or horizontal "ne" / "en"; of a quaternion group "ned"
         (the default: FRD to NED) or "enu_flu" (a ROS orientation); of a group without ``from``,
         a 3-vector's frame: "frd" / "ned" (as it is), "flu" or "enu" (converted)."""
         if "frame" not in data:

@@ -48,7 +48,12 @@ GROUP_KEYS = (
     "noise_channels_scale",
     "gate",
     "delay_s",
+    "fresh",
 )
+#: ``fresh`` of a measurement group: when a sample counts as new (the filter updates with the group).
+#: "on_sample": at every logged sample (a sensor's own rows); "on_change": only at steps where one
+#: of its channels' held values changed (a wide CSV that forward-fills a slow sensor on every row).
+FRESH_MODES = ("on_sample", "on_change")
 GATE_KEYS = ("channel", "min")
 MODE_KEYS = ("channel", "stale_s")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
@@ -188,11 +193,14 @@ class MeasurementSpec:
     # a sample counts only where this channel (held) is at least gate_min: a GNSS fix type >= 3
     gate_channel: str | None = None
     gate_min: float = 0.0
+    # when a sample is fresh (FRESH_MODES): "on_sample" (each logged sample), "on_change" (a held
+    # value that changed: a forward-filled CSV column's repeats are not measurements)
+    fresh: str = "on_sample"
 
     @property
     def width(self) -> int:
         """Values per grid step: the converted outputs with ``from``, else one per channel."""
-        return len(CONVERSIONS[self.source].outputs) if self.source is not None else len(self.channels)
+        return len(CONVERSIONS[self.source].output_names(self.frame)) if self.source is not None else len(self.channels)
 
     def output_names(self) -> tuple[str, ...] | None:
         """Names of the converted outputs (None without ``from`` or a converting ``frame``)."""
@@ -436,6 +444,8 @@ class Profile:
                 table["gate"] = {"channel": g.gate_channel, "min": g.gate_min}
             if g.delay_s:
                 table["delay_s"] = g.delay_s
+            if g.fresh != "on_sample":  # written only when set: default profiles' TOML is unchanged
+                table["fresh"] = g.fresh
             out["measurements"][g.name] = table
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
