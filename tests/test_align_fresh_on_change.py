@@ -46,10 +46,10 @@ def filled_log() -> Log:
         "/a": (t, slow),
         "/b": (t, b),
     }
-    return Log(
-        {n: Channel(n, np.asarray(tt, dtype=np.int64) * MS, np.asarray(v, dtype=float)) for n, (tt, v) in chans.items()},
-        SourceInfo("filled.csv", "csv"),
-    )
+    channels = {
+        n: Channel(n, np.asarray(tt, dtype=np.int64) * MS, np.asarray(v, dtype=float)) for n, (tt, v) in chans.items()
+    }
+    return Log(channels, SourceInfo("filled.csv", "csv"))
 
 
 def group_toml(fresh: str | None) -> str:

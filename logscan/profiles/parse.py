@@ -16,6 +16,7 @@ from logscan.profiles.loops import PRIMARY_LOOP, RecoverySpec, parse_loops, pars
 from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, suggest, type_name
 from logscan.profiles.schema import (
     ALARM_KEYS,
+    FRESH_MODES,
     GATE_KEYS,
     GROUP_KEYS,
     GROUP_STALE_PERIODS,
@@ -38,7 +39,6 @@ from logscan.profiles.schema import (
     SENSOR_KEYS,
     TOP_KEYS,
     VEHICLE_KEYS,
-    FRESH_MODES,
     DetectorSpec,
     InputSpec,
     MeasurementSpec,
