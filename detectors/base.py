@@ -54,7 +54,7 @@ import numpy as np
 
 from logscan.align import AlignedRun
 from logscan.detectors.params import describe_constraints, satisfies
-from logscan.errors import InputError, InternalError, NotTrainedError, ProfileError, UsageError
+from logscan.errors import InputError, InternalError, NotTrainedError, OutOfMemoryError, ProfileError, UsageError
 from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
 
@@ -206,7 +206,10 @@ class Detector:
             raise InternalError(f"detector {self.name!r}: {len(runs)} runs but {len(traces)} traces")
         if self.requires_trace and any(tr is None for tr in traces):
             raise UsageError(f"detector {self.name!r} needs the filter trace of every training run")
-        self._fit(runs, traces, **context)
+        try:
+            self._fit(runs, traces, **context)
+        except MemoryError:  # the logs are too big for this machine: exit 2 with what to do, not a bug
+            raise OutOfMemoryError() from None
         return self
 
     def _fit(self, runs: list[AlignedRun], traces: list[Any], **context: Any) -> None:
@@ -275,6 +278,8 @@ class Detector:
         self._alarm_policy = policy.unsuspended() if policy is not None and self.raw_topics else policy
         try:
             result = self._run(run, trace, **context)
+        except MemoryError:  # the log is too big for this machine: exit 2 with what to do, not a bug
+            raise OutOfMemoryError() from None
         finally:
             self._alarm_policy = None
         self._check_result(result, run)

@@ -77,3 +77,13 @@ class InternalError(LogscanError):
     """A bug in logscan; exit code 3 and a hint to rerun with --debug."""
 
     exit_code = ExitCode.INTERNAL
+
+
+OUT_OF_MEMORY = "the log needs more memory than is available: analyse a window with --start/--end"
+
+
+class OutOfMemoryError(LogscanError):
+    """A MemoryError met while working on a log: the machine is too small for it, not a bug (exit 2)."""
+
+    def __init__(self, path: str | None = None):
+        super().__init__(OUT_OF_MEMORY, path=path)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from logscan.errors import InputError, LogscanError, UsageError
+from logscan.errors import InputError, LogscanError, OutOfMemoryError, UsageError
 
 # What a directory expands to: log files by suffix, and sub-directories holding per-topic CSVs
 # (each such directory is one log). Formats themselves are detected by content (logscan.readers).
@@ -224,6 +224,8 @@ def _file_id(path: str) -> tuple[int, int] | None:
 
 def failure_of(path: str, exc: BaseException) -> LogFailure:
     """The one line a failed log becomes (LogscanError: its message; anything else: a bug)."""
+    if isinstance(exc, MemoryError):  # the machine is too small for this log: not a bug
+        exc = OutOfMemoryError()
     if isinstance(exc, LogscanError):
         line = exc.one_line() if exc.path else f"{path}: {exc.one_line()}"
         return LogFailure(path, line, exc.exit_code)

@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+MAX_NS = 2**62  # int64 nanoseconds with room for sums and differences (146 years past 1970)
+
 
 @dataclass
 class Channel:
@@ -190,6 +192,17 @@ class Log:
             origin = None
         if origin is None or origin <= 0:
             return self.start_ns  # no logger start: the first sample read
+        lasts = [t.last_ns for t in self.source.topics.values() if t.last_ns is not None]
+        if origin > MAX_NS or (lasts and origin > max(lasts)):
+            # a damaged header (2**64 - 1 us is 1.8e22 ns, no int64): a logger start after every
+            # message of the file is no time zero; the first sample read is
+            warning = (
+                f"the ULog header's start timestamp ({start_us} us) lies after every message of the file: "
+                "time zero is the first sample read"
+            )
+            if warning not in self.source.warnings:
+                self.source.warnings.append(warning)
+            return self.start_ns
         # kept even when a topic has samples before it (an appended log's early messages): time
         # zero must not move with the topics a profile or detector reads
         return origin

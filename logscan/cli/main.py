@@ -16,7 +16,7 @@ import click
 
 from logscan import __version__
 from logscan.cli.render import printable
-from logscan.errors import INTERRUPT_SEEN, ExitCode, LogscanError
+from logscan.errors import INTERRUPT_SEEN, OUT_OF_MEMORY, ExitCode, LogscanError
 
 
 @click.group(
@@ -137,6 +137,11 @@ def _run(args: list[str], debug: bool) -> int:
         return exc.exit_code
     except BrokenPipeError:
         return ExitCode.OK
+    except MemoryError:  # anywhere in a command: the log is too big for this machine, not a bug
+        if debug:
+            traceback.print_exc()
+        click.echo(f"logscan: error: {OUT_OF_MEMORY}", err=True)
+        return ExitCode.BAD_INPUT
     except OSError as exc:
         if debug:
             traceback.print_exc()
