@@ -16,6 +16,7 @@ from logscan.readers import read_log
     "  logscan inspect sample_logs/quad_healthy.mcap\n\n"
     "  logscan inspect flight.ulg --channels\n\n"
     "  logscan inspect flight.ulg --topic vehicle_imu_0 --full\n\n"
+    "  logscan inspect drive.bag --channels\n\n"
     "  logscan inspect csv_dir/ --json facts.json"
 )
 @click.argument("log_path", metavar="LOG", type=click.Path(path_type=str))
@@ -43,7 +44,8 @@ def inspect(
 ) -> None:
     """Show the topics, message types, counts, rates, time span and fields of LOG.
 
-    LOG is an MCAP file, a PX4 ULog file, a CSV file or a directory of per-topic CSV files. Names
+    LOG is an MCAP file, a PX4 ULog file, a ROS 1 bag, a rosbag2 .db3 file or directory, a CSV file
+    or a directory of per-topic CSV files. Names
     from the log are shown with control characters escaped (e.g. ESC as \\x1b).
     """
     from logscan.fleet import refuse_clobbering
@@ -61,7 +63,7 @@ def inspect(
 
 def read_facts(path: str, topics: tuple[str, ...] | None, use_header_stamp: bool) -> dict:
     """The facts of one log. An MCAP file is read in memory bounded by a few chunks (its channels'
-    statistics folded as it is decoded); ULog and CSV logs are read whole."""
+    statistics folded as it is decoded); ULog, ROS bag and CSV logs are read whole."""
     from logscan.readers import detect_format
 
     if detect_format(path) == "mcap":

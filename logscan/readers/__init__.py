@@ -19,28 +19,25 @@ from logscan.readers.common import (
     stat_input,
 )
 
+ROS1_BAG_MAGIC = b"#ROSBAG V2.0\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"  # a rosbag2 .db3
+DATAFLASH_HEAD = b"\xa3\x95"  # ArduPilot DataFlash message header
+
 
 def detect_format(path: str | os.PathLike) -> str:
-    """Return "mcap", "ulog", "csv" or "csv-dir" for ``path``, judged by content.
+    """Return "mcap", "ulog", "ros1bag", "rosbag2", "csv" or "csv-dir" for ``path``, judged by content.
 
-    Only regular files and directories are read, and that is checked before anything is opened
-    (opening a FIFO blocks until a writer comes). Raises InputError when the path is missing,
-    unreadable, not a regular file or directory (FIFO, device, socket), a directory that cannot be
-    listed or searched, or a directory holding a special file named ``*.csv``; and
-    UnsupportedFormatError when the content matches no reader.
+    "rosbag2" is a SQLite file (a rosbag2 ``.db3``) or a directory holding ``metadata.yaml``; any
+    other directory is a folder of CSV files. Only regular files and directories are read, and that
+    is checked before anything is opened (opening a FIFO blocks until a writer comes). Raises
+    InputError when the path is missing, unreadable, not a regular file or directory (FIFO, device,
+    socket), a directory that cannot be listed or searched, or a directory holding a special file
+    named ``*.csv`` or ``metadata.yaml``; and UnsupportedFormatError when the content matches no
+    reader (ArduPilot DataFlash and MAVLink telemetry logs say so, with what to do).
     """
     p = Path(path)
     if stat.S_ISDIR(stat_input(p).st_mode):
-        csvs = [(name, mode) for name, mode in list_directory(p) if name.lower().endswith(".csv")]
-        for name, mode in csvs:
-            kind = special_kind(mode)
-            if kind is not None:
-                raise InputError(f"is {kind}, not a regular file", path=str(p / name), hint=SPECIAL_FILE_HINT)
-        if any(stat.S_ISREG(mode) for _, mode in csvs):
-            return "csv-dir"
-        raise UnsupportedFormatError(
-            "directory holds no .csv files", path=str(p), hint="give an MCAP, ULog or CSV file"
-        )
+        return _directory_format(p)
     try:
         with open(p, "rb") as fh:
             head = fh.read(4096)
@@ -50,15 +47,97 @@ def detect_format(path: str | os.PathLike) -> str:
         return "mcap"
     if head.startswith(ULOG_MAGIC):
         return "ulog"
+    if head.startswith(ROS1_BAG_MAGIC):
+        return "ros1bag"
+    if head.startswith(b"#ROSBAG V"):
+        version = head[9:16].split(b"\n")[0].decode("ascii", "replace")
+        raise UnsupportedFormatError(
+            f"ROS bag version {version} is not supported (only V2.0)",
+            path=str(p),
+            hint="migrate it with `rosbag fix` (ROS 1), then read the new bag",
+        )
+    if head.startswith(SQLITE_MAGIC):
+        return "rosbag2"
     if not head:
         raise InputError("file is empty", path=str(p))
+    _refuse_ardupilot(head, p)
     if _looks_like_text(head):
         return "csv"
     raise UnsupportedFormatError(
-        f"not an MCAP, ULog or CSV file (unknown magic bytes {head[:8].hex(' ')})",
+        f"not an MCAP, ULog or CSV file, nor a ROS bag (unknown magic bytes {head[:8].hex(' ')})",
         path=str(p),
-        hint="logscan reads .mcap, .ulg and .csv logs",
+        hint="logscan reads .mcap, .ulg and .csv logs, ROS 1 .bag files, rosbag2 .db3 files and rosbag2 directories",
     )
+
+
+def _directory_format(p: Path) -> str:
+    """ "rosbag2" for a directory holding metadata.yaml, "csv-dir" for one holding CSV files."""
+    entries = list_directory(p)
+    special = [(name, mode) for name, mode in entries if name.lower().endswith(".csv") or name == "metadata.yaml"]
+    for name, mode in special:
+        kind = special_kind(mode)
+        if kind is not None:
+            raise InputError(f"is {kind}, not a regular file", path=str(p / name), hint=SPECIAL_FILE_HINT)
+    if any(name == "metadata.yaml" and stat.S_ISREG(mode) for name, mode in entries):
+        return "rosbag2"
+    if any(stat.S_ISREG(mode) for name, mode in special if name.lower().endswith(".csv")):
+        return "csv-dir"
+    raise UnsupportedFormatError(
+        "directory holds no .csv files and no rosbag2 metadata.yaml",
+        path=str(p),
+        hint="give an MCAP, ULog, ROS bag or CSV file, a rosbag2 directory or a directory of CSV files",
+    )
+
+
+def ardupilot_hint(name: str, types: str) -> str:
+    """What to do with a DataFlash or MAVLink log: convert the messages needed to CSV (pymavlink)."""
+    return (
+        f"convert it to CSV with `mavlogdump.py --format csv --types {types} {name} > log.csv` (pymavlink) "
+        "and analyse the CSV"
+    )
+
+
+def _refuse_ardupilot(head: bytes, p: Path) -> None:
+    """UnsupportedFormatError for an ArduPilot DataFlash log or a MAVLink telemetry log: by their
+    content (DataFlash message headers 0xA3 0x95; MAVLink frames, each after an 8-byte timestamp
+    in a .tlog), or a file no reader takes named .tlog, or .bin holding DataFlash message headers."""
+    suffix = p.suffix.lower()
+    # a DataFlash log starts with a message header; a .bin cut at a message holds several more
+    if head.startswith(DATAFLASH_HEAD) or (suffix == ".bin" and head.count(DATAFLASH_HEAD) >= 3):
+        raise UnsupportedFormatError(
+            "ArduPilot DataFlash log: not supported yet", path=str(p), hint=ardupilot_hint(p.name, "IMU,GPS")
+        )
+    if _mavlink_frames(head, stamped=True) or _mavlink_frames(head, stamped=False) or suffix == ".tlog":
+        raise UnsupportedFormatError(
+            "MAVLink telemetry log (ArduPilot/PX4 .tlog): not supported yet",
+            path=str(p),
+            hint=ardupilot_hint(p.name, "RAW_IMU,GPS_RAW_INT"),
+        )
+
+
+def _mavlink_frames(head: bytes, *, stamped: bool, frames: int = 3) -> bool:
+    """True when ``head`` starts with ``frames`` whole MAVLink v1/v2 frames back to back (each after
+    an 8-byte big-endian microsecond timestamp of a plausible date when ``stamped``, as in a .tlog)."""
+    pos = 0
+    for _ in range(frames):
+        if stamped:
+            if pos + 8 > len(head):
+                return False
+            stamp_us = int.from_bytes(head[pos : pos + 8], "big")
+            if not 946_684_800_000_000 <= stamp_us <= 4_102_444_800_000_000:  # 2000 .. 2100
+                return False
+            pos += 8
+        if pos + 3 > len(head):
+            return False
+        if head[pos] == 0xFE:  # v1: magic, len, seq, sys, comp, msgid, payload, crc16
+            pos += 8 + head[pos + 1]
+        elif head[pos] == 0xFD:  # v2: magic, len, incompat, compat, seq, sys, comp, msgid[3], payload, crc16
+            pos += 12 + head[pos + 1] + (13 if head[pos + 2] & 1 else 0)  # signed: 13 more bytes
+        else:
+            return False
+        if pos > len(head):
+            return False
+    return True
 
 
 def _looks_like_text(head: bytes) -> bool:
@@ -81,8 +160,8 @@ def read_log(
 ) -> Log:
     """Read ``path`` into a Log, decoding only ``topics`` (all when None).
 
-    ``topics`` are source topic names (MCAP topics, ULog ``topic_instance`` names, CSV file topics)
-    or channel names; a reader keeps a topic when it or any channel under it is asked for.
+    ``topics`` are source topic names (MCAP and bag topics, ULog ``topic_instance`` names, CSV file
+    topics) or channel names; a reader keeps a topic when it or any channel under it is asked for.
     """
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
@@ -94,6 +173,10 @@ def read_log(
         from logscan.readers.ulog_reader import read_ulog
 
         return read_ulog(path, wanted)
+    if fmt in ("ros1bag", "rosbag2"):
+        from logscan.readers.rosbag import read_rosbag
+
+        return read_rosbag(path, wanted, use_header_stamp=use_header_stamp)
     from logscan.readers.csv_reader import read_csv, read_csv_dir
 
     if fmt == "csv-dir":
@@ -106,7 +189,7 @@ def read_embedded(path: str | os.PathLike) -> tuple[str | None, dict | None]:
 
     MCAP: the metadata records ``logscan.profile`` (key ``toml``) and ``logscan.truth`` (key
     ``json``), through the summary's metadata index when there is one. CSV file or directory: the
-    ``<log>.profile.toml`` and ``<log>.truth.json`` sidecars. ULog: neither.
+    ``<log>.profile.toml`` and ``<log>.truth.json`` sidecars. ULog, ROS 1 bag, rosbag2: neither.
     Raises like ``read_log`` for a missing, unknown or corrupt file.
     """
     fmt = detect_format(path)
