@@ -211,7 +211,7 @@ class _opened:
                 f"reading ROS bags needs the rosbags library ({exc})", path=str(self.path), hint="pip install rosbags"
             ) from None
         except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on damaged files
-            kind = "ROS 1 bag" if self.ros1 else "rosbag2"
+            kind = "ROS 1 bag (truncated, or its index damaged?)" if self.ros1 else "rosbag2"
             raise InputError(
                 f"{kind} cannot be opened: {_why(exc)}", path=str(self.path), hint=ROS1_HINT if self.ros1 else ROS2_HINT
             ) from None

@@ -102,6 +102,7 @@ class TopicColumns:
     def __init__(self, store: Any):
         self.store = store
         self.layouts: dict[str, CdrLayout | None] = {}
+        self.names: dict[type, tuple[str, ...]] = {}  # field names per rosbags message class
 
     def layout(self, msgtype: str) -> CdrLayout | None:
         if msgtype not in self.layouts:
@@ -125,7 +126,7 @@ class TopicColumns:
         messages, failed = [], []
         for index, data in enumerate(cdrs):
             try:
-                messages.append(_plain(self.store.deserialize_cdr(data, msgtype)))
+                messages.append(_plain(self.store.deserialize_cdr(data, msgtype), self.store, self.names))
             except Exception:  # noqa: BLE001 - message bytes that do not fit the definition
                 failed.append(index)
         if failed:
@@ -136,14 +137,17 @@ class TopicColumns:
         return flatten_messages(messages), times
 
 
-def _plain(value: Any) -> Any:
-    """A rosbags message as the MCAP decoders give it: fields by name, ``uint8[]`` as bytes."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {
-            f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value) if not f.name.startswith("__")
-        }
+def _plain(value: Any, store: Any, names: dict[type, tuple[str, ...]]) -> Any:
+    """A rosbags message as the MCAP decoders give it: its fields (not its constants) by name,
+    ``uint8[]`` as bytes. ``names`` caches the field names per message class."""
+    kind = type(value)
+    if dataclasses.is_dataclass(kind):
+        fields = names.get(kind)
+        if fields is None:
+            fields = names[kind] = tuple(name for name, _ in store.fielddefs[value.__msgtype__][1])
+        return {name: _plain(getattr(value, name), store, names) for name in fields}
     if isinstance(value, np.ndarray):
         return value.tobytes() if value.dtype == np.uint8 else value
     if isinstance(value, list):
-        return [_plain(item) for item in value]
+        return [_plain(item, store, names) for item in value]
     return value
