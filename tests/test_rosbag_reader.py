@@ -1,0 +1,335 @@
+"""ROS 1 bags, rosbag2 .db3 files and rosbag2 directories read to the channels of the same messages
+in a ROS 2 MCAP; damaged bags are one clear error or a partial read; ArduPilot logs are refused."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import need_testdata
+
+from logscan.errors import InputError, UnsupportedFormatError
+from logscan.readers import detect_format, read_embedded, read_log
+
+HUSKY_BAG = "ros-robots/robot_localization_test1_husky.bag"
+HUSKY_ROS2 = "ros-robots/robot_localization_test1_husky_ros2"
+ODOM = "/husky_velocity_controller/odom"
+TOPICS = ("/imu/data", "/fix", ODOM)
+
+
+@pytest.fixture(scope="module")
+def husky_bag() -> Path:
+    return need_testdata(HUSKY_BAG)
+
+
+@pytest.fixture(scope="module")
+def bag_log(husky_bag):
+    return read_log(husky_bag)
+
+
+@pytest.fixture(scope="module")
+def mcap_log():
+    folder = need_testdata(HUSKY_ROS2)
+    return read_log(folder / f"{folder.name}.mcap")
+
+
+@pytest.fixture(scope="module")
+def husky_db3_dir(husky_bag, tmp_path_factory) -> Path:
+    """The Husky bag converted to a rosbag2 directory with sqlite3 storage, by rosbags itself."""
+    from rosbags.convert import convert
+
+    out = tmp_path_factory.mktemp("db3") / "husky_ros2_sqlite"
+    convert(
+        srcs=[husky_bag],
+        dst=out,
+        dst_storage="sqlite3",
+        dst_version=9,
+        compress=None,
+        compress_mode="file",
+        default_typestore=None,
+        typestore=None,
+        exclude_topics=[],
+        include_topics=[],
+        exclude_msgtypes=[],
+        include_msgtypes=[],
+    )
+    return out
+
+
+def _topic_channels(log, topic: str) -> dict:
+    return {name: c for name, c in log.channels.items() if name.startswith(topic + "/")}
+
+
+def assert_same_channels(log, reference, *, exact: bool = True) -> None:
+    assert sorted(log.channels) == sorted(reference.channels)
+    for name, channel in reference.channels.items():
+        np.testing.assert_array_equal(log.channels[name].t, channel.t, err_msg=name)
+        if exact:
+            np.testing.assert_array_equal(log.channels[name].values, channel.values, err_msg=name)
+        else:
+            np.testing.assert_allclose(log.channels[name].values, channel.values, rtol=1e-6, atol=1e-7, err_msg=name)
+
+
+def test_ros1_bag_gives_the_channel_names_of_the_ros2_mcap(bag_log, mcap_log):
+    assert sorted(bag_log.channels) == sorted(mcap_log.channels)
+    for name in (
+        "/imu/data/linear_acceleration.x",
+        "/fix/position_covariance[0]",
+        f"{ODOM}/twist.twist.linear.x",
+        "/imu/data/header.stamp.sec",
+        "/imu/data/header.stamp.nanosec",
+    ):
+        assert name in bag_log.channels
+    # the ROS 1 header's seq is dropped, its stamp named as in ROS 2
+    assert not [name for name in bag_log.channels if "seq" in name or "secs" in name]
+
+
+@pytest.mark.parametrize("topic", TOPICS)
+def test_ros1_bag_and_ros2_mcap_give_the_same_samples(bag_log, mcap_log, topic):
+    bag, mcap = _topic_channels(bag_log, topic), _topic_channels(mcap_log, topic)
+    assert bag and sorted(bag) == sorted(mcap)
+    counts = {len(c) for c in bag.values()}
+    assert counts == {mcap_log.source.topics[topic].message_count}
+    for name, channel in mcap.items():
+        np.testing.assert_array_equal(bag[name].t, channel.t)
+        np.testing.assert_allclose(bag[name].values, channel.values, rtol=1.2e-7, atol=1e-30, err_msg=name)
+
+
+def test_ros1_bag_topics_are_described_in_ros2_terms(bag_log, mcap_log):
+    source = bag_log.source
+    assert source.format == "ros1bag" and not source.partial
+    assert {name: t.schema for name, t in source.topics.items()} == {
+        "/imu/data": "sensor_msgs/msg/Imu",
+        "/fix": "sensor_msgs/msg/NavSatFix",
+        ODOM: "nav_msgs/msg/Odometry",
+    }
+    for name, info in source.topics.items():
+        ros2 = mcap_log.source.topics[name]
+        assert info.encoding == "ros1"
+        assert (info.message_count, info.first_ns, info.last_ns) == (ros2.message_count, ros2.first_ns, ros2.last_ns)
+        assert info.fields == ros2.fields
+    assert [(s.what, s.why, s.count) for s in source.skipped] == [
+        (s.what, s.why, s.count) for s in mcap_log.source.skipped
+    ]
+
+
+def test_only_the_wanted_topics_are_decoded_but_all_are_listed(husky_bag):
+    log = read_log(husky_bag, topics={"/fix"})
+    assert log.channels and all(name.startswith("/fix/") for name in log.channels)
+    assert set(log.source.topics) == set(TOPICS)
+    assert log.source.topics["/imu/data"].message_count == 11865
+    assert read_log(husky_bag, topics=()).channels == {}
+
+
+def test_header_stamp_times_as_in_the_mcap_reader(husky_bag, mcap_log):
+    bag = read_log(husky_bag, topics={"/fix"}, use_header_stamp=True)
+    folder = need_testdata(HUSKY_ROS2)
+    mcap = read_log(folder / f"{folder.name}.mcap", topics={"/fix"}, use_header_stamp=True)
+    assert bag.source.time_source == mcap.source.time_source == "header.stamp"
+    sec, nsec = bag.channels["/fix/header.stamp.sec"], bag.channels["/fix/header.stamp.nanosec"]
+    expected = sec.values.astype(np.int64) * 1_000_000_000 + nsec.values.astype(np.int64)
+    np.testing.assert_array_equal(np.sort(expected), bag.channels["/fix/latitude"].t)
+    np.testing.assert_array_equal(bag.channels["/fix/latitude"].t, mcap.channels["/fix/latitude"].t)
+
+
+def test_deserializer_path_gives_the_layout_kernel_channels(husky_bag, bag_log, monkeypatch):
+    import logscan.readers.rosbag_types as rosbag_types
+
+    monkeypatch.setattr(rosbag_types, "cdr_layout", lambda schema: None)
+    slow = read_log(husky_bag)
+    assert_same_channels(slow, bag_log)
+    assert [(s.what, s.why, s.count) for s in slow.source.skipped] == [
+        (s.what, s.why, s.count) for s in bag_log.source.skipped
+    ]
+
+
+def test_rosbag2_sqlite_directory_and_db3_read_to_the_bag_channels(husky_db3_dir, bag_log):
+    db3 = next(husky_db3_dir.glob("*.db3"))
+    assert detect_format(husky_db3_dir) == "rosbag2" and detect_format(db3) == "rosbag2"
+    for path in (husky_db3_dir, db3):
+        log = read_log(path)
+        assert log.source.format == "rosbag2" and not log.source.partial
+        assert_same_channels(log, bag_log)
+        info = log.source.topics["/imu/data"]
+        assert (info.encoding, info.schema, info.message_count) == ("cdr", "sensor_msgs/msg/Imu", 11865)
+        assert info.first_ns == bag_log.source.topics["/imu/data"].first_ns
+
+
+def test_rosbag2_directory_with_mcap_storage_reads_to_the_bag_channels(bag_log):
+    folder = need_testdata(HUSKY_ROS2)
+    assert detect_format(folder) == "rosbag2"
+    log = read_log(folder)
+    assert (log.source.format, log.source.path) == ("rosbag2", str(folder))
+    assert_same_channels(log, bag_log)
+
+
+def test_bags_embed_no_profile(husky_bag, husky_db3_dir):
+    assert read_embedded(husky_bag) == (None, None)
+    assert read_embedded(husky_db3_dir) == (None, None)
+
+
+def test_truncated_bag_is_one_input_error_naming_the_file(husky_bag, tmp_path, cli):
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(husky_bag.read_bytes()[:500_000])
+    assert detect_format(cut) == "ros1bag"
+    with pytest.raises(InputError, match="ROS 1 bag") as caught:
+        read_log(cut)
+    assert caught.value.path == str(cut) and "rosbag reindex" in caught.value.hint
+    result = cli("inspect", cut)
+    assert result.exit_code == 2 and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and str(cut) in result.stderr
+
+
+def test_truncated_db3_is_one_input_error(husky_db3_dir, tmp_path):
+    db3 = next(husky_db3_dir.glob("*.db3"))
+    cut = tmp_path / "cut.db3"
+    cut.write_bytes(db3.read_bytes()[: db3.stat().st_size // 2])
+    with pytest.raises(InputError, match="rosbag2") as caught:
+        read_log(cut)
+    assert caught.value.path == str(cut)
+
+
+def test_bag_damaged_in_the_middle_is_read_up_to_the_damage(husky_bag, tmp_path):
+    data = bytearray(husky_bag.read_bytes())
+    data[600_000:601_000] = b"\xff" * 1000
+    damaged = tmp_path / "damaged.bag"
+    damaged.write_bytes(bytes(data))
+    log = read_log(damaged)
+    assert log.source.partial and "recovered" in log.source.partial_reason
+    assert 0 < len(log.channels["/imu/data/linear_acceleration.x"]) < 11865
+
+
+def test_ros1_bag_written_by_rosbags_reads_variable_length_arrays(tmp_path):
+    """No shared data needed: a bag with a fixed-layout and a variable-length type."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    Vector3 = store.types["geometry_msgs/msg/Vector3"]
+    JointState = store.types["sensor_msgs/msg/JointState"]
+    path = tmp_path / "small.bag"
+    with Writer(path) as writer:
+        accel = writer.add_connection("/accel", "geometry_msgs/msg/Vector3", typestore=store)
+        joints = writer.add_connection("/joints", "sensor_msgs/msg/JointState", typestore=store)
+        for k in range(20):
+            t = 1_000_000_000 + k * 10_000_000
+            writer.write(accel, t, store.serialize_ros1(Vector3(x=k, y=-k, z=0.5), "geometry_msgs/msg/Vector3"))
+            n = 1 + k % 2
+            header = Header(seq=k, stamp=Time(sec=1, nanosec=k * 10_000_000 + 5), frame_id="base")
+            msg = JointState(
+                header=header,
+                name=["a", "b"][:n],
+                position=np.arange(n, dtype=np.float64) + k,
+                velocity=np.zeros(0),
+                effort=np.zeros(0),
+            )
+            writer.write(joints, t + 1, store.serialize_ros1(msg, "sensor_msgs/msg/JointState"))
+    log = read_log(path)
+    assert log.source.format == "ros1bag"
+    np.testing.assert_array_equal(log.channels["/accel/x"].values, np.arange(20))
+    assert len(log.channels["/joints/position[0]"]) == 20 and len(log.channels["/joints/position[1]"]) == 10
+    np.testing.assert_array_equal(log.channels["/joints/position[1]"].values, np.arange(1, 20, 2) + 1)
+    assert "/joints/header.stamp.nanosec" in log.channels and "/joints/header.seq" not in log.channels
+    assert log.source.topics["/joints"].schema == "sensor_msgs/msg/JointState"
+    stamped = read_log(path, topics={"/joints"}, use_header_stamp=True)
+    assert stamped.channels["/joints/position[0]"].t[3] == 1_030_000_005
+
+
+def _dataflash() -> bytes:
+    # FMT message describing itself: header A3 95, type 128, type, length, name, format, columns
+    fmt = (
+        b"\xa3\x95\x80"
+        + bytes([128, 89])
+        + b"FMT\x00"
+        + b"BBnNZ".ljust(16, b"\x00")
+        + b"Type,Length".ljust(64, b"\x00")
+    )
+    return fmt * 5
+
+
+def _tlog(version: int) -> bytes:
+    out = b""
+    for k in range(4):
+        stamp = (1_700_000_000_000_000 + k * 1000).to_bytes(8, "big")
+        payload = bytes(9)
+        if version == 1:
+            frame = bytes([0xFE, len(payload), k, 1, 1, 0]) + payload + b"\x00\x00"
+        else:
+            frame = bytes([0xFD, len(payload), 0, 0, k, 1, 1, 0, 0, 0]) + payload + b"\x00\x00"
+        out += stamp + frame
+    return out
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "words"),
+    [
+        ("flight.bin", _dataflash(), "ArduPilot DataFlash log: not supported yet"),
+        ("00000042.BIN", _dataflash(), "ArduPilot DataFlash log"),
+        ("renamed.log", _dataflash(), "ArduPilot DataFlash log"),
+        ("flight.tlog", _tlog(1), "MAVLink telemetry log (ArduPilot"),
+        ("flight2.tlog", _tlog(2), "MAVLink telemetry log (ArduPilot"),
+        ("renamed.dat", _tlog(2), "MAVLink telemetry log (ArduPilot"),
+        ("odd.tlog", b"\x00\x01\x02junk", "MAVLink telemetry log (ArduPilot"),
+    ],
+)
+def test_ardupilot_logs_are_refused_with_what_to_do(tmp_path, cli, name, content, words):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(UnsupportedFormatError, match="ArduPilot") as caught:
+        detect_format(path)
+    assert words in caught.value.message and "mavlogdump.py --format csv" in caught.value.hint
+    result = cli("inspect", path)
+    assert result.exit_code == 2 and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and words in result.stderr
+
+
+def test_random_bytes_named_bin_are_not_called_dataflash(tmp_path):
+    path = tmp_path / "firmware.bin"
+    path.write_bytes(np.random.default_rng(1).integers(0, 256, 5000, dtype=np.uint8).tobytes())
+    with pytest.raises(UnsupportedFormatError, match="nor a ROS bag") as caught:
+        detect_format(path)
+    assert "ArduPilot" not in caught.value.message and ".db3" in caught.value.hint
+
+
+def test_format_detection_by_content(tmp_path):
+    (tmp_path / "a.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
+    (tmp_path / "b.anything").write_bytes(b"SQLite format 3\x00" + bytes(100))
+    (tmp_path / "old.bag").write_bytes(b"#ROSBAG V1.2\n" + bytes(100))
+    bag_dir, csv_dir, both = tmp_path / "bag", tmp_path / "csvs", tmp_path / "both"
+    for folder in (bag_dir, csv_dir, both):
+        folder.mkdir()
+    (bag_dir / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (csv_dir / "x.csv").write_text("t,a\n0,1\n")
+    (both / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (both / "x.csv").write_text("t,a\n0,1\n")
+    assert detect_format(tmp_path / "a.bag") == "ros1bag"
+    assert detect_format(tmp_path / "b.anything") == "rosbag2"
+    assert detect_format(bag_dir) == "rosbag2" and detect_format(both) == "rosbag2"
+    assert detect_format(csv_dir) == "csv-dir"
+    with pytest.raises(UnsupportedFormatError, match="ROS bag version 1.2"):
+        detect_format(tmp_path / "old.bag")
+
+
+def test_broken_bag_metadata_is_one_input_error(tmp_path):
+    folder = tmp_path / "bag"
+    folder.mkdir()
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: 9}\n")
+    with pytest.raises(InputError, match="rosbag2 cannot be opened") as caught:
+        read_log(folder)
+    assert caught.value.path == str(folder)
+
+
+def test_sqlite_file_not_named_db3_says_what_to_do(tmp_path):
+    path = tmp_path / "bag.sqlite"
+    path.write_bytes(b"SQLite format 3\x00" + bytes(100))
+    with pytest.raises(InputError, match="not named .db3"):
+        read_log(path)
+
+
+def test_inspect_shows_the_bag_in_ros2_terms(husky_bag, cli):
+    result = cli("inspect", husky_bag)
+    assert result.exit_code == 0, result.stderr
+    assert "ros1bag" in result.stdout and "ros1 / sensor_msgs/msg/Imu" in result.stdout
+    assert "unknown magic bytes" not in result.stdout + result.stderr
