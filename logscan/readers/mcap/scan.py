@@ -5,22 +5,27 @@ it is non-zero; the data-section CRC in the DataEnd record is checked when non-z
 never sliced one by one: each wanted channel keeps (buffer, starts, ends) segments into the
 decompressed chunk or the file.
 
-Corrupt files: the walk stops at the first record that is truncated, fails its CRC, fails to
-decompress or does not parse; ``Scan.problem`` says where and why, and the messages read before
-it are kept. Damage found once the walk is through (``Scan.damage``) makes the read partial too:
-a data-section CRC mismatch, or a summary Statistics record counting other numbers of messages
-or chunks than the data section holds. Records with an opcode the spec leaves to private use
-(0x80-0xff) are skipped, as the spec says; a chunk whose opcode byte is damaged looks exactly
-like one, so only that evidence can tell.
+Corrupt files: the walk stops at the first top-level record that is truncated or does not parse;
+``Scan.problem`` says where and why, and the messages read before it are kept. A chunk that
+fails its CRC, fails to decompress, is over a decompression cap or whose records do not parse is
+skipped (its messages are lost) and the walk goes on: the read is partial (``Scan.damage`` counts
+the chunks skipped and says why). Damage found once the walk is through makes the read partial
+too: a data-section CRC mismatch, a summary Statistics record counting other numbers of messages
+or chunks than the data section holds, messages on a channel id no Channel record defines (they
+are dropped and counted), and a channel or schema id defined twice with different content (the
+first definition is kept; the messages of the chunk holding the second are counted). Records with
+an opcode the spec leaves to private use (0x80-0xff) are skipped, as the spec says; a chunk whose
+opcode byte is damaged looks exactly like one, so only that evidence can tell.
 
-Bounded decompression: a chunk's sizes are checked before anything is allocated for it. Its
-declared uncompressed size may be at most ``MAX_CHUNK_BYTES`` and at most ``MAX_RATIO`` times its
-compressed size (chunks up to ``SMALL_CHUNK_BYTES`` are exempt from the ratio), and the chunks of
-one file may decompress to at most ``MAX_RATIO`` times the file size in all (at least
-``MIN_FILE_BUDGET_BYTES``). Decompression itself never produces more than the declared size (a
-zstd frame whose own content size disagrees is refused before it is decompressed; lz4 output is
-cut at the declared size). A chunk over a limit is a corrupt chunk like any other: the scan stops
-there. Attachment records are never decompressed or copied (the walk steps over them).
+Bounded decompression, by what is produced (never by a ratio, which refuses real payloads: a
+4 MB message of zeros is 130 bytes of zstd): chunks are decompressed a piece of
+``INFLATE_STEP`` bytes at a time into a buffer whose pages are only touched as they are written,
+counting the bytes as they come. A chunk stops (skipped as damaged) as soon as it produces more
+than its header declares, more than ``MAX_CHUNK_BYTES``, or more than the file's budget left
+(``max(MIN_FILE_BUDGET_BYTES, MAX_RATIO x the file size)`` for all its chunks); a chunk declaring
+more than either cap is skipped before it is decompressed. So a lie costs at most what the frame
+really produces up to the cap, and a bomb stops at the budget. Attachment records are never
+decompressed or copied (the walk steps over them).
 
 Bounded memory: the file is mapped, not read, and the pages already handed on are given back
 (``madvise``); with ``Scan.on_flush`` set, the batches are handed to it (the reader decodes them)
@@ -43,6 +48,7 @@ import numpy as np
 from logscan.errors import CorruptLogError
 from logscan.readers.common import MCAP_MAGIC, input_error, stat_input, topic_wanted
 from logscan.readers.flatten import MessageBytes
+from logscan.readers.mcap.inflate import InflateError, inflate
 from logscan.readers.mcap.records import (
     MESSAGE_HEADER,
     OP_CHANNEL,
@@ -66,12 +72,12 @@ from logscan.readers.mcap.records import (
     walk_records,
 )
 
-# Decompression bounds. Real MCAP chunks compress 2-20x (lz4 cannot exceed ~255x); a chunk that
-# claims more is a corrupt header or a decompression bomb (33 KB of zstd can claim 1 GB).
-MAX_CHUNK_BYTES = 1 << 30  # one chunk never decompresses to more than 1 GiB
-MAX_RATIO = 1000  # declared uncompressed size / compressed size, per chunk and per file
-SMALL_CHUNK_BYTES = 1 << 20  # a chunk declaring at most this is not held to MAX_RATIO
-MIN_FILE_BUDGET_BYTES = 64 << 20  # a file may decompress to max(this, MAX_RATIO x its size)
+# Decompression caps, on bytes produced. MCAP writers make chunks of 1-4 MiB (a chunk holds at least
+# one message: a point cloud or an image may make it tens of MB); 512 MiB per chunk keeps a run under
+# 2 GB whatever a file declares.
+MAX_CHUNK_BYTES = 512 << 20  # one chunk never decompresses to more
+MAX_RATIO = 1000  # the chunks of a file decompress to at most this times its size in all ...
+MIN_FILE_BUDGET_BYTES = 1 << 30  # ... or this, whichever is larger
 FLUSH_BYTES = 32 << 20  # message bytes held in batches before they are handed to ``on_flush``
 TOP_LEVEL_SLICE = 1 << 16  # top-level records handled at a time (unchunked files)
 WALK_WINDOW = 32 << 20  # bytes of the file walked for record boundaries before their pages go back
@@ -158,6 +164,9 @@ class Scan:
         self.last: dict[int, int] = {}
         self.raw: list[RawMessage] = []
         self.unknown_channel_messages = 0
+        self.skipped_chunks: list[tuple[int, str]] = []  # (offset, why) of the damaged chunks skipped
+        self.redefined: list[str] = []  # channel / schema ids defined twice differently: what and where
+        self.redefined_messages = 0  # messages of the chunks that redefine their channel
         self.messages_read = 0
         self.chunks_read = 0
         self.unchecked_records = 0  # schema/channel/message records outside CRC-checked chunks
@@ -189,6 +198,7 @@ class Scan:
         self._inflate_budget = max(MIN_FILE_BUDGET_BYTES, MAX_RATIO * len(raw))
         u8 = np.frombuffer(raw, dtype=np.uint8)
         top = self._walk(u8, len(MCAP_MAGIC), len(raw))
+        self._summary_definitions(raw, u8, top)
         try:
             self._top_level(raw, u8, top)
         except PARSE_ERRORS as exc:  # a field inside a record did not parse
@@ -197,6 +207,27 @@ class Scan:
             self.problem = _Corrupt(WALK_TEXT[top.status], top.end)
         elif self.problem is None and raw[top.end : top.end + 8] != MCAP_MAGIC:
             self.problem = _Corrupt("no closing magic bytes after the footer (truncated?)", top.end)
+
+    def _summary_definitions(self, raw: bytes, u8: np.ndarray, top: Records) -> None:
+        """Schema and Channel records of the summary section (after DataEnd), registered first: the
+        messages of a channel whose data-section definition lies in a skipped chunk are still read,
+        and a damaged definition in the data section conflicts with them (damage). A summary that
+        does not parse is not used."""
+        ends = np.flatnonzero(top.ops == OP_DATA_END)
+        if not ends.size:
+            return
+        after = slice(int(ends[0]) + 1, None)
+        ops = top.ops[after]
+        keep = (ops == OP_SCHEMA) | (ops == OP_CHANNEL)
+        if not keep.any():
+            return
+        try:
+            self._container(raw, u8, ops[keep], top.offsets[after][keep], top.lengths[after][keep], checked=True)
+        except (_Corrupt, *PARSE_ERRORS):
+            self.schemas.clear()
+            self.channels.clear()
+            self.redefined.clear()
+            self.warnings.append("the summary section's Schema/Channel records do not parse: not used")
 
     def _give_back(self, stop: int) -> None:
         """Drop the mapped file's pages before ``stop`` from this process (they are read again
@@ -261,7 +292,7 @@ class Scan:
                 return
             op, start, length = int(ops[i]), int(top.offsets[i]), int(top.lengths[i])
             if op == OP_CHUNK:
-                self._held_more(self._chunk(raw, start, length), start + length)
+                self._held_more(self._chunk_or_skip(raw, start, length), start + length)
             elif op == OP_METADATA:
                 cur = Cursor(raw, start, start + length)
                 name = cur.string()
@@ -275,6 +306,16 @@ class Scan:
                 return
             else:  # footer
                 return
+
+    def _chunk_or_skip(self, raw: bytes, start: int, length: int) -> int:
+        """`_chunk`, or 0 when the chunk is damaged: it is skipped (counted) and the walk goes on."""
+        try:
+            return self._chunk(raw, start, length)
+        except _Corrupt as exc:
+            self.skipped_chunks.append((exc.offset, exc.reason))
+        except PARSE_ERRORS as exc:  # a field inside one of its records did not parse
+            self.skipped_chunks.append((start, f"malformed record in the chunk ({type(exc).__name__}: {exc})"))
+        return 0
 
     def _chunk(self, raw: bytes, start: int, length: int) -> int:
         """Read one chunk's records; returns its uncompressed size."""
@@ -292,8 +333,12 @@ class Scan:
         if compression == "":
             data = payload
         else:
-            self._check_inflation(uncompressed_size, size, start)
-            data = _decompress(compression, payload, uncompressed_size, start)
+            self._check_declared(uncompressed_size, start)
+            try:
+                data = inflate(compression, payload, uncompressed_size)
+            except InflateError as exc:
+                raise_corrupt(str(exc), start)
+            self._inflate_budget -= len(data)
         if len(data) != uncompressed_size:
             raise_corrupt(f"chunk holds {len(data)} bytes, its header says {uncompressed_size}", start)
         if uncompressed_crc != 0 and zlib.crc32(data) != uncompressed_crc:
@@ -305,23 +350,45 @@ class Scan:
         self._container(data, u8, inner.ops, inner.offsets, inner.lengths, checked=uncompressed_crc != 0)
         return len(data)
 
-    def _check_inflation(self, declared: int, stored: int, offset: int) -> None:
-        """Refuse a compressed chunk whose declared size is over the limits (see the module doc)."""
-        limit = min(MAX_CHUNK_BYTES, max(SMALL_CHUNK_BYTES, MAX_RATIO * stored))
-        if declared > limit:
+    def _check_declared(self, declared: int, offset: int) -> None:
+        """Skip a compressed chunk declaring more than a cap before it is decompressed; `inflate`
+        never produces more than the chunk declares, so its output stays within both caps."""
+        if declared > MAX_CHUNK_BYTES:
             raise_corrupt(
-                f"chunk declares {declared} bytes uncompressed from {stored} compressed, over logscan's "
-                f"limit of {limit} (at most {MAX_RATIO}x and {MAX_CHUNK_BYTES >> 30} GiB per chunk): "
-                "a corrupt chunk header or a decompression bomb",
+                f"chunk declares {declared} bytes uncompressed, over logscan's limit of {MAX_CHUNK_BYTES >> 20} MiB "
+                "per chunk: a corrupt chunk header or a decompression bomb",
                 offset,
             )
         if declared > self._inflate_budget:
             raise_corrupt(
-                f"chunks decompress to more than {MAX_RATIO}x the file size in all "
-                f"(at least {MIN_FILE_BUDGET_BYTES >> 20} MiB): a decompression bomb",
+                f"chunk declares {declared} bytes uncompressed, and the file's chunks may decompress to "
+                f"{MAX_RATIO}x the file size in all (at least {MIN_FILE_BUDGET_BYTES >> 20} MiB): "
+                f"{max(0, self._inflate_budget)} bytes are left: a decompression bomb",
                 offset,
             )
-        self._inflate_budget -= declared
+
+    def chunk_damage(self) -> None:
+        """The damage of the walk, once it is over, into ``damage``: chunks skipped, messages on
+        undefined channels, channels defined twice (each makes the read partial)."""
+        if self.skipped_chunks:
+            offset, why = self.skipped_chunks[0]
+            more = f" (and {len(self.skipped_chunks) - 1} more)" if len(self.skipped_chunks) > 1 else ""
+            self.damage.insert(
+                0,
+                f"{len(self.skipped_chunks)} damaged chunk(s) skipped with their messages; the first at byte "
+                f"{offset}: {why}{more}",
+            )
+        if self.unknown_channel_messages:
+            self.damage.append(
+                f"{self.unknown_channel_messages} message(s) on channel ids no Channel record defines were "
+                "dropped (a damaged channel id, or a lost Channel record)"
+            )
+        if self.redefined:
+            self.damage.append(
+                f"{len(self.redefined)} Channel/Schema record(s) redefine an id with other content "
+                f"({self.redefined[0]}); the first definition is kept, and {self.redefined_messages} message(s) "
+                "of the chunks holding the others may be attributed wrongly"
+            )
 
     def _data_end(self, raw: bytes, start: int, length: int) -> None:
         (expected,) = Cursor(raw, start, start + length).take("<I")
@@ -334,6 +401,12 @@ class Scan:
                 actual = zlib.crc32(view[lo:hi], actual)
                 self._give_back(hi)
         if actual == expected:
+            return
+        if self.skipped_chunks:
+            self.damage.append(
+                f"data section CRC mismatch (DataEnd record at byte {start - 9}): the damaged chunks skipped "
+                "explain it, unless records outside them are damaged too"
+            )
             return
         if self.unchecked_records == 0:
             # Every message read came from a chunk whose own CRC matched, but the damage may be a
@@ -373,6 +446,7 @@ class Scan:
         if not checked:
             self.unchecked_records += int(np.count_nonzero(np.isin(ops, (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE))))
         # schema and channel records are few: register them in order before the messages
+        redefined: set[int] = set()  # channel ids this container defines otherwise than before
         for k in np.flatnonzero((ops == OP_SCHEMA) | (ops == OP_CHANNEL)).tolist():
             start, length = int(offsets[k]), int(lengths[k])
             cur = Cursor(data, start, start + length)
@@ -382,14 +456,16 @@ class Scan:
                     name = cur.string()
                     encoding = cur.string()
                     (size,) = cur.take("<I")
-                    self.schemas[sid] = SchemaRec(sid, name, encoding, cur.raw(size))
+                    self._define(self.schemas, sid, SchemaRec(sid, name, encoding, cur.raw(size)), "schema", start)
                 else:
                     cid, sid = cur.take("<HH")
                     topic = cur.string()
                     encoding = cur.string()
                     meta = cur.string_map()
-                    self.channels[cid] = ChannelRec(cid, sid, topic, encoding, meta)
-                    self._wanted_ids.pop(cid, None)
+                    if not self._define(
+                        self.channels, cid, ChannelRec(cid, sid, topic, encoding, meta), "channel", start
+                    ):
+                        redefined.add(cid)
             except PARSE_ERRORS as exc:
                 raise_corrupt(f"schema/channel record does not parse ({exc})", start)
         if not is_message.any():
@@ -401,6 +477,8 @@ class Scan:
         channel_ids = gather_u16(u8, m_off)
         log_times = gather_u64(u8, m_off + 6).astype(np.int64)
         self.messages_read += int(m_off.size)
+        if redefined:
+            self.redefined_messages += int(np.count_nonzero(np.isin(channel_ids, list(redefined))))
         for cid in np.unique(channel_ids).tolist():
             select = channel_ids == cid
             channel = self.channels.get(cid)
@@ -433,6 +511,21 @@ class Scan:
                         bytes(data[start:stop]),
                     )
                 )
+
+    def _define(self, table: dict, key: int, record: SchemaRec | ChannelRec, kind: str, offset: int) -> bool:
+        """Register a Schema or Channel record; False (the first kept, the conflict noted) when its
+        id is already defined with other content. Writers repeat the same record in every chunk;
+        an id is never redefined otherwise (the MCAP specification): this is a damaged record."""
+        known = table.get(key)
+        if known is None:
+            table[key] = record
+            return True
+        if known == record:
+            return True
+        first = getattr(known, "topic", getattr(known, "name", ""))
+        other = getattr(record, "topic", getattr(record, "name", ""))
+        self.redefined.append(f"{kind} {key} {first[:60]!r}, redefined as {other[:60]!r} at byte {offset - 9}")
+        return False
 
     def _is_wanted(self, cid: int) -> bool:
         known = self._wanted_ids.get(cid)
@@ -474,35 +567,6 @@ def _private_records(top: Records) -> list[str]:
     ]
 
 
-def _decompress(compression: str, payload: bytes, size: int, offset: int) -> bytes:
-    """The chunk's records, never more than ``size`` (+1) bytes: more or fewer is a size mismatch."""
-    if compression == "lz4":
-        import lz4.frame
-
-        try:  # lz4.frame.decompress would allocate the frame's own (unchecked) content size
-            return lz4.frame.LZ4FrameDecompressor().decompress(payload, max_length=size + 1)
-        except RuntimeError as exc:  # lz4 raises RuntimeError on bad frames
-            raise_corrupt(f"lz4 chunk does not decompress ({exc})", offset)
-    if compression == "zstd":
-        try:
-            import zstandard
-        except ImportError:
-            raise_corrupt("zstd-compressed chunk and the zstandard package is not installed", offset)
-        if size == 0:
-            return b""
-        try:
-            # decompress() allocates the frame's content size when the frame states one, whatever
-            # max_output_size says: it must be the size the chunk header declares (checked above)
-            stated = zstandard.frame_content_size(payload)
-            if stated not in (-1, size):
-                raise_corrupt(f"zstd frame says {stated} bytes, the chunk header {size}", offset)
-            return zstandard.ZstdDecompressor().decompress(payload, max_output_size=size)
-        except zstandard.ZstdError as exc:
-            raise_corrupt(f"zstd chunk does not decompress ({exc})", offset)
-    raise_corrupt(f"unsupported chunk compression {compression[:40]!r}", offset)
-    raise AssertionError("unreachable")
-
-
 def scan_file(scan: Scan | str, wanted: set[str] | None = None, keep_raw: bool = False) -> Scan:
     """Run ``scan`` (or a new Scan of the path ``scan``, keeping the batches of ``wanted`` topics and
     every raw message when ``keep_raw``); damage is left in ``scan.problem``."""
@@ -512,6 +576,7 @@ def scan_file(scan: Scan | str, wanted: set[str] | None = None, keep_raw: bool =
         scan.run()
     except _Corrupt as exc:
         scan.problem = exc
+    scan.chunk_damage()
     return scan
 
 
