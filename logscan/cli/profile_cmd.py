@@ -1,4 +1,5 @@
-"""`logscan init-profile`: write the profile a log gets (embedded, or built-in) as TOML to edit."""
+"""`logscan init-profile`: write the profile a log gets (embedded, or built-in) as TOML to edit;
+a CSV log that has neither gets a starter profile (`logscan.profiles.starter`)."""
 
 from __future__ import annotations
 
@@ -6,15 +7,16 @@ from pathlib import Path
 
 import click
 
-from logscan.errors import UsageError
+from logscan.errors import InputError, ProfileError, UsageError
 
 
 @click.command(
     "init-profile",
     epilog="Examples:\n\n  logscan init-profile flight.ulg -o px4.toml\n\n"
-    "  logscan analyze flight.ulg --profile px4.toml",
+    "  logscan analyze flight.ulg --profile px4.toml\n\n"
+    "  logscan init-profile flights/flight_1.csv -o plane.toml",
 )
-@click.argument("log_path", metavar="LOG", type=click.Path(exists=True, dir_okay=False, path_type=str))
+@click.argument("log_path", metavar="LOG", type=click.Path(exists=True, path_type=str))
 @click.option(
     "-o",
     "--output",
@@ -26,14 +28,24 @@ from logscan.errors import UsageError
 def init_profile(log_path: str, output_path: str | None) -> None:
     """Write the profile `logscan analyze LOG` would use without --profile: the one the log embeds
     (logs of `logscan simulate`), else the built-in profile it gets (a PX4 ULog: `px4`, built from
-    the topics it holds, with comments saying where each value comes from). Edit it and pass it
-    with --profile; the documentation's profiles.md describes every key."""
+    the topics it holds, with comments saying where each value comes from). A CSV log (a wide file,
+    or a folder of per-topic CSVs) with neither gets a starter profile: one mean-reverting state
+    per numeric column, its noise read from the column itself, the columns left out listed with
+    why. Edit it and pass it with --profile; the documentation's profiles.md describes every key,
+    csv-logs.md the starter."""
     from logscan.pipeline import load_profile_for
 
-    loaded = load_profile_for(log_path, None)
-    text = loaded.text.rstrip("\n") + "\n"
-    if loaded.notes:
-        text = "".join(f"# {note}\n" for note in loaded.notes) + text
+    try:
+        loaded = load_profile_for(log_path, None)
+        text, notes, source = loaded.text, loaded.notes, loaded.source
+    except ProfileError:
+        built = _starter(log_path)
+        if built is None:
+            raise
+        text, notes, source = built.text, built.notes, "starter"
+    text = text.rstrip("\n") + "\n"
+    if notes:
+        text = "".join(f"# {note}\n" for note in notes) + text
     if output_path is None:
         click.echo(text, nl=False)
         return
@@ -43,4 +55,23 @@ def init_profile(log_path: str, output_path: str | None) -> None:
     from logscan.artifacts import write_atomic
 
     write_atomic(output_path, text)
-    click.echo(f"{output_path}: profile ({loaded.source}) for {log_path}", err=True)
+    click.echo(f"{output_path}: profile ({source}) for {log_path}", err=True)
+
+
+def _starter(log_path: str):
+    """The starter profile (`logscan.profiles.starter.StarterProfile`) of a CSV log that embeds no
+    profile, else None; an InputError when no column can be a state."""
+    from logscan.profiles.starter import starter_profile
+    from logscan.readers import detect_format, read_embedded_profile, read_log
+
+    if detect_format(log_path) not in ("csv", "csv-dir") or read_embedded_profile(log_path):
+        return None
+    built = starter_profile(read_log(log_path))
+    if not built.kept:
+        why = "; ".join(f"{name}: {reason}" for name, reason in built.dropped[:6])
+        raise InputError(
+            f"no column varies enough to be a state ({why})",
+            path=log_path,
+            hint="a starter profile needs numeric columns that change; write one by hand (docs/profiles.md)",
+        )
+    return built
