@@ -12,7 +12,12 @@ its read loop: the rest of the file is dropped) and at a cut message. The reader
 byte range pyulog reads; a message cut by the end of the file, bytes never read (framing broken:
 the reader stopped early or jumped), appended-data offsets past the end of the file, or pyulog's
 corruption flag make the log partial, with ``partial_reason`` saying where and how much was
-recovered. A cut exactly between two messages leaves a valid, shorter ULog (the format has no
+recovered. Messages pyulog drops without a word are damage too, counted in ``partial_reason``:
+message types the format does not define (a damaged type byte), data messages with no
+subscription for their msg_id or of a size their format does not fit (a lost or damaged 'A'
+record), subscriptions an 'A' record reusing their msg_id replaces, a topic subscribed twice (the
+second copy), and timestamps whose nanoseconds do not fit int64 (a header start timestamp like
+that is not used as the log's time zero). A cut exactly between two messages leaves a valid, shorter ULog (the format has no
 index or end marker): that cannot be told from a log that ended there. A subscribed format without
 a ``timestamp`` field (the spec requires one; a damaged definition renames it) has no times: its
 topic is skipped with a warning naming it and the log is partial (a CorruptLogError when no other
@@ -52,6 +57,7 @@ _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
 _MAX_MESSAGE_BYTES = 0xFFFF  # a message's size field is a uint16
 _MAX_FORMAT_NESTING = 64  # nested message formats (PX4 nests 2 or 3 deep)
+_BEYOND_WHY = "timestamp beyond int64 nanoseconds (damaged)"
 _UNTIMED_WHY = "its message format has no timestamp field, which the ULog spec requires: the definition is damaged"
 
 
@@ -100,7 +106,7 @@ def _bounded_ulog_class():
         class _MessageData(ULog._MessageData):
             def initialize(self, data, header, subscriptions, ulog_object) -> bool:
                 try:
-                    return super().initialize(data, header, subscriptions, ulog_object)
+                    corrupt = super().initialize(data, header, subscriptions, ulog_object)
                 except struct.error:
                     if len(data) < 2:  # too short to name its topic: pyulog stops there (framing broken)
                         raise
@@ -109,8 +115,62 @@ def _bounded_ulog_class():
                     # file and drop the rest of it; read_ulog skips the topic and says why.
                     self.timestamp = 0
                     return False
+                if corrupt:  # no subscription for its msg_id, or a size its format does not fit: dropped
+                    _damage_of(ulog_object).dropped_data += 1
+                return corrupt
+
+        def _read_file_data(self, message_name_filter_list, read_until=None):
+            if not isinstance(self._subscriptions, _Subscriptions):
+                table = _Subscriptions()
+                table.update(self._subscriptions)
+                self._subscriptions = table
+            _damage_of(self)
+            return super()._read_file_data(message_name_filter_list, read_until)
+
+        def _check_packet_corruption(self, header):
+            # pyulog calls this for every message of a type it does not handle
+            if header.msg_type not in _KNOWN_TYPES:
+                types = _damage_of(self).unknown_types
+                types[header.msg_type] = types.get(header.msg_type, 0) + 1
+            return super()._check_packet_corruption(header)
 
     return BoundedULog
+
+
+_KNOWN_TYPES = frozenset(b"BFIMPQARDLCSO")  # the message types of the ULog specification
+MAX_TIMESTAMP_US = (2**63 - 1) // 1000  # microseconds whose nanoseconds fit int64
+
+
+class _Subscriptions(dict):
+    """pyulog's msg_id -> subscription table, counting the subscriptions an 'A' record replaces
+    (pyulog drops the messages buffered for them): a duplicated or damaged msg_id."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.replaced: list[tuple[str, int]] = []  # (topic, messages dropped) per replaced subscription
+
+    def __setitem__(self, msg_id, subscription) -> None:
+        old = self.get(msg_id)
+        if old is not None:
+            size = max(1, old.dtype.itemsize) if getattr(old, "dtype", None) is not None else 1
+            self.replaced.append((f"{old.message_name}_{old.multi_id}", len(old.buffer) // size))
+        super().__setitem__(msg_id, subscription)
+
+
+class _Damage:
+    """What a read of pyulog's drops silently: unknown message types, data messages without a
+    subscription or of a size their format does not fit, replaced subscriptions."""
+
+    def __init__(self) -> None:
+        self.unknown_types: dict[int, int] = {}  # message type byte -> count
+        self.dropped_data = 0
+
+
+def _damage_of(ulog) -> _Damage:
+    damage = getattr(ulog, "_logscan_damage", None)
+    if damage is None:
+        damage = ulog._logscan_damage = _Damage()
+    return damage
 
 
 class _ReadWatch(io.RawIOBase):
@@ -188,23 +248,31 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     ulog, watch, chatter = _parse(path, wanted)
     channels: dict[str, Channel] = {}
     untimed: list[str] = []  # topics whose format has no timestamp field: skipped, the log is partial
+    lost: list[str] = []  # other messages dropped: each makes the log partial
     for data in ulog.data_list:
         topic = f"{data.name}_{data.multi_id}"
         if not (topic_wanted(topic, wanted) or topic_wanted("/" + topic, wanted)):
             continue
         if topic in source.topics:  # same message and instance subscribed twice: keep the first
-            source.skip(f"topic {topic}", "subscribed twice in the file; second copy ignored")
+            count = len(next(iter(data.data.values()), ()))
+            source.skip(f"messages of {topic}", "subscribed twice in the file; second copy ignored", count)
+            lost.append(f"{topic} subscribed twice: the {count} message(s) of the second subscription dropped")
             continue
         if "timestamp" not in data.data:  # the format breaks the spec: its definition is damaged
             count = len(next(iter(data.data.values()), ()))
             source.skip(f"topic {topic}", _UNTIMED_WHY, count)
             untimed.append(topic)
             continue
-        t_us = np.asarray(data.data["timestamp"], dtype=np.int64)
-        keep = t_us != 0  # PX4 publishes timestamp 0 for a message never really set
+        t_raw = _timestamps_u64(np.asarray(data.data["timestamp"]))
+        keep = t_raw != 0  # PX4 publishes timestamp 0 for a message never really set
         if not keep.all():
             source.skip(f"messages of {topic}", ZERO_TIMESTAMP_WHY, int((~keep).sum()))
-        t_ns = t_us[keep] * 1000
+        beyond = t_raw > MAX_TIMESTAMP_US  # its nanoseconds do not fit int64: a damaged timestamp
+        if beyond.any():
+            source.skip(f"messages of {topic}", _BEYOND_WHY, int(beyond.sum()))
+            lost.append(f"{int(beyond.sum())} message(s) of {topic} dropped: {_BEYOND_WHY}")
+            keep &= ~beyond
+        t_ns = t_raw[keep].astype(np.int64) * 1000
         fields = []
         for field in data.field_data:
             name = field.field_name
@@ -232,7 +300,8 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         )
         report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
     _fill_metadata(ulog, source)
-    _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None, untimed=untimed)
+    lost = _header_damage(ulog, source) + _dropped_by_pyulog(ulog) + lost
+    _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None, untimed=untimed, lost=lost)
     if wanted is not None and not source.topics:
         source.warnings.append(f"none of the requested topics is in the log: {sorted(wanted)}")
     return Log(channels=channels, source=source)
@@ -276,8 +345,67 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     return ulog, watch, chatter
 
 
+def _timestamps_u64(raw: np.ndarray) -> np.ndarray:
+    """A timestamp column as uint64 microseconds: a damaged format may type it otherwise; negative,
+    fractional-overflow or non-finite values become 2**64-1 (beyond range: dropped and counted)."""
+    if raw.dtype == np.uint64:
+        return raw
+    bad = np.uint64(2**64 - 1)
+    if raw.dtype.kind == "i":
+        return np.where(raw < 0, bad, raw.astype(np.uint64))
+    values = raw.astype(np.float64)
+    fits = np.isfinite(values) & (values >= 0) & (values <= MAX_TIMESTAMP_US)
+    return np.where(fits, np.where(fits, values, 0).astype(np.uint64), bad)
+
+
+def _header_damage(ulog, source: SourceInfo) -> list[str]:
+    """A header start timestamp whose nanoseconds do not fit int64 is damage: it is not used as the
+    log's time zero (``start_timestamp_us`` left out of the metadata)."""
+    start = int(ulog.start_timestamp)
+    if start <= MAX_TIMESTAMP_US:
+        return []
+    log_facts = source.metadata.get("ulog.log", {})
+    log_facts.pop("start_timestamp_us", None)
+    log_facts["start_timestamp_us_damaged"] = str(start)
+    return [f"the header's start timestamp {start} us is beyond int64 nanoseconds (a damaged header): not used"]
+
+
+def _dropped_by_pyulog(ulog) -> list[str]:
+    """Messages pyulog drops without a word: unknown message types, data messages without a
+    subscription or of a size their format does not fit, subscriptions an 'A' record replaced."""
+    damage = _damage_of(ulog)
+    out = []
+    if damage.unknown_types:
+        types = ", ".join(f"0x{t:02x} x{n}" for t, n in sorted(damage.unknown_types.items())[:5])
+        out.append(
+            f"{sum(damage.unknown_types.values())} message(s) of types the ULog format does not define skipped "
+            f"({types}): damaged message type bytes"
+        )
+    if damage.dropped_data:
+        out.append(
+            f"{damage.dropped_data} data message(s) dropped as corrupt: no subscription ('A' record) for their "
+            "message id, or a size their format does not fit (a lost or damaged subscription)"
+        )
+    replaced = getattr(ulog._subscriptions, "replaced", [])
+    if replaced:
+        topics = ", ".join(sorted({topic for topic, _ in replaced})[:5])
+        out.append(
+            f"{len(replaced)} subscription(s) replaced by an 'A' record reusing their message id ({topics}): "
+            f"{sum(n for _, n in replaced)} message(s) read before dropped"
+        )
+    return out
+
+
 def _report_damage(
-    path, ulog, source: SourceInfo, chatter: str, watch: _ReadWatch, *, all_topics: bool, untimed: list[str]
+    path,
+    ulog,
+    source: SourceInfo,
+    chatter: str,
+    watch: _ReadWatch,
+    *,
+    all_topics: bool,
+    untimed: list[str],
+    lost: list[str],
 ) -> None:
     """Mark the log partial when the file is truncated, its framing broken, pyulog skipped corrupt
     data or topics were skipped for lack of a timestamp field (``untimed``); the reason says where
@@ -301,8 +429,9 @@ def _report_damage(
     beyond = [int(o) for o in getattr(ulog, "_appended_offsets", []) if int(o) > size]
     if beyond:
         reasons.append(f"truncated: data appended at byte {beyond[0]} lies past the end of the file ({size} bytes)")
-    if ulog.file_corruption:
+    if ulog.file_corruption and not _damage_of(ulog).dropped_data:
         reasons.append("pyulog found corrupt data (broken framing or unknown message ids) and skipped it")
+    reasons += lost
     skipped = f"topic{'s' if len(untimed) > 1 else ''} {', '.join(untimed)}"
     if untimed:
         source.warnings.append(f"{skipped} skipped: {_UNTIMED_WHY}")
@@ -337,7 +466,7 @@ def _recovered(source: SourceInfo, ulog) -> str:
     if not timed:
         return "no data message was recovered"
     busiest = max(timed, key=lambda t: t.message_count)
-    start = int(ulog.start_timestamp) * 1000
+    start = int(ulog.start_timestamp) * 1000 if int(ulog.start_timestamp) <= MAX_TIMESTAMP_US else 0
     return (
         f"recovered {count} data messages of the topics read; {busiest.name} (the busiest topic) covers "
         f"{(busiest.first_ns - start) / 1e9:.3f} .. {(busiest.last_ns - start) / 1e9:.3f} s after the log start"
