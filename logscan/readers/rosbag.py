@@ -31,6 +31,7 @@ import numpy as np
 from logscan.errors import InputError
 from logscan.log import Log, SourceInfo, TopicInfo
 from logscan.readers.common import topic_wanted
+from logscan.readers.flatten import MessageBytes
 from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
 
@@ -65,7 +66,8 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
             chosen.append(connection)
         batches = _read_messages(reader, chosen, source)
     columns = TopicColumns(store)
-    for (topic, msgtype), (times, datas) in batches.items():
+    for topic, msgtype in list(batches):
+        times, datas = batches.pop((topic, msgtype))  # each topic's raw bytes go once decoded
         _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
         _note_span(source.topics[topic], times)
     pieces.report_to(source)
@@ -89,11 +91,14 @@ def _decode_topic(
     pieces: TopicPieces,
 ) -> None:
     if ros1:
-        datas, failed = ros1_to_cdr(columns.store, msgtype, datas)
+        cdrs, failed = ros1_to_cdr(columns.store, msgtype, datas)
         if failed:
             pieces.skips.skip(topic, "message bytes do not decode", len(failed))
             times = np.delete(times, failed)
-    flat, times = columns.columns(topic, msgtype, datas, times, pieces.skips)
+    else:
+        cdrs = MessageBytes.from_list(datas)
+    del datas
+    flat, times = columns.columns(topic, msgtype, cdrs, times, pieces.skips)
     pieces.add(topic, flat, times)
 
 

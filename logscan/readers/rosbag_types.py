@@ -79,20 +79,33 @@ def _types_from_idl(text: str, get_types_from_idl) -> dict:
     return typs
 
 
-def ros1_to_cdr(store: Any, msgtype: str, datas: list[bytes]) -> tuple[list, list[int]]:
-    """CDR bytes of ROS 1 messages (byte conversion, no deserialization); indices that fail."""
-    convert = store.ros1_to_cdr
-    try:
-        return [convert(data, msgtype) for data in datas], []
-    except Exception:  # noqa: BLE001 - retry one by one to find and count the bad messages
-        pass
-    out, failed = [], []
+def ros1_to_cdr(store: Any, msgtype: str, datas: list[bytes]) -> tuple[MessageBytes, list[int]]:
+    """CDR of ROS 1 messages, by byte conversion (no deserialization) into one buffer, each
+    message after its 4-byte CDR header; and the indices of the messages that do not fit the
+    definition (left out). What ``Typestore.ros1_to_cdr`` does per message, without a buffer each."""
+    msgdef = store.get_msgdef(msgtype)
+    getsize, convert = msgdef.getsize_ros1_to_cdr, msgdef.ros1_to_cdr
+    sizes: list[int] = []
+    kept: list[bytes] = []
+    failed: list[int] = []
     for index, data in enumerate(datas):
         try:
-            out.append(convert(data, msgtype))
+            used, size = getsize(data, 0, None, 0, store)
         except Exception:  # noqa: BLE001 - message bytes that do not fit the definition
+            used, size = -1, 0
+        if used != len(data):
             failed.append(index)
-    return out, failed
+            continue
+        sizes.append(size + 4)
+        kept.append(data)
+    ends = np.cumsum(np.asarray(sizes, dtype=np.int64))
+    starts = ends - np.asarray(sizes, dtype=np.int64)
+    buf = bytearray(int(ends[-1]) if ends.size else 0)
+    view = memoryview(buf)
+    for data, start, end in zip(kept, starts.tolist(), ends.tolist()):
+        buf[start + 1] = 1  # CDR little endian: 00 01 00 00
+        convert(data, 0, view[start + 4 : end], 0, store)
+    return MessageBytes([(np.frombuffer(buf, dtype=np.uint8), starts, ends)]), failed
 
 
 class TopicColumns:
@@ -116,15 +129,15 @@ class TopicColumns:
         return self.layouts[msgtype]
 
     def columns(
-        self, topic: str, msgtype: str, cdrs: list, times: np.ndarray, skips: SourceInfo
+        self, topic: str, msgtype: str, cdrs: MessageBytes, times: np.ndarray, skips: SourceInfo
     ) -> tuple[FlatColumns, np.ndarray]:
         """Flat columns of one topic's CDR messages and the times of the messages they index."""
         layout = self.layout(msgtype)
-        flat = cdr_fast(layout, MessageBytes.from_list(cdrs)) if layout is not None else None
+        flat = cdr_fast(layout, cdrs) if layout is not None else None
         if flat is not None:
             return flat, times
         messages, failed = [], []
-        for index, data in enumerate(cdrs):
+        for index, data in enumerate(cdrs.to_list()):
             try:
                 messages.append(_plain(self.store.deserialize_cdr(data, msgtype), self.store, self.names))
             except Exception:  # noqa: BLE001 - message bytes that do not fit the definition
