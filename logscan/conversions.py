@@ -5,7 +5,7 @@
   yaw) in radians of that body-to-world rotation, R = Rz(yaw) Ry(pitch) Rx(roll).
 - ``from = "geodetic"``: channels (latitude deg, longitude deg, altitude m positive up) on the
   WGS-84 ellipsoid -> metres in the local tangent frame at an origin: (north, east, down) or
-  (east, north, up).
+  (east, north, up), or the horizontal pair only (``frame`` "ne" / "en").
 - ``frame`` of a 3-vector group without ``from`` (`vector_to_frd_ned`): "flu" (a body vector
   forward, left, up -> forward, right, down) or "enu" (a world vector east, north, up -> north,
   east, down); "frd" / "ned" leave it as it is. ``frame = "enu_flu"`` of a quaternion group
@@ -30,7 +30,15 @@ WGS84_A = 6378137.0  # semi-major axis, m
 WGS84_F = 1.0 / 298.257223563  # flattening
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
 
-FRAMES = ("ned", "enu")  # of a geodetic group's output
+# of a geodetic group's output: 3-D, or horizontal only ("ne", "en": a ground vehicle's planar model,
+# whose altitude follows terrain it does not know)
+FRAMES = ("ned", "enu", "ne", "en")
+_GEODETIC_OUTPUTS = {
+    "ned": ("north", "east", "down"),
+    "enu": ("east", "north", "up"),
+    "ne": ("north", "east"),
+    "en": ("east", "north"),
+}
 #: ``frame`` of a quaternion group: "ned" (body FRD to world NED, as PX4) or "enu_flu" (ROS).
 QUATERNION_FRAMES = ("ned", "enu_flu")
 #: ``frame`` of a 3-vector group without ``from``: the identity frames, then the converted ones.
@@ -50,8 +58,8 @@ class Conversion:
     outputs: tuple[str, ...]  # the converted values, one column each
 
     def output_names(self, frame: str = "ned") -> tuple[str, ...]:
-        if self.name == "geodetic" and frame == "enu":
-            return ("east", "north", "up")
+        if self.name == "geodetic":
+            return _GEODETIC_OUTPUTS.get(frame, self.outputs)
         return self.outputs
 
 
@@ -181,8 +189,9 @@ def geodetic_to_local(lla: np.ndarray, origin, frame: str = "ned") -> np.ndarray
         north = -sin lat0 cos lon0 dX - sin lat0 sin lon0 dY + cos lat0 dZ
         up    =  cos lat0 cos lon0 dX + cos lat0 sin lon0 dY + sin lat0 dZ
 
-    ``frame`` "ned": columns (north, east, down = -up); "enu": (east, north, up). Rows outside the
-    valid latitude / longitude range (`valid_geodetic`) are NaN.
+    ``frame`` "ned": columns (north, east, down = -up); "enu": (east, north, up); "ne" / "en": the
+    horizontal pair only, (N, 2). Rows outside the valid latitude / longitude range
+    (`valid_geodetic`) are NaN.
     """
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
@@ -195,7 +204,8 @@ def geodetic_to_local(lla: np.ndarray, origin, frame: str = "ned") -> np.ndarray
     east = -so * d[:, 0] + co * d[:, 1]
     north = -sl * co * d[:, 0] - sl * so * d[:, 1] + cl * d[:, 2]
     up = cl * co * d[:, 0] + cl * so * d[:, 1] + sl * d[:, 2]
-    out = np.stack([north, east, -up] if frame == "ned" else [east, north, up], axis=1)
+    columns = {"north": north, "east": east, "down": -up, "up": up}
+    out = np.stack([columns[name] for name in _GEODETIC_OUTPUTS[frame]], axis=1)
     out[~valid_geodetic(lla)] = np.nan
     return out
 

@@ -52,7 +52,19 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
         found = builtin_profile_for(path, with_log=True)
         if found is not None:
             built, log, extra = found
-            profile = parse_profile(built.text, source=f"{path} (built-in profile {built.name})")
+            try:
+                profile = parse_profile(built.text, source=f"{path} (built-in profile {built.name})")
+            except ProfileError:
+                if not built.model_not_run:
+                    raise
+                # the log's topics could not complete the profile: say why, keep its text to edit
+                error = InputError(
+                    built.model_not_run,
+                    path=str(path),
+                    hint=f"`logscan init-profile {shlex.quote(str(path))} -o profile.toml` writes it to complete",
+                )
+                error.profile_text = built.text
+                raise error from None
             notes = [f"built-in profile {built.name}: {note}" for note in built.notes]
             loaded = LoadedProfile(profile, built.text, f"built-in {built.name}", notes, log, extra)
             loaded.model_not_run = built.model_not_run
@@ -67,23 +79,23 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
 
 def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
     """The built-in profile (`logscan.profiles.builtin.BuiltProfile`) of a log that names itself (a
-    PX4 ULog, a ROS 2 MCAP), else None; reads only the topics the built-in profile may use, plus
+    PX4 ULog, a ROS log), else None; reads only the topics the built-in profile may use, plus
     those any detector reads from the log itself (`Detector.raw_topics`) and the report's states.
     ``with_log``: (profile, the log read, those extra topics), so the analysis need not read it
     again."""
-    from logscan.profiles import builtin
+    from logscan.profiles import builtin, ros
     from logscan.readers import detect_format, read_log
     from logscan.readers.csv_reader import csv_log_name
 
     fmt = None if path is None else detect_format(path)
     extra = _extra_topics()
-    if fmt == "mcap":  # a ROS 2 log: its topic list first (the summary), then only the topics the profile may use
-        schemas = builtin.mcap_topic_schemas(path)
-        if not any(builtin.is_ros2_topic(*value) for value in schemas.values()):
+    if fmt in builtin.ROS_FORMATS:  # a ROS log: its topic list first, then only the topics the profile may use
+        schemas = builtin.topic_schemas(path, fmt)
+        if not any(ros.is_ros_topic(*value) for value in schemas.values()):
             return None
-        # the extra topics the file has (its summary lists them all: the others are covered too)
-        log = read_log(path, topics=set(builtin.ros2_candidate_topics(schemas)) | (extra & set(schemas)))
-        built = builtin.ros2_profile(log) if builtin.identify(log) == "ros2" else None
+        # the extra topics the file has (its topic list names them all: the others are covered too)
+        log = read_log(path, topics=set(ros.ros_candidate_topics(schemas)) | (extra & set(schemas)))
+        built = ros.ros_profile(log) if builtin.identify(log) == "ros" else None
     elif fmt == "ulog" or (fmt == "csv-dir" and csv_log_name(Path(path))):  # a ULog, or ulog2csv's pieces of one
         log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra)
         built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None

@@ -64,7 +64,16 @@ def test_linear_discrete_matrices_are_used_as_given_and_dt_must_match():
 
 
 def test_registry_lists_models_and_rejects_unknown_names_and_params():
-    assert set(MODEL_NAMES) == {"quadcopter", "steer_by_wire", "dc_motor", "linear", "hover_uav", "ins", "unicycle"}
+    assert set(MODEL_NAMES) == {
+        "quadcopter",
+        "steer_by_wire",
+        "dc_motor",
+        "linear",
+        "hover_uav",
+        "ins",
+        "unicycle",
+        "wheeled",
+    }
     with pytest.raises(ModelError, match="unknown vehicle model 'hexacopter'") as err:
         get_model("hexacopter")
     assert "known models: quadcopter, steer_by_wire, dc_motor, linear, hover_uav" in err.value.one_line()

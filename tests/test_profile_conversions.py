@@ -250,7 +250,10 @@ def test_a_scalar_scale_applies_to_every_channel_and_a_plain_group_may_be_scaled
             '[measurements.baro]\nchannels = ["/b"]\nrate_hz = 10\nframe = "ned"\n',
             '[measurements.baro] frame: frame = "ned" needs exactly 3 channels (x, y, z), got 1',
         ),
-        (GNSS + 'frame = "nwu"\n', "[measurements.gnss_position] frame: expected 'ned' or 'enu', got string 'nwu'"),
+        (
+            GNSS + 'frame = "nwu"\n',
+            "[measurements.gnss_position] frame: expected 'ned', 'enu', 'ne' or 'en', got string 'nwu'",
+        ),
         (
             GNSS + "origin = [47.0, 8.0]\n",
             "[measurements.gnss_position] origin: expected [latitude_deg, longitude_deg, altitude_m] (3 numbers)",

@@ -1,5 +1,5 @@
 """ROS 2 logs: the generator of a ROS 2 MCAP from an `ins` simulation (logscan/simulate/ros2_export.py)
-and the built-in `ros2` profile (logscan/profiles/builtin.py) a ROS 2 MCAP without a profile gets:
+and the built-in `ros` profile (logscan/profiles/ros.py) a ROS 2 MCAP without a profile gets:
 topics picked by message type, ROS frames converted (Task A's transforms), noise from covariances.
 
 sample_logs/ros2_ins.mcap is analysed with no flags: every group updates, its mean NIS per output
@@ -15,10 +15,9 @@ import numpy as np
 import pytest
 
 from logscan.conversions import geodetic_to_local, quaternion_enu_flu_to_ned_frd, quaternion_to_euler
-from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.pipeline import builtin_profile_for, consistency_warnings, load_profile_for
-from logscan.profiles import builtin, parse_profile
+from logscan.profiles import builtin, parse_profile, ros
 from logscan.readers import read_log
 from logscan.simulate import ros2_export, simulate
 from logscan.simulate.ros2_export import ORIGIN, local_to_geodetic, ros_quaternion, write_ros2_mcap, write_sample
@@ -107,18 +106,18 @@ def test_only_the_ins_model_is_exported(tmp_path):
 
 
 def test_identify_tells_a_ros2_mcap_from_logscans_own(sample):
-    assert builtin.identify(read_log(sample(SAMPLE), topics=())) == "ros2"
+    assert builtin.identify(read_log(sample(SAMPLE), topics=())) == "ros"
     assert builtin.identify(read_log(sample("quad_healthy.mcap"), topics=())) is None
     assert builtin_profile_for(sample("quad_healthy.mcap")) is None
-    assert builtin.is_ros2_topic("cdr", "sensor_msgs/msg/Imu")
-    assert not builtin.is_ros2_topic("json", "sensor_msgs/msg/Imu")
-    assert not builtin.is_ros2_topic("cdr", "logscan/Imu")
+    assert ros.is_ros_topic("cdr", "sensor_msgs/msg/Imu") and ros.is_ros_topic("ros1", "sensor_msgs/msg/Imu")
+    assert not ros.is_ros_topic("json", "sensor_msgs/msg/Imu")
+    assert not ros.is_ros_topic("cdr", "logscan/Imu")
 
 
 def test_the_topic_list_comes_from_the_summary_and_only_candidates_are_read(sample, monkeypatch):
     import logscan.readers as readers
 
-    schemas = builtin.mcap_topic_schemas(sample(SAMPLE))
+    schemas = builtin.topic_schemas(sample(SAMPLE), "mcap")
     assert schemas == {
         "/imu/data": ("cdr", "sensor_msgs/msg/Imu"),
         "/gps/fix": ("cdr", "sensor_msgs/msg/NavSatFix"),
@@ -133,12 +132,12 @@ def test_the_topic_list_comes_from_the_summary_and_only_candidates_are_read(samp
 
     monkeypatch.setattr(readers, "read_log", spy)
     built = builtin_profile_for(sample(SAMPLE))
-    assert built.name == "ros2" and asked == [["/gps/fix", "/imu/data", "/odom"]]
+    assert built.name == "ros" and asked == [["/gps/fix", "/imu/data", "/odom"]]
 
 
 def test_the_ros2_profile_of_the_sample(sample):
     built = builtin_profile_for(sample(SAMPLE))
-    assert built.name == "ros2" and built.notes == []
+    assert built.name == "ros" and built.notes == []
     profile = parse_profile(built.text)
     assert profile.vehicle.model == "ins" and profile.vehicle.rate_hz == 250
     assert profile.vehicle.params == {"gyro_noise": 0.015, "accel_noise": 0.35}
@@ -156,7 +155,7 @@ def test_the_ros2_profile_of_the_sample(sample):
     assert att.channels == [f"/odom/pose.pose.orientation.{c}" for c in "wxyz"]
     # what `analyze` uses without --profile
     loaded = load_profile_for(sample(SAMPLE), None)
-    assert loaded.source == "built-in ros2" and loaded.profile == profile
+    assert loaded.source == "built-in ros" and loaded.profile == profile
 
 
 def test_topics_are_picked_by_message_type_not_by_name(short_sim, tmp_path, monkeypatch):
@@ -201,7 +200,7 @@ def test_zero_covariances_give_the_models_defaults():
     from logscan.models import get_model
 
     model = get_model("ins", {})
-    built = builtin.ros2_profile(ros_log())
+    built = ros.ros_profile(ros_log())
     profile = parse_profile(built.text)
     assert profile.vehicle.params == {"gyro_noise": model.p["gyro_noise"], "accel_noise": model.p["accel_noise"]}
     assert profile.measurements["gnss_position"].noise_std == list(model.groups["gnss_position"].noise_std)
@@ -209,21 +208,22 @@ def test_zero_covariances_give_the_models_defaults():
     assert "the model's defaults" in built.text and "rate_hz = 100" in built.text
 
 
-def test_missing_optional_topics_are_noted_and_an_imu_alone_is_refused():
-    built = builtin.ros2_profile(ros_log(with_odom=False))
+def test_missing_optional_topics_are_noted_and_an_imu_alone_is_not_run():
+    built = ros.ros_profile(ros_log(with_odom=False))
     assert set(parse_profile(built.text).measurements) == {"gnss_position"}
     assert len(built.notes) == 2 and all("nav_msgs/msg/Odometry" in n for n in built.notes)
-    with pytest.raises(InputError, match="nothing to check it against"):
-        builtin.ros2_profile(ros_log(with_odom=False, with_fix=False))
+    alone = ros.ros_profile(ros_log(with_odom=False, with_fix=False))
+    assert "nothing to check it against" in alone.model_not_run and "INCOMPLETE" in alone.text
 
 
-def test_a_slow_imu_or_none_is_refused():
-    with pytest.raises(InputError, match=r"/imu is logged at 20 Hz: the ins model needs the IMU at 50 Hz"):
-        builtin.ros2_profile(ros_log(imu_hz=20.0))
+def test_a_slow_imu_is_noted_one_too_slow_or_none_is_not_run():
+    built = ros.ros_profile(ros_log(imu_hz=20.0))
+    assert built.model_not_run == "" and parse_profile(built.text).vehicle.rate_hz == 20
+    assert any("/imu is logged at 20 Hz, below the ins model's 50 Hz" in note for note in built.notes)
+    assert "/imu is logged at 10 Hz" in ros.ros_profile(ros_log(imu_hz=10.0)).model_not_run
     log = ros_log()
     log.source.topics.pop("/imu")
-    with pytest.raises(InputError, match="without an IMU"):
-        builtin.ros2_profile(log)
+    assert "no sensor_msgs/msg/Imu topic" in ros.ros_profile(log).model_not_run
 
 
 # ------------------------------------------------------------------------------------------------
@@ -236,7 +236,7 @@ def test_the_sample_is_analysed_with_no_flags_and_its_filter_is_consistent(cli, 
     result = cli("analyze", sample(SAMPLE), "--no-report", "--json", out)
     assert result.exit_code in (0, 1), result.stdout + result.stderr
     entry = json.loads(out.read_text())["logs"][0]
-    assert entry["model"] == "ins" and entry["profile_source"] == "built-in ros2"
+    assert entry["model"] == "ins" and entry["profile_source"] == "built-in ros"
     f = entry["filter"]
     assert set(f["updates"]) == set(GROUPS) and min(f["updates"].values()) >= 300
     for group, size in GROUPS.items():
@@ -253,10 +253,10 @@ def test_consistency_warnings_stay_silent_on_the_sample(sample):
     assert consistency_warnings(prepared) == []
 
 
-def test_init_profile_prints_the_ros2_profile(cli, sample):
+def test_init_profile_prints_the_ros_profile(cli, sample):
     result = cli("init-profile", sample(SAMPLE))
     assert result.exit_code == 0, result.stderr
-    assert result.stdout.startswith("# logscan built-in profile `ros2`")
+    assert result.stdout.startswith("# logscan built-in profile `ros`")
     profile = parse_profile(result.stdout)
     assert profile.measurements["attitude"].frame == "enu_flu"
 
@@ -267,5 +267,5 @@ def test_an_accelerometer_bias_on_the_ros2_imu_alarms(cli, tmp_path):
     result = cli("analyze", path, "--no-report", "--json", out)
     assert result.exit_code == 1, result.stdout + result.stderr
     entry = json.loads(out.read_text())["logs"][0]
-    assert entry["profile_source"] == "built-in ros2"
+    assert entry["profile_source"] == "built-in ros"
     assert entry["scores"]["nis"]["tp"] == 1 and entry["scores"]["nis"]["fp"] == 0

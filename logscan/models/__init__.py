@@ -17,6 +17,7 @@ _REGISTRY = {
     "hover_uav": "logscan.models.hover_uav:HoverUav",
     "ins": "logscan.models.ins:Ins",
     "unicycle": "logscan.models.unicycle:Unicycle",
+    "wheeled": "logscan.models.wheeled:Wheeled",
 }
 MODEL_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 

@@ -49,6 +49,14 @@ from logscan.models.quadcopter_kernels import (
 from logscan.models.rk4 import rk4_f, rk4_predict, rk4_predict_into
 from logscan.models.steer_by_wire_kernels import STEER_BY_WIRE_ID, sbw_H, sbw_h, sbw_H_row_into
 from logscan.models.unicycle_kernels import UNICYCLE_ID, uni_H, uni_h, uni_meas_into, uni_predict, uni_predict_into
+from logscan.models.wheeled_kernels import (
+    WHEELED_ID,
+    wheeled_H,
+    wheeled_h,
+    wheeled_meas_into,
+    wheeled_predict,
+    wheeled_predict_into,
+)
 from logscan.numba_cache import follow_dependencies
 
 # the hover UAV (logscan.models.hover_uav) packs its exactly discretised A, B, C like a linear
@@ -63,6 +71,7 @@ MODEL_IDS = {
     HOVER_UAV_ID: "hover_uav",
     INS_ID: "ins",
     UNICYCLE_ID: "unicycle",
+    WHEELED_ID: "wheeled",
 }
 
 
@@ -89,6 +98,8 @@ def predict(model_id, p, x, u, dt):
         return ins_predict(p, x, u, dt)
     if model_id == UNICYCLE_ID:
         return uni_predict(p, x, u, dt)
+    if model_id == WHEELED_ID:
+        return wheeled_predict(p, x, u, dt)
     raise ValueError("predict: unknown model id")
 
 
@@ -122,6 +133,12 @@ def uni_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     uni_predict_into(p, x, u, dt, x_next, F)
 
 
+@njit(cache=True, inline="always")
+def wheeled_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the wheeled model (Euler step)."""
+    wheeled_predict_into(p, x, u, dt, x_next, F)
+
+
 @njit(cache=True)
 def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """predict() without allocation: f(x, u) into x_next, F(x, u) into F (kv, xs (n,) and
@@ -136,6 +153,8 @@ def predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         ins_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     elif model_id == UNICYCLE_ID:
         uni_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+    elif model_id == WHEELED_ID:
+        wheeled_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
     else:
         raise ValueError("predict_into: unknown model id")
 
@@ -151,6 +170,8 @@ def f_disc(model_id, p, x, u, dt):
         return ins_predict(p, x, u, dt)[0]
     if model_id == UNICYCLE_ID:
         return uni_predict(p, x, u, dt)[0]
+    if model_id == WHEELED_ID:
+        return wheeled_predict(p, x, u, dt)[0]
     raise ValueError("f_disc: unknown model id")
 
 
@@ -167,6 +188,8 @@ def h_meas(model_id, gid, p, x, u):
         return ins_h(p, gid, x, u)
     if model_id == UNICYCLE_ID:
         return uni_h(p, gid, x, u)
+    if model_id == WHEELED_ID:
+        return wheeled_h(p, gid, x, u)
     raise ValueError("h_meas: unknown model id")
 
 
@@ -183,6 +206,8 @@ def H_meas(model_id, gid, p, x, u):
         return ins_H(p, gid, x, u)
     if model_id == UNICYCLE_ID:
         return uni_H(p, gid, x, u)
+    if model_id == WHEELED_ID:
+        return wheeled_H(p, gid, x, u)
     raise ValueError("H_meas: unknown model id")
 
 
@@ -221,6 +246,12 @@ def uni_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
 
 
 @njit(cache=True, inline="always")
+def wheeled_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the wheeled model."""
+    wheeled_meas_into(p, gid, x, u, r, hx, Hs)
+
+
+@njit(cache=True, inline="always")
 def additive_boxplus_into(p, x, dx, out):
     """x (+) dx of the models whose state adds: out = x + dx."""
     for i in range(x.size):
@@ -247,6 +278,8 @@ def meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
         ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     elif model_id == UNICYCLE_ID:
         uni_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
+    elif model_id == WHEELED_ID:
+        wheeled_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3)
     else:
         raise ValueError("meas_into: unknown model id")
 
@@ -261,6 +294,7 @@ IN_PLACE = {
     HOVER_UAV_ID: (lin_step_into, lin_meas_rows_into, additive_boxplus_into),
     INS_ID: (ins_step_into, ins_meas_rows_into, ins_boxplus),
     UNICYCLE_ID: (uni_step_into, uni_meas_rows_into, additive_boxplus_into),
+    WHEELED_ID: (wheeled_step_into, wheeled_meas_rows_into, additive_boxplus_into),
 }
 
 

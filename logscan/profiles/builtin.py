@@ -26,33 +26,23 @@ built from the topics present (`px4_profile`):
 A group whose topic the log lacks is left out, with one info line (`BuiltProfile.notes`).
 GNSS samples count only with a 3D fix (``gate`` on fix_type >= 3), the origin too.
 
-A ROS 2 MCAP (a topic in CDR whose schema is a ROS 2 message type, ``pkg/msg/Type``) gets the
-`ros2` profile of the same model (`ros2_profile`), its topics chosen by message type, never by name
-(the first topic of each type, in the file's order), in ROS frames (REP 103: world ENU, body FLU):
-
- - inputs: the first ``sensor_msgs/msg/Imu`` (angular_velocity, linear_acceleration) with
-   ``frame = "flu"``; the grid at its rate; below MIN_IMU_HZ refused, as for PX4;
- - ``gnss_position`` from ``sensor_msgs/msg/NavSatFix`` (latitude, longitude, altitude;
-   ``from = "geodetic"``, local NED about the first fix);
- - ``odometry`` from ``nav_msgs/msg/Odometry``'s twist.twist.linear (the body velocity,
-   ``frame = "flu"``) and ``attitude`` from its pose.pose.orientation (``from = "quaternion"``,
-   ``frame = "enu_flu"``);
- - noise from the messages' covariance diagonals where they are positive (the square root of their
-   median over the messages), else the model's defaults.
+A ROS log (a ROS 2 MCAP, a ROS 1 bag, a rosbag2 database or directory: a topic of a ROS message
+type ``pkg/msg/Type``) gets the `ros` or `ros_wheeled` profile of `logscan.profiles.ros`.
 """
 
 from __future__ import annotations
 
 import json
-import re
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from logscan.docs import doc_url
 from logscan.errors import InputError
+from logscan.profiles.built import BuiltProfile, nice_rate, rate_hz, toml_list
 from logscan.profiles.px4_noise import NOISE_TOPICS, px4_noise
+from logscan.profiles.ros import is_ros_topic
 
+ROS_FORMATS = ("mcap", "ros1bag", "rosbag2")  # the formats a ROS log comes in (`logscan.profiles.ros`)
 MIN_IMU_HZ = 50.0  # the ins model holds one IMU sample over a grid period: slower is not an INS
 # candidate topics (ULog `topic_instance` names) the px4 profile may use
 PX4_TOPICS = (
@@ -76,37 +66,19 @@ LAND_TRIGGER_S = {"LNDMC_TRIG_TIME": 1.0, "LNDFW_TRIG_TIME": 2.0}
 MAV_TYPE_FIXED_WING = 1
 _IMU = "sensor_combined_0"
 _FULL_IMU = "vehicle_imu_0"  # the IMU's integrated increments at the full sensor rate
-# ROS 2 message types the ros2 profile reads
-ROS2_IMU = "sensor_msgs/msg/Imu"
-ROS2_NAVSATFIX = "sensor_msgs/msg/NavSatFix"
-ROS2_ODOMETRY = "nav_msgs/msg/Odometry"
-ROS2_TYPES = (ROS2_IMU, ROS2_NAVSATFIX, ROS2_ODOMETRY)
-_ROS2_SCHEMA = re.compile(r"^[A-Za-z][\w]*/msg/[A-Za-z]\w*$")
-
-
-@dataclass
-class BuiltProfile:
-    """A built-in profile: its name, TOML text (commented, to edit) and what was left out."""
-
-    name: str
-    text: str
-    notes: list[str] = field(default_factory=list)
-    # why the profile's model cannot run on this log ("": it can): only the detectors that need no
-    # filter run (health, PX4's own estimator tests), and the model is a `not checked` line
-    model_not_run: str = ""
 
 
 def identify(log) -> str | None:
-    """The built-in profile a log asks for (``"px4"``, ``"ros2"``), else None."""
+    """The built-in profile a log asks for (``"px4"``, ``"ros"``: `logscan.profiles.ros`), else None."""
     info = log.source.metadata.get("ulog.info", {})
     if log.source.format == "ulog" and info.get("sys_name", "").strip().upper() == "PX4":
         return "px4"
     if log.source.format == "csv-dir" and is_ulog2csv_px4(log.source.topics):
         return "px4"
-    if log.source.format == "mcap" and any(
-        is_ros2_topic(t.encoding, t.schema) for t in getattr(log.source, "topics", {}).values()
+    if log.source.format in ROS_FORMATS and any(
+        is_ros_topic(t.encoding, t.schema) for t in getattr(log.source, "topics", {}).values()
     ):
-        return "ros2"
+        return "ros"
     return None
 
 
@@ -117,16 +89,13 @@ def is_ulog2csv_px4(topics) -> bool:
     return any(name in (_IMU, _FULL_IMU) and info.schema == "ulog2csv" for name, info in topics.items())
 
 
-def is_ros2_topic(encoding: str, schema: str) -> bool:
-    """A ROS 2 topic: CDR messages of a ROS 2 message type ``pkg/msg/Type``."""
-    return encoding == "cdr" and bool(_ROS2_SCHEMA.match(schema or ""))
-
-
-def mcap_topic_schemas(path) -> dict[str, tuple[str, str]]:
-    """Topic -> (message encoding, schema name) of an MCAP file, without decoding its messages: from
-    the summary section when it has one (its Channel and Schema records), else a scan that decodes
-    nothing (`read_log` with no topic wanted)."""
+def topic_schemas(path, fmt: str) -> dict[str, tuple[str, str]]:
+    """Topic -> (message encoding, schema name) of a log, without decoding its messages: an MCAP's
+    summary section when it has one (its Channel and Schema records), else a read that decodes
+    nothing (`read_log` with no topic wanted: a scan of an MCAP, a bag's connections)."""
     try:
+        if fmt != "mcap":
+            raise LookupError(fmt)
         from mcap.reader import make_reader
 
         with open(path, "rb") as fh:
@@ -137,25 +106,12 @@ def mcap_topic_schemas(path) -> dict[str, tuple[str, str]]:
                 schema = summary.schemas.get(channel.schema_id)
                 out.setdefault(channel.topic, (channel.message_encoding, schema.name if schema else ""))
             return out
-    except Exception:  # noqa: BLE001 - a damaged or summary-less file: the scan below says what is wrong
+    except Exception:  # noqa: BLE001 - a bag, a damaged or summary-less MCAP: the read below says what is wrong
         pass
     from logscan.readers import read_log
 
     log = read_log(path, topics=())
     return {name: (t.encoding, t.schema) for name, t in log.source.topics.items()}
-
-
-def ros2_candidate_topics(schemas: dict[str, tuple[str, str]]) -> list[str]:
-    """The topics of ROS2_TYPES in ``schemas`` (from `mcap_topic_schemas`): what `ros2_profile` reads."""
-    return [topic for topic, (encoding, schema) in schemas.items() if encoding == "cdr" and schema in ROS2_TYPES]
-
-
-def rate_hz(t_ns: np.ndarray) -> float:
-    """A channel's sample rate: 1 / the median interval between its samples (0 for fewer than 2)."""
-    t = np.unique(np.asarray(t_ns, dtype=np.int64))
-    if t.size < 2:
-        return 0.0
-    return float(1e9 / np.median(np.diff(t)))
 
 
 def _delay_line(params: dict, name: str, default_ms: float) -> str:
@@ -186,11 +142,6 @@ def _land_trigger_line(params: dict) -> str:
 def _noise_std_line(noise) -> str:
     """``noise_std = [...]`` of a group's `logscan.profiles.px4_noise.Noise`, commented."""
     return f"noise_std = [{', '.join(f'{v:.3g}' for v in noise.std)}]  # {noise.comment()}"
-
-
-def _nice_rate(hz: float) -> float:
-    """A grid rate near ``hz``: whole hertz (PX4 logs its IMU at 200, 250, ... Hz)."""
-    return float(max(1, round(hz)))
 
 
 def _channels(topic: str, fields) -> list[str]:
@@ -229,11 +180,11 @@ def _imu(channels, has):
 
 def _imu_lines(topic: str, gyro: list[str], accel: list[str], per_second: float | None) -> list[str]:
     if per_second is None:
-        return [f"gyro = {_toml_list(gyro)}", f"accel = {_toml_list(accel)}"]
+        return [f"gyro = {toml_list(gyro)}", f"accel = {toml_list(accel)}"]
     note = f"  # {topic}'s increments per second: 1 / its median delta_angle_dt"
     return [
-        f"gyro = {{ channels = {_toml_list(gyro)}, scale = {per_second:.8g} }}{note}",
-        f"accel = {{ channels = {_toml_list(accel)}, scale = {per_second:.8g} }}",
+        f"gyro = {{ channels = {toml_list(gyro)}, scale = {per_second:.8g} }}{note}",
+        f"accel = {{ channels = {toml_list(accel)}, scale = {per_second:.8g} }}",
     ]
 
 
@@ -259,7 +210,7 @@ def px4_profile(log) -> BuiltProfile:
     topic, gyro, accel, per_second, imu_hz = imu
     # an IMU too slow for the ins model: the filter-free checks still run, on a grid of MIN_IMU_HZ
     model_not_run = slow_imu_reason(topic, imu_hz) if imu_hz < MIN_IMU_HZ else ""
-    rate = _nice_rate(max(imu_hz, MIN_IMU_HZ))
+    rate = nice_rate(max(imu_hz, MIN_IMU_HZ))
     lines = [
         "# logscan built-in profile `px4`: the IMU-driven ins model on a PX4 flight log, built from the",
         f"# topics of {path}. Edit and pass it with --profile ({doc_url('profiles.md')}).",
@@ -301,7 +252,7 @@ def px4_profile(log) -> BuiltProfile:
     if gnss is not None:
         topic, pos, scale, vel = gnss
         hz = rate_hz(channels[pos[0]].t)
-        lines += ["", "[measurements.gnss_position]", f"channels = {_toml_list(pos)}"]
+        lines += ["", "[measurements.gnss_position]", f"channels = {toml_list(pos)}"]
         if scale:
             lines.append("scale = [1e-7, 1e-7, 1e-3]  # PX4 logs degrees x 1e7 and millimetres")
         lines += [
@@ -318,7 +269,7 @@ def px4_profile(log) -> BuiltProfile:
             lines += [
                 "",
                 "[measurements.gnss_velocity]",
-                f"channels = {_toml_list(vel)}",
+                f"channels = {toml_list(vel)}",
                 f"rate_hz = {hz:.3g}",
                 _noise_std_line(noise["gnss_velocity"]),
             ]
@@ -335,7 +286,7 @@ def px4_profile(log) -> BuiltProfile:
             lines += [
                 "",
                 "[measurements.gnss_position]  # no GNSS in this log: PX4's own local position estimate",
-                f"channels = {_toml_list(local)}",
+                f"channels = {toml_list(local)}",
                 f"rate_hz = {hz:.3g}",
                 f"noise_std = {gps_p:.3g}",
             ]
@@ -363,7 +314,7 @@ def px4_profile(log) -> BuiltProfile:
         lines += [
             "",
             "[measurements.attitude]  # PX4's own attitude estimate, checked against the IMU and GNSS",
-            f"channels = {_toml_list(quaternion)}",
+            f"channels = {toml_list(quaternion)}",
             'from = "quaternion"',
             f"rate_hz = {hz:.3g}",
             "noise_std = 0.05",
@@ -421,181 +372,6 @@ def slow_imu_reason(topic: str, imu_hz: float) -> str:
     )
 
 
-def _topics_of_type(log, schema: str) -> list[str]:
-    """The log's topics of message type ``schema`` with messages, in the file's order."""
-    return [
-        name
-        for name, info in log.source.topics.items()
-        if info.schema == schema and info.encoding == "cdr" and info.message_count > 0
-    ]
-
-
-def _covariance_std(channels, names: list[str]) -> list[float | None]:
-    """Per channel of ``names`` (covariance diagonal entries): the square root of the median of its
-    positive finite samples, None when it has none (unknown: 0, or -1 as ROS marks "not given")."""
-    out: list[float | None] = []
-    for name in names:
-        ch = channels.get(name)
-        values = np.asarray(ch.values if ch is not None else [], dtype=np.float64)
-        values = values[np.isfinite(values) & (values > 0)]
-        out.append(float(np.sqrt(np.median(values))) if values.size else None)
-    return out
-
-
-def _noise_line(stds: list[float | None], defaults, what: str) -> str:
-    """``noise_std = [...]``: the covariance's where known, the model's default elsewhere, commented."""
-    values = [s if s is not None else float(d) for s, d in zip(stds, defaults)]
-    known = sum(s is not None for s in stds)
-    source = (
-        f"sqrt of the median {what} covariance"
-        if known == len(stds)
-        else "the model's defaults"
-        if not known
-        else f"sqrt of the median {what} covariance, the model's default where it is 0"
-    )
-    return f"noise_std = [{', '.join(f'{v:.4g}' for v in values)}]  # {source}"
-
-
-def _inline_input(channels: list[str]) -> str:
-    return f'{{ channels = {_toml_list(channels)}, frame = "flu" }}'
-
-
-def ros2_profile(log) -> BuiltProfile:
-    """The `ros2` profile of a ROS 2 MCAP read with (at least) its topics of ROS2_TYPES; see the
-    module docstring."""
-    from logscan.models import get_model
-
-    model = get_model("ins", {})
-    defaults = dict(model.p)
-    group_noise = {name: spec.noise_std for name, spec in model.groups.items()}
-    channels = log.channels
-    path = log.source.path
-    has = lambda name: name in channels and len(channels[name]) > 0  # noqa: E731
-    notes: list[str] = []
-
-    axes = ("x", "y", "z")
-    imu_topics = [
-        t
-        for t in _topics_of_type(log, ROS2_IMU)
-        if all(has(f"{t}/{f}.{a}") for f in ("angular_velocity", "linear_acceleration") for a in axes)
-    ]
-    if not imu_topics:
-        raise InputError(
-            f"a ROS 2 log without an IMU: the built-in ros2 profile needs a {ROS2_IMU} topic "
-            "(angular_velocity, linear_acceleration)",
-            path=path,
-            hint=f"pass --profile ({doc_url('profiles.md')})",
-        )
-    imu = imu_topics[0]
-    if len(imu_topics) > 1:
-        notes.append(f"{len(imu_topics)} {ROS2_IMU} topics: {imu} is the IMU, {', '.join(imu_topics[1:])} unused")
-    gyro = [f"{imu}/angular_velocity.{a}" for a in axes]
-    accel = [f"{imu}/linear_acceleration.{a}" for a in axes]
-    imu_hz = rate_hz(channels[gyro[0]].t)
-    if imu_hz < MIN_IMU_HZ:
-        raise InputError(
-            f"{imu} is logged at {imu_hz:.3g} Hz: the ins model needs the IMU at {MIN_IMU_HZ:g} Hz or more "
-            "(it holds one IMU sample per step)",
-            path=path,
-            hint="record the IMU topic at its full rate, or pass --profile with another model",
-        )
-    rate = _nice_rate(imu_hz)
-    diagonal3 = (0, 4, 8)
-    gyro_std = _covariance_std(channels, [f"{imu}/angular_velocity_covariance[{i}]" for i in diagonal3])
-    accel_std = _covariance_std(channels, [f"{imu}/linear_acceleration_covariance[{i}]" for i in diagonal3])
-
-    def pooled(stds, default):
-        known = [s for s in stds if s is not None]
-        return (float(np.median(known)), "its covariance") if known else (float(default), "the model's default")
-
-    gyro_noise, gyro_from = pooled(gyro_std, defaults["gyro_noise"])
-    accel_noise, accel_from = pooled(accel_std, defaults["accel_noise"])
-    lines = [
-        "# logscan built-in profile `ros2`: the IMU-driven ins model on a ROS 2 log (ENU world, FLU body,",
-        f"# REP 103), its topics chosen by message type from {path}.",
-        f"# Edit and pass it with --profile ({doc_url('profiles.md')}).",
-        'name = "ros2"',
-        'description = "built-in: ins model on a ROS 2 IMU, NavSatFix and odometry"',
-        "",
-        "[vehicle]",
-        'model = "ins"',
-        f"rate_hz = {rate:g}  # the IMU's rate in this log",
-        "",
-        "[vehicle.params]",
-        f"gyro_noise = {gyro_noise:.6g}  # rad/s, {gyro_from}",
-        f"accel_noise = {accel_noise:.6g}  # m/s^2, {accel_from}",
-        "",
-        f"[inputs]  # {imu} ({ROS2_IMU}): body FLU -> FRD",
-        f"gyro = {_inline_input(gyro)}",
-        f"accel = {_inline_input(accel)}",
-        f"stale_s = {max(2.5 / imu_hz, 0.05):.3g}  # an IMU gap longer than this is a dropout",
-    ]
-
-    fixes = [
-        t
-        for t in _topics_of_type(log, ROS2_NAVSATFIX)
-        if all(has(f"{t}/{f}") for f in ("latitude", "longitude", "altitude"))
-    ]
-    if fixes:
-        topic = fixes[0]
-        lla = [f"{topic}/{f}" for f in ("latitude", "longitude", "altitude")]
-        east, north, up = _covariance_std(channels, [f"{topic}/position_covariance[{i}]" for i in diagonal3])
-        lines += [
-            "",
-            f"[measurements.gnss_position]  # {topic} ({ROS2_NAVSATFIX})",
-            f"channels = {_toml_list(lla)}",
-            'from = "geodetic"  # local NED about the first fix',
-            'frame = "ned"',
-            f"rate_hz = {rate_hz(channels[lla[0]].t):.3g}",
-            _noise_line([north, east, up], group_noise["gnss_position"], "position"),
-        ]
-    else:
-        notes.append(f"optional gnss_position: no {ROS2_NAVSATFIX} topic: left out")
-
-    odoms = _topics_of_type(log, ROS2_ODOMETRY)
-    velocity = quaternion = None
-    if odoms:
-        topic = odoms[0]
-        velocity = [f"{topic}/twist.twist.linear.{a}" for a in axes]
-        quaternion = [f"{topic}/pose.pose.orientation.{c}" for c in ("w", "x", "y", "z")]
-        velocity = velocity if all(has(ch) for ch in velocity) else None
-        quaternion = quaternion if all(has(ch) for ch in quaternion) else None
-    if velocity is not None:
-        stds = _covariance_std(channels, [f"{odoms[0]}/twist.covariance[{i}]" for i in (0, 7, 14)])
-        lines += [
-            "",
-            f"[measurements.odometry]  # {odoms[0]} ({ROS2_ODOMETRY}) twist: the body velocity, FLU -> FRD",
-            f"channels = {_toml_list(velocity)}",
-            'frame = "flu"',
-            f"rate_hz = {rate_hz(channels[velocity[0]].t):.3g}",
-            _noise_line(stds, group_noise["odometry"], "twist"),
-        ]
-    else:
-        notes.append(f"optional odometry: no {ROS2_ODOMETRY} topic with twist.twist.linear: left out")
-    if quaternion is not None:
-        stds = _covariance_std(channels, [f"{odoms[0]}/pose.covariance[{i}]" for i in (21, 28, 35)])
-        lines += [
-            "",
-            f"[measurements.attitude]  # {odoms[0]} ({ROS2_ODOMETRY}) orientation: body FLU to world ENU",
-            f"channels = {_toml_list(quaternion)}  # w, x, y, z",
-            'from = "quaternion"',
-            'frame = "enu_flu"',
-            f"rate_hz = {rate_hz(channels[quaternion[0]].t):.3g}",
-            _noise_line(stds, group_noise["attitude"], "orientation"),
-        ]
-    else:
-        notes.append(f"optional attitude: no {ROS2_ODOMETRY} topic with pose.pose.orientation: left out")
-    if not fixes and velocity is None and quaternion is None:
-        raise InputError(
-            f"a ROS 2 log with an IMU but nothing to check it against: the built-in ros2 profile needs a "
-            f"{ROS2_NAVSATFIX} or {ROS2_ODOMETRY} topic",
-            path=path,
-            hint=f"pass --profile ({doc_url('profiles.md')})",
-        )
-    lines += ["", "[detectors.nis]  # logscan's filter: NIS per group", ""]
-    return BuiltProfile("ros2", "\n".join(lines), notes)
-
-
 def _gnss(channels, has):
     """(topic, position channels, integer scale?, velocity channels) of the log's GNSS, or None."""
     for topic in ("vehicle_gps_position_0", "sensor_gps_0"):
@@ -607,7 +383,3 @@ def _gnss(channels, has):
         if all(has(ch) for ch in ints):
             return topic, ints, True, vel
     return None
-
-
-def _toml_list(items) -> str:
-    return "[" + ", ".join(f'"{x}"' for x in items) + "]"

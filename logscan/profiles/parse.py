@@ -556,9 +556,10 @@ class _Checker:
         return CONVERSIONS[value]
 
     def frame(self, data: dict, where: str, source: str | None, channels: list[str] | None) -> str | None:
-        """``frame``: of a geodetic group "ned" (the default), "enu", or horizontal "ne" / "en"; of a quaternion group "ned"
-        (the default: FRD to NED) or "enu_flu" (a ROS orientation); of a group without ``from``,
-        a 3-vector's frame: "frd" / "ned" (as it is), "flu" or "enu" (converted)."""
+        """``frame``: of a geodetic group "ned" (the default), "enu", or horizontal "ne" / "en"; of a
+        quaternion group "ned" (the default: FRD to NED) or "enu_flu" (a ROS orientation); of a
+        group without ``from``, a 3-vector's frame: "frd" / "ned" (as it is), "flu" or "enu"
+        (converted)."""
         if "frame" not in data:
             return None
         value = data["frame"]

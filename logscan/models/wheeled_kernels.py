@@ -1,0 +1,100 @@
+"""Numba functions of the `wheeled` model (a planar wheeled ground robot whose wheels slip).
+
+Shapes: p (WHEELED_N_PARAMS,) = [tau_g] packed by `Wheeled.param_vector`, x (7,) [x, y, psi, b_w, s,
+g_x, g_y], u (2,) [v, w], F (7, 7); `position` (gid 0) measures x + g_x, y + g_y (the receiver's
+slowly wandering error g), `heading` (gid 1) psi: h into hx[r:r+m], H into Hs[r:r+m, :].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+WHEELED_ID = 7  # this model's branch in every dispatcher of logscan.models.dispatch
+WHEELED_N_PARAMS = 1
+WHEELED_N = 7
+
+
+@njit(cache=True)
+def wheeled_predict_into(p, x, u, dt, x_next, F):
+    """Euler step and its Jacobian F = df/dx; no allocation::
+
+        x_{k+1}   = x_k + s v cos(psi) dt        (v: the wheels' forward speed, s: its scale)
+        y_{k+1}   = y_k + s v sin(psi) dt
+        psi_{k+1} = psi_k + (w - b_w) dt         (w: the yaw rate input, b_w: its bias)
+        b_w, s    constant (random walks through Q)
+        g_{k+1}   = exp(-dt / tau_g) g_k         (the GNSS error: first-order Gauss-Markov, p[0] = tau_g)
+    """
+    c = np.cos(x[2])
+    sn = np.sin(x[2])
+    v = u[0]
+    scale = x[4]
+    x_next[0] = x[0] + scale * v * c * dt
+    x_next[1] = x[1] + scale * v * sn * dt
+    x_next[2] = x[2] + (u[1] - x[3]) * dt
+    x_next[3] = x[3]
+    x_next[4] = x[4]
+    decay = np.exp(-dt / p[0])
+    x_next[5] = decay * x[5]
+    x_next[6] = decay * x[6]
+    for i in range(WHEELED_N):
+        for j in range(WHEELED_N):
+            F[i, j] = 1.0 if i == j else 0.0
+    F[0, 2] = -scale * v * sn * dt  # dx/dpsi
+    F[0, 4] = v * c * dt  # dx/ds
+    F[1, 2] = scale * v * c * dt  # dy/dpsi
+    F[1, 4] = v * sn * dt  # dy/ds
+    F[2, 3] = -dt  # dpsi/db_w
+    F[5, 5] = decay
+    F[6, 6] = decay
+
+
+@njit(cache=True)
+def wheeled_predict(p, x, u, dt):
+    """(f(x, u), F(x, u)), allocating."""
+    x_next = np.empty(WHEELED_N)
+    F = np.empty((WHEELED_N, WHEELED_N))
+    wheeled_predict_into(p, x, u, dt, x_next, F)
+    return x_next, F
+
+
+@njit(cache=True)
+def _group_states(gid):
+    """The states a group reads directly: position (0) x and y, heading (1) psi."""
+    if gid == 1:
+        return 2, 3
+    return 0, 2
+
+
+@njit(cache=True)
+def wheeled_meas_into(p, gid, x, u, r, hx, Hs):
+    """position: z = [x + g_x, y + g_y]; heading: z = [psi] (the EKF wraps its innovation). Into
+    hx[r:r+m], H into Hs[r:r+m, :]."""
+    first, stop = _group_states(gid)
+    for i in range(stop - first):
+        hx[r + i] = x[first + i]
+        for j in range(WHEELED_N):
+            Hs[r + i, j] = 1.0 if j == first + i else 0.0
+        if gid == 0:  # the receiver's error adds to the position it reports
+            hx[r + i] += x[5 + i]
+            Hs[r + i, 5 + i] = 1.0
+
+
+@njit(cache=True)
+def _measure(p, gid, x, u):
+    """(h, H) of one group, freshly allocated."""
+    first, stop = _group_states(gid)
+    hx = np.empty(stop - first)
+    Hs = np.empty((stop - first, WHEELED_N))
+    wheeled_meas_into(p, gid, x, u, 0, hx, Hs)
+    return hx, Hs
+
+
+@njit(cache=True)
+def wheeled_h(p, gid, x, u):
+    return _measure(p, gid, x, u)[0]
+
+
+@njit(cache=True)
+def wheeled_H(p, gid, x, u):
+    return _measure(p, gid, x, u)[1]

@@ -1,0 +1,39 @@
+"""Edit a real ROS 1 bag (for tests): copy it with rosbags, changing one topic's messages in a window.
+
+`shift_fix` moves a NavSatFix's reported position north by a distance over a time window: a
+spoofed or multipath-jumped GNSS on a real robot's drive, everything else byte-for-byte as driven.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+METRES_PER_DEG_LAT = 111_132.954  # WGS-84 meridian degree near 45 deg (to 0.1 %: the test's jump is 10 m)
+
+
+def shift_fix(src: Path, dst: Path, topic: str, start_s: float, end_s: float, north_m: float) -> int:
+    """Copy the ROS 1 bag ``src`` to ``dst`` with ``topic``'s latitude moved ``north_m`` metres north
+    for the messages ``start_s`` to ``end_s`` seconds after the bag's start. Returns how many moved."""
+    from rosbags.rosbag1 import Reader, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    moved = 0
+    with Reader(src) as reader, Writer(dst) as writer:
+        t0 = reader.start_time
+        out = {}
+        for conn in reader.connections:
+            out[conn.id] = writer.add_connection(
+                conn.topic, conn.msgtype, msgdef=conn.msgdef.data, md5sum=conn.digest, callerid=conn.ext.callerid
+            )
+        for conn, stamp, raw in reader.messages():
+            since = (stamp - t0) / 1e9
+            if conn.topic == topic and start_s <= since <= end_s:
+                msg = store.deserialize_ros1(raw, conn.msgtype)
+                msg.latitude += north_m / METRES_PER_DEG_LAT
+                raw = store.serialize_ros1(msg, conn.msgtype)
+                moved += 1
+            writer.write(out[conn.id], stamp, raw)
+    assert math.isfinite(moved)
+    return moved
