@@ -38,8 +38,15 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.budget import check_proof, design_rate
-from logscan.detectors.params import Interval
+from logscan.detectors.params import (
+    MIN_DESIGN_RATE_PER_HOUR,
+    SLOWEST_TESTS_PER_HOUR,
+    Interval,
+    budget_bound,
+    multiplier_bound,
+)
 from logscan.detectors.words import group_words
+from logscan.errors import ProfileError
 
 POSITIVE = Interval(float, 0, None, closed="neither")
 SIEGMUND_SHIFT = 1.166  # b = h + 1.166: the overshoot correction of Siegmund's approximation
@@ -128,6 +135,41 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
     return g, onset
 
 
+def check_hiding(detector) -> None:
+    """Refuse, at creation, settings under which no healthy test could alarm at the lowest design
+    rate (`MIN_DESIGN_RATE_PER_HOUR`): they would hide faults. A clip at or under kappa keeps the
+    statistic at zero; an ARL margin that divides the budget below the floor; a fixed h whose ARL0,
+    at one update per 100 s, is over 3.6e13 updates."""
+    name, kappa = detector.name, float(detector.kappa)
+    if float(detector.clip) <= kappa:
+        raise ProfileError(
+            f"detector {name!r}: clip = {float(detector.clip):g} is not above kappa = {kappa:g}: no innovation "
+            "could ever raise the statistic, it would hide faults",
+            hint="clip must exceed kappa (defaults: clip 4, kappa 0.25)",
+        )
+    designed = design_rate(float(detector.budget_per_hour), detector.proof_hours) / float(detector.arl_margin)
+    if designed < MIN_DESIGN_RATE_PER_HOUR:
+        raise ProfileError(
+            f"detector {name!r}: budget_per_hour {float(detector.budget_per_hour):g} with arl_margin "
+            f"{float(detector.arl_margin):g} designs for {designed:.2g} false alarms per hour, under "
+            f"{MIN_DESIGN_RATE_PER_HOUR:g}: it would hide faults",
+            hint="lower arl_margin or raise budget_per_hour",
+        )
+    if detector.h is None:
+        return
+    longest = SLOWEST_TESTS_PER_HOUR / MIN_DESIGN_RATE_PER_HOUR  # ARL0 in updates at the lowest rate
+    with np.errstate(over="ignore"):
+        arl = float(siegmund_arl(float(detector.h), kappa))
+    if not arl <= longest:
+        highest = float(threshold_for_arl(longest, kappa)[0])
+        raise ProfileError(
+            f"detector {name!r}: h = {float(detector.h):g} at kappa = {kappa:g} gives a healthy test an average run "
+            f"of {arl:.2g} updates, under {MIN_DESIGN_RATE_PER_HOUR:g} false alarms per hour at one update per "
+            "100 s: it would hide faults",
+            hint=f"use h <= {highest:.3g} at this kappa, or leave h unset to follow budget_per_hour",
+        )
+
+
 def output_names(model, group: str, size: int) -> list[str]:
     """The group's output names from the model ("ax", "ay", "az"), else "0", "1", ...; a group of
     one output is named by the group alone."""
@@ -156,10 +198,10 @@ class CusumDetector(Detector):
     }
     parameter_constraints = {
         "kappa": [Interval(float, 0, None)],
-        "budget_per_hour": [POSITIVE],
-        "arl_margin": [Interval(float, 1, None)],
+        "budget_per_hour": [budget_bound()],
+        "arl_margin": [multiplier_bound(1, 1e6, "times the budget's design run length", closed="both")],
         "proof_hours": [POSITIVE, None],
-        "h": [POSITIVE, None],
+        "h": [multiplier_bound(0, 1000, "innovation standard deviations of drift before an alarm"), None],
         "cap": [Interval(float, 1, None, closed="neither")],
         "clip": [POSITIVE],
         "gap_s": [POSITIVE],
@@ -178,6 +220,7 @@ class CusumDetector(Detector):
     def check_params(self) -> None:
         super().check_params()
         check_proof(self)
+        check_hiding(self)
 
     def needs(self, run=None) -> Needs:
         return Needs.of(ekf=("y",))

@@ -31,11 +31,13 @@ import numpy as np
 
 from logscan.adaptive_threshold import adaptive_band, trailing_mean_var
 from logscan.detectors.base import Detector, DetectorResult, Needs
-from logscan.detectors.params import Boolean, Interval, Options, RealList
+from logscan.detectors.params import PERSIST, Boolean, Interval, Options, RealList, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError, ProfileError
 
 POSITIVE = Interval(float, 0, None, closed="neither")
+# mu +- rho s: `logscan train --tune` picks at most 20 plus its margin; a wider band hides faults
+BAND = multiplier_bound(0, 50, "spreads of the healthy statistic around its mean")
 
 # The paper's initial coding vectors (section VI), used by the constant-CV baseline.
 PAPER_CV0 = {
@@ -105,21 +107,21 @@ class EncodedEkfDetector(Detector):
 
     parameter_constraints = {
         "variant": [Options("adaptive", "baseline")],
-        "rho": [POSITIVE],
+        "rho": [BAND],
         "window": [Interval(int, 1, None)],
-        "n_persist": [Interval(int, 1, None)],
+        "n_persist": [PERSIST],
         "variance_check": [Options("auto", "onboard", "observed", "off")],
-        "rho_v": [POSITIVE],
+        "rho_v": [BAND],
         "window_v": [Interval(int, 1, None)],
         "sigma_floor": [POSITIVE],
         "r_max": [POSITIVE],
         "cv0": [RealList(), None],
-        "margin": [POSITIVE],
+        "margin": [multiplier_bound(0, 100, "times the largest healthy |e_x| of training")],
         "threshold": [POSITIVE, None],
         "rejected_hold_off_s": [POSITIVE],
         "rel_floor_v": [Interval(float, 0, None)],
         "onboard_state_check": [Boolean()],
-        "rho_s": [POSITIVE],
+        "rho_s": [BAND],
     }
 
     @classmethod

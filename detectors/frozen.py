@@ -36,7 +36,7 @@ import numba
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
-from logscan.detectors.params import Interval
+from logscan.detectors.params import Interval, budget_bound, multiplier_bound
 from logscan.detectors.raw_topics import skipped_lines
 from logscan.detectors.words import group_words
 from logscan.results import NotChecked
@@ -113,9 +113,9 @@ class FrozenSensorDetector(Detector):
         "budget_per_hour": 0.1,  # false alarms per hour all channels together may spend
     }
     parameter_constraints = {
-        "n_samples": [Interval(int, 2, None)],
+        "n_samples": [multiplier_bound(2, 100_000, "held samples before a sensor is stuck", closed="both", kind=int)],
         "still_ratio": [Interval(float, 0, 1, closed="left")],
-        "budget_per_hour": [Interval(float, 0, None, closed="neither")],
+        "budget_per_hour": [budget_bound()],
     }
 
     @classmethod

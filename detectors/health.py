@@ -36,7 +36,7 @@ import numpy as np
 from logscan.detectors.accuracy_jump import accuracy_jump
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.motor_outputs import MotorGroup, motor_groups
-from logscan.detectors.params import Interval
+from logscan.detectors.params import Interval, multiplier_bound
 from logscan.detectors.raw_topics import grid_steps, in_span, on_grid, persist_count, skipped_lines, split_topics
 from logscan.detectors.raw_topics import held as _held
 from logscan.detectors.raw_topics import log_parameter as _parameter
@@ -136,10 +136,12 @@ class HealthDetector(Detector):
         "accuracy_window_s": 10.0,  # ... the median of the reports this long before it
     }
     parameter_constraints = {
-        "min_duration_s": [Interval(float, 0, None, closed="left")],
-        "jamming_limit": [Interval(float, 0, None, closed="neither")],
-        "timeout_periods": [Interval(float, 1, None, closed="left")],
-        "accuracy_jump": [Interval(float, 1, None, closed="neither")],
+        "min_duration_s": [multiplier_bound(0, 3600, "s of a failing check before an alarm", closed="both")],
+        "jamming_limit": [
+            Interval(float, 0, 255, closed="right", why="the indicator is 0-255: over 255 it would hide jamming")
+        ],
+        "timeout_periods": [multiplier_bound(1, 10_000, "median periods of silence before a timeout", closed="both")],
+        "accuracy_jump": [multiplier_bound(1, 1000, "times the recent median accuracy", closed="neither")],
         "accuracy_window_s": [Interval(float, 0, None, closed="neither")],
     }
 

@@ -37,7 +37,7 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.modes import mode_changes
-from logscan.detectors.params import Interval
+from logscan.detectors.params import PERSIST, Interval, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
 
@@ -166,8 +166,8 @@ class KgnDetector(Detector):
         "hold_s": [Interval(float, 0, None)],
         "warmup_s": [Interval(float, 0, None)],
         "settle_tol": [Interval(float, 0, None, closed="neither")],
-        "n_persist": [Interval(int, 1, None)],
-        "rho": [Interval(float, 0, None, closed="neither"), None],
+        "n_persist": [PERSIST],
+        "rho": [multiplier_bound(0, 1e6, "the Kalman gain norm's distance from its healthy reference"), None],
         "probe_size": [Interval(float, None, None)],
         "probe_slope": [Interval(float, None, None)],
         "probe_s": [Interval(float, 0, None, closed="neither")],

@@ -26,7 +26,7 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
 from logscan.detectors.budget import check_proof, design_rate
-from logscan.detectors.params import Boolean, Interval
+from logscan.detectors.params import PERSIST, Boolean, Interval, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
 
 # A NIS beyond this (far beyond any chi-square threshold: a bit flip, a diverging filter) is summed
@@ -104,10 +104,10 @@ class NisDetector(Detector):
 
     parameter_constraints = {
         "window": [Interval(int, 1, None)],
-        "budget_per_hour": [Interval(float, 0, None, closed="neither")],
+        "budget_per_hour": [budget_bound()],
         "proof_hours": [Interval(float, 0, None, closed="neither"), None],
-        "alpha": [Interval(float, 0, 1, closed="neither"), None],
-        "n_persist": [Interval(int, 1, None)],
+        "alpha": [alpha_bound(), None],
+        "n_persist": [PERSIST],
         "overall": [Boolean()],
     }
 

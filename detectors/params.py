@@ -11,6 +11,11 @@ when the detector is created (right after the profile is parsed, before any log 
         "variant": [Options("adaptive", "baseline")],
         "threshold": [Interval(float, 0, None, closed="neither"), None],
     }
+
+A bound that keeps a setting from hiding faults says why (``why``): a false-alarm rate or
+probability whose design rate falls below `MIN_DESIGN_RATE_PER_HOUR`, or a multiplier over the
+bound stated for that parameter, is refused with that reason (issue 31: ``rho = 1e308`` made a
+faulty log "no alarms"). `logscan detectors` and docs/detectors.md show the bound and the reason.
 """
 
 from __future__ import annotations
@@ -20,6 +25,14 @@ from dataclasses import dataclass
 from typing import Any
 
 _INT64 = 2**63
+
+# The lowest false-alarm rate a detector may be designed for: below it a test practically never
+# alarms, whatever the fault (a setting that low hides faults and is refused).
+MIN_DESIGN_RATE_PER_HOUR = 1e-12
+# The slowest test a per-test probability is judged at: one test every 100 s (a 1 Hz GNSS in a
+# 100-update window); a faster log only raises the rate an alpha gives.
+SLOWEST_TESTS_PER_HOUR = 36.0
+MIN_ALPHA = 3e-14  # MIN_DESIGN_RATE_PER_HOUR / SLOWEST_TESTS_PER_HOUR = 2.8e-14, rounded up
 
 
 def _is_int(value: Any) -> bool:
@@ -37,12 +50,14 @@ def _is_real(value: Any) -> bool:
 class Interval:
     """A number in [low, high] (either end None: unbounded). kind int accepts integers only; kind
     float accepts any finite real number (an integer included). closed: "both", "left", "right" or
-    "neither"."""
+    "neither". ``why``: the reason for a bound that keeps the setting from hiding faults, said
+    wherever the constraint is (refusals, `logscan detectors`, docs/detectors.md)."""
 
     kind: type
     low: float | None = None
     high: float | None = None
     closed: str = "both"
+    why: str = ""
 
     def accepts(self, value: Any) -> bool:
         if not (_is_int(value) if self.kind is int else _is_real(value)):
@@ -63,7 +78,37 @@ class Interval:
         right = "]" if self.closed in ("both", "right") and self.high is not None else ")"
         low = "-inf" if self.low is None else f"{self.low:g}"
         high = "inf" if self.high is None else f"{self.high:g}"
-        return f"{noun} in {left}{low}, {high}{right}"
+        text = f"{noun} in {left}{low}, {high}{right}"
+        return f"{text} ({self.why})" if self.why else text
+
+
+def budget_bound() -> Interval:
+    """A false-alarm budget in alarms per hour: at least `MIN_DESIGN_RATE_PER_HOUR`."""
+    return Interval(
+        float,
+        MIN_DESIGN_RATE_PER_HOUR,
+        None,
+        why=f"a budget under {MIN_DESIGN_RATE_PER_HOUR:g} false alarms per hour designs a test that never "
+        "alarms: it would hide faults",
+    )
+
+
+def alpha_bound() -> Interval:
+    """A false-alarm probability per test: at least `MIN_ALPHA`, under 1."""
+    return Interval(
+        float,
+        MIN_ALPHA,
+        1,
+        closed="left",
+        why=f"below {MIN_ALPHA:g} a test run every 100 s designs for under {MIN_DESIGN_RATE_PER_HOUR:g} false "
+        "alarms per hour: it would hide faults",
+    )
+
+
+def multiplier_bound(low: float, high: float, what: str, *, closed: str = "right", kind: type = float) -> Interval:
+    """A threshold multiplier (or count) in (low, high]: over ``high`` it hides faults; ``what``
+    says what a larger value would hide."""
+    return Interval(kind, low, high, closed=closed, why=f"over {high:g} {what}: it would hide faults")
 
 
 @dataclass(frozen=True)
@@ -113,6 +158,10 @@ class StringList:
 
     def __str__(self) -> str:
         return "a list of names"
+
+
+# consecutive exceedances an alarm needs (a detector's n_persist)
+PERSIST = multiplier_bound(1, 10_000, "consecutive exceedances before an alarm", closed="both", kind=int)
 
 
 def satisfies(value: Any, constraints: list) -> bool:

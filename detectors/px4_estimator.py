@@ -34,7 +34,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult
-from logscan.detectors.params import Interval
+from logscan.detectors.params import multiplier_bound
 from logscan.detectors.raw_topics import held, log_parameter, on_grid, persist_count, split_topics
 
 PREFIX = "px4"
@@ -240,8 +240,8 @@ class Px4EstimatorDetector(Detector):
         "min_duration_s": 2.0,  # the ratio must stay above for this long
     }
     parameter_constraints = {
-        "ratio": [Interval(float, 0, None, closed="neither")],
-        "min_duration_s": [Interval(float, 0, None, closed="left")],
+        "ratio": [multiplier_bound(0, 100, "times PX4's own gate (a test ratio over 1 fails it)")],
+        "min_duration_s": [multiplier_bound(0, 3600, "s of a failing test before an alarm", closed="both")],
     }
 
     is_baseline = True  # PX4's own verdict: logscan's model-based alarms are reported against it

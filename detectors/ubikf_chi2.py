@@ -21,7 +21,7 @@ import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.nis import chi2_threshold, window_sums
-from logscan.detectors.params import Boolean, Interval, StringList
+from logscan.detectors.params import PERSIST, Boolean, Interval, StringList, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
 from logscan.errors import UsageError
 
@@ -62,9 +62,9 @@ class Chi2Detector(Detector):
     }
     parameter_constraints = {
         "window": [Interval(int, 1, None)],
-        "budget_per_hour": [Interval(float, 0, None, closed="neither")],
-        "alpha": [Interval(float, 0, 1, closed="neither"), None],
-        "n_persist": [Interval(int, 1, None)],
+        "budget_per_hour": [budget_bound()],
+        "alpha": [alpha_bound(), None],
+        "n_persist": [PERSIST],
         "states": [StringList()],
         "per_group": [Boolean()],
     }

@@ -209,7 +209,7 @@ def test_an_unknown_detector_given_on_the_command_line_is_not_blamed_on_the_prof
     ("setting", "expected"),
     [
         ("window = 1" + "0" * 400, "window must be an integer in [1, inf), got 10000000000000000000...00000000"),
-        ("budget_per_hour = 1" + "0" * 400, "budget_per_hour must be a number in (0, inf)"),
+        ("budget_per_hour = 1" + "0" * 400, "budget_per_hour must be a number in [1e-12, inf)"),
         ("window = 9223372036854775808", "window must be an integer in [1, inf), got 9223372036854775808"),
     ],
 )
@@ -221,7 +221,7 @@ def test_detector_settings_beyond_int64_or_float_range_are_profile_errors(cli, s
     (tmp_path / "quad.profile.toml").write_text(base + f"\n[detectors.nis]\n{setting}\n", encoding="utf-8")
     result = cli("analyze", log, "--no-report", "-q")
     assert result.exit_code == 2, result.stderr
-    assert expected in result.stderr and len(result.stderr) < 400
+    assert expected in result.stderr and len(result.stderr) < 500  # the 401 digits are not quoted
 
 
 @pytest.mark.parametrize(
