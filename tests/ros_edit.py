@@ -37,3 +37,20 @@ def shift_fix(src: Path, dst: Path, topic: str, start_s: float, end_s: float, no
             writer.write(out[conn.id], stamp, raw)
     assert math.isfinite(moved)
     return moved
+
+
+def drop_topics(src: Path, dst: Path, topics: tuple[str, ...]) -> None:
+    """Copy the ROS 1 bag ``src`` to ``dst`` without ``topics`` (a robot that did not record them)."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    with Reader(src) as reader, Writer(dst) as writer:
+        out = {
+            conn.id: writer.add_connection(
+                conn.topic, conn.msgtype, msgdef=conn.msgdef.data, md5sum=conn.digest, callerid=conn.ext.callerid
+            )
+            for conn in reader.connections
+            if conn.topic not in topics
+        }
+        for conn, stamp, raw in reader.messages():
+            if conn.id in out:
+                writer.write(out[conn.id], stamp, raw)

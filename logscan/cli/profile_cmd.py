@@ -38,6 +38,12 @@ def init_profile(log_path: str, output_path: str | None) -> None:
     try:
         loaded = load_profile_for(log_path, None)
         text, notes, source = loaded.text, loaded.notes, loaded.source
+    except InputError as error:
+        incomplete = getattr(error, "profile_text", None)  # a built-in profile the log cannot complete
+        if incomplete is None:
+            raise
+        text, notes, source = incomplete, [], "built-in, incomplete"
+        click.echo(f"logscan: warning: {log_path}: {error.message}: complete the profile it writes", err=True)
     except ProfileError:
         built = _starter(log_path)
         if built is None:

@@ -1,0 +1,195 @@
+"""Real ROS robots out of the box (issue 26): the Husky drive of ../shared/testdata/ros-robots as a
+ROS 2 MCAP, the original ROS 1 bag and a rosbag2 .db3 made from it here, analysed with no flags.
+
+What the log itself says: robot_localization's regression-test drive, a healthy Clearpath Husky on a
+campus for 395 s (README of the test data). Expected verdict: no alarm, on all three files alike, by
+the built-in `ros_wheeled` profile (its odometry twist is planar: a ground robot). A copy of the bag
+with the GNSS fix moved 10 m north for 30 s (tests/ros_edit.py) must alarm at the jump.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import need_testdata
+from ros_edit import drop_topics, shift_fix
+
+from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.profiles import parse_profile, ros
+
+ROS2_DIR = "ros-robots/robot_localization_test1_husky_ros2"
+ROS2_MCAP = f"{ROS2_DIR}/robot_localization_test1_husky_ros2.mcap"
+ROS1_BAG = "ros-robots/robot_localization_test1_husky.bag"
+MAX_FALSE_ALARMS = 1  # the issue's bound on the healthy drive
+
+
+@pytest.fixture(scope="module")
+def husky_db3(tmp_path_factory) -> Path:
+    """The Husky ROS 1 bag converted to a rosbag2 .db3 (sqlite3 storage) by rosbags itself."""
+    from rosbags.convert import convert
+
+    out = tmp_path_factory.mktemp("db3") / "husky_sqlite"
+    convert(
+        srcs=[need_testdata(ROS1_BAG)],
+        dst=out,
+        dst_storage="sqlite3",
+        dst_version=9,
+        compress=None,
+        compress_mode="file",
+        default_typestore=None,
+        typestore=None,
+        exclude_topics=[],
+        include_topics=[],
+        exclude_msgtypes=[],
+        include_msgtypes=[],
+    )
+    return next(out.glob("*.db3"))
+
+
+def summary(cli, path, tmp_path: Path, *args) -> tuple[int, dict, str]:
+    out = tmp_path / f"{Path(path).name}.json"
+    result = cli("analyze", path, "--no-report", "--json", out, *args)
+    assert "Traceback" not in result.stderr, result.stderr
+    return result.exit_code, json.loads(out.read_text())["logs"][0], result.stdout + result.stderr
+
+
+def test_the_healthy_husky_drive_gets_the_same_verdict_from_mcap_bag_and_db3(cli, tmp_path, husky_db3):
+    entries = {}
+    for path in (need_testdata(ROS2_MCAP), need_testdata(ROS1_BAG), husky_db3):
+        code, entry, text = summary(cli, path, tmp_path)
+        assert code == 0, text
+        entries[entry["log"]["format"]] = entry
+    assert set(entries) == {"mcap", "ros1bag", "rosbag2"}
+    for entry in entries.values():
+        assert entry["profile_source"] == "built-in ros_wheeled" and entry["model"] == "wheeled"
+        assert entry["n_alarms"] <= MAX_FALSE_ALARMS and entry["verdict"] == "no alarms"
+        assert entry["filter"]["updates"]["position"] >= 980  # every 2.5 Hz fix of the 395 s drive
+        assert entry["filter"]["divergence_episodes"] == 0
+        # a mean NIS per output of at most 1: the filter is not overconfident on a healthy drive
+        assert 0.05 <= entry["filter"]["mean_nis"]["position"] <= 2.0
+    nis = {fmt: e["filter"]["mean_nis"]["position"] for fmt, e in entries.items()}
+    assert max(nis.values()) - min(nis.values()) < 1e-6, nis  # the same samples, the same filter
+
+
+def test_a_ten_metre_gnss_jump_on_the_real_drive_alarms_at_its_onset(cli, tmp_path):
+    jumped = tmp_path / "jump.bag"
+    moved = shift_fix(need_testdata(ROS1_BAG), jumped, "/fix", 200.0, 230.0, 10.0)
+    assert moved > 70  # 2.5 Hz over 30 s
+    code, entry, text = summary(cli, jumped, tmp_path)
+    assert code == 1, text
+    starts = [incident["start"] for incident in entry["incidents"]]
+    assert any(199.5 <= s <= 202.0 for s in starts), starts  # within 2 s of the jump
+    assert all(195.0 <= s <= 235.0 for s in starts), starts  # nothing anywhere else on the drive
+
+
+def test_the_ros_wheeled_profile_of_the_husky(tmp_path):
+    from logscan.pipeline import builtin_profile_for
+
+    built = builtin_profile_for(need_testdata(ROS1_BAG))
+    assert built.name == "ros_wheeled" and built.model_not_run == ""
+    profile = parse_profile(built.text)
+    assert profile.vehicle.model == "wheeled" and profile.vehicle.rate_hz == 30
+    # the IMU is mounted with y up (gravity says so), and its y rate agrees with the wheels'
+    assert profile.inputs.mapping["w"] == {"channels": ["/imu/data/angular_velocity.y"], "scale": [1.0]}
+    assert profile.inputs.mapping["v"] == "/husky_velocity_controller/odom/twist.twist.linear.x"
+    position = profile.measurements["position"]
+    assert (position.source, position.frame, position.noise_std) == ("geodetic", "en", [0.8, 0.8])
+    # /fix reports position_covariance_type 1 (approximated): the wander is the GPS SPS standard's
+    assert profile.vehicle.params["gnss_error_std"] == pytest.approx(ros.GPS_SPS_SIGMA_M, rel=1e-2)
+    assert any("altitude not checked" in note for note in built.notes)
+
+
+@pytest.mark.parametrize("folder", ["px4-ulog", "px4-ulog-extra", "ros-robots"])
+def test_init_profile_on_every_real_log_writes_a_profile_analyze_accepts(cli, tmp_path, folder):
+    logs = [p for p in sorted(need_testdata(folder).iterdir()) if p.suffix in (".ulg", ".bag") or p.is_dir()]
+    assert logs
+    for log in logs:
+        written = tmp_path / f"{log.name}.toml"
+        made = cli("init-profile", log, "-o", written)
+        assert made.exit_code == 0, made.stderr
+        parse_profile(written.read_text())  # valid as written
+        result = cli("analyze", log, "--profile", written, "--no-report")
+        assert "Traceback" not in result.stderr and "invalid profile" not in result.stderr, result.stderr
+        assert result.exit_code in (0, 1, 2), result.stderr
+
+
+# in-memory ROS logs for the profile's cases the Husky lacks
+
+
+def ground_robot_log(
+    *, imu: bool = True, fix: bool = True, covariance: float = 1e-3, fix_type: int = 1, imu_up: str = "z"
+) -> Log:
+    channels: dict[str, Channel] = {}
+    topics: dict[str, TopicInfo] = {}
+    rng = np.random.default_rng(1)
+
+    def topic(name: str, schema: str, hz: float, fields: dict[str, np.ndarray | float]):
+        t = (np.arange(int(60 * hz)) * (1e9 / hz)).astype(np.int64)
+        for f, value in fields.items():
+            v = value(t) if callable(value) else np.full(t.size, value)
+            channels[f"{name}/{f}"] = Channel(f"{name}/{f}", t, np.asarray(v, dtype=float))
+        topics[name] = TopicInfo(name, t.size, "ros1", schema, int(t[0]), int(t[-1]))
+
+    def yaw_rate(t):
+        return 0.3 * np.sin(t / 1e9 / 5.0)
+
+    odom = {f"twist.twist.{c}": 0.0 for c in ("linear.y", "linear.z", "angular.x", "angular.y")}
+    odom["twist.twist.linear.x"] = 1.0
+    odom["twist.twist.angular.z"] = yaw_rate
+    odom.update({f"twist.covariance[{i}]": covariance for i in range(36)})
+    topic("/odom", "nav_msgs/msg/Odometry", 20.0, odom)
+    if imu:
+        fields: dict = {f"angular_velocity.{a}": 0.0 for a in "xyz"}
+        fields.update({f"linear_acceleration.{a}": 0.0 for a in "xyz"})
+        fields[f"linear_acceleration.{imu_up}"] = lambda t: 9.81 + 0.1 * rng.standard_normal(t.size)
+        fields[f"angular_velocity.{imu_up}"] = yaw_rate
+        fields.update({f"angular_velocity_covariance[{i}]": covariance for i in range(9)})
+        topic("/imu", "sensor_msgs/msg/Imu", 30.0, fields)
+    if fix:
+        lla = {"latitude": 47.0, "longitude": 8.0, "altitude": 400.0, "position_covariance_type": fix_type}
+        lla.update({f"position_covariance[{i}]": 4.0 for i in range(9)})
+        topic("/fix", "sensor_msgs/msg/NavSatFix", 5.0, lla)
+    return Log(channels, SourceInfo("robot.bag", "ros1bag", topics=topics))
+
+
+def test_unknown_covariances_by_ros_conventions_give_defaults_and_say_so():
+    from logscan.models import get_model
+
+    for unknown in (-1.0, 0.0, 1e6):
+        built = ros.ros_profile(ground_robot_log(covariance=unknown))
+        params = parse_profile(built.text).vehicle.params
+        assert params["speed_noise"] == get_model("wheeled").p["speed_noise"]
+        assert "the model's default" in built.text
+    known = parse_profile(ros.ros_profile(ground_robot_log(covariance=0.01)).text).vehicle.params
+    assert known["speed_noise"] == pytest.approx(0.1)
+
+
+def test_the_gyro_axis_follows_gravity_and_a_known_gnss_covariance_is_its_wander():
+    built = ros.ros_profile(ground_robot_log(imu_up="x", fix_type=2))
+    profile = parse_profile(built.text)
+    assert profile.inputs.mapping["w"] == {"channels": ["/imu/angular_velocity.x"], "scale": [1.0]}
+    assert profile.vehicle.params["gnss_error_std"] == pytest.approx(2.0)  # sqrt of the reported 4 m^2
+
+
+def test_without_an_imu_the_odometrys_yaw_rate_drives_the_heading():
+    profile = parse_profile(ros.ros_profile(ground_robot_log(imu=False)).text)
+    assert profile.inputs.mapping["w"] == "/odom/twist.twist.angular.z"
+    assert profile.vehicle.rate_hz == 20
+
+
+def test_a_ground_robot_without_gnss_gets_an_incomplete_profile_and_analyze_says_why(cli, tmp_path):
+    built = ros.ros_profile(ground_robot_log(fix=False))
+    assert "nothing independent of the wheels" in built.model_not_run and "INCOMPLETE" in built.text
+    no_fix = tmp_path / "no_fix.bag"
+    drop_topics(need_testdata(ROS1_BAG), no_fix, ("/fix",))
+    result = cli("analyze", no_fix, "--no-report")
+    assert result.exit_code == 2 and "nothing independent of the wheels" in result.stderr, result.stderr
+    assert "init-profile" in result.stderr  # what to do
+    written = tmp_path / "robot.toml"
+    made = cli("init-profile", no_fix, "-o", written)
+    assert made.exit_code == 0 and "complete the profile" in made.stderr, made.stderr
+    text = written.read_text()
+    assert "INCOMPLETE" in text and 'model = "wheeled"' in text and "[measurements.position]" in text
