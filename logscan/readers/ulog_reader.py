@@ -17,8 +17,9 @@ message types the format does not define (a damaged type byte), data messages wi
 subscription for their msg_id or of a size their format does not fit (a lost or damaged 'A'
 record), subscriptions an 'A' record reusing their msg_id replaces, a topic subscribed twice (the
 second copy), and timestamps whose nanoseconds do not fit int64 (a header start timestamp like
-that is not used as the log's time zero). A cut exactly between two messages leaves a valid, shorter ULog (the format has no
-index or end marker): that cannot be told from a log that ended there. A subscribed format without
+that is not used as the log's time zero). A cut exactly between two messages leaves a valid,
+shorter ULog (the format has no index or end marker): that cannot be told from a log that ended
+there. A subscribed format without
 a ``timestamp`` field (the spec requires one; a damaged definition renames it) has no times: its
 topic is skipped with a warning naming it and the log is partial (a CorruptLogError when no other
 topic is left); pyulog would stop reading the file at its first message, the reader reads on.
