@@ -34,7 +34,6 @@ Rules (documented in docs/inputs.md):
 
 from __future__ import annotations
 
-import csv
 import os
 import re
 from pathlib import Path
@@ -45,6 +44,7 @@ import numpy as np
 from logscan.errors import InputError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
+from logscan.readers.csv_blocks import CsvColumns, load_columns, sniff_delimiter
 from logscan.readers.csv_time import (
     MAX_TIME_NS,
     NS_PER_UNIT,
@@ -59,16 +59,14 @@ if TYPE_CHECKING:
 
 _ULOG2CSV_RE = re.compile(r"^(?P<rest>.+)_(?P<instance>\d+)$")
 _MIXED_MIN_NUMERIC_FRACTION = 0.5  # a column with at least this share of numbers is numeric
-# Cells that mean "no sample here" (pandas' default missing-value words without its NaN spellings,
-# which are written values); and the NaN spellings, read as NaN samples.
-_MISSING_CELLS = ("", "NA", "N/A", "n/a", "NULL", "null", "None", "<NA>", "#N/A", "#N/A N/A", "#NA")
+# The NaN spellings, read as NaN samples (the words meaning "no sample": csv_blocks.MISSING_CELLS).
 _NAN_WORDS = frozenset({"nan", "-nan", "+nan", "1.#ind", "-1.#ind", "1.#qnan", "-1.#qnan"})
 
 
 def read_csv(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     """Read one wide CSV file into a Log (see the module docstring for the rules)."""
     source = SourceInfo(path=str(path), format="csv", time_source="csv column")
-    frame = _load_frame(Path(path))
+    frame = load_columns(Path(path))
     channels = _frame_channels(frame, Path(path), source, wanted, topic=None)
     return Log(
         channels=channels,
@@ -113,7 +111,7 @@ def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
         topic, px4 = topics[file]
         if not (topic_wanted(topic, wanted) or topic_wanted("/" + topic, wanted)):
             continue
-        frame = _load_frame(file)
+        frame = load_columns(file)
         if px4 and "timestamp" not in frame.columns:
             px4 = False
         channels.update(_frame_channels(frame, file, source, wanted, topic=topic, stated_us=px4))
@@ -182,71 +180,7 @@ def _first_column(file: Path) -> str:
             header = fh.readline()
     except OSError:
         return ""
-    return header.split(_sniff_delimiter(header))[0].strip()
-
-
-def _sniff_delimiter(header: str) -> str:
-    counts = {sep: header.count(sep) for sep in (",", ";", "\t", "|")}
-    best = max(counts, key=lambda sep: counts[sep])
-    return best if counts[best] else ","
-
-
-def _load_frame(path: Path) -> pd.DataFrame:
-    """The file as a DataFrame of raw columns; one-line InputErrors for every unreadable case."""
-    import pandas as pd  # here, not at module import: reading an MCAP never loads pandas
-
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            header = fh.readline()
-    except FileNotFoundError:
-        raise InputError("no such file", path=str(path)) from None
-    except UnicodeDecodeError as exc:
-        raise InputError(
-            f"not UTF-8 text (bad byte at {exc.start} of the first line)", path=str(path), hint="save the CSV as UTF-8"
-        ) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=str(path)) from None
-    if not header.strip():
-        raise InputError(
-            "CSV file is empty (no header line)",
-            path=str(path),
-            hint="a CSV needs a header with a time column and data rows",
-        )
-    try:
-        frame = pd.read_csv(
-            path,
-            sep=_sniff_delimiter(header),
-            encoding="utf-8-sig",
-            skipinitialspace=True,
-            keep_default_na=False,
-            na_values=list(_MISSING_CELLS),
-            low_memory=False,
-            on_bad_lines="error",
-        )
-    except UnicodeDecodeError as exc:
-        raise InputError(
-            f"not UTF-8 text (bad byte at offset {exc.start} of a block)", path=str(path), hint="save the CSV as UTF-8"
-        ) from None
-    except pd.errors.EmptyDataError:
-        raise InputError("CSV file is empty", path=str(path)) from None
-    except (pd.errors.ParserError, csv.Error, ValueError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(
-            f"malformed CSV: {first}", path=str(path), hint="every row needs as many fields as the header"
-        ) from None
-    if not isinstance(frame.index, pd.RangeIndex):  # pandas made the surplus fields an index
-        raise InputError(
-            "malformed CSV: data rows have more fields than the header",
-            path=str(path),
-            hint="every row needs as many fields as the header",
-        )
-    frame.columns = [str(c).strip() for c in frame.columns]
-    if frame.empty:
-        raise InputError(
-            f"CSV has a header ({len(frame.columns)} column(s)) but no data rows",
-            path=str(path),
-        )
-    return frame
+    return header.split(sniff_delimiter(header))[0].strip()
 
 
 def _numeric_column(series: pd.Series) -> tuple[np.ndarray | None, int]:
@@ -312,7 +246,7 @@ def _time_ns(series: pd.Series, unit: str) -> tuple[np.ndarray, np.ndarray]:
     return np.round(values[valid] * factor).astype(np.int64), valid
 
 
-def _pick_time_column(frame: pd.DataFrame, path: Path) -> tuple[str, str | None]:
+def _pick_time_column(frame: CsvColumns, path: Path) -> tuple[str, str | None]:
     for name in frame.columns:
         is_time, unit = time_column_unit(name)
         if is_time:
@@ -327,7 +261,7 @@ def _pick_time_column(frame: pd.DataFrame, path: Path) -> tuple[str, str | None]
 
 
 def _frame_channels(
-    frame: pd.DataFrame,
+    frame: CsvColumns,
     path: Path,
     source: SourceInfo,
     wanted: set[str] | None,
@@ -342,6 +276,11 @@ def _frame_channels(
     source.metadata.setdefault("csv.time_units", {})[label] = unit.unit
     source.metadata.setdefault("csv.time_columns", {})[label] = f"{time_name!r} in {unit.unit}: {unit.reason}"
     t_ns, valid = _time_ns(frame[time_name], unit.unit)
+    frame.release(time_name)
+    if frame.cut_row:
+        source.skip(f"rows of {label}", "cut mid-row: the file ends inside it")
+        source.partial = True
+        source.partial_reason = "; ".join(filter(None, [source.partial_reason, f"{label}: {frame.cut_row}"]))
     if not valid.all():
         source.skip(f"rows of {label}", "time is empty, not a number or out of range", int((~valid).sum()))
     if stated_us and (t_ns == 0).any():  # the ULog reader's rule, so both readers agree
@@ -371,11 +310,16 @@ def _frame_channels(
         if not channel_wanted(name, topic or path.stem, wanted):
             continue
         filled = frame[column].notna().to_numpy()[valid]  # an empty cell is no sample, not a NaN
-        values = values[valid][filled]
+        frame.release(column)
+        if not valid.all():
+            values = values[valid]
+        every = bool(filled.all())
+        values = values if every else values[filled]
         n_nan = int(np.isnan(values).sum())
         if n_nan:
             nan_counts[name] = n_nan
-        channels[name] = Channel(name, t_ns[filled], values)
+        # a column filled on every row shares the table's times (one array, not one per column)
+        channels[name] = Channel(name, t_ns if every else t_ns[filled], values)
     if nan_counts:
         listed = ", ".join(f"{k}: {v}" for k, v in list(nan_counts.items())[:5])
         more = f", ... ({len(nan_counts)} channels)" if len(nan_counts) > 5 else ""
@@ -395,8 +339,8 @@ def _frame_channels(
 
 
 def _time_column(
-    frame: pd.DataFrame, path: Path, source: SourceInfo, label: str, stated_us: bool
-) -> tuple[pd.DataFrame, str, TimeUnit]:
+    frame: CsvColumns, path: Path, source: SourceInfo, label: str, stated_us: bool
+) -> tuple[CsvColumns, str, TimeUnit]:
     """The table's time column and its unit (stated, or inferred with a warning into ``source``);
     the frame comes back with ISO 8601 date-times replaced by epoch nanoseconds."""
     if stated_us:
