@@ -9,6 +9,10 @@ samples v_1 .. v_M (the steps where the channel has a new sample, `AlignedGroup.
     g_i      = r_i / L                                                the statistic: held samples, in
                                                                       units of the channel's own rate
 
+At rest (`Model.at_rest`: a ground robot whose wheels report, or are commanded, no speed) a sensor
+holding its value is stillness, not a freeze: those samples are not judged, and a run counts only
+the samples after the last one at rest (a GNSS receiver's static hold ends once the robot moves).
+
 The anchor a(i) is the first sample of the current run: a run ends when a sample leaves the band
 +-tol around it, so a slow healthy ramp (each step small, the sum not) is not a run. sigma is the
 channel's noise: the profile's noise_std, else the model's default, never larger than the channel's
@@ -105,7 +109,7 @@ class FrozenSensorDetector(Detector):
 
     name = "frozen"
     requires_trace = False
-    reads = frozenset({"z"})  # the measurement groups' samples and fresh masks
+    reads = frozenset({"z", "u"})  # the measurement groups' samples and fresh masks; the inputs (at rest)
     default_enabled = True
     defaults = {
         "n_samples": 5,  # at least this many held samples (of the channel's own rate) to be stuck
@@ -143,9 +147,10 @@ class FrozenSensorDetector(Detector):
         ]
         duration = max(float(run.t[-1] - run.t[0]), run.dt) if run.t.size else 1.0
         info = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
+        rest = model.at_rest(run.u) if model is not None and getattr(run, "u", None) is not None else None
         for group, j, signal in columns:  # one pass per channel: a few dozen at most
             info["channels"][signal] = group.channels[j] if j < len(group.channels) else group.name
-            stat, h, sigma, fill, steps, anchor = self._channel(run, group, j, model, len(columns), duration)
+            stat, h, sigma, fill, steps, anchor = self._channel(run, group, j, model, len(columns), duration, rest)
             if stat is None:
                 info["not_checked"][signal] = (
                     "fewer than 2 samples"
@@ -165,7 +170,7 @@ class FrozenSensorDetector(Detector):
         result.not_checked = [NotChecked(line) for line in skipped_lines(info["not_checked"], self.name)]
         return result
 
-    def _channel(self, run, group, j: int, model, tests: int, duration: float):
+    def _channel(self, run, group, j: int, model, tests: int, duration: float, rest=None):
         """(statistic (N,) NaN off the channel's fresh steps, or None when the channel is not
         checked; threshold h; sigma; fill factor L; the grid steps of its fresh samples; per fresh
         sample the index of its run's first sample, the anchor). Temporaries are the channel's
@@ -187,11 +192,18 @@ class FrozenSensorDetector(Detector):
         sigma = float(np.fmin(self._stated_sigma(group, j, model), channel_noise(v[new])))
         anchor = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0)
         del v, new
+        if rest is not None:  # a run starts again after the last sample at rest (module docstring)
+            still = np.asarray(rest, dtype=bool)[steps]
+            last_rest = np.maximum.accumulate(np.where(still, np.arange(steps.size), -1))
+            anchor = np.maximum(anchor, last_rest + 1)
+            anchor = np.minimum(anchor, np.arange(steps.size))
         held = np.arange(1, anchor.size + 1) - anchor  # r_i: samples held since the anchor (1 at it)
         lengths = np.diff(np.append(np.flatnonzero(held == 1), anchor.size))
         # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
         stat = np.full(run.n_steps, np.nan)
         stat[steps] = held / fill
+        if rest is not None:
+            stat[steps[still]] = np.nan  # stillness, not judged
         h = max(float(self.n_samples), run_threshold(lengths, fill, tests, duration, float(self.budget_per_hour)))
         return stat, h, sigma, fill, steps, anchor
 

@@ -1,7 +1,8 @@
 """Edit a real ROS 1 bag (for tests): copy it with rosbags, changing one topic's messages in a window.
 
-`shift_fix` moves a NavSatFix's reported position north by a distance over a time window: a
-spoofed or multipath-jumped GNSS on a real robot's drive, everything else byte-for-byte as driven.
+`shift_fix` moves a NavSatFix's reported position north by a distance over a time window (a
+spoofed or multipath-jumped GNSS), `hold_fix` freezes it (a stuck receiver), `drop_topics` leaves
+topics out: a real robot's drive, everything else byte-for-byte as driven.
 """
 
 from __future__ import annotations
@@ -15,11 +16,31 @@ METRES_PER_DEG_LAT = 111_132.954  # WGS-84 meridian degree near 45 deg (to 0.1 %
 def shift_fix(src: Path, dst: Path, topic: str, start_s: float, end_s: float, north_m: float) -> int:
     """Copy the ROS 1 bag ``src`` to ``dst`` with ``topic``'s latitude moved ``north_m`` metres north
     for the messages ``start_s`` to ``end_s`` seconds after the bag's start. Returns how many moved."""
+
+    def move(msg, first):
+        msg.latitude += north_m / METRES_PER_DEG_LAT
+
+    return edit_messages(src, dst, topic, start_s, end_s, move)
+
+
+def hold_fix(src: Path, dst: Path, topic: str, start_s: float, end_s: float) -> int:
+    """Copy the bag with ``topic``'s fix frozen at its first value in the window (a stuck receiver)."""
+
+    def hold(msg, first):
+        msg.latitude, msg.longitude, msg.altitude = first.latitude, first.longitude, first.altitude
+
+    return edit_messages(src, dst, topic, start_s, end_s, hold)
+
+
+def edit_messages(src: Path, dst: Path, topic: str, start_s: float, end_s: float, change) -> int:
+    """Copy the ROS 1 bag ``src`` to ``dst``, calling ``change(message, first message of the window)``
+    on each ``topic`` message ``start_s`` to ``end_s`` seconds after the bag's start. Returns how many."""
     from rosbags.rosbag1 import Reader, Writer
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
     moved = 0
+    first = None
     with Reader(src) as reader, Writer(dst) as writer:
         t0 = reader.start_time
         out = {}
@@ -31,7 +52,8 @@ def shift_fix(src: Path, dst: Path, topic: str, start_s: float, end_s: float, no
             since = (stamp - t0) / 1e9
             if conn.topic == topic and start_s <= since <= end_s:
                 msg = store.deserialize_ros1(raw, conn.msgtype)
-                msg.latitude += north_m / METRES_PER_DEG_LAT
+                first = first if first is not None else store.deserialize_ros1(raw, conn.msgtype)
+                change(msg, first)
                 raw = store.serialize_ros1(msg, conn.msgtype)
                 moved += 1
             writer.write(out[conn.id], stamp, raw)

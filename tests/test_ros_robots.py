@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import need_testdata
-from ros_edit import drop_topics, shift_fix
+from ros_edit import drop_topics, hold_fix, shift_fix
 
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.profiles import parse_profile, ros
@@ -83,6 +83,18 @@ def test_a_ten_metre_gnss_jump_on_the_real_drive_alarms_at_its_onset(cli, tmp_pa
     starts = [incident["start"] for incident in entry["incidents"]]
     assert any(199.5 <= s <= 202.0 for s in starts), starts  # within 2 s of the jump
     assert all(195.0 <= s <= 235.0 for s in starts), starts  # nothing anywhere else on the drive
+
+
+def test_a_stuck_gnss_alarms_while_driving_but_its_static_hold_at_a_stop_does_not(cli, tmp_path):
+    # the real drive stops from 236.8 s to 247 s, where the receiver holds its position exactly
+    code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path, "-d", "frozen")
+    assert code == 0 and entry["n_alarms"] == 0, text
+    stuck = tmp_path / "stuck.bag"
+    assert hold_fix(need_testdata(ROS1_BAG), stuck, "/fix", 100.0, 130.0) > 70
+    code, entry, text = summary(cli, stuck, tmp_path, "-d", "frozen")
+    assert code == 1, text
+    starts = [incident["start"] for incident in entry["incidents"]]
+    assert starts and all(100.0 <= s <= 110.0 for s in starts), starts
 
 
 def test_the_ros_wheeled_profile_of_the_husky(tmp_path):

@@ -182,6 +182,12 @@ class Model:
         """Typical magnitude of each state (sets the encoded check's sigma floor)."""
         return np.ones(len(self.state_names))
 
+    def at_rest(self, u: np.ndarray) -> np.ndarray | None:
+        """(N,) bool: the grid steps where the inputs ``u`` (N, nu) say the vehicle stands still (a
+        ground robot's wheels report, or are commanded, no speed), where a sensor holding its value
+        is stillness, not a freeze; None when the inputs cannot tell (the default)."""
+        return None
+
     # --- numpy views of the model (tests, simulator, reference filter) -------------------------
     # One call each; they run the same numba functions as the EKF kernel.
     def f(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:

@@ -44,6 +44,10 @@ import numpy as np
 from logscan.models.base import GroupSpec, Model
 from logscan.models.dispatch import WHEELED_ID
 
+# |v| at or below this (m/s) is a robot at rest: a parked robot's wheel odometry, or a zero
+# command, reads exactly 0; 1 mm/s is far below any drive and above float noise
+REST_SPEED = 1e-3
+
 DEFAULTS = {
     "speed_noise": 0.1,  # m/s, one wheel-speed sample's noise
     "speed_rate_hz": 10.0,  # Hz, the wheel odometry's rate
@@ -90,6 +94,10 @@ class Wheeled(Model):
         # origin is the first fix), heading unknown, the receiver's error at its steady state
         g = max(self.p["gnss_error_std"], 1e-6)
         return np.array([1e3, 1e3, np.pi, 0.02, 0.2, g, g])
+
+    def at_rest(self, u: np.ndarray) -> np.ndarray:
+        """The steps whose wheel speed v (measured or commanded) is at most REST_SPEED."""
+        return np.abs(np.asarray(u, dtype=np.float64)[:, 0]) <= REST_SPEED
 
     def default_Q(self, dt: float) -> np.ndarray:
         """Q = diag(q_xy, q_xy, q_psi, gyro_bias_rw^2, slip_rw^2) dt (module docstring), and the

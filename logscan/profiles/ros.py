@@ -257,6 +257,10 @@ def _wheeled_profile(log, found: _Found, odom: str) -> BuiltProfile:
         "",
         "[detectors.nis]  # logscan's filter: NIS per group",
         "",
+        "[detectors.cusum]  # slow drifts and small biases of each whitened innovation",
+        "",
+        "[detectors.frozen]  # a stuck sensor (not judged while the wheels stand still)",
+        "",
     ]
     return BuiltProfile("ros_wheeled", "\n".join(lines), notes)
 
