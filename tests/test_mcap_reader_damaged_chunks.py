@@ -179,3 +179,13 @@ def test_every_chunk_damaged_is_a_corrupt_log(tmp_path):
     path.write_bytes(_mcap(_chunk("zstd", b"not zstd at all", 100)))
     with pytest.raises(CorruptLogError, match="zstd chunk does not decompress"):
         read_log(path)
+
+
+def test_a_log_time_beyond_int64_nanoseconds_is_dropped_and_counted(tmp_path):
+    records = [_channel(1, "/a"), _channel(2, "/b")] + [_message(1 + i % 2, i, i) for i in range(20)]
+    records[4] = _record(0x05, struct.pack("<HIQQ", 1, 0, 2**64 - 1, 0) + b'{"x": 1}')  # wraps negative as int64
+    path = tmp_path / "time.mcap"
+    path.write_bytes(_mcap(_plain_chunk(records)))
+    log = read_log(path)
+    assert log.source.partial and "1 message(s) dropped: a log_time beyond int64" in log.source.partial_reason
+    assert log.channels["/a/x"].t.min() >= 0 and len(log.channels["/a/x"]) == 9

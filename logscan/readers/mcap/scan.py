@@ -78,6 +78,7 @@ from logscan.readers.mcap.records import (
 MAX_CHUNK_BYTES = 512 << 20  # one chunk never decompresses to more
 MAX_RATIO = 1000  # the chunks of a file decompress to at most this times its size in all ...
 MIN_FILE_BUDGET_BYTES = 1 << 30  # ... or this, whichever is larger
+MAX_LOG_TIME_NS = 2**63 - 1  # log_time is a uint64 in the file, int64 ns here
 FLUSH_BYTES = 32 << 20  # message bytes held in batches before they are handed to ``on_flush``
 TOP_LEVEL_SLICE = 1 << 16  # top-level records handled at a time (unchunked files)
 WALK_WINDOW = 32 << 20  # bytes of the file walked for record boundaries before their pages go back
@@ -167,6 +168,7 @@ class Scan:
         self.skipped_chunks: list[tuple[int, str]] = []  # (offset, why) of the damaged chunks skipped
         self.redefined: list[str] = []  # channel / schema ids defined twice differently: what and where
         self.redefined_messages = 0  # messages of the chunks that redefine their channel
+        self.beyond_int64 = 0  # messages dropped: a log_time int64 nanoseconds cannot hold
         self.messages_read = 0
         self.chunks_read = 0
         self.unchecked_records = 0  # schema/channel/message records outside CRC-checked chunks
@@ -383,6 +385,11 @@ class Scan:
                 f"{self.unknown_channel_messages} message(s) on channel ids no Channel record defines were "
                 "dropped (a damaged channel id, or a lost Channel record)"
             )
+        if self.beyond_int64:
+            self.damage.append(
+                f"{self.beyond_int64} message(s) dropped: a log_time beyond int64 nanoseconds (after 2262), "
+                "a damaged message header"
+            )
         if self.redefined:
             self.damage.append(
                 f"{len(self.redefined)} Channel/Schema record(s) redefine an id with other content "
@@ -474,9 +481,14 @@ class Scan:
         m_len = lengths[is_message]
         if (m_len < MESSAGE_HEADER).any():
             raise_corrupt("message record shorter than its header", int(m_off[m_len < MESSAGE_HEADER][0]))
-        channel_ids = gather_u16(u8, m_off)
-        log_times = gather_u64(u8, m_off + 6).astype(np.int64)
         self.messages_read += int(m_off.size)
+        raw_times = gather_u64(u8, m_off + 6)
+        fits = raw_times <= np.uint64(MAX_LOG_TIME_NS)  # int64 ns hold it (until 2262)
+        if not fits.all():  # a damaged log_time: the message is dropped and counted
+            self.beyond_int64 += int(m_off.size - np.count_nonzero(fits))
+            m_off, m_len, raw_times = m_off[fits], m_len[fits], raw_times[fits]
+        channel_ids = gather_u16(u8, m_off)
+        log_times = raw_times.astype(np.int64)
         if redefined:
             self.redefined_messages += int(np.count_nonzero(np.isin(channel_ids, list(redefined))))
         for cid in np.unique(channel_ids).tolist():
