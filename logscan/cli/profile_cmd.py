@@ -67,6 +67,7 @@ def init_profile(log_path: str, output_path: str | None) -> None:
 def _starter(log_path: str):
     """The starter profile (`logscan.profiles.starter.StarterProfile`) of a CSV log that embeds no
     profile, else None; an InputError when no column can be a state."""
+    from logscan.docs import doc_url
     from logscan.profiles.starter import starter_profile
     from logscan.readers import detect_format, read_embedded_profile, read_log
 
@@ -78,6 +79,6 @@ def _starter(log_path: str):
         raise InputError(
             f"no column varies enough to be a state ({why})",
             path=log_path,
-            hint="a starter profile needs numeric columns that change; write one by hand (docs/profiles.md)",
+            hint=f"a starter profile needs numeric columns that change; write one by hand ({doc_url('profiles.md')})",
         )
     return built

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from logscan.docs import doc_url
 from logscan.log import Log
 from logscan.profiles.toml_writer import _string
 
@@ -218,7 +219,9 @@ def _header(log: Log, kept: list[Column], dropped: list[tuple[str, str]]) -> lis
         "# Gauss-Markov, A = -1/tau), measured directly (C = 1). Its noise comes from the column's own",
         "# fresh samples: R from the scatter of second differences, Q from that of first differences,",
         "# tau from its spread. Calibrate both on healthy flights: logscan train --calibrate --tune",
-        "# (docs/csv-logs.md). Edit freely: drop a column by deleting its row, column, group and R entry.",
+        f"# ({doc_url('csv-logs.md')}).",
+        "# Edit freely: drop a column by deleting its row and column of A and Q, its C and R entries",
+        "# and its [measurements] table.",
         "#",
         "# columns not used:",
         *[f"#   {name}: {why}" for name, why in dropped],
