@@ -150,6 +150,13 @@ class FrozenSensorDetector(Detector):
         rest = model.at_rest(run.u) if model is not None and getattr(run, "u", None) is not None else None
         for group, j, signal in columns:  # one pass per channel: a few dozen at most
             info["channels"][signal] = group.channels[j] if j < len(group.channels) else group.name
+            spec = getattr(model, "groups", {}).get(group.name) if model is not None else None
+            if spec is not None and spec.steady:
+                info["not_checked"][signal] = (
+                    "holds one value over long stretches of healthy operation (the model says so): a freeze "
+                    "cannot be told from it"
+                )
+                continue
             stat, h, sigma, fill, steps, anchor = self._channel(run, group, j, model, len(columns), duration, rest)
             if stat is None:
                 info["not_checked"][signal] = (

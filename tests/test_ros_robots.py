@@ -192,16 +192,25 @@ def test_without_an_imu_the_odometrys_yaw_rate_drives_the_heading():
     assert profile.vehicle.rate_hz == 20
 
 
-def test_a_ground_robot_without_gnss_gets_an_incomplete_profile_and_analyze_says_why(cli, tmp_path):
-    built = ros.ros_profile(ground_robot_log(fix=False))
-    assert "nothing independent of the wheels" in built.model_not_run and "INCOMPLETE" in built.text
+def test_without_gnss_the_wheels_yaw_rate_is_checked_against_the_gyro(cli, tmp_path):
     no_fix = tmp_path / "no_fix.bag"
     drop_topics(need_testdata(ROS1_BAG), no_fix, ("/fix",))
-    result = cli("analyze", no_fix, "--no-report")
+    code, entry, text = summary(cli, no_fix, tmp_path)
+    assert code == 0 and entry["n_alarms"] == 0, text
+    assert set(entry["filter"]["updates"]) == {"wheel_yaw_rate"}
+    assert "the wheels' speed and the position are not checked" in text
+
+
+def test_a_ground_robot_with_nothing_to_check_gets_an_incomplete_profile_and_analyze_says_why(cli, tmp_path):
+    built = ros.ros_profile(ground_robot_log(fix=False, imu=False))
+    assert "nothing independent of the wheels" in built.model_not_run and "INCOMPLETE" in built.text
+    wheels_only = tmp_path / "wheels_only.bag"
+    drop_topics(need_testdata(ROS1_BAG), wheels_only, ("/fix", "/imu/data"))
+    result = cli("analyze", wheels_only, "--no-report")
     assert result.exit_code == 2 and "nothing independent of the wheels" in result.stderr, result.stderr
     assert "init-profile" in result.stderr  # what to do
     written = tmp_path / "robot.toml"
-    made = cli("init-profile", no_fix, "-o", written)
+    made = cli("init-profile", wheels_only, "-o", written)
     assert made.exit_code == 0 and "complete the profile" in made.stderr, made.stderr
     text = written.read_text()
     assert "INCOMPLETE" in text and 'model = "wheeled"' in text and "[measurements.position]" in text

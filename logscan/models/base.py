@@ -31,6 +31,9 @@ class GroupSpec:
     wrap: tuple[bool, ...] = ()  # angular output: the innovation is wrapped to (-pi, pi]
     direct_states: tuple[int, ...] = ()  # state observed directly (z = gain * x[i]); -1: none
     direct_gains: tuple[float, ...] = ()  # the gain of that direct observation
+    # the measured quantity holds one value over long stretches of healthy operation (a wheel
+    # odometry's yaw rate while driving straight): a frozen sensor cannot be told from it
+    steady: bool = False
 
     @property
     def size(self) -> int:

@@ -6,15 +6,19 @@ factor that drifts with the terrain, and the yaw rate they imply is off by more.
 the yaw rate from a gyro where there is one (or the odometry's where not) and carries the two
 errors as states, so a healthy drive is consistent and a sensor that departs from it is not.
 
-States (5): x, y (m, a local east-north plane about the first position: ROS's REP 103 ENU), psi
-(yaw, rad, counter-clockwise from east, not wrapped), b_w (rad/s, the yaw-rate input's bias) and
-s (the wheels' speed scale: 1 when the wheel odometry is exact, below 1 when they slip).
+States (8): x, y (m, a local east-north plane about the first position: ROS's REP 103 ENU), psi
+(yaw, rad, counter-clockwise from east, not wrapped), b_w (rad/s, the yaw-rate input's bias), s
+(the wheels' speed scale: 1 when the wheel odometry is exact, below 1 when they slip), g_x, g_y
+(m, the GNSS receiver's error, below) and c (the ratio of the yaw rate the wheels imply to the
+true one: 1 for a differential drive, above 1 for a skid steer that skids in turns).
 Inputs (2): v (m/s, the wheels' forward speed: nav_msgs/Odometry twist.linear.x) and w (rad/s,
 the yaw rate about up: a gyro's, or the odometry's twist.angular.z).
 Discrete model (Euler step, `wheeled_predict_into`):
     x += s v cos(psi) dt,  y += s v sin(psi) dt,  psi += (w - b_w) dt,  b_w and s random walks.
 Groups: `position` (x + g_x, y + g_y: a GNSS fix in the local east-north frame, `from =
-"geodetic"` with `frame = "en"`) and `heading` (psi: an absolute heading, e.g. a compass).
+"geodetic"` with `frame = "en"`), `heading` (psi: an absolute heading, e.g. a compass) and `wheel_yaw_rate` (the
+odometry's own yaw rate, c (w - b_w), when w is a gyro's: the wheels checked against the gyro,
+what a robot without GNSS can still be checked by).
 
 The GNSS error g (2 states) is a first-order Gauss-Markov process, g_{k+1} = exp(-dt/tau) g_k +
 w: a stand-alone receiver's error is mostly a slow wander (atmosphere, multipath, satellite
@@ -63,7 +67,16 @@ DEFAULTS = {
 class Wheeled(Model):
     name = "wheeled"
     model_id = WHEELED_ID
-    state_names = ("x", "y", "psi", "yaw_rate_bias", "speed_scale", "gnss_error_x", "gnss_error_y")
+    state_names = (
+        "x",
+        "y",
+        "psi",
+        "yaw_rate_bias",
+        "speed_scale",
+        "gnss_error_x",
+        "gnss_error_y",
+        "yaw_rate_ratio",
+    )
     input_names = ("v", "w")
     inputs_are_sensors = True  # wheel odometry and a gyro: readings, not commands
     groups = {
@@ -72,6 +85,10 @@ class Wheeled(Model):
         ),  # not direct: the receiver's error adds to x, y
         "heading": GroupSpec(
             "heading", 1, ("psi",), (0.1,), (-6.4,), (6.4,), ("rad",), wrap=(True,), direct_states=(2,)
+        ),
+        # the wheels' own yaw rate (odometry twist.angular.z) against the gyro's: c (w - b_w)
+        "wheel_yaw_rate": GroupSpec(
+            "wheel_yaw_rate", 2, ("yaw_rate",), (0.05,), (-20.0,), (20.0,), ("rad/s",), steady=True
         ),
     }
 
@@ -87,20 +104,20 @@ class Wheeled(Model):
         return np.array([self.p["gnss_error_tau"]])
 
     def default_x0(self) -> np.ndarray:
-        return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+        return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0])
 
     def state_scale(self) -> np.ndarray:
         # P0 = diag(state_scale^2): position anywhere within 1 km of the origin (a geodetic group's
         # origin is the first fix), heading unknown, the receiver's error at its steady state
         g = max(self.p["gnss_error_std"], 1e-6)
-        return np.array([1e3, 1e3, np.pi, 0.02, 0.2, g, g])
+        return np.array([1e3, 1e3, np.pi, 0.02, 0.2, g, g, 0.5])
 
     def at_rest(self, u: np.ndarray) -> np.ndarray:
         """The steps whose wheel speed v (measured or commanded) is at most REST_SPEED."""
         return np.abs(np.asarray(u, dtype=np.float64)[:, 0]) <= REST_SPEED
 
     def default_Q(self, dt: float) -> np.ndarray:
-        """Q = diag(q_xy, q_xy, q_psi, gyro_bias_rw^2, slip_rw^2) dt (module docstring), and the
+        """Q = diag(q_xy, q_xy, q_psi, gyro_bias_rw^2, slip_rw^2, ., ., slip_rw^2) dt (module docstring), and the
         Gauss-Markov GNSS error's exact step variance sigma_g^2 (1 - exp(-2 dt / tau_g)); 1e-12
         on the diagonal keeps it positive definite when a density is 0."""
         p = self.p
@@ -108,4 +125,5 @@ class Wheeled(Model):
         q_psi = p["yaw_rate_noise"] ** 2 / p["yaw_rate_hz"]
         q = np.array([q_xy, q_xy, q_psi, p["gyro_bias_rw"] ** 2, p["slip_rw"] ** 2]) * dt
         g = p["gnss_error_std"] ** 2 * -np.expm1(-2.0 * dt / p["gnss_error_tau"])
-        return np.diag(np.concatenate([q, [g, g]])) + 1e-12 * np.eye(7)
+        c = p["slip_rw"] ** 2 * dt  # the turning slip changes with the ground as the speed scale does
+        return np.diag(np.concatenate([q, [g, g, c]])) + 1e-12 * np.eye(8)

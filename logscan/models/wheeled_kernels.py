@@ -1,8 +1,10 @@
 """Numba functions of the `wheeled` model (a planar wheeled ground robot whose wheels slip).
 
-Shapes: p (WHEELED_N_PARAMS,) = [tau_g] packed by `Wheeled.param_vector`, x (7,) [x, y, psi, b_w, s,
-g_x, g_y], u (2,) [v, w], F (7, 7); `position` (gid 0) measures x + g_x, y + g_y (the receiver's
-slowly wandering error g), `heading` (gid 1) psi: h into hx[r:r+m], H into Hs[r:r+m, :].
+Shapes: p (WHEELED_N_PARAMS,) = [tau_g] packed by `Wheeled.param_vector`, x (8,) [x, y, psi, b_w, s,
+g_x, g_y, c], u (2,) [v, w], F (8, 8); `position` (gid 0) measures x + g_x, y + g_y (the receiver's
+slowly wandering error g), `heading` (gid 1) psi, `wheel_yaw_rate` (gid 2) c (w - b_w): the yaw rate
+the wheels imply, c times the true one (a skid-steer's turning slip). h into hx[r:r+m], H into
+Hs[r:r+m, :].
 """
 
 from __future__ import annotations
@@ -12,18 +14,18 @@ from numba import njit
 
 WHEELED_ID = 7  # this model's branch in every dispatcher of logscan.models.dispatch
 WHEELED_N_PARAMS = 1
-WHEELED_N = 7
+WHEELED_N = 8
 
 
 @njit(cache=True)
 def wheeled_predict_into(p, x, u, dt, x_next, F):
     """Euler step and its Jacobian F = df/dx; no allocation::
 
-        x_{k+1}   = x_k + s v cos(psi) dt        (v: the wheels' forward speed, s: its scale)
-        y_{k+1}   = y_k + s v sin(psi) dt
-        psi_{k+1} = psi_k + (w - b_w) dt         (w: the yaw rate input, b_w: its bias)
-        b_w, s    constant (random walks through Q)
-        g_{k+1}   = exp(-dt / tau_g) g_k         (the GNSS error: first-order Gauss-Markov, p[0] = tau_g)
+    x_{k+1}   = x_k + s v cos(psi) dt        (v: the wheels' forward speed, s: its scale)
+    y_{k+1}   = y_k + s v sin(psi) dt
+    psi_{k+1} = psi_k + (w - b_w) dt         (w: the yaw rate input, b_w: its bias)
+    b_w, s, c constant (random walks through Q)
+    g_{k+1}   = exp(-dt / tau_g) g_k         (the GNSS error: first-order Gauss-Markov, p[0] = tau_g)
     """
     c = np.cos(x[2])
     sn = np.sin(x[2])
@@ -37,6 +39,7 @@ def wheeled_predict_into(p, x, u, dt, x_next, F):
     decay = np.exp(-dt / p[0])
     x_next[5] = decay * x[5]
     x_next[6] = decay * x[6]
+    x_next[7] = x[7]
     for i in range(WHEELED_N):
         for j in range(WHEELED_N):
             F[i, j] = 1.0 if i == j else 0.0
@@ -60,17 +63,28 @@ def wheeled_predict(p, x, u, dt):
 
 @njit(cache=True)
 def _group_states(gid):
-    """The states a group reads directly: position (0) x and y, heading (1) psi."""
+    """The rows of a group and the states they start from: position (0) x and y, heading (1) psi,
+    wheel_yaw_rate (2) one row."""
     if gid == 1:
         return 2, 3
+    if gid == 2:
+        return 7, 8
     return 0, 2
 
 
 @njit(cache=True)
 def wheeled_meas_into(p, gid, x, u, r, hx, Hs):
-    """position: z = [x + g_x, y + g_y]; heading: z = [psi] (the EKF wraps its innovation). Into
-    hx[r:r+m], H into Hs[r:r+m, :]."""
+    """position: z = [x + g_x, y + g_y]; heading: z = [psi] (the EKF wraps its innovation);
+    wheel_yaw_rate: z = c (w - b_w). Into hx[r:r+m], H into Hs[r:r+m, :]."""
     first, stop = _group_states(gid)
+    if gid == 2:
+        for j in range(WHEELED_N):
+            Hs[r, j] = 0.0
+        rate = u[1] - x[3]
+        hx[r] = x[7] * rate
+        Hs[r, 3] = -x[7]  # dh/db_w
+        Hs[r, 7] = rate  # dh/dc
+        return
     for i in range(stop - first):
         hx[r + i] = x[first + i]
         for j in range(WHEELED_N):

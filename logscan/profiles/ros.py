@@ -196,7 +196,8 @@ def _wheeled_profile(log, found: _Found, odom: str) -> BuiltProfile:
     channels, notes = found.channels, found.notes
     from logscan.models import get_model
 
-    defaults = get_model("wheeled", {}).p
+    model = get_model("wheeled", {})
+    defaults = model.p
     speed = f"{odom}/twist.twist.linear.x"
     odom_hz = found.rate(speed)
     (speed_std,) = covariance_std(channels, [f"{odom}/twist.covariance[0]"])
@@ -227,33 +228,55 @@ def _wheeled_profile(log, found: _Found, odom: str) -> BuiltProfile:
         f"w = {yaw}",
         f"stale_s = {2.5 / min(odom_hz, yaw_hz):.3g}  # an input older than this is a dropout",
     ]
-    if not found.fixes:
-        why = f"no {ROS_NAVSATFIX} topic: nothing independent of the wheels to check them against"
+    groups: list[str] = []
+    odom_rate = f"{odom}/twist.twist.angular.z"
+    if imu_hz and found.has(odom_rate):  # the wheels' yaw rate against the gyro's
+        (std,) = covariance_std(channels, [f"{odom}/twist.covariance[35]"])
+        groups += [
+            "",
+            f"[measurements.wheel_yaw_rate]  # {odom}'s yaw rate against the gyro's (a skid steer's ratio is a state)",
+            f'channels = ["{odom_rate}"]',
+            f"rate_hz = {odom_hz:.3g}",
+            _noise_line([std], model.groups["wheel_yaw_rate"].noise_std, "yaw rate"),
+        ]
+    wander: list[str] = []
+    if found.fixes:
+        fix = found.fixes[0]
+        lla = [f"{fix}/{f}" for f in ("latitude", "longitude", "altitude")]
+        east, north = covariance_std(channels, [f"{fix}/position_covariance[{i}]" for i in (0, 4)])
+        white = [s for s in (east, north) if s is not None]
+        kind = channels.get(f"{fix}/position_covariance_type")
+        kinds = np.asarray(kind.values if kind is not None else [], dtype=np.float64)
+        known = bool(white) and kinds.size > 0 and float(np.median(kinds)) >= COVARIANCE_TYPE_DIAGONAL_KNOWN
+        wander = [
+            f"gnss_error_std = {float(np.mean(white)):.4g}  # m: {fix} reports its covariance as known"
+            if known
+            else f"gnss_error_std = {GPS_SPS_SIGMA_M:.3g}  # m: the GPS SPS accuracy standard (9 m 95 % "
+            f"horizontal); {fix}'s covariance is approximated or unknown"
+        ]
+        notes.append(
+            f"{fix} altitude not checked: the wheeled model is planar (a ground robot's altitude follows terrain)"
+        )
+        groups += [
+            "",
+            f"[measurements.position]  # {fix} ({ROS_NAVSATFIX}): east, north about the first fix",
+            f"channels = {toml_list(lla)}",
+            'from = "geodetic"',
+            'frame = "en"  # horizontal only: the altitude is not checked',
+            f"rate_hz = {found.rate(lla[0]):.3g}",
+            _noise_line([east, north], model.groups["position"].noise_std, "position"),
+        ]
+    elif groups:
+        notes.append(f"no {ROS_NAVSATFIX} topic: the wheels' speed and the position are not checked, only the yaw rate")
+    if not groups:
+        why = (
+            f"no {ROS_NAVSATFIX} topic and no gyro to check the wheels' yaw rate against: nothing independent "
+            "of the wheels to check them against"
+        )
         body = header + inputs + ["", "# [measurements.position]  # a position source: a GNSS fix", "#   ..."]
         return _undecided("ros_wheeled", log, found, why, body)
-    fix = found.fixes[0]
-    lla = [f"{fix}/{f}" for f in ("latitude", "longitude", "altitude")]
-    east, north = covariance_std(channels, [f"{fix}/position_covariance[{i}]" for i in (0, 4)])
-    white = [s for s in (east, north) if s is not None]
-    kind = channels.get(f"{fix}/position_covariance_type")
-    kinds = np.asarray(kind.values if kind is not None else [], dtype=np.float64)
-    known = bool(white) and kinds.size > 0 and float(np.median(kinds)) >= COVARIANCE_TYPE_DIAGONAL_KNOWN
-    wander = (
-        f"gnss_error_std = {float(np.mean(white)):.4g}  # m: {fix} reports its covariance as known"
-        if known
-        else f"gnss_error_std = {GPS_SPS_SIGMA_M:.3g}  # m: the GPS SPS accuracy standard (9 m 95 % horizontal); "
-        f"{fix}'s covariance is approximated or unknown"
-    )
-    notes.append(f"{fix} altitude not checked: the wheeled model is planar (a ground robot's altitude follows terrain)")
-    lines = header + [wander] + inputs
+    lines = header + wander + inputs + groups
     lines += [
-        "",
-        f"[measurements.position]  # {fix} ({ROS_NAVSATFIX}): east, north about the first fix",
-        f"channels = {toml_list(lla)}",
-        'from = "geodetic"',
-        'frame = "en"  # horizontal only: the altitude is not checked',
-        f"rate_hz = {found.rate(lla[0]):.3g}",
-        _noise_line([east, north], get_model("wheeled", {}).groups["position"].noise_std, "position"),
         "",
         "[detectors.nis]  # logscan's filter: NIS per group",
         "",
