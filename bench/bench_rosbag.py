@@ -1,0 +1,114 @@
+"""Benchmark of the ROS bag reader: logscan's read_log against rosbags' own reading of the same bags.
+
+Reads the Husky drive of ../shared/testdata (a ROS 1 bag: /imu/data, /fix and the wheel odometry,
+16,806 messages), a rosbag2 ``.db3`` converted from it with ``rosbags.convert`` (in a temporary
+directory, deleted afterwards) and, when present, the same drive as a rosbag2 directory with MCAP
+storage, and times in one run, best of ``--repeat``:
+
+ - logscan: ``read_log(path)`` -> every numeric field of every topic as a numpy channel;
+ - rosbags: ``AnyReader([path])``, ``messages()`` of the same topics and ``deserialize`` of each,
+   touching one field of every message (it builds no arrays, so it does less work than logscan).
+
+Prints messages/s of both and the ratio. Usage:
+
+    python bench/bench_rosbag.py                     # best of 5
+    python bench/bench_rosbag.py --repeat 2 --bag other.bag
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+from pathlib import Path
+
+from benchlib import best_of
+
+from logscan.readers import read_log
+
+TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "ros-robots"
+HUSKY = TESTDATA / "robot_localization_test1_husky.bag"
+HUSKY_MCAP_DIR = TESTDATA / "robot_localization_test1_husky_ros2"
+
+
+def to_db3(bag: Path, out: Path) -> Path:
+    """The ``.db3`` of a rosbag2 directory (sqlite3 storage) converted from ``bag`` by rosbags."""
+    from rosbags.convert import convert
+
+    convert(
+        srcs=[bag],
+        dst=out,
+        dst_storage="sqlite3",
+        dst_version=9,
+        compress=None,
+        compress_mode="file",
+        default_typestore=None,
+        typestore=None,
+        exclude_topics=[],
+        include_topics=[],
+        exclude_msgtypes=[],
+        include_msgtypes=[],
+    )
+    return next(out.glob("*.db3"))
+
+
+def read_logscan(path: Path) -> int:
+    log = read_log(path)
+    assert not log.source.partial and log.channels
+    return sum(info.message_count for info in log.source.topics.values())
+
+
+def read_rosbags(path: Path) -> int:
+    from rosbags.highlevel import AnyReader
+
+    count = 0
+    with AnyReader([path]) as reader:
+        for connection, _timestamp, data in reader.messages(connections=reader.connections):
+            message = reader.deserialize(data, connection.msgtype)
+            _ = message.header  # every topic of the Husky bag is stamped
+            count += 1
+    return count
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bag", type=Path, default=HUSKY, help="ROS 1 bag (default: the Husky drive)")
+    parser.add_argument("--repeat", type=int, default=5, help="runs of each reader; the best counts")
+    args = parser.parse_args()
+    if not args.bag.exists():
+        raise SystemExit(f"{args.bag}: missing (the shared test data, or give --bag)")
+    import rosbags
+
+    version = getattr(rosbags, "__version__", None)
+    if version is None:
+        from importlib.metadata import version as dist_version
+
+        version = dist_version("rosbags")
+    print(f"python {platform.python_version()}, {os.cpu_count()} cpu(s), {platform.machine()}, rosbags {version}")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="logscan-bench-") as tmp:
+        db3 = to_db3(args.bag, Path(tmp) / "bag_ros2")
+        inputs = [("ROS 1 .bag", args.bag), ("rosbag2 .db3", db3)]
+        if args.bag == HUSKY and HUSKY_MCAP_DIR.is_dir():
+            inputs.append(("rosbag2 dir (mcap)", HUSKY_MCAP_DIR))
+        for label, path in inputs:
+            n = read_logscan(path)  # warm-up: numba kernels, imports and the page cache, off the clock
+            assert read_rosbags(path) == n, label
+            ours = best_of(args.repeat, lambda path=path: read_logscan(path))
+            theirs = best_of(args.repeat, lambda path=path: read_rosbags(path))
+            rows.append((label, n, ours, theirs))
+    load = " / ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"load average (1 / 5 / 15 min): {load}")
+    print()
+    print("| input | messages | logscan read_log msg/s | rosbags AnyReader + deserialize msg/s | ratio |")
+    print("|---|---:|---:|---:|---:|")
+    for label, n, ours, theirs in rows:
+        print(
+            f"| {label} | {n:,} | {n / ours:,.0f} ({ours:.3f} s) | {n / theirs:,.0f} ({theirs:.3f} s) "
+            f"| {theirs / ours:.2f}x |"
+        )
+
+
+if __name__ == "__main__":
+    main()
