@@ -132,7 +132,13 @@ def test_init_profile_on_every_real_log_writes_a_profile_analyze_accepts(cli, tm
 
 
 def ground_robot_log(
-    *, imu: bool = True, fix: bool = True, covariance: float = 1e-3, fix_type: int = 1, imu_up: str = "z"
+    *,
+    imu: bool = True,
+    fix: bool = True,
+    covariance: float = 1e-3,
+    fix_type: int = 1,
+    imu_up: str = "z",
+    odometry: bool = True,
 ) -> Log:
     channels: dict[str, Channel] = {}
     topics: dict[str, TopicInfo] = {}
@@ -148,11 +154,16 @@ def ground_robot_log(
     def yaw_rate(t):
         return 0.3 * np.sin(t / 1e9 / 5.0)
 
-    odom = {f"twist.twist.{c}": 0.0 for c in ("linear.y", "linear.z", "angular.x", "angular.y")}
-    odom["twist.twist.linear.x"] = 1.0
-    odom["twist.twist.angular.z"] = yaw_rate
-    odom.update({f"twist.covariance[{i}]": covariance for i in range(36)})
-    topic("/odom", "nav_msgs/msg/Odometry", 20.0, odom)
+    if odometry:
+        odom = {f"twist.twist.{c}": 0.0 for c in ("linear.y", "linear.z", "angular.x", "angular.y")}
+        odom["twist.twist.linear.x"] = 1.0
+        odom["twist.twist.angular.z"] = yaw_rate
+        odom.update({f"twist.covariance[{i}]": covariance for i in range(36)})
+        topic("/odom", "nav_msgs/msg/Odometry", 20.0, odom)
+    else:
+        command: dict = {c: 0.0 for c in ("linear.y", "linear.z", "angular.x", "angular.y")}
+        command.update({"linear.x": 1.0, "angular.z": yaw_rate})
+        topic("/cmd_vel", "geometry_msgs/msg/Twist", 10.0, command)
     if imu:
         fields: dict = {f"angular_velocity.{a}": 0.0 for a in "xyz"}
         fields.update({f"linear_acceleration.{a}": 0.0 for a in "xyz"})
@@ -184,6 +195,17 @@ def test_the_gyro_axis_follows_gravity_and_a_known_gnss_covariance_is_its_wander
     profile = parse_profile(built.text)
     assert profile.inputs.mapping["w"] == {"channels": ["/imu/angular_velocity.x"], "scale": [1.0]}
     assert profile.vehicle.params["gnss_error_std"] == pytest.approx(2.0)  # sqrt of the reported 4 m^2
+
+
+def test_without_odometry_the_velocity_commands_drive_the_model():
+    built = ros.ros_profile(ground_robot_log(odometry=False))
+    profile = parse_profile(built.text)
+    assert profile.vehicle.model == "wheeled" and profile.inputs.mapping["v"] == "/cmd_vel/linear.x"
+    assert profile.inputs.stamp == "start"  # a command acts from its stamp on
+    assert profile.inputs.mapping["w"] == {"channels": ["/imu/angular_velocity.z"], "scale": [1.0]}
+    assert "wheel_yaw_rate" not in profile.measurements  # a command's yaw rate is no measurement
+    commands_only = parse_profile(ros.ros_profile(ground_robot_log(odometry=False, imu=False)).text)
+    assert commands_only.inputs.mapping["w"] == "/cmd_vel/angular.z"
 
 
 def test_without_an_imu_the_odometrys_yaw_rate_drives_the_heading():

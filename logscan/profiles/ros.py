@@ -4,11 +4,14 @@ Topics are chosen by message type, never by name (the first topic of each type, 
 order), in ROS frames (REP 103: world ENU, body FLU), and the model by what the robot is:
 
  - ``ros_wheeled``, the `wheeled` model, for a ground robot: its ``nav_msgs/Odometry`` twist is
-   planar (linear y, z and angular x, y identically 0: what a 2-D drive controller publishes).
-   Inputs: the wheels' forward speed (twist.linear.x) and the yaw rate: the IMU's gyro about the
-   axis gravity shows is up (`imu_up_axis`), confirmed against the odometry's yaw rate, else the
-   odometry's own; ``position`` from ``sensor_msgs/NavSatFix`` in the local east-north plane (a
-   ground robot's altitude follows terrain the model does not know: not checked, and said so).
+   planar (linear y, z and angular x, y identically 0: what a 2-D drive controller publishes), or
+   without odometry its ``geometry_msgs/Twist`` / ``TwistStamped`` velocity commands are (`Wheels`).
+   Inputs: the forward speed (twist.linear.x, measured or commanded) and the yaw rate: the IMU's
+   gyro about the axis gravity shows is up (`imu_up_axis`), confirmed against the wheels' yaw rate,
+   else the wheels' own; ``position`` from ``sensor_msgs/NavSatFix`` in the local east-north plane
+   (a ground robot's altitude follows terrain the model does not know: not checked, and said so);
+   ``wheel_yaw_rate``, the odometry's yaw rate against the gyro's. ``sensor_msgs/JointState`` wheel
+   speeds are not used: turning them into a speed needs the wheel radius and track (a note says so).
  - ``ros``, the IMU-driven `ins` model, for anything else with an IMU (MIN_IMU_HZ or faster; a
    warning below INS_NOMINAL_IMU_HZ, the grid follows the IMU) and a position or velocity source:
    ``gnss_position`` from NavSatFix, ``odometry`` from Odometry's twist.twist.linear (body FLU),
@@ -30,6 +33,7 @@ something to edit and `analyze` says "not checked" instead of guessing.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,7 +54,10 @@ MIN_YAW_RATE_AGREEMENT = 0.5  # the gyro's up axis against the odometry's yaw ra
 ROS_IMU = "sensor_msgs/msg/Imu"
 ROS_NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 ROS_ODOMETRY = "nav_msgs/msg/Odometry"
-ROS_TYPES = (ROS_IMU, ROS_NAVSATFIX, ROS_ODOMETRY)
+# velocity commands (cmd_vel): the field prefix of their twist
+ROS_COMMANDS = {"geometry_msgs/msg/Twist": "", "geometry_msgs/msg/TwistStamped": "twist."}
+ROS_JOINT_STATE = "sensor_msgs/msg/JointState"
+ROS_TYPES = (ROS_IMU, ROS_NAVSATFIX, ROS_ODOMETRY, *ROS_COMMANDS, ROS_JOINT_STATE)
 ROS_ENCODINGS = ("cdr", "ros1")  # ROS 2 (MCAP, rosbag2) and ROS 1 bags; schemas in ROS 2 form pkg/msg/Type
 _ROS_SCHEMA = re.compile(r"^[A-Za-z][\w]*/msg/[A-Za-z]\w*$")
 _AXES = ("x", "y", "z")
@@ -109,6 +116,27 @@ def _topics_of_type(log, schema: str) -> list[str]:
     ]
 
 
+@dataclass(frozen=True)
+class Wheels:
+    """Where a ground robot's speed and yaw rate come from: its wheel odometry (nav_msgs/Odometry,
+    measured) or, without one, its velocity commands (geometry_msgs/Twist*, commanded)."""
+
+    topic: str
+    prefix: str  # of the twist's fields: "twist.twist." (Odometry), "twist." (TwistStamped), ""
+    commanded: bool
+
+    def field(self, name: str) -> str:
+        return f"{self.topic}/{self.prefix}{name}"
+
+    def covariance(self, index: int) -> str | None:
+        """The twist covariance's entry ``index`` (Odometry only: a command has none)."""
+        return None if self.commanded else f"{self.topic}/twist.covariance[{index}]"
+
+    @property
+    def what(self) -> str:
+        return f"{self.topic}'s commands" if self.commanded else f"{self.topic}'s wheel odometry"
+
+
 class _Found:
     """The standard topics a ROS log holds, each checked for the fields the profiles read."""
 
@@ -128,6 +156,17 @@ class _Found:
             if all(self.has(f"{t}/{f}") for f in ("latitude", "longitude", "altitude"))
         ]
         self.odoms = [t for t in _topics_of_type(log, ROS_ODOMETRY) if self.has(f"{t}/twist.twist.linear.x")]
+        self.commands = [
+            Wheels(t, prefix, commanded=True)
+            for schema, prefix in ROS_COMMANDS.items()
+            for t in _topics_of_type(log, schema)
+            if self.has(f"{t}/{prefix}linear.x")
+        ]
+        if any(_topics_of_type(log, ROS_JOINT_STATE)):
+            self.notes.append(
+                f"{ROS_JOINT_STATE}: wheel joint speeds need the wheel radius and track, which the log does not "
+                "hold: not used (give them as inputs with a scale)"
+            )
         if len(self.imus) > 1:
             unused = ", ".join(self.imus[1:])
             self.notes.append(f"{len(self.imus)} {ROS_IMU} topics: {self.imus[0]} is the IMU, {unused} unused")
@@ -135,12 +174,15 @@ class _Found:
     def rate(self, name: str) -> float:
         return rate_hz(self.channels[name].t)
 
-    def planar_odometry(self) -> str | None:
-        """The first Odometry topic whose twist is planar (`_PLANAR_ZERO` all exactly 0): a ground robot."""
-        for topic in self.odoms:
-            names = [f"{topic}/twist.twist.{c}" for c in _PLANAR_ZERO]
+    def wheels(self) -> Wheels | None:
+        """A ground robot's wheels: the first Odometry topic whose twist is planar (`_PLANAR_ZERO`
+        all exactly 0: what a 2-D drive controller publishes), else the first such velocity
+        command topic; None for anything else."""
+        candidates = [Wheels(t, "twist.twist.", commanded=False) for t in self.odoms] + self.commands
+        for wheels in candidates:
+            names = [wheels.field(c) for c in _PLANAR_ZERO]
             if all(self.has(n) and not np.any(np.asarray(self.channels[n].values)) for n in names):
-                return topic
+                return wheels
         return None
 
 
@@ -176,9 +218,9 @@ def ros_profile(log) -> BuiltProfile:
     """The built-in profile of a ROS log read with (at least) its topics of ROS_TYPES: ``ros_wheeled``
     for a ground robot, ``ros`` (the ins model) otherwise; see the module docstring."""
     found = _Found(log)
-    odom = found.planar_odometry()
-    if odom is not None:
-        return _wheeled_profile(log, found, odom)
+    wheels = found.wheels()
+    if wheels is not None:
+        return _wheeled_profile(log, found, wheels)
     return _ins_profile(log, found)
 
 
@@ -192,21 +234,22 @@ def _undecided(name: str, log, found: _Found, why: str, lines: list[str]) -> Bui
     return BuiltProfile(name, "\n".join(text) + "\n", found.notes, model_not_run=why)
 
 
-def _wheeled_profile(log, found: _Found, odom: str) -> BuiltProfile:
+def _wheeled_profile(log, found: _Found, wheels: Wheels) -> BuiltProfile:
     channels, notes = found.channels, found.notes
     from logscan.models import get_model
 
     model = get_model("wheeled", {})
     defaults = model.p
-    speed = f"{odom}/twist.twist.linear.x"
+    speed = wheels.field("linear.x")
+    odom = wheels.topic
     odom_hz = found.rate(speed)
-    (speed_std,) = covariance_std(channels, [f"{odom}/twist.covariance[0]"])
-    yaw, yaw_std, yaw_hz, yaw_why = _yaw_rate(found, odom)
+    (speed_std,) = covariance_std(channels, [wheels.covariance(0) or ""])
+    yaw, yaw_std, yaw_hz, yaw_why = _yaw_rate(found, wheels)
     imu_hz = yaw_hz if yaw_why.startswith("the IMU") else 0.0
     rate = nice_rate(max(imu_hz, odom_hz))
     header = [
-        "# logscan built-in profile `ros_wheeled`: the `wheeled` model of a ground robot (its odometry is",
-        f"# planar) from the ROS topics of {log.source.path}, chosen by message type.",
+        "# logscan built-in profile `ros_wheeled`: the `wheeled` model of a ground robot (its twist is",
+        f"# planar: {wheels.what}) from the ROS topics of {log.source.path}, chosen by message type.",
         f"# Edit and pass it with --profile ({doc_url('profiles.md')}).",
         'name = "ros_wheeled"',
         f'description = "built-in: wheeled model on {odom}{" and " + found.imus[0] if imu_hz else ""}"',
@@ -216,22 +259,30 @@ def _wheeled_profile(log, found: _Found, odom: str) -> BuiltProfile:
         f"rate_hz = {rate:g}  # the fastest input's rate in this log",
         "",
         "[vehicle.params]",
-        _param_line("speed_noise", speed_std, defaults["speed_noise"], "m/s", f"{odom} twist.covariance[0]"),
+        _param_line(
+            "speed_noise",
+            speed_std,
+            defaults["speed_noise"],
+            "m/s",
+            "a command's covariance (it has none)" if wheels.commanded else f"{odom} twist.covariance[0]",
+        ),
         f"speed_rate_hz = {odom_hz:.4g}",
         _param_line("yaw_rate_noise", yaw_std, defaults["yaw_rate_noise"], "rad/s", "the yaw rate's covariance"),
         f"yaw_rate_hz = {yaw_hz:.4g}",
     ]
     inputs = [
         "",
-        f"[inputs]  # the wheels' forward speed; the yaw rate: {yaw_why}",
+        f"[inputs]  # the forward speed: {wheels.what}; the yaw rate: {yaw_why}",
         f'v = "{speed}"',
         f"w = {yaw}",
         f"stale_s = {2.5 / min(odom_hz, yaw_hz):.3g}  # an input older than this is a dropout",
     ]
+    if wheels.commanded:  # a command acts from its stamp on; it is republished while it holds
+        inputs.append('stamp = "start"  # a command acts from its stamp on')
     groups: list[str] = []
-    odom_rate = f"{odom}/twist.twist.angular.z"
-    if imu_hz and found.has(odom_rate):  # the wheels' yaw rate against the gyro's
-        (std,) = covariance_std(channels, [f"{odom}/twist.covariance[35]"])
+    odom_rate = wheels.field("angular.z")
+    if imu_hz and found.has(odom_rate) and not wheels.commanded:  # the wheels' yaw rate against the gyro's
+        (std,) = covariance_std(channels, [wheels.covariance(35) or ""])
         groups += [
             "",
             f"[measurements.wheel_yaw_rate]  # {odom}'s yaw rate against the gyro's (a skid steer's ratio is a state)",
@@ -294,13 +345,17 @@ def _param_line(name: str, std: float | None, default: float, unit: str, source:
     return f"{name} = {std:.4g}  # {unit}, sqrt of {source}"
 
 
-def _yaw_rate(found: _Found, odom: str) -> tuple[str, float | None, float, str]:
+def _yaw_rate(found: _Found, wheels: Wheels) -> tuple[str, float | None, float, str]:
     """(the ``w`` input's TOML value, its noise std or None, its rate, why): the IMU's gyro about
-    up when gravity shows the axis and the odometry's yaw rate agrees, else the odometry's own."""
+    up when gravity shows the axis and the wheels' yaw rate agrees, else the wheels' own."""
     channels = found.channels
-    odom_rate = f"{odom}/twist.twist.angular.z"
-    odom_hz = found.rate(f"{odom}/twist.twist.linear.x")
-    fallback_why = "the odometry's (a skid-steer's slips in turns: its bias is a state)"
+    odom_rate = wheels.field("angular.z")
+    odom_hz = found.rate(wheels.field("linear.x"))
+    fallback_why = (
+        "the commanded one"
+        if wheels.commanded
+        else "the odometry's (a skid-steer's slips in turns: its bias is a state)"
+    )
     if found.imus:
         imu = found.imus[0]
         imu_hz = found.rate(f"{imu}/angular_velocity.x")
@@ -324,7 +379,7 @@ def _yaw_rate(found: _Found, odom: str) -> tuple[str, float | None, float, str]:
             found.notes.append(
                 f"{imu}: its up axis disagrees with the odometry's yaw rate (r = {agreement:.2f}): not used"
             )
-    (std,) = covariance_std(channels, [f"{odom}/twist.covariance[35]"])
+    (std,) = covariance_std(channels, [wheels.covariance(35) or ""])
     return f'"{odom_rate}"', std, odom_hz, fallback_why
 
 
