@@ -133,15 +133,34 @@ def test_header_stamp_times_as_in_the_mcap_reader(husky_bag, mcap_log):
     np.testing.assert_array_equal(bag.channels["/fix/latitude"].t, mcap.channels["/fix/latitude"].t)
 
 
-def test_deserializer_path_gives_the_layout_kernel_channels(husky_bag, bag_log, monkeypatch):
+@pytest.mark.parametrize("path", ["rosbags iteration + CDR kernel", "deserializer"])
+def test_every_ros1_path_gives_the_chunk_walk_channels(husky_bag, bag_log, monkeypatch, path):
+    import logscan.readers.rosbag as rosbag
     import logscan.readers.rosbag_types as rosbag_types
 
-    monkeypatch.setattr(rosbag_types, "cdr_layout", lambda schema: None)
+    monkeypatch.setattr(rosbag, "_chunk_walk_possible", lambda reader, wire: False)
+    if path == "deserializer":
+        monkeypatch.setattr(rosbag_types, "cdr_layout", lambda schema: None)
     slow = read_log(husky_bag)
     assert_same_channels(slow, bag_log)
     assert [(s.what, s.why, s.count) for s in slow.source.skipped] == [
         (s.what, s.why, s.count) for s in bag_log.source.skipped
     ]
+    assert slow.source.topics == bag_log.source.topics
+
+
+def test_husky_types_are_decoded_in_place(husky_bag):
+    from rosbags.rosbag1 import Reader
+
+    import logscan.readers.rosbag1_chunks as chunks
+    from logscan.readers.rosbag_types import bag_typestore
+
+    with Reader(husky_bag) as reader:
+        store, bad, wire = bag_typestore(list(reader.connections), ros1=True)
+        layouts = {c.msgtype: chunks.ros1_layout(wire, store, c.msgtype) for c in reader.connections}
+    assert not bad and all(layout is not None for layout in layouts.values())
+    assert "header.stamp.sec" in layouts["sensor_msgs/msg/Imu"].paths
+    assert not [p for p in layouts["sensor_msgs/msg/Imu"].paths if "seq" in p]
 
 
 def test_rosbag2_sqlite_directory_and_db3_read_to_the_bag_channels(husky_db3_dir, bag_log):
@@ -190,18 +209,22 @@ def test_truncated_db3_is_one_input_error(husky_db3_dir, tmp_path):
     assert caught.value.path == str(cut)
 
 
-def test_bag_damaged_in_the_middle_is_read_up_to_the_damage(husky_bag, tmp_path):
+@pytest.mark.parametrize("at", [5_000, 600_000])
+def test_a_damaged_chunk_is_skipped_and_the_rest_read(husky_bag, tmp_path, at):
     data = bytearray(husky_bag.read_bytes())
-    data[600_000:601_000] = b"\xff" * 1000
+    data[at : at + 1000] = b"\xff" * 1000
     damaged = tmp_path / "damaged.bag"
     damaged.write_bytes(bytes(data))
     log = read_log(damaged)
-    assert log.source.partial and "recovered" in log.source.partial_reason
-    assert 0 < len(log.channels["/imu/data/linear_acceleration.x"]) < 11865
+    assert log.source.partial and "1 damaged chunk(s) skipped" in log.source.partial_reason
+    assert "recovered" in log.source.partial_reason
+    assert 11865 // 2 < len(log.channels["/imu/data/linear_acceleration.x"]) < 11865
 
 
-def test_ros1_bag_written_by_rosbags_reads_variable_length_arrays(tmp_path):
-    """No shared data needed: a bag with a fixed-layout and a variable-length type."""
+@pytest.mark.parametrize("compression", [None, "BZ2", "LZ4"])
+def test_ros1_bag_written_by_rosbags_reads_variable_length_arrays(tmp_path, compression):
+    """No shared data needed: a bag with a fixed-layout type (decoded in place), a variable-length
+    one (decoded per message) and an empty one, in each chunk compression."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -210,8 +233,12 @@ def test_ros1_bag_written_by_rosbags_reads_variable_length_arrays(tmp_path):
     Vector3 = store.types["geometry_msgs/msg/Vector3"]
     JointState = store.types["sensor_msgs/msg/JointState"]
     path = tmp_path / "small.bag"
-    with Writer(path) as writer:
+    writer = Writer(path)
+    if compression:
+        writer.set_compression(Writer.CompressionFormat[compression])
+    with writer:
         accel = writer.add_connection("/accel", "geometry_msgs/msg/Vector3", typestore=store)
+        empty = writer.add_connection("/tick", "std_msgs/msg/Empty", typestore=store)
         joints = writer.add_connection("/joints", "sensor_msgs/msg/JointState", typestore=store)
         for k in range(20):
             t = 1_000_000_000 + k * 10_000_000
@@ -226,7 +253,9 @@ def test_ros1_bag_written_by_rosbags_reads_variable_length_arrays(tmp_path):
                 effort=np.zeros(0),
             )
             writer.write(joints, t + 1, store.serialize_ros1(msg, "sensor_msgs/msg/JointState"))
+            writer.write(empty, t + 2, store.serialize_ros1(store.types["std_msgs/msg/Empty"](), "std_msgs/msg/Empty"))
     log = read_log(path)
+    assert log.source.topics["/tick"].message_count == 20 and not log.source.partial
     assert log.source.format == "ros1bag"
     np.testing.assert_array_equal(log.channels["/accel/x"].values, np.arange(20))
     assert len(log.channels["/joints/position[0]"]) == 20 and len(log.channels["/joints/position[1]"]) == 10

@@ -32,10 +32,10 @@ from logscan.errors import InputError
 from logscan.log import Log, SourceInfo, TopicInfo
 from logscan.readers.common import topic_wanted
 from logscan.readers.flatten import MessageBytes
+from logscan.readers.rosbag1_chunks import ROS1_HINT, read_chunks, ros1_layout
 from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
 
-ROS1_HINT = "check the copy; an unindexed bag (a recording cut short) can be repaired with `rosbag reindex`"
 ROS2_HINT = "check the copy; a rosbag2 database is read-only here, so repair it with `ros2 bag reindex` or sqlite3"
 
 
@@ -54,7 +54,7 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
     with _opened(p, ros1) as reader:
         source = SourceInfo(path=str(p), format=fmt)
         source.topics = _topic_infos(reader, ros1)
-        store, bad = bag_typestore(list(reader.connections), ros1)
+        store, bad, wire = bag_typestore(list(reader.connections), ros1)
         pieces = TopicPieces(str(p), fmt, use_header_stamp)
         chosen = []
         for connection in reader.connections:
@@ -64,8 +64,15 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
                 pieces.skips.skip(connection.topic, bad[connection.msgtype], connection.msgcount)
                 continue
             chosen.append(connection)
-        batches = _read_messages(reader, chosen, source)
-    columns = TopicColumns(store)
+        columns = TopicColumns(store)
+        if ros1 and _chunk_walk_possible(reader, wire):
+            layouts = {c.msgtype: ros1_layout(wire, store, c.msgtype) for c in chosen}
+            walked = read_chunks(str(p), reader, chosen, layouts, source)
+            for topic, flat, times in walked.decoded:
+                pieces.add(topic, flat, times)
+            batches = walked.raw
+        else:
+            batches = _read_messages(reader, chosen, source)
     for topic, msgtype in list(batches):
         times, datas = batches.pop((topic, msgtype))  # each topic's raw bytes go once decoded
         _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
@@ -79,6 +86,12 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
     if use_header_stamp:
         source.time_source = pieces.time_source()
     return Log(channels=channels, source=source)
+
+
+def _chunk_walk_possible(reader, wire) -> bool:
+    """Whether a ROS 1 bag can be read chunk by chunk (``rosbag1_chunks``): its types as written
+    are known, and the rosbags reader has the index and chunk tables that walk reads."""
+    return wire is not None and all(hasattr(reader, name) for name in ("indexes", "chunks", "connections"))
 
 
 def _decode_topic(

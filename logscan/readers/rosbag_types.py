@@ -29,8 +29,9 @@ def ros2_type_name(msgtype: str) -> str:
     return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
 
 
-def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str]]:
-    """(typestore of every type the bag's connections use, msgtype -> why it cannot be decoded).
+def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str], Any]:
+    """(typestore of every type the bag's connections use, as ROS 2 types; msgtype -> why it cannot
+    be decoded; for a ROS 1 bag, the store of its types as written (the ROS 1 Header), else None).
 
     A definition that does not parse, or a rosbag2 type without a definition that the built-in
     ROS 2 store does not know, makes that type undecodable (its topics are skipped), not the bag.
@@ -53,7 +54,14 @@ def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str]]:
         except Exception as exc:  # noqa: BLE001 - a definition from the file that does not parse
             bad[connection.msgtype] = f"message definition does not parse ({type(exc).__name__}: {exc})"
     ros2 = get_typestore(getattr(Stores, "LATEST", Stores.ROS2_HUMBLE))
-    if ros1:  # the ROS 2 Header: ros1_to_cdr drops the ROS 1 seq
+    wire = None
+    if ros1:
+        wire = get_typestore(Stores.EMPTY)
+        try:
+            wire.register(dict(typs))
+        except Exception:  # noqa: BLE001 - disagreeing definitions: reported for the ROS 2 store below
+            wire = None
+        # the ROS 2 Header: ros1_to_cdr drops the ROS 1 seq
         typs["std_msgs/msg/Header"] = ros2.fielddefs["std_msgs/msg/Header"]
     for msgtype in missing - set(typs):
         if msgtype not in ros2.fielddefs:
@@ -66,7 +74,7 @@ def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str]]:
     except Exception as exc:  # noqa: BLE001 - definitions of one type that disagree
         for msgtype in {c.msgtype for c in connections}:
             bad.setdefault(msgtype, f"message definitions do not agree ({type(exc).__name__}: {exc})")
-    return store, bad
+    return store, bad, wire
 
 
 def _types_from_idl(text: str, get_types_from_idl) -> dict:
