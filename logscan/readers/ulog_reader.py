@@ -121,11 +121,9 @@ def _bounded_ulog_class():
                 return corrupt
 
         def _read_file_data(self, message_name_filter_list, read_until=None):
-            if not isinstance(self._subscriptions, _Subscriptions):
-                table = _Subscriptions()
-                table.update(self._subscriptions)
-                self._subscriptions = table
-            _damage_of(self)
+            damage = _damage_of(self)  # each section (appended data too) subscribes afresh
+            self._subscriptions = _Subscriptions(self._subscriptions, self._filtered_message_ids, damage.replaced)
+            self._filtered_message_ids = self._subscriptions.filtered
             return super()._read_file_data(message_name_filter_list, read_until)
 
         def _check_packet_corruption(self, header):
@@ -143,19 +141,41 @@ MAX_TIMESTAMP_US = (2**63 - 1) // 1000  # microseconds whose nanoseconds fit int
 
 
 class _Subscriptions(dict):
-    """pyulog's msg_id -> subscription table, counting the subscriptions an 'A' record replaces
-    (pyulog drops the messages buffered for them): a duplicated or damaged msg_id."""
+    """pyulog's msg_id -> subscription table, counting the 'A' records that reuse a msg_id already
+    subscribed or filtered out (pyulog drops the messages buffered for a replaced subscription, and
+    reads the later messages of that id by the wrong format): a duplicated or damaged msg_id."""
 
-    def __init__(self) -> None:
-        super().__init__()
-        self.replaced: list[tuple[str, int]] = []  # (topic, messages dropped) per replaced subscription
+    def __init__(self, table: dict, filtered: set, replaced: list[tuple[str, int]]) -> None:
+        super().__init__(table)
+        self.filtered = _FilteredIds(filtered, self)
+        self.replaced = replaced  # (topic, messages dropped) per reused msg_id
 
     def __setitem__(self, msg_id, subscription) -> None:
         old = self.get(msg_id)
         if old is not None:
             size = max(1, old.dtype.itemsize) if getattr(old, "dtype", None) is not None else 1
             self.replaced.append((f"{old.message_name}_{old.multi_id}", len(old.buffer) // size))
+        elif msg_id in self.filtered.section:
+            self.replaced.append(("(a topic not read)", 0))
         super().__setitem__(msg_id, subscription)
+
+
+class _FilteredIds(set):
+    """pyulog's set of the msg_ids of topics not read, counting the 'A' records that reuse an id."""
+
+    def __init__(self, ids: set, subscriptions: _Subscriptions) -> None:
+        super().__init__(ids)  # those of earlier sections: their data may follow in appended data
+        self.subscriptions = subscriptions
+        self.section: set = set()  # those this section's 'A' records filtered out
+
+    def add(self, msg_id) -> None:
+        old = self.subscriptions.get(msg_id)
+        if old is not None:
+            self.subscriptions.replaced.append((f"{old.message_name}_{old.multi_id}", 0))
+        elif msg_id in self.section:
+            self.subscriptions.replaced.append(("(a topic not read)", 0))
+        self.section.add(msg_id)
+        super().add(msg_id)
 
 
 class _Damage:
@@ -165,6 +185,7 @@ class _Damage:
     def __init__(self) -> None:
         self.unknown_types: dict[int, int] = {}  # message type byte -> count
         self.dropped_data = 0
+        self.replaced: list[tuple[str, int]] = []  # 'A' records reusing a msg_id: (topic, messages dropped)
 
 
 def _damage_of(ulog) -> _Damage:
@@ -387,12 +408,11 @@ def _dropped_by_pyulog(ulog) -> list[str]:
             f"{damage.dropped_data} data message(s) dropped as corrupt: no subscription ('A' record) for their "
             "message id, or a size their format does not fit (a lost or damaged subscription)"
         )
-    replaced = getattr(ulog._subscriptions, "replaced", [])
-    if replaced:
-        topics = ", ".join(sorted({topic for topic, _ in replaced})[:5])
+    if damage.replaced:
+        topics = ", ".join(sorted({topic for topic, _ in damage.replaced})[:5])
         out.append(
-            f"{len(replaced)} subscription(s) replaced by an 'A' record reusing their message id ({topics}): "
-            f"{sum(n for _, n in replaced)} message(s) read before dropped"
+            f"{len(damage.replaced)} subscription(s) replaced by an 'A' record reusing their message id ({topics}): "
+            f"{sum(n for _, n in damage.replaced)} message(s) read before dropped, later ones read by the wrong format"
         )
     return out
 
