@@ -1,9 +1,9 @@
 """Benchmark of the ROS bag reader: logscan's read_log against rosbags' own reading of the same bags.
 
 Reads the Husky drive of ../shared/testdata (a ROS 1 bag: /imu/data, /fix and the wheel odometry,
-16,806 messages), a rosbag2 ``.db3`` converted from it with ``rosbags.convert`` (in a temporary
-directory, deleted afterwards) and, when present, the same drive as a rosbag2 directory with MCAP
-storage, and times in one run, best of ``--repeat``:
+16,806 messages, bz2 chunks), a copy of it with lz4 chunks and a rosbag2 ``.db3`` converted from
+it with ``rosbags.convert`` (both in a temporary directory, deleted afterwards) and, when present,
+the same drive as a rosbag2 directory with MCAP storage, and times in one run, best of ``--repeat``:
 
  - logscan: ``read_log(path)`` -> every numeric field of every topic as a numpy channel;
  - rosbags: ``AnyReader([path])``, ``messages()`` of the same topics and ``deserialize`` of each,
@@ -53,6 +53,21 @@ def to_db3(bag: Path, out: Path) -> Path:
     return next(out.glob("*.db3"))
 
 
+def to_lz4_bag(bag: Path, out: Path) -> Path:
+    """A copy of the ROS 1 ``bag`` with lz4 chunks (the Husky bag's are bz2), by rosbags."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    writer = Writer(out)
+    writer.set_compression(Writer.CompressionFormat.LZ4)
+    with Reader(bag) as reader, writer:
+        added = {}
+        for c in reader.connections:
+            added[c.id] = writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+        for connection, timestamp, data in reader.messages():
+            writer.write(added[connection.id], timestamp, data)
+    return out
+
+
 def read_logscan(path: Path) -> int:
     log = read_log(path)
     assert not log.source.partial and log.channels
@@ -89,7 +104,8 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory(prefix="logscan-bench-") as tmp:
         db3 = to_db3(args.bag, Path(tmp) / "bag_ros2")
-        inputs = [("ROS 1 .bag", args.bag), ("rosbag2 .db3", db3)]
+        lz4 = to_lz4_bag(args.bag, Path(tmp) / "lz4.bag")
+        inputs = [("ROS 1 .bag", args.bag), ("ROS 1 .bag, lz4 chunks", lz4), ("rosbag2 .db3", db3)]
         if args.bag == HUSKY and HUSKY_MCAP_DIR.is_dir():
             inputs.append(("rosbag2 dir (mcap)", HUSKY_MCAP_DIR))
         for label, path in inputs:
