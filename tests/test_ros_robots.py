@@ -236,3 +236,27 @@ def test_a_ground_robot_with_nothing_to_check_gets_an_incomplete_profile_and_ana
     assert made.exit_code == 0 and "complete the profile" in made.stderr, made.stderr
     text = written.read_text()
     assert "INCOMPLETE" in text and 'model = "wheeled"' in text and "[measurements.position]" in text
+
+
+def test_an_mcap_of_numeric_channels_without_a_profile_gets_a_starter_profile(cli, tmp_path):
+    from logscan.readers.mcap.writer import TopicData, write_mcap
+
+    rng = np.random.default_rng(3)
+    t = (np.arange(6000) * 1e7).astype(np.int64)  # 60 s at 100 Hz
+    speed = 10 + np.cumsum(rng.normal(0, 0.02, t.size)) + rng.normal(0, 0.1, t.size)
+    path = tmp_path / "rover.mcap"
+    write_mcap(path, {"/rover": TopicData("rover/State", t, {"speed": speed, "temp": 20 + 0 * speed})})
+    written = tmp_path / "rover.toml"
+    made = cli("init-profile", path, "-o", written)
+    assert made.exit_code == 0, made.stderr
+    profile = parse_profile(written.read_text())
+    assert profile.vehicle.model == "linear" and "/rover/speed" in written.read_text()
+    result = cli("analyze", path, "--profile", written, "--no-report")
+    assert result.exit_code in (0, 1), result.stderr
+
+
+def test_a_log_without_numeric_channels_says_there_is_nothing_to_profile(cli):
+    conformance = need_testdata("mcap-conformance/TenMessages")
+    path = next(conformance.glob("*.mcap"))
+    result = cli("init-profile", path)
+    assert result.exit_code == 2 and "holds no numeric channel" in result.stderr, result.stderr

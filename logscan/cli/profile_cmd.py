@@ -65,15 +65,23 @@ def init_profile(log_path: str, output_path: str | None) -> None:
 
 
 def _starter(log_path: str):
-    """The starter profile (`logscan.profiles.starter.StarterProfile`) of a CSV log that embeds no
-    profile, else None; an InputError when no column can be a state."""
+    """The starter profile (`logscan.profiles.starter.StarterProfile`) of a CSV log, or an MCAP of
+    numeric channels, that embeds no profile and gets no built-in one, else None; an InputError when
+    no channel can be a state."""
     from logscan.docs import doc_url
     from logscan.profiles.starter import starter_profile
     from logscan.readers import detect_format, read_embedded_profile, read_log
 
-    if detect_format(log_path) not in ("csv", "csv-dir") or read_embedded_profile(log_path):
+    if detect_format(log_path) not in ("csv", "csv-dir", "mcap") or read_embedded_profile(log_path):
         return None
-    built = starter_profile(read_log(log_path))
+    log = read_log(log_path)
+    if not log.channels:
+        raise InputError(
+            "the log holds no numeric channel: there is nothing a profile could check",
+            path=log_path,
+            hint="`logscan inspect LOG` lists its topics and why their fields were skipped",
+        )
+    built = starter_profile(log)
     if not built.kept:
         why = "; ".join(f"{name}: {reason}" for name, reason in built.dropped[:6])
         raise InputError(
