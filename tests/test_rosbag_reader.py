@@ -3,6 +3,7 @@ in a ROS 2 MCAP; damaged bags are one clear error or a partial read; ArduPilot l
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -362,3 +363,13 @@ def test_inspect_shows_the_bag_in_ros2_terms(husky_bag, cli):
     assert result.exit_code == 0, result.stderr
     assert "ros1bag" in result.stdout and "ros1 / sensor_msgs/msg/Imu" in result.stdout
     assert "unknown magic bytes" not in result.stdout + result.stderr
+
+
+def test_inspect_of_a_rosbag2_directory_names_the_directory(cli):
+    folder = need_testdata(HUSKY_ROS2)
+    result = cli("inspect", folder, "--json", "-")
+    assert result.exit_code == 0, result.stderr
+    facts = json.loads(result.stdout)
+    assert (facts["file"], facts["format"]) == (str(folder), "rosbag2")
+    assert facts["topics"]["/imu/data"]["message_count"] == 11865
+    assert facts["channels"]["/imu/data/linear_acceleration.x"]["samples"] == 11865

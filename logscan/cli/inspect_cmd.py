@@ -62,15 +62,25 @@ def inspect(
 
 
 def read_facts(path: str, topics: tuple[str, ...] | None, use_header_stamp: bool) -> dict:
-    """The facts of one log. An MCAP file is read in memory bounded by a few chunks (its channels'
-    statistics folded as it is decoded); ULog, ROS bag and CSV logs are read whole."""
+    """The facts of one log. An MCAP file (also the one file of a rosbag2 directory with MCAP
+    storage) is read in memory bounded by a few chunks (its channels' statistics folded as it is
+    decoded); ULog, other ROS bags and CSV logs are read whole."""
+    from pathlib import Path
+
     from logscan.readers import detect_format
 
-    if detect_format(path) == "mcap":
+    fmt = detect_format(path)
+    mcap_file = path if fmt == "mcap" else None
+    if fmt == "rosbag2":
+        from logscan.readers.rosbag import single_mcap
+
+        mcap_file = single_mcap(Path(path))
+    if mcap_file is not None:
         from logscan.readers.mcap import inspect_mcap
 
         wanted = None if topics is None else set(topics)
-        log, stats = inspect_mcap(path, wanted, use_header_stamp=use_header_stamp)
+        log, stats = inspect_mcap(mcap_file, wanted, use_header_stamp=use_header_stamp)
+        log.source.path, log.source.format = path, fmt
         facts = log.summary()
         facts.setdefault("metadata", {k: dict(v) for k, v in log.source.metadata.items()})
         for name, info in facts["channels"].items():

@@ -42,7 +42,7 @@ ROS2_HINT = "check the copy; a rosbag2 database is read-only here, so repair it 
 def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
     """Read the ROS 1 bag, rosbag2 ``.db3`` or rosbag2 directory ``path`` into a Log."""
     p = Path(path)
-    mcap_file = _single_mcap(p)
+    mcap_file = single_mcap(p)
     if mcap_file is not None:
         from logscan.readers.mcap import read_mcap
 
@@ -263,7 +263,7 @@ def _is_ros1(path: Path) -> bool:
         return False
 
 
-def _single_mcap(path: Path) -> Path | None:
+def single_mcap(path: Path) -> Path | None:
     """The one MCAP file of a rosbag2 directory whose storage is mcap (uncompressed), else None."""
     if not path.is_dir():
         return None
