@@ -104,7 +104,7 @@ def signature_evidence(
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
         # (one call site: the model's step is inlined wherever it is called, and compiled as often)
-        h = 1e-6 * (1.0 + np.abs(u[k]).max())
+        h = 1e-6 * (1.0 + (np.abs(u[k]).max() if nu > 0 else 0.0))  # a model may have no input
         for e in range(2 * A + 1):
             a, sign = (e - 1) // 2, 1.0 if e % 2 == 1 else -1.0
             for i in range(nu):
