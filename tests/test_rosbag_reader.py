@@ -373,3 +373,23 @@ def test_inspect_of_a_rosbag2_directory_names_the_directory(cli):
     assert (facts["file"], facts["format"]) == (str(folder), "rosbag2")
     assert facts["topics"]["/imu/data"]["message_count"] == 11865
     assert facts["channels"]["/imu/data/linear_acceleration.x"]["samples"] == 11865
+
+
+def test_a_topic_whose_definition_does_not_parse_is_skipped_and_named(tmp_path):
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    path = tmp_path / "odd.bag"
+    with Writer(path) as writer:
+        good = writer.add_connection("/accel", "geometry_msgs/msg/Vector3", typestore=store)
+        odd = writer.add_connection("/odd", "odd_msgs/msg/Odd", msgdef="float64[ x", md5sum="0" * 32)
+        for k in range(5):
+            vector = store.types["geometry_msgs/msg/Vector3"](x=k, y=0.0, z=0.0)
+            writer.write(good, 10 + k, store.serialize_ros1(vector, "geometry_msgs/msg/Vector3"))
+            writer.write(odd, 10 + k, b"\x00" * 8)
+    log = read_log(path)
+    assert list(log.channels) == ["/accel/x", "/accel/y", "/accel/z"]
+    assert "topics skipped (no decoder): /odd" in log.source.warnings
+    assert [(s.what, s.count) for s in log.source.skipped if s.what == "/odd"] == [("/odd", 5)]
+    assert "does not parse" in next(s.why for s in log.source.skipped if s.what == "/odd")

@@ -56,12 +56,13 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
         source.topics = _topic_infos(reader, ros1)
         store, bad, wire = bag_typestore(list(reader.connections), ros1)
         pieces = TopicPieces(str(p), fmt, use_header_stamp)
-        chosen = []
+        chosen, undecodable = [], set()
         for connection in reader.connections:
             if not topic_wanted(connection.topic, wanted):
                 continue
             if connection.msgtype in bad:
                 pieces.skips.skip(connection.topic, bad[connection.msgtype], connection.msgcount)
+                undecodable.add(connection.topic)
                 continue
             chosen.append(connection)
         columns = TopicColumns(store)
@@ -79,10 +80,8 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
         _note_span(source.topics[topic], times)
     pieces.report_to(source)
     channels = channels_in_time_order(pieces.pieces, source)
-    if bad:
-        skipped = sorted({c.topic for c in reader.connections if c.msgtype in bad and topic_wanted(c.topic, wanted)})
-        if skipped:
-            source.warnings.append("topics skipped (no decoder): " + ", ".join(skipped))
+    if undecodable:
+        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(undecodable)))
     if use_header_stamp:
         source.time_source = pieces.time_source()
     return Log(channels=channels, source=source)

@@ -52,7 +52,7 @@ def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str], A
             else:
                 missing.add(connection.msgtype)
         except Exception as exc:  # noqa: BLE001 - a definition from the file that does not parse
-            bad[connection.msgtype] = f"message definition does not parse ({type(exc).__name__}: {exc})"
+            bad[connection.msgtype] = f"message definition does not parse ({_one_line(exc)})"
     ros2 = get_typestore(getattr(Stores, "LATEST", Stores.ROS2_HUMBLE))
     wire = None
     if ros1:
@@ -73,8 +73,14 @@ def bag_typestore(connections: list, ros1: bool) -> tuple[Any, dict[str, str], A
         store.register(typs)
     except Exception as exc:  # noqa: BLE001 - definitions of one type that disagree
         for msgtype in {c.msgtype for c in connections}:
-            bad.setdefault(msgtype, f"message definitions do not agree ({type(exc).__name__}: {exc})")
+            bad.setdefault(msgtype, f"message definitions do not agree ({_one_line(exc)})")
     return store, bad, wire
+
+
+def _one_line(exc: Exception, limit: int = 160) -> str:
+    """An exception as one short line (rosbags' parse errors quote the definition over lines)."""
+    text = " ".join(f"{type(exc).__name__}: {exc}".split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _types_from_idl(text: str, get_types_from_idl) -> dict:
