@@ -393,3 +393,17 @@ def test_a_topic_whose_definition_does_not_parse_is_skipped_and_named(tmp_path):
     assert "topics skipped (no decoder): /odd" in log.source.warnings
     assert [(s.what, s.count) for s in log.source.skipped if s.what == "/odd"] == [("/odd", 5)]
     assert "does not parse" in next(s.why for s in log.source.skipped if s.what == "/odd")
+
+
+def test_db3_without_message_definitions_uses_the_ros2_types(husky_db3_dir, bag_log, tmp_path):
+    import shutil
+    import sqlite3
+
+    bare = tmp_path / "bare.db3"
+    shutil.copy(next(husky_db3_dir.glob("*.db3")), bare)
+    with sqlite3.connect(bare) as db:
+        db.execute("DELETE FROM message_definitions")
+    db.close()
+    log = read_log(bare)
+    assert_same_channels(log, bag_log)
+    assert not log.source.warnings
