@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 __version__ = "0.2.0"
@@ -63,3 +65,33 @@ if "numba" in sys.modules:  # imported before logscan: numba read its config alr
 _checkout = Path(__file__).resolve().parent.parent
 if not (Path(__file__).resolve().parent / "detectors").is_dir() and (_checkout / "detectors" / "__init__.py").is_file():
     __path__.append(str(_checkout))  # noqa: F821 - the package's own __path__
+
+
+def interrupted_while_loading(signum, frame) -> None:
+    """Ctrl-C while the `logscan` command loads its modules, before `logscan.cli.main.main`
+    installs its handler: nothing is written yet, so the run ends at once with exit 130 and one
+    line, not Python's KeyboardInterrupt traceback and a death by SIGINT."""
+    try:
+        sys.stderr.write("logscan: interrupted\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(130)
+
+
+def _run_as_the_command() -> bool:
+    """Whether this process is the `logscan` command: its script, or `python -m logscan` (while
+    the package imports, ``sys.argv[0]`` is still "-m"; ``sys.orig_argv`` names the module)."""
+    name = os.path.basename(sys.argv[0]) if sys.argv else ""
+    if name in ("logscan", "logscan.exe"):
+        return True
+    original = list(getattr(sys, "orig_argv", []))
+    return any(a == "-m" and b == "logscan" for a, b in zip(original, original[1:]))
+
+
+# only in the command's own process (a library user's or a test's Ctrl-C stays theirs)
+if (
+    _run_as_the_command()
+    and threading.current_thread() is threading.main_thread()
+    and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+):
+    signal.signal(signal.SIGINT, interrupted_while_loading)

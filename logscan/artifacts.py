@@ -13,8 +13,9 @@ JSON of one `logscan analyze` run): `stage` each into a temporary file beside it
   interrupted run leaves all previous files or all new ones. Only SIGKILL or a power cut in the
   few microseconds of the renames themselves can leave some targets new and some old (POSIX has
   no rename of several files at once); the JSON is renamed last, so a new JSON means new reports.
-  Such a kill also leaves its ``.<name>.<token>.*.tmp`` temporary files behind; the next run
-  writing the same target removes them (`remove_orphans`: the token names a process that is gone).
+  Such a kill also leaves its ``.<name>.<pid>-<hex>.*.tmp`` temporary files behind (every
+  temporary file and backup names the process that wrote it); the next run writing anything into
+  that folder removes them (`remove_dead_temporaries`: the pid names a process that is gone).
 
 A target that exists and is not a regular file is never replaced: a FIFO or a character device
 (``/dev/null``, a terminal), or a path naming an open file descriptor (``/dev/stdout``,
@@ -133,7 +134,8 @@ def stage(path: str | os.PathLike, data: bytes | str, *, token: str = "") -> Sta
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise OutputError("the output directory does not exist", path=str(directory), hint="create it first")
-    prefix = f".{target.name}.{token}." if token else f".{target.name}."
+    _sweep_once(str(directory))
+    prefix = f".{target.name}.{token or new_token()}."  # the pid in the name: see remove_dead_temporaries
     try:
         fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".tmp", dir=directory)
     except OSError as exc:
@@ -229,31 +231,48 @@ def cleanup(targets: Iterable[str | os.PathLike], token: str) -> None:
 
 
 ORPHAN_AGE_S = 60.0  # a temporary file of a dead process younger than this is left alone
+# ``.<target name>.<pid>-<8 hex>.<mkstemp's 8 characters>.tmp`` and ``.<target name>.<pid>-<8 hex>.bak``
+_TEMPORARY = re.compile(r"\..+\.(?P<pid>[0-9]+)-[0-9a-f]{8}(\.[A-Za-z0-9_]+\.tmp|\.bak)")
+_SWEPT: set[str] = set()  # the directories this process has cleaned (once each)
+
+
+def remove_dead_temporaries(directory: str | os.PathLike) -> int:
+    """Remove the temporary files and backups that killed runs of logscan left in ``directory``
+    (their names carry their process's pid): those whose process no longer exists and that are
+    over ORPHAN_AGE_S old (a live process, or one this machine cannot see, keeps its files).
+    Returns how many were removed."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return 0
+    removed = 0
+    for entry in names:
+        found = _TEMPORARY.fullmatch(entry)
+        if found is None or _process_exists(int(found["pid"])):
+            continue
+        path = os.path.join(directory, entry)
+        try:
+            st = os.lstat(path)
+            if stat.S_ISREG(st.st_mode) and time.time() - st.st_mtime > ORPHAN_AGE_S:
+                os.unlink(path)
+                removed += 1
+        except OSError:
+            continue
+    return removed
 
 
 def remove_orphans(targets: Iterable[str | os.PathLike]) -> None:
-    """Remove the temporary files a killed run left beside ``targets``: ``.<name>.<pid>-<hex>.*.tmp``
-    whose process no longer exists and that are over ORPHAN_AGE_S old (a live process, or one
-    this machine cannot see, keeps its files)."""
-    for target in targets:
-        directory, name = os.path.split(os.path.abspath(target))
-        try:
-            names = os.listdir(directory)
-        except OSError:
-            continue
-        prefix = f".{name}."
-        for entry in names:
-            if not (entry.startswith(prefix) and entry.endswith(".tmp")):
-                continue
-            pid_text = entry[len(prefix) :].split("-", 1)[0]
-            if not pid_text.isdigit() or _process_exists(int(pid_text)):
-                continue
-            path = os.path.join(directory, entry)
-            try:
-                if time.time() - os.lstat(path).st_mtime > ORPHAN_AGE_S:
-                    _unlink(path)
-            except OSError:
-                continue
+    """`remove_dead_temporaries` in the folder of each of ``targets``."""
+    for directory in {os.path.dirname(os.path.abspath(target)) for target in targets}:
+        remove_dead_temporaries(directory)
+
+
+def _sweep_once(directory: str) -> None:
+    """`remove_dead_temporaries` in ``directory``, the first time this process writes there."""
+    key = os.path.abspath(directory)
+    if key not in _SWEPT:
+        _SWEPT.add(key)
+        remove_dead_temporaries(key)
 
 
 def _process_exists(pid: int) -> bool:
@@ -342,7 +361,7 @@ def _backup(target: str) -> str | None:
         return None
     directory, name = os.path.split(os.path.abspath(target))
     for _ in range(3):
-        backup = os.path.join(directory, f".{name}.{secrets.token_hex(4)}.bak")
+        backup = os.path.join(directory, f".{name}.{os.getpid()}-{secrets.token_hex(4)}.bak")
         try:
             os.link(target, backup)
             return backup

@@ -115,6 +115,12 @@ def output_paths(logs: Sequence[str], output: str | None, suffix: str = ".report
     directory = Path(output)
     if directory.exists() and not directory.is_dir():
         raise UsageError(f"--output {output} is a file, but {len(logs)} logs need a directory")
+    if not directory.exists() and not output.endswith(("/", os.sep)):
+        # `-o two.html` for several logs is a mistake, not a directory to create
+        raise UsageError(
+            f"--output {output} does not exist, and {len(logs)} logs need a directory",
+            hint=f"give an existing directory, or end the name with / to create it (-o {output}/)",
+        )
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -283,7 +289,7 @@ def run_many(
                     bar.update(1)
             return outcomes
         outcomes: list[Any] = [None] * len(logs)
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_worker_init)
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_worker_init, initargs=(os.getpid(),))
         try:
             futures = {pool.submit(_isolated if isolate else _call, task, path): i for i, path in enumerate(logs)}
             for future in as_completed(futures):
@@ -300,14 +306,19 @@ def run_many(
             bar.render_finish()
 
 
-def _worker_init() -> None:
+def _worker_init(parent_pid: int | None = None) -> None:
     """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM) and removes their
     temporary files; on SIGTERM a worker ends its own children first (the background compile,
-    logscan.filters.warmup), which would otherwise outlive it."""
+    logscan.filters.warmup), which would otherwise outlive it. A worker whose parent dies (killed
+    alone) ends too (`logscan.parent_watch`)."""
     import signal
+
+    from logscan.parent_watch import exit_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _end_worker)
+    if parent_pid is not None:
+        exit_with_parent(parent_pid)
 
 
 def _end_worker(signum, frame) -> None:

@@ -96,9 +96,8 @@ def test_a_log_without_profile_asks_for_one(tmp_path, cli):
 
 def test_several_logs_one_bad_reports_the_rest_and_exits_two(tmp_path, cli, sample):
     out = tmp_path / "s.json"
-    result = cli(
-        "analyze", sample("sbw_healthy.mcap"), tmp_path / "missing.mcap", "-o", tmp_path / "reports", "--json", out
-    )
+    reports = f"{tmp_path / 'reports'}/"  # ends in "/": a directory to create
+    result = cli("analyze", sample("sbw_healthy.mcap"), tmp_path / "missing.mcap", "-o", reports, "--json", out)
     assert result.exit_code == 2
     summary = json.loads(out.read_text())
     assert [Path(s["file"]).name for s in summary["logs"]] == ["sbw_healthy.mcap"]

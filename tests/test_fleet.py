@@ -57,7 +57,7 @@ def test_analyze_on_a_folder_of_wide_csvs_reports_each_file(cli, tmp_path, sampl
 def test_outputs_are_named_after_their_logs_and_same_names_get_their_folder(tmp_path):
     assert output_paths(["x/a.mcap"], None) == ["a.report.html"]
     assert output_paths(["x/a.mcap"], "r.html") == ["r.html"]
-    names = output_paths(["x/a.mcap", "y/a.mcap"], str(tmp_path / "out"))
+    names = output_paths(["x/a.mcap", "y/a.mcap"], f"{tmp_path / 'out'}/")  # "/": a directory to create
     assert names == [str(tmp_path / "out" / "x_a.report.html"), str(tmp_path / "out" / "y_a.report.html")]
     (tmp_path / "file").write_text("")
     with pytest.raises(UsageError, match="is a file"):

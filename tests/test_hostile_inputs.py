@@ -263,7 +263,7 @@ def test_a_fifo_in_a_directory_of_logs_fails_alone(cli_process, tmp_path, sample
     os.mkfifo(logs / "stream.mcap")
     os.mkfifo(logs / "notes.txt")  # not named like a log: ignored like any other file
     assert expand_logs([str(logs)]) == [str(logs / "flight.mcap"), str(logs / "stream.mcap")]
-    result = cli_process("analyze", logs, "-o", tmp_path / "reports", timeout=300)
+    result = cli_process("analyze", logs, "-o", f"{tmp_path / 'reports'}/", timeout=300)
     assert result.exit_code == 2, result.stderr
     assert f"{logs / 'stream.mcap'}: is a FIFO (named pipe)" in result.stderr
     assert (tmp_path / "reports" / "flight.report.html").is_file()

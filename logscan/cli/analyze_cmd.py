@@ -54,7 +54,7 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
     "output_path",
     type=click.Path(path_type=str),
     default=None,
-    help="HTML report file (one log) or directory (several logs). "
+    help="HTML report file (one log) or directory (several logs: an existing one, or a name ending in / to create). "
     "Default: <log name>.report.html in the current directory.",
 )
 @json_option

@@ -14,7 +14,7 @@ from contextlib import contextmanager
 
 import click
 
-from logscan import __version__
+from logscan import __version__, interrupted_while_loading
 from logscan.cli.render import printable
 from logscan.errors import INTERRUPT_SEEN, OUT_OF_MEMORY, ExitCode, LogscanError
 
@@ -108,8 +108,48 @@ def main(argv: list[str] | None = None) -> None:
         with _warnings_as_lines(debug):
             code = _run(args, debug)
     finally:
+        if argv is None and previous.pop(signal.SIGINT, None) is not None:
+            # the process's own run: Ctrl-C stays logscan's until the process ends
+            signal.signal(signal.SIGINT, _interrupted_at_exit)
         _restore_signal_handlers(previous)
+    if argv is None:
+        _exit_process(int(code))
     sys.exit(code)
+
+
+def _exit_process(code: int) -> None:
+    """End the `logscan` process with ``code``: exit handlers run, streams flushed, then
+    ``os._exit``. A Ctrl-C until then (the work done, Python tearing down its modules) still gives
+    exit 130 and one line (`_interrupted_at_exit`): after Python's own shutdown has begun it would
+    kill the process by SIGINT, with no line."""
+    import atexit
+
+    try:
+        shutdown = getattr(threading, "_shutdown", None)  # what Python's own exit does first:
+        if shutdown is not None and threading.current_thread() is threading.main_thread():
+            shutdown()  # join the non-daemon threads, run the threads' exit hooks
+        atexit._run_exitfuncs()
+        _flush_streams()
+    finally:
+        os._exit(code)
+
+
+def _interrupted_at_exit(signum, frame) -> None:
+    _flush_streams()
+    try:
+        sys.stderr.write("logscan: interrupted\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+    os._exit(ExitCode.INTERRUPTED)
+
+
+def _flush_streams() -> None:
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
 
 
 def _run(args: list[str], debug: bool) -> int:
@@ -291,7 +331,7 @@ def _install_signal_handlers() -> dict:
         return previous
     _OWNER[0] = os.getpid()
     _INTERRUPT_SEEN[0] = False
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    if signal.getsignal(signal.SIGINT) in (signal.default_int_handler, interrupted_while_loading):
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
     if hasattr(signal, "SIGXFSZ"):
         previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)

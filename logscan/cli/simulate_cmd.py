@@ -117,6 +117,12 @@ _FAULT_HELP = (
     "profile assumes the noise at 1.9 m/s) or constant (the model's noise_std). Default: speed "
     "with --speed, else constant.",
 )
+@click.option(
+    "--force",
+    is_flag=True,
+    default=False,
+    help="Replace an existing file at the output (and a CSV log's sidecars); without it that is refused.",
+)
 @seed_option
 @quiet_option
 @output_option
@@ -135,6 +141,7 @@ def simulate(
     glitches_per_min,
     speed,
     noise,
+    force,
     seed,
     quiet,
     output_path,
@@ -179,6 +186,8 @@ def simulate(
         duration = 15.0 if model_name == "ground_robot" else 60.0
     if fmt is None:
         fmt = "csv" if output_path.lower().endswith(".csv") else "mcap-json"
+    if not force:
+        _refuse_replacing(output_path, fmt)
     specs = []
     for text in faults:
         spec = parse_fault(text)
@@ -243,3 +252,16 @@ def _simulator_cold(model_name: str = "") -> bool:
     from logscan.simulate.runner import closed_loop
 
     return not kernel_cached(closed_loop)
+
+
+def _refuse_replacing(output_path: str, fmt: str) -> None:
+    """UsageError when the output (or, for a CSV log, one of its sidecars) is an existing regular
+    file: a simulated log never silently replaces a log (`--force` allows it). A FIFO or a device
+    (/dev/null) is written into, not replaced."""
+    from logscan.simulate.output import sidecar_paths
+
+    paths = [Path(output_path), *(sidecar_paths(output_path) if fmt == "csv" else ())]
+    existing = [str(p) for p in paths if p.is_file()]
+    if existing:
+        what = "already exists" if existing == [output_path] else f"would replace {', '.join(existing)}"
+        raise UsageError(what, path=output_path, hint="pass --force to replace it, or give another -o")

@@ -1,0 +1,62 @@
+"""Worker processes end with their parent: a `--jobs` worker whose parent is killed (SIGKILL, an
+out-of-memory kill) must not go on computing, holding memory and writing temporary files.
+
+Two mechanisms, so that neither a missed signal nor a busy interpreter keeps a worker alive:
+
+- Linux: ``prctl(PR_SET_PDEATHSIG, SIGTERM)`` (through ctypes): the kernel sends the worker SIGTERM
+  the moment its parent ends; the worker's SIGTERM handler (`logscan.fleet`) ends its own children
+  (the background compile) and exits.
+- Everywhere: a daemon thread polls ``os.getppid()`` every `POLL_S` seconds; when the parent is gone
+  (the worker was re-parented) it sends the worker SIGTERM, and if the worker still lives
+  `GRACE_S` seconds later (its main thread stuck in a compiled kernel that never returns to Python)
+  it ends the process with ``os._exit``.
+
+Temporary files a killed worker leaves are removed by the next run writing to that folder
+(`logscan.artifacts`: their names carry the pid).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+POLL_S = 1.0
+GRACE_S = 5.0
+EXIT_CODE = 128 + signal.SIGTERM
+
+
+def exit_with_parent(parent_pid: int) -> None:
+    """Make this process (a worker) end when the process ``parent_pid`` ends."""
+    _ask_kernel()
+    if os.getppid() != parent_pid:  # the parent ended before the kernel was asked
+        os.kill(os.getpid(), signal.SIGTERM)
+    thread = threading.Thread(target=_watch, args=(parent_pid,), name="logscan-parent-watch", daemon=True)
+    thread.start()
+
+
+def _ask_kernel() -> bool:
+    """prctl(PR_SET_PDEATHSIG, SIGTERM) on Linux; False where it is not available."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _watch(parent_pid: int) -> None:
+    while os.getppid() == parent_pid:
+        time.sleep(POLL_S)
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)  # the handler ends the children, then the process
+    except OSError:
+        pass
+    time.sleep(GRACE_S)
+    os._exit(EXIT_CODE)
