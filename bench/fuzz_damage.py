@@ -6,7 +6,8 @@ Classes (each case is a healthy seed with one kind of damage, or a valid oddity)
                   seed has one): a message's channel id made undefined, a Channel record's id made
                   another channel's, a message's log_time beyond int64 ns. Damaged.
   mcap_lz4_lie    an lz4 chunk whose header declares another uncompressed size (1 GiB, 500 MiB, 2x,
-                  +1, -1, half, 0); the data-section CRC recomputed. Damaged.
+                  +1, -1, half, 0), or whose payload really inflates to 128 or 448 MiB of zeros (not
+                  records); the data-section CRC recomputed. Damaged.
   mcap_zero_chunk the seed rewritten with one more topic holding a single message of 1-16 MiB of zeros
                   (lz4 or zstd): valid, extremely compressible; must read as the seed does (same exit).
   ulog_subscription  a ULog 'A' record's type byte made undefined, an 'A' record reusing another's
@@ -192,6 +193,14 @@ def mcap_lz4_lie(seed, rng: random.Random):
     start, end = rng.choice(_chunks(data))
     chunk = _parse_chunk(data, start)
     actual = chunk["size"]
+    if rng.random() < 0.15:  # a payload that really inflates (zeros) to what it declares, up to the cap
+        import lz4.frame
+
+        zeros = rng.choice((128, 448)) << 20
+        record = _chunk_record(chunk, b"", declared=zeros, payload=lz4.frame.compress(bytes(zeros)))
+        out = _with_data_crc(data[:start] + record + data[end:])
+        detail = f"lz4 chunk at {start} replaced by {zeros >> 20} MiB of zeros (declared so; no records)"
+        return fc.Case(seed.name, "mcap", "mcap_lz4_lie", detail, out, ".mcap", damaged=True)
     lie = rng.choice((1 << 30, 500 << 20, 2 * actual, actual + 1, actual - 1, actual // 2, 0))
     inner = _decompress(chunk)
     record = _chunk_record(chunk, inner, declared=lie, payload=chunk["payload"])
