@@ -28,9 +28,11 @@ from typing import Any
 
 from logscan.errors import InputError, LogscanError, OutOfMemoryError, UsageError
 
-# What a directory expands to: log files by suffix, and sub-directories holding per-topic CSVs
-# (each such directory is one log). Formats themselves are detected by content (logscan.readers).
-LOG_FILE_SUFFIXES = (".mcap", ".ulg")
+# What a directory expands to: log files by suffix, rosbag2 directories (a `metadata.yaml` inside:
+# one log each) and sub-directories holding per-topic CSVs (each such directory is one log).
+# Formats themselves are detected by content (logscan.readers).
+LOG_FILE_SUFFIXES = (".mcap", ".ulg", ".bag", ".db3")
+ROSBAG2_METADATA = "metadata.yaml"
 
 
 @dataclass
@@ -43,9 +45,10 @@ class LogFailure:
 
 
 def expand_logs(paths: Sequence[str]) -> list[str]:
-    """Files as given; a directory holding log files expands to them (sorted) and to its
-    sub-directories of CSVs; a directory of per-topic CSVs (the ulog2csv pieces of one log) stays
-    one log; CSVs that are not such pieces are one log per file.
+    """Files as given; a directory holding log files expands to them (sorted), to its rosbag2
+    sub-directories and to its sub-directories of CSVs; a rosbag2 directory (its `metadata.yaml`)
+    and a directory of per-topic CSVs (the ulog2csv pieces of one log) stay one log; CSVs that are
+    not such pieces are one log per file.
 
     Only regular files are logs, and nothing is opened here. An entry named like a log (``.mcap``,
     ``.ulg``, ``.csv``) that is a FIFO, device or socket, and a directory or sub-directory that
@@ -64,10 +67,13 @@ def expand_logs(paths: Sequence[str]) -> list[str]:
         except InputError:
             logs.append(raw)
             continue
+        if _is_rosbag2(entries):  # one ROS 2 bag: its storage files are pieces of it
+            logs.append(raw)
+            continue
         inner = [path / n for n, mode in entries if stat.S_ISREG(mode) and _suffix(n) in LOG_FILE_SUFFIXES]
         special = [path / n for n, mode in entries if _is_special(mode) and _suffix(n) in _SPECIAL_CHECKED]
         inner_dirs = [path / n for n, mode in entries if stat.S_ISDIR(mode)]
-        found = (inner or _csv_logs(path, entries)) + [log for d in inner_dirs for log in _csv_logs(d)]
+        found = (inner or _csv_logs(path, entries)) + [log for d in inner_dirs for log in _dir_logs(d)]
         logs.extend(raw if p == path else str(p) for p in (found + special) or [path])
     return logs
 
@@ -81,6 +87,21 @@ def _suffix(name: str) -> str:
 
 def _is_special(mode: int) -> bool:
     return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
+def _is_rosbag2(entries: list[tuple[str, int]]) -> bool:
+    return any(name == ROSBAG2_METADATA and stat.S_ISREG(mode) for name, mode in entries)
+
+
+def _dir_logs(directory: Path) -> list[Path]:
+    """A sub-directory's logs: itself when it is a rosbag2 directory, else its CSV logs."""
+    from logscan.readers.common import list_directory
+
+    try:
+        entries = list_directory(directory)
+    except InputError:  # reading it will say why
+        return [directory]
+    return [directory] if _is_rosbag2(entries) else _csv_logs(directory, entries)
 
 
 def _csv_logs(directory: Path, entries: list[tuple[str, int]] | None = None) -> list[Path]:

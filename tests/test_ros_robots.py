@@ -261,3 +261,17 @@ def test_a_log_without_numeric_channels_says_there_is_nothing_to_profile(cli):
     path = next(conformance.glob("*.mcap"))
     result = cli("init-profile", path)
     assert result.exit_code == 2 and "holds no numeric channel" in result.stderr, result.stderr
+
+
+def test_a_folder_of_bags_is_one_log_per_bag_and_per_rosbag2_directory(tmp_path):
+    from logscan.fleet import expand_logs
+
+    fleet = tmp_path / "drives"
+    fleet.mkdir()
+    (fleet / "monday.bag").symlink_to(need_testdata(ROS1_BAG))
+    ros2 = fleet / "tuesday"
+    ros2.mkdir()
+    for piece in need_testdata(ROS2_DIR).iterdir():
+        (ros2 / piece.name).symlink_to(piece)
+    assert expand_logs([str(fleet)]) == [str(fleet / "monday.bag"), str(ros2)]
+    assert expand_logs([str(ros2)]) == [str(ros2)]  # its .mcap is a piece of it, not a second log
