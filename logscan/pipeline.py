@@ -545,7 +545,7 @@ def analyze_log(
 
     loaded = load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
-    trained = tables_path(None if tables is None else str(tables), loaded.profile)
+    trained = tables_path(None if tables is None else str(tables), loaded.profile, log=path)
     if trained is not None:  # the trained detectors, and the filter's calibrated noise in the profile
         detectors = apply_tables(detectors, trained, loaded.profile)
         calibration = read_tables_document(trained).get("calibration")
