@@ -53,6 +53,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from logscan.align import AlignedRun
+from logscan.detectors.isolation import call_isolated
 from logscan.detectors.params import describe_constraints, satisfies
 from logscan.errors import InputError, InternalError, NotTrainedError, OutOfMemoryError, ProfileError, UsageError
 from logscan.needs import Needs
@@ -145,6 +146,9 @@ class Detector:
     # The autopilot's own verdict (PX4's estimator tests): the baseline logscan's model-based alarms
     # are reported against (`logscan.analysis.Analysis.against_baseline`).
     is_baseline: ClassVar[bool] = False
+    # Where a plugin class comes from ("plugin <distribution> <version>"), set by the registry when it
+    # loads one; None for built-ins. A plugin's fit and run are isolated (`logscan.detectors.isolation`).
+    plugin_origin: ClassVar[str | None] = None
 
     def __init__(self, **params: Any) -> None:
         self.params = {**copy.deepcopy(dict(self.defaults)), **params}
@@ -199,6 +203,11 @@ class Detector:
     # --- training ---------------------------------------------------------------------------------
     def fit(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None = None, **context: Any) -> Detector:
         """Learn trained state (trailing-underscore attributes) from healthy runs; returns self."""
+        if type(self).plugin_origin is not None:  # plugin code: isolated from the analysis
+            return call_isolated(self, "fit", lambda: self._fit_checked(runs, traces, **context))
+        return self._fit_checked(runs, traces, **context)
+
+    def _fit_checked(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None, **context: Any) -> Detector:
         self.check_params()
         runs = list(runs)
         traces = [None] * len(runs) if traces is None else list(traces)
@@ -266,6 +275,11 @@ class Detector:
     # --- running ----------------------------------------------------------------------------------
     def run(self, run: AlignedRun, trace: Any = None, **context: Any) -> DetectorResult:
         """Run on one aligned run (and the shared filter trace); returns a DetectorResult."""
+        if type(self).plugin_origin is not None:  # plugin code: isolated from the analysis
+            return call_isolated(self, "run", lambda: self._run_checked(run, trace, **context))
+        return self._run_checked(run, trace, **context)
+
+    def _run_checked(self, run: AlignedRun, trace: Any, **context: Any) -> DetectorResult:
         self.check_params()
         if self.requires_fit:
             self.check_trained()

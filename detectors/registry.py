@@ -241,6 +241,8 @@ class Registry:
             return
         if entry.origin != BUILTIN and details["default_enabled"]:
             entry.problems.append("default_enabled is ignored for plugins: it runs only when a profile enables it")
+        if entry.origin != BUILTIN:  # its fit and run are isolated (`logscan.detectors.isolation`)
+            cls.plugin_origin = entry.origin
         entry.cls = cls
         self._taken[cls.name] = entry
 
@@ -322,6 +324,16 @@ class Registry:
                 hint="a bug in the plugin: report it to its authors, or remove the detector from the profile",
             )
         return detector
+
+    def builtin_names(self) -> list[str]:
+        """The built-in detectors that loaded (never imports plugin code)."""
+        return [e.name for e in self._load(plugins=False) if e.ok and e.origin == BUILTIN]
+
+    def plugin_entry_names(self) -> list[str]:
+        """The names of the installed plugins' entry points, read from their metadata (never imports
+        plugin code)."""
+        found = self._plugins if self._plugins is not None else list(entry_points(group=ENTRY_POINT_GROUP))
+        return sorted({ep.name for ep in found})
 
     def default_names(self) -> list[str]:
         """The detectors that run when a profile enables none: the built-ins with default_enabled.

@@ -19,11 +19,14 @@ STATUSES = ("new", "unchanged", "gone")
 
 def read_baseline(path: str) -> dict[str, Any]:
     """A previous `--json` summary (InputError naming the file when it is not one)."""
+    from logscan.input_files import MAX_BASELINE_BYTES, read_input_text
+
+    text = read_input_text(path, what="the baseline", limit=MAX_BASELINE_BYTES)
     try:
-        with open(path, encoding="utf-8") as fh:
-            document = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read the baseline: {exc}", path=path) from None
+        document = json.loads(text)
+    except (RecursionError, ValueError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise InputError(f"cannot read the baseline: {first}", path=path) from None
     if not isinstance(document, dict) or not isinstance(document.get("logs"), list):
         raise InputError(
             "not a logscan analyze summary", path=path, hint="pass a file written by `logscan analyze --json`"

@@ -132,6 +132,8 @@ def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) 
     # the profile's file, or "<log> (embedded profile)": its errors name the log too ("embedded" does not)
     source = profile.source
     chosen = list(names or profile.enabled_detectors() or registry.default_names())
+    if loaded.source == "embedded" and not names:
+        refuse_embedded_plugins(chosen, registry.builtin_names(), registry.plugin_entry_names(), source)
     detectors = []
     for name in chosen:
         spec = profile.detectors.get(name)
@@ -142,6 +144,32 @@ def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) 
                 exc.path = source
             raise
     return detectors
+
+
+def refuse_embedded_plugins(
+    chosen: Sequence[str], builtins: Sequence[str], plugins: Sequence[str], source: str
+) -> None:
+    """A profile embedded in a log (MCAP metadata, CSV sidecar) runs built-in detectors only: a
+    plugin is code, and it runs only when the user's own --profile or --detector names it (the log
+    is data; its author must not choose which installed code runs). ProfileError otherwise,
+    before any plugin is imported: an installed plugin's name is refused as such, any other name
+    is unknown."""
+    installed = [name for name in chosen if name not in builtins and name in plugins]
+    if installed:
+        raise ProfileError(
+            f"the profile embedded in the log names the plugin detector(s) {', '.join(map(repr, installed))}: "
+            "a profile that comes with a log never runs a plugin",
+            path=source,
+            hint="to run a plugin, name it yourself: --detector NAME, or a profile file of yours (--profile)",
+        )
+    unknown = next((name for name in chosen if name not in builtins), None)
+    if unknown is not None:
+        raise ProfileError(
+            f"unknown detector {unknown!r}",
+            path=source,
+            hint=f"available: {', '.join(builtins)} (a profile embedded in a log runs built-in detectors only; "
+            "see `logscan detectors`)",
+        )
 
 
 def needs_of(detectors: Sequence) -> Callable[[Any], Needs]:

@@ -52,11 +52,14 @@ class Suppression:
 
 def read_suppressions(path: str, today: date | None = None) -> list[Suppression]:
     """The entries of a suppressions file; InputError (exit 2) naming the entry that is wrong."""
+    from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
+
+    text = read_input_text(path, what="the suppressions file", limit=MAX_SUPPRESSIONS_BYTES)
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise InputError(f"cannot read the suppressions: {exc}", path=path) from None
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError, ValueError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise InputError(f"cannot read the suppressions: {first}", path=path) from None
     entries = data.get("suppress")
     if not isinstance(entries, list) or set(data) - {"suppress"}:
         raise InputError("a suppressions file holds [[suppress]] entries only", path=path)

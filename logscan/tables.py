@@ -115,11 +115,16 @@ def retrain_command(document: dict, tables: str | os.PathLike, profile, *, same_
 
 def read_tables_document(path: str | os.PathLike) -> dict[str, Any]:
     """The tables JSON (InputError on anything but a tables file of this schema)."""
+    from logscan.input_files import MAX_TABLES_BYTES, read_input_text
+
+    text = read_input_text(path, what="the tables file", limit=MAX_TABLES_BYTES)
     try:
-        with open(path, encoding="utf-8") as fh:
-            document = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read the tables file: {exc}", path=str(path)) from None
+        document = json.loads(text)
+    except RecursionError:
+        raise InputError("the tables file is nested too deeply to be tables JSON", path=str(path)) from None
+    except ValueError as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"cannot read the tables file: {first}", path=str(path)) from None
     if not isinstance(document, dict) or document.get("format") != TABLES_FORMAT:
         raise InputError("not a logscan tables file", path=str(path), hint="use a file written by `logscan train`")
     if document.get("schema_version") != TABLES_VERSION:
@@ -144,15 +149,22 @@ def read_tables(path: str | os.PathLike) -> dict[str, Any]:
     return trained
 
 
-def tables_path(option: str | None, profile) -> str | None:
-    """The tables to use: ``--tables``, else the profile's ``tables`` key (relative to its file)."""
+def tables_path(option: str | None, profile, log: str | os.PathLike | None = None) -> str | None:
+    """The tables to use: ``--tables``, else the profile's ``tables`` key: relative to the profile's
+    file, or, for the profile embedded in the log ``log`` (or any profile that is no file of the
+    user's), a file in the log's folder (the current directory without ``log``) and never outside
+    it (`logscan.input_files.inside_log_folder`)."""
+    from logscan.input_files import inside_log_folder
+
     if option is not None:
         return option
     if not profile.tables:
         return None
     source = Path(profile.source)
-    base = source.parent if source.is_file() else Path.cwd()
-    return str(base / profile.tables)
+    if source.is_file():  # the user's own profile file
+        return str(source.parent / profile.tables)
+    beside = log if log is not None else os.path.join(os.getcwd(), "log")
+    return inside_log_folder(str(profile.tables), beside, key="tables", source=str(profile.source))
 
 
 def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:

@@ -22,7 +22,7 @@ from typing import Any
 
 from logscan.errors import InputError, ProfileError, UsageError
 from logscan.pipeline import load_profile_for, prepare
-from logscan.stages import FILTERS, create_detectors, needs_of
+from logscan.stages import FILTERS, create_detectors, needs_of, refuse_embedded_plugins
 from logscan.tables import TABLES_FORMAT, TABLES_VERSION, profile_fingerprint, profile_rates
 
 
@@ -55,10 +55,18 @@ def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
     their configuration, and those whose tables the profile asks for (`Detector.asked_for_by`)."""
     from logscan.detectors.registry import default_registry
 
-    chosen = list(names or loaded.profile.enabled_detectors() or default_registry().default_names())
+    registry = default_registry()
+    chosen = list(names or loaded.profile.enabled_detectors() or registry.default_names())
     if not names:
-        registry = default_registry()
-        chosen += [n for n in registry.names() if n not in chosen and registry.get(n).asked_for_by(loaded.profile)]
+        if loaded.source == "embedded":  # a log's profile runs no plugin (`stages.refuse_embedded_plugins`)
+            refuse_embedded_plugins(
+                chosen, registry.builtin_names(), registry.plugin_entry_names(), loaded.profile.source
+            )
+        # the built-ins a profile asks for without enabling them (plugins run only when named)
+        asked = [
+            n for n in registry.builtin_names() if n not in chosen and registry.get(n).asked_for_by(loaded.profile)
+        ]
+        chosen += asked
     # none may learn: `logscan train --calibrate` still calibrates the filter (logscan.calibration)
     return [d for d in create_detectors(loaded, chosen) if d.learns()]
 

@@ -23,11 +23,9 @@ ABSOLUTE_NS = 10**15  # log times above this are epoch nanoseconds (later than 1
 
 def read_truth_file(path: str | os.PathLike) -> dict[str, Any]:
     """The truth JSON at ``path`` (InputError naming the file on anything unreadable)."""
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise InputError(f"ground truth cannot be read: {why}", path=str(path), hint="check the file") from None
+    from logscan.input_files import MAX_TRUTH_BYTES, read_input_text
+
+    text = read_input_text(path, what="ground truth", limit=MAX_TRUTH_BYTES)
     try:
         document = json.loads(text)
     except RecursionError:
