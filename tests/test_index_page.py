@@ -38,7 +38,7 @@ def index(tmp_path_factory):
     if not logs[0].exists():
         pytest.skip("sample logs missing")
     done = subprocess.run(
-        [sys.executable, "-m", "logscan", "analyze", *map(str, logs), "-o", str(root / "reports"),
+        [sys.executable, "-m", "logscan", "analyze", *map(str, logs), "-o", f"{root / 'reports'}/",
          "--plotlyjs", str(root / "reports"), "-q"], capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert done.returncode == 2, done.stderr  # the missing file

@@ -134,7 +134,7 @@ BROKEN = [
     (
         mutated("vehicle.model", "quadrotor"),
         "[vehicle] model: unknown model 'quadrotor' (did you mean 'quadcopter'?) "
-        "(known models: dc_motor, hover_uav, ins, linear, quadcopter, steer_by_wire, unicycle)",
+        "(known models: dc_motor, hover_uav, ins, linear, quadcopter, steer_by_wire, unicycle, wheeled)",
     ),
     (mutated("vehicle.model", ...), "[vehicle]: missing required key 'model'"),
     (mutated("vehicle.rate_hz", 0), "[vehicle] rate_hz: must be > 0, got 0"),
