@@ -23,6 +23,7 @@ MAX_TABLES_BYTES = 256 * MB  # trained tables: A-TFM tables of many windows and 
 MAX_BASELINE_BYTES = 512 * MB  # a previous `--json` summary of a large fleet
 MAX_SUPPRESSIONS_BYTES = 16 * MB
 MAX_TRUTH_BYTES = 64 * MB
+MAX_PROFILE_SIDECAR_BYTES = 16 * MB  # a CSV log's <log>.profile.toml
 
 
 def read_input_bytes(path: str | os.PathLike, *, what: str, limit: int) -> bytes:

@@ -240,3 +240,13 @@ def test_a_plugins_fit_is_isolated_and_keeps_what_it_learnt(plugins):
     assert type(detector).plugin_origin == "plugin"
     detector.__dict__["before"] = 1
     assert detector.fit([]) is detector and detector.before == 1
+
+
+def test_a_csv_logs_sidecars_are_read_as_regular_files_only(tmp_path, cli):
+    import os
+
+    log = tmp_path / "flight.csv"
+    log.write_text("t,x\n0,1\n0.1,2\n0.2,3\n")
+    os.mkfifo(tmp_path / "flight.profile.toml")  # a FIFO would block a plain read forever
+    result = cli("analyze", log, "--no-report")
+    assert result.exit_code == 2 and "profile sidecar" in result.stderr and "FIFO" in result.stderr, result.stderr

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from logscan.errors import InputError
+from logscan.input_files import MAX_PROFILE_SIDECAR_BYTES, MAX_TRUTH_BYTES, read_input_text
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
 from logscan.readers.csv_blocks import CsvColumns, load_columns, sniff_delimiter
@@ -381,15 +382,10 @@ def read_truth_sidecar(path: Path) -> dict | None:
     import json
 
     sidecar = _sidecar(path, ".truth.json")
-    if not sidecar.is_file():
+    if not os.path.lexists(sidecar):
         return None
-    try:
-        text = sidecar.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise InputError(
-            f"ground-truth sidecar cannot be read: {why}", path=str(sidecar), hint="check its permissions"
-        ) from None
+    # a regular file under a size limit: a FIFO or a device there is refused, never read
+    text = read_input_text(sidecar, what="the ground-truth sidecar", limit=MAX_TRUTH_BYTES)
     try:
         return json.loads(text)
     except RecursionError:
@@ -402,12 +398,7 @@ def read_truth_sidecar(path: Path) -> dict | None:
 def read_profile_sidecar(path: Path) -> str | None:
     """Profile text from the ``<log>.profile.toml`` sidecar (written by `logscan simulate`)."""
     sidecar = _sidecar(path, ".profile.toml")
-    if not sidecar.is_file():
+    if not os.path.lexists(sidecar):
         return None
-    try:
-        return sidecar.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise InputError(
-            f"profile sidecar cannot be read: {why}", path=str(sidecar), hint="check its permissions and encoding"
-        ) from None
+    # a regular file under a size limit: a FIFO or a device there is refused, never read
+    return read_input_text(sidecar, what="the profile sidecar", limit=MAX_PROFILE_SIDECAR_BYTES)
