@@ -41,9 +41,9 @@ def call_isolated(detector: Any, method: str, call: Callable[[], Any]) -> Any:
 
 
 def _blame(detector: Any, method: str, what: str) -> InternalError:
-    origin = getattr(type(detector), "plugin_origin", None) or "plugin"
+    # the pipeline's failure line names the detector and its origin already
     return InternalError(
-        f"detector {detector.name!r} ({origin}) {what} in {method}",
+        f"{what} in {method}",
         hint="a bug in the plugin: report it to its authors, or remove the detector from the profile",
     )
 

@@ -227,8 +227,8 @@ def test_a_plugin_that_prints_or_ends_its_process_cannot_end_or_corrupt_the_run(
     (log,) = summary["logs"]
     assert [r["detector"] for r in log["detectors"]] == ["nis", "chatty"]
     failures = " ".join(str(f) for f in log.get("failures", [])) + proc.stderr
-    assert "'exiting' (plugin) ended its process (exit code 0) in run" in failures
-    assert "'sysexiting' (plugin) raised SystemExit: 0 in run" in failures
+    assert "'exiting' (plugin) failed: ended its process (exit code 0) in run" in failures
+    assert "'sysexiting' (plugin) failed: raised SystemExit: 0 in run" in failures
     assert "hello from a plugin" in proc.stderr and "raw bytes on file descriptor 1" in proc.stderr
 
 
