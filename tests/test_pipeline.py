@@ -61,8 +61,8 @@ def _bad_profile(tmp_path, settings: str) -> Path:
     [
         ("windw = 3", "unknown parameter(s) windw"),
         ("window = 0", "window must be an integer in [1, inf), got 0"),
-        ("budget_per_hour = -1.0", "budget_per_hour must be a number in (0, inf)"),
-        ("alpha = 1.5", "alpha must be a number in (0, 1) or None, got 1.5"),
+        ("budget_per_hour = -1.0", "budget_per_hour must be a number in [1e-12, inf)"),
+        ("alpha = 1.5", "alpha must be a number in [3e-14, 1)"),
         ('overall = "yes"', "overall must be true or false"),
     ],
 )
@@ -84,7 +84,7 @@ def test_detectors_command_shows_each_parameter_with_its_constraint(cli):
     assert result.exit_code == 0
     assert "nis parameters" in result.output
     line = next(line for line in result.output.splitlines() if line.strip().startswith("rho "))
-    assert "default 4.0" in line and "a number in (0, inf)" in line
+    assert "default 4.0" in line and "a number in (0, 50]" in line and "it would hide faults" in line
 
 
 def test_every_builtin_parameter_has_a_declared_constraint():

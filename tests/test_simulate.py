@@ -287,14 +287,16 @@ def test_help_documents_every_option(cli):
 def test_every_help_example_runs(tmp_path, monkeypatch, cli):
     from logscan.cli.simulate_cmd import simulate as command
 
-    monkeypatch.chdir(tmp_path)
     examples = [line.strip() for line in command.epilog.splitlines() if line.strip().startswith("logscan ")]
     assert len(examples) >= 3
-    for example in examples:
+    for i, example in enumerate(examples):
+        here = tmp_path / str(i)  # each in a folder of its own: simulate never replaces a file
+        here.mkdir()
+        monkeypatch.chdir(here)
         args = example.split()[1:] + ["-q"]
         result = cli(*args)
         assert result.exit_code == 0, (example, result.output)
-        assert (tmp_path / args[args.index("-o") + 1]).stat().st_size > 0
+        assert (here / args[args.index("-o") + 1]).stat().st_size > 0
 
 
 def test_output_suffix_csv_selects_the_csv_format(tmp_path, cli):

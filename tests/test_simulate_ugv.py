@@ -34,7 +34,7 @@ def _reading_error(log, channel: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _commanded(tmp_path, cli, *args: str):
     out = tmp_path / "ugv.mcap"
-    result = cli("simulate", "dc_motor", "-q", "-o", out, *args)
+    result = cli("simulate", "dc_motor", "-q", "--force", "-o", out, *args)  # tests call it more than once
     assert result.exit_code == 0, result.stderr
     return read_log(out)
 

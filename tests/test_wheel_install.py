@@ -88,7 +88,7 @@ def test_version_and_import_come_from_the_venv_not_the_checkout(installed_wheel)
 def test_analyze_a_log_of_every_model_and_reader(installed_wheel):
     logs = [SAMPLES / name for name in (*MODEL_SAMPLES.values(), *READER_SAMPLES)]
     out = installed_wheel.workdir / "reports"
-    result = installed_wheel.run("analyze", *logs, "-o", out, "--json", "summary.json")
+    result = installed_wheel.run("analyze", *logs, "-o", f"{out}/", "--json", "summary.json")
     assert "Traceback" not in result.stderr, result.stderr[-3000:]
     assert result.returncode == 1, (result.returncode, result.stderr[-3000:])  # faults: alarms, never 3
     summary = json.loads((installed_wheel.workdir / "summary.json").read_text(encoding="utf-8"))

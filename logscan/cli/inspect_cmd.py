@@ -80,7 +80,7 @@ def read_facts(path: str, topics: tuple[str, ...] | None, use_header_stamp: bool
 
         wanted = None if topics is None else set(topics)
         log, stats = inspect_mcap(mcap_file, wanted, use_header_stamp=use_header_stamp)
-        log.source.path, log.source.format = path, fmt
+        log.source.path, log.source.format = str(path), fmt
         facts = log.summary()
         facts.setdefault("metadata", {k: dict(v) for k, v in log.source.metadata.items()})
         for name, info in facts["channels"].items():
