@@ -137,7 +137,7 @@ def _exit_process(code: int) -> None:
 def _interrupted_at_exit(signum, frame) -> None:
     _flush_streams()
     try:
-        sys.stderr.write("logscan: interrupted\n")
+        sys.stderr.write(_interrupted_line() + "\n")
         sys.stderr.flush()
     except (OSError, ValueError):
         pass
@@ -274,8 +274,18 @@ def _source_name(filename: str) -> str:
 
 
 def _interrupted() -> int:
-    click.echo("logscan: interrupted", err=True)
+    click.echo(_interrupted_line(), err=True)
     return ExitCode.INTERRUPTED
+
+
+def _interrupted_line() -> str:
+    """The interruption's line; on a terminal on a line of its own (a progress bar may hold the
+    current one, without its newline)."""
+    try:
+        on_terminal = sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        on_terminal = False
+    return ("\n" if on_terminal else "") + "logscan: interrupted"
 
 
 def _internal_error(exc: BaseException) -> int:
