@@ -41,7 +41,7 @@ from logscan.detectors.raw_topics import grid_steps, in_span, on_grid, persist_c
 from logscan.detectors.raw_topics import held as _held
 from logscan.detectors.raw_topics import log_parameter as _parameter
 from logscan.results import NotChecked
-from logscan.run_context import logged_messages
+from logscan.log import logged_messages
 
 PREFIX = "health"
 INSTANCES = (0, 1, 2, 3)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from logscan.run_context import MESSAGE_LEVELS, logged_messages
+from logscan.log import MESSAGE_LEVELS, logged_messages
 
 SLACK_S = 1.0  # a message this close to an incident's span falls in it
 MAX_SHOWN = 50  # distinct messages the report's table shows (the JSON has them all)

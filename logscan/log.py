@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -266,3 +267,41 @@ def _span_text(duration_s: float, first: str | None, last: str | None) -> str:
         "several logs or read a time column in the wrong unit; analyse each log on its own, or state "
         "the time unit (e.g. a column named time_s)"
     )
+
+
+# --- the autopilot's own logged messages (a ULog's `ulog.messages` metadata) -----------------------
+
+MAX_MESSAGES = 200
+MESSAGE_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING")
+_MESSAGE = re.compile(r"^\s*(?P<t>[-+0-9.eE]+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
+
+
+@dataclass
+class LoggedMessage:
+    """One message the autopilot logged: time (s since the log's start, and as the log's ns), level,
+    text."""
+
+    t: float
+    level: str
+    text: str
+    t_ns: int = 0
+
+
+def logged_messages(
+    metadata: dict, start_ns: int, levels: tuple[str, ...] = MESSAGE_LEVELS, limit: int | None = MAX_MESSAGES
+) -> list[LoggedMessage]:
+    """The log's own messages of ``levels`` (default: WARNING and above), in time order, at most
+    ``limit``: a ULog's ``ulog.messages`` metadata (on the clock of its channels)."""
+    out = []
+    for line in (metadata or {}).get("ulog.messages", {}).values():
+        match = _MESSAGE.match(str(line))
+        if match is None or match.group("level") not in levels:
+            continue
+        try:
+            t_ns = round(float(match.group("t")) * 1e6) * 1000  # written in microseconds
+        except ValueError:
+            continue
+        out.append(LoggedMessage((t_ns - start_ns) / 1e9, match.group("level"), match.group("text").strip(), t_ns))
+        if limit is not None and len(out) >= limit:
+            break
+    return out

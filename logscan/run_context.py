@@ -17,26 +17,23 @@ what the report shows beside the statistics is extracted right after alignment, 
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from logscan.decimate import decimate_indices
+from logscan.log import LoggedMessage, logged_messages
 
 MAX_PATH_POINTS = 1_000
 MAX_MODE_INTERVALS = 200
 MAX_MODE_POINTS = 1_000
 POSITION_STATES = ("x", "y")
-MAX_MESSAGES = 200
 MAX_STATE_INTERVALS = 200
 # topics read beside a profile's for the states drawn in the report (absent topics cost nothing)
 STATE_TOPICS = ("vehicle_status_0",)
 ARMED_STATE = 2.0  # PX4 vehicle_status.arming_state: ARMING_STATE_ARMED
 # a ULog message's level, as logscan.readers.ulog_reader writes it ("<s> s [<LEVEL>] <text>"), most severe first
-MESSAGE_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING")
 # a ULog message as logscan.readers.ulog_reader writes it: "<seconds> s [<LEVEL>] <text>"
-_MESSAGE = re.compile(r"^\s*(?P<t>[-+0-9.eE]+) s \[(?P<level>[A-Z]+)\] (?P<text>.*)$", re.S)
 
 
 @dataclass
@@ -60,17 +57,6 @@ class ModeTrack:
     value: np.ndarray
     intervals: list[tuple[float, float, float]] = field(default_factory=list)  # empty: too many
     n_changes: int = 0
-
-
-@dataclass
-class LoggedMessage:
-    """One message the autopilot logged: time (s since the log's start, and as the log's ns), level,
-    text."""
-
-    t: float
-    level: str
-    text: str
-    t_ns: int = 0
 
 
 @dataclass
@@ -111,26 +97,6 @@ def autopilot_states(channels: dict, start_ns: int, end_s: float) -> dict[str, l
         t = (np.asarray(channel.t, dtype=np.int64) - start_ns) / 1e9
         values = np.asarray(channel.values, dtype=np.float64)
         out[state] = _intervals(t, test(np.nan_to_num(values)), end_s)
-    return out
-
-
-def logged_messages(
-    metadata: dict, start_ns: int, levels: tuple[str, ...] = MESSAGE_LEVELS, limit: int | None = MAX_MESSAGES
-) -> list[LoggedMessage]:
-    """The log's own messages of ``levels`` (default: WARNING and above), in time order, at most
-    ``limit``: a ULog's ``ulog.messages`` metadata (on the clock of its channels)."""
-    out = []
-    for line in (metadata or {}).get("ulog.messages", {}).values():
-        match = _MESSAGE.match(str(line))
-        if match is None or match.group("level") not in levels:
-            continue
-        try:
-            t_ns = round(float(match.group("t")) * 1e6) * 1000  # written in microseconds
-        except ValueError:
-            continue
-        out.append(LoggedMessage((t_ns - start_ns) / 1e9, match.group("level"), match.group("text").strip(), t_ns))
-        if limit is not None and len(out) >= limit:
-            break
     return out
 
 

@@ -107,7 +107,7 @@ def test_analyze_print_profile_shows_the_profile_used(cli, sample):
 
 def test_the_autopilots_warnings_are_drawn_on_the_time_axis(cli, tmp_path):
     from logscan.readers import read_log
-    from logscan.run_context import logged_messages
+    from logscan.log import logged_messages
 
     path = need_testdata("px4-ulog/sample_px4_events.ulg")
     log = read_log(path, topics={"vehicle_status_0"})
