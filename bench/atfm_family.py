@@ -86,7 +86,7 @@ class RunTask:
 def train(root: str, quiet: bool) -> tuple[str, tuple[str, str]]:
     """Tables from 8 healthy training logs, and the adaptive and fixed-row profiles."""
     from logscan.pipeline import load_profile_for
-    from logscan.training import train_logs
+    from logscan.training.train import train_logs
 
     logs = []
     for k in range(8):

@@ -21,7 +21,7 @@ def main() -> None:
     from benchlib import best_of, simulate_log
 
     from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
-    from logscan.training import fit_detectors
+    from logscan.training.train import fit_detectors
 
     with tempfile.TemporaryDirectory(prefix="bench-train-") as root:
         log = os.path.join(root, "hour.mcap")

@@ -21,7 +21,7 @@ rejected-sample checks as the baseline-configured detector reports them, and "an
 
 Every run is 60 s, one fault starting at a uniform time in [20, 40) s (drawn from the run's seed)
 with the family's default target, magnitude and length (`logscan simulate --help`); false alarms
-per hour come from healthy runs (normal and `--aggressive`). Scoring is `logscan.scoring`'s
+per hour come from healthy runs (normal and `--aggressive`). Scoring is `logscan.verdict.scoring`'s
 (docs/algorithms.md section 7): an alarm already on at the fault's onset is no detection (cells
 count such runs apart), alarms in the recovery window after a detected fault are neither
 detections nor false alarms (a row of their own). Seeds (none used by
@@ -34,7 +34,7 @@ sample_logs/make_samples.py or the tests; nothing was tuned on them):
 
 Runs go through the Python API (simulate -> MCAP (ROS 2 CDR) in a temporary directory ->
 `logscan.pipeline`, the same reader and pipeline as `logscan analyze`) in local processes
-(`logscan.fleet.run_many`); the baseline is trained on prepared healthy runs (`logscan.training`).
+(`logscan.fleet.run_many`); the baseline is trained on prepared healthy runs (`logscan.training.train`).
 
     python bench/evaluate_detectors.py                     # 20 runs per family, 2 processes
     python bench/evaluate_detectors.py --runs 3 --json /tmp/eval.json    # a quick look
@@ -57,7 +57,7 @@ import numpy as np
 DURATION_S = 60.0
 START_RANGE_S = (20.0, 40.0)
 GRACE_S = 1.0
-RECOVERY_S = 5.0  # logscan.scoring.DEFAULT_RECOVERY_S
+RECOVERY_S = 5.0  # logscan.verdict.scoring.DEFAULT_RECOVERY_S
 MARGIN = 1.0
 N_TRAIN = 10
 
@@ -177,7 +177,7 @@ def train_one(job: Job) -> tuple[str, int, float]:
     """`fit` of the baseline on one prepared healthy run (no detector runs over it):
     (model, seed, margin * max |e_x|)."""
     from logscan.pipeline import load_profile_for, prepare
-    from logscan.training import fit_detectors
+    from logscan.training.train import fit_detectors
 
     detector = _baseline({})
     with tempfile.TemporaryDirectory() as directory:
@@ -190,9 +190,9 @@ def train_one(job: Job) -> tuple[str, int, float]:
 def evaluate_one(args: tuple[Job, dict[str, float]]):
     """Score one run under every method; returns (job, LogEvaluation or error text, the merged
     alarm spans per method (for rescoring the JSON), seconds)."""
-    from logscan.evaluate import LogEvaluation, merge_intervals, score_groups
     from logscan.results import events_from_truth
-    from logscan.scoring import label_observability
+    from logscan.verdict.evaluation import LogEvaluation, merge_intervals, score_groups
+    from logscan.verdict.scoring import label_observability
 
     job, thresholds = args
     started = time.perf_counter()
@@ -236,7 +236,7 @@ def evaluate_one(args: tuple[Job, dict[str, float]]):
             transients=transients,
             log=f"{job.model}/{job.family}/{job.seed}",
         )
-        # faults wholly where they could not be seen are labelled (logscan.observability), not excused
+        # faults wholly where they could not be seen are labelled (logscan.verdict.observability), not excused
         seen = analysis.observability
         verdicts = [seen.event_verdict(e) if seen is not None else None for e in analysis.events]
         for score in scores.values():
@@ -274,7 +274,7 @@ CATEGORIES = (  # the paper's Table III rows, mapped onto the simulator's fault 
 def category_table(results: list, methods: dict[str, str]) -> str:
     """The paper's Table III rows: detection accuracy and mean latency per fault category, per
     model, pooled over the families of the category (events detected / events)."""
-    from logscan.scoring import aggregate
+    from logscan.verdict.scoring import aggregate
 
     out = ["| model: fault category | " + " | ".join(methods.values()) + " |", "|---|" + "---|" * len(methods)]
     for model in FAMILIES:
@@ -312,7 +312,7 @@ def family_cell(scores) -> str:
     """detected / runs (detections after the fault ended; runs with an alarm already on at the
     onset; faults wholly where they could not be seen, the misses among them, and the detection
     rate of the others) · mean / max latency."""
-    from logscan.scoring import aggregate
+    from logscan.verdict.scoring import aggregate
 
     score = aggregate(scores)
     late = score.tp - detected_while_active(scores)
@@ -332,7 +332,7 @@ def family_cell(scores) -> str:
 
 
 def _fa_per_hour(scores) -> str:
-    from logscan.scoring import aggregate
+    from logscan.verdict.scoring import aggregate
 
     total = aggregate(scores)
     rate = total.false_alarms_per_hour_healthy
@@ -341,7 +341,7 @@ def _fa_per_hour(scores) -> str:
 
 def family_tables(results: list, methods: dict[str, str], runs: int) -> str:
     """Per model: one row per fault family, one column per method (Table III layout)."""
-    from logscan.scoring import aggregate
+    from logscan.verdict.scoring import aggregate
 
     out = []
     for model, families in FAMILIES.items():
@@ -399,7 +399,7 @@ DEV_RHOS = (2.0, 2.5, 3.0, 3.5, 4.0)
 def diagnose_actuator_offsets() -> str:
     """Why A misses actuator offsets: the step of e_x at the fault onset in units of its healthy
     spread, and (for information, not tuning) detections vs. false alarms of A over rho."""
-    from logscan.evaluate import merge_intervals, score_groups
+    from logscan.verdict.evaluation import merge_intervals, score_groups
 
     lines = [
         "| model, fault (start 30 s) | e_x step at onset / healthy std (8 dev runs) | "

@@ -26,9 +26,9 @@ MAGNITUDES = {-0.10: "-10 % thrust (the simulator's motor-offset)", -0.19: "-10 
 
 def one(job: tuple[float, int]) -> tuple[float, int, float, int, float | None]:
     """(magnitude, seed, e_x step in healthy std, detected 0/1, latency s or None)."""
-    from logscan.evaluate import score_groups
     from logscan.pipeline import analyze_log
     from logscan.simulate import parse_fault, simulate, write_simulation
+    from logscan.verdict.evaluation import score_groups
 
     magnitude, seed = job
     with tempfile.TemporaryDirectory() as directory:

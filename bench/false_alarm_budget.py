@@ -13,7 +13,7 @@ runs without failing on a 60 s healthy probe log of each model (a detector that 
 tables, another filter or topics these logs lack is listed as not applicable, with its reason).
 
 Counting is `logscan evaluate`'s: alarms grouped per detector and per check
-(`logscan.evaluate.alarm_groups`), merged into disjoint spans (`merge_intervals`); each span on
+(`logscan.verdict.evaluation.alarm_groups`), merged into disjoint spans (`merge_intervals`); each span on
 a healthy log is one false alarm. Rate = alarms / hours; the 95 % interval is the exact
 (Garwood) Poisson interval
 
@@ -106,8 +106,8 @@ def probe(model: str) -> tuple[list[str], dict[str, str]]:
 def count_one(job: Job) -> dict:
     """Simulate and analyse one healthy log; its false alarms per detector and check, with each
     alarm's statistic and peak / threshold (a "hair above" crossing reads 1.00)."""
-    from logscan.evaluate import alarm_groups, merge_intervals
     from logscan.pipeline import analyze_log
+    from logscan.verdict.evaluation import alarm_groups, merge_intervals
 
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as directory:

@@ -4,7 +4,7 @@ the frozen-sensor check (`frozen`) and of every detector `logscan analyze` runs 
 bench/evaluate_detectors.py sticks the default target only (the quadcopter's accel.x, the
 steer-by-wire's yaw rate); this bench sticks each channel in turn, as that campaign draws its runs
 (60 s, the fault's start uniform in [20, 40) s from the run's seed, 5 s long) and scores them the
-same way (`logscan.evaluate.score_groups`, grace 1 s). Seeds, used nowhere else:
+same way (`logscan.verdict.evaluation.score_groups`, grace 1 s). Seeds, used nowhere else:
 
     quadcopter     6000 + 100 * channel index + run     (6000 .. 7199)
     steer_by_wire  8000 + 100 * channel index + run     (8000 .. 8299)
@@ -59,9 +59,9 @@ def make_jobs(runs: int) -> list[Job]:
 def score_one(job: Job):
     """(job, {"frozen": Score, "any": Score} or error text): the run analysed with the default
     detectors (`frozen` among them)."""
-    from logscan.evaluate import merge_intervals, score_groups
     from logscan.pipeline import analyze_log
     from logscan.simulate import parse_fault, simulate, write_simulation
+    from logscan.verdict.evaluation import merge_intervals, score_groups
 
     try:
         with tempfile.TemporaryDirectory() as directory:
@@ -81,7 +81,7 @@ def score_one(job: Job):
 
 
 def table(results: list) -> str:
-    from logscan.scoring import aggregate
+    from logscan.verdict.scoring import aggregate
 
     lines = [
         f"| model | stuck channel | `{CHECK}`: detected · mean / max latency | within 1 s | any default detector |",

@@ -8,10 +8,10 @@ flies a figure-eight between; after KGN's 35 s warm-up its steady gate (/flight_
 for 10 s) judges 35-60 s, 70-75 s and 85-120 s. Scenarios: the step at 70-80 s (the steady hover),
 the slope over the judged hover (70-75 s, 0.1 m/s^2 at its end), over the whole hover (60-75 s,
 0.3 m/s^2 at its end) and from 60 s to the log's end (into the figure-eight, 1.2 m/s^2 at 120 s).
-`kgn` is trained by `logscan.training.train_logs` on TRAIN healthy logs with a profile enabling
+`kgn` is trained by `logscan.training.train.train_logs` on TRAIN healthy logs with a profile enabling
 [detectors.kgn] and [detectors.nis] (defaults); every
 scenario runs RUNS unseen seeds, and RUNS unseen healthy logs give the false alarms per hour (of
-log time). Scoring is `logscan.scoring`'s: an alarm detects a fault when it starts between the
+log time). Scoring is `logscan.verdict.scoring`'s: an alarm detects a fault when it starts between the
 fault's start and 1 s after its end; latency from the fault's start.
 
 Seeds (none used by sample_logs/ or the tests): step 9000.., whole-hover slope 9100.., long slope
@@ -103,7 +103,7 @@ class RunTask:
 def train(root: str, count: int, model: str = "quadcopter") -> tuple[str, str, dict]:
     """A profile enabling kgn and nis, and kgn's tables trained on ``count`` healthy logs."""
     from logscan.pipeline import load_profile_for
-    from logscan.training import train_logs
+    from logscan.training.train import train_logs
 
     seeds = range(TRAIN_SEED, TRAIN_SEED + count)
     logs = [simulate(os.path.join(root, f"train-{s}.mcap"), s, model=model) for s in seeds]

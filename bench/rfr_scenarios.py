@@ -182,7 +182,7 @@ def shifted_recovery(analysis):
     from dataclasses import replace
 
     from logscan.filters.ekf import run_ekf
-    from logscan.loops import loop_runs
+    from logscan.pipeline.loops import loop_runs
     from logscan.recovery import LoopRun, RecoverySettings, anomalies_from_truth, recover
 
     loops = []

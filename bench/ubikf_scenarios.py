@@ -4,7 +4,7 @@ The scenarios (`logscan simulate hover_uav`; the UBIKF paper's section IV.B): a
 0.1 rad bias on the roll output for samples k in [30, 70], and the total loss of rotor 1 from
 k = 31 (k counted from the excitation's start, docs/models.md); RUNS unseen seeds each, and RUNS
 healthy runs for false alarms. Each log is analysed by `chi2` (robust alarms, and "possible fault"
-warnings counted apart) and by `nis`, with default settings. Scoring is `logscan.scoring`'s: an
+warnings counted apart) and by `nis`, with default settings. Scoring is `logscan.verdict.scoring`'s: an
 alarm detects a fault when it starts between the fault's start and 1 s after its end.
 
 Seeds (none used by sample_logs/ or the tests): roll bias 8000.., rotor loss 8100.., healthy 8200..

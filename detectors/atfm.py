@@ -9,14 +9,14 @@ chapter II). Per `[redundant.<group>]` of the profile:
   `[mode]` channel, e.g. the commanded speed), the error against the median of the others on
   segments of one mode value (a settle time after each change dropped), e(eps, w) for every eps and
   window, the knee per window, the knees at the detection window w as the table row, and the
-  monotone envelope of eps over the mode values (`logscan.tfm`).
+  monotone envelope of eps over the mode values (`logscan.redundant.tfm`).
 - Detection: the row is the smallest trained mode >= max(commanded, measured - margin), measured
   being the median of the sensors; above the top row the top row is used with a warning.
   Intervals [y_i - eps_i, y_i + eps_i]; WI_ij when two do not overlap; SI_ij when the WI count over
   the last w samples exceeds e_i + e_j: one statistic per pair (the count against e_i + e_j),
   alarms closer than w samples merged. Attribution: a sensor in SI with every other sensor (a
   majority for groups of 4+) is named; otherwise the pair.
-- Fusion (thesis chapter III): the group's fused signals as extras (`logscan.fusion`).
+- Fusion (thesis chapter III): the group's fused signals as extras (`logscan.redundant.fusion`).
 """
 
 from __future__ import annotations
@@ -81,10 +81,10 @@ def train_table(
     sensors: list[str], segments: dict[float, list[np.ndarray]], windows: list[int], w: int, eps_points: int
 ) -> dict:
     """The lookup table of one group from its error segments by mode value ((M, s) arrays): per
-    sensor and mode, e(eps, w) for every window and its knee (`logscan.tfm.train_sensor`); the
+    sensor and mode, e(eps, w) for every window and its knee (`logscan.redundant.tfm.train_sensor`); the
     row is the knee at the detection window ``w``; eps then takes its monotone envelope over the
     mode values. Keeps the curves for the training report."""
-    from logscan.tfm import monotone_envelope, train_sensor
+    from logscan.redundant.tfm import monotone_envelope, train_sensor
 
     modes = sorted(segments)
     at = windows.index(w)
@@ -122,7 +122,7 @@ def check_windows(detector: Detector) -> None:
 def table_rows(detector: str, modes: np.ndarray, row, margin: float, commanded: np.ndarray, measured: np.ndarray):
     """(row per step, above the top row per step): "next higher" by max(commanded, measured -
     margin) when ``row`` is "adaptive", else the trained mode value ``row`` throughout."""
-    from logscan.tfm import select_rows
+    from logscan.redundant.tfm import select_rows
 
     if row == "adaptive":
         return select_rows(modes, commanded, measured, margin)
@@ -220,7 +220,7 @@ class AtfmDetector(Detector):
 
     # --- training -----------------------------------------------------------------------------------
     def _fit(self, runs, traces, **context) -> None:
-        from logscan.tfm import reference_errors
+        from logscan.redundant.tfm import reference_errors
 
         names = _redundant_names(runs)
         tables = {}
@@ -258,7 +258,7 @@ class AtfmDetector(Detector):
         return table
 
     def _run(self, run, trace, **context) -> DetectorResult:
-        from logscan.tfm import attribute, strong_inconsistency
+        from logscan.redundant.tfm import attribute, strong_inconsistency
 
         result = self.new_result()
         t = run.t
@@ -334,7 +334,7 @@ class AtfmDetector(Detector):
 
     def _extras(self, result, grid: int, name, samples, modes, rows, eps) -> None:
         """The mode value, the table row in use and the fused signals, on the analysis grid."""
-        from logscan.fusion import fuse_all
+        from logscan.redundant.fusion import fuse_all
 
         selection = np.full(grid, np.nan, dtype=np.float32)
         selection[samples.steps] = modes[rows]
@@ -353,7 +353,7 @@ class AtfmDetector(Detector):
         """Each fusion method's RMSE against the same method on the fault-free readings: the
         readings of the sensors the truth's fault events name are dropped while those last (the
         thesis's chapter III comparison of the methods under attack)."""
-        from logscan.fusion import fuse_all, rmse
+        from logscan.redundant.fusion import fuse_all, rmse
 
         clean = samples.values.copy()
         t = samples.t
@@ -375,7 +375,7 @@ def _named_ratio(pairs: dict, n_sensors: int) -> list[np.ndarray]:
     """Per sensor (groups of 3+), how far it is into SI with the others it must disagree with to be
     named: the k-th largest over its pairs of WI count / (e_i + e_j + 1/2), k = every other sensor
     (3 sensors) or a majority of them (4+). Counts are integers, so the ratio exceeds 1 exactly
-    when count > e_i + e_j: > 1 is "named" (`logscan.tfm.attribute`'s rule), with a peak ratio."""
+    when count > e_i + e_j: > 1 is "named" (`logscan.redundant.tfm.attribute`'s rule), with a peak ratio."""
     if n_sensors < 3:
         return []
     others = n_sensors - 1

@@ -128,7 +128,7 @@ class Detector:
     requires_trace: ClassVar[bool] = False
     trained_attributes: ClassVar[tuple[str, ...]] = ()
     # Parameters that shape what `fit` learns: a trained detector keeps them from its tables; the
-    # others come from the profile it runs with (`logscan.tables.apply_tables`).
+    # others come from the profile it runs with (`logscan.training.tables.apply_tables`).
     fit_params: ClassVar[tuple[str, ...]] = ()
     state_version: ClassVar[int] = 1
     # Which of the large per-step series (`logscan.pipeline.RELEASABLE`: the EKF's state, covariance,
@@ -140,11 +140,11 @@ class Detector:
     # decodes those present and passes their channels, unaligned, as the context keyword ``raw``
     # (channel name -> logscan.log.Channel), with the log's metadata as ``metadata``.
     raw_topics: ClassVar[tuple[str, ...]] = ()
-    # Threshold multipliers `logscan train --tune` may choose (logscan.tuning): parameter -> the
+    # Threshold multipliers `logscan train --tune` may choose (logscan.training.tuning): parameter -> the
     # statistics whose alarms it alone decides, e.g. {"rho": ("e_x",)}.
     tunable: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     # The autopilot's own verdict (PX4's estimator tests): the baseline logscan's model-based alarms
-    # are reported against (`logscan.analysis.Analysis.against_baseline`).
+    # are reported against (`logscan.pipeline.analysis.Analysis.against_baseline`).
     is_baseline: ClassVar[bool] = False
     # Where a plugin class comes from ("plugin <distribution> <version>"), set by the registry when it
     # loads one; None for built-ins. A plugin's fit and run are isolated (`logscan.detectors.isolation`).
@@ -227,7 +227,7 @@ class Detector:
     @classmethod
     def signal_words(cls, signal: str) -> str | None:
         """Plain words for one of its statistics, said instead of "<group> inconsistent" in an
-        incident's headline (`logscan.incidents`); None: the default wording."""
+        incident's headline (`logscan.verdict.incidents`); None: the default wording."""
         return None
 
     @classmethod
@@ -239,7 +239,7 @@ class Detector:
         return cls.signal_words(signal)
 
     def with_params(self, **params: Any) -> Detector:
-        """A copy with ``params`` changed (checked), trained state kept (`logscan.tuning`)."""
+        """A copy with ``params`` changed (checked), trained state kept (`logscan.training.tuning`)."""
         other = copy.deepcopy(self)
         other.params.update(params)
         other.check_params()

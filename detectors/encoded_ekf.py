@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.adaptive_threshold import adaptive_band, trailing_mean_var
+from logscan.detectors.adaptive_threshold import adaptive_band, trailing_mean_var
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.params import PERSIST, Boolean, Interval, Options, RealList, multiplier_bound
 from logscan.detectors.words import group_words

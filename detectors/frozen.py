@@ -173,7 +173,7 @@ class FrozenSensorDetector(Detector):
                 alarm.change_time = float(run.t[steps[anchor[i] + 1]]) if i > anchor[i] else None
             info["fill"][signal], info["h"][signal], info["sigma"][signal] = float(fill), float(h), float(sigma)
         result.info.update(info)
-        # listed beside the verdict (logscan.coverage.skipped_checks), not only in the JSON's info
+        # listed beside the verdict (logscan.verdict.coverage.skipped_checks), not only in the JSON's info
         result.not_checked = [NotChecked(line) for line in skipped_lines(info["not_checked"], self.name)]
         return result
 

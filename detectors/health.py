@@ -40,8 +40,8 @@ from logscan.detectors.params import Interval, multiplier_bound
 from logscan.detectors.raw_topics import grid_steps, in_span, on_grid, persist_count, skipped_lines, split_topics
 from logscan.detectors.raw_topics import held as _held
 from logscan.detectors.raw_topics import log_parameter as _parameter
-from logscan.results import NotChecked
 from logscan.log import logged_messages
+from logscan.results import NotChecked
 
 PREFIX = "health"
 INSTANCES = (0, 1, 2, 3)
@@ -194,7 +194,7 @@ class HealthDetector(Detector):
         if not self._checks:
             if topics and NO_TOPICS not in result.warnings:
                 result.warnings.append("health: none of the log's PX4 topics had a sample to check on the grid")
-            # never finite: the verdict lists it as not checked (logscan.coverage)
+            # never finite: the verdict lists it as not checked (logscan.verdict.coverage)
             result.add_statistic(run.t, NOTHING, np.full(n, np.nan), upper=1.0, valid=np.zeros(n, bool))
         result.info["checks"] = self._checks
         result.info["skipped"] = self._skipped

@@ -149,7 +149,7 @@ NO_RATIOS = (
     "px4_estimator: the log has no PX4 estimator test ratios (estimator_innovation_test_ratios, "
     "estimator_status, estimator_aid_src_*, ekf2_innovations)"
 )
-# the statistic that stands for "nothing was checked" (never finite: logscan.coverage says so)
+# the statistic that stands for "nothing was checked" (never finite: logscan.verdict.coverage says so)
 NOTHING = f"{PREFIX}.test_ratios"
 
 _ELEMENT = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")
@@ -363,7 +363,7 @@ class Px4EstimatorDetector(Detector):
                 if not found
                 else "px4_estimator: the log's PX4 estimator topics carry no test ratio (all zero or not finite)"
             )
-            # never finite: the verdict lists it as not checked (logscan.coverage)
+            # never finite: the verdict lists it as not checked (logscan.verdict.coverage)
             result.add_statistic(t_grid, NOTHING, np.full(n, np.nan), upper=float(self.ratio), valid=np.zeros(n, bool))
         result.info["sources"] = sources
         result.info["n_persist"] = persist

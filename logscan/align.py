@@ -8,7 +8,7 @@ duplicate timestamps dropped keeping the last, non-finite samples removed and co
 onto the grid with one compiled merge pass (numba): z[k] is the latest sample at or before t_k when it is no
 older than the staleness limit, else NaN.
 
-Time sanity (`logscan.time_sanity`, docs/algorithms.md section 8.1): the grid spans where the
+Time sanity (`logscan.timebase.time_sanity`, docs/algorithms.md section 8.1): the grid spans where the
 input and measurement channels are dense (outlying runs dropped with a warning), its size is
 checked before anything is allocated, and ``start_s``/``end_s`` cut it to a window of the log.
 """
@@ -24,7 +24,7 @@ from numba import njit
 
 from logscan import conversions
 from logscan.numba_cache import follow_dependencies
-from logscan.time_sanity import MAX_GRID_STEPS, check_window, dense_span, grid, outlier_warnings, outlying_runs
+from logscan.timebase.time_sanity import MAX_GRID_STEPS, check_window, dense_span, grid, outlier_warnings, outlying_runs
 
 
 @dataclass

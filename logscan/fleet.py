@@ -331,10 +331,10 @@ def _worker_init(parent_pid: int | None = None) -> None:
     """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM) and removes their
     temporary files; on SIGTERM a worker ends its own children first (the background compile,
     logscan.filters.warmup), which would otherwise outlive it. A worker whose parent dies (killed
-    alone) ends too (`logscan.parent_watch`)."""
+    alone) ends too (`logscan.fleet_workers`)."""
     import signal
 
-    from logscan.parent_watch import exit_with_parent
+    from logscan.fleet_workers import exit_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _end_worker)

@@ -50,7 +50,7 @@ class AlarmPolicy:
 
     n_persist: int = 1
     min_duration_s: float = 0.0
-    merge_gap_s: float = 1.0  # alarms of one statistic closer than this merge (logscan.incidents)
+    merge_gap_s: float = 1.0  # alarms of one statistic closer than this merge (logscan.verdict.incidents)
     # ground time: a channel non-zero while the vehicle is on the ground (a landed flag); no
     # statistic is judged there, nor for after_ground_s after each take-off (the transient), nor
     # for before_ground_s before each landing (a land detector confirms a touchdown late)
@@ -147,7 +147,7 @@ class NotChecked:
 
     ``partial`` (the log is "not fully checked", exit 2): the sensor is in the log but gave no valid
     sample to judge over the whole log (a battery reporting ``connected`` 0, a GNSS without a 3D
-    fix), as a measurement group without valid samples is (`logscan.coverage`). Otherwise the log
+    fix), as a measurement group without valid samples is (`logscan.verdict.coverage`). Otherwise the log
     holds nothing for the check to judge (no such topic or field, never armed): listed, the verdict
     stands."""
 
@@ -183,7 +183,9 @@ class DetectorResult:
     info: dict[str, Any] = field(default_factory=dict)
     checks: dict[str, str] = field(default_factory=dict)
     possible: list[AlarmInterval] = field(default_factory=list)
-    suppressed: list[tuple[AlarmInterval, str]] = field(default_factory=list)  # (alarm, reason): logscan.suppressions
+    suppressed: list[tuple[AlarmInterval, str]] = field(
+        default_factory=list
+    )  # (alarm, reason): logscan.verdict.suppressions
     not_checked: list[NotChecked] = field(default_factory=list)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
     judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
@@ -303,7 +305,7 @@ def _band_series(value, n: int) -> np.ndarray | None:
 @dataclass
 class Incident:
     """Alarms of different checks that overlap in time, headed by their most likely source
-    (`logscan.incidents`): one line for a user, the alarms behind it for the details.
+    (`logscan.verdict.incidents`): one line for a user, the alarms behind it for the details.
 
     ``headline`` gives the times in seconds since the log's time zero; ``what`` (the source in
     words) and ``detail`` (the quoted check and its peak), when set, let `headline_in` give the same
@@ -318,7 +320,7 @@ class Incident:
     detail: str = ""  # "nis.accel, peak 10.7x"
 
     def headline_in(self, clock=None) -> str:
-        """The headline with its times in ``clock`` (a `logscan.clock.Clock`; None: as built)."""
+        """The headline with its times in ``clock`` (a `logscan.timebase.clock.Clock`; None: as built)."""
         if clock is None or not self.what:
             return self.headline
         return f"{self.what} {clock.span_text(self.start, self.end)} ({self.detail})"

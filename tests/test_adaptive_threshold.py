@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan.adaptive_threshold import adaptive_band, trailing_mean_var
+from logscan.detectors.adaptive_threshold import adaptive_band, trailing_mean_var
 
 
 def reference_band(e, defined, window, rho):

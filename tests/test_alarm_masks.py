@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from conftest import need_testdata
 
-from logscan.coverage import MAX_UNJUDGED_FLIGHT, unjudged_flight
 from logscan.detectors.base import Detector
 from logscan.results import AlarmPolicy
+from logscan.verdict.coverage import MAX_UNJUDGED_FLIGHT, unjudged_flight
 
 DT = 0.02
 T = np.arange(0.0, 30.0, DT)

@@ -1,4 +1,4 @@
-"""A-TFM end to end (detectors/atfm.py, logscan/training.py, `logscan train`): training on healthy
+"""A-TFM end to end (detectors/atfm.py, logscan/training/train.py, `logscan train`): training on healthy
 Jackal-like logs gives a lookup table the detector uses; an attack on one speed sensor alarms on
 its pairs and names it; tables trained for another profile or on faulty logs are refused."""
 
@@ -12,8 +12,8 @@ import pytest
 from logscan.detectors.atfm import AtfmDetector, mode_segments
 from logscan.errors import NotTrainedError, ProfileError
 from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
-from logscan.tables import apply_tables, profile_fingerprint, read_tables
-from logscan.training import train_logs
+from logscan.training.tables import apply_tables, profile_fingerprint, read_tables
+from logscan.training.train import train_logs
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from conftest import need_testdata
 
-from logscan.autopilot_messages import flight_messages
-from logscan.clock import Clock
+from logscan.timebase.clock import Clock
+from logscan.verdict.autopilot_messages import flight_messages
 
 START_NS = 10_000_000_000  # the run's time zero: 10 s of the log's clock
 
@@ -76,8 +76,8 @@ def test_the_robologs_flight_lists_its_dangerous_battery_error(cli, tmp_path):
 
 
 def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():
-    from logscan.autopilot_messages import AutopilotMessage
     from logscan.cli.render import render_summary
+    from logscan.verdict.autopilot_messages import AutopilotMessage
 
     messages = [AutopilotMessage("WARNING", f"[ekf2] warning {k}", float(k), float(k)) for k in range(15)]
     run = SimpleNamespace(t=np.arange(0.0, 20.0, 0.01), dt=0.01)

@@ -1,11 +1,11 @@
-"""Baselines (logscan/baseline.py, `analyze --baseline --fail-on new`): alarms matched with a previous
+"""Baselines (logscan/verdict/baseline.py, `analyze --baseline --fail-on new`): alarms matched with a previous
 summary by log name, detector, statistic and overlapping time; only new alarms fail the run."""
 
 from __future__ import annotations
 
 import json
 
-from logscan.baseline import compare, exit_code_on_new
+from logscan.verdict.baseline import compare, exit_code_on_new
 
 
 def summary(*logs) -> dict:
@@ -61,7 +61,7 @@ def test_fail_on_new_through_the_cli(cli, sample, tmp_path):
     assert document["exit_code"] == 1 and document["baseline"]["new"] == 4
     flipped = next(log for log in document["logs"] if log["file"].endswith("quad_imu_bitflip.mcap"))
     assert all(a["baseline"] == "new" for r in flipped["detectors"] for a in r["alarms"])
-    from logscan.ci_artifacts import junit_xml, markdown_summary
+    from logscan.report.ci_artifacts import junit_xml, markdown_summary
 
     table = markdown_summary(document)
     assert table.count("| new |") == 4 and table.count("| unchanged |") == 12

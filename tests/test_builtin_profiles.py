@@ -106,8 +106,8 @@ def test_analyze_print_profile_shows_the_profile_used(cli, sample):
 
 
 def test_the_autopilots_warnings_are_drawn_on_the_time_axis(cli, tmp_path):
-    from logscan.readers import read_log
     from logscan.log import logged_messages
+    from logscan.readers import read_log
 
     path = need_testdata("px4-ulog/sample_px4_events.ulg")
     log = read_log(path, topics={"vehicle_status_0"})
@@ -191,7 +191,7 @@ def test_the_autopilots_armed_and_failsafe_states_are_drawn(cli, tmp_path):
     import numpy as np
 
     from logscan.log import Channel
-    from logscan.run_context import autopilot_states
+    from logscan.report.run_context import autopilot_states
 
     t = np.arange(0, 10) * 1_000_000_000
     raw = {
@@ -208,7 +208,7 @@ def test_the_autopilots_armed_and_failsafe_states_are_drawn(cli, tmp_path):
 
 def test_plain_words_for_the_autopilot_checks():
     from logscan.alarms import AlarmInterval
-    from logscan.incidents import headline, plain_words
+    from logscan.verdict.incidents import headline, plain_words
 
     assert plain_words("health.gnss_fix", "health") == "GNSS 3D fix lost"
     assert plain_words("px4.ekf1.pos_test_ratio", "px4_estimator") == "PX4's own test of the position failed"
@@ -221,7 +221,7 @@ def test_model_based_alarms_are_reported_against_px4s_own_tests():
     """PX4's gps_hpos test fails at 20-30 s: a model-based alarm overlapping it counts as also
     flagged by PX4; PX4's heading alarm at 45 s is PX4's alone."""
     from logscan.alarms import AlarmInterval
-    from logscan.analysis import Analysis
+    from logscan.pipeline.analysis import Analysis
     from logscan.results import DetectorResult
 
     def alarm(start, end, signal, detector):

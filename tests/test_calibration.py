@@ -1,4 +1,4 @@
-"""Calibration of the measurement noise by `logscan train` (logscan.calibration).
+"""Calibration of the measurement noise by `logscan train` (logscan.training.calibration).
 
 A profile whose noise_std is five times the simulated noise leaves every group's mean NIS per
 output near 1/25; `logscan train --calibrate` on healthy logs writes tables that carry a
@@ -14,9 +14,9 @@ import re
 import numpy as np
 import pytest
 
-from logscan.calibration import apply_calibration, calibrate
 from logscan.pipeline import load_profile_for
 from logscan.profiles import parse_profile
+from logscan.training.calibration import apply_calibration, calibrate
 
 
 def _five_times_the_noise(text: str) -> str:
@@ -121,10 +121,10 @@ def test_calibration_reads_only_the_judged_steps(ins_logs):
     """Steps the [alarms] policy does not judge (here the filter's first 30 s) are not calibrated
     on: the NIS counts are those of the judged steps alone, and judged_steps follows the policy."""
     from logscan.align import align
-    from logscan.calibration import judged_steps
     from logscan.models import get_model
-    from logscan.process_noise import evaluate
     from logscan.readers import read_log
+    from logscan.training.calibration import judged_steps
+    from logscan.training.process_noise import evaluate
 
     (path, _, _), wrong = ins_logs
     text = open(wrong).read() + "\n[alarms]\nignore_start_s = 30.0\n"
@@ -146,7 +146,7 @@ def test_calibration_reads_only_the_judged_steps(ins_logs):
 def test_a_group_whose_noise_is_at_the_floor_is_costed_at_its_own_level():
     """The concentrated cost takes each group's level of S out; at the R floor the level is Q's to
     set, so that group's cost is the plain -2 log L (log S + y^2 / S summed)."""
-    from logscan.process_noise import _concentrated_cost
+    from logscan.training.process_noise import _concentrated_cost
 
     terms = {"a": np.array([10.0, 0.5, 100.0]), "b": np.array([-3.0, 400.0, 50.0])}
     concentrated = _concentrated_cost(terms)
@@ -163,9 +163,9 @@ def test_a_group_with_logged_noise_is_calibrated_through_a_factor_on_it(ins_logs
     from dataclasses import replace
 
     from logscan.align import align
-    from logscan.calibration import calibrated_runs, calibration_lines, mean_nis_per_output
     from logscan.models import get_model
     from logscan.readers import read_log
+    from logscan.training.calibration import calibrated_runs, calibration_lines, mean_nis_per_output
 
     (path, _, _), wrong = ins_logs
     profile = parse_profile(open(wrong).read())
@@ -206,11 +206,11 @@ def test_a_group_no_noise_std_can_calibrate_keeps_the_profiles(ins_logs, monkeyp
     """A group whose mean NIS per output is still under the band with its noise at the floor (here
     a floor of half the profile's variance, for a profile 5x too wide) keeps the profile's noise
     and says why: its R at the floor would alarm on every small deviation of a real log."""
-    import logscan.calibration as calibration_module
+    import logscan.training.calibration as calibration_module
     from logscan.align import align
-    from logscan.calibration import calibration_lines
     from logscan.models import get_model
     from logscan.readers import read_log
+    from logscan.training.calibration import calibration_lines
 
     (path, _, _), wrong = ins_logs
     monkeypatch.setattr(calibration_module, "CAL_FLOOR", 0.5)

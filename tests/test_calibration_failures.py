@@ -15,10 +15,10 @@ import shlex
 import pytest
 from conftest import need_testdata
 
-import logscan.calibration
-from logscan.calibration import CAL_CEILING, calibration_failures, calibration_lines
+import logscan.training.calibration
 from logscan.pipeline import load_profile_for
-from logscan.process_noise import Q_SCALE_MIN
+from logscan.training.calibration import CAL_CEILING, calibration_failures, calibration_lines
+from logscan.training.process_noise import Q_SCALE_MIN
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +69,7 @@ def test_a_calibration_that_does_not_converge_is_failed_and_its_command_retrains
     flight = need_testdata("px4-ulog/sample_px4_events.ulg")
     tables = tmp_path / "px4.tables.json"
     with monkeypatch.context() as forced:
-        forced.setattr(logscan.calibration, "CAL_ITERATIONS", 1)
+        forced.setattr(logscan.training.calibration, "CAL_ITERATIONS", 1)
         trained = cli("train", flight, "--calibrate", "-o", tables, "--no-report")
     assert trained.exit_code == 2 and "not converged in 1 iteration(s)" in trained.stderr
     document = json.loads(tables.read_text())
@@ -88,8 +88,8 @@ def test_a_noise_at_its_ceiling_is_a_failure_and_a_worked_calibration_has_none()
     group |= {"noise_std": [1000.0], "profile_noise_std": [1.0], "updates": 50, "nis_at_floor": None}
     group |= {"mean_nis_per_output_before": 1e6, "mean_nis_per_output_after": 3.0}
     document = {"groups": {"baro": group}}
-    failures = logscan.calibration._failures(document, True, 3)
+    failures = logscan.training.calibration._failures(document, True, 3)
     assert failures == ["the noise of baro ran to its ceiling (noise_std x 1e+03)"]
     assert calibration_lines({**document, "failures": failures})[0].startswith("  FAILED: the noise of baro")
     ok = {"groups": {"baro": {**group, "noise_factor": 2.0}}}
-    assert logscan.calibration._failures(ok, True, 3) == [] and calibration_failures(None) == []
+    assert logscan.training.calibration._failures(ok, True, 3) == [] and calibration_failures(None) == []

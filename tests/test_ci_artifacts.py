@@ -1,4 +1,4 @@
-"""CI artifacts of `logscan analyze` (logscan/ci_artifacts.py): the JUnit XML validates against the
+"""CI artifacts of `logscan analyze` (logscan/report/ci_artifacts.py): the JUnit XML validates against the
 schema CI servers read and says what the JSON says, the Markdown summary's tables, GitHub Actions
 annotations (one per alarm, escaped), and `--fail-on never`."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from logscan.ci_artifacts import github_annotations
+from logscan.report.ci_artifacts import github_annotations
 
 XSD = Path(__file__).parent / "data" / "junit.xsd"
 

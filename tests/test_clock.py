@@ -1,4 +1,4 @@
-"""The log's own clock (logscan/clock.py) on stdout, in the JSON and on the report's time axis: a
+"""The log's own clock (logscan/timebase/clock.py) on stdout, in the JSON and on the report's time axis: a
 crafted ULog counts PX4 boot time, an MCAP with epoch stamps UTC (a date axis), a simulated log
 seconds since its start; ground truth scores the same whatever the clock."""
 
@@ -13,7 +13,7 @@ from conftest import SAMPLES, need_testdata, one_state_profile
 from test_report import array, figures
 from ulog_writer import write_ulog
 
-from logscan.clock import BOOT_TIME, SINCE_START, UTC, Clock, clock_of, gnss_utc_zero
+from logscan.timebase.clock import BOOT_TIME, SINCE_START, UTC, Clock, clock_of, gnss_utc_zero
 
 THRUST = "/vehicle_thrust_setpoint_0/xyz[2]"
 ACCEL = "/sensor_combined_0/accelerometer_m_s2[2]"

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from logscan.decimate import bucket_width, decimate, decimate_indices, edge_indices
+from logscan.report.decimate import bucket_width, decimate, decimate_indices, edge_indices
 
 
 def _check_buckets(y: np.ndarray, idx: np.ndarray, max_points: int, n_keep: int) -> None:

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from logscan.alarms import AlarmInterval
-from logscan.evaluate import (
+from logscan.results import DetectorResult, FaultEvent
+from logscan.verdict.evaluation import (
     Evaluation,
     LogEvaluation,
     alarm_groups,
@@ -21,7 +22,6 @@ from logscan.evaluate import (
     merge_intervals,
     score_groups,
 )
-from logscan.results import DetectorResult, FaultEvent
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 HEALTHY = SAMPLES / "quad_healthy.mcap"

@@ -59,8 +59,8 @@ def test_the_new_detector_loads_with_its_declared_parameters(new_detector, cli):
 
 
 def test_the_new_detector_runs_through_the_pipeline_and_is_scored(new_detector):
-    from logscan.evaluate import evaluate_analysis
     from logscan.pipeline import analyze_log
+    from logscan.verdict.evaluation import evaluate_analysis
 
     analysis = analyze_log(SAMPLES / "quad_imu_bias.mcap", detector_names=["innovation_mean"])
     (result,) = analysis.results

@@ -1,4 +1,4 @@
-"""Sensor fusion of redundant groups (logscan.fusion): every method against a reference implementation."""
+"""Sensor fusion of redundant groups (logscan.redundant.fusion): every method against a reference implementation."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan import fusion
+from logscan.redundant import fusion
 
 # readings on a quarter grid so that touching and equal endpoints happen often
 _READING = st.one_of(st.integers(-20, 20).map(lambda k: k / 4), st.just(np.nan))

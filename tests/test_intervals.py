@@ -7,8 +7,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan.filters.interval_model import loewner_upper
 from logscan.filters.intervals import congruence_bound, interval_product, reduce_zonotope, zonotope_hull
+from logscan.models.interval_model import loewner_upper
 
 SAMPLES = 200
 

@@ -14,8 +14,8 @@ import pytest
 
 from logscan.detectors.kgn import KgnDetector, column_norms, steady_steps, window_means
 from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
-from logscan.tables import apply_tables
-from logscan.training import train_logs
+from logscan.training.tables import apply_tables
+from logscan.training.train import train_logs
 
 FAULT_AT = 70.0  # hover from 60 s; steady (mode unchanged for 10 s) from 70 s to 75 s
 
@@ -74,7 +74,7 @@ def test_the_steady_gate_excludes_set_point_changes():
 @pytest.fixture(scope="module")
 def quad(tmp_path_factory):
     """Healthy training logs, unseen healthy logs, a step and a drift, a profile enabling kgn and
-    tables trained on the healthy logs with it (through `logscan.training.train_logs`)."""
+    tables trained on the healthy logs with it (through `logscan.training.train.train_logs`)."""
     from logscan.cli.main import main
 
     root = tmp_path_factory.mktemp("kgn")

@@ -102,7 +102,9 @@ class _Valid(tuple):
 
 @pytest.fixture(scope="module")
 def valid_file(tmp_path_factory) -> tuple[Path, bytes, Log]:
-    data = mcap_bytes(_imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}}, chunk_size=16 * 1024)
+    data = mcap_bytes(
+        _imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}}, chunk_size=16 * 1024
+    )
     path = tmp_path_factory.mktemp("mcap") / "valid.mcap"
     path.write_bytes(data)
     log = read_mcap(path, None)

@@ -1,4 +1,4 @@
-"""The observability verdict (logscan.observability, docs/algorithms.md section 10): a steer-by-wire
+"""The observability verdict (logscan.verdict.observability, docs/algorithms.md section 10): a steer-by-wire
 actuator offset cannot be seen in straight driving and can in a lane change, a quadcopter sensor bias
 is always seen, evaluate counts the misses where a fault could not be seen apart, and the summary's
 observability validates against the published schema."""
@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from logscan.observability import Direction, Observability, spans_of
 from logscan.results import FaultEvent
-from logscan.scoring import label_observability, score_log
+from logscan.verdict.observability import Direction, Observability, spans_of
+from logscan.verdict.scoring import label_observability, score_log
 
 SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "schema" / "analyze-summary.schema.json"
 
@@ -96,7 +96,7 @@ def _crafted() -> Observability:
 
 
 def test_verdict_of_a_fault_follows_its_span_and_size():
-    from logscan.observability import SNR_MIN, snr_needed
+    from logscan.verdict.observability import SNR_MIN, snr_needed
 
     # the matched test at 0.1 false alarms per hour (one test per 0.25 s) with 90 % power
     assert snr_needed() == pytest.approx(4.3453 + 1.2816, abs=1e-3) == pytest.approx(SNR_MIN, abs=5e-3)
@@ -113,7 +113,7 @@ def test_verdict_of_a_fault_follows_its_span_and_size():
 
 def test_evaluate_counts_misses_where_a_fault_could_not_be_seen_apart():
     from logscan.cli.render import render_observability
-    from logscan.evaluate import Evaluation, LogEvaluation, kind_summary
+    from logscan.verdict.evaluation import Evaluation, LogEvaluation, kind_summary
 
     obs = _crafted()
     events = [

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from logscan import pipeline
+from logscan.pipeline import stages
 from logscan.detectors.registry import default_registry
 from logscan.errors import ProfileError
 from logscan.needs import Needs
@@ -36,9 +36,9 @@ def test_the_encoded_checks_ask_for_the_gain_only_without_onboard_variances():
 
 def test_each_needed_filter_runs_exactly_once(monkeypatch):
     calls = []
-    real = pipeline.FILTERS["ekf"]
+    real = stages.FILTERS["ekf"]
     monkeypatch.setitem(
-        pipeline.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts)
+        stages.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts)
     )
     analysis = analyze_log(HEALTHY, detector_names=["encoded_ekf", "nis"])
     assert len(calls) == 1 and [r.detector for r in analysis.results] == ["encoded_ekf", "nis"]

@@ -1,4 +1,4 @@
-"""Calibration of the process noise Q by `logscan train --calibrate` (logscan.process_noise).
+"""Calibration of the process noise Q by `logscan train --calibrate` (logscan.training.process_noise).
 
 Simulated quadcopter logs (their process noise is the model's default Q) analysed with a profile
 whose Q is 10x too large (and one 10x too small), the measurement noise right: R-only calibration
@@ -17,12 +17,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan.calibration import base_noise_std, calibrate, calibrated_runs, process_noise_scale
 from logscan.filters.q_scale import scale_vector, scaled_Q
 from logscan.models import get_model
 from logscan.pipeline import load_profile_for
-from logscan.process_noise import evaluate, state_blocks
 from logscan.report.training_page import render_training_html
+from logscan.training.calibration import base_noise_std, calibrate, calibrated_runs, process_noise_scale
+from logscan.training.process_noise import evaluate, state_blocks
 
 Q_ACCEL, Q_ANGACC = 0.2, 1.0  # the quadcopter's defaults: the simulated process noise
 SIZES = {"accel": 3, "gyro": 3, "position": 3, "attitude": 3}

@@ -11,8 +11,8 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from logscan.loops import recover_analysis
 from logscan.pipeline import analyze_log, load_profile_for
+from logscan.pipeline.loops import recover_analysis
 
 SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "schema" / "analyze-summary.schema.json"
 

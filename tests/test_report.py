@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from logscan.decimate import DEFAULT_MAX_POINTS
 from logscan.errors import InputError
-from logscan.incidents import signal_label
 from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
+from logscan.report.decimate import DEFAULT_MAX_POINTS
 from logscan.report.page import _report_js
 from logscan.results import DetectorResult, FaultEvent
+from logscan.verdict.incidents import signal_label
 
 HOSTILE = "<script>alert(1)</script>"
 HOSTILE_SHOWN = "&lt;script&gt;alert(1)&lt;/script&gt;"  # as plotly receives it: text, not markup

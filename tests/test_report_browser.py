@@ -23,8 +23,8 @@ import pytest
 from test_report import HOSTILE, OWN_SCRIPTS, figures, make_report
 from test_run_context import sample_context
 
-from logscan.incidents import find_incidents
 from logscan.report import render_report
+from logscan.verdict.incidents import find_incidents
 
 CHROMIUM = next(
     (

@@ -14,8 +14,16 @@ from logscan.align import AlignedGroup
 from logscan.models import get_model
 from logscan.report import render_html
 from logscan.report.plotly_json import POINT_BUDGET
+from logscan.report.run_context import (
+    MAX_MODE_INTERVALS,
+    MAX_PATH_POINTS,
+    ModeTrack,
+    Path2D,
+    RunContext,
+    mode_of,
+    path_of,
+)
 from logscan.results import Incident
-from logscan.run_context import MAX_MODE_INTERVALS, MAX_PATH_POINTS, ModeTrack, Path2D, RunContext, mode_of, path_of
 
 N = 360_000  # 1 hour at 100 Hz
 

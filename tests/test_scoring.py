@@ -10,7 +10,7 @@ import pytest
 from logscan.alarms import AlarmInterval
 from logscan.errors import InputError
 from logscan.results import FaultEvent, events_from_truth
-from logscan.scoring import (
+from logscan.verdict.scoring import (
     AT_ONSET,
     DETECTION,
     FALSE_ALARM,
@@ -277,7 +277,7 @@ def test_events_from_truth_rejects_bad_records(record):
 def test_simultaneous_faults_are_each_detected_by_the_alarm_that_names_them():
     """A hierarchical robot's attack hits the mocap position and both encoders at once: an alarm
     counts for every fault whose target its statistic names, else for the first fault only."""
-    from logscan.evaluate import Span
+    from logscan.verdict.evaluation import Span
 
     events = [
         FaultEvent(3.25, 5.0, "bias", "position"),

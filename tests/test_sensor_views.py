@@ -1,4 +1,4 @@
-"""The sensor beside the statistic (logscan.sensor_views, logscan.report.sensor_figures): every
+"""The sensor beside the statistic (logscan.report.sensor_views, logscan.report.sensor_figures): every
 group's prediction, innovation and sigma packed right after the filter, unpacked for the groups an
 alarm names, drawn per channel with the log's channel names."""
 
@@ -12,7 +12,7 @@ import pytest
 from logscan.needs import Needs
 from logscan.pipeline import analyze_log, create_detectors, detect, load_profile_for, needs_of, prepare
 from logscan.report import render_html
-from logscan.sensor_views import PACKED, pack_innovations
+from logscan.report.sensor_views import PACKED, pack_innovations
 
 
 def analysed(path, **kwargs):
@@ -138,7 +138,7 @@ def test_a_healthy_report_draws_no_sensor_figure(sample):
     assert "measured vs predicted" not in page
 
 
-def hour_innovations(n: int) -> Innovations:  # noqa: F821 - the type is logscan.sensor_views.Innovations
+def hour_innovations(n: int) -> Innovations:  # noqa: F821 - the type is logscan.report.sensor_views.Innovations
     """Packed innovations of three 3-channel groups over ``n`` steps (gps at 10 Hz)."""
     rng = np.random.default_rng(1)
     names, groups, ys, Ss = ["accel", "gyro", "gps"], {}, [], []

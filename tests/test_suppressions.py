@@ -1,4 +1,4 @@
-"""Suppressions (logscan/suppressions.py, `analyze --suppressions`): known alarms leave the verdict and
+"""Suppressions (logscan/verdict/suppressions.py, `analyze --suppressions`): known alarms leave the verdict and
 exit code with their reason listed everywhere; an entry without a reason, or expired, is exit 2."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from datetime import date
 import pytest
 
 from logscan.errors import InputError
-from logscan.suppressions import read_suppressions
+from logscan.verdict.suppressions import read_suppressions
 
 ENTRY = """[[suppress]]
 detector = "nis"

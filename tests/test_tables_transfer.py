@@ -21,7 +21,7 @@ from conftest import need_testdata
 from pyulog import ULog
 
 from logscan.pipeline import load_profile_for
-from logscan.tables import profile_fingerprint
+from logscan.training.tables import profile_fingerprint
 
 pytestmark = pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
 FLIGHT = "px4-ulog/sample_px4_events.ulg"

@@ -1,4 +1,4 @@
-"""A-TFM numeric core (logscan/tfm.py) against brute-force loops and hand-built cases."""
+"""A-TFM numeric core (logscan/redundant/tfm.py) against brute-force loops and hand-built cases."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan import tfm
+from logscan.redundant import tfm
 
 NAN = math.nan
 # a small lattice makes errors equal to grid points (err > eps is strict) and ties in the knee common

@@ -28,7 +28,7 @@ CELL = re.compile(r"^(\S+) \((\d+)\)(?: · knee (\S+))?$")
 def document() -> dict:
     if not SAMPLE.exists():
         pytest.skip(f"{SAMPLE} missing (run sample_logs/make_samples.py)")
-    from logscan.training import train_logs
+    from logscan.training.train import train_logs
 
     return train_logs([str(SAMPLE)], None)
 

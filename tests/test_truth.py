@@ -11,7 +11,7 @@ import pytest
 from conftest import need_testdata
 
 from logscan.errors import InputError
-from logscan.truth import in_log_time, read_truth_file
+from logscan.verdict.truth import in_log_time, read_truth_file
 
 
 def summary_of(cli, *args, tmp_path):

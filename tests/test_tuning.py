@@ -1,4 +1,4 @@
-"""`logscan train --tune` (logscan.tuning): the threshold multipliers chosen by the rule (smallest
+"""`logscan train --tune` (logscan.training.tuning): the threshold multipliers chosen by the rule (smallest
 value without false alarms on the healthy logs plus the margin, F1 on labelled logs breaking ties),
 the filter run once per log, and the choice applied by `logscan analyze --tables`."""
 
@@ -9,8 +9,8 @@ import json
 import pytest
 
 from logscan.pipeline import create_detectors, load_profile_for
-from logscan.tables import apply_tables
-from logscan.tuning import TUNE_GRID, TUNE_MARGIN
+from logscan.training.tables import apply_tables
+from logscan.training.tuning import TUNE_GRID, TUNE_MARGIN
 
 
 @pytest.fixture(scope="module")
@@ -18,8 +18,8 @@ def tuned(tmp_path_factory):
     """One healthy and one labelled sample log (a -10 % motor offset at 30-40 s)."""
     from conftest import SAMPLES
 
-    from logscan.training import train_logs
-    from logscan.tuning import tuning_lines
+    from logscan.training.train import train_logs
+    from logscan.training.tuning import tuning_lines
 
     logs = [str(SAMPLES / "quad_healthy.mcap"), str(SAMPLES / "quad_motor_offset.mcap")]
     document = train_logs(logs, None, tune=True)

@@ -13,8 +13,8 @@ import scipy.linalg
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.errors import ModelError
-from logscan.filters.interval_model import IntervalModel
 from logscan.filters.ubikf import run_ubikf
+from logscan.models.interval_model import IntervalModel
 
 GRAVITY = 9.81
 HOVER_STATES = ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "p", "q", "r")

@@ -13,11 +13,11 @@ import pandas as pd
 import pytest
 
 from logscan.alarms import AlarmInterval
-from logscan.coverage import unchecked_reasons
 from logscan.detectors.base import Detector
 from logscan.detectors.registry import BUILTIN_DETECTORS, Registry
-from logscan.incidents import find_incidents, group_of
 from logscan.results import DetectorResult
+from logscan.verdict.coverage import unchecked_reasons
+from logscan.verdict.incidents import find_incidents, group_of
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"

@@ -15,7 +15,7 @@ from test_report import figures
 
 from logscan.detectors.registry import default_registry
 from logscan.detectors.words import group_words
-from logscan.incidents import signal_label
+from logscan.verdict.incidents import signal_label
 
 REGISTRY = default_registry()
 SIMULATED = [name for name in REGISTRY.names() if not REGISTRY.get(name).raw_topics]

@@ -200,7 +200,7 @@ def analyze(
 
         create_detectors(load_profile_for(None, profile_path), names)
     if tables_path is not None:  # a bad tables file stops the run before any log is read
-        from logscan.tables import read_tables
+        from logscan.training.tables import read_tables
 
         read_tables(tables_path)
     logs = expand_logs(log_paths)
@@ -216,12 +216,12 @@ def analyze(
         raise UsageError("--fail-on new needs --baseline PREVIOUS.json (the run whose alarms are known)")
     rules = ()
     if suppressions_path is not None:  # checked before any log is read: no reason or expired is exit 2
-        from logscan.suppressions import read_suppressions
+        from logscan.verdict.suppressions import read_suppressions
 
         rules = tuple(read_suppressions(suppressions_path))
     previous = None
     if baseline_path is not None:  # read before any log is analysed: a bad baseline stops the run at once
-        from logscan.baseline import read_baseline
+        from logscan.verdict.baseline import read_baseline
 
         previous = read_baseline(baseline_path)
     artifacts = {"--junit": junit_path, "--markdown": markdown_path}
@@ -268,7 +268,7 @@ def analyze(
         if previous is not None:
             code = _compare_with_baseline(document, previous, code, fail_on, exit_zero, err=json_path == "-")
         if github_annotations:
-            from logscan.ci_artifacts import github_annotations as annotations
+            from logscan.report.ci_artifacts import github_annotations as annotations
 
             for line in annotations(document):
                 click.echo(line, err=json_path == "-")
@@ -291,7 +291,7 @@ def analyze(
 def _compare_with_baseline(document: dict, previous: dict, code, fail_on: str, exit_zero: bool, err: bool):
     """Mark the alarms new / unchanged / gone (in the document), print the counts, and with
     ``--fail-on new`` let only new alarms fail the run; returns the exit code."""
-    from logscan.baseline import compare, exit_code_on_new
+    from logscan.verdict.baseline import compare, exit_code_on_new
 
     totals = compare(document, previous)
     click.echo(
@@ -363,7 +363,7 @@ def _write_outputs(
         if js is not None:
             staged.insert(0, js)
     if junit_path or markdown_path:
-        from logscan.ci_artifacts import junit_xml, markdown_summary
+        from logscan.report.ci_artifacts import junit_xml, markdown_summary
 
         for path, render in ((junit_path, junit_xml), (markdown_path, markdown_summary)):
             if path:
@@ -402,7 +402,7 @@ class AnalyzeTask:
     tables_path: str | None = None  # --tables: trained tables (logscan train)
     truth_path: str | None = None  # --truth: ground truth to score against
     fail_on_warning: bool = False  # --fail-on warning: possible faults exit 1 too
-    suppressions: tuple = ()  # --suppressions: logscan.suppressions.Suppression entries
+    suppressions: tuple = ()  # --suppressions: logscan.verdict.suppressions.Suppression entries
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         from logscan.pipeline import analyze_log
@@ -428,7 +428,7 @@ class AnalyzeTask:
             truth=self.truth_path,
         )
         if self.suppressions:
-            from logscan.suppressions import apply_suppressions
+            from logscan.verdict.suppressions import apply_suppressions
 
             apply_suppressions(analysis, list(self.suppressions))
         summary = analysis.summary()

@@ -20,7 +20,7 @@ from logscan.cli.options import (
 )
 from logscan.cli.render import printable, render_evaluation
 from logscan.errors import ExitCode, InputError
-from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
+from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 
 
 @click.command(
@@ -101,8 +101,8 @@ def evaluate(
     be analysed or none has ground truth.
     """
     from logscan.align import check_window
-    from logscan.evaluate import evaluate_logs
     from logscan.fleet import expand_logs, refuse_clobbering
+    from logscan.verdict.evaluation import evaluate_logs
 
     check_window(start_s, end_s)
     check_parallelism(jobs, scheduler)

@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from logscan.docs import doc_url
-from logscan.evaluate import CHECK_SEPARATOR
+from logscan.verdict.evaluation import CHECK_SEPARATOR
 
 if TYPE_CHECKING:
-    from logscan.evaluate import Evaluation
+    from logscan.verdict.evaluation import Evaluation
 
 _EPOCH_MIN_NS = 946_684_800 * 10**9  # 2000-01-01: later start times are wall-clock (epoch) time
 _FIELD_LINES = 3  # wrapped lines of fields per topic before truncating (--full shows all)
@@ -97,8 +97,8 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
     lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
-    from logscan.incidents import signal_label
     from logscan.report import overview
+    from logscan.verdict.incidents import signal_label
 
     shown = 0
     for k, incident in enumerate(analysis.incidents):
@@ -253,7 +253,7 @@ def render_kinds(evaluation: Evaluation) -> str:
 
 
 def render_observability(evaluation: Evaluation) -> str:
-    """Per fault kind with unobservable events (`logscan.observability`): per detector, the misses,
+    """Per fault kind with unobservable events (`logscan.verdict.observability`): per detector, the misses,
     those of them that lay wholly where the fault could not be seen, and the detection rate over the
     events that could be seen. Empty when no event was judged unobservable."""
     keys = [key for key in evaluation.keys() if CHECK_SEPARATOR not in key]

@@ -89,11 +89,11 @@ def train(
     fingerprint) for `logscan analyze --tables`, and a training report. Exit 0, or 2 on bad input
     or a calibration that failed (not converged, or a noise at its bound: written, marked failed).
     """
-    from logscan.calibration import calibration_failures
     from logscan.errors import InputError
     from logscan.fleet import expand_logs, refuse_clobbering
-    from logscan.time_sanity import check_window
-    from logscan.training import train_logs
+    from logscan.timebase.time_sanity import check_window
+    from logscan.training.calibration import calibration_failures
+    from logscan.training.train import train_logs
 
     check_parallelism(jobs, scheduler)
     check_window(start_s, end_s)
@@ -154,8 +154,8 @@ def _summary_lines(document: dict, output_path: str, report: str | None) -> list
     from logscan.detectors.registry import default_registry
 
     registry = default_registry()
-    from logscan.calibration import calibration_lines
     from logscan.report.training_page import window_text
+    from logscan.training.calibration import calibration_lines
 
     window = window_text(document.get("training_window"))
     each = f" ({window} of each)" if window else ""
@@ -164,7 +164,7 @@ def _summary_lines(document: dict, output_path: str, report: str | None) -> list
         lines.append("  filter noise calibrated (mean NIS per output -> 1; process noise Q per block):")
         lines.extend("  " + line for line in calibration_lines(document["calibration"]))
     if document.get("tuning"):
-        from logscan.tuning import tuning_lines
+        from logscan.training.tuning import tuning_lines
 
         lines.append("  threshold multipliers tuned:")
         lines.extend("  " + line for line in tuning_lines(document["tuning"]))

@@ -492,7 +492,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     if x0.size != n or not np.all(np.isfinite(x0)):
         raise ModelError(f"x0 must hold {n} finite values")
     P0 = model.default_P0() if P0 is None else _square("P0", P0, n)
-    if Q is None:  # the model's, scaled when trained tables calibrated it (`logscan.process_noise`)
+    if Q is None:  # the model's, scaled when trained tables calibrated it (`logscan.training.process_noise`)
         Q = calibrated_Q(model, run.dt)
     Q = model.default_Q(run.dt) if Q is None else _square("Q", Q, n)
     finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))

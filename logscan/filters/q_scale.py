@@ -1,9 +1,9 @@
 """The filter's Q scaled per state: Q' = D^1/2 Q D^1/2 with D = diag(scale), and a model's Q with
-the per-state scales that `logscan train --calibrate` fitted (`logscan.process_noise`, whose
+the per-state scales that `logscan train --calibrate` fitted (`logscan.training.process_noise`, whose
 docstring says why this form: a congruence keeps Q symmetric positive semi-definite).
 
 It lives in the filters layer so that `logscan.filters.ekf` applies a model's calibrated Q without
-importing the calibration; `logscan.process_noise` uses it to try its scales.
+importing the calibration; `logscan.training.process_noise` uses it to try its scales.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 
 
 def scaled_Q(Q: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Q' = D^1/2 Q D^1/2, D = diag(scale) (see `logscan.process_noise`'s docstring)."""
+    """Q' = D^1/2 Q D^1/2, D = diag(scale) (see `logscan.training.process_noise`'s docstring)."""
     root = np.sqrt(np.asarray(scale, dtype=np.float64))
     return root[:, None] * np.asarray(Q, dtype=np.float64) * root[None, :]
 

@@ -1,7 +1,7 @@
 """The UBIKF: a Kalman filter on an interval linear model with a covariance upper bound and a
 sound envelope of the state estimates (docs/algorithms.md section 2).
 
-Model `logscan.filters.interval_model.IntervalModel`: x_{k+1} = [A] x_k + [B] u_k + w, y_k = [C] x_k + v,
+Model `logscan.models.interval_model.IntervalModel`: x_{k+1} = [A] x_k + [B] u_k + w, y_k = [C] x_k + v,
 [M] = M_m +- M_r; Q+ and R+ are Loewner upper bounds of [Q] and [R] (`loewner_upper`).
 
 Covariance bound (weighted): (sum_t a_t)(sum_t a_t)^T <= sum_t a_t a_t^T / lambda_t with lambda_t
@@ -44,7 +44,6 @@ from numba import njit
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
-from logscan.filters.interval_model import IntervalModel, loewner_upper
 from logscan.filters.intervals import (
     append_box,
     append_scaled_columns,
@@ -67,6 +66,7 @@ from logscan.filters.linalg import (
     sparse_mm,
     sparse_rows,
 )
+from logscan.models.interval_model import IntervalModel, loewner_upper
 from logscan.numba_cache import follow_dependencies
 
 

@@ -37,9 +37,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from logscan.filters.interval_model import IntervalModel
 from logscan.models.base import GroupSpec, raise_problems
 from logscan.models.dispatch import HOVER_UAV_ID
+from logscan.models.interval_model import IntervalModel
 from logscan.models.linear import LinearBase, discretise
 from logscan.models.quadcopter import Quadcopter
 

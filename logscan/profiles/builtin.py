@@ -354,7 +354,7 @@ def px4_profile(log) -> BuiltProfile:
 def _vehicle_id_line(log) -> list[str]:
     """``id = "..."``: which vehicle flew, from the ULog's info and parameters (the board ver_hw,
     its unique sys_uuid where logged, the airframe SYS_AUTOSTART); none when the log says none (a
-    ulog2csv export). Trained tables are refused on another vehicle's flights (`logscan.training`)."""
+    ulog2csv export). Trained tables are refused on another vehicle's flights (`logscan.training.train`)."""
     info = log.source.metadata.get("ulog.info", {}) or {}
     airframe = (log.source.metadata.get("ulog.parameters", {}) or {}).get("SYS_AUTOSTART")
     parts = [str(info.get(key, "")).strip() for key in ("ver_hw", "sys_uuid")]

@@ -78,7 +78,7 @@ MAX_SUSPEND_S = 600.0  # after_ground_s, ignore_start_s: a transient, not a flig
 #: would hide real faults (documented in docs/profiles.md).
 MAX_ALARM_PERSIST = 1000
 MAX_ALARM_DURATION_S = 10.0
-MAX_MERGE_GAP_S = 60.0  # alarms of one check this close are one alarm (logscan.incidents)
+MAX_MERGE_GAP_S = 60.0  # alarms of one check this close are one alarm (logscan.verdict.incidents)
 #: Bounds of every rate and finite staleness limit (documented in docs/profiles.md). Beyond them a
 #: value is a slip, and it would overflow downstream: dt**4 in a model's process noise and NaN grid
 #: steps (a tiny rate), a limit in int64 nanoseconds (logscan.align.stale_ns). A rate too high for
@@ -111,7 +111,7 @@ class VehicleSpec:
     params: dict[str, Any] = field(default_factory=dict)
     loop: str = ""  # the loop's name in a hierarchical profile ("": the primary's default name)
     # which vehicle the profile describes (a built-in px4 profile: the board, its unique id, the
-    # airframe): part of the trained tables' fingerprint (`logscan.training`), nothing else reads it
+    # airframe): part of the trained tables' fingerprint (`logscan.training.train`), nothing else reads it
     id: str = ""
 
 

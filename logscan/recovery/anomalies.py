@@ -1,7 +1,7 @@
 """Anomalies to recover from: a detector's alarm intervals, or the ground truth (oracle, evaluation only).
 
 An alarm whose statistic names a measurement group of its loop (``nis.gps`` -> gps,
-`logscan.incidents.group_of`) flags that group; an alarm that names none (an overall or state
+`logscan.verdict.incidents.group_of`) flags that group; an alarm that names none (an overall or state
 check), or any alarm of a detector used as generic, flags nothing: the anomaly is generic. Alarms
 that overlap (or lie within ``merge_gap_s``) form one anomaly, their groups joined; one generic
 alarm makes the whole anomaly generic.
@@ -13,9 +13,9 @@ import math
 from collections.abc import Mapping, Sequence
 
 from logscan.alarms import AlarmInterval
-from logscan.incidents import group_of
 from logscan.recovery.records import Anomaly, LoopRun
 from logscan.results import FaultEvent
+from logscan.verdict.incidents import group_of
 
 # one alarm or fault, before merging: (start, end, {loop: groups} or None)
 _Piece = tuple[float, float, dict[str, tuple[str, ...]] | None]

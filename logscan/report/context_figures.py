@@ -1,5 +1,5 @@
 """The report's context figures: mode / set-point bands on the shared time axis, and the 2-D path
-with the incidents marked on it (from `logscan.run_context.RunContext`, already decimated)."""
+with the incidents marked on it (from `logscan.report.run_context.RunContext`, already decimated)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from logscan.clock import Clock
 from logscan.report.plotly_json import TIME_AXIS, plot_text, spec_json
 from logscan.results import Incident
+from logscan.timebase.clock import Clock
 
 MAX_BAND_VALUES = 12  # a mode with more distinct values is a set-point: drawn as a line only
 MAX_MARKED_INCIDENTS = 50

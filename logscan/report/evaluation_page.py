@@ -8,7 +8,7 @@ contained as the analysis report: plotly.js embedded once, every name escaped.
 
 from __future__ import annotations
 
-from logscan.evaluate import CHECK_SEPARATOR, Evaluation
+from logscan.verdict.evaluation import CHECK_SEPARATOR, Evaluation
 
 
 def _number(value, digits: int = 2) -> str:

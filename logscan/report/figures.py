@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.decimate import edge_indices
+from logscan.report.decimate import edge_indices
 from logscan.results import DetectorResult
 
 MAX_SPANS = 100  # shaded spans per figure (closer spans are merged for display)

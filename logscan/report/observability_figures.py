@@ -1,12 +1,12 @@
 """The report's observability figure: one row per (actuator or sensor, fault kind), shaded where a
-fault of that kind could not have been seen (`logscan.observability`), on the shared time axis."""
+fault of that kind could not have been seen (`logscan.verdict.observability`), on the shared time axis."""
 
 from __future__ import annotations
 
-from logscan.clock import Clock
 from logscan.docs import doc_url
 from logscan.report.context_figures import _spec, _time_row_layout, _time_row_spec
 from logscan.report.plotly_json import plot_text
+from logscan.timebase.clock import Clock
 
 BLIND_FILL = "rgba(127, 127, 127, 0.35)"
 ROW_HEIGHT = 28  # px per row beyond the figure's base height

@@ -15,10 +15,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from logscan.alarms import AlarmInterval
-from logscan.clock import Clock
-from logscan.incidents import signal_label
 from logscan.report.margins import Margin, peak_margin, ratio_text
 from logscan.results import DetectorResult, Incident
+from logscan.timebase.clock import Clock
+from logscan.verdict.incidents import signal_label
 
 REJECTED_PREFIX = "rejected."  # indicator statistics: 1 where the filter refused a sample
 

@@ -18,13 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from logscan import scoring
 from logscan.alarms import AlarmInterval
 from logscan.artifacts import Staged, commit, stage, write_atomic
-from logscan.autopilot_messages import MAX_SHOWN
-from logscan.clock import Clock
 from logscan.errors import InputError
-from logscan.incidents import signal_label
 from logscan.report import overview
 from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
 from logscan.report.context_figures import context_figures
@@ -33,10 +29,14 @@ from logscan.report.margins import Margin, result_margins
 from logscan.report.observability_figures import observability_figures
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
 from logscan.report.recovery_figures import recovery_figures, recovery_rows
+from logscan.report.run_context import RunContext
 from logscan.report.sensor_figures import named_group_figures
+from logscan.report.sensor_views import Innovations
 from logscan.results import DetectorResult, FaultEvent, Incident
-from logscan.run_context import RunContext
-from logscan.sensor_views import Innovations
+from logscan.timebase.clock import Clock
+from logscan.verdict import scoring
+from logscan.verdict.autopilot_messages import MAX_SHOWN
+from logscan.verdict.incidents import signal_label
 
 PLOTLY_JS_NAME = "plotly.min.js"
 MAX_TABLE_ROWS = 200  # alarm table rows shown; the JSON summary has them all
@@ -60,27 +60,27 @@ class ReportInput:
                       :func:`report_matches` when the log has truth.
     verdict:          the analysis' verdict ("no alarms", "N alarms in K incidents; not fully checked"...).
     warnings:         run-level warnings shown under the verdict.
-    incidents:        alarms grouped in time (logscan.incidents), listed before the alarms.
+    incidents:        alarms grouped in time (logscan.verdict.incidents), listed before the alarms.
     unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
-    skipped:          the checks with nothing to judge in this log (`logscan.coverage.skipped_checks`),
+    skipped:          the checks with nothing to judge in this log (`logscan.verdict.coverage.skipped_checks`),
                       listed beside ``unchecked`` in the margins section.
     unjudged:         what the profile's [alarms] suspension left unjudged of the model-based
                       statistics, when at most half of the flight ("": nothing; more is an
                       ``unchecked`` line): said where "every check ran" would be.
     messages:         the autopilot's messages during flight with their incidents
-                      (`logscan.autopilot_messages.AutopilotMessage`), a table under the incidents.
+                      (`logscan.verdict.autopilot_messages.AutopilotMessage`), a table under the incidents.
     groups:           the profile's measurement groups as used, with the filter's counts
                       (`logscan.report.context.measurement_groups`). Empty: not shown.
-    context:          the run's path and mode (`logscan.run_context.RunContext`), drawn in the
+    context:          the run's path and mode (`logscan.report.run_context.RunContext`), drawn in the
                       "Context" section (`logscan.report.context_figures`). None: not shown.
-    innovations:      the EKF's packed innovations (`logscan.sensor_views.Innovations`): a group
+    innovations:      the EKF's packed innovations (`logscan.report.sensor_views.Innovations`): a group
                       an alarm names is drawn (measured vs predicted, per channel) in the first
                       section whose alarms name it. None: not drawn.
-    clock:            the log's own clock (`logscan.clock`): the time axis, the tables and the
+    clock:            the log's own clock (`logscan.timebase.clock`): the time axis, the tables and the
                       headlines show times in it. Default: seconds since the log's start.
     recovery:         the recovered estimates per loop and state and one record per anomaly
-                      (`logscan.recovery_view`). None: no recovery section.
-    observability:    when a fault of a kind could not be seen (`logscan.observability`), drawn as
+                      (`logscan.report.recovery_view`). None: no recovery section.
+    observability:    when a fault of a kind could not be seen (`logscan.verdict.observability`), drawn as
                       bands in the "Context" section. None: not drawn.
     """
 
@@ -104,8 +104,8 @@ class ReportInput:
     context: RunContext | None = None
     innovations: Innovations | None = None
     clock: Clock = field(default_factory=Clock)
-    recovery: Any = None  # logscan.recovery_view.RecoveryView: the recovery section, when [recovery] ran
-    observability: Any = None  # logscan.observability.Observability: shaded where a fault could not be seen
+    recovery: Any = None  # logscan.report.recovery_view.RecoveryView: the recovery section, when [recovery] ran
+    observability: Any = None  # logscan.verdict.observability.Observability: shaded where a fault could not be seen
 
 
 # --- alarms and ground truth ------------------------------------------------------------------
@@ -143,7 +143,7 @@ def report_matches(
 ) -> list[dict]:
     """Per alarm of :func:`flat_alarms`: the ground-truth event it detected and its latency.
 
-    Uses ``logscan.scoring.match_alarms`` (an alarm detects the earliest event it overlaps,
+    Uses ``logscan.verdict.scoring.match_alarms`` (an alarm detects the earliest event it overlaps,
     within the grace period after the event's end); latency = alarm start - event start, clipped
     at 0 as in scoring.
     """

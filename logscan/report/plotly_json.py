@@ -1,13 +1,13 @@
 """Figure specs as plotly JSON for an HTML page: one point budget, decimated traces, escaped text.
 
-Traces are decimated (``logscan.decimate``: min/max per bucket, alarm edges and NaN gaps kept)
+Traces are decimated (``logscan.report.decimate``: min/max per bucket, alarm edges and NaN gaps kept)
 under one point budget per report, so a report stays a few hundred kilobytes plus plotly.js
 whatever the log length. Every name shown in a figure (trace names, titles, axis titles) goes
 through `plot_text`: plotly draws ``<a href>``, ``<b>``, ``<br>`` in them as markup, and names come
 from logs and profiles. The JSON has every ``<``, ``>`` and ``&`` escaped, so it can sit inside a
 ``<script>`` element.
 
-Time axes show the log's own clock (`logscan.clock`: PX4 boot time, UTC as a date axis, or time
+Time axes show the log's own clock (`logscan.timebase.clock`: PX4 boot time, UTC as a date axis, or time
 since the log's start): figures are built in seconds since the log's time zero and `on_clock`, in
 `spec_json`, moves every figure on TIME_AXIS to the clock, in one place.
 
@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.clock import Clock
-from logscan.decimate import DEFAULT_MAX_POINTS, decimate_indices
+from logscan.report.decimate import DEFAULT_MAX_POINTS, decimate_indices
 from logscan.report.figures import Figure, merge_spans
+from logscan.timebase.clock import Clock
 
 POINT_BUDGET = 20_000  # plotted points per report, shared by all varying traces
 MIN_POINTS_PER_TRACE = 400
@@ -38,7 +38,7 @@ TIME_AXIS = {
     "exponentformat": "none",  # 20000 s, not "20k"
 }
 ZOOM_MARGIN_S, ZOOM_MARGIN_FRACTION = 2.0, 0.5  # as templates/report.js zooms to a row's span
-INCIDENT_GAP_S = 1.0  # alarms this close form one incident (logscan.incidents.DEFAULT_GAP_S)
+INCIDENT_GAP_S = 1.0  # alarms this close form one incident (logscan.verdict.incidents.DEFAULT_GAP_S)
 FOCUS_SHARE = 0.25  # of a decimated trace's points, spent inside the zoom windows
 MAX_FOCUS_FRACTION = 0.2  # no focus when the windows cover more of the log than this
 ALARM_FILL = "rgba(214, 39, 40, 0.18)"

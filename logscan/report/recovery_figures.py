@@ -1,4 +1,4 @@
-"""The report's recovery section (`logscan.recovery_view.RecoveryView`): per loop and recovered
+"""The report's recovery section (`logscan.report.recovery_view.RecoveryView`): per loop and recovered
 state, the measurement that reads it, the shared EKF's estimate and the recovered estimate with its
 k-sigma bound as a band, the anomalies shaded and the checkpoints used marked; and a table with one
 row per anomaly (checkpoint, roll-forward length, T_max, whether recovery stayed trustworthy)."""
@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.clock import Clock
 from logscan.report.context_figures import _band_trace, _spec, _time_row_layout
 from logscan.report.plotly_json import plot_text
+from logscan.timebase.clock import Clock
 
 HEIGHT = 320
 COLOURS = {

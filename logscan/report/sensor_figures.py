@@ -2,7 +2,7 @@
 
 Per channel of the group, the measured value against the filter's prediction h(x_prior) with its
 +-k sigma band of S; then one figure of every channel's normalised innovation y_i / sigma_i
-(`logscan.sensor_views`). The legend carries the channel names from the log.
+(`logscan.report.sensor_views`). The legend carries the channel names from the log.
 """
 
 from __future__ import annotations
@@ -11,12 +11,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from logscan.decimate import decimate_indices, edge_indices
-from logscan.incidents import group_of
+from logscan.report.decimate import decimate_indices, edge_indices
 from logscan.report.figures import LINE_COLOURS, Figure, Trace, judged_range, merge_spans, span_limits
 from logscan.report.plotly_json import in_windows, zoom_windows
+from logscan.report.sensor_views import K_SIGMA, Innovations, SensorView
 from logscan.results import DetectorResult
-from logscan.sensor_views import K_SIGMA, Innovations, SensorView
+from logscan.verdict.incidents import group_of
 
 BAND_FILL = "rgba(255, 127, 14, 0.18)"
 PREDICTED_COLOUR = "#ff7f0e"

@@ -24,16 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from logscan.calibration import calibration_failures
 from logscan.detectors.base import decode_state_value
 from logscan.report.context import number_text
 from logscan.report.page import _environment, _plotly_js
 from logscan.report.plotly_json import plot_text, spec_json
+from logscan.training.calibration import calibration_failures
 
 CURVE_HEIGHT = 260  # px, the small e/w-vs-eps figures (three to a row)
 TABLE_HEIGHT = 340  # px, eps against the mode value
 SHORT_HASH = 12  # characters of a SHA-256 shown (the whole one in the cell's title)
-KNEE_LIMIT = 0.5  # e/w of a knee stays below this (logscan.tfm.KNEE_MAX_RATIO)
+KNEE_LIMIT = 0.5  # e/w of a knee stays below this (logscan.redundant.tfm.KNEE_MAX_RATIO)
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 SMALL_MODEBAR_REMOVED = ["toImage", "sendDataToCloud", "lasso2d", "select2d", "zoomIn2d", "zoomOut2d", "autoScale2d"]
 AXIS = {"gridcolor": "#eee", "zeroline": False, "exponentformat": "e"}
@@ -298,7 +298,7 @@ def _other_detector(state: Mapping) -> dict:
 # --- the page -------------------------------------------------------------------------------------
 
 
-LOOKUP_KEYS = {"sensors", "modes", "eps", "e"}  # a transient-fault-model lookup table (logscan.tfm)
+LOOKUP_KEYS = {"sensors", "modes", "eps", "e"}  # a transient-fault-model lookup table (logscan.redundant.tfm)
 
 
 def _holds_lookup_tables(state: Mapping) -> bool:
@@ -313,7 +313,7 @@ def _holds_lookup_tables(state: Mapping) -> bool:
 
 
 def _calibration_rows(calibration: Mapping | None) -> list[dict]:
-    """The calibrated noise per group (`logscan.calibration`), as table cells."""
+    """The calibrated noise per group (`logscan.training.calibration`), as table cells."""
     rows = []
     for name, entry in ((calibration or {}).get("groups") or {}).items():
         after = ", ".join(f"{v:.3g}" for v in entry.get("noise_std") or [])
@@ -342,7 +342,7 @@ def _calibration_note(entry: Mapping) -> str:
 
 
 def _process_noise_rows(calibration: Mapping | None) -> list[dict]:
-    """The Q scale of each block of states (`logscan.process_noise`), as rows of the same table."""
+    """The Q scale of each block of states (`logscan.training.process_noise`), as rows of the same table."""
     rows = []
     for name, entry in ((calibration or {}).get("process_noise_blocks") or {}).items():
         identified = bool(entry.get("identified"))
@@ -359,7 +359,7 @@ def _process_noise_rows(calibration: Mapping | None) -> list[dict]:
 
 
 def _tuning_rows(tuning: Mapping | None) -> list[dict]:
-    """The tuned multipliers (`logscan.tuning`), with their false-alarm counts by value."""
+    """The tuned multipliers (`logscan.training.tuning`), with their false-alarm counts by value."""
     rows = []
     for detector, params in (tuning or {}).items():
         for param, entry in (params or {}).items():
@@ -387,7 +387,7 @@ def window_text(window: dict | None) -> str:
 
 
 def render_training_html(document: dict) -> str:
-    """The training report of a tables document (`logscan.training.tables_document`) as a string."""
+    """The training report of a tables document (`logscan.training.train.tables_document`) as a string."""
     figures: list[tuple[str, str]] = []
     atfm, others = [], []
     for state in document.get("detectors") or []:

@@ -1,7 +1,7 @@
 """Observability verdict: when could a fault of a kind on a sensor or actuator be seen at all?
 
 Specified in docs/algorithms.md section 10. For each fault direction of the model (each actuator,
-each measured output) the kernel (`logscan.observability_kernel`) propagates a unit fault through the
+each measured output) the kernel (`logscan.verdict.observability_kernel`) propagates a unit fault through the
 filter linearised along its own trajectory and sums the evidence it leaves in the innovations over
 ``window_s`` from every window start on a ``stride_s`` grid: lambda = sum r^T S^-1 r, the
 non-centrality of the innovations. A fault of size m scales it by m^2 (an actuator offset of
@@ -223,7 +223,7 @@ def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S,
     """The verdict of one filtered run (the EKF trace with its x_prior and x_post); ``snr_min`` None:
     `snr_needed` at the grid's stride."""
     from logscan.models.dispatch import call_literal
-    from logscan.observability_kernel import signature_evidence
+    from logscan.verdict.observability_kernel import signature_evidence
 
     dt = float(trace.dt)
     stride = max(int(round(stride_s / dt)), 1)

@@ -21,10 +21,10 @@ from typing import Any
 
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
-from logscan.loops import RECOVERY_NEEDS, detect_loops, prepare_loops, recover_analysis
 from logscan.needs import Needs
-from logscan.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
-from logscan.tables import apply_tables, read_tables_document, tables_path
+from logscan.pipeline.loops import RECOVERY_NEEDS, detect_loops, prepare_loops, recover_analysis
+from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
+from logscan.training.tables import apply_tables, read_tables_document, tables_path
 
 Progress = Callable[[str], None]
 
@@ -108,9 +108,9 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
 
 def _extra_topics() -> frozenset[str]:
     """Every topic a registered detector reads from the log itself, and the report's states."""
-    from logscan.clock import GNSS_UTC_CHANNELS
     from logscan.detectors.registry import default_registry
-    from logscan.run_context import STATE_TOPICS
+    from logscan.report.run_context import STATE_TOPICS
+    from logscan.timebase.clock import GNSS_UTC_CHANNELS
 
     registry = default_registry()
     extra = frozenset(STATE_TOPICS) | frozenset(GNSS_UTC_CHANNELS)
@@ -170,11 +170,11 @@ def prepare(
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
     from logscan.align import align
-    from logscan.clock import GNSS_UTC_CHANNELS, clock_of
     from logscan.log import MAX_SPAN_S
     from logscan.models import get_model
     from logscan.readers import read_log
-    from logscan.run_context import STATE_TOPICS, run_context
+    from logscan.report.run_context import STATE_TOPICS, run_context
+    from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
 
     step = progress or (lambda message: None)
     path = str(path)
@@ -237,8 +237,8 @@ def prepare(
 
 def _attach_truth(log, path: str, truth_path) -> None:
     """Ground truth from ``truth_path`` (--truth), else the log's own, else `<log>.truth.json`
-    beside it; UTC event times turned into the log's seconds (`logscan.truth`)."""
-    from logscan.truth import in_log_time, read_truth_file, truth_beside
+    beside it; UTC event times turned into the log's seconds (`logscan.verdict.truth`)."""
+    from logscan.verdict.truth import in_log_time, read_truth_file, truth_beside
 
     source = truth_path if truth_path is not None else (truth_beside(path) if log.truth is None else None)
     if source is not None:
@@ -274,16 +274,16 @@ def detect(
     raises is named in ``analysis.failures``; the others' results are kept. ``free_series``: free
     each large series once no detector still to run reads it (`release_unread`; the prepared log
     then serves no further detector). ``sensor_views``: pack the EKF's innovations, when it kept
-    them, for the report (`Prepared.innovations`, `logscan.sensor_views`)."""
-    from logscan.analysis import Analysis
-    from logscan.coverage import unchecked_reasons, unjudged_flight
-    from logscan.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
+    them, for the report (`Prepared.innovations`, `logscan.report.sensor_views`)."""
+    from logscan.pipeline.analysis import Analysis
+    from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
+    from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
 
     step = progress or (lambda message: None)
     free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
-    from logscan.observability import observability_for
+    from logscan.verdict.observability import observability_for
 
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
@@ -372,7 +372,7 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
     import numpy as np
     from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
 
-    from logscan.calibration import calibrate_command
+    from logscan.training.calibration import calibrate_command
 
     trace = prepared.trace
     if trace is None or trace.nis_group is None:
@@ -399,7 +399,7 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
     judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
     import numpy as np
 
-    from logscan.calibration import calibrate_command, judged_steps
+    from logscan.training.calibration import calibrate_command, judged_steps
 
     judged = judged_steps(prepared.profile, prepared.run)
     if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
@@ -431,7 +431,7 @@ def _pack_innovations(prepared: Prepared, detectors: Sequence, reuse_samples: bo
     import numpy as np
 
     from logscan.filters.ekf import samples_side_by_side
-    from logscan.sensor_views import pack_innovations
+    from logscan.report.sensor_views import pack_innovations
 
     trace, run = prepared.trace, prepared.run
     if trace is None or trace.y is None or trace.S_diag is None:
@@ -473,9 +473,9 @@ def release_unread(prepared: Prepared, still_to_run: Sequence, keep: frozenset[s
 def detector_failure(name: str, exc: BaseException):
     """The line and exit code of a detector that raised: its own error (its exit code), or a bug
     in that detector (exit 3), blamed on the plugin package when it comes from one."""
-    from logscan.analysis import DetectorFailure
     from logscan.detectors.registry import default_registry
     from logscan.errors import ExitCode
+    from logscan.pipeline.analysis import DetectorFailure
 
     origin = default_registry().origin(name) or "not registered"
     if isinstance(exc, LogscanError):
@@ -490,7 +490,7 @@ def detector_failure(name: str, exc: BaseException):
 
 
 def rescore(analysis, grace_s: float = 1.0) -> None:
-    """Score the analysis again (its alarms changed: `logscan.suppressions`)."""
+    """Score the analysis again (its alarms changed: `logscan.verdict.suppressions`)."""
     names = [r.detector for r in analysis.results] + [f.detector for f in analysis.failures]
     _score(analysis, names, grace_s)
 
@@ -498,7 +498,7 @@ def rescore(analysis, grace_s: float = 1.0) -> None:
 def _score(analysis, detector_names: list[str], grace_s: float) -> None:
     """Scores against the log's ground truth, when it has some."""
     from logscan.results import events_from_truth
-    from logscan.scoring import score_by_detector
+    from logscan.verdict.scoring import score_by_detector
 
     prepared = analysis.prepared
     truth = prepared.log.truth
@@ -539,9 +539,9 @@ def analyze_log(
     ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
     ``start_s``/``end_s``: a window of the log (seconds since its start); ``free_series``: see
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
-    figures (`logscan.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
+    figures (`logscan.report.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it)."""
-    from logscan.calibration import process_noise_scale, uncalibrable_groups
+    from logscan.training.calibration import process_noise_scale, uncalibrable_groups
 
     loaded = load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)

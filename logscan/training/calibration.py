@@ -9,7 +9,7 @@ covariance is all R, and converges in a few steps when H P H^T is a part of S. T
 noise_std per output of each group (the profile's per-output proportions kept).
 
 Process noise Q. The NIS cannot tell a Q too large from an R too large (both widen S), so Q is fitted
-on what can: the innovations' likelihood (`logscan.process_noise`, whose docstring says why not
+on what can: the innovations' likelihood (`logscan.training.process_noise`, whose docstring says why not
 covariance matching). The model's states are grouped in blocks of like meaning (for `ins`: position,
 velocity, attitude, gyro bias, accelerometer bias, barometer offset) and each block's Q is scaled
 (Q' = D^1/2 Q D^1/2, symmetric positive semi-definite, the model's proportions inside a block kept)
@@ -21,7 +21,7 @@ CAL_ITERATIONS. Scales are clipped to [1e-4, 1e4]; a block whose Q does not chan
 is measured) keeps scale 1 and is reported as not identified.
 
 A calibration that did not converge in CAL_ITERATIONS, or whose Q scale of a block ran to its bound
-(`logscan.process_noise.Q_SCALE_MIN`, Q_SCALE_MAX: the likelihood still falling there, so the logs
+(`logscan.training.process_noise.Q_SCALE_MIN`, Q_SCALE_MAX: the likelihood still falling there, so the logs
 do not fix it) or whose noise_std ran to its ceiling, has failed: ``failures`` says why, the train
 summary and training report say it failed, and `logscan analyze --tables` refuses it.
 
@@ -40,7 +40,7 @@ from dataclasses import replace
 import numpy as np
 
 from logscan.errors import InputError
-from logscan.process_noise import Q_SCALE_MAX, Q_SCALE_MIN, BlockFit, evaluate, fit_blocks, state_blocks
+from logscan.training.process_noise import Q_SCALE_MAX, Q_SCALE_MIN, BlockFit, evaluate, fit_blocks, state_blocks
 
 CAL_ITERATIONS = 10
 CAL_FLOOR = 1e-6  # the smallest calibrated variance, relative to the profile's (std / 1000)
@@ -216,7 +216,7 @@ def _group_entries(
 def _process_noise_entries(model, blocks: dict[str, BlockFit], before, after, converged: bool) -> dict:
     """The process-noise part of the calibration document: the scale of each state's Q (what
     `logscan analyze --tables` applies), each block's, and the innovations' cost per output before
-    and after (`logscan.process_noise.Evaluation.cost` over its outputs: lower is likelier)."""
+    and after (`logscan.training.process_noise.Evaluation.cost` over its outputs: lower is likelier)."""
     names = model.state_names
     scales = {name: float(np.exp(fit.log_scale)) if fit.identified else 1.0 for name, fit in blocks.items()}
     return {

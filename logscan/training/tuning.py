@@ -40,7 +40,7 @@ def _alarms_by_statistic(detector, prepared) -> dict[str, list]:
 
 def _f1(labelled: Sequence, alarms_per_log: list[dict], statistics: Sequence[str], grace_s: float) -> float | None:
     from logscan.results import events_from_truth
-    from logscan.scoring import score_log
+    from logscan.verdict.scoring import score_log
 
     tp = fp = fn = 0
     for prepared, by_check in zip(labelled, alarms_per_log):

@@ -1,5 +1,5 @@
 """The process noise Q that `logscan train --calibrate` fits: blocks of like states, Q scaled per
-block, the innovations' likelihood it is fitted on, and one fitting step (`logscan.calibration`).
+block, the innovations' likelihood it is fitted on, and one fitting step (`logscan.training.calibration`).
 
 Q keeps the model's structure: a scale s_i per state (one per block of like states) gives
 Q' = D^1/2 Q D^1/2 with D = diag(s), so a state's variance is multiplied by its block's scale and a

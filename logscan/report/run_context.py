@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.decimate import decimate_indices
 from logscan.log import LoggedMessage, logged_messages
+from logscan.report.decimate import decimate_indices
 
 MAX_PATH_POINTS = 1_000
 MAX_MODE_INTERVALS = 200

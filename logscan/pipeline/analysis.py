@@ -10,10 +10,10 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from logscan import __version__
-from logscan.autopilot_messages import flight_messages
-from logscan.coverage import skipped_checks
 from logscan.errors import ExitCode
 from logscan.results import DetectorResult, FaultEvent, Incident
+from logscan.verdict.autopilot_messages import flight_messages
+from logscan.verdict.coverage import skipped_checks
 
 
 @dataclass
@@ -32,18 +32,18 @@ class Analysis:
     prepared: Any  # logscan.pipeline.Prepared
     results: list[DetectorResult] = field(default_factory=list)
     incidents: list[Incident] = field(default_factory=list)  # alarms grouped, in time order
-    unchecked: list[str] = field(default_factory=list)  # what could not be checked (logscan.coverage)
+    unchecked: list[str] = field(default_factory=list)  # what could not be checked (logscan.verdict.coverage)
     # what the [alarms] suspension left unjudged of the model-based statistics, when at most half of
-    # the flight (`logscan.coverage.unjudged_flight`; more is an ``unchecked`` line); "": nothing
+    # the flight (`logscan.verdict.coverage.unjudged_flight`; more is an ``unchecked`` line); "": nothing
     unjudged: str = ""
     failures: list[DetectorFailure] = field(default_factory=list)  # detectors that raised
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
-    scores: dict = field(default_factory=dict)  # detector -> logscan.scoring.Score (with truth)
+    scores: dict = field(default_factory=dict)  # detector -> logscan.verdict.scoring.Score (with truth)
     warnings: list[str] = field(default_factory=list)
     loops: dict[str, Analysis] = field(default_factory=dict)  # a hierarchical profile's further loops
     recovery: Any = None  # logscan.recovery.Recovery, when the profile asks for [recovery]
-    recovery_view: Any = None  # logscan.recovery_view.RecoveryView: what the report draws of it
-    observability: Any = None  # logscan.observability.Observability: when a fault could be seen at all
+    recovery_view: Any = None  # logscan.report.recovery_view.RecoveryView: what the report draws of it
+    observability: Any = None  # logscan.verdict.observability.Observability: when a fault could be seen at all
 
     # --- the prepared log, read through ------------------------------------------------------------
     @property
@@ -80,9 +80,9 @@ class Analysis:
 
     @property
     def clock(self):
-        """The log's own clock (`logscan.clock`): the one the pipeline kept, when it dated the log
+        """The log's own clock (`logscan.timebase.clock`): the one the pipeline kept, when it dated the log
         before releasing its samples (a ULog's GNSS time), else derived from the log and run now."""
-        from logscan.clock import clock_of
+        from logscan.timebase.clock import clock_of
 
         kept = getattr(self.prepared, "clock", None)
         return kept if kept is not None else clock_of(self.log, self.run.start_ns)
@@ -117,12 +117,12 @@ class Analysis:
     @property
     def skipped_checks(self) -> list[str]:
         """The checks the detectors could not run because the log holds nothing for them to judge
-        (`logscan.coverage.skipped_checks`): listed; unlike ``unchecked``, the verdict stands."""
+        (`logscan.verdict.coverage.skipped_checks`): listed; unlike ``unchecked``, the verdict stands."""
         return skipped_checks(self.results)
 
     def autopilot_messages(self) -> tuple[list, int]:
         """(the autopilot's distinct messages of WARNING and above during flight, each with its
-        incident (`logscan.autopilot_messages`); the number logged while disarmed)."""
+        incident (`logscan.verdict.autopilot_messages`); the number logged while disarmed)."""
         context = getattr(self.prepared, "context", None)
         states = getattr(context, "states", None) or {}
         metadata = self.log.source.metadata or {}
@@ -197,7 +197,7 @@ class Analysis:
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary of this log (the `--json` artifact's per-log entry). Times stay seconds
         since the log's time zero (``start``, ``end``); alarms and incidents add them in the log's
-        own clock (``start_clock``, ``start_utc``...: `logscan.clock.Clock.stamp`)."""
+        own clock (``start_clock``, ``start_utc``...: `logscan.timebase.clock.Clock.stamp`)."""
         clock = self.clock
         return {
             "file": self.path,
@@ -297,7 +297,7 @@ def _messages_summary(messages: list, disarmed: int, clock) -> dict[str, Any]:
 def _stamped(result: dict, clock) -> dict:
     """A detector result's JSON with its alarms' times also in the log's clock, and its statistics'
     plain words (``labels``; each alarm's ``label``)."""
-    from logscan.incidents import signal_label
+    from logscan.verdict.incidents import signal_label
 
     detector = result["detector"]
     result["labels"] = {name: signal_label(name, detector) for name in result.get("series", {})}

@@ -1,5 +1,5 @@
 """What the pipeline of one log is made of, below its orchestration (`logscan.pipeline`) and the
-further control loops (`logscan.loops`), which both use them: the filters (`FILTERS`), a loaded
+further control loops (`logscan.pipeline.loops`), which both use them: the filters (`FILTERS`), a loaded
 profile (`LoadedProfile`), a prepared log (`Prepared`), the detectors a profile runs
 (`create_detectors`) and the union of their needs (`needs_of`).
 """
@@ -58,7 +58,7 @@ class LoadedProfile:
     # (`builtin_profile_for`): `prepare` takes it instead of reading the file again, then drops it
     log: Any = field(default=None, repr=False, compare=False)
     log_extra_topics: frozenset = field(default=frozenset(), repr=False, compare=False)
-    # the tables' calibrated process noise, {state: scale of its Q} (`logscan.calibration`; set by
+    # the tables' calibrated process noise, {state: scale of its Q} (`logscan.training.calibration`; set by
     # `analyze_log` from --tables): `prepare` gives it to the model, the EKF scales Q by it
     process_noise_scale: dict | None = field(default=None, compare=False)
     # the groups those tables' calibration could not bring to NIS 1 (kept the profile's noise)
@@ -80,11 +80,11 @@ class Prepared:
     traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
     warnings: list[str] = field(default_factory=list)
     _filter_summary: dict | None = None
-    context: Any = None  # logscan.run_context.RunContext: the path and mode the report draws (small)
-    innovations: Any = None  # logscan.sensor_views.Innovations: the report's measured-vs-predicted figures
+    context: Any = None  # logscan.report.run_context.RunContext: the path and mode the report draws (small)
+    innovations: Any = None  # logscan.report.sensor_views.Innovations: the report's measured-vs-predicted figures
     raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
     loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
-    clock: Any = None  # logscan.clock.Clock: the log's own clock, dated before the samples go
+    clock: Any = None  # logscan.timebase.clock.Clock: the log's own clock, dated before the samples go
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""

@@ -74,7 +74,7 @@ class EventMatch:
     latency_s: float | None = None  # earliest of those starts - t_start, >= 0
     onset_alarm_indices: list[int] = field(default_factory=list)  # alarms already on at t_start
     recovery_indices: list[int] = field(default_factory=list)  # alarms in its recovery window
-    # whether the fault could be seen at all (`logscan.observability`): True, False (its whole span
+    # whether the fault could be seen at all (`logscan.verdict.observability`): True, False (its whole span
     # lies where it could not be seen: a miss there is labelled so), None (no verdict)
     observable: bool | None = None
 
@@ -100,7 +100,7 @@ class EventMatch:
 
 
 def _interval(alarm) -> tuple[float, float]:
-    """(start, end) of an AlarmInterval, a merged span (`logscan.evaluate.Span`) or a pair."""
+    """(start, end) of an AlarmInterval, a merged span (`logscan.verdict.evaluation.Span`) or a pair."""
     if hasattr(alarm, "start"):
         return float(alarm.start), float(alarm.end)
     start, end = alarm

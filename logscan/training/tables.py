@@ -1,4 +1,4 @@
-"""The trained tables file (`logscan train` writes it, `logscan.training`): reading it, checking it
+"""The trained tables file (`logscan train` writes it, `logscan.training.train`): reading it, checking it
 against a profile and applying it to the detectors (`apply_tables`), below the pipeline that
 applies it (`logscan.pipeline.analyze_log`) and the training that writes it.
 
@@ -171,8 +171,8 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     """``detectors`` with the trained state of ``path`` (trained for this profile, else exit 2):
     each detector the tables hold is replaced by its trained self, its run-time parameters taken
     from the profile; the others are kept. The tables' calibrated measurement noise is set in
-    ``profile`` (`logscan.calibration.apply_calibration`): the filter then runs as in training."""
-    from logscan.calibration import apply_calibration, calibration_failures
+    ``profile`` (`logscan.training.calibration.apply_calibration`): the filter then runs as in training."""
+    from logscan.training.calibration import apply_calibration, calibration_failures
 
     document = read_tables_document(path)
     fingerprint = document.get("profile_fingerprint")
@@ -203,7 +203,7 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     trained = read_tables(path)
     # after the profile check: the calibrated noise changes the profile it fingerprints
     apply_calibration(profile, document.get("calibration"))
-    from logscan.tuning import tuned_params
+    from logscan.training.tuning import tuned_params
 
     out = []
     for detector in detectors:

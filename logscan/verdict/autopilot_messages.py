@@ -2,7 +2,7 @@
 
 What PX4 told its pilot ("Attitude failure (roll)", "Failsafe activated", "Dangerous battery
 level!, please land!") belongs beside logscan's verdict: a ULog's logged messages
-(`logscan.run_context.logged_messages`) while the vehicle was armed (every message when the log does
+(`logscan.report.run_context.logged_messages`) while the vehicle was armed (every message when the log does
 not say when it was armed), repeated identical messages folded into one with a count (a message
 PX4 repeats each second must not flood the summary), each placed in the incident whose span, widened
 by ``SLACK_S``, holds it (the autopilot reports after the fact; the same second of slack as the

@@ -16,7 +16,7 @@ from typing import Any
 
 from logscan.errors import LogscanError
 from logscan.needs import Needs
-from logscan.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
+from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
 
 #: what recovery needs of every loop's EKF: the full covariance at the checkpoints
 RECOVERY_NEEDS = Needs.of(ekf=("P",))
@@ -79,7 +79,7 @@ def _sensor_alarms(alarms: list, groups: list[str]) -> list:
     """The alarms without those of a statistic over every sensor (``nis.all``) that an alarm naming
     a sensor overlaps: that one says which sensors to leave out, the sum only that something is off
     (kept alone, it would make the anomaly generic: every sensor left out)."""
-    from logscan.incidents import group_of
+    from logscan.verdict.incidents import group_of
 
     named = [a for a in alarms if group_of(a.signal, groups) is not None]
     return named + [
@@ -95,7 +95,7 @@ def recover_analysis(analysis):
     (`logscan.recovery.recover`). None, with a warning, when the oracle has no truth to read."""
     from logscan.profiles.loops import ORACLE
     from logscan.recovery import RecoverySettings, anomalies_from_alarms, anomalies_from_truth, recover
-    from logscan.recovery_view import recovery_view, true_states
+    from logscan.report.recovery_view import recovery_view, true_states
 
     spec = analysis.profile.recovery
     settings = RecoverySettings(**spec.settings)

@@ -95,7 +95,7 @@ def read_suppressions(path: str, today: date | None = None) -> list[Suppression]
 def apply_suppressions(analysis, rules: list[Suppression]) -> int:
     """Move the alarms ``rules`` match out of ``analysis``'s results into ``result.suppressed``
     (with their reason), then redo its incidents and scores; returns how many were suppressed."""
-    from logscan.incidents import DEFAULT_GAP_S, find_incidents
+    from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents
 
     count = 0
     for result in analysis.results:

@@ -1,6 +1,6 @@
 """Evaluation of detectors against ground truth over many logs: per detector, per check, per fault kind.
 
-`logscan.scoring` scores one detector on one log (docs/algorithms.md section 7); this module runs the
+`logscan.verdict.scoring` scores one detector on one log (docs/algorithms.md section 7); this module runs the
 analysis on every log that has ground truth and pools the scores, at three levels:
 
  - per detector: every alarm the detector raised;
@@ -14,7 +14,7 @@ analysis on every log that has ground truth and pools the scores, at three level
 Alarms of one group (a detector, or the several signals of one check) that overlap in time are
 merged into one span before scoring, so a fault that trips e_x and a rejected-sample check at once
 counts once, and a false alarm is a span when the group is on with no fault (nor a fault just
-ended, nor a healthy transient listed in the truth: see `logscan.scoring`). A check is scored only
+ended, nor a healthy transient listed in the truth: see `logscan.verdict.scoring`). A check is scored only
 on the logs where it ran (its statistic exists there), so e.g. ``nis:position`` is not charged with
 misses on steer-by-wire logs. Logs without ground truth are skipped and listed; a log that cannot be
 analysed is recorded as one line and counted, never raised.
@@ -28,7 +28,14 @@ from typing import NamedTuple
 
 from logscan.alarms import AlarmInterval
 from logscan.results import events_from_truth
-from logscan.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S, Score, aggregate, label_observability, score_log
+from logscan.verdict.scoring import (
+    DEFAULT_GRACE_S,
+    DEFAULT_RECOVERY_S,
+    Score,
+    aggregate,
+    label_observability,
+    score_log,
+)
 
 CHECK_SEPARATOR = ":"
 
@@ -111,7 +118,7 @@ class LogEvaluation:
     path: str
     model: str
     duration_s: float
-    events: list  # logscan.scoring.FaultEvent
+    events: list  # logscan.verdict.scoring.FaultEvent
     scores: dict[str, Score]
     aggressive: bool = False
     transients: list = field(default_factory=list)  # healthy transients of the truth (FaultEvent)
@@ -232,7 +239,7 @@ def _score_summary(score: Score) -> dict:
 def evaluate_analysis(
     analysis, *, grace_s: float = DEFAULT_GRACE_S, recovery_s: float = DEFAULT_RECOVERY_S
 ) -> LogEvaluation:
-    """Score one analysed log (`logscan.analysis.Analysis` with ground truth) per detector and
+    """Score one analysed log (`logscan.pipeline.analysis.Analysis` with ground truth) per detector and
     check, with the healthy transients its truth lists scored apart."""
     duration = analysis.duration_s
     truth = analysis.log.truth or {}
@@ -246,7 +253,7 @@ def evaluate_analysis(
         transients=transients,
         log=analysis.path,
     )
-    # the events that could not be seen at all (logscan.observability), labelled in every key's score
+    # the events that could not be seen at all (logscan.verdict.observability), labelled in every key's score
     observability = getattr(analysis, "observability", None)
     verdicts = [observability.event_verdict(e) if observability is not None else None for e in analysis.events]
     for score in scores.values():

@@ -7,7 +7,7 @@
 
 Training never runs a detector over a log: it prepares each healthy log (read, align, filters) and
 hands the runs and traces to each detector's `fit`. The tables file it writes, and how analysis
-reads and checks it, is `logscan.tables`'s.
+reads and checks it, is `logscan.training.tables`'s.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from typing import Any
 
 from logscan.errors import InputError, ProfileError, UsageError
 from logscan.pipeline import load_profile_for, prepare
-from logscan.stages import FILTERS, create_detectors, needs_of, refuse_embedded_plugins
-from logscan.tables import TABLES_FORMAT, TABLES_VERSION, profile_fingerprint, profile_rates
+from logscan.pipeline.stages import FILTERS, create_detectors, needs_of, refuse_embedded_plugins
+from logscan.training.tables import TABLES_FORMAT, TABLES_VERSION, profile_fingerprint, profile_rates
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -67,12 +67,12 @@ def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
             n for n in registry.builtin_names() if n not in chosen and registry.get(n).asked_for_by(loaded.profile)
         ]
         chosen += asked
-    # none may learn: `logscan train --calibrate` still calibrates the filter (logscan.calibration)
+    # none may learn: `logscan train --calibrate` still calibrates the filter (logscan.training.calibration)
     return [d for d in create_detectors(loaded, chosen) if d.learns()]
 
 
 def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
-    """Fit every detector on the prepared healthy runs (`logscan.stages.Prepared`); returns them."""
+    """Fit every detector on the prepared healthy runs (`logscan.pipeline.stages.Prepared`); returns them."""
     if not prepared:
         raise UsageError("training needs at least one healthy log")
     runs = [p.run for p in prepared]
@@ -91,7 +91,7 @@ def tables_document(
 ) -> dict[str, Any]:
     """The tables JSON: format, version, what it was trained on (the logs, and the ``window`` of
     each, seconds since its start), the filter's calibrated measurement noise
-    (`logscan.calibration`) and each detector's trained state."""
+    (`logscan.training.calibration`) and each detector's trained state."""
     from logscan import __version__
 
     return {
@@ -191,7 +191,7 @@ def train_logs(
         fit_detectors(detectors, healthy)
     tuning = None
     if tune:
-        from logscan.tuning import tune as tune_multipliers
+        from logscan.training.tuning import tune as tune_multipliers
 
         step(f"tuning {', '.join(d.name for d in tuned)} on {len(healthy)} healthy and {len(labelled)} labelled log(s)")
         tuning = tune_multipliers(tuned, healthy, labelled)
@@ -212,16 +212,16 @@ def tunable_detectors(loaded) -> list:
 class PrepareTask:
     """Check and prepare one healthy training log, an item (path, its number from 1): the per-log
     work of `train_logs`, picklable for local processes and Dask workers. Returns its
-    `logscan.stages.Prepared` (read, aligned, filtered), which the fit and calibration read."""
+    `logscan.pipeline.stages.Prepared` (read, aligned, filtered), which the fit and calibration read."""
 
-    loaded: Any  # logscan.stages.LoadedProfile: the first log's (or --profile's)
+    loaded: Any  # logscan.pipeline.stages.LoadedProfile: the first log's (or --profile's)
     first_log: str
     profile_path: str | None
     fingerprint: str
     allow_faulty: bool = False
     calibrate: bool = False
     notice: Any = None  # a module-level function (picklable), or None
-    tune: bool = False  # the tuned detectors' needs too (logscan.tuning)
+    tune: bool = False  # the tuned detectors' needs too (logscan.training.tuning)
     start_s: float | None = None  # --start/--end: the window of each log trained on
     end_s: float | None = None
 
@@ -272,9 +272,9 @@ def _with_ekf(needs):
 
 def calibrate_prepared(prepared: Sequence, needs) -> dict:
     """Calibrate the measurement and process noise on the prepared healthy logs
-    (`logscan.calibration`), then put the calibrated noise in their runs and models and re-run their
+    (`logscan.training.calibration`), then put the calibrated noise in their runs and models and re-run their
     filters, so the detectors are fitted on the filter `logscan analyze --tables` runs."""
-    from logscan.calibration import calibrate, calibrated_runs, judged_steps, process_noise_scale
+    from logscan.training.calibration import calibrate, calibrated_runs, judged_steps, process_noise_scale
 
     judged = [judged_steps(p.profile, p.run) for p in prepared]
     calibration = calibrate(prepared[0].model, [p.run for p in prepared], judged=judged)
