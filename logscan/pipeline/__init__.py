@@ -11,17 +11,10 @@ and then fit or score. No module outside `detectors/` names a detector: each dec
 needs (`Detector.needs`) and the pipeline runs the union of those needs.
 """
 
-from logscan.pipeline.run import (
-    NIS_BLIND,
-    RELEASABLE,
-    analyze_log,
-    builtin_profile_for,
-    consistency_warnings,
-    detect,
-    load_profile_for,
-    prepare,
-    rescore,
-)
+from logscan.pipeline.detect import NIS_BLIND, consistency_warnings, detect, rescore
+from logscan.pipeline.prepare import builtin_profile_for, load_profile_for, prepare
+from logscan.pipeline.release import RELEASABLE
+from logscan.pipeline.run import analyze_log
 from logscan.pipeline.stages import LoadedProfile, Prepared, create_detectors, needs_of
 
 __all__ = [

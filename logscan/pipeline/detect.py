@@ -1,0 +1,235 @@
+"""Run the detectors on a prepared log and turn their results into the verdict's parts: incidents,
+what was not checked, the filter's consistency warnings, scores against ground truth (`detect`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+from logscan.docs import doc_url
+from logscan.errors import LogscanError
+from logscan.pipeline.loops import detect_loops, recover_analysis
+from logscan.pipeline.prepare import Progress
+from logscan.pipeline.release import pack_innovations_for, reads_samples, release_unread
+from logscan.pipeline.stages import Prepared
+
+
+def detect(
+    prepared: Prepared,
+    detectors: Sequence,
+    *,
+    grace_s: float = 1.0,
+    progress: Progress | None = None,
+    free_series: bool = False,
+    sensor_views: bool = False,
+):
+    """Run the detectors on a prepared log, merge their alarm fragments into incidents, say what
+    could not be checked, and score the alarms when the log carries ground truth. A detector that
+    raises is named in ``analysis.failures``; the others' results are kept. ``free_series``: free
+    each large series once no detector still to run reads it (`release_unread`; the prepared log
+    then serves no further detector). ``sensor_views``: pack the EKF's innovations, when it kept
+    them, for the report (`Prepared.innovations`, `logscan.report.sensor_views`)."""
+    from logscan.pipeline.analysis import Analysis
+    from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
+    from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
+
+    step = progress or (lambda message: None)
+    free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
+    analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
+    # when a fault of a kind could be seen at all: from the filter's states, before any is freed
+    from logscan.verdict.observability import observability_for
+
+    analysis.observability, why = observability_for(prepared)
+    analysis.warnings += [why] if why else []
+    policy = prepared.profile.alarm_policy
+    if policy is not None and policy.suspends:
+        policy = policy.suspend(prepared.run.t, prepared.run.ground)
+    # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
+    # a warning, or the log is not fully checked when it kept them from most of the flight
+    unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
+    if unjudged is not None and not unjudged[1]:
+        analysis.warnings.append(unjudged[0])
+        analysis.unjudged = unjudged[0]  # the report says it where "every check ran" would be
+    analysis.results = _run_detectors(prepared, detectors, policy, analysis, free_series, sensor_views, step)
+    analysis.warnings[:0] = consistency_warnings(prepared)  # first: they question every verdict below
+    gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
+    merge_fragments(analysis.results, gap_s)
+    groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
+    analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
+    analysis.unchecked = unchecked_reasons(prepared, analysis.results)
+    if unjudged is not None and unjudged[1]:
+        analysis.unchecked.append(unjudged[0])
+    if prepared.loaded.model_not_run:  # its filter's detectors were not run (`filter_free`)
+        model = prepared.profile.vehicle.model
+        analysis.unchecked.insert(0, f"the {model} model (logscan's filter): {prepared.loaded.model_not_run}")
+    if prepared.loops:  # a hierarchical profile: every further loop checked by its own detectors
+        analysis.loops = detect_loops(prepared, detect=detect, grace_s=grace_s, progress=progress)
+        for name, loop in analysis.loops.items():  # what a loop could not check is the log's
+            analysis.unchecked += [f"loop {name}: {reason}" for reason in loop.unchecked]
+            analysis.failures += [replace(f, message=f"loop {name}: {f.message}") for f in loop.failures]
+            analysis.warnings += [w if w.startswith(f"loop {name}") else f"loop {name}: {w}" for w in loop.warnings]
+    _score(analysis, [d.name for d in detectors], grace_s)
+    if prepared.profile.recovery is not None:
+        step("recovery")
+        analysis.recovery = recover_analysis(analysis)
+    return analysis
+
+
+def _run_detectors(
+    prepared: Prepared, detectors: Sequence, policy, analysis, free_series: bool, sensor_views: bool, step
+):
+    """The detectors' results, in the given order; a detector that raises is named in
+    ``analysis.failures``. Those that read the samples run first (the frozen-sensor check), so the
+    report's pack of innovations can then take the samples' buffer (`pack_innovations_for`)."""
+    order = sorted(range(len(detectors)), key=lambda i: not reads_samples(detectors[i]))
+    results: dict[int, Any] = {}
+    packed = not sensor_views
+    for position, index in enumerate(order):
+        detector, still_to_run = detectors[index], [detectors[i] for i in order[position:]]
+        if not packed and not any(reads_samples(d) for d in still_to_run):
+            pack_innovations_for(prepared, still_to_run, reuse_samples=free_series)
+            packed = True
+        if free_series:  # the report's pack, still to come, reads the innovations
+            release_unread(prepared, still_to_run, keep=frozenset() if packed else frozenset({"y", "S_diag"}))
+        step(f"detector {detector.name}")
+        try:
+            result = detector.run(
+                prepared.run,
+                prepared.trace,
+                model=prepared.model,
+                log_name=prepared.path,
+                traces=prepared.traces,
+                alarm_policy=policy,
+                truth=prepared.log.truth,  # simulated logs' ground truth, None for real logs
+                raw=prepared.raw,
+                metadata=prepared.log.source.metadata,
+            )
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
+            analysis.failures.append(detector_failure(detector.name, exc))
+            continue
+        results[index] = result
+    if not packed:  # every detector reads the samples
+        pack_innovations_for(prepared, [], reuse_samples=False)
+    return [results[i] for i in sorted(results)]
+
+
+# A group's NIS far from its chi-square law on a whole log: the filter's model of it is wrong. The
+# median NIS over its updates against the chi-square median of its size (robust: a fault over less
+# than half of the log does not move it). Above NIS_MISMATCH times, the samples disagree with the
+# prediction far beyond their noise (units, signs, frames, a wrong channel); below 1 / NIS_MISMATCH**2
+# its noise_std dwarfs the data's scatter, so a fault of that size hides. Checked only with enough
+# updates to mean something.
+NIS_MISMATCH = 10.0
+
+
+NIS_MIN_UPDATES = 20
+
+
+# A group whose mean NIS per output over the judged updates is below NIS_BLIND is blind: its test
+# is looser than the data by more than 1 / sqrt(NIS_BLIND) (1.8x) in std, so a fault of that size
+# hides and the verdict says so (healthy: [NIS_BLIND, 1 / NIS_BLIND], about 1 expected).
+NIS_BLIND = 0.3
+
+
+def consistency_warnings(prepared: Prepared) -> list[str]:
+    """One warning per measurement group whose median NIS is far from the chi-square median of its
+    size (see NIS_MISMATCH); the ratio is given per output."""
+    import numpy as np
+    from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
+
+    from logscan.training.calibration import calibrate_command
+
+    trace = prepared.trace
+    if trace is None or trace.nis_group is None:
+        return []
+    out = []
+    for g, (name, size) in enumerate(zip(trace.group_names, trace.group_sizes.tolist())):
+        used = trace.updated[:, g] & np.isfinite(trace.nis_group[:, g])
+        if int(used.sum()) < NIS_MIN_UPDATES or not size:
+            continue
+        ratio = float(np.median(trace.nis_group[used, g])) / float(chdtri(size, 0.5))
+        if ratio > NIS_MISMATCH:
+            out.append(
+                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "
+                "profile mismatch, check units, signs and frames of its channels, or its noise_std "
+                f"({doc_url('troubleshooting.md')}; `{calibrate_command(prepared.profile)}`, then --tables tables.json)"
+            )
+        else:
+            out.extend(_blind_warning(prepared, g, name, size, used))
+    return out
+
+
+def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> list[str]:
+    """The "blind" warning of group ``g`` when its mean NIS per output is below NIS_BLIND over the
+    judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
+    import numpy as np
+
+    from logscan.training.calibration import calibrate_command, judged_steps
+
+    judged = judged_steps(prepared.profile, prepared.run)
+    if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
+        used = used & judged
+    level = float(np.mean(prepared.trace.nis_group[used, g])) / size
+    if not level < NIS_BLIND:
+        return []
+    kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())
+    return [
+        f"group {name!r} is blind: mean NIS per output {level:.3g} over {int(used.sum())} updates (about 1 "
+        f"expected, {NIS_BLIND:g} at the least): its noise_std is {1.0 / np.sqrt(level):.3g} times the scatter "
+        "the filter sees, so a fault of that size hides; "
+        + (
+            "the tables' calibration found no noise_std that brings it to 1 (see their training report)"
+            if kept
+            else f"lower noise_std: `{calibrate_command(prepared.profile)}`, then analyze with --tables tables.json"
+        )
+    ]
+
+
+def detector_failure(name: str, exc: BaseException):
+    """The line and exit code of a detector that raised: its own error (its exit code), or a bug
+    in that detector (exit 3), blamed on the plugin package when it comes from one."""
+    from logscan.detectors.registry import default_registry
+    from logscan.errors import ExitCode
+    from logscan.pipeline.analysis import DetectorFailure
+
+    origin = default_registry().origin(name) or "not registered"
+    if isinstance(exc, LogscanError):
+        return DetectorFailure(name, f"detector {name!r} ({origin}) failed: {exc.one_line()}", int(exc.exit_code))
+    owner = "logscan" if origin == "built-in" else f"the {origin}"
+    return DetectorFailure(
+        name,
+        f"detector {name!r} ({origin}) failed: {type(exc).__name__}: {exc} (a bug in {owner}; that "
+        "detector's results are missing, the other detectors ran)",
+        int(ExitCode.INTERNAL),
+    )
+
+
+def rescore(analysis, grace_s: float = 1.0) -> None:
+    """Score the analysis again (its alarms changed: `logscan.verdict.suppressions`)."""
+    names = [r.detector for r in analysis.results] + [f.detector for f in analysis.failures]
+    _score(analysis, names, grace_s)
+
+
+def _score(analysis, detector_names: list[str], grace_s: float) -> None:
+    """Scores against the log's ground truth, when it has some."""
+    from logscan.results import events_from_truth
+    from logscan.verdict.scoring import score_by_detector
+
+    prepared = analysis.prepared
+    truth = prepared.log.truth
+    if truth is None:
+        return
+    analysis.events = events_from_truth(truth.get("events", []), path=prepared.path)
+    if prepared.run.window is not None:  # a window scores only the faults it overlaps
+        first, last = float(prepared.run.t[0]), float(prepared.run.t[-1])
+        analysis.events = [e for e in analysis.events if e.end_or_inf >= first and e.t_start <= last]
+    analysis.scores = score_by_detector(
+        analysis.events,
+        analysis.alarms,
+        duration_s=analysis.duration_s,
+        grace_s=grace_s,
+        transients=events_from_truth(truth.get("transients", []), path=prepared.path),
+        detectors=detector_names,
+        log=prepared.path,
+    )

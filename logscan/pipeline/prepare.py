@@ -1,0 +1,241 @@
+"""Prepare one log for its detectors: its profile (the file given, the log's embedded one, or a
+built-in one), then read only the topics it needs, align them and run each filter the detectors
+need exactly once (`prepare`)."""
+
+from __future__ import annotations
+
+import os
+import shlex
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from logscan.docs import doc_url
+from logscan.errors import InputError, LogscanError, ProfileError
+from logscan.needs import Needs
+from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
+from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared
+
+Progress = Callable[[str], None]
+
+
+def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
+    """The profile of a log: the file given, else the one the log embeds (a metadata-only read), else
+    the built-in profile of a log that names itself (a PX4 ULog: `logscan.profiles.builtin`)."""
+    from logscan.profiles import load_profile, parse_profile
+    from logscan.readers import read_embedded_profile
+
+    if profile_path is not None:
+        profile = load_profile(profile_path)
+        return LoadedProfile(profile, profile.to_toml(), str(profile_path))
+    embedded = read_embedded_profile(path)
+    if not embedded:
+        found = builtin_profile_for(path, with_log=True)
+        if found is not None:
+            built, log, extra = found
+            try:
+                profile = parse_profile(built.text, source=f"{path} (built-in profile {built.name})")
+            except ProfileError:
+                if not built.model_not_run:
+                    raise
+                # the log's topics could not complete the profile: say why, keep its text to edit
+                error = InputError(
+                    built.model_not_run,
+                    path=str(path),
+                    hint=f"`logscan init-profile {shlex.quote(str(path))} -o profile.toml` writes it to complete",
+                )
+                error.profile_text = built.text
+                raise error from None
+            notes = [f"built-in profile {built.name}: {note}" for note in built.notes]
+            loaded = LoadedProfile(profile, built.text, f"built-in {built.name}", notes, log, extra)
+            loaded.model_not_run = built.model_not_run
+            return loaded
+        raise ProfileError(
+            "no profile: the log embeds none",
+            path=str(path),
+            hint=f"pass --profile PROFILE.toml (see {doc_url('profiles.md')})",
+        )
+    return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
+
+
+def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
+    """The built-in profile (`logscan.profiles.builtin.BuiltProfile`) of a log that names itself (a
+    PX4 ULog, a ROS log), else None; reads only the topics the built-in profile may use, plus
+    those any detector reads from the log itself (`Detector.raw_topics`) and the report's states.
+    ``with_log``: (profile, the log read, those extra topics), so the analysis need not read it
+    again."""
+    from logscan.profiles import builtin, ros
+    from logscan.readers import detect_format, read_log
+    from logscan.readers.csv_reader import csv_log_name
+
+    fmt = None if path is None else detect_format(path)
+    extra = _extra_topics()
+    if fmt in builtin.ROS_FORMATS:  # a ROS log: its topic list first, then only the topics the profile may use
+        schemas = builtin.topic_schemas(path, fmt)
+        if not any(ros.is_ros_topic(*value) for value in schemas.values()):
+            return None
+        # the extra topics the file has (its topic list names them all: the others are covered too)
+        log = read_log(path, topics=set(ros.ros_candidate_topics(schemas)) | (extra & set(schemas)))
+        built = ros.ros_profile(log) if builtin.identify(log) == "ros" else None
+    elif fmt == "ulog" or (fmt == "csv-dir" and csv_log_name(Path(path))):  # a ULog, or ulog2csv's pieces of one
+        log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra)
+        built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None
+    else:
+        return None
+    if built is None or not with_log:
+        return built
+    return built, log, extra
+
+
+def _extra_topics() -> frozenset[str]:
+    """Every topic a registered detector reads from the log itself, and the report's states."""
+    from logscan.detectors.registry import default_registry
+    from logscan.report.run_context import STATE_TOPICS
+    from logscan.timebase.clock import GNSS_UTC_CHANNELS
+
+    registry = default_registry()
+    extra = frozenset(STATE_TOPICS) | frozenset(GNSS_UTC_CHANNELS)
+    return raw_topics_of([registry.get(name) for name in registry.names()]) | extra
+
+
+def filter_free(detectors: Sequence, loaded: LoadedProfile, path) -> list:
+    """``detectors``, less those that need a filter when the profile's model cannot run on the log
+    (`LoadedProfile.model_not_run`: the verdict lists the model as not checked); an InputError
+    when none is left."""
+    if not loaded.model_not_run:
+        return list(detectors)
+    kept = [d for d in detectors if not d.needs(None).filters]
+    if not kept:
+        names = ", ".join(d.name for d in detectors)
+        raise InputError(
+            f"{loaded.model_not_run}; {names} need{'s' if len(detectors) == 1 else ''} its filter",
+            path=str(path),
+            hint="run the checks without a filter (-d health -d px4_estimator), or pass --profile with another model",
+        )
+    return kept
+
+
+def raw_topics_of(detectors: Sequence) -> frozenset[str]:
+    """The source topics the detectors read from the log itself (`Detector.raw_topics`)."""
+    return frozenset(topic for detector in detectors for topic in getattr(detector, "raw_topics", ()))
+
+
+def raw_channels(log, topics: frozenset[str]) -> dict:
+    """The log's channels under ``topics`` (``/topic/field`` or ``topic/field``), as read."""
+    if not topics:
+        return {}
+    return {
+        name: channel
+        for name, channel in log.channels.items()
+        if name.lstrip("/").split("/", 1)[0] in topics or name in topics
+    }
+
+
+def prepare(
+    path: str | os.PathLike,
+    loaded: LoadedProfile,
+    needs: Needs | Callable[[Any], Needs],
+    *,
+    use_header_stamp: bool = False,
+    progress: Progress | None = None,
+    notice: Progress | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    raw_topics: frozenset[str] = frozenset(),
+    truth_path: str | os.PathLike | None = None,
+) -> Prepared:
+    """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
+    ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
+    may be a function of the aligned run (needs can follow what the log holds, e.g. K and S only
+    when it carries no on-board variances). ``notice`` hears the one
+    line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
+    (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
+    from logscan.align import align
+    from logscan.log import MAX_SPAN_S
+    from logscan.models import get_model
+    from logscan.readers import read_log
+    from logscan.report.run_context import STATE_TOPICS, run_context
+    from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
+
+    step = progress or (lambda message: None)
+    path = str(path)
+    profile = loaded.profile
+    model = get_model(profile.vehicle.model, profile.vehicle.params)
+    model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
+    compiling = _start_compile(model, needs, notice)
+    step("reading")
+    # the autopilot's states for the report, and a ULog's GNSS time (its UTC), when the log has them
+    context_topics = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
+    log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
+    if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
+        wanted = profile.topics() | set(raw_topics) | context_topics
+        log = read_log(path, topics=wanted, use_header_stamp=use_header_stamp)
+    _attach_truth(log, path, truth_path)
+    profile.check_channels(log)
+    step("aligning")
+    run = align(log, profile, start_s=start_s, end_s=end_s)
+    if run.n_steps < 2:
+        raise LogscanError(
+            "too few samples on the analysis grid to filter",
+            path=path,
+            hint=f"check the profile's channels and rate_hz against `logscan inspect {shlex.quote(path)}`",
+        )
+    raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
+    context = run_context(run, model, log)  # the report's context, from the samples about to go
+    prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
+    prepared.clock = clock_of(log, run.start_ns)  # dated while the GNSS time is still there
+    if profile.loops:
+        prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
+    log.release_samples()  # the run holds what the filters and detectors read from here on
+    wanted = needs(run) if callable(needs) else needs
+    if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
+        raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
+    if profile.recovery is not None:
+        wanted = wanted | RECOVERY_NEEDS
+    prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
+    span_warning = log.span_warning()
+    if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
+        prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)
+    else:
+        prepared.warnings.extend(log.source.warnings)
+    prepared.warnings.extend(run.warnings)
+    if log.source.partial:
+        prepared.warnings.append(f"partial read: {log.source.partial_reason}")
+    for name, parts in wanted.filters.items():
+        if name not in FILTERS:
+            raise ProfileError(
+                f"a detector needs the filter {name!r}, which this logscan does not have",
+                hint=f"known filters: {', '.join(FILTERS)}",
+            )
+        step("filtering")
+        compiling.wait()
+        prepared.traces[name] = FILTERS[name](model, run, frozenset(parts))
+    ekf = prepared.trace
+    for episode in ekf.divergence_episodes if ekf is not None else ():
+        prepared.warnings.append(f"filter diverged: {episode}")
+    return prepared
+
+
+def _attach_truth(log, path: str, truth_path) -> None:
+    """Ground truth from ``truth_path`` (--truth), else the log's own, else `<log>.truth.json`
+    beside it; UTC event times turned into the log's seconds (`logscan.verdict.truth`)."""
+    from logscan.verdict.truth import in_log_time, read_truth_file, truth_beside
+
+    source = truth_path if truth_path is not None else (truth_beside(path) if log.truth is None else None)
+    if source is not None:
+        log.truth = read_truth_file(source)
+    if log.truth is not None:
+        log.truth = in_log_time(log.truth, log.start_ns, str(source or path))
+
+
+def _start_compile(model, needs, notice: Progress | None):
+    """The EKF kernel's first compile, beside the reading (logscan.filters.warmup), when a
+    detector may need the EKF and the cache lacks the model's kernel."""
+    from logscan.filters.warmup import COMPILING_NOTE, Compile, start_compile
+
+    if isinstance(needs, Needs) and "ekf" not in needs.filters:
+        return Compile(cold=False)
+    compiling = start_compile(model)
+    if compiling.cold and notice is not None:
+        notice(COMPILING_NOTE)
+    return compiling

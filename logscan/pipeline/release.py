@@ -1,0 +1,70 @@
+"""Free the large per-step series no detector still to run reads (`release_unread`), and pack the
+EKF's innovations for the report before the samples' buffer is reused (`pack_innovations_for`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from logscan.pipeline.stages import Prepared
+
+# The large per-step series a detector declares it reads (`Detector.reads`): each is freed once no
+# detector still to run reads it. What runs after the detectors (incidents, coverage, the summary)
+# reads none of them.
+RELEASABLE_TRACE = ("x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_diag", "K", "S", "P_prior", "P_post")
+
+
+# "z": the measurement groups' samples; "redundant": the [redundant] groups' readings
+RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode", "redundant")
+
+
+RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
+
+
+def reads_samples(detector) -> bool:
+    """Whether a detector reads the groups' samples (undeclared reads: it may)."""
+    return detector.reads is None or "z" in detector.reads
+
+
+def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:
+    """`Prepared.innovations` from the EKF trace's innovations and the groups' samples; with
+    ``reuse_samples``, into the samples' own buffer when no detector reads them (they are dropped)."""
+    import numpy as np
+
+    from logscan.filters.ekf import samples_side_by_side
+    from logscan.report.sensor_views import pack_innovations
+
+    trace, run = prepared.trace, prepared.run
+    if trace is None or trace.y is None or trace.S_diag is None:
+        return
+    samples = None
+    if reuse_samples and all(d.reads is not None and "z" not in d.reads for d in detectors):
+        samples = samples_side_by_side(run, trace.group_names, trace.group_offsets, trace.group_sizes)
+    prepared.innovations = pack_innovations(run, trace, samples)
+    if samples is not None:  # the buffer now holds the pack: no group may read it as samples
+        for group in (*run.groups.values(), *run.redundant.values()):
+            if isinstance(group.z, np.ndarray) and group.z.base is samples:
+                group.z = None
+
+
+def release_unread(prepared: Prepared, still_to_run: Sequence, keep: frozenset[str] = frozenset()) -> None:
+    """Free the large series none of ``still_to_run`` declares it reads (all of them declare), but
+    those in ``keep``."""
+    wanted: set[str] = set(keep)
+    for detector in still_to_run:
+        if detector.reads is None:
+            return
+        wanted |= detector.reads
+    for trace in prepared.traces.values():
+        for name in RELEASABLE_TRACE:
+            if name not in wanted and getattr(trace, name, None) is not None:
+                setattr(trace, name, None)
+    run = prepared.run
+    for name in ("onboard_state", "onboard_variance", "u", "mode"):
+        if name not in wanted and getattr(run, name) is not None:
+            setattr(run, name, None)
+    if "z" not in wanted:
+        for group in run.groups.values():
+            group.z = group.fresh = group.channel_fresh = None
+    if "redundant" not in wanted:
+        for group in run.redundant.values():
+            group.z = group.fresh = group.channel_fresh = None
