@@ -4,19 +4,20 @@ them (its embedded profile), only inside the log's folder.
 
 A FIFO there would block the read forever, a device such as /dev/zero would be read until memory
 runs out, and a profile that travels inside a log is the log's author's, not the user's: it may name
-a file beside the log, never /etc/... or ../../... (issue 31). The same special-file refusal as for
-logs (`logscan.readers.common.special_kind`): checked with ``os.stat`` before opening, and again
-on the opened descriptor (the path may have been replaced in between), opened non-blocking.
+a file beside the log, never /etc/... or ../../... (issue 31). The special-file refusal
+(`special_kind`) and the words for OS errors (`os_error_text`) live here and the log readers use them
+too: checked with ``os.stat`` before opening, and again on the opened descriptor (the path may have
+been replaced in between), opened non-blocking.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 from pathlib import Path
 
 from logscan.errors import InputError, ProfileError
-from logscan.readers.common import SPECIAL_FILE_HINT, os_error_text, special_kind
 
 MB = 1 << 20
 MAX_TABLES_BYTES = 256 * MB  # trained tables: A-TFM tables of many windows and modes stay far below
@@ -24,6 +25,43 @@ MAX_BASELINE_BYTES = 512 * MB  # a previous `--json` summary of a large fleet
 MAX_SUPPRESSIONS_BYTES = 16 * MB
 MAX_TRUTH_BYTES = 64 * MB
 MAX_PROFILE_SIDECAR_BYTES = 16 * MB  # a CSV log's <log>.profile.toml
+
+_SPECIAL_KINDS = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+SPECIAL_FILE_HINT = "logscan reads regular files only; save the data to a file first"
+
+
+def special_kind(mode: int) -> str | None:
+    """What a non-regular, non-directory ``st_mode`` is ("a FIFO (named pipe)", ...); None for a
+    regular file or a directory."""
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return next((text for test, text in _SPECIAL_KINDS if test(mode)), "a special file")
+
+
+def os_error_text(exc: OSError, *, directory: bool = False) -> tuple[str, str | None]:
+    """(what is wrong, what to do) for an OSError met while reading an input."""
+    if isinstance(exc, FileNotFoundError):
+        return "no such file", None
+    if isinstance(exc, PermissionError):
+        if directory:  # listing needs read, reaching the entries needs execute (search) permission
+            return (
+                "permission denied (cannot list or search the directory)",
+                "make it listable and searchable: chmod +rx",
+            )
+        return "permission denied", "make the file readable (chmod +r) and its directories searchable (chmod +x)"
+    if isinstance(exc, IsADirectoryError):
+        return "is a directory, not a file", "give a file"
+    if isinstance(exc, NotADirectoryError):
+        return "a part of the path is not a directory", "check the path"
+    if exc.errno == errno.ELOOP:
+        return "too many levels of symbolic links", "check the path"
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    return f"cannot read: {reason}", "check the disk, the network mount or the file system, then retry"
 
 
 def read_input_bytes(path: str | os.PathLike, *, what: str, limit: int) -> bytes:

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from logscan.conversions import CONVERSIONS, GROUP_FRAMES, Conversion
+from logscan.input_files import SPECIAL_FILE_HINT, os_error_text, special_kind
 from logscan.profiles.bind import bind_inputs_without_model, build_model, check_against_model
 from logscan.profiles.loops import PRIMARY_LOOP, RecoverySpec, parse_loops, parse_recovery
 from logscan.profiles.problems import DOCS_HINT, is_number, profile_error, single_error, suggest, type_name
@@ -49,7 +50,6 @@ from logscan.profiles.schema import (
     SensorSpec,
     VehicleSpec,
 )
-from logscan.readers.common import SPECIAL_FILE_HINT, os_error_text, special_kind
 from logscan.results import AlarmPolicy
 
 _STD_LIMITS = (1e-150, 1e150)  # a noise std whose square (the variance) is a normal float

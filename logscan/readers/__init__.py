@@ -8,16 +8,9 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from logscan.errors import InputError, UnsupportedFormatError
-from logscan.log import Log
-from logscan.readers.common import (
-    MCAP_MAGIC,
-    SPECIAL_FILE_HINT,
-    ULOG_MAGIC,
-    input_error,
-    list_directory,
-    special_kind,
-    stat_input,
-)
+from logscan.input_files import SPECIAL_FILE_HINT, special_kind
+from logscan.log import Log, SourceInfo
+from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC, input_error, list_directory, stat_input
 
 ROS1_BAG_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"  # a rosbag2 .db3
@@ -194,7 +187,6 @@ def read_embedded(path: str | os.PathLike) -> tuple[str | None, dict | None]:
     """
     fmt = detect_format(path)
     if fmt == "mcap":
-        from logscan.log import Log, SourceInfo
         from logscan.readers.mcap import attach_logscan_records, read_mcap_metadata
 
         header = Log(channels={}, source=SourceInfo(str(path), "mcap", metadata=read_mcap_metadata(path)))

@@ -5,54 +5,17 @@ from __future__ import annotations
 
 import errno
 import os
-import stat
 
 import numpy as np
 
 from logscan.errors import InputError
+from logscan.input_files import SPECIAL_FILE_HINT, os_error_text, special_kind
 from logscan.log import SourceInfo
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 
 ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
-
-_SPECIAL_KINDS = (
-    (stat.S_ISFIFO, "a FIFO (named pipe)"),
-    (stat.S_ISCHR, "a character device"),
-    (stat.S_ISBLK, "a block device"),
-    (stat.S_ISSOCK, "a socket"),
-)
-SPECIAL_FILE_HINT = "logscan reads regular files only; save the data to a file first"
-
-
-def special_kind(mode: int) -> str | None:
-    """What a non-regular, non-directory ``st_mode`` is ("a FIFO (named pipe)", ...); None for a
-    regular file or a directory."""
-    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
-        return None
-    return next((text for test, text in _SPECIAL_KINDS if test(mode)), "a special file")
-
-
-def os_error_text(exc: OSError, *, directory: bool = False) -> tuple[str, str | None]:
-    """(what is wrong, what to do) for an OSError met while reading an input."""
-    if isinstance(exc, FileNotFoundError):
-        return "no such file", None
-    if isinstance(exc, PermissionError):
-        if directory:  # listing needs read, reaching the entries needs execute (search) permission
-            return (
-                "permission denied (cannot list or search the directory)",
-                "make it listable and searchable: chmod +rx",
-            )
-        return "permission denied", "make the file readable (chmod +r) and its directories searchable (chmod +x)"
-    if isinstance(exc, IsADirectoryError):
-        return "is a directory, not a file", "give a file"
-    if isinstance(exc, NotADirectoryError):
-        return "a part of the path is not a directory", "check the path"
-    if exc.errno == errno.ELOOP:
-        return "too many levels of symbolic links", "check the path"
-    reason = exc.strerror or str(exc) or type(exc).__name__
-    return f"cannot read: {reason}", "check the disk, the network mount or the file system, then retry"
 
 
 def input_error(exc: OSError, path: str | os.PathLike, *, directory: bool = False) -> InputError:

@@ -32,6 +32,7 @@ from logscan.errors import InputError
 from logscan.log import Log, SourceInfo, TopicInfo
 from logscan.readers.common import topic_wanted
 from logscan.readers.flatten import MessageBytes
+from logscan.readers.mcap import read_mcap
 from logscan.readers.rosbag1_chunks import ROS1_HINT, read_chunks, ros1_layout
 from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
@@ -44,8 +45,6 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
     p = Path(path)
     mcap_file = single_mcap(p)
     if mcap_file is not None:
-        from logscan.readers.mcap import read_mcap
-
         log = read_mcap(mcap_file, wanted, use_header_stamp=use_header_stamp)
         log.source.path, log.source.format = str(p), "rosbag2"
         return log
