@@ -1,0 +1,149 @@
+"""Holding one channel onto the grid: cleaning (sort, deduplicate, drop non-finite samples), the
+compiled zero-order hold with its staleness limit, gaps, and which steps changed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from logscan.numba_cache import follow_dependencies
+
+# ------------------------------------------------------------------------------------------------
+# Implementation
+# ------------------------------------------------------------------------------------------------
+
+_NS = 1_000_000_000
+_NEVER_STALE_NS = np.iinfo(np.int64).max // 4  # stale_s = inf
+_MAX_GAP_WARNINGS = 20
+
+
+@dataclass
+class _Clean:
+    """One channel after cleaning: sorted unique int64 ns times with finite float64 values."""
+
+    t: np.ndarray
+    values: np.ndarray
+    samples: int
+    nonfinite: int
+    unsorted: int
+    duplicates: int
+    outliers: int = 0  # outlying samples dropped (see `outlying_runs`)
+
+
+def stale_ns(stale_s: float) -> int:
+    """A staleness limit in integer nanoseconds (inf: never stale)."""
+    if not np.isfinite(stale_s):
+        return int(_NEVER_STALE_NS)
+    return int(round(stale_s * _NS))
+
+
+def clean_samples(t_ns: np.ndarray, values: np.ndarray) -> _Clean:
+    """Stable-sort by time, drop duplicate timestamps (keep the last), then drop non-finite values."""
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    values = np.asarray(values, dtype=np.float64)
+    samples = int(t_ns.size)
+    unsorted = int(np.count_nonzero(t_ns[1:] < t_ns[:-1]))
+    if unsorted:
+        order = np.argsort(t_ns, kind="stable")
+        t_ns, values = t_ns[order], values[order]
+    last_of_run = np.ones(t_ns.size, dtype=bool)
+    last_of_run[:-1] = t_ns[1:] != t_ns[:-1]
+    duplicates = int(t_ns.size - np.count_nonzero(last_of_run))
+    if duplicates:
+        t_ns, values = t_ns[last_of_run], values[last_of_run]
+    finite = np.isfinite(values)
+    nonfinite = int(finite.size - np.count_nonzero(finite))
+    if nonfinite:
+        t_ns, values = t_ns[finite], values[finite]
+    return _Clean(t_ns, values, samples, nonfinite, unsorted, duplicates)
+
+
+@njit(cache=True)
+def _hold_kernel(t_ns, values, grid_ns, limit_ns, z, fresh):  # pragma: no cover - compiled
+    # One merge pass over two sorted arrays: i = max{i : t_i <= g_k} (-1: none yet).
+    i = -1
+    n_t = t_ns.size
+    for k in range(grid_ns.size):
+        g = grid_ns[k]
+        while i + 1 < n_t and t_ns[i + 1] <= g:
+            i += 1
+        if i >= 0 and g - t_ns[i] <= limit_ns:
+            z[k] = values[i]
+            fresh[k] = k == 0 or t_ns[i] > grid_ns[k - 1]
+        else:
+            z[k] = np.nan
+            fresh[k] = False
+
+
+def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: int, z=None, fresh=None):
+    """Zero-order hold of sorted unique samples onto ``grid_ns`` within ``limit_ns``.
+
+    Returns (z, fresh): z[k] = the latest sample at or before grid_ns[k] if it is at most
+    ``limit_ns`` old, else NaN; fresh[k] = that sample is newer than grid_ns[k-1] (for k = 0:
+    any sample within the limit). A compiled merge of the two sorted arrays, O(N + M);
+    ``z`` / ``fresh`` may be given (e.g. a column of a 2-D array) to be written in place.
+    """
+    n = grid_ns.size
+    z = np.empty(n) if z is None else z
+    fresh = np.empty(n, dtype=np.bool_) if fresh is None else fresh
+    _hold_kernel(
+        np.ascontiguousarray(t_ns, dtype=np.int64),
+        np.ascontiguousarray(values, dtype=np.float64),
+        np.ascontiguousarray(grid_ns, dtype=np.int64),
+        np.int64(limit_ns),
+        z,
+        fresh,
+    )
+    return z, fresh
+
+
+@njit(cache=True)
+def _gap_kernel(t_ns, g0, g1, limit_ns, starts, ends):  # pragma: no cover - compiled
+    # Stretches without a sample inside [g0, g1] longer than the limit; edges: the last sample
+    # before g0 (else g0), every sample in [g0, g1], then g1. Writes up to starts.size of them
+    # (pass empty arrays to only count) and returns how many there are.
+    i0 = np.searchsorted(t_ns, g0)  # first sample >= g0
+    i1 = np.searchsorted(t_ns, g1, side="right")  # one past the last sample <= g1
+    prev = t_ns[i0 - 1] if i0 > 0 else g0
+    count = 0
+    for i in range(i0, i1 + 1):
+        cur = t_ns[i] if i < i1 else g1
+        if cur - prev > limit_ns:
+            if count < starts.size:
+                starts[count] = prev
+                ends[count] = cur
+            count += 1
+        prev = cur
+    return count
+
+
+def _gaps(t_ns: np.ndarray, limit_ns: int, grid_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(start_ns, end_ns) of every stretch of the grid span without a sample for > limit_ns.
+
+    A stretch starts at the last sample before the span when there is one, else at the span
+    start, and the one after the last sample ends at the span end; each counts only when it
+    exceeds the limit.
+    """
+    args = (t_ns, np.int64(grid_ns[0]), np.int64(grid_ns[-1]), np.int64(limit_ns))
+    count = _gap_kernel(*args, np.empty(0, np.int64), np.empty(0, np.int64))
+    starts, ends = np.empty(count, np.int64), np.empty(count, np.int64)
+    _gap_kernel(*args, starts, ends)
+    return starts, ends
+
+
+def changed_steps(z: np.ndarray) -> np.ndarray:
+    """(N,) bool: the grid steps where at least one column of ``z`` (N, m) holds a finite value
+    that differs from the step before (step 0: any finite value). A held value changes only when
+    a new sample arrives, so these are the new samples that are not repeats (``fresh =
+    "on_change"``); a value back after a stale gap (NaN before it) counts as changed."""
+    finite = np.isfinite(z)
+    out = np.zeros(z.shape[0], dtype=bool)
+    if z.shape[0]:
+        out[0] = finite[0].any()
+        out[1:] = ((z[1:] != z[:-1]) & finite[1:]).any(axis=1)
+    return out
+
+
+follow_dependencies(__name__)  # the cached hold kernels are stamped with time_sanity's source too

@@ -1,0 +1,216 @@
+"""`align`: a log onto its profile's analysis grid, the inputs, measurement groups, mode, ground
+flag, on-board estimates and redundant sensors each held by the aligner."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.align.aligned import AlignedGroup, AlignedRun
+from logscan.align.aligner import _Aligner, _linear_transforms
+from logscan.align.hold import _NS
+from logscan.timebase.time_sanity import check_window, grid, outlier_warnings
+
+
+def align(log, profile, *, start_s: float | None = None, end_s: float | None = None) -> AlignedRun:
+    """Put ``log`` onto ``profile``'s analysis grid (see the module docstring for the rules),
+    from ``start_s`` to ``end_s`` seconds since the log's start when given.
+
+    Raises ProfileError when the profile names channels the log lacks (with close names),
+    InputError when none of its input/measurement channels holds a finite sample, the grid is
+    over MAX_GRID_STEPS or the window misses the log, and UsageError for a window with end <= start.
+    """
+    check_window(start_s, end_s)
+    profile.check_channels(log)
+    aligner = _Aligner(log, profile)
+    input_channels = list(profile.inputs.channels)
+    window = None if start_s is None and end_s is None else (start_s, end_s)
+    grid_ns, t, start_ns = _grid(aligner, log, profile, window)
+    n, dt = grid_ns.size, 1.0 / float(profile.vehicle.rate_hz)
+
+    scratch = np.empty(n, dtype=bool)  # fresh masks nobody reads
+    u, u_fresh = _inputs(aligner, profile, grid_ns, dt, scratch)
+    groups = _measurement_groups(aligner, profile, grid_ns, scratch)
+    mode = None
+    mode_channel = None
+    if profile.mode is not None:
+        mode_channel = profile.mode.channel
+        mode, _ = aligner.hold(mode_channel, grid_ns, profile.mode.stale_s, fresh=scratch)
+
+    ground = None
+    policy = getattr(profile, "alarm_policy", None)
+    if policy is not None and policy.ground_channel:  # logged on change: held as long as it says
+        ground, _ = aligner.hold(policy.ground_channel, grid_ns, float("inf"), fresh=scratch)
+    onboard = _onboard(aligner, profile, log, grid_ns)
+    return AlignedRun(
+        t=t,
+        dt=dt,
+        start_ns=start_ns,
+        u=u,
+        u_fresh=u_fresh,
+        input_channels=input_channels,
+        groups=groups,
+        mode=mode,
+        ground=ground,
+        onboard_state=onboard.state,
+        onboard_variance=onboard.variance,
+        warnings=aligner.warnings + aligner.gap_lines(),
+        gaps=sorted(aligner.gaps),
+        input_names=list(profile.inputs.names),
+        mode_channel=mode_channel,
+        onboard_names=onboard.names,
+        onboard_state_channels=onboard.state_channels,
+        onboard_variance_channels=onboard.variance_channels,
+        redundant=_redundant_groups(aligner, profile, grid_ns),
+        channel_stats=_channel_stats(aligner),
+        window=window,
+    )
+
+
+def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarray, int]:
+    """(grid_ns, t in s since the log's time zero, that time zero in ns): the grid spans where the
+    input and measurement channels are dense, cut to ``window``."""
+    rate = float(profile.vehicle.rate_hz)
+    span_channels = list(profile.inputs.channels) + [ch for g in profile.measurements.values() for ch in g.channels]
+    first, last = aligner.span(span_channels)
+    origin = getattr(log, "origin_ns", log.start_ns)  # the log's own time zero, whatever was read
+    start_ns = int(origin) if origin is not None else first
+    early = [int(times[0]) for times in aligner.dropped.values() if times[0] < first]
+    if early and start_ns <= max(early):  # the log's start is an outlier: count from the grid's
+        start_ns = first
+    aligner.start_ns = start_ns
+    kept = {name: aligner.cache[name].t.size for name in aligner.dropped}
+    aligner.warnings.extend(outlier_warnings(aligner.dropped, kept, start_ns))
+    grid_ns, k0 = grid(first, last, rate, window, start_ns, aligner.ends, log.source.path)
+    n = grid_ns.size
+    dt = 1.0 / rate
+    t = (first - start_ns) / _NS + (k0 + np.arange(n)) * dt
+
+    return grid_ns, t, start_ns
+
+
+def _inputs(aligner: _Aligner, profile, grid_ns: np.ndarray, dt: float, scratch: np.ndarray):
+    """(u (N, nu), u_fresh (N,)): the model inputs held onto the grid."""
+    n = grid_ns.size
+    input_channels = list(profile.inputs.channels)
+    u = np.empty((n, len(input_channels)))
+    # an input table's scale, offset and frame ("flu": the 2nd and 3rd negated), per bound channel
+    input_transforms = _linear_transforms(
+        profile.inputs.factors or None, profile.inputs.offsets or None, len(input_channels)
+    )
+    # an input stamped when it starts to act holds from the next step: step k (x_{k-1} -> x_k)
+    # takes the input logged at or before t_{k-1}
+    input_grid_ns = grid_ns
+    if profile.inputs.stamp == "start" and n:  # the previous grid time itself (not t_k - dt, rounded)
+        input_grid_ns = np.concatenate(([grid_ns[0] - int(round(dt * _NS))], grid_ns[:-1]))
+    for j, ch in enumerate(input_channels):
+        transform = input_transforms[j] if input_transforms else None
+        aligner.hold(ch, input_grid_ns, profile.inputs.stale_s, transform, z=u[:, j], fresh=scratch)
+    u_fresh = np.ones(n, dtype=bool)
+    for j in range(u.shape[1]):
+        u_fresh &= np.isfinite(u[:, j])
+
+    return u, u_fresh
+
+
+def _measurement_groups(
+    aligner: _Aligner, profile, grid_ns: np.ndarray, scratch: np.ndarray
+) -> dict[str, AlignedGroup]:
+    """The measurement groups on the grid, their samples side by side in one array."""
+    n = grid_ns.size
+    groups: dict[str, AlignedGroup] = {}
+    # the groups' samples side by side in one (N, m_total) array, in the profile's order: the
+    # filter reads it in place (`filters.ekf.pack_run`) instead of a copy; a group with `from`
+    # takes its converted width
+    z_all = np.empty((n, sum(spec.width for spec in profile.measurements.values())))
+    columns = 0
+    for spec in profile.measurements.values():
+        z = z_all[:, columns : columns + spec.width]
+        columns += spec.width
+        # a delayed sensor: the sample stamped t + delay_s is the vehicle at grid time t
+        at = grid_ns + int(round(spec.delay_s * _NS)) if spec.delay_s else grid_ns
+        g = aligner.measurement_group(spec, at, z)
+        g.rate_hz = float(spec.rate_hz)
+        if spec.noise_channels:  # held like the samples, so each sample gets the std logged with it
+            g.noise_std = None if spec.noise_std is None else np.asarray(spec.noise_std, dtype=np.float64)
+            series = np.empty((n, len(spec.noise_channels)))
+            for j, ch in enumerate(spec.noise_channels):
+                aligner.hold(ch, at, spec.stale_s, z=series[:, j], fresh=scratch)
+            if spec.noise_channels_scale != 1.0:
+                series *= spec.noise_channels_scale
+            g.noise_std_series = series
+        for attr in ("noise_std", "range_lo", "range_hi"):
+            value = getattr(spec, attr)
+            setattr(g, attr, None if value is None else np.asarray(value, dtype=np.float64))
+        groups[spec.name] = g
+
+    return groups
+
+
+@dataclass
+class _Onboard:
+    """The on-board estimator's states and variances on the grid, and their channels."""
+
+    state: np.ndarray | None = None
+    variance: np.ndarray | None = None
+    names: list[str] = field(default_factory=list)
+    state_channels: list = field(default_factory=list)
+    variance_channels: list = field(default_factory=list)
+
+
+def _onboard(aligner: _Aligner, profile, log, grid_ns: np.ndarray) -> _Onboard:
+    """The profile's [onboard] estimate held onto the grid (empty without one)."""
+    out = _Onboard()
+    if profile.onboard is None:
+        return out
+    for which in ("state", "variance"):
+        chans, names = profile.onboard_channels(which, log.channels)
+        if not chans:
+            continue
+        out.names = out.names or names
+        missing = [nm for nm, ch in zip(names, chans) if ch is None]
+        if missing:
+            aligner.warnings.append(f"[onboard] {which}: no channel for {', '.join(missing)}; those columns are NaN")
+        # variances in float32, as the filter's own P diagonals they are compared with
+        dtype = np.float64 if which == "state" else np.float32
+        arr = aligner.table(chans, grid_ns, profile.onboard.stale_s, dtype)
+        if which == "state":
+            out.state, out.state_channels = arr, chans
+        else:
+            out.variance, out.variance_channels = arr, chans
+    return out
+
+
+def _redundant_groups(aligner: _Aligner, profile, grid_ns: np.ndarray) -> dict[str, AlignedGroup]:
+    """The [redundant] groups on the grid, each sensor through its calibration polynomial."""
+    from numpy.polynomial import polynomial as P
+
+    redundant: dict[str, AlignedGroup] = {}
+    for red in profile.redundant.values():
+        sensors = list(red.sensors.values())
+        transforms = [
+            # the default argument binds each sensor's own coefficients
+            (lambda v, c=np.asarray(s.poly): P.polyval(v, c)) if s.poly is not None else None  # noqa: B008
+            for s in sensors
+        ]
+        g = aligner.group(red.name, [s.channel for s in sensors], grid_ns, red.stale_limit_s(), transforms)
+        g.rate_hz = red.rate_hz
+        g.labels = [s.name for s in sensors]
+        redundant[red.name] = g
+
+    return redundant
+
+
+def _channel_stats(aligner: _Aligner) -> dict:
+    """Per channel read: samples, non-finite, duplicate, unsorted and outlying counts."""
+    return {
+        name: {
+            "samples": c.samples,
+            "nonfinite": c.nonfinite,
+            "duplicates": c.duplicates,
+            "unsorted": c.unsorted,
+            **({"outliers": c.outliers} if c.outliers else {}),
+        }
+        for name, c in aligner.cache.items()
+    }
