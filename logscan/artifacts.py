@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from logscan.errors import INTERRUPT_SEEN, LogscanError
+from logscan.json_policy import jsonable
 
 # errno -> (what is wrong, what to do) for the write-side errors a user can fix
 _WRITE_ERRORS = {
@@ -291,10 +292,8 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:
 
 
 def json_text(obj: Any) -> str:
-    """JSON under the one JSON policy (`logscan.results.jsonable`: numpy values to plain ones,
+    """JSON under the one JSON policy (`logscan.json_policy.jsonable`: numpy values to plain ones,
     NaN and infinities to null)."""
-    from logscan.results import jsonable
-
     return json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
 
 

@@ -17,13 +17,13 @@ import os
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime
 
+from logscan.report.overview import is_rejected, rejected_words
+
 MAX_MARKDOWN_ROWS = 200
 
 
 def _peak(alarm: dict) -> str:
     """peak/threshold, or the plain words of an alarm whose ratio means nothing (refused samples)."""
-    from logscan.report.overview import is_rejected, rejected_words
-
     if is_rejected(str(alarm.get("signal", ""))):
         return rejected_words(int(alarm.get("n_exceed", 0)))
     ratio = alarm.get("peak_ratio")

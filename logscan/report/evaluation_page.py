@@ -8,6 +8,9 @@ contained as the analysis report: plotly.js embedded once, every name escaped.
 
 from __future__ import annotations
 
+from logscan import __version__
+from logscan.report.page import _environment, _plotly_js
+from logscan.report.plotly_json import plot_text, spec_json
 from logscan.verdict.evaluation import CHECK_SEPARATOR, Evaluation
 
 
@@ -16,10 +19,6 @@ def _number(value, digits: int = 2) -> str:
 
 
 def render_evaluation_html(evaluation: Evaluation) -> str:
-    from logscan import __version__
-    from logscan.report.page import _environment, _plotly_js
-    from logscan.report.plotly_json import plot_text, spec_json
-
     keys = evaluation.keys()
     rows, boxes = [], []
     for key in keys:

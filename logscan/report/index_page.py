@@ -12,6 +12,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from logscan.report.page import _environment
+
 INDEX_NAME = "index.html"
 
 
@@ -25,8 +27,6 @@ def index_path(reports: list[str | None]) -> str | None:
 
 def render_index_html(document: dict, index: str) -> str:
     """The index page of an analyze run's document, with links relative to ``index``."""
-    from logscan.report.page import _environment
-
     base = Path(index).parent
     detectors = sorted({r["detector"] for log in document.get("logs", []) for r in log.get("detectors", [])})
     rows = []

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+import logscan.templates
 from logscan.alarms import AlarmInterval
 from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.errors import InputError
@@ -270,8 +271,6 @@ def _install_plotly_js(directory: Path, report_path: Path) -> str:
 def _environment():
     import jinja2
 
-    import logscan.templates
-
     return jinja2.Environment(
         loader=jinja2.FileSystemLoader(Path(logscan.templates.__file__).parent),
         autoescape=True,
@@ -283,8 +282,6 @@ def _environment():
 
 def _report_js() -> str:
     """templates/report.js (the page's interactions), "" when absent; safe inside a <script>."""
-    import logscan.templates
-
     path = Path(logscan.templates.__file__).parent / "report.js"
     js = path.read_text(encoding="utf-8") if path.is_file() else ""
     return js.replace("</script", "<\\/script").replace("</SCRIPT", "<\\/SCRIPT")

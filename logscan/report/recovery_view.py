@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from logscan.readers import read_log
+
 MAX_POINTS = 20_000  # per series: longer loops are drawn at a stride (recovered spans are short)
 
 
@@ -47,8 +49,6 @@ def true_states(path: str, truth: dict | None, loops) -> dict[str, np.ndarray]:
     """Loop name -> (N, n) true states on that loop's grid, for the loops whose channels the log's
     ground truth names (``loops.<name>.true_state_channels``, as `logscan simulate` writes them),
     read again from the log (only those channels), held at each grid time."""
-    from logscan.readers import read_log
-
     named = {
         loop.name: ((truth or {}).get("loops") or {}).get(loop.name, {}).get("true_state_channels") for loop in loops
     }
