@@ -25,8 +25,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
+from typing import overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from logscan.errors import InternalError
 from logscan.json_policy import jsonable
@@ -72,7 +74,11 @@ class AlarmInterval:
 _TIME_EPS = 1e-9
 
 
-def _as_series(name: str, value, n: int) -> np.ndarray | None:
+@overload
+def _as_series(name: str, value: None, n: int) -> None: ...
+@overload
+def _as_series(name: str, value: ArrayLike, n: int) -> np.ndarray: ...
+def _as_series(name: str, value: ArrayLike | None, n: int) -> np.ndarray | None:
     if value is None:
         return None
     arr = np.asarray(value, dtype=np.float64)

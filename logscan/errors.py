@@ -52,6 +52,10 @@ class UsageError(LogscanError):
 class InputError(LogscanError):
     """An input file cannot be read: missing, unknown format, corrupt or empty."""
 
+    # set when a built-in profile the log cannot complete is why: its TOML text, to edit (read with
+    # getattr by `logscan profile`)
+    profile_text: str
+
 
 class UnsupportedFormatError(InputError):
     """The file's content matches none of the readers."""
@@ -64,9 +68,13 @@ class CorruptLogError(InputError):
 class ProfileError(LogscanError):
     """A profile is invalid: unknown key, wrong type, unknown channel or model."""
 
+    problems: list[str]  # every problem found, when more than the message's first (`profiles.problems`)
+
 
 class ModelError(LogscanError):
     """A vehicle model cannot be built from the given name or parameters."""
+
+    problems: list[str]  # every problem found, when more than the message's first (`models.base.model_error`)
 
 
 class NotTrainedError(LogscanError):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -158,7 +158,8 @@ class Log:
         log = cls.__new__(cls)
         log.channels = {name: Channel(name, empty_t, empty_v) for name in spans}
         log.source, log.truth, log.profile_text = source, None, None
-        timed = {name: span for name, span in spans.items() if span[0]}
+        # a channel with samples has its first and last times
+        timed = cast(dict[str, tuple[int, int, int]], {name: span for name, span in spans.items() if span[0]})
         log._sample_counts = {name: span[0] for name, span in spans.items()}
         log._span_ns = None
         log._span_text = None

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -284,6 +284,10 @@ class DetectorResult:
         return out
 
 
+@overload
+def _drawn(series: np.ndarray) -> np.ndarray: ...
+@overload
+def _drawn(series: None) -> None: ...
 def _drawn(series: np.ndarray | None) -> np.ndarray | None:
     """A statistic or band series as kept for figures: float32, a broadcast constant as it is."""
     if series is None or series.strides == (0,):

@@ -102,7 +102,7 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
                 IKH = np.eye(n) - K @ H
                 P_new = IKH @ P @ IKH.T + K @ R @ K.T
                 P_new = 0.5 * (P_new + P_new.T)
-                ok = np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))
+                ok: bool | np.bool_ = np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))
             except (LinAlgError, ValueError):
                 ok = False
             if ok:

@@ -98,6 +98,11 @@ class Model:
     input_names: tuple[str, ...] = ()
     inputs_are_sensors: bool = False  # True when the inputs are sensor readings (ins: the IMU), not commands
     groups: dict[str, GroupSpec] = {}
+    # set on instances: the parameters merged over the defaults (each subclass's __init__,
+    # `_merge_params`), and the trained tables' Q scales, {state: scale}, when calibrated (set by
+    # `logscan.pipeline.prepare`, read by `logscan.filters.q_scale`)
+    p: dict
+    process_noise_scale: dict | None
 
     def __init__(self, params: dict | None = None):
         dispatch.check_model_id(self.model_id, self.name)

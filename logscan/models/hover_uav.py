@@ -195,11 +195,12 @@ class HoverUav(LinearBase):
         lo_A = hi_A = lo_B = hi_B = None
         for corner in itertools.product(*(box[k] for k in names)):
             Ad, Bd = self.discrete_AB(dt, **dict(zip(names, corner)))
-            if lo_A is None:
+            if lo_A is None or hi_A is None or lo_B is None or hi_B is None:  # the first corner sets all four
                 lo_A, hi_A, lo_B, hi_B = Ad.copy(), Ad.copy(), Bd.copy(), Bd.copy()
             else:
                 lo_A, hi_A = np.minimum(lo_A, Ad), np.maximum(hi_A, Ad)
                 lo_B, hi_B = np.minimum(lo_B, Bd), np.maximum(hi_B, Bd)
+        assert lo_A is not None and hi_A is not None and lo_B is not None and hi_B is not None  # a box has a corner
         group_names = tuple(sorted(self.groups, key=lambda g: self.groups[g].group_id))
         C_m = np.vstack([self._C[g] for g in group_names])
         sizes = np.array([self.groups[g].size for g in group_names], dtype=np.int64)

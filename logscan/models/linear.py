@@ -255,10 +255,10 @@ def _system(params: dict, problems: list[str]):
     n = None if A is None else A.shape[0]
     B = _matrix(params["B"], "B", (n, None), problems) if "B" in params else None
     nu = None if B is None else B.shape[1]
-    C = {g: _matrix(v, f"C[{g}]", (None, n), problems) for g, v in _table(params, "C", None, problems).items()}
-    if "C" in params and not C:
+    read = {g: _matrix(v, f"C[{g}]", (None, n), problems) for g, v in _table(params, "C", None, problems).items()}
+    if "C" in params and not read:
         problems.append("linear model: C has no group")
-    C = {g: c for g, c in C.items() if c is not None}
+    C = {g: c for g, c in read.items() if c is not None}
     D = {
         g: _matrix(v, f"D[{g}]", (C[g].shape[0] if g in C else None, nu), problems)
         for g, v in _table(params, "D", list(C), problems).items()

@@ -46,7 +46,7 @@ def analyze_log(
         calibration = read_tables_document(trained).get("calibration")
         loaded.process_noise_scale = process_noise_scale(calibration)
         loaded.uncalibrated = uncalibrable_groups(calibration)
-    options = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
+    options: dict[str, Any] = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
     raw = raw_topics_of(detectors)
     prepared = prepare(
