@@ -59,35 +59,19 @@ class GroupChecker(ValueChecker):
             return None
         if "origin" in data and origin is None:
             return None
-        if scale is not None:
-            scale = self._sized(scale, len(channels), f"{where} scale")
-        if offset is not None:
-            offset = self._sized(offset, len(channels), f"{where} offset")
-        if conversion is not None and len(channels) != len(conversion.inputs):
-            self.add(
-                f"{where} channels",
-                f'from = "{source}" needs exactly {len(conversion.inputs)} channels, in the order '
-                f"{', '.join(conversion.inputs)}; got {len(channels)}",
-            )
+        scale = self._sized(scale, len(channels), f"{where} scale") if scale is not None else None
+        offset = self._sized(offset, len(channels), f"{where} offset") if offset is not None else None
+        outputs = self._outputs(channels, conversion, frame, where)
+        if outputs is None:
             return None
-        outputs = list(conversion.output_names(frame or "ned")) if conversion is not None else channels
         n = len(outputs)
         noun = "outputs" if conversion is not None else "channels"
         noise = self._sized(noise, n, f"{where} noise_std", noun)
         noise_channels = self._noise_channels(data, where, n, noun)
         if "noise_channels" in data and noise_channels is None:
             return None
-        delay = self.number(data, "delay_s", where, minimum=0, strict=False, maximum=MAX_DELAY_S)
-        if "delay_s" in data and delay is None:
-            return None
-        fresh = data.get("fresh", FRESH_MODES[0])
-        if fresh not in FRESH_MODES:
-            self.add(f"{where} fresh", f"expected {_choices(FRESH_MODES)}, got {type_name(fresh)}")
-            return None
-        # a factor on every logged std (set by `logscan train --calibrate`, or by hand)
-        noise_channels_scale = self.number(data, "noise_channels_scale", where, minimum=0, strict=True)
-        if "noise_channels_scale" in data and noise_channels is None:
-            self.add(f"{where} noise_channels_scale", "scales the noise_channels' std: list noise_channels too")
+        timing = self._timing(data, where, noise_channels)
+        if timing is None:
             return None
         lo, hi = self._ranges(lo, hi, outputs, where, noun)
         if stale is None and "stale_s" not in data:
@@ -108,11 +92,43 @@ class GroupChecker(ValueChecker):
             frame=frame or "ned",
             offset=offset,
             noise_channels=noise_channels,
-            noise_channels_scale=1.0 if noise_channels_scale is None else noise_channels_scale,
-            delay_s=0.0 if delay is None else delay,
-            fresh=fresh,
+            **timing,
             **self.gate(data, where),
         )
+
+    def _outputs(self, channels: list[str], conversion, frame: str | None, where: str) -> list[str] | None:
+        """The group's outputs: its channels, or what its ``from`` conversion gives (None: the
+        conversion's channel count is wrong)."""
+        if conversion is None:
+            return channels
+        if len(channels) != len(conversion.inputs):
+            self.add(
+                f"{where} channels",
+                f'from = "{conversion.name}" needs exactly {len(conversion.inputs)} channels, in the order '
+                f"{', '.join(conversion.inputs)}; got {len(channels)}",
+            )
+            return None
+        return list(conversion.output_names(frame or "ned"))
+
+    def _timing(self, data: dict, where: str, noise_channels) -> dict | None:
+        """``delay_s``, ``fresh`` and ``noise_channels_scale`` as MeasurementSpec keywords (None: a problem)."""
+        delay = self.number(data, "delay_s", where, minimum=0, strict=False, maximum=MAX_DELAY_S)
+        if "delay_s" in data and delay is None:
+            return None
+        fresh = data.get("fresh", FRESH_MODES[0])
+        if fresh not in FRESH_MODES:
+            self.add(f"{where} fresh", f"expected {_choices(FRESH_MODES)}, got {type_name(fresh)}")
+            return None
+        # a factor on every logged std (set by `logscan train --calibrate`, or by hand)
+        scale = self.number(data, "noise_channels_scale", where, minimum=0, strict=True)
+        if "noise_channels_scale" in data and noise_channels is None:
+            self.add(f"{where} noise_channels_scale", "scales the noise_channels' std: list noise_channels too")
+            return None
+        return {
+            "delay_s": 0.0 if delay is None else delay,
+            "fresh": fresh,
+            "noise_channels_scale": 1.0 if scale is None else scale,
+        }
 
     def _noise_channels(self, data: dict, where: str, n: int, noun: str) -> list[str] | None:
         """``noise_channels``: one channel of noise std per output (one channel may serve several
