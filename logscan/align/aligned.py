@@ -44,7 +44,7 @@ class AlignedGroup:
     noise_std_series: np.ndarray | None = None
     gated_s: float = 0.0  # time its gate was closed (no 3D fix): no sample there, and none expected
     # a `from = "geodetic"` group: the (lat deg, lon deg, alt m) its north/east/down are relative to
-    origin: tuple[float, float, float] | None = None
+    origin: tuple[float, ...] | None = None
 
 
 class HeldTable:

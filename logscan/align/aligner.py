@@ -154,6 +154,7 @@ class _Aligner:
         if not spec.converted:
             return self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms, z=z)
         raw = self.group(spec.name, spec.channels, grid_ns, spec.stale_s, transforms)
+        assert raw.channel_fresh is not None  # `group` sets it
         origin = None
         channel_fresh = np.repeat(raw.fresh[:, None], spec.width, axis=1)
         if spec.source is None:  # a 3-vector's frame: FLU -> FRD or ENU -> NED
@@ -191,7 +192,7 @@ class _Aligner:
             origin=None if origin is None else tuple(float(v) for v in origin),
         )
 
-    def first_fix(self, spec, grid_ns: np.ndarray, raw: AlignedGroup) -> tuple[float, float, float] | None:
+    def first_fix(self, spec, grid_ns: np.ndarray, raw: AlignedGroup) -> tuple[float, ...] | None:
         """The default origin of a geodetic group: its first sample inside the grid's span with a
         finite altitude and a latitude / longitude in range (the cleaned samples, scaled, at times
         all three channels share), else the first fresh grid step with such values."""

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.align.aligned import AlignedGroup, AlignedRun
+from logscan.align.aligned import AlignedGroup, AlignedRun, HeldTable
 from logscan.align.aligner import _Aligner, _linear_transforms
 from logscan.align.hold import _NS
 from logscan.timebase.time_sanity import check_window, grid, outlier_warnings
@@ -152,8 +152,8 @@ def _measurement_groups(
 class _Onboard:
     """The on-board estimator's states and variances on the grid, and their channels."""
 
-    state: np.ndarray | None = None
-    variance: np.ndarray | None = None
+    state: np.ndarray | HeldTable | None = None
+    variance: np.ndarray | HeldTable | None = None
     names: list[str] = field(default_factory=list)
     state_channels: list = field(default_factory=list)
     variance_channels: list = field(default_factory=list)
