@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from logscan.models import MODEL_NAMES, get_model
 from logscan.profiles.problems import is_number, plural, suggest
 from logscan.profiles.schema import (
     MeasurementSpec,
@@ -13,17 +14,10 @@ from logscan.profiles.schema import (
 )
 
 
-def _registry():
-    """(get_model, MODEL_NAMES) of logscan.models, imported lazily (profiles load without numba)."""
-    from logscan.models import MODEL_NAMES, get_model
-
-    return get_model, tuple(MODEL_NAMES)
-
-
 def build_model(vehicle: VehicleSpec, problems: list[str]):
     """The registry's model named in ``[vehicle]`` built from its params, or None with problems
     (every problem the model found in its parameters)."""
-    get_model, names = _registry()
+    names = tuple(MODEL_NAMES)
     name = vehicle.model
     if name not in names:
         problems.append(

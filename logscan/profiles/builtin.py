@@ -41,6 +41,8 @@ from logscan.errors import InputError
 from logscan.profiles.built import BuiltProfile, nice_rate, rate_hz, toml_list
 from logscan.profiles.px4_noise import NOISE_TOPICS, px4_noise
 from logscan.profiles.ros import is_ros_topic
+from logscan.profiles.schema import MAX_DELAY_S
+from logscan.readers import read_log
 
 ROS_FORMATS = ("mcap", "ros1bag", "rosbag2")  # the formats a ROS log comes in (`logscan.profiles.ros`)
 MIN_IMU_HZ = 50.0  # the ins model holds one IMU sample over a grid period: slower is not an INS
@@ -108,7 +110,6 @@ def topic_schemas(path, fmt: str) -> dict[str, tuple[str, str]]:
             return out
     except Exception:  # noqa: BLE001 - a bag, a damaged or summary-less MCAP: the read below says what is wrong
         pass
-    from logscan.readers import read_log
 
     log = read_log(path, topics=())
     return {name: (t.encoding, t.schema) for name, t in log.source.topics.items()}
@@ -116,8 +117,6 @@ def topic_schemas(path, fmt: str) -> dict[str, tuple[str, str]]:
 
 def _delay_line(params: dict, name: str, default_ms: float) -> str:
     """``delay_s = ...`` from PX4's sensor delay parameter (ms), clipped to what a profile takes."""
-    from logscan.profiles.schema import MAX_DELAY_S
-
     delay = min(max(_param(params, name, default_ms), 0.0) / 1000.0, MAX_DELAY_S)
     return f"delay_s = {delay:.3g}  # {name}: the sensor's latency PX4 flew with"
 

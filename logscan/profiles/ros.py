@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from logscan.docs import doc_url
+from logscan.models import get_model
 from logscan.profiles.built import BuiltProfile, nice_rate, rate_hz, toml_list
 
 MIN_IMU_HZ = 20.0  # slower, one held IMU sample no longer stands for the motion between grid steps
@@ -236,7 +237,6 @@ def _undecided(name: str, log, found: _Found, why: str, lines: list[str]) -> Bui
 
 def _wheeled_profile(log, found: _Found, wheels: Wheels) -> BuiltProfile:
     channels, notes = found.channels, found.notes
-    from logscan.models import get_model
 
     model = get_model("wheeled", {})
     defaults = model.p
@@ -385,8 +385,6 @@ def _yaw_rate(found: _Found, wheels: Wheels) -> tuple[str, float | None, float, 
 
 def _ins_profile(log, found: _Found) -> BuiltProfile:
     """The ``ros`` profile: the ins model on the IMU, NavSatFix and odometry (module docstring)."""
-    from logscan.models import get_model
-
     model = get_model("ins", {})
     defaults = dict(model.p)
     group_noise = {name: spec.noise_std for name, spec in model.groups.items()}

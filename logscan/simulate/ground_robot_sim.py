@@ -55,6 +55,7 @@ import numpy as np
 from logscan.errors import UsageError
 from logscan.models import get_model
 from logscan.numba_cache import follow_dependencies
+from logscan.profiles import dumps_toml
 from logscan.results import FaultEvent
 from logscan.simulate.ground_robot_kernels import RobotParams, robot_loop, wheel_references
 from logscan.simulate.simulation import TRUTH_SCHEMA, Series
@@ -374,8 +375,6 @@ class GroundRobotSimulation:
         }
 
     def profile_toml(self) -> str:
-        from logscan.profiles import dumps_toml
-
         return dumps_toml(self.profile_dict())
 
 

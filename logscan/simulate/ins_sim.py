@@ -37,6 +37,7 @@ from numba import njit
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.errors import UsageError
+from logscan.filters.ekf import run_ekf
 from logscan.models.ins_kernels import ins_h
 from logscan.numba_cache import follow_dependencies
 from logscan.simulate.faults import (
@@ -360,8 +361,6 @@ def _held(z: np.ndarray, fresh: np.ndarray) -> np.ndarray:
 def onboard_ekf(sc: Scenario, u: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """logscan's EKF (`run_ekf`, the analysis's filter, default start) on the logged IMU and aiding
     sensors: (x_post (N, n), P_post diagonal (N, n), rejected samples)."""
-    from logscan.filters.ekf import run_ekf
-
     n = u.shape[0]
     groups, offset = {}, 0
     for g in sc.groups:

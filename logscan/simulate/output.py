@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from logscan.artifacts import commit, discard, stage
 from logscan.errors import UsageError
+from logscan.readers.mcap.writer import TopicData, write_mcap
 from logscan.simulate.simulation import Simulation
 
 FORMATS = ("mcap-json", "mcap-ros2", "csv")
@@ -58,7 +60,6 @@ def write_simulation(sim: Simulation, path: str | Path, fmt: str = "mcap-json") 
     profile_text = sim.profile_toml()
     if fmt == "csv":
         return _write_csv(sim, Path(path), truth_text, profile_text)
-    from logscan.readers.mcap.writer import TopicData, write_mcap
 
     t_ns = grid_ns(sim)
     topics = {
@@ -76,8 +77,6 @@ def write_simulation(sim: Simulation, path: str | Path, fmt: str = "mcap-json") 
 
 def _write_csv(sim: Simulation, path: Path, truth_text: str, profile_text: str) -> list[Path]:
     import pandas as pd
-
-    from logscan.artifacts import commit, discard, stage
 
     columns: dict[str, np.ndarray] = {"time_ns": grid_ns(sim)}
     for s in sim.series():

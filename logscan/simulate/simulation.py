@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from logscan.errors import UsageError
+from logscan.profiles import dumps_toml
 from logscan.results import FaultEvent
 from logscan.simulate.faults import (
     FaultSpec,
@@ -192,8 +193,6 @@ class Simulation:
         return profile
 
     def profile_toml(self) -> str:
-        from logscan.profiles import dumps_toml
-
         return dumps_toml(self.profile_dict())
 
 
