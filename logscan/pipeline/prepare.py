@@ -168,8 +168,8 @@ def prepare(
     context_topics = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
     log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
     if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
-        wanted = profile.topics() | set(raw_topics) | context_topics
-        log = read_log(path, topics=wanted, use_header_stamp=use_header_stamp)
+        topics = profile.topics() | set(raw_topics) | context_topics
+        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp)
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")

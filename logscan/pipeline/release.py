@@ -43,7 +43,7 @@ def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples:
     if samples is not None:  # the buffer now holds the pack: no group may read it as samples
         for group in (*run.groups.values(), *run.redundant.values()):
             if isinstance(group.z, np.ndarray) and group.z.base is samples:
-                group.z = None
+                group.z = None  # type: ignore[assignment]  # released: read by no detector still to run
 
 
 def release_unread(prepared: Prepared, still_to_run: Sequence, keep: frozenset[str] = frozenset()) -> None:
@@ -62,9 +62,10 @@ def release_unread(prepared: Prepared, still_to_run: Sequence, keep: frozenset[s
     for name in ("onboard_state", "onboard_variance", "u", "mode"):
         if name not in wanted and getattr(run, name) is not None:
             setattr(run, name, None)
+    # released: read by no detector still to run (they declare what they read)
     if "z" not in wanted:
         for group in run.groups.values():
-            group.z = group.fresh = group.channel_fresh = None
+            group.z = group.fresh = group.channel_fresh = None  # type: ignore[assignment]
     if "redundant" not in wanted:
         for group in run.redundant.values():
-            group.z = group.fresh = group.channel_fresh = None
+            group.z = group.fresh = group.channel_fresh = None  # type: ignore[assignment]

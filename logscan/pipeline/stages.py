@@ -8,11 +8,20 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from logscan.docs import doc_url
 from logscan.errors import ProfileError
 from logscan.needs import Needs, union
+
+if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported where they are used)
+    from logscan.align import AlignedRun
+    from logscan.log import Log
+    from logscan.models.base import Model
+    from logscan.profiles.schema import Profile
+    from logscan.report.run_context import RunContext
+    from logscan.report.sensor_views import Innovations
+    from logscan.timebase.clock import Clock
 
 
 def _run_ekf(model, run, parts: frozenset[str]):
@@ -50,13 +59,13 @@ FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf, "ubikf": _run_ubikf}
 class LoadedProfile:
     """A parsed profile with its TOML text and where it came from ("embedded" or a file path)."""
 
-    profile: Any  # logscan.profiles.Profile
+    profile: Profile
     text: str
     source: str  # a file path, "embedded", or "built-in <name>"
     notes: list[str] = field(default_factory=list)  # what a built-in profile left out, one line each
     # a built-in profile's log, read once to build it with every topic an analysis of it may read
     # (`builtin_profile_for`): `prepare` takes it instead of reading the file again, then drops it
-    log: Any = field(default=None, repr=False, compare=False)
+    log: Log | None = field(default=None, repr=False, compare=False)
     log_extra_topics: frozenset = field(default=frozenset(), repr=False, compare=False)
     # the tables' calibrated process noise, {state: scale of its Q} (`logscan.training.calibration`; set by
     # `analyze_log` from --tables): `prepare` gives it to the model, the EKF scales Q by it
@@ -73,18 +82,18 @@ class Prepared:
     """One log made ready for detectors: the log, its profile, model, aligned run and filter traces."""
 
     path: str
-    log: Any  # logscan.log.Log
+    log: Log
     loaded: LoadedProfile
-    model: Any  # logscan.models.base.Model
-    run: Any  # logscan.align.AlignedRun
+    model: Model
+    run: AlignedRun
     traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
     warnings: list[str] = field(default_factory=list)
     _filter_summary: dict | None = None
-    context: Any = None  # logscan.report.run_context.RunContext: the path and mode the report draws (small)
-    innovations: Any = None  # logscan.report.sensor_views.Innovations: the report's measured-vs-predicted figures
+    context: RunContext | None = None  # the path and mode the report draws (small)
+    innovations: Innovations | None = None  # the report's measured-vs-predicted figures
     raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
     loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
-    clock: Any = None  # logscan.timebase.clock.Clock: the log's own clock, dated before the samples go
+    clock: Clock | None = None  # the log's own clock, dated before the samples go
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
@@ -113,7 +122,7 @@ class Prepared:
         )
 
     @property
-    def profile(self):
+    def profile(self) -> Profile:
         return self.loaded.profile
 
     @property
