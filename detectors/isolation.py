@@ -8,7 +8,7 @@ analysis reports the detector as failed ("ended its process"), its other detecto
 In the child, file descriptor 1 is pointed at stderr, so whatever the plugin prints (Python's
 ``print``, C code writing to stdout) never reaches stdout, which may hold ``--json -``. The child
 ignores Ctrl-C (the parent is interrupted and ends it) and ends with its parent
-(`logscan.fleet_workers`). What `fit` learns (the detector's attributes) comes back with it.
+(`logscan.fleet.workers`). What `fit` learns (the detector's attributes) comes back with it.
 
 Without ``fork`` the call runs in-process: stdout (Python's and file descriptor 1) goes to stderr
 while it runs, and SystemExit or a KeyboardInterrupt the plugin raises itself become its failure;
@@ -58,7 +58,7 @@ def _in_child(detector: Any, method: str, call: Callable[[], Any]) -> Any:
     def child() -> None:
         reader.close()
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends this child
-        from logscan.fleet_workers import exit_with_parent
+        from logscan.fleet.workers import exit_with_parent
 
         exit_with_parent(parent)
         _stdout_to_stderr()
