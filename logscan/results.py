@@ -63,9 +63,9 @@ class AlarmPolicy:
     min_ground_s: float = 0.0
     ignore_start_s: float = 0.0  # not judged for this long from the grid's start (the filter converging)
     # (N,) bool, the grid steps not judged (from the keys above, set per run by the pipeline)
-    suspended: Any = field(default=None, repr=False, compare=False)
+    suspended: np.ndarray | None = field(default=None, repr=False, compare=False)
     # (N,) bool, the steps in flight (said not on the ground, blips ignored); None: no ground channel
-    airborne: Any = field(default=None, repr=False, compare=False)
+    airborne: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def suspends(self) -> bool:

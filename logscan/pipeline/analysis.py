@@ -7,13 +7,19 @@ no output files and no printing here.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from logscan import __version__
 from logscan.errors import ExitCode
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.verdict.autopilot_messages import flight_messages
 from logscan.verdict.coverage import skipped_checks
+
+if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no runtime edge)
+    from logscan.pipeline.stages import Prepared
+    from logscan.recovery.records import Recovery
+    from logscan.report.recovery_view import RecoveryView
+    from logscan.verdict.observability import Observability
 
 
 @dataclass
@@ -29,7 +35,7 @@ class DetectorFailure:
 class Analysis:
     """Everything one analysed log produced."""
 
-    prepared: Any  # logscan.pipeline.Prepared
+    prepared: Prepared
     results: list[DetectorResult] = field(default_factory=list)
     incidents: list[Incident] = field(default_factory=list)  # alarms grouped, in time order
     unchecked: list[str] = field(default_factory=list)  # what could not be checked (logscan.verdict.coverage)
@@ -41,9 +47,9 @@ class Analysis:
     scores: dict = field(default_factory=dict)  # detector -> logscan.verdict.scoring.Score (with truth)
     warnings: list[str] = field(default_factory=list)
     loops: dict[str, Analysis] = field(default_factory=dict)  # a hierarchical profile's further loops
-    recovery: Any = None  # logscan.recovery.Recovery, when the profile asks for [recovery]
-    recovery_view: Any = None  # logscan.report.recovery_view.RecoveryView: what the report draws of it
-    observability: Any = None  # logscan.verdict.observability.Observability: when a fault could be seen at all
+    recovery: Recovery | None = None  # when the profile asks for [recovery]
+    recovery_view: RecoveryView | None = None  # what the report draws of it
+    observability: Observability | None = None  # when a fault could be seen at all
 
     # --- the prepared log, read through ------------------------------------------------------------
     @property
@@ -249,10 +255,12 @@ class Analysis:
         """One record per recovered anomaly (`logscan.recovery.AnomalyRecord`), times also in the
         log's clock."""
         keys = ("t_detect", "t_end", "t_checkpoint", "t_recovered_end", "t_agreed")
+        recovery = self.recovery
+        assert recovery is not None  # `summary` asks only when there is one
         return {
-            "method": self.recovery.settings.method,
-            "k_sigma": self.recovery.settings.k_sigma,
-            "anomalies": [clock.stamp(record.to_dict(), keys) for record in self.recovery.anomalies],
+            "method": recovery.settings.method,
+            "k_sigma": recovery.settings.k_sigma,
+            "anomalies": [clock.stamp(record.to_dict(), keys) for record in recovery.anomalies],
         }
 
     def report_input(self, grace_s: float | None = None):
