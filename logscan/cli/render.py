@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from logscan.docs import doc_url
-from logscan.verdict.evaluation import CHECK_SEPARATOR
 
 if TYPE_CHECKING:
     from logscan.verdict.evaluation import Evaluation
@@ -201,6 +200,8 @@ def _num(value: float | None, fmt: str = "{:.2f}") -> str:
 def render_scores(evaluation: Evaluation) -> str:
     """Per detector and per check: counts (the alarms that are neither detections nor false alarms
     apart), precision/recall/F1, latency, false alarms per hour; a legend of the apart columns."""
+    from logscan.verdict.evaluation import CHECK_SEPARATOR  # here: that module loads the pipeline
+
     header = (
         f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
         f"{'at onset':>8} {'recovery':>8} {'transient':>9} "
@@ -228,6 +229,8 @@ def render_scores(evaluation: Evaluation) -> str:
 def render_kinds(evaluation: Evaluation) -> str:
     """Per fault kind (Table III view): detected/events, events with an alarm already on at their
     onset, and latency of each detector and check."""
+    from logscan.verdict.evaluation import CHECK_SEPARATOR  # here: that module loads the pipeline
+
     kinds = evaluation.kinds()
     if not kinds:
         return "per fault kind: no fault events in the evaluated logs"
@@ -256,6 +259,8 @@ def render_observability(evaluation: Evaluation) -> str:
     """Per fault kind with unobservable events (`logscan.verdict.observability`): per detector, the misses,
     those of them that lay wholly where the fault could not be seen, and the detection rate over the
     events that could be seen. Empty when no event was judged unobservable."""
+    from logscan.verdict.evaluation import CHECK_SEPARATOR  # here: that module loads the pipeline
+
     keys = [key for key in evaluation.keys() if CHECK_SEPARATOR not in key]
     per_key = {key: evaluation.by_kind(key) for key in keys}
     kinds = [kind for kind in evaluation.kinds() if any(s.unobservable for k in keys if (s := per_key[k].get(kind)))]

@@ -40,6 +40,7 @@ from dataclasses import replace
 import numpy as np
 
 from logscan.errors import InputError
+from logscan.filters.ekf import pack_run
 from logscan.training.process_noise import Q_SCALE_MAX, Q_SCALE_MIN, BlockFit, evaluate, fit_blocks, state_blocks
 
 CAL_ITERATIONS = 10
@@ -53,8 +54,6 @@ CAL_Q_TOLERANCE = float(np.log(1.25))  # ... and no block's Q scale moved by mor
 def base_noise_std(model, run) -> dict[str, np.ndarray]:
     """Each group's noise std as the filter takes it (`logscan.filters.ekf.pack_run`: the
     profile's, else the model's default R), from the diagonal of its block of R."""
-    from logscan.filters.ekf import pack_run
-
     packed = pack_run(model, run)
     diagonal = np.sqrt(np.diag(packed.R_all))
     return {

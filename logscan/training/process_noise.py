@@ -47,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from logscan.filters.ekf import run_ekf
 from logscan.filters.q_scale import scaled_Q
 
 Q_SCALE_MIN = 1e-4  # the smallest scale of a block's Q
@@ -128,8 +129,6 @@ def evaluate(
     """Filter ``runs`` with R from ``noise_std`` and Q scaled by ``scale`` (one per state); the
     NIS and the likelihood over each run's ``judged`` steps ((N,) bool, None: all of them), the
     ``floored`` groups' at their own level (`_concentrated_cost`)."""
-    from logscan.filters.ekf import run_ekf
-
     sums: dict[str, float] = {}
     counts: dict[str, int] = {}
     terms: dict[str, np.ndarray] = {}  # per group: sum of log S_jj, of y_j^2 / S_jj, outputs

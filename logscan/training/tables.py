@@ -22,7 +22,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from logscan.detectors.registry import default_registry
 from logscan.errors import InputError, ProfileError
+from logscan.input_files import MAX_TABLES_BYTES, inside_log_folder, read_input_text
+from logscan.training.calibration import apply_calibration, calibration_failures
+from logscan.training.tuning import tuned_params
 
 TABLES_FORMAT = "logscan-tables"
 TABLES_VERSION = 3  # 3: the fingerprint leaves out measured values, the rates are held apart
@@ -115,8 +119,6 @@ def retrain_command(document: dict, tables: str | os.PathLike, profile, *, same_
 
 def read_tables_document(path: str | os.PathLike) -> dict[str, Any]:
     """The tables JSON (InputError on anything but a tables file of this schema)."""
-    from logscan.input_files import MAX_TABLES_BYTES, read_input_text
-
     text = read_input_text(path, what="the tables file", limit=MAX_TABLES_BYTES)
     try:
         document = json.loads(text)
@@ -138,8 +140,6 @@ def read_tables_document(path: str | os.PathLike) -> dict[str, Any]:
 
 def read_tables(path: str | os.PathLike) -> dict[str, Any]:
     """Trained detectors by name from a tables file (InputError on anything but a tables file)."""
-    from logscan.detectors.registry import default_registry
-
     document = read_tables_document(path)
     registry = default_registry()
     trained = {}
@@ -154,8 +154,6 @@ def tables_path(option: str | None, profile, log: str | os.PathLike | None = Non
     file, or, for the profile embedded in the log ``log`` (or any profile that is no file of the
     user's), a file in the log's folder (the current directory without ``log``) and never outside
     it (`logscan.input_files.inside_log_folder`)."""
-    from logscan.input_files import inside_log_folder
-
     if option is not None:
         return option
     if not profile.tables:
@@ -172,8 +170,6 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     each detector the tables hold is replaced by its trained self, its run-time parameters taken
     from the profile; the others are kept. The tables' calibrated measurement noise is set in
     ``profile`` (`logscan.training.calibration.apply_calibration`): the filter then runs as in training."""
-    from logscan.training.calibration import apply_calibration, calibration_failures
-
     document = read_tables_document(path)
     fingerprint = document.get("profile_fingerprint")
     if fingerprint != profile_fingerprint(profile):
@@ -203,7 +199,6 @@ def apply_tables(detectors: Sequence, path: str | os.PathLike, profile) -> list:
     trained = read_tables(path)
     # after the profile check: the calibrated noise changes the profile it fingerprints
     apply_calibration(profile, document.get("calibration"))
-    from logscan.training.tuning import tuned_params
 
     out = []
     for detector in detectors:

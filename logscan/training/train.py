@@ -20,10 +20,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from logscan import __version__
+from logscan.artifacts import write_json
+from logscan.detectors.registry import default_registry
 from logscan.errors import InputError, ProfileError, UsageError
+from logscan.fleet import run_many
+from logscan.needs import Needs
 from logscan.pipeline import load_profile_for, prepare
 from logscan.pipeline.stages import FILTERS, create_detectors, needs_of, refuse_embedded_plugins
+from logscan.readers import read_embedded
+from logscan.training.calibration import calibrate, calibrated_runs, judged_steps, process_noise_scale
 from logscan.training.tables import TABLES_FORMAT, TABLES_VERSION, profile_fingerprint, profile_rates
+from logscan.training.tuning import tune as tune_multipliers
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -53,8 +61,6 @@ def _log_files(path: str | os.PathLike) -> list[str]:
 def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
     """The detectors training fits: those the profile runs (or ``names``) that learn something in
     their configuration, and those whose tables the profile asks for (`Detector.asked_for_by`)."""
-    from logscan.detectors.registry import default_registry
-
     registry = default_registry()
     chosen = list(names or loaded.profile.enabled_detectors() or registry.default_names())
     if not names:
@@ -92,8 +98,6 @@ def tables_document(
     """The tables JSON: format, version, what it was trained on (the logs, and the ``window`` of
     each, seconds since its start), the filter's calibrated measurement noise
     (`logscan.training.calibration`) and each detector's trained state."""
-    from logscan import __version__
-
     return {
         "format": TABLES_FORMAT,
         "schema_version": TABLES_VERSION,
@@ -114,8 +118,6 @@ def tables_document(
 
 def write_tables(path: str | os.PathLike, document: dict) -> None:
     """Write the tables JSON atomically."""
-    from logscan.artifacts import write_json
-
     write_json(path, document)
 
 
@@ -172,8 +174,6 @@ def train_logs(
             step(f"reading {path} ({number}/{len(logs)})")
             prepared.append(task((path, number)))
     else:
-        from logscan.fleet import run_many
-
         step(f"reading {len(logs)} log(s) on " + (f"the scheduler {scheduler}" if scheduler else f"{jobs} processes"))
         prepared = run_many(items, task, jobs=jobs, scheduler=scheduler, isolate=False)
     needs = task.needs()
@@ -191,8 +191,6 @@ def train_logs(
         fit_detectors(detectors, healthy)
     tuning = None
     if tune:
-        from logscan.training.tuning import tune as tune_multipliers
-
         step(f"tuning {', '.join(d.name for d in tuned)} on {len(healthy)} healthy and {len(labelled)} labelled log(s)")
         tuning = tune_multipliers(tuned, healthy, labelled)
     document = tables_document(detectors, logs, loaded.profile, calibration, (start_s, end_s))
@@ -202,8 +200,6 @@ def train_logs(
 
 def tunable_detectors(loaded) -> list:
     """The profile's detectors (those it runs, else the defaults) that declare multipliers to tune."""
-    from logscan.detectors.registry import default_registry
-
     chosen = list(loaded.profile.enabled_detectors() or default_registry().default_names())
     return [d for d in create_detectors(loaded, chosen) if getattr(d, "tunable", None)]
 
@@ -232,8 +228,6 @@ class PrepareTask:
         return _with_ekf(needs) if self.calibrate else needs
 
     def __call__(self, item: tuple[str, int]):
-        from logscan.readers import read_embedded
-
         path, number = item
         _, truth = read_embedded(path)  # one metadata read: the truth
         faults = ((truth or {}).get("events")) or []
@@ -265,8 +259,6 @@ class PrepareTask:
 
 def _with_ekf(needs):
     """``needs`` plus the EKF's default trace (calibration filters every training log)."""
-    from logscan.needs import Needs
-
     return lambda run: needs(run) | Needs.of(ekf=())
 
 
@@ -274,8 +266,6 @@ def calibrate_prepared(prepared: Sequence, needs) -> dict:
     """Calibrate the measurement and process noise on the prepared healthy logs
     (`logscan.training.calibration`), then put the calibrated noise in their runs and models and re-run their
     filters, so the detectors are fitted on the filter `logscan analyze --tables` runs."""
-    from logscan.training.calibration import calibrate, calibrated_runs, judged_steps, process_noise_scale
-
     judged = [judged_steps(p.profile, p.run) for p in prepared]
     calibration = calibrate(prepared[0].model, [p.run for p in prepared], judged=judged)
     for one, run in zip(prepared, calibrated_runs([p.run for p in prepared], calibration)):

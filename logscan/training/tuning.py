@@ -18,6 +18,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from logscan.results import events_from_truth
+from logscan.verdict.scoring import score_log
+
 TUNE_GRID = tuple(float(v) for v in np.round(np.arange(1.0, 20.01, 0.5), 2))
 TUNE_MARGIN = 1.0
 
@@ -39,9 +42,6 @@ def _alarms_by_statistic(detector, prepared) -> dict[str, list]:
 
 
 def _f1(labelled: Sequence, alarms_per_log: list[dict], statistics: Sequence[str], grace_s: float) -> float | None:
-    from logscan.results import events_from_truth
-    from logscan.verdict.scoring import score_log
-
     tp = fp = fn = 0
     for prepared, by_check in zip(labelled, alarms_per_log):
         truth = prepared.log.truth or {}

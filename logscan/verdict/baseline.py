@@ -13,14 +13,13 @@ import os
 from typing import Any
 
 from logscan.errors import InputError
+from logscan.input_files import MAX_BASELINE_BYTES, read_input_text
 
 STATUSES = ("new", "unchanged", "gone")
 
 
 def read_baseline(path: str) -> dict[str, Any]:
     """A previous `--json` summary (InputError naming the file when it is not one)."""
-    from logscan.input_files import MAX_BASELINE_BYTES, read_input_text
-
     text = read_input_text(path, what="the baseline", limit=MAX_BASELINE_BYTES)
     try:
         document = json.loads(text)

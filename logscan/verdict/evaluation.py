@@ -27,6 +27,9 @@ from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 from logscan.alarms import AlarmInterval
+from logscan.fleet import LogFailure, run_many
+from logscan.pipeline import analyze_log
+from logscan.readers import read_embedded
 from logscan.results import events_from_truth
 from logscan.verdict.scoring import (
     DEFAULT_GRACE_S,
@@ -271,8 +274,6 @@ def evaluate_analysis(
 
 def has_truth(path: str) -> bool:
     """Whether the log carries ground truth (reads only its metadata, not its messages)."""
-    from logscan.readers import read_embedded
-
     return read_embedded(path)[1] is not None
 
 
@@ -291,8 +292,6 @@ class EvaluationTask:
     tables_path: str | None = None  # trained tables (logscan train); None: each profile's own key
 
     def __call__(self, path: str) -> LogEvaluation | None:
-        from logscan.pipeline import analyze_log
-
         if not has_truth(path):
             return None
         analysis = analyze_log(
@@ -327,8 +326,6 @@ def evaluate_logs(
     """Analyse and score every log with ground truth (``jobs`` local processes, or the Dask
     ``scheduler``: `logscan.fleet.run_many`); skip the others; record failures as lines.
     ``start_s``/``end_s``: the window of each log analysed."""
-    from logscan.fleet import LogFailure, run_many
-
     names = tuple(detector_names) if detector_names else None
     task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s, start_s, end_s, tables_path)
     evaluation = Evaluation(grace_s=grace_s, recovery_s=recovery_s)

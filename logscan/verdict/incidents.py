@@ -27,6 +27,7 @@ import numpy as np
 
 from logscan.alarms import AlarmInterval, merge_close
 from logscan.detectors import words
+from logscan.detectors.registry import default_registry
 from logscan.results import DetectorResult, Incident
 
 DEFAULT_GAP_S = 1.0
@@ -38,8 +39,6 @@ GROUP_WORDS = words.GROUP_WORDS
 
 def _detector_class(detector: str):
     """The registered class of ``detector``, None when the registry has none (or it is broken)."""
-    from logscan.detectors.registry import default_registry
-
     try:
         return default_registry().get(detector)
     except Exception:  # noqa: BLE001 - an unknown or broken detector keeps the default wording

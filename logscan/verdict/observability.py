@@ -30,6 +30,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from logscan.models.dispatch import call_literal
+from logscan.simulate.dispatch import build_scenario
+from logscan.simulate.scenario import SIMULATED_MODELS
+from logscan.verdict.observability_kernel import signature_evidence
+
 # kind -> reference size for the report's shading and the summary (the simulator's default sizes:
 # `logscan simulate --help`); evaluate scales by each fault's own magnitude instead
 REFERENCE_SIZE = {"actuator-offset": -0.10, "lost-actuator": 1.0, "bias": 1.0}
@@ -192,9 +197,6 @@ def actuators_of(model, dt: float) -> tuple[list[str], np.ndarray, np.ndarray]:
     if getattr(model, "inputs_are_sensors", False):
         return [], np.zeros((model.n_inputs, 0)), np.zeros(0)
     try:
-        from logscan.simulate.dispatch import build_scenario
-        from logscan.simulate.scenario import SIMULATED_MODELS
-
         if model.name in SIMULATED_MODELS:
             rate = 1.0 / dt
             sc = build_scenario(model.name, 4 * dt, rate, False, np.random.default_rng(0), params=model.params)
@@ -222,9 +224,6 @@ def held_inputs(u: np.ndarray) -> np.ndarray:
 def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S, snr_min=None) -> Observability:
     """The verdict of one filtered run (the EKF trace with its x_prior and x_post); ``snr_min`` None:
     `snr_needed` at the grid's stride."""
-    from logscan.models.dispatch import call_literal
-    from logscan.verdict.observability_kernel import signature_evidence
-
     dt = float(trace.dt)
     stride = max(int(round(stride_s / dt)), 1)
     window = max(int(round(window_s / dt / stride)), 1) * stride

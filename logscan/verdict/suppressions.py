@@ -26,6 +26,9 @@ from dataclasses import dataclass
 from datetime import date
 
 from logscan.errors import InputError
+from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
+from logscan.pipeline import rescore
+from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents
 
 KEYS = {"detector", "check", "log", "start", "end", "reason", "expires"}
 
@@ -52,8 +55,6 @@ class Suppression:
 
 def read_suppressions(path: str, today: date | None = None) -> list[Suppression]:
     """The entries of a suppressions file; InputError (exit 2) naming the entry that is wrong."""
-    from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
-
     text = read_input_text(path, what="the suppressions file", limit=MAX_SUPPRESSIONS_BYTES)
     try:
         data = tomllib.loads(text)
@@ -95,8 +96,6 @@ def read_suppressions(path: str, today: date | None = None) -> list[Suppression]
 def apply_suppressions(analysis, rules: list[Suppression]) -> int:
     """Move the alarms ``rules`` match out of ``analysis``'s results into ``result.suppressed``
     (with their reason), then redo its incidents and scores; returns how many were suppressed."""
-    from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents
-
     count = 0
     for result in analysis.results:
         kept = []
@@ -115,7 +114,5 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
         groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
         analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
         if analysis.events:
-            from logscan.pipeline import rescore
-
             rescore(analysis)
     return count

@@ -17,14 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from logscan.errors import InputError
+from logscan.input_files import MAX_TRUTH_BYTES, read_input_text
 
 ABSOLUTE_NS = 10**15  # log times above this are epoch nanoseconds (later than 1970-01-12)
 
 
 def read_truth_file(path: str | os.PathLike) -> dict[str, Any]:
     """The truth JSON at ``path`` (InputError naming the file on anything unreadable)."""
-    from logscan.input_files import MAX_TRUTH_BYTES, read_input_text
-
     text = read_input_text(path, what="ground truth", limit=MAX_TRUTH_BYTES)
     try:
         document = json.loads(text)
