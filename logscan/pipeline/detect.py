@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 from logscan.docs import doc_url
 from logscan.errors import LogscanError
@@ -13,6 +13,9 @@ from logscan.pipeline.loops import detect_loops, recover_analysis
 from logscan.pipeline.prepare import Progress
 from logscan.pipeline.release import pack_innovations_for, reads_samples, release_unread
 from logscan.pipeline.stages import Prepared
+
+if TYPE_CHECKING:
+    from logscan.results import DetectorResult
 
 
 def detect(
@@ -83,7 +86,7 @@ def _run_detectors(
     ``analysis.failures``. Those that read the samples run first (the frozen-sensor check), so the
     report's pack of innovations can then take the samples' buffer (`pack_innovations_for`)."""
     order = sorted(range(len(detectors)), key=lambda i: not reads_samples(detectors[i]))
-    results: dict[int, Any] = {}
+    results: dict[int, DetectorResult] = {}
     packed = not sensor_views
     for position, index in enumerate(order):
         detector, still_to_run = detectors[index], [detectors[i] for i in order[position:]]

@@ -8,13 +8,16 @@ import os
 import shlex
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
 from logscan.needs import Needs
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared
+
+if TYPE_CHECKING:
+    from logscan.align import AlignedRun
 
 Progress = Callable[[str], None]
 
@@ -134,7 +137,7 @@ def raw_channels(log, topics: frozenset[str]) -> dict:
 def prepare(
     path: str | os.PathLike,
     loaded: LoadedProfile,
-    needs: Needs | Callable[[Any], Needs],
+    needs: Needs | Callable[[AlignedRun], Needs],
     *,
     use_header_stamp: bool = False,
     progress: Progress | None = None,

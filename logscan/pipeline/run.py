@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from logscan.needs import Needs
 from logscan.pipeline.detect import detect
 from logscan.pipeline.prepare import Progress, filter_free, load_profile_for, prepare, raw_topics_of
 from logscan.pipeline.stages import create_detectors, needs_of
 from logscan.training.tables import apply_tables, read_tables_document, tables_path
+
+if TYPE_CHECKING:
+    from logscan.align import AlignedRun
 
 
 def analyze_log(
@@ -57,7 +60,7 @@ def analyze_log(
     )
 
 
-def _with_innovations(needs: Callable[[Any], Needs]) -> Callable[[Any], Needs]:
+def _with_innovations(needs: Callable[[AlignedRun], Needs]) -> Callable[[AlignedRun], Needs]:
     """``needs`` plus the EKF's innovations, when the EKF runs at all."""
 
     def wanted(run) -> Needs:

@@ -181,6 +181,6 @@ def refuse_embedded_plugins(
         )
 
 
-def needs_of(detectors: Sequence) -> Callable[[Any], Needs]:
+def needs_of(detectors: Sequence) -> Callable[[AlignedRun], Needs]:
     """The union of the detectors' needs, as a function of the aligned run they depend on."""
     return lambda run: union(detector.needs(run) for detector in detectors)
