@@ -173,7 +173,9 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
     judged = judged_steps(prepared.profile, prepared.run)
     if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
         used = used & judged
-    level = float(np.mean(prepared.trace.nis_group[used, g])) / size
+    trace = prepared.trace
+    assert trace is not None and trace.nis_group is not None  # `consistency_warnings` checked
+    level = float(np.mean(trace.nis_group[used, g])) / size
     if not level < NIS_BLIND:
         return []
     kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())

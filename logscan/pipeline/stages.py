@@ -16,6 +16,8 @@ from logscan.needs import Needs, union
 
 if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported where they are used)
     from logscan.align import AlignedRun
+    from logscan.filters.trace import EkfTrace
+    from logscan.filters.ubikf import UbikfTrace
     from logscan.log import Log
     from logscan.models.base import Model
     from logscan.profiles.schema import Profile
@@ -86,7 +88,7 @@ class Prepared:
     loaded: LoadedProfile
     model: Model
     run: AlignedRun
-    traces: dict[str, Any] = field(default_factory=dict)  # filter name -> trace
+    traces: dict[str, EkfTrace | UbikfTrace] = field(default_factory=dict)  # filter name -> trace
     warnings: list[str] = field(default_factory=list)
     _filter_summary: dict | None = None
     context: RunContext | None = None  # the path and mode the report draws (small)
@@ -126,9 +128,9 @@ class Prepared:
         return self.loaded.profile
 
     @property
-    def trace(self):
+    def trace(self) -> EkfTrace | None:
         """The shared EKF trace (None when no detector needed the EKF)."""
-        return self.traces.get("ekf")
+        return self.traces.get("ekf")  # type: ignore[return-value]  # FILTERS["ekf"] makes an EkfTrace
 
 
 def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
