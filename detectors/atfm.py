@@ -25,12 +25,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.base import Detector, DetectorResult, Needs, decode_state_value
 from logscan.detectors.modes import mode_segments
 from logscan.detectors.params import Interval, Options, RealList
 from logscan.detectors.words import group_words
 from logscan.docs import doc_url
 from logscan.errors import NotTrainedError, ProfileError
+from logscan.redundant.fusion import fuse_all, rmse
+from logscan.redundant.tfm import (
+    attribute,
+    monotone_envelope,
+    reference_errors,
+    select_rows,
+    strong_inconsistency,
+    train_sensor,
+)
 
 EXTRA_CAPTIONS = {
     "mode": "The commanded mode value and the lookup-table row in use (the next higher trained mode value than "
@@ -84,8 +93,6 @@ def train_table(
     sensor and mode, e(eps, w) for every window and its knee (`logscan.redundant.tfm.train_sensor`); the
     row is the knee at the detection window ``w``; eps then takes its monotone envelope over the
     mode values. Keeps the curves for the training report."""
-    from logscan.redundant.tfm import monotone_envelope, train_sensor
-
     modes = sorted(segments)
     at = windows.index(w)
     eps = np.zeros((len(modes), len(sensors)))
@@ -122,8 +129,6 @@ def check_windows(detector: Detector) -> None:
 def table_rows(detector: str, modes: np.ndarray, row, margin: float, commanded: np.ndarray, measured: np.ndarray):
     """(row per step, above the top row per step): "next higher" by max(commanded, measured -
     margin) when ``row`` is "adaptive", else the trained mode value ``row`` throughout."""
-    from logscan.redundant.tfm import select_rows
-
     if row == "adaptive":
         return select_rows(modes, commanded, measured, margin)
     fixed = np.flatnonzero(np.isclose(modes, float(row)))
@@ -198,8 +203,6 @@ class AtfmDetector(Detector):
     @classmethod
     def state_lines(cls, state) -> list[str]:
         """The lookup table of each group: eps (e) per sensor and mode value."""
-        from logscan.detectors.base import decode_state_value
-
         lines = []
         for group, table in decode_state_value(state["state"]["tables_"]).items():
             sensors, modes, eps, e = table["sensors"], table["modes"], table["eps"], table["e"]
@@ -220,8 +223,6 @@ class AtfmDetector(Detector):
 
     # --- training -----------------------------------------------------------------------------------
     def _fit(self, runs, traces, **context) -> None:
-        from logscan.redundant.tfm import reference_errors
-
         names = _redundant_names(runs)
         tables = {}
         for name in names:
@@ -258,8 +259,6 @@ class AtfmDetector(Detector):
         return table
 
     def _run(self, run, trace, **context) -> DetectorResult:
-        from logscan.redundant.tfm import attribute, strong_inconsistency
-
         result = self.new_result()
         t = run.t
         for name in run.redundant:
@@ -334,8 +333,6 @@ class AtfmDetector(Detector):
 
     def _extras(self, result, grid: int, name, samples, modes, rows, eps) -> None:
         """The mode value, the table row in use and the fused signals, on the analysis grid."""
-        from logscan.redundant.fusion import fuse_all
-
         selection = np.full(grid, np.nan, dtype=np.float32)
         selection[samples.steps] = modes[rows]
         result.extras[f"{name} row in use.mode"] = selection
@@ -353,8 +350,6 @@ class AtfmDetector(Detector):
         """Each fusion method's RMSE against the same method on the fault-free readings: the
         readings of the sensors the truth's fault events name are dropped while those last (the
         thesis's chapter III comparison of the methods under attack)."""
-        from logscan.redundant.fusion import fuse_all, rmse
-
         clean = samples.values.copy()
         t = samples.t
         touched = False

@@ -28,7 +28,7 @@ from logscan.detectors.atfm import (
     table_rows,
     train_table,
 )
-from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.base import Detector, DetectorResult, Needs, decode_state_value
 from logscan.detectors.modes import mode_changes, mode_segments
 from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError
@@ -113,8 +113,6 @@ class AtfmResidualDetector(Detector):
 
     @classmethod
     def state_lines(cls, state) -> list[str]:
-        from logscan.detectors.base import decode_state_value
-
         lines = []
         for label, table in decode_state_value(state["state"]["tables_"]).items():
             cells = ", ".join(

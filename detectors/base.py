@@ -52,6 +52,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from logscan import __version__
 from logscan.align import AlignedRun
 from logscan.detectors.isolation import call_isolated
 from logscan.detectors.params import describe_constraints, satisfies
@@ -325,7 +326,6 @@ class Detector:
     def to_state(self) -> dict[str, Any]:
         """Trained state as strict JSON: format, detector name, schema version, params, state."""
         self.check_trained()
-        from logscan import __version__
 
         return {
             "format": STATE_FORMAT,

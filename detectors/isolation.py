@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from logscan.errors import InternalError
+from logscan.fleet.workers import exit_with_parent
 
 
 def call_isolated(detector: Any, method: str, call: Callable[[], Any]) -> Any:
@@ -58,7 +59,6 @@ def _in_child(detector: Any, method: str, call: Callable[[], Any]) -> Any:
     def child() -> None:
         reader.close()
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends this child
-        from logscan.fleet.workers import exit_with_parent
 
         exit_with_parent(parent)
         _stdout_to_stderr()

@@ -35,11 +35,12 @@ import math
 
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.base import Detector, DetectorResult, Needs, decode_state_value
 from logscan.detectors.modes import mode_changes
 from logscan.detectors.params import PERSIST, Interval, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
+from logscan.filters.ekf import run_ekf
 
 SPREAD_FLOOR = 1e-9  # relative floor of a column's spread: a zero spread alarms on rounding
 NO_MODE = "all"  # the single operating-point bin of a run without a mode channel
@@ -189,8 +190,6 @@ class KgnDetector(Detector):
     @classmethod
     def state_lines(cls, state) -> list[str]:
         """rho, the reference per bin and group, and the blindness verdicts."""
-        from logscan.detectors.base import decode_state_value
-
         st = decode_state_value(state["state"])
         ref, rho, blind = st["reference_"], st["rho_"], st["blindness_"]
         lines = [f"  {cls.name}: rho = {rho:.3g}, {len(ref['bins'])} operating-point bin(s) ({ref['mode']})"]
@@ -318,7 +317,6 @@ class KgnDetector(Detector):
         over the stretch and the group's columns; blind when z < rho in every bin."""
         if model is None:
             return {"_note": "no model given to fit: the probe did not run"}
-        from logscan.filters.ekf import run_ekf
 
         span = max(int(math.ceil(float(self.probe_s) / float(self.window_s))), 1)
         stretches = {}  # bin -> (run index, first window, count)

@@ -24,6 +24,7 @@ from logscan.detectors.nis import chi2_threshold, window_sums
 from logscan.detectors.params import PERSIST, Boolean, Interval, StringList, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
 from logscan.errors import UsageError
+from logscan.filters.box_chi2 import box_chi2_bounds
 
 EXTRA_CAPTIONS = {
     "trace(P+)": "Trace of the UBIKF's covariance upper bound P+ after each update. Normal: it settles to a "
@@ -91,8 +92,6 @@ class Chi2Detector(Detector):
         return float(self.budget_per_hour) / (3600.0 * tests_per_second)  # alpha = budget / (3600 tests/s)
 
     def _run(self, run, trace, **context) -> DetectorResult:
-        from logscan.filters.box_chi2 import box_chi2_bounds
-
         ubikf = (context.get("traces") or {}).get("ubikf")
         if ubikf is None:
             raise UsageError("detector 'chi2' needs the UBIKF trace, but the pipeline did not run it")

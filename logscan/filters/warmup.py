@@ -17,6 +17,8 @@ import threading
 
 import numpy as np
 
+from logscan.align import AlignedGroup, AlignedRun
+from logscan.filters.ekf import ekf_run, run_ekf
 from logscan.models.base import Model
 
 COMPILING_NOTE = "compiling numerical kernels (first run only, 10-20 s)"
@@ -25,8 +27,6 @@ COMPILING_NOTE = "compiling numerical kernels (first run only, 10-20 s)"
 def ekf_cached(model: Model) -> bool:
     """True when numba's disk cache holds the EKF kernel for the model's id on this machine (or
     when the cache cannot be inspected: then nothing is said and nothing is started)."""
-    from logscan.filters.ekf import ekf_run
-
     return kernel_cached(ekf_run, model.model_id)
 
 
@@ -94,9 +94,6 @@ def _can_fork() -> bool:
 def _compile_ekf(model: Model) -> None:
     """Child process: run the EKF on two empty steps of the model (the kernel's signature depends
     on array ranks and dtypes only), which compiles and caches it."""
-    from logscan.align import AlignedGroup, AlignedRun
-    from logscan.filters.ekf import run_ekf
-
     name, spec = next(iter(model.groups.items()))
     steps = 2
     run = AlignedRun(
