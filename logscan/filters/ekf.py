@@ -5,6 +5,9 @@ Every model-based detector reads the `EkfTrace` (logscan.filters.trace) this mod
 model-agnostic: it calls the model's in-place f/F and h/H functions through
 `logscan.models.dispatch`, resolved for the literal model id, so numba compiles and caches one
 specialisation per model, only for the models a run uses; its linear algebra is `logscan.filters.linalg`.
+Its arguments are grouped by meaning into NamedTuples, every field's shape and dtype beside it:
+`EkfModel` (parameters, Q, prior), `EkfSensors` (the groups' layout, R, ranges), `EkfData` (the
+run's inputs and samples) and `EkfBuffers` (the trace it writes); `pack_run` builds the first three.
 
 Conventions (step k on the grid, u_k the input held at step k):
  - k = 0: x_prior = x0, P_prior = P0 (no prediction); k > 0: x_prior = f(x_post_{k-1}, u_k).
@@ -24,8 +27,8 @@ Conventions (step k on the grid, u_k the input held at step k):
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import literally, njit
@@ -81,74 +84,97 @@ def _store(k, x, P, xs, P_diag, P_full, store_P):
 
 
 # =============================================================================================
+# the kernel's arguments (N steps, n states, nu inputs, G groups, m_total outputs of all groups
+# stacked group after group; a group's outputs are rows group_offsets[g] : + group_sizes[g])
+# =============================================================================================
+class EkfModel(NamedTuple):
+    """The model and the prior: what the kernel holds fixed over a run."""
+
+    p: np.ndarray  # (n_p,) float64: the model's packed parameters (Model.param_vector)
+    dt: float  # the grid step, s
+    Q: np.ndarray  # (n, n) float64: process noise covariance of one step
+    x0: np.ndarray  # (n,) float64: the initial state, and the state a restart returns to
+    P0: np.ndarray  # (n, n) float64: its covariance
+    seed_at_start: bool  # no x0 given: seed the directly observed states from their first samples
+
+
+class EkfSensors(NamedTuple):
+    """The measurement groups: which model outputs, their noise, range and direct states."""
+
+    group_ids: np.ndarray  # (G,) int64: each group's id in the model (its h, H)
+    group_offsets: np.ndarray  # (G,) int64: each group's first output
+    group_sizes: np.ndarray  # (G,) int64: each group's number of outputs
+    R_all: np.ndarray  # (m_total, m_total) float64: measurement noise covariance (group blocks)
+    range_lo: np.ndarray  # (m_total,) float64: physical range of each output (outside: rejected)
+    range_hi: np.ndarray  # (m_total,) float64
+    wrap: np.ndarray  # (m_total,) bool: an angle (its innovation wraps to [-pi, pi))
+    direct_idx: np.ndarray  # (m_total,) int64: the state i an output observes as z = gain * x[i], else -1
+    direct_gain: np.ndarray  # (m_total,) float64: that gain
+
+
+class EkfData(NamedTuple):
+    """The run's samples on the grid."""
+
+    u: np.ndarray  # (N, nu) float64: the input held at each step (a non-finite row: the last finite one)
+    u_default: np.ndarray  # (nu,) float64: the input held before the first finite row
+    z: np.ndarray  # (N, m_total) float64: the samples, group blocks side by side
+    fresh: np.ndarray  # (N, G) bool: group g has a new sample at step k
+    R_std: np.ndarray  # (N, m_total) float64: per-sample noise std (NaN: R_all's); (0, m_total): none
+
+
+class EkfBuffers(NamedTuple):
+    """What the kernel writes, preallocated by the caller (NaN / False / 0 filled, but S_out and
+    K_out, which the kernel NaN-fills step by step). The optional ones (marked *) are stored when
+    their first dimension is N; a zero-length first dimension skips them."""
+
+    x_prior: np.ndarray  # (N, n) float64
+    x_post: np.ndarray  # (N, n) float64
+    P_prior_diag: np.ndarray  # (N, n) float32
+    P_post_diag: np.ndarray  # (N, n) float32
+    P_prior_full: np.ndarray  # (N, n, n) float64 *
+    P_post_full: np.ndarray  # (N, n, n) float64 *
+    y_out: np.ndarray  # (N, m_total) float32 * innovation, NaN where not updated
+    S_out: np.ndarray  # (N, m_total, m_total) float64 * innovation covariance
+    S_diag_out: np.ndarray  # (N, m_total) float32, stored with y_out
+    K_out: np.ndarray  # (N, n, m_total) float64 * gain
+    nis: np.ndarray  # (N,) float64
+    nis_group: np.ndarray  # (N, G) float64
+    m_k: np.ndarray  # (N,) int64: outputs in the update (0: none)
+    gain_norm: np.ndarray  # (N,) float64: Frobenius norm of K
+    updated: np.ndarray  # (N, G) bool
+    rejected: np.ndarray  # (N, G) bool: fresh but non-finite or out of range
+    seeded: np.ndarray  # (N, G) bool
+    diverged: np.ndarray  # (N,) bool
+    input_held: np.ndarray  # (N,) bool
+
+
+# =============================================================================================
 # the kernel
 # =============================================================================================
 @njit(cache=True, error_model="numpy")
-def ekf_run(
-    model_id,
-    p,
-    x0,
-    P0,
-    Q,
-    u,
-    u_default,
-    z,
-    fresh,
-    group_ids,
-    group_offsets,
-    group_sizes,
-    R_all,
-    R_std,
-    range_lo,
-    range_hi,
-    wrap,
-    direct_idx,
-    direct_gain,
-    dt,
-    seed_at_start,
-    x_prior,
-    x_post,
-    P_prior_diag,
-    P_post_diag,
-    P_prior_full,
-    P_post_full,
-    y_out,
-    S_out,
-    S_diag_out,
-    K_out,
-    nis,
-    nis_group,
-    m_k,
-    gain_norm,
-    updated,
-    rejected,
-    seeded,
-    diverged,
-    input_held,
-):
-    """Filter N steps; every output array is preallocated by the caller (NaN / False filled,
-    except S_out and K_out, which the kernel fills step by step: NaN where not updated).
-
-    P_prior_full, P_post_full, y_out with S_diag_out, S_out, K_out are stored when their first
-    dimension is N (pass zero-length arrays to skip them). R_std (N, m_total) holds a per-sample
-    noise standard deviation (its square replaces that output's row and column of R at that step;
-    NaN: R_all's) when its first dimension is N; zero-length: R_all throughout. All work arrays
-    are allocated once, before the loop.
+def ekf_run(model_id, model, sensors, data, out):
+    """Filter the N steps of ``data`` (EkfData) with ``model`` (EkfModel) and ``sensors``
+    (EkfSensors) into ``out`` (EkfBuffers); ``model_id`` is the model's kernel id, compiled as a
+    literal. All work arrays are allocated once, before the loop.
     """
     literally(model_id)  # one specialisation per model (logscan.models.dispatch)
+    p, dt, Q, x0, P0 = model.p, model.dt, model.Q, model.x0, model.P0
+    group_ids, group_offsets, group_sizes = sensors.group_ids, sensors.group_offsets, sensors.group_sizes
+    R_all, direct_idx, direct_gain = sensors.R_all, sensors.direct_idx, sensors.direct_gain
+    u, z, fresh, R_std = data.u, data.z, data.fresh, data.R_std
     N = u.shape[0]
     n = x0.size
     nu = u.shape[1]
     G = group_ids.size
     m_total = z.shape[1]
-    store_P = P_prior_full.shape[0] == N
-    store_y = y_out.shape[0] == N  # y and the diagonal of S
-    store_S = S_out.shape[0] == N
-    store_K = K_out.shape[0] == N
+    store_P = out.P_prior_full.shape[0] == N
+    store_y = out.y_out.shape[0] == N  # y and the diagonal of S
+    store_S = out.S_out.shape[0] == N
+    store_K = out.K_out.shape[0] == N
     dyn_R = R_std.shape[0] == N
     x = x0.copy()
     P = P0.copy()
-    u_last = u_default.copy()
+    u_last = data.u_default.copy()
     # direct groups: every output observes one state
     is_direct = np.zeros(G, dtype=np.bool_)
     for g in range(G):
@@ -158,7 +184,7 @@ def ekf_run(
                 ok = False
         is_direct[g] = ok
     seed_done = np.zeros(G, dtype=np.bool_)
-    pending = seed_at_start
+    pending = model.seed_at_start
     # counters start from a typed zero: a literal 0 makes numba compile every helper they
     # reach twice (once for Literal[int](0), once for int64), doubling the cold compile
     zero = np.int64(0)
@@ -191,7 +217,7 @@ def ekf_run(
             for i in range(nu):
                 u_last[i] = uk[i]
         else:
-            input_held[k] = True
+            out.input_held[k] = True
             uk = u_last
         # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
         if k > 0:
@@ -202,8 +228,8 @@ def ekf_run(
             for i in range(n):
                 x[i] = x_new[i]
             if not (all_finite(x) and all_finite2(P)):
-                diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
-        _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
+                out.diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        _store(k, x, P, out.x_prior, out.P_prior_diag, out.P_prior_full, store_P)
         # ---- select the fresh, valid groups -------------------------------------------------
         m = zero
         ng = zero
@@ -214,10 +240,10 @@ def ekf_run(
             ok = True
             for j in range(o, o + group_sizes[g]):
                 zj = z[k, j]
-                if not np.isfinite(zj) or zj < range_lo[j] or zj > range_hi[j]:
+                if not np.isfinite(zj) or zj < sensors.range_lo[j] or zj > sensors.range_hi[j]:
                     ok = False
             if not ok:
-                rejected[k, g] = True
+                out.rejected[k, g] = True
                 continue
             if pending and is_direct[g] and not seed_done[g]:
                 # re-seed the directly observed states from this sample
@@ -233,7 +259,7 @@ def ekf_run(
                         rj = R_std[k, j] * R_std[k, j]
                     P[i, i] = rj / (gain * gain)
                 seed_done[g] = True
-                seeded[k, g] = True
+                out.seeded[k, g] = True
                 continue
             sel_g[ng] = g
             ng += 1
@@ -248,9 +274,9 @@ def ekf_run(
             pending = still
         # ---- update -----------------------------------------------------------------------
         if store_S:  # S_out and K_out come unfilled (np.empty): NaN where not updated
-            nan_fill(S_out[k])
+            nan_fill(out.S_out[k])
         if store_K:
-            nan_fill(K_out[k])
+            nan_fill(out.K_out[k])
         if m > 0:
             r = zero
             for a in range(ng):
@@ -262,7 +288,7 @@ def ekf_run(
                 j = rows[a]
                 # y~ = z - h(x_prior)
                 ya = z[k, j] - hx[a]
-                if wrap[j]:
+                if sensors.wrap[j]:
                     ya = wrap_angle(ya)
                 y[a] = ya
                 for b in range(m):
@@ -312,42 +338,42 @@ def ekf_run(
                     for i in range(n):
                         x[i] = x_upd[i]
                     P, P_upd = P_upd, P
-                    m_k[k] = m
+                    out.m_k[k] = m
                     # NIS = y^T S^-1 y = |L^-1 y|^2
-                    nis[k] = forward_sq(L, m, y, zero, v)
+                    out.nis[k] = forward_sq(L, m, y, zero, v)
                     knorm = 0.0
                     for a in range(m):
                         for i in range(n):
                             knorm += KT[a, i] * KT[a, i]
-                    gain_norm[k] = np.sqrt(knorm)
+                    out.gain_norm[k] = np.sqrt(knorm)
                     for a in range(m):
                         j = rows[a]
                         if store_y:
-                            y_out[k, j] = y[a]
-                            S_diag_out[k, j] = S[a, a]
+                            out.y_out[k, j] = y[a]
+                            out.S_diag_out[k, j] = S[a, a]
                         if store_S:
                             for b in range(m):
-                                S_out[k, j, rows[b]] = S[a, b]
+                                out.S_out[k, j, rows[b]] = S[a, b]
                         if store_K:
                             for i in range(n):
-                                K_out[k, i, j] = KT[a, i]
+                                out.K_out[k, i, j] = KT[a, i]
                     # per-group NIS on the group's own block of S
                     r = zero
                     for a in range(ng):
                         g = sel_g[a]
                         mg = group_sizes[g]
-                        updated[k, g] = True
+                        out.updated[k, g] = True
                         if r == 0:  # the leading block's factor is L's leading block
-                            nis_group[k, g] = forward_sq(L, mg, y, zero, v)
+                            out.nis_group[k, g] = forward_sq(L, mg, y, zero, v)
                         else:
                             cholesky(S, r, mg, Lg)
-                            nis_group[k, g] = forward_sq(Lg, mg, y, r, v)
+                            out.nis_group[k, g] = forward_sq(Lg, mg, y, r, v)
                         r += mg
                 else:
                     ok = False
             if not ok:
-                diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
-        _store(k, x, P, x_post, P_post_diag, P_post_full, store_P)
+                out.diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        _store(k, x, P, out.x_post, out.P_post_diag, out.P_post_full, store_P)
 
 
 # =============================================================================================
@@ -380,6 +406,23 @@ class KernelInputs:
     direct_gain: np.ndarray
     dt: float
     seed_at_start: bool
+
+    def kernel_arguments(self) -> tuple[int, EkfModel, EkfSensors, EkfData]:
+        """``ekf_run``'s arguments before its buffers: the model id and the pack's arrays grouped
+        by meaning (the same arrays, not copies)."""
+        model = EkfModel(self.p, self.dt, self.Q, self.x0, self.P0, self.seed_at_start)
+        sensors = EkfSensors(
+            self.group_ids,
+            self.group_offsets,
+            self.group_sizes,
+            self.R_all,
+            self.range_lo,
+            self.range_hi,
+            self.wrap,
+            self.direct_idx,
+            self.direct_gain,
+        )
+        return self.model_id, model, sensors, EkfData(self.u, self.u_default, self.z, self.fresh, self.R_std)
 
 
 def _square(name: str, value, size: int) -> np.ndarray:
@@ -525,10 +568,6 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     )
 
 
-# ekf_run's parameters after the inputs, in order (the keys of run_ekf's `out`)
-_OUTPUT_NAMES = tuple(inspect.signature(ekf_run.py_func).parameters)[21:]
-
-
 def compiled_for(args: tuple):
     """ekf_run's compiled entry point for these arguments, the model id as a literal."""
     return dispatch.compiled_for_model(ekf_run, args)
@@ -556,7 +595,7 @@ def run_ekf(
     k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0)
     N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
     nan = np.nan
-    out = dict(
+    out = EkfBuffers(
         x_prior=np.full((N, n), nan),
         x_post=np.full((N, n), nan),
         # float32: variances are scales (coding vectors, consistency bands), 7 digits are ample,
@@ -583,10 +622,7 @@ def run_ekf(
         input_held=np.zeros(N, dtype=np.bool_),
     )
     if N:
-        inputs = (k.p, k.x0, k.P0, k.Q, k.u, k.u_default, k.z, k.fresh, k.group_ids, k.group_offsets)
-        inputs += (k.group_sizes, k.R_all, k.R_std, k.range_lo, k.range_hi, k.wrap, k.direct_idx, k.direct_gain)
-        inputs += (k.dt, k.seed_at_start)
-        args = (k.model_id, *inputs, *(out[name] for name in _OUTPUT_NAMES))
+        args = (*k.kernel_arguments(), out)
         compiled_for(args)(*args)
     t = np.asarray(run.t, dtype=np.float64)
     return EkfTrace(
@@ -597,28 +633,28 @@ def run_ekf(
         group_sizes=k.group_sizes,
         t=t,
         dt=k.dt,
-        x_prior=out["x_prior"],
-        x_post=out["x_post"],
-        P_prior_diag=out["P_prior_diag"],
-        P_post_diag=out["P_post_diag"],
-        y=out["y_out"] if store_innovations else None,
-        S_diag=out["S_diag_out"] if store_innovations else None,
-        nis=out["nis"],
-        nis_group=out["nis_group"],
-        m_k=out["m_k"],
-        gain_norm=out["gain_norm"],
-        updated=out["updated"],
-        rejected=out["rejected"],
-        seeded=out["seeded"],
-        diverged=out["diverged"],
-        input_held=out["input_held"],
+        x_prior=out.x_prior,
+        x_post=out.x_post,
+        P_prior_diag=out.P_prior_diag,
+        P_post_diag=out.P_post_diag,
+        y=out.y_out if store_innovations else None,
+        S_diag=out.S_diag_out if store_innovations else None,
+        nis=out.nis,
+        nis_group=out.nis_group,
+        m_k=out.m_k,
+        gain_norm=out.gain_norm,
+        updated=out.updated,
+        rejected=out.rejected,
+        seeded=out.seeded,
+        diverged=out.diverged,
+        input_held=out.input_held,
         Q=k.Q,
         R=k.R_all,
-        P_prior=out["P_prior_full"] if full_P else None,
-        P_post=out["P_post_full"] if full_P else None,
-        S=out["S_out"] if store_S else None,
-        K=out["K_out"] if store_gain else None,
-        divergence_episodes=divergence_episodes(t, out["diverged"], out["m_k"]),
+        P_prior=out.P_prior_full if full_P else None,
+        P_post=out.P_post_full if full_P else None,
+        S=out.S_out if store_S else None,
+        K=out.K_out if store_gain else None,
+        divergence_episodes=divergence_episodes(t, out.diverged, out.m_k),
     )
 
 

@@ -37,6 +37,7 @@ restarts from x0/P0 with an empty zonotope (no statistic of that step is stored)
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -98,6 +99,65 @@ class UbikfTrace:
     state_names: tuple[str, ...]
     K: np.ndarray | None = None  # (N, n, m) gain, NaN-padded (store_gain)
     P: np.ndarray | None = None  # (N, n, n) P+_post (store_P)
+
+
+# ================================================================================================
+# the kernel's arguments (N steps, n states, nu inputs, G groups, m outputs of all groups stacked
+# group after group; group g's rows are group_offsets[g] : + group_sizes[g])
+# ================================================================================================
+class UbikfModel(NamedTuple):
+    """The interval model [M] = M_m +- M_r, its noise bounds, prior and measurement groups."""
+
+    A_m: np.ndarray  # (n, n) float64: state transition, midpoint
+    A_r: np.ndarray  # (n, n) float64: its radius (>= 0)
+    B_m: np.ndarray  # (n, nu) float64: input matrix, midpoint
+    B_r: np.ndarray  # (n, nu) float64: its radius
+    C_m: np.ndarray  # (m, n) float64: output matrix, midpoint
+    C_r: np.ndarray  # (m, n) float64: its radius
+    Q: np.ndarray  # (n, n) float64: Q+, a Loewner upper bound of [Q]
+    R: np.ndarray  # (m, m) float64: R+, a Loewner upper bound of [R]
+    x0: np.ndarray  # (n,) float64: the initial state, and the state a restart returns to
+    P0: np.ndarray  # (n, n) float64: its covariance
+    group_offsets: np.ndarray  # (G,) int64: each group's first row
+    group_sizes: np.ndarray  # (G,) int64: each group's number of rows
+
+
+class UbikfData(NamedTuple):
+    """The run's samples on the grid."""
+
+    u: np.ndarray  # (N, nu) float64: the input of each step (a non-finite row: the last finite one)
+    u_default: np.ndarray  # (nu,) float64: the input held before the first finite row
+    z: np.ndarray  # (N, m) float64: the samples, group blocks side by side
+    fresh: np.ndarray  # (N, G) bool: group g has a new sample at step k
+
+
+class UbikfSettings(NamedTuple):
+    """The filter's two settings."""
+
+    L: int  # order-reduction period, steps (>= 1)
+    cap: float  # divergence threshold on |P+|, |x_c| and the hull radius
+
+
+class UbikfBuffers(NamedTuple):
+    """What the kernel writes, preallocated by the caller (NaN filled; n_generators, m_k 0 and the
+    flags False). K and P are stored when their first dimension is N (zero-length: skipped). The
+    field names are `UbikfTrace`'s."""
+
+    x_mid: np.ndarray  # (N, n) float64: mid-model point estimate x_c (posterior)
+    x_lo: np.ndarray  # (N, n) float64: hull of the posterior zonotope
+    x_hi: np.ndarray  # (N, n) float64
+    P_trace: np.ndarray  # (N,) float64: trace(P+_post)
+    P_diag: np.ndarray  # (N, n) float32: diag(P+_post)
+    n_generators: np.ndarray  # (N,) int64: zonotope order after the step
+    P: np.ndarray  # (N, n, n) float64: P+_post, or (0, n, n)
+    r_mid: np.ndarray  # (N, m) float64: innovation box midpoint, NaN where not updated
+    r_rad: np.ndarray  # (N, m) float64: innovation box radius
+    S: np.ndarray  # (N, m, m) float64: S+ of the rows updated
+    nis: np.ndarray  # (N,) float64: point NIS
+    K: np.ndarray  # (N, n, m) float64: gain, or (0, n, m)
+    updated: np.ndarray  # (N, G) bool
+    m_k: np.ndarray  # (N,) int64: measurements in the update
+    diverged: np.ndarray  # (N,) bool: restarted from x0/P0 at this step
 
 
 # ================================================================================================
@@ -190,9 +250,10 @@ def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_out):
 
 
 @njit(cache=True, error_model="numpy")
-def store_step(k, x, h, P, p, outputs):
-    """The posterior of step k: x_c, its hull x_c -+ h, diag and trace of P+, generator count."""
-    x_mid, x_lo, x_hi, P_trace, P_diag, n_gen, P_out = outputs
+def store_step(k, x, h, P, p, out):
+    """The posterior of step k into ``out`` (UbikfBuffers): x_c, its hull x_c -+ h, diag and trace
+    of P+, generator count."""
+    x_mid, x_lo, x_hi, P_diag = out.x_mid, out.x_lo, out.x_hi, out.P_diag
     tr = 0.0
     for i in range(x.size):
         x_mid[k, i] = x[i]
@@ -200,17 +261,19 @@ def store_step(k, x, h, P, p, outputs):
         x_hi[k, i] = x[i] + h[i]
         P_diag[k, i] = P[i, i]
         tr += P[i, i]
-    P_trace[k] = tr
-    n_gen[k] = p
-    if P_out.shape[0] == x_mid.shape[0]:
-        P_out[k] = P
+    out.P_trace[k] = tr
+    out.n_generators[k] = p
+    if out.P.shape[0] == x_mid.shape[0]:
+        out.P[k] = P
 
 
 @njit(cache=True, error_model="numpy")
-def store_update(k, rows, m, y, work, K_out, r_mid, r_rad, S_out, nis, v):
-    """The innovation box, S+, the point NIS and (K_out of length N) the gain of step k."""
+def store_update(k, rows, m, y, work, out, v):
+    """The innovation box, S+, the point NIS and (out.K of length N) the gain of step k into ``out``
+    (UbikfBuffers)."""
     r_box, gamma, S, Lc, K = work[7], work[8], work[4], work[5], work[11][6]
-    nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
+    r_mid, r_rad, S_out, K_out = out.r_mid, out.r_rad, out.S, out.K
+    out.nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
     for a in range(m):
         j = rows[a]
         r_mid[k, j] = y[a]
@@ -236,15 +299,17 @@ def work_arrays(n, m, cap_p):
 
 
 @njit(cache=True, error_model="numpy")
-def ubikf_run(A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh, group_offsets, group_sizes, L, cap,
-              outputs, r_mid, r_rad, S_out, nis, K_out, updated, m_k, diverged):  # fmt: skip
-    """Filter N steps. outputs = (x_mid, x_lo, x_hi, P_trace, P_diag, n_gen, P_out), all
-    preallocated by the caller (r_mid, r_rad, S_out, nis, K_out NaN, the flags False); K_out and
-    P_out are stored when their first dimension is N."""
+def ubikf_run(model, data, settings, out):
+    """Filter the N steps of ``data`` (UbikfData) with ``model`` (UbikfModel) and ``settings``
+    (UbikfSettings) into ``out`` (UbikfBuffers)."""
+    A_m, A_r, B_m, B_r, C_m, C_r = model.A_m, model.A_r, model.B_m, model.B_r, model.C_m, model.C_r
+    x0, P0, group_offsets, group_sizes = model.x0, model.P0, model.group_offsets, model.group_sizes
+    u, z, fresh = data.u, data.z, data.fresh
+    L, cap = settings.L, settings.cap
     n, m_total = x0.size, C_m.shape[0]
     cap_p = n + 2 * L * (n + m_total)  # generators: a box, then at most 2 L steps of new ones
     # work arrays (allocated once)
-    x, x_prior, u_last, h = x0.copy(), np.empty(n), u_default.copy(), np.zeros(n)
+    x, x_prior, u_last, h = x0.copy(), np.empty(n), data.u_default.copy(), np.zeros(n)
     sigma, rho, alpha = np.empty(n), np.empty(n), np.empty(n)
     P, P_next, Wn = P0.copy(), np.empty((n, n)), np.zeros((4, n, n))  # Wn[3] stays zero
     G, G_next = np.zeros((n, cap_p)), np.zeros((n, cap_p))
@@ -261,7 +326,7 @@ def ubikf_run(A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh
             p = predict_step(A_m, acols, annz, A_r, B_m, B_r, u_last, x, h, G, p, G_next, alpha, x_prior)
             G, G_next = G_next, G
             x[:] = x_prior
-            predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
+            predict_bound(A_m, acols, annz, A_r, all_rows, model.Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
             P, P_next = P_next, P
             zonotope_hull_into(G, n, p, h)
         ok = True
@@ -271,7 +336,7 @@ def ubikf_run(A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh
                 Cs[a] = C_m[rows[a]]
                 y[a] = z[k, rows[a]] - np.dot(C_m[rows[a]], x)  # r = y - C_m x_c,prior
                 for b in range(m):
-                    Rs[a, b] = R[rows[a], rows[b]]
+                    Rs[a, b] = model.R[rows[a], rows[b]]
             ok, p = update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_next)
             P, P_next = P_next, P
         age += 1
@@ -280,16 +345,16 @@ def ubikf_run(A_m, A_r, B_m, B_r, C_m, C_r, Q, R, x0, P0, u, u_default, z, fresh
             p_mark = p
         zonotope_hull_into(G, n, p, h)
         if not (ok and below_cap(x, cap) and below_cap(P, cap) and below_cap(h, cap)):
-            diverged[k] = True
+            out.diverged[k] = True
             x[:] = x0
             P[:] = P0
             h[:] = 0.0
             p, p_mark, age, m = 0, 0, 0, 0
-        store_step(k, x, h, P, p, outputs)
+        store_step(k, x, h, P, p, out)
         if m > 0:
-            m_k[k] = m
-            updated[k] = upd
-            store_update(k, rows, m, y, work, K_out, r_mid, r_rad, S_out, nis, v)
+            out.m_k[k] = m
+            out.updated[k] = upd
+            store_update(k, rows, m, y, work, out, v)
 
 
 # ================================================================================================
@@ -385,8 +450,7 @@ def run_ubikf(
     finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite[0]].copy() if finite.size else np.zeros(u.shape[1])
     c, nan = np.ascontiguousarray, np.nan
-    # the posterior per step (ubikf_run's `outputs`, in order), then the update's outputs
-    posterior = dict(
+    out = UbikfBuffers(
         x_mid=np.full((N, n), nan),
         x_lo=np.full((N, n), nan),
         x_hi=np.full((N, n), nan),
@@ -394,8 +458,6 @@ def run_ubikf(
         P_diag=np.full((N, n), nan, dtype=np.float32),
         n_generators=np.zeros(N, dtype=np.int64),
         P=np.full((N if store_P else 0, n, n), nan),
-    )
-    update = dict(
         r_mid=np.full((N, m), nan),
         r_rad=np.full((N, m), nan),
         S=np.full((N, m, m), nan),
@@ -406,17 +468,24 @@ def run_ubikf(
         diverged=np.zeros(N, dtype=np.bool_),
     )
     if N:
-        matrices = [c(getattr(model, name), dtype=np.float64) for name in ("A_m", "A_r", "B_m", "B_r", "C_m", "C_r")]
-        Q, R = c(loewner_upper(model.Q_m, model.Q_r)), c(loewner_upper(model.R_m, model.R_r))
-        offsets, sizes = c(model.group_offsets, dtype=np.int64), c(model.group_sizes, dtype=np.int64)
-        inputs = (*matrices, Q, R, c(x0), c(P0), u, u_default, z, fresh, offsets, sizes, int(L), float(cap))
-        ubikf_run(*inputs, tuple(posterior.values()), *update.values())
-    posterior["P"] = posterior["P"] if store_P else None
-    update["K"] = update["K"] if store_gain else None
+        names = ("A_m", "A_r", "B_m", "B_r", "C_m", "C_r")
+        matrices = {name: c(getattr(model, name), dtype=np.float64) for name in names}
+        kernel_model = UbikfModel(
+            **matrices,
+            Q=c(loewner_upper(model.Q_m, model.Q_r)),
+            R=c(loewner_upper(model.R_m, model.R_r)),
+            x0=c(x0),
+            P0=c(P0),
+            group_offsets=c(model.group_offsets, dtype=np.int64),
+            group_sizes=c(model.group_sizes, dtype=np.int64),
+        )
+        ubikf_run(kernel_model, UbikfData(u, u_default, z, fresh), UbikfSettings(int(L), float(cap)), out)
+    buffers = out._asdict()
+    buffers["P"] = out.P if store_P else None
+    buffers["K"] = out.K if store_gain else None
     return UbikfTrace(
         t=np.asarray(run.t, dtype=np.float64),
-        **posterior,
-        **update,
+        **buffers,
         group_names=tuple(model.group_names),
         group_offsets=np.asarray(model.group_offsets),
         group_sizes=np.asarray(model.group_sizes),
