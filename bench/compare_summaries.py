@@ -1,0 +1,73 @@
+"""Are the `--json` summaries of every sample log byte-identical to those of another commit?
+
+    python bench/compare_summaries.py 93bce00            # the commit before a refactoring
+
+Checks the other commit out into a temporary git worktree, runs `logscan analyze LOG --no-report
+--json OUT` with that commit's code and with this checkout's on every sample log (the .mcap files,
+quad_healthy.csv and husky_drive.bag), and compares the files byte for byte. The other commit's
+code runs in this venv (its dependencies must be the same); its import is forced to the worktree
+(the editable install's finder is left out), and the run checks that it was. Prints one line per
+log and exits 1 when any summary differs. A refactoring that moves code and changes no number
+leaves every summary identical.
+"""
+
+from __future__ import annotations
+
+import filecmp
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+SAMPLES = REPO / "sample_logs"
+
+# runs the CLI of the checkout at argv[1] (a path), whatever the venv's editable install points at
+RUNNER = """
+import sys
+root = sys.argv.pop(1)
+sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in (type(f).__name__ + type(f).__module__).lower()]
+sys.path.insert(0, root)
+import logscan
+assert logscan.__file__.startswith(root), logscan.__file__
+from logscan.cli.main import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def sample_logs() -> list[Path]:
+    return sorted(SAMPLES.glob("*.mcap")) + [SAMPLES / "quad_healthy.csv", SAMPLES / "husky_drive.bag"]
+
+
+def summarise(root: Path, log: Path, out: Path) -> None:
+    cmd = [sys.executable, "-c", RUNNER, str(root), "analyze", str(log), "--no-report", "--json", str(out)]
+    subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=REPO)
+    if not out.exists():
+        raise SystemExit(f"{log.name}: no summary written by {root}")
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 1:
+        print(__doc__)
+        return 2
+    base = argv[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "base"
+        subprocess.run(["git", "worktree", "add", "-q", "--detach", str(tree), base], cwd=REPO, check=True)
+        try:
+            differ = 0
+            for log in sample_logs():
+                old, new = Path(tmp) / f"{log.name}.base.json", Path(tmp) / f"{log.name}.now.json"
+                summarise(tree, log, old)
+                summarise(REPO, log, new)
+                same = filecmp.cmp(old, new, shallow=False)
+                differ += not same
+                print(f"{'same' if same else 'DIFFERS'}  {log.name}")
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO, check=False)
+    print(f"{len(sample_logs()) - differ} of {len(sample_logs())} summaries byte-identical to {base}")
+    return 1 if differ else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
