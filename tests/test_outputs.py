@@ -369,7 +369,7 @@ def test_a_simulated_csv_and_its_sidecars_are_replaced_together_or_not_at_all(tm
     import errno
 
     from logscan import artifacts
-    from logscan.simulate import simulate, write_simulation
+    from logscan.simulate import output, simulate, write_simulation
 
     target = tmp_path / "run.csv"
     for name in ("run.csv", "run.truth.json", "run.profile.toml"):
@@ -381,7 +381,7 @@ def test_a_simulated_csv_and_its_sidecars_are_replaced_together_or_not_at_all(tm
             raise artifacts.output_error(OSError(errno.ENOSPC, "No space left on device"), path)
         return real_stage(path, data, **kwargs)
 
-    monkeypatch.setattr(artifacts, "stage", failing_stage)
+    monkeypatch.setattr(output, "stage", failing_stage)  # the simulator's own name for artifacts.stage
     sim = simulate("dc_motor", [], duration=2.0, seed=1)
     with pytest.raises(artifacts.OutputError):
         write_simulation(sim, target, "csv")
@@ -389,7 +389,7 @@ def test_a_simulated_csv_and_its_sidecars_are_replaced_together_or_not_at_all(tm
         (tmp_path / name).read_text() == "previous" for name in ("run.csv", "run.truth.json", "run.profile.toml")
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv", "run.profile.toml", "run.truth.json"]
-    monkeypatch.setattr(artifacts, "stage", real_stage)
+    monkeypatch.setattr(output, "stage", real_stage)
     write_simulation(sim, target, "csv")
     assert all(
         (tmp_path / name).read_text() != "previous" for name in ("run.csv", "run.truth.json", "run.profile.toml")

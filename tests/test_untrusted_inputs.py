@@ -175,7 +175,7 @@ def test_every_named_input_file_is_a_regular_file(cli, sample, tmp_path, option,
 
 
 def test_a_named_input_file_over_its_size_limit_is_refused_before_it_is_read(cli, sample, tmp_path, monkeypatch):
-    monkeypatch.setattr("logscan.input_files.MAX_SUPPRESSIONS_BYTES", 100)
+    monkeypatch.setattr("logscan.verdict.suppressions.MAX_SUPPRESSIONS_BYTES", 100)
     path = tmp_path / "big.toml"
     path.write_text("#" * 101)
     result = cli("analyze", sample(SAMPLE), "--suppressions", path, "--no-report")

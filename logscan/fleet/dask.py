@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from logscan.artifacts import OutputError
 from logscan.errors import UsageError
 from logscan.fleet.failures import (
     KILLED_WORKER_RESUBMITS,
@@ -144,8 +145,6 @@ def run_on_dask(
                             errors[index] = _worker_died_error(failure)
                         outcomes[index] = failure
                     except Exception as exc:  # raised by the task (isolate: only what stops the run)
-                        from logscan.artifacts import OutputError
-
                         if not isolate:
                             errors[index] = exc
                         elif isinstance(exc, OutputError):

@@ -8,6 +8,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from logscan.errors import InputError
+from logscan.readers.common import list_directory
+from logscan.readers.csv_reader import csv_files, csv_log_name
 
 # What a directory expands to: log files by suffix, rosbag2 directories (a `metadata.yaml` inside:
 # one log each) and sub-directories holding per-topic CSVs (each such directory is one log).
@@ -26,8 +28,6 @@ def expand_logs(paths: Sequence[str]) -> list[str]:
     ``.ulg``, ``.csv``) that is a FIFO, device or socket, and a directory or sub-directory that
     cannot be listed or searched, are listed as logs of their own: each fails with one line
     (exit 2) when it is read, and the other logs still run."""
-    from logscan.readers.common import list_directory
-
     logs: list[str] = []
     for raw in paths:
         path = Path(raw)
@@ -67,8 +67,6 @@ def _is_rosbag2(entries: list[tuple[str, int]]) -> bool:
 
 def _dir_logs(directory: Path) -> list[Path]:
     """A sub-directory's logs: itself when it is a rosbag2 directory, else its CSV logs."""
-    from logscan.readers.common import list_directory
-
     try:
         entries = list_directory(directory)
     except InputError:  # reading it will say why
@@ -79,9 +77,6 @@ def _dir_logs(directory: Path) -> list[Path]:
 def _csv_logs(directory: Path, entries: list[tuple[str, int]] | None = None) -> list[Path]:
     """The directory when its CSVs are the pieces of one log, else its CSV files (one log each);
     none when it holds no regular ``.csv`` file."""
-    from logscan.readers.common import list_directory
-    from logscan.readers.csv_reader import csv_files, csv_log_name
-
     if entries is None:
         try:
             entries = list_directory(directory)

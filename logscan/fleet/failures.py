@@ -9,7 +9,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from logscan.errors import LogscanError, OutOfMemoryError
+from logscan.artifacts import OutputError
+from logscan.errors import InternalError, LogscanError, OutOfMemoryError
 
 
 @dataclass
@@ -66,8 +67,6 @@ def _worker_died(path: str, attempts: int, exc: BaseException) -> LogFailure:
 
 
 def _worker_died_error(failure: LogFailure) -> LogscanError:
-    from logscan.errors import InternalError
-
     return InternalError(failure.message)
 
 
@@ -81,8 +80,6 @@ KILLED_WORKER_RESUBMITS = 2
 
 
 def _isolated(task: Callable[[Any], Any], item: Any) -> Any:
-    from logscan.artifacts import OutputError
-
     try:
         return task(item)
     except OutputError:

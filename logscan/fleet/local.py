@@ -13,6 +13,7 @@ from logscan.fleet.failures import (
     _isolated,
     _progress_bar,
 )
+from logscan.fleet.workers import exit_with_parent
 
 
 def run_many(
@@ -68,8 +69,6 @@ def _worker_init(parent_pid: int | None = None) -> None:
     logscan.filters.warmup), which would otherwise outlive it. A worker whose parent dies (killed
     alone) ends too (`logscan.fleet.workers`)."""
     import signal
-
-    from logscan.fleet.workers import exit_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _end_worker)

@@ -8,8 +8,10 @@ import stat
 from collections.abc import Sequence
 from pathlib import Path
 
+from logscan.artifacts import output_error
 from logscan.errors import InputError, UsageError
 from logscan.fleet.expand import LOG_FILE_SUFFIXES, _suffix
+from logscan.readers.common import list_directory
 
 
 def output_paths(logs: Sequence[str], output: str | None, suffix: str = ".report.html") -> list[str]:
@@ -34,8 +36,6 @@ def output_paths(logs: Sequence[str], output: str | None, suffix: str = ".report
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        from logscan.artifacts import output_error
-
         raise output_error(exc, directory) from None
     return [str(directory / name) for name in names]
 
@@ -125,8 +125,6 @@ def _input_files(logs: Sequence[str], profile: str | None) -> list[str]:
 
 
 def _listing(path: Path) -> list[tuple[str, int]]:
-    from logscan.readers.common import list_directory
-
     return list_directory(path)
 
 
