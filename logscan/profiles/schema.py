@@ -13,6 +13,7 @@ from typing import Any
 from logscan.conversions import CONVERSIONS, VECTOR_FRAME_OUTPUTS
 from logscan.profiles.loops import PRIMARY_LOOP, RecoverySpec
 from logscan.profiles.problems import profile_error, suggest
+from logscan.profiles.toml_tables import alarms_table, group_table, redundant_table
 from logscan.profiles.toml_writer import dumps_toml
 from logscan.results import AlarmPolicy
 
@@ -426,11 +427,11 @@ class Profile:
             out["inputs"]["stamp"] = self.inputs.stamp
         out["measurements"] = {}
         for g in self.measurements.values():
-            out["measurements"][g.name] = _group_table(g)
+            out["measurements"][g.name] = group_table(g)
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
         if self.redundant:
-            out["redundant"] = {r.name: _redundant_table(r) for r in self.redundant.values()}
+            out["redundant"] = {r.name: redundant_table(r) for r in self.redundant.values()}
         if self.onboard is not None:
             table = {k: getattr(self.onboard, k) for k in ("state", "variance") if getattr(self.onboard, k) is not None}
             table["stale_s"] = self.onboard.stale_s
@@ -438,7 +439,7 @@ class Profile:
         if self.detectors:
             out["detectors"] = {d.name: {"enabled": d.enabled, **d.settings} for d in self.detectors.values()}
         if self.alarm_policy is not None:
-            out["alarms"] = _alarms_table(self.alarm_policy)
+            out["alarms"] = alarms_table(self.alarm_policy)
         if self.loops:
             out["loops"] = {name: _loop_table(loop) for name, loop in self.loops.items()}
         if self.recovery is not None:
@@ -454,62 +455,4 @@ def _loop_table(loop: Profile) -> dict[str, Any]:
     """A further loop as its ``[loops.<name>]`` table (its name is the table's)."""
     table = loop.to_dict()
     table["vehicle"].pop("loop", None)
-    return table
-
-
-def _group_table(g: MeasurementSpec) -> dict[str, Any]:
-    """A measurement group as TOML-ready data."""
-    table: dict[str, Any] = {"channels": g.channels, "rate_hz": g.rate_hz, "stale_s": g.stale_s}
-    for key in ("noise_std", "range_lo", "range_hi", "scale", "offset"):
-        if getattr(g, key) is not None:
-            table[key] = getattr(g, key)
-    if g.source is not None:
-        table["from"] = g.source
-    if g.source == "geodetic" or g.frame != "ned":
-        table["frame"] = g.frame
-    if g.origin is not None:
-        table["origin"] = g.origin
-    if g.noise_channels is not None:
-        table["noise_channels"] = g.noise_channels
-        if g.noise_channels_scale != 1.0:
-            table["noise_channels_scale"] = g.noise_channels_scale
-    if g.gate_channel is not None:
-        table["gate"] = {"channel": g.gate_channel, "min": g.gate_min}
-    if g.delay_s:
-        table["delay_s"] = g.delay_s
-    if g.fresh != "on_sample":  # written only when set: default profiles' TOML is unchanged
-        table["fresh"] = g.fresh
-    return table
-
-
-def _redundant_table(r) -> dict[str, Any]:
-    """A [redundant] group as TOML-ready data."""
-    sensors = {
-        s.name: ({"channel": s.channel, "poly": s.poly} if s.poly is not None else s.channel)
-        for s in r.sensors.values()
-    }
-    table: dict[str, Any] = {"sensors": sensors}
-    if r.rate_hz is not None:
-        table["rate_hz"] = r.rate_hz
-    if r.stale_s is not None:
-        table["stale_s"] = r.stale_s
-    return table
-
-
-def _alarms_table(policy) -> dict[str, Any]:
-    """The [alarms] policy as TOML-ready data."""
-    table: dict[str, Any] = {
-        "n_persist": policy.n_persist,
-        "min_duration_s": policy.min_duration_s,
-        "merge_gap_s": policy.merge_gap_s,
-    }
-    if policy.ground_channel:
-        table["ground_channel"] = policy.ground_channel
-        table["after_ground_s"] = policy.after_ground_s
-        if policy.before_ground_s:
-            table["before_ground_s"] = policy.before_ground_s
-        if policy.min_ground_s:
-            table["min_ground_s"] = policy.min_ground_s
-    if policy.ignore_start_s:
-        table["ignore_start_s"] = policy.ignore_start_s
     return table
