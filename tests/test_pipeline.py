@@ -4,6 +4,7 @@ any log is read, and no module outside detectors/ names a detector."""
 from __future__ import annotations
 
 import ast
+import importlib
 from pathlib import Path
 
 import pytest
@@ -70,7 +71,8 @@ def test_a_bad_detector_setting_is_refused_before_any_log_is_read(tmp_path, monk
     def no_reading(*args, **kwargs):
         raise AssertionError("the log was read before the profile's detector settings were checked")
 
-    monkeypatch.setattr("logscan.readers.read_log", no_reading)
+    # the module that reads (the package's `prepare` is a function of that name)
+    monkeypatch.setattr(importlib.import_module("logscan.pipeline.prepare"), "read_log", no_reading)
     profile = _bad_profile(tmp_path, settings)
     with pytest.raises(ProfileError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")):
         analyze_log(HEALTHY, profile)

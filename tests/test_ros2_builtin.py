@@ -115,7 +115,10 @@ def test_identify_tells_a_ros2_mcap_from_logscans_own(sample):
 
 
 def test_the_topic_list_comes_from_the_summary_and_only_candidates_are_read(sample, monkeypatch):
-    import logscan.readers as readers
+    import importlib
+
+    # builtin_profile_for reads through this module's read_log (the package's `prepare` is a function)
+    prepare = importlib.import_module("logscan.pipeline.prepare")
 
     schemas = builtin.topic_schemas(sample(SAMPLE), "mcap")
     assert schemas == {
@@ -124,13 +127,14 @@ def test_the_topic_list_comes_from_the_summary_and_only_candidates_are_read(samp
         "/odom": ("cdr", "nav_msgs/msg/Odometry"),
     }
     asked = []
-    real = readers.read_log
+    real = prepare.read_log
 
     def spy(path, topics=None, **kwargs):
         asked.append(None if topics is None else sorted(topics))
         return real(path, topics, **kwargs)
 
-    monkeypatch.setattr(readers, "read_log", spy)
+    monkeypatch.setattr(prepare, "read_log", spy)
+    monkeypatch.setattr(builtin, "read_log", spy)  # and the topic list: never from a read
     built = builtin_profile_for(sample(SAMPLE))
     assert built.name == "ros" and asked == [["/gps/fix", "/imu/data", "/odom"]]
 

@@ -10,10 +10,15 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from logscan import __version__
+from logscan.detectors.registry import default_registry
 from logscan.errors import ExitCode
+from logscan.report import ReportInput, report_matches
+from logscan.report.context import measurement_groups
 from logscan.results import DetectorResult, FaultEvent, Incident
+from logscan.timebase.clock import clock_of
 from logscan.verdict.autopilot_messages import flight_messages
 from logscan.verdict.coverage import skipped_checks
+from logscan.verdict.incidents import signal_label
 
 if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no runtime edge)
     from logscan.pipeline.stages import Prepared
@@ -88,8 +93,6 @@ class Analysis:
     def clock(self):
         """The log's own clock (`logscan.timebase.clock`): the one the pipeline kept, when it dated the log
         before releasing its samples (a ULog's GNSS time), else derived from the log and run now."""
-        from logscan.timebase.clock import clock_of
-
         kept = getattr(self.prepared, "clock", None)
         return kept if kept is not None else clock_of(self.log, self.run.start_ns)
 
@@ -174,8 +177,6 @@ class Analysis:
         also flagged (overlapping in time, 1 s of slack), how many it did not, and its alarms no
         model-based detector matched. Detectors that read the autopilot's topics (`raw_topics`)
         are neither side."""
-        from logscan.detectors.registry import default_registry
-
         registry = default_registry()
 
         def kind(result) -> str:
@@ -265,9 +266,6 @@ class Analysis:
 
     def report_input(self, grace_s: float | None = None):
         """What the HTML report shows of this log."""
-        from logscan.report import ReportInput, report_matches
-        from logscan.report.context import measurement_groups
-
         return ReportInput(
             log_facts=self.log.summary(),
             profile_text=self.profile_text,
@@ -305,8 +303,6 @@ def _messages_summary(messages: list, disarmed: int, clock) -> dict[str, Any]:
 def _stamped(result: dict, clock) -> dict:
     """A detector result's JSON with its alarms' times also in the log's clock, and its statistics'
     plain words (``labels``; each alarm's ``label``)."""
-    from logscan.verdict.incidents import signal_label
-
     detector = result["detector"]
     result["labels"] = {name: signal_label(name, detector) for name in result.get("series", {})}
     for key in ("alarms", "possible_faults", "suppressed"):

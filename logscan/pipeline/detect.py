@@ -7,12 +7,20 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
-from logscan.errors import LogscanError
+from logscan.errors import ExitCode, LogscanError
+from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.loops import detect_loops, recover_analysis
 from logscan.pipeline.prepare import Progress
 from logscan.pipeline.release import pack_innovations_for, reads_samples, release_unread
 from logscan.pipeline.stages import Prepared
+from logscan.results import events_from_truth
+from logscan.training.calibration import calibrate_command, judged_steps
+from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
+from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
+from logscan.verdict.observability import observability_for
+from logscan.verdict.scoring import score_by_detector
 
 if TYPE_CHECKING:
     from logscan.results import DetectorResult
@@ -33,16 +41,10 @@ def detect(
     each large series once no detector still to run reads it (`release_unread`; the prepared log
     then serves no further detector). ``sensor_views``: pack the EKF's innovations, when it kept
     them, for the report (`Prepared.innovations`, `logscan.report.sensor_views`)."""
-    from logscan.pipeline.analysis import Analysis
-    from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
-    from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments
-
     step = progress or (lambda message: None)
     free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
-    from logscan.verdict.observability import observability_for
-
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
     policy = prepared.profile.alarm_policy
@@ -141,8 +143,6 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
     import numpy as np
     from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
 
-    from logscan.training.calibration import calibrate_command
-
     trace = prepared.trace
     if trace is None or trace.nis_group is None:
         return []
@@ -168,8 +168,6 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
     judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
     import numpy as np
 
-    from logscan.training.calibration import calibrate_command, judged_steps
-
     judged = judged_steps(prepared.profile, prepared.run)
     if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
         used = used & judged
@@ -194,10 +192,6 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
 def detector_failure(name: str, exc: BaseException):
     """The line and exit code of a detector that raised: its own error (its exit code), or a bug
     in that detector (exit 3), blamed on the plugin package when it comes from one."""
-    from logscan.detectors.registry import default_registry
-    from logscan.errors import ExitCode
-    from logscan.pipeline.analysis import DetectorFailure
-
     origin = default_registry().origin(name) or "not registered"
     if isinstance(exc, LogscanError):
         return DetectorFailure(name, f"detector {name!r} ({origin}) failed: {exc.one_line()}", int(exc.exit_code))
@@ -218,9 +212,6 @@ def rescore(analysis, grace_s: float = 1.0) -> None:
 
 def _score(analysis, detector_names: list[str], grace_s: float) -> None:
     """Scores against the log's ground truth, when it has some."""
-    from logscan.results import events_from_truth
-    from logscan.verdict.scoring import score_by_detector
-
     prepared = analysis.prepared
     truth = prepared.log.truth
     if truth is None:

@@ -14,9 +14,15 @@ import shlex
 from collections.abc import Callable
 from typing import Any
 
+from logscan.align import align
 from logscan.errors import LogscanError
+from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared, create_detectors, needs_of
+from logscan.profiles.loops import ORACLE
+from logscan.recovery import LoopRun, RecoverySettings, anomalies_from_alarms, anomalies_from_truth, recover
+from logscan.report.recovery_view import recovery_view, true_states
+from logscan.verdict.incidents import group_of
 
 #: what recovery needs of every loop's EKF: the full covariance at the checkpoints
 RECOVERY_NEEDS = Needs.of(ekf=("P",))
@@ -29,9 +35,6 @@ def loop_detectors(loaded) -> list:
 
 def prepare_loops(primary, log, *, start_s=None, end_s=None, step: Callable[[str], None]) -> dict:
     """Loop name -> Prepared for every further loop of ``primary.profile`` (aligned and filtered)."""
-    from logscan.align import align
-    from logscan.models import get_model
-
     profile = primary.profile
     extra = RECOVERY_NEEDS if profile.recovery is not None else Needs()
     loops = {}
@@ -69,8 +72,6 @@ def detect_loops(prepared, *, detect: Callable[..., Any], grace_s: float, progre
 
 def loop_runs(prepared) -> list:
     """Every loop of a prepared log, the primary first, as the recovery engine takes them."""
-    from logscan.recovery import LoopRun
-
     pairs = [(prepared.profile.loop_name, prepared), *prepared.loops.items()]
     return [LoopRun(name, one.model, one.run, one.trace) for name, one in pairs]
 
@@ -79,8 +80,6 @@ def _sensor_alarms(alarms: list, groups: list[str]) -> list:
     """The alarms without those of a statistic over every sensor (``nis.all``) that an alarm naming
     a sensor overlaps: that one says which sensors to leave out, the sum only that something is off
     (kept alone, it would make the anomaly generic: every sensor left out)."""
-    from logscan.verdict.incidents import group_of
-
     named = [a for a in alarms if group_of(a.signal, groups) is not None]
     return named + [
         a
@@ -93,10 +92,6 @@ def recover_analysis(analysis):
     """The profile's [recovery] over every loop: the anomalies of its detector's alarms (or of the
     ground truth, `detector = "oracle"`), each recovered from a consistent checkpoint
     (`logscan.recovery.recover`). None, with a warning, when the oracle has no truth to read."""
-    from logscan.profiles.loops import ORACLE
-    from logscan.recovery import RecoverySettings, anomalies_from_alarms, anomalies_from_truth, recover
-    from logscan.report.recovery_view import recovery_view, true_states
-
     spec = analysis.profile.recovery
     settings = RecoverySettings(**spec.settings)
     loops = loop_runs(analysis.prepared)

@@ -10,11 +10,22 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from logscan.align import align
+from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
+from logscan.filters.warmup import COMPILING_NOTE, Compile, start_compile
+from logscan.log import MAX_SPAN_S
+from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared
+from logscan.profiles import builtin, load_profile, parse_profile, ros
+from logscan.readers import detect_format, read_embedded_profile, read_log
+from logscan.readers.csv_reader import csv_log_name
+from logscan.report.run_context import STATE_TOPICS, run_context
+from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
+from logscan.verdict.truth import in_log_time, read_truth_file, truth_beside
 
 if TYPE_CHECKING:
     from logscan.align import AlignedRun
@@ -25,9 +36,6 @@ Progress = Callable[[str], None]
 def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
     """The profile of a log: the file given, else the one the log embeds (a metadata-only read), else
     the built-in profile of a log that names itself (a PX4 ULog: `logscan.profiles.builtin`)."""
-    from logscan.profiles import load_profile, parse_profile
-    from logscan.readers import read_embedded_profile
-
     if profile_path is not None:
         profile = load_profile(profile_path)
         return LoadedProfile(profile, profile.to_toml(), str(profile_path))
@@ -67,10 +75,6 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
     those any detector reads from the log itself (`Detector.raw_topics`) and the report's states.
     ``with_log``: (profile, the log read, those extra topics), so the analysis need not read it
     again."""
-    from logscan.profiles import builtin, ros
-    from logscan.readers import detect_format, read_log
-    from logscan.readers.csv_reader import csv_log_name
-
     fmt = None if path is None else detect_format(path)
     extra = _extra_topics()
     if fmt in builtin.ROS_FORMATS:  # a ROS log: its topic list first, then only the topics the profile may use
@@ -92,10 +96,6 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
 
 def _extra_topics() -> frozenset[str]:
     """Every topic a registered detector reads from the log itself, and the report's states."""
-    from logscan.detectors.registry import default_registry
-    from logscan.report.run_context import STATE_TOPICS
-    from logscan.timebase.clock import GNSS_UTC_CHANNELS
-
     registry = default_registry()
     extra = frozenset(STATE_TOPICS) | frozenset(GNSS_UTC_CHANNELS)
     return raw_topics_of([registry.get(name) for name in registry.names()]) | extra
@@ -153,13 +153,6 @@ def prepare(
     when it carries no on-board variances). ``notice`` hears the one
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
-    from logscan.align import align
-    from logscan.log import MAX_SPAN_S
-    from logscan.models import get_model
-    from logscan.readers import read_log
-    from logscan.report.run_context import STATE_TOPICS, run_context
-    from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
-
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
@@ -222,8 +215,6 @@ def prepare(
 def _attach_truth(log, path: str, truth_path) -> None:
     """Ground truth from ``truth_path`` (--truth), else the log's own, else `<log>.truth.json`
     beside it; UTC event times turned into the log's seconds (`logscan.verdict.truth`)."""
-    from logscan.verdict.truth import in_log_time, read_truth_file, truth_beside
-
     source = truth_path if truth_path is not None else (truth_beside(path) if log.truth is None else None)
     if source is not None:
         log.truth = read_truth_file(source)
@@ -234,8 +225,6 @@ def _attach_truth(log, path: str, truth_path) -> None:
 def _start_compile(model, needs, notice: Progress | None):
     """The EKF kernel's first compile, beside the reading (logscan.filters.warmup), when a
     detector may need the EKF and the cache lacks the model's kernel."""
-    from logscan.filters.warmup import COMPILING_NOTE, Compile, start_compile
-
     if isinstance(needs, Needs) and "ekf" not in needs.filters:
         return Compile(cold=False)
     compiling = start_compile(model)

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from logscan.filters.ekf import samples_side_by_side
 from logscan.pipeline.stages import Prepared
+from logscan.report.sensor_views import pack_innovations
 
 # The large per-step series a detector declares it reads (`Detector.reads`): each is freed once no
 # detector still to run reads it. What runs after the detectors (incidents, coverage, the summary)
@@ -29,9 +31,6 @@ def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples:
     """`Prepared.innovations` from the EKF trace's innovations and the groups' samples; with
     ``reuse_samples``, into the samples' own buffer when no detector reads them (they are dropped)."""
     import numpy as np
-
-    from logscan.filters.ekf import samples_side_by_side
-    from logscan.report.sensor_views import pack_innovations
 
     trace, run = prepared.trace, prepared.run
     if trace is None or trace.y is None or trace.S_diag is None:

@@ -11,6 +11,7 @@ from logscan.needs import Needs
 from logscan.pipeline.detect import detect
 from logscan.pipeline.prepare import Progress, filter_free, load_profile_for, prepare, raw_topics_of
 from logscan.pipeline.stages import create_detectors, needs_of
+from logscan.training.calibration import process_noise_scale, uncalibrable_groups
 from logscan.training.tables import apply_tables, read_tables_document, tables_path
 
 if TYPE_CHECKING:
@@ -39,8 +40,6 @@ def analyze_log(
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
     figures (`logscan.report.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it)."""
-    from logscan.training.calibration import process_noise_scale, uncalibrable_groups
-
     loaded = load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
     trained = tables_path(None if tables is None else str(tables), loaded.profile, log=path)

@@ -10,8 +10,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import ProfileError
+from logscan.filters.ekf import run_ekf
+from logscan.filters.ubikf import run_ubikf
 from logscan.needs import Needs, union
 
 if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported where they are used)
@@ -27,8 +30,6 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
 
 
 def _run_ekf(model, run, parts: frozenset[str]):
-    from logscan.filters.ekf import run_ekf
-
     # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
     # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run
     return run_ekf(
@@ -42,8 +43,6 @@ def _run_ekf(model, run, parts: frozenset[str]):
 
 
 def _run_ubikf(model, run, parts: frozenset[str]):
-    from logscan.filters.ubikf import run_ubikf
-
     interval_model = getattr(model, "interval_model", None)
     if interval_model is None:
         raise ProfileError(
@@ -136,8 +135,6 @@ class Prepared:
 def create_detectors(loaded: LoadedProfile, names: Sequence[str] | None = None) -> list:
     """The detectors to run: ``names``, else those the profile enables, else the registry's defaults;
     configured from the profile's [detectors.NAME] tables and checked before any log is read."""
-    from logscan.detectors.registry import default_registry
-
     registry = default_registry()
     profile = loaded.profile
     # the profile's file, or "<log> (embedded profile)": its errors name the log too ("embedded" does not)
