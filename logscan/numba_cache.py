@@ -8,7 +8,9 @@ cache. `follow_dependencies(__name__)`, called at the end of every module that h
 and imports numba functions or constants from other logscan modules, makes the stamp of each of its
 cached functions (own stamp, sha256 of each dependency's source), over the dependencies found
 transitively (`kernel_dependencies`). tests/test_numba_cache.py fails for a module that forgets the
-call.
+call. It also makes each of them read an index that names a class no longer there (a kernel's
+NamedTuple argument renamed or moved: numba unpickles the whole index before it compares stamps)
+as stale, instead of failing on every load and save of that kernel (`tolerate_missing_classes`).
 
 Uses numba internals (`_cache._cache_file._source_stamp`, numba/core/caching.py); a no-op if
 they change.
@@ -20,6 +22,7 @@ import ast
 import functools
 import hashlib
 import importlib.util
+import pickle
 import re
 import sys
 from types import FunctionType, ModuleType
@@ -31,15 +34,36 @@ PACKAGE = __name__.split(".")[0]
 
 def follow_dependencies(module_name: str) -> None:
     """Key the disk cache of every cached numba function of the module on its own file and on
-    the source of every module in `kernel_dependencies` (nothing to do when there is none)."""
+    the source of every module in `kernel_dependencies` (none: its own file only), and let it
+    read an index naming a class since renamed as stale (`tolerate_missing_classes`)."""
     module = sys.modules[module_name]
     dependencies = kernel_dependencies(module)
-    if not dependencies:
-        return
     for dispatcher in cached_dispatchers(module):
         cache_file = getattr(dispatcher._cache, "_cache_file", None)
-        if cache_file is not None and hasattr(cache_file, "_source_stamp"):
+        if cache_file is None:
+            continue
+        tolerate_missing_classes(cache_file)
+        if dependencies and hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = source_stamp(dispatcher, dependencies)
+
+
+def tolerate_missing_classes(cache_file) -> None:
+    """Read the cache's index as empty (stale) when unpickling it fails on a class or module that
+    no longer exists, as numba reads an index with an old stamp; the next save rewrites it. numba
+    alone raises there on every load and every save (`IndexDataCacheFile._load_index` unpickles the
+    signatures, which name a NamedTuple argument's class, before it compares stamps)."""
+    load_index = getattr(cache_file, "_load_index", None)
+    if load_index is None or getattr(load_index, "tolerates_missing_classes", False):
+        return
+
+    def tolerant_load_index():
+        try:
+            return load_index()
+        except (AttributeError, ImportError, pickle.UnpicklingError):
+            return {}
+
+    tolerant_load_index.tolerates_missing_classes = True  # type: ignore[attr-defined]
+    cache_file._load_index = tolerant_load_index
 
 
 def source_stamp(dispatcher: Dispatcher, dependencies: list[ModuleType]):

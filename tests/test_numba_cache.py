@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import importlib
 import re
+import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 from numba.core.caching import IndexDataCacheFile
@@ -110,3 +112,30 @@ def test_an_edited_dependency_makes_the_cached_index_stale(kernel_module, kernel
         monkeypatch.undo()
         numba_cache.follow_dependencies(kernel_module)
     assert dispatcher._cache._cache_file._source_stamp == before
+
+
+class RenamedArgument(NamedTuple):
+    """A kernel's NamedTuple argument, renamed (deleted from this module) after a cache was saved."""
+
+    x: int
+
+
+def test_an_index_naming_a_class_since_renamed_is_stale_not_an_error(tmp_path, monkeypatch):
+    saved = IndexDataCacheFile(str(tmp_path), "kernel", "stamp")
+    saved.save((RenamedArgument(1),), "compiled code")
+    monkeypatch.delattr(sys.modules[__name__], "RenamedArgument")
+    with pytest.raises(AttributeError):  # numba alone fails on every load (and save) of the kernel
+        IndexDataCacheFile(str(tmp_path), "kernel", "stamp").load(("signature",))
+    cache_file = IndexDataCacheFile(str(tmp_path), "kernel", "stamp")
+    numba_cache.tolerate_missing_classes(cache_file)
+    assert cache_file.load(("signature",)) is None
+    cache_file.save(("signature",), "recompiled code")  # the next save rewrites the index
+    assert IndexDataCacheFile(str(tmp_path), "kernel", "stamp").load(("signature",)) == "recompiled code"
+
+
+@pytest.mark.parametrize(
+    "module_name", ["logscan.filters.ekf", "logscan.filters.ubikf", "logscan.verdict.observability_kernel"]
+)
+def test_kernels_with_namedtuple_arguments_tolerate_a_renamed_class(module_name):
+    for dispatcher in numba_cache.cached_dispatchers(importlib.import_module(module_name)):
+        assert dispatcher._cache._cache_file._load_index.tolerates_missing_classes
