@@ -33,7 +33,13 @@ import numpy as np
 from logscan.models.dispatch import call_literal
 from logscan.simulate.dispatch import build_scenario
 from logscan.simulate.scenario import SIMULATED_MODELS
-from logscan.verdict.observability_kernel import signature_evidence
+from logscan.verdict.observability_kernel import (
+    FaultDirections,
+    FilterModel,
+    FilterTrajectory,
+    Windows,
+    signature_evidence,
+)
 
 # kind -> reference size for the report's shading and the summary (the simulator's default sizes:
 # `logscan simulate --help`); evaluate scales by each fault's own magnitude instead
@@ -244,27 +250,25 @@ def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S,
             target = group if size == 1 else f"{group}.{field_name}"
             directions.append(Direction(target, "sensor", channel))
             cols.append(int(trace.group_offsets[g]) + c)
-    evidence = call_literal(
-        signature_evidence,
-        model.model_id,
-        model.param_vector(dt),
-        np.ascontiguousarray(trace.x_prior, dtype=np.float64),
-        np.ascontiguousarray(trace.x_post, dtype=np.float64),
-        u,
-        dt,
-        np.ascontiguousarray(trace.Q, dtype=np.float64),
-        np.ascontiguousarray(trace.R, dtype=np.float64),
-        np.diag(np.nan_to_num(trace.P_post_diag[0].astype(np.float64), nan=1.0)),
-        np.ascontiguousarray(trace.updated),
-        np.array([model.group(g).group_id for g in trace.group_names], dtype=np.int64),
-        np.asarray(trace.group_offsets, dtype=np.int64),
-        np.asarray(trace.group_sizes, dtype=np.int64),
-        np.ascontiguousarray(M.T, dtype=np.float64),
-        values,
-        np.array(cols, dtype=np.int64),
-        np.int64(window),
-        np.int64(stride),
+    filter_model = FilterModel(
+        p=model.param_vector(dt),
+        dt=dt,
+        Q=np.ascontiguousarray(trace.Q, dtype=np.float64),
+        R=np.ascontiguousarray(trace.R, dtype=np.float64),
+        P0=np.diag(np.nan_to_num(trace.P_post_diag[0].astype(np.float64), nan=1.0)),
+        group_ids=np.array([model.group(g).group_id for g in trace.group_names], dtype=np.int64),
+        group_offsets=np.asarray(trace.group_offsets, dtype=np.int64),
+        group_sizes=np.asarray(trace.group_sizes, dtype=np.int64),
     )
+    trajectory = FilterTrajectory(
+        x_prior=np.ascontiguousarray(trace.x_prior, dtype=np.float64),
+        x_post=np.ascontiguousarray(trace.x_post, dtype=np.float64),
+        u=u,
+        updated=np.ascontiguousarray(trace.updated),
+    )
+    faults = FaultDirections(np.ascontiguousarray(M.T, dtype=np.float64), values, np.array(cols, dtype=np.int64))
+    windows = Windows(np.int64(window), np.int64(stride))
+    evidence = call_literal(signature_evidence, model.model_id, filter_model, trajectory, faults, windows)
     t = np.asarray(trace.t, dtype=np.float64)
     starts = t[0] + dt * stride * np.arange(evidence.shape[0])
     keep = starts <= t[-1]

@@ -18,12 +18,55 @@ fault beginning there, in one pass.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import literally, njit
 
 from logscan.filters.linalg import all_finite, all_finite2, cho_solve_rows, cholesky, forward_sq
 from logscan.models import dispatch
 from logscan.numba_cache import follow_dependencies
+
+
+# ================================================================================================
+# the kernel's arguments (N steps, n states, nu inputs, G groups, m_total outputs of all groups
+# stacked group after group, A actuator and B sensor fault directions)
+# ================================================================================================
+class FilterModel(NamedTuple):
+    """The filter's model: parameters, noises, prior and measurement groups (as the EKF ran)."""
+
+    p: np.ndarray  # (n_p,) float64: the model's packed parameters (Model.param_vector)
+    dt: float  # the grid step, s
+    Q: np.ndarray  # (n, n) float64: process noise covariance of one step
+    R: np.ndarray  # (m_total, m_total) float64: measurement noise covariance
+    P0: np.ndarray  # (n, n) float64: the covariance at the first step
+    group_ids: np.ndarray  # (G,) int64: each group's id in the model (its h, H)
+    group_offsets: np.ndarray  # (G,) int64: each group's first output
+    group_sizes: np.ndarray  # (G,) int64: each group's number of outputs
+
+
+class FilterTrajectory(NamedTuple):
+    """The filter's own trajectory, along which it is linearised."""
+
+    x_prior: np.ndarray  # (N, n) float64
+    x_post: np.ndarray  # (N, n) float64
+    u: np.ndarray  # (N, nu) float64: the inputs as the filter held them (finite)
+    updated: np.ndarray  # (N, G) bool: the groups the filter updated with at step k
+
+
+class FaultDirections(NamedTuple):
+    """The unit faults: A actuator directions, then B sensor biases."""
+
+    act_dirs: np.ndarray  # (A, nu) float64: the input change per unit of actuator a
+    act_values: np.ndarray  # (N, A) float64: actuator a's value (du_k = act_dirs[a] * act_values[k, a])
+    sensor_cols: np.ndarray  # (B,) int64: the measurement column of each unit sensor bias
+
+
+class Windows(NamedTuple):
+    """The evidence windows, in steps."""
+
+    window: np.int64  # the window length, a multiple of stride
+    stride: np.int64  # the grid of window starts
 
 
 @njit(cache=True, error_model="numpy")
@@ -49,21 +92,20 @@ def _mm_t(A, B, ra, ca, rb, out):
 
 
 @njit(cache=True)
-def signature_evidence(
-    model_id, p, x_prior, x_post, u, dt, Q, R, P0, updated, group_ids, offsets, sizes, act_dirs, act_values,
-    sensor_cols, window, stride,
-):  # fmt: skip
+def signature_evidence(model_id, model, trajectory, faults, windows):
     """Non-centrality lambda of a unit fault per window start (on the stride grid) and direction.
 
-    Shapes: x_prior, x_post (N, n); u (N, nu) finite; Q (n, n); R (m_total, m_total); P0 (n, n);
-    updated (N, G) bool; group_ids, offsets, sizes (G,) int64; act_dirs (A, nu): the input change
-    per unit of actuator a; act_values (N, A): actuator a's value (the fault du_k = act_dirs[a] *
-    act_values[k, a]: a unit relative offset); sensor_cols (B,) int64: the measurement column of
-    each unit sensor bias. window, stride: steps (window a multiple of stride).
+    ``model`` (FilterModel) and ``trajectory`` (FilterTrajectory): the filter and its run; ``faults``
+    (FaultDirections): a unit relative offset per actuator, a unit bias per sensor column;
+    ``windows`` (Windows); ``model_id``: the model's kernel id, compiled as a literal.
     Returns (N // stride + 1, A + B) float64: lambda over [k, k + window) for k = i * stride (over
     what is left of the log for the last windows), NaN where the filter's trajectory is not finite.
     """
     literally(model_id)
+    p, dt, Q, R, group_ids = model.p, model.dt, model.Q, model.R, model.group_ids
+    x_prior, x_post, u, updated = trajectory.x_prior, trajectory.x_post, trajectory.u, trajectory.updated
+    act_dirs, act_values, sensor_cols = faults.act_dirs, faults.act_values, faults.sensor_cols
+    window, stride = windows.window, windows.stride
     N, n = x_post.shape
     nu = u.shape[1]
     A = act_dirs.shape[0]
@@ -74,7 +116,7 @@ def signature_evidence(
     mu = np.zeros((J, D, n))
     lam = np.zeros((J, D))
     start = np.full(J, -1, dtype=np.int64)  # window start of each phase's running signature
-    P = P0.copy()
+    P = model.P0.copy()
     x_next, x_hi, kv, xs, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     F, F2, Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     FP, IKH = np.empty((n, n)), np.empty((n, n))
@@ -100,7 +142,7 @@ def signature_evidence(
         xk = x_post[k - 1]
         if not (all_finite(xk) and all_finite(x_prior[k]) and all_finite2(P)):
             start[:] = -1  # a diverged filter: no verdict until the next window start
-            P[:] = P0
+            P[:] = model.P0
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
         # (one call site: the model's step is inlined wherever it is called, and compiled as often)
@@ -143,9 +185,9 @@ def signature_evidence(
         for g in range(group_ids.size):
             if updated[k, g]:
                 dispatch.model_meas_into(model_id, group_ids[g], p, x_prior[k], u[k], m, hx, Hs, R3, D3)
-                for c in range(sizes[g]):
-                    rows[m + c] = offsets[g] + c
-                m += sizes[g]
+                for c in range(model.group_sizes[g]):
+                    rows[m + c] = model.group_offsets[g] + c
+                m += model.group_sizes[g]
         if m == 0:
             continue
         for a in range(m):
@@ -159,7 +201,7 @@ def signature_evidence(
                 S[a, b] += Rm[a, b]
         if not cholesky(S, 0, m, L):
             start[:] = -1
-            P[:] = P0
+            P[:] = model.P0
             continue
         for a in range(m):
             for i in range(n):
