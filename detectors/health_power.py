@@ -1,0 +1,140 @@
+"""The health checks of the power chain: battery voltage and state, motor outputs (DShot or PWM)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from logscan.detectors.health_checks import (
+    ARMED,
+    BATTERY,
+    CELL_EMPTY_V,
+    FLAG,
+    OUTPUTS,
+    PREFIX,
+    STATUS,
+    ZERO_VOLTAGE_V,
+    HealthChecks,
+    _suffix,
+)
+from logscan.detectors.motor_outputs import MotorGroup, motor_groups
+from logscan.detectors.raw_topics import held as _held
+from logscan.detectors.raw_topics import in_span
+from logscan.detectors.raw_topics import log_parameter as _parameter
+
+
+class PowerChecks(HealthChecks):
+    """Battery and motors."""
+
+    # --- 1. battery ------------------------------------------------------------------------------
+    def _battery(self, topics, parameters) -> None:
+        found = sorted(i for topic, i in topics if topic == BATTERY)
+        if not found:
+            self._skipped["battery"] = f"no {BATTERY} topic"
+            return
+        for instance in found:
+            fields = topics[(BATTERY, instance)]
+            where = f"{BATTERY}_{instance}"
+            name = f"{PREFIX}.battery{_suffix(instance)}"
+            voltage = fields.get("voltage_v")
+            if voltage is None:
+                self._skipped[name] = f"{where} has no voltage_v"
+                continue
+            t, v = voltage.t, voltage.values
+            connected = fields.get("connected")
+            on = np.ones(t.size, bool) if connected is None else np.nan_to_num(_held(connected, t)) != 0
+            inside = in_span(self._grid, t)
+            if connected is not None and inside.any() and not on[inside].any():
+                seen = v[inside][np.isfinite(v[inside])]
+                volts = f", voltage {seen.min():.2f}-{seen.max():.2f} V" if seen.size else ""
+                self._unmonitored.append(f"battery not monitored: connected=0 all flight ({where}{volts})")
+                continue
+            k = instance + 1
+            empty = _parameter(parameters, f"BAT{k}_V_EMPTY", "BAT_V_EMPTY")
+            v_empty, empty_from = empty if empty else (CELL_EMPTY_V, "default")
+            cells = np.full(t.size, np.nan)
+            cells_from = None
+            if "cell_count" in fields:
+                cells = np.where(_held(fields["cell_count"], t) > 0, _held(fields["cell_count"], t), np.nan)
+                cells_from = f"{where}.cell_count" if np.isfinite(cells).any() else None
+            param = _parameter(parameters, f"BAT{k}_N_CELLS", "BAT_N_CELLS")
+            if param is not None:
+                if cells_from is None:
+                    cells_from = param[1]
+                cells = np.where(np.isfinite(cells), cells, param[0])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                if cells_from is None:
+                    self._skipped[name] = (
+                        f"{where}: cell count unknown (no cell_count, no BAT{k}_N_CELLS / BAT_N_CELLS)"
+                    )
+                else:
+                    limit = cells * v_empty
+                    ok = on & np.isfinite(v) & (v >= ZERO_VOLTAGE_V)
+                    cells_seen = cells[np.isfinite(cells)]
+                    self._add(
+                        name,
+                        where,
+                        t,
+                        np.where(ok, limit / v, np.nan),
+                        limit={
+                            "empty_v": float(np.median(cells_seen)) * v_empty,
+                            "cells": float(np.median(cells_seen)),
+                            "cells_from": cells_from,
+                            "cell_empty_v": v_empty,
+                            "cell_empty_from": empty_from,
+                        },
+                    )
+                zero = np.where(on & np.isfinite(v), np.where(v < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
+            self._add(
+                f"{PREFIX}.battery_zero{_suffix(instance)}",
+                where,
+                t,
+                zero,
+                limit={"below_v": ZERO_VOLTAGE_V, "while": "connected" if connected is not None else "always"},
+            )
+
+    # --- 3. motors (which outputs are motors and their levels: motor_outputs.py) ----------------
+    def _motors(self, topics, parameters, armed) -> None:
+        if not any(t == OUTPUTS for t, _ in topics):
+            self._skipped["motors"] = f"no {OUTPUTS} topic"
+            return
+        if armed is None:
+            self._skipped["motors"] = f"arming state unknown (no {ARMED}.armed, no {STATUS}.arming_state)"
+            return
+        groups, skipped = motor_groups(topics, parameters, armed)
+        for sfx, why in skipped.items():
+            self._skipped[f"{PREFIX}.motor_saturated{sfx}"] = why
+        for group in groups:
+            self._motor_checks(group, armed)
+
+    def _motor_checks(self, group: MotorGroup, armed) -> None:
+        """Saturated share, each motor at its max (while armed), any motor stopped (while flying),
+        each judged only where PX4 commands that motor to run (``group.runs``)."""
+        t, values, runs, label, where = group.t, group.values, group.runs, group.label, group.where
+        sfx = f".{label}" if label else ""
+        on = armed[1](t)
+        fly = armed[2](t)
+        saturated = (values >= group.top[None, :] - 0.5) & runs
+        n_runs = runs.sum(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(on & (n_runs > 0), saturated.sum(axis=1) / (n_runs - 0.5), np.nan)
+        why = " (armed)"
+        limits = group.limits
+        self._add(f"{PREFIX}.motor_saturated{sfx}", where, t, share, limit={**limits, "all_outputs": True}, why=why)
+        for j, k in enumerate(group.outputs):
+            flag = np.where(on & runs[:, j], np.where(saturated[:, j], FLAG, 0.0), np.nan)
+            self._add(
+                f"{PREFIX}.motor_max.{label}{k + 1}",
+                where,
+                t,
+                flag,
+                limit={"output": f"{label}{k + 1}", "field": f"output[{k}]", "max": float(group.top[j])},
+                why=why,
+            )
+        stopped = group.stopped & runs & fly[:, None]
+        judged = fly & (n_runs > 0)
+        zero = np.where(judged, np.where(stopped.any(axis=1), FLAG, 0.0), np.nan)
+        name = f"{PREFIX}.motor_zero{sfx}"
+        if self._add(name, where, t, zero, limit={**limits, "while": "armed and flying"}, why=" (armed and flying)"):
+            self._checks[name]["outputs_stopped"] = [
+                f"{label}{k + 1}" for j, k in enumerate(group.outputs) if stopped[:, j].any()
+            ]
