@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from logscan.cli.render import compact_fields, render_inspect
+from logscan.cli.render_inspect import compact_fields, render_inspect
 
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
 ULOGS = sorted((TESTDATA / "px4-ulog").glob("*.ulg"))

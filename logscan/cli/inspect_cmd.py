@@ -6,7 +6,7 @@ import click
 import numpy as np
 
 from logscan.cli.options import header_stamp_option, json_option
-from logscan.cli.render import render_inspect
+from logscan.cli.render_inspect import render_inspect
 from logscan.log import Log
 from logscan.readers import read_log
 
