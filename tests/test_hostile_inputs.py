@@ -222,7 +222,7 @@ def test_ulog_formats_that_cannot_fit_a_message_are_refused_quickly(cli_process,
 def test_ulog_format_sizes_are_counted_once_per_format():
     from pyulog import ULog
 
-    from logscan.readers.ulog_reader import format_bytes
+    from logscan.readers.ulog_damage import format_bytes
 
     def fmt(text: bytes):
         return ULog.MessageFormat(text, None)
