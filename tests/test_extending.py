@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -146,3 +147,82 @@ def test_the_new_model_is_filtered_by_the_shared_ekf(new_model):
     assert dispatch.MODEL_IDS[new_model.model_id] == "linear"  # the shared linear kernels
     assert np.abs(trace.x_post[-100:, 0] - truth[-100:, 0]).max() < 0.05
     assert 0.5 < np.nanmean(trace.nis) < 2.0  # consistent: mean NIS per measurement about 1
+
+
+@pytest.fixture
+def nonlinear_model(tmp_path, monkeypatch):
+    """The doc's pendulum: its kernels and class modules written into a folder searched as part of
+    `logscan.models`, its dispatch registry line run (the import that registers the kernels), its
+    model registry line added. The EKF compiled for its id is kept out of the disk cache (the id
+    is the doc's, not the repository's)."""
+    from numba.core.caching import NullCache
+
+    from logscan import models
+    from logscan.filters import ekf
+
+    heading = "### A nonlinear model"
+    (tmp_path / "pendulum_kernels.py").write_text(code_after(heading, index=0))
+    (tmp_path / "pendulum.py").write_text(code_after(heading, index=1))
+    monkeypatch.setattr(models, "__path__", [*models.__path__, str(tmp_path)])
+    monkeypatch.setattr(ekf.ekf_run, "_cache", NullCache())
+    dispatch_line = code_after(heading, index=2).strip()
+    assert dispatch_line.startswith("from logscan.models.pendulum_kernels import") and "\n" not in dispatch_line
+    namespace: dict = {}
+    exec(dispatch_line, namespace)
+    line = registry_line(code_after(heading, index=3))
+    name, spec = re.match(r'\s*"(\w+)": "(logscan\.models\.\w+:\w+)"', line).groups()
+    monkeypatch.setitem(models._REGISTRY, name, spec)
+    yield models.get_model(name)
+    from logscan.models import model_kernels
+
+    for table in (model_kernels.REGISTRY, model_kernels.MODEL_IDS):
+        table.pop(namespace["PENDULUM_ID"], None)
+    for module in ("logscan.models.pendulum", "logscan.models.pendulum_kernels"):
+        sys.modules.pop(module, None)
+
+
+@pytest.mark.parametrize(
+    "check",
+    [
+        "test_model_id_is_dispatched_under_the_registered_name",
+        "test_states_inputs_groups_and_defaults_have_consistent_shapes",
+        "test_measurement_jacobian_H_matches_central_differences_of_h_per_group",
+        "test_direct_groups_really_observe_their_states",
+        "test_parameters_round_trip_through_describe_and_json",
+        "test_unknown_model_id_is_a_clear_model_error_before_any_kernel_runs",
+    ],
+)
+def test_the_nonlinear_model_passes_the_model_contract(nonlinear_model, check):
+    getattr(_contract_module(), check)(nonlinear_model.name, None)
+
+
+def test_the_nonlinear_model_discrete_jacobian_matches_differences(nonlinear_model):
+    _contract_module().test_discrete_jacobian_F_matches_central_differences_of_f(nonlinear_model.name, None, 0.01)
+
+
+def test_the_nonlinear_model_is_filtered_by_the_shared_ekf(nonlinear_model):
+    from logscan.align import AlignedGroup, AlignedRun
+    from logscan.filters import run_ekf
+
+    n, dt = 1000, 0.01
+    rng = np.random.default_rng(5)
+    t = np.arange(n) * dt
+    torque = 0.5 * np.sin(2.0 * t)[:, None]
+    x = np.array([0.8, 0.0])
+    truth = np.empty((n, 2))
+    for k in range(n):
+        x = nonlinear_model.f(x, torque[k], dt)
+        truth[k] = x
+    z = truth[:, :1] + rng.normal(0.0, 0.01, (n, 1))
+    run = AlignedRun(
+        t=t,
+        dt=dt,
+        start_ns=0,
+        u=torque,
+        u_fresh=np.ones(n, bool),
+        input_channels=["/pendulum/torque"],
+        groups={"angle": AlignedGroup("angle", ["/pendulum/theta"], z, np.ones(n, bool))},
+    )
+    trace = run_ekf(nonlinear_model, run, x0=np.array([0.8, 0.0]))
+    assert np.abs(trace.x_post[-200:, 0] - truth[-200:, 0]).max() < 0.05
+    assert np.abs(trace.x_post[-200:, 1] - truth[-200:, 1]).max() < 0.3  # the unmeasured rate

@@ -19,7 +19,7 @@ import pytest
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.errors import ModelError
 from logscan.filters import run_ekf
-from logscan.models import MODEL_NAMES, dispatch, get_model, model_class, rk4
+from logscan.models import MODEL_NAMES, dispatch, get_model, model_class
 
 LINEAR_PARAMS = {
     "A": [[0.0, 1.0], [-2.0, -0.5]],
@@ -28,10 +28,18 @@ LINEAR_PARAMS = {
     "D": {"mix": [[0.5], [0.0]]},
     "Q": [[1e-4, 0.0], [0.0, 1e-3]],
 }
+# a model without inputs, as `logscan init-profile` writes one for a CSV (B with zero columns)
+ZERO_INPUT_PARAMS = {
+    "states": ["level", "drift"],
+    "A": [[-0.5, 1.0], [0.0, -0.1]],
+    "B": [[], []],
+    "C": {"level": [[1.0, 0.0]], "both": [[1.0, 1.0]]},
+    "Q": [[1e-4, 0.0], [0.0, 1e-3]],
+}
 # registered name -> parameter sets the contract is checked with (default: one set, None)
 EXAMPLE_PARAMS = {
     "quadcopter": [None, {"inputs": "motors"}],
-    "linear": [LINEAR_PARAMS],
+    "linear": [LINEAR_PARAMS, ZERO_INPUT_PARAMS],
 }
 CASES = [
     pytest.param(name, params, id=f"{name}-{i}")
@@ -98,7 +106,8 @@ def test_model_id_is_dispatched_under_the_registered_name(name, params):
 def test_states_inputs_groups_and_defaults_have_consistent_shapes(name, params):
     model = get_model(name, params)
     n, nu = model.n_states, model.n_inputs
-    assert n == len(model.state_names) > 0 and nu == len(model.input_names) > 0
+    # a model may have no input (a profile's linear model with B of zero columns): only states
+    assert n == len(model.state_names) > 0 and nu == len(model.input_names) >= 0
     assert sorted(g.group_id for g in model.groups.values()) == list(range(len(model.groups)))
     for group_name, spec in model.groups.items():
         assert spec.name == group_name
@@ -196,7 +205,7 @@ def test_boxplus_and_boxminus_are_inverse_and_the_kernel_applies_the_same(name, 
     model = get_model(name, params)
     rng = np.random.default_rng(9)
     p = model.param_vector(0.01)
-    boxplus = dispatch.IN_PLACE[model.model_id][2]
+    boxplus = dispatch.REGISTRY[model.model_id].boxplus_into
     for _ in range(20):
         x, _u = random_point(model, rng)
         dx = rng.normal(size=x.size) * model.state_scale() * 0.5
@@ -266,7 +275,6 @@ def test_every_dispatcher_raises_on_an_unknown_model_id(name, params):
         "meas_into": lambda: dispatch.meas_into(
             UNKNOWN_ID, 0, p, x, u, 0, np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
         ),
-        "cont_fA": lambda: rk4.cont_fA(UNKNOWN_ID, p, x, u, np.empty(n), np.empty((n, n)), True),
     }
     for label, call in calls.items():
         with pytest.raises(ValueError, match=f"{label}: "):

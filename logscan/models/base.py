@@ -3,7 +3,7 @@
 INTERFACE (fixed): models are registered by name in `logscan.models` (`get_model(name, params)`,
 `MODEL_NAMES`). The numeric parts run inside numba kernels: each model has an integer `model_id`
 and a packed float64 parameter vector, and `logscan.models.dispatch` dispatches
-`f / F / h / H` on (model_id, group_id) so one cached EKF kernel serves every model.
+`f / F / h / H` on (model_id, group_id) to the functions the model registered.
 """
 
 from __future__ import annotations
@@ -87,9 +87,9 @@ def covariance_problem(M, name: str, *, definite: bool) -> str | None:
 class Model:
     """Discrete-time model x_k = f(x_{k-1}, u_k) + w, z = h_g(x_k, u_k) + v per group g.
 
-    Subclasses set the class attributes and implement the numpy methods as thin wrappers around
-    their numba functions (`<model>_kernels.py` beside the class module, reached through
-    `logscan.models.dispatch`). `model_id` must be one of `dispatch.MODEL_IDS`.
+    Subclasses set the class attributes; the numpy views f, F, h, H call the numba functions their
+    kernels module (`<model>_kernels.py` beside the class module) registers under `model_id`, which
+    must be one of `dispatch.MODEL_IDS`.
     """
 
     name: str = ""
@@ -197,21 +197,22 @@ class Model:
         return None
 
     # --- numpy views of the model (tests, simulator, reference filter) -------------------------
-    # One call each; they run the same numba functions as the EKF kernel.
+    # One call each of the model's own registered numba functions, the ones the EKF kernel runs.
     def f(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        return dispatch.f_disc(self.model_id, self.param_vector(dt), _vec(x), _vec(u), float(dt))
+        kernels = dispatch.REGISTRY[self.model_id]
+        return kernels.f_disc(self.param_vector(dt), _vec(x), _vec(u), float(dt))
 
     def F(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        p = self.param_vector(dt)
-        return dispatch.predict(self.model_id, p, _vec(x), _vec(u), float(dt))[1]
+        kernels = dispatch.REGISTRY[self.model_id]
+        return kernels.predict(self.param_vector(dt), _vec(x), _vec(u), float(dt))[1]
 
     def h(self, group: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         gid = self.group(group).group_id
-        return dispatch.h_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
+        return dispatch.REGISTRY[self.model_id].h_meas(self.param_vector(), gid, _vec(x), _vec(u))
 
     def H(self, group: str, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         gid = self.group(group).group_id
-        return dispatch.H_meas(self.model_id, gid, self.param_vector(), _vec(x), _vec(u))
+        return dispatch.REGISTRY[self.model_id].H_meas(self.param_vector(), gid, _vec(x), _vec(u))
 
     # --- the state's chart: additive unless the model says otherwise (ins: rotated attitude) ----
     def boxplus(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:

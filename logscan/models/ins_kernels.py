@@ -20,10 +20,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from logscan.models.model_kernels import ModelKernels, register
 from logscan.models.quadcopter_kernels import quad_rotation_into
 from logscan.numba_cache import follow_dependencies
 
-INS_ID = 5  # this model's branch in every dispatcher of logscan.models.dispatch
+INS_ID = 5  # its registered id (logscan.models.model_kernels)
 INS_N = 16
 
 # ---- parameter layout -------------------------------------------------------------------------
@@ -265,4 +266,41 @@ def ins_H(p, gid, x, u):
     return H
 
 
+@njit(cache=True)
+def ins_f(p, x, u, dt):
+    """f(x, u): the strapdown step alone."""
+    return ins_predict(p, x, u, dt)[0]
+
+
+@njit(cache=True, inline="always")
+def ins_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the ins model (strapdown step, error-state Jacobian)."""
+    ins_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
+@njit(cache=True, inline="always")
+def ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the ins model."""
+    ins_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+
+
+@njit(cache=True, inline="always")
+def ins_boxplus(p, x, dx, out):
+    """x (+) dx of the ins model (the attitude rotates)."""
+    ins_boxplus_into(p, x, dx, out)
+
+
+register(
+    ModelKernels(
+        INS_ID,
+        "ins",
+        predict=ins_predict,
+        f_disc=ins_f,
+        h_meas=ins_h,
+        H_meas=ins_H,
+        predict_into=ins_step_into,
+        meas_into=ins_meas_rows_into,
+        boxplus_into=ins_boxplus,
+    )
+)
 follow_dependencies(__name__)

@@ -2,17 +2,21 @@
 
 Packed p = [n, nu, G, group_start[G], Ad (n*n), Bd (n*nu), groups...], each group block
 = [m, C (m*n), D (m*nu)] (`LinearBase.param_vector`); x (n,), u (nu,), F (n, n); a group's
-measurements go to rows r:r+m of hx (m_total,) and Hs (m_total, n). The dc_motor model packs its
-exactly discretised A, B, C like a linear model, so both ids run this code.
+measurements go to rows r:r+m of hx (m_total,) and Hs (m_total, n). The dc_motor and hover_uav
+models pack their exactly discretised A, B, C like a linear model: the three ids run this code.
 """
 
 from __future__ import annotations
 
 from numba import njit
 
-# the two models' branches in every dispatcher of logscan.models.dispatch
+from logscan.models.model_kernels import ModelKernels, additive_boxplus_into, register
+from logscan.numba_cache import follow_dependencies
+
+# the registered ids of the models that run on these kernels (logscan.models.model_kernels)
 DC_MOTOR_ID = 2
 LINEAR_ID = 3
+HOVER_UAV_ID = 4
 
 
 @njit(cache=True)
@@ -93,3 +97,51 @@ def lin_predict_into(p, x, u, x_next, F):
         for j in range(nu):
             t += p[b0 + i * nu + j] * u[j]
         x_next[i] = t
+
+
+@njit(cache=True)
+def lin_predict(p, x, u, dt):
+    """(f(x, u), F = Ad), allocating."""
+    Ad, Bd = lin_AB(p)
+    return lin_f(p, x, u), Ad.copy()
+
+
+@njit(cache=True)
+def lin_f_disc(p, x, u, dt):
+    """f(x, u) = Ad x + Bd u (dt is packed in Ad, Bd)."""
+    return lin_f(p, x, u)
+
+
+@njit(cache=True, inline="always")
+def lin_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the linear models (dc_motor, linear, hover_uav)."""
+    lin_predict_into(p, x, u, x_next, F)
+
+
+@njit(cache=True, inline="always")
+def lin_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the linear models."""
+    lin_meas_into(p, gid, x, u, r, hx, Hs)
+
+
+def linear_kernels(model_id: int, name: str) -> ModelKernels:
+    """The registration of a model that packs its parameters like `LinearBase.param_vector`."""
+    return ModelKernels(
+        model_id,
+        name,
+        predict=lin_predict,
+        f_disc=lin_f_disc,
+        h_meas=lin_h,
+        H_meas=lin_H,
+        predict_into=lin_step_into,
+        meas_into=lin_meas_rows_into,
+        boxplus_into=additive_boxplus_into,
+    )
+
+
+register(
+    linear_kernels(DC_MOTOR_ID, "dc_motor"),
+    linear_kernels(LINEAR_ID, "linear"),
+    linear_kernels(HOVER_UAV_ID, "hover_uav"),
+)
+follow_dependencies(__name__)

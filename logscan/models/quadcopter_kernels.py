@@ -12,7 +12,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-QUADCOPTER_ID = 0  # this model's branch in every dispatcher of logscan.models.dispatch
+from logscan.models.model_kernels import ModelKernels, additive_boxplus_into, register
+from logscan.models.rk4 import rk4_f, rk4_predict
+from logscan.numba_cache import follow_dependencies
+
+QUADCOPTER_ID = 0  # its registered id (logscan.models.model_kernels)
 
 # ---- parameter layout -------------------------------------------------------------------------
 QP_MASS, QP_G, QP_KD, QP_IX, QP_IY, QP_IZ, QP_ARM, QP_KT, QP_BTAU, QP_INPUT_MODE = range(10)
@@ -324,3 +328,44 @@ def quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         J, Jn = Jn, J
     for i in range(12):
         F[i, i] += 1.0
+
+
+@njit(cache=True)
+def quad_predict(p, x, u, dt):
+    """(f(x, u), F(x, u)) by the generic RK4 step (allocating)."""
+    return rk4_predict(QUADCOPTER_ID, p, x, u, dt)
+
+
+@njit(cache=True)
+def quad_f(p, x, u, dt):
+    """f(x, u): the RK4 step alone (the simulator's truth)."""
+    return rk4_f(QUADCOPTER_ID, p, x, u, dt)
+
+
+@njit(cache=True, inline="always")
+def quad_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the quadcopter (RK4 on the 3x3 blocks of its Jacobian)."""
+    quad_rk4_predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
+@njit(cache=True, inline="always")
+def quad_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the quadcopter."""
+    quad_meas_into(p, gid, x, u, r, hx, Hs, R3, D3, True)
+
+
+register(
+    ModelKernels(
+        QUADCOPTER_ID,
+        "quadcopter",
+        predict=quad_predict,
+        f_disc=quad_f,
+        h_meas=quad_h,
+        H_meas=quad_H,
+        predict_into=quad_step_into,
+        meas_into=quad_meas_rows_into,
+        boxplus_into=additive_boxplus_into,
+        fA=quad_fA,
+    )
+)
+follow_dependencies(__name__)

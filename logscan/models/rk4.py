@@ -3,30 +3,40 @@
 The discrete Jacobian F is the exact derivative of the RK4 step, obtained by propagating the
 continuous Jacobian A through the four stages (dk_i/dx = A(x_i) dx_i/dx). Shapes: x, x_next,
 kv, xs (n,); F, A, J, Jn (n, n); p is the model's packed parameter vector.
+
+The model's continuous dynamics are its registered `fA` (`logscan.models.model_kernels`), found
+while numba compiles a step for the literal model id: a model's kernels module calls these with its
+own id constant, and its cached functions carry the step (these are not cached on their own: they
+would carry a model's dynamics without following its module).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import literally, njit
+from numba.extending import overload
 
-from logscan.models.quadcopter_kernels import QUADCOPTER_ID, quad_fA
-from logscan.models.steer_by_wire_kernels import STEER_BY_WIRE_ID, sbw_fA
-from logscan.numba_cache import follow_dependencies
+from logscan.models.model_kernels import literal_kernel
 
 
-@njit(cache=True)
 def cont_fA(model_id, p, x, u, d, A, want_A):
-    """Continuous dynamics d = f_c(x, u) and, when want_A, A = df_c/dx of model `model_id`."""
-    if model_id == QUADCOPTER_ID:
-        quad_fA(p, x, u, d, A, want_A)
-    elif model_id == STEER_BY_WIRE_ID:
-        sbw_fA(p, x, u, d, A, want_A)
-    else:
-        raise ValueError("cont_fA: the model id has no continuous dynamics")
+    """Continuous dynamics d = f_c(x, u) and, when want_A, A = df_c/dx of the model ``model_id``
+    (a compile-time constant; numba code only)."""
+    raise NotImplementedError("cont_fA is resolved by numba at compile time")
 
 
-@njit(cache=True)
+@overload(cont_fA, inline="always")
+def _cont_fA(model_id, p, x, u, d, A, want_A):
+    fA = literal_kernel(model_id, "fA")
+    if fA is not None:
+
+        def impl(model_id, p, x, u, d, A, want_A):
+            fA(p, x, u, d, A, want_A)
+
+        return impl
+
+
+@njit
 def rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     """One RK4 step x_next and its exact Jacobian F = d x_next / d x, into x_next and F.
 
@@ -37,6 +47,7 @@ def rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
     kv, xs (n,) and A, J, Jn (n, n) are work arrays; the products skip the zeros of the sparse
     continuous Jacobian A.
     """
+    literally(model_id)  # one step per model: its fA compiled in
     n = x.size
     c = dt / 6.0
     for i in range(n):
@@ -69,9 +80,10 @@ def rk4_predict_into(model_id, p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
         F[i, i] += 1.0
 
 
-@njit(cache=True)
+@njit
 def rk4_predict(model_id, p, x, u, dt):
     """One RK4 step x_next and its exact Jacobian F (allocating wrapper of rk4_predict_into)."""
+    literally(model_id)
     n = x.size
     x_next = np.empty(n)
     F = np.empty((n, n))
@@ -81,9 +93,10 @@ def rk4_predict(model_id, p, x, u, dt):
     return x_next, F
 
 
-@njit(cache=True)
+@njit
 def rk4_f(model_id, p, x, u, dt):
     """The RK4 step alone (no Jacobian): the simulator's truth propagation."""
+    literally(model_id)
     n = x.size
     k = np.empty(n)
     xs = x.copy()
@@ -98,6 +111,3 @@ def rk4_f(model_id, p, x, u, dt):
             x_next[i] += c * w * k[i]
             xs[i] = x[i] + step * k[i]
     return x_next
-
-
-follow_dependencies(__name__)

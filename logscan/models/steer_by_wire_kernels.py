@@ -10,7 +10,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-STEER_BY_WIRE_ID = 1  # this model's branch in every dispatcher of logscan.models.dispatch
+from logscan.models.model_kernels import ModelKernels, additive_boxplus_into, register
+from logscan.models.rk4 import rk4_f, rk4_predict, rk4_predict_into
+from logscan.numba_cache import follow_dependencies
+
+STEER_BY_WIRE_ID = 1  # its registered id (logscan.models.model_kernels)
 
 # ---- parameter layout -------------------------------------------------------------------------
 (SP_JEQ, SP_BEQ, SP_FS, SP_CF, SP_CR, SP_LF, SP_LR, SP_LC, SP_LP, SP_M, SP_IZ, SP_V, SP_VS) = range(13)
@@ -82,3 +86,48 @@ def sbw_H(p, gid, x, u):
 def sbw_h(p, gid, x, u):
     H = sbw_H(p, gid, x, u)
     return H @ x
+
+
+@njit(cache=True)
+def sbw_predict(p, x, u, dt):
+    """(f(x, u), F(x, u)) by the generic RK4 step (allocating)."""
+    return rk4_predict(STEER_BY_WIRE_ID, p, x, u, dt)
+
+
+@njit(cache=True)
+def sbw_f(p, x, u, dt):
+    """f(x, u): the RK4 step alone (the simulator's truth)."""
+    return rk4_f(STEER_BY_WIRE_ID, p, x, u, dt)
+
+
+@njit(cache=True, inline="always")
+def sbw_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the steer-by-wire model (generic RK4)."""
+    rk4_predict_into(STEER_BY_WIRE_ID, p, x, u, dt, x_next, F, kv, xs, A, J, Jn)
+
+
+@njit(cache=True, inline="always")
+def sbw_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the steer-by-wire model (linear outputs: hx = H x)."""
+    sbw_H_row_into(p, gid, Hs, r)
+    t = 0.0
+    for j in range(4):
+        t += Hs[r, j] * x[j]
+    hx[r] = t
+
+
+register(
+    ModelKernels(
+        STEER_BY_WIRE_ID,
+        "steer_by_wire",
+        predict=sbw_predict,
+        f_disc=sbw_f,
+        h_meas=sbw_h,
+        H_meas=sbw_H,
+        predict_into=sbw_step_into,
+        meas_into=sbw_meas_rows_into,
+        boxplus_into=additive_boxplus_into,
+        fA=sbw_fA,
+    )
+)
+follow_dependencies(__name__)

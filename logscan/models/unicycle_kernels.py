@@ -12,7 +12,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-UNICYCLE_ID = 6  # this model's branch in every dispatcher of logscan.models.dispatch
+from logscan.models.model_kernels import ModelKernels, additive_boxplus_into, register
+from logscan.numba_cache import follow_dependencies
+
+UNICYCLE_ID = 6  # its registered id (logscan.models.model_kernels)
 UNI_N_PARAMS = 1
 
 
@@ -83,3 +86,37 @@ def uni_h(p, gid, x, u):
 @njit(cache=True)
 def uni_H(p, gid, x, u):
     return _measure(p, gid, x, u)[1]
+
+
+@njit(cache=True)
+def uni_f(p, x, u, dt):
+    """f(x, u): the Euler step alone."""
+    return uni_predict(p, x, u, dt)[0]
+
+
+@njit(cache=True, inline="always")
+def uni_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the unicycle (Euler step)."""
+    uni_predict_into(p, x, u, dt, x_next, F)
+
+
+@njit(cache=True, inline="always")
+def uni_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the unicycle."""
+    uni_meas_into(p, gid, x, u, r, hx, Hs)
+
+
+register(
+    ModelKernels(
+        UNICYCLE_ID,
+        "unicycle",
+        predict=uni_predict,
+        f_disc=uni_f,
+        h_meas=uni_h,
+        H_meas=uni_H,
+        predict_into=uni_step_into,
+        meas_into=uni_meas_rows_into,
+        boxplus_into=additive_boxplus_into,
+    )
+)
+follow_dependencies(__name__)

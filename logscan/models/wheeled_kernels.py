@@ -12,7 +12,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-WHEELED_ID = 7  # this model's branch in every dispatcher of logscan.models.dispatch
+from logscan.models.model_kernels import ModelKernels, additive_boxplus_into, register
+from logscan.numba_cache import follow_dependencies
+
+WHEELED_ID = 7  # its registered id (logscan.models.model_kernels)
 WHEELED_N_PARAMS = 1
 WHEELED_N = 8
 
@@ -112,3 +115,37 @@ def wheeled_h(p, gid, x, u):
 @njit(cache=True)
 def wheeled_H(p, gid, x, u):
     return _measure(p, gid, x, u)[1]
+
+
+@njit(cache=True)
+def wheeled_f(p, x, u, dt):
+    """f(x, u): the Euler step alone."""
+    return wheeled_predict(p, x, u, dt)[0]
+
+
+@njit(cache=True, inline="always")
+def wheeled_step_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn):
+    """predict_into of the wheeled model (Euler step)."""
+    wheeled_predict_into(p, x, u, dt, x_next, F)
+
+
+@njit(cache=True, inline="always")
+def wheeled_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
+    """meas_into of the wheeled model."""
+    wheeled_meas_into(p, gid, x, u, r, hx, Hs)
+
+
+register(
+    ModelKernels(
+        WHEELED_ID,
+        "wheeled",
+        predict=wheeled_predict,
+        f_disc=wheeled_f,
+        h_meas=wheeled_h,
+        H_meas=wheeled_H,
+        predict_into=wheeled_step_into,
+        meas_into=wheeled_meas_rows_into,
+        boxplus_into=additive_boxplus_into,
+    )
+)
+follow_dependencies(__name__)
