@@ -160,7 +160,7 @@ def test_lz4_output_stops_past_the_declared_size(tmp_path):
 
 def test_cdr_layouts_of_huge_fixed_arrays_fall_back_to_the_decoder():
     from logscan.readers.mcap.cdr import cdr_layout
-    from logscan.readers.mcap.scan import SchemaRec
+    from logscan.readers.mcap.scan_records import SchemaRec
 
     flat = SchemaRec(1, "pkg/msg/Big", "ros2msg", b"float64[1000000] x")
     nested = SchemaRec(

@@ -102,9 +102,7 @@ class _Valid(tuple):
 
 @pytest.fixture(scope="module")
 def valid_file(tmp_path_factory) -> tuple[Path, bytes, Log]:
-    data = mcap_bytes(
-        _imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}}, chunk_size=16 * 1024
-    )
+    data = mcap_bytes(_imu_topics(), metadata={"logscan.truth": {"json": '{"events": []}'}}, chunk_size=16 * 1024)
     path = tmp_path_factory.mktemp("mcap") / "valid.mcap"
     path.write_bytes(data)
     log = read_mcap(path, None)
@@ -566,7 +564,7 @@ def test_ros2_fast_cdr_path_matches_the_mcap_ros2_decoder(tmp_path):
     from mcap_ros2.writer import Writer as Ros2Writer
 
     from logscan.readers.mcap.cdr import cdr_fast, cdr_layout
-    from logscan.readers.mcap.scan import SchemaRec
+    from logscan.readers.mcap.scan_records import SchemaRec
 
     rng = np.random.default_rng(5)
     path = tmp_path / "fixed.mcap"

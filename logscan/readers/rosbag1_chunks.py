@@ -27,7 +27,7 @@ from logscan.errors import InputError
 from logscan.log import SourceInfo
 from logscan.readers.flatten import FlatColumns, MessageBytes
 from logscan.readers.mcap.cdr import CdrLayout, cdr_layout
-from logscan.readers.mcap.scan import SchemaRec
+from logscan.readers.mcap.scan_records import SchemaRec
 from logscan.readers.rosbag_types import ros2_type_name
 
 ROS1_HINT = "check the copy; an unindexed bag (a recording cut short) can be repaired with `rosbag reindex`"

@@ -20,7 +20,7 @@ import numpy as np
 from logscan.log import SourceInfo
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
-from logscan.readers.mcap.scan import SchemaRec
+from logscan.readers.mcap.scan_records import SchemaRec
 
 
 def ros2_type_name(msgtype: str) -> str:

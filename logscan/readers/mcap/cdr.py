@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from logscan.readers.flatten import FlatColumns, MessageBytes
-from logscan.readers.mcap.scan import SchemaRec
+from logscan.readers.mcap.scan_records import SchemaRec
 
 
 class _Unsupported(Exception):
