@@ -76,3 +76,25 @@ def drop_topics(src: Path, dst: Path, topics: tuple[str, ...]) -> None:
         for conn, stamp, raw in reader.messages():
             if conn.id in out:
                 writer.write(out[conn.id], stamp, raw)
+
+
+def to_db3(bag: Path, out: Path) -> Path:
+    """The ROS 1 bag ``bag`` converted by rosbags itself to a rosbag2 directory ``out`` with sqlite3
+    storage (a .db3, the rosbag2 default before Iron); returns the directory."""
+    from rosbags.convert import convert
+
+    convert(
+        srcs=[bag],
+        dst=out,
+        dst_storage="sqlite3",
+        dst_version=9,
+        compress=None,
+        compress_mode="file",
+        default_typestore=None,
+        typestore=None,
+        exclude_topics=[],
+        include_topics=[],
+        exclude_msgtypes=[],
+        include_msgtypes=[],
+    )
+    return out

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import need_testdata
-from ros_edit import drop_topics, hold_fix, shift_fix
+from ros_edit import drop_topics, hold_fix, shift_fix, to_db3
 
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.profiles import parse_profile, ros
@@ -29,23 +29,8 @@ MAX_FALSE_ALARMS = 1  # the issue's bound on the healthy drive
 @pytest.fixture(scope="module")
 def husky_db3(tmp_path_factory) -> Path:
     """The Husky ROS 1 bag converted to a rosbag2 .db3 (sqlite3 storage) by rosbags itself."""
-    from rosbags.convert import convert
-
     out = tmp_path_factory.mktemp("db3") / "husky_sqlite"
-    convert(
-        srcs=[need_testdata(ROS1_BAG)],
-        dst=out,
-        dst_storage="sqlite3",
-        dst_version=9,
-        compress=None,
-        compress_mode="file",
-        default_typestore=None,
-        typestore=None,
-        exclude_topics=[],
-        include_topics=[],
-        exclude_msgtypes=[],
-        include_msgtypes=[],
-    )
+    to_db3(need_testdata(ROS1_BAG), out)
     return next(out.glob("*.db3"))
 
 

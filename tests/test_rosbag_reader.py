@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import need_testdata
+from ros_edit import to_db3
 
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.readers import detect_format, read_embedded, read_log
@@ -38,23 +39,8 @@ def mcap_log():
 @pytest.fixture(scope="module")
 def husky_db3_dir(husky_bag, tmp_path_factory) -> Path:
     """The Husky bag converted to a rosbag2 directory with sqlite3 storage, by rosbags itself."""
-    from rosbags.convert import convert
-
     out = tmp_path_factory.mktemp("db3") / "husky_ros2_sqlite"
-    convert(
-        srcs=[husky_bag],
-        dst=out,
-        dst_storage="sqlite3",
-        dst_version=9,
-        compress=None,
-        compress_mode="file",
-        default_typestore=None,
-        typestore=None,
-        exclude_topics=[],
-        include_topics=[],
-        exclude_msgtypes=[],
-        include_msgtypes=[],
-    )
+    to_db3(husky_bag, out)
     return out
 
 
