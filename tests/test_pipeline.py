@@ -9,11 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from logscan.pipeline import stages
 from logscan.detectors.registry import default_registry
 from logscan.errors import ProfileError
 from logscan.needs import Needs
-from logscan.pipeline import analyze_log, create_detectors, load_profile_for, needs_of, prepare
+from logscan.pipeline import analyze_log, create_detectors, load_profile_for, needs_of, prepare, stages
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "sample_logs"
@@ -38,9 +37,7 @@ def test_the_encoded_checks_ask_for_the_gain_only_without_onboard_variances():
 def test_each_needed_filter_runs_exactly_once(monkeypatch):
     calls = []
     real = stages.FILTERS["ekf"]
-    monkeypatch.setitem(
-        stages.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts)
-    )
+    monkeypatch.setitem(stages.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts))
     analysis = analyze_log(HEALTHY, detector_names=["encoded_ekf", "nis"])
     assert len(calls) == 1 and [r.detector for r in analysis.results] == ["encoded_ekf", "nis"]
 
