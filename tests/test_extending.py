@@ -1,5 +1,6 @@
-"""docs/extending.md followed step by step: its example detector (one file plus one registry line) and
-its example linear model (one class module plus one registry line) work end to end."""
+"""docs/extending.md followed step by step: its example detector (one file plus one registry line),
+its example linear model (one class module plus one registry line), its nonlinear model (kernels,
+class, registry lines) and its reader (one function plus one registration) work end to end."""
 
 from __future__ import annotations
 
@@ -70,6 +71,20 @@ def test_the_new_detector_runs_through_the_pipeline_and_is_scored(new_detector):
     assert accel and 30.0 <= accel[0].start < 31.0  # the +1 m/s^2 bias on accel.x starts at 30 s
     scores = evaluate_analysis(analysis).scores
     assert scores["innovation_mean:accel"].tp == 1
+
+
+def test_the_new_detector_runs_in_logscan_analyze_with_its_words(new_detector, cli, tmp_path):
+    out = tmp_path / "summary.json"
+    log = SAMPLES / "quad_imu_bias.mcap"
+    result = cli("analyze", log, "-d", "innovation_mean", "--no-report", "--json", out)
+    assert result.exit_code == 1, result.stderr  # alarms raised
+    (entry,) = json.loads(out.read_text())["logs"][0]["detectors"]
+    assert entry["detector"] == "innovation_mean"
+    assert "innovation_mean.accel" in entry["series"]
+    assert "innovation_mean.accel" in {a["signal"] for a in entry["alarms"]}
+    for signal in entry["series"]:  # tests/test_words.py's rule: plain words for every statistic
+        assert entry["labels"][signal] and len(entry["labels"][signal]) > 15, entry["labels"]
+    assert "accelerometer" in entry["labels"]["innovation_mean.accel"]
 
 
 def test_the_new_detector_raises_nothing_on_the_healthy_sample(new_detector):
@@ -226,3 +241,149 @@ def test_the_nonlinear_model_is_filtered_by_the_shared_ekf(nonlinear_model):
     trace = run_ekf(nonlinear_model, run, x0=np.array([0.8, 0.0]))
     assert np.abs(trace.x_post[-200:, 0] - truth[-200:, 0]).max() < 0.05
     assert np.abs(trace.x_post[-200:, 1] - truth[-200:, 1]).max() < 0.3  # the unmeasured rate
+
+
+@pytest.fixture
+def new_reader(tmp_path, monkeypatch):
+    """The doc's reader module written into a folder searched as part of `logscan.readers`, its
+    registration line run; the registered reader removed afterwards."""
+    from logscan import readers
+
+    heading = "## Adding a reader"
+    (tmp_path / "kv_reader.py").write_text(code_after(heading, index=0))
+    monkeypatch.setattr(readers, "__path__", [*readers.__path__, str(tmp_path)])
+    monkeypatch.setattr(readers, "READERS", dict(readers.READERS))
+    line = code_after(heading, index=1).strip()
+    assert line.startswith("from logscan.readers import kv_reader") and "\n" not in line
+    exec(line, {})
+    yield readers.READERS["kv"]
+    sys.modules.pop("logscan.readers.kv_reader", None)
+    del readers.kv_reader  # the next import runs the module (and its registration) again
+
+
+def write_tank_log(path: Path, bias_from_s: float | None = None) -> Path:
+    """60 s of the doc's tank (x' = -2 x + 2 u) at 100 Hz in the doc's text format, level noise
+    0.01; a +0.1 offset on the level sensor from ``bias_from_s`` on."""
+    dt, n = 0.01, 6000
+    rng = np.random.default_rng(11)
+    a = np.exp(-2.0 * dt)
+    x, lines = 0.0, []
+    for k in range(n):
+        t = k * dt
+        valve = 0.5 + 0.3 * np.sin(0.5 * t)
+        level = x + rng.normal(0.0, 0.01) + (0.1 if bias_from_s is not None and t >= bias_from_s else 0.0)
+        lines.append(f"t={t:.2f} valve={valve:.5f} level={level:.5f}")
+        x = a * x + (1.0 - a) * valve + rng.normal(0.0, np.sqrt(0.01 * dt))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_the_doc_example_lines_are_read_by_the_new_reader(new_reader, tmp_path, cli):
+    from logscan.readers import detect_format, read_log
+
+    example = tmp_path / "example.kv"
+    example.write_text(code_after("## Adding a reader", language="text"))
+    assert detect_format(example) == "kv"
+    log = read_log(example)
+    assert sorted(log.channels) == ["level", "valve"]
+    assert log.channels["level"].t.tolist() == [0, 10_000_000, 20_000_000]
+    assert read_log(example, topics=["level"]).channels.keys() == {"level"}
+    result = cli("inspect", example, "--json", "-")
+    assert result.exit_code == 0, result.stderr
+    facts = json.loads(result.output)
+    assert facts["format"] == "kv" and set(facts["channels"]) == {"level", "valve"}
+
+
+def test_builtin_formats_are_still_detected_first(new_reader):
+    from logscan.readers import detect_format
+
+    assert detect_format(SAMPLES / "quad_imu_bias.mcap") == "mcap"
+    assert detect_format(SAMPLES / "quad_healthy.csv") == "csv"
+    with pytest.raises(ValueError, match="built-in"):
+        from logscan.readers import register_reader
+
+        register_reader("csv", new_reader.sniff, new_reader.read)
+
+
+def test_a_log_of_the_new_format_is_analysed_with_the_doc_profile(new_reader, tmp_path, cli):
+    profile = tmp_path / "tank.toml"
+    profile.write_text(code_after("## Adding a reader", language="text", index=1))
+    healthy = write_tank_log(tmp_path / "tank.kv")
+    out = tmp_path / "summary.json"
+    result = cli("analyze", healthy, "--profile", profile, "--no-report", "--json", out)
+    assert result.exit_code == 0, result.stdout + result.stderr
+    entry = json.loads(out.read_text())["logs"][0]
+    assert entry["detectors"] and all(d["alarms"] == [] for d in entry["detectors"])
+    biased = write_tank_log(tmp_path / "tank_bias.kv", bias_from_s=30.0)
+    result = cli("analyze", biased, "--profile", profile, "--no-report", "--json", out)
+    assert result.exit_code == 1, result.stdout + result.stderr
+    alarms = [a for d in json.loads(out.read_text())["logs"][0]["detectors"] for a in d["alarms"]]
+    assert alarms and 30.0 <= min(a["start"] for a in alarms) < 32.0
+
+
+_PENDULUM_CLI = """\
+import sys
+
+from logscan import models
+
+models.__path__.append(sys.argv[1])
+exec(sys.argv[2])  # the doc's registry line of logscan/models/dispatch.py
+name, spec = sys.argv[3].split("=", 1)  # the doc's line of the _REGISTRY table
+models._REGISTRY[name] = spec
+models.MODEL_NAMES = tuple(models._REGISTRY)  # as when the line is in the table's source
+
+from logscan.cli.main import main  # after the registration, as in the installed package
+
+main(sys.argv[4:])
+"""
+
+
+def test_the_nonlinear_model_runs_in_logscan_analyze(nonlinear_model, tmp_path):
+    """`logscan analyze` on a CSV log of the pendulum, in a fresh process with a fresh cache
+    directory: the doc's id is not one of the repository's, so no compiled kernel may be reused or
+    left behind for it. An angle sensor offset of 0.1 rad from 10 s on is seen by `nis`."""
+    import os
+    import subprocess
+
+    heading = "### A nonlinear model"
+    package = tmp_path / "models"
+    package.mkdir()
+    (package / "pendulum_kernels.py").write_text(code_after(heading, index=0))
+    (package / "pendulum.py").write_text(code_after(heading, index=1))
+    name, spec = re.match(
+        r'\s*"(\w+)": "(logscan\.models\.\w+:\w+)"', registry_line(code_after(heading, index=3))
+    ).groups()
+    n, dt = 2000, 0.01
+    rng = np.random.default_rng(7)
+    t = np.arange(n) * dt
+    torque = 0.5 * np.sin(2.0 * t)
+    x, theta = np.array([0.8, 0.0]), np.empty(n)
+    for k in range(n):
+        theta[k] = x[0]
+        x = nonlinear_model.f(x, torque[k : k + 1], dt)
+    theta += rng.normal(0.0, 0.01, n) + np.where(t >= 10.0, 0.1, 0.0)
+    log = tmp_path / "pendulum.csv"
+    rows = [f"{round(tk * 1e9)},{uk:.6f},{zk:.6f}" for tk, uk, zk in zip(t, torque, theta)]
+    log.write_text("time_ns,/pendulum/torque,/pendulum/theta\n" + "\n".join(rows) + "\n")
+    profile = tmp_path / "pendulum.toml"
+    profile.write_text(
+        f'[vehicle]\nmodel = "{name}"\nrate_hz = 100\n[inputs]\ntorque = "/pendulum/torque"\n'
+        '[measurements.angle]\nchannels = ["/pendulum/theta"]\nrate_hz = 100\n'
+    )
+    out = tmp_path / "summary.json"
+    args = ["analyze", log, "--profile", profile, "-d", "nis", "--no-report", "--json", out]
+    env = {**os.environ, "LOGSCAN_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("NUMBA_CACHE_DIR", None)
+    proc = subprocess.run(
+        [sys.executable, "-c", _PENDULUM_CLI, str(package), code_after(heading, index=2).strip(), f"{name}={spec}"]
+        + [str(a) for a in args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr  # alarms raised
+    (entry,) = json.loads(out.read_text())["logs"][0]["detectors"]
+    assert "nis.angle" in entry["series"]
+    starts = [a["start"] for a in entry["alarms"] if a["signal"] == "nis.angle"]
+    assert starts and 10.0 <= min(starts) < 11.0

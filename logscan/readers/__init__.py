@@ -1,11 +1,18 @@
-"""The format table: pick the reader by the file's content (magic bytes), not only its suffix."""
+"""The format table: pick the reader by the file's content (magic bytes), not only its suffix.
+
+A new file format is a reader function plus one `register_reader` call (docs/extending.md, "Adding
+a reader"): `detect_format` asks the registered readers' ``sniff`` after the built-in magic bytes
+(MCAP, ULog, ROS bags) and before the CSV catch-all, and `read_log` calls the ``read`` of the one
+that claimed the file.
+"""
 
 from __future__ import annotations
 
 import os
 import stat
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import NamedTuple
 
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.input_files import SPECIAL_FILE_HINT, special_kind
@@ -15,10 +22,33 @@ from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC, input_error, list_dir
 ROS1_BAG_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"  # a rosbag2 .db3
 DATAFLASH_HEAD = b"\xa3\x95"  # ArduPilot DataFlash message header
+BUILTIN_FORMATS = frozenset({"mcap", "ulog", "ros1bag", "rosbag2", "csv", "csv-dir"})
+
+
+class Reader(NamedTuple):
+    """A registered reader: ``sniff(head, path)`` says whether a file's first 4096 bytes are its
+    format; ``read(path, wanted, use_header_stamp=...)`` reads it into a Log (``wanted``: the
+    source topics or channel names to keep, None for all)."""
+
+    name: str
+    sniff: Callable[[bytes, Path], bool]
+    read: Callable[..., Log]
+
+
+READERS: dict[str, Reader] = {}  # registered readers by format name, asked in registration order
+
+
+def register_reader(name: str, sniff: Callable[[bytes, Path], bool], read: Callable[..., Log]) -> None:
+    """Register a reader of the format ``name`` (a name the built-ins do not use; registering the
+    same name again replaces it). Files only: a directory is always a ROS bag or CSV folder."""
+    if name in BUILTIN_FORMATS:
+        raise ValueError(f"{name!r} is a built-in format")
+    READERS[name] = Reader(name, sniff, read)
 
 
 def detect_format(path: str | os.PathLike) -> str:
-    """Return "mcap", "ulog", "ros1bag", "rosbag2", "csv" or "csv-dir" for ``path``, judged by content.
+    """Return "mcap", "ulog", "ros1bag", "rosbag2", "csv" or "csv-dir" for ``path``, judged by content,
+    or the name of the registered reader (`register_reader`) whose ``sniff`` claims the file.
 
     "rosbag2" is a SQLite file (a rosbag2 ``.db3``) or a directory holding ``metadata.yaml``; any
     other directory is a folder of CSV files. Only regular files and directories are read, and that
@@ -53,6 +83,9 @@ def detect_format(path: str | os.PathLike) -> str:
         return "rosbag2"
     if not head:
         raise InputError("file is empty", path=str(p))
+    for reader in READERS.values():
+        if reader.sniff(head, p):
+            return reader.name
     _refuse_ardupilot(head, p)
     if _looks_like_text(head):
         return "csv"
@@ -158,6 +191,8 @@ def read_log(
     """
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
+    if fmt in READERS:
+        return READERS[fmt].read(path, wanted, use_header_stamp=use_header_stamp)
     if fmt == "mcap":
         from logscan.readers.mcap import read_mcap
 
