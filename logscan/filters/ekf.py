@@ -158,19 +158,27 @@ def ekf_run(model_id, model, sensors, data, out):
     literal. All work arrays are allocated once, before the loop.
     """
     literally(model_id)  # one specialisation per model (logscan.models.dispatch)
+    # the arguments' arrays under the kernel's names, read once: an attribute read inside the loop
+    # would count a reference up and down at every access (2-3 % of a step)
     p, dt, Q, x0, P0 = model.p, model.dt, model.Q, model.x0, model.P0
     group_ids, group_offsets, group_sizes = sensors.group_ids, sensors.group_offsets, sensors.group_sizes
-    R_all, direct_idx, direct_gain = sensors.R_all, sensors.direct_idx, sensors.direct_gain
+    R_all, range_lo, range_hi, wrap = sensors.R_all, sensors.range_lo, sensors.range_hi, sensors.wrap
+    direct_idx, direct_gain = sensors.direct_idx, sensors.direct_gain
     u, z, fresh, R_std = data.u, data.z, data.fresh, data.R_std
+    x_prior, x_post, P_prior_diag, P_post_diag = out.x_prior, out.x_post, out.P_prior_diag, out.P_post_diag
+    P_prior_full, P_post_full, y_out, S_out, K_out = out.P_prior_full, out.P_post_full, out.y_out, out.S_out, out.K_out
+    S_diag_out, nis, nis_group, m_k, gain_norm = out.S_diag_out, out.nis, out.nis_group, out.m_k, out.gain_norm
+    updated, rejected, seeded = out.updated, out.rejected, out.seeded
+    diverged, input_held = out.diverged, out.input_held
     N = u.shape[0]
     n = x0.size
     nu = u.shape[1]
     G = group_ids.size
     m_total = z.shape[1]
-    store_P = out.P_prior_full.shape[0] == N
-    store_y = out.y_out.shape[0] == N  # y and the diagonal of S
-    store_S = out.S_out.shape[0] == N
-    store_K = out.K_out.shape[0] == N
+    store_P = P_prior_full.shape[0] == N
+    store_y = y_out.shape[0] == N  # y and the diagonal of S
+    store_S = S_out.shape[0] == N
+    store_K = K_out.shape[0] == N
     dyn_R = R_std.shape[0] == N
     x = x0.copy()
     P = P0.copy()
@@ -217,7 +225,7 @@ def ekf_run(model_id, model, sensors, data, out):
             for i in range(nu):
                 u_last[i] = uk[i]
         else:
-            out.input_held[k] = True
+            input_held[k] = True
             uk = u_last
         # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
         if k > 0:
@@ -228,8 +236,8 @@ def ekf_run(model_id, model, sensors, data, out):
             for i in range(n):
                 x[i] = x_new[i]
             if not (all_finite(x) and all_finite2(P)):
-                out.diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
-        _store(k, x, P, out.x_prior, out.P_prior_diag, out.P_prior_full, store_P)
+                diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
         # ---- select the fresh, valid groups -------------------------------------------------
         m = zero
         ng = zero
@@ -240,10 +248,10 @@ def ekf_run(model_id, model, sensors, data, out):
             ok = True
             for j in range(o, o + group_sizes[g]):
                 zj = z[k, j]
-                if not np.isfinite(zj) or zj < sensors.range_lo[j] or zj > sensors.range_hi[j]:
+                if not np.isfinite(zj) or zj < range_lo[j] or zj > range_hi[j]:
                     ok = False
             if not ok:
-                out.rejected[k, g] = True
+                rejected[k, g] = True
                 continue
             if pending and is_direct[g] and not seed_done[g]:
                 # re-seed the directly observed states from this sample
@@ -259,7 +267,7 @@ def ekf_run(model_id, model, sensors, data, out):
                         rj = R_std[k, j] * R_std[k, j]
                     P[i, i] = rj / (gain * gain)
                 seed_done[g] = True
-                out.seeded[k, g] = True
+                seeded[k, g] = True
                 continue
             sel_g[ng] = g
             ng += 1
@@ -274,9 +282,9 @@ def ekf_run(model_id, model, sensors, data, out):
             pending = still
         # ---- update -----------------------------------------------------------------------
         if store_S:  # S_out and K_out come unfilled (np.empty): NaN where not updated
-            nan_fill(out.S_out[k])
+            nan_fill(S_out[k])
         if store_K:
-            nan_fill(out.K_out[k])
+            nan_fill(K_out[k])
         if m > 0:
             r = zero
             for a in range(ng):
@@ -288,7 +296,7 @@ def ekf_run(model_id, model, sensors, data, out):
                 j = rows[a]
                 # y~ = z - h(x_prior)
                 ya = z[k, j] - hx[a]
-                if sensors.wrap[j]:
+                if wrap[j]:
                     ya = wrap_angle(ya)
                 y[a] = ya
                 for b in range(m):
@@ -338,42 +346,42 @@ def ekf_run(model_id, model, sensors, data, out):
                     for i in range(n):
                         x[i] = x_upd[i]
                     P, P_upd = P_upd, P
-                    out.m_k[k] = m
+                    m_k[k] = m
                     # NIS = y^T S^-1 y = |L^-1 y|^2
-                    out.nis[k] = forward_sq(L, m, y, zero, v)
+                    nis[k] = forward_sq(L, m, y, zero, v)
                     knorm = 0.0
                     for a in range(m):
                         for i in range(n):
                             knorm += KT[a, i] * KT[a, i]
-                    out.gain_norm[k] = np.sqrt(knorm)
+                    gain_norm[k] = np.sqrt(knorm)
                     for a in range(m):
                         j = rows[a]
                         if store_y:
-                            out.y_out[k, j] = y[a]
-                            out.S_diag_out[k, j] = S[a, a]
+                            y_out[k, j] = y[a]
+                            S_diag_out[k, j] = S[a, a]
                         if store_S:
                             for b in range(m):
-                                out.S_out[k, j, rows[b]] = S[a, b]
+                                S_out[k, j, rows[b]] = S[a, b]
                         if store_K:
                             for i in range(n):
-                                out.K_out[k, i, j] = KT[a, i]
+                                K_out[k, i, j] = KT[a, i]
                     # per-group NIS on the group's own block of S
                     r = zero
                     for a in range(ng):
                         g = sel_g[a]
                         mg = group_sizes[g]
-                        out.updated[k, g] = True
+                        updated[k, g] = True
                         if r == 0:  # the leading block's factor is L's leading block
-                            out.nis_group[k, g] = forward_sq(L, mg, y, zero, v)
+                            nis_group[k, g] = forward_sq(L, mg, y, zero, v)
                         else:
                             cholesky(S, r, mg, Lg)
-                            out.nis_group[k, g] = forward_sq(Lg, mg, y, r, v)
+                            nis_group[k, g] = forward_sq(Lg, mg, y, r, v)
                         r += mg
                 else:
                     ok = False
             if not ok:
-                out.diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
-        _store(k, x, P, out.x_post, out.P_post_diag, out.P_post_full, store_P)
+                diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        _store(k, x, P, x_post, P_post_diag, P_post_full, store_P)
 
 
 # =============================================================================================

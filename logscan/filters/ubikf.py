@@ -253,7 +253,7 @@ def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_out):
 def store_step(k, x, h, P, p, out):
     """The posterior of step k into ``out`` (UbikfBuffers): x_c, its hull x_c -+ h, diag and trace
     of P+, generator count."""
-    x_mid, x_lo, x_hi, P_diag = out.x_mid, out.x_lo, out.x_hi, out.P_diag
+    x_mid, x_lo, x_hi, P_diag, P_out = out.x_mid, out.x_lo, out.x_hi, out.P_diag, out.P
     tr = 0.0
     for i in range(x.size):
         x_mid[k, i] = x[i]
@@ -263,8 +263,8 @@ def store_step(k, x, h, P, p, out):
         tr += P[i, i]
     out.P_trace[k] = tr
     out.n_generators[k] = p
-    if out.P.shape[0] == x_mid.shape[0]:
-        out.P[k] = P
+    if P_out.shape[0] == x_mid.shape[0]:
+        P_out[k] = P
 
 
 @njit(cache=True, error_model="numpy")
@@ -304,8 +304,10 @@ def ubikf_run(model, data, settings, out):
     (UbikfSettings) into ``out`` (UbikfBuffers)."""
     A_m, A_r, B_m, B_r, C_m, C_r = model.A_m, model.A_r, model.B_m, model.B_r, model.C_m, model.C_r
     x0, P0, group_offsets, group_sizes = model.x0, model.P0, model.group_offsets, model.group_sizes
-    u, z, fresh = data.u, data.z, data.fresh
+    Q, R, u, z, fresh = model.Q, model.R, data.u, data.z, data.fresh
     L, cap = settings.L, settings.cap
+    # read once (an attribute read inside the loop counts a reference up and down at each access)
+    updated, m_k, diverged = out.updated, out.m_k, out.diverged
     n, m_total = x0.size, C_m.shape[0]
     cap_p = n + 2 * L * (n + m_total)  # generators: a box, then at most 2 L steps of new ones
     # work arrays (allocated once)
@@ -326,7 +328,7 @@ def ubikf_run(model, data, settings, out):
             p = predict_step(A_m, acols, annz, A_r, B_m, B_r, u_last, x, h, G, p, G_next, alpha, x_prior)
             G, G_next = G_next, G
             x[:] = x_prior
-            predict_bound(A_m, acols, annz, A_r, all_rows, model.Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
+            predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
             P, P_next = P_next, P
             zonotope_hull_into(G, n, p, h)
         ok = True
@@ -336,7 +338,7 @@ def ubikf_run(model, data, settings, out):
                 Cs[a] = C_m[rows[a]]
                 y[a] = z[k, rows[a]] - np.dot(C_m[rows[a]], x)  # r = y - C_m x_c,prior
                 for b in range(m):
-                    Rs[a, b] = model.R[rows[a], rows[b]]
+                    Rs[a, b] = R[rows[a], rows[b]]
             ok, p = update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_next)
             P, P_next = P_next, P
         age += 1
@@ -345,15 +347,15 @@ def ubikf_run(model, data, settings, out):
             p_mark = p
         zonotope_hull_into(G, n, p, h)
         if not (ok and below_cap(x, cap) and below_cap(P, cap) and below_cap(h, cap)):
-            out.diverged[k] = True
+            diverged[k] = True
             x[:] = x0
             P[:] = P0
             h[:] = 0.0
             p, p_mark, age, m = 0, 0, 0, 0
         store_step(k, x, h, P, p, out)
         if m > 0:
-            out.m_k[k] = m
-            out.updated[k] = upd
+            m_k[k] = m
+            updated[k] = upd
             store_update(k, rows, m, y, work, out, v)
 
 

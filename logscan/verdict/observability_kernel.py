@@ -102,7 +102,10 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
     what is left of the log for the last windows), NaN where the filter's trajectory is not finite.
     """
     literally(model_id)
-    p, dt, Q, R, group_ids = model.p, model.dt, model.Q, model.R, model.group_ids
+    # the arguments' arrays under the kernel's names, read once: an attribute read inside the loop
+    # would count a reference up and down at every access
+    p, dt, Q, R, P0 = model.p, model.dt, model.Q, model.R, model.P0
+    group_ids, offsets, sizes = model.group_ids, model.group_offsets, model.group_sizes
     x_prior, x_post, u, updated = trajectory.x_prior, trajectory.x_post, trajectory.u, trajectory.updated
     act_dirs, act_values, sensor_cols = faults.act_dirs, faults.act_values, faults.sensor_cols
     window, stride = windows.window, windows.stride
@@ -116,7 +119,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
     mu = np.zeros((J, D, n))
     lam = np.zeros((J, D))
     start = np.full(J, -1, dtype=np.int64)  # window start of each phase's running signature
-    P = model.P0.copy()
+    P = P0.copy()
     x_next, x_hi, kv, xs, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     F, F2, Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     FP, IKH = np.empty((n, n)), np.empty((n, n))
@@ -142,7 +145,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
         xk = x_post[k - 1]
         if not (all_finite(xk) and all_finite(x_prior[k]) and all_finite2(P)):
             start[:] = -1  # a diverged filter: no verdict until the next window start
-            P[:] = model.P0
+            P[:] = P0
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
         # (one call site: the model's step is inlined wherever it is called, and compiled as often)
@@ -185,9 +188,9 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
         for g in range(group_ids.size):
             if updated[k, g]:
                 dispatch.model_meas_into(model_id, group_ids[g], p, x_prior[k], u[k], m, hx, Hs, R3, D3)
-                for c in range(model.group_sizes[g]):
-                    rows[m + c] = model.group_offsets[g] + c
-                m += model.group_sizes[g]
+                for c in range(sizes[g]):
+                    rows[m + c] = offsets[g] + c
+                m += sizes[g]
         if m == 0:
             continue
         for a in range(m):
@@ -201,7 +204,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
                 S[a, b] += Rm[a, b]
         if not cholesky(S, 0, m, L):
             start[:] = -1
-            P[:] = model.P0
+            P[:] = P0
             continue
         for a in range(m):
             for i in range(n):
