@@ -3,14 +3,13 @@ group and the [alarms] policy, each with its defaults written out as the checker
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from logscan.profiles.schema import MeasurementSpec, RedundantSpec
-    from logscan.results import AlarmPolicy
+# The specs are read by attribute only: importing logscan.profiles.schema here, even for the type
+# checker, would close an import cycle (schema's Profile.to_dict calls these).
 
 
-def group_table(g: MeasurementSpec) -> dict[str, Any]:
+def group_table(g: Any) -> dict[str, Any]:
     """A measurement group as TOML-ready data."""
     table: dict[str, Any] = {"channels": g.channels, "rate_hz": g.rate_hz, "stale_s": g.stale_s}
     for key in ("noise_std", "range_lo", "range_hi", "scale", "offset"):
@@ -35,7 +34,7 @@ def group_table(g: MeasurementSpec) -> dict[str, Any]:
     return table
 
 
-def redundant_table(r: RedundantSpec) -> dict[str, Any]:
+def redundant_table(r: Any) -> dict[str, Any]:
     """A [redundant] group as TOML-ready data."""
     sensors = {
         s.name: ({"channel": s.channel, "poly": s.poly} if s.poly is not None else s.channel)
@@ -49,7 +48,7 @@ def redundant_table(r: RedundantSpec) -> dict[str, Any]:
     return table
 
 
-def alarms_table(policy: AlarmPolicy) -> dict[str, Any]:
+def alarms_table(policy: Any) -> dict[str, Any]:
     """The [alarms] policy as TOML-ready data."""
     table: dict[str, Any] = {
         "n_persist": policy.n_persist,
