@@ -20,52 +20,20 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import tempfile
 from pathlib import Path
 
 from benchlib import best_of
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the tests' bag helpers
+from ros_edit import copy_bag, to_db3  # noqa: E402
 
 from logscan.readers import read_log
 
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "ros-robots"
 HUSKY = TESTDATA / "robot_localization_test1_husky.bag"
 HUSKY_MCAP_DIR = TESTDATA / "robot_localization_test1_husky_ros2"
-
-
-def to_db3(bag: Path, out: Path) -> Path:
-    """The ``.db3`` of a rosbag2 directory (sqlite3 storage) converted from ``bag`` by rosbags."""
-    from rosbags.convert import convert
-
-    convert(
-        srcs=[bag],
-        dst=out,
-        dst_storage="sqlite3",
-        dst_version=9,
-        compress=None,
-        compress_mode="file",
-        default_typestore=None,
-        typestore=None,
-        exclude_topics=[],
-        include_topics=[],
-        exclude_msgtypes=[],
-        include_msgtypes=[],
-    )
-    return next(out.glob("*.db3"))
-
-
-def to_lz4_bag(bag: Path, out: Path) -> Path:
-    """A copy of the ROS 1 ``bag`` with lz4 chunks (the Husky bag's are bz2), by rosbags."""
-    from rosbags.rosbag1 import Reader, Writer
-
-    writer = Writer(out)
-    writer.set_compression(Writer.CompressionFormat.LZ4)
-    with Reader(bag) as reader, writer:
-        added = {}
-        for c in reader.connections:
-            added[c.id] = writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-        for connection, timestamp, data in reader.messages():
-            writer.write(added[connection.id], timestamp, data)
-    return out
 
 
 def read_logscan(path: Path) -> int:
@@ -103,8 +71,8 @@ def main() -> None:
     print(f"python {platform.python_version()}, {os.cpu_count()} cpu(s), {platform.machine()}, rosbags {version}")
     rows = []
     with tempfile.TemporaryDirectory(prefix="logscan-bench-") as tmp:
-        db3 = to_db3(args.bag, Path(tmp) / "bag_ros2")
-        lz4 = to_lz4_bag(args.bag, Path(tmp) / "lz4.bag")
+        db3 = next(to_db3(args.bag, Path(tmp) / "bag_ros2").glob("*.db3"))
+        lz4 = copy_bag(args.bag, Path(tmp) / "lz4.bag", lz4=True)
         inputs = [("ROS 1 .bag", args.bag), ("ROS 1 .bag, lz4 chunks", lz4), ("rosbag2 .db3", db3)]
         if args.bag == HUSKY and HUSKY_MCAP_DIR.is_dir():
             inputs.append(("rosbag2 dir (mcap)", HUSKY_MCAP_DIR))

@@ -63,19 +63,29 @@ def edit_messages(src: Path, dst: Path, topic: str, start_s: float, end_s: float
 
 def drop_topics(src: Path, dst: Path, topics: tuple[str, ...]) -> None:
     """Copy the ROS 1 bag ``src`` to ``dst`` without ``topics`` (a robot that did not record them)."""
+    copy_bag(src, dst, drop=topics)
+
+
+def copy_bag(src: Path, dst: Path, *, drop: tuple[str, ...] = (), lz4: bool = False) -> Path:
+    """Copy the ROS 1 bag ``src`` to ``dst`` message for message, without the topics in ``drop``;
+    ``lz4``: with lz4 chunks (the Husky bag's are bz2)."""
     from rosbags.rosbag1 import Reader, Writer
 
-    with Reader(src) as reader, Writer(dst) as writer:
+    writer = Writer(dst)
+    if lz4:
+        writer.set_compression(Writer.CompressionFormat.LZ4)
+    with Reader(src) as reader, writer:
         out = {
             conn.id: writer.add_connection(
                 conn.topic, conn.msgtype, msgdef=conn.msgdef.data, md5sum=conn.digest, callerid=conn.ext.callerid
             )
             for conn in reader.connections
-            if conn.topic not in topics
+            if conn.topic not in drop
         }
         for conn, stamp, raw in reader.messages():
             if conn.id in out:
                 writer.write(out[conn.id], stamp, raw)
+    return dst
 
 
 def to_db3(bag: Path, out: Path) -> Path:
