@@ -5,24 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_align import MS, FakeModel  # the same stand-in model and time unit
 
 from logscan.align import align, changed_steps
 from logscan.errors import ProfileError
 from logscan.log import Channel, Log, SourceInfo
-from logscan.models.base import GroupSpec
 from logscan.profiles import parse_profile
-
-MS = 1_000_000  # ns per millisecond
-
-
-class FakeModel:
-    input_names = ("force",)
-    state_names = ("pos", "vel")
-    groups = {
-        "speed": GroupSpec("speed", 0, ("v",), (0.1,), (-10.0,), (10.0,)),
-        "pair": GroupSpec("pair", 1, ("a", "b"), (0.1, 0.1), (-1.0, -1.0), (1.0, 1.0)),
-    }
-
 
 BASE = """
 [vehicle]
