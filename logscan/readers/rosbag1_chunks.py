@@ -25,8 +25,9 @@ from numba import njit
 
 from logscan.errors import InputError
 from logscan.log import SourceInfo
+from logscan.numba_cache import follow_dependencies
 from logscan.readers.flatten import FlatColumns, MessageBytes
-from logscan.readers.mcap.cdr import CdrLayout, cdr_layout
+from logscan.readers.mcap.cdr import CdrLayout, cdr_layout, le_value
 from logscan.readers.mcap.scan_records import SchemaRec
 from logscan.readers.rosbag_types import ros2_type_name
 
@@ -144,26 +145,7 @@ def _ros1_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: 
             if kinds[k] == 0:
                 if pos + size > end:
                     return False
-                raw = np.uint64(0)
-                for i in range(size):
-                    raw |= np.uint64(buf[pos + i]) << np.uint64(8 * i)
-                code = codes[k]
-                if code == 10:
-                    word[0] = raw
-                    value = as_f64[0]
-                elif code == 9:
-                    half[0] = np.uint32(raw)
-                    value = np.float64(as_f32[0])
-                elif code == 1 or code == 3 or code == 5 or code == 7:
-                    value = np.float64(raw)
-                elif code == 8:
-                    value = np.float64(np.int64(raw))
-                else:  # signed 1, 2 or 4 bytes: two's complement
-                    bits = 8 * size
-                    signed = np.int64(raw)
-                    if signed >= (np.int64(1) << (bits - 1)):
-                        signed -= np.int64(1) << bits
-                    value = np.float64(signed)
+                value = le_value(buf, pos, size, codes[k], word, as_f64, half, as_f32)
                 if columns[k] >= 0:
                     out[m, columns[k]] = value
                 pos += size
@@ -283,3 +265,6 @@ def _decode_chunk(buf, starts, ends, numbers, times, connections: list, layouts:
         raw_times, raw_datas = result.raw.setdefault((topic, msgtype), ([], []))
         raw_times.extend(sel_times.tolist())
         raw_datas.extend(MessageBytes([(buf, sel_starts, sel_ends)]).to_list())
+
+
+follow_dependencies(__name__)  # the cached kernels are stamped with cdr's value decoding too

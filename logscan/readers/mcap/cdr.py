@@ -122,6 +122,31 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
     return CdrLayout(table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy(), table[:, 3].copy(), paths, skipped)
 
 
+@njit(cache=True, inline="always")
+def le_value(buf, pos, size, code, word, as_f64, half, as_f32):  # pragma: no cover - compiled
+    """The little-endian value of ``size`` bytes at ``buf[pos]`` as float64, by its type ``code``
+    (`_CDR_PRIMITIVES`): float64 (10) and float32 (9) through the ``word`` / ``half`` views,
+    unsigned (1, 3, 5, 7), int64 (8), other signed sizes by two's complement."""
+    raw = np.uint64(0)
+    for i in range(size):
+        raw |= np.uint64(buf[pos + i]) << np.uint64(8 * i)
+    if code == 10:
+        word[0] = raw
+        return as_f64[0]
+    if code == 9:
+        half[0] = np.uint32(raw)
+        return np.float64(as_f32[0])
+    if code == 1 or code == 3 or code == 5 or code == 7:
+        return np.float64(raw)
+    if code == 8:
+        return np.float64(np.int64(raw))
+    bits = 8 * size  # signed 1, 2 or 4 bytes: two's complement
+    signed = np.int64(raw)
+    if signed >= (np.int64(1) << (bits - 1)):
+        signed -= np.int64(1) << bits
+    return np.float64(signed)
+
+
 @njit(cache=True)
 def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: no cover - compiled
     """Run the layout program over each message; False when a message does not fit it."""
@@ -144,28 +169,7 @@ def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: n
                     pos += size - (pos - base) % size
                 if pos + size > end:
                     return False
-                raw = np.uint64(0)
-                for i in range(size):
-                    raw |= np.uint64(buf[pos + i]) << np.uint64(8 * i)
-                code = codes[k]
-                if code == 10:
-                    word[0] = raw
-                    value = as_f64[0]
-                elif code == 9:
-                    half[0] = np.uint32(raw)
-                    value = np.float64(as_f32[0])
-                elif code == 1 or code == 3 or code == 5:
-                    value = np.float64(raw)
-                elif code == 7:
-                    value = np.float64(raw)
-                elif code == 8:
-                    value = np.float64(np.int64(raw))
-                else:  # signed 1, 2 or 4 bytes: two's complement
-                    bits = 8 * size
-                    signed = np.int64(raw)
-                    if signed >= (np.int64(1) << (bits - 1)):
-                        signed -= np.int64(1) << bits
-                    value = np.float64(signed)
+                value = le_value(buf, pos, size, codes[k], word, as_f64, half, as_f32)
                 if columns[k] >= 0:
                     out[m, columns[k]] = value
                 pos += size
