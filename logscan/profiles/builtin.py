@@ -95,24 +95,30 @@ def topic_schemas(path, fmt: str) -> dict[str, tuple[str, str]]:
     """Topic -> (message encoding, schema name) of a log, without decoding its messages: an MCAP's
     summary section when it has one (its Channel and Schema records), else a read that decodes
     nothing (`read_log` with no topic wanted: a scan of an MCAP, a bag's connections)."""
+    if fmt == "mcap":
+        summarised = _mcap_summary_schemas(path)
+        if summarised:
+            return summarised
+    log = read_log(path, topics=())
+    return {name: (t.encoding, t.schema) for name, t in log.source.topics.items()}
+
+
+def _mcap_summary_schemas(path) -> dict[str, tuple[str, str]] | None:
+    """`topic_schemas` from an MCAP's summary section; None without one (or a damaged one)."""
     try:
-        if fmt != "mcap":
-            raise LookupError(fmt)
         from mcap.reader import make_reader
 
         with open(path, "rb") as fh:
             summary = make_reader(fh).get_summary()
-        if summary is not None and summary.channels:
-            out = {}
-            for channel in summary.channels.values():
-                schema = summary.schemas.get(channel.schema_id)
-                out.setdefault(channel.topic, (channel.message_encoding, schema.name if schema else ""))
-            return out
-    except Exception:  # noqa: BLE001 - a bag, a damaged or summary-less MCAP: the read below says what is wrong
-        pass
-
-    log = read_log(path, topics=())
-    return {name: (t.encoding, t.schema) for name, t in log.source.topics.items()}
+    except Exception:  # noqa: BLE001 - a damaged or summary-less MCAP: the scan says what is wrong
+        return None
+    if summary is None or not summary.channels:
+        return None
+    out: dict[str, tuple[str, str]] = {}
+    for channel in summary.channels.values():
+        schema = summary.schemas.get(channel.schema_id)
+        out.setdefault(channel.topic, (channel.message_encoding, schema.name if schema else ""))
+    return out
 
 
 def _delay_line(params: dict, name: str, default_ms: float) -> str:

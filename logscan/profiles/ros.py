@@ -244,8 +244,8 @@ def _wheeled_profile(log, found: _Found, wheels: Wheels) -> BuiltProfile:
     odom = wheels.topic
     odom_hz = found.rate(speed)
     (speed_std,) = covariance_std(channels, [wheels.covariance(0) or ""])
-    yaw, yaw_std, yaw_hz, yaw_why = _yaw_rate(found, wheels)
-    imu_hz = yaw_hz if yaw_why.startswith("the IMU") else 0.0
+    yaw, yaw_std, yaw_hz, yaw_why, from_gyro = _yaw_rate(found, wheels)
+    imu_hz = yaw_hz if from_gyro else 0.0
     rate = nice_rate(max(imu_hz, odom_hz))
     header = [
         "# logscan built-in profile `ros_wheeled`: the `wheeled` model of a ground robot (its twist is",
@@ -345,9 +345,9 @@ def _param_line(name: str, std: float | None, default: float, unit: str, source:
     return f"{name} = {std:.4g}  # {unit}, sqrt of {source}"
 
 
-def _yaw_rate(found: _Found, wheels: Wheels) -> tuple[str, float | None, float, str]:
-    """(the ``w`` input's TOML value, its noise std or None, its rate, why): the IMU's gyro about
-    up when gravity shows the axis and the wheels' yaw rate agrees, else the wheels' own."""
+def _yaw_rate(found: _Found, wheels: Wheels) -> tuple[str, float | None, float, str, bool]:
+    """(the ``w`` input's TOML value, its noise std or None, its rate, why, from a gyro?): the IMU's
+    gyro about up when gravity shows the axis and the wheels' yaw rate agrees, else the wheels' own."""
     channels = found.channels
     odom_rate = wheels.field("angular.z")
     odom_hz = found.rate(wheels.field("linear.x"))
@@ -375,12 +375,12 @@ def _yaw_rate(found: _Found, wheels: Wheels) -> tuple[str, float | None, float, 
                 (std,) = covariance_std(channels, [f"{imu}/angular_velocity_covariance[{4 * axis}]"])
                 value = f'{{ channels = ["{gyro}"], scale = [{sign:g}] }}'
                 why = f"the IMU's {_AXES[axis]} axis, up by gravity (agrees with the odometry's: r = {agreement:.2f})"
-                return value, std, imu_hz, why
+                return value, std, imu_hz, why, True
             found.notes.append(
                 f"{imu}: its up axis disagrees with the odometry's yaw rate (r = {agreement:.2f}): not used"
             )
     (std,) = covariance_std(channels, [wheels.covariance(35) or ""])
-    return f'"{odom_rate}"', std, odom_hz, fallback_why
+    return f'"{odom_rate}"', std, odom_hz, fallback_why, False
 
 
 def _ins_profile(log, found: _Found) -> BuiltProfile:
