@@ -268,3 +268,14 @@ def test_every_allow_list_entry_still_has_an_import_inside_a_function():
     importers = {edge.importer for edge in internal_imports() if edge.in_function}
     stale = [p for p in FUNCTION_IMPORTS_ALLOWED if not any(fnmatch.fnmatchcase(m, p) for m in importers)]
     assert not stale, f"allowed but unused (drop them from the list): {stale}"
+
+
+def test_the_verdicts_import_nothing_from_the_simulator():
+    # the verdicts judge any log, simulated or not: the observability verdict's actuator names and
+    # mixers are the model's (`Model.actuators`, which the simulator reads too), not a scenario's
+    crossing = [
+        edge.where()
+        for edge in internal_imports()
+        if edge.importer.startswith("logscan.verdict") and edge.target.startswith("logscan.simulate")
+    ]
+    assert not crossing, "logscan.verdict imports the simulator:\n" + "\n".join(sorted(set(crossing)))

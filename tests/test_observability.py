@@ -10,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_model_contract import CASES  # every model, with the contract's example parameters
 
+from logscan.models import get_model
 from logscan.results import FaultEvent
 from logscan.verdict.observability import Direction, Observability, spans_of
 from logscan.verdict.scoring import label_observability, score_log
@@ -75,6 +77,8 @@ def test_steer_by_wire_shading_words_and_report_figure(steer):
 def test_quadcopter_sensor_bias_is_always_observable(tmp_path_factory):
     _, analysis = _simulated(tmp_path_factory, "quadcopter", 15.0, 9102)
     obs = analysis.observability
+    # the model's actuators (Model.actuators), named as the simulator's truth names them
+    assert [d.target for d in obs.directions if d.what == "actuator"] == ["motor1", "motor2", "motor3", "motor4"]
     for target in ("accel.x", "accel.z", "gyro.y"):
         d = _index(obs, target)
         judged = np.isfinite(obs.evidence[:, d])
@@ -83,6 +87,28 @@ def test_quadcopter_sensor_bias_is_always_observable(tmp_path_factory):
         assert obs.unobservable_intervals(d, "bias") == []
     assert obs.event_verdict(FaultEvent(5.0, 8.0, "bias", "accel.x", 1.0)) is True
     assert obs.event_verdict(FaultEvent(5.0, 8.0, "stuck", "accel.x", 0.0)) is None  # no verdict
+
+
+@pytest.mark.parametrize(("name", "params"), CASES)
+def test_every_model_s_actuators_drive_its_inputs_each_its_own_way(name, params):
+    model = get_model(name, params)
+    actuators = model.actuators()
+    A = len(actuators.names)
+    assert actuators.M.shape == (model.n_inputs, A) and actuators.trim.shape == (A,)
+    if model.inputs_are_sensors:
+        assert A == 0  # the IMU of ins is a sensor: its faults are sensor faults
+    else:  # one actuator per input at least (none for a model without inputs), each its own direction
+        assert A >= model.n_inputs and np.linalg.matrix_rank(actuators.M) == model.n_inputs
+        assert len(set(actuators.names)) == A
+
+
+def test_the_mixer_follows_what_the_quadcopter_s_inputs_are():
+    wrench, motors = get_model("quadcopter").actuators(), get_model("quadcopter", {"inputs": "motors"}).actuators()
+    assert wrench.names == motors.names == ("motor1", "motor2", "motor3", "motor4")
+    assert np.allclose(wrench.M, get_model("quadcopter").mixer_matrix())  # thrust and torques from motor thrusts
+    assert np.array_equal(motors.M, np.eye(4))  # the inputs are the motors' own speeds
+    hover = get_model("hover_uav")
+    assert np.allclose(hover.actuators().trim, hover.hover_thrust())  # F1..F4 deviate from hover
 
 
 def _crafted() -> Observability:

@@ -17,6 +17,18 @@ from logscan.models import dispatch
 
 
 @dataclass(frozen=True)
+class Actuators:
+    """What drives a model's inputs: u = M @ a for actuator values a (the inputs as logged), an
+    actuator fault acting on its total trim + a. The simulator's actuators (`logscan simulate`) and
+    the fault directions of the observability verdict (`logscan.verdict.observability`) both read it,
+    so the verdict's names are the ground truth's."""
+
+    names: tuple[str, ...]  # as the simulator's truth names fault targets: motor1, steering_motor, rotor1
+    M: np.ndarray  # (n_inputs, A) float64: the mixer, inputs per unit of each actuator
+    trim: np.ndarray  # (A,) float64: the operating point the inputs deviate from (zeros: none)
+
+
+@dataclass(frozen=True)
 class GroupSpec:
     """A measurement group of a model (e.g. quadcopter "accel" = specific force x, y, z)."""
 
@@ -189,6 +201,14 @@ class Model:
     def state_scale(self) -> np.ndarray:
         """Typical magnitude of each state (sets the encoded check's sigma floor)."""
         return np.ones(len(self.state_names))
+
+    def actuators(self) -> Actuators:
+        """The model's actuators (`Actuators`): by default one per input, named after it, driving it
+        alone; none when the inputs are sensor readings (ins). A model with a mixer or an operating
+        point overrides it."""
+        if self.inputs_are_sensors:
+            return Actuators((), np.zeros((self.n_inputs, 0)), np.zeros(0))
+        return Actuators(tuple(self.input_names), np.eye(self.n_inputs), np.zeros(self.n_inputs))
 
     def at_rest(self, u: np.ndarray) -> np.ndarray | None:
         """(N,) bool: the grid steps where the inputs ``u`` (N, nu) say the vehicle stands still (a

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.models.base import GroupSpec
+from logscan.models.base import Actuators, GroupSpec
 from logscan.models.dispatch import DC_MOTOR_ID
 from logscan.models.linear import LinearBase
 
@@ -107,6 +107,10 @@ class DcMotor(LinearBase):
 
     def state_scale(self) -> np.ndarray:
         return np.array([5.0, 5.0])
+
+    def actuators(self) -> Actuators:
+        """The motor, whose armature voltage is the input."""
+        return Actuators(("motor",), np.eye(1), np.zeros(1))
 
     def steady_state(self, Va: float) -> np.ndarray:
         """Equilibrium [i_a, w_v] at constant voltage Va (A x + B Va = 0)."""

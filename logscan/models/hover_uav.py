@@ -37,7 +37,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from logscan.models.base import GroupSpec, raise_problems
+from logscan.models.base import Actuators, GroupSpec, raise_problems
 from logscan.models.dispatch import HOVER_UAV_ID
 from logscan.models.interval_model import IntervalModel
 from logscan.models.linear import LinearBase, discretise
@@ -159,6 +159,11 @@ class HoverUav(LinearBase):
     def mixer_matrix(self) -> np.ndarray:
         """The nominal mixer: [u1, u2, u3, u4] = M @ [F1, F2, F3, F4]."""
         return mixer_matrix(self.p["arm"], self.p["k_yaw"])
+
+    def actuators(self) -> Actuators:
+        """rotor1..rotor4: the inputs F1..F4 are their thrust deviations from hover (the mixer is
+        inside the model), a fault acts on the total thrust hover + F."""
+        return Actuators(("rotor1", "rotor2", "rotor3", "rotor4"), np.eye(4), np.full(4, self.hover_thrust()))
 
     # --- interval model (the UBIKF's) ----------------------------------------------------------
     def parameter_box(self) -> dict[str, tuple[float, float]]:

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from logscan.errors import ModelError
-from logscan.models.base import GroupSpec, Model
+from logscan.models.base import Actuators, GroupSpec, Model
 from logscan.models.dispatch import QUADCOPTER_ID
 
 _WRENCH_INPUTS = ("thrust", "tau_x", "tau_y", "tau_z")
@@ -154,6 +154,13 @@ class Quadcopter(Model):
         return np.array([thrust, 0.0, 0.0, 0.0])
 
     # --- mixer (for the simulator's controller and actuator faults) ---------------------------
+    def actuators(self) -> Actuators:
+        """motor1..motor4: their thrusts through the mixer (wrench inputs), or their speeds
+        themselves (inputs = "motors")."""
+        names = ("motor1", "motor2", "motor3", "motor4")
+        M = np.eye(4) if self.p["inputs"] == "motors" else self.mixer_matrix()
+        return Actuators(names, M, np.zeros(4))
+
     def mixer_matrix(self) -> np.ndarray:
         """M with [T, tau_x, tau_y, tau_z] = M @ [T1, T2, T3, T4] (motor thrusts, N).
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.models.base import GroupSpec, Model
+from logscan.models.base import Actuators, GroupSpec, Model
 from logscan.models.dispatch import STEER_BY_WIRE_ID
 
 DEFAULTS = {
@@ -104,3 +104,7 @@ class SteerByWire(Model):
 
     def state_scale(self) -> np.ndarray:
         return np.array([0.05, 0.1, 0.01, 0.05])
+
+    def actuators(self) -> Actuators:
+        """The steering motor, whose torque is the input."""
+        return Actuators(("steering_motor",), np.eye(1), np.zeros(1))

@@ -226,8 +226,6 @@ def ins_scenario(model, dt: float, t: np.ndarray, groups: list[SensorGroup], agg
         model=model,
         dt=dt,
         groups=groups,
-        actuators=[],
-        M=np.zeros((model.n_inputs, 0)),
         a_lo=np.zeros(0),
         a_hi=np.zeros(0),
         ctrl_id=-1,

@@ -161,9 +161,7 @@ class Scenario:
     model: Model
     dt: float
     groups: list[SensorGroup]
-    actuators: list[str]
-    M: np.ndarray  # inputs = M @ actuators
-    a_lo: np.ndarray
+    a_lo: np.ndarray  # the actuators' limits (the actuators themselves are the model's: `actuators`)
     a_hi: np.ndarray
     ctrl_id: int
     ctrl_params: np.ndarray
@@ -182,9 +180,6 @@ class Scenario:
     detectors: dict[str, dict] = field(default_factory=dict)  # the profile's [detectors.<name>] tables
     speed: str | None = None  # dc_motor's --speed as given (None: the mode cycle)
     noise: str = "constant"  # sensor noise: "speed" (SPEED_NOISE) or "constant"
-    # actuators' operating point when the inputs are deviations from it (hover_uav: m g / 4 per
-    # rotor); actuator faults act on a_trim + a. None: zeros
-    a_trim: np.ndarray | None = None
     profile_params: dict | None = None  # the profile's [vehicle] params (None: those given)
     # the controller flies on the true state, not the on-board estimate (hover_uav: the UBIKF
     # paper's scenarios excite the vehicle open loop, so a sensor fault does not feed back into the
@@ -192,6 +187,18 @@ class Scenario:
     control_on_truth: bool = False
     controller_input: str = "on-board EKF estimate"  # what the truth says the vehicle flew on
     truth_extra: dict = field(default_factory=dict)  # extra entries of the truth document
+
+    @property
+    def actuators(self) -> list[str]:  # the model's (`Model.actuators`), as the observability verdict's
+        return list(self.model.actuators().names)
+
+    @property
+    def M(self) -> np.ndarray:  # (n_inputs, A): inputs = M @ actuators
+        return self.model.actuators().M
+
+    @property
+    def a_trim(self) -> np.ndarray:  # (A,) operating point (hover_uav: m g / 4): faults act on a_trim + a
+        return self.model.actuators().trim
 
 
 def input_channel(name: str) -> str:
@@ -365,7 +372,6 @@ def _quadcopter(model, dt, t, groups, aggressive, rng) -> Scenario:
     ref = ctl.quad_reference(t, aggressive)
     x0 = np.zeros(12)
     x0[:3] = ref[0, :3]
-    M = model.mixer_matrix()
     hover_motor = model.p["mass"] * model.p["g"] / 4.0
     mode = np.where(np.abs(ref[:, 3:6]).sum(axis=1) > 1e-9, 1.0, 0.0)  # 0 hover, 1 figure-eight
     return Scenario(
@@ -373,8 +379,6 @@ def _quadcopter(model, dt, t, groups, aggressive, rng) -> Scenario:
         model=model,
         dt=dt,
         groups=groups,
-        actuators=["motor1", "motor2", "motor3", "motor4"],
-        M=M,
         a_lo=np.zeros(4),
         a_hi=np.full(4, 2.5 * hover_motor),
         ctrl_id=ctl.QUAD_CTRL,
@@ -406,8 +410,6 @@ def _steer_by_wire(model, dt, t, groups, aggressive, rng) -> Scenario:
         model=model,
         dt=dt,
         groups=groups,
-        actuators=["steering_motor"],
-        M=np.eye(1),
         a_lo=np.array([-limit]),
         a_hi=np.array([limit]),
         ctrl_id=ctl.SBW_CTRL,
@@ -445,8 +447,6 @@ def _dc_motor(model, dt, t, groups, aggressive, rng, changes=None) -> Scenario:
         model=model,
         dt=dt,
         groups=groups,
-        actuators=["motor"],
-        M=np.eye(1),
         a_lo=np.array([-supply]),
         a_hi=np.array([supply]),
         ctrl_id=ctl.DCM_CTRL,
@@ -474,8 +474,6 @@ def _hover_uav(model, dt, t, groups, aggressive, rng) -> Scenario:
         model=model,
         dt=dt,
         groups=groups,
-        actuators=["rotor1", "rotor2", "rotor3", "rotor4"],
-        M=np.eye(4),  # the inputs are the rotor thrust deviations; the mixer is inside the model
         a_lo=np.full(4, -hover),  # a rotor cannot pull down: total thrust >= 0
         a_hi=np.full(4, 1.5 * hover),  # total <= 2.5 x hover, as the quadcopter's motors
         ctrl_id=ctl.HOVER_CTRL,
@@ -494,7 +492,6 @@ def _hover_uav(model, dt, t, groups, aggressive, rng) -> Scenario:
             "/setpoint/yaw": ref[:, 5],
         },
         onboard_rate_hz=min(50.0, 1.0 / dt),
-        a_trim=np.full(4, hover),
         profile_params=dict(model.p),
         control_on_truth=True,
     )

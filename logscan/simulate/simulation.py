@@ -345,7 +345,7 @@ def simulate_closed_loop(
         np.ascontiguousarray(np.linalg.inv(sc.M)),
         sc.a_lo.astype(np.float64),
         sc.a_hi.astype(np.float64),
-        np.zeros(len(sc.actuators)) if sc.a_trim is None else sc.a_trim.astype(np.float64),
+        np.ascontiguousarray(sc.a_trim, dtype=np.float64),
         table.kind,
         table.target,
         table.start,

@@ -19,8 +19,8 @@ commanded torque is nearly zero, so is the offset) is the case in point.
 Kinds with a verdict: actuator-offset and lost-actuator on every actuator, bias on every measured
 output. Other kinds (drift, stuck, noise, bit flips, estimator corruption) get none: their
 signature does not depend on the excitation this way (a stuck sensor is seen by its vanished noise).
-Actuators: the simulator's scenario of the model (names, mixer and operating point, so the names
-match the ground truth of simulated logs), else one actuator per model input.
+Actuators: the model's own (`Model.actuators`: names, mixer and operating point, the source the
+simulator reads too, so the names match the ground truth of simulated logs).
 """
 
 from __future__ import annotations
@@ -31,8 +31,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from logscan.models.dispatch import call_literal
-from logscan.simulate.dispatch import build_scenario
-from logscan.simulate.scenario import SIMULATED_MODELS
 from logscan.verdict.observability_kernel import (
     FaultDirections,
     FilterModel,
@@ -196,25 +194,6 @@ def spans_of(mask: np.ndarray, t_start: np.ndarray, stride_s: float, t_end: floa
 # --- building the verdict from a filtered run ------------------------------------------------------
 
 
-def actuators_of(model, dt: float) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """(names, M, trim): inputs u = M a for actuator values a, a fault acting on trim + a. The
-    simulator's scenario of the model when it has one (its names are the ground truth's), else
-    one actuator per model input. A model whose inputs are sensors (ins) has none."""
-    if getattr(model, "inputs_are_sensors", False):
-        return [], np.zeros((model.n_inputs, 0)), np.zeros(0)
-    try:
-        if model.name in SIMULATED_MODELS:
-            rate = 1.0 / dt
-            sc = build_scenario(model.name, 4 * dt, rate, False, np.random.default_rng(0), params=model.params)
-            M = np.asarray(sc.M, dtype=np.float64)
-            if M.shape == (model.n_inputs, len(sc.actuators)):
-                trim = np.zeros(M.shape[1]) if sc.a_trim is None else np.asarray(sc.a_trim, dtype=np.float64)
-                return list(sc.actuators), M, trim
-    except Exception:  # noqa: BLE001 - a scenario that cannot be built: fall back to the inputs
-        pass
-    return list(model.input_names), np.eye(model.n_inputs), np.zeros(model.n_inputs)
-
-
 def held_inputs(u: np.ndarray) -> np.ndarray:
     """u with every non-finite row replaced by the last finite one (zeros before the first), as
     the filter holds them."""
@@ -233,7 +212,8 @@ def observability_of(model, run, trace, *, window_s=WINDOW_S, stride_s=STRIDE_S,
     dt = float(trace.dt)
     stride = max(int(round(stride_s / dt)), 1)
     window = max(int(round(window_s / dt / stride)), 1) * stride
-    names, M, trim = actuators_of(model, dt)
+    actuators = model.actuators()
+    names, M, trim = list(actuators.names), np.asarray(actuators.M, dtype=np.float64), actuators.trim
     u = held_inputs(run.u)
     # actuator values a = M^+ u (+ trim): the fault du = M[:, a] * m * value
     values = np.ascontiguousarray(u @ np.linalg.pinv(M).T) if names else np.zeros((u.shape[0], 0))
