@@ -18,7 +18,7 @@ from conftest import need_testdata
 from ros_edit import drop_topics, hold_fix, shift_fix, to_db3
 
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
-from logscan.profiles import parse_profile, ros
+from logscan.profiles import parse_profile, ros, ros_wheeled
 
 ROS2_DIR = "ros-robots/robot_localization_test1_husky_ros2"
 ROS2_MCAP = f"{ROS2_DIR}/robot_localization_test1_husky_ros2.mcap"
@@ -95,7 +95,7 @@ def test_the_ros_wheeled_profile_of_the_husky(tmp_path):
     position = profile.measurements["position"]
     assert (position.source, position.frame, position.noise_std) == ("geodetic", "en", [0.8, 0.8])
     # /fix reports position_covariance_type 1 (approximated): the wander is the GPS SPS standard's
-    assert profile.vehicle.params["gnss_error_std"] == pytest.approx(ros.GPS_SPS_SIGMA_M, rel=1e-2)
+    assert profile.vehicle.params["gnss_error_std"] == pytest.approx(ros_wheeled.GPS_SPS_SIGMA_M, rel=1e-2)
     assert any("altitude not checked" in note for note in built.notes)
 
 

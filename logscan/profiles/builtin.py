@@ -66,6 +66,7 @@ BEFORE_LANDING_S = 3.0  # PX4's land detector confirms a touchdown about 2 s lat
 # are PX4's): a shorter stay on the ground in flight is a blip (a bounce, an impact), judged as flight
 LAND_TRIGGER_S = {"LNDMC_TRIG_TIME": 1.0, "LNDFW_TRIG_TIME": 2.0}
 MAV_TYPE_FIXED_WING = 1
+GPS_P_NOISE_M = 0.5  # PX4's default EKF2_GPS_P_NOISE: the GNSS (or local) position noise
 _IMU = "sensor_combined_0"
 _FULL_IMU = "vehicle_imu_0"  # the IMU's integrated increments at the full sensor rate
 
@@ -197,7 +198,6 @@ def px4_profile(log) -> BuiltProfile:
     """The `px4` profile of a PX4 ULog read with (at least) PX4_TOPICS; see the module docstring."""
     channels = log.channels
     params = log.source.metadata.get("ulog.parameters", {})
-    path = log.source.path
     has = lambda name: name in channels and len(channels[name]) > 0  # noqa: E731
     notes: list[str] = []
     if log.source.format == "csv-dir":  # PX4's ulog2csv export: the topics alone
@@ -209,16 +209,29 @@ def px4_profile(log) -> BuiltProfile:
     if imu is None:
         raise InputError(
             "a PX4 log without an IMU topic (sensor_combined or vehicle_imu): the built-in px4 profile needs one",
-            path=path,
+            path=log.source.path,
             hint=f"pass --profile ({doc_url('profiles.md')}; examples in {doc_url('examples')})",
         )
-    topic, gyro, accel, per_second, imu_hz = imu
+    topic, *_, imu_hz = imu
     # an IMU too slow for the ins model: the filter-free checks still run, on a grid of MIN_IMU_HZ
     model_not_run = slow_imu_reason(topic, imu_hz) if imu_hz < MIN_IMU_HZ else ""
+    lines = _head_lines(log, params, imu, model_not_run)
+    noise = _group_noise(channels, params)
+    lines += _gnss_lines(channels, has, params, noise, notes)
+    lines += _baro_lines(channels, has, params, noise, notes)
+    lines += _attitude_lines(channels, has, notes)
+    lines += _tail_lines(has, params, model_not_run)
+    return BuiltProfile("px4", "\n".join(lines), notes, model_not_run)
+
+
+def _head_lines(log, params: dict, imu, model_not_run: str) -> list[str]:
+    """The profile's comment, name, ``[vehicle]`` (rate and PX4's EKF2 IMU noise) and ``[inputs]``
+    (the IMU of `_imu`)."""
+    topic, gyro, accel, per_second, imu_hz = imu
     rate = nice_rate(max(imu_hz, MIN_IMU_HZ))
-    lines = [
+    return [
         "# logscan built-in profile `px4`: the IMU-driven ins model on a PX4 flight log, built from the",
-        f"# topics of {path}. Edit and pass it with --profile ({doc_url('profiles.md')}).",
+        f"# topics of {log.source.path}. Edit and pass it with --profile ({doc_url('profiles.md')}).",
         *([f"# The ins model is not run: {model_not_run}. Only the filter-free checks."] * bool(model_not_run)),
         'name = "px4"',
         f'description = "built-in: ins model on {topic}, GNSS, barometer and PX4\'s attitude"',
@@ -238,11 +251,15 @@ def px4_profile(log) -> BuiltProfile:
         *_imu_lines(topic, gyro, accel, per_second),
         f"stale_s = {max(2.5 / imu_hz, 0.05):.3g}  # an IMU gap longer than this is a dropout",
     ]
-    gps_p = _param(params, "EKF2_GPS_P_NOISE", 0.5)
+
+
+def _group_noise(channels, params: dict) -> dict:
+    """Each group's noise (`logscan.profiles.px4_noise.Noise`) from the scatter of PX4's own
+    innovations, PX4's configured noise the ceiling; never the receiver's reported accuracy (a sensor
+    does not vouch for itself)."""
+    gps_p = _param(params, "EKF2_GPS_P_NOISE", GPS_P_NOISE_M)
     gps_v = _param(params, "EKF2_GPS_V_NOISE", 0.3)
-    # each group's noise from the scatter of PX4's own innovations, PX4's configured noise the
-    # ceiling; never the receiver's reported accuracy (a sensor does not vouch for itself)
-    noise = px4_noise(
+    return px4_noise(
         channels,
         lambda name, default: _param(params, name, default),
         {
@@ -251,81 +268,105 @@ def px4_profile(log) -> BuiltProfile:
             "baro": ((_param(params, "EKF2_BARO_NOISE", 3.5),), "EKF2_BARO_NOISE"),
         },
     )
+
+
+def _gnss_lines(channels, has, params: dict, noise: dict, notes: list[str]) -> list[str]:
+    """``[measurements.gnss_position]`` and ``gnss_velocity`` from the log's GNSS (`_gnss`), else
+    PX4's own local position as the position; none without either (a note says so)."""
+    gnss = _gnss(channels, has)
+    if gnss is None:
+        return _local_position_lines(channels, has, params, notes)
+    topic, pos, scale, vel = gnss
     # the receiver's latency PX4 flew with (ms; its default 110): a fix describes the vehicle then
     gps_delay = _delay_line(params, "EKF2_GPS_DELAY", 110.0)
-    gnss = _gnss(channels, has)
-    if gnss is not None:
-        topic, pos, scale, vel = gnss
-        hz = rate_hz(channels[pos[0]].t)
-        lines += ["", "[measurements.gnss_position]", f"channels = {toml_list(pos)}"]
-        if scale:
-            lines.append("scale = [1e-7, 1e-7, 1e-3]  # PX4 logs degrees x 1e7 and millimetres")
+    hz = rate_hz(channels[pos[0]].t)
+    lines = ["", "[measurements.gnss_position]", f"channels = {toml_list(pos)}"]
+    if scale:
+        lines.append("scale = [1e-7, 1e-7, 1e-3]  # PX4 logs degrees x 1e7 and millimetres")
+    lines += [
+        'from = "geodetic"  # local NED about the first fix',
+        f"rate_hz = {hz:.3g}",
+        _noise_std_line(noise["gnss_position"]),
+    ]
+    fix = f"/{topic}/fix_type"
+    gate = f'gate = {{ channel = "{fix}", min = 3 }}  # only 3D fixes' if has(fix) else None
+    if gate:
+        lines.append(gate)
+    lines.append(gps_delay)
+    if all(has(ch) for ch in vel):
         lines += [
-            'from = "geodetic"  # local NED about the first fix',
+            "",
+            "[measurements.gnss_velocity]",
+            f"channels = {toml_list(vel)}",
             f"rate_hz = {hz:.3g}",
-            _noise_std_line(noise["gnss_position"]),
+            _noise_std_line(noise["gnss_velocity"]),
         ]
-        fix = f"/{topic}/fix_type"
-        gate = f'gate = {{ channel = "{fix}", min = 3 }}  # only 3D fixes' if has(fix) else None
         if gate:
             lines.append(gate)
         lines.append(gps_delay)
-        if all(has(ch) for ch in vel):
-            lines += [
-                "",
-                "[measurements.gnss_velocity]",
-                f"channels = {toml_list(vel)}",
-                f"rate_hz = {hz:.3g}",
-                _noise_std_line(noise["gnss_velocity"]),
-            ]
-            if gate:
-                lines.append(gate)
-            lines.append(gps_delay)
-        else:
-            notes.append(f"optional gnss_velocity: {topic} has no vel_n_m_s/vel_e_m_s/vel_d_m_s: left out")
     else:
-        local = _channels("vehicle_local_position_0", ("x", "y", "z"))
-        if all(has(ch) for ch in local):
-            hz = rate_hz(channels[local[0]].t)
-            notes.append("no GNSS topic: PX4's own local position (vehicle_local_position x, y, z) is the position")
-            lines += [
-                "",
-                "[measurements.gnss_position]  # no GNSS in this log: PX4's own local position estimate",
-                f"channels = {toml_list(local)}",
-                f"rate_hz = {hz:.3g}",
-                f"noise_std = {gps_p:.3g}",
-            ]
-        else:
-            notes.append("optional gnss_position, gnss_velocity: no vehicle_gps_position or sensor_gps: left out")
+        notes.append(f"optional gnss_velocity: {topic} has no vel_n_m_s/vel_e_m_s/vel_d_m_s: left out")
+    return lines
+
+
+def _local_position_lines(channels, has, params: dict, notes: list[str]) -> list[str]:
+    """Without GNSS: ``[measurements.gnss_position]`` from PX4's own local position (x, y, z)."""
+    local = _channels("vehicle_local_position_0", ("x", "y", "z"))
+    if not all(has(ch) for ch in local):
+        notes.append("optional gnss_position, gnss_velocity: no vehicle_gps_position or sensor_gps: left out")
+        return []
+    hz = rate_hz(channels[local[0]].t)
+    notes.append("no GNSS topic: PX4's own local position (vehicle_local_position x, y, z) is the position")
+    return [
+        "",
+        "[measurements.gnss_position]  # no GNSS in this log: PX4's own local position estimate",
+        f"channels = {toml_list(local)}",
+        f"rate_hz = {hz:.3g}",
+        f"noise_std = {_param(params, 'EKF2_GPS_P_NOISE', GPS_P_NOISE_M):.3g}",
+    ]
+
+
+def _baro_lines(channels, has, params: dict, noise: dict, notes: list[str]) -> list[str]:
+    """``[measurements.baro]`` from ``vehicle_air_data`` (older logs: ``sensor_combined``)."""
     baro = next(
         (ch for ch in ("/vehicle_air_data_0/baro_alt_meter", f"/{_IMU}/baro_alt_meter") if has(ch)),
         None,
     )
-    if baro is not None:
-        hz = rate_hz(channels[baro].t)
-        lines += [
-            "",
-            "[measurements.baro]",
-            f'channels = ["{baro}"]',
-            f"rate_hz = {hz:.3g}",
-            _noise_std_line(noise["baro"]),
-            _delay_line(params, "EKF2_BARO_DELAY", 0.0),
-        ]
-    else:
+    if baro is None:
         notes.append("optional baro: no vehicle_air_data: left out")
+        return []
+    hz = rate_hz(channels[baro].t)
+    return [
+        "",
+        "[measurements.baro]",
+        f'channels = ["{baro}"]',
+        f"rate_hz = {hz:.3g}",
+        _noise_std_line(noise["baro"]),
+        _delay_line(params, "EKF2_BARO_DELAY", 0.0),
+    ]
+
+
+def _attitude_lines(channels, has, notes: list[str]) -> list[str]:
+    """``[measurements.attitude]`` from PX4's own estimate, ``vehicle_attitude.q``."""
     quaternion = _channels("vehicle_attitude_0", ("q[0]", "q[1]", "q[2]", "q[3]"))
-    if all(has(ch) for ch in quaternion):
-        hz = rate_hz(channels[quaternion[0]].t)
-        lines += [
-            "",
-            "[measurements.attitude]  # PX4's own attitude estimate, checked against the IMU and GNSS",
-            f"channels = {toml_list(quaternion)}",
-            'from = "quaternion"',
-            f"rate_hz = {hz:.3g}",
-            "noise_std = 0.05",
-        ]
-    else:
+    if not all(has(ch) for ch in quaternion):
         notes.append("optional attitude: no vehicle_attitude: left out")
+        return []
+    hz = rate_hz(channels[quaternion[0]].t)
+    return [
+        "",
+        "[measurements.attitude]  # PX4's own attitude estimate, checked against the IMU and GNSS",
+        f"channels = {toml_list(quaternion)}",
+        'from = "quaternion"',
+        f"rate_hz = {hz:.3g}",
+        "noise_std = 0.05",
+    ]
+
+
+def _tail_lines(has, params: dict, model_not_run: str) -> list[str]:
+    """``[mode]`` (PX4's flight mode), ``[alarms]`` (the convergence, the ground and its transients
+    not judged) and the detectors."""
+    lines = []
     if has("/vehicle_status_0/nav_state"):
         lines += [
             "",
@@ -353,7 +394,7 @@ def px4_profile(log) -> BuiltProfile:
         "[detectors.health]  # plausibility: battery, GNSS fix, motors, IMU clipping, logged errors, timeouts",
         "",
     ]
-    return BuiltProfile("px4", "\n".join(lines), notes, model_not_run)
+    return lines
 
 
 def _vehicle_id_line(log) -> list[str]:
