@@ -56,7 +56,15 @@ from logscan import __version__
 from logscan.align import AlignedRun
 from logscan.detectors.isolation import call_isolated
 from logscan.detectors.params import describe_constraints, satisfies
-from logscan.errors import InputError, InternalError, NotTrainedError, OutOfMemoryError, ProfileError, UsageError
+from logscan.errors import (
+    InputError,
+    InternalError,
+    NotTrainedError,
+    OutOfMemoryError,
+    ProfileError,
+    UsageError,
+    did_you_mean,
+)
 from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
 
@@ -183,7 +191,8 @@ class Detector:
         if unknown:
             raise ProfileError(
                 f"detector {self.name!r}: unknown parameter(s) {', '.join(unknown)}",
-                hint=f"known: {', '.join(sorted(self.defaults)) or 'none'}",
+                hint="".join(did_you_mean(name, self.defaults) for name in unknown)
+                + f"known: {', '.join(sorted(self.defaults)) or 'none'}",
             )
         for key, constraints in self.parameter_constraints.items():
             value = self.params.get(key)

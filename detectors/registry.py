@@ -26,7 +26,7 @@ from typing import Any
 
 from logscan.detectors.base import Detector, describe
 from logscan.detectors.params import describe_constraints
-from logscan.errors import LogscanError, ProfileError
+from logscan.errors import LogscanError, ProfileError, did_you_mean
 
 ENTRY_POINT_GROUP = "logscan.detectors"
 
@@ -299,7 +299,8 @@ class Registry:
             )
         raise ProfileError(
             f"unknown detector {name!r}",
-            hint=f"available: {', '.join(self.names()) or 'none'} (see `logscan detectors`)",
+            hint=f"{did_you_mean(name, self.names())}available: {', '.join(self.names()) or 'none'} "
+            "(see `logscan detectors`)",
         )
 
     def origin(self, name: str) -> str | None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
 from enum import IntEnum
 
 # set by the CLI's Ctrl-C handler (logscan.cli.main): a Ctrl-C whose exception Python swallowed
@@ -38,11 +40,20 @@ class LogscanError(Exception):
         parts = []
         if self.path:
             parts.append(f"{self.path}:")
-        parts.append(self.message)
+        parts.append(self._every_problem())
         text = " ".join(parts)
         if self.hint:
             text = f"{text} ({self.hint})"
         return " ".join(text.split())
+
+    def _every_problem(self) -> str:
+        """The message with every problem an error collected (``problems``) listed: "invalid
+        profile: 3 problems: a; b; c" for its "invalid profile: a (2 more)"."""
+        problems = getattr(self, "problems", None) or []
+        folded = f"{problems[0]} ({len(problems) - 1} more)" if len(problems) > 1 else None
+        if folded is None or folded not in self.message:
+            return self.message
+        return self.message.replace(folded, f"{len(problems)} problems: " + "; ".join(problems))
 
 
 class UsageError(LogscanError):
@@ -95,3 +106,10 @@ class OutOfMemoryError(LogscanError):
 
     def __init__(self, path: str | None = None):
         super().__init__(OUT_OF_MEMORY, path=path)
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """ "did you mean 'nis'? " (with its trailing space, to open a hint) when one of ``choices`` is
+    close to the misspelt ``word`` (difflib's ratio >= 0.6, up to three names); "" when none is."""
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=3, cutoff=0.6)
+    return f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""

@@ -10,6 +10,7 @@ import click
 from logscan.artifacts import Staged
 from logscan.cli.options import (
     check_parallelism,
+    detector_option,
     echo_notice,
     header_stamp_option,
     jobs_option,
@@ -67,13 +68,7 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
     help="Write plotly.min.js once into this directory and reference it from the reports "
     "(small reports for fleets) instead of embedding it in each report.",
 )
-@click.option(
-    "--detector",
-    "-d",
-    "detector_names",
-    multiple=True,
-    help="Run only this detector (repeatable). Default: those the profile enables.",
-)
+@detector_option("Run only this detector (repeatable). Default: those the profile enables.")
 @click.option("--exit-zero", is_flag=True, default=False, help="Exit 0 even when there are alarms.")
 @click.option(
     "--allow-partial",
@@ -199,10 +194,6 @@ def analyze(
         from logscan.pipeline import create_detectors, load_profile_for
 
         create_detectors(load_profile_for(None, profile_path), names)
-    if tables_path is not None:  # a bad tables file stops the run before any log is read
-        from logscan.training.tables import read_tables
-
-        read_tables(tables_path)
     logs = expand_logs(log_paths)
     if print_profile:
         _print_profiles(logs, profile_path, err=json_path == "-")

@@ -8,6 +8,7 @@ import click
 
 from logscan.cli.options import (
     check_parallelism,
+    detector_option,
     header_stamp_option,
     jobs_option,
     json_option,
@@ -57,13 +58,7 @@ from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
     help="Seconds after the grace period of a detected fault during which an alarm that starts is "
     "counted as recovery (the filter settling), neither a detection nor a false alarm.",
 )
-@click.option(
-    "--detector",
-    "-d",
-    "detector_names",
-    multiple=True,
-    help="Evaluate only this detector (repeatable). Default: those each log's profile enables.",
-)
+@detector_option("Evaluate only this detector (repeatable). Default: those each log's profile enables.")
 @profile_option
 @tables_option
 @window_option

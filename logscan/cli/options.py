@@ -6,13 +6,58 @@ import sys
 
 import click
 
+
+def _tables_file(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """Read --tables before any log (exit 2 on a file that is not tables JSON)."""
+    if value is not None:
+        from logscan.training.tables import read_tables
+
+        read_tables(value)
+    return value
+
+
 tables_option = click.option(
     "--tables",
     "tables_path",
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
+    callback=_tables_file,
     help="Trained tables written by `logscan train` for this profile. Default: the profile's `tables` key.",
 )
+
+
+def _detector_names(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+    """Every --detector name known to the registry, before any profile or log is read (exit 2:
+    "unknown detector 'nsi' (did you mean 'nis'? available: ...)")."""
+    if value:
+        from logscan.detectors.registry import default_registry
+
+        registry = default_registry()
+        for name in value:
+            registry.get(name)
+    return value
+
+
+def complete_detectors(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
+    """Shell completion of detector names (built-in and plugins)."""
+    from logscan.detectors.registry import default_registry
+
+    return [name for name in default_registry().names() if name.startswith(incomplete)]
+
+
+def detector_option(help_text: str):
+    """-d/--detector NAME (repeatable), checked against the registry and completed by the shell."""
+    return click.option(
+        "--detector",
+        "-d",
+        "detector_names",
+        multiple=True,
+        metavar="NAME",
+        callback=_detector_names,
+        shell_complete=complete_detectors,
+        help=help_text,
+    )
+
 
 profile_option = click.option(
     "--profile",

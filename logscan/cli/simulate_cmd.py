@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from logscan.cli.options import echo_notice, output_option, quiet_option, seed_option, show_progress
-from logscan.errors import UsageError
+from logscan.errors import UsageError, did_you_mean
 
 _FAULT_HELP = (
     "Inject a fault (repeatable). KIND or KIND:TARGET:START:END:MAGNITUDE (empty fields take "
@@ -18,6 +18,42 @@ _FAULT_HELP = (
     "its attitude excitation): roll-bias (0.1 rad on attitude.roll for k in [30, 70]), rotor-loss "
     "(rotor1 stops from k = 31)."
 )
+
+
+def _models() -> tuple[str, ...]:
+    """What `logscan simulate` simulates: the models of the scenarios, and the hierarchical robot."""
+    from logscan.simulate import SIMULATED_MODELS
+
+    return (*SIMULATED_MODELS, "ground_robot")
+
+
+def _model_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    """MODEL checked first, before any output, fault or compile (exit 2, with the closest names)."""
+    if value not in _models():
+        raise UsageError(
+            f"cannot simulate model {value!r}",
+            hint=did_you_mean(value, _models()) + "simulated models: " + ", ".join(_models()),
+        )
+    return value
+
+
+def _fault_texts(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+    """Each --fault parsed before any output is checked or kernel compiled (exit 2 on a bad one)."""
+    from logscan.simulate import parse_fault
+
+    for text in value:
+        parse_fault(text)
+    return value
+
+
+def _complete_models(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
+    return [name for name in _models() if name.startswith(incomplete)]
+
+
+def _complete_faults(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
+    from logscan.simulate import FAULT_NAMES
+
+    return [name for name in FAULT_NAMES if name.startswith(incomplete)]
 
 
 @click.command(
@@ -32,8 +68,16 @@ _FAULT_HELP = (
     "  logscan simulate ground_robot -o robot.mcap\n\n"
     "  logscan simulate ground_robot --scenario random --seed 3 -o robot_3.mcap"
 )
-@click.argument("model_name", metavar="MODEL")
-@click.option("--fault", "faults", multiple=True, metavar="KIND[:TARGET:START:END:MAG]", help=_FAULT_HELP)
+@click.argument("model_name", metavar="MODEL", callback=_model_name, shell_complete=_complete_models)
+@click.option(
+    "--fault",
+    "faults",
+    multiple=True,
+    metavar="KIND[:TARGET:START:END:MAG]",
+    callback=_fault_texts,
+    shell_complete=_complete_faults,
+    help=_FAULT_HELP,
+)
 @click.option(
     "--at",
     "at",

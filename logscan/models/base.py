@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from logscan.errors import ModelError
+from logscan.errors import ModelError, did_you_mean
 from logscan.models import dispatch
 
 
@@ -123,7 +123,10 @@ class Model:
     def _merge_params(self, defaults: dict) -> dict:
         """defaults updated by self.params; one ModelError listing every unknown, non-numeric or
         non-finite parameter."""
-        problems = [f"model {self.name!r}: unknown parameter {k}" for k in sorted(set(self.params) - set(defaults))]
+        problems = []
+        for k in sorted(set(self.params) - set(defaults)):
+            close = did_you_mean(k, defaults).strip()
+            problems.append(f"model {self.name!r}: unknown parameter {k}" + (f" ({close})" if close else ""))
         merged = dict(defaults)
         for key, value in self.params.items():
             if key not in defaults:

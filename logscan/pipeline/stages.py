@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
-from logscan.errors import ProfileError
+from logscan.errors import ProfileError, did_you_mean
 from logscan.filters.ekf import run_ekf
 from logscan.filters.ubikf import run_ubikf
 from logscan.needs import Needs, union
@@ -175,7 +175,8 @@ def refuse_embedded_plugins(
         raise ProfileError(
             f"unknown detector {unknown!r}",
             path=source,
-            hint=f"available: {', '.join(builtins)} (a profile embedded in a log runs built-in detectors only; "
+            hint=f"{did_you_mean(unknown, builtins)}available: {', '.join(builtins)} "
+            "(a profile embedded in a log runs built-in detectors only; "
             "see `logscan detectors`)",
         )
 

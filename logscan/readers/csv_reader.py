@@ -45,7 +45,7 @@ from logscan.errors import InputError
 from logscan.input_files import MAX_PROFILE_SIDECAR_BYTES, MAX_TRUTH_BYTES, read_input_text
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
-from logscan.readers.csv_blocks import CsvColumns, load_columns, sniff_delimiter
+from logscan.readers.csv_blocks import CsvColumns, _header_line, load_columns, sniff_delimiter
 from logscan.readers.csv_time import (
     MAX_TIME_NS,
     NS_PER_UNIT,
@@ -261,6 +261,17 @@ def _pick_time_column(frame: CsvColumns, path: Path) -> tuple[str, str | None]:
     )
 
 
+def _check_time_header(path: Path) -> None:
+    """The InputError of `_pick_time_column` when the header line of the wide CSV ``path`` names
+    no time column (read from the header alone, as the full read names the columns)."""
+    import csv
+    import io
+
+    header = _header_line(path)
+    names = [name.strip() for name in next(csv.reader(io.StringIO(header), delimiter=sniff_delimiter(header)), [])]
+    _pick_time_column(CsvColumns(names, {}, 0, ""), path)
+
+
 def _frame_channels(
     frame: CsvColumns,
     path: Path,
@@ -396,9 +407,13 @@ def read_truth_sidecar(path: Path) -> dict | None:
 
 
 def read_profile_sidecar(path: Path) -> str | None:
-    """Profile text from the ``<log>.profile.toml`` sidecar (written by `logscan simulate`)."""
+    """Profile text from the ``<log>.profile.toml`` sidecar (written by `logscan simulate`). A wide
+    CSV without one is first checked for a time column: a file that is no log says so before "no
+    profile"."""
     sidecar = _sidecar(path, ".profile.toml")
     if not os.path.lexists(sidecar):
+        if path.is_file():
+            _check_time_header(path)
         return None
     # a regular file under a size limit: a FIFO or a device there is refused, never read
     return read_input_text(sidecar, what="the profile sidecar", limit=MAX_PROFILE_SIDECAR_BYTES)

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from logscan.errors import UsageError
+from logscan.errors import UsageError, did_you_mean
 from logscan.results import FaultEvent
 
 # Kernel codes (the closed-loop kernel switches on these).
@@ -103,7 +103,7 @@ def parse_fault(text: str) -> FaultSpec:
     if kind not in ALL_NAMES:
         raise UsageError(
             f"unknown fault kind {kind!r}",
-            hint="choose one of " + ", ".join(ALL_NAMES),
+            hint=did_you_mean(kind, ALL_NAMES) + "choose one of " + ", ".join(ALL_NAMES),
         )
     if len(parts) > 5:
         raise UsageError(
@@ -257,7 +257,9 @@ def _defaults(name: str) -> tuple[str, str | None, float, float]:
     if name in KIND_DEFAULTS:
         magnitude, length = KIND_DEFAULTS[name]
         return name, None, magnitude, length
-    raise UsageError(f"unknown fault kind {name!r}", hint="choose one of " + ", ".join(ALL_NAMES))
+    raise UsageError(
+        f"unknown fault kind {name!r}", hint=did_you_mean(name, ALL_NAMES) + "choose one of " + ", ".join(ALL_NAMES)
+    )
 
 
 def _sensor_target(target: str, imu_default: str, channels: list[tuple[str, str]], kind: str) -> int:

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import logscan.simulate.controllers as ctl
-from logscan.errors import UsageError
+from logscan.errors import UsageError, did_you_mean
 from logscan.models import get_model
 from logscan.models.base import Model
 from logscan.simulate.faults import PAPER_SETTLE_S
@@ -240,7 +240,7 @@ def prepare_scenario(
     if model_name not in SIMULATED_MODELS:
         raise UsageError(
             f"cannot simulate model {model_name!r}",
-            hint="simulated models: " + ", ".join(SIMULATED_MODELS),
+            hint=did_you_mean(model_name, SIMULATED_MODELS) + "simulated models: " + ", ".join(SIMULATED_MODELS),
         )
     changes = check_speed(model_name, speed, duration)
     noise = resolve_noise(model_name, noise, speed)

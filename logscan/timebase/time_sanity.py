@@ -125,8 +125,10 @@ def grid(
             hi = min(hi, start_ns + round(end_s * NS))
         if hi - lo < dt_ns:
             span = f"{(first - start_ns) / NS:.3f} .. {(last - start_ns) / NS:.3f} s"
+            given = (("--start", start_s), ("--end", end_s))
+            asked = " ".join(f"{flag} {value:g}" for flag, value in given if value is not None)
             raise InputError(
-                f"the window --start {start_s} --end {end_s} holds no two grid steps of the log's channels ({span})",
+                f"the window {asked} holds no two grid steps of the log's channels ({span})",
                 path=path,
                 hint="give --start/--end in seconds since the log's start, within its span",
             )

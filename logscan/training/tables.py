@@ -124,9 +124,11 @@ def read_tables_document(path: str | os.PathLike) -> dict[str, Any]:
         document = json.loads(text)
     except RecursionError:
         raise InputError("the tables file is nested too deeply to be tables JSON", path=str(path)) from None
-    except ValueError as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"cannot read the tables file: {first}", path=str(path)) from None
+    except ValueError as exc:  # a JSONDecodeError: where, not the decoder's words
+        where = f" (line {exc.lineno}, column {exc.colno})" if isinstance(exc, json.JSONDecodeError) else ""
+        raise InputError(
+            f"not a tables file: not JSON{where}", path=str(path), hint="give the tables JSON `logscan train -o` wrote"
+        ) from None
     if not isinstance(document, dict) or document.get("format") != TABLES_FORMAT:
         raise InputError("not a logscan tables file", path=str(path), hint="use a file written by `logscan train`")
     if document.get("schema_version") != TABLES_VERSION:

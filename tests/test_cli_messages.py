@@ -1,0 +1,156 @@
+"""The CLI's messages for bad arguments (issue 30): one line naming the argument or file, what is
+wrong and what to do, exit 2; misspelt names get the closest ones (did you mean), and every
+argument is checked before a log is read or a kernel compiled."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+README = Path(__file__).resolve().parents[1] / "README.md"
+PROFILE = SAMPLES / "quad_healthy.profile.toml"
+DETECTORS = "encoded_ekf, nis, cusum, frozen, atfm, atfm_residual, chi2, kgn, px4_estimator, health"
+PROFILES_DOC = "https://github.com/logscan/logscan/blob/main/docs/profiles.md"
+FAULTS = (
+    "bias, drift, random, bitflip, stuck, actuator-offset, lost-actuator, cov-corruption, state-corruption, "
+    "imu-bias, imu-drift, imu-random, imu-bitflip, imu-stuck, motor-offset, lost-motor, roll-bias, rotor-loss"
+)
+
+
+def assert_message(result, line: str) -> None:
+    assert result.exit_code == 2, (result.exit_code, result.stderr)
+    assert result.stderr == f"logscan: error: {line}\n"
+
+
+def test_an_unknown_model_is_named_with_the_closest_before_anything_else(cli, tmp_path, monkeypatch):
+    import logscan.cli.simulate_cmd as simulate_cmd
+
+    def compiles(*args, **kwargs):
+        raise AssertionError("the simulator's kernel was looked at before the model was checked")
+
+    monkeypatch.setattr(simulate_cmd, "_simulator_cold", compiles)
+    result = cli("simulate", "quadcoptr", "-o", tmp_path / "q.mcap")
+    assert_message(
+        result,
+        "cannot simulate model 'quadcoptr' (did you mean 'quadcopter'? simulated models: quadcopter, "
+        "steer_by_wire, dc_motor, hover_uav, ins, ground_robot)",
+    )
+    assert not (tmp_path / "q.mcap").exists()
+
+
+def test_an_unknown_fault_kind_is_named_with_the_closest_before_the_output_is_checked(cli):
+    result = cli("simulate", "quadcopter", "--fault", "imu-bais")  # no -o: the fault is the first problem
+    assert_message(
+        result, f"unknown fault kind 'imu-bais' (did you mean 'imu-bias' or 'imu-bitflip'? choose one of {FAULTS})"
+    )
+
+
+@pytest.mark.parametrize("command", ["analyze", "evaluate"])
+def test_an_unknown_detector_on_the_command_line_gets_the_closest_name(cli, command):
+    result = cli(command, SAMPLES / "quad_healthy.mcap", "-d", "nsi", "--json", "-")
+    assert_message(
+        result, f"unknown detector 'nsi' (did you mean 'nis'? available: {DETECTORS} (see `logscan detectors`))"
+    )
+    assert result.stdout == ""
+
+
+def test_a_window_after_the_log_says_which_option_not_none(cli):
+    log = SAMPLES / "quad_healthy.mcap"
+    result = cli("analyze", log, "--start", "100", "--no-report")
+    assert_message(
+        result,
+        f"{log}: the window --start 100 holds no two grid steps of the log's channels (0.000 .. 60.000 s) "
+        "(give --start/--end in seconds since the log's start, within its span)",
+    )
+
+
+@pytest.mark.parametrize("command", ["analyze", "evaluate"])
+def test_tables_that_are_not_json_are_one_line_before_any_log(cli, command):
+    result = cli(command, SAMPLES / "quad_healthy.mcap", "--tables", README, "--json", "-")
+    assert_message(
+        result,
+        f"{README}: not a tables file: not JSON (line 1, column 1) (give the tables JSON `logscan train -o` wrote)",
+    )
+    assert result.stdout == ""
+
+
+def test_a_csv_without_time_column_says_so_before_no_profile(cli, tmp_path):
+    log = tmp_path / "flight.csv"
+    log.write_text("a,b\n1,2\n3,4\n")
+    result = cli("analyze", log, "--no-report")
+    assert_message(
+        result,
+        f"{log}: no time column among 'a', 'b' "
+        "(name it time, timestamp, t or stamp, optionally with a unit: time_s, timestamp_us)",
+    )
+
+
+def test_a_csv_with_a_time_column_and_no_profile_still_says_no_profile(cli, tmp_path):
+    log = tmp_path / "flight.csv"
+    log.write_text("time_s,a\n0,2\n0.1,4\n")
+    result = cli("analyze", log, "--no-report")
+    assert_message(result, f"{log}: no profile: the log embeds none (pass --profile PROFILE.toml (see {PROFILES_DOC}))")
+
+
+def profile_with(tmp_path, old: str, new: str) -> Path:
+    text = PROFILE.read_text()
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def test_every_profile_problem_is_listed_not_counted(cli, tmp_path):
+    profile = tmp_path / "bad.toml"
+    profile.write_text(
+        PROFILE.read_text().replace("stale_s = 0.025", "stale_s = -1").replace("rate_hz = 10.0", "rate_hz = 0")
+    )
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--profile", profile, "--no-report")
+    assert_message(
+        result,
+        f"{profile}: invalid profile: 3 problems: [measurements.accel] stale_s: must be > 0, got -1; "
+        "[measurements.gyro] stale_s: must be > 0, got -1; [measurements.position] rate_hz: must be > 0, got 0 "
+        f"(see {PROFILES_DOC})",
+    )
+
+
+def test_a_misspelt_detector_parameter_gets_the_closest(cli, tmp_path):
+    profile = profile_with(tmp_path, "[mode]", "[detectors.nis]\nwindw = 3\n\n[mode]")
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--profile", profile, "--no-report")
+    assert_message(
+        result,
+        f"{profile}: detector 'nis': unknown parameter(s) windw (did you mean 'window'? known: alpha, "
+        "budget_per_hour, n_persist, overall, proof_hours, window)",
+    )
+
+
+def test_a_misspelt_detector_in_a_profile_gets_the_closest(cli, tmp_path):
+    profile = profile_with(tmp_path, "[mode]", "[detectors.nsi]\n\n[mode]")
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--profile", profile, "--no-report")
+    assert_message(
+        result,
+        f"{profile}: unknown detector 'nsi' (did you mean 'nis'? available: {DETECTORS} (see `logscan detectors`))",
+    )
+
+
+def test_a_misspelt_model_parameter_gets_the_closest(cli, tmp_path):
+    profile = profile_with(tmp_path, 'model = "quadcopter"', 'model = "quadcopter"\nparams = { masss = 1.2 }')
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--profile", profile, "--no-report")
+    assert_message(
+        result,
+        f"{profile}: invalid profile: [vehicle] params: model 'quadcopter' cannot be built: model 'quadcopter': "
+        f"unknown parameter masss (did you mean 'mass'?) (see {PROFILES_DOC})",
+    )
+
+
+def test_a_misspelt_model_in_a_profile_gets_the_closest(cli, tmp_path):
+    profile = profile_with(tmp_path, 'model = "quadcopter"', 'model = "quadcoptr"')
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--profile", profile, "--no-report")
+    assert_message(
+        result,
+        f"{profile}: invalid profile: [vehicle] model: unknown model 'quadcoptr' (did you mean 'quadcopter'?) "
+        "(known models: dc_motor, hover_uav, ins, linear, quadcopter, steer_by_wire, unicycle, wheeled) "
+        f"(see {PROFILES_DOC})",
+    )
