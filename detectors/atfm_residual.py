@@ -5,8 +5,12 @@ channel is the shared EKF's innovation r = z - h(x_prior) at the steps where the
 its group (the group's detection grid). Training, per channel and mode value, is A-TFM's on |r|
 instead of the error against the other sensors: segments of one mode value (settle time dropped),
 e(eps, w) for every eps and window, the knee at the detection window w, the monotone envelope of eps
-over the mode values (`detectors.atfm.train_table`). Detection: count(|r| > eps) over the last w
-updates against e, the row being the next higher trained mode value than the commanded one.
+over the mode values (`detectors.atfm.train_table`), and per row the runs of |r| > eps (their rate
+and lengths: `detectors.atfm_budget`). Detection: count(|r| > eps) over the last w updates against
+e, the row being the next higher trained mode value than the commanded one, and e the larger of
+the knee's and the smallest count whose alarm rate the run model bounds within the false-alarm
+budget (`budget_per_hour`, `proof_hours`, as `nis`): the knee's e is the largest count of a few
+training minutes, which new data exceeds.
 
 Two choices the specification leaves open: as in training, the settle time after the start and
 after each mode change is not judged (the residual is not stationary there: a fault that starts in
@@ -28,8 +32,11 @@ from logscan.detectors.atfm import (
     table_rows,
     train_table,
 )
+from logscan.detectors.atfm_budget import budget_count, run_rate_upper, run_statistics
 from logscan.detectors.base import Detector, DetectorResult, Needs, decode_state_value
+from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.modes import mode_changes, mode_segments
+from logscan.detectors.params import Interval, budget_bound
 from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError
 
@@ -82,9 +89,18 @@ class AtfmResidualDetector(Detector):
     requires_trace = True
     reads = frozenset({"y", "mode"})
     trained_attributes = ("tables_",)
+    state_version = 2  # 2: each table keeps the runs of |r| > eps per row (the budget's count model)
     fit_params = TABLE_FIT_PARAMS
-    defaults = dict(TABLE_DEFAULTS)  # window: w in updates of the channel's group; row by the command
-    parameter_constraints = dict(TABLE_CONSTRAINTS)
+    defaults = {
+        **TABLE_DEFAULTS,  # window: w in updates of the channel's group; row by the command
+        "budget_per_hour": 0.1,  # false alarms per hour the whole detector may spend
+        "proof_hours": 100.0,  # design so that this many healthy hours show the budget met (None: spend it all)
+    }
+    parameter_constraints = {
+        **TABLE_CONSTRAINTS,
+        "budget_per_hour": [budget_bound()],
+        "proof_hours": [Interval(float, 0, None, closed="neither"), None],
+    }
 
     @classmethod
     def signal_label(cls, signal: str) -> str | None:
@@ -99,6 +115,7 @@ class AtfmResidualDetector(Detector):
     def check_params(self) -> None:
         super().check_params()
         check_windows(self)
+        check_proof(self)
 
     def needs(self, run=None) -> Needs:
         return Needs.of(ekf=("y",))
@@ -116,10 +133,15 @@ class AtfmResidualDetector(Detector):
         lines = []
         for label, table in decode_state_value(state["state"]["tables_"]).items():
             cells = ", ".join(
-                f"{m:g}: {eps:.4g} ({int(e)})"
-                for m, eps, e in zip(table["modes"], table["eps"][:, 0], table["e"][:, 0])
+                f"{m:g}: {eps:.4g} ({int(e)}; {int(k)} runs in {int(n)})"
+                for m, eps, e, k, n in zip(
+                    table["modes"], table["eps"][:, 0], table["e"][:, 0], table["runs"], table["updates"]
+                )
             )
-            lines.append(f"  {cls.name} {label}: w = {table['w']}, eps (e) by mode value {cells}")
+            lines.append(
+                f"  {cls.name} {label}: w = {table['w']}, eps (knee e; runs of |r| > eps in updates) by mode "
+                f"value {cells}"
+            )
         return lines
 
     @staticmethod
@@ -151,15 +173,36 @@ class AtfmResidualDetector(Detector):
             )
         windows = [int(w) for w in self.windows]
         self.tables_ = {
-            label: train_table([label], by_mode, windows, int(self.window), int(self.eps_points))
+            label: _with_runs(train_table([label], by_mode, windows, int(self.window), int(self.eps_points)), by_mode)
             for label, by_mode in segments.items()
             if by_mode
         }
 
     # --- detection ----------------------------------------------------------------------------------
+    def _alpha(self, run, trace) -> float:
+        """Per update, the alarm-start probability the budget allows: rate_design / (3600 tests
+        per second), every update of every channel checked a test (a union bound, as `nis`)."""
+        updates = sum(int(np.isfinite(trace.y[:, column]).sum()) for _, column, _, _ in residual_channels(run, trace))
+        duration = max(float(run.t[-1] - run.t[0]), run.dt) if run.t.size else 1.0
+        tests_per_second = max(updates / duration, 1e-9)
+        return design_rate(float(self.budget_per_hour), self.proof_hours) / (3600.0 * tests_per_second)
+
+    def thresholds(self, table: dict, alpha: float) -> np.ndarray:
+        """Per table row, the count threshold: the larger of the knee's e and the budget's."""
+        w = int(table["w"])
+        knee = np.asarray(table["e"], dtype=np.int64)[:, 0]
+        budget = [
+            budget_count(run_rate_upper(int(k), int(n)), table["run_lengths"], w, alpha)
+            for k, n in zip(table["runs"], table["updates"])
+        ]
+        return np.maximum(knee, np.asarray(budget, dtype=np.int64))
+
     def _run(self, run, trace, **context) -> DetectorResult:
         result = self.new_result()
         t = run.t
+        alpha = self._alpha(run, trace)
+        result.info["alpha"] = alpha
+        result.info["design_rate_per_hour"] = design_rate(float(self.budget_per_hour), self.proof_hours)
         for group, column, channel, _ in residual_channels(run, trace):
             label = _label(group, channel, run)
             table = self.tables_.get(label)
@@ -167,6 +210,8 @@ class AtfmResidualDetector(Detector):
                 raise NotTrainedError(
                     f"detector {self.name!r}: the tables have no {label!r}", hint=f"retrain with `{TRAIN_COMMAND}`"
                 )
+            thresholds = self.thresholds(table, alpha)
+            result.info[f"e.{label}"] = ", ".join(f"{m:g}: {int(e)}" for m, e in zip(table["modes"], thresholds))
             steps, residual = self._residuals(run, trace, column)
             commanded = run.mode[steps] if run.mode is not None else np.full(steps.size, np.nan)
             dt = float(np.median(np.diff(t[steps]))) if steps.size > 1 else run.dt
@@ -179,7 +224,7 @@ class AtfmResidualDetector(Detector):
             # and a noisy reading near a row's value would flip between rows whose e differ
             rows, _ = table_rows(self.name, modes, self.row, 0.0, commanded, commanded)
             eps = np.asarray(table["eps"], dtype=np.float64)[rows, 0]
-            e = np.asarray(table["e"], dtype=np.float64)[rows, 0]
+            e = thresholds[rows].astype(np.float64)
             w = int(table["w"])
             count = segment_counts(residual > eps, commanded, w)
             statistic, upper = np.full(t.size, np.nan), np.full(t.size, np.nan)
@@ -189,3 +234,20 @@ class AtfmResidualDetector(Detector):
         result.info["window"] = int(self.window)
         result.info["row"] = self.row
         return result
+
+
+def _with_runs(table: dict, by_mode: dict[float, list[np.ndarray]]) -> dict:
+    """``table`` with, per row, the training updates and the runs of |r| > eps (eps after the
+    envelope: the value detection uses) in them, and the channel's run lengths pooled over its
+    modes (a histogram, index = length): the budget's count model (`detectors.atfm_budget`)."""
+    updates, runs, histogram = [], [], np.zeros(2, dtype=np.int64)
+    for r, value in enumerate(table["modes"]):
+        n, k, lengths = run_statistics([s[:, 0] for s in by_mode[float(value)]], float(table["eps"][r, 0]))
+        updates.append(n)
+        runs.append(k)
+        size = max(histogram.size, lengths.size)
+        histogram = np.pad(histogram, (0, size - histogram.size)) + np.pad(lengths, (0, size - lengths.size))
+    table["updates"] = np.asarray(updates, dtype=np.int64)
+    table["runs"] = np.asarray(runs, dtype=np.int64)
+    table["run_lengths"] = histogram
+    return table

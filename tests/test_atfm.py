@@ -244,9 +244,28 @@ def test_the_residual_flavour_is_quiet_on_its_training_logs_and_sees_the_gps_bia
     profile, tables_file, _ = residual_setup
     for healthy in logs["healthy"]:
         assert residual_result(healthy, profile, tables_file).alarms == []
-    alarms = residual_result(logs["bias"], profile, tables_file).alarms
-    gps = [a for a in alarms if a.signal == "atfm_residual.gps_speed"]
-    assert gps and any(a.start <= 62.0 <= a.end for a in gps)
+    result = residual_result(logs["bias"], profile, tables_file)
+    gps = [a for a in result.alarms if a.signal == "atfm_residual.gps_speed"]
+    # the bias starts with a mode change (60 s), judged after its settle time (65 s); then the count
+    # passes the budget's e (at most w = 100) once e + 1 GPS updates (10 Hz) have exceeded eps
+    e = max(int(v.split(": ")[1]) for v in result.info["e.gps_speed"].split(", "))
+    assert gps and any(65.0 <= a.start <= 65.0 + (e + 1) / 10.0 + 0.5 and a.end >= 89.0 for a in gps)
+
+
+def test_the_budget_threshold_is_never_below_the_knee(residual_setup):
+    from logscan.detectors.atfm_residual import AtfmResidualDetector
+    from logscan.detectors.budget import design_rate
+
+    _, _, document = residual_setup
+    (state,) = [s for s in document["detectors"] if s["detector"] == "atfm_residual"]
+    detector = AtfmResidualDetector.from_state(state)
+    for table in detector.tables_.values():
+        knee = table["e"][:, 0]
+        alpha = design_rate(0.1, 100.0) / (3600.0 * 50.0)  # 50 updates per second (the UGV's speed sensors)
+        loose, tight = detector.thresholds(table, 1.0), detector.thresholds(table, alpha)
+        assert np.array_equal(loose, knee)  # a budget that allows anything leaves the thesis's e
+        assert np.all(tight >= knee) and np.all(tight > knee)  # minutes of training: the margin binds
+        assert table["runs"].sum() > 0 and np.all(table["updates"] > 0)
 
 
 def test_every_knee_of_the_sample_tables_equals_the_brute_force_rule(sample):
