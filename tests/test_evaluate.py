@@ -12,13 +12,13 @@ import pytest
 
 from logscan.alarms import AlarmInterval
 from logscan.results import DetectorResult, FaultEvent
+from logscan.tasks import evaluate_logs
 from logscan.verdict.evaluation import (
     Evaluation,
     LogEvaluation,
     alarm_groups,
     check_key,
     evaluate_analysis,
-    evaluate_logs,
     merge_intervals,
     score_groups,
 )

@@ -367,7 +367,7 @@ def test_a_warning_left_is_one_logscan_line(cli, sample, monkeypatch):
     assert result.exit_code in (0, 1)
     line = one_line(result.stderr)
     assert re.fullmatch(
-        r"logscan: warning: numeric problem in logscan/cli/analyze_cmd\.py line \d+ "
+        r"logscan: warning: numeric problem in logscan/tasks\.py line \d+ "
         r"\(tests/test_fuzz_fixes_outputs\.py\): overflow encountered in cast \(a result there may be inf or NaN\)",
         line,
     ), line

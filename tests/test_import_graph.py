@@ -30,6 +30,9 @@ FUNCTION_IMPORTS_ALLOWED = (
     # the format table: a log is read by one reader, and each pulls its own heavy library (the MCAP
     # reader's numba kernels, rosbags, pandas for CSV), so reading one format does not load the others
     "logscan.readers",
+    # the per-log analysis task: plotly and the report's modules (~58 MB) load only once the
+    # detectors are done, and only for a log that gets a report
+    "logscan.tasks",
 )
 
 # Shared foundations left flat in logscan/ (everything else lives in a folder per layer), plus
@@ -262,6 +265,28 @@ def test_internal_imports_inside_functions_only_where_they_save_start_up_time():
 def test_only_the_shared_foundations_stay_flat_in_logscan():
     flat = sorted(path.name for path in (REPO / "logscan").glob("*.py"))
     assert len(flat) <= MAX_FLAT_MODULES, f"{len(flat)} flat modules (give each layer its folder): {flat}"
+
+
+def crossings(importers: str, targets: tuple[str, ...]) -> list[str]:
+    """The imports from the modules under ``importers`` into those under any of ``targets``."""
+
+    def under(module: str, package: str) -> bool:
+        return module == package or module.startswith(package + ".")
+
+    return sorted(
+        {
+            edge.where()
+            for edge in internal_imports()
+            if under(edge.importer, importers) and any(under(edge.target, t) for t in targets)
+        }
+    )
+
+
+def test_the_verdicts_run_no_pipeline_fleet_command_or_report():
+    # verdict/ judges an analysis it is given (scores, incidents, coverage, suppressions): the
+    # per-log work that runs the pipeline over a fleet is logscan.tasks, above it
+    crossing = crossings("logscan.verdict", ("logscan.pipeline", "logscan.fleet", "logscan.cli", "logscan.report"))
+    assert not crossing, "logscan.verdict reaches above itself:\n" + "\n".join(crossing)
 
 
 def test_every_allow_list_entry_still_has_an_import_inside_a_function():

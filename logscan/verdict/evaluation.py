@@ -1,7 +1,8 @@
 """Evaluation of detectors against ground truth over many logs: per detector, per check, per fault kind.
 
-`logscan.verdict.scoring` scores one detector on one log (docs/algorithms.md section 7); this module runs the
-analysis on every log that has ground truth and pools the scores, at three levels:
+`logscan.verdict.scoring` scores one detector on one log (docs/algorithms.md section 7); this module scores
+an analysed log per detector and check (`evaluate_analysis`) and pools the scores of many logs
+(`Evaluation`; `logscan.tasks.evaluate_logs` analyses them), at three levels:
 
  - per detector: every alarm the detector raised;
  - per check of a detector, ``<detector>:<check>``: each statistic is scored with the check its
@@ -18,6 +19,8 @@ ended, nor a healthy transient listed in the truth: see `logscan.verdict.scoring
 on the logs where it ran (its statistic exists there), so e.g. ``nis:position`` is not charged with
 misses on steer-by-wire logs. Logs without ground truth are skipped and listed; a log that cannot be
 analysed is recorded as one line and counted, never raised.
+
+Scoring only: this module runs no pipeline and no fleet (it sits below both).
 """
 
 from __future__ import annotations
@@ -27,9 +30,6 @@ from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 from logscan.alarms import AlarmInterval
-from logscan.fleet import LogFailure, run_many
-from logscan.pipeline import analyze_log
-from logscan.readers import read_embedded
 from logscan.results import events_from_truth
 from logscan.verdict.scoring import (
     DEFAULT_GRACE_S,
@@ -270,72 +270,3 @@ def evaluate_analysis(
         aggressive=bool(truth.get("aggressive", False)),
         transients=transients,
     )
-
-
-def has_truth(path: str) -> bool:
-    """Whether the log carries ground truth (reads only its metadata, not its messages)."""
-    return read_embedded(path)[1] is not None
-
-
-@dataclass(frozen=True)
-class EvaluationTask:
-    """Score one log (the per-log task of `evaluate_logs`; picklable for local processes).
-    Returns a LogEvaluation, or None for a log without ground truth."""
-
-    profile_path: str | None = None
-    detector_names: tuple[str, ...] | None = None
-    grace_s: float = DEFAULT_GRACE_S
-    use_header_stamp: bool = False
-    recovery_s: float = DEFAULT_RECOVERY_S
-    start_s: float | None = None  # the window analysed (s since each log's start), None: all of it
-    end_s: float | None = None
-    tables_path: str | None = None  # trained tables (logscan train); None: each profile's own key
-
-    def __call__(self, path: str) -> LogEvaluation | None:
-        if not has_truth(path):
-            return None
-        analysis = analyze_log(
-            path,
-            self.profile_path,
-            use_header_stamp=self.use_header_stamp,
-            detector_names=self.detector_names,
-            grace_s=self.grace_s,
-            start_s=self.start_s,
-            end_s=self.end_s,
-            free_series=True,  # nothing reads the filter's series after the detectors
-            tables=self.tables_path,
-        )
-        return evaluate_analysis(analysis, grace_s=self.grace_s, recovery_s=self.recovery_s)
-
-
-def evaluate_logs(
-    paths: Sequence[str],
-    *,
-    profile_path: str | None = None,
-    detector_names: Sequence[str] | None = None,
-    grace_s: float = DEFAULT_GRACE_S,
-    recovery_s: float = DEFAULT_RECOVERY_S,
-    use_header_stamp: bool = False,
-    jobs: int = 1,
-    progress: bool = False,
-    start_s: float | None = None,
-    end_s: float | None = None,
-    tables_path: str | None = None,
-    scheduler: str | None = None,
-) -> Evaluation:
-    """Analyse and score every log with ground truth (``jobs`` local processes, or the Dask
-    ``scheduler``: `logscan.fleet.run_many`); skip the others; record failures as lines.
-    ``start_s``/``end_s``: the window of each log analysed."""
-    names = tuple(detector_names) if detector_names else None
-    task = EvaluationTask(profile_path, names, grace_s, use_header_stamp, recovery_s, start_s, end_s, tables_path)
-    evaluation = Evaluation(grace_s=grace_s, recovery_s=recovery_s)
-    for path, outcome in zip(
-        paths, run_many(paths, task, jobs=jobs, progress=progress, label="evaluating", scheduler=scheduler)
-    ):
-        if isinstance(outcome, LogFailure):
-            evaluation.failures.append(outcome)
-        elif outcome is None:
-            evaluation.skipped.append(path)
-        else:
-            evaluation.logs.append(outcome)
-    return evaluation

@@ -27,7 +27,6 @@ from datetime import date
 
 from logscan.errors import InputError
 from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
-from logscan.pipeline import rescore
 from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents
 
 KEYS = {"detector", "check", "log", "start", "end", "reason", "expires"}
@@ -95,7 +94,8 @@ def read_suppressions(path: str, today: date | None = None) -> list[Suppression]
 
 def apply_suppressions(analysis, rules: list[Suppression]) -> int:
     """Move the alarms ``rules`` match out of ``analysis``'s results into ``result.suppressed``
-    (with their reason), then redo its incidents and scores; returns how many were suppressed."""
+    (with their reason), then redo its incidents; returns how many were suppressed. Its scores
+    against ground truth are the pipeline's to redo (`logscan.pipeline.rescore`: `logscan.tasks`)."""
     count = 0
     for result in analysis.results:
         kept = []
@@ -113,6 +113,4 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
         gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
         groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
         analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
-        if analysis.events:
-            rescore(analysis)
     return count
