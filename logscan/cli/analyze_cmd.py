@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
 
 import click
 
-from logscan.artifacts import Staged
 from logscan.cli.options import (
     check_parallelism,
     detector_option,
@@ -182,9 +180,10 @@ def analyze(
     written in every case and says what could not be checked.
     """
     from logscan.align import check_window
-    from logscan.artifacts import cleanup, new_token, remove_orphans
+    from logscan.artifacts import cleanup, discard, new_token, remove_orphans, stage
     from logscan.fleet import expand_logs, output_paths, refuse_clobbering, run_many
     from logscan.report.index_page import index_path
+    from logscan.tasks import AnalyzeTask, LogOutcome
 
     check_window(start_s, end_s)
     check_parallelism(jobs, scheduler)
@@ -233,8 +232,9 @@ def analyze(
         use_header_stamp,
         plotlyjs_dir,
         allow_partial,
-        steps=progress and len(logs) == 1,
-        notices=not quiet,
+        render=render_summary,
+        step=_echo_step if progress and len(logs) == 1 else None,
+        notice=echo_notice if not quiet else None,
         token=token,
         start_s=start_s,
         end_s=end_s,
@@ -264,15 +264,12 @@ def analyze(
             for line in annotations(document):
                 click.echo(line, err=json_path == "-")
         if index is not None:
-            from logscan.artifacts import stage
             from logscan.report.index_page import render_index_html
 
             staged.append(stage(index, render_index_html(document, index), token=token))
         _write_outputs(staged, json_path, document, plotlyjs_dir, token, junit_path, markdown_path)
     except BaseException:
         # an error or Ctrl-C: no output is replaced, and no temporary file stays
-        from logscan.artifacts import discard
-
         discard(staged)
         cleanup([p for p in written if p and p != "-"], token)
         raise
@@ -367,73 +364,6 @@ def _write_outputs(
         sys.stdout.write(json_text(document))
 
 
-@dataclass
-class LogOutcome:
-    """What one analysed log sends back to the command: its JSON summary and its text."""
-
-    summary: dict
-    text: str
-    staged: Staged | None = None  # the report in its temporary file, renamed by the command at the end
-
-
-@dataclass(frozen=True)
-class AnalyzeTask:
-    """Analyse one (log, report path) pair and write its report (picklable for --jobs)."""
-
-    profile_path: str | None
-    detector_names: tuple[str, ...] | None
-    use_header_stamp: bool
-    plotlyjs_dir: str | None
-    allow_partial: bool = False  # a log not fully checked exits 0/1 instead of 2
-    steps: bool = False  # print each step on stderr (one log on a terminal)
-    notices: bool = True  # print the one-off notes (the first run's compile) on stderr
-    token: str = ""  # tags the temporary files of the run (logscan.artifacts.cleanup)
-    start_s: float | None = None  # --start/--end: the window analysed (s since the log's start)
-    end_s: float | None = None
-    tables_path: str | None = None  # --tables: trained tables (logscan train)
-    truth_path: str | None = None  # --truth: ground truth to score against
-    fail_on_warning: bool = False  # --fail-on warning: possible faults exit 1 too
-    suppressions: tuple = ()  # --suppressions: logscan.verdict.suppressions.Suppression entries
-
-    def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
-        from logscan.pipeline import analyze_log
-
-        log_path, report_path = item
-
-        def step(message: str) -> None:
-            if self.steps:
-                click.echo(printable(f"logscan: {log_path}: {message}..."), err=True)
-
-        analysis = analyze_log(
-            log_path,
-            self.profile_path,
-            use_header_stamp=self.use_header_stamp,
-            detector_names=self.detector_names,
-            progress=step,
-            notice=echo_notice if self.notices else None,
-            start_s=self.start_s,
-            end_s=self.end_s,
-            free_series=True,  # nothing reads the filter's series after the detectors
-            sensor_views=report_path is not None,
-            tables=self.tables_path,
-            truth=self.truth_path,
-        )
-        if self.suppressions:
-            from logscan.verdict.suppressions import apply_suppressions
-
-            apply_suppressions(analysis, list(self.suppressions))
-        summary = analysis.summary()
-        summary["exit_code"] = int(analysis.exit_code(self.allow_partial, self.fail_on_warning))
-        summary["report"] = report_path
-        text = render_summary(analysis, report_path)
-        analysis.prepared.release_series()  # the report reads the results and the grid's times
-        staged = None
-        if report_path is not None:
-            # imported only now: plotly and the report's modules are ~58 MB, not needed while detecting
-            from logscan.report.page import stage_report
-
-            step("writing report")
-            staged = stage_report(
-                analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed", token=self.token
-            )
-        return LogOutcome(summary, text, staged)
+def _echo_step(message: str) -> None:
+    """A step of the analysis of one log (``<log>: <step>``), on stderr (`logscan.tasks.AnalyzeTask`)."""
+    click.echo(printable(f"logscan: {message}..."), err=True)

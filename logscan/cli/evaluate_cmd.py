@@ -97,7 +97,7 @@ def evaluate(
     """
     from logscan.align import check_window
     from logscan.fleet import expand_logs, refuse_clobbering
-    from logscan.verdict.evaluation import evaluate_logs
+    from logscan.tasks import evaluate_logs
 
     check_window(start_s, end_s)
     check_parallelism(jobs, scheduler)
