@@ -154,3 +154,56 @@ def test_a_misspelt_model_in_a_profile_gets_the_closest(cli, tmp_path):
         "(known models: dc_motor, hover_uav, ins, linear, quadcopter, steer_by_wire, unicycle, wheeled) "
         f"(see {PROFILES_DOC})",
     )
+
+
+# --- help and tables ---------------------------------------------------------------------------------
+
+
+def test_analyze_help_groups_its_options(cli):
+    result = cli("analyze", "--help")
+    assert result.exit_code == 0
+    titles = [line for line in result.stdout.splitlines() if line and not line.startswith(" ") and line.endswith(":")]
+    assert titles == ["Input:", "Detectors:", "Outputs:", "CI:", "Parallel:", "Other options:"]
+    section = result.stdout.split("\nParallel:\n", 1)[1].split("\n\n", 1)[0]
+    assert "--jobs" in section and "--scheduler" in section and "--junit" not in section
+
+
+def test_every_option_of_a_grouped_command_is_in_a_group():
+    import click
+
+    from logscan.cli.analyze_cmd import analyze
+
+    untagged = [p.name for p in analyze.params if isinstance(p, click.Option) and not hasattr(p, "help_group")]
+    assert untagged == ["help"] or untagged == [], untagged
+
+
+def test_the_command_list_is_not_cut(cli):
+    result = cli("--help")
+    listing = result.stdout.split("\nCommands:\n", 1)[1]
+    assert "..." not in listing
+    assert "Run the model-based detectors on each LOG and report the incidents and alarms." in " ".join(listing.split())
+
+
+def test_alarm_rows_align_whatever_the_names():
+    from types import SimpleNamespace
+
+    from logscan.alarms import AlarmInterval
+    from logscan.cli.render import _incident_lines
+
+    def alarm(detector, signal, start):
+        return AlarmInterval(start, start + 1, start, start, 2.0, 1.0, 2.0, "upper", 3, signal, detector)
+
+    clock = SimpleNamespace(utc=False, short=lambda t, digits=3: f"{t:.{digits}f}")
+    incidents = [
+        SimpleNamespace(alarms=[alarm("nis", "nis.accel", 1.0)], headline_in=lambda c: "first"),
+        SimpleNamespace(
+            alarms=[alarm("a_long_detector_name", "a_very_long_statistic.name_x", 5.0)], headline_in=lambda c: "2nd"
+        ),
+    ]
+    lines, shown = _incident_lines(incidents, clock, max_rows=12)
+    rows = [line for line in lines if not line.lstrip().startswith("incident")]
+    assert shown == 2 and len(rows) == 2
+    assert rows[0].index("1.00") == rows[1].index("5.00")  # the start column, after the longest names
+    end = rows[0].index("2.00") + len("2.00")
+    assert rows[1].index("6.00") + len("6.00") == end
+    assert rows[0][end : end + 10] == rows[1][end : end + 10] == "         2"  # peak/threshold

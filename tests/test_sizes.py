@@ -24,7 +24,6 @@ FUNCTIONS_OVER = {
     "logscan/alarms.py::alarm_intervals": 121,
     "logscan/cli/analyze_cmd.py::analyze": 135,
     "logscan/cli/evaluate_cmd.py::evaluate": 71,
-    "logscan/cli/render.py::render_summary": 90,
     "logscan/cli/render_inspect.py::render_inspect": 69,
     "logscan/cli/simulate_cmd.py::simulate": 106,
     "logscan/cli/train_cmd.py::train": 70,

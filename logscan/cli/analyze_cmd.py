@@ -7,10 +7,12 @@ import sys
 import click
 
 from logscan.cli.options import (
+    GroupedCommand,
     check_parallelism,
     detector_option,
     echo_notice,
     header_stamp_option,
+    help_groups,
     jobs_option,
     json_option,
     profile_option,
@@ -38,11 +40,29 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
         click.echo(loaded.text.rstrip("\n") + "\n", err=err)
 
 
+@help_groups(
+    {
+        "Input": ("profile_path", "tables_path", "truth_path", "start_s", "end_s", "use_header_stamp", "print_profile"),
+        "Detectors": ("detector_names", "suppressions_path"),
+        "Outputs": ("output_path", "json_path", "no_report", "plotlyjs_dir", "quiet"),
+        "CI": (
+            "exit_zero",
+            "fail_on",
+            "allow_partial",
+            "baseline_path",
+            "junit_path",
+            "markdown_path",
+            "github_annotations",
+        ),
+        "Parallel": ("jobs", "scheduler"),
+    }
+)
 @click.command(
+    cls=GroupedCommand,
     epilog="Examples:\n\n"
     "  logscan analyze sample_logs/quad_imu_bias.mcap\n\n"
     "  logscan analyze flight.mcap --profile quad.toml -o flight.html --json flight.json\n\n"
-    "  logscan analyze sample_logs/ -o reports/ --plotlyjs reports/ --exit-zero"
+    "  logscan analyze sample_logs/ -o reports/ --plotlyjs reports/ --exit-zero",
 )
 @click.argument("log_paths", metavar="LOG...", nargs=-1, required=True, type=click.Path(path_type=str))
 @profile_option

@@ -8,7 +8,10 @@ from logscan.cli.options import json_option
 from logscan.cli.render import render_detectors
 
 
-@click.command(epilog="Examples:\n\n  logscan detectors\n\n  logscan detectors --json -")
+@click.command(
+    short_help="List the detectors logscan can run, with their parameters.",
+    epilog="Examples:\n\n  logscan detectors\n\n  logscan detectors --json -",
+)
 @json_option
 def detectors(json_path: str | None) -> None:
     """List the detectors logscan can run: name, origin (built-in or plugin package), description,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import inspect
 import os
 import re
 import signal
@@ -19,7 +20,29 @@ from logscan.cli.render import printable
 from logscan.errors import INTERRUPT_SEEN, OUT_OF_MEMORY, ExitCode, LogscanError
 
 
+class _CommandList(click.Group):
+    """The top-level group: its --help lists each command with the whole first sentence of its
+    help, wrapped (click cuts it to the width left, with "...")."""
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = []
+        for name in self.list_commands(ctx):
+            command = self.get_command(ctx, name)
+            if command is not None and not command.hidden:
+                rows.append((name, command.short_help or _first_sentence(command.help or "")))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+def _first_sentence(help_text: str) -> str:
+    paragraph = " ".join(inspect.cleandoc(help_text).split("\f", 1)[0].split("\n\n", 1)[0].split())
+    match = re.match(r"(.+?\.)(?:\s|$)", paragraph)
+    return match.group(1) if match else paragraph
+
+
 @click.group(
+    cls=_CommandList,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
     epilog="Example: logscan analyze sample_logs/quad_imu_bias.mcap",
 )

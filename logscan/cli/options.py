@@ -7,6 +7,42 @@ import sys
 import click
 
 
+class GroupedCommand(click.Command):
+    """A command whose --help lists its options in titled groups (click has none): each option
+    carries its group's title in ``help_group`` (set by `help_groups`); the untagged ones, --help
+    among them, come last under "Other options"."""
+
+    def format_options(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        groups: dict[str, list[tuple[str, str]]] = {}
+        for param in self.get_params(ctx):
+            record = param.get_help_record(ctx) if isinstance(param, click.Option) else None
+            if record is not None:
+                groups.setdefault(getattr(param, "help_group", "Other options"), []).append(record)
+        order = getattr(self, "help_group_order", ())
+        titles = sorted(groups, key=lambda t: (t == "Other options", order.index(t) if t in order else len(order)))
+        for title, rows in ((t, groups[t]) for t in titles):
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
+
+
+def help_groups(groups: dict[str, tuple[str, ...]]):
+    """Decorator above a `GroupedCommand`'s @click.command: ``{title: (parameter names)}``, in the
+    order --help shows them; a name that is no parameter of the command is a bug (ValueError)."""
+
+    def tag(command: click.Command) -> click.Command:
+        params = {param.name: param for param in command.params}
+        for title, names in groups.items():
+            for name in names:
+                if name not in params:
+                    raise ValueError(f"{command.name}: no parameter {name!r} for help group {title!r}")
+                params[name].help_group = title  # type: ignore[attr-defined]
+        command.help_group_order = tuple(groups)  # type: ignore[attr-defined]
+        return command
+
+    return tag
+
+
 def _tables_file(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     """Read --tables before any log (exit 2 on a file that is not tables JSON)."""
     if value is not None:

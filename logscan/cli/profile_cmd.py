@@ -12,6 +12,7 @@ from logscan.errors import InputError, ProfileError, UsageError
 
 @click.command(
     "init-profile",
+    short_help="Write the profile a log gets (embedded, built-in or a starter) as TOML to edit.",
     epilog="Examples:\n\n  logscan init-profile flight.ulg -o px4.toml\n\n"
     "  logscan analyze flight.ulg --profile px4.toml\n\n"
     "  logscan init-profile flights/flight_1.csv -o plane.toml",

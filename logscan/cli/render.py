@@ -76,43 +76,10 @@ def _recovery_lines(recovery, clock) -> list[str]:
 def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str:
     """One screen per log: verdict, what could not be checked, the incidents in time order with the
     alarms behind each, scores against ground truth."""
-    lines = [
-        f"{analysis.path}: {analysis.verdict()}  "
-        f"({_analysed_span(analysis)}, model {analysis.model.name}, "
-        f"detectors {', '.join(r.detector for r in analysis.results)})"
-    ]
     clock = analysis.clock
-    if not clock.relative:  # seconds since the log's start, as the span above, need no line
-        lines.append(f"  times: {_clock_line(clock)}")
-    lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
-    lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
-    lines += [f"  error: {failure.message}" for failure in analysis.failures]
-    from logscan.report import overview
-    from logscan.verdict.incidents import signal_label
-
-    shown = 0
-    for k, incident in enumerate(analysis.incidents):
-        lines.append(f"  incident {k + 1}: {incident.headline_in(clock)}")
-        for alarm in sorted(incident.alarms, key=lambda a: (a.start, a.signal)):
-            if shown == max_rows:
-                break
-            ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
-            note = overview.alarm_note(alarm)  # an indicator's ratio means nothing: its count, in words
-            # plain words beside the name (a note already says it in words)
-            label = "" if note else signal_label(alarm.signal, alarm.detector)
-            lines.append(
-                f"    {alarm.detector:<12} {alarm.signal:<16} {_clock_time(clock, alarm.start)} "
-                f"{_clock_time(clock, alarm.end)} "
-                + (f"  {note}" if note else f"{ratio:>9}")
-                + (f"  {label}" if label else "")
-            )
-            shown += 1
-    messages, disarmed = analysis.autopilot_messages()
-    lines += [f"  autopilot: {message.line(clock)}" for message in messages[:max_rows]]
-    if len(messages) > max_rows:
-        lines.append(f"  ... {len(messages) - max_rows} more autopilot message(s) (see the report / --json)")
-    if disarmed:
-        lines.append(f"  autopilot: {disarmed} more message(s) of WARNING and above while disarmed (in the report)")
+    lines = _verdict_lines(analysis)
+    incident_lines, shown = _incident_lines(analysis.incidents, clock, max_rows)
+    lines += incident_lines + _autopilot_lines(analysis, clock, max_rows)
     for name, loop in analysis.loops.items():  # a hierarchical profile's further loops
         lines.append(
             f"  loop {name}: {loop.verdict()}  (model {loop.model.name}, {loop.profile.vehicle.rate_hz:g} Hz, "
@@ -124,19 +91,92 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
         lines.append(f"  ... {len(analysis.alarms) - shown} more alarm(s) (see the report / --json)")
     if analysis.recovery is not None:
         lines += _recovery_lines(analysis.recovery, clock)
-    for result in analysis.results:
-        for alarm, reason in result.suppressed[:3]:
-            lines.append(
-                f"  suppressed: {alarm.detector} {alarm.signal} {clock.span_text(alarm.start, alarm.end)} ({reason})"
-            )
-    possible = analysis.possible
-    for p in possible[:3]:
+    lines += _set_apart_lines(analysis, clock) + _truth_lines(analysis)
+    lines += [f"  warning: {warning}" for warning in analysis.warnings[:5]]
+    if report_path:
+        lines.append(f"  report: {report_path}")
+    return _lines(lines)
+
+
+def _verdict_lines(analysis) -> list[str]:
+    """The verdict line (log, verdict, span, model, detectors), the clock, what was not checked."""
+    lines = [
+        f"{analysis.path}: {analysis.verdict()}  "
+        f"({_analysed_span(analysis)}, model {analysis.model.name}, "
+        f"detectors {', '.join(r.detector for r in analysis.results)})"
+    ]
+    if not analysis.clock.relative:  # seconds since the log's start, as the span above, need no line
+        lines.append(f"  times: {_clock_line(analysis.clock)}")
+    lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
+    lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
+    lines += [f"  error: {failure.message}" for failure in analysis.failures]
+    return lines
+
+
+def _incident_lines(incidents, clock, max_rows: int) -> tuple[list[str], int]:
+    """Each incident's headline and under it its alarms (``max_rows`` in all), in columns as wide
+    as the longest detector and statistic shown (at least 12 and 16); the lines and the alarms shown."""
+    from logscan.report import overview
+    from logscan.verdict.incidents import signal_label
+
+    rows: list = []  # (incident, None for its headline or one of its alarms)
+    left = max_rows
+    for k, incident in enumerate(incidents):
+        alarms = sorted(incident.alarms, key=lambda a: (a.start, a.signal))[:left]
+        left -= len(alarms)
+        rows += [(k, None), *((k, alarm) for alarm in alarms)]
+    shown = [alarm for _, alarm in rows if alarm is not None]
+    detector_w = max([12, *(len(printable(a.detector)) for a in shown)])
+    signal_w = max([16, *(len(printable(a.signal)) for a in shown)])
+    lines = []
+    for k, alarm in rows:
+        if alarm is None:
+            lines.append(f"  incident {k + 1}: {incidents[k].headline_in(clock)}")
+            continue
+        ratio = "-" if alarm.peak_ratio is None else f"{alarm.peak_ratio:.3g}"
+        note = overview.alarm_note(alarm)  # an indicator's ratio means nothing: its count, in words
+        label = "" if note else signal_label(alarm.signal, alarm.detector)  # a note already says it in words
         lines.append(
-            f"  possible fault: {p.detector} {p.signal} {clock.span_text(p.start, p.end)} "
-            "(a warning: only the upper bound of the statistic crossed its threshold)"
+            f"    {printable(alarm.detector):<{detector_w}} {printable(alarm.signal):<{signal_w}} "
+            f"{_clock_time(clock, alarm.start)} {_clock_time(clock, alarm.end)} "
+            + (f"  {note}" if note else f"{ratio:>9}")
+            + (f"  {label}" if label else "")
         )
+    return lines, len(shown)
+
+
+def _autopilot_lines(analysis, clock, max_rows: int) -> list[str]:
+    """The autopilot's own messages (WARNING and above, armed), ``max_rows`` of them."""
+    messages, disarmed = analysis.autopilot_messages()
+    lines = [f"  autopilot: {message.line(clock)}" for message in messages[:max_rows]]
+    if len(messages) > max_rows:
+        lines.append(f"  ... {len(messages) - max_rows} more autopilot message(s) (see the report / --json)")
+    if disarmed:
+        lines.append(f"  autopilot: {disarmed} more message(s) of WARNING and above while disarmed (in the report)")
+    return lines
+
+
+def _set_apart_lines(analysis, clock) -> list[str]:
+    """Suppressed alarms (with their reason) and possible faults, three of each."""
+    lines = [
+        f"  suppressed: {alarm.detector} {alarm.signal} {clock.span_text(alarm.start, alarm.end)} ({reason})"
+        for result in analysis.results
+        for alarm, reason in result.suppressed[:3]
+    ]
+    possible = analysis.possible
+    lines += [
+        f"  possible fault: {p.detector} {p.signal} {clock.span_text(p.start, p.end)} "
+        "(a warning: only the upper bound of the statistic crossed its threshold)"
+        for p in possible[:3]
+    ]
     if len(possible) > 3:
         lines.append(f"  ... {len(possible) - 3} more possible fault(s) (see the report / --json)")
+    return lines
+
+
+def _truth_lines(analysis) -> list[str]:
+    """The scores against the log's ground truth, and against PX4's own estimator."""
+    lines = []
     for name, score in analysis.scores.items():
         latency = "-" if score.mean_latency_s is None else f"{score.mean_latency_s:.2f} s"
         apart = [
@@ -158,11 +198,7 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
             f"{versus['logscan_alarms']} model-based alarm(s) also flagged by PX4; "
             f"{versus['px4_alone']} of PX4's {versus['px4_alarms']} seen by PX4 alone"
         )
-    for warning in analysis.warnings[:5]:
-        lines.append(f"  warning: {warning}")
-    if report_path:
-        lines.append(f"  report: {report_path}")
-    return _lines(lines)
+    return lines
 
 
 def _clock_line(clock) -> str:

@@ -19,9 +19,10 @@ from logscan.cli.options import (
 
 
 @click.command(
+    short_help="Train the detectors' tables and thresholds (and the filter's noise) on healthy logs.",
     epilog="Examples:\n\n"
     "  logscan train sample_logs/jackal_train_1.mcap sample_logs/jackal_train_2.mcap -o jackal.tables.json\n\n"
-    "  logscan analyze sample_logs/jackal_gps_bias.mcap --tables jackal.tables.json -d atfm"
+    "  logscan analyze sample_logs/jackal_gps_bias.mcap --tables jackal.tables.json -d atfm",
 )
 @click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
 @profile_option
