@@ -125,8 +125,11 @@
       var y = el.layout.yaxis || {};
       return { el: el, x: rangeOf(el), yAuto: !!y.autorange || !y.range, y: y.range ? y.range.slice() : null };
     });
-    var x = els[0]._fullLayout.xaxis.range;
-    full = [axisNumber(x[0]), axisNumber(x[1])];
+    /* the whole log (<body data-log-span="start end">, axis units): the headline figure starts zoomed in */
+    var span = (document.body.getAttribute("data-log-span") || "").split(" ").map(Number);
+    var x = els[els.length - 1]._fullLayout.xaxis.range;
+    full = span.length === 2 && isFinite(span[0]) && isFinite(span[1]) && span[1] > span[0] ? span :
+      [axisNumber(x[0]), axisNumber(x[1])];
     controls();
     els.forEach(follow);
     var path = document.getElementById("ctx-path");

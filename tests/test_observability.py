@@ -6,6 +6,7 @@ observability validates against the published schema."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +73,8 @@ def test_steer_by_wire_shading_words_and_report_figure(steer):
     figures = observability_figures(analysis.observability)
     assert len(figures) == 1 and figures[0]["id"] == "ctx-observability"
     assert "could not be seen here" in figures[0]["json"]
+    assert f"less than {analysis.observability.snr_min:.3g} standard deviations" in figures[0]["caption"]
+    assert not re.search(r"\d\.\d{4,} standard deviations", figures[0]["caption"])  # not 5.62716
 
 
 def test_quadcopter_sensor_bias_is_always_observable(tmp_path_factory):

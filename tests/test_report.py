@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import html
 import json
 import re
 from html.parser import HTMLParser
@@ -214,10 +215,11 @@ def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report,
     assert header[9:] == ["matched ground-truth event", "latency (s)"]
     alarms = flat_alarms(hour_report.results)
     assert len(body) == len(alarms) >= 3
-    words = {row[2].splitlines()[0]: row[2].splitlines()[1:] for row in body}
-    assert words["e_x"] == [signal_label("e_x", "encoded_ekf")]  # its plain words under the name
-    for row in body:
-        row[2] = row[2].splitlines()[0]
+    assert all("\n" not in cell for row in body for cell in row)  # one line per alarm
+    # its plain words as the signal's tooltip
+    title = html.escape(signal_label("e_x", "encoded_ekf"), quote=True)
+    assert f'<td title="{title}">e_x</td>' in embedded
+    assert [int(row[0]) for row in body] == list(range(1, len(body) + 1))  # numbered from 1
     for row, alarm in zip(body, alarms):
         assert row[1] == alarm.detector and row[2] == alarm.signal
         assert float(row[3]) == pytest.approx(alarm.start, abs=1e-3)

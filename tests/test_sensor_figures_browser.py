@@ -77,6 +77,10 @@ def test_the_sensor_figures_follow_the_time_axis(bias_page):
     assert all(r == pytest.approx(zoom) for r in steps["incident"]["ranges"])
     # reset restores each figure's first view: autorange, or the 0-60 s range a figure is drawn with
     # (the observability context figure, ctx-observability)
-    first_views = steps["start"]["ranges"]
-    assert steps["reset"]["ranges"] == first_views and all(r in ("auto", [0, 60]) for r in first_views)
-    assert all(r == "auto" for i, r in zip(ids, first_views, strict=True) if i in sensor_ids)
+    # (the observability context figure, ctx-observability), or the headline figure's zoom to its alarm
+    first_views = dict(zip(ids, steps["start"]["ranges"], strict=True))
+    assert steps["reset"]["ranges"] == steps["start"]["ranges"]
+    headline = first_views.pop("fig-headline")
+    assert 20 < headline[0] < 30 and 41.3 < headline[1] < 50  # the nis.accel alarm, 30.00-41.27 s
+    assert all(r in ("auto", [0, 60]) for r in first_views.values())
+    assert all(r == "auto" for i, r in first_views.items() if i in sensor_ids)

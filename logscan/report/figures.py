@@ -59,6 +59,7 @@ class Figure:
     hlines: list[tuple[float, str]] = field(default_factory=list)  # (y, name)
     y_range: tuple[float, float] | None = None  # initial view; None: autorange
     subtitle: str = ""  # the statistic in plain words, under the title (`Detector.signal_label`)
+    x_range: tuple[float, float] | None = None  # initial time range (s); None: the whole log
 
 
 def merge_spans(spans: Sequence[tuple[float, float]], min_width: float, min_gap: float) -> list:

@@ -40,7 +40,7 @@ def observability_figures(observability, clock: Clock | None = None) -> list[dic
     size = f"of the size named in {doc_url('algorithms.md')} section 10"
     caption = (
         f"Grey: a fault of that kind, {size} (actuator offset 10 %, a lost actuator, a sensor bias of 1 unit), "
-        f"starting there would leave less than {observability.snr_min:g} standard deviations of evidence in the "
+        f"starting there would leave less than {observability.snr_min:.3g} standard deviations of evidence in the "
         f"filter's innovations within {observability.window_s:g} s, so no detector reading these sensors could "
         f"promise to see it ({words}). A missed fault there is no detector's failure; `logscan evaluate` counts it "
         "apart."

@@ -100,6 +100,34 @@ def margin_rows(
     return rows
 
 
+MIN_MARGINS_SHOWN = 3  # the closest checks shown even when none came near its threshold
+
+
+def fold_margins(margins: Sequence[Margin], rows: list[dict]) -> dict:
+    """The margin table folded to the checks that matter: those that alarmed or came above 0.8 of
+    their threshold, and at least the MIN_MARGINS_SHOWN closest; the rest (``folded``, with a line
+    saying how close they came at most) behind a toggle. ``rows``: `margin_rows` of ``margins``."""
+    matter = {i for i, row in enumerate(rows) if row["level"] or row["n_alarms"]}
+    ratios = {
+        i: float(m.ratio)
+        for i, m in enumerate(margins)
+        if m.ratio is not None and not math.isnan(m.ratio) and not is_rejected(m.statistic)
+    }
+    rated = sorted(ratios, key=lambda i: -ratios[i])
+    for i in rated:
+        if len(matter) >= MIN_MARGINS_SHOWN:
+            break
+        matter.add(i)
+    folded = [i for i in range(len(rows)) if i not in matter]
+    closest = max((ratios[i] for i in folded if i in ratios), default=None)
+    line = "none with a ratio" if closest is None else f"each at most {ratio_text(closest)} of its threshold"
+    return {
+        "shown": [row for i, row in enumerate(rows) if i in matter],
+        "folded": [rows[i] for i in folded],
+        "folded_line": line,
+    }
+
+
 def _level(margin: Margin) -> str:
     """CSS class of a margin row: "over" (alarmed or above 1), "near" (above 0.8), "" otherwise."""
     if margin.n_alarms or (margin.ratio is not None and margin.ratio > 1):

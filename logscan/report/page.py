@@ -26,6 +26,7 @@ from logscan.report import overview
 from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
 from logscan.report.context_figures import context_figures
 from logscan.report.figures import Figure, detector_figures, merge_spans
+from logscan.report.headline import Headline, headline_figure, headlines
 from logscan.report.margins import Margin, result_margins
 from logscan.report.observability_figures import observability_figures
 from logscan.report.plotly_json import POINT_BUDGET, figures_json
@@ -169,7 +170,7 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
     for i, alarm in enumerate(alarms[:MAX_TABLE_ROWS]):
         start, end = float(alarm.start), float(alarm.end)
         row = {
-            "index": i,
+            "index": i + 1,  # numbered from 1, as the incidents
             "detector": alarm.detector,
             "signal": alarm.signal,
             "label": signal_label(alarm.signal, alarm.detector),
@@ -201,14 +202,15 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
     return sorted(rows, key=lambda r: (r["incident"] == "", r["incident"], r["order"]))
 
 
-def _incident_rows(incidents: Sequence[Incident], clock: Clock) -> list[dict]:
+def _incident_rows(heads: Sequence[Headline], clock: Clock) -> list[dict]:
     return [
-        {"index": i, "headline": inc.headline_in(clock), "start": clock.short(inc.start),
+        {"index": i, "headline": head.line(clock), "start": clock.short(inc.start),
          "end": clock.short(inc.end), "t0": repr(clock.axis_value(inc.start)), "t1": repr(clock.axis_value(inc.end)),
          "n_alarms": len(inc.alarms),
          "checks": [{"name": name, "label": signal_label(name, detector)}
                     for detector, name in sorted({(a.detector, a.signal) for a in inc.alarms}, key=lambda c: c[1])]}
-        for i, inc in enumerate(incidents, 1)
+        for i, head in enumerate(heads, 1)
+        for inc in [head.incident]
     ]  # fmt: skip
 
 
@@ -368,6 +370,27 @@ def clock_text(clock: Clock) -> str:
     return f"{clock.name}; the analysis' time zero at {clock.at(0.0):.3f} s{dated}"
 
 
+def _headlines(report: ReportInput, t: np.ndarray, truth_spans: list, figures: list) -> tuple[list[Headline], Any]:
+    """Each incident's `Headline`, and the first one's sensor figure (inserted first in ``figures``
+    as "fig-headline"; None when it names no sensor channel)."""
+    heads = headlines(report.incidents, report.innovations, t, report.model)
+    first = headline_figure(heads[0], report.innovations, t, truth_spans) if heads else None
+    if first is not None:  # the first screen: the headline's sensor, zoomed to it
+        figures.insert(0, ("fig-headline", first))
+    return heads, first
+
+
+def _verdict_lines(report: ReportInput, heads: Sequence[Headline], margins: Sequence[Margin]) -> list[str]:
+    """Each incident's headline (or the closest margin), the possible faults, the suppressed alarms."""
+    clock = report.clock
+    lines = [head.line(clock) for head in heads] or overview.verdict_lines((), margins, clock)
+    return lines + _possible_lines(report.results, clock) + _suppressed_lines(report.results, clock)
+
+
+def _ids(sections: Sequence[dict]) -> dict[str, str]:
+    return {s["detector"]: s["id"] for s in sections}
+
+
 def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_budget: int = POINT_BUDGET) -> str:
     """The report page as a string; plotly.js inline, or from ``plotlyjs_src`` (a URL) if given."""
     t = np.asarray(report.t, dtype=np.float64)
@@ -378,6 +401,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     margins = result_margins(report.results, t)
     sections, figures = _sections(report, t, truth_spans, margins)
     clock = report.clock
+    heads, first = _headlines(report, t, truth_spans, figures)
     context = context_figures(report.context, report.incidents, clock)
     context += observability_figures(report.observability, clock)
     recovered = recovery_figures(report.recovery, clock)
@@ -394,13 +418,12 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         model=model_view(report.model),
         version=report.logscan_version,
         verdict=report.verdict,
-        verdict_lines=overview.verdict_lines(report.incidents, margins, clock)
-        + _possible_lines(report.results, clock)
-        + _suppressed_lines(report.results, clock),
-        margins=overview.margin_rows(margins, report.results, {s["detector"]: s["id"] for s in sections}, clock),
+        verdict_lines=_verdict_lines(report, heads, margins),
+        margins=overview.fold_margins(margins, overview.margin_rows(margins, report.results, _ids(sections), clock)),
         time_head=_time_head(clock),
         time_axis=clock.axis_title(),
         time_scale=1000 if clock.utc else 1,  # axis units per second (a date axis counts milliseconds)
+        log_span=" ".join(repr(clock.axis_value(float(v))) for v in t[[0, -1]]) if t.size > 1 else "",
         groups=group_rows(report.groups),
         verdict_class=_verdict_class(report.verdict, len(alarms), report.unchecked),
         n_alarms=len(alarms),
@@ -410,7 +433,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         unjudged=str(report.unjudged),
         messages=[_message_row(m, clock) for m in report.messages[:MAX_SHOWN]],
         messages_hidden=max(len(report.messages) - MAX_SHOWN, 0),
-        incidents=_incident_rows(report.incidents, clock),
+        incidents=_incident_rows(heads, clock),
+        headline_figure=first and {"id": "fig-headline", "title": first.title, "caption": first.caption},
         rows=rows,
         rows_hidden=max(len(alarms) - len(rows), 0),
         has_truth=has_truth,

@@ -196,7 +196,7 @@ def figure_json(
         "title": title,
         "height": 380 if fig.subtitle else 360,
         "margin": {"l": 70, "r": 20, "t": 60 if fig.subtitle else 40, "b": 80},
-        "xaxis": TIME_AXIS,
+        "xaxis": TIME_AXIS if fig.x_range is None else {**TIME_AXIS, "range": list(fig.x_range)},
         "yaxis": {
             "title": {"text": plot_text(fig.y_title)},
             "gridcolor": "#eee",

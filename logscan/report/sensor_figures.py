@@ -58,14 +58,19 @@ def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tu
     return t[steps], steps
 
 
-def sensor_figures(view: SensorView, t: np.ndarray, spans: dict, alarm_spans: Sequence) -> list[Figure]:
+def sensor_figures(
+    view: SensorView, t: np.ndarray, spans: dict, alarm_spans: Sequence, channels: Sequence[int] | None = None
+) -> list[Figure]:
     """The figures of one group: one per channel (measured vs predicted), then the normalised
     innovations; ``spans`` shaded as on the statistic's figure, ``alarm_spans`` (the alarms
-    naming the group) kept in full around them."""
+    naming the group) kept in full around them. ``channels``: only these columns (the normalised
+    innovations of these alone)."""
     windows = zoom_windows(list(alarm_spans), t)
     k = K_SIGMA
     figures, normalised = [], []
     for j, channel in enumerate(view.channels):
+        if channels is not None and j not in channels:
+            continue
         predicted, measured = view.predicted[:, j], view.measured[:, j]
         half = np.float32(k) * view.sigma[:, j]
         upper, lower = predicted + half, predicted - half

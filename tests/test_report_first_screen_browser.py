@@ -1,0 +1,89 @@
+"""The report of quad_imu_bias in headless Chromium at 1400x900: the first screen holds the verdict and
+the headline sensor's figure (measured vs predicted, zoomed to the alarm), drawn.
+
+The page gets a probe script (`PROBE`) that, once every figure is drawn, writes the positions of the
+verdict and the headline figure into ``<body data-first-screen>``, which the test reads from the DOM
+Chromium dumps. Skipped (with the reason) when no Chromium is installed.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import re
+import subprocess
+
+import pytest
+from test_report_browser import CHROMIUM, js_errors
+
+from logscan.report.page import render_report
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (Debian: apt-get install -y chromium)"),
+]
+
+WIDTH, HEIGHT = 1400, 900
+
+PROBE = """<script>
+(function () {
+  function box(el) {
+    if (!el) { return null; }
+    var r = el.getBoundingClientRect();
+    return { top: r.top, bottom: r.bottom, drawn: !!el.querySelector(".main-svg"),
+             lines: el.querySelectorAll("path.js-line").length };
+  }
+  function record() {
+    var out = { verdict: box(document.getElementById("verdict")), width: window.innerWidth,
+                headline: box(document.getElementById("fig-headline")) };
+    document.body.setAttribute("data-first-screen", JSON.stringify(out));
+  }
+  var observer = new MutationObserver(function () {
+    if (document.body.hasAttribute("data-plots-rendered")) { observer.disconnect(); record(); }
+  });
+  if (document.body.hasAttribute("data-plots-rendered")) { record(); }
+  else { observer.observe(document.body, { attributes: true, attributeFilter: ["data-plots-rendered"] }); }
+})();
+</script>"""
+
+
+def first_screen(page, profile) -> tuple[dict, str]:
+    command = [
+        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-dev-shm-usage",
+        f"--window-size={WIDTH},{HEIGHT}", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
+        "--dump-dom", page.resolve().as_uri(),
+    ]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    match = re.search(r'data-first-screen="([^"]*)"', done.stdout)
+    assert match, "the probe did not run: figures not drawn"
+    return json.loads(html.unescape(match.group(1))), done.stdout
+
+
+@pytest.fixture(scope="module")
+def bias_report():
+    from conftest import SAMPLES
+
+    from logscan.pipeline import analyze_log
+
+    log = SAMPLES / "quad_imu_bias.mcap"
+    if not log.exists():
+        pytest.skip(f"{log} missing (run sample_logs/make_samples.py)")
+    return analyze_log(log, sensor_views=True, free_series=True).report_input()
+
+
+def test_the_first_screen_holds_the_verdict_and_the_headline_sensor_figure(bias_report, tmp_path):
+    page = tmp_path / "report.html"
+    render_report(bias_report, page, plotlyjs=tmp_path / "js")
+    text = page.read_text(encoding="utf-8")
+    page.write_text(text.replace("</body>", PROBE + "</body>", 1), encoding="utf-8")
+    screen, dom = first_screen(page, tmp_path / "profile")
+    assert js_errors(dom) == ""
+    assert screen["width"] == WIDTH  # (the viewport's height under --dump-dom is the window's less its frame;
+    # the layout depends on the width only, and the screenshot of the same window is 900 px high)
+    verdict, headline = screen["verdict"], screen["headline"]
+    assert headline is not None, "no headline figure"
+    assert 0 <= verdict["top"] < verdict["bottom"] <= headline["top"]
+    assert headline["bottom"] <= HEIGHT, f"the headline figure ends at {headline['bottom']} px, below the first screen"
+    assert headline["drawn"] and headline["lines"] >= 3  # band, prediction, measured
+    assert 'aria-label="accel ax: measured vs predicted' in dom

@@ -1,0 +1,90 @@
+"""The report's first screen on quad_imu_bias (+1.0 m/s² on accelerometer x, 30-40 s): the verdict line
+gives the span of the check it quotes and the physical size of the deviation, the headline sensor's
+figure comes first and is zoomed to it, and the margin table shows the checks that matter."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from test_report import figures, table
+
+from logscan.report.headline import quoted_alarm, significant
+from logscan.report.page import render_html
+
+
+@pytest.fixture(scope="module")
+def bias():
+    """(ReportInput, page) of quad_imu_bias, analysed as `logscan analyze` does for a report."""
+    from conftest import SAMPLES
+
+    from logscan.pipeline import analyze_log
+
+    log = SAMPLES / "quad_imu_bias.mcap"
+    if not log.exists():
+        pytest.skip(f"{log} missing (run sample_logs/make_samples.py)")
+    analysis = analyze_log(log, sensor_views=True, free_series=True)
+    report = analysis.report_input()
+    return report, render_html(report, plotlyjs_src="plotly.min.js")
+
+
+def verdict_lines(page: str) -> list[str]:
+    block = re.search(r'<ul id="verdict-lines">(.*?)</ul>', page, re.S)
+    assert block, "no verdict lines"
+    return re.findall(r"<li>(.*?)</li>", block.group(1))
+
+
+def test_the_headline_gives_the_quoted_checks_span_and_the_deviation_in_the_sensors_units(bias):
+    report, page = bias
+    (incident,) = report.incidents
+    assert (incident.start, incident.end) == (30.0, 60.0)  # every alarm of the incident
+    quoted = quoted_alarm(incident, list(report.model["groups"]))
+    assert quoted.signal == "nis.accel"
+    (line,) = verdict_lines(page)
+    match = re.fullmatch(
+        r"accelerometer inconsistent: ([+-][\d.]+) m/s² \(([\d.]+)σ\) on accel ax for ([\d.]+) s, "
+        r"30\.00-([\d.]+) s \(nis\.accel, peak 10\.7x\)",
+        line,
+    )
+    assert match, line
+    size, sigmas, duration, end = (float(g) for g in match.groups())
+    assert end == pytest.approx(float(quoted.end), abs=0.01) and end < 45  # not the incident's 60 s
+    assert duration == pytest.approx(float(quoted.end - quoted.start), abs=0.05)
+    assert 0.8 <= size <= 1.2  # the injected bias is +1.0 m/s²; the filter absorbs a part of it
+    assert sigmas > 5
+    # the incident table says the same line
+    assert line in page[page.index('id="incident-table"') :]
+
+
+def test_the_headline_sensor_figure_is_first_and_zoomed_to_the_alarm(bias):
+    report, page = bias
+    assert page.index('id="fig-headline"') < page.index('id="incident-table"') < page.index('id="alarm-table"')
+    spec = figures(page)[0]
+    assert spec["id"] == "fig-headline"
+    layout = spec["figure"]["layout"]
+    start, end = layout["xaxis"]["range"]
+    assert 20 < start < 30 and 41.3 < end < 50  # the alarm 30.00-41.27 s with the zoom margin
+    names = [trace.get("name") for trace in spec["figure"]["data"]]
+    assert "/imu/accel.x" in names and "predicted ± 3σ" in names
+    assert "+0." in layout["title"]["text"] or "+1." in layout["title"]["text"]
+
+
+def test_the_margin_table_shows_the_checks_that_matter_and_folds_the_rest(bias):
+    report, page = bias
+    shown, folded = table(page, "margin-table")[1:], table(page, "margin-table-more")[1:]
+    assert len(shown) + len(folded) == sum(len(r.series) for r in report.results)
+    assert 3 <= len(shown) < len(folded)
+    for row in shown:
+        ratio = float(row[3]) if row[3] not in ("—", "inf") else 0.0
+        assert int(row[6]) > 0 or ratio > 0.8 or len(shown) == 3
+    for row in folded:
+        assert int(row[6]) == 0 and (row[3] in ("—",) or float(row[3]) <= 0.8)
+    assert re.search(r'<details id="margin-more"><summary>\d+ more checks, each at most [\d.]+ of its threshold', page)
+
+
+def test_significant_figures_keep_the_sign_and_trailing_zeros():
+    assert significant(1.0) == "+1.0"
+    assert significant(-0.03418) == "-0.034"
+    assert significant(0.9234) == "+0.92"
+    assert significant(123.4) == "+123"
+    assert significant(5.62716, 3) == "+5.63"
