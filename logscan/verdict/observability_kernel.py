@@ -22,9 +22,11 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import literally, njit
+from numba.extending import overload
 
-from logscan.filters.linalg import all_finite, all_finite2, cho_solve_rows, cholesky, forward_sq
+from logscan.filters.linalg import all_finite, all_finite2, cho_solve_rows, cholesky
 from logscan.models import dispatch
+from logscan.models.model_kernels import literal_kernel
 from logscan.numba_cache import follow_dependencies
 
 
@@ -69,15 +71,69 @@ class Windows(NamedTuple):
     stride: np.int64  # the grid of window starts
 
 
+# The evidence of every fault direction of every phase is one signature: column s = j * D + d of
+# the (n, J * D) matrix mu (phase j, direction d), so a step moves all of them with one product
+# per matrix (F mu, H mu, L^-1 r, K r) whose innermost loop runs along the signatures (contiguous,
+# vectorised). Each sum keeps the order of the plain per-signature loops it replaces (a product
+# skips only exact zeros of F and H), so the evidence is the same to the last bit.
+
+
+def model_f_into(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
+    """x_next = f(x, u) of the model ``model_id`` (a compile-time constant; numba code only): the
+    RK4 step of `logscan.models.rk4.rk4_f` in place, without its Jacobian, for a model with
+    continuous dynamics (its sums in the same order: the same bits as the step the EKF takes); the
+    model's own predict_into for the others (exactly discretised, no Jacobian to save). k, xs (n,),
+    A0 (0, 0) and F, Aw, Jw, Jnw (n, n) are work arrays."""
+    raise NotImplementedError("model_f_into is resolved by numba at compile time")
+
+
+@overload(model_f_into)
+def _model_f_into(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
+    fA = literal_kernel(model_id, "fA")
+    if fA is not None:
+
+        def rk4(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
+            c = dt / 6.0
+            for i in range(x.size):
+                x_next[i] = x[i]
+                xs[i] = x[i]
+            for stage in range(4):
+                fA(p, xs, u, k, A0, False)
+                w = 1.0 if stage == 0 or stage == 3 else 2.0
+                step = 0.5 * dt if stage < 2 else dt
+                for i in range(x.size):
+                    x_next[i] += c * w * k[i]
+                    xs[i] = x[i] + step * k[i]
+
+        return rk4
+    predict_into = literal_kernel(model_id, "predict_into")
+    if predict_into is not None:
+
+        def impl(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
+            predict_into(p, x, u, dt, x_next, F, k, xs, Aw, Jw, Jnw)
+
+        return impl
+
+
 @njit(cache=True, error_model="numpy")
-def _mm(A, B, ra, ca, cb, out):
-    """out[:ra, :cb] = A[:ra, :ca] @ B[:ca, :cb] (plain loops: compile in a fraction of np.dot's time)."""
+def _mm_rows(A, B, ra, ca, cb, out):
+    """out[:ra, :cb] = A[:ra, :ca] @ B[:ca, :cb], each sum in c order (zeros of A skipped: exact)."""
     for i in range(ra):
         for j in range(cb):
-            s = 0.0
-            for c in range(ca):
-                s += A[i, c] * B[c, j]
-            out[i, j] = s
+            out[i, j] = 0.0
+        for c in range(ca):
+            a = A[i, c]
+            if a != 0.0:
+                for j in range(cb):
+                    out[i, j] += a * B[c, j]
+
+
+@njit(cache=True, error_model="numpy")
+def _transpose(A, r, c, out):
+    """out[:c, :r] = A[:r, :c]^T."""
+    for i in range(r):
+        for j in range(c):
+            out[j, i] = A[i, j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -89,6 +145,97 @@ def _mm_t(A, B, ra, ca, rb, out):
             for c in range(ca):
                 s += A[i, c] * B[j, c]
             out[i, j] = s
+
+
+@njit(cache=True, error_model="numpy")
+def _input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, hi, lo, k, xs, A0, F, Aw, Jw, Jnw):
+    """Gd[a] = df/du . act_dirs[a] at (xk, uk): central differences of the model's step (f alone
+    when the model can; hi, lo, k, xs (n,), A0 (0, 0) and F, Aw, Jw, Jnw (n, n) are work arrays)."""
+    literally(model_id)
+    n, nu = xk.size, uk.size
+    for a in range(act_dirs.shape[0]):
+        for i in range(nu):
+            ua[i] = uk[i] + h * act_dirs[a, i]
+        model_f_into(model_id, p, xk, ua, dt, hi, k, xs, A0, F, Aw, Jw, Jnw)
+        for i in range(nu):
+            ua[i] = uk[i] - h * act_dirs[a, i]
+        model_f_into(model_id, p, xk, ua, dt, lo, k, xs, A0, F, Aw, Jw, Jnw)
+        for i in range(n):
+            Gd[a, i] = (hi[i] - lo[i]) / (2.0 * h)
+
+
+@njit(cache=True, error_model="numpy")
+def _joseph(P, KT, Hs, Rm, m, n, IKH, IKHt, FP, KR, row):
+    """P = (I - K H) P (I - K H)^T + K R K^T, in place (K^T in KT, m rows)."""
+    for i in range(n):
+        for c in range(n):
+            IKH[i, c] = 1.0 if i == c else 0.0
+        for a in range(m):
+            k = KT[a, i]
+            for c in range(n):
+                IKH[i, c] -= k * Hs[a, c]
+    _mm_rows(IKH, P, n, n, n, FP)
+    _transpose(IKH, n, n, IKHt)
+    _mm_rows(FP, IKHt, n, n, n, P)
+    for i in range(n):
+        for b in range(m):
+            KR[i, b] = 0.0
+        for a in range(m):
+            k = KT[a, i]
+            for b in range(m):
+                KR[i, b] += k * Rm[a, b]
+        for c in range(n):
+            row[c] = 0.0
+        for b in range(m):
+            k = KR[i, b]
+            for c in range(n):
+                row[c] += k * KT[b, c]
+        for c in range(n):
+            P[i, c] += row[c]
+
+
+@njit(cache=True, error_model="numpy")
+def _signatures_update(mu, Hs, L, KT, m, n, rows, bias_of_row, A, D, J, r, v, acc, lam):
+    """r = H mu (+ the unit bias of each sensor signature on its row); lambda += |L^-1 r|^2;
+    mu -= K r; for all J * D signatures (columns) at once."""
+    ns = J * D
+    for a in range(m):
+        for s in range(ns):
+            r[a, s] = 0.0
+        for c in range(n):
+            h = Hs[a, c]
+            if h != 0.0:
+                for s in range(ns):
+                    r[a, s] += h * mu[c, s]
+        b = bias_of_row[rows[a]]
+        if b >= 0:
+            for j in range(J):
+                r[a, j * D + A + b] += 1.0
+    for s in range(ns):
+        acc[s] = 0.0
+    for i in range(m):  # forward substitution L v = r, all columns
+        for s in range(ns):
+            v[i, s] = r[i, s]
+        for c in range(i):
+            l = L[i, c]
+            for s in range(ns):
+                v[i, s] -= l * v[c, s]
+        d = L[i, i]
+        for s in range(ns):
+            t = v[i, s] / d
+            v[i, s] = t
+            acc[s] += t * t
+    for s in range(ns):
+        lam[s] += acc[s]
+    for i in range(n):
+        for s in range(ns):
+            acc[s] = 0.0
+        for a in range(m):
+            k = KT[a, i]
+            for s in range(ns):
+                acc[s] += k * r[a, s]
+        for s in range(ns):
+            mu[i, s] -= acc[s]
 
 
 @njit(cache=True)
@@ -114,15 +261,20 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
     A = act_dirs.shape[0]
     D = A + sensor_cols.size
     J = window // stride
+    ns = J * D
     m_total = R.shape[0]
     out = np.full((N // stride + 1, D), np.nan)
-    mu = np.zeros((J, D, n))
-    lam = np.zeros((J, D))
+    mu, mu_next = np.zeros((n, ns)), np.zeros((n, ns))  # signature s = j * D + d in column s
+    lam = np.zeros(ns)
     start = np.full(J, -1, dtype=np.int64)  # window start of each phase's running signature
+    bias_of_row = np.full(m_total, -1, dtype=np.int64)  # the sensor signature biased on each row
+    for b in range(sensor_cols.size):
+        bias_of_row[sensor_cols[b]] = b
     P = P0.copy()
-    x_next, x_hi, kv, xs, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    F, F2, Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    FP, IKH = np.empty((n, n)), np.empty((n, n))
+    x_next, kv, xs, row = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    x_hi, x_lo, A0 = np.empty(n), np.empty(n), np.empty((0, 0))
+    F, Ft, Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    FP, IKH, IKHt = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     Gd = np.zeros((A, n))
     ua = np.empty(nu)
     hx, Hs = np.zeros(m_total), np.zeros((m_total, n))
@@ -130,7 +282,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
     rows = np.empty(m_total, dtype=np.int64)
     S, L, Rm = np.empty((m_total, m_total)), np.zeros((m_total, m_total)), np.empty((m_total, m_total))
     PHt, KT, KR = np.empty((n, m_total)), np.empty((m_total, n)), np.empty((n, m_total))
-    r, v = np.zeros(m_total), np.zeros(m_total)
+    r, v, acc = np.zeros((m_total, ns)), np.zeros((m_total, ns)), np.zeros(ns)
     zero = np.int64(0)
     for k in range(1, N):
         # ---- restart the phases whose window starts here ---------------------------------------
@@ -138,50 +290,37 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
             if k >= j * stride and (k - j * stride) % window == 0:
                 if start[j] >= 0:
                     for d in range(D):
-                        out[start[j] // stride, d] = lam[j, d]
+                        out[start[j] // stride, d] = lam[j * D + d]
                 start[j] = k
-                mu[j] = 0.0
-                lam[j] = 0.0
+                for s in range(j * D, (j + 1) * D):
+                    lam[s] = 0.0
+                    for i in range(n):
+                        mu[i, s] = 0.0
         xk = x_post[k - 1]
         if not (all_finite(xk) and all_finite(x_prior[k]) and all_finite2(P)):
             start[:] = -1  # a diverged filter: no verdict until the next window start
             P[:] = P0
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
-        # (one call site: the model's step is inlined wherever it is called, and compiled as often)
+        # (one call site each: the model's step is inlined wherever it is called, and compiled as often)
+        dispatch.model_predict_into(model_id, p, xk, u[k], dt, x_next, F, kv, xs, Aw, Jw, Jnw)
         h = 1e-6 * (1.0 + (np.abs(u[k]).max() if nu > 0 else 0.0))  # a model may have no input
-        for e in range(2 * A + 1):
-            a, sign = (e - 1) // 2, 1.0 if e % 2 == 1 else -1.0
-            for i in range(nu):
-                ua[i] = u[k, i] + (sign * h * act_dirs[a, i] if e > 0 else 0.0)
-            dispatch.model_predict_into(model_id, p, xk, ua, dt, x_next, F2, kv, xs, Aw, Jw, Jnw)
-            if e == 0:
-                F[:] = F2
-            elif e % 2 == 1:
-                x_hi[:] = x_next
-            else:
-                for i in range(n):
-                    Gd[a, i] = (x_hi[i] - x_next[i]) / (2.0 * h)
+        _input_columns(model_id, p, xk, u[k], dt, act_dirs, h, ua, Gd, x_hi, x_lo, kv, xs, A0, Ft, Aw, Jw, Jnw)
         # P_prior = F P F^T + Q
-        _mm(F, P, n, n, n, FP)
-        _mm_t(FP, F, n, n, n, P)
+        _mm_rows(F, P, n, n, n, FP)
+        _transpose(F, n, n, Ft)
+        _mm_rows(FP, Ft, n, n, n, P)
         for i in range(n):
             for c in range(n):
                 P[i, c] += Q[i, c]
+        # mu_prior = F mu_post (+ G du for an actuator fault), every signature at once
+        _mm_rows(F, mu, n, n, ns, mu_next)
+        mu, mu_next = mu_next, mu
         for j in range(J):
-            if start[j] < 0:
-                continue
-            for d in range(D):
-                # mu_prior = F mu_post (+ G du for an actuator fault)
-                for i in range(n):
-                    s = 0.0
-                    for c in range(n):
-                        s += F[i, c] * mu[j, d, c]
-                    tmp[i] = s
-                mu[j, d] = tmp
             for a in range(A):
+                value = act_values[k, a]
                 for i in range(n):
-                    mu[j, a, i] += Gd[a, i] * act_values[k, a]
+                    mu[i, j * D + a] += Gd[a, i] * value
         # ---- update with the groups the filter used ----------------------------------------
         m = zero
         Hs[:] = 0.0
@@ -198,7 +337,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
                 Rm[a, b] = R[rows[a], rows[b]]
         # S = H P H^T + R;  K^T = S^-1 H P (S = L L^T)
         _mm_t(P, Hs, n, n, m, PHt)
-        _mm(Hs, PHt, m, n, m, S)
+        _mm_rows(Hs, PHt, m, n, m, S)
         for a in range(m):
             for b in range(m):
                 S[a, b] += Rm[a, b]
@@ -210,50 +349,13 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
             for i in range(n):
                 KT[a, i] = PHt[i, a]
         cho_solve_rows(L, m, KT, n)
-        # Joseph form: P = (I - K H) P (I - K H)^T + K R K^T
-        for i in range(n):
-            for c in range(n):
-                s = 1.0 if i == c else 0.0
-                for a in range(m):
-                    s -= KT[a, i] * Hs[a, c]
-                IKH[i, c] = s
-        _mm(IKH, P, n, n, n, FP)
-        _mm_t(FP, IKH, n, n, n, P)
-        for i in range(n):
-            for b in range(m):
-                s = 0.0
-                for a in range(m):
-                    s += KT[a, i] * Rm[a, b]
-                KR[i, b] = s
-        for i in range(n):
-            for c in range(n):
-                s = 0.0
-                for b in range(m):
-                    s += KR[i, b] * KT[b, c]
-                P[i, c] += s
-        for j in range(J):
-            if start[j] < 0:
-                continue
-            for d in range(D):
-                # r = H mu_prior (+ the unit bias on its column)
-                for a in range(m):
-                    s = 0.0
-                    for c in range(n):
-                        s += Hs[a, c] * mu[j, d, c]
-                    if d >= A and rows[a] == sensor_cols[d - A]:
-                        s += 1.0
-                    r[a] = s
-                # lambda += r^T S^-1 r;  mu_post = mu_prior - K r
-                lam[j, d] += forward_sq(L, m, r, zero, v)
-                for i in range(n):
-                    s = 0.0
-                    for a in range(m):
-                        s += KT[a, i] * r[a]
-                    mu[j, d, i] -= s
+        _joseph(P, KT, Hs, Rm, m, n, IKH, IKHt, FP, KR, row)
+        # r = H mu_prior (+ the unit bias);  lambda += r^T S^-1 r;  mu_post = mu_prior - K r
+        _signatures_update(mu, Hs, L, KT, m, n, rows, bias_of_row, A, D, J, r, v, acc, lam)
     for j in range(J):  # the windows the log's end cut short: the evidence up to the end
         if start[j] >= 0:
             for d in range(D):
-                out[start[j] // stride, d] = lam[j, d]
+                out[start[j] // stride, d] = lam[j * D + d]
     return out
 
 
