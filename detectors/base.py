@@ -35,8 +35,10 @@ Context keywords passed to `fit` / `run` (all optional): ``model`` (a logscan.mo
 every statistic but those of a detector with ``raw_topics``, which are never suspended), ``truth`` (a simulated
 log's ground truth: fault events and transients; None for real logs; never used to detect, only to
 report against, e.g. fusion error against the fault-free fusion), ``raw`` (the channels of the
-detector's `raw_topics` present in the log, as read: channel name -> logscan.log.Channel) and
-``metadata`` (the log's metadata: ULog info and parameters, MCAP metadata records).
+detector's `raw_topics` present in the log, as read: channel name -> logscan.log.Channel),
+``metadata`` (the log's metadata: ULog info and parameters, MCAP metadata records) and, for `fit`
+only, ``refilter`` (the pipeline's filter on a run the detector made, given when its needs declare
+probes: `logscan.needs`; a detector never runs a filter itself).
 The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
 module does not import the filter layer.
 """

@@ -23,9 +23,11 @@ section states).
 - Blindness probe (`fit`, needs the model): a step of ``probe_size`` (the group's unit) on the
   first channel of each group, and on the first input of each sensor that drives a sensor-driven
   model (ins: gyro_x, accel_x), for ``probe_s`` seconds in a judged segment of the training runs,
-  re-filtered; z_g = max over the probe windows and the group's columns (every column for an
-  input) of |Nbar_fault - Nbar_clean| / s_j. z_g < rho: KGN cannot see that fault on this model and filter
-  (`blindness_`, result.info["blindness"] and a warning naming the groups).
+  re-filtered by the pipeline (the EKF with its gain: a probe of the needs, `refilter` in the fit
+  context; the detector runs no filter itself); z_g = max over the probe windows and the group's
+  columns (every column for an input) of |Nbar_fault - Nbar_clean| / s_j. z_g < rho: KGN cannot see
+  that fault on this model and filter (`blindness_`, result.info["blindness"] and a warning naming
+  the groups).
 """
 
 from __future__ import annotations
@@ -40,7 +42,6 @@ from logscan.detectors.modes import mode_changes
 from logscan.detectors.params import PERSIST, Interval, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
-from logscan.filters.ekf import run_ekf
 
 SPREAD_FLOOR = 1e-9  # relative floor of a column's spread: a zero spread alarms on rounding
 NO_MODE = "all"  # the single operating-point bin of a run without a mode channel
@@ -182,7 +183,8 @@ class KgnDetector(Detector):
         return f"the filter weighs the {group_words(group)} unlike on healthy runs (Kalman gain norm)"
 
     def needs(self, run=None) -> Needs:
-        return Needs.of(ekf=("K",))
+        # the log's EKF with its gain; the same EKF again on the blindness probe's faulty runs (`fit`)
+        return Needs.of(ekf=("K",), probes=("ekf",))
 
     def learns(self) -> bool:
         return True
@@ -284,7 +286,7 @@ class KgnDetector(Detector):
             if np.isfinite(d[w.judged]).any():
                 worst = max(worst, float(np.nanmax(d[w.judged])))
         self.rho_ = worst + 1.0
-        self.blindness_ = self._probe(runs, wins, context.get("model"))
+        self.blindness_ = self._probe(runs, wins, context.get("model"), context.get("refilter"))
 
     def _deviation(self, w: Windows) -> np.ndarray:
         """(W, m) d_j = |Nbar_j - ref_j| / s_j, NaN in windows whose bin has no reference."""
@@ -310,13 +312,16 @@ class KgnDetector(Detector):
             out[has, g] = np.nanmax(block[has], axis=1)
         return out
 
-    def _probe(self, runs, wins: list[Windows], model) -> dict:
+    def _probe(self, runs, wins: list[Windows], model, refilter) -> dict:
         """Blindness verdict per group and fault kind (see the module docstring): per operating-point
         bin, the longest stretch (up to ``probe_s``) of judged windows of that bin in the training
         runs gets the fault on the group's first channel; z = max |Nbar_fault - Nbar_clean| / s_j
-        over the stretch and the group's columns; blind when z < rho in every bin."""
+        over the stretch and the group's columns; blind when z < rho in every bin. ``refilter``: the
+        pipeline's EKF on a faulty run (`logscan.pipeline.stages.fit_context`)."""
         if model is None:
             return {"_note": "no model given to fit: the probe did not run"}
+        if refilter is None:
+            return {"_note": "no refilter given to fit (the pipeline's EKF for the probe): the probe did not run"}
 
         span = max(int(math.ceil(float(self.probe_s) / float(self.window_s))), 1)
         stretches = {}  # bin -> (run index, first window, count)
@@ -342,7 +347,7 @@ class KgnDetector(Detector):
                     faulty = inject(run, lo, hi, fault)
                     if faulty is None:
                         continue
-                    ftrace = run_ekf(model, faulty, store_gain=True, store_S=False, store_innovations=False)
+                    ftrace = refilter("ekf", faulty)
                     fw = self.windows(faulty, ftrace)
                     spread = np.asarray(self.reference_["bins"][key]["spread"], dtype=np.float64)[cols]
                     sl = slice(w0, w0 + count)

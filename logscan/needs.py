@@ -3,6 +3,12 @@
 A detector declares its needs (`Detector.needs`); the pipeline takes the union over the detectors it
 runs and runs each needed filter exactly once, keeping only the trace parts someone asked for
 (the EKF's gain K and innovation covariance S are large: (N, n, m) and (N, m, m)).
+
+Detectors ask, the pipeline filters: no detector runs a filter itself. One that must filter runs of
+its own making while it trains (KGN's blindness probe re-filters a healthy run with a fault added)
+declares those filters as ``probes``; training then passes its `fit` the context keyword
+``refilter``, ``refilter(filter name, aligned run) -> trace``: that filter run by the pipeline on the
+given run, with the model and trace parts it uses for the log (`logscan.pipeline.stages.refilter_for`).
 """
 
 from __future__ import annotations
@@ -18,17 +24,20 @@ class Needs:
     "y" (the innovations y and the diagonal of S per step)."""
 
     filters: Mapping[str, frozenset[str]] = field(default_factory=dict)
+    # the filters `fit` re-runs on runs it makes (`refilter`, see the module docstring)
+    probes: frozenset[str] = frozenset()
 
     @classmethod
-    def of(cls, **filters: Iterable[str]) -> Needs:
-        """``Needs.of(ekf=("K", "S"))``: the EKF with its gain and innovation covariance."""
-        return cls({name: frozenset(parts) for name, parts in filters.items()})
+    def of(cls, *, probes: Iterable[str] = (), **filters: Iterable[str]) -> Needs:
+        """``Needs.of(ekf=("K", "S"))``: the EKF with its gain and innovation covariance;
+        ``Needs.of(ekf=("K",), probes=("ekf",))``: and the EKF again, with its gain, on runs `fit` makes."""
+        return cls({name: frozenset(parts) for name, parts in filters.items()}, frozenset(probes))
 
     def __or__(self, other: Needs) -> Needs:
         merged = {name: frozenset(parts) for name, parts in self.filters.items()}
         for name, parts in other.filters.items():
             merged[name] = merged.get(name, frozenset()) | frozenset(parts)
-        return Needs(merged)
+        return Needs(merged, self.probes | other.probes)
 
     def parts(self, filter_name: str) -> frozenset[str]:
         return frozenset(self.filters.get(filter_name, ()))

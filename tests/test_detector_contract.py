@@ -261,8 +261,10 @@ def pipeline_detector(name: str) -> Detector:
     healthy_run, healthy_trace, model, profile, _ = pipeline_case("healthy", name)
     spec = profile.detectors.get(name)
     detector = REGISTRY.get(name).from_config(spec.settings if spec else {})
-    if detector.trained_attributes:
-        detector.fit([healthy_run], [healthy_trace], model=model)
+    if detector.trained_attributes:  # as training fits it: with the filters it probes with (kgn)
+        from logscan.pipeline.stages import fit_context
+
+        detector.fit([healthy_run], [healthy_trace], **fit_context(detector, model, healthy_run))
     return detector
 
 

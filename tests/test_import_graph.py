@@ -289,6 +289,47 @@ def test_the_verdicts_run_no_pipeline_fleet_command_or_report():
     assert not crossing, "logscan.verdict reaches above itself:\n" + "\n".join(crossing)
 
 
+# The filters' pure maths a detector may use itself; the filters that run over a log (ekf, ubikf)
+# are the pipeline's, asked for through `Detector.needs` (and `Needs.probes` for re-filtering in fit).
+DETECTORS_MAY_IMPORT_FROM_FILTERS = ("logscan.filters.box_chi2",)
+
+
+def filter_runs_in_detectors(imports: list[Import]) -> list[Import]:
+    """The imports (one per source line) by which a module of detectors/ (`logscan.detectors`) would
+    run a filter: an import from logscan.filters must name one of the allowed helper modules
+    (`from logscan.filters import run_ekf`, whose only edge is the package, is refused too)."""
+    per_line: dict[tuple[str, int], list[Import]] = {}
+    for edge in imports:
+        if edge.importer.startswith("logscan.detectors.") and edge.target.startswith("logscan.filters"):
+            per_line.setdefault((edge.importer, edge.line), []).append(edge)
+    refused = []
+    for edges in per_line.values():
+        modules = {edge.target for edge in edges} - {"logscan.filters"}
+        if not modules or not modules <= set(DETECTORS_MAY_IMPORT_FROM_FILTERS):
+            refused.append(edges[0])
+    return refused
+
+
+def test_the_filter_rule_refuses_a_filter_and_its_package_re_export_not_a_helper():
+    path = REPO / "pyproject.toml"
+
+    def line(number: int, *targets: str) -> list[Import]:
+        return [Import("logscan.detectors.x", target, path, number, False) for target in targets]
+
+    imports = [
+        *line(1, "logscan.filters", "logscan.filters.ekf"),  # from logscan.filters.ekf import run_ekf
+        *line(2, "logscan.filters"),  # from logscan.filters import run_ekf
+        *line(3, "logscan.filters", "logscan.filters.box_chi2"),  # a maths helper
+        Import("logscan.pipeline.stages", "logscan.filters.ekf", path, 4, False),  # the pipeline filters
+    ]
+    assert [edge.line for edge in filter_runs_in_detectors(imports)] == [1, 2]
+
+
+def test_detectors_ask_and_the_pipeline_filters():
+    refused = sorted({edge.where() for edge in filter_runs_in_detectors(internal_imports())})
+    assert not refused, "detectors ask the pipeline for filter traces (Detector.needs):\n" + "\n".join(refused)
+
+
 def test_every_allow_list_entry_still_has_an_import_inside_a_function():
     importers = {edge.importer for edge in internal_imports() if edge.in_function}
     stale = [p for p in FUNCTION_IMPORTS_ALLOWED if not any(fnmatch.fnmatchcase(m, p) for m in importers)]

@@ -7,6 +7,7 @@ hover, a 0.02 m/s^2/s drift over the judged hover not seen, and the blindness pr
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -17,6 +18,7 @@ from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepa
 from logscan.training.tables import apply_tables
 from logscan.training.train import train_logs
 
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 FAULT_AT = 70.0  # hover from 60 s; steady (mode unchanged for 10 s) from 70 s to 75 s
 
 
@@ -202,3 +204,33 @@ def test_without_a_mode_channel_the_whole_run_after_warm_up_is_judged_and_said_s
     early = detector.run(*synthetic(3, jump_at=5.0))
     # nothing before the warm-up ends (20 s): the first two judged windows end at 20.9 s and 21.9 s
     assert [a.start for a in early.alarms] == [pytest.approx(21.9)]
+
+
+def test_without_the_pipelines_refilter_the_probe_does_not_run_and_says_why():
+    detector = KgnDetector(warmup_s=20.0).fit(*zip(synthetic(1), synthetic(2)), model=SimpleNamespace())
+    assert "refilter" in detector.blindness_["_note"]
+
+
+def test_training_gives_kgn_the_pipelines_ekf_for_its_probe_and_nothing_else():
+    """Detectors ask, the pipeline filters: KGN declares the EKF as a probe and its fit gets the
+    pipeline's EKF with the gain, the filter it used to run itself; a detector without probes gets
+    the model only."""
+    from logscan.errors import InternalError
+    from logscan.filters.ekf import run_ekf
+    from logscan.pipeline.stages import fit_context
+
+    path = SAMPLES / "quad_healthy.mcap"
+    if not path.exists():
+        pytest.skip(f"{path} missing (run sample_logs/make_samples.py)")
+    kgn = KgnDetector()
+    prepared = prepare(path, load_profile_for(path, None), needs_of([kgn]))
+    context = fit_context(kgn, prepared.model, prepared.run)
+    assert set(context) == {"model", "refilter"} and context["model"] is prepared.model
+    probe = context["refilter"]("ekf", prepared.run)
+    own = run_ekf(prepared.model, prepared.run, store_gain=True, store_S=False, store_innovations=False)
+    np.testing.assert_array_equal(probe.K, own.K)
+    np.testing.assert_array_equal(probe.P_post_diag, own.P_post_diag)
+    with pytest.raises(InternalError, match="not one of its probes"):
+        context["refilter"]("ubikf", prepared.run)
+    (nis,) = create_detectors(load_profile_for(path, None), ["nis"])
+    assert fit_context(nis, prepared.model, prepared.run) == {"model": prepared.model}

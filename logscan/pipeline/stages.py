@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
-from logscan.errors import ProfileError, did_you_mean
+from logscan.errors import InternalError, ProfileError, did_you_mean
 from logscan.filters.ekf import run_ekf
 from logscan.filters.ubikf import run_ubikf
 from logscan.needs import Needs, union
@@ -184,3 +184,20 @@ def refuse_embedded_plugins(
 def needs_of(detectors: Sequence) -> Callable[[AlignedRun], Needs]:
     """The union of the detectors' needs, as a function of the aligned run they depend on."""
     return lambda run: union(detector.needs(run) for detector in detectors)
+
+
+def fit_context(detector, model: Model, run: AlignedRun) -> dict[str, Any]:
+    """The context keywords of a detector's `fit` on training runs like ``run``: the ``model``, and
+    ``refilter`` when its needs declare probes (`logscan.needs`): ``refilter(name, run)`` runs the
+    filter ``name``, one of its probes, on a run the detector made, with this model and the trace
+    parts the detector asks of that filter, as the pipeline runs it on a log."""
+    if not detector.needs(run).probes:
+        return {"model": model}
+
+    def refilter(name: str, probe_run: AlignedRun) -> Any:
+        needs = detector.needs(probe_run)
+        if name not in needs.probes:
+            raise InternalError(f"detector {detector.name!r} re-filters with {name!r}, not one of its probes")
+        return FILTERS[name](model, probe_run, needs.parts(name))
+
+    return {"model": model, "refilter": refilter}

@@ -27,7 +27,7 @@ from logscan.errors import InputError, ProfileError, UsageError
 from logscan.fleet import run_many
 from logscan.needs import Needs
 from logscan.pipeline import load_profile_for, prepare
-from logscan.pipeline.stages import FILTERS, create_detectors, needs_of, refuse_embedded_plugins
+from logscan.pipeline.stages import FILTERS, create_detectors, fit_context, needs_of, refuse_embedded_plugins
 from logscan.readers import read_embedded
 from logscan.training.calibration import calibrate, calibrated_runs, judged_steps, process_noise_scale
 from logscan.training.tables import TABLES_FORMAT, TABLES_VERSION, profile_fingerprint, profile_rates
@@ -78,13 +78,14 @@ def trainable_detectors(loaded, names: Sequence[str] | None = None) -> list:
 
 
 def fit_detectors(detectors: Sequence, prepared: Sequence) -> list:
-    """Fit every detector on the prepared healthy runs (`logscan.pipeline.stages.Prepared`); returns them."""
+    """Fit every detector on the prepared healthy runs (`logscan.pipeline.stages.Prepared`), with the
+    model and the filters it probes with (`fit_context`); returns them."""
     if not prepared:
         raise UsageError("training needs at least one healthy log")
     runs = [p.run for p in prepared]
     traces = [p.trace for p in prepared]
     for detector in detectors:
-        detector.fit(runs, traces, model=prepared[0].model)
+        detector.fit(runs, traces, **fit_context(detector, prepared[0].model, runs[0]))
     return list(detectors)
 
 
