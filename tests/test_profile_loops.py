@@ -44,6 +44,12 @@ def test_loops_parse_and_round_trip():
     assert parse_profile(profile.to_toml()) == profile
 
 
+def test_recovery_takes_the_false_alarm_budget_of_its_kept_alarm():
+    profile = parse_profile(BASE + "[recovery]\nbudget_per_hour = 0.05\nproof_hours = 200.0\n")
+    assert profile.recovery.settings == {"budget_per_hour": 0.05, "proof_hours": 200.0}
+    assert parse_profile(profile.to_toml()) == profile
+
+
 def test_a_profile_without_loops_is_one_loop_called_main():
     profile = parse_profile(BASE.split("[loops.left_motor]")[0].replace('loop = "outer"\n', ""))
     assert profile.loop_name == "main" and profile.loops == {} and profile.recovery is None
@@ -63,6 +69,7 @@ def test_a_loop_is_checked_against_its_own_model_and_named_in_the_problem():
         ("k_sigma = 0", "k_sigma: must be > 0"),
         ('allowed_error = { "inner.x" = 1.0 }', "'inner.x': expected 'loop.state'"),
         ("checkpoint_every = 1.0", "unknown key 'checkpoint_every'"),
+        ("budget_per_hour = 0", "budget_per_hour: must be > 0"),
     ],
 )
 def test_recovery_table_problems(recovery, expected):

@@ -70,7 +70,10 @@ def test_the_pipelines_bound_covers_the_truth_and_refiltering_matches_the_protot
 
 def test_inputs_one_step_early_break_the_bound(robot_log):
     """The contrast: the same inputs one step early (a profile without stamp = "start") and the
-    roll-forward drifts outside its own bound, metres off."""
+    roll-forward drifts outside its own bound, worse than with the right timing. (It no longer runs
+    on into the next attack: a recovery that does not re-agree after an attack ends there, so each
+    attack is recovered from its own checkpoint, and the contrast is smaller than when one drifting
+    roll-forward ran through both attacks.)"""
     early = measure(robot_log, rfr.Variant("oracle", "rollforward", shifted=True))
     rolled = measure(robot_log, rfr.Variant("oracle", "rollforward"))
-    assert early["coverage"] < 0.5 and early["rec"] > 2 * rolled["rec"]
+    assert early["coverage"] < 0.5 and early["rec"] > 1.5 * rolled["rec"]

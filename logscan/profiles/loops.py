@@ -26,6 +26,8 @@ RECOVERY_KEYS = (
     "max_duration_s",
     "agreement_quantile",
     "consistency_tol_s",
+    "budget_per_hour",
+    "proof_hours",
 )
 RECOVERY_METHODS = ("refilter", "rollforward", "replace")
 #: ``[recovery] detector = "oracle"``: anomalies from the log's ground truth, for evaluation only
@@ -93,7 +95,7 @@ def parse_recovery(checker, raw: Any, loop_names: set[str]) -> RecoverySpec | No
         settings["method"] = method
     for key in ("checkpoint_period_s", "detection_time_s", "hold_s"):
         settings[key] = checker.number(data, key, where, minimum=0, strict=False)
-    for key in ("k_sigma", "max_duration_s", "consistency_tol_s"):
+    for key in ("k_sigma", "max_duration_s", "consistency_tol_s", "budget_per_hour", "proof_hours"):
         settings[key] = checker.number(data, key, where, minimum=0, strict=True)
     settings["agreement_quantile"] = checker.number(
         data, "agreement_quantile", where, minimum=0, strict=True, maximum=1

@@ -18,16 +18,18 @@ API
    ``[loop.]group[.output]`` or its channels).
  - ``RecoverySettings(method="refilter"|"rollforward"|"replace", checkpoint_period_s=0,
    detection_time_s=0, k_sigma=3, allowed_error={"loop.state": E}, hold_s=1, max_duration_s=60,
-   agreement_quantile=0.99, consistency_tol_s=None)``: validated at creation (ProfileError listing
-   every problem).
+   agreement_quantile=0.99, consistency_tol_s=None, budget_per_hour=0.1, proof_hours=100)``:
+   validated at creation (ProfileError listing every problem).
  - ``recover(loops, anomalies, settings) -> Recovery``: ``Recovery.loops[name]`` is a
    `LoopRecovery` with, on that loop's grid, ``x_recovered`` (N, n) (NaN outside recovered spans),
    ``bound`` (N, n) k-sigma of the covariance propagated through the recovery and ``worst_case``
    (N, n) (the paper's Proposition 5.1, labelled worst case); ``Recovery.anomalies`` one
    `AnomalyRecord` per (merged) anomaly: checkpoint time and steps, roll-forward length, recovered
-   span end, whether the alarm was kept, when the flagged sensors agreed again, T_max per state
-   with an allowed error, ``outlasted`` (``verdict`` = "recovery no longer trustworthy"), method,
-   targets, a note when nothing could be recovered.
+   span end, whether the alarm was kept, when the flagged sensors agreed again, why each loop's
+   span ended (``end_reasons``, ``end_reason``: e.g. "did not re-agree" when, after the detector's
+   alarm, a flagged sensor disagreed with the recovered estimate without showing the anomaly at the
+   false-alarm budget's bound), T_max per state with an allowed error, ``outlasted`` (``verdict`` =
+   "recovery no longer trustworthy"), method, targets, a note when nothing could be recovered.
 Times are seconds since the first loop's ``run.start_ns`` (the log's grid seconds).
 Input convention: step k of a run predicts x_k = f(x_{k-1}, u[k]) as the shared EKF does; u[k] is
 the input applied over the interval that ends at t_k.

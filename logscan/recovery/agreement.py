@@ -6,7 +6,9 @@ recovered estimate has not absorbed it (the flagged groups are excluded), so eac
 fresh sample is tested against the recovery's prior (x_R, P_R):
     y = z - h(x_R),   S = H P_R H^T + R_g,   NIS = y^T S^-1 y   (chi-square with m_g dof)
 and agrees when NIS <= the chi-square quantile. A sample outside the group's physical range (or
-non-finite) disagrees.
+non-finite) disagrees. With a per-sample false-alarm probability ``keep_alpha`` (the false-alarm
+budget's, `keep_alpha`), a disagreeing sample whose NIS also exceeds chi2.ppf(1 - keep_alpha, m_g)
+*shows the anomaly* (SHOWN): after the detector's alarm only such a sample keeps a recovery open.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from collections.abc import Collection
 import numpy as np
 from scipy.special import chdtri
 
+from logscan.detectors.budget import design_rate
 from logscan.filters.ekf import pack_run
 from logscan.filters.trace import EkfTrace
 from logscan.models.dispatch import call_literal
@@ -23,7 +26,20 @@ from logscan.recovery.kernels import group_predictions
 from logscan.recovery.records import LoopRun
 from logscan.recovery.rerun import shared_R, slice_run
 
-AGREE, DISAGREE, NO_SAMPLE = 1, -1, 0
+AGREE, DISAGREE, NO_SAMPLE, SHOWN = 1, -1, 0, -2  # SHOWN: disagrees beyond the budget's bound too
+
+
+def keep_alpha(budget_per_hour: float, proof_hours: float, samples_per_s: float) -> float:
+    """The per-sample probability that a consistent recovered estimate and an honest sensor sampled
+    ``samples_per_s`` times a second show an anomaly: the false-alarm budget's design rate (as `nis`
+    designs for, `logscan.detectors.budget.design_rate`) over the samples of an hour."""
+    return design_rate(budget_per_hour, proof_hours) / (3600.0 * max(samples_per_s, 1e-9))
+
+
+def sample_rate(fresh: np.ndarray, t: np.ndarray) -> float:
+    """Fresh samples per second over ``t`` (at least one sample over the span)."""
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    return max(int(np.count_nonzero(fresh)), 1) / span if span > 0 else 1.0
 
 
 def group_nis(packed, g: int, part: EkfTrace, u: np.ndarray, fresh: np.ndarray) -> np.ndarray:
@@ -73,9 +89,18 @@ def held_inputs(u: np.ndarray) -> np.ndarray:
     return held
 
 
-def agreement_status(loop: LoopRun, k1: int, part: EkfTrace, flagged: Collection[str], quantile: float) -> np.ndarray:
+def agreement_status(
+    loop: LoopRun,
+    k1: int,
+    part: EkfTrace,
+    flagged: Collection[str],
+    quantile: float,
+    budget: tuple[float, float] | None = None,
+) -> np.ndarray:
     """(len(part),) int8 over the slice starting at k1: AGREE where every flagged group with a fresh
-    sample agrees with the recovery's prior, DISAGREE where one does not, NO_SAMPLE elsewhere."""
+    sample agrees with the recovery's prior, DISAGREE where one does not, NO_SAMPLE elsewhere; with
+    ``budget`` = (budget_per_hour, proof_hours), SHOWN where one shows the anomaly (its NIS beyond the
+    chi-square quantile of `keep_alpha` at the group's own rate over the whole run, `keep_bound`)."""
     N = part.n_steps
     sliced = slice_run(loop.run, k1, k1 + N, ())
     packed = pack_run(loop.model, sliced, Q=loop.trace.Q, R=shared_R(loop.trace), x0=part.x_post[0])
@@ -88,20 +113,38 @@ def agreement_status(loop: LoopRun, k1: int, part: EkfTrace, flagged: Collection
         nis = group_nis(packed, g, part, u, fresh)
         limit = chdtri(int(packed.group_sizes[g]), 1.0 - quantile)  # chi2.ppf(quantile, m)
         sampled = ~np.isnan(nis)
-        status[sampled & (nis <= limit) & (status != DISAGREE)] = AGREE
-        status[sampled & ~(nis <= limit)] = DISAGREE
+        status[sampled & (nis <= limit) & (status == NO_SAMPLE)] = AGREE
+        status[sampled & ~(nis <= limit) & (status != SHOWN)] = DISAGREE
+        if budget is not None:
+            status[sampled & ~(nis <= keep_bound(loop, name, budget))] = SHOWN
     return status
 
 
+def keep_bound(loop: LoopRun, group: str, budget: tuple[float, float]) -> float:
+    """chi2.ppf(1 - keep_alpha, m_g): the NIS beyond which a sample of ``group`` shows the anomaly,
+    at the group's own sample rate over the loop's whole run."""
+    grp = loop.run.groups[group]
+    rate = sample_rate(np.asarray(grp.fresh), np.asarray(loop.run.t))
+    return float(chdtri(int(np.asarray(grp.z).shape[1]), keep_alpha(budget[0], budget[1], rate)))
+
+
 def agreed_at(t: np.ndarray, status: np.ndarray, t_from: float, hold_s: float) -> float | None:
-    """The first time >= t_from of an agreeing sample after which no sample disagrees for hold_s
-    (the hold must fit in ``t``), else None."""
+    """The first time >= t_from of an agreeing sample after which no sample disagrees (DISAGREE or
+    SHOWN) for hold_s (the hold must fit in ``t``), else None."""
     cand = np.flatnonzero((status == AGREE) & (t >= t_from))
     if cand.size == 0:
         return None
-    dis = np.flatnonzero(status == DISAGREE)
+    dis = np.flatnonzero(status < NO_SAMPLE)
     nxt = np.searchsorted(dis, cand, side="right")
     t_next = np.append(t[dis], np.inf)[nxt]  # the next disagreeing sample's time (inf: none)
     ok = (t_next > t[cand] + hold_s) & (t[cand] + hold_s <= t[-1] + 1e-9)
     found = np.flatnonzero(ok)
     return float(t[cand[found[0]]]) if found.size else None
+
+
+def failed_at(t: np.ndarray, status: np.ndarray, t_from: float) -> float | None:
+    """The first time >= t_from of a sample that disagrees with the recovered prediction without
+    showing the anomaly (DISAGREE, not SHOWN): the recovered estimate did not re-agree with a sensor
+    that shows no anomaly. None if there is none."""
+    found = np.flatnonzero((status == DISAGREE) & (t >= t_from))
+    return float(t[found[0]]) if found.size else None

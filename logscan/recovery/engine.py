@@ -6,9 +6,12 @@ Per anomaly, in time order (docs/algorithms.md section 5):
  2. every affected loop (a specific anomaly's flagged loops; every loop for a generic one) re-runs
     the shared filter from k1 (`logscan.recovery.rerun`) up to the max_duration_s horizon: without
     the flagged groups (refilter, specific), without any measurement (rollforward, generic, replace);
- 3. the anomaly ends when the flagged groups agree with the recovered prediction for hold_s
-    (`logscan.recovery.agreement`), a generic one hold_s after the detector's alarm; cut at
-    max_duration_s;
+ 3. the anomaly ends at the flagged groups' first sample that agrees with the recovered prediction
+    and holds for hold_s (`logscan.recovery.agreement`): the span ends at that sample, the hold only
+    confirms it. A generic anomaly tests every group, after the detector's alarm, and ends hold_s
+    after that alarm at the latest. Sooner, after the detector's alarm, at a sample that disagrees
+    without showing the anomaly at the false-alarm budget's bound (the recovered estimate did not
+    re-agree: it is the one off). Cut at max_duration_s. The record says why (`end_reasons`);
  4. the recovered estimate, its k-sigma bound, T_max and the worst-case bound
     (`logscan.recovery.bounds`) fill the span [k1, end] of each affected loop.
 An anomaly detected inside the previous one's recovered span merges with it (recovered again as
@@ -23,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from logscan.filters.trace import EkfTrace
-from logscan.recovery.agreement import agreed_at, agreement_status, held_inputs
+from logscan.recovery.agreement import agreed_at, agreement_status, failed_at, held_inputs, keep_bound
 from logscan.recovery.anomalies import join_targets
 from logscan.recovery.bounds import k_sigma_bound, t_max, worst_case
 from logscan.recovery.checkpoints import (
@@ -151,14 +154,16 @@ def _recover_one(anomaly: Anomaly, ctx: _Context, blocked, latest: dict[str, flo
     record.checkpoint_steps = ctx.checkpoints.step_of(index)
     t_cap = anomaly.t_detect + s.max_duration_s
     parts = [_rerun_loop(lp, record.checkpoint_steps[lp.name], t_cap, anomaly, ctx) for lp in affected]
-    ends, agreed = _loop_ends(anomaly, parts, s, latest)
+    ends, agreed, reasons = _loop_ends(anomaly, parts, s, latest)
     record.t_agreed = None if any(a is None for a in agreed) else max(agreed)
-    for p, end in zip(parts, ends):
+    for p, end, reason in zip(parts, ends, reasons):
         t_log_end = float(ctx.times[ctx.loops.index(p.loop)][-1])
-        record.capped |= end >= t_cap and t_log_end >= t_cap
+        if end >= t_cap and t_log_end >= t_cap:
+            record.capped, reason = True, f"cut at max_duration_s = {s.max_duration_s:g} s"
         if end > t_log_end and t_log_end < t_cap:
-            record.note = "the anomaly lasts until the end of the log"
+            record.note = reason = "the anomaly lasts until the end of the log"
         record.loop_ends[p.loop.name] = min(end, t_cap, t_log_end)
+        record.end_reasons[p.loop.name] = reason
     end = max(record.loop_ends.values())
     record.t_recovered_end = end
     record.rollforward_s = end - record.t_checkpoint
@@ -183,18 +188,41 @@ def _rerun_loop(loop: LoopRun, k1: int, t_cap: float, anomaly: Anomaly, ctx: _Co
     return _LoopPart(loop, t_loop[k1 : k_stop + 1], k1, part, flagged)
 
 
-def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, latest) -> tuple[list[float], list]:
-    """Per loop: (end of its span, uncut; when its flagged groups agreed again, None if never).
-
-    Specific: the loop's flagged groups agree again after its latest detection, held for hold_s (inf
-    if they never do); generic: hold_s after the detector's alarm, every loop."""
-    if anomaly.targets is None:
-        return [anomaly.t_end + s.hold_s] * len(parts), [None] * len(parts)
-    agreed = []
+def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, latest) -> tuple[list, list, list]:
+    """Per loop: (end of its span, uncut; when its flagged groups agreed again, None if that did
+    not end it; why). The span ends at the first agreeing sample that holds for hold_s (the hold
+    only confirms it): a specific anomaly's after the loop's latest detection, a generic one's after
+    the detector's alarm and at most hold_s after it. Either ends sooner at the first sample after
+    the detector's alarm that disagrees without showing the anomaly (inf if nothing ends it)."""
+    budget = (s.budget_per_hour, s.proof_hours)
+    generic = anomaly.targets is None
+    ends, agreed, reasons = [], [], []
     for p in parts:
-        status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile)
-        agreed.append(agreed_at(p.t, status, latest.get(p.loop.name, anomaly.t_detect), s.hold_s))
-    return [np.inf if a is None else a + s.hold_s for a in agreed], agreed
+        t_from = latest.get(p.loop.name, anomaly.t_detect)
+        status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile, budget)
+        t_agreed = agreed_at(p.t, status, anomaly.t_end if generic else t_from, s.hold_s)
+        end, reason = np.inf, ""
+        if t_agreed is not None:
+            groups = ", ".join(p.flagged)
+            end, reason = t_agreed, f"{groups} agreed with the recovered estimate again ({s.hold_s:g} s held)"
+        if generic and anomaly.t_end + s.hold_s < end:
+            t_agreed, end, reason = None, anomaly.t_end + s.hold_s, f"{s.hold_s:g} s after the detector's alarm"
+        t_failed = failed_at(p.t, status, max(anomaly.t_end, t_from))
+        if t_failed is not None and t_failed < end:
+            t_agreed, end, reason = None, t_failed, _not_reagreed(p, t_failed, budget)
+        ends.append(end)
+        agreed.append(t_agreed)
+        reasons.append(reason)
+    return ends, agreed, reasons
+
+
+def _not_reagreed(p: _LoopPart, t: float, budget: tuple[float, float]) -> str:
+    bounds = ", ".join(f"{g} {keep_bound(p.loop, g, budget):.1f}" for g in p.flagged)
+    return (
+        f"did not re-agree: at {t:.2f} s, after the detector's alarm, {p.loop.name} "
+        f"{', '.join(p.flagged)} disagreed with the recovered estimate but showed no anomaly (NIS within the "
+        f"false-alarm budget's bound: {bounds}), so the recovered estimate is the one off; recovery ended"
+    )
 
 
 def _fill(p: _LoopPart, end: float, ctx: _Context):

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from logscan.align import AlignedRun
+from logscan.detectors.budget import design_rate
 from logscan.docs import doc_url
 from logscan.errors import ProfileError
 from logscan.filters.trace import EkfTrace
@@ -61,10 +62,14 @@ class RecoverySettings:
     k_sigma: the reported bound is k_sigma * sqrt(diag P) of the recovery.
     allowed_error: "loop.state" -> allowed error E; T_max is computed for these states only.
     hold_s: flagged sensors must agree with the recovered prediction this long to end an anomaly
-        (a generic anomaly ends this long after the detector's alarm).
+        (the span ends where that agreement began; a generic anomaly ends this long after the
+        detector's alarm at the latest).
     max_duration_s: an anomaly is cut this long after its first alarmed time.
     agreement_quantile: a flagged group's sample agrees when its NIS against the recovered
         prediction is below this chi-square quantile.
+    budget_per_hour, proof_hours: the false-alarm budget (as `nis`'s) that sizes the bound beyond
+        which a flagged sample still shows the anomaly after the detector's alarm; a sample that
+        disagrees within it ends the recovery (the recovered estimate did not re-agree).
     consistency_tol_s: loops' steps closer than this are the same instant (None: half the fastest
         loop's period).
     """
@@ -78,6 +83,8 @@ class RecoverySettings:
     max_duration_s: float = 60.0
     agreement_quantile: float = 0.99
     consistency_tol_s: float | None = None
+    budget_per_hour: float = 0.1
+    proof_hours: float = 100.0
 
     def __post_init__(self) -> None:
         problems = []
@@ -86,12 +93,13 @@ class RecoverySettings:
         for name in ("checkpoint_period_s", "detection_time_s", "hold_s"):
             if not _finite_at_least(getattr(self, name), 0.0):
                 problems.append(f"recovery {name} must be a finite number >= 0, got {getattr(self, name)!r}")
-        for name in ("k_sigma", "max_duration_s"):
+        for name in ("k_sigma", "max_duration_s", "budget_per_hour", "proof_hours"):
             if not _finite_at_least(getattr(self, name), 0.0) or getattr(self, name) == 0:
                 problems.append(f"recovery {name} must be a finite number > 0, got {getattr(self, name)!r}")
         q = self.agreement_quantile
         if not (_finite_at_least(q, 0.0) and 0.0 < q < 1.0):
             problems.append(f"recovery agreement_quantile must lie strictly between 0 and 1, got {q!r}")
+        problems += _budget_problems(self.budget_per_hour, self.proof_hours)
         tol = self.consistency_tol_s
         if tol is not None and not (_finite_at_least(tol, 0.0) and tol > 0):
             problems.append(f"recovery consistency_tol_s must be > 0 (or None), got {tol!r}")
@@ -105,6 +113,17 @@ class RecoverySettings:
             err = ProfileError(problems[0] + more, hint=f"see {doc_url('algorithms.md')} section 5")
             err.problems = problems
             raise err
+
+
+def _budget_problems(budget_per_hour, proof_hours) -> list[str]:
+    """A demonstration too short to ever show the budget (as `nis` refuses it)."""
+    if not all(_finite_at_least(v, 0.0) and v > 0 for v in (budget_per_hour, proof_hours)):
+        return []  # reported as non-positive numbers
+    try:
+        design_rate(float(budget_per_hour), float(proof_hours))
+    except ValueError as exc:
+        return [f"recovery proof_hours: {exc}"]
+    return []
 
 
 def _finite_at_least(value, low: float) -> bool:
@@ -150,6 +169,9 @@ class AnomalyRecord:
     (or at the end of the log). t_max: "loop.state" -> the first duration after t_detect where the
     bound exceeds the allowed error (negative: already at detection; None: not within the
     max_duration_s horizon). outlasted: the states whose T_max the anomaly outlasted.
+    end_reasons: loop -> why its recovered span ended there (the flagged sensors agreed again; the
+    recovered estimate did not re-agree with a sensor that no longer shows the anomaly; the
+    detector's alarm; the cap; the end of the log); end_reason: that of the loop that ended last.
     """
 
     t_detect: float
@@ -169,10 +191,19 @@ class AnomalyRecord:
     outlasted: tuple[str, ...] = ()
     merged: int = 1
     note: str = ""
+    end_reasons: dict[str, str] = field(default_factory=dict)
 
     @property
     def specific(self) -> bool:
         return self.targets is not None
+
+    @property
+    def end_reason(self) -> str:
+        """Why the recovery ended: the reason of the loop whose span ended last ('' if none)."""
+        if not self.loop_ends:
+            return ""
+        last = max(self.loop_ends, key=lambda name: self.loop_ends[name])
+        return self.end_reasons.get(last, "")
 
     @property
     def verdict(self) -> str:
@@ -199,6 +230,8 @@ class AnomalyRecord:
             "verdict": self.verdict,
             "merged": self.merged,
             "note": self.note,
+            "end_reason": self.end_reason,
+            "end_reasons": dict(self.end_reasons),
         }
 
 

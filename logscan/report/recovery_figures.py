@@ -93,6 +93,12 @@ def _seconds(value: float | None) -> str:
     return "-" if value is None else f"{value:.2f}"
 
 
+def _ended(a) -> str:
+    """The "alarm" cell: whether recovery went on past the detector's alarm, and why it ended."""
+    kept = ("kept until the sensors agreed" if a.t_agreed is not None else "kept") if a.alarm_kept else "-"
+    return f"{kept}; ended: {a.end_reason}" if a.end_reason else kept
+
+
 def recovery_rows(view, clock: Clock) -> list[dict]:
     """One row per anomaly, times in ``clock``."""
     if view is None:
@@ -108,7 +114,7 @@ def recovery_rows(view, clock: Clock) -> list[dict]:
             "checkpoint": "-" if a.t_checkpoint is None else clock.text(a.t_checkpoint),
             "rollforward": _seconds(a.rollforward_s),
             "end": "-" if a.t_recovered_end is None else clock.text(a.t_recovered_end),
-            "kept": ("kept until the sensors agreed" if a.t_agreed is not None else "kept") if a.alarm_kept else "-",
+            "kept": _ended(a),
             "t_max": t_max, "verdict": a.verdict or a.note or "trustworthy",
             "untrusted": bool(a.outlasted),
         })  # fmt: skip
