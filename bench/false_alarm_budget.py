@@ -1,16 +1,21 @@
 """False alarms per hour of every detector and check over >= 100 healthy simulated hours.
 
 The campaign behind docs/evaluation.md ("The false-alarm budget over 100 hours"): healthy runs of
-the quadcopter and the steer-by-wire, normal and `--aggressive`, equal hours each (default 25 h
-per configuration as 50 logs of 30 min), no faults and no glitches, so every alarm is a false
-alarm. Each log is simulated, written as MCAP (ROS 2 CDR) in a temporary directory and analysed
-by `logscan.pipeline.analyze_log` (the reader, pipeline and alarm rules of `logscan analyze`), in
+the quadcopter, the steer-by-wire and the Jackal-like UGV (`dc_motor`: its mode cycle, `--aggressive`
+holding each speed half as long), normal and `--aggressive`, equal hours each (default 16.7 h per
+configuration as logs of 30 min), no faults and no glitches, so every alarm is a false alarm.
+Each log is simulated, written as MCAP (ROS 2 CDR; the UGV's as JSON) in a temporary directory and analysed by
+`logscan.pipeline.analyze_log` (the reader, pipeline and alarm rules of `logscan analyze`), in
 local processes (`logscan.fleet.run_many`).
 
 Detectors: those `logscan analyze` runs by default on these logs (the embedded profile's, else the
-registry's defaults), plus every other registered detector that applies to both models: one that
-runs without failing on a 60 s healthy probe log of each model (a detector that needs trained
-tables, another filter or topics these logs lack is listed as not applicable, with its reason).
+registry's defaults), plus every other registered detector that applies to the model: one that
+runs without failing on a 60 s healthy probe log of it (a detector that needs another filter or
+topics these logs lack is listed as not applicable, with its reason). The trained detectors
+(`TRAINED`: atfm, atfm_residual, kgn) get tables from `logscan train` on TRAIN_LOGS healthy normal
+logs of TRAIN_S seconds per model (unseen seeds, `TRAIN_SEED`), and every log is analysed with
+them and with a profile enabling them (the embedded profile plus their sections): trained on
+normal flights, judged on normal and aggressive ones.
 
 Counting is `logscan evaluate`'s: alarms grouped per detector and per check
 (`logscan.verdict.evaluation.alarm_groups`), merged into disjoint spans (`merge_intervals`); each span on
@@ -22,11 +27,14 @@ a healthy log is one false alarm. Rate = alarms / hours; the 95 % interval is th
 (lower = 0 when n = 0), n alarms over T hours. Seeds (used nowhere else: evaluate_detectors.py
 uses 500 .. 4109):
 
-    quadcopter 10000.., aggressive 11000..; steer_by_wire 12000.., aggressive 13000..
+    quadcopter 10000.., aggressive 11000..; steer_by_wire 12000.., aggressive 13000..;
+    dc_motor 16000.., aggressive 17000..; training: quadcopter 14000.., steer_by_wire 14100..,
+    dc_motor 14200..
 
     python bench/false_alarm_budget.py                       # 100 h, 2 processes
     python bench/false_alarm_budget.py --hours 4 --log-s 600 # a quick look
     python bench/false_alarm_budget.py --table runs.json      # the tables of a (partial) --json
+    python bench/false_alarm_budget.py --detector atfm_residual --detector kgn   # only these (where they apply)
 """
 
 from __future__ import annotations
@@ -40,13 +48,18 @@ import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-MODELS = ("quadcopter", "steer_by_wire")
+MODELS = ("quadcopter", "steer_by_wire", "dc_motor")
 SEED_BASE = {
     ("quadcopter", False): 10000,
     ("quadcopter", True): 11000,
     ("steer_by_wire", False): 12000,
     ("steer_by_wire", True): 13000,
+    ("dc_motor", False): 16000,
+    ("dc_motor", True): 17000,
 }
+TRAINED = ("atfm", "atfm_residual", "kgn")  # trained on normal logs (atfm: models with a redundant group)
+TRAIN_SEED = {"quadcopter": 14000, "steer_by_wire": 14100, "dc_motor": 14200}
+TRAIN_LOGS, TRAIN_S = 4, 600.0
 BUDGET_PER_HOUR = 0.1
 PROBE_S = 60.0
 PROBE_SEED = 9999
@@ -59,6 +72,17 @@ class Job:
     aggressive: bool
     seed: int
     duration_s: float
+    detectors: tuple[str, ...]
+    profile: str | None = None  # the embedded profile with the trained detectors enabled
+    tables: str | None = None  # their tables (`logscan train` on the model's training logs)
+
+
+@dataclass(frozen=True)
+class Trained:
+    """One model's profile enabling the trained detectors, and their tables."""
+
+    profile: str
+    tables: str
     detectors: tuple[str, ...]
 
 
@@ -77,24 +101,45 @@ def _simulate(model: str, aggressive: bool, seed: int, duration_s: float, direct
 
     sim = simulate(model, [], duration=duration_s, seed=seed, aggressive=aggressive)
     path = os.path.join(directory, f"{model}_{'aggressive' if aggressive else 'normal'}_{seed}.mcap")
-    write_simulation(sim, path, "mcap-ros2")
+    # the UGV's input topic has fields no ROS 2 message may have ('Va'): its logs are MCAP with JSON
+    write_simulation(sim, path, "mcap-json" if model == "dc_motor" else "mcap-ros2")
     return path
 
 
-def probe(model: str) -> tuple[list[str], dict[str, str]]:
+def train(model: str, directory: str) -> Trained:
+    """`logscan train` on TRAIN_LOGS healthy normal logs of ``model`` with a profile enabling the
+    trained detectors (atfm only where the profile has a redundant group)."""
+    from logscan.artifacts import json_text
+    from logscan.pipeline import load_profile_for
+    from logscan.training.train import train_logs
+
+    logs = [_simulate(model, False, TRAIN_SEED[model] + k, TRAIN_S, directory) for k in range(TRAIN_LOGS)]
+    loaded = load_profile_for(logs[0], None)
+    names = tuple(n for n in TRAINED if n != "atfm" or loaded.profile.to_dict().get("redundant"))
+    profile = os.path.join(directory, f"{model}.toml")
+    with open(profile, "w", encoding="utf-8") as fh:
+        fh.write(loaded.profile.to_toml() + "".join(f"\n[detectors.{n}]\n" for n in names))
+    tables = os.path.join(directory, f"{model}.tables.json")
+    with open(tables, "w", encoding="utf-8") as fh:
+        fh.write(json_text(train_logs(logs, profile)))
+    for path in logs:
+        os.unlink(path)
+    return Trained(profile, tables, names)
+
+
+def probe(model: str, trained: Trained | None, names: list[str]) -> tuple[list[str], dict[str, str]]:
     """(the default detectors on this model's logs, {detector: why it does not apply}) from one
-    short healthy log run through every registered detector."""
-    from logscan.detectors.registry import default_registry
+    short healthy log run through each of ``names`` (the trained ones with ``trained``)."""
     from logscan.pipeline import analyze_log, create_detectors, load_profile_for
 
-    registry = default_registry()
     reasons: dict[str, str] = {}
+    profile, tables = (trained.profile, trained.tables) if trained else (None, None)
     with tempfile.TemporaryDirectory() as directory:
         path = _simulate(model, False, PROBE_SEED, PROBE_S, directory)
         defaults = [d.name for d in create_detectors(load_profile_for(path, None))]
-        for name in registry.names():
+        for name in names:
             try:  # one detector at a time: one that cannot run must not take the others down
-                analysis = analyze_log(path, detector_names=[name])
+                analysis = analyze_log(path, profile, detector_names=[name], tables=tables)
             except Exception as exc:  # noqa: BLE001 - a detector that cannot run here does not apply
                 reasons[name] = f"{type(exc).__name__}: {exc}"
                 continue
@@ -112,7 +157,7 @@ def count_one(job: Job) -> dict:
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as directory:
         path = _simulate(job.model, job.aggressive, job.seed, job.duration_s, directory)
-        analysis = analyze_log(path, detector_names=list(job.detectors))
+        analysis = analyze_log(path, job.profile, detector_names=list(job.detectors), tables=job.tables)
     groups = alarm_groups(analysis.results)
     alarms = [
         {
@@ -137,14 +182,17 @@ def count_one(job: Job) -> dict:
     }
 
 
-def make_jobs(hours: float, log_s: float, detectors: dict[str, tuple[str, ...]]) -> list[Job]:
+def make_jobs(
+    hours: float, log_s: float, detectors: dict[str, tuple[str, ...]], trained: dict[str, Trained | None]
+) -> list[Job]:
     """Equal hours per (model, aggressive) configuration, in logs of ``log_s`` seconds."""
     per_config = max(1, round(hours * 3600.0 / len(SEED_BASE) / log_s))
-    return [
-        Job(model, aggressive, base + i, log_s, detectors[model])
-        for (model, aggressive), base in SEED_BASE.items()
-        for i in range(per_config)
-    ]
+    jobs = []
+    for (model, aggressive), base in SEED_BASE.items():
+        mine = trained.get(model)
+        where = (mine.profile, mine.tables) if mine else (None, None)
+        jobs += [Job(model, aggressive, base + i, log_s, detectors[model], *where) for i in range(per_config)]
+    return jobs
 
 
 def rate_table(runs: list[dict]) -> str:
@@ -201,7 +249,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--hours", type=float, default=100.0, help="healthy hours in all (equal per configuration)")
     parser.add_argument("--log-s", type=float, default=1800.0, help="length of each simulated log (s)")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--detector", action="append", default=None, help="only these detectors (repeatable)")
+    parser.add_argument(
+        "--detector", action="append", default=None, help="only these detectors, where they apply (repeatable)"
+    )
     parser.add_argument("--json", dest="json_path", default=None, help="write every log's counts and alarms here")
     parser.add_argument("--table", default=None, help="only print the tables of a --json file (also a partial one)")
     args = parser.parse_args(argv)
@@ -217,25 +267,31 @@ def main(argv: list[str] | None = None) -> int:
         print(rate_table(runs) + "\n" + alarm_list(runs))
         return 0
 
-    import logscan
-    from logscan.fleet import run_many
-
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from evaluate_detectors import code_version
+
+    with tempfile.TemporaryDirectory(prefix="false-alarm-budget-") as directory:
+        return campaign(args, directory, code_version())
+
+
+def campaign(args, directory: str, version: str) -> int:
+    """Train, probe and run the healthy logs; print the tables (and write --json)."""
+    import logscan
+    from logscan.detectors.registry import default_registry
+    from logscan.fleet import run_many
 
     started = time.perf_counter()
     detectors: dict[str, tuple[str, ...]] = {}
     reasons: dict[str, dict[str, str]] = {}
+    trained: dict[str, Trained | None] = {}
+    wanted = args.detector or default_registry().names()
     for model in MODELS:
-        if args.detector:
-            detectors[model], reasons[model] = tuple(args.detector), {}
-            continue
-        defaults, reasons[model] = probe(model)
-        from logscan.detectors.registry import default_registry
-
-        applicable = [n for n in default_registry().names() if n not in reasons[model]]
-        detectors[model] = tuple(dict.fromkeys(defaults + applicable))
-    jobs = make_jobs(args.hours, args.log_s, detectors)
+        trained[model] = train(model, directory) if any(n in TRAINED for n in wanted) else None
+        defaults, reasons[model] = probe(model, trained[model], wanted)
+        applicable = [n for n in wanted if n not in reasons[model]]
+        chosen = (defaults if not args.detector else []) + applicable
+        detectors[model] = tuple(dict.fromkeys(chosen))
+    jobs = make_jobs(args.hours, args.log_s, detectors, trained)
     runs: list[dict] = []
     # in chunks, the configurations interleaved, so that an interrupted campaign still has a
     # balanced partial result in --json (written after every chunk)
@@ -250,8 +306,10 @@ def main(argv: list[str] | None = None) -> int:
     per_log = sum(r["seconds"] for r in runs) / max(len(runs), 1)
 
     lines = [
-        f"Measured {datetime.now(UTC):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} ({code_version()}), "
-        f"`python bench/false_alarm_budget.py --hours {args.hours:g} --log-s {args.log_s:g} --jobs {args.jobs}`: "
+        f"Measured {datetime.now(UTC):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} ({version}), "
+        f"`python bench/false_alarm_budget.py --hours {args.hours:g} --log-s {args.log_s:g} --jobs {args.jobs}"
+        + "".join(f" --detector {n}" for n in args.detector or [])
+        + "`: "
         f"{len(runs)} healthy logs, {total_hours:.1f} h, in {elapsed:.0f} s ({per_log:.1f} s per log: simulate, "
         f"write, analyse; {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, "
         f"Python {platform.python_version()}).",
