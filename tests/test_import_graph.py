@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ast
 import fnmatch
+import re
 import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -328,6 +329,60 @@ def test_the_filter_rule_refuses_a_filter_and_its_package_re_export_not_a_helper
 def test_detectors_ask_and_the_pipeline_filters():
     refused = sorted({edge.where() for edge in filter_runs_in_detectors(internal_imports())})
     assert not refused, "detectors ask the pipeline for filter traces (Detector.needs):\n" + "\n".join(refused)
+
+
+LAYERS_DOC = REPO / "docs" / "extending.md"  # its section "Who imports whom"
+UNIT = re.compile(r"[a-z_]+(?:/|\.py)")  # a folder (`verdict/`) or a flat module (`tasks.py`)
+
+
+def unit(module: str, modules: dict[str, Path]) -> str:
+    """The folder (``verdict/``) or flat module (``tasks.py``) of logscan a module belongs to; "" for
+    the package `logscan` itself."""
+    parts = module.split(".")
+    if len(parts) == 1:
+        return ""
+    return f"{parts[1]}/" if len(parts) > 2 or modules[module].name == "__init__.py" else f"{parts[1]}.py"
+
+
+def documented_layers(text: str) -> tuple[set[str], dict[str, set[str] | None]]:
+    """From the section "Who imports whom": the foundations (the ``x.py`` names of its first paragraph)
+    and, per folder or flat module of its list, what it may import besides them (None: every folder)."""
+    section = text.split("### Who imports whom", 1)[1].split("\n#", 1)[0]
+    intro, _, rest = section.partition("\n- ")
+    foundations = {name for name in re.findall(r"`([^`]+)`", intro) if UNIT.fullmatch(name) and name.endswith(".py")}
+    allowed: dict[str, set[str] | None] = {}
+    for item in ("- " + rest).split("\n- "):
+        head, _, body = item.removeprefix("- ").partition(": ")
+        body = body.split("\n\n", 1)[0]
+        names = {name for name in re.findall(r"`([^`]+)`", body) if UNIT.fullmatch(name)}
+        allowed[head.strip("`")] = None if "every folder" in body else names
+    return foundations, allowed
+
+
+def test_the_layer_list_is_read_as_written():
+    text = """### Who imports whom\n\nFlat in `logscan/`: `a.py`, `b.py` (`tests/x.py` is no unit).\n\n- `one/`: nothing
+- `two/`: `one/`, `three/` (only `three/helper.py`)\n- `cli/`: every folder\n\nProse after the list.\n\n## Next"""
+    assert documented_layers(text) == ({"a.py", "b.py"}, {"one/": set(), "two/": {"one/", "three/"}, "cli/": None})
+
+
+def test_every_folder_imports_only_what_docs_extending_md_lists():
+    modules = internal_modules()
+    foundations, allowed = documented_layers(LAYERS_DOC.read_text(encoding="utf-8"))
+    units = {unit(module, modules) for module in modules} - {""}
+    unlisted = units - foundations - set(allowed)
+    assert not unlisted, f"not in {LAYERS_DOC.name}'s list: {unlisted}"
+    assert not set(allowed) - units, f"listed but not in logscan/: {set(allowed) - units}"
+    crossing = set()
+    for edge in internal_imports():
+        importer, target = unit(edge.importer, modules), unit(edge.target, modules)
+        if not target or importer == target or target in foundations:
+            continue
+        may = set() if importer in foundations else allowed[importer]
+        if may is not None and target not in may:
+            crossing.add(f"{importer} -> {target}: {edge.where()}")
+    assert not crossing, f'imports {LAYERS_DOC.name} does not allow ("Who imports whom"):\n' + "\n".join(
+        sorted(crossing)
+    )
 
 
 def test_every_allow_list_entry_still_has_an_import_inside_a_function():
