@@ -207,3 +207,72 @@ def test_alarm_rows_align_whatever_the_names():
     end = rows[0].index("2.00") + len("2.00")
     assert rows[1].index("6.00") + len("6.00") == end
     assert rows[0][end : end + 10] == rows[1][end : end + 10] == "         2"  # peak/threshold
+
+
+# --- colour and progress -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("env", "expected"),
+    [
+        ({}, False),
+        ({"FORCE_COLOR": "1"}, True),
+        ({"NO_COLOR": "1", "FORCE_COLOR": "1"}, False),
+        ({"FORCE_COLOR": ""}, False),
+    ],
+)
+def test_colour_follows_no_color_and_force_color_off_a_terminal(monkeypatch, env, expected):
+    from logscan.cli.progress import use_colour
+
+    for name in ("NO_COLOR", "FORCE_COLOR"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    assert use_colour() is expected and use_colour(err=True) is expected
+
+
+def test_the_verdict_is_coloured_by_the_exit_code_with_force_color(cli, monkeypatch):
+    monkeypatch.delenv("NO_COLOR", raising=False)
+    monkeypatch.setenv("FORCE_COLOR", "1")
+    result = cli("analyze", SAMPLES / "quad_imu_bias.mcap", "--no-report", "-q")
+    assert result.exit_code == 1
+    first = result.stdout.splitlines()[0]
+    assert first.startswith(f"{SAMPLES / 'quad_imu_bias.mcap'}: \x1b[31m\x1b[1m12 alarms in 1 incident\x1b[0m  (")
+    monkeypatch.setenv("NO_COLOR", "1")
+    plain = cli("analyze", SAMPLES / "quad_imu_bias.mcap", "--no-report", "-q")
+    assert plain.exit_code == 1 and "\x1b" not in plain.stdout
+    assert plain.stdout == result.stdout.replace("\x1b[31m\x1b[1m", "").replace("\x1b[0m", "")
+
+
+def test_no_progress_under_ci_even_on_a_terminal(monkeypatch):
+    import sys
+    from types import SimpleNamespace
+
+    from logscan.cli.options import show_progress
+
+    monkeypatch.setattr(sys, "stderr", SimpleNamespace(isatty=lambda: True))
+    monkeypatch.delenv("CI", raising=False)
+    assert show_progress(False) and not show_progress(True)
+    monkeypatch.setenv("CI", "true")
+    assert not show_progress(False)
+
+
+def test_a_step_line_ticks_and_ends_with_the_time_each_step_took(monkeypatch):
+    import io
+    import sys
+    import time
+
+    from logscan.cli.progress import StepLine
+
+    err = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", err)
+    line = StepLine(interval=0.01)
+    line.step("logscan: f.mcap: filtering")
+    time.sleep(0.1)
+    line.step("logscan: f.mcap: detecting")
+    line.close()
+    text = err.getvalue()
+    assert text.count("\r\x1b[Klogscan: f.mcap: filtering... 0 s") >= 2  # drawn, then redrawn by the ticker
+    ended = [part for part in text.split("\r\x1b[K") if part.endswith("\n")]
+    assert [part.split(" (")[0] for part in ended] == ["logscan: f.mcap: filtering", "logscan: f.mcap: detecting"]
+    assert ended[0].endswith(" s)\n") and float(ended[0].split(" (")[1].split(" s)")[0]) >= 0.1

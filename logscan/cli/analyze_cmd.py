@@ -22,6 +22,7 @@ from logscan.cli.options import (
     tables_option,
     window_option,
 )
+from logscan.cli.progress import coloured_verdict, echo_step, end_steps, use_colour
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode, UsageError
 
@@ -201,7 +202,7 @@ def analyze(
     """
     from logscan.align import check_window
     from logscan.artifacts import cleanup, discard, new_token, remove_orphans, stage
-    from logscan.fleet import expand_logs, output_paths, refuse_clobbering, run_many
+    from logscan.fleet import expand_logs, output_paths, refuse_clobbering
     from logscan.report.index_page import index_path
     from logscan.tasks import AnalyzeTask, LogOutcome
 
@@ -253,7 +254,7 @@ def analyze(
         plotlyjs_dir,
         allow_partial,
         render=render_summary,
-        step=_echo_step if progress and len(logs) == 1 else None,
+        step=echo_step if progress and len(logs) == 1 else None,
         notice=echo_notice if not quiet else None,
         token=token,
         start_s=start_s,
@@ -265,15 +266,7 @@ def analyze(
     )
     staged = []
     try:
-        outcomes = run_many(
-            list(zip(logs, reports)),
-            task,
-            jobs=jobs,
-            progress=progress,
-            label="analysing",
-            isolate=len(logs) > 1,
-            scheduler=scheduler,
-        )
+        outcomes = _run_logs(list(zip(logs, reports)), task, jobs, progress, scheduler)
         staged = [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
         code, document = _report_outcomes(outcomes, exit_zero, err=json_path == "-")
         if previous is not None:
@@ -294,6 +287,19 @@ def analyze(
         cleanup([p for p in written if p and p != "-"], token)
         raise
     sys.exit(code)
+
+
+def _run_logs(items: list, task, jobs: int, progress: bool, scheduler: str | None) -> list:
+    """Each (log, report) through ``task`` (`logscan.fleet.run_many`); one log's step line ended
+    (its last step's time printed) before anything else is."""
+    from logscan.fleet import run_many
+
+    try:
+        return run_many(
+            items, task, jobs=jobs, progress=progress, label="analysing", isolate=len(items) > 1, scheduler=scheduler
+        )
+    finally:
+        end_steps()
 
 
 def _compare_with_baseline(document: dict, previous: dict, code, fail_on: str, exit_zero: bool, err: bool):
@@ -333,7 +339,9 @@ def _report_outcomes(outcomes: list, exit_zero: bool, err: bool) -> tuple[ExitCo
         summaries.append(outcome.summary)
         codes.append(ExitCode(outcome.summary["exit_code"]))
         # with --json - the JSON owns stdout; the human summary goes to stderr
-        click.echo(outcome.text, err=err)
+        colour = use_colour(err)
+        text = coloured_verdict(outcome.text, outcome.summary["verdict"], outcome.summary["exit_code"])
+        click.echo(text if colour else outcome.text, err=err, color=colour)
 
     # the worst log decides: a failure (3) over bad or unchecked input (2) over alarms (1)
     code = max(codes, default=ExitCode.OK)
@@ -382,8 +390,3 @@ def _write_outputs(
     staged.clear()
     if json_path == "-":
         sys.stdout.write(json_text(document))
-
-
-def _echo_step(message: str) -> None:
-    """A step of the analysis of one log (``<log>: <step>``), on stderr (`logscan.tasks.AnalyzeTask`)."""
-    click.echo(printable(f"logscan: {message}..."), err=True)

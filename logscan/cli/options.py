@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
@@ -204,10 +205,16 @@ window_option = window_options("Analyse", "the log", "e.g. to leave out a clock 
 
 
 def show_progress(quiet: bool) -> bool:
-    """Progress goes to stderr only when it is a terminal and --quiet is off."""
-    return not quiet and sys.stderr.isatty()
+    """Progress goes to stderr only when it is a terminal, --quiet is off and no CI runs us
+    (CI=true, as GitHub Actions, GitLab CI and most CI servers set it)."""
+    in_ci = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+    return not quiet and not in_ci and sys.stderr.isatty()
 
 
 def echo_notice(message: str) -> None:
-    """A one-off note for the user (e.g. the first run's compile), on stderr."""
+    """A one-off note for the user (e.g. the first run's compile), on stderr, on a line of its own
+    (a step line being drawn is erased first: `logscan.cli.progress`)."""
+    from logscan.cli.progress import clear_step_line
+
+    clear_step_line()
     click.echo(f"logscan: {message}", err=True)
