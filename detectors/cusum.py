@@ -26,7 +26,11 @@ shortens the run length of a test tuned to small shifts (measured, docs/algorith
 Resets to zero: when an alarm ends (|g| falls back to h or below: the alarm's evidence is spent, the
 next alarm needs a full h of new evidence, which is what the ARL counts); at a filter divergence
 (the filter restarts); across a gap in a group's updates longer than max(gap_s, 5 update periods).
-The statistic is held at most c h (``cap``) so that an alarm ends soon after the fault does.
+The statistic is held at most c h (``cap``) so that an alarm ends soon after the fault does. The
+same sums without the cap (restarted with them) give the size the cap hides: for each alarm whose
+uncapped statistic went past its capped peak, ``info["uncapped_peaks"][signal]`` has that peak
+(the report's alarm table shows it; the alarm's own peak stays the capped statistic's, 1.5 h at
+most, so incidents keep quoting by the statistics as drawn).
 The change time reported with each alarm (``AlarmInterval.change_time``) is Page's estimate: the
 first update after the last time the alarming side was zero.
 """
@@ -96,15 +100,19 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
     reset (N,) bool, steps where every test restarts (filter divergence); gap (J,) s, a longer gap
     between a column's updates restarts it; h (J,) thresholds; kappa reference; cap: statistics held
     at most cap * h; clip: each u enters at most +-clip (one glitch cannot raise an alarm alone).
-    Returns g (N, J), the signed statistic (NaN without update), and onset (N, J), the first step of
-    the run of the side g shows (-1 when that side is zero).
+    Returns g (N, J), the signed statistic (NaN without update); onset (N, J), the first step of
+    the run of the side g shows (-1 when that side is zero); and free (N, J), the same sides without
+    the cap (restarted with them), whose peak is an alarm's real magnitude.
     """
     n, m = y.shape
     g = np.full((n, m), np.nan)
+    free = np.full((n, m), np.nan)
     onset = np.full((n, m), -1, dtype=np.int64)
     for j in range(m):
         sp = 0.0
         sm = 0.0
+        fp = 0.0  # the sides without the cap
+        fm = 0.0
         p0 = -1
         m0 = -1
         last = -np.inf
@@ -112,27 +120,55 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
         top = cap * h[j]
         for i in range(n):
             if reset[i]:
-                sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
+                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
             x = y[i, j] / np.sqrt(S_diag[i, j])  # u = y~ / sqrt(S_jj)
             if not np.isfinite(x):
                 continue
             if t[i] - last > gap[j]:
-                sp, sm, p0, m0, on = 0.0, 0.0, -1, -1, False
+                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
             last = t[i]
             x = min(max(x, -clip), clip)
             sp, p0 = _side(sp, p0, x, kappa, top, i)  # S+ on u_k
             sm, m0 = _side(sm, m0, -x, kappa, top, i)  # S- on -u_k
+            fp = max(0.0, fp + x - kappa)
+            fm = max(0.0, fm - x - kappa)
             now = max(sp, sm) > h[j]
             if on and not now:  # the alarm ended: its evidence is spent, both sides restart
-                sp, sm, p0, m0 = 0.0, 0.0, -1, -1
+                sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, -1, -1
             on = now
             if sp >= sm:
                 g[i, j] = sp
+                free[i, j] = fp
                 onset[i, j] = p0
             else:
                 g[i, j] = -sm
+                free[i, j] = -fm
                 onset[i, j] = m0
-    return g, onset
+    return g, onset, free
+
+
+def uncapped_peaks(alarms, t: np.ndarray, free: np.ndarray, h: float) -> list[dict]:
+    """Where the cap hid an alarm's size: per alarm whose uncapped statistic ``free`` (N,) went
+    further than its (capped) peak, ``{start, end, peak_time, peak_value, peak_threshold,
+    peak_ratio}`` of the uncapped peak (the sign kept, the ratio positive). The capped statistic sits
+    at cap x h for as long as the fault lasts, which says nothing of its size."""
+    out = []
+    for alarm in alarms:
+        lo, hi = np.searchsorted(t, [alarm.start, alarm.end], side="left")
+        part = free[lo : hi + 1]
+        defined = np.flatnonzero(np.isfinite(part))
+        if defined.size == 0 or alarm.bound == "nonfinite":
+            continue
+        k = int(defined[np.argmax(np.abs(part[defined]))])
+        value = float(part[k])
+        if abs(value) <= abs(float(alarm.peak_value)):
+            continue
+        threshold = h if value > 0 else -h
+        out.append({
+            "start": float(alarm.start), "end": float(alarm.end), "peak_time": float(t[lo + k]),
+            "peak_value": value, "peak_threshold": threshold, "peak_ratio": value / threshold,
+        })  # fmt: skip
+    return out
 
 
 def check_hiding(detector) -> None:
@@ -254,8 +290,8 @@ class CusumDetector(Detector):
                 # one column at a time: (N,) temporaries, not the (N, J) statistic and onsets at once
                 column = slice(j, j + 1)
                 y, S_diag = (np.ascontiguousarray(a[:, column]) for a in (trace.y, trace.S_diag))
-                stat, onset = cusum_kernel(t, y, S_diag, trace.diverged, gaps[column], h[column], *settings)
-                stat, onset = stat[:, 0], onset[:, 0]
+                stat, onset, free = cusum_kernel(t, y, S_diag, trace.diverged, gaps[column], h[column], *settings)
+                stat, onset, free = stat[:, 0], onset[:, 0], free[:, 0]
                 valid = np.isfinite(stat)
                 alarms = result.add_statistic(
                     t, signal, stat, upper=h[j], lower=-h[j], valid=valid, hold_off_s=self.hold_off_s
@@ -263,6 +299,9 @@ class CusumDetector(Detector):
                 for alarm in alarms:  # Page's change-time estimate at the crossing
                     first = int(onset[np.searchsorted(t, alarm.start)])
                     alarm.change_time = float(t[first]) if first >= 0 else None
+                saturated = uncapped_peaks(alarms, t, free, float(h[j]))
+                if saturated:
+                    result.info.setdefault("uncapped_peaks", {})[signal] = saturated
                 result.info["h"][signal] = float(h[j])
                 result.info["arl0_updates"][signal] = float(arl[j])
         return result

@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from logscan.alarms import AlarmInterval
 from logscan.detectors.budget import design_rate
-from logscan.detectors.cusum import CusumDetector, cusum_kernel, siegmund_arl, threshold_for_arl
+from logscan.detectors.cusum import CusumDetector, cusum_kernel, siegmund_arl, threshold_for_arl, uncapped_peaks
 
 DT = 0.01
 
@@ -19,7 +20,16 @@ def run_kernel(u, h, *, kappa=0.25, cap=1.5, gap=1.0, reset=None, clip=4.0):
     t = np.arange(u.shape[0]) * DT
     reset = np.zeros(u.shape[0], dtype=bool) if reset is None else reset
     m = u.shape[1]
-    return cusum_kernel(t, u, np.ones_like(u), reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)
+    return cusum_kernel(t, u, np.ones_like(u), reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)[:2]
+
+
+def run_uncapped(u, h, **settings):
+    """The kernel's uncapped statistic (its third output) beside the capped one."""
+    u = np.asarray(u, dtype=np.float64)[:, None]
+    t = np.arange(u.shape[0]) * DT
+    one = np.ones(1)
+    g, _, free = cusum_kernel(t, u, np.ones_like(u), np.zeros(u.shape[0], bool), one, one * h, 0.25, 1.5, 4.0)
+    return t, g[:, 0], free[:, 0]
 
 
 def alarm_starts(g: np.ndarray, h: float) -> np.ndarray:
@@ -79,6 +89,24 @@ def test_the_statistic_is_capped_and_restarts_when_the_alarm_ends():
     below = int(np.flatnonzero((np.arange(400) >= 200) & (g[:, 0] <= 10.0))[0])
     assert g[below, 0] == 0.0  # the sample the alarm ends on restarts the test
     assert np.all(g[below:, 0] == 0.0)
+
+
+def test_a_saturated_alarm_reports_the_uncapped_peak_not_the_cap():
+    u = np.concatenate([np.full(200, 1.25), np.full(200, -0.25)])  # as above: saturates at 1.5 h
+    t, g, free = run_uncapped(u, 10.0)
+    assert np.nanmax(g) == pytest.approx(15.0)
+    assert np.nanmax(free) == pytest.approx(200 * (1.25 - 0.25))  # the sum the cap hid
+    assert np.all(free[np.abs(g) == 0.0] == 0.0)  # restarted with the capped sides
+    alarm = AlarmInterval(float(t[20]), float(t[250]), float(t[20]), float(t[30]), 15.0, 10.0, 1.5, "upper", 200)
+    (peak,) = uncapped_peaks([alarm], t, free, 10.0)
+    assert peak["peak_value"] == pytest.approx(200.0) and peak["peak_ratio"] == pytest.approx(20.0)
+    assert peak["peak_time"] == pytest.approx(float(t[199])) and peak["peak_threshold"] == 10.0
+    assert (peak["start"], peak["end"]) == (alarm.start, alarm.end) and alarm.peak_ratio == 1.5  # left as it was
+    low = AlarmInterval(float(t[20]), float(t[250]), float(t[20]), float(t[30]), -15.0, -10.0, 1.5, "lower", 200)
+    (peak,) = uncapped_peaks([low], t, -free, 10.0)  # the downward side: the sign kept, the ratio positive
+    assert peak["peak_value"] == pytest.approx(-200.0) and peak["peak_ratio"] == pytest.approx(20.0)
+    unsaturated = AlarmInterval(float(t[20]), float(t[250]), float(t[20]), float(t[199]), 200.0, 10.0, 20.0, "upper", 1)
+    assert uncapped_peaks([unsaturated], t, free, 10.0) == []  # nothing hidden: nothing reported
 
 
 def test_divergence_and_gaps_restart_the_test():

@@ -212,7 +212,7 @@ def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report,
     header, body = rows[0], rows[1:]
     assert header[:9] == ["#", "detector", "signal / sensor", "start (s)", "end (s)", "duration (s)",
                           "peak", "threshold at peak", "peak / threshold"]  # fmt: skip
-    assert header[9:] == ["matched ground-truth event", "latency (s)"]
+    assert header[9:] == ["matched ground-truth event", "latency (s)", "note"]
     alarms = flat_alarms(hour_report.results)
     assert len(body) == len(alarms) >= 3
     assert all("\n" not in cell for row in body for cell in row)  # one line per alarm
@@ -239,7 +239,7 @@ def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report,
 def test_truth_columns_and_table_appear_only_with_truth():
     page = render_html(make_report(60_000, truth=False, hostile=False), plotlyjs_src="plotly.min.js")
     header = table(page, "alarm-table")[0]
-    assert len(header) == 9 and "latency (s)" not in header
+    assert len(header) == 10 and "latency (s)" not in header
     assert 'id="truth-table"' not in page and "ground truth" not in json.dumps(figures(page))
 
 

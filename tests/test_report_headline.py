@@ -88,3 +88,18 @@ def test_significant_figures_keep_the_sign_and_trailing_zeros():
     assert significant(0.9234) == "+0.92"
     assert significant(123.4) == "+123"
     assert significant(5.62716, 3) == "+5.63"
+
+
+def test_a_saturated_cusum_alarm_shows_its_uncapped_size_not_the_cap(bias):
+    report, page = bias
+    (cusum,) = [r for r in report.results if r.detector == "cusum"]
+    capped = [a for a in cusum.alarms if a.signal == "cusum.accel.ax" and a.peak_ratio == pytest.approx(1.5)]
+    assert capped, "the accelerometer x CUSUM no longer saturates: pick another statistic"
+    uncapped = cusum.info["uncapped_peaks"]["cusum.accel.ax"]
+    rows = [row for row in table(page, "alarm-table")[1:] if row[3] == "cusum.accel.ax"]
+    ratios = sorted(float(row[9]) for row in rows)
+    assert ratios == pytest.approx(sorted(abs(r["peak_ratio"]) for r in uncapped), rel=1e-2)
+    assert max(ratios) > 10  # a 1 m/s² bias over 10 s is far past the threshold, not 1.5 times it
+    assert all(row[-1].startswith("uncapped peak") for row in rows)
+    margin = next(row for row in table(page, "margin-table")[1:] if row[1] == "cusum.accel.ax")
+    assert float(margin[3]) == pytest.approx(max(ratios), rel=1e-2)

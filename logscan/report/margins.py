@@ -10,6 +10,9 @@ where the statistic and its threshold are both defined, the largest of:
   ``upper / e`` for a negative one (``e`` must stay below it);
 - lower bound only: ``e / lower`` for a negative bound, ``lower / e`` for a positive one.
 
+A detector that holds its statistic at a cap (cusum, at 1.5 h) gives its alarms' uncapped peaks
+(``info["uncapped_peaks"]``): the largest, where above, is the margin.
+
 A statistic on the wrong side of zero from a one-sided bound of the other sign, or on a zero-width
 band, is infinitely far (ratio inf); a zero bound has no ratio (the sample is skipped). Only the
 samples that could raise an alarm count (``DetectorResult.judged``: valid, past the warm-up); of
@@ -105,7 +108,16 @@ def statistic_margin(result: DetectorResult, name: str, t: np.ndarray) -> Margin
         return margin
     index, margin.ratio = peak
     margin.time, margin.value = float(t[index]), float(values[index])
+    _uncapped_peak(margin, (result.info.get("uncapped_peaks") or {}).get(name) or [])
     return margin
+
+
+def _uncapped_peak(margin: Margin, records: Sequence[dict]) -> None:
+    """The largest uncapped peak a detector gives for the statistic it holds at a cap (cusum:
+    ``info["uncapped_peaks"][name]``), where it is above the statistic's own."""
+    best = max(records, key=lambda r: abs(r["peak_ratio"]), default=None)
+    if best is not None and margin.ratio is not None and abs(best["peak_ratio"]) > margin.ratio:
+        margin.ratio, margin.time, margin.value = abs(best["peak_ratio"]), best["peak_time"], best["peak_value"]
 
 
 def _peak(values: np.ndarray, upper, lower, judged: np.ndarray | None) -> tuple[int, float] | None:

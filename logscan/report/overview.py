@@ -15,12 +15,14 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from logscan.alarms import AlarmInterval
+from logscan.report.context import number_text
 from logscan.report.margins import Margin, peak_margin, ratio_text
 from logscan.results import DetectorResult, Incident
 from logscan.timebase.clock import Clock
 from logscan.verdict.incidents import signal_label
 
 REJECTED_PREFIX = "rejected."  # indicator statistics: 1 where the filter refused a sample
+UNCAPPED = "uncapped peak"  # the alarm table's note where the figure holds the statistic at a cap
 
 
 def rejected_words(n: int) -> str:
@@ -40,6 +42,28 @@ def alarm_note(alarm: AlarmInterval) -> str:
     if alarm.change_time is not None:
         return f"change estimated to begin {max(alarm.start - alarm.change_time, 0.0):.2f} s before the alarm"
     return ""
+
+
+def uncapped_peak(alarm: AlarmInterval, info: Mapping) -> dict | None:
+    """The uncapped peak a detector gives for an alarm whose statistic it holds at a cap (cusum:
+    ``info["uncapped_peaks"][signal]``, one record per alarm it raised), the largest of those within
+    the alarm (alarms merged later hold several); None when there is none."""
+    records = (info.get("uncapped_peaks") or {}).get(alarm.signal) or []
+    inside = [r for r in records if r["start"] >= alarm.start - 1e-9 and r["end"] <= alarm.end + 1e-9]
+    return max(inside, key=lambda r: abs(r["peak_ratio"]), default=None)
+
+
+def peak_cells(alarm: AlarmInterval, info: Mapping) -> dict:
+    """The alarm table's peak, threshold at peak, peak / threshold and note: the uncapped peak where
+    the detector gives one (the figure holds the statistic at its cap)."""
+    note, peak = alarm_note(alarm), uncapped_peak(alarm, info)
+    if peak is None:
+        value, threshold, ratio = alarm.peak_value, alarm.peak_threshold, alarm.peak_ratio
+    else:
+        value, threshold, ratio = peak["peak_value"], peak["peak_threshold"], peak["peak_ratio"]
+        note = f"{UNCAPPED}; {note}" if note else UNCAPPED
+    cells = {"peak": number_text(value), "threshold": number_text(threshold), "ratio": number_text(ratio, 3)}
+    return cells | {"note": note, "uncapped": peak is not None}
 
 
 def closest_line(margins: Sequence[Margin], clock: Clock | None = None) -> str:

@@ -162,6 +162,7 @@ def report_matches(
 def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> list[dict]:
     alarms = flat_alarms(report.results)
     incident_of = {id(alarm): i for i, incident in enumerate(report.incidents, 1) for alarm in incident.alarms}
+    info_of = {id(alarm): result.info for result in report.results for alarm in result.alarms}
     matches = report.matches
     if has_truth and matches is None and alarms:
         matches = report_matches(report.results, report.truth_events)
@@ -180,11 +181,9 @@ def _alarm_rows(report: ReportInput, events: list[dict], has_truth: bool) -> lis
             "t1": repr(clock.axis_value(end)),
             "order": start,
             "duration": f"{end - start:.3f}",
-            "peak": number_text(alarm.peak_value),
-            "threshold": number_text(alarm.peak_threshold),
-            "ratio": number_text(alarm.peak_ratio, 3),
+            **overview.peak_cells(alarm, info_of.get(id(alarm), {})),  # peak, threshold, ratio, note
             "bound": alarm.bound,
-            "note": overview.alarm_note(alarm),
+            "rejected": overview.is_rejected(alarm.signal),  # the note replaces peak / threshold
             "event": None,
             "latency": None,
         }
