@@ -51,80 +51,92 @@ class GnssChecks(HealthChecks):
             return
         eph_limit, eph_from = _parameter(parameters, "EKF2_REQ_EPH") or (REQ_EPH_M, "default")
         epv_limit, epv_from = _parameter(parameters, "EKF2_REQ_EPV") or (REQ_EPV_M, "default")
+        accuracy = (("eph", eph_limit, eph_from), ("epv", epv_limit, epv_from))
         for instance in found:
-            fields = topics[(topic, instance)]
-            where = f"{topic}_{instance}"
-            sfx = _suffix(instance)
-            any_channel = next(iter(fields.values()))
-            t = any_channel.t
-            px4_passing = _px4_gnss_passing(topics, t)
-            gate = np.ones(t.size, bool) if armed is None else armed[1](t)
-            while_ = "armed" if armed is not None else "always (arming state unknown)"
-            fixed = np.ones(t.size, bool)  # 3D-fixed now (all when fix_type is absent)
-            fix = fields.get("fix_type")
-            if fix is not None and np.array_equal(fix.t, t):
-                three_d = fix.values >= 3
-                first = np.flatnonzero(three_d)
-                inside = in_span(self._grid, t)
-                if inside.any() and not three_d[inside].any():
-                    best = int(np.nanmax(fix.values)) if np.isfinite(fix.values).any() else None
-                    self._unmonitored.append(
-                        f"GNSS: no 3D fix all flight ({where}.fix_type"
-                        + (f" at most {best})" if best is not None else " never set)")
-                    )
-                    fixed = np.zeros(t.size, bool)
-                elif first.size == 0:
-                    self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where}: no 3D fix in the log"
-                    fixed = three_d
-                else:
-                    after = np.arange(t.size) >= first[0]
-                    flag = np.where(three_d, 0.0, FLAG)
-                    self._add(
-                        f"{PREFIX}.gnss_fix{sfx}",
-                        where,
-                        t,
-                        np.where(after & gate, flag, np.nan),
-                        limit={
-                            "fix_type_below": 3,
-                            "after_s": (t[first[0]] - self._grid.start_ns) / 1e9,
-                            "while": while_,
-                        },
-                        why=f" ({while_}, after the first 3D fix)",
-                    )
-                    fixed = three_d
+            self._one_gnss(topics, topic, instance, accuracy, armed)
+
+    def _one_gnss(self, topics, topic: str, instance: int, accuracy, armed) -> None:
+        """The checks of one receiver: its fix, its accuracy (``accuracy``: (field, limit in m, where
+        the limit comes from) for eph and epv) and accuracy jumps while 3D-fixed, its jamming."""
+        fields = topics[(topic, instance)]
+        where = f"{topic}_{instance}"
+        sfx = _suffix(instance)
+        any_channel = next(iter(fields.values()))
+        t = any_channel.t
+        px4_passing = _px4_gnss_passing(topics, t)
+        gate = np.ones(t.size, bool) if armed is None else armed[1](t)
+        while_ = "armed" if armed is not None else "always (arming state unknown)"
+        fixed = self._gnss_fix(fields, where, sfx, t, gate, while_)
+        for field, limit, source in accuracy:
+            name = f"{PREFIX}.gnss_{field}{sfx}"
+            if not fixed.any():  # judged while 3D-fixed only: the line above says it
+                continue
+            channel = fields.get(field)
+            if channel is None or not np.array_equal(channel.t, t):
+                self._skipped[name] = f"{where} has no {field}"
+                continue
+            values = np.where(gate & fixed, channel.values / limit, np.nan)
+            if px4_passing is not None:  # PX4's own checks passed within 5 s: not failing
+                values = np.where(px4_passing, np.minimum(values, 1.0), values)
+            self._add(
+                name,
+                where,
+                t,
+                values,
+                limit={"m": limit, "from": source, "while": f"{while_}, 3D fix", "for_s": GNSS_CHECKS_FAILING_S},
+                why=f" ({while_}, 3D fix)",
+                # PX4's own pass/fail timer, when logged, already waited the 5 s
+                min_duration_s=None if px4_passing is not None else GNSS_CHECKS_FAILING_S,
+            )
+        if fixed.any():  # judged while 3D-fixed only, as eph / epv
+            self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")
+        jam = fields.get("jamming_indicator")
+        name = f"{PREFIX}.gnss_jamming{sfx}"
+        if jam is None or not np.array_equal(jam.t, t):
+            self._skipped[name] = f"{where} has no jamming_indicator"
+        else:
+            values = np.where(gate, jam.values / float(self.jamming_limit), np.nan)
+            limit = {"indicator": float(self.jamming_limit), "while": while_}
+            self._add(name, where, t, values, limit=limit, why=f" ({while_})")
+
+    def _gnss_fix(self, fields, where: str, sfx: str, t, gate, while_: str) -> np.ndarray:
+        """Whether the receiver is 3D-fixed at each of its times ``t`` (all when fix_type is absent),
+        and ``health.gnss_fix``: a fix below 3D, judged where ``gate`` after the first 3D fix."""
+        fixed = np.ones(t.size, bool)  # 3D-fixed now (all when fix_type is absent)
+        fix = fields.get("fix_type")
+        if fix is not None and np.array_equal(fix.t, t):
+            three_d = fix.values >= 3
+            first = np.flatnonzero(three_d)
+            inside = in_span(self._grid, t)
+            if inside.any() and not three_d[inside].any():
+                best = int(np.nanmax(fix.values)) if np.isfinite(fix.values).any() else None
+                self._unmonitored.append(
+                    f"GNSS: no 3D fix all flight ({where}.fix_type"
+                    + (f" at most {best})" if best is not None else " never set)")
+                )
+                fixed = np.zeros(t.size, bool)
+            elif first.size == 0:
+                self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where}: no 3D fix in the log"
+                fixed = three_d
             else:
-                self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where} has no fix_type"
-            for field, limit, source in (("eph", eph_limit, eph_from), ("epv", epv_limit, epv_from)):
-                name = f"{PREFIX}.gnss_{field}{sfx}"
-                if not fixed.any():  # judged while 3D-fixed only: the line above says it
-                    continue
-                channel = fields.get(field)
-                if channel is None or not np.array_equal(channel.t, t):
-                    self._skipped[name] = f"{where} has no {field}"
-                    continue
-                values = np.where(gate & fixed, channel.values / limit, np.nan)
-                if px4_passing is not None:  # PX4's own checks passed within 5 s: not failing
-                    values = np.where(px4_passing, np.minimum(values, 1.0), values)
+                after = np.arange(t.size) >= first[0]
+                flag = np.where(three_d, 0.0, FLAG)
                 self._add(
-                    name,
+                    f"{PREFIX}.gnss_fix{sfx}",
                     where,
                     t,
-                    values,
-                    limit={"m": limit, "from": source, "while": f"{while_}, 3D fix", "for_s": GNSS_CHECKS_FAILING_S},
-                    why=f" ({while_}, 3D fix)",
-                    # PX4's own pass/fail timer, when logged, already waited the 5 s
-                    min_duration_s=None if px4_passing is not None else GNSS_CHECKS_FAILING_S,
+                    np.where(after & gate, flag, np.nan),
+                    limit={
+                        "fix_type_below": 3,
+                        "after_s": (t[first[0]] - self._grid.start_ns) / 1e9,
+                        "while": while_,
+                    },
+                    why=f" ({while_}, after the first 3D fix)",
                 )
-            if fixed.any():  # judged while 3D-fixed only, as eph / epv
-                self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")
-            jam = fields.get("jamming_indicator")
-            name = f"{PREFIX}.gnss_jamming{sfx}"
-            if jam is None or not np.array_equal(jam.t, t):
-                self._skipped[name] = f"{where} has no jamming_indicator"
-            else:
-                values = np.where(gate, jam.values / float(self.jamming_limit), np.nan)
-                limit = {"indicator": float(self.jamming_limit), "while": while_}
-                self._add(name, where, t, values, limit=limit, why=f" ({while_})")
+                fixed = three_d
+        else:
+            self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where} has no fix_type"
+        return fixed
 
     def _accuracy_jumps(self, fields, where: str, sfx: str, judged, while_: str) -> None:
         """``health.gnss_accuracy_jump.<field>``: each reported accuracy over ``accuracy_jump``

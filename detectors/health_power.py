@@ -32,65 +32,58 @@ class PowerChecks(HealthChecks):
             self._skipped["battery"] = f"no {BATTERY} topic"
             return
         for instance in found:
-            fields = topics[(BATTERY, instance)]
-            where = f"{BATTERY}_{instance}"
-            name = f"{PREFIX}.battery{_suffix(instance)}"
-            voltage = fields.get("voltage_v")
-            if voltage is None:
-                self._skipped[name] = f"{where} has no voltage_v"
-                continue
-            t, v = voltage.t, voltage.values
-            connected = fields.get("connected")
-            on = np.ones(t.size, bool) if connected is None else np.nan_to_num(_held(connected, t)) != 0
-            inside = in_span(self._grid, t)
-            if connected is not None and inside.any() and not on[inside].any():
-                seen = v[inside][np.isfinite(v[inside])]
-                volts = f", voltage {seen.min():.2f}-{seen.max():.2f} V" if seen.size else ""
-                self._unmonitored.append(f"battery not monitored: connected=0 all flight ({where}{volts})")
-                continue
-            k = instance + 1
-            empty = _parameter(parameters, f"BAT{k}_V_EMPTY", "BAT_V_EMPTY")
-            v_empty, empty_from = empty if empty else (CELL_EMPTY_V, "default")
-            cells = np.full(t.size, np.nan)
-            cells_from = None
-            if "cell_count" in fields:
-                cells = np.where(_held(fields["cell_count"], t) > 0, _held(fields["cell_count"], t), np.nan)
-                cells_from = f"{where}.cell_count" if np.isfinite(cells).any() else None
-            param = _parameter(parameters, f"BAT{k}_N_CELLS", "BAT_N_CELLS")
-            if param is not None:
-                if cells_from is None:
-                    cells_from = param[1]
-                cells = np.where(np.isfinite(cells), cells, param[0])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                if cells_from is None:
-                    self._skipped[name] = (
-                        f"{where}: cell count unknown (no cell_count, no BAT{k}_N_CELLS / BAT_N_CELLS)"
-                    )
-                else:
-                    limit = cells * v_empty
-                    ok = on & np.isfinite(v) & (v >= ZERO_VOLTAGE_V)
-                    cells_seen = cells[np.isfinite(cells)]
-                    self._add(
-                        name,
-                        where,
-                        t,
-                        np.where(ok, limit / v, np.nan),
-                        limit={
-                            "empty_v": float(np.median(cells_seen)) * v_empty,
-                            "cells": float(np.median(cells_seen)),
-                            "cells_from": cells_from,
-                            "cell_empty_v": v_empty,
-                            "cell_empty_from": empty_from,
-                        },
-                    )
-                zero = np.where(on & np.isfinite(v), np.where(v < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
-            self._add(
-                f"{PREFIX}.battery_zero{_suffix(instance)}",
-                where,
-                t,
-                zero,
-                limit={"below_v": ZERO_VOLTAGE_V, "while": "connected" if connected is not None else "always"},
-            )
+            self._one_battery(topics[(BATTERY, instance)], instance, parameters)
+
+    def _one_battery(self, fields, instance: int, parameters) -> None:
+        """``health.battery`` (the cells' empty voltage over the voltage) and ``battery_zero`` of one
+        battery instance, while it is connected."""
+        where = f"{BATTERY}_{instance}"
+        name = f"{PREFIX}.battery{_suffix(instance)}"
+        voltage = fields.get("voltage_v")
+        if voltage is None:
+            self._skipped[name] = f"{where} has no voltage_v"
+            return
+        t, v = voltage.t, voltage.values
+        connected = fields.get("connected")
+        on = np.ones(t.size, bool) if connected is None else np.nan_to_num(_held(connected, t)) != 0
+        inside = in_span(self._grid, t)
+        if connected is not None and inside.any() and not on[inside].any():
+            seen = v[inside][np.isfinite(v[inside])]
+            volts = f", voltage {seen.min():.2f}-{seen.max():.2f} V" if seen.size else ""
+            self._unmonitored.append(f"battery not monitored: connected=0 all flight ({where}{volts})")
+            return
+        k = instance + 1
+        empty = _parameter(parameters, f"BAT{k}_V_EMPTY", "BAT_V_EMPTY")
+        v_empty, empty_from = empty if empty else (CELL_EMPTY_V, "default")
+        cells, cells_from = _cell_count(fields, t, parameters, k, where)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if cells_from is None:
+                self._skipped[name] = f"{where}: cell count unknown (no cell_count, no BAT{k}_N_CELLS / BAT_N_CELLS)"
+            else:
+                limit = cells * v_empty
+                ok = on & np.isfinite(v) & (v >= ZERO_VOLTAGE_V)
+                cells_seen = cells[np.isfinite(cells)]
+                self._add(
+                    name,
+                    where,
+                    t,
+                    np.where(ok, limit / v, np.nan),
+                    limit={
+                        "empty_v": float(np.median(cells_seen)) * v_empty,
+                        "cells": float(np.median(cells_seen)),
+                        "cells_from": cells_from,
+                        "cell_empty_v": v_empty,
+                        "cell_empty_from": empty_from,
+                    },
+                )
+            zero = np.where(on & np.isfinite(v), np.where(v < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
+        self._add(
+            f"{PREFIX}.battery_zero{_suffix(instance)}",
+            where,
+            t,
+            zero,
+            limit={"below_v": ZERO_VOLTAGE_V, "while": "connected" if connected is not None else "always"},
+        )
 
     # --- 3. motors (which outputs are motors and their levels: motor_outputs.py) ----------------
     def _motors(self, topics, parameters, armed) -> None:
@@ -138,3 +131,19 @@ class PowerChecks(HealthChecks):
             self._checks[name]["outputs_stopped"] = [
                 f"{label}{k + 1}" for j, k in enumerate(group.outputs) if stopped[:, j].any()
             ]
+
+
+def _cell_count(fields, t, parameters, k: int, where: str):
+    """(the cell count at each time ``t``, where it comes from; None: unknown) of battery ``k`` (from
+    1): its own ``cell_count`` where it reports one, else BAT<k>_N_CELLS (or BAT_N_CELLS)."""
+    cells = np.full(t.size, np.nan)
+    cells_from = None
+    if "cell_count" in fields:
+        cells = np.where(_held(fields["cell_count"], t) > 0, _held(fields["cell_count"], t), np.nan)
+        cells_from = f"{where}.cell_count" if np.isfinite(cells).any() else None
+    param = _parameter(parameters, f"BAT{k}_N_CELLS", "BAT_N_CELLS")
+    if param is not None:
+        if cells_from is None:
+            cells_from = param[1]
+        cells = np.where(np.isfinite(cells), cells, param[0])
+    return cells, cells_from

@@ -19,8 +19,6 @@ MODULES_OVER = {
     "logscan/readers/mcap/scan.py": 541,
 }
 FUNCTIONS_OVER = {
-    "detectors/health_gnss.py::_gnss": 82,
-    "detectors/health_power.py::_battery": 65,
     "logscan/alarms.py::alarm_intervals": 121,
     "logscan/cli/analyze_cmd.py::analyze": 135,
     "logscan/cli/evaluate_cmd.py::evaluate": 71,
@@ -33,7 +31,6 @@ FUNCTIONS_OVER = {
     "logscan/filters/ubikf.py::run_ubikf": 71,
     "logscan/fleet/dask.py::run_on_dask": 72,
     "logscan/pipeline/prepare.py::prepare": 76,
-    "logscan/profiles/check_groups.py::group": 61,
     "logscan/readers/csv_reader.py::_frame_channels": 76,
     "logscan/readers/mcap/cdr.py::cdr_layout": 65,
     "logscan/readers/mcap/scan.py::_container": 76,
@@ -43,7 +40,6 @@ FUNCTIONS_OVER = {
     "logscan/simulate/ins_sim.py::simulate_ins": 83,
     "logscan/simulate/ros2_export.py::write_ros2_mcap": 132,
     "logscan/simulate/simulation.py::simulate_closed_loop": 103,
-    "logscan/training/train.py::train_logs": 75,
 }
 
 

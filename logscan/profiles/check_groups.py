@@ -52,13 +52,9 @@ class GroupChecker(ValueChecker):
         source = conversion.name if conversion is not None else None
         frame = self.frame(data, where, source, channels)
         origin = self.origin(data, where, source)
-        bad_keys = any(
-            key in data and value is None for key, value in (("scale", scale), ("offset", offset), ("frame", frame))
-        )
-        if channels is None or rate is None or bad_keys or ("from" in data and conversion is None):
-            return None
-        if "origin" in data and origin is None:
-            return None
+        given = {"scale": scale, "offset": offset, "frame": frame, "from": conversion, "origin": origin}
+        if channels is None or rate is None or any(key in data and given[key] is None for key in given):
+            return None  # a problem is reported: a key missing, or given but invalid
         scale = self._sized(scale, len(channels), f"{where} scale") if scale is not None else None
         offset = self._sized(offset, len(channels), f"{where} offset") if offset is not None else None
         outputs = self._outputs(channels, conversion, frame, where)

@@ -151,32 +151,14 @@ def train_logs(
     detectors = trainable_detectors(loaded)
     fingerprint = profile_fingerprint(loaded.profile)
     tuned = tunable_detectors(loaded) if tune else []
-    if tune and not tuned:
-        raise UsageError(
-            "--tune: no detector of this profile has threshold multipliers to tune",
-            hint="enable [detectors.encoded_ekf] (its rho, rho_v and rho_s are tuned)",
-        )
-    if not detectors and not calibrate and not tune:
-        raise UsageError(
-            "nothing to train: no detector of this profile learns from healthy logs",
-            hint="pass --calibrate to calibrate the filter's measurement noise, add a [redundant.<name>] "
-            "group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
-        )
+    _refuse_nothing_to_train(detectors, tuned, calibrate, tune)
     # the first log, when its profile is built in, was read to build it: its task reads it again
     # (a task travels to worker processes without a log in it)
     loaded = dataclasses.replace(loaded, log=None)
     task = PrepareTask(
         loaded, logs[0], profile_path, fingerprint, allow_faulty or tune, calibrate, notice, tune, start_s, end_s
     )
-    items = [(path, number) for number, path in enumerate(logs, 1)]
-    if jobs <= 1 and scheduler is None:
-        prepared = []
-        for path, number in items:
-            step(f"reading {path} ({number}/{len(logs)})")
-            prepared.append(task((path, number)))
-    else:
-        step(f"reading {len(logs)} log(s) on " + (f"the scheduler {scheduler}" if scheduler else f"{jobs} processes"))
-        prepared = run_many(items, task, jobs=jobs, scheduler=scheduler, isolate=False)
+    prepared = _prepare_logs(task, logs, jobs, scheduler, step)
     needs = task.needs()
     # --tune takes labelled logs too (ground truth with faults): they only score the multipliers
     labelled = [p for p in prepared if ((p.log.truth or {}).get("events") or [])] if tune else []
@@ -197,6 +179,35 @@ def train_logs(
     document = tables_document(detectors, logs, loaded.profile, calibration, (start_s, end_s))
     document["tuning"] = tuning
     return document
+
+
+def _refuse_nothing_to_train(detectors: list, tuned: list, calibrate: bool, tune: bool) -> None:
+    """A UsageError when --tune finds no detector to tune, or when nothing would be trained."""
+    if tune and not tuned:
+        raise UsageError(
+            "--tune: no detector of this profile has threshold multipliers to tune",
+            hint="enable [detectors.encoded_ekf] (its rho, rho_v and rho_s are tuned)",
+        )
+    if not detectors and not calibrate and not tune:
+        raise UsageError(
+            "nothing to train: no detector of this profile learns from healthy logs",
+            hint="pass --calibrate to calibrate the filter's measurement noise, add a [redundant.<name>] "
+            "group (A-TFM) or [detectors.encoded_ekf] variant = 'baseline'",
+        )
+
+
+def _prepare_logs(task: PrepareTask, logs: Sequence[str], jobs: int, scheduler: str | None, step) -> list:
+    """Each log prepared by ``task`` (`PrepareTask`), in order: here one by one (``step`` says which),
+    or in ``jobs`` local processes or on the Dask ``scheduler`` (`logscan.fleet.run_many`)."""
+    items = [(path, number) for number, path in enumerate(logs, 1)]
+    if jobs <= 1 and scheduler is None:
+        prepared = []
+        for path, number in items:
+            step(f"reading {path} ({number}/{len(logs)})")
+            prepared.append(task((path, number)))
+        return prepared
+    step(f"reading {len(logs)} log(s) on " + (f"the scheduler {scheduler}" if scheduler else f"{jobs} processes"))
+    return run_many(items, task, jobs=jobs, scheduler=scheduler, isolate=False)
 
 
 def tunable_detectors(loaded) -> list:
