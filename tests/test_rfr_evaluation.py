@@ -45,6 +45,20 @@ def test_truth_is_read_on_the_loops_grids_and_the_anomaly_windows_are_the_papers
     assert np.max(np.abs(analysis.prepared.trace.x_post[healthy, 0] - truth[healthy, 0])) < 0.5
     # 3.25-5 s and 8.25-10 s on the 10 Hz grid: 3.3 .. 4.9 and 8.3 .. 9.9
     assert mask.sum() == 2 * 17 and outer.t[mask][0] == pytest.approx(3.3)
+    # after the attacks: [5, 8.25) and from 10 s to the end of the log, every step after the first attack in no attack
+    post = rfr.post_attack_mask(analysis.events, outer.t, mask)
+    expected = ((outer.t >= 5.0 - 1e-9) & (outer.t < 8.25)) | (outer.t >= 10.0 - 1e-9)
+    np.testing.assert_array_equal(post, expected)
+
+
+def test_after_the_attacks_the_oracles_recovery_is_no_worse_than_the_ekf(robot_log):
+    """A recovery ends when its sensors agree again or do not re-agree (docs/algorithms.md 5.4), so
+    it does not dead-reckon past the attacks: what a user reads there (recovered inside the spans,
+    the EKF's elsewhere) is no worse than the EKF alone."""
+    for method in rfr.METHODS:
+        figures = measure(robot_log, rfr.Variant("oracle", method))
+        assert figures["post_rec"] <= figures["post_ekf"], (method, figures["post_rec"], figures["post_ekf"])
+        assert figures["post_recovered_s"][1] < 1.0  # seconds recovered past the attacks on this seed
 
 
 def test_oracle_recovery_beats_the_ekf_during_the_anomalies(robot_log):
