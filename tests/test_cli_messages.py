@@ -276,3 +276,25 @@ def test_a_step_line_ticks_and_ends_with_the_time_each_step_took(monkeypatch):
     ended = [part for part in text.split("\r\x1b[K") if part.endswith("\n")]
     assert [part.split(" (")[0] for part in ended] == ["logscan: f.mcap: filtering", "logscan: f.mcap: detecting"]
     assert ended[0].endswith(" s)\n") and float(ended[0].split(" (")[1].split(" s)")[0]) >= 0.1
+
+
+# --- shell completion ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "incomplete", "expected"),
+    [
+        (["simulate"], "quad", ["quadcopter"]),
+        (["simulate"], "g", ["ground_robot"]),
+        (["simulate", "quadcopter", "--fault"], "imu-b", ["imu-bias", "imu-bitflip"]),
+        (["analyze", "flight.mcap", "-d"], "n", ["nis"]),
+        (["evaluate", "logs/", "--detector"], "atfm", ["atfm", "atfm_residual"]),
+    ],
+)
+def test_the_shell_completes_models_fault_kinds_and_detectors(args, incomplete, expected):
+    from click.shell_completion import BashComplete
+
+    from logscan.cli.main import cli
+
+    completions = BashComplete(cli, {}, "logscan", "_LOGSCAN_COMPLETE").get_completions(args, incomplete)
+    assert [item.value for item in completions] == expected
