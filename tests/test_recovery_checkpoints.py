@@ -67,17 +67,18 @@ def test_the_checkpoint_period_thins_the_checkpoints(loops):
 
 
 def test_no_checkpoint_inside_an_earlier_anomaly(loops):
-    # A: detected 2.05, ends 3.0 + hold 0.5 = 3.5; margin 0.1 blocks [1.95, 3.5]. B at 3.55 (not
-    # inside A's span, so not merged) must roll forward from before A
-    anomalies = [Anomaly(2.05, 3.0, None), Anomaly(3.55, 4.0, None)]
+    # A: detected 2.05, alarm to 3.0, every sensor agrees at once after it (healthy loops): its span
+    # ends at 3.0; margin 0.1 blocks [1.95, 3.0]. B at 3.05 (not inside A's span, so not merged)
+    # must roll forward from before A
+    anomalies = [Anomaly(2.05, 3.0, None), Anomaly(3.05, 4.0, None)]
     rec = recover(loops, anomalies, RecoverySettings(hold_s=0.5))
     a, b = rec.anomalies
-    assert a.t_recovered_end == pytest.approx(3.5) and a.t_checkpoint == pytest.approx(1.9)
+    assert a.t_recovered_end == pytest.approx(3.0) and a.t_checkpoint == pytest.approx(1.9)
     assert b.t_checkpoint == pytest.approx(1.9)
     # select_checkpoint on its own: the blocked interval is skipped
     cp = consistent_checkpoints(loops, 0.0, None)
-    assert cp.t[select_checkpoint(cp, 3.55, 0.1, [(1.95, 3.5)])] == pytest.approx(1.9)
-    assert cp.t[select_checkpoint(cp, 3.55, 0.1, [])] == pytest.approx(3.4)
+    assert cp.t[select_checkpoint(cp, 3.05, 0.1, [(1.95, 3.0)])] == pytest.approx(1.9)
+    assert cp.t[select_checkpoint(cp, 3.05, 0.1, [])] == pytest.approx(2.9)
 
 
 def test_only_the_flagged_loop_is_recovered_by_a_specific_anomaly(loops):

@@ -6,9 +6,10 @@ recovered estimate has not absorbed it (the flagged groups are excluded), so eac
 fresh sample is tested against the recovery's prior (x_R, P_R):
     y = z - h(x_R),   S = H P_R H^T + R_g,   NIS = y^T S^-1 y   (chi-square with m_g dof)
 and agrees when NIS <= the chi-square quantile. A sample outside the group's physical range (or
-non-finite) disagrees. With a per-sample false-alarm probability ``keep_alpha`` (the false-alarm
-budget's, `keep_alpha`), a disagreeing sample whose NIS also exceeds chi2.ppf(1 - keep_alpha, m_g)
-*shows the anomaly* (SHOWN): after the detector's alarm only such a sample keeps a recovery open.
+non-finite) disagrees. A disagreeing sample whose NIS also exceeds chi2.ppf(1 - alpha, m_g), alpha
+the false-alarm budget's per-sample probability (`keep_alpha`), *shows the anomaly* (SHOWN): after
+the detector's alarm only such a sample keeps a recovery open, and one that disagrees without
+showing it ends the recovery (`failed_at`: the recovered estimate did not re-agree).
 """
 
 from __future__ import annotations
