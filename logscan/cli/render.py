@@ -69,7 +69,7 @@ def _recovery_lines(recovery, clock) -> list[str]:
             f"{clock.text(a.t_checkpoint)}, rolled forward {a.rollforward_s:.2f} s to {clock.text(a.t_recovered_end)}"
             + (f"; T_max {t_max}" if t_max else "")
             + (f": {a.verdict}" if a.verdict else "")
-            + (f" (ended: {a.end_reason})" if a.end_reason else "")
+            + (f"; ended: {a.end_reason}" if a.end_reason else "")
         )
     return lines
 

@@ -204,7 +204,7 @@ def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, la
         end, reason = np.inf, ""
         if t_agreed is not None:
             groups = ", ".join(p.flagged)
-            end, reason = t_agreed, f"{groups} agreed with the recovered estimate again ({s.hold_s:g} s held)"
+            end, reason = t_agreed, f"{groups} agreed with the recovered estimate again, held {s.hold_s:g} s"
         if generic and anomaly.t_end + s.hold_s < end:
             t_agreed, end, reason = None, anomaly.t_end + s.hold_s, f"{s.hold_s:g} s after the detector's alarm"
         t_failed = failed_at(p.t, status, max(anomaly.t_end, t_from))
@@ -221,7 +221,7 @@ def _not_reagreed(p: _LoopPart, t: float, budget: tuple[float, float]) -> str:
     return (
         f"did not re-agree: at {t:.2f} s, after the detector's alarm, {p.loop.name} "
         f"{', '.join(p.flagged)} disagreed with the recovered estimate but showed no anomaly (NIS within the "
-        f"false-alarm budget's bound: {bounds}), so the recovered estimate is the one off; recovery ended"
+        f"false-alarm budget's bound, {bounds}): the recovered estimate is the one off"
     )
 
 
