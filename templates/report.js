@@ -6,7 +6,9 @@
    Times on the axis are in the log's clock; a UTC clock is a date axis counting milliseconds
    (<body data-time-scale="1000">: axis units per second), whose ranges plotly gives as date strings.
    Feedback guard: a follower's own plotly_relayout echoes the range already shared, and is
-   ignored while the followers are being moved. */
+   ignored while the followers are being moved. A detector section is one figure (its rows share
+   one x axis, one spike line across them), so a zoom is one relayout per section; sections folded
+   away follow when opened. */
 (function () {
   "use strict";
   var MIN_MARGIN_S = 2, MARGIN_FRACTION = 0.5;
@@ -44,16 +46,34 @@
     label.textContent = zoomed ? "time " + timeText(range[0]) + " to " + timeText(range[1]) + unit : "full time range";
     button.disabled = !zoomed;
   }
-  /* Moves every figure but `source` to `range` ("auto": autorange). */
+  function folded(el) { return !!el.closest("details:not([open])"); }
+  function xUpdate(range) { return range === "auto" ? { "xaxis.autorange": true } : { "xaxis.range": range.slice() }; }
+  /* Moves every figure but `source` to `range` ("auto": autorange), in one pass: one relayout per
+     figure (a section is one figure, its rows on one axis); a figure in a folded section is moved
+     when the section opens (`catchUp`). */
   function share(range, source) {
     shared = range;
     show(range);
-    var update = range === "auto" ? { "xaxis.autorange": true } : { "xaxis.range": range.slice() };
+    var update = xUpdate(range);
     syncing += 1;
-    var jobs = plots().filter(function (el) { return el !== source; }).map(function (el) {
-      return Plotly.relayout(el, update);
+    var jobs = [];
+    plots().forEach(function (el) {
+      if (el === source) { return; }
+      if (folded(el)) { el.lsStale = true; return; }
+      el.lsStale = false;
+      jobs.push(Plotly.relayout(el, update));
     });
     return Promise.all(jobs).then(function () { syncing -= 1; }, function (err) { syncing -= 1; fail(err); });
+  }
+  function catchUp(section) {
+    if (!section.open) { return; }
+    var stale = Array.prototype.filter.call(section.querySelectorAll(".ls-timeseries"), function (el) {
+      return el.lsStale && el._fullLayout;
+    });
+    if (!stale.length) { return; }
+    syncing += 1;
+    var jobs = stale.map(function (el) { el.lsStale = false; return Plotly.relayout(el, xUpdate(shared)); });
+    Promise.all(jobs).then(function () { syncing -= 1; }, function (err) { syncing -= 1; fail(err); });
   }
   function follow(el) {
     el.on("plotly_relayout", function (event) {
@@ -75,7 +95,10 @@
     syncing += 1;
     var jobs = initial.map(function (view) {
       var update = { "xaxis.range": view.x === "auto" ? null : view.x.slice(), "xaxis.autorange": view.x === "auto" };
-      update[view.yAuto ? "yaxis.autorange" : "yaxis.range"] = view.yAuto ? true : view.y.slice();
+      view.y.forEach(function (axis) {  // every row's y axis
+        update[axis.auto ? axis.key + ".autorange" : axis.key + ".range"] = axis.auto ? true : axis.range.slice();
+      });
+      view.el.lsStale = false;
       return Plotly.relayout(view.el, update);
     });
     return Promise.all(jobs).then(function () { syncing -= 1; }, function (err) { syncing -= 1; fail(err); });
@@ -122,8 +145,16 @@
     var els = plots();
     if (!els.length) { return; }
     initial = els.map(function (el) {
-      var y = el.layout.yaxis || {};
-      return { el: el, x: rangeOf(el), yAuto: !!y.autorange || !y.range, y: y.range ? y.range.slice() : null };
+      var y = Object.keys(el.layout).filter(function (key) {
+        return /^yaxis\d*$/.test(key) && !el.layout[key].fixedrange;  // not the rows' hidden span overlays
+      }).map(function (key) {
+        var axis = el.layout[key];
+        return { key: key, auto: !!axis.autorange || !axis.range, range: axis.range ? axis.range.slice() : null };
+      });
+      return { el: el, x: rangeOf(el), y: y };
+    });
+    Array.prototype.forEach.call(document.querySelectorAll("details.detector"), function (section) {
+      section.addEventListener("toggle", function () { catchUp(section); });
     });
     /* the whole log (<body data-log-span="start end">, axis units): the headline figure starts zoomed in */
     var span = (document.body.getAttribute("data-log-span") || "").split(" ").map(Number);

@@ -140,6 +140,23 @@ def figures(html: str) -> list[dict]:
     return json.loads(match.group(1))
 
 
+def rows_of(spec: dict) -> dict[str, list[dict]]:
+    """A figure's rows, title -> its traces: a detector section's figure has a row per statistic,
+    sensor or extra on one time axis (titled by annotations above them; traces on the row's y axis
+    or its span overlay); any other figure is one row titled by its title."""
+    layout, data = spec["figure"]["layout"], spec["figure"]["data"]
+    notes = layout.get("annotations") or []
+    if not notes:
+        return {layout["title"]["text"]: data}
+    n = len(notes)
+    out = {}
+    for r, note in enumerate(notes, 1):
+        title = re.sub(r"\s*<span.*$", "", note["text"]).replace("<b>", "").replace("</b>", "")
+        axes = {f"y{'' if r == 1 else r}", f"y{n + r}"}
+        out[title] = [trace for trace in data if trace.get("yaxis", "y") in axes]
+    return out
+
+
 def array(value) -> np.ndarray:
     if isinstance(value, dict):  # plotly typed-array encoding
         return np.frombuffer(base64.b64decode(value["bdata"]), dtype=np.dtype(value["dtype"]))
@@ -280,25 +297,41 @@ def test_every_trace_is_decimated_and_keeps_alarm_edges_and_gaps(hour_report, em
 
 
 def test_figures_per_detector_view(embedded):
-    titles = [fig["figure"]["layout"]["title"]["text"] for fig in figures(embedded)]
-    assert titles[:3] == ["encoded_ekf: e_x", "encoded_ekf: e_v", "encoded_ekf: coding_vector"]
-    assert titles[3:] == ["nis: statistic / threshold", "nis: per_dof"]
-    by_title = {fig["figure"]["layout"]["title"]["text"]: fig["figure"] for fig in figures(embedded)}
-    cv_names = [tr["name"] for tr in by_title["encoded_ekf: coding_vector"]["data"] if tr["name"].startswith("x")]
+    specs = figures(embedded)
+    assert len(specs) == 2  # one figure per detector section
+    by_title = {title: traces for spec in specs for title, traces in rows_of(spec).items()}
+    assert list(rows_of(specs[0])) == ["encoded_ekf: e_x", "encoded_ekf: e_v", "encoded_ekf: coding_vector"]
+    assert list(rows_of(specs[1])) == ["nis: statistic / threshold", "nis: per_dof"]
+    cv_names = [tr["name"] for tr in by_title["encoded_ekf: coding_vector"] if tr["name"].startswith("x")]
     assert cv_names == [f"x{i}" for i in range(12)]  # labelled with the model's states
-    spans = {tr["name"] for tr in by_title["encoded_ekf: e_x"]["data"] if tr.get("fill") == "toself"}
+    spans = {tr["name"] for tr in by_title["encoded_ekf: e_x"] if tr.get("fill") == "toself"}
     assert spans == {"alarm", "ground truth"}
-    ratio = next(tr for tr in by_title["nis: statistic / threshold"]["data"] if tr["name"] == "nis.accel")
+    ratio = next(tr for tr in by_title["nis: statistic / threshold"] if tr["name"] == "nis.accel")
     assert np.nanmax(array(ratio["y"])) == pytest.approx(500.0 / 90.0, rel=1e-6)
-    per_dof = [tr["name"] for tr in by_title["nis: per_dof"]["data"] if tr.get("fill") != "toself"]
+    per_dof = [tr["name"] for tr in by_title["nis: per_dof"] if tr.get("fill") != "toself"]
     assert per_dof == ["nis.accel", f"nis.{HOSTILE_SHOWN}", "nis.gps", "nis.all"]
+
+
+def test_a_section_is_one_figure_with_its_rows_on_one_time_axis(embedded):
+    """Every row of a section's figure plots against the one x axis, which draws one spike line
+    across the rows; the page hovers every row at once."""
+    for spec in figures(embedded):
+        layout, data = spec["figure"]["layout"], spec["figure"]["data"]
+        assert {trace["xaxis"] for trace in data} == {"x"}
+        assert not any(key.startswith("xaxis") and key != "xaxis" for key in layout)
+        assert layout["xaxis"]["showspikes"] and layout["xaxis"]["spikemode"] == "across"
+        assert layout["hovermode"] == "x unified" and layout["hoversubplots"] == "axis"
+        rows = [key for key in layout if re.fullmatch(r"yaxis\d*", key) and "overlaying" not in layout[key]]
+        domains = sorted(layout[key]["domain"] for key in rows)
+        assert all(low[1] <= high[0] for low, high in zip(domains, domains[1:]))  # stacked, not overlapping
+        assert len(rows) == len(layout["annotations"])  # a title above each row
 
 
 def test_a_sparse_statistic_is_drawn_as_a_line_not_as_gaps(embedded):
     """A 10 Hz group's statistic is NaN 9 steps in 10 on the grid: draw its defined samples joined."""
     ratio = next(
-        tr for fig in figures(embedded) for tr in fig["figure"]["data"]
-        if fig["figure"]["layout"]["title"]["text"] == "nis: statistic / threshold" and tr["name"] == "nis.gps"
+        tr for spec in figures(embedded) for title, traces in rows_of(spec).items() for tr in traces
+        if title == "nis: statistic / threshold" and tr["name"] == "nis.gps"
     )  # fmt: skip
     y = array(ratio["y"])
     assert y.size > 1000 and np.isfinite(y).all()

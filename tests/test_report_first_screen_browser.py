@@ -1,9 +1,11 @@
 """The report of quad_imu_bias in headless Chromium at 1400x900: the first screen holds the verdict and
-the headline sensor's figure (measured vs predicted, zoomed to the alarm), drawn.
+the headline sensor's figure (measured vs predicted, zoomed to the alarm), drawn; a detector section is
+one figure whose rows share one crosshair (hovering one row draws one spike line through every row
+and one hover box with every row's values).
 
-The page gets a probe script (`PROBE`) that, once every figure is drawn, writes the positions of the
-verdict and the headline figure into ``<body data-first-screen>``, which the test reads from the DOM
-Chromium dumps. Skipped (with the reason) when no Chromium is installed.
+The page gets a probe script that, once every figure is drawn, writes what it measured into an
+attribute of ``<body>``, which the tests read from the DOM Chromium dumps. Skipped (with the
+reason) when no Chromium is installed.
 """
 
 from __future__ import annotations
@@ -47,7 +49,34 @@ PROBE = """<script>
 </script>"""
 
 
-def first_screen(page, profile) -> tuple[dict, str]:
+HOVER = """<script>
+(function () {
+  function hover() {  /* the mouse over the first row of the first section, 55 % along its time axis */
+    var el = document.querySelector(".ls-section"), drags = el.querySelectorAll(".nsewdrag");
+    var box = drags[0], r = box.getBoundingClientRect();
+    box.dispatchEvent(new MouseEvent("mousemove", {bubbles: true, cancelable: true, view: window,
+      clientX: r.left + 0.55 * r.width, clientY: r.top + r.height / 2}));
+    setTimeout(function () {
+      function span(node) { var b = node.getBoundingClientRect(); return [b.left, b.top, b.bottom]; }
+      var out = {
+        rows: Array.prototype.map.call(drags, span),
+        spikes: Array.prototype.map.call(el.querySelectorAll(".spikeline"), span),
+        label: (el.querySelector(".hoverlayer") || {}).textContent || "",
+        other: Array.prototype.filter.call(document.querySelectorAll(".ls-timeseries"), function (f) {
+          return f !== el && f.querySelector(".spikeline");
+        }).length
+      };
+      document.body.setAttribute("data-hover", JSON.stringify(out));
+    }, 500);
+  }
+  var wait = setInterval(function () {
+    if (document.body.hasAttribute("data-time-axis")) { clearInterval(wait); hover(); }
+  }, 50);
+})();
+</script>"""
+
+
+def first_screen(page, profile, attribute: str = "data-first-screen") -> tuple[dict, str]:
     command = [
         CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-dev-shm-usage",
         f"--window-size={WIDTH},{HEIGHT}", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
@@ -55,7 +84,7 @@ def first_screen(page, profile) -> tuple[dict, str]:
     ]  # fmt: skip
     done = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
-    match = re.search(r'data-first-screen="([^"]*)"', done.stdout)
+    match = re.search(rf'{attribute}="([^"]*)"', done.stdout)
     assert match, "the probe did not run: figures not drawn"
     return json.loads(html.unescape(match.group(1))), done.stdout
 
@@ -87,3 +116,21 @@ def test_the_first_screen_holds_the_verdict_and_the_headline_sensor_figure(bias_
     assert headline["bottom"] <= HEIGHT, f"the headline figure ends at {headline['bottom']} px, below the first screen"
     assert headline["drawn"] and headline["lines"] >= 3  # band, prediction, measured
     assert 'aria-label="accel ax: measured vs predicted' in dom
+
+
+def test_hovering_one_row_of_a_section_draws_one_crosshair_through_all_its_rows(bias_report, tmp_path):
+    page = tmp_path / "report.html"
+    render_report(bias_report, page, plotlyjs=tmp_path / "js")
+    text = page.read_text(encoding="utf-8")
+    page.write_text(text.replace("</body>", HOVER + "</body>", 1), encoding="utf-8")
+    hover, dom = first_screen(page, tmp_path / "profile", "data-hover")
+    assert js_errors(dom) == ""
+    rows, spikes = hover["rows"], hover["spikes"]
+    assert len(rows) >= 6  # nis: its ratio, the accelerometer's and the position's channels, ...
+    top, bottom = rows[0][1], rows[-1][2]
+    assert spikes, "no spike line"
+    assert len({round(left) for left, _, _ in spikes}) == 1  # one time, one vertical line
+    assert min(s[1] for s in spikes) <= top + 1 and max(s[2] for s in spikes) >= bottom - 1  # through every row
+    # one hover box with the values of every row at that time: the first row's and the last row's
+    assert "nis.accel" in hover["label"] and "/imu/accel.x" in hover["label"] and "/attitude" in hover["label"]
+    assert hover["other"] == 0  # the other sections' figures show no crosshair

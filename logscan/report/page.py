@@ -25,15 +25,16 @@ from logscan.errors import InputError
 from logscan.report import overview
 from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
 from logscan.report.context_figures import context_figures
-from logscan.report.figures import Figure, detector_figures, merge_spans
+from logscan.report.figures import detector_figures, merge_spans
 from logscan.report.headline import Headline, headline_figure, headlines
 from logscan.report.margins import Margin, result_margins
 from logscan.report.observability_figures import observability_figures
-from logscan.report.plotly_json import POINT_BUDGET, figures_json
+from logscan.report.plotly_json import POINT_BUDGET
 from logscan.report.recovery_figures import recovery_figures, recovery_rows
 from logscan.report.run_context import RunContext
 from logscan.report.sensor_figures import named_group_figures
 from logscan.report.sensor_views import Innovations
+from logscan.report.stacked import figures_json, fold_flat, row_captions
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import Clock
 from logscan.verdict import scoring
@@ -293,17 +294,18 @@ def _report_js() -> str:
 
 def _sections(
     report: ReportInput, t: np.ndarray, truth_spans: list, margins: Sequence[Margin]
-) -> tuple[list[dict], list[tuple[str, Figure]]]:
-    """One section per detector result, alarmed ones first, and every figure with its element id
-    ("fig-<n>", numbered in page order)."""
+) -> tuple[list[dict], list[tuple[str, Any]]]:
+    """One section per detector result, alarmed ones first, and its one figure (its rows, a list of
+    `Figure`, `logscan.report.stacked`) with its element id ("fig-<n>", numbered in page order)."""
     sections = []
     drawn: set[str] = set()  # groups whose sensor figures are placed
     for result in report.results:
         problems: list[str] = []
         labels = {name: signal_label(name, result.detector) for name in result.series}
         figs = detector_figures(result, t, truth_spans, report.model, problems, labels)
-        # the sensor beside the statistic: right after the statistic's figure
-        figs[1:1] = named_group_figures(result, report.innovations, t, truth_spans, drawn)
+        # the sensor beside the statistic: right after the statistics' rows, before the extras
+        after = 1 + max((i for i, f in enumerate(figs) if f.y_title in result.series), default=0)
+        figs[after:after] = named_group_figures(result, report.innovations, t, truth_spans, drawn)
         own = [m for m in margins if m.detector == result.detector]
         sections.append({
             "detector": result.detector,
@@ -316,13 +318,15 @@ def _sections(
             "figures": figs,
         })  # fmt: skip
     sections, figures = overview.order_sections(sections), []
-    for section in sections:
-        views = []
-        for fig in section["figures"]:
-            fig_id = f"fig-{len(figures)}"
-            views.append({"id": fig_id, "title": fig.title, "caption": fig.caption})
-            figures.append((fig_id, fig))
-        section["figures"] = views
+    for section in sections:  # one figure per section: its rows on one time axis
+        rows, flat = fold_flat(section["figures"])
+        section["figures"] = []
+        if not rows:  # nothing drawable (its problems are the section's warnings)
+            continue
+        fig_id = f"fig-{len(figures)}"
+        title = "; ".join(fig.title for fig in rows)
+        section["figures"] = [{"id": fig_id, "title": title, "captions": row_captions(rows, flat), "rows": len(rows)}]
+        figures.append((fig_id, rows))
     return sections, figures
 
 

@@ -19,6 +19,8 @@ a fifth of the log.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from logscan.report.decimate import DEFAULT_MAX_POINTS, decimate_indices
@@ -154,7 +156,7 @@ def _decimated(x: np.ndarray, y: np.ndarray, keep: np.ndarray, max_points: int, 
     return np.union1d(overview, inside[decimate_indices(y[inside], n_focus, simplify_flat=True)])
 
 
-def _trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> list[dict]:
+def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> list[dict]:
     """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines."""
     windows = np.zeros((0, 2)) if windows is None else windows
     data: list[dict] = []
@@ -211,7 +213,7 @@ def figure_json(
         "paper_bgcolor": "white",
         "template": {},
     }
-    return spec_json(_trace_data(fig, t, points, windows), layout, clock)
+    return spec_json(trace_data(fig, t, points, windows), layout, clock)
 
 
 # hover texts of times in seconds, as the figure builders write them, and as a UTC date axis shows them
@@ -256,23 +258,25 @@ def spec_json(data: list[dict], layout: dict, clock: Clock | None = None) -> str
     return escape_json(figure.to_json(validate=False, remove_uids=True))
 
 
-def figures_json(
-    figures: list[tuple[str, Figure]],
-    t: np.ndarray,
-    point_budget: int = POINT_BUDGET,
-    extra: list[dict] = (),
-    clock: Clock | None = None,
-) -> str:
-    """``[{"id": ..., "figure": ...}, ...]`` for (element id, figure) pairs, under one point budget,
-    then the ``extra`` figures already serialised (``{"id", "json", "points"}``, e.g.
-    `logscan.report.context_figures`), whose points come out of the same budget. Time axes in
-    ``clock`` (None: seconds since the log's start)."""
-    budget = max(point_budget - sum(int(spec.get("points", 0)) for spec in extra), 0)
-    points = allocate_points([fig for _, fig in figures], budget)
-    windows = focus_windows([fig for _, fig in figures], t)
-    parts = [f'{{"id":"{fig_id}","figure":{figure_json(fig, t, points, windows, clock)}}}' for fig_id, fig in figures]
-    parts += [f'{{"id":"{spec["id"]}","figure":{spec["json"]}}}' for spec in extra]
-    return "[" + ",".join(parts) + "]"
+def plain_json(data: list[dict], layout: dict, clock: Clock | None = None) -> str:
+    """As `spec_json`, without building plotly's validated Figure: a detector section's layout of
+    many axes, legends and annotations takes plotly ~70 ms to validate, more than drawing its data.
+    numpy arrays become plotly.js typed arrays, as plotly writes them."""
+    from _plotly_utils.utils import to_typed_array_spec
+
+    if clock is not None:
+        data, layout = on_clock(data, layout, clock)
+    traces = [
+        {k: to_typed_array_spec(v) if isinstance(v, np.ndarray) else v for k, v in trace.items()} for trace in data
+    ]
+    text = json.dumps({"data": traces, "layout": layout}, separators=(",", ":"), default=_scalar, allow_nan=False)
+    return escape_json(text)
+
+
+def _scalar(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON: {type(value).__name__}")
 
 
 def escape_json(text: str) -> str:
