@@ -40,6 +40,25 @@ def test_an_unknown_model_is_named_with_the_closest_before_anything_else(cli, tm
     assert not (tmp_path / "q.mcap").exists()
 
 
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["--duration", "-1"], "--duration -1 s is out of range (use 0 < duration <= 86400 s)"),
+        (["--rate", "0.5"], "--rate 0.5 Hz is out of range (use 1 .. 10000 Hz)"),
+        (["--scenario", "random"], "--scenario is for ground_robot (drop --scenario)"),
+    ],
+)
+def test_simulate_checks_every_option_before_the_compile_note(cli, tmp_path, monkeypatch, args, line):
+    import logscan.cli.simulate_cmd as simulate_cmd
+
+    def compiles(*args, **kwargs):
+        raise AssertionError("the simulator's kernel was looked at before the options were checked")
+
+    monkeypatch.setattr(simulate_cmd, "_simulator_cold", compiles)
+    assert_message(cli("simulate", "quadcopter", *args, "-o", tmp_path / "q.mcap"), line)
+    assert not (tmp_path / "q.mcap").exists()
+
+
 def test_an_unknown_fault_kind_is_named_with_the_closest_before_the_output_is_checked(cli):
     result = cli("simulate", "quadcopter", "--fault", "imu-bais")  # no -o: the fault is the first problem
     assert_message(

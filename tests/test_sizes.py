@@ -20,11 +20,6 @@ MODULES_OVER = {
 }
 FUNCTIONS_OVER = {
     "logscan/alarms.py::alarm_intervals": 121,
-    "logscan/cli/analyze_cmd.py::analyze": 135,
-    "logscan/cli/evaluate_cmd.py::evaluate": 71,
-    "logscan/cli/render_inspect.py::render_inspect": 69,
-    "logscan/cli/simulate_cmd.py::simulate": 106,
-    "logscan/cli/train_cmd.py::train": 70,
     "logscan/filters/ekf.py::pack_run": 99,
     "logscan/filters/ekf.py::run_ekf": 83,
     "logscan/filters/reference.py::_reference_ekf": 94,

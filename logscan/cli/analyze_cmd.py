@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 
 import click
 
@@ -26,6 +27,16 @@ from logscan.cli.progress import coloured_verdict, echo_step, end_steps, use_col
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode, UsageError
 
+_HELP = """Run the model-based detectors on each LOG and report the incidents and alarms.
+
+LOG is an MCAP, ULog or CSV file, a directory of per-topic CSVs, or a directory of logs. The
+profile comes from --profile or from the log itself (logs written by `logscan simulate` embed
+theirs). Exit code: 0 no alarm and everything checked; 1 alarms (0 with --exit-zero); 2 bad
+input, or a log that could not be fully checked (read in part, a sensor without valid samples,
+a diverged filter; 0 or 1 with --allow-partial); 3 a detector or logscan failed. The report is
+written in every case and says what could not be checked.
+"""
+
 SUMMARY_SCHEMA_VERSION = 1  # of the --json document; a removed or retyped field changes it
 
 
@@ -39,6 +50,41 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
         for note in loaded.notes:
             click.echo(f"# {note}", err=err)
         click.echo(loaded.text.rstrip("\n") + "\n", err=err)
+
+
+@dataclass(frozen=True)
+class _Run:
+    """The options of one `logscan analyze` run, as click parsed them (the command's parameters)."""
+
+    log_paths: tuple[str, ...]
+    profile_path: str | None
+    tables_path: str | None
+    output_path: str | None
+    json_path: str | None
+    no_report: bool
+    plotlyjs_dir: str | None
+    detector_names: tuple[str, ...]
+    exit_zero: bool
+    allow_partial: bool
+    fail_on: str
+    suppressions_path: str | None
+    baseline_path: str | None
+    junit_path: str | None
+    markdown_path: str | None
+    github_annotations: bool
+    truth_path: str | None
+    print_profile: bool
+    start_s: float | None
+    end_s: float | None
+    use_header_stamp: bool
+    jobs: int
+    scheduler: str | None
+    quiet: bool
+
+    @property
+    def err(self) -> bool:
+        """With --json - the JSON owns stdout: the summaries and other lines go to stderr."""
+        return self.json_path == "-"
 
 
 @help_groups(
@@ -60,6 +106,7 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
 )
 @click.command(
     cls=GroupedCommand,
+    help=_HELP,
     epilog="Examples:\n\n"
     "  logscan analyze sample_logs/quad_imu_bias.mcap\n\n"
     "  logscan analyze flight.mcap --profile quad.toml -o flight.html --json flight.json\n\n"
@@ -165,128 +212,129 @@ def _print_profiles(logs, profile_path: str | None, err: bool) -> None:
 @jobs_option
 @scheduler_option
 @quiet_option
-def analyze(
-    log_paths: tuple[str, ...],
-    profile_path: str | None,
-    tables_path: str | None,
-    output_path: str | None,
-    json_path: str | None,
-    no_report: bool,
-    plotlyjs_dir: str | None,
-    detector_names: tuple[str, ...],
-    exit_zero: bool,
-    allow_partial: bool,
-    fail_on: str,
-    suppressions_path: str | None,
-    baseline_path: str | None,
-    junit_path: str | None,
-    markdown_path: str | None,
-    github_annotations: bool,
-    truth_path: str | None,
-    print_profile: bool,
-    start_s: float | None,
-    end_s: float | None,
-    use_header_stamp: bool,
-    jobs: int,
-    scheduler: str | None,
-    quiet: bool,
-) -> None:
-    """Run the model-based detectors on each LOG and report the incidents and alarms.
+def analyze(**options) -> None:
+    """`logscan analyze` (its help: ``_HELP``); click passes the options of `_Run`."""
+    from logscan.artifacts import cleanup, discard, new_token
+    from logscan.fleet import expand_logs
+    from logscan.tasks import LogOutcome
 
-    LOG is an MCAP, ULog or CSV file, a directory of per-topic CSVs, or a directory of logs. The
-    profile comes from --profile or from the log itself (logs written by `logscan simulate` embed
-    theirs). Exit code: 0 no alarm and everything checked; 1 alarms (0 with --exit-zero); 2 bad
-    input, or a log that could not be fully checked (read in part, a sensor without valid samples,
-    a diverged filter; 0 or 1 with --allow-partial); 3 a detector or logscan failed. The report is
-    written in every case and says what could not be checked.
-    """
-    from logscan.align import check_window
-    from logscan.artifacts import cleanup, discard, new_token, remove_orphans, stage
-    from logscan.fleet import expand_logs, output_paths, refuse_clobbering
-    from logscan.report.index_page import index_path
-    from logscan.tasks import AnalyzeTask, LogOutcome
-
-    check_window(start_s, end_s)
-    check_parallelism(jobs, scheduler)
-    names = tuple(detector_names) or None
-    if profile_path is not None:
-        # one profile for every log: its detector settings are checked once, before any log is read
-        from logscan.pipeline import create_detectors, load_profile_for
-
-        create_detectors(load_profile_for(None, profile_path), names)
-    logs = expand_logs(log_paths)
-    if print_profile:
-        _print_profiles(logs, profile_path, err=json_path == "-")
-    reports = output_paths(logs, output_path) if not no_report else [None] * len(logs)
-    plotlyjs_dir = None if no_report else plotlyjs_dir
-    plotly_js = _plotly_js_path(plotlyjs_dir)
-    report_option = "--output" if output_path else "report"
-    # before any log is read: no output may replace an input or another output
-    exit_zero = exit_zero or fail_on == "never"
-    if fail_on == "new" and baseline_path is None:
-        raise UsageError("--fail-on new needs --baseline PREVIOUS.json (the run whose alarms are known)")
-    rules = ()
-    if suppressions_path is not None:  # checked before any log is read: no reason or expired is exit 2
-        from logscan.verdict.suppressions import read_suppressions
-
-        rules = tuple(read_suppressions(suppressions_path))
-    previous = None
-    if baseline_path is not None:  # read before any log is analysed: a bad baseline stops the run at once
-        from logscan.verdict.baseline import read_baseline
-
-        previous = read_baseline(baseline_path)
-    artifacts = {"--junit": junit_path, "--markdown": markdown_path}
-    refuse_clobbering(
-        [*((report_option, r) for r in reports), ("--json", json_path), ("--plotlyjs", plotly_js), *artifacts.items()],
-        logs,
-        profile_path,
-    )
-    progress = show_progress(quiet)
-    # temporary files a killed run left beside these outputs
-    index = index_path(reports) if output_path is not None else None  # several reports: their index page
-    written = (*reports, json_path, plotly_js, junit_path, markdown_path, index)
-    remove_orphans([p for p in written if p and p != "-"])
+    run = _Run(**options)
+    names, rules, previous = _check_arguments(run)  # before any log is read
+    logs = expand_logs(run.log_paths)
+    if run.print_profile:
+        _print_profiles(logs, run.profile_path, err=run.err)
+    reports, index, written = _output_paths(run, logs)
     token = new_token()  # tags this run's temporary files, wherever a worker wrote them
-    task = AnalyzeTask(
-        profile_path,
-        names,
-        use_header_stamp,
-        plotlyjs_dir,
-        allow_partial,
-        render=render_summary,
-        step=echo_step if progress and len(logs) == 1 else None,
-        notice=echo_notice if not quiet else None,
-        token=token,
-        start_s=start_s,
-        end_s=end_s,
-        tables_path=tables_path,
-        truth_path=truth_path,
-        fail_on_warning=fail_on == "warning",
-        suppressions=rules,
-    )
-    staged = []
+    progress = show_progress(run.quiet)
+    task = _task(run, names, rules, token, steps=progress and len(logs) == 1)
+    staged: list = []
     try:
-        outcomes = _run_logs(list(zip(logs, reports)), task, jobs, progress, scheduler)
-        staged = [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
-        code, document = _report_outcomes(outcomes, exit_zero, err=json_path == "-")
-        if previous is not None:
-            code = _compare_with_baseline(document, previous, code, fail_on, exit_zero, err=json_path == "-")
-        if github_annotations:
-            from logscan.report.ci_artifacts import github_annotations as annotations
-
-            for line in annotations(document):
-                click.echo(line, err=json_path == "-")
-        if index is not None:
-            from logscan.report.index_page import render_index_html
-
-            staged.append(stage(index, render_index_html(document, index), token=token))
-        _write_outputs(staged, json_path, document, plotlyjs_dir, token, junit_path, markdown_path)
+        outcomes = _run_logs(list(zip(logs, reports)), task, run.jobs, progress, run.scheduler)
+        staged += [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
+        code = _finish(run, outcomes, previous, staged, index, token)
     except BaseException:
         # an error or Ctrl-C: no output is replaced, and no temporary file stays
         discard(staged)
-        cleanup([p for p in written if p and p != "-"], token)
+        cleanup(written, token)
         raise
     sys.exit(code)
+
+
+def _check_arguments(run: _Run) -> tuple[tuple[str, ...] | None, tuple, dict | None]:
+    """Every argument checked before any log is read (exit 2): the window, parallelism, one
+    profile's detector settings, --fail-on new's baseline; the detectors asked for, the
+    suppression rules and the baseline's document."""
+    from logscan.align import check_window
+
+    check_window(run.start_s, run.end_s)
+    check_parallelism(run.jobs, run.scheduler)
+    names = tuple(run.detector_names) or None
+    if run.profile_path is not None:  # one profile for every log: its detector settings checked once
+        from logscan.pipeline import create_detectors, load_profile_for
+
+        create_detectors(load_profile_for(None, run.profile_path), names)
+    if run.fail_on == "new" and run.baseline_path is None:
+        raise UsageError("--fail-on new needs --baseline PREVIOUS.json (the run whose alarms are known)")
+    rules: tuple = ()
+    if run.suppressions_path is not None:  # no reason or an expired entry is exit 2
+        from logscan.verdict.suppressions import read_suppressions
+
+        rules = tuple(read_suppressions(run.suppressions_path))
+    previous = None
+    if run.baseline_path is not None:  # a bad baseline stops the run at once
+        from logscan.verdict.baseline import read_baseline
+
+        previous = read_baseline(run.baseline_path)
+    return names, rules, previous
+
+
+def _output_paths(run: _Run, logs: list) -> tuple[list, str | None, list[str]]:
+    """(each log's report or None, the index page of several reports, every file written), checked
+    before any log is read: no output may replace an input or another output; the temporary files
+    a killed run left beside them are removed."""
+    from logscan.artifacts import remove_orphans
+    from logscan.fleet import output_paths, refuse_clobbering
+    from logscan.report.index_page import index_path
+
+    reports = output_paths(logs, run.output_path) if not run.no_report else [None] * len(logs)
+    plotly_js = _plotly_js_path(None if run.no_report else run.plotlyjs_dir)
+    report_option = "--output" if run.output_path else "report"
+    artifacts = {"--json": run.json_path, "--plotlyjs": plotly_js, "--junit": run.junit_path}
+    refuse_clobbering(
+        [*((report_option, r) for r in reports), *artifacts.items(), ("--markdown", run.markdown_path)],
+        logs,
+        run.profile_path,
+    )
+    index = index_path(reports) if run.output_path is not None else None  # several reports: their index page
+    given = (*reports, run.json_path, plotly_js, run.junit_path, run.markdown_path, index)
+    written = [p for p in given if p and p != "-"]
+    remove_orphans(written)
+    return reports, index, written
+
+
+def _task(run: _Run, names, rules: tuple, token: str, steps: bool):
+    """The per-log task (`logscan.tasks.AnalyzeTask`) of this run."""
+    from logscan.tasks import AnalyzeTask
+
+    return AnalyzeTask(
+        run.profile_path,
+        names,
+        run.use_header_stamp,
+        None if run.no_report else run.plotlyjs_dir,
+        run.allow_partial,
+        render=render_summary,
+        step=echo_step if steps else None,
+        notice=echo_notice if not run.quiet else None,
+        token=token,
+        start_s=run.start_s,
+        end_s=run.end_s,
+        tables_path=run.tables_path,
+        truth_path=run.truth_path,
+        fail_on_warning=run.fail_on == "warning",
+        suppressions=rules,
+    )
+
+
+def _finish(run: _Run, outcomes: list, previous: dict | None, staged: list, index: str | None, token: str):
+    """The summaries, the baseline's comparison and the annotations printed, then every output
+    written at once (`_write_outputs`); the run's exit code."""
+    exit_zero = run.exit_zero or run.fail_on == "never"
+    code, document = _report_outcomes(outcomes, exit_zero, err=run.err)
+    if previous is not None:
+        code = _compare_with_baseline(document, previous, code, run.fail_on, exit_zero, err=run.err)
+    if run.github_annotations:
+        from logscan.report.ci_artifacts import github_annotations as annotations
+
+        for line in annotations(document):
+            click.echo(line, err=run.err)
+    if index is not None:
+        from logscan.artifacts import stage
+        from logscan.report.index_page import render_index_html
+
+        staged.append(stage(index, render_index_html(document, index), token=token))
+    plotlyjs_dir = None if run.no_report else run.plotlyjs_dir
+    _write_outputs(staged, run.json_path, document, plotlyjs_dir, token, run.junit_path, run.markdown_path)
+    return code
 
 
 def _run_logs(items: list, task, jobs: int, progress: bool, scheduler: str | None) -> list:

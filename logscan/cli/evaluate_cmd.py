@@ -104,29 +104,11 @@ def evaluate(
     logs = expand_logs(log_paths)
     refuse_clobbering([("--json", json_path), ("--output", page_path)], logs, profile_path)  # before any log
     evaluation = evaluate_logs(
-        logs,
-        profile_path=profile_path,
-        detector_names=list(detector_names) or None,
-        grace_s=grace_s,
-        recovery_s=recovery_s,
-        use_header_stamp=use_header_stamp,
-        jobs=jobs,
-        scheduler=scheduler,
-        progress=show_progress(quiet),
-        start_s=start_s,
-        end_s=end_s,
-        tables_path=tables_path,
-    )
-    if json_path:
-        from logscan import __version__
-        from logscan.artifacts import write_json
-
-        write_json(json_path, {"logscan_version": __version__, **evaluation.to_dict()})
-    if page_path and evaluation.logs:
-        from logscan.artifacts import write_atomic
-        from logscan.report.evaluation_page import render_evaluation_html
-
-        write_atomic(page_path, render_evaluation_html(evaluation))
+        logs, profile_path=profile_path, detector_names=list(detector_names) or None, grace_s=grace_s,
+        recovery_s=recovery_s, use_header_stamp=use_header_stamp, jobs=jobs, scheduler=scheduler,
+        progress=show_progress(quiet), start_s=start_s, end_s=end_s, tables_path=tables_path,
+    )  # fmt: skip
+    _write_outputs(evaluation, json_path, page_path)
     if json_path != "-":
         click.echo(render_evaluation(evaluation))
     for failure in evaluation.failures:
@@ -137,3 +119,17 @@ def evaluate(
             hint="evaluate logs written by `logscan simulate` (fault events embedded) or a CSV with <log>.truth.json",
         )
     sys.exit(ExitCode.BAD_INPUT if evaluation.failures else ExitCode.OK)
+
+
+def _write_outputs(evaluation, json_path: str | None, page_path: str | None) -> None:
+    """--json (the evaluation's document) and --output (its HTML page, when a log was evaluated)."""
+    if json_path:
+        from logscan import __version__
+        from logscan.artifacts import write_json
+
+        write_json(json_path, {"logscan_version": __version__, **evaluation.to_dict()})
+    if page_path and evaluation.logs:
+        from logscan.artifacts import write_atomic
+        from logscan.report.evaluation_page import render_evaluation_html
+
+        write_atomic(page_path, render_evaluation_html(evaluation))

@@ -89,9 +89,10 @@ _LINE: list[StepLine | None] = [None]  # the step line of this process's one log
 def echo_step(message: str) -> None:
     """A step of the analysis of one log (``<log>: <step>``), on its ticking line (`StepLine`);
     module-level, so a task that carries it still pickles."""
-    if _LINE[0] is None:
-        _LINE[0] = StepLine()
-    _LINE[0].step(printable(f"logscan: {message}"))
+    line = _LINE[0]
+    if line is None:
+        line = _LINE[0] = StepLine()
+    line.step(printable(f"logscan: {message}"))
 
 
 def end_steps() -> None:

@@ -82,6 +82,12 @@ def _limited(items: list[str], full: bool, what: str) -> list[str]:
 def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, width: int | None = None) -> str:
     """Plain-text view of ``inspect_facts`` / ``Log.summary()`` for the terminal."""
     width = width or max(60, min(shutil.get_terminal_size((100, 24)).columns, 160))
+    lines = _source_lines(facts) + _topic_lines(facts, width, full) + _channel_lines(facts, show_channels)
+    return _lines(lines + _skipped_lines(facts, full))
+
+
+def _source_lines(facts: dict) -> list[str]:
+    """The file, its format and time column(s), time span, what was not read, and its metadata."""
     metadata = facts.get("metadata", {})
     lines = [
         f"file:      {facts['file']}",
@@ -111,9 +117,14 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
     )
     lines.extend(_render_metadata(metadata))
 
+    return lines
+
+
+def _topic_lines(facts: dict, width: int, full: bool) -> list[str]:
+    """The topics with counts, rates, encodings and (wrapped) fields."""
     topics = [(printable(name), info) for name, info in facts["topics"].items()]  # escaped before measured
     total = sum(info["message_count"] for _, info in topics)
-    lines += ["", f"{len(topics)} topic(s), {total} message(s):"]
+    lines = ["", f"{len(topics)} topic(s), {total} message(s):"]
     if topics:
         name_width = min(max(len(name) for name, _ in topics), 48)
         lines.append(f"  {'topic':<{name_width}}  {'messages':>9}  {'rate Hz':>9}  encoding / schema")
@@ -123,9 +134,14 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
             if info["fields"]:
                 lines.extend(_wrap_fields([printable(f) for f in info["fields"]], "    ", width, full))
 
+    return lines
+
+
+def _channel_lines(facts: dict, show_channels: bool) -> list[str]:
+    """The count of numeric channels and, with --channels, one line each."""
     channels = [(printable(name), info) for name, info in facts["channels"].items()]
     with_nan = sum(1 for _, info in channels if info.get("nonfinite"))
-    lines += [
+    lines = [
         "",
         f"{len(channels)} numeric channel(s)"
         + (f", {with_nan} with NaN/inf values" if with_nan else "")
@@ -139,6 +155,12 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
             span = "-" if low is None else f"{low:.6g} .. {high:.6g}"
             rate = _rate(info.get("rate_hz", 0.0))
             lines.append(f"  {name:<{name_width}}  {info['samples']:>9}  {rate}  {info.get('nonfinite', 0):>7}  {span}")
+    return lines
+
+
+def _skipped_lines(facts: dict, full: bool) -> list[str]:
+    """What was skipped (kinds with counts) and the warnings."""
+    lines: list[str] = []
     if facts["skipped"]:
         total_skipped = sum(item["count"] for item in facts["skipped"])
         lines += ["", f"skipped ({len(facts['skipped'])} kind(s), {total_skipped} item(s)):"]
@@ -147,7 +169,7 @@ def render_inspect(facts: dict, show_channels: bool, *, full: bool = False, widt
     if facts["warnings"]:
         lines += ["", f"warnings ({len(facts['warnings'])}):"]
         lines.extend(_limited([f"  {w}" for w in facts["warnings"]], full, "warnings"))
-    return _lines(lines)
+    return lines
 
 
 def _render_metadata(metadata: dict) -> list[str]:

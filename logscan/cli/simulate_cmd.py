@@ -20,6 +20,27 @@ _FAULT_HELP = (
 )
 
 
+_HELP = """Simulate MODEL in closed loop with injected faults and write the log.
+
+MODEL is quadcopter, steer_by_wire, dc_motor, hover_uav, ins or ground_robot. The log holds
+commands (/cmd), sensors, the on-board EKF's state and variance (/ekf/state, /ekf/variance),
+set-points and the true state (/truth/state); the fault events and the matching profile are
+embedded, so `logscan analyze` and `logscan evaluate` need no other file. Same seed, same
+bytes.
+
+ins (the IMU-driven inertial navigation model) is open loop: a multirotor flies a reference
+(hover at 10 m, then minimum-jerk moves between random waypoints); its IMU (/imu/gyro.*,
+/imu/accel.*, 250 Hz) is the model's input and takes sensor faults (accel.x .. gyro.z, imu-*
+aliases) like GNSS (/gnss), barometer (/baro), heading (/mag) and attitude (/mocap); actuator
+and estimator faults do not apply.
+
+ground_robot is the checkpointing / roll-forward-recovery paper's hierarchical robot: an outer
+unicycle loop at 10 Hz (mocap, /cmd/outer.v and .w) over two DC-motor loops at 100 Hz (/enc,
+/motor_cmd), each with its own on-board filter (/ekf/..., per loop) and true state (/truth/...);
+its anomalies come from --scenario, its profile has one [loops.<name>] table per motor loop.
+"""
+
+
 def _models() -> tuple[str, ...]:
     """What `logscan simulate` simulates: the models of the scenarios, and the hierarchical robot."""
     from logscan.simulate import SIMULATED_MODELS
@@ -57,6 +78,7 @@ def _complete_faults(ctx: click.Context, param: click.Parameter, incomplete: str
 
 
 @click.command(
+    help=_HELP,
     epilog="Examples:\n\n"
     "  logscan simulate quadcopter --fault imu-bias --at 30 -o q.mcap\n\n"
     "  logscan simulate quadcopter --fault imu-bitflip --at 20 --fault motor-offset:motor2:40:50 -o q.mcap\n\n"
@@ -66,7 +88,7 @@ def _complete_faults(ctx: click.Context, param: click.Parameter, incomplete: str
     "  logscan simulate hover_uav --fault roll-bias -o hover.mcap\n\n"
     "  logscan simulate ins --duration 120 --seed 3 --fault imu-bias:accel.x:60:70:1.0 -o ins.mcap\n\n"
     "  logscan simulate ground_robot -o robot.mcap\n\n"
-    "  logscan simulate ground_robot --scenario random --seed 3 -o robot_3.mcap"
+    "  logscan simulate ground_robot --scenario random --seed 3 -o robot_3.mcap",
 )
 @click.argument("model_name", metavar="MODEL", callback=_model_name, shell_complete=_complete_models)
 @click.option(
@@ -171,99 +193,50 @@ def _complete_faults(ctx: click.Context, param: click.Parameter, incomplete: str
 @quiet_option
 @output_option
 def simulate(
-    model_name,
-    faults,
-    at,
-    fault_duration,
-    magnitude,
-    target,
-    duration,
-    scenario,
-    rate_hz,
-    fmt,
-    aggressive,
-    glitches_per_min,
-    speed,
-    noise,
-    force,
-    seed,
-    quiet,
-    output_path,
+    model_name: str,
+    faults: tuple[str, ...],
+    at: float | None,
+    fault_duration: float | None,
+    magnitude: float | None,
+    target: str | None,
+    duration: float | None,
+    scenario: str | None,
+    rate_hz: float | None,
+    fmt: str | None,
+    aggressive: bool,
+    glitches_per_min: float,
+    speed: str | None,
+    noise: str | None,
+    force: bool,
+    seed: int,
+    quiet: bool,
+    output_path: str | None,
 ) -> None:
-    """Simulate MODEL in closed loop with injected faults and write the log.
-
-    MODEL is quadcopter, steer_by_wire, dc_motor, hover_uav, ins or ground_robot. The log holds
-    commands (/cmd), sensors, the on-board EKF's state and variance (/ekf/state, /ekf/variance),
-    set-points and the true state (/truth/state); the fault events and the matching profile are
-    embedded, so `logscan analyze` and `logscan evaluate` need no other file. Same seed, same
-    bytes.
-
-    ins (the IMU-driven inertial navigation model) is open loop: a multirotor flies a reference
-    (hover at 10 m, then minimum-jerk moves between random waypoints); its IMU (/imu/gyro.*,
-    /imu/accel.*, 250 Hz) is the model's input and takes sensor faults (accel.x .. gyro.z, imu-*
-    aliases) like GNSS (/gnss), barometer (/baro), heading (/mag) and attitude (/mocap); actuator
-    and estimator faults do not apply.
-
-    ground_robot is the checkpointing / roll-forward-recovery paper's hierarchical robot: an outer
-    unicycle loop at 10 Hz (mocap, /cmd/outer.v and .w) over two DC-motor loops at 100 Hz (/enc,
-    /motor_cmd), each with its own on-board filter (/ekf/..., per loop) and true state (/truth/...);
-    its anomalies come from --scenario, its profile has one [loops.<name>] table per motor loop.
-    """
+    """`logscan simulate` (its help: ``_HELP``)."""
     from logscan.filters.warmup import COMPILING_NOTE
-    from logscan.simulate import parse_fault, write_simulation
     from logscan.simulate import simulate as run_simulation
-    from logscan.simulate.faults import FaultSpec
-    from logscan.simulate.scenario import check_speed, resolve_noise
+    from logscan.simulate import write_simulation
 
-    if not output_path:
-        raise UsageError("no output file", hint="give -o OUT (e.g. -o q.mcap)")
-    if Path(output_path).is_dir():
-        raise UsageError("the output is a directory", path=output_path, hint="give a file name, e.g. -o q.mcap")
-    if output_path.lower().endswith(_NOT_LOG_SUFFIXES):
-        # such a name is a profile, a CSV log's sidecar, a JSON summary or a report: never replace one with a log
-        raise UsageError(
-            "the output is named like a profile, a sidecar, a JSON summary or a report",
-            path=output_path,
-            hint="give the log a .mcap or .csv name, e.g. -o q.mcap",
-        )
-    if duration is None:
-        duration = 15.0 if model_name == "ground_robot" else 60.0
-    if fmt is None:
-        fmt = "csv" if output_path.lower().endswith(".csv") else "mcap-json"
+    output_path = _checked_output(output_path)
+    duration = duration if duration is not None else 15.0 if model_name == "ground_robot" else 60.0
+    fmt = fmt or ("csv" if output_path.lower().endswith(".csv") else "mcap-json")
     if not force:
         _refuse_replacing(output_path, fmt)
-    specs = []
-    for text in faults:
-        spec = parse_fault(text)
-        if ":" not in text:
-            start = at
-            end = None if fault_duration is None else (at if at is not None else 0.5 * duration) + fault_duration
-            spec = FaultSpec(spec.kind, target, start, end, magnitude)
-        specs.append(spec)
-    if model_name == "ins":  # an actuator or estimator fault fails before any progress line
-        from logscan.simulate.ins_sim import check_ins_faults
-
-        check_ins_faults(specs)
-    check_speed(model_name, speed, duration)  # a bad --speed fails before any progress line
-    resolve_noise(model_name, noise, speed)
-    progress = show_progress(quiet)
-    cold = not quiet and _simulator_cold(model_name)
+    specs = _fault_specs(faults, at, fault_duration, magnitude, target, duration)
+    options = dict(
+        duration=duration, seed=seed, rate_hz=rate_hz, aggressive=aggressive, glitches_per_min=glitches_per_min,
+        speed=speed, noise=noise, scenario=scenario,
+    )  # fmt: skip
+    _check_options(model_name, specs, options)  # every argument, before a compile note or progress line
+    progress, cold = show_progress(quiet), not quiet and _simulator_cold(model_name)
     if cold:
         echo_notice(COMPILING_NOTE)
     if progress:
         click.echo(f"simulating {model_name} for {duration:g} s ...", err=True)
     sim = run_simulation(
-        model_name,
-        specs,
-        duration=duration,
-        seed=seed,
-        rate_hz=rate_hz,
-        aggressive=aggressive,
-        glitches_per_min=glitches_per_min,
-        speed=speed,
-        noise=noise,
-        scenario=scenario,
-    )
+        model_name, specs, duration=duration, seed=seed, rate_hz=rate_hz, aggressive=aggressive,
+        glitches_per_min=glitches_per_min, speed=speed, noise=noise, scenario=scenario,
+    )  # fmt: skip
     if progress:
         compiled = " (compiling included)" if cold else ""
         click.echo(f"simulated {sim.n_steps} steps in {sim.elapsed_s:.2f} s{compiled}; writing {output_path}", err=True)
@@ -276,6 +249,65 @@ def simulate(
                 err=True,
             )
         click.echo("wrote " + ", ".join(str(p) for p in written), err=True)
+
+
+def _checked_output(output_path: str | None) -> str:
+    """-o, refused when missing, a directory, or named like anything but a log (exit 2)."""
+    if not output_path:
+        raise UsageError("no output file", hint="give -o OUT (e.g. -o q.mcap)")
+    if Path(output_path).is_dir():
+        raise UsageError("the output is a directory", path=output_path, hint="give a file name, e.g. -o q.mcap")
+    if output_path.lower().endswith(_NOT_LOG_SUFFIXES):
+        # such a name is a profile, a CSV log's sidecar, a JSON summary or a report: never replace one with a log
+        raise UsageError(
+            "the output is named like a profile, a sidecar, a JSON summary or a report",
+            path=output_path,
+            hint="give the log a .mcap or .csv name, e.g. -o q.mcap",
+        )
+    return output_path
+
+
+def _fault_specs(faults, at, fault_duration, magnitude, target, duration: float) -> list:
+    """The --fault specs; those given by KIND alone take --at, --fault-duration, --magnitude and
+    --target (`logscan.simulate.faults.FaultSpec`)."""
+    from logscan.simulate import parse_fault
+    from logscan.simulate.faults import FaultSpec
+
+    specs = []
+    for text in faults:
+        spec = parse_fault(text)
+        if ":" not in text:
+            end = None if fault_duration is None else (at if at is not None else 0.5 * duration) + fault_duration
+            spec = FaultSpec(spec.kind, target, at, end, magnitude)
+        specs.append(spec)
+    return specs
+
+
+def _check_options(model_name: str, specs: list, options: dict) -> None:
+    """What the simulator would refuse, refused before anything is compiled or printed (exit 2)."""
+    from logscan.simulate.scenario import check_speed, resolve_noise
+    from logscan.simulate.simulation import check_run_options
+
+    check_run_options(options["duration"], options["seed"], options["glitches_per_min"])
+    rate = options["rate_hz"]
+    if rate is not None and not (1.0 <= rate <= 10000.0):
+        raise UsageError(f"--rate {rate:g} Hz is out of range", hint="use 1 .. 10000 Hz")
+    if model_name == "ground_robot":
+        from logscan.simulate.ground_robot_sim import check_ground_robot_options
+
+        opts = options
+        check_ground_robot_options(
+            specs, rate, opts["aggressive"], opts["glitches_per_min"], opts["speed"], opts["noise"]
+        )
+        return
+    if options["scenario"] is not None:
+        raise UsageError("--scenario is for ground_robot", hint="drop --scenario")
+    if model_name == "ins":  # an actuator or estimator fault
+        from logscan.simulate.ins_sim import check_ins_faults
+
+        check_ins_faults(specs)
+    check_speed(model_name, options["speed"], options["duration"])
+    resolve_noise(model_name, options["noise"], options["speed"])
 
 
 _NOT_LOG_SUFFIXES = (".toml", ".json", ".html", ".htm", ".xml", ".js")

@@ -101,25 +101,11 @@ def train(
     logs = expand_logs(log_paths)
     report = None if no_report else (report_path or _beside(output_path))
     refuse_clobbering([("--output", output_path), ("--report", report)], logs, profile_path)
-    progress = show_progress(quiet)
-
-    def step(message: str) -> None:
-        if progress:
-            click.echo(f"logscan: {message}", err=True)
-
     document = train_logs(
-        logs,
-        profile_path,
-        allow_faulty=allow_faulty,
-        calibrate=calibrate,
-        tune=tune,
-        progress=step,
-        notice=None if quiet else echo_notice,
-        jobs=jobs,
-        scheduler=scheduler,
-        start_s=start_s,
-        end_s=end_s,
-    )
+        logs, profile_path, allow_faulty=allow_faulty, calibrate=calibrate, tune=tune,
+        progress=_echo_step if show_progress(quiet) else None, notice=None if quiet else echo_notice,
+        jobs=jobs, scheduler=scheduler, start_s=start_s, end_s=end_s,
+    )  # fmt: skip
     _write(output_path, report, document)
     if not quiet:
         for line in _summary_lines(document, output_path, report):
@@ -131,6 +117,11 @@ def train(
             path=output_path,
             hint="calibrate on more or longer healthy flights, or train without --calibrate",
         )
+
+
+def _echo_step(message: str) -> None:
+    """A step of the training (a log read, a table fitted), on stderr."""
+    click.echo(f"logscan: {message}", err=True)
 
 
 def _beside(output_path: str) -> str:
