@@ -162,9 +162,10 @@ class AnomalyRecord:
     t_checkpoint: the consistent checkpoint used (k1), None when no checkpoint qualifies (then
     nothing is recovered and ``note`` says why); checkpoint_steps: loop -> k1 on its grid.
     rollforward_s: t_recovered_end - t_checkpoint. t_agreed: when the flagged sensors of every loop
-    agreed again with the recovered prediction (held for hold_s), None if some did not (or generic).
+    (a generic anomaly's: every sensor, after the detector's alarm) agreed again with the recovered
+    prediction (held for hold_s), None if a loop's span ended otherwise.
     loop_ends: each affected loop's own recovered span end (a specific anomaly ends per loop, when
-    that loop's flagged sensors agree again); t_recovered_end is the latest.
+    that loop's flagged sensors agree again or do not re-agree); t_recovered_end is the latest.
     alarm_kept: the recovery went on past the detector's alarm end. capped: cut at max_duration_s
     (or at the end of the log). t_max: "loop.state" -> the first duration after t_detect where the
     bound exceeds the allowed error (negative: already at detection; None: not within the
