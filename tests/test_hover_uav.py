@@ -151,7 +151,7 @@ def test_mid_model_is_detectable_with_the_default_groups_and_position_and_attitu
     # the check itself can fail: attitude alone cannot see position
     assert _unobservable_modes(im.A_m, im.C_m[6:9])
     # and the UBIKF's own check agrees (it refuses an undetectable model)
-    from logscan.filters.ubikf import unobservable_unstable_states
+    from logscan.filters.detectability import unobservable_unstable_states
 
     assert unobservable_unstable_states(im) == []
 

@@ -15,15 +15,10 @@ MAX_FUNCTION_LINES = 60
 
 # still over the limit (lines today): may only shrink
 MODULES_OVER = {
-    "logscan/filters/ekf.py": 669,
     "logscan/readers/mcap/scan.py": 541,
 }
 FUNCTIONS_OVER = {
     "logscan/alarms.py::alarm_intervals": 121,
-    "logscan/filters/ekf.py::pack_run": 99,
-    "logscan/filters/ekf.py::run_ekf": 83,
-    "logscan/filters/reference.py::_reference_ekf": 94,
-    "logscan/filters/ubikf.py::run_ubikf": 71,
     "logscan/fleet/dask.py::run_on_dask": 72,
     "logscan/pipeline/prepare.py::prepare": 76,
     "logscan/readers/csv_reader.py::_frame_channels": 76,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
-from logscan.filters.ekf import KernelInputs
+from logscan.filters.ekf_pack import KernelInputs
 from logscan.models.base import Model
 
 
@@ -24,18 +24,7 @@ def reference_ekf(model: Model, k: KernelInputs) -> dict:
 def _reference_ekf(model: Model, k: KernelInputs) -> dict:
     N, n = k.u.shape[0], k.x0.size
     G, m_total = k.group_ids.size, k.z.shape[1]
-    out = {
-        "x_prior": np.full((N, n), np.nan),
-        "x_post": np.full((N, n), np.nan),
-        "P_prior": np.full((N, n, n), np.nan),
-        "P_post": np.full((N, n, n), np.nan),
-        "y": np.full((N, m_total), np.nan),
-        "nis": np.full(N, np.nan),
-        "updated": np.zeros((N, G), bool),
-        "rejected": np.zeros((N, G), bool),
-        "seeded": np.zeros((N, G), bool),
-        "diverged": np.zeros(N, bool),
-    }
+    out = _outputs(N, n, G, m_total)
     slices = [slice(o, o + s) for o, s in zip(k.group_offsets, k.group_sizes)]
     is_direct = np.array([np.all(k.direct_idx[s] >= 0) for s in slices])
     x, P = k.x0.copy(), k.P0.copy()
@@ -66,15 +55,7 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
                 out["rejected"][step, g] = True
                 continue
             if pending and is_direct[g] and not seed_done[g]:
-                idx, gain = k.direct_idx[s], k.direct_gain[s]
-                for j, i in enumerate(idx):
-                    x[i] = zg[j] / gain[j]
-                    P[i, :] = 0.0
-                    P[:, i] = 0.0
-                    rj = k.R_all[s, s][j, j]
-                    if k.R_std.shape[0] == N and np.isfinite(k.R_std[step, s][j]) and k.R_std[step, s][j] > 0:
-                        rj = k.R_std[step, s][j] ** 2
-                    P[i, i] = rj / gain[j] ** 2
+                _seed(k, x, P, step, s)
                 seed_done[g] = out["seeded"][step, g] = True
                 continue
             used.append(g)
@@ -82,36 +63,75 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
             pending = bool(np.any(is_direct & ~seed_done))
         if used:
             rows = np.concatenate([np.arange(slices[g].start, slices[g].stop) for g in used])
-            H = np.vstack([model.H(k.group_names[g], x, uk) for g in used])
-            hx = np.concatenate([model.h(k.group_names[g], x, uk) for g in used])
-            y = k.z[step, rows] - hx
-            y = np.where(k.wrap[rows], (y + np.pi) % (2 * np.pi) - np.pi, y)
-            R = k.R_all[np.ix_(rows, rows)].copy()
-            if k.R_std.shape[0] == N:  # per-sample noise replaces its row and column
-                for a, j in enumerate(rows):
-                    sd = k.R_std[step, j]
-                    if np.isfinite(sd) and sd > 0:
-                        R[a, :] = 0.0
-                        R[:, a] = 0.0
-                        R[a, a] = sd * sd
-            S = H @ P @ H.T + R
-            try:
-                factor = cho_factor(S, lower=True)
-                K = cho_solve(factor, H @ P).T
-                x_new = model.boxplus(x, K @ y)
-                IKH = np.eye(n) - K @ H
-                P_new = IKH @ P @ IKH.T + K @ R @ K.T
-                P_new = 0.5 * (P_new + P_new.T)
-                ok: bool | np.bool_ = np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))
-            except (LinAlgError, ValueError):
-                ok = False
-            if ok:
-                x, P = x_new, P_new
+            result = _update(model, k, x, P, uk, step, used, rows)
+            if result is not None:
+                x, P, y, nis = result
                 out["y"][step, rows] = y
-                out["nis"][step] = y @ cho_solve(factor, y)
+                out["nis"][step] = nis
                 out["updated"][step, used] = True
             else:
                 out["diverged"][step] = True
                 x, P, pending, seed_done = restart()
         out["x_post"][step], out["P_post"][step] = x, P
     return out
+
+
+def _outputs(N: int, n: int, G: int, m_total: int) -> dict:
+    """The result's arrays, NaN / False filled."""
+    return {
+        "x_prior": np.full((N, n), np.nan),
+        "x_post": np.full((N, n), np.nan),
+        "P_prior": np.full((N, n, n), np.nan),
+        "P_post": np.full((N, n, n), np.nan),
+        "y": np.full((N, m_total), np.nan),
+        "nis": np.full(N, np.nan),
+        "updated": np.zeros((N, G), bool),
+        "rejected": np.zeros((N, G), bool),
+        "seeded": np.zeros((N, G), bool),
+        "diverged": np.zeros(N, bool),
+    }
+
+
+def _seed(k: KernelInputs, x: np.ndarray, P: np.ndarray, step: int, s: slice) -> None:
+    """Re-seed, in place, the states a direct group observes from its sample at ``step``."""
+    zg = k.z[step, s]
+    idx, gain = k.direct_idx[s], k.direct_gain[s]
+    for j, i in enumerate(idx):
+        x[i] = zg[j] / gain[j]
+        P[i, :] = 0.0
+        P[:, i] = 0.0
+        rj = k.R_all[s, s][j, j]
+        if k.R_std.shape[0] == k.u.shape[0] and np.isfinite(k.R_std[step, s][j]) and k.R_std[step, s][j] > 0:
+            rj = k.R_std[step, s][j] ** 2
+        P[i, i] = rj / gain[j] ** 2
+
+
+def _update(model: Model, k: KernelInputs, x, P, uk, step: int, used: list[int], rows: np.ndarray):
+    """The Joseph-form update with the groups ``used`` (outputs ``rows``): (x, P, y, NIS), or None
+    when it fails (S not positive definite, a non-finite state or covariance)."""
+    H = np.vstack([model.H(k.group_names[g], x, uk) for g in used])
+    hx = np.concatenate([model.h(k.group_names[g], x, uk) for g in used])
+    y = k.z[step, rows] - hx
+    y = np.where(k.wrap[rows], (y + np.pi) % (2 * np.pi) - np.pi, y)
+    R = k.R_all[np.ix_(rows, rows)].copy()
+    if k.R_std.shape[0] == k.u.shape[0]:  # per-sample noise replaces its row and column
+        for a, j in enumerate(rows):
+            sd = k.R_std[step, j]
+            if np.isfinite(sd) and sd > 0:
+                R[a, :] = 0.0
+                R[:, a] = 0.0
+                R[a, a] = sd * sd
+    S = H @ P @ H.T + R
+    try:
+        factor = cho_factor(S, lower=True)
+        K = cho_solve(factor, H @ P).T
+        x_new = model.boxplus(x, K @ y)
+        IKH = np.eye(x.size) - K @ H
+        P_new = IKH @ P @ IKH.T + K @ R @ K.T
+        P_new = 0.5 * (P_new + P_new.T)
+        ok: bool | np.bool_ = np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))
+    except (LinAlgError, ValueError):
+        return None
+    if not ok:
+        return None
+    return x_new, P_new, y, y @ cho_solve(factor, y)

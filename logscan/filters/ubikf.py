@@ -40,11 +40,11 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
+from logscan.filters.detectability import check_detectable
 from logscan.filters.intervals import (
     append_box,
     append_scaled_columns,
@@ -362,49 +362,6 @@ def ubikf_run(model, data, settings, out):
 # ================================================================================================
 # the Python entry point
 # ================================================================================================
-def unobservable_unstable_states(model: IntervalModel, rtol: float = 1e-9, margin: float = 1e-6) -> list[str]:
-    """The states in the undetectable subspace of (A_m, C_m): the modes with |lambda| >= 1 - margin
-    of the unobservable subspace (the largest A_m-invariant subspace in null(C_m), by orthogonal
-    deflation with rank decisions relative to |A_m|, |C_m|)."""
-    A, C = model.A_m, model.C_m
-    n = A.shape[0]
-    scale_A = max(np.linalg.norm(A, 2), 1.0)
-    scale_C = max(np.linalg.norm(C, 2) if C.size else 0.0, np.finfo(float).tiny)
-
-    def null_space(M, scale):
-        if M.shape[0] == 0:
-            return np.eye(M.shape[1])
-        _, s, Vt = np.linalg.svd(M)
-        rank = int(np.sum(s > rtol * scale))
-        return Vt[rank:].T
-
-    V = null_space(C, scale_C)  # null(C)
-    while V.shape[1]:
-        # {x in span V: A x in span V}
-        N = null_space(A @ V - V @ (V.T @ A @ V), scale_A)
-        if N.shape[1] == V.shape[1]:
-            break
-        V = V @ N  # orthonormal columns still
-    if not V.shape[1]:
-        return []
-    _, Zs, sdim = scipy.linalg.schur(V.T @ A @ V, output="complex", sort=lambda lam: abs(lam) >= 1.0 - margin)
-    if sdim == 0:
-        return []
-    U = np.abs(V @ Zs[:, :sdim])
-    weight = np.sqrt(np.sum(U**2, axis=1))
-    return [model.state_names[i] for i in range(n) if weight[i] > 1e-6]
-
-
-def check_detectable(model: IntervalModel) -> None:
-    """ModelError naming the states whose unstable or marginal modes no measurement sees."""
-    states = unobservable_unstable_states(model)
-    if states:
-        raise ModelError(
-            f"the interval model is not detectable: (A_m, C_m) cannot observe {', '.join(states)}",
-            hint="add a measurement group that observes these states, or make their dynamics stable",
-        )
-
-
 def _measurements(model: IntervalModel, run: AlignedRun) -> tuple[np.ndarray, np.ndarray]:
     """z (N, m) and fresh (N, G) in the model's group order."""
     N = run.n_steps
@@ -451,8 +408,27 @@ def run_ubikf(
     P0 = np.eye(n) if model.P0.size == 0 else np.asarray(model.P0, dtype=np.float64)
     finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite[0]].copy() if finite.size else np.zeros(u.shape[1])
-    c, nan = np.ascontiguousarray, np.nan
-    out = UbikfBuffers(
+    out = _buffers(N, n, m, G, store_P=store_P, store_gain=store_gain)
+    if N:
+        kernel_model = _kernel_model(model, x0, P0)
+        ubikf_run(kernel_model, UbikfData(u, u_default, z, fresh), UbikfSettings(int(L), float(cap)), out)
+    buffers = out._asdict()
+    buffers["P"] = out.P if store_P else None
+    buffers["K"] = out.K if store_gain else None
+    return UbikfTrace(
+        t=np.asarray(run.t, dtype=np.float64),
+        **buffers,
+        group_names=tuple(model.group_names),
+        group_offsets=np.asarray(model.group_offsets),
+        group_sizes=np.asarray(model.group_sizes),
+        state_names=tuple(model.state_names),
+    )
+
+
+def _buffers(N: int, n: int, m: int, G: int, *, store_P: bool, store_gain: bool) -> UbikfBuffers:
+    """The kernel's output arrays, NaN / False / 0 filled (P and K empty unless stored)."""
+    nan = np.nan
+    return UbikfBuffers(
         x_mid=np.full((N, n), nan),
         x_lo=np.full((N, n), nan),
         x_hi=np.full((N, n), nan),
@@ -469,29 +445,21 @@ def run_ubikf(
         m_k=np.zeros(N, dtype=np.int64),
         diverged=np.zeros(N, dtype=np.bool_),
     )
-    if N:
-        names = ("A_m", "A_r", "B_m", "B_r", "C_m", "C_r")
-        matrices = {name: c(getattr(model, name), dtype=np.float64) for name in names}
-        kernel_model = UbikfModel(
-            **matrices,
-            Q=c(loewner_upper(model.Q_m, model.Q_r)),
-            R=c(loewner_upper(model.R_m, model.R_r)),
-            x0=c(x0),
-            P0=c(P0),
-            group_offsets=c(model.group_offsets, dtype=np.int64),
-            group_sizes=c(model.group_sizes, dtype=np.int64),
-        )
-        ubikf_run(kernel_model, UbikfData(u, u_default, z, fresh), UbikfSettings(int(L), float(cap)), out)
-    buffers = out._asdict()
-    buffers["P"] = out.P if store_P else None
-    buffers["K"] = out.K if store_gain else None
-    return UbikfTrace(
-        t=np.asarray(run.t, dtype=np.float64),
-        **buffers,
-        group_names=tuple(model.group_names),
-        group_offsets=np.asarray(model.group_offsets),
-        group_sizes=np.asarray(model.group_sizes),
-        state_names=tuple(model.state_names),
+
+
+def _kernel_model(model: IntervalModel, x0: np.ndarray, P0: np.ndarray) -> UbikfModel:
+    """The model's matrices as the kernel reads them (contiguous float64, Q+ and R+ bounds)."""
+    c = np.ascontiguousarray
+    names = ("A_m", "A_r", "B_m", "B_r", "C_m", "C_r")
+    matrices = {name: c(getattr(model, name), dtype=np.float64) for name in names}
+    return UbikfModel(
+        **matrices,
+        Q=c(loewner_upper(model.Q_m, model.Q_r)),
+        R=c(loewner_upper(model.R_m, model.R_r)),
+        x0=c(x0),
+        P0=c(P0),
+        group_offsets=c(model.group_offsets, dtype=np.int64),
+        group_sizes=c(model.group_sizes, dtype=np.int64),
     )
 
 
