@@ -27,7 +27,8 @@ from logscan.readers.mcap.records import (
     Cursor,
     walk_records,
 )
-from logscan.readers.mcap.scan import raise_if_unrecoverable, scan_file
+from logscan.readers.mcap.scan import scan_file
+from logscan.readers.mcap.scan_damage import raise_if_unrecoverable
 
 TRUTH_RECORD = "logscan.truth"
 PROFILE_RECORD = "logscan.profile"

@@ -57,7 +57,8 @@ from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
 from logscan.readers.mcap.metadata import attach_logscan_records
-from logscan.readers.mcap.scan import Scan, problem_text, raise_if_unrecoverable, scan_file
+from logscan.readers.mcap.scan import Scan, scan_file
+from logscan.readers.mcap.scan_damage import problem_text, raise_if_unrecoverable
 from logscan.readers.mcap.scan_records import ChannelRec, SchemaRec
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order, unsorted_text
 

@@ -55,7 +55,6 @@ from logscan.readers.mcap.records import (
     OP_MESSAGE,
     OP_METADATA,
     OP_SCHEMA,
-    OP_STATISTICS,
     PARSE_ERRORS,
     WALK_BAD_OPCODE,
     WALK_END,
@@ -67,6 +66,12 @@ from logscan.readers.mcap.records import (
     gather_u32,
     gather_u64,
     walk_records,
+)
+from logscan.readers.mcap.scan_damage import (
+    chunk_damage,
+    data_section_damage,
+    problem_text,
+    statistics_damage,
 )
 from logscan.readers.mcap.scan_records import (
     ChannelRec,
@@ -90,7 +95,6 @@ MAX_LOG_TIME_NS = 2**63 - 1  # log_time is a uint64 in the file, int64 ns here
 FLUSH_BYTES = 32 << 20  # message bytes held in batches before they are handed to ``on_flush``
 TOP_LEVEL_SLICE = 1 << 16  # top-level records handled at a time (unchunked files)
 WALK_WINDOW = 32 << 20  # bytes of the file walked for record boundaries before their pages go back
-CRC_BLOCK = 16 << 20  # bytes of the data-section CRC computed before their pages are given back
 
 
 class Scan:
@@ -245,8 +249,11 @@ class Scan:
                 self.metadata[name] = cur.string_map()
                 self.unchecked_records += 1
             elif op == OP_DATA_END:
-                self._data_end(raw, start, length)
-                self._check_statistics(raw, top, i + 1)
+                crc = data_section_damage(
+                    raw, start, length, self._give_back, self.skipped_chunks, self.unchecked_records
+                )
+                counts = statistics_damage(raw, top, i + 1, self.messages_read, self.chunks_read)
+                self.damage.extend(text for text in (crc, counts) if text)
                 if self.damage:
                     self.damage.extend(_private_records(top))
                 return
@@ -313,112 +320,12 @@ class Scan:
                 offset,
             )
 
-    def chunk_damage(self) -> None:
-        """The damage of the walk, once it is over, into ``damage``: chunks skipped, messages on
-        undefined channels, channels defined twice (each makes the read partial)."""
-        if self.skipped_chunks:
-            offset, why = self.skipped_chunks[0]
-            more = f" (and {len(self.skipped_chunks) - 1} more)" if len(self.skipped_chunks) > 1 else ""
-            self.damage.insert(
-                0,
-                f"{len(self.skipped_chunks)} damaged chunk(s) skipped with their messages; the first at byte "
-                f"{offset}: {why}{more}",
-            )
-        if self.unknown_channel_messages:
-            self.damage.append(
-                f"{self.unknown_channel_messages} message(s) on channel ids no Channel record defines were "
-                "dropped (a damaged channel id, or a lost Channel record)"
-            )
-        if self.beyond_int64:
-            self.damage.append(
-                f"{self.beyond_int64} message(s) dropped: a log_time beyond int64 nanoseconds (after 2262), "
-                "a damaged message header"
-            )
-        if self.redefined:
-            self.damage.append(
-                f"{len(self.redefined)} Channel/Schema record(s) redefine an id with other content "
-                f"({self.redefined[0]}); the first definition is kept, and {self.redefined_messages} message(s) "
-                "of the chunks holding the others may be attributed wrongly"
-            )
-
-    def _data_end(self, raw: bytes, start: int, length: int) -> None:
-        (expected,) = Cursor(raw, start, start + length).take("<I")
-        if expected == 0:
-            return
-        actual = 0
-        with memoryview(raw) as view:
-            for lo in range(0, start - 9, CRC_BLOCK):
-                hi = min(lo + CRC_BLOCK, start - 9)
-                actual = zlib.crc32(view[lo:hi], actual)
-                self._give_back(hi)
-        if actual == expected:
-            return
-        if self.skipped_chunks:
-            self.damage.append(
-                f"data section CRC mismatch (DataEnd record at byte {start - 9}): the damaged chunks skipped "
-                "explain it, unless records outside them are damaged too"
-            )
-            return
-        if self.unchecked_records == 0:
-            # Every message read came from a chunk whose own CRC matched, but the damage may be a
-            # chunk's opcode byte, and such a chunk was skipped like a private record: messages may
-            # be missing, so the read is partial (a damaged message index alone costs nothing, but
-            # the CRC cannot tell the two apart).
-            self.damage.append(
-                f"data section CRC mismatch (DataEnd record at byte {start - 9}): bytes outside the "
-                "CRC-checked chunks are damaged, and a chunk whose opcode byte is damaged is skipped "
-                "like an unknown record, so messages may be missing"
-            )
-            return
-        raise _Corrupt("data section CRC mismatch (the data section is corrupt)", start - 9, fatal=True)
-
-    def _check_statistics(self, raw: bytes, top: Records, first: int) -> None:
-        """Damage when the summary's Statistics record counts other numbers of messages or chunks
-        than the walk read: a chunk was skipped (the data section may have no CRC to show it)."""
-        for k in np.flatnonzero(top.ops[first:] == OP_STATISTICS).tolist():
-            start = int(top.offsets[first + k])
-            try:
-                messages, _schemas, _channels, _attachments, _metadata, chunks = Cursor(
-                    raw, start, start + int(top.lengths[first + k])
-                ).take("<QHIIII")
-            except PARSE_ERRORS:
-                continue  # a statistics record that does not parse is no evidence either way
-            if (messages, chunks) != (self.messages_read, self.chunks_read):
-                self.damage.append(
-                    f"the summary's Statistics record (byte {start - 9}) counts {messages} messages in "
-                    f"{chunks} chunks, the data section holds {self.messages_read} in {self.chunks_read} "
-                    "(a chunk was skipped, or the summary is damaged)"
-                )
-            return
-
     def _container(self, data, u8, ops, offsets, lengths, *, checked: bool) -> None:
         """Schema, channel and message records of one chunk (or one run of top-level records)."""
         is_message = ops == OP_MESSAGE
         if not checked:
             self.unchecked_records += int(np.count_nonzero(np.isin(ops, (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE))))
-        # schema and channel records are few: register them in order before the messages
-        redefined: set[int] = set()  # channel ids this container defines otherwise than before
-        for k in np.flatnonzero((ops == OP_SCHEMA) | (ops == OP_CHANNEL)).tolist():
-            start, length = int(offsets[k]), int(lengths[k])
-            cur = Cursor(data, start, start + length)
-            try:
-                if ops[k] == OP_SCHEMA:
-                    (sid,) = cur.take("<H")
-                    name = cur.string()
-                    encoding = cur.string()
-                    (size,) = cur.take("<I")
-                    self._define(self.schemas, sid, SchemaRec(sid, name, encoding, cur.raw(size)), "schema", start)
-                else:
-                    cid, sid = cur.take("<HH")
-                    topic = cur.string()
-                    encoding = cur.string()
-                    meta = cur.string_map()
-                    if not self._define(
-                        self.channels, cid, ChannelRec(cid, sid, topic, encoding, meta), "channel", start
-                    ):
-                        redefined.add(cid)
-            except PARSE_ERRORS as exc:
-                raise_corrupt(f"schema/channel record does not parse ({exc})", start)
+        redefined = self._definitions(data, ops, offsets, lengths)
         if not is_message.any():
             return
         m_off = offsets[is_message]
@@ -452,21 +359,52 @@ class Scan:
             batch.times.append(times)
             batch.segments.append((u8, m_off[select] + MESSAGE_HEADER, m_off[select] + m_len[select]))
         if self.keep_raw:
-            sequences = gather_u32(u8, m_off + 2).tolist()
-            publish = gather_u64(u8, m_off + 14).astype(np.int64).tolist()
-            for k, cid in enumerate(channel_ids.tolist()):
-                channel = self.channels.get(cid)
-                start, stop = int(m_off[k]) + MESSAGE_HEADER, int(m_off[k] + m_len[k])
-                self.raw.append(
-                    RawMessage(
-                        channel.topic if channel else "",
-                        cid,
-                        sequences[k],
-                        int(log_times[k]),
-                        publish[k],
-                        bytes(data[start:stop]),
-                    )
+            self._keep_raw(data, u8, m_off, m_len, channel_ids, log_times)
+
+    def _definitions(self, data, ops, offsets, lengths) -> set[int]:
+        """Register the container's schema and channel records (few: in order, before its
+        messages); the channel ids it defines otherwise than before."""
+        redefined: set[int] = set()  # channel ids this container defines otherwise than before
+        for k in np.flatnonzero((ops == OP_SCHEMA) | (ops == OP_CHANNEL)).tolist():
+            start, length = int(offsets[k]), int(lengths[k])
+            cur = Cursor(data, start, start + length)
+            try:
+                if ops[k] == OP_SCHEMA:
+                    (sid,) = cur.take("<H")
+                    name = cur.string()
+                    encoding = cur.string()
+                    (size,) = cur.take("<I")
+                    self._define(self.schemas, sid, SchemaRec(sid, name, encoding, cur.raw(size)), "schema", start)
+                else:
+                    cid, sid = cur.take("<HH")
+                    topic = cur.string()
+                    encoding = cur.string()
+                    meta = cur.string_map()
+                    if not self._define(
+                        self.channels, cid, ChannelRec(cid, sid, topic, encoding, meta), "channel", start
+                    ):
+                        redefined.add(cid)
+            except PARSE_ERRORS as exc:
+                raise_corrupt(f"schema/channel record does not parse ({exc})", start)
+        return redefined
+
+    def _keep_raw(self, data, u8, m_off, m_len, channel_ids, log_times) -> None:
+        """Every message of the container, undecoded, into ``raw`` (``keep_raw``)."""
+        sequences = gather_u32(u8, m_off + 2).tolist()
+        publish = gather_u64(u8, m_off + 14).astype(np.int64).tolist()
+        for k, cid in enumerate(channel_ids.tolist()):
+            channel = self.channels.get(cid)
+            start, stop = int(m_off[k]) + MESSAGE_HEADER, int(m_off[k] + m_len[k])
+            self.raw.append(
+                RawMessage(
+                    channel.topic if channel else "",
+                    cid,
+                    sequences[k],
+                    int(log_times[k]),
+                    publish[k],
+                    bytes(data[start:stop]),
                 )
+            )
 
     def _define(self, table: dict, key: int, record: SchemaRec | ChannelRec, kind: str, offset: int) -> bool:
         """Register a Schema or Channel record; False (the first kept, the conflict noted) when its
@@ -499,16 +437,8 @@ def scan_file(scan: Scan | str, wanted: set[str] | None = None, keep_raw: bool =
         scan.run()
     except _Corrupt as exc:
         scan.problem = exc
-    scan.chunk_damage()
+    chunk_damage(scan)
     return scan
-
-
-def problem_text(scan: Scan) -> str:
-    """Why and where the scan stopped early."""
-    problem = scan.problem
-    assert problem is not None
-    where = f" at byte {problem.offset}" if problem.offset >= 0 else ""
-    return f"{problem.reason}{where}"
 
 
 def iter_raw_messages(path: str | os.PathLike) -> Iterator[RawMessage]:
@@ -521,21 +451,3 @@ def iter_raw_messages(path: str | os.PathLike) -> Iterator[RawMessage]:
     if scan.problem is not None or scan.damage:
         raise CorruptLogError(problem_text(scan) if scan.problem else "; ".join(scan.damage), path=str(path))
     yield from scan.raw
-
-
-def raise_if_unrecoverable(scan: Scan) -> None:
-    """CorruptLogError when the walk stopped before any message, or nothing it read can be trusted,
-    or it found damage (``Scan.damage``) and no message."""
-    if scan.problem is not None and (scan.messages_read == 0 or scan.problem.fatal):
-        lost = "nothing read can be trusted" if scan.problem.fatal else "no messages could be recovered"
-        raise CorruptLogError(
-            f"corrupt MCAP: {problem_text(scan)}; {lost}",
-            path=scan.path,
-            hint="the file is damaged; re-export or re-record it",
-        )
-    if scan.damage and scan.messages_read == 0:
-        raise CorruptLogError(
-            f"corrupt MCAP: {'; '.join(scan.damage)}; no messages could be recovered",
-            path=scan.path,
-            hint="the file is damaged; re-export or re-record it",
-        )
