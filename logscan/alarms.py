@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
-from typing import overload
+from typing import NamedTuple, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -147,13 +147,36 @@ def alarm_intervals(
     if n_persist < 1:
         raise InternalError(f"alarm_intervals: n_persist must be >= 1, got {n_persist}")
     judged, in_warmup = judged_mask(t, valid, warmup, warmup_s)
+    samples = _exceedances(t, x, hi, lo, judged, in_warmup)
+    if samples is None:
+        return []
+    spans = _alarm_spans(samples, n_persist, hold_off_s, min_duration_s)
+    if spans is None:
+        return []
+    return _intervals(samples, *spans, signal, detector)
 
+
+class _Considered(NamedTuple):
+    """The samples an alarm may hold (judged or in warm-up), and which of them exceed."""
+
+    xs: np.ndarray  # the statistic
+    ts: np.ndarray  # the times
+    warm: np.ndarray  # in warm-up: breaks a run, never exceeds
+    his: np.ndarray | None  # the upper threshold (None: none given)
+    los: np.ndarray | None  # the lower threshold (None: none given)
+    over: np.ndarray  # above the upper threshold
+    nonfinite: np.ndarray  # a non-finite statistic
+    exceed: np.ndarray  # over, under or non-finite, and not in warm-up
+
+
+def _exceedances(t, x, hi, lo, judged: np.ndarray, in_warmup: np.ndarray) -> _Considered | None:
+    """The judged and warm-up samples with their exceedances (rule 2); None when none exceeds."""
     # Work on the judged samples and the warm-up samples (which break runs but never exceed); when
     # that is every sample (the usual case) on the series themselves: no (N,) copies.
     considered = judged | in_warmup
     keep = None if considered.all() else np.flatnonzero(considered)
     if keep is not None and keep.size == 0:
-        return []
+        return None
     xs, ts, warm = (x, t, in_warmup) if keep is None else (x[keep], t[keep], in_warmup[keep])
     his = hi if hi is None or keep is None else hi[keep]
     los = lo if lo is None or keep is None else lo[keep]
@@ -163,8 +186,16 @@ def alarm_intervals(
     nonfinite = ~np.isfinite(xs)
     exceed = (over | under | nonfinite) & ~warm
     if not exceed.any():
-        return []
+        return None
+    return _Considered(xs, ts, warm, his, los, over, nonfinite, exceed)
 
+
+def _alarm_spans(
+    samples: _Considered, n_persist: int, hold_off_s: float, min_duration_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(start, last, first exceedance) indices of each alarm into the considered samples, after
+    persistence, hold-off and minimum duration (rules 3-5); None when no alarm is left."""
+    ts, warm, exceed = samples.ts, samples.warm, samples.exceed
     # Runs of consecutive exceedances: starts where the padded mask goes 0 -> 1, ends 1 -> 0.
     edges = np.diff(np.concatenate(([0], exceed.view(np.int8), [0])))
     run_start = np.flatnonzero(edges == 1)
@@ -181,7 +212,7 @@ def alarm_intervals(
     # chain's last exceedance.
     qualifying = np.flatnonzero(run_len >= n_persist)
     if qualifying.size == 0:
-        return []
+        return None
     chains, first = np.unique(chain[qualifying], return_index=True)
     first_run = qualifying[first]
     a_first = run_start[first_run]
@@ -192,7 +223,16 @@ def alarm_intervals(
 
     i0, i1, f0 = a_start[keep_alarm], a_last[keep_alarm], a_first[keep_alarm]
     if i0.size == 0:
-        return []
+        return None
+    return i0, i1, f0
+
+
+def _intervals(
+    samples: _Considered, i0: np.ndarray, i1: np.ndarray, f0: np.ndarray, signal: str, detector: str
+) -> list[AlarmInterval]:
+    """The alarms over [i0, i1] (first exceedance f0) with the peak of each."""
+    xs, ts, his, los = samples.xs, samples.ts, samples.his, samples.los
+    over, nonfinite, exceed = samples.over, samples.nonfinite, samples.exceed
 
     def excess(index: np.ndarray) -> np.ndarray:
         """Excess over the crossed bound at ``index``, which picks the peak sample; non-finite
@@ -207,7 +247,7 @@ def alarm_intervals(
     peak = _segment_argmax(excess, i0, i1)
     value = xs[peak]
     is_nonfinite = nonfinite[peak]
-    crossed_upper = over[peak] | (is_nonfinite & (hi is not None))
+    crossed_upper = over[peak] | (is_nonfinite & (his is not None))
     threshold = np.where(crossed_upper, _at(his, peak), _at(los, peak))
     bound = np.where(is_nonfinite, "nonfinite", np.where(over[peak], "upper", "lower"))
     # a finite value far beyond a small threshold: the ratio overflows to inf (the JSON's null)

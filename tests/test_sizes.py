@@ -16,9 +16,6 @@ MAX_FUNCTION_LINES = 60
 # still over the limit (lines today): may only shrink
 MODULES_OVER = {}
 FUNCTIONS_OVER = {
-    "logscan/alarms.py::alarm_intervals": 121,
-    "logscan/fleet/dask.py::run_on_dask": 72,
-    "logscan/pipeline/prepare.py::prepare": 76,
     "logscan/readers/csv_reader.py::_frame_channels": 76,
     "logscan/readers/mcap/cdr.py::cdr_layout": 65,
     "logscan/readers/ulog_reader.py::read_ulog": 63,

@@ -108,7 +108,6 @@ def run_on_dask(
     without ``isolate`` the error of the first log in input order propagates, once every log before
     it has completed. On Ctrl-C or an error that stops the run the logs still queued are cancelled."""
     from distributed import as_completed
-    from distributed.scheduler import KilledWorker
 
     logs = list(logs)
     function = _isolated if isolate else _captured
@@ -116,7 +115,6 @@ def run_on_dask(
     try:
         with _DaskClient(scheduler) as client:
             futures = {}
-            attempts = [1] * len(logs)
 
             def submit(index: int):
                 future = client.submit(function, task, logs[index], pure=False, retries=TASK_RETRIES)
@@ -124,44 +122,67 @@ def run_on_dask(
                 return future
 
             pending = as_completed([submit(i) for i in range(len(logs))])
-            outcomes: list[Any] = [None] * len(logs)
-            done = [False] * len(logs)
-            errors: dict[int, BaseException] = {}
+            collected = _Outcomes(logs, isolate)
             try:
                 for future in pending:
                     index = futures.pop(future)
-                    try:
-                        outcome = future.result()
-                        if isinstance(outcome, _Raised):
-                            raise outcome.error
-                        outcomes[index] = outcome
-                    except KilledWorker as exc:
-                        if attempts[index] <= KILLED_WORKER_RESUBMITS:
-                            attempts[index] += 1
-                            pending.add(submit(index))
-                            continue
-                        failure = _worker_died(log_of(logs[index]), attempts[index], exc)
-                        if not isolate:
-                            errors[index] = _worker_died_error(failure)
-                        outcomes[index] = failure
-                    except Exception as exc:  # raised by the task (isolate: only what stops the run)
-                        if not isolate:
-                            errors[index] = exc
-                        elif isinstance(exc, OutputError):
-                            raise
-                        else:  # e.g. an outcome that could not be sent back
-                            outcomes[index] = failure_of(log_of(logs[index]), exc)
-                    done[index] = True
+                    if not collected.record(index, future, lambda i: pending.add(submit(i))):
+                        continue  # resubmitted: its worker died
                     if bar:
                         bar.update(1)
-                    if errors:
-                        first = min(errors)
-                        if all(done[:first]):
-                            raise errors[first]
+                    collected.raise_first_error()
             except BaseException:
                 client.cancel(list(futures))
                 raise
-            return outcomes
+            return collected.outcomes
     finally:
         if bar:
             bar.render_finish()
+
+
+class _Outcomes:
+    """The outcomes of a run on Dask in the order of the logs, recorded as their futures complete,
+    and the errors that stop it (without ``isolate``)."""
+
+    def __init__(self, logs: list[Any], isolate: bool):
+        self.logs, self.isolate = logs, isolate
+        self.outcomes: list[Any] = [None] * len(logs)
+        self.done = [False] * len(logs)
+        self.attempts = [1] * len(logs)
+        self.errors: dict[int, BaseException] = {}
+
+    def record(self, index: int, future, resubmit: Callable[[int], Any]) -> bool:
+        """Record the outcome of log ``index`` from its completed future; False when its worker
+        died and ``resubmit(index)`` ran it again instead (`KILLED_WORKER_RESUBMITS` times)."""
+        from distributed.scheduler import KilledWorker
+
+        try:
+            outcome = future.result()
+            if isinstance(outcome, _Raised):
+                raise outcome.error
+            self.outcomes[index] = outcome
+        except KilledWorker as exc:
+            if self.attempts[index] <= KILLED_WORKER_RESUBMITS:
+                self.attempts[index] += 1
+                resubmit(index)
+                return False
+            failure = _worker_died(log_of(self.logs[index]), self.attempts[index], exc)
+            if not self.isolate:
+                self.errors[index] = _worker_died_error(failure)
+            self.outcomes[index] = failure
+        except Exception as exc:  # raised by the task (isolate: only what stops the run)
+            if not self.isolate:
+                self.errors[index] = exc
+            elif isinstance(exc, OutputError):
+                raise
+            else:  # e.g. an outcome that could not be sent back
+                self.outcomes[index] = failure_of(log_of(self.logs[index]), exc)
+        self.done[index] = True
+        return True
+
+    def raise_first_error(self) -> None:
+        """The error of the first log in input order, once every log before it has completed."""
+        if self.errors:
+            first = min(self.errors)
+            if all(self.done[:first]):
+                raise self.errors[first]

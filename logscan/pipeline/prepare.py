@@ -15,7 +15,7 @@ from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
 from logscan.filters.warmup import COMPILING_NOTE, Compile, start_compile
-from logscan.log import MAX_SPAN_S
+from logscan.log import MAX_SPAN_S, Log
 from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
@@ -160,12 +160,7 @@ def prepare(
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice)
     step("reading")
-    # the autopilot's states for the report, and a ULog's GNSS time (its UTC), when the log has them
-    context_topics = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
-    log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
-    if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
-        topics = profile.topics() | set(raw_topics) | context_topics
-        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp)
+    log = _read(path, loaded, raw_topics, use_header_stamp)
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")
@@ -189,14 +184,40 @@ def prepare(
     if profile.recovery is not None:
         wanted = wanted | RECOVERY_NEEDS
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
+    prepared.warnings.extend(_read_warnings(log, run))
+    _run_filters(prepared, wanted, compiling, step)
+    return prepared
+
+
+def _read(path: str, loaded: LoadedProfile, raw_topics: frozenset[str], use_header_stamp: bool) -> Log:
+    """The log with the topics the profile needs, the detectors' ``raw_topics`` and the report's
+    context: the built-in profile's log when it already holds them (read once), else read now."""
+    # the autopilot's states for the report, and a ULog's GNSS time (its UTC), when the log has them
+    context_topics = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
+    log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
+    if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
+        topics = loaded.profile.topics() | set(raw_topics) | context_topics
+        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp)
+    return log
+
+
+def _read_warnings(log: Log, run: AlignedRun) -> list[str]:
+    """What reading and aligning the log warned of, in that order."""
+    warnings: list[str] = []
     span_warning = log.span_warning()
     if span_warning and run.n_steps * run.dt <= MAX_SPAN_S:  # outlying times dropped at alignment
-        prepared.warnings.extend(w for w in log.source.warnings if w != span_warning)
+        warnings.extend(w for w in log.source.warnings if w != span_warning)
     else:
-        prepared.warnings.extend(log.source.warnings)
-    prepared.warnings.extend(run.warnings)
+        warnings.extend(log.source.warnings)
+    warnings.extend(run.warnings)
     if log.source.partial:
-        prepared.warnings.append(f"partial read: {log.source.partial_reason}")
+        warnings.append(f"partial read: {log.source.partial_reason}")
+    return warnings
+
+
+def _run_filters(prepared: Prepared, wanted: Needs, compiling: Compile, step: Progress) -> None:
+    """Run each filter the needs ask for once, into ``prepared.traces``; the EKF's divergence
+    episodes become warnings."""
     for name, parts in wanted.filters.items():
         if name not in FILTERS:
             raise ProfileError(
@@ -205,11 +226,10 @@ def prepare(
             )
         step("filtering")
         compiling.wait()
-        prepared.traces[name] = FILTERS[name](model, run, frozenset(parts))
+        prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
     ekf = prepared.trace
     for episode in ekf.divergence_episodes if ekf is not None else ():
         prepared.warnings.append(f"filter diverged: {episode}")
-    return prepared
 
 
 def _attach_truth(log, path: str, truth_path) -> None:
