@@ -20,6 +20,9 @@ section states).
   rho = max over the training windows of d_j(w) + 1 (the smallest false-alarm-free value plus 1).
 - Alarm: statistic kgn.<group>(w) = max over the group's columns of d_j(w), against rho, for
   ``n_persist`` consecutive judged windows (the shared alarm logic).
+- Operating envelope (`fit`; `detectors.kgn_operating`): the box of the training windows' input
+  means and spreads (widened by ``envelope_margin``); a window outside it, or within ``hold_s``
+  after one, is not judged, and the result says so in a `not checked` line, not in alarms.
 - Blindness probe (`fit`, needs the model): a step of ``probe_size`` (the group's unit) on the
   first channel of each group, and on the first input of each sensor that drives a sensor-driven
   model (ins: gyro_x, accel_x), for ``probe_s`` seconds in a judged segment of the training runs,
@@ -38,10 +41,12 @@ import math
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, Needs, decode_state_value
+from logscan.detectors.kgn_operating import envelope_gate, fit_envelope, inside, operating_features, outside_line
 from logscan.detectors.modes import mode_changes
 from logscan.detectors.params import PERSIST, Interval, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
+from logscan.results import NotChecked
 
 SPREAD_FLOOR = 1e-9  # relative floor of a column's spread: a zero spread alarms on rounding
 NO_MODE = "all"  # the single operating-point bin of a run without a mode channel
@@ -120,6 +125,8 @@ class Windows:
     bins: list[str]
     warmup_end_s: float
     has_mode: bool
+    op_names: list[str]  # the operating-point features (`detectors.kgn_operating`)
+    op: np.ndarray  # (W, F) their values per window
 
 
 def longest_stretch(mask: np.ndarray) -> tuple[int, int]:
@@ -148,8 +155,11 @@ class KgnDetector(Detector):
     requires_fit = True
     requires_trace = True
     reads = frozenset({"K", "P_post_diag", "mode"})
-    trained_attributes = ("reference_", "rho_", "blindness_")
-    fit_params = ("window_s", "hold_s", "warmup_s", "settle_tol", "probe_size", "probe_slope", "probe_s")
+    trained_attributes = ("reference_", "rho_", "blindness_", "envelope_")
+    state_version = 2  # 2: the operating envelope
+    fit_params = (
+        "window_s", "hold_s", "warmup_s", "settle_tol", "probe_size", "probe_slope", "probe_s", "envelope_margin",
+    )  # fmt: skip
     defaults = {
         "window_s": 1.0,  # Nbar window, s (aligned to the slowest group's updates)
         "hold_s": 10.0,  # steady: no mode change for this long
@@ -162,6 +172,8 @@ class KgnDetector(Detector):
         # length of the probe faults, s (at most: the steady stretch may be shorter); a drift's verdict
         # holds for this long (0.02 unit/s reaches 0.3 units)
         "probe_s": 15.0,
+        "envelope_margin": 1.0,  # the trained envelope's box widened by this x its width on each side
+        "envelope_share": 0.5,  # a flight with more of its windows outside the envelope is not checked at all
     }
     parameter_constraints = {
         "window_s": [Interval(float, 0, None, closed="neither")],
@@ -173,6 +185,8 @@ class KgnDetector(Detector):
         "probe_size": [Interval(float, None, None)],
         "probe_slope": [Interval(float, None, None)],
         "probe_s": [Interval(float, 0, None, closed="neither")],
+        "envelope_margin": [Interval(float, 0, None)],
+        "envelope_share": [Interval(float, 0, 1)],
     }
 
     @classmethod
@@ -201,6 +215,9 @@ class KgnDetector(Detector):
                 for g, o, s in zip(ref["groups"], ref["offsets"], ref["sizes"])
             )
             lines.append(f"    bin {key} ({row['windows']} windows): mean Nbar per group {cells}")
+        envelope = st["envelope_"]
+        for name, lo, hi in zip(envelope["names"], envelope["lo"], envelope["hi"]):
+            lines.append(f"    envelope: {name} {lo:.3g} to {hi:.3g}")
         for group, verdict in blind.items():
             if not isinstance(verdict, dict):
                 lines.append(f"    probe: {verdict}")
@@ -215,7 +232,7 @@ class KgnDetector(Detector):
         return lines
 
     def check_trained(self) -> None:
-        if not hasattr(self, "reference_") or not hasattr(self, "rho_") or not hasattr(self, "blindness_"):
+        if not all(hasattr(self, name) for name in self.trained_attributes):
             raise NotTrainedError(
                 "detector 'kgn' has no reference gain norms",
                 hint="train it with `logscan train HEALTHY_LOG... -o tables.json` (and --profile FILE, the "
@@ -249,7 +266,8 @@ class KgnDetector(Detector):
         bad = np.concatenate([[0], np.cumsum(~steady)])
         judged = (bad[starts + period] - bad[starts] == 0) & (t[starts] >= warmup_end) & np.isfinite(nbar).any(axis=1)
         bins = [mode_key(v) for v in run.mode[starts]] if has_mode else [NO_MODE] * starts.size
-        return Windows(starts, ends, nbar, judged, bins, warmup_end, has_mode)
+        op_names, op = operating_features(run, starts, period)
+        return Windows(starts, ends, nbar, judged, bins, warmup_end, has_mode, op_names, op)
 
     # --- training ---------------------------------------------------------------------------------
     def _fit(self, runs, traces, **context) -> None:
@@ -286,6 +304,9 @@ class KgnDetector(Detector):
             if np.isfinite(d[w.judged]).any():
                 worst = max(worst, float(np.nanmax(d[w.judged])))
         self.rho_ = worst + 1.0
+        # every window after warm-up, steady or not: where the training flights flew
+        warm = [w.op[run.t[w.starts] >= w.warmup_end_s] for run, w in zip(runs, wins)]
+        self.envelope_ = fit_envelope(wins[0].op_names, warm, float(self.envelope_margin))
         self.blindness_ = self._probe(runs, wins, context.get("model"), context.get("refilter"))
 
     def _deviation(self, w: Windows) -> np.ndarray:
@@ -417,6 +438,27 @@ class KgnDetector(Detector):
         return out
 
     # --- detection ----------------------------------------------------------------------------------
+    def _in_envelope(self, run, w: Windows, judged: np.ndarray, result: DetectorResult) -> np.ndarray:
+        """``judged`` less the windows outside the trained envelope or within hold_s after one; a
+        `not checked` line says for how long and where (`detectors.kgn_operating`)."""
+        envelope = self.envelope_
+        if w.op_names != envelope["names"]:
+            result.warnings.append(
+                "kgn: this log's inputs differ from the training logs' (" + ", ".join(w.op_names) + "): the "
+                "trained envelope was not checked"
+            )
+            return judged
+        ok = inside(w.op, envelope)
+        t_starts = run.t[w.starts]
+        warm = t_starts >= w.warmup_end_s
+        lost, share = envelope_gate(ok, t_starts, warm, judged, float(self.hold_s), float(self.envelope_share))
+        result.info["outside_envelope_s"] = float(lost.sum() * float(self.window_s))
+        result.info["outside_envelope_share"] = share
+        if lost.any():
+            seconds, total = lost.sum() * float(self.window_s), judged.sum() * float(self.window_s)
+            result.not_checked.append(NotChecked(outside_line(w.op, envelope, ~ok, seconds, total)))
+        return judged & ~lost
+
     def _run(self, run, trace, **context) -> DetectorResult:
         result = self.new_result()
         t = run.t
@@ -424,7 +466,7 @@ class KgnDetector(Detector):
         w = self.windows(run, trace)
         rho = float(self.rho) if self.rho is not None else float(self.rho_)
         known = np.isin(np.asarray(w.bins, dtype=object), list(self.reference_["bins"]))
-        judged = w.judged & known
+        judged = self._in_envelope(run, w, w.judged & known, result)
         stat = self._group_max(self._deviation(w))
         result.info["rho"] = rho
         result.info["window_s"] = float(self.window_s)

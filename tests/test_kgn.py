@@ -98,6 +98,7 @@ def quad(tmp_path_factory):
         # drift from the start of a steady stretch). Started at 60 s, it is 0.2-0.3 m/s^2 by the
         # judged windows and KGN sees it in about half the runs (bench/kgn_scenarios.py: 11/20).
         "drift": simulate("drift.mcap", 302, "--fault", f"drift:accel.x:{FAULT_AT:g}:75:0.02"),
+        "aggressive": simulate("aggressive.mcap", 401, "--aggressive"),
     }
     loaded = load_profile_for(healthy[0], None)
     profile = root / "p.toml"
@@ -132,6 +133,19 @@ def test_no_alarm_on_unseen_healthy_logs(quad):
         _, result = kgn_result(path, quad)
         assert result.alarms == [], path
         assert result.info["judged_windows"] > 40  # 35-60, 70-75 and 85-120 s
+
+
+def test_an_aggressive_flight_after_normal_training_is_not_checked_not_alarmed(quad):
+    """Trained on normal flights, the aggressive figure-eight (faster: thrust up to about 16 N against
+    the training's 11.5-12.3) lies outside the trained envelope: a `not checked` line, no alarm."""
+    detector, result = kgn_result(quad["aggressive"], quad)
+    assert result.alarms == []
+    assert result.info["outside_envelope_share"] > detector.envelope_share
+    (line,) = [c.reason for c in result.not_checked]
+    assert line.startswith("outside the trained envelope") and "/cmd/thrust" in line
+    for path in quad["unseen"]:  # normal flights lie inside it: judged as before
+        _, healthy = kgn_result(path, quad)
+        assert healthy.not_checked == [] and healthy.info["outside_envelope_share"] == 0.0
 
 
 def test_the_accelerometer_step_is_detected_in_the_hover(quad):
