@@ -5,7 +5,9 @@
 Analyses the log once (not timed), then renders its report with ``--plotlyjs`` shared (plotly.min.js
 beside the page, as `logscan analyze --plotlyjs DIR` writes it) five times and prints the best time,
 the page's size, how many figures it draws, and, with Chromium installed, the page's height at a
-1400 px wide window after every figure is drawn (the page's own `<body data-plots-rendered>`).
+1400 px wide window after every figure is drawn (the page's own `<body data-plots-rendered>`) and
+the time a click on the first incident row takes to zoom every figure (the median of five: the
+JavaScript the click runs, every `Plotly.relayout` included).
 ``--screenshot`` also writes the first screen (1400x900) as DIR/<log>.png.
 """
 
@@ -40,6 +42,31 @@ PROBE = """<script>
 </script></body>"""
 
 
+# appended to the page: times a click on the first incident (or alarm) row, then "reset zoom", five
+# times, as soon as report.js has linked the time axes; writes the click times (ms). Synchronous, in
+# the page's first task: headless Chromium's virtual time (--virtual-time-budget) stops the page's
+# clocks between tasks, and plotly's relayout does its work before it returns.
+ZOOM_PROBE = """<script>
+(function () {
+  function run() {
+    var row = document.querySelector("#incident-table tbody tr, #alarm-table tbody tr"), times = [];
+    for (var i = 0; row && i < 5; i++) {
+      var t0 = performance.now();
+      row.click();
+      times.push(performance.now() - t0);
+      document.getElementById("ls-reset-zoom").click();
+    }
+    document.body.setAttribute("data-zoom-ms", JSON.stringify(times));
+  }
+  if (document.body.hasAttribute("data-time-axis")) { run(); return; }
+  var observer = new MutationObserver(function () {
+    if (document.body.hasAttribute("data-time-axis")) { observer.disconnect(); run(); }
+  });
+  observer.observe(document.body, { attributes: true, attributeFilter: ["data-time-axis"] });
+})();
+</script></body>"""
+
+
 def chromium() -> str | None:
     return shutil.which("chromium") or shutil.which("chromium-browser")
 
@@ -53,12 +80,25 @@ def browser(page: Path, *options: str) -> str:
         return subprocess.run(command, capture_output=True, text=True, timeout=180).stdout
 
 
-def page_height(page: Path) -> int | None:
+def probed(page: Path, probe_script: str, attribute: str) -> str | None:
+    """The value the probe script wrote into ``<body attribute>`` once the page ran."""
     probe = page.with_name(page.stem + ".probe.html")
-    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", PROBE, 1), encoding="utf-8")
-    match = re.search(r'data-page-height="(\d+)"', browser(probe, "--dump-dom"))
+    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", probe_script, 1), encoding="utf-8")
+    match = re.search(rf'{attribute}="([^"]*)"', browser(probe, "--dump-dom"))
     probe.unlink()
-    return int(match.group(1)) if match else None
+    return match.group(1) if match else None
+
+
+def page_height(page: Path) -> int | None:
+    value = probed(page, PROBE, "data-page-height")
+    return None if value is None else int(value)
+
+
+def zoom_ms(page: Path) -> float | None:
+    """The median of five clicks on the first incident (or alarm) row, ms until every figure moved."""
+    value = probed(page, ZOOM_PROBE, "data-zoom-ms")
+    times = json.loads(value.replace("&quot;", '"')) if value else []
+    return round(float(sorted(times)[len(times) // 2]), 1) if times else None
 
 
 def main(argv: list[str]) -> int:
@@ -84,6 +124,7 @@ def main(argv: list[str]) -> int:
            "figures": n_figures, "page": str(page)}  # fmt: skip
     if chromium():
         row["height_px"] = page_height(page)
+        row["click_zoom_ms"] = zoom_ms(page)
         if args.screenshot:
             browser(page, f"--screenshot={out / (page.stem + '.png')}")
             row["screenshot"] = str(out / (page.stem + ".png"))

@@ -246,10 +246,10 @@ def test_alarm_table_lists_every_alarm_with_truth_match_and_latency(hour_report,
     assert e_x_rows[1][6] == "NaN"  # the gap: a non-finite statistic is an exceedance
     assert [row[9] for row in e_x_rows[:2]] == ["none (false alarm)"] * 2
     burst = [row for row in body if row[2] == "e_x" and row[9] != "none (false alarm)"]
-    assert len(burst) == 1 and burst[0][9] == "#0 imu-bias accel.x"
+    assert len(burst) == 1 and burst[0][9] == "#1 imu-bias accel.x"
     assert float(burst[0][10]) == pytest.approx(0.52, abs=1e-6)  # 2000.52 - 2000.0
     accel = next(row for row in body if row[2] == "nis.accel")
-    assert accel[9] == "#0 imu-bias accel.x" and float(accel[10]) == pytest.approx(0.22, abs=1e-6)
+    assert accel[9] == "#1 imu-bias accel.x" and float(accel[10]) == pytest.approx(0.22, abs=1e-6)
     assert float(accel[6]) == 500.0 and float(accel[7]) == 90.0
 
 

@@ -54,6 +54,9 @@ def test_the_headline_gives_the_quoted_checks_span_and_the_deviation_in_the_sens
     assert sigmas > 5
     # the incident table says the same line
     assert line in page[page.index('id="incident-table"') :]
+    # incidents, alarms and ground-truth events are all numbered from 1
+    assert table(page, "incident-table")[1][0] == "1" and table(page, "alarm-table")[1][1] == "1"
+    assert table(page, "truth-table")[1][0] == "1" and table(page, "alarm-table")[1][10] == "#1 bias accel.x"
 
 
 def test_the_headline_sensor_figure_is_first_and_zoomed_to_the_alarm(bias):

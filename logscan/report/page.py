@@ -127,7 +127,8 @@ def _time_head(clock: Clock) -> str:
 
 
 def _event_view(event: FaultEvent, index: int, t_end: float) -> dict:
-    """A truth event as {index, kind, target, start, end, open_ended, magnitude, label}."""
+    """A truth event as {index, kind, target, start, end, open_ended, magnitude, label}; ``index``
+    counts from 0 (the JSON's event index), the label from 1 (the report's tables)."""
     open_ended = event.t_end is None
     return {
         "index": index,
@@ -137,7 +138,7 @@ def _event_view(event: FaultEvent, index: int, t_end: float) -> dict:
         "end": t_end if open_ended else float(event.t_end),
         "open_ended": open_ended,
         "magnitude": event.magnitude,
-        "label": f"#{index} {event.kind} {event.target}".strip(),
+        "label": f"#{index + 1} {event.kind} {event.target}".strip(),  # numbered from 1, as alarms
     }
 
 
