@@ -26,8 +26,14 @@ from pathlib import Path
 
 from benchlib import simulate_log
 
+import logscan
+
+# run against the logscan tree the bench itself imports (argv[1]), not the venv's editable install
 COLD = """
+import sys
 import time
+sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in (type(f).__name__ + type(f).__module__).lower()]
+sys.path.insert(0, sys.argv[1])
 from bench_ekf import make_run
 from logscan.filters import run_ekf
 from logscan.verdict.observability import observability_of
@@ -63,7 +69,9 @@ def cold_compile() -> float:
         env = {k: v for k, v in os.environ.items() if k not in ("LOGSCAN_CACHE_DIR", "PYTHONPATH")}
         env["NUMBA_CACHE_DIR"] = cache
         env["PYTHONPATH"] = str(Path(__file__).resolve().parent)
-        out = subprocess.run([sys.executable, "-c", COLD], env=env, capture_output=True, text=True, check=True)
+        root = str(Path(logscan.__file__).resolve().parents[1])
+        command = [sys.executable, "-c", COLD, root]
+        out = subprocess.run(command, env=env, capture_output=True, text=True, check=True)
         return float(out.stdout.strip().splitlines()[-1])
 
 

@@ -1,7 +1,9 @@
 """The observability verdict (logscan.verdict.observability, docs/algorithms.md section 10): a steer-by-wire
 actuator offset cannot be seen in straight driving and can in a lane change, a quadcopter sensor bias
-is always seen, evaluate counts the misses where a fault could not be seen apart, and the summary's
-observability validates against the published schema."""
+is always seen, the analysis judges only around the ground truth's faults (and the same as the whole
+run there), the batched kernel equals the recursion written out per signature, evaluate counts the
+misses where a fault could not be seen apart, and the summary's observability validates against the
+published schema."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from test_model_contract import CASES  # every model, with the contract's exampl
 
 from logscan.models import get_model
 from logscan.results import FaultEvent
-from logscan.verdict.observability import Direction, Observability, spans_of
+from logscan.verdict.observability import Direction, Observability, observability_of, spans_of
 from logscan.verdict.scoring import label_observability, score_log
 
 SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "schema" / "analyze-summary.schema.json"
@@ -42,9 +44,16 @@ def _index(obs: Observability, target: str) -> int:
     return next(i for i, d in enumerate(obs.directions) if d.target == target)
 
 
+def _whole(analysis) -> Observability:
+    """The verdict over every window start of the analysed log (the pipeline judges only around
+    the ground truth's faults)."""
+    prepared = analysis.prepared
+    return observability_of(prepared.model, prepared.run, prepared.trace)
+
+
 def test_steer_by_wire_actuator_offset_is_unobservable_straight_and_observable_in_a_lane_change(steer):
     _, analysis = steer
-    obs = analysis.observability
+    obs = _whole(analysis)
     d = _index(obs, "steering_motor")
     seen = obs.observable(d, "actuator-offset")
     t = obs.t_start
@@ -79,7 +88,8 @@ def test_steer_by_wire_shading_words_and_report_figure(steer):
 
 def test_quadcopter_sensor_bias_is_always_observable(tmp_path_factory):
     _, analysis = _simulated(tmp_path_factory, "quadcopter", 15.0, 9102)
-    obs = analysis.observability
+    assert analysis.observability is None  # no fault in its truth: no verdict needed
+    obs = _whole(analysis)
     # the model's actuators (Model.actuators), named as the simulator's truth names them
     assert [d.target for d in obs.directions if d.what == "actuator"] == ["motor1", "motor2", "motor3", "motor4"]
     for target in ("accel.x", "accel.z", "gyro.y"):
@@ -112,6 +122,82 @@ def test_the_mixer_follows_what_the_quadcopter_s_inputs_are():
     assert np.array_equal(motors.M, np.eye(4))  # the inputs are the motors' own speeds
     hover = get_model("hover_uav")
     assert np.allclose(hover.actuators().trim, hover.hover_thrust())  # F1..F4 deviate from hover
+
+
+def test_the_analysis_judges_around_the_truth_s_faults_as_the_whole_run_does(steer):
+    _, analysis = steer
+    obs, whole = analysis.observability, _whole(analysis)
+    assert "judged around the ground truth's faults" in obs.notes[0]
+    judged = np.isfinite(obs.evidence).all(axis=1)
+    t = obs.t_start
+    # the offset over 6-16 s: its window starts from a window before it to its end, no others
+    assert judged[(t >= 5.0) & (t <= 16.0)].all() and not judged[(t < 5.0) | (t > 16.0)].any()
+    assert np.array_equal(obs.evidence[judged], whole.evidence[judged])  # its kernel started at the log's start
+    assert obs.event_verdict(analysis.events[0]) is whole.event_verdict(analysis.events[0]) is False
+
+
+def test_a_span_judged_alone_settles_to_the_whole_run_s_evidence(steer):
+    _, analysis = steer
+    prepared = analysis.prepared
+    whole = _whole(analysis)
+    short = observability_of(prepared.model, prepared.run, prepared.trace, spans=[(21.0, 22.0)])
+    judged = np.isfinite(short.evidence).all(axis=1)
+    assert judged.sum() == 5 and np.allclose(short.evidence[judged], whole.evidence[judged], rtol=1e-9, atol=0)
+
+
+def _reference_evidence(model, run, trace, window: int, stride: int, steps: int) -> np.ndarray:
+    """The recursion of docs/algorithms.md section 10 written out per signature with numpy (the
+    model's own f, F, h, H), phase j restarted at k = j * stride + q * window."""
+    from logscan.verdict.observability import _fault_directions, held_inputs
+
+    dt, u = float(trace.dt), held_inputs(run.u)[:steps]
+    _, faults = _fault_directions(model, run, trace, u)
+    A, D = faults.act_dirs.shape[0], faults.act_dirs.shape[0] + faults.sensor_cols.size
+    J, n = window // stride, model.n_states
+    P = np.diag(trace.P_post_diag[0].astype(np.float64))
+    out = np.full((steps // stride + 1, D), np.nan)
+    mu, lam, start = np.zeros((J, D, n)), np.zeros((J, D)), [-1] * J
+    for k in range(1, steps):
+        for j in range(J):
+            if k >= j * stride and (k - j * stride) % window == 0:
+                if start[j] >= 0:
+                    out[start[j] // stride] = lam[j]
+                start[j], mu[j], lam[j] = k, 0.0, 0.0
+        x = trace.x_post[k - 1]
+        F = model.F(x, u[k], dt)
+        h = 1e-6 * (1.0 + np.abs(u[k]).max())
+        G = [(model.f(x, u[k] + h * d, dt) - model.f(x, u[k] - h * d, dt)) / (2 * h) for d in faults.act_dirs]
+        P = F @ P @ F.T + trace.Q
+        mu = mu @ F.T
+        for a in range(A):
+            mu[:, a] += G[a] * faults.act_values[k, a]
+        used = [g for g, name in enumerate(trace.group_names) if trace.updated[k, g]]
+        H = np.vstack([model.H(trace.group_names[g], trace.x_prior[k], u[k]) for g in used])
+        rows = np.concatenate([trace.group_offsets[g] + np.arange(trace.group_sizes[g]) for g in used])
+        R = trace.R[np.ix_(rows, rows)]
+        S = H @ P @ H.T + R
+        K = P @ H.T @ np.linalg.inv(S)
+        IKH = np.eye(n) - K @ H
+        P = IKH @ P @ IKH.T + K @ R @ K.T
+        r = mu @ H.T
+        for b, col in enumerate(faults.sensor_cols):
+            r[:, A + b, rows == col] += 1.0
+        lam += np.einsum("jda,ab,jdb->jd", r, np.linalg.inv(S), r)
+        mu -= r @ K.T
+    return out
+
+
+def test_the_batched_kernel_equals_the_recursion_per_signature(steer):
+    _, analysis = steer
+    prepared = analysis.prepared
+    model, run, trace = prepared.model, prepared.run, prepared.trace
+    steps, window, stride = 400, 100, 25  # 4 s: the first lane change, 4 phases
+    reference = _reference_evidence(model, run, trace, window, stride, steps)
+    obs = observability_of(model, run, trace, spans=[(0.0, 3.0)])  # the kernel's own arguments, cut short
+    assert obs.stride_s == pytest.approx(0.25) and obs.window_s == pytest.approx(1.0)
+    judged = np.isfinite(reference).all(axis=1)
+    assert judged.sum() >= 10
+    assert np.allclose(obs.evidence[: judged.size][judged], reference[judged], rtol=1e-7, atol=1e-12)
 
 
 def _crafted() -> Observability:
