@@ -83,6 +83,7 @@ def test_steer_by_wire_shading_words_and_report_figure(steer):
     assert len(figures) == 1 and figures[0]["id"] == "ctx-observability"
     assert "could not be seen here" in figures[0]["json"]
     assert f"less than {analysis.observability.snr_min:.3g} standard deviations" in figures[0]["caption"]
+    assert "Judged only from a second before each fault" in figures[0]["caption"]  # white elsewhere: no verdict
     assert not re.search(r"\d\.\d{4,} standard deviations", figures[0]["caption"])  # not 5.62716
 
 

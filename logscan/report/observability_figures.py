@@ -45,6 +45,8 @@ def observability_figures(observability, clock: Clock | None = None) -> list[dic
         f"promise to see it ({words}). A missed fault there is no detector's failure; `logscan evaluate` counts it "
         "apart."
     )
+    if any(d.startswith("judged around") for d in observability.notes):  # `observability_for`
+        caption += " Judged only from a second before each fault of the ground truth to its end: elsewhere, no verdict."
     spec = _time_row_spec("ctx-observability", "where a fault could not be seen", caption)
     spec["height"] = layout["height"]
     return [_spec(spec, data, layout, clock)]
