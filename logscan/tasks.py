@@ -10,6 +10,7 @@ imports the command line.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -30,6 +31,7 @@ class LogOutcome:
     summary: dict
     text: str
     staged: Staged | None = None  # the report in its temporary file, renamed by the command at the end
+    seconds: float = 0.0  # the wall time of its analysis and report (JUnit's time; not in the JSON)
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,7 @@ class AnalyzeTask:
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         log_path, report_path = item
+        started = time.perf_counter()
 
         def step(message: str) -> None:
             if self.step is not None:
@@ -93,7 +96,7 @@ class AnalyzeTask:
             staged = stage_report(
                 analysis.report_input(), report_path, plotlyjs=self.plotlyjs_dir or "embed", token=self.token
             )
-        return LogOutcome(summary, text, staged)
+        return LogOutcome(summary, text, staged, seconds=time.perf_counter() - started)
 
 
 def has_truth(path: str) -> bool:

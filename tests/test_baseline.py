@@ -76,3 +76,34 @@ def test_baseline_mistakes_exit_two(cli, sample, tmp_path):
     junk.write_text("[1, 2]")
     bad = cli("analyze", bias, "--no-report", "--baseline", junk)
     assert bad.exit_code == 2 and "not a logscan analyze summary" in bad.stderr
+
+
+def test_baselined_logs_missing_from_the_run_are_not_analysed():
+    previous = summary(("/old/a.mcap", 1, [("nis", "nis.accel", 10, 12)]), ("/old/b.mcap", 0, []))
+    previous["errors"] = [{"file": "/old/c.mcap", "error": "unreadable", "exit_code": 2}]
+    current = summary(("/new/b.mcap", 0, []))
+    current["logs"][0]["verdict"] = "no alarms"
+    current["errors"] = [{"file": "/new/c.mcap", "error": "unreadable", "exit_code": 2}]
+    totals = compare(current, previous)
+    assert current["baseline"]["not_analysed"] == ["/old/a.mcap"]  # c failed to read: an error, not missing
+    assert totals["gone"] == 0  # a.mcap's alarm was not looked for: not gone
+    from logscan.report.ci_annotations import github_annotations
+    from logscan.report.ci_artifacts import junit_xml, markdown_summary
+
+    assert "**Not analysed**: 1 log(s) of the baseline not analysed in this run:\n\n- /old/a.mcap" in (
+        markdown_summary(current)
+    )
+    assert '<skipped message="in the --baseline summary, not analysed in this run"' in junit_xml(current)
+    assert github_annotations(current)[-1] == (
+        "::warning file=/old/a.mcap,title=logscan log not analysed::in the --baseline summary, not analysed in this run"
+    )
+    every = summary(("/new/a.mcap", 0, []), ("/new/b.mcap", 0, []), ("/new/c.mcap", 0, []))
+    compare(every, previous)
+    assert every["baseline"]["not_analysed"] == []
+
+
+def test_a_missing_log_is_said_in_the_terminal(cli, sample, tmp_path):
+    base = tmp_path / "base.json"
+    base.write_text(json.dumps(summary(("/old/quad_imu_bias.mcap", 1, []), ("/old/gone_flight.mcap", 0, []))))
+    result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "-q", "--baseline", base)
+    assert "baseline: 1 log(s) not analysed in this run: /old/gone_flight.mcap" in result.stdout

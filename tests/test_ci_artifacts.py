@@ -1,6 +1,7 @@
 """CI artifacts of `logscan analyze` (logscan/report/ci_artifacts.py): the JUnit XML validates against the
 schema CI servers read and says what the JSON says, the Markdown summary's tables, GitHub Actions
-annotations (one per alarm, escaped), and `--fail-on never`."""
+annotations (one per incident, at most 10 per log, escaped as GitHub's toolkit), the analysis times in
+JUnit, and `--fail-on never`."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from logscan.report.ci_artifacts import github_annotations
+from logscan.report.ci_annotations import MAX_PER_LOG, github_annotations
+from logscan.report.ci_artifacts import junit_xml, markdown_summary
 
 XSD = Path(__file__).parent / "data" / "junit.xsd"
 
@@ -72,21 +74,92 @@ def test_the_markdown_summary_has_the_verdict_and_alarm_tables(run):
     _, out, document = run
     text = out["r.md"].read_text()
     for log in document["logs"]:
-        assert f"| {log['file']} | {log['verdict']} | {log['n_alarms']} |" in text
-    assert "| quad_imu_bitflip.mcap | nis | nis.accel | 30.13 | 31.27 | peak/threshold 7.46 | - |" in text
+        assert f"| {log['file']} | {log['verdict']} | {log['n_incidents']} | {log['n_alarms']} |" in text
+    assert "| quad_imu_bitflip.mcap | 1 | nis | nis.accel | 30.13 | 31.27 | peak/threshold 7.46 | - |" in text
     assert "22 samples outside the physical range" in text  # refused samples in words, not a ratio
     assert "missing.mcap | error:" in text
 
 
-def test_github_annotations_one_error_per_alarm_escaped(run):
+def test_github_annotations_one_error_per_incident_escaped(run):
     _, _, document = run
     lines = github_annotations(document)
-    n_alarms = sum(log["n_alarms"] for log in document["logs"])
-    assert sum(line.startswith("::error file=") for line in lines) == n_alarms + len(document["errors"])
-    hostile = {"logs": [{"file": "a,b:c%.mcap", "detectors": [{"detector": "d", "alarms": [
-        {"signal": "s", "start": 1.0, "end": 2.0, "peak_ratio": 3.0}]}]}], "errors": []}  # fmt: skip
+    n_incidents = sum(log["n_incidents"] for log in document["logs"])
+    assert n_incidents < sum(log["n_alarms"] for log in document["logs"])  # the test tells the two apart
+    assert sum(line.startswith("::error file=") for line in lines) == n_incidents + len(document["errors"])
+    (incident,) = [line for line in lines if "title=logscan incident" in line]
+    (expected,) = [i for log in document["logs"] for i in log["incidents"]]
+    assert f"::{expected['headline']}; {expected['n_alarms']} alarm(s) on " in incident
+    hostile = {"logs": [{"file": "a,b:c%.mcap", "incidents": [_incident(1.0, "s 50%\nx")], "detectors": []}],
+               "errors": []}  # fmt: skip
     (line,) = github_annotations(hostile)
-    assert line.startswith("::error file=a%2Cb%3Ac%25.mcap,title=logscan d s::s 1.00-2.00 s")
+    # as @actions/core: escapeProperty (%, CR, LF, ':' and ',') in properties, escapeData in the message
+    assert line == "::error file=a%2Cb%3Ac%25.mcap,title=logscan incident 1 of 1::s 50%25%0Ax; 1 alarm(s) on s"
+
+
+def _incident(start: float, headline: str = "h") -> dict:
+    return {"start": start, "end": start + 0.5, "headline": headline, "checks": ["d:s"], "n_alarms": 1}
+
+
+def test_github_annotations_at_most_ten_per_log_then_one_notice():
+    many = {"file": "runs/a.mcap", "report": "out/a.report.html", "detectors": [],
+            "incidents": [_incident(float(i)) for i in range(13)],
+            "unchecked": [f"u{i}" for i in range(11)]}  # fmt: skip
+    few = {"file": "runs/b.mcap", "detectors": [], "incidents": [_incident(1.0)]}
+    lines = github_annotations({"logs": [many, few], "errors": []}, summary="summary.md")
+    errors = [line for line in lines if line.startswith("::error file=runs/a.mcap")]
+    warnings = [line for line in lines if line.startswith("::warning file=runs/a.mcap")]
+    assert len(errors) == MAX_PER_LOG == 10 and len(warnings) == 10
+    notices = [line for line in lines if line.startswith("::notice")]
+    assert notices == [
+        "::notice file=runs/a.mcap,title=logscan::3 more incidents in a.mcap: see out/a.report.html",
+        "::notice file=runs/a.mcap,title=logscan::1 more warning in a.mcap: see out/a.report.html",
+    ]
+    assert [line for line in lines if "runs/b.mcap" in line] == [
+        "::error file=runs/b.mcap,title=logscan incident 1 of 1::h; 1 alarm(s) on s"
+    ]
+    del many["report"]
+    assert "3 more incidents in a.mcap: see summary.md" in "\n".join(github_annotations({"logs": [many]}, "summary.md"))
+
+
+def test_github_annotations_say_new_incidents_with_a_baseline():
+    alarm = {"detector": "d", "signal": "s", "start": 1.0, "end": 1.5, "baseline": "new"}
+    log = {"file": "a.mcap", "incidents": [_incident(1.0)], "detectors": [{"detector": "d", "alarms": [alarm]}]}
+    (line,) = github_annotations({"logs": [log]})
+    assert line.endswith("1 alarm(s) on s [1 new]")
+    alarm["baseline"] = "unchanged"
+    assert github_annotations({"logs": [log]})[0].endswith(" [unchanged]")
+
+
+def test_the_markdown_links_are_relative_to_its_folder_with_an_incident_column(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "ci" / "summary").mkdir(parents=True)
+    alarm = {"detector": "d", "signal": "s", "start": 1.2, "end": 1.4, "peak_ratio": 2.0}
+    log = {"file": "a.mcap", "verdict": "1 alarm", "n_alarms": 1, "n_incidents": 2,
+           "report": "out/my run.report.html", "incidents": [_incident(5.0), _incident(1.0)],
+           "detectors": [{"detector": "d", "alarms": [alarm]}]}  # fmt: skip
+    text = markdown_summary({"logs": [log], "errors": []}, "ci/summary/s.md")
+    assert "[my run.report.html](../../out/my%20run.report.html)" in text  # from ci/summary/, not from the cwd
+    assert "| log | verdict | incidents | alarms |" in text and "| a.mcap | 1 alarm | 2 | 1 |" in text
+    assert "| a.mcap | 2 | d | s | 1.20 | 1.40 | peak/threshold 2 | - |" in text  # the second incident holds it
+    assert "](out/my%20run.report.html)" in markdown_summary({"logs": [log], "errors": []}, "s.md")
+    assert "](out/my%20run.report.html)" in markdown_summary({"logs": [log], "errors": []}, "/dev/stdout")
+
+
+def test_the_junit_time_is_each_logs_analysis_time(run):
+    from lxml import etree
+
+    _, out, document = run
+    suites = etree.parse(str(out["r.xml"])).getroot()
+    analysed = [s for s in suites.findall("testsuite") if s.get("name") in {log["file"] for log in document["logs"]}]
+    assert len(analysed) == 2
+    for suite in analysed:
+        seconds = float(suite.get("time"))
+        assert 0.05 < seconds < 600  # measured, not a placeholder
+        cases = [float(c.get("time")) for c in suite.findall("testcase")]
+        assert sum(cases) == pytest.approx(seconds, abs=0.001 * len(cases))
+    assert float(suites.get("time")) == pytest.approx(sum(float(s.get("time")) for s in analysed), abs=0.002)
+    xml = junit_xml(document, [1.5, 2.25])
+    assert 'time="1.500"' in xml and 'time="2.250"' in xml
 
 
 def test_fail_on_never_exits_zero_with_alarms(cli, sample):

@@ -68,3 +68,35 @@ def test_a_bad_file_stops_analyze_before_any_log(cli, sample, tmp_path):
     path.write_text('[[suppress]]\ndetector = "nis"\n')
     result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--suppressions", path)
     assert result.exit_code == 2 and "has no reason" in result.stderr
+
+
+def test_an_entry_that_matched_nothing_is_a_warning_everywhere(cli, sample, tmp_path):
+    rules = tmp_path / "s.toml"
+    shadowed = ENTRY.format(check="nis.position").replace("(OPS-1)", "(OPS-2)")  # its alarm went to entry 1
+    unused = ENTRY.format(check="nis.gps_speed").replace("OPS-1", "OPS-3")
+    rules.write_text(ENTRY.format(check="nis.position") + shadowed + unused)
+    out, md = tmp_path / "s.json", tmp_path / "s.md"
+    result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--suppressions", rules, "--json", out,
+                 "--markdown", md, "--github-annotations")  # fmt: skip
+    assert result.exit_code == 1  # the alarms left decide, not the unused entries
+    lines = [line for line in result.stderr.splitlines() if "matched no alarm" in line]
+    assert lines == [
+        f"logscan: warning: {rules}: [[suppress]] entry 2 (detector nis, check nis.position, log quad_imu_*.mcap, "
+        "25-60 s) matched no alarm; reason: the position group follows the accelerometer bias (OPS-2)",
+        f"logscan: warning: {rules}: [[suppress]] entry 3 (detector nis, check nis.gps_speed, log quad_imu_*.mcap, "
+        "25-60 s) matched no alarm; reason: the position group follows the accelerometer bias (OPS-3)",
+    ]
+    document = json.loads(out.read_text())
+    assert [e["entry"] for e in document["suppressions"]["unused"]] == [2, 3]
+    assert document["suppressions"]["file"] == str(rules)
+    assert "**Warning**: 2 suppression entries matched no alarm:" in md.read_text()
+    assert result.stdout.count(f"::warning file={rules},title=logscan unused suppression::") == 2
+
+
+def test_every_entry_used_gives_no_warning(cli, sample, tmp_path):
+    rules = tmp_path / "s.toml"
+    rules.write_text(ENTRY.format(check="nis.position"))
+    out = tmp_path / "s.json"
+    result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--suppressions", rules, "--json", out)
+    assert "matched no alarm" not in result.stderr + result.stdout
+    assert json.loads(out.read_text())["suppressions"]["unused"] == []

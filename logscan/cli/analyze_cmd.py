@@ -159,7 +159,8 @@ class _Run:
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
     help="A TOML file of accepted alarms ([[suppress]]: detector, check, log glob, start/end, reason, "
-    "expires): they leave the verdict and exit code and are listed with their reason everywhere.",
+    "expires): they leave the verdict and exit code and are listed with their reason everywhere; an entry "
+    "that matched no alarm is a warning.",
 )
 @click.option(
     "--baseline",
@@ -167,30 +168,31 @@ class _Run:
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
     help="A previous run's --json summary: every alarm is marked new or unchanged (same log name, "
-    "detector and statistic, overlapping in time) and the previous ones no longer raised are listed as gone.",
+    "detector and statistic, overlapping in time), the previous ones no longer raised are listed as gone, "
+    "and its logs this run did not analyse as not analysed.",
 )
 @click.option(
     "--junit",
     "junit_path",
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
-    help="Write a JUnit XML report: a testsuite per log, a testcase per detector and statistic (failed "
-    "when it alarmed), for CI servers' test views.",
+    help="Write a JUnit XML report: a testsuite per log (its time: the log's analysis time), a testcase per "
+    "detector and statistic (failed when it alarmed), for CI servers' test views.",
 )
 @click.option(
     "--markdown",
     "markdown_path",
     type=click.Path(dir_okay=False, path_type=str),
     default=None,
-    help="Write a Markdown summary (verdict and alarm tables, links to the reports) for a CI job summary "
-    "page (e.g. >> $GITHUB_STEP_SUMMARY).",
+    help="Write a Markdown summary (verdict and alarm tables, links to the reports relative to the file) for a "
+    "CI job summary page (e.g. >> $GITHUB_STEP_SUMMARY).",
 )
 @click.option(
     "--github-annotations",
     is_flag=True,
     default=False,
-    help="Print one GitHub Actions '::error' line per alarm and '::warning' per possible fault or "
-    "unchecked part, so they show on the workflow run.",
+    help="Print one GitHub Actions '::error' line per incident and '::warning' per possible fault or "
+    "unchecked part (at most 10 of each per log, then a '::notice' of how many more), shown on the workflow run.",
 )
 @click.option(
     "--truth",
@@ -231,7 +233,7 @@ def analyze(**options) -> None:
     try:
         outcomes = _run_logs(list(zip(logs, reports)), task, run.jobs, progress, run.scheduler)
         staged += [o.staged for o in outcomes if isinstance(o, LogOutcome) and o.staged is not None]
-        code = _finish(run, outcomes, previous, staged, index, token)
+        code = _finish(run, outcomes, previous, staged, index, token, rules)
     except BaseException:
         # an error or Ctrl-C: no output is replaced, and no temporary file stays
         discard(staged)
@@ -315,17 +317,22 @@ def _task(run: _Run, names, rules: tuple, token: str, steps: bool):
     )
 
 
-def _finish(run: _Run, outcomes: list, previous: dict | None, staged: list, index: str | None, token: str):
-    """The summaries, the baseline's comparison and the annotations printed, then every output
-    written at once (`_write_outputs`); the run's exit code."""
+def _finish(run: _Run, outcomes: list, previous: dict | None, staged: list, index: str | None, token: str, rules=()):
+    """The summaries, the unused suppressions, the baseline's comparison and the annotations
+    printed, then every output written at once (`_write_outputs`); the run's exit code."""
+    from logscan.tasks import LogOutcome
+
     exit_zero = run.exit_zero or run.fail_on == "never"
     code, document = _report_outcomes(outcomes, exit_zero, err=run.err)
+    if run.suppressions_path is not None:
+        _warn_unused_suppressions(document, list(rules), run.suppressions_path)
     if previous is not None:
         code = _compare_with_baseline(document, previous, code, run.fail_on, exit_zero, err=run.err)
     if run.github_annotations:
-        from logscan.report.ci_artifacts import github_annotations as annotations
+        from logscan.report.ci_annotations import github_annotations as annotations
 
-        for line in annotations(document):
+        summary = run.markdown_path or (run.json_path if run.json_path != "-" else None)
+        for line in annotations(document, summary):
             click.echo(line, err=run.err)
     if index is not None:
         from logscan.artifacts import stage
@@ -333,8 +340,19 @@ def _finish(run: _Run, outcomes: list, previous: dict | None, staged: list, inde
 
         staged.append(stage(index, render_index_html(document, index), token=token))
     plotlyjs_dir = None if run.no_report else run.plotlyjs_dir
-    _write_outputs(staged, run.json_path, document, plotlyjs_dir, token, run.junit_path, run.markdown_path)
+    times = [o.seconds for o in outcomes if isinstance(o, LogOutcome)]  # JUnit's, in the order of the logs
+    _write_outputs(staged, run.json_path, document, plotlyjs_dir, token, run.junit_path, run.markdown_path, times)
     return code
+
+
+def _warn_unused_suppressions(document: dict, rules: list, path: str) -> None:
+    """List the suppression entries that matched no alarm in the document and warn of each on
+    stderr (as ruff's unused ``noqa``); the exit code stays (docs/ci.md says why)."""
+    from logscan.report.ci_artifacts import unused_line
+    from logscan.verdict.suppressions import mark_unused
+
+    for entry in mark_unused(document, rules, path):
+        click.echo(f"logscan: warning: {printable(path)}: {printable(unused_line(entry))}", err=True)
 
 
 def _run_logs(items: list, task, jobs: int, progress: bool, scheduler: str | None) -> list:
@@ -359,6 +377,10 @@ def _compare_with_baseline(document: dict, previous: dict, code, fail_on: str, e
     click.echo(
         f"baseline: {totals['new']} new, {totals['unchanged']} unchanged, {totals['gone']} gone alarm(s)", err=err
     )
+    missing = document["baseline"]["not_analysed"]
+    if missing:
+        names = ", ".join(printable(name) for name in missing)
+        click.echo(f"baseline: {len(missing)} log(s) not analysed in this run: {names}", err=err)
     if fail_on == "new" and not exit_zero:
         code = ExitCode(exit_code_on_new(document))
         document["exit_code"] = int(code)
@@ -414,6 +436,7 @@ def _write_outputs(
     token: str,
     junit_path: str | None = None,
     markdown_path: str | None = None,
+    times: list[float] | None = None,
 ) -> None:
     """The run's outputs all at once: the reports (already staged by the tasks), plotly.js and the
     JSON staged beside their targets, then renamed in a row (`logscan.artifacts.commit`: the JSON
@@ -429,9 +452,10 @@ def _write_outputs(
     if junit_path or markdown_path:
         from logscan.report.ci_artifacts import junit_xml, markdown_summary
 
-        for path, render in ((junit_path, junit_xml), (markdown_path, markdown_summary)):
-            if path:
-                staged.append(stage(path, render(document), token=token))
+        if junit_path:  # each log's analysis time, which the JSON leaves out
+            staged.append(stage(junit_path, junit_xml(document, times), token=token))
+        if markdown_path:  # the report links relative to its folder
+            staged.append(stage(markdown_path, markdown_summary(document, markdown_path), token=token))
     if json_path and json_path != "-":
         staged.append(stage(json_path, json_text(document), token=token))
     commit(staged)

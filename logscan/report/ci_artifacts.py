@@ -2,24 +2,31 @@
 
 - JUnit XML (`--junit`): one testsuite per log, one testcase per detector and statistic (a failure
   when it alarmed: the alarms with times and peak/threshold), an error testcase for a detector that
-  failed, a log that could not be fully checked, or a log that could not be read;
-- Markdown (`--markdown`): a verdict table and an alarm table for a CI job's summary page, linking
-  the reports;
-- GitHub Actions annotations (`--github-annotations`): one `::error` line per alarm, one
-  `::warning` line per possible fault or unchecked part, in the workflow-command format.
+  failed, a log that could not be fully checked, or a log that could not be read; a skipped
+  testcase for a log of the `--baseline` not analysed in this run. Each testsuite's ``time`` is the
+  log's analysis time, shared equally by its testcases (the detectors run on one filter pass);
+- Markdown (`--markdown`): a verdict table and an alarm table (with the incident each alarm
+  belongs to) for a CI job's summary page, linking the reports relative to the Markdown file's
+  folder; the suppression entries that matched nothing and the baseline's logs not analysed;
+- GitHub Actions annotations (`--github-annotations`, `logscan.report.ci_annotations`).
 
-Only the JSON document is read, so every artifact agrees with `--json`.
+Only the JSON document is read (and the analysis times, which the JSON leaves out so that it
+stays the same from run to run), so every artifact agrees with `--json`.
 """
 
 from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from datetime import UTC, datetime
+from urllib.parse import quote
 
+from logscan.artifacts import check_target
 from logscan.report.overview import is_rejected, rejected_words
 
 MAX_MARKDOWN_ROWS = 200
+NOT_ANALYSED = "in the --baseline summary, not analysed in this run"
 
 
 def _peak(alarm: dict) -> str:
@@ -30,74 +37,138 @@ def _peak(alarm: dict) -> str:
     return f"peak/threshold {ratio:.3g}" if isinstance(ratio, (int, float)) else ""
 
 
-def _alarm_line(alarm: dict) -> str:
+def alarm_line(alarm: dict) -> str:
+    """``<statistic> <start>-<end> s, peak/threshold <r> [<baseline status>]``."""
     peak = _peak(alarm)
     status = f" [{alarm['baseline']}]" if alarm.get("baseline") else ""  # --baseline: new / unchanged
     where = f"{alarm.get('signal', '')} {alarm['start']:.2f}-{alarm['end']:.2f} s"
     return where + (f", {peak}" if peak else "") + status
 
 
-def _name(path: str) -> str:
+def log_name(path: str) -> str:
+    """A log's file name (a directory log's folder name)."""
     return os.path.basename(str(path).rstrip("/")) or str(path)
 
 
-def junit_xml(document: dict) -> str:
-    """The JUnit XML of an analyze run (``<testsuites>``; see the module docstring)."""
+def incident_of(log: dict, alarm: dict, detector: str = "") -> int | None:
+    """The number (from 1, as the summary and the report count them) of the incident of ``log``
+    that holds ``alarm``: the first one listing its check whose span covers it; None if none does."""
+    check = f"{alarm.get('detector') or detector}:{alarm.get('signal', '')}"
+    for number, incident in enumerate(log.get("incidents", []), start=1):
+        inside = incident["start"] - 1e-6 <= alarm["start"] and alarm["end"] <= incident["end"] + 1e-6
+        if check in incident.get("checks", []) and inside:
+            return number
+    return None
+
+
+def not_analysed(document: dict) -> list[str]:
+    """The logs of the `--baseline` summary that this run did not analyse (`compare` lists them)."""
+    return list((document.get("baseline") or {}).get("not_analysed", []))
+
+
+def unused_suppressions(document: dict) -> list[dict]:
+    """The `--suppressions` entries that matched no alarm of the run (`logscan.verdict.suppressions`)."""
+    return list((document.get("suppressions") or {}).get("unused", []))
+
+
+def unused_line(entry: dict) -> str:
+    """One unused suppression entry in words: which entry, what it names, its reason."""
+    names = [f"detector {entry['detector']}"]
+    names += [f"{key} {entry[key]}" for key in ("check", "log") if entry.get(key) is not None]
+    span = (entry.get("start"), entry.get("end"))
+    if span != (None, None):
+        names.append(f"{_seconds(span[0], '-inf')}-{_seconds(span[1], 'inf')} s")
+    return f"[[suppress]] entry {entry['entry']} ({', '.join(names)}) matched no alarm; reason: {entry['reason']}"
+
+
+def _seconds(value: float | None, unbounded: str) -> str:
+    return unbounded if value is None else f"{value:g}"
+
+
+# --- JUnit XML --------------------------------------------------------------------------------
+
+
+def junit_xml(document: dict, times: Sequence[float] | None = None) -> str:
+    """The JUnit XML of an analyze run (``<testsuites>``; see the module docstring). ``times``:
+    each analysed log's analysis time in seconds, in the order of ``document["logs"]``."""
     stamp = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S")
     suites = ET.Element("testsuites", name="logscan analyze")
-    totals = {"tests": 0, "failures": 0, "errors": 0}
-    for index, log in enumerate(document.get("logs", [])):
-        suite = ET.SubElement(suites, "testsuite", name=str(log["file"]), id=str(index), timestamp=stamp)
-        cases = []
-        for result in log.get("detectors", []):
-            detector = result["detector"]
-            alarms_by_signal: dict[str, list] = {}
-            for alarm in result.get("alarms", []):
-                alarms_by_signal.setdefault(alarm.get("signal", ""), []).append(alarm)
-            for signal in result.get("series", {}):
-                alarms = alarms_by_signal.get(signal, [])
-                case = {"name": f"{detector}: {signal}", "failure": None, "error": None}
-                if alarms:
-                    case["failure"] = (
-                        f"{len(alarms)} alarm(s) on {signal}",
-                        "\n".join(_alarm_line(a) for a in alarms),
-                    )
-                cases.append(case)
-        for suppressed in log.get("suppressed", []):
-            cases.append({
-                "name": f"{suppressed.get('detector', '')}: {suppressed.get('signal', '')} (suppressed)",
-                "failure": None, "error": None,
-                "skipped": f"{_alarm_line(suppressed)}: {suppressed.get('reason', '')}",
-            })  # fmt: skip
-        for failed in log.get("failed_detectors", []):
-            cases.append({"name": f"{failed['detector']}: ran", "failure": None, "error": ("failed", failed["error"])})
-        if log.get("unchecked"):
-            cases.append({
-                "name": "log: fully checked", "failure": None,
-                "error": ("not fully checked", "\n".join(str(u) for u in log["unchecked"])),
-            })  # fmt: skip
-        _cases(suite, cases, _name(log["file"]))
-        possible = [p for r in log.get("detectors", []) for p in r.get("possible_faults", [])]
-        if possible:
-            out = ET.SubElement(suite, "system-out")
-            out.text = "possible faults (warnings, not alarms):\n" + "\n".join(_alarm_line(p) for p in possible)
+    totals = {"tests": 0, "failures": 0, "errors": 0}  # the schema's <testsuites> has no "skipped"
+    logs = document.get("logs", [])
+    runs: list[tuple[str, list[dict], str, float]] = []
+    for index, log in enumerate(logs):
+        seconds = float(times[index]) if times is not None and index < len(times) else 0.0
+        runs.append((str(log["file"]), _log_cases(log), log_name(log["file"]), seconds))
+    for error in document.get("errors", []):
+        case = {"name": "log: read", "failure": None, "error": ("bad input", error["error"])}
+        runs.append((str(error["file"]), [case], "logscan", 0.0))
+    for missing in not_analysed(document):
+        case = {"name": "log: analysed", "failure": None, "error": None, "skipped": NOT_ANALYSED}
+        runs.append((str(missing), [case], "logscan", 0.0))
+    total_s = 0.0
+    for index, (name, cases, classname, seconds) in enumerate(runs):
+        suite = ET.SubElement(suites, "testsuite", name=name, id=str(index), timestamp=stamp)
+        _cases(suite, cases, classname, seconds)
+        if index < len(logs):
+            _possible_faults(suite, logs[index])
         for key in totals:
             totals[key] += int(suite.get(key, "0"))
-    for index, error in enumerate(document.get("errors", []), start=len(document.get("logs", []))):
-        suite = ET.SubElement(suites, "testsuite", name=str(error["file"]), id=str(index), timestamp=stamp)
-        _cases(suite, [{"name": "log: read", "failure": None, "error": ("bad input", error["error"])}], "logscan")
-        for key in totals:
-            totals[key] += int(suite.get(key, "0"))
+        total_s += seconds
     for key, value in totals.items():
         suites.set(key, str(value))
+    suites.set("time", _time(total_s))
     ET.indent(suites)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
 
 
-def _cases(suite: ET.Element, cases: list[dict], classname: str) -> None:
+def _log_cases(log: dict) -> list[dict]:
+    """One analysed log's testcases: a statistic each, its suppressed alarms, failed detectors and
+    what could not be checked."""
+    cases = []
+    for result in log.get("detectors", []):
+        detector = result["detector"]
+        alarms_by_signal: dict[str, list] = {}
+        for alarm in result.get("alarms", []):
+            alarms_by_signal.setdefault(alarm.get("signal", ""), []).append(alarm)
+        for signal in result.get("series", {}):
+            alarms = alarms_by_signal.get(signal, [])
+            case = {"name": f"{detector}: {signal}", "failure": None, "error": None}
+            if alarms:
+                case["failure"] = (f"{len(alarms)} alarm(s) on {signal}", "\n".join(alarm_line(a) for a in alarms))
+            cases.append(case)
+    for suppressed in log.get("suppressed", []):
+        cases.append({
+            "name": f"{suppressed.get('detector', '')}: {suppressed.get('signal', '')} (suppressed)",
+            "failure": None, "error": None,
+            "skipped": f"{alarm_line(suppressed)}: {suppressed.get('reason', '')}",
+        })  # fmt: skip
+    for failed in log.get("failed_detectors", []):
+        cases.append({"name": f"{failed['detector']}: ran", "failure": None, "error": ("failed", failed["error"])})
+    if log.get("unchecked"):
+        cases.append({
+            "name": "log: fully checked", "failure": None,
+            "error": ("not fully checked", "\n".join(str(u) for u in log["unchecked"])),
+        })  # fmt: skip
+    return cases
+
+
+def _possible_faults(suite: ET.Element, log: dict) -> None:
+    possible = [p for r in log.get("detectors", []) for p in r.get("possible_faults", [])]
+    if possible:
+        out = ET.SubElement(suite, "system-out")
+        out.text = "possible faults (warnings, not alarms):\n" + "\n".join(alarm_line(p) for p in possible)
+
+
+def _time(seconds: float) -> str:
+    """An xs:decimal of seconds (never an exponent)."""
+    return f"{max(seconds, 0.0):.3f}"
+
+
+def _cases(suite: ET.Element, cases: list[dict], classname: str, seconds: float) -> None:
     failures = errors = skipped = 0
+    each = _time(seconds / len(cases)) if cases else "0"
     for case in cases:
-        element = ET.SubElement(suite, "testcase", name=case["name"], classname=classname, time="0")
+        element = ET.SubElement(suite, "testcase", name=case["name"], classname=classname, time=each)
         if case["failure"] is not None:
             message, text = case["failure"]
             ET.SubElement(element, "failure", message=message, type="alarm").text = text
@@ -113,7 +184,10 @@ def _cases(suite: ET.Element, cases: list[dict], classname: str) -> None:
     suite.set("failures", str(failures))
     suite.set("errors", str(errors))
     suite.set("skipped", str(skipped))
-    suite.set("time", "0")
+    suite.set("time", _time(seconds))
+
+
+# --- Markdown ---------------------------------------------------------------------------------
 
 
 def _cell(text: object) -> str:
@@ -121,82 +195,91 @@ def _cell(text: object) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def markdown_summary(document: dict) -> str:
-    """Verdict and alarm tables of an analyze run, for a CI job's summary page."""
+def link_base(markdown_path: str | None) -> str:
+    """The folder the Markdown's links are relative to: the file's own (a link is followed from
+    where the file is), or the working directory for stdout, a FIFO or a device."""
+    if markdown_path is None or markdown_path == "-" or check_target(markdown_path):
+        return os.getcwd()
+    return os.path.dirname(os.path.abspath(markdown_path))
+
+
+def _link(report: str | None, base: str) -> str:
+    if not report:
+        return "-"
+    target = os.path.relpath(os.path.abspath(report), base).replace(os.sep, "/")
+    return f"[{_cell(log_name(report))}]({quote(target)})"
+
+
+def markdown_summary(document: dict, markdown_path: str | None = None) -> str:
+    """Verdict and alarm tables of an analyze run, for a CI job's summary page written to
+    ``markdown_path`` (the report links are relative to its folder)."""
     logs = document.get("logs", [])
     n_alarms = sum(log.get("n_alarms", 0) for log in logs)
+    n_incidents = sum(log.get("n_incidents", 0) for log in logs)
     lines = [
         "## logscan analyze",
         "",
-        f"{len(logs) + len(document.get('errors', []))} log(s), {n_alarms} alarm(s), exit code "
-        f"{document.get('exit_code', '')}.",
+        f"{len(logs) + len(document.get('errors', []))} log(s), {n_incidents} incident(s), {n_alarms} alarm(s), "
+        f"exit code {document.get('exit_code', '')}.",
         "",
-        "| log | verdict | alarms | possible faults | exit | report |",
-        "|---|---|---:|---:|---:|---|",
+        "| log | verdict | incidents | alarms | possible faults | exit | report |",
+        "|---|---|---:|---:|---:|---:|---|",
     ]
+    base = link_base(markdown_path)
     for log in logs:
-        report = log.get("report")
-        link = f"[{_cell(_name(report))}]({_cell(report)})" if report else "-"
         lines.append(
-            f"| {_cell(log['file'])} | {_cell(log['verdict'])} | {log.get('n_alarms', 0)} | "
-            f"{log.get('n_possible', 0)} | {log.get('exit_code', '')} | {link} |"
+            f"| {_cell(log['file'])} | {_cell(log['verdict'])} | {log.get('n_incidents', 0)} | "
+            f"{log.get('n_alarms', 0)} | {log.get('n_possible', 0)} | {log.get('exit_code', '')} | "
+            f"{_link(log.get('report'), base)} |"
         )
     for error in document.get("errors", []):
-        lines.append(f"| {_cell(error['file'])} | error: {_cell(error['error'])} | - | - | {error['exit_code']} | - |")
-    alarms = [(log, a) for log in logs for r in log.get("detectors", []) for a in r.get("alarms", [])]
-    if alarms:
-        lines += [
-            "",
-            "| log | detector | signal | start (s) | end (s) | peak | baseline |",
-            "|---|---|---|---:|---:|---|---|",
-        ]
-        for log, alarm in alarms[:MAX_MARKDOWN_ROWS]:
-            cells = [_name(log["file"]), alarm.get("detector", ""), alarm.get("signal", "")]
-            lines.append(
-                "| " + " | ".join(_cell(c) for c in cells) + f" | {alarm['start']:.2f} | {alarm['end']:.2f} | "
-                f"{_cell(_peak(alarm) or '-')} | {_cell(alarm.get('baseline', '-'))} |"
-            )
-    gone = [(log, a) for log in logs for a in (log.get("baseline") or {}).get("gone", [])]
-    if gone:
-        lines += ["", f"{len(gone)} alarm(s) of the baseline gone:", ""]
-        lines += [f"- {_cell(_name(log['file']))}: {_cell(_alarm_line(a))}" for log, a in gone[:MAX_MARKDOWN_ROWS]]
-        if len(alarms) > MAX_MARKDOWN_ROWS:
-            lines.append(f"\n... {len(alarms) - MAX_MARKDOWN_ROWS} more alarm(s) in the JSON summary")
-    suppressed = [(log, a) for log in logs for a in log.get("suppressed", [])]
-    if suppressed:
-        lines += ["", f"{len(suppressed)} alarm(s) suppressed:", ""]
-        lines += [f"- {_cell(_name(log['file']))}: {_cell(_alarm_line(a))} ({_cell(a.get('reason', ''))})"
-                  for log, a in suppressed[:MAX_MARKDOWN_ROWS]]  # fmt: skip
+        lines.append(
+            f"| {_cell(error['file'])} | error: {_cell(error['error'])} | - | - | - | {error['exit_code']} | - |"
+        )
+    lines += _alarm_table(logs) + _lists(document)
     return "\n".join(lines) + "\n"
 
 
-def _escape_data(text: str) -> str:
-    """A workflow command's message: %, CR and LF escaped (GitHub Actions' format)."""
-    return text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+def _alarm_table(logs: list[dict]) -> list[str]:
+    alarms = [(log, r, a) for log in logs for r in log.get("detectors", []) for a in r.get("alarms", [])]
+    if not alarms:
+        return []
+    lines = [
+        "",
+        "| log | incident | detector | signal | start (s) | end (s) | peak | baseline |",
+        "|---|---:|---|---|---:|---:|---|---|",
+    ]
+    for log, result, alarm in alarms[:MAX_MARKDOWN_ROWS]:
+        incident = incident_of(log, alarm, result.get("detector", ""))
+        cells = [log_name(log["file"]), incident or "-", alarm.get("detector", ""), alarm.get("signal", "")]
+        lines.append(
+            "| " + " | ".join(_cell(c) for c in cells) + f" | {alarm['start']:.2f} | {alarm['end']:.2f} | "
+            f"{_cell(_peak(alarm) or '-')} | {_cell(alarm.get('baseline', '-'))} |"
+        )
+    if len(alarms) > MAX_MARKDOWN_ROWS:
+        lines.append(f"\n... {len(alarms) - MAX_MARKDOWN_ROWS} more alarm(s) in the JSON summary")
+    return lines
 
 
-def _escape_property(text: str) -> str:
-    """A workflow command's property value: as data, plus ':' and ','."""
-    return _escape_data(text).replace(":", "%3A").replace(",", "%2C")
-
-
-def github_annotations(document: dict) -> list[str]:
-    """``::error`` per alarm and per log that could not be read, ``::warning`` per possible fault
-    and per part of a log that could not be checked."""
-    lines = []
-    for log in document.get("logs", []):
-        where = f"file={_escape_property(str(log['file']))}"
-        for result in log.get("detectors", []):
-            for alarm in result.get("alarms", []):
-                detector = alarm.get("detector") or result.get("detector", "")
-                title = _escape_property(f"logscan {detector} {alarm.get('signal', '')}")
-                lines.append(f"::error {where},title={title}::{_escape_data(_alarm_line(alarm))}")
-            for possible in result.get("possible_faults", []):
-                title = _escape_property(f"logscan possible fault {possible.get('signal', '')}")
-                lines.append(f"::warning {where},title={title}::{_escape_data(_alarm_line(possible))}")
-        for unchecked in log.get("unchecked", []):
-            lines.append(f"::warning {where},title=logscan not fully checked::{_escape_data(str(unchecked))}")
-    for error in document.get("errors", []):
-        where = f"file={_escape_property(str(error['file']))}"
-        lines.append(f"::error {where},title=logscan could not analyse the log::{_escape_data(str(error['error']))}")
+def _lists(document: dict) -> list[str]:
+    """The baseline's gone alarms and logs not analysed, the suppressed alarms, the unused
+    suppression entries: one bulleted list each."""
+    logs = document.get("logs", [])
+    lines: list[str] = []
+    gone = [(log, a) for log in logs for a in (log.get("baseline") or {}).get("gone", [])]
+    gone_lines = [f"{log_name(log['file'])}: {alarm_line(a)}" for log, a in gone]
+    missing = not_analysed(document)
+    suppressed = [(log, a) for log in logs for a in log.get("suppressed", [])]
+    suppressed_lines = [f"{log_name(log['file'])}: {alarm_line(a)} ({a.get('reason', '')})" for log, a in suppressed]
+    unused = [unused_line(entry) for entry in unused_suppressions(document)]
+    for items, heading in (
+        (gone_lines, f"{len(gone)} alarm(s) of the baseline gone:"),
+        (missing, f"**Not analysed**: {len(missing)} log(s) of the baseline not analysed in this run:"),
+        (suppressed_lines, f"{len(suppressed)} alarm(s) suppressed:"),
+        (unused, f"**Warning**: {len(unused)} suppression entr{'y' if len(unused) == 1 else 'ies'} matched no alarm:"),
+    ):
+        if items:
+            lines += ["", heading, ""] + [f"- {_cell(item)}" for item in items[:MAX_MARKDOWN_ROWS]]
+            if len(items) > MAX_MARKDOWN_ROWS:
+                lines.append(f"- ... {len(items) - MAX_MARKDOWN_ROWS} more")
     return lines

@@ -4,6 +4,12 @@ An alarm is "unchanged" when the previous summary has an alarm of the same log (
 same detector and the same statistic whose interval overlaps it, else "new"; a previous alarm no
 current alarm overlaps that way is "gone". `logscan analyze --baseline previous.json --fail-on new`
 fails only on new alarms, so a team can accept the known ones and still be told of any other.
+
+A log the previous summary holds (analysed or not readable) that this run neither analysed nor
+failed to read is "not analysed" (listed under the JSON's ``baseline.not_analysed``, a warning in
+the terminal, Markdown and GitHub annotations, a skipped testcase in JUnit): its alarms are not
+"gone", they were not looked for. It does not change the exit code: a job may analyse a part of
+the logs on purpose; a log that disappeared by mistake is seen in every artifact.
 """
 
 from __future__ import annotations
@@ -70,8 +76,19 @@ def compare(document: dict, previous: dict) -> dict[str, int]:
             "unchanged": sum(a["baseline"] == "unchanged" for a in current),
             "gone": gone,
         }
-    document["baseline"] = totals
+    document["baseline"] = {**totals, "not_analysed": missing_logs(document, previous)}
     return totals
+
+
+def missing_logs(document: dict, previous: dict) -> list[str]:
+    """The logs of ``previous`` (by file name, as `compare` matches them) that ``document`` neither
+    analysed nor failed to read, as ``previous`` names them, each once."""
+    seen = {_key(entry) for entry in (*document.get("logs", []), *document.get("errors", []))}
+    missing: dict[str, str] = {}
+    for entry in (*previous.get("logs", []), *previous.get("errors", [])):
+        if isinstance(entry, dict) and _key(entry) not in seen:
+            missing.setdefault(_key(entry), str(entry.get("file", "")))
+    return list(missing.values())
 
 
 def exit_code_on_new(document: dict) -> int:

@@ -14,6 +14,11 @@ A TOML file (`logscan analyze --suppressions FILE`) of ``[[suppress]]`` entries:
 An entry without a reason, an expired one, or an unknown key is exit 2 (before any log is read). A
 suppressed alarm leaves the verdict, the exit code and the scores; it is listed, with its reason,
 in the summary, the JSON, the report and the CI artifacts.
+
+An entry that suppressed no alarm of the run (as ruff reports an unused ``noqa``) is listed by
+`mark_unused` under the JSON's ``suppressions.unused`` and shown as a warning in the terminal, the
+Markdown summary and the GitHub annotations; it does not change the exit code (one file often
+serves several jobs, each analysing a part of the logs).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import os
 import tomllib
 from dataclasses import dataclass
 from datetime import date
+from typing import NamedTuple
 
 from logscan.errors import InputError
 from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
@@ -114,3 +120,36 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
         groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
         analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s)
     return count
+
+
+class _Alarm(NamedTuple):
+    """An alarm of the JSON summary, as `Suppression.matches` reads it."""
+
+    detector: str
+    signal: str
+    start: float
+    end: float
+
+
+def _entry(number: int, rule: Suppression) -> dict:
+    span = (("start", rule.start), ("end", rule.end))
+    bounded = {key: value if math.isfinite(value) else None for key, value in span}
+    return {"entry": number, "detector": rule.detector, "check": rule.check, "log": rule.log, **bounded,
+            "reason": rule.reason}  # fmt: skip
+
+
+def mark_unused(document: dict, rules: list[Suppression], path: str) -> list[dict]:
+    """List under ``document["suppressions"]`` (the file and its ``unused`` entries) the entries of
+    ``rules`` that suppressed no alarm of the run: an alarm is suppressed by the first entry that
+    matches it (`apply_suppressions`), so an entry whose alarms an earlier one took is unused too.
+    Entries are numbered from 1 in the file's order. Returns the unused entries."""
+    used = set()
+    for log in document.get("logs", []):
+        for alarm in log.get("suppressed", []):
+            view = _Alarm(str(alarm.get("detector", "")), str(alarm.get("signal", "")), alarm["start"], alarm["end"])
+            number = next((n for n, rule in enumerate(rules) if rule.matches(log["file"], view)), None)
+            if number is not None:
+                used.add(number)
+    unused = [_entry(n + 1, rule) for n, rule in enumerate(rules) if n not in used]
+    document["suppressions"] = {"file": path, "unused": unused}
+    return unused
