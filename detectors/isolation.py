@@ -8,7 +8,7 @@ analysis reports the detector as failed ("ended its process"), its other detecto
 In the child, file descriptor 1 is pointed at stderr, so whatever the plugin prints (Python's
 ``print``, C code writing to stdout) never reaches stdout, which may hold ``--json -``. The child
 ignores Ctrl-C (the parent is interrupted and ends it) and ends with its parent
-(`logscan.fleet.workers`). What `fit` learns (the detector's attributes) comes back with it.
+(`logscan.child_processes`). What `fit` learns (the detector's attributes) comes back with it.
 
 Without ``fork`` the call runs in-process: stdout (Python's and file descriptor 1) goes to stderr
 while it runs, and SystemExit or a KeyboardInterrupt the plugin raises itself become its failure;
@@ -28,8 +28,8 @@ import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from logscan.child_processes import exit_with_parent
 from logscan.errors import InternalError
-from logscan.fleet.workers import exit_with_parent
 
 
 def call_isolated(detector: Any, method: str, call: Callable[[], Any]) -> Any:

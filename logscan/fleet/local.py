@@ -8,12 +8,12 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from logscan.child_processes import exit_with_parent
 from logscan.fleet.dask import run_on_dask
 from logscan.fleet.failures import (
     _isolated,
     _progress_bar,
 )
-from logscan.fleet.workers import exit_with_parent
 
 
 def run_many(
@@ -67,7 +67,7 @@ def _worker_init(parent_pid: int | None = None) -> None:
     """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM) and removes their
     temporary files; on SIGTERM a worker ends its own children first (the background compile,
     logscan.filters.warmup), which would otherwise outlive it. A worker whose parent dies (killed
-    alone) ends too (`logscan.fleet.workers`)."""
+    alone) ends too (`logscan.child_processes`)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
