@@ -317,3 +317,15 @@ def test_the_shell_completes_models_fault_kinds_and_detectors(args, incomplete, 
 
     completions = BashComplete(cli, {}, "logscan", "_LOGSCAN_COMPLETE").get_completions(args, incomplete)
     assert [item.value for item in completions] == expected
+
+
+@pytest.mark.parametrize("command", ["analyze", "evaluate"])
+def test_a_bad_profile_for_several_logs_is_one_line_before_any_log(cli, tmp_path, command):
+    profile = profile_with(tmp_path, "stale_s = 0.025", "stale_s = -1")
+    logs = [SAMPLES / "quad_healthy.mcap", SAMPLES / "quad_imu_bias.mcap"]
+    result = cli(command, *logs, "--profile", profile, "--json", "-")
+    assert_message(
+        result,
+        f"{profile}: invalid profile: [measurements.accel] stale_s: must be > 0, got -1 (see {PROFILES_DOC})",
+    )
+    assert result.stdout == ""

@@ -10,6 +10,7 @@ import click
 from logscan.cli.options import (
     GroupedCommand,
     check_parallelism,
+    check_profile,
     detector_option,
     echo_notice,
     header_stamp_option,
@@ -251,10 +252,7 @@ def _check_arguments(run: _Run) -> tuple[tuple[str, ...] | None, tuple, dict | N
     check_window(run.start_s, run.end_s)
     check_parallelism(run.jobs, run.scheduler)
     names = tuple(run.detector_names) or None
-    if run.profile_path is not None:  # one profile for every log: its detector settings checked once
-        from logscan.pipeline import create_detectors, load_profile_for
-
-        create_detectors(load_profile_for(None, run.profile_path), names)
+    check_profile(run.profile_path, names)
     if run.fail_on == "new" and run.baseline_path is None:
         raise UsageError("--fail-on new needs --baseline PREVIOUS.json (the run whose alarms are known)")
     rules: tuple = ()

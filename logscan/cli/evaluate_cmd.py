@@ -8,6 +8,7 @@ import click
 
 from logscan.cli.options import (
     check_parallelism,
+    check_profile,
     detector_option,
     header_stamp_option,
     jobs_option,
@@ -101,6 +102,7 @@ def evaluate(
 
     check_window(start_s, end_s)
     check_parallelism(jobs, scheduler)
+    check_profile(profile_path, tuple(detector_names) or None)
     logs = expand_logs(log_paths)
     refuse_clobbering([("--json", json_path), ("--output", page_path)], logs, profile_path)  # before any log
     evaluation = evaluate_logs(

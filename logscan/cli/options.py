@@ -188,6 +188,15 @@ def check_parallelism(jobs: int, scheduler: str | None) -> None:
         raise UsageError(f"--scheduler and --jobs {jobs} exclude each other: give one of them")
 
 
+def check_profile(profile_path: str | None, detector_names: tuple[str, ...] | None) -> None:
+    """One --profile for every log: it and its detectors' settings checked once, before any log is
+    read (exit 2), not once per log."""
+    if profile_path is not None:
+        from logscan.pipeline import create_detectors, load_profile_for
+
+        create_detectors(load_profile_for(None, profile_path), detector_names)
+
+
 def window_options(verb: str, each: str, example: str):
     """--start/--end (seconds since a log's start) as ``verb`` uses them; a decorator for both."""
     start = click.option(
