@@ -57,7 +57,7 @@ class Headline:
     """One incident as the verdict box says it, and (the first incident's) sensor figure."""
 
     incident: Incident
-    alarm: AlarmInterval  # the alarm of the check the headline quotes
+    alarm: AlarmInterval | None  # the alarm of the check the headline quotes
     group: str | None
     deviation: Deviation | None
 
@@ -65,7 +65,7 @@ class Headline:
         """'accelerometer inconsistent: +0.92 m/s² (9.2σ) on accel ax for 11.3 s, 30.00-41.27 s
         (nis.accel, peak 10.7x)'; the incident's own headline when it quotes no alarm in words."""
         inc = self.incident
-        if not inc.what:
+        if not inc.what or self.alarm is None:
             return inc.headline_in(clock)
         size = f": {self.deviation.text()}," if self.deviation else ""
         return f"{inc.what}{size} {clock.span_text(float(self.alarm.start), float(self.alarm.end))} ({inc.detail})"
@@ -85,13 +85,14 @@ def _ratio(alarm: AlarmInterval) -> float:
     return alarm.peak_ratio if alarm.peak_ratio is not None else -math.inf
 
 
-def quoted_alarm(incident: Incident, groups: Sequence[str]) -> AlarmInterval:
+def quoted_alarm(incident: Incident, groups: Sequence[str]) -> AlarmInterval | None:
     """The alarm an incident's headline quotes: its source group's (or signal's) alarm with the
-    largest peak / threshold (`logscan.verdict.incidents`, rule 3)."""
+    largest peak / threshold (`logscan.verdict.incidents`, rule 3); None for an incident without
+    alarms."""
     alarms = incident.alarms
     named = [a for a in alarms if group_of(a.signal, groups) == incident.source]
     named = named or [a for a in alarms if a.signal == incident.source] or alarms
-    return max(named, key=_ratio)
+    return max(named, key=_ratio, default=None)
 
 
 def unit_text(unit: str) -> str:
@@ -158,9 +159,11 @@ def headlines(
     out = []
     for incident in incidents:
         alarm = quoted_alarm(incident, groups)
-        group = group_of(alarm.signal, innovations.group_names) if innovations is not None else None
+        group = None
+        if alarm is not None and innovations is not None:
+            group = group_of(alarm.signal, innovations.group_names)
         size = None
-        if group is not None and innovations is not None:
+        if alarm is not None and group is not None and innovations is not None:
             if group not in views:
                 views[group] = innovations.view(group)
             view = views[group]
@@ -180,7 +183,7 @@ def headline_figure(
 ) -> Figure | None:
     """The channel the headline names, measured vs predicted with its ±3σ band, zoomed to the
     quoted alarm; None when the headline names no sensor channel."""
-    if headline.deviation is None or headline.group is None or innovations is None:
+    if headline.deviation is None or headline.group is None or innovations is None or headline.alarm is None:
         return None
     view = innovations.view(headline.group)
     if view is None:
