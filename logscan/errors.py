@@ -108,6 +108,13 @@ class OutOfMemoryError(LogscanError):
         super().__init__(OUT_OF_MEMORY, path=path)
 
 
+def where_in_text(exc: BaseException) -> str:
+    """ " (line 3, column 9)" for a parser's error that knows where it stopped (json's
+    JSONDecodeError), "" for one that does not: a message names the place, not the parser's words."""
+    line, column = getattr(exc, "lineno", None), getattr(exc, "colno", None)
+    return f" (line {line}, column {column})" if line is not None and column is not None else ""
+
+
 def did_you_mean(word: str, choices: Iterable[str]) -> str:
     """ "did you mean 'nis'? " (with its trailing space, to open a hint) when one of ``choices`` is
     close to the misspelt ``word`` (difflib's ratio >= 0.6, up to three names); "" when none is."""

@@ -329,3 +329,21 @@ def test_a_bad_profile_for_several_logs_is_one_line_before_any_log(cli, tmp_path
         f"{profile}: invalid profile: [measurements.accel] stale_s: must be > 0, got -1 (see {PROFILES_DOC})",
     )
     assert result.stdout == ""
+
+
+def test_a_baseline_that_is_not_json_names_the_place_not_the_decoder(cli):
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--no-report", "--baseline", README)
+    assert_message(
+        result,
+        f"{README}: not a logscan analyze summary: not JSON (line 1, column 1) "
+        "(pass a file written by `logscan analyze --json`)",
+    )
+
+
+def test_ground_truth_that_is_not_json_names_the_place_not_the_decoder(cli):
+    result = cli("analyze", SAMPLES / "quad_healthy.mcap", "--no-report", "--truth", README)
+    assert_message(
+        result,
+        f"{README}: ground truth is not valid JSON (line 1, column 1) "
+        "(give a JSON object with a list of events (kind, target, start and end in seconds))",
+    )

@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from logscan.errors import InputError
+from logscan.errors import InputError, where_in_text
 from logscan.input_files import MAX_PROFILE_SIDECAR_BYTES, MAX_TRUTH_BYTES, read_input_text
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
 from logscan.readers.common import ZERO_TIMESTAMP_WHY, channel_wanted, report_time_order, topic_wanted
@@ -402,8 +402,7 @@ def read_truth_sidecar(path: Path) -> dict | None:
     except RecursionError:
         raise InputError("ground-truth sidecar is nested too deeply to be truth JSON", path=str(sidecar)) from None
     except ValueError as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"ground-truth sidecar is not valid JSON: {first}", path=str(sidecar)) from None
+        raise InputError(f"ground-truth sidecar is not valid JSON{where_in_text(exc)}", path=str(sidecar)) from None
 
 
 def read_profile_sidecar(path: Path) -> str | None:

@@ -18,7 +18,7 @@ import json
 import os
 from typing import Any
 
-from logscan.errors import InputError
+from logscan.errors import InputError, where_in_text
 from logscan.input_files import MAX_BASELINE_BYTES, read_input_text
 
 STATUSES = ("new", "unchanged", "gone")
@@ -30,8 +30,11 @@ def read_baseline(path: str) -> dict[str, Any]:
     try:
         document = json.loads(text)
     except (RecursionError, ValueError) as exc:
-        first = (str(exc).splitlines() or [type(exc).__name__])[0]
-        raise InputError(f"cannot read the baseline: {first}", path=path) from None
+        raise InputError(
+            f"not a logscan analyze summary: not JSON{where_in_text(exc)}",
+            path=path,
+            hint="pass a file written by `logscan analyze --json`",
+        ) from None
     if not isinstance(document, dict) or not isinstance(document.get("logs"), list):
         raise InputError(
             "not a logscan analyze summary", path=path, hint="pass a file written by `logscan analyze --json`"

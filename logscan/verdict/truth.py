@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from logscan.errors import InputError
+from logscan.errors import InputError, where_in_text
 from logscan.input_files import MAX_TRUTH_BYTES, read_input_text
 
 ABSOLUTE_NS = 10**15  # log times above this are epoch nanoseconds (later than 1970-01-12)
@@ -30,8 +30,11 @@ def read_truth_file(path: str | os.PathLike) -> dict[str, Any]:
     except RecursionError:
         raise InputError("ground truth is nested too deeply to be truth JSON", path=str(path)) from None
     except ValueError as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"ground truth is not valid JSON: {first}", path=str(path)) from None
+        raise InputError(
+            f"ground truth is not valid JSON{where_in_text(exc)}",
+            path=str(path),
+            hint="give a JSON object with a list of events (kind, target, start and end in seconds)",
+        ) from None
     if not isinstance(document, dict) or not isinstance(document.get("events", []), list):
         raise InputError(
             "ground truth must be a JSON object with a list of events",
