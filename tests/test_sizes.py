@@ -16,10 +16,6 @@ MAX_FUNCTION_LINES = 60
 # still over the limit (lines today): may only shrink
 MODULES_OVER = {}
 FUNCTIONS_OVER = {
-    "logscan/readers/csv_reader.py::_frame_channels": 76,
-    "logscan/readers/mcap/cdr.py::cdr_layout": 65,
-    "logscan/readers/ulog_reader.py::read_ulog": 63,
-    "logscan/report/training_page.py::_curve_figure": 66,
     "logscan/simulate/faults.py::resolve_faults": 91,
     "logscan/simulate/ins_sim.py::simulate_ins": 83,
     "logscan/simulate/ros2_export.py::write_ros2_mcap": 132,

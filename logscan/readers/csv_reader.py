@@ -283,6 +283,25 @@ def _frame_channels(
 ) -> dict[str, Channel]:
     """Channels of one CSV table; fills the topic facts, skips and warnings into ``source``."""
     label = topic or path.name
+    frame, time_name, t_ns, valid = _table_times(frame, path, source, label, stated_us)
+    channels, fields = _value_channels(frame, time_name, t_ns, valid, source, wanted, topic, path)
+    source.topics[topic or path.stem] = TopicInfo(
+        name=topic or path.stem,
+        message_count=int(t_ns.size),
+        encoding="csv",
+        schema="ulog2csv" if stated_us else "wide",
+        first_ns=int(t_ns.min()) if t_ns.size else None,
+        last_ns=int(t_ns.max()) if t_ns.size else None,
+        fields=fields,
+    )
+    return channels
+
+
+def _table_times(
+    frame: CsvColumns, path: Path, source: SourceInfo, label: str, stated_us: bool
+) -> tuple[CsvColumns, str, np.ndarray, np.ndarray]:
+    """(frame, time column, t_ns of the valid rows, valid rows): the table's times read, their
+    unit and the rows skipped noted in ``source``."""
     frame, time_name, unit = _time_column(frame, path, source, label, stated_us)
     source.time_unit = unit.unit
     source.metadata.setdefault("csv.time_units", {})[label] = unit.unit
@@ -301,7 +320,22 @@ def _frame_channels(
         valid[np.flatnonzero(valid)[~nonzero]] = False
         t_ns = t_ns[nonzero]
     report_time_order(t_ns, label, source)
+    return frame, time_name, t_ns, valid
 
+
+def _value_channels(
+    frame: CsvColumns,
+    time_name: str,
+    t_ns: np.ndarray,
+    valid: np.ndarray,
+    source: SourceInfo,
+    wanted: set[str] | None,
+    topic: str | None,
+    path: Path,
+) -> tuple[dict[str, Channel], list[str]]:
+    """(channels, numeric fields): every numeric column of the table, the wanted ones as channels
+    on the valid rows (an empty cell is no sample); text columns, garbage cells and NaNs noted."""
+    label = topic or path.name
     channels: dict[str, Channel] = {}
     fields: list[str] = []
     nan_counts: dict[str, int] = {}
@@ -338,16 +372,7 @@ def _frame_channels(
         source.warnings.append(
             f"{label}: {sum(nan_counts.values())} NaN value(s) kept ({listed}{more}); alignment masks them"
         )
-    source.topics[topic or path.stem] = TopicInfo(
-        name=topic or path.stem,
-        message_count=int(t_ns.size),
-        encoding="csv",
-        schema="ulog2csv" if stated_us else "wide",
-        first_ns=int(t_ns.min()) if t_ns.size else None,
-        last_ns=int(t_ns.max()) if t_ns.size else None,
-        fields=fields,
-    )
-    return channels
+    return channels, fields
 
 
 def _time_column(

@@ -114,22 +114,7 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
             lost.append(f"{int(beyond.sum())} message(s) of {topic} dropped: {_BEYOND_WHY}")
             keep &= ~beyond
         t_ns = t_raw[keep].astype(np.int64) * 1000
-        fields = []
-        for field in data.field_data:
-            name = field.field_name
-            if name == "timestamp":
-                continue
-            if name.startswith("_padding"):
-                continue
-            if field.type_str == "char":
-                if "[" in name and not name.endswith("[0]"):
-                    continue  # one skip per string field, not per character
-                source.skip(f"text field {data.name}.{_array_base(name)}", "char (string) field")
-                continue
-            fields.append(name)
-            channel = f"/{topic}/{name}"
-            if channel_wanted(channel, topic, wanted):
-                channels[channel] = Channel(channel, t_ns, data.data[name][keep])
+        fields = _topic_channels(data, topic, t_ns, keep, wanted, source, channels)
         source.topics[topic] = TopicInfo(
             name=topic,
             message_count=int(t_ns.size),
@@ -146,6 +131,30 @@ def read_ulog(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     if wanted is not None and not source.topics:
         source.warnings.append(f"none of the requested topics is in the log: {sorted(wanted)}")
     return Log(channels=channels, source=source)
+
+
+def _topic_channels(
+    data, topic: str, t_ns: np.ndarray, keep: np.ndarray, wanted: set[str] | None, source: SourceInfo, channels: dict
+) -> list[str]:
+    """The topic's numeric fields (its samples ``keep``, at ``t_ns``) into ``channels`` where
+    wanted; returns every numeric field's name. Text (char) fields are skipped, once each."""
+    fields = []
+    for field in data.field_data:
+        name = field.field_name
+        if name == "timestamp":
+            continue
+        if name.startswith("_padding"):
+            continue
+        if field.type_str == "char":
+            if "[" in name and not name.endswith("[0]"):
+                continue  # one skip per string field, not per character
+            source.skip(f"text field {data.name}.{_array_base(name)}", "char (string) field")
+            continue
+        fields.append(name)
+        channel = f"/{topic}/{name}"
+        if channel_wanted(channel, topic, wanted):
+            channels[channel] = Channel(channel, t_ns, data.data[name][keep])
+    return fields
 
 
 def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:

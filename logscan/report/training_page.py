@@ -184,7 +184,15 @@ def _curve_figure(sensor: str, mode_text: str, curve: Mapping, windows: Sequence
     knees = {int(k[0]): (float(k[1]), int(k[2])) for k in curve["knees"]}
     shown = [window for window in windows if window in knees]
     main = [window == w for window in shown]
-    data.append({
+    data.append(_knee_markers(knees, shown, main, color))
+    column = min(max([knees[window][0] for window in shown], default=0.0) + 0.12 * eps_max, 0.7 * eps_max)
+    annotations = _knee_labels(knees, shown, main, color, column)
+    return spec_json(data, _curve_layout(sensor, mode_text, eps_max, annotations))
+
+
+def _knee_markers(knees: dict, shown: list[int], main: list[bool], color: dict) -> dict:
+    """The knees' markers (the detection window's a larger diamond)."""
+    return {
         "type": "scatter", "mode": "markers", "name": "knees", "showlegend": False,
         "x": [knees[window][0] for window in shown],
         "y": [knees[window][1] / window for window in shown],
@@ -196,9 +204,12 @@ def _curve_figure(sensor: str, mode_text: str, curve: Mapping, windows: Sequence
             "line": {"color": "black", "width": [1.5 if m else 0.5 for m in main]},
         },
         "hovertemplate": "w=%{customdata[0]} knee: eps %{x:.4g}, e %{customdata[1]}<extra></extra>",
-    })  # fmt: skip
-    column = min(max([knees[window][0] for window in shown], default=0.0) + 0.12 * eps_max, 0.7 * eps_max)
-    annotations = [
+    }  # fmt: skip
+
+
+def _knee_labels(knees: dict, shown: list[int], main: list[bool], color: dict, column: float) -> list[dict]:
+    """The knees' labels in a column at eps ``column``, arrows to their knees."""
+    return [
         {"x": knees[window][0], "y": knees[window][1] / window, "xref": "x", "yref": "y",
          "text": f"<b>w={window} knee</b>" if m else f"w={window} knee",
          "showarrow": True, "arrowhead": 0, "arrowwidth": 1, "arrowcolor": "#999",
@@ -206,7 +217,11 @@ def _curve_figure(sensor: str, mode_text: str, curve: Mapping, windows: Sequence
          "bgcolor": "rgba(255, 255, 255, 0.85)", "font": {"size": 10, "color": color[window]}}
         for n, (window, m) in enumerate(zip(shown, main))
     ]  # fmt: skip
-    layout = {
+
+
+def _curve_layout(sensor: str, mode_text: str, eps_max: float, annotations: list[dict]) -> dict:
+    """The figure's axes, the diagonal and the e/w = 0.5 line, its labels and legend."""
+    return {
         "title": {"text": plot_text(f"{sensor} · mode {mode_text}"), "font": {"size": 12}, "x": 0.01, "y": 0.97},
         "height": CURVE_HEIGHT,
         "margin": {"l": 45, "r": 10, "t": 30, "b": 38},
@@ -229,7 +244,6 @@ def _curve_figure(sensor: str, mode_text: str, curve: Mapping, windows: Sequence
         "font": {"size": 10},
         "template": {},
     }  # fmt: skip
-    return spec_json(data, layout)
 
 
 def _curve_caption(sensor: str, mode_text: str, curve: Mapping, w: int) -> tuple[str, str]:
@@ -386,8 +400,9 @@ def window_text(window: dict | None) -> str:
     return f"from {start:g} s" if start is not None else (f"up to {end:g} s" if end is not None else "")
 
 
-def render_training_html(document: dict) -> str:
-    """The training report of a tables document (`logscan.training.train.tables_document`) as a string."""
+def render_training_html(document: dict, plotlyjs_src: str | None = None) -> str:
+    """The training report of a tables document (`logscan.training.train.tables_document`) as a string;
+    plotly.js inside it, or from ``plotlyjs_src`` (a URL: `logscan.report.plotly_script`) if given."""
     figures: list[tuple[str, str]] = []
     atfm, others = [], []
     for state in document.get("detectors") or []:
@@ -425,7 +440,8 @@ def render_training_html(document: dict) -> str:
             tuning=_tuning_rows(document.get("tuning")),
             n_figures=len(figures),
             figure_json=figure_json,
-            plotlyjs_inline=_plotly_js(),
+            plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
+            plotlyjs_src=plotlyjs_src,
             shared=shared_parts(),
         )
     )

@@ -57,6 +57,24 @@ class CdrLayout(NamedTuple):
 
 def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
     """Program for messages whose fields are primitives, strings and fixed-size arrays, else None."""
+    msgdefs = _message_definitions(schema)
+    root = None if msgdefs is None else msgdefs.get(schema.name)
+    if msgdefs is None or root is None:
+        return None
+    program = _Program(msgdefs)
+    try:
+        program.add(root, "", 0)
+    except _Unsupported:
+        return None
+    table = np.array(program.steps, dtype=np.int64).reshape(-1, 4)
+    return CdrLayout(
+        table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy(), table[:, 3].copy(), program.paths, program.skipped
+    )
+
+
+def _message_definitions(schema: SchemaRec) -> dict[str, Any] | None:
+    """The schema's message definitions by full and short name (builtin Time and Duration
+    included), else None (the schema does not parse, or mcap_ros2's private helpers moved)."""
     try:
         from mcap_ros2._dynamic import TimeDefinition, _for_each_msgdef
     except ImportError:  # the private helpers moved: the decoder path still works
@@ -71,55 +89,58 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
         _for_each_msgdef(schema.name, schema.data.decode("utf-8"), keep)
     except Exception:  # noqa: BLE001 - an unparsable schema is reported by the decoder path
         return None
-    program: list[tuple[int, int, int, int]] = []
-    paths: list[str] = []
-    skipped: list[str] = []
+    return msgdefs
 
-    def build(msgdef: Any, prefix: str, depth: int) -> None:
+
+class _Program:
+    """A layout's steps (op, size, code, path index), built field by field; `_Unsupported` for a
+    message the layout cannot describe."""
+
+    def __init__(self, msgdefs: dict[str, Any]):
+        self.msgdefs = msgdefs
+        self.steps: list[tuple[int, int, int, int]] = []
+        self.paths: list[str] = []
+        self.skipped: list[str] = []
+
+    def add(self, msgdef: Any, prefix: str, depth: int) -> None:
+        """The steps of a message's fields, nested messages unrolled (names under ``prefix``)."""
         if depth > 32:
             raise _Unsupported("nesting too deep")
         if not msgdef.fields:
-            program.append((_OP_VALUE, 1, 1, -1))  # the placeholder uint8 of an empty message
+            self.steps.append((_OP_VALUE, 1, 1, -1))  # the placeholder uint8 of an empty message
         for fld in msgdef.fields:
-            ftype = fld.type
-            name = prefix + fld.name
-            if ftype.is_array and not ftype.is_fixed_size_array():
-                raise _Unsupported("variable-length array")
-            count = ftype.array_size if ftype.is_array else None
-            if ftype.type in ("uint8", "byte") and count is not None:
-                program.append((_OP_SKIP, count, 0, -1))  # one step, whatever the count
-                skipped.append(name)
-                continue
-            if len(program) + (count or 1) > MAX_LAYOUT_STEPS:
-                raise _Unsupported("fixed-size arrays unroll to too many steps")
-            names = [name] if count is None else [f"{name}[{i}]" for i in range(count)]
-            if not ftype.is_primitive_type():
-                sub = msgdefs.get(f"{ftype.pkg_name}/{ftype.type}")
-                if sub is None:
-                    raise _Unsupported("unknown nested type")
-                for item in names:
-                    build(sub, item + ".", depth + 1)
-            elif ftype.type == "string":
-                for item in names:
-                    program.append((_OP_STRING, 4, 0, -1))
-                    skipped.append(item)
-            elif ftype.type in _CDR_PRIMITIVES:
-                size, code = _CDR_PRIMITIVES[ftype.type]
-                for item in names:
-                    program.append((_OP_VALUE, size, code, len(paths)))
-                    paths.append(item)
-            else:
-                raise _Unsupported(f"type {ftype.type}")
+            self.add_field(fld, prefix + fld.name, depth)
 
-    root = msgdefs.get(schema.name)
-    if root is None:
-        return None
-    try:
-        build(root, "", 0)
-    except _Unsupported:
-        return None
-    table = np.array(program, dtype=np.int64).reshape(-1, 4)
-    return CdrLayout(table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy(), table[:, 3].copy(), paths, skipped)
+    def add_field(self, fld: Any, name: str, depth: int) -> None:
+        """The steps of one field: fixed-size arrays unrolled, a byte array one skip step."""
+        ftype = fld.type
+        if ftype.is_array and not ftype.is_fixed_size_array():
+            raise _Unsupported("variable-length array")
+        count = ftype.array_size if ftype.is_array else None
+        if ftype.type in ("uint8", "byte") and count is not None:
+            self.steps.append((_OP_SKIP, count, 0, -1))  # one step, whatever the count
+            self.skipped.append(name)
+            return
+        if len(self.steps) + (count or 1) > MAX_LAYOUT_STEPS:
+            raise _Unsupported("fixed-size arrays unroll to too many steps")
+        names = [name] if count is None else [f"{name}[{i}]" for i in range(count)]
+        if not ftype.is_primitive_type():
+            sub = self.msgdefs.get(f"{ftype.pkg_name}/{ftype.type}")
+            if sub is None:
+                raise _Unsupported("unknown nested type")
+            for item in names:
+                self.add(sub, item + ".", depth + 1)
+        elif ftype.type == "string":
+            for item in names:
+                self.steps.append((_OP_STRING, 4, 0, -1))
+                self.skipped.append(item)
+        elif ftype.type in _CDR_PRIMITIVES:
+            size, code = _CDR_PRIMITIVES[ftype.type]
+            for item in names:
+                self.steps.append((_OP_VALUE, size, code, len(self.paths)))
+                self.paths.append(item)
+        else:
+            raise _Unsupported(f"type {ftype.type}")
 
 
 @njit(cache=True, inline="always")
