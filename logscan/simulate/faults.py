@@ -172,26 +172,7 @@ def resolve_faults(
     events: list[FaultEvent] = []
     rows: list[tuple[int, int, int, int, float]] = []
     for spec in specs:
-        kind, alias_target, magnitude, length = _defaults(spec.kind)
-        target = spec.target or alias_target
-        start = 0.5 * duration if spec.start is None else spec.start
-        end = start + length if spec.end is None else spec.end
-        if spec.kind in ALIAS_SAMPLES:
-            start, end = _sample_window(spec, dt)
-        magnitude = magnitude if spec.magnitude is None else spec.magnitude
-        if not (0.0 <= start < duration):
-            raise UsageError(
-                f"fault {spec.kind} starts at {start:g} s, outside the log (0 .. {duration:g} s)",
-                hint="choose --at within the log or raise --duration",
-            )
-        end = min(end, duration)
-        if end <= start:
-            raise UsageError(
-                f"fault {spec.kind} ends at {end:g} s, not after its start {start:g} s",
-                hint="give a positive duration",
-            )
-        if not math.isfinite(magnitude):
-            raise UsageError(f"fault {spec.kind}: magnitude must be finite, got {magnitude}")
+        kind, target, start, end, magnitude = _when_and_how_much(spec, duration, dt)
         if kind in SENSOR_KINDS:
             target = target or "imu"
             index = _sensor_target((sensor_aliases or {}).get(target, target), imu_default, sensor_channels, spec.kind)
@@ -207,28 +188,68 @@ def resolve_faults(
             index = actuators.index(target)
             channels = ()
         else:
-            target = target or ("all" if kind == "cov-corruption" else state_names[0])
-            if target == "all":
-                index = -1
-                names = state_names
-            elif target in state_names:
-                index = state_names.index(target)
-                names = (target,)
-            else:
-                raise UsageError(
-                    f"fault {spec.kind}: unknown estimator state {target!r}",
-                    hint="choose 'all' or one of " + ", ".join(state_names),
-                )
-            channels = tuple(estimator_fields[n] for n in names)
+            target, index, channels = _estimator_target(spec, kind, target, state_names, estimator_fields)
         first = int(math.ceil(start / dt - 1e-9))
         last = min(int(math.ceil(end / dt - 1e-9)), n_steps)
         if kind == "state-corruption":
             last = first + 1  # one memory upset; the event window is where its effect is expected
         rows.append((KIND_CODES[kind], index, first, max(last, first + 1), float(magnitude)))
         events.append(FaultEvent(float(start), float(end), kind, target, float(magnitude), tuple(channels)))
+    return events, _fault_table(rows, n_steps, rng)
+
+
+def _when_and_how_much(spec: FaultSpec, duration: float, dt: float) -> tuple[str, str | None, float, float, float]:
+    """(kind, target or None, start s, end s, magnitude) of a spec, its alias's defaults filled in;
+    UsageError for a window outside the log or a non-finite magnitude."""
+    kind, alias_target, magnitude, length = _defaults(spec.kind)
+    target = spec.target or alias_target
+    start = 0.5 * duration if spec.start is None else spec.start
+    end = start + length if spec.end is None else spec.end
+    if spec.kind in ALIAS_SAMPLES:
+        start, end = _sample_window(spec, dt)
+    magnitude = magnitude if spec.magnitude is None else spec.magnitude
+    if not (0.0 <= start < duration):
+        raise UsageError(
+            f"fault {spec.kind} starts at {start:g} s, outside the log (0 .. {duration:g} s)",
+            hint="choose --at within the log or raise --duration",
+        )
+    end = min(end, duration)
+    if end <= start:
+        raise UsageError(
+            f"fault {spec.kind} ends at {end:g} s, not after its start {start:g} s",
+            hint="give a positive duration",
+        )
+    if not math.isfinite(magnitude):
+        raise UsageError(f"fault {spec.kind}: magnitude must be finite, got {magnitude}")
+    return kind, target, start, end, magnitude
+
+
+def _estimator_target(
+    spec: FaultSpec, kind: str, target: str | None, state_names: tuple[str, ...], estimator_fields: dict[str, str]
+) -> tuple[str, int, tuple[str, ...]]:
+    """(target, state index or -1 for all, logged channels) of an estimator fault."""
+    target = target or ("all" if kind == "cov-corruption" else state_names[0])
+    if target == "all":
+        index = -1
+        names = state_names
+    elif target in state_names:
+        index = state_names.index(target)
+        names = (target,)
+    else:
+        raise UsageError(
+            f"fault {spec.kind}: unknown estimator state {target!r}",
+            hint="choose 'all' or one of " + ", ".join(state_names),
+        )
+    channels = tuple(estimator_fields[n] for n in names)
+    return target, index, channels
+
+
+def _fault_table(rows: list[tuple[int, int, int, int, float]], n_steps: int, rng: np.random.Generator) -> FaultTable:
+    """The kernel's fault table of the rows (kind code, target index, first step, end step,
+    magnitude), with each fault's random draws for every step."""
     nf = len(rows)
     if nf == 0:
-        return events, FaultTable.empty(n_steps)
+        return FaultTable.empty(n_steps)
     table = FaultTable(
         kind=np.array([r[0] for r in rows], dtype=np.int64),
         target=np.array([r[1] for r in rows], dtype=np.int64),
@@ -238,7 +259,7 @@ def resolve_faults(
         uniform=rng.random((nf, n_steps)),
         bit=rng.integers(BITFLIP_LOWEST_BIT, 32, size=(nf, n_steps)).astype(np.int64),
     )
-    return events, table
+    return table
 
 
 def _sample_window(spec: FaultSpec, dt: float) -> tuple[float, float]:

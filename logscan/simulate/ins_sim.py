@@ -40,12 +40,14 @@ from logscan.errors import UsageError
 from logscan.filters.ekf import run_ekf
 from logscan.models.ins_kernels import ins_h
 from logscan.numba_cache import follow_dependencies
+from logscan.results import FaultEvent
 from logscan.simulate.faults import (
     ACTUATOR_KINDS,
     ESTIMATOR_KINDS,
     SENSOR_KINDS,
     STUCK,
     FaultSpec,
+    FaultTable,
     _defaults,
     corrupt_logged_variance,
     resolve_faults,
@@ -389,6 +391,51 @@ def onboard_ekf(sc: Scenario, u: np.ndarray, z: np.ndarray) -> tuple[np.ndarray,
     return trace.x_post, trace.P_post_diag.astype(np.float64), int(trace.rejected.sum())
 
 
+def _resolve(
+    sc: Scenario, faults: list[FaultSpec], duration: float, rng: np.random.Generator
+) -> tuple[list[FaultEvent], FaultTable]:
+    """The faults' events and table over the IMU (the model's inputs are its aliases) and the
+    aiding sensors; estimator faults act on the logged variances."""
+    model = sc.model
+    imu = imu_channels()
+    imu_targets = list(IMU_FIELDS)
+    sensor_channels = list(zip(imu_targets, imu)) + [
+        (target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)
+    ]
+    aliases = {**sensor_aliases(sc), **{name: t for name, t in zip(model.input_names, imu_targets)}}
+    return resolve_faults(
+        faults,
+        duration=duration,
+        dt=sc.dt,
+        sensor_channels=sensor_channels,
+        imu_default=sc.imu_default,
+        sensor_aliases=aliases,
+        actuators=[],
+        state_names=model.state_names,
+        estimator_fields={s: f"/ekf/variance/{s}" for s in model.state_names},
+        rng=rng,
+    )
+
+
+def _sensed(sc: Scenario, x_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The aiding sensors' noisy samples of the true states (each group at its rate)."""
+    model = sc.model
+    n_steps = sc.reference.shape[0]
+    std = np.concatenate([g.noise_std for g in sc.groups])
+    g_m = np.array([len(g.fields) for g in sc.groups], dtype=np.int64)
+    return sample_sensors(
+        model.param_vector(sc.dt),
+        np.ascontiguousarray(x_true),
+        np.array([g.group_id for g in sc.groups], dtype=np.int64),
+        g_m,
+        np.concatenate([[0], np.cumsum(g_m)[:-1]]).astype(np.int64),
+        np.array([g.ratio for g in sc.groups], dtype=np.int64),
+        std,
+        np.concatenate([g.wrap for g in sc.groups]).astype(np.bool_),
+        rng.standard_normal((n_steps, std.size)),
+    )
+
+
 def simulate_ins(
     sc: Scenario,
     faults: list[FaultSpec],
@@ -403,44 +450,14 @@ def simulate_ins(
     check_ins_faults(faults)
     rng = np.random.default_rng(seed)
     model = sc.model
-    n_steps = sc.reference.shape[0]
-    imu = imu_channels()
-    imu_targets = list(IMU_FIELDS)
-    sensor_channels = list(zip(imu_targets, imu)) + [
-        (target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)
-    ]
     glitches = _glitches(sc, duration, glitches_per_min, np.random.default_rng([seed, 3]))
-    aliases = {**sensor_aliases(sc), **{name: t for name, t in zip(model.input_names, imu_targets)}}
-    events, table = resolve_faults(
-        faults + glitches,
-        duration=duration,
-        dt=sc.dt,
-        sensor_channels=sensor_channels,
-        imu_default=sc.imu_default,
-        sensor_aliases=aliases,
-        actuators=[],
-        state_names=model.state_names,
-        estimator_fields={s: f"/ekf/variance/{s}" for s in model.state_names},
-        rng=np.random.default_rng([seed, 2]),
-    )
+    events, table = _resolve(sc, faults + glitches, duration, np.random.default_rng([seed, 2]))
     events, transients = events[: len(faults)], events[len(faults) :]
     started = time.perf_counter()
     x_true, imu_true = ins_truth(sc, rng)
     imu_std = np.array([model.p["gyro_noise"]] * 3 + [model.p["accel_noise"]] * 3)
     imu_noisy = imu_true + rng.standard_normal(imu_true.shape) * imu_std
-    std = np.concatenate([g.noise_std for g in sc.groups])
-    g_m = np.array([len(g.fields) for g in sc.groups], dtype=np.int64)
-    z = sample_sensors(
-        model.param_vector(sc.dt),
-        np.ascontiguousarray(x_true),
-        np.array([g.group_id for g in sc.groups], dtype=np.int64),
-        g_m,
-        np.concatenate([[0], np.cumsum(g_m)[:-1]]).astype(np.int64),
-        np.array([g.ratio for g in sc.groups], dtype=np.int64),
-        std,
-        np.concatenate([g.wrap for g in sc.groups]).astype(np.bool_),
-        rng.standard_normal((n_steps, std.size)),
-    )
+    z = _sensed(sc, x_true, rng)
     logged = apply_sensor_faults(
         np.ascontiguousarray(np.hstack([imu_noisy, z])),
         sc.dt,

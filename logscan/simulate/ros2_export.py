@@ -214,17 +214,7 @@ def write_ros2_mcap(
     if sc.model.name != "ins":
         raise ValueError(f"write_ros2_mcap needs a simulation of the ins model, got {sc.model.name!r}")
     path = Path(path)
-    dt = sim.dt
-    n = sim.n_steps
-    t_ns = start_ns + np.round(np.arange(n) * dt * 1e9).astype(np.int64)
-    euler = sim.x_true[:, 6:9]
-    ned = sim.x_true[:, 0:3]
-    v_ned = sim.x_true[:, 3:6]
-    flu = np.array([1.0, -1.0, -1.0])
-    gyro_std, accel_std = float(sc.model.p["gyro_noise"]), float(sc.model.p["accel_noise"])
-    rng = np.random.default_rng([sim.seed, 2103])  # the odometry's noise
-
-    messages: list[tuple[int, int, str, object, dict]] = []  # (t_ns, order, topic, schema, message)
+    t_ns = start_ns + np.round(np.arange(sim.n_steps) * sim.dt * 1e9).astype(np.int64)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "wb") as fh:
@@ -234,106 +224,137 @@ def write_ros2_mcap(
         imu_schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_MSGDEF)
         fix_schema = writer.register_msgdef("sensor_msgs/msg/NavSatFix", NAVSATFIX_MSGDEF)
         odom_schema = writer.register_msgdef("nav_msgs/msg/Odometry", ODOMETRY_MSGDEF)
-
-        # IMU: every simulator step, FRD -> FLU
-        gyro = sim.u_cmd[:, 0:3] * flu
-        accel = sim.u_cmd[:, 3:6] * flu
-        q_imu = ros_quaternion(euler)
-        imu_cov = (
-            _diag([IMU_ORIENTATION_STD**2] * 3, 3),
-            _diag([gyro_std**2] * 3, 3),
-            _diag([accel_std**2] * 3, 3),
-        )
-        for k in range(n):
-            messages.append(
-                (
-                    int(t_ns[k]),
-                    0,
-                    IMU_TOPIC,
-                    imu_schema,
-                    {
-                        "header": {"stamp": _stamp(t_ns[k]), "frame_id": "imu_link"},
-                        "orientation": _quaternion(q_imu[k]),
-                        "orientation_covariance": imu_cov[0],
-                        "angular_velocity": _vector(gyro[k]),
-                        "angular_velocity_covariance": imu_cov[1],
-                        "linear_acceleration": _vector(accel[k]),
-                        "linear_acceleration_covariance": imu_cov[2],
-                    },
-                )
-            )
-
-        # GNSS: the simulated NED fixes (noise and faults included) as latitude, longitude, altitude
-        groups = {g.name: g for g in sc.groups}
-        gnss = groups.get("gnss_position")
-        if gnss is not None:
-            cols = sim.group_slices()["gnss_position"]
-            steps = np.arange(0, n, gnss.ratio)
-            fixes = sim.z[steps, cols]
-            std = np.asarray(gnss.noise_std, dtype=np.float64)  # north, east, down
-        else:  # a run without GNSS: the truth at 10 Hz
-            steps = np.arange(0, n, max(1, int(round(0.1 / dt))))
-            fixes, std = ned[steps], np.array([0.5, 0.5, 1.0])
-        lla = local_to_geodetic(fixes, origin)
-        fix_cov = _diag([std[1] ** 2, std[0] ** 2, std[2] ** 2], 3)  # ENU
-        for k, row in zip(steps, lla):
-            messages.append(
-                (
-                    int(t_ns[k]),
-                    1,
-                    GNSS_TOPIC,
-                    fix_schema,
-                    {
-                        "header": {"stamp": _stamp(t_ns[k]), "frame_id": "gps_link"},
-                        "status": {"status": 0, "service": 1},
-                        "latitude": float(row[0]),
-                        "longitude": float(row[1]),
-                        "altitude": float(row[2]),
-                        "position_covariance": fix_cov,
-                        "position_covariance_type": 2,
-                    },
-                )
-            )
-
-        # odometry from the truth, with noise
-        steps = np.arange(0, n, max(1, int(round(1.0 / (ODOM_HZ * dt)))))
-        m = steps.size
-        R = euler_matrix(euler[steps])
-        v_body = np.einsum("kji,kj->ki", R, v_ned[steps])  # R^T v, FRD
-        v_body += rng.standard_normal((m, 3)) * ODOM_VELOCITY_STD
-        q_odom = ros_quaternion(euler[steps] + rng.standard_normal((m, 3)) * ODOM_ATTITUDE_STD)
-        enu = ned[steps][:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0]) + rng.standard_normal((m, 3)) * ODOM_POSITION_STD
-        rate = sim.u_act[steps, 0:3] * flu
-        pose_cov = _diag([ODOM_POSITION_STD**2] * 3 + [ODOM_ATTITUDE_STD**2] * 3, 6)
-        twist_cov = _diag([ODOM_VELOCITY_STD**2] * 3 + [gyro_std**2] * 3, 6)
-        for j, k in enumerate(steps):
-            messages.append(
-                (
-                    int(t_ns[k]),
-                    2,
-                    ODOM_TOPIC,
-                    odom_schema,
-                    {
-                        "header": {"stamp": _stamp(t_ns[k]), "frame_id": "odom"},
-                        "child_frame_id": "base_link",
-                        "pose": {
-                            "pose": {"position": _vector(enu[j]), "orientation": _quaternion(q_odom[j])},
-                            "covariance": pose_cov,
-                        },
-                        "twist": {
-                            "twist": {"linear": _vector(v_body[j] * flu), "angular": _vector(rate[j])},
-                            "covariance": twist_cov,
-                        },
-                    },
-                )
-            )
-
+        # (t_ns, order, topic, schema, message)
+        messages = [
+            *_imu_messages(sim, t_ns, imu_schema),
+            *_gnss_messages(sim, t_ns, fix_schema, origin),
+            *_odometry_messages(sim, t_ns, odom_schema),
+        ]
         messages.sort(key=lambda m: (m[0], m[1]))
         for t, _, topic, schema, message in messages:
             writer.write_message(topic, schema, message, log_time=t, publish_time=t)
         writer.finish()
     os.replace(tmp, path)
     return path
+
+
+_Message = tuple[int, int, str, object, dict]  # (t_ns, order at equal times, topic, schema, message)
+_FLU = np.array([1.0, -1.0, -1.0])  # FRD -> FLU, per axis
+
+
+def _imu_messages(sim, t_ns: np.ndarray, imu_schema) -> list[_Message]:
+    """IMU: every simulator step, FRD -> FLU, the true attitude as its orientation."""
+    sc, flu = sim.scenario, _FLU
+    gyro_std, accel_std = float(sc.model.p["gyro_noise"]), float(sc.model.p["accel_noise"])
+    euler = sim.x_true[:, 6:9]
+    messages: list[_Message] = []
+    gyro = sim.u_cmd[:, 0:3] * flu
+    accel = sim.u_cmd[:, 3:6] * flu
+    q_imu = ros_quaternion(euler)
+    imu_cov = (
+        _diag([IMU_ORIENTATION_STD**2] * 3, 3),
+        _diag([gyro_std**2] * 3, 3),
+        _diag([accel_std**2] * 3, 3),
+    )
+    for k in range(sim.n_steps):
+        messages.append(
+            (
+                int(t_ns[k]),
+                0,
+                IMU_TOPIC,
+                imu_schema,
+                {
+                    "header": {"stamp": _stamp(t_ns[k]), "frame_id": "imu_link"},
+                    "orientation": _quaternion(q_imu[k]),
+                    "orientation_covariance": imu_cov[0],
+                    "angular_velocity": _vector(gyro[k]),
+                    "angular_velocity_covariance": imu_cov[1],
+                    "linear_acceleration": _vector(accel[k]),
+                    "linear_acceleration_covariance": imu_cov[2],
+                },
+            )
+        )
+    return messages
+
+
+def _gnss_messages(sim, t_ns: np.ndarray, fix_schema, origin) -> list[_Message]:
+    """GNSS: the simulated NED fixes (noise and faults included) as latitude, longitude, altitude;
+    a run without GNSS: the truth at 10 Hz."""
+    sc, n, dt = sim.scenario, sim.n_steps, sim.dt
+    ned = sim.x_true[:, 0:3]
+    messages: list[_Message] = []
+    groups = {g.name: g for g in sc.groups}
+    gnss = groups.get("gnss_position")
+    if gnss is not None:
+        cols = sim.group_slices()["gnss_position"]
+        steps = np.arange(0, n, gnss.ratio)
+        fixes = sim.z[steps, cols]
+        std = np.asarray(gnss.noise_std, dtype=np.float64)  # north, east, down
+    else:  # a run without GNSS: the truth at 10 Hz
+        steps = np.arange(0, n, max(1, int(round(0.1 / dt))))
+        fixes, std = ned[steps], np.array([0.5, 0.5, 1.0])
+    lla = local_to_geodetic(fixes, origin)
+    fix_cov = _diag([std[1] ** 2, std[0] ** 2, std[2] ** 2], 3)  # ENU
+    for k, row in zip(steps, lla):
+        messages.append(
+            (
+                int(t_ns[k]),
+                1,
+                GNSS_TOPIC,
+                fix_schema,
+                {
+                    "header": {"stamp": _stamp(t_ns[k]), "frame_id": "gps_link"},
+                    "status": {"status": 0, "service": 1},
+                    "latitude": float(row[0]),
+                    "longitude": float(row[1]),
+                    "altitude": float(row[2]),
+                    "position_covariance": fix_cov,
+                    "position_covariance_type": 2,
+                },
+            )
+        )
+    return messages
+
+
+def _odometry_messages(sim, t_ns: np.ndarray, odom_schema) -> list[_Message]:
+    """Odometry at ODOM_HZ from the truth, with noise seeded by the simulation's seed."""
+    sc, n, dt, flu = sim.scenario, sim.n_steps, sim.dt, _FLU
+    gyro_std = float(sc.model.p["gyro_noise"])
+    euler, ned, v_ned = sim.x_true[:, 6:9], sim.x_true[:, 0:3], sim.x_true[:, 3:6]
+    rng = np.random.default_rng([sim.seed, 2103])  # the odometry's noise
+    messages: list[_Message] = []
+    steps = np.arange(0, n, max(1, int(round(1.0 / (ODOM_HZ * dt)))))
+    m = steps.size
+    R = euler_matrix(euler[steps])
+    v_body = np.einsum("kji,kj->ki", R, v_ned[steps])  # R^T v, FRD
+    v_body += rng.standard_normal((m, 3)) * ODOM_VELOCITY_STD
+    q_odom = ros_quaternion(euler[steps] + rng.standard_normal((m, 3)) * ODOM_ATTITUDE_STD)
+    enu = ned[steps][:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0]) + rng.standard_normal((m, 3)) * ODOM_POSITION_STD
+    rate = sim.u_act[steps, 0:3] * flu
+    pose_cov = _diag([ODOM_POSITION_STD**2] * 3 + [ODOM_ATTITUDE_STD**2] * 3, 6)
+    twist_cov = _diag([ODOM_VELOCITY_STD**2] * 3 + [gyro_std**2] * 3, 6)
+    for j, k in enumerate(steps):
+        messages.append(
+            (
+                int(t_ns[k]),
+                2,
+                ODOM_TOPIC,
+                odom_schema,
+                {
+                    "header": {"stamp": _stamp(t_ns[k]), "frame_id": "odom"},
+                    "child_frame_id": "base_link",
+                    "pose": {
+                        "pose": {"position": _vector(enu[j]), "orientation": _quaternion(q_odom[j])},
+                        "covariance": pose_cov,
+                    },
+                    "twist": {
+                        "twist": {"linear": _vector(v_body[j] * flu), "angular": _vector(rate[j])},
+                        "covariance": twist_cov,
+                    },
+                },
+            )
+        )
+    return messages
 
 
 def write_sample(path: str | os.PathLike, faults=(), *, duration: float = SAMPLE_DURATION_S, seed: int = SAMPLE_SEED):

@@ -283,8 +283,45 @@ def simulate_closed_loop(
     called by `logscan.simulate.dispatch.simulate`, which has checked its arguments."""
     rng = np.random.default_rng(seed)
     n_steps = sc.reference.shape[0]
+    events, transients, table = _resolve(sc, list(faults or []), duration, seed, glitches_per_min)
+    model = sc.model
+    n = model.n_states
+    Q = np.ascontiguousarray(model.default_Q(sc.dt))
+    L_Q = np.linalg.cholesky(Q)
+    # w_k ~ N(0, Q): w = L_Q e, e ~ N(0, I)
+    W = rng.standard_normal((n_steps, n)) @ L_Q.T
+    std = np.concatenate([g.noise_std for g in sc.groups])  # nominal: the on-board EKF's R
+    base = np.concatenate([g.noise_std if g.noise_base is None else g.noise_base for g in sc.groups])
+    slope = np.concatenate([np.zeros(len(g.fields)) if g.noise_slope is None else g.noise_slope for g in sc.groups])
+    E = rng.standard_normal((n_steps, std.size))
+    started = time.perf_counter()
+    x_true, u_cmd, u_act, z, x_hat, P_diag, rejected = _closed_loop(sc, table, Q, W, E, base, slope, std)
+    elapsed = time.perf_counter() - started
+    return Simulation(
+        scenario=sc,
+        seed=seed,
+        duration=duration,
+        aggressive=aggressive,
+        events=events,
+        transients=transients,
+        faults=table,
+        x_true=x_true,
+        u_cmd=u_cmd,
+        u_act=u_act,
+        z=z,
+        x_hat=x_hat,
+        P_diag=corrupt_logged_variance(P_diag, table),
+        rejected=int(rejected),
+        elapsed_s=elapsed,
+    )
+
+
+def _resolve(
+    sc: Scenario, faults: list[FaultSpec], duration: float, seed: int, glitches_per_min: float
+) -> tuple[list[FaultEvent], list[FaultEvent], FaultTable]:
+    """(the faults' events, the glitches' events, the kernel's fault table) of a closed-loop run;
+    state-corruption events name the logged state, cov-corruption ones the logged variance."""
     sensor_channels = [(target, ch) for g in sc.groups for target, ch in zip(g.targets(), g.channels)]
-    faults = list(faults or [])
     glitches = _glitches(sc, duration, glitches_per_min, np.random.default_rng([seed, 3]))
     events, table = resolve_faults(
         faults + glitches,
@@ -306,19 +343,15 @@ def simulate_closed_loop(
         else replace(e, channels=tuple(c.replace("/ekf/variance/", "/ekf/state/") for c in e.channels))
         for e in events
     ]
+    return events, transients, table
+
+
+def _closed_loop(sc: Scenario, table: FaultTable, Q, W, E, base, slope, std) -> tuple:
+    """The closed-loop kernel (`logscan.simulate.runner.closed_loop`) on the scenario, its process
+    noise W, sensor noise E (scaled by base + slope), nominal noise std and fault table."""
     model = sc.model
-    n = model.n_states
-    Q = np.ascontiguousarray(model.default_Q(sc.dt))
-    L_Q = np.linalg.cholesky(Q)
-    # w_k ~ N(0, Q): w = L_Q e, e ~ N(0, I)
-    W = rng.standard_normal((n_steps, n)) @ L_Q.T
-    std = np.concatenate([g.noise_std for g in sc.groups])  # nominal: the on-board EKF's R
-    base = np.concatenate([g.noise_std if g.noise_base is None else g.noise_base for g in sc.groups])
-    slope = np.concatenate([np.zeros(len(g.fields)) if g.noise_slope is None else g.noise_slope for g in sc.groups])
-    E = rng.standard_normal((n_steps, std.size))
     g_m = np.array([len(g.fields) for g in sc.groups], dtype=np.int64)
-    started = time.perf_counter()
-    x_true, u_cmd, u_act, z, x_hat, P_diag, rejected = closed_loop(
+    return closed_loop(
         model.model_id,
         model.param_vector(sc.dt),
         sc.dt,
@@ -354,22 +387,4 @@ def simulate_closed_loop(
         table.uniform,
         table.bit,
         bool(sc.control_on_truth),
-    )
-    elapsed = time.perf_counter() - started
-    return Simulation(
-        scenario=sc,
-        seed=seed,
-        duration=duration,
-        aggressive=aggressive,
-        events=events,
-        transients=transients,
-        faults=table,
-        x_true=x_true,
-        u_cmd=u_cmd,
-        u_act=u_act,
-        z=z,
-        x_hat=x_hat,
-        P_diag=corrupt_logged_variance(P_diag, table),
-        rejected=int(rejected),
-        elapsed_s=elapsed,
     )
