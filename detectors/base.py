@@ -39,8 +39,8 @@ detector's `raw_topics` present in the log, as read: channel name -> logscan.log
 ``metadata`` (the log's metadata: ULog info and parameters, MCAP metadata records) and, for `fit`
 only, ``refilter`` (the pipeline's filter on a run the detector made, given when its needs declare
 probes: `logscan.needs`; a detector never runs a filter itself).
-The trace is the shared EKF trace (``logscan.filters.ekf.EkfTrace``), typed loosely here so this
-module does not import the filter layer.
+The trace is the shared EKF trace (``logscan.traces.EkfTrace``: data between the layers, a
+foundation, so this module does not import the filter layer).
 """
 
 from __future__ import annotations
@@ -69,6 +69,7 @@ from logscan.errors import (
 )
 from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
+from logscan.traces import EkfTrace
 
 __all__ = ["Band", "Detector", "DetectorResult", "Needs", "describe"]
 
@@ -213,13 +214,17 @@ class Detector:
         return Needs.of(ekf=()) if self.requires_trace else Needs()
 
     # --- training ---------------------------------------------------------------------------------
-    def fit(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None = None, **context: Any) -> Detector:
+    def fit(
+        self, runs: Sequence[AlignedRun], traces: Sequence[EkfTrace | None] | None = None, **context: Any
+    ) -> Detector:
         """Learn trained state (trailing-underscore attributes) from healthy runs; returns self."""
         if type(self).plugin_origin is not None:  # plugin code: isolated from the analysis
             return call_isolated(self, "fit", lambda: self._fit_checked(runs, traces, **context))
         return self._fit_checked(runs, traces, **context)
 
-    def _fit_checked(self, runs: Sequence[AlignedRun], traces: Sequence[Any] | None, **context: Any) -> Detector:
+    def _fit_checked(
+        self, runs: Sequence[AlignedRun], traces: Sequence[EkfTrace | None] | None, **context: Any
+    ) -> Detector:
         self.check_params()
         runs = list(runs)
         traces = [None] * len(runs) if traces is None else list(traces)
@@ -233,7 +238,7 @@ class Detector:
             raise OutOfMemoryError() from None
         return self
 
-    def _fit(self, runs: list[AlignedRun], traces: list[Any], **context: Any) -> None:
+    def _fit(self, runs: list[AlignedRun], traces: list[EkfTrace | None], **context: Any) -> None:
         """Training step of subclasses that learn something; the default learns nothing."""
 
     @classmethod
@@ -285,13 +290,13 @@ class Detector:
             )
 
     # --- running ----------------------------------------------------------------------------------
-    def run(self, run: AlignedRun, trace: Any = None, **context: Any) -> DetectorResult:
+    def run(self, run: AlignedRun, trace: EkfTrace | None = None, **context: Any) -> DetectorResult:
         """Run on one aligned run (and the shared filter trace); returns a DetectorResult."""
         if type(self).plugin_origin is not None:  # plugin code: isolated from the analysis
             return call_isolated(self, "run", lambda: self._run_checked(run, trace, **context))
         return self._run_checked(run, trace, **context)
 
-    def _run_checked(self, run: AlignedRun, trace: Any, **context: Any) -> DetectorResult:
+    def _run_checked(self, run: AlignedRun, trace: EkfTrace | None, **context: Any) -> DetectorResult:
         self.check_params()
         if self.requires_fit:
             self.check_trained()
@@ -311,7 +316,7 @@ class Detector:
         self._check_result(result, run)
         return result
 
-    def _run(self, run: AlignedRun, trace: Any, **context: Any) -> DetectorResult:
+    def _run(self, run: AlignedRun, trace: EkfTrace | None, **context: Any) -> DetectorResult:
         raise NotImplementedError(f"{type(self).__name__} must implement _run")
 
     def new_result(self) -> DetectorResult:

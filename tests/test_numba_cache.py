@@ -56,7 +56,7 @@ def test_classes_and_python_functions_are_not_kernel_dependencies():
         "logscan.align",
         "logscan.errors",
         "logscan.models.base",
-        "logscan.filters.trace",
+        "logscan.traces",
         "logscan.numba_cache",
     ):
         assert module not in found

@@ -1,6 +1,6 @@
 """Filters shared by every model-based detector: the numba EKF core and its trace."""
 
 from logscan.filters.ekf import run_ekf
-from logscan.filters.trace import DivergenceEpisode, EkfTrace
+from logscan.traces import DivergenceEpisode, EkfTrace
 
 __all__ = ["DivergenceEpisode", "EkfTrace", "run_ekf"]

@@ -1,6 +1,6 @@
 """The shared EKF core: one numba kernel that filters a whole aligned run, and its trace.
 
-Every model-based detector reads the `EkfTrace` (logscan.filters.trace) this module returns
+Every model-based detector reads the `EkfTrace` (logscan.traces) this module returns
 (docs/algorithms.md section 8); none carries its own filter. The kernel `ekf_run` is
 model-agnostic: it calls the model's in-place f/F and h/H functions through
 `logscan.models.dispatch`, resolved for the literal model id, so numba compiles and caches one
@@ -46,10 +46,10 @@ from logscan.filters.linalg import (
     sparse_rows,
     wrap_angle,
 )
-from logscan.filters.trace import EkfTrace, divergence_episodes
 from logscan.models import dispatch
 from logscan.models.base import Model
 from logscan.numba_cache import follow_dependencies
+from logscan.traces import EkfTrace, divergence_episodes
 
 # packing a run (logscan.filters.ekf_pack), importable from here as before
 __all__ = ["EkfBuffers", "KernelInputs", "compiled_for", "ekf_run", "pack_run", "run_ekf", "samples_side_by_side"]

@@ -19,7 +19,6 @@ from logscan.needs import Needs, union
 
 if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported where they are used)
     from logscan.align import AlignedRun
-    from logscan.filters.trace import EkfTrace
     from logscan.filters.ubikf import UbikfTrace
     from logscan.log import Log
     from logscan.models.base import Model
@@ -27,6 +26,7 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.report.run_context import RunContext
     from logscan.report.sensor_views import Innovations
     from logscan.timebase.clock import Clock
+    from logscan.traces import EkfTrace
 
 
 def _run_ekf(model, run, parts: frozenset[str]):

@@ -21,11 +21,11 @@ from scipy.special import chdtri
 
 from logscan.detectors.budget import design_rate
 from logscan.filters.ekf import pack_run
-from logscan.filters.trace import EkfTrace
 from logscan.models.dispatch import call_literal
 from logscan.recovery.kernels import group_predictions
 from logscan.recovery.records import LoopRun
 from logscan.recovery.rerun import shared_R, slice_run
+from logscan.traces import EkfTrace
 
 AGREE, DISAGREE, NO_SAMPLE, SHOWN = 1, -1, 0, -2  # SHOWN: disagrees beyond the budget's bound too
 

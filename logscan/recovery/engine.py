@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from logscan.filters.trace import EkfTrace
 from logscan.recovery.agreement import agreed_at, agreement_status, failed_at, held_inputs, keep_bound
 from logscan.recovery.anomalies import join_targets
 from logscan.recovery.bounds import k_sigma_bound, t_max, worst_case
@@ -46,6 +45,7 @@ from logscan.recovery.records import (
 )
 from logscan.recovery.rerun import replace_mask, rerun
 from logscan.recovery.validate import allowed_states, check_anomalies, check_loops
+from logscan.traces import EkfTrace
 
 
 @dataclass

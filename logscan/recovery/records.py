@@ -16,8 +16,8 @@ from logscan.align import AlignedRun
 from logscan.detectors.budget import design_rate
 from logscan.docs import doc_url
 from logscan.errors import ProfileError
-from logscan.filters.trace import EkfTrace
 from logscan.models.base import Model
+from logscan.traces import EkfTrace
 
 METHODS = ("refilter", "rollforward", "replace")
 UNTRUSTWORTHY = "recovery no longer trustworthy"

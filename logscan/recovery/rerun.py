@@ -22,8 +22,8 @@ import numpy as np
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters.ekf import run_ekf
-from logscan.filters.trace import EkfTrace
 from logscan.recovery.records import LoopRun
+from logscan.traces import EkfTrace
 
 
 def _cut(value, sl: slice):
