@@ -347,3 +347,20 @@ def test_ground_truth_that_is_not_json_names_the_place_not_the_decoder(cli):
         f"{README}: ground truth is not valid JSON (line 1, column 1) "
         "(give a JSON object with a list of events (kind, target, start and end in seconds))",
     )
+
+
+def test_evaluation_rows_align_whatever_the_check_names():
+    from types import SimpleNamespace
+
+    from logscan.cli.render import render_scores
+    from logscan.verdict.evaluation import CHECK_SEPARATOR
+
+    stats = SimpleNamespace(
+        n_logs=2, n_events=6, tp=2, fn=4, fp=0, at_onset=0, recovery_alarms=0, transient_alarms=0, precision=1.0,
+        recall=0.33, f1=0.5, mean_latency_s=0.09, max_latency_s=0.09, false_alarms_per_hour_healthy=0.0,
+    )  # fmt: skip
+    keys = ["cusum", f"cusum{CHECK_SEPARATOR}baro", f"cusum{CHECK_SEPARATOR}gnss_velocity.v_north_with_a_long_name"]
+    evaluation = SimpleNamespace(keys=lambda: keys, aggregate=lambda key: stats, recovery_s=5.0)
+    rows = render_scores(evaluation).splitlines()[2:5]
+    assert len({len(row) for row in rows}) == 1, rows  # every column ends where the header's does
+    assert len({row.index(" 0.33") for row in rows}) == 1

@@ -230,17 +230,18 @@ def render_scores(evaluation: Evaluation) -> str:
     apart), precision/recall/F1, latency, false alarms per hour; a legend of the apart columns."""
     from logscan.verdict.evaluation import CHECK_SEPARATOR  # here: that module loads the pipeline
 
+    labels = {key: key if CHECK_SEPARATOR not in key else "  " + key for key in evaluation.keys()}
+    w = _width("detector / check", labels.values())
     header = (
-        f"{'detector / check':<26} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
+        f"{'detector / check':<{w}} {'logs':>4} {'events':>6} {'TP':>4} {'FN':>4} {'FP':>4} "
         f"{'at onset':>8} {'recovery':>8} {'transient':>9} "
         f"{'prec':>5} {'recall':>6} {'F1':>5} {'lat mean':>8} {'lat max':>8} {'FA/h healthy':>12}"
     )
     lines = [header, "-" * len(header)]
-    for key in evaluation.keys():
+    for key, label in labels.items():
         s = evaluation.aggregate(key)
-        label = key if CHECK_SEPARATOR not in key else "  " + key
         lines.append(
-            f"{label:<26} {s.n_logs:>4} {s.n_events:>6} {s.tp:>4} {s.fn:>4} {s.fp:>4} "
+            f"{label:<{w}} {s.n_logs:>4} {s.n_events:>6} {s.tp:>4} {s.fn:>4} {s.fp:>4} "
             f"{s.at_onset:>8} {s.recovery_alarms:>8} {s.transient_alarms:>9} "
             f"{_num(s.precision):>5} {_num(s.recall):>6} {_num(s.f1):>5} "
             f"{_num(s.mean_latency_s, '{:.2f} s'):>8} {_num(s.max_latency_s, '{:.2f} s'):>8} "
@@ -262,11 +263,14 @@ def render_kinds(evaluation: Evaluation) -> str:
     kinds = evaluation.kinds()
     if not kinds:
         return "per fault kind: no fault events in the evaluated logs"
+    keys = evaluation.keys()
+    kind_w = _width("fault kind", kinds)
+    w = _width("detector / check", ["  " + key for key in keys])
     header = (
-        f"{'fault kind':<30} {'detector / check':<26} {'detected':>8} {'at onset':>8} {'lat mean':>8} {'lat max':>8}"
+        f"{'fault kind':<{kind_w}} {'detector / check':<{w}} {'detected':>8} {'at onset':>8} {'lat mean':>8} "
+        f"{'lat max':>8}"
     )
     lines = [header, "-" * len(header)]
-    keys = evaluation.keys()
     per_key = {key: evaluation.by_kind(key) for key in keys}
     for kind in kinds:
         first = True
@@ -276,7 +280,8 @@ def render_kinds(evaluation: Evaluation) -> str:
                 continue
             label = key if CHECK_SEPARATOR not in key else "  " + key
             lines.append(
-                f"{kind if first else '':<30} {label:<26} {f'{stats.tp}/{stats.n_events}':>8} {stats.at_onset:>8} "
+                f"{kind if first else '':<{kind_w}} {label:<{w}} {f'{stats.tp}/{stats.n_events}':>8} "
+                f"{stats.at_onset:>8} "
                 f"{_num(stats.mean_latency_s, '{:.2f} s'):>8} {_num(stats.max_latency_s, '{:.2f} s'):>8}"
             )
             first = False
@@ -294,8 +299,9 @@ def render_observability(evaluation: Evaluation) -> str:
     kinds = [kind for kind in evaluation.kinds() if any(s.unobservable for k in keys if (s := per_key[k].get(kind)))]
     if not kinds:
         return ""
+    kind_w, w = _width("fault kind", kinds), _width("detector", keys)
     header = (
-        f"{'fault kind':<30} {'detector':<26} {'events':>6} {'unobs.':>6} {'missed':>6} {'of them unobs.':>14} "
+        f"{'fault kind':<{kind_w}} {'detector':<{w}} {'events':>6} {'unobs.':>6} {'missed':>6} {'of them unobs.':>14} "
         f"{'detected / observable':>21}"
     )
     lines = [f"faults that could not be seen ({doc_url('algorithms.md')} section 10):", header, "-" * len(header)]
@@ -304,11 +310,16 @@ def render_observability(evaluation: Evaluation) -> str:
             st = per_key[key][kind]
             seen = f"{st.tp - (st.unobservable - st.fn_unobservable)}/{st.n_events - st.unobservable}"
             lines.append(
-                f"{kind if i == 0 else '':<30} {key:<26} {st.n_events:>6} {st.unobservable:>6} {st.fn:>6} "
+                f"{kind if i == 0 else '':<{kind_w}} {key:<{w}} {st.n_events:>6} {st.unobservable:>6} {st.fn:>6} "
                 f"{st.fn_unobservable:>14} {seen:>21}"
             )
     lines.append("unobs.: events whose whole span lay where a fault of their kind and size left no signature.")
     return _lines(lines)
+
+
+def _width(title: str, names, least: int = 0) -> int:
+    """A name column's width: its longest name (escaped as printed) or its title."""
+    return max([least, len(title), *(len(printable(name)) for name in names)])
 
 
 def render_evaluation(evaluation: Evaluation) -> str:
