@@ -177,6 +177,8 @@ def count_one(job: Job) -> dict:
         "hours": float(analysis.run.t[-1] - analysis.run.t[0]) / 3600.0,
         "counts": {key: len(merge_intervals(items)) for key, items in groups.items()},
         "failures": [f"{f.detector}: {f.message}" for f in analysis.failures],
+        # what a detector said it did not check (kgn: a flight outside its trained envelope)
+        "not_checked": {r.detector: [c.reason for c in r.not_checked] for r in analysis.results if r.not_checked},
         "alarms": alarms,
         "seconds": time.perf_counter() - started,
     }
@@ -229,6 +231,23 @@ def _ratio(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
 
 
+def not_checked_list(runs: list[dict]) -> str:
+    """Per configuration and detector, the logs with a `not checked` line, and the first line."""
+    seen: dict[tuple[str, str], list[str]] = {}
+    for r in runs:
+        for detector, lines in (r.get("not_checked") or {}).items():
+            config = f"{r['model']}{' aggressive' if r['aggressive'] else ''}"
+            seen.setdefault((config, detector), []).extend(lines[:1])
+    if not seen:
+        return "Nothing reported as not checked.\n"
+    logs = {
+        f"{m}{' aggressive' if a else ''}": sum(1 for r in runs if (r["model"], r["aggressive"]) == (m, a))
+        for m, a in SEED_BASE
+    }
+    rows = [f"| {c} | {d} | {len(lines)} of {logs[c]} | {lines[0]} |" for (c, d), lines in sorted(seen.items())]
+    return "| configuration | detector | logs | first line |\n|---|---|---:|---|\n" + "\n".join(rows) + "\n"
+
+
 def alarm_list(runs: list[dict]) -> str:
     """Every false alarm: log, statistic, start, length and peak / threshold."""
     rows = [
@@ -264,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
         hours = sum(r["hours"] for r in runs)
         state = "partial: " if document.get("partial") else ""
         print(f"{state}{len(runs)} logs, {hours:.1f} h, {document['elapsed_s']:.0f} s\n")
-        print(rate_table(runs) + "\n" + alarm_list(runs))
+        print(rate_table(runs) + "\n" + alarm_list(runs) + "\nNot checked:\n\n" + not_checked_list(runs))
         return 0
 
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -324,6 +343,9 @@ def campaign(args, directory: str, version: str) -> int:
         "False alarms:",
         "",
         alarm_list(runs),
+        "Not checked:",
+        "",
+        not_checked_list(runs),
     ]
     if failures:
         lines += ["Detector failures:", ""] + [f"- {f}" for f in failures] + [""]
