@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import click
 
@@ -17,6 +17,7 @@ from logscan.cli.options import (
     help_groups,
     jobs_option,
     json_option,
+    plotlyjs_option,
     profile_option,
     quiet_option,
     scheduler_option,
@@ -127,13 +128,10 @@ class _Run:
 )
 @json_option
 @click.option("--no-report", is_flag=True, default=False, help="Write no HTML report.")
-@click.option(
-    "--plotlyjs",
-    "plotlyjs_dir",
-    type=click.Path(file_okay=False, path_type=str),
-    default=None,
-    help="Write plotly.min.js once into this directory and reference it from the reports "
-    "(small reports for fleets) instead of embedding it in each report.",
+@plotlyjs_option(
+    "Write plotly.min.js once into DIR and reference it from the reports (small reports for fleets); "
+    "'embed' puts it into each report (self-contained files). Default: embed for one log; for several, one "
+    "copy beside the reports (in --output's directory)."
 )
 @detector_option("Run only this detector (repeatable). Default: those the profile enables.")
 @click.option("--exit-zero", is_flag=True, default=False, help="Exit 0 even when there are alarms.")
@@ -226,7 +224,11 @@ def analyze(**options) -> None:
     logs = expand_logs(run.log_paths)
     if run.print_profile:
         _print_profiles(logs, run.profile_path, err=run.err)
+    run = _shared_plotly_js(run, len(logs))
     reports, index, written = _output_paths(run, logs)
+    if run.plotlyjs_dir is not None and options["plotlyjs_dir"] is None and not run.quiet:
+        shared = _plotly_js_path(run.plotlyjs_dir)  # the default for several logs: say so
+        echo_notice(f"plotly.js: one copy for the {len(logs)} reports, {shared} (--plotlyjs embed: one in each)")
     token = new_token()  # tags this run's temporary files, wherever a worker wrote them
     progress = show_progress(run.quiet)
     task = _task(run, names, rules, token, steps=progress and len(logs) == 1)
@@ -241,6 +243,17 @@ def analyze(**options) -> None:
         cleanup(written, token)
         raise
     sys.exit(code)
+
+
+def _shared_plotly_js(run: _Run, n_logs: int) -> _Run:
+    """--plotlyjs resolved: ``embed`` (or no report) is None, plotly.js inside each report; not
+    given, for several logs, the reports' directory: one shared copy of plotly.js (~4.6 MB)
+    instead of one in each report."""
+    if run.no_report or run.plotlyjs_dir == "embed":
+        return replace(run, plotlyjs_dir=None)
+    if run.plotlyjs_dir is None and n_logs > 1:
+        return replace(run, plotlyjs_dir=run.output_path or ".")
+    return run
 
 
 def _check_arguments(run: _Run) -> tuple[tuple[str, ...] | None, tuple, dict | None]:

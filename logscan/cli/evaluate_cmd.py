@@ -13,6 +13,7 @@ from logscan.cli.options import (
     header_stamp_option,
     jobs_option,
     json_option,
+    plotlyjs_option,
     profile_option,
     quiet_option,
     scheduler_option,
@@ -42,6 +43,7 @@ from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
     help="Write the evaluation as an HTML page: the scores per detector and check with the latency "
     "distribution, and the detection matrix per fault kind.",
 )
+@plotlyjs_option("Write plotly.min.js once into DIR and link it from the --output page; default 'embed': inside it.")
 @click.option(
     "--grace",
     "grace_s",
@@ -71,6 +73,7 @@ def evaluate(
     log_paths: tuple[str, ...],
     json_path: str | None,
     page_path: str | None,
+    plotlyjs_dir: str | None,
     grace_s: float,
     recovery_s: float,
     detector_names: tuple[str, ...],
@@ -110,7 +113,7 @@ def evaluate(
         recovery_s=recovery_s, use_header_stamp=use_header_stamp, jobs=jobs, scheduler=scheduler,
         progress=show_progress(quiet), start_s=start_s, end_s=end_s, tables_path=tables_path,
     )  # fmt: skip
-    _write_outputs(evaluation, json_path, page_path)
+    _write_outputs(evaluation, json_path, page_path, plotlyjs_dir)
     if json_path != "-":
         click.echo(render_evaluation(evaluation))
     for failure in evaluation.failures:
@@ -123,15 +126,20 @@ def evaluate(
     sys.exit(ExitCode.BAD_INPUT if evaluation.failures else ExitCode.OK)
 
 
-def _write_outputs(evaluation, json_path: str | None, page_path: str | None) -> None:
-    """--json (the evaluation's document) and --output (its HTML page, when a log was evaluated)."""
+def _write_outputs(evaluation, json_path: str | None, page_path: str | None, plotlyjs: str | None = None) -> None:
+    """--json (the evaluation's document) and --output (its HTML page, when a log was evaluated;
+    with --plotlyjs DIR, plotly.min.js beside it, written with it)."""
     if json_path:
         from logscan import __version__
         from logscan.artifacts import write_json
 
         write_json(json_path, {"logscan_version": __version__, **evaluation.to_dict()})
     if page_path and evaluation.logs:
-        from logscan.artifacts import write_atomic
+        from logscan.artifacts import commit, new_token, stage
         from logscan.report.evaluation_page import render_evaluation_html
+        from logscan.report.plotly_script import shared_plotly_js
 
-        write_atomic(page_path, render_evaluation_html(evaluation))
+        token = new_token()
+        src, js = shared_plotly_js(page_path, plotlyjs, token)
+        page = stage(page_path, render_evaluation_html(evaluation, plotlyjs_src=src), token=token)
+        commit([js, page] if js is not None else [page])

@@ -126,6 +126,20 @@ json_option = click.option(
     "such as /dev/null is written into, never replaced).",
 )
 
+
+def plotlyjs_option(help_text: str):
+    """--plotlyjs DIR|embed (analyze, train, evaluate): plotly.js once in DIR, linked from the pages,
+    or inside each page (`logscan.report.plotly_script`)."""
+    return click.option(
+        "--plotlyjs",
+        "plotlyjs_dir",
+        type=click.Path(file_okay=False, path_type=str),
+        default=None,
+        metavar="DIR|embed",
+        help=help_text,
+    )
+
+
 output_option = click.option(
     "--output",
     "-o",

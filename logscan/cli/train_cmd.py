@@ -10,6 +10,7 @@ from logscan.cli.options import (
     check_parallelism,
     echo_notice,
     jobs_option,
+    plotlyjs_option,
     profile_option,
     quiet_option,
     scheduler_option,
@@ -35,6 +36,7 @@ from logscan.cli.options import (
     help="Write the training report here instead of beside the tables.",
 )  # fmt: skip
 @click.option("--no-report", is_flag=True, default=False, help="Write no training report.")
+@plotlyjs_option("Write plotly.min.js once into DIR and link it from the training report; default 'embed': inside it.")
 @click.option(
     "--allow-faulty", is_flag=True, default=False,
     help="Train on logs whose ground truth lists faults (refused by default: a table trained on a fault "
@@ -67,6 +69,7 @@ def train(
     output_path: str,
     report_path: str | None,
     no_report: bool,
+    plotlyjs_dir: str | None,
     allow_faulty: bool,
     calibrate: bool,
     start_s: float | None,
@@ -106,7 +109,7 @@ def train(
         progress=_echo_step if show_progress(quiet) else None, notice=None if quiet else echo_notice,
         jobs=jobs, scheduler=scheduler, start_s=start_s, end_s=end_s,
     )  # fmt: skip
-    _write(output_path, report, document)
+    _write(output_path, report, document, plotlyjs_dir)
     if not quiet:
         for line in _summary_lines(document, output_path, report):
             click.echo(line)
@@ -129,16 +132,21 @@ def _beside(output_path: str) -> str:
     return (root if ext.lower() == ".json" else output_path) + ".html"
 
 
-def _write(output_path: str, report: str | None, document: dict) -> None:
-    """The tables and the report, both or neither (staged, then renamed in a row)."""
+def _write(output_path: str, report: str | None, document: dict, plotlyjs: str | None = None) -> None:
+    """The tables and the report (with --plotlyjs DIR, plotly.min.js there too), all or none
+    (staged, then renamed in a row)."""
     from logscan.artifacts import commit, json_text, new_token, stage
 
     token = new_token()
     staged = [stage(output_path, json_text(document), token=token)]
     if report is not None:
+        from logscan.report.plotly_script import shared_plotly_js
         from logscan.report.training_page import render_training_html
 
-        staged.insert(0, stage(report, render_training_html(document), token=token))
+        src, js = shared_plotly_js(report, plotlyjs, token)
+        staged.insert(0, stage(report, render_training_html(document, plotlyjs_src=src), token=token))
+        if js is not None:
+            staged.insert(0, js)
     commit(staged)
 
 

@@ -18,7 +18,8 @@ def _number(value, digits: int = 2) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
-def render_evaluation_html(evaluation: Evaluation) -> str:
+def render_evaluation_html(evaluation: Evaluation, plotlyjs_src: str | None = None) -> str:
+    """The evaluation page; plotly.js inside it, or from ``plotlyjs_src`` (a URL) if given."""
     keys = evaluation.keys()
     rows, boxes = [], []
     for key in keys:
@@ -63,7 +64,8 @@ def render_evaluation_html(evaluation: Evaluation) -> str:
             detectors=detectors,
             matrix=matrix,
             figure_json=figure,
-            plotly_js=_plotly_js() if figure else "",
+            plotly_js=_plotly_js() if figure and not plotlyjs_src else "",
+            plotlyjs_src=plotlyjs_src,
             skipped=evaluation.skipped,
             failures=[f.message for f in evaluation.failures],
         )
