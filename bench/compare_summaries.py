@@ -7,13 +7,15 @@ Checks the other commit out into a temporary git worktree, runs `logscan analyze
 quad_healthy.csv and husky_drive.bag), and compares the files byte for byte. The other commit's
 code runs in this venv (its dependencies must be the same); its import is forced to the worktree
 (the editable install's finder is left out), and the run checks that it was. Prints one line per
-log and exits 1 when any summary differs. A refactoring that moves code and changes no number
+log, and under a differing one the JSON fields that differ (list indices as [*]), and exits 1 when
+any summary differs. A refactoring that moves code and changes no number
 leaves every summary identical.
 """
 
 from __future__ import annotations
 
 import filecmp
+import json
 import subprocess
 import sys
 import tempfile
@@ -46,6 +48,22 @@ def summarise(root: Path, log: Path, out: Path) -> None:
         raise SystemExit(f"{log.name}: no summary written by {root}")
 
 
+def differing_fields(old: object, new: object, path: str = "") -> set[str]:
+    """The JSON paths where two documents differ, list indices written [*] so that a field that
+    differs in every element of a list is one line."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        fields: set[str] = set()
+        for key in old.keys() | new.keys():
+            if key not in old or key not in new:
+                fields.add(f"{path}.{key} ({'only now' if key in new else 'only before'})")
+            else:
+                fields |= differing_fields(old[key], new[key], f"{path}.{key}")
+        return fields
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        return set().union(*(differing_fields(a, b, f"{path}[*]") for a, b in zip(old, new, strict=True)))
+    return set() if old == new else {path or "."}
+
+
 def main(argv: list[str]) -> int:
     if len(argv) != 1:
         print(__doc__)
@@ -63,6 +81,10 @@ def main(argv: list[str]) -> int:
                 same = filecmp.cmp(old, new, shallow=False)
                 differ += not same
                 print(f"{'same' if same else 'DIFFERS'}  {log.name}")
+                if not same:
+                    before, now = (json.loads(path.read_text(encoding="utf-8")) for path in (old, new))
+                    for name in sorted(differing_fields(before, now)):
+                        print(f"    {name}")
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO, check=False)
     print(f"{len(sample_logs()) - differ} of {len(sample_logs())} summaries byte-identical to {base}")
