@@ -8,6 +8,14 @@ import json
 from logscan.verdict.baseline import compare, exit_code_on_new
 
 
+def _schema():
+    import jsonschema
+    from conftest import REPO
+
+    schema = json.loads((REPO / "docs" / "schema" / "analyze-summary.schema.json").read_text(encoding="utf-8"))
+    return jsonschema.Draft202012Validator(schema)
+
+
 def summary(*logs) -> dict:
     """A summary document: logs as (file, exit_code, [(detector, signal, start, end), ...])."""
     return {
@@ -59,6 +67,8 @@ def test_fail_on_new_through_the_cli(cli, sample, tmp_path):
     assert more.exit_code == 1 and "baseline: 4 new, 12 unchanged, 0 gone" in more.stdout
     document = json.loads(out.read_text())
     assert document["exit_code"] == 1 and document["baseline"]["new"] == 4
+    assert document["baseline"]["not_analysed"] == []  # the baseline's one log was analysed
+    assert list(_schema().iter_errors(document)) == []
     flipped = next(log for log in document["logs"] if log["file"].endswith("quad_imu_bitflip.mcap"))
     assert all(a["baseline"] == "new" for r in flipped["detectors"] for a in r["alarms"])
     from logscan.report.ci_artifacts import junit_xml, markdown_summary

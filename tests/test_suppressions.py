@@ -88,6 +88,9 @@ def test_an_entry_that_matched_nothing_is_a_warning_everywhere(cli, sample, tmp_
     ]
     document = json.loads(out.read_text())
     assert [e["entry"] for e in document["suppressions"]["unused"]] == [2, 3]
+    assert list(_schema().iter_errors(document)) == []  # docs/schema describes suppressions.unused
+    document["suppressions"]["unused"][0]["entry"] = 0
+    assert list(_schema().iter_errors(document))  # ...and can fail
     assert document["suppressions"]["file"] == str(rules)
     assert "**Warning**: 2 suppression entries matched no alarm:" in md.read_text()
     assert result.stdout.count(f"::warning file={rules},title=logscan unused suppression::") == 2
@@ -100,3 +103,11 @@ def test_every_entry_used_gives_no_warning(cli, sample, tmp_path):
     result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--suppressions", rules, "--json", out)
     assert "matched no alarm" not in result.stderr + result.stdout
     assert json.loads(out.read_text())["suppressions"]["unused"] == []
+
+
+def _schema():
+    import jsonschema
+    from conftest import REPO
+
+    schema = json.loads((REPO / "docs" / "schema" / "analyze-summary.schema.json").read_text(encoding="utf-8"))
+    return jsonschema.Draft202012Validator(schema)
