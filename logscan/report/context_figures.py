@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from logscan.report.flight_modes import has_names, mode_name
 from logscan.report.plotly_json import TIME_AXIS, plot_text, spec_json
 from logscan.results import Incident
 from logscan.timebase.clock import Clock
@@ -71,26 +72,64 @@ def _value_text(value: float) -> str:
     return f"{value:g}"
 
 
+def _mode_yaxis(channel: str, values: list[float], named: bool) -> dict:
+    """The mode figure's y axis: a row per named value (named by `_mode_notes`), else the values as
+    numbers."""
+    if named:
+        return {"tickvals": list(range(len(values))), "showticklabels": False, "range": [-0.5, len(values) - 0.5],
+                "gridcolor": "#eee", "zeroline": False, "fixedrange": True}  # fmt: skip
+    return {"title": {"text": plot_text(channel)}, "gridcolor": "#eee", "exponentformat": "e"}
+
+
+def _mode_notes(channel: str, values: list[float]) -> list[dict]:
+    """Each named value's name at its row, inside the plot's left edge (tick labels would widen the
+    margin, and the time axis would no longer line up with the other figures')."""
+    return [
+        {"text": plot_text(mode_name(channel, v)), "xref": "paper", "x": 0.002, "xanchor": "left", "yref": "y",
+         "y": i, "yanchor": "bottom", "showarrow": False, "font": {"size": 11, "color": "#333"}}
+        for i, v in enumerate(values)
+    ]  # fmt: skip
+
+
+def _mode_rows(value: np.ndarray, values: list[float]) -> np.ndarray:
+    """Each sample's row: the index of its value in ``values`` (NaN where undefined)."""
+    rows = np.full(value.shape, np.nan)
+    for i, v in enumerate(values):
+        rows[value == v] = i
+    return rows
+
+
 def mode_figure(mode, clock: Clock | None = None) -> dict:
-    """The mode channel as a step line, shaded by value when it takes few values."""
+    """The mode channel as a step line, shaded by value when it takes few values (each value named,
+    one row each, when it has a name: `logscan.report.flight_modes`)."""
     name = plot_text(mode.channel)
     values = sorted({v for _, _, v in mode.intervals})
     banded = bool(mode.intervals) and len(values) <= MAX_BAND_VALUES
+    named = banded and has_names(mode.channel)
     data = []
     if banded:
         for i, value in enumerate(values):
             spans = [(a, b) for a, b, v in mode.intervals if v == value]
-            data.append(_band_trace(f"{mode.channel} = {_value_text(value)}", spans, BAND_FILLS[i % len(BAND_FILLS)]))
-    data.append({
-        "type": "scatter", "name": name, "x": mode.t.astype(np.float32), "y": mode.value.astype(np.float32),
+            label = mode_name(mode.channel, value) if named else f"{mode.channel} = {_value_text(value)}"
+            data.append(_band_trace(label, spans, BAND_FILLS[i % len(BAND_FILLS)]))
+    y = _mode_rows(mode.value, values) if named else mode.value
+    line = {
+        "type": "scatter", "name": name, "x": mode.t.astype(np.float32), "y": y.astype(np.float32),
         "mode": "lines", "line": {"shape": "hv", "color": "#333", "width": 1.5},
         "hovertemplate": "%{y:.6g} from %{x:.3f} s",
-    })  # fmt: skip
-    layout = _time_row_layout(f"mode: {name}", {"title": {"text": name}, "gridcolor": "#eee", "exponentformat": "e"})
+    }  # fmt: skip
+    if named:  # the mode's name on hover
+        line["text"] = [plot_text(mode_name(mode.channel, float(v))) for v in mode.value]
+        line["hovertemplate"] = "%{text} from %{x:.3f} s"
+    data.append(line)
+    layout = _time_row_layout(f"mode: {name}", _mode_yaxis(mode.channel, values, named))
+    if named:
+        layout["annotations"] = _mode_notes(mode.channel, values)
     layout["yaxis2"] = {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True}
     caption = (
         f"The profile's mode channel {mode.channel} on the shared time axis"
         + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
+        + (" (PX4's flight modes named from its VehicleStatus.msg)" if named else "")
         + ". Read an alarm against the mode it happened in."
     )
     return _spec(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout, clock)
