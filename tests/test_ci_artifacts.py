@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from logscan.report.ci_annotations import MAX_PER_LOG, github_annotations
+from logscan.report.ci_annotations import MAX_PER_LOG, github_annotations, summary_words
 from logscan.report.ci_artifacts import junit_xml, markdown_summary
 
 XSD = Path(__file__).parent / "data" / "junit.xsd"
@@ -171,3 +171,10 @@ def test_fail_on_never_exits_zero_with_alarms(cli, sample):
 def test_an_artifact_named_like_a_log_is_refused(cli, sample, tmp_path):
     result = cli("analyze", sample("quad_healthy.mcap"), "--no-report", "--junit", tmp_path / "x.mcap")
     assert result.exit_code == 2
+
+
+def test_the_notice_names_the_job_summary_when_the_markdown_goes_there(monkeypatch):
+    monkeypatch.setenv("GITHUB_STEP_SUMMARY", "/runner/_temp/step_summary_1")
+    assert summary_words("/runner/_temp/step_summary_1", "s.json") == "the job summary"
+    assert summary_words("out/s.md", "s.json") == "out/s.md"
+    assert summary_words(None, "s.json") == "s.json" and summary_words(None, "-") is None

@@ -341,9 +341,9 @@ def _finish(run: _Run, outcomes: list, previous: dict | None, staged: list, inde
         code = _compare_with_baseline(document, previous, code, run.fail_on, exit_zero, err=run.err)
     if run.github_annotations:
         from logscan.report.ci_annotations import github_annotations as annotations
+        from logscan.report.ci_annotations import summary_words
 
-        summary = run.markdown_path or (run.json_path if run.json_path != "-" else None)
-        for line in annotations(document, summary):
+        for line in annotations(document, summary_words(run.markdown_path, run.json_path)):
             click.echo(line, err=run.err)
     if index is not None:
         from logscan.artifacts import stage

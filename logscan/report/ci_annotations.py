@@ -11,6 +11,8 @@ GitHub's toolkit does (``@actions/core``: ``escapeData`` and ``escapeProperty``)
 
 from __future__ import annotations
 
+import os
+
 from logscan.report.ci_artifacts import (
     alarm_line,
     incident_of,
@@ -83,6 +85,15 @@ def _log_annotations(log: dict, see: str) -> list[str]:
             message = f"{more} more {what}{'s' if more > 1 else ''} in {log_name(file)}: see {see}"
             lines.append(_command("notice", message, file, "logscan"))
     return lines
+
+
+def summary_words(markdown_path: str | None, json_path: str | None) -> str | None:
+    """Where a user reads what the capped annotations leave out, when a log has no report: the
+    job's summary page when the Markdown goes to ``$GITHUB_STEP_SUMMARY``, else the Markdown or
+    the JSON file (None: neither is written to a file)."""
+    if markdown_path and markdown_path == os.environ.get("GITHUB_STEP_SUMMARY"):
+        return "the job summary"
+    return markdown_path or (json_path if json_path != "-" else None)
 
 
 def github_annotations(document: dict, summary: str | None = None) -> list[str]:
