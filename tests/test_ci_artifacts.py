@@ -178,3 +178,13 @@ def test_the_notice_names_the_job_summary_when_the_markdown_goes_there(monkeypat
     assert summary_words("/runner/_temp/step_summary_1", "s.json") == "the job summary"
     assert summary_words("out/s.md", "s.json") == "out/s.md"
     assert summary_words(None, "s.json") == "s.json" and summary_words(None, "-") is None
+
+
+def test_the_markdown_says_how_many_alarms_its_table_leaves_out():
+    from logscan.report.ci_artifacts import MAX_MARKDOWN_ROWS
+
+    alarms = [{"detector": "d", "signal": "s", "start": float(i), "end": i + 0.5} for i in range(MAX_MARKDOWN_ROWS + 3)]
+    log = {"file": "a.mcap", "verdict": "alarms", "detectors": [{"detector": "d", "alarms": alarms}]}
+    text = markdown_summary({"logs": [log], "errors": []})
+    assert text.count("| a.mcap | - | d | s |") == MAX_MARKDOWN_ROWS  # no incident holds them: "-"
+    assert "... 3 more alarm(s) in the JSON summary" in text  # also when no baseline alarm is gone
