@@ -11,6 +11,7 @@ import datetime as _dt
 import json
 import math
 import os
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -143,3 +144,41 @@ def group_rows(groups: list[dict]) -> list[dict]:
         }
         for g in groups
     ]
+
+
+_COLOUR_CODES = re.compile(r"\x1b\[[0-9;]*m")  # a terminal's colour codes (PX4 colours "Ready for takeoff!")
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f\u202a-\u202e\u2066-\u2069]")
+
+
+def message_text(text: str) -> str:
+    """A logged message as the page shows it: terminal colour codes dropped, any other control
+    character (or bidirectional override) as a visible escape (``\\x1b``)."""
+    text = _COLOUR_CODES.sub("", text)
+    return _CONTROL.sub(_escape, text)
+
+
+def _escape(match: re.Match) -> str:
+    code = ord(match.group())
+    return f"\\x{code:02x}" if code < 256 else f"\\u{code:04x}"
+
+
+def log_message_rows(context, clock) -> dict:
+    """The folded table of every message the autopilot logged (a `logscan.report.run_context.RunContext`'s
+    ``log_messages``, any level): ``{"rows": [{time, level, text, t0}], "n": count in the log}``;
+    ``t0`` in the time axis' units, where a click zooms."""
+    messages = list(getattr(context, "log_messages", None) or [])
+    rows = [
+        {
+            "time": clock.short(m.t),
+            "level": m.level.lower(),
+            "text": message_text(m.text),
+            "t0": repr(clock.axis_value(m.t)),
+        }
+        for m in messages
+    ]
+    return {"rows": rows, "n": max(int(getattr(context, "n_log_messages", 0) or 0), len(rows))}
+
+
+def context_tables(context, clock) -> dict:
+    """The report's tables of the flight beside its figures: the autopilot's logged messages."""
+    return {"log_messages": log_message_rows(context, clock)}

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from logscan.report.context import message_text
 from logscan.report.flight_modes import has_names, mode_name
 from logscan.report.plotly_json import TIME_AXIS, plot_text, spec_json
 from logscan.results import Incident
@@ -74,9 +75,9 @@ def _value_text(value: float) -> str:
 
 def _mode_yaxis(channel: str, values: list[float], named: bool) -> dict:
     """The mode figure's y axis: a row per named value (named by `_mode_notes`), else the values as
-    numbers."""
+    numbers; room at the top for the message markers."""
     if named:
-        return {"tickvals": list(range(len(values))), "showticklabels": False, "range": [-0.5, len(values) - 0.5],
+        return {"tickvals": list(range(len(values))), "showticklabels": False, "range": [-0.5, len(values) - 0.05],
                 "gridcolor": "#eee", "zeroline": False, "fixedrange": True}  # fmt: skip
     return {"title": {"text": plot_text(channel)}, "gridcolor": "#eee", "exponentformat": "e"}
 
@@ -99,9 +100,29 @@ def _mode_rows(value: np.ndarray, values: list[float]) -> np.ndarray:
     return rows
 
 
-def mode_figure(mode, clock: Clock | None = None) -> dict:
+_MESSAGE_Y = 0.94  # the message markers' height on the overlay axis (0..1 spans the plot): along its top
+
+
+def _message_marks(messages) -> list[dict]:
+    """Every message the autopilot logged as a marker along the plot's top (on the overlay axis),
+    coloured by level, its level and text on hover."""
+    if not messages:
+        return []
+    colours = [_LEVEL_COLOURS.get(m.level, "#1f77b4") for m in messages]
+    return [{
+        "type": "scatter", "name": "logged messages", "x": np.array([m.t for m in messages], dtype=np.float32),
+        "y": np.full(len(messages), _MESSAGE_Y, dtype=np.float32), "yaxis": "y2", "mode": "markers",
+        "marker": {"symbol": "triangle-down", "size": 9, "color": colours, "line": {"color": "white", "width": 1}},
+        "text": [plot_text(f"{m.level.lower()}: {message_text(m.text[:200])}") for m in messages],
+        "hovertemplate": "%{text}<extra></extra>",
+    }]  # fmt: skip
+
+
+def mode_figure(mode, clock: Clock | None = None, messages=(), t_span: tuple[float, float] | None = None) -> dict:
     """The mode channel as a step line, shaded by value when it takes few values (each value named,
-    one row each, when it has a name: `logscan.report.flight_modes`)."""
+    one row each, when it has a name: `logscan.report.flight_modes`), and the autopilot's logged
+    ``messages`` (`logscan.log.LoggedMessage`, any level) as markers along its top; its time axis
+    spans ``t_span`` (the analysis grid's) when given, as the other context figures'."""
     name = plot_text(mode.channel)
     values = sorted({v for _, _, v in mode.intervals})
     banded = bool(mode.intervals) and len(values) <= MAX_BAND_VALUES
@@ -122,7 +143,8 @@ def mode_figure(mode, clock: Clock | None = None) -> dict:
         line["text"] = [plot_text(mode_name(mode.channel, float(v))) for v in mode.value]
         line["hovertemplate"] = "%{text} from %{x:.3f} s"
     data.append(line)
-    layout = _time_row_layout(f"mode: {name}", _mode_yaxis(mode.channel, values, named))
+    data += _message_marks(messages)
+    layout = _time_row_layout(f"mode: {name}", _mode_yaxis(mode.channel, values, named), t_span)
     if named:
         layout["annotations"] = _mode_notes(mode.channel, values)
     layout["yaxis2"] = {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True}
@@ -130,6 +152,11 @@ def mode_figure(mode, clock: Clock | None = None) -> dict:
         f"The profile's mode channel {mode.channel} on the shared time axis"
         + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
         + (" (PX4's flight modes named from its VehicleStatus.msg)" if named else "")
+        + (
+            f"; triangles along the top: the {len(messages)} message(s) the autopilot logged (hover for the text)"
+            if messages
+            else ""
+        )
         + ". Read an alarm against the mode it happened in."
     )
     return _spec(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout, clock)
@@ -259,7 +286,8 @@ def context_figures(context, incidents: Sequence[Incident], clock: Clock | None 
         return []
     figures = []
     if context.mode is not None:
-        figures.append(mode_figure(context.mode, clock))
+        messages, t_span = getattr(context, "log_messages", ()), getattr(context, "t_span", None)
+        figures.append(mode_figure(context.mode, clock, messages, t_span))
     if getattr(context, "states", None):
         figures.append(states_figure(context.states, getattr(context, "t_span", None), clock))
     if getattr(context, "messages", None):

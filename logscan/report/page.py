@@ -23,7 +23,7 @@ from logscan.alarms import AlarmInterval
 from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.errors import InputError
 from logscan.report import overview
-from logscan.report.context import group_rows, info_rows, log_view, model_view, number_text
+from logscan.report.context import context_tables, group_rows, info_rows, log_view, model_view, number_text
 from logscan.report.context_figures import context_figures
 from logscan.report.figures import detector_figures, merge_spans
 from logscan.report.headline import Headline, headline_figure, headlines
@@ -446,6 +446,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         sections=sections,
         n_figures=len(figures) + len(context) + len(recovered),
         context=context,
+        **context_tables(report.context, clock),  # the autopilot's logged messages
         recovery=recovered,
         recovery_rows=recovery_rows(report.recovery, clock),
         figure_json=figure_json,
@@ -465,8 +466,8 @@ def _message_row(message, clock) -> dict:
         "last": clock.short(message.last) if message.count > 1 else "",
         "count": message.count,
         "incident": "" if message.incident is None else str(message.incident),
-        "start": message.first,
-        "end": message.last,
+        "start": repr(clock.axis_value(message.first)),  # where a click zooms: the time axis' units
+        "end": repr(clock.axis_value(message.last)),
     }
 
 

@@ -10,7 +10,8 @@ what the report shows beside the statistics is extracted right after alignment, 
 - the mode: the profile's ``[mode]`` channel as intervals of one value (``MAX_MODE_INTERVALS`` at
   most), or, when it changes more often (a continuous set-point), as a decimated series;
 - the autopilot's own logged messages of level WARNING and above (a ULog's ``logged_messages``,
-  ``MAX_MESSAGES`` at most), on the same time axis;
+  ``MAX_MESSAGES`` at most), on the same time axis, and all its messages whatever their level
+  (``MAX_LOG_MESSAGES`` at most; the reader keeps 500) for the report's folded message table;
 - the autopilot's states as intervals: armed (PX4 ``vehicle_status.arming_state`` 2) and in
   failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`).
 """
@@ -29,6 +30,9 @@ MAX_MODE_INTERVALS = 200
 MAX_MODE_POINTS = 1_000
 POSITION_STATES = ("x", "y")
 MAX_STATE_INTERVALS = 200
+MAX_LOG_MESSAGES = 500
+# every level a ULog message can have (pyulog's MessageLogging.log_level_str), most severe first
+ALL_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING", "NOTICE", "INFO", "DEBUG")
 # topics read beside a profile's for the states drawn in the report (absent topics cost nothing)
 STATE_TOPICS = ("vehicle_status_0",)
 ARMED_STATE = 2.0  # PX4 vehicle_status.arming_state: ARMING_STATE_ARMED
@@ -66,6 +70,8 @@ class RunContext:
     messages: list[LoggedMessage] = field(default_factory=list)
     t_span: tuple[float, float] | None = None  # the grid's first and last time: the shared time axis
     states: dict[str, list[tuple[float, float]]] = field(default_factory=dict)  # "armed" -> intervals (s)
+    log_messages: list[LoggedMessage] = field(default_factory=list)  # every level, in time order
+    n_log_messages: int = 0  # how many the log holds (log_messages may be fewer)
 
 
 def _intervals(t: np.ndarray, on: np.ndarray, end: float) -> list[tuple[float, float]]:
@@ -165,11 +171,21 @@ def mode_of(run, max_intervals: int = MAX_MODE_INTERVALS, max_points: int = MAX_
     return track
 
 
+def _message_count(metadata: dict, kept: int) -> int:
+    """The log's count of logged messages (a ULog's ``ulog.log`` facts), at least ``kept``."""
+    try:
+        return max(int((metadata or {}).get("ulog.log", {}).get("logged_messages", 0)), kept)
+    except (TypeError, ValueError):
+        return kept
+
+
 def run_context(run, model, log=None) -> RunContext:
     """The path and the mode of an aligned run (each None when the run has none), and, from its
     ``log`` (before its samples are released), the autopilot's messages and states."""
     context = RunContext(path=path_of(run, model), mode=mode_of(run), t_span=(float(run.t[0]), float(run.t[-1])))
     if log is not None:
         context.messages = logged_messages(log.source.metadata, run.start_ns)
+        context.log_messages = logged_messages(log.source.metadata, run.start_ns, ALL_LEVELS, MAX_LOG_MESSAGES)
+        context.n_log_messages = _message_count(log.source.metadata, len(context.log_messages))
         context.states = autopilot_states(log.channels, run.start_ns, context.t_span[1])
     return context
