@@ -4,8 +4,10 @@ Array fields keep pyulog's names (``xyz[0]``). Messages with timestamp 0 (PX4's 
 are dropped and counted. ``char`` fields (strings) and ``_padding`` fields
 are skipped and counted. Timestamps are microseconds in the file and int64 nanoseconds here.
 ``source.metadata`` holds ``ulog.info`` (``sys_name``, ``ver_hw``, ...), ``ulog.parameters``
-(initial values), ``ulog.parameters_changed``, ``ulog.log`` (counts of dropouts, logged messages,
-changed parameters, corruption flags) and ``ulog.messages`` (the logged text messages).
+(initial values), ``ulog.parameters_default`` (PX4's system defaults of the parameters set away
+from them, when the log has them), ``ulog.parameters_changed``, ``ulog.log`` (counts of dropouts,
+logged messages, changed parameters, corruption flags) and ``ulog.messages`` (the logged text
+messages).
 
 Damage: pyulog stops without a word at a message it cannot frame (a data message of size 0 ends
 its read loop: the rest of the file is dropped) and at a cut message. The reader watches every
@@ -216,6 +218,10 @@ def _fill_metadata(ulog, source: SourceInfo) -> None:
     """Info, parameters, dropouts and logged messages of the file into ``source.metadata``."""
     source.metadata["ulog.info"] = {str(k): _text(v) for k, v in ulog.msg_info_dict.items()}
     source.metadata["ulog.parameters"] = {str(k): _text(v) for k, v in ulog.initial_parameters.items()}
+    if ulog.has_default_parameters:  # newer PX4: the system default of each parameter set away from it
+        source.metadata["ulog.parameters_default"] = {
+            str(k): _text(v) for k, v in ulog.get_default_parameters(0).items()
+        }
     changed = ulog.changed_parameters
     if changed:
         source.metadata["ulog.parameters_changed"] = {

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from logscan.report.parameters import parameter_rows
+
 
 def number_text(value: Any, digits: int = 4) -> str:
     """A number in ``digits`` significant digits, plain ("—" for None, "NaN", "inf")."""
@@ -180,5 +182,7 @@ def log_message_rows(context, clock) -> dict:
 
 
 def context_tables(context, clock) -> dict:
-    """The report's tables of the flight beside its figures: the autopilot's logged messages."""
-    return {"log_messages": log_message_rows(context, clock)}
+    """The report's tables of the flight beside its figures: the autopilot's logged messages and
+    its parameters (PX4)."""
+    parameters = parameter_rows(getattr(context, "parameters", None), clock)
+    return {"log_messages": log_message_rows(context, clock), "parameters": parameters}

@@ -12,6 +12,7 @@ what the report shows beside the statistics is extracted right after alignment, 
 - the autopilot's own logged messages of level WARNING and above (a ULog's ``logged_messages``,
   ``MAX_MESSAGES`` at most), on the same time axis, and all its messages whatever their level
   (``MAX_LOG_MESSAGES`` at most; the reader keeps 500) for the report's folded message table;
+- a ULog's parameters set away from their defaults and changed in flight (`logscan.report.parameters`);
 - the autopilot's states as intervals: armed (PX4 ``vehicle_status.arming_state`` 2) and in
   failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`).
 """
@@ -24,6 +25,7 @@ import numpy as np
 
 from logscan.log import LoggedMessage, logged_messages
 from logscan.report.decimate import decimate_indices
+from logscan.report.parameters import ParameterFacts, parameter_facts
 
 MAX_PATH_POINTS = 1_000
 MAX_MODE_INTERVALS = 200
@@ -72,6 +74,7 @@ class RunContext:
     states: dict[str, list[tuple[float, float]]] = field(default_factory=dict)  # "armed" -> intervals (s)
     log_messages: list[LoggedMessage] = field(default_factory=list)  # every level, in time order
     n_log_messages: int = 0  # how many the log holds (log_messages may be fewer)
+    parameters: ParameterFacts | None = None  # a ULog's parameters away from their defaults, and changed
 
 
 def _intervals(t: np.ndarray, on: np.ndarray, end: float) -> list[tuple[float, float]]:
@@ -187,5 +190,6 @@ def run_context(run, model, log=None) -> RunContext:
         context.messages = logged_messages(log.source.metadata, run.start_ns)
         context.log_messages = logged_messages(log.source.metadata, run.start_ns, ALL_LEVELS, MAX_LOG_MESSAGES)
         context.n_log_messages = _message_count(log.source.metadata, len(context.log_messages))
+        context.parameters = parameter_facts(log.source.metadata, run.start_ns)
         context.states = autopilot_states(log.channels, run.start_ns, context.t_span[1])
     return context
