@@ -56,7 +56,7 @@ def cpu_best(n: int, fn) -> float:
 
 
 def prepared_log(path: str):
-    from logscan.pipeline.prepare import load_profile_for, prepare
+    from logscan.pipeline.preparation import load_profile_for, prepare
     from logscan.pipeline.stages import create_detectors, needs_of
 
     loaded = load_profile_for(path, None)

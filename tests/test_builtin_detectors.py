@@ -20,7 +20,7 @@ SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 
 @cache
 def pipeline(name: str, store_gain: bool = False):
-    """(aligned run, EKF trace, model, log) of a sample log through `logscan.pipeline.prepare`."""
+    """(aligned run, EKF trace, model, log) of a sample log through `logscan.pipeline.preparation`."""
     from logscan.needs import Needs
     from logscan.pipeline import load_profile_for, prepare
 

@@ -268,6 +268,25 @@ def test_only_the_shared_foundations_stay_flat_in_logscan():
     assert len(flat) <= MAX_FLAT_MODULES, f"{len(flat)} flat modules (give each layer its folder): {flat}"
 
 
+def test_no_package_binds_a_name_that_hides_one_of_its_modules():
+    """`from logscan.pipeline.prepare import prepare` in the package's __init__ used to rebind
+    `logscan.pipeline.prepare` from the module to the function, so patching the module by its
+    dotted path patched the function instead. A package's own names and its modules' differ."""
+    modules = internal_modules()
+    hidden = []
+    for package, path in modules.items():
+        if path.name != "__init__.py":
+            continue
+        bound = set()
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.ImportFrom):
+                bound |= {alias.asname or alias.name for alias in node.names}
+            elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                bound.add(node.name)
+        hidden += [f"{package}.{name}" for name in sorted(bound) if f"{package}.{name}" in modules]
+    assert not hidden, f"package names that hide a module of the same name: {hidden}"
+
+
 def crossings(importers: str, targets: tuple[str, ...]) -> list[str]:
     """The imports from the modules under ``importers`` into those under any of ``targets``."""
 

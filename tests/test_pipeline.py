@@ -69,7 +69,7 @@ def test_a_bad_detector_setting_is_refused_before_any_log_is_read(tmp_path, monk
         raise AssertionError("the log was read before the profile's detector settings were checked")
 
     # the module that reads (the package's `prepare` is a function of that name)
-    monkeypatch.setattr(importlib.import_module("logscan.pipeline.prepare"), "read_log", no_reading)
+    monkeypatch.setattr(importlib.import_module("logscan.pipeline.preparation"), "read_log", no_reading)
     profile = _bad_profile(tmp_path, settings)
     with pytest.raises(ProfileError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")):
         analyze_log(HEALTHY, profile)

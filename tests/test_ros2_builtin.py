@@ -118,7 +118,7 @@ def test_the_topic_list_comes_from_the_summary_and_only_candidates_are_read(samp
     import importlib
 
     # builtin_profile_for reads through this module's read_log (the package's `prepare` is a function)
-    prepare = importlib.import_module("logscan.pipeline.prepare")
+    prepare = importlib.import_module("logscan.pipeline.preparation")
 
     schemas = builtin.topic_schemas(sample(SAMPLE), "mcap")
     assert schemas == {

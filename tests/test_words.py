@@ -24,7 +24,7 @@ AUTOPILOT = [name for name in REGISTRY.names() if REGISTRY.get(name).raw_topics]
 
 def produced_on_fixtures(name: str) -> set[str]:
     """The statistics detector ``name`` produces on its healthy and faulty simulated fixtures (the
-    contract test's sample logs through `logscan.pipeline.prepare`, trained on the healthy one)."""
+    contract test's sample logs through `logscan.pipeline.preparation`, trained on the healthy one)."""
     found: set[str] = set()
     for kind in ("healthy", "faulty"):
         run, trace, model, _, traces = pipeline_case(kind, name)

@@ -14,8 +14,8 @@ checked before anything is allocated, and ``start_s``/``end_s`` cut it to a wind
 """
 
 from logscan.align.aligned import AlignedGroup, AlignedRun, HeldTable
-from logscan.align.hold import _gaps, changed_steps, clean_samples, hold, stale_ns
 from logscan.align.onto_grid import align
+from logscan.align.sample_hold import _gaps, changed_steps, clean_samples, hold, stale_ns
 from logscan.timebase.time_sanity import MAX_GRID_STEPS, check_window, outlying_runs
 
 __all__ = [

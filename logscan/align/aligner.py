@@ -11,7 +11,16 @@ import numpy as np
 
 from logscan import conversions
 from logscan.align.aligned import AlignedGroup, HeldTable
-from logscan.align.hold import _MAX_GAP_WARNINGS, _NS, _Clean, _gaps, changed_steps, clean_samples, hold, stale_ns
+from logscan.align.sample_hold import (
+    _MAX_GAP_WARNINGS,
+    _NS,
+    _Clean,
+    _gaps,
+    changed_steps,
+    clean_samples,
+    hold,
+    stale_ns,
+)
 from logscan.timebase.time_sanity import dense_span
 
 

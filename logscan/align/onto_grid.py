@@ -9,7 +9,7 @@ import numpy as np
 
 from logscan.align.aligned import AlignedGroup, AlignedRun, HeldTable
 from logscan.align.aligner import _Aligner, _linear_transforms
-from logscan.align.hold import _NS
+from logscan.align.sample_hold import _NS
 from logscan.timebase.time_sanity import check_window, grid, outlier_warnings
 
 

@@ -25,7 +25,7 @@ def scale_vector(model, scales: dict[str, float] | None) -> np.ndarray:
 
 def calibrated_Q(model, dt: float) -> np.ndarray | None:
     """The model's Q at ``dt`` scaled by its ``process_noise_scale`` ({state: scale}, set from the
-    tables' calibration by `logscan.pipeline.prepare`), or None (the filter's default Q)."""
+    tables' calibration by `logscan.pipeline.preparation`), or None (the filter's default Q)."""
     scales = getattr(model, "process_noise_scale", None)
     if not scales:
         return None

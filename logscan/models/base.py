@@ -112,7 +112,7 @@ class Model:
     groups: dict[str, GroupSpec] = {}
     # set on instances: the parameters merged over the defaults (each subclass's __init__,
     # `_merge_params`), and the trained tables' Q scales, {state: scale}, when calibrated (set by
-    # `logscan.pipeline.prepare`, read by `logscan.filters.q_scale`)
+    # `logscan.pipeline.preparation`, read by `logscan.filters.q_scale`)
     p: dict
     process_noise_scale: dict | None
 

@@ -1,18 +1,20 @@
 """The pipeline of one log, in the order it runs (each step a module of this package):
 
-    profile = load_profile_for(path, profile_path)           # prepare: the file, the log's embedded one, a built-in
+    profile = load_profile_for(path, profile_path)           # preparation: the file, the log's embedded one, a built-in
     detectors = create_detectors(profile)                      # stages: parameters checked, no log read yet
-    prepared = prepare(path, profile, needs_of(detectors))    # prepare: read the needed topics, align, filter
-    analysis = detect(prepared, detectors)                    # detect: DetectorResults, scores against truth
+    prepared = prepare(path, profile, needs_of(detectors))    # preparation: read the needed topics, align, filter
+    analysis = detect(prepared, detectors)                    # detection: DetectorResults, scores against truth
 
-`run.analyze_log` alone composes them for one log; `loops` runs a hierarchical profile's further
-loops; `release` frees what no detector still to run reads. Training and evaluation call `prepare`
-and then fit or score. No module outside `detectors/` names a detector: each declares what it
-needs (`Detector.needs`) and the pipeline runs the union of those needs.
+The modules are named for the step (`preparation`, `detection`), the functions for the act, so a
+re-exported function never hides its module. `run.analyze_log` alone composes them for one log;
+`loops` runs a hierarchical profile's further loops; `release` frees what no detector still to run
+reads. Training and evaluation call `prepare` and then fit or score. No module outside `detectors/`
+names a detector: each declares what it needs (`Detector.needs`) and the pipeline runs the union of
+those needs.
 """
 
-from logscan.pipeline.detect import NIS_BLIND, consistency_warnings, detect, rescore
-from logscan.pipeline.prepare import builtin_profile_for, load_profile_for, prepare
+from logscan.pipeline.detection import NIS_BLIND, consistency_warnings, detect, rescore
+from logscan.pipeline.preparation import builtin_profile_for, load_profile_for, prepare
 from logscan.pipeline.release import RELEASABLE
 from logscan.pipeline.run import analyze_log
 from logscan.pipeline.stages import LoadedProfile, Prepared, create_detectors, needs_of

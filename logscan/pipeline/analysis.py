@@ -1,6 +1,6 @@
 """Analysis: the typed results of one analysed log, its verdict, JSON summary and report input.
 
-Built by `logscan.pipeline.detect`; read by the CLI, the report, evaluation and the artifacts. Pure:
+Built by `logscan.pipeline.detection`; read by the CLI, the report, evaluation and the artifacts. Pure:
 no output files and no printing here.
 """
 

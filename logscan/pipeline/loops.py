@@ -2,7 +2,7 @@
 checked like a log of its own: its model, its rate, its inputs and sensors, the shared filters run
 on it once, and its own detectors (from its ``[detectors]`` table, else the registry's defaults).
 
-`logscan.pipeline.prepare` calls `prepare_loops` on the log it read once (the profile's topics
+`logscan.pipeline.preparation` calls `prepare_loops` on the log it read once (the profile's topics
 include every loop's channels) before the samples are released; `detect` runs `detect_loops`
 (handing it itself: this module sits below the pipeline and never imports it) and the recovery
 stage reads the loops' traces (`logscan.recovery`).
@@ -63,7 +63,7 @@ def prepare_loops(primary, log, *, start_s=None, end_s=None, step: Callable[[str
 
 def detect_loops(prepared, *, detect: Callable[..., Any], grace_s: float, progress=None) -> dict:
     """Loop name -> the Analysis of that loop (its detectors on its own run, by ``detect``: the
-    pipeline's per-log detection step, `logscan.pipeline.detect`, which calls this)."""
+    pipeline's per-log detection step, `logscan.pipeline.detection`, which calls this)."""
     return {
         name: detect(loop, loop_detectors(loop.loaded), grace_s=grace_s, progress=progress)
         for name, loop in prepared.loops.items()

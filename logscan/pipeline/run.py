@@ -8,8 +8,8 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from logscan.needs import Needs
-from logscan.pipeline.detect import detect
-from logscan.pipeline.prepare import Progress, filter_free, load_profile_for, prepare, raw_topics_of
+from logscan.pipeline.detection import detect
+from logscan.pipeline.preparation import Progress, filter_free, load_profile_for, prepare, raw_topics_of
 from logscan.pipeline.stages import create_detectors, needs_of
 from logscan.training.calibration import process_noise_scale, uncalibrable_groups
 from logscan.training.tables import apply_tables, read_tables_document, tables_path

@@ -58,7 +58,7 @@ def _f1(labelled: Sequence, alarms_per_log: list[dict], statistics: Sequence[str
 def tune(detectors: Sequence, healthy: Sequence, labelled: Sequence = (), grace_s: float = 1.0) -> dict:
     """{detector: {parameter: {"value", "smallest_without_false_alarms", "false_alarms", "f1"}}} for
     every detector of ``detectors`` that declares multipliers (see the module docstring); the
-    prepared logs come from `logscan.pipeline.prepare`."""
+    prepared logs come from `logscan.pipeline.preparation`."""
     out: dict = {}
     for detector in detectors:
         tunable = dict(getattr(detector, "tunable", {}) or {})

@@ -12,7 +12,7 @@ from logscan.docs import doc_url
 from logscan.errors import ExitCode, LogscanError
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.loops import detect_loops, recover_analysis
-from logscan.pipeline.prepare import Progress
+from logscan.pipeline.preparation import Progress
 from logscan.pipeline.release import pack_innovations_for, reads_samples, release_unread
 from logscan.pipeline.stages import Prepared
 from logscan.results import events_from_truth
