@@ -92,11 +92,11 @@ def test_the_report_json_and_summary_show_the_words_beside_the_name(tmp_path, cl
     assert words and words == signal_label(alarm["signal"], alarm["detector"])
     assert any(alarm["signal"] in line and words in line for line in result.stdout.splitlines())  # stdout
     html = report.read_text(encoding="utf-8")
-    assert f'{alarm["signal"]}<br><span class="label">{words}' in html.replace("&#39;", "'")  # alarm table
+    # the alarm table: one line per alarm, its words the signal cell's tooltip
+    assert f'<td title="{words}">{alarm["signal"]}</td>' in html.replace("&#39;", "'")
     # a statistic's own figure carries its words under the title (the technical name stays in it)
     e_x = signal_label("e_x", "encoded_ekf")
-    titles = [f["figure"]["layout"]["title"] for f in figures(html)]
-    assert {"text": "encoded_ekf: e_x", "subtitle": e_x} in [
-        {"text": t["text"], "subtitle": t.get("subtitle", {}).get("text")} for t in titles
-    ], titles
+    # a section's rows are one figure: each row's title is an annotation, "<b>name</b> words"
+    titles = [a["text"] for f in figures(html) for a in f["figure"]["layout"].get("annotations", [])]
+    assert any(t.startswith("<b>encoded_ekf: e_x</b>") and e_x in t for t in titles), titles
     assert "what its" in html  # the section's list of its statistics in words
