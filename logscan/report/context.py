@@ -186,3 +186,17 @@ def context_tables(context, clock) -> dict:
     its parameters (PX4)."""
     parameters = parameter_rows(getattr(context, "parameters", None), clock)
     return {"log_messages": log_message_rows(context, clock), "parameters": parameters}
+
+
+def message_row(message, clock) -> dict:
+    """One autopilot message as the report's table shows it."""
+    return {
+        "level": message.level,
+        "text": message.text,
+        "time": clock.short(message.first),
+        "last": clock.short(message.last) if message.count > 1 else "",
+        "count": message.count,
+        "incident": "" if message.incident is None else str(message.incident),
+        "start": repr(clock.axis_value(message.first)),  # where a click zooms: the time axis' units
+        "end": repr(clock.axis_value(message.last)),
+    }

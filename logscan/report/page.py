@@ -23,9 +23,18 @@ from logscan.alarms import AlarmInterval
 from logscan.artifacts import Staged, commit, stage, write_atomic
 from logscan.errors import InputError
 from logscan.report import overview
-from logscan.report.context import context_tables, group_rows, info_rows, log_view, model_view, number_text
+from logscan.report.context import (
+    context_tables,
+    group_rows,
+    info_rows,
+    log_view,
+    message_row,
+    model_view,
+    number_text,
+)
 from logscan.report.context_figures import context_figures
 from logscan.report.figures import detector_figures, merge_spans
+from logscan.report.flight_overview import FIGURE_ID, checked_rows, checked_view
 from logscan.report.headline import Headline, headline_figure, headlines
 from logscan.report.margins import Margin, result_margins
 from logscan.report.observability_figures import observability_figures
@@ -374,14 +383,19 @@ def clock_text(clock: Clock) -> str:
     return f"{clock.name}; the analysis' time zero at {clock.at(0.0):.3f} s{dated}"
 
 
-def _headlines(report: ReportInput, t: np.ndarray, truth_spans: list, figures: list) -> tuple[list[Headline], Any]:
-    """Each incident's `Headline`, and the first one's sensor figure (inserted first in ``figures``
-    as "fig-headline"; None when it names no sensor channel)."""
+def _headlines(
+    report: ReportInput, t: np.ndarray, truth_spans: list, figures: list
+) -> tuple[list[Headline], Any, list]:
+    """Each incident's `Headline` and the first one's sensor figure (inserted first in ``figures``
+    as "fig-headline"; None when it names no sensor channel); without incidents, every group
+    against its prediction (`logscan.report.flight_overview`, appended to ``figures``; [] else)."""
     heads = headlines(report.incidents, report.innovations, t, report.model)
     first = headline_figure(heads[0], report.innovations, t, truth_spans) if heads else None
     if first is not None:  # the first screen: the headline's sensor, zoomed to it
         figures.insert(0, ("fig-headline", first))
-    return heads, first
+    checked = [] if report.incidents else checked_rows(report.innovations, t, truth_spans)
+    figures += [(FIGURE_ID, checked)] if checked else []  # the flight when nothing alarmed
+    return heads, first, checked
 
 
 def _verdict_lines(report: ReportInput, heads: Sequence[Headline], margins: Sequence[Margin]) -> list[str]:
@@ -405,12 +419,11 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     margins = result_margins(report.results, t)
     sections, figures = _sections(report, t, truth_spans, margins)
     clock = report.clock
-    heads, first = _headlines(report, t, truth_spans, figures)
+    heads, first, checked = _headlines(report, t, truth_spans, figures)
     context = context_figures(report.context, report.incidents, clock)
     context += observability_figures(report.observability, clock)
     recovered = recovery_figures(report.recovery, clock)
     figure_json = figures_json(figures, t, point_budget, extra=context + recovered, clock=clock)
-
     alarms = flat_alarms(report.results)
     rows = _alarm_rows(report, events, has_truth)
     log = log_view(report.log_facts) | {"clock": clock_text(clock)}
@@ -435,9 +448,10 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         unchecked=[str(u) for u in report.unchecked],
         skipped=[str(u) for u in report.skipped],
         unjudged=str(report.unjudged),
-        messages=[_message_row(m, clock) for m in report.messages[:MAX_SHOWN]],
+        messages=[message_row(m, clock) for m in report.messages[:MAX_SHOWN]],
         messages_hidden=max(len(report.messages) - MAX_SHOWN, 0),
         incidents=_incident_rows(heads, clock),
+        checked_figure=checked_view(checked),
         headline_figure=first and {"id": "fig-headline", "title": first.title, "caption": first.caption},
         rows=rows,
         rows_hidden=max(len(alarms) - len(rows), 0),
@@ -455,20 +469,6 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         report_js=_report_js(),
         grid={"n": int(t.size), "dt": number_text(float(np.median(np.diff(t))) if t.size > 1 else None)},
     )  # fmt: skip
-
-
-def _message_row(message, clock) -> dict:
-    """One autopilot message as the report's table shows it."""
-    return {
-        "level": message.level,
-        "text": message.text,
-        "time": clock.short(message.first),
-        "last": clock.short(message.last) if message.count > 1 else "",
-        "count": message.count,
-        "incident": "" if message.incident is None else str(message.incident),
-        "start": repr(clock.axis_value(message.first)),  # where a click zooms: the time axis' units
-        "end": repr(clock.axis_value(message.last)),
-    }
 
 
 def render_report(report: ReportInput, path: str | os.PathLike, *, plotlyjs: str | os.PathLike = "embed") -> None:

@@ -1,0 +1,36 @@
+"""The flight at a glance: a report without incidents draws every measurement group against its
+prediction (one row per group, on the page's time axis); a report with incidents does not."""
+
+from __future__ import annotations
+
+import re
+
+from test_report import figures, make_report
+from test_sensor_views import hour_innovations
+
+from logscan.report import render_html
+from logscan.results import Incident
+
+
+def _report(incidents: bool):
+    report = make_report(6_000, truth=False, hostile=False)
+    report.innovations = hour_innovations(report.t.size)
+    report.incidents = [Incident(10.0, 11.0, "accel", "accel x", [])] if incidents else []
+    return report
+
+
+def test_a_log_without_incidents_shows_every_group_against_its_prediction():
+    page = render_html(_report(incidents=False))
+    assert re.search(r'<h2 id="checked">What was checked', page)
+    assert '<div class="figure ls-timeseries ls-section" id="fig-checked" data-rows="3"' in page
+    spec = next(s["figure"] for s in figures(page) if s["id"] == "fig-checked")
+    titles = [note["text"] for note in spec["layout"]["annotations"] if "normalised innovation" in note["text"]]
+    assert [title.removeprefix("<b>").split(":")[0] for title in titles] == ["accel", "gyro", "gps"]
+    channels = {trace["name"] for trace in spec["data"]}
+    assert {"/accel/x", "/gyro/y", "/gps/z"} <= channels
+    assert page.index('id="fig-checked"') < page.index("<h2>Alarms</h2>")  # under the verdict
+
+
+def test_a_log_with_incidents_keeps_its_points_for_the_evidence():
+    page = render_html(_report(incidents=True))
+    assert 'id="fig-checked"' not in page and 'id="checked"' not in page
