@@ -1,4 +1,4 @@
-"""Benchmark of the MCAP reader: logscan's read_mcap against plain mcap iter_decoded_messages.
+"""Benchmark of the readers: MCAP, ULog and CSV against mcap, pyulog and pandas, ratios in one run.
 
 Generates (in a temporary directory, deleted afterwards) a JSON MCAP and a ROS 2 MCAP of IMU-like
 messages on several topics with ``logscan.readers.mcap.writer``, then times, in one run:
@@ -7,10 +7,19 @@ messages on several topics with ``logscan.readers.mcap.writer``, then times, in 
  - plain mcap: ``make_reader(f, decoder_factories=[...]).iter_decoded_messages()``, touching
    one field of every decoded message (it builds no arrays, so it does less work than logscan).
 
+Then, best of ``--reps`` each:
+
+ - ULog: ``read_ulog(path, None)`` against pyulog's ``ULog(path)`` (every topic), and
+   ``read_ulog(path, <the PX4 profile's topics>)`` against ``ULog(path, <their message names>)``,
+   summed over the PX4 sample logs of ``../shared/testdata/px4-ulog`` (skipped when absent);
+ - CSV: ``read_csv(path, None)`` against ``pandas.read_csv(path)`` of a generated wide CSV
+   (``--csv`` rows: a time column in seconds and 6 float columns, ``repr`` floats).
+
 Prints messages/s of both and the ratio. Usage:
 
     python bench/bench_readers.py                      # 1,000,000 JSON + 200,000 ROS 2 messages
     python bench/bench_readers.py --json 100000 --ros2 20000   # quick run
+    python bench/bench_readers.py --json 0 --ros2 0    # ULog and CSV only
 """
 
 from __future__ import annotations
@@ -102,15 +111,74 @@ def time_plain_mcap(path: Path) -> tuple[float, int]:
     return time.perf_counter() - start, count
 
 
+_ULOG_DIR = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog"
+
+
+def _best(fn, reps: int) -> float:
+    best = float("inf")
+    for _ in range(reps):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def ulog_rows(reps: int) -> list[tuple[str, str, float, float]]:
+    """(case, size, logscan s, pyulog s) over the PX4 sample logs, best of ``reps`` per file."""
+    from pyulog import ULog
+
+    from logscan.profiles.builtin import PX4_TOPICS
+    from logscan.readers.ulog_reader import message_filter, read_ulog
+
+    files = sorted(_ULOG_DIR.glob("*.ulg"))
+    if not files:
+        print(f"ulog: no sample logs in {_ULOG_DIR}: skipped")
+        return []
+    size = f"{len(files)} files, {sum(f.stat().st_size for f in files) / 1e6:.1f} MB"
+    wanted = set(PX4_TOPICS)
+    names = message_filter(wanted)
+    read_ulog(files[0], None)  # warm-up: imports
+    rows = []
+    for case, ours_wanted, theirs_names in (
+        ("ulog, every topic", None, None),
+        ("ulog, PX4 profile topics", wanted, names),
+    ):
+        ours = sum(_best(lambda f=f, w=ours_wanted: read_ulog(f, w), reps) for f in files)
+        theirs = sum(_best(lambda f=f, n=theirs_names: ULog(str(f), n), reps) for f in files)
+        rows.append((case, size, ours, theirs))
+    return rows
+
+
+def csv_rows(n_rows: int, tmp: str, reps: int) -> list[tuple[str, str, float, float]]:
+    """(case, size, logscan s, pandas s) of a generated wide CSV, best of ``reps``."""
+    import pandas as pd
+
+    from logscan.readers.csv_reader import read_csv
+
+    rng = np.random.default_rng(1)
+    path = Path(tmp) / "bench.csv"
+    columns = {"time_s": np.arange(n_rows) * 0.01}
+    columns.update({f"c{i}": rng.normal(size=n_rows) for i in range(6)})
+    pd.DataFrame(columns).to_csv(path, index=False)
+    read_csv(path, None)  # warm-up
+    ours = _best(lambda: read_csv(path, None), reps)
+    theirs = _best(lambda: pd.read_csv(path), reps)
+    return [("csv", f"{n_rows:,} rows x 7, {path.stat().st_size / 1e6:.0f} MB", ours, theirs)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=int, default=1_000_000, help="messages in the JSON file")
     parser.add_argument("--ros2", type=int, default=200_000, help="messages in the ROS 2 file")
+    parser.add_argument("--csv", type=int, default=1_000_000, help="rows of the CSV file (0: none)")
+    parser.add_argument("--reps", type=int, default=5, help="ULog and CSV: best of this many reads")
     args = parser.parse_args()
     print(f"python {platform.python_version()}, {os.cpu_count()} cpu(s), {platform.machine()}")
     rows = []
     with tempfile.TemporaryDirectory(prefix="logscan-bench-") as tmp:
         for encoding, n in (("json", args.json), ("ros2", args.ros2)):
+            if not n:
+                continue
             path = Path(tmp) / f"bench_{encoding}.mcap"
             start = time.perf_counter()
             write_mcap(path, make_topics(n), encoding=encoding)
@@ -122,6 +190,7 @@ def main() -> None:
             plain, plain_n = time_plain_mcap(path)
             assert ours_n == plain_n == n, (ours_n, plain_n, n)
             rows.append((encoding, n, ours, plain))
+        other = ulog_rows(args.reps) + (csv_rows(args.csv, tmp, args.reps) if args.csv else [])
     print()
     print("| file | messages | logscan read_mcap msg/s | mcap iter_decoded_messages msg/s | ratio |")
     print("|---|---:|---:|---:|---:|")
@@ -130,6 +199,12 @@ def main() -> None:
             f"| {encoding} | {n:,} | {n / ours:,.0f} ({ours:.1f} s) | {n / plain:,.0f} ({plain:.1f} s) "
             f"| {plain / ours:.2f}x |"
         )
+
+    print()
+    print("| reader | input | logscan s | library s | library / logscan |")
+    print("|---|---|---:|---:|---:|")
+    for case, size, ours, theirs in other:
+        print(f"| {case} | {size} | {ours:.3f} | {theirs:.3f} | {theirs / ours:.2f}x |")
 
 
 if __name__ == "__main__":

@@ -3,7 +3,10 @@ duplicated subscriptions and unknown message types, and the read's damage report
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import io
+import mmap
 import os
 import struct
 
@@ -155,27 +158,53 @@ class _ReadWatch(io.RawIOBase):
 
     pyulog stops silently at a cut message; a clean end of file is a 3-byte message-header read
     that returns nothing, anything shorter than asked for is truncation.
+
+    pyulog reads message by message (two reads each), so ``read`` is the reader's hot path: the file
+    is memory-mapped and sliced (no system call or ``tell`` per read), and consecutive reads extend
+    one run of bytes read instead of adding an entry each (``unread`` sees the same union).
     """
 
-    def __init__(self, path: str):
+    def __init__(self, path: str | None, data: bytes = b""):
         super().__init__()
-        self._fh = open(path, "rb")  # noqa: SIM115 - closed by close()
+        self._buf: mmap.mmap | bytes = data
+        if path is not None:
+            with open(path, "rb") as fh:
+                with contextlib.suppress(ValueError):  # an empty file cannot be mapped
+                    self._buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        self._pos = 0
         self.cut_at: int | None = None
-        self.starts: list[int] = []  # one entry per read: pyulog reads message by message
+        self.starts: list[int] = []  # runs of consecutive reads: [starts[i], ends[i]) was read
         self.ends: list[int] = []
+        self._run_start = self._run_end = -1
 
-    def read(self, size: int = -1) -> bytes:
-        pos = self._fh.tell()
-        data = self._fh.read(size)
-        if self.cut_at is None and 0 <= len(data) < size and not (size == 3 and not data):
+    @classmethod
+    def over(cls, data: bytes) -> _ReadWatch:
+        """The watch of reads of ``data`` (in memory)."""
+        return cls(None, data)
+
+    def read(self, size: int | None = -1) -> bytes:
+        pos = self._pos
+        data = self._buf[pos:] if size is None or size < 0 else self._buf[pos : pos + size]
+        n = len(data)
+        if size is not None and n < size and self.cut_at is None and not (size == 3 and not n):
             self.cut_at = pos
-        if data:
-            self.starts.append(pos)
-            self.ends.append(pos + len(data))
+        if n:
+            if pos != self._run_end:
+                self._close_run()
+                self._run_start = pos
+            self._run_end = pos + n
+            self._pos = pos + n
         return data
+
+    def _close_run(self) -> None:
+        if self._run_end > self._run_start:
+            self.starts.append(self._run_start)
+            self.ends.append(self._run_end)
+        self._run_start = self._run_end = -1
 
     def unread(self, size: int) -> tuple[int, int]:
         """(bytes of the file never read, offset of the first of them; -1 when all were read)."""
+        self._close_run()
         if not self.starts:
             return size, 0
         order = np.argsort(self.starts, kind="stable")
@@ -194,13 +223,18 @@ class _ReadWatch(io.RawIOBase):
         return True
 
     def seek(self, offset: int, whence: int = 0) -> int:
-        return self._fh.seek(offset, whence)
+        base = (0, self._pos, len(self._buf))[whence]
+        if base + offset < 0:
+            raise OSError(errno.EINVAL, os.strerror(errno.EINVAL))
+        self._pos = base + offset
+        return self._pos
 
     def tell(self) -> int:
-        return self._fh.tell()
+        return self._pos
 
     def close(self) -> None:
-        self._fh.close()
+        if isinstance(self._buf, mmap.mmap):
+            self._buf.close()
         super().close()
 
 

@@ -64,6 +64,7 @@ from logscan.readers.ulog_damage import (
     _ReadWatch,
     _report_damage,
 )
+from logscan.readers.ulog_framed import parse_clean
 
 _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
@@ -168,6 +169,9 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
 
     chatter = io.StringIO()
     stat_input(path)  # a FIFO or device is refused before it is opened
+    clean = parse_clean(str(path), message_filter(wanted))  # an undamaged file: pyulog skips the data loop
+    if clean is not None:
+        return clean
     try:
         watch = _ReadWatch(str(path))
     except OSError as exc:

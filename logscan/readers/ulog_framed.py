@@ -1,0 +1,274 @@
+"""The ULog read of an undamaged file without pyulog's per-message loop over the data messages.
+
+pyulog reads a ULog message by message in Python (two reads, a header and a payload, and a
+buffer append per data message), also for the topics it then drops. Here a numba kernel frames
+the whole file first (offset, size and type of every message); when the framing is clean, pyulog
+parses a copy of the file without its data ('D') messages (header, definitions, subscriptions,
+parameters, logged text: a few thousand small messages), and each subscription read gets its
+messages' payloads copied into its buffer by a second kernel, as pyulog would have appended them.
+The values that depend on the data messages read so far (the time of each parameter change and
+dropout: the latest data timestamp before it; the log's last timestamp) are set from the same
+timestamps, vectorised.
+
+Clean means: the messages tile the file exactly, every type byte is one the format defines, the
+file has no appended data, each message id is subscribed once and before its first data message,
+every data message of a topic read fits its format and its format has a uint64-sized timestamp
+field inside the stored bytes, and pyulog read the reduced copy without a short read, a skipped byte
+or a corruption flag. Anything else returns None and the caller reads the file the careful way
+(`logscan.readers.ulog_reader`), which counts and reports the damage: the result of both paths is
+the same pyulog object for a clean file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import mmap
+import struct
+
+import numpy as np
+from numba import njit
+
+from logscan.readers.ulog_damage import _bounded_ulog_class, _damage_of, _ReadWatch
+
+_DEFINITIONS = np.frombuffer(b"BFIMPQ", dtype=np.uint8)  # the types pyulog reads in the definitions
+_SECTION_END = np.frombuffer(b"ALC", dtype=np.uint8)
+_DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads in the data section
+_HEADER_BYTES = 16
+_EMPTY = np.empty(0, np.uint8)
+
+
+@njit(cache=True)
+def _frame(buf, start):  # pragma: no cover - numba kernel
+    """(offsets, payload sizes, types) of the messages from ``start``, and where the walk ended
+    (``len(buf)`` when the messages tile the rest of the file; short of it when the last is cut)."""
+    n = buf.size
+    cap = max(16, (n - start) // 16)
+    offsets = np.empty(cap, np.int64)
+    sizes = np.empty(cap, np.int64)
+    types = np.empty(cap, np.uint8)
+    count = 0
+    pos = start
+    while pos + 3 <= n:
+        size = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8)
+        if pos + 3 + size > n:
+            break
+        if count == offsets.size:
+            offsets = np.concatenate((offsets, np.empty(offsets.size, np.int64)))
+            sizes = np.concatenate((sizes, np.empty(sizes.size, np.int64)))
+            types = np.concatenate((types, np.empty(types.size, np.uint8)))
+        offsets[count] = pos
+        sizes[count] = size
+        types[count] = buf[pos + 2]
+        count += 1
+        pos += 3 + size
+    return offsets[:count], sizes[:count], types[:count], pos
+
+
+@njit(cache=True)
+def _gather(buf, starts, width):  # pragma: no cover - numba kernel
+    """``width`` bytes from each of ``starts``, one after the other."""
+    out = np.empty(starts.size * width, np.uint8)
+    for i in range(starts.size):
+        s = starts[i]
+        out[i * width : (i + 1) * width] = buf[s : s + width]
+    return out
+
+
+@njit(cache=True)
+def _compact(buf, head, offsets, sizes):  # pragma: no cover - numba kernel
+    """The first ``head`` bytes of ``buf`` followed by the listed messages (3-byte header + payload)."""
+    total = head
+    for i in range(offsets.size):
+        total += 3 + sizes[i]
+    out = np.empty(total, np.uint8)
+    out[:head] = buf[:head]
+    pos = head
+    for i in range(offsets.size):
+        width = 3 + sizes[i]
+        out[pos : pos + width] = buf[offsets[i] : offsets[i] + width]
+        pos += width
+    return out
+
+
+class _Plan:
+    """The framing of a clean file: the data messages of each message id, and what the parse found."""
+
+    def __init__(self, buf: np.ndarray, offsets: np.ndarray, sizes: np.ndarray, types: np.ndarray) -> None:
+        self.buf = buf
+        data = types == ord("D")
+        self.data_offsets = offsets[data]
+        self.data_sizes = sizes[data]
+        ids = buf[self.data_offsets + 3].astype(np.int64) | (buf[self.data_offsets + 4].astype(np.int64) << 8)
+        order = np.argsort(ids, kind="stable")
+        self.ids, first = np.unique(ids[order], return_index=True)
+        self.groups = np.split(order, first[1:]) if order.size else []
+        self.kept = (offsets[~data], sizes[~data], types[~data])
+        self.read: list[tuple[np.ndarray, np.ndarray]] = []  # (positions, timestamps) of the data read
+        self.failed = False
+
+    def messages_of(self, msg_id: int) -> np.ndarray:
+        """Indices (into the data messages) of ``msg_id``'s data messages, in file order."""
+        at = int(np.searchsorted(self.ids, msg_id))
+        if at < self.ids.size and self.ids[at] == msg_id:
+            return self.groups[at]
+        return np.empty(0, np.int64)
+
+    def fill(self, subscription) -> None:
+        """The subscription's buffer, as pyulog would append it; ``failed`` when a message does not fit."""
+        index = self.messages_of(subscription.msg_id)
+        if not index.size:
+            return
+        width = subscription.dtype.itemsize
+        sizes = self.data_sizes[index] - 2
+        t_off = subscription.timestamp_offset
+        if (
+            sizes.min() < width
+            or sizes.max() > subscription.max_data_size
+            or subscription.timestamp_idx < 0
+            or t_off + 8 > width
+        ):
+            self.failed = True
+            return
+        starts = self.data_offsets[index] + 5
+        subscription.buffer = _gather(self.buf, starts, width)  # np.frombuffer reads it as is
+        stamps = _gather(self.buf, starts + t_off, 8).view("<u8")
+        self.read.append((self.data_offsets[index], stamps))
+
+
+def _clean_plan(buf: np.ndarray) -> _Plan | None:
+    """The plan of a file whose messages tile it with known types, subscribed once before their data."""
+    if buf.size < _HEADER_BYTES:
+        return None
+    offsets, sizes, types = _frame(buf, _HEADER_BYTES)[:3]
+    if offsets.size == 0 or offsets[-1] + 3 + sizes[-1] != buf.size:
+        return None
+    ends = np.flatnonzero(np.isin(types, _SECTION_END))  # the definitions section ends at the first of them
+    split = int(ends[0]) if ends.size else types.size
+    if not (np.isin(types[:split], _DEFINITIONS).all() and np.isin(types[split:], _DATA_SECTION).all()):
+        return None  # types pyulog skips with a search for a sync sequence, or a damaged type byte
+    if (types == ord("B")).any():  # flag bits: may announce appended data, read the careful way
+        flags = offsets[types == ord("B")]
+        if flags.size != 1 or np.any(buf[flags[0] + 3 + 8 : flags[0] + 3 + 40]):  # incompat flags, offsets
+            return None
+    subscribe = offsets[types == ord("A")]
+    sub_ids = buf[subscribe + 4].astype(np.int64) | (buf[subscribe + 5].astype(np.int64) << 8)
+    if np.unique(sub_ids).size != sub_ids.size or (sizes[types == ord("A")] < 3).any():
+        return None
+    plan = _Plan(buf, offsets, sizes, types)
+    if (plan.data_sizes < 2).any():
+        return None
+    first_data = np.array([plan.data_offsets[g[0]] for g in plan.groups], dtype=np.int64)
+    where = np.searchsorted(np.sort(sub_ids), plan.ids)
+    known = (where < sub_ids.size) & (np.sort(sub_ids)[np.minimum(where, sub_ids.size - 1)] == plan.ids)
+    if not known.all():
+        return None
+    sub_at = dict(zip(sub_ids.tolist(), subscribe.tolist(), strict=True))
+    if any(sub_at[i] > f for i, f in zip(plan.ids.tolist(), first_data.tolist(), strict=True)):
+        return None
+    return plan
+
+
+def _framed_ulog_class(plan: _Plan, wanted: set[str] | None):
+    """pyulog's (bounded) ULog whose subscriptions of the topics read fill their buffer from ``plan``."""
+    base = _bounded_ulog_class()
+
+    class FramedULog(base):  # type: ignore[misc, valid-type]
+        class _MessageAddLogged(base._MessageAddLogged):  # type: ignore[name-defined]
+            def __init__(self, data, header, message_formats):
+                super().__init__(data, header, message_formats)
+                if wanted is None or self.message_name in wanted:
+                    plan.fill(self)
+
+    return FramedULog
+
+
+def parse_clean(path: str, names: list[str] | None) -> tuple | None:
+    """(pyulog ULog, clean read watch, chatter) of an undamaged file read without pyulog's data-message
+    loop; None when the file is not clean or cannot be parsed (the caller then reads it the careful
+    way, which says why)."""
+    try:
+        with open(path, "rb") as fh:
+            mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    except (OSError, ValueError):  # unreadable or empty: the careful read says so
+        return None
+    try:
+        return _parse_mapped(np.frombuffer(mapped, dtype=np.uint8), names)
+    finally:
+        with contextlib.suppress(BufferError):  # an array still viewing it keeps the map alive
+            mapped.close()
+
+
+def _parse_mapped(buf: np.ndarray, names: list[str] | None) -> tuple | None:
+    from pyulog.exceptions import ULogException
+
+    plan = _clean_plan(buf)
+    if plan is None:
+        return None
+    kept_offsets, kept_sizes, kept_types = plan.kept
+    reduced = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes).tobytes()
+    ULog = _framed_ulog_class(plan, None if names is None else set(names))
+    watch = _ReadWatch.over(reduced)
+    chatter = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter), watch:
+            ulog = ULog(watch, names, True)
+    except (ULogException, struct.error, ValueError, IndexError, KeyError, OverflowError, TypeError):
+        return None  # the careful read raises the error and its message
+    finally:
+        plan.buf = _EMPTY  # the map can be closed: the buffers are copies
+    damage = _damage_of(ulog)
+    if (
+        plan.failed
+        or watch.cut_at is not None
+        or watch.unread(len(reduced))[0]
+        or ulog.file_corruption
+        or ulog.has_data_appended
+        or damage.unknown_types
+        or damage.dropped_data
+        or damage.replaced
+    ):
+        return None
+    _set_times(ulog, plan, kept_offsets, kept_types)
+    return ulog, _CleanRead(), chatter
+
+
+def _set_times(ulog, plan: _Plan, offsets: np.ndarray, types: np.ndarray) -> None:
+    """The times pyulog gives parameter changes and dropouts (the latest data timestamp read before
+    each, from the header's start timestamp on) and the log's last timestamp."""
+    start = int(ulog.start_timestamp)
+    if plan.read:
+        positions = np.concatenate([p for p, _ in plan.read])
+        order = np.argsort(positions, kind="stable")
+        positions = positions[order]
+        stamps = np.concatenate([s for _, s in plan.read])[order]
+        latest = np.maximum(np.maximum.accumulate(stamps), np.uint64(start))
+    else:
+        positions = np.empty(0, np.int64)
+        latest = np.empty(0, np.uint64)
+
+    def at(position: int) -> int:
+        i = int(np.searchsorted(positions, position))
+        return int(latest[i - 1]) if i else start
+
+    section = np.flatnonzero(np.isin(types, _SECTION_END))
+    first = int(offsets[section[0]]) if section.size else -1
+    in_data = offsets >= first if first >= 0 else np.zeros(offsets.size, bool)
+    changes = offsets[in_data & (types == ord("P"))]
+    if len(changes) != len(ulog._changed_parameters):
+        raise AssertionError("ULog framed read: parameter changes do not match")  # never: same messages
+    ulog._changed_parameters = [
+        (at(int(p)), key, value) for p, (_, key, value) in zip(changes, ulog._changed_parameters, strict=True)
+    ]
+    for p, dropout in zip(offsets[in_data & (types == ord("O"))], ulog._dropouts, strict=True):
+        dropout.timestamp = at(int(p))
+    ulog._last_timestamp = int(latest[-1]) if latest.size else start
+
+
+class _CleanRead:
+    """The read watch of a clean file: every byte read, nothing cut."""
+
+    cut_at = None
+
+    def unread(self, size: int) -> tuple[int, int]:
+        return 0, -1
