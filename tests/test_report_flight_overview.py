@@ -34,3 +34,24 @@ def test_a_log_without_incidents_shows_every_group_against_its_prediction():
 def test_a_log_with_incidents_keeps_its_points_for_the_evidence():
     page = render_html(_report(incidents=True))
     assert 'id="fig-checked"' not in page and 'id="checked"' not in page
+
+
+def test_a_geodetic_position_is_drawn_as_a_map_east_against_north_about_the_first_fix():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from logscan.models import get_model
+    from logscan.report.run_context import path_of
+
+    n = 500
+    t = np.arange(n) * 0.1
+    ned = np.column_stack([10 * np.sin(t / 10), 30 * np.cos(t / 10) - 30, np.full(n, -5.0)])  # north, east, down
+    group = SimpleNamespace(z=ned, fresh=np.ones(n, bool), origin=(47.0, 8.0, 400.0),
+                            channels=["/vehicle_gps_position_0/lat", "/vehicle_gps_position_0/lon",
+                                      "/vehicle_gps_position_0/alt"])  # fmt: skip
+    run = SimpleNamespace(t=t, groups={"gnss_position": group})
+    path = path_of(run, get_model("ins", {}))
+    assert path is not None and path.group == "gnss_position"
+    assert path.channels == ("east (m from the first fix)", "north (m from the first fix)")
+    assert np.allclose(path.x, ned[:, 1]) and np.allclose(path.y, ned[:, 0])  # east across, north up

@@ -4,7 +4,8 @@ The aligned run's arrays are freed once the detectors have run (`logscan.pipelin
 what the report shows beside the statistics is extracted right after alignment, decimated:
 
 - the path: the measurement group the model maps directly onto its states named ``x`` and ``y``
-  (a position sensor), its samples where the group had a new one, at most ``MAX_PATH_POINTS``
+  (a position sensor), or ``east`` and ``north`` (a GNSS group converted to metres about its first
+  fix: a map without tiles), its samples where the group had a new one, at most ``MAX_PATH_POINTS``
   (half evenly in time, half the min/max per bucket of x and of y, so an excursion of one sample
   stays visible);
 - the mode: the profile's ``[mode]`` channel as intervals of one value (``MAX_MODE_INTERVALS`` at
@@ -30,7 +31,9 @@ from logscan.report.parameters import ParameterFacts, parameter_facts
 MAX_PATH_POINTS = 1_000
 MAX_MODE_INTERVALS = 200
 MAX_MODE_POINTS = 1_000
-POSITION_STATES = ("x", "y")
+# model states a path is drawn from, horizontal axis first: a model's own x-y plane, or the local
+# north-east frame (an INS model; a geodetic group converted about its origin) drawn as a map
+POSITION_PAIRS = (("x", "y"), ("east", "north"))
 MAX_STATE_INTERVALS = 200
 MAX_LOG_MESSAGES = 500
 # every level a ULog message can have (pyulog's MessageLogging.log_level_str), most severe first
@@ -109,19 +112,29 @@ def autopilot_states(channels: dict, start_ns: int, end_s: float) -> dict[str, l
     return out
 
 
-def position_columns(run, model) -> tuple[str, int, int] | None:
-    """(group, column of x, column of y): the first aligned group the model maps directly onto
-    its states ``x`` and ``y``; None when none does."""
+def position_columns(run, model) -> tuple[str, int, int, tuple[str, str]] | None:
+    """(group, column of the horizontal axis, column of the vertical one, their states): the first
+    aligned group the model maps directly onto a pair of `POSITION_PAIRS`; None when none does."""
     states = list(getattr(model, "state_names", ()))
-    if not all(name in states for name in POSITION_STATES):
-        return None
-    wanted = [states.index(name) for name in POSITION_STATES]
-    for name, group in run.groups.items():
-        spec = getattr(model, "groups", {}).get(name)
-        direct = list(getattr(spec, "direct_states", ()) or ())
-        if all(i in direct for i in wanted) and group.z.ndim == 2 and group.z.shape[1] == len(direct):
-            return name, direct.index(wanted[0]), direct.index(wanted[1])
+    for pair in POSITION_PAIRS:
+        if not all(name in states for name in pair):
+            continue
+        wanted = [states.index(name) for name in pair]
+        for name, group in run.groups.items():
+            spec = getattr(model, "groups", {}).get(name)
+            direct = list(getattr(spec, "direct_states", ()) or ())
+            if all(i in direct for i in wanted) and group.z.ndim == 2 and group.z.shape[1] == len(direct):
+                return name, direct.index(wanted[0]), direct.index(wanted[1]), pair
     return None
+
+
+def _axis_names(group, cx: int, cy: int, pair: tuple[str, str]) -> tuple[str, str]:
+    """The path's axis titles: the channels of a group drawn as logged (x, y), the local frame's
+    axes of a geodetic group (its channels are degrees; its values metres about its origin)."""
+    if pair == ("x", "y"):
+        return group.channels[cx], group.channels[cy]
+    about = "the first fix" if getattr(group, "origin", None) is not None else "the origin"
+    return f"{pair[0]} (m from {about})", f"{pair[1]} (m from {about})"
 
 
 def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
@@ -129,7 +142,7 @@ def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
     found = position_columns(run, model)
     if found is None:
         return None
-    name, cx, cy = found
+    name, cx, cy, pair = found
     group = run.groups[name]
     x, y = group.z[:, cx], group.z[:, cy]
     idx = np.flatnonzero(np.asarray(group.fresh, dtype=bool) & np.isfinite(x) & np.isfinite(y))
@@ -141,7 +154,7 @@ def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
         quarter = max(max_points // 4, 16)
         extremes = np.union1d(decimate_indices(x[idx], quarter), decimate_indices(y[idx], quarter))
         idx = idx[np.union1d(even, extremes)]
-    return Path2D(run.t[idx].copy(), x[idx].copy(), y[idx].copy(), (group.channels[cx], group.channels[cy]), name)
+    return Path2D(run.t[idx].copy(), x[idx].copy(), y[idx].copy(), _axis_names(group, cx, cy, pair), name)
 
 
 def _runs(value: np.ndarray) -> np.ndarray:
