@@ -19,7 +19,9 @@ Variance check e_v, with its own mu +- rho_v s band:
 On-board state check e_s (when the log carries the vehicle's estimate): e_s(k) = CV_k (x_onboard_k -
 x_post_k), the shadow filter checking the estimator's state computation, with a mu +- rho_s s band.
 Baseline (the paper's reference [15]): constant CV_0 and a fixed threshold max|e_x| on healthy
-training runs times a margin; selected with variant = "baseline", trained by `fit`.
+training runs times a margin; selected with variant = "baseline", trained by `fit`. With
+rejected_checks = false the rejected.<group> statistics are left out (the baseline as the paper
+compares it, without a range check; the filter still refuses the samples).
 
 Coverage (stated in the result): e_x weighs each state by 1/sigma, so accelerometer biases and slow
 drifts barely move it; bias coverage comes from the NIS detector on the same trace.
@@ -100,6 +102,9 @@ class EncodedEkfDetector(Detector):
         "rel_floor_v": 0.02,  # e_v spread floor, as a fraction of the check variance CV P CV^T
         "onboard_state_check": True,  # e_s: the logged on-board state against the shadow filter
         "rho_s": 8.0,
+        # the rejected.<group> statistics; false for the paper's baseline of reference [15], which
+        # has no range check (its Table III: constant CV and threshold alone)
+        "rejected_checks": True,
     }
 
     # `logscan train --tune`: each band factor decides the alarms of its own check alone
@@ -122,6 +127,7 @@ class EncodedEkfDetector(Detector):
         "rel_floor_v": [Interval(float, 0, None)],
         "onboard_state_check": [Boolean()],
         "rho_s": [BAND],
+        "rejected_checks": [Boolean()],
     }
 
     @classmethod
@@ -205,7 +211,8 @@ class EncodedEkfDetector(Detector):
         result.info["coverage"] = COVERAGE_NOTE
         result.info["variant"] = self.variant
         result.info["rejected_samples"] = int(trace.rejected.sum())
-        self._rejected_checks(result, run, trace)
+        if self.rejected_checks:
+            self._rejected_checks(result, run, trace)
         if self.variant == "baseline":
             limit = self.threshold if self.threshold is not None else getattr(self, "threshold_", None)
             if limit is None:

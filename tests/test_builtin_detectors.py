@@ -76,6 +76,26 @@ def test_bit_flips_rejected_by_the_filter_raise_an_alarm_naming_the_sensor():
     assert "rejected.accel" in signals
 
 
+@pytest.mark.parametrize("variant", ["adaptive", "baseline"])
+def test_rejected_checks_false_leaves_out_the_range_check_alarms_only(variant):
+    run, trace, model, log = pipeline("quad_imu_bitflip.mcap")
+    params = {"variant": variant, "threshold": 1.684} if variant == "baseline" else {}
+    full = EncodedEkfDetector(**params).run(run, trace, model=model)
+    bare = EncodedEkfDetector(rejected_checks=False, **params).run(run, trace, model=model)
+    assert any(a.signal.startswith("rejected.") for a in full.alarms)
+    assert not any(s.startswith("rejected.") for s in bare.series)
+    kept = [(a.signal, a.start) for a in full.alarms if not a.signal.startswith("rejected.")]
+    assert [(a.signal, a.start) for a in bare.alarms] == kept
+    assert bare.info["rejected_samples"] == full.info["rejected_samples"] > 0
+
+
+def test_rejected_checks_must_be_a_boolean():
+    from logscan.errors import ProfileError
+
+    with pytest.raises(ProfileError):
+        EncodedEkfDetector(rejected_checks="no").check_params()
+
+
 def test_covariance_corruption_is_caught_by_the_onboard_variance_check():
     run, trace, model, log = pipeline("quad_cov_corruption.mcap")
     result = EncodedEkfDetector().run(run, trace, model=model)
