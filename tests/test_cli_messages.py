@@ -15,6 +15,7 @@ DETECTORS = "encoded_ekf, nis, cusum, frozen, atfm, atfm_residual, chi2, kgn, px
 PROFILES_DOC = "https://github.com/logscan/logscan/blob/main/docs/profiles.md"
 FAULTS = (
     "bias, drift, random, bitflip, stuck, actuator-offset, lost-actuator, cov-corruption, state-corruption, "
+    "control-fault, control-stuck, "
     "imu-bias, imu-drift, imu-random, imu-bitflip, imu-stuck, motor-offset, lost-motor, roll-bias, rotor-loss"
 )
 

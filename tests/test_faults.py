@@ -7,6 +7,7 @@ import pytest
 
 from logscan.errors import UsageError
 from logscan.simulate import parse_fault, simulate
+from logscan.simulate.controllers import control
 from logscan.simulate.faults import ALL_NAMES, FaultSpec
 from logscan.simulate.runner import _bitflip
 
@@ -149,6 +150,51 @@ def test_actuator_offset_and_lost_actuator_change_delivered_not_commanded_thrust
         inside = _window(sim, START, end)
         np.testing.assert_allclose(motors_act[inside, 1], expected * motors_cmd[inside, 1], atol=1e-9)
         np.testing.assert_allclose(motors_act[~inside], motors_cmd[~inside], atol=1e-9)
+
+
+def _controller_outputs(sim) -> np.ndarray:
+    """(N, inputs) the fault-free controller's output at every step, replayed on the run's own
+    logged estimates (the controller reads the posterior of the step before)."""
+    sc = sim.scenario
+    cs, u = sc.ctrl_state.astype(np.float64).copy(), np.zeros(sim.u_cmd.shape[1])
+    out = np.empty_like(sim.u_cmd)
+    for k in range(sim.n_steps):
+        xh = sc.x0.astype(np.float64) if k == 0 else sim.x_hat[k - 1]
+        control(sc.ctrl_id, sc.ctrl_params.astype(np.float64), cs, sc.reference[k], xh, sc.dt, u)
+        out[k] = u
+    return out
+
+
+@pytest.mark.parametrize("fault", [f"control-fault:tau_x:{START}:{END}:0.5", f"control-stuck:tau_x:{START}:{END}:"])
+def test_a_control_fault_changes_the_controller_output_during_its_window_only(healthy, fault):
+    sim = _run(fault)
+    k0 = int(round(START / sim.dt))
+    np.testing.assert_array_equal(sim.u_cmd[:k0], healthy.u_cmd[:k0])
+    intended = _controller_outputs(sim)
+    inside = _window(sim)
+    expected = intended.copy()
+    expected[inside, 1] = 1.5 * intended[inside, 1] if fault.startswith("control-fault") else intended[k0 - 1, 1]
+    # the vehicle logs and flies the faulty output (no actuator limit reached here)
+    np.testing.assert_allclose(sim.u_cmd, expected, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(sim.u_act, sim.u_cmd, rtol=1e-9, atol=1e-9)
+    assert (
+        np.abs(expected[inside, 1] - intended[inside, 1]).max() > 1e-3
+    )  # the fault did act (torques near hover are small)
+    event = sim.truth()["events"][0]
+    assert (event["target"], event["channels"]) == ("tau_x", ["/cmd/tau.x"])
+
+
+@pytest.mark.parametrize(
+    "model, fault, words",
+    [
+        ("quadcopter", "control-fault:yaw", "unknown controller output"),
+        ("ins", "control-stuck", "closed-loop controller"),
+    ],
+)
+def test_a_control_fault_needs_a_controller_output(model, fault, words):
+    with pytest.raises(UsageError) as info:
+        simulate(model, [parse_fault(fault)], duration=DURATION, seed=1)
+    assert words in info.value.one_line()
 
 
 def test_cov_corruption_scales_only_the_logged_variance(healthy):

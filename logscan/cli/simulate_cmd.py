@@ -12,7 +12,9 @@ from logscan.errors import UsageError, did_you_mean
 _FAULT_HELP = (
     "Inject a fault (repeatable). KIND or KIND:TARGET:START:END:MAGNITUDE (empty fields take "
     "defaults). Kinds: bias, drift, random, bitflip, stuck, actuator-offset, lost-actuator, "
-    "cov-corruption, state-corruption; aliases imu-bias (1.0 m/s^2 on accel.x), imu-drift, "
+    "cov-corruption, state-corruption, control-fault (the controller's output TARGET, its first "
+    "input by default, x (1 + MAGNITUDE), +0.5 for 2 s), control-stuck (held at its value before "
+    "START); aliases imu-bias (1.0 m/s^2 on accel.x), imu-drift, "
     "imu-random, imu-bitflip (1.2 s burst), imu-stuck, motor-offset (-10 % thrust on motor1), "
     "lost-motor; the UBIKF paper's scenarios (hover_uav; samples k counted from 5 s, the start of "
     "its attitude excitation): roll-bias (0.1 rad on attitude.roll for k in [30, 70]), rotor-loss "

@@ -14,6 +14,13 @@ A fault is (kind, target, start, end, magnitude), times in seconds since the log
     cov-corruption   on-board state    LOGGED variance *= m          (100; "all" states)
     state-corruption on-board state    estimator state += m, once at start (the controller
                                        then flies on the corrupted estimate)
+    control-fault    controller output u_j *= 1 + m                 (a wrong gain; +0.5 on the
+                     (model input)                                   first input, 2 s)
+    control-stuck    controller output u_j = its value at the step before start (m unused; 2 s)
+
+The control kinds are the encoded-EKF paper's control-program fault (Tables I-IV): the controller
+computes a wrong output, and the vehicle logs and flies that output (the logged command is the
+faulty one; the actuator limits still apply).
 
 Aliases: imu-bias = bias on the accelerometer x channel (Kalman-gain-norm paper: +1 m/s^2),
 imu-bitflip = a 1.2 s burst of bit flips in one IMU channel (encoded-EKF paper), imu-drift,
@@ -35,7 +42,7 @@ from logscan.errors import UsageError, did_you_mean
 from logscan.results import FaultEvent
 
 # Kernel codes (the closed-loop kernel switches on these).
-BIAS, DRIFT, RANDOM, BITFLIP, STUCK, ACT_OFFSET, LOST_ACT, COV_CORRUPT, STATE_CORRUPT = range(9)
+BIAS, DRIFT, RANDOM, BITFLIP, STUCK, ACT_OFFSET, LOST_ACT, COV_CORRUPT, STATE_CORRUPT, CTRL_GAIN, CTRL_STUCK = range(11)
 
 KIND_CODES = {
     "bias": BIAS,
@@ -47,10 +54,13 @@ KIND_CODES = {
     "lost-actuator": LOST_ACT,
     "cov-corruption": COV_CORRUPT,
     "state-corruption": STATE_CORRUPT,
+    "control-fault": CTRL_GAIN,
+    "control-stuck": CTRL_STUCK,
 }
 SENSOR_KINDS = frozenset({"bias", "drift", "random", "bitflip", "stuck"})
 ACTUATOR_KINDS = frozenset({"actuator-offset", "lost-actuator"})
 ESTIMATOR_KINDS = frozenset({"cov-corruption", "state-corruption"})
+CONTROL_KINDS = frozenset({"control-fault", "control-stuck"})
 
 # alias -> (kind, fixed default target or None, default magnitude, default duration s)
 ALIASES = {
@@ -80,6 +90,8 @@ KIND_DEFAULTS = {
     "lost-actuator": (0.0, 5.0),
     "cov-corruption": (100.0, 1.0),
     "state-corruption": (1.0, 1.0),
+    "control-fault": (0.5, 2.0),
+    "control-stuck": (0.0, 2.0),
 }
 ALL_NAMES = tuple(KIND_CODES) + tuple(ALIASES)
 BITFLIP_LOWEST_BIT = 24  # bits 24..30 are the high-order exponent bits, 31 the sign
@@ -160,13 +172,16 @@ def resolve_faults(
     estimator_fields: dict[str, str],
     rng: np.random.Generator,
     sensor_aliases: dict[str, str] | None = None,
+    inputs: tuple[tuple[str, str], ...] = (),
 ) -> tuple[list[FaultEvent], FaultTable]:
     """Turn user specs into ground-truth events and the kernel's fault table.
 
     ``sensor_channels``: (target name like "accel.x", log channel) per measured value, in kernel
     order; ``imu_default``: the target of imu-* aliases; ``actuators``: actuator target names in
     kernel order; ``estimator_fields``: state name -> logged field prefix (for the truth's channels);
-    ``sensor_aliases``: other names of sensor targets -> target name (gps -> gps_speed).
+    ``sensor_aliases``: other names of sensor targets -> target name (gps -> gps_speed);
+    ``inputs``: (model input name, logged command channel) per controller output, in kernel order
+    (none: the simulation has no controller to corrupt).
     """
     n_steps = int(round(duration / dt)) + 1
     events: list[FaultEvent] = []
@@ -187,6 +202,8 @@ def resolve_faults(
                 )
             index = actuators.index(target)
             channels = ()
+        elif kind in CONTROL_KINDS:
+            target, index, channels = _control_target(spec, target, list(inputs))
         else:
             target, index, channels = _estimator_target(spec, kind, target, state_names, estimator_fields)
         first = int(math.ceil(start / dt - 1e-9))
@@ -222,6 +239,25 @@ def _when_and_how_much(spec: FaultSpec, duration: float, dt: float) -> tuple[str
     if not math.isfinite(magnitude):
         raise UsageError(f"fault {spec.kind}: magnitude must be finite, got {magnitude}")
     return kind, target, start, end, magnitude
+
+
+def _control_target(
+    spec: FaultSpec, target: str | None, inputs: list[tuple[str, str]]
+) -> tuple[str, int, tuple[str, ...]]:
+    """(target, controller output index, the logged command channel) of a control fault."""
+    if not inputs:
+        raise UsageError(
+            f"fault {spec.kind} needs a closed-loop controller, which this simulation does not have",
+            hint="simulate quadcopter, steer_by_wire, dc_motor or hover_uav",
+        )
+    names = [name for name, _ in inputs]
+    target = target or names[0]
+    if target not in names:
+        raise UsageError(
+            f"fault {spec.kind}: unknown controller output {target!r}", hint="choose one of " + ", ".join(names)
+        )
+    index = names.index(target)
+    return target, index, (inputs[index][1],)
 
 
 def _estimator_target(

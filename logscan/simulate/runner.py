@@ -2,6 +2,7 @@
 
 One step k (period dt, x_k = f(x_{k-1}, u_k) + w_k as the models define it):
   1. controller: u_k from the on-board posterior estimate of step k-1 (never the true state);
+     control faults act on u_k (the vehicle logs and flies the faulty output);
      actuators: a = M^-1 u clipped to the actuators' limits, u_cmd = M a (logged command);
   2. actuator faults act on a (on the actuator's total a_trim + a when the inputs are deviations
      from an operating point a_trim, the hover_uav's rotor thrusts; zero otherwise); the truth is
@@ -33,6 +34,8 @@ from logscan.simulate.faults import (
     ACT_OFFSET,
     BIAS,
     BITFLIP,
+    CTRL_GAIN,
+    CTRL_STUCK,
     DRIFT,
     LOST_ACT,
     RANDOM,
@@ -70,6 +73,23 @@ def _sensor_faults(k, c, z, dt, f_kind, f_target, f_start, f_end, f_mag, f_unif,
         elif kind == STUCK:
             z = stuck[i]
     return z
+
+
+@njit(cache=True)
+def _control_faults(k, u, u_last, f_kind, f_target, f_start, f_end, f_mag, held):
+    """Apply the control faults active at step ``k`` to the controller's output ``u`` (in place),
+    then remember it in ``u_last``: a control-stuck fault holds the output of the step before its
+    start."""
+    for i in range(f_kind.size):
+        if f_kind[i] == CTRL_STUCK and k == f_start[i]:
+            held[i] = u_last[f_target[i]]
+        if k < f_start[i] or k >= f_end[i]:
+            continue
+        if f_kind[i] == CTRL_GAIN:
+            u[f_target[i]] *= 1.0 + f_mag[i]
+        elif f_kind[i] == CTRL_STUCK:
+            u[f_target[i]] = held[i]
+    u_last[:] = u
 
 
 @njit(cache=True)
@@ -128,6 +148,8 @@ def closed_loop(
     z_all = np.full((N, n_meas), np.nan)
     last_z = np.zeros(n_meas)
     stuck = np.zeros(f_kind.size)
+    held = np.zeros(f_kind.size)  # control-stuck: the output held
+    u_last = np.zeros(M.shape[0])  # the controller's output of the previous step (after its faults)
     rejected = 0
     y_s = np.empty(n_meas)
     R_s = np.empty(n_meas)
@@ -139,6 +161,7 @@ def closed_loop(
     for k in range(N):
         # 1. controller on the estimate (or on the true state: Scenario.control_on_truth), actuator limits
         control(ctrl_id, cp, cs, ref[k], x if control_on_truth else xh, dt, u)
+        _control_faults(k, u, u_last, f_kind, f_target, f_start, f_end, f_mag, held)
         a = M_inv @ u
         for j in range(a.size):
             a[j] = min(max(a[j], a_lo[j]), a_hi[j])

@@ -331,6 +331,7 @@ def _resolve(
         imu_default=sc.imu_default,
         sensor_aliases=sensor_aliases(sc),
         actuators=sc.actuators,
+        inputs=tuple(zip(sc.model.input_names, sc.input_channels)),
         state_names=sc.model.state_names,
         estimator_fields={s: f"/ekf/variance/{s}" for s in sc.model.state_names},
         rng=np.random.default_rng([seed, 2]),
