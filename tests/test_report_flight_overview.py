@@ -55,3 +55,28 @@ def test_a_geodetic_position_is_drawn_as_a_map_east_against_north_about_the_firs
     assert path is not None and path.group == "gnss_position"
     assert path.channels == ("east (m from the first fix)", "north (m from the first fix)")
     assert np.allclose(path.x, ned[:, 1]) and np.allclose(path.y, ned[:, 0])  # east across, north up
+
+
+def test_the_path_is_the_filters_estimate_over_the_measured_fixes():
+    import json
+
+    import numpy as np
+    from test_report import array
+
+    from logscan.report.context_figures import path_figure
+    from logscan.report.run_context import Path2D, estimated_path
+
+    n = 3_000
+    t = np.arange(n) * 0.01
+    innovations = hour_innovations(n)
+    fixes = Path2D(t[::10], np.zeros(n // 10), np.ones(n // 10), ("/gps/x", "/gps/y"), "gps", (0, 1))
+    estimate = estimated_path(fixes, innovations, t)
+    view = innovations.view("gps")
+    steps = np.flatnonzero(np.isfinite(view.predicted[:, 0]))  # the 10 Hz updates
+    assert np.array_equal(estimate.t, t[steps]) and np.allclose(estimate.x, view.predicted[steps, 0])
+    assert np.allclose(estimate.y, view.predicted[steps, 1])
+    figure = json.loads(path_figure(fixes, [], None, estimate)["json"])
+    by_name = {trace["name"]: trace for trace in figure["data"]}
+    assert np.allclose(array(by_name["the filter's estimate"]["x"]), estimate.x, atol=1e-5)
+    assert array(by_name["fixes (measured)"]["y"]).tolist() == [1.0] * (n // 10)
+    assert estimated_path(fixes, None, t) is None and estimated_path(None, innovations, t) is None

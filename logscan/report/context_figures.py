@@ -10,6 +10,7 @@ import numpy as np
 from logscan.report.context import message_text
 from logscan.report.flight_modes import has_names, mode_name
 from logscan.report.plotly_json import TIME_AXIS, plot_text, spec_json
+from logscan.report.run_context import estimated_path
 from logscan.results import Incident
 from logscan.timebase.clock import Clock
 
@@ -188,15 +189,31 @@ def _incident_traces(path, incidents: Sequence[Incident], clock: Clock) -> list[
     ]  # fmt: skip
 
 
-def path_figure(path, incidents: Sequence[Incident], clock: Clock | None = None) -> dict:
-    """The 2-D path (equal axes), its start and end, and the incidents on it; times in ``clock``."""
+def _fixes_trace(fixes, when: str, clock: Clock) -> dict:
+    """The measured fixes as small dots under the filter's estimate."""
+    return {
+        "type": "scatter", "name": "fixes (measured)", "x": fixes.x.astype(np.float32), "y": fixes.y.astype(np.float32),
+        "customdata": clock.axis_values(fixes.t), "mode": "markers", "opacity": 0.6,
+        "marker": {"size": 3, "color": "#9a9a9a"},
+        "hovertemplate": f"fix (%{{x:.2f}}, %{{y:.2f}}) at {when}<extra></extra>",
+    }  # fmt: skip
+
+
+def path_figure(path, incidents: Sequence[Incident], clock: Clock | None = None, estimate=None) -> dict:
+    """The 2-D path (equal axes), its start and end, and the incidents on it; times in ``clock``.
+    With the filter's ``estimate`` of it (`logscan.report.run_context.estimated_path`) the estimate
+    is the line and the measured fixes are dots beneath."""
     clock = clock or Clock()
+    fixes, path = (path, estimate) if estimate is not None else (None, path)
     x_name, y_name = plot_text(path.channels[0]), plot_text(path.channels[1])
     # the hover's time: clock seconds, or the UTC time of day (customdata in epoch ms on a UTC clock)
     when = "%{customdata|%H:%M:%S.%L} UTC" if clock.utc else "%{customdata:.1f} s"
     data = [
-        {"type": "scatter", "name": "path", "x": path.x.astype(np.float32), "y": path.y.astype(np.float32),
-         "customdata": clock.axis_values(path.t), "mode": "lines", "line": {"color": "#7f7f7f", "width": 1},
+        *([_fixes_trace(fixes, when, clock)] if fixes is not None else []),
+        {"type": "scatter", "name": "the filter's estimate" if fixes is not None else "path",
+         "x": path.x.astype(np.float32), "y": path.y.astype(np.float32),
+         "customdata": clock.axis_values(path.t), "mode": "lines",
+         "line": {"color": "#1f77b4" if fixes is not None else "#7f7f7f", "width": 1.5 if fixes is not None else 1},
          "hovertemplate": f"(%{{x:.2f}}, %{{y:.2f}}) at {when}<extra></extra>"},
         {"type": "scatter", "name": "start / end", "x": [float(path.x[0]), float(path.x[-1])],
          "y": [float(path.y[0]), float(path.y[-1])], "mode": "markers", "hoverinfo": "text",
@@ -214,7 +231,12 @@ def path_figure(path, incidents: Sequence[Incident], clock: Clock | None = None)
     }
     caption = (
         f"Where the vehicle was: {path.channels[0]} against {path.channels[1]} (equal scales). "
-        "Red: the path during an incident, x where it began (numbered as in the incident table; "
+        + (
+            "Blue: the filter's estimate (its prediction at each update), grey dots: the measured fixes. "
+            if fixes is not None
+            else ""
+        )
+        + "Red: the path during an incident, x where it began (numbered as in the incident table; "
         "click one to zoom the time axis to it)."
     )
     spec = {"id": "ctx-path", "title": f"path: {path.group}", "caption": caption, "timeseries": False,
@@ -278,9 +300,12 @@ def states_figure(states: dict, t_span: tuple[float, float] | None = None, clock
     return _spec(_time_row_spec("ctx-states", "autopilot state", caption), data, layout, clock)
 
 
-def context_figures(context, incidents: Sequence[Incident], clock: Clock | None = None) -> list[dict]:
+def context_figures(
+    context, incidents: Sequence[Incident], clock: Clock | None = None, innovations=None, t: np.ndarray | None = None
+) -> list[dict]:
     """``{"id", "title", "caption", "timeseries", "height", "json", "points"}`` per context figure: the mode
-    when the profile has a mode channel, the path when a group measures position. [] for None.
+    when the profile has a mode channel, the path when a group measures position (the filter's
+    estimate of it from ``innovations`` on the grid ``t``, when given). [] for None.
     Times in ``clock`` (None: seconds since the log's start)."""
     if context is None:
         return []
@@ -293,5 +318,6 @@ def context_figures(context, incidents: Sequence[Incident], clock: Clock | None 
     if getattr(context, "messages", None):
         figures.append(messages_figure(context.messages, getattr(context, "t_span", None), clock))
     if context.path is not None:
-        figures.append(path_figure(context.path, incidents, clock))
+        estimate = estimated_path(context.path, innovations, t) if t is not None else None
+        figures.append(path_figure(context.path, incidents, clock, estimate))
     return figures

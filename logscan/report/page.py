@@ -420,7 +420,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
     sections, figures = _sections(report, t, truth_spans, margins)
     clock = report.clock
     heads, first, checked = _headlines(report, t, truth_spans, figures)
-    context = context_figures(report.context, report.incidents, clock)
+    context = context_figures(report.context, report.incidents, clock, report.innovations, t)
     context += observability_figures(report.observability, clock)
     recovered = recovery_figures(report.recovery, clock)
     figure_json = figures_json(figures, t, point_budget, extra=context + recovered, clock=clock)

@@ -54,6 +54,7 @@ class Path2D:
     y: np.ndarray
     channels: tuple[str, str]
     group: str
+    columns: tuple[int, int] = (0, 1)  # the group's columns drawn across and up
 
 
 @dataclass
@@ -137,6 +138,17 @@ def _axis_names(group, cx: int, cy: int, pair: tuple[str, str]) -> tuple[str, st
     return f"{pair[0]} (m from {about})", f"{pair[1]} (m from {about})"
 
 
+def _path_indices(x: np.ndarray, y: np.ndarray, idx: np.ndarray, max_points: int) -> np.ndarray:
+    """``idx`` (the steps with a position) cut to about ``max_points``: half evenly in time (the
+    shape), a quarter each on x's and y's extremes."""
+    if idx.size <= max_points:
+        return idx
+    even = np.linspace(0, idx.size - 1, max_points // 2).round().astype(np.int64)
+    quarter = max(max_points // 4, 16)
+    extremes = np.union1d(decimate_indices(x[idx], quarter), decimate_indices(y[idx], quarter))
+    return idx[np.union1d(even, extremes)]
+
+
 def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
     """The decimated 2-D path of the position group, or None (no such group, < 2 samples)."""
     found = position_columns(run, model)
@@ -148,13 +160,25 @@ def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
     idx = np.flatnonzero(np.asarray(group.fresh, dtype=bool) & np.isfinite(x) & np.isfinite(y))
     if idx.size < 2:
         return None
-    if idx.size > max_points:
-        # half the points evenly in time (the shape), a quarter each on x's and y's extremes
-        even = np.linspace(0, idx.size - 1, max_points // 2).round().astype(np.int64)
-        quarter = max(max_points // 4, 16)
-        extremes = np.union1d(decimate_indices(x[idx], quarter), decimate_indices(y[idx], quarter))
-        idx = idx[np.union1d(even, extremes)]
-    return Path2D(run.t[idx].copy(), x[idx].copy(), y[idx].copy(), _axis_names(group, cx, cy, pair), name)
+    idx = _path_indices(x, y, idx, max_points)
+    names = _axis_names(group, cx, cy, pair)
+    return Path2D(run.t[idx].copy(), x[idx].copy(), y[idx].copy(), names, name, (cx, cy))
+
+
+def estimated_path(path: Path2D | None, innovations, t: np.ndarray, max_points: int = MAX_PATH_POINTS):
+    """The filter's estimate of ``path``'s group: its prediction h(x_prior) at each update
+    (`logscan.report.sensor_views.Innovations`), smooth where the fixes jump, decimated as the
+    fixes are; None without the group's innovations."""
+    view = innovations.view(path.group) if path is not None and innovations is not None else None
+    if view is None:
+        return None
+    cx, cy = path.columns
+    x, y = view.predicted[:, cx].astype(np.float64), view.predicted[:, cy].astype(np.float64)
+    idx = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    if idx.size < 2:
+        return None
+    idx = _path_indices(x, y, idx, max_points)
+    return Path2D(t[idx].copy(), x[idx], y[idx], path.channels, path.group, path.columns)
 
 
 def _runs(value: np.ndarray) -> np.ndarray:
