@@ -22,6 +22,7 @@ chapter II). Per `[redundant.<group>]` of the profile:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -141,14 +142,14 @@ def table_rows(detector: str, modes: np.ndarray, row, margin: float, commanded: 
 
 
 # The lookup-table parameters of every transient-fault-model detector (atfm, atfm_residual)
-TABLE_DEFAULTS = {
+TABLE_DEFAULTS: dict[str, Any] = {
     "window": 100,  # w, the detection window
     "windows": [25, 50, 100, 200],  # windows whose e(eps, w) curves are trained (w among them)
     "settle_s": 5.0,  # dropped after every mode change when training
     "row": "adaptive",  # "adaptive", or a trained mode value to use throughout (a fixed table)
     "eps_points": 201,
 }
-TABLE_CONSTRAINTS = {
+TABLE_CONSTRAINTS: dict[str, list] = {
     "window": [Interval(int, 1, None)],
     "windows": [RealList()],  # positive integers, checked by check_windows
     "settle_s": [Interval(float, 0, None)],

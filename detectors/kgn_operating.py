@@ -59,7 +59,7 @@ def inside(features: np.ndarray, envelope: dict) -> np.ndarray:
         return np.ones(features.shape[0], dtype=bool)  # another vehicle's inputs: the caller says so
     with np.errstate(invalid="ignore"):
         out = (features < lo) | (features > hi)
-    return ~out.any(axis=1)
+    return np.asarray(~out.any(axis=1), dtype=bool)
 
 
 def held_inside(ok: np.ndarray, t_starts: np.ndarray, hold_s: float) -> np.ndarray:
@@ -67,7 +67,7 @@ def held_inside(ok: np.ndarray, t_starts: np.ndarray, hold_s: float) -> np.ndarr
     bad = np.concatenate([[0], np.cumsum(~np.asarray(ok, dtype=bool))])
     first = np.searchsorted(t_starts, t_starts - hold_s, side="left")
     last = np.arange(t_starts.size) + 1
-    return bad[last] - bad[first] == 0
+    return np.asarray(bad[last] - bad[first] == 0, dtype=bool)
 
 
 def envelope_gate(
