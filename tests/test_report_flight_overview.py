@@ -80,3 +80,10 @@ def test_the_path_is_the_filters_estimate_over_the_measured_fixes():
     assert np.allclose(array(by_name["the filter's estimate"]["x"]), estimate.x, atol=1e-5)
     assert array(by_name["fixes (measured)"]["y"]).tolist() == [1.0] * (n // 10)
     assert estimated_path(fixes, None, t) is None and estimated_path(None, innovations, t) is None
+
+
+def test_what_was_not_checked_stays_above_the_overview():
+    report = _report(incidents=False)
+    report.unchecked = ["the model-based statistics were not judged on the ground"]
+    page = render_html(report)
+    assert page.index('id="unchecked"') < page.index('id="fig-checked"')
