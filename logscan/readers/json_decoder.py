@@ -13,6 +13,7 @@ from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.records import Schema
 from numba import njit
 
+from logscan.readers.decimal_float import POW10_HI, POW10_LO, eisel_lemire
 from logscan.readers.flatten import FlatColumns, MessageBytes, add_to_groups, columns_from_groups, layout_of
 
 
@@ -155,16 +156,19 @@ def _match_template(buf, starts, ends, literal, lit_start, lit_len, is_token, ok
 # 10**0 .. 10**22: every one is exact in float64 (5**22 < 2**53)
 _POW10 = np.array([10.0**k for k in range(23)], dtype=np.float64)
 _MANTISSA_MAX = 2**53
+_W_MAX = (2**63 - 1 - 9) // 10  # digits beyond this would overflow the int64 mantissa
 
 
 @njit(cache=True)
-def _json_number(text, start, stop, pow10):  # pragma: no cover - compiled
-    """(value, True) for a JSON number token text[start:stop] that Clinger's fast path gives exactly.
+def _json_number(text, start, stop, pow10, pow_hi, pow_lo):  # pragma: no cover - compiled
+    """(value, True) for a JSON number token text[start:stop] that the exact kernels give.
 
     Decimal token = w * 10**e with integer w <= 2**53 and |e| <= 22: w and 10**|e| are exact
     doubles, so the one IEEE product / quotient x = w * 10**e or x = w / 10**-e is the correctly
-    rounded value, as json.loads / strtod give it. Anything else (more digits, larger exponents,
-    NaN, Infinity, not JSON number syntax) -> (nan, False).
+    rounded value, as json.loads / strtod give it (Clinger's fast path). Up to 18 digits otherwise
+    (17-digit ``repr`` floats): Eisel-Lemire (`decimal_float`), correctly rounded where it decides.
+    Anything else (more digits, an undecided rounding, NaN, Infinity, not JSON number syntax) ->
+    (nan, False).
     """
     i = start
     negative = False
@@ -181,18 +185,18 @@ def _json_number(text, start, stop, pow10):  # pragma: no cover - compiled
             return np.nan, False
     else:
         while i < stop and 48 <= text[i] <= 57:
-            w = w * 10 + (text[i] - 48)
-            if w > _MANTISSA_MAX:
+            if w > _W_MAX:
                 return np.nan, False
+            w = w * 10 + (text[i] - 48)
             i += 1
     if i < stop and text[i] == 46:  # '.' then at least one digit
         i += 1
         if i >= stop or text[i] < 48 or text[i] > 57:
             return np.nan, False
         while i < stop and 48 <= text[i] <= 57:
-            w = w * 10 + (text[i] - 48)
-            if w > _MANTISSA_MAX:
+            if w > _W_MAX:
                 return np.nan, False
+            w = w * 10 + (text[i] - 48)
             e -= 1
             i += 1
     if i < stop and (text[i] == 101 or text[i] == 69):  # 'e' / 'E', optional sign, digits
@@ -213,17 +217,19 @@ def _json_number(text, start, stop, pow10):  # pragma: no cover - compiled
         return np.nan, False
     if w == 0:
         value = 0.0
-    elif 0 <= e <= 22:
+    elif w <= _MANTISSA_MAX and 0 <= e <= 22:
         value = np.float64(w) * pow10[e]  # x = w * 10**e, one rounding
-    elif -22 <= e < 0:
+    elif w <= _MANTISSA_MAX and -22 <= e < 0:
         value = np.float64(w) / pow10[-e]  # x = w / 10**-e, one rounding
     else:
-        return np.nan, False
+        value, exact = eisel_lemire(w, e, pow_hi, pow_lo)
+        if not exact:
+            return np.nan, False
     return (-value if negative else value), True
 
 
 @njit(cache=True)
-def _parse_numbers(text, used, pow10, values, rest):  # pragma: no cover - compiled
+def _parse_numbers(text, used, pow10, pow_hi, pow_lo, values, rest):  # pragma: no cover - compiled
     """Parse the space-terminated tokens of text[:used] into ``values``.
 
     Tokens ``_json_number`` does not take are left NaN in ``values`` and copied, space-terminated,
@@ -239,7 +245,7 @@ def _parse_numbers(text, used, pow10, values, rest):  # pragma: no cover - compi
             q += 1
         if count >= values.size:
             return count + 1, n_rest, r
-        value, exact = _json_number(text, p, q, pow10)
+        value, exact = _json_number(text, p, q, pow10, pow_hi, pow_lo)
         values[count] = value
         if not exact:
             for i in range(p, q + 1):
@@ -325,7 +331,7 @@ def _fast_json(packed: MessageBytes):
         return None
     values = np.empty(indices.size * len(keys), dtype=np.float64)
     rest = np.empty(used + 1, dtype=np.uint8)
-    count, n_rest, rest_used = _parse_numbers(out, used, _POW10, values, rest)
+    count, n_rest, rest_used = _parse_numbers(out, used, _POW10, POW10_HI, POW10_LO, values, rest)
     if count != values.size:
         return None
     if n_rest:  # tokens the exact kernel leaves alone: numpy's correctly rounded parser
