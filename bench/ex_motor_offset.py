@@ -16,6 +16,7 @@ on the thrust, +50 % for 2 s), both from 30 s.
 
     python bench/ex_motor_offset.py             # 2 processes, about a minute
     python bench/ex_motor_offset.py --table3    # and the baseline and control rows, about 2 minutes
+    python bench/ex_motor_offset.py --model steer_by_wire    # the same comparison (Table IV)
 """
 
 from __future__ import annotations
@@ -37,25 +38,33 @@ TABLE3 = {
     "sensor": ("bitflip:accel.x:30:31.2:1.0", "sensor: accel.x bit flips for 1.2 s (`imu-bitflip`)"),
     "control": ("control-fault:thrust:30:32:0.5", "control program: thrust output x 1.5 for 2 s (`control-fault`)"),
 }
+# --model steer_by_wire (the paper's Table IV): the steering motor's torque -10 %, yaw-rate bit
+# flips, the sliding-mode controller's output x 1.5
+SBW = {
+    "actuator": ("motor-offset::30::-0.1", "actuator: steering-motor torque -10 % for 10 s (`motor-offset`)"),
+    "sensor": ("bitflip:yaw_rate:30:31.2:1.0", "sensor: yaw-rate bit flips for 1.2 s"),
+    "control": ("control-fault:tau_eq:30:32:0.5", "control program: steering torque output x 1.5 for 2 s"),
+}
 
 
-def _analysed(fault: str | None, seed: int):
-    """The `logscan analyze` analysis (encoded_ekf alone) of a 60 s quadcopter run."""
+def _analysed(fault: str | None, seed: int, model: str = "quadcopter"):
+    """The `logscan analyze` analysis (encoded_ekf alone) of a 60 s run of ``model``."""
     from logscan.pipeline import analyze_log
     from logscan.simulate import parse_fault, simulate, write_simulation
 
     faults = [parse_fault(fault)] if fault else []
     with tempfile.TemporaryDirectory() as directory:
         path = os.path.join(directory, f"run_{seed}.mcap")
-        write_simulation(simulate("quadcopter", faults, duration=60.0, seed=seed), path, "mcap-ros2")
+        write_simulation(simulate(model, faults, duration=60.0, seed=seed), path, "mcap-ros2")
         return analyze_log(path, detector_names=["encoded_ekf"])
 
 
-def healthy_peak(seed: int) -> float:
-    """max |e_x| of the baseline (constant CV_0) on a healthy run: its training."""
+def healthy_peak(job: tuple[str, int]) -> float:
+    """max |e_x| of the baseline (constant CV_0) on a healthy run (model, seed): its training."""
     from logscan.detectors.encoded_ekf import EncodedEkfDetector
 
-    prepared = _analysed(None, seed).prepared
+    model, seed = job
+    prepared = _analysed(None, seed, model).prepared
     e_x, defined, _ = EncodedEkfDetector(variant="baseline").state_check(prepared.trace, prepared.model, None)
     return float(np.nanmax(np.abs(e_x[defined])))
 
@@ -66,8 +75,9 @@ def one(job: tuple) -> tuple:
     from logscan.detectors.encoded_ekf import EncodedEkfDetector
     from logscan.verdict.evaluation import score_groups
 
-    key, seed, threshold = job
-    analysis = _analysed(FAULTS[key] if key in FAULTS else TABLE3[key][0], seed)
+    key, seed, threshold, model = job
+    fault = SBW[key][0] if model == "steer_by_wire" else FAULTS[key] if key in FAULTS else TABLE3[key][0]
+    analysis = _analysed(fault, seed, model)
     (result,) = analysis.results
     e_x = result.series["e_x"]
     k = int(np.searchsorted(analysis.run.t, START_S))
@@ -96,16 +106,23 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--table3", action="store_true", help="also the baseline and the control-program fault")
+    parser.add_argument("--model", choices=("quadcopter", "steer_by_wire"), default="quadcopter")
     args = parser.parse_args(argv)
+    args.table3 = args.table3 or args.model == "steer_by_wire"
     from logscan.fleet import run_many
 
     threshold = None
-    labels = dict(MAGNITUDES)
+    labels: dict = dict(MAGNITUDES)
+    if args.model == "steer_by_wire":
+        labels = {key: label for key, (_, label) in SBW.items()}
     if args.table3:
-        threshold = max(run_many(list(TRAIN_SEEDS), healthy_peak, jobs=args.jobs, isolate=False))
-        labels.update({key: label for key, (_, label) in TABLE3.items()})
+        training = [(args.model, s) for s in TRAIN_SEEDS]
+        threshold = max(run_many(training, healthy_peak, jobs=args.jobs, isolate=False))
+        if args.model == "quadcopter":
+            labels.update({key: label for key, (_, label) in TABLE3.items()})
         print(f"baseline threshold (max |e_x| over {len(TRAIN_SEEDS)} healthy runs): {threshold:.4g}")
-    rows = run_many([(m, s, threshold) for m in labels for s in SEEDS], one, jobs=args.jobs, isolate=False)
+    jobs = [(m, s, threshold, args.model) for m in labels for s in SEEDS]
+    rows = run_many(jobs, one, jobs=args.jobs, isolate=False)
     head = "| fault | e_x step / healthy std | e_x detected | mean / max latency |"
     print(head + (" baseline detected | its mean / max latency | its false alarms |" if args.table3 else ""))
     print("|---|---|---|---|" + ("---|---|---|" if args.table3 else ""))
