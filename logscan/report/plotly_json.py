@@ -274,8 +274,15 @@ def plain_json(data: list[dict], layout: dict, clock: Clock | None = None) -> st
 
 
 def _scalar(value: object) -> object:
+    """numpy values json cannot write: scalars as numbers, arrays nested below a trace's top level
+    (a marker's colours, a hover's customdata) as plotly.js typed arrays, as at the top level."""
     if isinstance(value, np.generic):
         return value.item()
+    if isinstance(value, np.ndarray):
+        from _plotly_utils.utils import to_typed_array_spec
+
+        spec = to_typed_array_spec(value)  # strings and objects come back as they went in
+        return value.tolist() if isinstance(spec, np.ndarray) else spec
     raise TypeError(f"not JSON: {type(value).__name__}")
 
 
