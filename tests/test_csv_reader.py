@@ -332,3 +332,19 @@ def test_the_span_warning_is_added_once_whoever_builds_the_log():
     log = Log(channels=channels, source=source)
     Log(channels=channels, source=source)  # a second Log over the same source adds nothing
     assert [w for w in source.warnings if "3.0 days" in w] == [log.span_warning()]
+
+
+@pytest.mark.parametrize("name", ["flight.mcap", "flight.ULG", "drive.bag", "drive.db3"])
+def test_text_named_like_a_binary_log_is_refused_not_read_as_csv(tmp_path, name):
+    path = tmp_path / name
+    path.write_text("time,speed\n0,1\n1,2\n")  # a CSV would read: the name says it is something else
+    with pytest.raises(LogscanError) as caught:
+        read_log(path)
+    line = caught.value.one_line()
+    assert f"named {path.suffix} but not" in line and "time column" not in line, line
+
+
+def test_a_csv_named_csv_still_reads(tmp_path):
+    path = tmp_path / "flight.csv"
+    path.write_text("time,speed\n0,1\n1,2\n")
+    assert read_log(path).source.format == "csv"

@@ -58,11 +58,13 @@ def test_evaluate_on_a_cluster_writes_the_same_json_as_one_job(cli, tmp_path, sc
     for name, how in (("jobs", ["--jobs", "1"]), ("dask", ["--scheduler", scheduler])):
         path = tmp_path / f"{name}.json"
         result = cli("evaluate", *logs, "--json", path, *how)
-        assert result.exit_code == 0, result.output
+        assert result.exit_code == 2, result.output  # the file that is no log is an error in either
         outputs[name] = (path.read_bytes(), result.stdout)
     assert outputs["jobs"] == outputs["dask"]
     document = json.loads(outputs["dask"][0])
-    assert document["n_logs"] == 3 and document["skipped_no_truth"] == [logs[-1]]  # no ground truth
+    assert document["n_logs"] == 3 and document["skipped_no_truth"] == []
+    assert [error["file"] for error in document["errors"]] == [logs[-1]], document["errors"]
+    assert "named .mcap but not an MCAP file" in document["errors"][0]["error"]
 
 
 def test_train_prepares_the_logs_on_the_cluster_and_fits_the_same_tables(cli, tmp_path, scheduler):

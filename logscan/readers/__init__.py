@@ -87,6 +87,7 @@ def detect_format(path: str | os.PathLike) -> str:
         if reader.sniff(head, p):
             return reader.name
     _refuse_ardupilot(head, p)
+    _refuse_misnamed(p)
     if _looks_like_text(head):
         return "csv"
     raise UnsupportedFormatError(
@@ -94,6 +95,21 @@ def detect_format(path: str | os.PathLike) -> str:
         path=str(p),
         hint="logscan reads .mcap, .ulg and .csv logs, ROS 1 .bag files, rosbag2 .db3 files and rosbag2 directories",
     )
+
+
+# a file named like a binary log whose content is not that log: cut short, or not a log at all; read
+# as text it would only give a misleading CSV message
+BINARY_SUFFIXES = {".mcap": "an MCAP file", ".ulg": "a ULog", ".bag": "a ROS 1 bag", ".db3": "a rosbag2 .db3 file"}
+
+
+def _refuse_misnamed(p: Path) -> None:
+    what = BINARY_SUFFIXES.get(p.suffix.lower())
+    if what is not None:
+        raise UnsupportedFormatError(
+            f"named {p.suffix} but not {what} (its first bytes are not that format's magic)",
+            path=str(p),
+            hint="its start is damaged or it is not a log: copy it again from the vehicle or the recorder",
+        )
 
 
 def _directory_format(p: Path) -> str:
