@@ -74,6 +74,10 @@ UNBOUNDED = {
     ("encoded_ekf", "threshold"): "an absolute threshold in the statistic's unit (the user's)",
     ("atfm", "margin"): "a selection margin in the sensor's unit, not a threshold",
     ("frozen", "still_ratio"): "a share of the noise in [0, 1): a larger one flags more, never less",
+    (
+        "kgn",
+        "envelope_margin",
+    ): "widens the trained envelope; windows outside it are reported not checked, never passed",
 }
 
 

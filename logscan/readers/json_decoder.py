@@ -13,6 +13,7 @@ from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.records import Schema
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
 from logscan.readers.decimal_float import POW10_HI, POW10_LO, eisel_lemire
 from logscan.readers.flatten import FlatColumns, MessageBytes, add_to_groups, columns_from_groups, layout_of
 
@@ -350,3 +351,6 @@ def _fast_json(packed: MessageBytes):
     if not np.array_equal(matrix[0], np.asarray(first_values, dtype=np.float64), equal_nan=True):
         return None
     return signature, indices, matrix
+
+
+follow_dependencies(__name__)  # the cached kernels are stamped with decimal_float's parsing too
