@@ -236,9 +236,9 @@ _PIPELINE_CACHE: dict[str, tuple] = {}
 
 
 def pipeline_case(kind: str, name: str | None = None):
-    """(aligned run, EKF trace, model, profile, every filter trace) of a sample log through `logscan.pipeline.preparation`
-    with what every detector under test needs, computed once per session; ``name``: the detector
-    whose fixtures (`OWN_FIXTURES`) to use."""
+    """(aligned run, EKF trace, model, profile, every filter trace) of a sample log through
+    `logscan.pipeline.preparation` with what every detector under test needs, computed once per
+    session; ``name``: the detector whose fixtures (`OWN_FIXTURES`) to use."""
     fixture = OWN_FIXTURES.get(name, FIXTURES)[kind]
     if fixture in _PIPELINE_CACHE:
         return _PIPELINE_CACHE[fixture]
