@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -18,8 +18,21 @@ from logscan.errors import CorruptLogError
 from logscan.readers.mcap.records import OP_STATISTICS, PARSE_ERRORS, Cursor, Records
 from logscan.readers.mcap.scan_records import _Corrupt
 
-if TYPE_CHECKING:
-    from logscan.readers.mcap.scan import Scan
+
+class Scan(Protocol):
+    """What these functions read and write of a `logscan.readers.mcap.scan.Scan` (named by its
+    fields, not imported: the scan imports this module)."""
+
+    path: str
+    problem: _Corrupt | None
+    damage: list[str]
+    messages_read: int
+    skipped_chunks: list[tuple[int, str]]
+    unknown_channel_messages: int
+    beyond_int64: int
+    redefined: list[str]
+    redefined_messages: int
+
 
 CRC_BLOCK = 16 << 20  # bytes of the data-section CRC computed before their pages are given back
 
