@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from benchlib import best_of
 
 from logscan.readers.mcap.reader import decoder_factories, read_mcap
 from logscan.readers.mcap.writer import TopicData, write_mcap
@@ -114,15 +115,6 @@ def time_plain_mcap(path: Path) -> tuple[float, int]:
 _ULOG_DIR = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog"
 
 
-def _best(fn, reps: int) -> float:
-    best = float("inf")
-    for _ in range(reps):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def ulog_rows(reps: int) -> list[tuple[str, str, float, float]]:
     """(case, size, logscan s, pyulog s) over the PX4 sample logs, best of ``reps`` per file."""
     from pyulog import ULog
@@ -143,8 +135,8 @@ def ulog_rows(reps: int) -> list[tuple[str, str, float, float]]:
         ("ulog, every topic", None, None),
         ("ulog, PX4 profile topics", wanted, names),
     ):
-        ours = sum(_best(lambda f=f, w=ours_wanted: read_ulog(f, w), reps) for f in files)
-        theirs = sum(_best(lambda f=f, n=theirs_names: ULog(str(f), n), reps) for f in files)
+        ours = sum(best_of(reps, lambda f=f, w=ours_wanted: read_ulog(f, w)) for f in files)
+        theirs = sum(best_of(reps, lambda f=f, n=theirs_names: ULog(str(f), n)) for f in files)
         rows.append((case, size, ours, theirs))
     return rows
 
@@ -161,8 +153,8 @@ def csv_rows(n_rows: int, tmp: str, reps: int) -> list[tuple[str, str, float, fl
     columns.update({f"c{i}": rng.normal(size=n_rows) for i in range(6)})
     pd.DataFrame(columns).to_csv(path, index=False)
     read_csv(path, None)  # warm-up
-    ours = _best(lambda: read_csv(path, None), reps)
-    theirs = _best(lambda: pd.read_csv(path), reps)
+    ours = best_of(reps, lambda: read_csv(path, None))
+    theirs = best_of(reps, lambda: pd.read_csv(path))
     return [("csv", f"{n_rows:,} rows x 7, {path.stat().st_size / 1e6:.0f} MB", ours, theirs)]
 
 
