@@ -15,7 +15,7 @@ import pytest
 from logscan.errors import InputError
 from logscan.report import ReportInput, flat_alarms, render_html, render_report, report_matches
 from logscan.report.decimate import DEFAULT_MAX_POINTS
-from logscan.report.page import _report_js
+from logscan.report.page_assets import report_js
 from logscan.results import DetectorResult, FaultEvent
 from logscan.verdict.incidents import signal_label
 
@@ -23,7 +23,7 @@ HOSTILE = "<script>alert(1)</script>"
 HOSTILE_SHOWN = "&lt;script&gt;alert(1)&lt;/script&gt;"  # as plotly receives it: text, not markup
 GRID_N = 360_000  # 1 hour at 100 Hz
 BIAS_START = 2000.0  # ground-truth fault, seconds
-OWN_SCRIPTS = 4 + bool(_report_js())  # error recorder, plotly.js, figure JSON, drawing, report.js
+OWN_SCRIPTS = 4 + bool(report_js())  # error recorder, plotly.js, figure JSON, drawing, report.js
 
 
 def make_report(n: int = GRID_N, *, truth: bool = True, hostile: bool = True, seed: int = 0) -> ReportInput:

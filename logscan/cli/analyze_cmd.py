@@ -400,7 +400,7 @@ def _compare_with_baseline(document: dict, previous: dict, code, fail_on: str, e
 
 def _plotly_js_path(plotlyjs_dir: str | None) -> str | None:
     """Where --plotlyjs DIR puts plotly.js (DIR is created here, before any log is read)."""
-    from logscan.report.page import plotly_js_target
+    from logscan.report.page_assets import plotly_js_target
 
     return None if plotlyjs_dir is None else str(plotly_js_target(plotlyjs_dir))
 
@@ -455,7 +455,7 @@ def _write_outputs(
     from logscan.artifacts import commit, json_text, stage
 
     if plotlyjs_dir is not None:
-        from logscan.report.page import stage_plotly_js
+        from logscan.report.page_assets import stage_plotly_js
 
         js = stage_plotly_js(plotlyjs_dir, token)
         if js is not None:

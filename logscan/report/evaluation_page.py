@@ -9,7 +9,7 @@ contained as the analysis report: plotly.js embedded once, every name escaped.
 from __future__ import annotations
 
 from logscan import __version__
-from logscan.report.page import _environment, _plotly_js
+from logscan.report.page_assets import environment, plotly_js
 from logscan.report.plotly_json import plot_text, spec_json
 from logscan.verdict.evaluation import CHECK_SEPARATOR, Evaluation
 
@@ -49,7 +49,7 @@ def render_evaluation_html(evaluation: Evaluation, plotlyjs_src: str | None = No
     figure = spec_json(boxes, layout) if boxes else None
     hours = sum(log.duration_s for log in evaluation.logs if log.healthy) / 3600.0
     return (
-        _environment()
+        environment()
         .get_template("evaluation.html.j2")
         .render(
             title="logscan evaluation",
@@ -64,7 +64,7 @@ def render_evaluation_html(evaluation: Evaluation, plotlyjs_src: str | None = No
             detectors=detectors,
             matrix=matrix,
             figure_json=figure,
-            plotly_js=_plotly_js() if figure and not plotlyjs_src else "",
+            plotly_js=plotly_js() if figure and not plotlyjs_src else "",
             plotlyjs_src=plotlyjs_src,
             skipped=evaluation.skipped,
             failures=[f.message for f in evaluation.failures],

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from logscan.report.page import _environment
+from logscan.report.page_assets import environment
 
 INDEX_NAME = "index.html"
 
@@ -52,7 +52,7 @@ def render_index_html(document: dict, index: str) -> str:
         for e in document.get("errors", [])
     ]  # fmt: skip
     return (
-        _environment()
+        environment()
         .get_template("index.html.j2")
         .render(
             title=f"logscan: {len(rows) + len(failed)} logs",

@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 
 from logscan.artifacts import Staged
-from logscan.report.page import _plotly_js_src, stage_plotly_js
+from logscan.report.page_assets import plotly_js_src, stage_plotly_js
 
 EMBED = "embed"  # --plotlyjs embed: plotly.js inside the page
 
@@ -27,4 +27,4 @@ def shared_plotly_js(
     if directory is None:
         return None, None
     staged = stage_plotly_js(directory, token)
-    return _plotly_js_src(Path(directory), Path(page_path)), staged
+    return plotly_js_src(Path(directory), Path(page_path)), staged

@@ -26,7 +26,7 @@ import numpy as np
 
 from logscan.detectors.base import decode_state_value
 from logscan.report.context import number_text
-from logscan.report.page import _environment, _plotly_js
+from logscan.report.page_assets import environment, plotly_js
 from logscan.report.plotly_json import plot_text, spec_json
 from logscan.training.calibration import calibration_failures
 
@@ -50,7 +50,7 @@ _SHARED = {
 def shared_parts() -> dict[str, str]:
     """The analysis report's <style> block, error recorder and drawing script (each "" when the
     template no longer has it: the tests check all three are found)."""
-    env = _environment()
+    env = environment()
     source = env.loader.get_source(env, "report.html.j2")[0]
     parts = {}
     for key, pattern in _SHARED.items():
@@ -421,7 +421,7 @@ def render_training_html(document: dict, plotlyjs_src: str | None = None) -> str
     figure_json = "[" + ",".join(f'{{"id":{json.dumps(i)},"figure":{spec}}}' for i, spec in figures) + "]"
     fingerprint = document.get("profile_fingerprint") or ""
     return (
-        _environment()
+        environment()
         .get_template("training.html.j2")
         .render(
             title="logscan training report",
@@ -440,7 +440,7 @@ def render_training_html(document: dict, plotlyjs_src: str | None = None) -> str
             tuning=_tuning_rows(document.get("tuning")),
             n_figures=len(figures),
             figure_json=figure_json,
-            plotlyjs_inline=None if plotlyjs_src else _plotly_js(),
+            plotlyjs_inline=None if plotlyjs_src else plotly_js(),
             plotlyjs_src=plotlyjs_src,
             shared=shared_parts(),
         )

@@ -1,0 +1,65 @@
+"""Where a figure joins the report page: one line in one of the lists below.
+
+``DETECTOR_ROWS``: rows of a detector section's one figure (`logscan.report.stacked`), placed after
+    the rows of the detector's own statistics and before its extras. A builder takes the section's
+    `DetectorResult` and the `PageInput` and returns `logscan.report.figures.Figure` rows ([] when the
+    result is not its kind); the rows share the section's time axis, crosshair and zoom.
+``CONTEXT_FIGURES``: figures of the "Context" section, each already serialised
+    (``{"id", "title", "caption", "timeseries", "height", "json", "points"}``, as
+    `logscan.report.context_figures._spec` makes them; their points come out of the page's budget).
+    A builder takes the `PageInput` and returns a list of them.
+
+A new figure is a function in a module of its own (`report/` may import only what
+docs/extending.md "Who imports whom" lists) and its name added to one list here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.report.context_figures import context_figures
+from logscan.report.figures import Figure
+from logscan.report.observability_figures import observability_figures
+from logscan.report.report_input import ReportInput
+from logscan.report.sensor_figures import named_group_figures
+from logscan.results import DetectorResult
+
+
+@dataclass
+class PageInput:
+    """What a figure builder may read: the report, its analysis grid ``t`` (seconds since the log's
+    start, float64), the ground-truth spans to shade, and the measurement groups whose sensor
+    figures are already placed (a group is drawn once per page)."""
+
+    report: ReportInput
+    t: np.ndarray
+    truth_spans: list[tuple[float, float]]
+    drawn: set[str] = field(default_factory=set)
+
+
+def sensor_rows(result: DetectorResult, page: PageInput) -> list[Figure]:
+    """The sensors the result's alarms name, measured vs predicted (`logscan.report.sensor_figures`)."""
+    return named_group_figures(result, page.report.innovations, page.t, page.truth_spans, page.drawn)
+
+
+def run_context_figures(page: PageInput) -> list[dict]:
+    """The mode, the autopilot's state and messages, the path (`logscan.report.context_figures`)."""
+    report = page.report
+    return context_figures(report.context, report.incidents, report.clock, report.innovations, page.t)
+
+
+def blind_figures(page: PageInput) -> list[dict]:
+    """Where a fault could not have been seen (`logscan.report.observability_figures`)."""
+    return observability_figures(page.report.observability, page.report.clock)
+
+
+DETECTOR_ROWS: list[Callable[[DetectorResult, PageInput], list[Figure]]] = [
+    sensor_rows,
+]
+CONTEXT_FIGURES: list[Callable[[PageInput], list[dict]]] = [
+    run_context_figures,
+    blind_figures,
+]
