@@ -94,3 +94,14 @@ def test_bench_counts_false_alarms_per_detector_and_check_on_a_healthy_log():
     assert {"nis", "nis:all", "nis:yaw_rate"} <= set(run["counts"])
     assert sum(run["counts"].values()) == 0 and run["failures"] == []
     assert "| nis | 0 |" in bench.rate_table([run])
+
+
+def test_bench_covers_every_simulated_model_and_only_the_chosen_ones():
+    from logscan.simulate import SIMULATED_MODELS
+
+    assert set(bench.MODELS) == {*SIMULATED_MODELS, "ground_robot"}
+    assert {model for model, _ in bench.SEED_BASE} == set(bench.MODELS)
+    jobs = bench.make_jobs(1.0, 1800.0, {"ground_robot": ("nis",), "ins": ("nis",)}, {})
+    # ground_robot flies no aggressive variant: three configurations share the hour
+    assert {(j.model, j.aggressive) for j in jobs} == {("ground_robot", False), ("ins", False), ("ins", True)}
+    assert len(jobs) == 3 and len({j.seed for j in jobs}) == 3
