@@ -4,7 +4,12 @@ Coding vector (Lemma 1): alpha_i,k = c_k / sigma_i,k with sigma_i,k = sqrt(P_pri
 sigma_min_i = sigma_floor * state_scale_i (NaN-safe), c_k = min(1, R_max / sum_i 1/sigma_i,k).
 State check, only on steps with a measurement update: e_x(k) = CV_k x_prior_k - CV_k x_post_k
 (= -CV_k K_k y_k; CV_k on both terms, see docs/algorithms.md section 1.8). A step where the filter diverged gets
-e_x = NaN, which counts as an exceedance. A measurement the filter rejected (non-finite or outside
+e_x = NaN, which counts as an exceedance. How e_x is judged (``ex_statistic``, section 1.2):
+  raw:        e_x against the adaptive band of eq. 4 (below), rho default 4;
+  normalised: z = e_x / sqrt(CV K S K^T CV^T) against a fixed bound from the false-alarm budget;
+  window_sum: the sum of z over the last W judged steps, over sqrt(W), against the same bound
+              (`logscan.detectors.normalised_check`; both need the trace's K and S).
+A measurement the filter rejected (non-finite or outside
 the sensor's physical range: a flipped exponent bit gives 1e20) never reaches e_x, so it gets its
 own statistic per group, `rejected.<group>`, alarmed at the first such sample (no persistence: an
 impossible value is not noise), with the burst merged by a hold-off.
@@ -33,13 +38,22 @@ import numpy as np
 
 from logscan.detectors.adaptive_threshold import adaptive_band, trailing_mean_var
 from logscan.detectors.base import Detector, DetectorResult, Needs
-from logscan.detectors.params import PERSIST, Boolean, Interval, Options, RealList, multiplier_bound
+from logscan.detectors.budget import check_proof, design_rate
+from logscan.detectors.normalised_check import (
+    normal_bound,
+    normalised_series,
+    predicted_variance,
+    row_blocks,
+    window_sum,
+)
+from logscan.detectors.params import PERSIST, Boolean, Interval, Options, RealList, budget_bound, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError, ProfileError
 
 POSITIVE = Interval(float, 0, None, closed="neither")
 # mu +- rho s: `logscan train --tune` picks at most 20 plus its margin; a wider band hides faults
 BAND = multiplier_bound(0, 50, "spreads of the healthy statistic around its mean")
+RAW_RHO = 4.0  # rho of the raw e_x's adaptive band when unset (the specification's prototype value)
 
 # The paper's initial coding vectors (section VI), used by the constant-CV baseline.
 PAPER_CV0 = {
@@ -87,8 +101,13 @@ class EncodedEkfDetector(Detector):
     fit_params = ("margin",)
     defaults = {
         "variant": "adaptive",  # "adaptive" (time-varying CV, mu +- rho s) or "baseline" (CV_0, fixed)
-        "rho": 4.0,
-        "window": 100,  # W, samples of the trailing window
+        # how the adaptive variant judges e_x: "raw" (eq. 4's band), "normalised" or "window_sum"
+        # (over its predicted spread, against the budget's bound; docs/algorithms.md section 1.2)
+        "ex_statistic": "window_sum",
+        "rho": None,  # e_x's band factor (raw: 4.0) or bound (normalised, window_sum: from the budget)
+        "window": 100,  # W, samples of the trailing window (raw: the band's; window_sum: the sum's)
+        "budget_per_hour": 0.1,  # false alarms per hour the normalised e_x may spend
+        "proof_hours": 100.0,  # design so that this many healthy hours show it (None: the budget itself)
         "n_persist": 3,
         "variance_check": "auto",  # "auto", "onboard", "observed" or "off"
         "rho_v": 8.0,
@@ -112,7 +131,10 @@ class EncodedEkfDetector(Detector):
 
     parameter_constraints = {
         "variant": [Options("adaptive", "baseline")],
-        "rho": [BAND],
+        "ex_statistic": [Options("raw", "normalised", "window_sum")],
+        "rho": [BAND, None],
+        "budget_per_hour": [budget_bound()],
+        "proof_hours": [Interval(float, 0, None, closed="neither"), None],
         "window": [Interval(int, 1, None)],
         "n_persist": [PERSIST],
         "variance_check": [Options("auto", "onboard", "observed", "off")],
@@ -130,6 +152,10 @@ class EncodedEkfDetector(Detector):
         "rejected_checks": [Boolean()],
     }
 
+    def check_params(self) -> None:
+        super().check_params()
+        check_proof(self)
+
     @classmethod
     def signal_label(cls, signal: str) -> str | None:
         if signal.startswith("rejected."):
@@ -142,12 +168,19 @@ class EncodedEkfDetector(Detector):
         return self.variant == "baseline"
 
     def needs(self, run=None) -> Needs:
-        """The EKF trace; its K and S too when the variance check may run in observed mode (no
-        on-board variances in the log), since e_v then compares var(e_x) with CV K S K^T CV^T."""
+        """The EKF trace; its K and S too when e_x is normalised (by CV K S K^T CV^T) or when the
+        variance check may run in observed mode (no on-board variances in the log), since e_v then
+        compares var(e_x) with CV K S K^T CV^T."""
+        if self._normalised():
+            return Needs.of(ekf=("K", "S"))
         no_onboard = run is None or run.onboard_variance is None
         if self.variance_check == "observed" or (self.variance_check == "auto" and no_onboard):
             return Needs.of(ekf=("K", "S"))
         return Needs.of(ekf=())
+
+    def _normalised(self) -> bool:
+        """e_x judged over its predicted spread (the adaptive variant's normalised statistics)."""
+        return self.variant == "adaptive" and self.ex_statistic != "raw"
 
     # --- the check quantities -----------------------------------------------------------------
     def _coding_vectors(self, trace, model):
@@ -171,7 +204,7 @@ class EncodedEkfDetector(Detector):
         n_steps, n = trace.x_prior.shape
         e_x = np.empty(n_steps)
         cv = None if cv_dtype is None else np.empty((n_steps, n), dtype=cv_dtype)
-        for rows in _row_blocks(n_steps):  # no (N, n) float64 temporary
+        for rows in row_blocks(n_steps):  # no (N, n) float64 temporary
             block = cv_of(rows)
             if cv is not None:
                 cv[rows] = block
@@ -199,7 +232,7 @@ class EncodedEkfDetector(Detector):
         # long log is here): float32 is ample and halves the (N, n) array it keeps
         cv_of = self._coding_vectors(trace, model)
         cv = result.extras["coding_vector"] = np.empty(trace.x_prior.shape, dtype=np.float32)
-        for rows in _row_blocks(cv.shape[0]):
+        for rows in row_blocks(cv.shape[0]):
             cv[rows] = cv_of(rows)
         return result
 
@@ -225,7 +258,11 @@ class EncodedEkfDetector(Detector):
             result.add_statistic(t, "e_x", e_x, upper=limit, lower=-limit, valid=defined, n_persist=self.n_persist)
             return
 
-        self._adaptive_check(result, t, "e_x", e_x, defined, self.window, self.rho)
+        result.info["ex_statistic"] = self.ex_statistic
+        if self._normalised():
+            self._normalised_check(result, t, trace, cv_of, e_x, defined)
+        else:
+            self._adaptive_check(result, t, "e_x", e_x, defined, self.window, RAW_RHO if self.rho is None else self.rho)
 
         mode = self._variance_mode(run, trace)
         result.info["variance_check"] = mode
@@ -240,6 +277,29 @@ class EncodedEkfDetector(Detector):
             e_s, defined_s = self.onboard_state_series(run, trace, cv_of, model, defined)
             self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s)
             result.info["onboard_state_check"] = True
+
+    def _normalised_check(self, result, t, trace, cv_of, e_x, defined) -> None:
+        """e_x over its predicted spread, per sample or summed over W, against +-bound (section 1.2)."""
+        if trace.K is None or trace.S is None:
+            raise ProfileError(
+                f"detector {self.name!r}: ex_statistic = {self.ex_statistic!r} needs K and S on the trace",
+                hint="run it through `logscan analyze` (it asks the pipeline for them), or set ex_statistic = 'raw'",
+            )
+        z, valid = normalised_series(e_x, defined, predicted_variance(cv_of, trace.K, trace.S))
+        warm = valid
+        if self.ex_statistic == "window_sum":
+            z, warm = window_sum(z, valid, self.window)
+        if self.rho is not None:
+            bound = float(self.rho)
+        else:
+            duration = max(float(t[-1] - t[0]), trace.dt) if t.size else 1.0
+            rate = design_rate(float(self.budget_per_hour), self.proof_hours)
+            bound = normal_bound(rate, float(valid.sum()) / duration)
+            result.info["design_rate_per_hour"] = rate
+        result.info["ex_bound"] = bound
+        result.add_statistic(
+            t, "e_x", z, upper=bound, lower=-bound, valid=valid, warmup=valid & ~warm, n_persist=self.n_persist
+        )
 
     def _adaptive_check(self, result, t, name, e, defined, window, rho, s_floor=None) -> None:
         """mu +- rho s band over the masked trailing window, then the shared alarm logic."""
@@ -280,7 +340,7 @@ class EncodedEkfDetector(Detector):
         if mode == "onboard":
             n_steps = trace.n_steps
             e_v, scale, any_logged = np.empty(n_steps), np.empty(n_steps), np.empty(n_steps, dtype=bool)
-            for rows in _row_blocks(n_steps):  # (N, n) temporaries a block at a time
+            for rows in row_blocks(n_steps):  # (N, n) temporaries a block at a time
                 onboard, P_post = run.onboard_variance[rows], trace.P_post_diag[rows]
                 logged = np.isfinite(onboard)
                 cv = cv_of(rows)
@@ -295,10 +355,7 @@ class EncodedEkfDetector(Detector):
         if trace.K is None or trace.S is None:
             raise ProfileError(f"detector {self.name!r}: the observed variance check needs K and S on the trace")
         # predicted variance of e_x: g S g^T with g = CV_k K_k (padded columns are NaN: zero them)
-        K = np.nan_to_num(trace.K)
-        S = np.nan_to_num(trace.S)
-        g = np.einsum("kn,knm->km", cv_of(slice(None)), K)
-        predicted = np.einsum("km,kmj,kj->k", g, S, g)
+        predicted = predicted_variance(cv_of, trace.K, trace.S)
         _, var_obs = trailing_mean_var(e_x, defined, self.window_v)
         mean_pred, _ = trailing_mean_var(predicted, defined, self.window_v)
         e_v = var_obs - mean_pred
@@ -315,7 +372,7 @@ class EncodedEkfDetector(Detector):
         n_steps, n = trace.x_post.shape
         angles = _angle_states(model, n)
         e_s, any_logged = np.empty(n_steps), np.empty(n_steps, dtype=bool)
-        for rows in _row_blocks(n_steps):  # (N, n) temporaries a block at a time
+        for rows in row_blocks(n_steps):  # (N, n) temporaries a block at a time
             onboard = run.onboard_state[rows]
             logged = np.isfinite(onboard)
             diff = np.where(logged, onboard - trace.x_post[rows], 0.0)
@@ -327,19 +384,11 @@ class EncodedEkfDetector(Detector):
         return e_s, defined_s
 
 
-ROW_BLOCK = 16_384  # steps per block of the (N, n) arithmetic: temporaries of ~1.5 MB, numpy speed
-
-
 def _any_finite(series: np.ndarray | None) -> bool:
     """Any finite entry, a block at a time (no (N, n) mask)."""
     if series is None:
         return False
-    return any(np.isfinite(series[rows]).any() for rows in _row_blocks(series.shape[0]))
-
-
-def _row_blocks(n_steps: int):
-    """Slices of at most ROW_BLOCK steps covering range(n_steps)."""
-    return [slice(start, min(start + ROW_BLOCK, n_steps)) for start in range(0, n_steps, ROW_BLOCK)]
+    return any(np.isfinite(series[rows]).any() for rows in row_blocks(series.shape[0]))
 
 
 def _angle_states(model, n: int) -> np.ndarray:

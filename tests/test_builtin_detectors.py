@@ -27,7 +27,8 @@ def pipeline(name: str, store_gain: bool = False):
     path = SAMPLES / name
     if not path.exists():
         pytest.skip(f"{path} missing")
-    prepared = prepare(path, load_profile_for(path, None), Needs.of(ekf=("K", "S", "y") if store_gain else ()))
+    # K and S always: the default e_x statistic (window_sum) normalises e_x by CV K S K^T CV^T
+    prepared = prepare(path, load_profile_for(path, None), Needs.of(ekf=("K", "S", "y") if store_gain else ("K", "S")))
     return prepared.run, prepared.trace, prepared.model, prepared.log
 
 
@@ -107,7 +108,7 @@ def test_covariance_corruption_is_caught_by_the_onboard_variance_check():
 
 def test_observed_variance_check_is_centred_on_a_healthy_log():
     run, trace, model, _ = pipeline("quad_healthy.mcap", True)
-    detector = EncodedEkfDetector(variance_check="observed")
+    detector = EncodedEkfDetector(variance_check="observed", ex_statistic="raw")
     result = detector.run(run, trace, model=model)
     e_v = result.series["e_v"]
     e_x = result.series["e_x"]

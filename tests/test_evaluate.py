@@ -128,10 +128,13 @@ def test_nis_detects_the_accelerometer_bias_and_names_the_sensor(evaluation):
     assert evaluation.by_kind("nis")["quadcopter/bias"].tp == 1
 
 
-def test_encoded_check_catches_the_bit_flips_and_not_the_bias(evaluation):
+def test_encoded_check_catches_the_bit_flips_and_the_bias_only_by_its_window_sum(evaluation):
     e_x = evaluation.by_kind("encoded_ekf:e_x")
     assert e_x["quadcopter/bitflip"].tp == 1 and e_x["quadcopter/bitflip"].max_latency_s < 1.0
-    assert e_x["quadcopter/bias"].tp == 0  # coverage limit of docs/algorithms.md section 1.9
+    # the 1 m/s^2 bias moves e_x by a fraction of its spread per sample: the default window sum
+    # accumulates it (docs/algorithms.md section 1.9), not at once but within its window of 1 s
+    bias = e_x["quadcopter/bias"]
+    assert bias.tp == 1 and 0.1 < bias.max_latency_s < 2.0
 
 
 def test_healthy_log_raises_no_false_alarm(evaluation):

@@ -24,14 +24,17 @@ def test_needs_merge_filters_and_their_parts():
     assert merged.parts("ekf") == {"K", "S"} and merged.wants("ekf") and not merged.wants("ubikf")
 
 
-def test_the_encoded_checks_ask_for_the_gain_only_without_onboard_variances():
+def test_the_encoded_checks_ask_for_the_gain_only_when_normalising_or_without_onboard_variances():
     loaded = load_profile_for(HEALTHY, None)
     (encoded,) = create_detectors(loaded, ["encoded_ekf"])
+    raw = encoded.with_params(ex_statistic="raw")
     prepared = prepare(HEALTHY, loaded, Needs.of(ekf=()))
     assert prepared.run.onboard_variance is not None
-    assert encoded.needs(prepared.run) == Needs.of(ekf=())
-    prepared.run.onboard_variance = None
+    # the default e_x statistic (window_sum) is normalised by CV K S K^T CV^T: K and S always
     assert encoded.needs(prepared.run).parts("ekf") == {"K", "S"}
+    assert raw.needs(prepared.run) == Needs.of(ekf=())
+    prepared.run.onboard_variance = None
+    assert raw.needs(prepared.run).parts("ekf") == {"K", "S"}
 
 
 def test_each_needed_filter_runs_exactly_once(monkeypatch):
@@ -82,8 +85,8 @@ def test_detectors_command_shows_each_parameter_with_its_constraint(cli):
     result = cli("detectors")
     assert result.exit_code == 0
     assert "nis parameters" in result.output
-    line = next(line for line in result.output.splitlines() if line.strip().startswith("rho "))
-    assert "default 4.0" in line and "a number in (0, 50]" in line and "it would hide faults" in line
+    line = next(line for line in result.output.splitlines() if line.strip().startswith("rho_v "))
+    assert "default 8.0" in line and "a number in (0, 50]" in line and "it would hide faults" in line
 
 
 def test_every_builtin_parameter_has_a_declared_constraint():
