@@ -811,8 +811,7 @@ def test_embedded_profile_of_csv_and_ulog_logs(tmp_path):
 def test_exact_json_number_kernel_is_correctly_rounded_or_declines():
     import re
 
-    from logscan.readers.decimal_float import POW10_HI, POW10_LO
-    from logscan.readers.json_decoder import _POW10, _json_number
+    from logscan.readers.decimal_float import decimal_number
 
     grammar = re.compile(r"-?(0|[1-9][0-9]*)(\.[0-9]+)?([eE][+-]?[0-9]+)?\Z")
     rng = np.random.default_rng(11)
@@ -841,21 +840,27 @@ def test_exact_json_number_kernel_is_correctly_rounded_or_declines():
         "5e-324",
         "0.1",
         "0.3",
+        "0.0012345678901234567",  # zeros after the point are not significant digits
+        "-0.000000000000000000012345678901234567",
+        "9999999999999999999",  # 19 digits, above 2**63
+        "1.8446744073709551615e-7",
+        "12345678901234567890",  # 20 digits: declined
+        "123456789.12345678901",
     ]
     taken = 0
     for token in tokens:
         text = np.frombuffer(token.encode(), dtype=np.uint8)
-        value, exact = _json_number(text, 0, text.size, _POW10, POW10_HI, POW10_LO)
-        if exact:
+        value, exact, stop = decimal_number(text, 0, text.size)
+        if exact and stop == text.size:
             taken += 1
             assert grammar.match(token), token
             assert np.float64(value).tobytes() == np.float64(float(token)).tobytes(), token
-        else:
+        elif not exact:
             assert np.isnan(value)
     assert taken > 5500  # the short decimals loggers write and 17-digit repr floats take the exact path
-    text = np.frombuffer(b"1.5 -2 1e400 7 ", dtype=np.uint8)
-    from logscan.readers.json_decoder import _parse_numbers
-
-    values, rest = np.empty(4), np.empty(16, dtype=np.uint8)
-    assert _parse_numbers(text, text.size, _POW10, POW10_HI, POW10_LO, values, rest) == (4, 1, 6)
-    assert rest[:6].tobytes() == b"1e400 " and values[[0, 1, 3]].tolist() == [1.5, -2.0, 7.0]
+    text = np.frombuffer(b"1.5 -2 1e400 7 ", dtype=np.uint8)  # a token ends where the number stops
+    assert decimal_number(text, 0, text.size)[1:] == (True, 3)
+    assert decimal_number(text, 4, text.size)[1:] == (True, 6)
+    assert decimal_number(text, 7, text.size)[1] is False  # 1e400: beyond float64, declined
+    for token, taken_here in ((b"9999999999999999999", True), (b"12345678901234567890", False)):
+        assert decimal_number(np.frombuffer(token, dtype=np.uint8), 0, len(token))[1] is taken_here

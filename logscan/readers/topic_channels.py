@@ -104,17 +104,20 @@ def channels_in_time_order(
     """One Channel per name, its pieces joined and sorted by time (stable); a warning names the unsorted."""
     channels: dict[str, Channel] = {}
     unsorted_topics: set[str] = set()
-    joined: dict[tuple[int, ...], np.ndarray] = {}  # pieces' times shared by a topic's fields, joined once
+    # pieces' times shared by a topic's fields: joined, checked and ordered once -> (t, order or None);
+    # keyed by the ids of the pieces' times, all alive together when the loop starts
+    joined: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray | None]] = {}
     for name in list(pieces):
         parts = pieces.pop(name)  # each channel's pieces go as it is joined
         key = tuple(id(p[0]) for p in parts)
         if key not in joined:
-            joined[key] = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
-        t = joined[key]
+            t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+            unsorted = t.size > 1 and bool((t[1:] < t[:-1]).any())
+            joined[key] = (t, np.argsort(t, kind="stable") if unsorted else None)
+        t, order = joined[key]
         v = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
         del parts
-        if t.size > 1 and (np.diff(t) < 0).any():
-            order = np.argsort(t, kind="stable")
+        if order is not None:
             t, v = t[order], v[order]
             unsorted_topics.add(name)
         channels[name] = Channel(name, t, v)
