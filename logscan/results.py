@@ -322,12 +322,21 @@ class Incident:
     alarms: list[AlarmInterval] = field(default_factory=list)
     what: str = ""  # "accelerometer inconsistent"
     detail: str = ""  # "nis.accel, peak 10.7x"
+    quoted: AlarmInterval | None = None  # the alarm of the check the headline quotes: its span is the headline's
+    size: str = ""  # "+0.92 m/s² (9.2σ) on accel ax for 11.3 s" (`logscan.verdict.deviation`); "": not known
 
-    def headline_in(self, clock=None) -> str:
-        """The headline with its times in ``clock`` (a `logscan.timebase.clock.Clock`; None: as built)."""
-        if clock is None or not self.what:
+    def headline_in(self, clock=None, size: str | None = None) -> str:
+        """'accelerometer inconsistent: +0.92 m/s² (9.2σ) on accel ax for 11.3 s, 30.00-41.27 s
+        (nis.accel, peak 10.7x)': the source in words, the deviation's size (``size``, else the
+        incident's own), the span of the check the headline quotes (the incident's when it quotes
+        none) in ``clock`` (a `logscan.timebase.clock.Clock`; None: seconds since the log's time
+        zero) and that check. The one wording of an incident: terminal, JSON and report."""
+        if not self.what:
             return self.headline
-        return f"{self.what} {clock.span_text(self.start, self.end)} ({self.detail})"
+        size = self.size if size is None else size
+        a, b = (self.start, self.end) if self.quoted is None else (float(self.quoted.start), float(self.quoted.end))
+        span = f"{a:.2f}-{b:.2f} s" if clock is None else clock.span_text(a, b)
+        return f"{self.what}{f': {size},' if size else ''} {span} ({self.detail})"
 
     def to_dict(self, clock=None) -> dict:
         """JSON view; with a ``clock`` the headline is in it and start/end are also given in it."""

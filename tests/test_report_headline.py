@@ -25,7 +25,7 @@ def bias():
         pytest.skip(f"{log} missing (run sample_logs/make_samples.py)")
     analysis = analyze_log(log, sensor_views=True, free_series=True)
     report = analysis.report_input()
-    return report, render_html(report, plotlyjs_src="plotly.min.js")
+    return report, render_html(report, plotlyjs_src="plotly.min.js"), analysis
 
 
 def verdict_lines(page: str) -> list[str]:
@@ -35,7 +35,7 @@ def verdict_lines(page: str) -> list[str]:
 
 
 def test_the_headline_gives_the_quoted_checks_span_and_the_deviation_in_the_sensors_units(bias):
-    report, page = bias
+    report, page, _ = bias
     (incident,) = report.incidents
     assert (incident.start, incident.end) == (30.0, 60.0)  # every alarm of the incident
     quoted = quoted_alarm(incident, list(report.model["groups"]))
@@ -55,12 +55,12 @@ def test_the_headline_gives_the_quoted_checks_span_and_the_deviation_in_the_sens
     # the incident table says the same line
     assert line in page[page.index('id="incident-table"') :]
     # incidents, alarms and ground-truth events are all numbered from 1
-    assert table(page, "incident-table")[1][0] == "1" and table(page, "alarm-table")[1][1] == "1"
+    assert table(page, "incident-table")[1][0] == "1" and min(int(r[1]) for r in table(page, "alarm-table")[1:]) == 1
     assert table(page, "truth-table")[1][0] == "1" and table(page, "alarm-table")[1][10] == "#1 bias accel.x"
 
 
 def test_the_headline_sensor_figure_is_first_and_zoomed_to_the_alarm(bias):
-    report, page = bias
+    report, page, _ = bias
     assert page.index('id="fig-headline"') < page.index('id="incident-table"') < page.index('id="alarm-table"')
     spec = figures(page)[0]
     assert spec["id"] == "fig-headline"
@@ -73,7 +73,7 @@ def test_the_headline_sensor_figure_is_first_and_zoomed_to_the_alarm(bias):
 
 
 def test_the_margin_table_shows_the_checks_that_matter_and_folds_the_rest(bias):
-    report, page = bias
+    report, page, _ = bias
     shown, folded = table(page, "margin-table")[1:], table(page, "margin-table-more")[1:]
     assert len(shown) + len(folded) == sum(len(r.series) for r in report.results)
     assert 3 <= len(shown) < len(folded)
@@ -94,7 +94,7 @@ def test_significant_figures_keep_the_sign_and_trailing_zeros():
 
 
 def test_a_saturated_cusum_alarm_shows_its_uncapped_size_not_the_cap(bias):
-    report, page = bias
+    report, page, _ = bias
     (cusum,) = [r for r in report.results if r.detector == "cusum"]
     capped = [a for a in cusum.alarms if a.signal == "cusum.accel.ax" and a.peak_ratio == pytest.approx(1.5)]
     assert capped, "the accelerometer x CUSUM no longer saturates: pick another statistic"
@@ -106,3 +106,31 @@ def test_a_saturated_cusum_alarm_shows_its_uncapped_size_not_the_cap(bias):
     assert all(row[-1].startswith("uncapped peak") for row in rows)
     margin = next(row for row in table(page, "margin-table")[1:] if row[1] == "cusum.accel.ax")
     assert float(margin[3]) == pytest.approx(max(ratios), rel=1e-2)
+
+
+def test_the_terminal_and_the_json_say_the_reports_headline(bias):
+    """One wording (`Incident.headline_in`): the headline check's span and the deviation's size, not
+    the incident's 30-60 s, in the terminal summary and the JSON document as on the report."""
+    from logscan.cli.render import render_summary
+
+    report, page, analysis = bias
+    (line,) = verdict_lines(page)
+    assert "30.00-60.00" not in line and " m/s² (" in line
+    (incident,) = analysis.summary()["incidents"]
+    assert incident["headline"] == line
+    assert (incident["start"], incident["end"]) == (30.0, 60.0)  # the incident's own span stays in the JSON
+    assert f"incident 1: {line}" in render_summary(analysis, None)
+
+
+def test_without_the_innovations_the_headline_keeps_the_checks_span_and_says_no_size():
+    from logscan.alarms import AlarmInterval
+    from logscan.results import Incident
+
+    quoted = AlarmInterval(30.0, 41.27, 30.0, 31.0, 10.7, 1.0, 10.7, "upper", 100, "nis.accel", "nis")
+    late = AlarmInterval(35.0, 60.0, 35.0, 36.0, 2.0, 1.0, 2.0, "upper", 100, "nis.all", "nis")
+    incident = Incident(30.0, 60.0, "accel", "", [quoted, late], "accelerometer inconsistent", "nis.accel, peak 10.7x",
+                        quoted)  # fmt: skip
+    assert incident.headline_in() == "accelerometer inconsistent 30.00-41.27 s (nis.accel, peak 10.7x)"
+    assert incident.headline_in(size="+1.0 m/s² (9.0σ) on accel ax for 11.3 s") == (
+        "accelerometer inconsistent: +1.0 m/s² (9.0σ) on accel ax for 11.3 s, 30.00-41.27 s (nis.accel, peak 10.7x)"
+    )

@@ -21,7 +21,8 @@ alarms behind it. The rules:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -29,6 +30,7 @@ from logscan.alarms import AlarmInterval, merge_close
 from logscan.detectors import words
 from logscan.detectors.registry import default_registry
 from logscan.results import DetectorResult, Incident
+from logscan.verdict.deviation import GroupViews, deviation
 
 DEFAULT_GAP_S = 1.0
 
@@ -122,10 +124,15 @@ def _rejected_counts(trace, start: float, end: float) -> dict[str, int]:
 
 
 def find_incidents(
-    results: Sequence[DetectorResult], trace, groups: Sequence[str], gap_s: float = DEFAULT_GAP_S
+    results: Sequence[DetectorResult],
+    trace,
+    groups: Sequence[str],
+    gap_s: float = DEFAULT_GAP_S,
+    sizes: Sizes | None = None,
 ) -> list[Incident]:
     """Incidents in time order from every result's alarms (merge fragments first). ``trace``: the
-    shared EKF trace (its rejected samples point at the source), or None."""
+    shared EKF trace (its rejected samples point at the source), or None. ``sizes``: the filter's
+    innovations to give each headline the deviation's size with (`Sizes`); None: no size."""
     alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
     starts = np.array([a.start for a in alarms])
     ends = np.maximum.accumulate(np.array([a.end for a in alarms])) if alarms else np.zeros(0)
@@ -138,6 +145,38 @@ def find_incidents(
         rejected = _rejected_counts(trace, start, stop)
         group, quoted = _source(members, list(groups), rejected)
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
-        text = f"{what} {start:.2f}-{stop:.2f} s ({detail})"
-        incidents.append(Incident(start, stop, group or quoted.signal, text, members, what=what, detail=detail))
+        size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
+        incident = Incident(start, stop, group or quoted.signal, "", members, what, detail, quoted, size)
+        incident.headline = incident.headline_in()
+        incidents.append(incident)
     return incidents
+
+
+@dataclass
+class Sizes:
+    """What an incident's headline needs for the deviation's size (`logscan.verdict.deviation`): every
+    group's view of the filter's innovations, the analysis grid and the model's `describe()`."""
+
+    views: GroupViews
+    t: np.ndarray
+    model: Mapping
+    _cache: dict = field(default_factory=dict)
+
+    def text(self, group: str, alarm: AlarmInterval) -> str:
+        """'+0.92 m/s² (9.2σ) on accel ax for 11.3 s' during ``alarm`` on ``group``; "" when the
+        group was not updated in it (or has no view)."""
+        if group not in self._cache:
+            self._cache[group] = self.views.view(group)
+        view = self._cache[group]
+        found = None if view is None else deviation(view, self.t, alarm, self.model)
+        return "" if found is None else found.text()
+
+
+def sizes_of(prepared) -> Sizes | None:
+    """`Sizes` from a prepared log (`logscan.pipeline.stages.Prepared`) whose filter's innovations
+    were kept (for a report); None when they were not."""
+    views = getattr(prepared, "innovations", None)
+    if views is None:
+        return None
+    model = getattr(prepared, "model", None)
+    return Sizes(views, prepared.run.t, model.describe() if model is not None else {})
