@@ -32,6 +32,9 @@ from logscan.models import dispatch, get_model
 from logscan.models.quadcopter_kernels import QP_G, QP_MASS, QUADCOPTER_ID
 from logscan.numba_cache import follow_dependencies
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from ekf_baselines import NumpyQuadcopter, run_hand_tuned  # noqa: E402
+
 DT = 0.01
 
 
@@ -98,18 +101,21 @@ def _seed_numba(seed):
     np.random.seed(seed)
 
 
-def run_filterpy(model, run, x0, P0):
-    """filterpy's ExtendedKalmanFilter on the same model: F before predict, stacked H/h/R."""
+def run_filterpy(model, run, x0, P0, functions=None):
+    """filterpy's ExtendedKalmanFilter on the same model: F before predict, stacked H/h/R.
+    ``functions``: the f/F/h/H to drive it with (default: the logscan model's own, each a call
+    into compiled code; `NumpyQuadcopter`: plain numpy)."""
     from filterpy.kalman import ExtendedKalmanFilter
 
     n = model.n_states
+    fun = model if functions is None else functions
     names = list(run.groups)
     Q = model.default_Q(run.dt)
     R = {g: model.default_R(g) for g in names}
 
     class ModelEKF(ExtendedKalmanFilter):
         def predict_x(self, u=0):
-            self.x = model.f(self.x, u, run.dt)
+            self.x = fun.f(self.x, u, run.dt)
 
     ekf = ModelEKF(dim_x=n, dim_z=9)
     ekf.x = x0.copy()
@@ -120,7 +126,7 @@ def run_filterpy(model, run, x0, P0):
     for k in range(run.n_steps):
         u = run.u[k]
         if k > 0:
-            ekf.F = model.F(ekf.x, u, run.dt)
+            ekf.F = fun.F(ekf.x, u, run.dt)
             ekf.predict(u=u)
         used = [g for g, f in zip(names, fresh[k]) if f]
         z = np.concatenate([run.groups[g].z[k] for g in used])
@@ -132,8 +138,8 @@ def run_filterpy(model, run, x0, P0):
             o += s
         ekf.update(
             z,
-            HJacobian=lambda x, used=used, u=u: np.vstack([model.H(g, x, u) for g in used]),
-            Hx=lambda x, used=used, u=u: np.concatenate([model.h(g, x, u) for g in used]),
+            HJacobian=lambda x, used=used, u=u: np.vstack([fun.H(g, x, u) for g in used]),
+            Hx=lambda x, used=used, u=u: np.concatenate([fun.h(g, x, u) for g in used]),
             R=Rk,
         )
         x_post[k] = ekf.x
@@ -302,35 +308,53 @@ def main(argv=None) -> int:
     x0 = truth[0].copy()
     P0 = np.diag(np.square(model.state_scale())) * 0.01
     run_ekf(model, run, x0=x0, P0=P0)  # compile / load from cache outside the timing
-    (full, wall, cpu), (light, wall_l, cpu_l) = best_of(
+    run_hand_tuned(model, run, x0, P0)
+    (full, wall, cpu), (light, wall_l, cpu_l), (hand, wall_h, cpu_h) = best_of(
         [
             lambda: run_ekf(model, run, x0=x0, P0=P0),
             lambda: run_ekf(model, run, x0=x0, P0=P0, store_gain=False, store_S=False),
+            lambda: run_hand_tuned(model, run, x0, P0),
         ],
         args.reps,
     )
-    t0, c0 = time.perf_counter(), time.process_time()
-    x_fp = run_filterpy(model, run, x0, P0)
-    wall_fp, cpu_fp = time.perf_counter() - t0, time.process_time() - c0
+    filterpy_runs = {}
+    for label, functions in (
+        ("logscan's compiled model", None),
+        ("numpy model", NumpyQuadcopter(model.param_vector(DT))),
+    ):
+        t0, c0 = time.perf_counter(), time.process_time()
+        x_fp = run_filterpy(model, run, x0, P0, functions)
+        filterpy_runs[label] = (x_fp, time.perf_counter() - t0, time.process_time() - c0)
+    cpu_fp = filterpy_runs["numpy model"][2]
+    cpu_fp_compiled = filterpy_runs["logscan's compiled model"][2]
 
-    diff = np.max(np.abs(full.x_post - x_fp))
-    rel = diff / np.max(np.abs(full.x_post))
     rmse = np.sqrt(np.mean((full.x_post[:, :3] - truth[:, :3]) ** 2))
     N = args.steps
     print(
         f"steps {N}: accel+gyro 100 Hz, position 10 Hz; position RMSE vs truth {rmse:.3f} m; "
         f"mean NIS/m {np.nanmean(full.nis / full.m_k):.3f}"
     )
-    print("| filter | wall s | steps/s (wall) | CPU s | steps/s (CPU) | speed-up (CPU) |")
+    print("| filter | wall s | steps/s (wall) | CPU s | us/step (CPU) | speed-up vs filterpy, numpy model (CPU) |")
     print("|---|---:|---:|---:|---:|---:|")
-    for label, w, c in (
+    rows = [
         ("logscan, full trace (S, K stored)", wall, cpu),
         ("logscan, store_gain=False, store_S=False", wall_l, cpu_l),
-        ("filterpy ExtendedKalmanFilter", wall_fp, cpu_fp),
-    ):
-        print(f"| {label} | {w:.2f} | {N / w:,.0f} | {c:.2f} | {N / c:,.0f} | {cpu_fp / c:.1f}x |")
-    print(f"agreement: max |x_logscan - x_filterpy| = {diff:.2e} (relative {rel:.1e})")
-    ok = diff < 1e-6 and np.array_equal(full.x_post, light.x_post)
+        ("hand-tuned reference algebra (bench/ekf_baselines.py)", wall_h, cpu_h),
+    ]
+    rows += [(f"filterpy ExtendedKalmanFilter, {label}", w, c) for label, (_, w, c) in filterpy_runs.items()]
+    for label, w, c in rows:
+        print(f"| {label} | {w:.2f} | {N / w:,.0f} | {c:.2f} | {c / N * 1e6:.2f} | {cpu_fp / c:.1f}x |")
+    print(
+        f"logscan / hand-tuned (CPU per step): full trace {cpu / cpu_h:.2f}x, light {cpu_l / cpu_h:.2f}x; "
+        f"filterpy with logscan's compiled model / with the numpy model: {cpu_fp_compiled / cpu_fp:.2f}"
+    )
+    ok = np.array_equal(full.x_post, light.x_post)
+    for label, other in [("hand-tuned", hand)] + [(f"filterpy ({k})", v[0]) for k, v in filterpy_runs.items()]:
+        diff = np.max(np.abs(full.x_post - other))
+        print(
+            f"agreement: max |x_logscan - x_{label}| = {diff:.2e} (relative {diff / np.max(np.abs(full.x_post)):.1e})"
+        )
+        ok = ok and diff < 1e-6
     print("agreement check:", "PASS" if ok else "FAIL")
     if not args.no_phases:
         short = run_ekf(model, make_run(2000)[1], x0=x0, P0=P0, full_P=True)

@@ -36,12 +36,12 @@ from logscan.filters.ekf_pack import EkfBuffers, KernelInputs, pack_run, samples
 from logscan.filters.linalg import (
     all_finite,
     all_finite2,
-    cho_solve_rows,
     cholesky,
     forward_sq,
     fpft_q,
+    gain_rows,
     joseph,
-    nan_fill,
+    short_update,
     sparse_mm,
     sparse_rows,
     wrap_angle,
@@ -56,6 +56,12 @@ __all__ = ["EkfBuffers", "KernelInputs", "compiled_for", "ekf_run", "pack_run", 
 
 # error_model="numpy": float division without the Python-style zero checks (no division here
 # can see a zero: Cholesky pivots are checked > 0 first); not fastmath, NaN checks still hold.
+
+# The short covariance update P - K S K^T is used where every variance keeps more than this share
+# of its prior; else the step takes the Joseph form (docs/algorithms.md, "The covariance update").
+# Rounding leaves P_ii - (K S K^T)_ii an absolute error of about (m + 1) eps P_ii, so the short
+# form's variances keep a relative error below (m + 1) eps / SHORT_FORM_KEEP: 5e-9 for m <= 20.
+SHORT_FORM_KEEP = 1e-6
 
 
 @njit(cache=True, error_model="numpy", no_cpython_wrapper=True)
@@ -81,6 +87,26 @@ def _store(k, x, P, xs, P_diag, P_full, store_P):
         for i in range(n):
             for j in range(n):
                 P_full[k, i, j] = P[i, j]
+
+
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True)
+def _store_gain(k, pos, S, KT, S_out, K_out, store_S, store_K):
+    """S and K of step k into the full trace in one pass (the buffers come unfilled): S_out[k, j, l]
+    = S[pos[j], pos[l]] where outputs j and l were in the update (pos >= 0), else NaN; K likewise."""
+    m_total = pos.size
+    if store_S:
+        Sk = S_out[k]
+        for j in range(m_total):
+            pj = pos[j]
+            for c in range(m_total):
+                pc = pos[c]
+                Sk[j, c] = S[pj, pc] if pj >= 0 and pc >= 0 else np.nan
+    if store_K:
+        Kk = K_out[k]
+        for i in range(Kk.shape[0]):
+            for j in range(m_total):
+                pj = pos[j]
+                Kk[i, j] = KT[pj, i] if pj >= 0 else np.nan
 
 
 # =============================================================================================
@@ -146,12 +172,12 @@ def ekf_run(model_id, model, sensors, data, out):
     RsT = np.zeros((m_total, m_total))
     rcols, rnnz = np.empty((m_total, m_total), dtype=np.int64), np.empty(m_total, dtype=np.int64)
     L, Lg = np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
-    D, DT = np.zeros((n, m_total)), np.zeros((m_total, n))
+    D, DT, V = np.zeros((n, m_total)), np.zeros((m_total, n)), np.zeros((m_total, n))
     all_cols = np.empty((n, m_total), dtype=np.int64)  # all_cols[i, a] = a
     for i in range(n):
         for a in range(m_total):
             all_cols[i, a] = a
-    m_cnt = np.empty(n, dtype=np.int64)
+    m_cnt, pos = np.empty(n, dtype=np.int64), np.empty(m_total, dtype=np.int64)
 
     for k in range(N):
         # ---- input ----------------------------------------------------------------------
@@ -170,7 +196,14 @@ def ekf_run(model_id, model, sensors, data, out):
             P, P_upd = P_upd, P
             for i in range(n):
                 x[i] = x_new[i]
-            if not (all_finite(x) and all_finite2(P)):
+            # the previous P is finite, so a non-finite entry of F or of the new P shows on the new
+            # P's diagonal (F[i, c] meets P[c, c], or where P's row c is zero, 0 * inf = NaN in the
+            # terms of (F P F^T)[i, i])
+            finite = all_finite(x)
+            for i in range(n):
+                if not np.isfinite(P[i, i]):
+                    finite = False
+            if not finite:
                 diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
         _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
         # ---- select the fresh, valid groups -------------------------------------------------
@@ -216,10 +249,8 @@ def ekf_run(model_id, model, sensors, data, out):
                     still = True
             pending = still
         # ---- update -----------------------------------------------------------------------
-        if store_S:  # S_out and K_out come unfilled (np.empty): NaN where not updated
-            nan_fill(S_out[k])
-        if store_K:
-            nan_fill(K_out[k])
+        for j in range(m_total):  # where each output sits in this step's update (-1: not in it)
+            pos[j] = -1
         if m > 0:
             r = zero
             for a in range(ng):
@@ -244,10 +275,6 @@ def ekf_run(model_id, model, sensors, data, out):
                             Rs[a, b] = 0.0
                             Rs[b, a] = 0.0
                         Rs[a, a] = sd * sd
-            for a in range(m):
-                for b in range(m):
-                    RsT[b, a] = Rs[a, b]
-            sparse_rows(RsT, m, m, rcols, rnnz)
             # H P (H sparse: its rows' non-zeros only)
             sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
             # S = H P H^T + R (upper triangle, mirrored)
@@ -262,11 +289,8 @@ def ekf_run(model_id, model, sensors, data, out):
                     S[a, b] = S[b, a]
             ok = cholesky(S, zero, m, L)
             if ok:
-                # K = P H^T S^-1  via  S K^T = H P  (P symmetric)
-                for a in range(m):
-                    for j in range(n):
-                        KT[a, j] = HP[a, j]
-                cho_solve_rows(L, m, KT, n)
+                # K = P H^T S^-1  via  S K^T = H P  (P symmetric): V = L^-1 H P, K^T = L^-T V
+                gain_rows(L, m, HP, V, KT, n)
                 for i in range(n):
                     t = 0.0
                     for a in range(m):
@@ -274,10 +298,19 @@ def ekf_run(model_id, model, sensors, data, out):
                     dx[i] = t
                 # x_post = x_prior (+) K y~ (additive but for a model with a rotation in its state)
                 dispatch.model_boxplus_into(model_id, p, x, dx, x_upd)
-                # P_post = (I - K H) P (I - K H)^T + K R K^T   (Joseph form)
-                m_cnt[:] = m
-                joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT, D, P_upd)
-                if all_finite(x_upd) and all_finite2(P_upd):
+                # P_post = P - K S K^T = P - V^T V (the short form, exact for the optimal gain K),
+                # where every variance keeps more than SHORT_FORM_KEEP of its prior (that check is
+                # also its finite check); else (I - K H) P (I - K H)^T + K R K^T (Joseph form)
+                finite = short_update(P, V, m, n, SHORT_FORM_KEEP, P_upd)
+                if not finite:
+                    for a in range(m):  # R's non-zeros by column, for the Joseph form
+                        for b in range(m):
+                            RsT[b, a] = Rs[a, b]
+                    sparse_rows(RsT, m, m, rcols, rnnz)
+                    m_cnt[:] = m
+                    joseph(P, Hs, hcols, hnnz, HP, KT, Rs, rcols, rnnz, m, n, all_cols, m_cnt, W, DT, D, P_upd)
+                    finite = all_finite2(P_upd)
+                if finite and all_finite(x_upd):
                     for i in range(n):
                         x[i] = x_upd[i]
                     P, P_upd = P_upd, P
@@ -285,21 +318,19 @@ def ekf_run(model_id, model, sensors, data, out):
                     # NIS = y^T S^-1 y = |L^-1 y|^2
                     nis[k] = forward_sq(L, m, y, zero, v)
                     knorm = 0.0
-                    for a in range(m):
+                    for a in range(m):  # row sums first: m short chains instead of one of m n adds
+                        KTa = KT[a]
+                        ka = 0.0
                         for i in range(n):
-                            knorm += KT[a, i] * KT[a, i]
+                            ka += KTa[i] * KTa[i]
+                        knorm += ka
                     gain_norm[k] = np.sqrt(knorm)
                     for a in range(m):
                         j = rows[a]
+                        pos[j] = a
                         if store_y:
                             y_out[k, j] = y[a]
                             S_diag_out[k, j] = S[a, a]
-                        if store_S:
-                            for b in range(m):
-                                S_out[k, j, rows[b]] = S[a, b]
-                        if store_K:
-                            for i in range(n):
-                                K_out[k, i, j] = KT[a, i]
                     # per-group NIS on the group's own block of S
                     r = zero
                     for a in range(ng):
@@ -316,6 +347,8 @@ def ekf_run(model_id, model, sensors, data, out):
                     ok = False
             if not ok:
                 diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
+        if store_S or store_K:
+            _store_gain(k, pos, S, KT, S_out, K_out, store_S, store_K)
         _store(k, x, P, x_post, P_post_diag, P_post_full, store_P)
 
 
@@ -369,7 +402,7 @@ def _buffers(
         P_post_diag=np.full((N, n), nan, dtype=np.float32),
         P_prior_full=np.full((N if full_P else 0, n, n), nan),
         P_post_full=np.full((N if full_P else 0, n, n), nan),
-        # S_out, K_out: NaN-filled step by step by ekf_run (one pass over the memory, not two)
+        # S_out, K_out: written step by step by ekf_run, NaN where not updated (one pass, not two)
         # float32: y and diag(S) are drawn (the report's measured-vs-predicted figures), never
         # filtered further; a 1-hour log keeps 35 MB less
         y_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),

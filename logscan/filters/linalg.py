@@ -74,14 +74,74 @@ def cho_solve_rows(L, m, B, n):
 
 
 @njit(cache=True, error_model="numpy")
+def gain_rows(L, m, HP, V, KT, n):
+    """K^T = S^-1 H P (S = L L^T) row by row, in two halves: V = L^-1 H P, then K^T = L^-T V;
+    V is kept (P - V^T V is the short covariance update). The operations of `cho_solve_rows`."""
+    for i in range(m):  # L V = H P
+        Vi = V[i]
+        for j in range(n):
+            Vi[j] = HP[i, j]
+        for c in range(i):
+            l = L[i, c]
+            Vc = V[c]
+            for j in range(n):
+                Vi[j] -= l * Vc[j]
+        d = 1.0 / L[i, i]
+        for j in range(n):
+            Vi[j] *= d
+    for i in range(m - 1, -1, -1):  # L^T K^T = V
+        Ki = KT[i]
+        for j in range(n):
+            Ki[j] = V[i, j]
+        for c in range(i + 1, m):
+            l = L[c, i]
+            Kc = KT[c]
+            for j in range(n):
+                Ki[j] -= l * Kc[j]
+        d = 1.0 / L[i, i]
+        for j in range(n):
+            Ki[j] *= d
+
+
+@njit(cache=True, error_model="numpy")
+def short_update(P, V, m, n, keep, out):
+    """The short covariance update out = P - V^T V (V = L^-1 H P, S = L L^T, so V^T V = K S K^T
+    = K H P) on the lower triangle, mirrored, row by row. Returns True when every variance keeps
+    more than ``keep`` of its prior (out[i, i] > keep P[i, i]); False also when one is not finite.
+
+    For a finite P (the kernel's prior always is), that check is the whole finite check: every V[a, i]
+    enters out[i, i], and |V[a, i] V[a, j]| <= sqrt(P[i, i] P[j, j]) when the variances pass."""
+    ok = True
+    for i in range(n):
+        Oi = out[i]
+        Pi = P[i]
+        for j in range(i + 1):
+            Oi[j] = Pi[j]
+        for a in range(m):
+            Va = V[a]
+            f = Va[i]
+            for j in range(i + 1):
+                Oi[j] -= f * Va[j]
+        if not (Oi[i] > keep * Pi[i]) or not np.isfinite(Oi[i]):
+            ok = False
+    for i in range(n):
+        for j in range(i + 1, n):
+            out[i, j] = out[j, i]
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
 def sparse_rows(M, m, n, cols, nnz):
-    """Column indices of the non-zeros of each row of M[:m, :n] into cols[a, :nnz[a]]."""
+    """Column indices of the non-zeros of each row of M[:m, :n] into cols[a, :nnz[a]] (the rest of
+    cols[a] is overwritten too). Branch-free: every index is written, the count moves on a non-zero
+    (a Jacobian's pattern is not one a branch predictor learns)."""
     for a in range(m):
         c = 0
+        Ma = M[a]
+        ca = cols[a]
         for j in range(n):
-            if M[a, j] != 0.0:
-                cols[a, c] = j
-                c += 1
+            ca[c] = j
+            c += Ma[j] != 0.0
         nnz[a] = c
 
 
