@@ -188,12 +188,30 @@ def test_analyze_help_groups_its_options(cli):
     assert "--jobs" in section and "--scheduler" in section and "--junit" not in section
 
 
-def test_every_option_of_a_grouped_command_is_in_a_group():
+@pytest.mark.parametrize(
+    "command, titles",
+    [
+        ("evaluate", ["Input:", "Detectors:", "Scoring:", "Outputs:", "Parallel:", "Other options:"]),
+        ("train", ["Input:", "Training:", "Outputs:", "Parallel:", "Other options:"]),
+    ],
+)
+def test_evaluate_and_train_help_group_their_options_like_analyze(cli, command, titles):
+    result = cli(command, "--help")
+    assert result.exit_code == 0
+    shown = [line for line in result.stdout.splitlines() if line and not line.startswith(" ") and line.endswith(":")]
+    assert shown == titles
+    section = result.stdout.split("\nParallel:\n", 1)[1].split("\n\n", 1)[0]
+    assert "--jobs" in section and "--scheduler" in section and "--quiet" not in section
+
+
+@pytest.mark.parametrize("command", ["analyze", "evaluate", "train"])
+def test_every_option_of_a_grouped_command_is_in_a_group(command):
     import click
 
-    from logscan.cli.analyze_cmd import analyze
+    from logscan.cli.main import cli as group
 
-    untagged = [p.name for p in analyze.params if isinstance(p, click.Option) and not hasattr(p, "help_group")]
+    params = group.commands[command].params
+    untagged = [p.name for p in params if isinstance(p, click.Option) and not hasattr(p, "help_group")]
     assert untagged == ["help"] or untagged == [], untagged
 
 

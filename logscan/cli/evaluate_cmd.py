@@ -7,10 +7,12 @@ import sys
 import click
 
 from logscan.cli.options import (
+    GroupedCommand,
     check_parallelism,
     check_profile,
     detector_option,
     header_stamp_option,
+    help_groups,
     jobs_option,
     json_option,
     plotlyjs_option,
@@ -26,11 +28,21 @@ from logscan.errors import ExitCode, InputError
 from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 
 
+@help_groups(
+    {
+        "Input": ("profile_path", "tables_path", "start_s", "end_s", "use_header_stamp"),
+        "Detectors": ("detector_names",),
+        "Scoring": ("grace_s", "recovery_s"),
+        "Outputs": ("json_path", "page_path", "plotlyjs_dir", "quiet"),
+        "Parallel": ("jobs", "scheduler"),
+    }
+)
 @click.command(
+    cls=GroupedCommand,
     epilog="Examples:\n\n"
     "  logscan evaluate sample_logs/\n\n"
     "  logscan evaluate runs/*.mcap --detector nis --json eval.json\n\n"
-    "  logscan evaluate sample_logs/ --grace 0.5 --recovery 10"
+    "  logscan evaluate sample_logs/ --grace 0.5 --recovery 10",
 )
 @click.argument("log_paths", metavar="LOG_OR_DIR...", nargs=-1, required=True, type=click.Path(path_type=str))
 @json_option

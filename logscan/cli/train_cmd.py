@@ -7,8 +7,10 @@ import os
 import click
 
 from logscan.cli.options import (
+    GroupedCommand,
     check_parallelism,
     echo_notice,
+    help_groups,
     jobs_option,
     plotlyjs_option,
     profile_option,
@@ -19,7 +21,16 @@ from logscan.cli.options import (
 )
 
 
+@help_groups(
+    {
+        "Input": ("profile_path", "start_s", "end_s", "allow_faulty"),
+        "Training": ("calibrate", "tune"),
+        "Outputs": ("output_path", "report_path", "no_report", "plotlyjs_dir", "quiet"),
+        "Parallel": ("jobs", "scheduler"),
+    }
+)
 @click.command(
+    cls=GroupedCommand,
     short_help="Train the detectors' tables and thresholds (and the filter's noise) on healthy logs.",
     epilog="Examples:\n\n"
     "  logscan train sample_logs/jackal_train_1.mcap sample_logs/jackal_train_2.mcap -o jackal.tables.json\n\n"
