@@ -28,6 +28,8 @@ def test_continuous_matrices_at_nominal_parameters_follow_the_quadcopter_convent
         expected_A[6 + i, 9 + i] = 1.0
     expected_A[3, 7] = G  # vx' = g pitch
     expected_A[4, 6] = -G  # vy' = -g roll
+    for i in (3, 4, 5):
+        expected_A[i, i] = -0.25 / 1.2  # linear drag / mass
     np.testing.assert_array_equal(A, expected_A)
     m, Ixx, Iyy, Izz, arm, k = 1.2, 0.0212, 0.0212, 0.0392, 0.3, 0.0245
     expected_B = np.zeros((12, 4))
@@ -52,10 +54,11 @@ def test_hover_is_an_equilibrium_and_each_rotor_pushes_the_right_way():
     # the quadcopter's small-angle signs: +pitch accelerates towards +x, +roll towards -y
     tilted = np.zeros(12)
     tilted[7] = 0.1
-    assert model.f(tilted, u0, DT)[3] == pytest.approx(G * 0.1 * DT, rel=1e-12)
+    a = 0.25 / 1.2  # drag / mass: the velocity integrates the tilt through e^{-a t}
+    assert model.f(tilted, u0, DT)[3] == pytest.approx(G * 0.1 * (1 - np.exp(-a * DT)) / a, rel=1e-9)
     tilted = np.zeros(12)
     tilted[6] = 0.1
-    assert model.f(tilted, u0, DT)[4] == pytest.approx(-G * 0.1 * DT, rel=1e-12)
+    assert model.f(tilted, u0, DT)[4] == pytest.approx(-G * 0.1 * (1 - np.exp(-a * DT)) / a, rel=1e-9)
     # the same signs as the quadcopter model's nonlinear dynamics near hover: the wrench of a
     # thrust step on rotor i (through the hover_uav's mixer), and a small tilt at hover thrust
     quad = get_model("quadcopter", {"drag": 0.0})
@@ -88,16 +91,19 @@ def test_interval_model_encloses_the_vertices_and_random_parameter_sets():
     im = model.interval_model(DT)
     im.check()
     assert set(INTERVAL_PARAMS) == set(model.parameter_box())
-    assert im.B_r.max() > 0 and im.A_r.max() == 0.0  # the parameters move B only
+    # drag / mass moves A, vel_scale C, and mass, inertias, arm and k_yaw B
+    assert im.A_r.max() > 0 and im.B_r.max() > 0 and im.C_r.max() > 0
+    assert np.flatnonzero(im.C_r.max(axis=1)).tolist() == [3, 4, 5]  # the velocity rows
+    assert not model.interval_widened  # every entry monotone: the vertices enclose the box
     for corner in _box_corners(model):
-        Ad, Bd = model.discrete_AB(DT, **corner)
-        assert _inside(Ad, im.A_m, im.A_r) and _inside(Bd, im.B_m, im.B_r), corner
+        Ad, Bd, C = model.point_system(DT, **corner)
+        assert _inside(Ad, im.A_m, im.A_r) and _inside(Bd, im.B_m, im.B_r) and _inside(C, im.C_m, im.C_r), corner
     rng = np.random.default_rng(7)
     box = model.parameter_box()
     for _ in range(300):
         values = {k: rng.uniform(lo, hi) for k, (lo, hi) in box.items()}
-        Ad, Bd = model.discrete_AB(DT, **values)
-        assert _inside(Ad, im.A_m, im.A_r) and _inside(Bd, im.B_m, im.B_r), values
+        Ad, Bd, C = model.point_system(DT, **values)
+        assert _inside(Ad, im.A_m, im.A_r) and _inside(Bd, im.B_m, im.B_r) and _inside(C, im.C_m, im.C_r), values
     # the enclosure is tight: every entry's bounds are reached at some vertex
     corners = [model.discrete_AB(DT, **c)[1] for c in _box_corners(model)]
     np.testing.assert_allclose(np.max(corners, axis=0), im.B_m + im.B_r, rtol=1e-12, atol=1e-18)
@@ -122,8 +128,9 @@ def test_interval_model_noise_and_measurement_rows_are_the_point_models():
     im = model.interval_model(DT)
     assert im.group_names == ("position", "velocity", "attitude")
     assert im.group_offsets.tolist() == [0, 3, 6] and im.group_sizes.tolist() == [3, 3, 3]
-    np.testing.assert_array_equal(im.C_m, np.eye(12)[:9])
-    assert im.C_r.max() == 0 and im.Q_r.max() == 0 and im.R_r.max() == 0
+    np.testing.assert_allclose(im.C_m, np.eye(12)[:9], rtol=1e-15)
+    np.testing.assert_allclose(im.C_r, 0.05 * np.eye(12)[:9] * (np.arange(9) // 3 == 1)[:, None], rtol=1e-12)
+    assert im.Q_r.max() == 0 and im.R_r.max() == 0
     np.testing.assert_array_equal(im.Q_m, model.default_Q(DT))
     np.testing.assert_allclose(np.diag(im.R_m), [0.25] * 3 + [0.01] * 3 + [0.0004] * 3, rtol=1e-12)
     assert np.count_nonzero(im.R_m - np.diag(np.diag(im.R_m))) == 0
@@ -276,3 +283,13 @@ def test_actuator_faults_act_on_the_total_rotor_thrust():
     hover = sim.scenario.model.hover_thrust()
     k = int(round(12.0 / DT))
     assert sim.u_act[k, 1] == pytest.approx((hover + sim.u_cmd[k, 1]) * 0.5 - hover)
+
+
+def test_a_non_monotone_entry_is_found_and_its_interval_widened():
+    from logscan.models.interval_model import enclose_over_box
+
+    (pair,), widened = enclose_over_box(lambda a: (np.array([a * (1.0 - a), a]),), {"a": (0.0, 1.0)})
+    mid, rad = pair
+    assert widened  # both vertices give 0 for a (1 - a), the inside up to 0.25
+    assert mid[0] - rad[0] <= 0.0 and mid[0] + rad[0] >= 0.25
+    np.testing.assert_allclose([mid[1], rad[1]], [0.5, 0.5])  # a monotone entry keeps the vertex hull

@@ -134,7 +134,7 @@ def test_an_index_naming_a_class_since_renamed_is_stale_not_an_error(tmp_path, m
 
 
 @pytest.mark.parametrize(
-    "module_name", ["logscan.filters.ekf", "logscan.filters.ubikf", "logscan.verdict.observability_kernel"]
+    "module_name", ["logscan.filters.ekf", "logscan.filters.ubikf_kernel", "logscan.verdict.observability_kernel"]
 )
 def test_kernels_with_namedtuple_arguments_tolerate_a_renamed_class(module_name):
     for dispatcher in numba_cache.cached_dispatchers(importlib.import_module(module_name)):

@@ -135,24 +135,36 @@ def reduce_order(G, p, q):
     """Box the first q generators: replace G[:, :q] by diag(rowsum |G[:, :q]|) (n columns, an
     enclosure of what they span) followed by the remaining G[:, q:p]; returns the new p (q = 0:
     nothing to box)."""
+    return box_columns(G, p, 0, q)
+
+
+@njit(cache=True, error_model="numpy")
+def box_columns(G, p, q0, q1):
+    """Box the generators q0 .. q1 - 1: replace G[:, q0:q1] by diag(rowsum |G[:, q0:q1]|) (n
+    columns, an enclosure of what they span) followed by the remaining G[:, q1:p]; returns the new
+    p (q1 <= q0: nothing to box)."""
     n = G.shape[0]
-    if q <= 0:
+    if q1 <= q0:
         return p
-    keep = p - q
+    keep = p - q1
     box = np.empty(n)
-    zonotope_hull_into(G, n, q, box)
+    for i in range(n):
+        s = 0.0
+        for j in range(q0, q1):
+            s += abs(G[i, j])
+        box[i] = widen(s)
     for i in range(n):
         Gi = G[i]
-        if n <= q:  # moving left: front to back
+        if q0 + n <= q1:  # moving left: front to back
             for j in range(keep):
-                Gi[n + j] = Gi[q + j]
+                Gi[q0 + n + j] = Gi[q1 + j]
         else:  # moving right: back to front
             for j in range(keep - 1, -1, -1):
-                Gi[n + j] = Gi[q + j]
-        for j in range(n):
+                Gi[q0 + n + j] = Gi[q1 + j]
+        for j in range(q0, q0 + n):
             Gi[j] = 0.0
-        Gi[i] = box[i]
-    return n + keep
+        Gi[q0 + i] = box[i]
+    return q0 + n + keep
 
 
 # ================================================================================================

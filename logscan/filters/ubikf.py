@@ -19,56 +19,40 @@ covariance below P+.
 State set: the mid-model point estimate x_c and the zonotope x_c + G [-1, 1]^p of the deviations
 of every admissible point filter's estimate (same gains, inputs and measurements) from it:
 
-    x_c,prior = A_m x_c + B_m u              G <- [A_m G, diag(A_r (|x_c| + h) + B_r |u|)]
-    r = y - C_m x_c,prior                     r_rad = rowsum |C_m G| + gamma,  gamma = C_r (|x_c,prior| + h_prior)
-    x_c,post = x_c,prior + K r                G <- [(I - K C_m) G, K diag(gamma)]
+    x_c,prior = A_m x_c + B_m u              G <- A_m G,  alpha = A_r (|x_c| + h) + B_r |u|
+    r = y - C_m x_c,prior                     r_rad = rowsum |C_m G| + |C_m| alpha + gamma,
+                                              gamma = C_r (|x_c,prior| + h_prior)
+    x_c,post = x_c,prior + K r                G <- [(I - K C_m) G, diag(|I - K C_m| alpha + |K| gamma)]
 
-with h = rowsum |G| the hull radius. Every L steps (default 60) the generators older than L steps
-are boxed (`logscan.filters.intervals.reduce_order`). The innovation box [r] = r +- r_rad encloses
+with h = rowsum |G| the hull radius (h_prior adds alpha). The step's new deviations (the alpha box
+through I - K C_m, and K [-gamma, gamma]) are boxed once, when they enter: one column per state
+and step instead of n + m, then mapped exactly until the order reduction: every L_box steps
+(default 10) the generators those steps added are boxed together (`box_columns`), and every L steps
+(default 60, a multiple of L_box) the generators older than L steps are boxed
+(`logscan.filters.intervals.reduce_order`); each is boxed once at each level, so no wrapping
+compounds below L. The states fall into independent blocks where the model allows
+(`logscan.filters.ubikf_blocks`), each filtered alone. The innovation box [r] = r +- r_rad encloses
 y - C x_prior for every admissible point filter (it is the image of the zonotope through [C]).
 
 Conventions (as the EKF core, logscan.filters.ekf): k = 0: prior = x0, P0, no prediction; k > 0:
 predict with u_k (a non-finite input row is replaced by the last finite one). A group updates at k
 when it is fresh and its whole sample is finite. Divergence: a non-positive-definite S+, or P+, G
-or x_c non-finite or above `cap` in absolute value: the step is flagged `diverged` and the filter
-restarts from x0/P0 with an empty zonotope (no statistic of that step is stored).
+or x_c non-finite or above `cap` in absolute value: the step is flagged `diverged` and the block
+restarts from x0/P0 with an empty zonotope (no statistic of that step is stored, in any block).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
 from logscan.filters.detectability import check_detectable
-from logscan.filters.intervals import (
-    append_box,
-    append_scaled_columns,
-    innovation_bound,
-    posterior_bound,
-    predict_bound,
-    radius_times,
-    reduce_order,
-    sqrt_diag,
-    subtract_product,
-    widen,
-    zonotope_hull_into,
-    zonotope_map_into,
-)
-from logscan.filters.linalg import (
-    all_finite,
-    cho_solve_rows,
-    cholesky,
-    forward_sq,
-    sparse_mm,
-    sparse_rows,
-)
+from logscan.filters.ubikf_blocks import Block, block_groups, state_blocks, usable_groups
+from logscan.filters.ubikf_kernel import UbikfBuffers, UbikfData, UbikfModel, UbikfSettings, ubikf_run
 from logscan.models.interval_model import IntervalModel, loewner_upper
-from logscan.numba_cache import follow_dependencies
 
 
 @dataclass
@@ -102,264 +86,6 @@ class UbikfTrace:
 
 
 # ================================================================================================
-# the kernel's arguments (N steps, n states, nu inputs, G groups, m outputs of all groups stacked
-# group after group; group g's rows are group_offsets[g] : + group_sizes[g])
-# ================================================================================================
-class UbikfModel(NamedTuple):
-    """The interval model [M] = M_m +- M_r, its noise bounds, prior and measurement groups."""
-
-    A_m: np.ndarray  # (n, n) float64: state transition, midpoint
-    A_r: np.ndarray  # (n, n) float64: its radius (>= 0)
-    B_m: np.ndarray  # (n, nu) float64: input matrix, midpoint
-    B_r: np.ndarray  # (n, nu) float64: its radius
-    C_m: np.ndarray  # (m, n) float64: output matrix, midpoint
-    C_r: np.ndarray  # (m, n) float64: its radius
-    Q: np.ndarray  # (n, n) float64: Q+, a Loewner upper bound of [Q]
-    R: np.ndarray  # (m, m) float64: R+, a Loewner upper bound of [R]
-    x0: np.ndarray  # (n,) float64: the initial state, and the state a restart returns to
-    P0: np.ndarray  # (n, n) float64: its covariance
-    group_offsets: np.ndarray  # (G,) int64: each group's first row
-    group_sizes: np.ndarray  # (G,) int64: each group's number of rows
-
-
-class UbikfData(NamedTuple):
-    """The run's samples on the grid."""
-
-    u: np.ndarray  # (N, nu) float64: the input of each step (a non-finite row: the last finite one)
-    u_default: np.ndarray  # (nu,) float64: the input held before the first finite row
-    z: np.ndarray  # (N, m) float64: the samples, group blocks side by side
-    fresh: np.ndarray  # (N, G) bool: group g has a new sample at step k
-
-
-class UbikfSettings(NamedTuple):
-    """The filter's two settings."""
-
-    L: int  # order-reduction period, steps (>= 1)
-    cap: float  # divergence threshold on |P+|, |x_c| and the hull radius
-
-
-class UbikfBuffers(NamedTuple):
-    """What the kernel writes, preallocated by the caller (NaN filled; n_generators, m_k 0 and the
-    flags False). K and P are stored when their first dimension is N (zero-length: skipped). The
-    field names are `UbikfTrace`'s."""
-
-    x_mid: np.ndarray  # (N, n) float64: mid-model point estimate x_c (posterior)
-    x_lo: np.ndarray  # (N, n) float64: hull of the posterior zonotope
-    x_hi: np.ndarray  # (N, n) float64
-    P_trace: np.ndarray  # (N,) float64: trace(P+_post)
-    P_diag: np.ndarray  # (N, n) float32: diag(P+_post)
-    n_generators: np.ndarray  # (N,) int64: zonotope order after the step
-    P: np.ndarray  # (N, n, n) float64: P+_post, or (0, n, n)
-    r_mid: np.ndarray  # (N, m) float64: innovation box midpoint, NaN where not updated
-    r_rad: np.ndarray  # (N, m) float64: innovation box radius
-    S: np.ndarray  # (N, m, m) float64: S+ of the rows updated
-    nis: np.ndarray  # (N,) float64: point NIS
-    K: np.ndarray  # (N, n, m) float64: gain, or (0, n, m)
-    updated: np.ndarray  # (N, G) bool
-    m_k: np.ndarray  # (N,) int64: measurements in the update
-    diverged: np.ndarray  # (N,) bool: restarted from x0/P0 at this step
-
-
-# ================================================================================================
-# the kernel
-# ================================================================================================
-@njit(cache=True, error_model="numpy")
-def below_cap(M, cap):
-    """Every entry finite and |entry| <= cap."""
-    for v in M.ravel():
-        if not (abs(v) <= cap):
-            return False
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def interval_input_radius(A_r, x, h, B_r, u, out):
-    """out = A_r (|x| + h) + B_r |u| (widened): the box the interval terms of the prediction add."""
-    n = out.size
-    for i in range(n):
-        s = 0.0
-        for j in range(x.size):
-            s += A_r[i, j] * (abs(x[j]) + h[j])
-        for j in range(u.size):
-            s += B_r[i, j] * abs(u[j])
-        out[i] = widen(s)
-
-
-@njit(cache=True, error_model="numpy")
-def select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd):
-    """Stack the rows of the groups with a fresh, finite sample at step k; returns their count."""
-    m = 0
-    for g in range(group_offsets.size):
-        upd[g] = False
-        if not fresh[k, g]:
-            continue
-        o = group_offsets[g]
-        if not all_finite(z[k, o : o + group_sizes[g]]):
-            continue
-        upd[g] = True
-        for j in range(o, o + group_sizes[g]):
-            rows[m] = j
-            m += 1
-    return m
-
-
-@njit(cache=True, error_model="numpy")
-def predict_step(A_m, acols, annz, A_r, B_m, B_r, u, x, h, G, p, G_out, alpha, x_prior):
-    """x_c,prior = A_m x_c + B_m u and G_out = [A_m G, diag(A_r (|x_c| + h) + B_r |u|)]; returns
-    the new generator count."""
-    interval_input_radius(A_r, x, h, B_r, u, alpha)
-    zonotope_map_into(A_m, acols, annz, G, p, G_out)
-    for i in range(x.size):
-        x_prior[i] = np.dot(A_m[i], x) + np.dot(B_m[i], u)
-    return append_box(G_out, p, alpha)
-
-
-@njit(cache=True, error_model="numpy")
-def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_out):
-    """The correction with the m stacked rows (Cs = C_m[rows], y = r on entry): S+, K, P+_post
-    into P_out, x_c += K r, G <- [(I - K C_m) G, K diag(gamma)]. Returns (ok, p); ok False when
-    S+ is not positive definite. Leaves S+ and its Cholesky factor, the box radius of C_m G and
-    gamma in `work`."""
-    hcols, hnnz, HP, KT, S, Lc, CG, r_box, gamma, rho_c, sigma, w = work
-    n = x.size
-    sparse_rows(Cs, m, n, hcols, hnnz)
-    sparse_mm(Cs, hcols, hnnz, m, P, n, HP)
-    sqrt_diag(P, sigma)
-    radius_times(C_r, rows, m, sigma, rho_c)
-    ratio_c = innovation_bound(Cs, hcols, hnnz, m, P, HP, rho_c, Rs, S)
-    if not cholesky(S, 0, m, Lc):
-        return False, p
-    # K^T = (c/c0) (S+)^-1 C P
-    for a in range(m):
-        for j in range(n):
-            KT[a, j] = ratio_c * HP[a, j]
-    cho_solve_rows(Lc, m, KT, n)
-    posterior_bound(P, Cs, hcols, hnnz, HP, KT, Rs, m, rho_c, w, P_out)
-    K = w[6]
-    # innovation box radius rowsum |C_m G| + gamma, gamma = C_r (|x_c,prior| + h_prior)
-    for i in range(n):
-        sigma[i] = abs(x[i]) + h[i]
-    radius_times(C_r, rows, m, sigma, gamma)
-    sparse_mm(Cs, hcols, hnnz, m, G, p, CG)
-    zonotope_hull_into(CG, m, p, r_box)
-    # G <- [(I - K C_m) G, K diag(gamma)];  x_c,post = x_c,prior + K r
-    subtract_product(K, m, CG, p, G)
-    for i in range(n):
-        x[i] += np.dot(K[i, :m], y[:m])
-    return True, append_scaled_columns(G, p, K, m, gamma)
-
-
-@njit(cache=True, error_model="numpy")
-def store_step(k, x, h, P, p, out):
-    """The posterior of step k into ``out`` (UbikfBuffers): x_c, its hull x_c -+ h, diag and trace
-    of P+, generator count."""
-    x_mid, x_lo, x_hi, P_diag, P_out = out.x_mid, out.x_lo, out.x_hi, out.P_diag, out.P
-    tr = 0.0
-    for i in range(x.size):
-        x_mid[k, i] = x[i]
-        x_lo[k, i] = x[i] - h[i]
-        x_hi[k, i] = x[i] + h[i]
-        P_diag[k, i] = P[i, i]
-        tr += P[i, i]
-    out.P_trace[k] = tr
-    out.n_generators[k] = p
-    if P_out.shape[0] == x_mid.shape[0]:
-        P_out[k] = P
-
-
-@njit(cache=True, error_model="numpy")
-def store_update(k, rows, m, y, work, out, v):
-    """The innovation box, S+, the point NIS and (out.K of length N) the gain of step k into ``out``
-    (UbikfBuffers)."""
-    r_box, gamma, S, Lc, K = work[7], work[8], work[4], work[5], work[11][6]
-    r_mid, r_rad, S_out, K_out = out.r_mid, out.r_rad, out.S, out.K
-    out.nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
-    for a in range(m):
-        j = rows[a]
-        r_mid[k, j] = y[a]
-        r_rad[k, j] = widen(r_box[a] + gamma[a])
-        for b in range(m):
-            S_out[k, j, rows[b]] = S[a, b]
-        if K_out.shape[0] == r_mid.shape[0]:
-            for i in range(K.shape[0]):
-                K_out[k, i, j] = K[i, a]
-
-
-@njit(cache=True, error_model="numpy")
-def work_arrays(n, m, cap_p):
-    """The update's work arrays (see `update_step`), allocated once."""
-    all_cols = np.empty((n, m), dtype=np.int64)
-    for i in range(n):
-        all_cols[i, :] = np.arange(m)
-    int_n, int_m, int_mm = np.empty(n, dtype=np.int64), np.zeros(m, dtype=np.int64), np.empty((m, m), dtype=np.int64)
-    w = (all_cols, int_n, int_mm, int_m, np.empty((n, n)), np.empty((m, n)), np.zeros((n, m)), np.empty((n, m)))
-    hcols, hnnz = np.empty((m, n), dtype=np.int64), np.empty(m, dtype=np.int64)
-    HP, KT, S, Lc = np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, m)), np.zeros((m, m))
-    return (hcols, hnnz, HP, KT, S, Lc, np.zeros((m, cap_p)), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(n), w)
-
-
-@njit(cache=True, error_model="numpy")
-def ubikf_run(model, data, settings, out):
-    """Filter the N steps of ``data`` (UbikfData) with ``model`` (UbikfModel) and ``settings``
-    (UbikfSettings) into ``out`` (UbikfBuffers)."""
-    A_m, A_r, B_m, B_r, C_m, C_r = model.A_m, model.A_r, model.B_m, model.B_r, model.C_m, model.C_r
-    x0, P0, group_offsets, group_sizes = model.x0, model.P0, model.group_offsets, model.group_sizes
-    Q, R, u, z, fresh = model.Q, model.R, data.u, data.z, data.fresh
-    L, cap = settings.L, settings.cap
-    # read once (an attribute read inside the loop counts a reference up and down at each access)
-    updated, m_k, diverged = out.updated, out.m_k, out.diverged
-    n, m_total = x0.size, C_m.shape[0]
-    cap_p = n + 2 * L * (n + m_total)  # generators: a box, then at most 2 L steps of new ones
-    # work arrays (allocated once)
-    x, x_prior, u_last, h = x0.copy(), np.empty(n), data.u_default.copy(), np.zeros(n)
-    sigma, rho, alpha = np.empty(n), np.empty(n), np.empty(n)
-    P, P_next, Wn = P0.copy(), np.empty((n, n)), np.zeros((4, n, n))  # Wn[3] stays zero
-    G, G_next = np.zeros((n, cap_p)), np.zeros((n, cap_p))
-    acols, annz, all_rows = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64), np.arange(n)
-    sparse_rows(A_m, n, n, acols, annz)
-    rows, upd = np.empty(m_total, dtype=np.int64), np.zeros(group_offsets.size, dtype=np.bool_)
-    Cs, Rs, y, v = np.zeros((m_total, n)), np.zeros((m_total, m_total)), np.zeros(m_total), np.zeros(m_total)
-    work = work_arrays(n, m_total, cap_p)
-    p, p_mark, age = 0, 0, 0
-    for k in range(u.shape[0]):
-        if all_finite(u[k]):
-            u_last[:] = u[k]
-        if age > 0:  # k = 0 and after a restart: the prior is x0, P0
-            p = predict_step(A_m, acols, annz, A_r, B_m, B_r, u_last, x, h, G, p, G_next, alpha, x_prior)
-            G, G_next = G_next, G
-            x[:] = x_prior
-            predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
-            P, P_next = P_next, P
-            zonotope_hull_into(G, n, p, h)
-        ok = True
-        m = select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd)
-        if m > 0:
-            for a in range(m):
-                Cs[a] = C_m[rows[a]]
-                y[a] = z[k, rows[a]] - np.dot(C_m[rows[a]], x)  # r = y - C_m x_c,prior
-                for b in range(m):
-                    Rs[a, b] = R[rows[a], rows[b]]
-            ok, p = update_step(C_r, Cs, rows, m, y, Rs, P, x, h, G, p, work, P_next)
-            P, P_next = P_next, P
-        age += 1
-        if age % L == 0:  # box the generators older than L steps
-            p = reduce_order(G, p, p_mark)
-            p_mark = p
-        zonotope_hull_into(G, n, p, h)
-        if not (ok and below_cap(x, cap) and below_cap(P, cap) and below_cap(h, cap)):
-            diverged[k] = True
-            x[:] = x0
-            P[:] = P0
-            h[:] = 0.0
-            p, p_mark, age, m = 0, 0, 0, 0
-        store_step(k, x, h, P, p, out)
-        if m > 0:
-            m_k[k] = m
-            updated[k] = upd
-            store_update(k, rows, m, y, work, out, v)
-
-
-# ================================================================================================
 # the Python entry point
 # ================================================================================================
 def _measurements(model: IntervalModel, run: AlignedRun) -> tuple[np.ndarray, np.ndarray]:
@@ -384,6 +110,7 @@ def run_ubikf(
     run: AlignedRun,
     *,
     L: int = 60,
+    L_box: int = 10,
     cap: float = 1e12,
     store_gain: bool = False,
     store_P: bool = False,
@@ -395,8 +122,10 @@ def run_ubikf(
     P0 to the identity when the model gives none. Raises ModelError for an ill-formed or
     undetectable model, or a run that does not match it.
     """
-    if int(L) < 1:
-        raise ValueError(f"the order-reduction period L must be at least 1 step, got {L}")
+    if int(L) < 1 or int(L_box) < 1 or int(L) % int(L_box):
+        raise ValueError(
+            f"the order-reduction periods must be L >= 1 steps, a multiple of L_box >= 1; got {L}, {L_box}"
+        )
     model.check()
     check_detectable(model)
     n, m, N, G = model.n, model.m, run.n_steps, len(model.group_names)
@@ -409,9 +138,15 @@ def run_ubikf(
     finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite[0]].copy() if finite.size else np.zeros(u.shape[1])
     out = _buffers(N, n, m, G, store_P=store_P, store_gain=store_gain)
+    kernel_model = _kernel_model(model, x0, P0)
+    usable = usable_groups(z, fresh, kernel_model.group_offsets, kernel_model.group_sizes)
+    settings = UbikfSettings(int(L), int(L_box), float(cap))
+    blocks = state_blocks(*(kernel_model[i] for i in (0, 1, 4, 5, 6, 7, 9)))
     if N:
-        kernel_model = _kernel_model(model, x0, P0)
-        ubikf_run(kernel_model, UbikfData(u, u_default, z, fresh), UbikfSettings(int(L), float(cap)), out)
+        out.P_trace[:] = 0.0
+        for block in blocks:
+            _run_block(kernel_model, block, UbikfData(u, u_default, z, usable), settings, out)
+        _finish(out, usable, kernel_model.group_sizes)
     buffers = out._asdict()
     buffers["P"] = out.P if store_P else None
     buffers["K"] = out.K if store_gain else None
@@ -423,6 +158,58 @@ def run_ubikf(
         group_sizes=np.asarray(model.group_sizes),
         state_names=tuple(model.state_names),
     )
+
+
+def _run_block(model: UbikfModel, block: Block, data: UbikfData, settings: UbikfSettings, out: UbikfBuffers) -> None:
+    """Filter one block (`logscan.filters.ubikf_blocks`) and write its part of ``out``."""
+    s, r = block.states, block.rows
+    c = np.ascontiguousarray
+    offsets, sizes = block_groups(r, model.group_offsets, model.group_sizes)
+    sub = UbikfModel(
+        A_m=c(model.A_m[np.ix_(s, s)]), A_r=c(model.A_r[np.ix_(s, s)]),
+        B_m=c(model.B_m[s]), B_r=c(model.B_r[s]),
+        C_m=c(model.C_m[np.ix_(r, s)]), C_r=c(model.C_r[np.ix_(r, s)]),
+        Q=c(model.Q[np.ix_(s, s)]), R=c(model.R[np.ix_(r, r)]),
+        x0=c(model.x0[s]), P0=c(model.P0[np.ix_(s, s)]),
+        group_offsets=offsets, group_sizes=sizes,
+    )  # fmt: skip
+    N, G = data.fresh.shape
+    part = _buffers(N, s.size, r.size, G, store_P=out.P.shape[0] == N, store_gain=out.K.shape[0] == N)
+    ubikf_run(sub, UbikfData(data.u, data.u_default, c(data.z[:, r]), data.fresh), settings, part)
+    for name in ("x_mid", "x_lo", "x_hi", "P_diag"):
+        getattr(out, name)[:, s] = getattr(part, name)
+    out.P_trace[:] += part.P_trace
+    out.n_generators[:] += part.n_generators
+    out.diverged[:] |= part.diverged
+    out.r_mid[:, r], out.r_rad[:, r] = part.r_mid, part.r_rad
+    out.S[:, r[:, None], r[None, :]] = part.S
+    if out.P.shape[0] == N:
+        out.P[:, s[:, None], s[None, :]] = np.nan_to_num(part.P)
+    if out.K.shape[0] == N:
+        out.K[:, s[:, None], r[None, :]] = part.K
+    seen = np.isfinite(part.nis)
+    out.nis[seen] = np.where(np.isnan(out.nis[seen]), 0.0, out.nis[seen]) + part.nis[seen]
+
+
+def _finish(out: UbikfBuffers, usable: np.ndarray, sizes: np.ndarray) -> None:
+    """The whole model's update flags after every block ran: a group updated where it was usable
+    and no block diverged (a diverged step stores no update); S+ is zero between the rows of
+    different blocks, NaN outside the rows updated; a gain entry between blocks is zero."""
+    bad = out.diverged
+    if out.P.shape[0]:
+        out.P[np.isnan(out.P)] = 0.0  # between blocks
+    out.updated[:] = usable & ~bad[:, None]
+    out.m_k[:] = out.updated @ sizes
+    for name in ("r_mid", "r_rad", "nis"):
+        getattr(out, name)[bad] = np.nan
+    rows = np.isfinite(out.r_mid)
+    both = rows[:, :, None] & rows[:, None, :]
+    out.S[both & np.isnan(out.S)] = 0.0
+    out.S[~both] = np.nan
+    if out.K.shape[0]:
+        K = out.K
+        K[np.isnan(K) & rows[:, None, :]] = 0.0
+        K[~np.broadcast_to(rows[:, None, :], K.shape)] = np.nan
 
 
 def _buffers(N: int, n: int, m: int, G: int, *, store_P: bool, store_gain: bool) -> UbikfBuffers:
@@ -461,6 +248,3 @@ def _kernel_model(model: IntervalModel, x0: np.ndarray, P0: np.ndarray) -> Ubikf
         group_offsets=c(model.group_offsets, dtype=np.int64),
         group_sizes=c(model.group_sizes, dtype=np.int64),
     )
-
-
-follow_dependencies(__name__)

@@ -17,29 +17,33 @@ enters B and a rotor loss is an input fault. Linearised about hover with the qua
 conventions (z up, body FLU, small-angle inversion of a = R e3 T/m - g e3):
 
     x' = vx, y' = vy, z' = vz
-    vx' = g pitch,  vy' = -g roll,  vz' = u1 / mass
+    vx' = g pitch - (drag/mass) vx,  vy' = -g roll - (drag/mass) vy,  vz' = u1 / mass - (drag/mass) vz
     roll' = p, pitch' = q, yaw' = r
     p' = u2 / Ixx,  q' = u3 / Iyy,  r' = u4 / Izz
 
 discretised exactly (zero-order hold, `logscan.models.linear.discretise`). Process noise: white
 accelerations, q_accel on vx, vy, vz and q_angacc on p, q, r (continuous densities, Van Loan).
+Measurements: position and attitude directly, velocity through a scale factor vel_scale (nominal
+1: an optical-flow velocity, the AR.Drone 2's own, scales with the camera's calibration and the
+altitude it is scaled by).
 
-Interval parameters: mass, Ixx, Iyy, Izz, arm and k_yaw each lie in nominal * (1 +- rel) with
-rel = mass_rel, inertia_rel (the three inertias independently), arm_rel, k_yaw_rel. The point
-model (the EKF's, the simulator's truth) uses the nominal values; `interval_model(dt)` encloses
-the discretised system of every parameter set in the box (see its docstring).
+Interval parameters: mass, Ixx, Iyy, Izz, arm, k_yaw, drag and vel_scale each lie in
+nominal * (1 +- rel) with rel = mass_rel, inertia_rel (the three inertias independently), arm_rel,
+k_yaw_rel, drag_rel, vel_scale_rel. drag / mass puts them in A, vel_scale in C, mass, inertias,
+arm and k_yaw in B. The point model (the EKF's; the simulator's truth unless it draws an
+off-nominal plant, `logscan simulate --plant-draw`) uses the nominal values; `interval_model(dt)`
+encloses the discretised system of every parameter set in the box (see its docstring).
 """
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import replace
 
 import numpy as np
 
 from logscan.models.base import Actuators, GroupSpec, raise_problems
 from logscan.models.dispatch import HOVER_UAV_ID
-from logscan.models.interval_model import IntervalModel
+from logscan.models.interval_model import IntervalModel, enclose_over_box
 from logscan.models.linear import LinearBase, discretise
 from logscan.models.quadcopter import Quadcopter
 
@@ -51,11 +55,15 @@ DEFAULTS = {
     "arm": 0.3,  # m, lever arm of each rotor about the roll and pitch axes (l = l')
     "k_yaw": 0.0245,  # m, yaw torque per unit thrust (the quadcopter's b_tau)
     "g": 9.81,
+    "drag": 0.25,  # N s/m, linear translational drag (the quadcopter model's k_D)
+    "vel_scale": 1.0,  # velocity output = vel_scale * velocity
     # relative half-widths of the parameter intervals: p in nominal * [1 - rel, 1 + rel]
     "mass_rel": 0.05,
     "inertia_rel": 0.05,  # Ixx, Iyy and Izz, each independently
     "arm_rel": 0.05,
     "k_yaw_rel": 0.05,
+    "drag_rel": 0.1,  # drag coefficients are known less well than masses (+-10 %, the spec's upper end)
+    "vel_scale_rel": 0.05,
     # process noise: continuous white accelerations
     "q_accel": 0.05,  # m/s^2 / sqrt(Hz) on vx, vy, vz
     "q_angacc": 0.02,  # rad/s^2 / sqrt(Hz) on p, q, r
@@ -68,15 +76,19 @@ INTERVAL_PARAMS = {
     "Izz": "inertia_rel",
     "arm": "arm_rel",
     "k_yaw": "k_yaw_rel",
+    "drag": "drag_rel",
+    "vel_scale": "vel_scale_rel",
 }
+POINT_PARAMS = ("mass", "Ixx", "Iyy", "Izz", "arm", "k_yaw", "g", "drag")  # those of (A, B)
 Q_FLOOR = 1e-12  # added to Q's diagonal (as the quadcopter's): positive definite for a simulator
 
 
-def hover_matrices(mass, Ixx, Iyy, Izz, arm, k_yaw, g) -> tuple[np.ndarray, np.ndarray]:
+def hover_matrices(mass, Ixx, Iyy, Izz, arm, k_yaw, g, drag=0.0) -> tuple[np.ndarray, np.ndarray]:
     """Continuous (A, B) of the linearised hover model for one parameter set."""
     A = np.zeros((12, 12))
     for i in range(3):
         A[i, 3 + i] = 1.0  # position <- velocity
+        A[3 + i, 3 + i] = -drag / mass  # linear drag
         A[6 + i, 9 + i] = 1.0  # angle <- body rate (small angles)
     A[3, 7] = g  # vx' = g pitch
     A[4, 6] = -g  # vy' = -g roll
@@ -126,16 +138,19 @@ class HoverUav(LinearBase):
         super().__init__(params)
         p = self.p = self._merge_params(DEFAULTS)
         self._check_signs(
-            positive=("mass", "Ixx", "Iyy", "Izz", "arm", "k_yaw"),
-            non_negative=("g", "q_accel", "q_angacc", "mass_rel", "inertia_rel", "arm_rel", "k_yaw_rel"),
+            positive=("mass", "Ixx", "Iyy", "Izz", "arm", "k_yaw", "vel_scale"),
+            non_negative=("g", "drag", "q_accel", "q_angacc", *sorted(set(INTERVAL_PARAMS.values()))),
         )
         too_wide = [k for k in sorted(set(INTERVAL_PARAMS.values())) if not p[k] < 1.0]
         if too_wide:
             raise_problems([f"{self.name}: parameter {k} must be < 1 (got {p[k]})" for k in too_wide])
-        A, B = hover_matrices(*(p[k] for k in ("mass", "Ixx", "Iyy", "Izz", "arm", "k_yaw", "g")))
+        if p["vel_scale"] != 1.0:  # the velocity outputs' gain (the class's groups say 1)
+            velocity = replace(type(self).groups["velocity"], direct_gains=(p["vel_scale"],) * 3)
+            self.groups = {**type(self).groups, "velocity": velocity}
+        A, B = hover_matrices(*(p[k] for k in POINT_PARAMS))
         C = {
             "position": np.eye(12)[0:3],
-            "velocity": np.eye(12)[3:6],
+            "velocity": p["vel_scale"] * np.eye(12)[3:6],
             "attitude": np.eye(12)[6:9],
         }
         self._setup(A, B, C, {}, self._Qc(), True, None)
@@ -175,39 +190,44 @@ class HoverUav(LinearBase):
     def discrete_AB(self, dt: float, **values: float) -> tuple[np.ndarray, np.ndarray]:
         """(Ad, Bd) at period ``dt`` for the nominal parameters with ``values`` replacing some
         (mass, Ixx, ...): the point system of one parameter set."""
-        q = {k: self.p[k] for k in ("mass", "Ixx", "Iyy", "Izz", "arm", "k_yaw", "g")}
-        q.update(values)
+        q = {k: self.p[k] for k in POINT_PARAMS}
+        q.update({k: v for k, v in values.items() if k in q})
         A, B = hover_matrices(**q)
         Ad, Bd, _ = discretise(A, B, np.zeros((12, 12)), float(dt))
         return Ad, Bd
 
+    def output_matrix(self, **values: float) -> np.ndarray:
+        """C (9, 12) of the position, velocity and attitude groups stacked, for the nominal
+        parameters with ``values`` replacing some (vel_scale)."""
+        C = np.eye(12)[:9].copy()
+        C[3:6] *= values.get("vel_scale", self.p["vel_scale"])
+        return C
+
+    def point_system(self, dt: float, **values: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(Ad, Bd, C) of one parameter set (the nominal ones with ``values`` replacing some)."""
+        return (*self.discrete_AB(dt, **values), self.output_matrix(**values))
+
     def interval_model(self, dt: float) -> IntervalModel:
         """The interval linear model on a grid of period ``dt`` (docs/algorithms.md section 2).
 
-        [A_d], [B_d]: the exact discretisation evaluated at every vertex of the parameter box
-        (2^6 = 64 parameter sets), elementwise min and max, as midpoint and radius. An enclosure of
-        every parameter set in the box, because every entry of A_d and B_d is monotone in each
-        parameter: A_d = expm(A dt) does not depend on them (A holds only g and integrators), and
-        B_d = Gamma B with Gamma = int_0^dt expm(A s) ds fixed; the four chains (z; x <- pitch <- q;
-        y <- roll <- p; yaw <- r) are decoupled, so each entry of B_d is one entry of Gamma times
-        one of +-1/mass, +-arm/Ixx, +-arm/Iyy, +-k_yaw/Izz: monotone in each parameter, hence
-        extreme at vertices. (tests/test_hover_uav.py checks it on random parameter sets.)
-        C exact (radius 0), Q and R the point model's (radius 0): the noise model has no
-        parameter uncertainty. x0 the hover point, P0 = diag(state_scale^2).
+        [A_d], [B_d], [C]: the exact discretisation evaluated at every vertex of the parameter box
+        (2^8 = 256 parameter sets), elementwise min and max, as midpoint and radius
+        (`enclose_over_box`, which checks on random parameter sets that no entry leaves the
+        vertex hull, and widens by a margin if one does). An enclosure because every entry is
+        monotone in each parameter: drag and mass enter A only as a = drag / mass, on the
+        velocity diagonal; each chain (z, vz; x, vx, pitch, q; y, vy, roll, p; yaw, r) is
+        decoupled, and the entries of expm(A dt) and of Gamma = int_0^dt expm(A s) ds are
+        integrals of e^{-a s} times non-negative polynomials in s (monotone in a); each entry of
+        B_d is one entry of Gamma times one of +-1/mass, +-arm/Ixx, +-arm/Iyy, +-k_yaw/Izz (the
+        vz entry (1 - e^{-drag dt / mass}) / drag falls with mass); C holds vel_scale alone.
+        (tests/test_hover_uav.py checks it on random parameter sets; `enclose_over_box` would say
+        so if it failed.) Q and R the point model's (radius 0): the noise model has no parameter
+        uncertainty. x0 the hover point, P0 = diag(state_scale^2).
         """
-        box = self.parameter_box()
-        names = list(box)
-        lo_A = hi_A = lo_B = hi_B = None
-        for corner in itertools.product(*(box[k] for k in names)):
-            Ad, Bd = self.discrete_AB(dt, **dict(zip(names, corner)))
-            if lo_A is None or hi_A is None or lo_B is None or hi_B is None:  # the first corner sets all four
-                lo_A, hi_A, lo_B, hi_B = Ad.copy(), Ad.copy(), Bd.copy(), Bd.copy()
-            else:
-                lo_A, hi_A = np.minimum(lo_A, Ad), np.maximum(hi_A, Ad)
-                lo_B, hi_B = np.minimum(lo_B, Bd), np.maximum(hi_B, Bd)
-        assert lo_A is not None and hi_A is not None and lo_B is not None and hi_B is not None  # a box has a corner
+        (A, B, C), self.interval_widened = enclose_over_box(
+            lambda **v: self.point_system(dt, **v), self.parameter_box()
+        )
         group_names = tuple(sorted(self.groups, key=lambda g: self.groups[g].group_id))
-        C_m = np.vstack([self._C[g] for g in group_names])
         sizes = np.array([self.groups[g].size for g in group_names], dtype=np.int64)
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         m = int(sizes.sum())
@@ -216,16 +236,8 @@ class HoverUav(LinearBase):
             R_m[o : o + s, o : o + s] = self.default_R(g)
         Q_m = self.default_Q(dt)
         model = IntervalModel(
-            A_m=0.5 * (lo_A + hi_A),
-            A_r=0.5 * (hi_A - lo_A),
-            B_m=0.5 * (lo_B + hi_B),
-            B_r=0.5 * (hi_B - lo_B),
-            C_m=C_m,
-            C_r=np.zeros_like(C_m),
-            Q_m=Q_m,
-            Q_r=np.zeros_like(Q_m),
-            R_m=R_m,
-            R_r=np.zeros_like(R_m),
+            A_m=A[0], A_r=A[1], B_m=B[0], B_r=B[1], C_m=C[0], C_r=C[1],
+            Q_m=Q_m, Q_r=np.zeros_like(Q_m), R_m=R_m, R_r=np.zeros_like(R_m),
             dt=float(dt),
             state_names=tuple(self.state_names),
             group_names=group_names,
@@ -233,6 +245,6 @@ class HoverUav(LinearBase):
             group_sizes=sizes,
             x0=self.default_x0(),
             P0=self.default_P0(),
-        )
+        )  # fmt: skip
         model.check()
         return model

@@ -12,6 +12,8 @@ analysis grid); `logscan.filters.ubikf` runs on it.
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -76,3 +78,45 @@ def loewner_upper(M_m: np.ndarray, M_r: np.ndarray) -> np.ndarray:
     (for any |E| <= M_r, diag(rowsum M_r) - E is diagonally dominant, hence PSD). The elementwise
     upper ends are not an upper bound when off-diagonal entries are intervals."""
     return M_m + np.diag(np.asarray(M_r, dtype=np.float64).sum(axis=1))
+
+
+# sampled check of the vertex enclosure: interior parameter sets drawn per derivation, and the
+# margin by which the radius is widened when one of them leaves the vertex hull (non-monotone entry)
+INTERIOR_SAMPLES = 256
+NON_MONOTONE_MARGIN = 2.0
+
+
+def enclose_over_box(
+    evaluate: Callable[..., tuple[np.ndarray, ...]],
+    box: dict[str, tuple[float, float]],
+    seed: int = 0,
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], bool]:
+    """Midpoint and radius of each matrix ``evaluate(**params)`` returns, over the parameter box
+    ``box`` (name -> (lo, hi)); returns ([(mid, rad) per matrix], widened).
+
+    The matrices are evaluated at the 2^p vertices of the box and the elementwise min/max taken
+    (docs/algorithms.md section 2): an enclosure of every parameter set in the box when each entry
+    is monotone in each parameter. That is then checked on INTERIOR_SAMPLES random parameter sets
+    (seeded): where one leaves the vertex hull, that entry is not monotone, and its radius grows by
+    (1 + NON_MONOTONE_MARGIN) times the largest distance a sample lay outside (the hull holding
+    the samples, plus a margin for what the samples missed); ``widened`` is then True.
+    """
+    names = list(box)
+    lo_hi = [box[k] for k in names]
+    vertices = [evaluate(**dict(zip(names, corner))) for corner in itertools.product(*lo_hi)]
+    lo = [np.min([v[i] for v in vertices], axis=0) for i in range(len(vertices[0]))]
+    hi = [np.max([v[i] for v in vertices], axis=0) for i in range(len(vertices[0]))]
+    rng = np.random.default_rng(seed)
+    excess = [np.zeros_like(a) for a in lo]  # per entry: how far a sample left the vertex hull
+    for _ in range(INTERIOR_SAMPLES if names else 0):
+        mats = evaluate(**{k: rng.uniform(a, b) for k, (a, b) in zip(names, lo_hi)})
+        for i, M in enumerate(mats):
+            tol = 1e-12 * (np.abs(hi[i]) + np.abs(lo[i]))
+            excess[i] = np.maximum(excess[i], np.maximum(M - hi[i] - tol, lo[i] - M - tol))
+    widened = any(bool(np.any(e > 0.0)) for e in excess)
+    result = []
+    for a, b, e in zip(lo, hi, excess):
+        e = np.maximum(e, 0.0)
+        # a sample outside the hull: the hull grows to hold it, and the margin beyond
+        result.append((0.5 * (a + b), 0.5 * (b - a) + (1.0 + NON_MONOTONE_MARGIN) * e))
+    return result, widened

@@ -1,0 +1,342 @@
+"""The UBIKF's numba kernel: one pass over a log of the interval filter of `logscan.filters.ubikf`
+(its docstring has the recursion; docs/algorithms.md section 2), on one block of states
+(`logscan.filters.ubikf_blocks`). Its arguments are the NamedTuples below, each field's shape and
+dtype in a comment.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from logscan.filters.intervals import (
+    append_box,
+    box_columns,
+    innovation_bound,
+    posterior_bound,
+    predict_bound,
+    radius_times,
+    reduce_order,
+    sqrt_diag,
+    subtract_product,
+    widen,
+    zonotope_hull_into,
+    zonotope_map_into,
+)
+from logscan.filters.linalg import (
+    all_finite,
+    cho_solve_rows,
+    cholesky,
+    forward_sq,
+    sparse_mm,
+    sparse_rows,
+)
+from logscan.numba_cache import follow_dependencies
+
+
+# ================================================================================================
+# the kernel's arguments (N steps, n states, nu inputs, G groups, m outputs of all groups stacked
+# group after group; group g's rows are group_offsets[g] : + group_sizes[g])
+# ================================================================================================
+class UbikfModel(NamedTuple):
+    """The interval model [M] = M_m +- M_r, its noise bounds, prior and measurement groups."""
+
+    A_m: np.ndarray  # (n, n) float64: state transition, midpoint
+    A_r: np.ndarray  # (n, n) float64: its radius (>= 0)
+    B_m: np.ndarray  # (n, nu) float64: input matrix, midpoint
+    B_r: np.ndarray  # (n, nu) float64: its radius
+    C_m: np.ndarray  # (m, n) float64: output matrix, midpoint
+    C_r: np.ndarray  # (m, n) float64: its radius
+    Q: np.ndarray  # (n, n) float64: Q+, a Loewner upper bound of [Q]
+    R: np.ndarray  # (m, m) float64: R+, a Loewner upper bound of [R]
+    x0: np.ndarray  # (n,) float64: the initial state, and the state a restart returns to
+    P0: np.ndarray  # (n, n) float64: its covariance
+    group_offsets: np.ndarray  # (G,) int64: each group's first row
+    group_sizes: np.ndarray  # (G,) int64: each group's number of rows
+
+
+class UbikfData(NamedTuple):
+    """The run's samples on the grid."""
+
+    u: np.ndarray  # (N, nu) float64: the input of each step (a non-finite row: the last finite one)
+    u_default: np.ndarray  # (nu,) float64: the input held before the first finite row
+    z: np.ndarray  # (N, m) float64: the samples, group blocks side by side
+    fresh: np.ndarray  # (N, G) bool: group g has a new sample at step k
+
+
+class UbikfSettings(NamedTuple):
+    """The filter's two settings."""
+
+    L: int  # order-reduction period, steps (>= 1)
+    L_box: int  # the steps whose new generators are boxed together (1 .. L, L a multiple of it)
+    cap: float  # divergence threshold on |P+|, |x_c| and the hull radius
+
+
+class UbikfBuffers(NamedTuple):
+    """What the kernel writes, preallocated by the caller (NaN filled; n_generators, m_k 0 and the
+    flags False). K and P are stored when their first dimension is N (zero-length: skipped). The
+    field names are `UbikfTrace`'s."""
+
+    x_mid: np.ndarray  # (N, n) float64: mid-model point estimate x_c (posterior)
+    x_lo: np.ndarray  # (N, n) float64: hull of the posterior zonotope
+    x_hi: np.ndarray  # (N, n) float64
+    P_trace: np.ndarray  # (N,) float64: trace(P+_post)
+    P_diag: np.ndarray  # (N, n) float32: diag(P+_post)
+    n_generators: np.ndarray  # (N,) int64: zonotope order after the step
+    P: np.ndarray  # (N, n, n) float64: P+_post, or (0, n, n)
+    r_mid: np.ndarray  # (N, m) float64: innovation box midpoint, NaN where not updated
+    r_rad: np.ndarray  # (N, m) float64: innovation box radius
+    S: np.ndarray  # (N, m, m) float64: S+ of the rows updated
+    nis: np.ndarray  # (N,) float64: point NIS
+    K: np.ndarray  # (N, n, m) float64: gain, or (0, n, m)
+    updated: np.ndarray  # (N, G) bool
+    m_k: np.ndarray  # (N,) int64: measurements in the update
+    diverged: np.ndarray  # (N,) bool: restarted from x0/P0 at this step
+
+
+# ================================================================================================
+# the kernel
+# ================================================================================================
+@njit(cache=True, error_model="numpy")
+def below_cap(M, cap):
+    """Every entry finite and |entry| <= cap."""
+    for v in M.ravel():
+        if not (abs(v) <= cap):
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def row_dot(M, i, x):
+    """M[i] . x (a loop: numba's np.dot on short vectors is a BLAS call)."""
+    t = 0.0
+    for j in range(x.size):
+        t += M[i, j] * x[j]
+    return t
+
+
+@njit(cache=True, error_model="numpy")
+def interval_input_radius(A_r, x, h, B_r, u, out):
+    """out = A_r (|x| + h) + B_r |u| (widened): the box the interval terms of the prediction add."""
+    n = out.size
+    for i in range(n):
+        s = 0.0
+        for j in range(x.size):
+            s += A_r[i, j] * (abs(x[j]) + h[j])
+        for j in range(u.size):
+            s += B_r[i, j] * abs(u[j])
+        out[i] = widen(s)
+
+
+@njit(cache=True, error_model="numpy")
+def select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd):
+    """Stack the rows of the groups with a fresh, finite sample at step k; returns their count."""
+    m = 0
+    for g in range(group_offsets.size):
+        upd[g] = False
+        if not fresh[k, g]:
+            continue
+        o = group_offsets[g]
+        if not all_finite(z[k, o : o + group_sizes[g]]):
+            continue
+        upd[g] = True
+        for j in range(o, o + group_sizes[g]):
+            rows[m] = j
+            m += 1
+    return m
+
+
+@njit(cache=True, error_model="numpy")
+def predict_step(A_m, acols, annz, A_r, B_m, B_r, u, x, h, G, p, G_out, alpha, x_prior):
+    """x_c,prior = A_m x_c + B_m u, G_out = A_m G and alpha = A_r (|x_c| + h) + B_r |u|: the prior
+    zonotope is x_c,prior + G_out [-1, 1]^p + [-alpha, alpha] (the box is appended after the
+    update, `update_step`, or as it is when no group updates)."""
+    interval_input_radius(A_r, x, h, B_r, u, alpha)
+    zonotope_map_into(A_m, acols, annz, G, p, G_out)
+    for i in range(x.size):
+        t = 0.0
+        for j in range(x.size):
+            t += A_m[i, j] * x[j]
+        for j in range(u.size):
+            t += B_m[i, j] * u[j]
+        x_prior[i] = t
+
+
+@njit(cache=True, error_model="numpy")
+def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, alpha, G, p, work, P_out):
+    """The correction with the m stacked rows (Cs = C_m[rows], y = r on entry) of the prior zonotope
+    x_c + G [-1, 1]^p + [-alpha, alpha] (h its hull radius): S+, K, P+_post into P_out,
+    x_c += K r, G <- [(I - K C_m) G, diag(|I - K C_m| alpha + |K| gamma)]. Returns (ok, p); ok
+    False when S+ is not positive definite. Leaves S+ and its Cholesky factor, the box radius of
+    C_m G (with the alpha box) and gamma in `work`."""
+    hcols, hnnz, HP, KT, S, Lc, CG, r_box, gamma, rho_c, sigma, w = work
+    n = x.size
+    sparse_rows(Cs, m, n, hcols, hnnz)
+    sparse_mm(Cs, hcols, hnnz, m, P, n, HP)
+    sqrt_diag(P, sigma)
+    radius_times(C_r, rows, m, sigma, rho_c)
+    ratio_c = innovation_bound(Cs, hcols, hnnz, m, P, HP, rho_c, Rs, S)
+    if not cholesky(S, 0, m, Lc):
+        return False, p
+    # K^T = (c/c0) (S+)^-1 C P
+    for a in range(m):
+        for j in range(n):
+            KT[a, j] = ratio_c * HP[a, j]
+    cho_solve_rows(Lc, m, KT, n)
+    posterior_bound(P, Cs, hcols, hnnz, HP, KT, Rs, m, rho_c, w, P_out)
+    K = w[6]
+    # innovation box radius rowsum |C_m G| + |C_m| alpha + gamma, gamma = C_r (|x_c,prior| + h_prior)
+    for i in range(n):
+        sigma[i] = abs(x[i]) + h[i]
+    radius_times(C_r, rows, m, sigma, gamma)
+    sparse_mm(Cs, hcols, hnnz, m, G, p, CG)
+    zonotope_hull_into(CG, m, p, r_box)
+    for a in range(m):
+        t = 0.0
+        for s in range(hnnz[a]):
+            t += abs(Cs[a, hcols[a, s]]) * alpha[hcols[a, s]]
+        r_box[a] = widen(r_box[a] + t)
+    # G <- (I - K C_m) G;  x_c,post = x_c,prior + K r
+    subtract_product(K, m, CG, p, G)
+    for i in range(n):
+        t = 0.0
+        for a in range(m):
+            t += K[i, a] * y[a]
+        x[i] += t
+    # the new deviations, boxed once: (I - K C_m) [-alpha, alpha] + K [-gamma, gamma]
+    for i in range(n):
+        t = 0.0
+        for j in range(n):
+            kc = 0.0
+            for a in range(m):
+                kc += K[i, a] * Cs[a, j]
+            t += abs((1.0 if i == j else 0.0) - kc) * alpha[j]
+        for a in range(m):
+            t += abs(K[i, a]) * gamma[a]
+        sigma[i] = widen(t)
+    return True, append_box(G, p, sigma)
+
+
+@njit(cache=True, error_model="numpy")
+def store_step(k, x, h, P, p, out):
+    """The posterior of step k into ``out`` (UbikfBuffers): x_c, its hull x_c -+ h, diag and trace
+    of P+, generator count."""
+    x_mid, x_lo, x_hi, P_diag, P_out = out.x_mid, out.x_lo, out.x_hi, out.P_diag, out.P
+    tr = 0.0
+    for i in range(x.size):
+        x_mid[k, i] = x[i]
+        x_lo[k, i] = x[i] - h[i]
+        x_hi[k, i] = x[i] + h[i]
+        P_diag[k, i] = P[i, i]
+        tr += P[i, i]
+    out.P_trace[k] = tr
+    out.n_generators[k] = p
+    if P_out.shape[0] == x_mid.shape[0]:
+        P_out[k] = P
+
+
+@njit(cache=True, error_model="numpy")
+def store_update(k, rows, m, y, work, out, v):
+    """The innovation box, S+, the point NIS and (out.K of length N) the gain of step k into ``out``
+    (UbikfBuffers)."""
+    r_box, gamma, S, Lc, K = work[7], work[8], work[4], work[5], work[11][6]
+    r_mid, r_rad, S_out, K_out = out.r_mid, out.r_rad, out.S, out.K
+    out.nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
+    for a in range(m):
+        j = rows[a]
+        r_mid[k, j] = y[a]
+        r_rad[k, j] = widen(r_box[a] + gamma[a])
+        for b in range(m):
+            S_out[k, j, rows[b]] = S[a, b]
+        if K_out.shape[0] == r_mid.shape[0]:
+            for i in range(K.shape[0]):
+                K_out[k, i, j] = K[i, a]
+
+
+@njit(cache=True, error_model="numpy")
+def work_arrays(n, m, cap_p):
+    """The update's work arrays (see `update_step`), allocated once."""
+    all_cols = np.empty((n, m), dtype=np.int64)
+    for i in range(n):
+        all_cols[i, :] = np.arange(m)
+    int_n, int_m, int_mm = np.empty(n, dtype=np.int64), np.zeros(m, dtype=np.int64), np.empty((m, m), dtype=np.int64)
+    w = (all_cols, int_n, int_mm, int_m, np.empty((n, n)), np.empty((m, n)), np.zeros((n, m)), np.empty((n, m)))
+    hcols, hnnz = np.empty((m, n), dtype=np.int64), np.empty(m, dtype=np.int64)
+    HP, KT, S, Lc = np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, m)), np.zeros((m, m))
+    return (hcols, hnnz, HP, KT, S, Lc, np.zeros((m, cap_p)), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(n), w)
+
+
+@njit(cache=True, error_model="numpy")
+def ubikf_run(model, data, settings, out):
+    """Filter the N steps of ``data`` (UbikfData) with ``model`` (UbikfModel) and ``settings``
+    (UbikfSettings) into ``out`` (UbikfBuffers)."""
+    A_m, A_r, B_m, B_r, C_m, C_r = model.A_m, model.A_r, model.B_m, model.B_r, model.C_m, model.C_r
+    x0, P0, group_offsets, group_sizes = model.x0, model.P0, model.group_offsets, model.group_sizes
+    Q, R, u, z, fresh = model.Q, model.R, data.u, data.z, data.fresh
+    L, L_box, cap = settings.L, settings.L_box, settings.cap
+    # read once (an attribute read inside the loop counts a reference up and down at each access)
+    updated, m_k, diverged = out.updated, out.m_k, out.diverged
+    n, m_total = x0.size, C_m.shape[0]
+    cap_p = n + 2 * L * n + n  # generators: a box, then at most 2 L steps of n new ones
+    # work arrays (allocated once)
+    x, x_prior, u_last, h = x0.copy(), np.empty(n), data.u_default.copy(), np.zeros(n)
+    sigma, rho, alpha = np.empty(n), np.empty(n), np.empty(n)
+    P, P_next, Wn = P0.copy(), np.empty((n, n)), np.zeros((4, n, n))  # Wn[3] stays zero
+    G, G_next = np.zeros((n, cap_p)), np.zeros((n, cap_p))
+    acols, annz, all_rows = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64), np.arange(n)
+    sparse_rows(A_m, n, n, acols, annz)
+    rows, upd = np.empty(m_total, dtype=np.int64), np.zeros(group_offsets.size, dtype=np.bool_)
+    Cs, Rs, y, v = np.zeros((m_total, n)), np.zeros((m_total, m_total)), np.zeros(m_total), np.zeros(m_total)
+    work = work_arrays(n, m_total, cap_p)
+    p, p_mark, p_recent, age = 0, 0, 0, 0
+    for k in range(u.shape[0]):
+        if all_finite(u[k]):
+            u_last[:] = u[k]
+        if age > 0:  # k = 0 and after a restart: the prior is x0, P0
+            predict_step(A_m, acols, annz, A_r, B_m, B_r, u_last, x, h, G, p, G_next, alpha, x_prior)
+            G, G_next = G_next, G
+            x[:] = x_prior
+            predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
+            P, P_next = P_next, P
+            zonotope_hull_into(G, n, p, h)
+            for i in range(n):  # the prior's hull: G's and the alpha box's
+                h[i] = widen(h[i] + alpha[i])
+        else:
+            alpha[:] = 0.0
+        ok = True
+        m = select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd)
+        if m > 0:
+            for a in range(m):
+                Cs[a] = C_m[rows[a]]
+                y[a] = z[k, rows[a]] - row_dot(C_m, rows[a], x)  # r = y - C_m x_c,prior
+                for b in range(m):
+                    Rs[a, b] = R[rows[a], rows[b]]
+            ok, p = update_step(C_r, Cs, rows, m, y, Rs, P, x, h, alpha, G, p, work, P_next)
+            P, P_next = P_next, P
+        else:
+            p = append_box(G, p, alpha)
+        age += 1
+        if age % L_box == 0:  # box the last L_box steps' new generators together
+            p = box_columns(G, p, p_recent, p)
+            p_recent = p
+        if age % L == 0:  # box the generators older than L steps
+            p = reduce_order(G, p, p_mark)
+            p_mark = p
+            p_recent = p
+        zonotope_hull_into(G, n, p, h)
+        if not (ok and below_cap(x, cap) and below_cap(P, cap) and below_cap(h, cap)):
+            diverged[k] = True
+            x[:] = x0
+            P[:] = P0
+            h[:] = 0.0
+            p, p_mark, p_recent, age, m = 0, 0, 0, 0, 0
+        store_step(k, x, h, P, p, out)
+        if m > 0:
+            m_k[k] = m
+            updated[k] = upd
+            store_update(k, rows, m, y, work, out, v)
+
+
+follow_dependencies(__name__)
