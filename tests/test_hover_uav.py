@@ -293,3 +293,23 @@ def test_a_non_monotone_entry_is_found_and_its_interval_widened():
     assert widened  # both vertices give 0 for a (1 - a), the inside up to 0.25
     assert mid[0] - rad[0] <= 0.0 and mid[0] + rad[0] >= 0.25
     np.testing.assert_allclose([mid[1], rad[1]], [0.5, 0.5])  # a monotone entry keeps the vertex hull
+
+
+def test_plant_draw_flies_an_off_nominal_plant_inside_the_intervals():
+    from logscan.errors import UsageError
+
+    sim = simulate("hover_uav", duration=20, seed=6, plant_draw=True)
+    drawn = sim.truth()["plant_params"]
+    box = sim.scenario.model.parameter_box()
+    assert set(drawn) == set(box) and all(box[k][0] <= v <= box[k][1] for k, v in drawn.items())
+    assert sim.profile_dict()["vehicle"]["params"]["mass"] == 1.2  # the profile stays nominal
+    # the velocity sensor reads through the drawn scale factor: z = vel_scale v + noise
+    vel = sim.group_slices()["velocity"]
+    v, z = sim.x_true[:, 3:6].ravel(), sim.z[:, vel].ravel()
+    scale = float(v @ z / (v @ v))
+    assert abs(scale - drawn["vel_scale"]) < 0.2 * abs(drawn["vel_scale"] - 1.0)
+    # and the truth's dynamics are the drawn plant's, not the nominal one's
+    nominal = simulate("hover_uav", duration=20, seed=6)
+    assert np.abs(nominal.x_true - sim.x_true).max() > 1e-3
+    with pytest.raises(UsageError, match="--plant-draw needs a model with interval parameters"):
+        simulate("quadcopter", duration=5, seed=1, plant_draw=True)

@@ -186,6 +186,15 @@ def _complete_faults(ctx: click.Context, param: click.Parameter, incomplete: str
     "with --speed, else constant.",
 )
 @click.option(
+    "--plant-draw",
+    "plant_draw",
+    is_flag=True,
+    default=False,
+    help="hover_uav: fly an off-nominal plant, every interval parameter (mass, inertias, arm, k_yaw, "
+    "drag, vel_scale) drawn uniformly inside its interval from the seed; the truth lists the values "
+    "(plant_params), the embedded profile keeps the nominal ones.",
+)
+@click.option(
     "--force",
     is_flag=True,
     default=False,
@@ -209,6 +218,7 @@ def simulate(
     glitches_per_min: float,
     speed: str | None,
     noise: str | None,
+    plant_draw: bool,
     force: bool,
     seed: int,
     quiet: bool,
@@ -227,7 +237,7 @@ def simulate(
     specs = _fault_specs(faults, at, fault_duration, magnitude, target, duration)
     options = dict(
         duration=duration, seed=seed, rate_hz=rate_hz, aggressive=aggressive, glitches_per_min=glitches_per_min,
-        speed=speed, noise=noise, scenario=scenario,
+        speed=speed, noise=noise, scenario=scenario, plant_draw=plant_draw,
     )  # fmt: skip
     _check_options(model_name, specs, options)  # every argument, before a compile note or progress line
     progress, cold = show_progress(quiet), not quiet and _simulator_cold(model_name)
@@ -237,7 +247,7 @@ def simulate(
         click.echo(f"simulating {model_name} for {duration:g} s ...", err=True)
     sim = run_simulation(
         model_name, specs, duration=duration, seed=seed, rate_hz=rate_hz, aggressive=aggressive,
-        glitches_per_min=glitches_per_min, speed=speed, noise=noise, scenario=scenario,
+        glitches_per_min=glitches_per_min, speed=speed, noise=noise, scenario=scenario, plant_draw=plant_draw,
     )  # fmt: skip
     if progress:
         compiled = " (compiling included)" if cold else ""
@@ -287,10 +297,12 @@ def _fault_specs(faults, at, fault_duration, magnitude, target, duration: float)
 
 def _check_options(model_name: str, specs: list, options: dict) -> None:
     """What the simulator would refuse, refused before anything is compiled or printed (exit 2)."""
+    from logscan.simulate.plant import check_plant_draw
     from logscan.simulate.scenario import check_speed, resolve_noise
     from logscan.simulate.simulation import check_run_options
 
     check_run_options(options["duration"], options["seed"], options["glitches_per_min"])
+    check_plant_draw(model_name, options["plant_draw"])
     rate = options["rate_hz"]
     if rate is not None and not (1.0 <= rate <= 10000.0):
         raise UsageError(f"--rate {rate:g} Hz is out of range", hint="use 1 .. 10000 Hz")

@@ -12,6 +12,7 @@ from logscan.errors import UsageError
 from logscan.simulate.faults import FaultSpec
 from logscan.simulate.ground_robot_sim import check_ground_robot_options, simulate_ground_robot
 from logscan.simulate.ins_sim import check_ins_faults, ins_scenario, simulate_ins
+from logscan.simulate.plant import check_plant_draw, draw_plant
 from logscan.simulate.scenario import Scenario, closed_loop_scenario, prepare_scenario
 from logscan.simulate.simulation import Simulation, check_run_options, simulate_closed_loop
 
@@ -48,6 +49,7 @@ def simulate(
     speed: str | None = None,
     noise: str | None = None,
     scenario: str | None = None,
+    plant_draw: bool = False,
 ) -> Simulation:
     """Simulate ``model_name`` for ``duration`` seconds with ``faults``; deterministic in ``seed``.
 
@@ -66,8 +68,13 @@ def simulate(
     (not a model: an outer unicycle loop over two DC-motor loops); it takes ``scenario`` ("paper",
     the default, "random" or "healthy"), ``duration`` and ``seed`` only, and returns a
     `GroundRobotSimulation`. ``scenario`` is for ground_robot alone.
+
+    ``plant_draw`` (hover_uav): the truth flies an off-nominal plant, every interval parameter drawn
+    uniformly inside its interval from the seed (`logscan.simulate.plant`); the truth document lists
+    the values (``plant_params``), the embedded profile keeps the nominal ones.
     """
     check_run_options(duration, seed, glitches_per_min)
+    check_plant_draw(model_name, plant_draw)
     if model_name == "ground_robot":  # several loops, several rates (logscan.simulate.ground_robot_sim)
         check_ground_robot_options(faults, rate_hz, aggressive, glitches_per_min, speed, noise)
         return simulate_ground_robot(scenario or "paper", duration=duration, seed=seed)
@@ -79,6 +86,9 @@ def simulate(
         check_ins_faults(faults or [])
     run = simulate_ins if model_name == "ins" else simulate_closed_loop
     sc = build_scenario(model_name, duration, rate_hz, aggressive, scenario_rng, params, speed, noise)
+    if plant_draw:
+        sc.plant, drawn = draw_plant(sc.model, seed)
+        sc.truth_extra["plant_params"] = drawn
     return run(
         sc,
         list(faults or []),

@@ -96,6 +96,7 @@ def _control_faults(k, u, u_last, f_kind, f_target, f_start, f_end, f_mag, held)
 def closed_loop(
     model_id,
     p,
+    p_true,
     dt,
     x0,
     P0,
@@ -131,6 +132,9 @@ def closed_loop(
     control_on_truth,
 ):
     """Run the whole log; returns (x_true, u_cmd, u_act, z, x_hat, P_diag, rejected).
+
+    p_true: the truth's packed parameters (the plant the vehicle is, its sensors' too); p: the
+    nominal ones the on-board EKF uses (the same array unless the plant is off-nominal).
 
     z is (N, total measurements) with NaN where a group did not sample; rejected counts samples
     the on-board EKF skipped (non-finite or outside the sensor's physical range). E holds unit
@@ -178,7 +182,7 @@ def closed_loop(
         u_act[k] = ua
         if k > 0:
             # x_k = f(x_{k-1}, u_k) + w_k
-            x = f_disc(model_id, p, x, ua, dt) + W[k]
+            x = f_disc(model_id, p_true, x, ua, dt) + W[k]
             # on-board EKF predict: x_prior = f(x_post, u_cmd), P_prior = F P F^T + Q
             xh, F = predict(model_id, p, xh, u_cmd[k], dt)
             P = F @ P @ F.T + Q
@@ -190,7 +194,7 @@ def closed_loop(
                 continue
             m = g_m[g]
             o = g_off[g]
-            zg = h_meas(model_id, g_id[g], p, x, ua)
+            zg = h_meas(model_id, g_id[g], p_true, x, ua)
             ok = True
             for j in range(m):
                 c = o + j

@@ -187,6 +187,7 @@ class Scenario:
     control_on_truth: bool = False
     controller_input: str = "on-board EKF estimate"  # what the truth says the vehicle flew on
     truth_extra: dict = field(default_factory=dict)  # extra entries of the truth document
+    plant: Model | None = None  # the truth's model when off-nominal (`plant.draw_plant`), else `model`
 
     @property
     def actuators(self) -> list[str]:  # the model's (`Model.actuators`), as the observability verdict's

@@ -355,6 +355,7 @@ def _closed_loop(sc: Scenario, table: FaultTable, Q, W, E, base, slope, std) -> 
     return closed_loop(
         model.model_id,
         model.param_vector(sc.dt),
+        (sc.plant or model).param_vector(sc.dt),
         sc.dt,
         sc.x0.astype(np.float64),
         np.ascontiguousarray(sc.P0, dtype=np.float64),
