@@ -2,9 +2,12 @@
 
 A 12-state quadcopter flies a hover-and-circle under a PD controller (truth: the model's RK4 step
 plus w ~ N(0, Q)); accelerometer and gyro at 100 Hz and position at 10 Hz with noise ~ N(0, R).
-Both filters use the same model functions (logscan.models: f, F, h, H), the same Q, R, x0, P0 and
-the same Joseph-form update (filterpy's EKF.update uses Joseph with inv(S); logscan uses Cholesky
-solves), so their state estimates agree to rounding; the script checks it.
+Both filters use the same model (filterpy: logscan's model functions f, F, h, H, each a call into
+compiled code, and again the same model in plain numpy, `ekf_baselines.NumpyQuadcopter`), the same
+Q, R, x0, P0 and the same update up to rounding (filterpy's EKF.update: Joseph form with inv(S);
+logscan: Cholesky solves and P - K S K^T), so their state estimates agree to rounding; the script
+checks it. A hand-tuned filter for this model and sensor layout (`ekf_baselines.hand_tuned_ekf`)
+runs beside logscan's, interleaved: the reference algebra the generic kernel is measured against.
 
 Also measured: the numba cold-compile time (fresh NUMBA_CACHE_DIR in a subprocess) and the
 warm-cache start-up time.
@@ -165,7 +168,8 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
     hcols, hnnz = np.empty((m, n), np.int64), np.empty(m, np.int64)
     rcols, rnnz = np.empty((m, m), np.int64), np.empty(m, np.int64)
     hx, Hs, R3, D3 = np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
-    HP, KT, S, L, D, DT = (
+    HP, KT, S, L, D, DT, V = (
+        np.empty((m, n)),
         np.empty((m, n)),
         np.empty((m, n)),
         np.empty((m, m)),
@@ -201,11 +205,12 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
                     for s in range(hnnz[b]):
                         t += HP[a, hcols[b, s]] * Hs[b, hcols[b, s]]
                     S[a, b] = t
-        if which == 4 or it == 0:  # Cholesky of S and K^T = S^-1 H P
+        if which == 4 or it == 0:  # Cholesky of S, V = L^-1 H P and K^T = L^-T V
             linalg.cholesky(S, 0, m, L)
-            KT[:, :] = HP
-            linalg.cho_solve_rows(L, m, KT, n)
-        if which == 5 or it == 0:  # Joseph form
+            linalg.gain_rows(L, m, HP, V, KT, n)
+        if which == 5 or it == 0:  # short form P - V^T V
+            linalg.short_update(P, V, m, n, 1e-6, P_upd)
+        if which == 6 or it == 0:  # Joseph form (the fallback)
             linalg.joseph(P, Hs, hcols, hnnz, HP, KT, R, rcols, rnnz, m, n, all_cols, m_cnt, W, DT, D, P_upd)
         acc += P_upd[1, 2] + KT[0, 0] + x_new[0]
     return acc
@@ -217,7 +222,8 @@ PHASES = (
     "h, H (accel, gyro)",
     "H P, S = H P H^T + R",
     "Cholesky of S, K = P H^T S^-1",
-    "Joseph P update",
+    "short P update P - V^T V",
+    "Joseph P update (fallback)",
 )
 
 
@@ -247,7 +253,7 @@ def phase_times(model, trace, run, reps=100_000):
 
 _COLD = """
 import time
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 import numpy as np
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters import run_ekf
@@ -259,18 +265,20 @@ run = AlignedRun(t=np.arange(N) * 0.01, dt=0.01, start_ns=0, u=np.tile(m.hover_i
                  groups={"gyro": AlignedGroup("gyro", ["a", "b", "c"], np.zeros((N, 3)),
                                               np.ones(N, bool))})
 run_ekf(m, run)
-print(time.perf_counter() - t0)
+print(time.perf_counter() - t0, time.process_time() - c0)
 """
 
 
-def compile_times() -> tuple[float, float]:
-    """(cold: empty NUMBA_CACHE_DIR, warm: same cache again) seconds to import + first run."""
+def compile_times() -> tuple[tuple[float, float], tuple[float, float]]:
+    """((wall s, CPU s) cold: empty NUMBA_CACHE_DIR, (wall s, CPU s) warm: same cache again) to
+    import + first run."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         out = []
         for _ in range(2):
             res = subprocess.run([sys.executable, "-c", _COLD], env=env, capture_output=True, text=True, check=True)
-            out.append(float(res.stdout.strip().splitlines()[-1]))
+            wall, cpu = res.stdout.strip().splitlines()[-1].split()
+            out.append((float(wall), float(cpu)))
     return out[0], out[1]
 
 
@@ -295,6 +303,8 @@ def main(argv=None) -> int:
     ap.add_argument("--reps", type=int, default=5, help="logscan repetitions (best is reported)")
     ap.add_argument("--no-compile", action="store_true", help="skip the cold-compile measurement")
     ap.add_argument("--no-phases", action="store_true", help="skip the per-sub-step timings")
+    ap.add_argument("--compile-only", action="store_true", help="only the cold-compile measurement")
+    ap.add_argument("--no-filterpy", action="store_true", help="skip the (slow) filterpy runs")
     args = ap.parse_args(argv)
 
     print(
@@ -302,8 +312,13 @@ def main(argv=None) -> int:
         f"load average {os.getloadavg()[0]:.1f}"
     )
     if not args.no_compile:
-        cold, warm = compile_times()
-        print(f"numba cold compile (empty cache, import + first run): {cold:.1f} s; warm cache: {warm:.2f} s")
+        (cold, cold_cpu), (warm, warm_cpu) = compile_times()
+        print(
+            f"numba cold compile (empty cache, import + first run): {cold:.1f} s ({cold_cpu:.1f} s CPU); "
+            f"warm cache: {warm:.2f} s ({warm_cpu:.2f} s CPU)"
+        )
+    if args.compile_only:
+        return 0
     model, run, truth = make_run(args.steps)
     x0 = truth[0].copy()
     P0 = np.diag(np.square(model.state_scale())) * 0.01
@@ -322,6 +337,9 @@ def main(argv=None) -> int:
         ("logscan's compiled model", None),
         ("numpy model", NumpyQuadcopter(model.param_vector(DT))),
     ):
+        if args.no_filterpy:  # placeholders: no filterpy figures printed (NaN)
+            filterpy_runs[label] = (full.x_post, np.nan, np.nan)
+            continue
         t0, c0 = time.perf_counter(), time.process_time()
         x_fp = run_filterpy(model, run, x0, P0, functions)
         filterpy_runs[label] = (x_fp, time.perf_counter() - t0, time.process_time() - c0)

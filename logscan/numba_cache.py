@@ -47,6 +47,17 @@ def follow_dependencies(module_name: str) -> None:
             cache_file._source_stamp = source_stamp(dispatcher, dependencies)
 
 
+def initialise_jit() -> None:
+    """Set numba's compiler up now: its typing and target registries (numba.np imports scipy's
+    BLAS check among others), which the first kernel a process compiles or loads from the cache
+    sets up otherwise, 0.4-1 s once per process. Called before forking workers (`--jobs`), so each
+    inherits it instead of paying it again."""
+    from numba.core.registry import cpu_target
+
+    cpu_target.typing_context.refresh()
+    cpu_target.target_context.refresh()
+
+
 def tolerate_missing_classes(cache_file) -> None:
     """Read the cache's index as empty (stale) when unpickling it fails on a class or module that
     no longer exists, as numba reads an index with an old stamp; the next save rewrites it. numba

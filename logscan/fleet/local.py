@@ -14,6 +14,7 @@ from logscan.fleet.failures import (
     _isolated,
     _progress_bar,
 )
+from logscan.numba_cache import initialise_jit
 
 
 def run_many(
@@ -46,6 +47,7 @@ def run_many(
                     bar.update(1)
             return outcomes
         outcomes: list[Any] = [None] * len(logs)
+        initialise_jit()  # once here, inherited by the forked workers (not once in each)
         pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_worker_init, initargs=(os.getpid(),))
         try:
             futures = {pool.submit(_isolated if isolate else _call, task, path): i for i, path in enumerate(logs)}
