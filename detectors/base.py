@@ -21,6 +21,8 @@ A detector (built-in or plugin) subclasses `Detector`:
             ...
         def _run(self, run, trace, **context) -> DetectorResult:
             ...
+        def end_delays(self, run, trace, result) -> dict:  # optional: a windowed statistic's
+            ...                                                # alarm outlasts the anomaly by its window
 
 Rules (STYLE.md): ``__init__`` only stores parameters (they are the detector's JSON config, read
 back as attributes: ``self.threshold``); the registry checks them against `parameter_constraints`
@@ -71,9 +73,16 @@ from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
 from logscan.traces import EkfTrace
 
-__all__ = ["Band", "Detector", "DetectorResult", "Needs", "describe"]
+__all__ = ["END_DELAY_KEY", "Band", "Detector", "DetectorResult", "Needs", "describe", "median_period"]
 
 STATE_FORMAT = "logscan-detector-state"
+END_DELAY_KEY = "end_delay_s"  # DetectorResult.info: statistic -> its declared end delay (`Detector.end_delays`)
+
+
+def median_period(t: np.ndarray, steps: np.ndarray) -> float:
+    """The median time between the steps of ``t`` where ``steps`` (bool) is True; 0 with fewer than two."""
+    times = np.asarray(t, dtype=np.float64)[np.asarray(steps, dtype=bool)]
+    return float(np.median(np.diff(times))) if times.size > 1 else 0.0
 
 
 # --- trained-state encoding (lossless, strict JSON) -----------------------------------------------
@@ -314,7 +323,18 @@ class Detector:
         finally:
             self._alarm_policy = None
         self._check_result(result, run)
+        delays = {name: float(s) for name, s in self.end_delays(run, trace, result).items() if name in result.series}
+        if delays:
+            result.info[END_DELAY_KEY] = delays
         return result
+
+    def end_delays(self, run: AlignedRun, trace: EkfTrace | None, result: DetectorResult) -> dict[str, float]:
+        """Statistic (of ``result``) -> its end delay (s): how long after an anomaly ends an alarm of
+        that statistic can still last because the statistic sums or spreads a trailing window over the
+        anomaly's samples. Stored in the result's info under ``END_DELAY_KEY``; recovery looks for the
+        end of an anomaly from an alarm's end minus it (docs/algorithms.md section 5). Default: none,
+        every statistic judges each sample alone (delay 0: its alarm ends with the anomaly)."""
+        return {}
 
     def _run(self, run: AlignedRun, trace: EkfTrace | None, **context: Any) -> DetectorResult:
         raise NotImplementedError(f"{type(self).__name__} must implement _run")

@@ -40,7 +40,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.base import Detector, DetectorResult, Needs, median_period
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import (
     MIN_DESIGN_RATE_PER_HOUR,
@@ -305,6 +305,19 @@ class CusumDetector(Detector):
                 result.info["h"][signal] = float(h[j])
                 result.info["arl0_updates"][signal] = float(arl[j])
         return result
+
+    def end_delays(self, run, trace, result) -> dict[str, float]:
+        """After an anomaly the capped statistic falls from cap h back to h by kappa per update on
+        average (healthy whitened innovations have mean 0): (cap - 1) h / kappa of the group's update
+        periods (median); kappa = 0 never falls back (inf)."""
+        kappa, delays = float(self.kappa), {}
+        for g, group in enumerate(trace.group_names):
+            period = median_period(trace.t, trace.updated[:, g])
+            for signal, h in result.info.get("h", {}).items():
+                if signal == f"cusum.{group}" or signal.startswith(f"cusum.{group}."):
+                    updates = (float(self.cap) - 1.0) * h / kappa if kappa > 0 else np.inf
+                    delays[signal] = updates * period
+        return delays
 
     def _gaps(self, trace) -> np.ndarray:
         """Per measurement column, the gap between updates that restarts its tests (s)."""

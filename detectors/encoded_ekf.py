@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.detectors.adaptive_threshold import adaptive_band, trailing_mean_var
-from logscan.detectors.base import Detector, DetectorResult, Needs
+from logscan.detectors.base import Detector, DetectorResult, Needs, median_period
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.normalised_check import (
     normal_bound,
@@ -277,6 +277,16 @@ class EncodedEkfDetector(Detector):
             e_s, defined_s = self.onboard_state_series(run, trace, cv_of, model, defined)
             self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s)
             result.info["onboard_state_check"] = True
+
+    def end_delays(self, run, trace, result) -> dict[str, float]:
+        """e_x summed over the last W checked steps (window_sum) and the observed e_v (a variance over
+        the last window_v) can alarm that long after an anomaly (median period between checked
+        steps); the other checks judge each sample alone."""
+        period = median_period(trace.t, trace.updated.any(axis=1))
+        delays = {"e_v": self.window_v * period} if result.info.get("variance_check") == "observed" else {}
+        if self.variant == "adaptive" and self.ex_statistic == "window_sum":
+            delays["e_x"] = self.window * period
+        return delays
 
     def _normalised_check(self, result, t, trace, cv_of, e_x, defined) -> None:
         """e_x over its predicted spread, per sample or summed over W, against +-bound (section 1.2)."""

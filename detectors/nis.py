@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.base import Detector, DetectorResult, median_period
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import PERSIST, Boolean, Interval, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
@@ -134,6 +134,18 @@ class NisDetector(Detector):
         tests_per_second = max(float(tests) / duration, 1e-9)
         # alpha = rate_design / (3600 * tests per second): a union bound over every test
         return design_rate(float(self.budget_per_hour), self.proof_hours) / (3600.0 * tests_per_second)
+
+    def end_delays(self, run, trace, result) -> dict[str, float]:
+        """A window sum still holds an anomaly's last update W - 1 updates later: nis.<group>'s alarm
+        can outlast an anomaly by W of the group's update periods, nis.all's by W periods between
+        updates of any group (medians)."""
+        delays = {
+            f"nis.{name}": self.window * median_period(trace.t, trace.updated[:, g])
+            for g, name in enumerate(trace.group_names)
+        }
+        if self.overall:
+            delays["nis.all"] = self.window * median_period(trace.t, trace.m_k > 0)
+        return delays
 
     def _run(self, run, trace, **context) -> DetectorResult:
         result = self.new_result()
