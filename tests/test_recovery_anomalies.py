@@ -25,21 +25,25 @@ def loops():
 def test_an_alarm_naming_a_group_flags_it_and_overlapping_alarms_join(loops):
     alarms = {"outer": [alarm(2.0, 3.0, "nis.gps"), alarm(2.5, 4.0, "nis.odo")], "left": [alarm(6.0, 7.0, "nis.gps")]}
     found = anomalies_from_alarms(alarms, loops)
-    assert found == [Anomaly(2.0, 4.0, {"outer": ("gps", "odo")}), Anomaly(6.0, 7.0, {"left": ("gps",)})]
+    assert found == [
+        Anomaly(2.0, 4.0, {"outer": ("gps", "odo")}, {"outer": 4.0}),
+        Anomaly(6.0, 7.0, {"left": ("gps",)}, {"left": 7.0}),
+    ]
     # loops that share a group name stay apart; alarms of two loops that overlap join
     both = anomalies_from_alarms({"outer": [alarm(2.0, 3.0, "nis.gps")], "left": [alarm(2.9, 3.5, "nis.gps")]}, loops)
-    assert both == [Anomaly(2.0, 3.5, {"outer": ("gps",), "left": ("gps",)})]
+    assert both == [Anomaly(2.0, 3.5, {"outer": ("gps",), "left": ("gps",)}, {"outer": 3.0, "left": 3.5})]
+    assert both[0].last_seen("outer") == 3.0  # each loop until its own alarm ended
 
 
 def test_an_alarm_naming_no_group_or_a_generic_detector_makes_a_generic_anomaly(loops):
     mixed = anomalies_from_alarms({"outer": [alarm(2.0, 3.0, "nis.gps"), alarm(2.8, 3.2, "nis.all")]}, loops)
-    assert mixed == [Anomaly(2.0, 3.2, None)]
+    assert mixed == [Anomaly(2.0, 3.2, None, {"outer": 3.2})]
     generic = anomalies_from_alarms({"outer": [alarm(2.0, 3.0, "nis.gps")]}, loops, specific=False)
-    assert generic == [Anomaly(2.0, 3.0, None)] and not generic[0].specific
+    assert generic == [Anomaly(2.0, 3.0, None, {"outer": 3.0})] and not generic[0].specific
     gap = anomalies_from_alarms(
         {"outer": [alarm(2.0, 3.0, "nis.gps"), alarm(3.4, 4.0, "nis.gps")]}, loops, merge_gap_s=0.5
     )
-    assert gap == [Anomaly(2.0, 4.0, {"outer": ("gps",)})]
+    assert gap == [Anomaly(2.0, 4.0, {"outer": ("gps",)}, {"outer": 4.0})]
     with pytest.raises(ValueError, match="unknown loop"):
         anomalies_from_alarms({"right": []}, loops)
 

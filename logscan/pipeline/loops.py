@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from logscan.align import align
+from logscan.detectors.base import END_DELAY_KEY
 from logscan.errors import LogscanError
 from logscan.models import get_model
 from logscan.needs import Needs
@@ -88,6 +89,17 @@ def _sensor_alarms(alarms: list, groups: list[str]) -> list:
     ]
 
 
+def _end_delays(results: list, detector: str | None) -> dict[tuple[str, str], float]:
+    """(detector, statistic) -> the end delay each chosen detector declared (`Detector.end_delays`)."""
+    return {
+        (r.detector, signal): float(delay)
+        for r in results
+        if detector in (None, r.detector)
+        for signal, delay in (r.info.get(END_DELAY_KEY) or {}).items()
+        if delay is not None
+    }
+
+
 def recover_analysis(analysis):
     """The profile's [recovery] over every loop: the anomalies of its detector's alarms (or of the
     ground truth, `detector = "oracle"`), each recovered from a consistent checkpoint
@@ -112,7 +124,8 @@ def recover_analysis(analysis):
             )
             for loop in loops
         }
-        anomalies = anomalies_from_alarms(alarms, loops)
+        delays = {loop.name: _end_delays(analyses[loop.name].results, spec.detector) for loop in loops}
+        anomalies = anomalies_from_alarms(alarms, loops, end_delays=delays)
     recovery = recover(loops, anomalies, settings)
     truths = true_states(analysis.path, analysis.prepared.log.truth, loops)  # a simulated log's
     analysis.recovery_view = recovery_view(loops, recovery, settings.k_sigma, truths)  # before the series go

@@ -8,11 +8,14 @@ API
  - ``LoopRun(name, model, run, trace)``: one control loop (its own model, grid rate and sensor
    groups) with the shared EKF's trace of its run, which must hold the full ``P_post``
    (``run_ekf(model, run, full_P=True)``).
- - ``Anomaly(t_detect, t_end, targets)``: the first alarmed time, the time the detector's alarm
-   ended, and ``targets``: loop name -> flagged group names (specific detector) or None (generic:
-   every loop affected, nothing known about which sensors).
- - ``anomalies_from_alarms({loop: [AlarmInterval, ...]}, loops, specific=True, merge_gap_s=0)``:
-   one detector's alarms as anomalies (an alarm's statistic names its group, e.g. ``nis.gps``).
+ - ``Anomaly(t_detect, t_end, targets, seen_until=None)``: the first alarmed time, the time the
+   detector's alarm ended, ``targets``: loop name -> flagged group names (specific detector) or None
+   (generic: every loop affected, nothing known about which sensors), and ``seen_until``: loop ->
+   the latest time its alarms still showed the anomaly (an alarm's end minus its statistic's
+   declared end delay, `Detector.end_delays`; None: the alarm's end).
+ - ``anomalies_from_alarms({loop: [AlarmInterval, ...]}, loops, specific=True, merge_gap_s=0,
+   end_delays={loop: {(detector, statistic): s}})``: one detector's alarms as anomalies (an
+   alarm's statistic names its group, e.g. ``nis.gps``).
  - ``anomalies_from_truth(events, detection_time_s, loops)``: the ground-truth ORACLE, for
    evaluation only (t_detect = fault start + detection_time_s; targets from the fault's target
    ``[loop.]group[.output]`` or its channels).
@@ -26,10 +29,12 @@ API
    (N, n) (the paper's Proposition 5.1, labelled worst case); ``Recovery.anomalies`` one
    `AnomalyRecord` per (merged) anomaly: checkpoint time and steps, roll-forward length, recovered
    span end, whether the alarm was kept, when the flagged sensors agreed again, why each loop's
-   span ended (``end_reasons``, ``end_reason``: e.g. "did not re-agree" when, after the detector's
-   alarm, a flagged sensor disagreed with the recovered estimate without showing the anomaly at the
-   false-alarm budget's bound), T_max per state with an allowed error, ``outlasted`` (``verdict`` =
-   "recovery no longer trustworthy"), method, targets, a note when nothing could be recovered.
+   span ended (``end_reasons``, ``end_reason``: e.g. "did not re-agree" when, after the alarms last
+   showed the anomaly, a flagged sensor disagreed with the recovered estimate without showing the
+   anomaly at the false-alarm budget's bound), T_max per state with an allowed error, ``outlasted``
+   (``verdict`` = "recovery no longer trustworthy"), method, targets, a note when nothing could be
+   recovered. At a span's last step, ended by a sample that no longer shows the anomaly, the
+   recovered estimate has taken that sample in.
 Times are seconds since the first loop's ``run.start_ns`` (the log's grid seconds).
 Input convention: step k of a run predicts x_k = f(x_{k-1}, u[k]) as the shared EKF does; u[k] is
 the input applied over the interval that ends at t_k.

@@ -8,8 +8,9 @@ fresh sample is tested against the recovery's prior (x_R, P_R):
 and agrees when NIS <= the chi-square quantile. A sample outside the group's physical range (or
 non-finite) disagrees. A disagreeing sample whose NIS also exceeds chi2.ppf(1 - alpha, m_g), alpha
 the false-alarm budget's per-sample probability (`keep_alpha`), *shows the anomaly* (SHOWN): after
-the detector's alarm only such a sample keeps a recovery open, and one that disagrees without
-showing it ends the recovery (`failed_at`: the recovered estimate did not re-agree).
+the alarms last showed the anomaly only such a sample keeps a recovery open (`released_at`): one that
+disagrees without showing it ends the recovery (the recovered estimate did not re-agree), and so does
+one that agrees unless the anomaly shows again within hold_s.
 """
 
 from __future__ import annotations
@@ -143,9 +144,22 @@ def agreed_at(t: np.ndarray, status: np.ndarray, t_from: float, hold_s: float) -
     return float(t[cand[found[0]]]) if found.size else None
 
 
-def failed_at(t: np.ndarray, status: np.ndarray, t_from: float) -> float | None:
-    """The first time >= t_from of a sample that disagrees with the recovered prediction without
-    showing the anomaly (DISAGREE, not SHOWN): the recovered estimate did not re-agree with a sensor
-    that shows no anomaly. None if there is none."""
-    found = np.flatnonzero((status == DISAGREE) & (t >= t_from))
-    return float(t[found[0]]) if found.size else None
+def released_at(t: np.ndarray, status: np.ndarray, t_from: float, hold_s: float) -> tuple[float, bool] | None:
+    """After the alarms last showed the anomaly (from ``t_from``), the first sample that ends the
+    recovery, as (time, agreed): a sample that disagrees without showing the anomaly (DISAGREE: the
+    recovered estimate did not re-agree), or one that agrees with no sample showing the anomaly
+    (SHOWN) over the next hold_s; ``agreed``: it agrees and none disagrees over that hold. None if
+    neither occurs."""
+    later = t >= t_from
+    dis = np.flatnonzero((status == DISAGREE) & later)
+    cand = np.flatnonzero((status == AGREE) & later)
+    shown = np.flatnonzero(status == SHOWN)
+    t_shown = np.append(t[shown], np.inf)[np.searchsorted(shown, cand, side="right")]  # the next SHOWN
+    held = cand[t_shown > t[cand] + hold_s]
+    ends = [int(k[0]) for k in (dis, held) if k.size]
+    if not ends:
+        return None
+    k = min(ends)
+    if status[k] == DISAGREE:
+        return float(t[k]), False
+    return float(t[k]), not bool(dis.size and t[dis[np.searchsorted(dis, k)]] <= t[k] + hold_s)

@@ -12,25 +12,48 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+
 from logscan.alarms import AlarmInterval
 from logscan.recovery.records import Anomaly, LoopRun
 from logscan.results import FaultEvent
 from logscan.verdict.incidents import group_of
 
-# one alarm or fault, before merging: (start, end, {loop: groups} or None)
-_Piece = tuple[float, float, dict[str, tuple[str, ...]] | None]
+# one alarm or fault, before merging: (start, end, {loop: groups} or None, {loop: seen until} or None)
+_Piece = tuple[float, float, dict[str, tuple[str, ...]] | None, dict[str, float] | None]
 
 
 def merge_pieces(pieces: Sequence[_Piece], gap_s: float) -> list[Anomaly]:
     """Overlapping pieces (closer than ``gap_s``) joined into anomalies, in time order."""
     out: list[Anomaly] = []
-    for start, end, targets in sorted(pieces, key=lambda p: (p[0], p[1])):
+    for start, end, targets, seen in sorted(pieces, key=lambda p: (p[0], p[1])):
+        piece = Anomaly(start, max(start, end), targets, seen)
         if out and start <= out[-1].t_end + gap_s:
-            last = out[-1]
-            out[-1] = Anomaly(last.t_detect, max(last.t_end, end), join_targets(last.targets, targets))
+            out[-1] = join(out[-1], piece)
         else:
-            out.append(Anomaly(start, max(start, end), targets))
+            out.append(piece)
     return out
+
+
+def join(a: Anomaly, b: Anomaly) -> Anomaly:
+    """One anomaly of two: the earlier detection, the later end, the groups joined, and per loop the
+    latest time an alarm still showed it."""
+    return Anomaly(
+        min(a.t_detect, b.t_detect), max(a.t_end, b.t_end), join_targets(a.targets, b.targets), join_seen(a, b)
+    )
+
+
+def join_seen(a: Anomaly, b: Anomaly) -> dict[str, float] | None:
+    """Per loop, the later of the two times an alarm on that loop last showed the anomaly (an
+    anomaly without ``seen_until`` showed it on every loop until its end)."""
+    if not a.seen_until and not b.seen_until:
+        return None
+    seen: dict[str, float] = {}
+    for one in (a, b):
+        mine = one.seen_until or {loop: one.t_end for loop in set(a.seen_until or {}) | set(b.seen_until or {})}
+        for loop, t in mine.items():
+            seen[loop] = max(seen.get(loop, -np.inf), t)
+    return seen
 
 
 def join_targets(a, b):
@@ -48,9 +71,12 @@ def anomalies_from_alarms(
     *,
     specific: bool = True,
     merge_gap_s: float = 0.0,
+    end_delays: Mapping[str, Mapping[tuple[str, str], float]] | None = None,
 ) -> list[Anomaly]:
     """One chosen detector's alarms, per loop name (loops may share group names, so each loop's
-    alarms come apart), as anomalies. ``specific=False`` uses the detector as generic."""
+    alarms come apart), as anomalies. ``specific=False`` uses the detector as generic.
+    ``end_delays``: loop -> (detector, statistic) -> its declared end delay in seconds
+    (`Detector.end_delays`; missing: 0): an alarm shows its anomaly lasting until its end minus it."""
     by_name = {lp.name: lp for lp in loops}
     unknown = sorted(set(alarms) - set(by_name))
     if unknown:
@@ -58,9 +84,15 @@ def anomalies_from_alarms(
     pieces: list[_Piece] = []
     for loop, intervals in alarms.items():
         groups = list(by_name[loop].run.groups)
+        delays = (end_delays or {}).get(loop, {})
         for alarm in intervals:
             group = group_of(alarm.signal, groups) if specific else None
-            pieces.append((float(alarm.start), float(alarm.end), None if group is None else {loop: (group,)}))
+            start, end = float(alarm.start), float(alarm.end)
+            delay = float(delays.get((alarm.detector, alarm.signal), 0.0))
+            if not delay >= 0:  # NaN or negative: no delay known
+                delay = 0.0
+            seen = {loop: max(start, end - delay)}
+            pieces.append((start, end, None if group is None else {loop: (group,)}, seen))
     return merge_pieces(pieces, merge_gap_s)
 
 
@@ -106,5 +138,5 @@ def anomalies_from_truth(
         t_detect = float(ev.t_start) + detection_time_s
         end = t_last if ev.t_end is None else float(ev.t_end)
         targets = resolve_target(ev.target, ev.channels, loops)
-        pieces.append((t_detect, max(end, t_detect), targets or None))
+        pieces.append((t_detect, max(end, t_detect), targets or None, None))
     return merge_pieces(pieces, merge_gap_s)

@@ -8,10 +8,13 @@ Per anomaly, in time order (docs/algorithms.md section 5):
     the flagged groups (refilter, specific), without any measurement (rollforward, generic, replace);
  3. the anomaly ends at the flagged groups' first sample that agrees with the recovered prediction
     and holds for hold_s (`logscan.recovery.agreement`): the span ends at that sample, the hold only
-    confirms it. A generic anomaly tests every group, after the detector's alarm, and ends hold_s
-    after that alarm at the latest. Sooner, after the detector's alarm, at a sample that disagrees
-    without showing the anomaly at the false-alarm budget's bound (the recovered estimate did not
-    re-agree: it is the one off). Cut at max_duration_s. The record says why (`end_reasons`);
+    confirms it (a generic anomaly: every group, only after the alarms last showed it). After the
+    alarms last showed the anomaly (`Anomaly.last_seen`: an alarm's end minus its statistic's
+    window), only samples that show it keep the span open: one that disagrees without showing it
+    ends the span (the recovered estimate did not re-agree), one that agrees ends it unless the
+    anomaly shows again within hold_s; a generic anomaly ends hold_s after that time at the latest.
+    Cut at max_duration_s. The record says why (`end_reasons`). At a span's last step, ended by a
+    sample that no longer shows the anomaly, the recovered estimate takes that sample in;
  4. the recovered estimate, its k-sigma bound, T_max and the worst-case bound
     (`logscan.recovery.bounds`) fill the span [k1, end] of each affected loop.
 An anomaly detected inside the previous one's recovered span merges with it (recovered again as
@@ -25,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from logscan.recovery.agreement import agreed_at, agreement_status, failed_at, held_inputs, keep_bound
-from logscan.recovery.anomalies import join_targets
+from logscan.recovery.agreement import agreed_at, agreement_status, held_inputs, keep_bound, released_at
+from logscan.recovery.anomalies import join
 from logscan.recovery.bounds import k_sigma_bound, t_max, worst_case
 from logscan.recovery.checkpoints import (
     Checkpoints,
@@ -43,7 +46,7 @@ from logscan.recovery.records import (
     Recovery,
     RecoverySettings,
 )
-from logscan.recovery.rerun import replace_mask, rerun
+from logscan.recovery.rerun import full_P, replace_mask, rerun, take_in_last
 from logscan.recovery.validate import allowed_states, check_anomalies, check_loops
 from logscan.traces import EkfTrace
 
@@ -114,7 +117,7 @@ def _recover_merging(queue: list[Anomaly], i: int, ctx: _Context, blocked):
         for lp in ctx.loops:
             if nxt.targets is None or nxt.targets.get(lp.name):
                 latest[lp.name] = nxt.t_detect
-        anomaly = Anomaly(anomaly.t_detect, max(anomaly.t_end, nxt.t_end), join_targets(anomaly.targets, nxt.targets))
+        anomaly = join(anomaly, nxt)
         j += 1
         record, fills = _recover_one(anomaly, ctx, blocked, latest)
     record.merged = j - i
@@ -154,21 +157,24 @@ def _recover_one(anomaly: Anomaly, ctx: _Context, blocked, latest: dict[str, flo
     record.checkpoint_steps = ctx.checkpoints.step_of(index)
     t_cap = anomaly.t_detect + s.max_duration_s
     parts = [_rerun_loop(lp, record.checkpoint_steps[lp.name], t_cap, anomaly, ctx) for lp in affected]
-    ends, agreed, reasons = _loop_ends(anomaly, parts, s, latest)
+    ends, agreed, reasons, honest = _loop_ends(anomaly, parts, s, latest)
     record.t_agreed = None if any(a is None for a in agreed) else max(agreed)
-    for p, end, reason in zip(parts, ends, reasons):
+    take_in = {}
+    for p, end, reason, sample in zip(parts, ends, reasons, honest):
         t_log_end = float(ctx.times[ctx.loops.index(p.loop)][-1])
         if end >= t_cap and t_log_end >= t_cap:
-            record.capped, reason = True, f"cut at max_duration_s = {s.max_duration_s:g} s"
+            record.capped, reason, sample = True, f"cut at max_duration_s = {s.max_duration_s:g} s", False
         if end > t_log_end and t_log_end < t_cap:
             record.note = reason = "the anomaly lasts until the end of the log"
+            sample = False
+        take_in[p.loop.name] = sample
         record.loop_ends[p.loop.name] = min(end, t_cap, t_log_end)
         record.end_reasons[p.loop.name] = reason
     end = max(record.loop_ends.values())
     record.t_recovered_end = end
     record.rollforward_s = end - record.t_checkpoint
     record.alarm_kept = end > anomaly.t_end
-    fills = [_fill(p, record.loop_ends[p.loop.name], ctx) for p in parts]
+    fills = [_fill(p, record.loop_ends[p.loop.name], ctx, take_in[p.loop.name]) for p in parts]
     for p in parts:
         duration = record.loop_ends[p.loop.name] - anomaly.t_detect
         for state, T in _t_max(p, anomaly, ctx).items():
@@ -188,49 +194,65 @@ def _rerun_loop(loop: LoopRun, k1: int, t_cap: float, anomaly: Anomaly, ctx: _Co
     return _LoopPart(loop, t_loop[k1 : k_stop + 1], k1, part, flagged)
 
 
-def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, latest) -> tuple[list, list, list]:
+def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, latest) -> tuple[list, ...]:
     """Per loop: (end of its span, uncut; when its flagged groups agreed again, None if that did
-    not end it; why). The span ends at the first agreeing sample that holds for hold_s (the hold
-    only confirms it): a specific anomaly's after the loop's latest detection, a generic one's after
-    the detector's alarm and at most hold_s after it. Either ends sooner at the first sample after
-    the detector's alarm that disagrees without showing the anomaly (inf if nothing ends it)."""
+    not end it; why; whether a sample that no longer shows the anomaly ended it). A specific
+    anomaly's span ends at the first sample after the loop's latest detection that agrees and
+    holds for hold_s (the hold only confirms it). After the alarms last showed the anomaly
+    (`Anomaly.last_seen`: an alarm's end minus its window) only samples that show it keep the span
+    open: it ends at the first that does not, unless one shows it again within hold_s
+    (`released_at`); a generic anomaly's at most hold_s after that time. inf if nothing ends it."""
     budget = (s.budget_per_hour, s.proof_hours)
     generic = anomaly.targets is None
-    ends, agreed, reasons = [], [], []
+    ends, agreed, reasons, honest = [], [], [], []
     for p in parts:
         t_from = latest.get(p.loop.name, anomaly.t_detect)
+        t_seen = max(anomaly.last_seen(p.loop.name), t_from)
         status = agreement_status(p.loop, p.k1, p.part, p.flagged, s.agreement_quantile, budget)
-        t_agreed = agreed_at(p.t, status, anomaly.t_end if generic else t_from, s.hold_s)
+        t_agreed = None if generic else agreed_at(p.t, status, t_from, s.hold_s)
         end, reason = np.inf, ""
+        held = f"{', '.join(p.flagged)} agreed with the recovered estimate again, held {s.hold_s:g} s"
         if t_agreed is not None:
-            groups = ", ".join(p.flagged)
-            end, reason = t_agreed, f"{groups} agreed with the recovered estimate again, held {s.hold_s:g} s"
-        if generic and anomaly.t_end + s.hold_s < end:
-            t_agreed, end, reason = None, anomaly.t_end + s.hold_s, f"{s.hold_s:g} s after the detector's alarm"
-        t_failed = failed_at(p.t, status, max(anomaly.t_end, t_from))
-        if t_failed is not None and t_failed < end:
-            t_agreed, end, reason = None, t_failed, _not_reagreed(p, t_failed, budget)
+            end, reason = t_agreed, held
+        released = released_at(p.t, status, t_seen, s.hold_s)
+        if released is not None and released[0] < end:
+            end, ok = released
+            t_agreed, reason = (end, held) if ok else (None, _not_reagreed(p, end, budget, s.hold_s))
+        sample = bool(np.isfinite(end))
+        if generic and t_seen + s.hold_s < end:
+            t_agreed, end, reason = None, t_seen + s.hold_s, _after_alarm(anomaly, t_seen, s.hold_s)
+            sample = False
         ends.append(end)
         agreed.append(t_agreed)
         reasons.append(reason)
-    return ends, agreed, reasons
+        honest.append(sample)
+    return ends, agreed, reasons, honest
 
 
-def _not_reagreed(p: _LoopPart, t: float, budget: tuple[float, float]) -> str:
+def _after_alarm(anomaly: Anomaly, t_seen: float, hold_s: float) -> str:
+    if t_seen >= anomaly.t_end:
+        return f"{hold_s:g} s after the detector's alarm"
+    return f"{hold_s:g} s after the detector's alarm last showed the anomaly (its end minus its window, {t_seen:.2f} s)"
+
+
+def _not_reagreed(p: _LoopPart, t: float, budget: tuple[float, float], hold_s: float) -> str:
     bounds = ", ".join(f"{g} {keep_bound(p.loop, g, budget):.1f}" for g in p.flagged)
     return (
-        f"did not re-agree: at {t:.2f} s, after the detector's alarm, {p.loop.name} "
-        f"{', '.join(p.flagged)} disagreed with the recovered estimate but showed no anomaly (NIS within the "
-        f"false-alarm budget's bound, {bounds}): the recovered estimate is the one off"
+        f"did not re-agree: from {t:.2f} s, after the detector's alarm last showed the anomaly, {p.loop.name} "
+        f"{', '.join(p.flagged)} showed no anomaly (NIS within the false-alarm budget's bound, {bounds}) but "
+        f"disagreed with the recovered estimate within {hold_s:g} s: the recovered estimate is the one off"
     )
 
 
-def _fill(p: _LoopPart, end: float, ctx: _Context):
-    """(loop, k1, x, bound, worst case) over the loop's steps k1..end."""
+def _fill(p: _LoopPart, end: float, ctx: _Context, take_in: bool = False):
+    """(loop, k1, x, bound, worst case) over the loop's steps k1..end; ``take_in``: the sample at
+    the end no longer shows the anomaly, so the recovered estimate there takes it in (`take_in_last`)."""
     s = ctx.settings
     J = max(1, int(np.searchsorted(p.t, end + 1e-9, side="right")))
-    x = p.part.x_post[:J]
-    bound = k_sigma_bound(p.part.P_post[:J], s.k_sigma)
+    x, P = p.part.x_post[:J], full_P(p.part)[:J]
+    if take_in and J >= 2:
+        x, P = take_in_last(p.loop, p.k1, p.part, J)
+    bound = k_sigma_bound(P, s.k_sigma)
     tr = p.loop.trace
     if s.method == "replace" and set(p.flagged) != set(p.loop.run.groups):
         # the paper's element replacement: roll-forward values where K g != 0, the EKF's elsewhere

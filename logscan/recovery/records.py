@@ -38,15 +38,28 @@ class LoopRun:
 class Anomaly:
     """One detected anomaly: its first alarmed time, the time the detector's alarm ended and what
     it flagged: loop name -> flagged measurement groups (a specific detector), or None (a generic
-    detector: every loop is affected, nothing is known about which sensors)."""
+    detector: every loop is affected, nothing is known about which sensors).
+
+    seen_until: loop name -> the latest time the detector's alarms on that loop show the anomaly
+    still lasting: each alarm's end minus its statistic's end delay (a windowed statistic's alarm
+    outlasts the anomaly by up to its window, `Detector.end_delays`), the latest over the loop's
+    alarms; None: the alarm's end (a per-sample test, or the ground truth)."""
 
     t_detect: float
     t_end: float
     targets: Mapping[str, tuple[str, ...]] | None = None
+    seen_until: Mapping[str, float] | None = None
 
     @property
     def specific(self) -> bool:
         return self.targets is not None
+
+    def last_seen(self, loop: str) -> float:
+        """When the alarms last showed the anomaly on ``loop``; a loop with no alarm of its own (a
+        generic anomaly's other loops) takes the latest of every loop's."""
+        if not self.seen_until:
+            return self.t_end
+        return min(self.t_end, self.seen_until.get(loop, max(self.seen_until.values())))
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from logscan.align import AlignedGroup, AlignedRun
+from logscan.errors import InternalError
 from logscan.filters.ekf import run_ekf
 from logscan.recovery.records import LoopRun
 from logscan.traces import EkfTrace
@@ -90,6 +91,35 @@ def rerun(loop: LoopRun, k1: int, k_stop: int, excluded: Collection[str], store_
         store_S=False,
         store_innovations=False,
     )
+
+
+def take_in_last(loop: LoopRun, k1: int, part: EkfTrace, J: int) -> tuple[np.ndarray, np.ndarray]:
+    """(x (J, n), P (J, n, n)): the re-run's first J steps with the last one filtered again from the
+    recovery's posterior one step before, every group's sample used: the sample that ended the
+    anomaly no longer shows it, so the recovered estimate takes it in there, as an on-board
+    estimator goes on from the recovered state (docs/algorithms.md section 5)."""
+    tr, P_part = loop.trace, full_P(part)
+    step = run_ekf(
+        loop.model,
+        slice_run(loop.run, k1 + J - 2, k1 + J, ()),
+        Q=tr.Q,
+        R=shared_R(tr),
+        x0=part.x_post[J - 2],
+        P0=P_part[J - 2],
+        full_P=True,
+        store_S=False,
+        store_innovations=False,
+    )
+    x, P = part.x_post[:J].copy(), P_part[:J].copy()
+    x[-1], P[-1] = step.x_post[1], full_P(step)[1]
+    return x, P
+
+
+def full_P(trace: EkfTrace) -> np.ndarray:
+    """The trace's full covariance series (N, n, n); every re-run keeps it."""
+    if trace.P_post is None:
+        raise InternalError("a recovery re-run kept no full covariance")
+    return trace.P_post
 
 
 def replace_mask(gain_trace: EkfTrace, flagged: Collection[str]) -> np.ndarray:
