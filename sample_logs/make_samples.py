@@ -135,8 +135,8 @@ SAMPLES = (
         (),
         13,
         20.0,
-        about="the UBIKF paper's hover quadcopter (interval mass, inertias, arm): hover with attitude "
-        "excitation; no fault",
+        about="the UBIKF paper's hover quadcopter (interval mass, inertias, arm, drag, velocity scale): hover "
+        "with attitude excitation; no fault",
     ),
     Sample(
         "hover_rotor_offset.mcap",

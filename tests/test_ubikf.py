@@ -5,6 +5,7 @@ by name; divergence is flagged and followed by a finite restart."""
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -359,3 +360,55 @@ def test_a_100000_step_12_state_6_measurement_run_stays_bounded():
     run_ubikf(model, simulated_run(rng, model, 20))  # compiled (or loaded from the cache) first
     trace = run_ubikf(model, run)
     assert len(trace.diverged) == N and not trace.diverged.any()
+
+
+def hover_uav_systems(rng, hover, model, count):
+    """(A, B, C, Q, R) stacks inside hover_uav's intervals: vertices of its parameter box (the
+    all-low and all-high ones and random others), random parameter sets inside it, then matrices
+    drawn entry by entry inside [A], [B], [C] (`point_systems`)."""
+    box = hover.parameter_box()
+    corners = np.array(list(itertools.product(*box.values())))
+    picked = np.concatenate([corners[[0, -1]], corners[rng.choice(len(corners), count - 2, replace=False)]])
+    inside = np.array([[rng.uniform(lo, hi) for lo, hi in box.values()] for _ in range(count)])
+    physical = [hover.point_system(model.dt, **dict(zip(box, values))) for values in np.concatenate([picked, inside])]
+    A, B, C = (np.array(part) for part in zip(*physical))
+    drawn = point_systems(rng, model, count)
+    stack = [np.concatenate([A, drawn[0]]), np.concatenate([B, drawn[1]]), np.concatenate([C, drawn[2]])]
+    Q = np.concatenate([np.tile(model.Q_m, (2 * count, 1, 1)), drawn[3]])
+    R = np.concatenate([np.tile(model.R_m, (2 * count, 1, 1)), drawn[4]])
+    return (*stack, Q, R)
+
+
+def test_point_filters_inside_hover_uavs_own_intervals_stay_inside_the_envelope_and_below_the_bound():
+    """The shipped model's intervals (drag and mass in A, vel_scale in C, mass, inertias, arm and
+    k_yaw in B): 32 vertex systems, 32 random parameter sets and 32 entrywise draws."""
+    from logscan.models import get_model
+
+    hover = get_model("hover_uav")
+    model = hover.interval_model(0.01)
+    assert model.A_r.max() > 0 and model.C_r.max() > 0
+    rng = np.random.default_rng(28)
+    run = simulated_run(rng, model, 400, input_scale=0.05, feedback=stabilising_feedback(model))
+    trace = run_ubikf(model, run, store_gain=True, store_P=True)
+    assert not trace.diverged.any()
+    systems = hover_uav_systems(rng, hover, model, 32)
+    cov_bad, box_bad, fill, late = envelope_violations(model, run, trace, systems)
+    assert (cov_bad, box_bad) == (0, 0)
+    assert fill.max() > 0.05
+    # the bound lies strictly above the point Kalman filter of the mid model (same gains' optimum)
+    P = model.P0.copy()
+    ratios = []
+    for k in range(run.n_steps):
+        if k:
+            P = model.A_m @ P @ model.A_m.T + model.Q_m
+        S = model.C_m @ P @ model.C_m.T + model.R_m
+        K = np.linalg.solve(S, model.C_m @ P).T
+        P = (np.eye(12) - K @ model.C_m) @ P @ (np.eye(12) - K @ model.C_m).T + K @ model.R_m @ K.T
+        if k >= 100:
+            assert np.linalg.eigvalsh(trace.P[k] - P).min() > -1e-9 * np.abs(trace.P[k]).max()
+            ratios.append(trace.P_trace[k] / np.trace(P))
+    assert min(ratios) > 1.0 + 1e-6
+    print(
+        f"hover_uav: 96 systems x 400 steps, 0 violations, envelope fill {fill.min():.2f}-{fill.max():.2f}; "
+        f"trace(P+) / trace(P) {min(ratios):.4f}-{max(ratios):.4f}"
+    )
