@@ -25,6 +25,7 @@ from logscan.report.figures import Figure
 from logscan.report.observability_figures import observability_figures
 from logscan.report.report_input import ReportInput
 from logscan.report.sensor_figures import named_group_figures
+from logscan.report.ubikf_view import ubikf_rows
 from logscan.results import DetectorResult
 
 
@@ -58,6 +59,7 @@ def blind_figures(page: PageInput) -> list[dict]:
 
 DETECTOR_ROWS: list[Callable[[DetectorResult, PageInput], list[Figure]]] = [
     sensor_rows,
+    ubikf_rows,
 ]
 CONTEXT_FIGURES: list[Callable[[PageInput], list[dict]]] = [
     run_context_figures,
