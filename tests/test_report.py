@@ -305,7 +305,9 @@ def test_figures_per_detector_view(embedded):
     cv_names = [tr["name"] for tr in by_title["encoded_ekf: coding_vector"] if tr["name"].startswith("x")]
     assert cv_names == [f"x{i}" for i in range(12)]  # labelled with the model's states
     spans = {tr["name"] for tr in by_title["encoded_ekf: e_x"] if tr.get("fill") == "toself"}
-    assert spans == {"alarm", "ground truth"}
+    assert spans == {"alarm"}  # the row's own alarms; the ground truth is shaded once across the figure
+    shapes = specs[0]["figure"]["layout"]["shapes"]
+    assert shapes and all(s["yref"] == "paper" and (s["y0"], s["y1"]) == (0, 1) for s in shapes)
     ratio = next(tr for tr in by_title["nis: statistic / threshold"] if tr["name"] == "nis.accel")
     assert np.nanmax(array(ratio["y"])) == pytest.approx(500.0 / 90.0, rel=1e-6)
     per_dof = [tr["name"] for tr in by_title["nis: per_dof"] if tr.get("fill") != "toself"]
@@ -317,7 +319,7 @@ def test_a_section_is_one_figure_with_its_rows_on_one_time_axis(embedded):
     across the rows; the page hovers every row at once."""
     for spec in figures(embedded):
         layout, data = spec["figure"]["layout"], spec["figure"]["data"]
-        assert {trace["xaxis"] for trace in data} == {"x"}
+        assert {trace.get("xaxis", "x") for trace in data} == {"x"}
         assert not any(key.startswith("xaxis") and key != "xaxis" for key in layout)
         assert layout["xaxis"]["showspikes"] and layout["xaxis"]["spikemode"] == "across"
         assert layout["hovermode"] == "x unified" and layout["hoversubplots"] == "axis"
@@ -325,6 +327,25 @@ def test_a_section_is_one_figure_with_its_rows_on_one_time_axis(embedded):
         domains = sorted(layout[key]["domain"] for key in rows)
         assert all(low[1] <= high[0] for low, high in zip(domains, domains[1:]))  # stacked, not overlapping
         assert len(rows) == len(layout["annotations"])  # a title above each row
+        # each row's legend is one line in the band under its title, not beside the rows: long
+        # channel names cannot squeeze the plots
+        legends = [layout[key] for key in layout if re.fullmatch(r"legend\d*", key)]
+        assert len(legends) == len(rows) and all(g["orientation"] == "h" and g["x"] == 0 for g in legends)
+        assert layout["margin"]["r"] <= 20
+
+
+def test_a_long_channel_name_is_shortened_in_its_legend_and_whole_in_its_hover():
+    from logscan.report.stacked import LEGEND_NAME_CHARS, legend_name
+
+    long = "sensor_combined/accelerometer_m_s2[0] &lt;x&gt; integrated"
+    trace = {"name": long, "hovertemplate": "%{y:.4g}"}
+    legend_name(trace)
+    assert len(trace["name"].replace("&lt;", "<").replace("&gt;", ">")) <= LEGEND_NAME_CHARS
+    assert trace["name"].startswith("sensor_combined/acc") and trace["name"].endswith("integrated")
+    assert trace["hovertemplate"] == f"{long}: %{{y:.4g}}<extra></extra>"
+    short = {"name": "nis.&lt;script&gt;alert(1)&lt;/script&gt;"}  # 29 characters shown
+    legend_name(short)
+    assert short["name"] == "nis.&lt;script&gt;alert(1)&lt;/script&gt;"
 
 
 def test_a_sparse_statistic_is_drawn_as_a_line_not_as_gaps(embedded):

@@ -312,8 +312,9 @@ def test_enter_on_a_focused_alarm_row_zooms_every_figure_to_that_alarm(interacte
 
 def test_the_mode_figure_follows_the_time_axis_and_the_path_does_not(interacted):
     _, _, steps, _ = interacted
-    assert "ctx-mode" in steps["drag"]["ids"] and "ctx-path" not in steps["drag"]["ids"]
-    mode = steps["drag"]["ids"].index("ctx-mode")
+    # the mode is a row of the Context section's one figure on the time axis (ctx-time)
+    assert "ctx-time" in steps["drag"]["ids"] and "ctx-path" not in steps["drag"]["ids"]
+    mode = steps["drag"]["ids"].index("ctx-time")
     assert steps["incident"]["ranges"][mode] == steps["incident"]["ranges"][0] != "auto"
     assert all(step["path"] is True for step in steps.values())  # x/y axes: never moved by time zoom
 

@@ -67,7 +67,7 @@ def test_the_mode_figure_marks_each_logged_message_on_its_time_axis():
     assert marks["yaxis"] == "y2" and len(marks["text"]) == 3
     assert marks["text"][0] == "info: Takeoff detected" and marks["text"][1].startswith("warning: Compass")
     page = figures(render_html(report))
-    mode = next(s["figure"] for s in page if s["id"] == "ctx-mode")
+    mode = next(s["figure"] for s in page if s["id"] == "ctx-time")  # the Context section's one figure
     assert any(trace["name"] == "logged messages" for trace in mode["data"])
 
 

@@ -118,9 +118,10 @@ def test_the_report_draws_the_mode_on_the_time_axis_and_the_path_with_incidents(
     report.incidents = [Incident(100.0, 101.0, "accel", "accel <b>x</b>", [])]
     page = render_html(report)
     specs = {spec["id"]: spec["figure"] for spec in figures(page)}
-    assert re.search(r'<div class="figure ls-timeseries" id="ctx-mode"', page)
+    # the mode is a row of the Context section's one figure on the time axis
+    assert re.search(r'<div class="figure ls-timeseries ls-section" id="ctx-time" data-rows="1"', page)
     assert re.search(r'<div class="figure" id="ctx-path"', page)  # not on the time axis
-    mode = specs["ctx-mode"]
+    mode = specs["ctx-time"]
     assert [tr["name"] for tr in mode["data"]][:3] == [f"/{HOSTILE_SHOWN}/mode = {v}" for v in (0, 1, 2)]
     assert mode["layout"]["margin"]["l"] == specs["fig-0"]["layout"]["margin"]["l"]  # time axes align
     path = specs["ctx-path"]

@@ -70,6 +70,17 @@ def _time_row_spec(fig_id: str, title: str, caption: str) -> dict:
     return {"id": fig_id, "title": title, "caption": caption, "timeseries": True, "height": MODE_HEIGHT}
 
 
+def time_row(spec: dict, data: list[dict], layout: dict) -> dict:
+    """A figure on the shared time axis before it is serialised: ``{"spec", "data", "layout"}``, drawn
+    alone (`row_figure`) or as a row of the Context section's one figure (`logscan.report.context_stack`)."""
+    return {"spec": spec, "data": data, "layout": layout}
+
+
+def row_figure(row: dict, clock: Clock | None = None) -> dict:
+    """A `time_row` as a figure of its own (serialised, its time axis in ``clock``)."""
+    return _spec(row["spec"], row["data"], row["layout"], clock)
+
+
 def _value_text(value: float) -> str:
     return f"{value:g}"
 
@@ -120,6 +131,11 @@ def _message_marks(messages) -> list[dict]:
 
 
 def mode_figure(mode, clock: Clock | None = None, messages=(), t_span: tuple[float, float] | None = None) -> dict:
+    """`mode_row` as a figure of its own."""
+    return row_figure(mode_row(mode, messages, t_span), clock)
+
+
+def mode_row(mode, messages=(), t_span: tuple[float, float] | None = None) -> dict:
     """The mode channel as a step line, shaded by value when it takes few values (each value named,
     one row each, when it has a name: `logscan.report.flight_modes`), and the autopilot's logged
     ``messages`` (`logscan.log.LoggedMessage`, any level) as markers along its top; its time axis
@@ -160,7 +176,7 @@ def mode_figure(mode, clock: Clock | None = None, messages=(), t_span: tuple[flo
         )
         + ". Read an alarm against the mode it happened in."
     )
-    return _spec(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout, clock)
+    return time_row(_time_row_spec("ctx-mode", f"mode: {mode.channel}", caption), data, layout)
 
 
 def _incident_traces(path, incidents: Sequence[Incident], clock: Clock) -> list[dict]:
@@ -171,8 +187,8 @@ def _incident_traces(path, incidents: Sequence[Incident], clock: Clock) -> list[
         start, end = float(incident.start), float(incident.end)
         inside = (path.t > start) & (path.t < end)
         t_seg = np.concatenate([[start], path.t[inside], [end]])
-        segments_x += [*np.interp(t_seg, path.t, path.x), np.nan]
-        segments_y += [*np.interp(t_seg, path.t, path.y), np.nan]
+        segments_x.append(np.append(np.interp(t_seg, path.t, path.x), np.nan))
+        segments_y.append(np.append(np.interp(t_seg, path.t, path.y), np.nan))
         x0, y0 = np.interp(start, path.t, path.x), np.interp(start, path.t, path.y)
         hover = f"incident {number}: {plot_text(incident.headline_in(clock))}<br>click: zoom the time axis to it"
         marks.append((float(x0), float(y0), str(number), hover, [clock.axis_value(start), clock.axis_value(end)]))
@@ -180,7 +196,8 @@ def _incident_traces(path, incidents: Sequence[Incident], clock: Clock) -> list[
         return []
     x, y, label, hover, spans = (list(column) for column in zip(*marks))
     return [
-        {"type": "scatter", "name": "during an incident", "x": segments_x, "y": segments_y, "mode": "lines",
+        {"type": "scatter", "name": "during an incident", "x": np.concatenate(segments_x).astype(np.float32),
+         "y": np.concatenate(segments_y).astype(np.float32), "mode": "lines",
          "line": {"color": INCIDENT_COLOUR, "width": 2.5}, "opacity": 0.75, "hoverinfo": "skip"},
         {"type": "scatter", "name": "incident start", "x": x, "y": y, "mode": "markers+text", "text": label,
          "textposition": "top right", "hovertext": hover, "hoverinfo": "text", "customdata": spans,
@@ -189,11 +206,18 @@ def _incident_traces(path, incidents: Sequence[Incident], clock: Clock) -> list[
     ]  # fmt: skip
 
 
+def _hover_times(clock: Clock, t: np.ndarray) -> np.ndarray:
+    """The times a path's hover shows (to 0.1 s): float32 on a seconds clock (half float64's bytes,
+    steps under 0.01 s up to 18 hours), float64 epoch milliseconds on a UTC clock."""
+    values = clock.axis_values(t)
+    return values if clock.utc else values.astype(np.float32)
+
+
 def _fixes_trace(fixes, when: str, clock: Clock) -> dict:
     """The measured fixes as small dots under the filter's estimate."""
     return {
         "type": "scatter", "name": "fixes (measured)", "x": fixes.x.astype(np.float32), "y": fixes.y.astype(np.float32),
-        "customdata": clock.axis_values(fixes.t), "mode": "markers", "opacity": 0.6,
+        "customdata": _hover_times(clock, fixes.t), "mode": "markers", "opacity": 0.6,
         "marker": {"size": 3, "color": "#9a9a9a"},
         "hovertemplate": f"fix (%{{x:.2f}}, %{{y:.2f}}) at {when}<extra></extra>",
     }  # fmt: skip
@@ -212,7 +236,7 @@ def path_figure(path, incidents: Sequence[Incident], clock: Clock | None = None,
         *([_fixes_trace(fixes, when, clock)] if fixes is not None else []),
         {"type": "scatter", "name": "the filter's estimate" if fixes is not None else "path",
          "x": path.x.astype(np.float32), "y": path.y.astype(np.float32),
-         "customdata": clock.axis_values(path.t), "mode": "lines",
+         "customdata": _hover_times(clock, path.t), "mode": "lines",
          "line": {"color": "#1f77b4" if fixes is not None else "#7f7f7f", "width": 1.5 if fixes is not None else 1},
          "hovertemplate": f"(%{{x:.2f}}, %{{y:.2f}}) at {when}<extra></extra>"},
         {"type": "scatter", "name": "start / end", "x": [float(path.x[0]), float(path.x[-1])],
@@ -250,6 +274,11 @@ _LEVEL_COLOURS = {"WARNING": "#e6a100", "ERROR": "#d62728", "CRITICAL": "#8c1c13
 
 
 def messages_figure(messages, t_span: tuple[float, float] | None = None, clock: Clock | None = None) -> dict:
+    """`messages_row` as a figure of its own."""
+    return row_figure(messages_row(messages, t_span), clock)
+
+
+def messages_row(messages, t_span: tuple[float, float] | None = None) -> dict:
     """The autopilot's own warnings and errors as markers on the shared time axis, one row per
     level, the text on hover."""
     data = []
@@ -271,13 +300,18 @@ def messages_figure(messages, t_span: tuple[float, float] | None = None, clock: 
         f"{len(messages)} message(s) of level warning and above the autopilot logged, at their time "
         "on the shared axis (hover for the text). Read an alarm against what the autopilot itself said."
     )
-    return _spec(_time_row_spec("ctx-messages", "autopilot messages", caption), data, layout, clock)
+    return time_row(_time_row_spec("ctx-messages", "autopilot messages", caption), data, layout)
 
 
 _STATE_FILLS = {"armed": "rgba(44, 160, 44, 0.25)", "failsafe": "rgba(214, 39, 40, 0.35)"}
 
 
 def states_figure(states: dict, t_span: tuple[float, float] | None = None, clock: Clock | None = None) -> dict:
+    """`states_row` as a figure of its own."""
+    return row_figure(states_row(states, t_span), clock)
+
+
+def states_row(states: dict, t_span: tuple[float, float] | None = None) -> dict:
     """The autopilot's armed and failsafe intervals as bands on the shared time axis, one row each."""
     data = []
     names = list(states)
@@ -297,27 +331,31 @@ def states_figure(states: dict, t_span: tuple[float, float] | None = None, clock
     layout = _time_row_layout("the autopilot's state", yaxis, t_span)
     summary = "; ".join(f"{name}: {len(spans)} interval(s)" for name, spans in states.items())
     caption = f"When the vehicle was armed and in failsafe, as its autopilot logged ({summary})."
-    return _spec(_time_row_spec("ctx-states", "autopilot state", caption), data, layout, clock)
+    return time_row(_time_row_spec("ctx-states", "autopilot state", caption), data, layout)
 
 
-def context_figures(
-    context, incidents: Sequence[Incident], clock: Clock | None = None, innovations=None, t: np.ndarray | None = None
-) -> list[dict]:
-    """``{"id", "title", "caption", "timeseries", "height", "json", "points"}`` per context figure: the mode
-    when the profile has a mode channel, the path when a group measures position (the filter's
-    estimate of it from ``innovations`` on the grid ``t``, when given). [] for None.
-    Times in ``clock`` (None: seconds since the log's start)."""
+def context_rows(context) -> list[dict]:
+    """The run's `time_row`s: the mode when the profile has a mode channel, the autopilot's state and
+    its warnings and errors when logged; [] for None."""
     if context is None:
         return []
-    figures = []
+    t_span = getattr(context, "t_span", None)
+    rows = []
     if context.mode is not None:
-        messages, t_span = getattr(context, "log_messages", ()), getattr(context, "t_span", None)
-        figures.append(mode_figure(context.mode, clock, messages, t_span))
+        rows.append(mode_row(context.mode, getattr(context, "log_messages", ()), t_span))
     if getattr(context, "states", None):
-        figures.append(states_figure(context.states, getattr(context, "t_span", None), clock))
+        rows.append(states_row(context.states, t_span))
     if getattr(context, "messages", None):
-        figures.append(messages_figure(context.messages, getattr(context, "t_span", None), clock))
-    if context.path is not None:
-        estimate = estimated_path(context.path, innovations, t) if t is not None else None
-        figures.append(path_figure(context.path, incidents, clock, estimate))
-    return figures
+        rows.append(messages_row(context.messages, t_span))
+    return rows
+
+
+def path_figures(
+    context, incidents: Sequence[Incident], clock: Clock | None = None, innovations=None, t: np.ndarray | None = None
+) -> list[dict]:
+    """The path when a group measures position (the filter's estimate of it from ``innovations`` on
+    the grid ``t``, when given), serialised (`_spec`); [] for None or no path."""
+    if context is None or context.path is None:
+        return []
+    estimate = estimated_path(context.path, innovations, t) if t is not None else None
+    return [path_figure(context.path, incidents, clock, estimate)]

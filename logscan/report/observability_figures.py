@@ -4,7 +4,7 @@ fault of that kind could not have been seen (`logscan.verdict.observability`), o
 from __future__ import annotations
 
 from logscan.docs import doc_url
-from logscan.report.context_figures import _spec, _time_row_layout, _time_row_spec
+from logscan.report.context_figures import _time_row_layout, _time_row_spec, row_figure, time_row
 from logscan.report.plotly_json import plot_text
 from logscan.timebase.clock import Clock
 
@@ -13,7 +13,12 @@ ROW_HEIGHT = 28  # px per row beyond the figure's base height
 
 
 def observability_figures(observability, clock: Clock | None = None) -> list[dict]:
-    """[] without a verdict or when every judged fault could be seen throughout; else one figure."""
+    """`observability_rows` as figures of their own."""
+    return [row_figure(row, clock) for row in observability_rows(observability)]
+
+
+def observability_rows(observability) -> list[dict]:
+    """[] without a verdict or when every judged fault could be seen throughout; else one `time_row`."""
     if observability is None:
         return []
     blind = observability.blind_periods()
@@ -49,4 +54,4 @@ def observability_figures(observability, clock: Clock | None = None) -> list[dic
         caption += " Judged only from a second before each fault of the ground truth to its end: elsewhere, no verdict."
     spec = _time_row_spec("ctx-observability", "where a fault could not be seen", caption)
     spec["height"] = layout["height"]
-    return [_spec(spec, data, layout, clock)]
+    return [time_row(spec, data, layout)]

@@ -21,11 +21,12 @@ import numpy as np
 from logscan.artifacts import Staged, stage, write_atomic
 from logscan.report import overview, page_rows
 from logscan.report.context import context_tables, group_rows, log_view, message_row, model_view, number_text
+from logscan.report.context_stack import stack_rows
 from logscan.report.figures import merge_spans
 from logscan.report.flight_overview import checked_view
 from logscan.report.margins import result_margins
 from logscan.report.page_assets import environment, install_plotly_js, plotly_js, plotly_js_src, report_js
-from logscan.report.page_parts import CONTEXT_FIGURES, PageInput
+from logscan.report.page_parts import CONTEXT_FIGURES, CONTEXT_ROWS, PageInput
 from logscan.report.page_sections import detector_sections, first_screen
 from logscan.report.plotly_json import POINT_BUDGET
 from logscan.report.recovery_figures import recovery_figures, recovery_rows
@@ -45,7 +46,9 @@ def _figures(report: ReportInput, point_budget: int) -> dict:
     margins = result_margins(report.results, t)
     sections, figures = detector_sections(page, margins)
     heads, first, checked = first_screen(page, figures)
-    context = [spec for build in CONTEXT_FIGURES for spec in build(page)]
+    rows = [row for build in CONTEXT_ROWS for row in build(page)]
+    span = (float(t[0]), float(t[-1])) if t.size > 1 else None
+    context = ([stack_rows(rows, report.clock, span)] if rows else []) + [f for b in CONTEXT_FIGURES for f in b(page)]
     recovered = recovery_figures(report.recovery, report.clock)
     ids = {s["detector"]: s["id"] for s in sections}
     return {

@@ -4,10 +4,14 @@
     the rows of the detector's own statistics and before its extras. A builder takes the section's
     `DetectorResult` and the `PageInput` and returns `logscan.report.figures.Figure` rows ([] when the
     result is not its kind); the rows share the section's time axis, crosshair and zoom.
-``CONTEXT_FIGURES``: figures of the "Context" section, each already serialised
-    (``{"id", "title", "caption", "timeseries", "height", "json", "points"}``, as
-    `logscan.report.context_figures._spec` makes them; their points come out of the page's budget).
-    A builder takes the `PageInput` and returns a list of them.
+``CONTEXT_ROWS``: rows of the "Context" section's one figure on the page's time axis (one hover,
+    one spike line and one zoom across them: `logscan.report.context_stack`). A builder takes the
+    `PageInput` and returns `logscan.report.context_figures.time_row`s (``{"spec", "data",
+    "layout"}``: a figure's traces, on ``y`` and the hidden overlay ``y2``, and its layout).
+``CONTEXT_FIGURES``: figures of the "Context" section not on the time axis (the path), each
+    already serialised (``{"id", "title", "caption", "timeseries", "height", "json", "points"}``,
+    as `logscan.report.context_figures._spec` makes them; their points come out of the page's
+    budget). A builder takes the `PageInput` and returns a list of them.
 
 A new figure is a function in a module of its own (`report/` may import only what
 docs/extending.md "Who imports whom" lists) and its name added to one list here.
@@ -20,12 +24,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.report.context_figures import context_figures
+from logscan.report.context_figures import context_rows, path_figures
 from logscan.report.figures import Figure
-from logscan.report.observability_figures import observability_figures
+from logscan.report.observability_figures import observability_rows
 from logscan.report.report_input import ReportInput
 from logscan.report.sensor_figures import named_group_figures
-from logscan.report.ubikf_view import ubikf_rows
 from logscan.results import DetectorResult
 
 
@@ -46,22 +49,29 @@ def sensor_rows(result: DetectorResult, page: PageInput) -> list[Figure]:
     return named_group_figures(result, page.report.innovations, page.t, page.truth_spans, page.drawn)
 
 
-def run_context_figures(page: PageInput) -> list[dict]:
-    """The mode, the autopilot's state and messages, the path (`logscan.report.context_figures`)."""
-    report = page.report
-    return context_figures(report.context, report.incidents, report.clock, report.innovations, page.t)
+def run_context_rows(page: PageInput) -> list[dict]:
+    """The mode, the autopilot's state and messages (`logscan.report.context_figures`)."""
+    return context_rows(page.report.context)
 
 
-def blind_figures(page: PageInput) -> list[dict]:
+def blind_rows(page: PageInput) -> list[dict]:
     """Where a fault could not have been seen (`logscan.report.observability_figures`)."""
-    return observability_figures(page.report.observability, page.report.clock)
+    return observability_rows(page.report.observability)
+
+
+def path_figure(page: PageInput) -> list[dict]:
+    """The path, the filter's estimate of it and the incidents on it (`logscan.report.context_figures`)."""
+    report = page.report
+    return path_figures(report.context, report.incidents, report.clock, report.innovations, page.t)
 
 
 DETECTOR_ROWS: list[Callable[[DetectorResult, PageInput], list[Figure]]] = [
     sensor_rows,
-    ubikf_rows,
+]
+CONTEXT_ROWS: list[Callable[[PageInput], list[dict]]] = [
+    run_context_rows,
+    blind_rows,
 ]
 CONTEXT_FIGURES: list[Callable[[PageInput], list[dict]]] = [
-    run_context_figures,
-    blind_figures,
+    path_figure,
 ]

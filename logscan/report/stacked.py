@@ -8,14 +8,19 @@ each zoomed by its own `relayout`). Here they are the rows of one plotly figure,
 the rows, one zoom for the section, one `relayout` to follow the page's time axis.
 
 Each row keeps what its `Figure` had: its own y axis (title, log or linear, initial range), its
-shaded spans on a hidden overlay axis (0..1 covers the row), its horizontal lines, its own legend
-beside it (plotly's ``legend2``, ``legend3``...), and its title as an annotation above it. A row
-whose statistic is constant all log long and never alarmed (an indicator that stayed 0) is left
-out and named in the section's caption (`fold_flat`).
+alarm spans on a hidden overlay axis (0..1 covers the row), its horizontal lines, and above it a
+band with its title and its own legend (plotly's ``legend2``, ``legend3``..., one horizontal line
+under the title). Not a legend beside the rows: PX4's long channel names widened that margin and
+squeezed every row's plot (a name longer than `LEGEND_NAME_CHARS` is shortened in the legend; the
+hover gives it whole). The ground truth is the same for every row, so it is shaded once across
+the whole figure (layout shapes), not once per row. A row whose statistic is constant all log long
+and never alarmed (an indicator that stayed 0) is left out and named in the section's caption
+(`fold_flat`).
 """
 
 from __future__ import annotations
 
+import html
 from collections.abc import Sequence
 
 import numpy as np
@@ -23,6 +28,7 @@ import numpy as np
 from logscan.report.figures import Figure
 from logscan.report.plotly_json import (
     TIME_AXIS,
+    TRUTH_FILL,
     allocate_points,
     figure_json,
     focus_windows,
@@ -33,9 +39,11 @@ from logscan.report.plotly_json import (
 
 ROW_PX = 190  # a row that alarmed, or a sensor's measured vs predicted
 QUIET_ROW_PX = 120  # a row without an alarm span
-TITLE_PX = 34  # above each row: its title (and the statistic's words)
+TITLE_PX, LEGEND_LINE_PX = 20, 20  # above each row: its title (and the statistic's words), then its legend
+BAND_PX = TITLE_PX + LEGEND_LINE_PX
 TOP_PX, BOTTOM_PX = 10, 60  # the figure's margins: the bottom one holds the time axis' title
-LEGEND_PX = 210  # right margin: each row's legend beside it
+RIGHT_PX = 20  # nothing beside the rows: the plots take the page's width
+LEGEND_NAME_CHARS = 40  # a longer trace name is shortened in its legend (about 240 px at 10 px type)
 SPIKES = {
     "showspikes": True,
     "spikemode": "across",  # one vertical line through every row
@@ -70,14 +78,25 @@ def _row_heights(rows: Sequence[Figure]) -> list[int]:
             for fig in rows]  # fmt: skip
 
 
-def stacked_layout(rows: Sequence[Figure]) -> tuple[dict, list[int]]:
-    """The layout of ``rows`` stacked on one time axis, and each row's y-axis number (1, 2, ...)."""
-    heights = _row_heights(rows)
-    plot_px = sum(heights) + TITLE_PX * len(rows)
-    total_px = plot_px + TOP_PX + BOTTOM_PX
-    layout: dict = {
-        "height": total_px,
-        "margin": {"l": 70, "r": LEGEND_PX, "t": TOP_PX, "b": BOTTOM_PX},
+def row_band(layout: dict, r: int, domain: list[float], title: str, subtitle: str = "") -> str:
+    """Row ``r``'s band above its ``domain`` (paper fractions): its title and, under it, its legend on
+    one horizontal line (scrolled, never wrapped into the row above); the legend's key."""
+    legend = "legend" if r == 1 else f"legend{r}"
+    layout[legend] = {"orientation": "h", "x": 0, "xanchor": "left", "y": domain[1], "yanchor": "bottom",
+                      "font": {"size": 10}, "maxheight": LEGEND_LINE_PX, "tracegroupgap": 2}  # fmt: skip
+    words = f"  <span style='font-size:11px;color:#555'>{plot_text(subtitle)}</span>" if subtitle else ""
+    layout["annotations"].append({
+        "text": f"<b>{plot_text(title)}</b>{words}", "xref": "paper", "yref": "paper", "x": 0, "y": domain[1],
+        "yshift": LEGEND_LINE_PX, "xanchor": "left", "yanchor": "bottom", "showarrow": False, "font": {"size": 12},
+    })  # fmt: skip
+    return legend
+
+
+def base_layout(plot_px: int) -> dict:
+    """A stacked figure's layout before its rows: one hover and one spike line across every row."""
+    return {
+        "height": plot_px + TOP_PX + BOTTOM_PX,
+        "margin": {"l": 70, "r": RIGHT_PX, "t": TOP_PX, "b": BOTTOM_PX},
         "hovermode": "x unified",
         "hoversubplots": "axis",  # hovering one row hovers every row at that time
         "plot_bgcolor": "white",
@@ -85,12 +104,25 @@ def stacked_layout(rows: Sequence[Figure]) -> tuple[dict, list[int]]:
         "template": {},
         "annotations": [],
     }
-    top = plot_px
-    n = len(rows)
-    for r, (fig, height) in enumerate(zip(rows, heights), 1):
-        top -= TITLE_PX
-        domain = [(top - height) / plot_px, top / plot_px]
+
+
+def row_domains(heights: Sequence[int]) -> tuple[int, list[list[float]]]:
+    """(the plot's height in px, each row's domain): rows top to bottom, a band above each."""
+    plot_px = sum(heights) + BAND_PX * len(heights)
+    top, domains = plot_px, []
+    for height in heights:
+        top -= BAND_PX
+        domains.append([(top - height) / plot_px, top / plot_px])
         top -= height
+    return plot_px, domains
+
+
+def stacked_layout(rows: Sequence[Figure]) -> tuple[dict, list[int]]:
+    """The layout of ``rows`` stacked on one time axis, and each row's y-axis number (1, 2, ...)."""
+    plot_px, domains = row_domains(_row_heights(rows))
+    layout = base_layout(plot_px)
+    n = len(rows)
+    for r, (fig, domain) in enumerate(zip(rows, domains), 1):
         axis = "yaxis" if r == 1 else f"yaxis{r}"
         layout[axis] = {
             "domain": domain,
@@ -103,34 +135,60 @@ def stacked_layout(rows: Sequence[Figure]) -> tuple[dict, list[int]]:
         }
         layout[f"yaxis{n + r}"] = {"overlaying": f"y{'' if r == 1 else r}", "domain": domain, "range": [0, 1],
                                    "visible": False, "fixedrange": True}  # fmt: skip
-        legend = "legend" if r == 1 else f"legend{r}"
-        layout[legend] = {"x": 1.01, "xanchor": "left", "y": domain[1], "yanchor": "top", "font": {"size": 10},
-                          "tracegroupgap": 2}  # fmt: skip
-        words = f"  <span style='font-size:11px;color:#555'>{plot_text(fig.subtitle)}</span>" if fig.subtitle else ""
-        layout["annotations"].append({
-            "text": f"<b>{plot_text(fig.title)}</b>{words}", "xref": "paper", "yref": "paper", "x": 0,
-            "y": domain[1], "xanchor": "left", "yanchor": "bottom", "showarrow": False, "font": {"size": 12},
-        })  # fmt: skip
+        row_band(layout, r, domain, fig.title, fig.subtitle)
     layout["xaxis"] = {**TIME_AXIS, "anchor": f"y{'' if n == 1 else n}", **SPIKES}
     return layout, list(range(1, n + 1))
+
+
+def legend_name(trace: dict) -> None:
+    """A trace whose name is longer than LEGEND_NAME_CHARS keeps its head and tail in the legend
+    and its whole name in the hover."""
+    name = str(trace.get("name", ""))
+    shown = html.unescape(name)  # as plotly shows it (`plot_text`): its length on the page
+    if len(shown) <= LEGEND_NAME_CHARS:
+        return
+    keep = (LEGEND_NAME_CHARS - 1) // 2
+    trace["name"] = plot_text(f"{shown[:keep]}…{shown[-keep:]}")
+    if "hovertemplate" in trace:
+        trace["hovertemplate"] = f"{name}: {trace['hovertemplate']}<extra></extra>"
+
+
+def on_row(trace: dict, axes: dict[str, str], legend: str) -> dict:
+    """``trace`` on its row: its y axis (``y``) or the row's overlay (``y2``) as ``axes`` name them,
+    its row's legend, a long name shortened there (`legend_name`); plotly's defaults left out
+    (scatter, the x axis ``x``, the first legend): a section has a hundred traces."""
+    trace = {key: value for key, value in trace.items() if not (key == "type" and value == "scatter")}
+    trace["yaxis"] = axes[trace.get("yaxis", "y")]
+    if legend != "legend":
+        trace["legend"] = legend
+    legend_name(trace)
+    return trace
+
+
+def truth_shapes(rows: Sequence[Figure], clock) -> list[dict]:
+    """The ground-truth spans (the same on every row) shaded once across the whole figure."""
+    spans = next((fig.spans.get("ground truth") for fig in rows if fig.spans.get("ground truth")), None) or []
+    at = (lambda v: clock.axis_value(v)) if clock is not None else float
+    return [{"type": "rect", "xref": "x", "yref": "paper", "x0": at(a), "x1": at(b), "y0": 0, "y1": 1,
+             "fillcolor": TRUTH_FILL, "line": {"width": 0}, "layer": "below"} for a, b in spans]  # fmt: skip
 
 
 def stacked_json(rows: Sequence[Figure], t: np.ndarray, points: dict[int, int], windows: np.ndarray, clock) -> str:
     """The rows as one figure's escaped plotly JSON, traces decimated to ``points`` (trace id ->
     points) as `logscan.report.plotly_json.figure_json` does for one figure."""
     layout, numbers = stacked_layout(rows)
+    layout["shapes"] = truth_shapes(rows, clock)
     n = len(rows)
     data: list[dict] = []
     for fig, r in zip(rows, numbers):
         axes = {"y": f"y{'' if r == 1 else r}", "y2": f"y{n + r}"}
         legend = "legend" if r == 1 else f"legend{r}"
         for trace in trace_data(fig, t, points, windows):
+            if trace.get("name") == "ground truth" and layout["shapes"]:
+                continue  # shaded once across the figure
             if "hovertemplate" in trace:  # the unified hover box gives the time once, on top
                 trace["hovertemplate"] = "%{y:.4g}"
-            trace["xaxis"] = "x"
-            trace["yaxis"] = axes[trace.get("yaxis", "y")]
-            trace["legend"] = legend
-            data.append(trace)
+            data.append(on_row(trace, axes, legend))
     return plain_json(data, layout, clock)
 
 
@@ -142,6 +200,8 @@ def row_captions(rows: Sequence[Figure], flat: Sequence[str]) -> list[str]:
             captions.append(fig.caption)
     if flat:
         captions.append(f"Not drawn, constant all log long and never alarmed: {', '.join(flat)}.")
+    if any(fig.spans.get("ground truth") for fig in rows):
+        captions.append("Shaded blue across every row: the ground-truth faults.")
     return captions
 
 
