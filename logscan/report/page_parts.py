@@ -29,6 +29,7 @@ from logscan.report.figures import Figure
 from logscan.report.observability_figures import observability_rows
 from logscan.report.report_input import ReportInput
 from logscan.report.sensor_figures import named_group_figures
+from logscan.report.ubikf_view import ubikf_rows
 from logscan.results import DetectorResult
 
 
@@ -67,6 +68,7 @@ def path_figure(page: PageInput) -> list[dict]:
 
 DETECTOR_ROWS: list[Callable[[DetectorResult, PageInput], list[Figure]]] = [
     sensor_rows,
+    ubikf_rows,
 ]
 CONTEXT_ROWS: list[Callable[[PageInput], list[dict]]] = [
     run_context_rows,
