@@ -7,7 +7,7 @@ messages on several topics with ``logscan.readers.mcap.writer``, then times, in 
  - plain mcap: ``make_reader(f, decoder_factories=[...]).iter_decoded_messages()``, touching
    one field of every decoded message (it builds no arrays, so it does less work than logscan).
 
-Then, best of ``--reps`` each:
+Then:
 
  - ULog: ``read_ulog(path, None)`` against pyulog's ``ULog(path)`` (every topic), and
    ``read_ulog(path, <the PX4 profile's topics>)`` against ``ULog(path, <their message names>)``,
@@ -15,7 +15,9 @@ Then, best of ``--reps`` each:
  - CSV: ``read_csv(path, None)`` against ``pandas.read_csv(path)`` of a generated wide CSV
    (``--csv`` rows: a time column in seconds and 6 float columns, ``repr`` floats).
 
-Prints messages/s of both and the ratio. Usage:
+Every figure is the best of ``--mcap-reps`` (MCAP) or ``--reps`` (ULog, CSV) rounds that run the
+two readers in turn, in wall seconds and in CPU seconds of this process (on a shared machine the
+CPU ratio is the steadier one). Prints one table row per case. Usage:
 
     python bench/bench_readers.py                      # 1,000,000 JSON + 200,000 ROS 2 messages
     python bench/bench_readers.py --json 100000 --ros2 20000   # quick run
@@ -32,7 +34,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from benchlib import best_of
 
 from logscan.readers.mcap.reader import decoder_factories, read_mcap
 from logscan.readers.mcap.writer import TopicData, write_mcap
@@ -84,13 +85,22 @@ def make_topics(n_messages: int, seed: int = 0) -> dict[str, TopicData]:
     return topics
 
 
-def time_logscan(path: Path) -> tuple[float, int]:
-    start = time.perf_counter()
+def best_wall_cpu(reps: int, runs: dict) -> dict:
+    """name -> (best wall s, best CPU s) of ``reps`` rounds, each calling every run once in turn."""
+    best = {name: (float("inf"), float("inf")) for name in runs}
+    for _ in range(reps):
+        for name, run in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            run()
+            wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+            best[name] = (min(best[name][0], wall), min(best[name][1], cpu))
+    return best
+
+
+def read_logscan(path: Path) -> int:
     log = read_mcap(path, None)
-    elapsed = time.perf_counter() - start
-    messages = sum(info.message_count for info in log.source.topics.values())
     assert not log.source.partial and not log.source.skipped
-    return elapsed, messages
+    return sum(info.message_count for info in log.source.topics.values())
 
 
 def _touch(decoded) -> object:
@@ -99,24 +109,24 @@ def _touch(decoded) -> object:
     return getattr(decoded, decoded.__slots__[0])
 
 
-def time_plain_mcap(path: Path) -> tuple[float, int]:
+def read_plain_mcap(path: Path) -> int:
     from mcap.reader import make_reader
 
-    start = time.perf_counter()
     count = 0
     with open(path, "rb") as fh:
         reader = make_reader(fh, decoder_factories=decoder_factories())
         for _schema, _channel, _message, decoded in reader.iter_decoded_messages():
             _touch(decoded)
             count += 1
-    return time.perf_counter() - start, count
+    return count
 
 
 _ULOG_DIR = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog"
 
 
-def ulog_rows(reps: int) -> list[tuple[str, str, float, float]]:
-    """(case, size, logscan s, pyulog s) over the PX4 sample logs, best of ``reps`` per file."""
+def ulog_rows(reps: int) -> list[tuple[str, str, tuple, tuple]]:
+    """(case, size, logscan (wall, CPU) s, pyulog (wall, CPU) s) over the PX4 sample logs, best of
+    ``reps`` per file, summed."""
     from pyulog import ULog
 
     from logscan.profiles.builtin import PX4_TOPICS
@@ -135,14 +145,22 @@ def ulog_rows(reps: int) -> list[tuple[str, str, float, float]]:
         ("ulog, every topic", None, None),
         ("ulog, PX4 profile topics", wanted, names),
     ):
-        ours = sum(best_of(reps, lambda f=f, w=ours_wanted: read_ulog(f, w)) for f in files)
-        theirs = sum(best_of(reps, lambda f=f, n=theirs_names: ULog(str(f), n)) for f in files)
-        rows.append((case, size, ours, theirs))
+        ours, theirs = np.zeros(2), np.zeros(2)
+        for f in files:
+            best = best_wall_cpu(
+                reps,
+                {
+                    "ours": lambda f=f, w=ours_wanted: read_ulog(f, w),
+                    "theirs": lambda f=f, n=theirs_names: ULog(str(f), n),
+                },
+            )
+            ours, theirs = ours + best["ours"], theirs + best["theirs"]
+        rows.append((case, size, tuple(ours), tuple(theirs)))
     return rows
 
 
-def csv_rows(n_rows: int, tmp: str, reps: int) -> list[tuple[str, str, float, float]]:
-    """(case, size, logscan s, pandas s) of a generated wide CSV, best of ``reps``."""
+def csv_rows(n_rows: int, tmp: str, reps: int) -> list[tuple[str, str, tuple, tuple]]:
+    """(case, size, logscan (wall, CPU) s, pandas (wall, CPU) s) of a generated wide CSV, best of ``reps``."""
     import pandas as pd
 
     from logscan.readers.csv_reader import read_csv
@@ -153,9 +171,8 @@ def csv_rows(n_rows: int, tmp: str, reps: int) -> list[tuple[str, str, float, fl
     columns.update({f"c{i}": rng.normal(size=n_rows) for i in range(6)})
     pd.DataFrame(columns).to_csv(path, index=False)
     read_csv(path, None)  # warm-up
-    ours = best_of(reps, lambda: read_csv(path, None))
-    theirs = best_of(reps, lambda: pd.read_csv(path))
-    return [("csv", f"{n_rows:,} rows x 7, {path.stat().st_size / 1e6:.0f} MB", ours, theirs)]
+    best = best_wall_cpu(reps, {"ours": lambda: read_csv(path, None), "theirs": lambda: pd.read_csv(path)})
+    return [("csv", f"{n_rows:,} rows x 7, {path.stat().st_size / 1e6:.0f} MB", best["ours"], best["theirs"])]
 
 
 def main() -> None:
@@ -164,6 +181,7 @@ def main() -> None:
     parser.add_argument("--ros2", type=int, default=200_000, help="messages in the ROS 2 file")
     parser.add_argument("--csv", type=int, default=1_000_000, help="rows of the CSV file (0: none)")
     parser.add_argument("--reps", type=int, default=5, help="ULog and CSV: best of this many reads")
+    parser.add_argument("--mcap-reps", type=int, default=3, help="MCAP: best of this many reads")
     args = parser.parse_args()
     print(f"python {platform.python_version()}, {os.cpu_count()} cpu(s), {platform.machine()}")
     rows = []
@@ -178,25 +196,20 @@ def main() -> None:
             size_mb = path.stat().st_size / 1e6
             print(f"{encoding}: wrote {n} messages ({size_mb:.1f} MB) in {written:.1f} s")
             read_mcap(path, {"/baro"})  # warm-up: numba kernels and imports, off the clock
-            ours, ours_n = time_logscan(path)
-            plain, plain_n = time_plain_mcap(path)
-            assert ours_n == plain_n == n, (ours_n, plain_n, n)
-            rows.append((encoding, n, ours, plain))
+            assert read_logscan(path) == read_plain_mcap(path) == n
+            best = best_wall_cpu(
+                args.mcap_reps, {"ours": lambda p=path: read_logscan(p), "theirs": lambda p=path: read_plain_mcap(p)}
+            )
+            rows.append((encoding, f"{n:,} messages, {size_mb:.0f} MB", best["ours"], best["theirs"]))
         other = ulog_rows(args.reps) + (csv_rows(args.csv, tmp, args.reps) if args.csv else [])
     print()
-    print("| file | messages | logscan read_mcap msg/s | mcap iter_decoded_messages msg/s | ratio |")
-    print("|---|---:|---:|---:|---:|")
-    for encoding, n, ours, plain in rows:
-        print(
-            f"| {encoding} | {n:,} | {n / ours:,.0f} ({ours:.1f} s) | {n / plain:,.0f} ({plain:.1f} s) "
-            f"| {plain / ours:.2f}x |"
-        )
-
-    print()
-    print("| reader | input | logscan s | library s | library / logscan |")
+    print("| reader | input | logscan s (wall / CPU) | library s (wall / CPU) | library / logscan (wall / CPU) |")
     print("|---|---|---:|---:|---:|")
-    for case, size, ours, theirs in other:
-        print(f"| {case} | {size} | {ours:.3f} | {theirs:.3f} | {theirs / ours:.2f}x |")
+    for case, size, ours, theirs in [(f"mcap {e}", n, o, t) for e, n, o, t in rows] + other:
+        print(
+            f"| {case} | {size} | {ours[0]:.3f} / {ours[1]:.3f} | {theirs[0]:.3f} / {theirs[1]:.3f} "
+            f"| {theirs[0] / ours[0]:.2f}x / {theirs[1] / ours[1]:.2f}x |"
+        )
 
 
 if __name__ == "__main__":

@@ -1,6 +1,10 @@
 """A CSV file read in blocks of rows into per-column pieces (`CsvColumns`), so memory follows the
 typed columns, not pandas' tokens of the whole file; and the check that the last row was not cut.
 
+A file of plain numbers (`csv_numeric`: most logs) is parsed from its mapped bytes by a numba
+kernel straight into typed columns, one piece each, with the columns pandas would give; every
+other file is read by pandas as below.
+
 pandas' C parser reading a whole file at once holds every field as text (about 3x the file); read
 ``BLOCK_BYTES`` of rows at a time, each block's columns are copied out as their own Series and the
 block is dropped. A column is joined when it is asked for (`CsvColumns.__getitem__`) and its
@@ -19,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from logscan.errors import InputError
+from logscan.readers.csv_numeric import numeric_columns
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -83,6 +88,9 @@ def load_columns(path: Path) -> CsvColumns:
 
     header = _header_line(path)
     sep = sniff_delimiter(header)
+    fast = _plain_numbers(path, header, sep)
+    if fast is not None:
+        return fast
     names: list[str] = []
     pieces: dict[str, list[pd.Series]] = {}
     rows = 0
@@ -133,6 +141,17 @@ def load_columns(path: Path) -> CsvColumns:
         for parts in pieces.values():
             parts[-1] = parts[-1].iloc[:-1]
     return CsvColumns(names, pieces, rows, cut_row)
+
+
+def _plain_numbers(path: Path, header: str, sep: str) -> CsvColumns | None:
+    """The columns of a file of plain numbers (`csv_numeric`): pandas' columns without its tokens."""
+    import pandas as pd
+
+    columns = numeric_columns(path, header, sep)
+    if columns is None:
+        return None
+    rows = len(next(iter(columns.values())))
+    return CsvColumns(list(columns), {name: [pd.Series(v, copy=False)] for name, v in columns.items()}, rows, "")
 
 
 def _header_line(path: Path) -> str:

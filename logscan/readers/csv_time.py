@@ -68,10 +68,10 @@ def infer_time_unit(values: np.ndarray) -> TimeUnit:
     Fractional numbers prefer the coarsest plausible unit (seconds); integers take the plausible
     unit whose period is closest to ~30 Hz in log scale (ties go to the coarser unit).
     """
-    finite = values[np.isfinite(values)]
+    finite = _finite(values)
     if finite.size == 0:
         return TimeUnit("s", "relative", "no finite time values; assumed seconds")
-    steps = np.diff(np.sort(finite))
+    steps = np.diff(finite if _ascending(finite) else np.sort(finite))
     steps = steps[steps > 0]
     step = float(np.median(steps)) if steps.size else 0.0
     low, high = float(finite.min()), float(finite.max())
@@ -101,12 +101,15 @@ def infer_time_unit(values: np.ndarray) -> TimeUnit:
 def check_stated_unit(values: np.ndarray, name: str, unit: str, path: Path) -> None:
     """InputError when the numbers of the time column ``name`` contradict the unit its name states
     (see _STATED_MAX_SPAN_S), saying what they look like and what to rename the column to."""
-    finite = values[np.isfinite(values)]
+    finite = _finite(values)
     if finite.size == 0:
         return
     scale = NS_PER_UNIT[unit] / 1e9
-    middle = float(np.median(finite))
-    times = np.sort(finite[np.abs(finite) < MAX_TIME_NS // NS_PER_UNIT[unit]])  # the rows read as times
+    in_order = _ascending(finite)
+    middle = _sorted_median(finite) if in_order else float(np.median(finite))
+    fits = np.abs(finite) < MAX_TIME_NS // NS_PER_UNIT[unit]  # the rows read as times
+    times = finite if fits.all() else finite[fits]
+    times = times if in_order else np.sort(times)
     steps = np.diff(times)
     step = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
     span = step * (times.size - 1) * scale  # the span its sampling implies: blind to a few wild rows
@@ -127,3 +130,22 @@ def check_stated_unit(values: np.ndarray, name: str, unit: str, path: Path) -> N
     raise InputError(
         f"time column {name!r} states {_UNIT_NAMES[unit]} but {problem}{looks}", path=str(path), hint=rename
     )
+
+
+# A time column is nearly always finite and in order: then it is used as it is, not copied and
+# sorted (the same numbers: np.median of sorted values is the mean of their middle one or two).
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    finite = np.isfinite(values)
+    return values if finite.all() else values[finite]
+
+
+def _ascending(values: np.ndarray) -> bool:
+    return values.size < 2 or bool((values[1:] >= values[:-1]).all())
+
+
+def _sorted_median(values: np.ndarray) -> float:
+    """np.median of ascending ``values`` (size >= 1), bit for bit: the mean of its middle one or two."""
+    half = values.size // 2
+    return float(np.mean(values[half - 1 : half + 1] if values.size % 2 == 0 else values[half : half + 1]))

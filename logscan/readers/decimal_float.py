@@ -17,16 +17,17 @@ and the 17-digit ``repr`` floats of Python's ``json``. Declined tokens (more tha
 digits, an undecided rounding, NaN, Infinity, anything not JSON number syntax) are the caller's to
 parse with a full parser.
 
-The 64x64 -> 128-bit product, the leading-zero count, the bit cast and the unaligned load are LLVM
-instructions (numba ``intrinsic``s): emulated with 32-bit halves they were half of the time.
+The 64x64 -> 128-bit product, the zero counts, the bit cast and the unaligned load are single LLVM
+instructions (`bits`): emulated with 32-bit halves the product was half of Eisel-Lemire's time.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir  # type: ignore[import-untyped]
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
+
+from logscan.numba_cache import follow_dependencies
+from logscan.readers.bits import float_of_bits, leading_zeros, load_u64, mul_128, trailing_zeros
 
 MAX_EXP10 = 340
 MAX_DIGITS = 19  # 10**19 - 1 < 2**64: the mantissa of 19 digits never overflows
@@ -53,57 +54,6 @@ POW10_HI, POW10_LO = _powers_of_ten()
 POW10 = np.array([10.0**k for k in range(23)], dtype=np.float64)  # 10**0 .. 10**22: all exact doubles
 
 
-@intrinsic
-def mul_128(typingctx, a, b):  # pragma: no cover - compiled
-    """(high, low) 64-bit halves of the 128-bit product of two uint64."""
-    signature = types.UniTuple(types.uint64, 2)(types.uint64, types.uint64)
-
-    def codegen(context, builder, sig, args):
-        wide = ir.IntType(128)
-        product = builder.mul(builder.zext(args[0], wide), builder.zext(args[1], wide))
-        high = builder.trunc(builder.lshr(product, ir.Constant(wide, 64)), ir.IntType(64))
-        low = builder.trunc(product, ir.IntType(64))
-        return context.make_tuple(builder, sig.return_type, (high, low))
-
-    return signature, codegen
-
-
-@intrinsic
-def leading_zeros(typingctx, a):  # pragma: no cover - compiled
-    """Leading zero bits of a uint64 (64 for 0)."""
-    signature = types.int64(types.uint64)
-
-    def codegen(context, builder, sig, args):
-        return builder.ctlz(args[0], ir.Constant(ir.IntType(1), 0))
-
-    return signature, codegen
-
-
-@intrinsic
-def float_of_bits(typingctx, a):  # pragma: no cover - compiled
-    """The float64 whose IEEE bits are the uint64 ``a``."""
-    signature = types.float64(types.uint64)
-
-    def codegen(context, builder, sig, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return signature, codegen
-
-
-@intrinsic
-def load_u64(typingctx, buf, index):  # pragma: no cover - compiled
-    """The 8 bytes buf[index:index + 8] of a uint8 array as one little-endian uint64 (any alignment;
-    the caller checks that they are inside the array)."""
-    signature = types.uint64(buf, types.int64)
-
-    def codegen(context, builder, sig, args):
-        array = context.make_array(sig.args[0])(context, builder, args[0])
-        pointer = builder.bitcast(builder.gep(array.data, [args[1]]), ir.IntType(64).as_pointer())
-        return builder.load(pointer, align=1)
-
-    return signature, codegen
-
-
 _M9 = np.uint64(0x1FF)
 _ONE = np.uint64(1)
 _ZEROS8 = np.uint64(0x3030303030303030)  # eight ASCII '0'
@@ -113,6 +63,9 @@ _THREES = np.uint64(0x3333333333333333)
 _BYTES_0_4 = np.uint64(0x000000FF000000FF)
 _MUL_100_1E6 = np.uint64(100 + (1000000 << 32))
 _MUL_1_1E4 = np.uint64(1 + (10000 << 32))
+_PLUS118 = np.uint64(0x7676767676767676)  # 0x76 + 10 = 0x80: the top bit of a byte over 9
+_BYTE_TOPS = np.uint64(0x8080808080808080)
+_POW10_INT = np.array([10**k for k in range(20)], dtype=np.uint64)
 
 
 @njit(cache=True, inline="always")
@@ -170,14 +123,23 @@ def eisel_lemire(w, e10):  # pragma: no cover - numba kernel
 
 @njit(cache=True, inline="always")
 def _digits(buf, i, end, w):  # pragma: no cover - numba kernel
-    """Accumulate the decimal digits from buf[i] into w, eight at a time where eight are there:
-    (w, where the digits stop)."""
+    """Accumulate the decimal digits from buf[i] into w: (w, where the digits stop). Eight bytes
+    are loaded at a time: all digits are combined at once, and so are the n < 8 digits before the
+    first non-digit (shifted to the top, '0's below them). Byte-wise in the last 7 bytes of buf."""
     while i + 8 <= end:
         v = load_u64(buf, i)
-        if not _eight_digits(v):
-            break
-        w = w * np.uint64(100000000) + _value_of_eight(v)
-        i += 8
+        x = v ^ _ZEROS8  # a digit byte becomes 0..9
+        non_digits = ((x + _PLUS118) | x) & _BYTE_TOPS  # top bit of each byte > 9 (exact up to the first)
+        if non_digits == np.uint64(0):
+            w = w * np.uint64(100000000) + _value_of_eight(v)
+            i += 8
+            continue
+        n = trailing_zeros(non_digits) >> 3  # digits before the first non-digit
+        if n:
+            shift = np.uint64(8 * (8 - n))
+            w = w * _POW10_INT[n] + _value_of_eight((v << shift) | (_ZEROS8 >> np.uint64(8 * n)))
+            i += n
+        return w, i
     while i < end and 48 <= buf[i] <= 57:
         w = w * np.uint64(10) + np.uint64(buf[i] - 48)
         i += 1
@@ -205,29 +167,32 @@ def _exponent(buf, i, end):  # pragma: no cover - numba kernel
     return (-exponent if negative else exponent), i, True
 
 
-@njit(cache=True)
-def decimal_number(buf, start, end):  # pragma: no cover - numba kernel
-    """The JSON number at buf[start:...] (uint8 array, not past ``end``): (value, True, where it
-    stops) when `decimal_number` rules give it exactly, else (nan, False, where reading stopped).
-    The caller checks that the token ends where the number stops."""
+@njit(cache=True, inline="always")
+def scan_number(buf, start, end):  # pragma: no cover - numba kernel
+    """Read the JSON number at buf[start:...] (uint8 array, not past ``end``) as sign, significant
+    digits w and power of ten e: (negative, w, e, digits, integer, where it stops, fine). ``integer``:
+    no fraction and no exponent; ``digits``: significant digits (over `MAX_DIGITS`: w is wrong);
+    ``fine`` False when the text is not JSON number syntax (then it stops where that showed)."""
     i = start
     negative = i < end and buf[i] == 45  # '-'
     if negative:
         i += 1
-    if i >= end or buf[i] < 48 or buf[i] > 57:
-        return np.nan, False, i
     w = np.uint64(0)
+    if i >= end or buf[i] < 48 or buf[i] > 57:
+        return negative, w, 0, 0, False, i, False
     digits = 0
     e = 0
     if buf[i] == 48:  # a leading 0 stands alone
         i += 1
         if i < end and 48 <= buf[i] <= 57:
-            return np.nan, False, i
+            return negative, w, 0, 0, False, i, False
     else:
         first = i
         w, i = _digits(buf, i, end, w)
         digits = i - first
+    integer = True
     if i < end and buf[i] == 46:  # '.' then at least one digit
+        integer = False
         i += 1
         point = i
         if digits == 0:  # 0.000ddd: the zeros after the point are not significant
@@ -236,13 +201,24 @@ def decimal_number(buf, start, end):  # pragma: no cover - numba kernel
         first = i
         w, i = _digits(buf, i, end, w)
         if i == point:
-            return np.nan, False, i
+            return negative, w, 0, 0, False, i, False
         digits += i - first
         e = point - i
-    exponent, i, fine = _exponent(buf, i, end)
-    if not fine or digits > MAX_DIGITS:
-        return np.nan, False, i
-    e += exponent
+    if i < end and (buf[i] == 101 or buf[i] == 69):
+        integer = False
+        exponent, i, fine = _exponent(buf, i, end)
+        if not fine:
+            return negative, w, 0, 0, False, i, False
+        e += exponent
+    return negative, w, e, digits, integer, i, True
+
+
+@njit(cache=True, inline="always")
+def number_value(negative, w, e, digits):  # pragma: no cover - numba kernel
+    """(the correctly rounded double of -+w * 10**e, True), or (nan, False) when declined (more
+    than `MAX_DIGITS` digits, an undecided rounding, a subnormal or overflowing result)."""
+    if digits > MAX_DIGITS:
+        return np.nan, False
     if w == np.uint64(0):
         value = 0.0
     elif w <= _CLINGER_W and 0 <= e <= 22:
@@ -252,5 +228,20 @@ def decimal_number(buf, start, end):  # pragma: no cover - numba kernel
     else:
         value, exact = eisel_lemire(w, e)
         if not exact:
-            return np.nan, False, i
-    return (-value if negative else value), True, i
+            return np.nan, False
+    return (-value if negative else value), True
+
+
+@njit(cache=True)
+def decimal_number(buf, start, end):  # pragma: no cover - numba kernel
+    """The JSON number at buf[start:...] (uint8 array, not past ``end``): (value, True, where it
+    stops) when the module's rules give it exactly, else (nan, False, where reading stopped). The
+    caller checks that the token ends where the number stops."""
+    negative, w, e, digits, _integer, stop, fine = scan_number(buf, start, end)
+    if not fine:
+        return np.nan, False, stop
+    value, exact = number_value(negative, w, e, digits)
+    return value, exact, stop
+
+
+follow_dependencies(__name__)  # the cached kernels are stamped with the intrinsics of `bits` too

@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 from logscan.numba_cache import follow_dependencies
-from logscan.readers.decimal_float import decimal_number, load_u64
+from logscan.readers.bits import load_u64
+from logscan.readers.decimal_float import decimal_number
 from logscan.readers.flatten import MessageBytes, layout_of
 
 _TOKEN_CHARS = frozenset(b"0123456789+-.eEabcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ")
