@@ -20,6 +20,7 @@ Seeds (none used by sample_logs/ or the tests): step 9000.., whole-hover slope 9
     python bench/kgn_scenarios.py                    # 20 runs per scenario
     python bench/kgn_scenarios.py --runs 3           # a quick look
     python bench/kgn_scenarios.py --write-docs       # also rewrite the table in docs/evaluation.md
+    python bench/kgn_scenarios.py --train-aggressive 5   # mixed training: normal and aggressive flights
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ SCENARIOS = {
 }
 HEALTHY_SEED = 9300
 TRAIN_SEED = 9900
+AGGRESSIVE_SEED = 9950  # --train-aggressive: healthy aggressive training logs
 # healthy training logs per model: the ins filter's K at the judged hover depends on how the random
 # manoeuvres before it excited the biases, so its spread needs more logs (5 gave 13 false alarms in
 # 20 healthy runs, 20 gave none)
@@ -68,12 +70,14 @@ class Run:
     seed: int
 
 
-def simulate(path: str, seed: int, fault: str | None = None, model: str = "quadcopter") -> str:
+def simulate(
+    path: str, seed: int, fault: str | None = None, model: str = "quadcopter", aggressive: bool = False
+) -> str:
     """Write a DURATION_S log of ``model`` (with ``fault``, `logscan simulate`'s syntax) to ``path``."""
     from logscan.simulate import parse_fault, simulate, write_simulation
 
     faults = [parse_fault(fault)] if fault else []
-    write_simulation(simulate(model, faults, duration=DURATION_S, seed=seed), path)
+    write_simulation(simulate(model, faults, duration=DURATION_S, seed=seed, aggressive=aggressive), path)
     return path
 
 
@@ -100,13 +104,16 @@ class RunTask:
         return out
 
 
-def train(root: str, count: int, model: str = "quadcopter") -> tuple[str, str, dict]:
-    """A profile enabling kgn and nis, and kgn's tables trained on ``count`` healthy logs."""
+def train(root: str, count: int, model: str = "quadcopter", aggressive: int = 0) -> tuple[str, str, dict]:
+    """A profile enabling kgn and nis, and kgn's tables trained on ``count`` healthy logs (and
+    ``aggressive`` healthy aggressive ones: mixed training, seeds AGGRESSIVE_SEED..)."""
     from logscan.pipeline import load_profile_for
     from logscan.training.train import train_logs
 
     seeds = range(TRAIN_SEED, TRAIN_SEED + count)
     logs = [simulate(os.path.join(root, f"train-{s}.mcap"), s, model=model) for s in seeds]
+    fast = range(AGGRESSIVE_SEED, AGGRESSIVE_SEED + aggressive)
+    logs += [simulate(os.path.join(root, f"fast-{s}.mcap"), s, model=model, aggressive=True) for s in fast]
     profile = os.path.join(root, "kgn.toml")
     with open(profile, "w", encoding="utf-8") as fh:
         fh.write(load_profile_for(logs[0], None).profile.to_toml() + "\n[detectors.kgn]\n\n[detectors.nis]\n")
@@ -156,6 +163,9 @@ def main() -> None:
     parser.add_argument("--train", type=int, default=None, help="healthy training logs (default: per model)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--model", choices=tuple(SCENARIOS), default="quadcopter")
+    parser.add_argument(
+        "--train-aggressive", type=int, default=0, help="also train on this many aggressive healthy logs (mixed)"
+    )
     parser.add_argument("-q", "--quiet", action="store_true")
     args = parser.parse_args()
     from logscan.fleet import LogFailure, run_many
@@ -168,7 +178,7 @@ def main() -> None:
     faults = {label: fault for label, (fault, _) in scenarios.items()} | {"healthy": None}
     runs = [Run(faults[label], seed) for label, chosen in seeds.items() for seed in chosen]
     with tempfile.TemporaryDirectory(prefix="kgn-") as root:
-        profile, tables, document = train(root, args.train, args.model)
+        profile, tables, document = train(root, args.train, args.model, args.train_aggressive)
         task = RunTask(root, profile, tables, args.model)
         results = run_many(runs, task, jobs=args.jobs, progress=not args.quiet, label="runs", isolate=True)
     broken = [r for r in results if isinstance(r, LogFailure)]
@@ -177,10 +187,13 @@ def main() -> None:
     by_label = {label: results[i * args.runs : (i + 1) * args.runs] for i, label in enumerate(seeds)}
     healthy = by_label.pop("healthy")
     lines = table({"faults": by_label, "healthy": healthy}, args.runs)
-    lines += ["", f"`kgn` trained on {args.train} healthy logs (seeds {TRAIN_SEED}..); its state and blindness probe:"]
+    mixed = f" and {args.train_aggressive} aggressive ones (seeds {AGGRESSIVE_SEED}..)" if args.train_aggressive else ""
+    trained = f"`kgn` trained on {args.train} healthy logs (seeds {TRAIN_SEED}..){mixed}"
+    lines += ["", f"{trained}; its state and blindness probe:"]
     lines += ["", "```", *(line.strip() for line in blindness_lines(document)), "```", ""]
     minutes = (time.time() - started) / 60
     command = f"python bench/kgn_scenarios.py --model {args.model} --runs {args.runs} --train {args.train}"
+    command += f" --train-aggressive {args.train_aggressive}" if args.train_aggressive else ""
     lines.append(f"(`{command}`, {minutes:.1f} min.)")
     report = "\n".join(lines)
     publish(report, args.write_docs, DOC, *MARKERS[args.model])

@@ -121,7 +121,11 @@ def test_train_logs_trains_kgn_when_the_profile_enables_it(quad):
     (state,) = quad["document"]["detectors"]
     assert state["detector"] == "kgn"
     detector = KgnDetector.from_state(state)
-    assert set(detector.reference_["bins"]) == {"0", "1"}  # hover and figure-eight
+    # hover and figure-eight, the figure-eight's windows split by speed, yaw rate and thrust
+    assert {key.split(" ")[0] for key in detector.reference_["bins"]} == {"0", "1"}
+    assert set(detector.reference_["edges"]["1"]) == {"speed", "yaw_rate", "thrust"}
+    assert all(row["windows"] >= detector.min_windows for row in detector.reference_["bins"].values())
+    assert detector.reference_["rho_fit"]["rule"].startswith("budget")
     assert detector.reference_["groups"] == ["accel", "gyro", "position", "attitude"]
     assert 1.0 < detector.rho_ < 50.0
     lines = KgnDetector.state_lines(state)
@@ -169,7 +173,7 @@ def test_a_slow_drift_is_not_detected_and_the_probe_agrees(quad):
 
 def test_train_and_analyze_with_tables_through_the_cli(quad, cli, tmp_path):
     out = tmp_path / "t.json"
-    trained = cli("train", *quad["healthy"][:2], "--profile", quad["profile"], "-o", out, "--no-report")
+    trained = cli("train", *quad["healthy"], "--profile", quad["profile"], "-o", out, "--no-report")
     assert trained.exit_code == 0, trained.stderr
     assert "kgn: rho" in trained.stdout and "probe accel" in trained.stdout
     summary = tmp_path / "s.json"

@@ -29,12 +29,15 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.traces import EkfTrace
 
 
-def _run_ekf(model, run, parts: frozenset[str]):
+def _run_ekf(model, run, parts: frozenset[str], x0=None, P0=None):
     # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
-    # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run
+    # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run. x0, P0: a
+    # checkpoint to start from (a probe re-filtering a slice), else the model's prior
     return run_ekf(
         model,
         run,
+        x0=x0,
+        P0=P0,
         store_gain="K" in parts,
         store_S="S" in parts,
         full_P="P" in parts,
@@ -190,14 +193,15 @@ def fit_context(detector, model: Model, run: AlignedRun) -> dict[str, Any]:
     """The context keywords of a detector's `fit` on training runs like ``run``: the ``model``, and
     ``refilter`` when its needs declare probes (`logscan.needs`): ``refilter(name, run)`` runs the
     filter ``name``, one of its probes, on a run the detector made, with this model and the trace
-    parts the detector asks of that filter, as the pipeline runs it on a log."""
+    parts the detector asks of that filter, as the pipeline runs it on a log; ``start`` (the EKF:
+    ``x0=..., P0=...``) starts it from a checkpoint instead of the model's prior."""
     if not detector.needs(run).probes:
         return {"model": model}
 
-    def refilter(name: str, probe_run: AlignedRun) -> Any:
+    def refilter(name: str, probe_run: AlignedRun, **start: Any) -> Any:
         needs = detector.needs(probe_run)
         if name not in needs.probes:
             raise InternalError(f"detector {detector.name!r} re-filters with {name!r}, not one of its probes")
-        return FILTERS[name](model, probe_run, needs.parts(name))
+        return FILTERS[name](model, probe_run, needs.parts(name), **start)
 
     return {"model": model, "refilter": refilter}

@@ -26,6 +26,7 @@ import numpy as np
 
 from logscan.report.context_figures import context_rows, path_figures
 from logscan.report.figures import Figure
+from logscan.report.kgn_view import kgn_rows
 from logscan.report.observability_figures import observability_rows
 from logscan.report.report_input import ReportInput
 from logscan.report.sensor_figures import named_group_figures
@@ -68,6 +69,7 @@ def path_figure(page: PageInput) -> list[dict]:
 
 DETECTOR_ROWS: list[Callable[[DetectorResult, PageInput], list[Figure]]] = [
     sensor_rows,
+    kgn_rows,
     ubikf_rows,
 ]
 CONTEXT_ROWS: list[Callable[[PageInput], list[dict]]] = [
