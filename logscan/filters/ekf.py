@@ -391,17 +391,19 @@ def _buffers(
     N: int, n: int, G: int, m: int, *, full_P: bool, store_gain: bool, store_S: bool, store_innovations: bool
 ) -> EkfBuffers:
     """The kernel's output arrays for N steps (n states, G groups, m outputs), NaN / False / 0
-    filled; the ones not stored have a zero-length first dimension."""
+    filled where the kernel writes only some steps; the ones not stored have a zero-length first
+    dimension."""
     nan = np.nan
     return EkfBuffers(
-        x_prior=np.full((N, n), nan),
-        x_post=np.full((N, n), nan),
+        # x and P, prior and posterior: written by ekf_run at every step, so not filled first
+        x_prior=np.empty((N, n)),
+        x_post=np.empty((N, n)),
         # float32: variances are scales (coding vectors, consistency bands), 7 digits are ample,
         # and a 1-hour log keeps 35 MB less
-        P_prior_diag=np.full((N, n), nan, dtype=np.float32),
-        P_post_diag=np.full((N, n), nan, dtype=np.float32),
-        P_prior_full=np.full((N if full_P else 0, n, n), nan),
-        P_post_full=np.full((N if full_P else 0, n, n), nan),
+        P_prior_diag=np.empty((N, n), dtype=np.float32),
+        P_post_diag=np.empty((N, n), dtype=np.float32),
+        P_prior_full=np.empty((N if full_P else 0, n, n)),
+        P_post_full=np.empty((N if full_P else 0, n, n)),
         # S_out, K_out: written step by step by ekf_run, NaN where not updated (one pass, not two)
         # float32: y and diag(S) are drawn (the report's measured-vs-predicted figures), never
         # filtered further; a 1-hour log keeps 35 MB less
