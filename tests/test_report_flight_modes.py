@@ -59,3 +59,38 @@ def test_a_mode_channel_without_names_keeps_its_numbers():
     figure = json.loads(mode_figure(_track("/flight_mode/mode"))["json"])
     assert [trace["name"] for trace in figure["data"][:-1]] == [f"/flight_mode/mode = {v}" for v in (4, 5, 17)]
     assert "annotations" not in figure["layout"]
+
+
+def test_the_profiles_mode_labels_name_a_ros_channels_values():
+    track = _track("/fix/status.status")
+    track.intervals = [(0.0, 10.0, -1.0), (10.0, 40.0, 0.0), (40.0, 60.0, 2.0)]
+    track.value = np.array([-1.0, 0.0, 2.0, 2.0])
+    track.labels = {-1.0: "NO_FIX", 0.0: "FIX", 2.0: "GBAS_FIX"}
+    spec = mode_figure(track)
+    figure = json.loads(spec["json"])
+    assert [trace["name"] for trace in figure["data"][:-1]] == ["NO_FIX (-1)", "FIX (0)", "GBAS_FIX (2)"]
+    assert figure["data"][-1]["text"][-1] == "GBAS_FIX (2)"  # on hover
+    assert "profile's [mode] labels" in spec["caption"] and "PX4" not in spec["caption"]
+    # a label comes before PX4's name; a value the labels leave out stays a number (or PX4's name)
+    assert mode_name("/vehicle_status/nav_state", 4.0, {4.0: "HOLD"}) == "HOLD (4)"
+    assert mode_name("/fix/status.status", 1.0, track.labels) == "1"
+
+
+def test_mode_labels_are_checked_each_problem_on_its_own_line():
+    from test_profile import QUAD
+
+    from logscan.errors import ProfileError
+    from logscan.profiles import dumps_toml, parse_profile
+
+    def profile(mode: dict) -> str:
+        return dumps_toml({**QUAD, "mode": {"channel": "/fix/status.status", **mode}})
+
+    assert parse_profile(profile({"labels": {"-1": "NO_FIX", "0": "FIX"}})).mode.labels == {-1.0: "NO_FIX", 0.0: "FIX"}
+    with pytest.raises(ProfileError) as error:
+        parse_profile(profile({"labels": {"fix": "FIX", "1": "", "1.0": 3}}))
+    text = "\n".join(error.value.problems)  # every problem, each on its own line (the CLI lists them all)
+    assert "[mode] labels: key 'fix' is not a number" in text
+    assert "[mode] labels: the name of '1' must be a non-empty string" in text
+    assert "[mode] labels: the name of '1.0' must be a non-empty string, not 3" in text
+    with pytest.raises(ProfileError, match=r"\[mode\] labels: expected a table of value = name"):
+        parse_profile(profile({"labels": ["FIX"]}))

@@ -97,6 +97,9 @@ def test_the_ros_wheeled_profile_of_the_husky(tmp_path):
     # /fix reports position_covariance_type 1 (approximated): the wander is the GPS SPS standard's
     assert profile.vehicle.params["gnss_error_std"] == pytest.approx(ros_wheeled.GPS_SPS_SIGMA_M, rel=1e-2)
     assert any("altitude not checked" in note for note in built.notes)
+    # the fix's status is the mode, its values named as sensor_msgs/NavSatStatus.msg names them
+    assert profile.mode.channel == "/fix/status.status"
+    assert profile.mode.labels == {-2.0: "UNKNOWN", -1.0: "NO_FIX", 0.0: "FIX", 1.0: "SBAS_FIX", 2.0: "GBAS_FIX"}
 
 
 @pytest.mark.parametrize("folder", ["px4-ulog", "px4-ulog-extra", "ros-robots"])

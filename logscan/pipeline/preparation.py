@@ -172,7 +172,8 @@ def prepare(
             hint=f"check the profile's channels and rate_hz against `logscan inspect {shlex.quote(path)}`",
         )
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
-    context = run_context(run, model, log)  # the report's context, from the samples about to go
+    labels = profile.mode.labels if profile.mode is not None else None
+    context = run_context(run, model, log, labels)  # the report's context, from the samples about to go
     prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
     prepared.clock = clock_of(log, run.start_ns)  # dated while the GNSS time is still there
     if profile.loops:

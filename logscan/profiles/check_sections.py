@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from logscan.profiles.check_groups import GroupChecker
@@ -138,9 +139,33 @@ class SectionChecker(GroupChecker):
         self.keys(data, where, MODE_KEYS, required=("channel",))
         channel = self.string(data, "channel", where)
         stale = self.stale(data, "stale_s", where)
-        if channel is None or ("stale_s" in data and stale is None):
+        problems = len(self.problems)
+        labels = self.mode_labels(data.get("labels", {}), f"{where} labels")
+        if channel is None or ("stale_s" in data and stale is None) or len(self.problems) > problems:
             return None
-        return ModeSpec(channel, MODE_STALE_S if stale is None else stale)
+        return ModeSpec(channel, MODE_STALE_S if stale is None else stale, labels)
+
+    def mode_labels(self, raw: Any, where: str) -> dict[float, str]:
+        """``{ "<value>" = "<name>" }`` -> {value: name}; each key that is not a finite number and each
+        name that is not a non-empty string is a problem of its own."""
+        if not isinstance(raw, dict):
+            self.add(where, f'expected a table of value = name (e.g. {{ "0" = "FIX" }}), got {type_name(raw)}')
+            return {}
+        labels: dict[float, str] = {}
+        for key, name in raw.items():
+            try:
+                value = float(key)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                self.add(where, f"key {key!r} is not a number (a value the mode channel takes)")
+            elif not isinstance(name, str) or not name.strip():
+                self.add(where, f"the name of {key!r} must be a non-empty string, not {name!r}")
+            elif value in labels:
+                self.add(where, f"key {key!r} names the value {value:g} again (as {labels[value]!r})")
+            else:
+                labels[value] = name.strip()
+        return labels
 
     def redundant(self, raw: Any) -> dict[str, RedundantSpec]:
         data = self.table(raw, "[redundant]")

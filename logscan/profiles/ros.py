@@ -54,6 +54,7 @@ from logscan.profiles.ros_topics import (
     ROS_TYPES,
     Found,
     covariance_std,
+    fix_status_mode_lines,
     noise_line,
     undecided,
 )
@@ -112,6 +113,7 @@ def _ins_profile(log, found: Found) -> BuiltProfile:
     if not found.fixes and velocity is None and quaternion is None:
         why = f"an IMU but nothing to check it against: no {ROS_NAVSATFIX} or {ROS_ODOMETRY} topic"
         return undecided("ros", log, found, why, lines[3:])
+    lines += fix_status_mode_lines(found)
     lines += ["", "[detectors.nis]  # logscan's filter: NIS per group", ""]
     return BuiltProfile("ros", "\n".join(lines), found.notes)
 

@@ -23,8 +23,28 @@ ROS_TYPES = (ROS_IMU, ROS_NAVSATFIX, ROS_ODOMETRY, *ROS_COMMANDS, ROS_JOINT_STAT
 ROS_ENCODINGS = ("cdr", "ros1")  # ROS 2 (MCAP, rosbag2) and ROS 1 bags; schemas in ROS 2 form pkg/msg/Type
 AXES = ("x", "y", "z")
 DIAGONAL3 = (0, 4, 8)
+# sensor_msgs/NavSatStatus.msg's STATUS_* constants (STATUS_UNKNOWN, -2, only in newer ROS 2): the
+# names a ROS profile's [mode] gives a NavSatFix's status.status
+NAVSAT_STATUS_LABELS = {-2: "UNKNOWN", -1: "NO_FIX", 0: "FIX", 1: "SBAS_FIX", 2: "GBAS_FIX"}
+HOLD_PERIODS = 2.5  # a held value older than this many of its periods is a dropout
 # twist components a 2-D drive controller never sets
 _PLANAR_ZERO = ("linear.y", "linear.z", "angular.x", "angular.y")
+
+
+def fix_status_mode_lines(found: Found) -> list[str]:
+    """``[mode]``: the first NavSatFix's ``status.status``, its values named by NavSatStatus.msg's
+    constants (the report draws the fix's status by name on the time axis); [] without one."""
+    channel = f"{found.fixes[0]}/status.status" if found.fixes else ""
+    if not channel or not found.has(channel):
+        return []
+    labels = ", ".join(f'"{value}" = "{name}"' for value, name in NAVSAT_STATUS_LABELS.items())
+    return [
+        "",
+        "[mode]  # the GNSS fix's status, named as sensor_msgs/NavSatStatus.msg names its values",
+        f'channel = "{channel}"',
+        f"stale_s = {HOLD_PERIODS / found.rate(channel):.3g}",
+        f"labels = {{ {labels} }}",
+    ]
 
 
 def covariance_std(channels, names: list[str]) -> list[float | None]:

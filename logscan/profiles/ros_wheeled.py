@@ -17,6 +17,7 @@ from logscan.profiles.ros_topics import (
     Found,
     Wheels,
     covariance_std,
+    fix_status_mode_lines,
     noise_line,
     undecided,
 )
@@ -102,7 +103,7 @@ def wheeled_profile(log, found: Found, wheels: Wheels) -> BuiltProfile:
         )
         body = header + inputs + ["", "# [measurements.position]  # a position source: a GNSS fix", "#   ..."]
         return undecided("ros_wheeled", log, found, why, body)
-    lines = header + wander + inputs + groups
+    lines = header + wander + inputs + groups + fix_status_mode_lines(found)
     lines += [
         "",
         "[detectors.nis]  # logscan's filter: NIS per group",

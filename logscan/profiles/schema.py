@@ -56,7 +56,7 @@ GROUP_KEYS = (
 #: of its channels' held values changed (a wide CSV that forward-fills a slow sensor on every row).
 FRESH_MODES = ("on_sample", "on_change")
 GATE_KEYS = ("channel", "min")
-MODE_KEYS = ("channel", "stale_s")
+MODE_KEYS = ("channel", "stale_s", "labels")
 REDUNDANT_KEYS = ("sensors", "rate_hz", "stale_s")
 SENSOR_KEYS = ("channel", "poly")
 ONBOARD_KEYS = ("state", "variance", "stale_s")
@@ -217,10 +217,13 @@ class MeasurementSpec:
 
 @dataclass
 class ModeSpec:
-    """`[mode]`: the operating-mode / set-point channel (e.g. commanded speed)."""
+    """`[mode]`: the operating-mode / set-point channel (e.g. commanded speed). ``labels``: a name
+    for each value the channel takes that has one (``labels = { "-1" = "NO_FIX", "0" = "FIX" }``,
+    as a message's constants name them); the report draws those values by name."""
 
     channel: str
     stale_s: float = MODE_STALE_S
+    labels: dict[float, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -430,6 +433,8 @@ class Profile:
             out["measurements"][g.name] = group_table(g)
         if self.mode is not None:
             out["mode"] = {"channel": self.mode.channel, "stale_s": self.mode.stale_s}
+            if self.mode.labels:
+                out["mode"]["labels"] = {f"{value:g}": label for value, label in self.mode.labels.items()}
         if self.redundant:
             out["redundant"] = {r.name: redundant_table(r) for r in self.redundant.values()}
         if self.onboard is not None:

@@ -3,7 +3,7 @@ with the incidents marked on it (from `logscan.report.run_context.RunContext`, a
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -94,14 +94,21 @@ def _mode_yaxis(channel: str, values: list[float], named: bool) -> dict:
     return {"title": {"text": plot_text(channel)}, "gridcolor": "#eee", "exponentformat": "e"}
 
 
-def _mode_notes(channel: str, values: list[float]) -> list[dict]:
+def _mode_notes(channel: str, values: list[float], labels: Mapping[float, str] | None = None) -> list[dict]:
     """Each named value's name at its row, inside the plot's left edge (tick labels would widen the
     margin, and the time axis would no longer line up with the other figures')."""
     return [
-        {"text": plot_text(mode_name(channel, v)), "xref": "paper", "x": 0.002, "xanchor": "left", "yref": "y",
+        {"text": plot_text(mode_name(channel, v, labels)), "xref": "paper", "x": 0.002, "xanchor": "left", "yref": "y",
          "y": i, "yanchor": "bottom", "showarrow": False, "font": {"size": 11, "color": "#333"}}
         for i, v in enumerate(values)
     ]  # fmt: skip
+
+
+def _names_from(mode) -> str:
+    """Where the mode's names come from, for its caption."""
+    if mode.labels:
+        return " (its values named by the profile's [mode] labels)"
+    return " (PX4's flight modes named from its VehicleStatus.msg)"
 
 
 def _mode_rows(value: np.ndarray, values: list[float]) -> np.ndarray:
@@ -143,12 +150,12 @@ def mode_row(mode, messages=(), t_span: tuple[float, float] | None = None) -> di
     name = plot_text(mode.channel)
     values = sorted({v for _, _, v in mode.intervals})
     banded = bool(mode.intervals) and len(values) <= MAX_BAND_VALUES
-    named = banded and has_names(mode.channel)
+    named = banded and has_names(mode.channel, mode.labels)
     data = []
     if banded:
         for i, value in enumerate(values):
             spans = [(a, b) for a, b, v in mode.intervals if v == value]
-            label = mode_name(mode.channel, value) if named else f"{mode.channel} = {_value_text(value)}"
+            label = mode_name(mode.channel, value, mode.labels) if named else f"{mode.channel} = {_value_text(value)}"
             data.append(_band_trace(label, spans, BAND_FILLS[i % len(BAND_FILLS)]))
     y = _mode_rows(mode.value, values) if named else mode.value
     line = {
@@ -157,18 +164,18 @@ def mode_row(mode, messages=(), t_span: tuple[float, float] | None = None) -> di
         "hovertemplate": "%{y:.6g} from %{x:.3f} s",
     }  # fmt: skip
     if named:  # the mode's name on hover
-        line["text"] = [plot_text(mode_name(mode.channel, float(v))) for v in mode.value]
+        line["text"] = [plot_text(mode_name(mode.channel, float(v), mode.labels)) for v in mode.value]
         line["hovertemplate"] = "%{text} from %{x:.3f} s"
     data.append(line)
     data += _message_marks(messages)
     layout = _time_row_layout(f"mode: {name}", _mode_yaxis(mode.channel, values, named), t_span)
     if named:
-        layout["annotations"] = _mode_notes(mode.channel, values)
+        layout["annotations"] = _mode_notes(mode.channel, values, mode.labels)
     layout["yaxis2"] = {"overlaying": "y", "range": [0, 1], "visible": False, "fixedrange": True}
     caption = (
         f"The profile's mode channel {mode.channel} on the shared time axis"
         + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
-        + (" (PX4's flight modes named from its VehicleStatus.msg)" if named else "")
+        + (_names_from(mode) if named else "")
         + (
             f"; triangles along the top: the {len(messages)} message(s) the autopilot logged (hover for the text)"
             if messages

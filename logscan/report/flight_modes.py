@@ -9,11 +9,14 @@ is a git hash and ``ver_sw_release`` a release number, and where each slot chang
 here); every other value names the same mode in both enums (ORBIT and AUTO_VTOL_TAKEOFF were added
 later, at numbers unused before).
 
-A ROS profile's ``[mode]`` has no labels (`logscan.profiles.schema.ModeSpec`: a channel and its
-staleness), so its values are drawn as numbers.
+Any profile's ``[mode]`` may name its values (`logscan.profiles.schema.ModeSpec.labels`): the
+built-in ROS profiles name a NavSatFix's ``status.status`` by sensor_msgs/NavSatStatus.msg's
+``STATUS_*`` constants; a profile's names come before PX4's.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 # PX4 msg/VehicleStatus.msg, NAVIGATION_STATE_*: the numbers whose meaning never changed
 PX4_NAV_STATES = {
@@ -49,15 +52,17 @@ def is_px4_nav_state(channel: str) -> bool:
     return topic == PX4_STATUS_TOPIC or (base == PX4_STATUS_TOPIC and instance.isdigit())
 
 
-def mode_name(channel: str, value: float) -> str:
-    """``value`` of the mode ``channel`` as the report shows it: "AUTO_LOITER (4)" for a PX4
-    nav_state it can name, the number otherwise."""
+def mode_name(channel: str, value: float, labels: Mapping[float, str] | None = None) -> str:
+    """``value`` of the mode ``channel`` as the report shows it: "FIX (0)" for a value the profile's
+    ``labels`` name, "AUTO_LOITER (4)" for a PX4 nav_state it can name, the number otherwise."""
     number = f"{value:g}"
+    if labels and float(value) in labels:
+        return f"{labels[float(value)]} ({number})"
     if is_px4_nav_state(channel) and float(value).is_integer() and int(value) in PX4_NAV_STATES:
         return f"{PX4_NAV_STATES[int(value)]} ({number})"
     return number
 
 
-def has_names(channel: str) -> bool:
+def has_names(channel: str, labels: Mapping[float, str] | None = None) -> bool:
     """Whether :func:`mode_name` names any value of ``channel``."""
-    return is_px4_nav_state(channel)
+    return bool(labels) or is_px4_nav_state(channel)

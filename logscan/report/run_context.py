@@ -67,6 +67,7 @@ class ModeTrack:
     value: np.ndarray
     intervals: list[tuple[float, float, float]] = field(default_factory=list)  # empty: too many
     n_changes: int = 0
+    labels: dict[float, str] = field(default_factory=dict)  # the profile's names of its values ([mode] labels)
 
 
 @dataclass
@@ -219,10 +220,13 @@ def _message_count(metadata: dict, kept: int) -> int:
         return kept
 
 
-def run_context(run, model, log=None) -> RunContext:
-    """The path and the mode of an aligned run (each None when the run has none), and, from its
-    ``log`` (before its samples are released), the autopilot's messages and states."""
+def run_context(run, model, log=None, mode_labels: dict[float, str] | None = None) -> RunContext:
+    """The path and the mode of an aligned run (each None when the run has none; the mode's values
+    named by ``mode_labels``, the profile's ``[mode] labels``), and, from its ``log`` (before its
+    samples are released), the autopilot's messages and states."""
     context = RunContext(path=path_of(run, model), mode=mode_of(run), t_span=(float(run.t[0]), float(run.t[-1])))
+    if context.mode is not None and mode_labels:
+        context.mode.labels = dict(mode_labels)
     if log is not None:
         context.messages = logged_messages(log.source.metadata, run.start_ns)
         context.log_messages = logged_messages(log.source.metadata, run.start_ns, ALL_LEVELS, MAX_LOG_MESSAGES)
