@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InternalError, ProfileError, did_you_mean
-from logscan.filters.ekf import run_ekf
 from logscan.filters.ubikf import run_ubikf
 from logscan.needs import Needs, union
+from logscan.pipeline.refilter import run_ekf_parts
 
 if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported where they are used)
     from logscan.align import AlignedRun
@@ -32,17 +32,9 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
 def _run_ekf(model, run, parts: frozenset[str], x0=None, P0=None):
     # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
     # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run. x0, P0: a
-    # checkpoint to start from (a probe re-filtering a slice), else the model's prior
-    return run_ekf(
-        model,
-        run,
-        x0=x0,
-        P0=P0,
-        store_gain="K" in parts,
-        store_S="S" in parts,
-        full_P="P" in parts,
-        store_innovations="y" in parts,
-    )
+    # checkpoint to start from (a probe re-filtering a slice), else the model's prior. K and S, when
+    # asked, are filtered again block by block as they are read (`logscan.pipeline.refilter`)
+    return run_ekf_parts(model, run, parts, x0=x0, P0=P0)
 
 
 def _run_ubikf(model, run, parts: frozenset[str]):

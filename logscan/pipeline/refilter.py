@@ -1,0 +1,174 @@
+"""The EKF's gain K and innovation covariance S without holding them for the whole log.
+
+K (N, n, m) and S (N, m, m) in float64 are 395 MB each per hour of a 100 Hz quadcopter log, more
+than everything else of an analysis together. A detector that reads them a block of steps at a
+time (the encoded EKF's predicted spread of e_x: `logscan.detectors.normalised_check`) needs them
+only one block at a time. So the pipeline filters the log once without them, and `run_ekf_parts`
+hands the trace a `Refiltered` K and S: array-like (N, ...) series that filter the block of steps
+asked for again, from the filter's state carried from the block before, and give the same numbers.
+
+The kernel's state between two steps is x, P, the last finite input, and the seeding flags; a block
+from step s > 0 is filtered as steps s-1 .. e-1, the first of them without samples (no update,
+no seeding) and with the held input, from x = x_post(s-1) and P = P_post(s-1) of the block before:
+its prediction at step s is then the one of the whole run. Exact only where the state is fully
+carried: no divergence in the log (a restart returns to the model's prior, not to the block's
+start), and the seeding of the directly observed states either done or not begun at each block
+start; otherwise the whole run's K and S are filtered in one go on first read (as before).
+Read in order (the detectors' row blocks), each step is filtered once more; a read that goes back,
+or an index other than a slice of steps (a full array: ``np.asarray``), costs a pass from the start.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from logscan.filters.ekf import KernelInputs, _buffers, compiled_for, pack_run, run_ekf
+from logscan.traces import EkfTrace
+
+BLOCK = 4096  # steps per kernel call: its full P, K and S buffers are ~2.4 KB per step (n = m = 12)
+
+
+def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None) -> EkfTrace:
+    """`run_ekf` with the trace ``parts`` asked for ("K", "S", "P", "y"); K and S, when asked,
+    re-filtered block by block on read (`Refiltered`) instead of held for the whole log."""
+    heavy = parts & {"K", "S"}
+    trace = run_ekf(
+        model,
+        run,
+        x0=x0,
+        P0=P0,
+        store_gain="K" in parts and "P" in parts,
+        store_S="S" in parts and "P" in parts,
+        full_P="P" in parts,
+        store_innovations="y" in parts,
+    )
+    if heavy and "P" not in parts:  # with the full P asked for, the trace holds them all anyway
+        source = Refiltered(pack_run(model, run, x0=x0, P0=P0), trace, heavy)
+        trace.K = source.part("K") if "K" in parts else None  # type: ignore[assignment]
+        trace.S = source.part("S") if "S" in parts else None  # type: ignore[assignment]
+    return trace
+
+
+class Refiltered:
+    """K and S of one EKF run, filtered again a block of steps at a time (see the module docstring)."""
+
+    def __init__(self, k: KernelInputs, trace: EkfTrace, parts: frozenset[str]) -> None:
+        self.k = k
+        self.store = {"store_gain": "K" in parts, "store_S": "S" in parts, "store_innovations": False}
+        self.n_steps = trace.n_steps
+        self.n, self.m = int(trace.x_prior.shape[1]), int(k.z.shape[1])
+        direct = np.array([bool(np.all(k.direct_idx[o : o + s] >= 0)) for o, s in zip(k.group_offsets, k.group_sizes)])
+        seeded = trace.seeded[:, direct]
+        # the first step each directly observed group was seeded at (n_steps: never)
+        self.first_seed = np.where(seeded.any(axis=0), seeded.argmax(axis=0), self.n_steps)
+        starts = range(BLOCK, self.n_steps, BLOCK)
+        self.exact_blocks = not trace.diverged.any() and all(self._settled(s) for s in starts)
+        self.whole: tuple[np.ndarray, np.ndarray] | None = None
+        self.cached: tuple[int, np.ndarray, np.ndarray] | None = None  # (block, K, S)
+        self.last: tuple[int, int, np.ndarray, np.ndarray] | None = None  # (start, stop, K, S) last read
+        self.carry: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None  # (next block, x, P, u_last)
+
+    def part(self, name: str) -> RefilteredPart:
+        shape = (self.n_steps, self.n, self.m) if name == "K" else (self.n_steps, self.m, self.m)
+        return RefilteredPart(self, 0 if name == "K" else 1, shape)
+
+    def _pending(self, start: int) -> bool:
+        """Whether the kernel still seeds directly observed states at step ``start`` (no divergence)."""
+        return bool(self.k.seed_at_start) and not bool(np.all(self.first_seed < start))
+
+    def _settled(self, start: int) -> bool:
+        """A block can start at ``start``: its seeding is done, or not begun (the kernel's flags all False)."""
+        return not self._pending(start) or bool(np.all(self.first_seed >= start))
+
+    def rows(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(K, S) of steps start .. stop-1."""
+        if stop <= start:
+            return np.empty((0, self.n, self.m)), np.empty((0, self.m, self.m))
+        if self.whole is not None or not self.exact_blocks:
+            K, S = self.all()
+            return K[start:stop], S[start:stop]
+        if self.last is not None and self.last[:2] == (start, stop):  # K then S of the same rows
+            return self.last[2], self.last[3]
+        first = start // BLOCK
+        blocks = [self.block(b) for b in range(first, (stop - 1) // BLOCK + 1)]
+        cut = slice(start - first * BLOCK, stop - first * BLOCK)
+        if len(blocks) == 1:
+            K, S = blocks[0][0][cut], blocks[0][1][cut]
+        else:
+            K, S = np.concatenate([b[0] for b in blocks])[cut], np.concatenate([b[1] for b in blocks])[cut]
+        self.last = (start, stop, K, S)
+        return K, S
+
+    def all(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, S) of the whole run, filtered in one go and kept."""
+        if self.whole is None:
+            out = _buffers(
+                self.n_steps, self.n, len(self.k.group_names), self.m,
+                full_P=False, **self.store,
+            )  # fmt: skip
+            args = (*self.k.kernel_arguments(), out)
+            if self.n_steps:
+                compiled_for(args)(*args)
+            self.whole = (out.K_out, out.S_out)
+        return self.whole
+
+    def block(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """(K, S) of block ``b``, filtered from the state the blocks before it left."""
+        if self.cached is not None and self.cached[0] == b:
+            return self.cached[1], self.cached[2]
+        if self.carry is not None and self.carry[0] > b:
+            self.carry = None  # a read that goes back: from the start again
+        while True:
+            following = 0 if self.carry is None else self.carry[0]
+            K, S = self._filter(following)
+            if following == b:
+                self.cached = (b, K, S)
+                return K, S
+
+    def _filter(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """Filter block ``b`` from the carried state (none: b = 0, the run's prior) and carry its
+        end state to block b + 1."""
+        start = b * BLOCK
+        stop = min(start + BLOCK, self.n_steps)
+        model_id, model, sensors, data = self.k.kernel_arguments()
+        first = start if self.carry is None else start - 1  # the row before: the carried state
+        u, fresh = data.u[first:stop], data.fresh[first:stop]
+        if self.carry is not None:
+            _, x, P, u_last = self.carry
+            u, fresh = u.copy(), fresh.copy()
+            u[0], fresh[0] = u_last, False  # no update, no seeding: only the carried state
+            model = model._replace(x0=x, P0=P, seed_at_start=self._pending(start))
+        R_std = data.R_std[first:stop] if data.R_std.shape[0] == self.n_steps else data.R_std
+        data = data._replace(u=u, z=data.z[first:stop], fresh=fresh, R_std=R_std)
+        G = len(self.k.group_names)
+        out = _buffers(stop - first, self.n, G, self.m, full_P=True, **self.store)
+        args = (model_id, model, sensors, data, out)
+        compiled_for(args)(*args)
+        finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
+        u_last = u[finite[-1]].copy() if finite.size else self.k.u_default.copy()
+        self.carry = (b + 1, out.x_post[-1].copy(), out.P_post_full[-1].copy(), u_last)
+        return out.K_out[start - first :], out.S_out[start - first :]
+
+
+class RefilteredPart:
+    """K or S of a `Refiltered` run, read like the (N, ...) float64 array: a slice of steps is
+    filtered on read; any other index, or ``np.asarray``, gives (and keeps) the whole run's."""
+
+    ndim = 3
+    dtype = np.dtype(np.float64)
+
+    def __init__(self, source: Refiltered, which: int, shape: tuple[int, int, int]) -> None:
+        self.source, self.which, self.shape = source, which, shape
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, index) -> np.ndarray:
+        if isinstance(index, slice) and index.step in (None, 1):
+            start, stop, _ = index.indices(self.shape[0])
+            return self.source.rows(start, max(stop, start))[self.which]
+        return self.source.all()[self.which][index]
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        whole = self.source.all()[self.which]
+        return whole if dtype is None else whole.astype(dtype)
