@@ -51,8 +51,8 @@ PROBE = """<script>
 
 HOVER = """<script>
 (function () {
-  function hover() {  /* the mouse over the first row of the first section, 55 % along its time axis */
-    var el = document.querySelector(".ls-section"), drags = el.querySelectorAll(".nsewdrag");
+  function hover() {  /* the mouse over the first row of the nis section, 55 % along its time axis */
+    var el = document.querySelector('.ls-section[aria-label^="nis"]'), drags = el.querySelectorAll(".nsewdrag");
     var box = drags[0], r = box.getBoundingClientRect();
     box.dispatchEvent(new MouseEvent("mousemove", {bubbles: true, cancelable: true, view: window,
       clientX: r.left + 0.55 * r.width, clientY: r.top + r.height / 2}));
@@ -134,3 +134,23 @@ def test_hovering_one_row_of_a_section_draws_one_crosshair_through_all_its_rows(
     # one hover box with the values of every row at that time: the first row's and the last row's
     assert "nis.accel" in hover["label"] and "/imu/accel.x" in hover["label"] and "/attitude" in hover["label"]
     assert hover["other"] == 0  # the other sections' figures show no crosshair
+
+
+def test_the_context_section_is_one_figure_with_one_crosshair_through_its_rows(bias_report, tmp_path):
+    """The mode and where a fault could not be seen are rows of one figure on one x axis (ctx-time)."""
+    page = tmp_path / "report.html"
+    render_report(bias_report, page, plotlyjs=tmp_path / "js")
+    text = page.read_text(encoding="utf-8")
+    nis = """document.querySelector('.ls-section[aria-label^="nis"]')"""
+    probe = HOVER.replace(nis, 'document.getElementById("ctx-time")')
+    page.write_text(text.replace("</body>", probe + "</body>", 1), encoding="utf-8")
+    hover, dom = first_screen(page, tmp_path / "profile", "data-hover")
+    assert js_errors(dom) == ""
+    assert re.search(r'id="ctx-time" data-rows="2" data-row-ids="ctx-mode ctx-observability"', dom)
+    rows, spikes = hover["rows"], hover["spikes"]
+    assert len(rows) == 2
+    top, bottom = rows[0][1], rows[-1][2]
+    assert spikes and len({round(left) for left, _, _ in spikes}) == 1
+    assert min(s[1] for s in spikes) <= top + 1 and max(s[2] for s in spikes) >= bottom - 1  # through both rows
+    assert "/flight_mode/mode" in hover["label"]
+    assert hover["other"] == 0

@@ -43,6 +43,7 @@ def stack_rows(rows: Sequence[dict], clock: Clock | None = None, t_span: tuple[f
     heights = [max(int(row["layout"].get("height", 0)) - OWN_MARGINS_PX, MIN_ROW_PX) for row in rows]
     plot_px, domains = row_domains(heights)
     layout = base_layout(plot_px)
+    layout["hoverdistance"] = -1  # a mode is a few steps: the hover gives the value in force, however far its last step
     n, data = len(rows), []
     for r, (row, domain) in enumerate(zip(rows, domains), 1):
         axes = _row_axes(layout, row, r, n, domain)
