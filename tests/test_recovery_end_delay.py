@@ -51,6 +51,8 @@ def test_an_alarm_shows_its_anomaly_until_its_end_minus_its_statistics_window():
     # each loop keeps its own alarms' time: the inner loop's shorter window does not lend the outer its end
     assert one.last_seen("outer") == pytest.approx(15.0) and one.last_seen("inner") == pytest.approx(15.5)
     assert two.last_seen("inner") == pytest.approx(20.1)
+    # a loop with no alarm of its own in the anomaly: the alarms showed it there only at the detection
+    assert two.last_seen("outer") == 20.0 and two.last_seen_anywhere() == pytest.approx(20.1)
     # a window longer than the alarm: the alarm shows the anomaly at its start at least
     (short,) = anomalies_from_alarms({"outer": [_alarm(10.3, 10.8)]}, [loop], end_delays=delays)
     assert short.last_seen("outer") == pytest.approx(10.3)
@@ -96,3 +98,19 @@ def test_the_sample_that_ended_the_anomaly_is_taken_in_by_the_recovered_estimate
     assert abs(outer.x_recovered[k, 0] - z) < abs(rolled.x_post[-1, 0] - z)
     assert outer.bound[k, 0] < 3.0 * np.sqrt(rolled.P_post[-1, 0, 0])
     np.testing.assert_allclose(outer.x_recovered[k - 1], rolled.x_post[-2])  # only the last step changes
+
+
+def test_a_generic_anomalys_loop_without_alarms_keeps_its_recovery_only_while_its_sensors_show_it():
+    """A generic anomaly raised on the inner loop only: the outer loop, attacked too, is recovered
+    while its own gps shows the attack and released at the attack's end, though the inner loop's
+    alarm lasts 3 s longer (its recovery capped hold_s after that alarm last showed the anomaly)."""
+    # (a bias that a 5 s roll-forward's growing covariance still shows: 10 = 33 sigma of the gps)
+    outer, _ = make_loop(N=400, seed=0, attacks=[("gps", 10.0, 15.0, 10.0)])
+    inner, _ = make_loop("inner", N=400, seed=1)
+    (anomaly,) = anomalies_from_alarms(
+        {"inner": [_alarm(10.3, 18.0, "nis.all")]}, [outer, inner], end_delays={"inner": {("nis", "nis.all"): 0.5}}
+    )
+    assert anomaly.targets is None and anomaly.last_seen("outer") == pytest.approx(10.3)
+    r = recover([outer, inner], [anomaly], RecoverySettings(hold_s=1.0)).anomalies[0]
+    assert 15.0 <= r.loop_ends["outer"] <= 15.2
+    assert r.loop_ends["inner"] <= 17.5 + 1.0 + 1e-9

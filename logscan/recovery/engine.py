@@ -201,7 +201,8 @@ def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, la
     holds for hold_s (the hold only confirms it). After the alarms last showed the anomaly
     (`Anomaly.last_seen`: an alarm's end minus its window) only samples that show it keep the span
     open: it ends at the first that does not, unless one shows it again within hold_s
-    (`released_at`); a generic anomaly's at most hold_s after that time. inf if nothing ends it."""
+    (`released_at`); a generic anomaly's at most hold_s after its alarms last showed it on any
+    loop. inf if nothing ends it."""
     budget = (s.budget_per_hour, s.proof_hours)
     generic = anomaly.targets is None
     ends, agreed, reasons, honest = [], [], [], []
@@ -219,8 +220,9 @@ def _loop_ends(anomaly: Anomaly, parts: list[_LoopPart], s: RecoverySettings, la
             end, ok = released
             t_agreed, reason = (end, held) if ok else (None, _not_reagreed(p, end, budget, s.hold_s))
         sample = bool(np.isfinite(end))
-        if generic and t_seen + s.hold_s < end:
-            t_agreed, end, reason = None, t_seen + s.hold_s, _after_alarm(anomaly, t_seen, s.hold_s)
+        t_last = max(anomaly.last_seen_anywhere(), t_from)
+        if generic and t_last + s.hold_s < end:
+            t_agreed, end, reason = None, t_last + s.hold_s, _after_alarm(anomaly, t_last, s.hold_s)
             sample = False
         ends.append(end)
         agreed.append(t_agreed)

@@ -43,7 +43,8 @@ class Anomaly:
     seen_until: loop name -> the latest time the detector's alarms on that loop show the anomaly
     still lasting: each alarm's end minus its statistic's end delay (a windowed statistic's alarm
     outlasts the anomaly by up to its window, `Detector.end_delays`), the latest over the loop's
-    alarms; None: the alarm's end (a per-sample test, or the ground truth)."""
+    alarms (a loop without alarms: its detection); None: the alarm's end on every loop (a
+    per-sample test, or the ground truth)."""
 
     t_detect: float
     t_end: float
@@ -55,11 +56,15 @@ class Anomaly:
         return self.targets is not None
 
     def last_seen(self, loop: str) -> float:
-        """When the alarms last showed the anomaly on ``loop``; a loop with no alarm of its own (a
-        generic anomaly's other loops) takes the latest of every loop's."""
+        """When the alarms last showed the anomaly on ``loop``; on a loop with no alarm of its own (a
+        generic anomaly's other loops) only at its detection."""
         if not self.seen_until:
             return self.t_end
-        return min(self.t_end, self.seen_until.get(loop, max(self.seen_until.values())))
+        return min(self.t_end, self.seen_until.get(loop, self.t_detect))
+
+    def last_seen_anywhere(self) -> float:
+        """When the alarms last showed the anomaly on any loop."""
+        return min(self.t_end, max(self.seen_until.values())) if self.seen_until else self.t_end
 
 
 @dataclass(frozen=True)
