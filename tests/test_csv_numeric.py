@@ -124,3 +124,14 @@ def test_a_read_through_the_fast_path_is_the_read_through_pandas(tmp_path, monke
         assert fast.channels[name].t.tobytes() == channel.t.tobytes()
         assert fast.channels[name].values.tobytes() == channel.values.tobytes()
     assert repr(fast.source) == repr(slow.source)
+
+
+def test_rows_shorter_than_the_first_ones_are_all_read(tmp_path, monkeypatch):
+    # the first 64 KiB set the guess of the row count (long rows: few); the rest are short rows
+    path = tmp_path / "uneven.csv"
+    long_rows = [f"{k},{k * 0.5}" + " " * 200 for k in range(400)]
+    short_rows = [f"{k},{k}" for k in range(400, 20400)]
+    path.write_text("t,a\n" + "\n".join(long_rows + short_rows) + "\n", encoding="utf-8")
+    fast = _fast_columns(path)
+    assert fast is not None and len(fast["t"]) == 20400
+    _same(fast, _pandas_columns(path, monkeypatch))

@@ -135,7 +135,7 @@ def numeric_columns(path: Path, header: str, sep: str) -> dict[str, np.ndarray] 
                 return None
             with _mapped(fh) as mapped:
                 cells, kinds, rows = _parse(mapped, len(names), ord(sep))
-    except OSError:  # unreadable: pandas says why
+    except (OSError, MemoryError):  # unreadable or too large to map: pandas says why
         return None
     if rows <= 0:
         return None  # not plain numbers (or no rows: pandas says so)
@@ -164,7 +164,14 @@ def _parse(mapped: mmap.mmap, columns: int, sep: int) -> tuple[np.ndarray, np.nd
         row_bytes = max(1.0, min(1 << 16, buf.size - start) / max(1, head_rows))
         rows = int(_ROOM * (buf.size - start) / row_bytes) + 16
         while True:  # rows counted exactly when the guess is short (a file of shorter rows later)
-            cells = np.empty((columns, rows), dtype=np.int64)
+            try:
+                cells = np.empty((columns, rows), dtype=np.int64)
+            except MemoryError:  # the guess is over an address-space limit: count, else pandas
+                exact = _count_lines(buf, start) + 1
+                if exact >= rows:
+                    raise
+                rows = exact
+                continue
             kinds = np.full(columns, INT, dtype=np.int64)
             rows, status = parse_numeric_rows(buf, start, sep, cells, cells.view(np.float64), kinds)
             if status != NO_ROOM:
