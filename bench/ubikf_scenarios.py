@@ -9,8 +9,8 @@ the analysis keeps the nominal model. Each log is analysed by `chi2` (robust ala
 updates where its upper band straddles delta is reported apart) and by `nis`, with default settings.
 "In window": the first alarm starts inside the fault's own window [start, end] (no grace).
 
-Seeds (none used by sample_logs/, the tests or earlier runs of this bench, 8000..8219): roll bias
-9000.., rotor loss 9100.., healthy 9200..
+Seeds (none used by sample_logs/, the tests or during development, 8000..8219 and 9000..9219): roll
+bias 9400.., rotor loss 9500.., healthy 9600..
 
     python bench/ubikf_scenarios.py                    # 20 runs per scenario
     python bench/ubikf_scenarios.py --runs 3           # a quick look
@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 from benchlib import publish, simulate_log  # bench/ is on the path when this script runs
 
-SCENARIOS = {"roll bias (0.1 rad, k 30-70)": ("roll-bias", 9000), "rotor 1 lost (k 31)": ("rotor-loss", 9100)}
-HEALTHY_SEED = 9200
+SCENARIOS = {"roll bias (0.1 rad, k 30-70)": ("roll-bias", 9400), "rotor 1 lost (k 31)": ("rotor-loss", 9500)}
+HEALTHY_SEED = 9600
 DURATION_S = 30.0
 DETECTORS = ("chi2", "nis")
 DOC = os.path.join(os.path.dirname(__file__), "..", "docs", "evaluation.md")

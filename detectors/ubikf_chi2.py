@@ -45,14 +45,34 @@ ENVELOPE_CAPTION = (
 )
 
 
-def _group_rows(ubikf, group: str | None) -> np.ndarray:
-    """(N, m) bool view: the measurement rows of one group's test (every row for the overall test)."""
+def _group_rows(ubikf, group: str | None, channel: int | None = None) -> np.ndarray:
+    """(N, m) bool view: the measurement rows of one group's test (every row for the overall test;
+    one row, ``channel`` of the group, for a channel's test)."""
     rows = np.ones(ubikf.r_mid.shape[1], dtype=bool)
     if group is not None:
         g = list(ubikf.group_names).index(group)
+        first = int(ubikf.group_offsets[g])
         rows[:] = False
-        rows[int(ubikf.group_offsets[g]) : int(ubikf.group_offsets[g] + ubikf.group_sizes[g])] = True
+        if channel is None:
+            rows[first : first + int(ubikf.group_sizes[g])] = True
+        else:
+            rows[first + channel] = True
     return np.broadcast_to(rows, ubikf.r_mid.shape)
+
+
+def _tests(ubikf, per_group: bool, per_channel: bool) -> list[tuple[str, str | None, str | None, int | None]]:
+    """(lower sum's name, upper sum's name or None, group or None, channel or None) of every test:
+    the overall one (the paper's), one per measurement group and one per channel of a group of
+    several (as the NIS test: a fault of one sensor, or of one channel, is not diluted by the
+    others' degrees of freedom, and the alarm names it)."""
+    tests: list[tuple[str, str | None, str | None, int | None]] = [("chi2.lower", "chi2.upper", None, None)]
+    several = len(ubikf.group_names) > 1
+    for g, size in zip(ubikf.group_names, ubikf.group_sizes):
+        if per_group and several:
+            tests.append((f"chi2.lower.{g}", None, g, None))
+        if per_channel and (size > 1 or several):
+            tests += [(f"chi2.lower.{g}[{j}]", None, g, j) for j in range(int(size))]
+    return tests
 
 
 class Chi2Detector(Detector):
@@ -69,6 +89,7 @@ class Chi2Detector(Detector):
         "n_persist": 1,
         "states": [],  # states whose envelopes the report draws; empty: the attitude, else the first 3
         "per_group": True,  # also a test per measurement group (False: the paper's overall test only)
+        "per_channel": True,  # also a test per channel of each group
     }
     parameter_constraints = {
         "window": [Interval(int, 1, None)],
@@ -77,6 +98,7 @@ class Chi2Detector(Detector):
         "n_persist": [PERSIST],
         "states": [StringList()],
         "per_group": [Boolean()],
+        "per_channel": [Boolean()],
     }
 
     @classmethod
@@ -107,15 +129,11 @@ class Chi2Detector(Detector):
             raise UsageError("detector 'chi2' needs the UBIKF trace, but the pipeline did not run it")
         result = self.new_result()
         t = run.t
-        # the overall test (the paper's), then one per measurement group (as the NIS test: a fault of
-        # one sensor is not diluted by the others' degrees of freedom, and the alarm names it)
-        tests = [("chi2.lower", "chi2.upper", None)]
-        if self.per_group and len(ubikf.group_names) > 1:
-            tests += [(f"chi2.lower.{g}", None, g) for g in ubikf.group_names]
+        tests = _tests(ubikf, bool(self.per_group), bool(self.per_channel))
         bounds = {}
         n_tests = 0
-        for lower_name, _, group in tests:
-            rows = _group_rows(ubikf, group)
+        for lower_name, _, group, channel in tests:
+            rows = _group_rows(ubikf, group, channel)
             beta_lo, beta_hi = box_chi2_bounds(ubikf.r_mid, ubikf.r_rad, ubikf.S, rows)
             used = np.isfinite(ubikf.r_mid) & rows
             updated = used.any(axis=1) & ~ubikf.diverged & np.isfinite(beta_lo)
@@ -125,7 +143,7 @@ class Chi2Detector(Detector):
         alpha = self._alpha(ubikf, n_tests)  # the budget is spent over every test
         result.info["alpha"] = alpha
         result.info["window_updates"] = int(self.window)
-        for lower_name, upper_name, _ in tests:
+        for lower_name, upper_name, _, _ in tests:
             beta_lo, beta_hi, updated, m_k = bounds[lower_name]
             steps = np.flatnonzero(updated)
             lower, upper_sum = np.full(t.size, np.nan), np.full(t.size, np.nan)
