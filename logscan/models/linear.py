@@ -27,6 +27,13 @@ from scipy.linalg import expm
 from logscan.errors import ModelError
 from logscan.models.base import GroupSpec, Model, covariance_problem, raise_problems
 from logscan.models.dispatch import LINEAR_ID
+from logscan.models.interval_model import IntervalModel
+from logscan.models.linear_intervals import (
+    MAX_UNCERTAIN_ENTRIES,
+    linear_interval_model,
+    parse_radius,
+    uncertain_entries,
+)
 
 
 def discretise(A: np.ndarray, B: np.ndarray, Qc: np.ndarray, dt: float):
@@ -129,7 +136,7 @@ class LinearBase(Model):
         return super().covariance_problems(dt)
 
 
-_KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs")
+_KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs", "radius")
 _DEFAULT_RANGE = 1e12
 
 
@@ -294,8 +301,21 @@ class LinearModel(LinearBase):
         if B is not None:
             self.input_names = _names(p.get("inputs"), "inputs", tuple(f"u{i}" for i in range(B.shape[1])), problems)
         self.groups, self._R_full = self._group_specs(C, D, problems)
+        self._radius = (
+            {} if A is None or B is None else parse_radius(p.get("radius"), A.shape[0], B.shape[1], C, problems)
+        )
+        if continuous and len(uncertain_entries(self._radius)) > MAX_UNCERTAIN_ENTRIES:
+            problems.append(
+                f"linear model: {len(uncertain_entries(self._radius))} entries of continuous A, B have a radius; "
+                f"vertex evaluation takes at most {MAX_UNCERTAIN_ENTRIES} (or discrete matrices: continuous = false)"
+            )
         raise_problems(problems)
         self._setup(A, B, C, D, Q, continuous, dt)
+
+    def interval_model(self, dt: float) -> IntervalModel:
+        """The UBIKF's interval model: the point matrices +- the profile's ``radius``
+        (`logscan.models.linear_intervals`)."""
+        return linear_interval_model(self, self._radius, dt, discretise)
 
     def _group_specs(self, C: dict, D: dict, problems: list[str]) -> tuple[dict[str, GroupSpec], dict]:
         """GroupSpecs of C's groups (names, noise from R, ranges) and the full R matrices given."""

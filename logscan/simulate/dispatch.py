@@ -68,10 +68,7 @@ def simulate(
     (not a model: an outer unicycle loop over two DC-motor loops); it takes ``scenario`` ("paper",
     the default, "random" or "healthy"), ``duration`` and ``seed`` only, and returns a
     `GroundRobotSimulation`. ``scenario`` is for ground_robot alone.
-
-    ``plant_draw`` (hover_uav): the truth flies an off-nominal plant, every interval parameter drawn
-    uniformly inside its interval from the seed (`logscan.simulate.plant`); the truth document lists
-    the values (``plant_params``), the embedded profile keeps the nominal ones.
+    ``plant_draw`` (hover_uav): the truth flies a plant drawn inside the intervals (`plant.draw_plant`).
     """
     check_run_options(duration, seed, glitches_per_min)
     check_plant_draw(model_name, plant_draw)
