@@ -168,15 +168,8 @@ def _phase_loop(which, reps, p, x, u, dt, P, Q, R):
     hcols, hnnz = np.empty((m, n), np.int64), np.empty(m, np.int64)
     rcols, rnnz = np.empty((m, m), np.int64), np.empty(m, np.int64)
     hx, Hs, R3, D3 = np.empty(m), np.empty((m, n)), np.empty((3, 3)), np.empty((3, 3, 3))
-    HP, KT, S, L, D, DT, V = (
-        np.empty((m, n)),
-        np.empty((m, n)),
-        np.empty((m, n)),
-        np.empty((m, m)),
-        np.empty((m, m)),
-        np.empty((n, m)),
-        np.empty((m, n)),
-    )
+    HP, KT, S, L = np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((m, m))
+    D, DT, V = np.empty((n, m)), np.empty((m, n)), np.empty((m, n))
     all_cols = np.empty((n, m), np.int64)
     for i in range(n):
         for a in range(m):
