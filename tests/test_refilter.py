@@ -65,3 +65,16 @@ def test_with_the_full_covariance_the_trace_holds_them():
     prepared = _prepared("quad_imu_bias.mcap")
     trace = refilter.run_ekf_parts(prepared.model, prepared.run, frozenset({"K", "S", "P"}))
     assert isinstance(trace.K, np.ndarray) and isinstance(trace.S, np.ndarray) and trace.P_post is not None
+
+
+def test_the_reports_pack_waits_for_the_blocks_that_read_the_samples():
+    """The report's innovations are packed into the samples' own buffer once no detector still to
+    run reads the samples: a K or S filtered again on read reads them, so the pack waits for it."""
+    from logscan.pipeline import analyze_log
+
+    path = str(SAMPLES / "quad_imu_bias.mcap")
+    plain = analyze_log(path, free_series=True)
+    packed = analyze_log(path, free_series=True, sensor_views=True)
+    assert packed.prepared.innovations is not None
+    for a, b in zip(plain.results, packed.results, strict=True):
+        assert a.to_dict() == b.to_dict(), a.detector

@@ -87,12 +87,12 @@ def _run_detectors(
     """The detectors' results, in the given order; a detector that raises is named in
     ``analysis.failures``. Those that read the samples run first (the frozen-sensor check), so the
     report's pack of innovations can then take the samples' buffer (`pack_innovations_for`)."""
-    order = sorted(range(len(detectors)), key=lambda i: not reads_samples(detectors[i]))
+    order = sorted(range(len(detectors)), key=lambda i: not reads_samples(detectors[i], prepared))
     results: dict[int, DetectorResult] = {}
     packed = not sensor_views
     for position, index in enumerate(order):
         detector, still_to_run = detectors[index], [detectors[i] for i in order[position:]]
-        if not packed and not any(reads_samples(d) for d in still_to_run):
+        if not packed and not any(reads_samples(d, prepared) for d in still_to_run):
             pack_innovations_for(prepared, still_to_run, reuse_samples=free_series)
             packed = True
         if free_series:  # the report's pack, still to come, reads the innovations

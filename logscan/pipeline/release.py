@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from logscan.filters.ekf import samples_side_by_side
+from logscan.pipeline.refilter import RefilteredPart
 from logscan.pipeline.stages import Prepared
 from logscan.report.sensor_views import pack_innovations
 
@@ -22,9 +23,13 @@ RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode", "redund
 RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
 
 
-def reads_samples(detector) -> bool:
-    """Whether a detector reads the groups' samples (undeclared reads: it may)."""
-    return detector.reads is None or "z" in detector.reads
+def reads_samples(detector, prepared: Prepared | None = None) -> bool:
+    """Whether a detector reads the groups' samples (undeclared reads: it may), also through a
+    trace part the EKF filters again from them as it is read (K, S: `logscan.pipeline.refilter`)."""
+    if detector.reads is None or "z" in detector.reads:
+        return True
+    traces = prepared.traces.values() if prepared is not None else ()
+    return any(isinstance(getattr(trace, part, None), RefilteredPart) for trace in traces for part in detector.reads)
 
 
 def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:
@@ -36,7 +41,7 @@ def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples:
     if trace is None or trace.y is None or trace.S_diag is None:
         return
     samples = None
-    if reuse_samples and all(d.reads is not None and "z" not in d.reads for d in detectors):
+    if reuse_samples and not any(reads_samples(d, prepared) for d in detectors):
         samples = samples_side_by_side(run, trace.group_names, trace.group_offsets, trace.group_sizes)
     prepared.innovations = pack_innovations(run, trace, samples)
     if samples is not None:  # the buffer now holds the pack: no group may read it as samples
