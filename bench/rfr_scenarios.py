@@ -9,7 +9,8 @@ The scenario is the checkpointing paper's (`logscan simulate ground_robot --scen
  - oracle: the anomalies are the ground truth's, first alarmed `detection_time_s` = 0.25 s after
    each start (the paper's detection time), with the attacked groups as targets;
  - a real detector (`nis`, `encoded_ekf`): its alarms on every loop drive recovery (its own
-   detection time, so the profile's default detection_time_s);
+   detection time, so the profile's default detection_time_s; each alarm shows its anomaly until
+   its end minus the statistic's declared end delay, `Detector.end_delays`);
 
 each with the methods `rollforward` (the paper's: no measurement while the anomaly lasts) and
 `refilter` (the default: the flagged groups excluded, the healthy ones still used).
