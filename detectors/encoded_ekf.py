@@ -3,7 +3,8 @@
 Coding vector (Lemma 1): alpha_i,k = c_k / sigma_i,k with sigma_i,k = sqrt(P_prior[i,i]) floored at
 sigma_min_i = sigma_floor * state_scale_i (NaN-safe), c_k = min(1, R_max / sum_i 1/sigma_i,k).
 State check, only on steps with a measurement update: e_x(k) = CV_k x_prior_k - CV_k x_post_k
-(= -CV_k K_k y_k; CV_k on both terms, see docs/algorithms.md section 1.8). A step where the filter diverged gets
+(= -CV_k K_k y_k; CV_k on both terms, see docs/algorithms.md section 1.8; an angle state's difference wrapped to
+[-pi, pi), section 1.2). A step where the filter diverged gets
 e_x = NaN, which counts as an exceedance. How e_x is judged (``ex_statistic``, section 1.2):
   raw:        e_x against the adaptive band of eq. 4 (below), rho default 4;
   normalised: z = e_x / sqrt(CV K S K^T CV^T) against a fixed bound from the false-alarm budget;
@@ -198,17 +199,21 @@ class EncodedEkfDetector(Detector):
 
     def state_check(self, trace, model=None, cv_dtype=np.float64):
         """(e_x (N,), defined (N,), CV (N, n) as ``cv_dtype``, None when ``cv_dtype`` is None):
-        e_x = CV_k (x_prior_k - x_post_k) on update steps."""
+        e_x = CV_k (x_prior_k - x_post_k) on update steps, the difference of an angle state wrapped
+        to [-pi, pi) (a heading crossing +-pi is wrapped by the filter, not corrected by 2 pi)."""
         cv_of = self._coding_vectors(trace, model)
         defined = trace.updated.any(axis=1) | trace.diverged
         n_steps, n = trace.x_prior.shape
+        angles = _angle_states(model, n)
         e_x = np.empty(n_steps)
         cv = None if cv_dtype is None else np.empty((n_steps, n), dtype=cv_dtype)
         for rows in row_blocks(n_steps):  # no (N, n) float64 temporary
             block = cv_of(rows)
             if cv is not None:
                 cv[rows] = block
-            e_x[rows] = np.einsum("kn,kn->k", block, trace.x_prior[rows] - trace.x_post[rows])
+            diff = trace.x_prior[rows] - trace.x_post[rows]
+            diff[:, angles] = (diff[:, angles] + np.pi) % (2.0 * np.pi) - np.pi
+            e_x[rows] = np.einsum("kn,kn->k", block, diff)
         e_x[~defined] = np.nan
         e_x[trace.diverged] = np.nan  # a divergence is an exceedance, never silence
         return e_x, defined, cv
