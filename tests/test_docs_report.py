@@ -33,7 +33,7 @@ PARTS = {
     "**one figure**": 'class="figure ls-timeseries ls-section"',
     "one vertical line across every row": '"spikemode":"across"',
     "## Context": 'id="context"',
-    "`[mode]` channel": 'aria-label="mode: /flight_mode/mode"',
+    "`[mode]` channel": 'data-row-ids="ctx-mode',
     "the path is\ndrawn from above": 'aria-label="path: position"',
     "## Log, profile and model": 'id="log-facts"',
     "## Times: the log's own clock": "times: time since log start (s)",

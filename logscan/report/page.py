@@ -47,7 +47,7 @@ def _figures(report: ReportInput, point_budget: int) -> dict:
     sections, figures = detector_sections(page, margins)
     heads, first, checked = first_screen(page, figures)
     rows = [row for build in CONTEXT_ROWS for row in build(page)]
-    span = (float(t[0]), float(t[-1])) if t.size > 1 else None
+    span = getattr(report.context, "t_span", None)  # the grid's, as the run's context figures had it
     context = ([stack_rows(rows, report.clock, span)] if rows else []) + [f for b in CONTEXT_FIGURES for f in b(page)]
     recovered = recovery_figures(report.recovery, report.clock)
     ids = {s["detector"]: s["id"] for s in sections}
