@@ -262,8 +262,12 @@ class KgnDetector(Detector):
         }
         self.rho_, self.reference_["rho_fit"] = self._budget_rho(wins)
         # every window after warm-up, steady or not: where the training flights flew
-        warm = [w.op[run.t[w.starts] >= w.warmup_end_s] for run, w in zip(runs, wins)]
-        self.envelope_ = fit_envelope(wins[0].op_names, warm, float(self.envelope_margin))
+        # a sensor-driven model's inputs are its sensors (ins: the IMU): their means carry the very
+        # faults KGN looks for, so its envelope is the manoeuvre's intensity only (the spreads)
+        sensors = bool(getattr(context.get("model"), "inputs_are_sensors", False))
+        keep = [f for f, name in enumerate(wins[0].op_names) if not (sensors and name.startswith("mean "))]
+        warm = [w.op[run.t[w.starts] >= w.warmup_end_s][:, keep] for run, w in zip(runs, wins)]
+        self.envelope_ = fit_envelope([wins[0].op_names[f] for f in keep], warm, float(self.envelope_margin))
         judged = [w.judged & self.known(w) for w in wins]
         self.blindness_ = run_probe(self, runs, traces, wins, judged, context.get("model"), context.get("refilter"))
 
@@ -358,13 +362,14 @@ class KgnDetector(Detector):
         """``judged`` less the windows outside the trained envelope or within hold_s after one; a
         `not checked` line says for how long and where (`detectors.kgn_operating`)."""
         envelope = self.envelope_
-        if w.op_names != envelope["names"]:
+        if not set(envelope["names"]) <= set(w.op_names):
             result.warnings.append(
                 "kgn: this log's inputs differ from the training logs' (" + ", ".join(w.op_names) + "): the "
                 "trained envelope was not checked"
             )
             return judged
-        ok = inside(w.op, envelope)
+        op = w.op[:, [w.op_names.index(name) for name in envelope["names"]]]
+        ok = inside(op, envelope)
         t_starts = run.t[w.starts]
         warm = t_starts >= w.warmup_end_s
         lost, share = envelope_gate(ok, t_starts, warm, judged, float(self.hold_s), float(self.envelope_share))
@@ -372,7 +377,7 @@ class KgnDetector(Detector):
         result.info["outside_envelope_share"] = share
         if lost.any():
             seconds, total = lost.sum() * float(self.window_s), judged.sum() * float(self.window_s)
-            result.not_checked.append(NotChecked(outside_line(w.op, envelope, ~ok, seconds, total)))
+            result.not_checked.append(NotChecked(outside_line(op, envelope, ~ok, seconds, total)))
         return judged & ~lost
 
     def _unbinned(self, w: Windows, known: np.ndarray, result: DetectorResult) -> None:

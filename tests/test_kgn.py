@@ -252,3 +252,21 @@ def test_training_gives_kgn_the_pipelines_ekf_for_its_probe_and_nothing_else():
         context["refilter"]("ubikf", prepared.run)
     (nis,) = create_detectors(load_profile_for(path, None), ["nis"])
     assert fit_context(nis, prepared.model, prepared.run) == {"model": prepared.model}
+
+
+def test_a_sensor_driven_models_envelope_leaves_out_the_sensors_means():
+    """ins: the inputs are the IMU, so a bias on it moves the inputs' means; the envelope keeps their
+    spreads only (a step on the accelerometer is judged, not "outside the trained envelope")."""
+    runs = []
+    for seed in (1, 2):
+        run, trace = synthetic(seed)
+        u = np.random.default_rng(seed).normal(size=(run.n_steps, 1))
+        runs.append((SimpleNamespace(**vars(run), u=u, input_channels=["/imu/accel.x"]), trace))
+    sensor = KgnDetector(warmup_s=20.0).fit(*zip(*runs), model=SimpleNamespace(inputs_are_sensors=True))
+    assert sensor.envelope_["names"] == ["spread /imu/accel.x"]
+    command = KgnDetector(warmup_s=20.0).fit(*zip(*runs), model=SimpleNamespace(inputs_are_sensors=False))
+    assert command.envelope_["names"] == ["mean /imu/accel.x", "spread /imu/accel.x"]
+    run, trace = runs[0]
+    biased = SimpleNamespace(**{**vars(run), "u": run.u + 5.0})  # a 5-sigma bias on the sensor
+    assert sensor.run(biased, trace).info["outside_envelope_s"] == 0.0
+    assert command.run(biased, trace).info["outside_envelope_s"] > 0.0
