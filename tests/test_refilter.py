@@ -67,12 +67,14 @@ def test_with_the_full_covariance_the_trace_holds_them():
     assert isinstance(trace.K, np.ndarray) and isinstance(trace.S, np.ndarray) and trace.P_post is not None
 
 
-def test_the_reports_pack_waits_for_the_blocks_that_read_the_samples():
+@pytest.mark.parametrize("name", ["quad_imu_bias.mcap", "jackal_gps_bias.mcap"])
+def test_the_reports_pack_waits_for_the_blocks_that_read_the_samples(name):
     """The report's innovations are packed into the samples' own buffer once no detector still to
-    run reads the samples: a K or S filtered again on read reads them, so the pack waits for it."""
+    run reads the samples: a K or S filtered again on read reads them, so the pack waits for it,
+    and the samples stay for it (jackal: no detector declares them)."""
     from logscan.pipeline import analyze_log
 
-    path = str(SAMPLES / "quad_imu_bias.mcap")
+    path = str(SAMPLES / name)
     plain = analyze_log(path, free_series=True)
     packed = analyze_log(path, free_series=True, sensor_views=True)
     assert packed.prepared.innovations is not None

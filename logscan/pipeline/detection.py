@@ -95,8 +95,8 @@ def _run_detectors(
         if not packed and not any(reads_samples(d, prepared) for d in still_to_run):
             pack_innovations_for(prepared, still_to_run, reuse_samples=free_series)
             packed = True
-        if free_series:  # the report's pack, still to come, reads the innovations
-            release_unread(prepared, still_to_run, keep=frozenset() if packed else frozenset({"y", "S_diag"}))
+        if free_series:  # the report's pack, still to come, reads the innovations and the samples
+            release_unread(prepared, still_to_run, keep=frozenset() if packed else frozenset({"y", "S_diag", "z"}))
         step(f"detector {detector.name}")
         try:
             result = detector.run(
