@@ -148,9 +148,9 @@ class _Run:
     type=click.Choice(["alarm", "warning", "new", "never"]),
     default="alarm",
     show_default=True,
-    help="Exit 1 on alarms; 'warning': also on 'possible fault' warnings (a level below alarms: e.g. the "
-    "UBIKF test's upper chi-square sum over its threshold while the lower one is not); 'new': only on "
-    "alarms the --baseline does not have; 'never': exit 0 whatever the alarms (as --exit-zero).",
+    help="Exit 1 on alarms; 'warning': also on 'possible fault' warnings (a level below alarms that a "
+    "detector may raise); 'new': only on alarms the --baseline does not have; 'never': exit 0 whatever "
+    "the alarms (as --exit-zero).",
 )
 @click.option(
     "--suppressions",
