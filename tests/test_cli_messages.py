@@ -275,7 +275,7 @@ def test_the_verdict_is_coloured_by_the_exit_code_with_force_color(cli, monkeypa
     result = cli("analyze", SAMPLES / "quad_imu_bias.mcap", "--no-report", "-q")
     assert result.exit_code == 1
     first = result.stdout.splitlines()[0]
-    assert first.startswith(f"{SAMPLES / 'quad_imu_bias.mcap'}: \x1b[31m\x1b[1m12 alarms in 1 incident\x1b[0m  (")
+    assert first.startswith(f"{SAMPLES / 'quad_imu_bias.mcap'}: \x1b[31m\x1b[1m14 alarms in 1 incident\x1b[0m  (")
     monkeypatch.setenv("NO_COLOR", "1")
     plain = cli("analyze", SAMPLES / "quad_imu_bias.mcap", "--no-report", "-q")
     assert plain.exit_code == 1 and "\x1b" not in plain.stdout

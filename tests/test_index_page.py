@@ -51,7 +51,7 @@ def test_every_log_has_a_row_and_every_link_resolves(index):
     assert sorted(links) == ["quad_healthy.report.html", "quad_imu_bias.report.html"]
     assert all((index.parent / html.unescape(link)).is_file() for link in links)
     assert "could not be analysed" in text and "missing.mcap" in text
-    assert re.search(r"<th>nis</th>", text) and "12 alarms in 1 incident" in text
+    assert re.search(r"<th>nis</th>", text) and "14 alarms in 1 incident" in text
 
 
 @pytest.mark.slow
