@@ -35,6 +35,10 @@ from logscan.errors import UsageError
 from logscan.filters.box_chi2 import box_chi2_bounds
 
 EXTRA_CAPTIONS = {
+    "chi2.upper / delta": "The upper end of the overall test's band: the window sum of the worst admissible "
+    "model's statistic (the maximum over the innovation box) over the threshold delta; the lower end is "
+    "chi2.lower in the figure above. Where the band straddles 1 the model's uncertainty could hide a fault "
+    "there; only the lower end raises alarms, this end has no false-alarm rate to budget.",
     "trace(P+)": "Trace of the UBIKF's covariance upper bound P+ after each update. Normal: it settles to a "
     "constant after a few steps (the paper's Fig. 4); growing without bound means the bound diverges.",
 }
@@ -159,7 +163,10 @@ class Chi2Detector(Detector):
             options = {"valid": updated, "warmup": warm, "n_persist": int(self.n_persist)}
             result.add_statistic(t, lower_name, lower, upper=delta, **options)
             if upper_name is not None:  # the overall test's upper sum: a band over the lower, not a count
-                result.series[upper_name] = upper_sum  # drawn beside the lower sums; alarms from those only
+                # drawn as its ratio to delta under the lower sums' shared ratio figure (an extra: no
+                # alarm, no margin, it is not a statistic with a false-alarm rate)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    result.extras[f"{upper_name} / delta"] = (upper_sum / delta).astype(np.float32)
                 judged = updated & ~warm
                 straddles = judged & (upper_sum > delta) & ~(lower > delta)
                 result.info["band_straddles_delta"] = float(straddles.sum() / max(int(judged.sum()), 1))

@@ -72,9 +72,13 @@ def test_the_upper_sum_is_a_band_not_a_count_of_warnings(sample, cli):
     assert result.possible == [] and result.alarms == []
     share = result.info["band_straddles_delta"]
     assert 0.0 <= share < 1.0
-    upper, lower = result.series["chi2.upper"], result.series["chi2.lower"]
+    upper, lower = (
+        result.extras["chi2.upper / delta"],
+        result.series["chi2.lower"] / result.thresholds["chi2.lower"].upper,
+    )
     judged = np.isfinite(lower)
-    assert np.all(upper[judged] >= lower[judged] * (1 - 1e-6))  # a band over the lower sum (float32 series)
+    assert np.all(upper[judged] >= lower[judged] * (1 - 1e-5))  # a band over the lower sum (float32 series)
+    assert "chi2.upper" not in result.series  # not a statistic: no margin, no alarm
     strict = cli("analyze", path, "-d", "chi2", "--no-report", "--fail-on", "warning")
     assert strict.exit_code == 0, strict.stdout + strict.stderr
 
@@ -101,5 +105,5 @@ def test_the_report_draws_the_sums_the_envelopes_and_the_bound(sample, tmp_path)
     analysis = analyze_log(sample("hover_rotor_offset.mcap"), detector_names=["chi2"], free_series=True)
     analysis.prepared.release_series()
     page = render_html(analysis.report_input())
-    for title in ("chi2: chi2.lower", "chi2: roll", "chi2: trace(P+)"):
+    for title in ("chi2: statistic / threshold", "chi2: roll", "chi2: trace(P+)", "chi2.upper / delta"):
         assert title in page, title
