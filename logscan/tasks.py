@@ -50,6 +50,7 @@ class AnalyzeTask:
     render: Callable[[Analysis, str | None], str] = field(kw_only=True)
     step: Callable[[str], None] | None = None
     notice: Callable[[str], None] | None = None
+    fraction: Callable[[int, int], None] | None = None  # the bytes read of the log (with ``step``)
     token: str = ""  # tags the temporary files of the run (logscan.artifacts.cleanup)
     start_s: float | None = None  # --start/--end: the window analysed (s since the log's start)
     end_s: float | None = None
@@ -79,6 +80,7 @@ class AnalyzeTask:
             sensor_views=report_path is not None,
             tables=self.tables_path,
             truth=self.truth_path,
+            fraction=self.fraction,
         )
         if self.suppressions and apply_suppressions(analysis, list(self.suppressions)) and analysis.events:
             rescore(analysis)  # the suppressed alarms leave the scores too

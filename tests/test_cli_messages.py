@@ -300,14 +300,18 @@ def test_a_step_line_ticks_and_ends_with_the_time_each_step_took(monkeypatch):
     import sys
     import time
 
-    from logscan.cli.progress import StepLine
+    from logscan.cli.progress_bar import BarLine
 
-    err = io.StringIO()
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    err = Terminal()
     monkeypatch.setattr(sys, "stderr", err)
-    line = StepLine(interval=0.01)
-    line.step("logscan: f.mcap: filtering")
+    line = BarLine(interval=0.01)
+    line.step("logscan: f.mcap: filtering", name="filtering")  # nothing says yet how fast: no bar, the time
     time.sleep(0.1)
-    line.step("logscan: f.mcap: detecting")
+    line.step("logscan: f.mcap: detecting", name="detector nis")
     line.close()
     text = err.getvalue()
     assert text.count("\r\x1b[Klogscan: f.mcap: filtering... 0 s") >= 2  # drawn, then redrawn by the ticker

@@ -25,7 +25,7 @@ from logscan.cli.options import (
     tables_option,
     window_option,
 )
-from logscan.cli.progress import coloured_verdict, echo_step, end_steps, use_colour
+from logscan.cli.progress import coloured_verdict, echo_fraction, echo_step, end_steps, use_colour
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode, UsageError
 
@@ -317,6 +317,7 @@ def _task(run: _Run, names, rules: tuple, token: str, steps: bool):
         run.allow_partial,
         render=render_summary,
         step=echo_step if steps else None,
+        fraction=echo_fraction if steps else None,
         notice=echo_notice if not run.quiet else None,
         token=token,
         start_s=run.start_s,

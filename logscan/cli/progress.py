@@ -1,11 +1,11 @@
 """What a terminal shows while one log is analysed, and the verdict's colour.
 
 The pipeline reports its steps (reading, aligning, filtering, detecting, writing the report) as
-they begin, not fractions of them: no reader counts its bytes to a callback and the filter's
-compiled loop over the samples reports nothing until it ends. So one long log gets one line per
-step with its elapsed time, ticking while the step runs (a frozen "filtering..." for 30 s looks
-like a hang; "filtering... 12 s" does not), and the time it took once the next begins; there is
-no bar and no ETA. Only on a terminal, and never under CI (`show_progress`).
+they begin, and the reader the bytes it has read, a block of the file at a time. One long log gets
+one line per step, redrawn in place while the step runs with a bar, its fraction and the ETAs of
+the step and the whole log (`logscan.cli.progress_bar`; a frozen "filtering..." for 30 s looks
+like a hang), and the time it took once the next begins. Only on a terminal, and never under CI
+or --quiet (`show_progress`).
 
 Colour follows https://no-color.org and https://force-color.org: NO_COLOR (non-empty) turns it
 off, else FORCE_COLOR (non-empty) turns it on, else it is on for a terminal only.
@@ -15,84 +15,30 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
-import time
 
 import click
 
+from logscan.cli.progress_bar import BarLine
 from logscan.cli.render import printable
 
-_CLEAR = "\r\x1b[K"  # back to the start of the line, and erase it
-
-
-class StepLine:
-    """One line on stderr for the step under way: "logscan: flight.ulg: filtering... 12 s",
-    redrawn every ``interval`` seconds by a daemon thread; a new step (or `close`) ends it as
-    "logscan: flight.ulg: filtering (31.4 s)"."""
-
-    def __init__(self, interval: float = 0.5):
-        self.interval = interval
-        self._lock = threading.Lock()
-        self._text: str | None = None
-        self._start = 0.0
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    def step(self, text: str) -> None:
-        with self._lock:
-            self._end_line()
-            self._text, self._start = text, time.monotonic()
-            self._draw()
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._tick, name="logscan-progress", daemon=True)
-            self._thread.start()
-
-    def clear(self) -> None:
-        """Erase the line (it is drawn again at the next tick): a notice printed now gets a line of its own."""
-        with self._lock:
-            if self._text is not None:
-                _write(_CLEAR)
-
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2 * self.interval)
-        with self._lock:
-            self._end_line()
-
-    def _tick(self) -> None:
-        while not self._stop.wait(self.interval):
-            with self._lock:
-                if self._text is not None:
-                    self._draw()
-
-    def _draw(self) -> None:
-        _write(f"{_CLEAR}{self._text}... {time.monotonic() - self._start:.0f} s")
-
-    def _end_line(self) -> None:
-        if self._text is not None:
-            _write(f"{_CLEAR}{self._text} ({time.monotonic() - self._start:.1f} s)\n")
-            self._text = None
-
-
-def _write(text: str) -> None:
-    try:
-        sys.stderr.write(text)
-        sys.stderr.flush()
-    except (OSError, ValueError):
-        pass  # stderr gone: progress is not worth an error
-
-
-_LINE: list[StepLine | None] = [None]  # the step line of this process's one log (analyze, one log on a terminal)
+_LINE: list[BarLine | None] = [None]  # the step line of this process's one log (analyze, one log on a terminal)
 
 
 def echo_step(message: str) -> None:
-    """A step of the analysis of one log (``<log>: <step>``), on its ticking line (`StepLine`);
+    """A step of the analysis of one log (``<log>: <step>``), on its redrawn line (`BarLine`);
     module-level, so a task that carries it still pickles."""
     line = _LINE[0]
     if line is None:
-        line = _LINE[0] = StepLine()
-    line.step(printable(f"logscan: {message}"))
+        line = _LINE[0] = BarLine()
+    line.step(printable(f"logscan: {message}"), name=message.rpartition(": ")[2])
+
+
+def echo_fraction(done: int, total: int) -> None:
+    """The step under way has done ``done`` of ``total`` (the bytes a reader has read); drawn with
+    the line's next tick. Module-level, as `echo_step`."""
+    line = _LINE[0]
+    if line is not None:
+        line.fraction(done, total)
 
 
 def end_steps() -> None:

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from logscan.align import AlignedRun
 
 Progress = Callable[[str], None]
+Fraction = Callable[[int, int], None]  # (done, total) of the step under way, e.g. bytes read
 
 
 def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
@@ -146,13 +147,15 @@ def prepare(
     end_s: float | None = None,
     raw_topics: frozenset[str] = frozenset(),
     truth_path: str | os.PathLike | None = None,
+    fraction: Fraction | None = None,
 ) -> Prepared:
     """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
     ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
     may be a function of the aligned run (needs can follow what the log holds, e.g. K and S only
     when it carries no on-board variances). ``notice`` hears the one
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
-    (seconds since the log's start) analyse a window of it. Raises LogscanError on bad input."""
+    (seconds since the log's start) analyse a window of it. ``fraction`` hears the bytes read, a
+    block at a time (`logscan.readers.read_log`'s ``progress``). Raises LogscanError on bad input."""
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
@@ -160,7 +163,7 @@ def prepare(
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice)
     step("reading")
-    log = _read(path, loaded, raw_topics, use_header_stamp)
+    log = _read(path, loaded, raw_topics, use_header_stamp, fraction)
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")
@@ -190,7 +193,9 @@ def prepare(
     return prepared
 
 
-def _read(path: str, loaded: LoadedProfile, raw_topics: frozenset[str], use_header_stamp: bool) -> Log:
+def _read(
+    path: str, loaded: LoadedProfile, raw_topics: frozenset[str], use_header_stamp: bool, fraction: Fraction | None
+) -> Log:
     """The log with the topics the profile needs, the detectors' ``raw_topics`` and the report's
     context: the built-in profile's log when it already holds them (read once), else read now."""
     # the autopilot's states for the report, and a ULog's GNSS time (its UTC), when the log has them
@@ -198,7 +203,7 @@ def _read(path: str, loaded: LoadedProfile, raw_topics: frozenset[str], use_head
     log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
     if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
         topics = loaded.profile.topics() | set(raw_topics) | context_topics
-        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp)
+        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction)
     return log
 
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from logscan.needs import Needs
 from logscan.pipeline.detection import detect
-from logscan.pipeline.preparation import Progress, filter_free, load_profile_for, prepare, raw_topics_of
+from logscan.pipeline.preparation import Fraction, Progress, filter_free, load_profile_for, prepare, raw_topics_of
 from logscan.pipeline.stages import create_detectors, needs_of
 from logscan.training.calibration import process_noise_scale, uncalibrable_groups
 from logscan.training.tables import apply_tables, read_tables_document, tables_path
@@ -33,13 +33,15 @@ def analyze_log(
     sensor_views: bool = False,
     tables: str | os.PathLike | None = None,
     truth: str | os.PathLike | None = None,
+    fraction: Fraction | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
     ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
     ``start_s``/``end_s``: a window of the log (seconds since its start); ``free_series``: see
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
     figures (`logscan.report.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
-    to score against (default: the log's own, or `<log>.truth.json` beside it)."""
+    to score against (default: the log's own, or `<log>.truth.json` beside it); ``fraction``: the
+    bytes read of the log, a block at a time (`prepare`)."""
     loaded = load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
     trained = tables_path(None if tables is None else str(tables), loaded.profile, log=path)
@@ -52,7 +54,15 @@ def analyze_log(
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
     raw = raw_topics_of(detectors)
     prepared = prepare(
-        path, loaded, needs, progress=progress, notice=notice, raw_topics=raw, truth_path=truth, **options
+        path,
+        loaded,
+        needs,
+        progress=progress,
+        notice=notice,
+        raw_topics=raw,
+        truth_path=truth,
+        fraction=fraction,
+        **options,
     )
     return detect(
         prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series, sensor_views=sensor_views

@@ -199,11 +199,14 @@ def read_log(
     topics: Iterable[str] | None = None,
     *,
     use_header_stamp: bool = False,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Log:
     """Read ``path`` into a Log, decoding only ``topics`` (all when None).
 
     ``topics`` are source topic names (MCAP and bag topics, ULog ``topic_instance`` names, CSV file
     topics) or channel names; a reader keeps a topic when it or any channel under it is asked for.
+    ``progress(done, total)``: the bytes read so far, a block at a time (an MCAP's chunks, a CSV
+    directory's files); the readers that parse the file in one call (ULog, a CSV file, bags) do not call it.
     """
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
@@ -212,7 +215,7 @@ def read_log(
     if fmt == "mcap":
         from logscan.readers.mcap import read_mcap
 
-        return read_mcap(path, wanted, use_header_stamp=use_header_stamp)
+        return read_mcap(path, wanted, use_header_stamp=use_header_stamp, progress=progress)
     if fmt == "ulog":
         from logscan.readers.ulog_reader import read_ulog
 
@@ -224,7 +227,7 @@ def read_log(
     from logscan.readers.csv_reader import read_csv, read_csv_dir
 
     if fmt == "csv-dir":
-        return read_csv_dir(path, wanted)
+        return read_csv_dir(path, wanted, progress=progress)
     return read_csv(path, wanted)
 
 

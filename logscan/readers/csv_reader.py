@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -89,9 +90,12 @@ def csv_log_name(directory: Path, files: list[Path] | None = None) -> str:
     return _log_prefix(directory, [f.stem for f in _ulog2csv_files(files)])
 
 
-def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
+def read_csv_dir(
+    path: str | os.PathLike, wanted: set[str] | None, *, progress: Callable[[int, int], None] | None = None
+) -> Log:
     """Read a directory of per-topic CSVs (PX4 ulog2csv layout, plus wide files beside them) into
-    one Log; a directory of separate CSV logs is an InputError naming its files."""
+    one Log; a directory of separate CSV logs is an InputError naming its files. ``progress(bytes
+    read, bytes of the files to read)`` after each file read."""
     directory = Path(path)
     files = csv_files(directory)
     if not files:
@@ -108,14 +112,17 @@ def read_csv_dir(path: str | os.PathLike, wanted: set[str] | None) -> Log:
     source = SourceInfo(path=str(directory), format="csv-dir", time_source="csv column")
     topics = _topic_names(files, log_name)
     channels: dict[str, Channel] = {}
-    for file in files:
+    read = [f for f in files if topic_wanted(topics[f][0], wanted) or topic_wanted("/" + topics[f][0], wanted)]
+    total, done = (sum(file.stat().st_size for file in read), 0) if progress is not None else (0, 0)
+    for file in read:
         topic, px4 = topics[file]
-        if not (topic_wanted(topic, wanted) or topic_wanted("/" + topic, wanted)):
-            continue
         frame = load_columns(file)
         if px4 and "timestamp" not in frame.columns:
             px4 = False
         channels.update(_frame_channels(frame, file, source, wanted, topic=topic, stated_us=px4))
+        if progress is not None:
+            done += file.stat().st_size
+            progress(done, total)
     units = sorted({t.schema for t in source.topics.values()})
     source.time_unit = "us" if units == ["ulog2csv"] else _dir_time_unit(source)
     return Log(

@@ -48,6 +48,7 @@ count other numbers of messages or chunks: ``scan.Scan.damage``) makes the Log p
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -63,12 +64,21 @@ from logscan.readers.mcap.scan_records import ChannelRec, SchemaRec
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order, unsorted_text
 
 
-def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
-    """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps."""
+def read_mcap(
+    path: str | os.PathLike,
+    wanted: set[str] | None,
+    *,
+    use_header_stamp: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> Log:
+    """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps;
+    ``progress(bytes passed, file size)`` is called a chunk or window of the file at a time."""
     path = str(path)
     decoding = _Decoding(path, use_header_stamp)
     scan = Scan(path, wanted)
     scan.on_flush = decoding  # batches decoded as the scan goes: memory follows the columns
+    if progress is not None:
+        scan.on_position = _bytes_of(path, progress)
     scan_file(scan)
     raise_if_unrecoverable(scan)
     scan.flush()
@@ -82,6 +92,19 @@ def read_mcap(path: str | os.PathLike, wanted: set[str] | None, *, use_header_st
     log = Log(channels=channels, source=source)
     attach_logscan_records(log)
     return log
+
+
+def _bytes_of(path: str, progress: Callable[[int, int], None]) -> Callable[[int], None]:
+    """``progress`` as the scan's ``on_position``: the offset and the file's size (looked up at
+    the first call, when the scan has opened the file)."""
+    size: list[int] = []
+
+    def position(offset: int) -> None:
+        if not size:
+            size.append(os.path.getsize(path))
+        progress(offset, size[0])
+
+    return position
 
 
 def inspect_mcap(

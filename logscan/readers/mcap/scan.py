@@ -126,6 +126,7 @@ class Scan:
         self._wanted_ids: dict[int, bool] = {}
         self._inflate_budget = MIN_FILE_BUDGET_BYTES  # bytes the file's chunks may still decompress to
         self.on_flush: Callable[[Scan], None] | None = None  # takes (and empties) the batches
+        self.on_position: Callable[[int], None] | None = None  # hears the file offset scanned to, per chunk
         self._held = 0  # message bytes in the batches since the last flush
         self._map: mmap.mmap | None = None
 
@@ -212,11 +213,15 @@ class Scan:
         )
 
     def _held_more(self, size: int, position: int) -> None:
-        """``size`` more message bytes in the batches; past FLUSH_BYTES they go to ``on_flush``."""
+        """``size`` more message bytes in the batches; past FLUSH_BYTES they go to ``on_flush``.
+        Called once per chunk (or slice of top-level records) ending at file offset ``position``,
+        never per message: ``on_position`` hears it here."""
         self._held += size
         if self._held >= FLUSH_BYTES:
             self.flush()
             self._give_back(position)
+        if self.on_position is not None:
+            self.on_position(position)
 
     def flush(self) -> None:
         """Hand the batches to ``on_flush`` (which empties them)."""
