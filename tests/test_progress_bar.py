@@ -66,6 +66,9 @@ def test_the_eta_model_extrapolates_this_logs_rate_to_the_steps_left():
     assert fraction == pytest.approx(0.5) and left == pytest.approx(0.5 * rate * SHARES["filtering"])
     assert whole == pytest.approx(left + rate * (SHARES["detecting"] + SHARES["report"]))
     assert model.estimate("filtering", 10 * rate, None)[:2] == (0.99, 0.0)  # late: never 100 % nor negative
+    unreported = EtaModel(skipped=frozenset({"report"}))  # --no-report: no report step to come
+    unreported.end("reading", 1.3)
+    assert unreported.estimate("detecting", 0.0, None)[1:] == pytest.approx((rate * SHARES["detecting"],) * 2)
 
 
 def test_step_names_map_to_the_models_phases():

@@ -25,7 +25,7 @@ from logscan.cli.options import (
     tables_option,
     window_option,
 )
-from logscan.cli.progress import coloured_verdict, echo_fraction, echo_step, end_steps, use_colour
+from logscan.cli.progress import coloured_verdict, echo_fraction, echo_step, end_steps, plan_steps, use_colour
 from logscan.cli.render import printable, render_summary
 from logscan.errors import ExitCode, UsageError
 
@@ -232,6 +232,7 @@ def analyze(**options) -> None:
     token = new_token()  # tags this run's temporary files, wherever a worker wrote them
     progress = show_progress(run.quiet)
     task = _task(run, names, rules, token, steps=progress and len(logs) == 1)
+    plan_steps(report=not run.no_report)  # the ETA of one log's steps leaves out a report not written
     staged: list = []
     try:
         outcomes = _run_logs(list(zip(logs, reports)), task, run.jobs, progress, run.scheduler)

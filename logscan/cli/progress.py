@@ -18,10 +18,18 @@ import sys
 
 import click
 
-from logscan.cli.progress_bar import BarLine
+from logscan.cli.progress_bar import BarLine, EtaModel
 from logscan.cli.render import printable
 
-_LINE: list[BarLine | None] = [None]  # the step line of this process's one log (analyze, one log on a terminal)
+_LINE: list[BarLine | None] = [None]
+_SKIPPED: set[str] = set()  # the phases this run leaves out, for the ETA of the whole log (`plan_steps`)
+
+
+def plan_steps(report: bool) -> None:
+    """What the steps of this run's one log will be: with or without the report's."""
+    _SKIPPED.clear()
+    if not report:
+        _SKIPPED.add("report")  # the step line of this process's one log (analyze, one log on a terminal)
 
 
 def echo_step(message: str) -> None:
@@ -29,7 +37,7 @@ def echo_step(message: str) -> None:
     module-level, so a task that carries it still pickles."""
     line = _LINE[0]
     if line is None:
-        line = _LINE[0] = BarLine()
+        line = _LINE[0] = BarLine(model=EtaModel(skipped=frozenset(_SKIPPED)))
     line.step(printable(f"logscan: {message}"), name=message.rpartition(": ")[2])
 
 

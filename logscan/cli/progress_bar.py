@@ -51,8 +51,9 @@ def phase_of(step: str) -> str | None:
 class EtaModel:
     """Seconds left of the step under way and of the whole log (see the module docstring)."""
 
-    def __init__(self, shares: dict[str, float] | None = None) -> None:
-        self.shares = dict(shares or SHARES)
+    def __init__(self, shares: dict[str, float] | None = None, skipped: frozenset[str] = frozenset()) -> None:
+        """``skipped``: phases this run leaves out (no report: ``--no-report``), no share of the whole."""
+        self.shares = {phase: 0.0 if phase in skipped else share for phase, share in (shares or SHARES).items()}
         self.spent: dict[str, float] = {}  # seconds of the steps ended, by phase
 
     def end(self, phase: str | None, seconds: float) -> None:
@@ -95,7 +96,8 @@ def eta_text(seconds: float) -> str:
 
 def bar_text(fraction: float, measured: bool) -> str:
     filled = int(fraction * BAR_WIDTH)
-    return f"[{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {'' if measured else '~'}{fraction * 100:.0f}%"
+    percent = int(fraction * 100)  # floored: 100 % only when done
+    return f"[{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {'' if measured else '~'}{percent}%"
 
 
 class BarLine:
