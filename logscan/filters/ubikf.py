@@ -200,8 +200,8 @@ def _finish(out: UbikfBuffers, usable: np.ndarray, sizes: np.ndarray) -> None:
         out.P[np.isnan(out.P)] = 0.0  # between blocks
     out.updated[:] = usable & ~bad[:, None]
     out.m_k[:] = out.updated @ sizes
-    for name in ("r_mid", "r_rad", "nis"):
-        getattr(out, name)[bad] = np.nan
+    for series in (out.r_mid, out.r_rad, out.nis):
+        series[bad] = np.nan
     rows = np.isfinite(out.r_mid)
     both = rows[:, :, None] & rows[:, None, :]
     out.S[both & np.isnan(out.S)] = 0.0
