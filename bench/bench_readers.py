@@ -11,7 +11,8 @@ Then:
 
  - ULog: ``read_ulog(path, None)`` against pyulog's ``ULog(path)`` (every topic), and
    ``read_ulog(path, <the PX4 profile's topics>)`` against ``ULog(path, <their message names>)``,
-   summed over the PX4 sample logs of ``../shared/testdata/px4-ulog`` (skipped when absent);
+   summed over the PX4 sample logs of ``../shared/testdata/px4-ulog`` and, as rows of their own,
+   ``px4-ulog-extra`` (each skipped when absent), with each file's every-topic ratio printed;
  - CSV: ``read_csv(path, None)`` against ``pandas.read_csv(path)`` of a generated wide CSV
    (``--csv`` rows: a time column in seconds and 6 float columns, ``repr`` floats).
 
@@ -122,40 +123,43 @@ def read_plain_mcap(path: Path) -> int:
 
 
 _ULOG_DIR = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "px4-ulog"
+_ULOG_DIRS = (("ulog", _ULOG_DIR), ("ulog extra", _ULOG_DIR.parent / "px4-ulog-extra"))
 
 
 def ulog_rows(reps: int) -> list[tuple[str, str, tuple, tuple]]:
     """(case, size, logscan (wall, CPU) s, pyulog (wall, CPU) s) over the PX4 sample logs, best of
-    ``reps`` per file, summed."""
+    ``reps`` per file, summed; one pair of rows per folder of ``_ULOG_DIRS`` that holds ULogs. Prints
+    each file's CPU ratio of the every-topic read."""
     from pyulog import ULog
 
     from logscan.profiles.builtin import PX4_TOPICS
     from logscan.readers.ulog_reader import message_filter, read_ulog
 
-    files = sorted(_ULOG_DIR.glob("*.ulg"))
-    if not files:
-        print(f"ulog: no sample logs in {_ULOG_DIR}: skipped")
-        return []
-    size = f"{len(files)} files, {sum(f.stat().st_size for f in files) / 1e6:.1f} MB"
     wanted = set(PX4_TOPICS)
     names = message_filter(wanted)
-    read_ulog(files[0], None)  # warm-up: imports
     rows = []
-    for case, ours_wanted, theirs_names in (
-        ("ulog, every topic", None, None),
-        ("ulog, PX4 profile topics", wanted, names),
-    ):
-        ours, theirs = np.zeros(2), np.zeros(2)
-        for f in files:
-            best = best_wall_cpu(
-                reps,
-                {
-                    "ours": lambda f=f, w=ours_wanted: read_ulog(f, w),
-                    "theirs": lambda f=f, n=theirs_names: ULog(str(f), n),
-                },
-            )
-            ours, theirs = ours + best["ours"], theirs + best["theirs"]
-        rows.append((case, size, tuple(ours), tuple(theirs)))
+    for label, folder in _ULOG_DIRS:
+        files = sorted(folder.glob("*.ulg"))
+        if not files:
+            print(f"{label}: no sample logs in {folder}: skipped")
+            continue
+        size = f"{len(files)} files, {sum(f.stat().st_size for f in files) / 1e6:.1f} MB"
+        read_ulog(files[0], None)  # warm-up: imports
+        for case, ours_wanted, theirs_names in (("every topic", None, None), ("PX4 profile topics", wanted, names)):
+            ours, theirs = np.zeros(2), np.zeros(2)
+            for f in files:
+                best = best_wall_cpu(
+                    reps,
+                    {
+                        "ours": lambda f=f, w=ours_wanted: read_ulog(f, w),
+                        "theirs": lambda f=f, n=theirs_names: ULog(str(f), n),
+                    },
+                )
+                ours, theirs = ours + best["ours"], theirs + best["theirs"]
+                if ours_wanted is None:
+                    ratio = best["theirs"][1] / best["ours"][1]
+                    print(f"{label}, every topic, {f.name}: pyulog / logscan CPU {ratio:.2f}x")
+            rows.append((f"{label}, {case}", size, tuple(ours), tuple(theirs)))
     return rows
 
 

@@ -9,6 +9,8 @@ from typing import Any, cast
 import numpy as np
 
 MAX_NS = 2**62  # int64 nanoseconds with room for sums and differences (146 years past 1970)
+_INT64 = np.dtype(np.int64)
+_FLOAT64 = np.dtype(np.float64)
 
 
 @dataclass
@@ -21,12 +23,17 @@ class Channel:
     unit: str | None = None
 
     def __post_init__(self) -> None:
-        self.t = np.asarray(self.t, dtype=np.int64)
-        # a float32 signalling NaN (a flipped bit) becomes a quiet NaN, an invalid sample like any
-        # other NaN: numpy's "invalid value encountered in cast" would say nothing more
-        with np.errstate(invalid="ignore"):
-            self.values = np.asarray(self.values, dtype=np.float64)
-        if self.t.shape != self.values.shape or self.t.ndim != 1:
+        # arrays already of the stored types are kept as they are (what np.asarray would return),
+        # without its call or an errstate block: a reader builds thousands of channels per log
+        t, values = self.t, self.values
+        if type(t) is not np.ndarray or (t.dtype is not _INT64 and t.dtype != _INT64):
+            self.t = t = np.asarray(t, dtype=np.int64)
+        if type(values) is not np.ndarray or (values.dtype is not _FLOAT64 and values.dtype != _FLOAT64):
+            # a float32 signalling NaN (a flipped bit) becomes a quiet NaN, an invalid sample like
+            # any other NaN: numpy's "invalid value encountered in cast" would say nothing more
+            with np.errstate(invalid="ignore"):
+                self.values = values = np.asarray(values, dtype=np.float64)
+        if t.shape != values.shape or t.ndim != 1:
             raise ValueError(
                 f"channel {self.name!r}: t and values must be 1-D of equal length, "
                 f"got {self.t.shape} and {self.values.shape}"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import io
 import mmap
 import os
@@ -52,9 +53,11 @@ def format_bytes(name: str, formats: dict) -> int:
     return size_of(name, ())
 
 
+@functools.cache
 def _bounded_ulog_class():
     """pyulog's ULog whose subscriptions check their format (``format_bytes``) before flattening it,
-    and which reads on past the data of a format without a uint64 ``timestamp`` field."""
+    and which reads on past the data of a format without a uint64 ``timestamp`` field. Made once:
+    the class holds no state of a read (a read's damage is kept on its ULog object)."""
     from pyulog import ULog
 
     class BoundedULog(ULog):

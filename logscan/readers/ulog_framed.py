@@ -36,6 +36,7 @@ _SECTION_END = np.frombuffer(b"ALC", dtype=np.uint8)
 _DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads in the data section
 _HEADER_BYTES = 16
 _EMPTY = np.empty(0, np.uint8)
+_NO_MESSAGES = np.empty(0, np.int64)
 
 
 @njit(cache=True)
@@ -103,16 +104,27 @@ class _Plan:
         order = np.argsort(ids, kind="stable")
         self.ids, first = np.unique(ids[order], return_index=True)
         self.groups = np.split(order, first[1:]) if order.size else []
+        self.group_of = dict(zip(self.ids.tolist(), self.groups, strict=True))
+        sizes_sorted = self.data_sizes[order]  # each id's smallest and largest data message
+        self.size_range = dict(
+            zip(
+                self.ids.tolist(),
+                zip(
+                    np.minimum.reduceat(sizes_sorted, first).tolist() if order.size else [],
+                    np.maximum.reduceat(sizes_sorted, first).tolist() if order.size else [],
+                    strict=True,
+                ),
+                strict=True,
+            )
+        )
         self.kept = (offsets[~data], sizes[~data], types[~data])
         self.read: list[tuple[np.ndarray, np.ndarray]] = []  # (positions, timestamps) of the data read
         self.failed = False
+        self.appended: _Appended | None = None  # the flag bits of a file with appended data
 
     def messages_of(self, msg_id: int) -> np.ndarray:
         """Indices (into the data messages) of ``msg_id``'s data messages, in file order."""
-        at = int(np.searchsorted(self.ids, msg_id))
-        if at < self.ids.size and self.ids[at] == msg_id:
-            return self.groups[at]
-        return np.empty(0, np.int64)
+        return self.group_of.get(msg_id, _NO_MESSAGES)
 
     def fill(self, subscription) -> None:
         """The subscription's buffer, as pyulog would append it; ``failed`` when a message does not fit."""
@@ -120,20 +132,65 @@ class _Plan:
         if not index.size:
             return
         width = subscription.dtype.itemsize
-        sizes = self.data_sizes[index] - 2
+        smallest, largest = self.size_range[subscription.msg_id]
         t_off = subscription.timestamp_offset
         if (
-            sizes.min() < width
-            or sizes.max() > subscription.max_data_size
+            smallest - 2 < width
+            or largest - 2 > subscription.max_data_size
             or subscription.timestamp_idx < 0
             or t_off + 8 > width
         ):
             self.failed = True
             return
         starts = self.data_offsets[index] + 5
-        subscription.buffer = _gather(self.buf, starts, width)  # np.frombuffer reads it as is
-        stamps = _gather(self.buf, starts + t_off, 8).view("<u8")
+        buffer = _gather(self.buf, starts, width)
+        subscription.buffer = buffer  # np.frombuffer reads it as is
+        # each message's timestamp where it stands in the buffer (a strided view, not a copy)
+        stamps = np.ndarray((index.size,), dtype="<u8", buffer=buffer, offset=t_off, strides=(width,))
         self.read.append((self.data_offsets[index], stamps))
+
+
+class _Appended:
+    """The flag bits message of a file with appended data: where it is, and what pyulog reads from it."""
+
+    def __init__(self, at: int, incompat: list[int], offsets: list[int]) -> None:
+        self.at = at  # offset of the flag bits message
+        self.incompat = incompat
+        self.offsets = offsets  # pyulog's list: the trailing zeros dropped
+
+
+def _appended_data(buf, offsets, sizes, types, split: int) -> _Appended | None | bool:
+    """False for a file without flag bits or with none set; the flag bits of appended data that a read
+    straight through gives the same as pyulog's read section by section (each offset a message start
+    after the first of the data section, increasing, and no subscription or data message from the
+    first offset on); None for anything else (unknown incompat flags, offsets elsewhere)."""
+    flags = np.flatnonzero(types == ord("B"))
+    if flags.size == 0:
+        return False
+    if flags.size != 1 or sizes[flags[0]] < 40:
+        return None
+    at = int(offsets[flags[0]])
+    incompat = buf[at + 3 + 8 : at + 3 + 16]
+    stated = buf[at + 3 + 16 : at + 3 + 40].copy().view("<u8")
+    if not (incompat.any() or stated.any()):
+        return False
+    if incompat[0] != 1 or incompat[1:].any():
+        return None  # no appended data but offsets, or flags pyulog refuses: the careful read
+    listed = stated.tolist()
+    while listed and listed[-1] == 0:
+        listed.pop()
+    if listed:
+        where = np.searchsorted(offsets, stated[: len(listed)])
+        if (
+            0 in listed
+            or np.any(np.diff(stated[: len(listed)].astype(np.int64)) <= 0)
+            or np.any(where <= split)
+            or np.any(where >= offsets.size)
+            or np.any(offsets[np.minimum(where, offsets.size - 1)] != stated[: len(listed)])
+            or np.isin(types[where[0] :], np.frombuffer(b"AD", dtype=np.uint8)).any()
+        ):
+            return None
+    return _Appended(at, incompat.tolist(), [int(o) for o in listed])
 
 
 def _clean_plan(buf: np.ndarray) -> _Plan | None:
@@ -147,15 +204,15 @@ def _clean_plan(buf: np.ndarray) -> _Plan | None:
     split = int(ends[0]) if ends.size else types.size
     if not (np.isin(types[:split], _DEFINITIONS).all() and np.isin(types[split:], _DATA_SECTION).all()):
         return None  # types pyulog skips with a search for a sync sequence, or a damaged type byte
-    if (types == ord("B")).any():  # flag bits: may announce appended data, read the careful way
-        flags = offsets[types == ord("B")]
-        if flags.size != 1 or np.any(buf[flags[0] + 3 + 8 : flags[0] + 3 + 40]):  # incompat flags, offsets
-            return None
+    appended = _appended_data(buf, offsets, sizes, types, split)
+    if appended is None:
+        return None
     subscribe = offsets[types == ord("A")]
     sub_ids = buf[subscribe + 4].astype(np.int64) | (buf[subscribe + 5].astype(np.int64) << 8)
     if np.unique(sub_ids).size != sub_ids.size or (sizes[types == ord("A")] < 3).any():
         return None
     plan = _Plan(buf, offsets, sizes, types)
+    plan.appended = appended or None
     if (plan.data_sizes < 2).any():
         return None
     first_data = np.array([plan.data_offsets[g[0]] for g in plan.groups], dtype=np.int64)
@@ -170,13 +227,35 @@ def _clean_plan(buf: np.ndarray) -> _Plan | None:
 
 
 def _framed_ulog_class(plan: _Plan, wanted: set[str] | None):
-    """pyulog's (bounded) ULog whose subscriptions of the topics read fill their buffer from ``plan``."""
+    """pyulog's (bounded) ULog whose subscriptions of the topics read fill their buffer from ``plan``.
+
+    Each message format is flattened once: the formats are all defined before the first
+    subscription, so a second instance of a topic (``multi_id`` 1, 2, ...) gets the first one's
+    fields, timestamp position, size and dtype, as pyulog would compute them again."""
     base = _bounded_ulog_class()
+    layouts: dict[str, tuple] = {}  # message name -> what pyulog derived from its format
 
     class FramedULog(base):  # type: ignore[misc, valid-type]
         class _MessageAddLogged(base._MessageAddLogged):  # type: ignore[name-defined]
             def __init__(self, data, header, message_formats):
-                super().__init__(data, header, message_formats)
+                name = base.parse_string(data[3:])
+                layout = layouts.get(name)
+                if layout is None:
+                    super().__init__(data, header, message_formats)
+                    layouts[name] = (
+                        self.field_data,
+                        self.timestamp_idx,
+                        self.timestamp_offset,
+                        self.max_data_size,
+                        self.dtype,
+                    )
+                else:
+                    (self.multi_id,) = struct.unpack("<B", data[0:1])
+                    (self.msg_id,) = struct.unpack("<H", data[1:3])
+                    self.message_name = name
+                    fields, self.timestamp_idx, self.timestamp_offset, self.max_data_size, self.dtype = layout
+                    self.field_data = list(fields)
+                    self.buffer = bytearray()
                 if wanted is None or self.message_name in wanted:
                     plan.fill(self)
 
@@ -206,7 +285,10 @@ def _parse_mapped(buf: np.ndarray, names: list[str] | None) -> tuple | None:
     if plan is None:
         return None
     kept_offsets, kept_sizes, kept_types = plan.kept
-    reduced = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes).tobytes()
+    reduced_array = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes)
+    if plan.appended is not None:  # read straight through: the same messages in the same order
+        reduced_array[plan.appended.at + 3 + 8 : plan.appended.at + 3 + 40] = 0
+    reduced = reduced_array.tobytes()
     ULog = _framed_ulog_class(plan, None if names is None else set(names))
     watch = _ReadWatch.over(reduced)
     chatter = io.StringIO()
@@ -230,6 +312,9 @@ def _parse_mapped(buf: np.ndarray, names: list[str] | None) -> tuple | None:
     ):
         return None
     _set_times(ulog, plan, kept_offsets, kept_types)
+    if plan.appended is not None:  # the flag bits as pyulog read them from the file
+        ulog._incompat_flags = plan.appended.incompat
+        ulog._appended_offsets = plan.appended.offsets
     return ulog, _CleanRead(), chatter
 
 

@@ -140,23 +140,29 @@ def _topic_channels(
     data, topic: str, t_ns: np.ndarray, keep: np.ndarray, wanted: set[str] | None, source: SourceInfo, channels: dict
 ) -> list[str]:
     """The topic's numeric fields (its samples ``keep``, at ``t_ns``) into ``channels`` where
-    wanted; returns every numeric field's name. Text (char) fields are skipped, once each."""
+    wanted; returns every numeric field's name. Text (char) fields are skipped, once each.
+
+    Each column is cast to float64 in one step (``astype`` of pyulog's strided column, or of its
+    kept samples), under one errstate for the topic: a float32 signalling NaN (a flipped bit)
+    becomes a quiet NaN, as `Channel` would make it."""
     fields = []
-    for field in data.field_data:
-        name = field.field_name
-        if name == "timestamp":
-            continue
-        if name.startswith("_padding"):
-            continue
-        if field.type_str == "char":
-            if "[" in name and not name.endswith("[0]"):
-                continue  # one skip per string field, not per character
-            source.skip(f"text field {data.name}.{_array_base(name)}", "char (string) field")
-            continue
-        fields.append(name)
-        channel = f"/{topic}/{name}"
-        if channel_wanted(channel, topic, wanted):
-            channels[channel] = Channel(channel, t_ns, data.data[name][keep])
+    every = wanted is None or topic in wanted or "/" + topic in wanted
+    keep_all = bool(keep.all())
+    with np.errstate(invalid="ignore"):
+        for field in data.field_data:
+            name = field.field_name
+            if name == "timestamp" or name.startswith("_padding"):
+                continue
+            if field.type_str == "char":
+                if "[" in name and not name.endswith("[0]"):
+                    continue  # one skip per string field, not per character
+                source.skip(f"text field {data.name}.{_array_base(name)}", "char (string) field")
+                continue
+            fields.append(name)
+            channel = f"/{topic}/{name}"
+            if every or channel_wanted(channel, topic, wanted):
+                column = data.data[name] if keep_all else data.data[name][keep]
+                channels[channel] = Channel(channel, t_ns, column.astype(np.float64, copy=keep_all))
     return fields
 
 
@@ -165,13 +171,12 @@ def _parse(path: str | os.PathLike, wanted: set[str] | None) -> tuple:
     InputError when the file cannot be read, CorruptLogError when its header or definitions break."""
     from pyulog.exceptions import ULogException
 
-    ULog = _bounded_ulog_class()
-
     chatter = io.StringIO()
     stat_input(path)  # a FIFO or device is refused before it is opened
     clean = parse_clean(str(path), message_filter(wanted))  # an undamaged file: pyulog skips the data loop
     if clean is not None:
         return clean
+    ULog = _bounded_ulog_class()
     try:
         watch = _ReadWatch(str(path))
     except OSError as exc:

@@ -1,0 +1,103 @@
+"""The framed ULog read (logscan.readers.ulog_framed) gives what the careful read gives, appended data too."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import need_testdata
+
+import logscan.readers.ulog_reader as ulog_reader
+from logscan.log import Channel
+from logscan.readers.ulog_framed import _frame, parse_clean
+from logscan.readers.ulog_reader import read_ulog
+
+TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
+ULOGS = sorted(TESTDATA.glob("px4-ulog*/*.ulg")) if TESTDATA.is_dir() else []
+APPENDED = TESTDATA / "px4-ulog" / "sample_appended_multiple.ulg"
+
+
+def _careful(path: Path, monkeypatch) -> object:
+    with monkeypatch.context() as patch:
+        patch.setattr(ulog_reader, "parse_clean", lambda *args: None)
+        return read_ulog(path, None)
+
+
+def _assert_same(a, b) -> None:
+    assert list(a.channels) == list(b.channels)
+    for name, channel in a.channels.items():
+        other = b.channels[name]
+        assert channel.t.dtype == other.t.dtype and channel.values.dtype == other.values.dtype
+        np.testing.assert_array_equal(channel.t, other.t, err_msg=name)
+        assert channel.values.tobytes() == other.values.tobytes(), name  # NaN payloads too
+    assert dataclasses.asdict(a.source) == dataclasses.asdict(b.source)
+
+
+@pytest.mark.parametrize("path", ULOGS, ids=[p.name for p in ULOGS])
+def test_framed_read_equals_careful_read(path, monkeypatch):
+    assert parse_clean(str(path), None) is not None  # every real sample is undamaged
+    _assert_same(read_ulog(path, None), _careful(path, monkeypatch))
+
+
+def _flag_offsets(data: bytes) -> tuple[int, list[int]]:
+    at = 16  # the flag bits message is the first after the header
+    assert data[at + 2 : at + 3] == b"B"
+    start = at + 3 + 16
+    return start, list(np.frombuffer(data[start : start + 24], dtype="<u8"))
+
+
+def test_appended_data_on_message_starts_is_read_framed(monkeypatch):
+    need_testdata(APPENDED)
+    data = APPENDED.read_bytes()
+    _, offsets = _flag_offsets(data)
+    assert [o for o in offsets if o]  # the sample has appended data
+    log = read_ulog(APPENDED, None)
+    assert parse_clean(str(APPENDED), None) is not None
+    assert log.source.metadata["ulog.log"]["data_appended"] == "true"
+    _assert_same(log, _careful(APPENDED, monkeypatch))
+
+
+@pytest.mark.parametrize("shift", [1, -1])
+def test_appended_offset_off_a_message_start_is_read_the_careful_way(tmp_path, monkeypatch, shift):
+    need_testdata(APPENDED)
+    data = bytearray(APPENDED.read_bytes())
+    start, offsets = _flag_offsets(bytes(data))
+    offsets[0] = int(offsets[0]) + shift  # pyulog cuts the section inside a message there
+    data[start : start + 24] = np.asarray(offsets, dtype="<u8").tobytes()
+    path = tmp_path / "moved.ulg"
+    path.write_bytes(bytes(data))
+    assert parse_clean(str(path), None) is None
+    _assert_same(read_ulog(path, None), _careful(path, monkeypatch))
+
+
+def test_appended_offset_before_data_messages_is_read_the_careful_way(tmp_path):
+    need_testdata(APPENDED)
+    data = bytearray(APPENDED.read_bytes())
+    start, offsets = _flag_offsets(bytes(data))
+    starts, _, types, _ = _frame(np.frombuffer(bytes(data), dtype=np.uint8), 16)
+    data_starts = starts[types == ord("D")]
+    offsets[0] = int(data_starts[data_starts.size // 2])  # a message start with data messages after it
+    data[start : start + 24] = np.asarray(offsets, dtype="<u8").tobytes()
+    path = tmp_path / "early.ulg"
+    path.write_bytes(bytes(data))
+    assert parse_clean(str(path), None) is None
+
+
+def test_channel_keeps_arrays_of_its_types_and_converts_others():
+    t = np.arange(3, dtype=np.int64)
+    values = np.array([1.0, 2.0, 3.0])
+    channel = Channel("/a", t, values)
+    assert channel.t is t and channel.values is values
+    snan = np.array([0x7FA00000, 0, 1], dtype="<u4").view(np.float32)  # a float32 signalling NaN
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        converted = Channel("/b", [0, 1, 2], snan)
+    assert converted.t.dtype == np.int64 and converted.values.dtype == np.float64
+    assert np.isnan(converted.values[0]) and converted.values[2] == np.float32(snan[2])
+    swapped = Channel("/c", t.astype(">i8"), values.astype(">f8"))
+    assert swapped.t.dtype == np.dtype(np.int64) and swapped.values.dtype == np.dtype(np.float64)
+    with pytest.raises(ValueError, match="equal length"):
+        Channel("/d", t, values[:2])
