@@ -11,7 +11,8 @@ dropout: the latest data timestamp before it; the log's last timestamp) are set 
 timestamps, vectorised.
 
 Clean means: the messages tile the file exactly, every type byte is one the format defines, the
-file has no appended data, each message id is subscribed once and before its first data message,
+file has no appended data or only appended data that a read straight through gives as pyulog's
+read section by section does (`_appended_data`), each message id is subscribed once and before its first data message,
 every data message of a topic read fits its format and its format has a uint64-sized timestamp
 field inside the stored bytes, and pyulog read the reduced copy without a short read, a skipped byte
 or a corruption flag. Anything else returns None and the caller reads the file the careful way
