@@ -61,6 +61,23 @@ def test_no_path_without_a_group_measuring_the_states_x_and_y():
     assert path_of(quad_run(1_000), sbw) is None
 
 
+def test_a_gnss_the_model_does_not_take_as_its_position_is_drawn_east_and_north():
+    # the wheeled model measures position as x + a GNSS error state, so no group maps onto x, y
+    # directly; a geodetic group's east/north columns about its first fix are the path
+    n = 200
+    fresh = np.arange(n) % 4 == 0
+    z = np.column_stack([np.linspace(0.0, 30.0, n), np.linspace(0.0, -12.0, n)])  # north first (frame "ne")
+    channels = ["/fix/{latitude,longitude} north", "/fix/{latitude,longitude} east"]
+    gnss = AlignedGroup("position", channels, z, fresh, origin=(42.37, -71.14, 7.3))
+    run = SimpleNamespace(t=np.arange(n) * 0.1, dt=0.1, n_steps=n, groups={"position": gnss})
+    path = path_of(run, get_model("wheeled", {}))
+    assert path is not None and path.group == "position" and path.columns == (1, 0)
+    assert path.channels == ("east (m from the first fix)", "north (m from the first fix)")
+    np.testing.assert_array_equal(path.x, z[fresh, 1])
+    gnss.origin = None  # the same columns not converted from geodetic: no map
+    assert path_of(run, get_model("wheeled", {})) is None
+
+
 def test_mode_intervals_of_a_flight_mode():
     n = 60_000
     mode = np.zeros(n)

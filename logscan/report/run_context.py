@@ -127,6 +127,19 @@ def position_columns(run, model) -> tuple[str, int, int, tuple[str, str]] | None
             direct = list(getattr(spec, "direct_states", ()) or ())
             if all(i in direct for i in wanted) and group.z.ndim == 2 and group.z.shape[1] == len(direct):
                 return name, direct.index(wanted[0]), direct.index(wanted[1]), pair
+    return _geodetic_columns(run)
+
+
+def _geodetic_columns(run) -> tuple[str, int, int, tuple[str, str]] | None:
+    """A geodetic group converted about its first fix (a GNSS the model does not take as its
+    position states, e.g. position plus a GNSS error state): its east and north columns, which the
+    aligner names "<fields> east" / "<fields> north"."""
+    for name, group in run.groups.items():
+        if getattr(group, "origin", None) is None:
+            continue
+        axes = [channel.rsplit(" ", 1)[-1] for channel in group.channels]
+        if "east" in axes and "north" in axes:
+            return name, axes.index("east"), axes.index("north"), ("east", "north")
     return None
 
 
