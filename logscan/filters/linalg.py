@@ -49,9 +49,9 @@ def forward_sq(L, m, b, r, v):
 
 
 @njit(cache=True, error_model="numpy")
-def cho_solve_rows(L, m, B, n):
-    """Solve (L L^T) X = B[:m, :n] in place, all n columns at once (rows are contiguous)."""
-    for i in range(m):  # L V = B
+def forward_rows(L, m, B, n):
+    """Solve L X = B[:m, :n] in place (forward substitution), all n columns at once."""
+    for i in range(m):
         Bi = B[i]
         for c in range(i):
             l = L[i, c]
@@ -61,7 +61,12 @@ def cho_solve_rows(L, m, B, n):
         d = 1.0 / L[i, i]
         for j in range(n):
             Bi[j] *= d
-    for i in range(m - 1, -1, -1):  # L^T X = V
+
+
+@njit(cache=True, error_model="numpy")
+def backward_rows(L, m, B, n):
+    """Solve L^T X = B[:m, :n] in place (back substitution), all n columns at once."""
+    for i in range(m - 1, -1, -1):
         Bi = B[i]
         for c in range(i + 1, m):
             l = L[c, i]
@@ -74,33 +79,24 @@ def cho_solve_rows(L, m, B, n):
 
 
 @njit(cache=True, error_model="numpy")
+def cho_solve_rows(L, m, B, n):
+    """Solve (L L^T) X = B[:m, :n] in place, all n columns at once (rows are contiguous)."""
+    forward_rows(L, m, B, n)  # L V = B
+    backward_rows(L, m, B, n)  # L^T X = V
+
+
+@njit(cache=True, error_model="numpy")
 def gain_rows(L, m, HP, V, KT, n):
     """K^T = S^-1 H P (S = L L^T) row by row, in two halves: V = L^-1 H P, then K^T = L^-T V;
     V is kept (P - V^T V is the short covariance update). The operations of `cho_solve_rows`."""
-    for i in range(m):  # L V = H P
-        Vi = V[i]
+    for i in range(m):
         for j in range(n):
-            Vi[j] = HP[i, j]
-        for c in range(i):
-            l = L[i, c]
-            Vc = V[c]
-            for j in range(n):
-                Vi[j] -= l * Vc[j]
-        d = 1.0 / L[i, i]
+            V[i, j] = HP[i, j]
+    forward_rows(L, m, V, n)  # L V = H P
+    for i in range(m):
         for j in range(n):
-            Vi[j] *= d
-    for i in range(m - 1, -1, -1):  # L^T K^T = V
-        Ki = KT[i]
-        for j in range(n):
-            Ki[j] = V[i, j]
-        for c in range(i + 1, m):
-            l = L[c, i]
-            Kc = KT[c]
-            for j in range(n):
-                Ki[j] -= l * Kc[j]
-        d = 1.0 / L[i, i]
-        for j in range(n):
-            Ki[j] *= d
+            KT[i, j] = V[i, j]
+    backward_rows(L, m, KT, n)  # L^T K^T = V
 
 
 @njit(cache=True, error_model="numpy")

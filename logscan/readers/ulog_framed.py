@@ -30,6 +30,7 @@ import struct
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
 from logscan.readers.ulog_damage import _bounded_ulog_class, _damage_of, _ReadWatch
 
 _DEFINITIONS = np.frombuffer(b"BFIMPQ", dtype=np.uint8)  # the types pyulog reads in the definitions
@@ -358,3 +359,6 @@ class _CleanRead:
 
     def unread(self, size: int) -> tuple[int, int]:
         return 0, -1
+
+
+follow_dependencies(__name__)  # the cached kernels are stamped with ulog_damage's source too
