@@ -61,10 +61,10 @@ def test_fail_on_new_through_the_cli(cli, sample, tmp_path):
     base = tmp_path / "base.json"
     assert cli("analyze", bias, "--no-report", "-q", "--json", base).exit_code == 1
     same = cli("analyze", bias, "--no-report", "-q", "--baseline", base, "--fail-on", "new")
-    assert same.exit_code == 0 and "baseline: 0 new, 12 unchanged, 0 gone" in same.stdout
+    assert same.exit_code == 0 and "baseline: 0 new, 14 unchanged, 0 gone" in same.stdout
     out = tmp_path / "now.json"
     more = cli("analyze", bias, flip, "--no-report", "-q", "--baseline", base, "--fail-on", "new", "--json", out)
-    assert more.exit_code == 1 and "baseline: 4 new, 12 unchanged, 0 gone" in more.stdout
+    assert more.exit_code == 1 and "baseline: 4 new, 14 unchanged, 0 gone" in more.stdout
     document = json.loads(out.read_text())
     assert document["exit_code"] == 1 and document["baseline"]["new"] == 4
     assert document["baseline"]["not_analysed"] == []  # the baseline's one log was analysed
@@ -74,7 +74,7 @@ def test_fail_on_new_through_the_cli(cli, sample, tmp_path):
     from logscan.report.ci_artifacts import junit_xml, markdown_summary
 
     table = markdown_summary(document)
-    assert table.count("| new |") == 4 and table.count("| unchanged |") == 12
+    assert table.count("| new |") == 4 and table.count("| unchanged |") == 14
     assert "nis.accel 30.13-31.27 s, peak/threshold 7.46 [new]" in junit_xml(document)
 
 

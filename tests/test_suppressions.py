@@ -26,23 +26,24 @@ def test_every_alarm_of_the_log_suppressed_turns_the_verdict(cli, sample, tmp_pa
     rules = tmp_path / "s.toml"
     nis = "".join(ENTRY.format(check=c) for c in ("nis.accel", "nis.all", "nis.position", "nis.attitude"))
     cusum = ENTRY.replace('detector = "nis"', 'detector = "cusum"').replace('check = "{check}"\n', "")
-    rules.write_text(nis + cusum)  # the cusum entry names no check: every one of its statistics
+    encoded = ENTRY.replace('detector = "nis"', 'detector = "encoded_ekf"').format(check="e_x")
+    rules.write_text(nis + cusum + encoded)  # the cusum entry names no check: every one of its statistics
     out, junit, md = tmp_path / "s.json", tmp_path / "s.xml", tmp_path / "s.md"
     result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--suppressions", rules,
                  "--json", out, "--junit", junit, "--markdown", md)  # fmt: skip
     assert result.exit_code == 0, result.stdout
     log = json.loads(out.read_text())["logs"][0]
-    assert log["n_alarms"] == 0 and len(log["suppressed"]) == 12 and log["verdict"] == "no alarms; 12 suppressed"
+    assert log["n_alarms"] == 0 and len(log["suppressed"]) == 14 and log["verdict"] == "no alarms; 14 suppressed"
     assert all(s["reason"].startswith("the position group") for s in log["suppressed"])
     assert "suppressed: nis nis.position" in result.stdout and "suppressed: cusum cusum.position.px" in result.stdout
-    assert junit.read_text().count("<skipped message=") == 12 and "12 alarm(s) suppressed" in md.read_text()
+    assert junit.read_text().count("<skipped message=") == 14 and "14 alarm(s) suppressed" in md.read_text()
 
 
 def test_a_rule_suppresses_only_what_it_names(cli, sample, tmp_path):
     rules = tmp_path / "s.toml"
     rules.write_text(ENTRY.format(check="nis.position"))
     result = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--suppressions", rules)
-    assert result.exit_code == 1 and "11 alarms in 1 incident; 1 suppressed" in result.stdout
+    assert result.exit_code == 1 and "13 alarms in 1 incident; 1 suppressed" in result.stdout
     other = cli("analyze", sample("quad_imu_bitflip.mcap"), "--no-report", "--suppressions", rules)
     assert "suppressed" not in other.stdout  # nis.position did not alarm there
 
