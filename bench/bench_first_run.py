@@ -28,17 +28,10 @@ from pathlib import Path
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "quad_imu_bias.mcap"
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
 # runs the CLI of the source tree at argv[1], whatever the venv's editable install points at
-TREE_RUNNER = """
-import sys
-root = sys.argv.pop(1)
-sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in (type(f).__name__ + type(f).__module__).lower()]
-sys.path.insert(0, root)
-import logscan
-assert logscan.__file__.startswith(root), logscan.__file__
-from logscan.cli.main import main
-sys.exit(main(sys.argv[1:]))
-"""
+from compare_summaries import RUNNER as TREE_RUNNER  # noqa: E402
 
 
 def command(tree: str) -> list[str]:
