@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchlib import simulate_log
+from benchlib import best_of, simulate_log
 
 import logscan
 
@@ -47,12 +47,7 @@ print(time.process_time() - start)
 
 def cpu_best(n: int, fn) -> float:
     """The shortest of ``n`` process CPU times of ``fn()``, seconds."""
-    best = float("inf")
-    for _ in range(n):
-        start = time.process_time()
-        fn()
-        best = min(best, time.process_time() - start)
-    return best
+    return best_of(n, fn, clock=time.process_time)
 
 
 def prepared_log(path: str):

@@ -21,7 +21,7 @@ import tempfile
 def main() -> None:
     import time
 
-    from benchlib import simulate_log
+    from benchlib import best_of, simulate_log
 
     from logscan.align import align
     from logscan.filters.box_chi2 import box_chi2_bounds
@@ -46,12 +46,7 @@ def main() -> None:
     n = run.n_steps
 
     def cpu_best(runs: int, work) -> float:
-        times = []
-        for _ in range(runs):
-            start = time.process_time()
-            work()
-            times.append(time.process_time() - start)
-        return min(times)
+        return best_of(runs, work, clock=time.process_time)
 
     ekf = cpu_best(3, lambda: run_ekf(model, run, store_gain=False, store_S=False, store_innovations=False))
     ubikf = cpu_best(3, lambda: run_ubikf(interval, run))
