@@ -1,7 +1,8 @@
 """What a terminal shows while one log is analysed, and the verdict's colour.
 
 The pipeline reports its steps (reading, aligning, filtering, detecting, writing the report) as
-they begin, and the reader the bytes it has read, a block of the file at a time. One long log gets
+they begin, the reader the bytes it has read, a block of the file at a time, and the EKF the steps
+it has filtered (`logscan.pipeline.step_counter`). One long log gets
 one line per step, redrawn in place while the step runs with a bar, its fraction and the ETAs of
 the step and the whole log (`logscan.cli.progress_bar`; a frozen "filtering..." for 30 s looks
 like a hang), and the time it took once the next begins. Only on a terminal, and never under CI
@@ -42,8 +43,8 @@ def echo_step(message: str) -> None:
 
 
 def echo_fraction(done: int, total: int) -> None:
-    """The step under way has done ``done`` of ``total`` (the bytes a reader has read); drawn with
-    the line's next tick. Module-level, as `echo_step`."""
+    """The step under way has done ``done`` of ``total`` (the bytes a reader has read, the steps the
+    EKF has filtered); drawn with the line's next tick. Module-level, as `echo_step`."""
     line = _LINE[0]
     if line is not None:
         line.fraction(done, total)

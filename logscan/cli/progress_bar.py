@@ -2,9 +2,9 @@
 way and for the whole log ("logscan: f.mcap: reading [#####.......] 41% ETA 3 s, log 21 s").
 
 What is measured: the bytes a reader has read of the file (`logscan.readers.read_log`'s
-``progress``, called per block of the file, never per message) give the reading step its fraction.
-The filter is one compiled call over all samples (it cannot resume from a block's end, see
-`logscan.pipeline.refilter`), the detectors are one call each: their fraction is estimated from
+``progress``, called per block of the file, never per message) give the reading step its fraction;
+the steps the EKF has filtered (counted by its kernel as it runs, `logscan.pipeline.step_counter`)
+give the filtering step its own. The detectors are one call each: their fraction is estimated from
 the time model below, and drawn with a "~".
 
 The time model (`EtaModel`): every step of an analysis does work in proportion to the log's size

@@ -83,6 +83,9 @@ class EkfBuffers(NamedTuple):
     seeded: np.ndarray  # (N, G) bool
     diverged: np.ndarray  # (N,) bool
     input_held: np.ndarray  # (N,) bool
+    # (1,) int64: the steps filtered so far, written at every step; the kernel runs without the GIL,
+    # so a thread can read it while the kernel runs (a progress bar counting filter steps)
+    steps_done: np.ndarray
 
 
 # =============================================================================================

@@ -19,7 +19,8 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
-from logscan.pipeline.stages import FILTERS, LoadedProfile, Prepared
+from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
+from logscan.pipeline.step_counter import counted_steps
 from logscan.profiles import builtin, load_profile, parse_profile, ros
 from logscan.readers import detect_format, read_embedded_profile, read_log
 from logscan.readers.csv_reader import csv_log_name
@@ -189,7 +190,7 @@ def prepare(
         wanted = wanted | RECOVERY_NEEDS
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     prepared.warnings.extend(_read_warnings(log, run))
-    _run_filters(prepared, wanted, compiling, step)
+    _run_filters(prepared, wanted, compiling, step, fraction)
     return prepared
 
 
@@ -221,9 +222,11 @@ def _read_warnings(log: Log, run: AlignedRun) -> list[str]:
     return warnings
 
 
-def _run_filters(prepared: Prepared, wanted: Needs, compiling: Compile, step: Progress) -> None:
+def _run_filters(
+    prepared: Prepared, wanted: Needs, compiling: Compile, step: Progress, fraction: Fraction | None
+) -> None:
     """Run each filter the needs ask for once, into ``prepared.traces``; the EKF's divergence
-    episodes become warnings."""
+    episodes become warnings. ``fraction`` hears the steps a counting filter has done."""
     for name, parts in wanted.filters.items():
         if name not in FILTERS:
             raise ProfileError(
@@ -232,7 +235,11 @@ def _run_filters(prepared: Prepared, wanted: Needs, compiling: Compile, step: Pr
             )
         step("filtering")
         compiling.wait()
-        prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
+        if name not in COUNTS_STEPS:
+            prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
+            continue
+        with counted_steps(prepared.run.n_steps, fraction) as steps_done:
+            prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts), steps_done=steps_done)
     ekf = prepared.trace
     for episode in ekf.divergence_episodes if ekf is not None else ():
         prepared.warnings.append(f"filter diverged: {episode}")

@@ -28,9 +28,10 @@ from logscan.traces import EkfTrace
 BLOCK = 4096  # steps per kernel call: its full P, K and S buffers are ~2.4 KB per step (n = m = 12)
 
 
-def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None) -> EkfTrace:
+def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None, steps_done=None) -> EkfTrace:
     """`run_ekf` with the trace ``parts`` asked for ("K", "S", "P", "y"); K and S, when asked,
-    re-filtered block by block on read (`Refiltered`) instead of held for the whole log."""
+    re-filtered block by block on read (`Refiltered`) instead of held for the whole log.
+    ``steps_done``: `run_ekf`'s progress counter."""
     heavy = parts & {"K", "S"}
     trace = run_ekf(
         model,
@@ -41,6 +42,7 @@ def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None) -> EkfTra
         store_S="S" in parts and "P" in parts,
         full_P="P" in parts,
         store_innovations="y" in parts,
+        steps_done=steps_done,
     )
     if heavy and "P" not in parts:  # with the full P asked for, the trace holds them all anyway
         source = Refiltered(pack_run(model, run, x0=x0, P0=P0), trace, heavy)

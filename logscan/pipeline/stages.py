@@ -29,12 +29,12 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.traces import EkfTrace
 
 
-def _run_ekf(model, run, parts: frozenset[str], x0=None, P0=None):
+def _run_ekf(model, run, parts: frozenset[str], x0=None, P0=None, steps_done=None):
     # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
     # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run. x0, P0: a
     # checkpoint to start from (a probe re-filtering a slice), else the model's prior. K and S, when
     # asked, are filtered again block by block as they are read (`logscan.pipeline.refilter`)
-    return run_ekf_parts(model, run, parts, x0=x0, P0=P0)
+    return run_ekf_parts(model, run, parts, x0=x0, P0=P0, steps_done=steps_done)
 
 
 def _run_ubikf(model, run, parts: frozenset[str]):
@@ -49,6 +49,9 @@ def _run_ubikf(model, run, parts: frozenset[str]):
 
 # Filter name -> function(model, aligned run, trace parts to keep) -> trace. A new filter is one line.
 FILTERS: dict[str, Callable[..., Any]] = {"ekf": _run_ekf, "ubikf": _run_ubikf}
+# The filters that count their steps into a ``steps_done`` array as they run (`logscan.pipeline.step_counter`);
+# the others' progress is estimated from the time the step takes on other logs.
+COUNTS_STEPS = frozenset({"ekf"})
 
 
 @dataclass
