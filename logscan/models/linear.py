@@ -12,6 +12,8 @@ Profile parameters (`[vehicle] model = "linear"`, `params = {...}`):
  - `dt`: period of discrete matrices (required when `continuous = false`; the grid must match).
  - `states`, `inputs`: optional names; `outputs`: optional table group -> names (unique, one per
    row or column).
+ - `radius`, `interval`: optional interval matrices for the UBIKF, each matrix as a radius around
+   the point matrix or as [lo, hi] per entry (`logscan.models.linear_intervals`).
 Every matrix must be finite and of the right shape; Q symmetric positive semi-definite, a covariance
 R positive definite, standard deviations > 0; D, R, range and outputs only for groups of C. Every
 problem is reported at once (one ModelError whose `problems` lists them).
@@ -30,9 +32,11 @@ from logscan.models.dispatch import LINEAR_ID
 from logscan.models.interval_model import IntervalModel
 from logscan.models.linear_intervals import (
     MAX_UNCERTAIN_ENTRIES,
+    ProfileIntervals,
     linear_interval_model,
+    parse_interval,
     parse_radius,
-    uncertain_entries,
+    q_interval_problem,
 )
 
 
@@ -136,7 +140,9 @@ class LinearBase(Model):
         return super().covariance_problems(dt)
 
 
-_KNOWN = ("A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs", "radius")
+_KNOWN = (
+    "A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs", "radius", "interval",
+)  # fmt: skip
 _DEFAULT_RANGE = 1e12
 
 
@@ -301,21 +307,42 @@ class LinearModel(LinearBase):
         if B is not None:
             self.input_names = _names(p.get("inputs"), "inputs", tuple(f"u{i}" for i in range(B.shape[1])), problems)
         self.groups, self._R_full = self._group_specs(C, D, problems)
-        self._radius = (
-            {} if A is None or B is None else parse_radius(p.get("radius"), A.shape[0], B.shape[1], C, problems)
-        )
-        if continuous and len(uncertain_entries(self._radius)) > MAX_UNCERTAIN_ENTRIES:
+        self._intervals = ProfileIntervals()
+        if A is not None and B is not None:
+            self._intervals = self._profile_intervals(A, B, C, None if continuous else Q, problems)
+        uncertain = len(self._intervals.uncertain_entries())
+        if continuous and uncertain > MAX_UNCERTAIN_ENTRIES:
             problems.append(
-                f"linear model: {len(uncertain_entries(self._radius))} entries of continuous A, B have a radius; "
+                f"linear model: {uncertain} entries of continuous A, B have a radius or an interval; "
                 f"vertex evaluation takes at most {MAX_UNCERTAIN_ENTRIES} (or discrete matrices: continuous = false)"
             )
         raise_problems(problems)
         self._setup(A, B, C, D, Q, continuous, dt)
 
+    def _profile_intervals(self, A, B, C: dict, Q_discrete, problems: list[str]) -> ProfileIntervals:
+        """The profile's ``radius`` and ``interval`` checked (``Q_discrete``: Q when it is the
+        discrete covariance, None when the grid period sets it)."""
+        p = self.params
+        radius = parse_radius(p.get("radius"), A.shape[0], B.shape[1], C, problems)
+        point = {
+            "n": A.shape[0], "A": A, "B": B, "Q": Q_discrete, "C": C,
+            "R": {g: self.default_R(g) for g in C if g in self.groups},
+        }  # fmt: skip
+        return ProfileIntervals(radius, parse_interval(p.get("interval"), point, p.get("radius"), problems))
+
+    def covariance_problems(self, dt: float) -> list[str]:
+        """`LinearBase.covariance_problems`, then whether Q's interval holds the discrete
+        covariance at ``dt`` (a continuous model's is known only with the grid period)."""
+        found = super().covariance_problems(dt)
+        if not found and self._continuous:
+            issue = q_interval_problem(self._intervals, self.default_Q(dt))
+            found += [f"{issue} (at dt = {dt:g} s)"] if issue else []
+        return found
+
     def interval_model(self, dt: float) -> IntervalModel:
-        """The UBIKF's interval model: the point matrices +- the profile's ``radius``
-        (`logscan.models.linear_intervals`)."""
-        return linear_interval_model(self, self._radius, dt, discretise)
+        """The UBIKF's interval model: the point matrices +- the profile's ``radius``, or its
+        ``interval`` boxes (`logscan.models.linear_intervals`)."""
+        return linear_interval_model(self, self._intervals, dt, discretise)
 
     def _group_specs(self, C: dict, D: dict, problems: list[str]) -> tuple[dict[str, GroupSpec], dict]:
         """GroupSpecs of C's groups (names, noise from R, ranges) and the full R matrices given."""
