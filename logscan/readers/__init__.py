@@ -205,8 +205,13 @@ def read_log(
 
     ``topics`` are source topic names (MCAP and bag topics, ULog ``topic_instance`` names, CSV file
     topics) or channel names; a reader keeps a topic when it or any channel under it is asked for.
-    ``progress(done, total)``: the bytes read so far, a block at a time (an MCAP's chunks, a CSV
-    directory's files); the readers that parse the file in one call (ULog, a CSV file, bags) do not call it.
+    ``progress(done, total)``: the bytes read so far of ``total`` (the file's size; a directory's
+    files), a block at a time, never per message: an MCAP's chunks, a ROS 1 bag's chunks (a bag
+    read through rosbags, a rosbag2 ``.db3``: every 4096 messages, estimated from the message count),
+    a CSV directory's files, a CSV file's parse and columns, a ULog's framing, definitions and
+    topics. Multi-stage reads (ULog, a CSV file) weight each stage's bytes by its share of the read's
+    time (`common.StagedBytes`). ``done`` never decreases, and the last call is ``(total, total)``.
+    Registered readers (`register_reader`) are not given it.
     """
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
@@ -219,16 +224,16 @@ def read_log(
     if fmt == "ulog":
         from logscan.readers.ulog_reader import read_ulog
 
-        return read_ulog(path, wanted)
+        return read_ulog(path, wanted, progress=progress)
     if fmt in ("ros1bag", "rosbag2"):
         from logscan.readers.rosbag import read_rosbag
 
-        return read_rosbag(path, wanted, use_header_stamp=use_header_stamp)
+        return read_rosbag(path, wanted, use_header_stamp=use_header_stamp, progress=progress)
     from logscan.readers.csv_reader import read_csv, read_csv_dir
 
     if fmt == "csv-dir":
         return read_csv_dir(path, wanted, progress=progress)
-    return read_csv(path, wanted)
+    return read_csv(path, wanted, progress=progress)
 
 
 def read_embedded(path: str | os.PathLike) -> tuple[str | None, dict | None]:

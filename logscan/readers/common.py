@@ -1,10 +1,11 @@
 """Helpers every reader shares: format magic bytes, which inputs may be opened and how OS errors read,
-which topics and channels are wanted, time-order warnings."""
+which topics and channels are wanted, time-order warnings, byte progress of a read in stages."""
 
 from __future__ import annotations
 
 import errno
 import os
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -101,3 +102,35 @@ def report_time_order(t_ns: np.ndarray, label: str, source: SourceInfo, note: st
         f"{duplicates} duplicate(s)); kept in file order, alignment sorts and deduplicates"
         + (f" ({note})" if note and backwards else "")
     )
+
+
+class StagedBytes:
+    """``progress(done, total)`` of a read that passes over one file in stages (frame it, parse its
+    definitions, convert its columns), for a bar with an ETA: ``total`` is the file's size, ``done``
+    that size times the share of the read done. A stage's own part is a byte fraction (bytes
+    framed, bytes of the topics converted so far) weighted by the stage's measured share of the
+    read's time, so the bar advances about evenly in time rather than jumping to the end after a
+    fast framing pass. ``done`` never decreases and never exceeds ``total``; `finish` reports
+    ``(total, total)``."""
+
+    def __init__(self, progress: Callable[[int, int], None], size: int, shares: Sequence[float]) -> None:
+        self.progress = progress
+        self.size = size
+        scale = 1.0 / sum(shares)
+        self.shares = [share * scale for share in shares]
+        self.starts = [sum(self.shares[:stage]) for stage in range(len(shares))]
+        self.done = 0
+
+    def at(self, stage: int, fraction: float) -> None:
+        """Stage ``stage`` (0-based) is ``fraction`` (0..1, a byte fraction of that stage) done."""
+        share = self.starts[stage] + self.shares[stage] * min(max(fraction, 0.0), 1.0)
+        self.done = max(self.done, min(self.size, int(share * self.size)))
+        self.progress(self.done, self.size)
+
+    def at_bytes(self, stage: int, done: int) -> None:
+        """Stage ``stage`` has passed ``done`` bytes of the file."""
+        self.at(stage, done / max(1, self.size))
+
+    def finish(self) -> None:
+        self.done = self.size
+        self.progress(self.size, self.size)

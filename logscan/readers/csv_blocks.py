@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -81,16 +82,38 @@ def sniff_delimiter(header: str) -> str:
     return best if counts[best] else ","
 
 
-def load_columns(path: Path) -> CsvColumns:
+def load_columns(path: Path, on_read: Callable[[int], None] | None = None) -> CsvColumns:
     """The file's raw columns, read a block of rows at a time; one-line InputErrors for every
-    unreadable case."""
-    import pandas as pd  # here, not at module import: reading an MCAP never loads pandas
-
+    unreadable case. ``on_read(bytes of the file read)``: before and after the parse of a file of
+    plain numbers (one kernel call), or after each block pandas reads."""
     header = _header_line(path)
     sep = sniff_delimiter(header)
+    if on_read is not None:
+        on_read(0)
     fast = _plain_numbers(path, header, sep)
     if fast is not None:
+        if on_read is not None:
+            on_read(path.stat().st_size)
         return fast
+    names, pieces, rows = _read_blocks(path, sep, on_read)
+    if not names:  # a header and no rows
+        names = [str(c).strip() for c in next(csv.reader(io.StringIO(header), delimiter=sep), [])]
+    if rows == 0:
+        raise InputError(f"CSV has a header ({len(names)} column(s)) but no data rows", path=str(path))
+    cut_row = _cut_last_row(path, sep, len(names))
+    if cut_row:
+        rows -= 1
+        for parts in pieces.values():
+            parts[-1] = parts[-1].iloc[:-1]
+    return CsvColumns(names, pieces, rows, cut_row)
+
+
+def _read_blocks(
+    path: Path, sep: str, on_read: Callable[[int], None] | None
+) -> tuple[list[str], dict[str, list[pd.Series]], int]:
+    """(column names, each column's pieces, rows) read by pandas a block of rows at a time."""
+    import pandas as pd  # here, not at module import: reading an MCAP never loads pandas
+
     names: list[str] = []
     pieces: dict[str, list[pd.Series]] = {}
     rows = 0
@@ -120,6 +143,8 @@ def load_columns(path: Path) -> CsvColumns:
                     pieces[name].append(block[column].copy())  # its own data: the block goes
                 rows += len(block)
                 del block
+                if on_read is not None:
+                    _report_read(reader, on_read)
     except UnicodeDecodeError as exc:
         raise InputError(
             f"not UTF-8 text (bad byte at offset {exc.start} of a block)", path=str(path), hint="save the CSV as UTF-8"
@@ -131,16 +156,22 @@ def load_columns(path: Path) -> CsvColumns:
         raise InputError(
             f"malformed CSV: {first}", path=str(path), hint="every row needs as many fields as the header"
         ) from None
-    if not names:  # a header and no rows
-        names = [str(c).strip() for c in next(csv.reader(io.StringIO(header), delimiter=sep), [])]
-    if rows == 0:
-        raise InputError(f"CSV has a header ({len(names)} column(s)) but no data rows", path=str(path))
-    cut_row = _cut_last_row(path, sep, len(names))
-    if cut_row:
-        rows -= 1
-        for parts in pieces.values():
-            parts[-1] = parts[-1].iloc[:-1]
-    return CsvColumns(names, pieces, rows, cut_row)
+    return names, pieces, rows
+
+
+def _report_read(reader, on_read: Callable[[int], None]) -> None:
+    """``on_read`` of the bytes pandas has read of the file: the position of the binary file under
+    its text handle (ahead of the rows parsed by at most its read buffer); no call when pandas'
+    handle does not say (its ``handles`` are not public API)."""
+    handle = getattr(getattr(reader, "handles", None), "handle", None)
+    tell = getattr(getattr(handle, "buffer", handle), "tell", None)
+    if tell is None:
+        return
+    try:
+        position = int(tell())
+    except (OSError, ValueError, TypeError):
+        return
+    on_read(position)
 
 
 def _plain_numbers(path: Path, header: str, sep: str) -> CsvColumns | None:

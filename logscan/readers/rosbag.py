@@ -24,6 +24,7 @@ rosbag2) is one InputError line; a bag that fails part way is returned with what
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,15 +38,26 @@ from logscan.readers.rosbag1_chunks import ROS1_HINT, read_chunks, ros1_layout
 from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
 
+_PROGRESS_MESSAGES = 4096  # messages read through rosbags between two progress calls
 ROS2_HINT = "check the copy; a rosbag2 database is read-only here, so repair it with `ros2 bag reindex` or sqlite3"
 
 
-def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False) -> Log:
-    """Read the ROS 1 bag, rosbag2 ``.db3`` or rosbag2 directory ``path`` into a Log."""
+def read_rosbag(
+    path: str | os.PathLike,
+    wanted: set[str] | None,
+    *,
+    use_header_stamp: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> Log:
+    """Read the ROS 1 bag, rosbag2 ``.db3`` or rosbag2 directory ``path`` into a Log.
+
+    ``progress(done, total)``: the bytes of the bag read (a directory: of its files), after each
+    chunk of a ROS 1 bag, every `_PROGRESS_MESSAGES` messages read through rosbags, and at the end
+    (``(total, total)``); a directory holding one MCAP reports as `read_mcap` does."""
     p = Path(path)
     mcap_file = single_mcap(p)
     if mcap_file is not None:
-        log = read_mcap(mcap_file, wanted, use_header_stamp=use_header_stamp)
+        log = read_mcap(mcap_file, wanted, use_header_stamp=use_header_stamp, progress=progress)
         log.source.path, log.source.format = str(p), "rosbag2"
         return log
     ros1 = not p.is_dir() and _is_ros1(p)
@@ -67,12 +79,13 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
         columns = TopicColumns(store)
         if ros1 and _chunk_walk_possible(reader, wire):
             layouts = {c.msgtype: ros1_layout(wire, store, c.msgtype) for c in chosen}
-            walked = read_chunks(str(p), reader, chosen, layouts, source)
+            walked = read_chunks(str(p), reader, chosen, layouts, source, progress=progress)
             for topic, flat, times in walked.decoded:
                 pieces.add(topic, flat, times)
             batches = walked.raw
         else:
-            batches = _read_messages(reader, chosen, source)
+            counted = None if progress is None else _MessageBytes(progress, _bag_size(p), chosen)
+            batches = _read_messages(reader, chosen, source, counted)
     for topic, msgtype in list(batches):
         times, datas = batches.pop((topic, msgtype))  # each topic's raw bytes go once decoded
         _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
@@ -83,7 +96,31 @@ def read_rosbag(path: str | os.PathLike, wanted: set[str] | None, *, use_header_
         source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(undecodable)))
     if use_header_stamp:
         source.time_source = pieces.time_source()
+    if progress is not None:
+        size = _bag_size(p)
+        progress(size, size)
     return Log(channels=channels, source=source)
+
+
+def _bag_size(path: Path) -> int:
+    """The bytes of a bag file, or of the files of a rosbag2 directory."""
+    if not path.is_dir():
+        return path.stat().st_size
+    return sum(entry.stat().st_size for entry in path.iterdir() if entry.is_file())
+
+
+class _MessageBytes:
+    """Byte progress of a read through rosbags, which gives messages, not file positions: the
+    messages read so far out of the connections' total ``msgcount``, scaled to the bag's size (an
+    estimate: messages are not all the same size, and the bag holds other records too)."""
+
+    def __init__(self, progress: Callable[[int, int], None], size: int, connections: list) -> None:
+        self.progress = progress
+        self.size = size
+        self.total = max(1, sum(int(c.msgcount) for c in connections))
+
+    def __call__(self, count: int) -> None:
+        self.progress(min(self.size, self.size * count // self.total), self.size)
 
 
 def _chunk_walk_possible(reader, wire) -> bool:
@@ -113,14 +150,18 @@ def _decode_topic(
     pieces.add(topic, flat, times)
 
 
-def _read_messages(reader, connections: list, source: SourceInfo) -> dict[tuple[str, str], tuple[list, list]]:
+def _read_messages(
+    reader, connections: list, source: SourceInfo, counted: _MessageBytes | None = None
+) -> dict[tuple[str, str], tuple[list, list]]:
     """(topic, msgtype) -> (receive times, raw message bytes) of ``connections``, in bag order. A
-    bag that fails part way keeps what was read before, and the source says so."""
+    bag that fails part way keeps what was read before, and the source says so. ``counted(messages
+    read)`` every `_PROGRESS_MESSAGES` messages: a counter per message, not a call."""
     batches: dict[tuple[str, str], tuple[list, list]] = {}
     if not connections:
         return batches
     count = 0
     last = None
+    next_report = _PROGRESS_MESSAGES if counted is not None else -1  # -1: count never reaches it
     try:
         for connection, timestamp, data in reader.messages(connections=connections):
             key = (connection.topic, connection.msgtype)
@@ -131,6 +172,9 @@ def _read_messages(reader, connections: list, source: SourceInfo) -> dict[tuple[
             batch[1].append(data)
             count += 1
             last = timestamp
+            if count == next_report and counted is not None:
+                counted(count)
+                next_report += _PROGRESS_MESSAGES
     except Exception as exc:  # noqa: BLE001 - rosbags' errors on damaged data are many kinds
         if not count:
             raise InputError(

@@ -18,6 +18,8 @@ source is partial and says how many chunks and messages; nothing recovered is an
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -187,21 +189,34 @@ def _index_arrays(reader, connections: list) -> tuple[np.ndarray, ...]:
     return table[:, 0], table[:, 1], table[:, 2], table[:, 3]
 
 
-def read_chunks(path: str, reader, connections: list, layouts: dict, source: SourceInfo) -> ChunkRead:
+def read_chunks(
+    path: str,
+    reader,
+    connections: list,
+    layouts: dict,
+    source: SourceInfo,
+    *,
+    progress: Callable[[int, int], None] | None = None,
+) -> ChunkRead:
     """Decode the messages of ``connections`` chunk by chunk (``layouts``: msgtype -> layout or
     None). A chunk that cannot be read is skipped with its messages and the walk goes on; the
-    source then says how much was skipped and recovered (nothing recovered: InputError)."""
+    source then says how much was skipped and recovered (nothing recovered: InputError).
+    ``progress(end of the chunk, file size)`` after each chunk read (chunks in file order)."""
     result = ChunkRead([], {})
     numbers, times, chunk_pos, offsets = _index_arrays(reader, connections)
     ids = np.array([c.id for c in connections], dtype=np.int64)
     bounds = np.flatnonzero(np.diff(chunk_pos)) + 1
     damaged: list[tuple[int, int, str]] = []  # (chunk position, messages skipped, why)
     with open(path, "rb") as fh:
+        size = os.fstat(fh.fileno()).st_size
         for first, last in zip(np.r_[0, bounds].tolist(), np.r_[bounds, chunk_pos.size].tolist()):
             if first == last:
                 continue
             position = int(chunk_pos[first])
-            found = _read_chunk(fh, reader.chunks.get(position), offsets[first:last])
+            chunk = reader.chunks.get(position)
+            found = _read_chunk(fh, chunk, offsets[first:last])
+            if progress is not None:
+                progress(min(size, chunk.datapos + chunk.datasize if chunk is not None else position), size)
             if not isinstance(found, str) and (found[3] != ids[numbers[first:last]]).any():
                 found = "a message record of another connection than the index says"
             if isinstance(found, str):

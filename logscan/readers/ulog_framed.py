@@ -26,6 +26,7 @@ import contextlib
 import io
 import mmap
 import struct
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
@@ -264,28 +265,30 @@ def _framed_ulog_class(plan: _Plan, wanted: set[str] | None):
     return FramedULog
 
 
-def parse_clean(path: str, names: list[str] | None) -> tuple | None:
+def parse_clean(path: str, names: list[str] | None, on_framed: Callable[[], None] | None = None) -> tuple | None:
     """(pyulog ULog, clean read watch, chatter) of an undamaged file read without pyulog's data-message
     loop; None when the file is not clean or cannot be parsed (the caller then reads it the careful
-    way, which says why)."""
+    way, which says why). ``on_framed()`` is called once the whole file is framed and found clean."""
     try:
         with open(path, "rb") as fh:
             mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except (OSError, ValueError):  # unreadable or empty: the careful read says so
         return None
     try:
-        return _parse_mapped(np.frombuffer(mapped, dtype=np.uint8), names)
+        return _parse_mapped(np.frombuffer(mapped, dtype=np.uint8), names, on_framed)
     finally:
         with contextlib.suppress(BufferError):  # an array still viewing it keeps the map alive
             mapped.close()
 
 
-def _parse_mapped(buf: np.ndarray, names: list[str] | None) -> tuple | None:
+def _parse_mapped(buf: np.ndarray, names: list[str] | None, on_framed: Callable[[], None] | None) -> tuple | None:
     from pyulog.exceptions import ULogException
 
     plan = _clean_plan(buf)
     if plan is None:
         return None
+    if on_framed is not None:
+        on_framed()
     kept_offsets, kept_sizes, kept_types = plan.kept
     reduced_array = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes)
     if plan.appended is not None:  # read straight through: the same messages in the same order

@@ -72,7 +72,8 @@ def read_mcap(
     progress: Callable[[int, int], None] | None = None,
 ) -> Log:
     """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps;
-    ``progress(bytes passed, file size)`` is called a chunk or window of the file at a time."""
+    ``progress(bytes passed, file size)`` is called a chunk or window of the file at a time, and
+    with (file size, file size) at the end."""
     path = str(path)
     decoding = _Decoding(path, use_header_stamp)
     scan = Scan(path, wanted)
@@ -91,6 +92,9 @@ def read_mcap(
         source.time_source = decoding.time_source()
     log = Log(channels=channels, source=source)
     attach_logscan_records(log)
+    if progress is not None:
+        size = os.path.getsize(path)
+        progress(size, size)
     return log
 
 
