@@ -20,7 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-from logscan.memory import return_freed_arrays_to_the_system
+from logscan.memory import reuse_freed_arrays
 
 
 def rss_mib() -> float:
@@ -92,7 +92,7 @@ def profile(path: str) -> tuple[dict[str, float], list[tuple[float, str]], float
     """The peak RSS per step of analysing ``path``, the arrays held after the detectors, the log's hours."""
     from logscan.pipeline import analyze_log
 
-    return_freed_arrays_to_the_system()  # as the CLI does
+    reuse_freed_arrays()  # as the CLI does
     peaks = PhasePeaks()
     analysis = analyze_log(path, free_series=True, sensor_views=True, progress=peaks.step)
     held = held_arrays(analysis)

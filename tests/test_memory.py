@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from logscan.memory import return_freed_arrays_to_the_system
+from logscan.memory import reuse_freed_arrays
 from logscan.needs import Needs
 from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
 from logscan.readers import read_log
@@ -43,7 +43,7 @@ def test_innovations_are_kept_only_when_a_detector_asks(sample):
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
 def test_the_mmap_threshold_is_fixed_on_glibc():
-    assert return_freed_arrays_to_the_system() is True
+    assert reuse_freed_arrays() is True
 
 
 def test_the_filter_reads_the_aligned_samples_in_place(sample):

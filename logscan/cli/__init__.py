@@ -1,6 +1,6 @@
 """Command-line interface of logscan (click)."""
 
-from logscan.memory import return_freed_arrays_to_the_system
+from logscan.memory import reuse_freed_arrays
 
-# a command-line run owns its process: large arrays freed between phases go back to the system
-return_freed_arrays_to_the_system()
+# a command-line run owns its process: freed arrays are reused from the heap, the largest returned
+reuse_freed_arrays()
