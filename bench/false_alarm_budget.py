@@ -200,16 +200,20 @@ def count_one(job: Job) -> dict:
     with tempfile.TemporaryDirectory() as directory:
         path = _simulate(job.model, job.aggressive, job.seed, job.duration_s, directory)
         analysis = analyze_log(path, job.profile, detector_names=list(job.detectors), tables=job.tables)
-    groups = alarm_groups(analysis.results)
+    # a hierarchical log's further loops (the ground robot's motors) are judged too: their alarms
+    # join their detector's count, their signals naming the loop (`alarm_groups`)
+    loops = {name: loop.results for name, loop in analysis.loops.items()}
+    groups = alarm_groups(analysis.results, loops)
     alarms = [
         {
             "detector": result.detector,
-            "signal": alarm.signal,
+            "signal": prefix + alarm.signal,
             "start": float(alarm.start),
             "end": float(alarm.end),
             "ratio": None if alarm.peak_ratio is None else float(alarm.peak_ratio),
         }
-        for result in analysis.results
+        for prefix, results in [("", analysis.results), *((f"{n}/", r) for n, r in loops.items())]
+        for result in results
         for alarm in result.alarms
     ]
     return {

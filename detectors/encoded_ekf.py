@@ -55,6 +55,9 @@ POSITIVE = Interval(float, 0, None, closed="neither")
 # mu +- rho s: `logscan train --tune` picks at most 20 plus its margin; a wider band hides faults
 BAND = multiplier_bound(0, 50, "spreads of the healthy statistic around its mean")
 RAW_RHO = 4.0  # rho of the raw e_x's adaptive band when unset (the specification's prototype value)
+# a logged on-board estimate's relative rounding: half a unit in the 7th significant digit (7 digits:
+# what text loggers print and float32's 24-bit mantissa holds, whose half-ulp is 6e-8 relative)
+LOGGED_PRECISION = 5e-7
 
 # The paper's initial coding vectors (section VI), used by the constant-CV baseline.
 PAPER_CV0 = {
@@ -279,8 +282,8 @@ class EncodedEkfDetector(Detector):
                 result, t, "e_v", e_v, defined_v, self.window_v, self.rho_v, self.rel_floor_v * np.abs(scale_v)
             )
         if self.onboard_state_check and _any_finite(run.onboard_state):
-            e_s, defined_s = self.onboard_state_series(run, trace, cv_of, model, defined)
-            self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s)
+            e_s, defined_s, floor_s = self.onboard_state_series(run, trace, cv_of, model, defined)
+            self._adaptive_check(result, t, "e_s", e_s, defined_s, self.window_v, self.rho_s, floor_s)
             result.info["onboard_state_check"] = True
 
     def end_delays(self, run, trace, result) -> dict[str, float]:
@@ -378,25 +381,37 @@ class EncodedEkfDetector(Detector):
         return e_v, defined_v, mean_pred
 
     def onboard_state_series(self, run, trace, cv_of, model, defined):
-        """(e_s (N,), defined (N,)): e_s = CV_k (x_onboard_k - x_post_k) over the logged states.
+        """(e_s (N,), defined (N,), spread floor (N,)): e_s = CV_k (x_onboard_k - x_post_k) over the
+        logged states.
 
         The offline analogue of the paper's check on the estimator's state computation: the vehicle's
         own estimate against logscan's shadow filter on the same data. Angle states (those a wrapped
         measurement observes directly) are compared modulo 2 pi.
+
+        The two estimators run one model on one data, so e_s is mostly the rounding of the logged
+        estimate, and that grows with the value: a logged number keeps about 7 significant digits
+        (float32: 7.2; text loggers print 7), so it is within LOGGED_PRECISION |x| of the estimate. An
+        unwrapped heading crossing 100 or 1000 rad loses a digit at once, and a band fitted on the
+        finer digits alarmed there (8 false alarms in 2 h of the ground robot). The floor is that
+        rounding's spread, sqrt(sum_i (CV_i LOGGED_PRECISION x_i)^2 / 3) (uniform error), the least
+        that e_s can be trusted to.
         """
         n_steps, n = trace.x_post.shape
         angles = _angle_states(model, n)
-        e_s, any_logged = np.empty(n_steps), np.empty(n_steps, dtype=bool)
+        e_s, floor, any_logged = np.empty(n_steps), np.empty(n_steps), np.empty(n_steps, dtype=bool)
         for rows in row_blocks(n_steps):  # (N, n) temporaries a block at a time
             onboard = run.onboard_state[rows]
             logged = np.isfinite(onboard)
+            cv = cv_of(rows)
             diff = np.where(logged, onboard - trace.x_post[rows], 0.0)
             diff[:, angles] = (diff[:, angles] + np.pi) % (2.0 * np.pi) - np.pi
-            e_s[rows] = np.einsum("kn,kn->k", cv_of(rows), diff)
+            e_s[rows] = np.einsum("kn,kn->k", cv, diff)
+            rounding = np.where(logged, cv * (LOGGED_PRECISION * np.abs(onboard)), 0.0)
+            floor[rows] = np.sqrt(np.einsum("kn,kn->k", rounding, rounding) / 3.0)
             any_logged[rows] = logged.any(axis=1)
         defined_s = defined & any_logged
         e_s[~defined_s] = np.nan
-        return e_s, defined_s
+        return e_s, defined_s, floor
 
 
 def _any_finite(series: np.ndarray | None) -> bool:
