@@ -29,7 +29,7 @@ import numpy as np
 from logscan.detectors.base import Detector, DetectorResult, Needs
 from logscan.detectors.nis import chi2_threshold, window_sums
 from logscan.detectors.params import PERSIST, Boolean, Interval, StringList, alpha_bound, budget_bound
-from logscan.detectors.ubikf_bound import BoundView
+from logscan.detectors.ubikf_bound import BoundView, EnvelopeView
 from logscan.detectors.words import group_words
 from logscan.errors import UsageError
 from logscan.filters.box_chi2 import box_chi2_bounds
@@ -77,6 +77,22 @@ def _tests(ubikf, per_group: bool, per_channel: bool) -> list[tuple[str, str | N
         if per_channel and (size > 1 or several):
             tests += [(f"chi2.lower.{g}[{j}]", None, g, j) for j in range(int(size))]
     return tests
+
+
+def _report_views(result: DetectorResult, ubikf, point_trace, truth: dict | None) -> None:
+    """What the report draws of the UBIKF beside the statistics: its bound against the point EKF's
+    covariance (`BoundView`, when that trace has P_post_diag) and, on a simulated log whose ground
+    truth names the true state of some of its states, its envelopes (`EnvelopeView`; the true state
+    itself reaches the report in its run context, `logscan.report.run_context.true_states`)."""
+    point = getattr(point_trace, "P_post_diag", None)
+    if point is not None and point.shape[1] == ubikf.P_diag.shape[1]:
+        result.info["bound_view"] = BoundView(
+            ubikf.t, ubikf.P_trace, np.asarray(point, dtype=np.float64).sum(axis=1), ~ubikf.diverged
+        )
+    if set((truth or {}).get("true_state_fields") or ()) & set(ubikf.state_names):
+        result.info["envelope_view"] = EnvelopeView(
+            ubikf.t, tuple(ubikf.state_names), ubikf.x_mid, ubikf.x_lo, ubikf.x_hi, ubikf.P_diag, ~ubikf.diverged
+        )
 
 
 class Chi2Detector(Detector):
@@ -175,11 +191,7 @@ class Chi2Detector(Detector):
                 f"the UBIKF bound diverged on {int(ubikf.diverged.sum())} steps and restarted; those are not judged"
             )
         self._envelopes(result, ubikf)
-        point = getattr(trace or (context.get("traces") or {}).get("ekf"), "P_post_diag", None)
-        if point is not None and point.shape[1] == ubikf.P_diag.shape[1]:
-            result.info["bound_view"] = BoundView(
-                ubikf.t, ubikf.P_trace, np.asarray(point, dtype=np.float64).sum(axis=1), ~ubikf.diverged
-            )
+        _report_views(result, ubikf, trace or (context.get("traces") or {}).get("ekf"), context.get("truth"))
         result.info["extra_captions"] = {**EXTRA_CAPTIONS, **{s: ENVELOPE_CAPTION for s in self._states(ubikf)}}
         return result
 

@@ -46,6 +46,7 @@ class Trace:
     style: dict
     varying: bool = True
     t: np.ndarray | None = None  # the samples' own times, when they are not the whole grid
+    max_points: int | None = None  # its share of the page's points at most (a smooth band needs few)
 
 
 @dataclass

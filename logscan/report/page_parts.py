@@ -30,6 +30,7 @@ from logscan.report.kgn_view import kgn_rows
 from logscan.report.observability_figures import observability_rows
 from logscan.report.report_input import ReportInput
 from logscan.report.sensor_figures import named_group_figures
+from logscan.report.ubikf_truth_view import ubikf_truth_rows
 from logscan.report.ubikf_view import ubikf_rows
 from logscan.results import DetectorResult
 
@@ -71,6 +72,7 @@ DETECTOR_ROWS: list[Callable[[DetectorResult, PageInput], list[Figure]]] = [
     sensor_rows,
     kgn_rows,
     ubikf_rows,
+    ubikf_truth_rows,
 ]
 CONTEXT_ROWS: list[Callable[[PageInput], list[dict]]] = [
     run_context_rows,

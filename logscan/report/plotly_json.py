@@ -111,11 +111,13 @@ def span_trace(name: str, spans: list, fill: str) -> dict:
 def allocate_points(figures: list[Figure], budget: int) -> dict[int, int]:
     """Points per varying trace (by id), proportional to weight, within [floor, DEFAULT_MAX]; the
     floor is MIN_POINTS_PER_TRACE, lowered (to MIN_POINTS_FLOOR at least) when that many traces at
-    the floor would spend more than half the budget (the sensor figures of several groups)."""
+    the floor would spend more than half the budget (the sensor figures of several groups); a
+    trace's own ``max_points`` caps its share, floor or not."""
     varying = [tr for fig in figures for tr in fig.traces if tr.varying]
     total_weight = sum(tr.weight for tr in varying) or 1.0
     floor = max(MIN_POINTS_FLOOR, min(MIN_POINTS_PER_TRACE, budget // max(2 * len(varying), 1)))
-    return {id(tr): int(min(DEFAULT_MAX_POINTS, max(floor, budget * tr.weight / total_weight))) for tr in varying}
+    share = {id(tr): max(floor, budget * tr.weight / total_weight) for tr in varying}
+    return {id(tr): int(min(DEFAULT_MAX_POINTS, tr.max_points or DEFAULT_MAX_POINTS, share[id(tr)])) for tr in varying}
 
 
 def focus_windows(figures: list[Figure], t: np.ndarray) -> np.ndarray:

@@ -15,7 +15,10 @@ what the report shows beside the statistics is extracted right after alignment, 
   (``MAX_LOG_MESSAGES`` at most; the reader keeps 500) for the report's folded message table;
 - a ULog's parameters set away from their defaults and changed in flight (`logscan.report.parameters`);
 - the autopilot's states as intervals: armed (PX4 ``vehicle_status.arming_state`` 2) and in
-  failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`).
+  failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`);
+- a simulated log's true state (`logscan simulate` writes it on `TRUTH_STATE_TOPIC`, its ground
+  truth names the topic and fields) on the grid, for the model's states it gives (`true_states`):
+  the UBIKF's estimation error against its envelopes (`logscan.report.ubikf_truth_view`).
 """
 
 from __future__ import annotations
@@ -38,8 +41,10 @@ MAX_STATE_INTERVALS = 200
 MAX_LOG_MESSAGES = 500
 # every level a ULog message can have (pyulog's MessageLogging.log_level_str), most severe first
 ALL_LEVELS = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING", "NOTICE", "INFO", "DEBUG")
+# the topic `logscan simulate` writes the true state on (its ground truth's ``true_state_topic``)
+TRUTH_STATE_TOPIC = "/truth/state"
 # topics read beside a profile's for the states drawn in the report (absent topics cost nothing)
-STATE_TOPICS = ("vehicle_status_0",)
+STATE_TOPICS = ("vehicle_status_0", TRUTH_STATE_TOPIC)
 ARMED_STATE = 2.0  # PX4 vehicle_status.arming_state: ARMING_STATE_ARMED
 # a ULog message's level, as logscan.readers.ulog_reader writes it ("<s> s [<LEVEL>] <text>"), most severe first
 # a ULog message as logscan.readers.ulog_reader writes it: "<seconds> s [<LEVEL>] <text>"
@@ -80,6 +85,8 @@ class RunContext:
     log_messages: list[LoggedMessage] = field(default_factory=list)  # every level, in time order
     n_log_messages: int = 0  # how many the log holds (log_messages may be fewer)
     parameters: ParameterFacts | None = None  # a ULog's parameters away from their defaults, and changed
+    # a simulated log's true state on the grid, model state -> (N,) float64 (`true_states`); empty: no truth
+    true_states: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def _intervals(t: np.ndarray, on: np.ndarray, end: float) -> list[tuple[float, float]]:
@@ -233,10 +240,28 @@ def _message_count(metadata: dict, kept: int) -> int:
         return kept
 
 
+def true_states(log, run, model) -> dict[str, np.ndarray]:
+    """Model state -> its true value at each grid step (the latest truth sample at or before it,
+    NaN before the first), for the states the log's ground truth gives: ``true_state_fields`` on
+    ``true_state_topic``, as `logscan simulate` writes them; {} for a log without them."""
+    truth = getattr(log, "truth", None) or {}
+    topic, fields = truth.get("true_state_topic"), truth.get("true_state_fields") or ()
+    states = set(getattr(model, "state_names", ()))
+    channels = {name: log.channels.get(f"{topic}/{name}") for name in fields if name in states}
+    channels = {name: channel for name, channel in channels.items() if channel is not None and len(channel)}
+    grid_ns = run.start_ns + np.round(np.asarray(run.t, dtype=np.float64) * 1e9).astype(np.int64)
+    out = {}
+    for name, channel in channels.items():
+        i = np.searchsorted(np.asarray(channel.t, dtype=np.int64), grid_ns, side="right") - 1
+        values = np.asarray(channel.values, dtype=np.float64)
+        out[name] = np.where(i >= 0, values[np.clip(i, 0, None)], np.nan)
+    return out
+
+
 def run_context(run, model, log=None, mode_labels: dict[float, str] | None = None) -> RunContext:
     """The path and the mode of an aligned run (each None when the run has none; the mode's values
     named by ``mode_labels``, the profile's ``[mode] labels``), and, from its ``log`` (before its
-    samples are released), the autopilot's messages and states."""
+    samples are released), the autopilot's messages and states and a simulated log's true state."""
     context = RunContext(path=path_of(run, model), mode=mode_of(run), t_span=(float(run.t[0]), float(run.t[-1])))
     if context.mode is not None and mode_labels:
         context.mode.labels = dict(mode_labels)
@@ -246,4 +271,5 @@ def run_context(run, model, log=None, mode_labels: dict[float, str] | None = Non
         context.n_log_messages = _message_count(log.source.metadata, len(context.log_messages))
         context.parameters = parameter_facts(log.source.metadata, run.start_ns)
         context.states = autopilot_states(log.channels, run.start_ns, context.t_span[1])
+        context.true_states = true_states(log, run, model)
     return context
