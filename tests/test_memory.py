@@ -11,12 +11,16 @@ from logscan.memory import reuse_freed_arrays
 from logscan.needs import Needs
 from logscan.pipeline import create_detectors, load_profile_for, needs_of, prepare
 from logscan.readers import read_log
+from logscan.report.run_context import STATE_TOPICS
+from logscan.timebase.clock import GNSS_UTC_CHANNELS
 
 
 def test_prepare_releases_the_raw_samples_and_keeps_the_logs_facts(sample):
     path = sample("quad_imu_bias.mcap")
     loaded = load_profile_for(path, None)
-    before = read_log(path, topics=loaded.profile.topics()).summary()
+    # what prepare reads: the profile's topics and the report's context (states, a ULog's UTC)
+    context = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
+    before = read_log(path, topics=loaded.profile.topics() | context).summary()
     prepared = prepare(path, loaded, Needs.of(ekf=()))
     log = prepared.log
     assert log.channels and all(len(channel) == 0 for channel in log.channels.values())
