@@ -16,8 +16,8 @@ section states). Its parts, one module each:
   training alarm statistic, with 95 % margins, at the budget's per-window probability.
 - Alarm: kgn.<group>(w) = max over the group's columns of d_j(w) against rho for ``n_persist``
   consecutive judged windows (the shared alarm logic).
-- Operating envelope (`detectors.kgn_operating`): a window outside the box of the training windows'
-  input means and spreads is not judged; a flight mostly outside it is a `not checked` line.
+- Not judged (`detectors.kgn_operating`), said in `not checked` lines: windows outside the trained envelope,
+  steady stretches after a manoeuvre beyond the trained range, and any window of a linear model.
 - Blindness probe (`detectors.kgn_probe`): a step and a drift on each group's first channel (and a
   sensor-driven model's inputs), re-filtered from a checkpoint over a slice; z < rho: blind.
 """
@@ -25,6 +25,7 @@ section states). Its parts, one module each:
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +40,18 @@ from logscan.detectors.kgn_bins import (
     window_quantities,
 )
 from logscan.detectors.kgn_budget import alarm_statistic, budget_rho
-from logscan.detectors.kgn_operating import envelope_gate, fit_envelope, inside, operating_features, outside_line
+from logscan.detectors.kgn_operating import (
+    LINEAR_LINE,
+    envelope_gate,
+    fit_envelope,
+    fit_ranges,
+    inside,
+    memory_gate,
+    operating_features,
+    outside_line,
+    outside_ranges,
+    range_line,
+)
 from logscan.detectors.kgn_probe import run_probe
 from logscan.detectors.kgn_windows import (  # noqa: F401  (re-exported: the statistic's helpers)
     NO_MODE,
@@ -55,6 +67,7 @@ from logscan.detectors.kgn_windows import (  # noqa: F401  (re-exported: the sta
 from logscan.detectors.params import PERSIST, Interval, budget_bound, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
+from logscan.models.linear import LinearBase
 from logscan.results import NotChecked
 
 SPREAD_FLOOR = 1e-9  # relative floor of a column's spread: a zero spread alarms on rounding
@@ -86,7 +99,9 @@ class KgnDetector(Detector):
     requires_trace = True
     reads = frozenset({"K", "P_post_diag", "x_post", "mode", "u"})  # x_post, u: the operating point
     trained_attributes = ("reference_", "rho_", "blindness_", "envelope_")
-    state_version = 3  # 2: the operating envelope; 3: operating-point bins, rho from the budget
+    # 2: the operating envelope; 3: operating-point bins, rho from the budget; 4: the operating-point
+    # range and the linear model's data-independent gain
+    state_version = 4
     fit_params = (
         "window_s", "hold_s", "warmup_s", "settle_tol", "probe_size", "probe_slope", "probe_s", "probe_lead_s",
         "envelope_margin", "op_bins", "min_windows", "budget_per_hour", "proof_hours", "n_persist",
@@ -251,7 +266,7 @@ class KgnDetector(Detector):
                 f"warm-up (warmup_s = {self.warmup_s} s), or lower min_windows",
             )
         first = traces[0]
-        self.reference_ = {
+        self.reference_: dict[str, Any] = {
             "mode": "mode channel" if any(w.has_mode for w in wins) else "no mode channel",
             "groups": list(first.group_names),
             "offsets": [int(o) for o in first.group_offsets],
@@ -268,6 +283,14 @@ class KgnDetector(Detector):
         keep = [f for f, name in enumerate(wins[0].op_names) if not (sensors and name.startswith("mean "))]
         warm = [w.op[run.t[w.starts] >= w.warmup_end_s][:, keep] for run, w in zip(runs, wins)]
         self.envelope_ = fit_envelope([wins[0].op_names[f] for f in keep], warm, float(self.envelope_margin))
+        sources: dict[str, str] = {}
+        quantity_series(runs[0], traces[0], sources)
+        # the manoeuvres' range (`memory_gate`): a sensor-driven model's estimated states only
+        roles = {role for role, source in sources.items() if sensors and source == "state"}
+        after = [{r: w.quantities[r][run.t[w.starts] >= w.warmup_end_s] for r in roles} for run, w in zip(runs, wins)]
+        self.reference_["ranges"] = fit_ranges(after)
+        # a linear model's K (fixed Q, R: the Riccati recursion) never reads a measurement (`LINEAR_LINE`)
+        self.reference_["linear"] = isinstance(context.get("model"), LinearBase)
         judged = [w.judged & self.known(w) for w in wins]
         self.blindness_ = run_probe(self, runs, traces, wins, judged, context.get("model"), context.get("refilter"))
 
@@ -380,6 +403,20 @@ class KgnDetector(Detector):
             result.not_checked.append(NotChecked(outside_line(op, envelope, ~ok, seconds, total)))
         return judged & ~lost
 
+    def _in_range(self, run, w: Windows, judged: np.ndarray, result: DetectorResult) -> np.ndarray:
+        """``judged`` less the steady stretches after a manoeuvre beyond the trained operating-point
+        range (`detectors.kgn_operating.memory_gate`), said in a `not checked` line."""
+        ranges = self.reference_.get("ranges", {})
+        t_starts = run.t[w.starts]
+        outside = outside_ranges(w.quantities, ranges, w.starts.size) & (t_starts >= w.warmup_end_s)
+        outside &= ~w.judged  # the manoeuvres' windows (`memory_gate`)
+        lost = judged & memory_gate(outside, w.judged)
+        result.info["outside_range_s"] = float(lost.sum() * float(self.window_s))
+        if lost.any():
+            seconds = lost.sum() * float(self.window_s)
+            result.not_checked.append(NotChecked(range_line(w.quantities, ranges, outside, seconds)))
+        return judged & ~lost
+
     def _unbinned(self, w: Windows, known: np.ndarray, result: DetectorResult) -> None:
         """Say where steady windows had no trained operating-point bin (not judged there)."""
         missing = w.judged & ~known
@@ -406,6 +443,10 @@ class KgnDetector(Detector):
         known = self.known(w)
         self._unbinned(w, known, result)
         judged = self._in_envelope(run, w, w.judged & known, result)
+        if self.reference_.get("linear"):  # nothing to compare (`LINEAR_LINE`)
+            result.not_checked.append(NotChecked(LINEAR_LINE.format(seconds=judged.sum() * float(self.window_s))))
+            judged = np.zeros_like(judged)
+        judged = self._in_range(run, w, judged, result)
         stat = self._group_max(self._deviation(w))
         result.info["rho"] = rho
         result.info["rho_rule"] = self.reference_.get("rho_fit", {}).get("rule", "")

@@ -58,9 +58,10 @@ def _columns(names: list[str], wanted: tuple[str, ...]) -> list[int] | None:
     return [names.index(n) for n in wanted] if all(n in names for n in wanted) else None
 
 
-def quantity_series(run, trace) -> dict[str, np.ndarray]:
+def quantity_series(run, trace, sources: dict[str, str] | None = None) -> dict[str, np.ndarray]:
     """role -> (N,) the quantity per step, for the roles this model has (states from the filter's
-    posterior ``trace.x_post``, inputs from ``run.u``)."""
+    posterior ``trace.x_post``, inputs from ``run.u``); ``sources``, when given, gets role ->
+    "state" or "input"."""
     states = list(getattr(trace, "state_names", None) or [])
     inputs = list(getattr(run, "input_names", None) or [])
     x = getattr(trace, "x_post", None)
@@ -74,6 +75,8 @@ def quantity_series(run, trace) -> dict[str, np.ndarray]:
                 continue
             block = np.asarray(values, dtype=np.float64)[:, cols]
             out[role] = np.sqrt(np.sum(block * block, axis=1)) if how == "norm" else np.sum(block, axis=1)
+            if sources is not None:
+                sources[role] = source
             break
     return out
 

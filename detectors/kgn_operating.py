@@ -12,6 +12,8 @@ input held stale, does not count against it). K also carries the memory of P: af
 outside, the gains relax for seconds (measured: the position columns 20 spreads off at the start of
 a hover after an aggressive figure-eight, 2 after 3 s), so a window is judged only when every
 window that starts within ``hold_s`` before it is inside too: the same hold as the steady gate.
+The operating-point range (`fit_ranges`, `memory_gate`) takes the steady stretch after a manoeuvre
+beyond what training flew: the gain remembers it for longer than the hold.
 """
 
 from __future__ import annotations
@@ -99,3 +101,83 @@ def outside_line(features: np.ndarray, envelope: dict, outside: np.ndarray, seco
         f"outside the trained envelope for {seconds:.0f} s of {total:.0f} s judged ({cells}): the gain there "
         "is not compared with the reference (train on flights like this one to check them)"
     )
+
+
+# --- the operating-point range and the gain's memory of it -----------------------------------------
+# K carries the memory of P: after a manoeuvre harder than any in training, the gains relax at the
+# filter's own rate for longer than the steady gate's hold (measured on `ins` flights that fly
+# twice the training's distance per move: the GNSS and barometer columns 15 spreads off 10 s after
+# the move, back within 1 after 20 s), so the steady stretch after it has no trained reference.
+
+
+MAGNITUDES = ("speed", "yaw_rate")  # `detectors.kgn_bins` quantities >= 0; thrust departs from hover both ways
+
+
+def fit_ranges(blocks: list[dict[str, np.ndarray]]) -> dict[str, list[float]]:
+    """role -> [lo, hi]: the range of each operating-point quantity (`detectors.kgn_bins`) over the
+    training windows after warm-up, steady or not (``blocks``: role -> (W,) per run), from 0 for a
+    magnitude (speed, yaw rate); a quantity with no finite value gets no range."""
+    out: dict[str, list[float]] = {}
+    for role in blocks[0] if blocks else {}:
+        values = np.concatenate([b[role] for b in blocks])
+        values = values[np.isfinite(values)]
+        if values.size:  # a magnitude's gentlest value is 0: only its top bounds the manoeuvre
+            out[role] = [0.0 if role in MAGNITUDES else float(values.min()), float(values.max())]
+    return out
+
+
+def outside_ranges(quantities: dict[str, np.ndarray], ranges: dict[str, list[float]], n: int) -> np.ndarray:
+    """(W,) True where some quantity's window mean lies outside its trained range (NaN: not outside)."""
+    out = np.zeros(n, dtype=bool)
+    for role, (lo, hi) in ranges.items():
+        values = quantities.get(role)
+        if values is not None:
+            with np.errstate(invalid="ignore"):
+                out |= (values < lo) | (values > hi)
+    return out
+
+
+def memory_gate(outside: np.ndarray, steady: np.ndarray) -> np.ndarray:
+    """(W,) the steady windows the gain's memory of a manoeuvre beyond the trained range takes away:
+    every window of each steady stretch (a run of ``steady`` windows) whose manoeuvre (the windows
+    since the last steady stretch, which the steady gate does not judge) holds an ``outside``
+    window. Outside steady windows do not count: there a fault's own reaction (closed loop: the
+    commands) may move the operating point, and the envelope judges them."""
+    steady = np.asarray(steady, dtype=bool)
+    outside = np.asarray(outside, dtype=bool) & ~steady
+    if not outside.any():
+        return np.zeros(steady.size, dtype=bool)
+    start = steady & ~np.concatenate([[False], steady[:-1]])
+    stretch = np.cumsum(start) + ~steady  # a manoeuvre belongs to the steady stretch after it
+    hard = np.zeros(int(stretch.max()) + 1, dtype=bool)
+    hard[stretch[outside]] = True
+    return steady & hard[stretch]
+
+
+def range_line(quantities: dict[str, np.ndarray], ranges: dict, outside: np.ndarray, seconds: float) -> str:
+    """The `not checked` line of the memory gate: how long, and the manoeuvres' quantities outside
+    their range (``outside``: those windows)."""
+    cells = []
+    for role, (lo, hi) in ranges.items():
+        values = quantities.get(role)
+        if values is None:
+            continue
+        with np.errstate(invalid="ignore"):
+            beyond = outside & ((values < lo) | (values > hi))
+        if beyond.any():
+            cells.append(
+                f"{role.replace('_', ' ')} {np.nanmin(values[beyond]):.3g} to {np.nanmax(values[beyond]):.3g} "
+                f"against the trained {lo:.3g} to {hi:.3g}"
+            )
+    return (
+        f"manoeuvres beyond the trained range ({'; '.join(cells)}): the gain remembers them, so the "
+        f"{seconds:.0f} s of steady windows after it are not compared with the reference (train on flights like "
+        "this one to check them)"
+    )
+
+
+LINEAR_LINE = (
+    "the model is linear: its filter's gain follows the Riccati recursion, which never reads a measurement, so "
+    "the gain cannot show a sensor fault; the {seconds:.0f} s of steady windows are not compared with the "
+    "reference (the blindness probe agrees)"
+)

@@ -270,3 +270,51 @@ def test_a_sensor_driven_models_envelope_leaves_out_the_sensors_means():
     biased = SimpleNamespace(**{**vars(run), "u": run.u + 5.0})  # a 5-sigma bias on the sensor
     assert sensor.run(biased, trace).info["outside_envelope_s"] == 0.0
     assert command.run(biased, trace).info["outside_envelope_s"] > 0.0
+
+
+def test_a_linear_models_gain_is_not_compared_and_said_so():
+    """A linear model's filter gets its gain from the Riccati recursion, which never reads a
+    measurement (dc_motor, hover_uav: the gain constant to rounding): nothing is judged, no alarm,
+    a `not checked` line says why."""
+    from logscan.models import get_model
+
+    model = get_model("dc_motor")
+    detector = KgnDetector(warmup_s=20.0).fit(*zip(synthetic(1), synthetic(2)), model=model)
+    assert detector.reference_["linear"] is True
+    result = detector.run(*synthetic(3, jump_at=80.0))
+    assert result.alarms == [] and result.info["judged_windows"] == 0
+    assert any(c.reason.startswith("the model is linear") for c in result.not_checked)
+    nonlinear = KgnDetector(warmup_s=20.0).fit(*zip(synthetic(1), synthetic(2)), model=SimpleNamespace())
+    assert nonlinear.reference_["linear"] is False and nonlinear.run(*synthetic(3, jump_at=80.0)).alarms
+
+
+def moded(seed: int, speed_from: float | None = None, jump_at: float | None = None):
+    """`synthetic` with a mode channel (0, 1 from 40 s, 0 from 80 s) and velocity states at about
+    1 m/s (``speed_from``: 3 m/s from then to 85 s, a manoeuvre faster than any in training)."""
+    run, trace = synthetic(seed, jump_at=jump_at)
+    t = run.t
+    v = np.zeros((t.size, 3))
+    v[:, 0] = 1.0 + 0.05 * np.random.default_rng(seed + 100).normal(size=t.size)
+    if speed_from is not None:
+        v[(t >= speed_from) & (t < 85.0), 0] = 3.0
+    run = SimpleNamespace(**{**vars(run), "mode": np.where((t >= 40.0) & (t < 80.0), 1.0, 0.0)})
+    return run, SimpleNamespace(**{**vars(trace), "state_names": ["vx", "vy", "vz"], "x_post": v})
+
+
+def test_the_steady_stretch_after_a_manoeuvre_beyond_the_trained_range_is_not_judged():
+    """The gain remembers a manoeuvre through P: on a sensor-driven model, the steady stretch after
+    one faster than any in training (3 m/s against the trained 1 +- 0.2) is not judged, and a line
+    says so; a command-driven model has no range (a fault moves its manoeuvres in closed loop)."""
+    sensor = SimpleNamespace(inputs_are_sensors=True)
+    detector = KgnDetector(warmup_s=20.0, hold_s=5.0).fit(*zip(moded(1), moded(2)), model=sensor)
+    lo, hi = detector.reference_["ranges"]["speed"]
+    assert lo == 0.0 and 1.0 < hi < 1.5
+    judged = detector.run(*moded(3, jump_at=95.0))  # the gain moves in the last steady stretch
+    assert [a.signal for a in judged.alarms] == ["kgn.b"] and judged.info["outside_range_s"] == 0.0
+    hard = detector.run(*moded(3, speed_from=82.0, jump_at=95.0))  # after the change to mode 0: not steady
+    assert hard.alarms == [] and hard.info["outside_range_s"] == pytest.approx(120.0 - 85.0)
+    assert hard.info["judged_windows"] == judged.info["judged_windows"] - 35
+    (line,) = [c.reason for c in hard.not_checked]
+    assert line.startswith("manoeuvres beyond the trained range") and "speed 3 to 3 against the trained 0" in line
+    command = KgnDetector(warmup_s=20.0, hold_s=5.0).fit(*zip(moded(1), moded(2)), model=SimpleNamespace())
+    assert command.reference_["ranges"] == {}

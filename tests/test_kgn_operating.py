@@ -1,6 +1,6 @@
 """KGN's trained operating envelope (detectors/kgn_operating.py, docs/algorithms.md section 3): the
-window features, the box, the hold after an excursion and the flight-level rule, against brute
-force."""
+window features, the box, the hold after an excursion, the flight-level rule, the operating-point
+range and the gain's memory of an excursion beyond it, against brute force."""
 
 from __future__ import annotations
 
@@ -10,7 +10,16 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan.detectors.kgn_operating import envelope_gate, fit_envelope, held_inside, inside, operating_features
+from logscan.detectors.kgn_operating import (
+    envelope_gate,
+    fit_envelope,
+    fit_ranges,
+    held_inside,
+    inside,
+    memory_gate,
+    operating_features,
+    outside_ranges,
+)
 
 
 def test_features_are_each_windows_input_mean_and_spread():
@@ -55,3 +64,27 @@ def test_a_flight_mostly_outside_is_not_checked_at_all():
     ok[5:16] = False  # 11 of the 18 windows after warm-up: the whole flight
     lost, share = envelope_gate(ok, t, warm, judged, 2.0, 0.5)
     assert share == 11 / 18 and np.array_equal(lost, judged)
+
+
+def test_the_range_is_the_trained_windows_from_zero_for_a_magnitude():
+    blocks = [
+        {"speed": np.array([0.5, 2.0]), "thrust": np.array([9.0, np.nan])},
+        {"speed": np.array([1.0]), "thrust": np.array([11.0])},
+    ]
+    ranges = fit_ranges(blocks)
+    assert ranges == {"speed": [0.0, 2.0], "thrust": [9.0, 11.0]}
+    quantities = {"speed": np.array([0.1, 2.1, 1.0, np.nan]), "thrust": np.array([10.0, 10.0, 8.9, 10.0])}
+    # slower than any training window is not outside (a magnitude); less thrust is; NaN is not
+    assert outside_ranges(quantities, ranges, 4).tolist() == [False, True, True, False]
+
+
+def test_the_gains_memory_takes_the_steady_stretch_after_a_manoeuvre_beyond_the_range():
+    steady = np.array([0, 0, 1, 1, 1, 0, 0, 1, 1, 1, 0, 1, 1], dtype=bool)
+    outside = np.zeros(steady.size, dtype=bool)
+    outside[5] = True  # in the manoeuvre before the stretch 7-9: all of it
+    outside[12] = True  # in a steady stretch: the envelope's business, not the memory's
+    assert np.flatnonzero(memory_gate(outside, steady)).tolist() == [7, 8, 9]
+    outside[0] = True  # before the first stretch too
+    assert np.flatnonzero(memory_gate(outside, steady)).tolist() == [2, 3, 4, 7, 8, 9]
+    assert not memory_gate(np.zeros(steady.size, dtype=bool), steady).any()
+    assert not memory_gate(outside, np.ones(steady.size, dtype=bool)).any()  # no manoeuvre: nothing
