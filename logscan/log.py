@@ -42,6 +42,28 @@ class Channel:
     def __len__(self) -> int:
         return int(self.t.size)
 
+    @classmethod
+    def sharing_time(cls, names: list[str], t: np.ndarray, rows: np.ndarray) -> list[Channel]:
+        """One channel per name, its values the matching row of ``rows`` (float64, one row per name,
+        as long as ``t``), all at the same ``t`` (int64): a reader's topic of many fields. The checks
+        of `__post_init__` are made once for the lot (a ULog log has 2,000 channels or more)."""
+        if not (
+            type(t) is np.ndarray
+            and t.dtype == _INT64
+            and t.ndim == 1
+            and type(rows) is np.ndarray
+            and rows.dtype == _FLOAT64
+            and rows.shape == (len(names), t.size)
+        ):
+            return [cls(name, t, row) for name, row in zip(names, rows, strict=True)]
+        made = []
+        new = object.__new__
+        for name, row in zip(names, rows):
+            channel = new(cls)
+            channel.name, channel.t, channel.values, channel.unit = name, t, row, None
+            made.append(channel)
+        return made
+
 
 @dataclass
 class TopicInfo:
@@ -184,7 +206,7 @@ class Log:
     def start_ns(self) -> int | None:
         if self._span_ns is not None:
             return self._span_ns[0]
-        firsts = [int(c.t.min()) for c in self.channels.values() if len(c)]
+        firsts = [int(t.min()) for t in _distinct_times(self.channels)]
         if not firsts:
             topic_firsts = [t.first_ns for t in self.source.topics.values() if t.first_ns is not None]
             return min(topic_firsts) if topic_firsts else None
@@ -220,7 +242,7 @@ class Log:
     def end_ns(self) -> int | None:
         if self._span_ns is not None:
             return self._span_ns[1]
-        lasts = [int(c.t.max()) for c in self.channels.values() if len(c)]
+        lasts = [int(t.max()) for t in _distinct_times(self.channels)]
         if not lasts:
             topic_lasts = [t.last_ns for t in self.source.topics.values() if t.last_ns is not None]
             return max(topic_lasts) if topic_lasts else None
@@ -266,6 +288,13 @@ class Log:
             "has_truth": self.truth is not None,
             "has_profile": self.profile_text is not None,
         }
+
+
+def _distinct_times(channels: dict[str, Channel]) -> list[np.ndarray]:
+    """The channels' non-empty ``t`` arrays, each once: a reader gives a topic's channels one shared
+    array (a ULog topic of 100 fields), so the log's span takes its min and max once."""
+    distinct = {id(c.t): c.t for c in channels.values()}
+    return [t for t in distinct.values() if t.size]
 
 
 def _span_text(duration_s: float, first: str | None, last: str | None) -> str:

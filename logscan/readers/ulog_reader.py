@@ -58,6 +58,7 @@ from logscan.readers.common import (
     stat_input,
     topic_wanted,
 )
+from logscan.readers.ulog_columns import field_lists, stamp_facts
 from logscan.readers.ulog_damage import (
     _UNTIMED_WHY,
     MAX_TIMESTAMP_US,
@@ -72,11 +73,11 @@ from logscan.readers.ulog_framed import parse_clean
 _INSTANCE_RE = re.compile(r"^(?P<name>.+)_(?P<instance>\d+)$")
 _MAX_TEXT_MESSAGES = 500  # logged text messages kept in metadata (the count is always exact)
 _BEYOND_WHY = "timestamp beyond int64 nanoseconds (damaged)"
-# Shares of a clean read's CPU time (px4-ulog test logs, 0.4 to 1.9 MB: about 20-25%, 45-50% and
-# 25-35%): the numba framing pass, pyulog's parse of the definitions (with the subscriptions'
+# Shares of a clean read's CPU time (the 6 ULogs of ../shared/testdata, 0.4 to 1.9 MB: about 7-15%,
+# 30-40% and 45-60%): the numba framing pass, the parse of the definitions (with the subscriptions'
 # buffers filled), the topics' columns converted. They weight the byte progress (`StagedBytes`) so
 # that a bar advances about evenly in time.
-_STAGE_SHARES = (0.20, 0.50, 0.30)
+_STAGE_SHARES = (0.15, 0.35, 0.50)
 _FRAMED, _PARSED, _CONVERTED = range(3)
 _DATA_HEADER_BYTES = 5  # a data message's size, type and msg_id before its payload
 
@@ -101,7 +102,7 @@ def read_ulog(
 ) -> Log:
     """Read a ULog file into a Log, decoding only the messages ``wanted`` asks for.
 
-    ``progress(done, file size)`` (`StagedBytes`): after the framing pass, after pyulog's parse,
+    ``progress(done, file size)`` (`StagedBytes`): after the framing pass, after the parse of the definitions,
     after each topic converted (the bytes of the data messages converted so far), and at the end.
     A damaged file (read the careful way) is not framed: no call before pyulog's parse ends."""
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
@@ -113,39 +114,19 @@ def read_ulog(
     untimed: list[str] = []  # topics whose format has no timestamp field: skipped, the log is partial
     lost: list[str] = []  # other messages dropped: each makes the log partial
     chosen = [data for data in ulog.data_list if _is_wanted(data, wanted)]
-    for data in chosen if steps is None else _converting(chosen, steps):
-        topic = f"{data.name}_{data.multi_id}"
-        if topic in source.topics:  # same message and instance subscribed twice: keep the first
-            count = len(next(iter(data.data.values()), ()))
-            source.skip(f"messages of {topic}", "subscribed twice in the file; second copy ignored", count)
-            lost.append(f"{topic} subscribed twice: the {count} message(s) of the second subscription dropped")
-            continue
-        if "timestamp" not in data.data:  # the format breaks the spec: its definition is damaged
-            count = len(next(iter(data.data.values()), ()))
-            source.skip(f"topic {topic}", _UNTIMED_WHY, count)
-            untimed.append(topic)
-            continue
-        t_raw = _timestamps_u64(np.asarray(data.data["timestamp"]))
-        keep = t_raw != 0  # PX4 publishes timestamp 0 for a message never really set
-        if not keep.all():
-            source.skip(f"messages of {topic}", ZERO_TIMESTAMP_WHY, int((~keep).sum()))
-        beyond = t_raw > MAX_TIMESTAMP_US  # its nanoseconds do not fit int64: a damaged timestamp
-        if beyond.any():
-            source.skip(f"messages of {topic}", _BEYOND_WHY, int(beyond.sum()))
-            lost.append(f"{int(beyond.sum())} message(s) of {topic} dropped: {_BEYOND_WHY}")
-            keep &= ~beyond
-        t_ns = t_raw[keep].astype(np.int64) * 1000
-        fields = _topic_channels(data, topic, t_ns, keep, wanted, source, channels)
-        source.topics[topic] = TopicInfo(
-            name=topic,
-            message_count=int(t_ns.size),
-            encoding="ulog",
-            schema=data.name,
-            first_ns=int(t_ns.min()) if t_ns.size else None,
-            last_ns=int(t_ns.max()) if t_ns.size else None,
-            fields=fields,
-        )
-        report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
+    with np.errstate(invalid="ignore"):  # entered once per read, not once per topic
+        for data in chosen if steps is None else _converting(chosen, steps):
+            topic = f"{data.name}_{data.multi_id}"
+            if topic in source.topics:  # same message and instance subscribed twice: keep the first
+                count = len(next(iter(data.data.values()), ()))
+                source.skip(f"messages of {topic}", "subscribed twice in the file; second copy ignored", count)
+                lost.append(f"{topic} subscribed twice: the {count} message(s) of the second subscription dropped")
+            elif not _has_timestamp(data):  # the format breaks the spec: its definition is damaged
+                count = len(next(iter(data.data.values()), ()))
+                source.skip(f"topic {topic}", _UNTIMED_WHY, count)
+                untimed.append(topic)
+            else:
+                lost.extend(_read_topic(data, topic, wanted, source, channels))
     _fill_metadata(ulog, source)
     lost = _header_damage(ulog, source) + _dropped_by_pyulog(ulog) + lost
     _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None, untimed=untimed, lost=lost)
@@ -154,6 +135,52 @@ def read_ulog(
     if steps is not None:
         steps.finish()
     return Log(channels=channels, source=source)
+
+
+def _read_topic(data, topic: str, wanted: set[str] | None, source: SourceInfo, channels: dict) -> list[str]:
+    """A timed topic's channels and `TopicInfo` (its samples with a usable timestamp, the others
+    skipped and counted); returns the damage to report (timestamps beyond int64 nanoseconds). Called
+    under ``np.errstate(invalid="ignore")``: a float32 signalling NaN (a flipped bit) cast to float64
+    becomes a quiet NaN, as `Channel` would make it."""
+    lost = []
+    records = getattr(data, "logscan_records", None)  # a clean read's records: read without pyulog's dict
+    t_raw = records.stamps() if records is not None else None
+    if t_raw is None:
+        t_raw = _timestamps_u64(np.asarray(data.data["timestamp"]))
+    zeros, beyond, in_order = stamp_facts(t_raw, np.uint64(MAX_TIMESTAMP_US))
+    keep = None
+    if zeros:  # PX4 publishes timestamp 0 for a message never really set
+        source.skip(f"messages of {topic}", ZERO_TIMESTAMP_WHY, zeros)
+    if beyond:  # its nanoseconds do not fit int64: a damaged timestamp
+        source.skip(f"messages of {topic}", _BEYOND_WHY, beyond)
+        lost.append(f"{beyond} message(s) of {topic} dropped: {_BEYOND_WHY}")
+    if zeros or beyond:
+        keep = (t_raw != 0) & (t_raw <= MAX_TIMESTAMP_US)
+    t_ns = (t_raw if keep is None else t_raw[keep]).astype(np.int64)  # a copy either way
+    t_ns *= 1000
+    fields = _topic_channels(data, topic, t_ns, keep, wanted, source, channels)
+    if keep is not None:  # in order once the dropped samples are out?
+        in_order = bool((np.diff(t_ns) > 0).all())
+    first_ns = last_ns = None
+    if t_ns.size:
+        first_ns, last_ns = (int(t_ns[0]), int(t_ns[-1])) if in_order else (int(t_ns.min()), int(t_ns.max()))
+    source.topics[topic] = TopicInfo(
+        name=topic,
+        message_count=int(t_ns.size),
+        encoding="ulog",
+        schema=data.name,
+        first_ns=first_ns,
+        last_ns=last_ns,
+        fields=fields,
+    )
+    if not in_order:
+        report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
+    return lost
+
+
+def _has_timestamp(data) -> bool:
+    records = getattr(data, "logscan_records", None)
+    return "timestamp" in (records.layout.names if records is not None else data.data)
 
 
 def _is_wanted(data, wanted: set[str] | None) -> bool:
@@ -176,38 +203,53 @@ def _converting(chosen: Iterable, steps: StagedBytes) -> Iterator:
 
 def _data_bytes(data) -> int:
     """The bytes in the file of a pyulog topic's data messages."""
+    records = getattr(data, "logscan_records", None)
+    if records is not None:
+        return records.bytes_in_file(_DATA_HEADER_BYTES)
     columns = data.data.values()
     count = len(next(iter(columns), ()))
     return count * (_DATA_HEADER_BYTES + sum(column.dtype.itemsize for column in columns))
 
 
 def _topic_channels(
-    data, topic: str, t_ns: np.ndarray, keep: np.ndarray, wanted: set[str] | None, source: SourceInfo, channels: dict
+    data,
+    topic: str,
+    t_ns: np.ndarray,
+    keep: np.ndarray | None,
+    wanted: set[str] | None,
+    source: SourceInfo,
+    channels: dict,
 ) -> list[str]:
-    """The topic's numeric fields (its samples ``keep``, at ``t_ns``) into ``channels`` where
-    wanted; returns every numeric field's name. Text (char) fields are skipped, once each.
-
-    Each column is cast to float64 in one step (``astype`` of pyulog's strided column, or of its
-    kept samples), under one errstate for the topic: a float32 signalling NaN (a flipped bit)
-    becomes a quiet NaN, as `Channel` would make it."""
-    fields = []
-    every = wanted is None or topic in wanted or "/" + topic in wanted
-    keep_all = bool(keep.all())
-    with np.errstate(invalid="ignore"):
-        for field in data.field_data:
-            name = field.field_name
-            if name == "timestamp" or name.startswith("_padding"):
-                continue
-            if field.type_str == "char":
-                if "[" in name and not name.endswith("[0]"):
-                    continue  # one skip per string field, not per character
-                source.skip(f"text field {data.name}.{_array_base(name)}", "char (string) field")
-                continue
-            fields.append(name)
-            channel = f"/{topic}/{name}"
-            if every or channel_wanted(channel, topic, wanted):
-                column = data.data[name] if keep_all else data.data[name][keep]
-                channels[channel] = Channel(channel, t_ns, column.astype(np.float64, copy=keep_all))
+    """The topic's numeric fields (its samples ``keep``, all when None, at ``t_ns``) into
+    ``channels`` where wanted; returns every numeric field's name. Text (char) fields are skipped,
+    once each. Each column is cast to float64 in one step (``astype`` of pyulog's strided column,
+    or of its kept samples)."""
+    records = getattr(data, "logscan_records", None)  # a clean read: its records and their layout
+    if records is not None:
+        numeric, text = records.layout.lists()
+        fields = list(numeric)
+    else:
+        fields, text = field_lists(
+            [field.field_name for field in data.field_data], [field.type_str for field in data.field_data]
+        )
+    for name in text:
+        source.skip(f"text field {data.name}.{name}", "char (string) field")
+    prefix = f"/{topic}/"
+    if not (wanted is None or topic in wanted or "/" + topic in wanted):
+        fields_read = [name for name in fields if channel_wanted(prefix + name, topic, wanted)]
+    else:
+        fields_read = fields
+    if records is not None and keep is None and fields_read:  # one kernel call for all fields
+        names = [prefix + name for name in fields_read]
+        channels.update(zip(names, Channel.sharing_time(names, t_ns, records.rows(fields_read)), strict=True))
+        return fields
+    columns = data.data
+    for name in fields_read:
+        channel = prefix + name
+        if keep is None:
+            channels[channel] = Channel(channel, t_ns, columns[name].astype(np.float64))
+        else:
+            channels[channel] = Channel(channel, t_ns, columns[name][keep].astype(np.float64, copy=False))
     return fields
 
 
@@ -266,14 +308,10 @@ def _timestamps_u64(raw: np.ndarray) -> np.ndarray:
     return np.where(fits, np.where(fits, values, 0).astype(np.uint64), bad)
 
 
-def _array_base(name: str) -> str:
-    return name.split("[", 1)[0]
-
-
 def _fill_metadata(ulog, source: SourceInfo) -> None:
     """Info, parameters, dropouts and logged messages of the file into ``source.metadata``."""
     source.metadata["ulog.info"] = {str(k): _text(v) for k, v in ulog.msg_info_dict.items()}
-    source.metadata["ulog.parameters"] = {str(k): _text(v) for k, v in ulog.initial_parameters.items()}
+    source.metadata["ulog.parameters"] = _texts(ulog.initial_parameters)
     if ulog.has_default_parameters:  # newer PX4: the system default of each parameter set away from it
         source.metadata["ulog.parameters_default"] = {
             str(k): _text(v) for k, v in ulog.get_default_parameters(0).items()
@@ -306,6 +344,11 @@ def _fill_metadata(ulog, source: SourceInfo) -> None:
     }
     if dropouts:
         source.warnings.append(f"{len(dropouts)} logging dropout(s), {dropout_ms} ms of data lost in total")
+
+
+def _texts(values: dict) -> dict[str, str]:
+    """``{str(key): _text(value)}``, the plain ints and floats of a thousand parameters inline."""
+    return {str(k): repr(v) if type(v) is float else str(v) if type(v) is int else _text(v) for k, v in values.items()}
 
 
 def _text(value) -> str:
