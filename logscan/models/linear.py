@@ -142,6 +142,7 @@ class LinearBase(Model):
 
 _KNOWN = (
     "A", "B", "C", "D", "Q", "R", "range", "dt", "continuous", "states", "inputs", "outputs", "radius", "interval",
+    "x0", "P0",
 )  # fmt: skip
 _DEFAULT_RANGE = 1e12
 
@@ -287,6 +288,23 @@ def _system(params: dict, problems: list[str]):
     return A, B, C, {g: d for g, d in D.items() if d is not None}, Q
 
 
+def _prior(params: dict, n: int | None, problems: list[str]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The profile's x0 (n values) and P0 (n x n covariance) checked; None where not given."""
+    x0 = P0 = None
+    if n is None:
+        return x0, P0
+    if "x0" in params:
+        row = _matrix(params["x0"], "x0", (1, n), problems)
+        x0 = None if row is None else row[0]
+    if "P0" in params:
+        P0 = _matrix(params["P0"], "P0", (n, n), problems)
+        issue = None if P0 is None else covariance_problem(P0, "P0", definite=False)
+        if issue:
+            problems.append(f"linear model: {issue}")
+            P0 = None
+    return x0, P0
+
+
 class LinearModel(LinearBase):
     """A linear model from a profile's matrices; every parameter problem is reported at once."""
 
@@ -301,6 +319,7 @@ class LinearModel(LinearBase):
         if unknown:
             problems.append(f"linear model: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(_KNOWN)})")
         A, B, C, D, Q = _system(p, problems)
+        self._prior = _prior(p, None if A is None else A.shape[0], problems)
         continuous, dt = _timing(p, problems)
         if A is not None:
             self.state_names = _names(p.get("states"), "states", tuple(f"x{i}" for i in range(A.shape[0])), problems)
@@ -318,6 +337,19 @@ class LinearModel(LinearBase):
             )
         raise_problems(problems)
         self._setup(A, B, C, D, Q, continuous, dt)
+
+    def default_x0(self) -> np.ndarray:
+        """The profile's x0, else zeros (the directly measured states are seeded from their first
+        samples either way)."""
+        x0 = self._prior[0]
+        return super().default_x0() if x0 is None else x0.copy()
+
+    def default_P0(self) -> np.ndarray:
+        """The profile's P0, else the identity: a state the sensors do not measure directly starts
+        this far from x0 at most a few times, so P0 must cover where the system may be when the log
+        begins (a motor already turning), or the filter's first second reads as a fault."""
+        P0 = self._prior[1]
+        return super().default_P0() if P0 is None else P0.copy()
 
     def _profile_intervals(self, A, B, C: dict, Q_discrete, problems: list[str]) -> ProfileIntervals:
         """The profile's ``radius`` and ``interval`` checked (``Q_discrete``: Q when it is the
