@@ -67,7 +67,6 @@ from logscan.detectors.kgn_windows import (  # noqa: F401  (re-exported: the sta
 from logscan.detectors.params import PERSIST, Interval, budget_bound, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import InternalError, NotTrainedError
-from logscan.models.linear import LinearBase
 from logscan.results import NotChecked
 
 SPREAD_FLOOR = 1e-9  # relative floor of a column's spread: a zero spread alarms on rounding
@@ -290,7 +289,7 @@ class KgnDetector(Detector):
         after = [{r: w.quantities[r][run.t[w.starts] >= w.warmup_end_s] for r in roles} for run, w in zip(runs, wins)]
         self.reference_["ranges"] = fit_ranges(after)
         # a linear model's K (fixed Q, R: the Riccati recursion) never reads a measurement (`LINEAR_LINE`)
-        self.reference_["linear"] = isinstance(context.get("model"), LinearBase)
+        self.reference_["linear"] = bool(getattr(context.get("model"), "gain_is_data_free", False))
         judged = [w.judged & self.known(w) for w in wins]
         self.blindness_ = run_probe(self, runs, traces, wins, judged, context.get("model"), context.get("refilter"))
 

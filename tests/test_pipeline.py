@@ -40,7 +40,9 @@ def test_the_encoded_checks_ask_for_the_gain_only_when_normalising_or_without_on
 def test_each_needed_filter_runs_exactly_once(monkeypatch):
     calls = []
     real = stages.FILTERS["ekf"]
-    monkeypatch.setitem(stages.FILTERS, "ekf", lambda model, run, parts: calls.append(parts) or real(model, run, parts))
+    monkeypatch.setitem(
+        stages.FILTERS, "ekf", lambda model, run, parts, **kw: calls.append(parts) or real(model, run, parts, **kw)
+    )
     analysis = analyze_log(HEALTHY, detector_names=["encoded_ekf", "nis"])
     assert len(calls) == 1 and [r.detector for r in analysis.results] == ["encoded_ekf", "nis"]
 

@@ -109,6 +109,9 @@ class Model:
     state_names: tuple[str, ...] = ()
     input_names: tuple[str, ...] = ()
     inputs_are_sensors: bool = False  # True when the inputs are sensor readings (ins: the IMU), not commands
+    # True when the filter's gain never reads a measurement (a linear model with fixed Q and R: the
+    # Riccati recursion alone), so a gain-based check (kgn) has nothing to see
+    gain_is_data_free: bool = False
     groups: dict[str, GroupSpec] = {}
     # set on instances: the parameters merged over the defaults (each subclass's __init__,
     # `_merge_params`), and the trained tables' Q scales, {state: scale}, when calibrated (set by

@@ -78,6 +78,8 @@ def discretise(A: np.ndarray, B: np.ndarray, Qc: np.ndarray, dt: float):
 class LinearBase(Model):
     """A model whose kernel is the packed linear one: subclasses call `_setup` in __init__."""
 
+    gain_is_data_free = True  # fixed Q and R: K follows the Riccati recursion, never a measurement
+
     def _setup(self, A, B, C: dict, D: dict, Q, continuous: bool, discrete_dt: float | None):
         self._A = np.asarray(A, dtype=np.float64)
         self._B = np.asarray(B, dtype=np.float64)

@@ -101,15 +101,9 @@ def motor_matrices(dt: float = DT) -> tuple[np.ndarray, np.ndarray]:
 
 
 def motor_params() -> dict:
-    """The `linear` model's params of one motor loop (discrete matrices at 100 Hz). The prior says
-    where a motor may be when the log begins: already turning (`initial_state`: at the steady state
-    of its first wheel-speed reference, current equal to speed), so x0 = 0 with a standard deviation
-    of the larger first reference on both states. The default P0 = I put the unmeasured current 35-45
-    standard deviations off, and the loops' checks read the first second as a fault (1-2 false
-    alarms per hour of the motor loops)."""
+    """The `linear` model's params of one motor loop (discrete matrices at 100 Hz), its prior covering
+    a motor already turning (`initial_state`; P0 = I put the current 35-45 sigma off: alarms)."""
     Ad, Bd = motor_matrices()
-    _, m0, _ = initial_state()
-    spread = float(np.abs(m0).max())
     return {
         "A": Ad.tolist(),
         "B": Bd.reshape(2, 1).tolist(),
@@ -122,7 +116,7 @@ def motor_params() -> dict:
         "inputs": ["V"],
         "outputs": {"encoder": ["w"]},
         "x0": [0.0, 0.0],
-        "P0": (spread**2 * np.eye(2)).tolist(),
+        "P0": (np.abs(initial_state()[1]).max() ** 2 * np.eye(2)).tolist(),  # spread: the larger speed
     }
 
 
