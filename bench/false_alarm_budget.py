@@ -40,6 +40,7 @@ uses 500 .. 4109):
     python bench/false_alarm_budget.py --table runs.json      # the tables of a (partial) --json
     python bench/false_alarm_budget.py --detector atfm_residual --detector kgn   # only these (where they apply)
     python bench/false_alarm_budget.py --model dc_motor --detector atfm --hours 40   # one model
+    python bench/false_alarm_budget.py --model hover_uav --detector chi2 --hours 40 --first-log 40   # 40 more
 """
 
 from __future__ import annotations
@@ -231,10 +232,15 @@ def count_one(job: Job) -> dict:
 
 
 def make_jobs(
-    hours: float, log_s: float, detectors: dict[str, tuple[str, ...]], trained: dict[str, Trained | None]
+    hours: float,
+    log_s: float,
+    detectors: dict[str, tuple[str, ...]],
+    trained: dict[str, Trained | None],
+    first_log: int = 0,
 ) -> list[Job]:
     """Equal hours per (model, aggressive) configuration of the models in ``detectors``, in logs of
-    ``log_s`` seconds."""
+    ``log_s`` seconds; each configuration's seeds from its base + ``first_log`` (a later run that
+    extends an earlier one's hours flies unseen seeds)."""
     configs = [c for c in SEED_BASE if c[0] in detectors]
     per_config = max(1, math.ceil(hours * 3600.0 / len(configs) / log_s - 1e-9))  # at least ``hours``
     jobs = []
@@ -242,7 +248,8 @@ def make_jobs(
         base = SEED_BASE[(model, aggressive)]
         mine = trained.get(model)
         where = (mine.profile, mine.tables) if mine else (None, None)
-        jobs += [Job(model, aggressive, base + i, log_s, detectors[model], *where) for i in range(per_config)]
+        seeds = range(base + first_log, base + first_log + per_config)
+        jobs += [Job(model, aggressive, seed, log_s, detectors[model], *where) for seed in seeds]
     return jobs
 
 
@@ -324,6 +331,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--log-s", type=float, default=1800.0, help="length of each simulated log (s)")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument(
+        "--first-log",
+        type=int,
+        default=0,
+        help="start each configuration's seeds this many logs past its base (extend an earlier run's hours)",
+    )
+    parser.add_argument(
         "--detector", action="append", default=None, help="only these detectors, where they apply (repeatable)"
     )
     parser.add_argument(
@@ -378,7 +391,7 @@ def campaign(args, directory: str, version: str) -> int:
         applicable = [n for n in wanted if n not in reasons[model]]
         chosen = (defaults if not args.detector else []) + applicable
         detectors[model] = tuple(dict.fromkeys(chosen))
-    jobs = make_jobs(args.hours, args.log_s, detectors, trained)
+    jobs = make_jobs(args.hours, args.log_s, detectors, trained, args.first_log)
     runs: list[dict] = []
     # in chunks, the configurations interleaved, so that an interrupted campaign still has a
     # balanced partial result in --json (written after every chunk)
@@ -395,6 +408,7 @@ def campaign(args, directory: str, version: str) -> int:
     lines = [
         f"Measured {datetime.now(UTC):%Y-%m-%d %H:%M} UTC with logscan {logscan.__version__} ({version}), "
         f"`python bench/false_alarm_budget.py --hours {args.hours:g} --log-s {args.log_s:g} --jobs {args.jobs}"
+        + (f" --first-log {args.first_log}" if args.first_log else "")
         + "".join(f" --model {m}" for m in args.model or [])
         + "".join(f" --detector {n}" for n in args.detector or [])
         + "`: "
