@@ -23,7 +23,7 @@ from logscan.pipeline.refilter import run_ekf_parts
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 
 
-def held_whole(model, run, parts: frozenset[str], x0=None, P0=None):
+def held_whole(model, run, parts: frozenset[str], x0=None, P0=None, steps_done=None):
     """The trace as the pipeline filtered it before: K and S, when asked, held for the whole log."""
     return run_ekf(
         model,
@@ -34,16 +34,18 @@ def held_whole(model, run, parts: frozenset[str], x0=None, P0=None):
         store_S="S" in parts,
         full_P="P" in parts,
         store_innovations="y" in parts,
+        steps_done=steps_done,
     )
 
 
 def summary(path: str, filter_ekf) -> str:
+    before = stages.FILTERS["ekf"]
     stages.FILTERS["ekf"] = filter_ekf
     try:
         analysis = analyze_log(path, free_series=True, sensor_views=True)
         return json.dumps(analysis.summary(), sort_keys=True, default=str)
     finally:
-        stages.FILTERS["ekf"] = stages._run_ekf
+        stages.FILTERS["ekf"] = before
 
 
 def main(argv: list[str]) -> int:
