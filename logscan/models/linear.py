@@ -281,10 +281,7 @@ def _system(params: dict, problems: list[str]):
     }
     Q = None
     if "Q" in params:
-        Q = _matrix(params["Q"], "Q", (n, n), problems)
-        issue = None if Q is None else covariance_problem(Q, "Q", definite=False)
-        if issue:
-            problems.append(f"linear model: {issue}")
+        Q = _covariance(params["Q"], "Q", n, problems)
     elif n is not None:
         Q = 1e-4 * np.eye(n)
     return A, B, C, {g: d for g, d in D.items() if d is not None}, Q
@@ -299,12 +296,18 @@ def _prior(params: dict, n: int | None, problems: list[str]) -> tuple[np.ndarray
         row = _matrix(params["x0"], "x0", (1, n), problems)
         x0 = None if row is None else row[0]
     if "P0" in params:
-        P0 = _matrix(params["P0"], "P0", (n, n), problems)
-        issue = None if P0 is None else covariance_problem(P0, "P0", definite=False)
-        if issue:
-            problems.append(f"linear model: {issue}")
-            P0 = None
+        P0 = _covariance(params["P0"], "P0", n, problems)
     return x0, P0
+
+
+def _covariance(value, name: str, n: int | None, problems: list[str]) -> np.ndarray | None:
+    """``value`` as an n x n matrix, a problem when it is no covariance (symmetric positive
+    semi-definite); the matrix is returned all the same (Q's intervals are checked against it)."""
+    M = _matrix(value, name, (n, n), problems)
+    issue = None if M is None else covariance_problem(M, name, definite=False)
+    if issue:
+        problems.append(f"linear model: {issue}")
+    return M
 
 
 class LinearModel(LinearBase):

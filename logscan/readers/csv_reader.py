@@ -132,7 +132,7 @@ def read_csv_dir(
     source = SourceInfo(path=str(directory), format="csv-dir", time_source="csv column")
     topics = _topic_names(files, log_name)
     channels: dict[str, Channel] = {}
-    read = [f for f in files if topic_wanted(topics[f][0], wanted) or topic_wanted("/" + topics[f][0], wanted)]
+    read = [f for f in files if topic_wanted(topics[f][0], wanted)]
     total, done = (sum(file.stat().st_size for file in read), 0) if progress is not None else (0, 0)
     for file in read:
         topic, px4 = topics[file]

@@ -28,7 +28,6 @@ from logscan.readers.ulog_columns import ColumnLayout, Records
 from logscan.readers.ulog_damage import _MAX_FORMAT_NESTING, _MAX_MESSAGE_BYTES, _bounded_ulog_class
 
 _HEADER_BYTES = 16
-_SECTION_END = np.frombuffer(b"ALC", dtype=np.uint8)  # the definitions section ends at the first of them
 _LITTLE_ENDIAN = sys.byteorder == "little"  # the column kernel reads fields in native byte order
 _FLAG_BITS_MAX = 8 + 8 + 3 * 8  # longer flag bits make pyulog print a warning
 _CORRUPT = (IndexError, ValueError, KeyError, OverflowError, struct.error, TypeError, UnicodeDecodeError)

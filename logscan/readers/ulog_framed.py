@@ -32,12 +32,11 @@ import numpy as np
 from numba import njit
 
 from logscan.numba_cache import follow_dependencies
-from logscan.readers.ulog_definitions import build_ulog
+from logscan.readers.ulog_definitions import _HEADER_BYTES, build_ulog
 
 _DEFINITIONS = np.frombuffer(b"BFIMPQ", dtype=np.uint8)  # the types pyulog reads in the definitions
 _SECTION_END = np.frombuffer(b"ALC", dtype=np.uint8)
 _DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads in the data section
-_HEADER_BYTES = 16
 _EMPTY = np.empty(0, np.uint8)
 _NO_MESSAGES = np.empty(0, np.int64)
 

@@ -185,7 +185,7 @@ def _has_timestamp(data) -> bool:
 
 def _is_wanted(data, wanted: set[str] | None) -> bool:
     topic = f"{data.name}_{data.multi_id}"
-    return topic_wanted(topic, wanted) or topic_wanted("/" + topic, wanted)
+    return topic_wanted(topic, wanted)  # "/" or not: topic_wanted ignores it
 
 
 def _converting(chosen: Iterable, steps: StagedBytes) -> Iterator:

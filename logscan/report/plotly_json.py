@@ -117,7 +117,7 @@ def allocate_points(figures: list[Figure], budget: int) -> dict[int, int]:
     total_weight = sum(tr.weight for tr in varying) or 1.0
     floor = max(MIN_POINTS_FLOOR, min(MIN_POINTS_PER_TRACE, budget // max(2 * len(varying), 1)))
     share = {id(tr): max(floor, budget * tr.weight / total_weight) for tr in varying}
-    return {id(tr): int(min(DEFAULT_MAX_POINTS, tr.max_points or DEFAULT_MAX_POINTS, share[id(tr)])) for tr in varying}
+    return {id(tr): int(min(tr.max_points or DEFAULT_MAX_POINTS, share[id(tr)])) for tr in varying}
 
 
 def focus_windows(figures: list[Figure], t: np.ndarray) -> np.ndarray:
