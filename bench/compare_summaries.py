@@ -7,9 +7,9 @@ Checks the other commit out into a temporary git worktree, runs `logscan analyze
 quad_healthy.csv and husky_drive.bag), and compares the files byte for byte. The other commit's
 code runs in this venv (its dependencies must be the same); its import is forced to the worktree
 (the editable install's finder is left out), and the run checks that it was. Prints one line per
-log, and under a differing one the JSON fields that differ (list indices as [*]), and exits 1 when
-any summary differs. A refactoring that moves code and changes no number
-leaves every summary identical.
+log, and under a differing one the JSON fields that differ (list indices as [*]) with the largest
+relative change of their numbers, and exits 1 when any summary differs. A refactoring that moves
+code and changes no number leaves every summary identical.
 """
 
 from __future__ import annotations
@@ -48,20 +48,33 @@ def summarise(root: Path, log: Path, out: Path) -> None:
         raise SystemExit(f"{log.name}: no summary written by {root}")
 
 
-def differing_fields(old: object, new: object, path: str = "") -> set[str]:
+def differing_fields(old: object, new: object, path: str = "") -> dict[str, float]:
     """The JSON paths where two documents differ, list indices written [*] so that a field that
-    differs in every element of a list is one line."""
+    differs in every element of a list is one line, each with the largest relative change of its
+    numbers (inf where a value is not a number or changed type)."""
     if isinstance(old, dict) and isinstance(new, dict):
-        fields: set[str] = set()
+        fields: dict[str, float] = {}
         for key in old.keys() | new.keys():
             if key not in old or key not in new:
-                fields.add(f"{path}.{key} ({'only now' if key in new else 'only before'})")
+                fields[f"{path}.{key} ({'only now' if key in new else 'only before'})"] = float("inf")
             else:
-                fields |= differing_fields(old[key], new[key], f"{path}.{key}")
+                _merge(fields, differing_fields(old[key], new[key], f"{path}.{key}"))
         return fields
     if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
-        return set().union(*(differing_fields(a, b, f"{path}[*]") for a, b in zip(old, new, strict=True)))
-    return set() if old == new else {path or "."}
+        fields = {}
+        for a, b in zip(old, new, strict=True):
+            _merge(fields, differing_fields(a, b, f"{path}[*]"))
+        return fields
+    if old == new:
+        return {}
+    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (old, new))
+    change = abs(new - old) / max(abs(old), abs(new)) if numbers else float("inf")  # type: ignore[operator]
+    return {path or ".": change}
+
+
+def _merge(into: dict[str, float], more: dict[str, float]) -> None:
+    for name, change in more.items():
+        into[name] = max(into.get(name, 0.0), change)
 
 
 def main(argv: list[str]) -> int:
@@ -83,8 +96,8 @@ def main(argv: list[str]) -> int:
                 print(f"{'same' if same else 'DIFFERS'}  {log.name}")
                 if not same:
                     before, now = (json.loads(path.read_text(encoding="utf-8")) for path in (old, new))
-                    for name in sorted(differing_fields(before, now)):
-                        print(f"    {name}")
+                    for name, change in sorted(differing_fields(before, now).items()):
+                        print(f"    {name}  (largest relative change {change:.1e})")
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO, check=False)
     print(f"{len(sample_logs()) - differ} of {len(sample_logs())} summaries byte-identical to {base}")

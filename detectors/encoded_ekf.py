@@ -50,6 +50,7 @@ from logscan.detectors.normalised_check import (
 from logscan.detectors.params import PERSIST, Boolean, Interval, Options, RealList, budget_bound, multiplier_bound
 from logscan.detectors.words import group_words
 from logscan.errors import NotTrainedError, ProfileError
+from logscan.needs import CodedVariance
 
 POSITIVE = Interval(float, 0, None, closed="neither")
 # mu +- rho s: `logscan train --tune` picks at most 20 plus its margin; a wider band hides faults
@@ -98,7 +99,7 @@ class EncodedEkfDetector(Detector):
     name = "encoded_ekf"
     requires_trace = True
     reads = frozenset(
-        {"x_prior", "x_post", "P_prior_diag", "P_post_diag", "K", "S", "onboard_state", "onboard_variance"}
+        {"x_prior", "x_post", "P_prior_diag", "P_post_diag", "ex_variance", "onboard_state", "onboard_variance"}
     )
     default_enabled = True
     trained_attributes = ("threshold_",)
@@ -172,15 +173,25 @@ class EncodedEkfDetector(Detector):
         return self.variant == "baseline"
 
     def needs(self, run=None) -> Needs:
-        """The EKF trace; its K and S too when e_x is normalised (by CV K S K^T CV^T) or when the
-        variance check may run in observed mode (no on-board variances in the log), since e_v then
-        compares var(e_x) with CV K S K^T CV^T."""
+        """The EKF trace; with e_x's predicted variance CV K S K^T CV^T (computed by the filter,
+        `CodedVariance`) when e_x is normalised by it or when the variance check may run in observed
+        mode (no on-board variances in the log), since e_v then compares var(e_x) with it."""
+        predicted = Needs.of(ekf=(CodedVariance(float(self.sigma_floor), float(self.r_max)),))
         if self._normalised():
-            return Needs.of(ekf=("K", "S"))
+            return predicted
         no_onboard = run is None or run.onboard_variance is None
         if self.variance_check == "observed" or (self.variance_check == "auto" and no_onboard):
-            return Needs.of(ekf=("K", "S"))
+            return predicted
         return Needs.of(ekf=())
+
+    def predicted_variance(self, trace, cv_of):
+        """CV_k K_k S_k K_k^T CV_k^T per step (0 where not updated): the filter's (`ex_variance`),
+        else from a trace that holds K and S (a trace filtered outside the pipeline); None without."""
+        if trace.ex_variance is not None:
+            return trace.ex_variance
+        if trace.K is None or trace.S is None:
+            return None
+        return predicted_variance(cv_of, trace.K, trace.S)
 
     def _normalised(self) -> bool:
         """e_x judged over its predicted spread (the adaptive variant's normalised statistics)."""
@@ -298,12 +309,14 @@ class EncodedEkfDetector(Detector):
 
     def _normalised_check(self, result, t, trace, cv_of, e_x, defined) -> None:
         """e_x over its predicted spread, per sample or summed over W, against +-bound (section 1.2)."""
-        if trace.K is None or trace.S is None:
+        predicted = self.predicted_variance(trace, cv_of)
+        if predicted is None:
             raise ProfileError(
-                f"detector {self.name!r}: ex_statistic = {self.ex_statistic!r} needs K and S on the trace",
-                hint="run it through `logscan analyze` (it asks the pipeline for them), or set ex_statistic = 'raw'",
+                f"detector {self.name!r}: ex_statistic = {self.ex_statistic!r} needs e_x's predicted variance "
+                "(or K and S) on the trace",
+                hint="run it through `logscan analyze` (it asks the pipeline for it), or set ex_statistic = 'raw'",
             )
-        z, valid = normalised_series(e_x, defined, predicted_variance(cv_of, trace.K, trace.S))
+        z, valid = normalised_series(e_x, defined, predicted)
         warm = valid
         if self.ex_statistic == "window_sum":
             z, warm = window_sum(z, valid, self.window)
@@ -345,7 +358,8 @@ class EncodedEkfDetector(Detector):
         if self.variance_check == "auto":
             if has_onboard:
                 return "onboard"
-            return "observed" if trace.K is not None and trace.S is not None else "off"
+            has_variance = trace.ex_variance is not None or (trace.K is not None and trace.S is not None)
+            return "observed" if has_variance else "off"
         if self.variance_check == "onboard" and not has_onboard:
             raise ProfileError(
                 f"detector {self.name!r}: variance_check = 'onboard' needs [onboard] variance channels in the profile"
@@ -370,10 +384,12 @@ class EncodedEkfDetector(Detector):
             defined_v = defined & any_logged
             e_v[~defined_v] = np.nan
             return e_v, defined_v, scale
-        if trace.K is None or trace.S is None:
-            raise ProfileError(f"detector {self.name!r}: the observed variance check needs K and S on the trace")
-        # predicted variance of e_x: g S g^T with g = CV_k K_k (padded columns are NaN: zero them)
-        predicted = predicted_variance(cv_of, trace.K, trace.S)
+        predicted = self.predicted_variance(trace, cv_of)
+        if predicted is None:
+            raise ProfileError(
+                f"detector {self.name!r}: the observed variance check needs e_x's predicted variance "
+                "(or K and S) on the trace"
+            )
         _, var_obs = trailing_mean_var(e_x, defined, self.window_v)
         mean_pred, _ = trailing_mean_var(predicted, defined, self.window_v)
         e_v = var_obs - mean_pred

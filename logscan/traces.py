@@ -60,6 +60,9 @@ class EkfTrace:
     P_post: np.ndarray | None = None  # (N, n, n) when full_P
     S: np.ndarray | None = None  # (N, m_total, m_total) padded with NaN, when store_S
     K: np.ndarray | None = None  # (N, n, m_total) padded with NaN, when store_gain
+    # (N,) the encoded check's predicted variance CV K S K^T CV^T, 0 where not updated, when asked
+    # (`logscan.needs.CodedVariance`)
+    ex_variance: np.ndarray | None = None
     divergence_episodes: list[DivergenceEpisode] = field(default_factory=list)
 
     @property

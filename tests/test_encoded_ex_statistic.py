@@ -107,9 +107,9 @@ def test_rho_given_is_the_bound_of_the_normalised_statistics():
     np.testing.assert_array_equal(result.thresholds["e_x"].upper[np.isfinite(result.series["e_x"])], 7.5)
 
 
-def test_the_normalised_statistics_refuse_a_trace_without_k_and_s():
+def test_the_normalised_statistics_refuse_a_trace_without_their_predicted_variance():
     p = prepared("quad_healthy.mcap", gain=False)
-    with pytest.raises(ProfileError, match="needs K and S"):
+    with pytest.raises(ProfileError, match="needs e_x's predicted variance"):
         EncodedEkfDetector().run(p.run, p.trace, model=p.model)
     # the raw statistic needs neither (on a log with on-board variances)
     EncodedEkfDetector(ex_statistic="raw").run(p.run, p.trace, model=p.model)

@@ -31,9 +31,11 @@ def test_prepare_releases_the_raw_samples_and_keeps_the_logs_facts(sample):
 def test_innovations_are_kept_only_when_a_detector_asks(sample):
     path = sample("quad_imu_bias.mcap")
     loaded = load_profile_for(path, None)
-    # nis does not ask for them (cusum, a default detector, does; encoded_ekf asks for K and S)
+    # nis does not ask for them (cusum, a default detector, does; encoded_ekf asks for e_x's
+    # predicted variance, which the filter computes, so it keeps no K and S either)
     default = prepare(path, loaded, needs_of(create_detectors(loaded, ["encoded_ekf", "nis"])))
-    assert default.trace.y is None and default.trace.S_diag is None and default.trace.K is not None
+    assert default.trace.y is None and default.trace.S_diag is None and default.trace.K is None
+    assert default.trace.ex_variance is not None
     with_cusum = prepare(path, loaded, needs_of(create_detectors(loaded, None)))
     assert with_cusum.trace.y is not None and with_cusum.trace.P_prior is None
     asked = prepare(path, loaded, Needs.of(ekf=("y",)))

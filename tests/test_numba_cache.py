@@ -40,7 +40,7 @@ def names(modules) -> set[str]:
 
 def test_the_ekf_kernel_depends_on_dispatch_linear_algebra_and_every_model_kernel_module():
     assert len(MODEL_KERNEL_MODULES) >= 5
-    expected = {*MODEL_KERNEL_MODULES, "logscan.filters.linalg"}
+    expected = {*MODEL_KERNEL_MODULES, "logscan.filters.linalg", "logscan.filters.coding"}
     assert names(numba_cache.kernel_dependencies(ekf)) == expected
 
 
@@ -85,7 +85,10 @@ def changed_copy(module, tmp_path: Path) -> str:
 
 @pytest.mark.parametrize(
     ("kernel_module", "kernel", "dependency"),
-    [("logscan.filters.ekf", "ekf_run", name) for name in (*MODEL_KERNEL_MODULES, "logscan.filters.linalg")]
+    [
+        ("logscan.filters.ekf", "ekf_run", name)
+        for name in (*MODEL_KERNEL_MODULES, "logscan.filters.linalg", "logscan.filters.coding")
+    ]
     + [
         ("logscan.simulate.runner", "closed_loop", name)
         for name in (*MODEL_KERNEL_MODULES, "logscan.simulate.controllers", "logscan.simulate.faults")

@@ -11,7 +11,7 @@ import pytest
 
 from logscan.detectors.registry import default_registry
 from logscan.errors import ProfileError
-from logscan.needs import Needs
+from logscan.needs import CodedVariance, Needs
 from logscan.pipeline import analyze_log, create_detectors, load_profile_for, needs_of, prepare, stages
 
 REPO = Path(__file__).resolve().parents[1]
@@ -24,17 +24,20 @@ def test_needs_merge_filters_and_their_parts():
     assert merged.parts("ekf") == {"K", "S"} and merged.wants("ekf") and not merged.wants("ubikf")
 
 
-def test_the_encoded_checks_ask_for_the_gain_only_when_normalising_or_without_onboard_variances():
+def test_the_encoded_checks_ask_for_the_predicted_variance_only_when_normalising_or_without_onboard_variances():
     loaded = load_profile_for(HEALTHY, None)
     (encoded,) = create_detectors(loaded, ["encoded_ekf"])
     raw = encoded.with_params(ex_statistic="raw")
     prepared = prepare(HEALTHY, loaded, Needs.of(ekf=()))
     assert prepared.run.onboard_variance is not None
-    # the default e_x statistic (window_sum) is normalised by CV K S K^T CV^T: K and S always
-    assert encoded.needs(prepared.run).parts("ekf") == {"K", "S"}
+    # the default e_x statistic (window_sum) is normalised by CV K S K^T CV^T, which the filter
+    # computes with the detector's coding vector: never K and S
+    coded = CodedVariance(encoded.sigma_floor, encoded.r_max)
+    assert encoded.needs(prepared.run).parts("ekf") == {coded}
     assert raw.needs(prepared.run) == Needs.of(ekf=())
     prepared.run.onboard_variance = None
-    assert raw.needs(prepared.run).parts("ekf") == {"K", "S"}
+    assert raw.needs(prepared.run).parts("ekf") == {coded}
+    assert raw.with_params(r_max=10.0).needs(prepared.run).parts("ekf") == {CodedVariance(encoded.sigma_floor, 10.0)}
 
 
 def test_each_needed_filter_runs_exactly_once(monkeypatch):

@@ -32,6 +32,7 @@ import numpy as np
 from numba import literally, njit
 
 from logscan.align import AlignedRun
+from logscan.filters.coding import coded_variance, coding_vector_into
 from logscan.filters.ekf_pack import EkfBuffers, KernelInputs, pack_run, samples_side_by_side
 from logscan.filters.linalg import (
     all_finite,
@@ -48,6 +49,7 @@ from logscan.filters.linalg import (
 )
 from logscan.models import dispatch
 from logscan.models.base import Model
+from logscan.needs import CodedVariance
 from logscan.numba_cache import follow_dependencies
 from logscan.traces import EkfTrace, divergence_episodes
 
@@ -122,6 +124,7 @@ def ekf_run(model_id, model, sensors, data, out):
     # the arguments' arrays under the kernel's names, read once: an attribute read inside the loop
     # would count a reference up and down at every access (2-3 % of a step)
     p, dt, Q, x0, P0 = model.p, model.dt, model.Q, model.x0, model.P0
+    coding_floor, coding_r_max, ex_var = model.coding_floor, model.coding_r_max, out.ex_var
     group_ids, group_offsets, group_sizes = sensors.group_ids, sensors.group_offsets, sensors.group_sizes
     R_all, range_lo, range_hi, wrap = sensors.R_all, sensors.range_lo, sensors.range_hi, sensors.wrap
     direct_idx, direct_gain = sensors.direct_idx, sensors.direct_gain
@@ -141,6 +144,7 @@ def ekf_run(model_id, model, sensors, data, out):
     store_S = S_out.shape[0] == N
     store_K = K_out.shape[0] == N
     dyn_R = R_std.shape[0] == N
+    store_ex_var = ex_var.shape[0] == N
     x = x0.copy()
     P = P0.copy()
     u_last = data.u_default.copy()
@@ -178,6 +182,7 @@ def ekf_run(model_id, model, sensors, data, out):
         for a in range(m_total):
             all_cols[i, a] = a
     m_cnt, pos = np.empty(n, dtype=np.int64), np.empty(m_total, dtype=np.int64)
+    cv = np.empty(n)  # the encoded check's coding vector of the step's prior
 
     for k in range(N):
         steps_done[0] = k
@@ -207,6 +212,8 @@ def ekf_run(model_id, model, sensors, data, out):
             if not finite:
                 diverged[k] = pending = _restart(x, P, x0, P0, seed_done)
         _store(k, x, P, x_prior, P_prior_diag, P_prior_full, store_P)
+        if store_ex_var:
+            coding_vector_into(P, coding_floor, coding_r_max, cv)
         # ---- select the fresh, valid groups -------------------------------------------------
         m = zero
         ng = zero
@@ -326,6 +333,8 @@ def ekf_run(model_id, model, sensors, data, out):
                             ka += KTa[i] * KTa[i]
                         knorm += ka
                     gain_norm[k] = np.sqrt(knorm)
+                    if store_ex_var:  # CV K S K^T CV^T = |V CV|^2 (logscan.filters.coding)
+                        ex_var[k] = coded_variance(V, m, n, cv)
                     for a in range(m):
                         j = rows[a]
                         pos[j] = a
@@ -371,21 +380,25 @@ def run_ekf(
     store_S=True,
     store_innovations=True,
     steps_done: np.ndarray | None = None,
+    coding: CodedVariance | None = None,
 ) -> EkfTrace:
     """Filter the aligned run with the model; see the module docstring for the conventions.
     ``steps_done``: a (1,) int64 array the kernel sets to the steps filtered so far (a progress
-    watcher's; the kernel releases the GIL).
+    watcher's; the kernel releases the GIL). ``coding``: the trace's ``ex_variance`` is the
+    encoded check's predicted variance with that coding vector (`logscan.filters.coding`).
 
     Memory: the full P, S and K add N*n*n, N*m*m and N*n*m float64 (a 1 h 100 Hz quadcopter log:
     415 MB each); `store_gain=False` / `store_S=False` drop K / S (the trace keeps NIS and the gain
     norm), `store_innovations=False` drops y and S_diag (2 * N*m float32: 35 MB for that log),
     `full_P` adds P_prior and P_post.
     """
-    k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0)
+    k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0, coding=coding)
     N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
     out = _buffers(
         N, n, G, m, full_P=full_P, store_gain=store_gain, store_S=store_S, store_innovations=store_innovations
     )
+    if coding is not None:
+        out = out._replace(ex_var=np.zeros(N))
     if steps_done is not None:
         out = out._replace(steps_done=steps_done)
     if N:
@@ -418,6 +431,7 @@ def _buffers(
         S_out=np.empty((N if store_S else 0, m, m)),
         S_diag_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),
         K_out=np.empty((N if store_gain else 0, n, m)),
+        ex_var=np.empty(0),
         nis=np.full(N, nan),
         nis_group=np.full((N, G), nan),
         m_k=np.zeros(N, dtype=np.int64),
@@ -472,6 +486,7 @@ def _trace(
         P_post=out.P_post_full if full_P else None,
         S=out.S_out if store_S else None,
         K=out.K_out if store_gain else None,
+        ex_variance=out.ex_var if out.ex_var.shape[0] == t.size else None,
         divergence_episodes=divergence_episodes(t, out.diverged, out.m_k),
     )
 

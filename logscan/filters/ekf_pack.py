@@ -15,9 +15,11 @@ import numpy as np
 
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
+from logscan.filters.coding import coding_arguments
 from logscan.filters.q_scale import calibrated_Q
 from logscan.models import dispatch
 from logscan.models.base import Model
+from logscan.needs import CodedVariance
 
 
 # =============================================================================================
@@ -33,6 +35,10 @@ class EkfModel(NamedTuple):
     x0: np.ndarray  # (n,) float64: the initial state, and the state a restart returns to
     P0: np.ndarray  # (n, n) float64: its covariance
     seed_at_start: bool  # no x0 given: seed the directly observed states from their first samples
+    # the encoded check's coding vector (logscan.filters.coding): its floor sigma_floor * state scale,
+    # (n,) float64, (0,) when its predicted variance is not asked for; and the sum bound r_max
+    coding_floor: np.ndarray
+    coding_r_max: float
 
 
 class EkfSensors(NamedTuple):
@@ -74,6 +80,7 @@ class EkfBuffers(NamedTuple):
     S_out: np.ndarray  # (N, m_total, m_total) float64 * innovation covariance
     S_diag_out: np.ndarray  # (N, m_total) float32, stored with y_out
     K_out: np.ndarray  # (N, n, m_total) float64 * gain
+    ex_var: np.ndarray  # (N,) float64 * CV K S K^T CV^T, 0 where not updated (EkfModel.coding_floor)
     nis: np.ndarray  # (N,) float64
     nis_group: np.ndarray  # (N, G) float64
     m_k: np.ndarray  # (N,) int64: outputs in the update (0: none)
@@ -118,11 +125,15 @@ class KernelInputs:
     direct_gain: np.ndarray
     dt: float
     seed_at_start: bool
+    coding_floor: np.ndarray  # EkfModel's: (0,) unless pack_run was given a CodedVariance
+    coding_r_max: float
 
     def kernel_arguments(self) -> tuple[int, EkfModel, EkfSensors, EkfData]:
         """``ekf_run``'s arguments before its buffers: the model id and the pack's arrays grouped
         by meaning (the same arrays, not copies)."""
-        model = EkfModel(self.p, self.dt, self.Q, self.x0, self.P0, self.seed_at_start)
+        model = EkfModel(
+            self.p, self.dt, self.Q, self.x0, self.P0, self.seed_at_start, self.coding_floor, self.coding_r_max
+        )
         sensors = EkfSensors(
             self.group_ids,
             self.group_offsets,
@@ -179,13 +190,16 @@ def samples_side_by_side(
     return base
 
 
-def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) -> KernelInputs:
+def pack_run(
+    model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, coding: CodedVariance | None = None
+) -> KernelInputs:
     """Check the run against the model and pack it into the kernel's arrays.
 
     Q: None (the model's default_Q, scaled by its calibrated ``process_noise_scale`` when set),
     or an (n, n) matrix. R: None (each group's profile noise_std, else the model's default_R), or a dict
     group -> (m, m) matrix or (m,) standard deviations. The physical range (samples outside it are
-    rejected) is each group's profile range_lo / range_hi where given, else the model's.
+    rejected) is each group's profile range_lo / range_hi where given, else the model's. ``coding``:
+    the encoded check's predicted variance is computed too (`logscan.filters.coding`).
     """
     dispatch.check_model_id(model.model_id, model.name)
     u = _inputs(model, run)
@@ -201,6 +215,7 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
     finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite_rows[0]].copy() if finite_rows.size else np.zeros(model.n_inputs)
     direct = [s.direct_map() for s in specs]
+    coding_floor, coding_r_max = coding_arguments(coding, model)
     return KernelInputs(
         model_id=int(model.model_id),
         p=np.ascontiguousarray(model.param_vector(run.dt), dtype=np.float64),
@@ -225,6 +240,8 @@ def pack_run(model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None) ->
         direct_gain=np.concatenate([d[1] for d in direct]),
         dt=float(run.dt),
         seed_at_start=seed,
+        coding_floor=coding_floor,
+        coding_r_max=coding_r_max,
     )
 
 

@@ -22,17 +22,22 @@ from __future__ import annotations
 
 import numpy as np
 
+from logscan.errors import InternalError
 from logscan.filters.ekf import KernelInputs, _buffers, compiled_for, pack_run, run_ekf
+from logscan.needs import CodedVariance, Part
 from logscan.traces import EkfTrace
 
 BLOCK = 4096  # steps per kernel call: its full P, K and S buffers are ~2.4 KB per step (n = m = 12)
 
 
-def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None, steps_done=None) -> EkfTrace:
-    """`run_ekf` with the trace ``parts`` asked for ("K", "S", "P", "y"); K and S, when asked,
-    re-filtered block by block on read (`Refiltered`) instead of held for the whole log.
+def run_ekf_parts(model, run, parts: frozenset[Part], x0=None, P0=None, steps_done=None) -> EkfTrace:
+    """`run_ekf` with the trace ``parts`` asked for ("K", "S", "P", "y", a `CodedVariance`); K and S,
+    when asked, re-filtered block by block on read (`Refiltered`) instead of held for the whole log.
     ``steps_done``: `run_ekf`'s progress counter."""
     heavy = parts & {"K", "S"}
+    codings = {part for part in parts if isinstance(part, CodedVariance)}
+    if len(codings) > 1:  # one encoded check per profile: its coding is the one asked for
+        raise InternalError(f"the EKF was asked for {len(codings)} different coding vectors; it computes one")
     trace = run_ekf(
         model,
         run,
@@ -43,6 +48,7 @@ def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None, steps_don
         full_P="P" in parts,
         store_innovations="y" in parts,
         steps_done=steps_done,
+        coding=next(iter(codings), None),
     )
     if heavy and "P" not in parts:  # with the full P asked for, the trace holds them all anyway
         source = Refiltered(pack_run(model, run, x0=x0, P0=P0), trace, heavy)
@@ -54,7 +60,7 @@ def run_ekf_parts(model, run, parts: frozenset[str], x0=None, P0=None, steps_don
 class Refiltered:
     """K and S of one EKF run, filtered again a block of steps at a time (see the module docstring)."""
 
-    def __init__(self, k: KernelInputs, trace: EkfTrace, parts: frozenset[str]) -> None:
+    def __init__(self, k: KernelInputs, trace: EkfTrace, parts: frozenset[Part]) -> None:
         self.k = k
         self.store = {"store_gain": "K" in parts, "store_S": "S" in parts, "store_innovations": False}
         self.n_steps = trace.n_steps

@@ -13,7 +13,9 @@ from logscan.report.sensor_views import pack_innovations
 # The large per-step series a detector declares it reads (`Detector.reads`): each is freed once no
 # detector still to run reads it. What runs after the detectors (incidents, coverage, the summary)
 # reads none of them.
-RELEASABLE_TRACE = ("x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_diag", "K", "S", "P_prior", "P_post")
+RELEASABLE_TRACE = (
+    "x_prior", "x_post", "P_prior_diag", "P_post_diag", "y", "S_diag", "K", "S", "P_prior", "P_post", "ex_variance",
+)  # fmt: skip
 
 
 # "z": the measurement groups' samples; "redundant": the [redundant] groups' readings

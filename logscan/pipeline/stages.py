@@ -14,7 +14,7 @@ from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InternalError, ProfileError, did_you_mean
 from logscan.filters.ubikf import run_ubikf
-from logscan.needs import Needs, union
+from logscan.needs import Needs, Part, union
 from logscan.pipeline.refilter import run_ekf_parts
 
 if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported where they are used)
@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.traces import EkfTrace
 
 
-def _run_ekf(model, run, parts: frozenset[str], x0=None, P0=None, steps_done=None):
+def _run_ekf(model, run, parts: frozenset[Part], x0=None, P0=None, steps_done=None):
     # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
     # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run. x0, P0: a
     # checkpoint to start from (a probe re-filtering a slice), else the model's prior. K and S, when
@@ -37,7 +37,7 @@ def _run_ekf(model, run, parts: frozenset[str], x0=None, P0=None, steps_done=Non
     return run_ekf_parts(model, run, parts, x0=x0, P0=P0, steps_done=steps_done)
 
 
-def _run_ubikf(model, run, parts: frozenset[str]):
+def _run_ubikf(model, run, parts: frozenset[Part]):
     interval_model = getattr(model, "interval_model", None)
     if interval_model is None:
         raise ProfileError(
