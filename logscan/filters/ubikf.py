@@ -51,7 +51,7 @@ from logscan.align import AlignedRun
 from logscan.errors import ModelError
 from logscan.filters.detectability import check_detectable
 from logscan.filters.ubikf_blocks import Block, block_groups, state_blocks, usable_groups
-from logscan.filters.ubikf_kernel import UbikfBuffers, UbikfData, UbikfModel, UbikfSettings, ubikf_run
+from logscan.filters.ubikf_kernel import BlockPlace, UbikfBuffers, UbikfData, UbikfModel, UbikfSettings, ubikf_run
 from logscan.models.interval_model import IntervalModel, loewner_upper
 
 
@@ -161,7 +161,7 @@ def run_ubikf(
 
 
 def _run_block(model: UbikfModel, block: Block, data: UbikfData, settings: UbikfSettings, out: UbikfBuffers) -> None:
-    """Filter one block (`logscan.filters.ubikf_blocks`) and write its part of ``out``."""
+    """Filter one block (`logscan.filters.ubikf_blocks`): the kernel writes its part of ``out``."""
     s, r = block.states, block.rows
     c = np.ascontiguousarray
     offsets, sizes = block_groups(r, model.group_offsets, model.group_sizes)
@@ -173,22 +173,8 @@ def _run_block(model: UbikfModel, block: Block, data: UbikfData, settings: Ubikf
         x0=c(model.x0[s]), P0=c(model.P0[np.ix_(s, s)]),
         group_offsets=offsets, group_sizes=sizes,
     )  # fmt: skip
-    N, G = data.fresh.shape
-    part = _buffers(N, s.size, r.size, G, store_P=out.P.shape[0] == N, store_gain=out.K.shape[0] == N)
-    ubikf_run(sub, UbikfData(data.u, data.u_default, c(data.z[:, r]), data.fresh), settings, part)
-    for name in ("x_mid", "x_lo", "x_hi", "P_diag"):
-        getattr(out, name)[:, s] = getattr(part, name)
-    out.P_trace[:] += part.P_trace
-    out.n_generators[:] += part.n_generators
-    out.diverged[:] |= part.diverged
-    out.r_mid[:, r], out.r_rad[:, r] = part.r_mid, part.r_rad
-    out.S[:, r[:, None], r[None, :]] = part.S
-    if out.P.shape[0] == N:
-        out.P[:, s[:, None], s[None, :]] = np.nan_to_num(part.P)
-    if out.K.shape[0] == N:
-        out.K[:, s[:, None], r[None, :]] = part.K
-    seen = np.isfinite(part.nis)
-    out.nis[seen] = np.where(np.isnan(out.nis[seen]), 0.0, out.nis[seen]) + part.nis[seen]
+    block_data = UbikfData(data.u, data.u_default, c(data.z[:, r]), data.fresh)
+    ubikf_run(sub, block_data, settings, out, BlockPlace(c(s, dtype=np.int64), c(r, dtype=np.int64)))
 
 
 def _finish(out: UbikfBuffers, usable: np.ndarray, sizes: np.ndarray) -> None:

@@ -1,7 +1,9 @@
 """The UBIKF's numba kernel: one pass over a log of the interval filter of `logscan.filters.ubikf`
 (its docstring has the recursion; docs/algorithms.md section 2), on one block of states
 (`logscan.filters.ubikf_blocks`). Its arguments are the NamedTuples below, each field's shape and
-dtype in a comment.
+dtype in a comment. The step loop and every function it calls run without numba's reference
+counting (``_nrt=False``; the shared helpers as private copies, `logscan.filters.ubikf_nrt`): it
+allocates nothing, and the counting of every array view cost a third of the filter's time.
 """
 
 from __future__ import annotations
@@ -11,29 +13,27 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from logscan.filters.intervals import (
-    append_box,
-    box_columns,
-    innovation_bound,
-    posterior_bound,
-    predict_bound,
-    radius_times,
-    reduce_order,
-    sqrt_diag,
-    subtract_product,
-    widen,
-    zonotope_hull_into,
-    zonotope_map_into,
-)
-from logscan.filters.linalg import (
-    all_finite,
-    cho_solve_rows,
-    cholesky,
-    forward_sq,
-    sparse_mm,
-    sparse_rows,
-)
+from logscan.filters import intervals, linalg
+from logscan.filters.ubikf_nrt import nrt_free
 from logscan.numba_cache import follow_dependencies
+
+# the shared helpers the step loop calls, as private NRT-free copies (`logscan.filters.ubikf_nrt`)
+append_box = nrt_free(intervals.append_box)
+innovation_bound = nrt_free(intervals.innovation_bound)
+posterior_bound = nrt_free(intervals.posterior_bound)
+predict_bound = nrt_free(intervals.predict_bound)
+radius_times = nrt_free(intervals.radius_times)
+sqrt_diag = nrt_free(intervals.sqrt_diag)
+subtract_product = nrt_free(intervals.subtract_product)
+widen = nrt_free(intervals.widen)
+zonotope_hull_into = nrt_free(intervals.zonotope_hull_into)
+zonotope_map_into = nrt_free(intervals.zonotope_map_into)
+all_finite = nrt_free(linalg.all_finite)
+cho_solve_rows = nrt_free(linalg.cho_solve_rows)
+cholesky = nrt_free(linalg.cholesky)
+forward_sq = nrt_free(linalg.forward_sq)
+sparse_mm = nrt_free(linalg.sparse_mm)
+sparse_rows = nrt_free(linalg.sparse_rows)
 
 
 # ================================================================================================
@@ -75,9 +75,11 @@ class UbikfSettings(NamedTuple):
 
 
 class UbikfBuffers(NamedTuple):
-    """What the kernel writes, preallocated by the caller (NaN filled; n_generators, m_k 0 and the
-    flags False). K and P are stored when their first dimension is N (zero-length: skipped). The
-    field names are `UbikfTrace`'s."""
+    """The whole model's outputs, preallocated by the caller (NaN filled; n_generators, m_k 0 and
+    the flags False; P_trace 0 before the first block). Each block's kernel writes its states' and
+    rows' entries (`BlockPlace`), adds its trace, generator count and NIS to the sums and sets
+    ``diverged``; ``updated`` and ``m_k`` are the caller's, after every block. K and P are stored
+    when their first dimension is N (zero-length: skipped). The field names are `UbikfTrace`'s."""
 
     x_mid: np.ndarray  # (N, n) float64: mid-model point estimate x_c (posterior)
     x_lo: np.ndarray  # (N, n) float64: hull of the posterior zonotope
@@ -96,19 +98,26 @@ class UbikfBuffers(NamedTuple):
     diverged: np.ndarray  # (N,) bool: restarted from x0/P0 at this step
 
 
+class BlockPlace(NamedTuple):
+    """Where a block's states and rows sit in the whole model (`logscan.filters.ubikf_blocks`)."""
+
+    states: np.ndarray  # (n,) int64: the whole model's index of each of the block's states
+    rows: np.ndarray  # (m,) int64: the whole model's index of each of the block's measurement rows
+
+
 # ================================================================================================
 # the kernel
 # ================================================================================================
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def below_cap(M, cap):
-    """Every entry finite and |entry| <= cap."""
-    for v in M.ravel():
+    """Every entry of the vector or matrix M finite and |entry| <= cap."""
+    for v in M.flat:
         if not (abs(v) <= cap):
             return False
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def row_dot(M, i, x):
     """M[i] . x (a loop: numba's np.dot on short vectors is a BLAS call)."""
     t = 0.0
@@ -117,7 +126,7 @@ def row_dot(M, i, x):
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def interval_input_radius(A_r, x, h, B_r, u, out):
     """out = A_r (|x| + h) + B_r |u| (widened): the box the interval terms of the prediction add."""
     n = out.size
@@ -130,7 +139,7 @@ def interval_input_radius(A_r, x, h, B_r, u, out):
         out[i] = widen(s)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd):
     """Stack the rows of the groups with a fresh, finite sample at step k; returns their count."""
     m = 0
@@ -148,7 +157,7 @@ def select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd):
     return m
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def predict_step(A_m, acols, annz, A_r, B_m, B_r, u, x, h, G, p, G_out, alpha, x_prior):
     """x_c,prior = A_m x_c + B_m u, G_out = A_m G and alpha = A_r (|x_c| + h) + B_r |u|: the prior
     zonotope is x_c,prior + G_out [-1, 1]^p + [-alpha, alpha] (the box is appended after the
@@ -164,7 +173,7 @@ def predict_step(A_m, acols, annz, A_r, B_m, B_r, u, x, h, G, p, G_out, alpha, x
         x_prior[i] = t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, alpha, G, p, work, P_out):
     """The correction with the m stacked rows (Cs = C_m[rows], y = r on entry) of the prior zonotope
     x_c + G [-1, 1]^p + [-alpha, alpha] (h its hull radius): S+, K, P+_post into P_out,
@@ -219,40 +228,47 @@ def update_step(C_r, Cs, rows, m, y, Rs, P, x, h, alpha, G, p, work, P_out):
     return True, append_box(G, p, sigma)
 
 
-@njit(cache=True, error_model="numpy")
-def store_step(k, x, h, P, p, out):
-    """The posterior of step k into ``out`` (UbikfBuffers): x_c, its hull x_c -+ h, diag and trace
-    of P+, generator count."""
+@njit(cache=True, error_model="numpy", _nrt=False)
+def store_step(k, x, h, P, p, out, states):
+    """The posterior of step k into the block's states of ``out`` (UbikfBuffers): x_c, its hull
+    x_c -+ h, diag of P+ and (out.P of length N) P+; its trace and the generator count added to
+    the sums."""
     x_mid, x_lo, x_hi, P_diag, P_out = out.x_mid, out.x_lo, out.x_hi, out.P_diag, out.P
     tr = 0.0
     for i in range(x.size):
-        x_mid[k, i] = x[i]
-        x_lo[k, i] = x[i] - h[i]
-        x_hi[k, i] = x[i] + h[i]
-        P_diag[k, i] = P[i, i]
+        s = states[i]
+        x_mid[k, s] = x[i]
+        x_lo[k, s] = x[i] - h[i]
+        x_hi[k, s] = x[i] + h[i]
+        P_diag[k, s] = P[i, i]
         tr += P[i, i]
-    out.P_trace[k] = tr
-    out.n_generators[k] = p
+    out.P_trace[k] += tr
+    out.n_generators[k] += p
     if P_out.shape[0] == x_mid.shape[0]:
-        P_out[k] = P
+        for i in range(x.size):
+            for j in range(x.size):
+                P_out[k, states[i], states[j]] = P[i, j]
 
 
-@njit(cache=True, error_model="numpy")
-def store_update(k, rows, m, y, work, out, v):
-    """The innovation box, S+, the point NIS and (out.K of length N) the gain of step k into ``out``
-    (UbikfBuffers)."""
+@njit(cache=True, error_model="numpy", _nrt=False)
+def store_update(k, rows, m, y, work, out, v, place):
+    """The innovation box, S+ and (out.K of length N) the gain of step k into the block's rows of
+    ``out`` (UbikfBuffers); its point NIS, when finite, added to the step's."""
     r_box, gamma, S, Lc, K = work[7], work[8], work[4], work[5], work[11][6]
     r_mid, r_rad, S_out, K_out = out.r_mid, out.r_rad, out.S, out.K
-    out.nis[k] = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
+    nis = forward_sq(Lc, m, y, 0, v)  # r^T (S+)^-1 r
+    if np.isfinite(nis):
+        before = out.nis[k]
+        out.nis[k] = (0.0 if np.isnan(before) else before) + nis
     for a in range(m):
-        j = rows[a]
+        j = place.rows[rows[a]]
         r_mid[k, j] = y[a]
         r_rad[k, j] = widen(r_box[a] + gamma[a])
         for b in range(m):
-            S_out[k, j, rows[b]] = S[a, b]
+            S_out[k, j, place.rows[rows[b]]] = S[a, b]
         if K_out.shape[0] == r_mid.shape[0]:
             for i in range(K.shape[0]):
-                K_out[k, i, j] = K[i, a]
+                K_out[k, place.states[i], j] = K[i, a]
 
 
 @njit(cache=True, error_model="numpy")
@@ -269,35 +285,43 @@ def work_arrays(n, m, cap_p):
 
 
 @njit(cache=True, error_model="numpy")
-def ubikf_run(model, data, settings, out):
-    """Filter the N steps of ``data`` (UbikfData) with ``model`` (UbikfModel) and ``settings``
-    (UbikfSettings) into ``out`` (UbikfBuffers)."""
+def ubikf_run(model, data, settings, out, place):
+    """Filter the N steps of ``data`` (UbikfData) with ``model`` (UbikfModel, one block) and
+    ``settings`` (UbikfSettings) into the block's part of ``out`` (UbikfBuffers; ``place``:
+    BlockPlace): the work arrays allocated once here, the steps run by `filter_steps`."""
+    n, m_total = model.x0.size, model.C_m.shape[0]
+    cap_p = n + 2 * settings.L * n + n  # generators: a box, then at most 2 L steps of n new ones
+    state = (model.x0.copy(), data.u_default.copy(), model.P0.copy(), np.zeros((n, cap_p)), np.zeros((n, cap_p)))
+    vectors = np.zeros((6, n))  # x_prior, h, sigma, rho, alpha and box_columns_into's box
+    matrices = np.zeros((5, n, n))  # P_next, and predict_bound's work (the last stays zero)
+    acols, annz = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64)
+    sparse_rows(model.A_m, n, n, acols, annz)
+    rows, upd = np.empty(m_total, dtype=np.int64), np.zeros(model.group_offsets.size, dtype=np.bool_)
+    Cs, Rs = np.zeros((m_total, n)), np.zeros((m_total, m_total))
+    y, v = np.zeros(m_total), np.zeros(m_total)
+    scratch = (vectors, matrices, acols, annz, np.arange(n), rows, upd, Cs, Rs, y, v)
+    filter_steps(model, data, settings, out, place, state, scratch, work_arrays(n, m_total, cap_p))
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def filter_steps(model, data, settings, out, place, state, scratch, work):
+    """The step loop of `ubikf_run` (NRT off: it allocates nothing, `logscan.filters.ubikf_nrt`)."""
     A_m, A_r, B_m, B_r, C_m, C_r = model.A_m, model.A_r, model.B_m, model.B_r, model.C_m, model.C_r
     x0, P0, group_offsets, group_sizes = model.x0, model.P0, model.group_offsets, model.group_sizes
     Q, R, u, z, fresh = model.Q, model.R, data.u, data.z, data.fresh
-    L, L_box, cap = settings.L, settings.L_box, settings.cap
-    # read once (an attribute read inside the loop counts a reference up and down at each access)
-    updated, m_k, diverged = out.updated, out.m_k, out.diverged
-    n, m_total = x0.size, C_m.shape[0]
-    cap_p = n + 2 * L * n + n  # generators: a box, then at most 2 L steps of n new ones
-    # work arrays (allocated once)
-    x, x_prior, u_last, h = x0.copy(), np.empty(n), data.u_default.copy(), np.zeros(n)
-    sigma, rho, alpha = np.empty(n), np.empty(n), np.empty(n)
-    P, P_next, Wn = P0.copy(), np.empty((n, n)), np.zeros((4, n, n))  # Wn[3] stays zero
-    G, G_next = np.zeros((n, cap_p)), np.zeros((n, cap_p))
-    acols, annz, all_rows = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64), np.arange(n)
-    sparse_rows(A_m, n, n, acols, annz)
-    rows, upd = np.empty(m_total, dtype=np.int64), np.zeros(group_offsets.size, dtype=np.bool_)
-    Cs, Rs, y, v = np.zeros((m_total, n)), np.zeros((m_total, m_total)), np.zeros(m_total), np.zeros(m_total)
-    work = work_arrays(n, m_total, cap_p)
+    L, L_box, cap, diverged = settings.L, settings.L_box, settings.cap, out.diverged
+    x, u_last, P, G, G_next = state
+    vectors, Wn, acols, annz, all_rows, rows, upd, Cs, Rs, y, v = scratch
+    x_prior, h, sigma, rho, alpha, box = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4], vectors[5]
+    P_next, n = Wn[4], x0.size
     p, p_mark, p_recent, age = 0, 0, 0, 0
     for k in range(u.shape[0]):
         if all_finite(u[k]):
-            u_last[:] = u[k]
+            copy_into(u[k], u_last)
         if age > 0:  # k = 0 and after a restart: the prior is x0, P0
             predict_step(A_m, acols, annz, A_r, B_m, B_r, u_last, x, h, G, p, G_next, alpha, x_prior)
             G, G_next = G_next, G
-            x[:] = x_prior
+            copy_into(x_prior, x)
             predict_bound(A_m, acols, annz, A_r, all_rows, Q, P, sigma, rho, Wn[3], Wn[0], Wn[1], Wn[2], P_next)
             P, P_next = P_next, P
             zonotope_hull_into(G, n, p, h)
@@ -309,7 +333,7 @@ def ubikf_run(model, data, settings, out):
         m = select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd)
         if m > 0:
             for a in range(m):
-                Cs[a] = C_m[rows[a]]
+                copy_into(C_m[rows[a]], Cs[a])
                 y[a] = z[k, rows[a]] - row_dot(C_m, rows[a], x)  # r = y - C_m x_c,prior
                 for b in range(m):
                     Rs[a, b] = R[rows[a], rows[b]]
@@ -319,24 +343,56 @@ def ubikf_run(model, data, settings, out):
             p = append_box(G, p, alpha)
         age += 1
         if age % L_box == 0:  # box the last L_box steps' new generators together
-            p = box_columns(G, p, p_recent, p)
+            p = box_columns_into(G, p, p_recent, p, box)
             p_recent = p
         if age % L == 0:  # box the generators older than L steps
-            p = reduce_order(G, p, p_mark)
+            p = box_columns_into(G, p, 0, p_mark, box)
             p_mark = p
             p_recent = p
         zonotope_hull_into(G, n, p, h)
         if not (ok and below_cap(x, cap) and below_cap(P, cap) and below_cap(h, cap)):
             diverged[k] = True
-            x[:] = x0
-            P[:] = P0
+            copy_into(x0, x)
+            copy_into(P0, P)
             h[:] = 0.0
             p, p_mark, p_recent, age, m = 0, 0, 0, 0, 0
-        store_step(k, x, h, P, p, out)
+        store_step(k, x, h, P, p, out, place.states)
         if m > 0:
-            m_k[k] = m
-            updated[k] = upd
-            store_update(k, rows, m, y, work, out, v)
+            store_update(k, rows, m, y, work, out, v, place)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def copy_into(src, dst):
+    """dst[:] = src for two vectors or two matrices of one shape that do not overlap (``dst[:] =
+    src`` checks for an overlap and may copy through a temporary, which needs the NRT)."""
+    for i, value in enumerate(src.flat):
+        dst.flat[i] = value
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def box_columns_into(G, p, q0, q1, box):
+    """`logscan.filters.intervals.box_columns` (box the generators q0 .. q1 - 1; returns the new
+    p) with its (n,) work vector given (``box``), so that the step loop allocates nothing."""
+    n = G.shape[0]
+    if q1 <= q0:
+        return p
+    keep = p - q1
+    for i in range(n):
+        s = 0.0
+        for j in range(q0, q1):
+            s += abs(G[i, j])
+        box[i] = widen(s)
+    for i in range(n):
+        if q0 + n <= q1:  # moving left: front to back
+            for j in range(keep):
+                G[i, q0 + n + j] = G[i, q1 + j]
+        else:  # moving right: back to front
+            for j in range(keep - 1, -1, -1):
+                G[i, q0 + n + j] = G[i, q1 + j]
+        for j in range(q0, q0 + n):
+            G[i, j] = 0.0
+        G[i, q0 + i] = box[i]
+    return q0 + n + keep
 
 
 follow_dependencies(__name__)
