@@ -80,6 +80,12 @@ def adaptive_band(e, defined, window, rho, s_floor):
     return mu, s, lower, upper, exceed, warm
 
 
+def compile_kernels() -> None:
+    """Compile (or load) `adaptive_band` for the types its detectors pass: the first run calls it
+    while the EKF compiles in its own process."""
+    adaptive_band(np.zeros(2), np.ones(2, dtype=np.bool_), 1, 1.0, np.zeros(2))
+
+
 @njit(cache=True)
 def trailing_mean_var(values, defined, window):
     """Exact mean and population variance of the last ``window`` defined, finite values up to and

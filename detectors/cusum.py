@@ -108,24 +108,25 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
     g = np.full((n, m), np.nan)
     free = np.full((n, m), np.nan)
     onset = np.full((n, m), -1, dtype=np.int64)
+    no_run = np.int64(-1)  # a run start of no run; int64, not the literal -1: _side compiles once
     for j in range(m):
         sp = 0.0
         sm = 0.0
         fp = 0.0  # the sides without the cap
         fm = 0.0
-        p0 = -1
-        m0 = -1
+        p0 = no_run
+        m0 = no_run
         last = -np.inf
         on = False
         top = cap * h[j]
         for i in range(n):
             if reset[i]:
-                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
+                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
             x = y[i, j] / np.sqrt(S_diag[i, j])  # u = y~ / sqrt(S_jj)
             if not np.isfinite(x):
                 continue
             if t[i] - last > gap[j]:
-                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
+                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
             last = t[i]
             x = min(max(x, -clip), clip)
             sp, p0 = _side(sp, p0, x, kappa, top, i)  # S+ on u_k
@@ -134,7 +135,7 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
             fm = max(0.0, fm - x - kappa)
             now = max(sp, sm) > h[j]
             if on and not now:  # the alarm ended: its evidence is spent, both sides restart
-                sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, -1, -1
+                sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, no_run, no_run
             on = now
             if sp >= sm:
                 g[i, j] = sp
@@ -145,6 +146,13 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
                 free[i, j] = -fm
                 onset[i, j] = m0
     return g, onset, free
+
+
+def compile_kernels() -> None:
+    """Compile (or load) `cusum_kernel` for the types `Cusum` passes (the EKF trace's float32
+    innovations and variances): the first run calls it while the EKF compiles in its own process."""
+    y = np.zeros((2, 1), dtype=np.float32)
+    cusum_kernel(np.zeros(2), y, y + 1.0, np.zeros(2, dtype=bool), np.ones(1), np.ones(1), 0.5, 2.0, 5.0)
 
 
 def uncapped_peaks(alarms, t: np.ndarray, free: np.ndarray, h: float) -> list[dict]:

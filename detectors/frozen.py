@@ -69,6 +69,12 @@ def held_runs(v, tol):  # pragma: no cover - compiled
     return anchor
 
 
+def compile_kernels() -> None:
+    """Compile (or load) `held_runs` for the types `Frozen` passes: the first run calls it while
+    the EKF compiles in its own process."""
+    held_runs(np.zeros(2), 0.0)
+
+
 def channel_noise(values: np.ndarray) -> float:
     """A channel's noise std from its own samples: median |v_i - v_i-1| / (0.6745 sqrt 2) (motion
     adds to it, a stuck stretch shorter than half the log does not move the median)."""

@@ -58,6 +58,24 @@ def initialise_jit() -> None:
     cpu_target.target_context.refresh()
 
 
+class OneSignature:
+    """A cached numba function that holds one compiled version, for ``argtypes``: compiled (or
+    loaded from the disk cache) at the first call, after which the dispatcher compiles nothing
+    else, so a call whose arguments convert to those types (a C-contiguous array to an "A" layout
+    one, a writable array to a read-only one) runs that version instead of compiling another: a
+    cold first run pays one compile, not one per layout its callers happen to pass."""
+
+    def __init__(self, dispatcher: Dispatcher, argtypes: tuple):
+        self.dispatcher = dispatcher
+        self.argtypes = argtypes
+
+    def __call__(self, *args):
+        if self.dispatcher._can_compile:  # the first call (a forked child inherits the state)
+            self.dispatcher.compile(self.argtypes)
+            self.dispatcher.disable_compile()
+        return self.dispatcher(*args)
+
+
 def tolerate_missing_classes(cache_file) -> None:
     """Read the cache's index as empty (stale) when unpickling it fails on a class or module that
     no longer exists, as numba reads an index with an old stamp; the next save rewrites it. numba

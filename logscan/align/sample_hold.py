@@ -6,9 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
-from logscan.numba_cache import follow_dependencies
+from logscan.numba_cache import OneSignature, follow_dependencies
 
 # ------------------------------------------------------------------------------------------------
 # Implementation
@@ -77,6 +77,22 @@ def _hold_kernel(t_ns, values, grid_ns, limit_ns, z, fresh):  # pragma: no cover
             fresh[k] = False
 
 
+# z and fresh are often columns of 2-D arrays ("A" layout), sometimes whole arrays ("C"); the
+# samples are sometimes read-only (as read from a mapped file): one compile for all of them
+_IN = {"layout": "C", "readonly": True}
+_hold_one = OneSignature(
+    _hold_kernel,
+    (
+        types.Array(types.int64, 1, **_IN),
+        types.Array(types.float64, 1, **_IN),
+        types.Array(types.int64, 1, **_IN),
+        types.int64,
+        types.float64[:],
+        types.boolean[:],
+    ),
+)
+
+
 def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: int, z=None, fresh=None):
     """Zero-order hold of sorted unique samples onto ``grid_ns`` within ``limit_ns``.
 
@@ -88,7 +104,7 @@ def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: in
     n = grid_ns.size
     z = np.empty(n) if z is None else z
     fresh = np.empty(n, dtype=np.bool_) if fresh is None else fresh
-    _hold_kernel(
+    _hold_one(
         np.ascontiguousarray(t_ns, dtype=np.int64),
         np.ascontiguousarray(values, dtype=np.float64),
         np.ascontiguousarray(grid_ns, dtype=np.int64),
@@ -100,12 +116,26 @@ def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: in
 
 
 @njit(cache=True)
+def _count_at_most(t_ns, value):  # pragma: no cover - compiled
+    # np.searchsorted(t_ns, value, side="right") of sorted t_ns, by bisection: numba's searchsorted
+    # compiles in about 1 s, a first run's share of the alignment
+    lo, hi = 0, t_ns.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t_ns[mid] <= value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
 def _gap_kernel(t_ns, g0, g1, limit_ns, starts, ends):  # pragma: no cover - compiled
     # Stretches without a sample inside [g0, g1] longer than the limit; edges: the last sample
     # before g0 (else g0), every sample in [g0, g1], then g1. Writes up to starts.size of them
     # (pass empty arrays to only count) and returns how many there are.
-    i0 = np.searchsorted(t_ns, g0)  # first sample >= g0
-    i1 = np.searchsorted(t_ns, g1, side="right")  # one past the last sample <= g1
+    i0 = _count_at_most(t_ns, g0 - 1)  # first sample >= g0 (integer times)
+    i1 = _count_at_most(t_ns, g1)  # one past the last sample <= g1
     prev = t_ns[i0 - 1] if i0 > 0 else g0
     count = 0
     for i in range(i0, i1 + 1):

@@ -14,12 +14,15 @@ from __future__ import annotations
 import multiprocessing
 import sys
 import threading
+from collections.abc import Callable, Iterable
 
 import numpy as np
+from numba.core.dispatcher import Dispatcher
 
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters.ekf import ekf_run, run_ekf
 from logscan.models.base import Model
+from logscan.numba_cache import initialise_jit
 
 COMPILING_NOTE = "compiling numerical kernels (first run only, 10-20 s)"
 
@@ -61,6 +64,11 @@ class Compile:
         self.cold = cold
         self._process = process
 
+    @property
+    def in_background(self) -> bool:
+        """Whether the kernel is compiling in its own process (until `wait`)."""
+        return self._process is not None
+
     def wait(self) -> None:
         """Join the compiling process, if any (its result is in the disk cache)."""
         if self._process is not None:
@@ -74,12 +82,31 @@ def start_compile(model: Model) -> Compile:
         return Compile(cold=False)
     if not _can_fork():
         return Compile(cold=True)
+    initialise_jit()  # once, here, inherited by the child: not paid again on the compile's critical path
     try:
         process = multiprocessing.get_context("fork").Process(target=_compile_ekf, args=(model,), daemon=True)
         process.start()
     except (OSError, ValueError, AssertionError):  # no process could be started: compile on first use
         return Compile(cold=True)
     return Compile(cold=True, process=process)
+
+
+def kernel_compilers(users: Iterable[object]) -> list[Callable[[], None]]:
+    """The ``compile_kernels()`` functions (each compiles or loads its module's kernels for the
+    types its callers pass) of the modules whose numba kernels ``users`` (e.g. detectors) call:
+    their own class's module and the modules it imports kernels from, each once. The first run
+    calls them while the EKF's kernel compiles in its own process."""
+    modules: dict[str, object] = {}
+    for user in users:
+        own = sys.modules.get(type(user).__module__)
+        if own is None:
+            continue
+        modules.setdefault(own.__name__, own)
+        for value in vars(own).values():
+            if isinstance(value, Dispatcher) and value.py_func.__module__ in sys.modules:
+                modules.setdefault(value.py_func.__module__, sys.modules[value.py_func.__module__])
+    compilers = (getattr(module, "compile_kernels", None) for module in modules.values())
+    return [compiler for compiler in compilers if callable(compiler)]
 
 
 def _can_fork() -> bool:

@@ -14,7 +14,7 @@ from logscan.align import align
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
-from logscan.filters.warmup import COMPILING_NOTE, Compile, start_compile
+from logscan.filters.warmup import COMPILING_NOTE, Compile, kernel_cached, start_compile
 from logscan.log import MAX_SPAN_S, Log
 from logscan.models import get_model
 from logscan.needs import Needs
@@ -26,6 +26,9 @@ from logscan.readers import detect_format, read_embedded_profile, read_log
 from logscan.readers.csv_reader import csv_log_name
 from logscan.report.run_context import STATE_TOPICS, run_context
 from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
+from logscan.verdict.observability import compile_kernel as compile_verdict_kernel
+from logscan.verdict.observability import judged_spans
+from logscan.verdict.observability_kernel import signature_evidence
 from logscan.verdict.truth import in_log_time, read_truth_file, truth_beside
 
 if TYPE_CHECKING:
@@ -149,6 +152,7 @@ def prepare(
     raw_topics: frozenset[str] = frozenset(),
     truth_path: str | os.PathLike | None = None,
     fraction: Fraction | None = None,
+    ahead: Sequence[Callable[[], None]] = (),
 ) -> Prepared:
     """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
     ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
@@ -156,7 +160,9 @@ def prepare(
     when it carries no on-board variances). ``notice`` hears the one
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. ``fraction`` hears the bytes read, a
-    block at a time (`logscan.readers.read_log`'s ``progress``). Raises LogscanError on bad input."""
+    block at a time (`logscan.readers.read_log`'s ``progress``). ``ahead``: functions that compile
+    the detectors' kernels, called while the EKF's compiles in its own process (the first run:
+    `logscan.filters.warmup.kernel_compilers`). Raises LogscanError on bad input."""
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
@@ -190,7 +196,7 @@ def prepare(
         wanted = wanted | RECOVERY_NEEDS
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     prepared.warnings.extend(_read_warnings(log, run))
-    _run_filters(prepared, wanted, compiling, step, fraction)
+    _run_filters(prepared, wanted, compiling, step, fraction, ahead)
     return prepared
 
 
@@ -223,7 +229,12 @@ def _read_warnings(log: Log, run: AlignedRun) -> list[str]:
 
 
 def _run_filters(
-    prepared: Prepared, wanted: Needs, compiling: Compile, step: Progress, fraction: Fraction | None
+    prepared: Prepared,
+    wanted: Needs,
+    compiling: Compile,
+    step: Progress,
+    fraction: Fraction | None,
+    ahead: Sequence[Callable[[], None]] = (),
 ) -> None:
     """Run each filter the needs ask for once, into ``prepared.traces``; the EKF's divergence
     episodes become warnings. ``fraction`` hears the steps a counting filter has done."""
@@ -234,6 +245,8 @@ def _run_filters(
                 hint=f"known filters: {', '.join(FILTERS)}",
             )
         step("filtering")
+        if compiling.in_background:
+            _compile_ahead(prepared, ahead)
         compiling.wait()
         if name not in COUNTS_STEPS:
             prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
@@ -243,6 +256,17 @@ def _run_filters(
     ekf = prepared.trace
     for episode in ekf.divergence_episodes if ekf is not None else ():
         prepared.warnings.append(f"filter diverged: {episode}")
+
+
+def _compile_ahead(prepared: Prepared, ahead: Sequence[Callable[[], None]]) -> None:
+    """While the EKF's kernel compiles in its own process (the first run), compile here the kernels
+    that run after it: the observability verdict's, when the log's ground truth asks for it, and
+    the detectors' (``ahead``)."""
+    model = prepared.model
+    if judged_spans(prepared) and not kernel_cached(signature_evidence, model.model_id):
+        compile_verdict_kernel(model, prepared.run.dt)
+    for compile_kernels in ahead:
+        compile_kernels()
 
 
 def _attach_truth(log, path: str, truth_path) -> None:

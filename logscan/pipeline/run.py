@@ -7,6 +7,7 @@ import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from logscan.filters.warmup import kernel_compilers
 from logscan.needs import Needs
 from logscan.pipeline.detection import detect
 from logscan.pipeline.preparation import Fraction, Progress, filter_free, load_profile_for, prepare, raw_topics_of
@@ -62,6 +63,7 @@ def analyze_log(
         raw_topics=raw,
         truth_path=truth,
         fraction=fraction,
+        ahead=kernel_compilers(detectors),
         **options,
     )
     return detect(

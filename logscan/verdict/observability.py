@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -311,6 +312,30 @@ def observability_of(
     )
 
 
+def compile_kernel(model, dt: float) -> None:
+    """Compile (or load from the disk cache) the verdict's kernel for ``model``: `observability_of`
+    on three steps of a stand-in EKF run of its first group (the kernel's signature depends on the
+    model id, array ranks and dtypes only: the same as a real run's). The first run calls it while
+    the EKF's kernel compiles in its own process (`logscan.filters.warmup`), not after it."""
+    name, spec = next(iter(model.groups.items()))
+    steps, n, size = 3, model.n_states, spec.size
+    trace = SimpleNamespace(
+        dt=dt,
+        t=np.arange(steps) * dt,
+        Q=np.eye(n),
+        R=np.eye(size),
+        P_post_diag=np.ones((steps, n), dtype=np.float32),
+        group_names=[name],
+        group_offsets=np.zeros(1, dtype=np.int64),
+        group_sizes=np.full(1, size, dtype=np.int64),
+        x_prior=np.zeros((steps, n)),
+        x_post=np.zeros((steps, n)),
+        updated=np.zeros((steps, 1), dtype=bool),
+    )
+    run = SimpleNamespace(u=np.zeros((steps, model.n_inputs)), groups={})
+    observability_of(model, run, trace)
+
+
 def fault_spans(events, window_s: float = WINDOW_S) -> list[tuple[float, float]]:
     """Where a verdict is needed: from a window before each fault event of a judged kind to its
     end (open-ended: the log's), the window starts `Observability.event_verdict` reads."""
@@ -327,9 +352,8 @@ def observability_for(prepared) -> tuple[Observability | None, str | None]:
     run = prepared.run
     if trace is None or getattr(trace, "x_prior", None) is None or trace.x_post is None or run.u is None:
         return None, None
-    truth = prepared.log.truth
     try:
-        spans = fault_spans(events_from_truth(truth.get("events", []), path=prepared.path)) if truth else []
+        spans = judged_spans(prepared)
         if not spans:
             return None, None
         obs = observability_of(prepared.model, run, trace, spans=spans)
@@ -337,6 +361,13 @@ def observability_for(prepared) -> tuple[Observability | None, str | None]:
         return obs, None
     except Exception as exc:  # noqa: BLE001 - the verdict is an aid; it must not cost the analysis
         return None, f"observability verdict not computed: {type(exc).__name__}: {exc}"
+
+
+def judged_spans(prepared) -> list[tuple[float, float]]:
+    """The spans of a prepared log the verdict judges (`fault_spans` of its ground truth's events):
+    none without ground truth or without a fault of a judged kind."""
+    truth = prepared.log.truth
+    return fault_spans(events_from_truth(truth.get("events", []), path=prepared.path)) if truth else []
 
 
 def describe(obs: Observability | None) -> str:

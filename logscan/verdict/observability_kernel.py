@@ -165,6 +165,29 @@ def _input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, hi, lo, k, xs, 
 
 
 @njit(cache=True, error_model="numpy")
+def _copy_square(src, n, dst):
+    """dst[:n, :n] = src[:n, :n], element by element: a slice assignment from an array would compile
+    numba's shape-mismatch message (string formatting, about 3 s of the first run's compile)."""
+    for i in range(n):
+        for c in range(n):
+            dst[i, c] = src[i, c]
+
+
+@njit(cache=True, error_model="numpy")
+def _abs_max(v):
+    """max |v_i| (0.0 for an empty v; NaN when v holds one, as np.abs(v).max()), without the
+    temporary array and numba's array-max implementation to compile."""
+    best = 0.0
+    for i in range(v.size):
+        a = abs(v[i])
+        if a != a:
+            return a
+        if a > best:
+            best = a
+    return best
+
+
+@njit(cache=True, error_model="numpy")
 def _joseph(P, KT, Hs, Rm, m, n, IKH, IKHt, FP, KR, row):
     """P = (I - K H) P (I - K H)^T + K R K^T, in place (K^T in KT, m rows)."""
     for i in range(n):
@@ -299,12 +322,12 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
         xk = x_post[k - 1]
         if not (all_finite(xk) and all_finite(x_prior[k]) and all_finite2(P)):
             start[:] = -1  # a diverged filter: no verdict until the next window start
-            P[:] = P0
+            _copy_square(P0, n, P)
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
         # (one call site each: the model's step is inlined wherever it is called, and compiled as often)
         dispatch.model_predict_into(model_id, p, xk, u[k], dt, x_next, F, kv, xs, Aw, Jw, Jnw)
-        h = 1e-6 * (1.0 + (np.abs(u[k]).max() if nu > 0 else 0.0))  # a model may have no input
+        h = 1e-6 * (1.0 + _abs_max(u[k]))  # 0.0 for a model without inputs
         _input_columns(model_id, p, xk, u[k], dt, act_dirs, h, ua, Gd, x_hi, x_lo, kv, xs, A0, Ft, Aw, Jw, Jnw)
         # P_prior = F P F^T + Q
         _mm_rows(F, P, n, n, n, FP)
@@ -341,9 +364,9 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
         for a in range(m):
             for b in range(m):
                 S[a, b] += Rm[a, b]
-        if not cholesky(S, 0, m, L):
+        if not cholesky(S, zero, m, L):  # int64 as in the EKF: one compile of it
             start[:] = -1
-            P[:] = P0
+            _copy_square(P0, n, P)
             continue
         for a in range(m):
             for i in range(n):

@@ -88,6 +88,9 @@ class Records(NamedTuple):
 
 def walk_records(u8: np.ndarray, start: int, stop: int) -> Records:
     """The records of ``u8[start:stop]``: one compiled pass counts them, a second fills their places."""
+    if u8.flags.writeable:  # a read-only view (as of a mapped file): the kernels compile for one type
+        u8 = u8.view()
+        u8.flags.writeable = False
     n, end, status = _count_records(u8, start, stop)
     ops = np.empty(n, dtype=np.uint8)
     offsets = np.empty(n, dtype=np.int64)
