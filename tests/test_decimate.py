@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from logscan.report.decimate import bucket_width, decimate, decimate_indices, edge_indices
+from logscan.report.decimate import bucket_width, decimate, decimate_indices, edge_indices, sorted_unique
 
 
 def _check_buckets(y: np.ndarray, idx: np.ndarray, max_points: int, n_keep: int) -> None:
@@ -133,3 +133,38 @@ def test_property_bound_extremes_edges_gaps(y, max_points, keep):
     if y.size > max_points:
         n_keep = min(valid_keep.size, max(max_points // 2, 1))
         _check_buckets(y, idx, max_points, n_keep)
+
+
+def _first_extremes(y: np.ndarray, width: int) -> set[int]:
+    """Per bucket, the index of its first minimum and first maximum (NaN ignored), one at a time."""
+    out = set()
+    for start in range(0, y.size, width):
+        block = y[start : start + width]
+        finite = ~np.isnan(block)
+        if finite.any():
+            values = np.where(finite, block, np.nan)
+            out |= {start + int(np.nanargmin(values)), start + int(np.nanargmax(values))}
+    return out
+
+
+@pytest.mark.parametrize("with_nan", [False, True])
+def test_each_bucket_gives_its_first_extremes_also_from_a_strided_float32_view(with_nan):
+    rng = np.random.default_rng(5)
+    base = np.round(rng.normal(size=2 * 10_007), 1).astype(np.float32)  # ties: the first one counts
+    y = base[::2]  # a strided view: the buckets are reshaped from it, not from a padded copy
+    if with_nan:
+        y = y.copy()
+        y[rng.random(y.size) < 0.05] = np.nan
+    idx = decimate_indices(y, 500)
+    width = bucket_width(y.size, 500, 0, with_nan)
+    assert y.size % width  # the last bucket is shorter
+    assert _first_extremes(y, width) <= set(idx.tolist())
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(st.integers(-50, 50), max_size=30), min_size=1, max_size=4))
+def test_sorted_unique_is_the_union_of_the_arrays(arrays):
+    arrays = [np.array(a, dtype=np.int64) for a in arrays]
+    got = sorted_unique(*arrays)
+    np.testing.assert_array_equal(got, np.unique(np.concatenate(arrays)))
+    assert got.dtype == np.int64

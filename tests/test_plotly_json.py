@@ -1,5 +1,6 @@
 """Decimation for the zoom: a click on an incident or alarm row shows that window drawn densely, on a
-1-hour log, without growing the report; no focus when alarms are everywhere."""
+1-hour log, without growing the report; no focus when alarms are everywhere. The figures' data made
+without copies of a whole log where none is needed."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ import pytest
 from test_report import GRID_N, array, figures, make_report
 
 from logscan.report import render_html
-from logscan.report.figures import Figure, Trace
-from logscan.report.plotly_json import MAX_FOCUS_FRACTION, POINT_BUDGET, focus_windows
+from logscan.report.figures import Figure, Trace, grid_step
+from logscan.report.plotly_json import MAX_FOCUS_FRACTION, POINT_BUDGET, _defined_samples, focus_windows, typed_array
+from logscan.report.stacked import is_flat
 
 
 @pytest.fixture(scope="module")
@@ -60,3 +62,45 @@ def test_no_focus_when_alarms_cover_much_of_the_log():
     spans = [(s, s + 1.0) for s in np.arange(0.0, 600.0, 600.0 * MAX_FOCUS_FRACTION / 5 / 2)]
     fig = Figure("f", "y", [Trace("y", np.zeros(t.size), np.zeros(0, int), 1.0, {})], {"alarm": spans})
     assert focus_windows([fig], t).shape == (0, 2)
+
+
+# --- the figures' data, made cheaply ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_typed_arrays_are_written_as_plotly_writes_them(dtype):
+    from _plotly_utils.utils import to_typed_array_spec
+
+    values = np.array([1.5, np.nan, -2.25e-7, 3.4e38, 0.0], dtype=dtype)
+    for array_like in (values, values[::2]):  # a strided view too
+        assert typed_array(array_like) == to_typed_array_spec(array_like)
+    assert typed_array(np.array([3, 4], dtype=np.int64)) == to_typed_array_spec(np.array([3, 4], dtype=np.int64))
+
+
+def test_a_statistic_defined_after_its_warm_up_is_drawn_from_there_with_its_kept_samples():
+    t = np.arange(1_000) * 0.01
+    y = np.sin(t).astype(np.float32)
+    y[:100] = np.nan  # the warm-up
+    y[990:] = np.nan
+    tc, yc, kept = _defined_samples(t, y, np.array([0, 150, 995]))
+    assert np.shares_memory(tc, t) and np.shares_memory(yc, y)  # views, not copies
+    np.testing.assert_array_equal(tc, t[100:990])
+    np.testing.assert_array_equal(kept, [0, 50, 889])  # as the grid steps map onto the drawn samples
+    y[500] = np.nan  # a missing step inside: the samples either side are joined (within 3 steps)
+    tc, yc, _ = _defined_samples(t, y, np.zeros(0, np.int64))
+    assert tc.size == 889 and not np.isnan(yc).any()
+
+
+def test_the_grid_step_is_the_median_step():
+    assert grid_step(np.array([0.0, 0.5, 1.0, 1.6])) == 0.5
+    assert grid_step(np.arange(1_000_001) * 0.01) == pytest.approx(0.01, rel=1e-9)  # from 10,000 of its steps
+    assert grid_step(np.zeros(1)) is None
+
+
+@pytest.mark.parametrize(
+    ("values", "flat"),
+    [([np.nan, 1.0, 1.0, np.inf], True), ([1.0, 2.0], False), ([np.nan], True), ([0.0, -0.0], True)],
+)
+def test_a_row_is_flat_when_its_finite_values_are_one_value(values, flat):
+    trace = Trace("s", np.array(values, dtype=np.float32), np.zeros(0, np.int64), 1.0, {})
+    assert is_flat(Figure("det: s", "s", [trace], {})) is flat

@@ -68,6 +68,44 @@ def test_one_sided_margins_constant_bands_and_bounds_of_either_sign():
     np.testing.assert_allclose(ratios, expected)
 
 
+def reference_ratios(e, hi, lo):
+    """The module docstring's ratios, every case computed everywhere in float64 and picked per sample."""
+    e, hi, lo = (np.asarray(a, dtype=np.float64) for a in (e, hi, lo))
+    has_hi, has_lo = np.isfinite(hi), np.isfinite(lo)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        centre, half = 0.5 * (hi + lo), 0.5 * (hi - lo)
+        two_sided = np.where(half > 0, np.abs(e - centre) / half, np.where(e == centre, 0.0, np.inf))
+        upper_only = np.where(hi > 0, e / hi, np.where(e < 0, hi / e, np.inf))
+        lower_only = np.where(lo < 0, e / lo, np.where(e > 0, lo / e, np.inf))
+    ratio = np.where(has_hi & has_lo, two_sided, np.where(has_hi, upper_only, np.where(has_lo, lower_only, np.nan)))
+    ratio[(has_hi & ~has_lo & (hi == 0)) | (has_lo & ~has_hi & (lo == 0)) | np.isnan(e)] = np.nan
+    return ratio
+
+
+def test_margin_ratios_and_peak_are_the_float64_ratios_of_every_case_exactly():
+    rng = np.random.default_rng(11)
+    e = rng.normal(0.0, 3.0, N)
+    e[rng.random(N) < 0.05] = np.nan
+    e[::97] = 0.0
+    hi = rng.choice([4.0, -1.0, 0.0, np.nan, np.inf], N)
+    lo = np.where(rng.random(N) < 0.5, hi, rng.choice([-4.0, 1.0, 0.0, np.nan], N))  # lo == hi: zero width
+    result = result_with("s", e, upper=hi, lower=lo, valid=rng.random(N) < 0.9)
+    kept = result.series["s"], result.thresholds["s"].upper, result.thresholds["s"].lower  # float32
+    expected = reference_ratios(*kept)
+    np.testing.assert_array_equal(margin_ratios(*kept), expected)
+    ranked = np.where(result.judged["s"] & ~np.isnan(expected), expected, -np.inf)
+    margin = statistic_margin(result, "s", T)
+    assert margin.ratio == ranked.max() and margin.time == T[int(np.argmax(ranked))]
+
+
+def test_a_constant_band_is_one_value_for_every_sample():
+    e = np.linspace(-2.0, 3.0, N)
+    result = result_with("e", e, upper=2.0, lower=-2.0)
+    assert result.thresholds["e"].upper.strides == (0,)  # a broadcast constant, never copied to N values
+    np.testing.assert_array_equal(margin_ratios(e, np.broadcast_to(2.0, (N,)), None), reference_ratios(e, 2.0, np.nan))
+    assert statistic_margin(result, "e", T).ratio == 1.5
+
+
 def test_samples_that_cannot_alarm_do_not_count_toward_the_margin():
     e = np.zeros(N)
     e[:50] = 30.0  # a settling transient in the warm-up

@@ -179,3 +179,12 @@ def test_an_hour_with_three_alarming_groups_stays_under_the_size_limits(tmp_path
         assert text.count("measured vs predicted") >= 9 and text.count("normalised innovation per channel") >= 3
         sizes[mode] = len(text.encode("utf-8"))
     assert sizes["embed"] <= 6_000_000 and sizes["directory"] <= 300_000, sizes
+
+
+def test_the_normalised_innovations_and_predictions_alone_are_the_views():
+    run, trace, *_ = synthetic([1e-6, 1.0, 3e4])
+    innovations = pack_innovations(run, trace)
+    view = innovations.view("g")
+    np.testing.assert_array_equal(innovations.normalised("g"), view.normalised)  # NaN where not updated, too
+    np.testing.assert_array_equal(innovations.predicted("g", (2, 0)), view.predicted[:, [2, 0]])
+    assert innovations.normalised("nope") is None and innovations.predicted("nope", (0,)) is None

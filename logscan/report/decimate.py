@@ -34,9 +34,17 @@ def bucket_width(n: int, max_points: int, n_keep: int = 0, has_nan: bool = False
     return max(math.ceil(n / n_buckets), 1)
 
 
+def sorted_unique(*arrays) -> np.ndarray:
+    """The sorted distinct values of the (integer index) arrays together: ``np.union1d`` and
+    ``np.unique`` without their hashing, which on a trace's few thousand indices took ten times
+    as long as a sort."""
+    values = np.sort(np.concatenate([np.asarray(a, dtype=np.int64).ravel() for a in arrays]))
+    return values[np.concatenate(([True], values[1:] != values[:-1]))] if values.size else values
+
+
 def _thin_keep(keep: np.ndarray, n: int, max_points: int) -> np.ndarray:
     """Valid, unique, sorted keep indices; evenly thinned to half the budget if there are more."""
-    keep = np.unique(np.asarray(keep, dtype=np.int64).ravel())
+    keep = sorted_unique(keep)
     keep = keep[(keep >= 0) & (keep < n)]
     limit = max(max_points // 2, 1)
     if keep.size > limit:
@@ -50,6 +58,35 @@ def _flat_interior(y: np.ndarray) -> np.ndarray:
     if y.size >= 3:
         inner[1:-1] = (y[1:-1] == y[:-2]) & (y[1:-1] == y[2:])  # NaN != NaN: gaps never dropped
     return inner
+
+
+def _bucket_extremes(y: np.ndarray, isnan: np.ndarray | None, width: int) -> np.ndarray:
+    """Per bucket of ``width`` consecutive samples (the last one shorter): the index of its first
+    minimum, of its first maximum (NaN ignored) and of its first NaN (``isnan``: None when ``y`` has
+    none). The full buckets are a reshaped view of ``y``, not a padded copy."""
+    n_full = y.size // width
+    parts = [_extremes_of(y[: n_full * width].reshape(n_full, width), None if isnan is None else
+                          isnan[: n_full * width].reshape(n_full, width), 0)]  # fmt: skip
+    if n_full * width < y.size:  # the last, shorter bucket
+        tail = slice(n_full * width, y.size)
+        parts.append(_extremes_of(y[tail][None, :], None if isnan is None else isnan[tail][None, :], n_full * width))
+    return np.concatenate(parts)
+
+
+def _extremes_of(blocks: np.ndarray, nan_blocks: np.ndarray | None, start: int) -> np.ndarray:
+    """`_bucket_extremes` of equal buckets (rows of ``blocks``), the first starting at sample ``start``."""
+    offsets = start + np.arange(blocks.shape[0], dtype=np.int64) * blocks.shape[1]
+    if nan_blocks is None:  # argmin/argmax give the first extreme, one pass each
+        return np.concatenate([offsets + np.argmin(blocks, axis=1), offsets + np.argmax(blocks, axis=1)])
+    with np.errstate(invalid="ignore"):
+        # fmin/fmax ignore NaN unless the whole bucket is NaN (argmin/argmax would pick the NaN)
+        lo = np.fmin.reduce(blocks, axis=1)
+        hi = np.fmax.reduce(blocks, axis=1)
+    i_min = offsets + np.argmax(blocks == lo[:, None], axis=1)
+    i_max = offsets + np.argmax(blocks == hi[:, None], axis=1)
+    has_nan = nan_blocks.any(axis=1)
+    i_nan = (offsets + np.argmax(nan_blocks, axis=1))[has_nan]
+    return np.concatenate([i_min, i_max, i_nan])
 
 
 def decimate_indices(
@@ -77,33 +114,25 @@ def decimate_indices(
         return np.zeros(0, dtype=np.int64)
     keep_idx = _thin_keep(np.zeros(0) if keep is None else keep, n, max_points)
     isnan = np.isnan(y)
-    width = bucket_width(n, max_points, keep_idx.size, bool(isnan.any()))
+    has_nan = bool(isnan.any())
+    width = bucket_width(n, max_points, keep_idx.size, has_nan)
     if width == 1:
         idx = np.arange(n, dtype=np.int64)
     else:
-        n_buckets = math.ceil(n / width)
-        pad = n_buckets * width - n
-        # pad with the last sample so the last bucket has full width; indices are clipped below
-        blocks = np.concatenate([y, np.repeat(y[-1:], pad)]).reshape(n_buckets, width)
-        nan_blocks = np.concatenate([isnan, np.repeat(isnan[-1:], pad)]).reshape(n_buckets, width)
-        with np.errstate(invalid="ignore"):
-            # fmin/fmax ignore NaN unless the whole bucket is NaN
-            lo = np.fmin.reduce(blocks, axis=1)
-            hi = np.fmax.reduce(blocks, axis=1)
-        offsets = np.arange(n_buckets, dtype=np.int64) * width
-        i_min = offsets + np.argmax(blocks == lo[:, None], axis=1)
-        i_max = offsets + np.argmax(blocks == hi[:, None], axis=1)
-        has_nan = nan_blocks.any(axis=1)
-        i_nan = (offsets + np.argmax(nan_blocks, axis=1))[has_nan]
-        idx = np.concatenate([i_min, i_max, i_nan, [0, n - 1]])
-        idx = np.minimum(idx, n - 1)
-    idx = np.union1d(idx, keep_idx)
+        idx = np.concatenate([_bucket_extremes(y, isnan if has_nan else None, width), [0, n - 1]])
+    idx = sorted_unique(idx, keep_idx)
     if simplify_flat and idx.size >= 3:
         drop = _flat_interior(y[idx])
         if keep_idx.size:
-            drop &= ~np.isin(idx, keep_idx)
+            drop &= ~_member(idx, keep_idx)
         idx = idx[~drop]
     return idx
+
+
+def _member(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """Mask of ``values`` found in the sorted, non-empty ``sorted_set`` (``np.isin`` by bisection)."""
+    at = np.minimum(np.searchsorted(sorted_set, values), sorted_set.size - 1)
+    return sorted_set[at] == values
 
 
 def edge_indices(t: np.ndarray, spans) -> np.ndarray:
@@ -117,7 +146,7 @@ def edge_indices(t: np.ndarray, spans) -> np.ndarray:
     if t.size == 0 or pairs.size == 0:
         return np.zeros(0, dtype=np.int64)
     idx = np.searchsorted(t, pairs.ravel(), side="left")
-    return np.unique(np.clip(idx, 0, t.size - 1))
+    return sorted_unique(np.clip(idx, 0, t.size - 1))
 
 
 def decimate(

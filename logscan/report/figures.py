@@ -16,6 +16,10 @@ from logscan.report.decimate import edge_indices
 from logscan.results import DetectorResult
 
 MAX_SPANS = 100  # shaded spans per figure (closer spans are merged for display)
+# values the initial y range's percentiles are taken from, evenly spread (`judged_range`): a 1-hour
+# 100 Hz statistic and its band are a million values, whose percentiles cost more than drawing them
+RANGE_SAMPLE = 100_000
+STEP_SAMPLE = 10_000  # steps of the grid its typical step is the median of (`grid_step`)
 MAX_NAMED_IN_CAPTION = 6  # a shared figure's caption says the words of this many statistics at most
 ALARM_TAIL = "long enough is an alarm (shaded red)"
 
@@ -135,27 +139,36 @@ def judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray
     """Initial y range for a statistic and its band, when a settling transient (warm-up, the first
     adaptive windows) would otherwise squash the rest of the plot; None: plotly's autorange.
 
-    Covers the 0.1-99.9 percentiles of the statistic and band where a threshold is defined, and
-    every alarm's peak value; double-clicking the plot restores the full range.
+    Covers the 0.1-99.9 percentiles of the statistic and band where a threshold is defined (of
+    RANGE_SAMPLE of their values at most, evenly spread), and every alarm's peak value;
+    double-clicking the plot restores the full range.
     """
     defined = [band for band in (upper, lower) if band is not None]
     if not defined:
         return None
     judged = np.logical_or.reduce([np.isfinite(band) for band in defined])
-    parts = np.concatenate([values[judged], *[band[judged] for band in defined]])
-    parts, everything = parts[np.isfinite(parts)], values[np.isfinite(values)]
-    if parts.size == 0 or everything.size == 0:
+    chosen = [values, *defined] if judged.all() else [part[judged] for part in (values, *defined)]
+    parts, everything = [_finite(part) for part in chosen], _finite(values)
+    n_parts = sum(part.size for part in parts)
+    if n_parts == 0 or everything.size == 0:
         return None
-    lo, hi = np.percentile(parts[:: max(parts.size // 1_000_000, 1)], [0.1, 99.9])  # a view, not a statistic
+    step = max(n_parts // RANGE_SAMPLE, 1)  # a view, not a statistic
+    lo, hi = np.percentile(np.concatenate([part[::step] for part in parts]), [0.1, 99.9])
     finite_peaks = [p for p in peaks if math.isfinite(p)]
     lo, hi = float(min([lo, *finite_peaks])), float(max([hi, *finite_peaks]))
     span = hi - lo
-    full_lo = min(float(everything.min()), *(float(np.nanmin(b)) for b in defined))
-    full_hi = max(float(everything.max()), *(float(np.nanmax(b)) for b in defined))
+    full_lo = min(float(everything.min()), *(float(np.fmin.reduce(b)) for b in defined))  # fmin/fmax skip NaN
+    full_hi = max(float(everything.max()), *(float(np.fmax.reduce(b)) for b in defined))
     if full_lo >= lo - span and full_hi <= hi + span:
         return None  # nothing far outside: autorange shows everything well
     pad = 0.05 * span if span > 0 else max(abs(hi), 1.0) * 0.05
     return (lo - pad, hi + pad)
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """``values`` without its NaN and infinities (``values`` itself when it has none)."""
+    finite = np.isfinite(values)
+    return values if finite.all() else values[finite]
 
 
 def _as_float(values) -> np.ndarray:
@@ -234,9 +247,18 @@ def span_limits(t: np.ndarray) -> tuple[float, float]:
     """(min_width, min_gap) of shaded spans on the grid ``t``: a step or 1/2000 of the log wide at
     least, merged when closer than 1/5000 of it (`merge_spans`)."""
     n = t.size
-    dt = float(np.median(np.diff(t))) if n > 1 else 0.0
+    dt = grid_step(t) or 0.0
     span_len = float(t[-1] - t[0]) if n > 1 else 0.0
     return max(dt, span_len / 2000.0), span_len / 5000.0
+
+
+def grid_step(t: np.ndarray) -> float | None:
+    """The grid's typical step: the median of at most STEP_SAMPLE of its steps, evenly spread (all
+    of a shorter grid's); None for fewer than two samples."""
+    if t.size < 2:
+        return None
+    every = max((t.size - 1) // STEP_SAMPLE, 1)
+    return float(np.median(t[1::every] - t[:-1:every]))
 
 
 def _positive_upper_only(band: tuple) -> bool:
@@ -303,7 +325,7 @@ def band_caption(name: str, band: tuple) -> str:
 def _columns(arr: np.ndarray, block: int = 65_536) -> np.ndarray:
     """(N, k) -> contiguous (k, N), transposed in blocks of rows (cache-friendly: a plain
     transposing copy of a long array is several times slower)."""
-    out = np.empty((arr.shape[1], arr.shape[0]), dtype=np.float64)
+    out = np.empty((arr.shape[1], arr.shape[0]), dtype=arr.dtype)  # float32 stays float32
     for start in range(0, arr.shape[0], block):
         out[:, start : start + block] = arr[start : start + block].T
     return out

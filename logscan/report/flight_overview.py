@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.report.figures import Figure
-from logscan.report.sensor_figures import sensor_figures
+from logscan.report.sensor_figures import normalised_figure
 from logscan.report.sensor_views import Innovations
 
 FIGURE_ID = "fig-checked"
@@ -25,10 +25,11 @@ def checked_rows(innovations: Innovations | None, t: np.ndarray, truth_spans: li
         return []
     rows = []
     for group in innovations.group_names:
-        view = innovations.view(group)
-        if view is None or not np.isfinite(view.normalised).any():
+        normalised = innovations.normalised(group)
+        if normalised is None or not np.isfinite(normalised).any():
             continue
-        rows.append(sensor_figures(view, t, {"ground truth": truth_spans}, [])[-1])
+        channels = innovations.channels[group]
+        rows.append(normalised_figure(group, channels, normalised, t, {"ground truth": truth_spans}))
     return rows
 
 

@@ -22,7 +22,7 @@ from logscan.artifacts import Staged, stage, write_atomic
 from logscan.report import overview, page_rows
 from logscan.report.context import context_tables, group_rows, log_view, message_row, model_view, number_text
 from logscan.report.context_stack import stack_rows
-from logscan.report.figures import merge_spans
+from logscan.report.figures import grid_step, merge_spans
 from logscan.report.flight_overview import checked_view
 from logscan.report.margins import result_margins
 from logscan.report.page_assets import environment, install_plotly_js, plotly_js, plotly_js_src, report_js
@@ -115,7 +115,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         plotlyjs_inline=None if plotlyjs_src else plotly_js(),
         plotlyjs_src=plotlyjs_src,
         report_js=report_js(),
-        grid={"n": int(t.size), "dt": number_text(float(np.median(np.diff(t))) if t.size > 1 else None)},
+        grid={"n": int(t.size), "dt": number_text(grid_step(t))},
     )  # fmt: skip
 
 

@@ -19,11 +19,12 @@ a fifth of the log.
 
 from __future__ import annotations
 
+import base64
 import json
 
 import numpy as np
 
-from logscan.report.decimate import DEFAULT_MAX_POINTS, decimate_indices
+from logscan.report.decimate import DEFAULT_MAX_POINTS, decimate_indices, sorted_unique
 from logscan.report.figures import Figure, merge_spans
 from logscan.timebase.clock import Clock
 
@@ -34,6 +35,7 @@ POINT_BUDGET = 18_000
 MIN_POINTS_PER_TRACE = 400
 MIN_POINTS_FLOOR = 100
 _F4_MAX = float(np.finfo(np.float32).max)
+SPACING_SAMPLE = 10_000  # spacings a trace's typical spacing is the median of (`_defined_samples`)
 
 TIME_TITLE = "time since log start (s)"  # the axis' title until `on_clock` names the log's clock
 TIME_AXIS = {
@@ -57,20 +59,32 @@ def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
     Statistics are NaN on steps where they are not evaluated (a 10 Hz group's NIS on a 100 Hz
     grid is NaN 9 steps in 10); drawn as is, such a line would be all gaps. So only defined
     samples are drawn, joined, except across a gap longer than 3x their typical spacing, where a
-    NaN still breaks the line. ``keep`` (grid indices) is mapped onto the returned samples.
+    NaN still breaks the line. ``keep`` (grid indices) is mapped onto the returned samples. The
+    typical spacing is the median of at most SPACING_SAMPLE spacings spread evenly over the series
+    (the median of all of a long log's cost more than the rest of its trace). Defined samples in
+    one run (NaN only before and after it: a warm-up) are that part of the series, as a series
+    defined everywhere is all of it: no step is missing inside it.
     """
     defined = ~np.isnan(y)
-    if defined.all():
+    n_defined = int(np.count_nonzero(defined))
+    if n_defined == y.size:
         return t, y, keep
+    first = int(np.argmax(defined))
+    if n_defined and defined[first : first + n_defined].all():
+        run = slice(first, first + n_defined)
+        kept = np.clip(keep, first, first + n_defined - 1) - first
+        return t[run], y[run], sorted_unique(kept)
     idx = np.flatnonzero(defined)
     tc, yc = t[idx], y[idx]
-    if idx.size >= 2:
+    if tc.size >= 2:
         spacing = np.diff(tc)
-        breaks = np.flatnonzero(spacing > 3.0 * np.median(spacing)) + 1
-        tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
-        yc = np.insert(yc, breaks, np.nan)
+        typical = np.median(spacing[:: max(spacing.size // SPACING_SAMPLE, 1)])
+        breaks = np.flatnonzero(spacing > 3.0 * typical) + 1
+        if breaks.size:
+            tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
+            yc = np.insert(yc, breaks, np.nan)
     kept = np.clip(np.searchsorted(tc, t[keep]), 0, max(tc.size - 1, 0)) if tc.size else keep[:0]
-    return tc, yc, np.unique(kept)
+    return tc, yc, sorted_unique(kept)
 
 
 def _display_values(y: np.ndarray) -> np.ndarray:
@@ -156,9 +170,9 @@ def _decimated(x: np.ndarray, y: np.ndarray, keep: np.ndarray, max_points: int, 
     inside = np.flatnonzero(in_windows(x, windows)) if focus else np.zeros(0, dtype=np.int64)
     if inside.size <= n_focus:  # not decimated, or the windows hold few samples: drawn in full below
         overview = decimate_indices(y, max_points - inside.size, keep=keep, simplify_flat=True)
-        return np.union1d(overview, inside)
+        return sorted_unique(overview, inside)
     overview = decimate_indices(y, max_points - n_focus, keep=keep, simplify_flat=True)
-    return np.union1d(overview, inside[decimate_indices(y[inside], n_focus, simplify_flat=True)])
+    return sorted_unique(overview, inside[decimate_indices(y[inside], n_focus, simplify_flat=True)])
 
 
 def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> list[dict]:
@@ -267,15 +281,22 @@ def plain_json(data: list[dict], layout: dict, clock: Clock | None = None) -> st
     """As `spec_json`, without building plotly's validated Figure: a detector section's layout of
     many axes, legends and annotations takes plotly ~70 ms to validate, more than drawing its data.
     numpy arrays become plotly.js typed arrays, as plotly writes them."""
-    from _plotly_utils.utils import to_typed_array_spec
-
     if clock is not None:
         data, layout = on_clock(data, layout, clock)
-    traces = [
-        {k: to_typed_array_spec(v) if isinstance(v, np.ndarray) else v for k, v in trace.items()} for trace in data
-    ]
+    traces = [{k: typed_array(v) if isinstance(v, np.ndarray) else v for k, v in trace.items()} for trace in data]
     text = json.dumps({"data": traces, "layout": layout}, separators=(",", ":"), default=_scalar, allow_nan=False)
     return escape_json(text)
+
+
+def typed_array(values: np.ndarray) -> object:
+    """A numpy array as the plotly.js typed array plotly writes (`to_typed_array_spec`); a 1-D float
+    array, every trace's x and y, directly: plotly's own way costs more than drawing it."""
+    from _plotly_utils.utils import to_typed_array_spec
+
+    short = {np.dtype("<f4"): "f4", np.dtype("<f8"): "f8"}.get(values.dtype)
+    if short is None or values.ndim != 1 or values.size == 0:
+        return to_typed_array_spec(values)
+    return {"dtype": short, "bdata": base64.b64encode(np.ascontiguousarray(values).data).decode("ascii")}
 
 
 def _scalar(value: object) -> object:

@@ -190,11 +190,12 @@ def estimated_path(path: Path2D | None, innovations, t: np.ndarray, max_points: 
     """The filter's estimate of ``path``'s group: its prediction h(x_prior) at each update
     (`logscan.report.sensor_views.Innovations`), smooth where the fixes jump, decimated as the
     fixes are; None without the group's innovations."""
-    view = innovations.view(path.group) if path is not None and innovations is not None else None
-    if view is None:
+    predicted = (
+        innovations.predicted(path.group, path.columns) if path is not None and innovations is not None else None
+    )
+    if predicted is None:
         return None
-    cx, cy = path.columns
-    x, y = view.predicted[:, cx].astype(np.float64), view.predicted[:, cy].astype(np.float64)
+    x, y = predicted[:, 0].astype(np.float64), predicted[:, 1].astype(np.float64)
     idx = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
     if idx.size < 2:
         return None

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from logscan.report.decimate import decimate_indices, edge_indices
+from logscan.report.decimate import decimate_indices, edge_indices, sorted_unique
 from logscan.report.figures import LINE_COLOURS, Figure, Trace, judged_range, merge_spans, span_limits
 from logscan.report.plotly_json import in_windows, zoom_windows
 from logscan.report.sensor_views import K_SIGMA, Innovations, SensorView
@@ -50,11 +50,13 @@ def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tu
     all until the page is written: the steps where the first series is defined, at most
     REDUCED_POINTS per series (min/max per bucket) plus every one inside the zoom ``windows``
     (the page decimates again under its point budget)."""
-    steps = np.flatnonzero(np.isfinite(series[0]))
+    defined = np.isfinite(series[0])
+    everywhere = bool(defined.all())  # then the series themselves, not copies of their defined steps
+    steps = np.arange(t.size) if everywhere else np.flatnonzero(defined)
     if steps.size > REDUCED_POINTS:
-        chosen = [decimate_indices(s[steps], REDUCED_POINTS, simplify_flat=True) for s in series]
-        inside = np.flatnonzero(in_windows(t[steps], windows))
-        steps = steps[np.unique(np.concatenate([*chosen, inside]))]
+        chosen = [decimate_indices(s if everywhere else s[steps], REDUCED_POINTS, simplify_flat=True) for s in series]
+        inside = np.flatnonzero(in_windows(t if everywhere else t[steps], windows)) if windows.size else steps[:0]
+        steps = steps[sorted_unique(*chosen, inside)]
     return t[steps], steps
 
 
@@ -99,17 +101,37 @@ def sensor_figures(
             "sensor's fault.",
             y_range=judged_range(measured[steps], upper[steps], lower[steps], []),
         ))  # fmt: skip
-        normalised.append(Trace(
-            channel, view.normalised[steps, j], keep, 0.5,
-            {"line": {"color": LINE_COLOURS[j % len(LINE_COLOURS)], "width": 1}}, t=x,
-        ))  # fmt: skip
-    figures.append(Figure(
-        title=f"{view.group}: normalised innovation per channel",
+        normalised.append(_normalised_trace(channel, j, view.normalised[steps, j], keep, x))
+    figures.append(_normalised_figure(view.group, normalised, spans))
+    return figures
+
+
+def _normalised_trace(channel: str, j: int, y: np.ndarray, keep: np.ndarray, x: np.ndarray) -> Trace:
+    return Trace(channel, y, keep, 0.5, {"line": {"color": LINE_COLOURS[j % len(LINE_COLOURS)], "width": 1}}, t=x)
+
+
+def _normalised_figure(group: str, traces: list[Trace], spans: dict) -> Figure:
+    k = K_SIGMA
+    return Figure(
+        title=f"{group}: normalised innovation per channel",
         y_title="innovation / σ",
-        traces=normalised,
+        traces=traces,
         spans=spans,
         caption=f"Each channel's innovation (measured − predicted) divided by its σ from S. Normal: noise "
         f"around 0, mostly within ±{k:g} (dashed); a sustained offset on one channel is a bias on that axis.",
         hlines=[(k, f"+{k:g}σ"), (-k, f"−{k:g}σ")],
-    ))  # fmt: skip
-    return figures
+    )  # fmt: skip
+
+
+def normalised_figure(
+    group: str, channels: Sequence[str], normalised: np.ndarray, t: np.ndarray, spans: dict
+) -> Figure:
+    """The last figure of `sensor_figures` alone, from the group's (N, k) normalised innovations
+    (`Innovations.normalised`): each channel reduced on its own samples, not with its measured and
+    predicted values, which are not drawn."""
+    no_windows = np.zeros((0, 2))
+    traces = []
+    for j, channel in enumerate(channels):
+        x, steps = _reduced(t, [normalised[:, j]], no_windows)
+        traces.append(_normalised_trace(channel, j, normalised[steps, j], np.zeros(0, np.int64), x))
+    return _normalised_figure(group, traces, spans)

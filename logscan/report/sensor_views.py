@@ -17,6 +17,7 @@ samples' memory (35 MB on a 1-hour 100 Hz quadcopter log), which would otherwise
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,20 +59,48 @@ class Innovations:
     scale: np.ndarray
     offset: np.ndarray
 
-    def view(self, group: str) -> SensorView | None:
-        """The group's `SensorView` (float32 arrays, made now), None for a group it does not hold."""
+    def _columns(self, group: str) -> slice | None:
         if group not in self.group_names:
             return None
         g = self.group_names.index(group)
-        columns = slice(int(self.group_offsets[g]), int(self.group_offsets[g] + self.group_sizes[g]))
+        return slice(int(self.group_offsets[g]), int(self.group_offsets[g] + self.group_sizes[g]))
+
+    def view(self, group: str) -> SensorView | None:
+        """The group's `SensorView` (float32 arrays, made now), None for a group it does not hold."""
+        columns = self._columns(group)
+        if columns is None:
+            return None
         part, scale, offset = self.packed[:, columns], self.scale[columns], self.offset[columns]
         predicted = part["predicted"] + offset  # float64 while the offset is added back
         y = part["innovation"] * scale
         sigma = (part["sigma"] * scale).astype(np.float32)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            normalised = (y / sigma).astype(np.float32)
         measured = (predicted + y).astype(np.float32)
+        normalised = _normalised(part)
         return SensorView(group, self.channels[group], measured, predicted.astype(np.float32), sigma, normalised)
+
+    def predicted(self, group: str, channels: Sequence[int]) -> np.ndarray | None:
+        """The group's predictions h(x_prior) of these of its channels (indices into the group),
+        (N, len(channels)) float32 as its `view` has them; None for a group it does not hold."""
+        columns = self._columns(group)
+        if columns is None:
+            return None
+        chosen = [columns.start + int(j) for j in channels]
+        return (self.packed["predicted"][:, chosen] + self.offset[chosen]).astype(np.float32)
+
+    def normalised(self, group: str) -> np.ndarray | None:
+        """The group's normalised innovations alone, (N, k) float32 as its `view` has them (a
+        quarter of the work: the overview of every group draws nothing else); None for a group
+        it does not hold."""
+        columns = self._columns(group)
+        return None if columns is None else _normalised(self.packed[:, columns])
+
+
+def _normalised(part: np.ndarray) -> np.ndarray:
+    """y_i / sigma_i of packed columns, float32, without float64 arrays: both carry the column's
+    power-of-two scale, which cancels exactly (within float32's range), and the float32 quotient
+    of float32 values is their float64 quotient rounded to float32."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.divide(part["innovation"], part["sigma"], dtype=np.float32)
 
 
 def _channel_scales(S_diag: np.ndarray) -> np.ndarray:

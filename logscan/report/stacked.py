@@ -60,8 +60,8 @@ def is_flat(fig: Figure) -> bool:
     if fig.spans.get("alarm") or not fig.traces or fig.traces[0].name != fig.y_title:
         return False
     y = np.asarray(fig.traces[0].y)
-    finite = y[np.isfinite(y)]
-    return finite.size == 0 or bool(np.all(finite == finite[0]))
+    finite = np.isfinite(y)  # one value: its finite samples' least and greatest are equal (none: flat too)
+    return bool(np.min(y, where=finite, initial=np.inf) >= np.max(y, where=finite, initial=-np.inf))
 
 
 def fold_flat(rows: Sequence[Figure]) -> tuple[list[Figure], list[str]]:
