@@ -33,7 +33,8 @@ from numba import literally, njit
 
 from logscan.align import AlignedRun
 from logscan.filters.coding import coded_variance, coding_vector_into
-from logscan.filters.ekf_pack import EkfBuffers, KernelInputs, pack_run, samples_side_by_side
+from logscan.filters.ekf_pack import EkfBuffers, EkfWork, KernelInputs, pack_run, samples_side_by_side
+from logscan.filters.ekf_pack import trace_buffers as _buffers
 from logscan.filters.linalg import (
     all_finite,
     all_finite2,
@@ -41,7 +42,9 @@ from logscan.filters.linalg import (
     forward_sq,
     fpft_q,
     gain_rows,
+    grow_pattern,
     joseph,
+    pattern_holds,
     short_update,
     sparse_mm,
     sparse_rows,
@@ -81,6 +84,7 @@ def _restart(x, P, x0, P0, seed_done):
 
 @njit(cache=True, error_model="numpy", no_cpython_wrapper=True)
 def _store(k, x, P, xs, P_diag, P_full, store_P):
+    """x and the diagonal of P (and P itself when ``store_P``) into row k of the trace."""
     n = x.size
     for i in range(n):
         xs[k, i] = x[i]
@@ -111,6 +115,44 @@ def _store_gain(k, pos, S, KT, S_out, K_out, store_S, store_K):
                 Kk[i, j] = KT[pj, i] if pj >= 0 else np.nan
 
 
+@njit(cache=True, no_cpython_wrapper=True)
+def allocate_work(x0, P0, u_default, direct_idx, group_offsets, group_sizes):
+    """The work arrays of a run (x = x0, P = P0, u_last = u_default); ``is_direct`` from the
+    groups' direct outputs (direct_idx >= 0 for every output of the group)."""
+    n = x0.size
+    G = group_sizes.size
+    m = direct_idx.size
+    is_direct = np.zeros(G, dtype=np.bool_)
+    for g in range(G):
+        ok = True
+        for j in range(group_offsets[g], group_offsets[g] + group_sizes[g]):
+            if direct_idx[j] < 0:
+                ok = False
+        is_direct[g] = ok
+    all_cols = np.empty((n, m), dtype=np.int64)
+    for i in range(n):
+        for a in range(m):
+            all_cols[i, a] = a
+    F = np.zeros((n, n))
+    return EkfWork(
+        x0.copy(), P0.copy(), u_default.copy(), is_direct, np.zeros(G, dtype=np.bool_),
+        np.empty(m, dtype=np.int64), np.empty(G, dtype=np.int64),
+        np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+        F, F.reshape(n * n).view(np.int64),
+        np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)),
+        np.empty((3, 3)), np.empty((3, 3, 3)),
+        np.full(n * n, -1, dtype=np.int64), np.empty((n, n), dtype=np.int64), np.zeros(n, dtype=np.int64),
+        np.empty((m, n), dtype=np.int64), np.empty(m, dtype=np.int64),
+        np.zeros(m), np.zeros(m), np.zeros(m),
+        np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, n)),
+        np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, m)),
+        np.empty((m, m), dtype=np.int64), np.empty(m, dtype=np.int64),
+        np.zeros((m, m)), np.zeros((m, m)),
+        np.zeros((n, m)), np.zeros((m, n)), np.zeros((m, n)),
+        all_cols, np.empty(n, dtype=np.int64), np.full(m, -1, dtype=np.int64), np.empty(n),
+    )  # fmt: skip
+
+
 # =============================================================================================
 # the kernel
 # =============================================================================================
@@ -118,11 +160,23 @@ def _store_gain(k, pos, S, KT, S_out, K_out, store_S, store_K):
 def ekf_run(model_id, model, sensors, data, out):
     """Filter the N steps of ``data`` (EkfData) with ``model`` (EkfModel) and ``sensors``
     (EkfSensors) into ``out`` (EkfBuffers); ``model_id`` is the model's kernel id, compiled as a
-    literal. All work arrays are allocated once, before the loop.
+    literal. The work arrays are allocated here, once; the step loop (`_filter_steps`) allocates
+    nothing.
     """
     literally(model_id)  # one specialisation per model (logscan.models.dispatch)
-    # the arguments' arrays under the kernel's names, read once: an attribute read inside the loop
-    # would count a reference up and down at every access (2-3 % of a step)
+    work = allocate_work(
+        model.x0, model.P0, data.u_default, sensors.direct_idx, sensors.group_offsets, sensors.group_sizes
+    )
+    _filter_steps(model_id, model, sensors, data, out, work)
+
+
+# Compiled without numba's reference counting (ekf_pack.EkfWork says why), and not cached itself:
+# ekf_run's cached code carries it (a model id compiled in a test stays out of the disk cache).
+@njit(error_model="numpy", nogil=True, no_cpython_wrapper=True, _nrt=False)
+def _filter_steps(model_id, model, sensors, data, out, work):
+    """The step loop of `ekf_run` on its work arrays (EkfWork)."""
+    literally(model_id)
+    # the arguments' arrays under the kernel's names, read once
     p, dt, Q, x0, P0 = model.p, model.dt, model.Q, model.x0, model.P0
     coding_floor, coding_r_max, ex_var = model.coding_floor, model.coding_r_max, out.ex_var
     group_ids, group_offsets, group_sizes = sensors.group_ids, sensors.group_offsets, sensors.group_sizes
@@ -134,6 +188,15 @@ def ekf_run(model_id, model, sensors, data, out):
     S_diag_out, nis, nis_group, m_k, gain_norm = out.S_diag_out, out.nis, out.nis_group, out.m_k, out.gain_norm
     updated, rejected, seeded = out.updated, out.rejected, out.seeded
     diverged, input_held, steps_done = out.diverged, out.input_held, out.steps_done
+    x, P, u_last, rows, sel_g = work.x, work.P, work.u_last, work.rows, work.sel_g
+    is_direct, seed_done = work.is_direct, work.seed_done
+    x_new, kv, xs, x_upd, dx = work.x_new, work.kv, work.xs, work.x_upd, work.dx
+    F, W, P_upd, Aw, Jw, Jnw, R3, D3 = work.F, work.W, work.P_upd, work.Aw, work.Jw, work.Jnw, work.R3, work.D3
+    F_bits, f_outside, fcols, fnnz = work.F_bits, work.f_outside, work.fcols, work.fnnz
+    hcols, hnnz = work.hcols, work.hnnz
+    hx, y, v, Hs, HP, KT, S, Rs, RsT = work.hx, work.y, work.v, work.Hs, work.HP, work.KT, work.S, work.Rs, work.RsT
+    rcols, rnnz, L, Lg, D, DT, V = work.rcols, work.rnnz, work.L, work.Lg, work.D, work.DT, work.V
+    all_cols, m_cnt, pos, cv = work.all_cols, work.m_cnt, work.pos, work.cv
     N = u.shape[0]
     n = x0.size
     nu = u.shape[1]
@@ -145,45 +208,10 @@ def ekf_run(model_id, model, sensors, data, out):
     store_K = K_out.shape[0] == N
     dyn_R = R_std.shape[0] == N
     store_ex_var = ex_var.shape[0] == N
-    x = x0.copy()
-    P = P0.copy()
-    u_last = data.u_default.copy()
-    # direct groups: every output observes one state
-    is_direct = np.zeros(G, dtype=np.bool_)
-    for g in range(G):
-        ok = True
-        for j in range(group_offsets[g], group_offsets[g] + group_sizes[g]):
-            if direct_idx[j] < 0:
-                ok = False
-        is_direct[g] = ok
-    seed_done = np.zeros(G, dtype=np.bool_)
     pending = model.seed_at_start
     # counters start from a typed zero: a literal 0 makes numba compile every helper they
     # reach twice (once for Literal[int](0), once for int64), doubling the cold compile
     zero = np.int64(0)
-    # work arrays (allocated once)
-    rows, sel_g = np.empty(m_total, dtype=np.int64), np.empty(G, dtype=np.int64)
-    x_new, kv, xs, x_upd, dx = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    F, W, P_upd = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))  # RK4 Jacobian stages
-    R3, D3 = np.empty((3, 3)), np.empty((3, 3, 3))  # quadcopter rotation and its derivatives
-    # non-zero columns per row of F and of H
-    fcols, fnnz = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64)
-    hcols, hnnz = np.empty((m_total, n), dtype=np.int64), np.empty(m_total, dtype=np.int64)
-    hx, y, v = np.zeros(m_total), np.zeros(m_total), np.zeros(m_total)
-    Hs, HP, KT = np.zeros((m_total, n)), np.zeros((m_total, n)), np.zeros((m_total, n))
-    S, Rs = np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
-    RsT = np.zeros((m_total, m_total))
-    rcols, rnnz = np.empty((m_total, m_total), dtype=np.int64), np.empty(m_total, dtype=np.int64)
-    L, Lg = np.zeros((m_total, m_total)), np.zeros((m_total, m_total))
-    D, DT, V = np.zeros((n, m_total)), np.zeros((m_total, n)), np.zeros((m_total, n))
-    all_cols = np.empty((n, m_total), dtype=np.int64)  # all_cols[i, a] = a
-    for i in range(n):
-        for a in range(m_total):
-            all_cols[i, a] = a
-    m_cnt, pos = np.empty(n, dtype=np.int64), np.empty(m_total, dtype=np.int64)
-    cv = np.empty(n)  # the encoded check's coding vector of the step's prior
-
     for k in range(N):
         steps_done[0] = k
         # ---- input ----------------------------------------------------------------------
@@ -197,7 +225,8 @@ def ekf_run(model_id, model, sensors, data, out):
         # ---- predict: x_prior = f(x_post, u); P_prior = F P F^T + Q -----------------------
         if k > 0:
             dispatch.model_predict_into(model_id, p, x, uk, dt, x_new, F, kv, xs, Aw, Jw, Jnw)
-            sparse_rows(F, n, n, fcols, fnnz)
+            if not pattern_holds(F_bits, f_outside):  # F's non-zeros: a new one since the last step
+                grow_pattern(F, n, f_outside, fcols, fnnz)
             fpft_q(F, P, Q, n, fcols, fnnz, Aw, W, P_upd)
             P, P_upd = P_upd, P
             for i in range(n):
@@ -257,8 +286,9 @@ def ekf_run(model_id, model, sensors, data, out):
                     still = True
             pending = still
         # ---- update -----------------------------------------------------------------------
-        for j in range(m_total):  # where each output sits in this step's update (-1: not in it)
-            pos[j] = -1
+        if store_S or store_K:  # where each output sits in this step's update (-1: not in it)
+            for j in range(m_total):
+                pos[j] = -1
         if m > 0:
             r = zero
             for a in range(ng):
@@ -405,44 +435,6 @@ def run_ekf(
         args = (*k.kernel_arguments(), out)
         compiled_for(args)(*args)
     return _trace(model, run, k, out, full_P, store_gain, store_S, store_innovations)
-
-
-def _buffers(
-    N: int, n: int, G: int, m: int, *, full_P: bool, store_gain: bool, store_S: bool, store_innovations: bool
-) -> EkfBuffers:
-    """The kernel's output arrays for N steps (n states, G groups, m outputs), NaN / False / 0
-    filled where the kernel writes only some steps; the ones not stored have a zero-length first
-    dimension."""
-    nan = np.nan
-    return EkfBuffers(
-        # x and P, prior and posterior: written by ekf_run at every step, so not filled first
-        x_prior=np.empty((N, n)),
-        x_post=np.empty((N, n)),
-        # float32: variances are scales (coding vectors, consistency bands), 7 digits are ample,
-        # and a 1-hour log keeps 35 MB less
-        P_prior_diag=np.empty((N, n), dtype=np.float32),
-        P_post_diag=np.empty((N, n), dtype=np.float32),
-        P_prior_full=np.empty((N if full_P else 0, n, n)),
-        P_post_full=np.empty((N if full_P else 0, n, n)),
-        # S_out, K_out: written step by step by ekf_run, NaN where not updated (one pass, not two)
-        # float32: y and diag(S) are drawn (the report's measured-vs-predicted figures), never
-        # filtered further; a 1-hour log keeps 35 MB less
-        y_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),
-        S_out=np.empty((N if store_S else 0, m, m)),
-        S_diag_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),
-        K_out=np.empty((N if store_gain else 0, n, m)),
-        ex_var=np.empty(0),
-        nis=np.full(N, nan),
-        nis_group=np.full((N, G), nan),
-        m_k=np.zeros(N, dtype=np.int64),
-        gain_norm=np.full(N, nan),
-        updated=np.zeros((N, G), dtype=np.bool_),
-        rejected=np.zeros((N, G), dtype=np.bool_),
-        seeded=np.zeros((N, G), dtype=np.bool_),
-        diverged=np.zeros(N, dtype=np.bool_),
-        input_held=np.zeros(N, dtype=np.bool_),
-        steps_done=np.zeros(1, dtype=np.int64),
-    )
 
 
 def _trace(

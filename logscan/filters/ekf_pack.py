@@ -3,7 +3,8 @@
 `logscan.filters.ekf.ekf_run` takes its arrays grouped by meaning into NamedTuples, every field's
 shape and dtype beside it: `EkfModel` (parameters, Q, prior), `EkfSensors` (the groups' layout, R,
 ranges), `EkfData` (the run's inputs and samples) and `EkfBuffers` (the trace it writes).
-`pack_run` checks a run against the model and builds the first three (`KernelInputs`).
+`pack_run` checks a run against the model and builds the first three (`KernelInputs`),
+`trace_buffers` the fourth; `EkfWork` holds the kernel's own work arrays.
 """
 
 from __future__ import annotations
@@ -93,6 +94,98 @@ class EkfBuffers(NamedTuple):
     # (1,) int64: the steps filtered so far, written at every step; the kernel runs without the GIL,
     # so a thread can read it while the kernel runs (a progress bar counting filter steps)
     steps_done: np.ndarray
+
+
+class EkfWork(NamedTuple):
+    """The step loop's state and work arrays, allocated once per run (`ekf.allocate_work`) and handed
+    to the loop, which is compiled without numba's reference counting (NRT) and so cannot allocate:
+    with the NRT on, every array argument of a call and every array swapped or viewed in the loop
+    counted a reference up and down (an external call and an atomic add each, tens per step)."""
+
+    x: np.ndarray  # (n,) float64: the state (x0 at the start)
+    P: np.ndarray  # (n, n) float64: its covariance (P0 at the start)
+    u_last: np.ndarray  # (nu,) float64: the last finite input
+    is_direct: np.ndarray  # (G,) bool: every output of the group observes one state
+    seed_done: np.ndarray  # (G,) bool: the group re-seeded its states since the last restart
+    rows: np.ndarray  # (m,) int64: the step's stacked outputs
+    sel_g: np.ndarray  # (G,) int64: the step's updating groups
+    x_new: np.ndarray  # (n,) float64: f(x, u)
+    kv: np.ndarray  # (n,) float64: RK4 work
+    xs: np.ndarray  # (n,) float64: RK4 work
+    x_upd: np.ndarray  # (n,) float64: x (+) K y
+    dx: np.ndarray  # (n,) float64: K y
+    F: np.ndarray  # (n, n) float64: the step's Jacobian
+    F_bits: np.ndarray  # (n * n,) int64: F's entries as int64 (the same memory)
+    W: np.ndarray  # (n, n) float64: work
+    P_upd: np.ndarray  # (n, n) float64: the next covariance (swapped with P)
+    Aw: np.ndarray  # (n, n) float64: RK4 Jacobian stages
+    Jw: np.ndarray  # (n, n) float64
+    Jnw: np.ndarray  # (n, n) float64
+    R3: np.ndarray  # (3, 3) float64: a rotation (quadcopter)
+    D3: np.ndarray  # (3, 3, 3) float64: its derivatives
+    f_outside: np.ndarray  # (n * n,) int64: -1 where F has been zero (of either sign) at every step so far
+    fcols: np.ndarray  # (n, n) int64: the other columns of F's row i (linalg.grow_pattern), first fnnz[i]
+    fnnz: np.ndarray  # (n,) int64
+    hcols: np.ndarray  # (m, n) int64: the non-zero columns of each row of H
+    hnnz: np.ndarray  # (m,) int64
+    hx: np.ndarray  # (m,) float64: h(x)
+    y: np.ndarray  # (m,) float64: innovation
+    v: np.ndarray  # (m,) float64: work
+    Hs: np.ndarray  # (m, n) float64: the stacked H
+    HP: np.ndarray  # (m, n) float64: H P
+    KT: np.ndarray  # (m, n) float64: K^T
+    S: np.ndarray  # (m, m) float64: H P H^T + R
+    Rs: np.ndarray  # (m, m) float64: the step's R
+    RsT: np.ndarray  # (m, m) float64: its transpose (Joseph form)
+    rcols: np.ndarray  # (m, m) int64: R's non-zeros by column (Joseph form)
+    rnnz: np.ndarray  # (m,) int64
+    L: np.ndarray  # (m, m) float64: Cholesky factor of S
+    Lg: np.ndarray  # (m, m) float64: of a group's block of S
+    D: np.ndarray  # (n, m) float64: Joseph form work
+    DT: np.ndarray  # (m, n) float64
+    V: np.ndarray  # (m, n) float64: L^-1 H P
+    all_cols: np.ndarray  # (n, m) int64: all_cols[i, a] = a
+    m_cnt: np.ndarray  # (n,) int64
+    pos: np.ndarray  # (m,) int64: where each output sits in the step's update (-1: not in it)
+    cv: np.ndarray  # (n,) float64: the encoded check's coding vector
+
+
+def trace_buffers(
+    N: int, n: int, G: int, m: int, *, full_P: bool, store_gain: bool, store_S: bool, store_innovations: bool
+) -> EkfBuffers:
+    """The kernel's output arrays for N steps (n states, G groups, m outputs), NaN / False / 0
+    filled where the kernel writes only some steps; the ones not stored have a zero-length first
+    dimension."""
+    nan = np.nan
+    return EkfBuffers(
+        # x and P, prior and posterior: written by ekf_run at every step, so not filled first
+        x_prior=np.empty((N, n)),
+        x_post=np.empty((N, n)),
+        # float32: variances are scales (coding vectors, consistency bands), 7 digits are ample,
+        # and a 1-hour log keeps 35 MB less
+        P_prior_diag=np.empty((N, n), dtype=np.float32),
+        P_post_diag=np.empty((N, n), dtype=np.float32),
+        P_prior_full=np.empty((N if full_P else 0, n, n)),
+        P_post_full=np.empty((N if full_P else 0, n, n)),
+        # S_out, K_out: written step by step by ekf_run, NaN where not updated (one pass, not two)
+        # float32: y and diag(S) are drawn (the report's measured-vs-predicted figures), never
+        # filtered further; a 1-hour log keeps 35 MB less
+        y_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),
+        S_out=np.empty((N if store_S else 0, m, m)),
+        S_diag_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),
+        K_out=np.empty((N if store_gain else 0, n, m)),
+        ex_var=np.empty(0),
+        nis=np.full(N, nan),
+        nis_group=np.full((N, G), nan),
+        m_k=np.zeros(N, dtype=np.int64),
+        gain_norm=np.full(N, nan),
+        updated=np.zeros((N, G), dtype=np.bool_),
+        rejected=np.zeros((N, G), dtype=np.bool_),
+        seeded=np.zeros((N, G), dtype=np.bool_),
+        diverged=np.zeros(N, dtype=np.bool_),
+        input_held=np.zeros(N, dtype=np.bool_),
+        steps_done=np.zeros(1, dtype=np.int64),
+    )
 
 
 # =============================================================================================

@@ -142,6 +142,36 @@ def sparse_rows(M, m, n, cols, nnz):
 
 
 @njit(cache=True, error_model="numpy")
+def pattern_holds(bits, outside):
+    """True when every entry of a matrix that ``outside`` marks (-1) is a zero of either sign, so
+    the pattern `grow_pattern` keeps still covers all of its non-zeros (NaN and inf among them).
+    ``bits``: the matrix's entries as int64 (a C-ordered (n, n) float64 array's flat int64 view);
+    shifting out the sign bit leaves zero exactly for +0.0 and -0.0. One OR per entry, no branch:
+    numba vectorises it, a small part of `sparse_rows`' serial count."""
+    acc = np.int64(0)
+    for i in range(bits.size):
+        acc |= (bits[i] << 1) & outside[i]
+    return acc == 0
+
+
+@njit(cache=True, error_model="numpy")
+def grow_pattern(M, n, outside, cols, nnz):
+    """Add the non-zeros of M[:n, :n] (NaN counts) to the kept pattern (outside[i * n + j] = 0
+    from then on), and list the pattern's columns of each row into cols[i, :nnz[i]]. The pattern
+    only grows: an entry of it that is zero at a step adds +-0 terms to the sparse products, which
+    leave their sums unchanged (the factors they meet are finite)."""
+    for i in range(n):
+        c = 0
+        for j in range(n):
+            if M[i, j] != 0.0:
+                outside[i * n + j] = 0
+            if outside[i * n + j] == 0:
+                cols[i, c] = j
+                c += 1
+        nnz[i] = c
+
+
+@njit(cache=True, error_model="numpy")
 def sparse_mm(M, cols, nnz, m, B, n, out):
     """out[:m, :n] = M[:m] B[:, :n] for row-sparse M (row a's non-zeros at cols[a, :nnz[a]])."""
     for a in range(m):
