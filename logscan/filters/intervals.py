@@ -143,27 +143,32 @@ def box_columns(G, p, q0, q1):
     """Box the generators q0 .. q1 - 1: replace G[:, q0:q1] by diag(rowsum |G[:, q0:q1]|) (n
     columns, an enclosure of what they span) followed by the remaining G[:, q1:p]; returns the new
     p (q1 <= q0: nothing to box)."""
+    return box_columns_into(G, p, q0, q1, np.empty(G.shape[0]))
+
+
+@njit(cache=True, error_model="numpy")
+def box_columns_into(G, p, q0, q1, box):
+    """`box_columns` with its (n,) work vector given (``box``): the UBIKF's step loop allocates
+    nothing (`logscan.filters.ubikf_nrt`)."""
     n = G.shape[0]
     if q1 <= q0:
         return p
     keep = p - q1
-    box = np.empty(n)
     for i in range(n):
         s = 0.0
         for j in range(q0, q1):
             s += abs(G[i, j])
         box[i] = widen(s)
     for i in range(n):
-        Gi = G[i]
         if q0 + n <= q1:  # moving left: front to back
             for j in range(keep):
-                Gi[q0 + n + j] = Gi[q1 + j]
+                G[i, q0 + n + j] = G[i, q1 + j]
         else:  # moving right: back to front
             for j in range(keep - 1, -1, -1):
-                Gi[q0 + n + j] = Gi[q1 + j]
+                G[i, q0 + n + j] = G[i, q1 + j]
         for j in range(q0, q0 + n):
-            Gi[j] = 0.0
-        Gi[q0 + i] = box[i]
+            G[i, j] = 0.0
+        G[i, q0 + i] = box[i]
     return q0 + n + keep
 
 

@@ -19,6 +19,7 @@ from logscan.numba_cache import follow_dependencies
 
 # the shared helpers the step loop calls, as private NRT-free copies (`logscan.filters.ubikf_nrt`)
 append_box = nrt_free(intervals.append_box)
+box_columns_into = nrt_free(intervals.box_columns_into)
 innovation_bound = nrt_free(intervals.innovation_bound)
 posterior_bound = nrt_free(intervals.posterior_bound)
 predict_bound = nrt_free(intervals.predict_bound)
@@ -367,32 +368,6 @@ def copy_into(src, dst):
     src`` checks for an overlap and may copy through a temporary, which needs the NRT)."""
     for i, value in enumerate(src.flat):
         dst.flat[i] = value
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def box_columns_into(G, p, q0, q1, box):
-    """`logscan.filters.intervals.box_columns` (box the generators q0 .. q1 - 1; returns the new
-    p) with its (n,) work vector given (``box``), so that the step loop allocates nothing."""
-    n = G.shape[0]
-    if q1 <= q0:
-        return p
-    keep = p - q1
-    for i in range(n):
-        s = 0.0
-        for j in range(q0, q1):
-            s += abs(G[i, j])
-        box[i] = widen(s)
-    for i in range(n):
-        if q0 + n <= q1:  # moving left: front to back
-            for j in range(keep):
-                G[i, q0 + n + j] = G[i, q1 + j]
-        else:  # moving right: back to front
-            for j in range(keep - 1, -1, -1):
-                G[i, q0 + n + j] = G[i, q1 + j]
-        for j in range(q0, q0 + n):
-            G[i, j] = 0.0
-        G[i, q0 + i] = box[i]
-    return q0 + n + keep
 
 
 follow_dependencies(__name__)
