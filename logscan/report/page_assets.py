@@ -77,7 +77,20 @@ def environment():
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
         lstrip_blocks=True,
+        bytecode_cache=_compiled_templates(jinja2),
     )
+
+
+def _compiled_templates(jinja2):
+    """The templates compiled once per machine, not once per process (0.1-0.2 s of every report):
+    jinja2's bytecode cache in logscan's cache directory, keyed on each template's source (an edited
+    template compiles again); None (no cache) where that directory cannot be written."""
+    directory = logscan.cache_dir() / "templates"
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    return jinja2.FileSystemBytecodeCache(str(directory)) if os.access(directory, os.W_OK) else None
 
 
 def report_js() -> str:
