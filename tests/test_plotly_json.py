@@ -6,11 +6,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_report import GRID_N, array, figures, make_report
 
 from logscan.report import render_html
 from logscan.report.figures import Figure, Trace, grid_step
-from logscan.report.plotly_json import MAX_FOCUS_FRACTION, POINT_BUDGET, _defined_samples, focus_windows, typed_array
+from logscan.report.plotly_json import (
+    MAX_FOCUS_FRACTION,
+    POINT_BUDGET,
+    _defined_samples,
+    focus_windows,
+    in_windows,
+    typed_array,
+    window_indices,
+)
 from logscan.report.stacked import is_flat
 
 
@@ -104,3 +114,16 @@ def test_the_grid_step_is_the_median_step():
 def test_a_row_is_flat_when_its_finite_values_are_one_value(values, flat):
     trace = Trace("s", np.array(values, dtype=np.float32), np.zeros(0, np.int64), 1.0, {})
     assert is_flat(Figure("det: s", "s", [trace], {})) is flat
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    x=st.lists(st.integers(0, 20), max_size=40).map(lambda v: np.sort(np.asarray(v, dtype=float))),
+    edges=st.lists(st.integers(-2, 22), max_size=6).map(lambda v: np.sort(np.asarray(v, dtype=float))),
+    shuffle=st.booleans(),
+)
+def test_window_indices_are_the_samples_in_windows_sorted_or_not(x, edges, shuffle):
+    windows = edges[: edges.size // 2 * 2].reshape(-1, 2)  # sorted and disjoint, or touching
+    if shuffle:
+        x = x[::-1].copy()  # unsorted: the per-sample search
+    np.testing.assert_array_equal(window_indices(x, windows), np.flatnonzero(in_windows(x, windows)))

@@ -163,11 +163,25 @@ def in_windows(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
     return (i >= 0) & (x <= windows[np.maximum(i, 0), 1])
 
 
+def window_indices(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
+    """Indices of ``x`` inside any of the sorted disjoint ``windows`` (`in_windows`' True places):
+    for an ascending ``x`` (a trace's times) found from the windows' edges, a binary search per edge
+    instead of one per sample (a 1-hour log's report asked 138 traces of 360,000 samples each)."""
+    if windows.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if x.size > 1 and not bool(np.all(x[1:] >= x[:-1])):  # unsorted, or NaN: sample by sample
+        return np.flatnonzero(in_windows(x, windows))
+    stop = np.searchsorted(x, windows[:, 1], side="right")
+    first = np.searchsorted(x, windows[:, 0], side="left")
+    first[1:] = np.maximum(first[1:], stop[:-1])  # windows that touch share no sample twice
+    return np.concatenate([np.arange(a, b) for a, b in zip(first.tolist(), stop.tolist())] or [np.zeros(0, np.int64)])
+
+
 def _decimated(x: np.ndarray, y: np.ndarray, keep: np.ndarray, max_points: int, windows: np.ndarray) -> np.ndarray:
     """Indices drawing ``y``: the whole under ``max_points``, FOCUS_SHARE of them inside ``windows``."""
     n_focus = int(max_points * FOCUS_SHARE)
     focus = y.size > max_points and n_focus >= 16
-    inside = np.flatnonzero(in_windows(x, windows)) if focus else np.zeros(0, dtype=np.int64)
+    inside = window_indices(x, windows) if focus else np.zeros(0, dtype=np.int64)
     if inside.size <= n_focus:  # not decimated, or the windows hold few samples: drawn in full below
         overview = decimate_indices(y, max_points - inside.size, keep=keep, simplify_flat=True)
         return sorted_unique(overview, inside)

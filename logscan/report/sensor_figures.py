@@ -13,7 +13,7 @@ import numpy as np
 
 from logscan.report.decimate import decimate_indices, edge_indices, sorted_unique
 from logscan.report.figures import LINE_COLOURS, Figure, Trace, judged_range, merge_spans, span_limits
-from logscan.report.plotly_json import in_windows, zoom_windows
+from logscan.report.plotly_json import window_indices, zoom_windows
 from logscan.report.sensor_views import K_SIGMA, Innovations, SensorView
 from logscan.results import DetectorResult
 from logscan.verdict.incidents import group_of
@@ -55,7 +55,7 @@ def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tu
     steps = np.arange(t.size) if everywhere else np.flatnonzero(defined)
     if steps.size > REDUCED_POINTS:
         chosen = [decimate_indices(s if everywhere else s[steps], REDUCED_POINTS, simplify_flat=True) for s in series]
-        inside = np.flatnonzero(in_windows(t if everywhere else t[steps], windows)) if windows.size else steps[:0]
+        inside = window_indices(t if everywhere else t[steps], windows) if windows.size else steps[:0]
         steps = steps[sorted_unique(*chosen, inside)]
     return t[steps], steps
 
