@@ -213,7 +213,7 @@ def test_boxplus_and_boxminus_are_inverse_and_the_kernel_applies_the_same(name, 
         np.testing.assert_allclose(model.boxminus(moved, x), dx, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(model.boxplus(x, np.zeros(x.size)), x, atol=1e-12)
         out = np.full(x.size, np.nan)
-        boxplus.py_func(p, x, dx, out)
+        boxplus.py_func(p, x, dx, out, np.empty((3, 3)), np.empty((3, 3, 3)))  # R3, D3: work
         np.testing.assert_allclose(out, moved, rtol=1e-13, atol=1e-13)
 
 

@@ -335,7 +335,8 @@ def _filter_steps(model_id, model, sensors, data, out, work):
                         t += KT[a, i] * y[a]
                     dx[i] = t
                 # x_post = x_prior (+) K y~ (additive but for a model with a rotation in its state)
-                dispatch.model_boxplus_into(model_id, p, x, dx, x_upd)
+                # (R3, D3: the measurements' rotation work, free again once they are evaluated)
+                dispatch.model_boxplus_into(model_id, p, x, dx, x_upd, R3, D3)
                 # P_post = P - K S K^T = P - V^T V (the short form, exact for the optimal gain K),
                 # where every variance keeps more than SHORT_FORM_KEEP of its prior (that check is
                 # also its finite check); else (I - K H) P (I - K H)^T + K R K^T (Joseph form)

@@ -103,8 +103,9 @@ def model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
     raise NotImplementedError("model_meas_into is resolved by numba at compile time")
 
 
-def model_boxplus_into(model_id, p, x, dx, out):
-    """out = x (+) dx of the model ``model_id`` (a compile-time constant; numba code only)."""
+def model_boxplus_into(model_id, p, x, dx, out, R3, D3):
+    """out = x (+) dx of the model ``model_id`` (a compile-time constant; numba code only); R3, D3
+    work arrays."""
     raise NotImplementedError("model_boxplus_into is resolved by numba at compile time")
 
 
@@ -131,12 +132,12 @@ def _model_meas_into(model_id, gid, p, x, u, r, hx, Hs, R3, D3):
 
 
 @overload(model_boxplus_into, inline="always")
-def _model_boxplus_into(model_id, p, x, dx, out):
+def _model_boxplus_into(model_id, p, x, dx, out, R3, D3):
     kernel = literal_kernel(model_id, "boxplus_into")
     if kernel is not None:
 
-        def impl(model_id, p, x, dx, out):
-            kernel(p, x, dx, out)
+        def impl(model_id, p, x, dx, out, R3, D3):
+            kernel(p, x, dx, out, R3, D3)
 
         return impl
 

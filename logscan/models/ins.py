@@ -153,7 +153,7 @@ class Ins(Model):
     # --- the error-state chart ------------------------------------------------------------------
     def boxplus(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
         out = np.empty(INS_N)
-        ins_boxplus_into(self.param_vector(), _vec(x), _vec(dx), out)
+        ins_boxplus_into(self.param_vector(), _vec(x), _vec(dx), out, np.empty((3, 3)), np.empty((3, 3, 3)))
         return out
 
     def boxminus(self, x1: np.ndarray, x0: np.ndarray) -> np.ndarray:

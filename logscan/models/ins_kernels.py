@@ -124,12 +124,13 @@ def _rotate_euler(x, d0, d1, d2, out, R, E, Jr, M):
 
 
 @njit(cache=True)
-def ins_boxplus_into(p, x, dx, out):
-    """out = x (+) dx: p, v, biases add; the attitude rotates, R(out) = R(x) Exp(dx[6:9])."""
+def ins_boxplus_into(p, x, dx, out, R3, D3):
+    """out = x (+) dx: p, v, biases add; the attitude rotates, R(out) = R(x) Exp(dx[6:9]). R3 (3, 3)
+    and D3 (3, 3, 3): work arrays (the EKF's step loop, compiled without numba's reference
+    counting, cannot allocate)."""
     for i in range(INS_N):
         out[i] = x[i] + dx[i]
-    W = np.empty((4, 3, 3))
-    _rotate_euler(x, dx[6], dx[7], dx[8], out, W[0], W[1], W[2], W[3])
+    _rotate_euler(x, dx[6], dx[7], dx[8], out, R3, D3[0], D3[1], D3[2])
 
 
 @njit(cache=True)
@@ -285,9 +286,9 @@ def ins_meas_rows_into(gid, p, x, u, r, hx, Hs, R3, D3):
 
 
 @njit(cache=True, inline="always")
-def ins_boxplus(p, x, dx, out):
+def ins_boxplus(p, x, dx, out, R3, D3):
     """x (+) dx of the ins model (the attitude rotates)."""
-    ins_boxplus_into(p, x, dx, out)
+    ins_boxplus_into(p, x, dx, out, R3, D3)
 
 
 register(

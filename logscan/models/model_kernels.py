@@ -11,7 +11,8 @@ rotation work arrays, free for any model to use):
     h_meas(p, gid, x, u) -> h (m,)               H_meas(p, gid, x, u) -> H (m, n)
     predict_into(p, x, u, dt, x_next, F, kv, xs, A, J, Jn)        (the EKF's: no allocation)
     meas_into(gid, p, x, u, r, hx, Hs, R3, D3)                    (the EKF's: no allocation)
-    boxplus_into(p, x, dx, out)                  out = x (+) dx (`additive_boxplus_into`: x + dx)
+    boxplus_into(p, x, dx, out, R3, D3)          out = x (+) dx (`additive_boxplus_into`: x + dx;
+                                                 R3, D3 work: the EKF's step loop cannot allocate)
     fA(p, x, u, d, A, want_A)                    continuous d = f_c(x, u), A = df_c/dx; only for
                                                  the shared RK4 step (`logscan.models.rk4`), else None
 
@@ -60,7 +61,7 @@ def register(*kernels: ModelKernels) -> None:
 
 
 @njit(cache=True, inline="always")
-def additive_boxplus_into(p, x, dx, out):
+def additive_boxplus_into(p, x, dx, out, R3, D3):
     """x (+) dx of the models whose state adds: out = x + dx."""
     for i in range(x.size):
         out[i] = x[i] + dx[i]
