@@ -38,13 +38,18 @@ def _numba_cache_dir() -> str:
     if os.environ.get("NUMBA_CACHE_DIR") and not os.environ.get("LOGSCAN_CACHE_DIR"):
         return os.environ["NUMBA_CACHE_DIR"]
     for candidate in (cache_dir() / "numba", Path(tempfile.gettempdir()) / f"logscan-{_user()}" / "numba"):
-        try:
-            candidate.mkdir(parents=True, exist_ok=True)
-            if os.access(candidate, os.W_OK):
-                return str(candidate)
-        except OSError:
-            continue
+        if writable_directory(candidate):
+            return str(candidate)
     return str(cache_dir() / "numba")  # numba itself then says it cannot cache
+
+
+def writable_directory(directory: Path) -> bool:
+    """Whether ``directory`` exists (created with its parents when missing) and can be written."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(directory, os.W_OK)
 
 
 def _user() -> str:

@@ -147,8 +147,11 @@ def judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray
     if not defined:
         return None
     judged = np.logical_or.reduce([np.isfinite(band) for band in defined])
-    chosen = [values, *defined] if judged.all() else [part[judged] for part in (values, *defined)]
-    parts, everything = [_finite(part) for part in chosen], _finite(values)
+    everything = _finite(values)
+    if judged.all():  # the statistic's finite values are the first part: one pass over it
+        parts = [everything, *(_finite(band) for band in defined)]
+    else:
+        parts = [_finite(part[judged]) for part in (values, *defined)]
     n_parts = sum(part.size for part in parts)
     if n_parts == 0 or everything.size == 0:
         return None

@@ -86,11 +86,7 @@ def _compiled_templates(jinja2):
     jinja2's bytecode cache in logscan's cache directory, keyed on each template's source (an edited
     template compiles again); None (no cache) where that directory cannot be written."""
     directory = logscan.cache_dir() / "templates"
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None
-    return jinja2.FileSystemBytecodeCache(str(directory)) if os.access(directory, os.W_OK) else None
+    return jinja2.FileSystemBytecodeCache(str(directory)) if logscan.writable_directory(directory) else None
 
 
 def report_js() -> str:

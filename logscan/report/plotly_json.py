@@ -25,7 +25,7 @@ import json
 import numpy as np
 
 from logscan.report.decimate import DEFAULT_MAX_POINTS, decimate_indices, sorted_unique
-from logscan.report.figures import Figure, merge_spans
+from logscan.report.figures import Figure, grid_step, merge_spans
 from logscan.timebase.clock import Clock
 
 # plotted points per report, shared by all varying traces: a report with plotly.js shared stays under
@@ -35,7 +35,6 @@ POINT_BUDGET = 18_000
 MIN_POINTS_PER_TRACE = 400
 MIN_POINTS_FLOOR = 100
 _F4_MAX = float(np.finfo(np.float32).max)
-SPACING_SAMPLE = 10_000  # spacings a trace's typical spacing is the median of (`_defined_samples`)
 
 TIME_TITLE = "time since log start (s)"  # the axis' title until `on_clock` names the log's clock
 TIME_AXIS = {
@@ -60,8 +59,8 @@ def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
     grid is NaN 9 steps in 10); drawn as is, such a line would be all gaps. So only defined
     samples are drawn, joined, except across a gap longer than 3x their typical spacing, where a
     NaN still breaks the line. ``keep`` (grid indices) is mapped onto the returned samples. The
-    typical spacing is the median of at most SPACING_SAMPLE spacings spread evenly over the series
-    (the median of all of a long log's cost more than the rest of its trace). Defined samples in
+    typical spacing is the samples' `grid_step` (the median of at most STEP_SAMPLE spacings spread
+    evenly over the series: the median of all of a long log's cost more than the rest of its trace). Defined samples in
     one run (NaN only before and after it: a warm-up) are that part of the series, as a series
     defined everywhere is all of it: no step is missing inside it.
     """
@@ -78,7 +77,7 @@ def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
     tc, yc = t[idx], y[idx]
     if tc.size >= 2:
         spacing = np.diff(tc)
-        typical = np.median(spacing[:: max(spacing.size // SPACING_SAMPLE, 1)])
+        typical = grid_step(tc)
         breaks = np.flatnonzero(spacing > 3.0 * typical) + 1
         if breaks.size:
             tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
@@ -319,9 +318,7 @@ def _scalar(value: object) -> object:
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
-        from _plotly_utils.utils import to_typed_array_spec
-
-        spec = to_typed_array_spec(value)  # strings and objects come back as they went in
+        spec = typed_array(value)  # strings and objects come back as they went in
         return value.tolist() if isinstance(spec, np.ndarray) else spec
     raise TypeError(f"not JSON: {type(value).__name__}")
 

@@ -54,8 +54,9 @@ def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tu
     everywhere = bool(defined.all())  # then the series themselves, not copies of their defined steps
     steps = np.arange(t.size) if everywhere else np.flatnonzero(defined)
     if steps.size > REDUCED_POINTS:
-        chosen = [decimate_indices(s if everywhere else s[steps], REDUCED_POINTS, simplify_flat=True) for s in series]
-        inside = window_indices(t if everywhere else t[steps], windows) if windows.size else steps[:0]
+        pick = slice(None) if everywhere else steps  # a view of the series where defined everywhere
+        chosen = [decimate_indices(s[pick], REDUCED_POINTS, simplify_flat=True) for s in series]
+        inside = window_indices(t[pick], windows) if windows.size else steps[:0]
         steps = steps[sorted_unique(*chosen, inside)]
     return t[steps], steps
 
