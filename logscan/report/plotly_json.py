@@ -77,7 +77,7 @@ def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
     tc, yc = t[idx], y[idx]
     if tc.size >= 2:
         spacing = np.diff(tc)
-        typical = grid_step(tc)
+        typical = grid_step(tc) or 0.0  # two samples or more: a float
         breaks = np.flatnonzero(spacing > 3.0 * typical) + 1
         if breaks.size:
             tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
