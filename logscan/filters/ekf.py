@@ -33,8 +33,7 @@ from numba import literally, njit
 
 from logscan.align import AlignedRun
 from logscan.filters.coding import coded_variance, coding_vector_into
-from logscan.filters.ekf_pack import EkfBuffers, EkfWork, KernelInputs, pack_run, samples_side_by_side
-from logscan.filters.ekf_pack import trace_buffers as _buffers
+from logscan.filters.ekf_pack import EkfBuffers, EkfWork, KernelInputs, pack_run, samples_side_by_side, trace_buffers
 from logscan.filters.linalg import (
     all_finite,
     all_finite2,
@@ -425,17 +424,23 @@ def run_ekf(
     """
     k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0, coding=coding)
     N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
-    out = _buffers(
-        N, n, G, m, full_P=full_P, store_gain=store_gain, store_S=store_S, store_innovations=store_innovations
+    out = trace_buffers(
+        N,
+        n,
+        G,
+        m,
+        full_P=full_P,
+        store_gain=store_gain,
+        store_S=store_S,
+        store_innovations=store_innovations,
+        store_ex_var=coding is not None,
     )
-    if coding is not None:
-        out = out._replace(ex_var=np.zeros(N))
     if steps_done is not None:
         out = out._replace(steps_done=steps_done)
     if N:
         args = (*k.kernel_arguments(), out)
         compiled_for(args)(*args)
-    return _trace(model, run, k, out, full_P, store_gain, store_S, store_innovations)
+    return _trace(model, run, k, out, full_P, store_gain, store_S, store_innovations, coding is not None)
 
 
 def _trace(
@@ -447,6 +452,7 @@ def _trace(
     store_gain: bool,
     store_S: bool,
     store_innovations: bool,
+    store_ex_var: bool,
 ) -> EkfTrace:
     """The trace of a filtered run: the kernel's buffers, the ones not stored as None."""
     t = np.asarray(run.t, dtype=np.float64)
@@ -479,7 +485,7 @@ def _trace(
         P_post=out.P_post_full if full_P else None,
         S=out.S_out if store_S else None,
         K=out.K_out if store_gain else None,
-        ex_variance=out.ex_var if out.ex_var.shape[0] == t.size else None,
+        ex_variance=out.ex_var if store_ex_var else None,
         divergence_episodes=divergence_episodes(t, out.diverged, out.m_k),
     )
 

@@ -151,7 +151,16 @@ class EkfWork(NamedTuple):
 
 
 def trace_buffers(
-    N: int, n: int, G: int, m: int, *, full_P: bool, store_gain: bool, store_S: bool, store_innovations: bool
+    N: int,
+    n: int,
+    G: int,
+    m: int,
+    *,
+    full_P: bool,
+    store_gain: bool,
+    store_S: bool,
+    store_innovations: bool,
+    store_ex_var: bool = False,
 ) -> EkfBuffers:
     """The kernel's output arrays for N steps (n states, G groups, m outputs), NaN / False / 0
     filled where the kernel writes only some steps; the ones not stored have a zero-length first
@@ -174,7 +183,7 @@ def trace_buffers(
         S_out=np.empty((N if store_S else 0, m, m)),
         S_diag_out=np.full((N if store_innovations else 0, m), nan, dtype=np.float32),
         K_out=np.empty((N if store_gain else 0, n, m)),
-        ex_var=np.empty(0),
+        ex_var=np.zeros(N if store_ex_var else 0),  # 0 where not updated
         nis=np.full(N, nan),
         nis_group=np.full((N, G), nan),
         m_k=np.zeros(N, dtype=np.int64),

@@ -23,7 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.errors import InternalError
-from logscan.filters.ekf import KernelInputs, _buffers, compiled_for, pack_run, run_ekf
+from logscan.filters.ekf import KernelInputs, compiled_for, pack_run, run_ekf
+from logscan.filters.ekf_pack import trace_buffers
 from logscan.needs import CodedVariance, Part
 from logscan.traces import EkfTrace
 
@@ -110,7 +111,7 @@ class Refiltered:
     def all(self) -> tuple[np.ndarray, np.ndarray]:
         """(K, S) of the whole run, filtered in one go and kept."""
         if self.whole is None:
-            out = _buffers(
+            out = trace_buffers(
                 self.n_steps, self.n, len(self.k.group_names), self.m,
                 full_P=False, **self.store,
             )  # fmt: skip
@@ -149,7 +150,7 @@ class Refiltered:
         R_std = data.R_std[first:stop] if data.R_std.shape[0] == self.n_steps else data.R_std
         data = data._replace(u=u, z=data.z[first:stop], fresh=fresh, R_std=R_std)
         G = len(self.k.group_names)
-        out = _buffers(stop - first, self.n, G, self.m, full_P=True, **self.store)
+        out = trace_buffers(stop - first, self.n, G, self.m, full_P=True, **self.store)
         args = (model_id, model, sensors, data, out)
         compiled_for(args)(*args)
         finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
