@@ -143,7 +143,6 @@ def run_ubikf(
     settings = UbikfSettings(int(L), int(L_box), float(cap))
     blocks = state_blocks(*(kernel_model[i] for i in (0, 1, 4, 5, 6, 7, 9)))
     if N:
-        out.P_trace[:] = 0.0
         for block in blocks:
             _run_block(kernel_model, block, UbikfData(u, u_default, z, usable), settings, out)
         _finish(out, usable, kernel_model.group_sizes)
@@ -205,7 +204,7 @@ def _buffers(N: int, n: int, m: int, G: int, *, store_P: bool, store_gain: bool)
         x_mid=np.full((N, n), nan),
         x_lo=np.full((N, n), nan),
         x_hi=np.full((N, n), nan),
-        P_trace=np.full(N, nan),
+        P_trace=np.zeros(N),  # each block adds its part
         P_diag=np.full((N, n), nan, dtype=np.float32),
         n_generators=np.zeros(N, dtype=np.int64),
         P=np.full((N if store_P else 0, n, n), nan),

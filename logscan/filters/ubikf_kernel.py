@@ -141,17 +141,15 @@ def interval_input_radius(A_r, x, h, B_r, u, out):
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd):
+def select_rows(k, z, fresh, group_offsets, group_sizes, rows):
     """Stack the rows of the groups with a fresh, finite sample at step k; returns their count."""
     m = 0
     for g in range(group_offsets.size):
-        upd[g] = False
         if not fresh[k, g]:
             continue
         o = group_offsets[g]
         if not all_finite(z[k, o : o + group_sizes[g]]):
             continue
-        upd[g] = True
         for j in range(o, o + group_sizes[g]):
             rows[m] = j
             m += 1
@@ -294,13 +292,13 @@ def ubikf_run(model, data, settings, out, place):
     cap_p = n + 2 * settings.L * n + n  # generators: a box, then at most 2 L steps of n new ones
     state = (model.x0.copy(), data.u_default.copy(), model.P0.copy(), np.zeros((n, cap_p)), np.zeros((n, cap_p)))
     vectors = np.zeros((6, n))  # x_prior, h, sigma, rho, alpha and box_columns_into's box
-    matrices = np.zeros((5, n, n))  # P_next, and predict_bound's work (the last stays zero)
+    matrices = np.zeros((5, n, n))  # predict_bound's work (the fourth, its Z, stays zero), then P_next
     acols, annz = np.empty((n, n), dtype=np.int64), np.empty(n, dtype=np.int64)
     sparse_rows(model.A_m, n, n, acols, annz)
-    rows, upd = np.empty(m_total, dtype=np.int64), np.zeros(model.group_offsets.size, dtype=np.bool_)
+    rows = np.empty(m_total, dtype=np.int64)
     Cs, Rs = np.zeros((m_total, n)), np.zeros((m_total, m_total))
     y, v = np.zeros(m_total), np.zeros(m_total)
-    scratch = (vectors, matrices, acols, annz, np.arange(n), rows, upd, Cs, Rs, y, v)
+    scratch = (vectors, matrices, acols, annz, np.arange(n), rows, Cs, Rs, y, v)
     filter_steps(model, data, settings, out, place, state, scratch, work_arrays(n, m_total, cap_p))
 
 
@@ -312,7 +310,7 @@ def filter_steps(model, data, settings, out, place, state, scratch, work):
     Q, R, u, z, fresh = model.Q, model.R, data.u, data.z, data.fresh
     L, L_box, cap, diverged = settings.L, settings.L_box, settings.cap, out.diverged
     x, u_last, P, G, G_next = state
-    vectors, Wn, acols, annz, all_rows, rows, upd, Cs, Rs, y, v = scratch
+    vectors, Wn, acols, annz, all_rows, rows, Cs, Rs, y, v = scratch
     x_prior, h, sigma, rho, alpha, box = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4], vectors[5]
     P_next, n = Wn[4], x0.size
     p, p_mark, p_recent, age = 0, 0, 0, 0
@@ -331,7 +329,7 @@ def filter_steps(model, data, settings, out, place, state, scratch, work):
         else:
             alpha[:] = 0.0
         ok = True
-        m = select_rows(k, z, fresh, group_offsets, group_sizes, rows, upd)
+        m = select_rows(k, z, fresh, group_offsets, group_sizes, rows)
         if m > 0:
             for a in range(m):
                 copy_into(C_m[rows[a]], Cs[a])
