@@ -261,12 +261,18 @@ def _run_filters(
 def _compile_ahead(prepared: Prepared, ahead: Sequence[Callable[[], None]]) -> None:
     """While the EKF's kernel compiles in its own process (the first run), compile here the kernels
     that run after it: the observability verdict's, when the log's ground truth asks for it, and
-    the detectors' (``ahead``)."""
+    the detectors' (``ahead``). Only a head start: a compile that fails here is left to the kernel's
+    first call, where the verdict (an aid, noted when it fails) or the one detector meets it, as
+    without this."""
     model = prepared.model
+    compiles = list(ahead)
     if judged_spans(prepared) and not kernel_cached(signature_evidence, model.model_id):
-        compile_verdict_kernel(model, prepared.run.dt)
-    for compile_kernels in ahead:
-        compile_kernels()
+        compiles.insert(0, lambda: compile_verdict_kernel(model, prepared.run.dt))
+    for compile_kernels in compiles:
+        try:
+            compile_kernels()
+        except Exception:  # noqa: BLE001, S112 - see the docstring: the first call meets it again
+            continue
 
 
 def _attach_truth(log, path: str, truth_path) -> None:
