@@ -26,6 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchlib import installed_environment
 from compare_summaries import RUNNER
 
 
@@ -36,7 +37,7 @@ def run_cli(args: list[str], cache_dir: Path) -> float:
 def measured_cli(args: list[str], cache_dir: Path, tree: Path | None = None) -> tuple[float, float]:
     """(wall seconds, peak RSS in MB = 1e6 bytes) of ``logscan ARGS`` in a fresh process; ``tree``:
     another checkout's code, run in this venv."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+    env = installed_environment(NUMBA_CACHE_DIR=str(cache_dir))
     command = [sys.executable, "-m", "logscan"] if tree is None else [sys.executable, "-c", RUNNER, str(tree)]
     start = time.perf_counter()
     with tempfile.TemporaryFile() as err:

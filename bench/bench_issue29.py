@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 from bench_analyze import simulate
+from benchlib import installed_environment
 from compare_summaries import RUNNER
 
 BENCH = Path(__file__).resolve().parent
@@ -38,7 +39,9 @@ def cli_usage(args: list[str], tree: Path | None) -> tuple[float, float, float]:
     """(CPU s of the process and its children, wall s, peak RSS MiB) of ``logscan ARGS``."""
     command = [sys.executable, "-m", "logscan"] if tree is None else [sys.executable, "-c", RUNNER, str(tree)]
     start = time.perf_counter()
-    process = subprocess.Popen([*command, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    process = subprocess.Popen(
+        [*command, *args], env=installed_environment(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
     _, status, usage = os.wait4(process.pid, 0)
     wall = time.perf_counter() - start
     if os.waitstatus_to_exitcode(status) not in (0, 1):

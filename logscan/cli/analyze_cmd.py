@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import sys
 from dataclasses import dataclass, replace
 
@@ -373,11 +374,15 @@ def _run_logs(items: list, task, jobs: int, progress: bool, scheduler: str | Non
     (its last step's time printed) before anything else is."""
     from logscan.fleet import run_many
 
+    # what the imports made lives to the end: the collector stops walking it while logs are analysed
+    # (0.1 s of a 1-hour log), and forked workers keep sharing its pages
+    gc.freeze()
     try:
         return run_many(
             items, task, jobs=jobs, progress=progress, label="analysing", isolate=len(items) > 1, scheduler=scheduler
         )
     finally:
+        gc.unfreeze()
         end_steps()
 
 
