@@ -252,8 +252,13 @@ def true_states(log, run, model) -> dict[str, np.ndarray]:
     channels = {name: channel for name, channel in channels.items() if channel is not None and len(channel)}
     grid_ns = run.start_ns + np.round(np.asarray(run.t, dtype=np.float64) * 1e9).astype(np.int64)
     out = {}
+    latest: dict[int, np.ndarray] = {}  # the fields of one truth message share its time array: searched once
     for name, channel in channels.items():
-        i = np.searchsorted(np.asarray(channel.t, dtype=np.int64), grid_ns, side="right") - 1
+        i = latest.get(id(channel.t))
+        if i is None:
+            i = latest[id(channel.t)] = (
+                np.searchsorted(np.asarray(channel.t, dtype=np.int64), grid_ns, side="right") - 1
+            )
         values = np.asarray(channel.values, dtype=np.float64)
         out[name] = np.where(i >= 0, values[np.clip(i, 0, None)], np.nan)
     return out
