@@ -26,14 +26,18 @@ from logscan.json_policy import jsonable
 
 def series_summary(values: np.ndarray) -> dict:
     """n, finite count, min and max of one series (the JSON summary's view of a statistic)."""
-    values = np.asarray(values, dtype=np.float64)
-    finite = values[np.isfinite(values)]
-    return {
-        "n": int(values.size),
-        "finite": int(finite.size),
-        "min": float(finite.min()) if finite.size else None,
-        "max": float(finite.max()) if finite.size else None,
-    }
+    values = np.asarray(values)
+    finite = np.isfinite(values)
+    count = int(np.count_nonzero(finite))
+    low = high = None
+    if count and count + int(np.count_nonzero(np.isnan(values))) == values.size:
+        # only NaN besides the finite values: fmin / fmax skip them, with no copy of the finite ones
+        # (an extreme of zero is left to min / max below: which of 0.0 and -0.0 they return differs)
+        low, high = float(np.fmin.reduce(values)), float(np.fmax.reduce(values))
+    if count and (low is None or low == 0.0 or high == 0.0):  # an infinity, or a zero extreme
+        kept = np.asarray(values[finite], dtype=np.float64)
+        low, high = float(kept.min()), float(kept.max())
+    return {"n": int(values.size), "finite": count, "min": low, "max": high}
 
 
 # --- alarms ---------------------------------------------------------------------------------------
