@@ -168,3 +168,12 @@ def test_sorted_unique_is_the_union_of_the_arrays(arrays):
     got = sorted_unique(*arrays)
     np.testing.assert_array_equal(got, np.unique(np.concatenate(arrays)))
     assert got.dtype == np.int64
+
+
+@pytest.mark.parametrize("value", [2.5, np.nan])
+@pytest.mark.parametrize("simplify_flat", [False, True])
+def test_a_broadcast_constant_is_decimated_as_its_samples_are(value, simplify_flat):
+    constant = np.broadcast_to(np.float32(value), (100_003,))  # as results keep a constant threshold
+    keep = np.array([5, 77_000])
+    expected = decimate_indices(constant.copy(), 1_000, keep=keep, simplify_flat=simplify_flat)
+    np.testing.assert_array_equal(decimate_indices(constant, 1_000, keep=keep, simplify_flat=simplify_flat), expected)

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from test_report import GRID_N, array, figures, make_report
 
 from logscan.report import render_html
-from logscan.report.figures import Figure, Trace, grid_step
+from logscan.report.figures import RANGE_SAMPLE, Figure, Trace, grid_step, judged_range
 from logscan.report.plotly_json import (
     MAX_FOCUS_FRACTION,
     POINT_BUDGET,
@@ -127,3 +127,44 @@ def test_window_indices_are_the_samples_in_windows_sorted_or_not(x, edges, shuff
     if shuffle:
         x = x[::-1].copy()  # unsorted: the per-sample search
     np.testing.assert_array_equal(window_indices(x, windows), np.flatnonzero(in_windows(x, windows)))
+
+
+def _masked_range(values, upper, lower, peaks):
+    """`judged_range` as first written: masks and copies of every array (the reference)."""
+    defined = [band for band in (upper, lower) if band is not None]
+    if not defined:
+        return None
+    judged = np.logical_or.reduce([np.isfinite(band) for band in defined])
+    everything = values[np.isfinite(values)]
+    parts = [part[judged][np.isfinite(part[judged])] for part in (values, *defined)]
+    n_parts = sum(part.size for part in parts)
+    if n_parts == 0 or everything.size == 0:
+        return None
+    step = max(n_parts // RANGE_SAMPLE, 1)
+    lo, hi = np.percentile(np.concatenate([part[::step] for part in parts]), [0.1, 99.9])
+    lo, hi = float(min([lo, *peaks])), float(max([hi, *peaks]))
+    span = hi - lo
+    with np.errstate(invalid="ignore"):
+        full_lo = min(float(everything.min()), *(float(np.fmin.reduce(b)) for b in defined))
+        full_hi = max(float(everything.max()), *(float(np.fmax.reduce(b)) for b in defined))
+    if full_lo >= lo - span and full_hi <= hi + span:
+        return None
+    pad = 0.05 * span if span > 0 else max(abs(hi), 1.0) * 0.05
+    return (lo - pad, hi + pad)
+
+
+special = st.sampled_from([np.nan, np.inf, -np.inf, 1e6, -1e6])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    values=st.lists(st.floats(-10, 10) | special, min_size=1, max_size=60),
+    upper=st.none() | st.lists(st.floats(0, 20) | special, min_size=60, max_size=60),
+    lower=st.none() | st.lists(st.floats(-20, 0) | special, min_size=60, max_size=60),
+    peaks=st.lists(st.floats(-100, 100), max_size=2),
+)
+def test_the_judged_range_is_that_of_the_finite_values_where_a_threshold_is_defined(values, upper, lower, peaks):
+    values = np.asarray(values, dtype=np.float32)
+    n = values.size
+    bands = [None if band is None else np.asarray(band[:n], dtype=np.float32) for band in (upper, lower)]
+    assert judged_range(values, *bands, peaks) == _masked_range(values, *bands, peaks)

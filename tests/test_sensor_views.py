@@ -188,3 +188,41 @@ def test_the_normalised_innovations_and_predictions_alone_are_the_views():
     np.testing.assert_array_equal(innovations.normalised("g"), view.normalised)  # NaN where not updated, too
     np.testing.assert_array_equal(innovations.predicted("g", (2, 0)), view.predicted[:, [2, 0]])
     assert innovations.normalised("nope") is None and innovations.predicted("nope", (0,)) is None
+
+
+@pytest.mark.parametrize("scale", [2.0**-110, 2.0**-20, 1.0, 2.0**40, 2.0**110])
+def test_a_view_is_the_pack_unpacked_in_float64_at_any_scale(scale):
+    from logscan.report.sensor_views import Innovations
+
+    rng = np.random.default_rng(3)
+    packed = np.empty((300, 2), dtype=PACKED)
+    packed["predicted"] = rng.normal(size=(300, 2)).astype(np.float32)
+    packed["innovation"] = rng.normal(size=(300, 2)).astype(np.float16)
+    packed["sigma"] = rng.uniform(0.5, 2.0, size=(300, 2)).astype(np.float16)
+    packed["innovation"][::7] = np.nan  # steps without an update
+    offset, scales = np.array([1e3, -5.0]), np.array([scale, 1.0])
+    innovations = Innovations(["g"], np.array([0]), np.array([2]), {"g": ["/a", "/b"]}, packed, scales, offset)
+    view = innovations.view("g")
+    # as the pack was first unpacked: every product and sum in float64, rounded once to float32
+    predicted = packed["predicted"] + offset
+    y = packed["innovation"] * scales
+    np.testing.assert_array_equal(view.predicted, predicted.astype(np.float32))
+    np.testing.assert_array_equal(view.measured, (predicted + y).astype(np.float32))
+    np.testing.assert_array_equal(view.sigma, (packed["sigma"] * scales).astype(np.float32))
+    with np.errstate(invalid="ignore"):
+        np.testing.assert_array_equal(
+            view.normalised, np.divide(packed["innovation"], packed["sigma"], dtype=np.float32)
+        )
+
+
+def test_a_page_makes_each_groups_view_once():
+    from logscan.report.sensor_views import PageViews
+
+    run, trace, *_ = synthetic([0.1, 2.0])
+    innovations = pack_innovations(run, trace)
+    made = []
+    innovations.view = lambda group, view=innovations.view: made.append(group) or view(group)
+    views = PageViews(innovations)
+    headline = views.view("g")  # the headline's, kept for the group's sensor figures
+    assert views.view("g") is headline and views.take("g") is headline and made == ["g"]
+    assert views.take("g") is not headline and made == ["g", "g"]  # taken: no longer kept

@@ -34,6 +34,13 @@ def bucket_width(n: int, max_points: int, n_keep: int = 0, has_nan: bool = False
     return max(math.ceil(n / n_buckets), 1)
 
 
+def collapsed(values: np.ndarray) -> np.ndarray:
+    """A broadcast constant (as results keep a constant threshold: one value, stride 0) as its one
+    element, anything else as it is: what holds for it holds for every sample, and numpy reduces a
+    stride-0 array sample by sample, slower than a real one."""
+    return values[:1] if values.ndim == 1 and values.size and values.strides[0] == 0 else values
+
+
 def sorted_unique(*arrays) -> np.ndarray:
     """The sorted distinct values of the (integer index) arrays together: ``np.union1d`` and
     ``np.unique`` without their hashing, which on a trace's few thousand indices took ten times
@@ -65,6 +72,8 @@ def _bucket_extremes(y: np.ndarray, isnan: np.ndarray | None, width: int) -> np.
     minimum, of its first maximum (NaN ignored) and of its first NaN (``isnan``: None when ``y`` has
     none). The full buckets are a reshaped view of ``y``, not a padded copy."""
     n_full = y.size // width
+    if collapsed(y) is not y:  # a broadcast constant: each bucket's first sample is its first least,
+        return np.arange(0, y.size, width, dtype=np.int64)  # greatest and NaN alike
     parts = [_extremes_of(y[: n_full * width].reshape(n_full, width), None if isnan is None else
                           isnan[: n_full * width].reshape(n_full, width), 0)]  # fmt: skip
     if n_full * width < y.size:  # the last, shorter bucket
@@ -95,6 +104,7 @@ def decimate_indices(
     *,
     keep: np.ndarray | None = None,
     simplify_flat: bool = False,
+    has_nan: bool | None = None,
 ) -> np.ndarray:
     """Sorted unique indices into ``y`` (1-D) that draw it with at most ``max_points`` points.
 
@@ -102,7 +112,8 @@ def decimate_indices(
     (NaN ignored; +-inf count as values), and its first NaN if any. ``keep`` indices (e.g. alarm
     edges) and the first and last sample are always included (``keep`` is thinned evenly if it
     alone exceeds half the budget). ``simplify_flat`` then drops kept samples that equal both
-    kept neighbours, except ``keep`` samples.
+    kept neighbours, except ``keep`` samples. ``has_nan``: whether ``y`` holds a NaN, when the
+    caller knows (None: looked for here, a pass over ``y``).
     """
     y = np.asarray(y)
     if y.ndim != 1:
@@ -113,13 +124,13 @@ def decimate_indices(
     if n == 0:
         return np.zeros(0, dtype=np.int64)
     keep_idx = _thin_keep(np.zeros(0) if keep is None else keep, n, max_points)
-    isnan = np.isnan(y)
-    has_nan = bool(isnan.any())
+    if has_nan is None:  # the least value is NaN when one is: one pass, no mask
+        has_nan = bool(np.isnan(collapsed(y).min()))
     width = bucket_width(n, max_points, keep_idx.size, has_nan)
     if width == 1:
         idx = np.arange(n, dtype=np.int64)
     else:
-        idx = np.concatenate([_bucket_extremes(y, isnan if has_nan else None, width), [0, n - 1]])
+        idx = np.concatenate([_bucket_extremes(y, np.isnan(y) if has_nan else None, width), [0, n - 1]])
     idx = sorted_unique(idx, keep_idx)
     if simplify_flat and idx.size >= 3:
         drop = _flat_interior(y[idx])

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.report.decimate import edge_indices
+from logscan.report.decimate import collapsed, edge_indices
 from logscan.results import DetectorResult
 
 MAX_SPANS = 100  # shaded spans per figure (closer spans are merged for display)
@@ -91,6 +91,7 @@ def merge_spans(spans: Sequence[tuple[float, float]], min_width: float, min_gap:
 
 
 def _is_piecewise_flat(y: np.ndarray, limit: int = 64) -> bool:
+    y = collapsed(y)
     changes = np.count_nonzero(y[1:] != y[:-1]) if y.size > 1 else 0
     return changes <= limit
 
@@ -112,7 +113,7 @@ def _bands(
                     f"{side} threshold of {name!r} has shape {arr.shape}, the grid has {n} steps: not drawn"
                 )
                 arr = None
-            sides.append(arr if arr is not None and np.isfinite(arr).any() else None)
+            sides.append(arr if arr is not None and np.isfinite(collapsed(arr)).any() else None)
         out[name] = (sides[0], sides[1])
     return out
 
@@ -144,14 +145,9 @@ def judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray
     double-clicking the plot restores the full range.
     """
     defined = [band for band in (upper, lower) if band is not None]
-    if not defined:
+    if not defined or values.size == 0:
         return None
-    judged = np.logical_or.reduce([np.isfinite(band) for band in defined])
-    everything = _finite(values)
-    if judged.all():  # the statistic's finite values are the first part: one pass over it
-        parts = [everything, *(_finite(band) for band in defined)]
-    else:
-        parts = [_finite(part[judged]) for part in (values, *defined)]
+    everything, parts, bounds = _judged_parts(values, defined)
     n_parts = sum(part.size for part in parts)
     if n_parts == 0 or everything.size == 0:
         return None
@@ -160,12 +156,34 @@ def judged_range(values: np.ndarray, upper: np.ndarray | None, lower: np.ndarray
     finite_peaks = [p for p in peaks if math.isfinite(p)]
     lo, hi = float(min([lo, *finite_peaks])), float(max([hi, *finite_peaks]))
     span = hi - lo
-    full_lo = min(float(everything.min()), *(float(np.fmin.reduce(b)) for b in defined))  # fmin/fmax skip NaN
-    full_hi = max(float(everything.max()), *(float(np.fmax.reduce(b)) for b in defined))
+    full_lo = min(low for low, _ in bounds)
+    full_hi = max(high for _, high in bounds)
     if full_lo >= lo - span and full_hi <= hi + span:
         return None  # nothing far outside: autorange shows everything well
     pad = 0.05 * span if span > 0 else max(abs(hi), 1.0) * 0.05
     return (lo - pad, hi + pad)
+
+
+def _judged_parts(values: np.ndarray, bands: list[np.ndarray]) -> tuple[np.ndarray, list, list]:
+    """(the statistic's finite values, the parts `judged_range` takes percentiles of: the finite
+    values of the statistic and of each band where a threshold is defined, and the least and
+    greatest finite value of the statistic and of each whole band). A band whose least and
+    greatest values are finite has neither NaN nor infinity, and a statistic too: then an array
+    is its own finite part, two passes over it, no mask and no copy (the usual case)."""
+    band_bounds = [_extremes(band) for band in bands]
+    if all(math.isfinite(lo) and math.isfinite(hi) for lo, hi in band_bounds):  # judged everywhere
+        finite = values if all(map(math.isfinite, _extremes(values))) else _finite(values)
+        return finite, [finite, *bands], [_extremes(finite), *band_bounds]
+    judged = np.logical_or.reduce([np.isfinite(band) for band in bands])
+    finite = _finite(values)
+    parts = [_finite(part[judged]) for part in (values, *bands)]
+    return finite, parts, [_extremes(finite), *((float(np.fmin.reduce(b)), float(np.fmax.reduce(b))) for b in bands)]
+
+
+def _extremes(values: np.ndarray) -> tuple[float, float]:
+    """(least, greatest) of an array, NaN when it holds a NaN; (inf, -inf) when it is empty."""
+    values = collapsed(values)
+    return (float(values.min()), float(values.max())) if values.size else (math.inf, -math.inf)
 
 
 def _finite(values: np.ndarray) -> np.ndarray:
@@ -266,7 +284,7 @@ def grid_step(t: np.ndarray) -> float | None:
 
 def _positive_upper_only(band: tuple) -> bool:
     upper, lower = band
-    return upper is not None and lower is None and bool(np.nanmin(upper) > 0)
+    return upper is not None and lower is None and bool(np.nanmin(collapsed(upper)) > 0)
 
 
 def _ratio_figure(detector: str, t: np.ndarray, series: dict, bands: dict, alarm_spans, spans: dict) -> Figure:

@@ -18,7 +18,7 @@ from logscan.alarms import AlarmInterval
 from logscan.report.figures import Figure
 from logscan.report.plotly_json import ZOOM_MARGIN_FRACTION, ZOOM_MARGIN_S
 from logscan.report.sensor_figures import sensor_figures
-from logscan.report.sensor_views import Innovations, SensorView
+from logscan.report.sensor_views import PageViews
 from logscan.results import Incident
 from logscan.timebase.clock import Clock
 from logscan.verdict.deviation import Deviation, deviation, significant
@@ -59,23 +59,18 @@ def quoted_alarm(incident: Incident, groups: Sequence[str]) -> AlarmInterval | N
     return max(named, key=_ratio, default=None)
 
 
-def headlines(
-    incidents: Sequence[Incident], innovations: Innovations | None, t: np.ndarray, model: Mapping
-) -> list[Headline]:
-    """One `Headline` per incident, in order."""
-    groups = list((model.get("groups") or {}).keys()) or (innovations.group_names if innovations else [])
-    views: dict[str, SensorView | None] = {}
+def headlines(incidents: Sequence[Incident], views: PageViews | None, t: np.ndarray, model: Mapping) -> list[Headline]:
+    """One `Headline` per incident, in order (the groups' views from ``views``, kept there)."""
+    groups = list((model.get("groups") or {}).keys()) or (views.group_names if views else [])
     out = []
     for incident in incidents:
         alarm = quoted_alarm(incident, groups)
         group = None
-        if alarm is not None and innovations is not None:
-            group = group_of(alarm.signal, innovations.group_names)
+        if alarm is not None and views is not None:
+            group = group_of(alarm.signal, views.group_names)
         size = None
-        if alarm is not None and group is not None and innovations is not None:
-            if group not in views:
-                views[group] = innovations.view(group)
-            view = views[group]
+        if alarm is not None and group is not None and views is not None:
+            view = views.view(group)
             size = None if view is None else deviation(view, t, alarm, model)
         out.append(Headline(incident, alarm, group, size))
     return out
@@ -87,14 +82,12 @@ def zoom_range(start: float, end: float) -> tuple[float, float]:
     return start - margin, end + margin
 
 
-def headline_figure(
-    headline: Headline, innovations: Innovations | None, t: np.ndarray, truth_spans: list
-) -> Figure | None:
+def headline_figure(headline: Headline, views: PageViews | None, t: np.ndarray, truth_spans: list) -> Figure | None:
     """The channel the headline names, measured vs predicted with its ±3σ band, zoomed to the
     quoted alarm; None when the headline names no sensor channel."""
-    if headline.deviation is None or headline.group is None or innovations is None or headline.alarm is None:
+    if headline.deviation is None or headline.group is None or views is None or headline.alarm is None:
         return None
-    view = innovations.view(headline.group)
+    view = views.view(headline.group)
     if view is None:
         return None
     span = (float(headline.alarm.start), float(headline.alarm.end))

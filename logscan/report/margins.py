@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from logscan.report.decimate import collapsed
 from logscan.results import Band, DetectorResult
 
 
@@ -62,21 +63,15 @@ def _side(value, n: int) -> np.ndarray | None:
     return np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr
 
 
-def _constant(arr: np.ndarray) -> np.ndarray:
-    """A broadcast constant (as results keep one, and `_side` makes one) as its one element,
-    anything else as it is: what holds for it holds for every sample."""
-    return arr[:1] if arr.ndim == 1 and arr.size and arr.strides[0] == 0 else arr
-
-
 _ABSENT = np.full(1, np.nan)  # a side that is not there: never finite
 
 
 def _kernel_array(value, dtype) -> np.ndarray:
     """``value`` as the kernels take it: writable C-contiguous ``dtype`` (one compiled version for
-    every caller), a constant as one element (`_constant`), None as `_ABSENT`."""
+    every caller), a constant as one element (`collapsed`), None as `_ABSENT`."""
     if value is None:
         return _ABSENT
-    return np.require(_constant(np.asarray(value)), dtype, ["C", "W"])
+    return np.require(collapsed(np.asarray(value)), dtype, ["C", "W"])
 
 
 @njit(cache=True, error_model="numpy")
@@ -127,7 +122,7 @@ def margin_ratios(e: np.ndarray, upper: np.ndarray | None, lower: np.ndarray | N
 
 def _kind(upper: np.ndarray | None, lower: np.ndarray | None) -> str:
     sides = [name for name, arr in (("upper", upper), ("lower", lower))
-             if arr is not None and np.isfinite(_constant(arr)).any()]  # fmt: skip
+             if arr is not None and np.isfinite(collapsed(arr)).any()]  # fmt: skip
     return {2: "two-sided", 1: sides[0] if sides else "", 0: ""}[len(sides)]
 
 

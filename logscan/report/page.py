@@ -27,7 +27,7 @@ from logscan.report.flight_overview import checked_view
 from logscan.report.margins import result_margins
 from logscan.report.page_assets import environment, install_plotly_js, plotly_js, plotly_js_src, report_js
 from logscan.report.page_parts import CONTEXT_FIGURES, CONTEXT_ROWS, PageInput
-from logscan.report.page_sections import detector_sections, first_screen
+from logscan.report.page_sections import detector_sections, first_screen, page_figures
 from logscan.report.plotly_json import POINT_BUDGET
 from logscan.report.recovery_figures import recovery_figures, recovery_rows
 from logscan.report.report_input import ReportInput, flat_alarms, report_matches
@@ -44,8 +44,9 @@ def _figures(report: ReportInput, point_budget: int) -> dict:
     events = [page_rows.event_view(e, i, t_end) for i, e in enumerate(report.truth_events)]
     page = PageInput(report, t, merge_spans([(e["start"], e["end"]) for e in events], 0.0, 0.0))
     margins = result_margins(report.results, t)
-    sections, figures = detector_sections(page, margins)
-    heads, first, checked = first_screen(page, figures)
+    heads, first, checked = first_screen(page)
+    sections, section_figures = detector_sections(page, margins)
+    figures = page_figures(section_figures, first, checked)
     rows = [row for build in CONTEXT_ROWS for row in build(page)]
     span = getattr(report.context, "t_span", None)  # the grid's, as the run's context figures had it
     context = ([stack_rows(rows, report.clock, span)] if rows else []) + [f for b in CONTEXT_FIGURES for f in b(page)]

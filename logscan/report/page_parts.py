@@ -30,6 +30,7 @@ from logscan.report.kgn_view import kgn_rows
 from logscan.report.observability_figures import observability_rows
 from logscan.report.report_input import ReportInput
 from logscan.report.sensor_figures import named_group_figures
+from logscan.report.sensor_views import PageViews
 from logscan.report.ubikf_truth_view import ubikf_truth_rows
 from logscan.report.ubikf_view import ubikf_rows
 from logscan.results import DetectorResult
@@ -38,18 +39,24 @@ from logscan.results import DetectorResult
 @dataclass
 class PageInput:
     """What a figure builder may read: the report, its analysis grid ``t`` (seconds since the log's
-    start, float64), the ground-truth spans to shade, and the measurement groups whose sensor
-    figures are already placed (a group is drawn once per page)."""
+    start, float64), the ground-truth spans to shade, the measurement groups whose sensor
+    figures are already placed (a group is drawn once per page), and the groups' views of the
+    filter's innovations, each made once for the page (None when no filter ran)."""
 
     report: ReportInput
     t: np.ndarray
     truth_spans: list[tuple[float, float]]
     drawn: set[str] = field(default_factory=set)
+    views: PageViews | None = field(init=False)
+
+    def __post_init__(self) -> None:
+        innovations = self.report.innovations
+        self.views = None if innovations is None else PageViews(innovations)
 
 
 def sensor_rows(result: DetectorResult, page: PageInput) -> list[Figure]:
     """The sensors the result's alarms name, measured vs predicted (`logscan.report.sensor_figures`)."""
-    return named_group_figures(result, page.report.innovations, page.t, page.truth_spans, page.drawn)
+    return named_group_figures(result, page.views, page.t, page.truth_spans, page.drawn)
 
 
 def run_context_rows(page: PageInput) -> list[dict]:

@@ -55,15 +55,20 @@ def detector_sections(page: PageInput, margins: Sequence[Margin]) -> tuple[list[
     return sections, figures
 
 
-def first_screen(page: PageInput, figures: list) -> tuple[list[Headline], Figure | None, list[Figure]]:
-    """Each incident's `Headline` and the first one's sensor figure (inserted first in ``figures``
-    as "fig-headline"; None when it names no sensor channel); without incidents, every group
-    against its prediction (`logscan.report.flight_overview`, appended to ``figures``; [] else)."""
+def first_screen(page: PageInput) -> tuple[list[Headline], Figure | None, list[Figure]]:
+    """Each incident's `Headline`, the first one's sensor figure (None when it names no sensor
+    channel) and, without incidents, every group against its prediction
+    (`logscan.report.flight_overview`; [] else). Made before the detector sections: the views
+    the headlines make are kept for the sections' sensor figures (`PageInput.views`)."""
     report, t = page.report, page.t
-    heads = headlines(report.incidents, report.innovations, t, report.model)
-    first = headline_figure(heads[0], report.innovations, t, page.truth_spans) if heads else None
-    if first is not None:  # the first screen: the headline's sensor, zoomed to it
-        figures.insert(0, ("fig-headline", first))
+    heads = headlines(report.incidents, page.views, t, report.model)
+    first = headline_figure(heads[0], page.views, t, page.truth_spans) if heads else None
     checked = [] if report.incidents else checked_rows(report.innovations, t, page.truth_spans)
-    figures += [(FIGURE_ID, checked)] if checked else []  # the flight when nothing alarmed
     return heads, first, checked
+
+
+def page_figures(sections: list, first: Figure | None, checked: list[Figure]) -> list[tuple[str, Figure | list]]:
+    """The page's figures in page order: the headline's sensor zoomed to it (the first screen),
+    each detector section's figure (`detector_sections`), the flight when nothing alarmed."""
+    headline = [("fig-headline", first)] if first is not None else []
+    return headline + sections + ([(FIGURE_ID, checked)] if checked else [])

@@ -24,7 +24,7 @@ import json
 
 import numpy as np
 
-from logscan.report.decimate import DEFAULT_MAX_POINTS, decimate_indices, sorted_unique
+from logscan.report.decimate import DEFAULT_MAX_POINTS, collapsed, decimate_indices, sorted_unique
 from logscan.report.figures import Figure, grid_step, merge_spans
 from logscan.timebase.clock import Clock
 
@@ -64,16 +64,13 @@ def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
     one run (NaN only before and after it: a warm-up) are that part of the series, as a series
     defined everywhere is all of it: no step is missing inside it.
     """
-    defined = ~np.isnan(y)
-    n_defined = int(np.count_nonzero(defined))
-    if n_defined == y.size:
+    if y.size == 0 or not np.isnan(collapsed(y).min()):  # no NaN (the least value is NaN when one is): no mask
         return t, y, keep
-    first = int(np.argmax(defined))
-    if n_defined and defined[first : first + n_defined].all():
-        run = slice(first, first + n_defined)
+    idx = np.flatnonzero(~np.isnan(y))
+    if idx.size and idx[-1] - idx[0] + 1 == idx.size:  # one run: no step missing between its ends
+        first, n_defined = int(idx[0]), idx.size
         kept = np.clip(keep, first, first + n_defined - 1) - first
-        return t[run], y[run], sorted_unique(kept)
-    idx = np.flatnonzero(defined)
+        return t[first : first + n_defined], y[first : first + n_defined], sorted_unique(kept)
     tc, yc = t[idx], y[idx]
     if tc.size >= 2:
         spacing = np.diff(tc)
@@ -162,13 +159,16 @@ def in_windows(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
     return (i >= 0) & (x <= windows[np.maximum(i, 0), 1])
 
 
-def window_indices(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
+def window_indices(x: np.ndarray, windows: np.ndarray, ascending: bool | None = None) -> np.ndarray:
     """Indices of ``x`` inside any of the sorted disjoint ``windows`` (`in_windows`' True places):
     for an ascending ``x`` (a trace's times) found from the windows' edges, a binary search per edge
-    instead of one per sample (a 1-hour log's report asked 138 traces of 360,000 samples each)."""
+    instead of one per sample (a 1-hour log's report asked 138 traces of 360,000 samples each).
+    ``ascending``: whether ``x`` ascends, when the caller knows (None: checked here)."""
     if windows.size == 0:
         return np.zeros(0, dtype=np.int64)
-    if x.size > 1 and not bool(np.all(x[1:] >= x[:-1])):  # unsorted, or NaN: sample by sample
+    if ascending is None:
+        ascending = ascends(x)
+    if not ascending:  # unsorted, or NaN: sample by sample
         return np.flatnonzero(in_windows(x, windows))
     stop = np.searchsorted(x, windows[:, 1], side="right")
     first = np.searchsorted(x, windows[:, 0], side="left")
@@ -176,16 +176,31 @@ def window_indices(x: np.ndarray, windows: np.ndarray) -> np.ndarray:
     return np.concatenate([np.arange(a, b) for a, b in zip(first.tolist(), stop.tolist())] or [np.zeros(0, np.int64)])
 
 
-def _decimated(x: np.ndarray, y: np.ndarray, keep: np.ndarray, max_points: int, windows: np.ndarray) -> np.ndarray:
-    """Indices drawing ``y``: the whole under ``max_points``, FOCUS_SHARE of them inside ``windows``."""
+def ascends(x: np.ndarray) -> bool:
+    """True when every value of ``x`` is at least the one before it (no NaN among them)."""
+    return x.size < 2 or bool(np.all(x[1:] >= x[:-1]))
+
+
+def _decimated(
+    x: np.ndarray,
+    y: np.ndarray,
+    keep: np.ndarray,
+    max_points: int,
+    windows: np.ndarray,
+    ascending: bool | None,
+    has_nan: bool | None,
+) -> np.ndarray:
+    """Indices drawing ``y``: the whole under ``max_points``, FOCUS_SHARE of them inside ``windows``
+    (``ascending``: whether ``x`` ascends, ``has_nan``: whether ``y`` holds a NaN; None: not known)."""
     n_focus = int(max_points * FOCUS_SHARE)
     focus = y.size > max_points and n_focus >= 16
-    inside = window_indices(x, windows) if focus else np.zeros(0, dtype=np.int64)
+    inside = window_indices(x, windows, ascending) if focus else np.zeros(0, dtype=np.int64)
     if inside.size <= n_focus:  # not decimated, or the windows hold few samples: drawn in full below
-        overview = decimate_indices(y, max_points - inside.size, keep=keep, simplify_flat=True)
+        overview = decimate_indices(y, max_points - inside.size, keep=keep, simplify_flat=True, has_nan=has_nan)
         return sorted_unique(overview, inside)
-    overview = decimate_indices(y, max_points - n_focus, keep=keep, simplify_flat=True)
-    return sorted_unique(overview, inside[decimate_indices(y[inside], n_focus, simplify_flat=True)])
+    overview = decimate_indices(y, max_points - n_focus, keep=keep, simplify_flat=True, has_nan=has_nan)
+    in_focus = decimate_indices(y[inside], n_focus, simplify_flat=True, has_nan=False if has_nan is False else None)
+    return sorted_unique(overview, inside[in_focus])
 
 
 def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> list[dict]:
@@ -202,10 +217,13 @@ def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.n
             "type": "scatter", "name": plot_text(name), "x": [t0, t1], "y": [y_value, y_value],
             "mode": "lines", "line": {"color": "#d62728", "dash": "dash", "width": 1},
         })  # fmt: skip
+    # whether t ascends, checked once: a trace on the grid draws some of its times, which then ascend too
+    grid_ascends = ascends(t) if windows.size and any(trace.t is None for trace in fig.traces) else None
     for trace in fig.traces:
         max_points = points.get(id(trace), DEFAULT_MAX_POINTS)
         x, y, keep = _defined_samples(t if trace.t is None else trace.t, trace.y, trace.keep)
-        idx = _decimated(x, y, keep, max_points, windows)
+        no_nan = False if y is trace.y else None  # the series itself: it was found to hold no NaN
+        idx = _decimated(x, y, keep, max_points, windows, grid_ascends if trace.t is None else None, no_nan)
         data.append({
             "type": "scatter",
             "name": plot_text(trace.name),
@@ -245,7 +263,7 @@ def figure_json(
         "paper_bgcolor": "white",
         "template": {},
     }
-    return spec_json(trace_data(fig, t, points, windows), layout, clock)
+    return plain_json(trace_data(fig, t, points, windows), layout, clock)  # plotly's validation: 15 ms a figure
 
 
 # hover texts of times in seconds, as the figure builders write them, and as a UTC date axis shows them

@@ -13,8 +13,8 @@ import numpy as np
 
 from logscan.report.decimate import decimate_indices, edge_indices, sorted_unique
 from logscan.report.figures import LINE_COLOURS, Figure, Trace, judged_range, merge_spans, span_limits
-from logscan.report.plotly_json import window_indices, zoom_windows
-from logscan.report.sensor_views import K_SIGMA, Innovations, SensorView
+from logscan.report.plotly_json import ascends, window_indices, zoom_windows
+from logscan.report.sensor_views import K_SIGMA, PageViews, SensorView
 from logscan.results import DetectorResult
 from logscan.verdict.incidents import group_of
 
@@ -25,15 +25,16 @@ REDUCED_POINTS = 4_000  # per series, before the page's own decimation
 
 
 def named_group_figures(
-    result: DetectorResult, innovations: Innovations | None, t: np.ndarray, truth_spans: list, drawn: set[str]
+    result: DetectorResult, views: PageViews | None, t: np.ndarray, truth_spans: list, drawn: set[str]
 ) -> list[Figure]:
     """The sensor figures of the groups ``result``'s alarms name (in the order they first alarm)
-    that are not in ``drawn`` (added to it: a group is drawn once per report)."""
-    if innovations is None:
+    that are not in ``drawn`` (added to it: a group is drawn once per report; its view taken from
+    ``views``)."""
+    if views is None:
         return []
     by_group: dict[str, list] = {}
     for alarm in sorted(result.alarms, key=lambda a: a.start):
-        group = group_of(alarm.signal, innovations.group_names)
+        group = group_of(alarm.signal, views.group_names)
         if group is not None and group not in drawn:
             by_group.setdefault(group, []).append((float(alarm.start), float(alarm.end)))
     figures = []
@@ -41,23 +42,36 @@ def named_group_figures(
     for group, alarm_spans in by_group.items():
         drawn.add(group)
         spans = {"alarm": merge_spans(alarm_spans, min_width, min_gap), "ground truth": truth_spans}
-        figures.extend(sensor_figures(innovations.view(group), t, spans, alarm_spans))
+        view = views.take(group)
+        figures.extend(sensor_figures(view, t, spans, alarm_spans) if view is not None else [])
     return figures
 
 
+def _defined_steps(series: np.ndarray) -> np.ndarray | slice:
+    """The steps where ``series`` is finite: an index array, or ``slice(None)`` when it is finite
+    everywhere (then the series are used as they are, views, not copies of their defined steps)."""
+    defined = np.isfinite(series)
+    return slice(None) if bool(defined.all()) else np.flatnonzero(defined)
+
+
+def _chosen(x: np.ndarray, series: list[np.ndarray], windows: np.ndarray, ascending: bool | None) -> np.ndarray:
+    """Indices into ``series`` (defined samples at the times ``x``) drawing them, without keeping
+    them all until the page is written: at most REDUCED_POINTS per series (min/max per bucket)
+    plus every one inside the zoom ``windows`` (the page decimates again under its point budget).
+    ``ascending``: whether ``x`` ascends (None: not known)."""
+    if x.size <= REDUCED_POINTS:
+        return np.arange(x.size)
+    chosen = [decimate_indices(s, REDUCED_POINTS, simplify_flat=True) for s in series]
+    inside = window_indices(x, windows, ascending) if windows.size else chosen[0][:0]
+    return sorted_unique(*chosen, inside)
+
+
 def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(times, indices): the steps drawing ``series`` (same length as ``t``), without keeping them
-    all until the page is written: the steps where the first series is defined, at most
-    REDUCED_POINTS per series (min/max per bucket) plus every one inside the zoom ``windows``
-    (the page decimates again under its point budget)."""
-    defined = np.isfinite(series[0])
-    everywhere = bool(defined.all())  # then the series themselves, not copies of their defined steps
-    steps = np.arange(t.size) if everywhere else np.flatnonzero(defined)
-    if steps.size > REDUCED_POINTS:
-        pick = slice(None) if everywhere else steps  # a view of the series where defined everywhere
-        chosen = [decimate_indices(s[pick], REDUCED_POINTS, simplify_flat=True) for s in series]
-        inside = window_indices(t[pick], windows) if windows.size else steps[:0]
-        steps = steps[sorted_unique(*chosen, inside)]
+    """(times, indices): the steps drawing ``series`` (same length as ``t``): the steps where the
+    first series is defined, `_chosen` among them."""
+    pick = _defined_steps(series[0])
+    steps = np.arange(t.size)[pick]
+    steps = steps[_chosen(t[pick], [s[pick] for s in series], windows, None)]
     return t[steps], steps
 
 
@@ -67,44 +81,56 @@ def sensor_figures(
     """The figures of one group: one per channel (measured vs predicted), then the normalised
     innovations; ``spans`` shaded as on the statistic's figure, ``alarm_spans`` (the alarms
     naming the group) kept in full around them. ``channels``: only these columns (the normalised
-    innovations of these alone)."""
+    innovations of these alone). Each channel is drawn from the steps where its prediction is
+    defined, taken before its band is computed (a 10 Hz sensor's on a 100 Hz grid: a tenth)."""
     windows = zoom_windows(list(alarm_spans), t)
-    k = K_SIGMA
+    grid_ascends = ascends(t) if windows.size else None  # the times of any steps of t then ascend too
     figures, normalised = [], []
     for j, channel in enumerate(view.channels):
         if channels is not None and j not in channels:
             continue
-        predicted, measured = view.predicted[:, j], view.measured[:, j]
-        half = np.float32(k) * view.sigma[:, j]
+        pick = _defined_steps(view.predicted[:, j])
+        predicted, measured, sigma, innovation = (a[pick, j] for a in (view.predicted, view.measured,
+                                                                       view.sigma, view.normalised))  # fmt: skip
+        half = np.float32(K_SIGMA) * sigma
         upper, lower = predicted + half, predicted - half
-        x, steps = _reduced(t, [predicted, measured, upper, lower, view.normalised[:, j]], windows)
+        series = [predicted, measured, upper, lower, innovation]
+        chosen = _chosen(t[pick], series, windows, grid_ascends)
+        x = t[pick][chosen]
+        predicted, measured, upper, lower, innovation = (s[chosen] for s in series)
         keep = edge_indices(x, list(alarm_spans))
-        band_style = {"line": {"width": 0, "color": BAND_FILL}, "hoverinfo": "skip"}
-        traces = [
-            Trace(f"predicted ± {k:g}σ", upper[steps], keep, 0.25, {**band_style, "legendgroup": "band"}, t=x),
-            Trace(
-                f"predicted ± {k:g}σ (lower)", lower[steps], keep, 0.25,
-                {**band_style, "legendgroup": "band", "showlegend": False, "fill": "tonexty", "fillcolor": BAND_FILL},
-                t=x,
-            ),
-            Trace("predicted h(x̂⁻)", predicted[steps], keep, 0.5,
-                  {"line": {"color": PREDICTED_COLOUR, "width": 1.2, "dash": "dot"}}, t=x),
-            Trace(channel, measured[steps], keep, 1.0, {"line": {"color": MEASURED_COLOUR, "width": 1.2}}, t=x),
-        ]  # fmt: skip
-        figures.append(Figure(
-            title=f"{view.group}: {channel} measured vs predicted",
-            y_title=channel,
-            traces=traces,
-            spans=spans,
-            caption=f"{channel} as the filter used it (blue) against the filter's prediction of it from the state "
-            f"before the update (orange, dotted) with ±{k:g}σ of the innovation covariance S (shaded). Normal: "
-            "blue inside the shaded band; blue leaving the band on one sensor while the others stay is that "
-            "sensor's fault.",
-            y_range=judged_range(measured[steps], upper[steps], lower[steps], []),
-        ))  # fmt: skip
-        normalised.append(_normalised_trace(channel, j, view.normalised[steps, j], keep, x))
+        figures.append(_channel_figure(view.group, channel, x, keep, predicted, measured, upper, lower, spans))
+        normalised.append(_normalised_trace(channel, j, innovation, keep, x))
     figures.append(_normalised_figure(view.group, normalised, spans))
     return figures
+
+
+def _channel_figure(group: str, channel: str, x, keep, predicted, measured, upper, lower, spans: dict) -> Figure:
+    """One channel, measured vs predicted with its band, drawn at the times ``x``."""
+    k = K_SIGMA
+    band_style = {"line": {"width": 0, "color": BAND_FILL}, "hoverinfo": "skip"}
+    traces = [
+        Trace(f"predicted ± {k:g}σ", upper, keep, 0.25, {**band_style, "legendgroup": "band"}, t=x),
+        Trace(
+            f"predicted ± {k:g}σ (lower)", lower, keep, 0.25,
+            {**band_style, "legendgroup": "band", "showlegend": False, "fill": "tonexty", "fillcolor": BAND_FILL},
+            t=x,
+        ),
+        Trace("predicted h(x̂⁻)", predicted, keep, 0.5,
+              {"line": {"color": PREDICTED_COLOUR, "width": 1.2, "dash": "dot"}}, t=x),
+        Trace(channel, measured, keep, 1.0, {"line": {"color": MEASURED_COLOUR, "width": 1.2}}, t=x),
+    ]  # fmt: skip
+    return Figure(
+        title=f"{group}: {channel} measured vs predicted",
+        y_title=channel,
+        traces=traces,
+        spans=spans,
+        caption=f"{channel} as the filter used it (blue) against the filter's prediction of it from the state "
+        f"before the update (orange, dotted) with ±{k:g}σ of the innovation covariance S (shaded). Normal: "
+        "blue inside the shaded band; blue leaving the band on one sensor while the others stay is that "
+        "sensor's fault.",
+        y_range=judged_range(measured, upper, lower, []),
+    )  # fmt: skip
 
 
 def _normalised_trace(channel: str, j: int, y: np.ndarray, keep: np.ndarray, x: np.ndarray) -> Trace:

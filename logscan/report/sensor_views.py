@@ -66,17 +66,30 @@ class Innovations:
         return slice(int(self.group_offsets[g]), int(self.group_offsets[g] + self.group_sizes[g]))
 
     def view(self, group: str) -> SensorView | None:
-        """The group's `SensorView` (float32 arrays, made now), None for a group it does not hold."""
+        """The group's `SensorView` (float32 arrays, made now, each channel a contiguous column),
+        None for a group it does not hold."""
         columns = self._columns(group)
         if columns is None:
             return None
-        part, scale, offset = self.packed[:, columns], self.scale[columns], self.offset[columns]
-        predicted = part["predicted"] + offset  # float64 while the offset is added back
-        y = part["innovation"] * scale
-        sigma = (part["sigma"] * scale).astype(np.float32)
-        measured = (predicted + y).astype(np.float32)
-        normalised = _normalised(part)
-        return SensorView(group, self.channels[group], measured, predicted.astype(np.float32), sigma, normalised)
+        fields = self._fields(columns)
+        n, k = self.packed.shape[0], columns.stop - columns.start
+        measured, predicted, sigma, normalised = (np.empty((n, k), dtype=np.float32, order="F") for _ in range(4))
+        for j, c in enumerate(range(columns.start, columns.stop)):
+            column = fields[j]
+            p = np.add(column["predicted"], self.offset[c], dtype=np.float64)  # float64 while the offset is added back
+            innovation, sigma_scaled = _halves(column["innovation"]), _halves(column["sigma"])
+            predicted[:, j] = p
+            # z = h(x_prior) + y in float64, rounded once to float32 (as before the pack)
+            np.add(p, _scaled(innovation, self.scale[c]), out=measured[:, j], dtype=np.float64, casting="unsafe")
+            np.copyto(sigma[:, j], _scaled(sigma_scaled, self.scale[c]), casting="unsafe")
+            normalised[:, j] = _quotient(innovation, sigma_scaled)
+        return SensorView(group, self.channels[group], measured, predicted, sigma, normalised)
+
+    def _fields(self, columns: slice) -> np.ndarray:
+        """The group's columns of the pack, (k, N) `PACKED`, each a contiguous row: one pass over the
+        pack's rows (a field read column by column is a pass over every group's bytes each time)."""
+        as_words = self.packed.view(np.uint64)  # one 8-byte word per (step, channel)
+        return np.ascontiguousarray(as_words[:, columns].T).view(PACKED)
 
     def predicted(self, group: str, channels: Sequence[int]) -> np.ndarray | None:
         """The group's predictions h(x_prior) of these of its channels (indices into the group),
@@ -92,15 +105,60 @@ class Innovations:
         quarter of the work: the overview of every group draws nothing else); None for a group
         it does not hold."""
         columns = self._columns(group)
-        return None if columns is None else _normalised(self.packed[:, columns])
+        if columns is None:
+            return None
+        part = self.packed[:, columns]  # one pass over the pack's rows, no table: a few times faster here
+        return _quotient(part["innovation"], part["sigma"])
 
 
-def _normalised(part: np.ndarray) -> np.ndarray:
-    """y_i / sigma_i of packed columns, float32, without float64 arrays: both carry the column's
-    power-of-two scale, which cancels exactly (within float32's range), and the float32 quotient
-    of float32 values is their float64 quotient rounded to float32."""
+class PageViews:
+    """The groups' `SensorView`s while one page is built, each made once: a view the headlines ask
+    for (`view`) is kept until the group's sensor figures take it (`take`: a group is drawn once
+    per page), so no more views are held at a time than the headlines held before."""
+
+    def __init__(self, innovations: Innovations):
+        self.innovations = innovations
+        self.group_names = innovations.group_names
+        self._kept: dict[str, SensorView | None] = {}
+
+    def view(self, group: str) -> SensorView | None:
+        """The group's view, kept for the next caller."""
+        if group not in self._kept:
+            self._kept[group] = self.innovations.view(group)
+        return self._kept[group]
+
+    def take(self, group: str) -> SensorView | None:
+        """The group's view, no longer kept."""
+        return self._kept.pop(group) if group in self._kept else self.innovations.view(group)
+
+
+# every float16's value as float32, by its bits: numpy converts float16 element by element, a
+# table lookup is a few times faster and gives the same values
+_HALF_VALUES = np.arange(1 << 16, dtype=np.uint32).astype(np.uint16).view(np.float16).astype(np.float32)
+# scales that keep every float16 value (2^-24 to 65504) a normal float32 (2^-126 to 2^128)
+_SCALE_RANGE = (2.0**-100, 2.0**100)
+
+
+def _halves(values: np.ndarray) -> np.ndarray:
+    """float16 ``values`` (a packed field) as float32, exactly."""
+    return np.take(_HALF_VALUES, values.view(np.uint16))
+
+
+def _scaled(halves: np.ndarray, scale: float) -> np.ndarray:
+    """``halves`` (float16 values as float32) times the column's power-of-two ``scale``: in float32,
+    exact, as float64's product rounded to float32 is, where the scale keeps every float16 value a
+    normal float32 (else in float64)."""
+    if _SCALE_RANGE[0] <= scale <= _SCALE_RANGE[1]:
+        return np.multiply(halves, np.float32(scale))
+    return np.multiply(halves, scale, dtype=np.float64)
+
+
+def _quotient(innovation: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """y_i / sigma_i from the packed (scaled) values, float16 or as float32, as float32: both carry
+    the column's power-of-two scale, which cancels exactly (within float32's range), and the float32
+    quotient of the float16 values is their float64 quotient rounded to float32."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.divide(part["innovation"], part["sigma"], dtype=np.float32)
+        return np.divide(innovation, sigma, dtype=np.float32)
 
 
 def _channel_scales(S_diag: np.ndarray) -> np.ndarray:

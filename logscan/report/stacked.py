@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from logscan.report.decimate import collapsed
 from logscan.report.figures import Figure
 from logscan.report.plotly_json import (
     TIME_AXIS,
@@ -59,9 +60,14 @@ def is_flat(fig: Figure) -> bool:
     holds one value all log long and which has no alarm span."""
     if fig.spans.get("alarm") or not fig.traces or fig.traces[0].name != fig.y_title:
         return False
-    y = np.asarray(fig.traces[0].y)
-    finite = np.isfinite(y)  # one value: its finite samples' least and greatest are equal (none: flat too)
-    return bool(np.min(y, where=finite, initial=np.inf) >= np.max(y, where=finite, initial=-np.inf))
+    y = collapsed(np.asarray(fig.traces[0].y))
+    # one value: its finite samples' least and greatest are equal (none: flat too); fmin and fmax
+    # skip NaN, so finite results are those (a masked min and max took 100 times as long)
+    lo, hi = (float(np.fmin.reduce(y)), float(np.fmax.reduce(y))) if y.size else (np.inf, -np.inf)
+    if not (np.isfinite(lo) and np.isfinite(hi)):  # every sample NaN, or infinities among them
+        finite = np.isfinite(y)
+        lo, hi = np.min(y, where=finite, initial=np.inf), np.max(y, where=finite, initial=-np.inf)
+    return bool(lo >= hi)
 
 
 def fold_flat(rows: Sequence[Figure]) -> tuple[list[Figure], list[str]]:
