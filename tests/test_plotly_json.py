@@ -14,8 +14,10 @@ from logscan.report import render_html
 from logscan.report.figures import RANGE_SAMPLE, Figure, Trace, grid_step, judged_range
 from logscan.report.plotly_json import (
     MAX_FOCUS_FRACTION,
+    MIN_POINTS_FLOOR,
     POINT_BUDGET,
     _defined_samples,
+    allocate_points,
     focus_windows,
     in_windows,
     typed_array,
@@ -129,6 +131,18 @@ def test_window_indices_are_the_samples_in_windows_sorted_or_not(x, edges, shuff
     np.testing.assert_array_equal(window_indices(x, windows), np.flatnonzero(in_windows(x, windows)))
 
 
+def test_the_floor_is_paid_from_the_budget():
+    y = np.zeros(10)
+    context = [Trace(f"c{i}", y, np.zeros(0, np.int64), 0.25, {}) for i in range(80)]
+    statistics = [Trace(f"s{i}", y, np.zeros(0, np.int64), 1.0, {}) for i in range(10)]
+    points = allocate_points([Figure("f", "y", context + statistics, {})], 10_000)
+    # a 0.25 share of 10,000 points among a weight of 30 is 83: the context traces get the floor
+    assert all(points[id(tr)] == MIN_POINTS_FLOOR for tr in context)
+    # ... out of the budget: the statistics share what is left (a third of 10,000 each on top of it)
+    assert all(points[id(tr)] == (10_000 - 80 * MIN_POINTS_FLOOR) // 10 for tr in statistics)
+    assert sum(points.values()) <= 10_000
+
+
 def _masked_range(values, upper, lower, peaks):
     """`judged_range` as first written: masks and copies of every array (the reference)."""
     defined = [band for band in (upper, lower) if band is not None]
@@ -168,3 +182,22 @@ def test_the_judged_range_is_that_of_the_finite_values_where_a_threshold_is_defi
     n = values.size
     bands = [None if band is None else np.asarray(band[:n], dtype=np.float32) for band in (upper, lower)]
     assert judged_range(values, *bands, peaks) == _masked_range(values, *bands, peaks)
+
+
+def test_an_alarms_peak_is_drawn_beside_a_larger_sample():
+    from logscan.report.figures import detector_figures
+    from logscan.report.plotly_json import trace_data
+    from logscan.results import DetectorResult
+
+    t = np.arange(360_000) * 0.01
+    statistic = np.zeros(t.size)
+    statistic[200_000:200_020] = 5.0  # an alarm
+    statistic[200_010] = 5.5  # its peak, inside it
+    statistic[199_996] = 100.0  # one sample far over the threshold, too short to alarm, in the peak's bucket
+    result = DetectorResult("d")
+    result.add_statistic(t, "d.s", statistic, upper=1.0, n_persist=3)
+    assert [alarm.peak_time for alarm in result.alarms] == [t[200_010]]
+    figure = detector_figures(result, t, [], {}, [])[0]
+    drawn = trace_data(figure, t, allocate_points([figure], 64), focus_windows([figure], t))
+    line = next(trace for trace in drawn if trace["name"] == "d.s")
+    assert np.float32(t[200_010]) in array(line["x"]) and np.float32(t[199_996]) in array(line["x"])

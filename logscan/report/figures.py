@@ -234,11 +234,18 @@ def detector_figures(
     series = _grid_series(result, n, problems)
     bands = _bands(result, n, problems)
 
-    def alarm_spans(names: Sequence[str]) -> list:
-        """Spans of the alarms on these statistics (all alarms if none names a drawn statistic)."""
+    def chosen(names: Sequence[str]) -> list:
+        """The alarms on these statistics (all alarms if none names a drawn statistic)."""
         named = [a for a in alarms if a.signal in series]
-        chosen = [a for a in named if a.signal in names] if named else alarms
-        return [(float(a.start), float(a.end)) for a in chosen]
+        return [a for a in named if a.signal in names] if named else alarms
+
+    def alarm_spans(names: Sequence[str]) -> list:
+        return [(float(a.start), float(a.end)) for a in chosen(names)]
+
+    def kept(names: Sequence[str]) -> np.ndarray:
+        """The grid samples every line of these statistics draws: each alarm's first, last and peak."""
+        peaks = [(float(a.peak_time),) * 2 for a in chosen(names) if math.isfinite(a.peak_time)]
+        return edge_indices(t, alarm_spans(names) + peaks)
 
     possible = merge_spans([(float(p.start), float(p.end)) for p in result.possible], min_width, min_gap)
 
@@ -247,7 +254,7 @@ def detector_figures(
         return {**spans, "possible fault": possible} if possible else spans
 
     if len(series) >= 2 and all(_positive_upper_only(bands.get(name, NO_BAND)) for name in series):
-        figures = [_ratio_figure(result.detector, t, series, bands, alarm_spans, shading(list(series)))]
+        figures = [_ratio_figure(result.detector, t, series, bands, kept, shading(list(series)))]
         named = [f"{name}: {labels[name]}" for name in series if (labels or {}).get(name)]
         if 0 < len(named) <= MAX_NAMED_IN_CAPTION:
             figures[0].caption += " The statistics: " + "; ".join(named) + "."
@@ -255,7 +262,7 @@ def detector_figures(
             figures[0].caption += " What each statistic means: the list above."
     else:
         figures = [
-            _band_figure(result, t, name, values, bands.get(name, NO_BAND), alarm_spans, shading([name]))
+            _band_figure(result, t, name, values, bands.get(name, NO_BAND), kept, shading([name]))
             for name, values in series.items()
         ]
         for fig, name in zip(figures, series):
@@ -287,14 +294,15 @@ def _positive_upper_only(band: tuple) -> bool:
     return upper is not None and lower is None and bool(np.nanmin(collapsed(upper)) > 0)
 
 
-def _ratio_figure(detector: str, t: np.ndarray, series: dict, bands: dict, alarm_spans, spans: dict) -> Figure:
-    """One figure of every statistic divided by its (positive, upper) threshold."""
+def _ratio_figure(detector: str, t: np.ndarray, series: dict, bands: dict, kept, spans: dict) -> Figure:
+    """One figure of every statistic divided by its (positive, upper) threshold; ``kept``: the
+    samples a statistic's line keeps, by its name (its alarms' first, last and peak samples)."""
     traces = []
     for i, (name, values) in enumerate(series.items()):
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = values / bands[name][0]
         traces.append(Trace(
-            name, ratio, edge_indices(t, alarm_spans([name])), 1.0,
+            name, ratio, kept([name]), 1.0,
             {"line": {"color": LINE_COLOURS[i % len(LINE_COLOURS)], "width": 1.2}},
         ))  # fmt: skip
     log_y = _wants_log_axis([tr.y for tr in traces])
@@ -309,10 +317,10 @@ def _ratio_figure(detector: str, t: np.ndarray, series: dict, bands: dict, alarm
 
 
 def _band_figure(
-    result: DetectorResult, t: np.ndarray, name: str, values: np.ndarray, band: tuple, alarm_spans, spans: dict
+    result: DetectorResult, t: np.ndarray, name: str, values: np.ndarray, band: tuple, kept, spans: dict
 ) -> Figure:
-    """One statistic against its threshold band, in the judged y range."""
-    keep = edge_indices(t, alarm_spans([name]))
+    """One statistic against its threshold band, in the judged y range; ``kept``: as `_ratio_figure`'s."""
+    keep = kept([name])
     traces = [Trace(name, values, keep, 1.0, {"line": {"color": "#1f77b4", "width": 1.2}})]
     for label, side in zip(("upper threshold", "lower threshold"), band):
         if side is not None:

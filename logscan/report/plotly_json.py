@@ -122,11 +122,21 @@ def allocate_points(figures: list[Figure], budget: int) -> dict[int, int]:
     """Points per varying trace (by id), proportional to weight, within [floor, DEFAULT_MAX]; the
     floor is MIN_POINTS_PER_TRACE, lowered (to MIN_POINTS_FLOOR at least) when that many traces at
     the floor would spend more than half the budget (the sensor figures of several groups); a
-    trace's own ``max_points`` caps its share, floor or not."""
+    trace's own ``max_points`` caps its share, floor or not. The floor's points come out of the
+    budget: the traces above it share what the floored ones leave, so the page keeps to its budget
+    (on top of it, the floor drew 12 % more points than the budget on a 1-hour log's incident page)."""
     varying = [tr for fig in figures for tr in fig.traces if tr.varying]
-    total_weight = sum(tr.weight for tr in varying) or 1.0
     floor = max(MIN_POINTS_FLOOR, min(MIN_POINTS_PER_TRACE, budget // max(2 * len(varying), 1)))
-    share = {id(tr): max(floor, budget * tr.weight / total_weight) for tr in varying}
+    floored: set[int] = set()
+    while True:  # each round floors the traces whose share of what is left falls under the floor
+        rest = [tr for tr in varying if id(tr) not in floored]
+        left = budget - floor * len(floored)
+        total_weight = sum(tr.weight for tr in rest) or 1.0
+        under = [id(tr) for tr in rest if left * tr.weight / total_weight < floor]
+        if not under:
+            break
+        floored.update(under)
+    share = {id(tr): floor if id(tr) in floored else left * tr.weight / total_weight for tr in varying}
     return {id(tr): int(min(tr.max_points or DEFAULT_MAX_POINTS, share[id(tr)])) for tr in varying}
 
 

@@ -44,6 +44,7 @@ TITLE_PX, LEGEND_LINE_PX = 20, 20  # above each row: its title (and the statisti
 BAND_PX = TITLE_PX + LEGEND_LINE_PX
 TOP_PX, BOTTOM_PX = 10, 60  # the figure's margins: the bottom one holds the time axis' title
 RIGHT_PX = 20  # nothing beside the rows: the plots take the page's width
+DOMAIN_DECIMALS = 6  # of a row's domain: pixel-exact up to 10,000 px (`row_domains`)
 LEGEND_NAME_CHARS = 40  # a longer trace name is shortened in its legend (about 240 px at 10 px type)
 SPIKES = {
     "showspikes": True,
@@ -53,6 +54,15 @@ SPIKES = {
     "spikedash": "solid",
     "spikecolor": "#555",
 }
+# what a detector section's traces, row titles and y axes have unless they say otherwise, written
+# once in its figure's template (plotly.js applies it to each of them) instead of on each: a section
+# has a hundred traces and forty rows, and these were a tenth of a 1-hour log's page
+TRACE_DEFAULTS = {"mode": "lines", "hovertemplate": "%{y:.4g}"}  # the unified hover gives the time once, on top
+TITLE_DEFAULTS = {"xref": "paper", "yref": "paper", "x": 0, "yshift": LEGEND_LINE_PX, "xanchor": "left",
+                  "yanchor": "bottom", "showarrow": False, "font": {"size": 12}}  # fmt: skip
+AXIS_DEFAULTS = {"anchor": "x", "gridcolor": "#eee", "exponentformat": "e"}  # 1e-04, never SI prefixes ("100µ")
+SECTION_TEMPLATE = {"data": {"scatter": [TRACE_DEFAULTS]}, "layout": {"annotationdefaults": TITLE_DEFAULTS,
+                                                                      "yaxis": AXIS_DEFAULTS}}  # fmt: skip
 
 
 def is_flat(fig: Figure) -> bool:
@@ -91,10 +101,7 @@ def row_band(layout: dict, r: int, domain: list[float], title: str, subtitle: st
     layout[legend] = {"orientation": "h", "x": 0, "xanchor": "left", "y": domain[1], "yanchor": "bottom",
                       "font": {"size": 10}, "maxheight": LEGEND_LINE_PX, "tracegroupgap": 2}  # fmt: skip
     words = f"  <span style='font-size:11px;color:#555'>{plot_text(subtitle)}</span>" if subtitle else ""
-    layout["annotations"].append({
-        "text": f"<b>{plot_text(title)}</b>{words}", "xref": "paper", "yref": "paper", "x": 0, "y": domain[1],
-        "yshift": LEGEND_LINE_PX, "xanchor": "left", "yanchor": "bottom", "showarrow": False, "font": {"size": 12},
-    })  # fmt: skip
+    layout["annotations"].append({"text": f"<b>{plot_text(title)}</b>{words}", **TITLE_DEFAULTS, "y": domain[1]})
     return legend
 
 
@@ -113,12 +120,14 @@ def base_layout(plot_px: int) -> dict:
 
 
 def row_domains(heights: Sequence[int]) -> tuple[int, list[list[float]]]:
-    """(the plot's height in px, each row's domain): rows top to bottom, a band above each."""
+    """(the plot's height in px, each row's domain): rows top to bottom, a band above each. A
+    domain's ends are whole pixels of the plot, as fractions of it to 6 decimals (a hundredth of
+    a pixel of a 10,000 px figure; 17 digits each were 2 KB of a 1-hour log's page)."""
     plot_px = sum(heights) + BAND_PX * len(heights)
     top, domains = plot_px, []
     for height in heights:
         top -= BAND_PX
-        domains.append([(top - height) / plot_px, top / plot_px])
+        domains.append([round((top - height) / plot_px, DOMAIN_DECIMALS), round(top / plot_px, DOMAIN_DECIMALS)])
         top -= height
     return plot_px, domains
 
@@ -130,20 +139,24 @@ def stacked_layout(rows: Sequence[Figure]) -> tuple[dict, list[int]]:
     n = len(rows)
     for r, (fig, domain) in enumerate(zip(rows, domains), 1):
         axis = "yaxis" if r == 1 else f"yaxis{r}"
-        layout[axis] = {
+        layout[axis] = {  # and AXIS_DEFAULTS, from the template
             "domain": domain,
-            "anchor": "x",
             "title": {"text": plot_text(fig.y_title), "font": {"size": 11}},
-            "gridcolor": "#eee",
-            "exponentformat": "e",  # 1e-04, never SI prefixes ("100µ") on ratios and statistics
             "type": "log" if fig.log_y else "linear",
             **({"range": list(fig.y_range)} if fig.y_range else {}),
         }
         layout[f"yaxis{n + r}"] = {"overlaying": f"y{'' if r == 1 else r}", "domain": domain, "range": [0, 1],
                                    "visible": False, "fixedrange": True}  # fmt: skip
         row_band(layout, r, domain, fig.title, fig.subtitle)
+    layout["annotations"] = [_without(note, TITLE_DEFAULTS) for note in layout["annotations"]]
     layout["xaxis"] = {**TIME_AXIS, "anchor": f"y{'' if n == 1 else n}", **SPIKES}
+    layout["template"] = SECTION_TEMPLATE
     return layout, list(range(1, n + 1))
+
+
+def _without(item: dict, defaults: dict) -> dict:
+    """``item`` without the keys whose values are the ``defaults`` (a template gives them)."""
+    return {key: value for key, value in item.items() if key not in defaults or defaults[key] != value}
 
 
 def legend_name(trace: dict) -> None:
@@ -193,8 +206,11 @@ def stacked_json(rows: Sequence[Figure], t: np.ndarray, points: dict[int, int], 
             if trace.get("name") == "ground truth" and layout["shapes"]:
                 continue  # shaded once across the figure
             if "hovertemplate" in trace:  # the unified hover box gives the time once, on top
-                trace["hovertemplate"] = "%{y:.4g}"
-            data.append(on_row(trace, axes, legend))
+                trace["hovertemplate"] = TRACE_DEFAULTS["hovertemplate"]
+            trace = on_row(trace, axes, legend)
+            if "hovertemplate" not in trace and trace.get("hoverinfo") != "skip":
+                trace["hovertemplate"] = ""  # plotly's own hover text, not the template's
+            data.append(_without(trace, TRACE_DEFAULTS))
     return plain_json(data, layout, clock)
 
 
