@@ -201,3 +201,21 @@ def test_an_alarms_peak_is_drawn_beside_a_larger_sample():
     drawn = trace_data(figure, t, allocate_points([figure], 64), focus_windows([figure], t))
     line = next(trace for trace in drawn if trace["name"] == "d.s")
     assert np.float32(t[200_010]) in array(line["x"]) and np.float32(t[199_996]) in array(line["x"])
+
+
+def test_series_with_one_pattern_of_nan_share_their_defined_steps():
+    from logscan.report.plotly_json import DefinedSteps
+
+    t = np.arange(2_000) * 0.01
+    rng = np.random.default_rng(5)
+    position = np.where(np.arange(t.size) % 10 == 3, rng.normal(size=t.size), np.nan).astype(np.float32)
+    position[1_000:1_200] = np.nan  # a gap: the line breaks there
+    cusum = np.where(np.isnan(position), np.nan, 2.0 * position).astype(np.float32)
+    attitude = np.where(np.arange(t.size) % 2 == 0, 1.0, np.nan).astype(np.float32)
+    steps, keep = DefinedSteps(t), np.array([0, 503, 1_990])
+    for y in (position, cusum, attitude):
+        shared, alone = _defined_samples(t, y, keep, steps), _defined_samples(t, y, keep)
+        for a, b in zip(shared, alone):
+            np.testing.assert_array_equal(a, b)
+    assert len(steps._found) == 2  # position's steps found once for both of its series
+    assert np.isnan(_defined_samples(t, cusum, keep, steps)[1]).sum() == 1  # the gap's one break

@@ -52,7 +52,7 @@ TRUTH_FILL = "rgba(31, 119, 180, 0.16)"
 POSSIBLE_FILL = "rgba(255, 165, 0, 0.22)"  # "possible fault" warnings: orange, apart from alarms
 
 
-def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
+def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray, steps: DefinedSteps | None = None) -> tuple:
     """The samples where ``y`` is defined, with one NaN where they are far apart in time.
 
     Statistics are NaN on steps where they are not evaluated (a 10 Hz group's NIS on a 100 Hz
@@ -60,27 +60,59 @@ def _defined_samples(t: np.ndarray, y: np.ndarray, keep: np.ndarray) -> tuple:
     samples are drawn, joined, except across a gap longer than 3x their typical spacing, where a
     NaN still breaks the line. ``keep`` (grid indices) is mapped onto the returned samples. The
     typical spacing is the samples' `grid_step` (the median of at most STEP_SAMPLE spacings spread
-    evenly over the series: the median of all of a long log's cost more than the rest of its trace). Defined samples in
-    one run (NaN only before and after it: a warm-up) are that part of the series, as a series
-    defined everywhere is all of it: no step is missing inside it.
+    evenly over the series: the median of all of a long log's cost more than the rest of its trace).
+    Defined samples in one run (NaN only before and after it: a warm-up) are that part of the
+    series, as a series defined everywhere is all of it: no step is missing inside it. ``steps``:
+    the page's `DefinedSteps` on ``t`` (None: found here).
     """
     if y.size == 0 or not np.isnan(collapsed(y).min()):  # no NaN (the least value is NaN when one is): no mask
         return t, y, keep
-    idx = np.flatnonzero(~np.isnan(y))
-    if idx.size and idx[-1] - idx[0] + 1 == idx.size:  # one run: no step missing between its ends
+    defined = ~np.isnan(y)
+    idx, tc, breaks = steps.of(defined) if steps is not None else _steps_of(t, defined)
+    if breaks is None:  # one run
         first, n_defined = int(idx[0]), idx.size
         kept = np.clip(keep, first, first + n_defined - 1) - first
         return t[first : first + n_defined], y[first : first + n_defined], sorted_unique(kept)
-    tc, yc = t[idx], y[idx]
-    if tc.size >= 2:
-        spacing = np.diff(tc)
-        typical = grid_step(tc) or 0.0  # two samples or more: a float
-        breaks = np.flatnonzero(spacing > 3.0 * typical) + 1
-        if breaks.size:
-            tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
-            yc = np.insert(yc, breaks, np.nan)
+    yc = np.insert(y[idx], breaks, np.nan) if breaks.size else y[idx]
     kept = np.clip(np.searchsorted(tc, t[keep]), 0, max(tc.size - 1, 0)) if tc.size else keep[:0]
     return tc, yc, sorted_unique(kept)
+
+
+def _steps_of(t: np.ndarray, defined: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(the steps where ``defined``, the times `_defined_samples` draws them at: a midpoint inserted
+    where a gap breaks the line, where those breaks go in the steps' samples); breaks None when the
+    steps are one run, no step missing between its ends."""
+    idx = np.flatnonzero(defined)
+    if idx.size and idx[-1] - idx[0] + 1 == idx.size:
+        return idx, t[idx[0] : idx[-1] + 1], None
+    tc, breaks = t[idx], np.zeros(0, dtype=np.int64)
+    if tc.size >= 2:
+        typical = grid_step(tc) or 0.0  # two samples or more: a float
+        breaks = np.flatnonzero(np.diff(tc) > 3.0 * typical) + 1
+        if breaks.size:
+            tc = np.insert(tc, breaks, 0.5 * (tc[breaks - 1] + tc[breaks]))
+    return idx, tc, breaks
+
+
+class DefinedSteps:
+    """The steps where the series drawn on one page's grid ``t`` are defined, found once per pattern
+    of NaN: the statistics of one measurement group (a 10 Hz group's NIS, its CUSUMs and frozen-
+    sensor checks, their thresholds) are NaN on the same steps, and finding those steps, their
+    times and the gaps that break the line for each of them took a third of drawing the lines of a
+    1-hour log's page."""
+
+    def __init__(self, t: np.ndarray):
+        self.t = t
+        self._found: list[tuple[np.ndarray, tuple]] = []
+
+    def of(self, defined: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """`_steps_of` ``defined`` (a mask over the grid)."""
+        for mask, found in self._found:
+            if np.array_equal(mask, defined):
+                return found
+        found = _steps_of(self.t, defined)
+        self._found.append((defined, found))
+        return found
 
 
 def _display_values(y: np.ndarray) -> np.ndarray:
@@ -213,8 +245,15 @@ def _decimated(
     return sorted_unique(overview, inside[in_focus])
 
 
-def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None) -> list[dict]:
-    """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines."""
+def trace_data(
+    fig: Figure,
+    t: np.ndarray,
+    points: dict[int, int],
+    windows: np.ndarray | None = None,
+    steps: DefinedSteps | None = None,
+) -> list[dict]:
+    """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines (``steps``:
+    the page's `DefinedSteps` on ``t``, None: found for each line)."""
     windows = np.zeros((0, 2)) if windows is None else windows
     data: list[dict] = []
     span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL, "possible fault": POSSIBLE_FILL}
@@ -231,7 +270,8 @@ def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.n
     grid_ascends = ascends(t) if windows.size and any(trace.t is None for trace in fig.traces) else None
     for trace in fig.traces:
         max_points = points.get(id(trace), DEFAULT_MAX_POINTS)
-        x, y, keep = _defined_samples(t if trace.t is None else trace.t, trace.y, trace.keep)
+        x, y, keep = (_defined_samples(t, trace.y, trace.keep, steps) if trace.t is None else
+                      _defined_samples(trace.t, trace.y, trace.keep))  # fmt: skip
         no_nan = False if y is trace.y else None  # the series itself: it was found to hold no NaN
         idx = _decimated(x, y, keep, max_points, windows, grid_ascends if trace.t is None else None, no_nan)
         data.append({
@@ -247,10 +287,16 @@ def trace_data(fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.n
 
 
 def figure_json(
-    fig: Figure, t: np.ndarray, points: dict[int, int], windows: np.ndarray | None = None, clock: Clock | None = None
+    fig: Figure,
+    t: np.ndarray,
+    points: dict[int, int],
+    windows: np.ndarray | None = None,
+    clock: Clock | None = None,
+    steps: DefinedSteps | None = None,
 ) -> str:
     """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points),
-    part of them inside the zoom ``windows`` (`focus_windows`), its time axis in ``clock``."""
+    part of them inside the zoom ``windows`` (`focus_windows`), its time axis in ``clock``
+    (``steps``: as `trace_data`'s)."""
     title = {"text": plot_text(fig.title), "font": {"size": 14}}
     if fig.subtitle:  # the statistic in plain words, a smaller line under its name
         title["subtitle"] = {"text": plot_text(fig.subtitle), "font": {"size": 12, "color": "#555"}}
@@ -273,7 +319,7 @@ def figure_json(
         "paper_bgcolor": "white",
         "template": {},
     }
-    return plain_json(trace_data(fig, t, points, windows), layout, clock)  # plotly's validation: 15 ms a figure
+    return plain_json(trace_data(fig, t, points, windows, steps), layout, clock)  # plotly's validation: 15 ms
 
 
 # hover texts of times in seconds, as the figure builders write them, and as a UTC date axis shows them

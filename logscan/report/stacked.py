@@ -30,6 +30,7 @@ from logscan.report.figures import Figure
 from logscan.report.plotly_json import (
     TIME_AXIS,
     TRUTH_FILL,
+    DefinedSteps,
     allocate_points,
     figure_json,
     focus_windows,
@@ -192,9 +193,17 @@ def truth_shapes(rows: Sequence[Figure], clock) -> list[dict]:
              "fillcolor": TRUTH_FILL, "line": {"width": 0}, "layer": "below"} for a, b in spans]  # fmt: skip
 
 
-def stacked_json(rows: Sequence[Figure], t: np.ndarray, points: dict[int, int], windows: np.ndarray, clock) -> str:
+def stacked_json(
+    rows: Sequence[Figure],
+    t: np.ndarray,
+    points: dict[int, int],
+    windows: np.ndarray,
+    clock,
+    steps: DefinedSteps | None = None,
+) -> str:
     """The rows as one figure's escaped plotly JSON, traces decimated to ``points`` (trace id ->
-    points) as `logscan.report.plotly_json.figure_json` does for one figure."""
+    points) as `logscan.report.plotly_json.figure_json` does for one figure (``steps``: the page's
+    `DefinedSteps` on ``t``)."""
     layout, numbers = stacked_layout(rows)
     layout["shapes"] = truth_shapes(rows, clock)
     n = len(rows)
@@ -202,7 +211,7 @@ def stacked_json(rows: Sequence[Figure], t: np.ndarray, points: dict[int, int], 
     for fig, r in zip(rows, numbers):
         axes = {"y": f"y{'' if r == 1 else r}", "y2": f"y{n + r}"}
         legend = "legend" if r == 1 else f"legend{r}"
-        for trace in trace_data(fig, t, points, windows):
+        for trace in trace_data(fig, t, points, windows, steps):
             if trace.get("name") == "ground truth" and layout["shapes"]:
                 continue  # shaded once across the figure
             if "hovertemplate" in trace:  # the unified hover box gives the time once, on top
@@ -242,10 +251,11 @@ def figures_json(
     every = [fig for _, item in figures for fig in (item if isinstance(item, list) else [item])]
     points = allocate_points(every, budget)
     windows = focus_windows(every, t)
+    steps = DefinedSteps(t)  # the series' defined steps, found once per pattern for the whole page
     parts = []
     for fig_id, item in figures:
-        spec = stacked_json(item, t, points, windows, clock) if isinstance(item, list) else (
-            figure_json(item, t, points, windows, clock))  # fmt: skip
+        spec = stacked_json(item, t, points, windows, clock, steps) if isinstance(item, list) else (
+            figure_json(item, t, points, windows, clock, steps))  # fmt: skip
         parts.append(f'{{"id":"{fig_id}","figure":{spec}}}')
     parts += [f'{{"id":"{spec["id"]}","figure":{spec["json"]}}}' for spec in extra]
     return "[" + ",".join(parts) + "]"
