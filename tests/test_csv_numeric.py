@@ -24,7 +24,8 @@ def _pandas_columns(path: Path, monkeypatch) -> dict[str, np.ndarray]:
 
 def _fast_columns(path: Path) -> dict[str, np.ndarray] | None:
     header = csv_blocks._header_line(path)
-    return numeric_columns(path, header, csv_blocks.sniff_delimiter(header))
+    found = numeric_columns(path, header, csv_blocks.sniff_delimiter(header))
+    return None if found is None else found.values
 
 
 def _same(fast: dict[str, np.ndarray], slow: dict[str, np.ndarray]) -> None:

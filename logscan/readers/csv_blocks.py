@@ -39,12 +39,21 @@ MISSING_CELLS = ("", "NA", "N/A", "n/a", "NULL", "null", "None", "<NA>", "#N/A",
 class CsvColumns:
     """The raw columns of one CSV file, as pieces (one per block) joined on demand."""
 
-    def __init__(self, names: list[str], pieces: dict[str, list[pd.Series]], rows: int, cut_row: str):
+    def __init__(
+        self,
+        names: list[str],
+        pieces: dict[str, list[pd.Series]],
+        rows: int,
+        cut_row: str,
+        complete: frozenset[str] = frozenset(),
+    ):
         self.columns = names
         self._pieces = pieces
         self._joined: dict[str, pd.Series] = {}
         self.rows = rows
         self.cut_row = cut_row  # why the last row was dropped ("" when it was not)
+        # columns known to hold a number in every row (no empty cell, no NaN: the parse saw them)
+        self.complete = set(complete)
 
     @property
     def empty(self) -> bool:
@@ -68,6 +77,7 @@ class CsvColumns:
         for name, series in columns.items():
             self._pieces.pop(name, None)
             self._joined[name] = series.reset_index(drop=True)
+            self.complete.discard(name)
         return self
 
     def release(self, name: str) -> None:
@@ -178,11 +188,13 @@ def _plain_numbers(path: Path, header: str, sep: str) -> CsvColumns | None:
     """The columns of a file of plain numbers (`csv_numeric`): pandas' columns without its tokens."""
     import pandas as pd
 
-    columns = numeric_columns(path, header, sep)
-    if columns is None:
+    found = numeric_columns(path, header, sep)
+    if found is None:
         return None
+    columns = found.values
     rows = len(next(iter(columns.values())))
-    return CsvColumns(list(columns), {name: [pd.Series(v, copy=False)] for name, v in columns.items()}, rows, "")
+    pieces = {name: [pd.Series(v, copy=False)] for name, v in columns.items()}
+    return CsvColumns(list(columns), pieces, rows, "", found.complete)
 
 
 def _header_line(path: Path) -> str:

@@ -71,9 +71,8 @@ def infer_time_unit(values: np.ndarray) -> TimeUnit:
     finite = _finite(values)
     if finite.size == 0:
         return TimeUnit("s", "relative", "no finite time values; assumed seconds")
-    steps = np.diff(finite if _ascending(finite) else np.sort(finite))
-    steps = steps[steps > 0]
-    step = float(np.median(steps)) if steps.size else 0.0
+    steps = _positive(np.diff(finite if _ascending(finite) else np.sort(finite)))
+    step = _median(steps) if steps.size else 0.0
     low, high = float(finite.min()), float(finite.max())
     integers = bool(np.all(finite == np.round(finite)))
 
@@ -107,11 +106,10 @@ def check_stated_unit(values: np.ndarray, name: str, unit: str, path: Path) -> N
     scale = NS_PER_UNIT[unit] / 1e9
     in_order = _ascending(finite)
     middle = _sorted_median(finite) if in_order else float(np.median(finite))
-    fits = np.abs(finite) < MAX_TIME_NS // NS_PER_UNIT[unit]  # the rows read as times
-    times = finite if fits.all() else finite[fits]
+    times = _fitting_times(finite, MAX_TIME_NS // NS_PER_UNIT[unit], in_order)  # the rows read as times
     times = times if in_order else np.sort(times)
-    steps = np.diff(times)
-    step = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    steps = _positive(np.diff(times))
+    step = _median(steps) if steps.size else 0.0
     span = step * (times.size - 1) * scale  # the span its sampling implies: blind to a few wild rows
     if abs(middle) * scale > _EPOCH_MAX_S:
         problem = f"a median of {middle:.3g} {unit} is {abs(middle) * scale / _YEAR_S:.3g} years"
@@ -143,6 +141,34 @@ def _finite(values: np.ndarray) -> np.ndarray:
 
 def _ascending(values: np.ndarray) -> bool:
     return values.size < 2 or bool((values[1:] >= values[:-1]).all())
+
+
+def _positive(steps: np.ndarray) -> np.ndarray:
+    """The steps > 0 (all of them, uncopied, when every step is)."""
+    positive = steps > 0
+    return steps if positive.all() else steps[positive]
+
+
+def _fitting_times(finite: np.ndarray, limit: int, in_order: bool) -> np.ndarray:
+    """The finite times whose magnitude is under ``limit`` (all of them, uncopied, when they are: an
+    ascending column's ends say so without a pass over it)."""
+    if in_order and -limit < float(finite[0]) and float(finite[-1]) < limit:
+        return finite
+    fits = np.abs(finite) < limit
+    return finite if fits.all() else finite[fits]
+
+
+def _median(own: np.ndarray) -> float:
+    """np.median of ``own`` (size >= 1, no NaN: steps between finite times; a temporary of the
+    caller's, partitioned in place), bit for bit: the mean of the middle one or two after one
+    partition at them (np.median copies, and partitions at the last element too to find NaNs: 4x
+    the time on a million steps)."""
+    half = own.size // 2
+    if own.size % 2:
+        own.partition(half)
+        return float(np.mean(own[half : half + 1]))
+    own.partition((half - 1, half))
+    return float(np.mean(own[half - 1 : half + 1]))
 
 
 def _sorted_median(values: np.ndarray) -> float:
