@@ -91,10 +91,22 @@ def pytest_runtest_setup(item):
 # The README's test command (pytest without arguments: the testpaths) runs on every core with
 # pytest-xdist, one test module per worker at a time, so that a module's fixtures are built once; a
 # run of chosen files or tests (-k) stays in one process unless -n is given. The modules that take
-# minutes start first (the others then fill both cores). A session fixture is built once per worker:
-# one too costly to build twice (installed_wheel, fuzz) is used by the tests of one module only. The
-# tests of a module whose fixtures cost little but whose tests take minutes each go to any worker.
-SLOWEST_MODULES_FIRST = ("test_readme.py", "test_wheel_install.py", "test_fuzz.py", "test_docs_examples.py")
+# longest start first, so that the last ones are short and both workers end together. The fuzz
+# seeds' warm-up comes second, beside the README's run, which like the wheel's after it compiles
+# into a cache of its own: in a fresh clone it fills the shared kernel cache alone (the docs
+# examples then start from it), not while another worker compiles the same kernels. A session
+# fixture is built once per worker: one too costly to build twice (installed_wheel, fuzz) is used by
+# the tests of one module only. The tests of a module whose fixtures cost little but whose tests
+# take minutes each go to any worker.
+SLOWEST_MODULES_FIRST = (
+    "test_readme.py",
+    "test_fuzz.py",
+    "test_wheel_install.py",
+    "test_docs_examples.py",
+    "test_first_run_signatures.py",  # an analysis compiled from an empty kernel cache
+    "test_extending.py",  # the pendulum's, from an empty cache too
+    "test_warmup.py",  # and the first run's
+)
 TESTS_TO_ANY_WORKER = ("test_docs_examples.py",)
 
 
