@@ -211,11 +211,12 @@ class EncodedEkfDetector(Detector):
         scale = model.state_scale() if model is not None else np.ones(n)
         return lambda rows: coding_vectors(trace.P_prior_diag[rows], scale, self.sigma_floor, self.r_max)
 
-    def state_check(self, trace, model=None, cv_dtype=np.float64):
+    def state_check(self, trace, model=None, cv_dtype=np.float64, cv_of=None):
         """(e_x (N,), defined (N,), CV (N, n) as ``cv_dtype``, None when ``cv_dtype`` is None):
         e_x = CV_k (x_prior_k - x_post_k) on update steps, the difference of an angle state wrapped
-        to [-pi, pi) (a heading crossing +-pi is wrapped by the filter, not corrected by 2 pi)."""
-        cv_of = self._coding_vectors(trace, model)
+        to [-pi, pi) (a heading crossing +-pi is wrapped by the filter, not corrected by 2 pi).
+        ``cv_of(rows)``: the coding vectors of those steps (default: computed from the trace)."""
+        cv_of = self._coding_vectors(trace, model) if cv_of is None else cv_of
         defined = trace.updated.any(axis=1) | trace.diverged
         n_steps, n = trace.x_prior.shape
         angles = _angle_states(model, n)
@@ -246,20 +247,24 @@ class EncodedEkfDetector(Detector):
     def _run(self, run, trace, **context) -> DetectorResult:
         model = context.get("model")
         result = self.new_result()
-        self._checks(result, run, trace, model)
-        # CV for the figure only, made once the checks' temporaries are gone (the peak memory of a
-        # long log is here): float32 is ample and halves the (N, n) array it keeps
+        # CV for the figure, float32 (half the (N, n) array it keeps). From the trace's float32
+        # variances the coding vectors are float32 themselves: the checks then read this one copy,
+        # made once, instead of computing them again for each check
         cv_of = self._coding_vectors(trace, model)
         cv = result.extras["coding_vector"] = np.empty(trace.x_prior.shape, dtype=np.float32)
+        exact = True
         for rows in row_blocks(cv.shape[0]):
-            cv[rows] = cv_of(rows)
+            block = cv_of(rows)
+            cv[rows] = block
+            exact = exact and block.dtype == np.float32
+        self._checks(result, run, trace, model, (lambda rows: cv[rows]) if exact else cv_of)
         return result
 
-    def _checks(self, result, run, trace, model) -> None:
-        """The state check, and in the adaptive variant the variance and on-board state checks."""
+    def _checks(self, result, run, trace, model, cv_of) -> None:
+        """The state check, and in the adaptive variant the variance and on-board state checks;
+        ``cv_of(rows)``: the coding vectors of those steps."""
         t = run.t
-        e_x, defined, _ = self.state_check(trace, model, None)
-        cv_of = self._coding_vectors(trace, model)
+        e_x, defined, _ = self.state_check(trace, model, None, cv_of)
         result.info["coverage"] = COVERAGE_NOTE
         result.info["variant"] = self.variant
         result.info["rejected_samples"] = int(trace.rejected.sum())
