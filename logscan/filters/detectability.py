@@ -7,7 +7,6 @@ measurement sees (its covariance bound would grow without limit); this module fi
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from logscan.errors import ModelError
 from logscan.models.interval_model import IntervalModel
@@ -38,6 +37,8 @@ def unobservable_unstable_states(model: IntervalModel, rtol: float = 1e-9, margi
         V = V @ N  # orthonormal columns still
     if not V.shape[1]:
         return []
+    import scipy.linalg  # here: only an interval model with unobservable modes needs it (0.25 s to import)
+
     _, Zs, sdim = scipy.linalg.schur(V.T @ A @ V, output="complex", sort=lambda lam: abs(lam) >= 1.0 - margin)
     if sdim == 0:
         return []
