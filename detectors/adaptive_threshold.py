@@ -37,6 +37,29 @@ def _ring_moments(ring, count):
 
 
 @njit(cache=True)
+def _ring_sum(ring):
+    """The sum of every ring entry, in index order (as `_ring_moments` adds them)."""
+    total = 0.0
+    for i in range(ring.shape[0]):
+        total += ring[i]
+    return total
+
+
+@njit(cache=True)
+def _spread_and_pushed_sum(ring, m, head, value):
+    """(sum of (ring - m)^2, sum of the ring with ``value`` at ``head``), both in index order: the
+    second is the next step's sum when ``value`` enters the window. Two independent chains of
+    additions in one loop run in about the time of one (each addition waits for the previous)."""
+    sq = 0.0
+    pushed = 0.0
+    for i in range(ring.shape[0]):
+        d = ring[i] - m
+        sq += d * d
+        pushed += value if i == head else ring[i]
+    return sq, pushed
+
+
+@njit(cache=True)
 def adaptive_band(e, defined, window, rho, s_floor):
     """Band of ``e`` over a trailing window of accepted samples.
 
@@ -58,12 +81,18 @@ def adaptive_band(e, defined, window, rho, s_floor):
     warm = np.zeros(n, dtype=np.bool_)
     ring = np.zeros(window)
     count = head = np.int64(0)  # not literal zeros: they would compile the ring helpers twice
+    total = 0.0  # the full ring's sum in index order (as `_ring_moments` adds), when known
+    known = False
     for k in range(n):
         if not defined[k]:
             continue
         value = e[k]
         if count == window:
-            m, var = _ring_moments(ring, count)
+            if not known:  # the ring just filled (it stays full: pushes keep ``total`` from here on)
+                total, known = _ring_sum(ring), True
+            m = total / count
+            sq, pushed_total = _spread_and_pushed_sum(ring, m, head, value)
+            var = sq / count
             sd = max(np.sqrt(var), s_floor[k])
             mu[k] = m
             s[k] = sd
@@ -74,6 +103,7 @@ def adaptive_band(e, defined, window, rho, s_floor):
             if not (abs(value - m) <= rho * sd):
                 exceed[k] = True
                 continue
+            total = pushed_total
         elif not np.isfinite(value):
             continue
         count, head = _ring_push(ring, count, head, value)
