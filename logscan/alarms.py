@@ -89,27 +89,28 @@ def _as_series(name: str, value: ArrayLike | None, n: int) -> np.ndarray | None:
     return arr
 
 
-def judged_mask(t: np.ndarray, valid, warmup, warmup_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """(judged, in_warmup) boolean masks over the grid: a sample is judged where it is valid and not
-    in warm-up (see rule 1 of the module docstring)."""
+def sample_masks(t: np.ndarray, valid, warmup, warmup_s: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(judged, in_warmup) boolean masks over the grid (rule 1 of the module docstring: a sample is
+    judged where it is valid; not in warm-up), None for "every sample is judged" and "no sample is
+    in warm-up": the usual cases cost no (N,) pass."""
     n = t.size
-    judged = np.ones(n, dtype=bool)
+    judged = None
     if valid is not None:
-        valid = np.asarray(valid, dtype=bool)
-        if valid.shape != (n,):
-            raise InternalError(f"alarm_intervals: valid has shape {valid.shape}, expected ({n},)")
-        judged &= valid
-    in_warmup = np.zeros(n, dtype=bool)
+        judged = np.asarray(valid, dtype=bool)
+        if judged.shape != (n,):
+            raise InternalError(f"alarm_intervals: valid has shape {judged.shape}, expected ({n},)")
+    in_warmup = None
     if warmup is not None:
         if isinstance(warmup, (int, np.integer)) and not isinstance(warmup, bool):
+            in_warmup = np.zeros(n, dtype=bool)
             in_warmup[: max(int(warmup), 0)] = True
         else:
-            mask = np.asarray(warmup, dtype=bool)
-            if mask.shape != (n,):
-                raise InternalError(f"alarm_intervals: warmup mask has shape {mask.shape}, expected ({n},)")
-            in_warmup |= mask
+            in_warmup = np.asarray(warmup, dtype=bool)
+            if in_warmup.shape != (n,):
+                raise InternalError(f"alarm_intervals: warmup mask has shape {in_warmup.shape}, expected ({n},)")
     if warmup_s > 0 and n:
-        in_warmup |= t < t[0] + warmup_s - _TIME_EPS
+        leading = t < t[0] + warmup_s - _TIME_EPS
+        in_warmup = leading if in_warmup is None else in_warmup | leading
     return judged, in_warmup
 
 
@@ -138,6 +139,39 @@ def alarm_intervals(
     t = np.asarray(t, dtype=np.float64)
     if t.ndim != 1:
         raise InternalError(f"alarm_intervals: t must be 1-D, got shape {t.shape}")
+    judged, in_warmup = sample_masks(t, valid, warmup, warmup_s)
+    return judged_alarms(
+        t,
+        statistic,
+        upper,
+        lower,
+        judged,
+        in_warmup,
+        n_persist=n_persist,
+        hold_off_s=hold_off_s,
+        min_duration_s=min_duration_s,
+        signal=signal,
+        detector=detector,
+    )
+
+
+def judged_alarms(
+    t: np.ndarray,
+    statistic: np.ndarray,
+    upper,
+    lower,
+    judged: np.ndarray | None,
+    in_warmup: np.ndarray | None,
+    *,
+    n_persist: int = 1,
+    hold_off_s: float = 0.0,
+    min_duration_s: float = 0.0,
+    signal: str = "",
+    detector: str = "",
+) -> list[AlarmInterval]:
+    """`alarm_intervals` on the grid times ``t`` (float64) with its masks made (`sample_masks`)."""
+    if t.ndim != 1:
+        raise InternalError(f"alarm_intervals: t must be 1-D, got shape {t.shape}")
     n = t.size
     x = _as_series("statistic", statistic, n)
     hi = _as_series("upper", upper, n)
@@ -146,7 +180,6 @@ def alarm_intervals(
         raise InternalError("alarm_intervals: give an upper or a lower threshold")
     if n_persist < 1:
         raise InternalError(f"alarm_intervals: n_persist must be >= 1, got {n_persist}")
-    judged, in_warmup = judged_mask(t, valid, warmup, warmup_s)
     samples = _exceedances(t, x, hi, lo, judged, in_warmup)
     if samples is None:
         return []
@@ -156,55 +189,81 @@ def alarm_intervals(
     return _intervals(samples, *spans, signal, detector)
 
 
-class _Considered(NamedTuple):
-    """The samples an alarm may hold (judged or in warm-up), and which of them exceed."""
+class _Exceedances(NamedTuple):
+    """The exceeding samples (rule 2), in grid order. Runs, chains, peaks and counts (rules 3-5)
+    involve exceeding samples only: the other samples an alarm may hold (judged or in warm-up, the
+    "considered" ones) matter only by their number between two exceedances, held here as ranks."""
 
-    xs: np.ndarray  # the statistic
-    ts: np.ndarray  # the times
-    warm: np.ndarray  # in warm-up: breaks a run, never exceeds
-    his: np.ndarray | None  # the upper threshold (None: none given)
-    los: np.ndarray | None  # the lower threshold (None: none given)
-    over: np.ndarray  # above the upper threshold
-    nonfinite: np.ndarray  # a non-finite statistic
-    exceed: np.ndarray  # over, under or non-finite, and not in warm-up
+    steps: np.ndarray  # each exceedance's grid index
+    rank: np.ndarray  # its position among the considered samples: consecutive ranks are one run
+    warm_before: np.ndarray  # warm-up samples before it: one between two exceedances breaks a chain
+    x: np.ndarray  # the statistic, (N,)
+    t: np.ndarray  # the times, (N,)
+    hi: np.ndarray | None  # the upper threshold, (N,) (None: none given)
+    lo: np.ndarray | None  # the lower threshold, (N,) (None: none given)
 
 
-def _exceedances(t, x, hi, lo, judged: np.ndarray, in_warmup: np.ndarray) -> _Considered | None:
-    """The judged and warm-up samples with their exceedances (rule 2); None when none exceeds."""
-    # Work on the judged samples and the warm-up samples (which break runs but never exceed); when
-    # that is every sample (the usual case) on the series themselves: no (N,) copies.
-    considered = judged | in_warmup
-    keep = None if considered.all() else np.flatnonzero(considered)
-    if keep is not None and keep.size == 0:
+def _exceedances(t, x, hi, lo, judged: np.ndarray | None, in_warmup: np.ndarray | None) -> _Exceedances | None:
+    """The judged samples over or under a bound or not finite, out of warm-up (rule 2); None when
+    none exceeds. A few boolean passes over the grid, no copy of the series."""
+    exceed = _outside(x, hi, lo)
+    if judged is not None:
+        exceed &= judged
+    if in_warmup is not None:
+        exceed &= ~in_warmup
+    index = np.flatnonzero(exceed)
+    if index.size == 0:
         return None
-    xs, ts, warm = (x, t, in_warmup) if keep is None else (x[keep], t[keep], in_warmup[keep])
-    his = hi if hi is None or keep is None else hi[keep]
-    los = lo if lo is None or keep is None else lo[keep]
+    if judged is None:  # every sample is considered
+        rank = index
+    else:
+        considered = judged if in_warmup is None else judged | in_warmup
+        rank = np.searchsorted(np.flatnonzero(considered), index)
+    warm_before = np.zeros(index.size, np.int64) if in_warmup is None else _count_in_prefix(in_warmup, index)
+    return _Exceedances(index, rank, warm_before, x, t, hi, lo)
+
+
+def _outside(x: np.ndarray, hi: np.ndarray | None, lo: np.ndarray | None) -> np.ndarray:
+    """(N,) bool: over ``hi``, under ``lo`` or not finite. Finite constant bounds (the usual case)
+    take two comparisons: not (lo <= x <= hi), a missing bound being infinite, holds exactly then."""
     with np.errstate(invalid="ignore"):
-        over = (xs > his) if his is not None else np.zeros(xs.size, dtype=bool)
-        under = (xs < los) if los is not None else np.zeros(xs.size, dtype=bool)
-    nonfinite = ~np.isfinite(xs)
-    exceed = (over | under | nonfinite) & ~warm
-    if not exceed.any():
-        return None
-    return _Considered(xs, ts, warm, his, los, over, nonfinite, exceed)
+        if _finite_constant(hi) and _finite_constant(lo):
+            inside = x <= hi[0] if hi is not None else x < np.inf
+            inside &= x >= lo[0] if lo is not None else x > -np.inf
+            return np.logical_not(inside, out=inside)
+        exceed = ~np.isfinite(x)
+        if hi is not None:
+            exceed |= x > hi
+        if lo is not None:
+            exceed |= x < lo
+    return exceed
+
+
+def _finite_constant(bound: np.ndarray | None) -> bool:
+    """Whether a bound is absent or one finite value on every sample (a broadcast scalar)."""
+    return bound is None or (bound.strides == (0,) and bound.size > 0 and bool(np.isfinite(bound[0])))
+
+
+def _count_in_prefix(mask: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """How many of ``mask`` are True before each of ``index`` (ascending)."""
+    return np.searchsorted(np.flatnonzero(mask), index)
 
 
 def _alarm_spans(
-    samples: _Considered, n_persist: int, hold_off_s: float, min_duration_s: float
+    samples: _Exceedances, n_persist: int, hold_off_s: float, min_duration_s: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(start, last, first exceedance) indices of each alarm into the considered samples, after
+    """(start, last, first exceedance) of each alarm as positions among the exceedances, after
     persistence, hold-off and minimum duration (rules 3-5); None when no alarm is left."""
-    ts, warm, exceed = samples.ts, samples.warm, samples.exceed
-    # Runs of consecutive exceedances: starts where the padded mask goes 0 -> 1, ends 1 -> 0.
-    edges = np.diff(np.concatenate(([0], exceed.view(np.int8), [0])))
-    run_start = np.flatnonzero(edges == 1)
-    run_last = np.flatnonzero(edges == -1) - 1
+    ts = samples.t[samples.steps]
+    # Runs of consecutive exceedances: a run starts where the rank jumps (a considered sample that
+    # does not exceed, or a warm-up one, lies between).
+    run_start = np.flatnonzero(np.concatenate(([True], np.diff(samples.rank) != 1)))
+    run_last = np.concatenate((run_start[1:] - 1, [samples.steps.size - 1]))
     run_len = run_last - run_start + 1
     # A run is bridged to the previous one when the gap between exceedances is <= hold_off_s and
     # no warm-up sample lies between them; a chain is a maximal sequence of bridged runs.
     gap = ts[run_start[1:]] - ts[run_last[:-1]]
-    warm_between = _count_in(np.flatnonzero(warm), run_last[:-1] + 1, run_start[1:]) > 0
+    warm_between = samples.warm_before[run_start[1:]] > samples.warm_before[run_last[:-1]]
     new_chain = np.concatenate(([True], (gap > hold_off_s + _TIME_EPS) | warm_between))
     chain = np.cumsum(new_chain) - 1
     chain_last_run = np.concatenate((np.flatnonzero(new_chain)[1:] - 1, [run_start.size - 1]))
@@ -228,37 +287,40 @@ def _alarm_spans(
 
 
 def _intervals(
-    samples: _Considered, i0: np.ndarray, i1: np.ndarray, f0: np.ndarray, signal: str, detector: str
+    samples: _Exceedances, i0: np.ndarray, i1: np.ndarray, f0: np.ndarray, signal: str, detector: str
 ) -> list[AlarmInterval]:
-    """The alarms over [i0, i1] (first exceedance f0) with the peak of each."""
-    xs, ts, his, los = samples.xs, samples.ts, samples.his, samples.los
-    over, nonfinite, exceed = samples.over, samples.nonfinite, samples.exceed
+    """The alarms over exceedances [i0, i1] (first exceedance f0) with the peak of each."""
+    x, his, los = samples.x, samples.hi, samples.lo
 
-    def excess(index: np.ndarray) -> np.ndarray:
-        """Excess over the crossed bound at ``index``, which picks the peak sample; non-finite
-        statistics rank highest, samples that do not exceed lowest."""
-        v = xs[index]
+    def excess(position: np.ndarray) -> np.ndarray:
+        """Excess over the crossed bound at these exceedances, which picks the peak sample;
+        non-finite statistics rank highest. (Every sample between an alarm's exceedances that does
+        not exceed ranks lowest: it is never its peak.)"""
+        at = samples.steps[position]
+        v = x[at]
         with np.errstate(invalid="ignore"):
-            above = v - his[index] if his is not None else np.full(index.size, -np.inf)
-            below = los[index] - v if los is not None else np.full(index.size, -np.inf)
-        out = np.where(exceed[index], np.fmax(above, below), -np.inf)
-        return np.where(exceed[index] & nonfinite[index], np.inf, out)
+            above = v - his[at] if his is not None else np.full(at.size, -np.inf)
+            below = los[at] - v if los is not None else np.full(at.size, -np.inf)
+        return np.where(np.isfinite(v), np.fmax(above, below), np.inf)
 
-    peak = _segment_argmax(excess, i0, i1)
-    value = xs[peak]
-    is_nonfinite = nonfinite[peak]
-    crossed_upper = over[peak] | (is_nonfinite & (his is not None))
+    peak = samples.steps[_segment_argmax(excess, i0, i1)]
+    value = x[peak]
+    is_nonfinite = ~np.isfinite(value)
+    with np.errstate(invalid="ignore"):
+        over = value > his[peak] if his is not None else np.zeros(peak.size, dtype=bool)
+    crossed_upper = over | (is_nonfinite & (his is not None))
     threshold = np.where(crossed_upper, _at(his, peak), _at(los, peak))
-    bound = np.where(is_nonfinite, "nonfinite", np.where(over[peak], "upper", "lower"))
+    bound = np.where(is_nonfinite, "nonfinite", np.where(over, "upper", "lower"))
     # a finite value far beyond a small threshold: the ratio overflows to inf (the JSON's null)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio = value / threshold
     ratio_ok = np.isfinite(value) & np.isfinite(threshold) & (threshold != 0.0)
-    n_exceed = _count_in(np.flatnonzero(exceed), f0, i1 + 1)
+    n_exceed = i1 - f0 + 1  # every sample from the first exceedance to the last that exceeds
+    ts = samples.t
     columns = zip(
-        ts[i0].tolist(),
-        ts[i1].tolist(),
-        ts[f0].tolist(),
+        ts[samples.steps[i0]].tolist(),
+        ts[samples.steps[i1]].tolist(),
+        ts[samples.steps[f0]].tolist(),
         ts[peak].tolist(),
         value.tolist(),
         np.where(np.isfinite(threshold), threshold, np.nan).tolist(),
@@ -278,11 +340,6 @@ def _intervals(
 
 def _at(series: np.ndarray | None, index: np.ndarray) -> np.ndarray:
     return np.full(index.size, np.nan) if series is None else series[index]
-
-
-def _count_in(sorted_index: np.ndarray, first: np.ndarray, stop: np.ndarray) -> np.ndarray:
-    """How many of ``sorted_index`` lie in [first[k], stop[k]) for each k."""
-    return np.searchsorted(sorted_index, stop) - np.searchsorted(sorted_index, first)
 
 
 def _segment_argmax(values_at, first: np.ndarray, last: np.ndarray) -> np.ndarray:

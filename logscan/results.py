@@ -17,7 +17,7 @@ from typing import Any, overload
 
 import numpy as np
 
-from logscan.alarms import AlarmInterval, alarm_intervals, judged_mask
+from logscan.alarms import AlarmInterval, alarm_intervals, judged_alarms, sample_masks
 from logscan.errors import InputError
 from logscan.json_policy import jsonable
 
@@ -223,22 +223,27 @@ class DetectorResult:
             suspended = self.alarm_policy.suspended
             if suspended is not None and np.shape(suspended) != (n,):  # the grid's statistics only
                 suspended = None
-        judged, in_warmup = judged_mask(
-            t, alarm_options.get("valid"), alarm_options.get("warmup"), alarm_options.get("warmup_s", 0.0)
+        t = np.asarray(t, dtype=np.float64)
+        judged, in_warmup = sample_masks(
+            t, alarm_options.pop("valid", None), alarm_options.pop("warmup", None), alarm_options.pop("warmup_s", 0.0)
         )
         # a warm-up or window longer than most of the log leaves the statistic unable to alarm there
         # (the profile's suspension, ground time, is a choice of scope, not a gap in the check)
-        alarmable = judged & ~in_warmup
-        self.judged_fraction[name] = float(alarmable.sum() / max(judged.sum(), 1)) if n else 1.0
+        alarmable = judged if in_warmup is None else ~in_warmup if judged is None else judged & ~in_warmup
+        n_judged = n if judged is None else np.count_nonzero(judged)
+        n_alarmable = n if alarmable is None else np.count_nonzero(alarmable)
+        self.judged_fraction[name] = float(n_alarmable / max(n_judged, 1)) if n else 1.0
         if suspended is not None:
-            alarmable = alarmable & ~suspended
-            valid = alarm_options.get("valid")
-            base = np.ones(n, dtype=bool) if valid is None else np.broadcast_to(np.asarray(valid, bool), (n,))
-            alarm_options["valid"] = base & ~suspended
-        self.judged[name] = np.broadcast_to(True, (n,)) if alarmable.all() else alarmable
-        alarms = alarm_intervals(
-            t, statistic, band.upper, band.lower, signal=name, detector=self.detector, **alarm_options
-        )
+            alarmable = ~suspended if alarmable is None else alarmable & ~suspended
+        if alarmable is not None and not alarmable.all():
+            own = alarmable is not judged  # else the caller's ``valid`` (maybe a view of the trace's): copied
+            self.judged[name] = alarmable if own else alarmable.copy()
+        else:
+            self.judged[name] = np.broadcast_to(True, (n,))
+        if suspended is not None:
+            judged = ~suspended if judged is None else judged & ~suspended
+        options = {"signal": name, "detector": self.detector, **alarm_options}
+        alarms = judged_alarms(t, statistic, band.upper, band.lower, judged, in_warmup, **options)
         self.alarms.extend(alarms)
         # once the alarms are drawn from them, the statistic and its band are only drawn and read for
         # margins (7 digits): float32 halves them (a 1-hour 100 Hz log: 1.4 MB per statistic)
