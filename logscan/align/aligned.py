@@ -53,19 +53,24 @@ class HeldTable:
     array (``table[rows]``, ``np.asarray(table)``); a 50 Hz on-board estimate on a 100 Hz grid
     takes half the memory plus 4 bytes a step."""
 
-    def __init__(self, samples: np.ndarray, row: np.ndarray):
+    def __init__(self, samples: np.ndarray, row: np.ndarray, padded: np.ndarray | None = None):
         self.samples = samples
         self.row = row
         self.shape = (int(row.size), int(samples.shape[1]))
         self.ndim = 2
         self.dtype = samples.dtype
+        # ``padded``: the samples followed by one row of NaN (``samples`` a view of its first M rows),
+        # when the aligner made them so: row -1 then reads NaN in one gather, without a mask
+        self.padded = padded
 
     def __len__(self) -> int:
         return self.shape[0]
 
     def __getitem__(self, rows) -> np.ndarray:
         held = self.row[rows]
-        out = self.samples[np.maximum(held, 0)]
+        if self.padded is not None:
+            return self.padded[held]
+        out = np.take(self.samples, np.maximum(held, 0), axis=0)  # a copy also for one step
         out[held < 0] = np.nan
         return out
 

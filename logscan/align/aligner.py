@@ -16,10 +16,12 @@ from logscan.align.sample_hold import (
     _NS,
     _Clean,
     _gaps,
+    _TimeOrder,
     changed_steps,
     clean_samples,
     hold,
     stale_ns,
+    time_order,
 )
 from logscan.timebase.time_sanity import dense_span
 
@@ -31,6 +33,10 @@ class _Aligner:
         self.log = log
         self.profile = profile
         self.cache: dict[str, _Clean] = {}
+        # a topic's channels share one time array: its order and its gaps are found once
+        # (keyed by the array's id; the array is kept with them, so the id is not reused)
+        self.orders: dict[int, _TimeOrder] = {}
+        self.gaps_found: dict[tuple[int, int, int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.warnings: list[str] = []
         self.gaps: list[tuple[float, float, str]] = []
         self.gap_reported: set[tuple[str, int]] = set()
@@ -43,7 +49,10 @@ class _Aligner:
     def clean(self, name: str) -> _Clean:
         if name not in self.cache:
             ch = self.log.channels[name]
-            c = clean_samples(ch.t, ch.values)
+            order = self.orders.get(id(ch.t))
+            if order is None or order.t is not ch.t:
+                order = self.orders[id(ch.t)] = time_order(ch.t)
+            c = clean_samples(ch.t, ch.values, order)
             if c.unsorted:
                 self.warnings.append(
                     f"channel {name!r}: timestamps out of order ({c.unsorted} backward steps): sorted (stable)"
@@ -77,20 +86,32 @@ class _Aligner:
             return np.full(n, np.nan), np.zeros(n, dtype=bool)
         c = self.clean(name)
         values = c.values if transform is None else transform(c.values)
-        limit = stale_ns(limit_s)
-        z, fresh = hold(c.t, values, grid_ns, limit, z, fresh)
-        key = (name, limit)
-        if key not in self.gap_reported:
-            self.gap_reported.add(key)
-            g_start, g_end = _gaps(c.t, limit, grid_ns)
-            if g_start.size:
-                s = (g_start - self.start_ns) / _NS
-                e = (g_end - self.start_ns) / _NS
-                self.gaps.extend((float(a), float(b), name) for a, b in zip(s, e))
-                longest = int(np.argmax(e - s))
-                gap = (g_start.size, f"{limit_s:g}", f"{e[longest] - s[longest]:.3f}", f"{s[longest]:.3f}")
-                self.gap_channels.setdefault((name.rsplit("/", 1)[0], *gap), []).append(name)
+        z, fresh = hold(c.t, values, grid_ns, stale_ns(limit_s), z, fresh)
+        self.report_gaps(name, grid_ns, limit_s)
         return z, fresh
+
+    def report_gaps(self, name: str, grid_ns: np.ndarray, limit_s: float) -> None:
+        """Note the stretches of the grid's span without a sample of ``name`` for longer than
+        ``limit_s`` (``gaps`` and `gap_lines`), once per channel and limit."""
+        limit = stale_ns(limit_s)
+        key = (name, limit)
+        if key in self.gap_reported:
+            return
+        self.gap_reported.add(key)
+        t = self.clean(name).t
+        # `_gaps` reads the grid's first and last times only
+        found_key = (id(t), limit, int(grid_ns[0]), int(grid_ns[-1]))
+        found = self.gaps_found.get(found_key)
+        if found is None or found[0] is not t:
+            found = self.gaps_found[found_key] = (t, *_gaps(t, limit, grid_ns))
+        _, g_start, g_end = found
+        if g_start.size:
+            s = (g_start - self.start_ns) / _NS
+            e = (g_end - self.start_ns) / _NS
+            self.gaps.extend((float(a), float(b), name) for a, b in zip(s, e))
+            longest = int(np.argmax(e - s))
+            gap = (g_start.size, f"{limit_s:g}", f"{e[longest] - s[longest]:.3f}", f"{s[longest]:.3f}")
+            self.gap_channels.setdefault((name.rsplit("/", 1)[0], *gap), []).append(name)
 
     def gap_lines(self) -> list[str]:
         """One warning per topic's channels with the same gaps (a GNSS receiver's ten fields lost
@@ -116,7 +137,10 @@ class _Aligner:
         named = [ch for ch in channels if ch is not None]
         column = np.empty(n)
         scratch = np.empty(n, dtype=bool)
-        shared = bool(named) and all(np.array_equal(self.clean(ch).t, self.clean(named[0]).t) for ch in named)
+        first_t = self.clean(named[0]).t if named else None
+        shared = bool(named) and all(
+            self.clean(ch).t is first_t or np.array_equal(self.clean(ch).t, first_t) for ch in named
+        )
         if not shared:
             arr = np.full((n, len(channels)), np.nan)
             for j, ch in enumerate(channels):
@@ -124,15 +148,16 @@ class _Aligner:
                     self.hold(ch, grid_ns, limit_s, z=arr[:, j], fresh=scratch)
             return arr
         for ch in named:  # the gaps and warnings of each channel, as a dense hold reports them
-            self.hold(ch, grid_ns, limit_s, z=column, fresh=scratch)
+            self.report_gaps(ch, grid_ns, limit_s)
         t = self.clean(named[0]).t
-        samples = np.full((t.size, len(channels)), np.nan, dtype=dtype)
+        padded = np.full((t.size + 1, len(channels)), np.nan, dtype=dtype)  # the last row: "none held"
+        samples = padded[:-1]
         for j, ch in enumerate(channels):
             if ch is not None:
                 samples[:, j] = self.clean(ch).values
         held, _ = hold(t, np.arange(t.size, dtype=np.float64), grid_ns, stale_ns(limit_s), column, scratch)
         row = np.where(np.isnan(held), -1, held).astype(np.int32 if t.size < 2**31 else np.int64)
-        return HeldTable(samples, row)
+        return HeldTable(samples, row, padded)
 
     def measurement_group(self, spec, grid_ns: np.ndarray, z: np.ndarray) -> AlignedGroup:
         """A profile's measurement group held into ``z`` (N, spec.width): each channel times its

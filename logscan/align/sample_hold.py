@@ -39,20 +39,47 @@ def stale_ns(stale_s: float) -> int:
     return int(round(stale_s * _NS))
 
 
-def clean_samples(t_ns: np.ndarray, values: np.ndarray) -> _Clean:
-    """Stable-sort by time, drop duplicate timestamps (keep the last), then drop non-finite values."""
+@dataclass
+class _TimeOrder:
+    """How one time array is put in order: the stable sort (None: already sorted) and the samples
+    kept after it (None: all, no duplicate times). The channels of a topic share their time array:
+    it is examined once for all of them (`clean_samples`'s ``order``)."""
+
+    t: np.ndarray  # the times it was found for (int64)
+    t_clean: np.ndarray  # sorted, each time once: shared by the channels cleaned with it
+    sort: np.ndarray | None
+    keep: np.ndarray | None
+    unsorted: int
+    duplicates: int
+
+
+def time_order(t_ns: np.ndarray) -> _TimeOrder:
+    """The stable sort and the duplicate times dropped (the last of each kept) of ``t_ns``."""
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    unsorted = int(np.count_nonzero(t_ns[1:] < t_ns[:-1]))
+    sort = np.argsort(t_ns, kind="stable") if unsorted else None
+    t_sorted = t_ns if sort is None else t_ns[sort]
+    last_of_run = np.ones(t_sorted.size, dtype=bool)
+    last_of_run[:-1] = t_sorted[1:] != t_sorted[:-1]
+    duplicates = int(t_sorted.size - np.count_nonzero(last_of_run))
+    keep = last_of_run if duplicates else None
+    t_clean = t_sorted if keep is None else t_sorted[keep]
+    return _TimeOrder(t_ns, t_clean, sort, keep, unsorted, duplicates)
+
+
+def clean_samples(t_ns: np.ndarray, values: np.ndarray, order: _TimeOrder | None = None) -> _Clean:
+    """Stable-sort by time, drop duplicate timestamps (keep the last), then drop non-finite values.
+    ``order``: `time_order` of ``t_ns``, when it is known (another channel of the same times)."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     values = np.asarray(values, dtype=np.float64)
     samples = int(t_ns.size)
-    unsorted = int(np.count_nonzero(t_ns[1:] < t_ns[:-1]))
-    if unsorted:
-        order = np.argsort(t_ns, kind="stable")
-        t_ns, values = t_ns[order], values[order]
-    last_of_run = np.ones(t_ns.size, dtype=bool)
-    last_of_run[:-1] = t_ns[1:] != t_ns[:-1]
-    duplicates = int(t_ns.size - np.count_nonzero(last_of_run))
-    if duplicates:
-        t_ns, values = t_ns[last_of_run], values[last_of_run]
+    order = time_order(t_ns) if order is None else order
+    unsorted, duplicates = order.unsorted, order.duplicates
+    t_ns = order.t_clean
+    if order.sort is not None:
+        values = values[order.sort]
+    if order.keep is not None:
+        values = values[order.keep]
     finite = np.isfinite(values)
     nonfinite = int(finite.size - np.count_nonzero(finite))
     if nonfinite:
