@@ -22,6 +22,7 @@ test that catches sensor biases, which the encoded checks cannot see.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from logscan.detectors.base import Detector, DetectorResult, median_period
@@ -41,8 +42,13 @@ def window_sums(values: np.ndarray, counts: np.ndarray, window: int):
 
     Returns (sum_values, sum_counts, full) where full marks entries with a complete window.
     Non-finite values propagate into every window that contains them (they are exceedances); a
-    window whose huge values add up beyond float range sums to inf.
+    window whose huge values add up beyond float range sums to inf. Each sum is the difference of
+    two running sums (float64: `trailing_sums`, one pass; other types: numpy's cumsum, in their type).
     """
+    values = np.asarray(values)
+    counts = np.asarray(counts)
+    if values.dtype == np.float64 and counts.dtype.kind in "iub":
+        return trailing_sums(np.ascontiguousarray(values), np.ascontiguousarray(counts, dtype=np.int64), int(window))
     finite = np.isfinite(values)
     huge = finite & (np.abs(values) > HUGE_NIS)
     cv = np.concatenate(([0.0], np.cumsum(np.where(finite & ~huge, values, 0.0))))
@@ -65,6 +71,54 @@ def window_sums(values: np.ndarray, counts: np.ndarray, window: int):
     return sums, cc[idx + 1] - cc[lo], idx + 1 >= window
 
 
+@numba.njit(cache=True)
+def trailing_sums(values, counts, window):  # pragma: no cover - compiled
+    """`window_sums` of float64 ``values`` and int64 ``counts``: the same running sums, added in the
+    same order as numpy's cumsum (so the same bits), in one pass without (N,) temporaries."""
+    n = values.size
+    prefix = np.empty(n + 1)  # running sum of the finite, not huge values; prefix[0] = 0
+    bad = np.zeros(n + 1, dtype=np.int64)  # running count of the non-finite ones
+    counted = np.zeros(n + 1, dtype=np.int64)
+    huge = np.empty(n, dtype=np.int64)  # the indices of the huge values, the first n_huge entries
+    prefix[0] = 0.0
+    n_huge = 0
+    for i in range(n):
+        v = values[i]
+        finite = np.isfinite(v)
+        is_huge = finite and abs(v) > HUGE_NIS
+        kept = 0.0 if is_huge or not finite else v
+        prefix[i + 1] = kept if i == 0 else prefix[i] + kept  # cumsum starts at the first value, not 0 + it
+        bad[i + 1] = bad[i] + (0 if finite else 1)
+        counted[i + 1] = counted[i] + counts[i]
+        if is_huge:
+            huge[n_huge] = i
+            n_huge += 1
+    sums = np.empty(n)
+    sum_counts = np.empty(n, dtype=np.int64)
+    full = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        lo = max(i + 1 - window, 0)
+        sums[i] = prefix[i + 1] - prefix[lo]
+        sum_counts[i] = counted[i + 1] - counted[lo]
+        full[i] = i + 1 >= window
+    # each huge value added to the windows that hold it, in the order `window_sums` adds them: by
+    # its distance to the window's end, then by index
+    for offset in range(min(window, n)):
+        for h in range(n_huge):
+            if huge[h] + offset < n:
+                sums[huge[h] + offset] += values[huge[h]]
+    for i in range(n):
+        if bad[i + 1] - bad[max(i + 1 - window, 0)] > 0:
+            sums[i] = np.inf
+    return sums, sum_counts, full
+
+
+def compile_kernels() -> None:
+    """Compile (or load) `trailing_sums` for the types the NIS test and the normalised e_x pass:
+    the first run calls it while the EKF compiles in its own process."""
+    trailing_sums(np.zeros(2), np.ones(2, dtype=np.int64), 1)
+
+
 def as_float32(values: np.ndarray) -> np.ndarray:
     """``values`` as float32 for the figures; values beyond float32's range become +-inf, as a
     cast would, deliberately (without numpy's overflow warning: such a NIS is off every scale)."""
@@ -80,10 +134,14 @@ def chi2_threshold(dof: np.ndarray, alpha: float) -> np.ndarray:
     from scipy.special import chdtri  # here: scipy.special costs ~20 MB, paid only when NIS runs
 
     dof = np.asarray(dof, dtype=np.int64)
-    out = np.full(dof.shape, np.nan)
-    for d in np.unique(dof[dof > 0]):  # a handful of distinct values, not a per-sample loop
-        out[dof == d] = chdtri(d, alpha)  # = chi2.ppf(1 - alpha, d)
-    return out
+    if dof.size == 0:
+        return np.full(dof.shape, np.nan)
+    positive = np.where(dof > 0, dof, 0)  # 0: no threshold (NaN)
+    table = np.full(int(positive.max()) + 1, np.nan)
+    present = np.flatnonzero(np.bincount(positive.ravel()))
+    present = present[present > 0]
+    table[present] = chdtri(present, alpha)  # = chi2.ppf(1 - alpha, d), once per distinct d
+    return table[positive]
 
 
 class NisDetector(Detector):
@@ -163,19 +221,24 @@ class NisDetector(Detector):
             tests.append(("nis.all", trace.nis, trace.m_k > 0, trace.m_k))
         for signal, nis, updated, m in tests:
             steps = np.flatnonzero(updated)
-            statistic = np.full(t.size, np.nan)
-            threshold = np.full(t.size, np.nan)
-            per_dof = np.full(t.size, np.nan, dtype=np.float32)  # about 1 on a consistent filter (figures)
-            warm = np.zeros(t.size, dtype=bool)
-            if steps.size:
-                m_steps = np.full(steps.size, m, dtype=np.int64) if isinstance(m, int) else m[steps]
-                sums, dof, full = window_sums(nis[steps], m_steps, self.window)
-                statistic[steps] = sums
-                threshold[steps] = chi2_threshold(dof, alpha)
-                per_dof[steps] = as_float32(sums / np.maximum(dof, 1))
-                warm[steps[full]] = True
+            m_steps = np.full(steps.size, m, dtype=np.int64) if isinstance(m, int) else m[steps]
+            sums, dof, full = window_sums(nis[steps], m_steps, self.window)
+            statistic = _on_grid(sums, steps, t.size)
+            threshold = _on_grid(chi2_threshold(dof, alpha), steps, t.size)
+            per_dof = _on_grid(as_float32(sums / np.maximum(dof, 1)), steps, t.size)  # about 1 when consistent
+            warmup = np.zeros(t.size, dtype=bool)  # the updates before the first full window
+            warmup[steps[~full]] = True
             result.add_statistic(
-                t, signal, statistic, upper=threshold, valid=updated, warmup=updated & ~warm, n_persist=self.n_persist
+                t, signal, statistic, upper=threshold, valid=updated, warmup=warmup, n_persist=self.n_persist
             )
             result.extras[f"{signal}.per_dof"] = per_dof
         return result
+
+
+def _on_grid(values: np.ndarray, steps: np.ndarray, n_steps: int) -> np.ndarray:
+    """``values`` at the grid ``steps`` (ascending), NaN elsewhere; themselves when every step is one."""
+    if steps.size == n_steps:
+        return values
+    out = np.full(n_steps, np.nan, dtype=values.dtype)
+    out[steps] = values
+    return out
