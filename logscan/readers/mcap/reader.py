@@ -3,7 +3,7 @@
 How a file is read
 ------------------
 The whole file is walked linearly, record by record (``records``: a numba kernel finds the record
-boundaries, numpy gathers channel ids and log times; ``scan``: Python works per chunk and channel,
+boundaries, another groups each chunk's messages by channel; ``scan``: Python works per chunk and channel,
 not per message). This is what the mcap library's streaming reader does too, but it is far faster,
 and it does not depend on the summary section, so it reads every conformance file, including the
 ones whose summary lacks channel or schema records (where ``mcap.reader.SeekingReader`` raises

@@ -1,4 +1,5 @@
-"""MCAP records: opcodes, the numba walk that finds record boundaries, vectorised field gathers, a field cursor."""
+"""MCAP records: opcodes, the numba walk that finds record boundaries, the numba pass that groups a
+container's messages by channel, vectorised field gathers, a field cursor."""
 
 from __future__ import annotations
 
@@ -97,6 +98,114 @@ def walk_records(u8: np.ndarray, start: int, stop: int) -> Records:
     lengths = np.empty(n, dtype=np.int64)
     _fill_records(u8, start, n, ops, offsets, lengths)
     return Records(ops, offsets, lengths, int(end), int(status))
+
+
+MAX_LOG_TIME_NS = 2**63 - 1  # log_time is a uint64 in the file, int64 ns here
+CHANNEL_IDS = 1 << 16  # channel ids are uint16
+
+
+class ChannelGroups(NamedTuple):
+    """A container's messages (`group_messages`): in its order, the ones whose log_time int64 ns
+    hold; and the same grouped by channel id (ascending), each group in the container's order."""
+
+    short_at: int  # body offset of the first message record shorter than its header, or -1 (nothing else set)
+    messages: int  # message records, the dropped ones included
+    channel_ids: np.ndarray  # int64, container order (log_time beyond int64 dropped)
+    log_times: np.ndarray  # int64 ns, container order
+    offsets: np.ndarray  # int64 record body offsets, container order
+    lengths: np.ndarray  # int64 record body lengths, container order
+    group_ids: np.ndarray  # int64 channel id of each group, ascending
+    bounds: np.ndarray  # int64, group g is [bounds[g], bounds[g + 1]) of the grouped arrays
+    low: np.ndarray  # int64 earliest log_time of each group
+    high: np.ndarray  # int64 latest log_time of each group
+    grouped_times: np.ndarray  # int64 ns
+    grouped_starts: np.ndarray  # int64 offset of each message's data (after its header)
+    grouped_ends: np.ndarray  # int64 end of each message's data
+
+
+@njit(cache=True)
+def _message_fields(buf, ops, offsets, lengths, channel_ids, log_times, m_off, m_len):  # pragma: no cover
+    """Channel id, log time, offset and length of each message record whose log_time int64 ns
+    hold, in order; how many; -1, or the body offset of the first message shorter than its header
+    (then nothing is filled)."""
+    for k in range(ops.size):
+        if ops[k] == OP_MESSAGE and lengths[k] < MESSAGE_HEADER:
+            return 0, offsets[k]
+    kept = 0
+    for k in range(ops.size):
+        if ops[k] != OP_MESSAGE:
+            continue
+        pos = offsets[k]
+        raw = np.uint64(0)
+        for i in range(8):
+            raw |= np.uint64(buf[pos + 6 + i]) << np.uint64(8 * i)
+        if raw > np.uint64(MAX_LOG_TIME_NS):  # a damaged log_time: dropped (counted by the caller)
+            continue
+        channel_ids[kept] = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8)
+        log_times[kept] = np.int64(raw)
+        m_off[kept] = pos
+        m_len[kept] = lengths[k]
+        kept += 1
+    return kept, -1
+
+
+@njit(cache=True)
+def _group_by_channel(channel_ids, log_times, m_off, m_len, slot, groups):  # pragma: no cover - compiled
+    """A stable counting sort of the messages by channel id: fills the ``groups`` arrays (ids,
+    bounds, low, high, times, starts, ends) and returns how many groups. ``slot`` (int64 per
+    channel id) is -1 everywhere on entry and again on return."""
+    ids, bounds, low, high, times, starts, ends = groups
+    n_groups = 0
+    for i in range(channel_ids.size):  # messages per channel id, and the ids met
+        c = channel_ids[i]
+        if slot[c] < 0:
+            slot[c] = 0
+            ids[n_groups] = c
+            n_groups += 1
+        slot[c] += 1
+    ids[:n_groups].sort()
+    position = 0
+    for g in range(n_groups):  # each id's first place in the grouped arrays
+        count = slot[ids[g]]
+        slot[ids[g]] = position
+        bounds[g] = position
+        position += count
+    bounds[n_groups] = position
+    for i in range(channel_ids.size):
+        j = slot[channel_ids[i]]
+        slot[channel_ids[i]] = j + 1
+        times[j] = log_times[i]
+        starts[j] = m_off[i] + MESSAGE_HEADER
+        ends[j] = m_off[i] + m_len[i]
+    for g in range(n_groups):
+        slot[ids[g]] = -1
+        low[g] = times[bounds[g] : bounds[g + 1]].min()
+        high[g] = times[bounds[g] : bounds[g + 1]].max()
+    return n_groups
+
+
+def group_messages(
+    u8: np.ndarray, ops: np.ndarray, offsets: np.ndarray, lengths: np.ndarray, slot: np.ndarray
+) -> ChannelGroups:
+    """The message records among ``ops``/``offsets``/``lengths`` (a container's records in ``u8``),
+    by channel (`ChannelGroups`): two compiled passes instead of a gather, a mask and a stable
+    argsort per field. ``slot``: int64[CHANNEL_IDS], -1 everywhere (left so)."""
+    if u8.flags.writeable:  # a read-only view (as of a mapped file): the kernels compile for one type
+        u8 = u8.view()
+        u8.flags.writeable = False
+    count = int(np.count_nonzero(ops == OP_MESSAGE))
+    fields = [np.empty(count, dtype=np.int64) for _ in range(4)]
+    kept, short_at = _message_fields(u8, ops, offsets, lengths, *fields)
+    fields = [field[:kept] for field in fields]
+    groups = [np.empty(size, dtype=np.int64) for size in (kept, kept + 1, kept, kept, kept, kept, kept)]
+    n_groups = _group_by_channel(*fields, slot, tuple(groups)) if short_at < 0 else 0
+    ids, bounds, low, high = (
+        groups[0][:n_groups],
+        groups[1][: n_groups + 1],
+        groups[2][:n_groups],
+        groups[3][:n_groups],
+    )
+    return ChannelGroups(int(short_at), count, *fields, ids, bounds, low, high, *groups[4:])
 
 
 def gather_u64(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:

@@ -47,6 +47,7 @@ from logscan.errors import CorruptLogError
 from logscan.readers.common import MCAP_MAGIC, input_error, stat_input, topic_wanted
 from logscan.readers.mcap.inflate import InflateError, inflate
 from logscan.readers.mcap.records import (
+    CHANNEL_IDS,
     MESSAGE_HEADER,
     OP_CHANNEL,
     OP_CHUNK,
@@ -62,9 +63,9 @@ from logscan.readers.mcap.records import (
     WALK_TEXT,
     Cursor,
     Records,
-    gather_u16,
     gather_u32,
     gather_u64,
+    group_messages,
     walk_records,
 )
 from logscan.readers.mcap.scan_damage import (
@@ -91,7 +92,6 @@ from logscan.readers.mcap.scan_records import (
 MAX_CHUNK_BYTES = 512 << 20  # one chunk never decompresses to more
 MAX_RATIO = 1000  # the chunks of a file decompress to at most this times its size in all ...
 MIN_FILE_BUDGET_BYTES = 1 << 30  # ... or this, whichever is larger
-MAX_LOG_TIME_NS = 2**63 - 1  # log_time is a uint64 in the file, int64 ns here
 FLUSH_BYTES = 32 << 20  # message bytes held in batches before they are handed to ``on_flush``
 TOP_LEVEL_SLICE = 1 << 16  # top-level records handled at a time (unchunked files)
 WALK_WINDOW = 32 << 20  # bytes of the file walked for record boundaries before their pages go back
@@ -124,6 +124,7 @@ class Scan:
         self.damage: list[str] = []  # damage that did not stop the walk: the read is partial all the same
         self.warnings: list[str] = []
         self._wanted_ids: dict[int, bool] = {}
+        self._slot = np.full(CHANNEL_IDS, -1, dtype=np.int64)  # `group_messages`' scratch, one per channel id
         self._inflate_budget = MIN_FILE_BUDGET_BYTES  # bytes the file's chunks may still decompress to
         self.on_flush: Callable[[Scan], None] | None = None  # takes (and empties) the batches
         self.on_position: Callable[[int], None] | None = None  # hears the file offset scanned to, per chunk
@@ -327,50 +328,33 @@ class Scan:
 
     def _container(self, data, u8, ops, offsets, lengths, *, checked: bool) -> None:
         """Schema, channel and message records of one chunk (or one run of top-level records)."""
-        is_message = ops == OP_MESSAGE
         if not checked:
             self.unchecked_records += int(np.count_nonzero(np.isin(ops, (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE))))
         redefined = self._definitions(data, ops, offsets, lengths)
-        if not is_message.any():
-            return
-        m_off = offsets[is_message]
-        m_len = lengths[is_message]
-        if (m_len < MESSAGE_HEADER).any():
-            raise_corrupt("message record shorter than its header", int(m_off[m_len < MESSAGE_HEADER][0]))
-        self.messages_read += int(m_off.size)
-        raw_times = gather_u64(u8, m_off + 6)
-        fits = raw_times <= np.uint64(MAX_LOG_TIME_NS)  # int64 ns hold it (until 2262)
-        if not fits.all():  # a damaged log_time: the message is dropped and counted
-            self.beyond_int64 += int(m_off.size - np.count_nonzero(fits))
-            m_off, m_len, raw_times = m_off[fits], m_len[fits], raw_times[fits]
-        channel_ids = gather_u16(u8, m_off)
-        log_times = raw_times.astype(np.int64)
+        found = group_messages(u8, ops, offsets, lengths, self._slot)
+        if found.short_at >= 0:
+            raise_corrupt("message record shorter than its header", found.short_at)
+        self.messages_read += found.messages
+        self.beyond_int64 += found.messages - found.channel_ids.size  # a damaged log_time: dropped, counted
         if redefined:
-            self.redefined_messages += int(np.count_nonzero(np.isin(channel_ids, list(redefined))))
-        # the messages grouped by channel, each group in the chunk's order (a stable sort): one
-        # gather per array instead of a mask and three selections per channel
-        order = np.argsort(channel_ids, kind="stable")
-        by_channel, times_of, offsets_of, lengths_of = (a[order] for a in (channel_ids, log_times, m_off, m_len))
-        bounds = np.flatnonzero(by_channel[1:] != by_channel[:-1]) + 1
-        for lo, hi in zip([0, *bounds.tolist()], [*bounds.tolist(), by_channel.size]) if by_channel.size else ():
-            cid = int(by_channel[lo])
-            select = slice(lo, hi)
+            self.redefined_messages += int(np.count_nonzero(np.isin(found.channel_ids, list(redefined))))
+        bounds = found.bounds.tolist()
+        for g, (cid, low, high) in enumerate(zip(found.group_ids.tolist(), found.low.tolist(), found.high.tolist())):
+            lo, hi = bounds[g], bounds[g + 1]
             channel = self.channels.get(cid)
             if channel is None:
                 self.unknown_channel_messages += hi - lo
                 continue
-            times = times_of[select]
-            self.counts[cid] = self.counts.get(cid, 0) + int(times.size)
-            low, high = int(times.min()), int(times.max())
+            self.counts[cid] = self.counts.get(cid, 0) + hi - lo
             self.first[cid] = min(self.first.get(cid, low), low)
             self.last[cid] = max(self.last.get(cid, high), high)
             if not self._is_wanted(cid):
                 continue
             batch = self.batches.setdefault(cid, _Batch())
-            batch.times.append(times)
-            batch.segments.append((u8, offsets_of[select] + MESSAGE_HEADER, offsets_of[select] + lengths_of[select]))
-        if self.keep_raw:
-            self._keep_raw(data, u8, m_off, m_len, channel_ids, log_times)
+            batch.times.append(found.grouped_times[lo:hi])
+            batch.segments.append((u8, found.grouped_starts[lo:hi], found.grouped_ends[lo:hi]))
+        if self.keep_raw and found.messages:
+            self._keep_raw(data, u8, found.offsets, found.lengths, found.channel_ids, found.log_times)
 
     def _definitions(self, data, ops, offsets, lengths) -> set[int]:
         """Register the container's schema and channel records (few: in order, before its
