@@ -78,9 +78,13 @@ def compile_kernels() -> None:
 def channel_noise(values: np.ndarray) -> float:
     """A channel's noise std from its own samples: median |v_i - v_i-1| / (0.6745 sqrt 2) (motion
     adds to it, a stuck stretch shorter than half the log does not move the median)."""
-    steps = np.abs(np.diff(values))
-    steps = steps[np.isfinite(steps)]
-    return float(np.median(steps)) / MAD_TO_STD if steps.size else np.nan
+    steps = np.diff(values)
+    np.abs(steps, out=steps)
+    finite = np.isfinite(steps)
+    if not finite.all():
+        steps = steps[finite]
+    # its own temporary: partitioned in place, not copied first
+    return float(np.median(steps, overwrite_input=True)) / MAD_TO_STD if steps.size else np.nan
 
 
 def fill_factor(lengths: np.ndarray) -> float:
@@ -198,11 +202,15 @@ class FrozenSensorDetector(Detector):
         # exact repeats first: their typical run is a forward fill's L; repeats on most steps and
         # in many runs: a sensor that holds its value whenever the quantity is still (not checked)
         new = np.concatenate(([True], v[1:] != v[:-1]))
-        exact = np.diff(np.append(np.flatnonzero(new), v.size))
-        fill = fill_factor(exact)
-        if 1.0 - new.mean() >= HELD_SHARE and repeat_probability(exact, fill) >= NOISELESS_P:
-            return None, np.nan, np.nan, fill, none, none
-        sigma = float(np.fmin(self._stated_sigma(group, j, model), channel_noise(v[new])))
+        n_new = int(np.count_nonzero(new))
+        fill = 1.0  # no exact repeat: every run is one sample long (L = 1, no sample held)
+        if n_new < v.size:
+            exact = np.diff(np.append(np.flatnonzero(new), v.size))
+            fill = fill_factor(exact)
+            if 1.0 - n_new / v.size >= HELD_SHARE and repeat_probability(exact, fill) >= NOISELESS_P:
+                return None, np.nan, np.nan, fill, none, none
+        noise = channel_noise(v if n_new == v.size else v[new])
+        sigma = float(np.fmin(self._stated_sigma(group, j, model), noise))
         anchor = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0)
         del v, new
         if rest is not None:  # a run starts again after the last sample at rest (module docstring)
@@ -213,8 +221,11 @@ class FrozenSensorDetector(Detector):
         held = np.arange(1, anchor.size + 1) - anchor  # r_i: samples held since the anchor (1 at it)
         lengths = np.diff(np.append(np.flatnonzero(held == 1), anchor.size))
         # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
-        stat = np.full(run.n_steps, np.nan)
-        stat[steps] = held / fill
+        if steps.size == run.n_steps:  # every step is a fresh sample
+            stat = held / fill
+        else:
+            stat = np.full(run.n_steps, np.nan)
+            stat[steps] = held / fill
         if rest is not None:
             stat[steps[still]] = np.nan  # stillness, not judged
         h = max(float(self.n_samples), run_threshold(lengths, fill, tests, duration, float(self.budget_per_hour)))
