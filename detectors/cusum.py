@@ -92,11 +92,12 @@ def _side(s, start, u, kappa, top, i):
 
 
 @numba.njit(cache=True)
-def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
+def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
     """Signed two-sided CUSUM per column with its resets (docs/algorithms.md section 1e).
 
-    t (N,) grid times; y, S_diag (N, J) innovations and their variances, NaN where a column has no
-    update (whitened here, u = y / sqrt(S), so no (N, J) temporaries);
+    t (N,) grid times; y, S_diag (N, M) innovations and their variances, NaN where a column has no
+    update (whitened here, u = y / sqrt(S), so no (N, M) temporaries), of which the J columns from
+    ``first`` on are tested (read in place: no copy of a column);
     reset (N,) bool, steps where every test restarts (filter divergence); gap (J,) s, a longer gap
     between a column's updates restarts it; h (J,) thresholds; kappa reference; cap: statistics held
     at most cap * h; clip: each u enters at most +-clip (one glitch cannot raise an alarm alone).
@@ -104,7 +105,7 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
     the run of the side g shows (-1 when that side is zero); and free (N, J), the same sides without
     the cap (restarted with them), whose peak is an alarm's real magnitude.
     """
-    n, m = y.shape
+    n, m = y.shape[0], gap.size
     g = np.full((n, m), np.nan)
     free = np.full((n, m), np.nan)
     onset = np.full((n, m), -1, dtype=np.int64)
@@ -122,7 +123,7 @@ def cusum_kernel(t, y, S_diag, reset, gap, h, kappa, cap, clip):  # pragma: no c
         for i in range(n):
             if reset[i]:
                 sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
-            x = y[i, j] / np.sqrt(S_diag[i, j])  # u = y~ / sqrt(S_jj)
+            x = y[i, first + j] / np.sqrt(S_diag[i, first + j])  # u = y~ / sqrt(S_jj)
             if not np.isfinite(x):
                 continue
             if t[i] - last > gap[j]:
@@ -152,7 +153,7 @@ def compile_kernels() -> None:
     """Compile (or load) `cusum_kernel` for the types `Cusum` passes (the EKF trace's float32
     innovations and variances): the first run calls it while the EKF compiles in its own process."""
     y = np.zeros((2, 1), dtype=np.float32)
-    cusum_kernel(np.zeros(2), y, y + 1.0, np.zeros(2, dtype=bool), np.ones(1), np.ones(1), 0.5, 2.0, 5.0)
+    cusum_kernel(np.zeros(2), y, y + 1.0, 0, np.zeros(2, dtype=bool), np.ones(1), np.ones(1), 0.5, 2.0, 5.0)
 
 
 def uncapped_peaks(alarms, t: np.ndarray, free: np.ndarray, h: float) -> list[dict]:
@@ -290,6 +291,7 @@ class CusumDetector(Detector):
         settings = (float(self.kappa), float(self.cap), float(self.clip))
         gaps = self._gaps(trace)
         model = context.get("model")
+        y, S_diag = np.ascontiguousarray(trace.y), np.ascontiguousarray(trace.S_diag)  # no copy: the trace's own
         result.info.update(kappa=float(self.kappa), budget_per_hour=float(self.budget_per_hour), tests=2 * h.size)
         result.info["h"], result.info["arl0_updates"] = {}, {}
         for g, group in enumerate(trace.group_names):
@@ -297,8 +299,7 @@ class CusumDetector(Detector):
                 signal = f"cusum.{group}" + (f".{output}" if output else "")
                 # one column at a time: (N,) temporaries, not the (N, J) statistic and onsets at once
                 column = slice(j, j + 1)
-                y, S_diag = (np.ascontiguousarray(a[:, column]) for a in (trace.y, trace.S_diag))
-                stat, onset, free = cusum_kernel(t, y, S_diag, trace.diverged, gaps[column], h[column], *settings)
+                stat, onset, free = cusum_kernel(t, y, S_diag, j, trace.diverged, gaps[column], h[column], *settings)
                 stat, onset, free = stat[:, 0], onset[:, 0], free[:, 0]
                 valid = np.isfinite(stat)
                 alarms = result.add_statistic(

@@ -20,7 +20,7 @@ def run_kernel(u, h, *, kappa=0.25, cap=1.5, gap=1.0, reset=None, clip=4.0):
     t = np.arange(u.shape[0]) * DT
     reset = np.zeros(u.shape[0], dtype=bool) if reset is None else reset
     m = u.shape[1]
-    return cusum_kernel(t, u, np.ones_like(u), reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)[:2]
+    return cusum_kernel(t, u, np.ones_like(u), 0, reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)[:2]
 
 
 def run_uncapped(u, h, **settings):
@@ -28,7 +28,7 @@ def run_uncapped(u, h, **settings):
     u = np.asarray(u, dtype=np.float64)[:, None]
     t = np.arange(u.shape[0]) * DT
     one = np.ones(1)
-    g, _, free = cusum_kernel(t, u, np.ones_like(u), np.zeros(u.shape[0], bool), one, one * h, 0.25, 1.5, 4.0)
+    g, _, free = cusum_kernel(t, u, np.ones_like(u), 0, np.zeros(u.shape[0], bool), one, one * h, 0.25, 1.5, 4.0)
     return t, g[:, 0], free[:, 0]
 
 
