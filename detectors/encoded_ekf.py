@@ -380,12 +380,14 @@ class EncodedEkfDetector(Detector):
             for rows in row_blocks(n_steps):  # (N, n) temporaries a block at a time
                 onboard, P_post = run.onboard_variance[rows], trace.P_post_diag[rows]
                 logged = np.isfinite(onboard)
+                every = logged.all()  # the usual block: no entry to leave out
                 cv = cv_of(rows)
                 alpha_sq = cv * cv
                 # e_v = CV P_onboard CV^T - CV P_shadow CV^T over the logged diagonal entries
-                e_v[rows] = np.einsum("kn,kn->k", alpha_sq, np.where(logged, onboard - P_post, 0.0))
-                scale[rows] = np.einsum("kn,kn->k", alpha_sq, np.where(logged, P_post, 0.0))
-                any_logged[rows] = logged.any(axis=1)
+                difference = onboard - P_post
+                e_v[rows] = np.einsum("kn,kn->k", alpha_sq, difference if every else np.where(logged, difference, 0.0))
+                scale[rows] = np.einsum("kn,kn->k", alpha_sq, P_post if every else np.where(logged, P_post, 0.0))
+                any_logged[rows] = True if every else logged.any(axis=1)
             defined_v = defined & any_logged
             e_v[~defined_v] = np.nan
             return e_v, defined_v, scale
@@ -423,13 +425,16 @@ class EncodedEkfDetector(Detector):
         for rows in row_blocks(n_steps):  # (N, n) temporaries a block at a time
             onboard = run.onboard_state[rows]
             logged = np.isfinite(onboard)
+            every = logged.all()  # the usual block: no entry to leave out
             cv = cv_of(rows)
-            diff = np.where(logged, onboard - trace.x_post[rows], 0.0)
+            diff = onboard - trace.x_post[rows]
+            diff = diff if every else np.where(logged, diff, 0.0)
             diff[:, angles] = (diff[:, angles] + np.pi) % (2.0 * np.pi) - np.pi
             e_s[rows] = np.einsum("kn,kn->k", cv, diff)
-            rounding = np.where(logged, cv * (LOGGED_PRECISION * np.abs(onboard)), 0.0)
+            rounding = cv * (LOGGED_PRECISION * np.abs(onboard))
+            rounding = rounding if every else np.where(logged, rounding, 0.0)
             floor[rows] = np.sqrt(np.einsum("kn,kn->k", rounding, rounding) / 3.0)
-            any_logged[rows] = logged.any(axis=1)
+            any_logged[rows] = True if every else logged.any(axis=1)
         defined_s = defined & any_logged
         e_s[~defined_s] = np.nan
         return e_s, defined_s, floor
