@@ -82,7 +82,8 @@ END_DELAY_KEY = "end_delay_s"  # DetectorResult.info: statistic -> its declared 
 def median_period(t: np.ndarray, steps: np.ndarray) -> float:
     """The median time between the steps of ``t`` where ``steps`` (bool) is True; 0 with fewer than two."""
     times = np.asarray(t, dtype=np.float64)[np.asarray(steps, dtype=bool)]
-    return float(np.median(np.diff(times))) if times.size > 1 else 0.0
+    # the differences are a temporary of its own: partitioned in place, not copied first
+    return float(np.median(np.diff(times), overwrite_input=True)) if times.size > 1 else 0.0
 
 
 # --- trained-state encoding (lossless, strict JSON) -----------------------------------------------

@@ -332,8 +332,8 @@ class CusumDetector(Detector):
         """Per measurement column, the gap between updates that restarts its tests (s)."""
         gap = np.zeros(int(trace.group_sizes.sum()))
         for g in range(len(trace.group_names)):  # a handful of groups
-            steps = np.flatnonzero(trace.updated[:, g])
-            period = float(np.median(np.diff(trace.t[steps]))) if steps.size > 1 else trace.dt
+            steps = trace.updated[:, g]
+            period = median_period(trace.t, steps) if np.count_nonzero(steps) > 1 else trace.dt
             gap[self._columns(trace, g)] = max(float(self.gap_s), GAP_PERIODS * period)
         return gap
 
