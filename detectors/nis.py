@@ -74,43 +74,59 @@ def window_sums(values: np.ndarray, counts: np.ndarray, window: int):
 @numba.njit(cache=True)
 def trailing_sums(values, counts, window):  # pragma: no cover - compiled
     """`window_sums` of float64 ``values`` and int64 ``counts``: the same running sums, added in the
-    same order as numpy's cumsum (so the same bits), in one pass without (N,) temporaries."""
+    same order as numpy's cumsum (so the same bits), in one pass; the running sums at the last
+    ``window`` + 1 entries are kept in a ring, not as (N,) arrays."""
     n = values.size
-    prefix = np.empty(n + 1)  # running sum of the finite, not huge values; prefix[0] = 0
-    bad = np.zeros(n + 1, dtype=np.int64)  # running count of the non-finite ones
-    counted = np.zeros(n + 1, dtype=np.int64)
-    huge = np.empty(n, dtype=np.int64)  # the indices of the huge values, the first n_huge entries
-    prefix[0] = 0.0
+    sums = np.empty(n)
+    sum_counts = np.empty(n, dtype=np.int64)
+    full = np.empty(n, dtype=np.bool_)
+    size = min(window, n) + 1
+    ring_sum = np.zeros(size)  # running sum of the finite, not huge values (0 before the first)
+    ring_bad = np.zeros(size, dtype=np.int64)  # running count of the non-finite ones
+    ring_count = np.zeros(size, dtype=np.int64)
+    running, bad, counted = 0.0, 0, 0
     n_huge = 0
     for i in range(n):
         v = values[i]
         finite = np.isfinite(v)
         is_huge = finite and abs(v) > HUGE_NIS
+        n_huge += 1 if is_huge else 0
         kept = 0.0 if is_huge or not finite else v
-        prefix[i + 1] = kept if i == 0 else prefix[i] + kept  # cumsum starts at the first value, not 0 + it
-        bad[i + 1] = bad[i] + (0 if finite else 1)
-        counted[i + 1] = counted[i] + counts[i]
-        if is_huge:
-            huge[n_huge] = i
-            n_huge += 1
-    sums = np.empty(n)
-    sum_counts = np.empty(n, dtype=np.int64)
-    full = np.empty(n, dtype=np.bool_)
+        running = kept if i == 0 else running + kept  # cumsum starts at the first value, not 0 + it
+        bad += 0 if finite else 1
+        counted += counts[i]
+        lo = i + 1 - window  # the window is (lo, i]: the running sums at lo are subtracted
+        if lo > 0:
+            at = lo % size
+            sums[i], sum_counts[i] = running - ring_sum[at], counted - ring_count[at]
+            window_bad = bad - ring_bad[at]
+        else:
+            sums[i], sum_counts[i], window_bad = running - 0.0, counted, bad
+        full[i] = lo >= 0
+        if window_bad > 0:
+            sums[i] = np.inf  # after the huge values' additions below, which cannot undo it
+        at = (i + 1) % size
+        ring_sum[at], ring_bad[at], ring_count[at] = running, bad, counted
+    if n_huge:
+        _add_huge(sums, values, window, n_huge)
+    return sums, sum_counts, full
+
+
+@numba.njit(cache=True)
+def _add_huge(sums, values, window, n_huge):  # pragma: no cover - compiled
+    """Each huge value added to the windows that hold it, in the order `window_sums` adds them: by
+    its distance to the window's end, then by index (a window already inf stays inf)."""
+    n = values.size
+    huge = np.empty(n_huge, dtype=np.int64)
+    k = 0
     for i in range(n):
-        lo = max(i + 1 - window, 0)
-        sums[i] = prefix[i + 1] - prefix[lo]
-        sum_counts[i] = counted[i + 1] - counted[lo]
-        full[i] = i + 1 >= window
-    # each huge value added to the windows that hold it, in the order `window_sums` adds them: by
-    # its distance to the window's end, then by index
+        if np.isfinite(values[i]) and abs(values[i]) > HUGE_NIS:
+            huge[k] = i
+            k += 1
     for offset in range(min(window, n)):
         for h in range(n_huge):
             if huge[h] + offset < n:
                 sums[huge[h] + offset] += values[huge[h]]
-    for i in range(n):
-        if bad[i + 1] - bad[max(i + 1 - window, 0)] > 0:
-            sums[i] = np.inf
-    return sums, sum_counts, full
 
 
 def compile_kernels() -> None:
