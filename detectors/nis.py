@@ -107,26 +107,19 @@ def trailing_sums(values, counts, window):  # pragma: no cover - compiled
             sums[i] = np.inf  # after the huge values' additions below, which cannot undo it
         at = (i + 1) % size
         ring_sum[at], ring_bad[at], ring_count[at] = running, bad, counted
-    if n_huge:
-        _add_huge(sums, values, window, n_huge)
-    return sums, sum_counts, full
-
-
-@numba.njit(cache=True)
-def _add_huge(sums, values, window, n_huge):  # pragma: no cover - compiled
-    """Each huge value added to the windows that hold it, in the order `window_sums` adds them: by
-    its distance to the window's end, then by index (a window already inf stays inf)."""
-    n = values.size
+    # each huge value added to the windows that hold it, in the order `window_sums` adds them: by
+    # its distance to the window's end, then by index (a window already inf stays inf)
     huge = np.empty(n_huge, dtype=np.int64)
     k = 0
-    for i in range(n):
+    for i in range(n if n_huge else 0):
         if np.isfinite(values[i]) and abs(values[i]) > HUGE_NIS:
             huge[k] = i
             k += 1
-    for offset in range(min(window, n)):
-        for h in range(n_huge):
-            if huge[h] + offset < n:
-                sums[huge[h] + offset] += values[huge[h]]
+    for offset in range(min(window, n) if n_huge else 0):
+        for h in huge:
+            if h + offset < n:
+                sums[h + offset] += values[h]
+    return sums, sum_counts, full
 
 
 def compile_kernels() -> None:
