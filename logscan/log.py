@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -157,14 +158,22 @@ class Log:
         if warning and warning not in self.source.warnings:
             self.source.warnings.append(warning)
 
-    def release_samples(self) -> None:
-        """Drop every channel's samples, keeping names, units and the log's span: once a log is
-        aligned, its raw samples (a 1-hour 100 Hz log: ~300 MB) are not read again."""
-        self._span_text = self.span_warning()
-        self._span_ns = (self.start_ns, self.end_ns)
-        self._sample_counts = {name: len(c) for name, c in self.channels.items()}
+    def release_samples(self, names: Iterable[str] | None = None) -> None:
+        """Drop the samples of the channels ``names`` (None: every channel), keeping names, units,
+        sample counts and the log's span (taken before the first is dropped): once a log is
+        aligned, its raw samples (a 1-hour 100 Hz log: ~300 MB) are not read again; alignment may
+        drop a channel's as soon as it has held it for the last time."""
+        if self._span_ns is None:  # the first release: the span and its warning, of every sample
+            self._span_ns = (self.start_ns, self.end_ns)
+            self._span_text = self.span_warning()
+        dropped = list(self.channels) if names is None else [name for name in names if name in self.channels]
         empty_t, empty_v = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
-        self.channels = {name: Channel(name, empty_t, empty_v, c.unit) for name, c in self.channels.items()}
+        channels = dict(self.channels)  # a new dict: whoever holds the old one keeps its samples
+        for name in dropped:
+            channel = channels[name]
+            self._sample_counts.setdefault(name, len(channel))
+            channels[name] = Channel(name, empty_t, empty_v, channel.unit)
+        self.channels = channels
 
     def span_warning(self) -> str | None:
         """A warning when the log spans more than MAX_SPAN_S, else None."""

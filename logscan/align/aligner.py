@@ -23,6 +23,7 @@ from logscan.align.sample_hold import (
     stale_ns,
     time_order,
 )
+from logscan.errors import InternalError
 from logscan.timebase.time_sanity import dense_span
 
 
@@ -33,6 +34,7 @@ class _Aligner:
         self.log = log
         self.profile = profile
         self.cache: dict[str, _Clean] = {}
+        self.released: set[str] = set()  # channels whose samples are gone (`release`)
         # a topic's channels share one time array: its order and its gaps are found once
         # (keyed by the array's id; the array is kept with them, so the id is not reused)
         self.orders: dict[int, _TimeOrder] = {}
@@ -47,6 +49,8 @@ class _Aligner:
         self.ends = ("", "")  # the channels that start first and end last (after `span`)
 
     def clean(self, name: str) -> _Clean:
+        if name in self.released:  # its samples are gone: holding it again would hold nothing
+            raise InternalError(f"alignment read the channel {name!r} after releasing its samples")
         if name not in self.cache:
             ch = self.log.channels[name]
             order = self.orders.get(id(ch.t))
@@ -67,6 +71,25 @@ class _Aligner:
                 )
             self.cache[name] = c
         return self.cache[name]
+
+    def release(self, names) -> None:
+        """Drop the samples of the channels ``names`` from the log (`Log.release_samples`) and
+        from the cleaned channels (their counts stay): held for the last time, they are not read
+        again, and a long log's raw samples then need not wait for every aligned copy."""
+        names = [name for name in names if name in self.log.channels and name not in self.released]
+        if not names:
+            return
+        self.released.update(names)
+        self.log.release_samples(names)
+        no_t, no_values = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
+        for name in names:
+            if name in self.cache:
+                self.cache[name] = replace(self.cache[name], t=no_t, values=no_values)
+        # the orders and gaps found for time arrays no channel holds any more go with them
+        raw = {id(channel.t) for channel in self.log.channels.values()}
+        self.orders = {key: order for key, order in self.orders.items() if id(order.t) in raw}
+        cleaned = {id(c.t) for c in self.cache.values()}
+        self.gaps_found = {key: found for key, found in self.gaps_found.items() if id(found[0]) in cleaned}
 
     def span(self, names: list[str]) -> tuple[int, int]:
         """(first, last) ns of the ``names`` where they are dense (`time_sanity.dense_span`); the
@@ -137,7 +160,7 @@ class _Aligner:
         named = [ch for ch in channels if ch is not None]
         column = np.empty(n)
         scratch = np.empty(n, dtype=bool)
-        first_t = self.clean(named[0]).t if named else None
+        first_t = self.clean(named[0]).t if named else np.empty(0, dtype=np.int64)
         shared = bool(named) and all(
             self.clean(ch).t is first_t or np.array_equal(self.clean(ch).t, first_t) for ch in named
         )

@@ -3,6 +3,7 @@ flag, on-board estimates and redundant sensors each held by the aligner."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -13,9 +14,18 @@ from logscan.align.sample_hold import _NS
 from logscan.timebase.time_sanity import check_window, grid, outlier_warnings
 
 
-def align(log, profile, *, start_s: float | None = None, end_s: float | None = None) -> AlignedRun:
+def align(
+    log,
+    profile,
+    *,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    release: Callable[[str], bool] | None = None,
+) -> AlignedRun:
     """Put ``log`` onto ``profile``'s analysis grid (see the module docstring for the rules),
-    from ``start_s`` to ``end_s`` seconds since the log's start when given.
+    from ``start_s`` to ``end_s`` seconds since the log's start when given. ``release`` (a test
+    of the name; None: none): the channels the log drops the samples of once held for the last
+    time (`Log.release_samples`): a long log's raw samples and aligned copies then overlap less.
 
     Raises ProfileError when the profile names channels the log lacks (with close names),
     InputError when none of its input/measurement channels holds a finite sample, the grid is
@@ -24,32 +34,28 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
     check_window(start_s, end_s)
     profile.check_channels(log)
     aligner = _Aligner(log, profile)
-    input_channels = list(profile.inputs.channels)
+    held = _LastHolds(aligner, profile, release)
     window = None if start_s is None and end_s is None else (start_s, end_s)
     grid_ns, t, start_ns = _grid(aligner, log, profile, window)
     n, dt = grid_ns.size, 1.0 / float(profile.vehicle.rate_hz)
 
     scratch = np.empty(n, dtype=bool)  # fresh masks nobody reads
     u, u_fresh = _inputs(aligner, profile, grid_ns, dt, scratch)
+    held.done("inputs")
     groups = _measurement_groups(aligner, profile, grid_ns, scratch)
-    mode = None
-    mode_channel = None
-    if profile.mode is not None:
-        mode_channel = profile.mode.channel
-        mode, _ = aligner.hold(mode_channel, grid_ns, profile.mode.stale_s, fresh=scratch)
-
-    ground = None
-    policy = getattr(profile, "alarm_policy", None)
-    if policy is not None and policy.ground_channel:  # logged on change: held as long as it says
-        ground, _ = aligner.hold(policy.ground_channel, grid_ns, float("inf"), fresh=scratch)
+    held.done("measurements")
+    mode_channel = profile.mode.channel if profile.mode is not None else None
+    mode, ground = _mode_and_ground(aligner, profile, grid_ns, scratch)
+    held.done("mode")
     onboard = _onboard(aligner, profile, log, grid_ns)
-    return AlignedRun(
+    held.done("onboard")
+    run = AlignedRun(
         t=t,
         dt=dt,
         start_ns=start_ns,
         u=u,
         u_fresh=u_fresh,
-        input_channels=input_channels,
+        input_channels=list(profile.inputs.channels),
         groups=groups,
         mode=mode,
         ground=ground,
@@ -66,6 +72,63 @@ def align(log, profile, *, start_s: float | None = None, end_s: float | None = N
         channel_stats=_channel_stats(aligner),
         window=window,
     )
+    held.done("redundant")
+    return run
+
+
+def _mode_and_ground(aligner: _Aligner, profile, grid_ns: np.ndarray, scratch: np.ndarray):
+    """(mode, ground): the profile's [mode] channel and [alarms] ground_channel held, each None
+    without one."""
+    mode = ground = None
+    if profile.mode is not None:
+        mode, _ = aligner.hold(profile.mode.channel, grid_ns, profile.mode.stale_s, fresh=scratch)
+    policy = getattr(profile, "alarm_policy", None)
+    if policy is not None and policy.ground_channel:  # logged on change: held as long as it says
+        ground, _ = aligner.hold(policy.ground_channel, grid_ns, float("inf"), fresh=scratch)
+    return mode, ground
+
+
+class _LastHolds:
+    """The channels each step of `align` holds, to release each (when ``release`` allows) once the
+    last step that holds it is done."""
+
+    def __init__(self, aligner: _Aligner, profile, release: Callable[[str], bool] | None):
+        self.aligner = aligner
+        self.release = release
+        self.steps: dict[str, set[str]] = {} if release is None else _channels_by_step(profile, aligner.log)
+
+    def done(self, step: str) -> None:
+        if self.release is None:
+            return
+        held = self.steps.pop(step)
+        later = set().union(*self.steps.values())
+        self.aligner.release(sorted(ch for ch in held - later if self.release(ch)))
+
+
+def _channels_by_step(profile, log) -> dict[str, set[str]]:
+    """The channels each step of `align` holds (or cleans), by step, in the order they run."""
+    measured: set[str] = set()
+    for spec in profile.measurements.values():
+        measured.update(spec.channels)
+        measured.update(spec.noise_channels or ())
+        if getattr(spec, "gate_channel", None):
+            measured.add(spec.gate_channel)
+    mode = {profile.mode.channel} if profile.mode is not None else set()
+    policy = getattr(profile, "alarm_policy", None)
+    if policy is not None and policy.ground_channel:
+        mode.add(policy.ground_channel)
+    onboard: set[str] = set()
+    if profile.onboard is not None:
+        for which in ("state", "variance"):
+            onboard.update(ch for ch in profile.onboard_channels(which, log.channels)[0] if ch is not None)
+    redundant = {sensor.channel for red in profile.redundant.values() for sensor in red.sensors.values()}
+    return {
+        "inputs": {ch for ch in profile.inputs.channels if ch is not None},
+        "measurements": measured,
+        "mode": mode,
+        "onboard": onboard,
+        "redundant": redundant,
+    }
 
 
 def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarray, int]:

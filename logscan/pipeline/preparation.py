@@ -36,6 +36,9 @@ if TYPE_CHECKING:
 
 Progress = Callable[[str], None]
 Fraction = Callable[[int, int], None]  # (done, total) of the step under way, e.g. bytes read
+# what is read besides the profile's topics: the autopilot's states for the report, and a ULog's
+# GNSS time (its UTC), when the log has them
+CONTEXT_TOPICS = frozenset(STATE_TOPICS) | frozenset(GNSS_UTC_CHANNELS)
 
 
 def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
@@ -174,7 +177,7 @@ def prepare(
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     step("aligning")
-    run = align(log, profile, start_s=start_s, end_s=end_s)
+    run = align(log, profile, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
     if run.n_steps < 2:
         raise LogscanError(
             "too few samples on the analysis grid to filter",
@@ -205,13 +208,29 @@ def _read(
 ) -> Log:
     """The log with the topics the profile needs, the detectors' ``raw_topics`` and the report's
     context: the built-in profile's log when it already holds them (read once), else read now."""
-    # the autopilot's states for the report, and a ULog's GNSS time (its UTC), when the log has them
-    context_topics = set(STATE_TOPICS) | set(GNSS_UTC_CHANNELS)
     log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
-    if log is None or use_header_stamp or not set(raw_topics) | context_topics <= loaded.log_extra_topics:
-        topics = loaded.profile.topics() | set(raw_topics) | context_topics
+    if log is None or use_header_stamp or not set(raw_topics) | CONTEXT_TOPICS <= loaded.log_extra_topics:
+        topics = loaded.profile.topics() | set(raw_topics) | CONTEXT_TOPICS
         log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction)
     return log
+
+
+def _released_once_held(log: Log, profile, raw_topics: frozenset[str]) -> Callable[[str], bool] | None:
+    """The channels alignment may drop the samples of once it has held them (`align`'s
+    ``release``): none with further loops (they align the log again), else those under no topic
+    read after alignment: the report's context, the ground truth's states, the ``raw_topics``."""
+    if profile.loops:
+        return None
+    truth_topic = (log.truth or {}).get("true_state_topic")
+    read_later = {*CONTEXT_TOPICS, *raw_topics, *([truth_topic] if isinstance(truth_topic, str) else [])}
+    prefixes = tuple(topic.strip("/") + "/" for topic in read_later)
+    exact = {topic.strip("/") for topic in read_later}
+
+    def releasable(name: str) -> bool:
+        bare = name.strip("/")
+        return bare not in exact and not bare.startswith(prefixes)
+
+    return releasable
 
 
 def _read_warnings(log: Log, run: AlignedRun) -> list[str]:
