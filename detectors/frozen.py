@@ -57,22 +57,42 @@ MAD_TO_STD = 0.6745 * np.sqrt(2.0)  # median |v_i - v_i-1| of N(0, sigma^2) nois
 
 
 @numba.njit(cache=True)
-def held_runs(v, tol):  # pragma: no cover - compiled
-    """Per sample, the first index of its run: a run lasts while samples stay within ``tol`` of its
-    first sample (the anchor); a NaN never joins a run."""
-    anchor = np.empty(v.size, dtype=np.int64)
+def held_runs(v, tol, still):  # pragma: no cover - compiled
+    """(anchor, held, run lengths): per sample the first index of its run, r_i (samples held since
+    it, 1 at it), and the length of each run in order. A run lasts while samples stay within
+    ``tol`` of its first sample (a NaN never joins a run); ``still`` (bool per sample, or empty:
+    none) marks samples at rest: each starts a run of its own and the next sample starts a new
+    one (a run counts only the samples after the last one at rest)."""
+    n = v.size
+    anchor = np.empty(n, dtype=np.int64)
+    held = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)  # the first n_runs entries
     a = 0
-    for i in range(v.size):
+    last_rest = -1
+    n_runs = 0
+    run_start = 0
+    for i in range(n):
         if i == 0 or not (abs(v[i] - v[a]) <= tol):
             a = i
-        anchor[i] = a
-    return anchor
+        if still.size and still[i]:
+            last_rest = i
+        b = min(max(a, last_rest + 1), i)
+        anchor[i] = b
+        held[i] = i + 1 - b
+        if b == i:  # a run starts here: the previous one ended at i - 1
+            if n_runs:
+                lengths[n_runs - 1] = i - run_start
+            run_start = i
+            n_runs += 1
+    if n_runs:
+        lengths[n_runs - 1] = n - run_start
+    return anchor, held, lengths[:n_runs]
 
 
 def compile_kernels() -> None:
     """Compile (or load) `held_runs` for the types `Frozen` passes: the first run calls it while
     the EKF compiles in its own process."""
-    held_runs(np.zeros(2), 0.0)
+    held_runs(np.zeros(2), 0.0, np.zeros(0, dtype=np.bool_))
 
 
 def channel_noise(values: np.ndarray) -> float:
@@ -211,15 +231,11 @@ class FrozenSensorDetector(Detector):
                 return None, np.nan, np.nan, fill, none, none
         noise = channel_noise(v if n_new == v.size else v[new])
         sigma = float(np.fmin(self._stated_sigma(group, j, model), noise))
-        anchor = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0)
+        # a run starts again after the last sample at rest (module docstring)
+        still = np.zeros(0, dtype=bool) if rest is None else np.asarray(rest, dtype=bool)[steps]
+        # r_i: samples held since the anchor (1 at it), and the length of each run
+        anchor, held, lengths = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0, still)
         del v, new
-        if rest is not None:  # a run starts again after the last sample at rest (module docstring)
-            still = np.asarray(rest, dtype=bool)[steps]
-            last_rest = np.maximum.accumulate(np.where(still, np.arange(steps.size), -1))
-            anchor = np.maximum(anchor, last_rest + 1)
-            anchor = np.minimum(anchor, np.arange(steps.size))
-        held = np.arange(1, anchor.size + 1) - anchor  # r_i: samples held since the anchor (1 at it)
-        lengths = np.diff(np.append(np.flatnonzero(held == 1), anchor.size))
         # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
         if steps.size == run.n_steps:  # every step is a fresh sample
             stat = held / fill

@@ -110,7 +110,9 @@ def test_a_forward_filled_channel_counts_its_own_samples():
 @given(st.lists(st.integers(-3, 3), min_size=1, max_size=60), st.floats(0.0, 2.0))
 def test_held_runs_anchor_every_sample_within_tol_of_its_run_start(values, tol):
     v = np.asarray(values, dtype=np.float64)
-    anchor = held_runs(v, tol)
+    anchor, held, lengths = held_runs(v, tol, np.zeros(0, dtype=bool))
+    assert held.tolist() == (np.arange(1, v.size + 1) - anchor).tolist()
+    assert lengths.sum() == v.size and lengths.size == np.count_nonzero(held == 1)
     assert anchor[0] == 0
     assert np.all(anchor <= np.arange(v.size))
     assert np.all(np.abs(v - v[anchor]) <= tol)
