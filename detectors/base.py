@@ -73,10 +73,20 @@ from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
 from logscan.traces import EkfTrace
 
-__all__ = ["END_DELAY_KEY", "Band", "Detector", "DetectorResult", "Needs", "describe", "median_period"]
+__all__ = ["END_DELAY_KEY", "Band", "Detector", "DetectorResult", "Needs", "any_per_row", "describe", "median_period"]
 
 STATE_FORMAT = "logscan-detector-state"
 END_DELAY_KEY = "end_delay_s"  # DetectorResult.info: statistic -> its declared end delay (`Detector.end_delays`)
+
+
+def any_per_row(mask: np.ndarray) -> np.ndarray:
+    """``mask.any(axis=1)`` of an (N, G) bool array (a trace's ``updated``): a C-contiguous row of 1,
+    2, 4 or 8 flags is read as one unsigned integer, non-zero when any flag is set (numpy's row
+    reduction over so few columns is some 80 times slower)."""
+    width = mask.shape[1] if mask.ndim == 2 else 0
+    if mask.dtype == np.bool_ and mask.flags.c_contiguous and width in (1, 2, 4, 8):
+        return mask.view(f"u{width}")[:, 0] != 0
+    return mask.any(axis=1)
 
 
 def median_period(t: np.ndarray, steps: np.ndarray) -> float:

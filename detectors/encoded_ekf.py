@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.detectors.adaptive_threshold import adaptive_band, trailing_mean_var
-from logscan.detectors.base import Detector, DetectorResult, Needs, median_period
+from logscan.detectors.base import Detector, DetectorResult, Needs, any_per_row, median_period
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.normalised_check import (
     normal_bound,
@@ -217,7 +217,7 @@ class EncodedEkfDetector(Detector):
         to [-pi, pi) (a heading crossing +-pi is wrapped by the filter, not corrected by 2 pi).
         ``cv_of(rows)``: the coding vectors of those steps (default: computed from the trace)."""
         cv_of = self._coding_vectors(trace, model) if cv_of is None else cv_of
-        defined = trace.updated.any(axis=1) | trace.diverged
+        defined = any_per_row(trace.updated) | trace.diverged
         n_steps, n = trace.x_prior.shape
         angles = _angle_states(model, n)
         e_x = np.empty(n_steps)
@@ -306,7 +306,7 @@ class EncodedEkfDetector(Detector):
         """e_x summed over the last W checked steps (window_sum) and the observed e_v (a variance over
         the last window_v) can alarm that long after an anomaly (median period between checked
         steps); the other checks judge each sample alone."""
-        period = median_period(trace.t, trace.updated.any(axis=1))
+        period = median_period(trace.t, any_per_row(trace.updated))
         delays = {"e_v": self.window_v * period} if result.info.get("variance_check") == "observed" else {}
         if self.variant == "adaptive" and self.ex_statistic == "window_sum":
             delays["e_x"] = self.window * period

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult, median_period
+from logscan.detectors.base import Detector, DetectorResult, any_per_row, median_period
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import PERSIST, Boolean, Interval, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
@@ -197,7 +197,7 @@ class NisDetector(Detector):
         if self.alpha is not None:
             return float(self.alpha)
         duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
-        tests = trace.updated.sum() + (trace.updated.any(axis=1).sum() if self.overall else 0)
+        tests = np.count_nonzero(trace.updated) + (np.count_nonzero(any_per_row(trace.updated)) if self.overall else 0)
         tests_per_second = max(float(tests) / duration, 1e-9)
         # alpha = rate_design / (3600 * tests per second): a union bound over every test
         return design_rate(float(self.budget_per_hour), self.proof_hours) / (3600.0 * tests_per_second)

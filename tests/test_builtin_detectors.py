@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
+from logscan.detectors.base import any_per_row
 from logscan.detectors.encoded_ekf import EncodedEkfDetector, coding_vectors
 from logscan.detectors.nis import NisDetector, chi2_threshold, window_sums
 from logscan.errors import NotTrainedError
@@ -151,6 +152,13 @@ def test_window_sums_match_brute_force(values, window):
         assert sums[i] == pytest.approx(v[lo : i + 1].sum())
         assert dof[i] == counts[lo : i + 1].sum()
         assert full[i] == (i + 1 >= window)
+
+
+@pytest.mark.parametrize("width", [1, 2, 3, 4, 5, 8, 12])
+def test_any_per_row_is_numpys_row_any(width):
+    mask = np.random.default_rng(width).random((50, width)) < 0.2
+    assert any_per_row(mask).tolist() == mask.any(axis=1).tolist()
+    assert any_per_row(np.asfortranarray(mask)).tolist() == mask.any(axis=1).tolist()
 
 
 def test_chi2_threshold_matches_scipy():
