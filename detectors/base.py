@@ -86,7 +86,7 @@ def any_per_row(mask: np.ndarray) -> np.ndarray:
     width = mask.shape[1] if mask.ndim == 2 else 0
     if mask.dtype == np.bool_ and mask.flags.c_contiguous and width in (1, 2, 4, 8):
         return mask.view(f"u{width}")[:, 0] != 0
-    return mask.any(axis=1)
+    return np.asarray(mask.any(axis=1))
 
 
 def median_period(t: np.ndarray, steps: np.ndarray) -> float:
