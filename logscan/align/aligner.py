@@ -173,11 +173,11 @@ class _Aligner:
         for ch in named:  # the gaps and warnings of each channel, as a dense hold reports them
             self.report_gaps(ch, grid_ns, limit_s)
         t = self.clean(named[0]).t
-        padded = np.full((t.size + 1, len(channels)), np.nan, dtype=dtype)  # the last row: "none held"
+        padded = np.empty((t.size + 1, len(channels)), dtype=dtype)
+        padded[-1] = np.nan  # the row -1 reads: "none held"
         samples = padded[:-1]
         for j, ch in enumerate(channels):
-            if ch is not None:
-                samples[:, j] = self.clean(ch).values
+            samples[:, j] = np.nan if ch is None else self.clean(ch).values
         held, _ = hold(t, np.arange(t.size, dtype=np.float64), grid_ns, stale_ns(limit_s), column, scratch)
         row = np.where(np.isnan(held), -1, held).astype(np.int32 if t.size < 2**31 else np.int64)
         return HeldTable(samples, row, padded)

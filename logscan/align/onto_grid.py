@@ -137,7 +137,9 @@ def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarr
     rate = float(profile.vehicle.rate_hz)
     span_channels = list(profile.inputs.channels) + [ch for g in profile.measurements.values() for ch in g.channels]
     first, last = aligner.span(span_channels)
-    origin = getattr(log, "origin_ns", log.start_ns)  # the log's own time zero, whatever was read
+    # the log's own time zero, whatever was read (`Log.origin_ns`); start_ns, a pass over every
+    # channel's times, only of a log without one
+    origin = log.origin_ns if hasattr(log, "origin_ns") else log.start_ns
     start_ns = int(origin) if origin is not None else first
     early = [int(times[0]) for times in aligner.dropped.values() if times[0] < first]
     if early and start_ns <= max(early):  # the log's start is an outlier: count from the grid's
