@@ -58,9 +58,12 @@ def window_sum(z: np.ndarray, valid: np.ndarray, window: int) -> tuple[np.ndarra
     """(sum_k, warm): the sum of z over the last ``window`` valid steps up to k, over sqrt(window),
     at each valid step (NaN elsewhere); warm where the window is full. A non-finite z makes every
     window holding it infinite (an exceedance), as in the NIS test's sums."""
+    steps = np.flatnonzero(valid)
+    if steps.size == z.size:  # every step judged: the sums are the series (no copy onto a NaN grid)
+        sums, _, full = window_sums(z, np.ones(z.size, dtype=np.int64), window)
+        return sums / np.sqrt(window), full
     out = np.full(z.size, np.nan)
     warm = np.zeros(z.size, dtype=bool)
-    steps = np.flatnonzero(valid)
     if steps.size:
         sums, _, full = window_sums(z[steps], np.ones(steps.size, dtype=np.int64), window)
         out[steps] = sums / np.sqrt(window)
