@@ -218,7 +218,8 @@ class FrozenSensorDetector(Detector):
         none = np.zeros(0, dtype=np.int64)
         if steps.size < 2:  # nothing to compare (the group's own gaps are the other checks' to report)
             return None, np.nan, np.nan, np.nan, none, none
-        v = np.asarray(column[steps], dtype=np.float64)
+        # a sample on every step: the column itself, copied whole (faster than gathering it)
+        v = np.array(column, dtype=np.float64) if steps.size == column.size else np.asarray(column[steps], np.float64)
         # exact repeats first: their typical run is a forward fill's L; repeats on most steps and
         # in many runs: a sensor that holds its value whenever the quantity is still (not checked)
         new = np.concatenate(([True], v[1:] != v[:-1]))
