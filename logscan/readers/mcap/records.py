@@ -188,16 +188,25 @@ def group_messages(
     count = int(np.count_nonzero(ops == OP_MESSAGE))
     fields = [np.empty(count, dtype=np.int64) for _ in range(4)]
     kept, short_at = _message_fields(u8, ops, offsets, lengths, *fields)
-    fields = [field[:kept] for field in fields]
-    groups = [np.empty(size, dtype=np.int64) for size in (kept, kept + 1, kept, kept, kept, kept, kept)]
-    n_groups = _group_by_channel(*fields, slot, tuple(groups)) if short_at < 0 else 0
-    ids, bounds, low, high = (
-        groups[0][:n_groups],
-        groups[1][: n_groups + 1],
-        groups[2][:n_groups],
-        groups[3][:n_groups],
+    channel_ids, log_times, m_off, m_len = (field[:kept] for field in fields)
+    groups = tuple(np.empty(size, dtype=np.int64) for size in (kept, kept + 1, kept, kept, kept, kept, kept))
+    n_groups = _group_by_channel(channel_ids, log_times, m_off, m_len, slot, groups) if short_at < 0 else 0
+    ids, bounds, low, high, times, starts, ends = groups
+    return ChannelGroups(
+        int(short_at),
+        count,
+        channel_ids,
+        log_times,
+        m_off,
+        m_len,
+        ids[:n_groups],
+        bounds[: n_groups + 1],
+        low[:n_groups],
+        high[:n_groups],
+        times,
+        starts,
+        ends,
     )
-    return ChannelGroups(int(short_at), count, *fields, ids, bounds, low, high, *groups[4:])
 
 
 def gather_u64(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
