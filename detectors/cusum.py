@@ -106,9 +106,9 @@ def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):  # pragm
     the cap (restarted with them), whose peak is an alarm's real magnitude.
     """
     n, m = y.shape[0], gap.size
-    g = np.full((n, m), np.nan)
-    free = np.full((n, m), np.nan)
-    onset = np.full((n, m), -1, dtype=np.int64)
+    g = np.empty((n, m))  # every entry written once below (NaN and -1 without an update)
+    free = np.empty((n, m))
+    onset = np.empty((n, m), dtype=np.int64)
     no_run = np.int64(-1)  # a run start of no run; int64, not the literal -1: _side compiles once
     for j in range(m):
         sp = 0.0
@@ -125,6 +125,7 @@ def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):  # pragm
                 sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
             x = y[i, first + j] / np.sqrt(S_diag[i, first + j])  # u = y~ / sqrt(S_jj)
             if not np.isfinite(x):
+                g[i, j], free[i, j], onset[i, j] = np.nan, np.nan, no_run
                 continue
             if t[i] - last > gap[j]:
                 sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
