@@ -382,7 +382,7 @@ def typed_array(values: np.ndarray) -> object:
     if values.size and values.dtype.kind in "iuf" and values.dtype.isnative:
         narrowed = _narrowed(values) if values.dtype.itemsize == 8 and values.dtype.kind in "iu" else values
         short = _TYPED_ARRAY_CODES.get(narrowed.dtype.name) if narrowed is not None else None
-        if short is not None:
+        if narrowed is not None and short is not None:
             spec = {"dtype": short, "bdata": base64.b64encode(np.ascontiguousarray(narrowed).data).decode("ascii")}
             if narrowed.ndim > 1:
                 spec["shape"] = str(narrowed.shape)[1:-1]
