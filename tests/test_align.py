@@ -240,6 +240,17 @@ def test_redundant_group_applies_its_polynomial_before_holding():
     assert steps(g.fresh) == list(range(0, 101, 10))
 
 
+def test_a_redundant_sensors_gap_is_the_runs_gap_and_warning():
+    """The [redundant] groups are held before the run's warnings and gaps are taken: a gap in one of
+    their sensors is reported like any measurement's (it was computed, then dropped)."""
+    t = np.arange(0, 1001, 100)
+    lost = t[(t < 300) | (t > 800)]  # the GNSS receiver silent from 0.3 to 0.8 s
+    toml = SPEED + '\n[redundant.v]\nsensors = { enc = "/enc", gps = "/gps" }\nrate_hz = 10\n'
+    r = run({"/force": force_100hz(), "/speed": (t, t), "/enc": (t, t / 100.0), "/gps": (lost, lost / 100.0)}, toml)
+    assert [name for _, _, name in r.gaps] == ["/gps"]
+    assert any("'/gps'" in w and "gap" in w for w in r.warnings)
+
+
 def test_profile_noise_and_range_overrides_reach_the_group():
     toml = PAIR.replace("rate_hz = 10", "rate_hz = 10\nnoise_std = [0.2, 0.3]\nrange_lo = -5\nrange_hi = 5")
     t = np.arange(0, 1001, 100)

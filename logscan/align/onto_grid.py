@@ -49,6 +49,9 @@ def align(
     held.done("mode")
     onboard = _onboard(aligner, profile, log, grid_ns)
     held.done("onboard")
+    # before the run's warnings and gaps are taken: a redundant sensor's gaps are the run's too
+    redundant = _redundant_groups(aligner, profile, grid_ns)
+    held.done("redundant")
     run = AlignedRun(
         t=t,
         dt=dt,
@@ -68,11 +71,10 @@ def align(
         onboard_names=onboard.names,
         onboard_state_channels=onboard.state_channels,
         onboard_variance_channels=onboard.variance_channels,
-        redundant=_redundant_groups(aligner, profile, grid_ns),
+        redundant=redundant,
         channel_stats=_channel_stats(aligner),
         window=window,
     )
-    held.done("redundant")
     return run
 
 
