@@ -181,6 +181,28 @@ def test_an_hour_with_three_alarming_groups_stays_under_the_size_limits(tmp_path
     assert sizes["embed"] <= 6_000_000 and sizes["directory"] <= 300_000, sizes
 
 
+@pytest.mark.parametrize("sigmas", [[1e-6, 1.0, 3e4], [2e-9, 5e-3], [1e-30, 1e18]])
+def test_the_pack_is_the_float64_formula_rounded_once(sigmas):
+    # innovations divided in float32 (exact for a power-of-two scale) pack as float64's quotient
+    # does, at the edges of float16 and float32 too: tiny, huge, subnormal, inf, NaN
+    run, trace, z, y, sigma = synthetic(sigmas)
+    edges = np.array([1e-45, -1e-40, 3e-8, 6e-8, 7e4, -1e30, 3e38, np.inf, -np.inf, np.nan], dtype=np.float32)
+    trace.y[1 : 1 + edges.size, 0] = edges
+    with np.errstate(over="ignore"):
+        trace.y[20 : 20 + edges.size, -1] = edges * np.float32(sigmas[-1])
+    pack = pack_innovations(run, trace)
+    y64, S64 = trace.y.astype(np.float64), trace.S_diag.astype(np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        expected = {
+            "predicted": (z - y64 - pack.offset).astype(np.float32),
+            "innovation": (y64 / pack.scale).astype(np.float16),
+            "sigma": (np.sqrt(S64) / pack.scale).astype(np.float16),
+        }
+    for field, values in expected.items():
+        bits = np.dtype(f"u{values.dtype.itemsize}")  # bit for bit: NaN's and zero's sign too
+        np.testing.assert_array_equal(np.ascontiguousarray(pack.packed[field]).view(bits), values.view(bits))
+
+
 def test_the_normalised_innovations_and_predictions_alone_are_the_views():
     run, trace, *_ = synthetic([1e-6, 1.0, 3e4])
     innovations = pack_innovations(run, trace)

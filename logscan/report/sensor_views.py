@@ -161,6 +161,14 @@ def _quotient(innovation: np.ndarray, sigma: np.ndarray) -> np.ndarray:
         return np.divide(innovation, sigma, dtype=np.float32)
 
 
+def _divisor(scale: np.ndarray, y_dtype: np.dtype) -> np.ndarray:
+    """The columns' power-of-two ``scale`` to divide float32 innovations by in float32: exact, so
+    rounded once to float16 as float64's quotient is (a quotient float32 cannot hold normally is
+    below float16's least or beyond its range either way: 0 or inf alike); float64 otherwise."""
+    fits = y_dtype == np.float32 and bool(np.all((scale >= _SCALE_RANGE[0]) & (scale <= _SCALE_RANGE[1])))
+    return scale.astype(np.float32) if fits else scale
+
+
 def _channel_scales(S_diag: np.ndarray) -> np.ndarray:
     """A power of two near each column's median sigma (1 for a column never updated)."""
     sample = S_diag[:: max(S_diag.shape[0] // 10_000, 1)].astype(np.float64)
@@ -201,17 +209,21 @@ def pack_innovations(run, trace, samples: np.ndarray | None = None) -> Innovatio
     scale = _channel_scales(trace.S_diag)
     offset = _channel_offsets(z_of, n_steps, m_total)
     packed = np.empty((n_steps, m_total), dtype=PACKED) if samples is None else samples.view(PACKED)
+    over_scale = _divisor(scale, trace.y.dtype)
     for start in range(0, n_steps, ROWS_PER_BLOCK):
         rows = slice(start, min(start + ROWS_PER_BLOCK, n_steps))
-        z = z_of(rows)
-        y = trace.y[rows].astype(np.float64)
+        z = z_of(rows)  # a block of its own: the arithmetic below is in place
+        y = trace.y[rows]  # float32: widened exactly where float64 meets it
         with np.errstate(invalid="ignore", over="ignore"):
-            sigma = np.sqrt(trace.S_diag[rows].astype(np.float64))
+            sigma = np.sqrt(trace.S_diag[rows], dtype=np.float64)
+            sigma /= scale
             # h(x_prior) = z - y; y and sigma in float16 (beyond its range: inf, a gap in the figure)
             block = packed[rows]
-            block["predicted"] = z - y - offset
-            block["innovation"] = y / scale
-            block["sigma"] = sigma / scale
+            z -= y
+            z -= offset
+            block["predicted"] = z
+            block["innovation"] = np.divide(y, over_scale)
+            block["sigma"] = sigma
     channels = {name: list(run.groups[name].channels) for name in trace.group_names}
     return Innovations(
         list(trace.group_names),
