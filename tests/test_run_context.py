@@ -22,6 +22,7 @@ from logscan.report.run_context import (
     RunContext,
     mode_of,
     path_of,
+    true_states,
 )
 from logscan.results import Incident
 
@@ -162,3 +163,28 @@ def test_context_points_come_out_of_the_report_point_budget():
 
     assert points(with_context) <= points(plain) + 200  # the path's points were paid for
     assert points(with_context) <= POINT_BUDGET + 2_000
+
+
+class TruthChannel(SimpleNamespace):
+    def __len__(self) -> int:
+        return len(self.values)
+
+
+def test_true_states_hold_the_latest_truth_sample_and_are_nan_before_the_first():
+    t_ns = np.array([15, 25, 40], dtype=np.int64) * 10**8  # 1.5, 2.5, 4.0 s after the log's zero
+    shared = TruthChannel(t=t_ns, values=np.array([1.0, 2.0, 3.0]))
+    late = TruthChannel(t=t_ns + 10**9, values=np.array([7.0, 8.0, 9.0]))
+    log = SimpleNamespace(
+        truth={"true_state_topic": "/truth", "true_state_fields": ["px", "py", "vx", "nope"]},
+        channels={"/truth/px": shared, "/truth/py": TruthChannel(t=t_ns, values=-shared.values), "/truth/vx": late},
+    )
+    run = SimpleNamespace(start_ns=0, t=np.arange(0.0, 5.5, 0.5))
+    model = SimpleNamespace(state_names=["px", "py", "vx"])
+    nan = np.nan
+    truth = true_states(log, run, model)
+    assert sorted(truth) == ["px", "py", "vx"]
+    px = [nan, nan, nan, 1.0, 1.0, 2.0, 2.0, 2.0, 3.0, 3.0, 3.0]
+    np.testing.assert_array_equal(truth["px"], px)
+    np.testing.assert_array_equal(truth["py"], -np.array(px))
+    np.testing.assert_array_equal(truth["vx"], [nan] * 5 + [7.0, 7.0, 8.0, 8.0, 8.0, 9.0])
+    assert all(values.dtype == np.float64 for values in truth.values())

@@ -252,15 +252,17 @@ def true_states(log, run, model) -> dict[str, np.ndarray]:
     channels = {name: channel for name, channel in channels.items() if channel is not None and len(channel)}
     grid_ns = run.start_ns + np.round(np.asarray(run.t, dtype=np.float64) * 1e9).astype(np.int64)
     out = {}
-    latest: dict[int, np.ndarray] = {}  # the fields of one truth message share its time array: searched once
+    # the fields of one truth message share its time array: searched once, for the index of each
+    # step's latest sample (0 before the first) and the steps before the first (empty, usually)
+    latest: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for name, channel in channels.items():
-        i = latest.get(id(channel.t))
-        if i is None:
-            i = latest[id(channel.t)] = (
-                np.searchsorted(np.asarray(channel.t, dtype=np.int64), grid_ns, side="right") - 1
-            )
-        values = np.asarray(channel.values, dtype=np.float64)
-        out[name] = np.where(i >= 0, values[np.clip(i, 0, None)], np.nan)
+        if id(channel.t) not in latest:
+            i = np.searchsorted(np.asarray(channel.t, dtype=np.int64), grid_ns, side="right") - 1
+            before_first = np.flatnonzero(i < 0)
+            latest[id(channel.t)] = (np.maximum(i, 0, out=i), before_first)
+        index, before_first = latest[id(channel.t)]
+        out[name] = np.asarray(channel.values, dtype=np.float64)[index]
+        out[name][before_first] = np.nan
     return out
 
 
