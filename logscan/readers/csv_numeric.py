@@ -43,7 +43,7 @@ from numba.extending import intrinsic
 
 from logscan.numba_cache import follow_dependencies
 from logscan.readers.bits import load_u64, set_bits
-from logscan.readers.decimal_float import number_value, scan_number
+from logscan.readers.decimal_float import byte_at, number_value, scan_number
 
 INT, FLOAT = 0, 1  # column kinds
 OK, NOT_PLAIN, NO_ROOM = 0, 1, 2  # how the kernel stopped
@@ -126,12 +126,13 @@ def parse_numeric_rows(buf, start, sep, cells, floats, kinds, empties, first, li
     while p < end:
         if row >= limit:
             return row - first, NO_ROOM
-        if buf[p] == _NL or buf[p] == _CR:  # a blank line: pandas skips it
+        if byte_at(buf, p) == _NL or byte_at(buf, p) == _CR:  # a blank line: pandas skips it
             return row - first, NOT_PLAIN
         for c in range(k):
-            while p < end and buf[p] == _SPACE:
+            while p < end and byte_at(buf, p) == _SPACE:
                 p += 1
-            if p >= end or buf[p] == sep or buf[p] == _NL or buf[p] == _CR:  # empty: no sample
+            # an empty cell: no sample
+            if p >= end or byte_at(buf, p) == sep or byte_at(buf, p) == _NL or byte_at(buf, p) == _CR:
                 if kinds[c] == INT:
                     floated[c] = row
                     kinds[c] = FLOAT
@@ -152,16 +153,16 @@ def parse_numeric_rows(buf, start, sep, cells, floats, kinds, empties, first, li
                         kinds[c] = FLOAT
                     floats[c, row] = number
                 p = q
-                while p < end and buf[p] == _SPACE:
+                while p < end and byte_at(buf, p) == _SPACE:
                     p += 1
             if c < k - 1:
-                if p >= end or buf[p] != sep:
+                if p >= end or byte_at(buf, p) != sep:
                     return row - first, NOT_PLAIN
                 p += 1
             elif p < end:
-                if buf[p] == _CR and p + 1 < end and buf[p + 1] == _NL:
+                if byte_at(buf, p) == _CR and p + 1 < end and byte_at(buf, p + 1) == _NL:
                     p += 1
-                if buf[p] != _NL:
+                if byte_at(buf, p) != _NL:
                     return row - first, NOT_PLAIN
                 p += 1
         row += 1

@@ -24,7 +24,8 @@ instructions (`bits`): emulated with 32-bit halves the product was half of Eisel
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
 from logscan.numba_cache import follow_dependencies
 from logscan.readers.bits import float_of_bits, leading_zeros, load_u64, mul_128, trailing_zeros
@@ -66,6 +67,19 @@ _MUL_1_1E4 = np.uint64(1 + (10000 << 32))
 _PLUS118 = np.uint64(0x7676767676767676)  # 0x76 + 10 = 0x80: the top bit of a byte over 9
 _BYTE_TOPS = np.uint64(0x8080808080808080)
 _POW10_INT = np.array([10**k for k in range(20)], dtype=np.uint64)
+
+
+@intrinsic
+def byte_at(typingctx, buf, index):  # pragma: no cover - compiled
+    """buf[index] of a uint8 array, 0 <= index < buf.size (the caller checks): numba's indexing with
+    a signed index adds a test for a negative one at every byte, 8 % of a CSV parse."""
+    signature = types.uint8(buf, types.int64)
+
+    def codegen(context, builder, sig, args):
+        array = context.make_array(sig.args[0])(context, builder, args[0])
+        return builder.load(builder.gep(array.data, [args[1]]))
+
+    return signature, codegen
 
 
 @njit(cache=True, inline="always")
@@ -140,8 +154,8 @@ def _digits(buf, i, end, w):  # pragma: no cover - numba kernel
             w = w * _POW10_INT[n] + _value_of_eight((v << shift) | (_ZEROS8 >> np.uint64(8 * n)))
             i += n
         return w, i
-    while i < end and 48 <= buf[i] <= 57:
-        w = w * np.uint64(10) + np.uint64(buf[i] - 48)
+    while i < end and 48 <= byte_at(buf, i) <= 57:
+        w = w * np.uint64(10) + np.uint64(byte_at(buf, i) - 48)
         i += 1
     return w, i
 
@@ -150,19 +164,19 @@ def _digits(buf, i, end, w):  # pragma: no cover - numba kernel
 def _exponent(buf, i, end):  # pragma: no cover - numba kernel
     """The exponent part at buf[i] ('e'/'E', optional sign, digits): (exponent, where it stops,
     False when the syntax is wrong). No 'e': (0, i, True). Huge exponents saturate at 10**4."""
-    if i >= end or (buf[i] != 101 and buf[i] != 69):
+    if i >= end or (byte_at(buf, i) != 101 and byte_at(buf, i) != 69):
         return 0, i, True
     i += 1
     negative = False
-    if i < end and (buf[i] == 43 or buf[i] == 45):
-        negative = buf[i] == 45
+    if i < end and (byte_at(buf, i) == 43 or byte_at(buf, i) == 45):
+        negative = byte_at(buf, i) == 45
         i += 1
-    if i >= end or buf[i] < 48 or buf[i] > 57:
+    if i >= end or byte_at(buf, i) < 48 or byte_at(buf, i) > 57:
         return 0, i, False
     exponent = 0
-    while i < end and 48 <= buf[i] <= 57:
+    while i < end and 48 <= byte_at(buf, i) <= 57:
         if exponent < 10000:
-            exponent = exponent * 10 + (buf[i] - 48)
+            exponent = exponent * 10 + (byte_at(buf, i) - 48)
         i += 1
     return (-exponent if negative else exponent), i, True
 
@@ -174,29 +188,29 @@ def scan_number(buf, start, end):  # pragma: no cover - numba kernel
     no fraction and no exponent; ``digits``: significant digits (over `MAX_DIGITS`: w is wrong);
     ``fine`` False when the text is not JSON number syntax (then it stops where that showed)."""
     i = start
-    negative = i < end and buf[i] == 45  # '-'
+    negative = i < end and byte_at(buf, i) == 45  # '-'
     if negative:
         i += 1
     w = np.uint64(0)
-    if i >= end or buf[i] < 48 or buf[i] > 57:
+    if i >= end or byte_at(buf, i) < 48 or byte_at(buf, i) > 57:
         return negative, w, 0, 0, False, i, False
     digits = 0
     e = 0
-    if buf[i] == 48:  # a leading 0 stands alone
+    if byte_at(buf, i) == 48:  # a leading 0 stands alone
         i += 1
-        if i < end and 48 <= buf[i] <= 57:
+        if i < end and 48 <= byte_at(buf, i) <= 57:
             return negative, w, 0, 0, False, i, False
     else:
         first = i
         w, i = _digits(buf, i, end, w)
         digits = i - first
     integer = True
-    if i < end and buf[i] == 46:  # '.' then at least one digit
+    if i < end and byte_at(buf, i) == 46:  # '.' then at least one digit
         integer = False
         i += 1
         point = i
         if digits == 0:  # 0.000ddd: the zeros after the point are not significant
-            while i < end and buf[i] == 48:
+            while i < end and byte_at(buf, i) == 48:
                 i += 1
         first = i
         w, i = _digits(buf, i, end, w)
@@ -204,7 +218,7 @@ def scan_number(buf, start, end):  # pragma: no cover - numba kernel
             return negative, w, 0, 0, False, i, False
         digits += i - first
         e = point - i
-    if i < end and (buf[i] == 101 or buf[i] == 69):
+    if i < end and (byte_at(buf, i) == 101 or byte_at(buf, i) == 69):
         integer = False
         exponent, i, fine = _exponent(buf, i, end)
         if not fine:
