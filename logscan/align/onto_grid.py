@@ -44,7 +44,6 @@ def align(
     held.done("inputs")
     groups = _measurement_groups(aligner, profile, grid_ns, scratch)
     held.done("measurements")
-    mode_channel = profile.mode.channel if profile.mode is not None else None
     mode, ground = _mode_and_ground(aligner, profile, grid_ns, scratch)
     held.done("mode")
     onboard = _onboard(aligner, profile, log, grid_ns)
@@ -52,7 +51,7 @@ def align(
     # before the run's warnings and gaps are taken: a redundant sensor's gaps are the run's too
     redundant = _redundant_groups(aligner, profile, grid_ns)
     held.done("redundant")
-    run = AlignedRun(
+    return AlignedRun(
         t=t,
         dt=dt,
         start_ns=start_ns,
@@ -67,7 +66,7 @@ def align(
         warnings=aligner.warnings + aligner.gap_lines(),
         gaps=sorted(aligner.gaps),
         input_names=list(profile.inputs.names),
-        mode_channel=mode_channel,
+        mode_channel=profile.mode.channel if profile.mode is not None else None,
         onboard_names=onboard.names,
         onboard_state_channels=onboard.state_channels,
         onboard_variance_channels=onboard.variance_channels,
@@ -75,7 +74,6 @@ def align(
         channel_stats=_channel_stats(aligner),
         window=window,
     )
-    return run
 
 
 def _mode_and_ground(aligner: _Aligner, profile, grid_ns: np.ndarray, scratch: np.ndarray):
