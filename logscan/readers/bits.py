@@ -1,11 +1,13 @@
 """Single machine instructions numba does not spell, as LLVM intrinsics for the readers' kernels:
-the 64x64 -> 128-bit product, leading / trailing zero and set-bit counts, a bit cast, and the
-unaligned 8-byte load that lets a kernel look at eight text bytes at once."""
+the 64x64 -> 128-bit product, leading / trailing zero and set-bit counts, a bit cast, the
+unaligned 8-byte load that lets a kernel look at eight text bytes at once, a byte read without
+numba's negative-index test, and an array view without a reference count."""
 
 from __future__ import annotations
 
 from llvmlite import ir  # type: ignore[import-untyped]
 from numba import types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 
@@ -80,3 +82,32 @@ def set_bits(typingctx, a):  # pragma: no cover - compiled
         return builder.ctpop(args[0])
 
     return signature, codegen
+
+
+@intrinsic
+def byte_at(typingctx, buf, index):  # pragma: no cover - compiled
+    """buf[index] of a uint8 array, 0 <= index < buf.size (the caller checks): numba's indexing with
+    a signed index adds a test for a negative one at every byte, 8 % of a CSV parse."""
+    signature = types.uint8(buf, types.int64)
+
+    def codegen(context, builder, sig, args):
+        array = context.make_array(sig.args[0])(context, builder, args[0])
+        return builder.load(builder.gep(array.data, [args[1]]))
+
+    return signature, codegen
+
+
+@intrinsic
+def uncounted(typingctx, array):  # pragma: no cover - compiled
+    """The array without its reference count (no meminfo, no parent), for a kernel that holds the
+    array itself for the whole call: numba increfs and decrefs an array at each inlined helper it
+    is passed to (`scan_number` per cell), atomic operations that were a third of the parse; on
+    this view they are no-ops LLVM removes."""
+
+    def codegen(context, builder, sig, args):
+        view = context.make_array(sig.args[0])(context, builder, value=args[0])
+        view.meminfo = cgutils.get_null_value(view.meminfo.type)
+        view.parent = cgutils.get_null_value(view.parent.type)
+        return view._getvalue()
+
+    return array(array), codegen

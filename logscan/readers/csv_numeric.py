@@ -38,12 +38,10 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from numba.core import cgutils
-from numba.extending import intrinsic
 
 from logscan.numba_cache import follow_dependencies
-from logscan.readers.bits import load_u64, set_bits
-from logscan.readers.decimal_float import byte_at, number_value, scan_number
+from logscan.readers.bits import byte_at, load_u64, set_bits, uncounted
+from logscan.readers.decimal_float import number_value, scan_number
 
 INT, FLOAT = 0, 1  # column kinds
 OK, NOT_PLAIN, NO_ROOM = 0, 1, 2  # how the kernel stopped
@@ -82,22 +80,6 @@ def _count_lines(buf, start):  # pragma: no cover - numba kernel
     return count
 
 
-@intrinsic
-def _uncounted(typingctx, array):  # pragma: no cover - compiled
-    """The array without its reference count (no meminfo, no parent), for a kernel that holds the
-    array itself for the whole call: numba increfs and decrefs an array at each inlined helper it
-    is passed to (`scan_number` per cell), atomic operations that were a third of the parse; on
-    this view they are no-ops LLVM removes."""
-
-    def codegen(context, builder, sig, args):
-        view = context.make_array(sig.args[0])(context, builder, value=args[0])
-        view.meminfo = cgutils.get_null_value(view.meminfo.type)
-        view.parent = cgutils.get_null_value(view.parent.type)
-        return view._getvalue()
-
-    return array(array), codegen
-
-
 @njit(cache=True, inline="always")
 def _to_float(cells, floats, c, first, row):  # pragma: no cover - numba kernel
     """Column c's integers of rows first..row-1 turned into doubles, in place (same memory)."""
@@ -115,7 +97,7 @@ def _to_float(cells, floats, c, first, row):  # pragma: no cover - numba kernel
 def parse_numeric_rows(buf, start, sep, cells, floats, kinds, empties, first, limit):  # pragma: no cover - numba kernel
     """(rows parsed, OK), or (rows before the one, NOT_PLAIN) where a cell or a row is not one the
     fast path takes, or (rows, NO_ROOM) when the block holds more than ``limit - first`` rows."""
-    buf = _uncounted(buf)
+    buf = uncounted(buf)
     k = kinds.size
     # the row where each column turned FLOAT: its integers before are turned into doubles once the
     # block is parsed, not in the loop (where the conversion's setup cost every row 7 %)

@@ -24,11 +24,10 @@ instructions (`bits`): emulated with 32-bit halves the product was half of Eisel
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
 
 from logscan.numba_cache import follow_dependencies
-from logscan.readers.bits import float_of_bits, leading_zeros, load_u64, mul_128, trailing_zeros
+from logscan.readers.bits import byte_at, float_of_bits, leading_zeros, load_u64, mul_128, trailing_zeros
 
 MAX_EXP10 = 340
 MAX_DIGITS = 19  # 10**19 - 1 < 2**64: the mantissa of 19 digits never overflows
@@ -67,19 +66,6 @@ _MUL_1_1E4 = np.uint64(1 + (10000 << 32))
 _PLUS118 = np.uint64(0x7676767676767676)  # 0x76 + 10 = 0x80: the top bit of a byte over 9
 _BYTE_TOPS = np.uint64(0x8080808080808080)
 _POW10_INT = np.array([10**k for k in range(20)], dtype=np.uint64)
-
-
-@intrinsic
-def byte_at(typingctx, buf, index):  # pragma: no cover - compiled
-    """buf[index] of a uint8 array, 0 <= index < buf.size (the caller checks): numba's indexing with
-    a signed index adds a test for a negative one at every byte, 8 % of a CSV parse."""
-    signature = types.uint8(buf, types.int64)
-
-    def codegen(context, builder, sig, args):
-        array = context.make_array(sig.args[0])(context, builder, args[0])
-        return builder.load(builder.gep(array.data, [args[1]]))
-
-    return signature, codegen
 
 
 @njit(cache=True, inline="always")

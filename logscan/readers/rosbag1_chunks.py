@@ -29,7 +29,7 @@ from logscan.errors import InputError
 from logscan.log import SourceInfo
 from logscan.numba_cache import follow_dependencies
 from logscan.readers.flatten import FlatColumns, MessageBytes
-from logscan.readers.mcap.cdr import CdrLayout, cdr_layout, le_value
+from logscan.readers.mcap.cdr import CdrLayout, cdr_layout, le_scratch, le_value
 from logscan.readers.mcap.scan_records import SchemaRec
 from logscan.readers.rosbag_types import ros2_type_name
 
@@ -135,10 +135,7 @@ def _ros1_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: 
     """The layout program over packed ROS 1 messages (``cdr._cdr_run`` without alignment and
     encapsulation header; each message must be used up exactly); False when one does not fit.
     Arrays: buf uint8[n]; starts, ends int64[m]; kinds, sizes, codes, columns int64[k]; out float64[m, c]."""
-    word = np.zeros(1, dtype=np.uint64)
-    as_f64 = word.view(np.float64)
-    half = np.zeros(1, dtype=np.uint32)
-    as_f32 = half.view(np.float32)
+    word, as_f64, half, as_f32 = le_scratch()
     for m in range(starts.size):
         pos = starts[m]
         end = ends[m]

@@ -168,6 +168,14 @@ class _Program:
 
 
 @njit(cache=True, inline="always")
+def le_scratch():  # pragma: no cover - compiled
+    """The work views `le_value` reads floats through: (word, its float64 view, half, its float32 view)."""
+    word = np.zeros(1, dtype=np.uint64)
+    half = np.zeros(1, dtype=np.uint32)
+    return word, word.view(np.float64), half, half.view(np.float32)
+
+
+@njit(cache=True, inline="always")
 def le_value(buf, pos, size, code, word, as_f64, half, as_f32):  # pragma: no cover - compiled
     """The little-endian value of ``size`` bytes at ``buf[pos]`` as float64, by its type ``code``
     (`_CDR_PRIMITIVES`): float64 (10) and float32 (9) through the ``word`` / ``half`` views,
@@ -196,10 +204,7 @@ def le_value(buf, pos, size, code, word, as_f64, half, as_f32):  # pragma: no co
 def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out, row):  # pragma: no cover - compiled
     """Run the layout program over each message, its columns into ``out[:, row:]`` (one row per
     column); False when a message does not fit it."""
-    word = np.zeros(1, dtype=np.uint64)
-    as_f64 = word.view(np.float64)
-    half = np.zeros(1, dtype=np.uint32)
-    as_f32 = half.view(np.float32)
+    word, as_f64, half, as_f32 = le_scratch()
     for m in range(starts.size):
         start = starts[m]
         end = ends[m]
@@ -244,10 +249,7 @@ def _cdr_run(buf, starts, ends, kinds, sizes, codes, columns, out, row):  # prag
 def _cdr_fixed(buf, starts, ends, need, offsets, sizes, codes, out, row):  # pragma: no cover - compiled
     """`_cdr_run` for a program without strings (`fixed_offsets`): the same columns and the same
     verdict, each value read at its offset (``sizes``/``codes`` per column, not per step)."""
-    word = np.zeros(1, dtype=np.uint64)
-    as_f64 = word.view(np.float64)
-    half = np.zeros(1, dtype=np.uint32)
-    as_f32 = half.view(np.float32)
+    word, as_f64, half, as_f32 = le_scratch()
     for m in range(starts.size):
         start = starts[m]
         if ends[m] - start < 4 + need or buf[start] != 0 or buf[start + 1] != 1:  # short, or not CDR LE

@@ -217,10 +217,6 @@ def gather_u64(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(u8[idx]).view("<u8").reshape(-1)
 
 
-def gather_u16(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    return u8[offsets].astype(np.int64) | (u8[offsets + 1].astype(np.int64) << 8)
-
-
 def gather_u32(u8: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     out = np.zeros(offsets.size, dtype=np.int64)
     for i in range(4):
