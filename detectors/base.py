@@ -73,10 +73,29 @@ from logscan.needs import Needs
 from logscan.results import Band, DetectorResult
 from logscan.traces import EkfTrace
 
-__all__ = ["END_DELAY_KEY", "Band", "Detector", "DetectorResult", "Needs", "any_per_row", "describe", "median_period"]
+__all__ = [
+    "END_DELAY_KEY",
+    "Band",
+    "Detector",
+    "DetectorResult",
+    "Needs",
+    "any_per_row",
+    "describe",
+    "median_period",
+    "on_steps",
+]
 
 STATE_FORMAT = "logscan-detector-state"
 END_DELAY_KEY = "end_delay_s"  # DetectorResult.info: statistic -> its declared end delay (`Detector.end_delays`)
+
+
+def on_steps(values: np.ndarray, steps: np.ndarray, n_steps: int) -> np.ndarray:
+    """``values`` at the grid ``steps`` (ascending), NaN elsewhere; themselves when every step is one."""
+    if steps.size == n_steps:
+        return values
+    out = np.full(n_steps, np.nan, dtype=values.dtype)
+    out[steps] = values
+    return out
 
 
 def any_per_row(mask: np.ndarray) -> np.ndarray:

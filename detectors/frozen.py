@@ -39,7 +39,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult
+from logscan.detectors.base import Detector, DetectorResult, on_steps
 from logscan.detectors.params import Interval, budget_bound, multiplier_bound
 from logscan.detectors.raw_topics import skipped_lines
 from logscan.detectors.words import group_words
@@ -238,11 +238,7 @@ class FrozenSensorDetector(Detector):
         anchor, held, lengths = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0, still)
         del v, new
         # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
-        if steps.size == run.n_steps:  # every step is a fresh sample
-            stat = held / fill
-        else:
-            stat = np.full(run.n_steps, np.nan)
-            stat[steps] = held / fill
+        stat = on_steps(held / fill, steps, run.n_steps)
         if rest is not None:
             stat[steps[still]] = np.nan  # stillness, not judged
         h = max(float(self.n_samples), run_threshold(lengths, fill, tests, duration, float(self.budget_per_hour)))

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from logscan.detectors.base import Detector, DetectorResult, any_per_row, median_period
+from logscan.detectors.base import Detector, DetectorResult, any_per_row, median_period, on_steps
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import PERSIST, Boolean, Interval, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
@@ -232,9 +232,9 @@ class NisDetector(Detector):
             steps = np.flatnonzero(updated)
             m_steps = np.full(steps.size, m, dtype=np.int64) if isinstance(m, int) else m[steps]
             sums, dof, full = window_sums(nis[steps], m_steps, self.window)
-            statistic = _on_grid(sums, steps, t.size)
-            threshold = _on_grid(chi2_threshold(dof, alpha), steps, t.size)
-            per_dof = _on_grid(as_float32(sums / np.maximum(dof, 1)), steps, t.size)  # about 1 when consistent
+            statistic = on_steps(sums, steps, t.size)
+            threshold = on_steps(chi2_threshold(dof, alpha), steps, t.size)
+            per_dof = on_steps(as_float32(sums / np.maximum(dof, 1)), steps, t.size)  # about 1 when consistent
             warmup = np.zeros(t.size, dtype=bool)  # the updates before the first full window
             warmup[steps[~full]] = True
             result.add_statistic(
@@ -242,12 +242,3 @@ class NisDetector(Detector):
             )
             result.extras[f"{signal}.per_dof"] = per_dof
         return result
-
-
-def _on_grid(values: np.ndarray, steps: np.ndarray, n_steps: int) -> np.ndarray:
-    """``values`` at the grid ``steps`` (ascending), NaN elsewhere; themselves when every step is one."""
-    if steps.size == n_steps:
-        return values
-    out = np.full(n_steps, np.nan, dtype=values.dtype)
-    out[steps] = values
-    return out
