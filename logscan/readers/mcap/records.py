@@ -145,23 +145,32 @@ def _message_fields(buf, ops, offsets, lengths, channel_ids, log_times, m_off, m
 def _group_by_channel(channel_ids, log_times, m_off, m_len, slot, groups):  # pragma: no cover - compiled
     """A stable counting sort of the messages by channel id: fills the ``groups`` arrays (ids,
     bounds, low, high, times, starts, ends) and returns how many groups. ``slot`` (int64 per
-    channel id) is -1 everywhere on entry and again on return."""
+    channel id) is -1 everywhere on entry and again on return. The ids met come in ascending order
+    from a scan of ``slot`` between the least and the greatest (a few ids, mostly close together),
+    and each group's low and high from a loop: with numba's generic sort and slice min / max the
+    kernel took 1.7 s to compile on the first run, with these loops 0.25 s."""
     ids, bounds, low, high, times, starts, ends = groups
-    n_groups = 0
-    for i in range(channel_ids.size):  # messages per channel id, and the ids met
+    least, greatest = CHANNEL_IDS, -1
+    for i in range(channel_ids.size):  # messages per channel id, and the span of the ids met
         c = channel_ids[i]
         if slot[c] < 0:
             slot[c] = 0
-            ids[n_groups] = c
-            n_groups += 1
+            if c < least:
+                least = c
+            if c > greatest:
+                greatest = c
         slot[c] += 1
-    ids[:n_groups].sort()
+    n_groups = 0
     position = 0
-    for g in range(n_groups):  # each id's first place in the grouped arrays
-        count = slot[ids[g]]
-        slot[ids[g]] = position
-        bounds[g] = position
+    for c in range(least, greatest + 1):  # each id's first place in the grouped arrays
+        count = slot[c]
+        if count < 0:
+            continue
+        ids[n_groups] = c
+        bounds[n_groups] = position
+        slot[c] = position
         position += count
+        n_groups += 1
     bounds[n_groups] = position
     for i in range(channel_ids.size):
         j = slot[channel_ids[i]]
@@ -171,8 +180,14 @@ def _group_by_channel(channel_ids, log_times, m_off, m_len, slot, groups):  # pr
         ends[j] = m_off[i] + m_len[i]
     for g in range(n_groups):
         slot[ids[g]] = -1
-        low[g] = times[bounds[g] : bounds[g + 1]].min()
-        high[g] = times[bounds[g] : bounds[g + 1]].max()
+        earliest = latest = times[bounds[g]]  # a group holds one message at least
+        for j in range(bounds[g] + 1, bounds[g + 1]):
+            if times[j] < earliest:
+                earliest = times[j]
+            if times[j] > latest:
+                latest = times[j]
+        low[g] = earliest
+        high[g] = latest
     return n_groups
 
 
