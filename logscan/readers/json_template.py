@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from logscan.numba_cache import follow_dependencies
-from logscan.readers.bits import load_u64
+from logscan.readers.bits import load_u64, uncounted
 from logscan.readers.decimal_float import decimal_number
 from logscan.readers.flatten import MessageBytes, layout_of
 
@@ -91,6 +91,7 @@ def match_and_parse(
     buf, starts, ends, literal, lit_start, lit_len, row0, ok, values, rest, rest_at, counts
 ):  # pragma: no cover
     """Check each message against the literal segments and parse its tokens into ``values``."""
+    buf = uncounted(buf)  # else each token's call to the number scan counts a reference up and down
     k = lit_start.size - 1  # tokens per message
     n = values.size // k if k else 0
     used = counts[0]
