@@ -60,6 +60,17 @@ def float_of_bits(typingctx, a):  # pragma: no cover - compiled
 
 
 @intrinsic
+def float32_of_bits(typingctx, a):  # pragma: no cover - compiled
+    """The float32 whose IEEE bits are the uint32 ``a``."""
+    signature = types.float32(types.uint32)
+
+    def codegen(context, builder, sig, args):
+        return builder.bitcast(args[0], ir.FloatType())
+
+    return signature, codegen
+
+
+@intrinsic
 def load_u64(typingctx, buf, index):  # pragma: no cover - compiled
     """The 8 bytes buf[index:index + 8] of a uint8 array as one little-endian uint64 (any alignment;
     the caller checks that they are inside the array)."""

@@ -29,7 +29,7 @@ from logscan.errors import InputError
 from logscan.log import SourceInfo
 from logscan.numba_cache import follow_dependencies
 from logscan.readers.flatten import FlatColumns, MessageBytes
-from logscan.readers.mcap.cdr import CdrLayout, cdr_layout, le_scratch, le_value
+from logscan.readers.mcap.cdr import CdrLayout, cdr_layout, le_value
 from logscan.readers.mcap.scan_records import SchemaRec
 from logscan.readers.rosbag_types import ros2_type_name
 
@@ -135,7 +135,6 @@ def _ros1_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: 
     """The layout program over packed ROS 1 messages (``cdr._cdr_run`` without alignment and
     encapsulation header; each message must be used up exactly); False when one does not fit.
     Arrays: buf uint8[n]; starts, ends int64[m]; kinds, sizes, codes, columns int64[k]; out float64[m, c]."""
-    word, as_f64, half, as_f32 = le_scratch()
     for m in range(starts.size):
         pos = starts[m]
         end = ends[m]
@@ -144,7 +143,7 @@ def _ros1_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: 
             if kinds[k] == 0:
                 if pos + size > end:
                     return False
-                value = le_value(buf, pos, size, codes[k], word, as_f64, half, as_f32)
+                value = le_value(buf, pos, size, codes[k])
                 if columns[k] >= 0:
                     out[m, columns[k]] = value
                 pos += size
