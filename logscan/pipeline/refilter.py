@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.errors import InternalError
-from logscan.filters.ekf import KernelInputs, compiled_for, pack_run, run_ekf
+from logscan.filters.ekf import KernelInputs, filter_into, pack_run, run_ekf
 from logscan.filters.ekf_pack import trace_buffers
 from logscan.needs import CodedVariance, Part
 from logscan.traces import EkfTrace
@@ -115,9 +115,8 @@ class Refiltered:
                 self.n_steps, self.n, len(self.k.group_names), self.m,
                 full_P=False, **self.store,
             )  # fmt: skip
-            args = (*self.k.kernel_arguments(), out)
             if self.n_steps:
-                compiled_for(args)(*args)
+                filter_into(*self.k.kernel_arguments(), out)
             self.whole = (out.K_out, out.S_out)
         return self.whole
 
@@ -151,8 +150,7 @@ class Refiltered:
         data = data._replace(u=u, z=data.z[first:stop], fresh=fresh, R_std=R_std)
         G = len(self.k.group_names)
         out = trace_buffers(stop - first, self.n, G, self.m, full_P=True, **self.store)
-        args = (model_id, model, sensors, data, out)
-        compiled_for(args)(*args)
+        filter_into(model_id, model, sensors, data, out)
         finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
         u_last = u[finite[-1]].copy() if finite.size else self.k.u_default.copy()
         self.carry = (b + 1, out.x_post[-1].copy(), out.P_post_full[-1].copy(), u_last)
