@@ -9,6 +9,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
+from logscan.readers.bits import load_u64
+
 OP_FOOTER = 0x02
 OP_SCHEMA = 0x03
 OP_CHANNEL = 0x04
@@ -28,6 +31,7 @@ PARSE_ERRORS = (struct.error, ValueError, UnicodeDecodeError, IndexError, Overfl
 WALK_END = 0  # reached the end of the buffer exactly
 WALK_FOOTER = 1  # stopped after a Footer record
 WALK_TRUNCATED = 2  # a record header or body runs past the end of the buffer
+_LENGTH_LIMIT = np.uint64(1 << 48)
 WALK_BAD_OPCODE = 3  # an opcode the MCAP specification reserves (0x00, 0x10-0x7f): misaligned or corrupt
 
 
@@ -43,11 +47,10 @@ def _walk_records(buf, start, stop, ops, offsets, lengths):  # pragma: no cover 
         op = buf[pos]
         if op == 0 or (op >= 0x10 and op < 0x80):
             return n, pos, WALK_BAD_OPCODE
-        if buf[pos + 7] != 0 or buf[pos + 8] != 0:  # length >= 2**48: no real record is that long
+        word = load_u64(buf, pos + 1)  # the uint64 length (inside buf[start:stop], checked above)
+        if word >= _LENGTH_LIMIT:  # length >= 2**48: no real record is that long
             return n, pos, WALK_TRUNCATED
-        length = np.int64(0)
-        for i in range(6):
-            length |= np.int64(buf[pos + 1 + i]) << (8 * i)
+        length = np.int64(word)
         if length > stop - pos - 9:
             return n, pos, WALK_TRUNCATED
         ops[n] = op
@@ -94,6 +97,7 @@ def walk_records(u8: np.ndarray, start: int, stop: int) -> Records:
 
 MAX_LOG_TIME_NS = 2**63 - 1  # log_time is a uint64 in the file, int64 ns here
 CHANNEL_IDS = 1 << 16  # channel ids are uint16
+_MAX_LOG_TIME = np.uint64(MAX_LOG_TIME_NS)
 
 
 class ChannelGroups(NamedTuple):
@@ -128,10 +132,8 @@ def _message_fields(buf, ops, offsets, lengths, channel_ids, log_times, m_off, m
         if ops[k] != OP_MESSAGE:
             continue
         pos = offsets[k]
-        raw = np.uint64(0)
-        for i in range(8):
-            raw |= np.uint64(buf[pos + 6 + i]) << np.uint64(8 * i)
-        if raw > np.uint64(MAX_LOG_TIME_NS):  # a damaged log_time: dropped (counted by the caller)
+        raw = load_u64(buf, pos + 6)
+        if raw > _MAX_LOG_TIME:  # a damaged log_time: dropped (counted by the caller)
             continue
         channel_ids[kept] = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8)
         log_times[kept] = np.int64(raw)
@@ -278,3 +280,6 @@ class Cursor:
         if self.pos != stop:
             raise ValueError("map entries overrun the map length")
         return out
+
+
+follow_dependencies(__name__)  # the cached kernels are stamped with the intrinsics of `bits` too
