@@ -13,7 +13,13 @@ from logscan.errors import ExitCode, LogscanError
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.loops import detect_loops, recover_analysis
 from logscan.pipeline.preparation import Progress
-from logscan.pipeline.release import pack_innovations_for, reads_samples, release_unread
+from logscan.pipeline.release import (
+    pack_innovations_for,
+    reads_samples,
+    release_unread,
+    release_unread_truth,
+    run_order,
+)
 from logscan.pipeline.stages import Prepared
 from logscan.results import events_from_truth
 from logscan.training.calibration import calibrate_command, judged_steps
@@ -44,6 +50,8 @@ def detect(
     step = progress or (lambda message: None)
     free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
+    if free_series:  # before the verdict and the detectors: their arrays may take the true states' place
+        release_unread_truth(prepared)
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
@@ -85,10 +93,14 @@ def _run_detectors(
     prepared: Prepared, detectors: Sequence, policy, analysis, free_series: bool, sensor_views: bool, step
 ):
     """The detectors' results, in the given order; a detector that raises is named in
-    ``analysis.failures``. Those that read the samples run first (the frozen-sensor check), so the
-    report's pack of innovations can then take the samples' buffer (`pack_innovations_for`)."""
-    order = sorted(range(len(detectors)), key=lambda i: not reads_samples(detectors[i], prepared))
+    ``analysis.failures`` (those that read the samples first, then in the given order). They run
+    in `run_order`: those that read the samples first (the frozen-sensor check), so the report's
+    pack of innovations can then take the samples' buffer (`pack_innovations_for`), then so that
+    each large series is freed as early as it can be."""
+    order = run_order(prepared, detectors)
+    listed = sorted(range(len(detectors)), key=lambda i: not reads_samples(detectors[i], prepared))
     results: dict[int, DetectorResult] = {}
+    failed: dict[int, DetectorFailure] = {}
     packed = not sensor_views
     for position, index in enumerate(order):
         detector, still_to_run = detectors[index], [detectors[i] for i in order[position:]]
@@ -111,11 +123,12 @@ def _run_detectors(
                 metadata=prepared.log.source.metadata,
             )
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
-            analysis.failures.append(detector_failure(detector.name, exc))
+            failed[index] = detector_failure(detector.name, exc)
             continue
         results[index] = result
     if not packed:  # every detector reads the samples
         pack_innovations_for(prepared, [], reuse_samples=False)
+    analysis.failures += [failed[i] for i in listed if i in failed]
     return [results[i] for i in sorted(results)]
 
 

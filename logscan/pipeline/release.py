@@ -1,10 +1,15 @@
-"""Free the large per-step series no detector still to run reads (`release_unread`), and pack the
-EKF's innovations for the report before the samples' buffer is reused (`pack_innovations_for`)."""
+"""Free the large per-step series no detector still to run reads (`release_unread`) and the true
+states no page will draw (`release_unread_truth`), order the detectors so that less is held while
+they run (`run_order`), and pack the EKF's innovations for the report before the samples' buffer is
+reused (`pack_innovations_for`)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
+from logscan.align.aligned import HeldTable
 from logscan.filters.ekf import samples_side_by_side
 from logscan.pipeline.refilter import RefilteredPart
 from logscan.pipeline.stages import Prepared
@@ -25,6 +30,11 @@ RELEASABLE_RUN = ("onboard_state", "onboard_variance", "u", "z", "mode", "redund
 RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
 
 
+# the filter whose trace the report draws against a simulated log's true states (its envelopes,
+# `logscan.report.ubikf_truth_view`): without it no page reads them
+TRUTH_DRAWN_WITH = "ubikf"
+
+
 def reads_samples(detector, prepared: Prepared | None = None) -> bool:
     """Whether a detector reads the groups' samples (undeclared reads: it may), also through a
     trace part the EKF filters again from them as it is read (K, S: `logscan.pipeline.refilter`)."""
@@ -34,11 +44,50 @@ def reads_samples(detector, prepared: Prepared | None = None) -> bool:
     return any(isinstance(getattr(trace, part, None), RefilteredPart) for trace in traces for part in detector.reads)
 
 
+def run_order(prepared: Prepared, detectors: Sequence) -> list[int]:
+    """The indices of ``detectors`` in the order they run, so that less is held while each runs
+    (each large series is freed once no detector still to run reads it, `release_unread`):
+    those that read the samples first (the report's pack then takes their buffer); then those
+    that read other large series, the fewer bytes of them first (what only they read is freed
+    before the heavier ones, whose working memory grows with what they read, run); last those
+    that read none (running one frees nothing, and its results would be held through the others)."""
+
+    def rank(index: int) -> tuple[int, int]:
+        detector = detectors[index]
+        if reads_samples(detector, prepared):
+            return (0, 0)
+        size = _bytes_read(prepared, detector.reads)
+        return (1, size) if size else (2, 0)
+
+    return sorted(range(len(detectors)), key=rank)
+
+
+def _bytes_read(prepared: Prepared, reads: frozenset[str]) -> int:
+    """The bytes of the large series among ``reads`` the prepared log holds now."""
+    parts = [getattr(trace, name, None) for trace in prepared.traces.values() for name in reads]
+    parts += [getattr(prepared.run, name, None) for name in reads if name in RELEASABLE_RUN]
+    total = 0
+    for part in parts:
+        if isinstance(part, HeldTable):  # the samples at their own rate and each step's row
+            total += part.samples.nbytes + part.row.nbytes
+        elif isinstance(part, np.ndarray):
+            total += part.nbytes
+    return total
+
+
+def release_unread_truth(prepared: Prepared) -> None:
+    """Free the run context's true states when no filter ran whose trace the report draws against
+    them (`TRUTH_DRAWN_WITH`): a simulated log's, (N,) float64 per state, read by no other page."""
+    context = prepared.context
+    if prepared.loops:  # a further loop's detectors may draw against them (the report's one context)
+        return
+    if context is not None and context.true_states and TRUTH_DRAWN_WITH not in prepared.traces:
+        context.true_states = {}
+
+
 def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:
     """`Prepared.innovations` from the EKF trace's innovations and the groups' samples; with
     ``reuse_samples``, into the samples' own buffer when no detector reads them (they are dropped)."""
-    import numpy as np
-
     trace, run = prepared.trace, prepared.run
     if trace is None or trace.y is None or trace.S_diag is None:
         return
