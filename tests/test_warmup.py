@@ -84,3 +84,35 @@ def test_cold_cache_compiles_only_the_logs_model_in_the_background(tmp_path, sam
     )
     assert COMPILING_NOTE not in second.stderr
     assert second.stdout == first.stdout
+
+
+@pytest.mark.slow
+def test_the_filter_helpers_compiled_ahead_are_the_ones_the_kernel_calls(tmp_path):
+    """In a fresh cache, the EKF kernel's compile alone gives each of FILTER_HELPERS exactly the
+    signature the first run compiles ahead for it: else that head start compiles a version the
+    kernel never calls, and the kernel's compile still pays for its own."""
+    probe = textwrap.dedent(
+        """
+        import numpy as np
+        from logscan.align import AlignedGroup, AlignedRun
+        from logscan.filters import run_ekf, warmup
+        from logscan.models import get_model
+
+        model = get_model("dc_motor")
+        name, spec = next(iter(model.groups.items()))
+        run = AlignedRun(
+            t=np.arange(3) * 0.01, dt=0.01, start_ns=0, u=np.zeros((3, model.n_inputs)),
+            u_fresh=np.ones(3, dtype=bool), input_channels=list(model.input_names),
+            groups={name: AlignedGroup(name, list(spec.outputs), np.zeros((3, spec.size)), np.ones(3, dtype=bool))},
+        )
+        run_ekf(model, run)
+        for dispatcher, codes in warmup.FILTER_HELPERS:
+            print(dispatcher.__name__, dispatcher.signatures == [warmup.helper_signature(codes)])
+        """
+    )
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    verdicts = dict(line.split() for line in done.stdout.splitlines())
+    assert len(verdicts) == 18
+    assert all(verdict == "True" for verdict in verdicts.values()), verdicts
