@@ -40,6 +40,7 @@ from logscan.verdict.observability_kernel import (
     FilterTrajectory,
     Windows,
     signature_evidence,
+    workspace,
 )
 
 # kind -> reference size for the report's shading and the summary (the simulator's default sizes:
@@ -293,7 +294,8 @@ def observability_of(
             updated=np.ascontiguousarray(trace.updated[k0:k1]),
         )
         span_faults = faults._replace(act_values=np.ascontiguousarray(faults.act_values[k0:k1]))
-        local = call_literal(signature_evidence, model.model_id, filter_model, trajectory, span_faults, windows)
+        work = workspace(filter_model, trajectory, span_faults, windows)
+        local = call_literal(signature_evidence, model.model_id, filter_model, trajectory, span_faults, windows, work)
         rows = np.arange(local.shape[0]) + k0 // stride
         take = rows < starts.size
         rows, local = rows[take], local[take]

@@ -71,6 +71,61 @@ class Windows(NamedTuple):
     stride: np.int64  # the grid of window starts
 
 
+class Workspace(NamedTuple):
+    """The kernel's work arrays, allocated by its caller (`workspace`), stacked by shape: numba
+    compiles each np.empty, np.zeros and np.full signature a kernel calls on its own, and unpacks
+    each array argument in the kernel's wrapper (the first run's compile, not its speed)."""
+
+    out: np.ndarray  # (N // stride + 1, D) NaN: the result
+    squares: np.ndarray  # (9, n, n): P, F, Ft, Aw, Jw, Jnw, FP, IKH, IKHt
+    vectors: np.ndarray  # (4, n): x_next, kv, xs, row
+    sides: np.ndarray  # (2, n): the steps of the input columns' central differences
+    signatures: np.ndarray  # (2, n, J * D) zeros: mu, mu_next
+    residuals: np.ndarray  # (2, m_total, J * D) zeros: r, v
+    sums: np.ndarray  # (2, J * D) zeros: lam, acc
+    gains: np.ndarray  # (3, m_total, m_total) zeros: S, L, Rm
+    state_by_output: np.ndarray  # (2, n, m_total): PHt, KR
+    output_by_state: np.ndarray  # (2, m_total, n) zeros: Hs, KT
+    rows: np.ndarray  # (2, m_total) int64: each row's sensor signature (-1: none), the rows updated
+    start: np.ndarray  # (J,) int64 -1: each phase's window start
+    Gd: np.ndarray  # (A, n) zeros
+    ua: np.ndarray  # (nu,)
+    hx: np.ndarray  # (m_total,) zeros
+    R3: np.ndarray  # (3, 3)
+    D3: np.ndarray  # (3, 3, 3)
+    A0: np.ndarray  # (0, 0)
+
+
+def workspace(model: FilterModel, trajectory: FilterTrajectory, faults: FaultDirections, windows: Windows) -> Workspace:
+    """The arrays `signature_evidence` works in, for these arguments."""
+    N, n = trajectory.x_post.shape
+    m_total, A = model.R.shape[0], faults.act_dirs.shape[0]
+    D = A + faults.sensor_cols.size
+    J = int(windows.window // windows.stride)
+    rows = np.full((2, m_total), -1, dtype=np.int64)
+    rows[0, faults.sensor_cols] = np.arange(faults.sensor_cols.size)
+    return Workspace(
+        out=np.full((N // windows.stride + 1, D), np.nan),
+        squares=np.empty((9, n, n)),
+        vectors=np.empty((4, n)),
+        sides=np.empty((2, n)),
+        signatures=np.zeros((2, n, J * D)),
+        residuals=np.zeros((2, m_total, J * D)),
+        sums=np.zeros((2, J * D)),
+        gains=np.zeros((3, m_total, m_total)),
+        state_by_output=np.empty((2, n, m_total)),
+        output_by_state=np.zeros((2, m_total, n)),
+        rows=rows,
+        start=np.full(J, -1, dtype=np.int64),
+        Gd=np.zeros((A, n)),
+        ua=np.empty(trajectory.u.shape[1]),
+        hx=np.zeros(m_total),
+        R3=np.empty((3, 3)),
+        D3=np.empty((3, 3, 3)),
+        A0=np.empty((0, 0)),
+    )
+
+
 # The evidence of every fault direction of every phase is one signature: column s = j * D + d of
 # the (n, J * D) matrix mu (phase j, direction d), so a step moves all of them with one product
 # per matrix (F mu, H mu, L^-1 r, K r) whose innermost loop runs along the signatures (contiguous,
@@ -78,44 +133,61 @@ class Windows(NamedTuple):
 # skips only exact zeros of F and H), so the evidence is the same to the last bit.
 
 
-def model_f_into(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
-    """x_next = f(x, u) of the model ``model_id`` (a compile-time constant; numba code only): the
-    RK4 step of `logscan.models.rk4.rk4_f` in place, without its Jacobian, for a model with
-    continuous dynamics (its sums in the same order: the same bits as the step the EKF takes); the
-    model's own predict_into for the others (exactly discretised, no Jacobian to save). k, xs (n,),
-    A0 (0, 0) and F, Aw, Jw, Jnw (n, n) are work arrays."""
-    raise NotImplementedError("model_f_into is resolved by numba at compile time")
+def input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
+    """Gd[a] = df/du . act_dirs[a] at (xk, uk), for every actuator a: central differences of the
+    step of the model ``model_id`` (a compile-time constant; numba code only), each side's step into
+    its row of sides (2, n). The step: the RK4 step of `logscan.models.rk4.rk4_f` in place, without
+    its Jacobian, for a model with continuous dynamics (its sums in the same order: the same bits as
+    the step the EKF takes); the model's own predict_into for the others (exactly discretised, no
+    Jacobian to save). k, xs (n,), A0 (0, 0) and F, Aw, Jw, Jnw (n, n) are work arrays."""
+    raise NotImplementedError("input_columns is resolved by numba at compile time")
 
 
-@overload(model_f_into)
-def _model_f_into(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
+# One function per model with its step at one call site: numba compiles every numba function a
+# kernel calls on its own, then again inside each caller (a step in its own function, called from
+# a function of the differences, cost the first run a second compile of the model's dynamics).
+@overload(input_columns, jit_options={"error_model": "numpy", "no_cpython_wrapper": True, "no_cfunc_wrapper": True})
+def _input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
     fA = literal_kernel(model_id, "fA")
     if fA is not None:
 
-        def rk4(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
+        def with_rk4(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
             c = dt / 6.0
-            for i in range(x.size):
-                x_next[i] = x[i]
-                xs[i] = x[i]
-            for stage in range(4):
-                fA(p, xs, u, k, A0, False)
-                w = 1.0 if stage == 0 or stage == 3 else 2.0
-                step = 0.5 * dt if stage < 2 else dt
-                for i in range(x.size):
-                    x_next[i] += c * w * k[i]
-                    xs[i] = x[i] + step * k[i]
+            for a in range(act_dirs.shape[0]):
+                for side in range(2):
+                    for i in range(uk.size):
+                        ua[i] = uk[i] + h * act_dirs[a, i] if side == 0 else uk[i] - h * act_dirs[a, i]
+                    x_next = sides[side]
+                    for i in range(xk.size):
+                        x_next[i] = xk[i]
+                        xs[i] = xk[i]
+                    for stage in range(4):
+                        fA(p, xs, ua, k, A0, False)
+                        w = 1.0 if stage == 0 or stage == 3 else 2.0
+                        step = 0.5 * dt if stage < 2 else dt
+                        for i in range(xk.size):
+                            x_next[i] += c * w * k[i]
+                            xs[i] = xk[i] + step * k[i]
+                for i in range(xk.size):
+                    Gd[a, i] = (sides[0, i] - sides[1, i]) / (2.0 * h)
 
-        return rk4
+        return with_rk4
     predict_into = literal_kernel(model_id, "predict_into")
     if predict_into is not None:
 
-        def impl(model_id, p, x, u, dt, x_next, k, xs, A0, F, Aw, Jw, Jnw):
-            predict_into(p, x, u, dt, x_next, F, k, xs, Aw, Jw, Jnw)
+        def with_step(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
+            for a in range(act_dirs.shape[0]):
+                for side in range(2):
+                    for i in range(uk.size):
+                        ua[i] = uk[i] + h * act_dirs[a, i] if side == 0 else uk[i] - h * act_dirs[a, i]
+                    predict_into(p, xk, ua, dt, sides[side], F, k, xs, Aw, Jw, Jnw)
+                for i in range(xk.size):
+                    Gd[a, i] = (sides[0, i] - sides[1, i]) / (2.0 * h)
 
-        return impl
+        return with_step
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _mm_rows(A, B, ra, ca, cb, out):
     """out[:ra, :cb] = A[:ra, :ca] @ B[:ca, :cb], each sum in c order (zeros of A skipped: exact)."""
     for i in range(ra):
@@ -128,7 +200,7 @@ def _mm_rows(A, B, ra, ca, cb, out):
                     out[i, j] += a * B[c, j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _transpose(A, r, c, out):
     """out[:c, :r] = A[:r, :c]^T."""
     for i in range(r):
@@ -136,7 +208,7 @@ def _transpose(A, r, c, out):
             out[j, i] = A[i, j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _mm_t(A, B, ra, ca, rb, out):
     """out[:ra, :rb] = A[:ra, :ca] @ B[:rb, :ca]^T."""
     for i in range(ra):
@@ -147,24 +219,7 @@ def _mm_t(A, B, ra, ca, rb, out):
             out[i, j] = s
 
 
-@njit(cache=True, error_model="numpy")
-def _input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, hi, lo, k, xs, A0, F, Aw, Jw, Jnw):
-    """Gd[a] = df/du . act_dirs[a] at (xk, uk): central differences of the model's step (f alone
-    when the model can; hi, lo, k, xs (n,), A0 (0, 0) and F, Aw, Jw, Jnw (n, n) are work arrays)."""
-    literally(model_id)
-    n, nu = xk.size, uk.size
-    for a in range(act_dirs.shape[0]):
-        for i in range(nu):
-            ua[i] = uk[i] + h * act_dirs[a, i]
-        model_f_into(model_id, p, xk, ua, dt, hi, k, xs, A0, F, Aw, Jw, Jnw)
-        for i in range(nu):
-            ua[i] = uk[i] - h * act_dirs[a, i]
-        model_f_into(model_id, p, xk, ua, dt, lo, k, xs, A0, F, Aw, Jw, Jnw)
-        for i in range(n):
-            Gd[a, i] = (hi[i] - lo[i]) / (2.0 * h)
-
-
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _copy_square(src, n, dst):
     """dst[:n, :n] = src[:n, :n], element by element: a slice assignment from an array would compile
     numba's shape-mismatch message (string formatting, about 3 s of the first run's compile)."""
@@ -173,7 +228,7 @@ def _copy_square(src, n, dst):
             dst[i, c] = src[i, c]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _abs_max(v):
     """max |v_i| (0.0 for an empty v; NaN when v holds one, as np.abs(v).max()), without the
     temporary array and numba's array-max implementation to compile."""
@@ -187,7 +242,7 @@ def _abs_max(v):
     return best
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _joseph(P, KT, Hs, Rm, m, n, IKH, IKHt, FP, KR, row):
     """P = (I - K H) P (I - K H)^T + K R K^T, in place (K^T in KT, m rows)."""
     for i in range(n):
@@ -217,7 +272,7 @@ def _joseph(P, KT, Hs, Rm, m, n, IKH, IKHt, FP, KR, row):
             P[i, c] += row[c]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def _signatures_update(mu, Hs, L, KT, m, n, rows, bias_of_row, A, D, J, r, v, acc, lam):
     """r = H mu (+ the unit bias of each sensor signature on its row); lambda += |L^-1 r|^2;
     mu -= K r; for all J * D signatures (columns) at once."""
@@ -261,15 +316,17 @@ def _signatures_update(mu, Hs, L, KT, m, n, rows, bias_of_row, A, D, J, r, v, ac
             mu[i, s] -= acc[s]
 
 
-@njit(cache=True)
-def signature_evidence(model_id, model, trajectory, faults, windows):
+@njit(cache=True, error_model="numpy", no_cfunc_wrapper=True)
+def signature_evidence(model_id, model, trajectory, faults, windows, work):
     """Non-centrality lambda of a unit fault per window start (on the stride grid) and direction.
 
     ``model`` (FilterModel) and ``trajectory`` (FilterTrajectory): the filter and its run; ``faults``
     (FaultDirections): a unit relative offset per actuator, a unit bias per sensor column;
-    ``windows`` (Windows); ``model_id``: the model's kernel id, compiled as a literal.
-    Returns (N // stride + 1, A + B) float64: lambda over [k, k + window) for k = i * stride (over
-    what is left of the log for the last windows), NaN where the filter's trajectory is not finite.
+    ``windows`` (Windows); ``model_id``: the model's kernel id, compiled as a literal; ``work``
+    (Workspace): `workspace` of the other arguments, fresh for each call.
+    Returns work.out, (N // stride + 1, A + B) float64: lambda over [k, k + window) for k = i * stride
+    (over what is left of the log for the last windows), NaN where the filter's trajectory is not
+    finite.
     """
     literally(model_id)
     # the arguments' arrays under the kernel's names, read once: an attribute read inside the loop
@@ -280,32 +337,20 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
     act_dirs, act_values, sensor_cols = faults.act_dirs, faults.act_values, faults.sensor_cols
     window, stride = windows.window, windows.stride
     N, n = x_post.shape
-    nu = u.shape[1]
     A = act_dirs.shape[0]
     D = A + sensor_cols.size
     J = window // stride
     ns = J * D
     m_total = R.shape[0]
-    out = np.full((N // stride + 1, D), np.nan)
-    mu, mu_next = np.zeros((n, ns)), np.zeros((n, ns))  # signature s = j * D + d in column s
-    lam = np.zeros(ns)
-    start = np.full(J, -1, dtype=np.int64)  # window start of each phase's running signature
-    bias_of_row = np.full(m_total, -1, dtype=np.int64)  # the sensor signature biased on each row
-    for b in range(sensor_cols.size):
-        bias_of_row[sensor_cols[b]] = b
-    P = P0.copy()
-    x_next, kv, xs, row = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    x_hi, x_lo, A0 = np.empty(n), np.empty(n), np.empty((0, 0))
-    F, Ft, Aw, Jw, Jnw = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    FP, IKH, IKHt = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    Gd = np.zeros((A, n))
-    ua = np.empty(nu)
-    hx, Hs = np.zeros(m_total), np.zeros((m_total, n))
-    R3, D3 = np.empty((3, 3)), np.empty((3, 3, 3))
-    rows = np.empty(m_total, dtype=np.int64)
-    S, L, Rm = np.empty((m_total, m_total)), np.zeros((m_total, m_total)), np.empty((m_total, m_total))
-    PHt, KT, KR = np.empty((n, m_total)), np.empty((m_total, n)), np.empty((n, m_total))
-    r, v, acc = np.zeros((m_total, ns)), np.zeros((m_total, ns)), np.zeros(ns)
+    out, start, Gd, ua, hx, R3, D3, A0 = work.out, work.start, work.Gd, work.ua, work.hx, work.R3, work.D3, work.A0
+    sq, vec, sig, res, sums = work.squares, work.vectors, work.signatures, work.residuals, work.sums
+    gains, n_by_m, m_by_n, int_rows = work.gains, work.state_by_output, work.output_by_state, work.rows
+    P, F, Ft, Aw, Jw, Jnw, FP, IKH, IKHt = sq[0], sq[1], sq[2], sq[3], sq[4], sq[5], sq[6], sq[7], sq[8]
+    x_next, kv, xs, row, sides = vec[0], vec[1], vec[2], vec[3], work.sides
+    mu, mu_next, r, v, lam, acc = sig[0], sig[1], res[0], res[1], sums[0], sums[1]
+    S, L, Rm, PHt, KR, Hs, KT = gains[0], gains[1], gains[2], n_by_m[0], n_by_m[1], m_by_n[0], m_by_n[1]
+    bias_of_row, rows = int_rows[0], int_rows[1]
+    _copy_square(P0, n, P)
     zero = np.int64(0)
     for k in range(1, N):
         # ---- restart the phases whose window starts here ---------------------------------------
@@ -321,14 +366,15 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
                         mu[i, s] = 0.0
         xk = x_post[k - 1]
         if not (all_finite(xk) and all_finite(x_prior[k]) and all_finite2(P)):
-            start[:] = -1  # a diverged filter: no verdict until the next window start
+            for j in range(J):  # a diverged filter: no verdict until the next window start
+                start[j] = -1
             _copy_square(P0, n, P)
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
         # (one call site each: the model's step is inlined wherever it is called, and compiled as often)
         dispatch.model_predict_into(model_id, p, xk, u[k], dt, x_next, F, kv, xs, Aw, Jw, Jnw)
         h = 1e-6 * (1.0 + _abs_max(u[k]))  # 0.0 for a model without inputs
-        _input_columns(model_id, p, xk, u[k], dt, act_dirs, h, ua, Gd, x_hi, x_lo, kv, xs, A0, Ft, Aw, Jw, Jnw)
+        input_columns(model_id, p, xk, u[k], dt, act_dirs, h, ua, Gd, sides, kv, xs, A0, Ft, Aw, Jw, Jnw)
         # P_prior = F P F^T + Q
         _mm_rows(F, P, n, n, n, FP)
         _transpose(F, n, n, Ft)
@@ -346,7 +392,9 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
                     mu[i, j * D + a] += Gd[a, i] * value
         # ---- update with the groups the filter used ----------------------------------------
         m = zero
-        Hs[:] = 0.0
+        for a in range(m_total):
+            for c in range(n):
+                Hs[a, c] = 0.0
         for g in range(group_ids.size):
             if updated[k, g]:
                 dispatch.model_meas_into(model_id, group_ids[g], p, x_prior[k], u[k], m, hx, Hs, R3, D3)
@@ -365,7 +413,8 @@ def signature_evidence(model_id, model, trajectory, faults, windows):
             for b in range(m):
                 S[a, b] += Rm[a, b]
         if not cholesky(S, zero, m, L):  # int64 as in the EKF: one compile of it
-            start[:] = -1
+            for j in range(J):
+                start[j] = -1
             _copy_square(P0, n, P)
             continue
         for a in range(m):
