@@ -13,53 +13,57 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True)
-def _ring_push(ring, count, head, value):
-    """Append ``value``, overwriting the oldest sample when full; returns (count, head)."""
-    ring[head] = value
-    window = ring.shape[0]
-    return min(count + 1, window), (head + 1) % window
+# The kernels allocate nothing and call no other numba function: their output arrays come from
+# numpy in the wrappers, and the ring's push and sums are written out in the loop. numba's generic
+# np.full / np.zeros, min / max and each helper compile apart (types, LLVM, linking into the caller):
+# the first run after install paid about 1 s for `adaptive_band` alone, 0.3 s like this.
 
 
 @njit(cache=True)
-def _ring_moments(ring, count):
-    """Exact mean and population variance of the first ``count`` ring entries (two passes)."""
-    total = 0.0
-    for i in range(count):
-        total += ring[i]
-    m = total / count
-    sq = 0.0
-    for i in range(count):
-        d = ring[i] - m
-        sq += d * d
-    return m, sq / count
+def _band_kernel(e, defined, window, rho, s_floor, mu, s, lower, upper, exceed, warm, ring):
+    """`adaptive_band` into its output arrays (mu, s, lower, upper: NaN; exceed, warm: False;
+    ring: ``window`` zeros), written only at the steps with a band."""
+    count = head = 0
+    total = 0.0  # the full ring's sum in index order (as the moments add it), when known
+    known = False
+    for k in range(e.shape[0]):
+        if not defined[k]:
+            continue
+        value = e[k]
+        if count == window:
+            if not known:  # the ring just filled (it stays full: pushes keep ``total`` from here on)
+                total, known = 0.0, True
+                for i in range(window):
+                    total += ring[i]
+            m = total / count
+            # (sum of (ring - m)^2, the next step's sum if ``value`` enters at ``head``), both in
+            # index order: two independent chains of additions run in about the time of one
+            sq = 0.0
+            pushed = 0.0
+            for i in range(window):
+                d = ring[i] - m
+                sq += d * d
+                pushed += value if i == head else ring[i]
+            root = np.sqrt(sq / count)
+            floor = s_floor[k]
+            sd = floor if floor > root else root  # max(root, floor), as Python's max picks
+            mu[k] = m
+            s[k] = sd
+            lower[k] = m - rho * sd
+            upper[k] = m + rho * sd
+            warm[k] = True
+            # NaN-safe: a non-finite value is outside every band and never enters the window
+            if not (abs(value - m) <= rho * sd):
+                exceed[k] = True
+                continue
+            total = pushed
+        elif not np.isfinite(value):
+            continue
+        ring[head] = value  # the push: overwrites the oldest sample once full
+        count = count + 1 if count < window else window
+        head = head + 1 if head + 1 < window else 0
 
 
-@njit(cache=True)
-def _ring_sum(ring):
-    """The sum of every ring entry, in index order (as `_ring_moments` adds them)."""
-    total = 0.0
-    for i in range(ring.shape[0]):
-        total += ring[i]
-    return total
-
-
-@njit(cache=True)
-def _spread_and_pushed_sum(ring, m, head, value):
-    """(sum of (ring - m)^2, sum of the ring with ``value`` at ``head``), both in index order: the
-    second is the next step's sum when ``value`` enters the window. Two independent chains of
-    additions in one loop run in about the time of one (each addition waits for the previous)."""
-    sq = 0.0
-    pushed = 0.0
-    for i in range(ring.shape[0]):
-        d = ring[i] - m
-        sq += d * d
-        pushed += value if i == head else ring[i]
-    return sq, pushed
-
-
-@njit(cache=True)
 def adaptive_band(e, defined, window, rho, s_floor):
     """Band of ``e`` over a trailing window of accepted samples.
 
@@ -73,62 +77,45 @@ def adaptive_band(e, defined, window, rho, s_floor):
       warm           (N,) bool, True once the window holds W samples (alarms allowed).
     """
     n = e.shape[0]
-    mu = np.full(n, np.nan)
-    s = np.full(n, np.nan)
-    lower = np.full(n, np.nan)
-    upper = np.full(n, np.nan)
+    mu, s, lower, upper = (np.full(n, np.nan) for _ in range(4))
     exceed = np.zeros(n, dtype=np.bool_)
     warm = np.zeros(n, dtype=np.bool_)
-    ring = np.zeros(window)
-    count = head = np.int64(0)  # not literal zeros: they would compile the ring helpers twice
-    total = 0.0  # the full ring's sum in index order (as `_ring_moments` adds), when known
-    known = False
-    for k in range(n):
-        if not defined[k]:
-            continue
-        value = e[k]
-        if count == window:
-            if not known:  # the ring just filled (it stays full: pushes keep ``total`` from here on)
-                total, known = _ring_sum(ring), True
-            m = total / count
-            sq, pushed_total = _spread_and_pushed_sum(ring, m, head, value)
-            var = sq / count
-            sd = max(np.sqrt(var), s_floor[k])
-            mu[k] = m
-            s[k] = sd
-            lower[k] = m - rho * sd
-            upper[k] = m + rho * sd
-            warm[k] = True
-            # NaN-safe: a non-finite value is outside every band and never enters the window
-            if not (abs(value - m) <= rho * sd):
-                exceed[k] = True
-                continue
-            total = pushed_total
-        elif not np.isfinite(value):
-            continue
-        count, head = _ring_push(ring, count, head, value)
+    _band_kernel(e, defined, window, rho, s_floor, mu, s, lower, upper, exceed, warm, np.zeros(window))
     return mu, s, lower, upper, exceed, warm
 
 
 def compile_kernels() -> None:
-    """Compile (or load) `adaptive_band` for the types its detectors pass: the first run calls it
-    while the EKF compiles in its own process."""
+    """Compile (or load) `adaptive_band`'s kernel for the types its detectors pass: the first run
+    calls it while the EKF compiles in its own process."""
     adaptive_band(np.zeros(2), np.ones(2, dtype=np.bool_), 1, 1.0, np.zeros(2))
 
 
 @njit(cache=True)
+def _trailing_kernel(values, defined, window, mean, var, ring):
+    """`trailing_mean_var` into ``mean`` and ``var`` (NaN), with a ring of ``window`` zeros."""
+    count = head = 0
+    for k in range(values.shape[0]):
+        if not defined[k] or not np.isfinite(values[k]):
+            continue
+        ring[head] = values[k]
+        count = count + 1 if count < window else window
+        head = head + 1 if head + 1 < window else 0
+        if count == window:  # exact moments, two passes over the ring in index order
+            total = 0.0
+            for i in range(count):
+                total += ring[i]
+            m = total / count
+            sq = 0.0
+            for i in range(count):
+                d = ring[i] - m
+                sq += d * d
+            mean[k], var[k] = m, sq / count
+
+
 def trailing_mean_var(values, defined, window):
     """Exact mean and population variance of the last ``window`` defined, finite values up to and
     including each step (NaN until ``window`` values were seen)."""
     n = values.shape[0]
-    mean = np.full(n, np.nan)
-    var = np.full(n, np.nan)
-    ring = np.zeros(window)
-    count = head = np.int64(0)  # not literal zeros: they would compile the ring helpers twice
-    for k in range(n):
-        if not defined[k] or not np.isfinite(values[k]):
-            continue
-        count, head = _ring_push(ring, count, head, values[k])
-        if count == window:
-            mean[k], var[k] = _ring_moments(ring, count)
+    mean, var = np.full(n, np.nan), np.full(n, np.nan)
+    _trailing_kernel(values, defined, window, mean, var, np.zeros(window))
     return mean, var
