@@ -81,23 +81,66 @@ def threshold_for_arl(arl, kappa: float) -> np.ndarray:
     return 0.5 * (lo + hi)
 
 
-@numba.njit(cache=True)
-def _side(s, start, u, kappa, top, i):
-    """One side's step: S_k = max(0, S_k-1 + u_k - kappa), held at ``top``; its run starts at the
-    step where it leaves 0 (``start``, -1 while at 0)."""
-    new = s + u - kappa
-    if new <= 0.0:
-        return 0.0, -1
-    return min(new, top), (i if s == 0.0 else start)
+# The kernel allocates nothing and calls no other numba function (its outputs come from numpy in
+# `cusum_statistics`; each side's step written out): numba's generic np.empty and a helper compile
+# apart (types, LLVM, linking into the caller), about a third of this kernel's first-run compile.
 
 
 @numba.njit(cache=True)
-def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):  # pragma: no cover - compiled
+def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip, g, onset, free):  # pragma: no cover
+    """`cusum_statistics` into its outputs g, onset, free (N, J), each entry written once."""
+    n, m = y.shape[0], gap.size
+    for j in range(m):
+        sp = sm = fp = fm = 0.0  # S+, S-, and the same sides without the cap
+        p0 = m0 = -1  # the first step of each side's run (-1: the side is at 0)
+        last = -np.inf
+        on = False
+        h_j, gap_j = h[j], gap[j]  # locals: the output arrays are arguments, which might alias them
+        top = cap * h_j
+        for i in range(n):
+            if reset[i]:
+                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
+            x = y[i, first + j] / np.sqrt(S_diag[i, first + j])  # u = y~ / sqrt(S_jj)
+            if not np.isfinite(x):
+                g[i, j], free[i, j], onset[i, j] = np.nan, np.nan, -1
+                continue
+            if t[i] - last > gap_j:
+                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
+            last = t[i]
+            x = min(max(x, -clip), clip)
+            # each side: S_k = max(0, S_k-1 + u_k - kappa) held at ``top``, its run starting at
+            # the step where it leaves 0; S+ on u_k, S- on -u_k (min / max, not conditional
+            # expressions: numba turns those into branches, a third slower here)
+            step = sp + x - kappa
+            if step <= 0.0:
+                sp, p0 = 0.0, -1
+            else:
+                p0 = i if sp == 0.0 else p0
+                sp = min(step, top)
+            step = sm - x - kappa
+            if step <= 0.0:
+                sm, m0 = 0.0, -1
+            else:
+                m0 = i if sm == 0.0 else m0
+                sm = min(step, top)
+            fp = max(0.0, fp + x - kappa)
+            fm = max(0.0, fm - x - kappa)
+            now = max(sp, sm) > h_j
+            if on and not now:  # the alarm ended: its evidence is spent, both sides restart
+                sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, -1, -1
+            on = now
+            if sp >= sm:
+                g[i, j], free[i, j], onset[i, j] = sp, fp, p0
+            else:
+                g[i, j], free[i, j], onset[i, j] = -sm, -fm, m0
+
+
+def cusum_statistics(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):
     """Signed two-sided CUSUM per column with its resets (docs/algorithms.md section 1e).
 
     t (N,) grid times; y, S_diag (N, M) innovations and their variances, NaN where a column has no
-    update (whitened here, u = y / sqrt(S), so no (N, M) temporaries), of which the J columns from
-    ``first`` on are tested (read in place: no copy of a column);
+    update (whitened in the kernel, u = y / sqrt(S), so no (N, M) temporaries), of which the J
+    columns from ``first`` on are tested (read in place: no copy of a column);
     reset (N,) bool, steps where every test restarts (filter divergence); gap (J,) s, a longer gap
     between a column's updates restarts it; h (J,) thresholds; kappa reference; cap: statistics held
     at most cap * h; clip: each u enters at most +-clip (one glitch cannot raise an alarm alone).
@@ -105,48 +148,9 @@ def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):  # pragm
     the run of the side g shows (-1 when that side is zero); and free (N, J), the same sides without
     the cap (restarted with them), whose peak is an alarm's real magnitude.
     """
-    n, m = y.shape[0], gap.size
-    g = np.empty((n, m))  # every entry written once below (NaN and -1 without an update)
-    free = np.empty((n, m))
-    onset = np.empty((n, m), dtype=np.int64)
-    no_run = np.int64(-1)  # a run start of no run; int64, not the literal -1: _side compiles once
-    for j in range(m):
-        sp = 0.0
-        sm = 0.0
-        fp = 0.0  # the sides without the cap
-        fm = 0.0
-        p0 = no_run
-        m0 = no_run
-        last = -np.inf
-        on = False
-        top = cap * h[j]
-        for i in range(n):
-            if reset[i]:
-                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
-            x = y[i, first + j] / np.sqrt(S_diag[i, first + j])  # u = y~ / sqrt(S_jj)
-            if not np.isfinite(x):
-                g[i, j], free[i, j], onset[i, j] = np.nan, np.nan, no_run
-                continue
-            if t[i] - last > gap[j]:
-                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, no_run, no_run, False
-            last = t[i]
-            x = min(max(x, -clip), clip)
-            sp, p0 = _side(sp, p0, x, kappa, top, i)  # S+ on u_k
-            sm, m0 = _side(sm, m0, -x, kappa, top, i)  # S- on -u_k
-            fp = max(0.0, fp + x - kappa)
-            fm = max(0.0, fm - x - kappa)
-            now = max(sp, sm) > h[j]
-            if on and not now:  # the alarm ended: its evidence is spent, both sides restart
-                sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, no_run, no_run
-            on = now
-            if sp >= sm:
-                g[i, j] = sp
-                free[i, j] = fp
-                onset[i, j] = p0
-            else:
-                g[i, j] = -sm
-                free[i, j] = -fm
-                onset[i, j] = m0
+    shape = (y.shape[0], gap.size)
+    g, free, onset = np.empty(shape), np.empty(shape), np.empty(shape, dtype=np.int64)
+    cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip, g, onset, free)
     return g, onset, free
 
 
@@ -154,7 +158,7 @@ def compile_kernels() -> None:
     """Compile (or load) `cusum_kernel` for the types `Cusum` passes (the EKF trace's float32
     innovations and variances): the first run calls it while the EKF compiles in its own process."""
     y = np.zeros((2, 1), dtype=np.float32)
-    cusum_kernel(np.zeros(2), y, y + 1.0, 0, np.zeros(2, dtype=bool), np.ones(1), np.ones(1), 0.5, 2.0, 5.0)
+    cusum_statistics(np.zeros(2), y, y + 1.0, 0, np.zeros(2, dtype=bool), np.ones(1), np.ones(1), 0.5, 2.0, 5.0)
 
 
 def uncapped_peaks(alarms, t: np.ndarray, free: np.ndarray, h: float) -> list[dict]:
@@ -300,7 +304,8 @@ class CusumDetector(Detector):
                 signal = f"cusum.{group}" + (f".{output}" if output else "")
                 # one column at a time: (N,) temporaries, not the (N, J) statistic and onsets at once
                 column = slice(j, j + 1)
-                stat, onset, free = cusum_kernel(t, y, S_diag, j, trace.diverged, gaps[column], h[column], *settings)
+                inputs = (t, y, S_diag, j, trace.diverged, gaps[column], h[column])
+                stat, onset, free = cusum_statistics(*inputs, *settings)
                 stat, onset, free = stat[:, 0], onset[:, 0], free[:, 0]
                 valid = np.isfinite(stat)
                 alarms = result.add_statistic(

@@ -9,7 +9,7 @@ import pytest
 
 from logscan.alarms import AlarmInterval
 from logscan.detectors.budget import design_rate
-from logscan.detectors.cusum import CusumDetector, cusum_kernel, siegmund_arl, threshold_for_arl, uncapped_peaks
+from logscan.detectors.cusum import CusumDetector, cusum_statistics, siegmund_arl, threshold_for_arl, uncapped_peaks
 
 DT = 0.01
 
@@ -20,7 +20,8 @@ def run_kernel(u, h, *, kappa=0.25, cap=1.5, gap=1.0, reset=None, clip=4.0):
     t = np.arange(u.shape[0]) * DT
     reset = np.zeros(u.shape[0], dtype=bool) if reset is None else reset
     m = u.shape[1]
-    return cusum_kernel(t, u, np.ones_like(u), 0, reset, np.full(m, gap), np.full(m, float(h)), kappa, cap, clip)[:2]
+    gaps, h = np.full(m, gap), np.full(m, float(h))
+    return cusum_statistics(t, u, np.ones_like(u), 0, reset, gaps, h, kappa, cap, clip)[:2]
 
 
 def run_uncapped(u, h, **settings):
@@ -28,7 +29,7 @@ def run_uncapped(u, h, **settings):
     u = np.asarray(u, dtype=np.float64)[:, None]
     t = np.arange(u.shape[0]) * DT
     one = np.ones(1)
-    g, _, free = cusum_kernel(t, u, np.ones_like(u), 0, np.zeros(u.shape[0], bool), one, one * h, 0.25, 1.5, 4.0)
+    g, _, free = cusum_statistics(t, u, np.ones_like(u), 0, np.zeros(u.shape[0], bool), one, one * h, 0.25, 1.5, 4.0)
     return t, g[:, 0], free[:, 0]
 
 
