@@ -57,36 +57,26 @@ def window_sums(values: np.ndarray, counts: np.ndarray, window: int):
     idx = np.arange(values.size)
     lo = np.maximum(idx + 1 - window, 0)
     sums = cv[idx + 1] - cv[lo]
-    at = np.flatnonzero(huge)
-    if at.size:
-        # each huge value is added to the windows that hold it, those ending at its index up to
-        # window - 1 later (a window's indices are distinct: plain fancy indexing adds once each)
-        big = values[at]
-        with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: inf, an exceedance
-            for offset in range(min(window, values.size)):
-                ends = at + offset
-                keep = ends < values.size
-                sums[ends[keep]] += big[keep]
+    if huge.any():
+        add_huge(sums, values, window)
     sums[(bad[idx + 1] - bad[lo]) > 0] = np.inf
     return sums, cc[idx + 1] - cc[lo], idx + 1 >= window
 
 
+# The kernel allocates nothing and calls no other numba function: its outputs and rings come from
+# numpy in `trailing_sums`, which adds the rare huge values itself; numba's generic np.empty /
+# np.zeros and min compile apart (types, LLVM, linking), half the kernel's first-run compile.
+
+
 @numba.njit(cache=True)
-def trailing_sums(values, counts, window):  # pragma: no cover - compiled
-    """`window_sums` of float64 ``values`` and int64 ``counts``: the same running sums, added in the
-    same order as numpy's cumsum (so the same bits), in one pass; the running sums at the last
-    ``window`` + 1 entries are kept in a ring, not as (N,) arrays."""
-    n = values.size
-    sums = np.empty(n)
-    sum_counts = np.empty(n, dtype=np.int64)
-    full = np.empty(n, dtype=np.bool_)
-    size = min(window, n) + 1
-    ring_sum = np.zeros(size)  # running sum of the finite, not huge values (0 before the first)
-    ring_bad = np.zeros(size, dtype=np.int64)  # running count of the non-finite ones
-    ring_count = np.zeros(size, dtype=np.int64)
+def _running_sums(values, counts, window, sums, sum_counts, full, ring_sum, ring_bad, ring_count):  # pragma: no cover
+    """`trailing_sums` but the huge values' additions, into its outputs (N,), with three rings of
+    min(window, N) + 1 zeros for the running sums at the last window + 1 entries; returns the
+    number of huge values."""
+    size = ring_sum.size
     running, bad, counted = 0.0, 0, 0
     n_huge = 0
-    for i in range(n):
+    for i in range(values.size):
         v = values[i]
         finite = np.isfinite(v)
         is_huge = finite and abs(v) > HUGE_NIS
@@ -104,27 +94,44 @@ def trailing_sums(values, counts, window):  # pragma: no cover - compiled
             sums[i], sum_counts[i], window_bad = running - 0.0, counted, bad
         full[i] = lo >= 0
         if window_bad > 0:
-            sums[i] = np.inf  # after the huge values' additions below, which cannot undo it
+            sums[i] = np.inf  # the huge values' additions after this cannot undo it
         at = (i + 1) % size
         ring_sum[at], ring_bad[at], ring_count[at] = running, bad, counted
-    # each huge value added to the windows that hold it, in the order `window_sums` adds them: by
-    # its distance to the window's end, then by index (a window already inf stays inf)
-    huge = np.empty(n_huge, dtype=np.int64)
-    k = 0
-    for i in range(n if n_huge else 0):
-        if np.isfinite(values[i]) and abs(values[i]) > HUGE_NIS:
-            huge[k] = i
-            k += 1
-    for offset in range(min(window, n) if n_huge else 0):
-        for h in huge:
-            if h + offset < n:
-                sums[h + offset] += values[h]
+    return n_huge
+
+
+def trailing_sums(values: np.ndarray, counts: np.ndarray, window: int):
+    """`window_sums` of contiguous float64 ``values`` and int64 ``counts``: the same running sums,
+    added in the same order as numpy's cumsum (so the same bits), in one compiled pass; the running
+    sums at the last ``window`` + 1 entries are kept in rings, not as (N,) arrays."""
+    n = values.size
+    sums, sum_counts, full = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.bool_)
+    size = min(window, n) + 1
+    # running sums (0 before the first entry) of the finite, not huge values; of the non-finite
+    # ones (counted); of ``counts``
+    rings = np.zeros(size), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64)
+    if _running_sums(values, counts, window, sums, sum_counts, full, *rings):
+        add_huge(sums, values, window)
     return sums, sum_counts, full
 
 
+def add_huge(sums: np.ndarray, values: np.ndarray, window: int) -> None:
+    """Add each huge value of ``values`` (finite, beyond HUGE_NIS: kept out of the running sums) to
+    the windows of ``window`` entries that hold it, those ending at its index up to window - 1
+    later: by its distance to the window's end, then by index (a window's indices are distinct:
+    plain fancy indexing adds once each; a window already inf stays inf)."""
+    at = np.flatnonzero(np.isfinite(values) & (np.abs(values) > HUGE_NIS))
+    big = values[at]
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: inf, an exceedance
+        for offset in range(min(window, values.size)):
+            ends = at + offset
+            keep = ends < values.size
+            sums[ends[keep]] += big[keep]
+
+
 def compile_kernels() -> None:
-    """Compile (or load) `trailing_sums` for the types the NIS test and the normalised e_x pass:
-    the first run calls it while the EKF compiles in its own process."""
+    """Compile (or load) `trailing_sums`'s kernel for the types the NIS test and the normalised e_x
+    pass: the first run calls it while the EKF compiles in its own process."""
     trailing_sums(np.zeros(2), np.ones(2, dtype=np.int64), 1)
 
 
