@@ -56,17 +56,16 @@ NOISELESS_P = 0.1
 MAD_TO_STD = 0.6745 * np.sqrt(2.0)  # median |v_i - v_i-1| of N(0, sigma^2) noise = 0.6745 sqrt(2) sigma
 
 
+# The kernel allocates nothing and calls no other numba function (its outputs come from numpy in
+# `held_runs`; Python's min / max written out): numba's generic np.empty and min / max compile
+# apart (types, LLVM, linking into the caller), about half of the kernel's first-run compile.
+
+
 @numba.njit(cache=True)
-def held_runs(v, tol, still):  # pragma: no cover - compiled
-    """(anchor, held, run lengths): per sample the first index of its run, r_i (samples held since
-    it, 1 at it), and the length of each run in order. A run lasts while samples stay within
-    ``tol`` of its first sample (a NaN never joins a run); ``still`` (bool per sample, or empty:
-    none) marks samples at rest: each starts a run of its own and the next sample starts a new
-    one (a run counts only the samples after the last one at rest)."""
+def _held_runs_kernel(v, tol, still, anchor, held, lengths):  # pragma: no cover - compiled
+    """`held_runs` into its outputs (N,) (the run lengths in the first entries of ``lengths``);
+    returns the number of runs."""
     n = v.size
-    anchor = np.empty(n, dtype=np.int64)
-    held = np.empty(n, dtype=np.int64)
-    lengths = np.empty(n, dtype=np.int64)  # the first n_runs entries
     a = 0
     last_rest = -1
     n_runs = 0
@@ -76,7 +75,8 @@ def held_runs(v, tol, still):  # pragma: no cover - compiled
             a = i
         if still.size and still[i]:
             last_rest = i
-        b = min(max(a, last_rest + 1), i)
+        b = last_rest + 1 if last_rest + 1 > a else a  # min(max(a, last_rest + 1), i)
+        b = i if i < b else b
         anchor[i] = b
         held[i] = i + 1 - b
         if b == i:  # a run starts here: the previous one ended at i - 1
@@ -86,12 +86,23 @@ def held_runs(v, tol, still):  # pragma: no cover - compiled
             n_runs += 1
     if n_runs:
         lengths[n_runs - 1] = n - run_start
+    return n_runs
+
+
+def held_runs(v: np.ndarray, tol: float, still: np.ndarray):
+    """(anchor, held, run lengths): per sample the first index of its run, r_i (samples held since
+    it, 1 at it), and the length of each run in order. A run lasts while samples stay within
+    ``tol`` of its first sample (a NaN never joins a run); ``still`` (bool per sample, or empty:
+    none) marks samples at rest: each starts a run of its own and the next sample starts a new
+    one (a run counts only the samples after the last one at rest)."""
+    anchor, held, lengths = (np.empty(v.size, dtype=np.int64) for _ in range(3))
+    n_runs = _held_runs_kernel(v, tol, still, anchor, held, lengths)
     return anchor, held, lengths[:n_runs]
 
 
 def compile_kernels() -> None:
-    """Compile (or load) `held_runs` for the types `Frozen` passes: the first run calls it while
-    the EKF compiles in its own process."""
+    """Compile (or load) `held_runs`'s kernel for the types `Frozen` passes: the first run calls it
+    while the EKF compiles in its own process."""
     held_runs(np.zeros(2), 0.0, np.zeros(0, dtype=np.bool_))
 
 
