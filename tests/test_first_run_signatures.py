@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from numba import njit, types
 
-from logscan.align.sample_hold import _count_at_most
 from logscan.filters.warmup import kernel_compilers
 from logscan.numba_cache import OneSignature
 from logscan.pipeline.preparation import load_profile_for
@@ -90,14 +89,6 @@ def test_one_signature_runs_a_contiguous_and_a_strided_column_with_one_compile()
     assert whole.tolist() == [0.0, 2.0, 4.0]
     assert columns[:, 1].tolist() == [0.0, 2.0, 4.0]
     assert len(double_into.signatures) == 1
-
-
-def test_count_at_most_is_searchsorted_right():
-    rng = np.random.default_rng(3)
-    t = np.sort(rng.integers(0, 50, 40)).astype(np.int64)
-    for value in range(-2, 53):
-        assert _count_at_most(t, np.int64(value)) == np.searchsorted(t, value, side="right")
-    assert _count_at_most(np.empty(0, np.int64), np.int64(5)) == 0
 
 
 def test_kernel_compilers_of_the_default_detectors_cover_the_modules_they_call_kernels_from(sample):

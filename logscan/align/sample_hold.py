@@ -145,26 +145,10 @@ def hold(t_ns: np.ndarray, values: np.ndarray, grid_ns: np.ndarray, limit_ns: in
 
 
 @njit(cache=True)
-def _count_at_most(t_ns, value):  # pragma: no cover - compiled
-    # np.searchsorted(t_ns, value, side="right") of sorted t_ns, by bisection: numba's searchsorted
-    # compiles in about 1 s, a first run's share of the alignment
-    lo, hi = 0, t_ns.size
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if t_ns[mid] <= value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True)
-def _gap_kernel(t_ns, g0, g1, limit_ns, starts, ends):  # pragma: no cover - compiled
+def _gap_kernel(t_ns, i0, i1, g0, g1, limit_ns, starts, ends):  # pragma: no cover - compiled
     # Stretches without a sample inside [g0, g1] longer than the limit; edges: the last sample
-    # before g0 (else g0), every sample in [g0, g1], then g1. Writes up to starts.size of them
-    # (pass empty arrays to only count) and returns how many there are.
-    i0 = _count_at_most(t_ns, g0 - 1)  # first sample >= g0 (integer times)
-    i1 = _count_at_most(t_ns, g1)  # one past the last sample <= g1
+    # before g0 (else g0), every sample in [g0, g1] (t_ns[i0:i1]), then g1. Writes up to
+    # starts.size of them (pass empty arrays to only count) and returns how many there are.
     prev = t_ns[i0 - 1] if i0 > 0 else g0
     count = 0
     for i in range(i0, i1 + 1):
@@ -185,7 +169,11 @@ def _gaps(t_ns: np.ndarray, limit_ns: int, grid_ns: np.ndarray) -> tuple[np.ndar
     start, and the one after the last sample ends at the span end; each counts only when it
     exceeds the limit.
     """
-    args = (t_ns, np.int64(grid_ns[0]), np.int64(grid_ns[-1]), np.int64(limit_ns))
+    g0, g1 = np.int64(grid_ns[0]), np.int64(grid_ns[-1])
+    # the samples in [g0, g1], found by numpy: numba's searchsorted (about 1 s) or a bisection in
+    # a kernel of its own would compile in the first run
+    i0, i1 = int(np.searchsorted(t_ns, g0, side="left")), int(np.searchsorted(t_ns, g1, side="right"))
+    args = (t_ns, i0, i1, g0, g1, np.int64(limit_ns))
     count = _gap_kernel(*args, np.empty(0, np.int64), np.empty(0, np.int64))
     starts, ends = np.empty(count, np.int64), np.empty(count, np.int64)
     _gap_kernel(*args, starts, ends)
