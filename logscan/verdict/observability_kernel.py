@@ -133,54 +133,60 @@ def workspace(model: FilterModel, trajectory: FilterTrajectory, faults: FaultDir
 # skips only exact zeros of F and H), so the evidence is the same to the last bit.
 
 
-def input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
-    """Gd[a] = df/du . act_dirs[a] at (xk, uk), for every actuator a: central differences of the
-    step of the model ``model_id`` (a compile-time constant; numba code only), each side's step into
-    its row of sides (2, n). The step: the RK4 step of `logscan.models.rk4.rk4_f` in place, without
-    its Jacobian, for a model with continuous dynamics (its sums in the same order: the same bits as
-    the step the EKF takes); the model's own predict_into for the others (exactly discretised, no
-    Jacobian to save). k, xs (n,), A0 (0, 0) and F, Aw, Jw, Jnw (n, n) are work arrays."""
-    raise NotImplementedError("input_columns is resolved by numba at compile time")
+def model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+    """The predict step of the model ``model_id`` (a compile-time constant; numba code only) at
+    (xk, uk): x_next and F = df/dx (the model's predict_into, the EKF's step), and Gd[a] = df/du .
+    act_dirs[a] for every actuator a, central differences of the step, each side's step into its row
+    of sides (2, n): the RK4 step of `logscan.models.rk4.rk4_f` in place, without its Jacobian, for a
+    model with continuous dynamics (its sums in the same order: the same bits as the step the EKF
+    takes), the model's own predict_into for the others (exactly discretised, no Jacobian to save).
+    k, xs (n,), A0 (0, 0) and Fw, Aw, Jw, Jnw (n, n) are work arrays."""
+    raise NotImplementedError("model_predict is resolved by numba at compile time")
 
 
-# One function per model with its step at one call site: numba compiles every numba function a
-# kernel calls on its own, then again inside each caller (a step in its own function, called from
-# a function of the differences, cost the first run a second compile of the model's dynamics).
-@overload(input_columns, jit_options={"error_model": "numpy", "no_cpython_wrapper": True, "no_cfunc_wrapper": True})
-def _input_columns(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
+# One function per model: numba compiles every numba function a kernel calls on its own, then again
+# inside each caller, and an inlined overload's implementation once more on its own (the step in a
+# function of its own, called from a function of the differences, and `dispatch.model_predict_into`
+# cost the first run a compile of the model's dynamics each)
+@overload(model_predict, jit_options={"error_model": "numpy", "no_cpython_wrapper": True, "no_cfunc_wrapper": True})
+def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+    predict_into = literal_kernel(model_id, "predict_into")
     fA = literal_kernel(model_id, "fA")
-    if fA is not None:
+    if predict_into is not None and fA is not None:
 
-        def with_rk4(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
+        def with_rk4(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+            predict_into(p, xk, uk, dt, x_next, F, k, xs, Aw, Jw, Jnw)
+            h = 1e-6 * (1.0 + _abs_max(uk))  # 0.0 for a model without inputs
             c = dt / 6.0
             for a in range(act_dirs.shape[0]):
                 for side in range(2):
                     for i in range(uk.size):
                         ua[i] = uk[i] + h * act_dirs[a, i] if side == 0 else uk[i] - h * act_dirs[a, i]
-                    x_next = sides[side]
+                    x_side = sides[side]
                     for i in range(xk.size):
-                        x_next[i] = xk[i]
+                        x_side[i] = xk[i]
                         xs[i] = xk[i]
                     for stage in range(4):
                         fA(p, xs, ua, k, A0, False)
                         w = 1.0 if stage == 0 or stage == 3 else 2.0
                         step = 0.5 * dt if stage < 2 else dt
                         for i in range(xk.size):
-                            x_next[i] += c * w * k[i]
+                            x_side[i] += c * w * k[i]
                             xs[i] = xk[i] + step * k[i]
                 for i in range(xk.size):
                     Gd[a, i] = (sides[0, i] - sides[1, i]) / (2.0 * h)
 
         return with_rk4
-    predict_into = literal_kernel(model_id, "predict_into")
     if predict_into is not None:
 
-        def with_step(model_id, p, xk, uk, dt, act_dirs, h, ua, Gd, sides, k, xs, A0, F, Aw, Jw, Jnw):
+        def with_step(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+            predict_into(p, xk, uk, dt, x_next, F, k, xs, Aw, Jw, Jnw)
+            h = 1e-6 * (1.0 + _abs_max(uk))  # 0.0 for a model without inputs
             for a in range(act_dirs.shape[0]):
                 for side in range(2):
                     for i in range(uk.size):
                         ua[i] = uk[i] + h * act_dirs[a, i] if side == 0 else uk[i] - h * act_dirs[a, i]
-                    predict_into(p, xk, ua, dt, sides[side], F, k, xs, Aw, Jw, Jnw)
+                    predict_into(p, xk, ua, dt, sides[side], Fw, k, xs, Aw, Jw, Jnw)
                 for i in range(xk.size):
                     Gd[a, i] = (sides[0, i] - sides[1, i]) / (2.0 * h)
 
@@ -371,10 +377,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows, work):
             _copy_square(P0, n, P)
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
-        # (one call site each: the model's step is inlined wherever it is called, and compiled as often)
-        dispatch.model_predict_into(model_id, p, xk, u[k], dt, x_next, F, kv, xs, Aw, Jw, Jnw)
-        h = 1e-6 * (1.0 + _abs_max(u[k]))  # 0.0 for a model without inputs
-        input_columns(model_id, p, xk, u[k], dt, act_dirs, h, ua, Gd, sides, kv, xs, A0, Ft, Aw, Jw, Jnw)
+        model_predict(model_id, p, xk, u[k], dt, act_dirs, x_next, F, Gd, ua, sides, kv, xs, A0, Ft, Aw, Jw, Jnw)
         # P_prior = F P F^T + Q
         _mm_rows(F, P, n, n, n, FP)
         _transpose(F, n, n, Ft)
