@@ -87,52 +87,50 @@ def threshold_for_arl(arl, kappa: float) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip, g, onset, free):  # pragma: no cover
-    """`cusum_statistics` into its outputs g, onset, free (N, J), each entry written once."""
-    n, m = y.shape[0], gap.size
-    for j in range(m):
-        sp = sm = fp = fm = 0.0  # S+, S-, and the same sides without the cap
-        p0 = m0 = -1  # the first step of each side's run (-1: the side is at 0)
-        last = -np.inf
-        on = False
-        h_j, gap_j = h[j], gap[j]  # locals: the output arrays are arguments, which might alias them
-        top = cap * h_j
-        for i in range(n):
-            if reset[i]:
-                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
-            x = y[i, first + j] / np.sqrt(S_diag[i, first + j])  # u = y~ / sqrt(S_jj)
-            if not np.isfinite(x):
-                g[i, j], free[i, j], onset[i, j] = np.nan, np.nan, -1
-                continue
-            if t[i] - last > gap_j:
-                sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
-            last = t[i]
-            x = min(max(x, -clip), clip)
-            # each side: S_k = max(0, S_k-1 + u_k - kappa) held at ``top``, its run starting at
-            # the step where it leaves 0; S+ on u_k, S- on -u_k (min / max, not conditional
-            # expressions: numba turns those into branches, a third slower here)
-            step = sp + x - kappa
-            if step <= 0.0:
-                sp, p0 = 0.0, -1
-            else:
-                p0 = i if sp == 0.0 else p0
-                sp = min(step, top)
-            step = sm - x - kappa
-            if step <= 0.0:
-                sm, m0 = 0.0, -1
-            else:
-                m0 = i if sm == 0.0 else m0
-                sm = min(step, top)
-            fp = max(0.0, fp + x - kappa)
-            fm = max(0.0, fm - x - kappa)
-            now = max(sp, sm) > h_j
-            if on and not now:  # the alarm ended: its evidence is spent, both sides restart
-                sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, -1, -1
-            on = now
-            if sp >= sm:
-                g[i, j], free[i, j], onset[i, j] = sp, fp, p0
-            else:
-                g[i, j], free[i, j], onset[i, j] = -sm, -fm, m0
+def cusum_kernel(t, y, S_diag, column, reset, gap, h, kappa, cap, clip, g, onset, free):  # pragma: no cover
+    """`cusum_statistics` of one column of y and S_diag, with its gap and threshold h, into its
+    outputs g, onset, free (N,), each entry written once."""
+    sp = sm = fp = fm = 0.0  # S+, S-, and the same sides without the cap
+    p0 = m0 = -1  # the first step of each side's run (-1: the side is at 0)
+    last = -np.inf
+    on = False
+    top = cap * h
+    for i in range(y.shape[0]):
+        if reset[i]:
+            sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
+        x = y[i, column] / np.sqrt(S_diag[i, column])  # u = y~ / sqrt(S_jj)
+        if not np.isfinite(x):
+            g[i], free[i], onset[i] = np.nan, np.nan, -1
+            continue
+        if t[i] - last > gap:
+            sp, sm, fp, fm, p0, m0, on = 0.0, 0.0, 0.0, 0.0, -1, -1, False
+        last = t[i]
+        x = min(max(x, -clip), clip)
+        # each side: S_k = max(0, S_k-1 + u_k - kappa) held at ``top``, its run starting at
+        # the step where it leaves 0; S+ on u_k, S- on -u_k (min / max, not conditional
+        # expressions: numba turns those into branches, a third slower here)
+        step = sp + x - kappa
+        if step <= 0.0:
+            sp, p0 = 0.0, -1
+        else:
+            p0 = i if sp == 0.0 else p0
+            sp = min(step, top)
+        step = sm - x - kappa
+        if step <= 0.0:
+            sm, m0 = 0.0, -1
+        else:
+            m0 = i if sm == 0.0 else m0
+            sm = min(step, top)
+        fp = max(0.0, fp + x - kappa)
+        fm = max(0.0, fm - x - kappa)
+        now = max(sp, sm) > h
+        if on and not now:  # the alarm ended: its evidence is spent, both sides restart
+            sp, sm, fp, fm, p0, m0 = 0.0, 0.0, 0.0, 0.0, -1, -1
+        on = now
+        if sp >= sm:
+            g[i], free[i], onset[i] = sp, fp, p0
+        else:
+            g[i], free[i], onset[i] = -sm, -fm, m0
 
 
 def cusum_statistics(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):
@@ -148,10 +146,12 @@ def cusum_statistics(t, y, S_diag, first, reset, gap, h, kappa, cap, clip):
     the run of the side g shows (-1 when that side is zero); and free (N, J), the same sides without
     the cap (restarted with them), whose peak is an alarm's real magnitude.
     """
-    shape = (y.shape[0], gap.size)
+    shape = (gap.size, y.shape[0])  # a row per column: the kernel fills contiguous (N,) arrays
     g, free, onset = np.empty(shape), np.empty(shape), np.empty(shape, dtype=np.int64)
-    cusum_kernel(t, y, S_diag, first, reset, gap, h, kappa, cap, clip, g, onset, free)
-    return g, onset, free
+    settings = (kappa, cap, clip)
+    for j in range(gap.size):
+        cusum_kernel(t, y, S_diag, first + j, reset, float(gap[j]), float(h[j]), *settings, g[j], onset[j], free[j])
+    return g.T, onset.T, free.T
 
 
 def compile_kernels() -> None:
