@@ -116,3 +116,31 @@ def test_the_filter_helpers_compiled_ahead_are_the_ones_the_kernel_calls(tmp_pat
     verdicts = dict(line.split() for line in done.stdout.splitlines())
     assert len(verdicts) == 18
     assert all(verdict == "True" for verdict in verdicts.values()), verdicts
+
+
+@pytest.mark.slow
+def test_the_kernels_compiled_after_the_ekf_compile_in_its_process(tmp_path):
+    """On a cold cache, ``start_compile(model, after=...)`` runs ``after`` in the forked process,
+    once the EKF kernel is compiled (the detectors' kernels, off the main process's critical path)."""
+    probe = textwrap.dedent(
+        f"""
+        import os, sys
+        from logscan.filters.warmup import ekf_cached, start_compile
+        from logscan.models import get_model
+
+        model = get_model("dc_motor")
+        def after():
+            with open({str(tmp_path / "after")!r}, "w") as fh:
+                fh.write(f"{{os.getpid()}} {{ekf_cached(model)}}")
+        compiling = start_compile(model, after=[after])
+        assert compiling.in_background
+        compiling.wait()
+        print(os.getpid())
+        """
+    )
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    child_pid, cached = (tmp_path / "after").read_text().split()
+    assert child_pid != done.stdout.strip()
+    assert cached == "True"

@@ -13,10 +13,12 @@ to the first call, as without this module.
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import sys
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 
 import numpy as np
 from numba.core.dispatcher import Dispatcher
@@ -79,21 +81,41 @@ class Compile:
             self._process = None
 
 
-def start_compile(model: Model) -> Compile:
-    """Compile the model's EKF kernel in a forked process when the cache lacks it, and its
-    model-independent helpers here meanwhile (`compile_filter_helpers`)."""
+def start_compile(model: Model, after: Sequence[Callable[[], None]] = ()) -> Compile:
+    """Compile the model's EKF kernel in a forked process when the cache lacks it, then there the
+    kernels ``after`` compiles (the detectors': `kernel_compilers`), and the EKF's
+    model-independent helpers here meanwhile (`compile_filter_helpers`). The two processes then
+    take about as long: this one also reads, aligns and compiles the rest (the observability
+    verdict's kernel)."""
     if ekf_cached(model):
         return Compile(cold=False)
     if not _can_fork():
         return Compile(cold=True)
     initialise_jit()  # once, here, inherited by the child: not paid again on the compile's critical path
     try:
-        process = multiprocessing.get_context("fork").Process(target=_compile_ekf, args=(model,), daemon=True)
+        process = multiprocessing.get_context("fork").Process(
+            target=_compile_kernels, args=(model, tuple(after)), daemon=True
+        )
         process.start()
     except (OSError, ValueError, AssertionError):  # no process could be started: compile on first use
         return Compile(cold=True)
-    compile_filter_helpers()
+    with collector_paused():
+        compile_filter_helpers()
     return Compile(cold=True, process=process)
+
+
+@contextmanager
+def collector_paused() -> Iterator[None]:
+    """Python's cyclic collector off while kernels compile: numba makes hundreds of thousands of
+    objects per kernel, and the collections they trigger walked them for about 0.7 s of the first
+    run's CPU; what they leave is collected once the collector is back on."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 # The EKF kernel's model-independent helpers, each with the one signature the kernel calls it with
@@ -171,6 +193,18 @@ def _can_fork() -> bool:
         and threading.active_count() == 1
         and not multiprocessing.current_process().daemon
     )
+
+
+def _compile_kernels(model: Model, after: Sequence[Callable[[], None]]) -> None:
+    """Child process: the EKF kernel of ``model``, then the kernels ``after`` compiles, each into
+    the disk cache (one that fails is left to its first call in the parent)."""
+    with collector_paused():
+        _compile_ekf(model)
+        for compile_kernels in after:
+            try:
+                compile_kernels()
+            except Exception:  # noqa: BLE001, S112 - only a head start
+                continue
 
 
 def _compile_ekf(model: Model) -> None:

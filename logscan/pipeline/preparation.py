@@ -14,7 +14,7 @@ from logscan.align import align
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
-from logscan.filters.warmup import COMPILING_NOTE, Compile, kernel_cached, start_compile
+from logscan.filters.warmup import COMPILING_NOTE, Compile, collector_paused, kernel_cached, start_compile
 from logscan.log import MAX_SPAN_S, Log
 from logscan.models import get_model
 from logscan.needs import Needs
@@ -164,14 +164,14 @@ def prepare(
     line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. ``fraction`` hears the bytes read, a
     block at a time (`logscan.readers.read_log`'s ``progress``). ``ahead``: functions that compile
-    the detectors' kernels, called while the EKF's compiles in its own process (the first run:
-    `logscan.filters.warmup.kernel_compilers`). Raises LogscanError on bad input."""
+    the detectors' kernels, called on the first run in the process that compiles the EKF's, after
+    it (`logscan.filters.warmup.kernel_compilers`). Raises LogscanError on bad input."""
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
     model = get_model(profile.vehicle.model, profile.vehicle.params)
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
-    compiling = _start_compile(model, needs, notice)
+    compiling = _start_compile(model, needs, notice, ahead)
     step("reading")
     log = _read(path, loaded, raw_topics, use_header_stamp, fraction)
     _attach_truth(log, path, truth_path)
@@ -199,7 +199,7 @@ def prepare(
         wanted = wanted | RECOVERY_NEEDS
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     prepared.warnings.extend(_read_warnings(log, run))
-    _run_filters(prepared, wanted, compiling, step, fraction, ahead)
+    _run_filters(prepared, wanted, compiling, step, fraction)
     return prepared
 
 
@@ -253,7 +253,6 @@ def _run_filters(
     compiling: Compile,
     step: Progress,
     fraction: Fraction | None,
-    ahead: Sequence[Callable[[], None]] = (),
 ) -> None:
     """Run each filter the needs ask for once, into ``prepared.traces``; the EKF's divergence
     episodes become warnings. ``fraction`` hears the steps a counting filter has done."""
@@ -265,7 +264,7 @@ def _run_filters(
             )
         step("filtering")
         if compiling.in_background:
-            _compile_ahead(prepared, ahead)
+            _compile_ahead(prepared)
         compiling.wait()
         if name not in COUNTS_STEPS:
             prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
@@ -277,21 +276,19 @@ def _run_filters(
         prepared.warnings.append(f"filter diverged: {episode}")
 
 
-def _compile_ahead(prepared: Prepared, ahead: Sequence[Callable[[], None]]) -> None:
-    """While the EKF's kernel compiles in its own process (the first run), compile here the kernels
-    that run after it: the observability verdict's, when the log's ground truth asks for it, and
-    the detectors' (``ahead``). Only a head start: a compile that fails here is left to the kernel's
-    first call, where the verdict (an aid, noted when it fails) or the one detector meets it, as
-    without this."""
+def _compile_ahead(prepared: Prepared) -> None:
+    """While the EKF's kernel compiles in its own process (the first run), compile here the
+    observability verdict's, when the log's ground truth asks for it (the detectors' compile in
+    that process, after the EKF's: `_start_compile`). Only a head start: a compile that fails here
+    is left to the kernel's first call, where the verdict (an aid, noted when it fails) meets it,
+    as without this."""
     model = prepared.model
-    compiles = list(ahead)
     if judged_spans(prepared) and not kernel_cached(signature_evidence, model.model_id):
-        compiles.insert(0, lambda: compile_verdict_kernel(model, prepared.run.dt))
-    for compile_kernels in compiles:
-        try:
-            compile_kernels()
-        except Exception:  # noqa: BLE001, S112 - see the docstring: the first call meets it again
-            continue
+        with collector_paused():
+            try:
+                compile_verdict_kernel(model, prepared.run.dt)
+            except Exception:  # noqa: BLE001, S110 - see the docstring: the first call meets it again
+                pass
 
 
 def _attach_truth(log, path: str, truth_path) -> None:
@@ -304,12 +301,13 @@ def _attach_truth(log, path: str, truth_path) -> None:
         log.truth = in_log_time(log.truth, log.start_ns, str(source or path))
 
 
-def _start_compile(model, needs, notice: Progress | None):
+def _start_compile(model, needs, notice: Progress | None, ahead: Sequence[Callable[[], None]]):
     """The EKF kernel's first compile, beside the reading (logscan.filters.warmup), when a
-    detector may need the EKF and the cache lacks the model's kernel."""
+    detector may need the EKF and the cache lacks the model's kernel; the detectors' kernels
+    (``ahead``) then compile in the same process, after it."""
     if isinstance(needs, Needs) and "ekf" not in needs.filters:
         return Compile(cold=False)
-    compiling = start_compile(model)
+    compiling = start_compile(model, after=ahead)
     if compiling.cold and notice is not None:
         notice(COMPILING_NOTE)
     return compiling
