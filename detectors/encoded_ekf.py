@@ -37,9 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# compile_kernels: the band kernel's, which the first run calls ahead: `kernel_compilers` finds it
-# here (adaptive_band is numpy around the kernel, not a numba function it would find)
-from logscan.detectors.adaptive_threshold import adaptive_band, compile_kernels, trailing_mean_var  # noqa: F401
+from logscan.detectors.adaptive_threshold import adaptive_band, trailing_mean_var
 from logscan.detectors.base import Detector, DetectorResult, Needs, any_per_row, median_period
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.normalised_check import (

@@ -19,6 +19,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from types import FunctionType
 
 import numpy as np
 from numba.core.dispatcher import Dispatcher
@@ -171,8 +172,9 @@ def compile_filter_helpers() -> None:
 def kernel_compilers(users: Iterable[object]) -> list[Callable[[], None]]:
     """The ``compile_kernels()`` functions (each compiles or loads its module's kernels for the
     types its callers pass) of the modules whose numba kernels ``users`` (e.g. detectors) call:
-    their own class's module and the modules it imports kernels from, each once. The first run
-    calls them while the EKF's kernel compiles in its own process."""
+    their own class's module and the modules it imports kernels or functions from (a numpy
+    function around a kernel), each once. The first run calls them in the process that compiles
+    the EKF's kernel, after it."""
     modules: dict[str, object] = {}
     for user in users:
         own = sys.modules.get(type(user).__module__)
@@ -180,8 +182,10 @@ def kernel_compilers(users: Iterable[object]) -> list[Callable[[], None]]:
             continue
         modules.setdefault(own.__name__, own)
         for value in vars(own).values():
-            if isinstance(value, Dispatcher) and value.py_func.__module__ in sys.modules:
-                modules.setdefault(value.py_func.__module__, sys.modules[value.py_func.__module__])
+            function = value.py_func if isinstance(value, Dispatcher) else value
+            origin = getattr(function, "__module__", None) if isinstance(function, FunctionType) else None
+            if origin in sys.modules:
+                modules.setdefault(origin, sys.modules[origin])
     compilers = (getattr(module, "compile_kernels", None) for module in modules.values())
     return [compiler for compiler in compilers if callable(compiler)]
 
