@@ -144,3 +144,20 @@ def test_the_kernels_compiled_after_the_ekf_compile_in_its_process(tmp_path):
     child_pid, cached = (tmp_path / "after").read_text().split()
     assert child_pid != done.stdout.strip()
     assert cached == "True"
+
+
+def test_each_kernel_compiled_after_the_ekf_is_taken_by_one_process_only():
+    """The first run's two processes split the kernels compiled after the EKF's: an item already
+    claimed (by the other process) is skipped, the others are claimed and compiled here."""
+    import multiprocessing
+
+    from logscan.filters.warmup import _compile_unclaimed
+
+    done: list[int] = []
+    claims = multiprocessing.get_context("fork").Array("b", 3)
+    claims[1] = 1  # the other process took the second
+    _compile_unclaimed([lambda: done.append(0), lambda: done.append(1), lambda: done.append(2)], claims)
+    assert done == [0, 2]
+    assert list(claims) == [1, 1, 1]
+    _compile_unclaimed([lambda: done.append(9)] * 3, claims)  # nothing left to take
+    assert done == [0, 2]

@@ -64,16 +64,25 @@ def kernel_cached(dispatcher, literal_first=None) -> bool:
 
 
 class Compile:
-    """A background compile of the EKF kernel (or nothing to wait for)."""
+    """A background compile of the EKF kernel (or nothing to wait for), with the kernels to compile
+    after it (``after``), which either process claims one by one (``claims``: 1 once taken)."""
 
-    def __init__(self, cold: bool, process=None):
+    def __init__(self, cold: bool, process=None, after: Sequence[Callable[[], None]] = (), claims=None):
         self.cold = cold
         self._process = process
+        self._after = tuple(after)
+        self._claims = claims
 
     @property
     def in_background(self) -> bool:
         """Whether the kernel is compiling in its own process (until `wait`)."""
         return self._process is not None
+
+    def share(self) -> None:
+        """Compile here those of the kernels ``after`` the other process has not taken yet: this
+        process, done with its own work before that one, takes the rest of the list."""
+        if self._claims is not None:
+            _compile_unclaimed(self._after, self._claims)
 
     def wait(self) -> None:
         """Join the compiling process, if any (its result is in the disk cache)."""
@@ -94,15 +103,15 @@ def start_compile(model: Model, after: Sequence[Callable[[], None]] = ()) -> Com
         return Compile(cold=True)
     initialise_jit()  # once, here, inherited by the child: not paid again on the compile's critical path
     try:
-        process = multiprocessing.get_context("fork").Process(
-            target=_compile_kernels, args=(model, tuple(after)), daemon=True
-        )
+        context = multiprocessing.get_context("fork")
+        claims = context.Array("b", max(len(after), 1))
+        process = context.Process(target=_compile_kernels, args=(model, tuple(after), claims), daemon=True)
         process.start()
     except (OSError, ValueError, AssertionError):  # no process could be started: compile on first use
         return Compile(cold=True)
     with collector_paused():
         compile_filter_helpers()
-    return Compile(cold=True, process=process)
+    return Compile(cold=True, process=process, after=after, claims=claims)
 
 
 @contextmanager
@@ -199,16 +208,27 @@ def _can_fork() -> bool:
     )
 
 
-def _compile_kernels(model: Model, after: Sequence[Callable[[], None]]) -> None:
-    """Child process: the EKF kernel of ``model``, then the kernels ``after`` compiles, each into
-    the disk cache (one that fails is left to its first call in the parent)."""
+def _compile_kernels(model: Model, after: Sequence[Callable[[], None]], claims) -> None:
+    """Child process: the EKF kernel of ``model``, then those of the kernels ``after`` compiles that
+    the parent has not taken (`Compile.share`), each into the disk cache (one that fails is left to
+    its first call in the parent)."""
     with collector_paused():
         _compile_ekf(model)
-        for compile_kernels in after:
-            try:
-                compile_kernels()
-            except Exception:  # noqa: BLE001, S112 - only a head start
+        _compile_unclaimed(after, claims)
+
+
+def _compile_unclaimed(compiles: Sequence[Callable[[], None]], claims) -> None:
+    """Call each of ``compiles`` whose claim (a shared byte per item) no process has taken, taking
+    it first: the two processes of a first run split the list between them, none compiled twice."""
+    for index, compile_kernels in enumerate(compiles):
+        with claims.get_lock():
+            if claims[index]:
                 continue
+            claims[index] = 1
+        try:
+            compile_kernels()
+        except Exception:  # noqa: BLE001, S112 - only a head start
+            continue
 
 
 def _compile_ekf(model: Model) -> None:

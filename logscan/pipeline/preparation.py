@@ -264,7 +264,7 @@ def _run_filters(
             )
         step("filtering")
         if compiling.in_background:
-            _compile_ahead(prepared)
+            _compile_ahead(prepared, compiling)
         compiling.wait()
         if name not in COUNTS_STEPS:
             prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
@@ -276,19 +276,20 @@ def _run_filters(
         prepared.warnings.append(f"filter diverged: {episode}")
 
 
-def _compile_ahead(prepared: Prepared) -> None:
+def _compile_ahead(prepared: Prepared, compiling: Compile) -> None:
     """While the EKF's kernel compiles in its own process (the first run), compile here the
-    observability verdict's, when the log's ground truth asks for it (the detectors' compile in
-    that process, after the EKF's: `_start_compile`). Only a head start: a compile that fails here
-    is left to the kernel's first call, where the verdict (an aid, noted when it fails) meets it,
-    as without this."""
+    observability verdict's, when the log's ground truth asks for it, then those of the detectors'
+    that process has not taken yet (they compile there after the EKF's: `_start_compile`). Only a
+    head start: a compile that fails here is left to the kernel's first call, where the verdict (an
+    aid, noted when it fails) or the one detector meets it, as without this."""
     model = prepared.model
-    if judged_spans(prepared) and not kernel_cached(signature_evidence, model.model_id):
-        with collector_paused():
+    with collector_paused():
+        if judged_spans(prepared) and not kernel_cached(signature_evidence, model.model_id):
             try:
                 compile_verdict_kernel(model, prepared.run.dt)
             except Exception:  # noqa: BLE001, S110 - see the docstring: the first call meets it again
                 pass
+        compiling.share()
 
 
 def _attach_truth(log, path: str, truth_path) -> None:
