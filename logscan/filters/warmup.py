@@ -6,9 +6,10 @@ already holds the model's kernel and, when it does not, compiles it in a forked 
 one reads and aligns the log (the compile holds the GIL, so a thread would not overlap), and
 first compiles here the kernel's model-independent helpers, which the child then loads from the
 cache instead of compiling them too (`compile_filter_helpers`): the two cores share the EKF's
-compile. `wait()` before filtering joins it; the kernel then loads from the cache. Anything
-unusual (no fork, threads running, a daemonic worker, the child failing) just leaves the compile
-to the first call, as without this module.
+compile. The kernels compiled after it (the detectors': `kernel_compilers`) go to whichever
+process is free first (`Compile.share`). `wait()` before filtering joins it; the kernel then
+loads from the cache. Anything unusual (no fork, threads running, a daemonic worker, the child
+failing) just leaves the compile to the first call, as without this module.
 """
 
 from __future__ import annotations
