@@ -50,22 +50,12 @@ def trailing_zeros(typingctx, a):  # pragma: no cover - compiled
 
 @intrinsic
 def float_of_bits(typingctx, a):  # pragma: no cover - compiled
-    """The float64 whose IEEE bits are the uint64 ``a``."""
-    signature = types.float64(types.uint64)
+    """The float whose IEEE bits are ``a``: a float32 for a uint32, else a float64 (``a`` as a uint64)."""
+    single = isinstance(a, types.Integer) and a.bitwidth == 32 and not a.signed
+    signature = types.float32(types.uint32) if single else types.float64(types.uint64)
 
     def codegen(context, builder, sig, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return signature, codegen
-
-
-@intrinsic
-def float32_of_bits(typingctx, a):  # pragma: no cover - compiled
-    """The float32 whose IEEE bits are the uint32 ``a``."""
-    signature = types.float32(types.uint32)
-
-    def codegen(context, builder, sig, args):
-        return builder.bitcast(args[0], ir.FloatType())
+        return builder.bitcast(args[0], ir.FloatType() if single else ir.DoubleType())
 
     return signature, codegen
 

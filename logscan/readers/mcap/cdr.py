@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from logscan.numba_cache import follow_dependencies
-from logscan.readers.bits import float32_of_bits, float_of_bits, load_u64
+from logscan.readers.bits import float_of_bits, load_u64
 from logscan.readers.flatten import FlatColumns, MessageBytes
 from logscan.readers.mcap.scan_records import SchemaRec
 
@@ -181,7 +181,7 @@ def le_value(buf, pos, size, code):  # pragma: no cover - compiled
     if code == 10:
         return float_of_bits(raw)
     if code == 9:
-        return np.float64(float32_of_bits(np.uint32(raw)))
+        return np.float64(float_of_bits(np.uint32(raw)))
     if code == 1 or code == 3 or code == 5 or code == 7:
         return np.float64(raw)
     if code == 8:
