@@ -20,9 +20,11 @@ import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from functools import partial
 from types import FunctionType
 
 import numpy as np
+from numba.core import types
 from numba.core.dispatcher import Dispatcher
 
 from logscan.align import AlignedGroup, AlignedRun
@@ -160,8 +162,6 @@ FILTER_HELPERS = (
 
 def helper_signature(codes: str) -> tuple:
     """The numba argument types of a FILTER_HELPERS signature."""
-    from numba.core import types
-
     scalars = {"f": types.float64, "i": types.int64, "b": types.boolean, "F": types.float32}
     return tuple(
         scalars[code[0]] if len(code) == 1 else types.Array(scalars[code[0]], int(code[1:]), "C")
@@ -173,10 +173,16 @@ def compile_filter_helpers() -> None:
     """Compile (or load from the cache) FILTER_HELPERS: the first run, while the EKF kernel
     compiles in its own process. A helper that fails here is left to the kernel's compile."""
     for dispatcher, codes in FILTER_HELPERS:
-        try:
-            dispatcher.compile(helper_signature(codes))
-        except Exception:  # noqa: BLE001, S112 - only a head start
-            continue
+        head_start(partial(dispatcher.compile, helper_signature(codes)))
+
+
+def head_start(compile_kernels: Callable[[], object]) -> None:
+    """Call ``compile_kernels``: a compile ahead of its first use, so one that fails here is left
+    to that use, which meets the error again."""
+    try:
+        compile_kernels()
+    except Exception:  # noqa: BLE001, S110 - see the docstring
+        pass
 
 
 def kernel_compilers(users: Iterable[object]) -> list[Callable[[], None]]:
@@ -226,10 +232,7 @@ def _compile_unclaimed(compiles: Sequence[Callable[[], None]], claims) -> None:
             if claims[index]:
                 continue
             claims[index] = 1
-        try:
-            compile_kernels()
-        except Exception:  # noqa: BLE001, S112 - only a head start
-            continue
+        head_start(compile_kernels)
 
 
 def _compile_ekf(model: Model) -> None:

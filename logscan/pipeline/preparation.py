@@ -14,7 +14,14 @@ from logscan.align import align
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import InputError, LogscanError, ProfileError
-from logscan.filters.warmup import COMPILING_NOTE, Compile, collector_paused, kernel_cached, start_compile
+from logscan.filters.warmup import (
+    COMPILING_NOTE,
+    Compile,
+    collector_paused,
+    head_start,
+    kernel_cached,
+    start_compile,
+)
 from logscan.log import MAX_SPAN_S, Log
 from logscan.models import get_model
 from logscan.needs import Needs
@@ -285,10 +292,7 @@ def _compile_ahead(prepared: Prepared, compiling: Compile) -> None:
     model = prepared.model
     with collector_paused():
         if judged_spans(prepared) and not kernel_cached(signature_evidence, model.model_id):
-            try:
-                compile_verdict_kernel(model, prepared.run.dt)
-            except Exception:  # noqa: BLE001, S110 - see the docstring: the first call meets it again
-                pass
+            head_start(lambda: compile_verdict_kernel(model, prepared.run.dt))
         compiling.share()
 
 
