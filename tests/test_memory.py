@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 import sys
 
 import numpy as np
@@ -50,6 +51,33 @@ def test_innovations_are_kept_only_when_a_detector_asks(sample):
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
 def test_the_mmap_threshold_is_fixed_on_glibc():
     assert reuse_freed_arrays() is True
+
+
+FREED_INSIDE_THE_HEAP = """
+import numpy as np
+from logscan.memory import return_freed_pages, reuse_freed_arrays
+
+def rss_mib():
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("VmRSS:")) / 1024
+
+reuse_freed_arrays()
+arrays = [np.ones(1 << 20) for _ in range(40)]  # 40 x 8 MiB: carved from the heap
+pinned = np.ones(1 << 20)  # above them: the heap's top is not free
+del arrays[:10]  # 80 MiB free inside the heap, under the trim threshold: kept for reuse
+print(return_freed_pages())
+arrays.clear()  # 320 MiB free: given back
+before = rss_mib()
+print(return_freed_pages(), round(before - rss_mib()))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc_trim")
+def test_freed_pages_inside_the_heap_go_back_from_the_trim_threshold():
+    out = subprocess.run([sys.executable, "-c", FREED_INSIDE_THE_HEAP], capture_output=True, text=True, check=True)
+    kept, (returned, mib) = out.stdout.split("\n")[0], out.stdout.split("\n")[1].split()
+    assert kept == "False" and returned == "True"
+    assert int(mib) >= 250  # of the 320 MiB freed below the pinned array
 
 
 def test_the_filter_reads_the_aligned_samples_in_place(sample):

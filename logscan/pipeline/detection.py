@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
 from logscan.errors import ExitCode, LogscanError
+from logscan.memory import return_freed_pages
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.loops import detect_loops, recover_analysis
 from logscan.pipeline.preparation import Progress
@@ -109,6 +110,7 @@ def _run_detectors(
             packed = True
         if free_series:  # the report's pack, still to come, reads the innovations and the samples
             release_unread(prepared, still_to_run, keep=frozenset() if packed else frozenset({"y", "S_diag", "z"}))
+        return_freed_pages()  # what the filter or the last detector freed
         step(f"detector {detector.name}")
         try:
             result = detector.run(
@@ -126,6 +128,7 @@ def _run_detectors(
             failed[index] = detector_failure(detector.name, exc)
             continue
         results[index] = result
+    return_freed_pages()
     if not packed:  # every detector reads the samples
         pack_innovations_for(prepared, [], reuse_samples=False)
     analysis.failures += [failed[i] for i in listed if i in failed]

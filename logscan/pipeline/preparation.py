@@ -23,6 +23,7 @@ from logscan.filters.warmup import (
     start_compile,
 )
 from logscan.log import MAX_SPAN_S, Log
+from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
@@ -183,6 +184,7 @@ def prepare(
     log = _read(path, loaded, raw_topics, use_header_stamp, fraction)
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
+    return_freed_pages()
     step("aligning")
     run = align(log, profile, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
     if run.n_steps < 2:
@@ -199,6 +201,7 @@ def prepare(
     if profile.loops:
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
+    return_freed_pages()
     wanted = needs(run) if callable(needs) else needs
     if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
         raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
