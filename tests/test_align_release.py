@@ -76,8 +76,8 @@ def test_a_channel_is_not_read_after_its_release():
 def test_prepare_keeps_the_ground_truth_states_for_the_report(sample):
     """The simulated log's true states (a topic the profile does not hold) reach the report's
     context as from the log kept whole; the profile's own channels are released by then."""
-    path = sample("quad_imu_bias.mcap")
-    prepared = prepare(path, load_profile_for(path, None), Needs())
+    path = sample("hover_healthy.mcap")  # the UBIKF's page draws them (a model with intervals)
+    prepared = prepare(path, load_profile_for(path, None), Needs.of(ubikf=()))
     truth = prepared.log.truth
     assert truth is not None and truth.get("true_state_topic")
     whole = read_log(path, topics=prepared.profile.topics() | {truth["true_state_topic"].strip("/")})

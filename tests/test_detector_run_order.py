@@ -1,6 +1,6 @@
 """The detectors run in the order that frees each large series early (`run_order`), with the same
 results, in the given order, and the failures listed as before; the run context's true states are
-freed when no page will draw them (`release_unread_truth`)."""
+made only for a page that draws them."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from logscan.results import DetectorResult
 NAMES = ["nis", "encoded_ekf", "cusum", "frozen"]
 
 
-def prepared_with(sample, names):
-    path = sample("quad_imu_bias.mcap")
+def prepared_with(sample, names, log="quad_imu_bias.mcap"):
+    path = sample(log)
     loaded = load_profile_for(path, None)
     detectors = create_detectors(loaded, names)
     return prepare(path, loaded, needs_of(detectors)), detectors
@@ -71,11 +71,8 @@ def test_failures_are_listed_the_samples_readers_first_then_as_given(sample):
     assert [r.detector for r in analysis.results] == ["nis"]
 
 
-def test_the_true_states_go_when_no_page_draws_them(sample):
-    prepared, detectors = prepared_with(sample, ["nis"])
-    assert prepared.context.true_states  # a simulated log: its truth gives the model's states
-    detect(prepared, detectors)
-    assert prepared.context.true_states  # not asked to free: the prepared log may serve more
-    detect(prepared, detectors, free_series=True)
-    # only the UBIKF's envelopes are drawn against them (tests/test_ubikf_truth_view.py: kept there)
-    assert prepared.context.true_states == {}
+def test_the_true_states_are_made_only_for_a_page_that_draws_them(sample):
+    prepared, _ = prepared_with(sample, ["nis"])  # a simulated log: its truth gives the model's states
+    assert prepared.context.true_states == {}  # only the UBIKF's envelopes are drawn against them
+    drawn, _ = prepared_with(sample, ["chi2"], "hover_healthy.mcap")  # tests/test_ubikf_truth_view.py
+    assert set(drawn.context.true_states) == set(drawn.model.state_names)

@@ -18,7 +18,6 @@ from logscan.pipeline.release import (
     pack_innovations_for,
     reads_samples,
     release_unread,
-    release_unread_truth,
     run_order,
 )
 from logscan.pipeline.stages import Prepared
@@ -51,8 +50,6 @@ def detect(
     step = progress or (lambda message: None)
     free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
-    if free_series:  # before the verdict and the detectors: their arrays may take the true states' place
-        release_unread_truth(prepared)
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []

@@ -27,6 +27,7 @@ from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
+from logscan.pipeline.release import TRUTH_DRAWN_WITH
 from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
 from logscan.pipeline.step_counter import counted_steps
 from logscan.profiles import builtin, load_profile, parse_profile, ros
@@ -193,20 +194,23 @@ def prepare(
             path=path,
             hint=f"check the profile's channels and rate_hz against `logscan inspect {shlex.quote(path)}`",
         )
+    wanted = needs(run) if callable(needs) else needs
+    if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
+        raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
+    if profile.recovery is not None:
+        wanted = wanted | RECOVERY_NEEDS
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
     labels = profile.mode.labels if profile.mode is not None else None
-    context = run_context(run, model, log, labels)  # the report's context, from the samples about to go
+    # the report's context, from the samples about to go; a simulated log's true states only for a
+    # page that draws them: the one filter's envelopes, or a further loop's (its detectors may)
+    truth = bool(profile.loops) or wanted.wants(TRUTH_DRAWN_WITH)
+    context = run_context(run, model, log, labels, with_truth=truth)
     prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
     prepared.clock = clock_of(log, run.start_ns)  # dated while the GNSS time is still there
     if profile.loops:
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     return_freed_pages()
-    wanted = needs(run) if callable(needs) else needs
-    if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
-        raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
-    if profile.recovery is not None:
-        wanted = wanted | RECOVERY_NEEDS
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     prepared.warnings.extend(_read_warnings(log, run))
     _run_filters(prepared, wanted, compiling, step, fraction)

@@ -1,7 +1,6 @@
-"""Free the large per-step series no detector still to run reads (`release_unread`) and the true
-states no page will draw (`release_unread_truth`), order the detectors so that less is held while
-they run (`run_order`), and pack the EKF's innovations for the report before the samples' buffer is
-reused (`pack_innovations_for`)."""
+"""Free the large per-step series no detector still to run reads (`release_unread`), order the
+detectors so that less is held while they run (`run_order`), and pack the EKF's innovations for the
+report before the samples' buffer is reused (`pack_innovations_for`)."""
 
 from __future__ import annotations
 
@@ -31,7 +30,7 @@ RELEASABLE = frozenset(RELEASABLE_TRACE + RELEASABLE_RUN)
 
 
 # the filter whose trace the report draws against a simulated log's true states (its envelopes,
-# `logscan.report.ubikf_truth_view`): without it no page reads them
+# `logscan.report.ubikf_truth_view`): without it no page reads them, and `prepare` does not make them
 TRUTH_DRAWN_WITH = "ubikf"
 
 
@@ -73,16 +72,6 @@ def _bytes_read(prepared: Prepared, reads: frozenset[str]) -> int:
         elif isinstance(part, np.ndarray):
             total += part.nbytes
     return total
-
-
-def release_unread_truth(prepared: Prepared) -> None:
-    """Free the run context's true states when no filter ran whose trace the report draws against
-    them (`TRUTH_DRAWN_WITH`): a simulated log's, (N,) float64 per state, read by no other page."""
-    context = prepared.context
-    if prepared.loops:  # a further loop's detectors may draw against them (the report's one context)
-        return
-    if context is not None and context.true_states and TRUTH_DRAWN_WITH not in prepared.traces:
-        context.true_states = {}
 
 
 def pack_innovations_for(prepared: Prepared, detectors: Sequence, reuse_samples: bool) -> None:

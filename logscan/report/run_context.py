@@ -266,10 +266,13 @@ def true_states(log, run, model) -> dict[str, np.ndarray]:
     return out
 
 
-def run_context(run, model, log=None, mode_labels: dict[float, str] | None = None) -> RunContext:
+def run_context(
+    run, model, log=None, mode_labels: dict[float, str] | None = None, with_truth: bool = True
+) -> RunContext:
     """The path and the mode of an aligned run (each None when the run has none; the mode's values
     named by ``mode_labels``, the profile's ``[mode] labels``), and, from its ``log`` (before its
-    samples are released), the autopilot's messages and states and a simulated log's true state."""
+    samples are released), the autopilot's messages and states and, ``with_truth``, a simulated
+    log's true state."""
     context = RunContext(path=path_of(run, model), mode=mode_of(run), t_span=(float(run.t[0]), float(run.t[-1])))
     if context.mode is not None and mode_labels:
         context.mode.labels = dict(mode_labels)
@@ -279,5 +282,5 @@ def run_context(run, model, log=None, mode_labels: dict[float, str] | None = Non
         context.n_log_messages = _message_count(log.source.metadata, len(context.log_messages))
         context.parameters = parameter_facts(log.source.metadata, run.start_ns)
         context.states = autopilot_states(log.channels, run.start_ns, context.t_span[1])
-        context.true_states = true_states(log, run, model)
+        context.true_states = true_states(log, run, model) if with_truth else {}
     return context
