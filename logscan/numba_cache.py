@@ -27,6 +27,7 @@ import re
 import sys
 from types import FunctionType, ModuleType
 
+from numba.core import types
 from numba.core.dispatcher import Dispatcher
 
 PACKAGE = __name__.split(".")[0]
@@ -171,3 +172,25 @@ def _imported_module_names(module: ModuleType) -> tuple[str, ...]:
     return tuple(
         sorted(name for name in names if (name == PACKAGE or name.startswith(PACKAGE + ".")) and name in sys.modules)
     )
+
+
+def kernel_cached(dispatcher, literal_first=None) -> bool:
+    """True when numba's disk cache holds a compiled version of the cached ``dispatcher`` for this
+    machine (with ``literal_first``: one whose first argument is that literal int); True as well
+    when the cache cannot be inspected."""
+    try:
+        cache_file = dispatcher._cache._cache_file
+        magic = dispatcher.targetctx.codegen().magic_tuple()
+        # keys: (signature, codegen magic, code hashes); _load_index is {} when the file is missing
+        # or its source stamp is stale (numba/core/caching.py)
+        for key in cache_file._load_index():
+            if key[1] != magic:
+                continue
+            if literal_first is None:
+                return True
+            first = key[0][0] if len(key[0]) else None
+            if isinstance(first, types.IntegerLiteral) and first.literal_value == literal_first:
+                return True
+        return False
+    except Exception:  # noqa: BLE001 - numba internals changed: behave as before this module
+        return True

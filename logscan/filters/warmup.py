@@ -31,7 +31,7 @@ from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters import coding, ekf, linalg
 from logscan.filters.ekf import ekf_run, run_ekf
 from logscan.models.base import Model
-from logscan.numba_cache import initialise_jit
+from logscan.numba_cache import initialise_jit, kernel_cached
 
 COMPILING_NOTE = "compiling numerical kernels (first run only, 10-20 s)"
 
@@ -40,30 +40,6 @@ def ekf_cached(model: Model) -> bool:
     """True when numba's disk cache holds the EKF kernel for the model's id on this machine (or
     when the cache cannot be inspected: then nothing is said and nothing is started)."""
     return kernel_cached(ekf_run, model.model_id)
-
-
-def kernel_cached(dispatcher, literal_first=None) -> bool:
-    """True when numba's disk cache holds a compiled version of the cached ``dispatcher`` for this
-    machine (with ``literal_first``: one whose first argument is that literal int); True as well
-    when the cache cannot be inspected."""
-    from numba.core import types
-
-    try:
-        cache_file = dispatcher._cache._cache_file
-        magic = dispatcher.targetctx.codegen().magic_tuple()
-        # keys: (signature, codegen magic, code hashes); _load_index is {} when the file is missing
-        # or its source stamp is stale (numba/core/caching.py)
-        for key in cache_file._load_index():
-            if key[1] != magic:
-                continue
-            if literal_first is None:
-                return True
-            first = key[0][0] if len(key[0]) else None
-            if isinstance(first, types.IntegerLiteral) and first.literal_value == literal_first:
-                return True
-        return False
-    except Exception:  # noqa: BLE001 - numba internals changed: behave as before this module
-        return True
 
 
 class Compile:
