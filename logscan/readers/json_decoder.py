@@ -12,7 +12,7 @@ from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.records import Schema
 
 from logscan.readers.flatten import FlatColumns, MessageBytes, add_to_groups, columns_from_groups
-from logscan.readers.json_template import fast_json
+from logscan.readers.json_template import JsonTier, fast_json
 
 
 class JsonDecoder:
@@ -61,18 +61,19 @@ class JsonDecoderFactory(McapDecoderFactory):
         return JsonDecoder()
 
 
-def json_columns(datas: MessageBytes | Sequence[bytes]) -> tuple[FlatColumns, list[int]]:
+def json_columns(datas: MessageBytes | Sequence[bytes], tier: JsonTier | None = None) -> tuple[FlatColumns, list[int]]:
     """Numeric columns of JSON messages (see ``flatten``) and the indices that are not JSON.
 
     ``datas``: packed message bytes, or a list of per-message bytes. Only the messages the template
-    path does not take become ``bytes`` objects.
+    path does not take become ``bytes`` objects. ``tier``: the log's choice of that path (none:
+    always tried).
     """
     packed = datas if isinstance(datas, MessageBytes) else MessageBytes.from_list(datas)
     groups: dict = {}
     entries = []
     n = len(packed)
     remaining: list[int] = list(range(n))
-    if n > 1:
+    if n > 1 and (tier is None or tier.use_kernel(packed.total_bytes())):
         fast = fast_json(packed)
         if fast is not None:
             signature, indices, matrix = fast

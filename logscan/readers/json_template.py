@@ -9,21 +9,36 @@ made on the way. Tokens the kernel declines (NaN, Infinity, more than 19 digits,
 rounding) are copied, space separated, for numpy's correctly rounded parser, in one call. A
 message that differs anywhere else (another string value, a missing key, other whitespace) is
 left to json.loads and the generic walk (`json_decoder.json_columns`).
+
+The kernel's first compile costs as much CPU as json.loads and the generic walk spend on about
+40-60 MB of JSON messages (measured on the quadcopter sample's messages: the compile 3.2-4.6 s, the
+generic path 0.22-0.33 s for its 3.7 MB), so a log's messages take the generic path, which gives the
+same columns, while the kernel is neither compiled in this process nor in the disk cache and until
+those parsed so, on this machine's reads together, reach `TIER_BYTES` (`JsonTier`): the ski-rental
+rule. A small log's first run does not pay the compile; a large log, or enough small ones, pay at
+most that much parsing the slow way before it is made once.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-from logscan.numba_cache import follow_dependencies
+from logscan.numba_cache import follow_dependencies, kernel_cached
 from logscan.readers.bits import load_u64, uncounted
 from logscan.readers.decimal_float import decimal_number
 from logscan.readers.flatten import MessageBytes, layout_of
+
+# JSON message bytes a log parses the generic way before the kernel is compiled (module docstring):
+# below the 40-60 MB the compile costs, so that a large log pays less than twice the compile
+TIER_BYTES = 32 << 20
+TALLY_NAME = "logscan-json-generic-bytes"  # `JsonTier`'s count across reads, beside numba's cache
 
 _TOKEN_CHARS = frozenset(b"0123456789+-.eEabcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ")
 IS_TOKEN = np.zeros(256, dtype=np.bool_)
@@ -223,6 +238,59 @@ def _has_huge_integer(tokens: bytes, parsed: np.ndarray) -> bool:
     """True when a space-separated token that parsed to +-inf is an integer (beyond float range)."""
     words = tokens.split()
     return any(_INTEGER_TOKEN.fullmatch(words[i]) for i in np.flatnonzero(np.isinf(parsed)).tolist())
+
+
+class JsonTier:
+    """Whether one log's JSON messages go through the kernel (`fast_json`): yes once it is
+    compiled here or cached on disk, or once the messages parsed the generic way reach `TIER_BYTES`,
+    counted over this machine's earlier reads too (``tally``, a file beside numba's cache; none:
+    this read's only), so that many small logs also come to the compile."""
+
+    def __init__(self, tally: Path | None = None) -> None:
+        self.tally = tally
+        self.generic_bytes = _tallied(tally)
+        self.counted = 0  # of them, this read's
+        self.ready: bool | None = None  # the kernel compiled or cached (asked once per log)
+
+    def use_kernel(self, message_bytes: int) -> bool:
+        """Whether the next batch (of ``message_bytes``) takes the kernel; counts it when not."""
+        if self.ready is None:
+            self.ready = bool(match_and_parse.signatures) or kernel_cached(match_and_parse)
+        if self.ready or self.generic_bytes >= TIER_BYTES:
+            return True
+        self.generic_bytes += message_bytes
+        self.counted += message_bytes
+        return False
+
+    def save(self) -> None:
+        """Add this read's generic bytes to the tally (best effort: a lost update, or a cache
+        directory that cannot be written, only delays the compile)."""
+        if self.tally is None or not self.counted:
+            return
+        total = _tallied(self.tally) + self.counted
+        try:
+            staged = self.tally.with_name(f"{self.tally.name}.{os.getpid()}")
+            staged.write_text(str(total), encoding="ascii")
+            os.replace(staged, self.tally)
+        except OSError:
+            return
+        self.counted = 0
+
+
+def tally_file() -> Path | None:
+    """The tally of the generic path's bytes, in numba's cache directory (set by `logscan`)."""
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(folder) / TALLY_NAME if folder else None
+
+
+def _tallied(tally: Path | None) -> int:
+    """The bytes the tally holds (0: none, or not a count)."""
+    if tally is None:
+        return 0
+    try:
+        return max(0, int(tally.read_text(encoding="ascii")))
+    except (OSError, ValueError):
+        return 0
 
 
 follow_dependencies(__name__)  # the cached kernel is stamped with decimal_float's parsing too

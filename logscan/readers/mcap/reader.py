@@ -56,6 +56,7 @@ import numpy as np
 from logscan.log import Log, SourceInfo, TopicInfo
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
+from logscan.readers.json_template import JsonTier, tally_file
 from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
 from logscan.readers.mcap.metadata import attach_logscan_records
 from logscan.readers.mcap.scan import Scan, scan_file
@@ -83,6 +84,7 @@ def read_mcap(
     scan_file(scan)
     raise_if_unrecoverable(scan)
     scan.flush()
+    decoding.json_tier.save()
     source = _source_of(scan)
     decoding.report_to(source)
     channels = channels_in_time_order(decoding.pieces, source)
@@ -131,6 +133,7 @@ def inspect_mcap(
     scan_file(scan)
     raise_if_unrecoverable(scan)
     scan.flush()
+    decoding.json_tier.save()
     source = _source_of(scan)
     decoding.report_to(source)
     unsorted = sorted(name for name, entry in stats.items() if entry.unsorted)
@@ -235,6 +238,8 @@ class _Decoding(TopicPieces):
         self.decoders: dict[int, tuple[Any, str | None]] = {}  # channel id -> (decoder, why none)
         self.layouts: dict[int, CdrLayout | None] = {}
         self.undecodable: set[str] = set()  # topics no decoder takes
+        # the bulk JSON kernel, or not yet (`logscan.readers.json_template`)
+        self.json_tier = JsonTier(tally_file())
 
     def __call__(self, scan: Scan) -> None:
         batches, scan.batches = scan.batches, {}
@@ -252,7 +257,7 @@ class _Decoding(TopicPieces):
             log_times = np.concatenate(batch.times)
             datas = batch.messages()
             batch.segments = []
-            flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self.layouts, self.skips)
+            flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self, self.skips)
             self.add(topic, flat, log_times)
 
     def fold_into(self, stats: dict[str, ChannelStats]) -> None:
@@ -270,20 +275,22 @@ def _columns_of(
     schema: SchemaRec | None,
     datas: MessageBytes,
     log_times: np.ndarray,
-    layouts: dict[int, CdrLayout | None],
+    decoding: _Decoding,
     source: SourceInfo,
 ) -> tuple[FlatColumns, np.ndarray]:
     """Columns of one channel's messages by the fastest path that fits them (CDR layout, bulk JSON,
-    the decoder), and the log times of the messages they index (undecodable messages dropped)."""
+    the decoder), and the log times of the messages they index (undecodable messages dropped).
+    ``decoding``: the read's CDR layouts per schema and its choice of the bulk JSON kernel."""
     topic = channel.topic
     flat = None
     if channel.message_encoding == "cdr" and schema is not None and schema.encoding == "ros2msg":
+        layouts = decoding.layouts
         if schema.id not in layouts:
             layouts[schema.id] = cdr_layout(schema)
         if layouts[schema.id] is not None:
             flat = cdr_fast(layouts[schema.id], datas)
     if flat is None and isinstance(decoder, JsonDecoder):
-        flat, failed = json_columns(datas)
+        flat, failed = json_columns(datas, decoding.json_tier)
         if failed:  # message numbers in flat index all messages, so log_times stay aligned
             source.skip(topic, "message bytes do not decode", len(failed))
     if flat is None:
