@@ -93,7 +93,6 @@ class Workspace(NamedTuple):
     hx: np.ndarray  # (m_total,) zeros
     R3: np.ndarray  # (3, 3)
     D3: np.ndarray  # (3, 3, 3)
-    A0: np.ndarray  # (0, 0)
 
 
 def workspace(model: FilterModel, trajectory: FilterTrajectory, faults: FaultDirections, windows: Windows) -> Workspace:
@@ -122,7 +121,6 @@ def workspace(model: FilterModel, trajectory: FilterTrajectory, faults: FaultDir
         hx=np.zeros(m_total),
         R3=np.empty((3, 3)),
         D3=np.empty((3, 3, 3)),
-        A0=np.empty((0, 0)),
     )
 
 
@@ -133,14 +131,14 @@ def workspace(model: FilterModel, trajectory: FilterTrajectory, faults: FaultDir
 # skips only exact zeros of F and H), so the evidence is the same to the last bit.
 
 
-def model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+def model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, Fw, Aw, Jw, Jnw):
     """The predict step of the model ``model_id`` (a compile-time constant; numba code only) at
     (xk, uk): x_next and F = df/dx (the model's predict_into, the EKF's step), and Gd[a] = df/du .
     act_dirs[a] for every actuator a, central differences of the step, each side's step into its row
     of sides (2, n): the RK4 step of `logscan.models.rk4.rk4_f` in place, without its Jacobian, for a
     model with continuous dynamics (its sums in the same order: the same bits as the step the EKF
     takes), the model's own predict_into for the others (exactly discretised, no Jacobian to save).
-    k, xs (n,), A0 (0, 0) and Fw, Aw, Jw, Jnw (n, n) are work arrays."""
+    k, xs (n,) and Fw, Aw, Jw, Jnw (n, n) are work arrays."""
     raise NotImplementedError("model_predict is resolved by numba at compile time")
 
 
@@ -149,12 +147,12 @@ def model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k
 # function of its own, called from a function of the differences, and `dispatch.model_predict_into`
 # cost the first run a compile of the model's dynamics each)
 @overload(model_predict, jit_options={"error_model": "numpy", "no_cpython_wrapper": True, "no_cfunc_wrapper": True})
-def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, Fw, Aw, Jw, Jnw):
     predict_into = literal_kernel(model_id, "predict_into")
     fA = literal_kernel(model_id, "fA")
     if predict_into is not None and fA is not None:
 
-        def with_rk4(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+        def with_rk4(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, Fw, Aw, Jw, Jnw):
             predict_into(p, xk, uk, dt, x_next, F, k, xs, Aw, Jw, Jnw)
             h = 1e-6 * (1.0 + _abs_max(uk))  # 0.0 for a model without inputs
             c = dt / 6.0
@@ -167,7 +165,9 @@ def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, 
                         x_side[i] = xk[i]
                         xs[i] = xk[i]
                     for stage in range(4):
-                        fA(p, xs, ua, k, A0, False)
+                        # with its Jacobian, into the free Aw: the EKF's own variant of the
+                        # dynamics, loaded from the cache instead of compiled again (k the same)
+                        fA(p, xs, ua, k, Aw, True)
                         w = 1.0 if stage == 0 or stage == 3 else 2.0
                         step = 0.5 * dt if stage < 2 else dt
                         for i in range(xk.size):
@@ -179,7 +179,7 @@ def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, 
         return with_rk4
     if predict_into is not None:
 
-        def with_step(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, A0, Fw, Aw, Jw, Jnw):
+        def with_step(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, k, xs, Fw, Aw, Jw, Jnw):
             predict_into(p, xk, uk, dt, x_next, F, k, xs, Aw, Jw, Jnw)
             h = 1e-6 * (1.0 + _abs_max(uk))  # 0.0 for a model without inputs
             for a in range(act_dirs.shape[0]):
@@ -348,7 +348,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows, work):
     J = window // stride
     ns = J * D
     m_total = R.shape[0]
-    out, start, Gd, ua, hx, R3, D3, A0 = work.out, work.start, work.Gd, work.ua, work.hx, work.R3, work.D3, work.A0
+    out, start, Gd, ua, hx, R3, D3 = work.out, work.start, work.Gd, work.ua, work.hx, work.R3, work.D3
     sq, vec, sig, res, sums = work.squares, work.vectors, work.signatures, work.residuals, work.sums
     gains, n_by_m, m_by_n, int_rows = work.gains, work.state_by_output, work.output_by_state, work.rows
     P, F, Ft, Aw, Jw, Jnw, FP, IKH, IKHt = sq[0], sq[1], sq[2], sq[3], sq[4], sq[5], sq[6], sq[7], sq[8]
@@ -377,7 +377,7 @@ def signature_evidence(model_id, model, trajectory, faults, windows, work):
             _copy_square(P0, n, P)
             continue
         # ---- predict: F at (x_post, u), then G_a = df/du . dir_a by central differences -------
-        model_predict(model_id, p, xk, u[k], dt, act_dirs, x_next, F, Gd, ua, sides, kv, xs, A0, Ft, Aw, Jw, Jnw)
+        model_predict(model_id, p, xk, u[k], dt, act_dirs, x_next, F, Gd, ua, sides, kv, xs, Ft, Aw, Jw, Jnw)
         # P_prior = F P F^T + Q
         _mm_rows(F, P, n, n, n, FP)
         _transpose(F, n, n, Ft)
