@@ -194,11 +194,7 @@ def prepare(
             path=path,
             hint=f"check the profile's channels and rate_hz against `logscan inspect {shlex.quote(path)}`",
         )
-    wanted = needs(run) if callable(needs) else needs
-    if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
-        raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
-    if profile.recovery is not None:
-        wanted = wanted | RECOVERY_NEEDS
+    wanted = _wanted(needs, run, loaded, path)
     raw = raw_channels(log, raw_topics)  # kept as read: the detectors that asked for them read them
     labels = profile.mode.labels if profile.mode is not None else None
     # the report's context, from the samples about to go; a simulated log's true states only for a
@@ -215,6 +211,15 @@ def prepare(
     prepared.warnings.extend(_read_warnings(log, run))
     _run_filters(prepared, wanted, compiling, step, fraction)
     return prepared
+
+
+def _wanted(needs: Needs | Callable[[AlignedRun], Needs], run: AlignedRun, loaded: LoadedProfile, path: str) -> Needs:
+    """The filters and trace parts to run on the aligned run: the detectors' needs, and the full P
+    for a profile's [recovery]."""
+    wanted = needs(run) if callable(needs) else needs
+    if loaded.model_not_run and wanted.filters:  # the filter-free detectors only (`filter_free`)
+        raise InputError(loaded.model_not_run, path=path, hint="pass --profile with a model this log can drive")
+    return wanted | RECOVERY_NEEDS if loaded.profile.recovery is not None else wanted
 
 
 def _read(
