@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from logscan.artifacts import write_atomic
+from logscan.errors import LogscanError
 from logscan.numba_cache import follow_dependencies, kernel_cached
 from logscan.readers.bits import load_u64, uncounted
 from logscan.readers.decimal_float import decimal_number
@@ -267,12 +269,9 @@ class JsonTier:
         directory that cannot be written, only delays the compile)."""
         if self.tally is None or not self.counted:
             return
-        total = _tallied(self.tally) + self.counted
         try:
-            staged = self.tally.with_name(f"{self.tally.name}.{os.getpid()}")
-            staged.write_text(str(total), encoding="ascii")
-            os.replace(staged, self.tally)
-        except OSError:
+            write_atomic(self.tally, str(_tallied(self.tally) + self.counted))
+        except LogscanError:  # an OutputError: the cache directory cannot be written
             return
         self.counted = 0
 
