@@ -25,7 +25,7 @@ MMAP_THRESHOLD_BYTES = 64 * 1024 * 1024
 TRIM_THRESHOLD_BYTES = 256 * 1024 * 1024
 
 
-_libc: ctypes.CDLL | None = None  # glibc, once its thresholds are set (`reuse_freed_arrays`)
+_heap: ctypes.CDLL | None = None  # glibc 2.33 or later, once its thresholds are set (`reuse_freed_arrays`)
 
 
 def reuse_freed_arrays() -> bool:
@@ -39,8 +39,10 @@ def reuse_freed_arrays() -> bool:
         )
     except (OSError, AttributeError):  # musl and other C libraries have no mallopt
         return False
-    global _libc
-    _libc = libc if done else None
+    global _heap
+    if done and hasattr(libc, "mallinfo2"):  # `return_freed_pages` reads the heap's free bytes
+        libc.mallinfo2.restype = _MallInfo2
+        _heap = libc
     return done
 
 
@@ -61,13 +63,6 @@ def return_freed_pages() -> bool:
     below the trace's arrays, which, larger than the mmap threshold, cannot reuse them. Below the
     threshold the pages stay, for the next step's arrays to reuse without faulting them in again.
     True when pages were returned; only where `reuse_freed_arrays` set the thresholds."""
-    if _libc is None:
+    if _heap is None or _heap.mallinfo2().fordblks < TRIM_THRESHOLD_BYTES:
         return False
-    try:
-        mallinfo2 = _libc.mallinfo2
-    except AttributeError:  # glibc before 2.33
-        return False
-    mallinfo2.restype = _MallInfo2
-    if mallinfo2().fordblks < TRIM_THRESHOLD_BYTES:
-        return False
-    return bool(_libc.malloc_trim(0))
+    return bool(_heap.malloc_trim(0))
