@@ -1,5 +1,7 @@
-"""Worker processes end with their parent: a `--jobs` worker whose parent is killed (SIGKILL, an
-out-of-memory kill) must not go on computing, holding memory and writing temporary files.
+"""Worker processes end with their parent, and use their share of the cores.
+
+A `--jobs` worker whose parent is killed (SIGKILL, an out-of-memory kill) must not go on computing,
+holding memory and writing temporary files.
 
 Two mechanisms, so that neither a missed signal nor a busy interpreter keeps a worker alive:
 
@@ -13,6 +15,11 @@ Two mechanisms, so that neither a missed signal nor a busy interpreter keeps a w
 
 Temporary files a killed worker leaves are removed by the next run writing to that folder
 (`logscan.artifacts`: their names carry the pid).
+
+The threads a process starts of its own (a large CSV's parse) fill its share of the cores
+(`usable_cores`): its affinity mask, which a container or `taskset` narrows, divided among the
+processes beside it on that mask. `--jobs N` workers each get 1/N (`share_cores`), so that N workers
+on C cores start C/N threads each instead of C, which would only wait for a core.
 """
 
 from __future__ import annotations
@@ -60,3 +67,21 @@ def _watch(parent_pid: int) -> None:
         pass
     time.sleep(GRACE_S)
     os._exit(EXIT_CODE)
+
+
+_sharers = 1  # the processes, this one among them, that share the affinity mask (`share_cores`)
+
+
+def share_cores(processes: int) -> None:
+    """This process runs beside ``processes - 1`` others on the same cores (a `--jobs` worker)."""
+    global _sharers
+    _sharers = max(1, int(processes))
+
+
+def usable_cores() -> int:
+    """This process's share of the cores it may run on (at least one)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # no affinity call here (macOS, Windows)
+        cores = os.cpu_count() or 1
+    return max(1, cores // _sharers)

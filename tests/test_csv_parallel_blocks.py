@@ -207,11 +207,6 @@ def test_a_file_is_cut_after_line_breaks_into_one_block_per_usable_core(tmp_path
     assert csv_numeric.row_blocks(data, start, len(data)) == [(start, len(data))]
 
 
-def test_usable_cores_are_the_affinity_mask_of_the_process(monkeypatch):
-    monkeypatch.setattr(csv_numeric.os, "sched_getaffinity", lambda pid: {0, 3, 5}, raising=False)
-    assert csv_numeric.usable_cores() == 3
-
-
 @pytest.mark.parametrize("source, to, count", [(10, 7, 40), (50, 0, 40), (12, 0, 30), (2, 1, 40), (5, 5, 9), (9, 3, 0)])
 def test_rows_moved_down_keep_their_bits_and_order(source, to, count):
     cells = np.arange(3 * 100, dtype=np.int64).reshape(3, 100)

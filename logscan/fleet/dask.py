@@ -7,6 +7,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from logscan.artifacts import OutputError
+from logscan.child_processes import share_cores
 from logscan.errors import UsageError
 from logscan.fleet.failures import (
     KILLED_WORKER_RESUBMITS,
@@ -75,6 +76,7 @@ class _DaskClient:
             workers = int(self.address.removeprefix("local:"))
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
             self.client = Client(self.cluster)
+            self.client.run(share_cores, workers)  # the workers share this machine's cores
             return self.client
         try:
             self.client = Client(self.address, timeout=_connect_timeout_s())

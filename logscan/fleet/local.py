@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
-from logscan.child_processes import exit_with_parent
+from logscan.child_processes import exit_with_parent, share_cores
 from logscan.fleet.dask import run_on_dask
 from logscan.fleet.failures import (
     _isolated,
@@ -48,7 +48,8 @@ def run_many(
             return outcomes
         outcomes: list[Any] = [None] * len(logs)
         initialise_jit()  # once here, inherited by the forked workers (not once in each)
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(logs)), initializer=_worker_init, initargs=(os.getpid(),))
+        workers = min(jobs, len(logs))
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init, initargs=(os.getpid(), workers))
         try:
             futures = {pool.submit(_isolated if isolate else _call, task, path): i for i, path in enumerate(logs)}
             for future in as_completed(futures):
@@ -65,13 +66,15 @@ def run_many(
             bar.render_finish()
 
 
-def _worker_init(parent_pid: int | None = None) -> None:
+def _worker_init(parent_pid: int | None = None, workers: int = 1) -> None:
     """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM) and removes their
     temporary files; on SIGTERM a worker ends its own children first (the background compile,
     logscan.filters.warmup), which would otherwise outlive it. A worker whose parent dies (killed
-    alone) ends too (`logscan.child_processes`)."""
+    alone) ends too (`logscan.child_processes`). Each of the ``workers`` starts threads (a large
+    CSV's parse) on its share of the cores only (`logscan.child_processes.usable_cores`)."""
     import signal
 
+    share_cores(workers)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _end_worker)
     if parent_pid is not None:

@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from logscan.child_processes import usable_cores
 from logscan.numba_cache import follow_dependencies
 from logscan.readers.bits import byte_at, load_u64, set_bits, uncounted
 from logscan.readers.decimal_float import number_value, scan_number
@@ -228,14 +229,6 @@ def _parse(mapped: mmap.mmap, columns: int, sep: int) -> tuple[np.ndarray, np.nd
     finally:
         del buf  # the mapping closes only with no array left on it
     return cells, column_kinds, empties.max(axis=0), rows
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its affinity mask, which a container or `taskset` narrows)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # no affinity call here (macOS, Windows)
-        return os.cpu_count() or 1
 
 
 def row_blocks(mapped: mmap.mmap | bytes, start: int, end: int) -> list[tuple[int, int]]:
