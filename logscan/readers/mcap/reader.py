@@ -81,17 +81,9 @@ def read_mcap(
     scan.on_flush = decoding  # batches decoded as the scan goes: memory follows the columns
     if progress is not None:
         scan.on_position = _bytes_of(path, progress)
-    scan_file(scan)
-    raise_if_unrecoverable(scan)
-    scan.flush()
-    decoding.json_tier.save()
-    source = _source_of(scan)
-    decoding.report_to(source)
+    source = _scanned(scan, decoding)
     channels = channels_in_time_order(decoding.pieces, source)
-    if decoding.undecodable:
-        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(decoding.undecodable)))
-    if use_header_stamp:
-        source.time_source = decoding.time_source()
+    decoding.note_skipped(source)
     log = Log(channels=channels, source=source)
     attach_logscan_records(log)
     if progress is not None:
@@ -113,6 +105,18 @@ def _bytes_of(path: str, progress: Callable[[int, int], None]) -> Callable[[int]
     return position
 
 
+def _scanned(scan: Scan, decoding: _Decoding) -> SourceInfo:
+    """Scan the file with ``decoding`` hearing each batch (refusing damage it cannot read past),
+    decode the last batch, keep the JSON tally, and say what the scan and the decoding found."""
+    scan_file(scan)
+    raise_if_unrecoverable(scan)
+    scan.flush()
+    decoding.json_tier.save()
+    source = _source_of(scan)
+    decoding.report_to(source)
+    return source
+
+
 def inspect_mcap(
     path: str | os.PathLike, wanted: set[str] | None, *, use_header_stamp: bool = False
 ) -> tuple[Log, dict[str, dict]]:
@@ -130,19 +134,11 @@ def inspect_mcap(
 
     scan = Scan(path, wanted)
     scan.on_flush = flush
-    scan_file(scan)
-    raise_if_unrecoverable(scan)
-    scan.flush()
-    decoding.json_tier.save()
-    source = _source_of(scan)
-    decoding.report_to(source)
+    source = _scanned(scan, decoding)
     unsorted = sorted(name for name, entry in stats.items() if entry.unsorted)
     if unsorted:
         source.warnings.append(unsorted_text(unsorted))
-    if decoding.undecodable:
-        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(decoding.undecodable)))
-    if use_header_stamp:
-        source.time_source = decoding.time_source()
+    decoding.note_skipped(source)
     log = Log.without_samples({name: entry.span() for name, entry in stats.items()}, source)
     attach_logscan_records(log)
     return log, {name: entry.to_dict() for name, entry in stats.items()}
@@ -259,6 +255,13 @@ class _Decoding(TopicPieces):
             batch.segments = []
             flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self, self.skips)
             self.add(topic, flat, log_times)
+
+    def note_skipped(self, source: SourceInfo) -> None:
+        """The topics no decoder takes, and (header stamps asked for) what the channel times are."""
+        if self.undecodable:
+            source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(self.undecodable)))
+        if self.use_header_stamp:
+            source.time_source = self.time_source()
 
     def fold_into(self, stats: dict[str, ChannelStats]) -> None:
         """Fold the pieces decoded so far into per-channel statistics, and drop them."""
