@@ -67,13 +67,12 @@ def read_rosbag(
         source.topics = _topic_infos(reader, ros1)
         store, bad, wire = bag_typestore(list(reader.connections), ros1)
         pieces = TopicPieces(str(p), fmt, use_header_stamp)
-        chosen, undecodable = [], set()
+        chosen = []
         for connection in reader.connections:
             if not topic_wanted(connection.topic, wanted):
                 continue
             if connection.msgtype in bad:
-                pieces.skips.skip(connection.topic, bad[connection.msgtype], connection.msgcount)
-                undecodable.add(connection.topic)
+                pieces.skip_topic(connection.topic, bad[connection.msgtype], connection.msgcount)
                 continue
             chosen.append(connection)
         columns = TopicColumns(store)
@@ -92,10 +91,7 @@ def read_rosbag(
         _note_span(source.topics[topic], times)
     pieces.report_to(source)
     channels = channels_in_time_order(pieces.pieces, source)
-    if undecodable:
-        source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(undecodable)))
-    if use_header_stamp:
-        source.time_source = pieces.time_source()
+    pieces.note_skipped(source)
     if progress is not None:
         size = _bag_size(p)
         progress(size, size)

@@ -26,7 +26,8 @@ _STAMP_FIELDS = (
 
 class TopicPieces:
     """Channel pieces (name -> [(t, values)]) collected topic batch by topic batch (`add`); the
-    skips met and the fields found go to the log's source at the end (`report_to`)."""
+    skips met and the fields found go to the log's source at the end (`report_to`), the topics no
+    decoder takes and the channels' time source after the channels are joined (`note_skipped`)."""
 
     def __init__(self, path: str, fmt: str, use_header_stamp: bool):
         self.use_header_stamp = use_header_stamp
@@ -35,6 +36,7 @@ class TopicPieces:
         self.stamp_topics: set[str] = set()  # topics timed by header.stamp
         self.fields: dict[str, list[str]] = {}  # topic -> field paths in first-seen order
         self.skips = SourceInfo(path=path, format=fmt)  # collects skip counts until report_to
+        self.undecodable: set[str] = set()  # topics no decoder takes (`skip_topic`)
 
     def add(self, topic: str, flat: FlatColumns, log_times: np.ndarray) -> None:
         """One batch of ``topic``'s messages: ``flat`` columns index ``log_times`` (int ns)."""
@@ -57,6 +59,11 @@ class TopicPieces:
             field_times = times if index.size == times.size else times[index]
             self.pieces.setdefault(channel_name(topic, field_path), []).append((field_times, values))
 
+    def skip_topic(self, topic: str, why: str, count: int) -> None:
+        """A topic no decoder takes: its ``count`` messages skipped for ``why``."""
+        self.skips.skip(topic, why, count)
+        self.undecodable.add(topic)
+
     def report_to(self, source: SourceInfo) -> None:
         """The skips and fields found, into the log's source."""
         for item in self.skips.skipped:
@@ -68,6 +75,13 @@ class TopicPieces:
     def time_source(self) -> str:
         """What the channel times are, when header stamps were asked for."""
         return time_source(self.decoded_topics, self.stamp_topics)
+
+    def note_skipped(self, source: SourceInfo) -> None:
+        """The topics no decoder takes, and (header stamps asked for) what the channel times are."""
+        if self.undecodable:
+            source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(self.undecodable)))
+        if self.use_header_stamp:
+            source.time_source = self.time_source()
 
 
 def time_source(decoded_topics: set[str], stamp_topics: set[str]) -> str:

@@ -233,7 +233,6 @@ class _Decoding(TopicPieces):
         self.factories = decoder_factories()
         self.decoders: dict[int, tuple[Any, str | None]] = {}  # channel id -> (decoder, why none)
         self.layouts: dict[int, CdrLayout | None] = {}
-        self.undecodable: set[str] = set()  # topics no decoder takes
         # the bulk JSON kernel, or not yet (`logscan.readers.json_template`)
         self.json_tier = JsonTier(tally_file())
 
@@ -247,21 +246,13 @@ class _Decoding(TopicPieces):
                 self.decoders[cid] = _choose_decoder(self.factories, channel, schema)
             decoder, why = self.decoders[cid]
             if decoder is None:
-                self.skips.skip(topic, why, batch.count())
-                self.undecodable.add(topic)
+                self.skip_topic(topic, why, batch.count())
                 continue
             log_times = np.concatenate(batch.times)
             datas = batch.messages()
             batch.segments = []
             flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self, self.skips)
             self.add(topic, flat, log_times)
-
-    def note_skipped(self, source: SourceInfo) -> None:
-        """The topics no decoder takes, and (header stamps asked for) what the channel times are."""
-        if self.undecodable:
-            source.warnings.append("topics skipped (no decoder): " + ", ".join(sorted(self.undecodable)))
-        if self.use_header_stamp:
-            source.time_source = self.time_source()
 
     def fold_into(self, stats: dict[str, ChannelStats]) -> None:
         """Fold the pieces decoded so far into per-channel statistics, and drop them."""
