@@ -27,7 +27,7 @@ from benchlib import installed_environment
 from compare_summaries import RUNNER
 
 BENCH = Path(__file__).resolve().parent
-ROWS = ("analyze", "memory", "ekf", "readers", "first_run", "report", "jobs", "ubikf", "kgn")
+ROWS = ("analyze", "memory", "window", "ekf", "readers", "first_run", "report", "jobs", "ubikf", "kgn")
 
 
 def uptime() -> str:
@@ -69,6 +69,26 @@ def analyze_rows(logs: Path, hours: list[float], trees: dict[str, Path | None], 
     print(f"\n{uptime()}")
 
 
+def window_rows(logs: Path, hours: list[float], trees: dict[str, Path | None]) -> None:
+    """CPU, wall and peak RSS of `analyze LOG --start S --end S+600` (its middle ten minutes) per
+    log length and tree; a 24-hour log is used when it is there, not simulated (hours of work)."""
+    print("| log | window | tree | CPU s | wall s | peak RSS MiB |\n|---|---|---|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for h in hours:
+            seconds = round(h * 3600)
+            log = logs / f"quad_{seconds}.mcap"
+            if seconds > 8 * 3600 and not log.exists():
+                print(f"| {h:g} h | - | - | not simulated here | | |")
+                continue
+            simulate(seconds, "mcap-ros2", log, Path(tmp) / "cache")
+            start = seconds // 2
+            for name, tree in trees.items():
+                args = ["analyze", str(log), "--start", str(start), "--end", str(start + 600), "--no-report", "-q"]
+                cpu, wall, rss = cli_usage([*args, "--json", f"{tmp}/s.json"], tree)
+                print(f"| {h:g} h | {start}-{start + 600} s | {name} | {cpu:.2f} | {wall:.2f} | {rss:.0f} |")
+    print(f"\n{uptime()}")
+
+
 def bench(script: str, *args: str) -> None:
     """Another benchmark of this folder, its output as it prints it."""
     subprocess.run([sys.executable, str(BENCH / script), *args], check=False)
@@ -94,6 +114,7 @@ def main() -> None:
     steps = {
         "analyze": lambda: analyze_rows(options.logs, [0.25, 1.0], trees, options.repeat),
         "memory": lambda: analyze_rows(options.logs, [4.0, 8.0], trees, 1),
+        "window": lambda: window_rows(options.logs, [1.0, 8.0, 24.0], trees),
         "ekf": lambda: bench("bench_ekf.py", "--steps", "100000", "--reps", "5", "--no-phases"),
         "readers": lambda: bench("bench_readers.py"),
         "first_run": lambda: bench(

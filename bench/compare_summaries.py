@@ -1,6 +1,7 @@
 """Are the `--json` summaries of every sample log byte-identical to those of another commit?
 
     python bench/compare_summaries.py 93bce00            # the commit before a refactoring
+    python bench/compare_summaries.py 93bce00 --start 10 --end 40   # each run given these flags too
 
 Checks the other commit out into a temporary git worktree, runs `logscan analyze LOG --no-report
 --json OUT` with that commit's code and with this checkout's on every sample log (the .mcap files,
@@ -41,8 +42,8 @@ def sample_logs() -> list[Path]:
     return sorted(SAMPLES.glob("*.mcap")) + [SAMPLES / "quad_healthy.csv", SAMPLES / "husky_drive.bag"]
 
 
-def summarise(root: Path, log: Path, out: Path) -> None:
-    cmd = [sys.executable, "-c", RUNNER, str(root), "analyze", str(log), "--no-report", "--json", str(out)]
+def summarise(root: Path, log: Path, out: Path, flags: list[str]) -> None:
+    cmd = [sys.executable, "-c", RUNNER, str(root), "analyze", str(log), "--no-report", "--json", str(out), *flags]
     subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=REPO)
     if not out.exists():
         raise SystemExit(f"{log.name}: no summary written by {root}")
@@ -78,10 +79,10 @@ def _merge(into: dict[str, float], more: dict[str, float]) -> None:
 
 
 def main(argv: list[str]) -> int:
-    if len(argv) != 1:
+    if not argv or argv[0].startswith("-"):
         print(__doc__)
         return 2
-    base = argv[0]
+    base, flags = argv[0], argv[1:]
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(tmp) / "base"
         subprocess.run(["git", "worktree", "add", "-q", "--detach", str(tree), base], cwd=REPO, check=True)
@@ -89,8 +90,8 @@ def main(argv: list[str]) -> int:
             differ = 0
             for log in sample_logs():
                 old, new = Path(tmp) / f"{log.name}.base.json", Path(tmp) / f"{log.name}.now.json"
-                summarise(tree, log, old)
-                summarise(REPO, log, new)
+                summarise(tree, log, old, flags)
+                summarise(REPO, log, new, flags)
                 same = filecmp.cmp(old, new, shallow=False)
                 differ += not same
                 print(f"{'same' if same else 'DIFFERS'}  {log.name}")

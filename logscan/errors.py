@@ -103,8 +103,9 @@ class InternalError(LogscanError):
 # --start/--end cut the analysis after the whole log is read: a window saves the later steps'
 # memory, not the reading's (a 10-minute window of a 24-hour log still peaks near 5.5 GiB)
 OUT_OF_MEMORY = (
-    "the log needs more memory than is available (logscan reads a whole log, also for a --start/--end window): "
-    "analyse it on a machine with more memory, or cut the part you need out of it first "
+    "the log needs more memory than is available (logscan reads a whole log, also for a --start/--end window, "
+    "except an MCAP file with message indexes): analyse it on a machine with more memory, or cut the part you "
+    "need out of it first "
     f"({doc_url('troubleshooting.md')}#a-log-does-not-fit-in-memory)"
 )
 

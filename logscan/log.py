@@ -154,6 +154,9 @@ class Log:
         self._span_ns: tuple[int | None, int | None] | None = None  # kept by release_samples
         self._sample_counts: dict[str, int] = {}  # likewise
         self._span_text: str | None = None  # likewise
+        # channel -> its topic's message times across the whole file, when only a window of it was
+        # read (`read_as_window`): alignment takes the grid's span and phase from them
+        self.whole_times: dict[str, np.ndarray] = {}
         warning = self.span_warning()
         if warning and warning not in self.source.warnings:
             self.source.warnings.append(warning)
@@ -167,6 +170,8 @@ class Log:
             self._span_ns = (self.start_ns, self.end_ns)
             self._span_text = self.span_warning()
         dropped = list(self.channels) if names is None else [name for name in names if name in self.channels]
+        if names is None:  # aligned for the last time: a window's whole-file times go too
+            self.whole_times = {}
         empty_t, empty_v = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
         channels = dict(self.channels)  # a new dict: whoever holds the old one keeps its samples
         for name in dropped:
@@ -174,6 +179,19 @@ class Log:
             self._sample_counts.setdefault(name, len(channel))
             channels[name] = Channel(name, empty_t, empty_v, channel.unit)
         self.channels = channels
+
+    def read_as_window(self, span_ns: tuple[int, int], whole_times: dict[str, np.ndarray]) -> None:
+        """This log holds a window of its file (`logscan.readers.mcap.window`): its span and its
+        channels' times across the whole file come from the file's index, not the samples read."""
+        self._span_ns = span_ns
+        self.whole_times = whole_times
+        timed = [name for name in self.channels if name in whole_times and whole_times[name].size]
+        if self.duration_s > MAX_SPAN_S and timed:  # named as the whole read names them
+            first = min(timed, key=lambda name: int(whole_times[name][0]))
+            last = max(timed, key=lambda name: int(whole_times[name][-1]))
+            self._span_text = _span_text(self.duration_s, first, last)
+            if self._span_text not in self.source.warnings:
+                self.source.warnings.append(self._span_text)
 
     def span_warning(self) -> str | None:
         """A warning when the log spans more than MAX_SPAN_S, else None."""
@@ -201,6 +219,7 @@ class Log:
         log._sample_counts = {name: span[0] for name, span in spans.items()}
         log._span_ns = None
         log._span_text = None
+        log.whole_times = {}
         if timed:
             first = min(timed, key=lambda name: timed[name][1])
             last = max(timed, key=lambda name: timed[name][2])

@@ -46,6 +46,7 @@ class _Aligner:
         self.gap_channels: dict[tuple, list[str]] = {}
         self.start_ns = 0
         self.dropped: dict[str, np.ndarray] = {}  # channel -> outlying times dropped (ns)
+        self.kept: dict[str, int] = {}  # channel -> its samples left, of a window's whole file (`span`)
         self.ends = ("", "")  # the channels that start first and end last (after `span`)
 
     def clean(self, name: str) -> _Clean:
@@ -93,13 +94,38 @@ class _Aligner:
 
     def span(self, names: list[str]) -> tuple[int, int]:
         """(first, last) ns of the ``names`` where they are dense (`time_sanity.dense_span`); the
-        outlying samples are dropped from the cleaned channels and kept in ``dropped``."""
+        outlying samples are dropped from the cleaned channels and kept in ``dropped``. A log read
+        as a window of its file (`Log.read_as_window`) is judged on the whole file's times."""
+        whole = getattr(self.log, "whole_times", None)
+        if whole:
+            return self._whole_span(names, whole)
         times = {name: self.clean(name).t for name in dict.fromkeys(names) if self.clean(name).t.size}
         first, last, drops, self.ends = dense_span(times, self.log.source.path)
         for name, drop in drops.items():
             c = self.cache[name]
             self.dropped[name] = c.t[drop]
             keep = ~drop
+            self.cache[name] = replace(c, t=c.t[keep], values=c.values[keep], outliers=int(drop.sum()))
+        return first, last
+
+    def _whole_span(self, names: list[str], whole: dict[str, np.ndarray]) -> tuple[int, int]:
+        """`span` from the whole file's times of a window's channels (sorted; a time logged twice
+        counts once, as cleaning keeps one): the samples read at an outlying time are dropped."""
+        unique: dict[int, np.ndarray] = {}  # a topic's channels share one array: made unique once
+        times = {}
+        for name in dict.fromkeys(names):
+            t = whole.get(name)
+            if t is not None and t.size:
+                if id(t) not in unique:
+                    repeated = t[1:] == t[:-1]
+                    unique[id(t)] = t[np.concatenate(([True], ~repeated))] if repeated.any() else t
+                times[name] = unique[id(t)]
+        first, last, drops, self.ends = dense_span(times, self.log.source.path)
+        for name, drop in drops.items():
+            c = self.clean(name)
+            self.dropped[name] = times[name][drop]
+            self.kept[name] = int(times[name].size - drop.sum())
+            keep = ~np.isin(c.t, self.dropped[name])
             self.cache[name] = replace(c, t=c.t[keep], values=c.values[keep], outliers=int(drop.sum()))
         return first, last
 

@@ -145,7 +145,7 @@ def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarr
     if early and start_ns <= max(early):  # the log's start is an outlier: count from the grid's
         start_ns = first
     aligner.start_ns = start_ns
-    kept = {name: aligner.cache[name].t.size for name in aligner.dropped}
+    kept = {name: aligner.kept.get(name, aligner.cache[name].t.size) for name in aligner.dropped}
     aligner.warnings.extend(outlier_warnings(aligner.dropped, kept, start_ns))
     grid_ns, k0 = grid(first, last, rate, window, start_ns, aligner.ends, log.source.path)
     n = grid_ns.size

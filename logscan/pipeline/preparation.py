@@ -31,7 +31,9 @@ from logscan.pipeline.release import TRUTH_DRAWN_WITH
 from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
 from logscan.pipeline.step_counter import counted_steps
 from logscan.profiles import builtin, load_profile, parse_profile, ros
+from logscan.profiles.schema import MAX_DELAY_S
 from logscan.readers import detect_format, read_embedded_profile, read_log
+from logscan.readers.common import ReadWindow
 from logscan.readers.csv_reader import csv_log_name
 from logscan.report.run_context import STATE_TOPICS, run_context
 from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
@@ -182,7 +184,7 @@ def prepare(
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice, ahead)
     step("reading")
-    log = _read(path, loaded, raw_topics, use_header_stamp, fraction)
+    log = _read(path, loaded, raw_topics, use_header_stamp, fraction, _read_window(profile, start_s, end_s))
     _attach_truth(log, path, truth_path)
     profile.check_channels(log)
     return_freed_pages()
@@ -223,15 +225,29 @@ def _wanted(needs: Needs | Callable[[AlignedRun], Needs], run: AlignedRun, loade
 
 
 def _read(
-    path: str, loaded: LoadedProfile, raw_topics: frozenset[str], use_header_stamp: bool, fraction: Fraction | None
+    path: str,
+    loaded: LoadedProfile,
+    raw_topics: frozenset[str],
+    use_header_stamp: bool,
+    fraction: Fraction | None,
+    window: ReadWindow | None,
 ) -> Log:
     """The log with the topics the profile needs, the detectors' ``raw_topics`` and the report's
-    context: the built-in profile's log when it already holds them (read once), else read now."""
+    context: the built-in profile's log when it already holds them (read once), else read now
+    (of an indexed MCAP file, only the chunks ``window`` needs)."""
     log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
     if log is None or use_header_stamp or not set(raw_topics) | CONTEXT_TOPICS <= loaded.log_extra_topics:
         topics = loaded.profile.topics() | set(raw_topics) | CONTEXT_TOPICS
-        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction)
+        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction, window=window)
     return log
+
+
+def _read_window(profile, start_s: float | None, end_s: float | None) -> ReadWindow | None:
+    """--start/--end as a read's window (None without either): a sample up to the longest delay a
+    profile may give a sensor (`MAX_DELAY_S`) and two steps outside it may still be held."""
+    if start_s is None and end_s is None:
+        return None
+    return ReadWindow(start_s, end_s, margin_s=MAX_DELAY_S + 2.0 / float(profile.vehicle.rate_hz))
 
 
 def _released_once_held(log: Log, profile, raw_topics: frozenset[str]) -> Callable[[str], bool] | None:

@@ -17,7 +17,7 @@ from typing import NamedTuple
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.input_files import SPECIAL_FILE_HINT, special_kind
 from logscan.log import Log, SourceInfo
-from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC, input_error, list_directory, stat_input
+from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC, ReadWindow, input_error, list_directory, stat_input
 
 ROS1_BAG_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"  # a rosbag2 .db3
@@ -200,8 +200,10 @@ def read_log(
     *,
     use_header_stamp: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    window: ReadWindow | None = None,
 ) -> Log:
-    """Read ``path`` into a Log, decoding only ``topics`` (all when None).
+    """Read ``path`` into a Log, decoding only ``topics`` (all when None); of an indexed MCAP file,
+    only the chunks ``window`` needs (`logscan.readers.mcap.window`: other logs are read whole).
 
     ``topics`` are source topic names (MCAP and bag topics, ULog ``topic_instance`` names, CSV file
     topics) or channel names; a reader keeps a topic when it or any channel under it is asked for.
@@ -220,7 +222,7 @@ def read_log(
     if fmt == "mcap":
         from logscan.readers.mcap import read_mcap
 
-        return read_mcap(path, wanted, use_header_stamp=use_header_stamp, progress=progress)
+        return read_mcap(path, wanted, use_header_stamp=use_header_stamp, progress=progress, window=window)
     if fmt == "ulog":
         from logscan.readers.ulog_reader import read_ulog
 

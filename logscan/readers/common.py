@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -17,6 +18,17 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 
 ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
+
+
+@dataclass(frozen=True)
+class ReadWindow:
+    """The part of a log a read is for (`read_log`'s ``window``): ``start_s`` .. ``end_s`` seconds
+    since the log's time zero (either None: that end of the log), and ``margin_s``, how far outside
+    them a sample may still be held (a sensor's delay, an input stamped a step early)."""
+
+    start_s: float | None
+    end_s: float | None
+    margin_s: float
 
 
 def input_error(exc: OSError, path: str | os.PathLike, *, directory: bool = False) -> InputError:

@@ -58,7 +58,11 @@ def dense_span(times: Mapping[str, np.ndarray], path: str) -> tuple[int, int, di
             path=path,
             hint=f"check the profile's channels with `logscan inspect {shlex.quote(str(path))} --channels`",
         )
-    found = {name: (t, outlying_runs(t)) for name, t in times.items()}
+    runs: dict[int, tuple] = {}  # channels sharing one time array (a topic's fields) split it once
+    found = {
+        name: (t, runs[id(t)] if id(t) in runs else runs.setdefault(id(t), outlying_runs(t)))
+        for name, t in times.items()
+    }
     bulk_lo = min(int(t[main[0]]) for t, (main, *_) in found.values())
     bulk_hi = max(int(t[main[1] - 1]) for t, (main, *_) in found.values())
     drops: dict[str, np.ndarray] = {}

@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from logscan.log import Log, SourceInfo, TopicInfo
+from logscan.readers.common import ReadWindow, topic_wanted
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 from logscan.readers.json_template import JsonTier, tally_file
@@ -62,7 +63,8 @@ from logscan.readers.mcap.metadata import attach_logscan_records
 from logscan.readers.mcap.scan import Scan, scan_file
 from logscan.readers.mcap.scan_damage import problem_text, raise_if_unrecoverable
 from logscan.readers.mcap.scan_records import ChannelRec, SchemaRec
-from logscan.readers.topic_channels import TopicPieces, channels_in_time_order, unsorted_text
+from logscan.readers.mcap.window import WindowPlan, channel_index, plan_window
+from logscan.readers.topic_channels import TopicPieces, channel_name, channels_in_time_order, unsorted_text
 
 
 def read_mcap(
@@ -71,20 +73,26 @@ def read_mcap(
     *,
     use_header_stamp: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    window: ReadWindow | None = None,
 ) -> Log:
     """Read the MCAP file ``path`` into a Log, decoding only topics ``topic_wanted`` keeps;
     ``progress(bytes passed, file size)`` is called a chunk or window of the file at a time, and
-    with (file size, file size) at the end."""
+    with (file size, file size) at the end. ``window``: decode only the chunks a window of the log
+    needs, when the file is indexed (`logscan.readers.mcap.window`; header stamps read it whole)."""
     path = str(path)
     decoding = _Decoding(path, use_header_stamp)
     scan = Scan(path, wanted)
     scan.on_flush = decoding  # batches decoded as the scan goes: memory follows the columns
+    planner = _WindowPlanner(window, decoding) if window is not None and not use_header_stamp else None
+    scan.plan = planner
     if progress is not None:
         scan.on_position = _bytes_of(path, progress)
     source = _scanned(scan, decoding)
     channels = channels_in_time_order(decoding.pieces, source)
     decoding.note_skipped(source)
     log = Log(channels=channels, source=source)
+    if planner is not None and planner.plan is not None:
+        planner.mark(log, scan, decoding)
     attach_logscan_records(log)
     if progress is not None:
         size = os.path.getsize(path)
@@ -182,6 +190,46 @@ class ChannelStats:
             "min": self.low,
             "max": self.high,
         }
+
+
+class _WindowPlanner:
+    """`Scan.plan` for a window (`window.plan_window`): the wanted channels a decoder takes, planned
+    from the file's index; then the log marked as a window of it (`mark`)."""
+
+    def __init__(self, window: ReadWindow, decoding: _Decoding):
+        self.window = window
+        self.decoding = decoding
+        self.plan: WindowPlan | None = None
+
+    def __call__(self, scan: Scan, u8: np.ndarray, top) -> set[int] | None:
+        wanted = set()
+        for cid, channel in scan.channels.items():  # the summary's channels: every channel of an indexed file
+            if topic_wanted(channel.topic, scan.wanted):
+                if cid not in self.decoding.decoders:
+                    schema = scan.schemas.get(channel.schema_id)
+                    self.decoding.decoders[cid] = _choose_decoder(self.decoding.factories, channel, schema)
+                if self.decoding.decoders[cid][0] is not None:
+                    wanted.add(cid)
+        index = channel_index(u8, top, wanted, set(scan.channels), scan.give_back)
+        self.plan = plan_window(index, self.window) if index is not None else None
+        if self.plan is None or index is None:
+            return None
+        # every channel's count and span as the whole read counts them (`Scan.window_totals`)
+        scan.window_totals = {cid: (entry.count, entry.first, entry.last) for cid, entry in index.items()}
+        return self.plan.chunks
+
+    def mark(self, log: Log, scan: Scan, decoding: _Decoding) -> None:
+        """The log's span and its channels' times across the whole file, from the plan."""
+        assert self.plan is not None
+        by_topic: dict[str, list[np.ndarray]] = {}
+        for cid, times in self.plan.times.items():
+            by_topic.setdefault(scan.channels[cid].topic, []).append(times)
+        whole: dict[str, np.ndarray] = {}
+        for topic, parts in by_topic.items():
+            times = parts[0] if len(parts) == 1 else np.sort(np.concatenate(parts), kind="stable")
+            for field_path in decoding.fields.get(topic, ()):
+                whole[channel_name(topic, field_path)] = times
+        log.read_as_window((self.plan.origin_ns, self.plan.end_ns), whole)
 
 
 def _source_of(scan: Scan) -> SourceInfo:

@@ -130,6 +130,13 @@ class Scan:
         self._inflate_budget = MIN_FILE_BUDGET_BYTES  # bytes the file's chunks may still decompress to
         self.on_flush: Callable[[Scan], None] | None = None  # takes (and empties) the batches
         self.on_position: Callable[[int], None] | None = None  # hears the file offset scanned to, per chunk
+        # the body offsets of the only chunks to decode (a window's: `window.plan_window`), chosen
+        # by ``plan`` from the top-level records once the summary's definitions are in; None: all
+        self.plan: Callable[[Scan, np.ndarray, Records], set[int] | None] | None = None
+        self.window_chunks: set[int] | None = None
+        # channel id -> (messages, first, last log time) of the whole file, from its index: a
+        # window's read counts what it did not decode as the whole read would
+        self.window_totals: dict[int, tuple[int, int, int]] = {}
         self._held = 0  # message bytes in the batches since the last flush
         self._map: mmap.mmap | None = None
 
@@ -153,10 +160,17 @@ class Scan:
         u8 = np.frombuffer(raw, dtype=np.uint8)
         top = self._walk(u8, len(MCAP_MAGIC), len(raw))
         self._summary_definitions(raw, u8, top)
+        if self.plan is not None:
+            self.window_chunks = self.plan(self, u8, top)
+            self.give_back(len(raw))  # the index pages the plan read
         try:
             self._top_level(raw, u8, top)
         except PARSE_ERRORS as exc:  # a field inside a record did not parse
             self.problem = _Corrupt(f"malformed record ({type(exc).__name__}: {exc})", -1)
+        if self.window_chunks is not None:
+            self.counts = {cid: total[0] for cid, total in self.window_totals.items()}
+            self.first = {cid: total[1] for cid, total in self.window_totals.items()}
+            self.last = {cid: total[2] for cid, total in self.window_totals.items()}
         if self.problem is None and top.status != WALK_FOOTER:
             self.problem = _Corrupt(WALK_TEXT[top.status], top.end)
         elif self.problem is None and raw[top.end : top.end + 8] != MCAP_MAGIC:
@@ -183,7 +197,7 @@ class Scan:
             self.redefined.clear()
             self.warnings.append("the summary section's Schema/Channel records do not parse: not used")
 
-    def _give_back(self, stop: int) -> None:
+    def give_back(self, stop: int) -> None:
         """Drop the mapped file's pages before ``stop`` from this process (they are read again
         from the page cache if touched): RSS follows what is in hand, not the file."""
         if self._map is not None and hasattr(mmap, "MADV_DONTNEED"):
@@ -201,7 +215,7 @@ class Scan:
             window = min(stop, max(pos + WALK_WINDOW, _claimed_end(u8, pos, stop)))
             part = walk_records(u8, pos, window)
             parts.append(part)
-            self._give_back(window)
+            self.give_back(window)
             if window >= stop or part.status in (WALK_FOOTER, WALK_BAD_OPCODE) or part.end == pos:
                 break
             pos = part.end  # a record crossing the window is walked again in the next one
@@ -222,7 +236,7 @@ class Scan:
         self._held += size
         if self._held >= FLUSH_BYTES:
             self.flush()
-            self._give_back(position)
+            self.give_back(position)
         if self.on_position is not None:
             self.on_position(position)
 
@@ -250,22 +264,23 @@ class Scan:
                 return
             op, start, length = int(ops[i]), int(top.offsets[i]), int(top.lengths[i])
             if op == OP_CHUNK:
-                self._held_more(self._chunk_or_skip(raw, start, length), start + length)
+                wanted = self.window_chunks is None or start in self.window_chunks
+                self._held_more(self._chunk_or_skip(raw, start, length) if wanted else 0, start + length)
             elif op == OP_METADATA:
                 cur = Cursor(raw, start, start + length)
                 name = cur.string()
                 self.metadata[name] = cur.string_map()
                 self.unchecked_records += 1
-            elif op == OP_DATA_END:
+            elif op == OP_DATA_END and self.window_chunks is None:  # a window's read: not every byte seen
                 crc = data_section_damage(
-                    raw, start, length, self._give_back, self.skipped_chunks, self.unchecked_records
+                    raw, start, length, self.give_back, self.skipped_chunks, self.unchecked_records
                 )
                 counts = statistics_damage(raw, top, i + 1, self.messages_read, self.chunks_read)
                 self.damage.extend(text for text in (crc, counts) if text)
                 if self.damage:
                     self.damage.extend(_private_records(top))
                 return
-            else:  # footer
+            else:  # footer, or a window's data end
                 return
 
     def _chunk_or_skip(self, raw: bytes, start: int, length: int) -> int:

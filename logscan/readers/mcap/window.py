@@ -1,0 +1,160 @@
+"""A window of an indexed MCAP file (`read_mcap`'s ``window``): which chunks to decode, planned
+from the Message Index records alone, so a window of a long log is not read whole.
+
+Each chunk of an indexed file is followed by one Message Index record per channel it holds (the
+MCAP specification), listing every message's log time: the whole file's times of the wanted
+channels come from them without decompressing a chunk. From those times the plan takes what the
+whole read would have given the window:
+ - time zero, the first message of the wanted channels (`Log.start_ns` of the whole read);
+ - each wanted channel's times, whole, for the grid's span and phase (`align`'s dense span);
+ - the chunks to decode: those holding a message of a wanted channel from ``margin_s`` before the
+   window to ``margin_s`` after it, and the one holding each channel's last message before that
+   (a hold reaches back as far as a channel's staleness allows, without limit for some).
+A file without a Message Index after every chunk, or with messages outside chunks, has no plan:
+it is read whole. What the window read does not see is in docs/algorithms.md section 8.1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from logscan.readers.common import ReadWindow
+from logscan.readers.mcap.records import OP_CHUNK, OP_MESSAGE, OP_MESSAGE_INDEX, Records, gather_u32
+
+_NS = 1_000_000_000
+_INT64_MAX = 2**63 - 1
+_GIVE_BACK_BYTES = 64 << 20
+_HEADS_SLICE = 4096  # Message Index records per slice of heads read
+_INDEX_HEAD = 6  # channel_id u16, then the byte length u32 of its (log_time u64, offset u64) pairs
+
+
+@dataclass
+class WindowPlan:
+    """The chunks to decode (their records' body offsets), the window's time zero and last time,
+    and each wanted channel's log times across the whole file (channel id -> sorted ns)."""
+
+    chunks: set[int]
+    origin_ns: int
+    end_ns: int
+    times: dict[int, np.ndarray]
+
+
+def channel_index(
+    u8: np.ndarray, top: Records, ids: set[int], known: set[int], give_back: Callable[[int], None]
+) -> dict[int, ChannelIndex] | None:
+    """The Message Index records of the channels ``ids`` (channel id -> `ChannelIndex`); None when
+    the file is not indexed throughout, or indexes a channel not in ``known`` (the summary's: one
+    defined only inside a chunk could be wanted). ``give_back(offset)`` hears the file offset read
+    to, every few MiB: the pages before it may go (`Scan.give_back`)."""
+    ops = top.ops
+    if np.any(ops == OP_MESSAGE):  # messages outside chunks have no index
+        return None
+    chunk_at = np.flatnonzero(ops == OP_CHUNK)
+    index_at = np.flatnonzero(ops == OP_MESSAGE_INDEX)
+    if not chunk_at.size:
+        return None
+    owner = np.searchsorted(chunk_at, index_at) - 1  # an index record follows the chunk it indexes
+    if np.any(owner < 0) or np.unique(owner).size != chunk_at.size:  # a chunk without an index
+        return None
+    body = top.offsets[index_at]
+    cids, sizes = _index_heads(u8, body, give_back)
+    if np.any(sizes % 16) or np.any(sizes + _INDEX_HEAD > top.lengths[index_at]):
+        return None  # a damaged index: the whole read finds what is wrong
+    if not set(np.unique(cids).tolist()) <= known:
+        return None
+    found: dict[int, ChannelIndex] = {}
+    for cid in np.unique(cids[np.isin(cids, list(ids))]).tolist():  # each wanted channel's times in one array
+        found[cid] = ChannelIndex(times=np.empty(int(sizes[cids == cid].sum()) // 16, dtype=np.int64))
+    given_back = 0
+    for k in np.flatnonzero(sizes > 0).tolist():
+        start = int(body[k]) + _INDEX_HEAD
+        times = u8[start : start + int(sizes[k])].view("<u8")[::2]  # a view: each pair's log time
+        entry = found.setdefault(int(cids[k]), ChannelIndex())
+        first, last = int(times.min()), int(times.max())
+        if last > _INT64_MAX:  # a log time int64 ns cannot hold: the whole read drops and counts it
+            return None
+        entry.first, entry.last = min(entry.first, first), max(entry.last, last)
+        if entry.times is not None:  # a wanted channel's
+            entry.times[entry.count : entry.count + times.size] = times
+            entry.records.append((entry.count, int(top.offsets[chunk_at[owner[k]]])))
+        entry.count += times.size
+        if start - given_back > _GIVE_BACK_BYTES:  # the index pages read so far
+            give_back(start)
+            given_back = start
+    return found
+
+
+def _index_heads(u8: np.ndarray, body: np.ndarray, give_back: Callable[[int], None]) -> tuple[np.ndarray, np.ndarray]:
+    """(channel id, byte length of the pairs) of each Message Index record at ``body``, read a
+    slice at a time with the pages given back: the records' heads lie on most of the index's pages."""
+    cids, sizes = np.empty(body.size, dtype=np.int64), np.empty(body.size, dtype=np.int64)
+    for lo in range(0, body.size, _HEADS_SLICE):
+        at = body[lo : lo + _HEADS_SLICE]
+        cids[lo : lo + at.size] = u8[at].astype(np.int64) | (u8[at + 1].astype(np.int64) << 8)
+        sizes[lo : lo + at.size] = gather_u32(u8, at + 2)
+        give_back(int(at[-1]))
+    return cids, sizes
+
+
+@dataclass
+class ChannelIndex:
+    """One channel's Message Index records: its message count and first and last log times, and of
+    a wanted channel the log times each record lists and the body offset of the chunk it indexes."""
+
+    count: int = 0
+    first: int = 2**64
+    last: int = -1
+    times: np.ndarray | None = None  # a wanted channel's, in record order
+    records: list[tuple[int, int]] = field(default_factory=list)  # (its first in times, chunk offset)
+
+
+def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPlan | None:
+    """The chunks the window needs (module docstring); None when no wanted channel has a message.
+    A chunk whose messages straddle the window is decoded even when none falls inside: a few
+    samples more than needed change no hold. The channels' times are sorted in place."""
+    index = {cid: entry for cid, entry in index.items() if entry.times is not None and entry.times.size}
+    if not index:
+        return None
+    origin = min(entry.first for entry in index.values())
+    end = max(entry.last for entry in index.values())
+    margin = round(window.margin_s * _NS)
+    # Python ints: exact at epoch magnitudes
+    lo = origin + round(window.start_s * _NS) - margin if window.start_s is not None else None
+    hi = origin + round(window.end_s * _NS) + margin if window.end_s is not None else None
+    chunks: set[int] = set()
+    for entry in index.values():
+        chunks |= _chunks_of(entry, lo, hi)
+    times: dict[int, np.ndarray] = {}
+    for cid, entry in index.items():
+        assert entry.times is not None
+        entry.times.sort(kind="stable")
+        times[cid] = entry.times
+    return WindowPlan(chunks, origin, end, times)
+
+
+def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> set[int]:
+    """The chunks of one channel the window from ``lo`` to ``hi`` ns (margins in) needs."""
+    assert entry.times is not None
+    starts = np.array([first for first, _ in entry.records], dtype=np.int64)
+    owners = np.array([chunk for _, chunk in entry.records], dtype=np.int64)
+    firsts = np.minimum.reduceat(entry.times, starts)  # each record's first and last log time
+    lasts = np.maximum.reduceat(entry.times, starts)
+    overlaps = np.ones(owners.size, dtype=bool)
+    if lo is not None:
+        overlaps &= lasts >= lo
+    if hi is not None:
+        overlaps &= firsts <= hi
+    chunks = set(owners[overlaps].tolist())
+    if lo is not None and firsts.min() < lo:  # the chunk of its last message before, held from
+        latest = np.where(lasts < lo, lasts, np.iinfo(np.int64).min)
+        bounds = np.append(starts, entry.times.size)
+        for k in np.flatnonzero((firsts < lo) & (lasts >= lo)).tolist():  # records straddling lo
+            t = entry.times[bounds[k] : bounds[k + 1]]
+            latest[k] = t[t < lo].max()
+        chunks.add(int(owners[np.argmax(latest)]))
+    elif not overlaps.any():  # all after the window: one chunk still tells its fields
+        chunks.add(int(owners[np.argmin(firsts)]))
+    return chunks

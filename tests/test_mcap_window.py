@@ -1,0 +1,171 @@
+"""A window of an indexed MCAP file decodes only the chunks it needs (`logscan.readers.mcap.window`)
+and aligns to exactly what the whole read gives the same window; a file without message indexes is
+read whole. The files are a sample log rewritten by the mcap library in small chunks."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, IndexType, Writer
+
+from logscan.align import align
+from logscan.profiles import parse_profile
+from logscan.readers import read_embedded_profile, read_log
+from logscan.readers.common import ReadWindow
+from logscan.readers.mcap.scan import Scan
+
+MARGIN_S = 5.02  # what `analyze` gives a 100 Hz profile (MAX_DELAY_S + two steps)
+
+
+def rewrite(
+    source: Path, target: Path, *, message_index: bool = True, keep=lambda topic, n: True, shift=lambda topic, n: 0
+) -> None:
+    """``source`` written again by the mcap library in 16 KiB chunks (with or without Message
+    Index records), its metadata kept; ``keep(topic, n)`` drops a topic's n-th message when False,
+    ``shift(topic, n)`` ns are added to its log time."""
+    index = IndexType.ALL if message_index else IndexType.ALL & ~IndexType.MESSAGE
+    with open(source, "rb") as fin, open(target, "wb") as fout:
+        reader = make_reader(fin)
+        writer = Writer(fout, chunk_size=16 * 1024, compression=CompressionType.LZ4, index_types=index)
+        writer.start(profile="", library="test")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        seen: dict[str, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                sid = schemas[schema.id] if schema is not None else 0
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, sid, dict(channel.metadata)
+                )
+            n = seen[channel.topic] = seen.get(channel.topic, -1) + 1
+            if keep(channel.topic, n):
+                log_time = message.log_time + shift(channel.topic, n)
+                writer.add_message(channels[channel.id], log_time, message.data, message.publish_time, message.sequence)
+        fin.seek(0)
+        for record in make_reader(fin).iter_metadata():
+            writer.add_metadata(record.name, dict(record.metadata))
+        writer.finish()
+
+
+@pytest.fixture(scope="module")
+def chunked(tmp_path_factory) -> dict[str, Path]:
+    source = Path(__file__).resolve().parent.parent / "sample_logs" / "quad_healthy.mcap"
+    if not source.exists():
+        pytest.skip(f"{source} missing (run sample_logs/make_samples.py)")
+    folder = tmp_path_factory.mktemp("window")
+    files = {name: folder / f"{name}.mcap" for name in ("indexed", "unindexed", "one_mode", "off_phase")}
+    rewrite(source, files["indexed"])
+    rewrite(source, files["unindexed"], message_index=False)
+    # the flight mode logged once, at the start: a window far later holds it from a chunk of its own
+    rewrite(source, files["one_mode"], keep=lambda topic, n: topic != "/flight_mode" or n == 0)
+    # every message 3 ms late but the first command: the grid keeps that one's phase, which no
+    # sample inside a window has
+    rewrite(source, files["off_phase"], shift=lambda topic, n: 0 if (topic, n) == ("/cmd", 0) else 3_000_000)
+    return files
+
+
+def profile_of(path: Path, mode_stale_s: str | None = None):
+    text = read_embedded_profile(path)
+    if mode_stale_s is not None:  # the flight mode held as long as it says
+        text = text.replace('channel = "/flight_mode/mode"', f'channel = "/flight_mode/mode"\nstale_s = {mode_stale_s}')
+    return parse_profile(text, source=str(path))
+
+
+def decoded(log) -> int:
+    return sum(len(channel) for channel in log.channels.values())
+
+
+def assert_same_run(path: Path, start_s: float | None, end_s: float | None, profile=None) -> tuple:
+    """The whole read and the window's read of ``path``, aligned on the window: the same run."""
+    profile = profile or profile_of(path)
+    whole = read_log(path, topics=profile.topics())
+    window = read_log(path, topics=profile.topics(), window=ReadWindow(start_s, end_s, MARGIN_S))
+    assert window.start_ns == whole.start_ns and window.end_ns == whole.end_ns
+    a = align(whole, profile, start_s=start_s, end_s=end_s)
+    b = align(window, profile, start_s=start_s, end_s=end_s)
+    assert a.start_ns == b.start_ns
+    for name in ("t", "u", "u_fresh", "mode", "ground", "onboard_state", "onboard_variance"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.groups.keys() == b.groups.keys()
+    for name, group in a.groups.items():
+        np.testing.assert_array_equal(group.z, b.groups[name].z, err_msg=name)
+        np.testing.assert_array_equal(group.fresh, b.groups[name].fresh, err_msg=name)
+    assert a.warnings == b.warnings and a.gaps == b.gaps
+    return whole, window
+
+
+def test_the_files_are_chunked_and_only_one_is_indexed(chunked):
+    scans = {name: Scan(str(path), None) for name, path in chunked.items()}
+    for scan in scans.values():
+        scan.plan = lambda scan, u8, top: None
+        scan.run()
+        assert scan.chunks_read > 20  # many chunks: a window has some to skip
+    with open(chunked["unindexed"], "rb") as fh:
+        assert not any(index.message_index_offsets for index in make_reader(fh).get_summary().chunk_indexes)
+
+
+@pytest.mark.parametrize("start_s, end_s", [(20.0, 30.0), (None, 12.0), (45.0, None), (0.0, 60.0)])
+def test_a_window_aligns_as_the_whole_read_does(chunked, start_s, end_s):
+    whole, window = assert_same_run(chunked["indexed"], start_s, end_s)
+    if (start_s, end_s) == (20.0, 30.0):  # 10 s and the margins of 60 s: well under half decoded
+        assert decoded(window) < 0.5 * decoded(whole)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(start=st.floats(0.0, 55.0), length=st.floats(0.05, 30.0))
+def test_any_window_aligns_as_the_whole_read_does(chunked, start, length):
+    assert_same_run(chunked["indexed"], start, start + length)
+
+
+@pytest.mark.parametrize("start_s, end_s", [(20.0, 30.0), (45.0, None)])
+def test_a_window_keeps_the_whole_logs_grid_phase(chunked, start_s, end_s):
+    whole, window = assert_same_run(chunked["off_phase"], start_s, end_s)
+    run = align(window, profile_of(chunked["off_phase"]), start_s=start_s, end_s=end_s)
+    assert run.start_ns == 0 and np.allclose(run.t[0] * 100 % 1, 0)  # on the first command's lattice
+    assert all((len(c) == 0 or int(c.t[0]) % 10_000_000 == 3_000_000) for c in window.channels.values())
+
+
+def test_a_mode_logged_once_is_held_into_a_late_window(chunked):
+    profile = profile_of(chunked["one_mode"], mode_stale_s="inf")
+    assert profile.mode.stale_s == float("inf")
+    whole, window = assert_same_run(chunked["one_mode"], 40.0, 50.0, profile)
+    assert len(window.channels["/flight_mode/mode"]) == 1  # its one sample, from the first chunk
+    run = align(window, profile, start_s=40.0, end_s=50.0)
+    assert run.mode is not None and np.isfinite(run.mode).all()
+
+
+def test_a_file_without_message_indexes_is_read_whole(chunked):
+    profile = profile_of(chunked["unindexed"])
+    whole = read_log(chunked["unindexed"], topics=profile.topics())
+    window = read_log(chunked["unindexed"], topics=profile.topics(), window=ReadWindow(20.0, 30.0, MARGIN_S))
+    assert decoded(window) == decoded(whole)
+    assert window.whole_times == {}
+
+
+def test_header_stamps_read_the_whole_file(chunked):
+    profile = profile_of(chunked["indexed"])
+    whole = read_log(chunked["indexed"], topics=profile.topics(), use_header_stamp=True)
+    window = read_log(
+        chunked["indexed"], topics=profile.topics(), use_header_stamp=True, window=ReadWindow(20.0, 30.0, MARGIN_S)
+    )
+    assert decoded(window) == decoded(whole)
+
+
+def test_analyze_gives_a_window_the_summary_of_the_whole_read(chunked, cli, tmp_path):
+    """The indexed file's window is read in part, the unindexed one's whole: the same summary."""
+    summaries = {}
+    for name in ("indexed", "unindexed"):
+        out = tmp_path / f"{name}.json"
+        result = cli("analyze", chunked[name], "--start", "20", "--end", "35", "--no-report", "--json", out)
+        assert result.exit_code in (0, 1), result.stderr
+        summaries[name] = out.read_text(encoding="utf-8").replace(str(chunked[name]), "LOG")
+    assert summaries["indexed"] == summaries["unindexed"]
+    assert json.loads(summaries["indexed"])["logs"][0]["filter"]["steps"] == 1501  # 20 .. 35 s at 100 Hz
