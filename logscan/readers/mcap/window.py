@@ -17,16 +17,18 @@ it is read whole. What the window read does not see is in docs/algorithms.md sec
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
+from logscan.numba_cache import follow_dependencies
+from logscan.readers.bits import load_u64
 from logscan.readers.common import ReadWindow
 from logscan.readers.mcap.records import OP_CHUNK, OP_MESSAGE, OP_MESSAGE_INDEX, Records, gather_u32
 
 _NS = 1_000_000_000
 _INT64_MAX = 2**63 - 1
-_GIVE_BACK_BYTES = 64 << 20
 _HEADS_SLICE = 4096  # Message Index records per slice of heads read
 _INDEX_HEAD = 6  # channel_id u16, then the byte length u32 of its (log_time u64, offset u64) pairs
 
@@ -65,26 +67,61 @@ def channel_index(
         return None  # a damaged index: the whole read finds what is wrong
     if not set(np.unique(cids).tolist()) <= known:
         return None
+    counts = sizes // 16
+    firsts, lasts, times, into = _index_times(u8, body + _INDEX_HEAD, counts, cids, ids, give_back)
+    if np.any(lasts > _INT64_MAX):  # a log time int64 ns cannot hold: the whole read drops and counts it
+        return None
     found: dict[int, ChannelIndex] = {}
-    for cid in np.unique(cids[np.isin(cids, list(ids))]).tolist():  # each wanted channel's times in one array
-        found[cid] = ChannelIndex(times=np.empty(int(sizes[cids == cid].sum()) // 16, dtype=np.int64))
-    given_back = 0
-    for k in np.flatnonzero(sizes > 0).tolist():
-        start = int(body[k]) + _INDEX_HEAD
-        times = u8[start : start + int(sizes[k])].view("<u8")[::2]  # a view: each pair's log time
-        entry = found.setdefault(int(cids[k]), ChannelIndex())
-        first, last = int(times.min()), int(times.max())
-        if last > _INT64_MAX:  # a log time int64 ns cannot hold: the whole read drops and counts it
-            return None
-        entry.first, entry.last = min(entry.first, first), max(entry.last, last)
-        if entry.times is not None:  # a wanted channel's
-            entry.times[entry.count : entry.count + times.size] = times
-            entry.records.append((entry.count, int(top.offsets[chunk_at[owner[k]]])))
-        entry.count += times.size
-        if start - given_back > _GIVE_BACK_BYTES:  # the index pages read so far
-            give_back(start)
-            given_back = start
+    for cid in np.unique(cids[counts > 0]).tolist():
+        mine = np.flatnonzero((cids == cid) & (counts > 0))  # its records, in file order
+        entry = found[cid] = ChannelIndex(int(counts[mine].sum()), int(firsts[mine].min()), int(lasts[mine].max()))
+        if into[mine[0]] >= 0:  # a wanted channel: its records' times lie together, in file order
+            base = int(into[mine[0]])
+            entry.times = times[base : base + entry.count]
+            entry.starts = into[mine] - base
+            entry.chunks = top.offsets[chunk_at[owner[mine]]]
     return found
+
+
+def _index_times(
+    u8: np.ndarray,
+    at: np.ndarray,
+    counts: np.ndarray,
+    cids: np.ndarray,
+    ids: set[int],
+    give_back: Callable[[int], None],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(first and last log time of each Message Index record at ``at`` (uint64), the times of the
+    records of the channels ``ids``, where each such record's times start in them, -1 for the
+    others): a channel's records' times lie together, in file order. A slice of records at a time,
+    the pages read given back."""
+    wanted = np.flatnonzero(np.isin(cids, list(ids)) & (counts > 0))
+    wanted = wanted[np.argsort(cids[wanted], kind="stable")]  # by channel, each in file order
+    into = np.full(at.size, -1, dtype=np.int64)
+    into[wanted] = np.cumsum(counts[wanted]) - counts[wanted]
+    times = np.empty(int(counts[wanted].sum()), dtype=np.int64)
+    firsts, lasts = np.empty(at.size, dtype=np.uint64), np.empty(at.size, dtype=np.uint64)
+    for lo in range(0, at.size, _HEADS_SLICE):
+        hi = min(lo + _HEADS_SLICE, at.size)
+        _record_times(u8, at[lo:hi], counts[lo:hi], into[lo:hi], times, firsts[lo:hi], lasts[lo:hi])
+        give_back(int(at[hi - 1]))
+    return firsts, lasts, times, into
+
+
+@njit(cache=True, nogil=True)
+def _record_times(u8, at, counts, into, times, firsts, lasts):  # pragma: no cover - compiled
+    """Record k lists counts[k] (log_time u64, offset u64) pairs from u8[at[k]]: the least and the
+    greatest log time into firsts[k] and lasts[k], and the times into times[into[k]:] when into[k] >= 0."""
+    for k in range(at.size):
+        first = last = load_u64(u8, at[k])
+        for j in range(counts[k]):
+            t = load_u64(u8, at[k] + 16 * j)
+            first = min(first, t)
+            last = max(last, t)
+            if into[k] >= 0:
+                times[into[k] + j] = np.int64(t)
+        firsts[k] = first
+        lasts[k] = last
 
 
 def _index_heads(u8: np.ndarray, body: np.ndarray, give_back: Callable[[int], None]) -> tuple[np.ndarray, np.ndarray]:
@@ -104,11 +141,12 @@ class ChannelIndex:
     """One channel's Message Index records: its message count and first and last log times, and of
     a wanted channel the log times each record lists and the body offset of the chunk it indexes."""
 
-    count: int = 0
-    first: int = 2**64
-    last: int = -1
-    times: np.ndarray | None = None  # a wanted channel's, in record order
-    records: list[tuple[int, int]] = field(default_factory=list)  # (its first in times, chunk offset)
+    count: int
+    first: int
+    last: int
+    times: np.ndarray | None = None  # a wanted channel's, its records one after the other
+    starts: np.ndarray | None = None  # where each of its records starts in times
+    chunks: np.ndarray | None = None  # the body offset of the chunk each record indexes
 
 
 def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPlan | None:
@@ -137,9 +175,8 @@ def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPla
 
 def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> set[int]:
     """The chunks of one channel the window from ``lo`` to ``hi`` ns (margins in) needs."""
-    assert entry.times is not None
-    starts = np.array([first for first, _ in entry.records], dtype=np.int64)
-    owners = np.array([chunk for _, chunk in entry.records], dtype=np.int64)
+    assert entry.times is not None and entry.starts is not None and entry.chunks is not None
+    starts, owners = entry.starts, entry.chunks
     firsts = np.minimum.reduceat(entry.times, starts)  # each record's first and last log time
     lasts = np.maximum.reduceat(entry.times, starts)
     overlaps = np.ones(owners.size, dtype=bool)
@@ -158,3 +195,6 @@ def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> set[int]:
     elif not overlaps.any():  # all after the window: one chunk still tells its fields
         chunks.add(int(owners[np.argmin(firsts)]))
     return chunks
+
+
+follow_dependencies(__name__)  # the cached kernel is stamped with the intrinsics of `bits` too
