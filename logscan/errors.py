@@ -100,8 +100,8 @@ class InternalError(LogscanError):
     exit_code = ExitCode.INTERNAL
 
 
-# --start/--end cut the analysis after the whole log is read: a window saves the later steps'
-# memory, not the reading's (a 10-minute window of a 24-hour log still peaks near 5.5 GiB)
+# --start/--end cut the analysis after the whole log is read, but for an indexed MCAP file (read in
+# part, `logscan.readers.mcap.window`): a window saves the later steps' memory, not the reading's
 OUT_OF_MEMORY = (
     "the log needs more memory than is available (logscan reads a whole log, also for a --start/--end window, "
     "except an MCAP file with message indexes): analyse it on a machine with more memory, or cut the part you "

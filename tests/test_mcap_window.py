@@ -169,3 +169,27 @@ def test_analyze_gives_a_window_the_summary_of_the_whole_read(chunked, cli, tmp_
         summaries[name] = out.read_text(encoding="utf-8").replace(str(chunked[name]), "LOG")
     assert summaries["indexed"] == summaries["unindexed"]
     assert json.loads(summaries["indexed"])["logs"][0]["filter"]["steps"] == 1501  # 20 .. 35 s at 100 Hz
+
+
+def test_a_wanted_topic_no_decoder_takes_is_counted_whole(tmp_path):
+    """Its messages are counted from the index, as the whole read counts them, not those of the
+    chunks read."""
+    path = tmp_path / "blob.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh, chunk_size=4096, compression=CompressionType.NONE)
+        writer.start(profile="", library="test")
+        json_schema = writer.register_schema("Speed", "jsonschema", b'{"type": "object"}')
+        speed = writer.register_channel("/speed", "json", json_schema)
+        blob = writer.register_channel("/blob", "x-unknown", 0)
+        for k in range(2000):  # 20 s at 100 Hz
+            t = k * 10_000_000
+            writer.add_message(speed, t, json.dumps({"v": k * 0.01}).encode(), t)
+            writer.add_message(blob, t, b"\x00\x01", t)
+        writer.finish()
+    whole = read_log(path, topics={"/speed", "/blob"})
+    window = read_log(path, topics={"/speed", "/blob"}, window=ReadWindow(8.0, 9.0, 0.5))
+    assert decoded(window) < 0.3 * decoded(whole)
+    assert [s.to_dict() for s in window.source.skipped] == [s.to_dict() for s in whole.source.skipped]
+    assert [s.count for s in whole.source.skipped if s.what == "/blob"] == [2000]
+    assert window.source.warnings == whole.source.warnings
+    assert window.source.topics["/blob"].message_count == 2000

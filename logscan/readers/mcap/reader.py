@@ -202,20 +202,21 @@ class _WindowPlanner:
         self.plan: WindowPlan | None = None
 
     def __call__(self, scan: Scan, u8: np.ndarray, top) -> set[int] | None:
-        wanted = set()
+        decoders = self.decoding.decoders
         for cid, channel in scan.channels.items():  # the summary's channels: every channel of an indexed file
-            if topic_wanted(channel.topic, scan.wanted):
-                if cid not in self.decoding.decoders:
-                    schema = scan.schemas.get(channel.schema_id)
-                    self.decoding.decoders[cid] = _choose_decoder(self.decoding.factories, channel, schema)
-                if self.decoding.decoders[cid][0] is not None:
-                    wanted.add(cid)
+            if cid not in decoders and topic_wanted(channel.topic, scan.wanted):
+                decoders[cid] = _choose_decoder(self.decoding.factories, channel, scan.schemas.get(channel.schema_id))
+        wanted = {cid for cid, (decoder, _) in decoders.items() if decoder is not None}
         index = channel_index(u8, top, wanted, set(scan.channels), scan.give_back)
         self.plan = plan_window(index, self.window) if index is not None else None
         if self.plan is None or index is None:
             return None
         # every channel's count and span as the whole read counts them (`Scan.window_totals`)
         scan.window_totals = {cid: (entry.count, entry.first, entry.last) for cid, entry in index.items()}
+        for cid, (decoder, why) in decoders.items():  # a wanted topic no decoder takes: all its messages
+            if decoder is None and cid in index:
+                scan.leave(cid)
+                self.decoding.skip_topic(scan.channels[cid].topic, why, index[cid].count)
         return self.plan.chunks
 
     def mark(self, log: Log, scan: Scan, decoding: _Decoding) -> None:

@@ -433,6 +433,10 @@ class Scan:
         self.redefined.append(f"{kind} {key} {first[:60]!r}, redefined as {other[:60]!r} at byte {offset - 9}")
         return False
 
+    def leave(self, cid: int) -> None:
+        """Keep no batch of channel ``cid`` (a window's read counts its messages from the index)."""
+        self._wanted_ids[cid] = False
+
     def _is_wanted(self, cid: int) -> bool:
         known = self._wanted_ids.get(cid)
         if known is None:
