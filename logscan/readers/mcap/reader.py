@@ -216,7 +216,7 @@ class _WindowPlanner:
         for cid, (decoder, why) in decoders.items():  # a wanted topic no decoder takes: all its messages
             if decoder is None and cid in index:
                 scan.leave(cid)
-                self.decoding.skip_topic(scan.channels[cid].topic, why, index[cid].count)
+                self.decoding.skip_topic(scan.channels[cid].topic, str(why), index[cid].count)
         return self.plan.chunks
 
     def mark(self, log: Log, scan: Scan, decoding: _Decoding) -> None:
@@ -365,7 +365,7 @@ def _mcap_schema(rec: SchemaRec | None):
     return Schema(id=rec.id, name=rec.name, encoding=rec.encoding, data=rec.data)
 
 
-def _choose_decoder(factories: list, channel: ChannelRec, schema: SchemaRec | None):
+def _choose_decoder(factories: list, channel: ChannelRec, schema: SchemaRec | None) -> tuple[Any, str | None]:
     """(decoder, None) or (None, why not)."""
     mcap_schema = _mcap_schema(schema)
     for factory in factories:
