@@ -15,9 +15,11 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from logscan.align import align
+from logscan.errors import LogscanError
 from logscan.profiles import parse_profile
 from logscan.readers import read_embedded_profile, read_log
-from logscan.readers.common import ReadWindow
+from logscan.readers.common import MCAP_MAGIC, ReadWindow
+from logscan.readers.mcap.records import OP_MESSAGE_INDEX, walk_records
 from logscan.readers.mcap.scan import Scan
 
 MARGIN_S = 5.02  # what `analyze` gives a 100 Hz profile (MAX_DELAY_S + two steps)
@@ -193,3 +195,25 @@ def test_a_wanted_topic_no_decoder_takes_is_counted_whole(tmp_path):
     assert [s.count for s in whole.source.skipped if s.what == "/blob"] == [2000]
     assert window.source.warnings == whole.source.warnings
     assert window.source.topics["/blob"].message_count == 2000
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(picks=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), min_size=1, max_size=8))
+def test_a_damaged_message_index_is_data_not_a_crash(chunked, tmp_path_factory, picks):
+    """Bytes of the Message Index records overwritten at random: the window's read gives a log or
+    one LogscanError, never another exception."""
+    data = bytearray(chunked["indexed"].read_bytes())
+    top = walk_records(np.frombuffer(bytes(data), dtype=np.uint8), len(MCAP_MAGIC), len(data))
+    at = top.offsets[top.ops == OP_MESSAGE_INDEX]
+    lengths = top.lengths[top.ops == OP_MESSAGE_INDEX]
+    for where, value in picks:
+        k = min(int(where * at.size), at.size - 1)
+        data[int(at[k]) + int(where * 7919) % int(lengths[k])] = value
+    path = tmp_path_factory.mktemp("damaged") / "damaged.mcap"
+    path.write_bytes(bytes(data))
+    profile = profile_of(chunked["indexed"])
+    try:
+        log = read_log(path, topics=profile.topics(), window=ReadWindow(20.0, 30.0, MARGIN_S))
+    except LogscanError:
+        return
+    assert log.channels  # read, as its index (or the whole file) gives it

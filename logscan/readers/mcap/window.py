@@ -159,9 +159,11 @@ def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPla
     origin = min(entry.first for entry in index.values())
     end = max(entry.last for entry in index.values())
     margin = round(window.margin_s * _NS)
-    # Python ints: exact at epoch magnitudes
+    # Python ints: exact at epoch magnitudes; then within int64, to compare with the times
     lo = origin + round(window.start_s * _NS) - margin if window.start_s is not None else None
     hi = origin + round(window.end_s * _NS) + margin if window.end_s is not None else None
+    lo = None if lo is None else min(max(lo, -_INT64_MAX), _INT64_MAX)
+    hi = None if hi is None else min(max(hi, -_INT64_MAX), _INT64_MAX)
     chunks: set[int] = set()
     for entry in index.values():
         chunks |= _chunks_of(entry, lo, hi)
