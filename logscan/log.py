@@ -183,6 +183,9 @@ class Log:
     def read_as_window(self, span_ns: tuple[int, int], whole_times: dict[str, np.ndarray]) -> None:
         """This log holds a window of its file (`logscan.readers.mcap.window`): its span and its
         channels' times across the whole file come from the file's index, not the samples read."""
+        partial = self.span_warning()  # of the samples read: not the log's
+        if partial in self.source.warnings:
+            self.source.warnings.remove(partial)
         self._span_ns = span_ns
         self.whole_times = whole_times
         timed = [name for name in self.channels if name in whole_times and whole_times[name].size]

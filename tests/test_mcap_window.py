@@ -23,14 +23,13 @@ from logscan.readers.mcap.records import OP_MESSAGE_INDEX, walk_records
 from logscan.readers.mcap.scan import Scan
 
 MARGIN_S = 5.02  # what `analyze` gives a 100 Hz profile (MAX_DELAY_S + two steps)
+S = 1_000_000_000  # ns
 
 
-def rewrite(
-    source: Path, target: Path, *, message_index: bool = True, keep=lambda topic, n: True, shift=lambda topic, n: 0
-) -> None:
+def rewrite(source: Path, target: Path, *, message_index: bool = True, edit=lambda topic, n, t, data: [(t, data)]):
     """``source`` written again by the mcap library in 16 KiB chunks (with or without Message
-    Index records), its metadata kept; ``keep(topic, n)`` drops a topic's n-th message when False,
-    ``shift(topic, n)`` ns are added to its log time."""
+    Index records), its metadata kept; ``edit(topic, n, log_time, data)`` gives the (log_time,
+    data) messages written for a topic's n-th message (none: dropped)."""
     index = IndexType.ALL if message_index else IndexType.ALL & ~IndexType.MESSAGE
     with open(source, "rb") as fin, open(target, "wb") as fout:
         reader = make_reader(fin)
@@ -48,13 +47,22 @@ def rewrite(
                     channel.topic, channel.message_encoding, sid, dict(channel.metadata)
                 )
             n = seen[channel.topic] = seen.get(channel.topic, -1) + 1
-            if keep(channel.topic, n):
-                log_time = message.log_time + shift(channel.topic, n)
-                writer.add_message(channels[channel.id], log_time, message.data, message.publish_time, message.sequence)
+            for log_time, data in edit(channel.topic, n, message.log_time, message.data):
+                writer.add_message(channels[channel.id], log_time, data, message.publish_time, message.sequence)
         fin.seek(0)
         for record in make_reader(fin).iter_metadata():
             writer.add_metadata(record.name, dict(record.metadata))
         writer.finish()
+
+
+def mode_once(topic, n, t, data):
+    """The flight mode logged once, at the start."""
+    return [] if topic == "/flight_mode" and n else [(t, data)]
+
+
+def late_but_first_command(ns: int):
+    """Every message ``ns`` late but the first command."""
+    return lambda topic, n, t, data: [(t + (0 if (topic, n) == ("/cmd", 0) else ns), data)]
 
 
 @pytest.fixture(scope="module")
@@ -64,13 +72,20 @@ def chunked(tmp_path_factory) -> dict[str, Path]:
         pytest.skip(f"{source} missing (run sample_logs/make_samples.py)")
     folder = tmp_path_factory.mktemp("window")
     files = {name: folder / f"{name}.mcap" for name in ("indexed", "unindexed", "one_mode", "off_phase")}
+    files["source"] = source
     rewrite(source, files["indexed"])
     rewrite(source, files["unindexed"], message_index=False)
     # the flight mode logged once, at the start: a window far later holds it from a chunk of its own
-    rewrite(source, files["one_mode"], keep=lambda topic, n: topic != "/flight_mode" or n == 0)
+    rewrite(
+        source, files["one_mode"], edit=lambda topic, n, t, data: [] if topic == "/flight_mode" and n else [(t, data)]
+    )
     # every message 3 ms late but the first command: the grid keeps that one's phase, which no
     # sample inside a window has
-    rewrite(source, files["off_phase"], shift=lambda topic, n: 0 if (topic, n) == ("/cmd", 0) else 3_000_000)
+    rewrite(
+        source,
+        files["off_phase"],
+        edit=lambda topic, n, t, data: [(t + (3_000_000 if (topic, n) != ("/cmd", 0) else 0), data)],
+    )
     return files
 
 
@@ -105,7 +120,7 @@ def assert_same_run(path: Path, start_s: float | None, end_s: float | None, prof
 
 
 def test_the_files_are_chunked_and_only_one_is_indexed(chunked):
-    scans = {name: Scan(str(path), None) for name, path in chunked.items()}
+    scans = {name: Scan(str(path), None) for name, path in chunked.items() if name != "source"}
     for scan in scans.values():
         scan.plan = lambda scan, u8, top: None
         scan.run()
@@ -132,7 +147,9 @@ def test_a_window_keeps_the_whole_logs_grid_phase(chunked, start_s, end_s):
     whole, window = assert_same_run(chunked["off_phase"], start_s, end_s)
     run = align(window, profile_of(chunked["off_phase"]), start_s=start_s, end_s=end_s)
     assert run.start_ns == 0 and np.allclose(run.t[0] * 100 % 1, 0)  # on the first command's lattice
-    assert all((len(c) == 0 or int(c.t[0]) % 10_000_000 == 3_000_000) for c in window.channels.values())
+    # the chunks read hold the first command (time zero is checked on it) and samples 3 ms late
+    assert all(np.all(c.t[c.t > 0] % 10_000_000 == 3_000_000) for c in window.channels.values())
+    assert window.whole_times and decoded(window) < 0.5 * decoded(whole)
 
 
 def test_a_mode_logged_once_is_held_into_a_late_window(chunked):
@@ -217,3 +234,91 @@ def test_a_damaged_message_index_is_data_not_a_crash(chunked, tmp_path_factory, 
     except LogscanError:
         return
     assert log.channels  # read, as its index (or the whole file) gives it
+
+
+def edited(chunked, tmp_path, edit) -> Path:
+    path = tmp_path / "edited.mcap"
+    rewrite(chunked["source"], path, edit=edit)
+    return path
+
+
+def test_a_first_message_that_gives_no_sample_reads_the_file_whole(chunked, tmp_path):
+    """Time zero is the first sample read: when the first message does not decode, the index's
+    first time is not it, and the window is read whole."""
+    first_bad = edited(
+        chunked,
+        tmp_path,
+        lambda topic, n, t, data: [(t, b"{not json")] if (topic, n) == ("/cmd", 0) else [(t + S, data)],
+    )
+    whole, window = assert_same_run(first_bad, 20.0, 30.0)
+    assert window.start_ns == S and window.whole_times == {}  # read whole
+    assert [s.to_dict() for s in window.source.skipped] == [s.to_dict() for s in whole.source.skipped]
+
+
+@pytest.mark.parametrize("last", [b'{"note": 1.0}', b'{"mode": NaN}'], ids=["field missing", "not finite"])
+def test_a_mode_not_given_before_the_window_reads_the_file_whole(chunked, tmp_path, last):
+    """The last mode message before the window lacks its field or holds NaN: the whole read holds
+    the one before it, so the window is read whole."""
+
+    def edit(topic, n, t, data):
+        if topic != "/flight_mode":
+            return [(t, data)]
+        return {0: [(t, b'{"mode": 3.0}')], 100: [(t, last)], 550: [(t, b'{"mode": 4.0}')]}.get(n, [])
+
+    path = edited(chunked, tmp_path, edit)
+    whole, window = assert_same_run(path, 40.0, 50.0, profile_of(path, mode_stale_s="inf"))
+    assert window.whole_times == {}
+    run = align(window, profile_of(path, mode_stale_s="inf"), start_s=40.0, end_s=50.0)
+    assert np.unique(run.mode).tolist() == [3.0]  # held from the start: the note at 10 s has no mode
+
+
+def test_a_time_logged_twice_in_two_chunks_holds_the_later_sample(chunked, tmp_path):
+    def edit(topic, n, t, data):
+        if topic != "/flight_mode":
+            return [(t, data)]
+        return {0: [(10 * S, b'{"mode": 1.0}')], 300: [(10 * S, b'{"mode": 2.0}')]}.get(n, [])
+
+    path = edited(chunked, tmp_path, edit)
+    profile = profile_of(path, mode_stale_s="inf")
+    whole, window = assert_same_run(path, 40.0, 50.0, profile)
+    assert window.whole_times and np.unique(align(window, profile, start_s=40.0, end_s=50.0).mode).tolist() == [2.0]
+
+
+def test_a_log_over_a_day_warns_once_as_the_whole_read_does(chunked, tmp_path):
+    day = int(1.5 * 86400) * S
+
+    def edit(topic, n, t, data):
+        if topic == "/flight_mode":
+            return [(t, data)] if n == 0 else []
+        return [(t + day + (day // 3 if (topic, n) == ("/gps", 600) else 0), data)]
+
+    path = edited(chunked, tmp_path, edit)
+    whole, window = assert_same_run(path, 129_620.0, 129_630.0, profile_of(path, mode_stale_s="inf"))
+    assert window.whole_times and window.source.warnings == whole.source.warnings
+    assert sum("spans" in w for w in window.source.warnings) == 1
+
+
+def test_analyze_reads_whole_a_window_whose_time_zero_is_an_outlier(chunked, cli, tmp_path):
+    """Every message an hour late but the first command: alignment counts from the grid's start,
+    not the index's first time, so the window is read again whole: the summary is the whole read's."""
+    late = late_but_first_command(3600 * S)
+    summaries = {}
+    for name, index in (("indexed", True), ("unindexed", False)):
+        path = tmp_path / f"{name}.mcap"
+        rewrite(chunked["source"], path, message_index=index, edit=late)
+        out = tmp_path / f"{name}.json"
+        result = cli("analyze", path, "--start", "20", "--end", "30", "--no-report", "--json", out)
+        assert result.exit_code in (0, 1), result.stderr
+        summaries[name] = out.read_text(encoding="utf-8").replace(str(path), "LOG")
+    assert summaries["indexed"] == summaries["unindexed"]
+    assert json.loads(summaries["indexed"])["logs"][0]["filter"]["steps"] == 1001
+
+
+@pytest.mark.parametrize("flags", [("--start", "1e300"), ("--end", "-1e300"), ("--start", "1e10")])
+def test_a_window_beyond_any_log_is_a_usage_error(cli, sample, flags):
+    """Seconds int64 nanoseconds cannot hold are refused in one line, for any log (they overflowed
+    at the grid before, and the window's plan)."""
+    for log in ("quad_healthy.mcap", "quad_healthy.csv"):
+        result = cli("analyze", sample(log), *flags, "--no-report")
+        assert result.exit_code == 2
+        assert "is beyond any log" in result.stderr and "Traceback" not in result.stderr

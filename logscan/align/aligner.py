@@ -114,6 +114,7 @@ class _Aligner:
         unique: dict[int, np.ndarray] = {}  # a topic's channels share one array: made unique once
         times = {}
         for name in dict.fromkeys(names):
+            self.clean(name)  # cleaned first, as the whole read's span does: its warnings come first
             t = whole.get(name)
             if t is not None and t.size:
                 if id(t) not in unique:

@@ -184,12 +184,7 @@ def prepare(
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice, ahead)
     step("reading")
-    log = _read(path, loaded, raw_topics, use_header_stamp, fraction, _read_window(profile, start_s, end_s))
-    _attach_truth(log, path, truth_path)
-    profile.check_channels(log)
-    return_freed_pages()
-    step("aligning")
-    run = align(log, profile, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
+    log, run = _read_and_align(path, loaded, raw_topics, use_header_stamp, fraction, (start_s, end_s), truth_path, step)
     if run.n_steps < 2:
         raise LogscanError(
             "too few samples on the analysis grid to filter",
@@ -240,6 +235,41 @@ def _read(
         topics = loaded.profile.topics() | set(raw_topics) | CONTEXT_TOPICS
         log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction, window=window)
     return log
+
+
+def _read_and_align(
+    path: str,
+    loaded: LoadedProfile,
+    raw_topics: frozenset[str],
+    use_header_stamp: bool,
+    fraction: Fraction | None,
+    window: tuple[float | None, float | None],
+    truth_path,
+    step: Progress,
+    *,
+    whole: bool = False,
+) -> tuple[Log, AlignedRun]:
+    """The log read (of an indexed MCAP file, only the chunks the ``window`` needs, unless
+    ``whole``) and aligned on the window. A window's read that the whole read would align otherwise
+    is read again whole: its time zero is not its first message (an outlying first sample), or a
+    profile channel is not in the chunks read."""
+    profile = loaded.profile
+    start_s, end_s = window
+    log = _read(path, loaded, raw_topics, use_header_stamp, fraction, None if whole else _read_window(profile, *window))
+    again = (path, loaded, raw_topics, use_header_stamp, fraction, window, truth_path, step)
+    _attach_truth(log, path, truth_path)
+    try:
+        profile.check_channels(log)
+    except ProfileError:
+        if not log.whole_times:
+            raise
+        return _read_and_align(*again, whole=True)
+    return_freed_pages()
+    step("aligning")
+    run = align(log, profile, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
+    if log.whole_times and run.start_ns != log.start_ns:
+        return _read_and_align(*again, whole=True)
+    return log, run
 
 
 def _read_window(profile, start_s: float | None, end_s: float | None) -> ReadWindow | None:

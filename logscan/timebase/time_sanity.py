@@ -26,6 +26,7 @@ OUTLIER_MIN_GAP_S = 10.0  # ... and over 10 s
 OUTLIER_MAX_SHARE = 0.01  # an outlying run holds at most 1% of its channel's samples (at least one)
 OUTLIER_MIN_SAMPLES = 50  # shorter channels are not searched for outliers
 _INT64 = np.iinfo(np.int64)
+MAX_WINDOW_S = _INT64.max / NS  # a --start/--end further from the log's start than any time can be
 
 
 def outlying_runs(t_ns: np.ndarray) -> tuple[tuple[int, int], np.ndarray, np.ndarray, int]:
@@ -109,6 +110,11 @@ def check_window(start_s: float | None, end_s: float | None) -> None:
     for flag, value in (("--start", start_s), ("--end", end_s)):
         if value is not None and not np.isfinite(value):
             raise UsageError(f"{flag} {value} is not a finite number of seconds since the log's start")
+        if value is not None and abs(value) > MAX_WINDOW_S:
+            raise UsageError(
+                f"{flag} {value:g} is beyond any log: int64 nanoseconds span {MAX_WINDOW_S:.3g} s each way",
+                hint="give --start/--end in seconds since the log's start",
+            )
     if start_s is not None and end_s is not None and end_s <= start_s:
         raise UsageError(f"--end {end_s:g} must be after --start {start_s:g} (seconds since the log's start)")
 

@@ -84,6 +84,7 @@ def read_mcap(
     scan = Scan(path, wanted)
     scan.on_flush = decoding  # batches decoded as the scan goes: memory follows the columns
     planner = _WindowPlanner(window, decoding) if window is not None and not use_header_stamp else None
+    progress = _onward(progress) if planner is not None else progress
     scan.plan = planner
     if progress is not None:
         scan.on_position = _bytes_of(path, progress)
@@ -91,13 +92,28 @@ def read_mcap(
     channels = channels_in_time_order(decoding.pieces, source)
     decoding.note_skipped(source)
     log = Log(channels=channels, source=source)
-    if planner is not None and planner.plan is not None:
-        planner.mark(log, scan, decoding)
+    if planner is not None and planner.plan is not None and not planner.mark(log, scan, decoding):
+        return read_mcap(path, wanted, use_header_stamp=use_header_stamp, progress=progress)
     attach_logscan_records(log)
     if progress is not None:
         size = os.path.getsize(path)
         progress(size, size)
     return log
+
+
+def _onward(progress: Callable[[int, int], None] | None) -> Callable[[int, int], None] | None:
+    """``progress`` that hears only bytes past the most it heard: a window's read that must then
+    read the file whole reports the second pass once it passes the first."""
+    if progress is None:
+        return None
+    heard = [-1]
+
+    def onward(done: int, total: int) -> None:
+        if done > heard[0]:
+            heard[0] = done
+            progress(done, total)
+
+    return onward
 
 
 def _bytes_of(path: str, progress: Callable[[int, int], None]) -> Callable[[int], None]:
@@ -219,18 +235,40 @@ class _WindowPlanner:
                 self.decoding.skip_topic(scan.channels[cid].topic, str(why), index[cid].count)
         return self.plan.chunks
 
-    def mark(self, log: Log, scan: Scan, decoding: _Decoding) -> None:
-        """The log's span and its channels' times across the whole file, from the plan."""
-        assert self.plan is not None
-        by_topic: dict[str, list[np.ndarray]] = {}
-        for cid, times in self.plan.times.items():
-            by_topic.setdefault(scan.channels[cid].topic, []).append(times)
+    def mark(self, log: Log, scan: Scan, decoding: _Decoding) -> bool:
+        """The log's span and its channels' times across the whole file, from the plan; False
+        (the log is to be read whole) when the chunks read cannot stand for the whole read: the
+        first message gave no sample (time zero moves), a field is missing from some messages, or
+        a channel has no finite sample from its topic's last message before the window (a hold
+        could reach further back)."""
+        plan = self.plan
+        assert plan is not None
+        firsts = [int(channel.t[0]) for channel in log.channels.values() if len(channel)]
+        if not firsts or min(firsts) != plan.origin_ns:
+            return False
+        by_topic: dict[str, list[int]] = {}
+        for cid in plan.times:
+            by_topic.setdefault(scan.channels[cid].topic, []).append(cid)
         whole: dict[str, np.ndarray] = {}
-        for topic, parts in by_topic.items():
+        for topic, cids in by_topic.items():
+            parts = [plan.times[cid] for cid in cids]
             times = parts[0] if len(parts) == 1 else np.sort(np.concatenate(parts), kind="stable")
-            for field_path in decoding.fields.get(topic, ()):
-                whole[channel_name(topic, field_path)] = times
-        log.read_as_window((self.plan.origin_ns, self.plan.end_ns), whole)
+            names = [channel_name(topic, field_path) for field_path in decoding.fields.get(topic, ())]
+            if len({len(log.channels[name]) for name in names}) > 1:  # fields that come and go
+                return False
+            before = [plan.before[cid] for cid in cids if cid in plan.before]
+            if before and not all(_held_from(log.channels[name], max(before), plan.lo_ns) for name in names):
+                return False
+            whole.update(dict.fromkeys(names, times))
+        log.read_as_window((plan.origin_ns, plan.end_ns), whole)
+        return True
+
+
+def _held_from(channel, before_ns: int, lo_ns: int | None) -> bool:
+    """Whether ``channel`` has a finite sample from ``before_ns`` (its topic's last message before
+    the chunks read hold every message) to ``lo_ns``: a hold into the window starts there."""
+    inside = (channel.t >= before_ns) & (channel.t < lo_ns)
+    return bool(np.isfinite(channel.values[inside]).any())
 
 
 def _source_of(scan: Scan) -> SourceInfo:

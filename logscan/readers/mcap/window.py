@@ -35,13 +35,16 @@ _INDEX_HEAD = 6  # channel_id u16, then the byte length u32 of its (log_time u64
 
 @dataclass
 class WindowPlan:
-    """The chunks to decode (their records' body offsets), the window's time zero and last time,
-    and each wanted channel's log times across the whole file (channel id -> sorted ns)."""
+    """The chunks to decode (their records' body offsets), the log's time zero and last time, each
+    wanted channel's log times across the whole file (channel id -> sorted ns), and what the chunks
+    read must show for a hold into the window to be the whole read's (`before`)."""
 
     chunks: set[int]
     origin_ns: int
     end_ns: int
     times: dict[int, np.ndarray]
+    lo_ns: int | None  # where the chunks read start to hold every message (the window less its margin)
+    before: dict[int, int]  # channel id -> its last log time before lo_ns, the sample a hold starts from
 
 
 def channel_index(
@@ -165,18 +168,25 @@ def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPla
     lo = None if lo is None else min(max(lo, -_INT64_MAX), _INT64_MAX)
     hi = None if hi is None else min(max(hi, -_INT64_MAX), _INT64_MAX)
     chunks: set[int] = set()
-    for entry in index.values():
-        chunks |= _chunks_of(entry, lo, hi)
+    before: dict[int, int] = {}
+    for cid, entry in index.items():
+        mine, last_before = _chunks_of(entry, lo, hi)
+        chunks |= mine
+        if last_before is not None:
+            before[cid] = last_before
     times: dict[int, np.ndarray] = {}
     for cid, entry in index.items():
         assert entry.times is not None
         entry.times.sort(kind="stable")
         times[cid] = entry.times
-    return WindowPlan(chunks, origin, end, times)
+    return WindowPlan(chunks, origin, end, times, lo, before)
 
 
-def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> set[int]:
-    """The chunks of one channel the window from ``lo`` to ``hi`` ns (margins in) needs."""
+def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> tuple[set[int], int | None]:
+    """The chunks of one channel the window from ``lo`` to ``hi`` ns (margins in) needs, and the
+    time of its last message before ``lo`` (None: none). With the window's: the chunk of its first
+    message (time zero is checked against it) and every chunk holding its last message before
+    ``lo`` (a time logged twice: the whole read keeps the later sample)."""
     assert entry.times is not None and entry.starts is not None and entry.chunks is not None
     starts, owners = entry.starts, entry.chunks
     firsts = np.minimum.reduceat(entry.times, starts)  # each record's first and last log time
@@ -186,17 +196,16 @@ def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> set[int]:
         overlaps &= lasts >= lo
     if hi is not None:
         overlaps &= firsts <= hi
-    chunks = set(owners[overlaps].tolist())
-    if lo is not None and firsts.min() < lo:  # the chunk of its last message before, held from
-        latest = np.where(lasts < lo, lasts, np.iinfo(np.int64).min)
-        bounds = np.append(starts, entry.times.size)
-        for k in np.flatnonzero((firsts < lo) & (lasts >= lo)).tolist():  # records straddling lo
-            t = entry.times[bounds[k] : bounds[k + 1]]
-            latest[k] = t[t < lo].max()
-        chunks.add(int(owners[np.argmax(latest)]))
-    elif not overlaps.any():  # all after the window: one chunk still tells its fields
-        chunks.add(int(owners[np.argmin(firsts)]))
-    return chunks
+    chunks = set(owners[overlaps].tolist()) | {int(owners[np.argmin(firsts)])}
+    if lo is None or firsts.min() >= lo:
+        return chunks, None
+    latest = np.where(lasts < lo, lasts, np.iinfo(np.int64).min)
+    bounds = np.append(starts, entry.times.size)
+    for k in np.flatnonzero((firsts < lo) & (lasts >= lo)).tolist():  # records straddling lo
+        t = entry.times[bounds[k] : bounds[k + 1]]
+        latest[k] = t[t < lo].max()
+    before = int(latest.max())
+    return chunks | set(owners[latest == before].tolist()), before
 
 
 follow_dependencies(__name__)  # the cached kernel is stamped with the intrinsics of `bits` too
