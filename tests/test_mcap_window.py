@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import need_testdata
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
@@ -322,3 +323,19 @@ def test_a_window_beyond_any_log_is_a_usage_error(cli, sample, flags):
         result = cli("analyze", sample(log), *flags, "--no-report")
         assert result.exit_code == 2
         assert "is beyond any log" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_real_robots_string_fields_are_counted_as_the_whole_read_counts_them(tmp_path):
+    """The husky's ROS 2 drive, rewritten in 16 KiB chunks: the frame ids (skipped, non-numeric)
+    of every message are counted, not only those of the chunks read; its aligned run is the same."""
+    source = need_testdata("ros-robots/robot_localization_test1_husky_ros2/robot_localization_test1_husky_ros2.mcap")
+    path = tmp_path / "husky.mcap"
+    rewrite(source, path)
+    topics = {"/imu/data", "/husky_velocity_controller/odom", "/fix"}
+    whole = read_log(path, topics=topics)
+    window = read_log(path, topics=topics, window=ReadWindow(100.0, 130.0, MARGIN_S))
+    assert window.whole_times and decoded(window) < 0.3 * decoded(whole)
+    frame_ids = [s.to_dict() for s in whole.source.skipped if s.what.endswith("frame_id")]
+    assert len(frame_ids) == 4 and [s.to_dict() for s in window.source.skipped] == [
+        s.to_dict() for s in whole.source.skipped
+    ]

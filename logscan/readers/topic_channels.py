@@ -37,12 +37,14 @@ class TopicPieces:
         self.fields: dict[str, list[str]] = {}  # topic -> field paths in first-seen order
         self.skips = SourceInfo(path=path, format=fmt)  # collects skip counts until report_to
         self.undecodable: set[str] = set()  # topics no decoder takes (`skip_topic`)
+        self.skipped_fields: dict[str, set[str]] = {}  # topic -> the names of its fields skipped
 
     def add(self, topic: str, flat: FlatColumns, log_times: np.ndarray) -> None:
         """One batch of ``topic``'s messages: ``flat`` columns index ``log_times`` (int ns)."""
         self.decoded_topics.add(topic)
         for (field_path, why_skipped), count in flat.skipped.items():
             self.skips.skip(channel_name(topic, field_path), why_skipped, count)
+            self.skipped_fields.setdefault(topic, set()).add(channel_name(topic, field_path))
         times = log_times
         if self.use_header_stamp:
             times, used, unfit = header_stamps(flat.columns, log_times)

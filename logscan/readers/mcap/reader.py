@@ -259,9 +259,24 @@ class _WindowPlanner:
             before = [plan.before[cid] for cid in cids if cid in plan.before]
             if before and not all(_held_from(log.channels[name], max(before), plan.lo_ns) for name in names):
                 return False
+            read = sum(scan.counts_read.get(cid, 0) for cid in cids)
+            if not _whole_skips(log.source.skipped, decoding.skipped_fields.get(topic, set()), read, int(times.size)):
+                return False
             whole.update(dict.fromkeys(names, times))
         log.read_as_window((plan.origin_ns, plan.end_ns), whole)
         return True
+
+
+def _whole_skips(skipped: list, fields: set[str], read: int, whole: int) -> bool:
+    """A topic's ``fields`` skipped in every one of its ``read`` messages decoded (a string field)
+    counted for its ``whole`` messages, as the whole read counts them; False when one was skipped
+    in some messages only (fields that come and go)."""
+    mine = [item for item in skipped if item.what in fields]
+    if any(item.count != read for item in mine):
+        return False
+    for item in mine:
+        item.count = whole
+    return True
 
 
 def _held_from(channel, before_ns: int, lo_ns: int | None) -> bool:

@@ -137,6 +137,7 @@ class Scan:
         # channel id -> (messages, first, last log time) of the whole file, from its index: a
         # window's read counts what it did not decode as the whole read would
         self.window_totals: dict[int, tuple[int, int, int]] = {}
+        self.counts_read: dict[int, int] = {}  # a window's: messages per channel in the chunks read
         self._held = 0  # message bytes in the batches since the last flush
         self._map: mmap.mmap | None = None
 
@@ -168,6 +169,7 @@ class Scan:
         except PARSE_ERRORS as exc:  # a field inside a record did not parse
             self.problem = _Corrupt(f"malformed record ({type(exc).__name__}: {exc})", -1)
         if self.window_chunks is not None:
+            self.counts_read = self.counts
             self.counts = {cid: total[0] for cid, total in self.window_totals.items()}
             self.first = {cid: total[1] for cid, total in self.window_totals.items()}
             self.last = {cid: total[2] for cid, total in self.window_totals.items()}
