@@ -22,6 +22,7 @@ from logscan.readers import read_embedded_profile, read_log
 from logscan.readers.common import MCAP_MAGIC, ReadWindow
 from logscan.readers.mcap.records import OP_MESSAGE_INDEX, walk_records
 from logscan.readers.mcap.scan import Scan
+from logscan.readers.mcap.window import _record_times
 
 MARGIN_S = 5.02  # what `analyze` gives a 100 Hz profile (MAX_DELAY_S + two steps)
 S = 1_000_000_000  # ns
@@ -339,3 +340,15 @@ def test_a_real_robots_string_fields_are_counted_as_the_whole_read_counts_them(t
     assert len(frame_ids) == 4 and [s.to_dict() for s in window.source.skipped] == [
         s.to_dict() for s in whole.source.skipped
     ]
+
+
+def test_an_index_record_listing_no_message_reads_no_byte():
+    """Its pairs end where the buffer may end (a truncated file): nothing is read from there."""
+    u8 = np.full(6, 0xFF, dtype=np.uint8)  # a record head, and the buffer's end
+    firsts, lasts = np.ones(2, dtype=np.uint64), np.ones(2, dtype=np.uint64)
+    times = np.empty(1, dtype=np.int64)
+    pairs = np.zeros(16, dtype=np.uint8)
+    pairs[:8] = np.frombuffer(np.uint64(7).tobytes(), dtype=np.uint8)
+    buffer = np.concatenate([pairs, u8])  # record 0: one pair at 0; record 1: none, at the end
+    _record_times(buffer, np.array([0, buffer.size]), np.array([1, 0]), np.array([0, -1]), times, firsts, lasts)
+    assert firsts.tolist() == [7, 0] and lasts.tolist() == [7, 0] and times.tolist() == [7]

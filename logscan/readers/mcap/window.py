@@ -73,6 +73,7 @@ def channel_index(
     counts = sizes // 16
     firsts, lasts, times, into = _index_times(u8, body + _INDEX_HEAD, counts, cids, ids, give_back)
     if np.any(lasts > _INT64_MAX):  # a log time int64 ns cannot hold: the whole read drops and counts it
+        # (a record listing no message reads 0 here)
         return None
     found: dict[int, ChannelIndex] = {}
     for cid in np.unique(cids[counts > 0]).tolist():
@@ -116,6 +117,9 @@ def _record_times(u8, at, counts, into, times, firsts, lasts):  # pragma: no cov
     """Record k lists counts[k] (log_time u64, offset u64) pairs from u8[at[k]]: the least and the
     greatest log time into firsts[k] and lasts[k], and the times into times[into[k]:] when into[k] >= 0."""
     for k in range(at.size):
+        if counts[k] == 0:  # nothing to read: its end may be the file's (a truncated file)
+            firsts[k], lasts[k] = np.uint64(0), np.uint64(0)
+            continue
         first = last = load_u64(u8, at[k])
         for j in range(counts[k]):
             t = load_u64(u8, at[k] + 16 * j)
