@@ -84,6 +84,7 @@ def channel_index(
             entry.times = times[base : base + entry.count]
             entry.starts = into[mine] - base
             entry.chunks = top.offsets[chunk_at[owner[mine]]]
+            entry.firsts, entry.lasts = firsts[mine].astype(np.int64), lasts[mine].astype(np.int64)
     return found
 
 
@@ -154,6 +155,8 @@ class ChannelIndex:
     times: np.ndarray | None = None  # a wanted channel's, its records one after the other
     starts: np.ndarray | None = None  # where each of its records starts in times
     chunks: np.ndarray | None = None  # the body offset of the chunk each record indexes
+    firsts: np.ndarray | None = None  # each of its records' first and last log time
+    lasts: np.ndarray | None = None
 
 
 def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPlan | None:
@@ -192,9 +195,8 @@ def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> tuple[set
     message (time zero is checked against it) and every chunk holding its last message before
     ``lo`` (a time logged twice: the whole read keeps the later sample)."""
     assert entry.times is not None and entry.starts is not None and entry.chunks is not None
-    starts, owners = entry.starts, entry.chunks
-    firsts = np.minimum.reduceat(entry.times, starts)  # each record's first and last log time
-    lasts = np.maximum.reduceat(entry.times, starts)
+    assert entry.firsts is not None and entry.lasts is not None
+    starts, owners, firsts, lasts = entry.starts, entry.chunks, entry.firsts, entry.lasts
     overlaps = np.ones(owners.size, dtype=bool)
     if lo is not None:
         overlaps &= lasts >= lo
