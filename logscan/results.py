@@ -70,21 +70,26 @@ class AlarmPolicy:
     suspended: np.ndarray | None = field(default=None, repr=False, compare=False)
     # (N,) bool, the steps in flight (said not on the ground, blips ignored); None: no ground channel
     airborne: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # whether ignore_start_s held back any step of the run (a window's filter led in: none)
+    start_held: bool = field(default=False, repr=False, compare=False)
 
     @property
     def suspends(self) -> bool:
         """Whether the policy leaves any step unjudged (ground time, take-off, the start)."""
         return bool(self.ground_channel or self.ignore_start_s)
 
-    def suspend(self, t, ground) -> AlarmPolicy:
+    def suspend(self, t, ground, filter_from: float | None = None) -> AlarmPolicy:
         """A copy with ``suspended`` and ``airborne`` set for a run of grid times ``t`` and held ground
-        channel values ``ground`` (None: none; NaN: unknown, judged; blips under min_ground_s: flight)."""
+        channel values ``ground`` (None: none; NaN: unknown, judged; blips under min_ground_s: flight).
+        ``filter_from``: where the filter started converging, when before the run (a window's
+        lead-in, `logscan.pipeline.lead_in`); ignore_start_s counts from there."""
         import dataclasses
 
         t = np.asarray(t, dtype=np.float64)
         out = np.zeros(t.size, dtype=bool)
         if t.size and self.ignore_start_s > 0:
-            out |= t < t[0] + self.ignore_start_s
+            out |= t < (t[0] if filter_from is None else filter_from) + self.ignore_start_s
+        start_held = bool(out.any())
         on = None
         if ground is not None and t.size:
             ground = np.asarray(ground, dtype=np.float64)
@@ -99,7 +104,7 @@ class AlarmPolicy:
                 following = np.minimum.accumulate(np.where(landing, t, np.inf)[::-1])[::-1]
                 out |= t >= following - self.before_ground_s
         airborne = None if on is None else ~on & np.isfinite(ground)  # unknown is judged, but not flight
-        return dataclasses.replace(self, suspended=out if out.any() else None, airborne=airborne)
+        return dataclasses.replace(self, suspended=out if out.any() else None, airborne=airborne, start_held=start_held)
 
     def unsuspended(self) -> AlarmPolicy:
         """This policy's floors without its suspension: for the checks of what the vehicle itself

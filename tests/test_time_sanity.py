@@ -317,7 +317,8 @@ def test_a_window_around_the_fault_gives_the_incident_at_the_log_time(cli, sampl
     assert all(25.0 <= a["start"] <= a["end"] <= 45.0 for d in log["detectors"] for a in d["alarms"])
     assert log["scores"]["nis"]["tp"] == 1
     text = cli("analyze", sample("quad_imu_bias.mcap"), "--no-report", "--start", "25", "--end", "45").stdout
-    assert "(25.0-45.0 s of 60.0 s, model quadcopter" in text.splitlines()[0]  # the summary names the window
+    # the summary names the window, and where its filter started
+    assert "(25.0-45.0 s of 60.0 s, filtered from 0.0 s, model quadcopter" in text.splitlines()[0]
 
 
 def test_window_grid_points_are_the_full_grids_points(sample):

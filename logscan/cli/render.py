@@ -30,7 +30,9 @@ def _analysed_span(analysis) -> str:
     if start <= 1e-9 and abs(whole - (end - start)) <= max(1e-6, 2.0 * analysis.run.dt):
         return f"{end - start:.1f} s"
     start = max(start, 0.0) if start > -0.05 else start  # a grid step before time zero reads "0.0", not "-0.0"
-    return f"{start:.1f}-{end:.1f} s of {whole:.1f} s"
+    lead = analysis.prepared.lead_in  # a window's filter led in from the log before it (not judged there)
+    led = f", filtered from {max(lead.start_s, 0.0):.1f} s" if lead is not None else ""
+    return f"{start:.1f}-{end:.1f} s of {whole:.1f} s{led}"
 
 
 def printable(text: object) -> str:

@@ -397,18 +397,20 @@ def run_ekf(
     store_innovations=True,
     steps_done: np.ndarray | None = None,
     coding: CodedVariance | None = None,
+    seed: bool | None = None,
 ) -> EkfTrace:
     """Filter the aligned run with the model; see the module docstring for the conventions.
     ``steps_done``: a (1,) int64 array the kernel sets to the steps filtered so far (a progress
     watcher's; the kernel releases the GIL). ``coding``: the trace's ``ex_variance`` is the
-    encoded check's predicted variance with that coding vector (`logscan.filters.coding`).
+    encoded check's predicted variance with that coding vector (`logscan.filters.coding`). ``seed``:
+    start by seeding the directly observed states (None: when no x0 is given; `pack_run`).
 
     Memory: the full P, S and K add N*n*n, N*m*m and N*n*m float64 (a 1 h 100 Hz quadcopter log:
     415 MB each); `store_gain=False` / `store_S=False` drop K / S (the trace keeps NIS and the gain
     norm), `store_innovations=False` drops y and S_diag (2 * N*m float32: 35 MB for that log),
     `full_P` adds P_prior and P_post.
     """
-    k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0, coding=coding)
+    k = pack_run(model, run, Q=Q, R=R, x0=x0, P0=P0, coding=coding, seed=seed)
     N, n, G, m = run.n_steps, model.n_states, len(k.group_names), k.z.shape[1]
     out = trace_buffers(
         N,

@@ -298,6 +298,12 @@ class KernelInputs:
         )
         return self.model_id, model, sensors, EkfData(self.u, self.u_default, self.z, self.fresh, self.R_std)
 
+    def direct_groups(self) -> np.ndarray:
+        """(G,) bool: the groups that observe states directly (the ones the kernel seeds)."""
+        return np.array(
+            [bool(np.all(self.direct_idx[o : o + s] >= 0)) for o, s in zip(self.group_offsets, self.group_sizes)]
+        )
+
 
 def _square(name: str, value, size: int) -> np.ndarray:
     M = np.asarray(value, dtype=np.float64)
@@ -342,7 +348,7 @@ def samples_side_by_side(
 
 
 def pack_run(
-    model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, coding: CodedVariance | None = None
+    model: Model, run: AlignedRun, Q=None, R=None, x0=None, P0=None, coding: CodedVariance | None = None, seed=None
 ) -> KernelInputs:
     """Check the run against the model and pack it into the kernel's arrays.
 
@@ -350,7 +356,8 @@ def pack_run(
     or an (n, n) matrix. R: None (each group's profile noise_std, else the model's default_R), or a dict
     group -> (m, m) matrix or (m,) standard deviations. The physical range (samples outside it are
     rejected) is each group's profile range_lo / range_hi where given, else the model's. ``coding``:
-    the encoded check's predicted variance is computed too (`logscan.filters.coding`).
+    the encoded check's predicted variance is computed too (`logscan.filters.coding`). ``seed``:
+    whether the run starts by seeding its directly observed states (None: when no x0 is given).
     """
     dispatch.check_model_id(model.model_id, model.name)
     u = _inputs(model, run)
@@ -362,7 +369,7 @@ def pack_run(
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     m_total = int(sizes.sum())
     z, fresh, R_all, R_std = _samples_and_noise(model, run, names, specs, offsets, sizes, dict(R or {}))
-    x0, P0, Q, seed = _prior(model, run, Q, x0, P0)
+    x0, P0, Q, seed = _prior(model, run, Q, x0, P0, seed)
     finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))
     u_default = u[finite_rows[0]].copy() if finite_rows.size else np.zeros(model.n_inputs)
     direct = [s.direct_map() for s in specs]
@@ -460,11 +467,11 @@ def _group_R(model: Model, name: str, spec, grp, R: dict) -> np.ndarray:
     return model.default_R(name)
 
 
-def _prior(model: Model, run: AlignedRun, Q, x0, P0) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+def _prior(model: Model, run: AlignedRun, Q, x0, P0, seed) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """(x0, P0, Q, seed_at_start): the given ones checked, else the model's (Q scaled when
-    trained tables calibrated it); seed_at_start when no x0 is given."""
+    trained tables calibrated it); seed_at_start as given, else when no x0 is given."""
     n = model.n_states
-    seed = x0 is None
+    seed = x0 is None if seed is None else bool(seed)
     x0 = model.default_x0() if x0 is None else np.asarray(x0, dtype=np.float64).reshape(-1)
     if x0.size != n or not np.all(np.isfinite(x0)):
         raise ModelError(f"x0 must hold {n} finite values")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import shlex
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,6 +27,7 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
+from logscan.pipeline.lead_in import filter_start, lead_in_start
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.release import TRUTH_DRAWN_WITH
 from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
@@ -184,7 +186,9 @@ def prepare(
     model.process_noise_scale = loaded.process_noise_scale  # read by every EKF run on it (pack_run)
     compiling = _start_compile(model, needs, notice, ahead)
     step("reading")
-    log, run = _read_and_align(path, loaded, raw_topics, use_header_stamp, fraction, (start_s, end_s), truth_path, step)
+    log, run, lead = _read_and_align(
+        path, loaded, raw_topics, use_header_stamp, fraction, (start_s, end_s), truth_path, step
+    )
     if run.n_steps < 2:
         raise LogscanError(
             "too few samples on the analysis grid to filter",
@@ -206,7 +210,7 @@ def prepare(
     return_freed_pages()
     prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
     prepared.warnings.extend(_read_warnings(log, run))
-    _run_filters(prepared, wanted, compiling, step, fraction)
+    _run_filters(prepared, wanted, compiling, step, fraction, lead)
     return prepared
 
 
@@ -248,14 +252,16 @@ def _read_and_align(
     step: Progress,
     *,
     whole: bool = False,
-) -> tuple[Log, AlignedRun]:
+) -> tuple[Log, AlignedRun, AlignedRun | None]:
     """The log read (of an indexed MCAP file, only the chunks the ``window`` needs, unless
-    ``whole``) and aligned on the window. A window's read that the whole read would align otherwise
-    is read again whole: its time zero is not its first message (an outlying first sample), or a
-    profile channel is not in the chunks read."""
+    ``whole``) and aligned on the window, and on the lead-in before it (`_lead_run`). A window's
+    read that the whole read would align otherwise is read again whole: its time zero is not its
+    first message (an outlying first sample), or a profile channel is not in the chunks read."""
     profile = loaded.profile
     start_s, end_s = window
-    log = _read(path, loaded, raw_topics, use_header_stamp, fraction, None if whole else _read_window(profile, *window))
+    lead_from = lead_in_start(start_s)
+    read_window = _read_window(profile, start_s if lead_from is None else lead_from, end_s)
+    log = _read(path, loaded, raw_topics, use_header_stamp, fraction, None if whole else read_window)
     again = (path, loaded, raw_topics, use_header_stamp, fraction, window, truth_path, step)
     _attach_truth(log, path, truth_path)
     try:
@@ -266,10 +272,39 @@ def _read_and_align(
         return _read_and_align(*again, whole=True)
     return_freed_pages()
     step("aligning")
-    run = align(log, profile, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
+    lead = _lead_run(log, profile, lead_from, start_s)
+    framed = profile if lead is None else _with_origins(profile, lead)  # the lead-in's local frame
+    run = align(log, framed, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
     if log.whole_times and run.start_ns != log.start_ns:
         return _read_and_align(*again, whole=True)
-    return log, run
+    return log, run, lead
+
+
+def _lead_run(log: Log, profile, lead_from: float | None, start_s: float | None) -> AlignedRun | None:
+    """The log aligned from ``lead_from`` to two steps into the window from ``start_s``, for the
+    window's filter to start from (`logscan.pipeline.lead_in`); None without a lead-in, or where
+    that span holds no grid step before the window (the window's own alignment says what is
+    wrong with it)."""
+    if lead_from is None or start_s is None:
+        return None
+    try:
+        return align(log, profile, start_s=lead_from, end_s=start_s + 2.0 / float(profile.vehicle.rate_hz))
+    except InputError:
+        return None
+
+
+def _with_origins(profile, lead: AlignedRun):
+    """``profile`` with each geodetic group's origin, where it gives none, the lead-in's (its first
+    fix there): the window's positions are then in the frame its filter's start is in."""
+    origins = {name: group.origin for name, group in lead.groups.items() if group.origin is not None}
+    specs = profile.measurements
+    if not any(specs[name].origin is None for name in origins if name in specs):
+        return profile
+    measurements = {
+        name: replace(spec, origin=list(origins[name])) if spec.origin is None and name in origins else spec
+        for name, spec in specs.items()
+    }
+    return replace(profile, measurements=measurements)
 
 
 def _read_window(profile, start_s: float | None, end_s: float | None) -> ReadWindow | None:
@@ -318,9 +353,11 @@ def _run_filters(
     compiling: Compile,
     step: Progress,
     fraction: Fraction | None,
+    lead: AlignedRun | None = None,
 ) -> None:
     """Run each filter the needs ask for once, into ``prepared.traces``; the EKF's divergence
-    episodes become warnings. ``fraction`` hears the steps a counting filter has done."""
+    episodes become warnings. ``fraction`` hears the steps a counting filter has done. ``lead``: a
+    window's lead-in, the EKF's start (`logscan.pipeline.lead_in`)."""
     for name, parts in wanted.filters.items():
         if name not in FILTERS:
             raise ProfileError(
@@ -334,11 +371,31 @@ def _run_filters(
         if name not in COUNTS_STEPS:
             prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts))
             continue
+        if name == "ekf" and lead is not None:
+            prepared.lead_in = _filter_start(prepared, lead)
+        start = {} if prepared.lead_in is None else prepared.lead_in.arguments()
         with counted_steps(prepared.run.n_steps, fraction) as steps_done:
-            prepared.traces[name] = FILTERS[name](prepared.model, prepared.run, frozenset(parts), steps_done=steps_done)
+            trace = FILTERS[name](prepared.model, prepared.run, frozenset(parts), steps_done=steps_done, **start)
+        if start and trace.diverged.any():  # a restart returns to x0, P0: the model's prior, as in the whole run
+            prepared.lead_in = None
+            with counted_steps(prepared.run.n_steps, fraction) as steps_done:
+                trace = FILTERS[name](prepared.model, prepared.run, frozenset(parts), steps_done=steps_done)
+        prepared.traces[name] = trace
     ekf = prepared.trace
     for episode in ekf.divergence_episodes if ekf is not None else ():
         prepared.warnings.append(f"filter diverged: {episode}")
+
+
+def _filter_start(prepared: Prepared, lead: AlignedRun):
+    """The EKF's start at the window's first step from its lead-in (`logscan.pipeline.lead_in`),
+    its warning (one that did not settle) among the prepared log's."""
+    asked = lead.window[0] if lead.window else None
+    # the lead-in's grid starts at the log's first step: time zero asked, or a later first step
+    from_log_start = not asked or float(lead.t[0]) >= asked + 0.5 * lead.dt
+    start = filter_start(prepared.model, lead, float(prepared.run.t[0]), from_log_start)
+    if start is not None and start.warning:
+        prepared.warnings.append(start.warning)
+    return start
 
 
 def _compile_ahead(prepared: Prepared, compiling: Compile) -> None:

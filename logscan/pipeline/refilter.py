@@ -31,10 +31,10 @@ from logscan.traces import EkfTrace
 BLOCK = 4096  # steps per kernel call: its full P, K and S buffers are ~2.4 KB per step (n = m = 12)
 
 
-def run_ekf_parts(model, run, parts: frozenset[Part], x0=None, P0=None, steps_done=None) -> EkfTrace:
+def run_ekf_parts(model, run, parts: frozenset[Part], x0=None, P0=None, steps_done=None, seed=None) -> EkfTrace:
     """`run_ekf` with the trace ``parts`` asked for ("K", "S", "P", "y", a `CodedVariance`); K and S,
     when asked, re-filtered block by block on read (`Refiltered`) instead of held for the whole log.
-    ``steps_done``: `run_ekf`'s progress counter."""
+    ``steps_done``: `run_ekf`'s progress counter; ``seed``: its (`pack_run`)."""
     heavy = parts & {"K", "S"}
     codings = {part for part in parts if isinstance(part, CodedVariance)}
     if len(codings) > 1:  # one encoded check per profile: its coding is the one asked for
@@ -50,9 +50,10 @@ def run_ekf_parts(model, run, parts: frozenset[Part], x0=None, P0=None, steps_do
         store_innovations="y" in parts,
         steps_done=steps_done,
         coding=next(iter(codings), None),
+        seed=seed,
     )
     if heavy and "P" not in parts:  # with the full P asked for, the trace holds them all anyway
-        source = Refiltered(pack_run(model, run, x0=x0, P0=P0), trace, heavy)
+        source = Refiltered(pack_run(model, run, x0=x0, P0=P0, seed=seed), trace, heavy)
         trace.K = source.part("K") if "K" in parts else None  # type: ignore[assignment]
         trace.S = source.part("S") if "S" in parts else None  # type: ignore[assignment]
     return trace
@@ -66,8 +67,7 @@ class Refiltered:
         self.store = {"store_gain": "K" in parts, "store_S": "S" in parts, "store_innovations": False}
         self.n_steps = trace.n_steps
         self.n, self.m = int(trace.x_prior.shape[1]), int(k.z.shape[1])
-        direct = np.array([bool(np.all(k.direct_idx[o : o + s] >= 0)) for o, s in zip(k.group_offsets, k.group_sizes)])
-        seeded = trace.seeded[:, direct]
+        seeded = trace.seeded[:, k.direct_groups()]
         # the first step each directly observed group was seeded at (n_steps: never)
         self.first_seed = np.where(seeded.any(axis=0), seeded.argmax(axis=0), self.n_steps)
         starts = range(BLOCK, self.n_steps, BLOCK)

@@ -22,6 +22,7 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.filters.ubikf import UbikfTrace
     from logscan.log import Log
     from logscan.models.base import Model
+    from logscan.pipeline.lead_in import FilterStart
     from logscan.profiles.schema import Profile
     from logscan.report.run_context import RunContext
     from logscan.report.sensor_views import Innovations
@@ -29,12 +30,13 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.traces import EkfTrace
 
 
-def _run_ekf(model, run, parts: frozenset[Part], x0=None, P0=None, steps_done=None):
+def _run_ekf(model, run, parts: frozenset[Part], x0=None, P0=None, steps_done=None, seed=None):
     # R from each group's profile noise_std, else the model's default; Q the model's, scaled when
     # trained tables calibrated it (`LoadedProfile.process_noise_scale`): pack_run. x0, P0: a
-    # checkpoint to start from (a probe re-filtering a slice), else the model's prior. K and S, when
+    # checkpoint to start from (a probe re-filtering a slice, a window's lead-in), else the model's
+    # prior; seed: whether it seeds the directly observed states first (`pack_run`). K and S, when
     # asked, are filtered again block by block as they are read (`logscan.pipeline.refilter`)
-    return run_ekf_parts(model, run, parts, x0=x0, P0=P0, steps_done=steps_done)
+    return run_ekf_parts(model, run, parts, x0=x0, P0=P0, steps_done=steps_done, seed=seed)
 
 
 def _run_ubikf(model, run, parts: frozenset[Part]):
@@ -93,11 +95,21 @@ class Prepared:
     raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
     loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
     clock: Clock | None = None  # the log's own clock, dated before the samples go
+    # a window's EKF started from its lead-in (`logscan.pipeline.lead_in`); None: from the model's prior
+    lead_in: FilterStart | None = None
+
+    @property
+    def filter_from(self) -> float | None:
+        """Where the filters started converging, when before the run: the EKF's lead-in, when it is
+        the only filter (the UBIKF has none)."""
+        return self.lead_in.start_s if self.lead_in is not None and set(self.traces) <= {"ekf"} else None
 
     def filter_summary(self) -> dict | None:
         """The EKF trace's JSON counts (kept when the series are released)."""
         if self._filter_summary is None and self.trace is not None:
             self._filter_summary = self.trace.summary()
+            if self.lead_in is not None:  # filtered from this long before the run, not judged there
+                self._filter_summary["lead_in_s"] = round(float(self.run.t[0]) - self.lead_in.start_s, 6)
         return self._filter_summary
 
     def release_series(self) -> None:

@@ -122,7 +122,7 @@ def unjudged_flight(policy, run) -> tuple[str, bool] | None:
     why = ", ".join(
         part
         for part, on in (
-            (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.ignore_start_s > 0),
+            (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.start_held),
             (
                 f"on the ground ({policy.ground_channel}), {policy.after_ground_s:g} s after take-off"
                 + (f" and {policy.before_ground_s:g} s before landing" if policy.before_ground_s else ""),

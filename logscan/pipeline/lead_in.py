@@ -1,0 +1,128 @@
+"""A window's EKF started from the log before it (`lead_in_start`, `filter_start`).
+
+A window (--start/--end) that begins after the log's first grid step would start its filter from
+the model's prior, mid-flight: the prior's state (at rest, level) and its covariance are not the
+vehicle's, and the first updates' innovations judge that, not the sensors (on the quadcopter the
+prior is 26-40 standard deviations from the whole run's state, and the first second's NIS 6-15 off).
+A profile's ``ignore_start_s`` would also hold back the window's own first seconds, not the log's.
+
+So the filter starts earlier and is filtered up to the window's first step, which it predicts but
+does not update: that prediction and its covariance are the window filter's prior there, as the
+whole run's are. How much earlier is the filter's own answer: lead-ins of LEAD_IN_S (30 s, the KGN
+probe's lead, docs/algorithms.md section 3), then twice, four times ... as long, up to MAX_LEAD_IN_S,
+until two of them agree (`settled`: every state within SETTLED_SIGMA of the longer one's standard
+deviation, every variance within SETTLED_VARIANCE of it); the longer is taken. A lead-in that
+reaches back to the log's first step is the whole run's start, exact without a comparison: the
+window's trace is then the whole run's rows (tests/test_lead_in.py). One that does not settle by
+MAX_LEAD_IN_S is taken with a warning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from logscan.filters.ekf import filter_into, pack_run
+from logscan.filters.ekf_pack import trace_buffers
+
+LEAD_IN_S = 30.0  # the first lead-in tried, s
+MAX_LEAD_IN_S = 240.0  # the longest (read with the window's chunks): 30, 60, 120, 240 s
+# Two starts agree when the later one's state is within a tenth of a standard deviation of the
+# earlier one's, each state, and each variance within 10 %: its first innovations then differ by
+# less than a tenth of their spread (a NIS of about 1 per output moves by about 0.2).
+SETTLED_SIGMA = 0.1
+SETTLED_VARIANCE = 0.1
+
+
+@dataclass(frozen=True)
+class FilterStart:
+    """The EKF's prior at a window's first step, from the lead-in filtered into it."""
+
+    start_s: float  # the lead-in's first grid time (seconds since the log's time zero)
+    x0: np.ndarray  # (n,) the prediction into the window's first step
+    P0: np.ndarray  # (n, n) its covariance
+    # a directly observed group not yet seeded in the lead-in (its first sample comes later): the
+    # window seeds every direct group from its next sample, as a run from the model's prior does
+    seed: bool = False
+    warning: str = ""  # the lead-in did not settle within MAX_LEAD_IN_S
+
+    def arguments(self) -> dict:
+        """The EKF's start as `FILTERS["ekf"]` takes it."""
+        return {"x0": self.x0, "P0": self.P0, "seed": self.seed}
+
+
+def lead_in_start(start_s: float | None) -> float | None:
+    """Where the longest lead-in of a window from ``start_s`` begins, never before the log's time
+    zero (None: no window start, or at time zero)."""
+    if start_s is None or start_s <= 0.0:
+        return None
+    return max(0.0, start_s - MAX_LEAD_IN_S)
+
+
+def filter_start(model, lead_run, first_t: float, from_log_start: bool) -> FilterStart | None:
+    """The EKF's prior at the window's first grid time ``first_t``, from ``lead_run`` (the log
+    aligned from the longest lead-in's start to at least that step; ``from_log_start``: that start
+    is the log's first step). None where no lead-in can stand for the log before the window: no
+    step before it, or every lead-in's filter diverged (a restart returns to the model's prior): the
+    window then starts from the prior as before."""
+    t = np.asarray(lead_run.t)
+    at = np.flatnonzero(t == first_t)
+    if at.size == 0 or at[0] == 0:
+        return None
+    last = int(at[0])
+    k = pack_run(model, lead_run)
+    lengths = [LEAD_IN_S * 2.0**i for i in range(int(np.log2(MAX_LEAD_IN_S / LEAD_IN_S)) + 1)]
+    firsts = sorted({int(np.searchsorted(t, first_t - length - 1e-9)) for length in lengths} | {0}, reverse=True)
+    earlier: FilterStart | None = None
+    for first in (row for row in firsts if row < last):
+        start = _filtered(k, first, last, float(t[first]))
+        if start is None:
+            continue
+        if first == 0 and from_log_start:  # the whole run's own start: nothing to compare
+            return start
+        if earlier is not None and settled(earlier, start):
+            return start
+        earlier = start
+    if earlier is None:
+        return None
+    lead = first_t - earlier.start_s
+    note = (
+        f"the filter had not settled over the {lead:g} s before the window (two lead-ins disagree by more "
+        f"than {SETTLED_SIGMA:g} standard deviation): the window's first steps may still judge its start; "
+        "give an earlier --start"
+    )
+    return FilterStart(earlier.start_s, earlier.x0, earlier.P0, earlier.seed, warning=note)
+
+
+def settled(shorter: FilterStart, longer: FilterStart) -> bool:
+    """Whether two lead-ins' starts agree: every state within SETTLED_SIGMA of the longer one's
+    standard deviation, every variance within SETTLED_VARIANCE of it (see the module docstring)."""
+    if shorter.seed != longer.seed:
+        return False
+    variance = np.diag(longer.P0)
+    sigma = np.sqrt(variance)
+    state = np.abs(shorter.x0 - longer.x0) <= SETTLED_SIGMA * sigma
+    spread = np.abs(np.diag(shorter.P0) - variance) <= SETTLED_VARIANCE * variance
+    return bool(np.all(state) and np.all(spread))
+
+
+def _filtered(k, first: int, last: int, start_s: float) -> FilterStart | None:
+    """The packed run's rows first .. last filtered from the model's prior, the last predicted but
+    not updated; None when the filter diverged (or left a non-finite state)."""
+    model_id, ekf_model, sensors, data = k.kernel_arguments()
+    rows = slice(first, last + 1)
+    fresh = data.fresh[rows].copy()
+    fresh[-1] = False  # the window's first step: its prediction only; the window updates it
+    dynamic_R = data.R_std.shape[0] == data.u.shape[0]
+    data = data._replace(
+        u=data.u[rows], z=data.z[rows], fresh=fresh, R_std=data.R_std[rows] if dynamic_R else data.R_std
+    )
+    out = trace_buffers(last + 1 - first, ekf_model.x0.size, len(k.group_names), data.z.shape[1], full_P=True,
+                        store_gain=False, store_S=False, store_innovations=False)  # fmt: skip
+    filter_into(model_id, ekf_model, sensors, data, out)
+    x0, P0 = out.x_prior[-1].copy(), out.P_prior_full[-1].copy()
+    if out.diverged.any() or not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
+        return None
+    unseeded = bool(k.seed_at_start) and not bool(np.all(out.seeded[:, k.direct_groups()].any(axis=0)))
+    return FilterStart(start_s=start_s, x0=x0, P0=P0, seed=unseeded)
