@@ -157,6 +157,9 @@ class Log:
         # channel -> its topic's message times across the whole file, when only a window of it was
         # read (`read_as_window`): alignment takes the grid's span and phase from them
         self.whole_times: dict[str, np.ndarray] = {}
+        # channels -> their whole-file times made unique and their dense span (`_Aligner._whole_span`):
+        # found once for a window and its filter's lead-in, which align the same channels
+        self.whole_spans: dict[tuple[str, ...], tuple] = {}
         warning = self.span_warning()
         if warning and warning not in self.source.warnings:
             self.source.warnings.append(warning)
@@ -171,7 +174,7 @@ class Log:
             self._span_text = self.span_warning()
         dropped = list(self.channels) if names is None else [name for name in names if name in self.channels]
         if names is None:  # aligned for the last time: a window's whole-file times go too
-            self.whole_times = {}
+            self.whole_times, self.whole_spans = {}, {}
         empty_t, empty_v = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
         channels = dict(self.channels)  # a new dict: whoever holds the old one keeps its samples
         for name in dropped:
@@ -222,7 +225,7 @@ class Log:
         log._sample_counts = {name: span[0] for name, span in spans.items()}
         log._span_ns = None
         log._span_text = None
-        log.whole_times = {}
+        log.whole_times, log.whole_spans = {}, {}
         if timed:
             first = min(timed, key=lambda name: timed[name][1])
             last = max(timed, key=lambda name: timed[name][2])

@@ -111,17 +111,22 @@ class _Aligner:
     def _whole_span(self, names: list[str], whole: dict[str, np.ndarray]) -> tuple[int, int]:
         """`span` from the whole file's times of a window's channels (sorted; a time logged twice
         counts once, as cleaning keeps one): the samples read at an outlying time are dropped."""
-        unique: dict[int, np.ndarray] = {}  # a topic's channels share one array: made unique once
-        times = {}
-        for name in dict.fromkeys(names):
+        key = tuple(dict.fromkeys(names))
+        for name in key:
             self.clean(name)  # cleaned first, as the whole read's span does: its warnings come first
-            t = whole.get(name)
-            if t is not None and t.size:
-                if id(t) not in unique:
-                    repeated = t[1:] == t[:-1]
-                    unique[id(t)] = t[np.concatenate(([True], ~repeated))] if repeated.any() else t
-                times[name] = unique[id(t)]
-        first, last, drops, self.ends = dense_span(times, self.log.source.path)
+        found = self.log.whole_spans.get(key)  # a window's lead-in aligns the same channels
+        if found is None:
+            unique: dict[int, np.ndarray] = {}  # a topic's channels share one array: made unique once
+            times = {}
+            for name in key:
+                t = whole.get(name)
+                if t is not None and t.size:
+                    if id(t) not in unique:
+                        repeated = t[1:] == t[:-1]
+                        unique[id(t)] = t[np.concatenate(([True], ~repeated))] if repeated.any() else t
+                    times[name] = unique[id(t)]
+            found = self.log.whole_spans[key] = (times, dense_span(times, self.log.source.path))
+        times, (first, last, drops, self.ends) = found
         for name, drop in drops.items():
             c = self.clean(name)
             self.dropped[name] = times[name][drop]
