@@ -3,18 +3,17 @@
 A window (--start/--end) that begins after the log's first grid step would start its filter from
 the model's prior, mid-flight: the prior's state (at rest, level) and its covariance are not the
 vehicle's, and the first updates' innovations judge that, not the sensors (on the quadcopter the
-prior is 26-40 standard deviations from the whole run's state, and the first second's NIS 6-15 off).
+prior is 26-50 standard deviations from the whole run's state, and the first second's NIS 5-15 off).
 A profile's ``ignore_start_s`` would also hold back the window's own first seconds, not the log's.
 
 So the filter starts earlier and is filtered up to the window's first step, which it predicts but
 does not update: that prediction and its covariance are the window filter's prior there, as the
 whole run's are. How much earlier is the filter's own answer: lead-ins of LEAD_IN_S (30 s, the KGN
 probe's lead, docs/algorithms.md section 3), then twice, four times ... as long, up to MAX_LEAD_IN_S,
-until two of them agree (`settled`: every state within SETTLED_SIGMA of the longer one's standard
-deviation, every variance within SETTLED_VARIANCE of it); the longer is taken. A lead-in that
-reaches back to the log's first step is the whole run's start, exact without a comparison: the
-window's trace is then the whole run's rows (tests/test_lead_in.py). One that does not settle by
-MAX_LEAD_IN_S is taken with a warning.
+until two of them agree where the detectors look, in the window's first second of innovations
+(`settled`); the longer is taken. A lead-in that reaches back to the log's first step is the whole
+run's start, exact without a comparison: the window's trace is then the whole run's rows
+(tests/test_lead_in.py). One that does not settle by MAX_LEAD_IN_S is taken with a warning.
 """
 
 from __future__ import annotations
@@ -28,11 +27,14 @@ from logscan.filters.ekf_pack import trace_buffers
 
 LEAD_IN_S = 30.0  # the first lead-in tried, s
 MAX_LEAD_IN_S = 240.0  # the longest (read with the window's chunks): 30, 60, 120, 240 s
-# Two starts agree when the later one's state is within a tenth of a standard deviation of the
-# earlier one's, each state, and each variance within 10 %: its first innovations then differ by
-# less than a tenth of their spread (a NIS of about 1 per output moves by about 0.2).
+# Two starts agree when the window's innovations over its first SETTLED_OVER_S, filtered from each,
+# differ by at most SETTLED_SIGMA of their predicted spread sqrt(S), output by output, and their
+# predicted variances S by at most SETTLED_VARIANCE: what the detectors judge then moves by less
+# than a tenth of its noise (a NIS of about 1 per output by about 0.2). States the measurements do
+# not see (a random walk no sensor observes) may differ without changing what is judged.
 SETTLED_SIGMA = 0.1
 SETTLED_VARIANCE = 0.1
+SETTLED_OVER_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -62,10 +64,10 @@ def lead_in_start(start_s: float | None) -> float | None:
 
 def filter_start(model, lead_run, first_t: float, from_log_start: bool) -> FilterStart | None:
     """The EKF's prior at the window's first grid time ``first_t``, from ``lead_run`` (the log
-    aligned from the longest lead-in's start to at least that step; ``from_log_start``: that start
-    is the log's first step). None where no lead-in can stand for the log before the window: no
-    step before it, or every lead-in's filter diverged (a restart returns to the model's prior): the
-    window then starts from the prior as before."""
+    aligned from the longest lead-in's start to SETTLED_OVER_S into the window; ``from_log_start``:
+    that start is the log's first step). None where no lead-in can stand for the log before the
+    window: no step before it, or every lead-in's filter diverged (a restart returns to the model's
+    prior): the window then starts from the prior as before."""
     t = np.asarray(lead_run.t)
     at = np.flatnonzero(t == first_t)
     if at.size == 0 or at[0] == 0:
@@ -74,37 +76,54 @@ def filter_start(model, lead_run, first_t: float, from_log_start: bool) -> Filte
     k = pack_run(model, lead_run)
     lengths = [LEAD_IN_S * 2.0**i for i in range(int(np.log2(MAX_LEAD_IN_S / LEAD_IN_S)) + 1)]
     firsts = sorted({int(np.searchsorted(t, first_t - length - 1e-9)) for length in lengths} | {0}, reverse=True)
-    earlier: FilterStart | None = None
+    judged = slice(last, int(np.searchsorted(t, first_t + SETTLED_OVER_S + 1e-9)))  # the window's first second
+    earlier: tuple[FilterStart, tuple] | None = None
     for first in (row for row in firsts if row < last):
         start = _filtered(k, first, last, float(t[first]))
         if start is None:
             continue
         if first == 0 and from_log_start:  # the whole run's own start: nothing to compare
             return start
-        if earlier is not None and settled(earlier, start):
+        seen = _innovations(k, judged, start)
+        if earlier is not None and settled(earlier[1], seen):
             return start
-        earlier = start
+        earlier = (start, seen)
     if earlier is None:
         return None
-    lead = first_t - earlier.start_s
+    longest = earlier[0]
     note = (
-        f"the filter had not settled over the {lead:g} s before the window (two lead-ins disagree by more "
-        f"than {SETTLED_SIGMA:g} standard deviation): the window's first steps may still judge its start; "
-        "give an earlier --start"
+        f"the filter had not settled over the {first_t - longest.start_s:g} s before the window (the first "
+        f"second's innovations from two lead-ins differ by more than {SETTLED_SIGMA:g} of their spread): the "
+        "window's first steps may still judge the filter's start; give an earlier --start"
     )
-    return FilterStart(earlier.start_s, earlier.x0, earlier.P0, earlier.seed, warning=note)
+    return FilterStart(longest.start_s, longest.x0, longest.P0, longest.seed, warning=note)
 
 
-def settled(shorter: FilterStart, longer: FilterStart) -> bool:
-    """Whether two lead-ins' starts agree: every state within SETTLED_SIGMA of the longer one's
-    standard deviation, every variance within SETTLED_VARIANCE of it (see the module docstring)."""
-    if shorter.seed != longer.seed:
+def settled(shorter: tuple, longer: tuple) -> bool:
+    """Whether the window's first innovations (y, S's diagonal) from two starts agree: every y within
+    SETTLED_SIGMA of the longer start's sqrt(S), every S within SETTLED_VARIANCE of it; an output
+    updated from one start and not the other (a sample rejected, a group seeded) disagrees."""
+    (y_short, s_short), (y_long, s_long) = shorter, longer
+    if not np.array_equal(np.isfinite(y_short), np.isfinite(y_long)):
         return False
-    variance = np.diag(longer.P0)
-    sigma = np.sqrt(variance)
-    state = np.abs(shorter.x0 - longer.x0) <= SETTLED_SIGMA * sigma
-    spread = np.abs(np.diag(shorter.P0) - variance) <= SETTLED_VARIANCE * variance
-    return bool(np.all(state) and np.all(spread))
+    both = np.isfinite(y_long) & np.isfinite(s_long) & (s_long > 0)
+    y_close = np.abs(y_short[both] - y_long[both]) <= SETTLED_SIGMA * np.sqrt(s_long[both])
+    s_close = np.abs(s_short[both] - s_long[both]) <= SETTLED_VARIANCE * s_long[both]
+    return bool(np.all(y_close) and np.all(s_close))
+
+
+def _innovations(k, rows: slice, start: FilterStart) -> tuple[np.ndarray, np.ndarray]:
+    """(y, S's diagonal) (R, m) of the packed run's ``rows`` filtered from ``start``, as float64."""
+    model_id, ekf_model, sensors, data = k.kernel_arguments()
+    ekf_model = ekf_model._replace(x0=start.x0, P0=start.P0, seed_at_start=start.seed)
+    dynamic_R = data.R_std.shape[0] == data.u.shape[0]
+    data = data._replace(u=data.u[rows], z=data.z[rows], fresh=data.fresh[rows],
+                         R_std=data.R_std[rows] if dynamic_R else data.R_std)  # fmt: skip
+    n_rows = data.u.shape[0]
+    out = trace_buffers(n_rows, ekf_model.x0.size, len(k.group_names), data.z.shape[1], full_P=False,
+                        store_gain=False, store_S=False, store_innovations=True)  # fmt: skip
+    filter_into(model_id, ekf_model, sensors, data, out)
+    return out.y_out.astype(np.float64), out.S_diag_out.astype(np.float64)
 
 
 def _filtered(k, first: int, last: int, start_s: float) -> FilterStart | None:

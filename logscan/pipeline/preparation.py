@@ -27,7 +27,7 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
-from logscan.pipeline.lead_in import filter_start, lead_in_start
+from logscan.pipeline.lead_in import SETTLED_OVER_S, filter_start, lead_in_start
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.release import TRUTH_DRAWN_WITH
 from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
@@ -281,14 +281,16 @@ def _read_and_align(
 
 
 def _lead_run(log: Log, profile, lead_from: float | None, start_s: float | None) -> AlignedRun | None:
-    """The log aligned from ``lead_from`` to two steps into the window from ``start_s``, for the
+    """The log aligned from ``lead_from`` to a second into the window from ``start_s``, for the
     window's filter to start from (`logscan.pipeline.lead_in`); None without a lead-in, or where
     that span holds no grid step before the window (the window's own alignment says what is
     wrong with it)."""
     if lead_from is None or start_s is None:
         return None
     try:
-        return align(log, profile, start_s=lead_from, end_s=start_s + 2.0 / float(profile.vehicle.rate_hz))
+        return align(
+            log, profile, start_s=lead_from, end_s=start_s + SETTLED_OVER_S + 2.0 / float(profile.vehicle.rate_hz)
+        )
     except InputError:
         return None
 
