@@ -31,14 +31,37 @@ def _first_row(whole, window) -> int:
     return int(np.flatnonzero(whole.run.t == window.run.t[0])[0])
 
 
-def test_a_lead_in_back_to_the_log_start_gives_the_whole_runs_rows(whole):
-    window = _prepared(QUAD, start_s=10.0, end_s=40.0)
+@pytest.mark.parametrize(
+    ("log", "start"),
+    [
+        ("quad_healthy.mcap", 10.0),
+        ("quad_healthy.mcap", 10.05),  # the position group not fresh at the window's first step
+        ("quad_healthy.mcap", 12.34),
+        ("ros2_ins.mcap", 12.34),
+        ("jackal_healthy.mcap", 10.0037),  # between two grid steps
+    ],
+)
+def test_a_lead_in_back_to_the_log_start_gives_the_whole_runs_rows(log, start):
+    path = str(SAMPLES / log)
+    whole, window = _prepared(path), _prepared(path, start_s=start, end_s=start + 5.0)
     assert window.lead_in is not None and window.lead_in.start_s == whole.run.t[0]
     first = _first_row(whole, window)
     rows = slice(first, first + window.run.n_steps)
     for name in TRACE_ROWS:
         assert np.array_equal(getattr(window.trace, name), getattr(whole.trace, name)[rows], equal_nan=True), name
-    assert window.filter_summary()["lead_in_s"] == 10.0
+    assert window.filter_summary()["lead_in_s"] == pytest.approx(window.run.t[0] - whole.run.t[0])
+
+
+def test_a_log_starting_before_time_zero_is_led_in_from_its_first_step():
+    """This real ULog's first grid step is at -0.028 s: the lead-in starts there, the whole run's
+    start, so the window is the whole run's rows."""
+    path = str(need_testdata("px4-ulog/sample_logging_tagged_and_default_params.ulg"))
+    whole, window = _prepared(path), _prepared(path, start_s=10.05, end_s=10.7)
+    assert whole.run.t[0] < 0.0 and window.lead_in is not None and window.lead_in.start_s == whole.run.t[0]
+    first = _first_row(whole, window)
+    rows = slice(first, first + window.run.n_steps)
+    for name in TRACE_ROWS:
+        assert np.array_equal(getattr(window.trace, name), getattr(whole.trace, name)[rows], equal_nan=True), name
 
 
 def test_a_mid_flight_window_starts_where_two_lead_ins_agree(whole, monkeypatch):
@@ -90,7 +113,8 @@ def test_a_window_from_the_log_start_has_no_lead_in():
     assert _prepared(QUAD, start_s=0.0, end_s=20.0).lead_in is None
     assert _prepared(QUAD, end_s=20.0).lead_in is None
     assert lead_in.lead_in_start(None) is None and lead_in.lead_in_start(0.0) is None
-    assert lead_in.lead_in_start(300.0) == 300.0 - lead_in.MAX_LEAD_IN_S and lead_in.lead_in_start(12.0) == 0.0
+    assert lead_in.lead_in_start(300.0) == 300.0 - lead_in.MAX_LEAD_IN_S
+    assert lead_in.lead_in_start(12.0) == 12.0 - lead_in.MAX_LEAD_IN_S  # alignment starts at the log's first step
 
 
 def test_a_window_whose_filter_diverges_is_filtered_from_the_prior(monkeypatch):
@@ -159,3 +183,18 @@ def test_a_state_no_sensor_sees_does_not_hold_the_lead_in_back():
     second = int(round(1.0 / window.run.dt))
     nis = np.abs(window.trace.nis[:second] - whole.trace.nis[first : first + second])
     assert np.nanmax(nis) < 0.1
+
+
+def test_the_lead_in_filtered_a_chunk_at_a_time_is_the_same(monkeypatch):
+    """Chunks of 7 rows, each from the state the one before left: the window's rows are still the
+    whole run's; with the direct groups' seeding half done at a chunk's start (this real flight's
+    GNSS has no sample before 9.1 s) the lead-in is filtered in one go, and gives what it gave."""
+    monkeypatch.setattr(lead_in, "CHUNK", 7)
+    test_a_lead_in_back_to_the_log_start_gives_the_whole_runs_rows("quad_healthy.mcap", 12.34)
+    path = str(need_testdata("px4-ulog/sample_px4_events.ulg"))
+    chunked = _prepared(path, start_s=8.0, end_s=12.0)
+    monkeypatch.setattr(lead_in, "CHUNK", 4096)
+    whole_lead = _prepared(path, start_s=8.0, end_s=12.0)
+    assert chunked.lead_in is not None and chunked.lead_in.seed
+    assert np.array_equal(chunked.lead_in.x0, whole_lead.lead_in.x0)
+    assert np.array_equal(chunked.lead_in.P0, whole_lead.lead_in.P0)

@@ -114,6 +114,7 @@ class AlignedRun:
     redundant: dict[str, AlignedGroup] = field(default_factory=dict)  # sensors as channels
     channel_stats: dict[str, dict[str, int]] = field(default_factory=dict)  # samples, nonfinite, ...
     window: tuple[float | None, float | None] | None = None  # --start/--end (s since start_ns), if given
+    first_step: int = 0  # the full grid's index of t[0] (0: the log's first step; a window: later)
 
     @property
     def n_steps(self) -> int:

@@ -36,9 +36,8 @@ def align(
     aligner = _Aligner(log, profile)
     held = _LastHolds(aligner, profile, release)
     window = None if start_s is None and end_s is None else (start_s, end_s)
-    grid_ns, t, start_ns = _grid(aligner, log, profile, window)
+    grid_ns, t, start_ns, first_step = _grid(aligner, log, profile, window)
     n, dt = grid_ns.size, 1.0 / float(profile.vehicle.rate_hz)
-
     scratch = np.empty(n, dtype=bool)  # fresh masks nobody reads
     u, u_fresh = _inputs(aligner, profile, grid_ns, dt, scratch)
     held.done("inputs")
@@ -73,6 +72,7 @@ def align(
         redundant=redundant,
         channel_stats=_channel_stats(aligner),
         window=window,
+        first_step=first_step,
     )
 
 
@@ -131,9 +131,10 @@ def _channels_by_step(profile, log) -> dict[str, set[str]]:
     }
 
 
-def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarray, int]:
-    """(grid_ns, t in s since the log's time zero, that time zero in ns): the grid spans where the
-    input and measurement channels are dense, cut to ``window``."""
+def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """(grid_ns, t in s since the log's time zero, that time zero in ns, the full grid's index of
+    the first step): the grid spans where the input and measurement channels are dense, cut to
+    ``window``."""
     rate = float(profile.vehicle.rate_hz)
     span_channels = list(profile.inputs.channels) + [ch for g in profile.measurements.values() for ch in g.channels]
     first, last = aligner.span(span_channels)
@@ -152,7 +153,7 @@ def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarr
     dt = 1.0 / rate
     t = (first - start_ns) / _NS + (k0 + np.arange(n)) * dt
 
-    return grid_ns, t, start_ns
+    return grid_ns, t, start_ns, k0
 
 
 def _inputs(aligner: _Aligner, profile, grid_ns: np.ndarray, dt: float, scratch: np.ndarray):

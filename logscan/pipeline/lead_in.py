@@ -26,6 +26,7 @@ from logscan.filters.ekf import filter_into, pack_run
 from logscan.filters.ekf_pack import trace_buffers
 
 LEAD_IN_S = 30.0  # the first lead-in tried, s
+CHUNK = 4096  # rows filtered at a time (their full covariances: 2 x 4096 x n x n float64)
 MAX_LEAD_IN_S = 240.0  # the longest (read with the window's chunks): 30, 60, 120, 240 s
 # Two starts agree when the window's innovations over its first SETTLED_OVER_S, filtered from each,
 # differ by at most SETTLED_SIGMA of their predicted spread sqrt(S), output by output, and their
@@ -55,11 +56,26 @@ class FilterStart:
 
 
 def lead_in_start(start_s: float | None) -> float | None:
-    """Where the longest lead-in of a window from ``start_s`` begins, never before the log's time
-    zero (None: no window start, or at time zero)."""
+    """Where the longest lead-in of a window from ``start_s`` begins (alignment starts it no earlier
+    than the log's first step, which may be before time zero); None: no window start, or at time
+    zero."""
     if start_s is None or start_s <= 0.0:
         return None
-    return max(0.0, start_s - MAX_LEAD_IN_S)
+    return start_s - MAX_LEAD_IN_S
+
+
+def carry_freshness(run, lead) -> None:
+    """The window's first step counts a sample as new only when it is newer than the step before,
+    as in the whole run: the lead-in's freshness there. The window's own alignment takes any sample
+    within the staleness limit as new at its first step, which would update the carried state with
+    a sample the lead-in already used (a NIS of 12 where the whole run has 2.9)."""
+    at = int(np.flatnonzero(np.asarray(lead.t) == run.t[0])[0])
+    for groups, led in ((run.groups, lead.groups), (run.redundant, lead.redundant)):
+        for name, group in groups.items():
+            if name in led:
+                group.fresh[0] = led[name].fresh[at]
+                if group.channel_fresh is not None and led[name].channel_fresh is not None:
+                    group.channel_fresh[0] = led[name].channel_fresh[at]
 
 
 def filter_start(model, lead_run, first_t: float, from_log_start: bool) -> FilterStart | None:
@@ -128,20 +144,57 @@ def _innovations(k, rows: slice, start: FilterStart) -> tuple[np.ndarray, np.nda
 
 def _filtered(k, first: int, last: int, start_s: float) -> FilterStart | None:
     """The packed run's rows first .. last filtered from the model's prior, the last predicted but
-    not updated; None when the filter diverged (or left a non-finite state)."""
+    not updated; None when the filter diverged (or left a non-finite state). Filtered CHUNK rows at
+    a time, each from the state the one before left (`logscan.pipeline.refilter`: the same numbers),
+    so that the full covariances it needs at the end take CHUNK rows of memory, not the lead-in's
+    (240 s of a 250 Hz, 16-state INS log: 250 MB); in one go when a chunk would start with the
+    direct groups' seeding half done (the kernel seeds all of them or none)."""
+    direct = k.direct_groups()
+    seeded = np.zeros(direct.size, dtype=bool)
+    carry = None  # (x_post, P_post, last finite input, seeding pending) of the chunk before
+    for start in range(first, last + 1, CHUNK):
+        stop = min(start + CHUNK, last + 1)
+        out = _chunk(k, start if carry is None else start - 1, stop, carry, stop == last + 1)
+        if out.diverged.any():
+            return None
+        if stop == last + 1:
+            break
+        seeded |= out.seeded.any(axis=0)
+        pending = bool(k.seed_at_start) and not bool(np.all(seeded[direct]))
+        if pending and bool(np.any(seeded[direct])):
+            out = _chunk(k, first, last + 1, None, True)
+            if out.diverged.any():
+                return None
+            break
+        u = np.asarray(k.u[start:stop])
+        finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
+        u_last = u[finite[-1]].copy() if finite.size else (k.u_default if carry is None else carry[2])
+        carry = (out.x_post[-1].copy(), out.P_post_full[-1].copy(), u_last, pending)
+    x0, P0 = out.x_prior[-1].copy(), out.P_prior_full[-1].copy()
+    if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
+        return None
+    seeded |= out.seeded.any(axis=0)
+    unseeded = bool(k.seed_at_start) and not bool(np.all(seeded[direct]))
+    return FilterStart(start_s=start_s, x0=x0, P0=P0, seed=unseeded)
+
+
+def _chunk(k, begin: int, stop: int, carry, final: bool):
+    """The kernel's buffers of the packed run's rows begin .. stop-1 with the full covariances; from
+    ``carry`` (the row before the chunk: no samples, the held input) or the model's prior; the
+    ``final`` chunk's last row (the window's first step) predicted, not updated."""
     model_id, ekf_model, sensors, data = k.kernel_arguments()
-    rows = slice(first, last + 1)
-    fresh = data.fresh[rows].copy()
-    fresh[-1] = False  # the window's first step: its prediction only; the window updates it
+    rows = slice(begin, stop)
+    u, fresh = data.u[rows], data.fresh[rows].copy()
+    if final:
+        fresh[-1] = False  # the window's first step: its prediction only; the window updates it
+    if carry is not None:
+        x, P, u_last, pending = carry
+        u = u.copy()
+        u[0], fresh[0] = u_last, False  # no update, no seeding: only the carried state
+        ekf_model = ekf_model._replace(x0=x, P0=P, seed_at_start=pending)
     dynamic_R = data.R_std.shape[0] == data.u.shape[0]
-    data = data._replace(
-        u=data.u[rows], z=data.z[rows], fresh=fresh, R_std=data.R_std[rows] if dynamic_R else data.R_std
-    )
-    out = trace_buffers(last + 1 - first, ekf_model.x0.size, len(k.group_names), data.z.shape[1], full_P=True,
+    data = data._replace(u=u, z=data.z[rows], fresh=fresh, R_std=data.R_std[rows] if dynamic_R else data.R_std)
+    out = trace_buffers(stop - begin, ekf_model.x0.size, len(k.group_names), data.z.shape[1], full_P=True,
                         store_gain=False, store_S=False, store_innovations=False)  # fmt: skip
     filter_into(model_id, ekf_model, sensors, data, out)
-    x0, P0 = out.x_prior[-1].copy(), out.P_prior_full[-1].copy()
-    if out.diverged.any() or not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
-        return None
-    unseeded = bool(k.seed_at_start) and not bool(np.all(out.seeded[:, k.direct_groups()].any(axis=0)))
-    return FilterStart(start_s=start_s, x0=x0, P0=P0, seed=unseeded)
+    return out

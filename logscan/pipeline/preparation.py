@@ -27,7 +27,7 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
-from logscan.pipeline.lead_in import SETTLED_OVER_S, filter_start, lead_in_start
+from logscan.pipeline.lead_in import SETTLED_OVER_S, carry_freshness, filter_start, lead_in_start
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.release import TRUTH_DRAWN_WITH
 from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
@@ -391,12 +391,10 @@ def _run_filters(
 def _filter_start(prepared: Prepared, lead: AlignedRun):
     """The EKF's start at the window's first step from its lead-in (`logscan.pipeline.lead_in`),
     its warning (one that did not settle) among the prepared log's."""
-    asked = lead.window[0] if lead.window else None
-    # the lead-in's grid starts at the log's first step: time zero asked, or a later first step
-    from_log_start = not asked or float(lead.t[0]) >= asked + 0.5 * lead.dt
-    start = filter_start(prepared.model, lead, float(prepared.run.t[0]), from_log_start)
-    if start is not None and start.warning:
-        prepared.warnings.append(start.warning)
+    start = filter_start(prepared.model, lead, float(prepared.run.t[0]), lead.first_step == 0)
+    if start is not None:
+        carry_freshness(prepared.run, lead)
+        prepared.warnings.extend([start.warning] if start.warning else [])
     return start
 
 

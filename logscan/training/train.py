@@ -283,8 +283,11 @@ def calibrate_prepared(prepared: Sequence, needs) -> dict:
     for one, run in zip(prepared, calibrated_runs([p.run for p in prepared], calibration)):
         one.run = run
         one.model.process_noise_scale = process_noise_scale(calibration)  # as `prepare` sets it from tables
+        # a window's EKF from its lead-in's start (taken with the noise before calibration)
+        start = {"ekf": one.lead_in.arguments()} if one.lead_in is not None else {}
         one.traces = {
-            name: FILTERS[name](one.model, run, frozenset(parts)) for name, parts in needs(run).filters.items()
+            name: FILTERS[name](one.model, run, frozenset(parts), **start.get(name, {}))
+            for name, parts in needs(run).filters.items()
         }
         one._filter_summary = None
     return calibration
