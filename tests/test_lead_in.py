@@ -198,3 +198,11 @@ def test_the_lead_in_filtered_a_chunk_at_a_time_is_the_same(monkeypatch):
     assert chunked.lead_in is not None and chunked.lead_in.seed
     assert np.array_equal(chunked.lead_in.x0, whole_lead.lead_in.x0)
     assert np.array_equal(chunked.lead_in.P0, whole_lead.lead_in.P0)
+
+
+def test_the_window_options_help_states_the_longest_lead_in():
+    from logscan.cli.options import window_options
+
+    command = window_options("Analyse", "the log", "e.g.")(lambda **kwargs: None)
+    start = next(p for p in command.__click_params__ if p.name == "start_s")
+    assert f"up to {lead_in.MAX_LEAD_IN_S:g} s of the log before it" in start.help

@@ -215,7 +215,8 @@ def window_options(verb: str, each: str, example: str):
     """--start/--end (seconds since a log's start) as ``verb`` uses them; a decorator for both."""
     start = click.option(
         "--start", "start_s", type=float, default=None,
-        help=f"{verb} {each} from this time, in seconds since its start ({example}). Default: the log's start.",
+        help=f"{verb} {each} from this time, in seconds since its start ({example}); the filter is "
+        "started from up to 240 s of the log before it, not judged there. Default: the log's start.",
     )  # fmt: skip
     end = click.option(
         "--end", "end_s", type=float, default=None,
