@@ -110,7 +110,7 @@ def test_the_filter_helpers_compiled_ahead_are_the_ones_the_kernel_calls(tmp_pat
             print(dispatcher.__name__, dispatcher.signatures == [warmup.helper_signature(codes)])
         """
     )
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), LOGSCAN_CACHE_DIR=str(tmp_path / "cache"))
     done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     verdicts = dict(line.split() for line in done.stdout.splitlines())
@@ -138,7 +138,7 @@ def test_the_kernels_compiled_after_the_ekf_compile_in_its_process(tmp_path):
         print(os.getpid())
         """
     )
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), LOGSCAN_CACHE_DIR=str(tmp_path / "cache"))
     done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     child_pid, cached = (tmp_path / "after").read_text().split()
