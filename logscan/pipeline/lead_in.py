@@ -18,12 +18,12 @@ run's start, exact without a comparison: the window's trace is then the whole ru
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from logscan.filters.ekf import filter_into, pack_run
-from logscan.filters.ekf_pack import trace_buffers
+from logscan.filters.ekf import pack_run
+from logscan.pipeline.refilter import filter_rows
 
 LEAD_IN_S = 30.0  # the first lead-in tried, s
 CHUNK = 4096  # rows filtered at a time (their full covariances: 2 x 4096 x n x n float64)
@@ -36,6 +36,7 @@ MAX_LEAD_IN_S = 240.0  # the longest (read with the window's chunks): 30, 60, 12
 SETTLED_SIGMA = 0.1
 SETTLED_VARIANCE = 0.1
 SETTLED_OVER_S = 1.0
+NO_PARTS = {"store_gain": False, "store_S": False, "store_innovations": False}  # x and P only
 
 
 @dataclass(frozen=True)
@@ -130,31 +131,24 @@ def settled(shorter: tuple, longer: tuple) -> bool:
 
 def _innovations(k, rows: slice, start: FilterStart) -> tuple[np.ndarray, np.ndarray]:
     """(y, S's diagonal) (R, m) of the packed run's ``rows`` filtered from ``start``, as float64."""
-    model_id, ekf_model, sensors, data = k.kernel_arguments()
-    ekf_model = ekf_model._replace(x0=start.x0, P0=start.P0, seed_at_start=start.seed)
-    dynamic_R = data.R_std.shape[0] == data.u.shape[0]
-    data = data._replace(u=data.u[rows], z=data.z[rows], fresh=data.fresh[rows],
-                         R_std=data.R_std[rows] if dynamic_R else data.R_std)  # fmt: skip
-    n_rows = data.u.shape[0]
-    out = trace_buffers(n_rows, ekf_model.x0.size, len(k.group_names), data.z.shape[1], full_P=False,
-                        store_gain=False, store_S=False, store_innovations=True)  # fmt: skip
-    filter_into(model_id, ekf_model, sensors, data, out)
+    from_start = replace(k, x0=start.x0, P0=start.P0, seed_at_start=start.seed)
+    out, _ = filter_rows(from_start, rows.start, rows.stop, store_gain=False, store_S=False, store_innovations=True)
     return out.y_out.astype(np.float64), out.S_diag_out.astype(np.float64)
 
 
 def _filtered(k, first: int, last: int, start_s: float) -> FilterStart | None:
     """The packed run's rows first .. last filtered from the model's prior, the last predicted but
     not updated; None when the filter diverged (or left a non-finite state). Filtered CHUNK rows at
-    a time, each from the state the one before left (`logscan.pipeline.refilter`: the same numbers),
-    so that the full covariances it needs at the end take CHUNK rows of memory, not the lead-in's
-    (240 s of a 250 Hz, 16-state INS log: 250 MB); in one go when a chunk would start with the
-    direct groups' seeding half done (the kernel seeds all of them or none)."""
+    a time, each from the state the one before left (`logscan.pipeline.refilter.filter_rows`: the
+    same numbers), so that the full covariances it needs at the end take CHUNK rows of memory, not
+    the lead-in's (240 s of a 250 Hz, 16-state INS log: 250 MB); in one go when a chunk would start
+    with the direct groups' seeding half done (the kernel seeds all of them or none)."""
     direct = k.direct_groups()
     seeded = np.zeros(direct.size, dtype=bool)
     carry = None  # (x_post, P_post, last finite input, seeding pending) of the chunk before
     for start in range(first, last + 1, CHUNK):
         stop = min(start + CHUNK, last + 1)
-        out = _chunk(k, start if carry is None else start - 1, stop, carry, stop == last + 1)
+        out, left = filter_rows(k, start, stop, carry, predict_last=stop == last + 1, **NO_PARTS)
         if out.diverged.any():
             return None
         if stop == last + 1:
@@ -162,39 +156,14 @@ def _filtered(k, first: int, last: int, start_s: float) -> FilterStart | None:
         seeded |= out.seeded.any(axis=0)
         pending = bool(k.seed_at_start) and not bool(np.all(seeded[direct]))
         if pending and bool(np.any(seeded[direct])):
-            out = _chunk(k, first, last + 1, None, True)
+            out, _ = filter_rows(k, first, last + 1, None, predict_last=True, **NO_PARTS)
             if out.diverged.any():
                 return None
             break
-        u = np.asarray(k.u[start:stop])
-        finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
-        u_last = u[finite[-1]].copy() if finite.size else (k.u_default if carry is None else carry[2])
-        carry = (out.x_post[-1].copy(), out.P_post_full[-1].copy(), u_last, pending)
+        carry = (*left, pending)
     x0, P0 = out.x_prior[-1].copy(), out.P_prior_full[-1].copy()
     if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
         return None
     seeded |= out.seeded.any(axis=0)
     unseeded = bool(k.seed_at_start) and not bool(np.all(seeded[direct]))
     return FilterStart(start_s=start_s, x0=x0, P0=P0, seed=unseeded)
-
-
-def _chunk(k, begin: int, stop: int, carry, final: bool):
-    """The kernel's buffers of the packed run's rows begin .. stop-1 with the full covariances; from
-    ``carry`` (the row before the chunk: no samples, the held input) or the model's prior; the
-    ``final`` chunk's last row (the window's first step) predicted, not updated."""
-    model_id, ekf_model, sensors, data = k.kernel_arguments()
-    rows = slice(begin, stop)
-    u, fresh = data.u[rows], data.fresh[rows].copy()
-    if final:
-        fresh[-1] = False  # the window's first step: its prediction only; the window updates it
-    if carry is not None:
-        x, P, u_last, pending = carry
-        u = u.copy()
-        u[0], fresh[0] = u_last, False  # no update, no seeding: only the carried state
-        ekf_model = ekf_model._replace(x0=x, P0=P, seed_at_start=pending)
-    dynamic_R = data.R_std.shape[0] == data.u.shape[0]
-    data = data._replace(u=u, z=data.z[rows], fresh=fresh, R_std=data.R_std[rows] if dynamic_R else data.R_std)
-    out = trace_buffers(stop - begin, ekf_model.x0.size, len(k.group_names), data.z.shape[1], full_P=True,
-                        store_gain=False, store_S=False, store_innovations=False)  # fmt: skip
-    filter_into(model_id, ekf_model, sensors, data, out)
-    return out

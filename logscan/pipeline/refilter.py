@@ -138,23 +138,38 @@ class Refiltered:
         end state to block b + 1."""
         start = b * BLOCK
         stop = min(start + BLOCK, self.n_steps)
-        model_id, model, sensors, data = self.k.kernel_arguments()
-        first = start if self.carry is None else start - 1  # the row before: the carried state
-        u, fresh = data.u[first:stop], data.fresh[first:stop]
-        if self.carry is not None:
-            _, x, P, u_last = self.carry
-            u, fresh = u.copy(), fresh.copy()
-            u[0], fresh[0] = u_last, False  # no update, no seeding: only the carried state
-            model = model._replace(x0=x, P0=P, seed_at_start=self._pending(start))
-        R_std = data.R_std[first:stop] if data.R_std.shape[0] == self.n_steps else data.R_std
-        data = data._replace(u=u, z=data.z[first:stop], fresh=fresh, R_std=R_std)
-        G = len(self.k.group_names)
-        out = trace_buffers(stop - first, self.n, G, self.m, full_P=True, **self.store)
-        filter_into(model_id, model, sensors, data, out)
-        finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
-        u_last = u[finite[-1]].copy() if finite.size else self.k.u_default.copy()
-        self.carry = (b + 1, out.x_post[-1].copy(), out.P_post_full[-1].copy(), u_last)
-        return out.K_out[start - first :], out.S_out[start - first :]
+        carry = None if self.carry is None else (*self.carry[1:], self._pending(start))
+        out, left = filter_rows(self.k, start, stop, carry, **self.store)
+        self.carry = (b + 1, *left)
+        offset = 0 if carry is None else 1  # the row before: the carried state
+        return out.K_out[offset:], out.S_out[offset:]
+
+
+def filter_rows(k: KernelInputs, start: int, stop: int, carry=None, *, predict_last: bool = False, **store):
+    """The kernel's buffers, with the full P, of the packed run's steps start .. stop-1, and the state
+    they leave to the steps after (x_post, P_post, the last finite input). From ``carry`` (x_post,
+    P_post, last finite input and whether seeding is pending, of the step before ``start``: filtered
+    as an extra first row without samples, with the held input), else from the run's prior at
+    ``start``. ``predict_last``: the last step predicted, not updated. ``store``: `trace_buffers`'s
+    store_gain, store_S, store_innovations."""
+    model_id, model, sensors, data = k.kernel_arguments()
+    first = start if carry is None else start - 1
+    u, fresh = data.u[first:stop], data.fresh[first:stop]
+    if carry is not None or predict_last:
+        u, fresh = u.copy(), fresh.copy()
+    if predict_last:
+        fresh[-1] = False
+    if carry is not None:
+        x, P, u_last, pending = carry
+        u[0], fresh[0] = u_last, False  # no update, no seeding: only the carried state
+        model = model._replace(x0=x, P0=P, seed_at_start=pending)
+    R_std = data.R_std[first:stop] if data.R_std.shape[0] == data.u.shape[0] else data.R_std
+    data = data._replace(u=u, z=data.z[first:stop], fresh=fresh, R_std=R_std)
+    out = trace_buffers(stop - first, model.x0.size, len(k.group_names), data.z.shape[1], full_P=True, **store)
+    filter_into(model_id, model, sensors, data, out)
+    finite = np.flatnonzero(np.all(np.isfinite(u), axis=1))
+    u_last = u[finite[-1]].copy() if finite.size else k.u_default.copy()
+    return out, (out.x_post[-1].copy(), out.P_post_full[-1].copy(), u_last)
 
 
 class RefilteredPart:
