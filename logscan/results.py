@@ -44,6 +44,24 @@ def series_summary(values: np.ndarray) -> dict:
 
 
 @dataclass(frozen=True)
+class GroundAround:
+    """A window's (--start/--end) ground channel held on the grid steps just before and after it:
+    a take-off before the window or a landing after it holds back steps inside it in the whole log."""
+
+    t_before: np.ndarray
+    before: np.ndarray
+    t_after: np.ndarray
+    after: np.ndarray
+
+    def joined(self, t: np.ndarray, ground: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """(times, ground values, index of the window's first step) over the steps before, inside and
+        after the window."""
+        times = np.concatenate([self.t_before, t, self.t_after])
+        values = np.concatenate([self.before, ground, self.after])
+        return times, values, int(self.t_before.size)
+
+
+@dataclass(frozen=True)
 class AlarmPolicy:
     """Floors a profile puts under every statistic's alarm options (the profile's [alarms] table):
     an alarm needs at least ``n_persist`` consecutive exceeding samples and lasts at least
@@ -78,11 +96,13 @@ class AlarmPolicy:
         """Whether the policy leaves any step unjudged (ground time, take-off, the start)."""
         return bool(self.ground_channel or self.ignore_start_s)
 
-    def suspend(self, t, ground, filter_from: float | None = None) -> AlarmPolicy:
+    def suspend(self, t, ground, filter_from: float | None = None, around: GroundAround | None = None) -> AlarmPolicy:
         """A copy with ``suspended`` and ``airborne`` set for a run of grid times ``t`` and held ground
         channel values ``ground`` (None: none; NaN: unknown, judged; blips under min_ground_s: flight).
         ``filter_from``: where the filter started converging, when before the run (a window's
-        lead-in, `logscan.pipeline.lead_in`); ignore_start_s counts from there."""
+        lead-in, `logscan.pipeline.lead_in`); ignore_start_s counts from there. ``around``: a
+        window's ground channel on the grid steps just outside it, so that a take-off before it or
+        a landing after it holds back what the whole log would."""
         import dataclasses
 
         t = np.asarray(t, dtype=np.float64)
@@ -93,18 +113,35 @@ class AlarmPolicy:
         on = None
         if ground is not None and t.size:
             ground = np.asarray(ground, dtype=np.float64)
-            on = _without_blips(t, np.nan_to_num(ground, nan=0.0) != 0.0, self.min_ground_s)
-            out |= on
-            # the latest take-off (ground -> air) at or before each step
-            takeoff = np.concatenate([[False], on[:-1] & ~on[1:]])
-            last = np.maximum.accumulate(np.where(takeoff, t, -np.inf))
-            out |= t < last + self.after_ground_s
-            if self.before_ground_s > 0:  # the next landing (air -> ground) at or after each step
-                landing = np.concatenate([[False], ~on[:-1] & on[1:]])
-                following = np.minimum.accumulate(np.where(landing, t, np.inf)[::-1])[::-1]
-                out |= t >= following - self.before_ground_s
+            t_all, ground_all, first = (t, ground, 0) if around is None else around.joined(t, ground)
+            on_all = _without_blips(t_all, np.nan_to_num(ground_all, nan=0.0) != 0.0, self.min_ground_s)
+            inside = slice(first, first + t.size)
+            on = on_all[inside]
+            out |= self._near_ground(t_all, on_all)[inside]
         airborne = None if on is None else ~on & np.isfinite(ground)  # unknown is judged, but not flight
         return dataclasses.replace(self, suspended=out if out.any() else None, airborne=airborne, start_held=start_held)
+
+    def _near_ground(self, t: np.ndarray, on: np.ndarray) -> np.ndarray:
+        """The steps on the ground (``on``), after_ground_s after each take-off and before_ground_s
+        before each landing."""
+        out = on.copy()
+        # the latest take-off (ground -> air) at or before each step
+        takeoff = np.concatenate([[False], on[:-1] & ~on[1:]])
+        last = np.maximum.accumulate(np.where(takeoff, t, -np.inf))
+        out |= t < last + self.after_ground_s
+        if self.before_ground_s > 0:  # the next landing (air -> ground) at or after each step
+            landing = np.concatenate([[False], ~on[:-1] & on[1:]])
+            following = np.minimum.accumulate(np.where(landing, t, np.inf)[::-1])[::-1]
+            out |= t >= following - self.before_ground_s
+        return out
+
+    def margins_s(self) -> tuple[float, float]:
+        """How far before and after a window its ground channel can change what is held back in it:
+        a take-off after_ground_s before it, a landing before_ground_s after it, and a blip's
+        min_ground_s on either side (0, 0: no ground channel)."""
+        if not self.ground_channel:
+            return 0.0, 0.0
+        return self.after_ground_s + self.min_ground_s, self.before_ground_s + self.min_ground_s
 
     def unsuspended(self) -> AlarmPolicy:
         """This policy's floors without its suspension: for the checks of what the vehicle itself

@@ -10,9 +10,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from conftest import need_testdata
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from logscan.detectors.base import Detector
-from logscan.results import AlarmPolicy
+from logscan.needs import Needs
+from logscan.pipeline import load_profile_for, prepare
+from logscan.results import AlarmPolicy, GroundAround
 from logscan.verdict.coverage import MAX_UNJUDGED_FLIGHT, unjudged_flight
 
 DT = 0.02
@@ -206,3 +210,53 @@ def test_a_partly_suspended_log_is_never_said_to_be_checked_on_the_whole_log(cli
     page = report.read_text(encoding="utf-8")
     assert "Every check ran on the whole log" not in page
     assert f"Every check ran; the model-based statistics were {line}" in page
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    spans=st.lists(st.tuples(st.floats(0.0, 29.0), st.floats(0.02, 6.0)), max_size=5),
+    window=st.tuples(st.floats(0.0, 29.0), st.floats(0.5, 30.0)),
+    min_ground_s=st.sampled_from([0.0, 1.0]),
+    before_ground_s=st.sampled_from([0.0, 3.0]),
+)
+def test_a_windows_suspension_is_the_whole_logs_with_the_ground_around_it(spans, window, min_ground_s, before_ground_s):
+    """A window (--start/--end) given the ground channel over `margins_s` before and after it holds
+    back exactly the steps the whole log holds back there: a take-off before it, a landing after it
+    and a blip across its edge are seen as in the whole log."""
+    policy = AlarmPolicy(
+        ground_channel="g", after_ground_s=5.0, before_ground_s=before_ground_s, min_ground_s=min_ground_s
+    )
+    ground = _ground(*[(start, start + length) for start, length in spans])
+    whole = policy.suspend(T, ground)
+    first = int(np.searchsorted(T, window[0]))
+    stop = max(first + 1, int(np.searchsorted(T, window[0] + window[1])))
+    before_s, after_s = policy.margins_s()
+    lo = int(np.searchsorted(T, T[first] - before_s - 2 * DT))
+    hi = int(np.searchsorted(T, T[stop - 1] + after_s + 2 * DT))
+    around = GroundAround(T[lo:first], ground[lo:first], T[stop:hi], ground[stop:hi])
+    windowed = policy.suspend(T[first:stop], ground[first:stop], around=around)
+    expected = np.zeros(T.size, dtype=bool) if whole.suspended is None else whole.suspended
+    got = np.zeros(stop - first, dtype=bool) if windowed.suspended is None else windowed.suspended
+    assert np.array_equal(got, expected[first:stop])
+    assert np.array_equal(windowed.airborne, whole.airborne[first:stop])
+
+
+def test_a_px4_window_holds_back_what_the_whole_flight_does(cli, tmp_path):
+    """This real flight's land detector says landed after 28 s. The whole log holds back the 3 s
+    before (PX4 confirms a touchdown late); a window ending at 28 s had judged them and alarmed on
+    the GNSS's vertical velocity at 26 s, in the descent. It now sees the landing after its end."""
+    path = str(need_testdata("px4-ulog/sample_px4_events.ulg"))
+    loaded = load_profile_for(path, None)
+    policy = loaded.profile.alarm_policy
+    whole = prepare(path, loaded, Needs.of(ekf=()))
+    window = prepare(path, load_profile_for(path, None), Needs.of(ekf=()), start_s=12.0, end_s=28.0)
+    assert window.run.ground_around is not None
+    whole_held = policy.suspend(whole.run.t, whole.run.ground).suspended
+    held = policy.suspend(window.run.t, window.run.ground, around=window.run.ground_around).suspended
+    inside = np.isin(whole.run.t, window.run.t)
+    assert np.array_equal(held, whole_held[inside])
+    assert held[window.run.t >= 25.5].all()  # the descent before the landing
+    out = tmp_path / "w.json"
+    result = cli("analyze", path, "--start", "12", "--end", "28", "--no-report", "--json", str(out))
+    assert result.exit_code == 2, result.stdout + result.stderr  # as the whole log: too little judged
+    assert json.loads(out.read_text())["logs"][0]["n_alarms"] == 0

@@ -55,7 +55,7 @@ def detect(
     analysis.warnings += [why] if why else []
     policy = prepared.profile.alarm_policy
     if policy is not None and policy.suspends:
-        policy = policy.suspend(prepared.run.t, prepared.run.ground, prepared.filter_from)
+        policy = policy.suspend(prepared.run.t, prepared.run.ground, prepared.filter_from, prepared.run.ground_around)
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
     unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None

@@ -160,7 +160,7 @@ def judged_steps(profile, run) -> np.ndarray | None:
     policy = getattr(profile, "alarm_policy", None)
     if policy is None or not policy.suspends:
         return None
-    suspended = policy.suspend(run.t, run.ground).suspended
+    suspended = policy.suspend(run.t, run.ground, around=run.ground_around).suspended
     return None if suspended is None else ~suspended
 
 
