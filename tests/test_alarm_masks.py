@@ -17,6 +17,7 @@ from logscan.detectors.base import Detector
 from logscan.needs import Needs
 from logscan.pipeline import load_profile_for, prepare
 from logscan.results import AlarmPolicy, GroundAround
+from logscan.training.calibration import judged_steps
 from logscan.verdict.coverage import MAX_UNJUDGED_FLIGHT, unjudged_flight
 
 DT = 0.02
@@ -260,3 +261,100 @@ def test_a_px4_window_holds_back_what_the_whole_flight_does(cli, tmp_path):
     result = cli("analyze", path, "--start", "12", "--end", "28", "--no-report", "--json", str(out))
     assert result.exit_code == 2, result.stdout + result.stderr  # as the whole log: too little judged
     assert json.loads(out.read_text())["logs"][0]["n_alarms"] == 0
+
+
+def _flight_csv(path, landed, seconds=600.0, rate=20):
+    """A CSV flight: one slowly varying column and a `landed` flag from ``landed(t)``."""
+    t = np.arange(int(round(seconds * rate)) + 1) / rate
+    a = np.sin(t / 7.0) + 0.05 * np.random.default_rng(1).standard_normal(t.size)
+    rows = "".join(f"{ti:.3f},{ai:.6f},{int(gi)}\n" for ti, ai, gi in zip(t, a, landed(t)))
+    path.write_text("time_s,a,landed\n" + rows)
+
+
+_LOOP_PROFILE = """
+[vehicle]
+model = "linear"
+rate_hz = 20
+[vehicle.params]
+states = ["a"]
+A = [[-0.005]]
+B = [[]]
+Q = [[0.01]]
+C = { a = [[1]] }
+R = { a = [0.05] }
+[measurements.a]
+channels = ["/a"]
+rate_hz = 20
+noise_std = 0.05
+[alarms]
+ground_channel = "/landed"
+ALARMS
+[loops.twin.vehicle]
+model = "linear"
+rate_hz = 10
+[loops.twin.vehicle.params]
+states = ["a"]
+A = [[-0.005]]
+B = [[]]
+Q = [[0.01]]
+C = { a = [[1]] }
+R = { a = [0.05] }
+[loops.twin.alarms]
+ground_channel = "/landed"
+ALARMS
+[loops.twin.measurements.a]
+channels = ["/a"]
+rate_hz = 20
+noise_std = 0.05
+"""
+
+
+@pytest.mark.parametrize(
+    ("landed", "alarms", "windows"),
+    [
+        # a take-off at 20 s holds back 300 s after it: longer than the lead-in's 240 s
+        (lambda t: t < 20, "after_ground_s = 300", [(280.0, 400.0), (300.0, None)]),
+        # a ground span of 250 s within flight, a blip under min_ground_s = 300
+        (lambda t: (t >= 10) & (t < 260), "min_ground_s = 300", [(255.0, 400.0)]),
+        # landed on the last row only: an --end less than a grid step before it
+        (lambda t: t >= 600.0 - 1e-9, "before_ground_s = 3", [(500.0, 599.99), (None, 599.96)]),
+    ],
+)
+def test_a_windows_suspension_is_the_whole_logs_on_any_profile(tmp_path, landed, alarms, windows):
+    """Each window (and a hierarchical profile's further loop, on its own grid) holds back the steps
+    the whole log holds back there, whatever the margins: the window's alignment holds the ground
+    channel on the whole grid's steps around it (`logscan.align.onto_grid`)."""
+    log = tmp_path / "flight.csv"
+    _flight_csv(log, landed)
+    profile = tmp_path / "p.toml"
+    profile.write_text(_LOOP_PROFILE.replace("ALARMS", alarms))
+    whole = prepare(str(log), load_profile_for(str(log), str(profile)), Needs())
+    for start, end in windows:
+        window = prepare(str(log), load_profile_for(str(log), str(profile)), Needs(), start_s=start, end_s=end)
+        for whole_run, run, policy in (
+            (whole.run, window.run, whole.profile.alarm_policy),
+            (whole.loops["twin"].run, window.loops["twin"].run, whole.loops["twin"].profile.alarm_policy),
+        ):
+            inside = np.isin(whole_run.t, run.t)
+            expected = policy.suspend(whole_run.t, whole_run.ground)
+            got = policy.suspend(run.t, run.ground, around=run.ground_around)
+            none = np.zeros(whole_run.t.size, dtype=bool)
+            want = (none if expected.suspended is None else expected.suspended)[inside]
+            have = none[: run.t.size] if got.suspended is None else got.suspended
+            assert np.array_equal(have, want), (start, end, int(have.sum()), int(want.sum()))
+            assert np.array_equal(got.airborne, expected.airborne[inside])
+
+
+def test_the_calibration_and_blind_warning_judge_a_window_as_its_detectors_do():
+    """`judged_steps` (train --calibrate, the "blind" warning) counts ignore_start_s from where a
+    window's filter started, as detection does: on this real flight from 18 s, led in from 0 s,
+    nothing is held back as the filter's start."""
+    path = str(need_testdata("px4-ulog/sample_px4_events.ulg"))
+    window = prepare(path, load_profile_for(path, None), Needs.of(ekf=()), start_s=18.0)
+    policy = window.profile.alarm_policy
+    detected = policy.suspend(window.run.t, window.run.ground, window.filter_from, window.run.ground_around)
+    judged = judged_steps(window.profile, window.run, window.filter_from)
+    assert window.filter_from == 0.0 and not detected.start_held
+    assert np.array_equal(judged, ~detected.suspended)
+    cold = judged_steps(window.profile, window.run)  # as if the window's filter had started at 18 s
+    assert cold.sum() < judged.sum()

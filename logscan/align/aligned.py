@@ -6,9 +6,10 @@ dataclasses; fields may be added with defaults, never renamed or removed."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+
+from logscan.results import GroundAround
 
 
 @dataclass
@@ -102,9 +103,9 @@ class AlignedRun:
     groups: dict[str, AlignedGroup]
     mode: np.ndarray | None = None
     ground: np.ndarray | None = None  # (N,) the [alarms] ground_channel held (non-zero: on the ground)
-    # a window's ground channel on the grid just outside it (`logscan.results.GroundAround`, set by
-    # the pipeline): a take-off before it or a landing after it holds back steps inside it
-    ground_around: Any = None
+    # a window's ground channel on the whole grid's steps just outside it: a take-off before it or a
+    # landing after it holds back steps inside it (`AlarmPolicy.suspend`)
+    ground_around: GroundAround | None = None
     onboard_state: np.ndarray | HeldTable | None = None
     onboard_variance: np.ndarray | HeldTable | None = None
     warnings: list[str] = field(default_factory=list)

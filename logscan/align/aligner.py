@@ -45,6 +45,7 @@ class _Aligner:
         # (topic, count, stale_s, longest, its start) -> the channels with those gaps (`gap_lines`)
         self.gap_channels: dict[tuple, list[str]] = {}
         self.start_ns = 0
+        self.grid_span = (0, 0)  # the whole grid's first and last sample times, ns (set by `align`)
         self.dropped: dict[str, np.ndarray] = {}  # channel -> outlying times dropped (ns)
         self.kept: dict[str, int] = {}  # channel -> its samples left, of a window's whole file (`span`)
         self.ends = ("", "")  # the channels that start first and end last (after `span`)

@@ -11,6 +11,7 @@ import numpy as np
 from logscan.align.aligned import AlignedGroup, AlignedRun, HeldTable
 from logscan.align.aligner import _Aligner, _linear_transforms
 from logscan.align.sample_hold import _NS
+from logscan.results import GroundAround
 from logscan.timebase.time_sanity import check_window, grid, outlier_warnings
 
 
@@ -29,8 +30,7 @@ def align(
 
     Raises ProfileError when the profile names channels the log lacks (with close names),
     InputError when none of its input/measurement channels holds a finite sample, the grid is
-    over MAX_GRID_STEPS or the window misses the log, and UsageError for a window with end <= start.
-    """
+    over MAX_GRID_STEPS or the window misses the log, and UsageError for a window with end <= start."""
     check_window(start_s, end_s)
     profile.check_channels(log)
     aligner = _Aligner(log, profile)
@@ -43,7 +43,7 @@ def align(
     held.done("inputs")
     groups = _measurement_groups(aligner, profile, grid_ns, scratch)
     held.done("measurements")
-    mode, ground = _mode_and_ground(aligner, profile, grid_ns, scratch)
+    mode, ground, around = _mode_and_ground(aligner, profile, grid_ns, scratch, None if window is None else first_step)
     held.done("mode")
     onboard = _onboard(aligner, profile, log, grid_ns)
     held.done("onboard")
@@ -60,6 +60,7 @@ def align(
         groups=groups,
         mode=mode,
         ground=ground,
+        ground_around=around,
         onboard_state=onboard.state,
         onboard_variance=onboard.variance,
         warnings=aligner.warnings + aligner.gap_lines(),
@@ -76,16 +77,39 @@ def align(
     )
 
 
-def _mode_and_ground(aligner: _Aligner, profile, grid_ns: np.ndarray, scratch: np.ndarray):
-    """(mode, ground): the profile's [mode] channel and [alarms] ground_channel held, each None
-    without one."""
-    mode = ground = None
+def _mode_and_ground(aligner: _Aligner, profile, grid_ns: np.ndarray, scratch: np.ndarray, first_step: int | None):
+    """(mode, ground, around): the profile's [mode] channel and [alarms] ground_channel held, each
+    None without one, and a window's (``first_step``: its first step's index in the whole grid) ground
+    channel around it (`_ground_around`)."""
+    mode = ground = around = None
     if profile.mode is not None:
         mode, _ = aligner.hold(profile.mode.channel, grid_ns, profile.mode.stale_s, fresh=scratch)
     policy = getattr(profile, "alarm_policy", None)
     if policy is not None and policy.ground_channel:  # logged on change: held as long as it says
         ground, _ = aligner.hold(policy.ground_channel, grid_ns, float("inf"), fresh=scratch)
-    return mode, ground
+        if first_step is not None and grid_ns.size:
+            around = _ground_around(aligner, policy, float(profile.vehicle.rate_hz), grid_ns, first_step)
+    return mode, ground, around
+
+
+def _ground_around(aligner: _Aligner, policy, rate: float, grid_ns: np.ndarray, first_step: int):
+    """A window's ground channel held on the whole grid's steps just before and after it, as far as
+    a take-off, a landing or a blip there holds back steps inside it (`AlarmPolicy.margins_s`, and
+    two steps); None without such a step. The steps are the whole grid's (`grid`'s first +
+    round(k dt)), the times its t."""
+    dt_ns = _NS / rate
+    first_ns, last_ns = aligner.grid_span
+    whole_steps = int(np.floor((last_ns - first_ns) / dt_ns + 1e-9)) + 1  # as `grid` without a window
+    before_s, after_s = policy.margins_s()
+    last_step = first_step + grid_ns.size - 1
+    before = np.arange(max(first_step - int(np.ceil(before_s * rate)) - 2, 0), first_step)
+    after = np.arange(last_step + 1, min(last_step + int(np.ceil(after_s * rate)) + 3, whole_steps))
+    if not before.size and not after.size:
+        return None
+    k = np.concatenate([before, after])
+    held, _ = aligner.hold(policy.ground_channel, first_ns + np.round(k * dt_ns).astype(np.int64), float("inf"))
+    t = (first_ns - aligner.start_ns) / _NS + k * (1.0 / rate)
+    return GroundAround(t[: before.size], held[: before.size], t[before.size :], held[before.size :])
 
 
 class _LastHolds:
@@ -146,6 +170,7 @@ def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarr
     if early and start_ns <= max(early):  # the log's start is an outlier: count from the grid's
         start_ns = first
     aligner.start_ns = start_ns
+    aligner.grid_span = (first, last)  # the whole grid's, a window's or not
     kept = {name: aligner.kept.get(name, aligner.cache[name].t.size) for name in aligner.dropped}
     aligner.warnings.extend(outlier_warnings(aligner.dropped, kept, start_ns))
     grid_ns, k0 = grid(first, last, rate, window, start_ns, aligner.ends, log.source.path)

@@ -182,7 +182,7 @@ def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> li
     judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
     import numpy as np
 
-    judged = judged_steps(prepared.profile, prepared.run)
+    judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
     if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
         used = used & judged
     trace = prepared.trace

@@ -24,7 +24,6 @@ import numpy as np
 
 from logscan.filters.ekf import pack_run
 from logscan.pipeline.refilter import filter_rows
-from logscan.results import GroundAround
 
 LEAD_IN_S = 30.0  # the first lead-in tried, s
 CHUNK = 4096  # rows filtered at a time (their full covariances: 2 x 4096 x n x n float64)
@@ -64,24 +63,6 @@ def lead_in_start(start_s: float | None) -> float | None:
     if start_s is None or start_s <= 0.0:
         return None
     return start_s - MAX_LEAD_IN_S
-
-
-def ground_around(run, lead, lead_out) -> GroundAround | None:
-    """The ground channel on the grid steps of the lead-in before the window and of the lead-out
-    after it (the same grid: `AlarmPolicy.suspend` then holds back in the window what it holds back
-    in the whole log); None without a ground channel or either. The lead-in's MAX_LEAD_IN_S covers
-    after_ground_s up to that long."""
-    if run.ground is None or (lead is None or lead.ground is None) and (lead_out is None or lead_out.ground is None):
-        return None
-    empty = np.empty(0)
-    t_before = before = t_after = after = empty
-    if lead is not None and lead.ground is not None:
-        keep = np.asarray(lead.t) < run.t[0]
-        t_before, before = np.asarray(lead.t)[keep], np.asarray(lead.ground)[keep]
-    if lead_out is not None and lead_out.ground is not None:
-        keep = np.asarray(lead_out.t) > run.t[-1]
-        t_after, after = np.asarray(lead_out.t)[keep], np.asarray(lead_out.ground)[keep]
-    return GroundAround(t_before, before, t_after, after)
 
 
 def carry_freshness(run, lead) -> None:

@@ -27,7 +27,7 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
-from logscan.pipeline.lead_in import SETTLED_OVER_S, carry_freshness, filter_start, ground_around, lead_in_start
+from logscan.pipeline.lead_in import SETTLED_OVER_S, carry_freshness, filter_start, lead_in_start
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.release import TRUTH_DRAWN_WITH
 from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepared
@@ -260,8 +260,7 @@ def _read_and_align(
     profile = loaded.profile
     start_s, end_s = window
     lead_from = lead_in_start(start_s)
-    after_s = _lead_out_s(profile, end_s)
-    read_window = _read_window(profile, start_s if lead_from is None else lead_from, _plus(end_s, after_s))
+    read_window = _read_window(profile, start_s if lead_from is None else lead_from, end_s)
     log = _read(path, loaded, raw_topics, use_header_stamp, fraction, None if whole else read_window)
     again = (path, loaded, raw_topics, use_header_stamp, fraction, window, truth_path, step)
     _attach_truth(log, path, truth_path)
@@ -274,12 +273,10 @@ def _read_and_align(
     return_freed_pages()
     step("aligning")
     lead = _lead_run(log, profile, lead_from, start_s)
-    lead_out = _lead_out_run(log, profile, end_s, after_s)
     framed = profile if lead is None else _with_origins(profile, lead)  # the lead-in's local frame
     run = align(log, framed, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
     if log.whole_times and run.start_ns != log.start_ns:
         return _read_and_align(*again, whole=True)
-    run.ground_around = ground_around(run, lead, lead_out)
     return log, run, lead
 
 
@@ -294,30 +291,6 @@ def _lead_run(log: Log, profile, lead_from: float | None, start_s: float | None)
         return align(
             log, profile, start_s=lead_from, end_s=start_s + SETTLED_OVER_S + 2.0 / float(profile.vehicle.rate_hz)
         )
-    except InputError:
-        return None
-
-
-def _lead_out_s(profile, end_s: float | None) -> float:
-    """How far past a window's --end its ground channel is aligned: as far as a landing there holds
-    back steps inside it (`AlarmPolicy.margins_s`); 0 without an --end or a ground channel."""
-    policy = profile.alarm_policy
-    if end_s is None or policy is None:
-        return 0.0
-    return policy.margins_s()[1]
-
-
-def _plus(end_s: float | None, after_s: float) -> float | None:
-    return None if end_s is None else end_s + after_s
-
-
-def _lead_out_run(log: Log, profile, end_s: float | None, after_s: float) -> AlignedRun | None:
-    """The log aligned over ``after_s`` past the window's ``end_s``, for its ground channel (the
-    whole log's suspension sees a landing there); None without one, or where no grid step is."""
-    if end_s is None or after_s <= 0.0:
-        return None
-    try:
-        return align(log, profile, start_s=end_s, end_s=end_s + after_s + 2.0 / float(profile.vehicle.rate_hz))
     except InputError:
         return None
 
@@ -338,10 +311,18 @@ def _with_origins(profile, lead: AlignedRun):
 
 def _read_window(profile, start_s: float | None, end_s: float | None) -> ReadWindow | None:
     """--start/--end as a read's window (None without either): a sample up to the longest delay a
-    profile may give a sensor (`MAX_DELAY_S`) and two steps outside it may still be held."""
+    profile may give a sensor (`MAX_DELAY_S`) and two steps outside it may still be held, and the
+    [alarms] ground channel as far around it as it can hold back steps inside it
+    (`AlarmPolicy.margins_s`, `logscan.align.onto_grid`)."""
     if start_s is None and end_s is None:
         return None
-    return ReadWindow(start_s, end_s, margin_s=MAX_DELAY_S + 2.0 / float(profile.vehicle.rate_hz))
+    margins = [p.alarm_policy.margins_s() for p in (profile, *profile.loops.values()) if p.alarm_policy is not None]
+    before_s, after_s = (max(m[0] for m in margins), max(m[1] for m in margins)) if margins else (0.0, 0.0)
+    return ReadWindow(
+        None if start_s is None else start_s - before_s,
+        None if end_s is None else end_s + after_s,
+        margin_s=MAX_DELAY_S + 2.0 / float(profile.vehicle.rate_hz),
+    )
 
 
 def _released_once_held(log: Log, profile, raw_topics: frozenset[str]) -> Callable[[str], bool] | None:

@@ -151,16 +151,16 @@ def calibration_failures(calibration: dict | None) -> list[str]:
     return [str(reason) for reason in (calibration or {}).get("failures") or []]
 
 
-def judged_steps(profile, run) -> np.ndarray | None:
+def judged_steps(profile, run, filter_from: float | None = None) -> np.ndarray | None:
     """The steps of ``run`` the detectors judge under ``profile``'s [alarms] policy: not on the
     ground, not in the take-off or touchdown transients, not in the filter's first seconds (None:
-    every step).
+    every step; ``filter_from``: where a window's filter started, `AlarmPolicy.suspend`).
     Calibration uses the same steps: a vehicle standing still (a real flight's ground time, a SITL
     log's exact GNSS at rest) tells little of the noise the detectors will judge in flight."""
     policy = getattr(profile, "alarm_policy", None)
     if policy is None or not policy.suspends:
         return None
-    suspended = policy.suspend(run.t, run.ground, around=run.ground_around).suspended
+    suspended = policy.suspend(run.t, run.ground, filter_from, run.ground_around).suspended
     return None if suspended is None else ~suspended
 
 

@@ -278,7 +278,7 @@ def calibrate_prepared(prepared: Sequence, needs) -> dict:
     """Calibrate the measurement and process noise on the prepared healthy logs
     (`logscan.training.calibration`), then put the calibrated noise in their runs and models and re-run their
     filters, so the detectors are fitted on the filter `logscan analyze --tables` runs."""
-    judged = [judged_steps(p.profile, p.run) for p in prepared]
+    judged = [judged_steps(p.profile, p.run, p.filter_from) for p in prepared]
     calibration = calibrate(prepared[0].model, [p.run for p in prepared], judged=judged)
     for one, run in zip(prepared, calibrated_runs([p.run for p in prepared], calibration)):
         one.run = run
