@@ -271,17 +271,19 @@ def _flight_csv(path, landed, seconds=600.0, rate=20):
     path.write_text("time_s,a,landed\n" + rows)
 
 
+_PARAMS = """states = ["a"]
+A = [[-0.005]]
+B = [[]]
+Q = [[0.01]]
+C = { a = [[1]] }
+R = { a = [0.05] }"""
+# the log's profile and a further loop at half its rate, each with the same [alarms]
 _LOOP_PROFILE = """
 [vehicle]
 model = "linear"
 rate_hz = 20
 [vehicle.params]
-states = ["a"]
-A = [[-0.005]]
-B = [[]]
-Q = [[0.01]]
-C = { a = [[1]] }
-R = { a = [0.05] }
+PARAMS
 [measurements.a]
 channels = ["/a"]
 rate_hz = 20
@@ -293,12 +295,7 @@ ALARMS
 model = "linear"
 rate_hz = 10
 [loops.twin.vehicle.params]
-states = ["a"]
-A = [[-0.005]]
-B = [[]]
-Q = [[0.01]]
-C = { a = [[1]] }
-R = { a = [0.05] }
+PARAMS
 [loops.twin.alarms]
 ground_channel = "/landed"
 ALARMS
@@ -327,7 +324,7 @@ def test_a_windows_suspension_is_the_whole_logs_on_any_profile(tmp_path, landed,
     log = tmp_path / "flight.csv"
     _flight_csv(log, landed)
     profile = tmp_path / "p.toml"
-    profile.write_text(_LOOP_PROFILE.replace("ALARMS", alarms))
+    profile.write_text(_LOOP_PROFILE.replace("PARAMS", _PARAMS).replace("ALARMS", alarms))
     whole = prepare(str(log), load_profile_for(str(log), str(profile)), Needs())
     for start, end in windows:
         window = prepare(str(log), load_profile_for(str(log), str(profile)), Needs(), start_s=start, end_s=end)

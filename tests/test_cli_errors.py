@@ -82,6 +82,18 @@ def test_ulog_cut_before_any_data(tmp_path, cli_process):
     assert_one_line_error(cli_process("inspect", str(path)), str(path), "truncated")
 
 
+@pytest.mark.parametrize("length", [100, 3000, 20000])
+def test_analyze_says_a_ulog_cut_before_its_data_is_damaged(tmp_path, cli, length):
+    """A real flight cut while copying: analyze names the damage, as inspect does, not a missing
+    profile or IMU topic (what the built-in profile found of what little was read)."""
+    need_testdata(ULOG)
+    path = tmp_path / "cut.ulg"
+    path.write_bytes(ULOG.read_bytes()[:length])
+    result = cli("analyze", path, "--no-report", "-q")
+    assert_one_line_error(result, str(path), "damaged log", "truncated")
+    assert "no profile" not in result.stderr and "IMU" not in result.stderr
+
+
 def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
     need_testdata(ULOG)
     path = tmp_path / "half.ulg"
@@ -90,6 +102,23 @@ def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
     result = cli("inspect", path)
     assert result.exit_code == 0 and "Traceback" not in result.stderr
     assert "PARTIAL:   only part of the file was read: truncated" in result.stdout
+
+
+def test_a_closed_output_pipe_exits_2_not_1():
+    """`logscan analyze ... 2>&1 | head`: the reader of stderr leaves after the first line. The lines
+    still to come cannot be written, an output not written: exit 2 (click's own answer was 1, which
+    says "alarms"), with no traceback. Each of the 154 conformance files of one folder gives a line
+    (no profile), a few at a time, long after the reader left."""
+    import subprocess
+    import sys
+
+    folder = need_testdata("mcap-conformance/TenMessages")
+    command = [sys.executable, "-m", "logscan", "analyze", str(folder), "--no-report", "-q"]
+    with subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) as proc:
+        assert proc.stderr is not None
+        proc.stderr.read(10)
+        proc.stderr.close()  # the reader leaves
+        assert proc.wait(timeout=300) == 2
 
 
 def test_unknown_option_is_a_usage_error(cli_process):

@@ -22,7 +22,15 @@ from logscan.errors import INTERRUPT_SEEN, OUT_OF_MEMORY, ExitCode, LogscanError
 
 class _CommandList(click.Group):
     """The top-level group: its --help lists each command with the whole first sentence of its
-    help, wrapped (click cuts it to the width left, with "...")."""
+    help, wrapped (click cuts it to the width left, with "..."); a command whose stdout or stderr
+    reader left (`| head`) ends with exit 2, an output not written (click's own answer is exit 1,
+    which says "alarms")."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:
+            raise click.exceptions.Exit(ExitCode.BAD_INPUT) from None
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = []
@@ -130,6 +138,8 @@ def main(argv: list[str] | None = None) -> None:
     try:
         with _warnings_as_lines(debug):
             code = _run(args, debug)
+    except BrokenPipeError:  # while `_run` wrote an error's line: as in a command (`_CommandList.invoke`)
+        code = ExitCode.BAD_INPUT
     finally:
         if argv is None and previous.pop(signal.SIGINT, None) is not None:
             # the process's own run: Ctrl-C stays logscan's until the process ends
@@ -198,8 +208,8 @@ def _run(args: list[str], debug: bool) -> int:
             traceback.print_exc()
         click.echo(f"logscan: error: {printable(exc.one_line())}", err=True)
         return exc.exit_code
-    except BrokenPipeError:
-        return ExitCode.OK
+    except BrokenPipeError:  # the reader of stdout or stderr left (`| head`): an output not written
+        return ExitCode.BAD_INPUT
     except MemoryError:  # anywhere in a command: the log is too big for this machine, not a bug
         if debug:
             traceback.print_exc()

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from logscan.align import align
 from logscan.detectors.registry import default_registry
 from logscan.docs import doc_url
-from logscan.errors import InputError, LogscanError, ProfileError
+from logscan.errors import CorruptLogError, InputError, LogscanError, ProfileError
 from logscan.filters.warmup import (
     COMPILING_NOTE,
     Compile,
@@ -107,12 +107,30 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
         built = ros.ros_profile(log) if builtin.identify(log) == "ros" else None
     elif fmt == "ulog" or (fmt == "csv-dir" and csv_log_name(Path(path))):  # a ULog, or ulog2csv's pieces of one
         log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra)
-        built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None
+        try:
+            built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None
+        except InputError:  # a topic it needs is missing: from the log, or from what damage left of it
+            _raise_if_damaged(log, path)
+            raise
     else:
         return None
+    if built is None:
+        _raise_if_damaged(log, path)
     if built is None or not with_log:
         return built
     return built, log, extra
+
+
+def _raise_if_damaged(log: Log, path) -> None:
+    """A damaged log's built-in profile could not be made from what was read: the damage is what
+    is wrong (not a missing profile or topic), said as the reader found it."""
+    if log.source.partial:
+        raise CorruptLogError(
+            f"damaged log, too little read to build its built-in profile: {log.source.partial_reason}",
+            path=str(path),
+            hint="copy the file again if it was cut or changed in transfer; else pass --profile to analyse what "
+            "is left",
+        )
 
 
 def _extra_topics() -> frozenset[str]:
