@@ -22,6 +22,7 @@ from logscan.readers import read_embedded
 from logscan.verdict.evaluation import Evaluation, LogEvaluation, evaluate_analysis
 from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
 from logscan.verdict.suppressions import apply_suppressions
+from logscan.verdict.truth import truth_beside
 
 
 @dataclass
@@ -102,8 +103,9 @@ class AnalyzeTask:
 
 
 def has_truth(path: str) -> bool:
-    """Whether the log carries ground truth (reads only its metadata, not its messages)."""
-    return read_embedded(path)[1] is not None
+    """Whether the log has ground truth: its own (reads only its metadata, not its messages), or a
+    `<log>.truth.json` beside it, as the analysis finds it (`logscan.verdict.truth.truth_beside`)."""
+    return truth_beside(path) is not None or read_embedded(path)[1] is not None
 
 
 @dataclass(frozen=True)

@@ -200,3 +200,17 @@ def test_cli_without_any_truth_is_bad_input(tmp_path, cli):
     result = cli("evaluate", no_truth)
     assert result.exit_code == 2
     assert "has ground truth" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_truth_file_beside_a_ulog_is_evaluated_as_analyze_scores_it(tmp_path):
+    """A real PX4 flight with a `<log>.truth.json` beside it: `analyze` scores against it, so
+    `evaluate` evaluates it (it had skipped the log as one without ground truth)."""
+    from conftest import need_testdata
+
+    log = tmp_path / "flight.ulg"
+    shutil.copy(need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg"), log)
+    truth = {"events": [{"kind": "bias", "target": "battery", "start": 1.0, "end": 3.0}]}
+    (tmp_path / "flight.truth.json").write_text(json.dumps(truth))
+    evaluation = evaluate_logs([str(log)])
+    assert not evaluation.skipped and not evaluation.failures
+    assert [len(one.events) for one in evaluation.logs] == [1]

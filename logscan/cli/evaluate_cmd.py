@@ -133,7 +133,7 @@ def evaluate(
     if not evaluation.logs and not evaluation.failures:
         raise InputError(
             f"none of the {len(logs)} log(s) has ground truth",
-            hint="evaluate logs written by `logscan simulate` (fault events embedded) or a CSV with <log>.truth.json",
+            hint="evaluate logs written by `logscan simulate` (fault events embedded) or with <log>.truth.json beside",
         )
     sys.exit(ExitCode.BAD_INPUT if evaluation.failures else ExitCode.OK)
 
