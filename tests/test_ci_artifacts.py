@@ -75,7 +75,7 @@ def test_the_markdown_summary_has_the_verdict_and_alarm_tables(run):
     text = out["r.md"].read_text()
     for log in document["logs"]:
         assert f"| {log['file']} | {log['verdict']} | {log['n_incidents']} | {log['n_alarms']} |" in text
-    assert "| quad_imu_bitflip.mcap | 1 | nis | nis.accel | 30.13 | 31.27 | peak/threshold 7.46 | - |" in text
+    assert "| quad_imu_bitflip.mcap | 1 | nis | nis.accel | 30.13 s | 31.27 s | peak/threshold 7.46 | - |" in text
     assert "22 samples outside the physical range" in text  # refused samples in words, not a ratio
     assert "missing.mcap | error:" in text
 
@@ -140,7 +140,7 @@ def test_the_markdown_links_are_relative_to_its_folder_with_an_incident_column(t
     text = markdown_summary({"logs": [log], "errors": []}, "ci/summary/s.md")
     assert "[my run.report.html](../../out/my%20run.report.html)" in text  # from ci/summary/, not from the cwd
     assert "| log | verdict | incidents | alarms |" in text and "| a.mcap | 1 alarm | 2 | 1 |" in text
-    assert "| a.mcap | 2 | d | s | 1.20 | 1.40 | peak/threshold 2 | - |" in text  # the second incident holds it
+    assert "| a.mcap | 2 | d | s | 1.20 s | 1.40 s | peak/threshold 2 | - |" in text  # the second incident holds it
     assert "](out/my%20run.report.html)" in markdown_summary({"logs": [log], "errors": []}, "s.md")
     assert "](out/my%20run.report.html)" in markdown_summary({"logs": [log], "errors": []}, "/dev/stdout")
 
@@ -188,3 +188,29 @@ def test_the_markdown_says_how_many_alarms_its_table_leaves_out():
     text = markdown_summary({"logs": [log], "errors": []})
     assert text.count("| a.mcap | - | d | s |") == MAX_MARKDOWN_ROWS  # no incident holds them: "-"
     assert "... 3 more alarm(s) in the JSON summary" in text  # also when no baseline alarm is gone
+
+
+@pytest.mark.parametrize(
+    ("clock", "cell", "span"),
+    [
+        ({"name": "PX4 boot time", "offset_s": 3.129, "utc": False, "utc_start": "2023-10-31T07:42:40.496Z"},
+         "5.27 s", "5.27-5.67 s"),
+        ({"name": "UTC", "offset_s": 1710773350.346, "utc": True, "utc_start": "2024-03-18T14:49:10.346Z"},
+         "14:49:12.489 UTC", "2024-03-18 14:49:12.489-14:49:12.889 UTC"),
+    ],
+)  # fmt: skip
+def test_the_markdown_and_junit_show_times_in_the_logs_own_clock(clock, cell, span):
+    """The terminal, the report and the annotations show a PX4 log's alarm at 5.27 s of boot time (or
+    a UTC log's at its time of day); the job summary and JUnit said 2.14 s, seconds since time zero,
+    with no clock named. They now show what the terminal shows."""
+    from lxml import etree
+
+    alarm = {"detector": "health", "signal": "health.battery", "start": 2.1435, "end": 2.5435, "peak_ratio": 1.04}
+    log = {"file": "f.ulg", "verdict": "1 alarm", "clock": clock, "detectors": [
+        {"detector": "health", "alarms": [alarm], "series": {"health.battery": {}}}]}  # fmt: skip
+    document = {"logs": [log], "errors": []}
+    text = markdown_summary(document)
+    end = cell.replace("12.489", "12.889").replace("5.27", "5.67")
+    assert f"| f.ulg | - | health | health.battery | {cell} | {end} | peak/threshold 1.04 | - |" in text
+    case = etree.fromstring(junit_xml(document).encode()).find(".//testcase[@name='health: health.battery']")
+    assert f"health.battery {span}, peak/threshold 1.04" in case.find("failure").text

@@ -16,6 +16,7 @@ import os
 from logscan.report.ci_artifacts import (
     alarm_line,
     incident_of,
+    log_clock,
     log_name,
     not_analysed,
     unused_line,
@@ -73,7 +74,12 @@ def _log_annotations(log: dict, see: str) -> list[str]:
         for n, incident in enumerate(incidents, start=1)
     ]
     warnings = [
-        _command("warning", alarm_line(possible), file, f"logscan possible fault {possible.get('signal', '')}")
+        _command(
+            "warning",
+            alarm_line(possible, log_clock(log)),
+            file,
+            f"logscan possible fault {possible.get('signal', '')}",
+        )
         for result in log.get("detectors", [])
         for possible in result.get("possible_faults", [])
     ]

@@ -24,6 +24,7 @@ from urllib.parse import quote
 
 from logscan.artifacts import check_target
 from logscan.report.overview import is_rejected, rejected_words
+from logscan.timebase.clock import Clock
 
 MAX_MARKDOWN_ROWS = 200
 NOT_ANALYSED = "in the --baseline summary, not analysed in this run"
@@ -37,12 +38,23 @@ def _peak(alarm: dict) -> str:
     return f"peak/threshold {ratio:.3g}" if isinstance(ratio, (int, float)) else ""
 
 
-def alarm_line(alarm: dict) -> str:
-    """``<statistic> <start>-<end> s, peak/threshold <r> [<baseline status>]``."""
+def alarm_line(alarm: dict, clock: Clock | None = None) -> str:
+    """``<statistic> <start>-<end> s, peak/threshold <r> [<baseline status>]``, the times in the log's
+    ``clock`` (`log_clock`) as the terminal and the report show them."""
     peak = _peak(alarm)
     status = f" [{alarm['baseline']}]" if alarm.get("baseline") else ""  # --baseline: new / unchanged
-    where = f"{alarm.get('signal', '')} {alarm['start']:.2f}-{alarm['end']:.2f} s"
+    where = f"{alarm.get('signal', '')} {(clock or Clock()).span_text(alarm['start'], alarm['end'])}"
     return where + (f", {peak}" if peak else "") + status
+
+
+def log_clock(log: dict) -> Clock:
+    """A summary's log's own clock (PX4 boot time, UTC, or time since its start)."""
+    return Clock.from_dict(log.get("clock"))
+
+
+def _clock_cell(clock: Clock, t: float) -> str:
+    """A time in a table cell: "5.27 s" (the log's clock's seconds) or "14:49:36.370 UTC"."""
+    return f"{clock.short(t)} UTC" if clock.utc else f"{clock.at(float(t)):.2f} s"
 
 
 def log_name(path: str) -> str:
@@ -134,13 +146,14 @@ def _log_cases(log: dict) -> list[dict]:
             alarms = alarms_by_signal.get(signal, [])
             case = {"name": f"{detector}: {signal}", "failure": None, "error": None}
             if alarms:
-                case["failure"] = (f"{len(alarms)} alarm(s) on {signal}", "\n".join(alarm_line(a) for a in alarms))
+                lines = "\n".join(alarm_line(a, log_clock(log)) for a in alarms)
+                case["failure"] = (f"{len(alarms)} alarm(s) on {signal}", lines)
             cases.append(case)
     for suppressed in log.get("suppressed", []):
         cases.append({
             "name": f"{suppressed.get('detector', '')}: {suppressed.get('signal', '')} (suppressed)",
             "failure": None, "error": None,
-            "skipped": f"{alarm_line(suppressed)}: {suppressed.get('reason', '')}",
+            "skipped": f"{alarm_line(suppressed, log_clock(log))}: {suppressed.get('reason', '')}",
         })  # fmt: skip
     for failed in log.get("failed_detectors", []):
         cases.append({"name": f"{failed['detector']}: ran", "failure": None, "error": ("failed", failed["error"])})
@@ -156,7 +169,9 @@ def _possible_faults(suite: ET.Element, log: dict) -> None:
     possible = [p for r in log.get("detectors", []) for p in r.get("possible_faults", [])]
     if possible:
         out = ET.SubElement(suite, "system-out")
-        out.text = "possible faults (warnings, not alarms):\n" + "\n".join(alarm_line(p) for p in possible)
+        out.text = "possible faults (warnings, not alarms):\n" + "\n".join(
+            alarm_line(p, log_clock(log)) for p in possible
+        )
 
 
 def _time(seconds: float) -> str:
@@ -246,16 +261,15 @@ def _alarm_table(logs: list[dict]) -> list[str]:
         return []
     lines = [
         "",
-        "| log | incident | detector | signal | start (s) | end (s) | peak | baseline |",
+        "| log | incident | detector | signal | start | end | peak | baseline |",
         "|---|---:|---|---|---:|---:|---|---|",
     ]
     for log, result, alarm in alarms[:MAX_MARKDOWN_ROWS]:
         incident = incident_of(log, alarm, result.get("detector", ""))
         cells = [log_name(log["file"]), incident or "-", alarm.get("detector", ""), alarm.get("signal", "")]
-        lines.append(
-            "| " + " | ".join(_cell(c) for c in cells) + f" | {alarm['start']:.2f} | {alarm['end']:.2f} | "
-            f"{_cell(_peak(alarm) or '-')} | {_cell(alarm.get('baseline', '-'))} |"
-        )
+        clock = log_clock(log)
+        cells += [_clock_cell(clock, alarm["start"]), _clock_cell(clock, alarm["end"]), _peak(alarm) or "-"]
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + f" | {_cell(alarm.get('baseline', '-'))} |")
     if len(alarms) > MAX_MARKDOWN_ROWS:
         lines.append(f"\n... {len(alarms) - MAX_MARKDOWN_ROWS} more alarm(s) in the JSON summary")
     return lines
@@ -267,10 +281,12 @@ def _lists(document: dict) -> list[str]:
     logs = document.get("logs", [])
     lines: list[str] = []
     gone = [(log, a) for log in logs for a in (log.get("baseline") or {}).get("gone", [])]
-    gone_lines = [f"{log_name(log['file'])}: {alarm_line(a)}" for log, a in gone]
+    gone_lines = [f"{log_name(log['file'])}: {alarm_line(a, log_clock(log))}" for log, a in gone]
     missing = not_analysed(document)
     suppressed = [(log, a) for log in logs for a in log.get("suppressed", [])]
-    suppressed_lines = [f"{log_name(log['file'])}: {alarm_line(a)} ({a.get('reason', '')})" for log, a in suppressed]
+    suppressed_lines = [
+        f"{log_name(log['file'])}: {alarm_line(a, log_clock(log))} ({a.get('reason', '')})" for log, a in suppressed
+    ]
     unused = [unused_line(entry) for entry in unused_suppressions(document)]
     for items, heading in (
         (gone_lines, f"{len(gone)} alarm(s) of the baseline gone:"),

@@ -120,6 +120,17 @@ class Clock:
                 out[f"{key}_utc"] = iso
         return out
 
+    @classmethod
+    def from_dict(cls, data: dict | None) -> Clock:
+        """The clock of a JSON summary's log (`to_dict`'s view; None or {}: time since log start)."""
+        if not data:
+            return cls()
+        offset, utc, start = float(data.get("offset_s", 0.0)), bool(data.get("utc")), data.get("utc_start")
+        # a UTC clock's zero is its offset (to the digit); another's, its time zero in UTC (to the ms)
+        zero = _dt.datetime.fromisoformat(start.replace("Z", "+00:00")).timestamp() if start else None
+        zero = offset if utc else zero
+        return cls(str(data.get("name", SINCE_START)), offset, utc, zero)
+
     def to_dict(self) -> dict:
         """The JSON view: name, offset_s, utc, and utc_start (ISO 8601 of time zero, or None)."""
         return {
