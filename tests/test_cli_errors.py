@@ -94,6 +94,48 @@ def test_analyze_says_a_ulog_cut_before_its_data_is_damaged(tmp_path, cli, lengt
     assert "no profile" not in result.stderr and "IMU" not in result.stderr
 
 
+def test_a_ulog_cut_only_in_its_last_message_keeps_the_error_of_what_it_lacks(tmp_path, cli):
+    """Power lost while logging cuts the last message: the rest is read, so a PX4 log without an IMU
+    topic is still told so, not sent to copy the file again."""
+    import numpy as np
+    from ulog_writer import write_ulog
+
+    t = (np.arange(2000) * 10_000 + 1_000_000).astype(np.int64)
+    full = tmp_path / "full.ulg"
+    write_ulog(
+        str(full), {"vehicle_attitude": (t, {"q": np.tile([1.0, 0, 0, 0], (t.size, 1))})}, info={"sys_name": "PX4"}
+    )
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(full.read_bytes()[:-5])
+    result = cli("analyze", cut, "--no-report", "-q")
+    assert_one_line_error(result, str(cut), "without an IMU topic")
+    assert "damaged" not in result.stderr
+
+
+def test_an_internal_errors_exit_code_stands_when_stderr_is_closed(monkeypatch):
+    """A bug's line cannot be written to a closed stderr (`2>&1 | head`): the exit code is still 3,
+    not a broken pipe's 2."""
+    import sys
+
+    from logscan.cli import main as cli_main
+
+    class Closed:
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def isatty(self):
+            return False
+
+    monkeypatch.setattr(sys, "stderr", Closed())
+    monkeypatch.setattr(cli_main.cli, "main", lambda **kwargs: (_ for _ in ()).throw(RuntimeError("a bug")))
+    with pytest.raises(SystemExit) as exit_info:
+        cli_main.main(["analyze", "x.mcap"])
+    assert exit_info.value.code == 3
+
+
 def test_truncated_ulog_is_read_as_partial_and_says_so(tmp_path, cli):
     need_testdata(ULOG)
     path = tmp_path / "half.ulg"

@@ -58,3 +58,16 @@ def test_bad_truth_is_one_clear_error(cli, sample, tmp_path):
     listless.write_text(json.dumps({"events": 3}))
     with pytest.raises(InputError, match="list of events"):
         read_truth_file(listless)
+
+
+def test_the_truth_beside_the_current_folder_is_looked_for_by_its_name(tmp_path, monkeypatch):
+    """`logscan analyze .` / `evaluate .` inside a rosbag2 folder: "." names the folder (it raised
+    "PosixPath('.') has an empty name", an internal error)."""
+    from logscan.verdict.truth import truth_beside
+
+    folder = tmp_path / "drive"
+    folder.mkdir()
+    monkeypatch.chdir(folder)
+    assert truth_beside(".") is None
+    (tmp_path / "drive.truth.json").write_text('{"events": []}')
+    assert truth_beside(".") == tmp_path / "drive.truth.json"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import inspect
 import os
@@ -138,7 +139,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         with _warnings_as_lines(debug):
             code = _run(args, debug)
-    except BrokenPipeError:  # while `_run` wrote an error's line: as in a command (`_CommandList.invoke`)
+    except BrokenPipeError:  # a line `_run` wrote outside its handlers (they keep their code, `_say`)
         code = ExitCode.BAD_INPUT
     finally:
         if argv is None and previous.pop(signal.SIGINT, None) is not None:
@@ -196,31 +197,32 @@ def _run(args: list[str], debug: bool) -> int:
     except click.exceptions.Abort as exc:
         if isinstance(exc.__context__, (Interrupted, KeyboardInterrupt)):
             return _interrupted()
-        click.echo("logscan: aborted", err=True)
+        _say("logscan: aborted")
         return ExitCode.BAD_INPUT
     except click.ClickException as exc:
-        exc.show()
+        with contextlib.suppress(BrokenPipeError):
+            exc.show()
         return ExitCode.BAD_INPUT
     except click.exceptions.Exit as exc:
         return exc.exit_code
     except LogscanError as exc:
         if debug:
             traceback.print_exc()
-        click.echo(f"logscan: error: {printable(exc.one_line())}", err=True)
+        _say(f"logscan: error: {printable(exc.one_line())}")
         return exc.exit_code
     except BrokenPipeError:  # the reader of stdout or stderr left (`| head`): an output not written
         return ExitCode.BAD_INPUT
     except MemoryError:  # anywhere in a command: the log is too big for this machine, not a bug
         if debug:
             traceback.print_exc()
-        click.echo(f"logscan: error: {OUT_OF_MEMORY}", err=True)
+        _say(f"logscan: error: {OUT_OF_MEMORY}")
         return ExitCode.BAD_INPUT
     except OSError as exc:
         if debug:
             traceback.print_exc()
         if not _is_environment_error(exc):
             return _internal_error(exc)
-        click.echo(f"logscan: error: {printable(_os_error_line(exc))}", err=True)
+        _say(f"logscan: error: {printable(_os_error_line(exc))}")
         return ExitCode.BAD_INPUT
     except Exception as exc:  # noqa: BLE001 - the one place internal errors are mapped
         if _INTERRUPT_SEEN[0]:
@@ -307,8 +309,15 @@ def _source_name(filename: str) -> str:
 
 
 def _interrupted() -> int:
-    click.echo(_interrupted_line(), err=True)
+    _say(_interrupted_line())
     return ExitCode.INTERRUPTED
+
+
+def _say(line: str) -> None:
+    """An outcome's line on stderr; a reader of stderr that left (`| head`) keeps the outcome's
+    exit code (an internal error's 3, Ctrl-C's 130), not a broken pipe's."""
+    with contextlib.suppress(BrokenPipeError):
+        click.echo(line, err=True)
 
 
 def _interrupted_line() -> str:
@@ -322,10 +331,9 @@ def _interrupted_line() -> str:
 
 
 def _internal_error(exc: BaseException) -> int:
-    click.echo(
+    _say(
         f"logscan: internal error: {type(exc).__name__}: {printable(exc)} "
-        "(this is a bug in logscan; rerun with --debug for the traceback and report it)",
-        err=True,
+        "(this is a bug in logscan; rerun with --debug for the traceback and report it)"
     )
     return ExitCode.INTERNAL
 

@@ -112,7 +112,7 @@ def _is_char_device(path: str) -> bool:
 def _input_files(logs: Sequence[str], profile: str | None) -> list[str]:
     files = [profile] if profile else []
     for log in logs:
-        path = Path(log)
+        path = Path(os.path.abspath(log))  # "." names its folder
         files.append(log)
         for suffix in (".truth.json", ".profile.toml"):  # the CSV reader's sidecars
             files.append(str(path.with_name(path.name + suffix) if path.is_dir() else path.with_suffix(suffix)))

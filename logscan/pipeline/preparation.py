@@ -122,9 +122,10 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
 
 
 def _raise_if_damaged(log: Log, path) -> None:
-    """A damaged log's built-in profile could not be made from what was read: the damage is what
-    is wrong (not a missing profile or topic), said as the reader found it."""
-    if log.source.partial:
+    """A damaged log of which no sample was read: its built-in profile could not be made because of
+    the damage (not a missing profile or topic), said as the reader found it. A log read but for its
+    cut last message keeps the error of what it lacks."""
+    if log.source.partial and not any(len(channel) for channel in log.channels.values()):
         raise CorruptLogError(
             f"damaged log, too little read to build its built-in profile: {log.source.partial_reason}",
             path=str(path),

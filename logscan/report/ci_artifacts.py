@@ -281,7 +281,8 @@ def _lists(document: dict) -> list[str]:
     logs = document.get("logs", [])
     lines: list[str] = []
     gone = [(log, a) for log in logs for a in (log.get("baseline") or {}).get("gone", [])]
-    gone_lines = [f"{log_name(log['file'])}: {alarm_line(a, log_clock(log))}" for log, a in gone]
+    # the baseline's alarms: in seconds since its log's start (its clock is the baseline run's)
+    gone_lines = [f"{log_name(log['file'])}: {alarm_line(a)}" for log, a in gone]
     missing = not_analysed(document)
     suppressed = [(log, a) for log in logs for a in log.get("suppressed", [])]
     suppressed_lines = [

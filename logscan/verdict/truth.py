@@ -46,7 +46,7 @@ def read_truth_file(path: str | os.PathLike) -> dict[str, Any]:
 
 def truth_beside(log_path: str | os.PathLike) -> Path | None:
     """``flight.ulg`` -> ``flight.truth.json`` (or ``flight.ulg.truth.json``), when one exists."""
-    p = Path(log_path)
+    p = Path(os.path.abspath(log_path))  # "." names its folder
     for candidate in (p.with_suffix(".truth.json"), p.with_name(p.name + ".truth.json")):
         if candidate != p and candidate.is_file():
             return candidate
