@@ -150,3 +150,15 @@ def test_ros2_bag_of_a_healthy_drive_has_no_alarm(cli, tmp_path):
     assert "Traceback" not in result.stderr
     assert result.exit_code in (0, 2), result.stdout + result.stderr
     assert "alarm" not in result.stdout.split("\n")[0].replace("no alarms", "")
+
+
+def test_a_gnss_gate_closed_for_a_few_steps_says_how_long(cli, tmp_path):
+    """sample_log_small's GNSS has no 3D fix for its first few grid steps (before its first fix
+    message): the warning gives their milliseconds, not "for 0.0 s"."""
+    path = need_testdata("px4-ulog/sample_log_small.ulg")
+    out = tmp_path / "s.json"
+    cli("analyze", path, "--no-report", "-q", "--allow-partial", "--json", out)
+    warnings = json.loads(out.read_text())["logs"][0]["warnings"]
+    gated = [w for w in warnings if "fix_type below 3" in w]
+    assert gated and not any(" for 0.0 s " in w for w in gated)
+    assert all(float(w.split(" for ")[1].split(" s ")[0]) > 0 for w in gated)

@@ -234,7 +234,7 @@ class _Aligner:
                 dt = float(np.median(np.diff(grid_ns))) / _NS if grid_ns.size > 1 else 0.0
                 group.gated_s = float(closed.sum()) * dt
                 self.warnings.append(
-                    f"group {spec.name!r}: {spec.gate_channel} below {spec.gate_min:g} for {group.gated_s:.1f} s "
+                    f"group {spec.name!r}: {spec.gate_channel} below {spec.gate_min:g} for {_seconds(group.gated_s)} s "
                     f"of {grid_ns.size * dt:.1f} s; no sample used there"
                 )
         return group
@@ -337,6 +337,12 @@ class _Aligner:
             stale_s=float(limit_s),
             channel_fresh=ch_fresh,
         )
+
+
+def _seconds(value: float) -> str:
+    """A duration in a warning: tenths of a second, or milliseconds under a tenth (a gate closed for
+    a step or two is not "0.0 s")."""
+    return f"{value:.1f}" if value >= 0.05 else f"{value:.3f}"
 
 
 def _linear(factor: float, offset: float):
