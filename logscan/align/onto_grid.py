@@ -12,7 +12,7 @@ from logscan.align.aligned import AlignedGroup, AlignedRun, HeldTable
 from logscan.align.aligner import _Aligner, _linear_transforms
 from logscan.align.sample_hold import _NS
 from logscan.results import GroundAround
-from logscan.timebase.time_sanity import check_window, grid, outlier_warnings
+from logscan.timebase.time_sanity import check_window, grid, grid_length, grid_points, outlier_warnings
 
 
 def align(
@@ -97,9 +97,8 @@ def _ground_around(aligner: _Aligner, policy, rate: float, grid_ns: np.ndarray, 
     a take-off, a landing or a blip there holds back steps inside it (`AlarmPolicy.margins_s`, and
     two steps); None without such a step. The steps are the whole grid's (`grid`'s first +
     round(k dt)), the times its t."""
-    dt_ns = _NS / rate
     first_ns, last_ns = aligner.grid_span
-    whole_steps = int(np.floor((last_ns - first_ns) / dt_ns + 1e-9)) + 1  # as `grid` without a window
+    whole_steps = grid_length(first_ns, last_ns, rate)
     before_s, after_s = policy.margins_s()
     last_step = first_step + grid_ns.size - 1
     before = np.arange(max(first_step - int(np.ceil(before_s * rate)) - 2, 0), first_step)
@@ -107,8 +106,8 @@ def _ground_around(aligner: _Aligner, policy, rate: float, grid_ns: np.ndarray, 
     if not before.size and not after.size:
         return None
     k = np.concatenate([before, after])
-    held, _ = aligner.hold(policy.ground_channel, first_ns + np.round(k * dt_ns).astype(np.int64), float("inf"))
-    t = (first_ns - aligner.start_ns) / _NS + k * (1.0 / rate)
+    held, _ = aligner.hold(policy.ground_channel, grid_points(first_ns, k, rate), float("inf"))
+    t = _grid_times(first_ns, aligner.start_ns, k, rate)
     return GroundAround(t[: before.size], held[: before.size], t[before.size :], held[before.size :])
 
 
@@ -174,11 +173,12 @@ def _grid(aligner: _Aligner, log, profile, window) -> tuple[np.ndarray, np.ndarr
     kept = {name: aligner.kept.get(name, aligner.cache[name].t.size) for name in aligner.dropped}
     aligner.warnings.extend(outlier_warnings(aligner.dropped, kept, start_ns))
     grid_ns, k0 = grid(first, last, rate, window, start_ns, aligner.ends, log.source.path)
-    n = grid_ns.size
-    dt = 1.0 / rate
-    t = (first - start_ns) / _NS + (k0 + np.arange(n)) * dt
+    return grid_ns, _grid_times(first, start_ns, k0 + np.arange(grid_ns.size), rate), start_ns, k0
 
-    return grid_ns, t, start_ns, k0
+
+def _grid_times(first: int, start_ns: int, k: np.ndarray, rate: float) -> np.ndarray:
+    """The grid's points ``k`` as t, seconds since the log's time zero ``start_ns``."""
+    return (first - start_ns) / _NS + k * (1.0 / rate)
 
 
 def _inputs(aligner: _Aligner, profile, grid_ns: np.ndarray, dt: float, scratch: np.ndarray):

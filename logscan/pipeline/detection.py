@@ -22,7 +22,7 @@ from logscan.pipeline.release import (
 )
 from logscan.pipeline.stages import Prepared
 from logscan.results import events_from_truth
-from logscan.training.calibration import calibrate_command, judged_steps
+from logscan.training.calibration import calibrate_command, judged_steps, suspended_policy
 from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
 from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments, sizes_of
 from logscan.verdict.observability import observability_for
@@ -53,9 +53,7 @@ def detect(
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
-    policy = prepared.profile.alarm_policy
-    if policy is not None and policy.suspends:
-        policy = policy.suspend(prepared.run.t, prepared.run.ground, prepared.filter_from, prepared.run.ground_around)
+    policy = suspended_policy(prepared.profile, prepared.run, prepared.filter_from)
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
     unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
@@ -160,6 +158,7 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
     if trace is None or trace.nis_group is None:
         return []
     out = []
+    judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
     for g, (name, size) in enumerate(zip(trace.group_names, trace.group_sizes.tolist())):
         nis = trace.nis_group[:, g]  # a column view: a mask picks from it a few times faster than [used, g]
         used = trace.updated[:, g] & np.isfinite(nis)
@@ -173,16 +172,15 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
                 f"({doc_url('troubleshooting.md')}; `{calibrate_command(prepared.profile)}`, then --tables tables.json)"
             )
         else:
-            out.extend(_blind_warning(prepared, g, name, size, used))
+            out.extend(_blind_warning(prepared, g, name, size, used, judged))
     return out
 
 
-def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used) -> list[str]:
+def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used, judged) -> list[str]:
     """The "blind" warning of group ``g`` when its mean NIS per output is below NIS_BLIND over the
-    judged updates (all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
+    ``judged`` updates (`judged_steps`; all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
     import numpy as np
 
-    judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
     if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
         used = used & judged
     trace = prepared.trace

@@ -54,7 +54,7 @@ def log_clock(log: dict) -> Clock:
 
 def _clock_cell(clock: Clock, t: float) -> str:
     """A time in a table cell: "5.27 s" (the log's clock's seconds) or "14:49:36.370 UTC"."""
-    return f"{clock.short(t)} UTC" if clock.utc else f"{clock.at(float(t)):.2f} s"
+    return f"{clock.short(t)} UTC" if clock.utc else clock.text(t)
 
 
 def log_name(path: str) -> str:
@@ -137,6 +137,7 @@ def _log_cases(log: dict) -> list[dict]:
     """One analysed log's testcases: a statistic each, its suppressed alarms, failed detectors and
     what could not be checked."""
     cases = []
+    clock = log_clock(log)
     for result in log.get("detectors", []):
         detector = result["detector"]
         alarms_by_signal: dict[str, list] = {}
@@ -146,14 +147,14 @@ def _log_cases(log: dict) -> list[dict]:
             alarms = alarms_by_signal.get(signal, [])
             case = {"name": f"{detector}: {signal}", "failure": None, "error": None}
             if alarms:
-                lines = "\n".join(alarm_line(a, log_clock(log)) for a in alarms)
+                lines = "\n".join(alarm_line(a, clock) for a in alarms)
                 case["failure"] = (f"{len(alarms)} alarm(s) on {signal}", lines)
             cases.append(case)
     for suppressed in log.get("suppressed", []):
         cases.append({
             "name": f"{suppressed.get('detector', '')}: {suppressed.get('signal', '')} (suppressed)",
             "failure": None, "error": None,
-            "skipped": f"{alarm_line(suppressed, log_clock(log))}: {suppressed.get('reason', '')}",
+            "skipped": f"{alarm_line(suppressed, clock)}: {suppressed.get('reason', '')}",
         })  # fmt: skip
     for failed in log.get("failed_detectors", []):
         cases.append({"name": f"{failed['detector']}: ran", "failure": None, "error": ("failed", failed["error"])})
@@ -169,9 +170,8 @@ def _possible_faults(suite: ET.Element, log: dict) -> None:
     possible = [p for r in log.get("detectors", []) for p in r.get("possible_faults", [])]
     if possible:
         out = ET.SubElement(suite, "system-out")
-        out.text = "possible faults (warnings, not alarms):\n" + "\n".join(
-            alarm_line(p, log_clock(log)) for p in possible
-        )
+        clock = log_clock(log)
+        out.text = "possible faults (warnings, not alarms):\n" + "\n".join(alarm_line(p, clock) for p in possible)
 
 
 def _time(seconds: float) -> str:

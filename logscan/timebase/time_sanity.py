@@ -152,8 +152,18 @@ def grid(
             hint="check the time unit or pass --start/--end",
         )
     n = max(int(np.floor(steps + 1e-9)) + 1, 0)
-    # g_k = g_0 + round(k * dt) in integer ns (exact for any log length float64 can index)
-    return first + np.round((k0 + np.arange(n)) * dt_ns).astype(np.int64), k0
+    return grid_points(first, k0 + np.arange(n), rate_hz), k0
+
+
+def grid_points(first: int, k: np.ndarray, rate_hz: float) -> np.ndarray:
+    """The grid's points ``k`` (indices from its first, ``first`` ns): g_k = g_0 + round(k * dt) in
+    integer ns (exact for any log length float64 can index)."""
+    return first + np.round(k * (NS / rate_hz)).astype(np.int64)
+
+
+def grid_length(first: int, last: int, rate_hz: float) -> int:
+    """The number of points of the whole grid from ``first`` to ``last`` ns (`grid` without a window)."""
+    return int(np.floor((last - first) / (NS / rate_hz) + 1e-9)) + 1
 
 
 def _span_text(seconds: float) -> str:

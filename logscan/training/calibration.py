@@ -151,16 +151,24 @@ def calibration_failures(calibration: dict | None) -> list[str]:
     return [str(reason) for reason in (calibration or {}).get("failures") or []]
 
 
+def suspended_policy(profile, run, filter_from: float | None = None):
+    """``profile``'s [alarms] policy suspended for ``run`` (`AlarmPolicy.suspend`: its ground channel,
+    a window's ground around it, ``filter_from``: where a window's filter started), as the detectors
+    judge it; the policy as it is when it suspends nothing, None without one."""
+    policy = getattr(profile, "alarm_policy", None)
+    if policy is None or not policy.suspends:
+        return policy
+    return policy.suspend(run.t, run.ground, filter_from, run.ground_around)
+
+
 def judged_steps(profile, run, filter_from: float | None = None) -> np.ndarray | None:
     """The steps of ``run`` the detectors judge under ``profile``'s [alarms] policy: not on the
     ground, not in the take-off or touchdown transients, not in the filter's first seconds (None:
-    every step; ``filter_from``: where a window's filter started, `AlarmPolicy.suspend`).
+    every step; ``filter_from``: see `suspended_policy`).
     Calibration uses the same steps: a vehicle standing still (a real flight's ground time, a SITL
     log's exact GNSS at rest) tells little of the noise the detectors will judge in flight."""
-    policy = getattr(profile, "alarm_policy", None)
-    if policy is None or not policy.suspends:
-        return None
-    suspended = policy.suspend(run.t, run.ground, filter_from, run.ground_around).suspended
+    policy = suspended_policy(profile, run, filter_from)
+    suspended = None if policy is None else policy.suspended
     return None if suspended is None else ~suspended
 
 
