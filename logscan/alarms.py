@@ -19,6 +19,10 @@ duration and warm-up. Rules, in order:
    after the previous one extends it. ``end`` is the time of the alarm's last exceeding sample,
    so ``end - start`` is the raised duration (0 for a one-sample alarm).
 5. Minimum duration: alarms with ``end - start < min_duration_s`` are dropped.
+6. Seen from a time (``from_t``: a window's first step, the grid before it a lead-in judged for
+   rules 3-5 only): an alarm that ends before it is dropped; one under way there starts at its first
+   exceedance from it, and its first exceedance, peak and count are those from it on. So a window
+   shows the alarms the whole log has in it, even where their persistence began before it.
 """
 
 from __future__ import annotations
@@ -128,13 +132,14 @@ def alarm_intervals(
     valid=None,
     signal: str = "",
     detector: str = "",
+    from_t: float | None = None,
 ) -> list[AlarmInterval]:
     """Alarm intervals of ``statistic`` against ``upper`` / ``lower`` (scalars or (N,) series).
 
     warmup: an (N,) bool mask of samples where no alarm may be raised, or an int number of leading
     samples; warmup_s: leading seconds (from t[0]) of warm-up, combined with ``warmup``.
-    valid: (N,) bool, samples to judge at all (others are skipped). See the module docstring for
-    the exact rules.
+    valid: (N,) bool, samples to judge at all (others are skipped). from_t: only the alarms seen
+    from this time on. See the module docstring for the exact rules.
     """
     t = np.asarray(t, dtype=np.float64)
     if t.ndim != 1:
@@ -152,6 +157,7 @@ def alarm_intervals(
         min_duration_s=min_duration_s,
         signal=signal,
         detector=detector,
+        from_t=from_t,
     )
 
 
@@ -168,8 +174,10 @@ def judged_alarms(
     min_duration_s: float = 0.0,
     signal: str = "",
     detector: str = "",
+    from_t: float | None = None,
 ) -> list[AlarmInterval]:
-    """`alarm_intervals` on the grid times ``t`` (float64) with its masks made (`sample_masks`)."""
+    """`alarm_intervals` on the grid times ``t`` (float64) with its masks made (`sample_masks`);
+    ``from_t``: the alarms seen from that time on (rule 6)."""
     if t.ndim != 1:
         raise InternalError(f"alarm_intervals: t must be 1-D, got shape {t.shape}")
     n = t.size
@@ -184,6 +192,8 @@ def judged_alarms(
     if samples is None:
         return []
     spans = _alarm_spans(samples, n_persist, hold_off_s, min_duration_s)
+    if spans is not None and from_t is not None:
+        spans = _seen_from(samples, spans, from_t)
     if spans is None:
         return []
     return _intervals(samples, *spans, signal, detector)
@@ -284,6 +294,20 @@ def _alarm_spans(
     if i0.size == 0:
         return None
     return i0, i1, f0
+
+
+def _seen_from(
+    samples: _Exceedances, spans: tuple[np.ndarray, np.ndarray, np.ndarray], from_t: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The alarm spans (positions among the exceedances) seen from ``from_t`` on (rule 6): those
+    ending before it dropped, the others' start and first exceedance no earlier than the first
+    exceedance at or after it; None when none is left."""
+    i0, i1, f0 = spans
+    first_from = int(np.searchsorted(samples.t[samples.steps], from_t - _TIME_EPS, side="left"))
+    keep = i1 >= first_from
+    if not keep.any():
+        return None
+    return np.maximum(i0[keep], first_from), i1[keep], np.maximum(f0[keep], first_from)
 
 
 def _intervals(

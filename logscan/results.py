@@ -90,6 +90,9 @@ class AlarmPolicy:
     airborne: np.ndarray | None = field(default=None, repr=False, compare=False)
     # whether ignore_start_s held back any step of the run (a window's filter led in: none)
     start_held: bool = field(default=False, repr=False, compare=False)
+    # alarms are seen from this time on (`logscan.alarms` rule 6): a window's first step, when a
+    # check runs on a grid led in before it (`logscan.pipeline.raw_lead`); None: from the first step
+    alarms_from_s: float | None = field(default=None, repr=False, compare=False)
 
     @property
     def suspends(self) -> bool:
@@ -284,7 +287,7 @@ class DetectorResult:
             self.judged[name] = np.broadcast_to(True, (n,))
         if suspended is not None:
             judged = ~suspended if judged is None else judged & ~suspended
-        options = {"signal": name, "detector": self.detector, **alarm_options}
+        options = {"signal": name, "detector": self.detector, "from_t": self._alarms_from(), **alarm_options}
         alarms = judged_alarms(t, statistic, band.upper, band.lower, judged, in_warmup, **options)
         self.alarms.extend(alarms)
         # once the alarms are drawn from them, the statistic and its band are only drawn and read for
@@ -299,10 +302,14 @@ class DetectorResult:
         if self.alarm_policy is not None:
             alarm_options = self.alarm_policy.apply(alarm_options)
         alarm_options.pop("check", None)
+        alarm_options["from_t"] = self._alarms_from()
         found = alarm_intervals(t, statistic, upper, None, signal=name, detector=self.detector, **alarm_options)
         kept = [p for p in found if not any(a.start <= p.end and p.start <= a.end for a in self.alarms)]
         self.possible.extend(kept)
         return kept
+
+    def _alarms_from(self) -> float | None:
+        return None if self.alarm_policy is None else self.alarm_policy.alarms_from_s
 
     def check_of(self, signal: str) -> str:
         """The check (score family) a statistic belongs to: declared by the detector, else the

@@ -261,3 +261,39 @@ def test_peak_is_the_largest_excess_inside_each_alarm(values, n, hold):
         assert a.peak_value == x[k]
         assert a.bound == ("upper" if x[k] > 1.0 else "lower")
         assert a.peak_threshold == (1.0 if x[k] > 1.0 else -2.0)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    values=st.lists(st.floats(-5, 5, allow_nan=False), min_size=1, max_size=60),
+    n=st.integers(1, 4),
+    hold=st.sampled_from([0.0, 0.1, 0.3]),
+    duration=st.sampled_from([0.0, 0.15]),
+    cut=st.integers(0, 60),
+)
+def test_alarms_seen_from_a_time_are_the_whole_series_alarms_from_it(values, n, hold, duration, cut):
+    """Rule 6: from ``from_t`` (a window's first step after a lead-in), the alarms are the whole
+    series' that end at or after it, each from its first exceedance there, with the peak and count
+    of that part: a persistence or hold-off that began before it still counts."""
+    x = np.array(values)
+    t = np.arange(x.size) * DT
+    from_t = t[min(cut, x.size - 1)]
+    options = {"upper": 1.0, "lower": -2.0, "n_persist": n, "hold_off_s": hold, "min_duration_s": duration}
+    whole = alarm_intervals(t, x, **options)
+    seen = alarm_intervals(t, x, **options, from_t=from_t)
+    assert [a.end for a in seen] == [a.end for a in whole if a.end >= from_t]
+    exceeds = (x > 1.0) | (x < -2.0)
+    excess = np.maximum(x - 1.0, -2.0 - x)
+    for a, b in zip(seen, [a for a in whole if a.end >= from_t]):
+        # its first exceedance and count from from_t on; its start and peak the whole one's when
+        # it starts from from_t, else from its first exceedance there
+        first = t[np.flatnonzero(exceeds & (t >= max(b.first_exceed, from_t) - 1e-12))[0]]
+        assert a.first_exceed == first
+        assert a.n_exceed == np.count_nonzero(exceeds & (t >= first - 1e-12) & (t <= a.end + 1e-12))
+        if b.start >= from_t:
+            assert (a.start, a.peak_time, a.peak_value) == (b.start, b.peak_time, b.peak_value)
+        else:
+            assert a.start == first
+            i0, i1 = int(round(a.start / DT)), int(round(a.end / DT))
+            span = np.where(exceeds[i0 : i1 + 1], excess[i0 : i1 + 1], -np.inf)
+            assert a.peak_time == t[i0 + int(np.argmax(span))]

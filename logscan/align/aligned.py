@@ -120,6 +120,7 @@ class AlignedRun:
     channel_stats: dict[str, dict[str, int]] = field(default_factory=dict)  # samples, nonfinite, ...
     window: tuple[float | None, float | None] | None = None  # --start/--end (s since start_ns), if given
     first_step: int = 0  # the full grid's index of t[0] (0: the log's first step; a window: later)
+    grid_origin_s: float = 0.0  # the full grid's step 0 as t: its step k is grid_origin_s + k * dt
 
     @property
     def n_steps(self) -> int:

@@ -27,7 +27,6 @@ def align(
     from ``start_s`` to ``end_s`` seconds since the log's start when given. ``release`` (a test
     of the name; None: none): the channels the log drops the samples of once held for the last
     time (`Log.release_samples`): a long log's raw samples and aligned copies then overlap less.
-
     Raises ProfileError when the profile names channels the log lacks (with close names),
     InputError when none of its input/measurement channels holds a finite sample, the grid is
     over MAX_GRID_STEPS or the window misses the log, and UsageError for a window with end <= start."""
@@ -74,6 +73,7 @@ def align(
         channel_stats=_channel_stats(aligner),
         window=window,
         first_step=first_step,
+        grid_origin_s=(aligner.grid_span[0] - start_ns) / _NS,  # `_grid_times` of step 0
     )
 
 

@@ -14,6 +14,7 @@ from logscan.memory import return_freed_pages
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.loops import detect_loops, recover_analysis
 from logscan.pipeline.preparation import Progress
+from logscan.pipeline.raw_lead import cut_to_window, led_grid, seen_from_window
 from logscan.pipeline.release import (
     pack_innovations_for,
     reads_samples,
@@ -108,17 +109,7 @@ def _run_detectors(
         return_freed_pages()  # what the filter or the last detector freed
         step(f"detector {detector.name}")
         try:
-            result = detector.run(
-                prepared.run,
-                prepared.trace,
-                model=prepared.model,
-                log_name=prepared.path,
-                traces=prepared.traces,
-                alarm_policy=policy,
-                truth=prepared.log.truth,  # simulated logs' ground truth, None for real logs
-                raw=prepared.raw,
-                metadata=prepared.log.source.metadata,
-            )
+            result = _run_one(detector, prepared, policy)
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - one detector must not take the others down
             failed[index] = detector_failure(detector.name, exc)
             continue
@@ -128,6 +119,24 @@ def _run_detectors(
         pack_innovations_for(prepared, [], reuse_samples=False)
     analysis.failures += [failed[i] for i in listed if i in failed]
     return [results[i] for i in sorted(results)]
+
+
+def _run_one(detector, prepared: Prepared, policy) -> DetectorResult:
+    """One detector's result on the prepared run; a window's checks of the vehicle's own reports
+    run from before it, their alarms seen from its first step (`logscan.pipeline.raw_lead`)."""
+    lead = led_grid(prepared.run) if detector.raw_topics else None
+    result = detector.run(
+        prepared.run if lead is None else lead,
+        prepared.trace,
+        model=prepared.model,
+        log_name=prepared.path,
+        traces=prepared.traces,
+        alarm_policy=policy if lead is None else seen_from_window(policy, prepared.run),
+        truth=prepared.log.truth,  # simulated logs' ground truth, None for real logs
+        raw=prepared.raw,
+        metadata=prepared.log.source.metadata,
+    )
+    return result if lead is None else cut_to_window(result, lead, prepared.run)
 
 
 # A group's NIS far from its chi-square law on a whole log: the filter's model of it is wrong. The

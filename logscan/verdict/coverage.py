@@ -52,16 +52,17 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
         profile = getattr(prepared, "profile", None)
         reasons += _starved_groups(prepared.run, trace, getattr(profile, "measurements", None))
         reasons += _divergence(trace)
+    span = "the log" if getattr(prepared.run, "window", None) is None else "the window (--start/--end)"
     for result in results:
         reasons += [f"{result.detector}: {c.reason}" for c in result.not_checked if c.partial]
         for name, series in result.series.items():
             if series.size and not np.isfinite(series).any():
-                reasons.append(f"{result.detector}: {name} was never computed (no finite value over the log)")
+                reasons.append(f"{result.detector}: {name} was never computed (no finite value over {span})")
             elif result.judged_fraction.get(name, 1.0) < MIN_JUDGED_FRACTION:
                 share = 100.0 * result.judged_fraction[name]
                 reasons.append(
                     f"{result.detector}: {name} was judged on only {share:.0f} % of its samples (its warm-up "
-                    "or window covers most of the log)"
+                    f"or window covers most of {span})"
                 )
     return reasons
 
