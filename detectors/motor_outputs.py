@@ -99,6 +99,8 @@ def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | s
         return f"{where}: never armed while it was logged"
     kind, protocol = _protocol(parameters, group)
     stop, stop_from = _stops(parameters, group, motors, kind, values, on)
+    if np.isnan(stop).any():
+        return f"{where}: {stop_from[int(np.flatnonzero(np.isnan(stop))[0])]}"
     top = np.array([_top(parameters, group, k, kind) for k in motors])
     idle = np.array([_idle(parameters, group, k, kind) for k in motors])
     command = _commanded(commands, [motor_of[k] for k in motors], t)
@@ -218,7 +220,20 @@ def _stops(parameters, group: str, motors, kind: str, values, on) -> tuple[np.nd
         off = off[np.isfinite(off)]
         if off.size:
             levels, counts = np.unique(off, return_counts=True)
-            stops.append(float(levels[np.argmax(counts)]))
+            level = float(levels[np.argmax(counts)])
+            # a stop runs below the motor: a disarmed value not under most of its armed values is
+            # some other publisher's or a failsafe's, not "stopped" (a ulog2csv export of the real
+            # robologs flight: 1500 disarmed, 1000-1300 in flight, all of it read as stopped)
+            running = float(np.nanmedian(values[on, j])) if np.isfinite(values[on, j]).any() else np.nan
+            if not level < running:
+                stops.append(np.nan)
+                whence.append(
+                    f"no PWM_{group}_DISn or PWM_DISARMED parameter, and output {k + 1}'s value while disarmed "
+                    f"({level:g}) is not below its median while armed ({running:g}): which value means stopped "
+                    "is unknown"
+                )
+                continue
+            stops.append(level)
             whence.append("its value while disarmed")
         else:
             stops.append(0.0)

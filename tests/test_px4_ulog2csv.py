@@ -73,3 +73,22 @@ def test_the_export_trains_tables_it_then_accepts(cli, exported, tmp_path):
     assert log["bytes"] == sum(p.stat().st_size for p in exported.iterdir())
     analysed = cli("analyze", exported, "--tables", tables, "--no-report", "--allow-partial")
     assert analysed.exit_code in (0, 1), analysed.stderr
+
+
+@pytest.mark.testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+def test_an_export_without_a_disarmed_value_below_the_motors_does_not_call_them_stopped(tmp_path, cli):
+    """The real robologs flight's actuator_outputs_0 holds 1500 while disarmed (rows of another
+    publisher, noutputs 4) and 1000-1300 in flight; its .ulg has PWM_MAIN_DISARM = 900. Its export
+    holds no parameters: read as "stopped", 1500 put every motor at zero for the whole flight (an
+    alarm over 2.96-6.16 s). A disarmed value not below the motors' armed values is not a stop:
+    the check says it cannot judge them."""
+    folder = tmp_path / "robologs_fmu_v5_test"  # ulog2csv names its files after the log
+    folder.mkdir()
+    convert_ulog2csv(str(need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")), None, str(folder), ",", None, None)
+    out = tmp_path / "s.json"
+    result = cli("analyze", folder, "--no-report", "--json", out)
+    assert result.exit_code in (0, 1, 2), result.stdout + result.stderr
+    log = json.loads(out.read_text())["logs"][0]
+    signals = [a["signal"] for d in log["detectors"] for a in d["alarms"]]
+    assert not any(s.startswith("health.motor") for s in signals)
+    assert any("value while disarmed (1500) is not below" in line for line in log["skipped_checks"])
