@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from logscan import __version__
 from logscan.detectors.registry import default_registry
 from logscan.errors import ExitCode
@@ -47,6 +49,9 @@ class Analysis:
     # what the [alarms] suspension left unjudged of the model-based statistics, when at most half of
     # the flight (`logscan.verdict.coverage.unjudged_flight`; more is an ``unchecked`` line); "": nothing
     unjudged: str = ""
+    # (N,) the grid steps the [alarms] suspension held back (None: none): where judging resumed
+    # after it, an incident's source is not the alarm that happened to update first
+    suspended: np.ndarray | None = field(default=None, repr=False)
     failures: list[DetectorFailure] = field(default_factory=list)  # detectors that raised
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
     scores: dict = field(default_factory=dict)  # detector -> logscan.verdict.scoring.Score (with truth)

@@ -25,7 +25,7 @@ from logscan.pipeline.stages import Prepared
 from logscan.results import events_from_truth
 from logscan.training.calibration import calibrate_command, judged_steps, suspended_policy
 from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
-from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, merge_fragments, sizes_of
+from logscan.verdict.incidents import DEFAULT_GAP_S, alarm_onsets, find_incidents, merge_fragments, sizes_of
 from logscan.verdict.observability import observability_for
 from logscan.verdict.scoring import score_by_detector
 
@@ -66,7 +66,9 @@ def detect(
     gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
     merge_fragments(analysis.results, gap_s)
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
-    analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared))
+    analysis.suspended = policy.suspended if policy is not None else None
+    onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
+    analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets)
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     if unjudged is not None and unjudged[1]:
         analysis.unchecked.append(unjudged[0])

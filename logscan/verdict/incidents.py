@@ -12,7 +12,10 @@ alarms behind it. The rules:
 3. The incident's source is the measurement group the filter rejected the most samples of during
    the incident (physically impossible values), if any; else the group whose alarm started first
    (ties: the larger peak/threshold), because the sensors that disagree with an estimate pulled off
-   by the faulty one alarm later; an alarm that names no group (an overall or state check) heads
+   by the faulty one alarm later. An alarm whose statistic's previous sample was held back by the
+   [alarms] suspension (the ground, a take-off) was under way when judging resumed: its onset is
+   somewhere before, so it starts, for this rule, where judging resumed, tied with every other
+   alarm under way there (`alarm_onsets`); an alarm that names no group (an overall or state check) heads
    an incident only when no group alarm is in it. The headline quotes the source group's alarm with
    the largest peak/threshold; without a group it says what that statistic means (the detector's
    `signal_words`, else its `signal_label`).
@@ -80,14 +83,43 @@ def _ratio(alarm: AlarmInterval) -> float:
     return alarm.peak_ratio if alarm.peak_ratio is not None else -math.inf
 
 
-def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[str, int]):
+def alarm_onsets(results: Sequence[DetectorResult], t: np.ndarray, suspended: np.ndarray | None) -> Onsets:
+    """(detector, signal, start) -> where judging resumed, for each alarm that was under way then
+    (rule 3): its statistic's last finite sample before its first exceedance was held back by the
+    suspension (not judged, on a suspended step). Empty without a suspension."""
+    onsets: Onsets = {}
+    if suspended is None or not suspended.any():
+        return onsets
+    resumed = np.flatnonzero(suspended[:-1] & ~suspended[1:]) + 1  # the first judged step after each
+    for result in results:
+        for signal in {a.signal for a in result.alarms}:
+            series, judged = result.series.get(signal), result.judged.get(signal)
+            if series is None or judged is None or np.shape(series) != t.shape:
+                continue
+            finite = np.flatnonzero(np.isfinite(series))
+            for alarm in (a for a in result.alarms if a.signal == signal):
+                at = int(np.searchsorted(t, alarm.first_exceed - 1e-9))
+                before = int(np.searchsorted(finite, at)) - 1
+                if before < 0 or judged[finite[before]] or not suspended[finite[before]]:
+                    continue
+                after = int(np.searchsorted(resumed, finite[before]))  # the resumption that follows it
+                if after < resumed.size and resumed[after] <= at:
+                    onsets[(alarm.detector, alarm.signal, alarm.start)] = float(t[resumed[after]])
+    return onsets
+
+
+Onsets = dict[tuple[str, str, float], float]
+
+
+def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[str, int], onsets: Onsets):
     """(group or None, the alarm the headline quotes) of one incident (rule 3)."""
     named = [(a, group_of(a.signal, groups)) for a in alarms]
     if rejected:
         group = max(rejected, key=lambda g: (rejected[g], -groups.index(g)))
     else:
         grouped = [(a, g) for a, g in named if g is not None]
-        first = min(grouped or named, key=lambda item: (item[0].start, -_ratio(item[0])))
+        onset = {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in alarms}
+        first = min(grouped or named, key=lambda item: (onset[id(item[0])], -_ratio(item[0])))
         group = first[1]
     quoted = [a for a, g in named if g == group] or alarms
     return group, max(quoted, key=_ratio)
@@ -129,10 +161,12 @@ def find_incidents(
     groups: Sequence[str],
     gap_s: float = DEFAULT_GAP_S,
     sizes: Sizes | None = None,
+    onsets: Onsets | None = None,
 ) -> list[Incident]:
     """Incidents in time order from every result's alarms (merge fragments first). ``trace``: the
     shared EKF trace (its rejected samples point at the source), or None. ``sizes``: the filter's
-    innovations to give each headline the deviation's size with (`Sizes`); None: no size."""
+    innovations to give each headline the deviation's size with (`Sizes`); None: no size.
+    ``onsets``: the alarms under way where judging resumed (`alarm_onsets`)."""
     alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
     starts = np.array([a.start for a in alarms])
     ends = np.maximum.accumulate(np.array([a.end for a in alarms])) if alarms else np.zeros(0)
@@ -143,7 +177,7 @@ def find_incidents(
         members = list(members)
         start, stop = members[0].start, max(a.end for a in members)
         rejected = _rejected_counts(trace, start, stop)
-        group, quoted = _source(members, list(groups), rejected)
+        group, quoted = _source(members, list(groups), rejected, onsets or {})
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
         size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
         incident = Incident(start, stop, group or quoted.signal, "", members, what, detail, quoted, size)

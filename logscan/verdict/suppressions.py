@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 from logscan.errors import InputError
 from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
-from logscan.verdict.incidents import DEFAULT_GAP_S, find_incidents, sizes_of
+from logscan.verdict.incidents import DEFAULT_GAP_S, alarm_onsets, find_incidents, sizes_of
 
 KEYS = {"detector", "check", "log", "start", "end", "reason", "expires"}
 
@@ -118,7 +118,8 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
         policy = prepared.profile.alarm_policy
         gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
         groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
-        analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared))
+        onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
+        analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets)
     return count
 
 

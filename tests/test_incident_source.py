@@ -1,0 +1,76 @@
+"""An incident's source where judging resumes after the [alarms] suspension (rule 3 of
+`logscan.verdict.incidents`): the alarms under way there began somewhere in the suspension, so
+which one updated first says nothing; the larger peak heads the incident."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import need_testdata
+from ulog_edit import edit_ulog
+
+from logscan.alarms import alarm_intervals
+from logscan.results import DetectorResult
+from logscan.verdict.incidents import alarm_onsets, find_incidents
+
+EVENTS = "px4-ulog/sample_px4_events.ulg"  # SITL quadcopter: take-off 16.7 s, judged from 21.7 s
+
+
+@pytest.mark.testdata(EVENTS)
+def test_a_gnss_jump_inside_the_take_off_mask_is_headed_by_the_gnss(cli, tmp_path):
+    """The real flight's GNSS position jumps 20 m north at 18 s, inside the 5 s after take-off that
+    are not judged. Where judging resumes (21.74 s) the attitude test's first update came 20 ms
+    before the GNSS's and exceeded 1.6 times; the GNSS test 257 times: the incident was headed
+    "attitude sensor inconsistent"."""
+    from pyulog import ULog
+
+    source = need_testdata(EVENTS)
+    start_us = ULog(str(source), ["vehicle_gps_position"]).start_timestamp
+
+    def jump(data) -> None:
+        t = (data["timestamp"].astype(np.int64) - start_us) / 1e6
+        data["latitude_deg"][t >= 18.0] += 20.0 / 111_320.0  # 20 m north, in degrees
+
+    path = edit_ulog(source, tmp_path / "jump.ulg", {"vehicle_gps_position": jump})
+    out = tmp_path / "s.json"
+    cli("analyze", str(path), "--no-report", "--json", str(out))
+    log = json.loads(out.read_text())["logs"][0]
+    first = log["incidents"][0]
+    assert first["source"] == "gnss_position", first
+    assert first["start"] < 23.0  # the incident where judging resumed, not a later one
+
+
+def _result(t, name, x, judged) -> DetectorResult:
+    result = DetectorResult(detector="nis")
+    result.series[name] = x
+    result.judged[name] = judged
+    result.alarms = alarm_intervals(t, x, 1.0, valid=judged, signal=name, detector="nis")
+    return result
+
+
+def test_alarms_under_way_where_judging_resumes_start_together():
+    t = np.arange(100) * 0.01
+    suspended = t < 0.5
+    # a 100 Hz group exceeding slightly from 0.5 s, a 10 Hz group far more from its first update at 0.52 s
+    small = np.where(t >= 0.3, 1.5, 0.5)
+    every_tenth = np.isclose((t * 100) % 10, 2)
+    large = np.where(every_tenth, np.where(t >= 0.3, 50.0, 0.5), np.nan)
+    fast = _result(t, "nis.fast", small, ~suspended)
+    slow = _result(t, "nis.slow", large, every_tenth & ~suspended)
+    onsets = alarm_onsets([fast, slow], t, suspended)
+    assert set(onsets.values()) == {0.5}
+    (incident,) = find_incidents([fast, slow], None, ["fast", "slow"], onsets=onsets)
+    assert incident.source == "slow"
+    (unsorted,) = find_incidents([fast, slow], None, ["fast", "slow"])
+    assert unsorted.source == "fast"  # the rule before: whichever updated first
+
+
+def test_an_alarm_that_begins_after_judged_samples_keeps_its_own_start():
+    t = np.arange(100) * 0.01
+    suspended = t < 0.2
+    x = np.where(t >= 0.6, 2.0, 0.5)
+    result = _result(t, "nis.fast", x, ~suspended)
+    assert alarm_onsets([result], t, suspended) == {}
+    assert alarm_onsets([result], t, None) == {}
