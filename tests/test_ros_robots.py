@@ -263,3 +263,26 @@ def test_a_folder_of_bags_is_one_log_per_bag_and_per_rosbag2_directory(tmp_path)
         (ros2 / piece.name).symlink_to(piece)
     assert expand_logs([str(fleet)]) == [str(fleet / "monday.bag"), str(ros2)]
     assert expand_logs([str(ros2)]) == [str(ros2)]  # its .mcap is a piece of it, not a second log
+
+
+@pytest.mark.parametrize("flip_from_s", [140.0, 300.0])
+def test_an_odometry_yaw_rate_that_flips_sign_does_not_overrule_the_gyro(cli, tmp_path, flip_from_s):
+    """The wheels' yaw rate sign-flipped from 140 s (most of the drive) or 300 s: the whole log's
+    correlation with the gyro's up axis (-0.78, 0.06) fell under the minimum and the built-in profile
+    dropped the healthy IMU, drove the heading with the faulty yaw rate and blamed the GNSS. The two
+    agree before the flip: a change in the log, for the detectors, who now name the wheels."""
+    from ros_edit import edit_messages
+
+    flipped = tmp_path / "flipped.bag"
+
+    def flip(msg, first):
+        msg.twist.twist.angular.z = -msg.twist.twist.angular.z
+
+    assert edit_messages(need_testdata(ROS1_BAG), flipped, "/husky_velocity_controller/odom", flip_from_s, 1e9, flip)
+    code, entry, text = summary(cli, flipped, tmp_path)
+    assert "/imu/data: its up axis disagrees" not in text
+    assert "agree over" in text and "detectors judge the odometry" in text
+    assert code == 1 and entry["incidents"], text
+    first = entry["incidents"][0]
+    assert first["source"] == "wheel_yaw_rate", first
+    assert flip_from_s <= first["start"] <= flip_from_s + 20.0, first

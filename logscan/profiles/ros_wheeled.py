@@ -29,6 +29,7 @@ COVARIANCE_TYPE_DIAGONAL_KNOWN = 2  # sensor_msgs/NavSatFix position_covariance_
 # an IMU's mean specific force this close to one of its axes (deg) says the axis is up
 MOUNT_AXIS_TOLERANCE_DEG = 15.0
 MIN_YAW_RATE_AGREEMENT = 0.5  # the gyro's up axis against the odometry's yaw rate: correlation
+AGREEMENT_WINDOW_S = 20.0  # stretches over which that agreement is judged again, when the whole log's is low
 
 
 class YawRate(NamedTuple):
@@ -59,14 +60,57 @@ def imu_up_axis(channels, imu: str) -> tuple[int, float] | None:
 
 def yaw_rate_agreement(channels, gyro: str, sign: float, odom_rate: str) -> float:
     """Correlation of the gyro's yaw rate (``sign`` x ``gyro``) with the odometry's, on the odometry's times."""
+    t_o, w_g, w_o = _yaw_rates(channels, gyro, sign, odom_rate)
+    return _correlation(w_g, w_o)
+
+
+def agreeing_stretches(channels, gyro: str, sign: float, odom_rate: str) -> tuple[list[float], list[float]]:
+    """(starts of the AGREEMENT_WINDOW_S stretches where the two yaw rates agree, r >= the minimum;
+    starts of those where they are opposite, r <= -the minimum), seconds since the odometry's first
+    sample. A wrong axis or sign convention disagrees all along; a yaw rate that goes wrong during
+    the log (a sign flip, a stuck sensor) agrees before: the log's own change, for the detectors."""
+    t_o, w_g, w_o = _yaw_rates(channels, gyro, sign, odom_rate)
+    if t_o.size == 0:
+        return [], []
+    stretch = np.floor((t_o - t_o[0]) / 1e9 / AGREEMENT_WINDOW_S).astype(np.int64)
+    bounds = np.flatnonzero(np.diff(stretch)) + 1
+    r = [_correlation(g, o) for g, o in zip(np.split(w_g, bounds), np.split(w_o, bounds))]
+    starts = np.unique(stretch) * AGREEMENT_WINDOW_S
+    agree = [float(s) for s, c in zip(starts, r) if c >= MIN_YAW_RATE_AGREEMENT]
+    opposite = [float(s) for s, c in zip(starts, r) if c <= -MIN_YAW_RATE_AGREEMENT]
+    return agree, opposite
+
+
+def _yaw_rates(channels, gyro: str, sign: float, odom_rate: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the odometry's times in ns, the gyro's yaw rate there, the odometry's)."""
     g, o = channels[gyro], channels[odom_rate]
     t_o = np.asarray(o.t, dtype=np.float64)
     w_g = sign * np.interp(t_o, np.asarray(g.t, dtype=np.float64), np.asarray(g.values, dtype=np.float64))
-    w_o = np.asarray(o.values, dtype=np.float64)
-    ok = np.isfinite(w_g) & np.isfinite(w_o)
-    if ok.sum() < 10 or np.std(w_o[ok]) == 0 or np.std(w_g[ok]) == 0:
+    return t_o, w_g, np.asarray(o.values, dtype=np.float64)
+
+
+def _correlation(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 10 or np.std(a[ok]) == 0 or np.std(b[ok]) == 0:
         return 0.0
-    return float(np.corrcoef(w_g[ok], w_o[ok])[0, 1])
+    return float(np.corrcoef(a[ok], b[ok])[0, 1])
+
+
+def _changed(found: Found, imu: str, gyro: str, sign: float, odom_rate: str) -> str:
+    """Why the gyro is used although the whole log's yaw rates disagree, when they agree over some
+    stretches (the odometry's or the gyro's yaw rate changed during the log: a fault the detectors
+    are to judge, not a mounting a faulty sensor may overrule); "" when they agree nowhere."""
+    agree, opposite = agreeing_stretches(found.channels, gyro, sign, odom_rate)
+    if not agree:
+        return ""
+    where = f" and are opposite over {len(opposite)} (from {opposite[0]:g} s)" if opposite else ""
+    found.notes.append(
+        f"{imu}: its up axis and the odometry's yaw rate agree over {len(agree)} stretches of "
+        f"{AGREEMENT_WINDOW_S:g} s (from {agree[0]:g} s){where}, not over the whole log: one of them changed "
+        "during it, so the gyro (up by gravity) is used and the detectors judge the odometry against it"
+    )
+    axis = gyro.rsplit(".", 1)[1]
+    return f"the IMU's {axis} axis, up by gravity (agrees with the odometry's over {len(agree)} stretches)"
 
 
 def wheeled_profile(log, found: Found, wheels: Wheels) -> BuiltProfile:
@@ -223,11 +267,12 @@ def _yaw_rate(found: Found, wheels: Wheels) -> YawRate:
             axis, sign = up
             gyro = f"{imu}/angular_velocity.{AXES[axis]}"
             agreement = yaw_rate_agreement(channels, gyro, sign, odom_rate) if found.has(odom_rate) else 1.0
-            if agreement >= MIN_YAW_RATE_AGREEMENT:
+            changed = "" if agreement >= MIN_YAW_RATE_AGREEMENT else _changed(found, imu, gyro, sign, odom_rate)
+            if agreement >= MIN_YAW_RATE_AGREEMENT or changed:
                 (std,) = covariance_std(channels, [f"{imu}/angular_velocity_covariance[{4 * axis}]"])
                 value = f'{{ channels = ["{gyro}"], scale = [{sign:g}] }}'
                 why = f"the IMU's {AXES[axis]} axis, up by gravity (agrees with the odometry's: r = {agreement:.2f})"
-                return YawRate(value, std, imu_hz, why, True)
+                return YawRate(value, std, imu_hz, changed or why, True)
             found.notes.append(
                 f"{imu}: its up axis disagrees with the odometry's yaw rate (r = {agreement:.2f}): not used"
             )
