@@ -13,9 +13,17 @@ from __future__ import annotations
 import numpy as np
 
 
-def accuracy_jump(t_ns: np.ndarray, values: np.ndarray, window_s: float) -> np.ndarray:
+def accuracy_jump(
+    t_ns: np.ndarray, values: np.ndarray, window_s: float, judged: np.ndarray | None = None
+) -> np.ndarray:
     """Per sample, ``values`` over the median of the finite positive values of the ``window_s``
-    before it (the samples judged: NaN where ``values`` is NaN or the window holds none).
+    before it: NaN where not ``judged`` (default: every sample), where ``values`` is NaN, or where
+    the window holds none.
+
+    The reference is every valid value (NaN marks one not valid, e.g. no 3D fix), judged or not:
+    a check judged only while armed still compares its first armed reports with the receiver's
+    level just before arming; a reference of judged reports alone would hold only the jumped ones
+    for a jump within a second of arming, and could never alarm.
 
     Vectorised over a window of samples (the count ``window_s`` spans at the median sample
     period), each window clipped to ``window_s`` in time."""
@@ -37,6 +45,8 @@ def accuracy_jump(t_ns: np.ndarray, values: np.ndarray, window_s: float) -> np.n
     reference = np.full(v.size, np.nan)
     if has.any():
         reference[has] = np.nanmedian(windows[has], axis=1)
-    judged = has & np.isfinite(good)
-    out[judged] = good[judged] / reference[judged]
+    judge = has & np.isfinite(good)
+    if judged is not None:
+        judge &= np.asarray(judged, dtype=bool)
+    out[judge] = good[judge] / reference[judge]
     return out

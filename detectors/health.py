@@ -19,8 +19,8 @@ log, a battery whose ``connected`` is 0 all flight or a GNSS without a 3D fix al
 - GNSS (``vehicle_gps_position``, else ``sensor_gps``), while armed when the arming state is
   known: fix lost after the first 3D fix, ``eph`` / ``epv`` over EKF2_REQ_EPH / EKF2_REQ_EPV while
   3D-fixed, ``jamming_indicator`` over ``jamming_limit``, and a sudden rise of the reported
-  accuracy (eph, epv, s_variance_m_s over ``accuracy_jump`` times their median of the
-  ``accuracy_window_s`` before: detectors/accuracy_jump.py);
+  accuracy (eph, epv, s_variance_m_s over ``accuracy_jump`` times their median of the 3D-fixed
+  reports of the ``accuracy_window_s`` before, armed or not: detectors/accuracy_jump.py);
 - motors (``actuator_outputs``, ``actuator_motors``, ``actuator_armed`` / ``vehicle_status``):
   saturated share, one output at its max, an output at its stopped value while flying; judged
   only on outputs that drive motors PX4 commands to run (detectors/motor_outputs.py);
@@ -62,7 +62,7 @@ class HealthDetector(PowerChecks, GnssChecks, EventChecks):
         "jamming_limit": 80.0,  # GNSS jamming_indicator (0-255) above this is jamming
         "timeout_periods": 5.0,  # a gap of more than this many median periods is a timeout
         "accuracy_jump": 2.0,  # GNSS eph / epv / speed accuracy over this times its recent median
-        "accuracy_window_s": 10.0,  # ... the median of the reports this long before it
+        "accuracy_window_s": 10.0,  # ... the median of the 3D-fixed reports this long before it
     }
     parameter_constraints = {
         "min_duration_s": [multiplier_bound(0, 3600, "s of a failing check before an alarm", closed="both")],

@@ -89,7 +89,7 @@ class GnssChecks(HealthChecks):
                 min_duration_s=None if px4_passing is not None else GNSS_CHECKS_FAILING_S,
             )
         if fixed.any():  # judged while 3D-fixed only, as eph / epv
-            self._accuracy_jumps(fields, where, sfx, gate & fixed, f"{while_}, 3D fix")
+            self._accuracy_jumps(fields, where, sfx, fixed, gate, f"{while_}, 3D fix")
         jam = fields.get("jamming_indicator")
         name = f"{PREFIX}.gnss_jamming{sfx}"
         if jam is None or not np.array_equal(jam.t, t):
@@ -138,16 +138,19 @@ class GnssChecks(HealthChecks):
             self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where} has no fix_type"
         return fixed
 
-    def _accuracy_jumps(self, fields, where: str, sfx: str, judged, while_: str) -> None:
+    def _accuracy_jumps(self, fields, where: str, sfx: str, fixed, gate, while_: str) -> None:
         """``health.gnss_accuracy_jump.<field>``: each reported accuracy over ``accuracy_jump``
-        times its recent median (detectors/accuracy_jump.py), judged where ``judged``."""
+        times its median over the 3D-fixed reports before it (detectors/accuracy_jump.py), judged
+        where ``gate`` and ``fixed``. The median takes the reports before arming too: a jump just
+        after arming is judged against the level the receiver had then."""
         for field in ("eph", "epv", "s_variance_m_s"):
             channel = fields.get(field)
             name = f"{PREFIX}.gnss_accuracy_jump.{field}{sfx}"
-            if channel is None or channel.t.shape != judged.shape:
+            if channel is None or channel.t.shape != fixed.shape:
                 self._skipped[name] = f"{where} has no {field}"
                 continue
-            ratio = accuracy_jump(channel.t, np.where(judged, channel.values, np.nan), float(self.accuracy_window_s))
+            valid = np.where(fixed, channel.values, np.nan)  # a report without a 3D fix is no level
+            ratio = accuracy_jump(channel.t, valid, float(self.accuracy_window_s), judged=gate & fixed)
             limit = {"times_recent_median": float(self.accuracy_jump), "window_s": float(self.accuracy_window_s)}
             limit["while"] = while_
             self._add(name, where, channel.t, ratio / float(self.accuracy_jump), limit=limit, why=f" ({while_})")

@@ -1,0 +1,56 @@
+"""The GNSS accuracy-jump check (detectors/accuracy_jump.py, docs/algorithms.md section 3c): its
+reference median is every 3D-fixed report before, armed or not; only the judging waits for arming.
+A jump within a second of arming is found on a real log edited as a receiver would report it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import need_testdata
+from ulog_edit import edit_ulog
+
+from logscan.detectors.accuracy_jump import accuracy_jump
+
+EVENTS = "px4-ulog/sample_px4_events.ulg"  # SITL quadcopter: first 3D fix 9.18 s, armed 14.94 s
+GPS = "vehicle_gps_position"
+
+
+def test_the_reference_takes_the_reports_not_judged_and_only_judged_samples_get_a_ratio():
+    t = (np.arange(100) * 0.2e9).astype(np.int64)  # 5 Hz for 20 s
+    eph = np.where(t >= 10.2e9, 4.0, 1.0)  # 4 times worse from 10.2 s
+    armed = t >= 10e9  # armed one sample before the jump
+    ratio = accuracy_jump(t, eph, 10.0, judged=armed)
+    assert np.isnan(ratio[~armed]).all()  # not judged before arming
+    assert ratio[50] == pytest.approx(1.0) and ratio[51] == pytest.approx(4.0)  # against the level before
+    assert ratio[56] == pytest.approx(4.0)  # and for the second it must persist to alarm
+    # a reference of judged reports alone: within 0.4 s it holds only the jumped ones
+    alone = accuracy_jump(t, np.where(armed, eph, np.nan), 10.0)
+    assert alone[51] == pytest.approx(4.0) and alone[52] == pytest.approx(1.6) and alone[53] == 1.0
+
+
+@pytest.mark.testdata("px4-ulog")
+def test_a_jump_half_a_second_after_arming_alarms(cli, tmp_path):
+    """eph / epv steady at 0.3 / 0.4 m from the first 3D fix, 4 times worse from 15.5 s (armed at
+    14.94 s): both jump checks alarm once it has lasted min_duration_s (1 s)."""
+    from pyulog import ULog
+
+    source = need_testdata(EVENTS)
+    start_us = ULog(str(source), [GPS]).start_timestamp
+    onset_s = 15.5
+
+    def worse(data) -> None:
+        t = (data["timestamp"].astype(np.int64) - start_us) / 1e6
+        fixed = data["fix_type"] >= 3
+        for field, level in (("eph", 0.3), ("epv", 0.4)):
+            data[field][fixed] = np.where(t[fixed] >= onset_s, 4.0 * level, level)
+
+    path = edit_ulog(source, tmp_path / "jump_after_arming.ulg", {GPS: worse})
+    out = tmp_path / "summary.json"
+    cli("analyze", str(path), "--no-report", "--json", str(out))
+    log = json.loads(out.read_text())["logs"][0]
+    health = next(d for d in log["detectors"] if d["detector"] == "health")
+    jumps = {a["signal"]: a for a in health["alarms"] if a["signal"].startswith("health.gnss_accuracy_jump.")}
+    assert set(jumps) == {"health.gnss_accuracy_jump.eph", "health.gnss_accuracy_jump.epv"}, health["alarms"]
+    assert all(onset_s - 0.2 <= a["first_exceed"] and a["start"] <= onset_s + 1.5 for a in jumps.values()), jumps
