@@ -109,11 +109,7 @@ class GnssChecks(HealthChecks):
             first = np.flatnonzero(three_d)
             inside = in_span(self._grid, t)
             if inside.any() and not three_d[inside].any():
-                best = int(np.nanmax(fix.values)) if np.isfinite(fix.values).any() else None
-                self._unmonitored.append(
-                    f"GNSS: no 3D fix all flight ({where}.fix_type"
-                    + (f" at most {best})" if best is not None else " never set)")
-                )
+                self._unmonitored.append(self._no_fix_reason(where, fix.values[inside]))
                 fixed = np.zeros(t.size, bool)
             elif first.size == 0:
                 self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where}: no 3D fix in the log"
@@ -137,6 +133,16 @@ class GnssChecks(HealthChecks):
         else:
             self._skipped[f"{PREFIX}.gnss_fix{sfx}"] = f"{where} has no fix_type"
         return fixed
+
+    def _no_fix_reason(self, where: str, judged_fix: np.ndarray) -> str:
+        """Why the GNSS is not checked: no 3D fix in ``judged_fix`` (its fix_type where judged). The
+        best fix is the judged samples' own: a window before the first 3D fix must not quote a fix
+        the log only reaches later."""
+        best = f"at most {int(np.nanmax(judged_fix))}" if np.isfinite(judged_fix).any() else "never set"
+        if self._grid.window is None:
+            return f"GNSS: no 3D fix all flight ({where}.fix_type {best})"
+        # a window's checks are led in before it (logscan/pipeline/raw_lead.py): judged there too
+        return f"GNSS: no 3D fix over the window ({where}.fix_type {best} while judged)"
 
     def _accuracy_jumps(self, fields, where: str, sfx: str, fixed, gate, while_: str) -> None:
         """``health.gnss_accuracy_jump.<field>``: each reported accuracy over ``accuracy_jump``

@@ -78,6 +78,16 @@ def test_a_gnss_without_3d_fix_all_flight_is_named_not_checked(cli, tmp_path):
     assert not any(name.startswith(("health.gnss_eph", "health.gnss_epv")) for name in _health(log)["series"])
 
 
+def test_a_window_before_the_first_3d_fix_quotes_the_fix_it_judged(cli, tmp_path):
+    """0-3 s of the unedited log: fix_type 0 there (2 from 8.45 s, 3 from 9.18 s). The reason names
+    the window and the best fix judged, not the whole log's 3."""
+    result, log, _ = _analyze(cli, need_testdata(EVENTS), tmp_path, "--start", "-5", "--end", "3")
+    line = "GNSS: no 3D fix over the window (vehicle_gps_position_0.fix_type at most 0 while judged)"
+    assert f"not checked: health: {line}" in result.stdout
+    assert f"health: {line}" in log["unchecked"], log["unchecked"]
+    assert "at most 3" not in result.stdout and "all flight (vehicle_gps" not in result.stdout
+
+
 def test_checks_with_nothing_to_judge_are_listed_and_leave_the_verdict(cli, tmp_path):
     result, log, page = _analyze(cli, need_testdata(APPENDED), tmp_path, "--allow-partial")
     skipped = log["skipped_checks"]
