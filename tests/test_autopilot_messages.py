@@ -33,7 +33,8 @@ def test_repeated_messages_are_folded_per_incident_and_disarmed_ones_counted():
         (26.0, "ERROR", "[commander] Dangerous battery level!, please land!"),
     )
     incidents = [SimpleNamespace(start=4.0, end=4.1), SimpleNamespace(start=11.0, end=12.0)]
-    messages, disarmed = flight_messages(metadata, START_NS, incidents, armed=[(2.0, 15.5)])
+    messages, disarmed, outside = flight_messages(metadata, START_NS, incidents, armed=[(2.0, 15.5)])
+    assert outside == 0  # no window: the whole log
     assert disarmed == 2  # the preflight warning at 1 s and the error at 16 s, after disarming
     assert [(m.level, m.first, m.last, m.count, m.incident) for m in messages] == [
         ("ERROR", 3.0, 4.0, 2, 1),  # 3.0 s is within 1 s of incident 1, 4.0 s inside it
@@ -44,9 +45,9 @@ def test_repeated_messages_are_folded_per_incident_and_disarmed_ones_counted():
         "ERROR at 3.0 s: [commander] Dangerous battery level!, please land! (x2, until 4.0 s; in incident 1)"
     )
     # unknown arming state: every message of the log is the flight's
-    every, none_disarmed = flight_messages(metadata, START_NS, [], armed=None)
+    every, none_disarmed, _ = flight_messages(metadata, START_NS, [], armed=None)
     assert none_disarmed == 0 and sum(m.count for m in every) == 6
-    assert flight_messages({}, START_NS, [], armed=None) == ([], 0)
+    assert flight_messages({}, START_NS, [], armed=None) == ([], 0, 0)
 
 
 @pytest.mark.testdata("px4-ulog-extra")
@@ -75,6 +76,37 @@ def test_the_robologs_flight_lists_its_dangerous_battery_error(cli, tmp_path):
     assert "Dangerous battery level!, please land!" in table[: table.index("</table>")]
 
 
+def test_a_window_lists_only_its_own_messages_and_counts_the_others():
+    metadata = _metadata(
+        (11.0, "WARNING", "[commander] before the window"),
+        (13.0, "ERROR", "[commander] Dangerous battery level!, please land!"),
+        (14.5, "WARNING", "[commander] in the window, disarmed"),
+        (16.0, "CRITICAL", "[commander] after the window"),
+    )
+    messages, disarmed, outside = flight_messages(metadata, START_NS, [], armed=[(0.0, 4.0)], window=(2.0, 5.0))
+    assert [m.text for m in messages] == ["[commander] Dangerous battery level!, please land!"]
+    assert (disarmed, outside) == (1, 2)  # the disarmed count is of the window's messages too
+
+
+@pytest.mark.testdata("px4-ulog-extra")
+def test_a_window_of_the_robologs_flight_leaves_out_the_messages_outside_it(cli, tmp_path):
+    """--start 2 --end 6 is 5.13-9.13 s of PX4's boot time: the battery ERROR at 3.24 s and the
+    load_mon WARNING at 10.95 s are outside it; the EKF switches at 5.68-5.72 s are inside."""
+    path = need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+    summary, report = tmp_path / "s.json", tmp_path / "r.html"
+    result = cli("analyze", path, "--start", "2", "--end", "6", "-o", report, "--json", summary)
+    (log,) = json.loads(summary.read_text())["logs"]
+    texts = [m["text"] for m in log["autopilot_messages"]]
+    assert texts and all(t.startswith("[ekf2] primary EKF changed") for t in texts), texts
+    assert all(2.0 <= m["start"] <= 6.0 for m in log["autopilot_messages"])
+    assert log["autopilot_messages_outside_window"] == 2
+    assert "ERROR at 3.24 s" not in result.stdout and "WARNING at 10.95 s" not in result.stdout
+    assert "  autopilot: 2 message(s) of WARNING and above outside the window (not listed)" in result.stdout
+    page = report.read_text(encoding="utf-8")
+    table = page[page.index('id="autopilot-messages"') :]
+    assert "Dangerous battery level" not in table[: table.index("</table>")]
+
+
 def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():
     from logscan.cli.render import render_summary
     from logscan.verdict.autopilot_messages import AutopilotMessage
@@ -93,7 +125,7 @@ def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():
         skipped_checks=[],
         failures=[],
         incidents=[],
-        autopilot_messages=lambda: (messages, 0),
+        autopilot_messages=lambda: (messages, 0, 0),
         loops={},
         alarms=[],
         recovery=None,
@@ -109,5 +141,5 @@ def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():
 
 def test_every_distinct_message_is_kept_however_many():
     metadata = _metadata(*[(11.0 + 0.1 * k, "WARNING", f"[navigator] waypoint {k} unreachable") for k in range(80)])
-    messages, _ = flight_messages(metadata, START_NS, [], armed=None)
+    messages, _, _ = flight_messages(metadata, START_NS, [], armed=None)
     assert len(messages) == 80 and all(m.count == 1 for m in messages)

@@ -149,13 +149,15 @@ def _incident_lines(incidents, clock, max_rows: int) -> tuple[list[str], int]:
 
 
 def _autopilot_lines(analysis, clock, max_rows: int) -> list[str]:
-    """The autopilot's own messages (WARNING and above, armed), ``max_rows`` of them."""
-    messages, disarmed = analysis.autopilot_messages()
+    """The autopilot's own messages (WARNING and above, armed, in the window), ``max_rows`` of them."""
+    messages, disarmed, outside = analysis.autopilot_messages()
     lines = [f"  autopilot: {message.line(clock)}" for message in messages[:max_rows]]
     if len(messages) > max_rows:
         lines.append(f"  ... {len(messages) - max_rows} more autopilot message(s) (see the report / --json)")
     if disarmed:
         lines.append(f"  autopilot: {disarmed} more message(s) of WARNING and above while disarmed (in the report)")
+    if outside:
+        lines.append(f"  autopilot: {outside} message(s) of WARNING and above outside the window (not listed)")
     return lines
 
 

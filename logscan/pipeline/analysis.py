@@ -18,7 +18,7 @@ from logscan.report import ReportInput, report_matches
 from logscan.report.context import measurement_groups
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import clock_of
-from logscan.verdict.autopilot_messages import flight_messages
+from logscan.verdict.autopilot_messages import FlightMessages, flight_messages
 from logscan.verdict.coverage import skipped_checks
 from logscan.verdict.incidents import signal_label
 
@@ -134,13 +134,17 @@ class Analysis:
         (`logscan.verdict.coverage.skipped_checks`): listed; unlike ``unchecked``, the verdict stands."""
         return skipped_checks(self.results)
 
-    def autopilot_messages(self) -> tuple[list, int]:
-        """(the autopilot's distinct messages of WARNING and above during flight, each with its
-        incident (`logscan.verdict.autopilot_messages`); the number logged while disarmed)."""
+    def autopilot_messages(self) -> FlightMessages:
+        """The autopilot's distinct messages of WARNING and above during flight and within the
+        window, each with its incident; the numbers logged while disarmed and outside the window
+        (`logscan.verdict.autopilot_messages`)."""
         context = getattr(self.prepared, "context", None)
         states = getattr(context, "states", None) or {}
         metadata = self.log.source.metadata or {}
-        return flight_messages(metadata, self.run.start_ns, self.incidents, states.get("armed"))
+        run = self.run
+        # the analysed span, as the raw-topic checks judge it (detectors/raw_topics.py `in_span`)
+        window = None if run.window is None else (float(run.t[0]), float(run.t[-1] + run.dt))
+        return flight_messages(metadata, run.start_ns, self.incidents, states.get("armed"), window)
 
     @property
     def duration_s(self) -> float:
@@ -225,7 +229,7 @@ class Analysis:
             "incidents": [incident.to_dict(clock) for incident in self.incidents],
             "unchecked": list(self.unchecked),
             "skipped_checks": self.skipped_checks,
-            **_messages_summary(*self.autopilot_messages(), clock),
+            **_messages_summary(self.autopilot_messages(), clock),
             "failed_detectors": [{"detector": f.detector, "error": f.message} for f in self.failures],
             "logscan_version": __version__,
             "profile_source": self.profile_source,
@@ -287,7 +291,7 @@ class Analysis:
             unchecked=self.unchecked + [f.message for f in self.failures],
             skipped=self.skipped_checks,
             unjudged=self.unjudged,
-            messages=self.autopilot_messages()[0],
+            messages=self.autopilot_messages().listed,
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
             context=getattr(self.prepared, "context", None),
             innovations=getattr(self.prepared, "innovations", None),
@@ -297,11 +301,13 @@ class Analysis:
         )
 
 
-def _messages_summary(messages: list, disarmed: int, clock) -> dict[str, Any]:
-    """The JSON of the autopilot's messages during flight and the count of those while disarmed."""
+def _messages_summary(messages: FlightMessages, clock) -> dict[str, Any]:
+    """The JSON of the autopilot's messages during flight and the counts of those while disarmed
+    and outside the window."""
     return {
-        "autopilot_messages": [m.to_dict(clock) for m in messages],
-        "autopilot_messages_disarmed": disarmed,
+        "autopilot_messages": [m.to_dict(clock) for m in messages.listed],
+        "autopilot_messages_disarmed": messages.disarmed,
+        "autopilot_messages_outside_window": messages.outside,
     }
 
 

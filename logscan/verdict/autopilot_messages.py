@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from logscan.log import MESSAGE_LEVELS, logged_messages
 
@@ -70,16 +71,31 @@ def _armed_at(t: float, armed: Sequence[tuple[float, float]] | None) -> bool:
     return armed is None or any(start <= t <= end for start, end in armed)
 
 
+class FlightMessages(NamedTuple):
+    """The autopilot's messages of WARNING and above as the verdict lists them."""
+
+    listed: list[AutopilotMessage]  # distinct, in time order of their first occurrence
+    disarmed: int  # logged while disarmed (within the window): counted, not listed
+    outside: int  # logged outside the window (--start/--end): counted, not listed
+
+
 def flight_messages(
-    metadata: dict, start_ns: int, incidents: Sequence, armed: Sequence[tuple[float, float]] | None
-) -> tuple[list[AutopilotMessage], int]:
-    """(the distinct messages of WARNING and above logged while ``armed`` (intervals in s since
-    ``start_ns``; None: unknown, every message), in time order of their first occurrence, with
-    their incident; how many messages of those levels were logged while disarmed)."""
+    metadata: dict,
+    start_ns: int,
+    incidents: Sequence,
+    armed: Sequence[tuple[float, float]] | None,
+    window: tuple[float, float] | None = None,
+) -> FlightMessages:
+    """The distinct messages of WARNING and above logged while ``armed`` (intervals in s since
+    ``start_ns``; None: unknown, every message) and within ``window`` (first and last time
+    analysed, s since ``start_ns``; None: the whole log), with their incident; and how many were
+    logged while disarmed, and outside the window. A window's verdict is about the window: a
+    message logged before or after it is no part of what was judged."""
     found = logged_messages(metadata, start_ns, MESSAGE_LEVELS, limit=None)
+    inside = [m for m in found if window is None or window[0] <= m.t <= window[1]]
     kept: dict[tuple[str, str, int | None], AutopilotMessage] = {}
     disarmed = 0
-    for message in found:
+    for message in inside:
         if not _armed_at(message.t, armed):
             disarmed += 1
             continue
@@ -91,4 +107,4 @@ def flight_messages(
             entry.last = max(entry.last, message.t)
         else:
             kept[key] = AutopilotMessage(message.level, message.text, message.t, message.t, 1, incident)
-    return sorted(kept.values(), key=lambda m: m.first), disarmed
+    return FlightMessages(sorted(kept.values(), key=lambda m: m.first), disarmed, len(found) - len(inside))
