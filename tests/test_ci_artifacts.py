@@ -12,6 +12,7 @@ import pytest
 
 from logscan.report.ci_annotations import MAX_PER_LOG, github_annotations, summary_words
 from logscan.report.ci_artifacts import junit_xml, markdown_summary
+from logscan.timebase.clock import Clock
 
 XSD = Path(__file__).parent / "data" / "junit.xsd"
 
@@ -212,5 +213,25 @@ def test_the_markdown_and_junit_show_times_in_the_logs_own_clock(clock, cell, sp
     text = markdown_summary(document)
     end = cell.replace("12.489", "12.889").replace("5.27", "5.67")
     assert f"| f.ulg | - | health | health.battery | {cell} | {end} | peak/threshold 1.04 | - |" in text
+    # the clock is named once above the times, as the terminal's "times:" line: "5.27 s" alone
+    # could be seconds since the log's start
+    assert f"\nTimes: {Clock.from_dict(clock).describe()}.\n" in text
+    assert text.index("Times: ") < text.index("| f.ulg | - | health")
     case = etree.fromstring(junit_xml(document).encode()).find(".//testcase[@name='health: health.battery']")
     assert f"health.battery {span}, peak/threshold 1.04" in case.find("failure").text
+
+
+def test_the_markdown_names_each_logs_clock_when_they_differ_and_none_without_times():
+    boot = {"name": "PX4 boot time", "offset_s": 3.129, "utc": False, "utc_start": None}
+    utc = {"name": "UTC", "offset_s": 1710773350.346, "utc": True, "utc_start": "2024-03-18T14:49:10.346Z"}
+    alarm = {"detector": "health", "signal": "health.battery", "start": 2.0, "end": 2.5}
+    logs = [
+        {"file": f, "verdict": "1 alarm", "clock": c, "detectors": [{"detector": "health", "alarms": [alarm]}]}
+        for f, c in (("a.ulg", boot), ("b.ulg", utc))
+    ]
+    text = markdown_summary({"logs": logs, "errors": []})
+    assert "Times, in each log's own clock:" in text
+    assert "- a.ulg: PX4 boot time (s); time zero at 3.129 s\n" in text
+    assert "- b.ulg: UTC (the log's clock; time zero 2024-03-18T14:49:10.346Z)\n" in text
+    quiet = {"file": "c.ulg", "verdict": "no alarms", "clock": boot, "detectors": [{"detector": "d", "alarms": []}]}
+    assert "Times" not in markdown_summary({"logs": [quiet], "errors": []})

@@ -109,7 +109,7 @@ def _verdict_lines(analysis) -> list[str]:
         f"detectors {', '.join(r.detector for r in analysis.results)})"
     ]
     if not analysis.clock.relative:  # seconds since the log's start, as the span above, need no line
-        lines.append(f"  times: {_clock_line(analysis.clock)}")
+        lines.append(f"  times: {analysis.clock.describe()}")
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
     lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
@@ -204,17 +204,6 @@ def _truth_lines(analysis) -> list[str]:
             f"{versus['px4_alone']} of PX4's {versus['px4_alarms']} seen by PX4 alone"
         )
     return lines
-
-
-def _clock_line(clock) -> str:
-    """What the times below count: "PX4 boot time (s); time zero at 20.309 s", "UTC (...)"."""
-    utc = clock.utc_text(0.0)
-    if clock.utc:
-        return f"UTC (the log's clock; time zero {utc})"
-    if clock.relative:
-        return clock.axis_title()
-    dated = f" = {utc} (GNSS)" if utc else ""
-    return f"{clock.axis_title()}; time zero at {clock.at(0.0):.3f} s{dated}"
 
 
 def _clock_time(clock, t: float) -> str:

@@ -251,8 +251,22 @@ def markdown_summary(document: dict, markdown_path: str | None = None) -> str:
         lines.append(
             f"| {_cell(error['file'])} | error: {_cell(error['error'])} | - | - | - | {error['exit_code']} | - |"
         )
-    lines += _alarm_table(logs) + _lists(document)
+    lines += _times_lines(logs) + _alarm_table(logs) + _lists(document)
     return "\n".join(lines) + "\n"
+
+
+def _times_lines(logs: list[dict]) -> list[str]:
+    """What the alarm and suppressed times count, named once as the terminal's ``times:`` line
+    does: a boot-time cell "6.38 s" says no clock by itself (a UTC cell does)."""
+    timed = [log for log in logs if log.get("suppressed") or any(r.get("alarms") for r in log.get("detectors", []))]
+    described = {log_name(log["file"]): log_clock(log).describe() for log in timed}
+    if not described:
+        return []
+    if len(set(described.values())) == 1:
+        return ["", f"Times: {next(iter(described.values()))}."]
+    return ["", "Times, in each log's own clock:", ""] + [
+        f"- {_cell(name)}: {_cell(text)}" for name, text in described.items()
+    ]
 
 
 def _alarm_table(logs: list[dict]) -> list[str]:

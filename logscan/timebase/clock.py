@@ -87,6 +87,17 @@ class Clock:
         """The time axis' title: "PX4 boot time (s)", "UTC", "time since log start (s)"."""
         return self.name if self.utc else f"{self.name} (s)"
 
+    def describe(self) -> str:
+        """What the times of this clock count, named once above them (the terminal's ``times:``
+        line, the Markdown summary's): "PX4 boot time (s); time zero at 20.309 s", "UTC (...)"."""
+        utc = self.utc_text(0.0)
+        if self.utc:
+            return f"UTC (the log's clock; time zero {utc})"
+        if self.relative:
+            return self.axis_title()
+        dated = f" = {utc} (GNSS)" if utc else ""
+        return f"{self.axis_title()}; time zero at {self.at(0.0):.3f} s{dated}"
+
     def axis_values(self, x: Any) -> Any:
         """Analysis times as the report's time axis plots them: epoch milliseconds (float64, what a
         plotly date axis reads) for UTC; clock seconds otherwise, as float32 while that resolves
