@@ -193,7 +193,7 @@ def test_iso_datetime_time_column_is_epoch_ns(tmp_path):
     f = write(tmp_path / "d.csv", "timestamp,x\n2024-03-18 14:49:10.000,1\n2024-03-18T14:49:10.250Z,2\n")
     log = read_csv(f, None)
     np.testing.assert_array_equal(log.channel("/x").t, [1_710_773_350_000_000_000, 1_710_773_350_250_000_000])
-    assert log.source.time_unit == "ns" and any("ISO 8601" in w for w in log.source.warnings)
+    assert log.source.time_unit == "ns" and "ISO 8601" in log.source.metadata["csv.time_columns"]["d.csv"]
 
 
 def test_semicolon_and_tab_delimiters_are_detected(tmp_path):
@@ -348,3 +348,26 @@ def test_a_csv_named_csv_still_reads(tmp_path):
     path = tmp_path / "flight.csv"
     path.write_text("time,speed\n0,1\n1,2\n")
     assert read_log(path).source.format == "csv"
+
+
+def test_iso_date_times_under_a_name_stating_a_unit_are_read_as_the_date_times(tmp_path):
+    # a date-time states its own unit: the name's unit neither applies to it nor drops its rows
+    f = write(tmp_path / "d.csv", "timestamp_ns,x\n2024-03-18T14:49:10.000Z,1\n2024-03-18T14:49:10.250Z,2\n")
+    log = read_csv(f, None)
+    np.testing.assert_array_equal(log.channel("/x").t, [1_710_773_350_000_000_000, 1_710_773_350_250_000_000])
+    assert log.source.warnings == [] and log.source.skipped == []
+
+
+def test_iso_date_times_get_no_advice_to_state_a_unit_only_the_utc_they_are_read_in(tmp_path):
+    naive = read_csv(write(tmp_path / "n.csv", "time,x\n2024-03-18 14:49:10,1\n2024-03-18 14:49:11,2\n"), None)
+    assert not any("name it" in w or "_ns" in w for w in naive.source.warnings)
+    assert [w for w in naive.source.warnings if "without a UTC offset" in w and "read as UTC" in w]
+    stated = read_csv(write(tmp_path / "z.csv", "time,x\n2024-03-18 14:49:10+01:00,1\n2024-03-18 14:49:11Z,2\n"), None)
+    assert stated.source.warnings == []
+
+
+def test_a_time_column_stating_a_unit_over_text_is_an_error_saying_so(tmp_path):
+    f = write(tmp_path / "t.csv", "time_s,x\nstart,1\nlater,2\n")
+    with pytest.raises(InputError) as caught:
+        read_csv(f, None)
+    assert "time column 'time_s' holds no numbers or dates" in caught.value.message

@@ -9,7 +9,8 @@ Rules (documented in docs/inputs.md):
   InputError naming the unit they fit: `check_stated_unit`); without one it is inferred from the
   median step and the magnitude (relative time since boot or epoch time) and the inference is
   reported as a warning and in ``source.time_unit``.
-  ISO 8601 date-time text (``2024-03-18 14:49:10.126``) is read as UTC epoch time.
+  ISO 8601 date-time text (``2024-03-18 14:49:10.126``) is read as epoch time under any time
+  column name (it states its own unit: `logscan.readers.csv_dates`), cells without an offset as UTC.
   Every other numeric column becomes a channel ``/<column>`` (a column already starting with
   ``/`` keeps its name). An empty cell (or a missing-value word: ``NA``, ``null``, ``None``,
   ``N/A``...) means "no sample at this time": a channel holds the rows where its cell is filled,
@@ -54,6 +55,7 @@ from logscan.readers.common import (
     topic_wanted,
 )
 from logscan.readers.csv_blocks import CsvColumns, _header_line, load_columns, sniff_delimiter
+from logscan.readers.csv_dates import datetime_ns, naive_example
 from logscan.readers.csv_time import (
     MAX_TIME_NS,
     NS_PER_UNIT,
@@ -242,21 +244,6 @@ def _float_or_none(value: object) -> object:
     return value
 
 
-def _datetime_ns(series: pd.Series) -> pd.Series | None:
-    """Date-time text (``2024-03-18 14:49:10.126``, ISO 8601) as nullable int64 epoch ns."""
-    import pandas as pd
-
-    try:
-        stamps = pd.to_datetime(series, errors="coerce", utc=True, format="ISO8601")
-    except (ValueError, TypeError):
-        return None
-    valid = stamps.notna()
-    if valid.sum() < _MIXED_MIN_NUMERIC_FRACTION * max(1, int(series.notna().sum())):
-        return None
-    ns = stamps.dt.tz_convert(None).astype("datetime64[ns]").astype("int64", errors="ignore")
-    return pd.Series(np.where(valid, ns, 0), index=series.index).astype("Int64").where(valid)
-
-
 def _time_ns(series: pd.Series, unit: str) -> tuple[np.ndarray, np.ndarray]:
     """(int64 ns of the valid rows, bool mask of valid rows) for a time column in ``unit``."""
     import pandas as pd
@@ -432,29 +419,41 @@ def _time_column(
     if stated_us:
         return frame, "timestamp", TimeUnit("us", "stated", "ulog2csv layout: timestamp in microseconds")
     time_name, stated = _pick_time_column(frame, path)
-    if stated:
-        values, _ = _numeric_column(frame[time_name])
-        if values is not None:
-            check_stated_unit(values, time_name, stated, path)
-        return frame, time_name, TimeUnit(stated, "stated", f"unit stated by the column name {time_name!r}")
     raw, _ = _numeric_column(frame[time_name])
-    if raw is None:
-        dates = _datetime_ns(frame[time_name])
-        if dates is None:
-            raise InputError(
-                f"time column {time_name!r} holds no numbers or dates",
-                path=str(path),
-                hint="use seconds, or ISO 8601 date-times",
-            )
-        frame = frame.assign(**{time_name: dates})
-        unit = TimeUnit("ns", "epoch", "ISO 8601 date-times (UTC unless an offset is given)")
-    else:
-        unit = infer_time_unit(raw)
+    if raw is None:  # date-times state their unit: one in the name (timestamp_ns) does not apply
+        return _date_time_column(frame, time_name, path, source, label), time_name, _DATE_TIMES
+    if stated:
+        check_stated_unit(raw, time_name, stated, path)
+        return frame, time_name, TimeUnit(stated, "stated", f"unit stated by the column name {time_name!r}")
+    unit = infer_time_unit(raw)
     source.warnings.append(
         f"{label}: time column {time_name!r} read as {unit.unit} inferred from {unit.reason}; "
         f"name it e.g. '{time_name}_{unit.unit}' to state the unit"
     )
     return frame, time_name, unit
+
+
+_DATE_TIMES = TimeUnit("ns", "epoch", "ISO 8601 date-times (UTC unless an offset is given)")
+
+
+def _date_time_column(frame: CsvColumns, time_name: str, path: Path, source: SourceInfo, label: str) -> CsvColumns:
+    """The frame with its time column of date-time text replaced by epoch ns; an InputError when
+    the column holds neither numbers nor date-times; a warning when cells give no UTC offset."""
+    text = frame[time_name]
+    dates = datetime_ns(text)
+    if dates is None:
+        raise InputError(
+            f"time column {time_name!r} holds no numbers or dates",
+            path=str(path),
+            hint="use seconds, or ISO 8601 date-times",
+        )
+    naive = naive_example(text, dates)
+    if naive is not None:
+        source.warnings.append(
+            f"{label}: time column {time_name!r} holds date-times without a UTC offset (e.g. {naive!r}): read as "
+            "UTC; write the offset (Z, +02:00) if they are local times"
+        )
+    return frame.assign(**{time_name: dates})
 
 
 def _sidecar(path: Path, suffix: str) -> Path:
