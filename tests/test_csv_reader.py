@@ -371,3 +371,17 @@ def test_a_time_column_stating_a_unit_over_text_is_an_error_saying_so(tmp_path):
     with pytest.raises(InputError) as caught:
         read_csv(f, None)
     assert "time column 'time_s' holds no numbers or dates" in caught.value.message
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "time;x;y\n1432235498,025;0,25;1\n1432235498,125;-0,5;2\n1432235498,225;1,5e-3;3\n",
+        "time_ms;x\n0;0,25\n10;-0,5\n20;1,75\n",  # the time reads; a value column does not
+    ],
+    ids=["time-column", "value-column"],
+)
+def test_numbers_with_a_decimal_comma_are_an_error_saying_so_and_what_to_do(tmp_path, text):
+    with pytest.raises(InputError) as caught:
+        read_csv(write(tmp_path / "comma.csv", text), None)
+    assert "decimal comma" in caught.value.message and "'.'" in caught.value.hint

@@ -56,6 +56,7 @@ from logscan.readers.common import (
 )
 from logscan.readers.csv_blocks import CsvColumns, _header_line, load_columns, sniff_delimiter
 from logscan.readers.csv_dates import datetime_ns, naive_example
+from logscan.readers.csv_decimal_comma import refuse_decimal_comma
 from logscan.readers.csv_time import (
     MAX_TIME_NS,
     NS_PER_UNIT,
@@ -370,6 +371,7 @@ def _value_channels(
         series = frame[column]
         values, garbage = _numeric_column(series)
         if values is None:
+            refuse_decimal_comma(series, column, path)
             source.skip(f"text column {column!r} of {label}", "not numeric")
             continue
         fields.append(column)
@@ -442,6 +444,7 @@ def _date_time_column(frame: CsvColumns, time_name: str, path: Path, source: Sou
     text = frame[time_name]
     dates = datetime_ns(text)
     if dates is None:
+        refuse_decimal_comma(text, time_name, path)
         raise InputError(
             f"time column {time_name!r} holds no numbers or dates",
             path=str(path),
