@@ -111,7 +111,11 @@ def test_a_csv_with_a_time_column_and_no_profile_still_says_no_profile(cli, tmp_
     log = tmp_path / "flight.csv"
     log.write_text("time_s,a\n0,2\n0.1,4\n")
     result = cli("analyze", log, "--no-report")
-    assert_message(result, f"{log}: no profile: the log embeds none (pass --profile PROFILE.toml (see {PROFILES_DOC}))")
+    assert_message(
+        result,
+        f"{log}: no profile: the log embeds none (`logscan init-profile {log} -o profile.toml` writes a starter one "
+        f"to edit; then pass --profile profile.toml (see {PROFILES_DOC}))",
+    )
 
 
 def profile_with(tmp_path, old: str, new: str) -> Path:

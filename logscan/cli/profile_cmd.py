@@ -70,10 +70,10 @@ def _starter(log_path: str):
     numeric channels, that embeds no profile and gets no built-in one, else None; an InputError when
     no channel can be a state."""
     from logscan.docs import doc_url
-    from logscan.profiles.starter import starter_profile
+    from logscan.profiles.starter import STARTER_FORMATS, starter_profile
     from logscan.readers import detect_format, read_embedded_profile, read_log
 
-    if detect_format(log_path) not in ("csv", "csv-dir", "mcap") or read_embedded_profile(log_path):
+    if detect_format(log_path) not in STARTER_FORMATS or read_embedded_profile(log_path):
         return None
     log = read_log(log_path)
     if not log.channels:

@@ -34,6 +34,7 @@ from logscan.pipeline.stages import COUNTS_STEPS, FILTERS, LoadedProfile, Prepar
 from logscan.pipeline.step_counter import counted_steps
 from logscan.profiles import builtin, load_profile, parse_profile, ros
 from logscan.profiles.schema import MAX_DELAY_S
+from logscan.profiles.starter import STARTER_FORMATS
 from logscan.readers import detect_format, read_embedded_profile, read_log
 from logscan.readers.common import ReadWindow
 from logscan.readers.csv_reader import csv_log_name
@@ -82,12 +83,18 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
             loaded = LoadedProfile(profile, built.text, f"built-in {built.name}", notes, log, extra)
             loaded.model_not_run = built.model_not_run
             return loaded
-        raise ProfileError(
-            "no profile: the log embeds none",
-            path=str(path),
-            hint=f"pass --profile PROFILE.toml (see {doc_url('profiles.md')})",
-        )
+        raise ProfileError("no profile: the log embeds none", path=str(path), hint=_no_profile_hint(path))
     return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
+
+
+def _no_profile_hint(path: str | os.PathLike) -> str:
+    """What to do about a log without a profile: pass one, written first by `logscan init-profile`
+    where it writes a starter (a CSV log, an MCAP), as docs/inputs.md recommends."""
+    see = f"see {doc_url('profiles.md')}"
+    if detect_format(path) not in STARTER_FORMATS:
+        return f"pass --profile PROFILE.toml ({see})"
+    init = f"logscan init-profile {shlex.quote(str(path))} -o profile.toml"
+    return f"`{init}` writes a starter one to edit; then pass --profile profile.toml ({see})"
 
 
 def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):

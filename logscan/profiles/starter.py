@@ -37,6 +37,9 @@ from logscan.docs import doc_url
 from logscan.log import Log
 from logscan.profiles.toml_writer import _string
 
+# The formats `logscan init-profile` writes a starter profile for when a log has no profile: their
+# channels are numeric columns or message fields that name no vehicle (a bag's ROS topics do).
+STARTER_FORMATS = frozenset({"csv", "csv-dir", "mcap"})
 MIN_FRESH = 30  # fewer fresh samples than this: too few to read a column's noise from
 FILLED_REPEAT_SHARE = 0.5  # exact repeats on at least half the rows: forward-filled (or held)
 MAX_DISCRETE_VALUES = 16  # a column with this few distinct values is a mode, a flag or a state number
