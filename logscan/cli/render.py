@@ -23,11 +23,16 @@ _CONTROL_RE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202
 
 
 def _analysed_span(analysis) -> str:
-    """ "60.0 s" for a whole log; "25.0-45.0 s of 60.0 s" for a window (--start/--end) or a log
-    whose outlying timestamps were dropped."""
-    t = analysis.run.t
-    start, end, whole = float(t[0]), float(t[-1]), analysis.log.duration_s
-    if start <= 1e-9 and abs(whole - (end - start)) <= max(1e-6, 2.0 * analysis.run.dt):
+    """ "60.0 s" for a whole log; "25.0-45.0 s of 60.0 s" for a window (--start/--end), or a log
+    whose grid misses more than its two end steps of it (outlying timestamps dropped)."""
+    run = analysis.run
+    start, end, whole = float(run.t[0]), float(run.t[-1]), analysis.log.duration_s
+    # Without a window the grid runs from the profile's first sample to its last in steps of dt: it
+    # may start a step after the log's time zero (a 10 Hz grid 3 ms after an unused IMU's first
+    # sample) and end a step before its last, leaving nothing out. Only a shortfall beyond those
+    # two steps (outlying timestamps dropped, inputs that start late) is a span worth showing.
+    shortfall = max(start, 0.0) + max(whole - end, 0.0)
+    if run.window is None and shortfall <= 2.0 * max(1e-6, float(run.dt)):
         return f"{end - start:.1f} s"
     start = max(start, 0.0) if start > -0.05 else start  # a grid step before time zero reads "0.0", not "-0.0"
     lead = analysis.prepared.lead_in  # a window's filter led in from the log before it (not judged there)
