@@ -301,7 +301,7 @@ def test_a_directory_of_separate_wide_csvs_is_not_read_as_one_log(tmp_path):
     with pytest.raises(InputError) as info:
         read_log(flights)
     line = info.value.one_line()
-    assert "separate logs" in line and "april.csv, monday.csv" in line and "pass the files" in line
+    assert "separate logs" in line and "april.csv, monday.csv" in line and "pass one file" in line
     assert "\n" not in line
 
 
@@ -385,3 +385,16 @@ def test_numbers_with_a_decimal_comma_are_an_error_saying_so_and_what_to_do(tmp_
     with pytest.raises(InputError) as caught:
         read_csv(write(tmp_path / "comma.csv", text), None)
     assert "decimal comma" in caught.value.message and "'.'" in caught.value.hint
+
+
+def test_a_folder_of_per_topic_csvs_not_in_ulog2csv_layout_says_what_a_folder_log_needs(tmp_path):
+    topics = tmp_path / "husky_topics"
+    topics.mkdir()
+    write(topics / "husky_imu.csv", "time,gyro.z\n1432235498.00,0.1\n1432235498.03,0.2\n")
+    write(topics / "husky_odom.csv", "time,speed\n1432235498.01,1\n1432235498.11,2\n")
+    with pytest.raises(InputError) as info:
+        read_log(topics)
+    line = info.value.one_line()
+    # what a folder read as one log must be, and both ways to get one from these files
+    assert "ulog2csv layout" in line and "<log>_<topic>_<n>.csv" in line and "'timestamp' in microseconds" in line
+    assert "join them into one wide CSV" in line and "pass one file" in line

@@ -27,8 +27,9 @@ Rules (documented in docs/inputs.md):
   directory's name, the stem of a ``.ulg`` beside the CSVs, or the longest ``_``-separated prefix
   all such files share. Any other ``.csv`` is read as a wide file with topic = its stem and
   channels ``/<stem>/<column>``. A directory without such per-topic pieces of one log (no
-  ``<log>`` found) is a folder of separate logs: reading it is an InputError saying to pass the
-  files (`logscan.fleet.expand_logs` expands it to one log per file).
+  ``<log>`` found) is a folder of separate logs, whatever its files' names say (per-topic wide
+  files cannot be told from separate flights): reading it is an InputError saying to pass the
+  files or make them one log (`logscan.fleet.expand_logs` expands it to one log per file).
 * Sidecars beside the log (``run.csv`` or directory ``run/``): ``run.truth.json`` (ground truth)
   and ``run.profile.toml`` (the profile, as `logscan simulate` writes them).
 """
@@ -127,10 +128,11 @@ def read_csv_dir(
     if not log_name:
         shown = ", ".join(f.name for f in files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
         raise InputError(
-            f"the directory's {len(files)} CSV file(s) ({shown}) are separate logs, not the per-topic CSVs of "
-            "one log (PX4 ulog2csv: <log>_<topic>_<n>.csv with a timestamp column)",
+            f"the directory's {len(files)} CSV file(s) ({shown}) are separate logs: a folder is one log only in "
+            "ulog2csv layout, <log>_<topic>_<n>.csv with a first column 'timestamp' in microseconds",
             path=str(directory),
-            hint="pass the files themselves (`logscan analyze DIR/` analyses each file as its own log)",
+            hint="pass one file (`logscan analyze DIR/` analyses each file as its own log); for one log of "
+            "per-topic files, join them into one wide CSV or name and stamp them as ulog2csv does",
         )
     source = SourceInfo(path=str(directory), format="csv-dir", time_source="csv column")
     topics = _topic_names(files, log_name)
