@@ -66,9 +66,18 @@ def drop_topics(src: Path, dst: Path, topics: tuple[str, ...]) -> None:
     copy_bag(src, dst, drop=topics)
 
 
-def copy_bag(src: Path, dst: Path, *, drop: tuple[str, ...] = (), lz4: bool = False) -> Path:
-    """Copy the ROS 1 bag ``src`` to ``dst`` message for message, without the topics in ``drop``;
-    ``lz4``: with lz4 chunks (the Husky bag's are bz2)."""
+def drop_window(src: Path, dst: Path, topic: str, start_s: float, end_s: float) -> Path:
+    """Copy the bag without ``topic``'s messages ``start_s`` to ``end_s`` seconds after its start (a
+    sensor that dropped out)."""
+    return copy_bag(src, dst, drop_in=(topic, start_s, end_s))
+
+
+def copy_bag(
+    src: Path, dst: Path, *, drop: tuple[str, ...] = (), lz4: bool = False, drop_in: tuple | None = None
+) -> Path:
+    """Copy the ROS 1 bag ``src`` to ``dst`` message for message, without the topics in ``drop``
+    (and ``drop_in``'s topic from its start to its end, s after the bag's start); ``lz4``: with lz4
+    chunks (the Husky bag's are bz2)."""
     from rosbags.rosbag1 import Reader, Writer
 
     writer = Writer(dst)
@@ -83,6 +92,9 @@ def copy_bag(src: Path, dst: Path, *, drop: tuple[str, ...] = (), lz4: bool = Fa
             if conn.topic not in drop
         }
         for conn, stamp, raw in reader.messages():
+            since = (stamp - reader.start_time) / 1e9
+            if drop_in is not None and conn.topic == drop_in[0] and drop_in[1] <= since <= drop_in[2]:
+                continue
             if conn.id in out:
                 writer.write(out[conn.id], stamp, raw)
     return dst

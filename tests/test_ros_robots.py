@@ -286,3 +286,17 @@ def test_an_odometry_yaw_rate_that_flips_sign_does_not_overrule_the_gyro(cli, tm
     first = entry["incidents"][0]
     assert first["source"] == "wheel_yaw_rate", first
     assert flip_from_s <= first["start"] <= flip_from_s + 20.0, first
+
+
+def test_an_incident_while_the_gyro_is_missing_is_headed_by_the_missing_input(cli, tmp_path):
+    """The real drive without /imu/data for 10 s from 150 s: the filter holds the gyro's last yaw
+    rate, and the checks that then alarm judge that held value against the wheels and the GNSS. The
+    incident named the healthy wheels ("wheel yaw rate inconsistent"); it names the missing input."""
+    from ros_edit import drop_window
+
+    dropped = drop_window(need_testdata(ROS1_BAG), tmp_path / "no_gyro.bag", "/imu/data", 150.0, 160.0)
+    code, entry, text = summary(cli, dropped, tmp_path)
+    during = [i for i in entry["incidents"] if 150.0 <= i["start"] <= 161.0]
+    assert during, text
+    assert all(i["source"] == "/imu/data/angular_velocity.y" for i in during), during
+    assert all(i["headline"].startswith("model input /imu/data/angular_velocity.y missing for") for i in during)

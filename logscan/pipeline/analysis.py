@@ -20,7 +20,7 @@ from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import clock_of
 from logscan.verdict.autopilot_messages import FlightMessages, flight_messages
 from logscan.verdict.coverage import skipped_checks
-from logscan.verdict.incidents import signal_label
+from logscan.verdict.incidents import InputGap, signal_label
 
 if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no runtime edge)
     from logscan.pipeline.stages import Prepared
@@ -52,6 +52,7 @@ class Analysis:
     # (N,) the grid steps the [alarms] suspension held back (None: none): where judging resumed
     # after it, an incident's source is not the alarm that happened to update first
     suspended: np.ndarray | None = field(default=None, repr=False)
+    input_gaps: list[InputGap] = field(default_factory=list)  # where the filter held a missing input
     failures: list[DetectorFailure] = field(default_factory=list)  # detectors that raised
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
     scores: dict = field(default_factory=dict)  # detector -> logscan.verdict.scoring.Score (with truth)

@@ -25,7 +25,14 @@ from logscan.pipeline.stages import Prepared
 from logscan.results import events_from_truth
 from logscan.training.calibration import calibrate_command, judged_steps, suspended_policy
 from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
-from logscan.verdict.incidents import DEFAULT_GAP_S, alarm_onsets, find_incidents, merge_fragments, sizes_of
+from logscan.verdict.incidents import (
+    DEFAULT_GAP_S,
+    alarm_onsets,
+    find_incidents,
+    input_gaps,
+    merge_fragments,
+    sizes_of,
+)
 from logscan.verdict.observability import observability_for
 from logscan.verdict.scoring import score_by_detector
 
@@ -55,6 +62,7 @@ def detect(
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
     policy = suspended_policy(prepared.profile, prepared.run, prepared.filter_from)
+    gaps = input_gaps(prepared.trace, prepared.run)  # before the detectors free the inputs
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
     unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
@@ -68,7 +76,8 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.suspended = policy.suspended if policy is not None else None
     onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
-    analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets)
+    incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets, gaps)
+    analysis.incidents, analysis.input_gaps = incidents, gaps
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     if unjudged is not None and unjudged[1]:
         analysis.unchecked.append(unjudged[0])

@@ -19,6 +19,9 @@ alarms behind it. The rules:
    an incident only when no group alarm is in it. The headline quotes the source group's alarm with
    the largest peak/threshold; without a group it says what that statistic means (the detector's
    `signal_words`, else its `signal_label`).
+4. An incident that begins while a model input is missing (the filter predicting on its last value,
+   `InputGap`), or within ``gap_s`` after, is headed by that input: its checks judge the held
+   input, not their sensors (the real Husky drive without its gyro for 10 s blamed the wheels').
 """
 
 from __future__ import annotations
@@ -155,6 +158,35 @@ def _rejected_counts(trace, start: float, end: float) -> dict[str, int]:
     return {name: int(n) for name, n in zip(trace.group_names, counts) if n > 0}
 
 
+@dataclass(frozen=True)
+class InputGap:
+    """A stretch where the filter held its inputs' last value: a model input was missing."""
+
+    start: float  # s since the log's time zero: the first step held
+    end: float  # the last step held
+    channels: tuple[str, ...]  # the inputs missing there
+
+    def words(self) -> str:
+        names = ", ".join(self.channels) or "a model input"
+        return f"model input {names} missing for {self.end - self.start:.1f} s (the filter held its last value), then"
+
+
+def input_gaps(trace, run) -> list[InputGap]:
+    """The stretches of steps where the filter held its inputs (`EkfTrace.input_held`), each with
+    the input channels not finite there (none named when the run's inputs were already freed)."""
+    held = getattr(trace, "input_held", None)
+    if held is None or not held.any():
+        return []
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], held, [False])).astype(np.int8)))
+    u = getattr(run, "u", None)
+    gaps = []
+    for first, stop in zip(edges[::2], edges[1::2]):
+        missing = () if u is None or u.shape[0] != held.size else ~np.isfinite(u[first:stop]).all(axis=0)
+        names = tuple(name for name, gone in zip(run.input_channels, missing) if gone)
+        gaps.append(InputGap(float(trace.t[first]), float(trace.t[stop - 1]), names))
+    return gaps
+
+
 def find_incidents(
     results: Sequence[DetectorResult],
     trace,
@@ -162,11 +194,13 @@ def find_incidents(
     gap_s: float = DEFAULT_GAP_S,
     sizes: Sizes | None = None,
     onsets: Onsets | None = None,
+    gaps: Sequence[InputGap] = (),
 ) -> list[Incident]:
     """Incidents in time order from every result's alarms (merge fragments first). ``trace``: the
     shared EKF trace (its rejected samples point at the source), or None. ``sizes``: the filter's
     innovations to give each headline the deviation's size with (`Sizes`); None: no size.
-    ``onsets``: the alarms under way where judging resumed (`alarm_onsets`)."""
+    ``onsets``: the alarms under way where judging resumed (`alarm_onsets`). ``gaps``: where a model
+    input was missing (`input_gaps`, rule 4)."""
     alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
     starts = np.array([a.start for a in alarms])
     ends = np.maximum.accumulate(np.array([a.end for a in alarms])) if alarms else np.zeros(0)
@@ -180,7 +214,11 @@ def find_incidents(
         group, quoted = _source(members, list(groups), rejected, onsets or {})
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
         size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
-        incident = Incident(start, stop, group or quoted.signal, "", members, what, detail, quoted, size)
+        source = group or quoted.signal
+        gap = next((g for g in gaps if g.start - 1e-9 <= start <= g.end + gap_s + 1e-9), None)
+        if gap is not None:  # rule 4: the checks judged a held input
+            what, size, source = gap.words(), "", ", ".join(gap.channels) or "inputs"
+        incident = Incident(start, stop, source, "", members, what, detail, quoted, size)
         incident.headline = incident.headline_in()
         incidents.append(incident)
     return incidents

@@ -119,7 +119,9 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
         gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
         groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
         onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
-        analysis.incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets)
+        analysis.incidents = find_incidents(
+            analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets, analysis.input_gaps
+        )
     return count
 
 
