@@ -74,3 +74,19 @@ def test_an_alarm_that_begins_after_judged_samples_keeps_its_own_start():
     result = _result(t, "nis.fast", x, ~suspended)
     assert alarm_onsets([result], t, suspended) == {}
     assert alarm_onsets([result], t, None) == {}
+
+
+def test_a_held_input_heads_the_model_checks_incident_but_not_the_autopilots():
+    from logscan.verdict.incidents import InputGap
+
+    t = np.arange(100) * 0.01
+    gap = InputGap(0.2, 0.4, ("/imu/gyro_z",))
+    model = _result(t, "nis.fast", np.where((t >= 0.3) & (t < 0.6), 2.0, 0.5), np.ones(t.size, bool))
+    (incident,) = find_incidents([model], None, ["fast"], gaps=[gap])
+    assert incident.source == "/imu/gyro_z" and incident.what.startswith("model input /imu/gyro_z missing")
+    later = _result(t, "nis.fast", np.where(t >= 0.8, 2.0, 0.5), np.ones(t.size, bool))
+    assert find_incidents([later], None, ["fast"], gaps=[gap], gap_s=0.2)[0].source == "fast"
+    health = DetectorResult(detector="health")
+    health.alarms = alarm_intervals(t, np.where(t >= 0.25, 2.0, 0.5), 1.0, signal="health.battery", detector="health")
+    incidents = find_incidents([health, model], None, ["fast"], gaps=[gap])
+    assert incidents[0].source != "/imu/gyro_z"  # the autopilot's own check does not read the held input

@@ -32,7 +32,7 @@ def _analysed_span(analysis) -> str:
     # sample) and end a step before its last, leaving nothing out. Only a shortfall beyond those
     # two steps (outlying timestamps dropped, inputs that start late) is a span worth showing.
     shortfall = max(start, 0.0) + max(whole - end, 0.0)
-    if run.window is None and shortfall <= 2.0 * max(1e-6, float(run.dt)):
+    if getattr(run, "window", None) is None and shortfall <= 2.0 * max(1e-6, float(run.dt)):
         return f"{end - start:.1f} s"
     start = max(start, 0.0) if start > -0.05 else start  # a grid step before time zero reads "0.0", not "-0.0"
     lead = analysis.prepared.lead_in  # a window's filter led in from the log before it (not judged there)

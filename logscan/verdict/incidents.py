@@ -187,6 +187,23 @@ def input_gaps(trace, run) -> list[InputGap]:
     return gaps
 
 
+def _held_input_gap(members: list[AlarmInterval], gaps: Sequence[InputGap], gap_s: float) -> InputGap | None:
+    """The input gap that heads an incident (rule 4): one in which (or within ``gap_s`` after) its
+    first alarm of the model's statistics begins, with no check of the vehicle's own reports
+    (`Detector.raw_topics`, which the held input does not touch) alarming before it ends."""
+    if not gaps:
+        return None
+    own = [a for a in members if getattr(_detector_class(a.detector), "raw_topics", ())]
+    model = [a for a in members if not any(a is b for b in own)]
+    if not model:
+        return None
+    first = min(a.start for a in model)
+    gap = next((g for g in gaps if g.start - 1e-9 <= first <= g.end + gap_s + 1e-9), None)
+    if gap is None or any(a.start < gap.end + gap_s for a in own):
+        return None
+    return gap
+
+
 def find_incidents(
     results: Sequence[DetectorResult],
     trace,
@@ -215,7 +232,7 @@ def find_incidents(
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
         size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
         source = group or quoted.signal
-        gap = next((g for g in gaps if g.start - 1e-9 <= start <= g.end + gap_s + 1e-9), None)
+        gap = _held_input_gap(members, gaps, gap_s)
         if gap is not None:  # rule 4: the checks judged a held input
             what, size, source = gap.words(), "", ", ".join(gap.channels) or "inputs"
         incident = Incident(start, stop, source, "", members, what, detail, quoted, size)
