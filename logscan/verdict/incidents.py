@@ -224,8 +224,8 @@ def find_incidents(
     # a new incident starts where an alarm begins more than gap_s after every earlier one ended
     breaks = np.flatnonzero(starts[1:] - ends[:-1] > gap_s + 1e-9) + 1 if alarms else np.zeros(0, int)
     incidents = []
-    for members in np.split(np.array(alarms, dtype=object), breaks) if alarms else []:
-        members = list(members)
+    for chunk in np.split(np.array(alarms, dtype=object), breaks) if alarms else []:
+        members: list[AlarmInterval] = list(chunk)
         start, stop = members[0].start, max(a.end for a in members)
         rejected = _rejected_counts(trace, start, stop)
         group, quoted = _source(members, list(groups), rejected, onsets or {})
