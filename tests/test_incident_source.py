@@ -90,3 +90,27 @@ def test_a_held_input_heads_the_model_checks_incident_but_not_the_autopilots():
     health.alarms = alarm_intervals(t, np.where(t >= 0.25, 2.0, 0.5), 1.0, signal="health.battery", detector="health")
     incidents = find_incidents([health, model], None, ["fast"], gaps=[gap])
     assert incidents[0].source != "/imu/gyro_z"  # the autopilot's own check does not read the held input
+
+
+@pytest.mark.testdata(EVENTS)
+def test_a_fault_over_most_of_the_log_is_not_called_a_profile_mismatch(cli, tmp_path):
+    """The real flight's GNSS walked north at 2 m/s from 19 s to its end: most of its GNSS updates
+    lie in the fault, so its median NIS is far above the chi-square's and the verdict warned "model
+    or profile mismatch ... --calibrate", advice that would widen the noise over the fault. Its
+    checks alarmed: the warning says a fault is as likely, and to calibrate only on healthy logs."""
+    from pyulog import ULog
+
+    source = need_testdata(EVENTS)
+    start_us = ULog(str(source), ["vehicle_gps_position"]).start_timestamp
+
+    def walk(data) -> None:
+        t = (data["timestamp"].astype(np.int64) - start_us) / 1e6
+        data["latitude_deg"][:] += 2.0 * np.clip(t - 19.0, 0.0, None) / 111_320.0
+
+    path = edit_ulog(source, tmp_path / "walk.ulg", {"vehicle_gps_position": walk})
+    out = tmp_path / "s.json"
+    cli("analyze", str(path), "--no-report", "--json", str(out))
+    log = json.loads(out.read_text())["logs"][0]
+    assert log["incidents"] and log["incidents"][0]["source"] == "gnss_position"
+    (median,) = [w for w in log["warnings"] if w.startswith("group 'gnss_position': median NIS")]
+    assert "a fault over much of the log" in median and "--calibrate" not in median

@@ -29,6 +29,7 @@ from logscan.verdict.incidents import (
     DEFAULT_GAP_S,
     alarm_onsets,
     find_incidents,
+    group_of,
     input_gaps,
     merge_fragments,
     sizes_of,
@@ -70,7 +71,7 @@ def detect(
         analysis.warnings.append(unjudged[0])
         analysis.unjudged = unjudged[0]  # the report says it where "every check ran" would be
     analysis.results = _run_detectors(prepared, detectors, policy, analysis, free_series, sensor_views, step)
-    analysis.warnings[:0] = consistency_warnings(prepared)  # first: they question every verdict below
+    analysis.warnings[:0] = consistency_warnings(prepared, analysis.results)  # first: they question every verdict
     gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
     merge_fragments(analysis.results, gap_s)
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
@@ -174,9 +175,11 @@ TAIL_ALPHA = 0.001
 TAIL_P = 0.001
 
 
-def consistency_warnings(prepared: Prepared) -> list[str]:
+def consistency_warnings(prepared: Prepared, results: Sequence[DetectorResult] = ()) -> list[str]:
     """One warning per measurement group whose median NIS is far from the chi-square median of its
-    size (see NIS_MISMATCH); the ratio is given per output."""
+    size (see NIS_MISMATCH); the ratio is given per output. A group far above it whose own checks
+    alarmed (in ``results``) may be faulty over most of the log rather than mismatched: said so,
+    and calibrating it is advised only on healthy logs (it would widen the noise over the fault)."""
     import numpy as np
     from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
 
@@ -185,13 +188,22 @@ def consistency_warnings(prepared: Prepared) -> list[str]:
         return []
     out = []
     judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
+    groups = list(trace.group_names)
+    alarmed = {group_of(a.signal, groups) for r in results for a in r.alarms}
     for g, (name, size) in enumerate(zip(trace.group_names, trace.group_sizes.tolist())):
         nis = trace.nis_group[:, g]  # a column view: a mask picks from it a few times faster than [used, g]
         used = trace.updated[:, g] & np.isfinite(nis)
         if int(used.sum()) < NIS_MIN_UPDATES or not size:
             continue
         ratio = float(np.median(nis[used])) / float(chdtri(size, 0.5))
-        if ratio > NIS_MISMATCH:
+        if ratio > NIS_MISMATCH and name in alarmed:
+            out.append(
+                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected), and its "
+                "checks alarmed: a fault over much of the log (the incidents below), or a model or profile "
+                "mismatch (units, signs, frames, noise_std) if the log is healthy; calibrate only on healthy logs "
+                f"({doc_url('troubleshooting.md')})"
+            )
+        elif ratio > NIS_MISMATCH:
             out.append(
                 f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "
                 "profile mismatch, check units, signs and frames of its channels, or its noise_std "
