@@ -39,6 +39,8 @@ def test_a_windows_battery_alarm_is_the_whole_logs_in_it(cli, tmp_path, start):
     expected = [a for a in whole if start <= a["end"] <= end]
     assert expected, "the case this pins: an alarm of the whole log inside the window"
     assert [(a["signal"], a["end"]) for a in seen] == [(a["signal"], a["end"]) for a in expected]
+    log = json.loads((tmp_path / f"--start-{start}---end-{end}.json").read_text())["logs"][0]
+    assert not any("most of the log" in line or "over the log" in line for line in log["unchecked"])
     for a, b in zip(seen, expected):
         assert a["start"] == (b["start"] if b["start"] >= start else pytest.approx(a["first_exceed"]))
         assert a["start"] >= start - 1e-6 and a["first_exceed"] >= start - 1e-6

@@ -52,7 +52,7 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
         profile = getattr(prepared, "profile", None)
         reasons += _starved_groups(prepared.run, trace, getattr(profile, "measurements", None))
         reasons += _divergence(trace)
-    span = "the log" if getattr(prepared.run, "window", None) is None else "the window (--start/--end)"
+    span = "the log" if getattr(prepared.run, "window", None) is None else "the --start/--end window"
     for result in results:
         reasons += [f"{result.detector}: {c.reason}" for c in result.not_checked if c.partial]
         for name, series in result.series.items():
@@ -62,7 +62,7 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
                 share = 100.0 * result.judged_fraction[name]
                 reasons.append(
                     f"{result.detector}: {name} was judged on only {share:.0f} % of its samples (its warm-up "
-                    f"or window covers most of {span})"
+                    f"{'or window ' if span == 'the log' else ''}covers most of {span})"
                 )
     return reasons
 
