@@ -197,6 +197,9 @@ class Detector:
     # The autopilot's own verdict (PX4's estimator tests): the baseline logscan's model-based alarms
     # are reported against (`logscan.pipeline.analysis.Analysis.against_baseline`).
     is_baseline: ClassVar[bool] = False
+    # What an incident headed by a group says of it when this detector's alarm is the one quoted
+    # (`logscan.verdict.incidents.headline_parts`): "accelerometer inconsistent", "barometer stuck".
+    group_verdict: ClassVar[str] = "inconsistent"
     # Where a plugin class comes from ("plugin <distribution> <version>"), set by the registry when it
     # loads one; None for built-ins. A plugin's fit and run are isolated (`logscan.detectors.isolation`).
     plugin_origin: ClassVar[str | None] = None

@@ -149,6 +149,7 @@ class FrozenSensorDetector(Detector):
     """Frozen-sensor check: a channel whose fresh samples stop changing ("stuck"), per channel."""
 
     name = "frozen"
+    group_verdict = "stuck (its samples repeat one value)"
     requires_trace = False
     reads = frozenset({"z", "u"})  # the measurement groups' samples and fresh masks; the inputs (at rest)
     default_enabled = True

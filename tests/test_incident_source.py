@@ -114,3 +114,13 @@ def test_a_fault_over_most_of_the_log_is_not_called_a_profile_mismatch(cli, tmp_
     assert log["incidents"] and log["incidents"][0]["source"] == "gnss_position"
     (median,) = [w for w in log["warnings"] if w.startswith("group 'gnss_position': median NIS")]
     assert "a fault over much of the log" in median and "--calibrate" not in median
+
+
+def test_a_group_headed_by_its_stuck_sensor_check_says_stuck():
+    """A tester froze the real flight's barometer: the incident quoted frozen.baro (12.6x) and said
+    "barometer inconsistent", though that check's own label is "stuck sensor"."""
+    t = np.arange(100) * 0.01
+    stuck = DetectorResult(detector="frozen")
+    stuck.alarms = alarm_intervals(t, np.where(t >= 0.3, 5.0, 0.5), 1.0, signal="frozen.baro", detector="frozen")
+    (incident,) = find_incidents([stuck], None, ["baro"])
+    assert incident.what == "barometer stuck (its samples repeat one value)", incident.what

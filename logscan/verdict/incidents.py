@@ -139,7 +139,7 @@ def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0
     )
     if not phrase:
         what = words.group_words(group) if group else f"{source.detector} {source.signal}"
-        phrase = f"{what} inconsistent"
+        phrase = f"{what} {getattr(_detector_class(source.detector), 'group_verdict', 'inconsistent')}"
     return phrase, f"{source.signal}, peak {peak}{rejected}"
 
 
