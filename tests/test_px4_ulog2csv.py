@@ -92,3 +92,20 @@ def test_an_export_without_a_disarmed_value_below_the_motors_does_not_call_them_
     signals = [a["signal"] for d in log["detectors"] for a in d["alarms"]]
     assert not any(s.startswith("health.motor") for s in signals)
     assert any("value while disarmed (1500) is not below" in line for line in log["skipped_checks"])
+
+
+@pytest.mark.testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+def test_the_export_reads_in_the_ulogs_clock(cli, tmp_path):
+    """ulog2csv keeps the ULog's timestamps (microseconds since PX4 booted): the real robologs
+    flight's export reads in PX4 boot time as its .ulg does, not "time since log start", so one
+    event has one time in both."""
+    source = need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+    folder = tmp_path / "robologs_fmu_v5_test"
+    folder.mkdir()
+    convert_ulog2csv(str(source), "vehicle_gps_position,sensor_combined,vehicle_attitude", str(folder), ",", None, None)
+    clocks = {}
+    for name, path in (("csv", folder), ("ulg", source)):
+        out = tmp_path / f"{name}.json"
+        cli("analyze", path, "--no-report", "--json", out)
+        clocks[name] = json.loads(out.read_text())["logs"][0]["clock"]
+    assert clocks["csv"]["name"] == clocks["ulg"]["name"] == "PX4 boot time", clocks

@@ -166,9 +166,16 @@ def clock_of(log, start_ns: int | None = None) -> Clock:
     zero_s = int(zero_ns) / 1e9
     if is_epoch_s(zero_s):
         return Clock(UTC, zero_s, utc=True, utc_zero_s=zero_s)
-    if log.source.format == "ulog":
+    if log.source.format == "ulog" or _ulog2csv_export(log.source):
         return Clock(BOOT_TIME, zero_s, utc_zero_s=gnss_utc_zero(log, int(zero_ns)))
     return Clock()
+
+
+def _ulog2csv_export(source) -> bool:
+    """Whether a CSV folder is a PX4 ulog2csv export (every topic in its layout): its timestamps are
+    the ULog's own, microseconds since PX4 booted, and its times read as the .ulg's do."""
+    topics = getattr(source, "topics", None) or {}
+    return source.format == "csv-dir" and bool(topics) and all(t.schema == "ulog2csv" for t in topics.values())
 
 
 def gnss_utc_zero(log, zero_ns: int) -> float | None:
