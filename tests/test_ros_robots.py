@@ -300,3 +300,17 @@ def test_an_incident_while_the_gyro_is_missing_is_headed_by_the_missing_input(cl
     assert during, text
     assert all(i["source"] == "/imu/data/angular_velocity.y" for i in during), during
     assert all(i["headline"].startswith("model input /imu/data/angular_velocity.y missing for") for i in during)
+
+
+def test_a_frozen_fix_is_headed_by_its_freeze_not_by_its_thaw(cli, tmp_path):
+    """The real drive's GNSS frozen from 150 s to 200 s: the stuck-sensor check alarms at once, and
+    the position test alarms far higher when the fix jumps back at 200 s. The headline quoted that
+    largest alarm, 48 s late ("position sensor inconsistent 19:14:58..."); it quotes the group's
+    first checks: the freeze."""
+    stuck = tmp_path / "stuck.bag"
+    assert hold_fix(need_testdata(ROS1_BAG), stuck, "/fix", 150.0, 200.0) > 100
+    code, entry, text = summary(cli, stuck, tmp_path)
+    first = entry["incidents"][0]
+    assert first["source"] == "position" and 150.0 <= first["start"] <= 160.0, first
+    assert first["headline"].startswith("position sensor stuck"), first["headline"]
+    assert "(frozen.position" in first["headline"], first["headline"]

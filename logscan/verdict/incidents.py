@@ -16,9 +16,10 @@ alarms behind it. The rules:
    [alarms] suspension (the ground, a take-off) was under way when judging resumed: its onset is
    somewhere before, so it starts, for this rule, where judging resumed, tied with every other
    alarm under way there (`alarm_onsets`); an alarm that names no group (an overall or state check) heads
-   an incident only when no group alarm is in it. The headline quotes the source group's alarm with
-   the largest peak/threshold; without a group it says what that statistic means (the detector's
-   `signal_words`, else its `signal_label`).
+   an incident only when no group alarm is in it. The headline quotes, of the source group's alarms
+   that began first (within ``gap_s`` of its first), the one with the largest peak/threshold (a later,
+   larger one is the fault's aftermath: a frozen GNSS's jump when it thaws); without a group it says
+   what that statistic means (the detector's `signal_words`, else its `signal_label`).
 4. An incident that begins while a model input is missing (the filter predicting on its last value,
    `InputGap`), or within ``gap_s`` after, is headed by that input: its checks judge the held
    input, not their sensors (the real Husky drive without its gyro for 10 s blamed the wheels').
@@ -114,18 +115,21 @@ def alarm_onsets(results: Sequence[DetectorResult], t: np.ndarray, suspended: np
 Onsets = dict[tuple[str, str, float], float]
 
 
-def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[str, int], onsets: Onsets):
+def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[str, int], onsets: Onsets, gap_s: float):
     """(group or None, the alarm the headline quotes) of one incident (rule 3)."""
     named = [(a, group_of(a.signal, groups)) for a in alarms]
+    onset = {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in alarms}
     if rejected:
         group = max(rejected, key=lambda g: (rejected[g], -groups.index(g)))
     else:
         grouped = [(a, g) for a, g in named if g is not None]
-        onset = {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in alarms}
         first = min(grouped or named, key=lambda item: (onset[id(item[0])], -_ratio(item[0])))
         group = first[1]
     quoted = [a for a, g in named if g == group] or alarms
-    return group, max(quoted, key=_ratio)
+    # its checks that alarmed first (within gap_s of the first): a later, larger alarm of the same
+    # group is the fault's aftermath (a frozen GNSS's jump back when it thaws), not what it was
+    earliest = min(onset[id(a)] for a in quoted)
+    return group, max((a for a in quoted if onset[id(a)] <= earliest + gap_s + 1e-9), key=_ratio)
 
 
 def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0) -> tuple[str, str]:
@@ -228,7 +232,7 @@ def find_incidents(
         members: list[AlarmInterval] = list(chunk)
         start, stop = members[0].start, max(a.end for a in members)
         rejected = _rejected_counts(trace, start, stop)
-        group, quoted = _source(members, list(groups), rejected, onsets or {})
+        group, quoted = _source(members, list(groups), rejected, onsets or {}, gap_s)
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
         size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
         source = group or quoted.signal
