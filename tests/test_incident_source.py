@@ -124,3 +124,21 @@ def test_a_group_headed_by_its_stuck_sensor_check_says_stuck():
     stuck.alarms = alarm_intervals(t, np.where(t >= 0.3, 5.0, 0.5), 1.0, signal="frozen.baro", detector="frozen")
     (incident,) = find_incidents([stuck], None, ["baro"])
     assert incident.what == "barometer stuck (its samples repeat one value)", incident.what
+
+
+def test_no_input_gap_at_the_first_step():
+    """The filter does not predict at step 0: an input not there yet (the Husky's odometry starts 3 ms
+    after its IMU) held nothing, and headed a GNSS jump's incident in the first second."""
+    from types import SimpleNamespace
+
+    from logscan.verdict.incidents import input_gaps
+
+    t = np.arange(10) * 0.1
+    held = np.zeros(10, bool)
+    held[0] = True
+    held[5:7] = True
+    u = np.ones((10, 1))
+    u[0] = u[5:7] = np.nan
+    run = SimpleNamespace(u=u, input_channels=["/odom/v"])
+    gaps = input_gaps(SimpleNamespace(input_held=held, t=t), run)
+    assert [(g.start, g.end, g.channels) for g in gaps] == [(t[5], t[6], ("/odom/v",))]

@@ -56,3 +56,20 @@ def test_the_led_grid_is_the_whole_grids_steps_before_and_through_the_window():
     first = int(np.flatnonzero(whole.t == lead.t[0])[0])
     assert np.array_equal(lead.t, whole.t[first : first + lead.n_steps])  # the same floats
     assert lead.t[-1] == window.t[-1] and lead.t[0] == whole.t[0]  # 240 s reaches back to the log's first step
+
+
+@pytest.mark.testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+def test_a_check_with_samples_only_before_the_window_has_nothing_to_judge_in_it(cli, tmp_path):
+    """From 8.5 s the real flight's GNSS, motor and timeout checks have samples only in the lead-in:
+    cut to the window their statistics hold no value, which read "never computed" and left the
+    window not fully checked (exit 2); a window alone says they had nothing to judge there."""
+    path = str(need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg"))
+    out = tmp_path / "late.json"
+    result = cli("analyze", path, "--start", "8.5", "-d", "health", "--no-report", "--json", str(out))
+    log = json.loads(out.read_text())["logs"][0]
+    assert result.exit_code == 0 and not log["unchecked"], result.stdout
+    assert any("health.gnss_fix: no sample in the --start/--end window" in line for line in log["skipped_checks"])
+    early = tmp_path / "early.json"
+    cli("analyze", path, "--start", "2", "--end", "6", "--no-report", "--json", str(early))
+    health = next(d for d in json.loads(early.read_text())["logs"][0]["detectors"] if d["detector"] == "health")
+    assert all(e["time"] >= 2.0 for e in health["info"].get("logged_errors", [])), health["info"]["logged_errors"]

@@ -300,6 +300,11 @@ def test_an_incident_while_the_gyro_is_missing_is_headed_by_the_missing_input(cl
     assert during, text
     assert all(i["source"] == "/imu/data/angular_velocity.y" for i in during), during
     assert all(i["headline"].startswith("model input /imu/data/angular_velocity.y missing for") for i in during)
+    report = tmp_path / "no_gyro.html"
+    cli("analyze", dropped, "-o", report)
+    html = report.read_text()
+    assert during[0]["headline"].split(" 2015-")[0] in html
+    assert "the filter held its last value), then:" not in html  # no healthy sensor's size in the report
 
 
 def test_a_frozen_fix_is_headed_by_its_freeze_not_by_its_thaw(cli, tmp_path):

@@ -18,7 +18,7 @@ import numpy as np
 
 from logscan.align.aligned import AlignedRun
 from logscan.pipeline.lead_in import MAX_LEAD_IN_S
-from logscan.results import AlarmPolicy, Band, DetectorResult
+from logscan.results import AlarmPolicy, Band, DetectorResult, NotChecked
 
 
 def led_grid(run: AlignedRun) -> AlignedRun | None:
@@ -52,8 +52,19 @@ def seen_from_window(policy: AlarmPolicy | None, run: AlignedRun) -> AlarmPolicy
 
 def cut_to_window(result: DetectorResult, lead: AlignedRun, run: AlignedRun) -> DetectorResult:
     """``result`` (on ``lead``) with its series, bands and judged masks on ``run``'s steps only (its
-    alarms are already seen from there)."""
+    alarms are already seen from there). A statistic with samples before the window and none in it
+    had nothing to judge there: not checked, as a window alone would have said (not "never
+    computed", which would leave the window not fully checked); the facts in its info that carry a
+    time (logged messages) only those in the window."""
     rows = slice(run.first_step - lead.first_step, run.first_step - lead.first_step + run.n_steps)
+    for name in [n for n, v in result.series.items() if np.isfinite(v).any() and not np.isfinite(v[rows]).any()]:
+        for named in (result.series, result.thresholds, result.judged, result.judged_fraction):
+            named.pop(name, None)
+        result.not_checked.append(NotChecked(f"{name}: no sample in the --start/--end window"))
+    first, last = float(run.t[0]) - 1e-9, float(run.t[-1]) + run.dt
+    for key, value in result.info.items():
+        if isinstance(value, list) and value and all(isinstance(v, dict) and "time" in v for v in value):
+            result.info[key] = [v for v in value if first <= float(v["time"]) <= last]
     result.series = {name: values[rows] for name, values in result.series.items()}
     result.extras = {name: values[rows] for name, values in result.extras.items()}
     result.judged = {name: values[rows] for name, values in result.judged.items()}

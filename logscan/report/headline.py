@@ -68,6 +68,8 @@ def headlines(incidents: Sequence[Incident], views: PageViews | None, t: np.ndar
         group = None
         if alarm is not None and views is not None:
             group = group_of(alarm.signal, views.group_names)
+        if group != incident.source:  # headed by no group (a missing input, an overall check): no size
+            group = None
         size = None
         if alarm is not None and group is not None and views is not None:
             view = views.view(group)

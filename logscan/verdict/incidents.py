@@ -185,6 +185,8 @@ def input_gaps(trace, run) -> list[InputGap]:
     u = getattr(run, "u", None)
     gaps = []
     for first, stop in zip(edges[::2], edges[1::2]):
+        if first == 0:  # no step before to hold a value from: the filter does not predict at step 0
+            continue
         missing = () if u is None or u.shape[0] != held.size else ~np.isfinite(u[first:stop]).all(axis=0)
         names = tuple(name for name, gone in zip(run.input_channels, missing) if gone)
         gaps.append(InputGap(float(trace.t[first]), float(trace.t[stop - 1]), names))
