@@ -136,7 +136,7 @@ def _run_detectors(
 def _run_one(detector, prepared: Prepared, policy) -> DetectorResult:
     """One detector's result on the prepared run; a window's checks of the vehicle's own reports
     run from before it, their alarms seen from its first step (`logscan.pipeline.raw_lead`)."""
-    lead = led_grid(prepared.run) if detector.raw_topics else None
+    lead = led_grid(prepared.run) if getattr(detector, "raw_topics", ()) else None
     result = detector.run(
         prepared.run if lead is None else lead,
         prepared.trace,
