@@ -406,10 +406,18 @@ def merge_close(intervals: Iterable[AlarmInterval], gap_s: float, *, by_signal: 
     return sorted(merged, key=lambda a: (a.start, a.end, a.detector, a.signal))
 
 
-def _peak_rank(alarm: AlarmInterval) -> float:
+def peak_rank(alarm: AlarmInterval) -> float:
+    """How high an alarm peaked, to rank alarms by: its peak/threshold; a non-finite statistic
+    highest, an undefined ratio lowest."""
     if alarm.bound == "nonfinite":
         return np.inf
     return alarm.peak_ratio if alarm.peak_ratio is not None else -np.inf
+
+
+def true_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first index, index after the last) of each run of True in the 1-D ``mask``."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], np.asarray(mask, dtype=np.int8), [0]))))
+    return edges[::2], edges[1::2]
 
 
 def _joined(names: Sequence[str]) -> str:
@@ -419,7 +427,7 @@ def _joined(names: Sequence[str]) -> str:
 def _combine(parts: list[AlarmInterval]) -> AlarmInterval:
     if len(parts) == 1:
         return parts[0]
-    peak = max(parts, key=_peak_rank)
+    peak = max(parts, key=peak_rank)
     return AlarmInterval(
         start=min(a.start for a in parts),
         end=max(a.end for a in parts),

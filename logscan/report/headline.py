@@ -8,13 +8,12 @@ of the channel that size was measured on.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from logscan.alarms import AlarmInterval
+from logscan.alarms import AlarmInterval, peak_rank
 from logscan.report.figures import Figure
 from logscan.report.plotly_json import ZOOM_MARGIN_FRACTION, ZOOM_MARGIN_S
 from logscan.report.sensor_figures import sensor_figures
@@ -41,22 +40,16 @@ class Headline:
         return self.incident.headline_in(clock, self.deviation.text() if self.deviation else None)
 
 
-def _ratio(alarm: AlarmInterval) -> float:
-    if alarm.bound == "nonfinite":
-        return math.inf
-    return alarm.peak_ratio if alarm.peak_ratio is not None else -math.inf
-
-
 def quoted_alarm(incident: Incident, groups: Sequence[str]) -> AlarmInterval | None:
-    """The alarm an incident's headline quotes: its source group's (or signal's) alarm with the
-    largest peak / threshold (`logscan.verdict.incidents`, rule 3); None for an incident without
-    alarms. The incident's own quoted alarm when it has one (`logscan.verdict.incidents`)."""
+    """The alarm an incident's headline quotes: the incident's own (`logscan.verdict.incidents`,
+    rule 3); for an incident built without one (read back from a summary), its source group's (or
+    signal's) alarm with the largest peak / threshold; None for an incident without alarms."""
     if incident.quoted is not None:
         return incident.quoted
     alarms = incident.alarms
     named = [a for a in alarms if group_of(a.signal, groups) == incident.source]
     named = named or [a for a in alarms if a.signal == incident.source] or alarms
-    return max(named, key=_ratio, default=None)
+    return max(named, key=peak_rank, default=None)
 
 
 def headlines(incidents: Sequence[Incident], views: PageViews | None, t: np.ndarray, model: Mapping) -> list[Headline]:

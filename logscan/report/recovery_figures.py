@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from logscan.alarms import true_runs
 from logscan.report.context_figures import _band_trace, _spec, _time_row_layout
 from logscan.report.plotly_json import plot_text
 from logscan.timebase.clock import Clock
@@ -28,10 +29,9 @@ def _band(name: str, t: np.ndarray, centre: np.ndarray, bound: np.ndarray) -> di
     """centre +- bound as one filled polygon per recovered span (NaN elsewhere): a fill between two
     lines would bridge the gaps between spans."""
     finite = np.isfinite(centre) & np.isfinite(bound)
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], finite.astype(np.int8), [0]))))
     x: list[float] = []
     y: list[float] = []
-    for first, stop in zip(edges[::2], edges[1::2]):
+    for first, stop in zip(*true_runs(finite)):
         span = slice(first, stop)
         x += [*t[span], *t[span][::-1], np.nan]
         y += [*(centre[span] + bound[span]), *(centre[span] - bound[span])[::-1], np.nan]

@@ -27,13 +27,12 @@ alarms behind it. The rules:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.alarms import AlarmInterval, merge_close
+from logscan.alarms import AlarmInterval, merge_close, peak_rank, true_runs
 from logscan.detectors import words
 from logscan.detectors.registry import default_registry
 from logscan.results import DetectorResult, Incident
@@ -81,12 +80,6 @@ def group_of(signal: str, groups: Sequence[str]) -> str | None:
     return next((part for part in parts if part in groups), None)
 
 
-def _ratio(alarm: AlarmInterval) -> float:
-    if alarm.bound == "nonfinite":
-        return math.inf
-    return alarm.peak_ratio if alarm.peak_ratio is not None else -math.inf
-
-
 def alarm_onsets(results: Sequence[DetectorResult], t: np.ndarray, suspended: np.ndarray | None) -> Onsets:
     """(detector, signal, start) -> where judging resumed, for each alarm that was under way then
     (rule 3): its statistic's last finite sample before its first exceedance was held back by the
@@ -123,13 +116,13 @@ def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[s
         group = max(rejected, key=lambda g: (rejected[g], -groups.index(g)))
     else:
         grouped = [(a, g) for a, g in named if g is not None]
-        first = min(grouped or named, key=lambda item: (onset[id(item[0])], -_ratio(item[0])))
+        first = min(grouped or named, key=lambda item: (onset[id(item[0])], -peak_rank(item[0])))
         group = first[1]
     quoted = [a for a, g in named if g == group] or alarms
     # its checks that alarmed first (within gap_s of the first): a later, larger alarm of the same
     # group is the fault's aftermath (a frozen GNSS's jump back when it thaws), not what it was
     earliest = min(onset[id(a)] for a in quoted)
-    return group, max((a for a in quoted if onset[id(a)] <= earliest + gap_s + 1e-9), key=_ratio)
+    return group, max((a for a in quoted if onset[id(a)] <= earliest + gap_s + 1e-9), key=peak_rank)
 
 
 def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0) -> tuple[str, str]:
@@ -181,10 +174,9 @@ def input_gaps(trace, run) -> list[InputGap]:
     held = getattr(trace, "input_held", None)
     if held is None or not held.any():
         return []
-    edges = np.flatnonzero(np.diff(np.concatenate(([False], held, [False])).astype(np.int8)))
     u = getattr(run, "u", None)
     gaps = []
-    for first, stop in zip(edges[::2], edges[1::2]):
+    for first, stop in zip(*true_runs(held)):
         if first == 0:  # no step before to hold a value from: the filter does not predict at step 0
             continue
         missing = () if u is None or u.shape[0] != held.size else ~np.isfinite(u[first:stop]).all(axis=0)

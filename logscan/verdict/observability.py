@@ -31,6 +31,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from logscan.alarms import true_runs
 from logscan.docs import doc_url
 from logscan.models.dispatch import call_literal
 from logscan.results import events_from_truth
@@ -191,8 +192,8 @@ def spans_of(mask: np.ndarray, t_start: np.ndarray, stride_s: float, t_end: floa
     """[t_start[i], t_start[i] + stride) of the True entries of ``mask``, merged, clipped to t_end."""
     if not mask.any():
         return []
-    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    first, stop = true_runs(mask)
+    last = stop - 1
     return [
         (float(t_start[a]), float(min(t_start[b] + stride_s, t_end))) for a, b in zip(first, last) if t_start[a] < t_end
     ]
