@@ -40,6 +40,7 @@ def slice_run(run: AlignedRun, start: int, stop: int) -> AlignedRun:
             fresh=fresh,
             channel_fresh=cut(g.channel_fresh),
             noise_std_series=cut(g.noise_std_series),
+            gate_closed=cut(g.gate_closed),
         )
 
     return dataclasses.replace(

@@ -153,12 +153,22 @@ def test_ros2_bag_of_a_healthy_drive_has_no_alarm(cli, tmp_path):
 
 
 def test_a_gnss_gate_closed_for_a_few_steps_says_how_long(cli, tmp_path):
-    """sample_log_small's GNSS has no 3D fix for its first few grid steps (before its first fix
-    message): the warning gives their milliseconds, not "for 0.0 s"."""
+    """sample_log_small's GNSS holds no sample for its first few grid steps (before its first fix
+    message): that is silence, not "no 3D fix", and no gate warning says so. With its first fix
+    edited to fix_type 2, the gate is closed until the next: the warning gives its duration, not
+    "for 0.0 s"."""
+    from ulog_edit import edit_ulog
+
+    def first_not_3d(data):
+        data["fix_type"][0] = 2
+
     path = need_testdata("px4-ulog/sample_log_small.ulg")
-    out = tmp_path / "s.json"
-    cli("analyze", path, "--no-report", "-q", "--allow-partial", "--json", out)
-    warnings = json.loads(out.read_text())["logs"][0]["warnings"]
-    gated = [w for w in warnings if "fix_type below 3" in w]
-    assert gated and not any(" for 0.0 s " in w for w in gated)
-    assert all(float(w.split(" for ")[1].split(" s ")[0]) > 0 for w in gated)
+    edited = edit_ulog(path, tmp_path / "first_2d.ulg", {"vehicle_gps_position": first_not_3d})
+    for log, closed in ((path, False), (edited, True)):
+        out = tmp_path / "s.json"
+        cli("analyze", log, "--no-report", "-q", "--allow-partial", "--json", out)
+        warnings = json.loads(out.read_text())["logs"][0]["warnings"]
+        gated = [w for w in warnings if "fix_type below 3" in w]
+        assert bool(gated) == closed, warnings
+        assert not any(" for 0.0 s " in w for w in gated)
+        assert all(float(w.split(" for ")[1].split(" s ")[0]) > 0 for w in gated)

@@ -319,3 +319,38 @@ def test_a_frozen_fix_is_headed_by_its_freeze_not_by_its_thaw(cli, tmp_path):
     assert first["source"] == "position" and 150.0 <= first["start"] <= 160.0, first
     assert first["headline"].startswith("position sensor stuck"), first["headline"]
     assert "(frozen.position" in first["headline"], first["headline"]
+
+
+def test_a_fix_whose_status_says_no_fix_is_not_checked_as_a_position(cli, tmp_path):
+    """NavSatStatus.msg: STATUS_NO_FIX (-1) means the position is not a fix (drivers still fill one
+    in). The real drive with status -1 and a position 500 m off for 20 s from 150 s: those samples
+    are gated out (the built-in profile's gate on status.status >= 0), no alarm, and a warning says
+    how long; they judged the filter as a 500 m jump before."""
+    from ros_edit import edit_messages
+
+    def no_fix(msg, first):
+        msg.status.status = -1
+        msg.latitude += 500.0 / 111_132.954
+
+    edited = tmp_path / "no_fix.bag"
+    assert edit_messages(need_testdata(ROS1_BAG), edited, "/fix", 150.0, 170.0, no_fix) > 40
+    code, entry, text = summary(cli, edited, tmp_path)
+    assert code == 0 and entry["n_alarms"] == 0, text
+    assert "/fix/status.status below 0 for 20" in text, text
+    code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path)
+    assert "status.status below" not in text, text  # every real fix has status 1; before the first: not "no fix"
+
+
+def test_a_gnss_that_stops_before_the_drive_ends_is_not_checked_after_it(cli, tmp_path):
+    """/fix gone from 250 s of the 395 s drive: "no alarms" with a gap warning said the drive was
+    judged; the position was not judged for its last 145 s: not fully checked, and says from when."""
+    from ros_edit import drop_window
+
+    dropped = drop_window(need_testdata(ROS1_BAG), tmp_path / "fix_stops.bag", "/fix", 250.0, 400.0)
+    code, entry, text = summary(cli, dropped, tmp_path)
+    assert code == 2, text
+    lines = [u for u in entry["unchecked"] if u.startswith("measurement group 'position': no sample after 2")]
+    assert lines and "its sensor stopped" in lines[0], entry["unchecked"]
+    mid = drop_window(need_testdata(ROS1_BAG), tmp_path / "fix_gap.bag", "/fix", 150.0, 180.0)
+    code, entry, text = summary(cli, mid, tmp_path)
+    assert not [u for u in entry["unchecked"] if "position" in u], entry["unchecked"]  # a gap: warned, not stopped

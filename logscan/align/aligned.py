@@ -45,6 +45,7 @@ class AlignedGroup:
     # (N, m) per-sample noise std held from the profile's noise_channels (NaN: the group's noise_std)
     noise_std_series: np.ndarray | None = None
     gated_s: float = 0.0  # time its gate was closed (no 3D fix): no sample there, and none expected
+    gate_closed: np.ndarray | None = None  # (N,) bool, where its gate was known closed (None: never)
     # a `from = "geodetic"` group: the (lat deg, lon deg, alt m) its north/east/down are relative to
     origin: tuple[float, ...] | None = None
 

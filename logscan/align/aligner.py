@@ -225,14 +225,19 @@ class _Aligner:
             group.fresh = changed_steps(group.z)
         if getattr(spec, "gate_channel", None):
             gate, _ = self.hold(spec.gate_channel, grid_ns, spec.stale_s, fresh=np.empty(grid_ns.size, dtype=bool))
-            closed = ~(np.nan_to_num(gate, nan=-np.inf) >= spec.gate_min)
-            if closed.any():
-                group.z[closed] = np.nan
-                group.fresh = group.fresh & ~closed
+            # no sample used where the gate is below its minimum or unknown (none held: before its
+            # first sample, or its topic silent); closed, with none expected, only where it is known
+            unusable = ~(np.nan_to_num(gate, nan=-np.inf) >= spec.gate_min)
+            closed = unusable & ~np.isnan(gate)
+            if unusable.any():
+                group.z[unusable] = np.nan
+                group.fresh = group.fresh & ~unusable
                 if group.channel_fresh is not None:
-                    group.channel_fresh = group.channel_fresh & ~closed[:, None]
+                    group.channel_fresh = group.channel_fresh & ~unusable[:, None]
+            if closed.any():
                 dt = float(np.median(np.diff(grid_ns))) / _NS if grid_ns.size > 1 else 0.0
                 group.gated_s = float(closed.sum()) * dt
+                group.gate_closed = closed
                 self.warnings.append(
                     f"group {spec.name!r}: {spec.gate_channel} below {spec.gate_min:g} for {_seconds(group.gated_s)} s "
                     f"of {grid_ns.size * dt:.1f} s; no sample used there"

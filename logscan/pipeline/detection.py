@@ -24,7 +24,7 @@ from logscan.pipeline.release import (
 from logscan.pipeline.stages import Prepared
 from logscan.results import events_from_truth
 from logscan.training.calibration import calibrate_command, judged_steps, suspended_policy
-from logscan.verdict.coverage import unchecked_reasons, unjudged_flight
+from logscan.verdict.coverage import stopped_groups, unchecked_reasons, unjudged_flight
 from logscan.verdict.incidents import (
     DEFAULT_GAP_S,
     alarm_onsets,
@@ -64,6 +64,7 @@ def detect(
     analysis.warnings += [why] if why else []
     policy = suspended_policy(prepared.profile, prepared.run, prepared.filter_from)
     gaps = input_gaps(prepared.trace, prepared.run)  # before the detectors free the inputs
+    stopped = stopped_groups(prepared.run, policy.suspended if policy is not None else None)  # and the samples
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
     unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
@@ -80,6 +81,8 @@ def detect(
     incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets, gaps)
     analysis.incidents, analysis.input_gaps = incidents, gaps
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
+    named = {line.split(":")[0] for line in analysis.unchecked}  # a group starved or never heard: said once
+    analysis.unchecked += [line for line in stopped if line.split(":")[0] not in named]
     if unjudged is not None and unjudged[1]:
         analysis.unchecked.append(unjudged[0])
     if prepared.loaded.model_not_run:  # its filter's detectors were not run (`filter_free`)

@@ -54,6 +54,7 @@ from logscan.profiles.ros_topics import (
     ROS_TYPES,
     Found,
     covariance_std,
+    fix_gate_lines,
     fix_status_mode_lines,
     noise_line,
     undecided,
@@ -172,6 +173,7 @@ def _gnss_position_lines(found: Found, default_noise) -> list[str]:
         'frame = "ned"',
         f"rate_hz = {found.rate(lla[0]):.3g}",
         noise_line([north, east, up], default_noise, "position"),
+        *fix_gate_lines(found),
     ]
 
 

@@ -26,6 +26,7 @@ DIAGONAL3 = (0, 4, 8)
 # sensor_msgs/NavSatStatus.msg's STATUS_* constants (STATUS_UNKNOWN, -2, only in newer ROS 2): the
 # names a ROS profile's [mode] gives a NavSatFix's status.status
 NAVSAT_STATUS_LABELS = {-2: "UNKNOWN", -1: "NO_FIX", 0: "FIX", 1: "SBAS_FIX", 2: "GBAS_FIX"}
+NAVSAT_STATUS_FIX = 0  # the lowest status.status that is a fix
 HOLD_PERIODS = 2.5  # a held value older than this many of its periods is a dropout
 # twist components a 2-D drive controller never sets
 _PLANAR_ZERO = ("linear.y", "linear.z", "angular.x", "angular.y")
@@ -45,6 +46,16 @@ def fix_status_mode_lines(found: Found) -> list[str]:
         f"stale_s = {HOLD_PERIODS / found.rate(channel):.3g}",
         f"labels = {{ {labels} }}",
     ]
+
+
+def fix_gate_lines(found: Found) -> list[str]:
+    """A NavSatFix group's ``gate``: a fix counts only where its ``status.status`` is STATUS_FIX (0) or
+    better (NavSatStatus.msg: STATUS_NO_FIX = -1 means the position is not a fix; drivers still fill
+    in the last or a default one); [] when the log has no status field."""
+    channel = f"{found.fixes[0]}/status.status" if found.fixes else ""
+    if not channel or not found.has(channel):
+        return []
+    return [f'gate = {{ channel = "{channel}", min = {NAVSAT_STATUS_FIX} }}  # STATUS_FIX and better, not NO_FIX']
 
 
 def covariance_std(channels, names: list[str]) -> list[float | None]:

@@ -17,6 +17,7 @@ from logscan.profiles.ros_topics import (
     Found,
     Wheels,
     covariance_std,
+    fix_gate_lines,
     fix_status_mode_lines,
     noise_line,
     undecided,
@@ -232,6 +233,7 @@ def _position_lines(found: Found, model) -> tuple[list[str], list[str]]:
         'frame = "en"  # horizontal only: the altitude is not checked',
         f"rate_hz = {found.rate(lla[0]):.3g}",
         noise_line([east, north], model.groups["position"].noise_std, "position"),
+        *fix_gate_lines(found),
     ]
 
 

@@ -45,6 +45,7 @@ def slice_group(group: AlignedGroup, sl: slice, excluded: bool) -> AlignedGroup:
         fresh=fresh,
         channel_fresh=_cut(group.channel_fresh, sl),
         noise_std_series=_cut(group.noise_std_series, sl),
+        gate_closed=_cut(group.gate_closed, sl),
     )
 
 

@@ -84,8 +84,9 @@ def _starved_groups(run, trace, specs=None) -> list[str]:
         expected = min(open_s * rate, float(run.n_steps))
         used = int(trace.updated[:, g].sum())
         spec = (specs or {}).get(name)
-        if used == 0 and expected < 1.0 and getattr(spec, "gate_channel", None):
-            # closed all the log: not one valid sample, the group's sensor was never checked
+        gated = float(getattr(group, "gated_s", 0.0) or 0.0) > 0.0
+        if used == 0 and gated and spec is not None and getattr(spec, "gate_channel", None):
+            # closed whenever it was known: not one valid sample, the group's sensor was never checked
             reasons.append(
                 f"measurement group {name!r}: its gate was closed all flight ({spec.gate_channel} below "
                 f"{spec.gate_min:g}{', no 3D fix' if 'fix_type' in spec.gate_channel else ''}): no sample used"
@@ -96,6 +97,45 @@ def _starved_groups(run, trace, specs=None) -> list[str]:
                 f"{rate:g} Hz rate implies (no valid samples, non-finite values or a silent sensor)"
             )
     return reasons
+
+
+def stopped_groups(run, suspended) -> list[str]:
+    """One line per measurement group whose sensor stopped while the log was still judged: no sample
+    held (none within its staleness limit, its gate not known closed) from some step to the last
+    judged one (``suspended``: the steps the [alarms] policy holds back, None: none). Unlike a gap,
+    nothing after it judged that sensor again: "no alarms" cannot be said of it there. A group
+    never heard at all is `_starved_groups`' line."""
+    n = int(run.n_steps)
+    judged = np.ones(n, dtype=bool) if suspended is None else ~np.asarray(suspended, dtype=bool)
+    if n == 0 or not judged.any():
+        return []
+    last_judged = int(np.flatnonzero(judged)[-1])
+    span = "the log" if getattr(run, "window", None) is None else "the --start/--end window"
+    lines = []
+    for name, group in run.groups.items():
+        heard = _heard_steps(group)
+        if heard is None or not heard.any():
+            continue
+        last = int(np.flatnonzero(heard)[-1])
+        unjudged_s = float(np.count_nonzero(judged[last + 1 :])) * float(run.dt)
+        if last < last_judged and unjudged_s > 0.0:
+            lines.append(
+                f"measurement group {name!r}: no sample after {float(run.t[last]):.1f} s, {unjudged_s:.1f} s of the "
+                f"judged time before the end of {span} (its sensor stopped): not judged there"
+            )
+    return lines
+
+
+def _heard_steps(group) -> np.ndarray | None:
+    """(N,) bool: steps where ``group`` holds a sample (within its staleness limit) or its gate is
+    known closed (none expected); None when its samples are no longer held."""
+    z = getattr(group, "z", None)
+    if z is None:
+        return None
+    rows = getattr(z, "row", None)
+    heard = rows >= 0 if rows is not None else ~np.isnan(np.asarray(z)).all(axis=1)
+    closed = getattr(group, "gate_closed", None)
+    return heard if closed is None else heard | closed
 
 
 def _divergence(trace) -> list[str]:
