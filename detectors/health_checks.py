@@ -98,8 +98,15 @@ class HealthChecks(Detector):
         """Put ``values`` (at times ``t_ns``, NaN: not judged) on the grid and alarm over 1.0.
         False (and ``name`` listed as skipped, ``why`` saying when it is judged) when no sample
         lands on a grid step."""
+        statistic = on_grid(self._grid, np.asarray(t_ns), np.asarray(values, dtype=np.float64))
+        return self._add_on_grid(name, where, statistic, limit=limit, n_persist=n_persist, why=why,
+                                 min_duration_s=min_duration_s)  # fmt: skip
+
+    def _add_on_grid(
+        self, name: str, where: str, statistic, *, limit, n_persist=None, why: str = "", min_duration_s=None
+    ) -> bool:
+        """`_add` of a statistic already on the grid (NaN: not judged)."""
         run = self._grid
-        statistic = on_grid(run, np.asarray(t_ns), np.asarray(values, dtype=np.float64))
         valid = np.isfinite(statistic)
         if not valid.any():
             never = self._never_armed and "armed" in why

@@ -86,6 +86,19 @@ class EventChecks(HealthChecks):
         self._result.info["logged_errors"] = errors
 
     # --- 7. sensor timeouts ----------------------------------------------------------------------
+    def _silence(self, t_ns: np.ndarray, limit_ns: float) -> np.ndarray:
+        """At each grid step, the age of the topic's newest sample over ``limit_ns`` (over 1: a
+        timeout, from the moment it began to the next sample, or to the end of the log for a
+        topic that never reports again); NaN until its second sample: the first interval is not
+        judged (PX4's logger writes a topic's latest sample when it subscribes, which can be
+        older than the topic's rate says)."""
+        run = self._grid
+        grid_ns = run.start_ns + np.round(np.asarray(run.t, dtype=np.float64) * 1e9)
+        newest = np.searchsorted(t_ns, grid_ns, side="right") - 1
+        ratio = (grid_ns - t_ns[np.maximum(newest, 0)].astype(np.float64)) / limit_ns
+        ratio[newest < 1] = np.nan
+        return ratio
+
     def _timeouts(self, topics, metadata) -> None:
         periods = float(self.timeout_periods)
         for (topic, instance), fields in sorted(topics.items()):
@@ -97,17 +110,12 @@ class EventChecks(HealthChecks):
             if t.size < 4:
                 self._skipped[name] = f"{where}: fewer than 4 samples"
                 continue
-            gaps = np.diff(t).astype(np.float64)
-            period = float(np.median(gaps))
+            period = float(np.median(np.diff(t)))
             if not period > 0:
                 self._skipped[name] = f"{where}: no sample period"
                 continue
-            ratio = np.full(t.size, np.nan)
-            # the first interval is not judged: PX4's logger writes a topic's latest sample when it
-            # subscribes, which can be older than the topic's rate says
-            ratio[2:] = gaps[1:] / (periods * period)
             limit = {"gap_s": periods * period / 1e9, "median_period_s": period / 1e9}
-            self._add(name, where, t, ratio, limit=limit, n_persist=1)
+            self._add_on_grid(name, where, self._silence(t, periods * period), limit=limit, n_persist=1)
         dropouts = (metadata.get("ulog.log") or {}).get("dropouts")
         if dropouts not in (None, "0"):
             self._result.info["logging_dropouts"] = (

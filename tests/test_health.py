@@ -48,13 +48,18 @@ def append_logged_messages(path: Path, messages: list[tuple[float, str, str]]) -
 
 
 def crafted_log(
-    path: Path, *, faults: bool = True, eph_over: tuple[float, float] | None = None, px4_flags: bool = True
+    path: Path,
+    *,
+    faults: bool = True,
+    eph_over: tuple[float, float] | None = None,
+    px4_flags: bool = True,
+    gps_until_s: float | None = None,
 ) -> Path:
     """60 s of a 4-cell quad armed from 5 s. With ``faults``: the battery at 12.4 V over [30, 35) s
     (under 4 x 3.5 V) and at 0 V over [45, 48) s, the GNSS fix lost (fix 1) over [20, 24) s,
     output 2 at its max (2000) over [40, 43) s, sensor_combined silent over (50, 52) s and an
     ERROR message at 12 s. ``eph_over``: eph at 4 m (over PX4's 3 m EKF2_REQ_EPH) over that span, with PX4's
-    gps_check_fail_flags saying so (``px4_flags``) or clear."""
+    gps_check_fail_flags saying so (``px4_flags``) or clear. ``gps_until_s``: no GNSS sample from then on."""
     imu_us = times(100)
     keep = ~between(imu_us, 50.005, 52.0) if faults else np.ones(imu_us.size, bool)
     imu_us = imu_us[keep]
@@ -66,6 +71,7 @@ def crafted_log(
     bat_us = times(10)
     voltage = np.full(bat_us.size, 15.6)
     gps_us = times(5)
+    gps_us = gps_us if gps_until_s is None else gps_us[gps_us / 1e6 < gps_until_s]  # a receiver that stops
     fix = np.full(gps_us.size, 3.0)
     out_us = times(10)
     # motors as PX4 drives them: at the disarmed value (900) until armed, then near hover, varying
@@ -108,6 +114,19 @@ def crafted_log(
     if faults:
         messages.append((ERROR_AT_S, "3", "[sensors] accel 0 failed"))
     return append_logged_messages(path, messages)
+
+
+def test_a_topic_that_never_reports_again_times_out_to_the_end_of_the_log(tmp_path, cli, profile):
+    """The GNSS silent from 40 s to the end of the 60 s log: a gap no sample ends. The timeout was
+    judged at the sample that ends a gap, so this one never alarmed; it alarms from when the silence
+    passed 5 periods (the 5 Hz receiver: 1 s) to the log's end."""
+    log = crafted_log(tmp_path / "gps_stops.ulg", faults=False, gps_until_s=40.0)
+    code, entry = analyze(cli, log, profile, tmp_path / "report.html")
+    alarms = health_entry(entry)["alarms"]
+    assert code == 1 and {a["signal"] for a in alarms} == {"health.timeout.vehicle_gps_position_0"}, alarms
+    (timeout,) = alarms
+    assert timeout["start"] == pytest.approx(39.8 + 5 * 0.2, abs=0.05)  # its last sample at 39.8 s
+    assert timeout["end"] >= 59.9
 
 
 def _eph_flags(t_us: np.ndarray, eph_over: tuple[float, float] | None) -> np.ndarray:
@@ -175,7 +194,9 @@ def test_each_fault_is_one_alarm_of_its_check_at_its_time(tmp_path, cli, profile
         assert alarm["end"] <= end + 0.15, signal
     assert only(alarms, "health.battery")["peak_value"] == pytest.approx(4 * 3.5 / 12.4, rel=1e-5)
     timeout = only(alarms, "health.timeout.sensor_combined_0")
-    assert timeout["start"] == pytest.approx(52.0, abs=0.05)
+    # from when the silence passed 5 periods (the gap begins at 50 s) to the sample that ends it
+    assert timeout["start"] == pytest.approx(50.0 + 5 * 0.01, abs=0.02)
+    assert timeout["end"] == pytest.approx(52.0, abs=0.02)
     assert timeout["peak_value"] == pytest.approx(2.0 / (5 * 0.01), rel=0.01)  # the gap / (5 periods)
     error = only(alarms, "health.logged_error")
     assert error["start"] == pytest.approx(ERROR_AT_S, abs=0.02)
