@@ -113,8 +113,12 @@ def _verdict_lines(analysis) -> list[str]:
         f"({_analysed_span(analysis)}, model {analysis.model.name}, "
         f"detectors {', '.join(r.detector for r in analysis.results)})"
     ]
-    if not analysis.clock.relative:  # seconds since the log's start, as the span above, need no line
-        lines.append(f"  times: {analysis.clock.describe()}")
+    clock = analysis.clock
+    if not clock.relative:  # seconds since the log's start, as the span above, need no line
+        # the span above and --start/--end count from time zero, the clock's seconds do not: said
+        # where both are seconds (PX4 boot time), or an incident's time given to --start misses it
+        since_zero = "" if clock.utc else "; the span above and --start/--end count from time zero"
+        lines.append(f"  times: {clock.describe()}{since_zero}")
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
     lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
