@@ -14,8 +14,9 @@ Checks (a check whose topic or field is absent is skipped, listed in ``info["ski
 log, a battery whose ``connected`` is 0 all flight or a GNSS without a 3D fix all flight, is a
 ``partial`` one: the log is not fully checked, as with a measurement group without valid samples):
 
-- battery (``battery_status``): ``cells * V_EMPTY / voltage_v``; a reading under 0.5 V while the
-  battery says it is connected: ``health.battery_zero``;
+- battery (``battery_status``): ``cells * V_EMPTY / voltage_filtered_v`` (else ``voltage_v``); a
+  reading under 0.5 V while the battery says it is connected: ``health.battery_zero``; PX4's own
+  ``warning`` at CRITICAL or worse: ``health.battery_warning``;
 - GNSS (``vehicle_gps_position``, else ``sensor_gps``), while armed when the arming state is
   known: fix lost after the first 3D fix, ``eph`` / ``epv`` over EKF2_REQ_EPH / EKF2_REQ_EPV while
   3D-fixed, ``jamming_indicator`` over ``jamming_limit``, and a sudden rise of the reported

@@ -57,6 +57,7 @@ def _suffix(instance: int) -> str:
 CHECK_WORDS = {
     "battery": "battery voltage below empty",
     "battery_zero": "battery sensor reading about 0 V",
+    "battery_warning": "PX4's battery warning critical or worse",
     "gnss_fix": "GNSS 3D fix lost",
     "gnss_eph": "GNSS horizontal accuracy worse than required",
     "gnss_epv": "GNSS vertical accuracy worse than required",

@@ -21,6 +21,11 @@ from logscan.detectors.raw_topics import held as _held
 from logscan.detectors.raw_topics import in_span
 from logscan.detectors.raw_topics import log_parameter as _parameter
 
+# battery_status.warning (PX4's msg/BatteryStatus.msg): the levels at which PX4 itself acts (CRITICAL:
+# return or abort, EMERGENCY: land now); LOW only warns and CHARGING (7) is no fault
+BATTERY_WARNING_NAMES = {2: "CRITICAL", 3: "EMERGENCY", 4: "FAILED", 6: "UNHEALTHY"}
+BATTERY_WARNINGS = tuple(BATTERY_WARNING_NAMES)
+
 
 class PowerChecks(HealthChecks):
     """Battery and motors."""
@@ -43,12 +48,13 @@ class PowerChecks(HealthChecks):
         if voltage is None:
             self._skipped[name] = f"{where} has no voltage_v"
             return
-        t, v = voltage.t, voltage.values
+        t, raw = voltage.t, voltage.values
+        v, v_from = _judged_voltage(fields, raw)
         connected = fields.get("connected")
         on = np.ones(t.size, bool) if connected is None else np.nan_to_num(_held(connected, t)) != 0
         inside = in_span(self._grid, t)
         if connected is not None and inside.any() and not on[inside].any():
-            seen = v[inside][np.isfinite(v[inside])]
+            seen = raw[inside][np.isfinite(raw[inside])]
             volts = f", voltage {seen.min():.2f}-{seen.max():.2f} V" if seen.size else ""
             self._unmonitored.append(f"battery not monitored: connected=0 all flight ({where}{volts})")
             return
@@ -69,6 +75,7 @@ class PowerChecks(HealthChecks):
                     t,
                     np.where(ok, limit / v, np.nan),
                     limit={
+                        "voltage": f"{where}.{v_from}",
                         "empty_v": float(np.median(cells_seen)) * v_empty,
                         "cells": float(np.median(cells_seen)),
                         "cells_from": cells_from,
@@ -76,13 +83,31 @@ class PowerChecks(HealthChecks):
                         "cell_empty_from": empty_from,
                     },
                 )
-            zero = np.where(on & np.isfinite(v), np.where(v < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
+            zero = np.where(on & np.isfinite(raw), np.where(raw < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
+        self._battery_warning(fields, t, on, instance, where)
         self._add(
             f"{PREFIX}.battery_zero{_suffix(instance)}",
             where,
             t,
             zero,
             limit={"below_v": ZERO_VOLTAGE_V, "while": "connected" if connected is not None else "always"},
+        )
+
+    def _battery_warning(self, fields, t, on, instance: int, where: str) -> None:
+        """``health.battery_warning``: PX4's own battery state (``warning``) at CRITICAL or worse,
+        the level at which PX4 itself acts (return, land), while the battery is connected."""
+        warning = fields.get("warning")
+        if warning is None:
+            return  # older PX4 versions log no warning field: the voltage check stands alone
+        level = np.asarray(warning.values, dtype=np.float64)
+        flag = np.where(np.isin(level, BATTERY_WARNINGS), FLAG, 0.0)
+        self._add(
+            f"{PREFIX}.battery_warning{_suffix(instance)}",
+            where,
+            warning.t,
+            np.where(np.isfinite(level) & _on_at(on, t, warning.t), flag, np.nan),
+            limit={"field": f"{where}.warning", "levels": dict(BATTERY_WARNING_NAMES)},
+            n_persist=1,  # set from PX4's own filtered charge estimate: one sample is its verdict
         )
 
     # --- 3. motors (which outputs are motors and their levels: motor_outputs.py) ----------------
@@ -147,3 +172,23 @@ def _cell_count(fields, t, parameters, k: int, where: str):
             cells_from = param[1]
         cells = np.where(np.isfinite(cells), cells, param[0])
     return cells, cells_from
+
+
+def _judged_voltage(fields, raw: np.ndarray) -> tuple[np.ndarray, str]:
+    """(the voltage the battery check judges, its field): PX4's own filtered voltage where it logs
+    one (``voltage_filtered_v``, "0 if unknown"; what PX4 estimates the charge from), else the raw
+    ``voltage_v``, which swings with the motors' current on every throttle change."""
+    filtered = fields.get("voltage_filtered_v")
+    if filtered is None or filtered.values.size != raw.size:
+        return raw, "voltage_v"
+    known = np.asarray(filtered.values, dtype=np.float64)
+    known = np.where(np.isfinite(known) & (known >= ZERO_VOLTAGE_V), known, np.nan)
+    if not np.isfinite(known).any():
+        return raw, "voltage_v"
+    return np.where(np.isfinite(known), known, raw), "voltage_filtered_v"
+
+
+def _on_at(on: np.ndarray, t: np.ndarray, t_other: np.ndarray) -> np.ndarray:
+    """``on`` (at times ``t``) held at the times ``t_other`` (off before ``t``'s first)."""
+    i = np.searchsorted(t, t_other, side="right") - 1
+    return (i >= 0) & on[np.maximum(i, 0)]
