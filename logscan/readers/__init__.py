@@ -17,7 +17,15 @@ from typing import NamedTuple
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.input_files import SPECIAL_FILE_HINT, special_kind
 from logscan.log import Log, SourceInfo
-from logscan.readers.common import MCAP_MAGIC, ULOG_MAGIC, ReadWindow, input_error, list_directory, stat_input
+from logscan.readers.common import (
+    MCAP_MAGIC,
+    ULOG_MAGIC,
+    ReadWindow,
+    input_error,
+    list_directory,
+    stat_input,
+    undecoded_as_partial,
+)
 
 ROS1_BAG_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"  # a rosbag2 .db3
@@ -214,7 +222,15 @@ def read_log(
     topics. Multi-stage reads (ULog, a CSV file) weight each stage's bytes by its share of the read's
     time (`common.StagedBytes`). ``done`` never decreases, and the last call is ``(total, total)``.
     Registered readers (`register_reader`) are not given it.
+
+    Messages whose bytes do not decode make the log read only in part (`common.undecoded_as_partial`).
     """
+    log = _read(path, topics, use_header_stamp=use_header_stamp, progress=progress, window=window)
+    undecoded_as_partial(log.source)
+    return log
+
+
+def _read(path, topics, *, use_header_stamp: bool, progress, window) -> Log:
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
     if fmt in READERS:

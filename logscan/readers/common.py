@@ -1,5 +1,6 @@
 """Helpers every reader shares: format magic bytes, which inputs may be opened and how OS errors read,
-which topics and channels are wanted, time-order warnings, byte progress of a read in stages."""
+which topics and channels are wanted, time-order warnings, messages lost to damage, byte progress of
+a read in stages."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 
 ZERO_TIMESTAMP_WHY = "timestamp 0 (never set by the publisher)"  # ULog and ulog2csv rows
+UNDECODED_WHY = "message bytes do not decode"  # a message dropped: damaged bytes, or not its schema
 
 
 @dataclass(frozen=True)
@@ -146,3 +148,16 @@ class StagedBytes:
     def finish(self) -> None:
         self.done = self.size
         self.progress(self.size, self.size)
+
+
+def undecoded_as_partial(source: SourceInfo) -> None:
+    """Messages dropped because their bytes do not decode make the log read only in part, as a damaged
+    chunk does: data of the log is missing, so no verdict may say it was all checked."""
+    lost = [item for item in source.skipped if item.why == UNDECODED_WHY]
+    if not lost:
+        return
+    count = sum(item.count for item in lost)
+    where = ", ".join(f"{item.what} x{item.count}" for item in lost)
+    text = f"{count} message(s) whose bytes do not decode dropped ({where})"
+    source.partial = True
+    source.partial_reason = "; ".join(filter(None, [source.partial_reason, text]))

@@ -31,7 +31,7 @@ import numpy as np
 
 from logscan.errors import InputError
 from logscan.log import Log, SourceInfo, TopicInfo
-from logscan.readers.common import topic_wanted
+from logscan.readers.common import UNDECODED_WHY, topic_wanted
 from logscan.readers.flatten import MessageBytes
 from logscan.readers.mcap import read_mcap
 from logscan.readers.rosbag1_chunks import ROS1_HINT, read_chunks, ros1_layout
@@ -137,7 +137,7 @@ def _decode_topic(
     if ros1:
         cdrs, failed = ros1_to_cdr(columns.store, msgtype, datas)
         if failed:
-            pieces.skips.skip(topic, "message bytes do not decode", len(failed))
+            pieces.skips.skip(topic, UNDECODED_WHY, len(failed))
             times = np.delete(times, failed)
     else:
         cdrs = MessageBytes.from_list(datas)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from logscan.log import SourceInfo
+from logscan.readers.common import UNDECODED_WHY
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
 from logscan.readers.mcap.scan_records import SchemaRec
@@ -157,7 +158,7 @@ class TopicColumns:
             except Exception:  # noqa: BLE001 - message bytes that do not fit the definition
                 failed.append(index)
         if failed:
-            skips.skip(topic, "message bytes do not decode", len(failed))
+            skips.skip(topic, UNDECODED_WHY, len(failed))
             keep = np.ones(len(cdrs), dtype=bool)
             keep[failed] = False
             times = times[keep]

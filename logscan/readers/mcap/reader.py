@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from logscan.log import Log, SourceInfo, TopicInfo
-from logscan.readers.common import ReadWindow, topic_wanted
+from logscan.readers.common import UNDECODED_WHY, ReadWindow, topic_wanted, undecoded_as_partial
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 from logscan.readers.json_template import JsonTier, tally_file
@@ -163,6 +163,7 @@ def inspect_mcap(
     if unsorted:
         source.warnings.append(unsorted_text(unsorted))
     decoding.note_skipped(source)
+    undecoded_as_partial(source)  # as `read_log` says of the same file
     log = Log.without_samples({name: entry.span() for name, entry in stats.items()}, source)
     attach_logscan_records(log)
     return log, {name: entry.to_dict() for name, entry in stats.items()}
@@ -388,11 +389,11 @@ def _columns_of(
     if flat is None and isinstance(decoder, JsonDecoder):
         flat, failed = json_columns(datas, decoding.json_tier)
         if failed:  # message numbers in flat index all messages, so log_times stay aligned
-            source.skip(topic, "message bytes do not decode", len(failed))
+            source.skip(topic, UNDECODED_WHY, len(failed))
     if flat is None:
         messages, failed = _decode_all(decoder, datas.to_list())
         if failed:
-            source.skip(topic, "message bytes do not decode", len(failed))
+            source.skip(topic, UNDECODED_WHY, len(failed))
             keep = np.ones(len(messages), dtype=bool)
             keep[failed] = False
             messages = [m for m, k in zip(messages, keep.tolist()) if k]
