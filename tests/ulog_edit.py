@@ -115,3 +115,18 @@ def edit_ulog(
         _edit(data, _dtype(ulog, topic), ids[(topic, instance)], edit)
     Path(dst).write_bytes(bytes(data))
     return Path(dst)
+
+
+def cut_ulog(src: str | Path, dst: str | Path, after_s: float) -> Path:
+    """Copy ULog ``src`` up to its first data message stamped more than ``after_s`` after the
+    header's start time, that message and all after it left out: a log that ends there cleanly, at
+    a message boundary (as if the logger had stopped)."""
+    data = Path(src).read_bytes()
+    start_us = struct.unpack_from("<Q", data, 8)[0]
+    end = len(data)
+    for kind, body, size in _messages(data):
+        if kind == ord("D") and size >= 10 and struct.unpack_from("<Q", data, body + 2)[0] > start_us + after_s * 1e6:
+            end = body - 3
+            break
+    Path(dst).write_bytes(data[:end])
+    return Path(dst)

@@ -4,6 +4,8 @@ A verdict is a promise: "no alarms" only when the whole log was read and every p
 names was checked. Each rule below yields one line saying what was not checked:
 
 - the log was read only in part (truncated, failed CRC, broken framing: the reader says how much);
+- the log ends in flight (its [alarms] ``ground_channel`` says airborne at the last step): the
+  flight's end was not logged, as a truncated log's end is missing;
 - a measurement group the filter used fewer than ``MIN_UPDATE_FRACTION`` of the updates its rate
   implies over the log (no valid sample at all, non-finite values, or silent after a while); a
   group whose ``gate`` was closed all the log (a GNSS without a 3D fix all flight) had no valid
@@ -47,9 +49,10 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
     source = prepared.log.source
     if source.partial:
         reasons.append(f"the log was read only in part: {source.partial_reason}")
+    profile = getattr(prepared, "profile", None)
+    reasons += ends_in_flight(prepared.run, getattr(profile, "alarm_policy", None))
     trace = prepared.trace
     if trace is not None:
-        profile = getattr(prepared, "profile", None)
         reasons += _starved_groups(prepared.run, trace, getattr(profile, "measurements", None))
         reasons += _divergence(trace)
     span = "the log" if getattr(prepared.run, "window", None) is None else "the --start/--end window"
@@ -65,6 +68,28 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
                     f"{'or window ' if span == 'the log' else ''}covers most of {span})"
                 )
     return reasons
+
+
+def ends_in_flight(run, policy) -> list[str]:
+    """One line when the log ends with the vehicle in flight: its ``ground_channel`` (PX4's
+    ``landed``) says airborne at the grid's last step, with no landing after. The flight's end (the
+    landing, or what stopped it) is missing from the log, as a truncated log's end is; a --end
+    window ends where the user chose, not the log."""
+    channel = getattr(policy, "ground_channel", None)
+    ground = getattr(run, "ground", None)
+    window = getattr(run, "window", None)
+    if not channel or ground is None or not run.n_steps or (window is not None and window[1] is not None):
+        return []
+    ground = np.asarray(ground, dtype=np.float64)
+    if not ground[-1] == 0.0:  # on the ground, or not known (NaN)
+        return []
+    on = np.flatnonzero(np.isfinite(ground) & (ground != 0.0))
+    since = float(run.t[on[-1] + 1]) if on.size else float(run.t[0])
+    return [
+        f"the log ends in flight: {channel} says airborne from {since:.1f} s to the last step "
+        f"({float(run.t[-1]):.1f} s after the log start), with no landing: the end of the flight was not "
+        "logged (a crash, a power loss or the logger stopped)"
+    ]
 
 
 def skipped_checks(results: Sequence) -> list[str]:
