@@ -156,6 +156,8 @@ class PowerChecks(HealthChecks):
             self._checks[name]["outputs_stopped"] = [
                 f"{label}{k + 1}" for j, k in enumerate(group.outputs) if stopped[:, j].any()
             ]
+        elif (why_not := _never_commanded(group, fly & in_span(self._grid, t))) is not None:
+            self._skipped[name] = f"{where}: {why_not}"
 
 
 def _cell_count(fields, t, parameters, k: int, where: str):
@@ -192,3 +194,16 @@ def _on_at(on: np.ndarray, t: np.ndarray, t_other: np.ndarray) -> np.ndarray:
     """``on`` (at times ``t``) held at the times ``t_other`` (off before ``t``'s first)."""
     i = np.searchsorted(t, t_other, side="right") - 1
     return (i >= 0) & on[np.maximum(i, 0)]
+
+
+def _never_commanded(group: MotorGroup, flying: np.ndarray) -> str | None:
+    """Why ``motor_zero`` judged nothing when the vehicle did fly: PX4 commanded none of the group's
+    motors to run then (``actuator_motors`` NaN: stopped on purpose, as a plane's motor at zero
+    thrust), so an output at its stopped value was no fault. None: it never flew in the span."""
+    if not flying.any() or group.runs[flying].any() or not group.limits.get("commands"):
+        return None
+    motors = ", ".join(f"{c} ({group.label}{k + 1})" for c, k in zip(group.limits["commands"], group.outputs))
+    return (
+        f"{motors} NaN at all {int(flying.sum())} samples armed and flying: PX4 commanded no motor to run "
+        "in flight (stopped on purpose), so a stopped output is no fault there"
+    )

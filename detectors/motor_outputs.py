@@ -121,6 +121,7 @@ def _group(fields, instance: int, parameters, armed, commands) -> MotorGroup | s
         "mapping": mapping,
         "protocol": protocol,
         "motor_topic": f"{MOTORS}_0 (judged where its command is finite)" if commands else None,
+        "commands": [f"{MOTORS}_0.control[{motor_of[motors[j]]}]" for j in keep] if commands else None,
         "outputs": [names[j] for j in keep],
         "not_motors": [n for n, a in zip(names, active) if not a],
         "max": top[keep].tolist(),

@@ -217,3 +217,22 @@ def test_where_stopped_and_idle_are_one_value_the_command_tells_them_apart(tmp_p
 def test_a_log_never_armed_says_so(tmp_path, cli):
     health = analyze(cli, NEVER_ARMED, need_testdata(NEVER_ARMED), tmp_path)
     assert health["info"]["skipped"]["health.motor_saturated"] == "actuator_outputs_0: never armed while it was logged"
+
+
+@pytest.mark.testdata("px4-ulog-extra/mcap_ulog2mcap_test_ulog.ulg")
+def test_a_motor_px4_never_commands_in_flight_is_named_as_the_reason_nothing_was_judged(tmp_path, cli):
+    """The real FMU-v6C plane (MAV_TYPE 1) has its motor 1 on AUX4 (PWM_AUX_FUNC4 101), at 1000 us
+    all its 2 s in the air and 1152-1223 us after; actuator_motors control[0] is NaN at every sample
+    armed and flying (PX4 stopped it on purpose). "No sample to judge on the analysis grid" hid that."""
+    out = tmp_path / "s.json"
+    path = need_testdata("px4-ulog-extra/mcap_ulog2mcap_test_ulog.ulg")
+    result = cli("analyze", str(path), "-d", "health", "--no-report", "--json", str(out))
+    (log,) = json.loads(out.read_text())["logs"]
+    (health,) = log["detectors"]
+    why = health["info"]["skipped"]["health.motor_zero.aux"]
+    assert why.startswith("actuator_outputs_1: actuator_motors_0.control[0] (aux4) NaN at all ")
+    assert "samples armed and flying: PX4 commanded no motor to run in flight" in why
+    assert f"health: motor_zero.aux: {why}" in log["skipped_checks"] and result.exit_code == 0
+    assert health["info"]["checks"]["health.motor_saturated.aux"]["limit"]["commands"] == [
+        "actuator_motors_0.control[0]"
+    ]
