@@ -7,9 +7,11 @@ import json
 import re
 from types import SimpleNamespace
 
+import numpy as np
 from test_report import HOSTILE, figures, make_report
 from test_run_context import quad_run, sample_context
 
+from logscan.log import Channel
 from logscan.models import get_model
 from logscan.report import render_html
 from logscan.report.context_figures import mode_figure
@@ -87,3 +89,28 @@ def test_colour_codes_are_dropped_and_other_control_characters_shown_as_escapes(
 
     assert message_text("[commander] \x1b[32mReady for takeoff!\x1b[0m") == "[commander] Ready for takeoff!"
     assert message_text("a\x1b[2Jb\u202ec") == "a\\x1b[2Jb\\u202ec"
+
+
+def test_a_window_s_context_keeps_only_its_own_messages_and_states_and_says_so():
+    # a --start/--end window from 0.8 s to 1.8 s: its grid, one step beyond its last the span's end
+    run = quad_run(100, mode=np.zeros(100))
+    run.t, run.start_ns, run.window = run.t + 0.8, START_NS, (0.8, 1.8)
+    t_ns = START_NS + np.array([0, 1, 2]) * 10**9
+    status = Channel("/vehicle_status_0/arming_state", t_ns, np.array([2.0, 1.0, 2.0]))
+    log = _log()
+    log.channels = {"/vehicle_status_0/arming_state": status}  # armed 0-1 s and from 2 s
+    context = run_context(run, get_model("quadcopter", {}), log)
+    assert context.window == (0.8, 1.8)
+    assert [(m.level, round(m.t, 3)) for m in context.log_messages] == [("WARNING", 1.0)]
+    assert [m.text for m in context.messages] == ["Compass needs calibration"]
+    assert (context.n_log_messages, context.n_outside) == (1, 3)  # the log counts 4
+    assert context.states["armed"] == [(0.8, 1.0)]  # the intervals cut to the window
+    report = make_report(6_000, truth=False)
+    report.context = context
+    page = render_html(report)
+    block = re.search(r'<details id="log-messages"><summary>(.*?)</summary>', page, re.S)
+    assert block and block.group(1) == (
+        "the 1 message the autopilot logged in the --start/--end window (every level); 3 outside it, not listed"
+    )
+    assert "the 1 message(s) the autopilot logged in the --start/--end window" in page  # the mode row's caption
+    assert "1 message(s) of level warning and above the autopilot logged in the --start/--end window" in page

@@ -16,6 +16,7 @@ from logscan.detectors.registry import default_registry
 from logscan.errors import ExitCode
 from logscan.report import ReportInput, report_matches
 from logscan.report.context import measurement_groups
+from logscan.report.run_context import analysed_span
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import clock_of
 from logscan.verdict.autopilot_messages import FlightMessages, flight_messages
@@ -142,10 +143,8 @@ class Analysis:
         context = getattr(self.prepared, "context", None)
         states = getattr(context, "states", None) or {}
         metadata = self.log.source.metadata or {}
-        run = self.run
-        # the analysed span, as the raw-topic checks judge it (detectors/raw_topics.py `in_span`)
-        window = None if run.window is None else (float(run.t[0]), float(run.t[-1] + run.dt))
-        return flight_messages(metadata, run.start_ns, self.incidents, states.get("armed"), window)
+        window = analysed_span(self.run)  # as the raw-topic checks judge it, and the report's context
+        return flight_messages(metadata, self.run.start_ns, self.incidents, states.get("armed"), window)
 
     @property
     def duration_s(self) -> float:

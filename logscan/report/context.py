@@ -166,8 +166,9 @@ def _escape(match: re.Match) -> str:
 
 def log_message_rows(context, clock) -> dict:
     """The folded table of every message the autopilot logged (a `logscan.report.run_context.RunContext`'s
-    ``log_messages``, any level): ``{"rows": [{time, level, text, t0}], "n": count in the log}``;
-    ``t0`` in the time axis' units, where a click zooms."""
+    ``log_messages``, any level): ``{"rows": [{time, level, text, t0}], "n": count in the log (in a
+    --start/--end window: in it), "outside": count outside the window, "window": whether there is
+    one}``; ``t0`` in the time axis' units, where a click zooms."""
     messages = list(getattr(context, "log_messages", None) or [])
     rows = [
         {
@@ -178,7 +179,12 @@ def log_message_rows(context, clock) -> dict:
         }
         for m in messages
     ]
-    return {"rows": rows, "n": max(int(getattr(context, "n_log_messages", 0) or 0), len(rows))}
+    return {
+        "rows": rows,
+        "n": max(int(getattr(context, "n_log_messages", 0) or 0), len(rows)),
+        "outside": int(getattr(context, "n_outside", 0) or 0),
+        "window": getattr(context, "window", None) is not None,
+    }
 
 
 def context_tables(context, clock) -> dict:

@@ -143,11 +143,15 @@ def mode_figure(mode, clock: Clock | None = None, messages=(), t_span: tuple[flo
     return row_figure(mode_row(mode, messages, t_span), clock)
 
 
-def mode_row(mode, messages=(), t_span: tuple[float, float] | None = None) -> dict:
+IN_WINDOW = " in the --start/--end window"  # what a window's context shows, as its coverage lines say
+
+
+def mode_row(mode, messages=(), t_span: tuple[float, float] | None = None, where: str = "") -> dict:
     """The mode channel as a step line, shaded by value when it takes few values (each value named,
     one row each, when it has a name: `logscan.report.flight_modes`), and the autopilot's logged
     ``messages`` (`logscan.log.LoggedMessage`, any level) as markers along its top; its time axis
-    spans ``t_span`` (the analysis grid's) when given, as the other context figures'."""
+    spans ``t_span`` (the analysis grid's) when given, as the other context figures'. ``where``:
+    `IN_WINDOW` when the messages are a window's."""
     name = plot_text(mode.channel)
     values = sorted({v for _, _, v in mode.intervals})
     banded = bool(mode.intervals) and len(values) <= MAX_BAND_VALUES
@@ -178,7 +182,8 @@ def mode_row(mode, messages=(), t_span: tuple[float, float] | None = None) -> di
         + (", shaded by value" if banded else f" ({mode.n_changes} changes: drawn as a line)")
         + (_names_from(mode) if named else "")
         + (
-            f"; triangles along the top: the {len(messages)} message(s) the autopilot logged (hover for the text)"
+            f"; triangles along the top: the {len(messages)} message(s) the autopilot logged{where} "
+            "(hover for the text)"
             if messages
             else ""
         )
@@ -287,9 +292,9 @@ def messages_figure(messages, t_span: tuple[float, float] | None = None, clock: 
     return row_figure(messages_row(messages, t_span), clock)
 
 
-def messages_row(messages, t_span: tuple[float, float] | None = None) -> dict:
+def messages_row(messages, t_span: tuple[float, float] | None = None, where: str = "") -> dict:
     """The autopilot's own warnings and errors as markers on the shared time axis, one row per
-    level, the text on hover."""
+    level, the text on hover; ``where`` as `mode_row`'s."""
     data = []
     for level, row in _LEVEL_ROWS.items():
         chosen = [m for m in messages if m.level == level]
@@ -306,7 +311,7 @@ def messages_row(messages, t_span: tuple[float, float] | None = None) -> dict:
              "range": [-0.5, max(rows) + 0.5], "fixedrange": True}  # fmt: skip
     layout = _time_row_layout("the autopilot's logged warnings and errors", yaxis, t_span)
     caption = (
-        f"{len(messages)} message(s) of level warning and above the autopilot logged, at their time "
+        f"{len(messages)} message(s) of level warning and above the autopilot logged{where}, at their time "
         "on the shared axis (hover for the text). Read an alarm against what the autopilot itself said."
     )
     return time_row(_time_row_spec("ctx-messages", "autopilot messages", caption), data, layout)
@@ -349,13 +354,14 @@ def context_rows(context) -> list[dict]:
     if context is None:
         return []
     t_span = getattr(context, "t_span", None)
+    where = IN_WINDOW if getattr(context, "window", None) is not None else ""
     rows = []
     if context.mode is not None:
-        rows.append(mode_row(context.mode, getattr(context, "log_messages", ()), t_span))
+        rows.append(mode_row(context.mode, getattr(context, "log_messages", ()), t_span, where))
     if getattr(context, "states", None):
         rows.append(states_row(context.states, t_span))
     if getattr(context, "messages", None):
-        rows.append(messages_row(context.messages, t_span))
+        rows.append(messages_row(context.messages, t_span, where))
     return rows
 
 

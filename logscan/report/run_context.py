@@ -12,10 +12,13 @@ what the report shows beside the statistics is extracted right after alignment, 
   most), or, when it changes more often (a continuous set-point), as a decimated series;
 - the autopilot's own logged messages of level WARNING and above (a ULog's ``logged_messages``,
   ``MAX_MESSAGES`` at most), on the same time axis, and all its messages whatever their level
-  (``MAX_LOG_MESSAGES`` at most; the reader keeps 500) for the report's folded message table;
+  (``MAX_LOG_MESSAGES`` at most; the reader keeps 500) for the report's folded message table; of a
+  window (--start/--end), only those in it (`analysed_span`), as the verdict's list of them
+  (`logscan.verdict.autopilot_messages`): the report is about what was judged;
 - a ULog's parameters set away from their defaults and changed in flight (`logscan.report.parameters`);
 - the autopilot's states as intervals: armed (PX4 ``vehicle_status.arming_state`` 2) and in
-  failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`);
+  failsafe (``vehicle_status.failsafe``), when the log carries them (`STATE_TOPICS`), cut to a
+  window's span;
 - a simulated log's true state (`logscan simulate` writes it on `TRUTH_STATE_TOPIC`, its ground
   truth names the topic and fields) on the grid, for the model's states it gives (`true_states`):
   the UBIKF's estimation error against its envelopes (`logscan.report.ubikf_truth_view`).
@@ -27,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from logscan.log import LoggedMessage, logged_messages
+from logscan.log import MAX_MESSAGES, LoggedMessage, logged_messages
 from logscan.report.decimate import decimate_indices
 from logscan.report.parameters import ParameterFacts, parameter_facts
 
@@ -87,6 +90,8 @@ class RunContext:
     parameters: ParameterFacts | None = None  # a ULog's parameters away from their defaults, and changed
     # a simulated log's true state on the grid, model state -> (N,) float64 (`true_states`); empty: no truth
     true_states: dict[str, np.ndarray] = field(default_factory=dict)
+    window: tuple[float, float] | None = None  # a --start/--end window's analysed span (`analysed_span`)
+    n_outside: int = 0  # messages of any level logged outside the window: counted, not kept
 
 
 def _intervals(t: np.ndarray, on: np.ndarray, end: float) -> list[tuple[float, float]]:
@@ -233,6 +238,28 @@ def mode_of(run, max_intervals: int = MAX_MODE_INTERVALS, max_points: int = MAX_
     return track
 
 
+def analysed_span(run) -> tuple[float, float] | None:
+    """A window's (--start/--end) analysed span, s since the log's start: its grid's first step to
+    one step after its last, as the raw-topic checks judge it (detectors/raw_topics.py `in_span`);
+    None for the whole log."""
+    if getattr(run, "window", None) is None:
+        return None
+    return float(run.t[0]), float(run.t[-1] + run.dt)
+
+
+def _within(messages: list[LoggedMessage], span: tuple[float, float] | None, limit: int) -> list[LoggedMessage]:
+    """The ``messages`` in ``span`` (all for None), the first ``limit`` of them."""
+    return [m for m in messages if span is None or span[0] <= m.t <= span[1]][:limit]
+
+
+def _clipped(states: dict[str, list[tuple[float, float]]], span: tuple[float, float] | None) -> dict:
+    """Each state's intervals cut to ``span`` (unchanged for None); those outside it dropped."""
+    if span is None:
+        return states
+    a, b = span
+    return {name: [(max(s, a), min(e, b)) for s, e in spans if e >= a and s <= b] for name, spans in states.items()}
+
+
 def _message_count(metadata: dict, kept: int) -> int:
     """The log's count of logged messages (a ULog's ``ulog.log`` facts), at least ``kept``."""
     try:
@@ -277,10 +304,15 @@ def run_context(
     if context.mode is not None and mode_labels:
         context.mode.labels = dict(mode_labels)
     if log is not None:
-        context.messages = logged_messages(log.source.metadata, run.start_ns)
-        context.log_messages = logged_messages(log.source.metadata, run.start_ns, ALL_LEVELS, MAX_LOG_MESSAGES)
-        context.n_log_messages = _message_count(log.source.metadata, len(context.log_messages))
-        context.parameters = parameter_facts(log.source.metadata, run.start_ns)
-        context.states = autopilot_states(log.channels, run.start_ns, context.t_span[1])
+        metadata, span = log.source.metadata, analysed_span(run)
+        context.window = span
+        context.messages = _within(logged_messages(metadata, run.start_ns, limit=None), span, MAX_MESSAGES)
+        every = logged_messages(metadata, run.start_ns, ALL_LEVELS, None)
+        context.log_messages = _within(every, span, MAX_LOG_MESSAGES)
+        n_log = _message_count(metadata, len(every))
+        inside = n_log if span is None else sum(1 for m in every if span[0] <= m.t <= span[1])
+        context.n_log_messages, context.n_outside = inside, n_log - inside
+        context.parameters = parameter_facts(metadata, run.start_ns)
+        context.states = _clipped(autopilot_states(log.channels, run.start_ns, context.t_span[1]), span)
         context.true_states = true_states(log, run, model) if with_truth else {}
     return context
