@@ -64,16 +64,22 @@ def test_the_led_grid_is_the_whole_grids_steps_before_and_through_the_window():
 def test_a_check_with_samples_only_before_the_window_has_nothing_to_judge_in_it(cli, tmp_path):
     """From 8.5 s the real flight's GNSS, motor and timeout checks have samples only in the lead-in:
     cut to the window their statistics hold no value, which read "never computed" and left the
-    window not fully checked (exit 2); a window alone says they had nothing to judge there. (Its
-    battery, under empty to the end, alarms there.)"""
+    window not fully checked (exit 2); a window alone says they had nothing to judge there, headed
+    as the window's, not the log's (the log has samples of them). (Its battery, under empty to the
+    end, alarms there.)"""
     path = str(need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg"))
-    out = tmp_path / "late.json"
-    result = cli("analyze", path, "--start", "8.5", "-d", "health", "--no-report", "--json", str(out))
+    out, page = tmp_path / "late.json", tmp_path / "late.html"
+    result = cli("analyze", path, "--start", "8.5", "-d", "health", "-o", str(page), "--json", str(out))
     log = json.loads(out.read_text())["logs"][0]
     assert result.exit_code == 1 and not log["unchecked"], result.stdout
     alarms = {a["signal"] for d in log["detectors"] for a in d["alarms"]}
     assert alarms == {"health.battery", "health.battery_warning"}, alarms
     assert any("health.gnss_fix: no sample in the --start/--end window" in line for line in log["skipped_checks"])
+    assert "  not checked (nothing to judge in the --start/--end window): health: " in result.stdout
+    assert "nothing to judge in this log" not in result.stdout
+    html = page.read_text(encoding="utf-8")
+    assert "<strong>Checks with nothing to judge in the --start/--end window</strong>" in html
+    assert "nothing to judge in this log" not in html and "on the whole log" not in html
     early = tmp_path / "early.json"
     cli("analyze", path, "--start", "2", "--end", "6", "--no-report", "--json", str(early))
     health = next(d for d in json.loads(early.read_text())["logs"][0]["detectors"] if d["detector"] == "health")

@@ -120,7 +120,7 @@ def _verdict_lines(analysis) -> list[str]:
         since_zero = "" if clock.utc else "; the span above and --start/--end count from time zero"
         lines.append(f"  times: {clock.describe()}{since_zero}")
     lines += [f"  not checked: {reason}" for reason in analysis.unchecked]
-    lines += [f"  not checked (nothing to judge in this log): {reason}" for reason in analysis.skipped_checks]
+    lines += [f"  not checked ({analysis.skipped_heading}): {reason}" for reason in analysis.skipped_checks]
     lines += [f"  error: {failure.message}" for failure in analysis.failures]
     return lines
 

@@ -20,7 +20,7 @@ from logscan.report.run_context import analysed_span
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import clock_of
 from logscan.verdict.autopilot_messages import FlightMessages, flight_messages
-from logscan.verdict.coverage import skipped_checks
+from logscan.verdict.coverage import judged_span, skipped_checks, skipped_heading
 from logscan.verdict.incidents import InputGap, signal_label
 
 if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no runtime edge)
@@ -135,6 +135,11 @@ class Analysis:
         """The checks the detectors could not run because the log holds nothing for them to judge
         (`logscan.verdict.coverage.skipped_checks`): listed; unlike ``unchecked``, the verdict stands."""
         return skipped_checks(self.results)
+
+    @property
+    def skipped_heading(self) -> str:
+        """What the skipped checks are listed under: nothing to judge in this log, or in the window."""
+        return skipped_heading(judged_span(self.run))
 
     def autopilot_messages(self) -> FlightMessages:
         """The autopilot's distinct messages of WARNING and above during flight and within the
@@ -290,6 +295,7 @@ class Analysis:
             incidents=self.incidents,
             unchecked=self.unchecked + [f.message for f in self.failures],
             skipped=self.skipped_checks,
+            judged=judged_span(self.run),
             unjudged=self.unjudged,
             messages=self.autopilot_messages().listed,
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),

@@ -33,6 +33,7 @@ from logscan.report.recovery_figures import recovery_figures, recovery_rows
 from logscan.report.report_input import ReportInput, flat_alarms, report_matches
 from logscan.report.stacked import figures_json
 from logscan.verdict.autopilot_messages import MAX_SHOWN
+from logscan.verdict.coverage import WHOLE_LOG, skipped_heading
 
 __all__ = ["ReportInput", "flat_alarms", "render_html", "render_report", "report_matches", "stage_report"]
 
@@ -96,6 +97,8 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         warnings=[str(w) for w in report.warnings],
         unchecked=[str(u) for u in report.unchecked],
         skipped=[str(u) for u in report.skipped],
+        skipped_heading=skipped_heading(report.judged),
+        checked_span="the whole log" if report.judged == WHOLE_LOG else report.judged,
         unjudged=str(report.unjudged),
         messages=[message_row(m, clock) for m in report.messages[:MAX_SHOWN]],
         messages_hidden=max(len(report.messages) - MAX_SHOWN, 0),

@@ -14,6 +14,7 @@ from logscan.report.sensor_views import Innovations
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import Clock
 from logscan.verdict import scoring
+from logscan.verdict.coverage import WHOLE_LOG
 
 
 @dataclass
@@ -38,6 +39,8 @@ class ReportInput:
     unchecked:        what could not be checked (and detectors that failed), shown under the verdict.
     skipped:          the checks with nothing to judge in this log (`logscan.verdict.coverage.skipped_checks`),
                       listed beside ``unchecked`` in the margins section.
+    judged:           what was judged, as the coverage lines say it (`logscan.verdict.coverage.judged_span`):
+                      "the log", or "the --start/--end window".
     unjudged:         what the profile's [alarms] suspension left unjudged of the model-based
                       statistics, when at most half of the flight ("": nothing; more is an
                       ``unchecked`` line): said where "every check ran" would be.
@@ -72,6 +75,7 @@ class ReportInput:
     incidents: list[Incident] = field(default_factory=list)
     unchecked: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    judged: str = WHOLE_LOG
     unjudged: str = ""
     messages: list = field(default_factory=list)
     groups: list[dict] = field(default_factory=list)

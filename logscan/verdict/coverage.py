@@ -43,6 +43,21 @@ MIN_JUDGED_FRACTION = 0.5  # of a statistic's valid samples that are out of warm
 MAX_UNJUDGED_FLIGHT = 0.5
 
 
+WHOLE_LOG = "the log"
+
+
+def judged_span(run) -> str:
+    """What a log's coverage lines speak of: ``WHOLE_LOG``, or a window's "the --start/--end window"."""
+    return WHOLE_LOG if getattr(run, "window", None) is None else "the --start/--end window"
+
+
+def skipped_heading(span: str) -> str:
+    """What the skipped checks' lines are headed with (`skipped_checks`): "nothing to judge in this
+    log", or in a window (``span`` of `judged_span`) "... in the --start/--end window": there a check
+    may have nothing to judge only because the window holds no sample of its topic."""
+    return f"nothing to judge in {'this log' if span == WHOLE_LOG else span}"
+
+
 def unchecked_reasons(prepared, results: Sequence) -> list[str]:
     """One line per part of the log that could not be checked (empty: everything was checked)."""
     reasons = []
@@ -55,7 +70,7 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
     if trace is not None:
         reasons += _starved_groups(prepared.run, trace, getattr(profile, "measurements", None))
         reasons += _divergence(trace)
-    span = "the log" if getattr(prepared.run, "window", None) is None else "the --start/--end window"
+    span = judged_span(prepared.run)
     for result in results:
         reasons += [f"{result.detector}: {c.reason}" for c in result.not_checked if c.partial]
         for name, series in result.series.items():
@@ -65,7 +80,7 @@ def unchecked_reasons(prepared, results: Sequence) -> list[str]:
                 share = 100.0 * result.judged_fraction[name]
                 reasons.append(
                     f"{result.detector}: {name} was judged on only {share:.0f} % of its samples (its warm-up "
-                    f"{'or window ' if span == 'the log' else ''}covers most of {span})"
+                    f"{'or window ' if span == WHOLE_LOG else ''}covers most of {span})"
                 )
     return reasons
 
@@ -93,8 +108,9 @@ def ends_in_flight(run, policy) -> list[str]:
 
 
 def skipped_checks(results: Sequence) -> list[str]:
-    """One line per check a detector could not run because the log holds nothing for it to judge
-    (no such topic or field, never armed): listed, not a reason of "not fully checked"."""
+    """One line per check a detector could not run because the log (or the window) holds nothing
+    for it to judge (no such topic or field, never armed, no sample in the window): listed under
+    `skipped_heading`, not a reason of "not fully checked"."""
     return [f"{result.detector}: {c.reason}" for result in results for c in result.not_checked if not c.partial]
 
 
