@@ -124,6 +124,9 @@ class SourceInfo:
     time_unit: str = "ns"  # unit the source's timestamps were in (inferred for CSV)
     time_source: str = "log_time"
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    # channels the log holds that the read left out (not asked for, where a reader knows their
+    # names: a CSV's columns, a read ULog topic's fields): a misspelt name is matched against them too
+    unread: list[str] = field(default_factory=list)
 
     def skip(self, what: str, why: str, count: int = 1) -> None:
         """Count a skipped item, merging repeats of the same (what, why)."""

@@ -74,6 +74,28 @@ def test_init_profile_writes_a_starter_for_a_csv_that_analyze_accepts(tmp_path):
     assert analysed.exit_code in (0, 1), analysed.output
 
 
+def test_a_misspelt_column_of_a_csv_with_units_in_its_header_suggests_the_real_one(cli, tmp_path):
+    """The read keeps only the columns the profile names, so a misspelt one ("/sped [m/s]") was
+    matched against none of the others; and "/x" is too far from "/x [m]" by letters alone (the
+    unit a CSV header carries is part of the channel's name)."""
+    t = np.arange(400) / 20
+    lines = ["time [s],x [m],y [m],speed [m/s]"] + [
+        f"{ti:.2f},{10 * np.cos(ti / 10):.4f},{10 * np.sin(ti / 10):.4f},{1 + 0.01 * np.sin(ti):.4f}" for ti in t
+    ]
+    log = tmp_path / "drive.csv"
+    log.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    starter = tmp_path / "p.toml"
+    assert cli("init-profile", log, "-o", starter).exit_code == 0
+    text = starter.read_text(encoding="utf-8")
+    assert '"/x [m]"' in text and '"/speed [m/s]"' in text
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('"/x [m]"', '"/x"').replace('"/speed [m/s]"', '"/sped [m/s]"'), encoding="utf-8")
+    result = cli("analyze", log, "--profile", bad, "--no-report")
+    assert result.exit_code == 2 and "Traceback" not in result.stderr
+    assert "no channel '/x' in the log (did you mean '/x [m]'?)" in result.stderr
+    assert "no channel '/sped [m/s]' in the log (did you mean '/speed [m/s]'?)" in result.stderr
+
+
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False, width=32)
 
 

@@ -241,3 +241,16 @@ def test_ulog2csv_directory_reads_to_the_same_channels_and_values(tmp_path, name
             equal_nan=True,
             err_msg=name_,
         )
+
+
+@pytest.mark.testdata("px4-ulog")
+def test_the_fields_of_a_read_topic_left_out_are_named_for_a_misspelt_profile_channel():
+    """A profile naming one field of a topic reads only it; the others stay known by name
+    (`SourceInfo.unread`), so a misspelt field is matched against them too."""
+    from logscan.profiles.problems import suggest_channel
+
+    path = need_testdata("px4-ulog/sample_log_small.ulg")
+    log = read_log(path, topics={"/vehicle_attitude_0/q[1]"})
+    assert list(log.channels) == ["/vehicle_attitude_0/q[1]"]
+    assert "/vehicle_attitude_0/q[0]" in log.source.unread and "/vehicle_attitude_0/q[1]" not in log.source.unread
+    assert "'/vehicle_attitude_0/q[0]'" in suggest_channel("/vehicle_attitude_0/qq[0]", log.source.unread)

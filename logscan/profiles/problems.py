@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import difflib
+import heapq
+import re
 from typing import Any
 
 from logscan.docs import doc_url
@@ -29,6 +31,35 @@ def suggest(word: str, choices, label: str = "did you mean") -> str:
     if close:
         return f" ({label} {', '.join(repr(c) for c in close)}?)"
     return ""
+
+
+_UNIT = re.compile(r"\s*\[[^\[\]]*\]\s*$")  # a column's unit in its header: "x [m]", "time [s]"
+MAX_SUGGESTED = 3
+
+
+def _bare(name: str) -> str:
+    return _UNIT.sub("", name)
+
+
+def suggest_channel(word: str, names) -> str:
+    """`suggest` for a channel name: each name also compared without a unit suffix on either side
+    (a CSV header's "x [m]": a profile naming "/x", or "/sped [m/s]"); the closest first."""
+    bare = _bare(word)
+    scored = []
+    for name in names:
+        score = max(_ratio(word, name), _ratio(bare, _bare(name)))
+        if score >= 0.6:  # difflib's cutoff, as `suggest`
+            scored.append((score, name))
+    close = [name for _, name in heapq.nlargest(MAX_SUGGESTED, scored)]  # ties as difflib orders them
+    return f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
+
+
+def _ratio(a: str, b: str) -> float:
+    matcher = difflib.SequenceMatcher(None, a, b)
+    # the cheap upper bounds first, as difflib.get_close_matches: most names are far off
+    if matcher.real_quick_ratio() < 0.6 or matcher.quick_ratio() < 0.6:
+        return 0.0
+    return matcher.ratio()
 
 
 def plural(n: int, noun: str) -> str:

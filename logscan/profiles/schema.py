@@ -12,7 +12,7 @@ from typing import Any
 
 from logscan.conversions import CONVERSIONS, VECTOR_FRAME_OUTPUTS
 from logscan.profiles.loops import PRIMARY_LOOP, RecoverySpec
-from logscan.profiles.problems import profile_error, suggest
+from logscan.profiles.problems import profile_error, suggest, suggest_channel
 from logscan.profiles.toml_tables import alarms_table, group_table, redundant_table
 from logscan.profiles.toml_writer import dumps_toml
 from logscan.results import AlarmPolicy
@@ -359,13 +359,15 @@ class Profile:
     def check_channels(self, log) -> None:
         """Raise ProfileError unless every channel the profile names exists in ``log``.
 
-        Unknown channels come with the closest existing names; all problems are reported.
+        Unknown channels come with the closest existing names, read or not (`SourceInfo.unread`);
+        all problems are reported.
         """
         names = list(log.channels)
+        known = names + [name for name in getattr(log.source, "unread", ()) if name not in log.channels]
         problems = []
         for where, ch in self.channel_refs():
             if ch not in log.channels:
-                problems.append(f"{where}: no channel {ch!r} in the log{suggest(ch, names)}")
+                problems.append(f"{where}: no channel {ch!r} in the log{suggest_channel(ch, known)}")
         for where, prefix in self.channel_prefixes():
             if not channels_under(prefix, names):
                 problems.append(f"{where}: no channel starts with {prefix!r} in the log{suggest(prefix, names)}")

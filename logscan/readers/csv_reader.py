@@ -380,6 +380,7 @@ def _value_channels(
         if garbage:
             source.skip(f"cells of column {column!r} of {label}", "not a number, read as NaN", garbage)
         if not channel_wanted(name, topic or path.stem, wanted):
+            source.unread.append(name)
             continue
         # an empty cell is no sample, not a NaN
         filled, nan_free = (None, True) if column in frame.complete else _filled_cells(series, values)

@@ -237,6 +237,8 @@ def _topic_channels(
     prefix = f"/{topic}/"
     if not (wanted is None or topic in wanted or "/" + topic in wanted):
         fields_read = [name for name in fields if channel_wanted(prefix + name, topic, wanted)]
+        read = set(fields_read)
+        source.unread.extend(prefix + name for name in fields if name not in read)
     else:
         fields_read = fields
     if records is not None and keep is None and fields_read:  # one kernel call for all fields
