@@ -260,3 +260,27 @@ def test_gnss_samples_count_only_with_a_3d_fix(cli, tmp_path):
     # not a starved group; the log is not fully checked because it never flew (on the ground all log)
     assert not [u for u in entry["unchecked"] if "gnss" in u.lower()], entry["unchecked"]
     assert any("never says airborne" in u for u in entry["unchecked"])
+
+
+@pytest.mark.testdata("px4-ulog")
+@pytest.mark.testdata("ros-robots")
+@pytest.mark.parametrize(
+    ("log", "note"),
+    [
+        ("px4-ulog/sample_appended_multiple.ulg", "built-in profile px4: no GNSS topic"),
+        ("ros-robots/robot_localization_test1_husky.bag", "built-in profile ros_wheeled: /fix altitude not checked"),
+    ],
+)
+def test_the_profile_init_profile_writes_says_what_the_builtin_one_says(cli, tmp_path, log, note):
+    """A built-in profile's notes (what it left out: a GNSS, the altitude) were comments in the
+    file init-profile writes, so analysing with that file lost them from the verdict's lines."""
+    path = need_testdata(log)
+    written = tmp_path / "p.toml"
+    assert cli("init-profile", path, "-o", written).exit_code == 0
+    assert parse_profile(written.read_text()).notes and note in written.read_text()
+    builtin = cli("analyze", path, "--no-report")
+    from_file = cli("analyze", path, "--profile", written, "--no-report")
+    assert f"  warning: {note}" in builtin.stdout
+    # the same lines, but the commands they suggest, which name the file given
+    assert from_file.stdout.replace(f" --profile {written}", "") == builtin.stdout
+    assert from_file.exit_code == builtin.exit_code

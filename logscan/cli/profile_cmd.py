@@ -51,7 +51,9 @@ def init_profile(log_path: str, output_path: str | None) -> None:
             raise
         text, notes, source = built.text, built.notes, "starter"
     text = text.rstrip("\n") + "\n"
-    if notes:
+    if notes and source.startswith("built-in "):
+        text = _notes_key(notes) + text
+    elif notes and source != "embedded":  # an embedded profile's are in its text
         text = "".join(f"# {note}\n" for note in notes) + text
     if output_path is None:
         click.echo(text, nl=False)
@@ -63,6 +65,15 @@ def init_profile(log_path: str, output_path: str | None) -> None:
 
     write_atomic(output_path, text)
     click.echo(f"{output_path}: profile ({source}) for {log_path}", err=True)
+
+
+def _notes_key(notes: list[str]) -> str:
+    """A built-in profile's notes as the profile's ``notes``: analysing with the file says them as
+    analysing without it does (what the profile left out: an altitude not checked, a missing GNSS)."""
+    from logscan.profiles.toml_writer import dumps_toml
+
+    why = "# what the built-in profile left out or chose: analyze says each as a warning (drop one no longer true)\n"
+    return why + dumps_toml({"notes": list(notes)})
 
 
 def _starter(log_path: str):

@@ -60,7 +60,7 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
     the built-in profile of a log that names itself (a PX4 ULog: `logscan.profiles.builtin`)."""
     if profile_path is not None:
         profile = load_profile(profile_path)
-        return LoadedProfile(profile, profile.to_toml(), str(profile_path))
+        return LoadedProfile(profile, profile.to_toml(), str(profile_path), list(profile.notes))
     embedded = read_embedded_profile(path)
     if not embedded:
         found = builtin_profile_for(path, with_log=True)
@@ -84,7 +84,8 @@ def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | 
             loaded.model_not_run = built.model_not_run
             return loaded
         raise ProfileError("no profile: the log embeds none", path=str(path), hint=_no_profile_hint(path))
-    return LoadedProfile(parse_profile(embedded, source=f"{path} (embedded profile)"), embedded, "embedded")
+    profile = parse_profile(embedded, source=f"{path} (embedded profile)")
+    return LoadedProfile(profile, embedded, "embedded", list(profile.notes))
 
 
 def _no_profile_hint(path: str | os.PathLike) -> str:

@@ -129,6 +129,9 @@ class _Checker(SectionChecker):
         for key in ("name", "description", "tables"):
             if key in data and not isinstance(data[key], str):
                 self.add(key, f"expected a string, got {type_name(data[key])}")
+        notes = data.get("notes", [])
+        if not (isinstance(notes, list) and all(isinstance(note, str) for note in notes)):
+            self.add("notes", f"expected an array of strings, got {type_name(notes)}")
         vehicle = self.vehicle_spec = self.vehicle(data["vehicle"]) if "vehicle" in data else None
         inputs = self.inputs(data.get("inputs", {}), vehicle)
         measurements = self.measurements(data["measurements"]) if "measurements" in data else {}
@@ -159,5 +162,6 @@ class _Checker(SectionChecker):
             name=data.get("name", ""),
             description=data.get("description", ""),
             tables=data.get("tables", ""),
+            notes=list(notes),
             source=source,
         )

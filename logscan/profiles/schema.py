@@ -20,6 +20,7 @@ from logscan.results import AlarmPolicy
 TOP_KEYS = (
     "name",
     "description",
+    "notes",
     "vehicle",
     "inputs",
     "measurements",
@@ -296,6 +297,9 @@ class Profile:
     name: str = ""
     description: str = ""
     tables: str = ""  # trained tables file (`logscan train`), relative to the profile's directory
+    # what the profile's maker said of it (a built-in profile's: what it left out, `logscan
+    # init-profile` writes them): analyze says each as a warning, as it does a built-in profile's
+    notes: list[str] = field(default_factory=list, compare=False)
     source: str = field(default="<embedded>", compare=False)
     model_facts: ModelFacts | None = field(default=None, compare=False, repr=False)
     loops: dict[str, Profile] = field(default_factory=dict)  # further loops ([loops.<name>], `loops`)
@@ -418,6 +422,8 @@ class Profile:
             out["name"] = self.name
         if self.description:
             out["description"] = self.description
+        if self.notes:
+            out["notes"] = list(self.notes)
         if self.tables:
             out["tables"] = self.tables
         out["vehicle"] = {"model": self.vehicle.model, "rate_hz": self.vehicle.rate_hz}
