@@ -290,6 +290,13 @@ class Detector:
         return None
 
     @classmethod
+    def judged_input(cls, signal: str) -> str | None:
+        """The model input (its name in `Model.input_names`) one of its statistics judges, not a
+        measurement group: an incident it alarms first in is headed by that input
+        (`logscan.verdict.incidents`, rule 5); None (the default): a group's or the filter's."""
+        return None
+
+    @classmethod
     def signal_label(cls, signal: str) -> str | None:
         """What one of its statistics means to a flight-test engineer, in plain words ("the state
         prediction disagrees with the measurements"), shown next to the statistic's name in the

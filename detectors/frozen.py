@@ -12,6 +12,10 @@ samples v_1 .. v_M (the steps where the channel has a new sample, `AlignedGroup.
 At rest (`Model.at_rest`: a ground robot whose wheels report, or are commanded, no speed) a sensor
 holding its value is stillness, not a freeze: those samples are not judged, and a run counts only
 the samples after the last one at rest (a GNSS receiver's static hold ends once the robot moves).
+The inputs that test reads (`Model.rest_inputs`: the wheel speed) are checked the same way, as
+``frozen.input.<input>``: held at a moving value, one would call the robot moving while it stands,
+and the still sensors stuck (the real Husky drive's wheel speed held for 100 s named its GNSS). An
+input is held on the grid between its samples: the fill factor L counts its own samples.
 
 The anchor a(i) is the first sample of the current run: a run ends when a sample leaves the band
 +-tol around it, so a slow healthy ramp (each step small, the sum not) is not a run. sigma is the
@@ -35,6 +39,8 @@ first that repeated the frozen value.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -145,6 +151,34 @@ def run_threshold(lengths: np.ndarray, fill: float, tests: int, duration_s: floa
     return 1.0 + np.log(q) / np.log(p)
 
 
+@dataclass
+class InputColumn:
+    """A model input `Model.at_rest` reads, checked as a group of one channel is (its samples: the
+    grid's held values, new or not; no stated noise: its own)."""
+
+    name: str  # "input.<input>"
+    channels: list[str]
+    z: np.ndarray  # (N, 1)
+    fresh: np.ndarray  # (N,) bool: finite
+    channel_fresh: None = None
+    noise_std: None = None
+
+
+def rest_inputs(run, model) -> list[InputColumn]:
+    """The inputs the model's rest test reads (`Model.rest_inputs`), as columns to check."""
+    u = getattr(run, "u", None)
+    if model is None or u is None or u.ndim != 2:
+        return []
+    names, channels = list(model.input_names), list(getattr(run, "input_channels", ()))
+    out = []
+    for k in getattr(model, "rest_inputs", ()):
+        if k < u.shape[1] and k < len(names):
+            column = u[:, k : k + 1]
+            channel = channels[k] if k < len(channels) else names[k]
+            out.append(InputColumn(f"input.{names[k]}", [channel], column, np.isfinite(column[:, 0])))
+    return out
+
+
 class FrozenSensorDetector(Detector):
     """Frozen-sensor check: a channel whose fresh samples stop changing ("stuck"), per channel."""
 
@@ -170,8 +204,17 @@ class FrozenSensorDetector(Detector):
         if prefix != PREFIX or not rest:
             return None
         group, _, output = rest.partition(".")
-        what = group_words(group) + (f" {output}" if output else "")
+        if group == "input" and output:
+            what = f"model input {output} (judges when the vehicle is at rest)"
+        else:
+            what = group_words(group) + (f" {output}" if output else "")
         return f"{what} stopped changing: its samples repeat one value (stuck sensor)"
+
+    @classmethod
+    def judged_input(cls, signal: str) -> str | None:
+        prefix, _, rest = signal.partition(".")
+        group, _, name = rest.partition(".")
+        return name if prefix == PREFIX and group == "input" and name else None
 
     @classmethod
     def signal_words(cls, signal: str) -> str | None:
@@ -186,7 +229,7 @@ class FrozenSensorDetector(Detector):
             for group in run.groups.values()
             if group.z is not None
             for j in range(group.z.shape[1])
-        ]
+        ] + [(column, 0, f"{PREFIX}.{column.name}") for column in rest_inputs(run, model)]
         duration = max(float(run.t[-1] - run.t[0]), run.dt) if run.t.size else 1.0
         info = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
         rest = model.at_rest(run.u) if model is not None and getattr(run, "u", None) is not None else None

@@ -354,3 +354,26 @@ def test_a_gnss_that_stops_before_the_drive_ends_is_not_checked_after_it(cli, tm
     mid = drop_window(need_testdata(ROS1_BAG), tmp_path / "fix_gap.bag", "/fix", 150.0, 180.0)
     code, entry, text = summary(cli, mid, tmp_path)
     assert not [u for u in entry["unchecked"] if "position" in u], entry["unchecked"]  # a gap: warned, not stopped
+
+
+def test_a_stuck_wheel_speed_is_named_not_the_gnss_it_made_look_frozen(cli, tmp_path):
+    """The real drive's wheel speed held at its 150 s value until 250 s: the robot stops at 236.8 s
+    while the wheels still say it moves, so the GNSS's static hold there read as a freeze and the
+    incident said "position sensor stuck". The wheel speed decides when the robot is at rest
+    (`Model.rest_inputs`): its own freeze is checked, from its onset, and heads the incident."""
+    from ros_edit import edit_messages
+
+    def hold_speed(msg, first):
+        msg.twist.twist.linear.x = first.twist.twist.linear.x
+
+    held = tmp_path / "speed_stuck.bag"
+    assert edit_messages(need_testdata(ROS1_BAG), held, "/husky_velocity_controller/odom", 150.0, 250.0, hold_speed)
+    code, entry, text = summary(cli, held, tmp_path)
+    assert code == 1, text
+    speed = "/husky_velocity_controller/odom/twist.twist.linear.x"
+    stuck = [i for i in entry["incidents"] if i["source"] == speed]
+    assert len(stuck) == 1 and 150.0 <= stuck[0]["start"] <= 152.0, entry["incidents"]
+    assert stuck[0]["headline"].startswith(f"model input v ({speed}) stuck"), stuck[0]["headline"]
+    assert "(frozen.input.v, peak" in stuck[0]["headline"]
+    # the GNSS's hold at the stop is in the wheel speed's incident, not one of its own
+    assert not any(i["headline"].startswith("position sensor stuck") for i in entry["incidents"]), text

@@ -109,6 +109,9 @@ class Model:
     state_names: tuple[str, ...] = ()
     input_names: tuple[str, ...] = ()
     inputs_are_sensors: bool = False  # True when the inputs are sensor readings (ins: the IMU), not commands
+    # the inputs (indices into input_names) `at_rest` reads: the frozen check trusts them to say when
+    # the vehicle moves, so it checks them for a freeze too (a stuck wheel speed makes rest "motion")
+    rest_inputs: tuple[int, ...] = ()
     # True when the filter's gain never reads a measurement (a linear model with fixed Q and R: the
     # Riccati recursion alone), so a gain-based check (kgn) has nothing to see
     gain_is_data_free: bool = False

@@ -78,6 +78,7 @@ class Wheeled(Model):
         "yaw_rate_ratio",
     )
     input_names = ("v", "w")
+    rest_inputs = (0,)  # `at_rest` reads the wheel speed v
     inputs_are_sensors = True  # wheel odometry and a gyro: readings, not commands
     groups = {
         "position": GroupSpec(
@@ -113,7 +114,7 @@ class Wheeled(Model):
         return np.array([1e3, 1e3, np.pi, 0.02, 0.2, g, g, 0.5])
 
     def at_rest(self, u: np.ndarray) -> np.ndarray:
-        """The steps whose wheel speed v (measured or commanded) is at most REST_SPEED."""
+        """The steps whose wheel speed v (measured or commanded) is at most REST_SPEED (`rest_inputs`)."""
         return np.abs(np.asarray(u, dtype=np.float64)[:, 0]) <= REST_SPEED
 
     def default_Q(self, dt: float) -> np.ndarray:

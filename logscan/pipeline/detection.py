@@ -31,6 +31,7 @@ from logscan.verdict.incidents import (
     find_incidents,
     group_of,
     input_gaps,
+    inputs_of,
     merge_fragments,
     sizes_of,
 )
@@ -78,7 +79,8 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.suspended = policy.suspended if policy is not None else None
     onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
-    incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets, gaps)
+    sizes, inputs = sizes_of(prepared), inputs_of(prepared)
+    incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes, onsets, gaps, inputs)
     analysis.incidents, analysis.input_gaps = incidents, gaps
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     named = {line.split(":")[0] for line in analysis.unchecked}  # a group starved or never heard: said once

@@ -23,6 +23,10 @@ alarms behind it. The rules:
 4. An incident that begins while a model input is missing (the filter predicting on its last value,
    `InputGap`), or within ``gap_s`` after, is headed by that input: its checks judge the held
    input, not their sensors (the real Husky drive without its gyro for 10 s blamed the wheels').
+5. An incident whose first alarm (rule 3's onsets; ties: the larger peak/threshold) is a check of a
+   model input itself (`Detector.judged_input`: a wheel speed stuck at one value) is headed by that
+   input and its channel: the checks that followed judged the stuck input (the real Husky drive's
+   wheel speed held while the robot stood called its GNSS, rightly still, stuck).
 """
 
 from __future__ import annotations
@@ -202,6 +206,33 @@ def _held_input_gap(members: list[AlarmInterval], gaps: Sequence[InputGap], gap_
     return gap
 
 
+def _judged_input(alarm: AlarmInterval) -> str | None:
+    """The model input an alarm's check judges (`Detector.judged_input`), None for any other."""
+    judged = getattr(_detector_class(alarm.detector), "judged_input", None)
+    return judged(alarm.signal) if judged is not None else None
+
+
+def _stuck_input(members: list[AlarmInterval], onsets: Onsets) -> tuple[AlarmInterval, str] | None:
+    """(its alarm, its name): the model input whose own check alarmed first in an incident (rule 5);
+    None when none did, or another check's alarm began before it."""
+    onset = {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in members}
+    first = min(members, key=lambda a: (onset[id(a)], -peak_rank(a)))
+    name = _judged_input(first)
+    return None if name is None else (first, name)
+
+
+def input_words(alarm: AlarmInterval, name: str, channel: str) -> str:
+    """'model input v (/odom/twist.twist.linear.x) stuck (its samples repeat one value)' (rule 5)."""
+    verdict = getattr(_detector_class(alarm.detector), "group_verdict", "inconsistent")
+    return f"model input {name} ({channel}) {verdict}" if channel != name else f"model input {name} {verdict}"
+
+
+def inputs_of(prepared) -> dict[str, str]:
+    """A prepared log's model inputs by name -> the channel each is read from (rule 5's words)."""
+    names = getattr(getattr(prepared, "model", None), "input_names", ())
+    return dict(zip(names, getattr(prepared.run, "input_channels", ())))
+
+
 def find_incidents(
     results: Sequence[DetectorResult],
     trace,
@@ -210,12 +241,14 @@ def find_incidents(
     sizes: Sizes | None = None,
     onsets: Onsets | None = None,
     gaps: Sequence[InputGap] = (),
+    inputs: Mapping[str, str] | None = None,
 ) -> list[Incident]:
     """Incidents in time order from every result's alarms (merge fragments first). ``trace``: the
     shared EKF trace (its rejected samples point at the source), or None. ``sizes``: the filter's
     innovations to give each headline the deviation's size with (`Sizes`); None: no size.
     ``onsets``: the alarms under way where judging resumed (`alarm_onsets`). ``gaps``: where a model
-    input was missing (`input_gaps`, rule 4)."""
+    input was missing (`input_gaps`, rule 4). ``inputs``: the model's inputs by name -> channel
+    (`inputs_of`), to name a stuck one's channel (rule 5)."""
     alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
     starts = np.array([a.start for a in alarms])
     ends = np.maximum.accumulate(np.array([a.end for a in alarms])) if alarms else np.zeros(0)
@@ -230,6 +263,11 @@ def find_incidents(
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
         size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
         source = group or quoted.signal
+        stuck = _stuck_input(members, onsets or {})
+        if stuck is not None:  # rule 5: the checks judged a stuck input
+            quoted, name = stuck
+            source = (inputs or {}).get(name, name)
+            what, detail, size = input_words(quoted, name, source), headline_parts(quoted, None)[1], ""
         gap = _held_input_gap(members, gaps, gap_s)
         if gap is not None:  # rule 4: the checks judged a held input
             what, size, source = gap.words(), "", ", ".join(gap.channels) or "inputs"

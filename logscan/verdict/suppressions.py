@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 from logscan.errors import InputError
 from logscan.input_files import MAX_SUPPRESSIONS_BYTES, read_input_text
-from logscan.verdict.incidents import DEFAULT_GAP_S, alarm_onsets, find_incidents, sizes_of
+from logscan.verdict.incidents import DEFAULT_GAP_S, alarm_onsets, find_incidents, inputs_of, sizes_of
 
 KEYS = {"detector", "check", "log", "start", "end", "reason", "expires"}
 
@@ -120,7 +120,14 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
         groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
         onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
         analysis.incidents = find_incidents(
-            analysis.results, prepared.trace, groups, gap_s, sizes_of(prepared), onsets, analysis.input_gaps
+            analysis.results,
+            prepared.trace,
+            groups,
+            gap_s,
+            sizes_of(prepared),
+            onsets,
+            analysis.input_gaps,
+            inputs_of(prepared),
         )
     return count
 
