@@ -105,6 +105,13 @@ def test_a_window_of_the_robologs_flight_leaves_out_the_messages_outside_it(cli,
     page = report.read_text(encoding="utf-8")
     table = page[page.index('id="autopilot-messages"') :]
     assert "Dangerous battery level" not in table[: table.index("</table>")]
+    # and says, as the terminal and the JSON do, how many it left out
+    assert "2 message(s) of WARNING and above outside the --start/--end window (not listed" in page
+    # the Context section is the window's too: its folded table of every message holds no other
+    folded = page[page.index('<details id="log-messages">') :]
+    folded = folded[: folded.index("</details>")]
+    assert "in the --start/--end window (every level); 8 outside it, not listed" in folded
+    assert "Dangerous battery level" not in folded and "gps low on stack" not in folded
 
 
 def test_the_summary_shows_at_most_max_rows_messages_and_says_how_many_more():

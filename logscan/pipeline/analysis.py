@@ -280,6 +280,7 @@ class Analysis:
 
     def report_input(self, grace_s: float | None = None):
         """What the HTML report shows of this log."""
+        messages = self.autopilot_messages()
         return ReportInput(
             log_facts=self.log.summary(),
             profile_text=self.profile_text,
@@ -297,7 +298,8 @@ class Analysis:
             skipped=self.skipped_checks,
             judged=judged_span(self.run),
             unjudged=self.unjudged,
-            messages=self.autopilot_messages().listed,
+            messages=messages.listed,
+            messages_outside=messages.outside,
             groups=measurement_groups(self.profile, self.prepared.filter_summary()),
             context=getattr(self.prepared, "context", None),
             innovations=getattr(self.prepared, "innovations", None),

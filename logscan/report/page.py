@@ -102,6 +102,7 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         unjudged=str(report.unjudged),
         messages=[message_row(m, clock) for m in report.messages[:MAX_SHOWN]],
         messages_hidden=max(len(report.messages) - MAX_SHOWN, 0),
+        messages_outside=report.messages_outside,
         incidents=page_rows.incident_rows(f["heads"], clock),
         checked_figure=f["checked_figure"],
         headline_figure=f["headline_figure"],

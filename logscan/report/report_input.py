@@ -45,7 +45,8 @@ class ReportInput:
                       statistics, when at most half of the flight ("": nothing; more is an
                       ``unchecked`` line): said where "every check ran" would be.
     messages:         the autopilot's messages during flight with their incidents
-                      (`logscan.verdict.autopilot_messages.AutopilotMessage`), a table under the incidents.
+                      (`logscan.verdict.autopilot_messages.AutopilotMessage`), a table under the incidents;
+                      of a --start/--end window, those in it (``messages_outside`` counts the others).
     groups:           the profile's measurement groups as used, with the filter's counts
                       (`logscan.report.context.measurement_groups`). Empty: not shown.
     context:          the run's path and mode (`logscan.report.run_context.RunContext`), drawn in the
@@ -78,6 +79,7 @@ class ReportInput:
     judged: str = WHOLE_LOG
     unjudged: str = ""
     messages: list = field(default_factory=list)
+    messages_outside: int = 0  # of WARNING and above logged outside a --start/--end window: counted, not listed
     groups: list[dict] = field(default_factory=list)
     context: RunContext | None = None
     innovations: Innovations | None = None
