@@ -18,6 +18,7 @@ from logscan.artifacts import Staged
 from logscan.fleet import LogFailure, run_many
 from logscan.pipeline import analyze_log, rescore
 from logscan.pipeline.analysis import Analysis
+from logscan.pipeline.blocks import analyze_blocked
 from logscan.readers import read_embedded
 from logscan.verdict.evaluation import Evaluation, LogEvaluation, evaluate_analysis
 from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
@@ -59,6 +60,7 @@ class AnalyzeTask:
     truth_path: str | None = None  # --truth: ground truth to score against
     fail_on_warning: bool = False  # --fail-on warning: possible faults exit 1 too
     suppressions: tuple = ()  # --suppressions: logscan.verdict.suppressions.Suppression entries
+    block_s: float | None = None  # --block-s: None a long indexed MCAP log in blocks, 0 never (logscan.pipeline.blocks)
 
     def __call__(self, item: tuple[str, str | None]) -> LogOutcome:
         log_path, report_path = item
@@ -68,9 +70,10 @@ class AnalyzeTask:
             if self.step is not None:
                 self.step(f"{log_path}: {message}")
 
-        analysis = analyze_log(
+        analysis = analyze_blocked(
             log_path,
             self.profile_path,
+            block_s=self.block_s,
             use_header_stamp=self.use_header_stamp,
             detector_names=self.detector_names,
             progress=step,

@@ -10,6 +10,7 @@ import click
 
 from logscan.cli.options import (
     GroupedCommand,
+    block_option,
     check_parallelism,
     check_profile,
     detector_option,
@@ -79,6 +80,7 @@ class _Run:
     print_profile: bool
     start_s: float | None
     end_s: float | None
+    block_s: float | None
     use_header_stamp: bool
     jobs: int
     scheduler: str | None
@@ -92,7 +94,16 @@ class _Run:
 
 @help_groups(
     {
-        "Input": ("profile_path", "tables_path", "truth_path", "start_s", "end_s", "use_header_stamp", "print_profile"),
+        "Input": (
+            "profile_path",
+            "tables_path",
+            "truth_path",
+            "start_s",
+            "end_s",
+            "block_s",
+            "use_header_stamp",
+            "print_profile",
+        ),
         "Detectors": ("detector_names", "suppressions_path"),
         "Outputs": ("output_path", "json_path", "no_report", "plotlyjs_dir", "quiet"),
         "CI": (
@@ -210,6 +221,7 @@ class _Run:
     "built-in one a PX4 log gets), as TOML, before analysing it.",
 )
 @window_option
+@block_option
 @header_stamp_option
 @jobs_option
 @scheduler_option
@@ -328,6 +340,7 @@ def _task(run: _Run, names, rules: tuple, token: str, steps: bool):
         truth_path=run.truth_path,
         fail_on_warning=run.fail_on == "warning",
         suppressions=rules,
+        block_s=run.block_s,
     )
 
 

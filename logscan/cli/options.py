@@ -226,6 +226,17 @@ def window_options(verb: str, each: str, example: str):
 
 
 window_option = window_options("Analyse", "the log", "e.g. to leave out a clock jump")
+block_option = click.option(
+    "--block-s",
+    "block_s",
+    type=click.FloatRange(min=0),
+    default=None,
+    metavar="SECONDS",
+    help="Analyse an indexed MCAP log in consecutive windows of this many seconds, each freed once its "
+    "alarms, counts and the report's series are kept, so memory is bounded by the block, not the log; "
+    "0: never. Default: in blocks of 180,000 grid steps (30 min at 100 Hz) when the log holds more "
+    "than 1,000,000. Other formats are read whole and analysed at once (a warning says so).",
+)
 
 
 def show_progress(quiet: bool) -> bool:

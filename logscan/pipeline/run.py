@@ -11,7 +11,7 @@ from logscan.filters.warmup import kernel_compilers
 from logscan.needs import Needs
 from logscan.pipeline.detection import detect
 from logscan.pipeline.preparation import Fraction, Progress, filter_free, load_profile_for, prepare, raw_topics_of
-from logscan.pipeline.stages import create_detectors, needs_of
+from logscan.pipeline.stages import LoadedProfile, create_detectors, needs_of
 from logscan.training.calibration import process_noise_scale, uncalibrable_groups
 from logscan.training.tables import apply_tables, read_tables_document, tables_path
 
@@ -35,6 +35,7 @@ def analyze_log(
     tables: str | os.PathLike | None = None,
     truth: str | os.PathLike | None = None,
     fraction: Fraction | None = None,
+    loaded: LoadedProfile | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
     ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
@@ -42,8 +43,9 @@ def analyze_log(
     `detect`; ``sensor_views``: keep the EKF's innovations for the report's measured-vs-predicted
     figures (`logscan.report.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it); ``fraction``: the
-    bytes read of the log, a block at a time (`prepare`)."""
-    loaded = load_profile_for(path, profile_path)
+    bytes read of the log, a block at a time (`prepare`); ``loaded``: the profile already loaded
+    from ``profile_path`` (block mode loads it once for every block), else loaded here."""
+    loaded = loaded if loaded is not None else load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
     trained = tables_path(None if tables is None else str(tables), loaded.profile, log=path)
     if trained is not None:  # the trained detectors, and the filter's calibrated noise in the profile

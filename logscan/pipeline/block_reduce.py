@@ -1,0 +1,96 @@
+"""One block's analysis reduced to what the merged verdict and report read (`reduce_block`): its
+detectors' series on the grid kept as an envelope of buckets (`envelope`), its filter's series and
+aligned signals freed. Block mode (`logscan.pipeline.blocks`) keeps one such analysis per block.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from logscan.results import Band, DetectorResult
+
+# Each series of the merged log keeps about this many points (two per bucket: the report draws at
+# most `logscan.report.decimate.DEFAULT_MAX_POINTS`, 5000, of a series, so ten times that leaves
+# its own decimation the choice of which to draw)
+MERGED_POINTS = 50_000
+
+
+def bucket_width(total_steps: int) -> int:
+    """Grid steps per bucket for a log of ``total_steps`` (1: every step kept)."""
+    return max(1, -(-int(total_steps) * 2 // MERGED_POINTS))
+
+
+def envelope(values: np.ndarray, width: int) -> np.ndarray:
+    """(2 * ceil(N / width), ...) from (N, ...): each bucket of ``width`` steps as its two extremes
+    (NaN skipped) in the order they occur, so a peak or a dip of the series survives; a bucket of
+    NaN only stays NaN (a gap still breaks the line). Booleans: whether any step of the bucket is
+    True, twice. ``width`` 1: ``values`` as they are."""
+    values = np.asarray(values)
+    if width <= 1:
+        return values
+    n = values.shape[0]
+    buckets = -(-n // width)
+    if values.dtype == bool:
+        padded = np.zeros((buckets * width, *values.shape[1:]), dtype=bool)
+        padded[:n] = values
+        anyone = padded.reshape(buckets, width, *values.shape[1:]).any(axis=1)
+        return np.repeat(anyone, 2, axis=0)
+    padded = np.full((buckets * width, *values.shape[1:]), np.nan, dtype=np.float64)
+    padded[:n] = values
+    grouped = padded.reshape(buckets, width, *values.shape[1:])
+    missing = np.isnan(grouped)
+    low_at = np.argmin(np.where(missing, np.inf, grouped), axis=1)[:, None]
+    high_at = np.argmax(np.where(missing, -np.inf, grouped), axis=1)[:, None]
+    low = np.take_along_axis(grouped, low_at, axis=1)[:, 0]
+    high = np.take_along_axis(grouped, high_at, axis=1)[:, 0]
+    in_order = (low_at <= high_at)[:, 0]
+    pairs = np.stack([np.where(in_order, low, high), np.where(in_order, high, low)], axis=1)
+    return pairs.reshape(2 * buckets, *values.shape[1:]).astype(values.dtype, copy=False)
+
+
+def envelope_times(t: np.ndarray, width: int) -> np.ndarray:
+    """The times of `envelope`'s points: each bucket's first and last step."""
+    if width <= 1:
+        return t
+    first = np.arange(0, t.size, width)
+    last = np.minimum(first + width - 1, t.size - 1)
+    return np.stack([t[first], t[last]], axis=1).reshape(-1)
+
+
+def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult:
+    """``result`` with each of its series on the grid (first axis ``n``) as its envelope; its
+    other arrays (not on the grid) are left out: what they index is the block's, not the log's."""
+
+    def on_grid(arrays: dict) -> dict:
+        return {k: envelope(v, width) for k, v in arrays.items() if np.shape(v)[:1] == (n,)}
+
+    def band(b: Band) -> Band:
+        upper = None if b.upper is None else envelope(b.upper, width)
+        return Band(upper=upper, lower=None if b.lower is None else envelope(b.lower, width))
+
+    judged = {k: envelope(np.asarray(v, dtype=bool), width) for k, v in result.judged.items() if np.shape(v) == (n,)}
+    return replace(
+        result,
+        series=on_grid(result.series),
+        thresholds={k: band(b) for k, b in result.thresholds.items()},
+        extras=on_grid(result.extras),
+        judged=judged,
+    )
+
+
+def reduce_block(analysis, width: int):
+    """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
+    as envelopes on the envelope's times (the block's grid ``run.t``), the filter's trace, aligned
+    signals, raw channels, the report's context and innovations, and the suspension's steps freed.
+    Returns it."""
+    prepared = analysis.prepared
+    prepared.release_series()  # the filter's counts stay (`filter_summary`)
+    n = prepared.run.n_steps
+    analysis.results = [reduced_result(result, n, width) for result in analysis.results]
+    t = envelope_times(prepared.run.t, width)
+    prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), ground=None, ground_around=None)
+    prepared.raw, prepared.context, prepared.innovations = {}, None, None
+    analysis.suspended = None
+    return analysis

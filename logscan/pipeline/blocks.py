@@ -1,0 +1,154 @@
+"""Block mode (`analyze_blocked`): a long log analysed as consecutive windows of bounded length, so
+memory is bounded by the block's length, not the log's (issue 29, item 2).
+
+Each block is a window (`analyze_log`'s ``start_s``/``end_s``): of an indexed MCAP file only the
+chunks it needs are decoded (`logscan.readers.mcap.window`), its EKF starts from a lead-in before
+it (`logscan.pipeline.lead_in`), the checks of the vehicle's own reports run from before it
+(`logscan.pipeline.raw_lead`). Once a block is analysed it is reduced to what the outputs read
+(`logscan.pipeline.block_reduce`: its alarms, incidents, lines, counts and the envelopes of its
+series) and its full-rate arrays are freed; the blocks are merged into one analysis
+(`logscan.pipeline.block_merge`). docs/algorithms.md section 8.1b says when it runs and what differs
+from the analysis of the whole log at once (the block borders).
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+from dataclasses import replace
+
+from logscan.docs import doc_url
+from logscan.errors import LogscanError
+from logscan.memory import return_freed_pages
+from logscan.pipeline.block_merge import merge_blocks
+from logscan.pipeline.block_reduce import bucket_width, reduce_block
+from logscan.pipeline.preparation import load_profile_for
+from logscan.pipeline.run import analyze_log
+from logscan.readers import detect_format
+from logscan.readers.mcap.span import indexed_span_s
+
+# The default block: grid steps analysed at once. The analysis holds ~0.8 KiB per step (the 100 Hz
+# quadcopter: ~282 MiB per log-hour, bench/README.md) beside ~0.7 KiB read per step and the index
+# times of the whole file (a window's read): 30 minutes at 100 Hz keeps a 24-hour log's peak within
+# the issue's 1 GB.
+BLOCK_STEPS = 180_000
+# Logs longer than this many grid steps are analysed in blocks unless --block-s 0: at ~1.5 KiB per
+# step read and analysed, the whole log at once would pass 1 GB beyond this (2.8 hours at 100 Hz).
+AUTO_STEPS = 1_000_000
+
+
+def block_windows(
+    span_s: float, block_s: float, dt: float, start_s: float | None = None, end_s: float | None = None
+) -> list[tuple[float | None, float | None]]:
+    """The consecutive windows [start, end] of ``block_s`` seconds covering ``start_s``..``end_s``
+    (None: that end of the log, ``span_s`` long); each ends half a grid step (``dt``) before the
+    next begins, so no step is analysed twice. A last piece shorter than half a block joins the
+    block before it. One window: the span itself."""
+    lo = 0.0 if start_s is None else float(start_s)
+    hi = float(span_s) if end_s is None else float(end_s)
+    borders = []
+    border = lo + block_s
+    while border < hi - block_s / 2:
+        borders.append(border)
+        border += block_s
+    starts = [start_s, *borders]
+    ends = [b - dt / 2 for b in borders] + [end_s]
+    return list(zip(starts, ends))
+
+
+def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s: float | None):
+    """The windows to analyse ``path`` in, or None: the whole log at once. ``block_s`` None: in
+    blocks of `BLOCK_STEPS` when the span analysed holds more than `AUTO_STEPS` grid steps; 0:
+    never; else blocks of that length whenever the span is longer than one. Only an indexed MCAP
+    file reads a window without the rest (other formats are read whole: None), and only a profile
+    without further loops or [recovery] (both re-read the whole run: None)."""
+    if block_s == 0 or detect_format(path) != "mcap":
+        return None
+    span_s = indexed_span_s(path)
+    profile = loaded.profile
+    if span_s is None or profile.loops or profile.recovery is not None:
+        return None
+    rate = float(profile.vehicle.rate_hz)
+    analysed_s = (span_s if end_s is None else min(end_s, span_s)) - (start_s or 0.0)
+    if block_s is None:
+        if analysed_s * rate <= AUTO_STEPS:
+            return None
+        block_s = BLOCK_STEPS / rate
+    windows = block_windows(span_s, block_s, 1.0 / rate, start_s, end_s)
+    return windows if len(windows) > 1 else None
+
+
+def why_not_blocks(path, loaded) -> str:
+    """Why ``path`` cannot be read in blocks (a --block-s it cannot honour: a warning); "": it can."""
+    fmt = detect_format(path)
+    if fmt != "mcap":
+        return f"--block-s: a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)"
+    if loaded.profile.loops or loaded.profile.recovery is not None:
+        return "--block-s: a profile with further loops or [recovery] re-reads the whole run; analysed at once"
+    if indexed_span_s(path) is None:
+        return "--block-s: the MCAP file has no chunk index or statistics to read a block from; analysed at once"
+    return ""
+
+
+def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: float | None = None, **options):
+    """`analyze_log`, of a long indexed MCAP log in blocks (`blocks_for`) merged into one analysis;
+    ``block_s``: None (auto), 0 (never) or the block's length in seconds; ``options``: those of
+    `analyze_log` (``start_s``/``end_s``: the span the blocks cover). A log longer than the
+    --block-s asked for that could not be read in blocks says so in its warnings."""
+    loaded = load_profile_for(path, profile_path)
+    start_s, end_s = options.pop("start_s", None), options.pop("end_s", None)
+    windows = blocks_for(path, loaded, block_s, start_s, end_s)
+    if windows is None:
+        refused = why_not_blocks(path, loaded) if block_s else None
+        analysis = analyze_log(path, profile_path, loaded=loaded, start_s=start_s, end_s=end_s, **options)
+        if refused and analysis.duration_s > block_s:  # shorter than one block: as it should be
+            analysis.warnings.append(refused)
+        return analysis
+    return _in_blocks(path, profile_path, loaded, windows, (start_s, end_s), options)
+
+
+def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options: dict):
+    """Each window analysed, reduced and its full-rate arrays freed; the blocks merged."""
+    progress = options.pop("progress", None)
+    options.pop("fraction", None)  # the bytes of each block's read would run back and forth
+    options["free_series"] = True  # sensor_views as asked: the incidents' sizes read the innovations
+    rate = float(loaded.profile.vehicle.rate_hz)
+    block_s = windows[1][0] - (windows[0][0] or 0.0)
+    width = bucket_width(int(len(windows) * block_s * rate))
+    loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own
+    blocks, refused = [], []
+    for k, (start_s, end_s) in enumerate(windows):
+        step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
+        own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
+        try:
+            analysis = analyze_log(
+                path, profile_path, loaded=own, start_s=start_s, end_s=end_s, progress=step, **options
+            )
+        except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
+            refused.append((k, exc))
+            continue
+        blocks.append(reduce_block(analysis, width))
+        del analysis
+        gc.collect()
+        return_freed_pages()
+    if not blocks:
+        raise refused[0][1]
+    merged = merge_blocks(blocks, None if window == (None, None) else window)
+    merged.unchecked += [_refused_line(windows, k, len(windows), exc) for k, exc in refused]
+    merged.warnings.append(
+        f"analysed in {len(windows)} blocks of {block_s:g} s (--block-s): at a block's border the detectors' "
+        f"windows and sums start again, so an alarm there may start later or end sooner than in the "
+        f"whole log's analysis at once ({doc_url('algorithms.md')}, section 8.1b)"
+    )
+    return merged
+
+
+def _refused_line(windows: list, k: int, n: int, exc: LogscanError) -> str:
+    """What was not checked of a block that could not be analysed, and why."""
+    start, end = windows[k]
+    span = f"{start or 0.0:.1f}-{'the end' if end is None else f'{end:.1f} s'}"
+    return f"block {k + 1} of {n} ({span}) not analysed: {exc.message}"
+
+
+def _prefixed(progress, prefix: str):
+    return lambda message: progress(prefix + message)

@@ -1,0 +1,162 @@
+"""Block mode (`logscan.pipeline.blocks`): a log analysed as consecutive windows merged into one
+analysis agrees with the analysis at once away from the block borders, an alarm or incident across
+a border is one, and a log shorter than a block takes the path it always took."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import SAMPLES
+
+from logscan.alarms import AlarmInterval
+from logscan.pipeline import analyze_log
+from logscan.pipeline.block_merge import merged_incidents
+from logscan.pipeline.block_reduce import envelope, envelope_times
+from logscan.pipeline.blocks import analyze_blocked, block_windows
+from logscan.results import DetectorResult, Incident
+
+BIAS = SAMPLES / "quad_imu_bias.mcap"  # 60 s at 100 Hz, an accelerometer bias from 30 to 40 s
+
+
+def test_block_windows_cover_the_span_without_a_step_twice():
+    windows = block_windows(100.0, 30.0, 0.01)
+    assert windows == [(None, 29.995), (30.0, 59.995), (60.0, None)]  # 90-100 s joins the block before
+    assert block_windows(100.0, 30.0, 0.01, start_s=10.0, end_s=70.0) == [(10.0, 39.995), (40.0, 70.0)]
+    assert block_windows(40.0, 30.0, 0.01) == [(None, None)]  # shorter than a block and a half: one
+
+
+def test_envelope_keeps_each_buckets_extremes_in_order_and_gaps():
+    values = np.array([1.0, 5.0, 2.0, 0.0, np.nan, np.nan, 3.0])
+    assert envelope(values, 2).tolist()[:4] == [1.0, 5.0, 2.0, 0.0]
+    assert np.isnan(envelope(values, 2)[4:6]).all()  # a bucket of NaN only stays a gap
+    assert envelope(values, 2)[6:].tolist() == [3.0, 3.0]
+    assert envelope(np.array([False, True, False, False]), 2).tolist() == [True, True, False, False]
+    assert envelope_times(np.arange(5.0), 2).tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 4.0]
+    assert envelope(values, 1) is values
+
+
+def _alarm(signal: str, start: float, end: float) -> AlarmInterval:
+    return AlarmInterval(start, end, start, start, 2.0, 1.0, 2.0, "upper", 1, signal=signal, detector="nis")
+
+
+def test_incidents_either_side_of_a_border_are_one():
+    before, after = _alarm("nis.accel", 10.0, 19.99), _alarm("nis.accel", 20.0, 25.0)
+    merged_alarm = _alarm("nis.accel", 10.0, 25.0)
+    incidents = [
+        Incident(10.0, 19.99, "accel", "", [before], "accelerometer inconsistent", "nis.accel", before),
+        Incident(20.0, 25.0, "accel", "", [after], "accelerometer inconsistent", "nis.accel", after),
+        Incident(40.0, 41.0, "gyro", "", [], "gyroscope inconsistent", "nis.gyro", None),
+    ]
+    result = DetectorResult("nis", alarms=[merged_alarm])
+    out = merged_incidents(incidents, [result], gap_s=1.0)
+    assert [(i.start, i.end) for i in out] == [(10.0, 25.0), (40.0, 41.0)]
+    assert out[0].alarms == [merged_alarm] and out[0].quoted is merged_alarm
+    assert "10.00-25.00 s" in out[0].headline
+
+
+@pytest.fixture(scope="module")
+def both():
+    whole = analyze_log(BIAS, free_series=True)
+    blocks = analyze_blocked(BIAS, block_s=20.0, free_series=True)  # borders at 20 and 40 s
+    return whole, blocks
+
+
+def test_blocks_agree_with_the_whole_log_away_from_the_borders(both):
+    whole, blocks = both
+    assert blocks.exit_code() == whole.exit_code()
+    assert len(blocks.incidents) == len(whole.incidents) == 1
+    assert blocks.incidents[0].what == whole.incidents[0].what
+    assert float(blocks.run.t[0]) == float(whole.run.t[0]) and float(blocks.run.t[-1]) == float(whole.run.t[-1])
+
+    def away(analysis) -> set:
+        """Alarms 5 s or more from a border at both ends, across none: at a border the detectors'
+        windows (1 s) and the CUSUM's sums restart (docs/algorithms.md section 8.1b)."""
+        return {
+            (a.detector, a.signal, a.start, a.end)
+            for a in analysis.alarms
+            if all(min(abs(a.start - b), abs(a.end - b)) >= 5 and not a.start < b < a.end for b in (20, 40))
+        }
+
+    assert away(blocks) == away(whole)
+    assert blocks.prepared.filter_summary()["steps"] == whole.prepared.filter_summary()["steps"]
+    assert blocks.warnings[-1].startswith("analysed in 3 blocks of 20 s (--block-s)")
+
+
+def test_an_alarm_across_a_border_is_one(both):
+    _, blocks = both
+    accel = [a for a in blocks.alarms if a.signal == "nis.accel"]
+    assert [(a.start, round(a.end, 2)) for a in accel] == [(30.0, 41.27)]  # across the border at 40 s
+    for result in blocks.results:  # no two alarms of one statistic within the merge gap
+        for signal in {a.signal for a in result.alarms}:
+            spans = sorted((a.start, a.end) for a in result.alarms if a.signal == signal)
+            assert all(b[0] - a[1] > 1.0 for a, b in zip(spans, spans[1:]))
+
+
+def test_a_log_shorter_than_a_block_takes_the_path_it_took(both):
+    whole, _ = both
+    for block_s in (None, 120.0):
+        same = analyze_blocked(BIAS, block_s=block_s, free_series=True)
+        assert json.dumps(same.summary(), default=str) == json.dumps(whole.summary(), default=str)
+        assert not any("--block-s" in w for w in same.warnings)
+
+
+def test_blocks_of_a_log_read_whole_are_said_to_be_analysed_at_once():
+    analysis = analyze_blocked(SAMPLES / "quad_healthy.csv", block_s=10.0, free_series=True)
+    assert any(w.startswith("--block-s: a csv") and "analysed at once" in w for w in analysis.warnings)
+
+
+def test_the_command_writes_one_verdict_and_every_artifact_of_the_blocks(tmp_path, monkeypatch):
+    import jsonschema
+
+    from logscan.cli.main import main
+    from logscan.pipeline import block_reduce
+
+    monkeypatch.setattr(block_reduce, "MERGED_POINTS", 1000)  # buckets of 12 steps: the report draws envelopes
+
+    paths = {name: tmp_path / name for name in ("r.html", "s.json", "j.xml", "m.md")}
+    args = ["-o", paths["r.html"], "--json", paths["s.json"], "--junit", paths["j.xml"], "--markdown", paths["m.md"]]
+    with pytest.raises(SystemExit) as exit_:
+        main(["analyze", str(BIAS), "--block-s", "20", "-q", *map(str, args)])
+    assert exit_.value.code == 1  # alarms, as at once
+    document = json.loads(paths["s.json"].read_text())
+    schema = json.loads((SAMPLES.parent / "docs" / "schema" / "analyze-summary.schema.json").read_text())
+    jsonschema.Draft202012Validator(schema).validate(document)
+    (log,) = document["logs"]
+    assert log["n_incidents"] == 1 and log["filter"]["steps"] == 6001
+    assert "nis.accel" in paths["r.html"].read_text() and "nis.accel" in paths["m.md"].read_text()
+    assert "<testsuite" in paths["j.xml"].read_text()
+    counts = {s["n"] for d in log["detectors"] for s in d["series"].values()}
+    assert len(counts) == 1 and counts.pop() < 1100  # 6001 steps as envelopes of buckets of 12
+
+
+def test_merged_series_lie_on_the_merged_times(monkeypatch):
+    from logscan.pipeline import block_reduce
+
+    monkeypatch.setattr(block_reduce, "MERGED_POINTS", 1000)
+    analysis = analyze_blocked(BIAS, block_s=20.0, free_series=True)
+    n = analysis.run.t.size
+    assert n < 6001 and np.all(np.diff(analysis.run.t) >= 0)
+    for result in analysis.results:
+        assert all(len(v) == n for v in result.series.values()), result.detector
+        assert all(b.upper is None or len(b.upper) == n for b in result.thresholds.values())
+        assert all(len(v) == n for v in result.judged.values())
+
+
+def test_a_block_that_cannot_be_analysed_is_a_line_of_what_was_not_checked(monkeypatch):
+    from logscan.errors import ExitCode, InputError
+    from logscan.pipeline import blocks
+
+    def analyze(path, profile_path=None, **options):
+        if options.get("start_s") == 20.0:  # as a block inside a long gap of the log
+            raise InputError("too few samples on the analysis grid to filter", path=str(path))
+        return analyze_log(path, profile_path, **options)
+
+    monkeypatch.setattr(blocks, "analyze_log", analyze)
+    analysis = analyze_blocked(BIAS, block_s=20.0, free_series=True)
+    assert (
+        analysis.unchecked[-1]
+        == "block 2 of 3 (20.0-40.0 s) not analysed: too few samples on the analysis grid to filter"
+    )
+    assert analysis.exit_code() == ExitCode.BAD_INPUT
