@@ -12,7 +12,7 @@ from conftest import SAMPLES
 
 from logscan.alarms import AlarmInterval
 from logscan.pipeline import analyze_log
-from logscan.pipeline.block_merge import merged_incidents
+from logscan.pipeline.block_merge import merged_incidents, said_once
 from logscan.pipeline.block_reduce import envelope, envelope_times
 from logscan.pipeline.blocks import analyze_blocked, block_windows
 from logscan.results import DetectorResult, Incident
@@ -54,6 +54,18 @@ def test_incidents_either_side_of_a_border_are_one():
     assert [(i.start, i.end) for i in out] == [(10.0, 25.0), (40.0, 41.0)]
     assert out[0].alarms == [merged_alarm] and out[0].quoted is merged_alarm
     assert "10.00-25.00 s" in out[0].headline
+
+
+def test_a_line_each_block_says_with_its_own_figures_is_said_once():
+    lines = [
+        ["note", "group 'gps' is blind: mean NIS 0.17 over 150 updates"],
+        ["note", "group 'gps' is blind: mean NIS 0.2 over 149 updates"],
+        ["note"],
+    ]
+    assert said_once(lines) == [
+        "note",
+        "group 'gps' is blind: mean NIS 0.17 over 150 updates (said in 2 of 3 blocks; these figures are block 1's)",
+    ]
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ the analysis of the whole log at once.
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -35,10 +36,10 @@ def merge_blocks(blocks: list[Analysis], window: tuple[float | None, float | Non
     prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), window=window, first_step=0)
     prepared._filter_summary = merged_filter_summary([b.prepared.filter_summary() for b in blocks])
     prepared.lead_in = None  # the first block's filter starts where the log does
-    merged = Analysis(prepared=prepared, warnings=_union(w for b in blocks for w in b.warnings))
+    merged = Analysis(prepared=prepared, warnings=said_once([b.warnings for b in blocks]))
     merged.results = merged_results(blocks, gap_s)
     merged.incidents = merged_incidents([i for b in blocks for i in b.incidents], merged.results, gap_s)
-    merged.unchecked = _union(line for b in blocks for line in b.unchecked)
+    merged.unchecked = said_once([b.unchecked for b in blocks])
     merged.unjudged = "; ".join(_union(b.unjudged for b in blocks if b.unjudged))
     merged.input_gaps = [gap for b in blocks for gap in b.input_gaps]
     failures = {(f.detector, f.message): f for b in blocks for f in b.failures}
@@ -53,6 +54,30 @@ def _merge_gap_s(profile) -> float:
     """The gap below which alarms of one statistic and incidents merge (`logscan.pipeline.detection`)."""
     policy = getattr(profile, "alarm_policy", None)
     return policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
+
+
+def said_once(lines: list[list[str]]) -> list[str]:
+    """Each block's lines (``lines[k]``: block k's) said once: a line every block that says it says
+    alike as it is; one said with other figures by other blocks (a group's NIS over each block) as
+    the first block's, saying in how many blocks it came and whose figures it gives."""
+    first: dict[str, tuple[str, int]] = {}
+    blocks: dict[str, set[int]] = {}
+    texts: dict[str, set[str]] = {}
+    for k, block in enumerate(lines):
+        for line in block:
+            key = _FIGURES.sub("#", line)
+            first.setdefault(key, (line, k))
+            blocks.setdefault(key, set()).add(k)
+            texts.setdefault(key, set()).add(line)
+    out = []
+    for key, (line, k) in first.items():
+        if len(texts[key]) > 1:
+            line += f" (said in {len(blocks[key])} of {len(lines)} blocks; these figures are block {k + 1}'s)"
+        out.append(line)
+    return out
+
+
+_FIGURES = re.compile(r"\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")
 
 
 def _union(items) -> list:
@@ -78,7 +103,7 @@ def merged_results(blocks: list[Analysis], gap_s: float) -> list[DetectorResult]
             thresholds=_joined_bands([None if r is None else r.thresholds for r in parts], sizes),
             alarms=merge_close([a for r in present for a in r.alarms], gap_s),
             possible=merge_close([p for r in present for p in r.possible], gap_s),
-            warnings=_union(w for r in present for w in r.warnings),
+            warnings=said_once([r.warnings for r in present]),
             not_checked=list({n.reason: n for r in present for n in r.not_checked}.values()),
             info=merged_info([r.info for r in present]),
             checks={k: v for r in present for k, v in r.checks.items()},
