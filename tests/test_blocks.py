@@ -138,6 +138,7 @@ def test_the_command_writes_one_verdict_and_every_artifact_of_the_blocks(tmp_pat
     (log,) = document["logs"]
     assert log["n_incidents"] == 1 and log["filter"]["steps"] == 6001
     assert "nis.accel" in paths["r.html"].read_text() and "nis.accel" in paths["m.md"].read_text()
+    assert "grid 6001 steps of 0.01 s" in paths["r.html"].read_text()  # the grid's, not the envelope's
     assert "<testsuite" in paths["j.xml"].read_text()
     counts = {s["n"] for d in log["detectors"] for s in d["series"].values()}
     assert len(counts) == 1 and counts.pop() < 1100  # 6001 steps as envelopes of buckets of 12

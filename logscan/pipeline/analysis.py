@@ -306,6 +306,7 @@ class Analysis:
             clock=self.clock,
             recovery=self.recovery_view,
             observability=self.observability,
+            grid=getattr(self.prepared, "grid", None),
         )
 
 

@@ -36,6 +36,7 @@ def merge_blocks(blocks: list[Analysis], window: tuple[float | None, float | Non
     prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), window=window, first_step=0)
     prepared._filter_summary = merged_filter_summary([b.prepared.filter_summary() for b in blocks])
     prepared.lead_in = None  # the first block's filter starts where the log does
+    prepared.grid = (sum(b.prepared.grid[0] for b in blocks if b.prepared.grid), float(prepared.run.dt))
     merged = Analysis(prepared=prepared, warnings=said_once([b.warnings for b in blocks]))
     merged.results = merged_results(blocks, gap_s)
     merged.incidents = merged_incidents([i for b in blocks for i in b.incidents], merged.results, gap_s)

@@ -88,6 +88,7 @@ def reduce_block(analysis, width: int):
     prepared = analysis.prepared
     prepared.release_series()  # the filter's counts stay (`filter_summary`)
     n = prepared.run.n_steps
+    prepared.grid = (n, float(prepared.run.dt))
     analysis.results = [reduced_result(result, n, width) for result in analysis.results]
     t = envelope_times(prepared.run.t, width)
     prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), ground=None, ground_around=None)

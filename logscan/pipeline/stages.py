@@ -97,6 +97,9 @@ class Prepared:
     clock: Clock | None = None  # the log's own clock, dated before the samples go
     # a window's EKF started from its lead-in (`logscan.pipeline.lead_in`); None: from the model's prior
     lead_in: FilterStart | None = None
+    # (steps, step in s) of the grid when ``run.t`` holds a block-mode analysis' envelope times instead
+    # (`logscan.pipeline.block_reduce`); None: ``run.t`` is the grid
+    grid: tuple[int, float] | None = None
 
     @property
     def filter_from(self) -> float | None:

@@ -120,8 +120,14 @@ def render_html(report: ReportInput, *, plotlyjs_src: str | None = None, point_b
         plotlyjs_inline=None if plotlyjs_src else plotly_js(),
         plotlyjs_src=plotlyjs_src,
         report_js=report_js(),
-        grid={"n": int(t.size), "dt": number_text(grid_step(t))},
+        grid=_grid_facts(getattr(report, "grid", None), t),
     )  # fmt: skip
+
+
+def _grid_facts(grid: tuple[int, float] | None, t: np.ndarray) -> dict:
+    """The header's grid: its steps and step, from ``t`` unless the report gives them (``grid``)."""
+    n, dt = grid if grid is not None else (int(t.size), grid_step(t))
+    return {"n": n, "dt": number_text(dt)}
 
 
 def render_report(report: ReportInput, path: str | os.PathLike, *, plotlyjs: str | os.PathLike = "embed") -> None:

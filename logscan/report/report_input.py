@@ -60,6 +60,8 @@ class ReportInput:
                       (`logscan.report.recovery_view`). None: no recovery section.
     observability:    when a fault of a kind could not be seen (`logscan.verdict.observability`), drawn as
                       bands in the "Context" section. None: not drawn.
+    grid:             (steps, step in s) of the analysis grid when ``t`` is not it: the envelope times
+                      of a log analysed in blocks (`logscan.pipeline.block_reduce`). None: ``t`` is the grid.
     """
 
     log_facts: dict
@@ -86,6 +88,7 @@ class ReportInput:
     clock: Clock = field(default_factory=Clock)
     recovery: Any = None  # logscan.report.recovery_view.RecoveryView: the recovery section, when [recovery] ran
     observability: Any = None  # logscan.verdict.observability.Observability: shaded where a fault could not be seen
+    grid: tuple[int, float] | None = None
 
 
 def flat_alarms(results: Sequence[DetectorResult]) -> list[AlarmInterval]:
