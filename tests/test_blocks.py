@@ -173,3 +173,12 @@ def test_a_block_that_cannot_be_analysed_is_a_line_of_what_was_not_checked(monke
         == "block 2 of 3 (20.0-40.0 s) not analysed: too few samples on the analysis grid to filter"
     )
     assert analysis.exit_code() == ExitCode.BAD_INPUT
+
+
+def test_blocks_of_a_window_start_their_filter_where_the_window_does():
+    window = analyze_log(BIAS, start_s=5.0, free_series=True)
+    blocks = analyze_blocked(BIAS, block_s=20.0, start_s=5.0, free_series=True)
+    assert blocks.run.window == (5.0, None) and float(blocks.run.t[0]) == float(window.run.t[0])
+    assert blocks.prepared.filter_summary()["lead_in_s"] == window.prepared.filter_summary()["lead_in_s"] == 5.0
+    assert blocks.prepared.lead_in is not None  # the text's "filtered from 0.0 s"
+    assert blocks.exit_code() == window.exit_code()

@@ -35,7 +35,6 @@ def merge_blocks(blocks: list[Analysis], window: tuple[float | None, float | Non
     t = np.concatenate([b.prepared.run.t for b in blocks])
     prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), window=window, first_step=0)
     prepared._filter_summary = merged_filter_summary([b.prepared.filter_summary() for b in blocks])
-    prepared.lead_in = None  # the first block's filter starts where the log does
     prepared.grid = (sum(b.prepared.grid[0] for b in blocks if b.prepared.grid), float(prepared.run.dt))
     merged = Analysis(prepared=prepared, warnings=said_once([b.warnings for b in blocks]))
     merged.results = merged_results(blocks, gap_s)
@@ -205,11 +204,11 @@ def _holds(alarm, part) -> bool:
 
 def merged_filter_summary(summaries: list[dict | None]) -> dict | None:
     """The EKF's counts over the blocks: steps, updates, rejections... summed; the mean NIS per
-    group weighted by its updates; the first block's other facts (the first block has no lead-in)."""
+    group weighted by its updates; the first block's other facts."""
     known = [s for s in summaries if s]
     if not known:
         return None
-    out = {k: v for k, v in known[0].items() if k != "lead_in_s"}
+    out = dict(known[0])  # its lead-in too: the first block's is the analysed span's (--start)
     for key in _SUMS:
         if key in out:
             out[key] = sum(s.get(key, 0) for s in known)
