@@ -393,7 +393,10 @@ class Incident:
             return self.headline
         size = self.size if size is None else size
         a, b = (self.start, self.end) if self.quoted is None else (float(self.quoted.start), float(self.quoted.end))
-        span = f"{a:.2f}-{b:.2f} s" if clock is None else clock.span_text(a, b)
+        if b - a < 1e-9:  # an instant (a logged message): "at 3.24 s", not "3.24-3.24 s"
+            span = f"at {a:.2f} s" if clock is None else f"at {clock.text(a)}"
+        else:
+            span = f"{a:.2f}-{b:.2f} s" if clock is None else clock.span_text(a, b)
         return f"{self.what}{f': {size},' if size else ''} {span} ({self.detail})"
 
     def to_dict(self, clock=None) -> dict:

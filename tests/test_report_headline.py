@@ -134,3 +134,19 @@ def test_without_the_innovations_the_headline_keeps_the_checks_span_and_says_no_
     assert incident.headline_in(size="+1.0 m/s² (9.0σ) on accel ax for 11.3 s") == (
         "accelerometer inconsistent: +1.0 m/s² (9.0σ) on accel ax for 11.3 s, 30.00-41.27 s (nis.accel, peak 10.7x)"
     )
+
+
+def test_an_instant_check_heads_its_incident_at_its_time_not_as_a_span():
+    """A logged error is one sample: the real robologs flight's incident read "the autopilot logged an
+    error 3.24-3.24 s"; it reads "at 3.24 s", in the log's clock too."""
+    from logscan.alarms import AlarmInterval
+    from logscan.results import Incident
+    from logscan.timebase.clock import BOOT_TIME, Clock
+
+    error = AlarmInterval(0.11, 0.11, 0.11, 0.11, 2.0, 1.0, 2.0, "upper", 1, "health.logged_error", "health")
+    battery = AlarmInterval(0.14, 8.94, 0.14, 0.14, 2.0, 1.0, 2.0, "upper", 40, "health.battery_warning", "health")
+    incident = Incident(0.11, 8.94, "", "", [error, battery], "the autopilot logged an error",
+                        "health.logged_error, peak 2x", error)  # fmt: skip
+    assert incident.headline_in() == "the autopilot logged an error at 0.11 s (health.logged_error, peak 2x)"
+    boot = Clock(BOOT_TIME, 3.129)
+    assert incident.headline_in(boot) == "the autopilot logged an error at 3.24 s (health.logged_error, peak 2x)"
