@@ -289,12 +289,21 @@ class FrozenSensorDetector(Detector):
         sigma = float(np.fmin(self._stated_sigma(group, j, model), noise))
         # a run starts again after the last sample at rest (module docstring)
         still = np.zeros(0, dtype=bool) if rest is None else np.asarray(rest, dtype=bool)[steps]
+        if isinstance(group, InputColumn) and np.isfinite(noise):
+            # an input held within its own noise of zero (a wheel speed creeping at a count or two
+            # of its encoder, 2 mm/s on the real Husky drive against its 7 mm/s) cannot be told from
+            # rest: stillness too, as `Model.at_rest`'s
+            near_zero = np.abs(v) <= noise
+            still = near_zero if still.size == 0 else still | near_zero
         # r_i: samples held since the anchor (1 at it), and the length of each run
-        anchor, held, lengths = held_runs(v, float(self.still_ratio) * sigma if np.isfinite(sigma) else 0.0, still)
+        # an input only repeats exactly when held: a controlled wheel speed cruising at 1.003 m/s
+        # stays within still_ratio of its noise for 4 samples on the real Husky drive, by control
+        tol = float(self.still_ratio) * sigma if np.isfinite(sigma) and not isinstance(group, InputColumn) else 0.0
+        anchor, held, lengths = held_runs(v, tol, still)
         del v, new
         # g_i = r_i / L: samples held since the anchor, in units of the channel's own rate
         stat = on_steps(held / fill, steps, run.n_steps)
-        if rest is not None:
+        if still.size:
             stat[steps[still]] = np.nan  # stillness, not judged
         h = max(float(self.n_samples), run_threshold(lengths, fill, tests, duration, float(self.budget_per_hour)))
         return stat, h, sigma, fill, steps, anchor

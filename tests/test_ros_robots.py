@@ -377,3 +377,16 @@ def test_a_stuck_wheel_speed_is_named_not_the_gnss_it_made_look_frozen(cli, tmp_
     assert "(frozen.input.v, peak" in stuck[0]["headline"]
     # the GNSS's hold at the stop is in the wheel speed's incident, not one of its own
     assert not any(i["headline"].startswith("position sensor stuck") for i in entry["incidents"]), text
+
+
+def test_the_healthy_drives_wheel_speed_is_far_from_a_freeze(cli, tmp_path):
+    """The real drive's wheel speed repeats one value only where it creeps at two encoder counts
+    (5 samples of 2 mm/s as it stops, against its own 7 mm/s noise): that is stillness, not a
+    freeze. Judged, it stood exactly at the check's threshold (5 of 5 samples); a drive of the
+    same robot with one more such sample would have called its wheel speed stuck."""
+    code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path, "-d", "frozen")
+    assert code == 0, text
+    frozen = next(d for d in entry["detectors"] if d["detector"] == "frozen")
+    h = frozen["info"]["h"]["frozen.input.v"]
+    peak = max(frozen["series"]["frozen.input.v"]["max"], 0.0)
+    assert peak <= 0.5 * h, (peak, h)  # its moving samples repeat at most twice
