@@ -64,11 +64,14 @@ def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s
     without further loops or [recovery] (both re-read the whole run: None)."""
     if block_s == 0 or detect_format(path) != "mcap":
         return None
-    span_s = indexed_span_s(path)
+    span = indexed_span_s(path)
     profile = loaded.profile
-    if span_s is None or profile.loops or profile.recovery is not None:
+    if span is None or profile.loops or profile.recovery is not None:
         return None
     rate = float(profile.vehicle.rate_hz)
+    span_s, messages = span
+    if span_s * rate > messages:  # not a long log: an outlying time (2**63 - 1 ns) stretches its span
+        return None
     analysed_s = (span_s if end_s is None else min(end_s, span_s)) - (start_s or 0.0)
     if block_s is None:
         if analysed_s * rate <= AUTO_STEPS:
@@ -85,8 +88,14 @@ def why_not_blocks(path, loaded) -> str:
         return f"--block-s: a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)"
     if loaded.profile.loops or loaded.profile.recovery is not None:
         return "--block-s: a profile with further loops or [recovery] re-reads the whole run; analysed at once"
-    if indexed_span_s(path) is None:
+    span = indexed_span_s(path)
+    if span is None:
         return "--block-s: the MCAP file has no chunk index or statistics to read a block from; analysed at once"
+    if span[0] * float(loaded.profile.vehicle.rate_hz) > span[1]:
+        return (
+            f"--block-s: the file's span ({span[0]:.6g} s) holds fewer messages than grid steps (an outlying "
+            "time stretches it); analysed at once, where outlying times are dropped"
+        )
     return ""
 
 

@@ -6,12 +6,13 @@ from __future__ import annotations
 import os
 
 
-def indexed_span_s(path: str | os.PathLike) -> float | None:
-    """Seconds from the file's first message to its last (the summary's Statistics record), when
-    every chunk is indexed (a Chunk Index record with Message Index offsets for each): the files
-    whose windows decode only the chunks they need (`logscan.readers.mcap.window`). None for a
-    file without a summary, statistics or chunk indexes, or one the library cannot open: a window
-    of it would read it whole, so it is not worth reading in blocks."""
+def indexed_span_s(path: str | os.PathLike) -> tuple[float, int] | None:
+    """(seconds from the file's first message to its last, its message count: the summary's
+    Statistics record), when every chunk is indexed (a Chunk Index record with Message Index
+    offsets for each): the files whose windows decode only the chunks they need
+    (`logscan.readers.mcap.window`). None for a file without a summary, statistics or chunk
+    indexes, or one the library cannot open: a window of it would read it whole, so it is not
+    worth reading in blocks."""
     try:
         from mcap.reader import make_reader
 
@@ -26,4 +27,4 @@ def indexed_span_s(path: str | os.PathLike) -> float | None:
     statistics = summary.statistics
     if statistics.message_count == 0 or statistics.message_end_time < statistics.message_start_time:
         return None
-    return (statistics.message_end_time - statistics.message_start_time) / 1e9
+    return (statistics.message_end_time - statistics.message_start_time) / 1e9, int(statistics.message_count)
