@@ -16,7 +16,7 @@ def _no_memory(*args, **kwargs):
 
 
 def test_a_memory_error_while_analysing_one_log_is_exit_2_with_what_to_do(cli, sample, monkeypatch):
-    monkeypatch.setattr("logscan.tasks.analyze_log", _no_memory)  # where the task looks it up
+    monkeypatch.setattr("logscan.tasks.analyze_blocked", _no_memory)  # where the task looks it up
     result = cli("analyze", sample("quad_healthy.mcap"), "--no-report")
     assert result.exit_code == 2, result.stderr
     lines = result.stderr.strip().splitlines()
@@ -25,7 +25,7 @@ def test_a_memory_error_while_analysing_one_log_is_exit_2_with_what_to_do(cli, s
 
 
 def test_a_memory_error_in_one_of_several_logs_is_that_logs_exit_2(cli, sample, monkeypatch, tmp_path):
-    monkeypatch.setattr("logscan.tasks.analyze_log", _no_memory)  # where the task looks it up
+    monkeypatch.setattr("logscan.tasks.analyze_blocked", _no_memory)  # where the task looks it up
     out = tmp_path / "summary.json"
     result = cli("analyze", sample("quad_healthy.mcap"), sample("jackal_healthy.mcap"), "--no-report", "--json", out)
     assert result.exit_code == 2, result.stderr
