@@ -84,7 +84,7 @@ class PowerChecks(HealthChecks):
                     },
                 )
             zero = np.where(on & np.isfinite(raw), np.where(raw < ZERO_VOLTAGE_V, FLAG, 0.0), np.nan)
-        self._battery_warning(fields, t, on, instance, where)
+        self._battery_warning(fields, connected, instance, where)
         self._add(
             f"{PREFIX}.battery_zero{_suffix(instance)}",
             where,
@@ -93,7 +93,7 @@ class PowerChecks(HealthChecks):
             limit={"below_v": ZERO_VOLTAGE_V, "while": "connected" if connected is not None else "always"},
         )
 
-    def _battery_warning(self, fields, t, on, instance: int, where: str) -> None:
+    def _battery_warning(self, fields, connected, instance: int, where: str) -> None:
         """``health.battery_warning``: PX4's own battery state (``warning``) at CRITICAL or worse,
         the level at which PX4 itself acts (return, land), while the battery is connected."""
         warning = fields.get("warning")
@@ -101,11 +101,12 @@ class PowerChecks(HealthChecks):
             return  # older PX4 versions log no warning field: the voltage check stands alone
         level = np.asarray(warning.values, dtype=np.float64)
         flag = np.where(np.isin(level, BATTERY_WARNINGS), FLAG, 0.0)
+        on = True if connected is None else np.nan_to_num(_held(connected, warning.t)) != 0
         self._add(
             f"{PREFIX}.battery_warning{_suffix(instance)}",
             where,
             warning.t,
-            np.where(np.isfinite(level) & _on_at(on, t, warning.t), flag, np.nan),
+            np.where(np.isfinite(level) & on, flag, np.nan),
             limit={"field": f"{where}.warning", "levels": dict(BATTERY_WARNING_NAMES)},
             n_persist=1,  # set from PX4's own filtered charge estimate: one sample is its verdict
         )
@@ -188,12 +189,6 @@ def _judged_voltage(fields, raw: np.ndarray) -> tuple[np.ndarray, str]:
     if not np.isfinite(known).any():
         return raw, "voltage_v"
     return np.where(np.isfinite(known), known, raw), "voltage_filtered_v"
-
-
-def _on_at(on: np.ndarray, t: np.ndarray, t_other: np.ndarray) -> np.ndarray:
-    """``on`` (at times ``t``) held at the times ``t_other`` (off before ``t``'s first)."""
-    i = np.searchsorted(t, t_other, side="right") - 1
-    return (i >= 0) & on[np.maximum(i, 0)]
 
 
 def _never_commanded(group: MotorGroup, flying: np.ndarray) -> str | None:

@@ -151,7 +151,7 @@ def stopped_groups(run, suspended) -> list[str]:
     if n == 0 or not judged.any():
         return []
     last_judged = int(np.flatnonzero(judged)[-1])
-    span = "the log" if getattr(run, "window", None) is None else "the --start/--end window"
+    span = judged_span(run)
     lines = []
     for name, group in run.groups.items():
         heard = _heard_steps(group)

@@ -112,10 +112,15 @@ def alarm_onsets(results: Sequence[DetectorResult], t: np.ndarray, suspended: np
 Onsets = dict[tuple[str, str, float], float]
 
 
+def _onset_by_id(alarms: list[AlarmInterval], onsets: Onsets) -> dict[int, float]:
+    """Each alarm's onset for rule 3 (`alarm_onsets`: where judging resumed, else its start), by id."""
+    return {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in alarms}
+
+
 def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[str, int], onsets: Onsets, gap_s: float):
     """(group or None, the alarm the headline quotes) of one incident (rule 3)."""
     named = [(a, group_of(a.signal, groups)) for a in alarms]
-    onset = {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in alarms}
+    onset = _onset_by_id(alarms, onsets)
     if rejected:
         group = max(rejected, key=lambda g: (rejected[g], -groups.index(g)))
     else:
@@ -215,7 +220,7 @@ def _judged_input(alarm: AlarmInterval) -> str | None:
 def _stuck_input(members: list[AlarmInterval], onsets: Onsets) -> tuple[AlarmInterval, str] | None:
     """(its alarm, its name): the model input whose own check alarmed first in an incident (rule 5);
     None when none did, or another check's alarm began before it."""
-    onset = {id(a): onsets.get((a.detector, a.signal, a.start), a.start) for a in members}
+    onset = _onset_by_id(members, onsets)
     first = min(members, key=lambda a: (onset[id(a)], -peak_rank(a)))
     name = _judged_input(first)
     return None if name is None else (first, name)
