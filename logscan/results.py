@@ -17,7 +17,7 @@ from typing import Any, overload
 
 import numpy as np
 
-from logscan.alarms import AlarmInterval, alarm_intervals, judged_alarms, sample_masks
+from logscan.alarms import AlarmInterval, alarm_intervals, judged_alarms, judged_share, sample_masks
 from logscan.errors import InputError
 from logscan.json_policy import jsonable
 
@@ -275,9 +275,7 @@ class DetectorResult:
         # a warm-up or window longer than most of the log leaves the statistic unable to alarm there
         # (the profile's suspension, ground time, is a choice of scope, not a gap in the check)
         alarmable = judged if in_warmup is None else ~in_warmup if judged is None else judged & ~in_warmup
-        n_judged = n if judged is None else np.count_nonzero(judged)
-        n_alarmable = n if alarmable is None else np.count_nonzero(alarmable)
-        self.judged_fraction[name] = float(n_alarmable / max(n_judged, 1)) if n else 1.0
+        self.judged_fraction[name] = judged_share(t, judged, alarmable, self._alarms_from()) if n else 1.0
         if suspended is not None:
             alarmable = ~suspended if alarmable is None else alarmable & ~suspended
         if alarmable is not None and not alarmable.all():

@@ -82,22 +82,24 @@ class EkfTrace:
         o = int(self.group_offsets[g])
         return slice(o, o + int(self.group_sizes[g]))
 
-    def summary(self) -> dict:
-        """JSON-ready counts: updates, rejections and seeds per group, divergence, mean NIS."""
+    def summary(self, first: int = 0) -> dict:
+        """JSON-ready counts: updates, rejections and seeds per group, divergence, mean NIS; of the
+        steps from ``first`` on (a block's own, after its lead-in)."""
+        rows = slice(int(first), self.n_steps)
+        nis, updated = self.nis_group[rows], self.updated[rows]
         # NIS near float's maximum (a value of 1e308 let through) add up beyond it: the mean is inf
         with np.errstate(invalid="ignore", over="ignore"):
             mean_nis = {
-                g: (float(np.nanmean(self.nis_group[:, i])) if self.updated[:, i].any() else None)
-                for i, g in enumerate(self.group_names)
+                g: float(np.nanmean(nis[:, i])) if updated[:, i].any() else None for i, g in enumerate(self.group_names)
             }
         return {
-            "steps": self.n_steps,
-            "updates": dict(zip(self.group_names, self.updated.sum(axis=0).tolist())),
-            "rejected": dict(zip(self.group_names, self.rejected.sum(axis=0).tolist())),
-            "seeded": dict(zip(self.group_names, self.seeded.sum(axis=0).tolist())),
-            "inputs_held": int(self.input_held.sum()),
-            "divergence_episodes": len(self.divergence_episodes),
-            "diverged_steps": int(self.diverged.sum()),
+            "steps": self.n_steps - rows.start,
+            "updates": dict(zip(self.group_names, updated.sum(axis=0).tolist())),
+            "rejected": dict(zip(self.group_names, self.rejected[rows].sum(axis=0).tolist())),
+            "seeded": dict(zip(self.group_names, self.seeded[rows].sum(axis=0).tolist())),
+            "inputs_held": int(self.input_held[rows].sum()),
+            "divergence_episodes": sum(1 for e in self.divergence_episodes if e.end_step >= rows.start),
+            "diverged_steps": int(self.diverged[rows].sum()),
             "mean_nis": mean_nis,
         }
 

@@ -1,6 +1,7 @@
-"""Block mode (`logscan.pipeline.blocks`): a log analysed as consecutive windows merged into one
-analysis agrees with the analysis at once away from the block borders, an alarm or incident across
-a border is one, and a log shorter than a block takes the path it always took."""
+"""Block mode (`logscan.pipeline.blocks`): a log analysed as consecutive windows, each led in for
+its detectors, merged into one analysis agrees with the analysis at once also across the block
+borders, an alarm or incident across a border is one, and a log shorter than a block takes the
+path it always took."""
 
 from __future__ import annotations
 
@@ -75,25 +76,43 @@ def both():
     return whole, blocks
 
 
-def test_blocks_agree_with_the_whole_log_away_from_the_borders(both):
+def _alarms(analysis) -> list:
+    return sorted((a.detector, a.signal, a.start, a.end, a.first_exceed) for a in analysis.alarms)
+
+
+def test_blocks_agree_with_the_whole_log_across_the_borders(both):
+    """Each block after the first is analysed from DETECTOR_LEAD_S before it (here: from the log's
+    start), its alarms seen from its own first step: every alarm, judged share, count and the
+    observability verdict are the analysis at once's, also at the borders (the accelerometer's
+    fault ends across 40 s, where e_x and the pitch CUSUM once restarted)."""
     whole, blocks = both
     assert blocks.exit_code() == whole.exit_code()
     assert len(blocks.incidents) == len(whole.incidents) == 1
-    assert blocks.incidents[0].what == whole.incidents[0].what
+    assert blocks.incidents[0].headline == whole.incidents[0].headline
     assert float(blocks.run.t[0]) == float(whole.run.t[0]) and float(blocks.run.t[-1]) == float(whole.run.t[-1])
+    assert _alarms(blocks) == _alarms(whole)
+    for ours, theirs in zip(blocks.results, whole.results):
+        assert ours.judged_fraction == pytest.approx(theirs.judged_fraction, abs=1e-3), ours.detector
+    summary, whole_summary = blocks.prepared.filter_summary(), whole.prepared.filter_summary()
+    assert {k: summary[k] for k in ("steps", "updates", "seeded")} == {
+        k: whole_summary[k] for k in ("steps", "updates", "seeded")
+    }
+    assert np.array_equal(blocks.observability.t_start, whole.observability.t_start)
+    np.testing.assert_allclose(blocks.observability.evidence, whole.observability.evidence, rtol=1e-9)
+    assert blocks.warnings[-2].startswith("analysed in 3 blocks of 20 s (--block-s), each after the first from")
+    assert blocks.warnings[-1].startswith("--block-s 20: each block is analysed with the 62 s before it")
 
-    def away(analysis) -> set:
-        """Alarms 5 s or more from a border at both ends, across none: at a border the detectors'
-        windows (1 s) and the CUSUM's sums restart (docs/algorithms.md section 8.1b)."""
-        return {
-            (a.detector, a.signal, a.start, a.end)
-            for a in analysis.alarms
-            if all(min(abs(a.start - b), abs(a.end - b)) >= 5 and not a.start < b < a.end for b in (20, 40))
-        }
 
-    assert away(blocks) == away(whole)
-    assert blocks.prepared.filter_summary()["steps"] == whole.prepared.filter_summary()["steps"]
-    assert blocks.warnings[-1].startswith("analysed in 3 blocks of 20 s (--block-s)")
+def test_a_lead_shorter_than_the_log_before_a_block_keeps_the_alarms(both, monkeypatch):
+    """A lead of 5 s (blocks from 15 and 35 s): the detectors' windows (1 s) and sums run in, so
+    the alarms at the borders are the analysis at once's; without one (a step) they are not."""
+    from logscan.pipeline import blocks
+
+    whole, _ = both
+    monkeypatch.setattr(blocks, "DETECTOR_LEAD_S", 5.0)
+    assert _alarms(analyze_blocked(BIAS, block_s=20.0, free_series=True)) == _alarms(whole)
+    monkeypatch.setattr(blocks, "DETECTOR_LEAD_S", 0.01)
+    assert _alarms(analyze_blocked(BIAS, block_s=20.0, free_series=True)) != _alarms(whole)
 
 
 def test_an_alarm_across_a_border_is_one(both):
@@ -162,7 +181,7 @@ def test_a_block_that_cannot_be_analysed_is_a_line_of_what_was_not_checked(monke
     from logscan.pipeline import blocks
 
     def analyze(path, profile_path=None, **options):
-        if options.get("start_s") == 20.0:  # as a block inside a long gap of the log
+        if options.get("judged_from_s") == 20.0:  # as a block inside a long gap of the log
             raise InputError("too few samples on the analysis grid to filter", path=str(path))
         return analyze_log(path, profile_path, **options)
 
@@ -182,3 +201,15 @@ def test_blocks_of_a_window_start_their_filter_where_the_window_does():
     assert blocks.prepared.filter_summary()["lead_in_s"] == window.prepared.filter_summary()["lead_in_s"] == 5.0
     assert blocks.prepared.lead_in is not None  # the text's "filtered from 0.0 s"
     assert blocks.exit_code() == window.exit_code()
+
+
+def test_a_window_two_blocks_give_is_kept_once_where_it_was_judged():
+    from logscan.pipeline.block_merge import merged_observability
+    from logscan.verdict.observability import Observability
+
+    directions: list = []
+    before = Observability(np.array([0.0, 0.25, 0.5]), np.array([[1.0], [2.0], [np.nan]]), directions, t_end=0.74)
+    after = Observability(np.array([0.5, 0.75]), np.array([[3.0], [4.0]]), directions, t_end=1.0)
+    merged = merged_observability([before, after])
+    assert merged.t_start.tolist() == [0.0, 0.25, 0.5, 0.75]
+    assert merged.evidence[:, 0].tolist() == [1.0, 2.0, 3.0, 4.0] and merged.t_end == 1.0

@@ -32,12 +32,13 @@ def merge_blocks(blocks: list[Analysis], window: tuple[float | None, float | Non
     first = blocks[0]
     prepared = first.prepared
     gap_s = _merge_gap_s(prepared.profile)
+    results = merged_results(blocks, gap_s)  # before the first block's run holds the merged times
     t = np.concatenate([b.prepared.run.t for b in blocks])
     prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), window=window, first_step=0)
     prepared._filter_summary = merged_filter_summary([b.prepared.filter_summary() for b in blocks])
     prepared.grid = (sum(b.prepared.grid[0] for b in blocks if b.prepared.grid), float(prepared.run.dt))
     merged = Analysis(prepared=prepared, warnings=said_once([b.warnings for b in blocks]))
-    merged.results = merged_results(blocks, gap_s)
+    merged.results = results
     merged.incidents = merged_incidents([i for b in blocks for i in b.incidents], merged.results, gap_s)
     merged.unchecked = said_once([b.unchecked for b in blocks])
     merged.unjudged = "; ".join(_union(b.unjudged for b in blocks if b.unjudged))
@@ -228,10 +229,16 @@ def _weighted_nis(summaries: list[dict], group: str):
 
 
 def merged_observability(parts: list):
-    """The blocks' observability verdicts end to end (None: no block judged one)."""
+    """The blocks' observability verdicts end to end (None: no block judged one); a window two
+    blocks give (the last of one, led in by the next) once, judged where it is."""
     known = [p for p in parts if p is not None and p.t_start.size]
     if not known:
         return None
     t_start = np.concatenate([p.t_start for p in known])
     evidence = np.concatenate([p.evidence for p in known])
-    return replace(known[0], t_start=t_start, evidence=evidence, t_end=known[-1].t_end)
+    slot = np.round(t_start / known[0].stride_s).astype(np.int64)
+    judged = np.isfinite(evidence).reshape(evidence.shape[0], -1).any(axis=1)
+    order = np.lexsort((judged, slot))  # by window start, a judged row last among its doubles
+    last = np.append(slot[order][1:] != slot[order][:-1], True)
+    kept = order[last]
+    return replace(known[0], t_start=t_start[kept], evidence=evidence[kept], t_end=known[-1].t_end)

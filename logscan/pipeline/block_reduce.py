@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from logscan.pipeline.raw_lead import cut_rows
 from logscan.results import Band, DetectorResult
 
 # Each series of the merged log keeps about this many points (two per bucket: the report draws at
@@ -80,18 +81,40 @@ def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult
     )
 
 
-def reduce_block(analysis, width: int):
+def reduce_block(analysis, width: int, from_s: float | None = None):
     """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
     as envelopes on the envelope's times (the block's grid ``run.t``), the filter's trace, aligned
-    signals, raw channels, the report's context and innovations, and the suspension's steps freed.
-    Returns it."""
+    signals, raw channels, the report's context and innovations, and the suspension's steps freed;
+    ``from_s``: the block's own first step, the steps before it a lead-in for the detectors (their
+    alarms already seen from it), cut off. Returns it."""
     prepared = analysis.prepared
+    t = prepared.run.t
+    first = 0 if from_s is None else int(np.searchsorted(t, from_s - 1e-9))
+    if prepared.trace is not None and first:  # the filter's counts of the block's own steps
+        prepared._filter_summary = {**prepared.filter_summary(), **prepared.trace.summary(first)}
     prepared.release_series()  # the filter's counts stay (`filter_summary`)
-    n = prepared.run.n_steps
+    if first:
+        _cut_lead(analysis, first)
+    n = t.size - first
     prepared.grid = (n, float(prepared.run.dt))
     analysis.results = [reduced_result(result, n, width) for result in analysis.results]
-    t = envelope_times(prepared.run.t, width)
-    prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), ground=None, ground_around=None)
+    times = envelope_times(t[first:], width)
+    prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
     prepared.raw, prepared.context, prepared.innovations = {}, None, None
     analysis.suspended = None
     return analysis
+
+
+def _cut_lead(analysis, first: int) -> None:
+    """The block's results, observability verdict and input gaps from its step ``first`` on; of the
+    verdict also the windows that start up to a window's length before it, which the block before
+    cannot judge (they run past its end: `merged_observability` takes them from here)."""
+    run = analysis.prepared.run
+    rows, from_s = slice(first, run.n_steps), float(run.t[first])
+    span = (from_s, float(run.t[-1]) + float(run.dt))
+    analysis.results = [cut_rows(result, rows, span, None) for result in analysis.results]
+    analysis.input_gaps = [replace(g, start=max(g.start, from_s)) for g in analysis.input_gaps if g.end >= from_s]
+    verdict = analysis.observability
+    if verdict is not None and verdict.t_start.size:  # and the windows the block before could not end
+        kept = verdict.t_start >= from_s - verdict.window_s - 1e-9
+        analysis.observability = replace(verdict, t_start=verdict.t_start[kept], evidence=verdict.evidence[kept])

@@ -26,12 +26,22 @@ from logscan.pipeline.preparation import load_profile_for
 from logscan.pipeline.run import analyze_log
 from logscan.readers import detect_format
 from logscan.readers.mcap.span import indexed_span_s
+from logscan.verdict.observability import WARMUP_S as OBSERVABILITY_WARMUP_S
+from logscan.verdict.observability import WINDOW_S as OBSERVABILITY_WINDOW_S
 
 # The default block: grid steps analysed at once. The analysis holds ~0.8 KiB per step (the 100 Hz
 # quadcopter: ~282 MiB per log-hour, bench/README.md) beside ~0.7 KiB read per step and the index
 # times of the whole file (a window's read): 30 minutes at 100 Hz keeps a 24-hour log's peak within
 # the issue's 1 GB.
 BLOCK_STEPS = 180_000
+# Every block after the first is analysed from this long before it, its alarms seen from its own first
+# step (`logscan.alarms` rule 6): the detectors' windows, sums and persistence run in over steps the
+# block before judged, so they stand at the border as in the whole log's analysis at once. Twice the
+# longest bounded memory among them: the observability verdict's kernel settles over WARMUP_S (30 s)
+# before a window of WINDOW_S (1 s); the NIS and e_x window sums, the frozen check's runs and the
+# alarms' persistence span seconds; a CUSUM forgets a healthy stretch in its drift's time
+# (docs/algorithms.md 8.1b).
+DETECTOR_LEAD_S = 2 * (OBSERVABILITY_WARMUP_S + OBSERVABILITY_WINDOW_S)
 # Logs longer than this many grid steps are analysed in blocks unless --block-s 0: at ~1.5 KiB per
 # step read and analysed, the whole log at once would pass 1 GB beyond this (2.8 hours at 100 Hz).
 AUTO_STEPS = 1_000_000
@@ -129,14 +139,23 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     for k, (start_s, end_s) in enumerate(windows):
         step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
         own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
+        # after the first block, the detectors' windows and sums run in from DETECTOR_LEAD_S before it
+        led = None if k == 0 else max(float(start_s) - DETECTOR_LEAD_S, float(windows[0][0] or 0.0))
         try:
             analysis = analyze_log(
-                path, profile_path, loaded=own, start_s=start_s, end_s=end_s, progress=step, **options
+                path,
+                profile_path,
+                loaded=own,
+                start_s=start_s if led is None else led,
+                end_s=end_s,
+                progress=step,
+                judged_from_s=None if led is None else start_s,
+                **options,
             )
         except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
             refused.append((k, exc))
             continue
-        blocks.append(reduce_block(analysis, width))
+        blocks.append(reduce_block(analysis, width, None if led is None else start_s))
         del analysis
         gc.collect()
         return_freed_pages()
@@ -145,10 +164,16 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     merged = merge_blocks(blocks, None if window == (None, None) else window)
     merged.unchecked += [_refused_line(windows, k, len(windows), exc) for k, exc in refused]
     merged.warnings.append(
-        f"analysed in {len(windows)} blocks of {block_s:g} s (--block-s): at a block's border the detectors' "
-        f"windows and sums start again, so an alarm there may start later or end sooner than in the "
-        f"whole log's analysis at once ({doc_url('algorithms.md')}, section 8.1b)"
+        f"analysed in {len(windows)} blocks of {block_s:g} s (--block-s), each after the first from "
+        f"{DETECTOR_LEAD_S:g} s before it, so the detectors' windows and sums run on across the borders; the "
+        f"thresholds a detector estimates from its samples are each block's ({doc_url('algorithms.md')}, "
+        "section 8.1b)"
     )
+    if block_s < DETECTOR_LEAD_S:
+        merged.warnings.append(
+            f"--block-s {block_s:g}: each block is analysed with the {DETECTOR_LEAD_S:g} s before it, so blocks "
+            f"shorter than that cost more than twice the analysis at once (default: {BLOCK_STEPS / rate:g} s)"
+        )
     return merged
 
 

@@ -22,7 +22,7 @@ from logscan.pipeline.release import (
     run_order,
 )
 from logscan.pipeline.stages import Prepared
-from logscan.results import events_from_truth
+from logscan.results import AlarmPolicy, events_from_truth
 from logscan.training.calibration import calibrate_command, judged_steps, suspended_policy
 from logscan.verdict.coverage import stopped_groups, unchecked_reasons, unjudged_flight
 from logscan.verdict.incidents import (
@@ -50,20 +50,21 @@ def detect(
     progress: Progress | None = None,
     free_series: bool = False,
     sensor_views: bool = False,
+    judged_from_s: float | None = None,
 ):
     """Run the detectors on a prepared log, merge their alarm fragments into incidents, say what
     could not be checked, and score the alarms when the log carries ground truth. A detector that
     raises is named in ``analysis.failures``; the others' results are kept. ``free_series``: free
     each large series once no detector still to run reads it (`release_unread`; the prepared log
     then serves no further detector). ``sensor_views``: pack the EKF's innovations, when it kept
-    them, for the report (`Prepared.innovations`, `logscan.report.sensor_views`)."""
+    them, for the report (`Prepared.innovations`, `logscan.report.sensor_views`); ``judged_from_s``: `_alarm_policy`."""
     step = progress or (lambda message: None)
     free_series = free_series and prepared.profile.recovery is None  # recovery re-runs the filters
     analysis = Analysis(prepared=prepared, warnings=list(prepared.warnings))
     # when a fault of a kind could be seen at all: from the filter's states, before any is freed
     analysis.observability, why = observability_for(prepared)
     analysis.warnings += [why] if why else []
-    policy = suspended_policy(prepared.profile, prepared.run, prepared.filter_from)
+    policy = _alarm_policy(prepared, judged_from_s)
     gaps = input_gaps(prepared.trace, prepared.run)  # before the detectors free the inputs
     stopped = stopped_groups(prepared.run, policy.suspended if policy is not None else None)  # and the samples
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
@@ -101,6 +102,13 @@ def detect(
         step("recovery")
         analysis.recovery = recover_analysis(analysis)
     return analysis
+
+
+def _alarm_policy(prepared: Prepared, judged_from_s: float | None):
+    """The profile's [alarms] policy on this run (`suspended_policy`); ``judged_from_s``: its alarms
+    seen from then on (`logscan.alarms` rule 6), the steps before a lead-in (`logscan.pipeline.blocks`)."""
+    policy = suspended_policy(prepared.profile, prepared.run, prepared.filter_from)
+    return policy if judged_from_s is None else replace(policy or AlarmPolicy(), alarms_from_s=float(judged_from_s))
 
 
 def _run_detectors(

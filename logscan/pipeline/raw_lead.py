@@ -46,8 +46,11 @@ def led_grid(run: AlignedRun) -> AlignedRun | None:
 
 
 def seen_from_window(policy: AlarmPolicy | None, run: AlignedRun) -> AlarmPolicy:
-    """``policy`` (or the default floors) with its alarms seen from ``run``'s first step on."""
-    return replace(policy or AlarmPolicy(), alarms_from_s=float(run.t[0]))
+    """``policy`` (or the default floors) with its alarms seen from ``run``'s first step on, or
+    from the later time ``policy`` already sees them from (a block's own first step)."""
+    policy = policy or AlarmPolicy()
+    from_s = float(run.t[0]) if policy.alarms_from_s is None else max(float(run.t[0]), policy.alarms_from_s)
+    return replace(policy, alarms_from_s=from_s)
 
 
 def cut_to_window(result: DetectorResult, lead: AlignedRun, run: AlignedRun) -> DetectorResult:
@@ -57,22 +60,32 @@ def cut_to_window(result: DetectorResult, lead: AlignedRun, run: AlignedRun) -> 
     computed", which would leave the window not fully checked); the facts in its info that carry a
     time (logged messages) only those in the window."""
     rows = slice(run.first_step - lead.first_step, run.first_step - lead.first_step + run.n_steps)
-    for name in [n for n, v in result.series.items() if np.isfinite(v).any() and not np.isfinite(v[rows]).any()]:
+    span = (float(run.t[0]), float(run.t[-1]) + run.dt)
+    return cut_rows(result, rows, span, "no sample in the --start/--end window")
+
+
+def cut_rows(result: DetectorResult, rows: slice, span: tuple[float, float], empty: str | None) -> DetectorResult:
+    """``result`` with its series, bands and judged masks on the grid (``rows.stop`` steps) on its
+    ``rows`` only (the steps of the times ``span``), and the facts in its info that carry a time only
+    those in ``span``; arrays not on the grid are left as they are. A statistic with samples
+    outside ``rows`` and none in them: dropped, with the not-checked reason ``empty`` when one is
+    given."""
+
+    def cut(values):
+        return values[rows] if values is not None and np.shape(values)[:1] == (rows.stop,) else values
+
+    series = result.series
+    for name in [n for n, v in series.items() if np.isfinite(v).any() and not np.isfinite(cut(v)).any()]:
         for named in (result.series, result.thresholds, result.judged, result.judged_fraction):
             named.pop(name, None)
-        result.not_checked.append(NotChecked(f"{name}: no sample in the --start/--end window"))
-    first, last = float(run.t[0]) - 1e-9, float(run.t[-1]) + run.dt
+        if empty is not None:
+            result.not_checked.append(NotChecked(f"{name}: {empty}"))
+    first, last = span[0] - 1e-9, span[1]
     for key, value in result.info.items():
         if isinstance(value, list) and value and all(isinstance(v, dict) and "time" in v for v in value):
             result.info[key] = [v for v in value if first <= float(v["time"]) <= last]
-    result.series = {name: values[rows] for name, values in result.series.items()}
-    result.extras = {name: values[rows] for name, values in result.extras.items()}
-    result.judged = {name: values[rows] for name, values in result.judged.items()}
-    result.thresholds = {
-        name: Band(
-            upper=None if band.upper is None else band.upper[rows],
-            lower=None if band.lower is None else band.lower[rows],
-        )
-        for name, band in result.thresholds.items()
-    }
+    result.series = {name: cut(values) for name, values in result.series.items()}
+    result.extras = {name: cut(values) for name, values in result.extras.items()}
+    result.judged = {name: cut(values) for name, values in result.judged.items()}
+    result.thresholds = {name: Band(upper=cut(b.upper), lower=cut(b.lower)) for name, b in result.thresholds.items()}
     return result

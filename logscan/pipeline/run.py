@@ -36,6 +36,7 @@ def analyze_log(
     truth: str | os.PathLike | None = None,
     fraction: Fraction | None = None,
     loaded: LoadedProfile | None = None,
+    judged_from_s: float | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
     ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
@@ -44,7 +45,8 @@ def analyze_log(
     figures (`logscan.report.sensor_views`), when a detector runs the EKF; ``truth``: a ground-truth JSON
     to score against (default: the log's own, or `<log>.truth.json` beside it); ``fraction``: the
     bytes read of the log, a block at a time (`prepare`); ``loaded``: the profile already loaded
-    from ``profile_path`` (block mode loads it once for every block), else loaded here."""
+    from ``profile_path`` (block mode loads it once for every block), else loaded here;
+    ``judged_from_s``: see `detect`."""
     loaded = loaded if loaded is not None else load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
     trained = tables_path(None if tables is None else str(tables), loaded.profile, log=path)
@@ -69,7 +71,13 @@ def analyze_log(
         **options,
     )
     return detect(
-        prepared, detectors, grace_s=grace_s, progress=progress, free_series=free_series, sensor_views=sensor_views
+        prepared,
+        detectors,
+        grace_s=grace_s,
+        progress=progress,
+        free_series=free_series,
+        sensor_views=sensor_views,
+        judged_from_s=judged_from_s,
     )
 
 
