@@ -279,7 +279,7 @@ class CusumDetector(Detector):
         """(h per measurement column, the ARL0 in updates it was solved for)."""
         sizes = trace.group_sizes.astype(np.int64)
         duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
-        rate = np.repeat(trace.updated.sum(axis=0) / duration, sizes)  # updates per second per column
+        rate = np.repeat(trace.tested.sum(axis=0) / duration, sizes)  # updates per second per column
         tests = 2 * int(sizes.sum())  # two one-sided tests per column
         # ARL0_j = margin J r_j 3600 / rate_design: J equal shares of the rate a proof_hours demonstration
         # shows within the budget (`detectors.budget`), with the design margin
@@ -326,8 +326,9 @@ class CusumDetector(Detector):
         average (healthy whitened innovations have mean 0): (cap - 1) h / kappa of the group's update
         periods (median); kappa = 0 never falls back (inf)."""
         kappa, delays = float(self.kappa), {}
+        tested = trace.tested
         for g, group in enumerate(trace.group_names):
-            period = median_period(trace.t, trace.updated[:, g])
+            period = median_period(trace.t, tested[:, g])
             for signal, h in result.info.get("h", {}).items():
                 if signal == f"cusum.{group}" or signal.startswith(f"cusum.{group}."):
                     updates = (float(self.cap) - 1.0) * h / kappa if kappa > 0 else np.inf
@@ -337,8 +338,9 @@ class CusumDetector(Detector):
     def _gaps(self, trace) -> np.ndarray:
         """Per measurement column, the gap between updates that restarts its tests (s)."""
         gap = np.zeros(int(trace.group_sizes.sum()))
+        tested = trace.tested
         for g in range(len(trace.group_names)):  # a handful of groups
-            steps = trace.updated[:, g]
+            steps = tested[:, g]
             period = median_period(trace.t, steps) if np.count_nonzero(steps) > 1 else trace.dt
             gap[self._columns(trace, g)] = max(float(self.gap_s), GAP_PERIODS * period)
         return gap

@@ -204,7 +204,8 @@ class NisDetector(Detector):
         if self.alpha is not None:
             return float(self.alpha)
         duration = max(float(trace.t[-1] - trace.t[0]), trace.dt) if trace.t.size else 1.0
-        tests = np.count_nonzero(trace.updated) + (np.count_nonzero(any_per_row(trace.updated)) if self.overall else 0)
+        tested = trace.tested  # an outlier the filter's gate left out is tested too
+        tests = np.count_nonzero(tested) + (np.count_nonzero(any_per_row(trace.updated)) if self.overall else 0)
         tests_per_second = max(float(tests) / duration, 1e-9)
         # alpha = rate_design / (3600 * tests per second): a union bound over every test
         return design_rate(float(self.budget_per_hour), self.proof_hours) / (3600.0 * tests_per_second)
@@ -213,8 +214,9 @@ class NisDetector(Detector):
         """A window sum still holds an anomaly's last update W - 1 updates later: nis.<group>'s alarm
         can outlast an anomaly by W of the group's update periods, nis.all's by W periods between
         updates of any group (medians)."""
+        tested = trace.tested
         delays = {
-            f"nis.{name}": self.window * median_period(trace.t, trace.updated[:, g])
+            f"nis.{name}": self.window * median_period(trace.t, tested[:, g])
             for g, name in enumerate(trace.group_names)
         }
         if self.overall:
@@ -229,8 +231,9 @@ class NisDetector(Detector):
         result.info["design_rate_per_hour"] = design_rate(float(self.budget_per_hour), self.proof_hours)
         result.info["window_updates"] = self.window
         # (signal, NIS, updated, measurements per update: an int for a group, per step for all)
+        tested = trace.tested  # used in the update, or an outlier the filter's gate left out of it
         tests = [
-            (f"nis.{name}", trace.nis_group[:, g], trace.updated[:, g], int(trace.group_sizes[g]))
+            (f"nis.{name}", trace.nis_group[:, g], tested[:, g], int(trace.group_sizes[g]))
             for g, name in enumerate(trace.group_names)
         ]
         if self.overall:

@@ -43,10 +43,11 @@ class EkfTrace:
     x_post: np.ndarray  # (N, n)
     P_prior_diag: np.ndarray  # (N, n) float32
     P_post_diag: np.ndarray  # (N, n) float32
-    y: np.ndarray | None  # (N, m_total) float32 innovation z - h(x_prior), NaN where not updated (None: not kept)
-    S_diag: np.ndarray | None  # (N, m_total) float32 diagonal of S, NaN where not updated (None: not kept)
+    # (N, m_total) float32 innovation z - h(x_prior), NaN where not tested (`tested`; None: not kept)
+    y: np.ndarray | None
+    S_diag: np.ndarray | None  # (N, m_total) float32 diagonal of S, NaN where not tested (None: not kept)
     nis: np.ndarray  # (N,) y^T S^-1 y over the stacked update, NaN without update
-    nis_group: np.ndarray  # (N, G) y_g^T S_gg^-1 y_g per group, NaN where not updated
+    nis_group: np.ndarray  # (N, G) y_g^T S_gg^-1 y_g per group, NaN where not tested
     m_k: np.ndarray  # (N,) int, measurements in the update (0: none)
     gain_norm: np.ndarray  # (N,) Frobenius norm of K, NaN without update
     updated: np.ndarray  # (N, G) bool, group used in the update
@@ -69,6 +70,12 @@ class EkfTrace:
     def n_steps(self) -> int:
         return int(self.t.size)
 
+    @property
+    def tested(self) -> np.ndarray:
+        """(N, G) bool: the group's sample was tested against the prediction: used in the update, or
+        left out by the group's outlier gate, its innovation and NIS kept (docs/algorithms.md 8.4)."""
+        return self.updated | np.isfinite(self.nis_group)
+
     def group_index(self, name: str) -> int:
         try:
             return self.group_names.index(name)
@@ -90,7 +97,8 @@ class EkfTrace:
         # NIS near float's maximum (a value of 1e308 let through) add up beyond it: the mean is inf
         with np.errstate(invalid="ignore", over="ignore"):
             mean_nis = {
-                g: float(np.nanmean(nis[:, i])) if updated[:, i].any() else None for i, g in enumerate(self.group_names)
+                g: float(np.nanmean(np.where(updated[:, i], nis[:, i], np.nan))) if updated[:, i].any() else None
+                for i, g in enumerate(self.group_names)
             }
         return {
             "steps": self.n_steps - rows.start,

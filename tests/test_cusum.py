@@ -131,6 +131,7 @@ def test_thresholds_spend_the_budget_over_every_test():
         group_sizes = np.array([3, 1])
         group_offsets = np.array([0, 3])
         updated = np.ones((t.size, 2), dtype=bool)
+        tested = updated  # no outlier gate here: every update is a test
 
     Trace.updated[:, 1] = np.arange(Trace.t.size) % 10 == 0  # a 10 Hz group
     tests = 8  # 2 sides x 4 outputs

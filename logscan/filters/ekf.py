@@ -14,7 +14,9 @@ Conventions (step k on the grid, u_k the input held at step k):
  - k = 0: x_prior = x0, P_prior = P0 (no prediction); k > 0: x_prior = f(x_post_{k-1}, u_k).
  - Multi-rate: only groups with a fresh sample at k are stacked into z, H, R.
  - A fresh group whose sample is non-finite or outside the group's physical range is skipped
-   for that step as a whole and flagged in `rejected[k, g]`.
+   for that step as a whole and flagged in `rejected[k, g]`. A group with an outlier gate
+   (`EkfSensors.gate`) whose NIS against the prior exceeds it is left out of the update too, its
+   innovation, diag(S) and NIS kept for the detectors (`nis_group` finite, `updated` False).
  - Inputs: a non-finite input row is replaced by the last finite one (`input_held[k]`).
  - Divergence (a non-positive-definite S, or a non-finite state or covariance) is flagged in
    `diverged[k]`; the filter restarts from x0/P0 at once, and then re-seeds every state that a
@@ -52,12 +54,12 @@ from logscan.filters.linalg import (
     fpft_q,
     gain_rows,
     grow_pattern,
+    innovation_covariance,
+    innovations,
     joseph,
     pattern_holds,
     short_update,
-    sparse_mm,
     sparse_rows,
-    wrap_angle,
 )
 from logscan.models import dispatch
 from logscan.models.base import Model
@@ -160,7 +162,7 @@ def _filter_steps(model_id, model, sensors, data, out, work):
     coding_floor, coding_r_max, ex_var = model.coding_floor, model.coding_r_max, out.ex_var
     group_ids, group_offsets, group_sizes = sensors.group_ids, sensors.group_offsets, sensors.group_sizes
     R_all, range_lo, range_hi, wrap = sensors.R_all, sensors.range_lo, sensors.range_hi, sensors.wrap
-    direct_idx, direct_gain = sensors.direct_idx, sensors.direct_gain
+    direct_idx, direct_gain, gate = sensors.direct_idx, sensors.direct_gain, sensors.gate
     u, z, fresh, R_std = data.u, data.z, data.fresh, data.R_std
     x_prior, x_post, P_prior_diag, P_post_diag = out.x_prior, out.x_post, out.P_prior_diag, out.P_post_diag
     P_prior_full, P_post_full, y_out, S_out, K_out = out.P_prior_full, out.P_post_full, out.y_out, out.S_out, out.K_out
@@ -253,6 +255,25 @@ def _filter_steps(model_id, model, sensors, data, out, work):
                 seed_done[g] = True
                 seeded[k, g] = True
                 continue
+            mg = group_sizes[g]
+            if gate[g] < np.inf:
+                # the outlier gate (docs/algorithms.md 8.4): the group alone against the prior;
+                # its block of the stacked S is this S, so its NIS is the update's nis_group
+                for a in range(mg):
+                    rows[m + a] = o + a
+                dispatch.model_meas_into(model_id, group_ids[g], p, x, uk, zero, hx, Hs, R3, D3)
+                sparse_rows(Hs, mg, n, hcols, hnnz)
+                innovations(z[k], rows, m, mg, hx, wrap, R_all, R_std[k] if dyn_R else R_all[0], dyn_R, y, Rs)
+                innovation_covariance(Hs, hcols, hnnz, mg, P, n, HP, Rs, S)
+                if cholesky(S, zero, mg, L):
+                    q = forward_sq(L, mg, y, zero, v)
+                    if q > gate[g]:  # kept for the detectors, not used in the update
+                        nis_group[k, g] = q
+                        if store_y:
+                            for a in range(mg):
+                                y_out[k, o + a] = y[a]
+                                S_diag_out[k, o + a] = S[a, a]
+                        continue
             sel_g[ng] = g
             ng += 1
             for j in range(o, o + group_sizes[g]):
@@ -275,35 +296,9 @@ def _filter_steps(model_id, model, sensors, data, out, work):
                 dispatch.model_meas_into(model_id, group_ids[g], p, x, uk, r, hx, Hs, R3, D3)
                 r += group_sizes[g]
             sparse_rows(Hs, m, n, hcols, hnnz)
-            for a in range(m):
-                j = rows[a]
-                # y~ = z - h(x_prior)
-                ya = z[k, j] - hx[a]
-                if wrap[j]:
-                    ya = wrap_angle(ya)
-                y[a] = ya
-                for b in range(m):
-                    Rs[a, b] = R_all[j, rows[b]]
-            if dyn_R:  # per-sample noise (a receiver's own accuracy estimate): replaces row and column
-                for a in range(m):
-                    sd = R_std[k, rows[a]]
-                    if np.isfinite(sd) and sd > 0.0:
-                        for b in range(m):
-                            Rs[a, b] = 0.0
-                            Rs[b, a] = 0.0
-                        Rs[a, a] = sd * sd
-            # H P (H sparse: its rows' non-zeros only)
-            sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
-            # S = H P H^T + R (upper triangle, mirrored)
-            for a in range(m):
-                for b in range(a, m):
-                    t = 0.0
-                    for s in range(hnnz[b]):
-                        c = hcols[b, s]
-                        t += HP[a, c] * Hs[b, c]
-                    S[a, b] = t + Rs[a, b]
-                for b in range(a):
-                    S[a, b] = S[b, a]
+            # y~ = z - h(x_prior); S = H P H^T + R
+            innovations(z[k], rows, zero, m, hx, wrap, R_all, R_std[k] if dyn_R else R_all[0], dyn_R, y, Rs)
+            innovation_covariance(Hs, hcols, hnnz, m, P, n, HP, Rs, S)
             ok = cholesky(S, zero, m, L)
             if ok:
                 # K = P H^T S^-1  via  S K^T = H P  (P symmetric): V = L^-1 H P, K^T = L^-T V

@@ -17,6 +17,7 @@ import numpy as np
 from logscan.align import AlignedRun
 from logscan.errors import ModelError
 from logscan.filters.coding import coding_arguments
+from logscan.filters.gates import outlier_gates
 from logscan.filters.q_scale import calibrated_Q
 from logscan.models import dispatch
 from logscan.models.base import Model
@@ -54,6 +55,8 @@ class EkfSensors(NamedTuple):
     wrap: np.ndarray  # (m_total,) bool: an angle (its innovation wraps to [-pi, pi))
     direct_idx: np.ndarray  # (m_total,) int64: the state i an output observes as z = gain * x[i], else -1
     direct_gain: np.ndarray  # (m_total,) float64: that gain
+    # (G,) float64: each group's outlier gate on its NIS against the prior (inf: none; `outlier_gates`)
+    gate: np.ndarray
 
 
 class EkfData(NamedTuple):
@@ -274,6 +277,7 @@ class KernelInputs:
     wrap: np.ndarray
     direct_idx: np.ndarray
     direct_gain: np.ndarray
+    gate: np.ndarray  # (G,) the groups' outlier gates (inf: none)
     dt: float
     seed_at_start: bool
     coding_floor: np.ndarray  # EkfModel's: (0,) unless pack_run was given a CodedVariance
@@ -295,6 +299,7 @@ class KernelInputs:
             self.wrap,
             self.direct_idx,
             self.direct_gain,
+            self.gate,
         )
         return self.model_id, model, sensors, EkfData(self.u, self.u_default, self.z, self.fresh, self.R_std)
 
@@ -396,6 +401,7 @@ def pack_run(
         wrap=np.concatenate([s.wrap_mask() for s in specs]),
         direct_idx=np.concatenate([d[0] for d in direct]),
         direct_gain=np.concatenate([d[1] for d in direct]),
+        gate=outlier_gates(specs, fresh, run.dt),
         dt=float(run.dt),
         seed_at_start=seed,
         coding_floor=coding_floor,

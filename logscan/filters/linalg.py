@@ -288,3 +288,40 @@ def nan_fill(M):
 @njit(cache=True, error_model="numpy")
 def wrap_angle(a):
     return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@njit(cache=True, error_model="numpy")
+def innovations(zk, rows, first, m, hx, wrap, R_all, R_std_k, dyn_R, y, Rs):
+    """y~ = z - h(x_prior) (angles wrapped) and R of the m outputs ``rows[first:first + m]`` into
+    y[:m] and Rs[:m, :m]; a finite positive per-sample std (``R_std_k``) replaces its row and column."""
+    for a in range(m):
+        j = rows[first + a]
+        ya = zk[j] - hx[a]
+        if wrap[j]:
+            ya = wrap_angle(ya)
+        y[a] = ya
+        for b in range(m):
+            Rs[a, b] = R_all[j, rows[first + b]]
+    if dyn_R:  # per-sample noise (a receiver's own accuracy estimate): replaces row and column
+        for a in range(m):
+            sd = R_std_k[rows[first + a]]
+            if np.isfinite(sd) and sd > 0.0:
+                for b in range(m):
+                    Rs[a, b] = 0.0
+                    Rs[b, a] = 0.0
+                Rs[a, a] = sd * sd
+
+
+@njit(cache=True, error_model="numpy")
+def innovation_covariance(Hs, hcols, hnnz, m, P, n, HP, Rs, S):
+    """HP = H P (H sparse) and S = H P H^T + R (upper triangle, mirrored) of the m rows of Hs."""
+    sparse_mm(Hs, hcols, hnnz, m, P, n, HP)
+    for a in range(m):
+        for b in range(a, m):
+            t = 0.0
+            for s in range(hnnz[b]):
+                c = hcols[b, s]
+                t += HP[a, c] * Hs[b, c]
+            S[a, b] = t + Rs[a, b]
+        for b in range(a):
+            S[a, b] = S[b, a]

@@ -16,7 +16,7 @@ from logscan.models.base import Model
 
 def reference_ekf(model: Model, k: KernelInputs) -> dict:
     """Filter the packed run; returns x_prior, x_post, P_prior, P_post, y, nis, updated,
-    rejected, seeded, diverged (full P, for comparison with the kernel)."""
+    rejected, gated, seeded, diverged (full P, for comparison with the kernel)."""
     with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected, not warned
         return _reference_ekf(model, k)
 
@@ -58,6 +58,8 @@ def _reference_ekf(model: Model, k: KernelInputs) -> dict:
                 _seed(k, x, P, step, s)
                 seed_done[g] = out["seeded"][step, g] = True
                 continue
+            if np.isfinite(k.gate[g]) and _gated(model, k, x, P, uk, step, g, out):
+                continue
             used.append(g)
         if pending:
             pending = bool(np.any(is_direct & ~seed_done))
@@ -87,6 +89,7 @@ def _outputs(N: int, n: int, G: int, m_total: int) -> dict:
         "nis": np.full(N, np.nan),
         "updated": np.zeros((N, G), bool),
         "rejected": np.zeros((N, G), bool),
+        "gated": np.zeros((N, G), bool),
         "seeded": np.zeros((N, G), bool),
         "diverged": np.zeros(N, bool),
     }
@@ -106,9 +109,20 @@ def _seed(k: KernelInputs, x: np.ndarray, P: np.ndarray, step: int, s: slice) ->
         P[i, i] = rj / gain[j] ** 2
 
 
-def _update(model: Model, k: KernelInputs, x, P, uk, step: int, used: list[int], rows: np.ndarray):
-    """The Joseph-form update with the groups ``used`` (outputs ``rows``): (x, P, y, NIS), or None
-    when it fails (S not positive definite, a non-finite state or covariance)."""
+def _gated(model: Model, k: KernelInputs, x, P, uk, step: int, g: int, out: dict) -> bool:
+    """The outlier gate: group ``g`` alone against the prior; over its gate, its innovation is
+    kept in ``out`` and it is left out of the update (True)."""
+    rows = np.arange(k.group_offsets[g], k.group_offsets[g] + k.group_sizes[g])
+    y, H, R = _innovation(model, k, x, uk, step, [g], rows)
+    if float(y @ np.linalg.solve(H @ P @ H.T + R, y)) <= k.gate[g]:
+        return False
+    out["y"][step, rows] = y
+    out["gated"][step, g] = True
+    return True
+
+
+def _innovation(model: Model, k: KernelInputs, x, uk, step: int, used: list[int], rows: np.ndarray):
+    """(y~, H, R) of the groups ``used`` (outputs ``rows``) at ``step`` against the state ``x``."""
     H = np.vstack([model.H(k.group_names[g], x, uk) for g in used])
     hx = np.concatenate([model.h(k.group_names[g], x, uk) for g in used])
     y = k.z[step, rows] - hx
@@ -121,6 +135,13 @@ def _update(model: Model, k: KernelInputs, x, P, uk, step: int, used: list[int],
                 R[a, :] = 0.0
                 R[:, a] = 0.0
                 R[a, a] = sd * sd
+    return y, H, R
+
+
+def _update(model: Model, k: KernelInputs, x, P, uk, step: int, used: list[int], rows: np.ndarray):
+    """The Joseph-form update with the groups ``used`` (outputs ``rows``): (x, P, y, NIS), or None
+    when it fails (S not positive definite, a non-finite state or covariance)."""
+    y, H, R = _innovation(model, k, x, uk, step, used, rows)
     S = H @ P @ H.T + R
     try:
         factor = cho_factor(S, lower=True)

@@ -46,6 +46,10 @@ class GroupSpec:
     # the measured quantity holds one value over long stretches of healthy operation (a wheel
     # odometry's yaw rate while driving straight): a frozen sensor cannot be told from it
     steady: bool = False
+    # an outlier gate (docs/algorithms.md 8.4): the group's error is a slow wander the model
+    # estimates (a GNSS receiver's), so an outlier taken into it would leave only at the wander's
+    # time constant; a sample whose NIS passes the gate is kept for the detectors, not the update
+    gated: bool = False
 
     @property
     def size(self) -> int:

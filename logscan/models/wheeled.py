@@ -81,9 +81,8 @@ class Wheeled(Model):
     rest_inputs = (0,)  # `at_rest` reads the wheel speed v
     inputs_are_sensors = True  # wheel odometry and a gyro: readings, not commands
     groups = {
-        "position": GroupSpec(
-            "position", 0, ("x", "y"), (1.0, 1.0), (-1e6, -1e6), (1e6, 1e6), ("m", "m")
-        ),  # not direct: the receiver's error adds to x, y
+        # not direct: the receiver's error adds to x, y; gated: that error is a wander of tau_g
+        "position": GroupSpec("position", 0, ("x", "y"), (1.0, 1.0), (-1e6, -1e6), (1e6, 1e6), ("m", "m"), gated=True),
         "heading": GroupSpec(
             "heading", 1, ("psi",), (0.1,), (-6.4,), (6.4,), ("rad",), wrap=(True,), direct_states=(2,)
         ),
