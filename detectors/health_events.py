@@ -18,6 +18,7 @@ from logscan.detectors.health_checks import (
     _suffix,
 )
 from logscan.detectors.raw_topics import grid_steps, on_grid
+from logscan.detectors.topic_clock import clock_period, lost_time
 from logscan.log import logged_messages
 
 
@@ -86,18 +87,39 @@ class EventChecks(HealthChecks):
         self._result.info["logged_errors"] = errors
 
     # --- 7. sensor timeouts ----------------------------------------------------------------------
-    def _silence(self, t_ns: np.ndarray, limit_ns: float) -> np.ndarray:
+    def _silence(self, t_ns: np.ndarray, limit_ns: float, lost_ns: np.ndarray) -> np.ndarray:
         """At each grid step, the age of the topic's newest sample over ``limit_ns`` (over 1: a
         timeout, from the moment it began to the next sample, or to the end of the log for a
         topic that never reports again); NaN until its second sample: the first interval is not
         judged (PX4's logger writes a topic's latest sample when it subscribes, which can be
-        older than the topic's rate says)."""
+        older than the topic's rate says). ``lost_ns`` (per sample, NaN for none): the time the gap
+        after that sample lost (`topic_clock.lost_time`); a gap that lost no more than the limit
+        is a jitter, not a stop: its age is held at the lost time."""
         run = self._grid
         grid_ns = run.start_ns + np.round(np.asarray(run.t, dtype=np.float64) * 1e9)
         newest = np.searchsorted(t_ns, grid_ns, side="right") - 1
-        ratio = (grid_ns - t_ns[np.maximum(newest, 0)].astype(np.float64)) / limit_ns
+        age = grid_ns - t_ns[np.maximum(newest, 0)].astype(np.float64)
+        lost = lost_ns[np.maximum(newest, 0)]
+        jitter = lost <= limit_ns  # False where NaN: no gap judged there
+        ratio = np.where(jitter, np.minimum(age, np.maximum(lost, 0.0)), age) / limit_ns
         ratio[newest < 1] = np.nan
         return ratio
+
+    def _lost(self, t: np.ndarray, limit_ns: float, where: str) -> np.ndarray:
+        """Per sample, the time the gap after it lost if that gap is over ``limit_ns`` (NaN
+        elsewhere); a warning names the topic when such gaps lost no more than the limit (jitter)."""
+        lost = np.full(t.size, np.nan)
+        gaps = np.flatnonzero(np.diff(t) > limit_ns)
+        lost[gaps] = lost_time(t, gaps, clock_period(t))
+        jittered = gaps[lost[gaps] <= limit_ns]
+        if jittered.size:
+            longest = float(np.max(t[jittered + 1] - t[jittered])) / 1e9
+            self._result.warnings.append(
+                f"health: {where}'s timestamps jitter: {jittered.size} gap(s) over the timeout's "
+                f"{limit_ns / 1e9:.3g} s (the longest {longest:.3g} s) lost no samples (the count after "
+                "each caught up), so they are not timeouts"
+            )
+        return lost
 
     def _timeouts(self, topics, metadata) -> None:
         periods = float(self.timeout_periods)
@@ -110,12 +132,14 @@ class EventChecks(HealthChecks):
             if t.size < 4:
                 self._skipped[name] = f"{where}: fewer than 4 samples"
                 continue
+            t = np.sort(t)  # a jittered sensor's timestamps can go back in the log's order
             period = float(np.median(np.diff(t)))
             if not period > 0:
                 self._skipped[name] = f"{where}: no sample period"
                 continue
             limit = {"gap_s": periods * period / 1e9, "median_period_s": period / 1e9}
-            self._add_on_grid(name, where, self._silence(t, periods * period), limit=limit, n_persist=1)
+            lost = self._lost(t, periods * period, where)
+            self._add_on_grid(name, where, self._silence(t, periods * period, lost), limit=limit, n_persist=1)
         dropouts = (metadata.get("ulog.log") or {}).get("dropouts")
         if dropouts not in (None, "0"):
             self._result.info["logging_dropouts"] = (
