@@ -14,8 +14,11 @@ holding its value is stillness, not a freeze: those samples are not judged, and 
 the samples after the last one at rest (a GNSS receiver's static hold ends once the robot moves).
 The inputs that test reads (`Model.rest_inputs`: the wheel speed) are checked the same way, as
 ``frozen.input.<input>``: held at a moving value, one would call the robot moving while it stands,
-and the still sensors stuck (the real Husky drive's wheel speed held for 100 s named its GNSS). An
-input is held on the grid between its samples: the fill factor L counts its own samples.
+and the still sensors stuck (the real Husky drive's wheel speed held for 100 s named its GNSS). So
+is every other input of a model whose inputs are sensor readings (`Model.inputs_are_sensors`: the
+gyro's yaw rate), not exempt near zero: a live sensor's noise changes its reading on every sample,
+also at rest (the real Husky drive's gyro held for 50 s named the wheels' yaw rate). An input is
+held on the grid between its samples: the fill factor L counts its own samples.
 
 The anchor a(i) is the first sample of the current run: a run ends when a sample leaves the band
 +-tol around it, so a slow healthy ramp (each step small, the sum not) is not a run. sigma is the
@@ -153,8 +156,9 @@ def run_threshold(lengths: np.ndarray, fill: float, tests: int, duration_s: floa
 
 @dataclass
 class InputColumn:
-    """A model input `Model.at_rest` reads, checked as a group of one channel is (its samples: the
-    grid's held values, new or not; no stated noise: its own)."""
+    """A model input checked as a group of one channel is (its samples: the grid's held values, new
+    or not; no stated noise: its own): one `Model.at_rest` reads, or a sensor's reading that drives
+    the prediction (`Model.inputs_are_sensors`: a gyro's yaw rate)."""
 
     name: str  # "input.<input>"
     channels: list[str]
@@ -162,21 +166,39 @@ class InputColumn:
     fresh: np.ndarray  # (N,) bool: finite
     channel_fresh: None = None
     noise_std: None = None
+    # read by the rest test (a wheel speed): within its own noise of zero it is at rest, not held
+    rest: bool = True
 
 
-def rest_inputs(run, model) -> list[InputColumn]:
-    """The inputs the model's rest test reads (`Model.rest_inputs`), as columns to check."""
+def checked_inputs(run, model) -> list[InputColumn]:
+    """The model inputs the check reads: the ones its rest test reads (`Model.rest_inputs`), and
+    every other one when the inputs are sensor readings (`Model.inputs_are_sensors`)."""
     u = getattr(run, "u", None)
     if model is None or u is None or u.ndim != 2:
         return []
     names, channels = list(model.input_names), list(getattr(run, "input_channels", ()))
+    rest = tuple(getattr(model, "rest_inputs", ()))
+    sensors = range(len(names)) if getattr(model, "inputs_are_sensors", False) else ()
     out = []
-    for k in getattr(model, "rest_inputs", ()):
+    for k in sorted(set(rest) | set(sensors)):
         if k < u.shape[1] and k < len(names):
             column = u[:, k : k + 1]
             channel = channels[k] if k < len(channels) else names[k]
-            out.append(InputColumn(f"input.{names[k]}", [channel], column, np.isfinite(column[:, 0])))
+            out.append(InputColumn(f"input.{names[k]}", [channel], column, _samples(column[:, 0]), rest=k in rest))
     return out
+
+
+def _samples(column: np.ndarray) -> np.ndarray:
+    """(N,) bool: the grid steps of an input column to judge: finite, but for the repeats that run
+    into a stretch without the input (the alignment holding its last sample until its staleness
+    limit: a sensor that stopped, which the missing-input rule reports, not one repeating itself)."""
+    finite = np.isfinite(column)
+    same = np.zeros(column.size, dtype=bool)
+    same[1:] = column[1:] == column[:-1]  # NaN never equals: a gap starts a run
+    run = np.cumsum(~same)
+    ends = np.flatnonzero(~np.append(same[1:], False))  # each run's last step
+    into_gap = ends[(ends < column.size - 1) & ~finite[np.minimum(ends + 1, column.size - 1)]]
+    return finite & ~(same & np.isin(run, run[into_gap]))
 
 
 class FrozenSensorDetector(Detector):
@@ -205,7 +227,7 @@ class FrozenSensorDetector(Detector):
             return None
         group, _, output = rest.partition(".")
         if group == "input" and output:
-            what = f"model input {output} (judges when the vehicle is at rest)"
+            what = f"model input {output}"
         else:
             what = group_words(group) + (f" {output}" if output else "")
         return f"{what} stopped changing: its samples repeat one value (stuck sensor)"
@@ -229,7 +251,7 @@ class FrozenSensorDetector(Detector):
             for group in run.groups.values()
             if group.z is not None
             for j in range(group.z.shape[1])
-        ] + [(column, 0, f"{PREFIX}.{column.name}") for column in rest_inputs(run, model)]
+        ] + [(column, 0, f"{PREFIX}.{column.name}") for column in checked_inputs(run, model)]
         duration = max(float(run.t[-1] - run.t[0]), run.dt) if run.t.size else 1.0
         info = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
         rest = model.at_rest(run.u) if model is not None and getattr(run, "u", None) is not None else None
@@ -289,7 +311,7 @@ class FrozenSensorDetector(Detector):
         sigma = float(np.fmin(self._stated_sigma(group, j, model), noise))
         # a run starts again after the last sample at rest (module docstring)
         still = np.zeros(0, dtype=bool) if rest is None else np.asarray(rest, dtype=bool)[steps]
-        if isinstance(group, InputColumn) and np.isfinite(noise):
+        if isinstance(group, InputColumn) and group.rest and np.isfinite(noise):
             # an input held within its own noise of zero (a wheel speed creeping at a count or two
             # of its encoder, 2 mm/s on the real Husky drive against its 7 mm/s) cannot be told from
             # rest: stillness too, as `Model.at_rest`'s

@@ -390,3 +390,26 @@ def test_the_healthy_drives_wheel_speed_is_far_from_a_freeze(cli, tmp_path):
     h = frozen["info"]["h"]["frozen.input.v"]
     peak = max(frozen["series"]["frozen.input.v"]["max"], 0.0)
     assert peak <= 0.5 * h, (peak, h)  # its moving samples repeat at most twice
+
+
+def test_a_stuck_gyro_is_named_not_the_wheels_it_made_disagree(cli, tmp_path):
+    """The real drive's /imu/data held at its 150 s message until 200 s: the gyro's yaw rate drives
+    the heading (a model input), so the wheels' yaw rate and then the GNSS disagreed with it and the
+    incident said "wheel yaw rate inconsistent", a healthy sensor. A sensor input is checked for a
+    freeze as the wheel speed is (`Model.inputs_are_sensors`), and its freeze heads the incident."""
+    from ros_edit import edit_messages
+
+    def hold_imu(msg, first):
+        msg.angular_velocity, msg.linear_acceleration = first.angular_velocity, first.linear_acceleration
+
+    held = tmp_path / "gyro_stuck.bag"
+    assert edit_messages(need_testdata(ROS1_BAG), held, "/imu/data", 150.0, 200.0, hold_imu) > 1000
+    code, entry, text = summary(cli, held, tmp_path)
+    assert code == 1, text
+    first = entry["incidents"][0]
+    assert first["source"].startswith("/imu/data/angular_velocity."), first
+    assert 150.0 <= first["start"] <= 151.0 and first["headline"].startswith("model input w ("), first
+    # the healthy drive's gyro repeats one reading at most twice: far below the check's threshold
+    code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path, "-d", "frozen")
+    frozen = next(d for d in entry["detectors"] if d["detector"] == "frozen")
+    assert frozen["series"]["frozen.input.w"]["max"] <= 0.5 * frozen["info"]["h"]["frozen.input.w"], frozen["info"]
