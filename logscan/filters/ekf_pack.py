@@ -401,7 +401,7 @@ def pack_run(
         wrap=np.concatenate([s.wrap_mask() for s in specs]),
         direct_idx=np.concatenate([d[0] for d in direct]),
         direct_gain=np.concatenate([d[1] for d in direct]),
-        gate=outlier_gates(specs, fresh, run.dt),
+        gate=outlier_gates(specs, [getattr(run.groups[g], "rate_hz", None) for g in names], fresh, run.dt),
         dt=float(run.dt),
         seed_at_start=seed,
         coding_floor=coding_floor,

@@ -10,17 +10,18 @@ import numpy as np
 GATE_HOURS = 100.0
 
 
-def outlier_gates(specs, fresh: np.ndarray, dt: float) -> np.ndarray:
+def outlier_gates(specs, rates: list[float | None], fresh: np.ndarray, dt: float) -> np.ndarray:
     """(G,) each group's outlier gate (docs/algorithms.md 8.4): for a `GroupSpec.gated` group the
-    NIS a consistent group's sample exceeds with probability 1 / (its updates in GATE_HOURS), its
-    chi-square point with the group's size as degrees of freedom; inf for the others."""
+    NIS a consistent group's sample exceeds with probability 1 / (its samples in GATE_HOURS), its
+    chi-square point with the group's size as degrees of freedom; inf for the others. A group's
+    rate is the profile's (``rates``: the whole log's, so a block of a long log gets the log's
+    gate), else its fresh samples' over the run."""
     from scipy.special import chdtri  # chdtri(d, q) = chi2.ppf(1 - q, d)
 
     gates = np.full(len(specs), np.inf)
     duration = max(fresh.shape[0] * float(dt), float(dt))
     for g, spec in enumerate(specs):
-        samples = int(np.count_nonzero(fresh[:, g]))
-        if spec.gated and samples:
-            per_hour = samples / duration * 3600.0
-            gates[g] = float(chdtri(spec.size, 1.0 / (per_hour * GATE_HOURS)))
+        rate = rates[g] or np.count_nonzero(fresh[:, g]) / duration
+        if spec.gated and rate > 0:
+            gates[g] = float(chdtri(spec.size, 1.0 / (rate * 3600.0 * GATE_HOURS)))
     return gates
