@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -140,6 +140,27 @@ class SourceInfo:
 MAX_SPAN_S = 86_400.0  # a log spanning more than a day is most likely several logs, or a wrong time unit
 
 
+@dataclass(eq=False)
+class WholeTimes:
+    """A topic's message times across a whole file of which only a window was read
+    (`Log.read_as_window`): ``count`` messages from ``first`` to ``last`` ns, the times themselves
+    read again from the file when asked: ``batches()``, sorted and unique (a time logged twice once),
+    a batch at a time, each after the one before; ``fetch(lo, hi)``, those from ``lo`` to ``hi``.
+    ``runs``: what alignment found in them (`logscan.timebase.time_runs.TimeRuns`), kept with them
+    for the file's next window."""
+
+    count: int
+    first: int
+    last: int
+    batches: Callable[[], Iterator[np.ndarray]]
+    fetch: Callable[[int, int], np.ndarray]
+    runs: Any = None
+
+    @property
+    def size(self) -> int:
+        return self.count
+
+
 @dataclass
 class Log:
     """Channels by name plus where they came from; optional ground truth and embedded profile.
@@ -157,10 +178,10 @@ class Log:
         self._span_ns: tuple[int | None, int | None] | None = None  # kept by release_samples
         self._sample_counts: dict[str, int] = {}  # likewise
         self._span_text: str | None = None  # likewise
-        # channel -> its topic's message times across the whole file, when only a window of it was
-        # read (`read_as_window`): alignment takes the grid's span and phase from them
-        self.whole_times: dict[str, np.ndarray] = {}
-        # channels -> their whole-file times made unique and their dense span (`_Aligner._whole_span`):
+        # channel -> its topic's message times across the whole file (`WholeTimes`), when only a
+        # window of it was read (`read_as_window`): alignment takes the grid's span and phase from them
+        self.whole_times: dict[str, WholeTimes] = {}
+        # channels -> their whole-file runs, dense span and outlying times (`_Aligner._whole_span`):
         # found once for a window and its filter's lead-in, which align the same channels
         self.whole_spans: dict[tuple[str, ...], tuple] = {}
         warning = self.span_warning()
@@ -186,7 +207,7 @@ class Log:
             channels[name] = Channel(name, empty_t, empty_v, channel.unit)
         self.channels = channels
 
-    def read_as_window(self, span_ns: tuple[int, int], whole_times: dict[str, np.ndarray]) -> None:
+    def read_as_window(self, span_ns: tuple[int, int], whole_times: dict[str, WholeTimes]) -> None:
         """This log holds a window of its file (`logscan.readers.mcap.window`): its span and its
         channels' times across the whole file come from the file's index, not the samples read."""
         partial = self.span_warning()  # of the samples read: not the log's
@@ -196,8 +217,8 @@ class Log:
         self.whole_times = whole_times
         timed = [name for name in self.channels if name in whole_times and whole_times[name].size]
         if self.duration_s > MAX_SPAN_S and timed:  # named as the whole read names them
-            first = min(timed, key=lambda name: int(whole_times[name][0]))
-            last = max(timed, key=lambda name: int(whole_times[name][-1]))
+            first = min(timed, key=lambda name: whole_times[name].first)
+            last = max(timed, key=lambda name: whole_times[name].last)
             self._span_text = _span_text(self.duration_s, first, last)
             if self._span_text not in self.source.warnings:
                 self.source.warnings.append(self._span_text)

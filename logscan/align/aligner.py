@@ -24,6 +24,8 @@ from logscan.align.sample_hold import (
     time_order,
 )
 from logscan.errors import InternalError
+from logscan.log import WholeTimes
+from logscan.timebase.time_runs import dense_runs, dropped_times, runs_of
 from logscan.timebase.time_sanity import dense_span
 
 
@@ -109,31 +111,30 @@ class _Aligner:
             self.cache[name] = replace(c, t=c.t[keep], values=c.values[keep], outliers=int(drop.sum()))
         return first, last
 
-    def _whole_span(self, names: list[str], whole: dict[str, np.ndarray]) -> tuple[int, int]:
-        """`span` from the whole file's times of a window's channels (sorted; a time logged twice
-        counts once, as cleaning keeps one): the samples read at an outlying time are dropped."""
+    def _whole_span(self, names: list[str], whole: dict[str, WholeTimes]) -> tuple[int, int]:
+        """`span` from the whole file's times of a window's channels, as runs (`time_runs.runs_of`:
+        sorted, a time logged twice counted once, as cleaning keeps one): the samples read at an
+        outlying time are dropped."""
         key = tuple(dict.fromkeys(names))
         for name in key:
             self.clean(name)  # cleaned first, as the whole read's span does: its warnings come first
         found = self.log.whole_spans.get(key)  # a window's lead-in aligns the same channels
         if found is None:
-            unique: dict[int, np.ndarray] = {}  # a topic's channels share one array: made unique once
-            times = {}
+            runs = {}
             for name in key:
-                t = whole.get(name)
-                if t is not None and t.size:
-                    if id(t) not in unique:
-                        repeated = t[1:] == t[:-1]
-                        unique[id(t)] = t[np.concatenate(([True], ~repeated))] if repeated.any() else t
-                    times[name] = unique[id(t)]
-            found = self.log.whole_spans[key] = (times, dense_span(times, self.log.source.path))
-        times, (first, last, drops, self.ends) = found
-        for name, drop in drops.items():
+                found_runs = runs_of(whole[name]) if name in whole and whole[name].size else None
+                if found_runs is not None:
+                    runs[name] = found_runs
+            first, last, drops, ends = dense_runs(runs, self.log.source.path)
+            dropped = {name: dropped_times(runs[name], drop) for name, drop in drops.items()}
+            found = self.log.whole_spans[key] = (runs, first, last, dropped, ends)
+        runs, first, last, dropped, self.ends = found
+        for name, times in dropped.items():
             c = self.clean(name)
-            self.dropped[name] = times[name][drop]
-            self.kept[name] = int(times[name].size - drop.sum())
-            keep = ~np.isin(c.t, self.dropped[name])
-            self.cache[name] = replace(c, t=c.t[keep], values=c.values[keep], outliers=int(drop.sum()))
+            self.dropped[name] = times
+            self.kept[name] = runs[name].size - times.size
+            keep = ~np.isin(c.t, times)
+            self.cache[name] = replace(c, t=c.t[keep], values=c.values[keep], outliers=int(times.size))
         return first, last
 
     def hold(self, name: str | None, grid_ns: np.ndarray, limit_s: float, transform=None, z=None, fresh=None):

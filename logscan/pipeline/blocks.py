@@ -131,6 +131,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     progress = options.pop("progress", None)
     options.pop("fraction", None)  # the bytes of each block's read would run back and forth
     options["free_series"] = True  # sensor_views as asked: the incidents' sizes read the innovations
+    options["read_plans"] = {}  # the file's plan, read by the first block's read and kept for the others
     rate = float(loaded.profile.vehicle.rate_hz)
     block_s = windows[1][0] - (windows[0][0] or 0.0)
     width = bucket_width(int(len(windows) * block_s * rate))

@@ -196,6 +196,7 @@ def prepare(
     truth_path: str | os.PathLike | None = None,
     fraction: Fraction | None = None,
     ahead: Sequence[Callable[[], None]] = (),
+    read_plans: dict | None = None,
 ) -> Prepared:
     """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
     ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
@@ -205,7 +206,9 @@ def prepare(
     (seconds since the log's start) analyse a window of it. ``fraction`` hears the bytes read, a
     block at a time (`logscan.readers.read_log`'s ``progress``). ``ahead``: functions that compile
     the detectors' kernels, called on the first run in the process that compiles the EKF's, after
-    it (`logscan.filters.warmup.kernel_compilers`). Raises LogscanError on bad input."""
+    it (`logscan.filters.warmup.kernel_compilers`). ``read_plans``: what a window's read learnt of
+    the file for the next window of it (`ReadWindow.plans`: block mode's). Raises LogscanError on
+    bad input."""
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
@@ -214,7 +217,7 @@ def prepare(
     compiling = _start_compile(model, needs, notice, ahead)
     step("reading")
     log, run, lead = _read_and_align(
-        path, loaded, raw_topics, use_header_stamp, fraction, (start_s, end_s), truth_path, step
+        path, loaded, raw_topics, use_header_stamp, fraction, (start_s, end_s), truth_path, step, plans=read_plans
     )
     if run.n_steps < 2:
         raise LogscanError(
@@ -279,6 +282,7 @@ def _read_and_align(
     step: Progress,
     *,
     whole: bool = False,
+    plans: dict | None = None,
 ) -> tuple[Log, AlignedRun, AlignedRun | None]:
     """The log read (of an indexed MCAP file, only the chunks the ``window`` needs, unless
     ``whole``) and aligned on the window, and on the lead-in before it (`_lead_run`). A window's
@@ -287,7 +291,7 @@ def _read_and_align(
     profile = loaded.profile
     start_s, end_s = window
     lead_from = lead_in_start(start_s)
-    read_window = _read_window(profile, start_s if lead_from is None else lead_from, end_s)
+    read_window = _read_window(profile, start_s if lead_from is None else lead_from, end_s, plans)
     log = _read(path, loaded, raw_topics, use_header_stamp, fraction, None if whole else read_window)
     again = (path, loaded, raw_topics, use_header_stamp, fraction, window, truth_path, step)
     _attach_truth(log, path, truth_path)
@@ -336,7 +340,7 @@ def _with_origins(profile, lead: AlignedRun):
     return replace(profile, measurements=measurements)
 
 
-def _read_window(profile, start_s: float | None, end_s: float | None) -> ReadWindow | None:
+def _read_window(profile, start_s: float | None, end_s: float | None, plans: dict | None) -> ReadWindow | None:
     """--start/--end as a read's window (None without either): a sample up to the longest delay a
     profile may give a sensor (`MAX_DELAY_S`) and two steps outside it may still be held, and the
     [alarms] ground channel as far around it as it can hold back steps inside it
@@ -349,6 +353,7 @@ def _read_window(profile, start_s: float | None, end_s: float | None) -> ReadWin
         None if start_s is None else start_s - before_s,
         None if end_s is None else end_s + after_s,
         margin_s=MAX_DELAY_S + 2.0 / float(profile.vehicle.rate_hz),
+        plans=plans,
     )
 
 

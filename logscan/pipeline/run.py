@@ -37,6 +37,7 @@ def analyze_log(
     fraction: Fraction | None = None,
     loaded: LoadedProfile | None = None,
     judged_from_s: float | None = None,
+    read_plans: dict | None = None,
 ):
     """One log end to end: profile, detectors (checked before the log is read), prepare, detect;
     ``tables``: trained tables (`logscan train`; default: the profile's ``tables`` key);
@@ -46,7 +47,8 @@ def analyze_log(
     to score against (default: the log's own, or `<log>.truth.json` beside it); ``fraction``: the
     bytes read of the log, a block at a time (`prepare`); ``loaded``: the profile already loaded
     from ``profile_path`` (block mode loads it once for every block), else loaded here;
-    ``judged_from_s``: see `detect`."""
+    ``judged_from_s``: see `detect`; ``read_plans``: what a window's read learns of the file, kept
+    for the next (block mode's)."""
     loaded = loaded if loaded is not None else load_profile_for(path, profile_path)
     detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
     trained = tables_path(None if tables is None else str(tables), loaded.profile, log=path)
@@ -68,6 +70,7 @@ def analyze_log(
         truth_path=truth,
         fraction=fraction,
         ahead=kernel_compilers(detectors),
+        read_plans=read_plans,
         **options,
     )
     return detect(

@@ -7,7 +7,7 @@ from __future__ import annotations
 import errno
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,6 +31,9 @@ class ReadWindow:
     start_s: float | None
     end_s: float | None
     margin_s: float
+    # path -> what a read of the file learnt that does not depend on the window (an MCAP file's
+    # `logscan.readers.mcap.file_plan.FilePlan`), kept for the next window of it (block mode's)
+    plans: dict | None = field(default=None, compare=False, hash=False)
 
 
 def input_error(exc: OSError, path: str | os.PathLike, *, directory: bool = False) -> InputError:

@@ -54,11 +54,7 @@ def dense_span(times: Mapping[str, np.ndarray], path: str) -> tuple[int, int, di
     (first, last) ns once the outlying runs are dropped, the mask of samples to drop per channel
     that has some, and the channels that start first and end last."""
     if not times:
-        raise InputError(
-            "none of the profile's input and measurement channels has a finite sample",
-            path=path,
-            hint=f"check the profile's channels with `logscan inspect {shlex.quote(str(path))} --channels`",
-        )
+        raise no_span_error(path)
     runs: dict[int, tuple] = {}  # channels sharing one time array (a topic's fields) split it once
     found = {
         name: (t, runs[id(t)] if id(t) in runs else runs.setdefault(id(t), outlying_runs(t)))
@@ -84,6 +80,15 @@ def dense_span(times: Mapping[str, np.ndarray], path: str) -> tuple[int, int, di
     first = min(found, key=lambda name: int(kept(name)[0]))
     last = max(found, key=lambda name: int(kept(name)[-1]))
     return int(kept(first)[0]), int(kept(last)[-1]), drops, (first, last)
+
+
+def no_span_error(path: str) -> InputError:
+    """Why a log has no span to analyse: none of its channels the span is taken from has a sample."""
+    return InputError(
+        "none of the profile's input and measurement channels has a finite sample",
+        path=path,
+        hint=f"check the profile's channels with `logscan inspect {shlex.quote(str(path))} --channels`",
+    )
 
 
 def outlier_warnings(dropped: Mapping[str, np.ndarray], kept: Mapping[str, int], start_ns: int) -> list[str]:

@@ -53,17 +53,18 @@ from typing import Any
 
 import numpy as np
 
-from logscan.log import Log, SourceInfo, TopicInfo
+from logscan.log import Log, SourceInfo, TopicInfo, WholeTimes
 from logscan.readers.common import UNDECODED_WHY, ReadWindow, topic_wanted, undecoded_as_partial
 from logscan.readers.flatten import FlatColumns, MessageBytes, flatten_messages
 from logscan.readers.json_decoder import JsonDecoder, JsonDecoderFactory, json_columns
 from logscan.readers.json_template import JsonTier, tally_file
 from logscan.readers.mcap.cdr import CdrLayout, cdr_fast, cdr_layout
+from logscan.readers.mcap.file_plan import FilePlan, file_plan, known_top
 from logscan.readers.mcap.metadata import attach_logscan_records
 from logscan.readers.mcap.scan import Scan, scan_file
 from logscan.readers.mcap.scan_damage import problem_text, raise_if_unrecoverable
 from logscan.readers.mcap.scan_records import ChannelRec, SchemaRec
-from logscan.readers.mcap.window import WindowPlan, channel_index, plan_window
+from logscan.readers.mcap.window import WindowPlan, plan_window
 from logscan.readers.topic_channels import TopicPieces, channel_name, channels_in_time_order, unsorted_text
 
 
@@ -86,6 +87,8 @@ def read_mcap(
     planner = _WindowPlanner(window, decoding) if window is not None and not use_header_stamp else None
     progress = _onward(progress) if planner is not None else progress
     scan.plan = planner
+    if planner is not None:  # a window of this file read before: its top-level records are known
+        scan.known_top = known_top(planner.window.plans, path)
     if progress is not None:
         scan.on_position = _bytes_of(path, progress)
     source = _scanned(scan, decoding)
@@ -211,12 +214,14 @@ class ChannelStats:
 
 class _WindowPlanner:
     """`Scan.plan` for a window (`window.plan_window`): the wanted channels a decoder takes, planned
-    from the file's index; then the log marked as a window of it (`mark`)."""
+    from the file's plan (`file_plan`: found once, kept in the window's ``plans``); then the log
+    marked as a window of it (`mark`)."""
 
     def __init__(self, window: ReadWindow, decoding: _Decoding):
         self.window = window
         self.decoding = decoding
         self.plan: WindowPlan | None = None
+        self.file: FilePlan | None = None
 
     def __call__(self, scan: Scan, u8: np.ndarray, top) -> set[int] | None:
         decoders = self.decoding.decoders
@@ -224,8 +229,10 @@ class _WindowPlanner:
             if cid not in decoders and topic_wanted(channel.topic, scan.wanted):
                 decoders[cid] = _choose_decoder(self.decoding.factories, channel, scan.schemas.get(channel.schema_id))
         wanted = {cid for cid, (decoder, _) in decoders.items() if decoder is not None}
-        index = channel_index(u8, top, wanted, set(scan.channels), scan.give_back)
-        self.plan = plan_window(index, self.window) if index is not None else None
+        topics = {cid: channel.topic for cid, channel in scan.channels.items()}
+        self.file = file_plan(scan.path, self.window.plans, u8, top, wanted, topics, scan.give_back)
+        index = self.file.index
+        self.plan = plan_window(index, self.window, u8) if index is not None else None
         if self.plan is None or index is None:
             return None
         # every channel's count and span as the whole read counts them (`Scan.window_totals`)
@@ -237,23 +244,22 @@ class _WindowPlanner:
         return self.plan.chunks
 
     def mark(self, log: Log, scan: Scan, decoding: _Decoding) -> bool:
-        """The log's span and its channels' times across the whole file, from the plan; False
-        (the log is to be read whole) when the chunks read cannot stand for the whole read: the
-        first message gave no sample (time zero moves), a field is missing from some messages, or
-        a channel has no finite sample from its topic's last message before the window (a hold
+        """The log's span and its channels' times across the whole file (as runs), from the plan;
+        False (the log is to be read whole) when the chunks read cannot stand for the whole read:
+        the first message gave no sample (time zero moves), a field is missing from some messages,
+        or a channel has no finite sample from its topic's last message before the window (a hold
         could reach further back)."""
-        plan = self.plan
-        assert plan is not None
+        plan, file = self.plan, self.file
+        assert plan is not None and file is not None and file.index is not None
         firsts = [int(channel.t[0]) for channel in log.channels.values() if len(channel)]
         if not firsts or min(firsts) != plan.origin_ns:
             return False
         by_topic: dict[str, list[int]] = {}
-        for cid in plan.times:
-            by_topic.setdefault(scan.channels[cid].topic, []).append(cid)
-        whole: dict[str, np.ndarray] = {}
+        for cid, entry in file.index.items():
+            if entry.at is not None:
+                by_topic.setdefault(scan.channels[cid].topic, []).append(cid)
+        whole: dict[str, WholeTimes] = {}
         for topic, cids in by_topic.items():
-            parts = [plan.times[cid] for cid in cids]
-            times = parts[0] if len(parts) == 1 else np.sort(np.concatenate(parts), kind="stable")
             names = [channel_name(topic, field_path) for field_path in decoding.fields.get(topic, ())]
             if len({len(log.channels[name]) for name in names}) > 1:  # fields that come and go
                 return False
@@ -261,9 +267,10 @@ class _WindowPlanner:
             if before and not all(_held_from(log.channels[name], max(before), plan.lo_ns) for name in names):
                 return False
             read = sum(scan.counts_read.get(cid, 0) for cid in cids)
-            if not _whole_skips(log.source.skipped, decoding.skipped_fields.get(topic, set()), read, int(times.size)):
+            messages = sum(file.index[cid].count for cid in cids)
+            if not _whole_skips(log.source.skipped, decoding.skipped_fields.get(topic, set()), read, messages):
                 return False
-            whole.update(dict.fromkeys(names, times))
+            whole.update(dict.fromkeys(names, file.times[topic]))
         log.read_as_window((plan.origin_ns, plan.end_ns), whole)
         return True
 

@@ -134,6 +134,7 @@ class Scan:
         # by ``plan`` from the top-level records once the summary's definitions are in; None: all
         self.plan: Callable[[Scan, np.ndarray, Records], set[int] | None] | None = None
         self.window_chunks: set[int] | None = None
+        self.known_top: Records | None = None  # the top-level records a window read of the file found
         # channel id -> (messages, first, last log time) of the whole file, from its index: a
         # window's read counts what it did not decode as the whole read would
         self.window_totals: dict[int, tuple[int, int, int]] = {}
@@ -159,7 +160,7 @@ class Scan:
             )
         self._inflate_budget = max(MIN_FILE_BUDGET_BYTES, MAX_RATIO * len(raw))
         u8 = np.frombuffer(raw, dtype=np.uint8)
-        top = self._walk(u8, len(MCAP_MAGIC), len(raw))
+        top = self.known_top if self.known_top is not None else self._walk(u8, len(MCAP_MAGIC), len(raw))
         self._summary_definitions(raw, u8, top)
         if self.plan is not None:
             self.window_chunks = self.plan(self, u8, top)

@@ -2,14 +2,16 @@
 from the Message Index records alone, so a window of a long log is not read whole.
 
 Each chunk of an indexed file is followed by one Message Index record per channel it holds (the
-MCAP specification), listing every message's log time: the whole file's times of the wanted
-channels come from them without decompressing a chunk. From those times the plan takes what the
-whole read would have given the window:
+MCAP specification), listing every message's log time: what the whole read would have given the
+window comes from them without decompressing a chunk, and what does not depend on the window is
+found once per file (`logscan.readers.mcap.file_plan`: block mode reads it once for every block):
  - time zero, the first message of the wanted channels (`Log.start_ns` of the whole read);
- - each wanted channel's times, whole, for the grid's span and phase (`align`'s dense span);
+ - the grid's span and phase: each wanted topic's times as the runs `time_sanity.outlying_runs`
+   splits them into (`logscan.timebase.time_runs`), not the times themselves;
  - the chunks to decode: those holding a message of a wanted channel from ``margin_s`` before the
    window to ``margin_s`` after it, and the one holding each channel's last message before that
-   (a hold reaches back as far as a channel's staleness allows, without limit for some).
+   (a hold reaches back as far as a channel's staleness allows, without limit for some): from
+   each record's first and last time, reading the times of the records that straddle the window.
 A file without a Message Index after every chunk, or with messages outside chunks, has no plan:
 it is read whole. What the window read does not see is in docs/algorithms.md section 8.1.
 """
@@ -35,14 +37,12 @@ _INDEX_HEAD = 6  # channel_id u16, then the byte length u32 of its (log_time u64
 
 @dataclass
 class WindowPlan:
-    """The chunks to decode (their records' body offsets), the log's time zero and last time, each
-    wanted channel's log times across the whole file (channel id -> sorted ns), and what the chunks
-    read must show for a hold into the window to be the whole read's (`before`)."""
+    """The chunks to decode (their records' body offsets), the log's time zero and last time, and
+    what the chunks read must show for a hold into the window to be the whole read's (`before`)."""
 
     chunks: set[int]
     origin_ns: int
     end_ns: int
-    times: dict[int, np.ndarray]
     lo_ns: int | None  # where the chunks read start to hold every message (the window less its margin)
     before: dict[int, int]  # channel id -> its last log time before lo_ns, the sample a hold starts from
 
@@ -71,46 +71,44 @@ def channel_index(
     if not set(np.unique(cids).tolist()) <= known:
         return None
     counts = sizes // 16
-    firsts, lasts, times, into = _index_times(u8, body + _INDEX_HEAD, counts, cids, ids, give_back)
+    firsts, lasts = _index_bounds(u8, body + _INDEX_HEAD, counts, give_back)
     if np.any(lasts > _INT64_MAX):  # a log time int64 ns cannot hold: the whole read drops and counts it
         # (a record listing no message reads 0 here)
         return None
     found: dict[int, ChannelIndex] = {}
+    wanted = set(ids)
     for cid in np.unique(cids[counts > 0]).tolist():
         mine = np.flatnonzero((cids == cid) & (counts > 0))  # its records, in file order
         entry = found[cid] = ChannelIndex(int(counts[mine].sum()), int(firsts[mine].min()), int(lasts[mine].max()))
-        if into[mine[0]] >= 0:  # a wanted channel: its records' times lie together, in file order
-            base = int(into[mine[0]])
-            entry.times = times[base : base + entry.count]
-            entry.starts = into[mine] - base
+        if cid in wanted:
+            entry.at, entry.counts = body[mine] + _INDEX_HEAD, counts[mine]
             entry.chunks = top.offsets[chunk_at[owner[mine]]]
             entry.firsts, entry.lasts = firsts[mine].astype(np.int64), lasts[mine].astype(np.int64)
     return found
 
 
-def _index_times(
-    u8: np.ndarray,
-    at: np.ndarray,
-    counts: np.ndarray,
-    cids: np.ndarray,
-    ids: set[int],
-    give_back: Callable[[int], None],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(first and last log time of each Message Index record at ``at`` (uint64), the times of the
-    records of the channels ``ids``, where each such record's times start in them, -1 for the
-    others): a channel's records' times lie together, in file order. A slice of records at a time,
-    the pages read given back."""
-    wanted = np.flatnonzero(np.isin(cids, list(ids)) & (counts > 0))
-    wanted = wanted[np.argsort(cids[wanted], kind="stable")]  # by channel, each in file order
-    into = np.full(at.size, -1, dtype=np.int64)
-    into[wanted] = np.cumsum(counts[wanted]) - counts[wanted]
-    times = np.empty(int(counts[wanted].sum()), dtype=np.int64)
+def _index_bounds(
+    u8: np.ndarray, at: np.ndarray, counts: np.ndarray, give_back: Callable[[int], None]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The first and last log time (uint64) of each Message Index record whose pairs start at
+    ``at``, a slice of records at a time, the pages read given back."""
     firsts, lasts = np.empty(at.size, dtype=np.uint64), np.empty(at.size, dtype=np.uint64)
+    none, nowhere = np.empty(0, dtype=np.int64), np.full(at.size, -1, dtype=np.int64)
     for lo in range(0, at.size, _HEADS_SLICE):
         hi = min(lo + _HEADS_SLICE, at.size)
-        _record_times(u8, at[lo:hi], counts[lo:hi], into[lo:hi], times, firsts[lo:hi], lasts[lo:hi])
+        _record_times(u8, at[lo:hi], counts[lo:hi], nowhere[lo:hi], none, firsts[lo:hi], lasts[lo:hi])
         give_back(int(at[hi - 1]))
-    return firsts, lasts, times, into
+    return firsts, lasts
+
+
+def record_times(u8: np.ndarray, at: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The log times the Message Index records whose pairs start at ``at`` list, one record after
+    the other (int64: the plan checked that they fit)."""
+    into = np.cumsum(counts) - counts
+    times = np.empty(int(counts.sum()), dtype=np.int64)
+    scratch = np.empty(at.size, dtype=np.uint64)
+    _record_times(u8, at, counts, into, times, scratch, scratch.copy())
+    return times
 
 
 @njit(cache=True, nogil=True)
@@ -147,23 +145,24 @@ def _index_heads(u8: np.ndarray, body: np.ndarray, give_back: Callable[[int], No
 @dataclass
 class ChannelIndex:
     """One channel's Message Index records: its message count and first and last log times, and of
-    a wanted channel the log times each record lists and the body offset of the chunk it indexes."""
+    a wanted channel, per record: where its pairs start, how many it lists, the body offset of the
+    chunk it indexes and its first and last log time."""
 
     count: int
     first: int
     last: int
-    times: np.ndarray | None = None  # a wanted channel's, its records one after the other
-    starts: np.ndarray | None = None  # where each of its records starts in times
-    chunks: np.ndarray | None = None  # the body offset of the chunk each record indexes
-    firsts: np.ndarray | None = None  # each of its records' first and last log time
+    at: np.ndarray | None = None  # a wanted channel's, its records in file order
+    counts: np.ndarray | None = None
+    chunks: np.ndarray | None = None
+    firsts: np.ndarray | None = None
     lasts: np.ndarray | None = None
 
 
-def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPlan | None:
-    """The chunks the window needs (module docstring); None when no wanted channel has a message.
-    A chunk whose messages straddle the window is decoded even when none falls inside: a few
-    samples more than needed change no hold. The channels' times are sorted in place."""
-    index = {cid: entry for cid, entry in index.items() if entry.times is not None and entry.times.size}
+def plan_window(index: dict[int, ChannelIndex], window: ReadWindow, u8: np.ndarray) -> WindowPlan | None:
+    """The chunks the window needs (module docstring) of the file ``u8``; None when no wanted
+    channel has a message. A chunk whose messages straddle the window is decoded even when none
+    falls inside: a few samples more than needed change no hold."""
+    index = {cid: entry for cid, entry in index.items() if entry.at is not None}
     if not index:
         return None
     origin = min(entry.first for entry in index.values())
@@ -177,26 +176,21 @@ def plan_window(index: dict[int, ChannelIndex], window: ReadWindow) -> WindowPla
     chunks: set[int] = set()
     before: dict[int, int] = {}
     for cid, entry in index.items():
-        mine, last_before = _chunks_of(entry, lo, hi)
+        mine, last_before = _chunks_of(entry, lo, hi, u8)
         chunks |= mine
         if last_before is not None:
             before[cid] = last_before
-    times: dict[int, np.ndarray] = {}
-    for cid, entry in index.items():
-        assert entry.times is not None
-        entry.times.sort(kind="stable")
-        times[cid] = entry.times
-    return WindowPlan(chunks, origin, end, times, lo, before)
+    return WindowPlan(chunks, origin, end, lo, before)
 
 
-def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> tuple[set[int], int | None]:
+def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None, u8: np.ndarray) -> tuple[set[int], int | None]:
     """The chunks of one channel the window from ``lo`` to ``hi`` ns (margins in) needs, and the
     time of its last message before ``lo`` (None: none). With the window's: the chunk of its first
     message (time zero is checked against it) and every chunk holding its last message before
     ``lo`` (a time logged twice: the whole read keeps the later sample)."""
-    assert entry.times is not None and entry.starts is not None and entry.chunks is not None
+    assert entry.at is not None and entry.counts is not None and entry.chunks is not None
     assert entry.firsts is not None and entry.lasts is not None
-    starts, owners, firsts, lasts = entry.starts, entry.chunks, entry.firsts, entry.lasts
+    owners, firsts, lasts = entry.chunks, entry.firsts, entry.lasts
     overlaps = np.ones(owners.size, dtype=bool)
     if lo is not None:
         overlaps &= lasts >= lo
@@ -206,9 +200,8 @@ def _chunks_of(entry: ChannelIndex, lo: int | None, hi: int | None) -> tuple[set
     if lo is None or firsts.min() >= lo:
         return chunks, None
     latest = np.where(lasts < lo, lasts, np.iinfo(np.int64).min)
-    bounds = np.append(starts, entry.times.size)
     for k in np.flatnonzero((firsts < lo) & (lasts >= lo)).tolist():  # records straddling lo
-        t = entry.times[bounds[k] : bounds[k + 1]]
+        t = record_times(u8, entry.at[k : k + 1], entry.counts[k : k + 1])
         latest[k] = t[t < lo].max()
     before = int(latest.max())
     return chunks | set(owners[latest == before].tolist()), before
