@@ -8,6 +8,9 @@ observability verdict runs under "filtering", before the first detector). Prints
 in MiB (2**20 bytes), and the arrays still held by the analysis when the detectors are done.
 
     python bench/memory_phases.py LOG [LOG2]     # two lengths of one log: also the growth per log-hour
+    python bench/memory_phases.py --blocks LOG   # block mode, as `logscan analyze LOG --no-report`
+                                                 # runs it: the steps of every block booked together,
+                                                 # and each block's peak
 
 Each log is analysed in a forked child process, so that both start from the same memory.
 """
@@ -109,6 +112,29 @@ def profile(path: str) -> tuple[dict[str, float], list[tuple[float, str]], float
     return peaks.peaks, held, analysis.duration_s / 3600.0
 
 
+def profile_blocks(path: str) -> tuple[dict[str, float], dict[str, float]]:
+    """The peak RSS per step of analysing ``path`` in blocks (`analyze_blocked`, as `logscan
+    analyze --no-report` does), each step's over every block, and each block's peak."""
+    from logscan.pipeline.blocks import analyze_blocked
+
+    reuse_freed_arrays()
+    steps, blocks = PhasePeaks(), PhasePeaks()
+
+    def step(message: str) -> None:
+        block, _, what = message.partition(": ") if message.startswith("block ") else ("", "", message)
+        steps.step(what)
+        if block and block != blocks.phase:
+            blocks.step(block)
+
+    analysis = analyze_blocked(path, free_series=True, progress=step)
+    steps.step("summary")
+    blocks.step("summary")
+    analysis.summary()
+    steps.stop()
+    blocks.stop()
+    return steps.peaks, blocks.peaks
+
+
 def in_child(path: str):
     """`profile` of ``path`` in a forked child process, so that each log starts from the same memory."""
     import multiprocessing
@@ -118,6 +144,18 @@ def in_child(path: str):
 
 
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--blocks"] and len(argv) == 2:
+        import multiprocessing
+
+        with multiprocessing.get_context("fork").Pool(1) as pool:
+            steps, blocks = pool.apply(profile_blocks, (argv[1],))
+        print(f"{'step (every block)':<24}{'peak MiB':>10}")
+        for name, mib in steps.items():
+            print(f"{name:<24}{mib:10.0f}")
+        print(f"\n{'block':<24}{'peak MiB':>10}")
+        for name, mib in blocks.items():
+            print(f"{name:<24}{mib:10.0f}")
+        return 0
     if not 1 <= len(argv) <= 2:
         print(__doc__)
         return 2

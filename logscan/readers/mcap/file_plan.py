@@ -9,7 +9,8 @@ reading only its own chunks (issue 29, item 2).
 A topic's times are read from the index a batch of records at a time: their records sorted by
 first time and cut where no record before reaches past the next one's first time (records
 overlapping in time are sorted together), so each batch, sorted and made unique, follows the one
-before. Memory: a batch, not the file's times; the pages read are given back as they go.
+before. Memory: a batch, not the file's times; the file's pages read are given back every few
+MiB (`GIVE_BACK_RECORDS`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from logscan.readers.mcap.records import Records
 from logscan.readers.mcap.window import ChannelIndex, channel_index, record_times
 
 BATCH_TIMES = 1 << 20  # index times read at a time for a pass over a topic's (8 MiB)
+GIVE_BACK_RECORDS = 16  # index records read before the file's pages read are given back (a few MiB of file)
 
 
 @dataclass
@@ -96,20 +98,20 @@ def _whole_times(path: str, entries: list[ChannelIndex]) -> WholeTimes:
     def batches() -> Iterator[np.ndarray]:
         with _Mapped(path) as mapped:
             for lo, hi in zip(bounds[:-1], bounds[1:]):
-                yield _sorted_unique(record_times(mapped.u8, at[lo:hi], counts[lo:hi]))
-                mapped.give_back(int(at[lo:hi].max()))
+                yield _sorted_unique(mapped.times(at[lo:hi], counts[lo:hi]))
 
     def fetch(lo_ns: int, hi_ns: int) -> np.ndarray:
         near = (lasts >= lo_ns) & (firsts <= hi_ns)
         with _Mapped(path) as mapped:
-            t = _sorted_unique(record_times(mapped.u8, at[near], counts[near]))
+            t = _sorted_unique(mapped.times(at[near], counts[near]))
         return t[(t >= lo_ns) & (t <= hi_ns)]
 
     return WholeTimes(int(counts.sum()), int(firsts.min()), int(lasts.max()), batches, fetch)
 
 
 class _Mapped:
-    """The file mapped read-only as ``u8`` while in a ``with``; `give_back` drops the pages read."""
+    """The file mapped read-only as ``u8`` while in a ``with``, its index times read with the pages
+    given back as they go (`times`)."""
 
     def __init__(self, path: str):
         self.path = path
@@ -120,10 +122,21 @@ class _Mapped:
         self.u8 = np.frombuffer(self._map, dtype=np.uint8)
         return self
 
-    def give_back(self, stop: int) -> None:
-        length = stop - stop % mmap.PAGESIZE
-        if length > 0 and hasattr(mmap, "MADV_DONTNEED"):
-            self._map.madvise(mmap.MADV_DONTNEED, 0, length)
+    def times(self, at: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """`record_times` of the records at ``at``, `GIVE_BACK_RECORDS` at a time, the pages before
+        the last one read given back after each: reading a record maps the whole folio around it
+        (up to megabytes), and a topic's records lie one after each chunk, all over the file."""
+        times = np.empty(int(counts.sum()), dtype=np.int64)
+        into = 0
+        for lo in range(0, at.size, GIVE_BACK_RECORDS):
+            part = record_times(self.u8, at[lo : lo + GIVE_BACK_RECORDS], counts[lo : lo + GIVE_BACK_RECORDS])
+            times[into : into + part.size] = part
+            into += part.size
+            stop = int(at[lo : lo + GIVE_BACK_RECORDS].max())
+            length = stop - stop % mmap.PAGESIZE
+            if length > 0 and hasattr(mmap, "MADV_DONTNEED"):
+                self._map.madvise(mmap.MADV_DONTNEED, 0, length)
+        return times
 
     def __exit__(self, *exc) -> None:
         del self.u8

@@ -31,7 +31,10 @@ from logscan.readers.mcap.records import OP_CHUNK, OP_MESSAGE, OP_MESSAGE_INDEX,
 
 _NS = 1_000_000_000
 _INT64_MAX = 2**63 - 1
-_HEADS_SLICE = 4096  # Message Index records per slice of heads read
+# Message Index records per slice read before the file's pages read are given back: one record per
+# chunk and channel, ~50 KiB of file apart in a 100 Hz quadcopter log, so a few MiB of file (a
+# slice of 4096 records held ~180 MiB of a 24-hour file's pages)
+_HEADS_SLICE = 128
 _INDEX_HEAD = 6  # channel_id u16, then the byte length u32 of its (log_time u64, offset u64) pairs
 
 
