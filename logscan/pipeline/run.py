@@ -59,29 +59,21 @@ def analyze_log(
         loaded.uncalibrated = uncalibrable_groups(calibration)
     options: dict[str, Any] = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
     needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
-    raw = raw_topics_of(detectors)
     prepared = prepare(
         path,
         loaded,
         needs,
         progress=progress,
         notice=notice,
-        raw_topics=raw,
+        raw_topics=raw_topics_of(detectors),
         truth_path=truth,
         fraction=fraction,
         ahead=kernel_compilers(detectors),
         read_plans=read_plans,
         **options,
     )
-    return detect(
-        prepared,
-        detectors,
-        grace_s=grace_s,
-        progress=progress,
-        free_series=free_series,
-        sensor_views=sensor_views,
-        judged_from_s=judged_from_s,
-    )
+    views = {"free_series": free_series, "sensor_views": sensor_views}
+    return detect(prepared, detectors, grace_s=grace_s, progress=progress, judged_from_s=judged_from_s, **views)
 
 
 def _with_innovations(needs: Callable[[AlignedRun], Needs]) -> Callable[[AlignedRun], Needs]:
