@@ -14,6 +14,10 @@ as stale, instead of failing on every load and save of that kernel (`tolerate_mi
 
 Uses numba internals (`_cache._cache_file._source_stamp`, numba/core/caching.py); a no-op if
 they change.
+
+`optimisation_level(level, *functions)` compiles the given kernels with LLVM at another level than
+numba's (NUMBA_OPT, 3): for a kernel that runs briefly against its compile, where the lower level
+compiles faster and runs as fast (bench/README.md measures each use).
 """
 
 from __future__ import annotations
@@ -25,9 +29,9 @@ import importlib.util
 import pickle
 import re
 import sys
-from types import FunctionType, ModuleType
+from types import CodeType, FunctionType, ModuleType
 
-from numba.core import types
+from numba.core import config, event, types
 from numba.core.dispatcher import Dispatcher
 
 PACKAGE = __name__.split(".")[0]
@@ -75,6 +79,46 @@ class OneSignature:
             self.dispatcher.compile(self.argtypes)
             self.dispatcher.disable_compile()
         return self.dispatcher(*args)
+
+
+# the LLVM optimisation level of each function given one (`optimisation_level`), by its code object
+_LEVELS: dict[CodeType, int] = {}
+_LISTENING: list[bool] = []  # the listener registered (once per process)
+
+
+def optimisation_level(level: int, *functions) -> None:
+    """Compile each of ``functions`` (numba functions, or the Python function an ``@overload``
+    returns) with LLVM's optimisation level ``level`` instead of numba's (NUMBA_OPT, 3 by default):
+    its IR's function and module passes, which take most of a large kernel's compile (LLVM's code
+    generation keeps numba's level). A function it compiles on its way keeps its own level. The
+    compiled code computes the same numbers (numba asks LLVM for no fast-math), only its speed may
+    differ: given only where bench/README.md measured the kernel as fast."""
+    for function in functions:
+        _LEVELS[getattr(function, "py_func", function).__code__] = level
+    if not _LISTENING:
+        event.register("numba:compile", _Levels(config.OPT))
+        _LISTENING.append(True)
+
+
+class _Levels(event.Listener):
+    """Sets numba's optimisation level (read by its pass builders as each compile lowers and
+    finalises its module) to that of the function compiling: numba compiles one function at a
+    time under its compiler lock, and a call's compile nests inside its caller's typing, so a stack
+    of the compiles under way says whose module is being optimised."""
+
+    def __init__(self, default):
+        self.default = default
+        self.levels: list = []
+
+    def on_start(self, event):
+        py_func = getattr((event.data or {}).get("dispatcher"), "py_func", None)
+        level = _LEVELS.get(getattr(py_func, "__code__", None))
+        self.levels.append(self.default if level is None else type(self.default)(level))
+        config.OPT = self.levels[-1]
+
+    def on_end(self, event):
+        self.levels.pop()
+        config.OPT = self.levels[-1] if self.levels else self.default
 
 
 def tolerate_missing_classes(cache_file) -> None:

@@ -142,3 +142,34 @@ def test_an_index_naming_a_class_since_renamed_is_stale_not_an_error(tmp_path, m
 def test_kernels_with_namedtuple_arguments_tolerate_a_renamed_class(module_name):
     for dispatcher in numba_cache.cached_dispatchers(importlib.import_module(module_name)):
         assert dispatcher._cache._cache_file._load_index.tolerates_missing_classes
+
+
+def test_a_function_given_a_level_is_optimised_at_it_and_what_it_compiles_on_its_way_at_numbas():
+    """LLVM's module passes of a function given a level run at it; a callee compiled during its
+    typing keeps numba's level, and the level in force after the compile is numba's again."""
+    import numba
+    from numba.core import codegen, config
+
+    @numba.njit
+    def callee(x):
+        return x + 1.0
+
+    @numba.njit
+    def caller(x):
+        return callee(x) * 2.0
+
+    numba_cache.optimisation_level(1, caller)
+    levels = {}
+    optimise = codegen.CPUCodeLibrary._optimize_final_module
+
+    def recorded(library):
+        levels[library.name.rsplit(".", 1)[-1]] = int(config.OPT)
+        return optimise(library)
+
+    default = config.OPT
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(codegen.CPUCodeLibrary, "_optimize_final_module", recorded)
+        assert caller(1.0) == 4.0
+    assert levels["caller"] == 1
+    assert levels["callee"] == int(default)
+    assert config.OPT is default

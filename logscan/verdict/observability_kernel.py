@@ -27,7 +27,7 @@ from numba.extending import overload
 from logscan.filters.linalg import all_finite, all_finite2, cho_solve_rows, cholesky
 from logscan.models import dispatch
 from logscan.models.model_kernels import literal_kernel
-from logscan.numba_cache import follow_dependencies
+from logscan.numba_cache import follow_dependencies, optimisation_level
 
 
 # ================================================================================================
@@ -176,6 +176,7 @@ def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, 
                 for i in range(xk.size):
                     Gd[a, i] = (sides[0, i] - sides[1, i]) / (2.0 * h)
 
+        optimisation_level(VERDICT_LEVEL, with_rk4)
         return with_rk4
     if predict_into is not None:
 
@@ -190,6 +191,7 @@ def _model_predict(model_id, p, xk, uk, dt, act_dirs, x_next, F, Gd, ua, sides, 
                 for i in range(xk.size):
                     Gd[a, i] = (sides[0, i] - sides[1, i]) / (2.0 * h)
 
+        optimisation_level(VERDICT_LEVEL, with_step)
         return with_step
 
 
@@ -434,4 +436,12 @@ def signature_evidence(model_id, model, trajectory, faults, windows, work):
     return out
 
 
+# LLVM's level 1 for the kernel and the functions only it calls: they run for a fraction of a second
+# on a log (about 70 ms on the README's sample) against 4-5 s of compile at level 3 on the first
+# run (the main process's largest), and at level 1 they compile about a quarter faster and run as
+# fast (bench/README.md, "the first run", 2026-12-01)
+VERDICT_LEVEL = 1
+optimisation_level(
+    VERDICT_LEVEL, signature_evidence, _signatures_update, _joseph, _mm_rows, _mm_t, _transpose, _copy_square, _abs_max
+)
 follow_dependencies(__name__)
