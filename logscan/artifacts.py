@@ -86,6 +86,9 @@ def describe_os_error(exc: OSError) -> tuple[str, str | None]:
 def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
     """The one-line error for an OSError met while writing ``path``."""
     what, hint = describe_os_error(exc)
+    if exc.errno == errno.ENOENT and os.path.isdir(os.path.dirname(os.path.abspath(path))):
+        # the directory is there but refuses new files (a virtual file system such as /proc)
+        what, hint = "the directory does not take new files", "give a path in an ordinary directory"
     return OutputError(f"cannot write the output: {what}", path=str(path), hint=hint)
 
 

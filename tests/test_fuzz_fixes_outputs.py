@@ -398,3 +398,21 @@ def test_other_warnings_are_one_line_too_and_debug_keeps_pythons_format(capsys):
         with cli_main._warnings_as_lines(debug=True):
             warnings.warn_explicit("something odd", UserWarning, "/x/site-packages/pkg/mod.py", 8)
     assert capsys.readouterr().err == ""
+
+
+def test_a_directory_that_takes_no_new_files_is_named_so(tmp_path):
+    """ENOENT on a file in an existing directory (/proc refuses new files so) is not a missing
+    directory: the message must not send the user to create one that exists."""
+    missing = artifacts.output_error(OSError(errno.ENOENT, "No such file"), tmp_path / "r.html")
+    assert "the directory does not take new files" in missing.one_line()
+    gone = artifacts.output_error(OSError(errno.ENOENT, "No such file"), tmp_path / "no" / "r.html")
+    assert "the directory does not exist" in gone.one_line()
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc")
+def test_report_into_proc_exits_2_with_the_real_reason(cli, sample):
+    result = cli("analyze", sample("quad_healthy.mcap"), "-o", "/proc/logscan_report.html", "-q")
+    assert result.exit_code == 2
+    assert "/proc/logscan_report.html: cannot write the output: the directory does not take new files" in one_line(
+        result.stderr
+    )
