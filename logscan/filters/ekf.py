@@ -138,24 +138,17 @@ def _store_gain(k, pos, S, KT, S_out, K_out, store_S, store_K):
 # =============================================================================================
 # the kernel
 # =============================================================================================
-# The cached entry point; the loop is its own function below, linked into it: the loop's code is
-# then optimised twice (in its own module and again in this one), and runs about 4 % faster than
-# when this were the loop itself, for about a second more of the first run's compile.
+# The cached entry point is the step loop itself, compiled without numba's reference counting
+# (ekf_pack.EkfWork says why). It was once a wrapper around the loop as a function of its own,
+# which LLVM then optimised twice (in its own module and again in the wrapper's): that second
+# round cost 4-6 s of CPU of the first run's compile and bought no speed measurable on this
+# machine (bench/README.md, issue 29 item 5, 2026-12-01).
 @njit(cache=True, error_model="numpy", nogil=True, _nrt=False)
 def ekf_run(model_id, model, sensors, data, out, work):
     """Filter the N steps of ``data`` (EkfData) with ``model`` (EkfModel) and ``sensors``
     (EkfSensors) into ``out`` (EkfBuffers), on the work arrays ``work`` (EkfWork, from
     `ekf_pack.work_arrays`); ``model_id`` is the model's kernel id, compiled as a literal (one
     specialisation per model, logscan.models.dispatch). Allocates nothing."""
-    literally(model_id)
-    _filter_steps(model_id, model, sensors, data, out, work)
-
-
-# Compiled without numba's reference counting (ekf_pack.EkfWork says why), and not cached itself:
-# ekf_run's cached code carries it (a model id compiled in a test stays out of the disk cache).
-@njit(error_model="numpy", nogil=True, no_cpython_wrapper=True, _nrt=False)
-def _filter_steps(model_id, model, sensors, data, out, work):
-    """The step loop of `ekf_run` on its work arrays (EkfWork)."""
     literally(model_id)
     # the arguments' arrays under the kernel's names, read once
     p, dt, Q, x0, P0 = model.p, model.dt, model.Q, model.x0, model.P0
