@@ -213,3 +213,58 @@ def test_a_window_two_blocks_give_is_kept_once_where_it_was_judged():
     merged = merged_observability([before, after])
     assert merged.t_start.tolist() == [0.0, 0.25, 0.5, 0.75]
     assert merged.evidence[:, 0].tolist() == [1.0, 2.0, 3.0, 4.0] and merged.t_end == 1.0
+
+
+def test_no_block_is_kept_once_it_is_folded_in(monkeypatch):
+    """Each block, once reduced, is folded into the merged state and freed: when a block is reduced
+    no block before it is alive (all of them were kept for the merge at the end: a 24-hour log's 48
+    blocks held 1.5 MiB each), and the state's envelopes are about MERGED_POINTS points per series
+    whether the log is analysed in 2 blocks or in 6."""
+    import gc
+    import weakref
+
+    from logscan.pipeline import block_fold, block_reduce, blocks
+
+    monkeypatch.setattr(block_reduce, "MERGED_POINTS", 600)  # 6000 steps: buckets of 20
+    reduce, add = blocks.reduce_block, block_fold.BlockFold.add
+    refs: list = []
+    alive: list[int] = []
+    held: list[int] = []
+
+    def reduce_and_watch(analysis, width, from_s=None):
+        gc.collect()
+        alive.append(sum(ref() is not None for ref in refs))
+        reduced = reduce(analysis, width, from_s)
+        refs.append(weakref.ref(reduced))
+        return reduced
+
+    def add_and_measure(self, block):
+        add(self, block)
+        held.append(self.nbytes())
+
+    monkeypatch.setattr(blocks, "reduce_block", reduce_and_watch)
+    monkeypatch.setattr(block_fold.BlockFold, "add", add_and_measure)
+    points, final = {}, {}
+    for block_s in (30.0, 10.0):
+        refs.clear(), alive.clear(), held.clear()
+        analysis = analyze_blocked(BIAS, block_s=block_s, free_series=True)
+        assert alive == [0] * len(alive) and len(alive) == 60 / block_s
+        points[block_s], final[block_s] = analysis.run.t.size, held[-1]
+    assert 600 <= points[30.0] <= 600 + 2 * 2 and 600 <= points[10.0] <= 600 + 2 * 6  # a bucket cut per block
+    assert final[30.0] <= final[10.0] <= final[30.0] * 1.02
+
+
+def test_the_fold_fills_what_a_block_does_not_give():
+    from logscan.pipeline.block_fold import Columns
+
+    columns = Columns()
+    columns.append({"a": np.array([1.0, 2.0])}, 0, 2)
+    columns.append(None, 2, 1)  # a block without the series: NaN, a gap in its line
+    columns.append({"a": np.array([3.0]), "b": np.array([4.0], dtype=np.float32)}, 3, 1)
+    assert columns.arrays["a"].tolist()[:2] == [1.0, 2.0] and np.isnan(columns.arrays["a"][2])
+    assert columns.arrays["a"][3] == 3.0 and columns.arrays["b"].dtype == np.float32
+    assert np.isnan(columns.arrays["b"][:3]).all() and columns.arrays["b"][3] == 4.0
+    judged = Columns(fill=False)
+    judged.append({"m": np.array([True])}, 0, 1)
+    judged.append({}, 1, 2)
+    assert judged.arrays["m"].tolist() == [True, False, False]

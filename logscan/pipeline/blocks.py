@@ -6,8 +6,8 @@ chunks it needs are decoded (`logscan.readers.mcap.window`), its EKF starts from
 it (`logscan.pipeline.lead_in`), the checks of the vehicle's own reports run from before it
 (`logscan.pipeline.raw_lead`). Once a block is analysed it is reduced to what the outputs read
 (`logscan.pipeline.block_reduce`: its alarms, incidents, lines, counts and the envelopes of its
-series) and its full-rate arrays are freed; the blocks are merged into one analysis
-(`logscan.pipeline.block_merge`). docs/algorithms.md section 8.1b says when it runs and what differs
+series), its full-rate arrays are freed and it is folded into one analysis of the blocks so far
+(`logscan.pipeline.block_fold`), not kept. docs/algorithms.md section 8.1b says when it runs and what differs
 from the analysis of the whole log at once (the block borders).
 """
 
@@ -20,7 +20,7 @@ from dataclasses import replace
 from logscan.docs import doc_url
 from logscan.errors import LogscanError
 from logscan.memory import return_freed_pages
-from logscan.pipeline.block_merge import merge_blocks
+from logscan.pipeline.block_fold import BlockFold
 from logscan.pipeline.block_reduce import bucket_width, reduce_block
 from logscan.pipeline.preparation import load_profile_for
 from logscan.pipeline.run import analyze_log
@@ -127,7 +127,7 @@ def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: floa
 
 
 def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options: dict):
-    """Each window analysed, reduced and its full-rate arrays freed; the blocks merged."""
+    """Each window analysed, reduced, its full-rate arrays freed and folded into the merged state."""
     progress = options.pop("progress", None)
     options.pop("fraction", None)  # the bytes of each block's read would run back and forth
     options["free_series"] = True  # sensor_views as asked: the incidents' sizes read the innovations
@@ -136,7 +136,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     block_s = windows[1][0] - (windows[0][0] or 0.0)
     width = bucket_width(int(len(windows) * block_s * rate))
     loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own
-    blocks, refused = [], []
+    fold, refused = BlockFold(), []
     for k, (start_s, end_s) in enumerate(windows):
         step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
         own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
@@ -156,13 +156,13 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
         except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
             refused.append((k, exc))
             continue
-        blocks.append(reduce_block(analysis, width, None if led is None else start_s))
+        fold.add(reduce_block(analysis, width, None if led is None else start_s))  # and not kept
         del analysis
         gc.collect()
         return_freed_pages()
-    if not blocks:
+    if fold.prepared is None:
         raise refused[0][1]
-    merged = merge_blocks(blocks, None if window == (None, None) else window)
+    merged = fold.merged(None if window == (None, None) else window)
     merged.unchecked += [_refused_line(windows, k, len(windows), exc) for k, exc in refused]
     merged.warnings.append(
         f"analysed in {len(windows)} blocks of {block_s:g} s (--block-s), each after the first from "

@@ -1,0 +1,203 @@
+"""The blocks' reduced analyses (`logscan.pipeline.block_reduce`) folded into one analysis of the log
+as each is reduced (`BlockFold.add`, then `BlockFold.merged`): the envelopes of every series
+appended end to end to one array per series, the observability windows to one verdict, and of the
+rest only what the merge reads (alarms, lines, counts, facts), so no block is kept once it is
+folded in. The running state holds the log's envelopes (about `MERGED_POINTS` points per series
+whatever the number of blocks), the observability windows and those lists. docs/algorithms.md
+section 8.1b says what the merge does and what differs from the analysis of the whole log at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from logscan.alarms import merge_close
+from logscan.pipeline.analysis import Analysis, DetectorFailure
+from logscan.pipeline.block_merge import (
+    merge_gap_s,
+    merged_filter_summary,
+    merged_incidents,
+    merged_info,
+    said_once,
+    windows_once,
+)
+from logscan.pipeline.detection import rescore
+from logscan.results import Band, DetectorResult
+
+if TYPE_CHECKING:
+    from logscan.pipeline.stages import Prepared
+
+
+class Columns:
+    """Named arrays end to end along their first axis, each block's piece appended in place
+    (`ndarray.resize`: the array grows, it is not copied per block), ``fill`` where a block has
+    none; a name first given by a later block is ``fill`` over the blocks before it."""
+
+    def __init__(self, fill=np.nan) -> None:
+        self.fill = fill
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def append(self, piece: dict | None, before: int, size: int) -> None:
+        """Block's ``piece`` (name -> (size, ...)) after the ``before`` points of the blocks before."""
+        piece = piece or {}
+        for name, values in piece.items():
+            if name not in self.arrays:
+                known = np.asarray(values)
+                self.arrays[name] = np.full((before, *known.shape[1:]), self.fill, dtype=known.dtype)
+        for name, array in self.arrays.items():
+            values = None if name not in piece else np.asarray(piece[name])
+            dtype = array.dtype if values is None else np.result_type(array, values)
+            if dtype != array.dtype:  # as np.concatenate would promote
+                array = self.arrays[name] = array.astype(dtype)
+            array.resize((before + size, *array.shape[1:]), refcheck=False)  # only this state holds it
+            array[before:] = self.fill if values is None else values
+
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self.arrays.values())
+
+
+class _Detector:
+    """One detector's results over the blocks folded so far."""
+
+    def __init__(self, first: DetectorResult) -> None:
+        self.template = replace(first, series={}, extras={}, judged={}, thresholds={})
+        self.series, self.extras, self.judged = Columns(), Columns(), Columns(fill=False)
+        self.uppers, self.lowers = Columns(), Columns()
+        self.bands: dict[str, None] = {}  # every statistic with thresholds, in the order they came
+        self.alarms: list = []
+        self.possible: list = []
+        self.warnings: list[list[str]] = []
+        self.not_checked: dict = {}
+        self.infos: list[dict] = []
+        self.checks: dict = {}
+        self.fractions: dict[str, list[float]] = {}  # statistic -> [sum of fraction x points, points]
+
+    def append(self, result: DetectorResult | None, before: int, size: int) -> None:
+        pieces = (None, None, None, None, None) if result is None else _pieces(result)
+        for columns, piece in zip((self.series, self.extras, self.judged, self.uppers, self.lowers), pieces):
+            columns.append(piece, before, size)
+        if result is None:
+            return
+        self.bands.update(dict.fromkeys(result.thresholds))
+        self.alarms += result.alarms
+        self.possible += result.possible
+        self.warnings.append(result.warnings)
+        self.not_checked.update({n.reason: n for n in result.not_checked})
+        self.infos.append(result.info)
+        self.checks.update(result.checks)
+        for name, fraction in result.judged_fraction.items():
+            total = self.fractions.setdefault(name, [0.0, 0.0])
+            total[0] += fraction * size
+            total[1] += size
+
+    def merged(self, gap_s: float) -> DetectorResult:
+        uppers, lowers = self.uppers.arrays, self.lowers.arrays
+        return replace(
+            self.template,
+            series=self.series.arrays,
+            extras=self.extras.arrays,
+            judged=self.judged.arrays,
+            thresholds={name: Band(upper=uppers.get(name), lower=lowers.get(name)) for name in self.bands},
+            alarms=merge_close(self.alarms, gap_s),
+            possible=merge_close(self.possible, gap_s),
+            warnings=said_once(self.warnings),
+            not_checked=list(self.not_checked.values()),
+            info=merged_info(self.infos),
+            checks=self.checks,
+            judged_fraction={name: weighted / max(weight, 1.0) for name, (weighted, weight) in self.fractions.items()},
+        )
+
+    def nbytes(self) -> int:
+        return sum(c.nbytes() for c in (self.series, self.extras, self.judged, self.uppers, self.lowers))
+
+
+def _pieces(result: DetectorResult) -> tuple:
+    """The result's series, extras, judged masks, upper and lower thresholds (name -> array)."""
+    bands = result.thresholds
+    uppers = {name: b.upper for name, b in bands.items() if b is not None and b.upper is not None}
+    lowers = {name: b.lower for name, b in bands.items() if b is not None and b.lower is not None}
+    return result.series, result.extras, result.judged, uppers, lowers
+
+
+class BlockFold:
+    """The merged analysis of the blocks folded in so far (`add`, in time order); `merged` gives it."""
+
+    def __init__(self) -> None:
+        self.prepared: Prepared | None = None  # the first block's: its log, profile and model
+        self.points = 0  # the envelopes' points so far (the merged times')
+        self.times = Columns()
+        self.detectors: dict[str, _Detector] = {}
+        self.steps = 0  # grid steps
+        self.summaries: list[dict | None] = []
+        self.warnings: list[list[str]] = []
+        self.unchecked: list[list[str]] = []
+        self.unjudged: dict[str, None] = {}
+        self.incidents: list = []
+        self.input_gaps: list = []
+        self.failures: dict = {}
+        self.observability = None
+
+    def add(self, block: Analysis) -> None:
+        """Fold a reduced block in; nothing of it is kept but what the merge reads."""
+        prepared = block.prepared
+        size = prepared.run.t.size
+        if self.prepared is None:
+            self.prepared = prepared
+        self.times.append({"t": prepared.run.t}, self.points, size)
+        for result in block.results:
+            if result.detector not in self.detectors:
+                self.detectors[result.detector] = _Detector(result)
+        for name, detector in self.detectors.items():
+            detector.append(next((r for r in block.results if r.detector == name), None), self.points, size)
+        self.points += size
+        self.steps += prepared.grid[0] if prepared.grid else 0
+        self.summaries.append(prepared.filter_summary())
+        self.warnings.append(block.warnings)
+        self.unchecked.append(block.unchecked)
+        if block.unjudged:
+            self.unjudged[block.unjudged] = None
+        self.incidents += block.incidents
+        self.input_gaps += block.input_gaps
+        self.failures.update({(f.detector, f.message): f for f in block.failures})
+        self.observability = windows_once(self.observability, block.observability)
+        block.results, block.observability = [], None  # the first block's prepared stays: the merged one's
+
+    def nbytes(self) -> int:
+        """The bytes of the envelopes folded so far (the merged times' and every detector's)."""
+        return self.times.nbytes() + sum(d.nbytes() for d in self.detectors.values())
+
+    def merged(self, window: tuple[float | None, float | None] | None) -> Analysis:
+        """One analysis of the log (``window``: the --start/--end the blocks cover, None: the whole
+        log): the first block's log, profile and model; the envelopes end to end; the alarms,
+        incidents, lines, counts and facts merged; the ground truth scored again on the merged
+        alarms (`rescore`)."""
+        prepared = self.prepared
+        if prepared is None:
+            raise ValueError("no block was folded in")
+        gap_s = merge_gap_s(prepared.profile)
+        t = self.times.arrays["t"]
+        prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), window=window, first_step=0)
+        prepared._filter_summary = merged_filter_summary(self.summaries)
+        prepared.grid = (self.steps, float(prepared.run.dt))
+        merged = Analysis(prepared=prepared, warnings=said_once(self.warnings))
+        merged.results = [detector.merged(gap_s) for detector in self.detectors.values()]
+        merged.incidents = merged_incidents(self.incidents, merged.results, gap_s)
+        merged.unchecked = said_once(self.unchecked)
+        merged.unjudged = "; ".join(self.unjudged)
+        merged.input_gaps = self.input_gaps
+        merged.failures = [DetectorFailure(f.detector, f.message, f.exit_code) for f in self.failures.values()]
+        merged.observability = self.observability
+        if prepared.log.truth is not None:
+            rescore(merged)
+        return merged
+
+
+def merge_blocks(blocks: list[Analysis], window: tuple[float | None, float | None] | None) -> Analysis:
+    """One analysis of the log from its reduced blocks (in time order), each folded in (`BlockFold`)."""
+    fold = BlockFold()
+    for block in blocks:
+        fold.add(block)
+    return fold.merged(window)
