@@ -193,11 +193,3 @@ class BlockFold:
         if prepared.log.truth is not None:
             rescore(merged)
         return merged
-
-
-def merge_blocks(blocks: list[Analysis], window: tuple[float | None, float | None] | None) -> Analysis:
-    """One analysis of the log from its reduced blocks (in time order), each folded in (`BlockFold`)."""
-    fold = BlockFold()
-    for block in blocks:
-        fold.add(block)
-    return fold.merged(window)
