@@ -1,6 +1,7 @@
 """One block's analysis reduced to what the merged verdict and report read (`reduce_block`): its
 detectors' series on the grid kept as an envelope of buckets (`envelope`), its filter's series and
-aligned signals freed. Block mode (`logscan.pipeline.blocks`) keeps one such analysis per block.
+aligned signals freed. Block mode (`logscan.pipeline.blocks`) folds each such analysis into the
+merged state (`logscan.pipeline.block_fold`) and does not keep it.
 """
 
 from __future__ import annotations
@@ -108,7 +109,7 @@ def reduce_block(analysis, width: int, from_s: float | None = None):
 def _cut_lead(analysis, first: int) -> None:
     """The block's results, observability verdict and input gaps from its step ``first`` on; of the
     verdict also the windows that start up to a window's length before it, which the block before
-    cannot judge (they run past its end: `merged_observability` takes them from here)."""
+    cannot judge (they run past its end: `windows_once` takes them from here)."""
     run = analysis.prepared.run
     rows, from_s = slice(first, run.n_steps), float(run.t[first])
     span = (from_s, float(run.t[-1]) + float(run.dt))
