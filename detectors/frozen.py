@@ -18,7 +18,9 @@ and the still sensors stuck (the real Husky drive's wheel speed held for 100 s n
 is every other input of a model whose inputs are sensor readings (`Model.inputs_are_sensors`: the
 gyro's yaw rate), not exempt near zero: a live sensor's noise changes its reading on every sample,
 also at rest (the real Husky drive's gyro held for 50 s named the wheels' yaw rate). An input is
-held on the grid between its samples: the fill factor L counts its own samples.
+held on the grid between its samples: the fill factor L counts its own samples. Rest that the
+gyro and the GNSS both deny (`Model.motion_inputs`, `Model.motion_group`: they say the robot moves)
+is motion: a wheel speed stuck at exactly 0 while driving claims rest (`logscan.detectors.frozen_rest`).
 
 The anchor a(i) is the first sample of the current run: a run ends when a sample leaves the band
 +-tol around it, so a slow healthy ramp (each step small, the sum not) is not a run. sigma is the
@@ -48,7 +50,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from logscan.alarms import true_runs
 from logscan.detectors.base import Detector, DetectorResult, on_steps
+from logscan.detectors.frozen_rest import denied_rest
 from logscan.detectors.params import Interval, budget_bound, multiplier_bound
 from logscan.detectors.raw_topics import skipped_lines
 from logscan.detectors.words import group_words
@@ -253,8 +257,13 @@ class FrozenSensorDetector(Detector):
             for j in range(group.z.shape[1])
         ] + [(column, 0, f"{PREFIX}.{column.name}") for column in checked_inputs(run, model)]
         duration = max(float(run.t[-1] - run.t[0]), run.dt) if run.t.size else 1.0
-        info = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
+        info: dict = {"channels": {}, "fill": {}, "h": {}, "sigma": {}, "not_checked": {}}
         rest = model.at_rest(run.u) if model is not None and getattr(run, "u", None) is not None else None
+        # rest the gyro and the GNSS both deny is motion: a wheel speed stuck at 0 (frozen_rest.py)
+        denied = denied_rest(run, model, rest, float(self.budget_per_hour))
+        if denied is not None and denied.any():
+            rest = rest & ~denied
+            info["rest_denied"] = [[float(run.t[a]), float(run.t[b - 1])] for a, b in zip(*true_runs(denied))]
         for group, j, signal in columns:  # one pass per channel: a few dozen at most
             info["channels"][signal] = group.channels[j] if j < len(group.channels) else group.name
             spec = getattr(model, "groups", {}).get(group.name) if model is not None else None
@@ -264,7 +273,9 @@ class FrozenSensorDetector(Detector):
                     "cannot be told from it"
                 )
                 continue
-            stat, h, sigma, fill, steps, anchor = self._channel(run, group, j, model, len(columns), duration, rest)
+            stat, h, sigma, fill, steps, anchor = self._channel(
+                run, group, j, model, len(columns), duration, rest, denied
+            )
             if stat is None:
                 info["not_checked"][signal] = (
                     "fewer than 2 samples"
@@ -284,7 +295,7 @@ class FrozenSensorDetector(Detector):
         result.not_checked = [NotChecked(line) for line in skipped_lines(info["not_checked"], self.name)]
         return result
 
-    def _channel(self, run, group, j: int, model, tests: int, duration: float, rest=None):
+    def _channel(self, run, group, j: int, model, tests: int, duration: float, rest=None, denied=None):
         """(statistic (N,) NaN off the channel's fresh steps, or None when the channel is not
         checked; threshold h; sigma; fill factor L; the grid steps of its fresh samples; per fresh
         sample the index of its run's first sample, the anchor). Temporaries are the channel's
@@ -316,6 +327,8 @@ class FrozenSensorDetector(Detector):
             # of its encoder, 2 mm/s on the real Husky drive against its 7 mm/s) cannot be told from
             # rest: stillness too, as `Model.at_rest`'s
             near_zero = np.abs(v) <= noise
+            if denied is not None:  # not where the gyro and the GNSS say it moved
+                near_zero &= ~np.asarray(denied, dtype=bool)[steps]
             still = near_zero if still.size == 0 else still | near_zero
         # r_i: samples held since the anchor (1 at it), and the length of each run
         # an input only repeats exactly when held: a controlled wheel speed cruising at 1.003 m/s

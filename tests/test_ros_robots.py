@@ -413,3 +413,30 @@ def test_a_stuck_gyro_is_named_not_the_wheels_it_made_disagree(cli, tmp_path):
     code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path, "-d", "frozen")
     frozen = next(d for d in entry["detectors"] if d["detector"] == "frozen")
     assert frozen["series"]["frozen.input.w"]["max"] <= 0.5 * frozen["info"]["h"]["frozen.input.w"], frozen["info"]
+
+
+def test_a_wheel_speed_stuck_at_zero_while_driving_is_named_not_the_gnss(cli, tmp_path):
+    """The real drive's wheel speed held at exactly 0 from 150 s to 170 s while the robot drives on
+    at about 1 m/s: 0 said "at rest", so its exact repeats were stillness and the GNSS that kept
+    moving (16 m) headed the incident ("position sensor inconsistent", a cusum alarm 12 s late).
+    The gyro shakes as in driving and the GNSS moves past its noise and wander: both deny the rest
+    (detectors/frozen_rest.py), so the held zero is judged and heads the incident. At the drive's
+    real stop (236.6-246.3 s, its speed repeating 2.4e-15 m/s exactly) the gyro is quiet: rest."""
+    from ros_edit import edit_messages
+
+    def zero(msg, first):
+        msg.twist.twist.linear.x = 0.0
+
+    held = tmp_path / "speed_zero.bag"
+    assert edit_messages(need_testdata(ROS1_BAG), held, "/husky_velocity_controller/odom", 150.0, 170.0, zero) > 150
+    code, entry, text = summary(cli, held, tmp_path)
+    assert code == 1, text
+    speed = "/husky_velocity_controller/odom/twist.twist.linear.x"
+    first = entry["incidents"][0]
+    assert first["source"] == speed and 150.0 <= first["start"] <= 152.0, entry["incidents"]
+    assert first["headline"].startswith(f"model input v ({speed}) stuck"), first["headline"]
+    frozen = next(d for d in entry["detectors"] if d["detector"] == "frozen")
+    (denied,) = frozen["info"]["rest_denied"]
+    assert 149.9 <= denied[0] <= 150.2 and 169.8 <= denied[1] <= 170.1, denied
+    code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path, "-d", "frozen")
+    assert code == 0 and "rest_denied" not in entry["detectors"][0]["info"], text

@@ -116,6 +116,10 @@ class Model:
     # the inputs (indices into input_names) `at_rest` reads: the frozen check trusts them to say when
     # the vehicle moves, so it checks them for a freeze too (a stuck wheel speed makes rest "motion")
     rest_inputs: tuple[int, ...] = ()
+    # sensors that can deny that rest (detectors/frozen_rest.py): inputs whose samples shake while the
+    # vehicle moves (a gyro), and the group that measures its position (a GNSS); none: rest trusted
+    motion_inputs: tuple[int, ...] = ()
+    motion_group: str | None = None
     # True when the filter's gain never reads a measurement (a linear model with fixed Q and R: the
     # Riccati recursion alone), so a gain-based check (kgn) has nothing to see
     gain_is_data_free: bool = False
@@ -228,6 +232,11 @@ class Model:
         ground robot's wheels report, or are commanded, no speed), where a sensor holding its value
         is stillness, not a freeze; None when the inputs cannot tell (the default)."""
         return None
+
+    def rest_position_var(self, duration_s: float) -> np.ndarray | float:
+        """Per axis, the variance the position group's error may change by over ``duration_s`` while
+        the vehicle stands (a receiver's slow wander; 0: only its white noise)."""
+        return 0.0
 
     # --- numpy views of the model (tests, simulator, reference filter) -------------------------
     # One call each of the model's own registered numba functions, the ones the EKF kernel runs.

@@ -79,6 +79,8 @@ class Wheeled(Model):
     )
     input_names = ("v", "w")
     rest_inputs = (0,)  # `at_rest` reads the wheel speed v
+    motion_inputs = (1,)  # the yaw rate w shakes while the robot drives (a gyro's)
+    motion_group = "position"  # and the GNSS moves
     inputs_are_sensors = True  # wheel odometry and a gyro: readings, not commands
     groups = {
         # not direct: the receiver's error adds to x, y; gated: that error is a wander of tau_g
@@ -115,6 +117,10 @@ class Wheeled(Model):
     def at_rest(self, u: np.ndarray) -> np.ndarray:
         """The steps whose wheel speed v (measured or commanded) is at most REST_SPEED (`rest_inputs`)."""
         return np.abs(np.asarray(u, dtype=np.float64)[:, 0]) <= REST_SPEED
+
+    def rest_position_var(self, duration_s: float) -> float:
+        """The Gauss-Markov GNSS error's change over ``duration_s``: 2 g^2 (1 - exp(-T / tau_g))."""
+        return 2.0 * self.p["gnss_error_std"] ** 2 * -np.expm1(-duration_s / self.p["gnss_error_tau"])
 
     def default_Q(self, dt: float) -> np.ndarray:
         """Q = diag(q_xy, q_xy, q_psi, gyro_bias_rw^2, slip_rw^2, ., ., slip_rw^2) dt (module docstring), and the
