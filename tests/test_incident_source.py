@@ -142,3 +142,80 @@ def test_no_input_gap_at_the_first_step():
     run = SimpleNamespace(u=u, input_channels=["/odom/v"])
     gaps = input_gaps(SimpleNamespace(input_held=held, t=t), run)
     assert [(g.start, g.end, g.channels) for g in gaps] == [(t[5], t[6], ("/odom/v",))]
+
+
+def _edited_events(tmp_path, topic: str, field: str, delta: float, name: str):
+    """The real SITL flight with ``delta`` added to ``topic``'s ``field`` from 22 s (judged from 21.7 s)."""
+    from pyulog import ULog
+
+    source = need_testdata(EVENTS)
+    start_us = ULog(str(source), [topic]).start_timestamp
+
+    def add(data) -> None:
+        t = (data["timestamp"].astype(np.int64) - start_us) / 1e6
+        data[field][t >= 22.0] += delta
+
+    return edit_ulog(source, tmp_path / name, {topic: add})
+
+
+def _first_incident(cli, path, tmp_path) -> dict:
+    out = tmp_path / f"{path.stem}.json"
+    cli("analyze", str(path), "--no-report", "--json", str(out))
+    incidents = json.loads(out.read_text())["logs"][0]["incidents"]
+    assert incidents, path
+    return incidents[0]
+
+
+@pytest.mark.testdata(EVENTS)
+def test_an_accelerometer_bias_is_headed_by_the_imu_not_the_gnss_velocity(cli, tmp_path):
+    """The real flight's accelerometer z reads +1 m/s^2 from 22 s (sensor_combined): under the ins
+    model the IMU drives the prediction, so the GNSS velocity's test alarmed first and headed the
+    incident ("GNSS velocity inconsistent"). What the log says: the GNSS velocity down, the GNSS
+    position down and the barometer all leave the prediction the way the integrated bias does (the
+    vehicle higher than predicted), so the one thing they agree against is the input (rule 6)."""
+    path = _edited_events(tmp_path, "sensor_combined", "accelerometer_m_s2[2]", 1.0, "accel_z.ulg")
+    first = _first_incident(cli, path, tmp_path)
+    assert first["source"].startswith("/sensor_combined_0/accelerometer_m_s2[0]"), first
+    assert first["headline"].startswith("IMU accelerometer (the model's input) suspect: GNSS velocity v_down"), first
+    assert "barometer altitude agree against its prediction" in first["headline"], first
+    assert 22.0 <= first["start"] <= 23.5, first
+
+
+@pytest.mark.testdata(EVENTS)
+@pytest.mark.parametrize(
+    ("field", "delta", "group"),
+    [
+        ("vel_d_m_s", -1.0, "gnss_velocity"),  # a velocity spoof: the filter follows it, the position disagrees
+        ("vel_n_m_s", 1.0, "gnss_velocity"),
+        ("altitude_msl_m", -5.0, "gnss_position"),  # a position jump: the velocity is pulled against it
+    ],
+)
+def test_a_gnss_spoof_stays_the_gnss(cli, tmp_path, field, delta, group):
+    path = _edited_events(tmp_path, "vehicle_gps_position", field, delta, f"{field}.ulg")
+    first = _first_incident(cli, path, tmp_path)
+    assert first["source"] == group, first
+
+
+def test_the_input_is_suspect_only_when_a_pair_agrees_and_none_disagrees():
+    from logscan.verdict.input_fault import KinematicEvidence, input_suspect
+
+    t = np.arange(200) * 0.01
+    alarm = alarm_intervals(t, np.where(t >= 1.0, 2.0, 0.5), 1.0, signal="nis.vel", detector="nis")[0]
+    after = (t >= 1.0)[:, None]
+
+    def evidence(rate: float, level: float, level2: float = 0.0) -> KinematicEvidence:
+        noise = np.random.default_rng(1).normal(size=(200, 4)).astype(np.float32)
+        rates = noise[:, :2] + np.float32(rate) * after
+        levels = noise[:, 2:] + np.float32(level) * after * np.array([[1.0, 0.0]]) + level2 * after * np.array([[0, 1]])
+        names = [("GNSS velocity v_down", "GNSS position down"), ("GNSS velocity v_down", "barometer altitude")]
+        pairs = (t, names, rates, levels.astype(np.float32))
+        return KinematicEvidence(*pairs, frozenset({"vel", "pos"}), "IMU", "/imu", 0.01)
+
+    words = input_suspect(evidence(-3.0, -2.0), "vel", alarm)
+    assert words is not None and words.startswith("GNSS velocity v_down and GNSS position down agree"), words
+    assert input_suspect(evidence(-3.0, 2.0), "vel", alarm) is None  # opposite: the sensor's own fault
+    assert input_suspect(evidence(-3.0, -2.0, 2.0), "vel", alarm) is None  # the barometer disagrees
+    assert input_suspect(evidence(-3.0, 0.0), "vel", alarm) is None  # the position says nothing
+    assert input_suspect(evidence(-3.0, -2.0), "other", alarm) is None  # a group no pair reads
+    kept = evidence(-3.0, -2.0).within([alarm])
+    assert kept.t.size == np.count_nonzero(t >= alarm.start - 1e-9) and input_suspect(kept, "vel", alarm) == words

@@ -120,6 +120,12 @@ class Model:
     # vehicle moves (a gyro), and the group that measures its position (a GNSS); none: rest trusted
     motion_inputs: tuple[int, ...] = ()
     motion_group: str | None = None
+    # (rate group, output, level group, output, sign): a measured rate and the measured level it
+    # integrates to, the level's innovation times sign (a barometer's altitude is minus down): an
+    # input the prediction integrates moves both innovations one way (logscan/verdict/input_fault.py)
+    kinematic_pairs: tuple[tuple[str, int, str, int, float], ...] = ()
+    kinematic_inputs: tuple[int, ...] = ()  # the inputs such a pair's agreement blames
+    kinematic_input_words: str = "model input"
     # True when the filter's gain never reads a measurement (a linear model with fixed Q and R: the
     # Riccati recursion alone), so a gain-based check (kgn) has nothing to see
     gain_is_data_free: bool = False

@@ -64,6 +64,12 @@ class Ins(Model):
     )
     input_names = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
     inputs_are_sensors = True  # the IMU: its faults are sensor faults (the KGN blindness probe tries them)
+    # the GNSS velocity integrates to its position on each axis, and down to minus the barometer's altitude
+    kinematic_pairs = tuple(("gnss_velocity", i, "gnss_position", i, 1.0) for i in range(3)) + (
+        ("gnss_velocity", 2, "baro", 0, -1.0),
+    )
+    kinematic_inputs = (3, 4, 5)  # the accelerometer's specific force, integrated twice
+    kinematic_input_words = "IMU accelerometer"
     groups = {
         "gnss_position": GroupSpec(
             "gnss_position",

@@ -22,6 +22,7 @@ from logscan.timebase.clock import clock_of
 from logscan.verdict.autopilot_messages import FlightMessages, flight_messages
 from logscan.verdict.coverage import judged_span, skipped_checks, skipped_heading
 from logscan.verdict.incidents import InputGap, signal_label
+from logscan.verdict.input_fault import KinematicEvidence
 
 if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no runtime edge)
     from logscan.pipeline.stages import Prepared
@@ -54,6 +55,9 @@ class Analysis:
     # after it, an incident's source is not the alarm that happened to update first
     suspended: np.ndarray | None = field(default=None, repr=False)
     input_gaps: list[InputGap] = field(default_factory=list)  # where the filter held a missing input
+    # the innovations of the sensors that measure the motion twice over (incidents' rule 6), kept
+    # from the EKF's before the detectors free them
+    kinematic: KinematicEvidence | None = field(default=None, repr=False)
     failures: list[DetectorFailure] = field(default_factory=list)  # detectors that raised
     events: list[FaultEvent] = field(default_factory=list)  # ground truth, when the log has it
     scores: dict = field(default_factory=dict)  # detector -> logscan.verdict.scoring.Score (with truth)

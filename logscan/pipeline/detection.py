@@ -35,6 +35,7 @@ from logscan.verdict.incidents import (
     merge_fragments,
     sizes_of,
 )
+from logscan.verdict.input_fault import kinematic_evidence
 from logscan.verdict.observability import observability_for
 from logscan.verdict.scoring import score_by_detector
 
@@ -66,6 +67,7 @@ def detect(
     analysis.warnings += [why] if why else []
     policy = _alarm_policy(prepared, judged_from_s)
     gaps = input_gaps(prepared.trace, prepared.run)  # before the detectors free the inputs
+    analysis.kinematic = kinematic_evidence(prepared.model, prepared.trace, prepared.run)  # and the innovations
     stopped = stopped_groups(prepared.run, policy.suspended if policy is not None else None)  # and the samples
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
@@ -79,10 +81,7 @@ def detect(
     merge_fragments(analysis.results, gap_s)
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.suspended = policy.suspended if policy is not None else None
-    onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
-    sizes, inputs = sizes_of(prepared), inputs_of(prepared)
-    incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes, onsets, gaps, inputs)
-    analysis.incidents, analysis.input_gaps = incidents, gaps
+    analysis.incidents, analysis.input_gaps = _incidents(analysis, groups, gap_s, gaps), gaps
     analysis.unchecked = unchecked_reasons(prepared, analysis.results)
     named = {line.split(":")[0] for line in analysis.unchecked}  # a group starved or never heard: said once
     analysis.unchecked += [line for line in stopped if line.split(":")[0] not in named]
@@ -102,6 +101,18 @@ def detect(
         step("recovery")
         analysis.recovery = recover_analysis(analysis)
     return analysis
+
+
+def _incidents(analysis: Analysis, groups, gap_s: float, gaps) -> list:
+    """The analysis's incidents (`find_incidents`); its kinematic evidence then cut to the alarms'
+    steps, what a suppression's second look reads, not the whole log's."""
+    prepared = analysis.prepared
+    onsets = alarm_onsets(analysis.results, prepared.run.t, analysis.suspended)
+    sizes, inputs, kinematic = sizes_of(prepared), inputs_of(prepared), analysis.kinematic
+    incidents = find_incidents(analysis.results, prepared.trace, groups, gap_s, sizes, onsets, gaps, inputs, kinematic)
+    if kinematic is not None:
+        analysis.kinematic = kinematic.within([a for r in analysis.results for a in r.alarms])
+    return incidents
 
 
 def _alarm_policy(prepared: Prepared, judged_from_s: float | None):

@@ -7,7 +7,9 @@ import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from logscan.errors import ModelError
 from logscan.filters.warmup import kernel_compilers
+from logscan.models import model_class
 from logscan.needs import Needs
 from logscan.pipeline.detection import detect
 from logscan.pipeline.preparation import Fraction, Progress, filter_free, load_profile_for, prepare, raw_topics_of
@@ -58,7 +60,9 @@ def analyze_log(
         loaded.process_noise_scale = process_noise_scale(calibration)
         loaded.uncalibrated = uncalibrable_groups(calibration)
     options: dict[str, Any] = {"use_header_stamp": use_header_stamp, "start_s": start_s, "end_s": end_s}
-    needs = _with_innovations(needs_of(detectors)) if sensor_views else needs_of(detectors)
+    # the innovations also for a model whose sensors measure the motion twice over (incidents' rule 6)
+    kinematic = _kinematic(loaded)
+    needs = _with_innovations(needs_of(detectors)) if sensor_views or kinematic else needs_of(detectors)
     prepared = prepare(
         path,
         loaded,
@@ -74,6 +78,15 @@ def analyze_log(
     )
     views = {"free_series": free_series, "sensor_views": sensor_views}
     return detect(prepared, detectors, grace_s=grace_s, progress=progress, judged_from_s=judged_from_s, **views)
+
+
+def _kinematic(loaded: LoadedProfile) -> bool:
+    """Whether the profile's model names sensors that measure the motion twice over (rule 6 of
+    `logscan.verdict.incidents` reads their innovations)."""
+    try:
+        return bool(getattr(model_class(str(loaded.profile.vehicle.model)), "kinematic_pairs", ()))
+    except ModelError:  # a model the registry does not know: its profile's own error, said elsewhere
+        return False
 
 
 def _with_innovations(needs: Callable[[AlignedRun], Needs]) -> Callable[[AlignedRun], Needs]:

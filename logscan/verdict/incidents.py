@@ -27,6 +27,12 @@ alarms behind it. The rules:
    model input itself (`Detector.judged_input`: a wheel speed stuck at one value) is headed by that
    input and its channel: the checks that followed judged the stuck input (the real Husky drive's
    wheel speed held while the robot stood called its GNSS, rightly still, stuck).
+6. An incident headed by a sensor that measures a rate the model integrates from its input, and
+   whose pair (`Model.kinematic_pairs`: the GNSS velocity and position, the velocity down and the
+   barometer) both leave their prediction the same way, is headed by that input
+   (`logscan.verdict.input_fault`): an accelerometer fault, not the GNSS velocity that saw it first.
+   Not for an alarm under way where judging resumed: the signs follow the filter's response, which
+   turns (a GNSS position jump pulls the velocity against it, then back), and its start went unseen.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ from logscan.detectors import words
 from logscan.detectors.registry import default_registry
 from logscan.results import DetectorResult, Incident
 from logscan.verdict.deviation import GroupViews, deviation
+from logscan.verdict.input_fault import KinematicEvidence, input_suspect
 
 DEFAULT_GAP_S = 1.0
 
@@ -247,13 +254,15 @@ def find_incidents(
     onsets: Onsets | None = None,
     gaps: Sequence[InputGap] = (),
     inputs: Mapping[str, str] | None = None,
+    kinematic: KinematicEvidence | None = None,
 ) -> list[Incident]:
     """Incidents in time order from every result's alarms (merge fragments first). ``trace``: the
     shared EKF trace (its rejected samples point at the source), or None. ``sizes``: the filter's
     innovations to give each headline the deviation's size with (`Sizes`); None: no size.
     ``onsets``: the alarms under way where judging resumed (`alarm_onsets`). ``gaps``: where a model
     input was missing (`input_gaps`, rule 4). ``inputs``: the model's inputs by name -> channel
-    (`inputs_of`), to name a stuck one's channel (rule 5)."""
+    (`inputs_of`), to name a stuck one's channel (rule 5). ``kinematic``: the innovations of the
+    sensors that measure the motion twice over (`kinematic_evidence`, rule 6)."""
     alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
     starts = np.array([a.start for a in alarms])
     ends = np.maximum.accumulate(np.array([a.end for a in alarms])) if alarms else np.zeros(0)
@@ -268,6 +277,12 @@ def find_incidents(
         what, detail = headline_parts(quoted, group, rejected.get(group, 0))
         size = sizes.text(group, quoted) if sizes is not None and group is not None else ""
         source = group or quoted.signal
+        # rule 6: the sensors agree against the input (judged from the alarm's start: not for one
+        # under way where judging resumed, whose start, and the fault's, went unseen)
+        seen = (quoted.detector, quoted.signal, quoted.start) not in (onsets or {})
+        suspect = input_suspect(kinematic, group, quoted) if seen else None
+        if suspect is not None and kinematic is not None:
+            what, size, source = f"{kinematic.what} suspect: {suspect}", "", kinematic.channels
         stuck = _stuck_input(members, onsets or {})
         if stuck is not None:  # rule 5: the checks judged a stuck input
             quoted, name = stuck

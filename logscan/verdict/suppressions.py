@@ -128,6 +128,7 @@ def apply_suppressions(analysis, rules: list[Suppression]) -> int:
             onsets,
             analysis.input_gaps,
             inputs_of(prepared),
+            analysis.kinematic,
         )
     return count
 
