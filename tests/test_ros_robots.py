@@ -440,3 +440,16 @@ def test_a_wheel_speed_stuck_at_zero_while_driving_is_named_not_the_gnss(cli, tm
     assert 149.9 <= denied[0] <= 150.2 and 169.8 <= denied[1] <= 170.1, denied
     code, entry, text = summary(cli, need_testdata(ROS1_BAG), tmp_path, "-d", "frozen")
     assert code == 0 and "rest_denied" not in entry["detectors"][0]["info"], text
+
+
+def test_a_gnss_jump_while_the_robot_stands_does_not_deny_its_rest(cli, tmp_path):
+    """The other side of the stuck-at-zero wheel speed: the real drive's fix moved 10 m north from
+    238 s to 244 s, while the robot stands (236.6-246.3 s). The GNSS alone says it moved; the gyro is
+    quiet, so the rest stands, the wheel speed's exact repeats there are stillness, and the
+    incident is the GNSS's."""
+    jumped = tmp_path / "jump_at_stop.bag"
+    assert shift_fix(need_testdata(ROS1_BAG), jumped, "/fix", 238.0, 244.0, 10.0) > 10
+    code, entry, text = summary(cli, jumped, tmp_path)
+    assert code == 1 and entry["incidents"][0]["source"] == "position", entry["incidents"]
+    frozen = next(d for d in entry["detectors"] if d["detector"] == "frozen")
+    assert "rest_denied" not in frozen["info"], frozen["info"]["rest_denied"]
