@@ -32,7 +32,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.stats import norm
 
 from logscan.alarms import AlarmInterval
 from logscan.detectors.words import group_words
@@ -115,7 +114,9 @@ def input_suspect(evidence: KinematicEvidence | None, group: str | None, alarm: 
         return None
     rows = (evidence.t >= alarm.start - 1e-9) & (evidence.t <= alarm.end + 1e-9)
     span_s = max(float(alarm.end - alarm.start), evidence.dt)
-    z_min = float(norm.isf(BUDGET_PER_HOUR * span_s / 3600.0 / 2.0))
+    from scipy.special import ndtri  # here, and not scipy.stats (46 MB to import)
+
+    z_min = -float(ndtri(BUDGET_PER_HOUR * span_s / 3600.0 / 2.0))
     agree: dict[str, float] = {}  # each sensor's z, in the pairs' order
     for p, (rate_name, level_name) in enumerate(evidence.names):
         zr, zl = _z(evidence.rate[rows, p]), _z(evidence.level[rows, p])
