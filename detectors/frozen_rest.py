@@ -43,34 +43,40 @@ def denied_rest(run, model, rest: np.ndarray | None, budget_per_hour: float) -> 
     duration_h = max(float(run.t[-1] - run.t[0]), 1e-9) / 3600.0
     alpha = min(0.5, float(budget_per_hour) * duration_h / firsts.size)
     denied = np.zeros(rest.size, dtype=bool)
-    references = [_drive_reference(u[:, k], rest) for k in inputs]
-    for first, stop in zip(firsts, stops):
-        shaken = all(_shakes(u[first:stop, k], ref, alpha) for k, ref in zip(inputs, references))
+    references = [_Driving(u[:, k], rest, alpha) for k in inputs]
+    for first, stop in zip(firsts, stops):  # per stretch of rest: a wheel speed near its bound flickers
+        shaken = all(ref.shaken(u[first:stop, k]) for k, ref in zip(inputs, references))
         if shaken and _moved(run.t, group, first, stop, model, alpha):
             denied[first:stop] = True
     return denied
 
 
-def _drive_reference(column: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """A witness input's squared successive differences where the wheels say the vehicle moves, in
-    order (the log's own driving, its rest stretches left out)."""
-    d = np.diff(column)
-    moving = ~(rest[1:] | rest[:-1]) & np.isfinite(d)
-    return d[moving] ** 2
+class _Driving:
+    """A witness input's squared successive differences where the wheels say the vehicle moves (the
+    log's own driving, its rest stretches left out), as running sums; the ``alpha`` quantile of
+    the means of its windows of one length is computed once per length: a wheel speed that hovers
+    at the rest bound makes thousands of short stretches, of few distinct lengths."""
 
+    def __init__(self, column: np.ndarray, rest: np.ndarray, alpha: float) -> None:
+        d = np.diff(column)
+        moving = ~(rest[1:] | rest[:-1]) & np.isfinite(d)
+        self.sums = np.cumsum(np.concatenate(([0.0], d[moving] ** 2)))
+        self.alpha = alpha
+        self.quantiles: dict[int, float] = {}
 
-def _shakes(stretch: np.ndarray, driving: np.ndarray, alpha: float) -> bool:
-    """Whether a stretch of a witness input shakes as the log's driving does: its mean square
-    difference is at least the ``alpha`` quantile of the driving's windows of its length (False
-    when the driving holds no such window)."""
-    d = np.diff(stretch)
-    d = d[np.isfinite(d)]
-    n = d.size
-    if n < 1 or driving.size < n:
-        return False
-    sums = np.cumsum(np.concatenate(([0.0], driving)))
-    windows = (sums[n:] - sums[:-n]) / n
-    return float(np.mean(d**2)) >= float(np.quantile(windows, alpha))
+    def shaken(self, stretch: np.ndarray) -> bool:
+        """Whether a stretch of the input shakes as the log's driving does: its mean square
+        difference is at least the ``alpha`` quantile of the driving's windows of its length (False
+        when the driving holds no such window)."""
+        d = np.diff(stretch)
+        d = d[np.isfinite(d)]
+        n = d.size
+        if n < 1 or self.sums.size - 1 < n:
+            return False
+        if n not in self.quantiles:
+            windows = (self.sums[n:] - self.sums[:-n]) / n
+            self.quantiles[n] = float(np.quantile(windows, self.alpha))
+        return float(np.mean(d**2)) >= self.quantiles[n]
 
 
 def _moved(t: np.ndarray, group, first: int, stop: int, model, alpha: float) -> bool:
