@@ -178,6 +178,7 @@ def test_an_accelerometer_bias_is_headed_by_the_imu_not_the_gnss_velocity(cli, t
     assert first["source"].startswith("/sensor_combined_0/accelerometer_m_s2[0]"), first
     assert first["headline"].startswith("IMU accelerometer (the model's input) suspect: GNSS velocity v_down"), first
     assert "barometer altitude agree against its prediction" in first["headline"], first
+    assert "a spoof" not in first["headline"], first  # the barometer, a sensor of its own, confirms
     assert 22.0 <= first["start"] <= 23.5, first
 
 
@@ -209,10 +210,15 @@ def test_the_input_is_suspect_only_when_a_pair_agrees_and_none_disagrees():
         levels = noise[:, 2:] + np.float32(level) * after * np.array([[1.0, 0.0]]) + level2 * after * np.array([[0, 1]])
         names = [("GNSS velocity v_down", "GNSS position down"), ("GNSS velocity v_down", "barometer altitude")]
         pairs = (t, names, rates, levels.astype(np.float32))
-        return KinematicEvidence(*pairs, frozenset({"vel", "pos"}), "IMU", "/imu", 0.01)
+        return KinematicEvidence(*pairs, frozenset({"vel", "pos"}), "IMU", "/imu", 0.01, (False, True))
 
     words = input_suspect(evidence(-3.0, -2.0), "vel", alarm)
     assert words is not None and words.startswith("GNSS velocity v_down and GNSS position down agree"), words
+    # only the one receiver's velocity and position agree: a coherent spoof of both is not ruled out
+    assert words.endswith("its fault moving both together (a spoof) looks alike"), words
+    confirmed = input_suspect(evidence(-3.0, -2.0, -2.0), "vel", alarm)  # the barometer agrees too
+    assert confirmed is not None and confirmed.endswith("agree against its prediction (" + confirmed.split("(")[-1])
+    assert "a spoof" not in confirmed, confirmed
     assert input_suspect(evidence(-3.0, 2.0), "vel", alarm) is None  # opposite: the sensor's own fault
     assert input_suspect(evidence(-3.0, -2.0, 2.0), "vel", alarm) is None  # the barometer disagrees
     assert input_suspect(evidence(-3.0, 0.0), "vel", alarm) is None  # the position says nothing

@@ -125,6 +125,9 @@ class Model:
     # input the prediction integrates moves both innovations one way (logscan/verdict/input_fault.py)
     kinematic_pairs: tuple[tuple[str, int, str, int, float], ...] = ()
     kinematic_inputs: tuple[int, ...] = ()  # the inputs such a pair's agreement blames
+    # the level groups measured by a sensor of their own, not by the rate's (a barometer against a
+    # GNSS receiver's velocity): only their agreement rules out that sensor wrong in both coherently
+    kinematic_witnesses: frozenset[str] = frozenset()
     kinematic_input_words: str = "model input"
     # True when the filter's gain never reads a measurement (a linear model with fixed Q and R: the
     # Riccati recursion alone), so a gain-based check (kgn) has nothing to see

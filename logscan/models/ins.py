@@ -69,6 +69,7 @@ class Ins(Model):
         ("gnss_velocity", 2, "baro", 0, -1.0),
     )
     kinematic_inputs = (3, 4, 5)  # the accelerometer's specific force, integrated twice
+    kinematic_witnesses = frozenset({"baro"})  # the GNSS position comes from the velocity's receiver
     kinematic_input_words = "IMU accelerometer"
     groups = {
         "gnss_position": GroupSpec(

@@ -24,7 +24,7 @@ input is suspect when a pair agrees and none disagrees; otherwise rule 3 stands.
 Limits: a spoofer that moves the GNSS position and velocity together, coherently, agrees with
 itself as the true motion would; on the down axis the barometer is a second, independent witness
 (its pair with the GNSS velocity then disagrees), but horizontally only the one receiver measures
-the motion, and such a spoof is read as an input fault.
+the motion: the words then say that such a spoof looks alike (`KinematicEvidence.independent`).
 """
 
 from __future__ import annotations
@@ -53,6 +53,9 @@ class KinematicEvidence:
     what: str  # "accelerometer (the model's input)"
     channels: str  # its log channels, joined
     dt: float  # the grid step, s
+    # per pair: whether its level is measured by a sensor of its own (the barometer), not by the
+    # rate's (the GNSS position from the receiver that gives the velocity); empty: none is
+    independent: tuple[bool, ...] = ()
 
     def within(self, alarms: list[AlarmInterval]) -> KinematicEvidence:
         """Only the steps within ``alarms`` (what a later call reads: the alarms a suppression
@@ -71,7 +74,8 @@ def kinematic_evidence(model, trace, run) -> KinematicEvidence | None:
     y, s = getattr(trace, "y", None), getattr(trace, "S_diag", None)
     if not pairs or y is None or s is None:
         return None
-    names, rate, level, groups = [], [], [], set()
+    names, rate, level, groups, independent = [], [], [], set(), []
+    witnesses = frozenset(getattr(model, "kinematic_witnesses", ()))
     for rate_group, i, level_group, j, sign in pairs:
         if rate_group not in trace.group_names or level_group not in trace.group_names:
             continue
@@ -81,6 +85,7 @@ def kinematic_evidence(model, trace, run) -> KinematicEvidence | None:
             level.append(sign * y[:, b] / np.sqrt(s[:, b]))
         names.append((_output(model, rate_group, i), _output(model, level_group, j)))
         groups |= {rate_group, level_group}
+        independent.append(level_group in witnesses)
     if not names:
         return None
     inputs = tuple(getattr(model, "kinematic_inputs", ()))
@@ -90,7 +95,7 @@ def kinematic_evidence(model, trace, run) -> KinematicEvidence | None:
     stack = np.column_stack
     return KinematicEvidence(
         trace.t, names, stack(rate).astype(np.float32), stack(level).astype(np.float32), frozenset(groups), what,
-        ", ".join(named), float(trace.dt),
+        ", ".join(named), float(trace.dt), tuple(independent),
     )  # fmt: skip
 
 
@@ -118,6 +123,7 @@ def input_suspect(evidence: KinematicEvidence | None, group: str | None, alarm: 
 
     z_min = -float(ndtri(BUDGET_PER_HOUR * span_s / 3600.0 / 2.0))
     agree: dict[str, float] = {}  # each sensor's z, in the pairs' order
+    confirmed = False  # by a pair whose level has a sensor of its own
     for p, (rate_name, level_name) in enumerate(evidence.names):
         zr, zl = _z(evidence.rate[rows, p]), _z(evidence.level[rows, p])
         if abs(zr) < z_min or abs(zl) < z_min:
@@ -126,8 +132,16 @@ def input_suspect(evidence: KinematicEvidence | None, group: str | None, alarm: 
             return None  # a fault of one of the pair's sensors
         agree.setdefault(rate_name, zr)
         agree.setdefault(level_name, zl)
+        confirmed |= p < len(evidence.independent) and evidence.independent[p]
     if not agree:
         return None
     names = list(agree)
     sigmas = ", ".join(f"{significant(z)}σ" for z in agree.values())
-    return f"{', '.join(names[:-1])} and {names[-1]} agree against its prediction ({sigmas})"
+    words = f"{', '.join(names[:-1])} and {names[-1]} agree against its prediction ({sigmas})"
+    # one sensor measuring both (a GNSS receiver's velocity and position) agrees with itself when it
+    # is wrong coherently, as a spoofer makes it: said, as nothing here tells the two apart
+    return (
+        words
+        if confirmed
+        else f"{words}; they come from one sensor, and its fault moving both together (a spoof) looks alike"
+    )
