@@ -6,7 +6,9 @@ Simulates --distinct logs (different seeds; MCAP) into a temporary directory and
 process (--rounds times, the modes alternating; best kept), after one warm-up run that fills the numba
 cache, with `--no-report --json`. The JSON of every mode must be the same (checked). Prints a markdown
 table with the speed-up against `--jobs 1` and each mode's CPU seconds (the CLI and its workers: on a
-shared machine the CPU a mode spends is steadier than its wall time); figures go in bench/README.md.
+shared machine the CPU a mode spends is steadier than its wall time), then each round's speed-up and
+CPU ratio against the same round's `--jobs 1`, and the load average; figures go in bench/README.md.
+The CLI runs as an installed logscan does, Python's bytecode cache on (`benchlib.installed_environment`).
 
     python bench/bench_fleet.py              # 20 logs
     python bench/bench_fleet.py --logs 200   # the issue's figure
@@ -29,7 +31,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_first_run import command  # noqa: E402
-from benchlib import simulate_log  # noqa: E402
+from benchlib import installed_environment, simulate_log  # noqa: E402
 
 MODES = {
     "--jobs 1": ["--jobs", "1"],
@@ -44,7 +46,9 @@ def analyze(logs_dir: Path, json_path: Path, how: list[str], tree: str = sys.exe
     args = [*command(tree), "analyze", str(logs_dir), "--no-report", "--json", str(json_path)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    result = subprocess.run([*args, *how, "--exit-zero", "--quiet"], capture_output=True, text=True)
+    result = subprocess.run(
+        [*args, *how, "--exit-zero", "--quiet"], capture_output=True, text=True, env=installed_environment()
+    )
     elapsed = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if result.returncode != 0:
@@ -63,6 +67,7 @@ def main() -> None:
     parser.add_argument(
         "--trees", help="NAME=PATH,...: source trees to compare (run with this venv), alternating; default this one"
     )
+    parser.add_argument("--simulated", help="directory of the simulated logs, kept and reused (default: a new one)")
     parser.add_argument("--keep", help="directory for the modes' JSON when they differ (default: a new one)")
     args = parser.parse_args()
     modes = {name: MODES[name] for name in ["--jobs 1", *(m for m in args.modes.split(",") if m != "--jobs 1")]}
@@ -72,10 +77,12 @@ def main() -> None:
         fleet = work / "fleet"
         fleet.mkdir()
         t0 = time.perf_counter()
+        simulated_dir = Path(args.simulated) if args.simulated else work
+        simulated_dir.mkdir(parents=True, exist_ok=True)
         distinct = [
-            simulate_log(
-                "quadcopter", str(work / f"seed{seed}.mcap"), "--duration", str(args.duration), "--seed", str(seed)
-            )
+            str(path)
+            if (path := simulated_dir / f"quad_{args.duration:g}s_seed{seed}.mcap").exists()
+            else simulate_log("quadcopter", str(path), "--duration", str(args.duration), "--seed", str(seed))
             for seed in range(min(args.distinct, args.logs))
         ]
         for number in range(args.logs):
@@ -87,6 +94,7 @@ def main() -> None:
         simulated = time.perf_counter() - t0
         for tree in trees.values():
             analyze(fleet / "quad_0000.mcap", work / "warm.json", ["--jobs", "1"], tree)  # numba cache filled
+        load_start = os.getloadavg()[0]
         times: dict[tuple[str, str], list[tuple[float, float]]] = {(t, m): [] for t in trees for m in modes}
         documents = {}
         for _ in range(args.rounds):  # trees and modes alternate round by round; the best round of each is kept
@@ -114,6 +122,17 @@ def main() -> None:
                 f"| {label} `{name}` | {wall[label, name]:.1f} | {wall[label, name] / args.logs:.2f} | "
                 f"{wall[one] / wall[label, name]:.2f}x | {cpu[label, name]:.1f} | {cpu[label, name] / cpu[one]:.2f} |"
             )
+        for label in trees:
+            for name in modes:
+                if name != "--jobs 1":
+                    pairs = list(zip(times[label, "--jobs 1"], times[label, name]))
+                    print(
+                        f"\n{label} `{name}` per round: speed-up "
+                        + ", ".join(f"{one[0] / many[0]:.2f}x" for one, many in pairs)
+                        + "; CPU / --jobs 1's "
+                        + ", ".join(f"{many[1] / one[1]:.2f}" for one, many in pairs)
+                    )
+        print(f"\nload average (1 min): {load_start:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
         if not same:
             keep = Path(args.keep or tempfile.mkdtemp(prefix="logscan-bench-fleet-json-"))
             keep.mkdir(parents=True, exist_ok=True)
