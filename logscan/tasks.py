@@ -19,6 +19,7 @@ from logscan.fleet import LogFailure, run_many
 from logscan.pipeline import analyze_log, rescore
 from logscan.pipeline.analysis import Analysis
 from logscan.pipeline.blocks import analyze_blocked
+from logscan.pipeline.run import load_kernels_for
 from logscan.readers import read_embedded
 from logscan.verdict.evaluation import Evaluation, LogEvaluation, evaluate_analysis
 from logscan.verdict.scoring import DEFAULT_GRACE_S, DEFAULT_RECOVERY_S
@@ -104,6 +105,13 @@ class AnalyzeTask:
             )
         return LogOutcome(summary, text, staged, seconds=time.perf_counter() - started)
 
+    def warm_up(self, items: Sequence[tuple[str, str | None]]) -> None:
+        """Before `run_many` forks its workers: load the kernels of the first log's analysis and
+        import its reader's and detectors' modules (`logscan.pipeline.run.load_kernels_for`), once
+        here instead of in every worker's first log."""
+        if items:
+            load_kernels_for(items[0][0], self.profile_path, detector_names=self.detector_names, notice=self.notice)
+
 
 def has_truth(path: str) -> bool:
     """Whether the log has ground truth: its own (reads only its metadata, not its messages), or a
@@ -140,6 +148,11 @@ class EvaluationTask:
             tables=self.tables_path,
         )
         return evaluate_analysis(analysis, grace_s=self.grace_s, recovery_s=self.recovery_s)
+
+    def warm_up(self, paths: Sequence[str]) -> None:
+        """Before `run_many` forks its workers: the first log's kernels, as `AnalyzeTask.warm_up`."""
+        if paths:
+            load_kernels_for(paths[0], self.profile_path, detector_names=self.detector_names)
 
 
 def evaluate_logs(

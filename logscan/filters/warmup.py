@@ -93,6 +93,27 @@ def start_compile(model: Model, after: Sequence[Callable[[], None]] = ()) -> Com
     return Compile(cold=True, process=process, after=after, claims=claims)
 
 
+def load_kernels(model: Model | None, users: Iterable[object], notice: Callable[[str], None] | None = None) -> None:
+    """Load the EKF kernel of ``model`` (None: no filter runs) and the kernels of ``users`` (the
+    detectors: `kernel_compilers`) now, ahead of any log: from numba's disk cache, or on a cold
+    cache compiled as the first run does (`start_compile`: the EKF's in a forked process, beside
+    this one; ``notice`` hears the first run's note). `--jobs` calls it in the parent before it
+    forks its workers (`logscan.pipeline.run.load_kernels_for`), which then inherit the loaded
+    machine code instead of each loading (or compiling) it again. A kernel that fails here is left
+    to its first call, as without this."""
+    compilers = kernel_compilers(users)
+    with collector_paused():
+        if model is not None:
+            compiling = start_compile(model, after=compilers)
+            if compiling.cold and notice is not None:
+                notice(COMPILING_NOTE)
+            compiling.share()
+            compiling.wait()
+            head_start(partial(_compile_ekf, model))
+        for compile_kernels in compilers:
+            head_start(compile_kernels)
+
+
 @contextmanager
 def collector_paused() -> Iterator[None]:
     """Python's cyclic collector off while kernels compile: numba makes hundreds of thousands of

@@ -3,6 +3,7 @@ isolation, workers that end with their parent and are resubmitted when killed.""
 
 from __future__ import annotations
 
+import gc
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -48,6 +49,7 @@ def run_many(
             return outcomes
         outcomes: list[Any] = [None] * len(logs)
         initialise_jit()  # once here, inherited by the forked workers (not once in each)
+        _warm_up(task, logs)
         workers = min(jobs, len(logs))
         pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init, initargs=(os.getpid(), workers))
         try:
@@ -64,6 +66,21 @@ def run_many(
     finally:
         if bar:
             bar.render_finish()
+
+
+def _warm_up(task: Callable[[Any], Any], logs: list[Any]) -> None:
+    """The task's ``warm_up(logs)``, when it has one (`logscan.tasks.AnalyzeTask.warm_up`: the
+    kernels of the first log's analysis): what every worker's first log would load, loaded once
+    here before the fork. When the caller froze its objects for the collector (`gc.freeze`, as
+    `logscan analyze` does), the warm-up's join them: the workers share those pages instead of
+    copying them as their collector walks them; `gc.unfreeze` releases both."""
+    warm_up = getattr(task, "warm_up", None)
+    if warm_up is None:
+        return
+    frozen = gc.get_freeze_count() > 0
+    warm_up(logs)
+    if frozen:
+        gc.freeze()
 
 
 def _worker_init(parent_pid: int | None = None, workers: int = 1) -> None:

@@ -8,8 +8,8 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from logscan.errors import ModelError
-from logscan.filters.warmup import kernel_compilers
-from logscan.models import model_class
+from logscan.filters.warmup import kernel_compilers, load_kernels
+from logscan.models import get_model, model_class
 from logscan.needs import Needs
 from logscan.pipeline.detection import detect
 from logscan.pipeline.preparation import Fraction, Progress, filter_free, load_profile_for, prepare, raw_topics_of
@@ -87,6 +87,28 @@ def _kinematic(loaded: LoadedProfile) -> bool:
         return bool(getattr(model_class(str(loaded.profile.vehicle.model)), "kinematic_pairs", ()))
     except ModelError:  # a model the registry does not know: its profile's own error, said elsewhere
         return False
+
+
+def load_kernels_for(
+    path: str | os.PathLike,
+    profile_path: str | os.PathLike | None = None,
+    *,
+    detector_names: Sequence[str] | None = None,
+    notice: Progress | None = None,
+) -> None:
+    """Load the kernels the analysis of the log at ``path`` calls (its model's EKF, its detectors':
+    `logscan.filters.warmup.load_kernels`), and import what its profile, reader and detectors
+    import, without reading its samples: `--jobs` calls it for the fleet's first log in the parent
+    before forking (`logscan.tasks.AnalyzeTask.warm_up`). Never raises: a log whose profile or
+    detectors fail here meets the error again in its own analysis, which says so."""
+    try:
+        loaded = load_profile_for(path, profile_path)
+        detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
+        vehicle = loaded.profile.vehicle
+        model = None if loaded.model_not_run else get_model(vehicle.model, vehicle.params)
+    except Exception:  # noqa: BLE001 - see the docstring
+        return
+    load_kernels(model, detectors, notice)
 
 
 def _with_innovations(needs: Callable[[AlignedRun], Needs]) -> Callable[[AlignedRun], Needs]:
