@@ -9,8 +9,8 @@ mapping: `logscan analyze` of a 1-hour 100 Hz log took
 trace) stay mappings and are returned; the heap top is trimmed only when 256 MiB lie free there.
 Measured on that log (bench/README.md, "System time"): 72 thousand page faults, 0.5-0.8 s of
 system time, peak RSS +30-48 MiB (+6-9 %). On a longer log the freed reading and aligning buffers
-left inside the heap grow past that: between the pipeline's steps, from 256 MiB free there (the trim
-threshold), its whole free pages go back to the system (`return_freed_pages`).
+left inside the heap grow past that, below arrays still alive (not at the top): between the
+pipeline's steps every whole free page inside the heap goes back to the system (`return_freed_pages`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ MMAP_THRESHOLD_BYTES = 64 * 1024 * 1024
 TRIM_THRESHOLD_BYTES = 256 * 1024 * 1024
 
 
-_heap: ctypes.CDLL | None = None  # glibc 2.33 or later, once its thresholds are set (`reuse_freed_arrays`)
+_heap: ctypes.CDLL | None = None  # glibc, once its thresholds are set (`reuse_freed_arrays`)
 
 
 def reuse_freed_arrays() -> bool:
@@ -40,29 +40,21 @@ def reuse_freed_arrays() -> bool:
     except (OSError, AttributeError):  # musl and other C libraries have no mallopt
         return False
     global _heap
-    if done and hasattr(libc, "mallinfo2"):  # `return_freed_pages` reads the heap's free bytes
-        libc.mallinfo2.restype = _MallInfo2
+    if done:  # `return_freed_pages` trims the heap
         _heap = libc
     return done
 
 
-class _MallInfo2(ctypes.Structure):
-    """glibc's `struct mallinfo2` (malloc.h, glibc 2.33 and later)."""
-
-    _fields_ = [
-        (name, ctypes.c_size_t)
-        for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd")
-        + ("usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")
-    ]
-
-
 def return_freed_pages() -> bool:
-    """Give the system back the whole free pages inside the heap (glibc's malloc_trim) when at
-    least the trim threshold lies free there, wherever: glibc returns that much only from the
-    heap's top, and between the pipeline's steps a long log's freed read and align buffers sit
-    below the trace's arrays, which, larger than the mmap threshold, cannot reuse them. Below the
-    threshold the pages stay, for the next step's arrays to reuse without faulting them in again.
-    True when pages were returned; only where `reuse_freed_arrays` set the thresholds."""
-    if _heap is None or _heap.mallinfo2().fordblks < TRIM_THRESHOLD_BYTES:
+    """Give the system back the whole free pages inside the heap (glibc's malloc_trim), wherever
+    they lie: glibc returns them by itself only from the heap's top past the trim threshold, and
+    between the pipeline's steps (and a long log's blocks) the freed read, align and detector
+    buffers sit below arrays still alive. Kept, they stay resident whether the next step reuses
+    them or not, so a block mode run's peak depended on whether the heap's free bytes happened to
+    stand above the trim threshold (the 24-hour log: 431 or 522 MiB, bench/README.md, "page return
+    between blocks"); given back, the next step faults in again what it reuses (~0.2 s of system
+    time per 30-minute block). True when pages were returned; only where `reuse_freed_arrays` set
+    the thresholds."""
+    if _heap is None:
         return False
     return bool(_heap.malloc_trim(0))
