@@ -10,7 +10,8 @@ trace) stay mappings and are returned; the heap top is trimmed only when 256 MiB
 Measured on that log (bench/README.md, "System time"): 72 thousand page faults, 0.5-0.8 s of
 system time, peak RSS +30-48 MiB (+6-9 %). On a longer log the freed reading and aligning buffers
 left inside the heap grow past that, below arrays still alive (not at the top): between the
-pipeline's steps every whole free page inside the heap goes back to the system (`return_freed_pages`).
+pipeline's steps, from 256 MiB free there (the trim threshold; in block mode from any), its whole
+free pages go back to the system (`return_freed_pages`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 M_TRIM_THRESHOLD = -1  # mallopt parameter numbers (malloc.h)
 M_MMAP_THRESHOLD = -3
@@ -25,7 +28,9 @@ MMAP_THRESHOLD_BYTES = 64 * 1024 * 1024
 TRIM_THRESHOLD_BYTES = 256 * 1024 * 1024
 
 
-_heap: ctypes.CDLL | None = None  # glibc, once its thresholds are set (`reuse_freed_arrays`)
+_heap: ctypes.CDLL | None = None  # glibc 2.33 or later, once its thresholds are set (`reuse_freed_arrays`)
+# the free bytes inside the heap from which `return_freed_pages` gives them back (`every_free_page`)
+_trim_from = [TRIM_THRESHOLD_BYTES]
 
 
 def reuse_freed_arrays() -> bool:
@@ -40,21 +45,43 @@ def reuse_freed_arrays() -> bool:
     except (OSError, AttributeError):  # musl and other C libraries have no mallopt
         return False
     global _heap
-    if done:  # `return_freed_pages` trims the heap
+    if done and hasattr(libc, "mallinfo2"):  # `return_freed_pages` reads the heap's free bytes
+        libc.mallinfo2.restype = _MallInfo2
         _heap = libc
     return done
 
 
+class _MallInfo2(ctypes.Structure):
+    """glibc's `struct mallinfo2` (malloc.h, glibc 2.33 and later)."""
+
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd")
+        + ("usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")
+    ]
+
+
+@contextmanager
+def every_free_page() -> Iterator[None]:
+    """Within it, `return_freed_pages` gives back whatever lies free, not only from the trim
+    threshold: block mode (`logscan.pipeline.blocks`), whose peak must not depend on whether the
+    heap's free bytes happen to stand above the threshold (the 24-hour log: 431 or 522 MiB,
+    bench/README.md, "page return between blocks"), for ~10 % more system time. A log analysed at
+    once keeps the threshold: its next step reuses the pages without faulting them in again."""
+    _trim_from.append(0)
+    try:
+        yield
+    finally:
+        _trim_from.pop()
+
+
 def return_freed_pages() -> bool:
     """Give the system back the whole free pages inside the heap (glibc's malloc_trim), wherever
-    they lie: glibc returns them by itself only from the heap's top past the trim threshold, and
-    between the pipeline's steps (and a long log's blocks) the freed read, align and detector
-    buffers sit below arrays still alive. Kept, they stay resident whether the next step reuses
-    them or not, so a block mode run's peak depended on whether the heap's free bytes happened to
-    stand above the trim threshold (the 24-hour log: 431 or 522 MiB, bench/README.md, "page return
-    between blocks"); given back, the next step faults in again what it reuses (~0.2 s of system
-    time per 30-minute block). True when pages were returned; only where `reuse_freed_arrays` set
-    the thresholds."""
-    if _heap is None:
+    they lie, when at least the trim threshold lies free there (anything within `every_free_page`):
+    glibc returns them by itself only from the heap's top, and between the pipeline's steps a long
+    log's freed read, align and detector buffers sit below arrays still alive. Below the threshold
+    the pages stay, for the next step's arrays to reuse without faulting them in again. True when
+    pages were returned; only where `reuse_freed_arrays` set the thresholds."""
+    if _heap is None or _heap.mallinfo2().fordblks < _trim_from[-1]:
         return False
     return bool(_heap.malloc_trim(0))

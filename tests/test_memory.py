@@ -55,18 +55,24 @@ def test_the_mmap_threshold_is_fixed_on_glibc():
 
 FREED_INSIDE_THE_HEAP = """
 import numpy as np
-from logscan.memory import return_freed_pages, reuse_freed_arrays
+from logscan.memory import every_free_page, return_freed_pages, reuse_freed_arrays
 
 def rss_mib():
     with open("/proc/self/status") as fh:
         return next(int(line.split()[1]) for line in fh if line.startswith("VmRSS:")) / 1024
 
 reuse_freed_arrays()
-arrays = [np.ones(1 << 20) for _ in range(40)]  # 40 x 8 MiB: carved from the heap
+arrays = [np.ones(1 << 20) for _ in range(50)]  # 50 x 8 MiB: carved from the heap
 pinned = np.ones(1 << 20)  # above them: the heap's top is not free
-del arrays[:10]  # 80 MiB free inside the heap, under the trim threshold: glibc keeps it
+del arrays[:10]  # 80 MiB free inside the heap, under the trim threshold: kept for reuse
 before = rss_mib()
-print(return_freed_pages(), round(before - rss_mib()))  # given back all the same
+print(return_freed_pages(), round(before - rss_mib()))
+with every_free_page():  # block mode: given back all the same
+    before = rss_mib()
+    print(return_freed_pages(), round(before - rss_mib()))
+del arrays[:10]  # 80 MiB free again, after the block: kept again
+before = rss_mib()
+print(return_freed_pages(), round(before - rss_mib()))
 arrays.clear()  # 320 MiB free: given back
 before = rss_mib()
 print(return_freed_pages(), round(before - rss_mib()))
@@ -74,11 +80,14 @@ print(return_freed_pages(), round(before - rss_mib()))
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc_trim")
-def test_freed_pages_inside_the_heap_go_back_also_under_the_trim_threshold():
+def test_freed_pages_inside_the_heap_go_back_from_the_trim_threshold_or_in_block_mode():
     out = subprocess.run([sys.executable, "-c", FREED_INSIDE_THE_HEAP], capture_output=True, text=True, check=True)
-    (small, small_mib), (returned, mib) = (line.split() for line in out.stdout.split("\n")[:2])
-    assert small == "True" and int(small_mib) >= 70  # of the 80 MiB under the trim threshold
-    assert returned == "True" and int(mib) >= 220  # of the 320 MiB freed below the pinned array, 80 given back
+    (kept, _), (blocks, blocks_mib), (kept_again, _), (returned, mib) = (
+        line.split() for line in out.stdout.split("\n")[:4]
+    )
+    assert kept == "False" and kept_again == "False"  # a log analysed at once reuses them
+    assert blocks == "True" and int(blocks_mib) >= 70  # of the 80 MiB under the trim threshold
+    assert returned == "True" and int(mib) >= 250  # of the 320 MiB freed below the pinned array
 
 
 def test_the_filter_reads_the_aligned_samples_in_place(sample):

@@ -19,7 +19,7 @@ from dataclasses import replace
 
 from logscan.docs import doc_url
 from logscan.errors import LogscanError
-from logscan.memory import return_freed_pages
+from logscan.memory import every_free_page, return_freed_pages
 from logscan.pipeline.block_fold import BlockFold
 from logscan.pipeline.block_reduce import bucket_width, reduce_block
 from logscan.pipeline.preparation import load_profile_for
@@ -137,29 +137,30 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     width = bucket_width(int(len(windows) * block_s * rate))
     loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own
     fold, refused = BlockFold(), []
-    for k, (start_s, end_s) in enumerate(windows):
-        step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
-        own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
-        # after the first block, the detectors' windows and sums run in from DETECTOR_LEAD_S before it
-        led = None if k == 0 else max(float(start_s) - DETECTOR_LEAD_S, float(windows[0][0] or 0.0))
-        try:
-            analysis = analyze_log(
-                path,
-                profile_path,
-                loaded=own,
-                start_s=start_s if led is None else led,
-                end_s=end_s,
-                progress=step,
-                judged_from_s=None if led is None else start_s,
-                **options,
-            )
-        except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
-            refused.append((k, exc))
-            continue
-        fold.add(reduce_block(analysis, width, None if led is None else start_s))  # and not kept
-        del analysis
-        gc.collect()
-        return_freed_pages()
+    with every_free_page():  # the peak must not depend on where the heap stands (logscan.memory)
+        for k, (start_s, end_s) in enumerate(windows):
+            step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
+            own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
+            # after the first block, the detectors' windows and sums run in from DETECTOR_LEAD_S before it
+            led = None if k == 0 else max(float(start_s) - DETECTOR_LEAD_S, float(windows[0][0] or 0.0))
+            try:
+                analysis = analyze_log(
+                    path,
+                    profile_path,
+                    loaded=own,
+                    start_s=start_s if led is None else led,
+                    end_s=end_s,
+                    progress=step,
+                    judged_from_s=None if led is None else start_s,
+                    **options,
+                )
+            except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
+                refused.append((k, exc))
+                continue
+            fold.add(reduce_block(analysis, width, None if led is None else start_s))  # and not kept
+            del analysis
+            gc.collect()
+            return_freed_pages()
     if fold.prepared is None:
         raise refused[0][1]
     merged = fold.merged(None if window == (None, None) else window)
