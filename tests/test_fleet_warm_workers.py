@@ -100,3 +100,18 @@ def test_the_warm_up_leaves_one_thread_to_fork_from():
         "print(len(ekf_run.overloads) > 0, len(cusum_kernel.overloads) > 0, threading.active_count())\n"
     )
     assert _python(code) == ["True", "True", "1"]
+
+
+def test_a_log_with_a_built_in_profile_is_not_read_by_the_warm_up(monkeypatch):
+    """A ROS bag's (or a ULog's) built-in profile is made by reading the log: the parent would read
+    the fleet's first log whole, alone, before any worker starts. Its kernels are left to the
+    workers; an MCAP's embedded profile is a metadata read, and its kernels load in the parent."""
+    from logscan.pipeline import run
+
+    profiles: list[str] = []
+    monkeypatch.setattr(run, "load_profile_for", lambda path, profile_path: profiles.append(path))
+    monkeypatch.setattr(run, "load_kernels", lambda *args, **kwargs: None)
+    run.load_kernels_for(str(REPO / "sample_logs" / "husky_drive.bag"))
+    assert profiles == []
+    run.load_kernels_for(SAMPLE)  # the embedded profile: read (the stand-in returns None, then stops)
+    assert profiles == [SAMPLE]
