@@ -328,7 +328,7 @@ class FrozenSensorDetector(Detector):
             # rest: stillness too, as `Model.at_rest`'s
             near_zero = np.abs(v) <= noise
             if denied is not None:  # not where the gyro and the GNSS say it moved
-                near_zero &= ~np.asarray(denied, dtype=bool)[steps]
+                near_zero &= ~denied[steps]
             still = near_zero if still.size == 0 else still | near_zero
         # r_i: samples held since the anchor (1 at it), and the length of each run
         # an input only repeats exactly when held: a controlled wheel speed cruising at 1.003 m/s

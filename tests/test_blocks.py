@@ -204,13 +204,13 @@ def test_blocks_of_a_window_start_their_filter_where_the_window_does():
 
 
 def test_a_window_two_blocks_give_is_kept_once_where_it_was_judged():
-    from logscan.pipeline.block_merge import merged_observability
+    from logscan.pipeline.block_merge import windows_once
     from logscan.verdict.observability import Observability
 
     directions: list = []
     before = Observability(np.array([0.0, 0.25, 0.5]), np.array([[1.0], [2.0], [np.nan]]), directions, t_end=0.74)
     after = Observability(np.array([0.5, 0.75]), np.array([[3.0], [4.0]]), directions, t_end=1.0)
-    merged = merged_observability([before, after])
+    merged = windows_once(windows_once(None, before), after)  # folded in as block mode does
     assert merged.t_start.tolist() == [0.0, 0.25, 0.5, 0.75]
     assert merged.evidence[:, 0].tolist() == [1.0, 2.0, 3.0, 4.0] and merged.t_end == 1.0
 

@@ -131,14 +131,6 @@ def _weighted_nis(summaries: list[dict], group: str):
     return sum(m * n for m, n in pairs) / total if total else summaries[0]["mean_nis"].get(group)
 
 
-def merged_observability(parts: list):
-    """The blocks' observability verdicts end to end (None: no block judged one), each window once."""
-    merged = None
-    for part in parts:
-        merged = windows_once(merged, part)
-    return merged
-
-
 def windows_once(merged, part):
     """The verdict ``merged`` (of the blocks before; None: none judged one) with the block's ``part``
     after it: a window both give (the last of one, led in by the next) once, the one judged where
