@@ -24,8 +24,9 @@ from logscan.json_policy import jsonable
 # --- JSON summaries -------------------------------------------------------------------------------
 
 
-def series_summary(values: np.ndarray) -> dict:
-    """n, finite count, min and max of one series (the JSON summary's view of a statistic)."""
+def series_summary(values: np.ndarray, counts: tuple[int, int] | None = None) -> dict:
+    """n, finite count, min and max of one series (the JSON summary's view of a statistic);
+    ``counts``: (n, finite) of the full-rate series ``values`` is the envelope of (block mode)."""
     values = np.asarray(values)
     finite = np.isfinite(values)
     count = int(np.count_nonzero(finite))
@@ -37,7 +38,8 @@ def series_summary(values: np.ndarray) -> dict:
     if count and (low is None or low == 0.0 or high == 0.0):  # an infinity, or a zero extreme
         kept = np.asarray(values[finite], dtype=np.float64)
         low, high = float(kept.min()), float(kept.max())
-    return {"n": int(values.size), "finite": count, "min": low, "max": high}
+    n, count = (int(values.size), count) if counts is None else counts
+    return {"n": n, "finite": count, "min": low, "max": high}
 
 
 # --- alarms ---------------------------------------------------------------------------------------
@@ -241,6 +243,8 @@ class DetectorResult:
     # statistic -> (N,) bool, the samples that could raise an alarm (valid, not in warm-up); the
     # report's margins are taken over these. All True: a read-only broadcast view.
     judged: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    # statistic -> (n, finite) of its full-rate series, where ``series`` holds its envelope (block mode)
+    series_counts: dict[str, tuple[int, int]] = field(default_factory=dict, repr=False, compare=False)
 
     def add_statistic(
         self,
@@ -329,7 +333,7 @@ class DetectorResult:
             "warnings": list(self.warnings),
             "not_checked": [{"reason": c.reason, "partial": c.partial} for c in self.not_checked],
             "info": jsonable(self.info),
-            "series": {name: series_summary(v) for name, v in self.series.items()},
+            "series": {name: series_summary(v, self.series_counts.get(name)) for name, v in self.series.items()},
         }
         if not summary_only:
             out["series_values"] = {name: jsonable(v) for name, v in self.series.items()}

@@ -103,6 +103,22 @@ def test_blocks_agree_with_the_whole_log_across_the_borders(both):
     assert blocks.warnings[-1].startswith("--block-s 20: each block is analysed with the 62 s before it")
 
 
+def test_the_summary_counts_the_logs_samples_not_the_envelopes_points(both, monkeypatch):
+    """Series kept as envelopes (buckets of 6 steps here) still count, in the JSON summary, every
+    sample and finite sample of the log, as the analysis at once does."""
+    from logscan.pipeline import block_reduce
+
+    whole, _ = both
+    monkeypatch.setattr(block_reduce, "MERGED_POINTS", 2000)
+    blocks = analyze_blocked(BIAS, block_s=20.0, free_series=True)
+    for ours, theirs in zip(blocks.results, whole.results):
+        assert ours.detector == theirs.detector
+        for name, values in ours.series.items():
+            assert len(values) < len(theirs.series[name])  # an envelope, not the series
+        counts = {k: (v["n"], v["finite"]) for k, v in ours.to_dict()["series"].items()}
+        assert counts == {k: (v["n"], v["finite"]) for k, v in theirs.to_dict()["series"].items()}, ours.detector
+
+
 def test_a_lead_shorter_than_the_log_before_a_block_keeps_the_alarms(both, monkeypatch):
     """A lead of 5 s (blocks from 15 and 35 s): the detectors' windows (1 s) and sums run in, so
     the alarms at the borders are the analysis at once's; without one (a step) they are not."""
@@ -160,7 +176,7 @@ def test_the_command_writes_one_verdict_and_every_artifact_of_the_blocks(tmp_pat
     assert "grid 6001 steps of 0.01 s" in paths["r.html"].read_text()  # the grid's, not the envelope's
     assert "<testsuite" in paths["j.xml"].read_text()
     counts = {s["n"] for d in log["detectors"] for s in d["series"].values()}
-    assert len(counts) == 1 and counts.pop() < 1100  # 6001 steps as envelopes of buckets of 12
+    assert counts == {6001}  # the log's samples, though its series are envelopes of buckets of 12
 
 
 def test_merged_series_lie_on_the_merged_times(monkeypatch):

@@ -74,13 +74,20 @@ class _Detector:
         self.infos: list[dict] = []
         self.checks: dict = {}
         self.fractions: dict[str, list[float]] = {}  # statistic -> [sum of fraction x points, points]
+        self.finite: dict[str, int] = {}  # statistic -> its finite samples in the blocks so far
+        self.per_step: dict[str, int] = {}  # statistic -> its values per grid step (a column: 1)
 
-    def append(self, result: DetectorResult | None, before: int, size: int) -> None:
+    def append(self, result: DetectorResult | None, before: int, size: int, steps: int) -> None:
+        """The block's ``result`` (None: the block has none) of ``size`` envelope points, ``steps`` grid steps."""
         pieces = (None, None, None, None, None) if result is None else _pieces(result)
         for columns, piece in zip((self.series, self.extras, self.judged, self.uppers, self.lowers), pieces):
             columns.append(piece, before, size)
         if result is None:
             return
+        for name, (samples, finite) in result.series_counts.items():
+            self.finite[name] = self.finite.get(name, 0) + finite
+            if steps:
+                self.per_step.setdefault(name, samples // steps)
         self.bands.update(dict.fromkeys(result.thresholds))
         self.alarms += result.alarms
         self.possible += result.possible
@@ -93,7 +100,8 @@ class _Detector:
             total[0] += fraction * size
             total[1] += size
 
-    def merged(self, gap_s: float) -> DetectorResult:
+    def merged(self, gap_s: float, steps: int) -> DetectorResult:
+        """The detector's result over the ``steps`` grid steps folded in (a series a block lacks: NaN there)."""
         uppers, lowers = self.uppers.arrays, self.lowers.arrays
         return replace(
             self.template,
@@ -108,7 +116,12 @@ class _Detector:
             info=merged_info(self.infos),
             checks=self.checks,
             judged_fraction={name: weighted / max(weight, 1.0) for name, (weighted, weight) in self.fractions.items()},
+            series_counts={name: self.counts(name, steps) for name in self.series.arrays},
         )
+
+    def counts(self, name: str, steps: int) -> tuple[int, int]:
+        """(samples, finite ones) of a statistic over ``steps`` grid steps, as its series at once has."""
+        return steps * self.per_step.get(name, 1), self.finite.get(name, 0)
 
     def nbytes(self) -> int:
         return sum(c.nbytes() for c in (self.series, self.extras, self.judged, self.uppers, self.lowers))
@@ -150,10 +163,11 @@ class BlockFold:
         for result in block.results:
             if result.detector not in self.detectors:
                 self.detectors[result.detector] = _Detector(result)
+        steps = prepared.grid[0] if prepared.grid else 0
         for name, detector in self.detectors.items():
-            detector.append(next((r for r in block.results if r.detector == name), None), self.points, size)
+            detector.append(next((r for r in block.results if r.detector == name), None), self.points, size, steps)
         self.points += size
-        self.steps += prepared.grid[0] if prepared.grid else 0
+        self.steps += steps
         self.summaries.append(prepared.filter_summary())
         self.warnings.append(block.warnings)
         self.unchecked.append(block.unchecked)
@@ -183,7 +197,7 @@ class BlockFold:
         prepared._filter_summary = merged_filter_summary(self.summaries)
         prepared.grid = (self.steps, float(prepared.run.dt))
         merged = Analysis(prepared=prepared, warnings=said_once(self.warnings))
-        merged.results = [detector.merged(gap_s) for detector in self.detectors.values()]
+        merged.results = [detector.merged(gap_s, self.steps) for detector in self.detectors.values()]
         merged.incidents = merged_incidents(self.incidents, merged.results, gap_s)
         merged.unchecked = said_once(self.unchecked)
         merged.unjudged = "; ".join(self.unjudged)

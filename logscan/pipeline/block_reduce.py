@@ -62,8 +62,9 @@ def envelope_times(t: np.ndarray, width: int) -> np.ndarray:
 
 
 def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult:
-    """``result`` with each of its series on the grid (first axis ``n``) as its envelope; its
-    other arrays (not on the grid) are left out: what they index is the block's, not the log's."""
+    """``result`` with each of its series on the grid (first axis ``n``) as its envelope, their
+    samples and finite ones counted first (``series_counts``: the summary's); its other arrays (not
+    on the grid) are left out: what they index is the block's, not the log's."""
 
     def on_grid(arrays: dict) -> dict:
         return {k: envelope(v, width) for k, v in arrays.items() if np.shape(v)[:1] == (n,)}
@@ -73,9 +74,12 @@ def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult
         return Band(upper=upper, lower=None if b.lower is None else envelope(b.lower, width))
 
     judged = {k: envelope(np.asarray(v, dtype=bool), width) for k, v in result.judged.items() if np.shape(v) == (n,)}
+    grid = {k: v for k, v in result.series.items() if np.shape(v)[:1] == (n,)}
+    counts = {k: (np.size(v), int(np.count_nonzero(np.isfinite(v)))) for k, v in grid.items()}
     return replace(
         result,
         series=on_grid(result.series),
+        series_counts=counts,
         thresholds={k: band(b) for k, b in result.thresholds.items()},
         extras=on_grid(result.extras),
         judged=judged,
