@@ -296,11 +296,16 @@ def ekf_run(model_id, model, sensors, data, out, work):
             if ok:
                 # K = P H^T S^-1  via  S K^T = H P  (P symmetric): V = L^-1 H P, K^T = L^-T V
                 gain_rows(L, m, HP, V, KT, n)
+                # dx = K y, accumulated row by row of K^T: each dx[i] sums over a in the same order
+                # as a dot product would, but the n sums run side by side (contiguous rows, no
+                # chain of m dependent adds per state)
                 for i in range(n):
-                    t = 0.0
-                    for a in range(m):
-                        t += KT[a, i] * y[a]
-                    dx[i] = t
+                    dx[i] = 0.0
+                for a in range(m):
+                    KTa = KT[a]
+                    ya = y[a]
+                    for i in range(n):
+                        dx[i] += KTa[i] * ya
                 # x_post = x_prior (+) K y~ (additive but for a model with a rotation in its state)
                 # (R3, D3: the measurements' rotation work, free again once they are evaluated)
                 dispatch.model_boxplus_into(model_id, p, x, dx, x_upd, R3, D3)
@@ -345,7 +350,9 @@ def ekf_run(model_id, model, sensors, data, out, work):
                         g = sel_g[a]
                         mg = group_sizes[g]
                         updated[k, g] = True
-                        if r == 0:  # the leading block's factor is L's leading block
+                        if ng == 1:  # the group is the whole update: its NIS is the step's
+                            nis_group[k, g] = nis[k]
+                        elif r == 0:  # the leading block's factor is L's leading block
                             nis_group[k, g] = forward_sq(L, mg, y, zero, v)
                         else:
                             cholesky(S, r, mg, Lg)

@@ -375,8 +375,8 @@ def pack_run(
     m_total = int(sizes.sum())
     z, fresh, R_all, R_std = _samples_and_noise(model, run, names, specs, offsets, sizes, dict(R or {}))
     x0, P0, Q, seed = _prior(model, run, Q, x0, P0, seed)
-    finite_rows = np.flatnonzero(np.all(np.isfinite(u), axis=1))
-    u_default = u[finite_rows[0]].copy() if finite_rows.size else np.zeros(model.n_inputs)
+    first = first_finite_row(u)
+    u_default = u[first].copy() if first >= 0 else np.zeros(model.n_inputs)
     direct = [s.direct_map() for s in specs]
     coding_floor, coding_r_max = coding_arguments(coding, model)
     return KernelInputs(
@@ -407,6 +407,18 @@ def pack_run(
         coding_floor=coding_floor,
         coding_r_max=coding_r_max,
     )
+
+
+def first_finite_row(u: np.ndarray) -> int:
+    """The first row of ``u`` (N, nu) with all values finite, -1 if none: looked for in blocks doubling
+    from 64 rows (the first row almost always is; checking all N was 2 ms of a 100,000-step run)."""
+    start, size = 0, 64
+    while start < u.shape[0]:
+        rows = np.flatnonzero(np.isfinite(u[start : start + size]).all(axis=1))
+        if rows.size:
+            return start + int(rows[0])
+        start, size = start + size, 2 * size
+    return -1
 
 
 def _inputs(model: Model, run: AlignedRun) -> np.ndarray:
