@@ -39,7 +39,7 @@ def observability_rows(observability) -> list[dict]:
         })  # fmt: skip
     yaxis = {"tickvals": list(range(len(names))), "ticktext": names, "range": [-0.6, len(names) - 0.4],
              "fixedrange": True, "automargin": True}  # fmt: skip
-    layout = _time_row_layout("where a fault could not be seen", yaxis, (observability.t_start[0], observability.t_end))
+    layout = _time_row_layout("where a fault could not be seen", yaxis, (observability.t_first, observability.t_end))
     layout["height"] = _time_row_spec("", "", "")["height"] + ROW_HEIGHT * max(len(names) - 3, 0)
     words = "; ".join(dict.fromkeys(p["words"].split(": ", 1)[1] for p in blind))
     size = f"of the size named in {doc_url('algorithms.md')} section 10"

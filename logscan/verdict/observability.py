@@ -110,14 +110,12 @@ class Observability:
     def observable(self, d: int, kind: str, magnitude: float | None = None) -> np.ndarray:
         """(W,) bool: a fault of ``kind`` and ``magnitude`` (None: the reference size) on direction
         ``d`` starting at each window start would leave sqrt(m^2 lambda) >= snr_min (NaN: False)."""
-        size = fault_scale(kind, REFERENCE_SIZE[kind] if magnitude is None else magnitude)
-        with np.errstate(invalid="ignore"):
-            return size * size * self.evidence[:, d] >= self.snr_min**2
+        return seen_rows(self.evidence[:, d], kind, magnitude, self.snr_min)
 
     def unobservable_intervals(self, d: int, kind: str, magnitude: float | None = None) -> list[tuple[float, float]]:
         """Merged [start, end) spans of window starts from which the fault would not be seen (windows
         without a verdict, NaN evidence, are neither seen nor unseen)."""
-        blind = np.isfinite(self.evidence[:, d]) & ~self.observable(d, kind, magnitude)
+        blind = blind_rows(self.evidence[:, d], kind, magnitude, self.snr_min)
         return spans_of(blind, self.t_start, self.stride_s, self.t_end)
 
     def find(self, target: str, channels=()) -> int | None:
@@ -139,14 +137,13 @@ class Observability:
             return None
         magnitude = event.magnitude if event.kind != "lost-actuator" else 1.0
         seen = self.observable(d, event.kind, magnitude)
-        end = min(event.end_or_inf, self.t_end)
-        # windows the fault fills: from the one in progress at its onset to the last that ends
-        # before the fault does (a fault ending a moment after the excitation began left no more
-        # than that moment's evidence); the onset's window always counts
-        last = max(end - self.window_s, event.t_start)
-        inside = (self.t_start + self.stride_s > event.t_start) & (self.t_start <= last + 1e-9)
-        inside &= np.isfinite(self.evidence[:, d])
+        inside = inside_rows(self.t_start, self.evidence[:, d], event, self)
         return bool(seen[inside].any()) if inside.any() else None
+
+    @property
+    def t_first(self) -> float:
+        """The first window's start (the report's time axis begins there)."""
+        return self.t_start[0]
 
     # --- views ----------------------------------------------------------------------------------
     def blind_periods(self) -> list[dict]:
@@ -188,15 +185,41 @@ def fault_scale(kind: str, magnitude: float) -> float:
     return 1.0 if kind == "lost-actuator" else float(magnitude)
 
 
+def seen_rows(evidence: np.ndarray, kind: str, magnitude: float | None, snr_min: float) -> np.ndarray:
+    """Of one direction's ``evidence`` (rows), whether a fault of ``kind`` and ``magnitude`` (None:
+    the reference size) starting there leaves sqrt(m^2 lambda) >= snr_min (NaN: False)."""
+    size = fault_scale(kind, REFERENCE_SIZE[kind] if magnitude is None else magnitude)
+    with np.errstate(invalid="ignore"):
+        return size * size * evidence >= snr_min**2
+
+
+def blind_rows(evidence: np.ndarray, kind: str, magnitude: float | None, snr_min: float) -> np.ndarray:
+    """The rows of one direction's ``evidence`` with a verdict (finite) that the fault is not seen."""
+    return np.isfinite(evidence) & ~seen_rows(evidence, kind, magnitude, snr_min)
+
+
+def inside_rows(t_start: np.ndarray, evidence: np.ndarray, event, verdict) -> np.ndarray:
+    """The rows (window starts ``t_start``, one direction's ``evidence``) with a verdict that a truth
+    event fills: from the window in progress at its onset to the last that ends before the fault
+    does (a fault ending a moment after the excitation began left no more than that moment's
+    evidence); the onset's window always counts. ``verdict``: its window_s, stride_s and t_end."""
+    end = min(event.end_or_inf, verdict.t_end)
+    last = max(end - verdict.window_s, event.t_start)
+    inside = (t_start + verdict.stride_s > event.t_start) & (t_start <= last + 1e-9)
+    return inside & np.isfinite(evidence)
+
+
 def spans_of(mask: np.ndarray, t_start: np.ndarray, stride_s: float, t_end: float) -> list[tuple[float, float]]:
     """[t_start[i], t_start[i] + stride) of the True entries of ``mask``, merged, clipped to t_end."""
     if not mask.any():
         return []
     first, stop = true_runs(mask)
-    last = stop - 1
-    return [
-        (float(t_start[a]), float(min(t_start[b] + stride_s, t_end))) for a, b in zip(first, last) if t_start[a] < t_end
-    ]
+    return spans_of_runs(t_start[first], t_start[stop - 1], stride_s, t_end)
+
+
+def spans_of_runs(firsts: np.ndarray, lasts: np.ndarray, stride_s: float, t_end: float) -> list[tuple[float, float]]:
+    """[first, last + stride) of each run of window starts (its first and last start), clipped to t_end."""
+    return [(float(a), float(min(b + stride_s, t_end))) for a, b in zip(firsts, lasts) if a < t_end]
 
 
 # --- building the verdict from a filtered run ------------------------------------------------------
