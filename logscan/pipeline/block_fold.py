@@ -22,10 +22,10 @@ from logscan.pipeline.block_merge import (
     merged_incidents,
     merged_info,
     said_once,
-    windows_once,
+    windows_folded,
 )
 from logscan.pipeline.detection import rescore
-from logscan.results import Band, DetectorResult
+from logscan.results import Band, DetectorResult, events_from_truth
 
 if TYPE_CHECKING:
     from logscan.pipeline.stages import Prepared
@@ -152,6 +152,7 @@ class BlockFold:
         self.input_gaps: list = []
         self.failures: dict = {}
         self.observability = None
+        self.events: list = []  # the log's truth events (`rescore` scores the merged alarms against them)
 
     def add(self, block: Analysis) -> None:
         """Fold a reduced block in; nothing of it is kept but what the merge reads."""
@@ -159,6 +160,8 @@ class BlockFold:
         size = prepared.run.t.size
         if self.prepared is None:
             self.prepared = prepared
+            truth = prepared.log.truth
+            self.events = events_from_truth(truth.get("events", []), path=prepared.path) if truth else []
         self.times.append({"t": prepared.run.t}, self.points, size)
         for result in block.results:
             if result.detector not in self.detectors:
@@ -176,7 +179,7 @@ class BlockFold:
         self.incidents += block.incidents
         self.input_gaps += block.input_gaps
         self.failures.update({(f.detector, f.message): f for f in block.failures})
-        self.observability = windows_once(self.observability, block.observability)
+        self.observability = windows_folded(self.observability, block.observability, self.events)
         block.results, block.observability = [], None  # the first block's prepared stays: the merged one's
 
     def nbytes(self) -> int:

@@ -15,6 +15,7 @@ import numpy as np
 
 from logscan.results import DetectorResult, Incident
 from logscan.verdict.incidents import DEFAULT_GAP_S
+from logscan.verdict.observability_folded import folded
 
 # the filter summary's counts summed over the blocks; its mean NIS weighted by each block's updates
 _COUNTS = ("updates", "rejected", "seeded")
@@ -158,3 +159,20 @@ def windows_once(merged, part):
     merged.evidence.resize((rows, *merged.evidence.shape[1:]), refcheck=False)
     merged.t_start[first:], merged.evidence[first:] = t_start[kept], evidence[kept]
     return replace(merged, t_end=part.t_end)
+
+
+def windows_folded(merged, part, events):
+    """`windows_once`, then the windows no later block can give or replace reduced to what the
+    verdict reads of them (`logscan.verdict.observability_folded`; ``events``: the log's truth
+    events, whose verdicts it keeps). A block's windows start a window before its first step
+    (`logscan.pipeline.block_reduce`), which is half a grid step after the last one of the block
+    before; so the windows starting more than a window and a stride before the merged verdict's end
+    are final."""
+    if part is not None and part.t_start.size and merged is not None and part.t_start.min() <= merged.last_reduced:
+        raise RuntimeError("a block's observability windows reach back into those already reduced")
+    merged = windows_once(merged, part)
+    if merged is None:
+        return None
+    merged = folded(merged, events)
+    open_from = merged.t_end - merged.window_s - merged.stride_s
+    return merged.reduced(int(np.searchsorted(merged.t_start, open_from, side="left")))
