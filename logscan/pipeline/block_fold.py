@@ -3,7 +3,8 @@ as each is reduced (`BlockFold.add`, then `BlockFold.merged`): the envelopes of 
 appended end to end to one array per series, the observability windows to one verdict, and of the
 rest only what the merge reads (alarms, lines, counts, facts), so no block is kept once it is
 folded in. The running state holds the log's envelopes (about `MERGED_POINTS` points per series
-whatever the number of blocks), the observability windows and those lists. docs/algorithms.md
+whatever the number of blocks), the observability verdict (its final windows reduced to what it
+reads: `block_merge.windows_folded`) and those lists. docs/algorithms.md
 section 8.1b says what the merge does and what differs from the analysis of the whole log at once.
 """
 
