@@ -289,3 +289,21 @@ def test_the_fold_fills_what_a_block_does_not_give():
     judged.append({"m": np.array([True])}, 0, 1)
     judged.append({}, 1, 2)
     assert judged.arrays["m"].tolist() == [True, False, False]
+
+
+def test_a_log_longer_than_the_memory_budget_allows_at_once_goes_to_blocks(monkeypatch):
+    """The longest span analysed at once is the 450 MB budget's (44.9 minutes at 100 Hz), not 1 GB's."""
+    from logscan.pipeline import blocks
+    from logscan.pipeline.preparation import load_profile_for
+
+    loaded = load_profile_for(BIAS, None)  # the 100 Hz quadcopter's profile
+    assert float(loaded.profile.vehicle.rate_hz) == 100.0
+    # 2700 s: one block and a half, which `block_windows` keeps as one (44.9 minutes is just below it)
+    for span_s, at_once in ((2690.0, True), (2700.0, True), (2710.0, False), (3600.0, False)):
+        # an indexed MCAP file of that span with a message per grid step
+        monkeypatch.setattr(blocks, "indexed_span_s", lambda path, s=span_s: (s, int(s * 100) + 1))
+        windows = blocks.blocks_for(BIAS, loaded, None, None, None)
+        assert (windows is None) == at_once, span_s
+        if windows is not None:  # blocks of BLOCK_STEPS, the last up to a block and a half
+            assert windows[0] == (None, blocks.BLOCK_STEPS / 100 - 0.005)
+    assert blocks.AUTO_STEPS * blocks.STEP_BYTES + blocks.START_BYTES <= blocks.MEMORY_BUDGET_BYTES

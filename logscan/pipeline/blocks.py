@@ -42,9 +42,19 @@ BLOCK_STEPS = 180_000
 # alarms' persistence span seconds; a CUSUM forgets a healthy stretch in its drift's time
 # (docs/algorithms.md 8.1b).
 DETECTOR_LEAD_S = 2 * (OBSERVABILITY_WARMUP_S + OBSERVABILITY_WINDOW_S)
-# Logs longer than this many grid steps are analysed in blocks unless --block-s 0: at ~1.5 KiB per
-# step read and analysed, the whole log at once would pass 1 GB beyond this (2.8 hours at 100 Hz).
-AUTO_STEPS = 1_000_000
+# The peak memory of a log analysed at once: issue 29's 450 MB for a log of any length.
+MEMORY_BUDGET_BYTES = 450_000_000
+# The peak RSS of `logscan analyze` of a log at once, as a line through the worst of three runs at 15
+# and at 60 minutes of the 100 Hz quadcopter log, with and without the report (bench/README.md,
+# "At-once peak by length"; it bounds the worst runs at 30, 45 and 50 minutes from above): START_BYTES
+# (interpreter, numba's kernels, the reader's and the report's fixed part) plus STEP_BYTES per grid step
+# (aligned run, EKF trace, detectors' series and working memory; 282 MiB per 100 Hz log-hour).
+START_BYTES = 218 * 2**20
+STEP_BYTES = 821
+# Logs longer than this many grid steps are analysed in blocks unless --block-s 0: the longest span
+# whose peak at once stays within the budget (269,683 steps: 44.9 minutes at 100 Hz). A span of up to
+# a block and a half is still one window (`block_windows`): 270,000 steps at 100 Hz, measured at 413 MiB.
+AUTO_STEPS = (MEMORY_BUDGET_BYTES - START_BYTES) // STEP_BYTES
 
 
 def block_windows(
