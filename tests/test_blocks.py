@@ -307,3 +307,5 @@ def test_a_log_longer_than_the_memory_budget_allows_at_once_goes_to_blocks(monke
         if windows is not None:  # blocks of BLOCK_STEPS, the last up to a block and a half
             assert windows[0] == (None, blocks.BLOCK_STEPS / 100 - 0.005)
     assert blocks.AUTO_STEPS * blocks.STEP_BYTES + blocks.START_BYTES <= blocks.MEMORY_BUDGET_BYTES
+    # the --block-s help (docs/cli.md is generated from it, tests/test_docs_cli.py) says the same number
+    assert f"more than {blocks.AUTO_STEPS:,} (" in (SAMPLES.parent / "docs" / "cli.md").read_text(encoding="utf-8")
