@@ -23,9 +23,13 @@ BIAS = SAMPLES / "quad_imu_bias.mcap"  # 60 s at 100 Hz, an accelerometer bias f
 
 def test_block_windows_cover_the_span_without_a_step_twice():
     windows = block_windows(100.0, 30.0, 0.01)
-    assert windows == [(None, 29.995), (30.0, 59.995), (60.0, None)]  # 90-100 s joins the block before
+    assert windows == [(None, 24.995), (25.0, 49.995), (50.0, 74.995), (75.0, None)]  # none over 30 s
     assert block_windows(100.0, 30.0, 0.01, start_s=10.0, end_s=70.0) == [(10.0, 39.995), (40.0, 70.0)]
-    assert block_windows(40.0, 30.0, 0.01) == [(None, None)]  # shorter than a block and a half: one
+    assert block_windows(40.0, 30.0, 0.01) == [(None, 19.995), (20.0, None)]
+    assert block_windows(30.2, 30.0, 0.01) == [(None, None)]  # within the slack: one
+    # a log of 24 one-hour pieces, each a step apart: 48 blocks a step longer than half an hour
+    day = block_windows(86400.24, 1800.0, 0.01)
+    assert len(day) == 48 and day[1][0] == pytest.approx(1800.01) and day[-1][1] is None
 
 
 def test_envelope_keeps_each_buckets_extremes_in_order_and_gaps():
@@ -298,14 +302,14 @@ def test_a_log_longer_than_the_memory_budget_allows_at_once_goes_to_blocks(monke
 
     loaded = load_profile_for(BIAS, None)  # the 100 Hz quadcopter's profile
     assert float(loaded.profile.vehicle.rate_hz) == 100.0
-    # 2700 s: one block and a half, which `block_windows` keeps as one (44.9 minutes is just below it)
-    for span_s, at_once in ((2690.0, True), (2700.0, True), (2710.0, False), (3600.0, False)):
+    # 44.9 minutes at once; beyond, blocks of equal length, none over BLOCK_STEPS
+    for span_s, at_once in ((2690.0, True), (2700.0, False), (2710.0, False), (3600.0, False)):
         # an indexed MCAP file of that span with a message per grid step
         monkeypatch.setattr(blocks, "indexed_span_s", lambda path, s=span_s: (s, int(s * 100) + 1))
         windows = blocks.blocks_for(BIAS, loaded, None, None, None)
         assert (windows is None) == at_once, span_s
-        if windows is not None:  # blocks of BLOCK_STEPS, the last up to a block and a half
-            assert windows[0] == (None, blocks.BLOCK_STEPS / 100 - 0.005)
+        if windows is not None:  # two blocks of half the span each
+            assert windows[0] == (None, pytest.approx(span_s / 2 - 0.005)) and len(windows) == 2
     assert blocks.AUTO_STEPS * blocks.STEP_BYTES + blocks.START_BYTES <= blocks.MEMORY_BUDGET_BYTES
     # the --block-s help (docs/cli.md is generated from it, tests/test_docs_cli.py) says the same number
     assert f"more than {blocks.AUTO_STEPS:,} (" in (SAMPLES.parent / "docs" / "cli.md").read_text(encoding="utf-8")

@@ -232,9 +232,10 @@ block_option = click.option(
     type=click.FloatRange(min=0),
     default=None,
     metavar="SECONDS",
-    help="Analyse an indexed MCAP log in consecutive windows of this many seconds, each freed once its "
-    "alarms, counts and the report's series are kept, so memory is bounded by the block, not the log; "
-    "0: never. Default: in blocks of 180,000 grid steps (30 min at 100 Hz) when the log holds more "
+    help="Analyse an indexed MCAP log in consecutive equal windows of at most this many seconds, each "
+    "freed once its alarms, counts and the report's series are kept, so memory is bounded by the block, "
+    "not the log; 0: never. Default: in blocks of at most 180,000 grid steps (30 min at 100 Hz) when the "
+    "log holds more "
     "than 269,683 (44.9 min at 100 Hz: the longest whose analysis at once stays within 450 MB). Other "
     "formats are read whole and analysed at once (a warning says so).",
 )

@@ -14,6 +14,7 @@ from the analysis of the whole log at once (the block borders).
 from __future__ import annotations
 
 import gc
+import math
 import os
 from dataclasses import replace
 
@@ -42,6 +43,9 @@ BLOCK_STEPS = 180_000
 # alarms' persistence span seconds; a CUSUM forgets a healthy stretch in its drift's time
 # (docs/algorithms.md 8.1b).
 DETECTOR_LEAD_S = 2 * (OBSERVABILITY_WARMUP_S + OBSERVABILITY_WINDOW_S)
+# A block may be this much of its length longer than asked (a 24-hour log of 1-hour pieces spans
+# 86,400.24 s: 48 blocks of 1800.005 s, not 49 shorter ones)
+BLOCK_SLACK = 0.01
 # The peak memory of a log analysed at once: issue 29's 450 MB for a log of any length.
 MEMORY_BUDGET_BYTES = 450_000_000
 # The peak RSS of `logscan analyze` of a log at once, as a line through the worst of three runs at 15
@@ -52,25 +56,24 @@ MEMORY_BUDGET_BYTES = 450_000_000
 START_BYTES = 218 * 2**20
 STEP_BYTES = 821
 # Logs longer than this many grid steps are analysed in blocks unless --block-s 0: the longest span
-# whose peak at once stays within the budget (269,683 steps: 44.9 minutes at 100 Hz). A span of up to
-# a block and a half is still one window (`block_windows`): 270,000 steps at 100 Hz, measured at 413 MiB.
+# whose peak at once stays within the budget (269,683 steps: 44.9 minutes at 100 Hz). Blocks are of
+# equal length, none longer than BLOCK_STEPS (`block_windows`), so no block comes near it either.
 AUTO_STEPS = (MEMORY_BUDGET_BYTES - START_BYTES) // STEP_BYTES
 
 
 def block_windows(
     span_s: float, block_s: float, dt: float, start_s: float | None = None, end_s: float | None = None
 ) -> list[tuple[float | None, float | None]]:
-    """The consecutive windows [start, end] of ``block_s`` seconds covering ``start_s``..``end_s``
-    (None: that end of the log, ``span_s`` long); each ends half a grid step (``dt``) before the
-    next begins, so no step is analysed twice. A last piece shorter than half a block joins the
-    block before it. One window: the span itself."""
+    """The fewest consecutive windows [start, end] of equal length, a whole number of grid steps
+    (``dt``), covering ``start_s``..``end_s`` (None: that end of the log, ``span_s`` long) with
+    none longer than ``block_s`` (by more than `BLOCK_SLACK` of it: a log's seams and rounding), so
+    each block's memory is bounded by ``block_s``, the last included; each ends half a grid step
+    before the next begins, so no step is analysed twice. One window: the span itself."""
     lo = 0.0 if start_s is None else float(start_s)
     hi = float(span_s) if end_s is None else float(end_s)
-    borders = []
-    border = lo + block_s
-    while border < hi - block_s / 2:
-        borders.append(border)
-        border += block_s
+    count = max(1, math.ceil((hi - lo) / block_s - BLOCK_SLACK))
+    length = math.ceil((hi - lo) / count / dt - 1e-9) * dt  # whole steps: a border on the grid
+    borders = [lo + k * length for k in range(1, count)]
     starts = [start_s, *borders]
     ends = [b - dt / 2 for b in borders] + [end_s]
     return list(zip(starts, ends))
