@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import json
 
+import hypothesis.extra.numpy as hnp
+import hypothesis.strategies as st
 import numpy as np
 import pytest
 from conftest import SAMPLES
+from hypothesis import given, settings
 
 from logscan.alarms import AlarmInterval
 from logscan.pipeline import analyze_log
@@ -40,6 +43,41 @@ def test_envelope_keeps_each_buckets_extremes_in_order_and_gaps():
     assert envelope(np.array([False, True, False, False]), 2).tolist() == [True, True, False, False]
     assert envelope_times(np.arange(5.0), 2).tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 4.0]
     assert envelope(values, 1) is values
+
+
+def _envelope_by_numpy(values: np.ndarray, width: int) -> np.ndarray:
+    """The envelope as numpy's argmin / argmax define it (NaN as +-inf, the first of ties)."""
+    n = values.shape[0]
+    buckets = -(-n // width)
+    padded = np.full((buckets * width, *values.shape[1:]), np.nan)
+    padded[:n] = values
+    grouped = padded.reshape(buckets, width, *values.shape[1:])
+    missing = np.isnan(grouped)
+    low_at = np.argmin(np.where(missing, np.inf, grouped), axis=1)[:, None]
+    high_at = np.argmax(np.where(missing, -np.inf, grouped), axis=1)[:, None]
+    low = np.take_along_axis(grouped, low_at, axis=1)[:, 0]
+    high = np.take_along_axis(grouped, high_at, axis=1)[:, 0]
+    in_order = (low_at <= high_at)[:, 0]
+    pairs = np.stack([np.where(in_order, low, high), np.where(in_order, high, low)], axis=1)
+    return pairs.reshape(2 * buckets, *values.shape[1:]).astype(values.dtype, copy=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=hnp.arrays(
+        st.sampled_from([np.float32, np.float64]),
+        st.tuples(st.integers(1, 40), st.integers(1, 3)),
+        elements=st.sampled_from([0.0, -0.0, 1.0, -2.5, 3.0, np.nan, np.inf, -np.inf]),
+    ),
+    width=st.integers(2, 9),
+    flat=st.booleans(),
+)
+def test_the_envelope_kernel_is_the_numpy_definition(values, width, flat):
+    """Ties, NaN, infinities, a partial last bucket, (N,) and (N, k), float32 and float64: the
+    compiled envelope gives numpy's argmin / argmax envelope bit for bit."""
+    values = values[:, 0] if flat else values
+    assert envelope(values, width).tobytes() == _envelope_by_numpy(values, width).tobytes()
+    assert envelope(values, width).dtype == values.dtype
 
 
 def _alarm(signal: str, start: float, end: float) -> AlarmInterval:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 
 from logscan.pipeline.raw_lead import cut_rows
 from logscan.results import Band, DetectorResult
@@ -39,17 +40,36 @@ def envelope(values: np.ndarray, width: int) -> np.ndarray:
         padded[:n] = values
         anyone = padded.reshape(buckets, width, *values.shape[1:]).any(axis=1)
         return np.repeat(anyone, 2, axis=0)
-    padded = np.full((buckets * width, *values.shape[1:]), np.nan, dtype=np.float64)
-    padded[:n] = values
-    grouped = padded.reshape(buckets, width, *values.shape[1:])
-    missing = np.isnan(grouped)
-    low_at = np.argmin(np.where(missing, np.inf, grouped), axis=1)[:, None]
-    high_at = np.argmax(np.where(missing, -np.inf, grouped), axis=1)[:, None]
-    low = np.take_along_axis(grouped, low_at, axis=1)[:, 0]
-    high = np.take_along_axis(grouped, high_at, axis=1)[:, 0]
-    in_order = (low_at <= high_at)[:, 0]
-    pairs = np.stack([np.where(in_order, low, high), np.where(in_order, high, low)], axis=1)
+    columns = np.ascontiguousarray(values.reshape(n, -1), dtype=np.float64)
+    pairs = np.empty((2 * buckets, columns.shape[1]))
+    _extremes_in_order(columns, width, pairs)
     return pairs.reshape(2 * buckets, *values.shape[1:]).astype(values.dtype, copy=False)
+
+
+@njit(cache=True)
+def _extremes_in_order(values, width, pairs):  # pragma: no cover - compiled
+    """Per column of ``values`` (N, K) and bucket of ``width`` rows: its lowest and highest value,
+    the first of each where several tie, NaN taken as +inf for the lowest and -inf for the highest
+    (a bucket of NaN only: its first value, NaN, twice), into ``pairs`` (2 x buckets, K) in the
+    order the two occur, the lowest first where they are one step."""
+    n, columns = values.shape
+    for c in range(columns):
+        for b in range(pairs.shape[0] // 2):
+            first = b * width
+            low_at = high_at = first
+            low, high = np.inf, -np.inf
+            for i in range(first, min(first + width, n)):
+                v = values[i, c]
+                if v != v:  # NaN: neither extreme
+                    continue
+                if v < low:
+                    low, low_at = v, i
+                if v > high:
+                    high, high_at = v, i
+            if low_at > high_at:
+                pairs[2 * b, c], pairs[2 * b + 1, c] = values[high_at, c], values[low_at, c]
+            else:
+                pairs[2 * b, c], pairs[2 * b + 1, c] = values[low_at, c], values[high_at, c]
 
 
 def envelope_times(t: np.ndarray, width: int) -> np.ndarray:
