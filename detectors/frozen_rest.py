@@ -26,6 +26,7 @@ budget over the log's stretches of rest (``budget_per_hour / stretches per hour`
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import chdtri  # not scipy.stats (46 MB to import)
 
 from logscan.alarms import true_runs
 
@@ -91,6 +92,4 @@ def _moved(t: np.ndarray, group, first: int, stop: int, model, alpha: float) -> 
     noise = np.asarray(group.noise_std if group.noise_std is not None else spec.noise_std, dtype=np.float64)
     variance = 2.0 * noise**2 + model.rest_position_var(float(t[b] - t[a]))
     shift = group.z[b] - group.z[a]
-    from scipy.special import chdtri  # chdtri(d, q) = chi2.isf(q, d), without scipy.stats (46 MB to import)
-
     return float(np.sum(shift**2 / variance)) > chdtri(shift.size, alpha)

@@ -109,7 +109,7 @@ def test_a_log_with_a_built_in_profile_is_not_read_by_the_warm_up(monkeypatch):
     from logscan.pipeline import run
 
     profiles: list[str] = []
-    monkeypatch.setattr(run, "load_profile_for", lambda path, profile_path: profiles.append(path))
+    monkeypatch.setattr(run, "load_profile_for", lambda path, profile_path, embedded=None: profiles.append(path))
     monkeypatch.setattr(run, "load_kernels", lambda *args, **kwargs: None)
     run.load_kernels_for(str(REPO / "sample_logs" / "husky_drive.bag"))
     assert profiles == []

@@ -94,12 +94,11 @@ def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult
         return Band(upper=upper, lower=None if b.lower is None else envelope(b.lower, width))
 
     judged = {k: envelope(np.asarray(v, dtype=bool), width) for k, v in result.judged.items() if np.shape(v) == (n,)}
-    grid = {k: v for k, v in result.series.items() if np.shape(v)[:1] == (n,)}
-    counts = {k: (np.size(v), int(np.count_nonzero(np.isfinite(v)))) for k, v in grid.items()}
+    series = {k: v for k, v in result.series.items() if np.shape(v)[:1] == (n,)}
     return replace(
         result,
-        series=on_grid(result.series),
-        series_counts=counts,
+        series=on_grid(series),
+        series_counts={k: (np.size(v), int(np.count_nonzero(np.isfinite(v)))) for k, v in series.items()},
         thresholds={k: band(b) for k, b in result.thresholds.items()},
         extras=on_grid(result.extras),
         judged=judged,

@@ -55,13 +55,16 @@ Fraction = Callable[[int, int], None]  # (done, total) of the step under way, e.
 CONTEXT_TOPICS = frozenset(STATE_TOPICS) | frozenset(GNSS_UTC_CHANNELS)
 
 
-def load_profile_for(path: str | os.PathLike, profile_path: str | os.PathLike | None) -> LoadedProfile:
-    """The profile of a log: the file given, else the one the log embeds (a metadata-only read), else
-    the built-in profile of a log that names itself (a PX4 ULog: `logscan.profiles.builtin`)."""
+def load_profile_for(
+    path: str | os.PathLike, profile_path: str | os.PathLike | None, embedded: str | None = None
+) -> LoadedProfile:
+    """The profile of a log: the file given, else the one the log embeds (a metadata-only read;
+    ``embedded``: its text, already read), else the built-in profile of a log that names itself (a
+    PX4 ULog: `logscan.profiles.builtin`)."""
     if profile_path is not None:
         profile = load_profile(profile_path)
         return LoadedProfile(profile, profile.to_toml(), str(profile_path), list(profile.notes))
-    embedded = read_embedded_profile(path)
+    embedded = embedded or read_embedded_profile(path)
     if not embedded:
         found = builtin_profile_for(path, with_log=True)
         if found is not None:

@@ -105,9 +105,10 @@ def load_kernels_for(
     built-in profile (a PX4 ULog, a ROS log) is left to its worker: that profile is made by reading
     the log, which would take the parent a whole read of it, alone, to save each worker ~0.1 s."""
     try:
-        if profile_path is None and not read_embedded_profile(path):
+        embedded = None if profile_path is not None else read_embedded_profile(path)
+        if profile_path is None and not embedded:
             return
-        loaded = load_profile_for(path, profile_path)
+        loaded = load_profile_for(path, profile_path, embedded)
         detectors = filter_free(create_detectors(loaded, detector_names), loaded, path)
         vehicle = loaded.profile.vehicle
         model = None if loaded.model_not_run else get_model(vehicle.model, vehicle.params)

@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.special import ndtri  # not scipy.stats (46 MB to import)
 
 from logscan.alarms import AlarmInterval
 from logscan.detectors.words import group_words
@@ -119,8 +120,6 @@ def input_suspect(evidence: KinematicEvidence | None, group: str | None, alarm: 
         return None
     rows = (evidence.t >= alarm.start - 1e-9) & (evidence.t <= alarm.end + 1e-9)
     span_s = max(float(alarm.end - alarm.start), evidence.dt)
-    from scipy.special import ndtri  # here, and not scipy.stats (46 MB to import)
-
     z_min = -float(ndtri(BUDGET_PER_HOUR * span_s / 3600.0 / 2.0))
     agree: dict[str, float] = {}  # each sensor's z, in the pairs' order
     confirmed = False  # by a pair whose level has a sensor of its own

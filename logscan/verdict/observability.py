@@ -138,7 +138,15 @@ class Observability:
         magnitude = event.magnitude if event.kind != "lost-actuator" else 1.0
         seen = self.observable(d, event.kind, magnitude)
         inside = inside_rows(self.t_start, self.evidence[:, d], event, self)
-        return bool(seen[inside].any()) if inside.any() else None
+        before = self.seen_before(event, magnitude)
+        if not inside.any():
+            return before
+        return bool(seen[inside].any()) or bool(before)
+
+    def seen_before(self, event, magnitude: float) -> bool | None:
+        """The verdict of the windows a truth event fills among those no longer held in full (a
+        long log's, `logscan.verdict.observability_folded`); None: none (every window is held)."""
+        return None
 
     @property
     def t_first(self) -> float:

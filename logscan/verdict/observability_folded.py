@@ -31,7 +31,6 @@ from logscan.verdict.observability import (
     blind_rows,
     fault_scale,
     inside_rows,
-    seen_rows,
     spans_of_runs,
 )
 
@@ -63,21 +62,15 @@ class FoldedObservability(Observability):
         runs = np.concatenate((self.runs.get((d, kind), _NO_RUNS), closed, last))
         return spans_of_runs(runs[:, 0], runs[:, 1], self.stride_s, self.t_end)
 
-    def event_verdict(self, event) -> bool | None:
-        """As `Observability.event_verdict`: the rows kept in full and the reduced ones' maximum."""
-        d = self.find(event.target, event.channels or ())
-        if d is None or event.kind not in self.kinds_of(self.directions[d]):
-            return None
+    def seen_before(self, event, magnitude: float) -> bool | None:
+        """Whether the reduced rows the event fills saw it (their maximum's verdict); None: none."""
         if self.first_start is not None and _key(event) not in self.maxima:
             raise LookupError(f"no verdict kept for {event}: not among the events the verdict was reduced for")
-        magnitude = event.magnitude if event.kind != "lost-actuator" else 1.0
-        inside = inside_rows(self.t_start, self.evidence[:, d], event, self)
-        seen = seen_rows(self.evidence[:, d], event.kind, magnitude, self.snr_min)
         past = self.maxima.get(_key(event), -np.inf)
-        if not inside.any() and past == -np.inf:
+        if past == -np.inf:
             return None
         size = fault_scale(event.kind, magnitude)
-        return bool(seen[inside].any() or (past > -np.inf and size * size * past >= self.snr_min**2))
+        return bool(size * size * past >= self.snr_min**2)
 
     def nbytes(self) -> int:
         """The bytes of what the verdict keeps per row or per blind run (the rows in full, the runs)."""
