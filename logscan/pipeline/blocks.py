@@ -136,11 +136,12 @@ def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: floa
         if refused and analysis.duration_s > block_s:  # shorter than one block: as it should be
             analysis.warnings.append(refused)
         return analysis
-    return _in_blocks(path, profile_path, loaded, windows, (start_s, end_s), options)
+    return _in_blocks(path, profile_path, loaded, windows, (start_s, end_s), options, block_s)
 
 
-def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options: dict):
-    """Each window analysed, reduced, its full-rate arrays freed and folded into the merged state."""
+def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options: dict, asked_s=None):
+    """Each window analysed, reduced, its full-rate arrays freed and folded into the merged state;
+    ``asked_s``: the --block-s given (None: the default), which the equal blocks may undercut."""
     progress = options.pop("progress", None)
     options.pop("fraction", None)  # the bytes of each block's read would run back and forth
     options["free_series"] = True  # sensor_views as asked: the incidents' sizes read the innovations
@@ -186,10 +187,17 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     )
     if block_s < DETECTOR_LEAD_S:
         merged.warnings.append(
-            f"--block-s {block_s:g}: each block is analysed with the {DETECTOR_LEAD_S:g} s before it, so blocks "
+            f"{_asked(asked_s, block_s)}: each block is analysed with the {DETECTOR_LEAD_S:g} s before it, so blocks "
             f"shorter than that cost more than twice the analysis at once (default: {BLOCK_STEPS / rate:g} s)"
         )
     return merged
+
+
+def _asked(asked_s: float | None, block_s: float) -> str:
+    """The --block-s given, and the equal blocks' length where it differs (a 60-s ask of 395 s: 56.5 s)."""
+    if asked_s is None:
+        return f"blocks of {block_s:g} s"
+    return f"--block-s {asked_s:g}" + ("" if f"{asked_s:g}" == f"{block_s:g}" else f" (blocks of {block_s:g} s)")
 
 
 def _refused_line(windows: list, k: int, n: int, exc: LogscanError) -> str:
