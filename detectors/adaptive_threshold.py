@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
+
 # The kernels allocate nothing and call no other numba function: their output arrays come from
 # numpy in the wrappers, and the ring's push and sums are written out in the loop. numba's generic
 # np.full / np.zeros, min / max and each helper compile apart (types, LLVM, linking into the caller):
@@ -119,3 +121,6 @@ def trailing_mean_var(values, defined, window):
     mean, var = np.full(n, np.nan), np.full(n, np.nan)
     _trailing_kernel(values, defined, window, mean, var, np.zeros(window))
     return mean, var
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -51,6 +51,7 @@ from logscan.detectors.params import (
 )
 from logscan.detectors.words import group_words
 from logscan.errors import ProfileError
+from logscan.numba_cache import follow_dependencies
 
 POSITIVE = Interval(float, 0, None, closed="neither")
 SIEGMUND_SHIFT = 1.166  # b = h + 1.166: the overshoot correction of Siegmund's approximation
@@ -349,3 +350,6 @@ class CusumDetector(Detector):
     def _columns(trace, g: int) -> np.ndarray:
         offset = int(trace.group_offsets[g])
         return np.arange(offset, offset + int(trace.group_sizes[g]))
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

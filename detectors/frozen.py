@@ -56,6 +56,7 @@ from logscan.detectors.frozen_rest import denied_rest
 from logscan.detectors.params import Interval, budget_bound, multiplier_bound
 from logscan.detectors.raw_topics import skipped_lines
 from logscan.detectors.words import group_words
+from logscan.numba_cache import follow_dependencies
 from logscan.results import NotChecked
 
 PREFIX = "frozen"
@@ -365,3 +366,6 @@ class FrozenSensorDetector(Detector):
         spec = getattr(model, "groups", {}).get(group.name) if model is not None else None
         outputs = list(spec.outputs) if spec is not None and len(spec.outputs) == width else None
         return f"{PREFIX}.{group.name}.{outputs[j] if outputs else j}"
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -29,6 +29,7 @@ from logscan.detectors.base import Detector, DetectorResult, any_per_row, median
 from logscan.detectors.budget import check_proof, design_rate
 from logscan.detectors.params import PERSIST, Boolean, Interval, alpha_bound, budget_bound
 from logscan.detectors.words import group_words
+from logscan.numba_cache import follow_dependencies
 
 # A NIS beyond this (far beyond any chi-square threshold: a bit flip, a diverging filter) is summed
 # apart: in the running sum it would cost every later window its precision (1e20 leaves no digit of
@@ -252,3 +253,6 @@ class NisDetector(Detector):
             )
             result.extras[f"{signal}.per_dof"] = per_dof
         return result
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -12,8 +12,16 @@ call. It also makes each of them read an index that names a class no longer ther
 NamedTuple argument renamed or moved: numba unpickles the whole index before it compares stamps)
 as stale, instead of failing on every load and save of that kernel (`tolerate_missing_classes`).
 
-Uses numba internals (`_cache._cache_file._source_stamp`, numba/core/caching.py); a no-op if
-they change.
+The same call files each of those kernels by what it compiles, not by where the package is
+installed: under ``<NUMBA_CACHE_DIR>/<module>-<digest>``, the digest a sha256 of its module's source
+and of every dependency's (`relocate`). numba files a kernel by the absolute path of its source
+directory, so a regular install, an editable one of the same tree (the README's two lines), a second
+venv or a reinstall of the same version each compiled every kernel again; now they share whatever
+kernels have the same source, and a changed module is a new folder (two versions used in turn never
+overwrite each other's kernels).
+
+Uses numba internals (`_cache._cache_file`, `_cache._impl._locator`, numba/core/caching.py); a no-op
+if they change.
 
 `optimisation_level(level, *functions)` compiles the given kernels with LLVM at another level than
 numba's (NUMBA_OPT, 3): for a kernel that runs briefly against its compile, where the lower level
@@ -26,10 +34,12 @@ import ast
 import functools
 import hashlib
 import importlib.util
+import os
 import pickle
 import re
 import sys
 from types import CodeType, FunctionType, ModuleType
+from typing import Any
 
 from numba.core import config, event, types
 from numba.core.dispatcher import Dispatcher
@@ -50,6 +60,58 @@ def follow_dependencies(module_name: str) -> None:
         tolerate_missing_classes(cache_file)
         if dependencies and hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = source_stamp(dispatcher, dependencies)
+        relocate(dispatcher, module, dependencies)
+
+
+def relocate(dispatcher: Dispatcher, module: ModuleType, dependencies: list[ModuleType]) -> None:
+    """File ``dispatcher``'s disk cache under `relocated_path` (its module's name and the digest of
+    the sources it compiles in) instead of numba's folder named after the absolute path of its
+    source directory, so every copy of the same sources shares it. Left as numba made it when
+    numba's cache directory is unset or its internals differ."""
+    cache: Any = getattr(dispatcher, "_cache", None)
+    cache_file: Any = getattr(cache, "_cache_file", None)
+    impl: Any = getattr(cache, "_impl", None)
+    if not config.CACHE_DIR or not hasattr(cache_file, "_index_name") or not hasattr(impl, "_locator"):
+        return
+    locator = impl._locator
+    original = getattr(locator, "original", locator)
+    path = relocated_path(module, dependencies)
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:  # numba's own folder stays (numba itself says when that cannot be written)
+        return
+    impl._locator = _RelocatedLocator(original, path)
+    cache._cache_path = cache_file._cache_path = path
+    cache_file._index_path = os.path.join(path, cache_file._index_name)
+
+
+def relocated_path(module: ModuleType, dependencies: list[ModuleType]) -> str:
+    """``<NUMBA_CACHE_DIR>/<module name>-<digest>``: the digest (16 hex digits) a sha256 over the
+    source of ``module`` and of each of ``dependencies``, so a change to any of them is a new
+    folder and identical sources anywhere on disk share one."""
+    digest = hashlib.sha256()
+    for source in (module, *dependencies):
+        digest.update(source.__name__.encode())
+        digest.update(file_digest(str(source.__file__)).encode())
+    return os.path.join(config.CACHE_DIR, f"{module.__name__}-{digest.hexdigest()[:16]}")
+
+
+class _RelocatedLocator:
+    """numba's locator of a kernel (its source stamp, its disambiguator), with the cache folder
+    given by `relocate`; numba asks it for that folder again before each save."""
+
+    def __init__(self, original, path: str):
+        self.original = original
+        self.path = path
+
+    def get_cache_path(self) -> str:
+        return self.path
+
+    def ensure_cache_path(self) -> None:
+        os.makedirs(self.path, exist_ok=True)
+
+    def __getattr__(self, name):
+        return getattr(self.original, name)
 
 
 def initialise_jit() -> None:
@@ -150,6 +212,13 @@ def source_stamp(dispatcher: Dispatcher, dependencies: list[ModuleType]):
 
 
 def file_digest(path: str) -> str:
+    """sha256 of the file's bytes, read once per process for each (path, size, mtime)."""
+    status = os.stat(path)
+    return _digest(path, status.st_size, status.st_mtime_ns)
+
+
+@functools.cache
+def _digest(path: str, size: int, mtime_ns: int) -> str:
     with open(path, "rb") as fh:
         return hashlib.sha256(fh.read()).hexdigest()
 

@@ -20,6 +20,8 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+import logscan  # noqa: F401 - sets NUMBA_CACHE_DIR (numba_cache_dir)
+
 # CI must not fail at random: property tests draw the same examples on every run (a seed per test).
 # HYPOTHESIS_PROFILE=explore draws fresh ones, to search for new failures locally.
 settings.register_profile("ci", derandomize=True, print_blob=True)
@@ -258,7 +260,7 @@ class InstalledWheel:
     wheel: Path
     venv: Path
     workdir: Path  # outside the checkout: run from here, nothing of the checkout is importable
-    env: dict[str, str]  # no checkout or dev venv on any path; its own kernel cache
+    env: dict[str, str]  # no checkout or dev venv on any path; this session's kernel cache
 
     def run(self, *args: str | os.PathLike, timeout: float = 900) -> subprocess.CompletedProcess:
         """`logscan ARGS...` from the venv's bin/, in workdir."""
@@ -279,6 +281,11 @@ def clean_env(cache_dir: Path) -> dict[str, str]:
     )
     env["LOGSCAN_CACHE_DIR"] = str(cache_dir)
     return env
+
+
+def numba_cache_dir() -> Path:
+    """The folder this session's logscan compiles its kernels into (set by `import logscan`)."""
+    return Path(os.environ["NUMBA_CACHE_DIR"])
 
 
 def copy_tracked_files(dest: Path) -> None:
@@ -303,6 +310,11 @@ def installed_wheel(tmp_path_factory) -> InstalledWheel:
     workdir.mkdir()
     copy_tracked_files(source)
     env = clean_env(root / "cache")
+    # the kernels this session compiled already: numba's cache files a kernel by its sources, not
+    # by where they are installed (logscan.numba_cache.relocate), so the wheel's identical sources
+    # load them instead of compiling every model again (6-7 minutes of a CI run)
+    env.pop("LOGSCAN_CACHE_DIR")
+    env["NUMBA_CACHE_DIR"] = str(numba_cache_dir())
 
     def step(*command: str | os.PathLike) -> None:
         done = subprocess.run([str(c) for c in command], cwd=workdir, env=env, capture_output=True, text=True)

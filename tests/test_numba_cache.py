@@ -1,9 +1,13 @@
-"""The numba disk cache of a kernel goes stale when any module it compiles in changes."""
+"""The numba disk cache of a kernel goes stale when any module it compiles in changes, and is filed
+by those modules' sources, not by where the package lies."""
 
 from __future__ import annotations
 
 import importlib
+import os
 import re
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -11,6 +15,7 @@ from typing import NamedTuple
 import pytest
 from numba.core.caching import IndexDataCacheFile
 
+import logscan.detectors
 from logscan import numba_cache
 from logscan.filters import ekf
 from logscan.simulate import runner
@@ -25,13 +30,16 @@ MODEL_KERNEL_MODULES = sorted(
 
 
 def modules_with_cached_kernels() -> list[str]:
-    """Every package module whose source declares a cached numba function."""
+    """Every package module whose source declares a cached numba function (logscan.detectors lives
+    in the checkout's detectors/ folder)."""
     names = []
-    for path in sorted(PACKAGE_DIR.rglob("*.py")):
-        if CACHED_KERNEL.search(path.read_text(encoding="utf-8")):
-            parts = path.relative_to(PACKAGE_DIR.parent).with_suffix("").parts
-            names.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
-    return names
+    for folder, prefix in ((PACKAGE_DIR, ()), (Path(logscan.detectors.__path__[0]), ("logscan", "detectors"))):
+        for path in sorted(folder.rglob("*.py")):
+            if CACHED_KERNEL.search(path.read_text(encoding="utf-8")):
+                parts = path.relative_to(folder.parent if not prefix else folder).with_suffix("").parts
+                parts = (*prefix, *parts)
+                names.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    return sorted(set(names))
 
 
 def names(modules) -> set[str]:
@@ -74,6 +82,62 @@ def test_every_cached_kernel_carries_the_stamp_of_its_dependencies(module_name):
             f"{module_name} imports kernels or constants of {names(dependencies)}: "
             "end it with `follow_dependencies(__name__)` (logscan.numba_cache)"
         )
+
+
+@pytest.mark.parametrize("module_name", modules_with_cached_kernels())
+def test_every_cached_kernel_is_filed_by_its_sources_not_by_its_path(module_name):
+    module = importlib.import_module(module_name)
+    folder = numba_cache.relocated_path(module, numba_cache.kernel_dependencies(module))
+    assert os.path.basename(folder).startswith(module_name + "-")
+    for dispatcher in numba_cache.cached_dispatchers(module):
+        cache = dispatcher._cache
+        assert cache._cache_path == cache._cache_file._cache_path == folder, (
+            f"{module_name}: end it with `follow_dependencies(__name__)` (logscan.numba_cache)"
+        )
+        assert os.path.dirname(cache._cache_file._index_path) == folder
+        assert cache._impl.locator.get_cache_path() == folder
+
+
+def test_a_copy_elsewhere_shares_the_folder_and_an_edit_moves_it(tmp_path, monkeypatch):
+    """The folder is named by the module and the digest of the sources: the same sources at another
+    path (another install) share it; one edited byte in the module or a dependency is another."""
+    module = importlib.import_module("logscan.filters.ekf")
+    dependencies = numba_cache.kernel_dependencies(module)
+    here = numba_cache.relocated_path(module, dependencies)
+    copy = tmp_path / "elsewhere" / "ekf.py"
+    copy.parent.mkdir()
+    shutil.copy2(module.__file__, copy)
+    os.utime(copy, (1, 1))  # another install: another path and time, the same bytes
+    monkeypatch.setattr(module, "__file__", str(copy))
+    assert numba_cache.relocated_path(module, dependencies) == here
+    monkeypatch.setattr(module, "__file__", changed_copy(module, tmp_path))
+    assert numba_cache.relocated_path(module, dependencies) != here
+    monkeypatch.undo()
+    linalg = importlib.import_module("logscan.filters.linalg")
+    monkeypatch.setattr(linalg, "__file__", changed_copy(linalg, tmp_path))
+    assert numba_cache.relocated_path(module, dependencies) != here
+
+
+@pytest.mark.slow
+def test_a_second_copy_of_the_package_loads_the_kernels_the_first_compiled(tmp_path):
+    """Two copies of the package (a checkout and an install, or two venvs) with one cache: a
+    kernel the first compiled, the second loads without compiling."""
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import logscan.filters.linalg as m;"
+        "assert m.__file__.startswith(sys.argv[1]), m.__file__;"
+        "m.wrap_angle(1.0); print(len(m.wrap_angle.stats.cache_misses), len(m.wrap_angle.stats.cache_hits))"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
+    env["LOGSCAN_CACHE_DIR"] = str(tmp_path / "cache")
+    counts = []
+    for copy in ("first", "second"):
+        shutil.copytree(PACKAGE_DIR, tmp_path / copy / "logscan", ignore=shutil.ignore_patterns("__pycache__"))
+        done = subprocess.run(
+            [sys.executable, "-c", code, str(tmp_path / copy)], env=env, cwd=tmp_path, capture_output=True, text=True
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        counts.append(done.stdout.split())
+    assert counts == [["1", "0"], ["0", "1"]]
 
 
 def changed_copy(module, tmp_path: Path) -> str:

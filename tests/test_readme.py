@@ -97,7 +97,8 @@ def _copy_of_the_checkout(dest: Path) -> None:
 def test_quick_start_lines_one_after_the_other_in_one_copy(tmp_path):
     """The README's two lines verbatim, one after the other in one copy of the tracked files (a
     regular install, then an editable one over it), leave a working `logscan` and `python -m
-    logscan` in and outside the checkout, and no compiled-kernel cache in the copy or the venv.
+    logscan` in and outside the checkout, and no compiled-kernel cache in the copy or the venv; the
+    editable install runs on the kernels the regular one compiled (the same sources).
 
     Line 2's pytest run is narrowed with PYTEST_ADDOPTS (the line itself is unchanged) to two tests
     and the two files that hold them, so that it neither runs the whole suite, this test included, a
@@ -141,6 +142,8 @@ def test_quick_start_lines_one_after_the_other_in_one_copy(tmp_path):
     assert elsewhere.returncode == 0, elsewhere.stderr[-2000:]
     again = shell(".venv/bin/logscan analyze sample_logs/quad_imu_bias.mcap --no-report")
     assert again.returncode == 1 and "incident 1: accelerometer" in again.stdout, again.stderr[-3000:]
+    # the editable install's sources are the regular one's: it loads the kernels line 1 compiled
+    assert "compiling numerical kernels" not in again.stderr, again.stderr[-3000:]
 
     leftovers = [str(p) for p in copy.rglob("*.nb[ic]")]
     assert leftovers == [], leftovers[:5]

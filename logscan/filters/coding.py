@@ -18,6 +18,7 @@ from numba import njit
 
 from logscan.models.base import Model
 from logscan.needs import CodedVariance
+from logscan.numba_cache import follow_dependencies
 
 
 @njit(cache=True, error_model="numpy", no_cpython_wrapper=True)
@@ -55,3 +56,6 @@ def coding_arguments(coding: CodedVariance | None, model: Model) -> tuple[np.nda
         return np.empty(0), 0.0
     floor = float(coding.sigma_floor) * np.asarray(model.state_scale(), dtype=np.float64)
     return np.ascontiguousarray(floor), float(coding.r_max)
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
+
 # error_model="numpy": float division without the Python-style zero checks (no division here
 # can see a zero: Cholesky pivots are checked > 0 first); not fastmath, NaN checks still hold.
 
@@ -325,3 +327,6 @@ def innovation_covariance(Hs, hcols, hnnz, m, P, n, HP, Rs, S):
             S[a, b] = t + Rs[a, b]
         for b in range(a):
             S[a, b] = S[b, a]
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

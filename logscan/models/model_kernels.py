@@ -28,6 +28,8 @@ from typing import Any, NamedTuple
 from numba import njit, types
 from numba.extending import overload
 
+from logscan.numba_cache import follow_dependencies
+
 
 class ModelKernels(NamedTuple):
     """One model's registration: its id, its registered name and its numba functions."""
@@ -116,3 +118,6 @@ def _by_model(field, index, model_id, args):
         return by_model(field, following, model_id, args)
 
     return branch
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -11,6 +11,7 @@ from dataclasses import replace
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
 from logscan.pipeline.raw_lead import cut_rows
 from logscan.results import Band, DetectorResult
 
@@ -142,3 +143,6 @@ def _cut_lead(analysis, first: int) -> None:
     if verdict is not None and verdict.t_start.size:  # and the windows the block before could not end
         kept = verdict.t_start >= from_s - verdict.window_s - 1e-9
         analysis.observability = replace(verdict, t_start=verdict.t_start[kept], evidence=verdict.evidence[kept])
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
 from logscan.report.decimate import collapsed
 from logscan.results import Band, DetectorResult
 
@@ -198,3 +199,6 @@ def peak_margin(margins: Sequence[Margin]) -> Margin | None:
     """The margin closest to (or furthest over) its threshold, None when none has a ratio."""
     rated = [m for m in margins if m.ratio is not None]
     return max(rated, key=lambda m: m.ratio) if rated else None
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

@@ -24,6 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
+
 QUAD_CTRL, SBW_CTRL, DCM_CTRL, HOVER_CTRL = 0, 1, 2, 3
 
 
@@ -293,3 +295,6 @@ def control(ctrl_id, cp, cs, r, xh, dt, u):
         hover_control(cp, cs, r, xh, dt, u)
     else:
         dcm_control(cp, cs, r, xh, dt, u)
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)

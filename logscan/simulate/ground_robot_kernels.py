@@ -18,6 +18,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from logscan.numba_cache import follow_dependencies
+
 
 class RobotParams(NamedTuple):
     """Scalar settings of the loop (floats, so numba sees one homogeneous tuple)."""
@@ -182,3 +184,6 @@ def robot_loop(p, x0, m0, integ0, Ad, Bd, Qo, Qm, W_o, W_m, E_o, E_m, A_o, A_m):
             M[j] = Ad @ M[j] + Bd * V[k, j] + W_m[k, j]
         V_prev[:] = V[k]
     return x_true, m_true, u_o, w_ref, V, z_o, z_m, xh_o, Ph_o, xh_m, Ph_m
+
+
+follow_dependencies(__name__)  # the disk cache filed by what the kernels compile (logscan.numba_cache)
