@@ -53,6 +53,7 @@ def follow_dependencies(module_name: str) -> None:
     read an index naming a class since renamed as stale (`tolerate_missing_classes`)."""
     module = sys.modules[module_name]
     dependencies = kernel_dependencies(module)
+    folder = relocated_path(module, dependencies) if config.CACHE_DIR else ""
     for dispatcher in cached_dispatchers(module):
         cache_file = getattr(dispatcher._cache, "_cache_file", None)
         if cache_file is None:
@@ -60,22 +61,21 @@ def follow_dependencies(module_name: str) -> None:
         tolerate_missing_classes(cache_file)
         if dependencies and hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = source_stamp(dispatcher, dependencies)
-        relocate(dispatcher, module, dependencies)
+        relocate(dispatcher, folder)
 
 
-def relocate(dispatcher: Dispatcher, module: ModuleType, dependencies: list[ModuleType]) -> None:
-    """File ``dispatcher``'s disk cache under `relocated_path` (its module's name and the digest of
-    the sources it compiles in) instead of numba's folder named after the absolute path of its
-    source directory, so every copy of the same sources shares it. Left as numba made it when
-    numba's cache directory is unset or its internals differ."""
+def relocate(dispatcher: Dispatcher, path: str) -> None:
+    """File ``dispatcher``'s disk cache in the folder ``path`` (`relocated_path`: its module's name
+    and the digest of the sources it compiles in) instead of numba's folder named after the absolute
+    path of its source directory, so every copy of the same sources shares it. Left as numba made it
+    when ``path`` is "" (numba's cache directory unset) or numba's internals differ."""
     cache: Any = getattr(dispatcher, "_cache", None)
     cache_file: Any = getattr(cache, "_cache_file", None)
     impl: Any = getattr(cache, "_impl", None)
-    if not config.CACHE_DIR or not hasattr(cache_file, "_index_name") or not hasattr(impl, "_locator"):
+    if not path or not hasattr(cache_file, "_index_name") or not hasattr(impl, "_locator"):
         return
     locator = impl._locator
     original = getattr(locator, "original", locator)
-    path = relocated_path(module, dependencies)
     try:
         os.makedirs(path, exist_ok=True)
     except OSError:  # numba's own folder stays (numba itself says when that cannot be written)
