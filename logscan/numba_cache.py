@@ -4,11 +4,11 @@ numba keys a cached function on its own source file only (the index's source sta
 that file; a stale index is ignored: `IndexDataCacheFile._load_index`), but a kernel that calls
 numba functions of other modules carries their compiled code, and reads their numeric constants as
 frozen values: editing a model's kernels would leave the EKF running the old equations from the
-cache. `follow_dependencies(__name__)`, called at the end of every module that holds cached kernels
-and imports numba functions or constants from other logscan modules, makes the stamp of each of its
-cached functions (own stamp, sha256 of each dependency's source), over the dependencies found
-transitively (`kernel_dependencies`). tests/test_numba_cache.py fails for a module that forgets the
-call. It also makes each of them read an index that names a class no longer there (a kernel's
+cache. `follow_dependencies(__name__)`, called at the end of every module that holds cached kernels,
+makes the stamp of each of its cached functions the sha256 of its module's source and of each
+dependency's, over the dependencies found transitively (`kernel_dependencies`): the modules it
+imports numba functions or constants from. tests/test_numba_cache.py fails for a module that
+forgets the call. It also makes each of them read an index that names a class no longer there (a kernel's
 NamedTuple argument renamed or moved: numba unpickles the whole index before it compares stamps)
 as stale, instead of failing on every load and save of that kernel (`tolerate_missing_classes`).
 
@@ -48,9 +48,10 @@ PACKAGE = __name__.split(".")[0]
 
 
 def follow_dependencies(module_name: str) -> None:
-    """Key the disk cache of every cached numba function of the module on its own file and on
-    the source of every module in `kernel_dependencies` (none: its own file only), and let it
-    read an index naming a class since renamed as stale (`tolerate_missing_classes`)."""
+    """Key the disk cache of every cached numba function of the module on its own source and on
+    the source of every module in `kernel_dependencies` (`source_stamp`), file it by them
+    (`relocate`), and let it read an index naming a class since renamed as stale
+    (`tolerate_missing_classes`)."""
     module = sys.modules[module_name]
     dependencies = kernel_dependencies(module)
     folder = relocated_path(module, dependencies) if config.CACHE_DIR else ""
@@ -59,7 +60,7 @@ def follow_dependencies(module_name: str) -> None:
         if cache_file is None:
             continue
         tolerate_missing_classes(cache_file)
-        if dependencies and hasattr(cache_file, "_source_stamp"):
+        if hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = source_stamp(dispatcher, dependencies)
         relocate(dispatcher, folder)
 
@@ -202,13 +203,12 @@ def tolerate_missing_classes(cache_file) -> None:
     cache_file._load_index = tolerant_load_index
 
 
-def source_stamp(dispatcher: Dispatcher, dependencies: list[ModuleType]):
-    """The index stamp the dispatcher's cache should carry: numba's own stamp of its file, with
-    the sha256 of each dependency's source when there are dependencies."""
-    own = dispatcher._cache._impl.locator.get_source_stamp()
-    if not dependencies:
-        return own
-    return (own, *(file_digest(module.__file__) for module in dependencies))
+def source_stamp(dispatcher: Dispatcher, dependencies: list[ModuleType]) -> tuple[str, ...]:
+    """The index stamp the dispatcher's cache should carry: the sha256 of its module's source and of
+    each dependency's. numba's own stamp is its file's modification time and size before numba 0.6x
+    (a content hash since): a copy of the same source elsewhere would read the index as stale."""
+    own = sys.modules[dispatcher.py_func.__module__]
+    return tuple(file_digest(str(module.__file__)) for module in (own, *dependencies))
 
 
 def file_digest(path: str) -> str:

@@ -108,8 +108,11 @@ def test_a_copy_elsewhere_shares_the_folder_and_an_edit_moves_it(tmp_path, monke
     copy.parent.mkdir()
     shutil.copy2(module.__file__, copy)
     os.utime(copy, (1, 1))  # another install: another path and time, the same bytes
+    stamp = numba_cache.source_stamp(module.ekf_run, dependencies)
     monkeypatch.setattr(module, "__file__", str(copy))
     assert numba_cache.relocated_path(module, dependencies) == here
+    # and the index's stamp: the bytes, not numba's modification time (numba < 0.6x)
+    assert numba_cache.source_stamp(module.ekf_run, dependencies) == stamp
     monkeypatch.setattr(module, "__file__", changed_copy(module, tmp_path))
     assert numba_cache.relocated_path(module, dependencies) != here
     monkeypatch.undo()
