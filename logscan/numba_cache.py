@@ -81,6 +81,8 @@ def relocate(dispatcher: Dispatcher, path: str) -> None:
         os.makedirs(path, exist_ok=True)
     except OSError:  # numba's own folder stays (numba itself says when that cannot be written)
         return
+    if not os.access(path, os.W_OK):  # another user's folder, say: a save there would raise
+        return
     impl._locator = _RelocatedLocator(original, path)
     cache._cache_path = cache_file._cache_path = path
     cache_file._index_path = os.path.join(path, cache_file._index_name)

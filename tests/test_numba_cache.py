@@ -240,3 +240,21 @@ def test_a_function_given_a_level_is_optimised_at_it_and_what_it_compiles_on_its
     assert levels["caller"] == 1
     assert levels["callee"] == int(default)
     assert config.OPT is default
+
+
+def test_a_folder_that_cannot_be_written_leaves_numbas_own(tmp_path, monkeypatch):
+    """A relocated folder that exists but cannot be written (another user's) is not used: numba's
+    own folder stays, so a save cannot fail there."""
+    module = importlib.import_module("logscan.filters.linalg")
+    dispatcher = module.wrap_angle
+    before = dispatcher._cache._cache_path
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    monkeypatch.setattr(os, "access", lambda path, mode: str(path) != str(locked))
+    numba_cache.relocate(dispatcher, str(locked))
+    assert dispatcher._cache._cache_path == before
+    monkeypatch.undo()
+    numba_cache.relocate(dispatcher, str(locked))
+    assert dispatcher._cache._cache_path == str(locked)
+    numba_cache.follow_dependencies("logscan.filters.linalg")
+    assert dispatcher._cache._cache_path == before
