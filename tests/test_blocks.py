@@ -294,10 +294,10 @@ def test_no_block_is_kept_once_it_is_folded_in(monkeypatch):
     alive: list[int] = []
     held: list[int] = []
 
-    def reduce_and_watch(analysis, width, from_s=None):
+    def reduce_and_watch(analysis, width, *rest):
         gc.collect()
         alive.append(sum(ref() is not None for ref in refs))
-        reduced = reduce(analysis, width, from_s)
+        reduced = reduce(analysis, width, *rest)
         refs.append(weakref.ref(reduced))
         return reduced
 

@@ -26,6 +26,7 @@ from logscan.pipeline.block_merge import (
     windows_folded,
 )
 from logscan.pipeline.detection import rescore
+from logscan.report.kept_views import KeptRows
 from logscan.results import Band, DetectorResult, events_from_truth
 
 if TYPE_CHECKING:
@@ -154,6 +155,7 @@ class BlockFold:
         self.failures: dict = {}
         self.observability = None
         self.events: list = []  # the log's truth events (`rescore` scores the merged alarms against them)
+        self.kept = KeptRows({})  # the rows of the sensor figures (`logscan.report.kept_views`)
 
     def add(self, block: Analysis) -> None:
         """Fold a reduced block in; nothing of it is kept but what the merge reads."""
@@ -181,11 +183,15 @@ class BlockFold:
         self.input_gaps += block.input_gaps
         self.failures.update({(f.detector, f.message): f for f in block.failures})
         self.observability = windows_folded(self.observability, block.observability, self.events)
+        if isinstance(prepared.innovations, KeptRows):
+            self.kept.extend(prepared.innovations)
+        prepared.innovations = None
         block.results, block.observability = [], None  # the first block's prepared stays: the merged one's
 
     def nbytes(self) -> int:
-        """The bytes of the envelopes folded so far (the merged times' and every detector's)."""
-        return self.times.nbytes() + sum(d.nbytes() for d in self.detectors.values())
+        """The bytes of the envelopes folded so far (the merged times' and every detector's) and of the
+        sensor figures' kept rows."""
+        return self.times.nbytes() + self.kept.nbytes() + sum(d.nbytes() for d in self.detectors.values())
 
     def merged(self, window: tuple[float | None, float | None] | None) -> Analysis:
         """One analysis of the log (``window``: the --start/--end the blocks cover, None: the whole
@@ -200,6 +206,7 @@ class BlockFold:
         prepared.run = replace(prepared.run, t=t, u=np.empty((t.size, 0)), window=window, first_step=0)
         prepared._filter_summary = merged_filter_summary(self.summaries)
         prepared.grid = (self.steps, float(prepared.run.dt))
+        prepared.innovations = self.kept if self.kept.group_names else None
         merged = Analysis(prepared=prepared, warnings=said_once(self.warnings))
         merged.results = [detector.merged(gap_s, self.steps) for detector in self.detectors.values()]
         merged.incidents = merged_incidents(self.incidents, merged.results, gap_s)

@@ -13,6 +13,8 @@ from numba import njit
 
 from logscan.numba_cache import follow_dependencies
 from logscan.pipeline.raw_lead import cut_rows
+from logscan.report.kept_views import kept_rows
+from logscan.report.sensor_figures import REDUCED_POINTS
 from logscan.results import Band, DetectorResult
 
 # Each series of the merged log keeps about this many points (two per bucket: the report draws at
@@ -106,10 +108,11 @@ def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult
     )
 
 
-def reduce_block(analysis, width: int, from_s: float | None = None):
+def reduce_block(analysis, width: int, from_s: float | None = None, points: int = REDUCED_POINTS):
     """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
-    as envelopes on the envelope's times (the block's grid ``run.t``), the filter's trace, aligned
-    signals, raw channels, the report's context and innovations, and the suspension's steps freed;
+    as envelopes on the envelope's times (the block's grid ``run.t``), the report's innovations as
+    the rows its sensor figures draw with at most ``points`` per series (`kept_rows`), the filter's
+    trace, aligned signals, raw channels, the report's context and the suspension's steps freed;
     ``from_s``: the block's own first step, the steps before it a lead-in for the detectors (their
     alarms already seen from it), cut off. Returns it."""
     prepared = analysis.prepared
@@ -120,12 +123,16 @@ def reduce_block(analysis, width: int, from_s: float | None = None):
     prepared.release_series()  # the filter's counts stay (`filter_summary`)
     if first:
         _cut_lead(analysis, first)
+    innovations = prepared.innovations
+    if innovations is not None:  # the alarms of the block's own steps: their zoom windows kept in full
+        alarms = [a for result in analysis.results for a in result.alarms]
+        innovations = kept_rows(innovations, t, first, alarms, points)
     n = t.size - first
     prepared.grid = (n, float(prepared.run.dt))
     analysis.results = [reduced_result(result, n, width) for result in analysis.results]
     times = envelope_times(t[first:], width)
     prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
-    prepared.raw, prepared.context, prepared.innovations = {}, None, None
+    prepared.raw, prepared.context, prepared.innovations = {}, None, innovations
     analysis.suspended = None
     return analysis
 

@@ -27,6 +27,7 @@ from logscan.pipeline.preparation import load_profile_for
 from logscan.pipeline.run import analyze_log
 from logscan.readers import detect_format
 from logscan.readers.mcap.span import indexed_span_s
+from logscan.report.sensor_figures import REDUCED_POINTS
 from logscan.verdict.observability import WARMUP_S as OBSERVABILITY_WARMUP_S
 from logscan.verdict.observability import WINDOW_S as OBSERVABILITY_WINDOW_S
 
@@ -149,6 +150,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     rate = float(loaded.profile.vehicle.rate_hz)
     block_s = windows[1][0] - (windows[0][0] or 0.0)
     width = bucket_width(int(len(windows) * block_s * rate))
+    points = -(-REDUCED_POINTS // len(windows))  # the sensor figures' rows: each block its share of the log's
     loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own
     fold, refused = BlockFold(), []
     with every_free_page():  # the peak must not depend on where the heap stands (logscan.memory)
@@ -171,7 +173,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
             except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
                 refused.append((k, exc))
                 continue
-            fold.add(reduce_block(analysis, width, None if led is None else start_s))  # and not kept
+            fold.add(reduce_block(analysis, width, None if led is None else start_s, points))  # and not kept
             del analysis
             gc.collect()
             return_freed_pages()

@@ -25,7 +25,7 @@ if TYPE_CHECKING:  # the types of the layers a prepared log carries (imported wh
     from logscan.pipeline.lead_in import FilterStart
     from logscan.profiles.schema import Profile
     from logscan.report.run_context import RunContext
-    from logscan.report.sensor_views import Innovations
+    from logscan.report.sensor_views import GroupRows
     from logscan.timebase.clock import Clock
     from logscan.traces import EkfTrace
 
@@ -91,7 +91,7 @@ class Prepared:
     warnings: list[str] = field(default_factory=list)
     _filter_summary: dict | None = None
     context: RunContext | None = None  # the path and mode the report draws (small)
-    innovations: Innovations | None = None  # the report's measured-vs-predicted figures
+    innovations: GroupRows | None = None  # the report's measured-vs-predicted figures (blocks: kept rows)
     raw: dict = field(default_factory=dict)  # the detectors' raw_topics' channels, as read (not aligned)
     loops: dict = field(default_factory=dict)  # a hierarchical profile's further loops: name -> Prepared
     clock: Clock | None = None  # the log's own clock, dated before the samples go

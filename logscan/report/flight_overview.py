@@ -13,12 +13,12 @@ import numpy as np
 
 from logscan.report.figures import Figure
 from logscan.report.sensor_figures import normalised_figure
-from logscan.report.sensor_views import Innovations
+from logscan.report.sensor_views import GroupRows
 
 FIGURE_ID = "fig-checked"
 
 
-def checked_rows(innovations: Innovations | None, t: np.ndarray, truth_spans: list) -> list[Figure]:
+def checked_rows(innovations: GroupRows | None, t: np.ndarray, truth_spans: list) -> list[Figure]:
     """One row per measurement group: its channels' normalised innovations (the last of
     `sensor_figures`); [] without innovations (no filter ran)."""
     if innovations is None:
@@ -29,7 +29,8 @@ def checked_rows(innovations: Innovations | None, t: np.ndarray, truth_spans: li
         if normalised is None or not np.isfinite(normalised).any():
             continue
         channels = innovations.channels[group]
-        rows.append(normalised_figure(group, channels, normalised, t, {"ground truth": truth_spans}))
+        times = innovations.times(group, t)  # block mode: the group's kept rows' own
+        rows.append(normalised_figure(group, channels, normalised, times, {"ground truth": truth_spans}))
     return rows
 
 

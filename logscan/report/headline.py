@@ -66,7 +66,7 @@ def headlines(incidents: Sequence[Incident], views: PageViews | None, t: np.ndar
         size = None
         if alarm is not None and group is not None and views is not None:
             view = views.view(group)
-            size = None if view is None else deviation(view, t, alarm, model)
+            size = None if view is None else deviation(view, views.times(group, t), alarm, model)
         out.append(Headline(incident, alarm, group, size))
     return out
 
@@ -87,7 +87,7 @@ def headline_figure(headline: Headline, views: PageViews | None, t: np.ndarray, 
         return None
     span = (float(headline.alarm.start), float(headline.alarm.end))
     spans = {"alarm": [span], "ground truth": truth_spans}
-    figures = sensor_figures(view, t, spans, [span], channels=[headline.deviation.channel])
+    figures = sensor_figures(view, views.times(headline.group, t), spans, [span], channels=[headline.deviation.channel])
     figure = figures[0]
     figure.title = f"{headline.deviation.name}: measured vs predicted, {headline.deviation.text()}"
     figure.x_range = zoom_range(*span)

@@ -10,7 +10,7 @@ import numpy as np
 
 from logscan.alarms import AlarmInterval
 from logscan.report.run_context import RunContext
-from logscan.report.sensor_views import Innovations
+from logscan.report.sensor_views import GroupRows
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import Clock
 from logscan.verdict import scoring
@@ -53,7 +53,8 @@ class ReportInput:
                       "Context" section (`logscan.report.context_figures`). None: not shown.
     innovations:      the EKF's packed innovations (`logscan.report.sensor_views.Innovations`): a group
                       an alarm names is drawn (measured vs predicted, per channel) in the first
-                      section whose alarms name it. None: not drawn.
+                      section whose alarms name it; block mode: the rows its figures draw, with their
+                      times (`logscan.report.kept_views.KeptRows`). None: not drawn.
     clock:            the log's own clock (`logscan.timebase.clock`): the time axis, the tables and the
                       headlines show times in it. Default: seconds since the log's start.
     recovery:         the recovered estimates per loop and state and one record per anomaly
@@ -84,7 +85,7 @@ class ReportInput:
     messages_outside: int = 0  # of WARNING and above logged outside a --start/--end window: counted, not listed
     groups: list[dict] = field(default_factory=list)
     context: RunContext | None = None
-    innovations: Innovations | None = None
+    innovations: GroupRows | None = None
     clock: Clock = field(default_factory=Clock)
     recovery: Any = None  # logscan.report.recovery_view.RecoveryView: the recovery section, when [recovery] ran
     observability: Any = None  # logscan.verdict.observability.Observability: shaded where a fault could not be seen

@@ -198,8 +198,9 @@ def estimated_path(path: Path2D | None, innovations, t: np.ndarray, max_points: 
     predicted = (
         innovations.predicted(path.group, path.columns) if path is not None and innovations is not None else None
     )
-    if predicted is None:
+    if predicted is None or path is None:
         return None
+    t = innovations.times(path.group, t)  # block mode: the group's kept rows' own
     x, y = predicted[:, 0].astype(np.float64), predicted[:, 1].astype(np.float64)
     idx = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
     if idx.size < 2:

@@ -29,7 +29,7 @@ def named_group_figures(
 ) -> list[Figure]:
     """The sensor figures of the groups ``result``'s alarms name (in the order they first alarm)
     that are not in ``drawn`` (added to it: a group is drawn once per report; its view taken from
-    ``views``)."""
+    ``views``), each at its group's times (`PageViews.times`: ``t``, the analysis grid, at once)."""
     if views is None:
         return []
     by_group: dict[str, list] = {}
@@ -43,7 +43,7 @@ def named_group_figures(
         drawn.add(group)
         spans = {"alarm": merge_spans(alarm_spans, min_width, min_gap), "ground truth": truth_spans}
         view = views.take(group)
-        figures.extend(sensor_figures(view, t, spans, alarm_spans) if view is not None else [])
+        figures.extend(sensor_figures(view, views.times(group, t), spans, alarm_spans) if view is not None else [])
     return figures
 
 
@@ -54,14 +54,16 @@ def _defined_steps(series: np.ndarray) -> np.ndarray | slice:
     return slice(None) if bool(defined.all()) else np.flatnonzero(defined)
 
 
-def _chosen(x: np.ndarray, series: list[np.ndarray], windows: np.ndarray, ascending: bool | None) -> np.ndarray:
+def _chosen(
+    x: np.ndarray, series: list[np.ndarray], windows: np.ndarray, ascending: bool | None, points: int = REDUCED_POINTS
+) -> np.ndarray:
     """Indices into ``series`` (defined samples at the times ``x``) drawing them, without keeping
-    them all until the page is written: at most REDUCED_POINTS per series (min/max per bucket)
+    them all until the page is written: at most ``points`` per series (min/max per bucket)
     plus every one inside the zoom ``windows`` (the page decimates again under its point budget).
     ``ascending``: whether ``x`` ascends (None: not known)."""
-    if x.size <= REDUCED_POINTS:
+    if x.size <= points:
         return np.arange(x.size)
-    chosen = [decimate_indices(s, REDUCED_POINTS, simplify_flat=True) for s in series]
+    chosen = [decimate_indices(s, points, simplify_flat=True) for s in series]
     inside = window_indices(x, windows, ascending) if windows.size else chosen[0][:0]
     return sorted_unique(*chosen, inside)
 
@@ -73,6 +75,24 @@ def _reduced(t: np.ndarray, series: list[np.ndarray], windows: np.ndarray) -> tu
     steps = np.arange(t.size)[pick]
     steps = steps[_chosen(t[pick], [s[pick] for s in series], windows, None)]
     return t[steps], steps
+
+
+def _channel_series(view: SensorView, j: int) -> tuple[np.ndarray | slice, list[np.ndarray]]:
+    """(steps, series): the steps where channel ``j``'s prediction is defined (`_defined_steps`) and
+    there its predicted, measured, upper and lower band and normalised innovation, as drawn."""
+    pick = _defined_steps(view.predicted[:, j])
+    predicted, measured, sigma, innovation = (a[pick, j] for a in (view.predicted, view.measured,
+                                                                   view.sigma, view.normalised))  # fmt: skip
+    half = np.float32(K_SIGMA) * sigma
+    return pick, [predicted, measured, predicted + half, predicted - half, innovation]
+
+
+def drawn_steps(view: SensorView, j: int, t: np.ndarray, windows: np.ndarray, points: int) -> np.ndarray:
+    """The steps (indices into ``t``, the view's times) channel ``j``'s figure draws from when
+    `_chosen` keeps at most ``points`` per series outside the zoom ``windows``."""
+    pick, series = _channel_series(view, j)
+    chosen = _chosen(t[pick], series, windows, ascends(t) if windows.size else None, points)
+    return np.arange(t.size)[pick][chosen]
 
 
 def sensor_figures(
@@ -89,12 +109,7 @@ def sensor_figures(
     for j, channel in enumerate(view.channels):
         if channels is not None and j not in channels:
             continue
-        pick = _defined_steps(view.predicted[:, j])
-        predicted, measured, sigma, innovation = (a[pick, j] for a in (view.predicted, view.measured,
-                                                                       view.sigma, view.normalised))  # fmt: skip
-        half = np.float32(K_SIGMA) * sigma
-        upper, lower = predicted + half, predicted - half
-        series = [predicted, measured, upper, lower, innovation]
+        pick, series = _channel_series(view, j)
         chosen = _chosen(t[pick], series, windows, grid_ascends)
         x = t[pick][chosen]
         predicted, measured, upper, lower, innovation = (s[chosen] for s in series)

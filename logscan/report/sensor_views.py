@@ -19,6 +19,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -100,6 +101,11 @@ class Innovations:
         chosen = [columns.start + int(j) for j in channels]
         return (self.packed["predicted"][:, chosen] + self.offset[chosen]).astype(np.float32)
 
+    def times(self, group: str, t: np.ndarray) -> np.ndarray:
+        """The times of the group's rows: the analysis grid ``t`` itself (every step is a row; block
+        mode's `logscan.report.kept_views.KeptRows` has times of its own)."""
+        return t
+
     def normalised(self, group: str) -> np.ndarray | None:
         """The group's normalised innovations alone, (N, k) float32 as its `view` has them (a
         quarter of the work: the overview of every group draws nothing else); None for a group
@@ -111,12 +117,25 @@ class Innovations:
         return _quotient(part["innovation"], part["sigma"])
 
 
+class GroupRows(Protocol):
+    """What the report reads of the filter's innovations: `Innovations` (every step of the grid)
+    or block mode's kept rows (`logscan.report.kept_views.KeptRows`, times of their own)."""
+
+    group_names: list[str]
+    channels: dict[str, list[str]]
+
+    def view(self, group: str) -> SensorView | None: ...
+    def times(self, group: str, t: np.ndarray) -> np.ndarray: ...
+    def normalised(self, group: str) -> np.ndarray | None: ...
+    def predicted(self, group: str, channels: Sequence[int]) -> np.ndarray | None: ...
+
+
 class PageViews:
     """The groups' `SensorView`s while one page is built, each made once: a view the headlines ask
     for (`view`) is kept until the group's sensor figures take it (`take`: a group is drawn once
     per page), so no more views are held at a time than the headlines held before."""
 
-    def __init__(self, innovations: Innovations):
+    def __init__(self, innovations: GroupRows):
         self.innovations = innovations
         self.group_names = innovations.group_names
         self._kept: dict[str, SensorView | None] = {}
@@ -126,6 +145,10 @@ class PageViews:
         if group not in self._kept:
             self._kept[group] = self.innovations.view(group)
         return self._kept[group]
+
+    def times(self, group: str, t: np.ndarray) -> np.ndarray:
+        """The times of the group's view's rows (``t``: the analysis grid)."""
+        return self.innovations.times(group, t)
 
     def take(self, group: str) -> SensorView | None:
         """The group's view, no longer kept."""

@@ -116,7 +116,8 @@ def deviation(view: GroupView, t: np.ndarray, alarm: AlarmInterval, model: Mappi
     normalised = view.normalised[rows].astype(np.float64)
     innovation = (view.measured[rows] - view.predicted[rows]).astype(np.float64)
     innovation[~np.isfinite(normalised)] = np.nan
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    # the step between the rows in the alarm (block mode's kept rows are full-rate only around alarms)
+    dt = float(np.median(np.diff(t[rows] if rows.size > 1 else t))) if t.size > 1 else 1.0
     width = max(int(round(DEVIATION_WINDOW_S / dt)), 1) if dt > 0 else rows.size
     sigmas, counts = _window_means(normalised, width)
     score = np.where(counts >= MIN_WINDOW_SAMPLES, np.abs(sigmas), -1.0)

@@ -1,0 +1,103 @@
+"""Block mode's sensor figures: of each block, per measurement group, only the rows of its packed
+innovations (`logscan.report.sensor_views.Innovations`) that the sensor figures would draw, with
+their times, kept once the block is freed (`kept_rows`), the blocks' end to end (`KeptRows.extend`).
+
+A block keeps, per channel of a group, the steps `logscan.report.sensor_figures.drawn_steps` picks
+on the block's own steps: the extremes of each drawn series in ``points`` buckets (the block's share
+of `REDUCED_POINTS`, so the log keeps about as many as its figure draws at once, whatever the number
+of blocks) and every sample inside the zoom windows around the block's alarms naming the group, as
+the figure at once keeps them in full. The rows hold the group's `SensorView` values (float32, as
+its pack gives them), so each block's own offsets and scales of the pack are applied before its
+rows join the others. docs/algorithms.md section 8.1b.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from logscan.report.plotly_json import zoom_windows
+from logscan.report.sensor_figures import drawn_steps
+from logscan.report.sensor_views import Innovations, SensorView
+from logscan.verdict.incidents import group_of
+
+_FIELDS = ("measured", "predicted", "sigma", "normalised")
+
+
+class KeptRows:
+    """Every group's kept rows: its `SensorView` values and their times (seconds, float64), in time
+    order; read as `Innovations` is (`view`, `normalised`, `predicted`, `times`)."""
+
+    def __init__(self, channels: dict[str, list[str]]) -> None:
+        self.group_names = list(channels)
+        self.channels = channels
+        self._pieces: dict[str, list[tuple[np.ndarray, SensorView]]] = {g: [] for g in channels}
+        self._joined: dict[str, tuple[np.ndarray, SensorView]] = {}
+
+    def add(self, group: str, t: np.ndarray, view: SensorView) -> None:
+        """A block's rows of ``group`` at the times ``t`` (after the rows added before)."""
+        if group not in self._pieces:
+            self.group_names.append(group)
+            self.channels[group] = list(view.channels)
+            self._pieces[group] = []
+        self._pieces[group].append((t, view))
+        self._joined.pop(group, None)
+
+    def extend(self, other: KeptRows) -> None:
+        """``other``'s rows (a later block's) after these."""
+        for group in other.group_names:
+            for t, view in other._pieces[group]:
+                self.add(group, t, view)
+
+    def _rows(self, group: str) -> tuple[np.ndarray, SensorView] | None:
+        """The group's pieces joined once (then kept as the one piece)."""
+        pieces = self._pieces.get(group)
+        if not pieces:
+            return None
+        if group not in self._joined:
+            t = np.concatenate([p[0] for p in pieces])
+            arrays = [np.concatenate([getattr(p[1], name) for p in pieces]) for name in _FIELDS]
+            self._joined[group] = t, SensorView(group, self.channels[group], *arrays)
+            self._pieces[group] = [self._joined[group]]
+        return self._joined[group]
+
+    def view(self, group: str) -> SensorView | None:
+        rows = self._rows(group)
+        return None if rows is None else rows[1]
+
+    def times(self, group: str, t: np.ndarray) -> np.ndarray:
+        """The times of the group's rows (``t``, the merged grid, is not theirs)."""
+        rows = self._rows(group)
+        return t[:0] if rows is None else rows[0]
+
+    def normalised(self, group: str) -> np.ndarray | None:
+        rows = self._rows(group)
+        return None if rows is None else rows[1].normalised
+
+    def predicted(self, group: str, channels: Sequence[int]) -> np.ndarray | None:
+        rows = self._rows(group)
+        return None if rows is None else rows[1].predicted[:, list(channels)]
+
+    def nbytes(self) -> int:
+        return sum(t.nbytes + sum(getattr(v, f).nbytes for f in _FIELDS) for p in self._pieces.values() for t, v in p)
+
+
+def kept_rows(innovations: Innovations, t: np.ndarray, first: int, alarms: Sequence, points: int) -> KeptRows:
+    """Of ``innovations`` on the block's grid ``t``, from its step ``first`` on (the steps before:
+    the lead-in, cut off), each group's rows its sensor figures draw with at most ``points`` per
+    series, and every one inside the zoom windows around the ``alarms`` that name the group."""
+    t = t[first:]
+    kept = KeptRows({})
+    for group in innovations.group_names:
+        spans = [(float(a.start), float(a.end)) for a in alarms if group_of(a.signal, innovations.group_names) == group]
+        windows = zoom_windows(spans, t)
+        view = innovations.view(group)
+        if view is None:
+            continue
+        whole = [getattr(view, name)[first:] for name in _FIELDS]
+        view = SensorView(group, view.channels, *whole)
+        steps = [drawn_steps(view, j, t, windows, points) for j in range(len(view.channels))]
+        rows = np.unique(np.concatenate(steps)) if steps else np.zeros(0, np.int64)
+        kept.add(group, t[rows], SensorView(group, view.channels, *(np.ascontiguousarray(a[rows]) for a in whole)))
+    return kept

@@ -1,0 +1,87 @@
+"""Block mode's report keeps the sensor figures (`logscan.report.kept_views`): each block keeps the
+rows of its packed innovations its figures draw, with their times; the merged report draws the
+alarmed group's measured vs predicted from them, at the values the analysis at once has there."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import SAMPLES
+
+from logscan.pipeline import analyze_log, blocks
+from logscan.pipeline.blocks import analyze_blocked
+from logscan.report import plotly_json
+from logscan.report.page_parts import PageInput
+from logscan.report.page_sections import first_screen
+from logscan.report.sensor_figures import REDUCED_POINTS
+from logscan.verdict.incidents import group_of
+
+BIAS = SAMPLES / "quad_imu_bias.mcap"  # 60 s at 100 Hz, an accelerometer bias from 30 to 40 s
+SERIES = 5  # a channel's figure draws predicted, measured, the band's two edges and the normalised innovation
+
+
+@pytest.fixture(scope="module")
+def whole():
+    return analyze_log(BIAS, free_series=True, sensor_views=True)
+
+
+def _at(whole, t: np.ndarray) -> np.ndarray:
+    """The steps of the analysis at once at the times ``t`` (each one of its grid's)."""
+    steps = np.searchsorted(whole.run.t, t - 1e-9)
+    np.testing.assert_allclose(whole.run.t[steps], t, atol=1e-9)
+    return steps
+
+
+def _equal_to_a_float32_rounding(ours: np.ndarray, theirs: np.ndarray) -> None:
+    """Equal but for a float32 rounding at each channel's magnitude: each block packs a prediction
+    as float32 less its own block's median, the analysis at once less the log's."""
+    assert np.array_equal(np.isfinite(ours), np.isfinite(theirs))
+    finite = np.isfinite(ours)
+    ours, theirs = (
+        np.where(finite, ours, 0).reshape(ours.shape[0], -1),
+        np.where(finite, theirs, 0).reshape(ours.shape[0], -1),
+    )
+    for j in range(ours.shape[1]):
+        rounding = 2 * np.spacing(np.max(np.abs(theirs[:, j])))
+        np.testing.assert_allclose(ours[:, j], theirs[:, j], rtol=0, atol=rounding)
+
+
+def test_the_headline_sensor_figure_is_drawn_from_the_kept_rows(whole):
+    """The block-mode report's headline figure is the alarmed accelerometer's measured vs predicted,
+    at the values of the analysis at once at the same times (float32 as packed)."""
+    merged = analyze_blocked(BIAS, block_s=20.0, free_series=True, sensor_views=True)
+    report = merged.report_input()
+    heads, first, _ = first_screen(PageInput(report, np.asarray(report.t, dtype=np.float64), []))
+    assert first is not None and heads[0].group == "accel"
+    traces = {trace.name: trace for trace in first.traces}
+    channel = heads[0].deviation.channel
+    at_once = whole.prepared.innovations.view("accel")
+    for name, field in ((at_once.channels[channel], "measured"), ("predicted h(x̂⁻)", "predicted")):
+        trace = traces[name]
+        assert trace.t.size > 100
+        _equal_to_a_float32_rounding(trace.y, getattr(at_once, field)[_at(whole, trace.t), channel])
+    kept = merged.prepared.innovations
+    t = kept.times("accel", report.t)
+    assert np.all(np.diff(t) > 0) and t[0] >= 0.0 and t[-1] <= 60.0  # no lead-in step twice
+    for field in ("measured", "predicted", "sigma", "normalised"):
+        _equal_to_a_float32_rounding(getattr(kept.view("accel"), field), getattr(at_once, field)[_at(whole, t)])
+
+
+def test_each_block_keeps_at_most_its_share_and_the_alarms_in_full(whole, monkeypatch):
+    """With 60 points per series over the log (20 per block) the accelerometer keeps at most that
+    many rows per series and channel outside its alarms' zoom windows, and every step inside."""
+    monkeypatch.setattr(blocks, "REDUCED_POINTS", 60)
+    monkeypatch.setattr(plotly_json, "MAX_FOCUS_FRACTION", 1.0)  # a 20-s block keeps its alarms' windows
+    merged = analyze_blocked(BIAS, block_s=20.0, free_series=True, sensor_views=True)
+    kept = merged.prepared.innovations
+    t = kept.times("accel", merged.run.t)
+    channels = len(kept.channels["accel"])
+    named = [(a.start, a.end) for a in merged.alarms if group_of(a.signal, kept.group_names) == "accel"]
+    for start, end in named:  # every step of an alarm naming the group, at full rate
+        grid = whole.run.t[(whole.run.t >= start) & (whole.run.t <= end)]
+        assert np.isin(np.round(grid, 6), np.round(t, 6)).all()
+    outside = ~plotly_json.in_windows(
+        t, plotly_json.zoom_windows(named, merged.run.t)
+    )  # the blocks' windows lie within
+    assert 0 < np.count_nonzero(outside) <= 3 * SERIES * channels * 20
+    assert t.size < 6001 and REDUCED_POINTS > 60
