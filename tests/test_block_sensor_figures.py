@@ -85,3 +85,21 @@ def test_each_block_keeps_at_most_its_share_and_the_alarms_in_full(whole, monkey
     )  # the blocks' windows lie within
     assert 0 < np.count_nonzero(outside) <= 3 * SERIES * channels * 20
     assert t.size < 6001 and REDUCED_POINTS > 60
+
+
+def test_an_alarm_from_a_border_is_drawn_in_full_from_before_it(whole, monkeypatch):
+    """Blocks of 30 s: the accelerometer's alarm begins on the border. Its zoom window's steps
+    before the border (the block before's, in the later block's lead-in) are kept in full from the
+    later block, in place of the block before's few, once each and in time order."""
+    monkeypatch.setattr(blocks, "REDUCED_POINTS", 60)
+    monkeypatch.setattr(plotly_json, "MAX_FOCUS_FRACTION", 10.0)  # windows past the block: kept
+    merged = analyze_blocked(BIAS, block_s=30.0, free_series=True, sensor_views=True)
+    kept = merged.prepared.innovations
+    t = kept.times("accel", merged.run.t)
+    assert np.all(np.diff(t) > 0)
+    before_border = whole.run.t[(whole.run.t >= 28.0) & (whole.run.t < 30.0)]  # within every margin (>= 2 s)
+    assert np.isin(np.round(before_border, 6), np.round(t, 6)).all()
+    assert np.count_nonzero(t < 20.0) <= SERIES * len(kept.channels["accel"]) * 30  # the first block's share
+    _equal_to_a_float32_rounding(
+        kept.view("accel").measured, whole.prepared.innovations.view("accel").measured[_at(whole, t)]
+    )

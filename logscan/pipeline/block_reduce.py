@@ -123,13 +123,13 @@ def reduce_block(analysis, width: int, from_s: float | None = None, points: int 
     prepared.release_series()  # the filter's counts stay (`filter_summary`)
     if first:
         _cut_lead(analysis, first)
-    innovations = prepared.innovations
-    if innovations is not None:  # the alarms of the block's own steps: their zoom windows kept in full
-        alarms = [a for result in analysis.results for a in result.alarms]
-        innovations = kept_rows(innovations, t, first, alarms, points)
     n = t.size - first
     prepared.grid = (n, float(prepared.run.dt))
     analysis.results = [reduced_result(result, n, width) for result in analysis.results]
+    innovations = prepared.innovations  # now, with the detectors' full-rate series freed (the group's view is made)
+    if innovations is not None:  # the alarms of the block's own steps: their zoom windows kept in full
+        alarms = [a for result in analysis.results for a in result.alarms]
+        innovations = kept_rows(innovations, t, first, alarms, points)
     times = envelope_times(t[first:], width)
     prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
     prepared.raw, prepared.context, prepared.innovations = {}, None, innovations

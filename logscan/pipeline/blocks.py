@@ -5,10 +5,11 @@ Each block is a window (`analyze_log`'s ``start_s``/``end_s``): of an indexed MC
 chunks it needs are decoded (`logscan.readers.mcap.window`), its EKF starts from a lead-in before
 it (`logscan.pipeline.lead_in`), the checks of the vehicle's own reports run from before it
 (`logscan.pipeline.raw_lead`). Once a block is analysed it is reduced to what the outputs read
-(`logscan.pipeline.block_reduce`: its alarms, incidents, lines, counts and the envelopes of its
-series), its full-rate arrays are freed and it is folded into one analysis of the blocks so far
-(`logscan.pipeline.block_fold`), not kept. docs/algorithms.md section 8.1b says when it runs and what differs
-from the analysis of the whole log at once (the block borders).
+(`logscan.pipeline.block_reduce`: its alarms, incidents, lines, counts, the envelopes of its
+series and the rows its sensor figures draw), its full-rate arrays are freed and it is folded into
+one analysis of the blocks so far (`logscan.pipeline.block_fold`), not kept. docs/algorithms.md
+section 8.1b says when it runs and what differs from the analysis of the whole log at once (the
+block borders).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from logscan.report.plotly_json import zoom_windows
+from logscan.report.plotly_json import in_windows, zoom_windows
 from logscan.report.sensor_figures import drawn_steps
 from logscan.report.sensor_views import Innovations, SensorView
 from logscan.verdict.incidents import group_of
@@ -34,31 +34,37 @@ class KeptRows:
         self.channels = channels
         self._pieces: dict[str, list[tuple[np.ndarray, SensorView]]] = {g: [] for g in channels}
         self._joined: dict[str, tuple[np.ndarray, SensorView]] = {}
+        self._lead: dict[str, np.ndarray] = {}  # group -> its rows' spans (K, 2) that replace earlier rows
 
-    def add(self, group: str, t: np.ndarray, view: SensorView) -> None:
-        """A block's rows of ``group`` at the times ``t`` (after the rows added before)."""
+    def add(self, group: str, t: np.ndarray, view: SensorView, replaces: np.ndarray | None = None) -> None:
+        """A block's rows of ``group`` at the times ``t``, after the rows added before but for those
+        of them inside ``replaces`` (spans (K, 2): its lead-in's zoom windows, kept in full here)."""
         if group not in self._pieces:
             self.group_names.append(group)
             self.channels[group] = list(view.channels)
             self._pieces[group] = []
+        if replaces is not None and replaces.size:
+            self._lead[group] = replaces
+            self._pieces[group] = [_without(p, replaces) for p in self._pieces[group]]
         self._pieces[group].append((t, view))
         self._joined.pop(group, None)
 
     def extend(self, other: KeptRows) -> None:
-        """``other``'s rows (a later block's) after these."""
+        """``other``'s rows (a later block's) after these, its lead-in's in place of theirs."""
         for group in other.group_names:
             for t, view in other._pieces[group]:
-                self.add(group, t, view)
+                self.add(group, t, view, other._lead.get(group))
 
     def _rows(self, group: str) -> tuple[np.ndarray, SensorView] | None:
-        """The group's pieces joined once (then kept as the one piece)."""
+        """The group's pieces joined once in time order (then kept as the one piece)."""
         pieces = self._pieces.get(group)
         if not pieces:
             return None
         if group not in self._joined:
             t = np.concatenate([p[0] for p in pieces])
-            arrays = [np.concatenate([getattr(p[1], name) for p in pieces]) for name in _FIELDS]
-            self._joined[group] = t, SensorView(group, self.channels[group], *arrays)
+            order = np.argsort(t, kind="stable")  # a lead-in's rows come before the block's own
+            arrays = [np.concatenate([getattr(p[1], name) for p in pieces])[order] for name in _FIELDS]
+            self._joined[group] = t[order], SensorView(group, self.channels[group], *arrays)
             self._pieces[group] = [self._joined[group]]
         return self._joined[group]
 
@@ -83,21 +89,35 @@ class KeptRows:
         return sum(t.nbytes + sum(getattr(v, f).nbytes for f in _FIELDS) for p in self._pieces.values() for t, v in p)
 
 
+def _without(piece: tuple[np.ndarray, SensorView], spans: np.ndarray) -> tuple[np.ndarray, SensorView]:
+    """``piece``'s rows outside the sorted disjoint ``spans``."""
+    t, view = piece
+    keep = ~in_windows(t, spans)
+    if keep.all():
+        return piece
+    return t[keep], SensorView(view.group, view.channels, *(getattr(view, name)[keep] for name in _FIELDS))
+
+
 def kept_rows(innovations: Innovations, t: np.ndarray, first: int, alarms: Sequence, points: int) -> KeptRows:
-    """Of ``innovations`` on the block's grid ``t``, from its step ``first`` on (the steps before:
-    the lead-in, cut off), each group's rows its sensor figures draw with at most ``points`` per
-    series, and every one inside the zoom windows around the ``alarms`` that name the group."""
-    t = t[first:]
+    """Of ``innovations`` on the block's grid ``t``, from its step ``first`` on, each group's rows
+    its sensor figures draw with at most ``points`` per series, and every one inside the zoom
+    windows around the ``alarms`` that name the group; of the lead-in before ``first`` (the block
+    before's steps) only those inside the windows, which replace the block before's there (an
+    alarm from a border is drawn in full from before it, as at once)."""
+    own = t[first:]
     kept = KeptRows({})
     for group in innovations.group_names:
         spans = [(float(a.start), float(a.end)) for a in alarms if group_of(a.signal, innovations.group_names) == group]
-        windows = zoom_windows(spans, t)
+        windows = zoom_windows(spans, own)  # as many of the block's own as at once of the log
         view = innovations.view(group)
         if view is None:
             continue
-        whole = [getattr(view, name)[first:] for name in _FIELDS]
-        view = SensorView(group, view.channels, *whole)
-        steps = [drawn_steps(view, j, t, windows, points) for j in range(len(view.channels))]
-        rows = np.unique(np.concatenate(steps)) if steps else np.zeros(0, np.int64)
-        kept.add(group, t[rows], SensorView(group, view.channels, *(np.ascontiguousarray(a[rows]) for a in whole)))
+        whole = [getattr(view, name) for name in _FIELDS]
+        ours = SensorView(group, view.channels, *(a[first:] for a in whole))
+        steps = [drawn_steps(ours, j, own, windows, points) + first for j in range(len(view.channels))]
+        lead = np.flatnonzero(in_windows(t[:first], windows) & np.isfinite(view.predicted[:first]).any(axis=1))
+        rows = np.unique(np.concatenate([lead, *steps]))
+        replaced = np.column_stack([windows[:, 0], np.minimum(windows[:, 1], own[0])]) if lead.size else None
+        rows_view = SensorView(group, view.channels, *(np.ascontiguousarray(a[rows]) for a in whole))
+        kept.add(group, t[rows], rows_view, None if replaced is None else replaced[replaced[:, 0] < own[0]])
     return kept
