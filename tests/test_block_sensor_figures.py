@@ -103,3 +103,14 @@ def test_an_alarm_from_a_border_is_drawn_in_full_from_before_it(whole, monkeypat
     _equal_to_a_float32_rounding(
         kept.view("accel").measured, whole.prepared.innovations.view("accel").measured[_at(whole, t)]
     )
+
+
+def test_an_incidents_size_from_the_merged_rows_is_the_analysis_at_onces(whole):
+    """The incidents found again on the merged analysis (a --suppressions file: `sizes_of`) size the
+    accelerometer's deviation from the kept rows at their own times, as at once from the grid."""
+    from logscan.verdict.incidents import sizes_of
+
+    merged = analyze_blocked(BIAS, block_s=20.0, free_series=True, sensor_views=True)
+    alarm = next(a for a in merged.alarms if a.signal == "nis.accel")
+    text = sizes_of(merged.prepared).text("accel", alarm)
+    assert text.startswith("+0.92 m/s² (9.2σ) on accel ax") and text == sizes_of(whole.prepared).text("accel", alarm)

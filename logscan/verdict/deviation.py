@@ -42,11 +42,13 @@ class GroupView(Protocol):
 
 
 class GroupViews(Protocol):
-    """Every group's view (`logscan.report.sensor_views.Innovations`)."""
+    """Every group's view (`logscan.report.sensor_views.Innovations`; block mode's kept rows,
+    `logscan.report.kept_views.KeptRows`) and the times of its rows (``t``: the analysis grid)."""
 
     group_names: list[str]
 
     def view(self, group: str) -> GroupView | None: ...
+    def times(self, group: str, t: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass

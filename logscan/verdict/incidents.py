@@ -313,7 +313,7 @@ class Sizes:
         if group not in self._cache:
             self._cache[group] = self.views.view(group)
         view = self._cache[group]
-        found = None if view is None else deviation(view, self.t, alarm, self.model)
+        found = None if view is None else deviation(view, self.views.times(group, self.t), alarm, self.model)
         return "" if found is None else found.text()
 
 
