@@ -155,7 +155,7 @@ class BlockFold:
         self.failures: dict = {}
         self.observability = None
         self.events: list = []  # the log's truth events (`rescore` scores the merged alarms against them)
-        self.kept = KeptRows({})  # the rows of the sensor figures (`logscan.report.kept_views`)
+        self.kept = KeptRows()  # the rows of the sensor figures (`logscan.report.kept_views`)
 
     def add(self, block: Analysis) -> None:
         """Fold a reduced block in; nothing of it is kept but what the merge reads."""

@@ -29,10 +29,10 @@ class KeptRows:
     """Every group's kept rows: its `SensorView` values and their times (seconds, float64), in time
     order; read as `Innovations` is (`view`, `normalised`, `predicted`, `times`)."""
 
-    def __init__(self, channels: dict[str, list[str]]) -> None:
-        self.group_names = list(channels)
-        self.channels = channels
-        self._pieces: dict[str, list[tuple[np.ndarray, SensorView]]] = {g: [] for g in channels}
+    def __init__(self) -> None:
+        self.group_names: list[str] = []
+        self.channels: dict[str, list[str]] = {}
+        self._pieces: dict[str, list[tuple[np.ndarray, SensorView]]] = {}
         self._joined: dict[str, tuple[np.ndarray, SensorView]] = {}
         self._lead: dict[str, np.ndarray] = {}  # group -> its rows' spans (K, 2) that replace earlier rows
 
@@ -89,13 +89,18 @@ class KeptRows:
         return sum(t.nbytes + sum(getattr(v, f).nbytes for f in _FIELDS) for p in self._pieces.values() for t, v in p)
 
 
+def _taken(view: SensorView, rows) -> SensorView:
+    """``view`` at ``rows`` (a slice, a mask or indices of its steps)."""
+    return SensorView(view.group, view.channels, *(getattr(view, name)[rows] for name in _FIELDS))
+
+
 def _without(piece: tuple[np.ndarray, SensorView], spans: np.ndarray) -> tuple[np.ndarray, SensorView]:
     """``piece``'s rows outside the sorted disjoint ``spans``."""
     t, view = piece
     keep = ~in_windows(t, spans)
     if keep.all():
         return piece
-    return t[keep], SensorView(view.group, view.channels, *(getattr(view, name)[keep] for name in _FIELDS))
+    return t[keep], _taken(view, keep)
 
 
 def kept_rows(innovations: Innovations, t: np.ndarray, first: int, alarms: Sequence, points: int) -> KeptRows:
@@ -105,19 +110,17 @@ def kept_rows(innovations: Innovations, t: np.ndarray, first: int, alarms: Seque
     before's steps) only those inside the windows, which replace the block before's there (an
     alarm from a border is drawn in full from before it, as at once)."""
     own = t[first:]
-    kept = KeptRows({})
+    kept = KeptRows()
     for group in innovations.group_names:
         spans = [(float(a.start), float(a.end)) for a in alarms if group_of(a.signal, innovations.group_names) == group]
         windows = zoom_windows(spans, own)  # as many of the block's own as at once of the log
         view = innovations.view(group)
         if view is None:
             continue
-        whole = [getattr(view, name) for name in _FIELDS]
-        ours = SensorView(group, view.channels, *(a[first:] for a in whole))
+        ours = _taken(view, slice(first, None))
         steps = [drawn_steps(ours, j, own, windows, points) + first for j in range(len(view.channels))]
         lead = np.flatnonzero(in_windows(t[:first], windows) & np.isfinite(view.predicted[:first]).any(axis=1))
         rows = np.unique(np.concatenate([lead, *steps]))
         replaced = np.column_stack([windows[:, 0], np.minimum(windows[:, 1], own[0])]) if lead.size else None
-        rows_view = SensorView(group, view.channels, *(np.ascontiguousarray(a[rows]) for a in whole))
-        kept.add(group, t[rows], rows_view, None if replaced is None else replaced[replaced[:, 0] < own[0]])
+        kept.add(group, t[rows], _taken(view, rows), None if replaced is None else replaced[replaced[:, 0] < own[0]])
     return kept
