@@ -114,3 +114,52 @@ def test_an_incidents_size_from_the_merged_rows_is_the_analysis_at_onces(whole):
     alarm = next(a for a in merged.alarms if a.signal == "nis.accel")
     text = sizes_of(merged.prepared).text("accel", alarm)
     assert text.startswith("+0.92 m/s² (9.2σ) on accel ax") and text == sizes_of(whole.prepared).text("accel", alarm)
+
+
+def test_past_the_logs_focus_rows_a_block_keeps_the_extremes_inside_its_windows(whole, monkeypatch):
+    """With the log's rows inside zoom windows capped at 600 (the alarm's windows hold about
+    3,000 steps, over two 20-s blocks), the accelerometer keeps at most that many there, and among them
+    each channel's highest and lowest measured value inside the windows at once."""
+    monkeypatch.setattr(blocks, "FOCUS_ROWS", 600)
+    monkeypatch.setattr(blocks, "REDUCED_POINTS", 60)
+    monkeypatch.setattr(plotly_json, "MAX_FOCUS_FRACTION", 1.0)  # a 20-s block keeps its alarms' windows
+    merged = analyze_blocked(BIAS, block_s=20.0, free_series=True, sensor_views=True)
+    kept = merged.prepared.innovations
+    assert 0 < kept.focus["accel"] <= 600
+    t = kept.times("accel", merged.run.t)
+    named = [(a.start, a.end) for a in merged.alarms if group_of(a.signal, kept.group_names) == "accel"]
+    windows = plotly_json.zoom_windows(named, merged.run.t)
+    inside_at_once = plotly_json.in_windows(whole.run.t, windows)
+    assert np.count_nonzero(inside_at_once) > 2500  # the cap thins them
+    channels = len(kept.channels["accel"])
+    inside = plotly_json.in_windows(t, windows)
+    assert np.count_nonzero(inside) <= 600 + 2 * SERIES * channels * 20  # and two blocks' own shares
+    measured, at_once = kept.view("accel").measured[inside], whole.prepared.innovations.view("accel").measured
+    for j in range(channels):
+        theirs = at_once[inside_at_once, j]
+        for extreme in (np.nanmax, np.nanmin):
+            rounding = 2 * float(np.spacing(np.nanmax(np.abs(theirs))))  # each block's pack, as above
+            assert float(extreme(measured[:, j])) == pytest.approx(float(extreme(theirs)), abs=rounding)
+
+
+def test_thinned_rows_keep_every_series_extremes_within_the_limit():
+    """`_thinned` of 5,000 rows to 600: at most the limit (plus each series' first and last), and
+    every channel's series (measured, predicted, the band's edges, normalised) keeps its extremes."""
+    from logscan.report.kept_views import DRAWN_SERIES, _thinned
+    from logscan.report.sensor_views import SensorView
+
+    rng = np.random.default_rng(7)
+    n, channels = 5000, 3
+    values = [rng.normal(size=(n, channels)).astype(np.float32) for _ in range(4)]
+    values[1][::3] = np.nan  # a channel's prediction undefined on some steps
+    view = SensorView("g", ["a", "b", "c"], *values)
+    t = np.arange(n) * 0.01
+    rows = np.arange(100, 4900)
+    kept = _thinned(view, t, rows, 600)
+    assert kept.size <= 600 + 2 * DRAWN_SERIES * channels and np.all(np.isin(kept, rows))
+    assert np.array_equal(_thinned(view, t, rows[:500], 600), rows[:500])  # under the limit: all
+    for j in range(channels):
+        defined = rows[np.isfinite(view.predicted[rows, j])]
+        for series in (view.measured[:, j], view.predicted[:, j], view.normalised[:, j]):
+            assert np.nanmax(series[kept]) == np.nanmax(series[defined])
+            assert np.nanmin(series[kept]) == np.nanmin(series[defined])

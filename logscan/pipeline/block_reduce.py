@@ -108,10 +108,11 @@ def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult
     )
 
 
-def reduce_block(analysis, width: int, from_s: float | None = None, points: int = REDUCED_POINTS):
+def reduce_block(analysis, width: int, from_s: float | None = None, points: int = REDUCED_POINTS, focus_rows=None):
     """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
     as envelopes on the envelope's times (the block's grid ``run.t``), the report's innovations as
-    the rows its sensor figures draw with at most ``points`` per series (`kept_rows`), the filter's
+    the rows its sensor figures draw with at most ``points`` per series and ``focus_rows(group)``
+    inside zoom windows (`kept_rows`; None: all there), the filter's
     trace, aligned signals, raw channels, the report's context and the suspension's steps freed;
     ``from_s``: the block's own first step, the steps before it a lead-in for the detectors (their
     alarms already seen from it), cut off. Returns it."""
@@ -129,7 +130,7 @@ def reduce_block(analysis, width: int, from_s: float | None = None, points: int 
     innovations = prepared.innovations  # now, with the detectors' full-rate series freed (the group's view is made)
     if innovations is not None:  # the alarms of the block's own steps: their zoom windows kept in full
         alarms = [a for result in analysis.results for a in result.alarms]
-        innovations = kept_rows(innovations, t, first, alarms, points)
+        innovations = kept_rows(innovations, t, first, alarms, points, focus_rows)
     times = envelope_times(t[first:], width)
     prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
     prepared.raw, prepared.context, prepared.innovations = {}, None, innovations

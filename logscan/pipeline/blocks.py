@@ -28,6 +28,7 @@ from logscan.pipeline.preparation import load_profile_for
 from logscan.pipeline.run import analyze_log
 from logscan.readers import detect_format
 from logscan.readers.mcap.span import indexed_span_s
+from logscan.report.kept_views import FOCUS_ROWS
 from logscan.report.sensor_figures import REDUCED_POINTS
 from logscan.verdict.observability import WARMUP_S as OBSERVABILITY_WARMUP_S
 from logscan.verdict.observability import WINDOW_S as OBSERVABILITY_WINDOW_S
@@ -174,7 +175,8 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
             except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
                 refused.append((k, exc))
                 continue
-            fold.add(reduce_block(analysis, width, None if led is None else start_s, points))  # and not kept
+            focus = _focus_share(fold, len(windows) - k)
+            fold.add(reduce_block(analysis, width, None if led is None else start_s, points, focus))  # and not kept
             del analysis
             gc.collect()
             return_freed_pages()
@@ -212,3 +214,9 @@ def _refused_line(windows: list, k: int, n: int, exc: LogscanError) -> str:
 
 def _prefixed(progress, prefix: str):
     return lambda message: progress(prefix + message)
+
+
+def _focus_share(fold: BlockFold, blocks_left: int):
+    """How many rows inside zoom windows a group's figures keep of this block: an equal share of
+    what the blocks before left of the log's `FOCUS_ROWS`, so the log keeps at most that many."""
+    return lambda group: max(FOCUS_ROWS - fold.kept.focus.get(group, 0), 0) // blocks_left

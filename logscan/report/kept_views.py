@@ -6,14 +6,15 @@ A block keeps, per channel of a group, the steps `logscan.report.sensor_figures.
 on the block's own steps: the extremes of each drawn series in ``points`` buckets (the block's share
 of `REDUCED_POINTS`, so the log keeps about as many as its figure draws at once, whatever the number
 of blocks) and every sample inside the zoom windows around the block's alarms naming the group, as
-the figure at once keeps them in full. The rows hold the group's `SensorView` values (float32, as
-its pack gives them), so each block's own offsets and scales of the pack are applied before its
-rows join the others. docs/algorithms.md section 8.1b.
+the figure at once keeps them in full, up to the log's `FOCUS_ROWS` per group (past it, their
+extremes: `_thinned`). The rows hold the group's `SensorView` values (float32, as its pack gives
+them), so each block's own offsets and scales of the pack are applied before its rows join the
+others. docs/algorithms.md section 8.1b.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -23,6 +24,13 @@ from logscan.report.sensor_views import Innovations, SensorView
 from logscan.verdict.incidents import group_of
 
 _FIELDS = ("measured", "predicted", "sigma", "normalised")
+_NO_WINDOWS = np.zeros((0, 2))
+DRAWN_SERIES = 5  # a channel's figure draws predicted, measured, the band's two edges, the normalised innovation
+# The rows kept inside zoom windows, per group over the whole log: 1,000 s of a 100 Hz group in full,
+# about 28 MB for the quadcopter's groups together, so a log alarming all day stays within the
+# memory bound (at once, as in a block, a page draws at most POINT_BUDGET * FOCUS_SHARE = 4,500
+# points of a trace inside its windows, the extremes of what is kept there).
+FOCUS_ROWS = 100_000
 
 
 class KeptRows:
@@ -35,14 +43,19 @@ class KeptRows:
         self._pieces: dict[str, list[tuple[np.ndarray, SensorView]]] = {}
         self._joined: dict[str, tuple[np.ndarray, SensorView]] = {}
         self._lead: dict[str, np.ndarray] = {}  # group -> its rows' spans (K, 2) that replace earlier rows
+        self.focus: dict[str, int] = {}  # group -> the rows added from inside zoom windows
 
-    def add(self, group: str, t: np.ndarray, view: SensorView, replaces: np.ndarray | None = None) -> None:
-        """A block's rows of ``group`` at the times ``t``, after the rows added before but for those
-        of them inside ``replaces`` (spans (K, 2): its lead-in's zoom windows, kept in full here)."""
+    def add(
+        self, group: str, t: np.ndarray, view: SensorView, replaces: np.ndarray | None = None, focus: int = 0
+    ) -> None:
+        """A block's rows of ``group`` at the times ``t``, ``focus`` of them from inside zoom windows,
+        after the rows added before but for those of them inside ``replaces`` (spans (K, 2): its
+        lead-in's zoom windows, kept here)."""
         if group not in self._pieces:
             self.group_names.append(group)
             self.channels[group] = list(view.channels)
             self._pieces[group] = []
+        self.focus[group] = self.focus.get(group, 0) + focus
         if replaces is not None and replaces.size:
             self._lead[group] = replaces
             self._pieces[group] = [_without(p, replaces) for p in self._pieces[group]]
@@ -54,6 +67,7 @@ class KeptRows:
         for group in other.group_names:
             for t, view in other._pieces[group]:
                 self.add(group, t, view, other._lead.get(group))
+            self.focus[group] += other.focus.get(group, 0)
 
     def _rows(self, group: str) -> tuple[np.ndarray, SensorView] | None:
         """The group's pieces joined once in time order (then kept as the one piece)."""
@@ -103,12 +117,20 @@ def _without(piece: tuple[np.ndarray, SensorView], spans: np.ndarray) -> tuple[n
     return t[keep], _taken(view, keep)
 
 
-def kept_rows(innovations: Innovations, t: np.ndarray, first: int, alarms: Sequence, points: int) -> KeptRows:
+def kept_rows(
+    innovations: Innovations,
+    t: np.ndarray,
+    first: int,
+    alarms: Sequence,
+    points: int,
+    focus_rows: Callable[[str], int] | None = None,
+) -> KeptRows:
     """Of ``innovations`` on the block's grid ``t``, from its step ``first`` on, each group's rows
     its sensor figures draw with at most ``points`` per series, and every one inside the zoom
     windows around the ``alarms`` that name the group; of the lead-in before ``first`` (the block
     before's steps) only those inside the windows, which replace the block before's there (an
-    alarm from a border is drawn in full from before it, as at once)."""
+    alarm from a border is drawn in full from before it, as at once). ``focus_rows``: how many rows
+    inside the windows a group may keep (None: all); past it, their extremes (`_thinned`)."""
     own = t[first:]
     kept = KeptRows()
     for group in innovations.group_names:
@@ -118,9 +140,30 @@ def kept_rows(innovations: Innovations, t: np.ndarray, first: int, alarms: Seque
         if view is None:
             continue
         ours = _taken(view, slice(first, None))
-        steps = [drawn_steps(ours, j, own, windows, points) + first for j in range(len(view.channels))]
-        lead = np.flatnonzero(in_windows(t[:first], windows) & np.isfinite(view.predicted[:first]).any(axis=1))
-        rows = np.unique(np.concatenate([lead, *steps]))
-        replaced = np.column_stack([windows[:, 0], np.minimum(windows[:, 1], own[0])]) if lead.size else None
-        kept.add(group, t[rows], _taken(view, rows), None if replaced is None else replaced[replaced[:, 0] < own[0]])
+        overview = [drawn_steps(ours, j, own, _NO_WINDOWS, points) + first for j in range(len(view.channels))]
+        inside = np.flatnonzero(in_windows(t, windows) & np.isfinite(view.predicted).any(axis=1))
+        led = inside.size > 0 and inside[0] < first  # the lead-in's rows inside: they replace earlier ones
+        if focus_rows is not None:
+            inside = _thinned(view, t, inside, focus_rows(group))
+        rows = np.unique(np.concatenate([inside, *overview]))
+        replaced = np.column_stack([windows[:, 0], np.minimum(windows[:, 1], own[0])]) if led else None
+        kept.add(
+            group,
+            t[rows],
+            _taken(view, rows),
+            None if replaced is None else replaced[replaced[:, 0] < own[0]],
+            focus=inside.size,
+        )
     return kept
+
+
+def _thinned(view: SensorView, t: np.ndarray, rows: np.ndarray, limit: int) -> np.ndarray:
+    """``rows`` (steps of ``view`` at the times ``t``), or past ``limit`` of them those drawing each
+    channel's series with the most and least of each of ``limit / (DRAWN_SERIES * channels)``
+    buckets (at least 16 points per series): the peaks a page draws inside a zoom window stay."""
+    if rows.size <= limit:
+        return rows
+    inside, channels = _taken(view, rows), len(view.channels)
+    points = max(16, limit // (DRAWN_SERIES * channels))
+    picked = [drawn_steps(inside, j, t[rows], _NO_WINDOWS, points) for j in range(channels)]
+    return rows[np.unique(np.concatenate(picked))]
