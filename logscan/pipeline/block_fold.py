@@ -26,11 +26,13 @@ from logscan.pipeline.block_merge import (
     windows_folded,
 )
 from logscan.pipeline.detection import rescore
+from logscan.report.context_join import joined
 from logscan.report.kept_views import KeptRows
 from logscan.results import Band, DetectorResult, events_from_truth
 
 if TYPE_CHECKING:
     from logscan.pipeline.stages import Prepared
+    from logscan.report.run_context import RunContext
 
 
 class Columns:
@@ -156,6 +158,7 @@ class BlockFold:
         self.observability = None
         self.events: list = []  # the log's truth events (`rescore` scores the merged alarms against them)
         self.kept = KeptRows()  # the rows of the sensor figures (`logscan.report.kept_views`)
+        self.context: RunContext | None = None  # the blocks' context so far (`logscan.report.context_join`)
 
     def add(self, block: Analysis) -> None:
         """Fold a reduced block in; nothing of it is kept but what the merge reads."""
@@ -186,6 +189,7 @@ class BlockFold:
         if isinstance(prepared.innovations, KeptRows):
             self.kept.extend(prepared.innovations)
         prepared.innovations = None
+        self.context, prepared.context = joined(self.context, prepared.context), None
         block.results, block.observability = [], None  # the first block's prepared stays: the merged one's
 
     def nbytes(self) -> int:
@@ -207,6 +211,7 @@ class BlockFold:
         prepared._filter_summary = merged_filter_summary(self.summaries)
         prepared.grid = (self.steps, float(prepared.run.dt))
         prepared.innovations = self.kept if self.kept.group_names else None
+        prepared.context = self.context
         merged = Analysis(prepared=prepared, warnings=said_once(self.warnings))
         merged.results = [detector.merged(gap_s, self.steps) for detector in self.detectors.values()]
         merged.incidents = merged_incidents(self.incidents, merged.results, gap_s)

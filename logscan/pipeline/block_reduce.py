@@ -13,6 +13,7 @@ from numba import njit
 
 from logscan.numba_cache import follow_dependencies
 from logscan.pipeline.raw_lead import cut_rows
+from logscan.report.context_join import own_part
 from logscan.report.kept_views import kept_rows
 from logscan.report.sensor_figures import REDUCED_POINTS
 from logscan.results import Band, DetectorResult
@@ -113,7 +114,7 @@ def reduce_block(analysis, width: int, from_s: float | None = None, points: int 
     as envelopes on the envelope's times (the block's grid ``run.t``), the report's innovations as
     the rows its sensor figures draw with at most ``points`` per series and ``focus_rows(group)``
     inside zoom windows (`kept_rows`; None: all there), the filter's
-    trace, aligned signals, raw channels, the report's context and the suspension's steps freed;
+    trace, aligned signals, raw channels, the context's true state and the suspension's steps freed;
     ``from_s``: the block's own first step, the steps before it a lead-in for the detectors (their
     alarms already seen from it), cut off. Returns it."""
     prepared = analysis.prepared
@@ -133,7 +134,7 @@ def reduce_block(analysis, width: int, from_s: float | None = None, points: int 
         innovations = kept_rows(innovations, t, first, alarms, points, focus_rows)
     times = envelope_times(t[first:], width)
     prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
-    prepared.raw, prepared.context, prepared.innovations = {}, None, innovations
+    prepared.raw, prepared.context, prepared.innovations = {}, own_part(prepared.context), innovations
     analysis.suspended = None
     return analysis
 

@@ -200,18 +200,19 @@ def prepare(
     fraction: Fraction | None = None,
     ahead: Sequence[Callable[[], None]] = (),
     read_plans: dict | None = None,
+    judged_from_s: float | None = None,
 ) -> Prepared:
     """Read only the topics the profile needs (and the detectors' ``raw_topics``, kept unaligned in
     ``Prepared.raw``), align them, and run each filter the needs ask for exactly once. ``needs``
     may be a function of the aligned run (needs can follow what the log holds, e.g. K and S only
-    when it carries no on-board variances). ``notice`` hears the one
-    line a user should see even without progress (the first run's compile). ``start_s``/``end_s``
+    when it carries no on-board variances). ``notice`` hears the one line a user should see even
+    without progress (the first run's compile). ``start_s``/``end_s``
     (seconds since the log's start) analyse a window of it. ``fraction`` hears the bytes read, a
     block at a time (`logscan.readers.read_log`'s ``progress``). ``ahead``: functions that compile
     the detectors' kernels, called on the first run in the process that compiles the EKF's, after
     it (`logscan.filters.warmup.kernel_compilers`). ``read_plans``: what a window's read learnt of
-    the file for the next window of it (`ReadWindow.plans`: block mode's). Raises LogscanError on
-    bad input."""
+    the file for the next window of it (`ReadWindow.plans`: block mode's); ``judged_from_s``: the
+    context from then on (a block's own steps). Raises LogscanError on bad input."""
     step = progress or (lambda message: None)
     path = str(path)
     profile = loaded.profile
@@ -234,15 +235,14 @@ def prepare(
     # the report's context, from the samples about to go; a simulated log's true states only for a
     # page that draws them: the one filter's envelopes, or a further loop's (its detectors may)
     truth = bool(profile.loops) or wanted.wants(TRUTH_DRAWN_WITH)
-    context = run_context(run, model, log, labels, with_truth=truth)
+    context = run_context(run, model, log, labels, with_truth=truth, from_s=judged_from_s)
     prepared = Prepared(path=path, log=log, loaded=loaded, model=model, run=run, context=context, raw=raw)
     prepared.clock = clock_of(log, run.start_ns)  # dated while the GNSS time is still there
     if profile.loops:
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     return_freed_pages()
-    prepared.warnings.extend(loaded.notes)  # first: what the profile is built from frames what follows
-    prepared.warnings.extend(_read_warnings(log, run))
+    prepared.warnings += [*loaded.notes, *_read_warnings(log, run)]  # the profile's notes frame the rest
     _run_filters(prepared, wanted, compiling, step, fraction, lead)
     return prepared
 

@@ -75,6 +75,7 @@ def analyze_log(
         fraction=fraction,
         ahead=kernel_compilers(detectors),
         read_plans=read_plans,
+        judged_from_s=judged_from_s,
         **options,
     )
     views = {"free_series": free_series, "sensor_views": sensor_views}

@@ -164,7 +164,7 @@ def _axis_names(group, cx: int, cy: int, pair: tuple[str, str]) -> tuple[str, st
     return f"{pair[0]} (m from {about})", f"{pair[1]} (m from {about})"
 
 
-def _path_indices(x: np.ndarray, y: np.ndarray, idx: np.ndarray, max_points: int) -> np.ndarray:
+def path_indices(x: np.ndarray, y: np.ndarray, idx: np.ndarray, max_points: int) -> np.ndarray:
     """``idx`` (the steps with a position) cut to about ``max_points``: half evenly in time (the
     shape), a quarter each on x's and y's extremes."""
     if idx.size <= max_points:
@@ -175,8 +175,9 @@ def _path_indices(x: np.ndarray, y: np.ndarray, idx: np.ndarray, max_points: int
     return idx[np.union1d(even, extremes)]
 
 
-def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
-    """The decimated 2-D path of the position group, or None (no such group, < 2 samples)."""
+def path_of(run, model, max_points: int = MAX_PATH_POINTS, first: int = 0) -> Path2D | None:
+    """The decimated 2-D path of the position group from the run's step ``first`` on, or None (no
+    such group, < 2 samples)."""
     found = position_columns(run, model)
     if found is None:
         return None
@@ -184,9 +185,10 @@ def path_of(run, model, max_points: int = MAX_PATH_POINTS) -> Path2D | None:
     group = run.groups[name]
     x, y = group.z[:, cx], group.z[:, cy]
     idx = np.flatnonzero(np.asarray(group.fresh, dtype=bool) & np.isfinite(x) & np.isfinite(y))
+    idx = idx[idx >= first]
     if idx.size < 2:
         return None
-    idx = _path_indices(x, y, idx, max_points)
+    idx = path_indices(x, y, idx, max_points)
     names = _axis_names(group, cx, cy, pair)
     return Path2D(run.t[idx].copy(), x[idx].copy(), y[idx].copy(), names, name, (cx, cy))
 
@@ -205,25 +207,28 @@ def estimated_path(path: Path2D | None, innovations, t: np.ndarray, max_points: 
     idx = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
     if idx.size < 2:
         return None
-    idx = _path_indices(x, y, idx, max_points)
+    idx = path_indices(x, y, idx, max_points)
     return Path2D(t[idx].copy(), x[idx], y[idx], path.channels, path.group, path.columns)
 
 
-def _runs(value: np.ndarray) -> np.ndarray:
+def run_starts(value: np.ndarray) -> np.ndarray:
     """Start indices of the runs of one value (NaN runs included; NaN equals NaN here)."""
     nan = np.isnan(value)
     change = (value[1:] != value[:-1]) & ~(nan[1:] & nan[:-1])
     return np.concatenate([[0], np.flatnonzero(change) + 1])
 
 
-def mode_of(run, max_intervals: int = MAX_MODE_INTERVALS, max_points: int = MAX_MODE_POINTS) -> ModeTrack | None:
-    """The mode channel as intervals and a decimated series, or None (no mode channel, never defined)."""
+def mode_of(
+    run, max_intervals: int = MAX_MODE_INTERVALS, max_points: int = MAX_MODE_POINTS, first: int = 0
+) -> ModeTrack | None:
+    """The mode channel from the run's step ``first`` on as intervals and a decimated series, or None
+    (no mode channel, never defined there)."""
     mode = getattr(run, "mode", None)
-    if mode is None or run.n_steps == 0 or not np.isfinite(mode).any():
+    if mode is None or run.n_steps <= first or not np.isfinite(mode[first:]).any():
         return None
-    value = np.asarray(mode, dtype=np.float64)
-    t = run.t
-    starts = _runs(value)
+    value = np.asarray(mode[first:], dtype=np.float64)
+    t = run.t[first:]
+    starts = run_starts(value)
     if starts.size < max_points // 2:  # a step line needs each run's start (and the end before a gap)
         before_gap = starts[np.isnan(value[starts]) & (starts > 0)] - 1
         idx = np.unique(np.concatenate([starts, before_gap, [value.size - 1]]))
@@ -295,17 +300,31 @@ def true_states(log, run, model) -> dict[str, np.ndarray]:
 
 
 def run_context(
-    run, model, log=None, mode_labels: dict[float, str] | None = None, with_truth: bool = True
+    run,
+    model,
+    log=None,
+    mode_labels: dict[float, str] | None = None,
+    with_truth: bool = True,
+    from_s: float | None = None,
 ) -> RunContext:
     """The path and the mode of an aligned run (each None when the run has none; the mode's values
     named by ``mode_labels``, the profile's ``[mode] labels``), and, from its ``log`` (before its
     samples are released), the autopilot's messages and states and, ``with_truth``, a simulated
-    log's true state."""
-    context = RunContext(path=path_of(run, model), mode=mode_of(run), t_span=(float(run.t[0]), float(run.t[-1])))
+    log's true state. ``from_s``: only from this time on (a block's own steps after its lead-in:
+    `logscan.report.context_join`), the true state excepted."""
+    first = 0 if from_s is None else int(np.searchsorted(run.t, from_s - 1e-9))
+    first = min(first, run.t.size - 1)
+    context = RunContext(
+        path=path_of(run, model, first=first),
+        mode=mode_of(run, first=first),
+        t_span=(float(run.t[first]), float(run.t[-1])),
+    )
     if context.mode is not None and mode_labels:
         context.mode.labels = dict(mode_labels)
     if log is not None:
         metadata, span = log.source.metadata, analysed_span(run)
+        if span is not None and first:
+            span = (float(run.t[first]), span[1])
         context.window = span
         context.messages = _within(logged_messages(metadata, run.start_ns, limit=None), span, MAX_MESSAGES)
         every = logged_messages(metadata, run.start_ns, ALL_LEVELS, None)
