@@ -86,7 +86,10 @@ def merge_spans(spans: Sequence[tuple[float, float]], min_width: float, min_gap:
         first = np.flatnonzero(new)
         if first.size <= MAX_SPANS:
             break
-        gap = max(gap * 2.0, min_width)
+        # doubled from a positive start (the least space between two of them): a gap of 0 and no
+        # width would never merge more of them
+        apart = starts[1:] - reach[:-1]
+        gap = max(gap * 2.0, min_width, float(apart[apart > 0].min()))
     return list(zip(starts[first].tolist(), np.maximum.reduceat(ends, first).tolist()))
 
 
