@@ -14,6 +14,8 @@ from logscan.results import DetectorResult, FaultEvent
 from logscan.timebase.clock import Clock
 from logscan.verdict.incidents import signal_label
 
+VERDICT_INCIDENTS = 10  # incidents the verdict names on the first screen; the Incidents table has them all
+
 MAX_TABLE_ROWS = 200  # alarm table rows shown; the JSON summary has them all
 
 
@@ -144,7 +146,10 @@ def clock_text(clock: Clock) -> str:
 
 
 def verdict_lines(report: ReportInput, heads: Sequence[Headline], margins: Sequence[Margin]) -> list[str]:
-    """Each incident's headline (or the closest margin), the possible faults, the suppressed alarms."""
+    """Each incident's headline, the first `VERDICT_INCIDENTS` of them and how many more (or the
+    closest margin), the possible faults, the suppressed alarms."""
     clock = report.clock
-    lines = [head.line(clock) for head in heads] or overview.verdict_lines((), margins, clock)
+    lines = [head.line(clock) for head in heads[:VERDICT_INCIDENTS]] or overview.verdict_lines((), margins, clock)
+    if len(heads) > VERDICT_INCIDENTS:  # a log alarming all day: the first screen is not the list
+        lines.append(f"... and {len(heads) - VERDICT_INCIDENTS} more incidents: see the Incidents table")
     return lines + _possible_lines(report.results, clock) + _suppressed_lines(report.results, clock)

@@ -1,6 +1,7 @@
-"""`merge_spans` (the shaded spans of a figure): at most MAX_SPANS, covering every span given, also
-when asked to merge nothing (no width, no gap: the page's ground-truth events), which once looped
-for ever on a log of more than MAX_SPANS faults."""
+"""A report of a log alarming all day (2,015 incidents, 1,728 truth events): `merge_spans` (the
+shaded spans of a figure) stays within MAX_SPANS and covers every span given, also when asked to
+merge nothing (no width, no gap: the ground-truth events), which once looped for ever; the verdict
+names only the first incidents."""
 
 from __future__ import annotations
 
@@ -29,3 +30,18 @@ def test_merged_spans_cover_every_span_and_stay_within_the_bound(spans, min_widt
     for start, end in spans:
         i = np.searchsorted(starts, start, side="right") - 1
         assert i >= 0 and merged[i][0] <= start and end <= merged[i][1]
+
+
+def test_the_verdict_names_the_first_incidents_and_counts_the_rest():
+    """A day of 2,015 incidents filled the report's first screen with its verdict list: it names
+    the first VERDICT_INCIDENTS and says how many more the Incidents table holds."""
+    from types import SimpleNamespace
+
+    from logscan.report.page_rows import VERDICT_INCIDENTS, verdict_lines
+
+    heads = [SimpleNamespace(line=lambda clock, k=k: f"incident {k}") for k in range(2015)]
+    report = SimpleNamespace(clock=None, results=[])
+    lines = verdict_lines(report, heads, [])
+    assert lines[:VERDICT_INCIDENTS] == [f"incident {k}" for k in range(VERDICT_INCIDENTS)]
+    assert lines[VERDICT_INCIDENTS:] == [f"... and {2015 - VERDICT_INCIDENTS} more incidents: see the Incidents table"]
+    assert verdict_lines(report, heads[:3], []) == ["incident 0", "incident 1", "incident 2"]
