@@ -84,7 +84,7 @@ def _modes(a: ModeTrack | None, b: ModeTrack | None) -> ModeTrack | None:
     if t.size > 2 * MAX_MODE_POINTS:
         idx = decimate_indices(value, MAX_MODE_POINTS, keep=run_starts(value), simplify_flat=True)
         t, value = t[idx], value[idx]
-    border_change = int(not (a.value[-1] == b.value[0] or (np.isnan(a.value[-1]) and np.isnan(b.value[0]))))
+    border_change = run_starts(np.array([a.value[-1], b.value[0]])).size - 1  # NaN equals NaN there
     intervals: list = []
     if a.intervals and b.intervals:  # both ran in few intervals: still few, or too many now
         intervals = _intervals(a.intervals, b.intervals)
