@@ -28,6 +28,7 @@ directory, a socket or a block device as a target is an `OutputError` (see `chec
 from __future__ import annotations
 
 import errno
+import io
 import json
 import os
 import re
@@ -38,9 +39,9 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import IO, Any, BinaryIO, NamedTuple, cast
 
 from logscan.errors import INTERRUPT_SEEN, LogscanError
 from logscan.json_policy import jsonable
@@ -131,10 +132,22 @@ def stage(path: str | os.PathLike, data: bytes | str, *, token: str = "") -> Sta
     """Write ``data`` completely (flushed to disk) to a temporary file in ``path``'s directory;
     `commit` renames it onto ``path``. On an error the temporary file is removed. A FIFO or a
     device at ``path`` (`check_target`) is not staged: the data waits for `commit` in memory."""
-    target = Path(path)
     payload = data.encode("utf-8") if isinstance(data, str) else data
+    return _staged(path, lambda fh: fh.write(payload), lambda: payload, token)
+
+
+def stage_json(path: str | os.PathLike, obj: Any, *, token: str = "") -> Staged:
+    """`stage` of `json_text` (``obj``), written to the temporary file piece by piece: the text of a
+    day's summary with thousands of alarms (24 MB) is never whole in memory, nor are the ~130 MB of
+    pieces `json.dumps` joins it from (bench/README.md, "the --json written in pieces")."""
+    return _staged(path, lambda fh: write_json_into(fh, obj), lambda: json_text(obj).encode("utf-8"), token)
+
+
+def _staged(path: str | os.PathLike, write: Callable[[IO[bytes]], object], payload: Callable[[], bytes], token: str):
+    """`stage`: ``write`` fills the temporary file; ``payload`` is the data a FIFO or device waits with."""
+    target = Path(path)
     if check_target(target):
-        return Staged(None, str(target), payload)
+        return Staged(None, str(target), payload())
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise OutputError("the output directory does not exist", path=str(directory), hint="create it first")
@@ -148,7 +161,7 @@ def stage(path: str | os.PathLike, data: bytes | str, *, token: str = "") -> Sta
         # mkstemp creates 0600; give the file the permissions a plain open() would (umask)
         os.chmod(tmp, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
+            write(fh)
             fh.flush()
             os.fsync(fh.fileno())
     except BaseException as exc:
@@ -300,13 +313,32 @@ def json_text(obj: Any) -> str:
     return json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
 
 
+def write_json_into(fh: IO[Any], obj: Any) -> None:
+    """`json_text` (``obj``), the same characters, written into ``fh`` (binary: as UTF-8) as the
+    encoder makes them instead of joined first; ``fh`` stays open."""
+    if not isinstance(fh, (io.BufferedIOBase, io.RawIOBase)):  # a text stream (sys.stdout)
+        _write_pieces(fh, obj)
+        return
+    text = io.TextIOWrapper(cast(BinaryIO, fh), encoding="utf-8")
+    try:
+        _write_pieces(text, obj)
+    finally:
+        text.detach()  # flushed into ``fh``, which its owner closes
+
+
+def _write_pieces(text: IO[str], obj: Any) -> None:
+    for piece in json.JSONEncoder(indent=2, sort_keys=False, allow_nan=False).iterencode(jsonable(obj)):
+        text.write(piece)
+    text.write("\n")
+    text.flush()
+
+
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     """JSON to ``path`` atomically, or to stdout when ``path`` is "-" (see `json_text`)."""
-    text = json_text(obj)
     if str(path) == "-":
-        sys.stdout.write(text)
+        write_json_into(sys.stdout, obj)
         return
-    write_atomic(path, text)
+    commit([stage_json(path, obj)])
 
 
 # --- helpers ------------------------------------------------------------------------------------

@@ -472,7 +472,7 @@ def _write_outputs(
     """The run's outputs all at once: the reports (already staged by the tasks), plotly.js and the
     JSON staged beside their targets, then renamed in a row (`logscan.artifacts.commit`: the JSON
     last, signals held), so an interrupted run leaves all previous outputs or all new ones."""
-    from logscan.artifacts import commit, json_text, stage
+    from logscan.artifacts import commit, stage, stage_json, write_json_into
 
     if plotlyjs_dir is not None:
         from logscan.report.page_assets import stage_plotly_js
@@ -488,8 +488,8 @@ def _write_outputs(
         if markdown_path:  # the report links relative to its folder
             staged.append(stage(markdown_path, markdown_summary(document, markdown_path), token=token))
     if json_path and json_path != "-":
-        staged.append(stage(json_path, json_text(document), token=token))
+        staged.append(stage_json(json_path, document, token=token))
     commit(staged)
     staged.clear()
     if json_path == "-":
-        sys.stdout.write(json_text(document))
+        write_json_into(sys.stdout, document)

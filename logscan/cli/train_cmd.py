@@ -146,10 +146,10 @@ def _beside(output_path: str) -> str:
 def _write(output_path: str, report: str | None, document: dict, plotlyjs: str | None = None) -> None:
     """The tables and the report (with --plotlyjs DIR, plotly.min.js there too), all or none
     (staged, then renamed in a row)."""
-    from logscan.artifacts import commit, json_text, new_token, stage
+    from logscan.artifacts import commit, new_token, stage, stage_json
 
     token = new_token()
-    staged = [stage(output_path, json_text(document), token=token)]
+    staged = [stage_json(output_path, document, token=token)]
     if report is not None:
         from logscan.report.plotly_script import shared_plotly_js
         from logscan.report.training_page import render_training_html
