@@ -11,6 +11,7 @@ from conftest import SAMPLES
 from logscan.pipeline import analyze_log, blocks
 from logscan.pipeline.blocks import analyze_blocked
 from logscan.report import plotly_json
+from logscan.report.headline import zoom_range
 from logscan.report.page_parts import PageInput
 from logscan.report.page_sections import first_screen
 from logscan.report.sensor_figures import REDUCED_POINTS
@@ -163,3 +164,25 @@ def test_thinned_rows_keep_every_series_extremes_within_the_limit():
         for series in (view.measured[:, j], view.predicted[:, j], view.normalised[:, j]):
             assert np.nanmax(series[kept]) == np.nanmax(series[defined])
             assert np.nanmin(series[kept]) == np.nanmin(series[defined])
+
+
+def test_where_the_alarms_cover_too_much_a_block_keeps_its_headlines_window(whole, monkeypatch):
+    """Where the zoom windows of all the alarms cover more of a block than is kept in full
+    (`MAX_FOCUS_FRACTION`, here almost none), each block still keeps every step inside the window of
+    its first incident's quoted alarm, which the report's headline opens on: the accelerometer's
+    bias from 30 s, drawn at full rate, not at the overview's share of 20 points per series, also
+    past the block's end at 40 s, where the next block's first incident quotes another sensor."""
+    monkeypatch.setattr(blocks, "REDUCED_POINTS", 60)
+    monkeypatch.setattr(plotly_json, "MAX_FOCUS_FRACTION", 1e-6)
+    merged = analyze_blocked(BIAS, block_s=20.0, free_series=True, sensor_views=True)
+    kept = merged.prepared.innovations
+    t = kept.times("accel", merged.run.t)
+    quoted = merged.incidents[0].quoted
+    assert quoted is not None and group_of(quoted.signal, kept.group_names) == "accel"
+    assert quoted.start == pytest.approx(30.0, abs=0.02)
+    # its block (20-40 s) keeps its part of the window, the next block, told of it, the rest
+    lo, hi = zoom_range(quoted.start, quoted.end)
+    grid = whole.run.t[(whole.run.t >= lo) & (whole.run.t <= hi)]
+    assert grid.size > 2000 and hi > 45.0
+    assert np.isin(np.round(grid, 6), np.round(t, 6)).all()
+    assert np.count_nonzero(t < 20.0) <= SERIES * len(kept.channels["accel"]) * 20  # no window in the first block

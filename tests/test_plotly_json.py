@@ -249,3 +249,24 @@ def test_series_with_one_pattern_of_nan_share_their_defined_steps():
             np.testing.assert_array_equal(a, b)
     assert len(steps._found) == 2  # position's steps found once for both of its series
     assert np.isnan(_defined_samples(t, cusum, keep, steps)[1]).sum() == 1  # the gap's one break
+
+
+def test_a_figure_opening_zoomed_draws_its_range_densely_whatever_the_pages_windows():
+    """The headline's figure opens on one alarm of a 1-hour log whose alarms cover too much of it for
+    the page's focus: three quarters of its points go to that range, not a few of the overview's."""
+    import json
+
+    from logscan.report.plotly_json import OPENED_SHARE, figure_json
+
+    t = np.arange(360_000) * 0.01
+    y = np.sin(t * 7.0)
+    fig = Figure("headline", "y", [Trace("y", y, np.zeros(0, np.int64), 1.0, {})], {"alarm": [(1000.0, 1000.1)]})
+    fig.x_range = (998.0, 1002.1)
+    drawn = json.loads(figure_json(fig, t, {}, np.zeros((0, 2))))["data"]
+    x = array(next(trace["x"] for trace in drawn if trace["name"] == "y"))
+    inside = np.count_nonzero((x >= 998.0) & (x <= 1002.1))
+    assert inside >= min(410, OPENED_SHARE * x.size * 0.9), (inside, x.size)
+    fig.x_range = None  # the same figure not zoomed: the overview's few points there
+    drawn = json.loads(figure_json(fig, t, {}, np.zeros((0, 2))))["data"]
+    x = array(next(trace["x"] for trace in drawn if trace["name"] == "y"))
+    assert np.count_nonzero((x >= 998.0) & (x <= 1002.1)) < 20

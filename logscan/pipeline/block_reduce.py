@@ -6,11 +6,13 @@ merged state (`logscan.pipeline.block_fold`) and does not keep it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 from numba import njit
 
+from logscan.alarms import AlarmInterval
 from logscan.numba_cache import follow_dependencies
 from logscan.pipeline.raw_lead import cut_rows
 from logscan.report.context_join import own_part
@@ -109,11 +111,19 @@ def reduced_result(result: DetectorResult, n: int, width: int) -> DetectorResult
     )
 
 
-def reduce_block(analysis, width: int, from_s: float | None = None, points: int = REDUCED_POINTS, focus_rows=None):
+def reduce_block(
+    analysis,
+    width: int,
+    from_s: float | None = None,
+    points: int = REDUCED_POINTS,
+    focus_rows=None,
+    carried: Sequence[AlarmInterval] = (),
+):
     """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
     as envelopes on the envelope's times (the block's grid ``run.t``), the report's innovations as
     the rows its sensor figures draw with at most ``points`` per series and ``focus_rows(group)``
-    inside zoom windows (`kept_rows`; None: all there), the filter's
+    inside zoom windows (`kept_rows`; None: all there; and those of the alarm its first incident
+    quotes and of ``carried``, the block before's, the windows a headline may open on), the filter's
     trace, aligned signals, raw channels, the context's true state and the suspension's steps freed;
     ``from_s``: the block's own first step, the steps before it a lead-in for the detectors (their
     alarms already seen from it), cut off. Returns it."""
@@ -131,12 +141,29 @@ def reduce_block(analysis, width: int, from_s: float | None = None, points: int 
     innovations = prepared.innovations  # now, with the detectors' full-rate series freed (the group's view is made)
     if innovations is not None:  # the alarms of the block's own steps: their zoom windows kept in full
         alarms = [a for result in analysis.results for a in result.alarms]
-        innovations = kept_rows(innovations, t, first, alarms, points, focus_rows)
+        quoted = first_quoted(analysis, float(t[first])) + _continued(carried, alarms, float(t[first]))
+        innovations = kept_rows(innovations, t, first, alarms, points, focus_rows, quoted)
     times = envelope_times(t[first:], width)
     prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
     prepared.raw, prepared.context, prepared.innovations = {}, own_part(prepared.context), innovations
     analysis.suspended = None
     return analysis
+
+
+def first_quoted(analysis, from_s: float) -> list[AlarmInterval]:
+    """The alarm quoted by the block's first incident that reaches its own steps (from ``from_s``):
+    the window a report's headline may open on (none: empty)."""
+    return [i.quoted for i in analysis.incidents if i.quoted is not None and i.quoted.end >= from_s][:1]
+
+
+def _continued(carried: Sequence[AlarmInterval], alarms: Sequence[AlarmInterval], from_s: float) -> list:
+    """The block before's quoted ``carried`` alarms, each to the end of the same check's alarm going
+    on from this block's first step (``from_s``): as the merge joins them, so its window is the merged one's."""
+    joined = []
+    for before in carried:
+        going_on = [a.end for a in alarms if a.signal == before.signal and a.start <= from_s + 1e-6]
+        joined.append(replace(before, end=max([before.end, *going_on])))
+    return joined
 
 
 def _cut_lead(analysis, first: int) -> None:

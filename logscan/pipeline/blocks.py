@@ -19,11 +19,12 @@ import math
 import os
 from dataclasses import replace
 
+from logscan.alarms import AlarmInterval
 from logscan.docs import doc_url
 from logscan.errors import LogscanError
 from logscan.memory import every_free_page, return_freed_pages
 from logscan.pipeline.block_fold import BlockFold
-from logscan.pipeline.block_reduce import bucket_width, reduce_block
+from logscan.pipeline.block_reduce import bucket_width, first_quoted, reduce_block
 from logscan.pipeline.preparation import load_profile_for
 from logscan.pipeline.run import analyze_log
 from logscan.readers import detect_format
@@ -155,6 +156,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     points = -(-REDUCED_POINTS // len(windows))  # the sensor figures' rows: each block its share of the log's
     loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own
     fold, refused = BlockFold(), []
+    carried: list[AlarmInterval] = []  # the alarm the block before's first incident quotes
     with every_free_page():  # the peak must not depend on where the heap stands (logscan.memory)
         for k, (start_s, end_s) in enumerate(windows):
             step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
@@ -176,7 +178,10 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
                 refused.append((k, exc))
                 continue
             focus = _focus_share(fold, len(windows) - k)
-            fold.add(reduce_block(analysis, width, None if led is None else start_s, points, focus))  # and not kept
+            from_s = None if led is None else start_s
+            reduce_block(analysis, width, from_s, points, focus, carried)
+            carried = first_quoted(analysis, float(analysis.run.t[0]))  # the next block keeps its window's rest
+            fold.add(analysis)  # and not kept
             del analysis
             gc.collect()
             return_freed_pages()

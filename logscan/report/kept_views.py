@@ -7,9 +7,10 @@ on the block's own steps: the extremes of each drawn series in ``points`` bucket
 of `REDUCED_POINTS`, so the log keeps about as many as its figure draws at once, whatever the number
 of blocks) and every sample inside the zoom windows around the block's alarms naming the group, as
 the figure at once keeps them in full, up to the log's `FOCUS_ROWS` per group (past it, their
-extremes: `_thinned`). The rows hold the group's `SensorView` values (float32, as its pack gives
-them), so each block's own offsets and scales of the pack are applied before its rows join the
-others. docs/algorithms.md section 8.1b.
+extremes: `_thinned`); where those windows cover too much of the block to be kept, the window of the
+alarm its first incident quotes, which the page's headline may open on. The rows hold the group's
+`SensorView` values (float32, as its pack gives them), so each block's own offsets and scales of
+the pack are applied before its rows join the others. docs/algorithms.md section 8.1b.
 """
 
 from __future__ import annotations
@@ -124,18 +125,23 @@ def kept_rows(
     alarms: Sequence,
     points: int,
     focus_rows: Callable[[str], int] | None = None,
+    quoted: Sequence = (),
 ) -> KeptRows:
     """Of ``innovations`` on the block's grid ``t``, from its step ``first`` on, each group's rows
     its sensor figures draw with at most ``points`` per series, and every one inside the zoom
     windows around the ``alarms`` that name the group; of the lead-in before ``first`` (the block
     before's steps) only those inside the windows, which replace the block before's there (an
     alarm from a border is drawn in full from before it, as at once). ``focus_rows``: how many rows
-    inside the windows a group may keep (None: all); past it, their extremes (`_thinned`)."""
+    inside the windows a group may keep (None: all); past it, their extremes (`_thinned`).
+    ``quoted``: alarms a report's headline may zoom to (the block's first incident's), whose
+    windows are kept even where the windows of all alarms cover too much of the block to be."""
     own = t[first:]
     kept = KeptRows()
-    for group in innovations.group_names:
-        spans = [(float(a.start), float(a.end)) for a in alarms if group_of(a.signal, innovations.group_names) == group]
-        windows = zoom_windows(spans, own)  # as many of the block's own as at once of the log
+    names = innovations.group_names
+    for group in names:
+        windows = zoom_windows(_spans(alarms, group, names), own)  # as many of the block's own as at once of the log
+        if not windows.size:  # alarms all over the block: of them only the headline's window
+            windows = zoom_windows(_spans(quoted, group, names), own, whatever_they_cover=True)
         view = innovations.view(group)
         if view is None:
             continue
@@ -155,6 +161,11 @@ def kept_rows(
             focus=inside.size,
         )
     return kept
+
+
+def _spans(alarms: Sequence, group: str, names: Sequence[str]) -> list[tuple[float, float]]:
+    """The spans of the ``alarms`` naming ``group``."""
+    return [(float(a.start), float(a.end)) for a in alarms if group_of(a.signal, names) == group]
 
 
 def _thinned(view: SensorView, t: np.ndarray, rows: np.ndarray, limit: int) -> np.ndarray:

@@ -14,7 +14,8 @@ since the log's start): figures are built in seconds since the log's time zero a
 Zooming to an incident or alarm (templates/report.js: its span with a margin of max(2 s, 50 %))
 would show a long log's overview decimation, a few points per window; so a quarter of each
 decimated trace's points is spent inside those windows (`focus_windows`), when they cover at most
-a fifth of the log.
+a fifth of the log. A figure that opens zoomed (the headline's) spends three quarters of its points
+(OPENED_SHARE) in the range it opens on instead, whatever the page's windows.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ TIME_AXIS = {
 ZOOM_MARGIN_S, ZOOM_MARGIN_FRACTION = 2.0, 0.5  # as templates/report.js zooms to a row's span
 INCIDENT_GAP_S = 1.0  # alarms this close form one incident (logscan.verdict.incidents.DEFAULT_GAP_S)
 FOCUS_SHARE = 0.25  # of a decimated trace's points, spent inside the zoom windows
+OPENED_SHARE = 0.75  # of a figure's that opens zoomed (the headline's), spent in the range it shows
 MAX_FOCUS_FRACTION = 0.2  # no focus when the windows cover more of the log than this
 ALARM_FILL = "rgba(214, 39, 40, 0.18)"
 TRUTH_FILL = "rgba(31, 119, 180, 0.16)"
@@ -179,8 +181,8 @@ def focus_windows(figures: list[Figure], t: np.ndarray) -> np.ndarray:
     return zoom_windows([span for fig in figures for span in fig.spans.get("alarm", [])], t)
 
 
-def zoom_windows(spans: list, t: np.ndarray) -> np.ndarray:
-    """`focus_windows` of these alarm spans."""
+def zoom_windows(spans: list, t: np.ndarray, whatever_they_cover: bool = False) -> np.ndarray:
+    """`focus_windows` of these alarm spans (``whatever_they_cover``: however much of ``t`` they cover)."""
     if not spans or t.size < 2:
         return np.zeros((0, 2))
     spans += merge_spans(spans, 0.0, INCIDENT_GAP_S)
@@ -188,7 +190,7 @@ def zoom_windows(spans: list, t: np.ndarray) -> np.ndarray:
     margin = np.maximum(ZOOM_MARGIN_S, ZOOM_MARGIN_FRACTION * (arr[:, 1] - arr[:, 0]))
     windows = np.asarray(merge_spans(np.column_stack([arr[:, 0] - margin, arr[:, 1] + margin]).tolist(), 0.0, 0.0))
     covered = float(np.sum(windows[:, 1] - windows[:, 0])) if windows.size else 0.0
-    if covered > MAX_FOCUS_FRACTION * float(t[-1] - t[0]):
+    if covered > MAX_FOCUS_FRACTION * float(t[-1] - t[0]) and not whatever_they_cover:
         return np.zeros((0, 2))
     return windows.reshape(-1, 2)
 
@@ -231,10 +233,11 @@ def _decimated(
     windows: np.ndarray,
     ascending: bool | None,
     has_nan: bool | None,
+    share: float = FOCUS_SHARE,
 ) -> np.ndarray:
-    """Indices drawing ``y``: the whole under ``max_points``, FOCUS_SHARE of them inside ``windows``
+    """Indices drawing ``y``: the whole under ``max_points``, ``share`` of them inside ``windows``
     (``ascending``: whether ``x`` ascends, ``has_nan``: whether ``y`` holds a NaN; None: not known)."""
-    n_focus = int(max_points * FOCUS_SHARE)
+    n_focus = int(max_points * share)
     focus = y.size > max_points and n_focus >= 16
     inside = window_indices(x, windows, ascending) if focus else np.zeros(0, dtype=np.int64)
     if inside.size <= n_focus:  # not decimated, or the windows hold few samples: drawn in full below
@@ -251,9 +254,11 @@ def trace_data(
     points: dict[int, int],
     windows: np.ndarray | None = None,
     steps: DefinedSteps | None = None,
+    share: float = FOCUS_SHARE,
 ) -> list[dict]:
     """The plotly traces of one figure: shaded spans, horizontal lines, decimated lines (``steps``:
-    the page's `DefinedSteps` on ``t``, None: found for each line)."""
+    the page's `DefinedSteps` on ``t``, None: found for each line), ``share`` of each one's points
+    inside the ``windows``."""
     windows = np.zeros((0, 2)) if windows is None else windows
     data: list[dict] = []
     span_fills = {"alarm": ALARM_FILL, "ground truth": TRUTH_FILL, "possible fault": POSSIBLE_FILL}
@@ -273,7 +278,7 @@ def trace_data(
         x, y, keep = (_defined_samples(t, trace.y, trace.keep, steps) if trace.t is None else
                       _defined_samples(trace.t, trace.y, trace.keep))  # fmt: skip
         no_nan = False if y is trace.y else None  # the series itself: it was found to hold no NaN
-        idx = _decimated(x, y, keep, max_points, windows, grid_ascends if trace.t is None else None, no_nan)
+        idx = _decimated(x, y, keep, max_points, windows, grid_ascends if trace.t is None else None, no_nan, share)
         data.append({
             "type": "scatter",
             "name": plot_text(trace.name),
@@ -295,8 +300,12 @@ def figure_json(
     steps: DefinedSteps | None = None,
 ) -> str:
     """One figure as escaped plotly JSON, its traces decimated to ``points`` (trace id -> points),
-    part of them inside the zoom ``windows`` (`focus_windows`), its time axis in ``clock``
-    (``steps``: as `trace_data`'s)."""
+    part of them inside the zoom ``windows`` (`focus_windows`), or, for a figure shown zoomed
+    (``x_range``: the headline's), most inside the range it opens on, whatever the page's windows; its
+    time axis in ``clock`` (``steps``: as `trace_data`'s)."""
+    share = FOCUS_SHARE
+    if fig.x_range is not None:  # its first view: drawn there at full rate, not at the log's decimation
+        windows, share = np.asarray([fig.x_range], dtype=np.float64), OPENED_SHARE
     title = {"text": plot_text(fig.title), "font": {"size": 14}}
     if fig.subtitle:  # the statistic in plain words, a smaller line under its name
         title["subtitle"] = {"text": plot_text(fig.subtitle), "font": {"size": 12, "color": "#555"}}
@@ -319,7 +328,7 @@ def figure_json(
         "paper_bgcolor": "white",
         "template": {},
     }
-    return plain_json(trace_data(fig, t, points, windows, steps), layout, clock)  # plotly's validation: 15 ms
+    return plain_json(trace_data(fig, t, points, windows, steps, share), layout, clock)  # plotly's validation: 15 ms
 
 
 # hover texts of times in seconds, as the figure builders write them, and as a UTC date axis shows them
