@@ -6,7 +6,7 @@ merged state (`logscan.pipeline.block_fold`) and does not keep it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -116,7 +116,7 @@ def reduce_block(
     width: int,
     from_s: float | None = None,
     points: int = REDUCED_POINTS,
-    focus_rows=None,
+    focus_rows: Callable[[str], int] | None = None,
     carried: Sequence[AlarmInterval] = (),
 ):
     """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
