@@ -33,7 +33,7 @@ from logscan.filters.ekf import ekf_run, run_ekf
 from logscan.models.base import Model
 from logscan.numba_cache import initialise_jit, kernel_cached
 
-COMPILING_NOTE = "compiling numerical kernels (first run only, 10-20 s)"
+COMPILING_NOTE = "compiling numerical kernels (first run only, about 20-60 s)"
 
 
 def ekf_cached(model: Model) -> bool:
