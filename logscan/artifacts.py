@@ -39,7 +39,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, BinaryIO, NamedTuple, cast
 
@@ -310,27 +310,28 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> None:
 def json_text(obj: Any) -> str:
     """JSON under the one JSON policy (`logscan.json_policy.jsonable`: numpy values to plain ones,
     NaN and infinities to null)."""
-    return json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
+    return "".join(_json_pieces(obj))
 
 
 def write_json_into(fh: IO[Any], obj: Any) -> None:
     """`json_text` (``obj``), the same characters, written into ``fh`` (binary: as UTF-8) as the
     encoder makes them instead of joined first; ``fh`` stays open."""
     if not isinstance(fh, (io.BufferedIOBase, io.RawIOBase)):  # a text stream (sys.stdout)
-        _write_pieces(fh, obj)
+        fh.writelines(_json_pieces(obj))
+        fh.flush()
         return
     text = io.TextIOWrapper(cast(BinaryIO, fh), encoding="utf-8")
     try:
-        _write_pieces(text, obj)
+        text.writelines(_json_pieces(obj))
+        text.flush()
     finally:
         text.detach()  # flushed into ``fh``, which its owner closes
 
 
-def _write_pieces(text: IO[str], obj: Any) -> None:
-    for piece in json.JSONEncoder(indent=2, sort_keys=False, allow_nan=False).iterencode(jsonable(obj)):
-        text.write(piece)
-    text.write("\n")
-    text.flush()
+def _json_pieces(obj: Any) -> Iterator[str]:
+    """`json_text`'s characters in the pieces the encoder makes them."""
+    yield from json.JSONEncoder(indent=2, sort_keys=False, allow_nan=False).iterencode(jsonable(obj))
+    yield "\n"
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:

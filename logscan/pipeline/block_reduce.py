@@ -117,13 +117,15 @@ def reduce_block(
     from_s: float | None = None,
     points: int = REDUCED_POINTS,
     focus_rows: Callable[[str], int] | None = None,
+    quoted: Sequence[AlarmInterval] = (),
     carried: Sequence[AlarmInterval] = (),
 ):
     """The block's analysis, in place, reduced to what the merged one reads: the detectors' series
     as envelopes on the envelope's times (the block's grid ``run.t``), the report's innovations as
     the rows its sensor figures draw with at most ``points`` per series and ``focus_rows(group)``
-    inside zoom windows (`kept_rows`; None: all there; and those of the alarm its first incident
-    quotes and of ``carried``, the block before's, the windows a headline may open on), the filter's
+    inside zoom windows (`kept_rows`; None: all there; and those of ``quoted``, the alarm its first
+    incident quotes, `first_quoted`, and of ``carried``, the block before's: the windows a headline
+    may open on), the filter's
     trace, aligned signals, raw channels, the context's true state and the suspension's steps freed;
     ``from_s``: the block's own first step, the steps before it a lead-in for the detectors (their
     alarms already seen from it), cut off. Returns it."""
@@ -141,8 +143,8 @@ def reduce_block(
     innovations = prepared.innovations  # now, with the detectors' full-rate series freed (the group's view is made)
     if innovations is not None:  # the alarms of the block's own steps: their zoom windows kept in full
         alarms = [a for result in analysis.results for a in result.alarms]
-        quoted = first_quoted(analysis, float(t[first])) + _continued(carried, alarms, float(t[first]))
-        innovations = kept_rows(innovations, t, first, alarms, points, focus_rows, quoted)
+        heads = [*quoted, *_continued(carried, alarms, float(t[first]))]
+        innovations = kept_rows(innovations, t, first, alarms, points, focus_rows, heads)
     times = envelope_times(t[first:], width)
     prepared.run = replace(prepared.run, t=times, u=np.empty((times.size, 0)), ground=None, ground_around=None)
     prepared.raw, prepared.context, prepared.innovations = {}, own_part(prepared.context), innovations

@@ -179,8 +179,9 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
                 continue
             focus = _focus_share(fold, len(windows) - k)
             from_s = None if led is None else start_s
-            reduce_block(analysis, width, from_s, points, focus, carried)
-            carried = first_quoted(analysis, float(analysis.run.t[0]))  # the next block keeps its window's rest
+            quoted = first_quoted(analysis, float(analysis.run.t[0]) if from_s is None else from_s)
+            reduce_block(analysis, width, from_s, points, focus, quoted, carried)
+            carried = quoted  # the next block keeps the rest of its window
             fold.add(analysis)  # and not kept
             del analysis
             gc.collect()
