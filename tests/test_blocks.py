@@ -11,7 +11,7 @@ import hypothesis.extra.numpy as hnp
 import hypothesis.strategies as st
 import numpy as np
 import pytest
-from conftest import SAMPLES
+from conftest import SAMPLES, need_testdata
 from hypothesis import given, settings
 
 from logscan.alarms import AlarmInterval
@@ -199,6 +199,26 @@ def test_a_log_shorter_than_a_block_takes_the_path_it_took(both):
 def test_blocks_of_a_log_read_whole_are_said_to_be_analysed_at_once():
     analysis = analyze_blocked(SAMPLES / "quad_healthy.csv", block_s=10.0, free_series=True)
     assert any(w.startswith("--block-s: a csv") and "analysed at once" in w for w in analysis.warnings)
+
+
+def test_a_log_read_whole_past_the_memory_budget_says_so_unless_at_once_was_asked(monkeypatch):
+    """A real ULog (read whole: no blocks) whose grid holds more steps than the budget allows at once
+    warns that its memory grew with its length, and why it was not read in blocks; within the
+    budget, or with --block-s 0 (at once, asked for), it does not."""
+    from logscan.pipeline import blocks
+
+    ulog = need_testdata("px4-ulog/sample_px4_events.ulg")  # 31 s of PX4's 250 Hz IMU: ~7,800 steps
+    quiet = analyze_blocked(ulog, free_series=True)
+    assert not any(w.startswith("memory:") for w in quiet.warnings)
+    monkeypatch.setattr(blocks, "AUTO_STEPS", 1000)
+    warned = analyze_blocked(ulog, free_series=True)
+    lines = [w for w in warned.warnings if w.startswith("memory:")]
+    steps = warned.run.n_steps
+    assert len(lines) == 1 and f"{steps:,} grid steps were analysed at once, more than the 1,000" in lines[0]
+    assert "a ulog log is read whole" in lines[0] and "--start/--end" in lines[0]
+    assert (warned.verdict(), warned.summary()["incidents"]) == (quiet.verdict(), quiet.summary()["incidents"])
+    asked = analyze_blocked(ulog, block_s=0, free_series=True)
+    assert not any(w.startswith("memory:") for w in asked.warnings)
 
 
 def test_the_command_writes_one_verdict_and_every_artifact_of_the_blocks(tmp_path, monkeypatch):

@@ -391,3 +391,19 @@ def test_evaluation_rows_align_whatever_the_check_names():
     rows = render_scores(evaluation).splitlines()[2:5]
     assert len({len(row) for row in rows}) == 1, rows  # every column ends where the header's does
     assert len({row.index(" 0.33") for row in rows}) == 1
+
+
+def test_the_summary_shows_the_first_warnings_and_counts_the_rest():
+    """A log's screen shows MAX_WARNINGS warnings and says how many more the report and --json hold."""
+    from logscan.cli.render import MAX_WARNINGS, render_summary
+    from logscan.pipeline import analyze_log
+
+    analysis = analyze_log(SAMPLES / "quad_healthy.mcap")
+    for count in (MAX_WARNINGS, MAX_WARNINGS + 3):
+        analysis.warnings = [f"warning number {k}" for k in range(count)]
+        text = render_summary(analysis, None)
+        assert [line for line in text.splitlines() if line.startswith("  warning: ")] == [
+            f"  warning: warning number {k}" for k in range(MAX_WARNINGS)
+        ]
+        more = [line for line in text.splitlines() if "more warning(s)" in line]
+        assert more == ([] if count == MAX_WARNINGS else ["  ... 3 more warning(s) (see the report / --json)"])

@@ -18,6 +18,8 @@ from logscan.docs import doc_url
 if TYPE_CHECKING:
     from logscan.verdict.evaluation import Evaluation
 
+# Warnings a log's screen shows; the rest are counted in one line (all are in the report and --json).
+MAX_WARNINGS = 5
 # C0 controls, DEL, C1 controls (CSI, OSC...), line/paragraph separators, bidirectional controls
 _CONTROL_RE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
 
@@ -100,7 +102,9 @@ def render_summary(analysis, report_path: str | None, max_rows: int = 12) -> str
     if analysis.recovery is not None:
         lines += _recovery_lines(analysis.recovery, clock)
     lines += _set_apart_lines(analysis, clock) + _truth_lines(analysis)
-    lines += [f"  warning: {warning}" for warning in analysis.warnings[:5]]
+    lines += [f"  warning: {warning}" for warning in analysis.warnings[:MAX_WARNINGS]]
+    if len(analysis.warnings) > MAX_WARNINGS:
+        lines.append(f"  ... {len(analysis.warnings) - MAX_WARNINGS} more warning(s) (see the report / --json)")
     if report_path:
         lines.append(f"  report: {report_path}")
     return _lines(lines)

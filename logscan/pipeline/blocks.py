@@ -109,21 +109,32 @@ def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s
 
 
 def why_not_blocks(path, loaded) -> str:
-    """Why ``path`` cannot be read in blocks (a --block-s it cannot honour: a warning); "": it can."""
+    """Why ``path`` cannot be read in blocks (a --block-s it cannot honour, or a log too long for
+    the budget at once: a warning); "": it can."""
     fmt = detect_format(path)
     if fmt != "mcap":
-        return f"--block-s: a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)"
+        return f"a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)"
     if loaded.profile.loops or loaded.profile.recovery is not None:
-        return "--block-s: a profile with further loops or [recovery] re-reads the whole run; analysed at once"
+        return "a profile with further loops or [recovery] re-reads the whole run; analysed at once"
     span = indexed_span_s(path)
     if span is None:
-        return "--block-s: the MCAP file has no chunk index or statistics to read a block from; analysed at once"
+        return "the MCAP file has no chunk index or statistics to read a block from; analysed at once"
     if span[0] * float(loaded.profile.vehicle.rate_hz) > span[1]:
         return (
-            f"--block-s: the file's span ({span[0]:.6g} s) holds fewer messages than grid steps (an outlying "
+            f"the file's span ({span[0]:.6g} s) holds fewer messages than grid steps (an outlying "
             "time stretches it); analysed at once, where outlying times are dropped"
         )
     return ""
+
+
+def over_budget_warning(steps: int, why: str) -> str:
+    """The warning of a log analysed at once although its grid holds more than `AUTO_STEPS` steps:
+    its memory grew with its length past the budget a log in blocks keeps (``why``: `why_not_blocks`)."""
+    return (
+        f"memory: {steps:,} grid steps were analysed at once, more than the {AUTO_STEPS:,} whose peak stays "
+        f"within {MEMORY_BUDGET_BYTES / 1e6:.0f} MB, so the peak grew with the log's length: {why}; "
+        f"--start/--end analyse a part with less memory ({doc_url('troubleshooting.md')}, a log does not fit in memory)"
+    )
 
 
 def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: float | None = None, **options):
@@ -135,10 +146,13 @@ def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: floa
     start_s, end_s = options.pop("start_s", None), options.pop("end_s", None)
     windows = blocks_for(path, loaded, block_s, start_s, end_s)
     if windows is None:
-        refused = why_not_blocks(path, loaded) if block_s else None
         analysis = analyze_log(path, profile_path, loaded=loaded, start_s=start_s, end_s=end_s, **options)
-        if refused and analysis.duration_s > block_s:  # shorter than one block: as it should be
-            analysis.warnings.append(refused)
+        if block_s and analysis.duration_s > block_s:  # shorter than one block: as it should be
+            refused = why_not_blocks(path, loaded)
+            analysis.warnings += [f"--block-s: {refused}"] if refused else []
+        elif block_s is None and analysis.run.n_steps > AUTO_STEPS:  # past the budget at once: say why
+            refused = why_not_blocks(path, loaded)
+            analysis.warnings += [over_budget_warning(analysis.run.n_steps, refused)] if refused else []
         return analysis
     return _in_blocks(path, profile_path, loaded, windows, (start_s, end_s), options, block_s)
 
