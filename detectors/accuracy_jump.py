@@ -12,6 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 
+# Entries of the (samples x window) matrix built at once: its rows are taken in slices of at most
+# this many entries (8 MiB of float64), so the memory is bounded by the window, not the log (a
+# 1-hour PX4 log's 67,000 GNSS reports x a 185-report window took ~560 MiB at once). The slices'
+# medians are the whole matrix's, row by row.
+WINDOW_ENTRIES = 2**20
+
 
 def accuracy_jump(
     t_ns: np.ndarray, values: np.ndarray, window_s: float, judged: np.ndarray | None = None
@@ -26,7 +32,7 @@ def accuracy_jump(
     for a jump within a second of arming, and could never alarm.
 
     Vectorised over a window of samples (the count ``window_s`` spans at the median sample
-    period), each window clipped to ``window_s`` in time."""
+    period), each window clipped to ``window_s`` in time, `WINDOW_ENTRIES` at a time."""
     t = np.asarray(t_ns, dtype=np.int64)
     v = np.asarray(values, dtype=np.float64)
     out = np.full(v.shape, np.nan)
@@ -38,13 +44,19 @@ def accuracy_jump(
     # row i: the k samples before sample i (NaN before the log's start), and their times
     padded = np.concatenate([np.full(k, np.nan), good])
     t_padded = np.concatenate([np.full(k, np.iinfo(np.int64).min // 2), t])
-    windows = np.lib.stride_tricks.sliding_window_view(padded, k)[: v.size]
+    windows = np.lib.stride_tricks.sliding_window_view(padded, k)[: v.size]  # views: nothing copied
     times = np.lib.stride_tricks.sliding_window_view(t_padded, k)[: v.size]
-    windows = np.where(times >= (t - int(window_s * 1e9))[:, None], windows, np.nan)
-    has = np.isfinite(windows).any(axis=1)
+    oldest = t - int(window_s * 1e9)
+    has = np.zeros(v.size, dtype=bool)
     reference = np.full(v.size, np.nan)
-    if has.any():
-        reference[has] = np.nanmedian(windows[has], axis=1)
+    rows = max(1, WINDOW_ENTRIES // k)
+    for lo in range(0, v.size, rows):  # a slice of rows at a time: `WINDOW_ENTRIES`
+        hi = min(lo + rows, v.size)
+        inside = np.where(times[lo:hi] >= oldest[lo:hi, None], windows[lo:hi], np.nan)
+        some = np.isfinite(inside).any(axis=1)
+        has[lo:hi] = some
+        if some.any():
+            reference[lo:hi][some] = np.nanmedian(inside[some], axis=1)
     judge = has & np.isfinite(good)
     if judged is not None:
         judge &= np.asarray(judged, dtype=bool)

@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import json
 
+import hypothesis.strategies as st
 import numpy as np
 import pytest
 from conftest import need_testdata
+from hypothesis import given, settings
 from ulog_edit import edit_ulog
 
+from logscan.detectors import accuracy_jump as accuracy_jump_module
 from logscan.detectors.accuracy_jump import accuracy_jump
 
 EVENTS = "px4-ulog/sample_px4_events.ulg"  # SITL quadcopter: first 3D fix 9.18 s, armed 14.94 s
@@ -54,3 +57,46 @@ def test_a_jump_half_a_second_after_arming_alarms(cli, tmp_path):
     jumps = {a["signal"]: a for a in health["alarms"] if a["signal"].startswith("health.gnss_accuracy_jump.")}
     assert set(jumps) == {"health.gnss_accuracy_jump.eph", "health.gnss_accuracy_jump.epv"}, health["alarms"]
     assert all(onset_s - 0.2 <= a["first_exceed"] and a["start"] <= onset_s + 1.5 for a in jumps.values()), jumps
+
+
+def _whole_matrix(t, values, window_s, judged):
+    """The definition on the whole (samples x window) matrix at once (what accuracy_jump computed
+    before it took the rows a slice at a time)."""
+    v = np.asarray(values, dtype=np.float64)
+    out = np.full(v.shape, np.nan)
+    if v.size < 2:
+        return out
+    period = float(np.median(np.diff(t))) if np.any(np.diff(t) > 0) else 0.0
+    k = int(np.clip(np.ceil(window_s * 1e9 / period), 1, v.size)) if period > 0 else 1
+    good = np.where(np.isfinite(v) & (v > 0), v, np.nan)
+    padded = np.concatenate([np.full(k, np.nan), good])
+    t_padded = np.concatenate([np.full(k, np.iinfo(np.int64).min // 2), t])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, k)[: v.size]
+    times = np.lib.stride_tricks.sliding_window_view(t_padded, k)[: v.size]
+    windows = np.where(times >= (t - int(window_s * 1e9))[:, None], windows, np.nan)
+    has = np.isfinite(windows).any(axis=1)
+    reference = np.full(v.size, np.nan)
+    if has.any():
+        reference[has] = np.nanmedian(windows[has], axis=1)
+    judge = has & np.isfinite(good) & judged
+    out[judge] = good[judge] / reference[judge]
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    steps=st.lists(st.integers(1, 400), min_size=0, max_size=120),
+    values=st.lists(st.one_of(st.floats(-1.0, 50.0), st.just(float("nan"))), min_size=120, max_size=120),
+    judged=st.lists(st.booleans(), min_size=120, max_size=120),
+    window_s=st.floats(0.05, 30.0),
+    entries=st.integers(1, 64),
+)
+def test_the_rows_a_slice_at_a_time_give_the_whole_matrix_medians(steps, values, judged, window_s, entries):
+    """Taken `WINDOW_ENTRIES` at a time, bit for bit the ratios of the whole matrix at once."""
+    t = (np.cumsum([0, *steps]) * 1e7).astype(np.int64)  # 10 ms to 4 s apart, irregular
+    v, gate = np.asarray(values[: t.size]), np.asarray(judged[: t.size])
+    expected = _whole_matrix(t, v, window_s, gate)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(accuracy_jump_module, "WINDOW_ENTRIES", entries)
+        sliced = accuracy_jump(t, v, window_s, judged=gate)
+    np.testing.assert_array_equal(sliced, expected)
