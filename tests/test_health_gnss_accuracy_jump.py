@@ -59,30 +59,6 @@ def test_a_jump_half_a_second_after_arming_alarms(cli, tmp_path):
     assert all(onset_s - 0.2 <= a["first_exceed"] and a["start"] <= onset_s + 1.5 for a in jumps.values()), jumps
 
 
-def _whole_matrix(t, values, window_s, judged):
-    """The definition on the whole (samples x window) matrix at once (what accuracy_jump computed
-    before it took the rows a slice at a time)."""
-    v = np.asarray(values, dtype=np.float64)
-    out = np.full(v.shape, np.nan)
-    if v.size < 2:
-        return out
-    period = float(np.median(np.diff(t))) if np.any(np.diff(t) > 0) else 0.0
-    k = int(np.clip(np.ceil(window_s * 1e9 / period), 1, v.size)) if period > 0 else 1
-    good = np.where(np.isfinite(v) & (v > 0), v, np.nan)
-    padded = np.concatenate([np.full(k, np.nan), good])
-    t_padded = np.concatenate([np.full(k, np.iinfo(np.int64).min // 2), t])
-    windows = np.lib.stride_tricks.sliding_window_view(padded, k)[: v.size]
-    times = np.lib.stride_tricks.sliding_window_view(t_padded, k)[: v.size]
-    windows = np.where(times >= (t - int(window_s * 1e9))[:, None], windows, np.nan)
-    has = np.isfinite(windows).any(axis=1)
-    reference = np.full(v.size, np.nan)
-    if has.any():
-        reference[has] = np.nanmedian(windows[has], axis=1)
-    judge = has & np.isfinite(good) & judged
-    out[judge] = good[judge] / reference[judge]
-    return out
-
-
 @settings(max_examples=60, deadline=None)
 @given(
     steps=st.lists(st.integers(1, 400), min_size=0, max_size=120),
@@ -92,11 +68,25 @@ def _whole_matrix(t, values, window_s, judged):
     entries=st.integers(1, 64),
 )
 def test_the_rows_a_slice_at_a_time_give_the_whole_matrix_medians(steps, values, judged, window_s, entries):
-    """Taken `WINDOW_ENTRIES` at a time, bit for bit the ratios of the whole matrix at once."""
+    """Taken `WINDOW_ENTRIES` at a time, bit for bit the ratios of the whole matrix at once (one
+    slice holding every row)."""
     t = (np.cumsum([0, *steps]) * 1e7).astype(np.int64)  # 10 ms to 4 s apart, irregular
     v, gate = np.asarray(values[: t.size]), np.asarray(judged[: t.size])
-    expected = _whole_matrix(t, v, window_s, gate)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(accuracy_jump_module, "WINDOW_ENTRIES", entries)
-        sliced = accuracy_jump(t, v, window_s, judged=gate)
-    np.testing.assert_array_equal(sliced, expected)
+    ratios = {}
+    for size in (entries, 2**62):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(accuracy_jump_module, "WINDOW_ENTRIES", size)
+            ratios[size] = accuracy_jump(t, v, window_s, judged=gate)
+    np.testing.assert_array_equal(ratios[entries], ratios[2**62])
+    # and the definition row by row: the median of the valid values among the k samples before
+    # (k: the window at the median period) that lie within window_s
+    steps_apart = np.diff(t)
+    period = float(np.median(steps_apart)) if np.any(steps_apart > 0) else 0.0
+    k = int(np.clip(np.ceil(window_s * 1e9 / period), 1, t.size)) if period > 0 else 1
+    expected = np.full(t.size, np.nan)
+    for i in range(t.size if t.size >= 2 else 0):
+        before, times = v[max(0, i - k) : i], t[max(0, i - k) : i]
+        valid = before[(times >= t[i] - int(window_s * 1e9)) & np.isfinite(before) & (before > 0)]
+        if valid.size and gate[i] and np.isfinite(v[i]) and v[i] > 0:
+            expected[i] = v[i] / np.median(valid)
+    np.testing.assert_allclose(ratios[entries], expected, rtol=1e-12)
