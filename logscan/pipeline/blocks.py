@@ -86,19 +86,15 @@ def block_windows(
 def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s: float | None):
     """The windows to analyse ``path`` in, or None: the whole log at once. ``block_s`` None: in
     blocks of `BLOCK_STEPS` when the span analysed holds more than `AUTO_STEPS` grid steps; 0:
-    never; else blocks of that length whenever the span is longer than one. Only an indexed MCAP
-    file reads a window without the rest (other formats are read whole: None), and only a profile
-    without further loops or [recovery] (both re-read the whole run: None)."""
-    if block_s == 0 or detect_format(path) != "mcap":
+    never; else blocks of that length whenever the span is longer than one. Only a log
+    `why_not_blocks` finds nothing against is read in blocks."""
+    if block_s == 0:
         return None
-    span = indexed_span_s(path)
-    profile = loaded.profile
-    if span is None or profile.loops or profile.recovery is not None:
+    refused, span = _refusal(path, loaded)
+    if refused or span is None:
         return None
-    rate = float(profile.vehicle.rate_hz)
-    span_s, messages = span
-    if span_s * rate > messages:  # not a long log: an outlying time (2**63 - 1 ns) stretches its span
-        return None
+    rate = float(loaded.profile.vehicle.rate_hz)
+    span_s = span[0]
     analysed_s = (span_s if end_s is None else min(end_s, span_s)) - (start_s or 0.0)
     if block_s is None:
         if analysed_s * rate <= AUTO_STEPS:
@@ -111,20 +107,28 @@ def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s
 def why_not_blocks(path, loaded) -> str:
     """Why ``path`` cannot be read in blocks (a --block-s it cannot honour, or a log too long for
     the budget at once: a warning); "": it can."""
+    return _refusal(path, loaded)[0]
+
+
+def _refusal(path, loaded) -> tuple[str, tuple[float, int] | None]:
+    """(why ``path`` cannot be read in blocks, "" when it can; its indexed span, `indexed_span_s`).
+    Only an indexed MCAP file reads a window without the rest (other formats are read whole), and
+    only a profile without further loops or [recovery] (both re-read the whole run)."""
     fmt = detect_format(path)
     if fmt != "mcap":
-        return f"a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)"
+        return f"a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)", None
     if loaded.profile.loops or loaded.profile.recovery is not None:
-        return "a profile with further loops or [recovery] re-reads the whole run; analysed at once"
+        return "a profile with further loops or [recovery] re-reads the whole run; analysed at once", None
     span = indexed_span_s(path)
     if span is None:
-        return "the MCAP file has no chunk index or statistics to read a block from; analysed at once"
-    if span[0] * float(loaded.profile.vehicle.rate_hz) > span[1]:
-        return (
+        return "the MCAP file has no chunk index or statistics to read a block from; analysed at once", None
+    if span[0] * float(loaded.profile.vehicle.rate_hz) > span[1]:  # an outlying time (2**63 - 1 ns)
+        why = (
             f"the file's span ({span[0]:.6g} s) holds fewer messages than grid steps (an outlying "
             "time stretches it); analysed at once, where outlying times are dropped"
         )
-    return ""
+        return why, span
+    return "", span
 
 
 def over_budget_warning(steps: int, why: str) -> str:
@@ -147,12 +151,13 @@ def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: floa
     windows = blocks_for(path, loaded, block_s, start_s, end_s)
     if windows is None:
         analysis = analyze_log(path, profile_path, loaded=loaded, start_s=start_s, end_s=end_s, **options)
-        if block_s and analysis.duration_s > block_s:  # shorter than one block: as it should be
-            refused = why_not_blocks(path, loaded)
-            analysis.warnings += [f"--block-s: {refused}"] if refused else []
-        elif block_s is None and analysis.run.n_steps > AUTO_STEPS:  # past the budget at once: say why
-            refused = why_not_blocks(path, loaded)
-            analysis.warnings += [over_budget_warning(analysis.run.n_steps, refused)] if refused else []
+        steps = analysis.run.n_steps
+        # longer than the --block-s asked for (shorter than one block: as it should be), or by default
+        # past the budget at once: why it was not read in blocks
+        too_long = (analysis.duration_s > block_s) if block_s else (block_s is None and steps > AUTO_STEPS)
+        refused = why_not_blocks(path, loaded) if too_long else ""
+        if refused:
+            analysis.warnings.append(f"--block-s: {refused}" if block_s else over_budget_warning(steps, refused))
         return analysis
     return _in_blocks(path, profile_path, loaded, windows, (start_s, end_s), options, block_s)
 
