@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import mmap
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -85,3 +86,12 @@ def return_freed_pages() -> bool:
     if _heap is None or _heap.mallinfo2().fordblks < _trim_from[-1]:
         return False
     return bool(_heap.malloc_trim(0))
+
+
+def drop_mapped_pages(mapped: mmap.mmap, stop: int) -> None:
+    """Drop the pages of the read-only file mapping ``mapped`` before byte ``stop`` from this
+    process (they are read again from the page cache if touched): a reader's RSS then follows what
+    it has in hand, not the file it walked (reading a byte maps the whole folio around it)."""
+    length = stop - stop % mmap.PAGESIZE
+    if length > 0 and hasattr(mmap, "MADV_DONTNEED"):
+        mapped.madvise(mmap.MADV_DONTNEED, 0, length)

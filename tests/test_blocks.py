@@ -202,23 +202,47 @@ def test_blocks_of_a_log_read_whole_are_said_to_be_analysed_at_once():
 
 
 def test_a_log_read_whole_past_the_memory_budget_says_so_unless_at_once_was_asked(monkeypatch):
-    """A real ULog (read whole: no blocks) whose grid holds more steps than the budget allows at once
-    warns that its memory grew with its length, and why it was not read in blocks; within the
-    budget, or with --block-s 0 (at once, asked for), it does not."""
+    """A CSV log with its own profile (read whole, no built-in profile's read to take blocks of)
+    whose grid holds more steps than the budget allows at once warns that its memory grew with its
+    length, and why it was not read in blocks; within the budget, or with --block-s 0 (at once,
+    asked for), it does not."""
     from logscan.pipeline import blocks
 
-    ulog = need_testdata("px4-ulog/sample_px4_events.ulg")  # 31 s of PX4's 250 Hz IMU: ~7,800 steps
-    quiet = analyze_blocked(ulog, free_series=True)
+    csv = SAMPLES / "quad_healthy.csv"  # 60 s at 100 Hz: 6,001 steps
+    quiet = analyze_blocked(csv, free_series=True)
     assert not any(w.startswith("memory:") for w in quiet.warnings)
     monkeypatch.setattr(blocks, "AUTO_STEPS", 1000)
-    warned = analyze_blocked(ulog, free_series=True)
+    warned = analyze_blocked(csv, free_series=True)
     lines = [w for w in warned.warnings if w.startswith("memory:")]
     steps = warned.run.n_steps
     assert len(lines) == 1 and f"{steps:,} grid steps were analysed at once, more than the 1,000" in lines[0]
-    assert "a ulog log is read whole" in lines[0] and "--start/--end" in lines[0]
+    assert "a csv log analysed with --profile or its embedded one is read whole" in lines[0]
+    assert "--start/--end" in lines[0]
     assert (warned.verdict(), warned.summary()["incidents"]) == (quiet.verdict(), quiet.summary()["incidents"])
-    asked = analyze_blocked(ulog, block_s=0, free_series=True)
+    asked = analyze_blocked(csv, block_s=0, free_series=True)
     assert not any(w.startswith("memory:") for w in asked.warnings)
+
+
+def test_a_ulog_goes_to_blocks_of_the_one_read_its_built_in_profile_made(monkeypatch):
+    """A real PX4 ULog past the budget (here 1,000 steps, blocks of 2,000) is analysed in blocks,
+    each a window of the read its built-in profile made (`logscan.readers.held_window`): the file
+    is read once, the alarms and the verdict are those of the analysis at once."""
+    from logscan.pipeline import blocks, preparation
+
+    ulog = need_testdata("px4-ulog/sample_px4_events.ulg")  # 31 s of PX4's 250 Hz IMU: ~7,800 steps
+    whole = analyze_blocked(ulog, block_s=0, free_series=True)
+    reads = []
+    read_log = preparation.read_log
+    monkeypatch.setattr(preparation, "read_log", lambda *a, **k: reads.append(a[0]) or read_log(*a, **k))
+    monkeypatch.setattr(blocks, "AUTO_STEPS", 1000)
+    monkeypatch.setattr(blocks, "BLOCK_STEPS", 2000)
+    parts = analyze_blocked(ulog, free_series=True)
+    assert reads == [ulog]
+    assert parts.warnings[-2].startswith("analysed in 4 blocks of 7.784 s")
+    assert not any(w.startswith("memory:") for w in parts.warnings)
+    assert (parts.verdict(), parts.exit_code()) == (whole.verdict(), whole.exit_code())
+    assert _alarms(parts) == _alarms(whole)
+    assert float(parts.run.t[0]) == float(whole.run.t[0]) and parts.run.n_steps == whole.run.n_steps
 
 
 def test_the_command_writes_one_verdict_and_every_artifact_of_the_blocks(tmp_path, monkeypatch):

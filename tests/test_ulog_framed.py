@@ -6,10 +6,13 @@ import dataclasses
 import warnings
 from pathlib import Path
 
+import hypothesis.strategies as st
 import numpy as np
 import pytest
 from conftest import need_testdata
+from hypothesis import given, settings
 
+import logscan.readers.ulog_framed as ulog_framed
 import logscan.readers.ulog_reader as ulog_reader
 from logscan.log import Channel
 from logscan.readers.ulog_framed import _frame, parse_clean
@@ -77,7 +80,8 @@ def test_appended_offset_before_data_messages_is_read_the_careful_way(tmp_path):
     need_testdata(APPENDED)
     data = bytearray(APPENDED.read_bytes())
     start, offsets = _flag_offsets(bytes(data))
-    starts, _, types, _ = _frame(np.frombuffer(bytes(data), dtype=np.uint8), 16)
+    buf = np.frombuffer(bytes(data), dtype=np.uint8)
+    starts, _, types, _, _ = _frame(buf, 16, buf.size)
     data_starts = starts[types == ord("D")]
     offsets[0] = int(data_starts[data_starts.size // 2])  # a message start with data messages after it
     data[start : start + 24] = np.asarray(offsets, dtype="<u8").tobytes()
@@ -101,3 +105,37 @@ def test_channel_keeps_arrays_of_its_types_and_converts_others():
     assert swapped.t.dtype == np.dtype(np.int64) and swapped.values.dtype == np.dtype(np.float64)
     with pytest.raises(ValueError, match="equal length"):
         Channel("/d", t, values[:2])
+
+
+@pytest.mark.parametrize("path", ULOGS, ids=[p.name for p in ULOGS])
+def test_framed_a_page_at_a_time_equals_careful_read(path, monkeypatch):
+    """The framing walks, gathers and copies a slice of the file at a time, its pages given back
+    after each (`_FRAME_BYTES`): slices of one page give what the careful read gives."""
+    given_back = []
+    monkeypatch.setattr(ulog_framed, "_FRAME_BYTES", 4096)
+    monkeypatch.setattr(ulog_framed, "drop_mapped_pages", lambda mapped, stop: given_back.append(stop))
+    framed = read_ulog(path, None)
+    assert len(given_back) > path.stat().st_size // 4096  # a walk of every page, and the gathers
+    _assert_same(framed, _careful(path, monkeypatch))
+
+
+def test_a_message_cut_in_a_later_slice_is_read_the_careful_way(tmp_path, monkeypatch):
+    need_testdata(APPENDED)
+    data = APPENDED.read_bytes()
+    path = tmp_path / "cut.ulg"
+    path.write_bytes(data[: len(data) - 7])  # the last message cut
+    monkeypatch.setattr(ulog_framed, "_FRAME_BYTES", 4096)
+    assert parse_clean(str(path), None) is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    steps=st.lists(st.integers(3, 70_000), min_size=0, max_size=60),
+    frame=st.integers(1, 200_000),
+)
+def test_file_slices_cover_every_offset_once_each_within_a_slice_of_the_file(steps, frame):
+    offsets = np.cumsum(np.asarray([16, *steps], dtype=np.int64))[: len(steps)]
+    slices = ulog_framed._file_slices(offsets, frame)
+    covered = [i for lo, hi in slices for i in range(lo, hi)]
+    assert covered == list(range(offsets.size))
+    assert all(hi > lo and offsets[hi - 1] - offsets[lo] < frame for lo, hi in slices)

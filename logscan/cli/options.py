@@ -232,12 +232,14 @@ block_option = click.option(
     type=click.FloatRange(min=0),
     default=None,
     metavar="SECONDS",
-    help="Analyse an indexed MCAP log in consecutive equal windows of at most this many seconds, each "
+    help="Analyse a long log in consecutive equal windows of at most this many seconds, each "
     "freed once its alarms, counts and the report's series are kept, so memory is bounded by the block, "
     "not the log; 0: never. Default: in blocks of at most 180,000 grid steps (30 min at 100 Hz) when the "
     "log holds more "
-    "than 269,683 (44.9 min at 100 Hz: the longest whose analysis at once stays within 450 MB). Other "
-    "formats are read whole and analysed at once (a warning says so).",
+    "than 269,683 (44.9 min at 100 Hz: the longest whose analysis at once stays within 450 MB). An indexed "
+    "MCAP log reads each block alone; a ULog or ROS bag its built-in profile reads whole is held once and "
+    "cut into blocks; a log analysed with --profile that is not an indexed MCAP is analysed at once (a "
+    "warning says so).",
 )
 
 

@@ -2,7 +2,8 @@
 memory is bounded by the block's length, not the log's (issue 29, item 2).
 
 Each block is a window (`analyze_log`'s ``start_s``/``end_s``): of an indexed MCAP file only the
-chunks it needs are decoded (`logscan.readers.mcap.window`), its EKF starts from a lead-in before
+chunks it needs are decoded (`logscan.readers.mcap.window`), of a log a built-in profile read whole
+the samples it needs are cut from that one read (`logscan.readers.held_window`), its EKF starts from a lead-in before
 it (`logscan.pipeline.lead_in`), the checks of the vehicle's own reports run from before it
 (`logscan.pipeline.raw_lead`). Once a block is analysed it is reduced to what the outputs read
 (`logscan.pipeline.block_reduce`: its alarms, incidents, lines, counts, the envelopes of its
@@ -83,14 +84,14 @@ def block_windows(
     return list(zip(starts, ends))
 
 
-def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s: float | None):
+def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s: float | None, refusal=None):
     """The windows to analyse ``path`` in, or None: the whole log at once. ``block_s`` None: in
     blocks of `BLOCK_STEPS` when the span analysed holds more than `AUTO_STEPS` grid steps; 0:
-    never; else blocks of that length whenever the span is longer than one. Only a log
-    `why_not_blocks` finds nothing against is read in blocks."""
+    never; else blocks of that length whenever the span is longer than one. Only a log `_refusal`
+    finds nothing against is read in blocks (``refusal``: it, found already)."""
     if block_s == 0:
         return None
-    refused, span = _refusal(path, loaded)
+    refused, span = _refusal(path, loaded) if refusal is None else refusal
     if refused or span is None:
         return None
     rate = float(loaded.profile.vehicle.rate_hz)
@@ -104,24 +105,24 @@ def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s
     return windows if len(windows) > 1 else None
 
 
-def why_not_blocks(path, loaded) -> str:
-    """Why ``path`` cannot be read in blocks (a --block-s it cannot honour, or a log too long for
-    the budget at once: a warning); "": it can."""
-    return _refusal(path, loaded)[0]
-
-
 def _refusal(path, loaded) -> tuple[str, tuple[float, int] | None]:
-    """(why ``path`` cannot be read in blocks, "" when it can; its indexed span, `indexed_span_s`).
-    Only an indexed MCAP file reads a window without the rest (other formats are read whole), and
-    only a profile without further loops or [recovery] (both re-read the whole run)."""
+    """(why ``path`` cannot be read in blocks, "" when it can; its span in seconds from time zero
+    and its message count). An indexed MCAP file reads a window without the rest; a log of another
+    format is read whole, and in blocks only when a built-in profile has read it already to build
+    itself (`loaded.log`: each block a window of that read, `logscan.readers.held_window`). Only a
+    profile without further loops or [recovery] (both re-read the whole run)."""
     fmt = detect_format(path)
-    if fmt != "mcap":
-        return f"a {fmt} log is read whole, so it was analysed at once (only an indexed MCAP reads a block)", None
+    if fmt != "mcap" and loaded.log is None:
+        return (
+            f"a {fmt} log analysed with --profile or its embedded one is read whole, so it was analysed at once "
+            "(an indexed MCAP, or a log a built-in profile reads, is read in blocks)"
+        ), None
     if loaded.profile.loops or loaded.profile.recovery is not None:
         return "a profile with further loops or [recovery] re-reads the whole run; analysed at once", None
-    span = indexed_span_s(path)
+    span = indexed_span_s(path) if fmt == "mcap" else held_span(loaded.log)
     if span is None:
-        return "the MCAP file has no chunk index or statistics to read a block from; analysed at once", None
+        why = "no chunk index or statistics to read a block from" if fmt == "mcap" else "no timed sample"
+        return f"the {'MCAP file' if fmt == 'mcap' else 'log'} has {why}; analysed at once", None
     if span[0] * float(loaded.profile.vehicle.rate_hz) > span[1]:  # an outlying time (2**63 - 1 ns)
         why = (
             f"the file's span ({span[0]:.6g} s) holds fewer messages than grid steps (an outlying "
@@ -131,9 +132,19 @@ def _refusal(path, loaded) -> tuple[str, tuple[float, int] | None]:
     return "", span
 
 
+def held_span(log) -> tuple[float, int] | None:
+    """(seconds from ``log``'s time zero to its last sample, its samples: one per time array), as
+    `indexed_span_s` gives an MCAP file's; None without a timed sample."""
+    origin, end = log.origin_ns, log.end_ns
+    if origin is None or end is None:
+        return None
+    counts = {id(channel.t): len(channel) for channel in log.channels.values()}
+    return (end - origin) / 1e9, sum(counts.values())
+
+
 def over_budget_warning(steps: int, why: str) -> str:
     """The warning of a log analysed at once although its grid holds more than `AUTO_STEPS` steps:
-    its memory grew with its length past the budget a log in blocks keeps (``why``: `why_not_blocks`)."""
+    its memory grew with its length past the budget a log in blocks keeps (``why``: `_refusal`)."""
     return (
         f"memory: {steps:,} grid steps were analysed at once, more than the {AUTO_STEPS:,} whose peak stays "
         f"within {MEMORY_BUDGET_BYTES / 1e6:.0f} MB, so the peak grew with the log's length: {why}; "
@@ -142,20 +153,21 @@ def over_budget_warning(steps: int, why: str) -> str:
 
 
 def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: float | None = None, **options):
-    """`analyze_log`, of a long indexed MCAP log in blocks (`blocks_for`) merged into one analysis;
+    """`analyze_log`, of a long log in blocks (`blocks_for`) merged into one analysis;
     ``block_s``: None (auto), 0 (never) or the block's length in seconds; ``options``: those of
     `analyze_log` (``start_s``/``end_s``: the span the blocks cover). A log longer than the
     --block-s asked for that could not be read in blocks says so in its warnings."""
     loaded = load_profile_for(path, profile_path)
     start_s, end_s = options.pop("start_s", None), options.pop("end_s", None)
-    windows = blocks_for(path, loaded, block_s, start_s, end_s)
+    refusal = ("", None) if block_s == 0 else _refusal(path, loaded)  # before the analysis takes loaded.log
+    windows = blocks_for(path, loaded, block_s, start_s, end_s, refusal)
     if windows is None:
         analysis = analyze_log(path, profile_path, loaded=loaded, start_s=start_s, end_s=end_s, **options)
         steps = analysis.run.n_steps
         # longer than the --block-s asked for (shorter than one block: as it should be), or by default
         # past the budget at once: why it was not read in blocks
         too_long = (analysis.duration_s > block_s) if block_s else (block_s is None and steps > AUTO_STEPS)
-        refused = why_not_blocks(path, loaded) if too_long else ""
+        refused = refusal[0] if too_long else ""
         if refused:
             analysis.warnings.append(f"--block-s: {refused}" if block_s else over_budget_warning(steps, refused))
         return analysis
@@ -173,7 +185,8 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     block_s = windows[1][0] - (windows[0][0] or 0.0)
     width = bucket_width(int(len(windows) * block_s * rate))
     points = -(-REDUCED_POINTS // len(windows))  # the sensor figures' rows: each block its share of the log's
-    loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own
+    if detect_format(path) == "mcap":
+        loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own window
     fold, refused = BlockFold(), []
     carried: list[AlarmInterval] = []  # the alarm the block before's first incident quotes
     with every_free_page():  # the peak must not depend on where the heap stands (logscan.memory)

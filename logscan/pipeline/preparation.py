@@ -38,6 +38,7 @@ from logscan.profiles.starter import STARTER_FORMATS
 from logscan.readers import detect_format, read_embedded_profile, read_log
 from logscan.readers.common import ReadWindow
 from logscan.readers.csv_reader import csv_log_name
+from logscan.readers.held_window import held_window
 from logscan.report.run_context import STATE_TOPICS, run_context
 from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
 from logscan.verdict.observability import compile_kernel as compile_verdict_kernel
@@ -266,10 +267,21 @@ def _read(
 ) -> Log:
     """The log with the topics the profile needs, the detectors' ``raw_topics`` and the report's
     context: the built-in profile's log when it already holds them (read once), else read now
-    (of an indexed MCAP file, only the chunks ``window`` needs)."""
+    (of an indexed MCAP file, only the chunks ``window`` needs). A block's ``window`` (one with
+    ``plans``) of another format is cut from one read of the whole log (`held_window`)."""
     log, loaded.log = loaded.log, None  # a built-in profile's log, read once (`load_profile_for`)
-    if log is None or use_header_stamp or not set(raw_topics) | CONTEXT_TOPICS <= loaded.log_extra_topics:
-        topics = loaded.profile.topics() | set(raw_topics) | CONTEXT_TOPICS
+    if log is not None and (use_header_stamp or not set(raw_topics) | CONTEXT_TOPICS <= loaded.log_extra_topics):
+        log = None  # it lacks a topic the analysis reads
+    topics = loaded.profile.topics() | set(raw_topics) | CONTEXT_TOPICS
+
+    def read_whole() -> Log:
+        if log is not None:
+            return log
+        return read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction)
+
+    if window is not None and window.plans is not None and detect_format(path) != "mcap":
+        return held_window(str(path), window, frozenset(topics), read_whole)  # a block of a log read whole
+    if log is None:
         log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction, window=window)
     return log
 
@@ -309,7 +321,7 @@ def _read_and_align(
     lead = _lead_run(log, profile, lead_from, start_s)
     framed = profile if lead is None else _with_origins(profile, lead)  # the lead-in's local frame
     run = align(log, framed, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
-    if log.whole_times and run.start_ns != log.start_ns:
+    if log.whole_times and run.start_ns != log.origin_ns:
         return _read_and_align(*again, whole=True)
     return log, run, lead
 

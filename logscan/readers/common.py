@@ -36,6 +36,12 @@ class ReadWindow:
     plans: dict | None = field(default=None, compare=False, hash=False)
 
 
+def file_stat(path: str | os.PathLike) -> tuple[int, int]:
+    """(size, modification time in ns) of ``path``: what tells a plan kept for a file that it changed."""
+    st = os.stat(path)
+    return st.st_size, st.st_mtime_ns
+
+
 def input_error(exc: OSError, path: str | os.PathLike, *, directory: bool = False) -> InputError:
     """The one-line InputError for an OSError met while reading the input ``path``."""
     message, hint = os_error_text(exc, directory=directory)

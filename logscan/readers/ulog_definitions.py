@@ -273,6 +273,12 @@ class _Topic:
         # the records and where each field lies (the column kernel reads native byte order)
         self.logscan_records = Records(subscription.layout.columns, subscription.buffer) if _LITTLE_ENDIAN else None
 
+    def release(self) -> None:
+        """Drop the records once the reader has its channels: a long log's topics are then not held
+        twice, as records and as channels, while the next ones are converted."""
+        self.logscan_records = None
+        self._subscription.buffer = bytearray()
+
     @functools.cached_property
     def field_data(self) -> list:
         return self._subscription.field_data

@@ -27,10 +27,12 @@ import contextlib
 import io
 import mmap
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 from numba import njit
 
+from logscan.memory import drop_mapped_pages
 from logscan.numba_cache import follow_dependencies
 from logscan.readers.ulog_definitions import _HEADER_BYTES, build_ulog
 
@@ -38,72 +40,112 @@ _DEFINITIONS = np.frombuffer(b"BFIMPQ", dtype=np.uint8)  # the types pyulog read
 _SECTION_END = np.frombuffer(b"ALC", dtype=np.uint8)
 _DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads in the data section
 _EMPTY = np.empty(0, np.uint8)
+_FRAME_BYTES = 16 << 20  # file bytes framed before their pages are given back
+
 _NO_MESSAGES = np.empty(0, np.int64)
 
 
 @njit(cache=True)
-def _frame(buf, start):  # pragma: no cover - numba kernel
-    """(offsets, payload sizes, types) of the messages from ``start``, and where the walk ended
-    (``len(buf)`` when the messages tile the rest of the file; short of it when the last is cut).
-    Two passes, a count then the fill: arrays of the exact size, and a fill loop without a branch
-    that grows them (with one, numba's loop ran about 15x slower)."""
+def _frame(buf, start, stop):  # pragma: no cover - numba kernel
+    """(offsets, payload sizes, types, message ids: a data message's, else 0) of the messages from
+    ``start`` that start before ``stop``, and where the walk ended: at or past ``stop`` when there
+    are more; ``len(buf)`` when the messages tile the rest of the file; short of both when the last
+    is cut. Two passes, a count then the fill: arrays of the exact size, and a fill loop without a
+    branch that grows them (with one, numba's loop ran about 15x slower)."""
     n = buf.size
     count = 0
     pos = start
-    while pos + 3 <= n:
+    while pos + 3 <= n and pos < stop:
         size = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8)
         if pos + 3 + size > n:
             break
         count += 1
         pos += 3 + size
     offsets = np.empty(count, np.int64)
-    sizes = np.empty(count, np.int64)
+    sizes = np.empty(count, np.uint16)  # a message's size is a uint16
     types = np.empty(count, np.uint8)
+    ids = np.zeros(count, np.uint16)
     pos = start
     for i in range(count):
         size = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8)
         offsets[i] = pos
         sizes[i] = size
         types[i] = buf[pos + 2]
+        if buf[pos + 2] == 68 and size >= 2:  # 'D': its msg_id, read while the page is in hand
+            ids[i] = np.uint16(buf[pos + 3]) | (np.uint16(buf[pos + 4]) << 8)
         pos += 3 + size
-    return offsets, sizes, types, pos
+    return offsets, sizes, types, ids, pos
+
+
+def _file_slices(offsets: np.ndarray, span: int | None = None) -> list[tuple[int, int]]:
+    """(lo, hi) index slices of the increasing file ``offsets``, each within ``span`` bytes of the
+    file (None: `_FRAME_BYTES`): read one after the other, the pages of each given back before the next."""
+    if not offsets.size:
+        return []
+    span = _FRAME_BYTES if span is None else span
+    marks = np.arange(int(offsets[0]) + span, int(offsets[-1]) + 1, span)
+    bounds = np.unique(np.concatenate(([0], np.searchsorted(offsets, marks), [offsets.size])))
+    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
+
+
+def _frame_file(buf: np.ndarray, start: int, give_back: Callable[[int], None]) -> tuple[np.ndarray, ...]:
+    """`_frame` of the whole file from ``start``, `_FRAME_BYTES` at a time with the pages walked
+    given back (``give_back(offset)``): one walk over the file would hold all of it."""
+    parts = []
+    pos = start
+    while True:
+        *framed, end = _frame(buf, pos, pos + _FRAME_BYTES)
+        parts.append(framed)
+        give_back(end)
+        if end < pos + _FRAME_BYTES or end >= buf.size:  # the end of the file, or a cut message
+            break
+        pos = end
+    return tuple(np.concatenate(column) for column in zip(*parts, strict=True))
 
 
 @njit(cache=True)
-def _gather(buf, starts, width):  # pragma: no cover - numba kernel
-    """``width`` bytes from each of ``starts``, one after the other."""
-    out = np.empty(starts.size * width, np.uint8)
+def _gather(buf, starts, width, out):  # pragma: no cover - numba kernel
+    """``width`` bytes from each of ``starts``, one after the other, into ``out``."""
     for i in range(starts.size):
         s = starts[i]
         out[i * width : (i + 1) * width] = buf[s : s + width]
-    return out
 
 
 @njit(cache=True)
-def _compact(buf, head, offsets, sizes):  # pragma: no cover - numba kernel
-    """The first ``head`` bytes of ``buf`` followed by the listed messages (3-byte header + payload)."""
-    total = head
-    for i in range(offsets.size):
-        total += 3 + sizes[i]
-    out = np.empty(total, np.uint8)
-    out[:head] = buf[:head]
-    pos = head
+def _copy_messages(buf, offsets, sizes, out, pos):  # pragma: no cover - numba kernel
+    """The listed messages (3-byte header + payload) into ``out`` from ``pos``; returns where they end."""
     for i in range(offsets.size):
         width = 3 + sizes[i]
         out[pos : pos + width] = buf[offsets[i] : offsets[i] + width]
         pos += width
+    return pos
+
+
+def _compact(buf: np.ndarray, head: int, offsets: np.ndarray, sizes: np.ndarray, give_back) -> np.ndarray:
+    """The first ``head`` bytes of ``buf`` followed by the listed messages, a slice of the file at a
+    time with the pages read given back (``give_back(offset)``, `_file_slices`): the
+    synchronisation and logged messages among them lie all over the file."""
+    out = np.empty(head + 3 * sizes.size + int(sizes.sum(dtype=np.int64)), np.uint8)
+    out[:head] = buf[:head]
+    pos = head
+    for lo, hi in _file_slices(offsets):
+        pos = _copy_messages(buf, offsets[lo:hi], sizes[lo:hi], out, pos)
+        give_back(int(offsets[hi - 1]))
+    give_back(buf.size)
     return out
 
 
 class _Plan:
     """The framing of a clean file: the data messages of each message id, and what the parse found."""
 
-    def __init__(self, buf: np.ndarray, offsets: np.ndarray, sizes: np.ndarray, types: np.ndarray) -> None:
+    def __init__(self, buf: np.ndarray, framed: tuple[np.ndarray, ...], give_back: Callable[[int], None]) -> None:
+        offsets, sizes, types, ids = framed
         self.buf = buf
+        self.give_back = give_back
         data = types == ord("D")
         self.data_offsets = offsets[data]
         self.data_sizes = sizes[data]
-        ids = buf[self.data_offsets + 3].astype(np.int64) | (buf[self.data_offsets + 4].astype(np.int64) << 8)
+        ids = ids[data]
         order = np.argsort(ids, kind="stable")
         self.ids, first = np.unique(ids[order], return_index=True)
         self.groups = np.split(order, first[1:]) if order.size else []
@@ -120,7 +162,7 @@ class _Plan:
                 strict=True,
             )
         )
-        self.kept = (offsets[~data], sizes[~data], types[~data])
+        self.kept = (offsets[~data], sizes[~data].astype(np.int64), types[~data])
         self.read: list[tuple[np.ndarray, np.ndarray]] = []  # (positions, timestamps) of the data read
         self.failed = False
         self.appended: _Appended | None = None  # the flag bits of a file with appended data
@@ -146,7 +188,11 @@ class _Plan:
             self.failed = True
             return
         starts = self.data_offsets[index] + 5
-        buffer = _gather(self.buf, starts, width)
+        buffer = np.empty(starts.size * width, np.uint8)
+        for lo, hi in _file_slices(starts):  # the pages read given back as it goes
+            _gather(self.buf, starts[lo:hi], width, buffer[lo * width : hi * width])
+            self.give_back(int(starts[hi - 1]))
+        self.give_back(self.buf.size)
         subscription.buffer = buffer  # np.frombuffer reads it as is
         # each message's timestamp where it stands in the buffer (a strided view, not a copy)
         stamps = np.ndarray((index.size,), dtype="<u8", buffer=buffer, offset=t_off, strides=(width,))
@@ -196,11 +242,13 @@ def _appended_data(buf, offsets, sizes, types, split: int) -> _Appended | None |
     return _Appended(at, incompat.tolist(), [int(o) for o in listed])
 
 
-def _clean_plan(buf: np.ndarray) -> _Plan | None:
-    """The plan of a file whose messages tile it with known types, subscribed once before their data."""
+def _clean_plan(buf: np.ndarray, give_back: Callable[[int], None]) -> _Plan | None:
+    """The plan of a file whose messages tile it with known types, subscribed once before their
+    data; ``give_back(offset)``: drop the file's pages before it from the process."""
     if buf.size < _HEADER_BYTES:
         return None
-    offsets, sizes, types = _frame(buf, _HEADER_BYTES)[:3]
+    framed = _frame_file(buf, _HEADER_BYTES, give_back)
+    offsets, sizes, types = framed[:3]
     if offsets.size == 0 or offsets[-1] + 3 + sizes[-1] != buf.size:
         return None
     ends = np.flatnonzero(np.isin(types, _SECTION_END))  # the definitions section ends at the first of them
@@ -214,7 +262,7 @@ def _clean_plan(buf: np.ndarray) -> _Plan | None:
     sub_ids = buf[subscribe + 4].astype(np.int64) | (buf[subscribe + 5].astype(np.int64) << 8)
     if np.unique(sub_ids).size != sub_ids.size or (sizes[types == ord("A")] < 3).any():
         return None
-    plan = _Plan(buf, offsets, sizes, types)
+    plan = _Plan(buf, framed, give_back)
     plan.appended = appended or None
     if (plan.data_sizes < 2).any():
         return None
@@ -239,20 +287,24 @@ def parse_clean(path: str, names: list[str] | None, on_framed: Callable[[], None
     except (OSError, ValueError):  # unreadable or empty: the careful read says so
         return None
     try:
-        return _parse_mapped(np.frombuffer(mapped, dtype=np.uint8), names, on_framed)
+        return _parse_mapped(
+            np.frombuffer(mapped, dtype=np.uint8), names, on_framed, partial(drop_mapped_pages, mapped)
+        )
     finally:
         with contextlib.suppress(BufferError):  # an array still viewing it keeps the map alive
             mapped.close()
 
 
-def _parse_mapped(buf: np.ndarray, names: list[str] | None, on_framed: Callable[[], None] | None) -> tuple | None:
-    plan = _clean_plan(buf)
+def _parse_mapped(
+    buf: np.ndarray, names: list[str] | None, on_framed: Callable[[], None] | None, give_back: Callable[[int], None]
+) -> tuple | None:
+    plan = _clean_plan(buf, give_back)
     if plan is None:
         return None
     if on_framed is not None:
         on_framed()
     kept_offsets, kept_sizes, kept_types = plan.kept
-    reduced_array = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes)
+    reduced_array = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes, give_back)
     if plan.appended is not None:  # read straight through: the same messages in the same order
         reduced_array[plan.appended.at + 3 + 8 : plan.appended.at + 3 + 40] = 0
     wanted = None if names is None else set(names)

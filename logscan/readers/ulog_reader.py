@@ -127,6 +127,8 @@ def read_ulog(
                 untimed.append(topic)
             else:
                 lost.extend(_read_topic(data, topic, wanted, source, channels))
+            if hasattr(data, "release"):  # a clean read's records (`ulog_definitions._Topic`)
+                data.release()
     _fill_metadata(ulog, source)
     lost = _header_damage(ulog, source) + _dropped_by_pyulog(ulog) + lost
     _report_damage(path, ulog, source, chatter.getvalue(), watch, all_topics=wanted is None, untimed=untimed, lost=lost)

@@ -16,13 +16,14 @@ MiB (`GIVE_BACK_RECORDS`).
 from __future__ import annotations
 
 import mmap
-import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from logscan.log import WholeTimes
+from logscan.memory import drop_mapped_pages
+from logscan.readers.common import file_stat
 from logscan.readers.mcap.records import Records
 from logscan.readers.mcap.window import ChannelIndex, channel_index, record_times
 
@@ -41,11 +42,6 @@ class FilePlan:
     wanted: frozenset[int]
     index: dict[int, ChannelIndex] | None
     times: dict[str, WholeTimes]
-
-
-def file_stat(path: str) -> tuple[int, int]:
-    st = os.stat(path)
-    return st.st_size, st.st_mtime_ns
 
 
 def known_top(plans: dict | None, path: str) -> Records | None:
@@ -132,10 +128,7 @@ class _Mapped:
             part = record_times(self.u8, at[lo : lo + GIVE_BACK_RECORDS], counts[lo : lo + GIVE_BACK_RECORDS])
             times[into : into + part.size] = part
             into += part.size
-            stop = int(at[lo : lo + GIVE_BACK_RECORDS].max())
-            length = stop - stop % mmap.PAGESIZE
-            if length > 0 and hasattr(mmap, "MADV_DONTNEED"):
-                self._map.madvise(mmap.MADV_DONTNEED, 0, length)
+            drop_mapped_pages(self._map, int(at[lo : lo + GIVE_BACK_RECORDS].max()))
         return times
 
     def __exit__(self, *exc) -> None:

@@ -46,6 +46,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from logscan.errors import CorruptLogError
+from logscan.memory import drop_mapped_pages
 from logscan.readers.common import MCAP_MAGIC, input_error, stat_input, topic_wanted
 from logscan.readers.mcap.inflate import InflateError, inflate
 from logscan.readers.mcap.records import (
@@ -203,10 +204,8 @@ class Scan:
     def give_back(self, stop: int) -> None:
         """Drop the mapped file's pages before ``stop`` from this process (they are read again
         from the page cache if touched): RSS follows what is in hand, not the file."""
-        if self._map is not None and hasattr(mmap, "MADV_DONTNEED"):
-            length = stop - stop % mmap.PAGESIZE
-            if length > 0:
-                self._map.madvise(mmap.MADV_DONTNEED, 0, length)
+        if self._map is not None:
+            drop_mapped_pages(self._map, stop)
 
     def _walk(self, u8: np.ndarray, start: int, stop: int) -> Records:
         """`walk_records` over the file a window at a time, giving back the pages walked: reading a
