@@ -99,6 +99,20 @@ def test_incidents_either_side_of_a_border_are_one():
     assert "10.00-25.00 s" in out[0].headline
 
 
+def test_an_incident_across_a_border_quotes_the_merged_alarms_peak():
+    """The part before the border peaked at 2x, the part after at 4x: the merged incident quotes
+    the merged alarm's peak (4x), its other words kept."""
+    from dataclasses import replace
+
+    before = _alarm("nis.accel", 10.0, 19.99)
+    merged_alarm = replace(_alarm("nis.accel", 10.0, 25.0), peak_value=4.0, peak_ratio=4.0)
+    detail = "nis.accel, peak 2x; 3 impossible samples rejected"
+    incident = Incident(10.0, 19.99, "accel", "", [before], "accelerometer inconsistent", detail, before)
+    (out,) = merged_incidents([incident], [DetectorResult("nis", alarms=[merged_alarm])], gap_s=1.0)
+    assert out.detail == "nis.accel, peak 4x; 3 impossible samples rejected"
+    assert out.headline.endswith("10.00-25.00 s (nis.accel, peak 4x; 3 impossible samples rejected)")
+
+
 def test_a_line_each_block_says_with_its_own_figures_is_said_once():
     lines = [
         ["note", "group 'gps' is blind: mean NIS 0.17 over 150 updates"],

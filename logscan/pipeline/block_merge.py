@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from logscan.results import DetectorResult, Incident
-from logscan.verdict.incidents import DEFAULT_GAP_S
+from logscan.verdict.incidents import DEFAULT_GAP_S, quoted_peak
 from logscan.verdict.observability_folded import folded
 
 # the filter summary's counts summed over the blocks; its mean NIS weighted by each block's updates
@@ -83,7 +83,8 @@ def _merged_value(values: list):
 def merged_incidents(incidents: list[Incident], results: list[DetectorResult], gap_s: float) -> list[Incident]:
     """The blocks' incidents, those at most ``gap_s`` apart (one each side of a border) as one:
     headed as the earlier (its source alarmed first), its span to the later's end; every
-    incident's alarms the merged ones within it."""
+    incident's alarms the merged ones within it, the check its headline quotes the merged alarm
+    with its peak (the part before a border peaked lower, or as high)."""
     alarms = sorted((a for r in results for a in r.alarms), key=lambda a: (a.start, a.end))
     out: list[Incident] = []
     for incident in sorted(incidents, key=lambda i: (i.start, i.end)):
@@ -93,10 +94,12 @@ def merged_incidents(incidents: list[Incident], results: list[DetectorResult], g
             out.append(incident)
     for i, incident in enumerate(out):
         members = [a for a in alarms if a.start <= incident.end + 1e-9 and a.end >= incident.start - 1e-9]
-        quoted = incident.quoted
-        if quoted is not None:  # the merged alarm the quoted part now belongs to
-            quoted = next((a for a in members if _holds(a, quoted)), quoted)
-        merged = replace(incident, alarms=members or incident.alarms, quoted=quoted)
+        quoted, detail = incident.quoted, incident.detail
+        if quoted is not None:  # the merged alarm the quoted part now belongs to, and its peak
+            part, quoted = quoted, next((a for a in members if _holds(a, quoted)), quoted)
+            if detail.startswith(quoted_peak(part)):  # a part's peak: the merged alarm's is the higher
+                detail = quoted_peak(quoted) + detail[len(quoted_peak(part)) :]
+        merged = replace(incident, alarms=members or incident.alarms, quoted=quoted, detail=detail)
         merged.headline = merged.headline_in()
         out[i] = merged
     return out

@@ -144,8 +144,6 @@ def _source(alarms: list[AlarmInterval], groups: Sequence[str], rejected: dict[s
 def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0) -> tuple[str, str]:
     """('accelerometer inconsistent', 'nis.accel, peak 10.7x'): an incident's source in words and
     the check its headline quotes."""
-    ratio = source.peak_ratio
-    peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
     rejected = f"; {n_rejected} impossible sample{'s' if n_rejected != 1 else ''} rejected" if n_rejected else ""
     phrase = (
         None if group else (plain_words(source.signal, source.detector) or signal_label(source.signal, source.detector))
@@ -153,7 +151,14 @@ def headline_parts(source: AlarmInterval, group: str | None, n_rejected: int = 0
     if not phrase:
         what = words.group_words(group) if group else f"{source.detector} {source.signal}"
         phrase = f"{what} {getattr(_detector_class(source.detector), 'group_verdict', 'inconsistent')}"
-    return phrase, f"{source.signal}, peak {peak}{rejected}"
+    return phrase, f"{quoted_peak(source)}{rejected}"
+
+
+def quoted_peak(source: AlarmInterval) -> str:
+    """'nis.accel, peak 10.7x': the check an incident's headline quotes and how high it peaked."""
+    ratio = source.peak_ratio
+    peak = "non-finite" if source.bound == "nonfinite" else ("-" if ratio is None else f"{ratio:.3g}x")
+    return f"{source.signal}, peak {peak}"
 
 
 def headline(source: AlarmInterval, group: str | None, start: float, end: float, n_rejected: int = 0) -> str:
