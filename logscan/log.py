@@ -184,6 +184,8 @@ class Log:
         # channels -> their whole-file runs, dense span and outlying times (`_Aligner._whole_span`):
         # found once for a window and its filter's lead-in, which align the same channels
         self.whole_spans: dict[tuple[str, ...], tuple] = {}
+        # the time zero a window read cut its samples from (`read_as_window`): alignment's must be it
+        self.window_zero_ns: int | None = None
         warning = self.span_warning()
         if warning and warning not in self.source.warnings:
             self.source.warnings.append(warning)
@@ -207,14 +209,18 @@ class Log:
             channels[name] = Channel(name, empty_t, empty_v, channel.unit)
         self.channels = channels
 
-    def read_as_window(self, span_ns: tuple[int, int], whole_times: dict[str, WholeTimes]) -> None:
+    def read_as_window(
+        self, span_ns: tuple[int, int], whole_times: dict[str, WholeTimes], zero_ns: int | None = None
+    ) -> None:
         """This log holds a window of its file (`logscan.readers.mcap.window`): its span and its
-        channels' times across the whole file come from the file's index, not the samples read."""
+        channels' times across the whole file come from the file's index, not the samples read;
+        ``zero_ns``: the time zero the window was cut from (None: the span's first time)."""
         partial = self.span_warning()  # of the samples read: not the log's
         if partial in self.source.warnings:
             self.source.warnings.remove(partial)
         self._span_ns = span_ns
         self.whole_times = whole_times
+        self.window_zero_ns = span_ns[0] if zero_ns is None else zero_ns
         timed = [name for name in self.channels if name in whole_times and whole_times[name].size]
         if self.duration_s > MAX_SPAN_S and timed:  # named as the whole read names them
             first = min(timed, key=lambda name: whole_times[name].first)
@@ -250,6 +256,7 @@ class Log:
         log._span_ns = None
         log._span_text = None
         log.whole_times, log.whole_spans = {}, {}
+        log.window_zero_ns = None
         if timed:
             first = min(timed, key=lambda name: timed[name][1])
             last = max(timed, key=lambda name: timed[name][2])

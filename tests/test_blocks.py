@@ -239,7 +239,7 @@ def test_a_log_read_whole_past_the_memory_budget_says_so_unless_at_once_was_aske
 
 def test_a_ulog_goes_to_blocks_of_the_one_read_its_built_in_profile_made(monkeypatch):
     """A real PX4 ULog past the budget (here 1,000 steps, blocks of 2,000) is analysed in blocks,
-    each a window of the read its built-in profile made (`logscan.readers.held_window`): the file
+    each a window of the read its built-in profile made (`logscan.pipeline.held_window`): the file
     is read once, the alarms and the verdict are those of the analysis at once."""
     from logscan.pipeline import blocks, preparation
 

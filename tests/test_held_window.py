@@ -1,6 +1,7 @@
-"""A window of a log read whole (`logscan.readers.held_window`): views of the samples a block needs
-(the window and its margin, and each channel from its last finite sample before it), the whole
-log's span and times, the source facts its own; the log read once for every window."""
+"""A window of a log read whole (`logscan.pipeline.held_window`): views of the samples a block needs
+(the window and its margin, and each time array from where its channels' holds into the window
+start), the whole log's span and its channels' times as alignment cleans them, the source facts
+its own; the log read once for every window."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ import numpy as np
 import pytest
 
 from logscan.log import Channel, Log, SourceInfo
+from logscan.pipeline.held_window import held_window, whole_times
 from logscan.readers.common import ReadWindow
-from logscan.readers.held_window import held_window, whole_times
 
 _S = 1_000_000_000
 
@@ -19,10 +20,13 @@ def _log() -> Log:
     gappy = np.arange(100.0)
     gappy[35:52] = np.nan  # no finite sample from 35 to 51 s (t = 40 .. 56 s)
     shuffled = np.array([3, 1, 2], dtype=np.int64) * _S + 5 * _S
+    twice = np.array([5, 50, 53, 53, 70], dtype=np.int64) * _S  # 53 s logged twice, the last NaN
     channels = {
         "/a/gappy": Channel("/a/gappy", t, gappy),
         "/a/dense": Channel("/a/dense", t, np.arange(100.0)),
+        "/a/never": Channel("/a/never", t, np.full(100, np.nan)),
         "/b/shuffled": Channel("/b/shuffled", shuffled, np.array([3.0, 1.0, 2.0])),
+        "/c/twice": Channel("/c/twice", twice, np.array([0.0, 1.0, 2.0, np.nan, 4.0])),
     }
     return Log(channels=channels, source=SourceInfo("held.csv", "csv"))
 
@@ -34,31 +38,39 @@ def _window(log: Log, start_s, end_s, plans: dict | None = None) -> Log:
 
 @pytest.fixture(autouse=True)
 def _any_file(monkeypatch):
-    from logscan.readers import held_window as module
+    from logscan.pipeline import held_window as module
 
     monkeypatch.setattr(module, "file_stat", lambda path: (0, 0))
 
 
-def test_a_window_holds_its_span_and_margin_and_each_hold_from_its_last_finite_sample():
+def test_a_window_holds_its_span_and_margin_and_each_hold_from_where_it_starts():
     whole = _log()
     part = _window(whole, 50.0, 60.0)  # 55 .. 65 s, with the 1-s margin 54 .. 66 s
     dense, gappy = part.channels["/a/dense"], part.channels["/a/gappy"]
-    assert (dense.t[0], dense.t[-1]) == (53 * _S, 66 * _S)  # and the sample a hold into 54 s starts from
-    assert (gappy.t[0], gappy.t[-1]) == (39 * _S, 66 * _S)  # from 39 s: the last finite sample before 54 s
+    # one view of the topic's times, from 39 s: the gappy field's last finite sample before 54 s
+    # (the dense field's is at 53 s; the field never finite starts no hold)
+    assert dense.t is gappy.t is part.channels["/a/never"].t
+    assert (dense.t[0], dense.t[-1]) == (39 * _S, 66 * _S)
     assert gappy.values[0] == 34.0 and np.isnan(gappy.values[1:18]).all()
     assert np.shares_memory(dense.values, whole.channels["/a/dense"].values)  # views, not copies
     assert part.channels["/b/shuffled"] is whole.channels["/b/shuffled"]  # out of order: all of it
+    # 53 s logged twice, the last NaN (cleaning keeps it, then drops it): the hold starts at 50 s
+    assert part.channels["/c/twice"].t.tolist() == [50 * _S, 53 * _S, 53 * _S]
     assert (part.start_ns, part.end_ns) == (whole.start_ns, whole.end_ns)  # the whole log's span
+    assert part.window_zero_ns == whole.origin_ns == 5 * _S
+    assert list(part.channels) == list(whole.channels)
     first = _window(whole, None, 10.0).channels["/a/dense"]
     assert (first.t[0], first.t[-1]) == (5 * _S, 16 * _S)
 
 
-def test_channels_of_one_time_array_share_the_whole_logs_times():
+def test_the_whole_logs_times_are_those_alignment_cleans():
     whole = _log()
-    times = whole_times(whole)
-    assert times["/a/dense"] is times["/a/gappy"] and times["/b/shuffled"] is not times["/a/dense"]
-    assert (times["/a/dense"].count, times["/a/dense"].first, times["/a/dense"].last) == (100, 5 * _S, 104 * _S)
+    times, never = whole_times(whole)
+    assert never == {"/a/never"} and "/a/never" not in times
+    assert times["/a/dense"].count == 100 and times["/a/dense"].first == 5 * _S
+    assert times["/a/gappy"] is not times["/a/dense"] and times["/a/gappy"].count == 83  # its finite samples
     assert times["/b/shuffled"].fetch(0, 10 * _S).tolist() == [6 * _S, 7 * _S, 8 * _S]  # sorted
+    assert times["/c/twice"].fetch(0, 100 * _S).tolist() == [5 * _S, 50 * _S, 70 * _S]  # 53 s: NaN kept last
     assert np.concatenate(list(times["/a/dense"].batches())).tolist() == whole.channels["/a/dense"].t.tolist()
     part = _window(whole, 50.0, 60.0)
     assert part.whole_times["/a/dense"].fetch(60 * _S, 62 * _S).tolist() == [60 * _S, 61 * _S, 62 * _S]
@@ -82,3 +94,36 @@ def test_the_log_is_read_once_for_every_window_and_each_window_has_its_own_sourc
     assert second.source.skipped == whole.source.skipped == []
     held_window("held.csv", ReadWindow(30.0, 40.0, margin_s=0.0, plans=plans), frozenset({"a", "b"}), read)
     assert len(reads) == 2  # other topics: read again
+
+
+def test_a_real_ulog_whose_first_samples_are_nan_aligns_a_window_as_the_whole_log(monkeypatch):
+    """The real events ULog with the first 50 samples of the topic that starts the grid made NaN:
+    the grid starts where the whole log's does (its finite samples', not its messages'), so a
+    window cut from the held read aligns as the whole log does on that window."""
+    from conftest import need_testdata
+
+    from logscan.align import align
+    from logscan.pipeline.held_window import HeldLog, window_of
+    from logscan.pipeline.preparation import load_profile_for
+
+    loaded = load_profile_for(need_testdata("px4-ulog/sample_px4_events.ulg"), None)
+    profile, log = loaded.profile, loaded.log
+    spanning = [*profile.inputs.channels, *(ch for g in profile.measurements.values() for ch in g.channels)]
+    earliest = min(spanning, key=lambda name: int(log.channels[name].t[0]))
+    t = log.channels[earliest].t
+    channels = dict(log.channels)
+    for name, channel in log.channels.items():
+        if channel.t is t:
+            values = channel.values.copy()
+            values[:50] = np.nan
+            channels[name] = Channel(name, t, values)
+    edited = Log(channels=channels, source=log.source)
+    times, never = whole_times(edited)
+    held = HeldLog(edited, (0, 0), frozenset(), times, never)
+    for start_s, end_s in ((None, None), (10.0, 20.0)):
+        whole = align(edited, profile, start_s=start_s, end_s=end_s)
+        part = align(window_of(held, ReadWindow(start_s, end_s, 5.02)), profile, start_s=start_s, end_s=end_s)
+        assert (float(part.t[0]), part.n_steps, part.start_ns) == (float(whole.t[0]), whole.n_steps, whole.start_ns)
+        np.testing.assert_array_equal(part.u, whole.u)
+        for name, group in whole.groups.items():
+            np.testing.assert_array_equal(part.groups[name].z, group.z, err_msg=name)

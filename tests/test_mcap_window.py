@@ -28,10 +28,18 @@ MARGIN_S = 5.02  # what `analyze` gives a 100 Hz profile (MAX_DELAY_S + two step
 S = 1_000_000_000  # ns
 
 
-def rewrite(source: Path, target: Path, *, message_index: bool = True, edit=lambda topic, n, t, data: [(t, data)]):
+def rewrite(
+    source: Path,
+    target: Path,
+    *,
+    message_index: bool = True,
+    edit=lambda topic, n, t, data: [(t, data)],
+    metadata: dict | None = None,
+):
     """``source`` written again by the mcap library in 16 KiB chunks (with or without Message
-    Index records), its metadata kept; ``edit(topic, n, log_time, data)`` gives the (log_time,
-    data) messages written for a topic's n-th message (none: dropped)."""
+    Index records), its metadata kept (and ``metadata``'s records added); ``edit(topic, n,
+    log_time, data)`` gives the (log_time, data) messages written for a topic's n-th message
+    (none: dropped)."""
     index = IndexType.ALL if message_index else IndexType.ALL & ~IndexType.MESSAGE
     with open(source, "rb") as fin, open(target, "wb") as fout:
         reader = make_reader(fin)
@@ -54,6 +62,8 @@ def rewrite(source: Path, target: Path, *, message_index: bool = True, edit=lamb
         fin.seek(0)
         for record in make_reader(fin).iter_metadata():
             writer.add_metadata(record.name, dict(record.metadata))
+        for name, values in (metadata or {}).items():
+            writer.add_metadata(name, values)
         writer.finish()
 
 
@@ -352,3 +362,21 @@ def test_an_index_record_listing_no_message_reads_no_byte():
     buffer = np.concatenate([pairs, u8])  # record 0: one pair at 0; record 1: none, at the end
     _record_times(buffer, np.array([0, buffer.size]), np.array([1, 0]), np.array([0, -1]), times, firsts, lasts)
     assert firsts.tolist() == [7, 0] and lasts.tolist() == [7, 0] and times.tolist() == [7]
+
+
+def test_a_ulog_start_in_the_metadata_reads_the_window_whole_again(chunked, tmp_path):
+    """A ULog start timestamp in the metadata 8 s after the first message is the log's time zero
+    (`Log.origin_ns`), not the first message the window was cut from: the analysis reads the file
+    whole again for the window, and aligns what the whole read aligns."""
+    from logscan.pipeline.preparation import _read_and_align, load_profile_for
+
+    with open(chunked["source"], "rb") as fh:
+        first = make_reader(fh).get_summary().statistics.message_start_time
+    path = tmp_path / "ulog_start.mcap"
+    rewrite(chunked["source"], path, metadata={"ulog.log": {"start_timestamp_us": str(first // 1000 + 8_000_000)}})
+    loaded = load_profile_for(path, None)
+    log, run, _ = _read_and_align(str(path), loaded, frozenset(), False, None, (20.0, 40.0), None, lambda m: None)
+    assert log.whole_times == {} and run.start_ns == first + 8 * S  # read whole, counted from the start
+    whole = align(read_log(path, topics=loaded.profile.topics()), loaded.profile, start_s=20.0, end_s=40.0)
+    np.testing.assert_array_equal(run.u, whole.u)
+    assert not np.isnan(run.u).any()

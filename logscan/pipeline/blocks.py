@@ -3,7 +3,7 @@ memory is bounded by the block's length, not the log's (issue 29, item 2).
 
 Each block is a window (`analyze_log`'s ``start_s``/``end_s``): of an indexed MCAP file only the
 chunks it needs are decoded (`logscan.readers.mcap.window`), of a log a built-in profile read whole
-the samples it needs are cut from that one read (`logscan.readers.held_window`), its EKF starts from a lead-in before
+the samples it needs are cut from that one read (`logscan.pipeline.held_window`), its EKF starts from a lead-in before
 it (`logscan.pipeline.lead_in`), the checks of the vehicle's own reports run from before it
 (`logscan.pipeline.raw_lead`). Once a block is analysed it is reduced to what the outputs read
 (`logscan.pipeline.block_reduce`: its alarms, incidents, lines, counts, the envelopes of its
@@ -105,11 +105,12 @@ def blocks_for(path, loaded, block_s: float | None, start_s: float | None, end_s
     return windows if len(windows) > 1 else None
 
 
-def _refusal(path, loaded) -> tuple[str, tuple[float, int] | None]:
+def _refusal(path, loaded, header_stamp: bool = False) -> tuple[str, tuple[float, int] | None]:
     """(why ``path`` cannot be read in blocks, "" when it can; its span in seconds from time zero
     and its message count). An indexed MCAP file reads a window without the rest; a log of another
     format is read whole, and in blocks only when a built-in profile has read it already to build
-    itself (`loaded.log`: each block a window of that read, `logscan.readers.held_window`). Only a
+    itself (`loaded.log`: each block a window of that read, `logscan.pipeline.held_window`), on
+    its log times (``header_stamp``: the analysis reads it again on the header stamps). Only a
     profile without further loops or [recovery] (both re-read the whole run)."""
     fmt = detect_format(path)
     if fmt != "mcap" and loaded.log is None:
@@ -117,6 +118,8 @@ def _refusal(path, loaded) -> tuple[str, tuple[float, int] | None]:
             f"a {fmt} log analysed with --profile or its embedded one is read whole, so it was analysed at once "
             "(an indexed MCAP, or a log a built-in profile reads, is read in blocks)"
         ), None
+    if fmt != "mcap" and header_stamp:
+        return f"a {fmt} log is read whole again on its header stamps (--use-header-stamp); analysed at once", None
     if loaded.profile.loops or loaded.profile.recovery is not None:
         return "a profile with further loops or [recovery] re-reads the whole run; analysed at once", None
     span = indexed_span_s(path) if fmt == "mcap" else held_span(loaded.log)
@@ -159,7 +162,8 @@ def analyze_blocked(path: str | os.PathLike, profile_path=None, *, block_s: floa
     --block-s asked for that could not be read in blocks says so in its warnings."""
     loaded = load_profile_for(path, profile_path)
     start_s, end_s = options.pop("start_s", None), options.pop("end_s", None)
-    refusal = ("", None) if block_s == 0 else _refusal(path, loaded)  # before the analysis takes loaded.log
+    # found before the analysis takes loaded.log
+    refusal = ("", None) if block_s == 0 else _refusal(path, loaded, bool(options.get("use_header_stamp")))
     windows = blocks_for(path, loaded, block_s, start_s, end_s, refusal)
     if windows is None:
         analysis = analyze_log(path, profile_path, loaded=loaded, start_s=start_s, end_s=end_s, **options)
@@ -185,14 +189,19 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     block_s = windows[1][0] - (windows[0][0] or 0.0)
     width = bucket_width(int(len(windows) * block_s * rate))
     points = -(-REDUCED_POINTS // len(windows))  # the sensor figures' rows: each block its share of the log's
-    if detect_format(path) == "mcap":
-        loaded.log = None  # a built-in profile's log, read whole to build it: each block reads its own window
+    # a built-in profile's log, read whole to build it: of an MCAP each block reads its own window;
+    # of another format the first block's read holds it for the others (`held_window`), and only that
+    first_log, loaded.log = (None if detect_format(path) == "mcap" else loaded.log), None
     fold, refused = BlockFold(), []
     carried: list[AlarmInterval] = []  # the alarm the block before's first incident quotes
     with every_free_page():  # the peak must not depend on where the heap stands (logscan.memory)
         for k, (start_s, end_s) in enumerate(windows):
             step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
             own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
+            if not options["read_plans"]:  # until a block's read holds the log
+                own.log = first_log
+            else:
+                first_log = None
             # after the first block, the detectors' windows and sums run in from DETECTOR_LEAD_S before it
             led = None if k == 0 else max(float(start_s) - DETECTOR_LEAD_S, float(windows[0][0] or 0.0))
             try:

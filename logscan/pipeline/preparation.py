@@ -27,6 +27,7 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
+from logscan.pipeline.held_window import held_window
 from logscan.pipeline.lead_in import SETTLED_OVER_S, carry_freshness, filter_start, lead_in_start
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.release import TRUTH_DRAWN_WITH
@@ -38,7 +39,6 @@ from logscan.profiles.starter import STARTER_FORMATS
 from logscan.readers import detect_format, read_embedded_profile, read_log
 from logscan.readers.common import ReadWindow
 from logscan.readers.csv_reader import csv_log_name
-from logscan.readers.held_window import held_window
 from logscan.report.run_context import STATE_TOPICS, run_context
 from logscan.timebase.clock import GNSS_UTC_CHANNELS, clock_of
 from logscan.verdict.observability import compile_kernel as compile_verdict_kernel
@@ -321,7 +321,7 @@ def _read_and_align(
     lead = _lead_run(log, profile, lead_from, start_s)
     framed = profile if lead is None else _with_origins(profile, lead)  # the lead-in's local frame
     run = align(log, framed, start_s=start_s, end_s=end_s, release=_released_once_held(log, profile, raw_topics))
-    if log.whole_times and run.start_ns != log.origin_ns:
+    if log.whole_times and run.start_ns != log.window_zero_ns:
         return _read_and_align(*again, whole=True)
     return log, run, lead
 

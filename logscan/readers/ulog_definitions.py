@@ -278,6 +278,7 @@ class _Topic:
         twice, as records and as channels, while the next ones are converted."""
         self.logscan_records = None
         self._subscription.buffer = bytearray()
+        self.__dict__.pop("data", None)  # pyulog's columns, when they were made: views of the records
 
     @functools.cached_property
     def field_data(self) -> list:

@@ -2,7 +2,9 @@
 
 pyulog reads a ULog message by message in Python (two reads, a header and a payload, and a
 buffer append per data message), also for the topics it then drops. Here a numba kernel frames
-the whole file first (offset, size and type of every message); when the framing is clean, the
+the whole file first (offset, size, type and a data message's id of every message), 16 MiB of it at
+a time with the pages walked given back (as are those of each later gather and copy: the process
+holds what it has read, not the mapped file); when the framing is clean, the
 messages other than the data ('D') messages (header, definitions, subscriptions, parameters,
 logged text: a few thousand small messages) are parsed into pyulog's ULog object by
 `ulog_definitions` (pyulog's rules, without its loop), and each subscription read gets its
