@@ -56,9 +56,21 @@ def accuracy_jump(
         some = np.isfinite(inside).any(axis=1)
         has[lo:hi] = some
         if some.any():
-            reference[lo:hi][some] = np.nanmedian(inside[some], axis=1)
+            reference[lo:hi][some] = _row_nanmedians(inside[some])
     judge = has & np.isfinite(good)
     if judged is not None:
         judge &= np.asarray(judged, dtype=bool)
     out[judge] = good[judge] / reference[judge]
     return out
+
+
+def _row_nanmedians(rows: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(rows, axis=1)`` of rows holding a finite value each, by one sort: NaN sorts
+    last, so the n finite values of a row are its first n, their median the mean of the sorted
+    row's ((n - 1) // 2)-th and (n // 2)-th. numpy's own takes a masked-array path for short rows,
+    about ten times slower (3.5 s of a 1-hour PX4 log's health check)."""
+    ordered = np.sort(rows, axis=1)
+    n = np.count_nonzero(~np.isnan(rows), axis=1)
+    low = np.take_along_axis(ordered, ((n - 1) // 2)[:, None], axis=1)[:, 0]
+    high = np.take_along_axis(ordered, (n // 2)[:, None], axis=1)[:, 0]
+    return (low + high) / 2

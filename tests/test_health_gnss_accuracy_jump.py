@@ -90,3 +90,18 @@ def test_the_rows_a_slice_at_a_time_give_the_whole_matrix_medians(steps, values,
         if valid.size and gate[i] and np.isfinite(v[i]) and v[i] > 0:
             expected[i] = v[i] / np.median(valid)
     np.testing.assert_allclose(ratios[entries], expected, rtol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    rows=st.integers(1, 30),
+    k=st.integers(1, 12),
+    data=st.data(),
+)
+def test_the_row_medians_are_numpys_nanmedian_bit_for_bit(rows, k, data):
+    """The one-sort median of rows of finite values and NaN, each row holding a finite one."""
+    cells = st.one_of(st.floats(1e-3, 1e6, allow_nan=False), st.just(float("nan")))
+    x = np.asarray(data.draw(st.lists(cells, min_size=rows * k, max_size=rows * k)), dtype=np.float64).reshape(rows, k)
+    x[np.isnan(x).all(axis=1), 0] = 1.0
+    expected = np.nanmedian(x, axis=1)
+    assert accuracy_jump_module._row_nanmedians(x).tobytes() == expected.tobytes()

@@ -20,11 +20,17 @@ class BuiltProfile:
 
 
 def rate_hz(t_ns: np.ndarray) -> float:
-    """A channel's sample rate: 1 / the median interval between its samples (0 for fewer than 2)."""
-    t = np.unique(np.asarray(t_ns, dtype=np.int64))
+    """A channel's sample rate: 1 / the median interval between its distinct sample times (0 for
+    fewer than 2). Times already in order, each once (as a reader gives them), are taken as they
+    are: `np.unique` of a 1-hour 250 Hz IMU's took 0.3 s."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    steps = np.diff(t)
+    if not bool((steps > 0).all()):
+        t = np.unique(t)
+        steps = np.diff(t)
     if t.size < 2:
         return 0.0
-    return float(1e9 / np.median(np.diff(t)))
+    return float(1e9 / np.median(steps))
 
 
 def nice_rate(hz: float) -> float:
