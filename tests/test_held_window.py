@@ -24,6 +24,7 @@ def _log() -> Log:
     channels = {
         "/a/gappy": Channel("/a/gappy", t, gappy),
         "/a/dense": Channel("/a/dense", t, np.arange(100.0)),
+        "/a/fine": Channel("/a/fine", t, np.arange(100.0) + 0.1),  # no float32 holds these
         "/a/never": Channel("/a/never", t, np.full(100, np.nan)),
         "/b/shuffled": Channel("/b/shuffled", shuffled, np.array([3.0, 1.0, 2.0])),
         "/c/twice": Channel("/c/twice", twice, np.array([0.0, 1.0, 2.0, np.nan, 4.0])),
@@ -45,6 +46,7 @@ def _any_file(monkeypatch):
 
 def test_a_window_holds_its_span_and_margin_and_each_hold_from_where_it_starts():
     whole = _log()
+    read = dict(whole.channels)
     part = _window(whole, 50.0, 60.0)  # 55 .. 65 s, with the 1-s margin 54 .. 66 s
     dense, gappy = part.channels["/a/dense"], part.channels["/a/gappy"]
     # one view of the topic's times, from 39 s: the gappy field's last finite sample before 54 s
@@ -52,8 +54,13 @@ def test_a_window_holds_its_span_and_margin_and_each_hold_from_where_it_starts()
     assert dense.t is gappy.t is part.channels["/a/never"].t
     assert (dense.t[0], dense.t[-1]) == (39 * _S, 66 * _S)
     assert gappy.values[0] == 34.0 and np.isnan(gappy.values[1:18]).all()
-    assert np.shares_memory(dense.values, whole.channels["/a/dense"].values)  # views, not copies
-    assert part.channels["/b/shuffled"] is whole.channels["/b/shuffled"]  # out of order: all of it
+    # held as float32 where that is exact, each window's float64 again; the others views, not copies
+    assert whole.channels["/a/dense"].values.dtype == np.float32 and dense.values.dtype == np.float64
+    assert dense.values.tolist() == read["/a/dense"].values[34:62].tolist()
+    assert whole.channels["/a/fine"].values.dtype == np.float64
+    assert np.shares_memory(part.channels["/a/fine"].values, whole.channels["/a/fine"].values)
+    shuffled = part.channels["/b/shuffled"]  # out of order: all of it
+    assert shuffled.t is read["/b/shuffled"].t and shuffled.values.tolist() == [3.0, 1.0, 2.0]
     # 53 s logged twice, the last NaN (cleaning keeps it, then drops it): the hold starts at 50 s
     assert part.channels["/c/twice"].t.tolist() == [50 * _S, 53 * _S, 53 * _S]
     assert (part.start_ns, part.end_ns) == (whole.start_ns, whole.end_ns)  # the whole log's span

@@ -56,8 +56,26 @@ def held_window(path: str, window: ReadWindow, topics: frozenset[str], read: Cal
     if not isinstance(held, HeldLog) or held.stat != stat or held.topics != topics:
         log = read()
         times, never_finite = whole_times(log)
+        narrow(log)
         held = plans[path] = HeldLog(log, stat, topics, times, never_finite)
     return window_of(held, window)
+
+
+def narrow(log: Log) -> None:
+    """Hold each channel's values as float32 where float32 holds every one of them exactly (a ULog's
+    float, 8 to 16-bit and small integer fields: most of a PX4 log, half the bytes), the others as
+    float64 copies of their own (a topic's fields are rows of one array, kept whole by any row left);
+    each window's channels are float64 again (`_cut`). In place: the log is the held read's alone."""
+    channels = {}
+    for name, channel in log.channels.items():
+        values = channel.values
+        narrowed = values.astype(np.float32)
+        exact = np.array_equal(narrowed, values, equal_nan=True)  # compared as float64: exactly
+        held = object.__new__(Channel)  # float32 values: the held read's only, never a window's
+        held.name, held.unit, held.t = name, channel.unit, channel.t
+        held.values = narrowed if exact else values.copy()
+        channels[name] = held
+    log.channels = channels
 
 
 def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str]]:
@@ -157,12 +175,16 @@ def _bounds(held: HeldLog, group: list[Channel], lo: int | None, hi: int | None)
 
 def _cut(channel: Channel, bounds: tuple[int, int] | None, t: np.ndarray | None) -> Channel:
     """``channel``'s samples within ``bounds``, at ``t`` (the view of its time array its group
-    shares, as the read's channels of one topic share their array) and a view of its values."""
-    if bounds is None or t is None or bounds == (0, channel.t.size):
+    shares, as the read's channels of one topic share their array), its values float64: a view of
+    the held ones, or a copy of those held as float32 (`narrow`)."""
+    cut = object.__new__(Channel)  # arrays already checked (`Channel.sharing_time`)
+    cut.name, cut.unit, cut.t, cut.values = channel.name, channel.unit, channel.t, channel.values
+    if bounds is not None and t is not None and bounds != (0, channel.t.size):
+        cut.t, cut.values = t, channel.values[bounds[0] : bounds[1]]
+    elif cut.values.dtype == np.float64:
         return channel
-    cut = object.__new__(Channel)  # views of arrays already checked (`Channel.sharing_time`)
-    cut.name, cut.unit = channel.name, channel.unit
-    cut.t, cut.values = t, channel.values[bounds[0] : bounds[1]]
+    if cut.values.dtype != np.float64:
+        cut.values = cut.values.astype(np.float64)
     return cut
 
 
