@@ -190,18 +190,15 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
     width = bucket_width(int(len(windows) * block_s * rate))
     points = -(-REDUCED_POINTS // len(windows))  # the sensor figures' rows: each block its share of the log's
     # a built-in profile's log, read whole to build it: of an MCAP each block reads its own window;
-    # of another format the first block's read holds it for the others (`held_window`), and only that
+    # of another format the first block's read holds it for the others (`held_window`), and only it
     first_log, loaded.log = (None if detect_format(path) == "mcap" else loaded.log), None
     fold, refused = BlockFold(), []
     carried: list[AlarmInterval] = []  # the alarm the block before's first incident quotes
     with every_free_page():  # the peak must not depend on where the heap stands (logscan.memory)
         for k, (start_s, end_s) in enumerate(windows):
             step = None if progress is None else _prefixed(progress, f"block {k + 1}/{len(windows)}: ")
-            own = replace(loaded)  # `analyze_log` sets the tables' calibration on it
-            if not options["read_plans"]:  # until a block's read holds the log
-                own.log = first_log
-            else:
-                first_log = None
+            # `analyze_log` sets the tables' calibration on it; the first block's read holds the log
+            own, first_log = replace(loaded, log=first_log), None
             # after the first block, the detectors' windows and sums run in from DETECTOR_LEAD_S before it
             led = None if k == 0 else max(float(start_s) - DETECTOR_LEAD_S, float(windows[0][0] or 0.0))
             try:
@@ -231,18 +228,25 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
         raise refused[0][1]
     merged = fold.merged(None if window == (None, None) else window)
     merged.unchecked += [_refused_line(windows, k, len(windows), exc) for k, exc in refused]
-    merged.warnings.append(
-        f"analysed in {len(windows)} blocks of {block_s:g} s (--block-s), each after the first from "
+    merged.warnings += _blocks_said(len(windows), block_s, asked_s, rate)
+    return merged
+
+
+def _blocks_said(count: int, block_s: float, asked_s: float | None, rate: float) -> list[str]:
+    """The warnings of a log analysed in ``count`` blocks of ``block_s``: that it was, and what
+    blocks shorter than the detectors' lead cost."""
+    said = [
+        f"analysed in {count} blocks of {block_s:g} s (--block-s), each after the first from "
         f"{DETECTOR_LEAD_S:g} s before it, so the detectors' windows and sums run on across the borders; the "
         f"thresholds a detector estimates from its samples are each block's ({doc_url('algorithms.md')}, "
         "section 8.1b)"
-    )
+    ]
     if block_s < DETECTOR_LEAD_S:
-        merged.warnings.append(
+        said.append(
             f"{_asked(asked_s, block_s)}: each block is analysed with the {DETECTOR_LEAD_S:g} s before it, so blocks "
             f"shorter than that cost more than twice the analysis at once (default: {BLOCK_STEPS / rate:g} s)"
         )
-    return merged
+    return said
 
 
 def _asked(asked_s: float | None, block_s: float) -> str:
