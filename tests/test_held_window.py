@@ -72,7 +72,7 @@ def test_a_window_holds_its_span_and_margin_and_each_hold_from_where_it_starts()
 
 def test_the_whole_logs_times_are_those_alignment_cleans():
     whole = _log()
-    times, never = whole_times(whole)
+    times, never, _ = whole_times(whole)
     assert never == {"/a/never"} and "/a/never" not in times
     assert times["/a/dense"].count == 100 and times["/a/dense"].first == 5 * _S
     assert times["/a/gappy"] is not times["/a/dense"] and times["/a/gappy"].count == 83  # its finite samples
@@ -125,8 +125,7 @@ def test_a_real_ulog_whose_first_samples_are_nan_aligns_a_window_as_the_whole_lo
             values[:50] = np.nan
             channels[name] = Channel(name, t, values)
     edited = Log(channels=channels, source=log.source)
-    times, never = whole_times(edited)
-    held = HeldLog(edited, (0, 0), frozenset(), times, never)
+    held = HeldLog(edited, (0, 0), frozenset(), *whole_times(edited))
     for start_s, end_s in ((None, None), (10.0, 20.0)):
         whole = align(edited, profile, start_s=start_s, end_s=end_s)
         part = align(window_of(held, ReadWindow(start_s, end_s, 5.02)), profile, start_s=start_s, end_s=end_s)

@@ -113,19 +113,20 @@ def _refusal(path, loaded, header_stamp: bool = False) -> tuple[str, tuple[float
     its log times (``header_stamp``: the analysis reads it again on the header stamps). Only a
     profile without further loops or [recovery] (both re-read the whole run)."""
     fmt = detect_format(path)
-    if fmt != "mcap" and loaded.log is None:
+    held = fmt != "mcap"  # read whole: its blocks are windows of the built-in profile's read
+    if held and loaded.log is None:
         return (
             f"a {fmt} log analysed with --profile or its embedded one is read whole, so it was analysed at once "
             "(an indexed MCAP, or a log a built-in profile reads, is read in blocks)"
         ), None
-    if fmt != "mcap" and header_stamp:
+    if held and header_stamp:
         return f"a {fmt} log is read whole again on its header stamps (--use-header-stamp); analysed at once", None
     if loaded.profile.loops or loaded.profile.recovery is not None:
         return "a profile with further loops or [recovery] re-reads the whole run; analysed at once", None
-    span = indexed_span_s(path) if fmt == "mcap" else held_span(loaded.log)
+    span = held_span(loaded.log) if held else indexed_span_s(path)
     if span is None:
-        why = "no chunk index or statistics to read a block from" if fmt == "mcap" else "no timed sample"
-        return f"the {'MCAP file' if fmt == 'mcap' else 'log'} has {why}; analysed at once", None
+        what = "the log has no timed sample" if held else "the MCAP file has no chunk index or statistics"
+        return f"{what} to read a block from; analysed at once", None
     if span[0] * float(loaded.profile.vehicle.rate_hz) > span[1]:  # an outlying time (2**63 - 1 ns)
         why = (
             f"the file's span ({span[0]:.6g} s) holds fewer messages than grid steps (an outlying "

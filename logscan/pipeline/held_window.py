@@ -35,16 +35,16 @@ _LOOK_BACK = 1024  # samples looked at per step back to a channel's last finite 
 @dataclass
 class HeldLog:
     """A log read whole, held for the windows of it: the file's stat when read (a changed file is
-    read again), the topics it was read for, its channels' times across it (`whole_times`), the
-    channels without a finite sample (no hold starts in them) and, per time array (its id), whether
-    it is in order."""
+    read again), the topics it was read for, and what `whole_times` found in it once: its channels'
+    times across it, the channels without a finite sample (no hold starts in them) and the time
+    arrays (their ids) out of order (a window holds all of theirs)."""
 
     log: Log
     stat: tuple
     topics: frozenset[str]
     times: dict[str, WholeTimes] = field(default_factory=dict)
     never_finite: frozenset[str] = frozenset()
-    in_order: dict[int, bool] = field(default_factory=dict)
+    out_of_order: frozenset[int] = frozenset()
 
 
 def held_window(path: str, window: ReadWindow, topics: frozenset[str], read: Callable[[], Log]) -> Log:
@@ -55,9 +55,9 @@ def held_window(path: str, window: ReadWindow, topics: frozenset[str], read: Cal
     stat = file_stat(path)
     if not isinstance(held, HeldLog) or held.stat != stat or held.topics != topics:
         log = read()
-        times, never_finite = whole_times(log)
+        found = whole_times(log)
         narrow(log)
-        held = plans[path] = HeldLog(log, stat, topics, times, never_finite)
+        held = plans[path] = HeldLog(log, stat, topics, *found)
     return window_of(held, window)
 
 
@@ -78,9 +78,10 @@ def narrow(log: Log) -> None:
     log.channels = channels
 
 
-def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str]]:
+def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozenset[int]]:
     """(each channel's times across ``log`` as alignment cleans them, as `WholeTimes`: the channels
-    of one time array whose samples are all finite share one; the channels without a finite sample)."""
+    of one time array whose samples are all finite share one; the channels without a finite sample;
+    the ids of the time arrays out of order)."""
     orders: dict = {}  # id of a time array -> its `time_order`, found once
     shared: dict[int, WholeTimes] = {}
     times: dict[str, WholeTimes] = {}
@@ -105,7 +106,7 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str]]:
                 times[name] = _times_of(cleaned.t)
         else:
             never.append(name)
-    return times, frozenset(never)
+    return times, frozenset(never), frozenset(key for key, order in orders.items() if order.unsorted)
 
 
 def _times_of(unique: np.ndarray) -> WholeTimes:
@@ -156,14 +157,9 @@ def window_of(held: HeldLog, window: ReadWindow) -> Log:
 def _bounds(held: HeldLog, group: list[Channel], lo: int | None, hi: int | None) -> tuple[int, int] | None:
     """The samples of the channels ``group`` (one time array) a window from ``lo`` to ``hi`` ns
     needs, as (first, end) indices: from the earliest of their holds' starts (`_hold_start`); None
-    for all of them: no window, or times out of order (found once per array)."""
+    for all of them: no window, or times out of order."""
     t = group[0].t
-    if lo is None and hi is None or t.size < 2:
-        return None
-    in_order = held.in_order.get(id(t))
-    if in_order is None:
-        in_order = held.in_order[id(t)] = bool((t[1:] >= t[:-1]).all())
-    if not in_order:
+    if lo is None and hi is None or t.size < 2 or id(t) in held.out_of_order:
         return None
     end = t.size if hi is None else int(np.searchsorted(t, hi, "right"))
     if lo is None:
@@ -177,14 +173,15 @@ def _cut(channel: Channel, bounds: tuple[int, int] | None, t: np.ndarray | None)
     """``channel``'s samples within ``bounds``, at ``t`` (the view of its time array its group
     shares, as the read's channels of one topic share their array), its values float64: a view of
     the held ones, or a copy of those held as float32 (`narrow`)."""
+    if bounds is None or t is None or bounds == (0, channel.t.size):
+        if channel.values.dtype == np.float64:
+            return channel
+        t, values = channel.t, channel.values
+    else:
+        values = channel.values[bounds[0] : bounds[1]]
     cut = object.__new__(Channel)  # arrays already checked (`Channel.sharing_time`)
-    cut.name, cut.unit, cut.t, cut.values = channel.name, channel.unit, channel.t, channel.values
-    if bounds is not None and t is not None and bounds != (0, channel.t.size):
-        cut.t, cut.values = t, channel.values[bounds[0] : bounds[1]]
-    elif cut.values.dtype == np.float64:
-        return channel
-    if cut.values.dtype != np.float64:
-        cut.values = cut.values.astype(np.float64)
+    cut.name, cut.unit, cut.t = channel.name, channel.unit, t
+    cut.values = values.astype(np.float64, copy=False)
     return cut
 
 

@@ -274,16 +274,14 @@ def _read(
         log = None  # it lacks a topic the analysis reads
     topics = loaded.profile.topics() | set(raw_topics) | CONTEXT_TOPICS
 
-    def read_whole() -> Log:
+    def read(window: ReadWindow | None = None) -> Log:
         if log is not None:
             return log
-        return read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction)
+        return read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction, window=window)
 
     if window is not None and window.plans is not None and detect_format(path) != "mcap":
-        return held_window(str(path), window, frozenset(topics), read_whole)  # a block of a log read whole
-    if log is None:
-        log = read_log(path, topics=topics, use_header_stamp=use_header_stamp, progress=fraction, window=window)
-    return log
+        return held_window(str(path), window, frozenset(topics), read)  # a block of a log read whole
+    return read(window)
 
 
 def _read_and_align(

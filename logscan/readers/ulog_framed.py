@@ -28,7 +28,7 @@ from __future__ import annotations
 import contextlib
 import io
 import mmap
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from functools import partial
 
 import numpy as np
@@ -43,7 +43,6 @@ _SECTION_END = np.frombuffer(b"ALC", dtype=np.uint8)
 _DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads in the data section
 _EMPTY = np.empty(0, np.uint8)
 _FRAME_BYTES = 16 << 20  # file bytes framed before their pages are given back
-
 _NO_MESSAGES = np.empty(0, np.int64)
 
 
@@ -77,6 +76,15 @@ def _frame(buf, start, stop):  # pragma: no cover - numba kernel
             ids[i] = np.uint16(buf[pos + 3]) | (np.uint16(buf[pos + 4]) << 8)
         pos += 3 + size
     return offsets, sizes, types, ids, pos
+
+
+def _given_back(offsets: np.ndarray, buf: np.ndarray, give_back: Callable[[int], None]) -> Iterator[tuple[int, int]]:
+    """`_file_slices` of ``offsets``, the pages before each slice's last offset given back once it
+    is read (``give_back(offset)``), and all of ``buf``'s after the last."""
+    for lo, hi in _file_slices(offsets):
+        yield lo, hi
+        give_back(int(offsets[hi - 1]))
+    give_back(buf.size)
 
 
 def _file_slices(offsets: np.ndarray, span: int | None = None) -> list[tuple[int, int]]:
@@ -130,10 +138,8 @@ def _compact(buf: np.ndarray, head: int, offsets: np.ndarray, sizes: np.ndarray,
     out = np.empty(head + 3 * sizes.size + int(sizes.sum(dtype=np.int64)), np.uint8)
     out[:head] = buf[:head]
     pos = head
-    for lo, hi in _file_slices(offsets):
+    for lo, hi in _given_back(offsets, buf, give_back):
         pos = _copy_messages(buf, offsets[lo:hi], sizes[lo:hi], out, pos)
-        give_back(int(offsets[hi - 1]))
-    give_back(buf.size)
     return out
 
 
@@ -191,10 +197,8 @@ class _Plan:
             return
         starts = self.data_offsets[index] + 5
         buffer = np.empty(starts.size * width, np.uint8)
-        for lo, hi in _file_slices(starts):  # the pages read given back as it goes
+        for lo, hi in _given_back(starts, self.buf, self.give_back):
             _gather(self.buf, starts[lo:hi], width, buffer[lo * width : hi * width])
-            self.give_back(int(starts[hi - 1]))
-        self.give_back(self.buf.size)
         subscription.buffer = buffer  # np.frombuffer reads it as is
         # each message's timestamp where it stands in the buffer (a strided view, not a copy)
         stamps = np.ndarray((index.size,), dtype="<u8", buffer=buffer, offset=t_off, strides=(width,))
