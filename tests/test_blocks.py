@@ -26,9 +26,10 @@ BIAS = SAMPLES / "quad_imu_bias.mcap"  # 60 s at 100 Hz, an accelerometer bias f
 
 def test_block_windows_cover_the_span_without_a_step_twice():
     windows = block_windows(100.0, 30.0, 0.01)
-    assert windows == [(None, 24.995), (25.0, 49.995), (50.0, 74.995), (75.0, None)]  # none over 30 s
-    assert block_windows(100.0, 30.0, 0.01, start_s=10.0, end_s=70.0) == [(10.0, 39.995), (40.0, 70.0)]
-    assert block_windows(40.0, 30.0, 0.01) == [(None, 19.995), (20.0, None)]
+    ns = 1e-9  # each ends a nanosecond before the next begins
+    assert windows == [(None, 25.0 - ns), (25.0, 50.0 - ns), (50.0, 75.0 - ns), (75.0, None)]  # none over 30 s
+    assert block_windows(100.0, 30.0, 0.01, start_s=10.0, end_s=70.0) == [(10.0, 40.0 - ns), (40.0, 70.0)]
+    assert block_windows(40.0, 30.0, 0.01) == [(None, 20.0 - ns), (20.0, None)]
     assert block_windows(30.2, 30.0, 0.01) == [(None, None)]  # within the slack: one
     # a log of 24 one-hour pieces, each a step apart: 48 blocks a step longer than half an hour
     day = block_windows(86400.24, 1800.0, 0.01)
@@ -405,7 +406,19 @@ def test_a_log_longer_than_the_memory_budget_allows_at_once_goes_to_blocks(monke
         windows = blocks.blocks_for(BIAS, loaded, None, None, None)
         assert (windows is None) == at_once, span_s
         if windows is not None:  # two blocks of half the span each
-            assert windows[0] == (None, pytest.approx(span_s / 2 - 0.005)) and len(windows) == 2
+            assert windows[0] == (None, pytest.approx(span_s / 2 - blocks.BORDER_GAP_S)) and len(windows) == 2
     assert blocks.AUTO_STEPS * blocks.STEP_BYTES + blocks.START_BYTES <= blocks.MEMORY_BUDGET_BYTES
     # the --block-s help (docs/cli.md is generated from it, tests/test_docs_cli.py) says the same number
     assert f"more than {blocks.AUTO_STEPS:,} (" in (SAMPLES.parent / "docs" / "cli.md").read_text(encoding="utf-8")
+
+
+def test_every_grid_step_of_a_ulog_is_in_one_block_whatever_its_phase():
+    """The real robologs ULog's time zero is its logger's start, not a grid step: in 3-s blocks
+    each step is analysed once (with half a step between blocks, a step fell between them at each
+    of its 3 borders: 1792 steps of 1795)."""
+    ulog = need_testdata("px4-ulog-extra/robologs_fmu_v5_test.ulg")
+    whole = analyze_blocked(ulog, block_s=0, free_series=True)
+    parts = analyze_blocked(ulog, block_s=3.0, free_series=True)
+    assert parts.warnings[-2].startswith("analysed in 4 blocks")
+    assert parts.prepared.filter_summary()["steps"] == whole.prepared.filter_summary()["steps"] == 1795
+    assert _alarms(parts) == _alarms(whole)

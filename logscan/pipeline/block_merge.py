@@ -168,7 +168,7 @@ def windows_folded(merged, part, events):
     """`windows_once`, then the windows no later block can give or replace reduced to what the
     verdict reads of them (`logscan.verdict.observability_folded`; ``events``: the log's truth
     events, whose verdicts it keeps). A block's windows start a window before its first step
-    (`logscan.pipeline.block_reduce`), which is half a grid step after the last one of the block
+    (`logscan.pipeline.block_reduce`), which is at most a grid step after the last one of the block
     before; so the windows starting more than a window and a stride before the merged verdict's end
     are final."""
     if part is not None and part.t_start.size and merged is not None and part.t_start.min() <= merged.last_reduced:

@@ -51,6 +51,10 @@ DETECTOR_LEAD_S = 2 * (OBSERVABILITY_WARMUP_S + OBSERVABILITY_WINDOW_S)
 # A block may be this much of its length longer than asked (a 24-hour log of 1-hour pieces spans
 # 86,400.24 s: 48 blocks of 1800.005 s, not 49 shorter ones)
 BLOCK_SLACK = 0.01
+# A block ends this long before the next begins: alignment takes the steps from a window's start
+# to its end in whole nanoseconds (`logscan.timebase.time_sanity.grid`), so a step is in the one
+# block or the next, whatever its phase
+BORDER_GAP_S = 1e-9
 # The peak memory of a log analysed at once: issue 29's 450 MB for a log of any length.
 MEMORY_BUDGET_BYTES = 450_000_000
 # The peak RSS of `logscan analyze` of a log at once, as a line through the worst of three runs at 15
@@ -72,15 +76,17 @@ def block_windows(
     """The fewest consecutive windows [start, end] of equal length, a whole number of grid steps
     (``dt``), covering ``start_s``..``end_s`` (None: that end of the log, ``span_s`` long) with
     none longer than ``block_s`` (by more than `BLOCK_SLACK` of it: a log's seams and rounding), so
-    each block's memory is bounded by ``block_s``, the last included; each ends half a grid step
-    before the next begins, so no step is analysed twice. One window: the span itself."""
+    each block's memory is bounded by ``block_s``, the last included; each ends a nanosecond
+    before the next begins (`BORDER_GAP_S`), so every step is analysed once, whatever the grid's
+    phase (a ULog's time zero is its logger's start, not a grid step: with half a step between
+    blocks, the steps falling in it were in none). One window: the span itself."""
     lo = 0.0 if start_s is None else float(start_s)
     hi = float(span_s) if end_s is None else float(end_s)
     count = max(1, math.ceil((hi - lo) / block_s - BLOCK_SLACK))
     length = math.ceil((hi - lo) / count / dt - 1e-9) * dt  # whole steps: a border on the grid
     borders = [lo + k * length for k in range(1, count)]
     starts = [start_s, *borders]
-    ends = [b - dt / 2 for b in borders] + [end_s]
+    ends = [b - BORDER_GAP_S for b in borders] + [end_s]
     return list(zip(starts, ends))
 
 
