@@ -118,16 +118,18 @@ def sample_masks(t: np.ndarray, valid, warmup, warmup_s: float) -> tuple[np.ndar
     return judged, in_warmup
 
 
-def judged_share(t: np.ndarray, judged: np.ndarray | None, alarmable: np.ndarray | None, from_t: float | None) -> float:
-    """The share of the judged samples that can raise an alarm (not in warm-up), counted over the
-    samples alarms are seen on (rule 6: from ``from_t``; a lead-in's are judged elsewhere); None
-    masks: every sample."""
+def judged_counts(
+    t: np.ndarray, judged: np.ndarray | None, alarmable: np.ndarray | None, from_t: float | None
+) -> tuple[int, int]:
+    """(the judged samples that can raise an alarm (not in warm-up), the judged samples), counted
+    over the samples alarms are seen on (rule 6: from ``from_t``; a lead-in's are judged elsewhere);
+    None masks: every sample. Their ratio is the statistic's judged share (block mode sums them)."""
     rows = slice(0 if from_t is None else int(np.searchsorted(t, from_t - _TIME_EPS)), t.size)
 
     def count(mask: np.ndarray | None) -> int:
         return rows.stop - rows.start if mask is None else int(np.count_nonzero(mask[rows]))
 
-    return float(count(alarmable) / max(count(judged), 1))
+    return count(alarmable), count(judged)
 
 
 def alarm_intervals(

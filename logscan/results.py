@@ -17,7 +17,7 @@ from typing import Any, overload
 
 import numpy as np
 
-from logscan.alarms import AlarmInterval, alarm_intervals, judged_alarms, judged_share, sample_masks
+from logscan.alarms import AlarmInterval, alarm_intervals, judged_alarms, judged_counts, sample_masks
 from logscan.errors import InputError
 from logscan.json_policy import jsonable
 
@@ -240,6 +240,8 @@ class DetectorResult:
     not_checked: list[NotChecked] = field(default_factory=list)
     alarm_policy: AlarmPolicy | None = field(default=None, repr=False, compare=False)
     judged_fraction: dict[str, float] = field(default_factory=dict)  # statistic -> judged / valid samples
+    # statistic -> (judged, valid) samples, the fraction's counts (block mode sums the blocks')
+    judged_counts: dict[str, tuple[int, int]] = field(default_factory=dict, repr=False, compare=False)
     # statistic -> (N,) bool, the samples that could raise an alarm (valid, not in warm-up); the
     # report's margins are taken over these. All True: a read-only broadcast view.
     judged: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
@@ -279,7 +281,8 @@ class DetectorResult:
         # a warm-up or window longer than most of the log leaves the statistic unable to alarm there
         # (the profile's suspension, ground time, is a choice of scope, not a gap in the check)
         alarmable = judged if in_warmup is None else ~in_warmup if judged is None else judged & ~in_warmup
-        self.judged_fraction[name] = judged_share(t, judged, alarmable, self._alarms_from()) if n else 1.0
+        counts = self.judged_counts[name] = judged_counts(t, judged, alarmable, self._alarms_from()) if n else (0, 0)
+        self.judged_fraction[name] = float(counts[0] / max(counts[1], 1)) if n else 1.0
         if suspended is not None:
             alarmable = ~suspended if alarmable is None else alarmable & ~suspended
         if alarmable is not None and not alarmable.all():

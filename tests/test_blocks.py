@@ -360,8 +360,8 @@ def test_no_block_is_kept_once_it_is_folded_in(monkeypatch):
         refs.append(weakref.ref(reduced))
         return reduced
 
-    def add_and_measure(self, block):
-        add(self, block)
+    def add_and_measure(self, block, span):
+        add(self, block, span)
         held.append(self.nbytes())
 
     monkeypatch.setattr(blocks, "reduce_block", reduce_and_watch)

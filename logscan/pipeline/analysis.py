@@ -20,7 +20,7 @@ from logscan.report.run_context import analysed_span
 from logscan.results import DetectorResult, FaultEvent, Incident
 from logscan.timebase.clock import clock_of
 from logscan.verdict.autopilot_messages import FlightMessages, flight_messages
-from logscan.verdict.coverage import judged_span, skipped_checks, skipped_heading
+from logscan.verdict.coverage import Coverage, judged_span, skipped_checks, skipped_heading
 from logscan.verdict.incidents import InputGap, signal_label
 from logscan.verdict.input_fault import KinematicEvidence
 
@@ -51,6 +51,8 @@ class Analysis:
     # what the [alarms] suspension left unjudged of the model-based statistics, when at most half of
     # the flight (`logscan.verdict.coverage.unjudged_flight`; more is an ``unchecked`` line); "": nothing
     unjudged: str = ""
+    # the coverage in figures (block mode judges the blocks' sum; None: not found, a failed analysis)
+    coverage: Coverage | None = field(default=None, repr=False)
     # (N,) the grid steps the [alarms] suspension held back (None: none): where judging resumed
     # after it, an incident's source is not the alarm that happened to update first
     suspended: np.ndarray | None = field(default=None, repr=False)

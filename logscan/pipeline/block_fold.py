@@ -18,17 +18,23 @@ import numpy as np
 from logscan.alarms import merge_close
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.block_merge import (
+    blocks_where,
+    coverage_lines,
+    figures_masked,
     merge_gap_s,
+    merged_coverage,
     merged_filter_summary,
     merged_incidents,
     merged_info,
+    own_coverage_lines,
     said_once,
     windows_folded,
 )
 from logscan.pipeline.detection import rescore
 from logscan.report.context_join import joined
 from logscan.report.kept_views import KeptRows
-from logscan.results import Band, DetectorResult, events_from_truth
+from logscan.results import Band, DetectorResult, NotChecked, events_from_truth
+from logscan.verdict.coverage import judged_span
 
 if TYPE_CHECKING:
     from logscan.pipeline.stages import Prepared
@@ -75,14 +81,16 @@ class _Detector:
         self.possible: list = []
         self.warnings: list[list[str]] = []
         self.not_checked: dict = {}
+        self.not_checked_in: dict[str, list[int]] = {}  # a reason (its figures masked) -> the blocks giving it
+        self.blocks: list[int] = []  # the blocks it ran in
         self.infos: list[dict] = []
         self.checks: dict = {}
-        self.fractions: dict[str, list[float]] = {}  # statistic -> [sum of fraction x points, points]
+        self.fractions: dict[str, list[int]] = {}  # statistic -> [judged, valid] samples over the blocks
         self.finite: dict[str, int] = {}  # statistic -> its finite samples in the blocks so far
         self.per_step: dict[str, int] = {}  # statistic -> its values per grid step (a column: 1)
 
-    def append(self, result: DetectorResult | None, before: int, size: int, steps: int) -> None:
-        """The block's ``result`` (None: the block has none) of ``size`` envelope points, ``steps`` grid steps."""
+    def append(self, result: DetectorResult | None, before: int, size: int, steps: int, block: int) -> None:
+        """Block ``block``'s ``result`` (None: the block has none) of ``size`` envelope points, ``steps`` grid steps."""
         pieces = (None, None, None, None, None) if result is None else _pieces(result)
         for columns, piece in zip((self.series, self.extras, self.judged, self.uppers, self.lowers), pieces):
             columns.append(piece, before, size)
@@ -96,16 +104,20 @@ class _Detector:
         self.alarms += result.alarms
         self.possible += result.possible
         self.warnings.append(result.warnings)
-        self.not_checked.update({n.reason: n for n in result.not_checked})
+        self.blocks.append(block)
+        for key, reason in {figures_masked(n.reason): n for n in result.not_checked}.items():
+            self.not_checked.setdefault(key, reason)
+            self.not_checked_in.setdefault(key, []).append(block)
         self.infos.append(result.info)
         self.checks.update(result.checks)
-        for name, fraction in result.judged_fraction.items():
-            total = self.fractions.setdefault(name, [0.0, 0.0])
-            total[0] += fraction * size
-            total[1] += size
+        for name, (alarmable, judged) in result.judged_counts.items():  # the log's share: the counts summed
+            total = self.fractions.setdefault(name, [0, 0])
+            total[0] += alarmable
+            total[1] += judged
 
-    def merged(self, gap_s: float, steps: int) -> DetectorResult:
-        """The detector's result over the ``steps`` grid steps folded in (a series a block lacks: NaN there)."""
+    def merged(self, gap_s: float, steps: int, spans: list[tuple[float, float]]) -> DetectorResult:
+        """The detector's result over the ``steps`` grid steps folded in (a series a block lacks: NaN
+        there); ``spans``: each block's first and last step judged (s)."""
         uppers, lowers = self.uppers.arrays, self.lowers.arrays
         return replace(
             self.template,
@@ -116,12 +128,26 @@ class _Detector:
             alarms=merge_close(self.alarms, gap_s),
             possible=merge_close(self.possible, gap_s),
             warnings=said_once(self.warnings),
-            not_checked=list(self.not_checked.values()),
+            not_checked=self.log_not_checked(spans),
             info=merged_info(self.infos),
             checks=self.checks,
-            judged_fraction={name: weighted / max(weight, 1.0) for name, (weighted, weight) in self.fractions.items()},
+            judged_fraction={name: float(a / max(j, 1)) for name, (a, j) in self.fractions.items()},
+            judged_counts={name: (a, j) for name, (a, j) in self.fractions.items()},
             series_counts={name: self.counts(name, steps) for name in self.series.arrays},
         )
+
+    def log_not_checked(self, spans: list[tuple[float, float]]) -> list[NotChecked]:
+        """The checks the log could not run: one every block it ran in could not run, as it is; a
+        check without a valid sample (``partial``) in some blocks only had one in others (as at
+        once, not the log's); one with nothing to judge in some blocks, named with them."""
+        out = []
+        for key, reason in self.not_checked.items():
+            said = self.not_checked_in[key]
+            if len(said) == len(self.blocks):
+                out.append(reason)
+            elif not reason.partial:
+                out.append(replace(reason, reason=f"{reason.reason} ({blocks_where(said, spans)})"))
+        return out
 
     def counts(self, name: str, steps: int) -> tuple[int, int]:
         """(samples, finite ones) of a statistic over ``steps`` grid steps, as its series at once has."""
@@ -151,7 +177,8 @@ class BlockFold:
         self.summaries: list[dict | None] = []
         self.warnings: list[list[str]] = []
         self.unchecked: list[list[str]] = []
-        self.unjudged: dict[str, None] = {}
+        self.coverages: list = []  # each block's coverage in figures: the log's is their sum
+        self.spans: list[tuple[float, float]] = []  # each block's first and last step judged, s
         self.incidents: list = []
         self.input_gaps: list = []
         self.failures: dict = {}
@@ -160,8 +187,9 @@ class BlockFold:
         self.kept = KeptRows()  # the rows of the sensor figures (`logscan.report.kept_views`)
         self.context: RunContext | None = None  # the blocks' context so far (`logscan.report.context_join`)
 
-    def add(self, block: Analysis) -> None:
-        """Fold a reduced block in; nothing of it is kept but what the merge reads."""
+    def add(self, block: Analysis, span: tuple[float, float]) -> None:
+        """Fold a reduced block in (``span``: its first and last step judged, s); nothing of it is
+        kept but what the merge reads."""
         prepared = block.prepared
         size = prepared.run.t.size
         if self.prepared is None:
@@ -174,14 +202,17 @@ class BlockFold:
                 self.detectors[result.detector] = _Detector(result)
         steps = prepared.grid[0] if prepared.grid else 0
         for name, detector in self.detectors.items():
-            detector.append(next((r for r in block.results if r.detector == name), None), self.points, size, steps)
+            detector.append(
+                next((r for r in block.results if r.detector == name), None), self.points, size, steps, len(self.spans)
+            )
         self.points += size
         self.steps += steps
         self.summaries.append(prepared.filter_summary())
-        self.warnings.append(block.warnings)
-        self.unchecked.append(block.unchecked)
-        if block.unjudged:
-            self.unjudged[block.unjudged] = None
+        own = own_coverage_lines(block)  # said of the log's sum, not of each block
+        self.warnings.append([line for line in block.warnings if line not in own])
+        self.unchecked.append([line for line in block.unchecked if line not in own])
+        self.coverages.append(block.coverage)
+        self.spans.append(span)
         self.incidents += block.incidents
         self.input_gaps += block.input_gaps
         self.failures.update({(f.detector, f.message): f for f in block.failures})
@@ -213,10 +244,14 @@ class BlockFold:
         prepared.innovations = self.kept if self.kept.group_names else None
         prepared.context = self.context
         merged = Analysis(prepared=prepared, warnings=said_once(self.warnings))
-        merged.results = [detector.merged(gap_s, self.steps) for detector in self.detectors.values()]
+        merged.results = [detector.merged(gap_s, self.steps, self.spans) for detector in self.detectors.values()]
         merged.incidents = merged_incidents(self.incidents, merged.results, gap_s)
-        merged.unchecked = said_once(self.unchecked)
-        merged.unjudged = "; ".join(self.unjudged)
+        merged.unchecked = said_once(self.unchecked, self.spans)
+        merged.coverage = merged_coverage(self.coverages)
+        if merged.coverage is not None:
+            lines, merged.unjudged = coverage_lines(merged.coverage, merged.results, judged_span(prepared.run))
+            merged.unchecked += lines
+            merged.warnings += [merged.unjudged] if merged.unjudged else []
         merged.input_gaps = self.input_gaps
         merged.failures = [DetectorFailure(f.detector, f.message, f.exit_code) for f in self.failures.values()]
         merged.observability = self.observability

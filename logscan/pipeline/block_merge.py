@@ -8,12 +8,15 @@ facts, the filter's counts and the observability windows once each. docs/algorit
 
 from __future__ import annotations
 
+import operator
 import re
 from dataclasses import replace
+from functools import reduce
 
 import numpy as np
 
 from logscan.results import DetectorResult, Incident
+from logscan.verdict.coverage import Coverage, Stop, series_reasons, unheard_stops
 from logscan.verdict.incidents import DEFAULT_GAP_S, quoted_peak
 from logscan.verdict.observability_folded import folded
 
@@ -28,28 +31,97 @@ def merge_gap_s(profile) -> float:
     return policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
 
 
-def said_once(lines: list[list[str]]) -> list[str]:
+def said_once(lines: list[list[str]], spans: list[tuple[float, float]] | None = None) -> list[str]:
     """Each block's lines (``lines[k]``: block k's) said once: a line every block that says it says
     alike as it is; one said with other figures by other blocks (a group's NIS over each block) as
-    the first block's, saying in how many blocks it came and whose figures it gives."""
+    the first block's, saying in how many blocks it came and whose figures it gives. With the
+    blocks' ``spans`` (their first and last step, s), a line not every block says names the blocks
+    and spans it holds for (a block's line of what it could not check is not the log's)."""
     first: dict[str, tuple[str, int]] = {}
     blocks: dict[str, set[int]] = {}
     texts: dict[str, set[str]] = {}
     for k, block in enumerate(lines):
         for line in block:
-            key = _FIGURES.sub("#", line)
+            key = figures_masked(line)
             first.setdefault(key, (line, k))
             blocks.setdefault(key, set()).add(k)
             texts.setdefault(key, set()).add(line)
     out = []
     for key, (line, k) in first.items():
-        if len(texts[key]) > 1:
-            line += f" (said in {len(blocks[key])} of {len(lines)} blocks; these figures are block {k + 1}'s)"
+        where = blocks_where(sorted(blocks[key]), spans) if spans and len(blocks[key]) < len(lines) else ""
+        figures = f"these figures are block {k + 1}'s" if len(texts[key]) > 1 else ""
+        if where:
+            line += f" ({where}{'; ' + figures if figures else ''})"
+        elif figures:
+            line += f" (said in {len(blocks[key])} of {len(lines)} blocks; {figures})"
         out.append(line)
     return out
 
 
+def blocks_where(said: list[int], spans: list[tuple[float, float]]) -> str:
+    """ "in blocks 1-2, 4 of 5: 0.0-15.6 s, 31.2-39.0 s": the blocks ``said`` (0-based, sorted) as
+    runs of consecutive ones, each with the span it covers."""
+    runs: list[list[int]] = []
+    for k in said:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    names = ", ".join(f"{a + 1}" if a == b else f"{a + 1}-{b + 1}" for a, b in runs)
+    times = ", ".join(f"{round(spans[a][0], 1) + 0.0:.1f}-{spans[b][1]:.1f} s" for a, b in runs)  # + 0.0: no "-0.0"
+    noun = "block" if len(said) == 1 else "blocks"
+    return f"in {noun} {names} of {len(spans)}: {times}"
+
+
+def own_coverage_lines(block) -> frozenset[str]:
+    """The lines of what a block could not check that its coverage figures and its detectors'
+    results gave it (`Coverage.said`): block mode says them of the log's sum instead
+    (`merged_coverage`, `coverage_lines`), not of each block."""
+    return frozenset() if block.coverage is None else block.coverage.said
+
+
+def merged_coverage(coverages: list[Coverage | None]) -> Coverage | None:
+    """The blocks' coverage figures as the log's: group uses, divergence, the unjudged share and the
+    judged time summed; a sensor stopped in a block and used in no later one stopped for the log,
+    the judged time of the blocks after it added to its own."""
+    known = [c for c in coverages if c is not None]
+    if not known:
+        return None
+    shares = [c.share for c in known if c.share is not None]
+    stops = {}
+    for k, coverage in enumerate(known):
+        for name, stop in coverage.stopped.items():
+            later = known[k + 1 :]
+            if not any(name in c.filter.uses and c.filter.uses[name].used for c in later):
+                stops[name] = Stop(stop.t, stop.unjudged_s + sum(c.judged_s for c in later))
+    return Coverage(
+        filter=reduce(operator.add, (c.filter for c in known)),
+        share=reduce(operator.add, shares) if shares else None,
+        stopped=stops,
+        judged_s=sum(c.judged_s for c in known),
+    )
+
+
+def coverage_lines(coverage: Coverage, results: list[DetectorResult], span: str) -> tuple[list[str], str]:
+    """The lines of what the log could not check that ``coverage`` and the ``results`` give, as
+    `logscan.pipeline.detection` says them of a log at once, and the unjudged share's line when it
+    is a warning, not such a line ("": none)."""
+    lines = coverage.filter.lines() + series_reasons(results, span)
+    lines += unheard_stops(lines, coverage.stopped, span)
+    share = coverage.share
+    if share is None:
+        return lines, ""
+    if share.over:
+        return [*lines, share.line()], ""
+    return lines, share.line()
+
+
 _FIGURES = re.compile(r"\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")
+
+
+def figures_masked(line: str) -> str:
+    """``line`` with its figures masked: the key of lines that differ only in them."""
+    return _FIGURES.sub("#", line)
 
 
 def _union(items) -> list:

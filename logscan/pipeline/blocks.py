@@ -227,7 +227,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
             quoted = first_quoted(analysis, float(analysis.run.t[0]) if from_s is None else from_s)
             reduce_block(analysis, width, from_s, points, focus, quoted, carried)
             carried = quoted  # the next block keeps the rest of its window
-            fold.add(analysis)  # and not kept
+            fold.add(analysis, (float(analysis.run.t[0]) if from_s is None else from_s, float(analysis.run.t[-1])))
             del analysis
             gc.collect()
             return_freed_pages()

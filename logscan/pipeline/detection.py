@@ -24,7 +24,18 @@ from logscan.pipeline.release import (
 from logscan.pipeline.stages import Prepared
 from logscan.results import AlarmPolicy, events_from_truth
 from logscan.training.calibration import calibrate_command, judged_steps, suspended_policy
-from logscan.verdict.coverage import stopped_groups, unchecked_reasons, unjudged_flight
+from logscan.verdict.coverage import (
+    Coverage,
+    filter_coverage,
+    judged_seconds,
+    judged_share,
+    judged_span,
+    series_reasons,
+    stopped_groups,
+    stopped_lines,
+    unchecked_reasons,
+    unheard_stops,
+)
 from logscan.verdict.incidents import (
     DEFAULT_GAP_S,
     alarm_onsets,
@@ -71,10 +82,10 @@ def detect(
     stopped = stopped_groups(prepared.run, policy.suspended if policy is not None else None)  # and the samples
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
-    unjudged = unjudged_flight(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
-    if unjudged is not None and not unjudged[1]:
-        analysis.warnings.append(unjudged[0])
-        analysis.unjudged = unjudged[0]  # the report says it where "every check ran" would be
+    share = judged_share(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
+    if share is not None and not share.over:
+        analysis.warnings.append(share.line())
+        analysis.unjudged = share.line()  # the report says it where "every check ran" would be
     analysis.results = _run_detectors(prepared, detectors, policy, analysis, free_series, sensor_views, step)
     analysis.warnings[:0] = consistency_warnings(prepared, analysis.results)  # first: they question every verdict
     gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
@@ -82,11 +93,11 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.suspended = policy.suspended if policy is not None else None
     analysis.incidents, analysis.input_gaps = _incidents(analysis, groups, gap_s, gaps), gaps
-    analysis.unchecked = unchecked_reasons(prepared, analysis.results)
-    named = {line.split(":")[0] for line in analysis.unchecked}  # a group starved or never heard: said once
-    analysis.unchecked += [line for line in stopped if line.split(":")[0] not in named]
-    if unjudged is not None and unjudged[1]:
-        analysis.unchecked.append(unjudged[0])
+    analysis.coverage = coverage = _coverage(prepared, analysis.results, policy, stopped, share)
+    lines = unchecked_reasons(prepared, analysis.results, coverage.filter)
+    analysis.unchecked = lines + unheard_stops(lines, stopped, judged_span(prepared.run))
+    if share is not None and share.over:
+        analysis.unchecked.append(share.line())
     if prepared.loaded.model_not_run:  # its filter's detectors were not run (`filter_free`)
         model = prepared.profile.vehicle.model
         analysis.unchecked.insert(0, f"the {model} model (logscan's filter): {prepared.loaded.model_not_run}")
@@ -113,6 +124,16 @@ def _incidents(analysis: Analysis, groups, gap_s: float, gaps) -> list:
     if kinematic is not None:
         analysis.kinematic = kinematic.within([a for r in analysis.results for a in r.alarms])
     return incidents
+
+
+def _coverage(prepared: Prepared, results, policy, stopped, share) -> Coverage:
+    """The run's coverage in figures, with the lines they give it (`Coverage.said`)."""
+    specs = getattr(prepared.profile, "measurements", None)
+    facts = filter_coverage(prepared.run, prepared.trace, specs, None if policy is None else policy.alarms_from_s)
+    span = judged_span(prepared.run)
+    said = facts.lines() + series_reasons(results, span) + stopped_lines(stopped, span)
+    said += [share.line()] if share is not None else []
+    return Coverage(facts, share, stopped, judged_seconds(policy, prepared.run), frozenset(said))
 
 
 def _alarm_policy(prepared: Prepared, judged_from_s: float | None):

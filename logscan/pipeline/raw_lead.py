@@ -76,7 +76,7 @@ def cut_rows(result: DetectorResult, rows: slice, span: tuple[float, float], emp
 
     series = result.series
     for name in [n for n, v in series.items() if np.isfinite(v).any() and not np.isfinite(cut(v)).any()]:
-        for named in (result.series, result.thresholds, result.judged, result.judged_fraction):
+        for named in (result.series, result.thresholds, result.judged, result.judged_fraction, result.judged_counts):
             named.pop(name, None)
         if empty is not None:
             result.not_checked.append(NotChecked(f"{name}: {empty}"))

@@ -31,6 +31,7 @@ a part of the log left unjudged).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -58,19 +59,107 @@ def skipped_heading(span: str) -> str:
     return f"nothing to judge in {'this log' if span == WHOLE_LOG else span}"
 
 
-def unchecked_reasons(prepared, results: Sequence) -> list[str]:
-    """One line per part of the log that could not be checked (empty: everything was checked)."""
+def unchecked_reasons(prepared, results: Sequence, facts: FilterCoverage | None = None) -> list[str]:
+    """One line per part of the log that could not be checked (empty: everything was checked);
+    ``facts``: the run's `filter_coverage`, when found already."""
     reasons = []
     source = prepared.log.source
     if source.partial:
         reasons.append(f"the log was read only in part: {source.partial_reason}")
     profile = getattr(prepared, "profile", None)
     reasons += ends_in_flight(prepared.run, getattr(profile, "alarm_policy", None))
-    trace = prepared.trace
-    if trace is not None:
-        reasons += _starved_groups(prepared.run, trace, getattr(profile, "measurements", None))
-        reasons += _divergence(trace)
-    span = judged_span(prepared.run)
+    if facts is None:
+        facts = filter_coverage(prepared.run, prepared.trace, getattr(profile, "measurements", None))
+    return reasons + facts.lines() + series_reasons(results, judged_span(prepared.run))
+
+
+@dataclass(frozen=True)
+class GroupUse:
+    """A measurement group's updates the filter used in a run, against those its rate implies while
+    its gate was open; ``gate``: the words of its gate where it was closed at some step (a GNSS
+    without a 3D fix), "" where never or without a gate channel."""
+
+    used: int
+    expected: float
+    rate_hz: float
+    gate: str
+
+    def __add__(self, other: GroupUse) -> GroupUse:
+        return GroupUse(self.used + other.used, self.expected + other.expected, self.rate_hz, self.gate or other.gate)
+
+
+@dataclass(frozen=True)
+class FilterCoverage:
+    """What the filter's run says of the coverage: each group's use, the steps it was diverged.
+    Two runs' add (block mode judges the log's sum by the rules of a log at once)."""
+
+    uses: dict[str, GroupUse]
+    diverged_steps: int
+    steps: int
+
+    def __add__(self, other: FilterCoverage) -> FilterCoverage:
+        uses = dict(self.uses)
+        for name, use in other.uses.items():
+            uses[name] = uses[name] + use if name in uses else use
+        return FilterCoverage(uses, self.diverged_steps + other.diverged_steps, self.steps + other.steps)
+
+    def lines(self) -> list[str]:
+        """A group with no valid sample while its gate was closed, or fewer than
+        MIN_UPDATE_FRACTION of the updates its rate implies; a filter diverged most of the log."""
+        reasons = []
+        for name, use in self.uses.items():
+            if use.used == 0 and use.gate:
+                # closed whenever it was known: not one valid sample, the group's sensor was never checked
+                line = f"measurement group {name!r}: its gate was closed all flight ({use.gate}): no sample used"
+                reasons.append(line)
+            elif use.used < MIN_UPDATE_FRACTION * use.expected:
+                reasons.append(
+                    f"measurement group {name!r}: the filter used {use.used} of the ~{use.expected:.0f} updates its "
+                    f"{use.rate_hz:g} Hz rate implies (no valid samples, non-finite values or a silent sensor)"
+                )
+        fraction = self.diverged_steps / max(self.steps, 1)
+        if fraction > MAX_DIVERGED_FRACTION:
+            reasons.append(f"the filter was diverged for {100 * fraction:.0f} % of the log")
+        return reasons
+
+
+def filter_coverage(run, trace, specs=None, from_s: float | None = None) -> FilterCoverage:
+    """`FilterCoverage` of the filter's ``trace`` on ``run`` (None: no filter ran, nothing to say);
+    ``from_s``: of the steps from then on only (a block's own, not its lead-in, which the block
+    before counts)."""
+    if trace is None:
+        return FilterCoverage({}, 0, 0)
+    dt = float(run.dt)
+    own = slice(None) if from_s is None else slice(int(np.searchsorted(run.t, from_s, side="left")), None)
+    steps = int(run.n_steps) if from_s is None else int(run.n_steps) - own.start
+    duration = float(run.t[-1] - run.t[0]) + dt if from_s is None else steps * dt
+    uses = {}
+    for g, name in enumerate(trace.group_names):
+        group = run.groups.get(name)
+        rate = group.rate_hz if group is not None and group.rate_hz else 1.0 / dt
+        # none expected while its gate was closed (a GNSS without a 3D fix): said at alignment
+        gated_s = float(getattr(group, "gated_s", 0.0) or 0.0)
+        closed = getattr(group, "gate_closed", None)
+        if from_s is not None and closed is not None:
+            gated_s = float(np.count_nonzero(closed[own])) * dt
+        open_s = max(duration - gated_s, 0.0)
+        spec = (specs or {}).get(name)
+        gate = ""
+        if gated_s > 0.0 and spec is not None and getattr(spec, "gate_channel", None):
+            fix = ", no 3D fix" if "fix_type" in spec.gate_channel else ""
+            gate = f"{spec.gate_channel} below {spec.gate_min:g}{fix}"
+        uses[name] = GroupUse(int(trace.updated[own, g].sum()), min(open_s * rate, float(steps)), rate, gate)
+    episodes = trace.divergence_episodes
+    if from_s is None:
+        return FilterCoverage(uses, sum(e.n_steps for e in episodes), int(trace.n_steps))
+    return FilterCoverage(uses, sum(max(e.end_step - max(e.start_step, own.start) + 1, 0) for e in episodes), steps)
+
+
+def series_reasons(results: Sequence, span: str) -> list[str]:
+    """The lines of `unchecked_reasons` the detectors' results give: a check without a valid sample
+    (`NotChecked.partial`), a statistic never finite or judged on too few of its samples over
+    ``span`` (`judged_span`). Block mode gives them of the merged results, not each block's."""
+    reasons = []
     for result in results:
         reasons += [f"{result.detector}: {c.reason}" for c in result.not_checked if c.partial]
         for name, series in result.series.items():
@@ -114,45 +203,26 @@ def skipped_checks(results: Sequence) -> list[str]:
     return [f"{result.detector}: {c.reason}" for result in results for c in result.not_checked if not c.partial]
 
 
-def _starved_groups(run, trace, specs=None) -> list[str]:
-    duration = float(run.t[-1] - run.t[0]) + float(run.dt)
-    reasons = []
-    for g, name in enumerate(trace.group_names):
-        group = run.groups.get(name)
-        rate = group.rate_hz if group is not None and group.rate_hz else 1.0 / float(run.dt)
-        # none expected while its gate was closed (a GNSS without a 3D fix): said at alignment
-        open_s = max(duration - float(getattr(group, "gated_s", 0.0) or 0.0), 0.0)
-        expected = min(open_s * rate, float(run.n_steps))
-        used = int(trace.updated[:, g].sum())
-        spec = (specs or {}).get(name)
-        gated = float(getattr(group, "gated_s", 0.0) or 0.0) > 0.0
-        if used == 0 and gated and spec is not None and getattr(spec, "gate_channel", None):
-            # closed whenever it was known: not one valid sample, the group's sensor was never checked
-            reasons.append(
-                f"measurement group {name!r}: its gate was closed all flight ({spec.gate_channel} below "
-                f"{spec.gate_min:g}{', no 3D fix' if 'fix_type' in spec.gate_channel else ''}): no sample used"
-            )
-        elif used < MIN_UPDATE_FRACTION * expected:
-            reasons.append(
-                f"measurement group {name!r}: the filter used {used} of the ~{expected:.0f} updates its "
-                f"{rate:g} Hz rate implies (no valid samples, non-finite values or a silent sensor)"
-            )
-    return reasons
+@dataclass(frozen=True)
+class Stop:
+    """A measurement group's sensor stopped: its last sample's time, the judged time after it."""
+
+    t: float
+    unjudged_s: float
 
 
-def stopped_groups(run, suspended) -> list[str]:
-    """One line per measurement group whose sensor stopped while the log was still judged: no sample
-    held (none within its staleness limit, its gate not known closed) from some step to the last
-    judged one (``suspended``: the steps the [alarms] policy holds back, None: none). Unlike a gap,
-    nothing after it judged that sensor again: "no alarms" cannot be said of it there. A group
-    never heard at all is `_starved_groups`' line."""
+def stopped_groups(run, suspended) -> dict[str, Stop]:
+    """Each measurement group whose sensor stopped while the log was still judged: no sample held
+    (none within its staleness limit, its gate not known closed) from some step to the last judged
+    one (``suspended``: the steps the [alarms] policy holds back, None: none). Unlike a gap, nothing
+    after it judged that sensor again: "no alarms" cannot be said of it there (`stopped_lines`). A
+    group never heard at all is `FilterCoverage.lines`'."""
     n = int(run.n_steps)
     judged = np.ones(n, dtype=bool) if suspended is None else ~np.asarray(suspended, dtype=bool)
     if n == 0 or not judged.any():
-        return []
+        return {}
     last_judged = int(np.flatnonzero(judged)[-1])
-    span = judged_span(run)
-    lines = []
+    stops = {}
     for name, group in run.groups.items():
         heard = _heard_steps(group)
         if heard is None or not heard.any():
@@ -160,11 +230,47 @@ def stopped_groups(run, suspended) -> list[str]:
         last = int(np.flatnonzero(heard)[-1])
         unjudged_s = float(np.count_nonzero(judged[last + 1 :])) * float(run.dt)
         if last < last_judged and unjudged_s > 0.0:
-            lines.append(
-                f"measurement group {name!r}: no sample after {float(run.t[last]):.1f} s, {unjudged_s:.1f} s of the "
-                f"judged time before the end of {span} (its sensor stopped): not judged there"
-            )
-    return lines
+            stops[name] = Stop(float(run.t[last]), unjudged_s)
+    return stops
+
+
+def stopped_lines(stops: dict[str, Stop], span: str) -> list[str]:
+    """One line per group of `stopped_groups` (``span``: `judged_span`)."""
+    return [
+        f"measurement group {name!r}: no sample after {stop.t:.1f} s, {stop.unjudged_s:.1f} s of the "
+        f"judged time before the end of {span} (its sensor stopped): not judged there"
+        for name, stop in stops.items()
+    ]
+
+
+def unheard_stops(lines: list[str], stops: dict[str, Stop], span: str) -> list[str]:
+    """`stopped_lines` of the groups no line of ``lines`` names (a group starved or never heard is
+    said once, by its own line)."""
+    named = {line.split(":")[0] for line in lines}
+    return [line for line in stopped_lines(stops, span) if line.split(":")[0] not in named]
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """A run's coverage in figures, not lines: block mode adds the blocks' and judges the log's by
+    the rules of a log at once (`logscan.pipeline.block_fold`)."""
+
+    filter: FilterCoverage
+    share: JudgedShare | None  # what the [alarms] suspension left unjudged (None: nothing suspended)
+    stopped: dict[str, Stop]
+    judged_s: float  # the judged time of the run's own steps (a block's: from its first, not its lead-in)
+    # the lines these figures and the detectors' results gave the run (block mode: a block's, which
+    # the log's sum says instead); empty for a sum
+    said: frozenset[str] = frozenset()
+
+
+def judged_seconds(policy, run) -> float:
+    """The judged time of a run's own steps (from the policy's ``alarms_from_s``), not suspended."""
+    t = np.asarray(run.t)
+    own = np.ones(t.size, dtype=bool) if policy is None or policy.alarms_from_s is None else t >= policy.alarms_from_s
+    if policy is not None and policy.suspended is not None:
+        own &= ~np.asarray(policy.suspended, dtype=bool)
+    return float(np.count_nonzero(own)) * float(run.dt)
 
 
 def _heard_steps(group) -> np.ndarray | None:
@@ -179,29 +285,75 @@ def _heard_steps(group) -> np.ndarray | None:
     return heard if closed is None else heard | closed
 
 
-def _divergence(trace) -> list[str]:
-    steps = sum(episode.n_steps for episode in trace.divergence_episodes)
-    fraction = steps / max(trace.n_steps, 1)
-    if fraction > MAX_DIVERGED_FRACTION:
-        return [f"the filter was diverged for {100 * fraction:.0f} % of the log"]
-    return []
-
-
 def unjudged_flight(policy, run) -> tuple[str, bool] | None:
     """What a suspending [alarms] policy (`AlarmPolicy.suspend` already applied) left unjudged of the
     model-based statistics, in one line, and whether it is more than MAX_UNJUDGED_FLIGHT of the
     flight (the log is then not fully checked: the line is its reason, else a warning). None: the
     policy suspended nothing."""
+    share = judged_share(policy, run)
+    return None if share is None else (share.line(), share.over)
+
+
+@dataclass(frozen=True)
+class JudgedShare:
+    """What a suspending [alarms] policy left unjudged of a run, in seconds: of all its steps and of
+    those in flight. Two runs' shares add (block mode: the blocks' shares make the log's, judged by
+    the same rule as the log at once, `logscan.pipeline.block_fold`)."""
+
+    suspended_s: float  # steps not judged
+    total_s: float
+    unjudged_air_s: float  # steps not judged while in flight
+    air_s: float  # steps in flight (0: it never flew, or no ground channel says)
+    ground_channel: str | None  # None: the policy has no ground channel (the whole run is the scope)
+    reasons: tuple[str, ...]  # why: the filter converging, the ground time
+
+    def __add__(self, other: JudgedShare) -> JudgedShare:
+        return JudgedShare(
+            self.suspended_s + other.suspended_s,
+            self.total_s + other.total_s,
+            self.unjudged_air_s + other.unjudged_air_s,
+            self.air_s + other.air_s,
+            self.ground_channel or other.ground_channel,
+            tuple(dict.fromkeys(self.reasons + other.reasons)),
+        )
+
+    @property
+    def flew(self) -> bool:
+        return self.air_s > 0.0
+
+    @property
+    def over(self) -> bool:
+        """More than MAX_UNJUDGED_FLIGHT of the flight (of everything, when it never flew) unjudged."""
+        unjudged_s, scope_s = (self.unjudged_air_s, self.air_s) if self.flew else (self.suspended_s, self.total_s)
+        return unjudged_s > MAX_UNJUDGED_FLIGHT * scope_s
+
+    def line(self) -> str:
+        total = f"{self.suspended_s:.1f} s of {self.total_s:.1f} s"
+        if self.flew:
+            share = f"{total} ({self.unjudged_air_s:.1f} s of the {self.air_s:.1f} s in flight)"
+        elif self.ground_channel:
+            share = f"{total} ({self.ground_channel} never says airborne: no flight to judge)"
+        else:
+            share = total
+        line = f"not judged for {share}: {', '.join(self.reasons)}"
+        if self.over:
+            line = f"the model-based statistics (not the autopilot's own checks) were {line}"
+        return line
+
+
+def judged_share(policy, run) -> JudgedShare | None:
+    """`JudgedShare` of a run whose [alarms] policy is applied (`AlarmPolicy.suspend`), counted from
+    its ``alarms_from_s`` on (a block's first step: not its lead-in, which the block before judged).
+    None: the policy suspended nothing."""
     if policy is None or policy.suspended is None:
         return None
     suspended = np.asarray(policy.suspended, dtype=bool)
-    airborne = policy.airborne
-    flew = airborne is not None and bool(np.any(airborne))
-    scope = np.asarray(airborne, dtype=bool) if flew else np.ones(suspended.size, dtype=bool)
+    airborne = None if policy.airborne is None else np.asarray(policy.airborne, dtype=bool)
+    if policy.alarms_from_s is not None:  # a block's own steps
+        own = np.asarray(run.t) >= policy.alarms_from_s
+        suspended, airborne = suspended[own], None if airborne is None else airborne[own]
     dt = float(run.dt)
-    unjudged_s, scope_s = float(np.sum(suspended & scope)) * dt, float(np.sum(scope)) * dt
-    over = unjudged_s > MAX_UNJUDGED_FLIGHT * scope_s
-    why = ", ".join(
+    reasons = tuple(
         part
         for part, on in (
             (f"the first {policy.ignore_start_s:g} s (the filter converging)", policy.start_held),
@@ -213,14 +365,13 @@ def unjudged_flight(policy, run) -> tuple[str, bool] | None:
         )
         if on
     )
-    total = f"{float(suspended.sum()) * dt:.1f} s of {suspended.size * dt:.1f} s"
-    if flew:
-        share = f"{total} ({unjudged_s:.1f} s of the {scope_s:.1f} s in flight)"
-    elif airborne is not None:
-        share = f"{total} ({policy.ground_channel} never says airborne: no flight to judge)"
-    else:
-        share = total
-    line = f"not judged for {share}: {why}"
-    if over:
-        line = f"the model-based statistics (not the autopilot's own checks) were {line}"
-    return line, over
+    flew = airborne is not None and bool(np.any(airborne))
+    in_flight = airborne if flew and airborne is not None else np.zeros(suspended.size, dtype=bool)
+    return JudgedShare(
+        suspended_s=float(suspended.sum()) * dt,
+        total_s=suspended.size * dt,
+        unjudged_air_s=float(np.sum(suspended & in_flight)) * dt if flew else 0.0,
+        air_s=float(np.sum(in_flight)) * dt if flew else 0.0,
+        ground_channel=policy.ground_channel if airborne is not None else None,
+        reasons=reasons,
+    )

@@ -1,0 +1,82 @@
+"""Block mode judges what the log could not check over the whole log, as at once: the blocks'
+coverage figures are summed and judged by the same rules (`logscan.verdict.coverage`), not each
+block's lines repeated as the log's (`logscan.pipeline.block_fold`, docs/algorithms.md 8.1b)."""
+
+from __future__ import annotations
+
+import pytest
+
+from logscan.pipeline.block_merge import merged_coverage, said_once
+from logscan.verdict.coverage import Coverage, FilterCoverage, GroupUse, JudgedShare, Stop
+
+GROUND = "/vehicle_land_detected_0/landed"
+
+
+def _share(suspended_s, total_s, unjudged_air_s=0.0, air_s=0.0, reasons=("on the ground",)) -> JudgedShare:
+    return JudgedShare(suspended_s, total_s, unjudged_air_s, air_s, GROUND, reasons)
+
+
+def _coverage(uses=None, share=None, stopped=None, judged_s=0.0) -> Coverage:
+    return Coverage(FilterCoverage(uses or {}, 0, 100), share, stopped or {}, judged_s)
+
+
+def test_a_block_all_on_the_ground_does_not_leave_the_log_unjudged():
+    """Block 1 never flew (all of it unjudged: over the limit on its own); block 2 flew 100 s and
+    judged 80 of them. The log flew, and judged most of its flight: a warning, not "not fully checked"."""
+    ground_block = _share(1800.0, 1800.0)
+    assert ground_block.over and "never says airborne" in ground_block.line()
+    log = merged_coverage([_coverage(share=ground_block), _coverage(share=_share(30.0, 120.0, 20.0, 100.0))])
+    assert log is not None and log.share is not None
+    assert not log.share.over
+    assert log.share.line().startswith("not judged for 1830.0 s of 1920.0 s (20.0 s of the 100.0 s in flight)")
+
+
+def test_a_gate_closed_in_one_block_only_is_no_gate_closed_all_flight():
+    closed = GroupUse(0, 0.0, 5.0, "fix_type below 3, no 3D fix")
+    assert closed.used == 0 and _coverage({"gnss": closed}).filter.lines()[0].startswith(
+        "measurement group 'gnss': its gate was closed all flight"
+    )
+    log = merged_coverage([_coverage({"gnss": closed}), _coverage({"gnss": GroupUse(480, 500.0, 5.0, "")})])
+    assert log is not None and log.filter.lines() == []
+
+
+def test_a_sensor_stopped_in_a_block_and_heard_again_later_did_not_stop():
+    use = GroupUse(10, 10.0, 1.0, "")
+    stopped = {"baro": Stop(50.0, 10.0)}
+    heard_again = merged_coverage([_coverage({"baro": use}, stopped=stopped), _coverage({"baro": use}, judged_s=60.0)])
+    assert heard_again is not None and heard_again.stopped == {}
+    never_again = [
+        _coverage({"baro": use}, stopped=stopped),
+        _coverage({"baro": GroupUse(0, 60.0, 1.0, "")}, judged_s=60.0),
+    ]
+    log = merged_coverage(never_again)
+    assert log is not None and log.stopped == {"baro": Stop(50.0, 70.0)}  # its own 10 s and the next block's 60
+
+
+def test_a_line_not_every_block_says_names_the_blocks_and_their_spans():
+    spans = [(-0.004, 599.99), (600.0, 1199.99), (1200.0, 1799.99), (1800.0, 2400.0)]
+    lines = [["read in part"], ["read in part", "ends in flight"], ["read in part"], ["read in part", "ends in flight"]]
+    assert said_once(lines, spans) == [
+        "read in part",
+        "ends in flight (in blocks 2, 4 of 4: 600.0-1200.0 s, 1800.0-2400.0 s)",
+    ]
+    assert said_once([["a"], []], spans[:2]) == ["a (in block 1 of 2: 0.0-600.0 s)"]
+
+
+@pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
+def test_a_real_ulog_in_short_blocks_is_not_checked_for_the_reasons_it_is_at_once():
+    """The real PX4 events log (31 s; no 3D fix for its first 8 s, on the ground for most of it) in
+    four blocks: the blocks said, as the log's, that the GNSS gate was closed all flight, that its
+    NIS was never computed, that the model-based statistics never judged a flight (block 1's) and
+    that they judged 1.7 of 23.4 s (block 3's, its lead-in counted). Judged over the log, the lines
+    are those of the log at once."""
+    from conftest import need_testdata
+
+    from logscan.pipeline.blocks import analyze_blocked
+    from logscan.pipeline.run import analyze_log
+
+    path = need_testdata("px4-ulog/sample_px4_events.ulg")
+    whole, blocks = analyze_log(path), analyze_blocked(path, block_s=10.0)
+    assert blocks.unchecked == whole.unchecked
+    assert len(whole.unchecked) == 1 and "27.7 s of 31.1 s (8.0 s of the 11.4 s in flight)" in whole.unchecked[0]
+    assert blocks.exit_code() == whole.exit_code() == 2
