@@ -5,6 +5,7 @@ log whose flight was mostly not judged is "not fully checked", never "no alarms"
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -18,7 +19,7 @@ from logscan.needs import Needs
 from logscan.pipeline import load_profile_for, prepare
 from logscan.results import AlarmPolicy, GroundAround
 from logscan.training.calibration import judged_steps
-from logscan.verdict.coverage import MAX_UNJUDGED_FLIGHT, unjudged_flight
+from logscan.verdict.coverage import MAX_UNJUDGED_FLIGHT, judged_share, unjudged_flight
 
 DT = 0.02
 T = np.arange(0.0, 30.0, DT)
@@ -355,3 +356,18 @@ def test_the_calibration_and_blind_warning_judge_a_window_as_its_detectors_do():
     assert np.array_equal(judged, ~detected.suspended)
     cold = judged_steps(window.profile, window.run)  # as if the window's filter had started at 18 s
     assert cold.sum() < judged.sum()
+
+
+def test_a_block_counts_its_own_steps_and_one_held_back_nowhere_still_counts():
+    """Block mode (`AlarmPolicy.alarms_from_s`: the block's first step): the share counts from there,
+    not the lead-in before it; a block all in flight, held back nowhere, gives a share of nothing
+    unjudged (the log's sum needs its flight), where a log at once held back nowhere gives none."""
+    on_ground = AlarmPolicy(ground_channel="g", after_ground_s=5.0)
+    flying = on_ground.suspend(T, np.zeros(T.size))
+    assert flying.suspended is None and unjudged_flight(flying, SimpleNamespace(dt=DT)) is None
+    block = replace(flying, alarms_from_s=float(T[100]))
+    share = judged_share(block, SimpleNamespace(t=T, dt=DT))
+    assert share is not None and share.suspended_s == 0.0 and share.air_s == pytest.approx((T.size - 100) * DT)
+    led = replace(on_ground.suspend(T, _ground((0, 10))), alarms_from_s=float(T[100]) + 1e-12)  # a border's rounding
+    share = judged_share(led, SimpleNamespace(t=T, dt=DT))
+    assert share is not None and share.total_s == pytest.approx((T.size - 100) * DT)

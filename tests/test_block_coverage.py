@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from logscan.pipeline.block_merge import merged_coverage, said_once
+from logscan.pipeline.block_merge import BlockSpan, merged_coverage, said_once
 from logscan.verdict.coverage import Coverage, FilterCoverage, GroupUse, JudgedShare, Stop
 
 GROUND = "/vehicle_land_detected_0/landed"
@@ -16,8 +16,8 @@ def _share(suspended_s, total_s, unjudged_air_s=0.0, air_s=0.0, reasons=("on the
     return JudgedShare(suspended_s, total_s, unjudged_air_s, air_s, GROUND, reasons)
 
 
-def _coverage(uses=None, share=None, stopped=None, judged_s=0.0) -> Coverage:
-    return Coverage(FilterCoverage(uses or {}, 0, 100), share, stopped or {}, judged_s)
+def _coverage(uses=None, share=None, stopped=None, judged_s=0.0, heard=()) -> Coverage:
+    return Coverage(FilterCoverage(uses or {}, 0, 100), share, stopped or {}, judged_s, frozenset(heard), ())
 
 
 def test_a_block_all_on_the_ground_does_not_leave_the_log_unjudged():
@@ -41,26 +41,36 @@ def test_a_gate_closed_in_one_block_only_is_no_gate_closed_all_flight():
 
 
 def test_a_sensor_stopped_in_a_block_and_heard_again_later_did_not_stop():
-    use = GroupUse(10, 10.0, 1.0, "")
     stopped = {"baro": Stop(50.0, 10.0)}
-    heard_again = merged_coverage([_coverage({"baro": use}, stopped=stopped), _coverage({"baro": use}, judged_s=60.0)])
+    first = _coverage(stopped=stopped, heard={"baro"})
+    heard_again = merged_coverage([first, _coverage(judged_s=60.0, heard={"baro"})])
     assert heard_again is not None and heard_again.stopped == {}
-    never_again = [
-        _coverage({"baro": use}, stopped=stopped),
-        _coverage({"baro": GroupUse(0, 60.0, 1.0, "")}, judged_s=60.0),
-    ]
-    log = merged_coverage(never_again)
+    log = merged_coverage([first, _coverage(judged_s=60.0, heard={"gps"})])
     assert log is not None and log.stopped == {"baro": Stop(50.0, 70.0)}  # its own 10 s and the next block's 60
 
 
+def test_blocks_held_back_nowhere_count_for_the_log_and_none_held_back_is_no_line():
+    """A block all in flight (nothing held back: no share of its own) still counts as flight; a
+    log held back nowhere has no unjudged line, as at once."""
+    takeoff, cruise = _share(10.0, 100.0, 5.0, 95.0), _share(0.0, 100.0, 0.0, 100.0)
+    log = merged_coverage([_coverage(share=takeoff), _coverage(share=cruise)])
+    assert log is not None and log.share is not None and log.share.air_s == 195.0
+    nowhere = merged_coverage([_coverage(share=cruise), _coverage(share=cruise)])
+    assert nowhere is not None and nowhere.share is None
+
+
 def test_a_line_not_every_block_says_names_the_blocks_and_their_spans():
-    spans = [(-0.004, 599.99), (600.0, 1199.99), (1200.0, 1799.99), (1800.0, 2400.0)]
-    lines = [["read in part"], ["read in part", "ends in flight"], ["read in part"], ["read in part", "ends in flight"]]
+    spans = [BlockSpan(k + 1, 4, start, start + 599.99) for k, start in enumerate((-0.004, 600.0, 1200.0, 1800.0))]
+    lines = [["read in part"], ["read in part", "gps: 3 of 9"], ["read in part"], ["read in part", "gps: 2 of 9"]]
     assert said_once(lines, spans) == [
         "read in part",
-        "ends in flight (in blocks 2, 4 of 4: 600.0-1200.0 s, 1800.0-2400.0 s)",
+        "gps: 3 of 9 (in blocks 2, 4 of 4: 600.0-1200.0 s, 1800.0-2400.0 s; these figures are block 2's)",
     ]
-    assert said_once([["a"], []], spans[:2]) == ["a (in block 1 of 2: 0.0-600.0 s)"]
+    assert said_once([["a"], []], spans[:2]) == ["a (in block 1 of 4: 0.0-600.0 s)"]
+    # a block refused (the third): the others' numbers stand
+    assert said_once([["a"], [], ["a"]], [spans[0], spans[1], spans[3]]) == [
+        "a (in blocks 1, 4 of 4: 0.0-600.0 s, 1800.0-2400.0 s)"
+    ]
 
 
 @pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")

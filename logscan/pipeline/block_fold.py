@@ -18,6 +18,7 @@ import numpy as np
 from logscan.alarms import merge_close
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.block_merge import (
+    BlockSpan,
     blocks_where,
     coverage_lines,
     figures_masked,
@@ -115,9 +116,9 @@ class _Detector:
             total[0] += alarmable
             total[1] += judged
 
-    def merged(self, gap_s: float, steps: int, spans: list[tuple[float, float]]) -> DetectorResult:
+    def merged(self, gap_s: float, steps: int, spans: list[BlockSpan]) -> DetectorResult:
         """The detector's result over the ``steps`` grid steps folded in (a series a block lacks: NaN
-        there); ``spans``: each block's first and last step judged (s)."""
+        there); ``spans``: the blocks folded in (`BlockSpan`)."""
         uppers, lowers = self.uppers.arrays, self.lowers.arrays
         return replace(
             self.template,
@@ -136,7 +137,7 @@ class _Detector:
             series_counts={name: self.counts(name, steps) for name in self.series.arrays},
         )
 
-    def log_not_checked(self, spans: list[tuple[float, float]]) -> list[NotChecked]:
+    def log_not_checked(self, spans: list[BlockSpan]) -> list[NotChecked]:
         """The checks the log could not run: one every block it ran in could not run, as it is; a
         check without a valid sample (``partial``) in some blocks only had one in others (as at
         once, not the log's); one with nothing to judge in some blocks, named with them."""
@@ -146,7 +147,7 @@ class _Detector:
             if len(said) == len(self.blocks):
                 out.append(reason)
             elif not reason.partial:
-                out.append(replace(reason, reason=f"{reason.reason} ({blocks_where(said, spans)})"))
+                out.append(replace(reason, reason=f"{reason.reason} ({blocks_where([spans[k] for k in said])})"))
         return out
 
     def counts(self, name: str, steps: int) -> tuple[int, int]:
@@ -178,7 +179,7 @@ class BlockFold:
         self.warnings: list[list[str]] = []
         self.unchecked: list[list[str]] = []
         self.coverages: list = []  # each block's coverage in figures: the log's is their sum
-        self.spans: list[tuple[float, float]] = []  # each block's first and last step judged, s
+        self.spans: list[BlockSpan] = []  # the blocks folded in, in order
         self.incidents: list = []
         self.input_gaps: list = []
         self.failures: dict = {}
@@ -187,9 +188,8 @@ class BlockFold:
         self.kept = KeptRows()  # the rows of the sensor figures (`logscan.report.kept_views`)
         self.context: RunContext | None = None  # the blocks' context so far (`logscan.report.context_join`)
 
-    def add(self, block: Analysis, span: tuple[float, float]) -> None:
-        """Fold a reduced block in (``span``: its first and last step judged, s); nothing of it is
-        kept but what the merge reads."""
+    def add(self, block: Analysis, span: BlockSpan) -> None:
+        """Fold a reduced block in (``span``: which it is); nothing of it is kept but what the merge reads."""
         prepared = block.prepared
         size = prepared.run.t.size
         if self.prepared is None:

@@ -12,6 +12,7 @@ import operator
 import re
 from dataclasses import replace
 from functools import reduce
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,12 +32,22 @@ def merge_gap_s(profile) -> float:
     return policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
 
 
-def said_once(lines: list[list[str]], spans: list[tuple[float, float]] | None = None) -> list[str]:
+class BlockSpan(NamedTuple):
+    """A block as its lines name it: its number (from 1) of the log's blocks, its first and last
+    step judged (s)."""
+
+    number: int
+    of: int
+    start_s: float
+    end_s: float
+
+
+def said_once(lines: list[list[str]], spans: list[BlockSpan] | None = None) -> list[str]:
     """Each block's lines (``lines[k]``: block k's) said once: a line every block that says it says
     alike as it is; one said with other figures by other blocks (a group's NIS over each block) as
     the first block's, saying in how many blocks it came and whose figures it gives. With the
-    blocks' ``spans`` (their first and last step, s), a line not every block says names the blocks
-    and spans it holds for (a block's line of what it could not check is not the log's)."""
+    blocks' ``spans`` (``spans[k]``: block k's), a line not every block says names the blocks and
+    spans it holds for (a block's line of what it could not check is not the log's)."""
     first: dict[str, tuple[str, int]] = {}
     blocks: dict[str, set[int]] = {}
     texts: dict[str, set[str]] = {}
@@ -48,29 +59,38 @@ def said_once(lines: list[list[str]], spans: list[tuple[float, float]] | None = 
             texts.setdefault(key, set()).add(line)
     out = []
     for key, (line, k) in first.items():
-        where = blocks_where(sorted(blocks[key]), spans) if spans and len(blocks[key]) < len(lines) else ""
-        figures = f"these figures are block {k + 1}'s" if len(texts[key]) > 1 else ""
+        said = sorted(blocks[key])
+        where = blocks_where([spans[j] for j in said]) if spans and len(said) < len(lines) else ""
+        number = spans[k].number if spans else k + 1
+        figures = f"these figures are block {number}'s" if len(texts[key]) > 1 else ""
         if where:
             line += f" ({where}{'; ' + figures if figures else ''})"
         elif figures:
-            line += f" (said in {len(blocks[key])} of {len(lines)} blocks; {figures})"
+            line += f" (said in {len(said)} of {len(lines)} blocks; {figures})"
         out.append(line)
     return out
 
 
-def blocks_where(said: list[int], spans: list[tuple[float, float]]) -> str:
-    """ "in blocks 1-2, 4 of 5: 0.0-15.6 s, 31.2-39.0 s": the blocks ``said`` (0-based, sorted) as
-    runs of consecutive ones, each with the span it covers."""
-    runs: list[list[int]] = []
-    for k in said:
-        if runs and k == runs[-1][1] + 1:
-            runs[-1][1] = k
+def blocks_where(said: list[BlockSpan]) -> str:
+    """ "in blocks 1-2, 4 of 5: 0.0-15.6 s, 31.2-39.0 s": the blocks ``said`` (in order) as runs of
+    consecutive ones, each with the span it covers."""
+    runs: list[list[BlockSpan]] = []
+    for span in said:
+        if runs and span.number == runs[-1][1].number + 1:
+            runs[-1][1] = span
         else:
-            runs.append([k, k])
-    names = ", ".join(f"{a + 1}" if a == b else f"{a + 1}-{b + 1}" for a, b in runs)
-    times = ", ".join(f"{round(spans[a][0], 1) + 0.0:.1f}-{spans[b][1]:.1f} s" for a, b in runs)  # + 0.0: no "-0.0"
-    noun = "block" if len(said) == 1 else "blocks"
-    return f"in {noun} {names} of {len(spans)}: {times}"
+            runs.append([span, span])
+    names = ", ".join(f"{a.number}" if a is b else f"{a.number}-{b.number}" for a, b in runs)
+    times = ", ".join(f"{round(a.start_s, 1) + 0.0:.1f}-{b.end_s:.1f} s" for a, b in runs)  # + 0.0: no "-0.0"
+    return f"in {'block' if len(said) == 1 else 'blocks'} {names} of {said[0].of}: {times}"
+
+
+_FIGURES = re.compile(r"(?<![\w.])\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")  # not the digits of a name (battery_status_0)
+
+
+def figures_masked(line: str) -> str:
+    """``line`` with its figures masked: the key of lines that differ only in them."""
+    return _FIGURES.sub("#", line)
 
 
 def own_coverage_lines(block) -> frozenset[str]:
@@ -88,17 +108,20 @@ def merged_coverage(coverages: list[Coverage | None]) -> Coverage | None:
     if not known:
         return None
     shares = [c.share for c in known if c.share is not None]
+    share = reduce(operator.add, shares) if shares else None
     stops = {}
     for k, coverage in enumerate(known):
         for name, stop in coverage.stopped.items():
             later = known[k + 1 :]
-            if not any(name in c.filter.uses and c.filter.uses[name].used for c in later):
+            if not any(name in c.heard for c in later):
                 stops[name] = Stop(stop.t, stop.unjudged_s + sum(c.judged_s for c in later))
     return Coverage(
         filter=reduce(operator.add, (c.filter for c in known)),
-        share=reduce(operator.add, shares) if shares else None,
+        share=share if share is not None and share.suspended_s > 0.0 else None,  # as at once: nothing held back
         stopped=stops,
         judged_s=sum(c.judged_s for c in known),
+        heard=frozenset().union(*(c.heard for c in known)),
+        log_end=known[-1].log_end,
     )
 
 
@@ -106,7 +129,7 @@ def coverage_lines(coverage: Coverage, results: list[DetectorResult], span: str)
     """The lines of what the log could not check that ``coverage`` and the ``results`` give, as
     `logscan.pipeline.detection` says them of a log at once, and the unjudged share's line when it
     is a warning, not such a line ("": none)."""
-    lines = coverage.filter.lines() + series_reasons(results, span)
+    lines = list(coverage.log_end) + coverage.filter.lines() + series_reasons(results, span)
     lines += unheard_stops(lines, coverage.stopped, span)
     share = coverage.share
     if share is None:
@@ -114,14 +137,6 @@ def coverage_lines(coverage: Coverage, results: list[DetectorResult], span: str)
     if share.over:
         return [*lines, share.line()], ""
     return lines, share.line()
-
-
-_FIGURES = re.compile(r"\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")
-
-
-def figures_masked(line: str) -> str:
-    """``line`` with its figures masked: the key of lines that differ only in them."""
-    return _FIGURES.sub("#", line)
 
 
 def _union(items) -> list:

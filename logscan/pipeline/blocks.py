@@ -25,6 +25,7 @@ from logscan.docs import doc_url
 from logscan.errors import LogscanError
 from logscan.memory import every_free_page, return_freed_pages
 from logscan.pipeline.block_fold import BlockFold
+from logscan.pipeline.block_merge import BlockSpan
 from logscan.pipeline.block_reduce import bucket_width, first_quoted, reduce_block
 from logscan.pipeline.preparation import load_profile_for
 from logscan.pipeline.run import analyze_log
@@ -227,7 +228,8 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
             quoted = first_quoted(analysis, float(analysis.run.t[0]) if from_s is None else from_s)
             reduce_block(analysis, width, from_s, points, focus, quoted, carried)
             carried = quoted  # the next block keeps the rest of its window
-            fold.add(analysis, (float(analysis.run.t[0]) if from_s is None else from_s, float(analysis.run.t[-1])))
+            first_s = float(analysis.run.t[0]) if from_s is None else from_s
+            fold.add(analysis, BlockSpan(k + 1, len(windows), first_s, float(analysis.run.t[-1])))
             del analysis
             gc.collect()
             return_freed_pages()

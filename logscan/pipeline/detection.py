@@ -27,9 +27,11 @@ from logscan.training.calibration import calibrate_command, judged_steps, suspen
 from logscan.verdict.coverage import (
     Coverage,
     filter_coverage,
+    heard_groups,
     judged_seconds,
     judged_share,
     judged_span,
+    log_end_lines,
     series_reasons,
     stopped_groups,
     stopped_lines,
@@ -80,6 +82,7 @@ def detect(
     gaps = input_gaps(prepared.trace, prepared.run)  # before the detectors free the inputs
     analysis.kinematic = kinematic_evidence(prepared.model, prepared.trace, prepared.run)  # and the innovations
     stopped = stopped_groups(prepared.run, policy.suspended if policy is not None else None)  # and the samples
+    heard = heard_groups(prepared.run, None if policy is None else policy.alarms_from_s)
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
     share = judged_share(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None
@@ -93,7 +96,7 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.suspended = policy.suspended if policy is not None else None
     analysis.incidents, analysis.input_gaps = _incidents(analysis, groups, gap_s, gaps), gaps
-    analysis.coverage = coverage = _coverage(prepared, analysis.results, policy, stopped, share)
+    analysis.coverage = coverage = _coverage(prepared, analysis.results, policy, (stopped, heard), share)
     lines = unchecked_reasons(prepared, analysis.results, coverage.filter)
     analysis.unchecked = lines + unheard_stops(lines, stopped, judged_span(prepared.run))
     if share is not None and share.over:
@@ -126,14 +129,16 @@ def _incidents(analysis: Analysis, groups, gap_s: float, gaps) -> list:
     return incidents
 
 
-def _coverage(prepared: Prepared, results, policy, stopped, share) -> Coverage:
-    """The run's coverage in figures, with the lines they give it (`Coverage.said`)."""
+def _coverage(prepared: Prepared, results, policy, sensors, share) -> Coverage:
+    """The run's coverage in figures, with the lines they give it (`Coverage.said`); ``sensors``:
+    (`stopped_groups`, `heard_groups`), found before the detectors free the samples."""
     specs = getattr(prepared.profile, "measurements", None)
     facts = filter_coverage(prepared.run, prepared.trace, specs, None if policy is None else policy.alarms_from_s)
-    span = judged_span(prepared.run)
-    said = facts.lines() + series_reasons(results, span) + stopped_lines(stopped, span)
+    span, (stopped, heard), log_end = judged_span(prepared.run), sensors, tuple(log_end_lines(prepared))
+    said = facts.lines() + series_reasons(results, span) + stopped_lines(stopped, span) + list(log_end)
     said += [share.line()] if share is not None else []
-    return Coverage(facts, share, stopped, judged_seconds(policy, prepared.run), frozenset(said))
+    judged_s = judged_seconds(policy, prepared.run)
+    return Coverage(facts, share, stopped, judged_s, heard, log_end, frozenset(said))
 
 
 def _alarm_policy(prepared: Prepared, judged_from_s: float | None):

@@ -45,6 +45,7 @@ MAX_UNJUDGED_FLIGHT = 0.5
 
 
 WHOLE_LOG = "the log"
+BORDER_EPS_S = 1e-9  # a block's first step is at its border up to this (`own_steps`)
 
 
 def judged_span(run) -> str:
@@ -67,7 +68,7 @@ def unchecked_reasons(prepared, results: Sequence, facts: FilterCoverage | None 
     if source.partial:
         reasons.append(f"the log was read only in part: {source.partial_reason}")
     profile = getattr(prepared, "profile", None)
-    reasons += ends_in_flight(prepared.run, getattr(profile, "alarm_policy", None))
+    reasons += log_end_lines(prepared)
     if facts is None:
         facts = filter_coverage(prepared.run, prepared.trace, getattr(profile, "measurements", None))
     return reasons + facts.lines() + series_reasons(results, judged_span(prepared.run))
@@ -130,7 +131,7 @@ def filter_coverage(run, trace, specs=None, from_s: float | None = None) -> Filt
     if trace is None:
         return FilterCoverage({}, 0, 0)
     dt = float(run.dt)
-    own = slice(None) if from_s is None else slice(int(np.searchsorted(run.t, from_s, side="left")), None)
+    own = slice(None) if from_s is None else slice(own_steps(np.asarray(run.t), from_s), None)
     steps = int(run.n_steps) if from_s is None else int(run.n_steps) - own.start
     duration = float(run.t[-1] - run.t[0]) + dt if from_s is None else steps * dt
     uses = {}
@@ -149,10 +150,9 @@ def filter_coverage(run, trace, specs=None, from_s: float | None = None) -> Filt
             fix = ", no 3D fix" if "fix_type" in spec.gate_channel else ""
             gate = f"{spec.gate_channel} below {spec.gate_min:g}{fix}"
         uses[name] = GroupUse(int(trace.updated[own, g].sum()), min(open_s * rate, float(steps)), rate, gate)
-    episodes = trace.divergence_episodes
     if from_s is None:
-        return FilterCoverage(uses, sum(e.n_steps for e in episodes), int(trace.n_steps))
-    return FilterCoverage(uses, sum(max(e.end_step - max(e.start_step, own.start) + 1, 0) for e in episodes), steps)
+        return FilterCoverage(uses, sum(e.n_steps for e in trace.divergence_episodes), int(trace.n_steps))
+    return FilterCoverage(uses, int(np.count_nonzero(trace.diverged[own])), steps)
 
 
 def series_reasons(results: Sequence, span: str) -> list[str]:
@@ -172,6 +172,11 @@ def series_reasons(results: Sequence, span: str) -> list[str]:
                     f"{'or window ' if span == WHOLE_LOG else ''}covers most of {span})"
                 )
     return reasons
+
+
+def log_end_lines(prepared) -> list[str]:
+    """`ends_in_flight` of an analysed run, with its profile's [alarms] policy."""
+    return ends_in_flight(prepared.run, getattr(getattr(prepared, "profile", None), "alarm_policy", None))
 
 
 def ends_in_flight(run, policy) -> list[str]:
@@ -234,6 +239,15 @@ def stopped_groups(run, suspended) -> dict[str, Stop]:
     return stops
 
 
+def heard_groups(run, from_s: float | None = None) -> frozenset[str]:
+    """The measurement groups with a sample held (or their gate known closed) at any step from
+    ``from_s`` on (a block's own steps; None: any step), or whose samples are no longer held (not
+    known: heard). Block mode: a sensor stopped in a block and heard in a later one did not stop."""
+    first = 0 if from_s is None else own_steps(np.asarray(run.t), from_s)
+    heard = {name: _heard_steps(group) for name, group in run.groups.items()}
+    return frozenset(name for name, steps in heard.items() if steps is None or steps[first:].any())
+
+
 def stopped_lines(stops: dict[str, Stop], span: str) -> list[str]:
     """One line per group of `stopped_groups` (``span``: `judged_span`)."""
     return [
@@ -259,6 +273,8 @@ class Coverage:
     share: JudgedShare | None  # what the [alarms] suspension left unjudged (None: nothing suspended)
     stopped: dict[str, Stop]
     judged_s: float  # the judged time of the run's own steps (a block's: from its first, not its lead-in)
+    heard: frozenset[str]  # the groups heard in its own steps (`heard_groups`)
+    log_end: tuple[str, ...]  # the lines of how the log ends (`ends_in_flight`): a block's, the last one's
     # the lines these figures and the detectors' results gave the run (block mode: a block's, which
     # the log's sum says instead); empty for a sum
     said: frozenset[str] = frozenset()
@@ -267,10 +283,17 @@ class Coverage:
 def judged_seconds(policy, run) -> float:
     """The judged time of a run's own steps (from the policy's ``alarms_from_s``), not suspended."""
     t = np.asarray(run.t)
-    own = np.ones(t.size, dtype=bool) if policy is None or policy.alarms_from_s is None else t >= policy.alarms_from_s
+    judged = np.zeros(t.size, dtype=bool)
+    judged[0 if policy is None or policy.alarms_from_s is None else own_steps(t, policy.alarms_from_s) :] = True
     if policy is not None and policy.suspended is not None:
-        own &= ~np.asarray(policy.suspended, dtype=bool)
-    return float(np.count_nonzero(own)) * float(run.dt)
+        judged &= ~np.asarray(policy.suspended, dtype=bool)
+    return float(np.count_nonzero(judged)) * float(run.dt)
+
+
+def own_steps(t: np.ndarray, from_s: float) -> int:
+    """The first of a block's own steps (at ``from_s``, its first: a border on the grid, up to
+    rounding), after its lead-in."""
+    return int(np.searchsorted(t, from_s - BORDER_EPS_S, side="left"))
 
 
 def _heard_steps(group) -> np.ndarray | None:
@@ -344,14 +367,18 @@ class JudgedShare:
 def judged_share(policy, run) -> JudgedShare | None:
     """`JudgedShare` of a run whose [alarms] policy is applied (`AlarmPolicy.suspend`), counted from
     its ``alarms_from_s`` on (a block's first step: not its lead-in, which the block before judged).
-    None: the policy suspended nothing."""
-    if policy is None or policy.suspended is None:
+    None: the policy suspended nothing (of a block: suspends nothing at all; a block it held back
+    nowhere, all in flight, counts for the log's share)."""
+    if policy is None or (policy.suspended is None and (policy.alarms_from_s is None or not policy.suspends)):
         return None
-    suspended = np.asarray(policy.suspended, dtype=bool)
+    if policy.suspended is None:
+        suspended = np.zeros(np.size(run.t), dtype=bool)
+    else:
+        suspended = np.asarray(policy.suspended, dtype=bool)
     airborne = None if policy.airborne is None else np.asarray(policy.airborne, dtype=bool)
     if policy.alarms_from_s is not None:  # a block's own steps
-        own = np.asarray(run.t) >= policy.alarms_from_s
-        suspended, airborne = suspended[own], None if airborne is None else airborne[own]
+        own = own_steps(np.asarray(run.t), policy.alarms_from_s)
+        suspended, airborne = suspended[own:], None if airborne is None else airborne[own:]
     dt = float(run.dt)
     reasons = tuple(
         part
