@@ -90,3 +90,18 @@ def test_a_real_ulog_in_short_blocks_is_not_checked_for_the_reasons_it_is_at_onc
     assert blocks.unchecked == whole.unchecked
     assert len(whole.unchecked) == 1 and "27.7 s of 31.1 s (8.0 s of the 11.4 s in flight)" in whole.unchecked[0]
     assert blocks.exit_code() == whole.exit_code() == 2
+
+
+@pytest.mark.testdata("ros-robots/robot_localization_test1_husky.bag")
+def test_the_real_husky_drive_in_short_blocks_is_fully_checked_as_at_once():
+    """The real Husky drive (ROS 1 bag) is fully checked at once (exit 0); in 3-s blocks its blocks'
+    own lines made it "not fully checked" (exit 2). Judged over the log, its verdict is the same."""
+    from conftest import need_testdata
+
+    from logscan.pipeline.blocks import analyze_blocked
+    from logscan.pipeline.run import analyze_log
+
+    path = need_testdata("ros-robots/robot_localization_test1_husky.bag")
+    whole, blocks = analyze_log(path), analyze_blocked(path, block_s=3.0)
+    assert whole.unchecked == [] and whole.exit_code() == 0
+    assert blocks.unchecked == [] and blocks.exit_code() == 0
