@@ -105,3 +105,26 @@ def test_the_real_husky_drive_in_short_blocks_is_fully_checked_as_at_once():
     whole, blocks = analyze_log(path), analyze_blocked(path, block_s=3.0)
     assert whole.unchecked == [] and whole.exit_code() == 0
     assert blocks.unchecked == [] and blocks.exit_code() == 0
+
+
+def test_a_check_the_log_could_not_run_is_one_no_block_ran():
+    """Merged over three blocks: a check with nothing to judge in blocks 1 and 3 is named with them;
+    one without a valid sample in block 1 only had one in the others (not the log's, as at once);
+    one no block could run, with each block's own figures, is the log's, with block 1's figures."""
+    from logscan.pipeline.block_fold import _Detector
+    from logscan.results import DetectorResult, NotChecked
+
+    spans = [BlockSpan(k + 1, 3, 10.0 * k, 10.0 * k + 9.99) for k in range(3)]
+    never, battery = NotChecked("gnss: never armed"), NotChecked("battery: connected 0 all flight", partial=True)
+    blocks = [
+        [never, battery, NotChecked("motor: NaN at all 7 samples")],
+        [NotChecked("motor: NaN at all 9 samples")],
+        [NotChecked("motor: NaN at all 3 samples"), never],
+    ]
+    detector = _Detector(DetectorResult("health", not_checked=blocks[0]))
+    for k, not_checked in enumerate(blocks):
+        detector.append(DetectorResult("health", not_checked=not_checked), 0, 0, 0, k)
+    assert [n.reason for n in detector.merged(1.0, 0, spans).not_checked] == [
+        "gnss: never armed (in blocks 1, 3 of 3: 0.0-10.0 s, 20.0-30.0 s)",
+        "motor: NaN at all 7 samples (said in 3 of 3 blocks; these figures are block 1's)",
+    ]

@@ -83,6 +83,7 @@ class _Detector:
         self.warnings: list[list[str]] = []
         self.not_checked: dict = {}
         self.not_checked_in: dict[str, list[int]] = {}  # a reason (its figures masked) -> the blocks giving it
+        self.not_checked_texts: dict[str, set[str]] = {}  # and its texts (with their figures)
         self.blocks: list[int] = []  # the blocks it ran in
         self.infos: list[dict] = []
         self.checks: dict = {}
@@ -109,6 +110,7 @@ class _Detector:
         for key, reason in {figures_masked(n.reason): n for n in result.not_checked}.items():
             self.not_checked.setdefault(key, reason)
             self.not_checked_in.setdefault(key, []).append(block)
+            self.not_checked_texts.setdefault(key, set()).add(reason.reason)
         self.infos.append(result.info)
         self.checks.update(result.checks)
         for name, (alarmable, judged) in result.judged_counts.items():  # the log's share: the counts summed
@@ -144,10 +146,16 @@ class _Detector:
         out = []
         for key, reason in self.not_checked.items():
             said = self.not_checked_in[key]
+            figures = (
+                f"these figures are block {spans[said[0]].number}'s" if len(self.not_checked_texts[key]) > 1 else ""
+            )
             if len(said) == len(self.blocks):
-                out.append(reason)
+                words = f"said in {len(said)} of {len(said)} blocks; {figures}" if figures else ""
             elif not reason.partial:
-                out.append(replace(reason, reason=f"{reason.reason} ({blocks_where([spans[k] for k in said])})"))
+                words = blocks_where([spans[k] for k in said]) + (f"; {figures}" if figures else "")
+            else:
+                continue
+            out.append(replace(reason, reason=f"{reason.reason} ({words})") if words else reason)
         return out
 
     def counts(self, name: str, steps: int) -> tuple[int, int]:

@@ -85,7 +85,8 @@ def blocks_where(said: list[BlockSpan]) -> str:
     return f"in {'block' if len(said) == 1 else 'blocks'} {names} of {said[0].of}: {times}"
 
 
-_FIGURES = re.compile(r"(?<![\w.])\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")  # not the digits of a name (battery_status_0)
+# a figure, its sign with it ("t=-0.028 s" and "t=0.000 s" alike), not the digits of a name (battery_status_0)
+_FIGURES = re.compile(r"(?<![\w.])-?\d+(?:[.,]\d+)*(?:e[-+]?\d+)?")
 
 
 def figures_masked(line: str) -> str:
