@@ -128,3 +128,20 @@ def test_a_check_the_log_could_not_run_is_one_no_block_ran():
         "gnss: never armed (in blocks 1, 3 of 3: 0.0-10.0 s, 20.0-30.0 s)",
         "motor: NaN at all 7 samples (said in 3 of 3 blocks; these figures are block 1's)",
     ]
+
+
+def test_a_blocks_stopped_sensor_counts_only_the_blocks_own_judged_time():
+    """A block run from its lead-in (steps 0-59, the block before's) whose baro's last sample is at
+    step 50: the judged time it stopped for is the block's own 40 steps, not the lead-in's too; at
+    once (no first step given) all 49 steps after it."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from logscan.verdict.coverage import stopped_groups
+
+    t = np.arange(100) * 0.1
+    z = np.where(np.arange(100)[:, None] <= 50, 1.0, np.nan)
+    run = SimpleNamespace(n_steps=100, t=t, dt=0.1, groups={"baro": SimpleNamespace(z=z, gate_closed=None)})
+    assert stopped_groups(run, None)["baro"] == Stop(pytest.approx(5.0), pytest.approx(4.9))
+    assert stopped_groups(run, None, from_s=6.0)["baro"] == Stop(pytest.approx(5.0), pytest.approx(4.0))

@@ -81,8 +81,9 @@ def detect(
     policy = _alarm_policy(prepared, judged_from_s)
     gaps = input_gaps(prepared.trace, prepared.run)  # before the detectors free the inputs
     analysis.kinematic = kinematic_evidence(prepared.model, prepared.trace, prepared.run)  # and the innovations
-    stopped = stopped_groups(prepared.run, policy.suspended if policy is not None else None)  # and the samples
-    heard = heard_groups(prepared.run, None if policy is None else policy.alarms_from_s)
+    from_s = None if policy is None else policy.alarms_from_s  # a block's first step
+    stopped = stopped_groups(prepared.run, None if policy is None else policy.suspended, from_s)  # and the samples
+    heard = heard_groups(prepared.run, from_s)
     # the suspension holds back the model-based statistics only (`Detector.run`): said when one runs,
     # a warning, or the log is not fully checked when it kept them from most of the flight
     share = judged_share(policy, prepared.run) if any(not d.raw_topics for d in detectors) else None

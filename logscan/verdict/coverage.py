@@ -216,14 +216,17 @@ class Stop:
     unjudged_s: float
 
 
-def stopped_groups(run, suspended) -> dict[str, Stop]:
+def stopped_groups(run, suspended, from_s: float | None = None) -> dict[str, Stop]:
     """Each measurement group whose sensor stopped while the log was still judged: no sample held
     (none within its staleness limit, its gate not known closed) from some step to the last judged
     one (``suspended``: the steps the [alarms] policy holds back, None: none). Unlike a gap, nothing
     after it judged that sensor again: "no alarms" cannot be said of it there (`stopped_lines`). A
-    group never heard at all is `FilterCoverage.lines`'."""
+    group never heard at all is `FilterCoverage.lines`'. ``from_s``: the judged time counted from
+    then on (a block's own steps: its lead-in is the block before's)."""
     n = int(run.n_steps)
     judged = np.ones(n, dtype=bool) if suspended is None else ~np.asarray(suspended, dtype=bool)
+    if from_s is not None:
+        judged[: own_steps(np.asarray(run.t), from_s)] = False
     if n == 0 or not judged.any():
         return {}
     last_judged = int(np.flatnonzero(judged)[-1])
