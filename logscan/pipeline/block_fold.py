@@ -19,15 +19,13 @@ from logscan.alarms import merge_close
 from logscan.pipeline.analysis import Analysis, DetectorFailure
 from logscan.pipeline.block_merge import (
     BlockSpan,
-    blocks_where,
-    coverage_lines,
+    block_note,
     figures_masked,
     merge_gap_s,
     merged_coverage,
     merged_filter_summary,
     merged_incidents,
     merged_info,
-    own_coverage_lines,
     said_once,
     windows_folded,
 )
@@ -81,9 +79,8 @@ class _Detector:
         self.alarms: list = []
         self.possible: list = []
         self.warnings: list[list[str]] = []
-        self.not_checked: dict = {}
-        self.not_checked_in: dict[str, list[int]] = {}  # a reason (its figures masked) -> the blocks giving it
-        self.not_checked_texts: dict[str, set[str]] = {}  # and its texts (with their figures)
+        # a reason (its figures masked) -> its first NotChecked, the blocks giving it, their texts
+        self.not_checked: dict[str, tuple[NotChecked, list[int], set[str]]] = {}
         self.blocks: list[int] = []  # the blocks it ran in
         self.infos: list[dict] = []
         self.checks: dict = {}
@@ -108,9 +105,9 @@ class _Detector:
         self.warnings.append(result.warnings)
         self.blocks.append(block)
         for key, reason in {figures_masked(n.reason): n for n in result.not_checked}.items():
-            self.not_checked.setdefault(key, reason)
-            self.not_checked_in.setdefault(key, []).append(block)
-            self.not_checked_texts.setdefault(key, set()).add(reason.reason)
+            _, blocks, texts = self.not_checked.setdefault(key, (reason, [], set()))
+            blocks.append(block)
+            texts.add(reason.reason)
         self.infos.append(result.info)
         self.checks.update(result.checks)
         for name, (alarmable, judged) in result.judged_counts.items():  # the log's share: the counts summed
@@ -143,20 +140,11 @@ class _Detector:
         """The checks the log could not run: one every block it ran in could not run, as it is; a
         check without a valid sample (``partial``) in some blocks only had one in others (as at
         once, not the log's); one with nothing to judge in some blocks, named with them."""
-        out = []
-        for key, reason in self.not_checked.items():
-            said = self.not_checked_in[key]
-            figures = (
-                f"these figures are block {spans[said[0]].number}'s" if len(self.not_checked_texts[key]) > 1 else ""
-            )
-            if len(said) == len(self.blocks):
-                words = f"said in {len(said)} of {len(said)} blocks; {figures}" if figures else ""
-            elif not reason.partial:
-                words = blocks_where([spans[k] for k in said]) + (f"; {figures}" if figures else "")
-            else:
-                continue
-            out.append(replace(reason, reason=f"{reason.reason} ({words})") if words else reason)
-        return out
+        return [
+            replace(reason, reason=reason.reason + block_note(said, len(self.blocks), len(texts) > 1, spans))
+            for reason, said, texts in self.not_checked.values()
+            if len(said) == len(self.blocks) or not reason.partial
+        ]
 
     def counts(self, name: str, steps: int) -> tuple[int, int]:
         """(samples, finite ones) of a statistic over ``steps`` grid steps, as its series at once has."""
@@ -216,7 +204,7 @@ class BlockFold:
         self.points += size
         self.steps += steps
         self.summaries.append(prepared.filter_summary())
-        own = own_coverage_lines(block)  # said of the log's sum, not of each block
+        own = block.coverage.said if block.coverage is not None else frozenset()  # said of the log's sum instead
         self.warnings.append([line for line in block.warnings if line not in own])
         self.unchecked.append([line for line in block.unchecked if line not in own])
         self.coverages.append(block.coverage)
@@ -257,7 +245,7 @@ class BlockFold:
         merged.unchecked = said_once(self.unchecked, self.spans)
         merged.coverage = merged_coverage(self.coverages)
         if merged.coverage is not None:
-            lines, merged.unjudged = coverage_lines(merged.coverage, merged.results, judged_span(prepared.run))
+            lines, merged.unjudged = merged.coverage.lines(merged.results, judged_span(prepared.run))
             merged.unchecked += lines
             merged.warnings += [merged.unjudged] if merged.unjudged else []
         merged.input_gaps = self.input_gaps

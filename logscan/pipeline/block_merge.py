@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from logscan.results import DetectorResult, Incident
-from logscan.verdict.coverage import Coverage, Stop, series_reasons, unheard_stops
+from logscan.verdict.coverage import Coverage, Stop
 from logscan.verdict.incidents import DEFAULT_GAP_S, quoted_peak
 from logscan.verdict.observability_folded import folded
 
@@ -57,18 +57,20 @@ def said_once(lines: list[list[str]], spans: list[BlockSpan] | None = None) -> l
             first.setdefault(key, (line, k))
             blocks.setdefault(key, set()).add(k)
             texts.setdefault(key, set()).add(line)
-    out = []
-    for key, (line, k) in first.items():
-        said = sorted(blocks[key])
-        where = blocks_where([spans[j] for j in said]) if spans and len(said) < len(lines) else ""
-        number = spans[k].number if spans else k + 1
-        figures = f"these figures are block {number}'s" if len(texts[key]) > 1 else ""
-        if where:
-            line += f" ({where}{'; ' + figures if figures else ''})"
-        elif figures:
-            line += f" (said in {len(said)} of {len(lines)} blocks; {figures})"
-        out.append(line)
-    return out
+    return [
+        line + block_note(sorted(blocks[key]), len(lines), len(texts[key]) > 1, spans)
+        for key, (line, _) in first.items()
+    ]
+
+
+def block_note(said: list[int], of: int, differ: bool, spans: list[BlockSpan] | None) -> str:
+    """What follows a line the blocks ``said`` (their places, in order) gave of the ``of`` that
+    could: with ``spans``, the blocks it holds for when not all; whose figures it gives when they
+    ``differ`` (the first's); "" when neither."""
+    figures = f"these figures are block {spans[said[0]].number if spans else said[0] + 1}'s" if differ else ""
+    if spans and len(said) < of:
+        return f" ({blocks_where([spans[k] for k in said])}{'; ' + figures if figures else ''})"
+    return f" (said in {len(said)} of {of} blocks; {figures})" if figures else ""
 
 
 def blocks_where(said: list[BlockSpan]) -> str:
@@ -94,13 +96,6 @@ def figures_masked(line: str) -> str:
     return _FIGURES.sub("#", line)
 
 
-def own_coverage_lines(block) -> frozenset[str]:
-    """The lines of what a block could not check that its coverage figures and its detectors'
-    results gave it (`Coverage.said`): block mode says them of the log's sum instead
-    (`merged_coverage`, `coverage_lines`), not of each block."""
-    return frozenset() if block.coverage is None else block.coverage.said
-
-
 def merged_coverage(coverages: list[Coverage | None]) -> Coverage | None:
     """The blocks' coverage figures as the log's: group uses, divergence, the unjudged share and the
     judged time summed; a sensor stopped in a block and used in no later one stopped for the log,
@@ -124,20 +119,6 @@ def merged_coverage(coverages: list[Coverage | None]) -> Coverage | None:
         heard=frozenset().union(*(c.heard for c in known)),
         log_end=known[-1].log_end,
     )
-
-
-def coverage_lines(coverage: Coverage, results: list[DetectorResult], span: str) -> tuple[list[str], str]:
-    """The lines of what the log could not check that ``coverage`` and the ``results`` give, as
-    `logscan.pipeline.detection` says them of a log at once, and the unjudged share's line when it
-    is a warning, not such a line ("": none)."""
-    lines = list(coverage.log_end) + coverage.filter.lines() + series_reasons(results, span)
-    lines += unheard_stops(lines, coverage.stopped, span)
-    share = coverage.share
-    if share is None:
-        return lines, ""
-    if share.over:
-        return [*lines, share.line()], ""
-    return lines, share.line()
 
 
 def _union(items) -> list:

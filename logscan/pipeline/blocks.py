@@ -225,10 +225,10 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
                 continue
             focus = _focus_share(fold, len(windows) - k)
             from_s = None if led is None else start_s
-            quoted = first_quoted(analysis, float(analysis.run.t[0]) if from_s is None else from_s)
+            first_s = float(analysis.run.t[0]) if from_s is None else from_s
+            quoted = first_quoted(analysis, first_s)
             reduce_block(analysis, width, from_s, points, focus, quoted, carried)
             carried = quoted  # the next block keeps the rest of its window
-            first_s = float(analysis.run.t[0]) if from_s is None else from_s
             fold.add(analysis, BlockSpan(k + 1, len(windows), first_s, float(analysis.run.t[-1])))
             del analysis
             gc.collect()

@@ -32,11 +32,8 @@ from logscan.verdict.coverage import (
     judged_share,
     judged_span,
     log_end_lines,
-    series_reasons,
+    read_in_part,
     stopped_groups,
-    stopped_lines,
-    unchecked_reasons,
-    unheard_stops,
 )
 from logscan.verdict.incidents import (
     DEFAULT_GAP_S,
@@ -97,11 +94,10 @@ def detect(
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
     analysis.suspended = policy.suspended if policy is not None else None
     analysis.incidents, analysis.input_gaps = _incidents(analysis, groups, gap_s, gaps), gaps
-    analysis.coverage = coverage = _coverage(prepared, analysis.results, policy, (stopped, heard), share)
-    lines = unchecked_reasons(prepared, analysis.results, coverage.filter)
-    analysis.unchecked = lines + unheard_stops(lines, stopped, judged_span(prepared.run))
-    if share is not None and share.over:
-        analysis.unchecked.append(share.line())
+    coverage = _coverage(prepared, policy, (stopped, heard), share)
+    lines, unjudged = coverage.lines(analysis.results, judged_span(prepared.run))
+    analysis.unchecked = read_in_part(prepared) + lines
+    analysis.coverage = replace(coverage, said=frozenset(lines + [unjudged] if unjudged else lines))
     if prepared.loaded.model_not_run:  # its filter's detectors were not run (`filter_free`)
         model = prepared.profile.vehicle.model
         analysis.unchecked.insert(0, f"the {model} model (logscan's filter): {prepared.loaded.model_not_run}")
@@ -130,16 +126,14 @@ def _incidents(analysis: Analysis, groups, gap_s: float, gaps) -> list:
     return incidents
 
 
-def _coverage(prepared: Prepared, results, policy, sensors, share) -> Coverage:
-    """The run's coverage in figures, with the lines they give it (`Coverage.said`); ``sensors``:
-    (`stopped_groups`, `heard_groups`), found before the detectors free the samples."""
+def _coverage(prepared: Prepared, policy, sensors, share) -> Coverage:
+    """The run's coverage in figures; ``sensors``: (`stopped_groups`, `heard_groups`), found before
+    the detectors free the samples."""
     specs = getattr(prepared.profile, "measurements", None)
     facts = filter_coverage(prepared.run, prepared.trace, specs, None if policy is None else policy.alarms_from_s)
-    span, (stopped, heard), log_end = judged_span(prepared.run), sensors, tuple(log_end_lines(prepared))
-    said = facts.lines() + series_reasons(results, span) + stopped_lines(stopped, span) + list(log_end)
-    said += [share.line()] if share is not None else []
+    stopped, heard = sensors
     judged_s = judged_seconds(policy, prepared.run)
-    return Coverage(facts, share, stopped, judged_s, heard, log_end, frozenset(said))
+    return Coverage(facts, share, stopped, judged_s, heard, tuple(log_end_lines(prepared)))
 
 
 def _alarm_policy(prepared: Prepared, judged_from_s: float | None):

@@ -60,18 +60,20 @@ def skipped_heading(span: str) -> str:
     return f"nothing to judge in {'this log' if span == WHOLE_LOG else span}"
 
 
-def unchecked_reasons(prepared, results: Sequence, facts: FilterCoverage | None = None) -> list[str]:
-    """One line per part of the log that could not be checked (empty: everything was checked);
-    ``facts``: the run's `filter_coverage`, when found already."""
-    reasons = []
+def unchecked_reasons(prepared, results: Sequence) -> list[str]:
+    """One line per part of the log that could not be checked (empty: everything was checked), of
+    the filter's coverage alone (`Coverage.lines` with no stopped sensor or suspension)."""
+    facts = filter_coverage(
+        prepared.run, prepared.trace, getattr(getattr(prepared, "profile", None), "measurements", None)
+    )
+    coverage = Coverage(facts, None, {}, 0.0, frozenset(), tuple(log_end_lines(prepared)))
+    return read_in_part(prepared) + coverage.lines(results, judged_span(prepared.run))[0]
+
+
+def read_in_part(prepared) -> list[str]:
+    """The line of a log the reader read only in part (truncated, failed CRC, broken framing)."""
     source = prepared.log.source
-    if source.partial:
-        reasons.append(f"the log was read only in part: {source.partial_reason}")
-    profile = getattr(prepared, "profile", None)
-    reasons += log_end_lines(prepared)
-    if facts is None:
-        facts = filter_coverage(prepared.run, prepared.trace, getattr(profile, "measurements", None))
-    return reasons + facts.lines() + series_reasons(results, judged_span(prepared.run))
+    return [f"the log was read only in part: {source.partial_reason}"] if source.partial else []
 
 
 @dataclass(frozen=True)
@@ -281,6 +283,17 @@ class Coverage:
     # the lines these figures and the detectors' results gave the run (block mode: a block's, which
     # the log's sum says instead); empty for a sum
     said: frozenset[str] = frozenset()
+
+    def lines(self, results: Sequence, span: str) -> tuple[list[str], str]:
+        """The lines of what could not be checked that these figures and the detectors' ``results``
+        give (``span``: `judged_span`): how the log ends, the filter's, the statistics', the sensors
+        stopped, the unjudged share when over the limit; and that share's line when it is only a
+        warning ("": none). A log at once and block mode's sum say them alike."""
+        lines = list(self.log_end) + self.filter.lines() + series_reasons(results, span)
+        lines += unheard_stops(lines, self.stopped, span)
+        if self.share is None:
+            return lines, ""
+        return ([*lines, self.share.line()], "") if self.share.over else (lines, self.share.line())
 
 
 def judged_seconds(policy, run) -> float:
