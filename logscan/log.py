@@ -44,6 +44,15 @@ class Channel:
         return int(self.t.size)
 
     @classmethod
+    def held(cls, name: str, t: np.ndarray, values: np.ndarray, unit: str | None = None) -> Channel:
+        """A channel of a log held for block mode's windows (`logscan.pipeline.held_window`): its
+        ``values`` as given, float32 where float32 holds every one exactly (half the bytes); never an
+        analysis's (each window's channels are float64 again)."""
+        channel = object.__new__(cls)
+        channel.name, channel.t, channel.values, channel.unit = name, t, values, unit
+        return channel
+
+    @classmethod
     def sharing_time(cls, names: list[str], t: np.ndarray, rows: np.ndarray) -> list[Channel]:
         """One channel per name, its values the matching row of ``rows`` (float64, one row per name,
         as long as ``t``), all at the same ``t`` (int64): a reader's topic of many fields. The checks

@@ -65,17 +65,27 @@ def narrow(log: Log) -> None:
     """Hold each channel's values as float32 where float32 holds every one of them exactly (a ULog's
     float, 8 to 16-bit and small integer fields: most of a PX4 log, half the bytes), the others as
     float64 copies of their own (a topic's fields are rows of one array, kept whole by any row left);
-    each window's channels are float64 again (`_cut`). In place: the log is the held read's alone."""
+    each window's channels are float64 again (`_cut`). In place: the log is the held read's alone.
+    Channels read as float32 already (`read_log`'s ``held``) are kept as they are."""
     channels = {}
     for name, channel in log.channels.items():
         values = channel.values
+        if values.dtype == np.float32:
+            channels[name] = channel
+            continue
         narrowed = values.astype(np.float32)
         exact = np.array_equal(narrowed, values, equal_nan=True)  # compared as float64: exactly
-        held = object.__new__(Channel)  # float32 values: the held read's only, never a window's
-        held.name, held.unit, held.t = name, channel.unit, channel.t
-        held.values = narrowed if exact else values.copy()
-        channels[name] = held
+        channels[name] = Channel.held(name, channel.t, narrowed if exact else values.copy(), channel.unit)
     log.channels = channels
+
+
+def widened(log: Log) -> Log:
+    """``log`` with its channels float64 (in place): a log read to be held (`read_log`'s ``held``)
+    but analysed whole after all; each topic's float32 array goes once its last channel is widened."""
+    for name, channel in log.channels.items():
+        if channel.values.dtype != np.float64:
+            log.channels[name] = Channel(name, channel.t, channel.values.astype(np.float64), channel.unit)
+    return log
 
 
 def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozenset[int]]:

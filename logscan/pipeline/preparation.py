@@ -27,7 +27,7 @@ from logscan.log import MAX_SPAN_S, Log
 from logscan.memory import return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
-from logscan.pipeline.held_window import held_window
+from logscan.pipeline.held_window import held_window, widened
 from logscan.pipeline.lead_in import SETTLED_OVER_S, carry_freshness, filter_start, lead_in_start
 from logscan.pipeline.loops import RECOVERY_NEEDS, prepare_loops
 from logscan.pipeline.release import TRUTH_DRAWN_WITH
@@ -118,7 +118,8 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
         log = read_log(path, topics=set(ros.ros_candidate_topics(schemas)) | (extra & set(schemas)))
         built = ros.ros_profile(log) if builtin.identify(log) == "ros" else None
     elif fmt == "ulog" or (fmt == "csv-dir" and csv_log_name(Path(path))):  # a ULog, or ulog2csv's pieces of one
-        log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra)
+        # held for block mode's windows when the analysis takes it (`held_window`): half the bytes
+        log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra, held=with_log)
         try:
             built = builtin.px4_profile(log) if builtin.identify(log) == "px4" else None
         except InputError:  # a topic it needs is missing: from the log, or from what damage left of it
@@ -281,7 +282,7 @@ def _read(
 
     if window is not None and window.plans is not None and detect_format(path) != "mcap":
         return held_window(str(path), window, frozenset(topics), read)  # a block of a log read whole
-    return read(window)
+    return widened(read(window))
 
 
 def _read_and_align(

@@ -120,7 +120,10 @@ def _pairs(channels, has, legacy_height: bool):
         if not (has(y_name) and has(s_name)):
             return None
         y, s = channels[y_name], channels[s_name]
-        return paired(np.asarray(y.t), np.asarray(y.values), np.asarray(s.t), np.asarray(s.values))
+        # float64: a log read to be held keeps float32 values (`read_log`'s ``held``)
+        return paired(
+            np.asarray(y.t), np.asarray(y.values, np.float64), np.asarray(s.t), np.asarray(s.values, np.float64)
+        )
 
     def aid(sources: tuple[str, ...], element: int | None):
         """(y, S) of the first estimator_aid_src_* source logged, its samples PX4 fused only."""

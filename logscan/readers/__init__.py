@@ -209,9 +209,12 @@ def read_log(
     use_header_stamp: bool = False,
     progress: Callable[[int, int], None] | None = None,
     window: ReadWindow | None = None,
+    held: bool = False,
 ) -> Log:
     """Read ``path`` into a Log, decoding only ``topics`` (all when None); of an indexed MCAP file,
     only the chunks ``window`` needs (`logscan.readers.mcap.window`: other logs are read whole).
+    ``held``: a log held for block mode's windows, a ULog's fields of a type float32 holds exactly
+    kept as float32 (`read_ulog`); any other format's as ever.
 
     ``topics`` are source topic names (MCAP and bag topics, ULog ``topic_instance`` names, CSV file
     topics) or channel names; a reader keeps a topic when it or any channel under it is asked for.
@@ -225,12 +228,12 @@ def read_log(
 
     Messages whose bytes do not decode make the log read only in part (`common.undecoded_as_partial`).
     """
-    log = _read(path, topics, use_header_stamp=use_header_stamp, progress=progress, window=window)
+    log = _read(path, topics, use_header_stamp=use_header_stamp, progress=progress, window=window, held=held)
     undecoded_as_partial(log.source)
     return log
 
 
-def _read(path, topics, *, use_header_stamp: bool, progress, window) -> Log:
+def _read(path, topics, *, use_header_stamp: bool, progress, window, held: bool = False) -> Log:
     fmt = detect_format(path)
     wanted = None if topics is None else set(topics)
     if fmt in READERS:
@@ -242,7 +245,7 @@ def _read(path, topics, *, use_header_stamp: bool, progress, window) -> Log:
     if fmt == "ulog":
         from logscan.readers.ulog_reader import read_ulog
 
-        return read_ulog(path, wanted, progress=progress)
+        return read_ulog(path, wanted, progress=progress, held=held)
     if fmt in ("ros1bag", "rosbag2"):
         from logscan.readers.rosbag import read_rosbag
 

@@ -33,6 +33,12 @@ TYPE_CODES = {
     "double": 9,
 }
 _SIZES = np.array([1, 1, 2, 2, 4, 4, 8, 8, 4, 8], np.int64)
+# The type codes float32 holds every value of exactly (8 and 16-bit integers, bool, float): a log
+# held for block mode's windows keeps those fields as float32 (`ColumnLayout.held_rows`)
+EXACT_IN_FLOAT32 = frozenset((0, 1, 2, 3, 8))
+# Records converted at a time by `held_rows`: a long topic is never float64 whole (16 MiB of a
+# 32-field topic's float64 at a time)
+HELD_CHUNK = 1 << 16
 
 
 class ColumnLayout:
@@ -71,6 +77,23 @@ class ColumnLayout:
             offsets, codes = places[:, 0].copy(), places[:, 1].copy()
             self._last = (names, offsets, codes)
         return _float_rows(records, records.size // self.width, self.width, offsets, codes)
+
+    def held_rows(self, records: np.ndarray, names: list[str]) -> list[np.ndarray]:
+        """The fields ``names`` of the packed ``records`` as rows, in order: float32 (rows of one
+        array) where the field's type is one float32 holds exactly (`EXACT_IN_FLOAT32`), float64
+        (rows of another) for the others; the float32 ones converted `HELD_CHUNK` records at a time,
+        so a long topic is never held whole as float64 (a log held for block mode's windows)."""
+        short = [name for name in names if self.place(name)[1] in EXACT_IN_FLOAT32]
+        wide = [name for name in names if self.place(name)[1] not in EXACT_IN_FLOAT32]
+        rows = dict(zip(wide, self.rows(records, wide) if wide else (), strict=True))
+        if short:
+            count = records.size // self.width
+            narrow = np.empty((len(short), count), np.float32)
+            for lo in range(0, count, HELD_CHUNK):
+                hi = min(lo + HELD_CHUNK, count)
+                narrow[:, lo:hi] = self.rows(records[lo * self.width : hi * self.width], short)
+            rows.update(zip(short, narrow, strict=True))
+        return [rows[name] for name in names]
 
 
 class Records:

@@ -80,6 +80,8 @@ _BEYOND_WHY = "timestamp beyond int64 nanoseconds (damaged)"
 _STAGE_SHARES = (0.15, 0.35, 0.50)
 _FRAMED, _PARSED, _CONVERTED = range(3)
 _DATA_HEADER_BYTES = 5  # a data message's size, type and msg_id before its payload
+# pyulog's column types float32 holds every value of exactly (`read_ulog`'s ``held``)
+_EXACT_IN_FLOAT32 = tuple(np.dtype(kind) for kind in ("int8", "uint8", "int16", "uint16", "float32", "bool"))
 
 
 def message_filter(wanted: set[str] | None) -> list[str] | None:
@@ -98,9 +100,15 @@ def message_filter(wanted: set[str] | None) -> list[str] | None:
 
 
 def read_ulog(
-    path: str | os.PathLike, wanted: set[str] | None, *, progress: Callable[[int, int], None] | None = None
+    path: str | os.PathLike,
+    wanted: set[str] | None,
+    *,
+    progress: Callable[[int, int], None] | None = None,
+    held: bool = False,
 ) -> Log:
-    """Read a ULog file into a Log, decoding only the messages ``wanted`` asks for.
+    """Read a ULog file into a Log, decoding only the messages ``wanted`` asks for; ``held``: a
+    log held for block mode's windows, its fields of a type float32 holds exactly (8 and 16-bit
+    integers, bool, float) kept as float32 (`Channel.held`: most of a PX4 log, half the bytes).
 
     ``progress(done, file size)`` (`StagedBytes`): after the framing pass, after the parse of the definitions,
     after each topic converted (the bytes of the data messages converted so far), and at the end.
@@ -126,7 +134,7 @@ def read_ulog(
                 source.skip(f"topic {topic}", _UNTIMED_WHY, count)
                 untimed.append(topic)
             else:
-                lost.extend(_read_topic(data, topic, wanted, source, channels))
+                lost.extend(_read_topic(data, topic, wanted, source, channels, held))
             if hasattr(data, "release"):  # a clean read's records (`ulog_definitions._Topic`)
                 data.release()
     _fill_metadata(ulog, source)
@@ -139,7 +147,9 @@ def read_ulog(
     return Log(channels=channels, source=source)
 
 
-def _read_topic(data, topic: str, wanted: set[str] | None, source: SourceInfo, channels: dict) -> list[str]:
+def _read_topic(
+    data, topic: str, wanted: set[str] | None, source: SourceInfo, channels: dict, held: bool = False
+) -> list[str]:
     """A timed topic's channels and `TopicInfo` (its samples with a usable timestamp, the others
     skipped and counted); returns the damage to report (timestamps beyond int64 nanoseconds). Called
     under ``np.errstate(invalid="ignore")``: a float32 signalling NaN (a flipped bit) cast to float64
@@ -160,7 +170,7 @@ def _read_topic(data, topic: str, wanted: set[str] | None, source: SourceInfo, c
         keep = (t_raw != 0) & (t_raw <= MAX_TIMESTAMP_US)
     t_ns = (t_raw if keep is None else t_raw[keep]).astype(np.int64)  # a copy either way
     t_ns *= 1000
-    fields = _topic_channels(data, topic, t_ns, keep, wanted, source, channels)
+    fields = _topic_channels(data, topic, t_ns, keep, wanted, source, channels, held)
     if keep is not None:  # in order once the dropped samples are out?
         in_order = bool((np.diff(t_ns) > 0).all())
     first_ns = last_ns = None
@@ -221,11 +231,12 @@ def _topic_channels(
     wanted: set[str] | None,
     source: SourceInfo,
     channels: dict,
+    held: bool = False,
 ) -> list[str]:
     """The topic's numeric fields (its samples ``keep``, all when None, at ``t_ns``) into
     ``channels`` where wanted; returns every numeric field's name. Text (char) fields are skipped,
     once each. Each column is cast to float64 in one step (``astype`` of pyulog's strided column,
-    or of its kept samples)."""
+    or of its kept samples); ``held``: to float32 where that holds its type exactly (`read_ulog`)."""
     records = getattr(data, "logscan_records", None)  # a clean read: its records and their layout
     if records is not None:
         numeric, text = records.layout.lists()
@@ -245,15 +256,20 @@ def _topic_channels(
         fields_read = fields
     if records is not None and keep is None and fields_read:  # one kernel call for all fields
         names = [prefix + name for name in fields_read]
-        channels.update(zip(names, Channel.sharing_time(names, t_ns, records.rows(fields_read)), strict=True))
+        if held:
+            rows = records.layout.held_rows(records.buffer, fields_read)
+            channels.update((name, Channel.held(name, t_ns, row)) for name, row in zip(names, rows, strict=True))
+        else:
+            channels.update(zip(names, Channel.sharing_time(names, t_ns, records.rows(fields_read)), strict=True))
         return fields
     columns = data.data
     for name in fields_read:
         channel = prefix + name
-        if keep is None:
-            channels[channel] = Channel(channel, t_ns, columns[name].astype(np.float64))
+        column = columns[name] if keep is None else columns[name][keep]
+        if held and column.dtype in _EXACT_IN_FLOAT32:
+            channels[channel] = Channel.held(channel, t_ns, column.astype(np.float32))
         else:
-            channels[channel] = Channel(channel, t_ns, columns[name][keep].astype(np.float64, copy=False))
+            channels[channel] = Channel(channel, t_ns, column.astype(np.float64, copy=keep is None))
     return fields
 
 
