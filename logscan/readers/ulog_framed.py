@@ -4,14 +4,15 @@ pyulog reads a ULog message by message in Python (two reads, a header and a payl
 buffer append per data message), also for the topics it then drops. Here a numba kernel frames
 the whole file first (offset, size, type and a data message's id of every message), 16 MiB of it at
 a time with the pages walked given back (as are those of each later gather and copy: the process
-holds what it has read, not the mapped file); when the framing is clean, the
+holds what it has read, not the mapped file), each slice's data messages kept as 8 bytes each
+(`_Part`: a 4-hour PX4 log has 14 million); when the framing is clean, the
 messages other than the data ('D') messages (header, definitions, subscriptions, parameters,
 logged text: a few thousand small messages) are parsed into pyulog's ULog object by
 `ulog_definitions` (pyulog's rules, without its loop), and each subscription read gets its
 messages' payloads copied into its buffer by a second kernel, as pyulog would have appended them.
 The values that depend on the data messages read so far (the time of each parameter change and
 dropout: the latest data timestamp before it; the log's last timestamp) are set from the same
-timestamps, vectorised.
+timestamps, vectorised, a topic at a time.
 
 Clean means: the messages tile the file exactly, every type byte is one the format defines, the
 file has no appended data or only appended data that a read straight through gives as pyulog's
@@ -98,19 +99,45 @@ def _file_slices(offsets: np.ndarray, span: int | None = None) -> list[tuple[int
     return list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
 
 
-def _frame_file(buf: np.ndarray, start: int, give_back: Callable[[int], None]) -> tuple[np.ndarray, ...]:
+class _Part:
+    """The data messages of one framed slice of the file (`_FRAME_BYTES`): where each starts, as an
+    offset from ``base`` (uint32: a slice is 16 MiB), its payload size and its message id; and
+    each id's count in it. 8 bytes a message, where whole-file arrays with a sort order took 26."""
+
+    __slots__ = ("base", "at", "sizes", "ids", "counts")
+
+    def __init__(self, offsets: np.ndarray, sizes: np.ndarray, ids: np.ndarray) -> None:
+        self.base = int(offsets[0]) if offsets.size else 0
+        self.at = (offsets - self.base).astype(np.uint32)
+        self.sizes, self.ids = sizes, ids
+        known, counts = np.unique(ids, return_counts=True)
+        self.counts = dict(zip(known.tolist(), counts.tolist(), strict=True))
+
+    def offsets_of(self, msg_id: int) -> tuple[np.ndarray, np.ndarray]:
+        """(file offsets, payload sizes) of ``msg_id``'s data messages in this slice, in file order."""
+        if msg_id not in self.counts:
+            return _NO_MESSAGES, _NO_MESSAGES
+        chosen = np.flatnonzero(self.ids == msg_id)
+        return self.at[chosen].astype(np.int64) + self.base, self.sizes[chosen]
+
+
+def _frame_file(buf: np.ndarray, start: int, give_back: Callable[[int], None]) -> tuple[list[_Part], tuple, int]:
     """`_frame` of the whole file from ``start``, `_FRAME_BYTES` at a time with the pages walked
-    given back (``give_back(offset)``): one walk over the file would hold all of it."""
-    parts = []
+    given back (``give_back(offset)``): one walk over the file would hold all of it. Returns the
+    data messages a slice at a time (`_Part`), the other messages (offsets, sizes, types: a few
+    thousand, whole-file arrays) and where the walk ended (the file's size when the messages tile it)."""
+    parts, kept = [], []
     pos = start
     while True:
-        *framed, end = _frame(buf, pos, pos + _FRAME_BYTES)
-        parts.append(framed)
+        offsets, sizes, types, ids, end = _frame(buf, pos, pos + _FRAME_BYTES)
+        data = types == ord("D")
+        if data.any():
+            parts.append(_Part(offsets[data], sizes[data], ids[data]))
+        kept.append((offsets[~data], sizes[~data], types[~data]))
         give_back(end)
         if end < pos + _FRAME_BYTES or end >= buf.size:  # the end of the file, or a cut message
-            break
+            return parts, tuple(np.concatenate(column) for column in zip(*kept, strict=True)), end
         pos = end
-    return tuple(np.concatenate(column) for column in zip(*parts, strict=True))
 
 
 @njit(cache=True)
@@ -144,65 +171,58 @@ def _compact(buf: np.ndarray, head: int, offsets: np.ndarray, sizes: np.ndarray,
 
 
 class _Plan:
-    """The framing of a clean file: the data messages of each message id, and what the parse found."""
+    """The framing of a clean file: its data messages a slice at a time (`_Part`), the other
+    messages, and what the subscriptions read found."""
 
-    def __init__(self, buf: np.ndarray, framed: tuple[np.ndarray, ...], give_back: Callable[[int], None]) -> None:
-        offsets, sizes, types, ids = framed
+    def __init__(self, buf: np.ndarray, parts: list[_Part], give_back: Callable[[int], None]) -> None:
         self.buf = buf
         self.give_back = give_back
-        data = types == ord("D")
-        self.data_offsets = offsets[data]
-        self.data_sizes = sizes[data]
-        ids = ids[data]
-        order = np.argsort(ids, kind="stable")
-        self.ids, first = np.unique(ids[order], return_index=True)
-        self.groups = np.split(order, first[1:]) if order.size else []
-        self.group_of = dict(zip(self.ids.tolist(), self.groups, strict=True))
-        sizes_sorted = self.data_sizes[order]  # each id's smallest and largest data message
-        self.size_range = dict(
-            zip(
-                self.ids.tolist(),
-                zip(
-                    np.minimum.reduceat(sizes_sorted, first).tolist() if order.size else [],
-                    np.maximum.reduceat(sizes_sorted, first).tolist() if order.size else [],
-                    strict=True,
-                ),
-                strict=True,
-            )
-        )
-        self.kept = (offsets[~data], sizes[~data].astype(np.int64), types[~data])
-        self.read: list[tuple[np.ndarray, np.ndarray]] = []  # (positions, timestamps) of the data read
+        self.parts = parts
+        self.kept: tuple[np.ndarray, np.ndarray, np.ndarray] = (_NO_MESSAGES, _NO_MESSAGES, _EMPTY)
+        self.queries = _NO_MESSAGES  # file offsets of the messages whose time is the data's so far (`_set_times`)
+        # per topic read: its timestamps (a strided view of its buffer) and how many of them lie
+        # before each of ``queries`` in the file
+        self.read: list[tuple[np.ndarray, np.ndarray]] = []
         self.failed = False
         self.appended: _Appended | None = None  # the flag bits of a file with appended data
 
-    def messages_of(self, msg_id: int) -> np.ndarray:
-        """Indices (into the data messages) of ``msg_id``'s data messages, in file order."""
-        return self.group_of.get(msg_id, _NO_MESSAGES)
+    def first_data(self) -> dict[int, int]:
+        """Each message id's first data message's file offset."""
+        first: dict[int, int] = {}
+        for part in self.parts:
+            for msg_id in part.counts.keys() - first.keys():
+                first[msg_id] = int(part.offsets_of(msg_id)[0][0])
+        return first
 
     def fill(self, subscription) -> None:
         """The subscription's buffer, as pyulog would append it; ``failed`` when a message does not fit."""
-        index = self.messages_of(subscription.msg_id)
-        if not index.size:
+        count = sum(part.counts.get(subscription.msg_id, 0) for part in self.parts)
+        if not count:
             return
         width = subscription.max_data_size  # pyulog's dtype: packed, its itemsize is this
-        smallest, largest = self.size_range[subscription.msg_id]
         t_off = subscription.timestamp_offset
-        if (
-            smallest - 2 < width
-            or largest - 2 > subscription.max_data_size
-            or subscription.timestamp_idx < 0
-            or t_off + 8 > width
-        ):
+        if subscription.timestamp_idx < 0 or t_off + 8 > width:
             self.failed = True
             return
-        starts = self.data_offsets[index] + 5
-        buffer = np.empty(starts.size * width, np.uint8)
-        for lo, hi in _given_back(starts, self.buf, self.give_back):
-            _gather(self.buf, starts[lo:hi], width, buffer[lo * width : hi * width])
+        buffer = np.empty(count * width, np.uint8)
+        before = np.zeros(self.queries.size, np.int64)
+        done = 0
+        for part in self.parts:
+            offsets, sizes = part.offsets_of(subscription.msg_id)
+            if not offsets.size:
+                continue
+            if int(sizes.min()) - 2 < width or int(sizes.max()) - 2 > width:
+                self.failed = True
+                return
+            _gather(self.buf, offsets + 5, width, buffer[done * width : (done + offsets.size) * width])
+            before += np.searchsorted(offsets, self.queries)
+            done += offsets.size
+            self.give_back(int(offsets[-1]))
+        self.give_back(self.buf.size)
         subscription.buffer = buffer  # np.frombuffer reads it as is
         # each message's timestamp where it stands in the buffer (a strided view, not a copy)
-        stamps = np.ndarray((index.size,), dtype="<u8", buffer=buffer, offset=t_off, strides=(width,))
-        self.read.append((self.data_offsets[index], stamps))
+        stamps = np.ndarray((count,), dtype="<u8", buffer=buffer, offset=t_off, strides=(width,))
+        self.read.append((stamps, before))
 
 
 class _Appended:
@@ -214,11 +234,13 @@ class _Appended:
         self.offsets = offsets  # pyulog's list: the trailing zeros dropped
 
 
-def _appended_data(buf, offsets, sizes, types, split: int) -> _Appended | None | bool:
+def _appended_data(buf, kept: tuple, parts: list[_Part], split: int) -> _Appended | None | bool:
     """False for a file without flag bits or with none set; the flag bits of appended data that a read
     straight through gives the same as pyulog's read section by section (each offset a message start
-    after the first of the data section, increasing, and no subscription or data message from the
-    first offset on); None for anything else (unknown incompat flags, offsets elsewhere)."""
+    after the first of the data section (at file offset ``split``), increasing, and no subscription
+    or data message from the first offset on); None for anything else (unknown incompat flags,
+    offsets elsewhere). ``kept``: the messages other than data messages (offsets, sizes, types)."""
+    offsets, sizes, types = kept
     flags = np.flatnonzero(types == ord("B"))
     if flags.size == 0:
         return False
@@ -231,21 +253,35 @@ def _appended_data(buf, offsets, sizes, types, split: int) -> _Appended | None |
         return False
     if incompat[0] != 1 or incompat[1:].any():
         return None  # no appended data but offsets, or flags pyulog refuses: the careful read
-    listed = stated.tolist()
+    listed = [int(o) for o in stated.tolist()]
     while listed and listed[-1] == 0:
         listed.pop()
     if listed:
-        where = np.searchsorted(offsets, stated[: len(listed)])
+        last_data = max((part.base + int(part.at[-1]) for part in parts), default=-1)
+        subscribed = offsets[types == ord("A")]
         if (
             0 in listed
-            or np.any(np.diff(stated[: len(listed)].astype(np.int64)) <= 0)
-            or np.any(where <= split)
-            or np.any(where >= offsets.size)
-            or np.any(offsets[np.minimum(where, offsets.size - 1)] != stated[: len(listed)])
-            or np.isin(types[where[0] :], np.frombuffer(b"AD", dtype=np.uint8)).any()
+            or any(b <= a for a, b in zip(listed, listed[1:]))
+            or listed[0] <= split
+            or not all(_starts_a_message(o, offsets, parts) for o in listed)
+            or last_data >= listed[0]
+            or (subscribed.size and int(subscribed[-1]) >= listed[0])
         ):
             return None
-    return _Appended(at, incompat.tolist(), [int(o) for o in listed])
+    return _Appended(at, incompat.tolist(), listed)
+
+
+def _starts_a_message(offset: int, kept_offsets: np.ndarray, parts: list[_Part]) -> bool:
+    """Whether a message of the file starts at ``offset``."""
+    where = int(np.searchsorted(kept_offsets, offset))
+    if where < kept_offsets.size and int(kept_offsets[where]) == offset:
+        return True
+    for part in parts:
+        relative = offset - part.base
+        if 0 <= relative <= int(part.at[-1]):
+            where = int(np.searchsorted(part.at, relative))
+            return where < part.at.size and int(part.at[where]) == relative
+    return False
 
 
 def _clean_plan(buf: np.ndarray, give_back: Callable[[int], None]) -> _Plan | None:
@@ -253,32 +289,34 @@ def _clean_plan(buf: np.ndarray, give_back: Callable[[int], None]) -> _Plan | No
     data; ``give_back(offset)``: drop the file's pages before it from the process."""
     if buf.size < _HEADER_BYTES:
         return None
-    framed = _frame_file(buf, _HEADER_BYTES, give_back)
-    offsets, sizes, types = framed[:3]
-    if offsets.size == 0 or offsets[-1] + 3 + sizes[-1] != buf.size:
+    parts, kept, end = _frame_file(buf, _HEADER_BYTES, give_back)
+    offsets, sizes, types = kept
+    if end != buf.size or (offsets.size == 0 and not parts):
         return None
     ends = np.flatnonzero(np.isin(types, _SECTION_END))  # the definitions section ends at the first of them
-    split = int(ends[0]) if ends.size else types.size
-    if not (np.isin(types[:split], _DEFINITIONS).all() and np.isin(types[split:], _DATA_SECTION).all()):
+    split = int(offsets[ends[0]]) if ends.size else buf.size
+    definitions = offsets < split
+    first_data = min((part.base for part in parts), default=buf.size)
+    if not (
+        np.isin(types[definitions], _DEFINITIONS).all()
+        and np.isin(types[~definitions], _DATA_SECTION).all()
+        and (not parts or first_data > split)  # a data message is never among the definitions
+    ):
         return None  # types pyulog skips with a search for a sync sequence, or a damaged type byte
-    appended = _appended_data(buf, offsets, sizes, types, split)
+    appended = _appended_data(buf, kept, parts, split)
     if appended is None:
         return None
     subscribe = offsets[types == ord("A")]
     sub_ids = buf[subscribe + 4].astype(np.int64) | (buf[subscribe + 5].astype(np.int64) << 8)
     if np.unique(sub_ids).size != sub_ids.size or (sizes[types == ord("A")] < 3).any():
         return None
-    plan = _Plan(buf, framed, give_back)
+    if any(int(part.sizes.min()) < 2 for part in parts):
+        return None
+    plan = _Plan(buf, parts, give_back)
+    plan.kept = (offsets, sizes.astype(np.int64), types)
     plan.appended = appended or None
-    if (plan.data_sizes < 2).any():
-        return None
-    first_data = np.array([plan.data_offsets[g[0]] for g in plan.groups], dtype=np.int64)
-    where = np.searchsorted(np.sort(sub_ids), plan.ids)
-    known = (where < sub_ids.size) & (np.sort(sub_ids)[np.minimum(where, sub_ids.size - 1)] == plan.ids)
-    if not known.all():
-        return None
     sub_at = dict(zip(sub_ids.tolist(), subscribe.tolist(), strict=True))
-    if any(sub_at[i] > f for i, f in zip(plan.ids.tolist(), first_data.tolist(), strict=True)):
+    if any(msg_id not in sub_at or sub_at[msg_id] > at for msg_id, at in plan.first_data().items()):
         return None
     return plan
 
@@ -310,6 +348,8 @@ def _parse_mapped(
     if on_framed is not None:
         on_framed()
     kept_offsets, kept_sizes, kept_types = plan.kept
+    changes, dropouts = _timed_by_data(kept_offsets, kept_types)
+    plan.queries = np.concatenate((changes, dropouts))
     reduced_array = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes, give_back)
     if plan.appended is not None:  # read straight through: the same messages in the same order
         reduced_array[plan.appended.at + 3 + 8 : plan.appended.at + 3 + 40] = 0
@@ -320,43 +360,42 @@ def _parse_mapped(
         plan.buf = _EMPTY  # the map can be closed: the buffers are copies
     if ulog is None or plan.failed:
         return None
-    _set_times(ulog, plan, kept_offsets, kept_types)
+    _set_times(ulog, plan, changes.size)
     if plan.appended is not None:  # the flag bits as pyulog read them from the file
         ulog._incompat_flags = plan.appended.incompat
         ulog._appended_offsets = plan.appended.offsets
     return ulog, _CleanRead(), io.StringIO()
 
 
-def _set_times(ulog, plan: _Plan, offsets: np.ndarray, types: np.ndarray) -> None:
-    """The times pyulog gives parameter changes and dropouts (the latest data timestamp read before
-    each, from the header's start timestamp on) and the log's last timestamp."""
-    start = int(ulog.start_timestamp)
-    if plan.read:
-        positions = np.concatenate([p for p, _ in plan.read])
-        order = np.argsort(positions, kind="stable")
-        positions = positions[order]
-        stamps = np.concatenate([s for _, s in plan.read])[order]
-        latest = np.maximum(np.maximum.accumulate(stamps), np.uint64(start))
-    else:
-        positions = np.empty(0, np.int64)
-        latest = np.empty(0, np.uint64)
-
-    def at(position: int) -> int:
-        i = int(np.searchsorted(positions, position))
-        return int(latest[i - 1]) if i else start
-
+def _timed_by_data(offsets: np.ndarray, types: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(file offsets of the parameter changes, of the dropouts) in the data section: pyulog times
+    each by the data read before it."""
     section = np.flatnonzero(np.isin(types, _SECTION_END))
     first = int(offsets[section[0]]) if section.size else -1
     in_data = offsets >= first if first >= 0 else np.zeros(offsets.size, bool)
-    changes = offsets[in_data & (types == ord("P"))]
-    if len(changes) != len(ulog._changed_parameters):
+    return offsets[in_data & (types == ord("P"))], offsets[in_data & (types == ord("O"))]
+
+
+def _set_times(ulog, plan: _Plan, changes: int) -> None:
+    """The times pyulog gives parameter changes and dropouts (the latest data timestamp read before
+    each, from the header's start timestamp on: ``plan.queries``, the ``changes`` first) and the
+    log's last timestamp; a topic's running maximum at a time, not the data read all at once."""
+    start = np.uint64(ulog.start_timestamp)
+    latest = np.full(plan.queries.size, start, np.uint64)
+    last = start
+    for stamps, before in plan.read:
+        running = np.maximum.accumulate(stamps)
+        seen = before > 0
+        latest[seen] = np.maximum(latest[seen], running[before[seen] - 1])
+        last = max(last, running[-1])
+    if changes != len(ulog._changed_parameters):
         raise AssertionError("ULog framed read: parameter changes do not match")  # never: same messages
     ulog._changed_parameters = [
-        (at(int(p)), key, value) for p, (_, key, value) in zip(changes, ulog._changed_parameters, strict=True)
+        (int(t), key, value) for t, (_, key, value) in zip(latest[:changes], ulog._changed_parameters, strict=True)
     ]
-    for p, dropout in zip(offsets[in_data & (types == ord("O"))], ulog._dropouts, strict=True):
-        dropout.timestamp = at(int(p))
-    ulog._last_timestamp = int(latest[-1]) if latest.size else start
+    for t, dropout in zip(latest[changes:], ulog._dropouts, strict=True):
+        dropout.timestamp = int(t)
+    ulog._last_timestamp = int(last)
 
 
 class _CleanRead:
