@@ -9,7 +9,7 @@ from conftest import need_testdata
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from logscan.pipeline.detection import _heavy_tail
+from logscan.verdict.nis_consistency import heavy_tail as _heavy_tail
 
 
 @settings(max_examples=30, deadline=None)

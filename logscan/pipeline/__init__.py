@@ -13,11 +13,12 @@ names a detector: each declares what it needs (`Detector.needs`) and the pipelin
 those needs.
 """
 
-from logscan.pipeline.detection import NIS_BLIND, consistency_warnings, detect, rescore
+from logscan.pipeline.detection import consistency_warnings, detect, rescore
 from logscan.pipeline.preparation import builtin_profile_for, load_profile_for, prepare
 from logscan.pipeline.release import RELEASABLE
 from logscan.pipeline.run import analyze_log
 from logscan.pipeline.stages import LoadedProfile, Prepared, create_detectors, needs_of
+from logscan.verdict.nis_consistency import NIS_BLIND
 
 __all__ = [
     "NIS_BLIND",

@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no 
     from logscan.pipeline.stages import Prepared
     from logscan.recovery.records import Recovery
     from logscan.report.recovery_view import RecoveryView
+    from logscan.verdict.nis_consistency import NisConsistency
     from logscan.verdict.observability import Observability
 
 
@@ -53,6 +54,8 @@ class Analysis:
     unjudged: str = ""
     # the coverage in figures (block mode judges the blocks' sum; None: not found, a failed analysis)
     coverage: Coverage | None = field(default=None, repr=False)
+    # the groups' NIS the consistency warnings judge (block mode judges the blocks' sum; None: no filter)
+    consistency: NisConsistency | None = field(default=None, repr=False)
     # (N,) the grid steps the [alarms] suspension held back (None: none): where judging resumed
     # after it, an incident's source is not the alarm that happened to update first
     suspended: np.ndarray | None = field(default=None, repr=False)

@@ -29,11 +29,12 @@ from logscan.pipeline.block_merge import (
     said_once,
     windows_folded,
 )
-from logscan.pipeline.detection import rescore
+from logscan.pipeline.detection import consistency_lines, rescore
 from logscan.report.context_join import joined
 from logscan.report.kept_views import KeptRows
 from logscan.results import Band, DetectorResult, NotChecked, events_from_truth
 from logscan.verdict.coverage import judged_span
+from logscan.verdict.nis_consistency import summed
 
 if TYPE_CHECKING:
     from logscan.pipeline.stages import Prepared
@@ -175,6 +176,7 @@ class BlockFold:
         self.warnings: list[list[str]] = []
         self.unchecked: list[list[str]] = []
         self.coverages: list = []  # each block's coverage in figures: the log's is their sum
+        self.consistency: list = []  # each block's groups' NIS: the log's consistency warnings judge their sum
         self.spans: list[BlockSpan] = []  # the blocks folded in, in order
         self.incidents: list = []
         self.input_gaps: list = []
@@ -205,9 +207,11 @@ class BlockFold:
         self.steps += steps
         self.summaries.append(prepared.filter_summary())
         own = block.coverage.said if block.coverage is not None else frozenset()  # said of the log's sum instead
+        own |= block.consistency.said if block.consistency is not None else frozenset()
         self.warnings.append([line for line in block.warnings if line not in own])
         self.unchecked.append([line for line in block.unchecked if line not in own])
         self.coverages.append(block.coverage)
+        self.consistency.append(block.consistency)
         self.spans.append(span)
         self.incidents += block.incidents
         self.input_gaps += block.input_gaps
@@ -248,6 +252,8 @@ class BlockFold:
             lines, merged.unjudged = merged.coverage.lines(merged.results, judged_span(prepared.run))
             merged.unchecked += lines
             merged.warnings += [merged.unjudged] if merged.unjudged else []
+        # first, as at once: they question every verdict
+        merged.warnings[:0] = consistency_lines(summed(self.consistency), prepared, merged.results)
         merged.input_gaps = self.input_gaps
         merged.failures = [DetectorFailure(f.detector, f.message, f.exit_code) for f in self.failures.values()]
         merged.observability = self.observability

@@ -8,7 +8,6 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from logscan.detectors.registry import default_registry
-from logscan.docs import doc_url
 from logscan.errors import ExitCode, LogscanError
 from logscan.memory import return_freed_pages
 from logscan.pipeline.analysis import Analysis, DetectorFailure
@@ -32,6 +31,7 @@ from logscan.verdict.coverage import (
     judged_share,
     judged_span,
     log_end_lines,
+    own_steps,
     read_in_part,
     stopped_groups,
 )
@@ -46,6 +46,7 @@ from logscan.verdict.incidents import (
     sizes_of,
 )
 from logscan.verdict.input_fault import kinematic_evidence
+from logscan.verdict.nis_consistency import NisConsistency, nis_consistency
 from logscan.verdict.observability import observability_for
 from logscan.verdict.scoring import score_by_detector
 
@@ -88,7 +89,7 @@ def detect(
         analysis.warnings.append(share.line())
         analysis.unjudged = share.line()  # the report says it where "every check ran" would be
     analysis.results = _run_detectors(prepared, detectors, policy, analysis, free_series, sensor_views, step)
-    analysis.warnings[:0] = consistency_warnings(prepared, analysis.results)  # first: they question every verdict
+    analysis.warnings[:0] = _consistency(analysis, judged_from_s)  # first: they question every verdict
     gap_s = policy.merge_gap_s if policy is not None else DEFAULT_GAP_S
     merge_fragments(analysis.results, gap_s)
     groups = prepared.trace.group_names if prepared.trace is not None else list(prepared.run.groups)
@@ -112,6 +113,19 @@ def detect(
         step("recovery")
         analysis.recovery = recover_analysis(analysis)
     return analysis
+
+
+def _consistency(analysis: Analysis, judged_from_s: float | None) -> list[str]:
+    """The consistency warnings of the run's own steps (a block's after its lead-in: the log's judge
+    the blocks' sum, `block_fold`), its groups' NIS kept in ``analysis.consistency``."""
+    prepared = analysis.prepared
+    first = 0 if judged_from_s is None else own_steps(prepared.run.t, judged_from_s)
+    judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
+    analysis.consistency = nis_consistency(prepared.trace, judged, first)
+    lines = consistency_lines(analysis.consistency, prepared, analysis.results)
+    if analysis.consistency is not None:
+        analysis.consistency.said = frozenset(lines)
+    return lines
 
 
 def _incidents(analysis: Analysis, groups, gap_s: float, gaps) -> list:
@@ -196,116 +210,24 @@ def _run_one(detector, prepared: Prepared, policy) -> DetectorResult:
     return result if lead is None else cut_to_window(result, lead, prepared.run)
 
 
-# A group's NIS far from its chi-square law on a whole log: the filter's model of it is wrong. The
-# median NIS over its updates against the chi-square median of its size (robust: a fault over less
-# than half of the log does not move it). Above NIS_MISMATCH times, the samples disagree with the
-# prediction far beyond their noise (units, signs, frames, a wrong channel); below 1 / NIS_MISMATCH**2
-# its noise_std dwarfs the data's scatter, so a fault of that size hides. Checked only with enough
-# updates to mean something.
-NIS_MISMATCH = 10.0
-
-
-NIS_MIN_UPDATES = 20
-
-
-# A group whose mean NIS per output over the judged updates is below NIS_BLIND is blind: its test
-# is looser than the data by more than 1 / sqrt(NIS_BLIND) (1.8x) in std, so a fault of that size
-# hides and the verdict says so (healthy: [NIS_BLIND, 1 / NIS_BLIND], about 1 expected).
-NIS_BLIND = 0.3
-# A blind group's NIS scaled to a mean of 1 per output that passes its chi-square TAIL_ALPHA point on
-# more updates than a chi-square law would by chance (binomial P < TAIL_P) has a scatter that varies
-# over the log: no one noise_std fits, and lowering it (the usual advice) alarms on the larger
-# stretches (the real Husky drive: 81 of 3951 wheel yaw rate updates against 4 expected).
-TAIL_ALPHA = 0.001
-TAIL_P = 0.001
-
-
 def consistency_warnings(prepared: Prepared, results: Sequence[DetectorResult] = ()) -> list[str]:
-    """One warning per measurement group whose median NIS is far from the chi-square median of its
-    size (see NIS_MISMATCH); the ratio is given per output. A group far above it whose own checks
-    alarmed (in ``results``) may be faulty over most of the log rather than mismatched: said so,
-    and calibrating it is advised only on healthy logs (it would widen the noise over the fault)."""
-    import numpy as np
-    from scipy.special import chdtri  # chi-square quantiles without scipy.stats (46 MB to import)
+    """The filter's consistency warnings of the whole run (`NisConsistency.lines`)."""
+    consistency = nis_consistency(prepared.trace, judged_steps(prepared.profile, prepared.run, prepared.filter_from))
+    return consistency_lines(consistency, prepared, results)
 
-    trace = prepared.trace
-    if trace is None or trace.nis_group is None:
+
+def consistency_lines(
+    consistency: NisConsistency | None, prepared: Prepared, results: Sequence[DetectorResult]
+) -> list[str]:
+    """``consistency``'s warnings (`NisConsistency.lines`): a group whose checks alarmed (in
+    ``results``) may be faulty over most of the log rather than mismatched; the calibrate command
+    and the groups calibration kept at their noise are the profile's and tables'."""
+    if consistency is None:
         return []
-    out = []
-    judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
-    groups = list(trace.group_names)
+    groups = [group.name for group in consistency.groups]
     alarmed = {group_of(a.signal, groups) for r in results for a in r.alarms}
-    for g, (name, size) in enumerate(zip(trace.group_names, trace.group_sizes.tolist())):
-        nis = trace.nis_group[:, g]  # a column view: a mask picks from it a few times faster than [used, g]
-        used = trace.updated[:, g] & np.isfinite(nis)
-        if int(used.sum()) < NIS_MIN_UPDATES or not size:
-            continue
-        ratio = float(np.median(nis[used])) / float(chdtri(size, 0.5))
-        if ratio > NIS_MISMATCH and name in alarmed:
-            out.append(
-                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected), and its "
-                "checks alarmed: a fault over much of the log (the incidents below), or a model or profile "
-                "mismatch (units, signs, frames, noise_std) if the log is healthy; calibrate only on healthy logs "
-                f"({doc_url('troubleshooting.md')})"
-            )
-        elif ratio > NIS_MISMATCH:
-            out.append(
-                f"group {name!r}: median NIS {ratio:.3g} times its chi-square median (about 1 expected): model or "
-                "profile mismatch, check units, signs and frames of its channels, or its noise_std "
-                f"({doc_url('troubleshooting.md')}; `{calibrate_command(prepared.profile)}`, then --tables tables.json)"
-            )
-        else:
-            out.extend(_blind_warning(prepared, g, name, size, used, judged))
-    return out
-
-
-def _blind_warning(prepared: Prepared, g: int, name: str, size: int, used, judged) -> list[str]:
-    """The "blind" warning of group ``g`` when its mean NIS per output is below NIS_BLIND over the
-    ``judged`` updates (`judged_steps`; all of ``used`` when fewer than NIS_MIN_UPDATES are judged)."""
-    import numpy as np
-
-    if judged is not None and int((used & judged).sum()) >= NIS_MIN_UPDATES:
-        used = used & judged
-    trace = prepared.trace
-    assert trace is not None and trace.nis_group is not None  # `consistency_warnings` checked
-    nis = trace.nis_group[:, g][used]
-    level = float(np.mean(nis)) / size
-    if not level < NIS_BLIND:
-        return []
-    tail = _heavy_tail(nis, size, level)
-    if tail is not None:
-        return [
-            f"group {name!r} is blind most of the time: mean NIS per output {level:.3g} over {nis.size} updates "
-            f"(about 1 expected, {NIS_BLIND:g} at the least), but its NIS is not one scaled chi-square: fitted to "
-            f"that mean, {tail[0]} of them would pass its {TAIL_ALPHA:.1%} point ({tail[1]:.2g} expected). Its "
-            "scatter varies over the log (quiet stretches and larger ones: at rest and moving, or a fault), so no "
-            "one noise_std fits it: a smaller one alarms on the larger stretches, and a fault smaller than the "
-            "present one hides in the quiet ones"
-        ]
-    kept = name in getattr(prepared.loaded, "uncalibrated", frozenset())
-    return [
-        f"group {name!r} is blind: mean NIS per output {level:.3g} over {int(used.sum())} updates (about 1 "
-        f"expected, {NIS_BLIND:g} at the least): its noise_std is {1.0 / np.sqrt(level):.3g} times the scatter "
-        "the filter sees, so a fault of that size hides; "
-        + (
-            "the tables' calibration found no noise_std that brings it to 1 (see their training report)"
-            if kept
-            else f"lower noise_std: `{calibrate_command(prepared.profile)}`, then analyze with --tables tables.json"
-        )
-    ]
-
-
-def _heavy_tail(nis, size: int, level: float) -> tuple[int, float] | None:
-    """(how many updates, how many expected) pass the chi-square TAIL_ALPHA point of ``size`` once
-    the NIS is scaled to a mean of 1 per output, when that count is beyond chance for a chi-square
-    law (binomial P(K >= k) < TAIL_P: a scatter that varies, not one noise); else None."""
-    import numpy as np
-    from scipy.special import bdtrc, chdtri
-
-    k = int(np.count_nonzero(nis / level > chdtri(size, TAIL_ALPHA)))
-    if k == 0 or not bdtrc(k - 1, nis.size, TAIL_ALPHA) < TAIL_P:
-        return None
-    return k, nis.size * TAIL_ALPHA
+    uncalibrated: frozenset = getattr(prepared.loaded, "uncalibrated", frozenset())
+    return consistency.lines(alarmed, calibrate_command(prepared.profile), uncalibrated)
 
 
 def detector_failure(name: str, exc: BaseException):
