@@ -1,6 +1,7 @@
 """Block mode judges the filter's consistency (a group blind, or far from its chi-square law) on
-the log's NIS, the blocks' own updates end to end (`logscan.verdict.nis_consistency.summed`), not
-each block's on its own with block 1's figures (docs/algorithms.md 8.1b)."""
+the log's NIS, the blocks' own updates end to end (`logscan.verdict.nis_consistency.summed`), and
+says alignment's gate and gap warnings of the log from the blocks' own steps
+(`logscan.pipeline.block_alignment`), not each block's with block 1's figures (docs/algorithms.md 8.1b)."""
 
 from __future__ import annotations
 
@@ -91,3 +92,63 @@ def test_a_real_log_in_short_blocks_warns_of_its_consistency_as_at_once(name, bl
         assert a.split(":")[0] == b.split(":")[0]  # the group and the kind of line
         assert a.split(" updates")[0].rsplit(" over ", 1)[1] == b.split(" updates")[0].rsplit(" over ", 1)[1]
         assert "said in" not in b
+
+
+def _run(t, gaps, closed=None, warnings=()):
+    from types import SimpleNamespace
+
+    from logscan.align.notes import GapReport
+
+    groups = {"gnss": SimpleNamespace(gate_closed=closed)}
+    reports = [
+        GapReport("/gps/lat", "0.2", np.array([a for a, _, _ in gaps]), np.array([b for _, b, _ in gaps]), gaps[-1][2])
+    ]
+    return SimpleNamespace(t=t, n_steps=t.size, dt=0.1, groups=groups, gap_reports=reports, warnings=list(warnings))
+
+
+def test_a_gap_across_a_border_is_the_next_blocks_and_the_log_says_its_gaps_and_gate_once():
+    """At once, /gps/lat has gaps 1-2 s, 4.9-5.6 s and 8-10 s (running to the log's end) and its
+    gate closed for 3 of 100 steps. Block 1 (0-4.9 s) sees the second gap run to its end without a
+    sample; block 2 (led in from 0 s, its own steps from 5 s) sees it whole, and the first again."""
+    from types import SimpleNamespace
+
+    from logscan.align.notes import GapReport, gap_lines, gate_line
+    from logscan.pipeline.block_alignment import alignment_figures, alignment_lines
+
+    specs = {"gnss": SimpleNamespace(gate_channel="/gps/fix", gate_min=3)}
+    t = np.arange(100) * 0.1
+    closed = np.zeros(100, bool)
+    closed[[10, 60, 61]] = True
+    said = gate_line("gnss", "/gps/fix", 3, 0.1, 5.0)
+    first = alignment_figures(_run(t[:50], [(1.0, 2.0, False), (4.9, 4.9, True)], closed[:50], [said]), specs, 0)
+    second = alignment_figures(_run(t, [(1.0, 2.0, False), (4.9, 5.6, False), (8.0, 9.9, True)], closed), specs, 50)
+    assert said in first.said and gap_lines([]) == []
+    at_once = GapReport("/gps/lat", "0.2", np.array([1.0, 4.9, 8.0]), np.array([2.0, 5.6, 9.9]))
+    expected = [gate_line("gnss", "/gps/fix", 3, 3 * 0.1, 100 * 0.1), *gap_lines([at_once])]
+    assert alignment_lines([first, second], specs) == expected
+    assert "3 gaps longer than stale_s=0.2 s (longest 1.900 s from t=8.000 s)" in expected[1]
+    assert alignment_lines([], specs) == []
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(name, marks=pytest.mark.testdata(name))
+        for name in ("px4-ulog/sample_px4_events.ulg", "px4-ulog/sample_logging_tagged_and_default_params.ulg")
+    ],
+)
+def test_a_real_ulog_in_short_blocks_gives_the_warnings_of_the_log_at_once(name):
+    """The real ULogs in 10-s blocks gave their GNSS gate closed "for 8.3 s of 9.9 s" and gaps with
+    block 1's figures ("said in 2 of 4 blocks"), and the NIS lines of each block. Said of the log,
+    every warning is the one at once, word for word; block mode adds only its own lines."""
+    from conftest import need_testdata
+
+    from logscan.pipeline.blocks import analyze_blocked
+    from logscan.pipeline.run import analyze_log
+
+    path = need_testdata(name)
+    whole, blocks = analyze_log(path), analyze_blocked(path, block_s=10.0)
+    own = [w for w in blocks.warnings if w.startswith(("analysed in ", "--block-s "))]
+    assert len(own) == 2
+    assert [w for w in blocks.warnings if w not in own] == whole.warnings
+    assert any(" gap" in w for w in whole.warnings) and any("below 3 for" in w for w in whole.warnings)

@@ -111,6 +111,7 @@ class AlignedRun:
     onboard_variance: np.ndarray | HeldTable | None = None
     warnings: list[str] = field(default_factory=list)
     gaps: list[tuple[float, float, str]] = field(default_factory=list)  # (start s, end s, channel)
+    gap_reports: list = field(default_factory=list)  # each channel's gaps, as reported (`logscan.align.notes`)
     # Optional additions (alignment fills them):
     input_names: list[str] = field(default_factory=list)  # model input name of each column of u
     mode_channel: str | None = None

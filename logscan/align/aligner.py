@@ -11,8 +11,8 @@ import numpy as np
 
 from logscan import conversions
 from logscan.align.aligned import AlignedGroup, HeldTable
+from logscan.align.notes import GapReport, gap_lines, gate_line
 from logscan.align.sample_hold import (
-    _MAX_GAP_WARNINGS,
     _NS,
     _Clean,
     _gaps,
@@ -44,8 +44,7 @@ class _Aligner:
         self.warnings: list[str] = []
         self.gaps: list[tuple[float, float, str]] = []
         self.gap_reported: set[tuple[str, int]] = set()
-        # (topic, count, stale_s, longest, its start) -> the channels with those gaps (`gap_lines`)
-        self.gap_channels: dict[tuple, list[str]] = {}
+        self.gap_reports: list[GapReport] = []  # the channels with gaps, as reported (`gap_lines`)
         self.start_ns = 0
         self.grid_span = (0, 0)  # the whole grid's first and last sample times, ns (set by `align`)
         self.dropped: dict[str, np.ndarray] = {}  # channel -> outlying times dropped (ns)
@@ -166,24 +165,14 @@ class _Aligner:
             s = (g_start - self.start_ns) / _NS
             e = (g_end - self.start_ns) / _NS
             self.gaps.extend((float(a), float(b), name) for a, b in zip(s, e))
-            longest = int(np.argmax(e - s))
-            gap = (g_start.size, f"{limit_s:g}", f"{e[longest] - s[longest]:.3f}", f"{s[longest]:.3f}")
-            self.gap_channels.setdefault((name.rsplit("/", 1)[0], *gap), []).append(name)
+            # the last stretch ran to the span's end without a sample (a block's next sees its end)
+            last = int(np.searchsorted(t, grid_ns[-1], side="right"))  # the samples up to the span's end
+            open_end = int(g_end[-1]) == int(grid_ns[-1]) and not (last and int(t[last - 1]) == int(grid_ns[-1]))
+            self.gap_reports.append(GapReport(name, f"{limit_s:g}", s, e, open_end))
 
     def gap_lines(self) -> list[str]:
-        """One warning per topic's channels with the same gaps (a GNSS receiver's ten fields lost
-        together are one line), at most _MAX_GAP_WARNINGS."""
-        lines = []
-        for (topic, count, limit, longest, at), names in self.gap_channels.items():
-            if len(names) == 1:
-                what = f"channel {names[0]!r}: {count} gap{'s' if count > 1 else ''}"
-            else:
-                fields = ", ".join(name[len(topic) + 1 :] for name in names)
-                what = f"channels {topic}/{{{fields}}}: {count} gap{'s' if count > 1 else ''} each"
-            lines.append(
-                f"{what} longer than stale_s={limit} s (longest {longest} s from t={at} s); held values are NaN there"
-            )
-        return lines[:_MAX_GAP_WARNINGS]
+        """One warning per topic's channels with the same gaps (`logscan.align.notes.gap_lines`)."""
+        return gap_lines(self.gap_reports)
 
     def table(
         self, channels: list[str | None], grid_ns: np.ndarray, limit_s: float, dtype=np.float64
@@ -240,8 +229,7 @@ class _Aligner:
                 group.gated_s = float(closed.sum()) * dt
                 group.gate_closed = closed
                 self.warnings.append(
-                    f"group {spec.name!r}: {spec.gate_channel} below {spec.gate_min:g} for {_seconds(group.gated_s)} s "
-                    f"of {grid_ns.size * dt:.1f} s; no sample used there"
+                    gate_line(spec.name, spec.gate_channel, spec.gate_min, group.gated_s, grid_ns.size * dt)
                 )
         return group
 
@@ -343,12 +331,6 @@ class _Aligner:
             stale_s=float(limit_s),
             channel_fresh=ch_fresh,
         )
-
-
-def _seconds(value: float) -> str:
-    """A duration in a warning: tenths of a second, or milliseconds under a tenth (a gate closed for
-    a step or two is not "0.0 s")."""
-    return f"{value:.1f}" if value >= 0.05 else f"{value:.3f}"
 
 
 def _linear(factor: float, offset: float):

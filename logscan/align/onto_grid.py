@@ -46,8 +46,7 @@ def align(
     held.done("mode")
     onboard = _onboard(aligner, profile, log, grid_ns)
     held.done("onboard")
-    # before the run's warnings and gaps are taken: a redundant sensor's gaps are the run's too
-    redundant = _redundant_groups(aligner, profile, grid_ns)
+    redundant = _redundant_groups(aligner, profile, grid_ns)  # before the gaps are taken: its gaps are the run's
     held.done("redundant")
     return AlignedRun(
         t=t,
@@ -64,6 +63,7 @@ def align(
         onboard_variance=onboard.variance,
         warnings=aligner.warnings + aligner.gap_lines(),
         gaps=sorted(aligner.gaps),
+        gap_reports=aligner.gap_reports,
         input_names=list(profile.inputs.names),
         mode_channel=profile.mode.channel if profile.mode is not None else None,
         onboard_names=onboard.names,

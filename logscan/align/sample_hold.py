@@ -16,7 +16,6 @@ from logscan.numba_cache import OneSignature, follow_dependencies
 
 _NS = 1_000_000_000
 _NEVER_STALE_NS = np.iinfo(np.int64).max // 4  # stale_s = inf
-_MAX_GAP_WARNINGS = 20
 
 
 @dataclass

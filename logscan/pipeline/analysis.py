@@ -56,6 +56,8 @@ class Analysis:
     coverage: Coverage | None = field(default=None, repr=False)
     # the groups' NIS the consistency warnings judge (block mode judges the blocks' sum; None: no filter)
     consistency: NisConsistency | None = field(default=None, repr=False)
+    # a block's gate and gap figures of its own steps (`logscan.pipeline.block_alignment`; None: at once)
+    alignment: Any = field(default=None, repr=False)
     # (N,) the grid steps the [alarms] suspension held back (None: none): where judging resumed
     # after it, an incident's source is not the alarm that happened to update first
     suspended: np.ndarray | None = field(default=None, repr=False)

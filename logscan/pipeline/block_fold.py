@@ -17,6 +17,7 @@ import numpy as np
 
 from logscan.alarms import merge_close
 from logscan.pipeline.analysis import Analysis, DetectorFailure
+from logscan.pipeline.block_alignment import alignment_lines
 from logscan.pipeline.block_merge import (
     BlockSpan,
     block_note,
@@ -177,6 +178,7 @@ class BlockFold:
         self.unchecked: list[list[str]] = []
         self.coverages: list = []  # each block's coverage in figures: the log's is their sum
         self.consistency: list = []  # each block's groups' NIS: the log's consistency warnings judge their sum
+        self.alignment: list = []  # each block's gate and gap figures: the log's lines sum them
         self.spans: list[BlockSpan] = []  # the blocks folded in, in order
         self.incidents: list = []
         self.input_gaps: list = []
@@ -208,10 +210,12 @@ class BlockFold:
         self.summaries.append(prepared.filter_summary())
         own = block.coverage.said if block.coverage is not None else frozenset()  # said of the log's sum instead
         own |= block.consistency.said if block.consistency is not None else frozenset()
+        own |= block.alignment.said if block.alignment is not None else frozenset()
         self.warnings.append([line for line in block.warnings if line not in own])
         self.unchecked.append([line for line in block.unchecked if line not in own])
         self.coverages.append(block.coverage)
         self.consistency.append(block.consistency)
+        self.alignment += [block.alignment] if block.alignment is not None else []
         self.spans.append(span)
         self.incidents += block.incidents
         self.input_gaps += block.input_gaps
@@ -252,8 +256,11 @@ class BlockFold:
             lines, merged.unjudged = merged.coverage.lines(merged.results, judged_span(prepared.run))
             merged.unchecked += lines
             merged.warnings += [merged.unjudged] if merged.unjudged else []
-        # first, as at once: they question every verdict
-        merged.warnings[:0] = consistency_lines(summed(self.consistency), prepared, merged.results)
+        # first, as at once: they question every verdict; then alignment's
+        specs = getattr(prepared.profile, "measurements", {})
+        merged.warnings[:0] = consistency_lines(summed(self.consistency), prepared, merged.results) + alignment_lines(
+            self.alignment, specs
+        )
         merged.input_gaps = self.input_gaps
         merged.failures = [DetectorFailure(f.detector, f.message, f.exit_code) for f in self.failures.values()]
         merged.observability = self.observability

@@ -14,6 +14,7 @@ from numba import njit
 
 from logscan.alarms import AlarmInterval
 from logscan.numba_cache import follow_dependencies
+from logscan.pipeline.block_alignment import alignment_figures
 from logscan.pipeline.raw_lead import cut_rows
 from logscan.report.context_join import own_part
 from logscan.report.kept_views import kept_rows
@@ -132,6 +133,8 @@ def reduce_block(
     prepared = analysis.prepared
     t = prepared.run.t
     first = 0 if from_s is None else int(np.searchsorted(t, from_s - 1e-9))
+    # the gate and gap figures of its own steps, before the aligned signals go (the log's lines sum them)
+    analysis.alignment = alignment_figures(prepared.run, getattr(prepared.profile, "measurements", {}), first)
     if prepared.trace is not None and first:  # the filter's counts of the block's own steps
         prepared._filter_summary = {**prepared.filter_summary(), **prepared.trace.summary(first)}
     prepared.release_series()  # the filter's counts stay (`filter_summary`)
