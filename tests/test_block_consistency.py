@@ -94,40 +94,67 @@ def test_a_real_log_in_short_blocks_warns_of_its_consistency_as_at_once(name, bl
         assert "said in" not in b
 
 
-def _run(t, gaps, closed=None, warnings=()):
+_NS = 1_000_000_000
+
+
+def _block(samples_s, grid_s, first_s=None, delay_s=0.0, closed=None, said=()):
+    """The alignment figures of a run on the grid ``grid_s`` (a block's: from its lead-in), its own
+    steps from ``first_s``, of one channel sampled at ``samples_s`` held ``delay_s`` after the steps
+    (stale after 1 s), by the aligner's own gap report."""
     from types import SimpleNamespace
 
-    from logscan.align.notes import GapReport
+    from logscan.align.aligner import _Aligner
+    from logscan.pipeline.block_alignment import alignment_figures
 
-    groups = {"gnss": SimpleNamespace(gate_closed=closed)}
-    reports = [
-        GapReport("/gps/lat", "0.2", np.array([a for a, _, _ in gaps]), np.array([b for _, b, _ in gaps]), gaps[-1][2])
-    ]
-    return SimpleNamespace(t=t, n_steps=t.size, dt=0.1, groups=groups, gap_reports=reports, warnings=list(warnings))
+    samples = np.round(np.asarray(samples_s) * _NS).astype(np.int64)
+    aligner = _Aligner(SimpleNamespace(channels={}), None)
+    aligner.clean = lambda name: SimpleNamespace(t=samples)
+    grid = np.round(np.asarray(grid_s) * _NS).astype(np.int64)
+    aligner.report_gaps("/gps/x", grid + round(delay_s * _NS), 1.0)
+    t = grid / _NS
+    run = SimpleNamespace(gap_reports=aligner.gap_reports, t=t, n_steps=t.size, dt=0.1, warnings=list(said))
+    run.groups = {"gnss": SimpleNamespace(gate_closed=closed)}
+    first = 0 if first_s is None else int(np.searchsorted(t, first_s - 1e-9))
+    return aligner, alignment_figures(run, {"gnss": _GATE}, first)
 
 
-def test_a_gap_across_a_border_is_the_next_blocks_and_the_log_says_its_gaps_and_gate_once():
-    """At once, /gps/lat has gaps 1-2 s, 4.9-5.6 s and 8-10 s (running to the log's end) and its
-    gate closed for 3 of 100 steps. Block 1 (0-4.9 s) sees the second gap run to its end without a
-    sample; block 2 (led in from 0 s, its own steps from 5 s) sees it whole, and the first again."""
-    from types import SimpleNamespace
+_GATE = __import__("types").SimpleNamespace(gate_channel="/gps/fix", gate_min=3)
 
-    from logscan.align.notes import GapReport, gap_lines, gate_line
-    from logscan.pipeline.block_alignment import alignment_figures, alignment_lines
 
-    specs = {"gnss": SimpleNamespace(gate_channel="/gps/fix", gate_min=3)}
-    t = np.arange(100) * 0.1
-    closed = np.zeros(100, bool)
-    closed[[10, 60, 61]] = True
-    said = gate_line("gnss", "/gps/fix", 3, 0.1, 5.0)
-    first = alignment_figures(_run(t[:50], [(1.0, 2.0, False), (4.9, 4.9, True)], closed[:50], [said]), specs, 0)
-    second = alignment_figures(_run(t, [(1.0, 2.0, False), (4.9, 5.6, False), (8.0, 9.9, True)], closed), specs, 50)
-    assert said in first.said and gap_lines([]) == []
-    at_once = GapReport("/gps/lat", "0.2", np.array([1.0, 4.9, 8.0]), np.array([2.0, 5.6, 9.9]))
-    expected = [gate_line("gnss", "/gps/fix", 3, 3 * 0.1, 100 * 0.1), *gap_lines([at_once])]
-    assert alignment_lines([first, second], specs) == expected
-    assert "3 gaps longer than stale_s=0.2 s (longest 1.900 s from t=8.000 s)" in expected[1]
-    assert alignment_lines([], specs) == []
+@pytest.mark.parametrize("delay_s", [0.0, 0.5])
+@pytest.mark.parametrize("resumes_s", [9.95, 10.2, 12.0])
+def test_a_gap_across_a_border_is_counted_once_as_at_once(resumes_s, delay_s):
+    """A 10 Hz grid in two blocks, 0-9.9 s and 10-19.9 s (led in from 5 s), a channel silent from
+    8 s until ``resumes_s``: at once one gap; in blocks the same one, whether its sample comes
+    between block 1's last step and block 2's first (9.95 s), or inside block 1's span of a
+    grid the delay shifts (10.2 s, 0.5 s late), or well into block 2."""
+    from logscan.align.notes import gap_lines
+    from logscan.pipeline.block_alignment import alignment_lines
+
+    samples = np.r_[np.arange(0, 80) * 0.1, resumes_s + np.arange(0, 120) * 0.1]
+    steps = np.arange(200) * 0.1
+    whole, _ = _block(samples, steps, delay_s=delay_s)
+    _, first = _block(samples, steps[:100], delay_s=delay_s)
+    _, second = _block(samples, steps[50:], first_s=10.0, delay_s=delay_s)
+    expected = gap_lines(whole.gap_reports)
+    assert len(expected) == 1 and ": 1 gap longer than" in expected[0]
+    assert alignment_lines([first, second], {}) == expected
+
+
+def test_the_log_says_its_gate_closed_over_the_blocks_own_steps():
+    from logscan.align.notes import gate_line
+    from logscan.pipeline.block_alignment import alignment_lines
+
+    samples = np.arange(200) * 0.1
+    closed = np.zeros(200, bool)
+    closed[[10, 60, 61]] = True  # steps 60 and 61 in block 1's span, and in block 2's lead-in
+    steps = np.arange(200) * 0.1
+    said = gate_line("gnss", "/gps/fix", 3, 0.1, 10.0)
+    _, first = _block(samples, steps[:100], closed=closed[:100], said=[said])
+    _, second = _block(samples, steps[50:], first_s=10.0, closed=closed[50:])
+    assert said in first.said
+    assert alignment_lines([first, second], {"gnss": _GATE}) == [gate_line("gnss", "/gps/fix", 3, 0.3, 20.0)]
+    assert alignment_lines([], {}) == []
 
 
 @pytest.mark.parametrize(

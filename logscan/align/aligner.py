@@ -168,7 +168,8 @@ class _Aligner:
             # the last stretch ran to the span's end without a sample (a block's next sees its end)
             last = int(np.searchsorted(t, grid_ns[-1], side="right"))  # the samples up to the span's end
             open_end = int(g_end[-1]) == int(grid_ns[-1]) and not (last and int(t[last - 1]) == int(grid_ns[-1]))
-            self.gap_reports.append(GapReport(name, f"{limit_s:g}", s, e, open_end))
+            before = np.searchsorted(grid_ns, g_end, side="left")  # the grid's points before each end
+            self.gap_reports.append(GapReport(name, f"{limit_s:g}", s, e, before, open_end))
 
     def gap_lines(self) -> list[str]:
         """One warning per topic's channels with the same gaps (`logscan.align.notes.gap_lines`)."""

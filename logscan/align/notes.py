@@ -15,14 +15,17 @@ MAX_GAP_WARNINGS = 20  # gap lines given; the rest are in the report's gap list
 @dataclass
 class GapReport:
     """A channel's stretches without a sample for longer than its staleness limit (``limit``, as
-    said), from ``starts`` to ``ends`` (seconds from the log's time zero); ``open_end``: the last
-    one ran to the end of the run's span without a sample (in a block, the next block sees where
-    it ends)."""
+    said), from ``starts`` to ``ends`` (seconds from the log's time zero); ``before``: of each, the
+    points of the grid it was held on (the run's steps, or those a delay or a start stamp shifts)
+    before its end, so a block tells the gaps ending after the block before's last step on that
+    grid; ``open_end``: the last one ran to the end of the run's span without a sample (in a
+    block, the next block sees where it ends)."""
 
     name: str
     limit: str
     starts: np.ndarray
     ends: np.ndarray
+    before: np.ndarray | None = None
     open_end: bool = False
 
 

@@ -2,9 +2,11 @@
 log from the figures of each block's own steps (after its lead-in: `alignment_figures`) summed
 (`alignment_lines`), not each block's with its own figures (docs/algorithms.md section 8.1b).
 
-A gap is the block's where it ends: one running across a border ends in the next block, whose
-lead-in holds the sample it started from (a gap longer than the lead-in is measured from the
-lead-in's start); the stretch a block's span ends in without a sample is the next block's.
+A gap is the block's where it ends: after the block before's last step on the grid it was held
+on (a delayed sensor's grid lies its delay after the run's steps, a start-stamped input's a step
+before), up to its own last; one running across a border ends in the next block, whose lead-in
+holds the sample it started from (a gap longer than the lead-in is measured from the lead-in's
+start); the stretch a block's span ends in without a sample is the next block's.
 """
 
 from __future__ import annotations
@@ -38,11 +40,10 @@ def alignment_figures(run, specs: dict, first: int) -> AlignmentFigures:
         gate = getattr(group, "gate_closed", None)
         closed[name] = (0 if gate is None else int(np.count_nonzero(gate[first:])), int(run.n_steps) - first)
         said |= {line for line in run.warnings if line.startswith(f"group {name!r}: {spec.gate_channel} below ")}
-    from_s = float(run.t[first]) if first < run.n_steps else float("inf")
     gaps = []
     for report in run.gap_reports:
-        keep = report.ends >= from_s
-        gaps.append(GapReport(report.name, report.limit, report.starts[keep], report.ends[keep], report.open_end))
+        keep = report.before >= first  # ends after the block before's last step on its grid
+        gaps.append(GapReport(report.name, report.limit, report.starts[keep], report.ends[keep], None, report.open_end))
     return AlignmentFigures(closed, gaps, float(run.dt), frozenset(said))
 
 

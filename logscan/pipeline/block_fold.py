@@ -179,6 +179,7 @@ class BlockFold:
         self.coverages: list = []  # each block's coverage in figures: the log's is their sum
         self.consistency: list = []  # each block's groups' NIS: the log's consistency warnings judge their sum
         self.alignment: list = []  # each block's gate and gap figures: the log's lines sum them
+        self.alignment_at = 0  # where the first block's alignment lines stood among its warnings kept
         self.spans: list[BlockSpan] = []  # the blocks folded in, in order
         self.incidents: list = []
         self.input_gaps: list = []
@@ -212,6 +213,9 @@ class BlockFold:
         own |= block.consistency.said if block.consistency is not None else frozenset()
         own |= block.alignment.said if block.alignment is not None else frozenset()
         self.warnings.append([line for line in block.warnings if line not in own])
+        if not self.spans and block.alignment is not None:  # the log's lines go where the first block's were
+            aligned = [k for k, line in enumerate(block.warnings) if line in block.alignment.said]
+            self.alignment_at = sum(line not in own for line in block.warnings[: aligned[0]]) if aligned else 0
         self.unchecked.append([line for line in block.unchecked if line not in own])
         self.coverages.append(block.coverage)
         self.consistency.append(block.consistency)
@@ -256,11 +260,11 @@ class BlockFold:
             lines, merged.unjudged = merged.coverage.lines(merged.results, judged_span(prepared.run))
             merged.unchecked += lines
             merged.warnings += [merged.unjudged] if merged.unjudged else []
-        # first, as at once: they question every verdict; then alignment's
         specs = getattr(prepared.profile, "measurements", {})
-        merged.warnings[:0] = consistency_lines(summed(self.consistency), prepared, merged.results) + alignment_lines(
-            self.alignment, specs
-        )
+        at = self.alignment_at
+        merged.warnings[at:at] = alignment_lines(self.alignment, specs)  # where the first block said its own
+        # first, as at once: they question every verdict
+        merged.warnings[:0] = consistency_lines(summed(self.consistency), prepared, merged.results)
         merged.input_gaps = self.input_gaps
         merged.failures = [DetectorFailure(f.detector, f.message, f.exit_code) for f in self.failures.values()]
         merged.observability = self.observability

@@ -83,8 +83,8 @@ def widened(log: Log) -> Log:
     """``log`` with its channels float64 (in place): a log read to be held (`read_log`'s ``held``)
     but analysed whole after all; each topic's float32 array goes once its last channel is widened."""
     for name, channel in log.channels.items():
-        if channel.values.dtype != np.float64:
-            log.channels[name] = Channel(name, channel.t, channel.values.astype(np.float64), channel.unit)
+        if channel.values.dtype != np.float64:  # `Channel` casts, a signalling NaN made quiet without a warning
+            log.channels[name] = Channel(name, channel.t, channel.values, channel.unit)
     return log
 
 
@@ -191,7 +191,8 @@ def _cut(channel: Channel, bounds: tuple[int, int] | None, t: np.ndarray | None)
         values = channel.values[bounds[0] : bounds[1]]
     cut = object.__new__(Channel)  # arrays already checked (`Channel.sharing_time`)
     cut.name, cut.unit, cut.t = channel.name, channel.unit, t
-    cut.values = values.astype(np.float64, copy=False)
+    with np.errstate(invalid="ignore"):  # a float32 signalling NaN made quiet, as `Channel` makes it
+        cut.values = values.astype(np.float64, copy=False)
     return cut
 
 
