@@ -45,13 +45,14 @@ class ColumnLayout:
     """A message format's flattened fields (names, pyulog's types, sizes) and where each lies in
     its packed record. What the reader asks of it is worked out on the first request."""
 
-    __slots__ = ("names", "kinds", "sizes", "width", "_lists", "_place", "_last")
+    __slots__ = ("names", "kinds", "sizes", "width", "_lists", "_place", "_columns", "_last")
 
     def __init__(self, names: list[str], kinds: list[str], sizes: list[int]) -> None:
         self.names, self.kinds, self.sizes = names, kinds, sizes
         self.width = sum(sizes)
         self._lists: tuple[list[str], list[str]] | None = None
         self._place: dict[str, tuple[int, int]] | None = None
+        self._columns: tuple[dict[str, int], np.ndarray, np.ndarray] | None = None  # index, offsets, codes
         self._last: tuple[list[str], np.ndarray, np.ndarray] | None = None  # the last field list asked for
 
     def lists(self) -> tuple[list[str], list[str]]:
@@ -73,8 +74,14 @@ class ColumnLayout:
         if known is not None and known[0] == names:  # the instances of a topic read the same fields
             offsets, codes = known[1], known[2]
         else:
-            places = np.array([self.place(name) for name in names], np.int64).reshape(-1, 2)
-            offsets, codes = places[:, 0].copy(), places[:, 1].copy()
+            if self._columns is None:  # every field's offset and type code, as arrays (a format has hundreds)
+                sizes = np.fromiter(self.sizes, np.int64, len(self.sizes))
+                every = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
+                types = np.fromiter(map(TYPE_CODES.__getitem__, self.kinds), np.int64, len(self.kinds))
+                self._columns = (dict(zip(self.names, range(len(self.names)))), every, types)
+            index, every, types = self._columns
+            picked = np.fromiter(map(index.__getitem__, names), np.int64, len(names))
+            offsets, codes = every[picked], types[picked]
             self._last = (names, offsets, codes)
         return _float_rows(records, records.size // self.width, self.width, offsets, codes)
 
@@ -125,7 +132,8 @@ def field_lists(names: list[str], kinds: list[str]) -> tuple[list[str], list[str
     """(numeric field names, text fields) of a format's flattened fields (names and pyulog's types),
     in order: the timestamp and padding are neither; a text (char) field is named once, without its
     index."""
-    if "char" not in kinds and not any(name.startswith("_padding") for name in names):  # the usual format
+    # the usual format: no text, no padding (one search of the names joined, not a test per name)
+    if "char" not in kinds and "\n_padding" not in "\n" + "\n".join(names):
         return [name for name in names if name != "timestamp"], []
     fields = zip(names, kinds)
     named = [(name, kind) for name, kind in fields if name != "timestamp" and not name.startswith("_padding")]

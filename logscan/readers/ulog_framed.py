@@ -104,14 +104,15 @@ class _Part:
     offset from ``base`` (uint32: a slice is 16 MiB), its payload size and its message id; and
     each id's count in it. 8 bytes a message, where whole-file arrays with a sort order took 26."""
 
-    __slots__ = ("base", "at", "sizes", "ids", "counts")
+    __slots__ = ("base", "at", "sizes", "ids", "counts", "first")
 
     def __init__(self, offsets: np.ndarray, sizes: np.ndarray, ids: np.ndarray) -> None:
         self.base = int(offsets[0]) if offsets.size else 0
         self.at = (offsets - self.base).astype(np.uint32)
         self.sizes, self.ids = sizes, ids
-        known, counts = np.unique(ids, return_counts=True)
+        known, first, counts = np.unique(ids, return_index=True, return_counts=True)
         self.counts = dict(zip(known.tolist(), counts.tolist(), strict=True))
+        self.first = dict(zip(known.tolist(), offsets[first].tolist(), strict=True))  # each id's first message
 
     def offsets_of(self, msg_id: int) -> tuple[np.ndarray, np.ndarray]:
         """(file offsets, payload sizes) of ``msg_id``'s data messages in this slice, in file order."""
@@ -189,9 +190,8 @@ class _Plan:
     def first_data(self) -> dict[int, int]:
         """Each message id's first data message's file offset."""
         first: dict[int, int] = {}
-        for part in self.parts:
-            for msg_id in part.counts.keys() - first.keys():
-                first[msg_id] = int(part.offsets_of(msg_id)[0][0])
+        for part in reversed(self.parts):  # the earliest part's last
+            first.update(part.first)
         return first
 
     def fill(self, subscription) -> None:
@@ -331,12 +331,19 @@ def parse_clean(path: str, names: list[str] | None, on_framed: Callable[[], None
     except (OSError, ValueError):  # unreadable or empty: the careful read says so
         return None
     try:
-        return _parse_mapped(
-            np.frombuffer(mapped, dtype=np.uint8), names, on_framed, partial(drop_mapped_pages, mapped)
-        )
+        return _parse_mapped(np.frombuffer(mapped, dtype=np.uint8), names, on_framed, _page_return(mapped))
     finally:
         with contextlib.suppress(BufferError):  # an array still viewing it keeps the map alive
             mapped.close()
+
+
+def _page_return(mapped: mmap.mmap) -> Callable[[int], None]:
+    """``give_back(offset)`` of the mapped file: its pages before the offset dropped from the
+    process; nothing for a file within one framing slice (`_FRAME_BYTES`), held whole by the
+    slice's walk anyway (two page drops per topic read are a tenth of a small log's read)."""
+    if len(mapped) <= _FRAME_BYTES:
+        return lambda offset: None
+    return partial(drop_mapped_pages, mapped)
 
 
 def _parse_mapped(
