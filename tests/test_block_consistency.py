@@ -5,6 +5,8 @@ says alignment's gate and gap warnings of the log from the blocks' own steps
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -138,7 +140,7 @@ def test_a_gap_across_a_border_is_counted_once_as_at_once(resumes_s, delay_s):
     _, second = _block(samples, steps[50:], first_s=10.0, delay_s=delay_s)
     expected = gap_lines(whole.gap_reports)
     assert len(expected) == 1 and ": 1 gap longer than" in expected[0]
-    assert alignment_lines([first, second], {}) == expected
+    assert alignment_lines([replace(first, number=1), replace(second, number=2)], {}) == expected
 
 
 def test_the_log_says_its_gate_closed_over_the_blocks_own_steps():
@@ -153,7 +155,9 @@ def test_the_log_says_its_gate_closed_over_the_blocks_own_steps():
     _, first = _block(samples, steps[:100], closed=closed[:100], said=[said])
     _, second = _block(samples, steps[50:], first_s=10.0, closed=closed[50:])
     assert said in first.said
-    assert alignment_lines([first, second], {"gnss": _GATE}) == [gate_line("gnss", "/gps/fix", 3, 0.3, 20.0)]
+    assert alignment_lines([first, replace(second, number=1)], {"gnss": _GATE}) == [
+        gate_line("gnss", "/gps/fix", 3, 0.3, 20.0)
+    ]
     assert alignment_lines([], {}) == []
 
 
@@ -179,3 +183,39 @@ def test_a_real_ulog_in_short_blocks_gives_the_warnings_of_the_log_at_once(name)
     assert len(own) == 2
     assert [w for w in blocks.warnings if w not in own] == whole.warnings
     assert any(" gap" in w for w in whole.warnings) and any("below 3 for" in w for w in whole.warnings)
+
+
+def test_the_logs_alignment_lines_stand_after_the_first_blocks_run_warnings():
+    """As at once: after the profile's notes, the reader's and alignment's own warnings, before the
+    filter's; where the first block's run warned of nothing, after the notes and the reader's."""
+    from types import SimpleNamespace
+
+    from logscan.pipeline.block_fold import _after_alignment
+
+    def block(run_warnings, warnings):
+        prepared = SimpleNamespace(
+            run=SimpleNamespace(warnings=run_warnings),
+            loaded=SimpleNamespace(notes=["note"]),
+            log=SimpleNamespace(source=SimpleNamespace(warnings=["read"])),
+        )
+        return SimpleNamespace(prepared=prepared, warnings=warnings)
+
+    assert _after_alignment(block(["aligned", "gaps"], ["nis", "note", "read", "aligned", "gaps", "filter"])) == 5
+    assert _after_alignment(block([], ["nis", "note", "read", "filter diverged"])) == 3
+    assert _after_alignment(block([], ["filter diverged"])) == 0
+
+
+@pytest.mark.parametrize(("resumes_s", "longest"), [(25.0, "17.100"), (12.0, "2.000")])
+def test_a_gap_running_into_a_block_not_analysed_is_counted_once(resumes_s, longest):
+    """Block 2 of 3 (10-20 s) refused (the log holds too little there). A channel silent from 7.9 s
+    until 25 s: block 3, led in from 15 s, has the gap whole from its last sample; until 12 s: no
+    block has its end, so block 1's stretch counts, to its border."""
+    from logscan.pipeline.block_alignment import alignment_lines
+
+    samples = np.r_[np.arange(0, 80) * 0.1, resumes_s + np.arange(0, 200) * 0.1]
+    steps = np.arange(300) * 0.1
+    _, first = _block(samples, steps[:100])
+    _, third = _block(samples, steps[150:], first_s=20.0)
+    lines = alignment_lines([replace(first, number=1), replace(third, number=3)], {})
+    assert len(lines) == 1 and ": 1 gap longer than" in lines[0]
+    assert f"(longest {longest} s from t=7.900 s)" in lines[0]

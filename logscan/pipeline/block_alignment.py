@@ -28,6 +28,7 @@ class AlignmentFigures:
     gaps: list[GapReport]
     step_s: float
     said: frozenset[str]
+    number: int = 0  # the block's number of the log's (`BlockSpan.number`), set as it is folded in
 
 
 def alignment_figures(run, specs: dict, first: int) -> AlignmentFigures:
@@ -49,7 +50,9 @@ def alignment_figures(run, specs: dict, first: int) -> AlignmentFigures:
 
 def alignment_lines(blocks: list[AlignmentFigures], specs: dict) -> list[str]:
     """The gate lines of the groups whose gate closed in some block, then the gap lines, of the
-    ``blocks`` in order (the stretch each but the last ends its span in is the next one's)."""
+    ``blocks`` in order. The stretch a block ends its span in is the next block's; after a block
+    that could not be analysed, the next one analysed has it when it ends there (from the same
+    last sample), else it is counted to the border."""
     if not blocks:
         return []
     step_s = blocks[0].step_s
@@ -61,7 +64,7 @@ def alignment_lines(blocks: list[AlignmentFigures], specs: dict) -> list[str]:
             total[0] += gated
             total[1] += steps
         for report in block.gaps:
-            cut = report.open_end and k < len(blocks) - 1 and report.ends.size  # the next block's
+            cut = report.open_end and report.ends.size and _ended_after(blocks, k, report)
             ends = slice(0, report.ends.size - 1) if cut else slice(None)
             pieces.setdefault((report.name, report.limit), []).append(
                 GapReport(report.name, report.limit, report.starts[ends], report.ends[ends])
@@ -76,3 +79,16 @@ def alignment_lines(blocks: list[AlignmentFigures], specs: dict) -> list[str]:
         for (name, limit), parts in pieces.items()
     ]
     return gates + gap_lines(reports)
+
+
+def _ended_after(blocks: list[AlignmentFigures], k: int, report: GapReport) -> bool:
+    """Whether a later block has the stretch ``report`` (block ``k``'s) ends its span in: the next
+    block does, when it is the next of the log; after one not analysed, the next analysed one
+    when it has a gap from the same last sample."""
+    if k == len(blocks) - 1:
+        return False
+    after = blocks[k + 1]
+    if after.number == blocks[k].number + 1:
+        return True
+    start = report.starts[-1]
+    return any(g.name == report.name and g.limit == report.limit and start in g.starts for g in after.gaps)

@@ -156,6 +156,17 @@ class _Detector:
         return sum(c.nbytes() for c in (self.series, self.extras, self.judged, self.uppers, self.lowers))
 
 
+def _after_alignment(block: Analysis) -> int:
+    """The index in ``block.warnings`` just after its run's alignment warnings (their last: its gap
+    lines); without any, after the profile's notes and the reader's warnings, where they would stand."""
+    prepared = block.prepared
+    for said in (set(prepared.run.warnings), {*prepared.loaded.notes, *prepared.log.source.warnings}):
+        marks = [k for k, line in enumerate(block.warnings) if line in said]
+        if marks:
+            return marks[-1] + 1
+    return 0
+
+
 def _pieces(result: DetectorResult) -> tuple:
     """The result's series, extras, judged masks, upper and lower thresholds (name -> array)."""
     bands = result.thresholds
@@ -179,7 +190,7 @@ class BlockFold:
         self.coverages: list = []  # each block's coverage in figures: the log's is their sum
         self.consistency: list = []  # each block's groups' NIS: the log's consistency warnings judge their sum
         self.alignment: list = []  # each block's gate and gap figures: the log's lines sum them
-        self.alignment_at = 0  # where the first block's alignment lines stood among its warnings kept
+        self.alignment_before: list[str] = []  # the first block's lines kept before its alignment lines
         self.spans: list[BlockSpan] = []  # the blocks folded in, in order
         self.incidents: list = []
         self.input_gaps: list = []
@@ -213,13 +224,13 @@ class BlockFold:
         own |= block.consistency.said if block.consistency is not None else frozenset()
         own |= block.alignment.said if block.alignment is not None else frozenset()
         self.warnings.append([line for line in block.warnings if line not in own])
-        if not self.spans and block.alignment is not None:  # the log's lines go where the first block's were
-            aligned = [k for k, line in enumerate(block.warnings) if line in block.alignment.said]
-            self.alignment_at = sum(line not in own for line in block.warnings[: aligned[0]]) if aligned else 0
+        if not self.spans:  # the log's alignment lines go where the first block's run said its own
+            self.alignment_before = [line for line in block.warnings[: _after_alignment(block)] if line not in own]
         self.unchecked.append([line for line in block.unchecked if line not in own])
         self.coverages.append(block.coverage)
         self.consistency.append(block.consistency)
-        self.alignment += [block.alignment] if block.alignment is not None else []
+        if block.alignment is not None:
+            self.alignment.append(replace(block.alignment, number=span.number))
         self.spans.append(span)
         self.incidents += block.incidents
         self.input_gaps += block.input_gaps
@@ -261,8 +272,8 @@ class BlockFold:
             merged.unchecked += lines
             merged.warnings += [merged.unjudged] if merged.unjudged else []
         specs = getattr(prepared.profile, "measurements", {})
-        at = self.alignment_at
-        merged.warnings[at:at] = alignment_lines(self.alignment, specs)  # where the first block said its own
+        at = len(said_once([self.alignment_before]))  # where the first block's run said its own, as at once
+        merged.warnings[at:at] = alignment_lines(self.alignment, specs)
         # first, as at once: they question every verdict
         merged.warnings[:0] = consistency_lines(summed(self.consistency), prepared, merged.results)
         merged.input_gaps = self.input_gaps
