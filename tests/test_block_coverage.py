@@ -145,3 +145,21 @@ def test_a_blocks_stopped_sensor_counts_only_the_blocks_own_judged_time():
     run = SimpleNamespace(n_steps=100, t=t, dt=0.1, groups={"baro": SimpleNamespace(z=z, gate_closed=None)})
     assert stopped_groups(run, None)["baro"] == Stop(pytest.approx(5.0), pytest.approx(4.9))
     assert stopped_groups(run, None, from_s=6.0)["baro"] == Stop(pytest.approx(5.0), pytest.approx(4.0))
+
+
+@pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
+def test_a_block_past_the_profiles_sensors_is_not_analysed_and_says_why():
+    """A block whose own span holds no grid step (the log's other topics run on after its IMU
+    stops: its lead-in alone has steps) raised IndexError; it is a block not analysed, said."""
+    from conftest import need_testdata
+
+    from logscan.pipeline.blocks import _in_blocks
+    from logscan.pipeline.preparation import load_profile_for
+
+    path = need_testdata("px4-ulog/sample_px4_events.ulg")
+    merged = _in_blocks(path, None, load_profile_for(path, None), [(None, 31.0), (31.3, 40.0)], (None, None), {})
+    assert merged.unchecked[-1] == (
+        "block 2 of 2 (31.3-40.0 s) not analysed: no grid step of its own: the profile's sensors have no "
+        "sample there (the grid ends at 31.1 s)"
+    )
+    assert merged.exit_code() == 2

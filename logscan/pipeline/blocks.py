@@ -223,8 +223,11 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
             except LogscanError as exc:  # a block the log holds too little of (a long gap): the others stand
                 refused.append((k, exc))
                 continue
-            focus = _focus_share(fold, len(windows) - k)
             from_s = None if led is None else start_s
+            if from_s is not None and float(analysis.run.t[-1]) < from_s - BORDER_GAP_S:  # its lead-in only
+                refused.append((k, _no_own_steps(analysis)))
+                continue
+            focus = _focus_share(fold, len(windows) - k)
             first_s = float(analysis.run.t[0]) if from_s is None else from_s
             quoted = first_quoted(analysis, first_s)
             reduce_block(analysis, width, from_s, points, focus, quoted, carried)
@@ -263,6 +266,14 @@ def _asked(asked_s: float | None, block_s: float) -> str:
     if asked_s is None:
         return f"blocks of {block_s:g} s"
     return f"--block-s {asked_s:g}" + ("" if f"{asked_s:g}" == f"{block_s:g}" else f" (blocks of {block_s:g} s)")
+
+
+def _no_own_steps(analysis) -> LogscanError:
+    """Why a block whose grid is its lead-in alone (the profile's sensors end before it) is not analysed."""
+    end = float(analysis.run.t[-1])
+    return LogscanError(
+        f"no grid step of its own: the profile's sensors have no sample there (the grid ends at {end:.1f} s)"
+    )
 
 
 def _refused_line(windows: list, k: int, n: int, exc: LogscanError) -> str:
