@@ -25,6 +25,7 @@ from logscan.verdict.incidents import InputGap, signal_label
 from logscan.verdict.input_fault import KinematicEvidence
 
 if TYPE_CHECKING:  # what an analysis carries from the layers that built it (no runtime edge)
+    from logscan.pipeline.block_alignment import AlignmentFigures
     from logscan.pipeline.stages import Prepared
     from logscan.recovery.records import Recovery
     from logscan.report.recovery_view import RecoveryView
@@ -57,7 +58,7 @@ class Analysis:
     # the groups' NIS the consistency warnings judge (block mode judges the blocks' sum; None: no filter)
     consistency: NisConsistency | None = field(default=None, repr=False)
     # a block's gate and gap figures of its own steps (`logscan.pipeline.block_alignment`; None: at once)
-    alignment: Any = field(default=None, repr=False)
+    alignment: AlignmentFigures | None = field(default=None, repr=False)
     # (N,) the grid steps the [alarms] suspension held back (None: none): where judging resumed
     # after it, an incident's source is not the alarm that happened to update first
     suspended: np.ndarray | None = field(default=None, repr=False)

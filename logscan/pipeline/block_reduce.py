@@ -20,6 +20,7 @@ from logscan.report.context_join import own_part
 from logscan.report.kept_views import kept_rows
 from logscan.report.sensor_figures import REDUCED_POINTS
 from logscan.results import Band, DetectorResult
+from logscan.verdict.coverage import own_steps
 
 # Each series of the merged log keeps about this many points (two per bucket: the report draws at
 # most `logscan.report.decimate.DEFAULT_MAX_POINTS`, 5000, of a series, so ten times that leaves
@@ -132,7 +133,7 @@ def reduce_block(
     alarms already seen from it), cut off. Returns it."""
     prepared = analysis.prepared
     t = prepared.run.t
-    first = 0 if from_s is None else int(np.searchsorted(t, from_s - 1e-9))
+    first = 0 if from_s is None else own_steps(t, from_s)
     # the gate and gap figures of its own steps, before the aligned signals go (the log's lines sum them)
     analysis.alignment = alignment_figures(prepared.run, getattr(prepared.profile, "measurements", {}), first)
     if prepared.trace is not None and first:  # the filter's counts of the block's own steps

@@ -33,6 +33,7 @@ from logscan.readers import detect_format
 from logscan.readers.mcap.span import indexed_span_s
 from logscan.report.kept_views import FOCUS_ROWS
 from logscan.report.sensor_figures import REDUCED_POINTS
+from logscan.verdict.coverage import own_steps
 from logscan.verdict.observability import WARMUP_S as OBSERVABILITY_WARMUP_S
 from logscan.verdict.observability import WINDOW_S as OBSERVABILITY_WINDOW_S
 
@@ -224,7 +225,7 @@ def _in_blocks(path, profile_path, loaded, windows: list, window: tuple, options
                 refused.append((k, exc))
                 continue
             from_s = None if led is None else start_s
-            if from_s is not None and float(analysis.run.t[-1]) < from_s - BORDER_GAP_S:  # its lead-in only
+            if from_s is not None and own_steps(analysis.run.t, from_s) == analysis.run.n_steps:  # its lead-in only
                 refused.append((k, _no_own_steps(analysis)))
                 continue
             focus = _focus_share(fold, len(windows) - k)

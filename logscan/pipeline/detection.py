@@ -120,8 +120,7 @@ def _consistency(analysis: Analysis, judged_from_s: float | None) -> list[str]:
     the blocks' sum, `block_fold`), its groups' NIS kept in ``analysis.consistency``."""
     prepared = analysis.prepared
     first = 0 if judged_from_s is None else own_steps(prepared.run.t, judged_from_s)
-    judged = judged_steps(prepared.profile, prepared.run, prepared.filter_from)
-    analysis.consistency = nis_consistency(prepared.trace, judged, first)
+    analysis.consistency = _group_nis(prepared, first)
     lines = consistency_lines(analysis.consistency, prepared, analysis.results)
     if analysis.consistency is not None:
         analysis.consistency.said = frozenset(lines)
@@ -212,8 +211,12 @@ def _run_one(detector, prepared: Prepared, policy) -> DetectorResult:
 
 def consistency_warnings(prepared: Prepared, results: Sequence[DetectorResult] = ()) -> list[str]:
     """The filter's consistency warnings of the whole run (`NisConsistency.lines`)."""
-    consistency = nis_consistency(prepared.trace, judged_steps(prepared.profile, prepared.run, prepared.filter_from))
-    return consistency_lines(consistency, prepared, results)
+    return consistency_lines(_group_nis(prepared), prepared, results)
+
+
+def _group_nis(prepared: Prepared, first: int = 0) -> NisConsistency | None:
+    """Each group's NIS at its updates from step ``first`` on, and which the [alarms] policy judges."""
+    return nis_consistency(prepared.trace, judged_steps(prepared.profile, prepared.run, prepared.filter_from), first)
 
 
 def consistency_lines(

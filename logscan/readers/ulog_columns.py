@@ -10,8 +10,6 @@ signalling NaN made quiet as numpy's cast makes it; 64-bit integers rounded to n
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 from numba import njit
 
@@ -32,10 +30,18 @@ TYPE_CODES = {
     "float": 8,
     "double": 9,
 }
-_SIZES = np.array([1, 1, 2, 2, 4, 4, 8, 8, 4, 8], np.int64)
-# The type codes float32 holds every value of exactly (8 and 16-bit integers, bool, float): a log
-# held for block mode's windows keeps those fields as float32 (`ColumnLayout.held_rows`)
-EXACT_IN_FLOAT32 = frozenset((0, 1, 2, 3, 8))
+# each type code's numpy type (its size: the kernel's bytes per field)
+_TYPES = (np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32, np.int64, np.uint64, np.float32, np.float64)
+_SIZES = np.array([np.dtype(kind).itemsize for kind in _TYPES], np.int64)
+
+
+def exact_in_float32(dtype) -> bool:
+    """Whether float32 holds every value of ``dtype`` exactly (8 and 16-bit integers, bool, float):
+    a log held for block mode's windows keeps such fields as float32 (`ColumnLayout.held_rows`)."""
+    return bool(np.can_cast(dtype, np.float32, "safe"))
+
+
+EXACT_IN_FLOAT32 = frozenset(code for code, kind in enumerate(_TYPES) if exact_in_float32(kind))  # type codes
 # Records converted at a time by `held_rows`: a long topic is never float64 whole (16 MiB of a
 # 32-field topic's float64 at a time)
 HELD_CHUNK = 1 << 16
@@ -45,13 +51,12 @@ class ColumnLayout:
     """A message format's flattened fields (names, pyulog's types, sizes) and where each lies in
     its packed record. What the reader asks of it is worked out on the first request."""
 
-    __slots__ = ("names", "kinds", "sizes", "width", "_lists", "_place", "_columns", "_last")
+    __slots__ = ("names", "kinds", "sizes", "width", "_lists", "_columns", "_last")
 
     def __init__(self, names: list[str], kinds: list[str], sizes: list[int]) -> None:
         self.names, self.kinds, self.sizes = names, kinds, sizes
         self.width = sum(sizes)
         self._lists: tuple[list[str], list[str]] | None = None
-        self._place: dict[str, tuple[int, int]] | None = None
         self._columns: tuple[dict[str, int], np.ndarray, np.ndarray] | None = None  # index, offsets, codes
         self._last: tuple[list[str], np.ndarray, np.ndarray] | None = None  # the last field list asked for
 
@@ -61,12 +66,22 @@ class ColumnLayout:
             self._lists = field_lists(self.names, self.kinds)
         return self._lists
 
+    def _places(self, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(byte offsets in the record, type codes) of the fields ``names``, picked from arrays of
+        every field's made once (a format has hundreds)."""
+        if self._columns is None:
+            sizes = np.fromiter(self.sizes, np.int64, len(self.sizes))
+            every = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
+            types = np.fromiter(map(TYPE_CODES.__getitem__, self.kinds), np.int64, len(self.kinds))
+            self._columns = (dict(zip(self.names, range(len(self.names)))), every, types)
+        index, every, types = self._columns
+        picked = np.fromiter(map(index.__getitem__, names), np.int64, len(names))
+        return every[picked], types[picked]
+
     def place(self, name: str) -> tuple[int, int]:
         """(byte offset in the record, type code) of field ``name``."""
-        if self._place is None:
-            offsets = itertools.accumulate(self.sizes[:-1], initial=0)
-            self._place = dict(zip(self.names, zip(offsets, map(TYPE_CODES.__getitem__, self.kinds))))
-        return self._place[name]
+        offsets, codes = self._places([name])
+        return int(offsets[0]), int(codes[0])
 
     def rows(self, records: np.ndarray, names: list[str]) -> np.ndarray:
         """(len(names), samples) float64: the fields ``names`` of the packed ``records`` (uint8)."""
@@ -74,14 +89,7 @@ class ColumnLayout:
         if known is not None and known[0] == names:  # the instances of a topic read the same fields
             offsets, codes = known[1], known[2]
         else:
-            if self._columns is None:  # every field's offset and type code, as arrays (a format has hundreds)
-                sizes = np.fromiter(self.sizes, np.int64, len(self.sizes))
-                every = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
-                types = np.fromiter(map(TYPE_CODES.__getitem__, self.kinds), np.int64, len(self.kinds))
-                self._columns = (dict(zip(self.names, range(len(self.names)))), every, types)
-            index, every, types = self._columns
-            picked = np.fromiter(map(index.__getitem__, names), np.int64, len(names))
-            offsets, codes = every[picked], types[picked]
+            offsets, codes = self._places(names)
             self._last = (names, offsets, codes)
         return _float_rows(records, records.size // self.width, self.width, offsets, codes)
 
@@ -90,8 +98,9 @@ class ColumnLayout:
         array) where the field's type is one float32 holds exactly (`EXACT_IN_FLOAT32`), float64
         (rows of another) for the others; the float32 ones converted `HELD_CHUNK` records at a time,
         so a long topic is never held whole as float64 (a log held for block mode's windows)."""
-        short = [name for name in names if self.place(name)[1] in EXACT_IN_FLOAT32]
-        wide = [name for name in names if self.place(name)[1] not in EXACT_IN_FLOAT32]
+        exact = [code in EXACT_IN_FLOAT32 for code in self._places(names)[1].tolist()]
+        short = [name for name, narrow in zip(names, exact, strict=True) if narrow]
+        wide = [name for name, narrow in zip(names, exact, strict=True) if not narrow]
         rows = dict(zip(wide, self.rows(records, wide) if wide else (), strict=True))
         if short:
             count = records.size // self.width

@@ -180,6 +180,7 @@ class _Plan:
         self.give_back = give_back
         self.parts = parts
         self.kept: tuple[np.ndarray, np.ndarray, np.ndarray] = (_NO_MESSAGES, _NO_MESSAGES, _EMPTY)
+        self.split = buf.size  # where the data section starts: its first 'A', 'L' or 'C' message
         self.queries = _NO_MESSAGES  # file offsets of the messages whose time is the data's so far (`_set_times`)
         # per topic read: its timestamps (a strided view of its buffer) and how many of them lie
         # before each of ``queries`` in the file
@@ -313,7 +314,7 @@ def _clean_plan(buf: np.ndarray, give_back: Callable[[int], None]) -> _Plan | No
     if any(int(part.sizes.min()) < 2 for part in parts):
         return None
     plan = _Plan(buf, parts, give_back)
-    plan.kept = (offsets, sizes.astype(np.int64), types)
+    plan.kept, plan.split = (offsets, sizes.astype(np.int64), types), split
     plan.appended = appended or None
     sub_at = dict(zip(sub_ids.tolist(), subscribe.tolist(), strict=True))
     if any(msg_id not in sub_at or sub_at[msg_id] > at for msg_id, at in plan.first_data().items()):
@@ -355,7 +356,7 @@ def _parse_mapped(
     if on_framed is not None:
         on_framed()
     kept_offsets, kept_sizes, kept_types = plan.kept
-    changes, dropouts = _timed_by_data(kept_offsets, kept_types)
+    changes, dropouts = _timed_by_data(kept_offsets, kept_types, plan.split)
     plan.queries = np.concatenate((changes, dropouts))
     reduced_array = _compact(buf, _HEADER_BYTES, kept_offsets, kept_sizes, give_back)
     if plan.appended is not None:  # read straight through: the same messages in the same order
@@ -374,12 +375,10 @@ def _parse_mapped(
     return ulog, _CleanRead(), io.StringIO()
 
 
-def _timed_by_data(offsets: np.ndarray, types: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(file offsets of the parameter changes, of the dropouts) in the data section: pyulog times
-    each by the data read before it."""
-    section = np.flatnonzero(np.isin(types, _SECTION_END))
-    first = int(offsets[section[0]]) if section.size else -1
-    in_data = offsets >= first if first >= 0 else np.zeros(offsets.size, bool)
+def _timed_by_data(offsets: np.ndarray, types: np.ndarray, split: int) -> tuple[np.ndarray, np.ndarray]:
+    """(file offsets of the parameter changes, of the dropouts) in the data section (from file
+    offset ``split``): pyulog times each by the data read before it."""
+    in_data = offsets >= split
     return offsets[in_data & (types == ord("P"))], offsets[in_data & (types == ord("O"))]
 
 

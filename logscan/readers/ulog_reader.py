@@ -58,7 +58,7 @@ from logscan.readers.common import (
     stat_input,
     topic_wanted,
 )
-from logscan.readers.ulog_columns import field_lists, stamp_facts
+from logscan.readers.ulog_columns import exact_in_float32, field_lists, stamp_facts
 from logscan.readers.ulog_damage import (
     _UNTIMED_WHY,
     MAX_TIMESTAMP_US,
@@ -80,8 +80,6 @@ _BEYOND_WHY = "timestamp beyond int64 nanoseconds (damaged)"
 _STAGE_SHARES = (0.15, 0.35, 0.50)
 _FRAMED, _PARSED, _CONVERTED = range(3)
 _DATA_HEADER_BYTES = 5  # a data message's size, type and msg_id before its payload
-# pyulog's column types float32 holds every value of exactly (`read_ulog`'s ``held``)
-_EXACT_IN_FLOAT32 = tuple(np.dtype(kind) for kind in ("int8", "uint8", "int16", "uint16", "float32", "bool"))
 
 
 def message_filter(wanted: set[str] | None) -> list[str] | None:
@@ -266,7 +264,7 @@ def _topic_channels(
     for name in fields_read:
         channel = prefix + name
         column = columns[name] if keep is None else columns[name][keep]
-        if held and column.dtype in _EXACT_IN_FLOAT32:
+        if held and exact_in_float32(column.dtype):
             channels[channel] = Channel.held(channel, t_ns, column.astype(np.float32))
         else:
             channels[channel] = Channel(channel, t_ns, column.astype(np.float64, copy=keep is None))
