@@ -25,6 +25,7 @@ import numpy as np
 
 from logscan.align.sample_hold import clean_samples, time_order
 from logscan.log import Channel, Log, WholeTimes
+from logscan.readers import spill
 from logscan.readers.common import ReadWindow, file_stat
 
 _NS = 1_000_000_000
@@ -45,6 +46,11 @@ class HeldLog:
     times: dict[str, WholeTimes] = field(default_factory=dict)
     never_finite: frozenset[str] = frozenset()
     out_of_order: frozenset[int] = frozenset()
+    span: tuple[int | None, int | None] | None = None  # the log's first and last time (ns)
+
+    def __post_init__(self) -> None:
+        if self.span is None:  # each a pass over every time array: once, not once per window
+            self.span = (self.log.start_ns, self.log.end_ns)
 
 
 def held_window(path: str, window: ReadWindow, topics: frozenset[str], read: Callable[[], Log]) -> Log:
@@ -55,9 +61,10 @@ def held_window(path: str, window: ReadWindow, topics: frozenset[str], read: Cal
     stat = file_stat(path)
     if not isinstance(held, HeldLog) or held.stat != stat or held.topics != topics:
         log = read()
-        found = whole_times(log)
-        narrow(log)
-        held = plans[path] = HeldLog(log, stat, topics, *found)
+        with spill.spilling(any(spill.on_disk(channel.t) for channel in log.channels.values())):
+            found = whole_times(log)  # a long log held on disk: the cleaned times there too
+            narrow(log)
+            held = plans[path] = HeldLog(log, stat, topics, *found)
     return window_of(held, window)
 
 
@@ -66,11 +73,12 @@ def narrow(log: Log) -> None:
     float, 8 to 16-bit and small integer fields: most of a PX4 log, half the bytes), the others as
     float64 copies of their own (a topic's fields are rows of one array, kept whole by any row left);
     each window's channels are float64 again (`_cut`). In place: the log is the held read's alone.
-    Channels read as float32 already (`read_log`'s ``held``) are kept as they are."""
+    Channels read as float32 already (`read_log`'s ``held``) or kept on disk (`logscan.readers.spill`) are
+    kept as they are."""
     channels = {}
     for name, channel in log.channels.items():
         values = channel.values
-        if values.dtype == np.float32:
+        if values.dtype == np.float32 or spill.on_disk(values):  # on disk: held without memory
             channels[name] = channel
             continue
         narrowed = values.astype(np.float32)
@@ -105,6 +113,7 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
         if order is None:
             order = orders[key] = time_order(channel.t)
         finite = np.isfinite(channel.values)
+        spill.passed(channel.values.nbytes + channel.t.nbytes)  # a long log's, on disk: given back as read
         if finite.all():
             found = shared.get(key)
             if found is None:
@@ -113,10 +122,20 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
         elif finite.any():
             cleaned = clean_samples(channel.t, channel.values, order)
             if cleaned.t.size:
-                times[name] = _times_of(cleaned.t)
+                times[name] = _times_of(_kept(cleaned.t))
         else:
             never.append(name)
     return times, frozenset(never), frozenset(key for key, order in orders.items() if order.unsorted)
+
+
+def _kept(t: np.ndarray) -> np.ndarray:
+    """``t`` copied to an array of `spill.empty` (on disk within `spill.spilling`), else itself."""
+    kept = spill.empty(t.size, t.dtype)
+    if not spill.on_disk(kept):
+        return t
+    kept[:] = t
+    spill.passed(kept.nbytes)
+    return kept
 
 
 def _times_of(unique: np.ndarray) -> WholeTimes:
@@ -125,6 +144,7 @@ def _times_of(unique: np.ndarray) -> WholeTimes:
     def batches() -> Iterator[np.ndarray]:
         for lo in range(0, unique.size, _BATCH):
             yield unique[lo : lo + _BATCH]
+            spill.passed(_BATCH * unique.itemsize)
 
     def fetch(lo_ns: int, hi_ns: int) -> np.ndarray:
         return unique[np.searchsorted(unique, lo_ns, "left") : np.searchsorted(unique, hi_ns, "right")]
@@ -136,6 +156,7 @@ def window_of(held: HeldLog, window: ReadWindow) -> Log:
     """The window of ``held``'s log (module docstring): a new `Log` of views of its samples, the
     channels of one time array sharing one, with its own copy of the source facts (an analysis
     adds warnings to them)."""
+    spill.give_back()  # the block before's pages of a log held on disk
     whole = held.log
     origin = whole.origin_ns
     margin = round(window.margin_s * _NS)
@@ -158,7 +179,7 @@ def window_of(held: HeldLog, window: ReadWindow) -> Log:
     )
     channels = {name: cuts[name] for name in whole.channels}  # in the read's order
     log = Log(channels=channels, source=source, truth=whole.truth, profile_text=whole.profile_text)
-    start, end = whole.start_ns, whole.end_ns
+    start, end = held.span or (None, None)
     if start is not None and end is not None and origin is not None:
         log.read_as_window((start, end), held.times, zero_ns=origin)
     return log

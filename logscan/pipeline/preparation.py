@@ -36,7 +36,7 @@ from logscan.pipeline.step_counter import counted_steps
 from logscan.profiles import builtin, load_profile, parse_profile, ros
 from logscan.profiles.schema import MAX_DELAY_S
 from logscan.profiles.starter import STARTER_FORMATS
-from logscan.readers import detect_format, read_embedded_profile, read_log
+from logscan.readers import detect_format, read_embedded_profile, read_log, spill
 from logscan.readers.common import ReadWindow
 from logscan.readers.csv_reader import csv_log_name
 from logscan.report.run_context import STATE_TOPICS, run_context
@@ -125,6 +125,8 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
         except InputError:  # a topic it needs is missing: from the log, or from what damage left of it
             _raise_if_damaged(log, path)
             raise
+        finally:
+            spill.give_back()  # the pages the profile read of a long log held on disk
     else:
         return None
     if built is None:

@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from logscan.numba_cache import follow_dependencies
+from logscan.readers import spill
 
 # pyulog's primitive types -> the kernel's type codes (bool and char are int8 in pyulog's dtype)
 TYPE_CODES = {
@@ -96,19 +97,24 @@ class ColumnLayout:
     def held_rows(self, records: np.ndarray, names: list[str]) -> list[np.ndarray]:
         """The fields ``names`` of the packed ``records`` as rows, in order: float32 (rows of one
         array) where the field's type is one float32 holds exactly (`EXACT_IN_FLOAT32`), float64
-        (rows of another) for the others; the float32 ones converted `HELD_CHUNK` records at a time,
-        so a long topic is never held whole as float64 (a log held for block mode's windows)."""
+        (rows of another) for the others; converted `HELD_CHUNK` records at a time into arrays of
+        `logscan.readers.spill.empty` (on disk within `spill.spilling`), so a long topic is never held
+        whole as float64 (a log held for block mode's windows)."""
         exact = [code in EXACT_IN_FLOAT32 for code in self._places(names)[1].tolist()]
-        short = [name for name, narrow in zip(names, exact, strict=True) if narrow]
-        wide = [name for name, narrow in zip(names, exact, strict=True) if not narrow]
-        rows = dict(zip(wide, self.rows(records, wide) if wide else (), strict=True))
-        if short:
-            count = records.size // self.width
-            narrow = np.empty((len(short), count), np.float32)
+        count = records.size // self.width
+        rows: dict[str, np.ndarray] = {}
+        for kind, chosen in (
+            (np.float32, [n for n, e in zip(names, exact, strict=True) if e]),
+            (np.float64, [n for n, e in zip(names, exact, strict=True) if not e]),
+        ):
+            if not chosen:
+                continue
+            out = spill.empty((len(chosen), count), kind)
             for lo in range(0, count, HELD_CHUNK):
                 hi = min(lo + HELD_CHUNK, count)
-                narrow[:, lo:hi] = self.rows(records[lo * self.width : hi * self.width], short)
-            rows.update(zip(short, narrow, strict=True))
+                out[:, lo:hi] = self.rows(records[lo * self.width : hi * self.width], chosen)
+                spill.passed((hi - lo) * (self.width + out.itemsize * len(chosen)))
+            rows.update(zip(chosen, out, strict=True))
         return [rows[name] for name in names]
 
 

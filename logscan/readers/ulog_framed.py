@@ -37,6 +37,7 @@ from numba import njit
 
 from logscan.memory import drop_mapped_pages
 from logscan.numba_cache import follow_dependencies
+from logscan.readers import spill
 from logscan.readers.ulog_definitions import _HEADER_BYTES, build_ulog
 
 _DEFINITIONS = np.frombuffer(b"BFIMPQ", dtype=np.uint8)  # the types pyulog reads in the definitions
@@ -45,6 +46,7 @@ _DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads i
 _EMPTY = np.empty(0, np.uint8)
 _FRAME_BYTES = 16 << 20  # file bytes framed before their pages are given back
 _NO_MESSAGES = np.empty(0, np.int64)
+_RUN_CHUNK = 1 << 20  # timestamps per step of `_running_max_at`
 
 
 @njit(cache=True)
@@ -108,8 +110,8 @@ class _Part:
 
     def __init__(self, offsets: np.ndarray, sizes: np.ndarray, ids: np.ndarray) -> None:
         self.base = int(offsets[0]) if offsets.size else 0
-        self.at = (offsets - self.base).astype(np.uint32)
-        self.sizes, self.ids = sizes, ids
+        self.at = _kept(offsets - self.base, np.uint32)  # on disk for a long log held whole (`logscan.readers.spill`)
+        self.sizes, self.ids = _kept(sizes, np.uint16), _kept(ids, np.uint16)
         known, first, counts = np.unique(ids, return_index=True, return_counts=True)
         self.counts = dict(zip(known.tolist(), counts.tolist(), strict=True))
         self.first = dict(zip(known.tolist(), offsets[first].tolist(), strict=True))  # each id's first message
@@ -119,7 +121,16 @@ class _Part:
         if msg_id not in self.counts:
             return _NO_MESSAGES, _NO_MESSAGES
         chosen = np.flatnonzero(self.ids == msg_id)
+        spill.passed(self.ids.nbytes + chosen.size * 6)  # the ids read, the offsets and sizes picked
         return self.at[chosen].astype(np.int64) + self.base, self.sizes[chosen]
+
+
+def _kept(values: np.ndarray, dtype) -> np.ndarray:
+    """``values`` as ``dtype`` in an array of `spill.empty`."""
+    kept = spill.empty(values.size, dtype)
+    kept[:] = values
+    spill.passed(kept.nbytes)
+    return kept
 
 
 def _frame_file(buf: np.ndarray, start: int, give_back: Callable[[int], None]) -> tuple[list[_Part], tuple, int]:
@@ -205,7 +216,7 @@ class _Plan:
         if subscription.timestamp_idx < 0 or t_off + 8 > width:
             self.failed = True
             return
-        buffer = np.empty(count * width, np.uint8)
+        buffer = spill.empty(count * width, np.uint8)  # on disk for a long log held whole
         before = np.zeros(self.queries.size, np.int64)
         done = 0
         for part in self.parts:
@@ -219,6 +230,7 @@ class _Plan:
             before += np.searchsorted(offsets, self.queries)
             done += offsets.size
             self.give_back(int(offsets[-1]))
+            spill.passed(offsets.size * width)
         self.give_back(self.buf.size)
         subscription.buffer = buffer  # np.frombuffer reads it as is
         # each message's timestamp where it stands in the buffer (a strided view, not a copy)
@@ -311,7 +323,9 @@ def _clean_plan(buf: np.ndarray, give_back: Callable[[int], None]) -> _Plan | No
     sub_ids = buf[subscribe + 4].astype(np.int64) | (buf[subscribe + 5].astype(np.int64) << 8)
     if np.unique(sub_ids).size != sub_ids.size or (sizes[types == ord("A")] < 3).any():
         return None
-    if any(int(part.sizes.min()) < 2 for part in parts):
+    short = any(int(part.sizes.min()) < 2 for part in parts)
+    spill.give_back()  # the framing of a long log held on disk: read again as each topic is gathered
+    if short:
         return None
     plan = _Plan(buf, parts, give_back)
     plan.kept, plan.split = (offsets, sizes.astype(np.int64), types), split
@@ -390,10 +404,10 @@ def _set_times(ulog, plan: _Plan, changes: int) -> None:
     latest = np.full(plan.queries.size, start, np.uint64)
     last = start
     for stamps, before in plan.read:
-        running = np.maximum.accumulate(stamps)
+        at, top = _running_max_at(stamps, before - 1)
         seen = before > 0
-        latest[seen] = np.maximum(latest[seen], running[before[seen] - 1])
-        last = max(last, running[-1])
+        latest[seen] = np.maximum(latest[seen], at[seen])
+        last = max(last, top)
     if changes != len(ulog._changed_parameters):
         raise AssertionError("ULog framed read: parameter changes do not match")  # never: same messages
     ulog._changed_parameters = [
@@ -402,6 +416,21 @@ def _set_times(ulog, plan: _Plan, changes: int) -> None:
     for t, dropout in zip(latest[changes:], ulog._dropouts, strict=True):
         dropout.timestamp = int(t)
     ulog._last_timestamp = int(last)
+
+
+def _running_max_at(stamps: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.uint64]:
+    """(the running maximum of ``stamps`` at each index of ``at``, 0 where it is -1; their maximum),
+    `_RUN_CHUNK` stamps at a time: a long log's records are on disk (`logscan.readers.spill`)."""
+    found = np.zeros(at.size, np.uint64)
+    carry = np.uint64(0)
+    for lo in range(0, stamps.size, _RUN_CHUNK):
+        running = np.maximum.accumulate(stamps[lo : lo + _RUN_CHUNK])
+        np.maximum(running, carry, out=running)
+        inside = (at >= lo) & (at < lo + running.size)
+        found[inside] = running[at[inside] - lo]
+        carry = running[-1]
+        spill.passed(running.size * stamps.strides[0])  # the records it ran through
+    return found, carry
 
 
 class _CleanRead:

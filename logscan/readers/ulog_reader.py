@@ -49,6 +49,7 @@ import numpy as np
 
 from logscan.errors import CorruptLogError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.readers import spill
 from logscan.readers.common import (
     ZERO_TIMESTAMP_WHY,
     StagedBytes,
@@ -58,7 +59,7 @@ from logscan.readers.common import (
     stat_input,
     topic_wanted,
 )
-from logscan.readers.ulog_columns import exact_in_float32, field_lists, stamp_facts
+from logscan.readers.ulog_columns import HELD_CHUNK, exact_in_float32, field_lists, stamp_facts
 from logscan.readers.ulog_damage import (
     _UNTIMED_WHY,
     MAX_TIMESTAMP_US,
@@ -80,6 +81,12 @@ _BEYOND_WHY = "timestamp beyond int64 nanoseconds (damaged)"
 _STAGE_SHARES = (0.15, 0.35, 0.50)
 _FRAMED, _PARSED, _CONVERTED = range(3)
 _DATA_HEADER_BYTES = 5  # a data message's size, type and msg_id before its payload
+# A held read (block mode's, `read_ulog`'s ``held``) of a file from this size keeps its arrays on
+# disk (`logscan.readers.spill`): about 20 minutes of a PX4 log at its default rates, where the held
+# channels (two thirds of the file's bytes) start to weigh beside a block's analysis; below it the
+# files and mappings are not worth their cost.
+SPILL_FROM_BYTES = 64 << 20
+_FACTS_CHUNK = 1 << 20  # timestamps per call of `stamp_facts`
 
 
 def message_filter(wanted: set[str] | None) -> list[str] | None:
@@ -110,7 +117,14 @@ def read_ulog(
 
     ``progress(done, file size)`` (`StagedBytes`): after the framing pass, after the parse of the definitions,
     after each topic converted (the bytes of the data messages converted so far), and at the end.
-    A damaged file (read the careful way) is not framed: no call before pyulog's parse ends."""
+    A damaged file (read the careful way) is not framed: no call before pyulog's parse ends.
+    A held read of a file of `SPILL_FROM_BYTES` or more keeps its records and channels on disk
+    (`logscan.readers.spill`): a long log held whole holds in memory only what a step has in hand."""
+    with spill.spilling(held and stat_input(path).st_size >= SPILL_FROM_BYTES):
+        return _read_ulog(path, wanted, progress, held)
+
+
+def _read_ulog(path: str | os.PathLike, wanted: set[str] | None, progress, held: bool) -> Log:
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
     steps = None if progress is None else StagedBytes(progress, stat_input(path).st_size, _STAGE_SHARES)
     ulog, watch, chatter = _parse(path, wanted, None if steps is None else partial(steps.at, _FRAMED, 1.0))
@@ -157,7 +171,7 @@ def _read_topic(
     t_raw = records.stamps() if records is not None else None
     if t_raw is None:
         t_raw = _timestamps_u64(np.asarray(data.data["timestamp"]))
-    zeros, beyond, in_order = stamp_facts(t_raw, np.uint64(MAX_TIMESTAMP_US))
+    zeros, beyond, in_order = _stamp_facts(t_raw)
     keep = None
     if zeros:  # PX4 publishes timestamp 0 for a message never really set
         source.skip(f"messages of {topic}", ZERO_TIMESTAMP_WHY, zeros)
@@ -166,8 +180,7 @@ def _read_topic(
         lost.append(f"{beyond} message(s) of {topic} dropped: {_BEYOND_WHY}")
     if zeros or beyond:
         keep = (t_raw != 0) & (t_raw <= MAX_TIMESTAMP_US)
-    t_ns = (t_raw if keep is None else t_raw[keep]).astype(np.int64)  # a copy either way
-    t_ns *= 1000
+    t_ns = _nanoseconds(t_raw if keep is None else t_raw[keep])
     fields = _topic_channels(data, topic, t_ns, keep, wanted, source, channels, held)
     if keep is not None:  # in order once the dropped samples are out?
         in_order = bool((np.diff(t_ns) > 0).all())
@@ -186,6 +199,32 @@ def _read_topic(
     if not in_order:
         report_time_order(t_ns, topic, source, "ULog topics are written in time order: the file may be damaged")
     return lost
+
+
+def _stamp_facts(t_raw: np.ndarray) -> tuple[int, int, bool]:
+    """`stamp_facts` of the uint64 timestamps ``t_raw``, `_FACTS_CHUNK` at a time: a long log's
+    records are on disk (`logscan.readers.spill`), their pages given back as they are read."""
+    zeros = beyond = 0
+    in_order = True
+    for lo in range(0, t_raw.size, _FACTS_CHUNK):
+        chunk = t_raw[lo : lo + _FACTS_CHUNK]
+        found = stamp_facts(chunk, np.uint64(MAX_TIMESTAMP_US))
+        zeros, beyond = zeros + found[0], beyond + found[1]
+        in_order = in_order and found[2] and (lo == 0 or bool(chunk[0] > t_raw[lo - 1]))
+        spill.passed(chunk.size * t_raw.strides[0])  # the records it ran through
+    return zeros, beyond, in_order
+
+
+def _nanoseconds(t_us: np.ndarray) -> np.ndarray:
+    """int64 nanoseconds of the uint64 microseconds ``t_us`` (all below `MAX_TIMESTAMP_US`), in a
+    new array of `spill.empty` (on disk within `spill.spilling`), `HELD_CHUNK` at a time."""
+    t_ns = spill.empty(t_us.size, np.int64)
+    for lo in range(0, t_us.size, HELD_CHUNK):
+        chunk = t_ns[lo : lo + HELD_CHUNK]
+        chunk[:] = t_us[lo : lo + HELD_CHUNK]  # numpy's unsafe cast, as astype: exact below 2**63
+        chunk *= 1000
+        spill.passed(chunk.size * (chunk.itemsize + t_us.strides[0]))  # written, and the records read
+    return t_ns
 
 
 def _has_timestamp(data) -> bool:

@@ -1,0 +1,113 @@
+"""A reader's arrays held on disk: a long log's read held whole for block mode
+(`logscan.pipeline.held_window`).
+
+A PX4 ULog has no index, so block mode reads it whole once and cuts each block from that read:
+held in memory it made the peak grow by about 190 MB per log-hour. Within `spilling()`, the read's
+large arrays (its records, timestamps and channels: `empty`) are each backed by an unlinked
+temporary file, mapped shared: the kernel writes their pages to the file and reads them back when
+touched, and this process holds only the pages it touches until it gives them back
+(`give_back`, `passed`): what a step has in hand, not the log. The values are the same arrays'
+either way; only where the bytes wait differs. The files are in the temporary directory
+(``TMPDIR``) and go with their arrays (or the process); where one cannot be made (no space, no
+such directory, no ``madvise``), the array is an ordinary one. On a ``tmpfs`` temporary directory
+the pages stay in memory, counted as the system's shared memory instead of this process's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import mmap
+import os
+import tempfile
+import weakref
+from collections.abc import Iterator
+
+import numpy as np
+
+MIN_BYTES = 64 << 10  # smaller arrays stay in memory: not worth the page faults
+MAX_FILES = 256  # arrays on disk at once (each mapping holds a file descriptor)
+PASSED_BYTES = 64 << 20  # bytes read through on disk (`passed`) before their pages are given back
+SHARED_BYTES = 8 << 20  # arrays up to this size are carved from one file of SHARED_FILE_BYTES
+SHARED_FILE_BYTES = 64 << 20
+
+_on = [False]
+_mapped: weakref.WeakSet[mmap.mmap] = weakref.WeakSet()
+_passed = [0]
+_shared: list[np.ndarray | None] = [None]  # the file small arrays are carved from, per `spilling`
+_shared_used = [0]
+_CAN = hasattr(mmap, "MADV_DONTNEED") and hasattr(os, "posix_fallocate")
+
+
+@contextlib.contextmanager
+def spilling(on: bool = True) -> Iterator[None]:
+    """Within it (``on``), `empty` backs its large arrays by files; the pages touched are given back at the end."""
+    _on.append(on and _CAN)
+    _shared.append(None)
+    _shared_used.append(0)
+    try:
+        yield
+    finally:
+        _on.pop()
+        _shared.pop()  # its arrays keep it: no later array is carved from it
+        _shared_used.pop()
+        give_back()
+
+
+def empty(shape: int | tuple[int, ...], dtype) -> np.ndarray:
+    """``np.empty(shape, dtype)``, backed by a file of its own within `spilling` when large."""
+    dtype = np.dtype(dtype)
+    count = int(np.prod(shape))
+    size = count * dtype.itemsize
+    if not _on[-1] or size < MIN_BYTES:
+        return np.empty(shape, dtype)
+    if size <= SHARED_BYTES:  # carved from a shared file: one mapping (one descriptor) for many
+        if _shared[-1] is None or _shared[-1].size - _shared_used[-1] < size:
+            _shared[-1], _shared_used[-1] = _mapping(SHARED_FILE_BYTES), 0
+        shared = _shared[-1]
+        if shared is not None:
+            at = _shared_used[-1]
+            _shared_used[-1] += -(-size // 64) * 64
+            return shared[at : at + size].view(dtype).reshape(shape)
+    own = _mapping(size)
+    return np.empty(shape, dtype) if own is None else own[:size].view(dtype).reshape(shape)
+
+
+def _mapping(size: int) -> np.ndarray | None:
+    """``size`` bytes (uint8) of a new unlinked file, mapped shared; None when it cannot be made."""
+    if len(_mapped) >= MAX_FILES:
+        return None
+    try:
+        with tempfile.TemporaryFile() as file:  # unlinked: gone with the last mapping of it
+            os.posix_fallocate(file.fileno(), 0, size)  # the blocks reserved: no SIGBUS on a full disk later
+            mapped = mmap.mmap(file.fileno(), size)
+    except (OSError, ValueError):
+        return None
+    _mapped.add(mapped)
+    return np.frombuffer(mapped, np.uint8)
+
+
+def on_disk(array: np.ndarray) -> bool:
+    """Whether ``array`` (or the array it views) is one `empty` put on disk."""
+    base = array
+    while isinstance(base, np.ndarray) and base.base is not None:
+        base = base.base
+    if isinstance(base, memoryview):  # np.frombuffer's base: a view of the mapping
+        base = base.obj
+    return isinstance(base, mmap.mmap) and base in _mapped
+
+
+def give_back() -> None:
+    """Drop every on-disk array's pages from this process (they are read again when touched)."""
+    _passed[0] = 0
+    for mapped in list(_mapped):
+        with contextlib.suppress(ValueError, OSError):  # closed meanwhile
+            mapped.madvise(mmap.MADV_DONTNEED)
+
+
+def passed(size: int) -> None:
+    """Count ``size`` bytes of on-disk arrays read or written; from `PASSED_BYTES` on, `give_back`."""
+    if not _mapped:
+        return
+    _passed[0] += size
+    if _passed[0] >= PASSED_BYTES:
+        give_back()

@@ -1,0 +1,142 @@
+"""Arrays held on disk (`logscan.readers.spill`): a long ULog's held read keeps its records, framing and
+channels in unlinked files whose pages this process gives back; the values are the same as in
+memory, and a page given back is read again, not lost."""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from logscan.pipeline.held_window import HeldLog, whole_times, window_of
+from logscan.readers import read_log, spill, ulog_columns, ulog_framed, ulog_reader
+from logscan.readers.common import ReadWindow
+
+TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
+ULOGS = sorted((TESTDATA / "px4-ulog").glob("*.ulg")) + sorted((TESTDATA / "px4-ulog-extra").glob("*.ulg"))
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/pagemap")
+
+
+def _resident_pages(array: np.ndarray) -> int:
+    """Pages of ``array`` mapped in this process now (the present bit of /proc/self/pagemap)."""
+    address = array.__array_interface__["data"][0]
+    first, last = address // 4096, (address + array.nbytes - 1) // 4096
+    with open("/proc/self/pagemap", "rb") as pagemap:
+        pagemap.seek(first * 8)
+        entries = np.frombuffer(pagemap.read((last - first + 1) * 8), np.uint64)
+    return int(np.count_nonzero(entries >> np.uint64(63)))
+
+
+def test_large_arrays_are_on_disk_only_within_spilling():
+    assert not spill.on_disk(spill.empty(1 << 20, np.float64))
+    with spill.spilling():
+        big, small = spill.empty((4, 1 << 16), np.float32), spill.empty(16, np.int64)
+        off = None
+        with spill.spilling(False):
+            off = spill.empty(1 << 20, np.uint8)
+    assert spill.on_disk(big) and spill.on_disk(big[2]) and not spill.on_disk(small) and not spill.on_disk(off)
+    assert big.shape == (4, 1 << 16) and big.dtype == np.float32 and big.flags.writeable
+
+
+@linux_only
+def test_pages_given_back_leave_the_process_and_come_back_with_their_values():
+    with spill.spilling():
+        array = spill.empty(1 << 21, np.float64)  # 16 MiB: a file of its own
+    array[:] = np.arange(array.size)
+    assert _resident_pages(array) == array.nbytes // 4096
+    spill.give_back()
+    assert _resident_pages(array) == 0
+    np.testing.assert_array_equal(array, np.arange(array.size))  # read again from the file
+
+
+@given(sizes=st.lists(st.integers(1, 3 << 20), min_size=1, max_size=12), seed=st.integers(0, 2**32 - 1))
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+def test_arrays_carved_from_one_file_never_overlap(sizes, seed, monkeypatch):  # the same constants each time
+    monkeypatch.setattr(spill, "MIN_BYTES", 1)
+    monkeypatch.setattr(spill, "SHARED_FILE_BYTES", 4 << 20)  # several files, some arrays each
+    rng = np.random.default_rng(seed)
+    with spill.spilling():
+        arrays = [spill.empty(size, np.uint8) for size in sizes]
+        expected = [rng.integers(0, 256, size, dtype=np.uint8) for size in sizes]
+        for array, values in zip(arrays, expected, strict=True):
+            array[:] = values
+            spill.passed(array.nbytes)
+    spill.give_back()
+    for array, values in zip(arrays, expected, strict=True):
+        np.testing.assert_array_equal(array, values)
+
+
+def test_an_array_that_cannot_be_put_on_disk_is_an_ordinary_one(monkeypatch):
+    def no_space(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", no_space)
+    with spill.spilling():
+        array = spill.empty(1 << 22, np.uint8)
+    assert array.size == 1 << 22 and not spill.on_disk(array)
+
+
+def _on_disk_everything(monkeypatch) -> None:
+    """Every array of a held read on disk, converted a few records at a time (chunk borders everywhere)."""
+    monkeypatch.setattr(ulog_reader, "SPILL_FROM_BYTES", 0)
+    monkeypatch.setattr(spill, "MIN_BYTES", 1)
+    monkeypatch.setattr(spill, "PASSED_BYTES", 4096)
+    monkeypatch.setattr(ulog_reader, "_FACTS_CHUNK", 97)
+    monkeypatch.setattr(ulog_reader, "HELD_CHUNK", 61)
+    monkeypatch.setattr(ulog_columns, "HELD_CHUNK", 53)
+    monkeypatch.setattr(ulog_framed, "_RUN_CHUNK", 89)
+
+
+@pytest.mark.testdata("px4-ulog")
+@pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
+def test_a_held_read_on_disk_is_the_held_read_in_memory(path, monkeypatch):
+    memory = read_log(path, held=True)
+    _on_disk_everything(monkeypatch)
+    disk = read_log(path, held=True)
+    assert disk.channels.keys() == memory.channels.keys()
+    for name, channel in disk.channels.items():
+        kept = memory.channels[name]
+        assert channel.values.dtype == kept.values.dtype, name
+        np.testing.assert_array_equal(channel.t, kept.t, err_msg=name)
+        np.testing.assert_array_equal(channel.values, kept.values, err_msg=name)
+    read = [channel for channel in disk.channels.values() if len(channel)]
+    assert all(spill.on_disk(channel.t) for channel in read)
+    # the values too, but a topic's with a sample dropped (timestamp 0): pyulog's columns, picked
+    assert sum(spill.on_disk(channel.values) for channel in read) >= 0.9 * len(read)
+    assert disk.source.topics == memory.source.topics
+    assert disk.source.metadata == memory.source.metadata  # the parameter changes' and dropouts' times too
+    assert disk.source.warnings == memory.source.warnings and disk.source.skipped == memory.source.skipped
+
+
+@pytest.mark.testdata("px4-ulog")
+def test_a_window_of_a_log_held_on_disk_is_the_window_in_memory(monkeypatch):
+    path = ULOGS[0]
+    memory = read_log(path, held=True)
+    _on_disk_everything(monkeypatch)
+    disk = read_log(path, held=True)
+    held_disk, held_memory = (HeldLog(log, (0, 0), frozenset(), *whole_times(log)) for log in (disk, memory))
+    for start in (0.0, 3.0, 11.5):
+        window = ReadWindow(start, start + 4.0, margin_s=1.0)
+        cut, kept = window_of(held_disk, window), window_of(held_memory, window)
+        assert cut.channels.keys() == kept.channels.keys()
+        for name, channel in cut.channels.items():
+            np.testing.assert_array_equal(channel.t, kept.channels[name].t, err_msg=name)
+            np.testing.assert_array_equal(channel.values, kept.channels[name].values, err_msg=name)
+        assert cut.start_ns == kept.start_ns and cut.end_ns == kept.end_ns
+
+
+@pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
+def test_a_real_ulog_held_on_disk_is_analysed_in_blocks_as_in_memory(monkeypatch):
+    from logscan.pipeline.blocks import analyze_blocked
+
+    path = TESTDATA / "px4-ulog" / "sample_px4_events.ulg"
+    memory = analyze_blocked(path, block_s=10.0).summary()
+    _on_disk_everything(monkeypatch)
+    disk = analyze_blocked(path, block_s=10.0).summary()
+    assert disk == memory
+    assert memory["warnings"] and memory["detectors"] and memory["filter"]  # figures that could differ
