@@ -247,8 +247,8 @@ class Log:
         timed = {name: c for name, c in self.channels.items() if len(c)}
         if not timed:
             return _span_text(self.duration_s, None, None)
-        first = min(timed, key=lambda name: int(timed[name].t.min()))
-        last = max(timed, key=lambda name: int(timed[name].t.max()))
+        first = min(timed, key=lambda name: _extreme(timed[name].t, np.min))
+        last = max(timed, key=lambda name: _extreme(timed[name].t, np.max))
         return _span_text(self.duration_s, first, last)
 
     @classmethod
@@ -280,7 +280,7 @@ class Log:
     def start_ns(self) -> int | None:
         if self._span_ns is not None:
             return self._span_ns[0]
-        firsts = [int(t.min()) for t in _distinct_times(self.channels)]
+        firsts = [_extreme(t, np.min) for t in _distinct_times(self.channels)]
         if not firsts:
             topic_firsts = [t.first_ns for t in self.source.topics.values() if t.first_ns is not None]
             return min(topic_firsts) if topic_firsts else None
@@ -316,7 +316,7 @@ class Log:
     def end_ns(self) -> int | None:
         if self._span_ns is not None:
             return self._span_ns[1]
-        lasts = [int(t.max()) for t in _distinct_times(self.channels)]
+        lasts = [_extreme(t, np.max) for t in _distinct_times(self.channels)]
         if not lasts:
             topic_lasts = [t.last_ns for t in self.source.topics.values() if t.last_ns is not None]
             return max(topic_lasts) if topic_lasts else None
@@ -362,6 +362,24 @@ class Log:
             "has_truth": self.truth is not None,
             "has_profile": self.profile_text is not None,
         }
+
+
+# Told the bytes of a time array each step of `_extreme` has read: a reader that keeps its arrays
+# on disk (`logscan.readers.spill`) gives their pages back as the log's span is found
+TIMES_READ: list[Callable[[int], None]] = []
+_EXTREME_CHUNK = 1 << 20  # times per step of `_extreme`
+
+
+def _extreme(t: np.ndarray, reduce: Callable) -> int:
+    """``reduce(t)`` (np.min or np.max) of a non-empty time array, `_EXTREME_CHUNK` times at a time."""
+    if t.size <= _EXTREME_CHUNK:
+        return int(reduce(t))
+    found = []
+    for lo in range(0, t.size, _EXTREME_CHUNK):
+        found.append(reduce(t[lo : lo + _EXTREME_CHUNK]))
+        for told in TIMES_READ:
+            told(min(_EXTREME_CHUNK, t.size - lo) * t.itemsize)
+    return int(reduce(found))
 
 
 def _distinct_times(channels: dict[str, Channel]) -> list[np.ndarray]:

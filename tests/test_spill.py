@@ -20,6 +20,10 @@ from logscan.readers.common import ReadWindow
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
 ULOGS = sorted((TESTDATA / "px4-ulog").glob("*.ulg")) + sorted((TESTDATA / "px4-ulog-extra").glob("*.ulg"))
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/pagemap")
+# where arrays cannot be put on disk (no madvise, a temporary directory in memory), there is nothing to test
+on_disk = pytest.mark.skipif(
+    not (spill._CAN and spill._room_on_disk(0)), reason="the temporary directory is not on a disk"
+)
 
 
 def _resident_pages(array: np.ndarray) -> int:
@@ -32,6 +36,7 @@ def _resident_pages(array: np.ndarray) -> int:
     return int(np.count_nonzero(entries >> np.uint64(63)))
 
 
+@on_disk
 def test_large_arrays_are_on_disk_only_within_spilling():
     assert not spill.on_disk(spill.empty(1 << 20, np.float64))
     with spill.spilling():
@@ -44,6 +49,7 @@ def test_large_arrays_are_on_disk_only_within_spilling():
 
 
 @linux_only
+@on_disk
 def test_pages_given_back_leave_the_process_and_come_back_with_their_values():
     with spill.spilling():
         array = spill.empty(1 << 21, np.float64)  # 16 MiB: a file of its own
@@ -54,6 +60,7 @@ def test_pages_given_back_leave_the_process_and_come_back_with_their_values():
     np.testing.assert_array_equal(array, np.arange(array.size))  # read again from the file
 
 
+@on_disk
 @given(sizes=st.lists(st.integers(1, 3 << 20), min_size=1, max_size=12), seed=st.integers(0, 2**32 - 1))
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 def test_arrays_carved_from_one_file_never_overlap(sizes, seed, monkeypatch):  # the same constants each time
@@ -81,6 +88,24 @@ def test_an_array_that_cannot_be_put_on_disk_is_an_ordinary_one(monkeypatch):
     assert array.size == 1 << 22 and not spill.on_disk(array)
 
 
+def test_nothing_is_put_on_disk_without_room_for_it():
+    with spill.spilling(needs=1 << 62):  # more free space than any disk has
+        array = spill.empty(1 << 22, np.uint8)
+    assert not spill.on_disk(array)
+
+
+@linux_only
+def test_nothing_is_put_on_disk_where_the_temporary_directory_is_in_memory(monkeypatch):
+    shm = Path("/dev/shm")
+    mounts = Path("/proc/self/mounts").read_text()
+    if not shm.is_dir() or not any(f" {shm} tmpfs " in line + " " for line in mounts.splitlines()):
+        pytest.skip("no tmpfs at /dev/shm")
+    monkeypatch.setattr(tempfile, "tempdir", str(shm))
+    with spill.spilling():
+        array = spill.empty(1 << 22, np.uint8)  # on tmpfs its file would be memory, reserved whole
+    assert not spill.on_disk(array)
+
+
 def _on_disk_everything(monkeypatch) -> None:
     """Every array of a held read on disk, converted a few records at a time (chunk borders everywhere)."""
     monkeypatch.setattr(ulog_reader, "SPILL_FROM_BYTES", 0)
@@ -92,6 +117,7 @@ def _on_disk_everything(monkeypatch) -> None:
     monkeypatch.setattr(ulog_framed, "_RUN_CHUNK", 89)
 
 
+@on_disk
 @pytest.mark.testdata("px4-ulog")
 @pytest.mark.parametrize("path", ULOGS, ids=lambda p: p.name)
 def test_a_held_read_on_disk_is_the_held_read_in_memory(path, monkeypatch):
@@ -113,6 +139,7 @@ def test_a_held_read_on_disk_is_the_held_read_in_memory(path, monkeypatch):
     assert disk.source.warnings == memory.source.warnings and disk.source.skipped == memory.source.skipped
 
 
+@on_disk
 @pytest.mark.testdata("px4-ulog")
 def test_a_window_of_a_log_held_on_disk_is_the_window_in_memory(monkeypatch):
     path = ULOGS[0]
@@ -130,6 +157,7 @@ def test_a_window_of_a_log_held_on_disk_is_the_window_in_memory(monkeypatch):
         assert cut.start_ns == kept.start_ns and cut.end_ns == kept.end_ns
 
 
+@on_disk
 @pytest.mark.testdata("px4-ulog/sample_px4_events.ulg")
 def test_a_real_ulog_held_on_disk_is_analysed_in_blocks_as_in_memory(monkeypatch):
     from logscan.pipeline.blocks import analyze_blocked

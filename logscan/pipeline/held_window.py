@@ -116,8 +116,8 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
         spill.passed(channel.values.nbytes + channel.t.nbytes)  # a long log's, on disk: given back as read
         if finite.all():
             found = shared.get(key)
-            if found is None:
-                found = shared[key] = _times_of(order.t_clean)
+            if found is None:  # a copy when the times were out of order or logged twice: on disk too
+                found = shared[key] = _times_of(order.t_clean if order.t_clean is channel.t else _kept(order.t_clean))
             times[name] = found
         elif finite.any():
             cleaned = clean_samples(channel.t, channel.values, order)

@@ -24,8 +24,16 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from logscan.log import TIMES_READ
+
+try:
+    import resource
+except ImportError:  # Windows, where nothing is put on disk (`_CAN`)
+    resource = None  # type: ignore[assignment]
+
 MIN_BYTES = 64 << 10  # smaller arrays stay in memory: not worth the page faults
-MAX_FILES = 256  # arrays on disk at once (each mapping holds a file descriptor)
+# files mapped at once: each mapping holds a file descriptor, at most a quarter of the process's
+MAX_FILES = 256
 PASSED_BYTES = 64 << 20  # bytes read through on disk (`passed`) before their pages are given back
 SHARED_BYTES = 8 << 20  # arrays up to this size are carved from one file of SHARED_FILE_BYTES
 SHARED_FILE_BYTES = 64 << 20
@@ -35,13 +43,16 @@ _mapped: weakref.WeakSet[mmap.mmap] = weakref.WeakSet()
 _passed = [0]
 _shared: list[np.ndarray | None] = [None]  # the file small arrays are carved from, per `spilling`
 _shared_used = [0]
-_CAN = hasattr(mmap, "MADV_DONTNEED") and hasattr(os, "posix_fallocate")
+_CAN = hasattr(mmap, "MADV_DONTNEED") and hasattr(os, "posix_fallocate")  # Linux (not macOS, Windows)
+_IN_MEMORY = frozenset({"tmpfs", "ramfs"})
 
 
 @contextlib.contextmanager
-def spilling(on: bool = True) -> Iterator[None]:
-    """Within it (``on``), `empty` backs its large arrays by files; the pages touched are given back at the end."""
-    _on.append(on and _CAN)
+def spilling(on: bool = True, needs: int = 0) -> Iterator[None]:
+    """Within it (``on``), `empty` backs its large arrays by files; the pages touched are given back
+    at the end. Not where the temporary directory is in memory (tmpfs: its files would hold the same
+    memory, reserved whole) or has less than ``needs`` bytes free (a full disk would end the files)."""
+    _on.append(on and _CAN and _room_on_disk(needs))
     _shared.append(None)
     _shared_used.append(0)
     try:
@@ -51,6 +62,25 @@ def spilling(on: bool = True) -> Iterator[None]:
         _shared.pop()  # its arrays keep it: no later array is carved from it
         _shared_used.pop()
         give_back()
+
+
+def _room_on_disk(needs: int) -> bool:
+    """Whether the temporary directory is on a disk (not tmpfs or ramfs) with ``needs`` bytes free."""
+    directory = os.path.realpath(tempfile.gettempdir())
+    try:
+        stat = os.statvfs(directory)
+        with open("/proc/self/mounts", encoding="utf-8", errors="replace") as mounts:
+            table = [line.split()[1:3] for line in mounts if len(line.split()) > 2]
+    except OSError:
+        return False
+    # the longest mount point the directory lies under (octal escapes as /proc writes a space: \040)
+    under = [(point, kind) for point, kind in table if _under(directory, point.replace("\\040", " "))]
+    kind = max(under, key=lambda found: len(found[0]))[1] if under else ""
+    return kind not in _IN_MEMORY and stat.f_bavail * stat.f_frsize >= needs
+
+
+def _under(path: str, point: str) -> bool:
+    return path == point or path.startswith(point.rstrip("/") + "/")
 
 
 def empty(shape: int | tuple[int, ...], dtype) -> np.ndarray:
@@ -74,7 +104,7 @@ def empty(shape: int | tuple[int, ...], dtype) -> np.ndarray:
 
 def _mapping(size: int) -> np.ndarray | None:
     """``size`` bytes (uint8) of a new unlinked file, mapped shared; None when it cannot be made."""
-    if len(_mapped) >= MAX_FILES:
+    if len(_mapped) >= min(MAX_FILES, _descriptors() // 4):
         return None
     try:
         with tempfile.TemporaryFile() as file:  # unlinked: gone with the last mapping of it
@@ -84,6 +114,14 @@ def _mapping(size: int) -> np.ndarray | None:
         return None
     _mapped.add(mapped)
     return np.frombuffer(mapped, np.uint8)
+
+
+def _descriptors() -> int:
+    """The soft limit of open files of this process."""
+    if resource is None:
+        return 1 << 20
+    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    return soft if soft != resource.RLIM_INFINITY else 1 << 20
 
 
 def on_disk(array: np.ndarray) -> bool:
@@ -111,3 +149,6 @@ def passed(size: int) -> None:
     _passed[0] += size
     if _passed[0] >= PASSED_BYTES:
         give_back()
+
+
+TIMES_READ.append(passed)  # the log's span: a pass over every time array (`logscan.log`)

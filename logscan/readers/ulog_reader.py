@@ -120,7 +120,8 @@ def read_ulog(
     A damaged file (read the careful way) is not framed: no call before pyulog's parse ends.
     A held read of a file of `SPILL_FROM_BYTES` or more keeps its records and channels on disk
     (`logscan.readers.spill`): a long log held whole holds in memory only what a step has in hand."""
-    with spill.spilling(held and stat_input(path).st_size >= SPILL_FROM_BYTES):
+    size = stat_input(path).st_size
+    with spill.spilling(held and size >= SPILL_FROM_BYTES, needs=2 * size):  # its arrays take about its size
         return _read_ulog(path, wanted, progress, held)
 
 
