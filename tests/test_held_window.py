@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from logscan.align.sample_hold import clean_samples
 from logscan.log import Channel, Log, SourceInfo
 from logscan.pipeline.held_window import held_window, whole_times
 from logscan.readers.common import ReadWindow
@@ -133,3 +136,40 @@ def test_a_real_ulog_whose_first_samples_are_nan_aligns_a_window_as_the_whole_lo
         np.testing.assert_array_equal(part.u, whole.u)
         for name, group in whole.groups.items():
             np.testing.assert_array_equal(part.groups[name].z, group.z, err_msg=name)
+
+
+@given(
+    count=st.integers(1, 60),
+    nan_share=st.floats(0.0, 1.0),
+    disorder=st.sampled_from(["in order", "twice", "shuffled"]),
+    seed=st.integers(0, 2**32 - 1),
+)
+@settings(max_examples=80, deadline=None)
+def test_each_channels_whole_times_are_its_cleaned_samples_times(count, nan_share, disorder, seed):
+    """A channel with non-finite samples has its own times: those `clean_samples` keeps, found a
+    batch at a time for times in order (a long log's channel is not copied whole as float64)."""
+    from logscan.pipeline import held_window as module
+
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.integers(1, 5, count)).astype(np.int64) * 1_000_000
+    if disorder == "twice" and count > 1:
+        t[rng.integers(1, count)] = t[0]
+        t.sort()
+    elif disorder == "shuffled":
+        rng.shuffle(t)
+    values = rng.normal(size=count).astype(np.float32)
+    values[rng.random(count) < nan_share] = np.nan
+    log = Log(channels={"/a/x": Channel.held("/a/x", t, values)}, source=SourceInfo(path="x", format="test"))
+    old = module._BATCH
+    module._BATCH = 7  # batch borders everywhere
+    try:
+        times, never, _ = whole_times(log)
+    finally:
+        module._BATCH = old
+    expected = clean_samples(t, values.astype(np.float64)).t
+    if not expected.size:
+        assert "/a/x" in never and "/a/x" not in times
+    else:
+        found = times["/a/x"]
+        assert (found.count, found.first, found.last) == (expected.size, expected[0], expected[-1])
+        np.testing.assert_array_equal(np.concatenate(list(found.batches())), expected)

@@ -119,6 +119,8 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
             if found is None:  # a copy when the times were out of order or logged twice: on disk too
                 found = shared[key] = _times_of(order.t_clean if order.t_clean is channel.t else _kept(order.t_clean))
             times[name] = found
+        elif finite.any() and order.sort is None and order.keep is None:  # in order: its finite samples' times
+            times[name] = _times_of(_finite_times(channel.t, finite))
         elif finite.any():
             cleaned = clean_samples(channel.t, channel.values, order)
             if cleaned.t.size:
@@ -126,6 +128,19 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
         else:
             never.append(name)
     return times, frozenset(never), frozenset(key for key, order in orders.items() if order.unsorted)
+
+
+def _finite_times(t: np.ndarray, finite: np.ndarray) -> np.ndarray:
+    """``t[finite]`` (what `clean_samples` keeps of times in order, each once), `_BATCH` at a
+    time into an array of `spill.empty`: a long log's channel is not copied whole as float64."""
+    kept = spill.empty(int(np.count_nonzero(finite)), t.dtype)
+    at = 0
+    for lo in range(0, t.size, _BATCH):
+        part = t[lo : lo + _BATCH][finite[lo : lo + _BATCH]]
+        kept[at : at + part.size] = part
+        at += part.size
+        spill.passed(2 * part.nbytes)
+    return kept
 
 
 def _kept(t: np.ndarray) -> np.ndarray:
