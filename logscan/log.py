@@ -377,9 +377,14 @@ def _extreme(t: np.ndarray, reduce: Callable) -> int:
     found = []
     for lo in range(0, t.size, _EXTREME_CHUNK):
         found.append(reduce(t[lo : lo + _EXTREME_CHUNK]))
-        for told in TIMES_READ:
-            told(min(_EXTREME_CHUNK, t.size - lo) * t.itemsize)
+        times_read(min(_EXTREME_CHUNK, t.size - lo) * t.itemsize)
     return int(reduce(found))
+
+
+def times_read(size: int) -> None:
+    """Tell `TIMES_READ` that a pass over a time array has read ``size`` more bytes of it."""
+    for told in TIMES_READ:
+        told(size)
 
 
 def _distinct_times(channels: dict[str, Channel]) -> list[np.ndarray]:

@@ -246,6 +246,7 @@ def prepare(
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     return_freed_pages()
+    spill.give_back()  # and the pages read of a log held on disk (a block's window of it)
     prepared.warnings += [*loaded.notes, *_read_warnings(log, run)]  # the profile's notes frame the rest
     _run_filters(prepared, wanted, compiling, step, fraction, lead)
     return prepared
