@@ -88,6 +88,16 @@ def test_an_array_that_cannot_be_put_on_disk_is_an_ordinary_one(monkeypatch):
     assert array.size == 1 << 22 and not spill.on_disk(array)
 
 
+def test_without_a_usable_temporary_directory_the_arrays_stay_in_memory(monkeypatch):
+    def none_usable():
+        raise FileNotFoundError("No usable temporary directory found")
+
+    monkeypatch.setattr(tempfile, "gettempdir", none_usable)  # a read-only container, say
+    with spill.spilling():
+        array = spill.empty(1 << 22, np.uint8)
+    assert not spill.on_disk(array)
+
+
 def test_nothing_is_put_on_disk_without_room_for_it():
     with spill.spilling(needs=1 << 62):  # more free space than any disk has
         array = spill.empty(1 << 22, np.uint8)

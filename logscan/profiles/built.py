@@ -28,11 +28,12 @@ def rate_hz(t_ns: np.ndarray) -> float:
     a time (`_step_counts`): a 24-hour IMU's steps and their sort took 350 MB at once."""
     t = np.asarray(t_ns, dtype=np.int64)
     counted = _step_counts(t)
-    if counted is None:
-        t = np.unique(t)
-        if t.size < 2:
-            return 0.0
-        return float(1e9 / np.median(np.diff(t)))
+    if counted is None:  # the median of all the steps at once
+        steps = np.diff(t)
+        if not bool((steps > 0).all()):
+            t = np.unique(t)
+            steps = np.diff(t)
+        return 0.0 if t.size < 2 else float(1e9 / np.median(steps))
     steps, counts = counted
     if not steps.size:
         return 0.0
@@ -45,8 +46,10 @@ def rate_hz(t_ns: np.ndarray) -> float:
 
 def _step_counts(t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """(each distinct step between consecutive times of ``t``, sorted, and how many there are), a
-    megasample at a time; None when a step is not positive (times out of order or logged twice)."""
+    megasample at a time; None when a step is not positive (times out of order or logged twice) or
+    the distinct steps are many (nanosecond stamps: counting them saves nothing)."""
     values, counts = [np.empty(0, np.int64)], [np.empty(0, np.int64)]
+    distinct = 0
     for lo in range(0, max(t.size - 1, 0), _STEP_CHUNK):
         steps = np.diff(t[lo : lo + _STEP_CHUNK + 1])
         times_read(steps.nbytes)
@@ -55,9 +58,12 @@ def _step_counts(t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         found = np.unique(steps, return_counts=True)
         values.append(found[0])
         counts.append(found[1])
-        if sum(v.size for v in values) > _STEP_CHUNK:  # many distinct steps (nanosecond stamps): merged
-            distinct, summed = _merged(values, counts)
-            values, counts = [distinct], [summed]
+        distinct += found[0].size
+        if distinct > _STEP_CHUNK:  # merged once their pieces outgrow a chunk; too many still: at once
+            merged = _merged(values, counts)
+            if merged[0].size > _STEP_CHUNK // 4:
+                return None
+            values, counts, distinct = [merged[0]], [merged[1]], merged[0].size
     return _merged(values, counts)
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import mmap
 import os
+import re
 import tempfile
 import weakref
 from collections.abc import Iterator
@@ -45,6 +46,7 @@ _shared: list[np.ndarray | None] = [None]  # the file small arrays are carved fr
 _shared_used = [0]
 _CAN = hasattr(mmap, "MADV_DONTNEED") and hasattr(os, "posix_fallocate")  # Linux (not macOS, Windows)
 _IN_MEMORY = frozenset({"tmpfs", "ramfs"})
+_OCTAL = re.compile(r"\\([0-7]{3})")
 
 
 @contextlib.contextmanager
@@ -66,16 +68,20 @@ def spilling(on: bool = True, needs: int = 0) -> Iterator[None]:
 
 def _room_on_disk(needs: int) -> bool:
     """Whether the temporary directory is on a disk (not tmpfs or ramfs) with ``needs`` bytes free."""
-    directory = os.path.realpath(tempfile.gettempdir())
     try:
+        directory = os.path.realpath(tempfile.gettempdir())  # FileNotFoundError: none is usable
         stat = os.statvfs(directory)
         with open("/proc/self/mounts", encoding="utf-8", errors="replace") as mounts:
             table = [line.split()[1:3] for line in mounts if len(line.split()) > 2]
     except OSError:
         return False
-    # the longest mount point the directory lies under (octal escapes as /proc writes a space: \040)
-    under = [(point, kind) for point, kind in table if _under(directory, point.replace("\\040", " "))]
-    kind = max(under, key=lambda found: len(found[0]))[1] if under else ""
+    # the filesystem of the longest mount point the directory lies under, the last mounted of
+    # equals (it hides those before); /proc writes a space, tab or backslash in octal (\040)
+    kind, longest = "", -1
+    for point, fs in table:
+        point = _OCTAL.sub(lambda code: chr(int(code.group(1), 8)), point)
+        if _under(directory, point) and len(point) >= longest:
+            kind, longest = fs, len(point)
     return kind not in _IN_MEMORY and stat.f_bavail * stat.f_frsize >= needs
 
 
