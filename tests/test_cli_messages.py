@@ -407,3 +407,20 @@ def test_the_summary_shows_the_first_warnings_and_counts_the_rest():
         ]
         more = [line for line in text.splitlines() if "more warning(s)" in line]
         assert more == ([] if count == MAX_WARNINGS else ["  ... 3 more warning(s) (see the report / --json)"])
+
+
+def test_the_summary_lists_the_first_incidents_and_counts_the_rest():
+    """A day-long PX4 log's screen listed its 2,783 incidents one by one (its alarms were capped):
+    the first max_rows are listed, then how many more the report and --json hold."""
+    from logscan.cli.render import render_summary
+    from logscan.pipeline import analyze_log
+
+    analysis = analyze_log(SAMPLES / "quad_imu_bias.mcap")
+    assert analysis.incidents
+    for count, more in ((12, []), (15, ["  ... 3 more incident(s) (see the report / --json)"])):
+        analysis.incidents = [analysis.incidents[0]] * count
+        lines = render_summary(analysis, None, max_rows=12).splitlines()
+        assert [line.split(":")[0] for line in lines if line.startswith("  incident ")] == [
+            f"  incident {k}" for k in range(1, 13)
+        ]
+        assert [line for line in lines if "more incident(s)" in line] == more

@@ -130,14 +130,15 @@ def _verdict_lines(analysis) -> list[str]:
 
 
 def _incident_lines(incidents, clock, max_rows: int) -> tuple[list[str], int]:
-    """Each incident's headline and under it its alarms (``max_rows`` in all), in columns as wide
-    as the longest detector and statistic shown (at least 12 and 16); the lines and the alarms shown."""
+    """The first ``max_rows`` incidents' headlines and under them their alarms (``max_rows`` in all),
+    in columns as wide as the longest detector and statistic shown (at least 12 and 16), then how
+    many incidents are not listed; the lines and the alarms shown."""
     from logscan.report import overview
     from logscan.verdict.incidents import signal_label
 
     rows: list = []  # (incident, None for its headline or one of its alarms)
     left = max_rows
-    for k, incident in enumerate(incidents):
+    for k, incident in enumerate(incidents[:max_rows]):  # a long log's thousands: the report lists them
         alarms = sorted(incident.alarms, key=lambda a: (a.start, a.signal))[:left]
         left -= len(alarms)
         rows += [(k, None), *((k, alarm) for alarm in alarms)]
@@ -158,6 +159,8 @@ def _incident_lines(incidents, clock, max_rows: int) -> tuple[list[str], int]:
             + (f"  {note}" if note else f"{ratio:>9}")
             + (f"  {label}" if label else "")
         )
+    if len(incidents) > max_rows:
+        lines.append(f"  ... {len(incidents) - max_rows} more incident(s) (see the report / --json)")
     return lines, len(shown)
 
 
