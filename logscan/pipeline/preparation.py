@@ -246,7 +246,6 @@ def prepare(
         prepared.loops = prepare_loops(prepared, log, start_s=start_s, end_s=end_s, step=step)
     log.release_samples()  # the run holds what the filters and detectors read from here on
     return_freed_pages()
-    spill.give_back()  # and the pages read of a log held on disk (a block's window of it)
     prepared.warnings += [*loaded.notes, *_read_warnings(log, run)]  # the profile's notes frame the rest
     _run_filters(prepared, wanted, compiling, step, fraction, lead)
     return prepared
@@ -417,6 +416,7 @@ def _run_filters(
     """Run each filter the needs ask for once, into ``prepared.traces``; the EKF's divergence
     episodes become warnings. ``fraction`` hears the steps a counting filter has done. ``lead``: a
     window's lead-in, the EKF's start (`logscan.pipeline.lead_in`)."""
+    spill.give_back()  # the pages read of a log held on disk (a block's window of it): released
     for name, parts in wanted.filters.items():
         if name not in FILTERS:
             raise ProfileError(
