@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from logscan.pipeline.held_window import HeldLog, whole_times, window_of
-from logscan.readers import read_log, spill, ulog_columns, ulog_framed, ulog_reader
+from logscan.readers import read_log, spill, ulog_columns, ulog_reader
 from logscan.readers.common import ReadWindow
 
 TESTDATA = Path(__file__).resolve().parents[2] / "shared" / "testdata"
@@ -121,10 +121,8 @@ def _on_disk_everything(monkeypatch) -> None:
     monkeypatch.setattr(ulog_reader, "SPILL_FROM_BYTES", 0)
     monkeypatch.setattr(spill, "MIN_BYTES", 1)
     monkeypatch.setattr(spill, "PASSED_BYTES", 4096)
-    monkeypatch.setattr(ulog_reader, "_FACTS_CHUNK", 97)
-    monkeypatch.setattr(ulog_reader, "HELD_CHUNK", 61)
+    monkeypatch.setattr(spill, "CHUNK", 97)
     monkeypatch.setattr(ulog_columns, "HELD_CHUNK", 53)
-    monkeypatch.setattr(ulog_framed, "_RUN_CHUNK", 89)
 
 
 @on_disk

@@ -117,14 +117,15 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
         if finite.all():
             found = shared.get(key)
             if found is None:  # a copy when the times were out of order or logged twice: on disk too
-                found = shared[key] = _times_of(order.t_clean if order.t_clean is channel.t else _kept(order.t_clean))
+                clean = order.t_clean
+                found = shared[key] = _times_of(clean if clean is channel.t else spill.copied(clean))
             times[name] = found
         elif finite.any() and order.sort is None and order.keep is None:  # in order: its finite samples' times
             times[name] = _times_of(_finite_times(channel.t, finite))
         elif finite.any():
             cleaned = clean_samples(channel.t, channel.values, order)
             if cleaned.t.size:
-                times[name] = _times_of(_kept(cleaned.t))
+                times[name] = _times_of(spill.copied(cleaned.t))
         else:
             never.append(name)
     return times, frozenset(never), frozenset(key for key, order in orders.items() if order.unsorted)
@@ -140,16 +141,6 @@ def _finite_times(t: np.ndarray, finite: np.ndarray) -> np.ndarray:
         kept[at : at + part.size] = part
         at += part.size
         spill.passed(2 * part.nbytes)
-    return kept
-
-
-def _kept(t: np.ndarray) -> np.ndarray:
-    """``t`` copied to an array of `spill.empty` (on disk within `spill.spilling`), else itself."""
-    kept = spill.empty(t.size, t.dtype)
-    if not spill.on_disk(kept):
-        return t
-    kept[:] = t
-    spill.passed(kept.nbytes)
     return kept
 
 

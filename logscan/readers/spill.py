@@ -36,6 +36,7 @@ MIN_BYTES = 64 << 10  # smaller arrays stay in memory: not worth the page faults
 # files mapped at once: each mapping holds a file descriptor, at most a quarter of the process's
 MAX_FILES = 256
 PASSED_BYTES = 64 << 20  # bytes read through on disk (`passed`) before their pages are given back
+CHUNK = 1 << 20  # elements per step of a pass over a whole on-disk array (its pages given back between)
 SHARED_BYTES = 8 << 20  # arrays up to this size are carved from one file of SHARED_FILE_BYTES
 SHARED_FILE_BYTES = 64 << 20
 
@@ -106,6 +107,17 @@ def empty(shape: int | tuple[int, ...], dtype) -> np.ndarray:
             return shared[at : at + size].view(dtype).reshape(shape)
     own = _mapping(size)
     return np.empty(shape, dtype) if own is None else own[:size].view(dtype).reshape(shape)
+
+
+def copied(values: np.ndarray, dtype=None) -> np.ndarray:
+    """``values`` as ``dtype`` (None: their own) in an array of `empty` (on disk within `spilling`
+    when large), else ``values.astype(dtype, copy=False)``."""
+    kept = empty(values.shape, values.dtype if dtype is None else dtype)
+    if not on_disk(kept):
+        return values.astype(kept.dtype, copy=False)
+    kept[...] = values
+    passed(kept.nbytes)
+    return kept
 
 
 def _mapping(size: int) -> np.ndarray | None:

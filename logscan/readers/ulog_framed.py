@@ -46,7 +46,6 @@ _DATA_SECTION = np.frombuffer(b"AILCMPQODS", dtype=np.uint8)  # those it reads i
 _EMPTY = np.empty(0, np.uint8)
 _FRAME_BYTES = 16 << 20  # file bytes framed before their pages are given back
 _NO_MESSAGES = np.empty(0, np.int64)
-_RUN_CHUNK = 1 << 20  # timestamps per step of `_running_max_at`
 
 
 @njit(cache=True)
@@ -110,8 +109,8 @@ class _Part:
 
     def __init__(self, offsets: np.ndarray, sizes: np.ndarray, ids: np.ndarray) -> None:
         self.base = int(offsets[0]) if offsets.size else 0
-        self.at = _kept(offsets - self.base, np.uint32)  # on disk for a long log held whole (`logscan.readers.spill`)
-        self.sizes, self.ids = _kept(sizes, np.uint16), _kept(ids, np.uint16)
+        self.at = spill.copied(offsets - self.base, np.uint32)  # on disk for a long log held whole
+        self.sizes, self.ids = spill.copied(sizes, np.uint16), spill.copied(ids, np.uint16)
         known, first, counts = np.unique(ids, return_index=True, return_counts=True)
         self.counts = dict(zip(known.tolist(), counts.tolist(), strict=True))
         self.first = dict(zip(known.tolist(), offsets[first].tolist(), strict=True))  # each id's first message
@@ -123,14 +122,6 @@ class _Part:
         chosen = np.flatnonzero(self.ids == msg_id)
         spill.passed(self.ids.nbytes + chosen.size * 6)  # the ids read, the offsets and sizes picked
         return self.at[chosen].astype(np.int64) + self.base, self.sizes[chosen]
-
-
-def _kept(values: np.ndarray, dtype) -> np.ndarray:
-    """``values`` as ``dtype`` in an array of `spill.empty`."""
-    kept = spill.empty(values.size, dtype)
-    kept[:] = values
-    spill.passed(kept.nbytes)
-    return kept
 
 
 def _frame_file(buf: np.ndarray, start: int, give_back: Callable[[int], None]) -> tuple[list[_Part], tuple, int]:
@@ -420,11 +411,11 @@ def _set_times(ulog, plan: _Plan, changes: int) -> None:
 
 def _running_max_at(stamps: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.uint64]:
     """(the running maximum of ``stamps`` at each index of ``at``, 0 where it is -1; their maximum),
-    `_RUN_CHUNK` stamps at a time: a long log's records are on disk (`logscan.readers.spill`)."""
+    `spill.CHUNK` stamps at a time: a long log's records are on disk (`logscan.readers.spill`)."""
     found = np.zeros(at.size, np.uint64)
     carry = np.uint64(0)
-    for lo in range(0, stamps.size, _RUN_CHUNK):
-        running = np.maximum.accumulate(stamps[lo : lo + _RUN_CHUNK])
+    for lo in range(0, stamps.size, spill.CHUNK):
+        running = np.maximum.accumulate(stamps[lo : lo + spill.CHUNK])
         np.maximum(running, carry, out=running)
         inside = (at >= lo) & (at < lo + running.size)
         found[inside] = running[at[inside] - lo]

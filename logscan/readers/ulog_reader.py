@@ -59,7 +59,7 @@ from logscan.readers.common import (
     stat_input,
     topic_wanted,
 )
-from logscan.readers.ulog_columns import HELD_CHUNK, exact_in_float32, field_lists, stamp_facts
+from logscan.readers.ulog_columns import exact_in_float32, field_lists, stamp_facts
 from logscan.readers.ulog_damage import (
     _UNTIMED_WHY,
     MAX_TIMESTAMP_US,
@@ -86,7 +86,6 @@ _DATA_HEADER_BYTES = 5  # a data message's size, type and msg_id before its payl
 # channels (two thirds of the file's bytes) start to weigh beside a block's analysis; below it the
 # files and mappings are not worth their cost.
 SPILL_FROM_BYTES = 64 << 20
-_FACTS_CHUNK = 1 << 20  # timestamps per call of `stamp_facts`
 
 
 def message_filter(wanted: set[str] | None) -> list[str] | None:
@@ -122,12 +121,12 @@ def read_ulog(
     (`logscan.readers.spill`): a long log held whole holds in memory only what a step has in hand."""
     size = stat_input(path).st_size
     with spill.spilling(held and size >= SPILL_FROM_BYTES, needs=2 * size):  # its arrays take about its size
-        return _read_ulog(path, wanted, progress, held)
+        return _read_ulog(path, wanted, progress, held, size)
 
 
-def _read_ulog(path: str | os.PathLike, wanted: set[str] | None, progress, held: bool) -> Log:
+def _read_ulog(path: str | os.PathLike, wanted: set[str] | None, progress, held: bool, size: int) -> Log:
     source = SourceInfo(path=str(path), format="ulog", time_unit="us", time_source="ulog timestamp")
-    steps = None if progress is None else StagedBytes(progress, stat_input(path).st_size, _STAGE_SHARES)
+    steps = None if progress is None else StagedBytes(progress, size, _STAGE_SHARES)
     ulog, watch, chatter = _parse(path, wanted, None if steps is None else partial(steps.at, _FRAMED, 1.0))
     if steps is not None:
         steps.at(_PARSED, 1.0)
@@ -203,12 +202,12 @@ def _read_topic(
 
 
 def _stamp_facts(t_raw: np.ndarray) -> tuple[int, int, bool]:
-    """`stamp_facts` of the uint64 timestamps ``t_raw``, `_FACTS_CHUNK` at a time: a long log's
+    """`stamp_facts` of the uint64 timestamps ``t_raw``, `spill.CHUNK` at a time: a long log's
     records are on disk (`logscan.readers.spill`), their pages given back as they are read."""
     zeros = beyond = 0
     in_order = True
-    for lo in range(0, t_raw.size, _FACTS_CHUNK):
-        chunk = t_raw[lo : lo + _FACTS_CHUNK]
+    for lo in range(0, t_raw.size, spill.CHUNK):
+        chunk = t_raw[lo : lo + spill.CHUNK]
         found = stamp_facts(chunk, np.uint64(MAX_TIMESTAMP_US))
         zeros, beyond = zeros + found[0], beyond + found[1]
         in_order = in_order and found[2] and (lo == 0 or bool(chunk[0] > t_raw[lo - 1]))
@@ -218,11 +217,11 @@ def _stamp_facts(t_raw: np.ndarray) -> tuple[int, int, bool]:
 
 def _nanoseconds(t_us: np.ndarray) -> np.ndarray:
     """int64 nanoseconds of the uint64 microseconds ``t_us`` (all below `MAX_TIMESTAMP_US`), in a
-    new array of `spill.empty` (on disk within `spill.spilling`), `HELD_CHUNK` at a time."""
+    new array of `spill.empty` (on disk within `spill.spilling`), `spill.CHUNK` at a time."""
     t_ns = spill.empty(t_us.size, np.int64)
-    for lo in range(0, t_us.size, HELD_CHUNK):
-        chunk = t_ns[lo : lo + HELD_CHUNK]
-        chunk[:] = t_us[lo : lo + HELD_CHUNK]  # numpy's unsafe cast, as astype: exact below 2**63
+    for lo in range(0, t_us.size, spill.CHUNK):
+        chunk = t_ns[lo : lo + spill.CHUNK]
+        chunk[:] = t_us[lo : lo + spill.CHUNK]  # numpy's unsafe cast, as astype: exact below 2**63
         chunk *= 1000
         spill.passed(chunk.size * (chunk.itemsize + t_us.strides[0]))  # written, and the records read
     return t_ns
