@@ -60,6 +60,21 @@ def test_pages_given_back_leave_the_process_and_come_back_with_their_values():
     np.testing.assert_array_equal(array, np.arange(array.size))  # read again from the file
 
 
+@linux_only
+@on_disk
+def test_a_binary_search_over_an_array_on_disk_maps_pages_not_folios_of_megabytes():
+    # each block's window of a held read searches its time arrays: mapped with read-ahead, each
+    # probe mapped the page cache's whole large folio (ext4, Linux 6.16+): 6 MiB per search here
+    with spill.spilling():
+        times = spill.empty(7_000_000, np.int64)  # 56 MB: a file of its own, written as a read writes it
+    for lo in range(0, times.size, 1 << 16):
+        times[lo : lo + (1 << 16)] = np.arange(lo, min(lo + (1 << 16), times.size))
+        spill.passed(1 << 19)
+    spill.give_back()
+    assert int(np.searchsorted(times, 4_500_001)) == 4_500_001
+    assert _resident_pages(times) <= 16 * 24  # the kernel's fault-around, 64 KiB, per probe at most
+
+
 @on_disk
 @given(sizes=st.lists(st.integers(1, 3 << 20), min_size=1, max_size=12), seed=st.integers(0, 2**32 - 1))
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -128,6 +128,10 @@ def _mapping(size: int) -> np.ndarray | None:
         with tempfile.TemporaryFile() as file:  # unlinked: gone with the last mapping of it
             os.posix_fallocate(file.fileno(), 0, size)  # the blocks reserved: no SIGBUS on a full disk later
             mapped = mmap.mmap(file.fileno(), size)
+            with contextlib.suppress(OSError):  # no read-ahead: the page cache's large folios (ext4
+                # on Linux 6.16+) map a whole folio, megabytes, at each touch of a window's edge or
+                # a binary search's probe (bench/README.md, "random access")
+                mapped.madvise(mmap.MADV_RANDOM)
     except (OSError, ValueError):
         return None
     _mapped.add(mapped)
