@@ -4,6 +4,8 @@ with the same results as channel by channel; a HeldTable's padded read equals it
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_align import BASE, MS, FakeModel, force_100hz
 
 from logscan.align import HeldTable, align, clean_samples
@@ -82,3 +84,25 @@ def test_a_padded_held_table_reads_like_the_masked_one():
     assert np.isnan(np.asarray(pad)[[0, 5, 6, 9]]).all()
     np.testing.assert_array_equal(np.asarray(pad), np.asarray(plain))
     np.testing.assert_array_equal(samples, np.arange(12.0).reshape(6, 2))
+
+
+@given(
+    t=st.lists(st.integers(0, 40), min_size=0, max_size=30).map(lambda v: np.array(v, dtype=np.int64)),
+    chunk=st.integers(1, 5),
+)
+@settings(max_examples=200, deadline=None)
+def test_a_time_array_is_found_in_order_a_chunk_at_a_time_as_whole(t, chunk):
+    # a long log's times on disk are checked a megasample at a time: an inversion or a repeat at a
+    # chunk's border counts as one inside it
+    from logscan.align import sample_hold
+
+    whole = time_order(t)
+    old, sample_hold._CHUNK = sample_hold._CHUNK, chunk
+    try:
+        chunked = time_order(t)
+    finally:
+        sample_hold._CHUNK = old
+    assert (chunked.sort is None, chunked.keep is None) == (whole.sort is None, whole.keep is None)
+    assert chunked.t_clean.tolist() == whole.t_clean.tolist()
+    in_order = bool((t[1:] > t[:-1]).all())
+    assert (chunked.t_clean is t) == in_order

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, types
 
+from logscan.log import times_read
 from logscan.numba_cache import OneSignature, follow_dependencies
 
 # ------------------------------------------------------------------------------------------------
@@ -16,6 +17,7 @@ from logscan.numba_cache import OneSignature, follow_dependencies
 
 _NS = 1_000_000_000
 _NEVER_STALE_NS = np.iinfo(np.int64).max // 4  # stale_s = inf
+_CHUNK = 1 << 20  # times per step of `_increasing`
 
 
 @dataclass
@@ -55,7 +57,7 @@ class _TimeOrder:
 def time_order(t_ns: np.ndarray) -> _TimeOrder:
     """The stable sort and the duplicate times dropped (the last of each kept) of ``t_ns``."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
-    if bool((t_ns[1:] > t_ns[:-1]).all()):  # the usual case, in one pass: in order, each time once
+    if _increasing(t_ns):  # the usual case, in one pass: in order, each time once
         return _TimeOrder(t_ns, t_ns, None, None, 0, 0)
     unsorted = int(np.count_nonzero(t_ns[1:] < t_ns[:-1]))
     sort = np.argsort(t_ns, kind="stable") if unsorted else None
@@ -66,6 +68,18 @@ def time_order(t_ns: np.ndarray) -> _TimeOrder:
     keep = last_of_run if duplicates else None
     t_clean = t_sorted if keep is None else t_sorted[keep]
     return _TimeOrder(t_ns, t_clean, sort, keep, unsorted, duplicates)
+
+
+def _increasing(t_ns: np.ndarray) -> bool:
+    """Whether each time of ``t_ns`` is after the one before, `_CHUNK` at a time: a long log's
+    times held on disk are not touched whole at once (`logscan.log.times_read`)."""
+    for lo in range(0, max(t_ns.size - 1, 0), _CHUNK):
+        part = t_ns[lo : lo + _CHUNK + 1]
+        increasing = bool((part[1:] > part[:-1]).all())
+        times_read(part.nbytes)
+        if not increasing:
+            return False
+    return True
 
 
 def clean_samples(t_ns: np.ndarray, values: np.ndarray, order: _TimeOrder | None = None) -> _Clean:

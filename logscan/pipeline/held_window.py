@@ -112,17 +112,16 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
         order = orders.get(key)
         if order is None:
             order = orders[key] = time_order(channel.t)
-        finite = np.isfinite(channel.values)
-        spill.passed(channel.values.nbytes + channel.t.nbytes)  # a long log's, on disk: given back as read
-        if finite.all():
+        finite = _finite_count(channel.values)
+        if finite == len(channel):
             found = shared.get(key)
             if found is None:  # a copy when the times were out of order or logged twice: on disk too
                 clean = order.t_clean
                 found = shared[key] = _times_of(clean if clean is channel.t else spill.copied(clean))
             times[name] = found
-        elif finite.any() and order.sort is None and order.keep is None:  # in order: its finite samples' times
-            times[name] = _times_of(_finite_times(channel.t, finite))
-        elif finite.any():
+        elif finite and order.sort is None and order.keep is None:  # in order: its finite samples' times
+            times[name] = _times_of(_finite_times(channel.t, channel.values, finite))
+        elif finite:
             cleaned = clean_samples(channel.t, channel.values, order)
             if cleaned.t.size:
                 times[name] = _times_of(spill.copied(cleaned.t))
@@ -131,16 +130,28 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
     return times, frozenset(never), frozenset(key for key, order in orders.items() if order.unsorted)
 
 
-def _finite_times(t: np.ndarray, finite: np.ndarray) -> np.ndarray:
-    """``t[finite]`` (what `clean_samples` keeps of times in order, each once), `_BATCH` at a
-    time into an array of `spill.empty`: a long log's channel is not copied whole as float64."""
-    kept = spill.empty(int(np.count_nonzero(finite)), t.dtype)
+def _finite_count(values: np.ndarray) -> int:
+    """How many of ``values`` are finite, `_BATCH` at a time: a long log's channel on disk is not
+    touched whole at once, nor a mask of its length made."""
+    count = 0
+    for lo in range(0, values.size, _BATCH):
+        part = values[lo : lo + _BATCH]
+        count += int(np.count_nonzero(np.isfinite(part)))
+        spill.passed(part.nbytes)
+    return count
+
+
+def _finite_times(t: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """The times of the ``count`` finite ``values`` (what `clean_samples` keeps of times in order,
+    each once), `_BATCH` at a time into an array of `spill.empty`: a long log's channel is not
+    copied whole as float64."""
+    kept = spill.empty(count, t.dtype)
     at = 0
     for lo in range(0, t.size, _BATCH):
-        part = t[lo : lo + _BATCH][finite[lo : lo + _BATCH]]
+        part = t[lo : lo + _BATCH][np.isfinite(values[lo : lo + _BATCH])]
         kept[at : at + part.size] = part
         at += part.size
-        spill.passed(2 * part.nbytes)
+        spill.passed(part.nbytes + min(_BATCH, t.size - lo) * (t.itemsize + values.itemsize))
     return kept
 
 

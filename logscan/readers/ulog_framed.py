@@ -105,10 +105,11 @@ class _Part:
     offset from ``base`` (uint32: a slice is 16 MiB), its payload size and its message id; and
     each id's count in it. 8 bytes a message, where whole-file arrays with a sort order took 26."""
 
-    __slots__ = ("base", "at", "sizes", "ids", "counts", "first")
+    __slots__ = ("base", "at", "sizes", "ids", "counts", "first", "shortest")
 
     def __init__(self, offsets: np.ndarray, sizes: np.ndarray, ids: np.ndarray) -> None:
         self.base = int(offsets[0]) if offsets.size else 0
+        self.shortest = int(sizes.min())  # found here: kept on disk, ``sizes`` is not read whole again
         self.at = spill.copied(offsets - self.base, np.uint32)  # on disk for a long log held whole
         self.sizes, self.ids = spill.copied(sizes, np.uint16), spill.copied(ids, np.uint16)
         known, first, counts = np.unique(ids, return_index=True, return_counts=True)
@@ -120,7 +121,9 @@ class _Part:
         if msg_id not in self.counts:
             return _NO_MESSAGES, _NO_MESSAGES
         chosen = np.flatnonzero(self.ids == msg_id)
-        spill.passed(self.ids.nbytes + chosen.size * 6)  # the ids read, the offsets and sizes picked
+        # the ids read, and the offsets and sizes picked: each pick maps its page and the kernel's
+        # fault-around (64 KiB), so a few picks a slice can map its arrays whole
+        spill.passed(self.ids.nbytes + self.at.nbytes + self.sizes.nbytes)
         return self.at[chosen].astype(np.int64) + self.base, self.sizes[chosen]
 
 
@@ -314,7 +317,7 @@ def _clean_plan(buf: np.ndarray, give_back: Callable[[int], None]) -> _Plan | No
     sub_ids = buf[subscribe + 4].astype(np.int64) | (buf[subscribe + 5].astype(np.int64) << 8)
     if np.unique(sub_ids).size != sub_ids.size or (sizes[types == ord("A")] < 3).any():
         return None
-    short = any(int(part.sizes.min()) < 2 for part in parts)
+    short = any(part.shortest < 2 for part in parts)
     spill.give_back()  # the framing of a long log held on disk: read again as each topic is gathered
     if short:
         return None
