@@ -12,6 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from logscan.pipeline import block_fold
+from logscan.readers import spill
 from logscan.verdict.nis_consistency import GroupNis, NisConsistency, summed
 
 CALIBRATE = "logscan train LOG --calibrate -o tables.json"
@@ -54,6 +56,31 @@ def test_the_blocks_summed_say_what_the_log_says(seed, cuts):
         "group 'attitude' is blind most of the time",
     ]
     assert "its checks alarmed" in whole.lines({"baro"}, CALIBRATE)[1]
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    seed=st.integers(0, 1000),
+    cuts=st.lists(st.integers(1, 99_999), max_size=8, unique=True),  # a part of 11,112 or more: on disk
+    on_disk=st.booleans(),
+    pending=st.sampled_from([1, 50_000, 1 << 30]),
+)
+def test_the_fold_keeps_the_blocks_nis_in_order_on_disk_or_not(seed, cuts, on_disk, pending):
+    # a long log's fold sums its earlier blocks' NIS a few MB at a time, on disk with its held read
+    whole = _consistency(np.random.default_rng(seed), 100_000)
+    kept = block_fold._KeptNis()
+    kept.PENDING_BYTES = pending
+    for part in [None, *_cut(whole, sorted(cuts))]:
+        kept.add(part, on_disk)
+    merged = kept.summed()
+    assert merged is not None
+    for got, want in zip(merged.groups, whole.groups, strict=True):
+        assert (got.name, got.size) == (want.name, want.size)
+        np.testing.assert_array_equal(got.nis, want.nis)
+        np.testing.assert_array_equal(got.judged, want.judged)
+    if on_disk and pending == 1 and spill._CAN and spill._room_on_disk(0):
+        large = [g.nis for part in kept.kept for g in part.groups if g.nis.nbytes >= spill.MIN_BYTES]
+        assert large and all(spill.on_disk(nis) for nis in large)
 
 
 def test_a_short_block_judged_alone_would_say_otherwise():

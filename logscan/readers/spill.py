@@ -156,6 +156,11 @@ def on_disk(array: np.ndarray) -> bool:
     return isinstance(base, mmap.mmap) and base in _mapped
 
 
+def holding() -> bool:
+    """Whether any array is on disk now (a long log's read held there)."""
+    return bool(_mapped)
+
+
 def give_back() -> None:
     """Drop every on-disk array's pages from this process (they are read again when touched)."""
     _passed[0] = 0
