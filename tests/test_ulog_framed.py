@@ -128,6 +128,18 @@ def test_a_message_cut_in_a_later_slice_is_read_the_careful_way(tmp_path, monkey
     assert parse_clean(str(path), None) is None
 
 
+def test_a_data_message_too_short_for_its_id_in_a_later_slice_is_read_the_careful_way(tmp_path, monkeypatch):
+    # a data message of a single byte, no room for its message id, is pyulog's to judge (each slice
+    # notes its shortest as it is framed: a long log's sizes are then kept on disk)
+    original = TESTDATA / "px4-ulog" / "sample_px4_events.ulg"
+    need_testdata(original)
+    path = tmp_path / "short.ulg"
+    path.write_bytes(original.read_bytes() + b"\x01\x00D\x07")  # size 1, type 'D', one byte
+    monkeypatch.setattr(ulog_framed, "_FRAME_BYTES", 4096)
+    assert parse_clean(str(original), None) is not None
+    assert parse_clean(str(path), None) is None
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     steps=st.lists(st.integers(3, 70_000), min_size=0, max_size=60),
