@@ -138,6 +138,9 @@ def test_a_data_message_too_short_for_its_id_in_a_later_slice_is_read_the_carefu
     monkeypatch.setattr(ulog_framed, "_FRAME_BYTES", 4096)
     assert parse_clean(str(original), None) is not None
     assert parse_clean(str(path), None) is None
+    # refused by the framing's plan itself, not only later when the topic is gathered
+    assert ulog_framed._clean_plan(np.fromfile(original, np.uint8), lambda offset: None) is not None
+    assert ulog_framed._clean_plan(np.fromfile(path, np.uint8), lambda offset: None) is None
 
 
 @settings(max_examples=200, deadline=None)

@@ -195,9 +195,10 @@ class _KeptNis:
             return
         joined = summed(self.pending)
         if joined is not None:
-            with spill.spilling(on_disk):
+            with spill.spilling(on_disk, needs=2 * self.pending_bytes):  # each array a file of its size
                 for group in joined.groups:
-                    group.nis, group.judged = spill.copied(group.nis), spill.copied(group.judged)
+                    group.nis = spill.copied(group.nis, alone=True)
+                    group.judged = spill.copied(group.judged, alone=True)
             self.kept.append(joined)
         self.pending, self.pending_bytes = [], 0
 

@@ -90,14 +90,16 @@ def _under(path: str, point: str) -> bool:
     return path == point or path.startswith(point.rstrip("/") + "/")
 
 
-def empty(shape: int | tuple[int, ...], dtype) -> np.ndarray:
-    """``np.empty(shape, dtype)``, backed by a file of its own within `spilling` when large."""
+def empty(shape: int | tuple[int, ...], dtype, alone: bool = False) -> np.ndarray:
+    """``np.empty(shape, dtype)``, backed by a file within `spilling` when large: up to
+    `SHARED_BYTES` carved from a shared file, unless ``alone`` (a file of its own, of its size: for
+    a few arrays in a context of their own, which would reserve a whole shared file)."""
     dtype = np.dtype(dtype)
     count = int(np.prod(shape))
     size = count * dtype.itemsize
     if not _on[-1] or size < MIN_BYTES:
         return np.empty(shape, dtype)
-    if size <= SHARED_BYTES:  # carved from a shared file: one mapping (one descriptor) for many
+    if size <= SHARED_BYTES and not alone:  # carved from a shared file: one mapping (one descriptor) for many
         if _shared[-1] is None or _shared[-1].size - _shared_used[-1] < size:
             _shared[-1], _shared_used[-1] = _mapping(SHARED_FILE_BYTES), 0
         shared = _shared[-1]
@@ -109,10 +111,10 @@ def empty(shape: int | tuple[int, ...], dtype) -> np.ndarray:
     return np.empty(shape, dtype) if own is None else own[:size].view(dtype).reshape(shape)
 
 
-def copied(values: np.ndarray, dtype=None) -> np.ndarray:
+def copied(values: np.ndarray, dtype=None, alone: bool = False) -> np.ndarray:
     """``values`` as ``dtype`` (None: their own) in an array of `empty` (on disk within `spilling`
-    when large), else ``values.astype(dtype, copy=False)``."""
-    kept = empty(values.shape, values.dtype if dtype is None else dtype)
+    when large; ``alone``: as `empty`'s), else ``values.astype(dtype, copy=False)``."""
+    kept = empty(values.shape, values.dtype if dtype is None else dtype, alone)
     if not on_disk(kept):
         return values.astype(kept.dtype, copy=False)
     kept[...] = values
@@ -131,7 +133,7 @@ def _mapping(size: int) -> np.ndarray | None:
             with contextlib.suppress(OSError):  # no read-ahead: the page cache's large folios (ext4
                 # on Linux 6.16+) map a whole folio, megabytes, at each touch of a window's edge or
                 # a binary search's probe (bench/README.md, "random access")
-                mapped.madvise(mmap.MADV_RANDOM)
+                mapped.madvise(getattr(mmap, "MADV_RANDOM", mmap.MADV_NORMAL))
     except (OSError, ValueError):
         return None
     _mapped.add(mapped)
@@ -157,7 +159,7 @@ def on_disk(array: np.ndarray) -> bool:
 
 
 def holding() -> bool:
-    """Whether any array is on disk now (a long log's read held there)."""
+    """Whether any array of this process is on disk now (a long log's read held there, or any other)."""
     return bool(_mapped)
 
 
