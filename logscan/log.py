@@ -367,18 +367,22 @@ class Log:
 # Told the bytes of a time array each step of `_extreme` has read: a reader that keeps its arrays
 # on disk (`logscan.readers.spill`) gives their pages back as the log's span is found
 TIMES_READ: list[Callable[[int], None]] = []
-_EXTREME_CHUNK = 1 << 20  # times per step of `_extreme`
+TIMES_CHUNK = 1 << 20  # elements per step of a pass over a whole array of a log (`read_in_chunks`)
 
 
 def _extreme(t: np.ndarray, reduce: Callable) -> int:
-    """``reduce(t)`` (np.min or np.max) of a non-empty time array, `_EXTREME_CHUNK` times at a time."""
-    if t.size <= _EXTREME_CHUNK:
-        return int(reduce(t))
-    found = []
-    for lo in range(0, t.size, _EXTREME_CHUNK):
-        found.append(reduce(t[lo : lo + _EXTREME_CHUNK]))
-        times_read(min(_EXTREME_CHUNK, t.size - lo) * t.itemsize)
-    return int(reduce(found))
+    """``reduce(t)`` (np.min or np.max) of a non-empty time array, a chunk at a time."""
+    return int(reduce([reduce(part) for part in read_in_chunks(t)]))
+
+
+def read_in_chunks(array: np.ndarray, size: int = TIMES_CHUNK, overlap: int = 0) -> Iterator[np.ndarray]:
+    """``array`` ``size`` elements at a time, each chunk with the ``overlap`` elements after it (a
+    pair across a border is seen in the chunk before it), the bytes of each told to `TIMES_READ`
+    once it is used: a long log's arrays held on disk are not touched whole at once."""
+    for lo in range(0, max(array.size - overlap, 0), size):
+        part = array[lo : lo + size + overlap]
+        yield part
+        times_read(part.nbytes)
 
 
 def times_read(size: int) -> None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, types
 
-from logscan.log import times_read
+from logscan.log import TIMES_CHUNK, read_in_chunks
 from logscan.numba_cache import OneSignature, follow_dependencies
 
 # ------------------------------------------------------------------------------------------------
@@ -17,7 +17,7 @@ from logscan.numba_cache import OneSignature, follow_dependencies
 
 _NS = 1_000_000_000
 _NEVER_STALE_NS = np.iinfo(np.int64).max // 4  # stale_s = inf
-_CHUNK = 1 << 20  # times per step of `_increasing`
+_CHUNK = TIMES_CHUNK  # times per step of `_increasing`
 
 
 @dataclass
@@ -72,14 +72,8 @@ def time_order(t_ns: np.ndarray) -> _TimeOrder:
 
 def _increasing(t_ns: np.ndarray) -> bool:
     """Whether each time of ``t_ns`` is after the one before, `_CHUNK` at a time: a long log's
-    times held on disk are not touched whole at once (`logscan.log.times_read`)."""
-    for lo in range(0, max(t_ns.size - 1, 0), _CHUNK):
-        part = t_ns[lo : lo + _CHUNK + 1]
-        increasing = bool((part[1:] > part[:-1]).all())
-        times_read(part.nbytes)
-        if not increasing:
-            return False
-    return True
+    times held on disk are not touched whole at once (`logscan.log.read_in_chunks`)."""
+    return all(bool((part[1:] > part[:-1]).all()) for part in read_in_chunks(t_ns, _CHUNK, overlap=1))
 
 
 def clean_samples(t_ns: np.ndarray, values: np.ndarray, order: _TimeOrder | None = None) -> _Clean:

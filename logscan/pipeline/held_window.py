@@ -24,12 +24,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from logscan.align.sample_hold import clean_samples, time_order
-from logscan.log import Channel, Log, WholeTimes
+from logscan.log import TIMES_CHUNK, Channel, Log, WholeTimes, read_in_chunks
 from logscan.readers import spill
 from logscan.readers.common import ReadWindow, file_stat
 
 _NS = 1_000_000_000
-_BATCH = 1 << 20  # times per batch of `WholeTimes.batches`
+_BATCH = TIMES_CHUNK  # times per batch of `WholeTimes.batches`, values per step of `_finite_count`
 _LOOK_BACK = 1024  # samples looked at per step back to a channel's last finite sample
 
 
@@ -133,12 +133,7 @@ def whole_times(log: Log) -> tuple[dict[str, WholeTimes], frozenset[str], frozen
 def _finite_count(values: np.ndarray) -> int:
     """How many of ``values`` are finite, `_BATCH` at a time: a long log's channel on disk is not
     touched whole at once, nor a mask of its length made."""
-    count = 0
-    for lo in range(0, values.size, _BATCH):
-        part = values[lo : lo + _BATCH]
-        count += int(np.count_nonzero(np.isfinite(part)))
-        spill.passed(part.nbytes)
-    return count
+    return sum(int(np.count_nonzero(np.isfinite(part))) for part in read_in_chunks(values, _BATCH))
 
 
 def _finite_times(t: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
@@ -159,9 +154,7 @@ def _times_of(unique: np.ndarray) -> WholeTimes:
     """Sorted, unique times as `WholeTimes`."""
 
     def batches() -> Iterator[np.ndarray]:
-        for lo in range(0, unique.size, _BATCH):
-            yield unique[lo : lo + _BATCH]
-            spill.passed(_BATCH * unique.itemsize)
+        return read_in_chunks(unique, _BATCH)
 
     def fetch(lo_ns: int, hi_ns: int) -> np.ndarray:
         return unique[np.searchsorted(unique, lo_ns, "left") : np.searchsorted(unique, hi_ns, "right")]

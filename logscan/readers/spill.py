@@ -25,7 +25,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from logscan.log import TIMES_READ
+from logscan.log import TIMES_CHUNK, TIMES_READ
 
 try:
     import resource
@@ -36,7 +36,7 @@ MIN_BYTES = 64 << 10  # smaller arrays stay in memory: not worth the page faults
 # files mapped at once: each mapping holds a file descriptor, at most a quarter of the process's
 MAX_FILES = 256
 PASSED_BYTES = 64 << 20  # bytes read through on disk (`passed`) before their pages are given back
-CHUNK = 1 << 20  # elements per step of a pass over a whole on-disk array (its pages given back between)
+CHUNK = TIMES_CHUNK  # elements per step of a pass over a whole on-disk array (its pages given back between)
 SHARED_BYTES = 8 << 20  # arrays up to this size are carved from one file of SHARED_FILE_BYTES
 SHARED_FILE_BYTES = 64 << 20
 
