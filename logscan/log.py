@@ -247,8 +247,8 @@ class Log:
         timed = {name: c for name, c in self.channels.items() if len(c)}
         if not timed:
             return _span_text(self.duration_s, None, None)
-        first = min(timed, key=lambda name: _extreme(timed[name].t, np.min))
-        last = max(timed, key=lambda name: _extreme(timed[name].t, np.max))
+        first = min(timed, key=lambda name: _extremes(timed[name].t)[0])
+        last = max(timed, key=lambda name: _extremes(timed[name].t)[1])
         return _span_text(self.duration_s, first, last)
 
     @classmethod
@@ -278,13 +278,7 @@ class Log:
 
     @property
     def start_ns(self) -> int | None:
-        if self._span_ns is not None:
-            return self._span_ns[0]
-        firsts = [_extreme(t, np.min) for t in _distinct_times(self.channels)]
-        if not firsts:
-            topic_firsts = [t.first_ns for t in self.source.topics.values() if t.first_ns is not None]
-            return min(topic_firsts) if topic_firsts else None
-        return min(firsts)
+        return self._span()[0]
 
     @property
     def origin_ns(self) -> int | None:
@@ -314,17 +308,25 @@ class Log:
 
     @property
     def end_ns(self) -> int | None:
+        return self._span()[1]
+
+    def _span(self) -> tuple[int | None, int | None]:
+        """(first, last) time of the log: kept (`release_samples`, `read_as_window`), else of the
+        samples held, one pass over each distinct time array (a ULog's 2,000 channels share a
+        hundred), else of the topics' first and last times (None where nothing tells)."""
         if self._span_ns is not None:
-            return self._span_ns[1]
-        lasts = [_extreme(t, np.max) for t in _distinct_times(self.channels)]
-        if not lasts:
-            topic_lasts = [t.last_ns for t in self.source.topics.values() if t.last_ns is not None]
-            return max(topic_lasts) if topic_lasts else None
-        return max(lasts)
+            return self._span_ns
+        extremes = [_extremes(t) for t in _distinct_times(self.channels)]
+        if extremes:
+            return min(first for first, _ in extremes), max(last for _, last in extremes)
+        topics = self.source.topics.values()
+        firsts = [t.first_ns for t in topics if t.first_ns is not None]
+        lasts = [t.last_ns for t in topics if t.last_ns is not None]
+        return (min(firsts) if firsts else None), (max(lasts) if lasts else None)
 
     @property
     def duration_s(self) -> float:
-        start, end = self.start_ns, self.end_ns
+        start, end = self._span()
         if start is None or end is None:
             return 0.0
         return (end - start) / 1e9
@@ -364,15 +366,19 @@ class Log:
         }
 
 
-# Told the bytes of a time array each step of `_extreme` has read: a reader that keeps its arrays
+# Told the bytes of a time array each step of `_extremes` has read: a reader that keeps its arrays
 # on disk (`logscan.readers.spill`) gives their pages back as the log's span is found
 TIMES_READ: list[Callable[[int], None]] = []
 TIMES_CHUNK = 1 << 20  # elements per step of a pass over a whole array of a log (`read_in_chunks`)
 
 
-def _extreme(t: np.ndarray, reduce: Callable) -> int:
-    """``reduce(t)`` (np.min or np.max) of a non-empty time array, a chunk at a time."""
-    return int(reduce([reduce(part) for part in read_in_chunks(t)]))
+def _extremes(t: np.ndarray) -> tuple[int, int]:
+    """(min, max) of a non-empty time array, in one pass a chunk at a time."""
+    if t.size <= TIMES_CHUNK:  # one chunk: without the generator (a ULog read has a hundred arrays)
+        times_read(t.nbytes)
+        return int(np.minimum.reduce(t)), int(np.maximum.reduce(t))
+    parts = [(np.minimum.reduce(part), np.maximum.reduce(part)) for part in read_in_chunks(t, TIMES_CHUNK)]
+    return int(min(low for low, _ in parts)), int(max(high for _, high in parts))
 
 
 def read_in_chunks(array: np.ndarray, size: int = TIMES_CHUNK, overlap: int = 0) -> Iterator[np.ndarray]:

@@ -16,6 +16,7 @@ the pages stay in memory, counted as the system's shared memory instead of this 
 from __future__ import annotations
 
 import contextlib
+import math
 import mmap
 import os
 import re
@@ -94,10 +95,11 @@ def empty(shape: int | tuple[int, ...], dtype, alone: bool = False) -> np.ndarra
     """``np.empty(shape, dtype)``, backed by a file within `spilling` when large: up to
     `SHARED_BYTES` carved from a shared file, unless ``alone`` (a file of its own, of its size: for
     a few arrays in a context of their own, which would reserve a whole shared file)."""
+    if not _on[-1]:  # not spilling: numpy's own (a reader asks for a few arrays per topic)
+        return np.empty(shape, dtype)
     dtype = np.dtype(dtype)
-    count = int(np.prod(shape))
-    size = count * dtype.itemsize
-    if not _on[-1] or size < MIN_BYTES:
+    size = int(math.prod(shape if isinstance(shape, (tuple, list)) else (shape,))) * dtype.itemsize
+    if size < MIN_BYTES:
         return np.empty(shape, dtype)
     if size <= SHARED_BYTES and not alone:  # carved from a shared file: one mapping (one descriptor) for many
         if _shared[-1] is None or _shared[-1].size - _shared_used[-1] < size:

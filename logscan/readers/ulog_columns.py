@@ -10,6 +10,8 @@ signalling NaN made quiet as numpy's cast makes it; 64-bit integers rounded to n
 
 from __future__ import annotations
 
+from itertools import accumulate
+
 import numpy as np
 from numba import njit
 
@@ -58,7 +60,7 @@ class ColumnLayout:
         self.names, self.kinds, self.sizes = names, kinds, sizes
         self.width = sum(sizes)
         self._lists: tuple[list[str], list[str]] | None = None
-        self._columns: tuple[dict[str, int], np.ndarray, np.ndarray] | None = None  # index, offsets, codes
+        self._columns: tuple[dict[str, int], list[int], list[int]] | None = None  # index, offsets, codes
         self._last: tuple[list[str], np.ndarray, np.ndarray] | None = None  # the last field list asked for
 
     def lists(self) -> tuple[list[str], list[str]]:
@@ -68,21 +70,15 @@ class ColumnLayout:
         return self._lists
 
     def _places(self, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
-        """(byte offsets in the record, type codes) of the fields ``names``, picked from arrays of
-        every field's made once (a format has hundreds)."""
-        if self._columns is None:
-            sizes = np.fromiter(self.sizes, np.int64, len(self.sizes))
-            every = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
-            types = np.fromiter(map(TYPE_CODES.__getitem__, self.kinds), np.int64, len(self.kinds))
+        """(byte offsets in the record, type codes) of the fields ``names``, picked from lists of
+        every field's made once per format."""
+        if self._columns is None:  # lists, not arrays: a format has tens of fields, a read a hundred formats
+            every = list(accumulate(self.sizes, initial=0))
+            types = list(map(TYPE_CODES.__getitem__, self.kinds))
             self._columns = (dict(zip(self.names, range(len(self.names)))), every, types)
         index, every, types = self._columns
-        picked = np.fromiter(map(index.__getitem__, names), np.int64, len(names))
-        return every[picked], types[picked]
-
-    def place(self, name: str) -> tuple[int, int]:
-        """(byte offset in the record, type code) of field ``name``."""
-        offsets, codes = self._places([name])
-        return int(offsets[0]), int(codes[0])
+        picked = list(map(index.__getitem__, names))
+        return np.array([every[i] for i in picked], np.int64), np.array([types[i] for i in picked], np.int64)
 
     def rows(self, records: np.ndarray, names: list[str]) -> np.ndarray:
         """(len(names), samples) float64: the fields ``names`` of the packed ``records`` (uint8)."""
@@ -130,10 +126,10 @@ class Records:
     def stamps(self) -> np.ndarray | None:
         """The ``timestamp`` column (a strided view), None unless the format has one of uint64."""
         layout = self.layout
-        if "timestamp" not in layout.names or layout.kinds[layout.names.index("timestamp")] != "uint64_t":
+        if "timestamp" not in layout.names or layout.kinds[at := layout.names.index("timestamp")] != "uint64_t":
             return None
-        at = layout.place("timestamp")[0]
-        return np.ndarray((self.count,), dtype="<u8", buffer=self.buffer, offset=at, strides=(layout.width,))
+        offset = sum(layout.sizes[:at])
+        return np.ndarray((self.count,), dtype="<u8", buffer=self.buffer, offset=offset, strides=(layout.width,))
 
     def rows(self, names: list[str]) -> np.ndarray:
         return self.layout.rows(self.buffer, names)

@@ -417,6 +417,12 @@ def _running_max_at(stamps: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.
     `spill.CHUNK` stamps at a time: a long log's records are on disk (`logscan.readers.spill`)."""
     found = np.zeros(at.size, np.uint64)
     carry = np.uint64(0)
+    if not at.size:  # no parameter change or dropout to time (most files): the maximum alone
+        for lo in range(0, stamps.size, spill.CHUNK):
+            part = stamps[lo : lo + spill.CHUNK]
+            carry = max(carry, np.maximum.reduce(part))
+            spill.passed(part.size * stamps.strides[0])
+        return found, carry
     for lo in range(0, stamps.size, spill.CHUNK):
         running = np.maximum.accumulate(stamps[lo : lo + spill.CHUNK])
         np.maximum(running, carry, out=running)
