@@ -302,7 +302,7 @@ def build_ulog(reduced: np.ndarray, sizes: np.ndarray, types: np.ndarray, names:
     ulog._file_version = raw[7]
     ulog._start_timestamp = ulog._last_timestamp = struct.unpack_from("<Q", raw, 8)[0]
     try:
-        in_bulk = _initial_parameters(ulog, reduced, sizes, types)
+        in_bulk = _initial_parameters(ulog, reduced, raw, sizes, types)
         subscriptions = _walk(ulog, raw, sizes.tolist(), types.tobytes(), names, in_bulk)
     except _CORRUPT:
         return None
@@ -317,12 +317,12 @@ def build_ulog(reduced: np.ndarray, sizes: np.ndarray, types: np.ndarray, names:
     return ulog
 
 
-def _initial_parameters(ulog, reduced: np.ndarray, sizes: np.ndarray, types: np.ndarray) -> bool:
+def _initial_parameters(ulog, reduced: np.ndarray, raw: bytes, sizes: np.ndarray, types: np.ndarray) -> bool:
     """The parameter ('P') messages of the definitions section (a thousand in a PX4 log) into
-    ``ulog._initial_parameters`` at once: their type-and-key strings decoded as one text, their
-    values read as one array. False (nothing done: the walk reads them one by one) unless every key
-    is plain ASCII text (pyulog decodes each string leniently) and every value an int32_t or a
-    float. Raises struct.error where pyulog's read would: a value of the wrong size."""
+    ``ulog._initial_parameters`` at once (``raw``: ``reduced``'s bytes): their type-and-key strings
+    decoded as one text, their values read as one array. False (nothing done: the walk reads them
+    one by one) unless every key is plain ASCII text (pyulog decodes each string leniently) and
+    every value an int32_t or a float. Raises struct.error where pyulog's read would: a value of the wrong size."""
     kinds_text = types.tobytes()
     split = min((at for at in map(kinds_text.find, (b"A", b"L", b"C")) if at >= 0), default=types.size)
     chosen = np.flatnonzero(types[:split] == ord("P"))
@@ -331,7 +331,6 @@ def _initial_parameters(ulog, reduced: np.ndarray, sizes: np.ndarray, types: np.
     payloads = _HEADER_BYTES + 3 + np.concatenate(([0], np.cumsum(sizes[: split - 1] + 3)))
     starts, sizes = payloads[chosen], sizes[chosen]
     key_lens = reduced[starts].astype(np.int64)
-    raw = reduced.tobytes()
     text = b"\n".join([raw[s + 1 : s + 1 + k] for s, k in zip(starts.tolist(), key_lens.tolist())])
     if not text.isascii() or text.count(b"\n") != chosen.size - 1:
         return False

@@ -217,11 +217,12 @@ class _Plan:
             offsets, sizes = part.offsets_of(subscription.msg_id)
             if not offsets.size:
                 continue
-            if int(sizes.min()) - 2 < width or int(sizes.max()) - 2 > width:
+            if not (sizes == width + 2).all():  # payload: the msg_id's 2 bytes, then the record
                 self.failed = True
                 return
             _gather(self.buf, offsets + 5, width, buffer[done * width : (done + offsets.size) * width])
-            before += np.searchsorted(offsets, self.queries)
+            if self.queries.size:
+                before += np.searchsorted(offsets, self.queries)
             done += offsets.size
             self.give_back(int(offsets[-1]))
             spill.passed(offsets.size * width)
