@@ -12,12 +12,19 @@ system time, peak RSS +30-48 MiB (+6-9 %). On a longer log the freed reading and
 left inside the heap grow past that, below arrays still alive (not at the top): between the
 pipeline's steps, from 256 MiB free there (the trim threshold; in block mode from any), its whole
 free pages go back to the system (`return_freed_pages`).
+
+Python's cyclic collector is paused (`collector_paused`) where code makes many objects at once:
+each 700 container objects made start a collection of the youngest generation, every tenth of those
+one of the middle generation, and the objects a numba compile (hundreds of thousands) or a log's
+read (a channel and its dict per field: 2,000-2,500 in a short PX4 log) makes were walked again and
+again while they were made. Paused, what they leave is walked once, when the collector is back on.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import gc
 import mmap
 import sys
 from collections.abc import Iterator
@@ -95,3 +102,17 @@ def drop_mapped_pages(mapped: mmap.mmap, stop: int) -> None:
     length = stop - stop % mmap.PAGESIZE
     if length > 0 and hasattr(mmap, "MADV_DONTNEED"):
         mapped.madvise(mmap.MADV_DONTNEED, 0, length)
+
+
+@contextmanager
+def collector_paused() -> Iterator[None]:
+    """The cyclic collector off inside the block (as it was before, after it): a kernel's compile
+    (about 0.7 s of the first run's CPU walked numba's objects) or a log's read (a tenth of a short
+    PX4 log's read, bench/README.md); neither leaves cyclic garbage to wait for it."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()

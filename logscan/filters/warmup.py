@@ -14,12 +14,10 @@ failing) just leaves the compile to the first call, as without this module.
 
 from __future__ import annotations
 
-import gc
 import multiprocessing
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from types import FunctionType
 
@@ -30,6 +28,7 @@ from numba.core.dispatcher import Dispatcher
 from logscan.align import AlignedGroup, AlignedRun
 from logscan.filters import coding, ekf, linalg
 from logscan.filters.ekf import ekf_run, run_ekf
+from logscan.memory import collector_paused
 from logscan.models.base import Model
 from logscan.numba_cache import initialise_jit, kernel_cached
 
@@ -112,20 +111,6 @@ def load_kernels(model: Model | None, users: Iterable[object], notice: Callable[
             head_start(partial(_compile_ekf, model))
         for compile_kernels in compilers:
             head_start(compile_kernels)
-
-
-@contextmanager
-def collector_paused() -> Iterator[None]:
-    """Python's cyclic collector off while kernels compile: numba makes hundreds of thousands of
-    objects per kernel, and the collections they trigger walked them for about 0.7 s of the first
-    run's CPU; what they leave is collected once the collector is back on."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
 
 
 # The EKF kernel's model-independent helpers, each with the one signature the kernel calls it with

@@ -18,13 +18,12 @@ from logscan.errors import CorruptLogError, InputError, LogscanError, ProfileErr
 from logscan.filters.warmup import (
     COMPILING_NOTE,
     Compile,
-    collector_paused,
     head_start,
     kernel_cached,
     start_compile,
 )
 from logscan.log import MAX_SPAN_S, Log
-from logscan.memory import return_freed_pages
+from logscan.memory import collector_paused, return_freed_pages
 from logscan.models import get_model
 from logscan.needs import Needs
 from logscan.pipeline.held_window import held_window, widened

@@ -175,7 +175,7 @@ def give_back() -> None:
 
 def passed(size: int) -> None:
     """Count ``size`` bytes of on-disk arrays read or written; from `PASSED_BYTES` on, `give_back`."""
-    if not _mapped.data:  # the live mappings' references (WeakSet's own len is a Python call)
+    if not _mapped:
         return
     _passed[0] += size
     if _passed[0] >= PASSED_BYTES:

@@ -49,6 +49,7 @@ import numpy as np
 
 from logscan.errors import CorruptLogError
 from logscan.log import Channel, Log, SourceInfo, TopicInfo
+from logscan.memory import collector_paused
 from logscan.readers import spill
 from logscan.readers.common import (
     ZERO_TIMESTAMP_WHY,
@@ -120,7 +121,9 @@ def read_ulog(
     A held read of a file of `SPILL_FROM_BYTES` or more keeps its records and channels on disk
     (`logscan.readers.spill`): a long log held whole holds in memory only what a step has in hand."""
     size = stat_input(path).st_size
-    with spill.spilling(held and size >= SPILL_FROM_BYTES, needs=2 * size):  # its arrays take about its size
+    # its arrays take about its size on disk; the collector paused: a channel and its dict per
+    # field, made by the thousand, were walked again by every collection they set off
+    with spill.spilling(held and size >= SPILL_FROM_BYTES, needs=2 * size), collector_paused():
         return _read_ulog(path, wanted, progress, held, size)
 
 
