@@ -154,3 +154,26 @@ def test_file_slices_cover_every_offset_once_each_within_a_slice_of_the_file(ste
     covered = [i for lo, hi in slices for i in range(lo, hi)]
     assert covered == list(range(offsets.size))
     assert all(hi > lo and offsets[hi - 1] - offsets[lo] < frame for lo, hi in slices)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    ids=st.lists(st.sampled_from([0, 1, 7, 300, 65535]), min_size=1, max_size=400),  # past insertion sort's 16
+    gaps=st.lists(st.integers(3, 40), min_size=400, max_size=400),
+    start=st.integers(16, 5000),
+)
+def test_a_slices_messages_grouped_by_id_are_each_ids_in_file_order(ids, gaps, start):
+    """`_Part`'s one stable sort by id gives what a pass over every id gives: each id's offsets
+    and sizes in file order, its count and its first message; nothing for an id not in the slice."""
+    ids_arr = np.array(ids, np.uint16)
+    offsets = start + np.cumsum(np.array(gaps[: ids_arr.size], np.int64))
+    sizes = (offsets % 251 + 2).astype(np.uint16)
+    part = ulog_framed._Part(offsets, sizes, ids_arr)
+    for msg_id in (0, 1, 7, 300, 65535, 9):
+        chosen = np.flatnonzero(ids_arr == msg_id)
+        got_offsets, got_sizes = part.offsets_of(msg_id)
+        np.testing.assert_array_equal(got_offsets, offsets[chosen])
+        np.testing.assert_array_equal(got_sizes, sizes[chosen])
+        assert got_offsets.dtype == np.int64
+        assert part.counts.get(msg_id, 0) == chosen.size
+        assert part.first.get(msg_id) == (int(offsets[chosen[0]]) if chosen.size else None)
