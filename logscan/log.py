@@ -14,7 +14,7 @@ _INT64 = np.dtype(np.int64)
 _FLOAT64 = np.dtype(np.float64)
 
 
-@dataclass
+@dataclass(slots=True)  # no dict per channel: a ULog read makes thousands
 class Channel:
     """One numeric signal: ``t`` int64 nanoseconds (sorted as read), ``values`` float64, same length."""
 
