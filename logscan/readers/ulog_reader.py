@@ -121,8 +121,9 @@ def read_ulog(
     A held read of a file of `SPILL_FROM_BYTES` or more keeps its records and channels on disk
     (`logscan.readers.spill`): a long log held whole holds in memory only what a step has in hand."""
     size = stat_input(path).st_size
-    # its arrays take about its size on disk; the collector paused: a channel and its dict per
-    # field, made by the thousand, were walked again by every collection they set off
+    # its arrays take about its size on disk; the collector paused: a channel per field, made by
+    # the thousand, was walked again by every collection they set off (what cyclic garbage the read
+    # leaves, a few thousand objects of its format tables at any length, waits for it once)
     with spill.spilling(held and size >= SPILL_FROM_BYTES, needs=2 * size), collector_paused():
         return _read_ulog(path, wanted, progress, held, size)
 
