@@ -247,8 +247,9 @@ class Log:
         timed = {name: c for name, c in self.channels.items() if len(c)}
         if not timed:
             return _span_text(self.duration_s, None, None)
-        first = min(timed, key=lambda name: _extremes(timed[name].t)[0])
-        last = max(timed, key=lambda name: _extremes(timed[name].t)[1])
+        ends = {name: _extremes(channel.t) for name, channel in timed.items()}  # each channel's once
+        first = min(timed, key=lambda name: ends[name][0])
+        last = max(timed, key=lambda name: ends[name][1])
         return _span_text(self.duration_s, first, last)
 
     @classmethod

@@ -16,7 +16,7 @@ free pages go back to the system (`return_freed_pages`).
 Python's cyclic collector is paused (`collector_paused`) where code makes many objects at once:
 each 700 container objects made start a collection of the youngest generation, every tenth of those
 one of the middle generation, and the objects a numba compile (hundreds of thousands) or a log's
-read (a channel and its dict per field: 2,000-2,500 in a short PX4 log) makes were walked again and
+read (a channel per field: 2,000-2,500 in a short PX4 log) makes were walked again and
 again while they were made. Paused, what they leave is walked once, when the collector is back on.
 """
 
