@@ -468,6 +468,48 @@ def test_a_ctrl_c_a_finalizer_swallowed_still_exits_130_and_commits_nothing(samp
     assert sys.unraisablehook is not cli_main._unraisable  # Python's hook back
 
 
+_HALF_CLOSED_AT_EXIT = """
+import atexit, gc, os, signal, sys
+from logscan.cli import main as cli_main
+
+
+class HalfClosed:  # llvmlite's ObjectRef after a Ctrl-C between detach's two lines
+    def __init__(self):
+        self.cycle = self  # freed by the collector, whenever it next runs
+
+    def __del__(self):
+        raise AttributeError("'TypeRef' object has no attribute '_as_parameter_'")
+
+
+def interrupted(*args, **kwargs):
+    HalfClosed()
+    os.kill(os.getpid(), signal.SIGINT)
+    return real(*args, **kwargs)
+
+
+real = cli_main.cli.main
+cli_main.cli.main = interrupted
+atexit.register(gc.collect)  # a collection while the process ends
+sys.argv = ["logscan", *sys.argv[1:]]
+cli_main.main()
+"""
+
+
+def test_a_finalizer_a_ctrl_c_left_half_done_fails_quietly_as_the_process_ends(sample, tmp_path):
+    """CI once saw a Ctrl-C during the first run's compile end with exit 130 and, as the last line,
+    the traceback of an llvmlite object's ``__del__`` the interruption had left half-closed: after
+    a Ctrl-C the finalizers' errors are not printed, also while the process ends."""
+    out = tmp_path / "r.html"
+    (previous,) = previous_outputs(tmp_path, "r.html")
+    args = ["analyze", sample("quad_healthy.mcap"), "-o", out, "-q"]
+    proc = subprocess.run(
+        [sys.executable, "-c", _HALF_CLOSED_AT_EXIT, *map(str, args)], capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.splitlines() == ["logscan: interrupted"]
+    assert previous.read_bytes() == OLD and temporary_files(tmp_path) == []
+
+
 def test_commit_refuses_after_a_ctrl_c_and_removes_its_temporary_files(tmp_path):
     from logscan.errors import INTERRUPT_SEEN
 

@@ -136,6 +136,7 @@ def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in args
     previous = _install_signal_handlers()
+    code: int = ExitCode.INTERNAL
     try:
         with _warnings_as_lines(debug):
             code = _run(args, debug)
@@ -145,6 +146,11 @@ def main(argv: list[str] | None = None) -> None:
         if argv is None and previous.pop(signal.SIGINT, None) is not None:
             # the process's own run: Ctrl-C stays logscan's until the process ends
             signal.signal(signal.SIGINT, _interrupted_at_exit)
+        if argv is None and code == ExitCode.INTERRUPTED:
+            # and so does the finalizers' quiet: one the interruption left half-done may fail as
+            # the process ends (`_unraisable`)
+            previous.pop("unraisablehook", None)
+            _ENDING_INTERRUPTED[0] = True
         _restore_signal_handlers(previous)
     if argv is None:
         _exit_process(int(code))
@@ -396,10 +402,19 @@ _HOOK = [sys.unraisablehook]  # the unraisable hook `_unraisable` passes everyth
 
 def _unraisable(unraisable) -> None:
     """Python's hook for an exception it cannot raise (one raised while a finalizer runs): a
-    Ctrl-C there is not printed as a traceback; the handler's flag carries it (`_run`)."""
+    Ctrl-C there is not printed as a traceback; the handler's flag carries it (`_run`). Nor is any
+    error of a finalizer after a Ctrl-C: the interruption may have left an object half-closed
+    (llvmlite's ObjectRef.detach stopped between deleting its pointer and marking itself closed
+    fails in its ``__del__`` with "AttributeError: ... '_as_parameter_'"), and the run ends with
+    its one line and exit 130 (`_ENDING_INTERRUPTED`: until the process ends)."""
     if isinstance(unraisable.exc_value, (Interrupted, KeyboardInterrupt)):
         return
+    if _INTERRUPT_SEEN[0] or _ENDING_INTERRUPTED[0]:
+        return
     _HOOK[0](unraisable)
+
+
+_ENDING_INTERRUPTED = [False]  # the process's own run was interrupted and the process is ending
 
 
 def _restore_signal_handlers(previous: dict) -> None:
