@@ -142,12 +142,15 @@ class NumpyQuadcopter:
 
 
 @njit(cache=True, error_model="numpy")
-def hand_tuned_ekf(p, dt, Q, x0, P0, u, z, fresh):
+def hand_tuned_ekf(p, dt, Q, x0, P0, u, z, fresh, S_out, K_out):
     """x_post (N, 12) of the quadcopter EKF on accel (z columns 0:3, every step), gyro (3:6, every
     step) and position (6:9, where fresh[k, 2]); z has N + 1 rows, the last one the diagonal of R
-    (`run_hand_tuned` packs them)."""
+    (`run_hand_tuned` packs them). With S_out (N, 9, 9) and K_out (N, 12, 9) of N rows (else 0) it
+    also stores each step's S and K as logscan's full trace does, NaN where a sensor was not in the
+    update: the same outputs, so that the full trace is measured against the same work."""
     N = u.shape[0]
     n = 12
+    store = S_out.shape[0] == N
     R_diag = z[N]
     x, P = x0.copy(), P0.copy()
     x_new, kv, xs = np.empty(n), np.empty(n), np.empty(n)
@@ -213,6 +216,9 @@ def hand_tuned_ekf(p, dt, Q, x0, P0, u, z, fresh):
                 for s in range(hnnz[b]):
                     c = hcols[b, s]
                     t += HP[a, c] * Hs[b, c]
+                if store:
+                    S_out[k, a, b] = t
+                    S_out[k, b, a] = t
                 for c in range(b):
                     t -= L[a, c] * L[b, c]
                 L[a, b] = np.sqrt(t) if a == b else t / L[b, b]
@@ -222,6 +228,19 @@ def hand_tuned_ekf(p, dt, Q, x0, P0, u, z, fresh):
                 for c in range(a):
                     t -= L[a, c] * V[c, j]
                 V[a, j] = t / L[a, a]
+        if store:  # K^T = L^-T V, straight into K; rows and columns of a sensor not updated: NaN
+            for a in range(m - 1, -1, -1):
+                for j in range(n):
+                    t = V[a, j]
+                    for c in range(a + 1, m):
+                        t -= L[c, a] * K_out[k, j, c]
+                    K_out[k, j, a] = t / L[a, a]
+            for a in range(m, 9):
+                for j in range(n):
+                    K_out[k, j, a] = np.nan
+                for b in range(9):
+                    S_out[k, a, b] = np.nan
+                    S_out[k, b, a] = np.nan
         for a in range(m):  # w = L^-1 y
             t = y[a]
             for c in range(a):
@@ -247,8 +266,9 @@ def hand_tuned_ekf(p, dt, Q, x0, P0, u, z, fresh):
     return xs_out
 
 
-def run_hand_tuned(model, run, x0, P0):
-    """The hand-tuned filter on the bench's run (accel, gyro at every step, position every tenth)."""
+def run_hand_tuned(model, run, x0, P0, store_gain=False):
+    """The hand-tuned filter on the bench's run (accel, gyro at every step, position every tenth):
+    x_post, or with ``store_gain`` (x_post, S, K) as logscan's full trace stores S and K."""
     names = ["accel", "gyro", "position"]
     N = run.n_steps
     z = np.empty((N + 1, 9))
@@ -263,7 +283,11 @@ def run_hand_tuned(model, run, x0, P0):
         if np.count_nonzero(R - np.diag(np.diag(R))):
             raise ValueError("the hand-tuned filter expects a diagonal R")
     p = model.param_vector(run.dt)
-    return hand_tuned_ekf(p, run.dt, model.default_Q(run.dt), x0, P0, np.ascontiguousarray(run.u), z, fresh)
+    rows = N if store_gain else 0
+    S_out, K_out = np.empty((rows, 9, 9)), np.empty((rows, 12, 9))
+    u = np.ascontiguousarray(run.u)
+    xs = hand_tuned_ekf(p, run.dt, model.default_Q(run.dt), x0, P0, u, z, fresh, S_out, K_out)
+    return (xs, S_out, K_out) if store_gain else xs
 
 
 follow_dependencies(__name__)
