@@ -31,12 +31,11 @@ from logscan.pipeline.block_merge import (
     windows_folded,
 )
 from logscan.pipeline.detection import consistency_lines, rescore
-from logscan.readers import spill
+from logscan.pipeline.kept_nis import KeptNis
 from logscan.report.context_join import joined
 from logscan.report.kept_views import KeptRows
 from logscan.results import Band, DetectorResult, NotChecked, events_from_truth
 from logscan.verdict.coverage import judged_span
-from logscan.verdict.nis_consistency import NisConsistency, summed
 
 if TYPE_CHECKING:
     from logscan.pipeline.stages import Prepared
@@ -176,37 +175,6 @@ def _pieces(result: DetectorResult) -> tuple:
     return result.series, result.extras, result.judged, uppers, lowers
 
 
-class _KeptNis:
-    """The blocks' groups' NIS (`nis_consistency`), in order: the latest blocks' as they came, the
-    earlier ones summed `PENDING_BYTES` at a time, on disk when the log's read is held there
-    (`logscan.readers.spill`): about 2 MB per log-hour that a long ULog's blocks no longer hold."""
-
-    PENDING_BYTES = 4 << 20
-
-    def __init__(self) -> None:
-        self.kept: list[NisConsistency] = []
-        self.pending: list[NisConsistency | None] = []
-        self.pending_bytes = 0
-
-    def add(self, part: NisConsistency | None, on_disk: bool) -> None:
-        self.pending.append(part)
-        self.pending_bytes += sum(g.nis.nbytes + g.judged.nbytes for g in part.groups) if part is not None else 0
-        if self.pending_bytes < self.PENDING_BYTES:
-            return
-        joined = summed(self.pending)
-        if joined is not None:
-            with spill.spilling(on_disk, needs=2 * self.pending_bytes):  # each array a file of its size
-                for group in joined.groups:
-                    group.nis = spill.copied(group.nis, alone=True)
-                    group.judged = spill.copied(group.judged, alone=True)
-            self.kept.append(joined)
-        self.pending, self.pending_bytes = [], 0
-
-    def summed(self) -> NisConsistency | None:
-        """The log's: every block's groups' NIS end to end (`summed`)."""
-        return summed([*self.kept, *self.pending])
-
-
 class BlockFold:
     """The merged analysis of the blocks folded in so far (`add`, in time order); `merged` gives it."""
 
@@ -220,7 +188,7 @@ class BlockFold:
         self.warnings: list[list[str]] = []
         self.unchecked: list[list[str]] = []
         self.coverages: list = []  # each block's coverage in figures: the log's is their sum
-        self.consistency = _KeptNis()  # the blocks' groups' NIS: the log's consistency warnings judge their sum
+        self.consistency = KeptNis()  # the blocks' groups' NIS, on disk: the log's consistency warnings judge it
         self.alignment: list = []  # each block's gate and gap figures: the log's lines sum them
         self.alignment_before: list[str] = []  # the first block's lines kept before its alignment lines
         self.spans: list[BlockSpan] = []  # the blocks folded in, in order
@@ -260,7 +228,7 @@ class BlockFold:
             self.alignment_before = [line for line in block.warnings[: _after_alignment(block)] if line not in own]
         self.unchecked.append([line for line in block.unchecked if line not in own])
         self.coverages.append(block.coverage)
-        self.consistency.add(block.consistency, spill.holding())  # on disk beside a read held there
+        self.consistency.add(block.consistency)
         if block.alignment is not None:
             self.alignment.append(replace(block.alignment, number=span.number))
         self.spans.append(span)

@@ -227,7 +227,7 @@ def consistency_lines(
     and the groups calibration kept at their noise are the profile's and tables'."""
     if consistency is None:
         return []
-    groups = [group.name for group in consistency.groups]
+    groups = consistency.group_names()
     alarmed = {group_of(a.signal, groups) for r in results for a in r.alarms}
     uncalibrated: frozenset = getattr(prepared.loaded, "uncalibrated", frozenset())
     return consistency.lines(alarmed, calibrate_command(prepared.profile), uncalibrated)

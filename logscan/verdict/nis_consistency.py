@@ -50,8 +50,13 @@ class GroupNis:
 class NisConsistency:
     """Each group's NIS at its updates (`nis_consistency`); ``said``: the lines given for them."""
 
-    groups: list[GroupNis]
+    groups: Sequence[GroupNis]  # a list, or block mode's groups joined as each is read (`logscan.pipeline.kept_nis`)
     said: frozenset[str] = frozenset()
+
+    def group_names(self) -> list[str]:
+        """The groups' names (of joined groups without joining them)."""
+        names = getattr(self.groups, "names", None)
+        return list(names) if names is not None else [group.name for group in self.groups]
 
     def lines(self, alarmed: set, calibrate: str, uncalibrated: frozenset = frozenset()) -> list[str]:
         """One warning per group whose median NIS is far above the chi-square median of its size, or
@@ -60,7 +65,7 @@ class NisConsistency:
         ``calibrate``: the command that calibrates the noise; ``uncalibrated``: the groups the tables'
         calibration could not bring to 1."""
         out = []
-        for group in self.groups:
+        for group in self.groups:  # one at a time: each joined group is dropped once judged
             if group.nis.size < NIS_MIN_UPDATES or not group.size:
                 continue
             ratio = float(np.median(group.nis)) / float(chdtri(group.size, 0.5))
