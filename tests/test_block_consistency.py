@@ -100,7 +100,7 @@ def test_the_merge_joins_one_group_at_a_time_each_part_in_one_file(monkeypatch):
         for part in kept.kept:
             arrays = [a for g in part.groups for a in (g.nis, g.judged)]
             assert all(spill.on_disk(a) for a in arrays)
-            assert len({id(spill_base(a)) for a in arrays}) == 1
+            assert len({id(spill.file_of(a)) for a in arrays}) == 1
     merged = kept.summed()
     joins = []
     real = kept_nis._joined
@@ -113,13 +113,6 @@ def test_the_merge_joins_one_group_at_a_time_each_part_in_one_file(monkeypatch):
         alive.append(weakref.ref(group.nis))
     assert len(joins) == 6
     assert merged.lines({"baro"}, CALIBRATE) == whole.lines({"baro"}, CALIBRATE)
-
-
-def spill_base(array: np.ndarray):
-    base = array
-    while isinstance(base, np.ndarray) and base.base is not None:
-        base = base.base
-    return base.obj if isinstance(base, memoryview) else base
 
 
 def test_a_short_block_judged_alone_would_say_otherwise():

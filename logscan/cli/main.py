@@ -147,10 +147,10 @@ def main(argv: list[str] | None = None) -> None:
             # the process's own run: Ctrl-C stays logscan's until the process ends
             signal.signal(signal.SIGINT, _interrupted_at_exit)
         if argv is None and code == ExitCode.INTERRUPTED:
-            # and so does the finalizers' quiet: one the interruption left half-done may fail as
-            # the process ends (`_unraisable`)
+            # and so does the finalizers' quiet (`_unraisable`, the flag kept): one the
+            # interruption left half-done may fail as the process ends
             previous.pop("unraisablehook", None)
-            _ENDING_INTERRUPTED[0] = True
+            _INTERRUPT_SEEN[0] = True
         _restore_signal_handlers(previous)
     if argv is None:
         _exit_process(int(code))
@@ -406,15 +406,10 @@ def _unraisable(unraisable) -> None:
     error of a finalizer after a Ctrl-C: the interruption may have left an object half-closed
     (llvmlite's ObjectRef.detach stopped between deleting its pointer and marking itself closed
     fails in its ``__del__`` with "AttributeError: ... '_as_parameter_'"), and the run ends with
-    its one line and exit 130 (`_ENDING_INTERRUPTED`: until the process ends)."""
-    if isinstance(unraisable.exc_value, (Interrupted, KeyboardInterrupt)):
-        return
-    if _INTERRUPT_SEEN[0] or _ENDING_INTERRUPTED[0]:
+    its one line and exit 130 (the process's own run: until the process ends, `main`)."""
+    if _INTERRUPT_SEEN[0] or isinstance(unraisable.exc_value, (Interrupted, KeyboardInterrupt)):
         return
     _HOOK[0](unraisable)
-
-
-_ENDING_INTERRUPTED = [False]  # the process's own run was interrupted and the process is ending
 
 
 def _restore_signal_handlers(previous: dict) -> None:

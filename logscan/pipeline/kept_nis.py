@@ -12,14 +12,11 @@ Where nothing can be put on disk (a tmpfs ``TMPDIR``, no room) the values stay i
 from __future__ import annotations
 
 from collections.abc import Sequence
-from itertools import accumulate
 
 import numpy as np
 
 from logscan.readers import spill
-from logscan.verdict.nis_consistency import GroupNis, NisConsistency, summed
-
-ALIGN = 64  # bytes: each array of a part starts on a cache line of its file
+from logscan.verdict.nis_consistency import GroupNis, NisConsistency, pieces_by_group, summed
 
 
 class KeptNis:
@@ -55,10 +52,7 @@ class JoinedGroups(Sequence):
     loop): a loop that keeps no group holds one at a time. ``names``: the groups', without joining."""
 
     def __init__(self, parts: Sequence[NisConsistency]) -> None:
-        self._pieces: dict[str, list[GroupNis]] = {}
-        for part in parts:
-            for group in part.groups:
-                self._pieces.setdefault(group.name, []).append(group)
+        self._pieces = pieces_by_group(parts)
         self.names = list(self._pieces)
 
     def __len__(self) -> int:
@@ -86,21 +80,10 @@ def _joined(arrays: list[np.ndarray]) -> np.ndarray:
 
 
 def _moved_to_disk(part: NisConsistency, on: bool) -> NisConsistency:
-    """``part``'s arrays copied into one file of their own when ``on`` and one can be made
-    (`spill.empty`), else ``part`` itself: one file per part, not one per array (a process maps at
-    most `spill.MAX_FILES`)."""
+    """``part``'s arrays in one file of their own when ``on`` (`spill.copied_together`: one file
+    per part, not one per array, as a process maps at most `spill.MAX_FILES`), else as they are."""
     arrays = [array for group in part.groups for array in (group.nis, group.judged)]
-    places = [-(-array.nbytes // ALIGN) * ALIGN for array in arrays]
-    with spill.spilling(on, needs=2 * sum(places)):  # its end gives back the pages written
-        file = spill.empty(sum(places), np.uint8, alone=True)
-        if not spill.on_disk(file):
-            return part
-        kept = [_copied_into(file, at, array) for at, array in zip(accumulate(places, initial=0), arrays)]
+    with spill.spilling(on, needs=2 * sum(array.nbytes for array in arrays)):  # its end gives back the pages written
+        kept = spill.copied_together(arrays)
     pairs = zip(part.groups, kept[::2], kept[1::2], strict=True)
     return NisConsistency([GroupNis(group.name, group.size, nis, judged) for group, nis, judged in pairs])
-
-
-def _copied_into(file: np.ndarray, at: int, array: np.ndarray) -> np.ndarray:
-    kept = file[at : at + array.nbytes].view(array.dtype)
-    kept[...] = array
-    return kept

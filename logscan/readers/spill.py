@@ -16,6 +16,7 @@ the pages stay in memory, counted as the system's shared memory instead of this 
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import mmap
 import os
@@ -107,7 +108,7 @@ def empty(shape: int | tuple[int, ...], dtype, alone: bool = False) -> np.ndarra
         shared = _shared[-1]
         if shared is not None:
             at = _shared_used[-1]
-            _shared_used[-1] += -(-size // 64) * 64
+            _shared_used[-1] += _aligned(size)
             return shared[at : at + size].view(dtype).reshape(shape)
     own = _mapping(size)
     return np.empty(shape, dtype) if own is None else own[:size].view(dtype).reshape(shape)
@@ -122,6 +123,27 @@ def copied(values: np.ndarray, dtype=None, alone: bool = False) -> np.ndarray:
     kept[...] = values
     passed(kept.nbytes)
     return kept
+
+
+def copied_together(arrays: list[np.ndarray]) -> list[np.ndarray]:
+    """Copies of ``arrays`` in one file of their summed size within `spilling` (each a file of
+    its own would count against `MAX_FILES`; a shared file reserves `SHARED_FILE_BYTES`), else
+    ``arrays`` themselves."""
+    places = [_aligned(array.nbytes) for array in arrays]
+    file = empty(sum(places), np.uint8, alone=True)
+    if not on_disk(file):
+        return arrays
+    kept = []
+    for at, array in zip(itertools.accumulate(places, initial=0), arrays):
+        kept.append(file[at : at + array.nbytes].view(array.dtype).reshape(array.shape))
+        kept[-1][...] = array
+    passed(file.nbytes)
+    return kept
+
+
+def _aligned(size: int) -> int:
+    """``size`` bytes rounded up to a cache line: where the next array carved from a file starts."""
+    return -(-size // 64) * 64
 
 
 def _mapping(size: int) -> np.ndarray | None:
@@ -152,12 +174,17 @@ def _descriptors() -> int:
 
 def on_disk(array: np.ndarray) -> bool:
     """Whether ``array`` (or the array it views) is one `empty` put on disk."""
+    return file_of(array) is not None
+
+
+def file_of(array: np.ndarray) -> mmap.mmap | None:
+    """The on-disk file ``array`` (or the array it views) lies in, None when it is in memory."""
     base = array
     while isinstance(base, np.ndarray) and base.base is not None:
         base = base.base
     if isinstance(base, memoryview):  # np.frombuffer's base: a view of the mapping
         base = base.obj
-    return isinstance(base, mmap.mmap) and base in _mapped
+    return base if isinstance(base, mmap.mmap) and base in _mapped else None
 
 
 def holding() -> bool:

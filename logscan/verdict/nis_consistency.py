@@ -95,10 +95,6 @@ def summed(parts: Sequence[NisConsistency | None]) -> NisConsistency | None:
     found = [part for part in parts if part is not None]
     if not found:
         return None
-    by_name: dict[str, list[GroupNis]] = {}
-    for part in found:
-        for group in part.groups:
-            by_name.setdefault(group.name, []).append(group)
     return NisConsistency(
         [
             GroupNis(
@@ -107,9 +103,18 @@ def summed(parts: Sequence[NisConsistency | None]) -> NisConsistency | None:
                 np.concatenate([p.nis for p in pieces]),
                 np.concatenate([p.judged for p in pieces]),
             )
-            for name, pieces in by_name.items()
+            for name, pieces in pieces_by_group(found).items()
         ]
     )
+
+
+def pieces_by_group(parts: Sequence[NisConsistency]) -> dict[str, list[GroupNis]]:
+    """Each group's pieces in ``parts``, in order, by name (in the order the groups first come)."""
+    by_name: dict[str, list[GroupNis]] = {}
+    for part in parts:
+        for group in part.groups:
+            by_name.setdefault(group.name, []).append(group)
+    return by_name
 
 
 def _mismatch_line(name: str, ratio: float, alarmed: bool, calibrate: str) -> str:
