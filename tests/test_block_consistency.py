@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from logscan.pipeline import kept_nis
 from logscan.readers import spill
-from logscan.verdict.nis_consistency import GroupNis, NisConsistency, summed
+from logscan.verdict import nis_consistency
+from logscan.verdict.nis_consistency import GroupNis, NisConsistency, pieces_by_group, summed
 
 CALIBRATE = "logscan train LOG --calibrate -o tables.json"
 
@@ -74,22 +75,23 @@ def test_the_fold_keeps_the_blocks_nis_in_order_on_disk_or_not(seed, cuts, on_di
         kept.add(part, on_disk)
     merged = kept.summed()
     assert merged is not None
-    for got, want in zip(merged.groups, whole.groups, strict=True):
-        assert (got.name, got.size) == (want.name, want.size)
-        np.testing.assert_array_equal(got.nis, want.nis)
-        np.testing.assert_array_equal(got.judged, want.judged)
+    pieces = pieces_by_group([merged])
+    assert list(pieces) == merged.group_names() == [g.name for g in whole.groups]
+    for want in whole.groups:
+        got = pieces[want.name]
+        assert {g.size for g in got} == {want.size}
+        np.testing.assert_array_equal(np.concatenate([g.nis for g in got]), want.nis)
+        np.testing.assert_array_equal(np.concatenate([g.judged for g in got]), want.judged)
+    assert merged.lines({"baro"}, CALIBRATE) == whole.lines({"baro"}, CALIBRATE)
     if on_disk and pending == 1 and spill._CAN and spill._room_on_disk(0):
         large = [g.nis for part in kept.kept for g in part.groups if g.nis.nbytes >= spill.MIN_BYTES]
         assert large and all(spill.on_disk(nis) for nis in large)
 
 
-def test_the_merge_joins_one_group_at_a_time_each_part_in_one_file(monkeypatch):
+def test_the_merge_reads_the_pieces_on_disk_without_joining_them(monkeypatch):
     """A long log's NIS grows with it (180 MB at 24 hours of a 100 Hz quadcopter): the fold keeps it
-    on disk by default, each joined part in one file, and the merge's warnings read one joined group
-    at a time; the group names come without joining any."""
-    import gc
-    import weakref
-
+    on disk by default, each joined part in one file, and the merge's warnings read it there a
+    chunk at a time, told to `spill` so that its pages go back: the merge holds no group whole."""
     whole = _consistency(np.random.default_rng(7), 60_000)
     kept = kept_nis.KeptNis()
     kept.PENDING_BYTES = 700_000  # two parts (405 KB each) a file
@@ -102,17 +104,39 @@ def test_the_merge_joins_one_group_at_a_time_each_part_in_one_file(monkeypatch):
             assert all(spill.on_disk(a) for a in arrays)
             assert len({id(spill.file_of(a)) for a in arrays}) == 1
     merged = kept.summed()
-    joins = []
-    real = kept_nis._joined
-    monkeypatch.setattr(kept_nis, "_joined", lambda arrays: joins.append(1) or real(arrays))
-    assert merged.group_names() == ["gnss", "baro", "attitude"] and joins == []
-    alive = []
-    for group in merged.groups:
-        gc.collect()
-        assert all(ref() is None for ref in alive)  # the group before was dropped
-        alive.append(weakref.ref(group.nis))
-    assert len(joins) == 6
-    assert merged.lines({"baro"}, CALIBRATE) == whole.lines({"baro"}, CALIBRATE)
+    assert merged.group_names() == ["gnss", "baro", "attitude"]
+    assert len(merged.groups) == 6  # two pieces a group, none joined
+    expected = whole.lines({"baro"}, CALIBRATE)
+    read = []
+    real = nis_consistency.read_in_chunks
+    monkeypatch.setattr(nis_consistency, "read_in_chunks", lambda a: read.append(a.size) or real(a, 4096))
+    monkeypatch.setattr(nis_consistency, "SELECT_AT_ONCE", 500)  # the median's last step: at most 500 values
+    partitioned = []
+    real_partition = np.partition
+    monkeypatch.setattr(np, "partition", lambda a, k: partitioned.append(a.size) or real_partition(a, k))
+    assert merged.lines({"baro"}, CALIBRATE) == expected
+    assert read and max(read) == 30_000  # a piece at a time, 4096 values a chunk
+    assert partitioned and max(partitioned) <= 500
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    pieces=st.lists(
+        st.lists(st.floats(-1e6, 1e6, allow_nan=False) | st.sampled_from([0.0, 1.0, 2.5]), min_size=1, max_size=60),
+        min_size=2,
+        max_size=5,
+    ),
+    at_once=st.sampled_from([1, 3, 1 << 20]),
+)
+def test_the_median_of_pieces_is_numpys_of_them_joined(pieces, at_once):
+    # exact: radix selection on the values' sort keys, whatever the candidates held at once
+    arrays = [np.asarray(p, dtype=np.float64) for p in pieces]
+    joined = np.concatenate(arrays)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(nis_consistency, "SELECT_AT_ONCE", at_once)
+        assert nis_consistency._median(arrays) == np.median(joined)
+        for k in {0, joined.size // 2, joined.size - 1}:
+            assert nis_consistency.order_statistic(arrays, k) == np.partition(joined, k)[k]
 
 
 def test_a_short_block_judged_alone_would_say_otherwise():
