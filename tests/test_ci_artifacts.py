@@ -155,7 +155,7 @@ def test_the_junit_time_is_each_logs_analysis_time(run):
     assert len(analysed) == 2
     for suite in analysed:
         seconds = float(suite.get("time"))
-        assert 0.05 < seconds < 600  # measured, not a placeholder
+        assert 0.001 < seconds < 600  # measured, not a placeholder (a short log: 0.05 s on a fast machine)
         cases = [float(c.get("time")) for c in suite.findall("testcase")]
         assert sum(cases) == pytest.approx(seconds, abs=0.001 * len(cases))
     assert float(suites.get("time")) == pytest.approx(sum(float(s.get("time")) for s in analysed), abs=0.002)
