@@ -218,10 +218,12 @@ def order_statistic(pieces: list[np.ndarray], k: int) -> float:
         digit = int(np.searchsorted(below, rank, side="right"))  # the first bucket holding rank + 1 keys
         rank -= int(below[digit - 1]) if digit else 0
         prefix = (prefix << RADIX_BITS) | digit
-        if counts[digit] <= SELECT_AT_ONCE or shift == 0:
+        if shift == 0:  # every key with this prefix is the one value (a run of equal values)
+            return float(_values(np.array([prefix], np.uint64))[0])
+        if counts[digit] <= SELECT_AT_ONCE:
             kept = np.concatenate([keys for keys in _keys_with_prefix(pieces, prefix, shift)])
             return float(_values(np.partition(kept, rank)[rank : rank + 1])[0])
-    raise AssertionError("unreachable: the last digit leaves one key value")
+    raise AssertionError("unreachable: the last digit is the whole key")
 
 
 _SIGN = np.uint64(1 << 63)
@@ -233,7 +235,7 @@ def _keys_with_prefix(pieces: list[np.ndarray], prefix: int, low_bits: int) -> I
     bit set for a positive value and every bit flipped for a negative one: keys order as the values
     (-0.0 just below 0.0, which np.partition counts equal: the value is the same)."""
     for chunk in _chunks(pieces):
-        bits = chunk.view(np.uint64)
+        bits = np.asarray(chunk, np.float64).view(np.uint64)
         keys = np.where(bits & _SIGN, ~bits, bits | _SIGN)
         if low_bits < 64:
             keys = keys[(keys >> np.uint64(low_bits)) == np.uint64(prefix)]
