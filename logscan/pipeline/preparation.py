@@ -113,9 +113,13 @@ def builtin_profile_for(path: str | os.PathLike, *, with_log: bool = False):
         schemas = builtin.topic_schemas(path, fmt)
         if not any(ros.is_ros_topic(*value) for value in schemas.values()):
             return None
-        # the extra topics the file has (its topic list names them all: the others are covered too)
-        log = read_log(path, topics=set(ros.ros_candidate_topics(schemas)) | (extra & set(schemas)))
-        built = ros.ros_profile(log) if builtin.identify(log) == "ros" else None
+        # the extra topics the file has (its topic list names them all: the others are covered too);
+        # held for block mode's windows when the analysis takes it (`held_window`): a long bag on disk
+        log = read_log(path, topics=set(ros.ros_candidate_topics(schemas)) | (extra & set(schemas)), held=with_log)
+        try:
+            built = ros.ros_profile(log) if builtin.identify(log) == "ros" else None
+        finally:
+            spill.give_back()  # the pages the profile read of a long bag held on disk
     elif fmt == "ulog" or (fmt == "csv-dir" and csv_log_name(Path(path))):  # a ULog, or ulog2csv's pieces of one
         # held for block mode's windows when the analysis takes it (`held_window`): half the bytes
         log = read_log(path, topics=set(builtin.PX4_TOPICS) | extra, held=with_log)

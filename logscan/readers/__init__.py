@@ -214,7 +214,7 @@ def read_log(
     """Read ``path`` into a Log, decoding only ``topics`` (all when None); of an indexed MCAP file,
     only the chunks ``window`` needs (`logscan.readers.mcap.window`: other logs are read whole).
     ``held``: a log held for block mode's windows, a ULog's fields of a type float32 holds exactly
-    kept as float32 (`read_ulog`); any other format's as ever.
+    kept as float32 (`read_ulog`); a long ULog's or ROS 1 bag's arrays on disk (`logscan.readers.spill`).
 
     ``topics`` are source topic names (MCAP and bag topics, ULog ``topic_instance`` names, CSV file
     topics) or channel names; a reader keeps a topic when it or any channel under it is asked for.
@@ -249,7 +249,7 @@ def _read(path, topics, *, use_header_stamp: bool, progress, window, held: bool 
     if fmt in ("ros1bag", "rosbag2"):
         from logscan.readers.rosbag import read_rosbag
 
-        return read_rosbag(path, wanted, use_header_stamp=use_header_stamp, progress=progress)
+        return read_rosbag(path, wanted, use_header_stamp=use_header_stamp, progress=progress, held=held)
     from logscan.readers.csv_reader import read_csv, read_csv_dir
 
     if fmt == "csv-dir":

@@ -25,12 +25,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from logscan.errors import InputError
 from logscan.log import Log, SourceInfo, TopicInfo
+from logscan.readers import spill
 from logscan.readers.common import UNDECODED_WHY, topic_wanted
 from logscan.readers.flatten import MessageBytes
 from logscan.readers.mcap import read_mcap
@@ -48,12 +50,15 @@ def read_rosbag(
     *,
     use_header_stamp: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    held: bool = False,
 ) -> Log:
     """Read the ROS 1 bag, rosbag2 ``.db3`` or rosbag2 directory ``path`` into a Log.
 
     ``progress(done, total)``: the bytes of the bag read (a directory: of its files), after each
     chunk of a ROS 1 bag, every `_PROGRESS_MESSAGES` messages read through rosbags, and at the end
-    (``(total, total)``); a directory holding one MCAP reports as `read_mcap` does."""
+    (``(total, total)``); a directory holding one MCAP reports as `read_mcap` does. ``held``: a log
+    held for block mode's windows: a ROS 1 bag whose decoded values come to `spill.HELD_FROM_BYTES`
+    or more keeps them on disk (`logscan.readers.spill`), as a long ULog does."""
     p = Path(path)
     mcap_file = single_mcap(p)
     if mcap_file is not None:
@@ -62,7 +67,8 @@ def read_rosbag(
         return log
     ros1 = not p.is_dir() and _is_ros1(p)
     fmt = "ros1bag" if ros1 else "rosbag2"
-    with _opened(p, ros1) as reader:
+    with ExitStack() as stack:
+        reader = stack.enter_context(_opened(p, ros1))
         source = SourceInfo(path=str(p), format=fmt)
         source.topics = _topic_infos(reader, ros1)
         store, bad, wire = bag_typestore(list(reader.connections), ros1)
@@ -78,6 +84,8 @@ def read_rosbag(
         columns = TopicColumns(store)
         if ros1 and _chunk_walk_possible(reader, wire):
             layouts = {c.msgtype: ros1_layout(wire, store, c.msgtype) for c in chosen}
+            values = _decoded_bytes(chosen, layouts)
+            stack.enter_context(spill.spilling(held and values >= spill.HELD_FROM_BYTES, needs=2 * values))
             walked = read_chunks(str(p), reader, chosen, layouts, source, progress=progress)
             for topic, flat, times in walked.decoded:
                 pieces.add(topic, flat, times)
@@ -85,17 +93,22 @@ def read_rosbag(
         else:
             counted = None if progress is None else _MessageBytes(progress, _bag_size(p), chosen)
             batches = _read_messages(reader, chosen, source, counted)
-    for topic, msgtype in list(batches):
-        times, datas = batches.pop((topic, msgtype))  # each topic's raw bytes go once decoded
-        _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
-        _note_span(source.topics[topic], times)
-    pieces.report_to(source)
-    channels = channels_in_time_order(pieces.pieces, source)
+        for topic, msgtype in list(batches):
+            times, datas = batches.pop((topic, msgtype))  # each topic's raw bytes go once decoded
+            _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
+            _note_span(source.topics[topic], times)
+        pieces.report_to(source)
+        channels = channels_in_time_order(pieces.pieces, source)  # joined on disk too, when spilling
     pieces.note_skipped(source)
     if progress is not None:
         size = _bag_size(p)
         progress(size, size)
     return Log(channels=channels, source=source)
+
+
+def _decoded_bytes(connections: list, layouts: dict) -> int:
+    """The bytes the chunk walk decodes ``connections`` into: 8 per field and message, and their times."""
+    return sum(c.msgcount * 8 * (len(layouts[c.msgtype].paths) + 1) for c in connections if layouts.get(c.msgtype))
 
 
 def _bag_size(path: Path) -> int:

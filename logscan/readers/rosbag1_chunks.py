@@ -28,6 +28,7 @@ from numba import njit
 from logscan.errors import InputError
 from logscan.log import SourceInfo
 from logscan.numba_cache import follow_dependencies
+from logscan.readers import spill
 from logscan.readers.flatten import FlatColumns, MessageBytes
 from logscan.readers.mcap.cdr import CdrLayout, cdr_layout, le_value
 from logscan.readers.mcap.scan_records import SchemaRec
@@ -42,6 +43,33 @@ class ChunkRead(NamedTuple):
 
     decoded: list[tuple[str, FlatColumns, np.ndarray]]
     raw: dict[tuple[str, str], tuple[list[int], list[bytes]]]
+
+
+# The decoded chunks wait in memory until they hold this many bytes, then each topic's become one
+# piece per field (`_flat`): on disk for a held read of a long bag (`spill.spilling`), so the read
+# holds a batch, not the bag; few pieces to join, whatever the chunk size.
+BATCH_BYTES = 16 << 20
+
+
+class _Batch:
+    """Decoded chunks not yet made pieces: per (topic, msgtype), its layout, the chunks' value
+    tables and receive times, in order."""
+
+    def __init__(self) -> None:
+        self.tables: dict[tuple[str, str], tuple[CdrLayout, list[np.ndarray], list[np.ndarray]]] = {}
+        self.nbytes = 0
+
+    def add(self, topic: str, msgtype: str, layout: CdrLayout, out: np.ndarray, times: np.ndarray) -> None:
+        _, outs, batch_times = self.tables.setdefault((topic, msgtype), (layout, [], []))
+        outs.append(out)
+        batch_times.append(times)
+        self.nbytes += out.nbytes
+
+    def into(self, result: ChunkRead) -> None:
+        """Each topic's chunks as one batch of pieces, in order; the batch emptied."""
+        for (topic, _), (layout, outs, times) in self.tables.items():
+            result.decoded.append((topic, _flat(layout, outs), spill.joined(times)))
+        self.tables, self.nbytes = {}, 0
 
 
 def ros1_layout(wire: Any, store: Any, msgtype: str) -> CdrLayout | None:
@@ -162,14 +190,17 @@ def _ros1_run(buf, starts, ends, kinds, sizes, codes, columns, out):  # pragma: 
     return True
 
 
-def _flat(layout: CdrLayout, out: np.ndarray) -> FlatColumns:
+def _flat(layout: CdrLayout, outs: list[np.ndarray]) -> FlatColumns:
+    """The columns of the chunks' value tables ``outs`` end to end, one array per field
+    (`spill.joined`: on disk within `spill.spilling`)."""
     flat = FlatColumns()
-    every = np.arange(out.shape[0], dtype=np.int64)
+    count = sum(out.shape[0] for out in outs)
+    every = np.arange(count, dtype=np.int64)
     for column, path in enumerate(layout.paths):
-        flat.columns[path] = (every, np.ascontiguousarray(out[:, column]))
+        flat.columns[path] = (every, spill.joined([out[:, column] for out in outs]))
         flat.fields.append(path)
     for path in layout.skipped:
-        flat.skipped[(path, "non-numeric")] = out.shape[0]
+        flat.skipped[(path, "non-numeric")] = count
     return flat
 
 
@@ -203,6 +234,7 @@ def read_chunks(
     ids = np.array([c.id for c in connections], dtype=np.int64)
     bounds = np.flatnonzero(np.diff(chunk_pos)) + 1
     damaged: list[tuple[int, int, str]] = []  # (chunk position, messages skipped, why)
+    batch = _Batch()
     with open(path, "rb") as fh:
         size = os.fstat(fh.fileno()).st_size
         for first, last in zip(np.r_[0, bounds].tolist(), np.r_[bounds, chunk_pos.size].tolist()):
@@ -219,7 +251,11 @@ def read_chunks(
                 damaged.append((position, last - first, found))
                 continue
             buf, starts, ends, _conns = found
-            _decode_chunk(buf, starts, ends, numbers[first:last], times[first:last], connections, layouts, result)
+            chunk_messages = numbers[first:last], times[first:last]
+            _decode_chunk(buf, starts, ends, *chunk_messages, connections, layouts, result, batch)
+            if batch.nbytes >= BATCH_BYTES:
+                batch.into(result)
+    batch.into(result)
     if damaged:
         _report_damage(path, source, damaged, int(chunk_pos.size))
     return result
@@ -257,8 +293,10 @@ def _read_chunk(fh, chunk, offsets: np.ndarray):
     return buf, starts, ends, conns
 
 
-def _decode_chunk(buf, starts, ends, numbers, times, connections: list, layouts: dict, result: ChunkRead) -> None:
-    """One chunk's messages of each (topic, msgtype), decoded in place or kept as bytes."""
+def _decode_chunk(
+    buf, starts, ends, numbers, times, connections: list, layouts: dict, result: ChunkRead, batch: _Batch
+) -> None:
+    """One chunk's messages of each (topic, msgtype), decoded in place into ``batch`` or kept as bytes."""
     keys: dict[tuple[str, str], list[int]] = {}
     for number, connection in enumerate(connections):
         keys.setdefault((connection.topic, connection.msgtype), []).append(number)
@@ -271,7 +309,7 @@ def _decode_chunk(buf, starts, ends, numbers, times, connections: list, layouts:
         if layout is not None:
             out = np.empty((sel_starts.size, len(layout.paths)), dtype=np.float64)
             if _ros1_run(buf, sel_starts, sel_ends, layout.kinds, layout.sizes, layout.codes, layout.columns, out):
-                result.decoded.append((topic, _flat(layout, out), sel_times))
+                batch.add(topic, msgtype, layout, out, sel_times)
                 continue
         raw_times, raw_datas = result.raw.setdefault((topic, msgtype), ([], []))
         raw_times.extend(sel_times.tolist())

@@ -35,6 +35,7 @@ except ImportError:  # Windows, where nothing is put on disk (`_CAN`)
     resource = None  # type: ignore[assignment]
 
 MIN_BYTES = 64 << 10  # smaller arrays stay in memory: not worth the page faults
+HELD_FROM_BYTES = 64 << 20  # a held read this large (a ULog's file, a bag's decoded values) waits on disk
 # files mapped at once: each mapping holds a file descriptor, at most a quarter of the process's
 MAX_FILES = 256
 PASSED_BYTES = 64 << 20  # bytes read through on disk (`passed`) before their pages are given back
@@ -123,6 +124,22 @@ def copied(values: np.ndarray, dtype=None, alone: bool = False) -> np.ndarray:
     kept[...] = values
     passed(kept.nbytes)
     return kept
+
+
+def joined(arrays: list[np.ndarray]) -> np.ndarray:
+    """``np.concatenate(arrays)`` (1-D, one dtype; one contiguous array: itself) into an array of
+    `empty`: on disk within `spilling` when large, its pages given back as it is written (`passed`)."""
+    if not _on[-1]:
+        return np.ascontiguousarray(arrays[0]) if len(arrays) == 1 else np.concatenate(arrays)
+    if len(arrays) == 1 and on_disk(arrays[0]) and arrays[0].flags.c_contiguous:
+        return arrays[0]
+    out = empty(sum(a.size for a in arrays), arrays[0].dtype)
+    at = 0
+    for array in arrays:
+        out[at : at + array.size] = array
+        at += array.size
+        passed(array.nbytes)
+    return out
 
 
 def copied_together(arrays: list[np.ndarray]) -> list[np.ndarray]:

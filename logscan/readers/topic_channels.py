@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from logscan.log import Channel, SourceInfo
+from logscan.readers import spill
 from logscan.readers.flatten import FlatColumns
 
 MAX_STAMP_S = 9.2e9  # header.stamp seconds int64 nanoseconds can hold (2**63 ns ~ 9.22e9 s)
@@ -127,11 +128,11 @@ def channels_in_time_order(
         parts = pieces.pop(name)  # each channel's pieces go as it is joined
         key = tuple(id(p[0]) for p in parts)
         if key not in joined:
-            t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+            t = spill.joined([p[0] for p in parts])  # on disk within `spill.spilling` (a long bag held)
             unsorted = t.size > 1 and bool((t[1:] < t[:-1]).any())
             joined[key] = (t, np.argsort(t, kind="stable") if unsorted else None)
         t, order = joined[key]
-        v = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
+        v = spill.joined([p[1] for p in parts])
         del parts
         if order is not None:
             t, v = t[order], v[order]

@@ -86,7 +86,7 @@ _DATA_HEADER_BYTES = 5  # a data message's size, type and msg_id before its payl
 # disk (`logscan.readers.spill`): about 20 minutes of a PX4 log at its default rates, where the held
 # channels (two thirds of the file's bytes) start to weigh beside a block's analysis; below it the
 # files and mappings are not worth their cost.
-SPILL_FROM_BYTES = 64 << 20
+SPILL_FROM_BYTES = spill.HELD_FROM_BYTES
 
 
 def message_filter(wanted: set[str] | None) -> list[str] | None:
