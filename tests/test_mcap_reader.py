@@ -17,7 +17,7 @@ from mcap.writer import CompressionType, Writer
 from logscan.errors import CorruptLogError, InputError
 from logscan.log import Log
 from logscan.readers import read_log
-from logscan.readers.mcap import iter_raw_messages, read_mcap
+from logscan.readers.mcap import inspect_mcap, iter_raw_messages, read_mcap
 from logscan.readers.mcap.writer import TopicData, mcap_bytes
 
 CONFORMANCE = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "mcap-conformance"
@@ -864,3 +864,30 @@ def test_exact_json_number_kernel_is_correctly_rounded_or_declines():
     assert decimal_number(text, 7, text.size)[1] is False  # 1e400: beyond float64, declined
     for token, taken_here in ((b"9999999999999999999", True), (b"12345678901234567890", False)):
         assert decimal_number(np.frombuffer(token, dtype=np.uint8), 0, len(token))[1] is taken_here
+
+
+@pytest.mark.parametrize("stream_goes_back", [False, True])
+def test_a_topic_on_two_channels_is_out_of_order_only_if_a_channel_is(tmp_path, stream_goes_back):
+    """Two channels of one topic interleave in the file; each channel's batch is decoded together,
+    so the pieces join out of order although the file is in order: sorted without a warning then,
+    with one when a channel's own messages go back in time (read and inspected alike)."""
+    path = tmp_path / "two.mcap"
+    firsts = [10, 30, 50, 70] if not stream_goes_back else [10, 50, 30, 70]
+    with open(path, "wb") as fh:
+        writer = Writer(fh, compression=CompressionType.NONE)
+        writer.start()
+        schema = writer.register_schema("Thing", "jsonschema", b"{}")
+        one, two = (writer.register_channel("/a", "json", schema) for _ in range(2))
+        for t in firsts:
+            writer.add_message(one, t, json.dumps({"x": t}).encode(), t)
+            writer.add_message(two, t + 10, json.dumps({"x": t + 10}).encode(), t + 10)
+        writer.finish()
+    log = read_mcap(path, None)
+    assert log.channels["/a/x"].t.tolist() == list(range(10, 90, 10))
+    assert log.channels["/a/x"].values.tolist() == list(range(10, 90, 10))
+    inspected, _ = inspect_mcap(path, None)
+    for source in (log.source, inspected.source):
+        warned = [w for w in source.warnings if "not in time order" in w]
+        assert warned == (
+            ["1 channel(s) not in time order in the file, sorted by time: /a/x"] if stream_goes_back else []
+        )

@@ -393,3 +393,38 @@ def test_db3_without_message_definitions_uses_the_ros2_types(husky_db3_dir, bag_
     log = read_log(bare)
     assert_same_channels(log, bag_log)
     assert not log.source.warnings
+
+
+@pytest.mark.parametrize("chunk_threshold", [20, 1 << 20])  # a chunk per message; one chunk
+@pytest.mark.parametrize("stream_goes_back", [False, True])
+def test_a_topic_recorded_under_two_types_is_out_of_order_only_if_a_type_is(
+    tmp_path, chunk_threshold, stream_goes_back
+):
+    """Two publishers of one topic with different types interleave in the file; each type's
+    messages are read together, so the topic's pieces join out of order although the file is in
+    order: no warning then, but one when a type's own messages go back in time."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    F64, F32 = store.types["std_msgs/msg/Float64"], store.types["std_msgs/msg/Float32"]
+    path = tmp_path / "two_types.bag"
+    writer = Writer(path)
+    writer.chunk_threshold = chunk_threshold
+    with writer:
+        wide = writer.add_connection("/x", "std_msgs/msg/Float64", typestore=store)
+        narrow = writer.add_connection("/x", "std_msgs/msg/Float32", typestore=store)
+        seconds = [1, 3, 5, 7, 9, 11]
+        if stream_goes_back:
+            seconds[3], seconds[4] = seconds[4], seconds[3]
+        for s in seconds:
+            writer.write(wide, s * 10**9, store.serialize_ros1(F64(data=float(s)), "std_msgs/msg/Float64"))
+            writer.write(narrow, (s + 1) * 10**9, store.serialize_ros1(F32(data=float(s + 1)), "std_msgs/msg/Float32"))
+    log = read_log(path)
+    channel = log.channels["/x/data"]
+    assert channel.t.tolist() == [s * 10**9 for s in range(1, 13)]
+    np.testing.assert_array_equal(channel.values, np.arange(1.0, 13.0))
+    warned = [w for w in log.source.warnings if "not in time order" in w]
+    assert warned == (
+        ["1 channel(s) not in time order in the file, sorted by time: /x/data"] if stream_goes_back else []
+    )

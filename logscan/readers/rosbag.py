@@ -87,8 +87,8 @@ def read_rosbag(
             values = _decoded_bytes(chosen, layouts)
             stack.enter_context(spill.spilling(held and values >= spill.HELD_FROM_BYTES, needs=2 * values))
             walked = read_chunks(str(p), reader, chosen, layouts, source, progress=progress)
-            for topic, flat, times in walked.decoded:
-                pieces.add(topic, flat, times)
+            for topic, msgtype, flat, times in walked.decoded:
+                pieces.add(topic, flat, times, stream=msgtype)
             batches = walked.raw
         else:
             counted = None if progress is None else _MessageBytes(progress, _bag_size(p), chosen)
@@ -98,7 +98,7 @@ def read_rosbag(
             _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
             _note_span(source.topics[topic], times)
         pieces.report_to(source)
-        channels = channels_in_time_order(pieces.pieces, source)  # joined on disk too, when spilling
+        channels = channels_in_time_order(pieces.pieces, source, pieces.unsorted)  # joined on disk too, when spilling
     pieces.note_skipped(source)
     if progress is not None:
         size = _bag_size(p)
@@ -156,7 +156,7 @@ def _decode_topic(
         cdrs = MessageBytes.from_list(datas)
     del datas
     flat, times = columns.columns(topic, msgtype, cdrs, times, pieces.skips)
-    pieces.add(topic, flat, times)
+    pieces.add(topic, flat, times, stream=msgtype)
 
 
 def _read_messages(

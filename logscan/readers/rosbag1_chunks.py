@@ -41,7 +41,7 @@ class ChunkRead(NamedTuple):
     """What the chunk walk gives: per (topic, msgtype), flat columns already decoded (each with the
     receive times of its messages), and the raw messages left for the per-message path."""
 
-    decoded: list[tuple[str, FlatColumns, np.ndarray]]
+    decoded: list[tuple[str, str, FlatColumns, np.ndarray]]
     raw: dict[tuple[str, str], tuple[list[int], list[bytes]]]
 
 
@@ -67,8 +67,8 @@ class _Batch:
 
     def into(self, result: ChunkRead) -> None:
         """Each topic's chunks as one batch of pieces, in order; the batch emptied."""
-        for (topic, _), (layout, outs, times) in self.tables.items():
-            result.decoded.append((topic, _flat(layout, outs), spill.joined(times)))
+        for (topic, msgtype), (layout, outs, times) in self.tables.items():
+            result.decoded.append((topic, msgtype, _flat(layout, outs), spill.joined(times)))
         self.tables, self.nbytes = {}, 0
 
 

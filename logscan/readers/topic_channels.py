@@ -12,6 +12,8 @@ had it. With header stamps asked for, messages with ``header.stamp`` (``sec``/``
 
 from __future__ import annotations
 
+from collections.abc import Hashable
+
 import numpy as np
 
 from logscan.log import Channel, SourceInfo
@@ -39,9 +41,17 @@ class TopicPieces:
         self.skips = SourceInfo(path=path, format=fmt)  # collects skip counts until report_to
         self.undecodable: set[str] = set()  # topics no decoder takes (`skip_topic`)
         self.skipped_fields: dict[str, set[str]] = {}  # topic -> the names of its fields skipped
+        # channels whose times go back within one stream of the file (`add`), and each
+        # (channel, stream)'s last time so far
+        self.unsorted: set[str] = set()
+        self.stream_ends: dict[tuple[str, Hashable], int] = {}
 
-    def add(self, topic: str, flat: FlatColumns, log_times: np.ndarray) -> None:
-        """One batch of ``topic``'s messages: ``flat`` columns index ``log_times`` (int ns)."""
+    def add(self, topic: str, flat: FlatColumns, log_times: np.ndarray, stream: Hashable = None) -> None:
+        """One batch of ``topic``'s messages: ``flat`` columns index ``log_times`` (int ns).
+        ``stream``: what wrote them (a channel, a message type), when a topic has several; the
+        batches of one stream come in file order. Their times are checked in that order, stream by
+        stream: a topic's streams interleave in the file, so its batches joined are out of order
+        without the file being so."""
         self.decoded_topics.add(topic)
         for (field_path, why_skipped), count in flat.skipped.items():
             self.skips.skip(channel_name(topic, field_path), why_skipped, count)
@@ -54,13 +64,26 @@ class TopicPieces:
             if unfit:
                 self.skips.skip(f"{topic} header.stamp", "not a time in range (log_time used)", unfit)
         fields = self.fields.setdefault(topic, [])
+        backwards = times.size > 1 and bool((times[1:] < times[:-1]).any())
         for field_path in flat.fields:
             if field_path not in fields:
                 fields.append(field_path)
             index, values = flat.columns[field_path]
             # a field every message has shares the topic's times (one array, not one per field)
             field_times = times if index.size == times.size else times[index]
-            self.pieces.setdefault(channel_name(topic, field_path), []).append((field_times, values))
+            name = channel_name(topic, field_path)
+            self.pieces.setdefault(name, []).append((field_times, values))
+            self._check_order(name, stream, field_times, backwards)
+
+    def _check_order(self, name: str, stream: Hashable, t: np.ndarray, backwards: bool) -> None:
+        """``name`` unsorted when ``t`` goes back, or starts before its stream's last batch ended
+        (``backwards``: whether the batch's times go back anywhere, else ``t`` need not be read)."""
+        if t.size == 0:
+            return
+        end = self.stream_ends.get((name, stream))
+        if (end is not None and int(t[0]) < end) or (backwards and bool((t[1:] < t[:-1]).any())):
+            self.unsorted.add(name)
+        self.stream_ends[(name, stream)] = int(t[-1])
 
     def skip_topic(self, topic: str, why: str, count: int) -> None:
         """A topic no decoder takes: its ``count`` messages skipped for ``why``."""
@@ -116,11 +139,13 @@ def header_stamps(columns: dict, log_times: np.ndarray) -> tuple[np.ndarray, boo
 
 
 def channels_in_time_order(
-    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]], source: SourceInfo
+    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]], source: SourceInfo, unsorted_in: set[str]
 ) -> dict[str, Channel]:
-    """One Channel per name, its pieces joined and sorted by time (stable); a warning names the unsorted."""
+    """One Channel per name, its pieces joined and sorted by time (stable); a warning names the
+    channels ``unsorted_in`` the file (`TopicPieces.unsorted`): one whose streams merely interleave
+    is sorted without it."""
     channels: dict[str, Channel] = {}
-    unsorted_topics: set[str] = set()
+    unsorted_in_file: list[str] = []
     # pieces' times shared by a topic's fields: joined, checked and ordered once -> (t, order or None);
     # keyed by the ids of the pieces' times, all alive together when the loop starts
     joined: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray | None]] = {}
@@ -136,10 +161,11 @@ def channels_in_time_order(
         del parts
         if order is not None:
             t, v = t[order], v[order]
-            unsorted_topics.add(name)
+            if name in unsorted_in:
+                unsorted_in_file.append(name)
         channels[name] = Channel(name, t, v)
-    if unsorted_topics:
-        source.warnings.append(unsorted_text(sorted(unsorted_topics)))
+    if unsorted_in_file:
+        source.warnings.append(unsorted_text(sorted(unsorted_in_file)))
     return channels
 
 

@@ -92,7 +92,7 @@ def read_mcap(
     if progress is not None:
         scan.on_position = _bytes_of(path, progress)
     source = _scanned(scan, decoding)
-    channels = channels_in_time_order(decoding.pieces, source)
+    channels = channels_in_time_order(decoding.pieces, source, decoding.unsorted)
     decoding.note_skipped(source)
     log = Log(channels=channels, source=source)
     if planner is not None and planner.plan is not None and not planner.mark(log, scan, decoding):
@@ -162,9 +162,8 @@ def inspect_mcap(
     scan = Scan(path, wanted)
     scan.on_flush = flush
     source = _scanned(scan, decoding)
-    unsorted = sorted(name for name, entry in stats.items() if entry.unsorted)
-    if unsorted:
-        source.warnings.append(unsorted_text(unsorted))
+    if decoding.unsorted:
+        source.warnings.append(unsorted_text(sorted(decoding.unsorted)))
     decoding.note_skipped(source)
     undecoded_as_partial(source)  # as `read_log` says of the same file
     log = Log.without_samples({name: entry.span() for name, entry in stats.items()}, source)
@@ -178,8 +177,6 @@ class ChannelStats:
     def __init__(self) -> None:
         self.samples = self.nonfinite = 0
         self.first = self.last = None  # ns
-        self.previous = None  # the last time of the previous piece (order check)
-        self.unsorted = False
         self.low = self.high = None
 
     def add(self, t: np.ndarray, values: np.ndarray) -> None:
@@ -189,9 +186,6 @@ class ChannelStats:
         low_t, high_t = int(t.min()), int(t.max())
         self.first = low_t if self.first is None else min(self.first, low_t)
         self.last = high_t if self.last is None else max(self.last, high_t)
-        if (self.previous is not None and int(t[0]) < self.previous) or (t.size > 1 and (np.diff(t) < 0).any()):
-            self.unsorted = True
-        self.previous = int(t[-1])
         finite = values[np.isfinite(values)]
         self.nonfinite += int(values.size - finite.size)
         if finite.size:
@@ -362,7 +356,7 @@ class _Decoding(TopicPieces):
             datas = batch.messages()
             batch.segments = []
             flat, log_times = _columns_of(decoder, channel, schema, datas, log_times, self, self.skips)
-            self.add(topic, flat, log_times)
+            self.add(topic, flat, log_times, stream=cid)
 
     def fold_into(self, stats: dict[str, ChannelStats]) -> None:
         """Fold the pieces decoded so far into per-channel statistics, and drop them."""
