@@ -541,3 +541,17 @@ def test_commit_refuses_after_a_ctrl_c_and_removes_its_temporary_files(tmp_path)
     finally:
         INTERRUPT_SEEN[0] = False
     assert target.read_text() == "old" and temporary_files(tmp_path) == []
+
+
+def test_a_sys_exit_with_words_says_them_and_exits_as_an_internal_error(monkeypatch, capsys):
+    """``sys.exit("why")`` inside a command (a library giving up; plugins' calls are contained by
+    their isolation): Python would print the words and exit 1, which a CI reads as alarms found;
+    logscan prints them and exits 3."""
+    from logscan.cli import main as cli_main
+
+    def gives_up(**_):
+        sys.exit("the model file is missing")
+
+    monkeypatch.setattr(cli_main.cli, "main", gives_up)
+    assert cli_main._run(["analyze"], debug=False) == 3
+    assert capsys.readouterr().err == "logscan: error: the model file is missing\n"

@@ -199,7 +199,10 @@ def _run(args: list[str], debug: bool) -> int:
             code = cli.main(args=args, prog_name="logscan", standalone_mode=False)
         except SystemExit as exc:  # a command's own code (`sys.exit`, as CliRunner reads it): the
             # process still ends by `_exit_process`, not by Python's teardown (0.2-0.35 s after a long log)
-            code = exc.code if isinstance(exc.code, int) else ExitCode.OK if exc.code is None else ExitCode.INTERNAL
+            code = ExitCode.OK if exc.code is None else exc.code
+            if not isinstance(code, int):  # ``sys.exit("why")`` (a library's): its words said, as Python
+                _say(f"logscan: error: {printable(str(code))}")  # would, but exit 3: Python's 1 reads as alarms
+                code = ExitCode.INTERNAL
         if _INTERRUPT_SEEN[0]:  # a Ctrl-C whose exception a finalizer swallowed: still Ctrl-C
             return _interrupted()
     except (Interrupted, KeyboardInterrupt):
