@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from conftest import need_testdata
 from ros_edit import to_db3
+from rosbags.typesys import Stores, get_typestore
 
 from logscan.errors import InputError, UnsupportedFormatError
 from logscan.readers import detect_format, read_embedded, read_log
@@ -395,6 +396,15 @@ def test_db3_without_message_definitions_uses_the_ros2_types(husky_db3_dir, bag_
     assert not log.source.warnings
 
 
+def _bag_writer(path, chunk_threshold: int):
+    """rosbags' ROS 1 writer, its chunks closed at ``chunk_threshold`` bytes (20: a chunk a message)."""
+    from rosbags.rosbag1 import Writer
+
+    writer = Writer(path)
+    writer.chunk_threshold = chunk_threshold
+    return writer
+
+
 @pytest.mark.parametrize("chunk_threshold", [20, 1 << 20])  # a chunk per message; one chunk
 @pytest.mark.parametrize("stream_goes_back", [False, True])
 def test_a_topic_recorded_under_two_types_is_out_of_order_only_if_a_type_is(
@@ -403,15 +413,10 @@ def test_a_topic_recorded_under_two_types_is_out_of_order_only_if_a_type_is(
     """Two publishers of one topic with different types interleave in the file; each type's
     messages are read together, so the topic's pieces join out of order although the file is in
     order: no warning then, but one when a type's own messages go back in time."""
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
     store = get_typestore(Stores.ROS1_NOETIC)
     F64, F32 = store.types["std_msgs/msg/Float64"], store.types["std_msgs/msg/Float32"]
     path = tmp_path / "two_types.bag"
-    writer = Writer(path)
-    writer.chunk_threshold = chunk_threshold
-    with writer:
+    with _bag_writer(path, chunk_threshold) as writer:
         wide = writer.add_connection("/x", "std_msgs/msg/Float64", typestore=store)
         narrow = writer.add_connection("/x", "std_msgs/msg/Float32", typestore=store)
         seconds = [1, 3, 5, 7, 9, 11]
@@ -428,3 +433,43 @@ def test_a_topic_recorded_under_two_types_is_out_of_order_only_if_a_type_is(
     assert warned == (
         ["1 channel(s) not in time order in the file, sorted by time: /x/data"] if stream_goes_back else []
     )
+
+
+def _index_of_rosbags_and_table(path):
+    from rosbags.rosbag1 import Reader
+
+    from logscan.readers.rosbag1_index import TableIndexReader
+
+    with Reader(path) as own, TableIndexReader(path) as table:
+        table.index_objects()
+        copies = [
+            ([c._replace(owner=None) for c in r.connections], {i: list(e) for i, e in r.indexes.items()})
+            for r in (own, table)
+        ]
+        return *copies, table.index
+
+
+@pytest.mark.parametrize("chunk_threshold", [20, 1 << 20])
+def test_the_index_table_is_rosbags_index(tmp_path, chunk_threshold):
+    """The bag's index kept as a table holds what rosbags' reader indexes, message for message:
+    its counts, and (made back into rosbags' objects for its own reads) the same index in the same
+    order, times going back and equal times across chunks included."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    F64 = store.types["std_msgs/msg/Float64"]
+    path = tmp_path / "index.bag"
+    with _bag_writer(path, chunk_threshold) as writer:
+        one = writer.add_connection("/a", "std_msgs/msg/Float64", typestore=store)
+        two = writer.add_connection("/b", "std_msgs/msg/Float64", typestore=store)
+        writer.add_connection("/never", "std_msgs/msg/Float64", typestore=store)
+        for k, seconds in enumerate([5, 1, 3, 3, 2, 9, 3, 7]):
+            data = store.serialize_ros1(F64(data=float(k)), "std_msgs/msg/Float64")
+            writer.write(one if k % 3 else two, seconds * 10**9 + 4_000_000_000 * 10**9, data)
+    rosbags_index, table_index, table = _index_of_rosbags_and_table(path)
+    assert table_index == rosbags_index
+    assert [c.msgcount for c in table_index[0]] == [5, 3, 0]
+    assert table.shape == (8, 4) and table[:, 1].min() == 4_000_000_001 * 10**9  # seconds near uint32's end, in ns
+
+
+def test_the_index_table_is_rosbags_index_on_a_real_drive(husky_bag):
+    rosbags_index, table_index, _ = _index_of_rosbags_and_table(husky_bag)
+    assert table_index == rosbags_index

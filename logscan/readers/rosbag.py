@@ -37,6 +37,7 @@ from logscan.readers.common import UNDECODED_WHY, topic_wanted
 from logscan.readers.flatten import MessageBytes
 from logscan.readers.mcap import read_mcap
 from logscan.readers.rosbag1_chunks import ROS1_HINT, read_chunks, ros1_layout
+from logscan.readers.rosbag1_index import TableIndexReader
 from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
 
@@ -135,7 +136,7 @@ class _MessageBytes:
 def _chunk_walk_possible(reader, wire) -> bool:
     """Whether a ROS 1 bag can be read chunk by chunk (``rosbag1_chunks``): its types as written
     are known, and the rosbags reader has the index and chunk tables that walk reads."""
-    return wire is not None and all(hasattr(reader, name) for name in ("indexes", "chunks", "connections"))
+    return wire is not None and all(hasattr(reader, name) for name in ("index", "chunks", "connections"))
 
 
 def _decode_topic(
@@ -165,6 +166,8 @@ def _read_messages(
     """(topic, msgtype) -> (receive times, raw message bytes) of ``connections``, in bag order. A
     bag that fails part way keeps what was read before, and the source says so. ``counted(messages
     read)`` every `_PROGRESS_MESSAGES` messages: a counter per message, not a call."""
+    if isinstance(reader, TableIndexReader):
+        reader.index_objects()  # rosbags' `messages` reads its own index
     batches: dict[tuple[str, str], tuple[list, list]] = {}
     if not connections:
         return batches
@@ -219,11 +222,13 @@ def _topic_infos(reader, ros1: bool) -> dict[str, TopicInfo]:
 
 
 def _ros1_spans(reader) -> dict[tuple[str, int], tuple[int, int]]:
+    """First and last receive time per connection, from the bag's index (`TableIndexReader.index`)."""
+    ids, times = reader.index[:, 0], reader.index[:, 1]
     out = {}
     for connection in reader.connections:
-        index = reader.indexes.get(connection.id) or []
-        if index:
-            out[(connection.topic, connection.id)] = (int(index[0].time), int(index[-1].time))
+        own = times[ids == connection.id]
+        if own.size:
+            out[(connection.topic, connection.id)] = (int(own.min()), int(own.max()))
     return out
 
 
@@ -270,10 +275,11 @@ class _opened:
         target = _for_rosbags(self.path)
         try:
             if self.ros1:
-                from rosbags.rosbag1 import Reader
+                self.reader = TableIndexReader(target)
             else:
                 from rosbags.rosbag2 import Reader
-            self.reader = Reader(target)
+
+                self.reader = Reader(target)
             self.reader.open()
         except ImportError as exc:
             raise InputError(

@@ -206,21 +206,14 @@ def _flat(layout: CdrLayout, outs: list[np.ndarray]) -> FlatColumns:
 
 def _index_arrays(reader, connections: list) -> tuple[np.ndarray, ...]:
     """(connection number, time, chunk position, offset) of every message of ``connections``, in
-    chunk and record order (connection number: the index into ``connections``). Each connection's
-    entries in the reader's index (a Python object per message: about 170 bytes, 200 MB for a
-    million messages) are taken out of it as they are read: nothing reads them after these arrays,
-    and the chunks' values then reuse their memory instead of adding to it."""
-    listed = [reader.indexes.pop(connection.id, []) for connection in connections]
-    table = np.empty((sum(len(entries) for entries in listed), 4), dtype=np.int64)
-    at = 0
-    for number in range(len(listed)):
-        entries, listed[number] = listed[number], []
-        table[at : at + len(entries), 0] = number
-        table[at : at + len(entries), 1:] = np.array(entries, dtype=np.int64).reshape(-1, 3)
-        at += len(entries)
-        del entries  # the connection's index objects go here
+    chunk and record order (connection number: the index into ``connections``), from the bag's
+    index table (`TableIndexReader.index`)."""
+    ids = np.array([c.id for c in connections], dtype=np.int64)
+    table = reader.index[np.isin(reader.index[:, 0], ids)]
+    by_id = np.argsort(ids, kind="stable")
+    numbers = by_id[np.searchsorted(ids, table[:, 0], sorter=by_id)]
     order = np.lexsort((table[:, 3], table[:, 2]))
-    return tuple(table[order, column] for column in range(4))
+    return numbers[order], table[order, 1], table[order, 2], table[order, 3]
 
 
 def read_chunks(
