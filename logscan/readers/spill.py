@@ -138,7 +138,7 @@ def joined(arrays: list[np.ndarray]) -> np.ndarray:
     for array in arrays:
         out[at : at + array.size] = array
         at += array.size
-        passed(array.nbytes)
+        passed(array.nbytes * (2 if on_disk(array) else 1))  # written, and read where it is on disk too
     return out
 
 
