@@ -24,7 +24,7 @@ rosbag2) is one InputError line; a bag that fails part way is returned with what
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -42,6 +42,9 @@ from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cd
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
 
 _PROGRESS_MESSAGES = 4096  # messages read through rosbags between two progress calls
+# a topic's raw messages read through rosbags are decoded each time they come to this many bytes: a
+# long bag (a rosbag2 database) is then held as its decoded values (on disk when held), not its bytes
+RAW_BATCH_BYTES = 16 << 20
 ROS2_HINT = "check the copy; a rosbag2 database is read-only here, so repair it with `ros2 bag reindex` or sqlite3"
 
 
@@ -58,8 +61,8 @@ def read_rosbag(
     ``progress(done, total)``: the bytes of the bag read (a directory: of its files), after each
     chunk of a ROS 1 bag, every `_PROGRESS_MESSAGES` messages read through rosbags, and at the end
     (``(total, total)``); a directory holding one MCAP reports as `read_mcap` does. ``held``: a log
-    held for block mode's windows: a ROS 1 bag whose decoded values come to `spill.HELD_FROM_BYTES`
-    or more keeps them on disk (`logscan.readers.spill`), as a long ULog does."""
+    held for block mode's windows: a bag whose decoded values (read message by message: its file)
+    come to `spill.HELD_FROM_BYTES` or more keeps them on disk (`readers.spill`), as a ULog does."""
     p = Path(path)
     mcap_file = single_mcap(p)
     if mcap_file is not None:
@@ -82,7 +85,7 @@ def read_rosbag(
                 pieces.skip_topic(connection.topic, bad[connection.msgtype], connection.msgcount)
                 continue
             chosen.append(connection)
-        columns = TopicColumns(store)
+        decode = _BatchDecoder(ros1, TopicColumns(store), pieces, source)
         if ros1 and _chunk_walk_possible(reader, wire):
             layouts = {c.msgtype: ros1_layout(wire, store, c.msgtype) for c in chosen}
             values = _decoded_bytes(chosen, layouts)
@@ -91,13 +94,13 @@ def read_rosbag(
             for topic, msgtype, flat, times in walked.decoded:
                 pieces.add(topic, flat, times, stream=msgtype)
             batches = walked.raw
-        else:
-            counted = None if progress is None else _MessageBytes(progress, _bag_size(p), chosen)
-            batches = _read_messages(reader, chosen, source, counted)
+        else:  # message by message through rosbags, decoded a batch at a time (on disk when long and held)
+            size = _bag_size(p)
+            stack.enter_context(spill.spilling(held and size >= spill.HELD_FROM_BYTES, needs=2 * size))
+            counted = None if progress is None else _MessageBytes(progress, size, chosen)
+            batches = _read_messages(reader, chosen, source, counted, decode)
         for topic, msgtype in list(batches):
-            times, datas = batches.pop((topic, msgtype))  # each topic's raw bytes go once decoded
-            _decode_topic(topic, msgtype, np.asarray(times, dtype=np.int64), datas, ros1, columns, pieces)
-            _note_span(source.topics[topic], times)
+            decode(topic, msgtype, *batches.pop((topic, msgtype)))  # each topic's raw bytes go once decoded
         pieces.report_to(source)
         channels = channels_in_time_order(pieces.pieces, source, pieces.unsorted)  # joined on disk too, when spilling
     pieces.note_skipped(source)
@@ -139,6 +142,24 @@ def _chunk_walk_possible(reader, wire) -> bool:
     return wire is not None and all(hasattr(reader, name) for name in ("index", "chunks", "connections"))
 
 
+class _BatchDecoder:
+    """Decodes one (topic, msgtype)'s raw messages at a time into ``pieces``; a topic's receive-time
+    span is kept from its messages where the bag's index gave none (`_topic_infos`)."""
+
+    def __init__(self, ros1: bool, columns: TopicColumns, pieces: TopicPieces, source: SourceInfo):
+        self.ros1, self.columns, self.pieces, self.source = ros1, columns, pieces, source
+        self.unspanned = {name for name, info in source.topics.items() if info.first_ns is None}
+
+    def __call__(self, topic: str, msgtype: str, times: list[int], datas: list) -> None:
+        if topic in self.unspanned and times:
+            info = self.source.topics[topic]
+            first, last = min(times), max(times)
+            info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
+            info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
+        t = np.asarray(times, dtype=np.int64)
+        _decode_topic(topic, msgtype, t, datas, self.ros1, self.columns, self.pieces)
+
+
 def _decode_topic(
     topic: str,
     msgtype: str,
@@ -161,29 +182,46 @@ def _decode_topic(
 
 
 def _read_messages(
-    reader, connections: list, source: SourceInfo, counted: _MessageBytes | None = None
+    reader,
+    connections: list,
+    source: SourceInfo,
+    counted: _MessageBytes | None = None,
+    decode: Callable[[str, str, list, list], None] | None = None,
 ) -> dict[tuple[str, str], tuple[list, list]]:
-    """(topic, msgtype) -> (receive times, raw message bytes) of ``connections``, in bag order. A
-    bag that fails part way keeps what was read before, and the source says so. ``counted(messages
-    read)`` every `_PROGRESS_MESSAGES` messages: a counter per message, not a call."""
+    """(topic, msgtype) -> (receive times, raw message bytes) of ``connections``, in bag order: with
+    ``decode``, those not yet given to it, which takes each (topic, msgtype)'s messages as their
+    bytes reach `RAW_BATCH_BYTES` (so a long bag's raw bytes are not held whole). A bag that fails
+    part way keeps what was read before, and the source says so. ``counted(messages read)`` every
+    `_PROGRESS_MESSAGES` messages: a counter per message, not a call."""
     if isinstance(reader, TableIndexReader):
         reader.index_objects()  # rosbags' `messages` reads its own index
-    batches: dict[tuple[str, str], tuple[list, list]] = {}
+    batches: dict[tuple[str, str], tuple[list, list, list[int]]] = {}  # and the bytes in each
+    for connection, timestamp, data in _messages(reader, connections, source, counted):
+        key = (connection.topic, connection.msgtype)
+        batch = batches.get(key)
+        if batch is None:
+            batch = batches[key] = ([], [], [0])
+        batch[0].append(timestamp)
+        batch[1].append(data)
+        batch[2][0] += len(data)
+        if decode is not None and batch[2][0] >= RAW_BATCH_BYTES:
+            decode(*key, *batches.pop(key)[:2])
+    return {key: (times, datas) for key, (times, datas, _) in batches.items()}
+
+
+def _messages(reader, connections: list, source: SourceInfo, counted: _MessageBytes | None) -> Iterator[tuple]:
+    """rosbags' (connection, receive time, bytes) of ``connections``, in bag order; a bag that fails
+    part way ends them there, and the source says so (nothing read: InputError)."""
     if not connections:
-        return batches
+        return
     count = 0
     last = None
     next_report = _PROGRESS_MESSAGES if counted is not None else -1  # -1: count never reaches it
     try:
-        for connection, timestamp, data in reader.messages(connections=connections):
-            key = (connection.topic, connection.msgtype)
-            batch = batches.get(key)
-            if batch is None:
-                batch = batches[key] = ([], [])
-            batch[0].append(timestamp)
-            batch[1].append(data)
+        for message in reader.messages(connections=connections):
+            yield message
             count += 1
-            last = timestamp
+            last = message[1]
             if count == next_report and counted is not None:
                 counted(count)
                 next_report += _PROGRESS_MESSAGES
@@ -198,7 +236,6 @@ def _read_messages(
         source.partial_reason = (
             f"read stopped: {_why(exc)}; recovered {count} messages (up to receive time {last / 1e9:.6f} s)"
         )
-    return batches
 
 
 def _topic_infos(reader, ros1: bool) -> dict[str, TopicInfo]:
@@ -257,11 +294,6 @@ def _sqlite_spans(reader) -> dict[tuple[str, int], tuple[int, int]]:
                     first, last = min(first, old[0]), max(last, old[1])
                 out[(connection.topic, connection.id)] = (first, last)
     return out
-
-
-def _note_span(info: TopicInfo, times: list) -> None:
-    if times and info.first_ns is None:
-        info.first_ns, info.last_ns = int(min(times)), int(max(times))
 
 
 class _opened:

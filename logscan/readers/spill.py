@@ -126,6 +126,13 @@ def copied(values: np.ndarray, dtype=None, alone: bool = False) -> np.ndarray:
     return kept
 
 
+def kept(array: np.ndarray) -> np.ndarray:
+    """``array`` itself, or within `spilling` a copy of it on disk (`copied`) unless it is there."""
+    if not _on[-1] or on_disk(array):
+        return array
+    return copied(array)
+
+
 def joined(arrays: list[np.ndarray]) -> np.ndarray:
     """``np.concatenate(arrays)`` (1-D, one dtype; one contiguous array: itself) into an array of
     `empty`: on disk within `spilling` when large, its pages given back as it is written (`passed`)."""

@@ -65,14 +65,15 @@ class TopicPieces:
                 self.skips.skip(f"{topic} header.stamp", "not a time in range (log_time used)", unfit)
         fields = self.fields.setdefault(topic, [])
         backwards = times.size > 1 and bool((times[1:] < times[:-1]).any())
+        times = spill.kept(times)  # the pieces wait on disk within `spill.spilling` (a long bag held)
         for field_path in flat.fields:
             if field_path not in fields:
                 fields.append(field_path)
             index, values = flat.columns[field_path]
             # a field every message has shares the topic's times (one array, not one per field)
-            field_times = times if index.size == times.size else times[index]
+            field_times = times if index.size == times.size else spill.kept(times[index])
             name = channel_name(topic, field_path)
-            self.pieces.setdefault(name, []).append((field_times, values))
+            self.pieces.setdefault(name, []).append((field_times, spill.kept(values)))
             self._check_order(name, stream, field_times, backwards)
 
     def _check_order(self, name: str, stream: Hashable, t: np.ndarray, backwards: bool) -> None:
