@@ -443,7 +443,7 @@ def _index_of_rosbags_and_table(path):
     with Reader(path) as own, TableIndexReader(path) as table:
         table.index_objects()
         copies = [
-            ([c._replace(owner=None) for c in r.connections], {i: list(e) for i, e in r.indexes.items()})
+            ([c._replace(owner=None) for c in r.connections], {i: [tuple(x) for x in e] for i, e in r.indexes.items()})
             for r in (own, table)
         ]
         return *copies, table.index
@@ -473,3 +473,48 @@ def test_the_index_table_is_rosbags_index(tmp_path, chunk_threshold):
 def test_the_index_table_is_rosbags_index_on_a_real_drive(husky_bag):
     rosbags_index, table_index, _ = _index_of_rosbags_and_table(husky_bag)
     assert table_index == rosbags_index
+
+
+@pytest.mark.parametrize("field", ["data length", "header length"])
+def test_a_damaged_index_length_is_one_error_without_reading_the_rest(tmp_path, field):
+    """A damaged length in an index record (after the first chunk) is refused before it is read:
+    a 0xFFFFFFF0 length read the rest of the file first (4 GiB at the most). Here the bag ends in
+    a sparse gigabyte, which such a read would hold."""
+    import os
+    import struct
+    import tracemalloc
+
+    from rosbags.rosbag1 import Reader
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    F64 = store.types["std_msgs/msg/Float64"]
+    path = tmp_path / "damaged_index.bag"
+    with _bag_writer(path, 20) as writer:
+        connection = writer.add_connection("/a", "std_msgs/msg/Float64", typestore=store)
+        for k in range(5):
+            writer.write(connection, (k + 1) * 10**9, store.serialize_ros1(F64(data=k), "std_msgs/msg/Float64"))
+    with Reader(path) as reader:
+        chunk = reader.chunks[min(reader.chunks)]
+        at = chunk.datapos + chunk.datasize  # the chunk's first index record
+    with open(path, "r+b") as fh:
+        fh.seek(at)
+        header_bytes = struct.unpack("<I", fh.read(4))[0]
+        fh.seek(at if field == "header length" else at + 4 + header_bytes)
+        fh.write(struct.pack("<I", 0xFFFFFFF0))
+    os.truncate(path, path.stat().st_size + (1 << 30))
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError, match="cannot be opened"):
+            read_log(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 << 20
+
+
+def test_without_rosbags_a_bag_is_one_error_saying_what_to_install(husky_bag, monkeypatch):
+    from logscan.readers import rosbag1_index
+
+    monkeypatch.setattr(rosbag1_index, "ROSBAGS_MISSING", ImportError("No module named 'rosbags'"))
+    with pytest.raises(InputError, match="needs the rosbags library"):
+        read_log(husky_bag)

@@ -32,12 +32,11 @@ import numpy as np
 
 from logscan.errors import InputError
 from logscan.log import Log, SourceInfo, TopicInfo
-from logscan.readers import spill
+from logscan.readers import rosbag1_index, spill
 from logscan.readers.common import UNDECODED_WHY, topic_wanted
 from logscan.readers.flatten import MessageBytes
 from logscan.readers.mcap import read_mcap
 from logscan.readers.rosbag1_chunks import ROS1_HINT, read_chunks, ros1_layout
-from logscan.readers.rosbag1_index import TableIndexReader
 from logscan.readers.rosbag_types import TopicColumns, bag_typestore, ros1_to_cdr, ros2_type_name
 from logscan.readers.topic_channels import TopicPieces, channels_in_time_order
 
@@ -193,7 +192,7 @@ def _read_messages(
     bytes reach `RAW_BATCH_BYTES` (so a long bag's raw bytes are not held whole). A bag that fails
     part way keeps what was read before, and the source says so. ``counted(messages read)`` every
     `_PROGRESS_MESSAGES` messages: a counter per message, not a call."""
-    if isinstance(reader, TableIndexReader):
+    if isinstance(reader, rosbag1_index.TableIndexReader):
         reader.index_objects()  # rosbags' `messages` reads its own index
     batches: dict[tuple[str, str], tuple[list, list, list[int]]] = {}  # and the bytes in each
     for connection, timestamp, data in _messages(reader, connections, source, counted):
@@ -307,12 +306,12 @@ class _opened:
         target = _for_rosbags(self.path)
         try:
             if self.ros1:
-                self.reader = TableIndexReader(target)
+                self.reader = rosbag1_index.opened(target)
             else:
                 from rosbags.rosbag2 import Reader
 
                 self.reader = Reader(target)
-            self.reader.open()
+                self.reader.open()
         except ImportError as exc:
             raise InputError(
                 f"reading ROS bags needs the rosbags library ({exc})", path=str(self.path), hint="pip install rosbags"

@@ -12,11 +12,19 @@ from __future__ import annotations
 import struct
 
 import numpy as np
-from rosbags.rosbag1 import Reader, ReaderError
-from rosbags.rosbag1.reader import IndexData
+
+try:
+    from rosbags.rosbag1 import Reader, ReaderError
+    from rosbags.rosbag1.reader import IndexData
+except ImportError as exc:  # a broken install: opening a bag says what is missing (`opened`), not an import
+    ROSBAGS_MISSING: ImportError | None = exc
+    Reader, ReaderError, IndexData = object, ValueError, tuple  # type: ignore[assignment,misc]
+else:
+    ROSBAGS_MISSING = None
 
 _ENTRY = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 _INDEX_OP = b"\x04"
+MAX_HEADER_BYTES = 4096  # an IndexData header is 47 bytes: a longer length is damage, not read
 
 
 class TableIndexReader(Reader):
@@ -45,9 +53,11 @@ class TableIndexReader(Reader):
             raise ReaderError("an index record of another kind or version than IndexData 1")
         count = _u32(fields.get("count"))
         size = _u32(self.bio.read(4))
-        data = self.bio.read(size)
-        if size != count * _ENTRY.itemsize or len(data) != size:
+        if size != count * _ENTRY.itemsize:  # checked before reading: a damaged length reads no 4 GiB
             raise ReaderError("an index record whose entries do not fill it")
+        data = self.bio.read(size)
+        if len(data) != size:
+            raise ReaderError("an index record cut short")
         self._records.append((_u32(fields.get("conn")), pos, np.frombuffer(data, _ENTRY)))
 
     def index_objects(self) -> None:
@@ -77,6 +87,8 @@ def _table(records: list[tuple[int, int, np.ndarray]]) -> np.ndarray:
 def _header_fields(bio) -> dict[str, bytes]:
     """A record header's fields (``<len><name>=<value>`` each, after the header's own length)."""
     size = _u32(bio.read(4))
+    if size > MAX_HEADER_BYTES:
+        raise ReaderError(f"a record header of {size} bytes")
     header = bio.read(size)
     if len(header) != size:
         raise ReaderError("a record header cut short")
@@ -95,3 +107,12 @@ def _u32(raw: bytes | None) -> int:
     if raw is None or len(raw) != 4:
         raise ReaderError("a record field is missing or not 4 bytes")
     return struct.unpack("<I", raw)[0]
+
+
+def opened(path) -> TableIndexReader:
+    """A `TableIndexReader` of ``path``, open (ImportError without rosbags)."""
+    if ROSBAGS_MISSING is not None:
+        raise ROSBAGS_MISSING
+    reader = TableIndexReader(path)
+    reader.open()
+    return reader
