@@ -150,12 +150,12 @@ class _BatchDecoder:
         self.unspanned = {name for name, info in source.topics.items() if info.first_ns is None}
 
     def __call__(self, topic: str, msgtype: str, times: list[int], datas: list) -> None:
-        if topic in self.unspanned and times:
+        t = np.asarray(times, dtype=np.int64)
+        if topic in self.unspanned and t.size:
             info = self.source.topics[topic]
-            first, last = min(times), max(times)
+            first, last = int(t.min()), int(t.max())
             info.first_ns = first if info.first_ns is None else min(info.first_ns, first)
             info.last_ns = last if info.last_ns is None else max(info.last_ns, last)
-        t = np.asarray(times, dtype=np.int64)
         _decode_topic(topic, msgtype, t, datas, self.ros1, self.columns, self.pieces)
 
 
@@ -194,18 +194,18 @@ def _read_messages(
     `_PROGRESS_MESSAGES` messages: a counter per message, not a call."""
     if isinstance(reader, rosbag1_index.TableIndexReader):
         reader.index_objects()  # rosbags' `messages` reads its own index
-    batches: dict[tuple[str, str], tuple[list, list, list[int]]] = {}  # and the bytes in each
+    batches: dict[tuple[str, str], tuple[list, list]] = {}
+    sizes: dict[tuple[str, str], int] = {}  # the bytes of each batch
     for connection, timestamp, data in _messages(reader, connections, source, counted):
         key = (connection.topic, connection.msgtype)
-        batch = batches.get(key)
-        if batch is None:
-            batch = batches[key] = ([], [], [0])
-        batch[0].append(timestamp)
-        batch[1].append(data)
-        batch[2][0] += len(data)
-        if decode is not None and batch[2][0] >= RAW_BATCH_BYTES:
-            decode(*key, *batches.pop(key)[:2])
-    return {key: (times, datas) for key, (times, datas, _) in batches.items()}
+        times, datas = batches.setdefault(key, ([], []))
+        times.append(timestamp)
+        datas.append(data)
+        sizes[key] = sizes.get(key, 0) + len(data)
+        if decode is not None and sizes[key] >= RAW_BATCH_BYTES:
+            del sizes[key]
+            decode(*key, *batches.pop(key))
+    return batches
 
 
 def _messages(reader, connections: list, source: SourceInfo, counted: _MessageBytes | None) -> Iterator[tuple]:
@@ -258,14 +258,16 @@ def _topic_infos(reader, ros1: bool) -> dict[str, TopicInfo]:
 
 
 def _ros1_spans(reader) -> dict[tuple[str, int], tuple[int, int]]:
-    """First and last receive time per connection, from the bag's index (`TableIndexReader.index`)."""
-    ids, times = reader.index[:, 0], reader.index[:, 1]
-    out = {}
-    for connection in reader.connections:
-        own = times[ids == connection.id]
-        if own.size:
-            out[(connection.topic, connection.id)] = (int(own.min()), int(own.max()))
-    return out
+    """First and last receive time per connection, from the bag's index (`TableIndexReader.index`),
+    in one pass over it: grouped by connection, each group's minimum and maximum."""
+    if not reader.index.size:
+        return {}
+    by_id = np.argsort(reader.index[:, 0], kind="stable")
+    ids, times = reader.index[by_id, 0], reader.index[by_id, 1]
+    present, starts = np.unique(ids, return_index=True)
+    first, last = np.minimum.reduceat(times, starts), np.maximum.reduceat(times, starts)
+    spans = {int(i): (int(a), int(b)) for i, a, b in zip(present, first, last)}
+    return {(c.topic, c.id): spans[c.id] for c in reader.connections if c.id in spans}
 
 
 def _sqlite_spans(reader) -> dict[tuple[str, int], tuple[int, int]]:
